@@ -1,0 +1,25 @@
+# The two entry points of the README: `make demo` (the main job) and `make test` (the whole suite).
+# Both set the machine up first (scripts/setup.sh), once per change of pyproject.toml or the script.
+VENV  := .venv
+PY    := $(VENV)/bin/python
+STAMP := $(VENV)/.gainlink-setup
+
+.PHONY: setup demo test bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml scripts/setup.sh
+	bash scripts/setup.sh
+	touch $@
+
+demo: setup
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/demo.sh
+
+test: setup
+	$(PY) -m pytest -q
+
+bench: setup
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh
+
+clean:
+	rm -rf build out .cache

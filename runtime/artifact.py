@@ -1,0 +1,233 @@
+"""The versioned gain artifact (``gains.json``): canonical form, hash, schema and invariants.
+
+The artifact is what every later step reads (C code, firmware, replay, HIL, MAVLink upload);
+nothing downstream looks at live Python design objects. Canonical JSON is ``sort_keys`` with
+round-trip floats and no timestamps; ``sha256`` covers the canonical text of every other key.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from functools import lru_cache
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import ArtifactError, IntegrityError
+from .fileio import atomic_write_text
+
+SCHEMA_VERSION = 1
+
+
+@lru_cache(maxsize=1)
+def schema() -> dict:
+    """Return the artifact's JSON Schema (``gainlink/schema/gains.schema.json``)."""
+    text = resources.files("gainlink").joinpath("schema/gains.schema.json").read_text("utf-8")
+    return json.loads(text)
+
+
+def canonical_json(obj: Any) -> str:
+    """Canonical compact JSON: sorted keys, no NaN/Inf, round-trip floats."""
+    try:
+        return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False, ensure_ascii=True)
+    except ValueError as exc:
+        raise ArtifactError(f"artifact holds a non-finite number ({exc})") from None
+
+
+def content_sha256(data: dict) -> str:
+    """sha256 of the canonical JSON of ``data`` without its ``sha256`` key."""
+    body = {k: v for k, v in data.items() if k != "sha256"}
+    return hashlib.sha256(canonical_json(body).encode("ascii")).hexdigest()
+
+
+def seal(data: dict) -> dict:
+    """Return a copy of ``data`` with its ``sha256`` set to the hash of its content."""
+    sealed = {k: v for k, v in data.items() if k != "sha256"}
+    sealed["sha256"] = content_sha256(sealed)
+    return sealed
+
+
+def render(data: dict) -> str:
+    """The text of ``gains.json``: the sealed dict, sorted keys, two-space indent, trailing newline."""
+    canonical_json(data)  # rejects NaN/Inf with a clear error
+    return json.dumps(data, sort_keys=True, indent=2, allow_nan=False) + "\n"
+
+
+def matrix_to_json(a: np.ndarray) -> list[list[float]]:
+    """A 2-D array as a list of row lists of Python floats (``-0.0`` folded to ``0.0``)."""
+    a = np.atleast_2d(np.asarray(a, dtype=float))
+    return [[float(v) + 0.0 for v in row] for row in a]
+
+
+def vector_to_json(v: np.ndarray) -> list[float]:
+    """A 1-D array as a list of Python floats."""
+    return [float(x) + 0.0 for x in np.asarray(v, dtype=float).ravel()]
+
+
+@dataclass(frozen=True)
+class Artifact:
+    """A loaded, validated gain artifact with its matrices as float64 arrays.
+
+    When there is no integral action (``q == 0``) ``Ci``, ``Ki`` and ``Kaw`` are empty arrays of
+    shapes (0, p), (m, 0) and (0, m); ``M`` is ``None`` unless ``observer_form == "current"``.
+    """
+
+    data: dict = field(repr=False)
+    name: str
+    Ts: float
+    n: int
+    m: int
+    p: int
+    q: int
+    Ad: np.ndarray
+    Bd: np.ndarray
+    Cd: np.ndarray
+    Dd: np.ndarray
+    K: np.ndarray
+    L: np.ndarray
+    M: np.ndarray | None
+    Ci: np.ndarray
+    Ki: np.ndarray
+    Kaw: np.ndarray
+    u_min: np.ndarray
+    u_max: np.ndarray
+    xh0: np.ndarray
+    z0: np.ndarray
+    anti_windup: str
+    observer_form: str
+    sha256: str
+
+    @property
+    def signals(self) -> dict:
+        """Names of states, inputs, outputs and references."""
+        return self.data["signals"]
+
+
+def _matrix(data: dict, key: str, shape: tuple[int, int]) -> np.ndarray:
+    rows = data[key]
+    widths = {len(r) for r in rows}
+    if len(widths) != 1:
+        raise ArtifactError(f"artifact matrix {key} has rows of different lengths")
+    a = np.array(rows, dtype=float)
+    if a.shape != shape:
+        raise ArtifactError(f"artifact matrix {key} is {a.shape[0]}x{a.shape[1]}, expected {shape[0]}x{shape[1]}")
+    if not np.all(np.isfinite(a)):
+        raise ArtifactError(f"artifact matrix {key} holds a non-finite entry")
+    return a
+
+
+def _vector(data: dict, key: str, length: int, default: float | None = None) -> np.ndarray:
+    if key not in data:
+        if default is None:
+            raise ArtifactError(f"artifact lacks {key}")
+        return np.full(length, default)
+    v = np.array(data[key], dtype=float)
+    if v.shape != (length,):
+        raise ArtifactError(f"artifact vector {key} has length {v.size}, expected {length}")
+    if not np.all(np.isfinite(v)):
+        raise ArtifactError(f"artifact vector {key} holds a non-finite entry")
+    return v
+
+
+def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
+    """Validate ``data`` (schema, hash, dimensions, invariants) and return an :class:`Artifact`."""
+    import jsonschema
+
+    if not isinstance(data, dict):
+        raise ArtifactError("artifact is not a JSON object")
+    validator = jsonschema.Draft202012Validator(schema())
+    errors = sorted(validator.iter_errors(data), key=lambda e: list(e.path))
+    if errors:
+        err = errors[0]
+        where = "/".join(str(p) for p in err.path) or "top level"
+        raise ArtifactError(f"artifact does not match the schema at {where}: {err.message}")
+    if check_hash:
+        actual = content_sha256(data)
+        if actual != data["sha256"]:
+            raise IntegrityError(
+                f"artifact sha256 mismatch: recorded {data['sha256'][:12]}..., content hashes to {actual[:12]}... "
+                "(the file was edited after design)"
+            )
+    n, m, p, q = (int(data[k]) for k in "nmpq")
+    Ad = _matrix(data, "Ad", (n, n))
+    Bd = _matrix(data, "Bd", (n, m))
+    Cd = _matrix(data, "Cd", (p, n))
+    Dd = _matrix(data, "Dd", (p, m))
+    K = _matrix(data, "K", (m, n))
+    L = _matrix(data, "L", (n, p))
+    form = data["observer_form"]
+    M = None
+    if form == "current":
+        if "M" not in data:
+            raise ArtifactError("observer_form 'current' needs the filter gain M")
+        M = _matrix(data, "M", (n, p))
+        if np.any(Dd != 0.0):
+            raise ArtifactError("observer_form 'current' requires Dd = 0")
+        if not np.allclose(L, Ad @ M, rtol=1e-9, atol=1e-12):
+            raise ArtifactError("observer_form 'current' requires L = Ad M")
+    elif "M" in data:
+        raise ArtifactError("M is only used with observer_form 'current'")
+    if q > 0:
+        missing = [k for k in ("Ci", "Ki", "Kaw") if k not in data]
+        if missing:
+            raise ArtifactError(f"integral action (q={q}) needs {', '.join(missing)}")
+        Ci = _matrix(data, "Ci", (q, p))
+        Ki = _matrix(data, "Ki", (m, q))
+        Kaw = _matrix(data, "Kaw", (q, m))
+    else:
+        present = [k for k in ("Ci", "Ki", "Kaw") if k in data]
+        if present:
+            raise ArtifactError(f"{', '.join(present)} given but q = 0")
+        Ci, Ki, Kaw = np.zeros((0, p)), np.zeros((m, 0)), np.zeros((0, m))
+    u_min = _vector(data, "u_min", m)
+    u_max = _vector(data, "u_max", m)
+    if np.any(u_min > u_max):
+        raise ArtifactError("artifact has u_min > u_max for some input")
+    sig = data["signals"]
+    for key, size in (("states", n), ("inputs", m), ("outputs", p), ("references", q)):
+        if len(sig[key]) != size:
+            raise ArtifactError(f"signals.{key} names {len(sig[key])} signals, expected {size}")
+    return Artifact(
+        data=data, name=data["name"], Ts=float(data["Ts"]), n=n, m=m, p=p, q=q,
+        Ad=Ad, Bd=Bd, Cd=Cd, Dd=Dd, K=K, L=L, M=M, Ci=Ci, Ki=Ki, Kaw=Kaw,
+        u_min=u_min, u_max=u_max, xh0=_vector(data, "xh0", n, 0.0), z0=_vector(data, "z0", q, 0.0),
+        anti_windup=data["anti_windup"], observer_form=form, sha256=data["sha256"],
+    )
+
+
+def load(path: str | Path, *, check_hash: bool = True) -> Artifact:
+    """Read and validate ``gains.json`` at ``path``.
+
+    Raises
+    ------
+    ArtifactError
+        Not JSON, schema violation, inconsistent dimensions or invariants.
+    IntegrityError
+        The recorded sha256 does not match the content.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text("utf-8")
+    except FileNotFoundError:
+        raise ArtifactError(f"artifact {path} not found") from None
+    except IsADirectoryError:
+        raise ArtifactError(f"artifact {path} is a directory, not a gains.json file") from None
+    try:
+        data = json.loads(text, parse_constant=_reject_constant)
+    except json.JSONDecodeError as exc:
+        raise ArtifactError(f"artifact {path} is not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    return from_dict(data, check_hash=check_hash)
+
+
+def _reject_constant(name: str) -> float:
+    raise ArtifactError(f"artifact holds the non-finite constant {name}")
+
+
+def write(path: str | Path, data: dict) -> None:
+    """Seal ``data`` and write it atomically to ``path``."""
+    atomic_write_text(path, render(seal(data)))
+

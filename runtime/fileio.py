@@ -1,0 +1,56 @@
+"""Atomic file output: nothing half-written, nothing written at all when a step fails."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Mapping
+
+from .errors import GainlinkError
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically."""
+    atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def prepare_output_dir(out_dir: str | os.PathLike) -> Path:
+    """Return ``out_dir`` as a Path, creating it; fail with one clear line if it is not a folder."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise GainlinkError(f"output path {out} exists and is not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise GainlinkError(f"cannot create output directory {out}: {exc.strerror}") from None
+    return out
+
+
+def publish_files(out_dir: str | os.PathLike, files: Mapping[str, bytes | str]) -> list[Path]:
+    """Write every file of ``files`` (name -> content) into ``out_dir``, each atomically.
+
+    Callers compute all content first and publish last, so a failing step leaves the folder untouched.
+    """
+    out = prepare_output_dir(out_dir)
+    written = []
+    for name, content in files.items():
+        data = content.encode("utf-8") if isinstance(content, str) else content
+        target = out / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(target, data)
+        written.append(target)
+    return written

@@ -1,0 +1,98 @@
+"""The float64 reference of the gainlink control law (DESIGN.md, "The control law").
+
+This is the executable statement of the contract that the C loop (float32) and every test
+compare against. It is deliberately plain: one step is a direct transcription of the law.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .artifact import Artifact
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What one step returns: the command, which inputs saturated, and whether the sample was refused."""
+
+    u: np.ndarray
+    saturated: np.ndarray
+    fault: bool
+
+
+@dataclass(frozen=True)
+class Trace:
+    """A block of steps: row k holds step k's command, saturation flags, and the state after it."""
+
+    u: np.ndarray  # (N, m)
+    saturated: np.ndarray  # (N, m) bool
+    xh: np.ndarray  # (N, n) estimate after the step
+    z: np.ndarray  # (N, q) integrator after the step
+    fault: np.ndarray  # (N,) bool
+
+
+class ReferenceLoop:
+    """The control law in float64, with caller-visible state ``xh`` and ``z``.
+
+    Parameters
+    ----------
+    artifact : Artifact
+        A validated gain artifact.
+    """
+
+    def __init__(self, artifact: Artifact) -> None:
+        self.a = artifact
+        self.safe_u = np.clip(np.zeros(artifact.m), artifact.u_min, artifact.u_max)
+        self.reset()
+
+    def reset(self) -> None:
+        """Put the estimate and the integrator back to the artifact's initial values."""
+        self.xh = self.a.xh0.copy()
+        self.z = self.a.z0.copy()
+
+    def step(self, y: np.ndarray, r: np.ndarray | None = None) -> StepResult:
+        """Run one sample of the law on measurement ``y`` (p) and reference ``r`` (q)."""
+        a = self.a
+        y = np.asarray(y, dtype=float).reshape(a.p)
+        r = np.zeros(a.q) if r is None else np.asarray(r, dtype=float).reshape(a.q)
+        if not (np.all(np.isfinite(y)) and np.all(np.isfinite(r))):
+            return StepResult(u=self.safe_u.copy(), saturated=np.zeros(a.m, dtype=bool), fault=True)
+        if a.observer_form == "current":
+            xc = self.xh + a.M @ (y - a.Cd @ self.xh)
+        else:
+            xc = self.xh
+        v = -a.K @ xc - a.Ki @ self.z
+        u = np.minimum(np.maximum(v, a.u_min), a.u_max)
+        saturated = u != v
+        e = r - a.Ci @ y
+        if a.anti_windup == "none":
+            z = self.z + a.Ts * e
+        elif a.anti_windup == "clamp":
+            z = self.z if saturated.any() else self.z + a.Ts * e
+        else:  # backcalc
+            z = self.z + a.Ts * e + a.Kaw @ (u - v)
+        if a.observer_form == "current":
+            xh = a.Ad @ xc + a.Bd @ u
+        else:
+            xh = a.Ad @ self.xh + a.Bd @ u + a.L @ (y - a.Cd @ self.xh - a.Dd @ u)
+        self.xh, self.z = xh, z
+        return StepResult(u=u, saturated=saturated, fault=False)
+
+    def run(self, Y: np.ndarray, R: np.ndarray | None = None) -> Trace:
+        """Run one step per row of ``Y`` (N, p) and ``R`` (N, q) from the current state."""
+        a = self.a
+        Y = np.asarray(Y, dtype=float).reshape(-1, a.p)
+        N = Y.shape[0]
+        R = np.zeros((N, a.q)) if R is None else np.asarray(R, dtype=float).reshape(N, a.q)
+        U = np.empty((N, a.m))
+        S = np.empty((N, a.m), dtype=bool)
+        XH = np.empty((N, a.n))
+        Z = np.empty((N, a.q))
+        F = np.empty(N, dtype=bool)
+        for k in range(N):
+            res = self.step(Y[k], R[k])
+            U[k], S[k], F[k] = res.u, res.saturated, res.fault
+            XH[k], Z[k] = self.xh, self.z
+        return Trace(u=U, saturated=S, xh=XH, z=Z, fault=F)
