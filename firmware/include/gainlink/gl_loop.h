@@ -1,0 +1,261 @@
+/**
+ * @file gl_loop.h
+ * @brief gainlink control loop: the DESIGN.md law in float32, double-buffered gains, watchdog.
+ *
+ * The law (predictor form; the current-estimator form is folded into the same step, see below):
+ * @code
+ *   v  = -K xh - Ki z                      (current form: -K xc - Ki z, xc = xh + M (y - Cd xh))
+ *   u  = clamp(v, u_min, u_max)
+ *   z += Ts (r - Ci y)            [+ Kaw (u - v) for back-calculation; skipped on saturation for clamp]
+ *   xh = Ad xh + Bd u + L (y - Cd xh - Dd u)     (always fed the saturated u)
+ * @endcode
+ * The library evaluates it as
+ * @code
+ *   v  = -(Kx xh + Ky y + Ki z)      Kx = K (I - M Cd), Ky = K M   (predictor: Kx = K, no Ky term)
+ *   xh = F xh + G u + L y            F = Ad - L Cd,  G = Bd - L Dd (current: L = Ad M, Dd = 0)
+ * @endcode
+ * with F, G, Kx, Ky derived in double precision from the artifact's matrices each time a gain set
+ * is accepted (gl_loop_init() or a staged update), so the per-sample step is only multiply-adds.
+ * Every multiply-add is an explicit fused `fmaf`, so a host (x86-64, SSE) build and the Cortex-M4F
+ * build (`vfma.f32`) give bit-identical results; both are compiled with `-ffp-contract=off`.
+ *
+ * Dimensions and structure (n, m, p, q, observer form, anti-windup mode) are compile-time macros from
+ * the generated header `gl_gains.h` (`gainlink export ARTIFACT --out DIR`); the numbers are
+ * run-time data (::gl_gains_t) and may be replaced while running (see "Gain updates").
+ *
+ * @par CMake targets (firmware/CMakeLists.txt, configure with `-DGL_GAINS_DIR=<export dir>`)
+ * - `gainlink_loop`  static library: this API (links `m`).
+ * - `gainlink_gains` static library: the generated `gl_gains_default` of the artifact in GL_GAINS_DIR,
+ *                    PUBLIC include dirs `firmware/include` and GL_GAINS_DIR.
+ * - host only: `gainlink_host` (shared library for Python ctypes), `gainlink_loop_host` (executable).
+ * - host only: apps in `firmware/apps/can` and `firmware/apps/mavlink` are added when present; they
+ *   link `gainlink_loop gainlink_gains`.
+ *
+ * @par Gain updates (double-buffered)
+ * A gain set is a whole ::gl_gains_t. To change gains at run time (e.g. one parameter over MAVLink):
+ * @code
+ *   static gl_gains_t staged;                    // caller-owned, e.g. a copy of gl_gains_default
+ *   staged = gl_gains_default;
+ *   staged.K[0][2] = 1.5f;                       // edit any numbers
+ *   staged.crc32 = gl_gains_crc32(&staged);      // seal it (or receive it sealed from the sender)
+ *   gl_status_t st = gl_loop_stage(&loop, &staged);   // checks; derives into the inactive bank
+ *   // st == GL_OK: the new set becomes active at the start of the next gl_loop_step()
+ *   // st <  0   : rejected whole (GL_ERR_DIMS, GL_ERR_NANINF, GL_ERR_CRC, GL_ERR_RANGE, GL_ERR_BUSY);
+ *   //             the running set is untouched.
+ * @endcode
+ * gl_loop_stage() checks, in this order: dimensions and structure against the compiled ones
+ * (GL_ERR_DIMS), CRC-32 of the payload (GL_ERR_CRC), finiteness of every number and Ts > 0
+ * (GL_ERR_NANINF), u_min <= u_max (GL_ERR_RANGE), then derives F, G, Kx, Ky and checks them finite.
+ * The swap happens inside gl_loop_step() before the sample is processed, so a step always runs on one
+ * complete set. gl_loop_active_crc32() tells which set is running. gl_loop_stage() may be called from a
+ * lower-priority context than gl_loop_step(); only one update can be pending (else GL_ERR_BUSY).
+ *
+ * @par Faults and watchdog
+ * A non-finite y or r leaves xh and z untouched, returns the safe command (zero clamped into
+ * [u_min, u_max]) and GL_ERR_NANINF. Call gl_loop_idle() in a period with no new measurement: it holds
+ * the last command, and after `watchdog_periods` consecutive idle periods returns the safe command and
+ * GL_ERR_WATCHDOG until the next gl_loop_step().
+ */
+#ifndef GAINLINK_GL_LOOP_H
+#define GAINLINK_GL_LOOP_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gl_gains.h" /* generated: GL_N, GL_M, GL_P, GL_Q, GL_OBSERVER_FORM, GL_ANTI_WINDUP, ... */
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Observer forms (values of GL_OBSERVER_FORM and gl_gains_t::observer_form). */
+#define GL_FORM_PREDICTOR 0
+#define GL_FORM_CURRENT 1
+
+/** Anti-windup modes (values of GL_ANTI_WINDUP and gl_gains_t::anti_windup). */
+#define GL_AW_NONE 0
+#define GL_AW_CLAMP 1
+#define GL_AW_BACKCALC 2
+
+/** Array length used for integrator-sized arrays (C has no zero-length arrays; unused when GL_Q == 0). */
+#define GL_QA ((GL_Q) > 0 ? (GL_Q) : 1)
+
+_Static_assert(GL_N >= 1 && GL_N <= 64, "GL_N out of range");
+_Static_assert(GL_M >= 1 && GL_M <= 16, "GL_M out of range");
+_Static_assert(GL_P >= 1 && GL_P <= 16, "GL_P out of range");
+_Static_assert(GL_Q >= 0 && GL_Q <= 16, "GL_Q out of range");
+_Static_assert(GL_OBSERVER_FORM == GL_FORM_PREDICTOR || GL_OBSERVER_FORM == GL_FORM_CURRENT, "bad observer form");
+_Static_assert(GL_ANTI_WINDUP == GL_AW_NONE || GL_ANTI_WINDUP == GL_AW_CLAMP || GL_ANTI_WINDUP == GL_AW_BACKCALC,
+               "bad anti-windup mode");
+
+/** Status codes: 0 success, negative errors, positive information. */
+typedef enum gl_status {
+    GL_OK = 0,              /**< Step done, no input saturated / call succeeded. */
+    GL_SATURATED = 1,       /**< Step done, at least one input was clamped (see gl_loop_t::sat_mask). */
+    GL_ERR_NULL = -1,       /**< A required pointer was NULL. */
+    GL_ERR_NANINF = -2,     /**< Non-finite measurement/reference (step) or gain (update). */
+    GL_ERR_CRC = -3,        /**< Gain set checksum does not match its payload. */
+    GL_ERR_DIMS = -4,       /**< Gain set dimensions/structure differ from the compiled ones. */
+    GL_ERR_RANGE = -5,      /**< A value is out of its range (u_min > u_max, Ts <= 0, watchdog 0). */
+    GL_ERR_WATCHDOG = -6,   /**< No measurement for the configured number of periods: safe command. */
+    GL_ERR_BUSY = -7,       /**< A staged gain set is still waiting to be applied. */
+    GL_ERR_FPU = -8         /**< Startup self-test: the FPU is not enabled (Cortex-M port). */
+} gl_status_t;
+
+/**
+ * @brief One complete gain set, as in the artifact (float32). May live in flash (const).
+ *
+ * Matrices are row-major `[rows][cols]`. Integrator-sized arrays have GL_QA rows/cols and are all zero
+ * when GL_Q == 0. `M` is all zero in the predictor form. `crc32` covers every other field, serialised
+ * as little-endian: n, m, p, q, observer_form, anti_windup as uint32, then every float in declaration
+ * order (see gl_gains_crc32()).
+ */
+typedef struct gl_gains {
+    uint32_t n;                /**< States; must equal GL_N. */
+    uint32_t m;                /**< Inputs; must equal GL_M. */
+    uint32_t p;                /**< Outputs; must equal GL_P. */
+    uint32_t q;                /**< Integrators; must equal GL_Q. */
+    uint32_t observer_form;    /**< GL_FORM_*; must equal GL_OBSERVER_FORM. */
+    uint32_t anti_windup;      /**< GL_AW_*; must equal GL_ANTI_WINDUP. */
+    float Ts;                  /**< Sample time [s], > 0. */
+    float Ad[GL_N][GL_N];      /**< Discrete state matrix. */
+    float Bd[GL_N][GL_M];      /**< Discrete input matrix. */
+    float Cd[GL_P][GL_N];      /**< Output matrix. */
+    float Dd[GL_P][GL_M];      /**< Feed-through matrix (zero in the current form). */
+    float K[GL_M][GL_N];       /**< State feedback gain. */
+    float L[GL_N][GL_P];       /**< Observer (predictor) gain; L = Ad M in the current form. */
+    float M[GL_N][GL_P];       /**< Current-estimator filter gain (zero in the predictor form). */
+    float Ci[GL_QA][GL_P];     /**< Tracked-output selector. */
+    float Ki[GL_M][GL_QA];     /**< Integral gain. */
+    float Kaw[GL_QA][GL_M];    /**< Back-calculation anti-windup gain. */
+    float u_min[GL_M];         /**< Lower command limits. */
+    float u_max[GL_M];         /**< Upper command limits. */
+    float xh0[GL_N];           /**< Initial estimate (gl_loop_reset()). */
+    float z0[GL_QA];           /**< Initial integrator (gl_loop_reset()). */
+    uint32_t crc32;            /**< CRC-32 (IEEE 802.3, as zlib.crc32) of the payload. */
+} gl_gains_t;
+
+/** @brief Derived coefficients the step runs on (one bank of the double buffer). Internal layout. */
+typedef struct gl_coeffs {
+    float Kx[GL_M][GL_N];      /**< Feedback on the estimate. */
+    float Ky[GL_M][GL_P];      /**< Feedback on the measurement (current form only). */
+    float Ki[GL_M][GL_QA];     /**< Integral gain. */
+    float u_min[GL_M];         /**< Lower limits. */
+    float u_max[GL_M];         /**< Upper limits. */
+    float u_safe[GL_M];        /**< Zero clamped into the limits. */
+    float Ci[GL_QA][GL_P];     /**< Tracked-output selector. */
+    float Ts;                  /**< Sample time. */
+    float Kaw[GL_QA][GL_M];    /**< Anti-windup gain. */
+    float F[GL_N][GL_N];       /**< Ad - L Cd. */
+    float G[GL_N][GL_M];       /**< Bd - L Dd. */
+    float L[GL_N][GL_P];       /**< Observer gain. */
+    float xh0[GL_N];           /**< Reset estimate. */
+    float z0[GL_QA];           /**< Reset integrator. */
+    uint32_t crc32;            /**< Checksum of the gain set these were derived from. */
+} gl_coeffs_t;
+
+/** @brief Loop instance: caller-owned (static storage), no allocation. Fields are read-only for callers. */
+typedef struct gl_loop {
+    gl_coeffs_t bank[2];              /**< Double buffer of coefficients. */
+    const gl_coeffs_t *active;        /**< The bank gl_loop_step() runs on. */
+    volatile uint32_t pending;        /**< 1 when the inactive bank holds an accepted, not yet applied set. */
+    float xh[GL_N];                   /**< State estimate. */
+    float z[GL_QA];                   /**< Integrator state. */
+    float u[GL_M];                    /**< Last command returned. */
+    uint32_t sat_mask;                /**< Bit k set when input k saturated on the last step. */
+    uint32_t missed;                  /**< Consecutive gl_loop_idle() periods since the last step. */
+    uint32_t watchdog_periods;        /**< Idle periods before the safe command. */
+    uint32_t faults;                  /**< Count of refused (non-finite) samples. */
+    uint32_t swaps;                   /**< Count of applied gain updates. */
+} gl_loop_t;
+
+/** The artifact's gain set, generated by `gainlink export` (gl_gains.c, CMake target gainlink_gains). */
+extern const gl_gains_t gl_gains_default;
+
+/**
+ * @brief Initialise a loop with a gain set and reset its state.
+ * @param[out] loop              Loop instance.
+ * @param[in]  gains             Gain set (checked as by gl_loop_stage()).
+ * @param[in]  watchdog_periods  Idle periods tolerated before the safe command (>= 1).
+ * @return GL_OK, or GL_ERR_NULL / GL_ERR_DIMS / GL_ERR_CRC / GL_ERR_NANINF / GL_ERR_RANGE.
+ */
+gl_status_t gl_loop_init(gl_loop_t *loop, const gl_gains_t *gains, uint32_t watchdog_periods);
+
+/**
+ * @brief Put xh and z back to the active set's xh0, z0; clear the watchdog and the last command.
+ * @param[in,out] loop  Loop instance.
+ * @return GL_OK or GL_ERR_NULL.
+ */
+gl_status_t gl_loop_reset(gl_loop_t *loop);
+
+/**
+ * @brief One sample of the control law.
+ * @param[in,out] loop  Loop instance (a pending gain set is applied first).
+ * @param[in]  y        Measurement, GL_P values.
+ * @param[in]  r        Reference, GL_Q values (may be NULL when GL_Q == 0).
+ * @param[out] u        Command, GL_M values.
+ * @return GL_OK, GL_SATURATED (see loop->sat_mask), GL_ERR_NANINF (state untouched, u = safe command)
+ *         or GL_ERR_NULL.
+ */
+gl_status_t gl_loop_step(gl_loop_t *loop, const float *y, const float *r, float *u);
+
+/**
+ * @brief A period without a new measurement: hold the last command, or the safe one once the watchdog expired.
+ * @param[in,out] loop  Loop instance.
+ * @param[out]    u     Command, GL_M values.
+ * @return GL_OK while holding, GL_ERR_WATCHDOG once `watchdog_periods` idle periods have passed, GL_ERR_NULL.
+ */
+gl_status_t gl_loop_idle(gl_loop_t *loop, float *u);
+
+/**
+ * @brief Check a gain set and stage it in the inactive bank; applied at the next gl_loop_step().
+ * @param[in,out] loop   Loop instance.
+ * @param[in]     gains  Candidate set (its crc32 must match gl_gains_crc32()).
+ * @return GL_OK (staged), or an error and nothing changed (see "Gain updates").
+ */
+gl_status_t gl_loop_stage(gl_loop_t *loop, const gl_gains_t *gains);
+
+/**
+ * @brief Check a gain set without staging it (same checks as gl_loop_stage()).
+ * @param[in] gains  Candidate set.
+ * @return GL_OK or the first failing check's error.
+ */
+gl_status_t gl_gains_check(const gl_gains_t *gains);
+
+/**
+ * @brief CRC-32 (IEEE 802.3, reflected, as zlib.crc32) of a gain set's payload (all fields but crc32).
+ * @param[in] gains  Gain set.
+ * @return The checksum (0 if gains is NULL).
+ */
+uint32_t gl_gains_crc32(const gl_gains_t *gains);
+
+/**
+ * @brief Checksum of the gain set currently running.
+ * @param[in] loop  Loop instance.
+ * @return Its crc32 (0 if loop is NULL).
+ */
+uint32_t gl_loop_active_crc32(const gl_loop_t *loop);
+
+/**
+ * @brief Run a block of samples (one call per block, for replay engines).
+ *
+ * Row k of each array belongs to step k. Any output pointer may be NULL.
+ * @param[in,out] loop   Loop instance.
+ * @param[in]  count     Number of steps.
+ * @param[in]  Y         count x GL_P measurements.
+ * @param[in]  R         count x GL_Q references (may be NULL when GL_Q == 0).
+ * @param[out] U         count x GL_M commands.
+ * @param[out] SAT       count saturation masks (bit k: input k).
+ * @param[out] XH        count x GL_N estimates after each step.
+ * @param[out] Z         count x GL_QA integrators after each step.
+ * @param[out] FAULT     count flags, 1 where the sample was refused.
+ * @return GL_OK or GL_ERR_NULL.
+ */
+gl_status_t gl_loop_run_block(gl_loop_t *loop, uint32_t count, const float *Y, const float *R, float *U,
+                              uint32_t *SAT, float *XH, float *Z, uint8_t *FAULT);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* GAINLINK_GL_LOOP_H */

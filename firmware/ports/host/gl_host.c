@@ -1,0 +1,31 @@
+/**
+ * @file gl_host.c
+ * @brief Host port: the entry points the Python ctypes binding (gainlink.engines.native) calls.
+ */
+#include "gl_host.h"
+
+size_t gl_host_loop_size(void)
+{
+    return sizeof(gl_loop_t);
+}
+
+size_t gl_host_gains_size(void)
+{
+    return sizeof(gl_gains_t);
+}
+
+const gl_gains_t *gl_host_default_gains(void)
+{
+    return &gl_gains_default;
+}
+
+const char *gl_host_artifact_sha256(void)
+{
+    return GL_ARTIFACT_SHA256;
+}
+
+uint32_t gl_host_dims(uint32_t which)
+{
+    static const uint32_t dims[6] = {GL_N, GL_M, GL_P, GL_Q, GL_OBSERVER_FORM, GL_ANTI_WINDUP};
+    return which < 6u ? dims[which] : 0u;
+}

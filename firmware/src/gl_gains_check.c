@@ -1,0 +1,165 @@
+/**
+ * @file gl_gains_check.c
+ * @brief Gain-set checksum, validation and derivation of the step coefficients (double precision).
+ */
+#include <math.h>
+#include <stddef.h>
+#include <string.h>
+
+#include "gl_internal.h"
+
+/** Number of floats in the checksummed payload, from Ts through z0. */
+#define GL_PAYLOAD_FLOATS                                                                                     \
+    (1 + GL_N * GL_N + GL_N * GL_M + GL_P * GL_N + GL_P * GL_M + GL_M * GL_N + 2 * GL_N * GL_P + GL_QA * GL_P + \
+     GL_M * GL_QA + GL_QA * GL_M + 2 * GL_M + GL_N + GL_QA)
+
+_Static_assert(offsetof(gl_gains_t, z0) + sizeof(((gl_gains_t *)0)->z0) - offsetof(gl_gains_t, Ts) ==
+                   sizeof(float) * (GL_PAYLOAD_FLOATS),
+               "gl_gains_t float payload must be contiguous (no padding)");
+
+static uint32_t crc32_update(uint32_t crc, uint32_t word)
+{
+    for (unsigned byte = 0; byte < 4u; ++byte) {
+        crc ^= (word >> (8u * byte)) & 0xFFu; /* little-endian byte order, independent of the host */
+        for (unsigned bit = 0; bit < 8u; ++bit) {
+            crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+        }
+    }
+    return crc;
+}
+
+uint32_t gl_gains_crc32(const gl_gains_t *gains)
+{
+    if (gains == NULL) {
+        return 0u;
+    }
+    uint32_t crc = 0xFFFFFFFFu;
+    const uint32_t header[6] = {gains->n, gains->m, gains->p, gains->q, gains->observer_form, gains->anti_windup};
+    for (size_t i = 0; i < 6u; ++i) {
+        crc = crc32_update(crc, header[i]);
+    }
+    const float *payload = &gains->Ts;
+    for (size_t i = 0; i < (size_t)(GL_PAYLOAD_FLOATS); ++i) {
+        uint32_t bits;
+        memcpy(&bits, &payload[i], sizeof bits);
+        crc = crc32_update(crc, bits);
+    }
+    return crc ^ 0xFFFFFFFFu;
+}
+
+gl_status_t gl_gains_check(const gl_gains_t *gains)
+{
+    if (gains == NULL) {
+        return GL_ERR_NULL;
+    }
+    if (gains->n != GL_N || gains->m != GL_M || gains->p != GL_P || gains->q != GL_Q ||
+        gains->observer_form != GL_OBSERVER_FORM || gains->anti_windup != GL_ANTI_WINDUP) {
+        return GL_ERR_DIMS;
+    }
+    if (gains->crc32 != gl_gains_crc32(gains)) {
+        return GL_ERR_CRC;
+    }
+    const float *payload = &gains->Ts;
+    for (size_t i = 0; i < (size_t)(GL_PAYLOAD_FLOATS); ++i) {
+        if (!isfinite(payload[i])) {
+            return GL_ERR_NANINF;
+        }
+    }
+    if (!(gains->Ts > 0.0f)) {
+        return GL_ERR_RANGE;
+    }
+    for (size_t k = 0; k < GL_M; ++k) {
+        if (gains->u_min[k] > gains->u_max[k]) {
+            return GL_ERR_RANGE;
+        }
+    }
+    return GL_OK;
+}
+
+/** Round a double to float and report whether it stayed finite. */
+static int store_finite(float *dst, double value)
+{
+    *dst = (float)value;
+    return isfinite(*dst);
+}
+
+gl_status_t gl_coeffs_derive(const gl_gains_t *g, gl_coeffs_t *c)
+{
+    gl_status_t st = gl_gains_check(g);
+    if (st != GL_OK) {
+        return st;
+    }
+    int ok = 1;
+    /* Observer gain actually used: L, or Ad M in the current form (DESIGN.md: L = Ad M). */
+    double Lrow[GL_P];
+    for (size_t i = 0; i < GL_N; ++i) {
+        for (size_t k = 0; k < GL_P; ++k) {
+            double acc = (double)g->L[i][k];
+#if GL_OBSERVER_FORM == GL_FORM_CURRENT
+            acc = 0.0;
+            for (size_t l = 0; l < GL_N; ++l) {
+                acc += (double)g->Ad[i][l] * (double)g->M[l][k];
+            }
+#endif
+            Lrow[k] = acc;
+            ok &= store_finite(&c->L[i][k], acc);
+        }
+        for (size_t j = 0; j < GL_N; ++j) {
+            double acc = (double)g->Ad[i][j];
+            for (size_t k = 0; k < GL_P; ++k) {
+                acc -= Lrow[k] * (double)g->Cd[k][j];
+            }
+            ok &= store_finite(&c->F[i][j], acc);
+        }
+        for (size_t j = 0; j < GL_M; ++j) {
+            double acc = (double)g->Bd[i][j];
+            for (size_t k = 0; k < GL_P; ++k) {
+                acc -= Lrow[k] * (double)g->Dd[k][j];
+            }
+            ok &= store_finite(&c->G[i][j], acc);
+        }
+        c->xh0[i] = g->xh0[i];
+    }
+    /* Feedback, stored negated so that v is a plain sum of products. */
+    for (size_t i = 0; i < GL_M; ++i) {
+        double KMrow[GL_P];
+        for (size_t k = 0; k < GL_P; ++k) {
+            double acc = 0.0;
+#if GL_OBSERVER_FORM == GL_FORM_CURRENT
+            for (size_t l = 0; l < GL_N; ++l) {
+                acc += (double)g->K[i][l] * (double)g->M[l][k];
+            }
+#endif
+            KMrow[k] = acc;
+            ok &= store_finite(&c->Ky[i][k], -acc);
+        }
+        for (size_t j = 0; j < GL_N; ++j) {
+            double acc = (double)g->K[i][j];
+            for (size_t k = 0; k < GL_P; ++k) {
+                acc -= KMrow[k] * (double)g->Cd[k][j];
+            }
+            ok &= store_finite(&c->Kx[i][j], -acc);
+        }
+        for (size_t j = 0; j < GL_QA; ++j) {
+            c->Ki[i][j] = -g->Ki[i][j];
+        }
+        c->u_min[i] = g->u_min[i];
+        c->u_max[i] = g->u_max[i];
+        float safe = 0.0f;
+        safe = safe < g->u_min[i] ? g->u_min[i] : safe;
+        safe = safe > g->u_max[i] ? g->u_max[i] : safe;
+        c->u_safe[i] = safe;
+    }
+    for (size_t j = 0; j < GL_QA; ++j) {
+        for (size_t k = 0; k < GL_P; ++k) {
+            c->Ci[j][k] = -g->Ci[j][k]; /* negated: e = r + sum(-Ci y) */
+        }
+        for (size_t k = 0; k < GL_M; ++k) {
+            c->Kaw[j][k] = g->Kaw[j][k];
+        }
+        c->z0[j] = g->z0[j];
+    }
+    c->Ts = g->Ts;
+    c->crc32 = g->crc32;
+    return ok ? GL_OK : GL_ERR_NANINF;
+}
