@@ -1,0 +1,222 @@
+"""A plant simulated by an FMI 2.0 Co-Simulation FMU through fmpy's low-level ``FMU2Slave`` loop.
+
+Per step the bridge calls the raw ``fmi2SetReal`` / ``fmi2DoStep`` / ``fmi2GetReal`` with ctypes
+arrays built once (FIELD-NOTES: ~2.5 us per step instead of ~4.8 us through the list wrappers).
+Snapshots use ``fmi2GetFMUstate`` / ``fmi2SetFMUstate`` when the FMU can.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import logging
+import os
+import shutil
+import zipfile
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from gainlink.errors import PlantError
+
+from .plant import PLANTS, Plant
+from .registry import take_keys
+
+log = logging.getLogger(__name__)
+
+
+def resolve_fmu(*, fmu: str | None, path: str | None, base_dir: Path | None = None) -> Path:
+    """The FMU file named by a plant config: ``fmu = "<project FMU name>"`` (built on demand) or ``path``."""
+    if (fmu is None) == (path is None):
+        raise PlantError("plant fmu: give exactly one of fmu (a project FMU name) or path (an .fmu file)")
+    if fmu is not None:
+        from .fmu_build import build_fmu
+
+        return build_fmu(fmu)
+    p = Path(path)
+    if not p.is_absolute() and base_dir is not None:
+        p = base_dir / p
+    if not p.exists():
+        raise PlantError(f"FMU {p} not found")
+    return p
+
+
+def read_description(path: Path) -> Any:
+    """fmpy's model description of ``path``; a clear :class:`PlantError` when it is not an FMU."""
+    from fmpy import read_model_description
+
+    if p_is_zip := path.is_file():
+        if not zipfile.is_zipfile(path):
+            raise PlantError(f"FMU {path} is not a zip archive (broken or not an FMU)")
+    try:
+        return read_model_description(str(path), validate=True)
+    except Exception as exc:  # fmpy raises plain Exceptions, lxml errors, KeyError, zipfile errors
+        kind = "archive" if p_is_zip else "folder"
+        raise PlantError(f"FMU {path}: cannot read modelDescription.xml from the {kind} ({exc})") from None
+
+
+class FmuPlant(Plant):
+    """A Co-Simulation FMU as a plant.
+
+    Parameters
+    ----------
+    path : Path
+        The ``.fmu`` file (or extracted folder).
+    inputs, outputs : list of str, optional
+        FMU variable names mapped to the artifact's inputs/outputs (default: the FMU's declared
+        inputs and outputs, in model-description order).
+    parameters : mapping, optional
+        Start values for parameters (or any settable real) applied on every reset.
+    states : list of str, optional
+        Variables reported as the plant state (default: continuous states from the model
+        structure, else the outputs).
+    """
+
+    def __init__(self, *, path: Path, inputs: Any = None, outputs: Any = None,
+                 parameters: Mapping[str, float] | None = None, states: Any = None) -> None:
+        from fmpy import extract
+        from fmpy.fmi2 import FMU2Slave, fmi2Real, fmi2ValueReference
+
+        self.path = Path(path)
+        md = read_description(self.path)
+        self.md = md
+        self.name = f"fmu:{md.modelName}"
+        if md.fmiVersion != "2.0":
+            raise PlantError(f"FMU {self.path} is FMI {md.fmiVersion}; the bridge runs FMI 2.0 Co-Simulation FMUs")
+        if md.coSimulation is None:
+            raise PlantError(f"FMU {self.path} has no Co-Simulation interface (only Model Exchange); "
+                             "the bridge needs Co-Simulation")
+        self.vars = {v.name: v for v in md.modelVariables}
+        real = {n for n, v in self.vars.items() if v.type == "Real"}
+        declared_in = [v.name for v in md.modelVariables if v.causality == "input" and v.type == "Real"]
+        declared_out = [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+        in_names = list(inputs) if inputs is not None else declared_in
+        out_names = list(outputs) if outputs is not None else declared_out
+        for what, names in (("input", in_names), ("output", out_names)):
+            bad = [n for n in names if n not in real]
+            if bad:
+                raise PlantError(f"FMU {md.modelName} has no Real variable named {', '.join(bad)} (for {what}s)")
+        if states is None:
+            if md.derivatives:
+                states = [d.variable.derivative.name for d in md.derivatives]
+            else:
+                states = out_names
+        self.input_names, self.output_names, self.state_names = tuple(in_names), tuple(out_names), tuple(states)
+        self.parameters = dict(parameters or {})
+        for key in self.parameters:
+            if key not in real:
+                raise PlantError(f"FMU {md.modelName} has no Real variable {key!r} to set")
+        self.can_snapshot = bool(md.coSimulation.canGetAndSetFMUstate)
+        self._unzip = extract(str(self.path)) if self.path.is_file() else str(self.path)
+        self._own_unzip = self.path.is_file()
+        try:
+            self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._unzip,
+                                 modelIdentifier=md.coSimulation.modelIdentifier, instanceName="plant")
+        except Exception as exc:
+            self._cleanup_unzip()
+            raise PlantError(f"FMU {self.path}: cannot load its binary ({exc})") from None
+        self._instantiated = False
+        vr = lambda names: (fmi2ValueReference * len(names))(*(self.vars[n].valueReference for n in names))  # noqa: E731
+        self._vr_in, self._vr_out, self._vr_state = vr(in_names), vr(out_names), vr(list(states))
+        self._val_in = (fmi2Real * len(in_names))()
+        self._val_out = (fmi2Real * len(out_names))()
+        self._val_state = (fmi2Real * len(states))()
+        self._out_np = np.frombuffer(self._val_out, dtype=np.float64)
+        self._in_np = np.frombuffer(self._val_in, dtype=np.float64)
+        self._n_in, self._n_out = len(in_names), len(out_names)
+        self.time = 0.0
+        self.reset(initial={})
+
+    def _cleanup_unzip(self) -> None:
+        if self._own_unzip and self._unzip:
+            shutil.rmtree(self._unzip, ignore_errors=True)
+            self._unzip = None
+
+    def _call(self, what: str, fn: Any, *args: Any) -> Any:
+        try:
+            return fn(*args)
+        except Exception as exc:
+            raise PlantError(f"FMU {self.md.modelName}: {what} failed ({exc})") from None
+
+    def reset(self, *, initial: Mapping[str, float]) -> None:
+        fmu = self.fmu
+        if self._instantiated:
+            self._call("terminate", fmu.terminate)
+            self._call("reset", fmu.reset)
+        else:
+            self._call("instantiate", fmu.instantiate)
+            self._instantiated = True
+        self._call("setupExperiment", fmu.setupExperiment, None, 0.0)
+        self._call("enterInitializationMode", fmu.enterInitializationMode)
+        values = dict(self.parameters)
+        for key, value in initial.items():
+            if key not in self.vars or self.vars[key].type != "Real":
+                raise PlantError(f"FMU {self.md.modelName} has no Real variable {key!r} for the initial state")
+            values[key] = float(value)
+        if values:
+            self._call("setReal", fmu.setReal, [self.vars[k].valueReference for k in values], list(values.values()))
+        self._call("exitInitializationMode", fmu.exitInitializationMode)
+        self.time = 0.0
+        self._call("getReal", fmu.fmi2GetReal, fmu.component, self._vr_out, self._n_out, self._val_out)
+
+    def outputs(self) -> np.ndarray:
+        return self._out_np.copy()
+
+    def advance(self, *, u: np.ndarray, dt: float) -> None:
+        fmu = self.fmu
+        self._in_np[:] = u
+        try:
+            fmu.fmi2SetReal(fmu.component, self._vr_in, self._n_in, self._val_in)
+            fmu.fmi2DoStep(fmu.component, self.time, dt, 1)
+            fmu.fmi2GetReal(fmu.component, self._vr_out, self._n_out, self._val_out)
+        except Exception as exc:
+            raise PlantError(f"FMU {self.md.modelName}: step at t={self.time:.6g} s failed ({exc})") from None
+        self.time += dt
+
+    def state(self) -> np.ndarray:
+        fmu = self.fmu
+        self._call("getReal", fmu.fmi2GetReal, fmu.component, self._vr_state, len(self.state_names), self._val_state)
+        return np.array(self._val_state[:], dtype=float)
+
+    def save_state(self) -> Any:
+        if not self.can_snapshot:
+            raise PlantError(f"FMU {self.md.modelName} cannot get/set its state (canGetAndSetFMUstate=false)")
+        return (self._call("getFMUstate", self.fmu.getFMUstate), self.time, self._out_np.copy())
+
+    def restore_state(self, snapshot: Any) -> None:
+        state, t, out = snapshot
+        self._call("setFMUstate", self.fmu.setFMUstate, state)
+        self.time = t
+        self._out_np[:] = out
+
+    def close(self) -> None:
+        fmu = getattr(self, "fmu", None)
+        if fmu is not None:
+            try:
+                if self._instantiated:
+                    fmu.terminate()
+                    fmu.freeInstance()
+                fmu.freeLibrary()
+            except Exception:  # closing is best effort; a broken FMU already reported its error
+                log.debug("FMU close failed", exc_info=True)
+            self.fmu = None
+        self._cleanup_unzip()
+
+
+@PLANTS.register("fmu")
+def _fmu_factory(config: Mapping[str, Any], *, base_dir: Path | None = None, **_context: Any) -> Plant:
+    cfg = take_keys(config, allowed={"kind", "fmu", "path", "inputs", "outputs", "parameters", "states"},
+                    where="plant fmu", error=PlantError)
+    path = resolve_fmu(fmu=cfg.get("fmu"), path=cfg.get("path"), base_dir=base_dir)
+    return FmuPlant(path=path, inputs=cfg.get("inputs"), outputs=cfg.get("outputs"),
+                    parameters=cfg.get("parameters"), states=cfg.get("states"))
+
+
+def plant_from_config(config: Mapping[str, Any], *, artifact: Any = None, base_dir: Path | None = None) -> Plant:
+    """Build a plant from its configuration table (``kind`` selects the registered plugin)."""
+    from . import models  # noqa: F401 - registers the built-in models
+
+    if not isinstance(config, Mapping) or "kind" not in config:
+        raise PlantError("plant: the [plant] table needs a kind (one of: fmu, cart_pendulum, quadrotor_lateral, "
+                         "wood_berry, linear)")
+    return PLANTS.create(str(config["kind"]), config, artifact=artifact, base_dir=base_dir)

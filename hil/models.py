@@ -1,0 +1,290 @@
+"""Built-in plant models: nonlinear cart pendulum, quadrotor lateral channel, Wood-Berry column,
+and a linear plant taken from the artifact itself.
+
+Continuous models integrate with fixed-step RK4 (sub-steps no longer than ``step`` seconds).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+from scipy.linalg import expm
+
+from gainlink.errors import PlantError
+
+from .plant import PLANTS, Plant, select
+from .registry import take_keys
+
+_COMMON_KEYS = {"kind", "inputs", "outputs", "parameters", "step"}
+
+
+class OdePlant(Plant):
+    """A continuous plant ``dx/dt = f(x, u)`` whose outputs are a selection of its states.
+
+    Subclasses set ``name``, ``all_inputs``, ``state_names``, ``defaults`` (parameters) and
+    implement :meth:`derivatives`.
+    """
+
+    all_inputs: tuple[str, ...]
+    defaults: dict[str, float]
+
+    def __init__(self, *, parameters: Mapping[str, float] | None = None, inputs: Any = None,
+                 outputs: Any = None, step: float = 1e-3) -> None:
+        params = dict(self.defaults)
+        for key, value in (parameters or {}).items():
+            if key not in params:
+                raise PlantError(f"plant {self.name} has no parameter {key!r} (has: {', '.join(params)})")
+            params[key] = float(value)
+        self.params = params
+        self._in_idx = select(self.all_inputs, inputs, what="inputs", plant=self.name)
+        self._out_idx = select(self.state_names, outputs if outputs is not None else self.default_outputs,
+                               what="outputs", plant=self.name)
+        self.input_names = tuple(self.all_inputs[i] for i in self._in_idx)
+        self.output_names = tuple(self.state_names[i] for i in self._out_idx)
+        if not step > 0:
+            raise PlantError(f"plant {self.name}: step must be positive")
+        self.h = float(step)
+        self._u = np.zeros(len(self.all_inputs))
+        self.x = np.zeros(len(self.state_names))
+
+    default_outputs: tuple[str, ...] = ()
+
+    def derivatives(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        """dx/dt at state ``x`` and full input vector ``u``."""
+        raise NotImplementedError
+
+    def reset(self, *, initial: Mapping[str, float]) -> None:
+        self.x = np.zeros(len(self.state_names))
+        for key, value in initial.items():
+            if key not in self.state_names:
+                raise PlantError(f"plant {self.name} has no state {key!r} (has: {', '.join(self.state_names)})")
+            self.x[self.state_names.index(key)] = float(value)
+
+    def outputs(self) -> np.ndarray:
+        return self.x[self._out_idx]
+
+    def state(self) -> np.ndarray:
+        return self.x.copy()
+
+    def advance(self, *, u: np.ndarray, dt: float) -> None:
+        full = self._u
+        full[:] = 0.0
+        full[self._in_idx] = u
+        n = max(1, math.ceil(dt / self.h - 1e-9))
+        h = dt / n
+        x = self.x
+        f = self.derivatives
+        for _ in range(n):
+            k1 = f(x, full)
+            k2 = f(x + 0.5 * h * k1, full)
+            k3 = f(x + 0.5 * h * k2, full)
+            k4 = f(x + h * k3, full)
+            x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        if not np.all(np.isfinite(x)):
+            raise PlantError(f"plant {self.name}: state became non-finite")
+        self.x = x
+
+    def save_state(self) -> Any:
+        return self.x.copy()
+
+    def restore_state(self, snapshot: Any) -> None:
+        self.x = np.array(snapshot, dtype=float)
+
+
+class CartPendulum(OdePlant):
+    """Cart with an inverted point-mass pendulum (theta from upright, positive force gives negative theta_ddot).
+
+    With s = sin(theta), c = cos(theta), w = theta_dot and D = M + m s^2::
+
+        x_ddot     = (F + m l w^2 s - m g s c) / D
+        theta_ddot = ((M + m) g s - c (F + m l w^2 s)) / (l D)
+
+    About upright: A = [[0,1,0,0],[0,0,-m g/M,0],[0,0,0,1],[0,0,(M+m) g/(M l),0]], B = [0,1/M,0,-1/(M l)].
+    """
+
+    name = "cart_pendulum"
+    all_inputs = ("F",)
+    state_names = ("x", "x_dot", "theta", "theta_dot")
+    default_outputs = ("x", "theta")
+    defaults = {"M": 1.0, "m": 0.1, "l": 0.5, "g": 9.81}
+
+    def derivatives(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        M, m, l, g = self.params["M"], self.params["m"], self.params["l"], self.params["g"]
+        s, c, w = math.sin(x[2]), math.cos(x[2]), x[3]
+        D = M + m * s * s
+        f = u[0] + m * l * w * w * s
+        return np.array([x[1], (f - m * g * s * c) / D, w, ((M + m) * g * s - c * f) / (l * D)])
+
+
+class QuadrotorLateral(OdePlant):
+    """Lateral channel of a quadrotor holding altitude: thrust tilts with roll.
+
+    States y, y_dot, phi, phi_dot; input roll torque tau. With thrust m g / cos(phi) (altitude hold)::
+
+        y_ddot   = g tan(phi) - (c_d / mass) y_dot
+        phi_ddot = tau / Ixx
+
+    About hover: A = [[0,1,0,0],[0,-c_d/mass,g,0],[0,0,0,1],[0,0,0,0]], B = [0,0,0,1/Ixx].
+    """
+
+    name = "quadrotor_lateral"
+    all_inputs = ("tau",)
+    state_names = ("y", "y_dot", "phi", "phi_dot")
+    default_outputs = ("y", "phi")
+    defaults = {"g": 9.81, "Ixx": 0.0023, "mass": 1.0, "c_d": 0.0}
+
+    def derivatives(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        p = self.params
+        return np.array([x[1], p["g"] * math.tan(x[2]) - p["c_d"] / p["mass"] * x[1], x[3], u[0] / p["Ixx"]])
+
+
+class WoodBerry(Plant):
+    """The Wood-Berry distillation column: four first-order lags with pure dead times (minutes).
+
+    ``xD = 12.8 e^{-s}/(16.7 s+1) R - 18.9 e^{-3 s}/(21 s+1) S``,
+    ``xB = 6.6 e^{-7 s}/(10.9 s+1) R - 19.4 e^{-3 s}/(14.4 s+1) S``.
+    Each lag is discretised exactly (zero-order hold) at the sub-step ``step``; each dead time is an
+    input history of ``round(delay / step)`` sub-steps, so choose ``step`` dividing the delays and ``Ts``.
+    """
+
+    name = "wood_berry"
+    GAIN = np.array([[12.8, -18.9], [6.6, -19.4]])
+    TAU = np.array([[16.7, 21.0], [10.9, 14.4]])
+    DELAY = np.array([[1.0, 3.0], [7.0, 3.0]])
+    all_inputs = ("R", "S")
+    all_outputs = ("xD", "xB")
+
+    def __init__(self, *, parameters: Mapping[str, float] | None = None, inputs: Any = None,
+                 outputs: Any = None, step: float = 0.1) -> None:
+        if parameters:
+            raise PlantError("plant wood_berry takes no parameters")
+        if not step > 0:
+            raise PlantError("plant wood_berry: step must be positive")
+        self._in_idx = select(self.all_inputs, inputs, what="inputs", plant=self.name)
+        self._out_idx = select(self.all_outputs, outputs, what="outputs", plant=self.name)
+        self.input_names = tuple(self.all_inputs[i] for i in self._in_idx)
+        self.output_names = tuple(self.all_outputs[i] for i in self._out_idx)
+        self.state_names = ("y11", "y12", "y21", "y22")
+        self.h = float(step)
+        self.a = np.exp(-self.h / self.TAU)
+        self.d = np.rint(self.DELAY / self.h).astype(int)
+        self.hist_len = int(self.d.max()) + 1
+        self.reset(initial={})
+
+    def reset(self, *, initial: Mapping[str, float]) -> None:
+        self.y = np.zeros((2, 2))
+        self.hist = np.zeros((self.hist_len, 2))  # ring buffer of full input vectors, newest at self.k
+        self.k = 0
+        for key, value in initial.items():
+            if key not in self.state_names:
+                raise PlantError(f"plant wood_berry has no state {key!r} (has: {', '.join(self.state_names)})")
+            i = self.state_names.index(key)
+            self.y[i // 2, i % 2] = float(value)
+
+    def outputs(self) -> np.ndarray:
+        return self.y.sum(axis=1)[self._out_idx]
+
+    def state(self) -> np.ndarray:
+        return self.y.ravel().copy()
+
+    def advance(self, *, u: np.ndarray, dt: float) -> None:
+        full = np.zeros(2)
+        full[self._in_idx] = u
+        n = max(1, int(round(dt / self.h)))
+        for _ in range(n):
+            self.k = (self.k + 1) % self.hist_len
+            self.hist[self.k] = full
+            for i in range(2):
+                for j in range(2):
+                    uj = self.hist[(self.k - self.d[i, j]) % self.hist_len, j]
+                    self.y[i, j] = self.a[i, j] * self.y[i, j] + (1.0 - self.a[i, j]) * self.GAIN[i, j] * uj
+
+    def save_state(self) -> Any:
+        return (self.y.copy(), self.hist.copy(), self.k)
+
+    def restore_state(self, snapshot: Any) -> None:
+        y, hist, k = snapshot
+        self.y, self.hist, self.k = y.copy(), hist.copy(), k
+
+
+class LinearPlant(Plant):
+    """The artifact's own plant model (``artifact.data["plant"]``), simulated exactly (matrix exponential)."""
+
+    def __init__(self, *, artifact: Any) -> None:
+        pl = artifact.data["plant"]
+        self.name = f"linear({artifact.name})"
+        self.A, self.B = np.array(pl["A"], float), np.array(pl["B"], float)
+        self.C, self.D = np.array(pl["C"], float), np.array(pl["D"], float)
+        self.continuous = pl["kind"] != "discrete"
+        self.Ts = artifact.Ts
+        sig = artifact.signals
+        n = self.A.shape[0]
+        self.state_names = tuple(sig["states"]) if len(sig["states"]) == n else tuple(f"x{i}" for i in range(n))
+        self.input_names = tuple(sig["inputs"])
+        self.output_names = tuple(sig["outputs"])
+        self._disc: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._u = np.zeros(self.B.shape[1])
+        self.x = np.zeros(n)
+
+    def _discrete(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        if dt not in self._disc:
+            if not self.continuous:
+                if abs(dt - self.Ts) > 1e-12 * self.Ts:
+                    raise PlantError(f"discrete plant can only advance by Ts={self.Ts}, not {dt}")
+                self._disc[dt] = (self.A, self.B)
+            else:
+                n, m = self.B.shape
+                big = np.zeros((n + m, n + m))
+                big[:n, :n], big[:n, n:] = self.A, self.B
+                e = expm(big * dt)
+                self._disc[dt] = (e[:n, :n], e[:n, n:])
+        return self._disc[dt]
+
+    def reset(self, *, initial: Mapping[str, float]) -> None:
+        self.x = np.zeros(self.A.shape[0])
+        self._u = np.zeros(self.B.shape[1])
+        for key, value in initial.items():
+            if key not in self.state_names:
+                raise PlantError(f"plant {self.name} has no state {key!r} (has: {', '.join(self.state_names)})")
+            self.x[self.state_names.index(key)] = float(value)
+
+    def outputs(self) -> np.ndarray:
+        return self.C @ self.x + self.D @ self._u
+
+    def state(self) -> np.ndarray:
+        return self.x.copy()
+
+    def advance(self, *, u: np.ndarray, dt: float) -> None:
+        Ad, Bd = self._discrete(dt)
+        self._u = np.asarray(u, float)
+        self.x = Ad @ self.x + Bd @ self._u
+
+    def save_state(self) -> Any:
+        return (self.x.copy(), self._u.copy())
+
+    def restore_state(self, snapshot: Any) -> None:
+        self.x, self._u = snapshot[0].copy(), snapshot[1].copy()
+
+
+def _ode_factory(cls: type) -> Any:
+    def factory(config: Mapping[str, Any], **_context: Any) -> Plant:
+        cfg = take_keys(config, allowed=_COMMON_KEYS, where=f"plant {cls.name}", error=PlantError)
+        kwargs = {k: cfg[k] for k in ("parameters", "inputs", "outputs", "step") if k in cfg}
+        return cls(**kwargs)
+
+    return factory
+
+
+PLANTS.register("cart_pendulum")(_ode_factory(CartPendulum))
+PLANTS.register("quadrotor_lateral")(_ode_factory(QuadrotorLateral))
+PLANTS.register("wood_berry")(_ode_factory(WoodBerry))
+
+
+@PLANTS.register("linear")
+def _linear_factory(config: Mapping[str, Any], *, artifact: Any = None, **_context: Any) -> Plant:
+    take_keys(config, allowed={"kind"}, where="plant linear", error=PlantError)
+    if artifact is None:
+        raise PlantError("plant linear needs the artifact (it simulates the artifact's own plant model)")
+    return LinearPlant(artifact=artifact)
