@@ -1,0 +1,160 @@
+"""Design-side commands: analyze, design, validate, simulate, replay."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .. import artifact as artifact_mod
+from ..analysis import analyze, complex_pairs
+from ..design import design
+from ..errors import DataError, GainlinkError
+from ..fileio import atomic_write_text, publish_files
+from ..replay import engine_names, replay
+from ..simulate import samples_csv, simulate_linear
+from ..spec import load_spec
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the design-side subcommands."""
+    p = sub.add_parser("analyze", help="structural analysis of a plant spec")
+    p.add_argument("spec", help="plant spec (TOML)")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.set_defaults(func=cmd_analyze)
+
+    p = sub.add_parser("design", help="design controller + observer and write DIR/gains.json")
+    p.add_argument("spec", help="plant spec (TOML)")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--json", action="store_true", help="print a JSON summary")
+    p.set_defaults(func=cmd_design)
+
+    p = sub.add_parser("validate", help="check a gain artifact against its schema, hash and invariants")
+    p.add_argument("artifact", help="gains.json")
+    p.set_defaults(func=cmd_validate)
+
+    p = sub.add_parser("simulate", help="closed-loop run on the artifact's discrete plant, written as replay input")
+    p.add_argument("artifact", help="gains.json")
+    p.add_argument("--steps", type=int, default=500, help="number of samples (default 500)")
+    p.add_argument("--x0", type=float, nargs="+", help="initial plant state (n values)")
+    p.add_argument("--ref", type=float, nargs="+", help="constant reference (q values)")
+    p.add_argument("--noise", type=float, default=0.0, help="measurement noise standard deviation")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True, help="output CSV (t, y0.., r0..)")
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("replay", help="run recorded samples through an engine of the control law")
+    p.add_argument("artifact", help="gains.json")
+    p.add_argument("--input", required=True, help="CSV with y0..y{p-1}, r0..r{q-1} (and optionally t)")
+    p.add_argument("--output", required=True, help="CSV to write: u, sat, fault, xh, z")
+    p.add_argument("--engine", default="reference", help=f"one of {', '.join(engine_names())}")
+    p.set_defaults(func=cmd_replay)
+
+
+def _c(z: complex) -> str:
+    return f"{z.real:.4g}" if abs(z.imag) < 1e-12 else f"{z.real:.4g}{z.imag:+.4g}j"
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    """``gainlink analyze SPEC``."""
+    rep = analyze(load_spec(args.spec))
+    if args.json:
+        print(json.dumps(rep.to_dict(), indent=2, default=str))
+        return 0
+    dom = "s" if rep.kind != "discrete" else "z"
+    print(f"{rep.name}: {rep.kind} plant, n={rep.n} m={rep.m} p={rep.p}, Ts={rep.Ts:g} s")
+    print(f"  open-loop poles ({dom}): {', '.join(_c(z) for z in rep.open_loop_poles)}")
+    print(f"  controllability: rank {rep.controllability_rank}/{rep.n}, cond {rep.controllability_cond:.3g}"
+          f"  -> {'stabilizable' if rep.stabilizable else 'NOT stabilizable'}")
+    print(f"  observability:   rank {rep.observability_rank}/{rep.n}, cond {rep.observability_cond:.3g}"
+          f"  -> {'detectable' if rep.detectable else 'NOT detectable'}")
+    print("  PBH per mode:")
+    for md in rep.modes:
+        print(f"    {_c(md.eigenvalue):>22}  {'stable  ' if md.stable else 'unstable'}"
+              f"  {'controllable' if md.controllable else 'UNCONTROLLABLE'}"
+              f"  {'observable' if md.observable else 'UNOBSERVABLE'}")
+    zeros = ", ".join(_c(z) for z in rep.transmission_zeros) or "none"
+    print(f"  transmission zeros: {zeros}")
+    print(f"  bandwidth ({rep.bandwidth_source}): {rep.bandwidth_rad_s:.3g} rad/s; "
+          f"sampling is {rep.sample_rate_ratio:.1f}x that")
+    print(f"  state scaling spread: {rep.state_scale_ratio:.3g}x")
+    for w in rep.warnings:
+        print(f"  warning: {w}")
+    return 0
+
+
+def cmd_design(args: argparse.Namespace) -> int:
+    """``gainlink design SPEC --out DIR``."""
+    spec = load_spec(args.spec)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise GainlinkError(f"output path {out} exists and is not a directory")
+    result = design(spec)
+    artifact_mod.from_dict(result.artifact)  # the written file must load: check before publishing
+    publish_files(out, {"gains.json": artifact_mod.render(result.artifact)})
+    a = result.artifact
+    if args.json:
+        print(json.dumps({
+            "artifact": str(out / "gains.json"), "sha256": a["sha256"], "K": a["K"], "L": a["L"],
+            "Ki": a.get("Ki"), "controller_poles": complex_pairs(result.controller_poles),
+            "observer_poles": complex_pairs(result.observer_poles), "margins": a["checks"]["margins"],
+            "warnings": result.warnings,
+        }, indent=2))
+        return 0
+    print(f"{spec.name}: n={spec.n} m={spec.m} p={spec.p} q={a['q']}, Ts={spec.Ts:g} s, "
+          f"{a['design']['controller']['method']} + {a['design']['observer']['method']} "
+          f"({a['observer_form']}), anti-windup {a['anti_windup']}")
+    with np.printoptions(precision=5, suppress=True, linewidth=110):
+        print(f"  K  = {np.array(a['K'])}".replace("\n", "\n       "))
+        if a["q"]:
+            print(f"  Ki = {np.array(a['Ki'])}".replace("\n", "\n       "))
+    print(f"  controller poles |z| max {np.max(np.abs(result.controller_poles)):.5f}, "
+          f"observer poles |z| max {np.max(np.abs(result.observer_poles)):.5f}, "
+          f"closed loop spectral radius {a['checks']['spectral_radius']:.5f}")
+    for mg in result.margins:
+        up = "inf" if mg.gain_margin_up_db is None else f"+{mg.gain_margin_up_db:.1f}"
+        down = "-inf" if mg.gain_margin_down_db is None else f"{mg.gain_margin_down_db:.1f}"
+        pm = "n/a" if mg.phase_margin_deg is None else f"{mg.phase_margin_deg:.1f} deg"
+        print(f"  margins at input {mg.input}: gain {up} / {down} dB, phase {pm}")
+    print(f"  wrote {out / 'gains.json'} (sha256 {a['sha256'][:16]})")
+    return 0
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    """``gainlink validate ARTIFACT``."""
+    a = artifact_mod.load(args.artifact)
+    print(f"{args.artifact}: valid gainlink artifact '{a.name}' (n={a.n} m={a.m} p={a.p} q={a.q}, "
+          f"{a.observer_form}, anti-windup {a.anti_windup}), sha256 {a.sha256}")
+    return 0
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """``gainlink simulate ARTIFACT --out CSV``."""
+    a = artifact_mod.load(args.artifact)
+    if args.x0 is not None and len(args.x0) != a.n:
+        raise DataError(f"--x0 needs {a.n} values (one per state), got {len(args.x0)}")
+    if args.ref is not None and len(args.ref) != a.q:
+        raise DataError(f"--ref needs {a.q} values (one per tracked output), got {len(args.ref)}")
+    if args.noise < 0 or not np.isfinite(args.noise):
+        raise DataError("--noise must be a finite number >= 0")
+    sim = simulate_linear(a, steps=args.steps, x0=args.x0, reference=args.ref, noise_std=args.noise, seed=args.seed)
+    out = Path(args.out)
+    if not out.parent.is_dir():
+        raise DataError(f"output folder {out.parent} does not exist")
+    atomic_write_text(out, samples_csv(sim))
+    print(f"wrote {args.steps} samples to {out}; final |y| = {np.abs(sim.y[-1]).max():.3g}, "
+          f"saturated {np.mean(np.any((sim.u <= a.u_min) | (sim.u >= a.u_max), axis=1)) * 100:.1f}% of steps")
+    return 0
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """``gainlink replay ARTIFACT --input IN.csv --output OUT.csv``."""
+    a = artifact_mod.load(args.artifact)
+    trace = replay(a, args.input, args.output, engine=args.engine)
+    print(f"replayed {trace.u.shape[0]} samples through {args.engine}: "
+          f"{int(trace.saturated.any(axis=1).sum())} saturated, {int(trace.fault.sum())} refused as non-finite; "
+          f"wrote {args.output}", file=sys.stdout)
+    return 0

@@ -1,0 +1,520 @@
+"""Discrete controller + observer design from a :class:`~gainlink.spec.PlantSpec` to a gain artifact.
+
+The pipeline is: discretise (ZOH or Tustin) -> augment with integrators of the tracked outputs
+-> DLQR (Q/R given or from Bryson's rule) or pole placement -> Kalman (DARE) or Luenberger
+observer in predictor or current form -> anti-windup gain -> checks of the combined closed loop
+-> the artifact dict, sealed. Every Riccati solution comes from python-control (SLICOT through
+slycot when present, SciPy otherwise).
+"""
+
+from __future__ import annotations
+
+import logging
+import platform
+from dataclasses import dataclass, field
+from importlib import metadata
+
+import numpy as np
+
+from . import __version__
+from .analysis import (complex_pairs, pole_frequency, unobservable_unstable,
+                       uncontrollable_unstable)
+from .artifact import SCHEMA_VERSION, matrix_to_json, seal, vector_to_json
+from .errors import DesignError, SpecError
+from .spec import PlantSpec, as_matrix, as_vector
+
+log = logging.getLogger(__name__)
+
+DEFAULT_AW_GAIN = 0.5
+POLE_MATCH_TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class Discretised:
+    """The discrete plant the controller is designed for."""
+
+    Ad: np.ndarray
+    Bd: np.ndarray
+    Cd: np.ndarray
+    Dd: np.ndarray
+    method: str
+
+
+@dataclass(frozen=True)
+class ChannelMargin:
+    """Loop-at-a-time margins with the loop broken at one plant input (others closed).
+
+    Gain margins are exact: the factors by which that loop's gain can rise or fall before an
+    eigenvalue of the closed loop leaves the unit circle (``None``: beyond 60 dB either way).
+    The phase margin and the gain crossover come from the loop's frequency response.
+    """
+
+    input: str
+    gain_margin_up_db: float | None
+    gain_margin_down_db: float | None
+    phase_margin_deg: float | None
+    gain_crossover_rad_s: float | None
+
+
+@dataclass(frozen=True)
+class DesignResult:
+    """A finished design: the sealed artifact dict and the numbers behind its checks."""
+
+    artifact: dict
+    controller_poles: np.ndarray
+    observer_poles: np.ndarray
+    closed_loop_poles: np.ndarray
+    margins: list[ChannelMargin]
+    warnings: list[str] = field(default_factory=list)
+
+
+def discretise(spec: PlantSpec) -> Discretised:
+    """ZOH or Tustin discretisation of a continuous spec; a discrete spec is returned as is."""
+    import control
+
+    if not spec.continuous:
+        return Discretised(spec.A, spec.B, spec.C, spec.D, "none")
+    sysc = control.ss(spec.A, spec.B, spec.C, spec.D)
+    sysd = control.c2d(sysc, spec.Ts, method=spec.discretization)
+    return Discretised(np.asarray(sysd.A, float), np.asarray(sysd.B, float), np.asarray(sysd.C, float),
+                       np.asarray(sysd.D, float), spec.discretization)
+
+
+def design(spec: PlantSpec) -> DesignResult:
+    """Design the controller and observer a spec asks for and return the sealed artifact.
+
+    Raises
+    ------
+    SpecError
+        A design setting is missing, malformed or inconsistent with the plant.
+    DesignError
+        The plant is not stabilizable/detectable, weights are not (semi)definite, or the
+        resulting closed loop is not stable.
+    """
+    warnings: list[str] = []
+    d = discretise(spec)
+    n, m, p = spec.n, spec.m, spec.p
+    u_min, u_max, anti_windup = _limits(spec)
+    Ci = _integral_selector(spec)
+    q = Ci.shape[0]
+    if q == 0 and anti_windup != "none":
+        anti_windup = "none"
+
+    bad = uncontrollable_unstable(d.Ad, d.Bd, discrete=True)
+    if bad:
+        raise DesignError(f"plant is not stabilizable: unstable mode(s) {_fmt_list(bad)} are uncontrollable")
+    bad = unobservable_unstable(d.Ad, d.Cd, discrete=True)
+    if bad:
+        raise DesignError(f"plant is not detectable: unstable mode(s) {_fmt_list(bad)} are unobservable")
+
+    Aa, Ba = augment(d, Ci, spec.Ts)
+    if q:
+        bad = uncontrollable_unstable(Aa, Ba, discrete=True)
+        if bad:
+            raise DesignError(
+                "integral action is not feasible: the tracked outputs cannot be driven to a constant "
+                f"reference (augmented modes {_fmt_list(bad)} uncontrollable; a plant zero at s=0 / z=1?)"
+            )
+    Ka, controller_record = _controller(spec, Aa, Ba, warnings)
+    K, Ki = Ka[:, :n], Ka[:, n:]
+    L, M, observer_record = _observer(spec, d, warnings)
+    form = spec.observer.get("form", "predictor")
+
+    aw_gain = float(spec.integral.get("aw_gain", DEFAULT_AW_GAIN)) if spec.integral else DEFAULT_AW_GAIN
+    Kaw = np.zeros((q, m))
+    if q and anti_windup == "backcalc":
+        if not 0 < aw_gain <= 1:
+            raise SpecError(f"integral.aw_gain must be in (0, 1], got {aw_gain}")
+        Kaw = -aw_gain * np.linalg.pinv(Ki)
+        controller_record["aw_gain"] = aw_gain
+
+    Acl = closed_loop_matrix(d, K=K, Ki=Ki, L=L, M=M, Ci=Ci, Ts=spec.Ts, form=form)
+    cl_poles = np.linalg.eigvals(Acl)
+    ctrl_poles = np.linalg.eigvals(Aa - Ba @ Ka)
+    obs_poles = np.linalg.eigvals(d.Ad - L @ d.Cd)
+    radius = float(np.max(np.abs(cl_poles)))
+    if not radius < 1.0:
+        raise DesignError(f"closed loop is unstable: spectral radius {radius:.6g} >= 1")
+    if not poles_match(cl_poles, np.concatenate([ctrl_poles, obs_poles])):
+        raise DesignError("closed-loop eigenvalues differ from the union of controller and observer eigenvalues "
+                          "(separation failed numerically: check the plant's conditioning)")
+    margins = input_margins(d, K=K, Ki=Ki, L=L, M=M, Ci=Ci, Ts=spec.Ts, form=form, inputs=spec.inputs)
+
+    bandwidth = loop_bandwidth(margins, ctrl_poles, spec.Ts)
+    if (2 * np.pi / spec.Ts) < 10 * bandwidth:
+        warnings.append(f"sampling at {2 * np.pi / spec.Ts:.3g} rad/s is less than 10x the closed-loop "
+                        f"bandwidth {bandwidth:.3g} rad/s")
+    for w in warnings:
+        log.warning(w)
+
+    data = {
+        "schema_version": SCHEMA_VERSION,
+        "name": spec.name,
+        "Ts": spec.Ts,
+        "n": n, "m": m, "p": p, "q": q,
+        "Ad": matrix_to_json(d.Ad), "Bd": matrix_to_json(d.Bd),
+        "Cd": matrix_to_json(d.Cd), "Dd": matrix_to_json(d.Dd),
+        "K": matrix_to_json(K), "L": matrix_to_json(L),
+        "u_min": vector_to_json(u_min), "u_max": vector_to_json(u_max),
+        "anti_windup": anti_windup,
+        "observer_form": form,
+        "signals": {
+            "states": list(spec.states), "inputs": list(spec.inputs), "outputs": list(spec.outputs),
+            "references": [f"r_{spec.outputs[int(np.argmax(row))]}" for row in Ci],
+        },
+        "plant": {"kind": spec.kind, "A": matrix_to_json(spec.A), "B": matrix_to_json(spec.B),
+                  "C": matrix_to_json(spec.C), "D": matrix_to_json(spec.D)},
+        "design": {"discretization": d.method, "controller": controller_record, "observer": observer_record},
+        "checks": {
+            "closed_loop_poles": complex_pairs(sorted(cl_poles, key=lambda z: (abs(z), z.imag))),
+            "spectral_radius": radius,
+            "margins": [dict(mg.__dict__) for mg in margins],
+        },
+        "provenance": provenance(spec),
+    }
+    if spec.pade_order is not None:
+        data["plant"]["pade_order"] = spec.pade_order
+    if M is not None:
+        data["M"] = matrix_to_json(M)
+    if q:
+        data["Ci"], data["Ki"], data["Kaw"] = matrix_to_json(Ci), matrix_to_json(Ki), matrix_to_json(Kaw)
+    return DesignResult(artifact=seal(data), controller_poles=ctrl_poles, observer_poles=obs_poles,
+                        closed_loop_poles=cl_poles, margins=margins, warnings=warnings)
+
+
+def augment(d: Discretised, Ci: np.ndarray, Ts: float) -> tuple[np.ndarray, np.ndarray]:
+    """The plant augmented with ``z+ = z + Ts (r - Ci y)`` (taken at r = 0) for integral action."""
+    n, m = d.Bd.shape
+    q = Ci.shape[0]
+    Aa = np.block([[d.Ad, np.zeros((n, q))], [-Ts * Ci @ d.Cd, np.eye(q)]])
+    Ba = np.vstack([d.Bd, -Ts * Ci @ d.Dd])
+    return Aa, Ba
+
+
+def closed_loop_matrix(d: Discretised, *, K, Ki, L, M, Ci, Ts: float, form: str,
+                       break_input: int | None = None) -> np.ndarray | tuple:
+    """State matrix of plant + observer + controller on the state ``[x; xh; z]`` (linear, r = 0).
+
+    With ``break_input = i`` returns ``(A, B, C)`` of the loop broken at plant input i: input
+    ``w`` drives plant input i, output is the controller's command for input i.
+    """
+    n, m = d.Bd.shape
+    q = Ci.shape[0]
+    Ad, Bd, Cd, Dd = d.Ad, d.Bd, d.Cd, d.Dd
+    if form == "current":
+        # xc = xh + M (Cd x - Cd xh); v = -K xc - Ki z; xh+ = Ad xc + Bd u
+        V = np.hstack([-K @ M @ Cd, -K @ (np.eye(n) - M @ Cd), -Ki])
+        Lx, Ah = Ad @ M @ Cd, Ad @ (np.eye(n) - M @ Cd)
+    else:
+        # v = -K xh - Ki z; xh+ = (Ad - L Cd) xh + Bd u + L Cd x  (the Dd u terms cancel)
+        V = np.hstack([np.zeros((m, n)), -K, -Ki])
+        Lx, Ah = L @ Cd, Ad - L @ Cd
+    A0 = np.block([
+        [Ad, np.zeros((n, n)), np.zeros((n, q))],
+        [Lx, Ah, np.zeros((n, q))],
+        [-Ts * Ci @ Cd, np.zeros((q, n)), np.eye(q)],
+    ])
+    Bu = np.vstack([Bd, Bd, -Ts * Ci @ Dd])
+    if break_input is None:
+        return A0 + Bu @ V
+    S = np.eye(m)
+    S[break_input, break_input] = 0.0
+    e = np.zeros((m, 1))
+    e[break_input] = 1.0
+    return A0 + Bu @ S @ V, Bu @ e, V[break_input:break_input + 1, :]
+
+
+def input_margins(d: Discretised, *, K, Ki, L, M, Ci, Ts, form, inputs) -> list[ChannelMargin]:
+    """Loop-at-a-time gain and phase margins at each plant input (others closed)."""
+    import control
+
+    out = []
+    for i, name in enumerate(inputs):
+        A, B, C = closed_loop_matrix(d, K=K, Ki=Ki, L=L, M=M, Ci=Ci, Ts=Ts, form=form, break_input=i)
+        loop = control.ss(A, B, -C, np.zeros((1, 1)), Ts)  # negative-feedback loop gain
+        with np.errstate(all="ignore"):
+            _, pm, _, _, wgc, _ = control.stability_margins(loop)
+        up = _gain_limit(A, B @ C, direction=+1)
+        down = _gain_limit(A, B @ C, direction=-1)
+        out.append(ChannelMargin(
+            input=name,
+            gain_margin_up_db=None if up is None else float(20 * np.log10(up)),
+            gain_margin_down_db=None if down is None else float(20 * np.log10(down)),
+            phase_margin_deg=_finite_or_none(pm),
+            gain_crossover_rad_s=_finite_or_none(wgc),
+        ))
+    return out
+
+
+def _gain_limit(A: np.ndarray, BC: np.ndarray, *, direction: int, max_db: float = 60.0) -> float | None:
+    """The loop-gain factor k (above or below 1) at which ``A + k BC`` first loses stability."""
+    def stable(k: float) -> bool:
+        return float(np.max(np.abs(np.linalg.eigvals(A + k * BC)))) < 1.0
+
+    step = 10 ** (direction * 0.25 / 20)  # quarter-dB grid, then bisection
+    inside, k = 1.0, 1.0
+    limit = 10 ** (direction * max_db / 20)
+    while True:
+        k *= step
+        if (direction > 0 and k > limit) or (direction < 0 and k < limit):
+            return None
+        if not stable(k):
+            break
+        inside = k
+    outside = k
+    for _ in range(40):
+        mid = np.sqrt(inside * outside)
+        inside, outside = (mid, outside) if stable(mid) else (inside, mid)
+    return float(outside)
+
+
+def loop_bandwidth(margins: list[ChannelMargin], controller_poles: np.ndarray, Ts: float) -> float:
+    """Closed-loop bandwidth proxy: the highest gain crossover at the plant inputs.
+
+    Falls back to the fastest controller pole when no loop crosses 0 dB.
+    """
+    crossings = [mg.gain_crossover_rad_s for mg in margins if mg.gain_crossover_rad_s]
+    if crossings:
+        return float(max(crossings))
+    return max(pole_frequency(z, discrete=True, Ts=Ts) for z in controller_poles)
+
+
+def poles_match(a: np.ndarray, b: np.ndarray, tol: float = POLE_MATCH_TOL) -> bool:
+    """True when the multisets a and b of complex numbers agree (greedy nearest matching)."""
+    if len(a) != len(b):
+        return False
+    rest = list(b)
+    for z in a:
+        j = int(np.argmin([abs(z - w) for w in rest]))
+        if abs(z - rest[j]) > tol * max(1.0, abs(z)):
+            return False
+        rest.pop(j)
+    return True
+
+
+def provenance(spec: PlantSpec) -> dict:
+    """Versions of everything that computed the gains, and the spec's hash."""
+    def version(dist: str) -> str:
+        try:
+            return metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            return "absent"
+
+    return {
+        "gainlink": __version__, "numpy": version("numpy"), "scipy": version("scipy"),
+        "control": version("control"), "slycot": version("slycot"),
+        "python": platform.python_version(), "spec_sha256": spec.source_sha256,
+    }
+
+
+# --- pieces ---------------------------------------------------------------------------------------
+
+
+def _limits(spec: PlantSpec) -> tuple[np.ndarray, np.ndarray, str]:
+    lim = spec.limits
+    for key in ("u_min", "u_max"):
+        if key not in lim:
+            raise SpecError(f"limits lacks {key}")
+    u_min = as_vector(lim["u_min"], "limits.u_min", spec.m)
+    u_max = as_vector(lim["u_max"], "limits.u_max", spec.m)
+    if np.any(u_min >= u_max):
+        raise SpecError("limits.u_min must be below limits.u_max for every input")
+    aw = lim.get("anti_windup", "backcalc" if spec.integral else "none")
+    if aw not in ("none", "clamp", "backcalc"):
+        raise SpecError(f"limits.anti_windup must be none, clamp or backcalc, not {aw!r}")
+    return u_min, u_max, aw
+
+
+def _integral_selector(spec: PlantSpec) -> np.ndarray:
+    if not spec.integral:
+        return np.zeros((0, spec.p))
+    outs = spec.integral.get("outputs")
+    if not isinstance(outs, list) or not outs:
+        raise SpecError("integral.outputs must list the tracked outputs (names or indices)")
+    rows = []
+    for o in outs:
+        if isinstance(o, str):
+            if o not in spec.outputs:
+                raise SpecError(f"integral.outputs names {o!r}, which is not an output ({', '.join(spec.outputs)})")
+            idx = spec.outputs.index(o)
+        elif isinstance(o, int) and not isinstance(o, bool) and 0 <= o < spec.p:
+            idx = o
+        else:
+            raise SpecError(f"integral.outputs entry {o!r} is not an output name or index")
+        rows.append(np.eye(spec.p)[idx])
+    Ci = np.array(rows)
+    if np.linalg.matrix_rank(Ci) < len(rows):
+        raise SpecError("integral.outputs repeats an output")
+    if len(rows) > spec.m:
+        raise SpecError(f"integral action on {len(rows)} outputs needs at least as many inputs (m = {spec.m})")
+    return Ci
+
+
+def _weight(table: dict, keys: tuple[str, str, str], size: int, where: str, *, required: bool) -> np.ndarray | None:
+    """A weight matrix from a full matrix, a diagonal, or Bryson's maxima (1 / max^2)."""
+    full, diag, bryson = keys
+    given = [k for k in keys if k in table]
+    if len(given) > 1:
+        raise SpecError(f"{where}: give only one of {', '.join(given)}")
+    if not given:
+        if required:
+            raise SpecError(f"{where} needs one of {full}, {diag} or {bryson}")
+        return None
+    key = given[0]
+    if key == full:
+        W = as_matrix(table[key], f"{where}.{key}")
+        if W.shape != (size, size):
+            raise SpecError(f"{where}.{key} is {W.shape[0]}x{W.shape[1]}, expected {size}x{size}")
+        return W
+    v = as_vector(table[key], f"{where}.{key}", size)
+    if key == bryson:
+        if np.any(v <= 0):
+            raise SpecError(f"{where}.{key} must be > 0 (Bryson's rule uses 1/max^2)")
+        return np.diag(1.0 / v**2)
+    return np.diag(v)
+
+
+def _check_psd(W: np.ndarray, what: str, *, definite: bool) -> None:
+    if not np.allclose(W, W.T, rtol=1e-10, atol=1e-12):
+        raise DesignError(f"{what} is not symmetric")
+    eig = np.linalg.eigvalsh((W + W.T) / 2)
+    scale = max(1.0, float(np.max(np.abs(eig))))
+    if definite and eig[0] <= 1e-12 * scale:
+        raise DesignError(f"{what} is not positive definite (smallest eigenvalue {eig[0]:.3g})")
+    if not definite and eig[0] < -1e-10 * scale:
+        raise DesignError(f"{what} is not positive semi-definite (smallest eigenvalue {eig[0]:.3g})")
+
+
+def _poles(table: dict, count: int, Ts: float, where: str) -> np.ndarray:
+    if ("poles" in table) == ("poles_z" in table):
+        raise SpecError(f"{where} needs exactly one of poles (s-plane) or poles_z (z-plane)")
+    key = "poles" if "poles" in table else "poles_z"
+    raw = table[key]
+    if not isinstance(raw, list):
+        raise SpecError(f"{where}.{key} must be a list of numbers or [re, im] pairs")
+    vals = []
+    for item in raw:
+        if isinstance(item, list) and len(item) == 2:
+            re_im = as_vector(item, f"{where}.{key} entry")
+            vals.append(complex(re_im[0], re_im[1]))
+        elif isinstance(item, (int, float)) and not isinstance(item, bool) and np.isfinite(item):
+            vals.append(complex(item))
+        else:
+            raise SpecError(f"{where}.{key} entry {item!r} is not a number or an [re, im] pair")
+    if len(vals) != count:
+        raise SpecError(f"{where}.{key} gives {len(vals)} poles, expected {count}")
+    poles = np.array(vals)
+    if not np.allclose(np.sort_complex(poles), np.sort_complex(poles.conj())):
+        raise SpecError(f"{where}.{key}: complex poles must come in conjugate pairs")
+    z = np.exp(poles * Ts) if key == "poles" else poles
+    if np.any(np.abs(z) >= 1):
+        raise SpecError(f"{where}.{key}: every pole must be stable (Re s < 0, |z| < 1)")
+    return z
+
+
+def _controller(spec: PlantSpec, Aa: np.ndarray, Ba: np.ndarray, warnings: list[str]) -> tuple[np.ndarray, dict]:
+    import control
+
+    ctl = spec.controller
+    method = ctl.get("method", "lqr")
+    na, m = Ba.shape
+    q = na - spec.n
+    if method == "lqr":
+        if "bryson_y_max" in ctl:
+            if any(k in ctl for k in ("Q", "Q_diag", "bryson_x_max")):
+                raise SpecError("controller: give only one of Q, Q_diag, bryson_x_max, bryson_y_max")
+            y_max = as_vector(ctl["bryson_y_max"], "controller.bryson_y_max", spec.p)
+            if np.any(y_max <= 0):
+                raise SpecError("controller.bryson_y_max must be > 0 (Bryson's rule uses 1/max^2)")
+            Q = spec.C.T @ np.diag(1.0 / y_max**2) @ spec.C  # output weighting: y' Qy y
+        else:
+            Q = _weight(ctl, ("Q", "Q_diag", "bryson_x_max"), spec.n, "controller", required=True)
+        R = _weight(ctl, ("R", "R_diag", "bryson_u_max"), m, "controller", required=True)
+        if q:
+            Qz = _weight(spec.integral, ("Q", "Q_diag", "bryson_max"), q, "integral", required=True)
+            Q = np.block([[Q, np.zeros((spec.n, q))], [np.zeros((q, spec.n)), Qz]])
+        _check_psd(Q, "controller Q", definite=False)
+        _check_psd(R, "controller R", definite=True)
+        try:
+            K, _, _ = control.dlqr(Aa, Ba, Q, R)
+        except Exception as exc:  # SLICOT/SciPy report failures with assorted exception types
+            raise DesignError(f"DLQR failed: {str(exc).splitlines()[0]} (is (Q, A) detectable?)") from None
+        return np.asarray(K, float), {"method": "lqr", "Q": matrix_to_json(Q), "R": matrix_to_json(R),
+                                      "augmented": bool(q)}
+    if method in ("place", "ackermann"):
+        poles = _poles(ctl, na, spec.Ts, "controller")
+        if method == "ackermann":
+            if m != 1:
+                raise SpecError("controller.method 'ackermann' is single-input only; use 'place'")
+            warnings.append("Ackermann's formula is numerically fragile for more than a few states; prefer 'place'")
+            K = control.acker(Aa, Ba, poles)
+        else:
+            try:
+                K = control.place(Aa, Ba, poles)
+            except Exception as exc:
+                raise DesignError(f"pole placement failed: {str(exc).splitlines()[0]}") from None
+        return np.real(np.asarray(K, complex)).astype(float), {
+            "method": method, "poles": complex_pairs(poles), "augmented": bool(q)}
+    raise SpecError(f"controller.method must be lqr, place or ackermann, not {method!r}")
+
+
+def _observer(spec: PlantSpec, d: Discretised, warnings: list[str]):
+    import control
+
+    obs = spec.observer
+    method = obs.get("method", "kalman")
+    form = obs.get("form", "predictor")
+    if form not in ("predictor", "current"):
+        raise SpecError(f"observer.form must be predictor or current, not {form!r}")
+    if form == "current" and np.any(d.Dd != 0):
+        raise SpecError("observer.form 'current' requires a plant without feedthrough (D = 0 after discretisation;"
+                        " Tustin adds feedthrough: use zoh)")
+    p, n = d.Cd.shape
+    if method == "kalman":
+        if obs.get("G") == "B":
+            G = d.Bd  # process noise enters where the inputs do
+        else:
+            G = as_matrix(obs["G"], "observer.G") if "G" in obs else np.eye(n)
+        if G.shape[0] != n:
+            raise SpecError(f"observer.G has {G.shape[0]} rows, expected {n}")
+        W = _weight(obs, ("W", "W_diag", "_none"), G.shape[1], "observer", required=True)
+        V = _weight(obs, ("V", "V_diag", "_none"), p, "observer", required=True)
+        _check_psd(W, "observer W (process noise covariance)", definite=False)
+        _check_psd(V, "observer V (measurement noise covariance)", definite=True)
+        try:
+            P, _, _ = control.dare(d.Ad.T, d.Cd.T, G @ W @ G.T, V)
+        except Exception as exc:
+            raise DesignError(f"Kalman DARE failed: {str(exc).splitlines()[0]} (is (A, G) stabilizable?)") from None
+        P = np.asarray(P, float)
+        M = P @ d.Cd.T @ np.linalg.inv(d.Cd @ P @ d.Cd.T + V)
+        L = d.Ad @ M
+        record = {"method": "kalman", "W": matrix_to_json(W), "V": matrix_to_json(V)}
+        if "G" in obs:
+            record["G"] = matrix_to_json(G)
+    elif method == "luenberger":
+        poles = _poles(obs, n, spec.Ts, "observer")
+        try:
+            L = np.real(np.asarray(control.place(d.Ad.T, d.Cd.T, poles), complex)).T
+        except Exception as exc:
+            raise DesignError(f"observer pole placement failed: {str(exc).splitlines()[0]}") from None
+        M = None
+        if form == "current":
+            if np.linalg.cond(d.Ad) > 1e12:
+                raise DesignError("current-form Luenberger observer needs an invertible Ad")
+            M = np.linalg.solve(d.Ad, L)
+        record = {"method": "luenberger", "poles": complex_pairs(poles)}
+    else:
+        raise SpecError(f"observer.method must be kalman or luenberger, not {method!r}")
+    return L, (M if form == "current" else None), record
+
+
+def _finite_or_none(x) -> float | None:
+    if x is None:
+        return None
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+def _fmt_list(values) -> str:
+    return ", ".join(f"{complex(v).real:.4g}{complex(v).imag:+.4g}j" if abs(complex(v).imag) > 1e-12
+                     else f"{complex(v).real:.4g}" for v in values)

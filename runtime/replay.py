@@ -1,0 +1,154 @@
+"""Replay recorded measurements through an engine that runs the control law.
+
+Engines share one signature, ``run(artifact, Y, R) -> Trace``: ``reference`` is the float64
+Python law; ``native`` (host C library) and ``qemu`` (Cortex-M4F image under QEMU) are provided
+by :mod:`gainlink.engines` and loaded on first use, so replay never imports a toolchain it does
+not need.
+
+Input CSV: a header with ``y0..y{p-1}`` and ``r0..r{q-1}`` (a ``t`` column is allowed and copied
+through). Output CSV: ``t`` if given, ``u0..``, ``sat0..`` (1 where that input saturated),
+``fault`` (1 where the sample was refused as non-finite), ``xh0..`` and ``z0..`` (state after the step).
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib
+import io
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .artifact import Artifact
+from .errors import DataError, GainlinkError
+from .fileio import atomic_write_text
+from .reference import ReferenceLoop, Trace
+
+Engine = Callable[[Artifact, np.ndarray, np.ndarray], Trace]
+
+_ENGINES: dict[str, Engine] = {}
+_LAZY_ENGINES = {"native": "gainlink.engines.native", "qemu": "gainlink.engines.qemu"}
+
+
+def register_engine(name: str, fn: Engine) -> None:
+    """Make ``fn`` available as ``--engine name``."""
+    _ENGINES[name] = fn
+
+
+def engine_names() -> list[str]:
+    """Every engine name replay accepts."""
+    return sorted(set(_ENGINES) | set(_LAZY_ENGINES))
+
+
+def get_engine(name: str) -> Engine:
+    """The engine called ``name``, importing its module on first use."""
+    if name not in _ENGINES and name in _LAZY_ENGINES:
+        module = importlib.import_module(_LAZY_ENGINES[name])
+        _ENGINES[name] = module.run
+    if name not in _ENGINES:
+        raise GainlinkError(f"unknown engine {name!r} (available: {', '.join(engine_names())})")
+    return _ENGINES[name]
+
+
+def run_reference(artifact: Artifact, Y: np.ndarray, R: np.ndarray) -> Trace:
+    """The float64 reference engine."""
+    return ReferenceLoop(artifact).run(Y, R)
+
+
+register_engine("reference", run_reference)
+
+
+@dataclass(frozen=True)
+class Samples:
+    """Measurements and references read from a replay CSV."""
+
+    Y: np.ndarray  # (N, p)
+    R: np.ndarray  # (N, q)
+    t: np.ndarray | None
+
+
+def read_samples(path: str | Path, artifact: Artifact) -> Samples:
+    """Read a replay input CSV for ``artifact``; non-finite values are kept (the law handles them).
+
+    Raises
+    ------
+    DataError
+        Missing or unknown columns, non-numeric cells, ragged rows, or no rows.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text("utf-8")
+    except FileNotFoundError:
+        raise DataError(f"input {path} not found") from None
+    except UnicodeDecodeError:
+        raise DataError(f"input {path} is not a UTF-8 text CSV") from None
+    rows = list(csv.reader(io.StringIO(text)))
+    if not rows:
+        raise DataError(f"input {path} is empty")
+    header = [h.strip() for h in rows[0]]
+    want_y = [f"y{i}" for i in range(artifact.p)]
+    want_r = [f"r{i}" for i in range(artifact.q)]
+    missing = [c for c in want_y + want_r if c not in header]
+    if missing:
+        raise DataError(f"input {path} lacks column(s) {', '.join(missing)} "
+                        f"(artifact {artifact.name} has p={artifact.p}, q={artifact.q})")
+    unknown = [c for c in header if c not in set(want_y + want_r + ["t"])]
+    if unknown:
+        raise DataError(f"input {path} has unknown column {unknown[0]!r} (expected t, {', '.join(want_y + want_r)})")
+    if len(set(header)) != len(header):
+        raise DataError(f"input {path} repeats a column name")
+    body = rows[1:]
+    if not body:
+        raise DataError(f"input {path} has a header but no samples")
+    data = np.empty((len(body), len(header)))
+    for k, row in enumerate(body, start=2):
+        if len(row) != len(header):
+            raise DataError(f"input {path} line {k} has {len(row)} fields, expected {len(header)}")
+        for j, cell in enumerate(row):
+            try:
+                data[k - 2, j] = float(cell)
+            except ValueError:
+                raise DataError(f"input {path} line {k}, column {header[j]}: {cell!r} is not a number") from None
+    col = {h: j for j, h in enumerate(header)}
+    Y = data[:, [col[c] for c in want_y]]
+    R = data[:, [col[c] for c in want_r]] if want_r else np.zeros((len(body), 0))
+    t = data[:, col["t"]] if "t" in col else None
+    return Samples(Y=Y, R=R, t=t)
+
+
+def format_trace(trace: Trace, t: np.ndarray | None = None) -> str:
+    """The output CSV text for a trace (round-trip float formatting)."""
+    N, m = trace.u.shape
+    n, q = trace.xh.shape[1], trace.z.shape[1]
+    header = (["t"] if t is not None else []) + [f"u{i}" for i in range(m)] + [f"sat{i}" for i in range(m)]
+    header += ["fault"] + [f"xh{i}" for i in range(n)] + [f"z{i}" for i in range(q)]
+    out = io.StringIO()
+    out.write(",".join(header) + "\n")
+    for k in range(N):
+        cells = ([_num(t[k])] if t is not None else []) + [_num(v) for v in trace.u[k]]
+        cells += [str(int(s)) for s in trace.saturated[k]] + [str(int(trace.fault[k]))]
+        cells += [_num(v) for v in trace.xh[k]] + [_num(v) for v in trace.z[k]]
+        out.write(",".join(cells) + "\n")
+    return out.getvalue()
+
+
+def _num(v: float) -> str:
+    v = float(v)
+    return repr(v) if math.isfinite(v) else ("nan" if math.isnan(v) else ("inf" if v > 0 else "-inf"))
+
+
+def replay(artifact: Artifact, input_path: str | Path, output_path: str | Path, *, engine: str = "reference") -> Trace:
+    """Replay ``input_path`` through ``engine`` and write ``output_path`` atomically."""
+    fn = get_engine(engine)
+    samples = read_samples(input_path, artifact)
+    trace = fn(artifact, samples.Y, samples.R)
+    out = Path(output_path)
+    if out.is_dir():
+        raise DataError(f"output {out} is a directory")
+    if not out.parent.exists():
+        raise DataError(f"output folder {out.parent} does not exist")
+    atomic_write_text(out, format_trace(trace, samples.t))
+    return trace
