@@ -29,3 +29,8 @@ uint32_t gl_host_dims(uint32_t which)
     static const uint32_t dims[6] = {GL_N, GL_M, GL_P, GL_Q, GL_OBSERVER_FORM, GL_ANTI_WINDUP};
     return which < 6u ? dims[which] : 0u;
 }
+
+uint32_t gl_host_sat_mask(const gl_loop_t *loop)
+{
+    return loop == NULL ? 0u : loop->sat_mask;
+}

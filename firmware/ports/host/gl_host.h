@@ -29,4 +29,11 @@ const char *gl_host_artifact_sha256(void);
  */
 uint32_t gl_host_dims(uint32_t which);
 
+/**
+ * @brief Saturation mask of the last step.
+ * @param[in] loop Loop instance.
+ * @return Bit k set when input k saturated (0 if loop is NULL).
+ */
+uint32_t gl_host_sat_mask(const gl_loop_t *loop);
+
 #endif /* GAINLINK_GL_HOST_H */

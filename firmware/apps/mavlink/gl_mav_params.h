@@ -1,0 +1,107 @@
+/**
+ * @file gl_mav_params.h
+ * @brief MAVLink parameter table over a staged ::gl_gains_t, with an atomic commit through GL_HASH.
+ *
+ * Naming scheme (index order; see also hil/mavlink_params.py, which must agree):
+ * - `GL_DIM_N GL_DIM_M GL_DIM_P GL_DIM_Q GL_FORM GL_AW` (INT32, read-only): compiled structure.
+ * - `GL_HASH` (INT32): CRC-32 of the committed gain set (gl_gains_crc32()). Setting it to the CRC of the
+ *   staged set commits that set; any other value, or a staged set that fails gl_gains_check() /
+ *   derivation, is refused and the committed set stays.
+ * - REAL32, one per number of ::gl_gains_t in declaration order: `GL_TS`, `GL_AD_i_j`, `GL_BD_i_j`,
+ *   `GL_CD_i_j`, `GL_DD_i_j`, `GL_K_i_j`, `GL_L_i_j`, `GL_M_i_j` (current-estimator form only),
+ *   `GL_CI_i_j`, `GL_KI_i_j`, `GL_KAW_i_j` (q > 0 only), `GL_UMIN_i`, `GL_UMAX_i`, `GL_XH0_i`,
+ *   `GL_Z0_i` (q > 0 only). Setting one stages it (non-finite values are refused); it reads back staged.
+ */
+#ifndef GL_MAV_PARAMS_H
+#define GL_MAV_PARAMS_H
+
+#include <stdint.h>
+
+#include "gainlink/gl_loop.h"
+
+/** Length of a MAVLink parameter id (not NUL-terminated when full). */
+#define GL_MAV_ID_LEN 16
+
+/** Read-only structure parameters plus GL_HASH. */
+#define GL_MAV_HEADER_PARAMS 7
+
+/** Upper bound of the number of parameters (every float of gl_gains_t plus the header ones). */
+#define GL_MAV_MAX_PARAMS                                                                                     \
+    (GL_MAV_HEADER_PARAMS + 1 + GL_N * GL_N + GL_N * GL_M + GL_P * GL_N + GL_P * GL_M + GL_M * GL_N +          \
+     2 * GL_N * GL_P + GL_QA * GL_P + GL_M * GL_QA + GL_QA * GL_M + 2 * GL_M + GL_N + GL_QA)
+
+_Static_assert(GL_MAV_MAX_PARAMS < 65535, "too many parameters for MAVLink's uint16 param_index");
+
+/** MAV_PARAM_TYPE values used here. */
+#define GL_MAV_TYPE_INT32 6
+#define GL_MAV_TYPE_REAL32 9
+
+/** Outcome of a parameter set. */
+typedef enum gl_mav_set_result {
+    GL_MAV_SET_OK = 0,        /**< Accepted (staged, or committed for GL_HASH). */
+    GL_MAV_SET_UNKNOWN = 1,   /**< No such parameter. */
+    GL_MAV_SET_READ_ONLY = 2, /**< Structure parameter. */
+    GL_MAV_SET_BAD_TYPE = 3,  /**< param_type differs from the parameter's. */
+    GL_MAV_SET_BAD_VALUE = 4, /**< Non-finite value, or a commit the library refused. */
+} gl_mav_set_result_t;
+
+/** One parameter: id, type and where its value lives. */
+typedef struct gl_mav_param {
+    char id[GL_MAV_ID_LEN + 1]; /**< NUL-terminated id. */
+    uint8_t type;               /**< GL_MAV_TYPE_*. */
+    int32_t header;             /**< 0..5 structure field, 6 GL_HASH, -1 for a float of the gain set. */
+    uint32_t offset;            /**< Float index from gl_gains_t::Ts (floats only). */
+} gl_mav_param_t;
+
+/** The table and the two gain sets it works on. Caller-owned (static storage). */
+typedef struct gl_mav_params {
+    gl_mav_param_t param[GL_MAV_MAX_PARAMS]; /**< Parameters in index order. */
+    uint16_t count;                          /**< Number of parameters. */
+    gl_gains_t staged;                       /**< Values as set, not yet committed. */
+    gl_gains_t committed;                    /**< The set the loop runs on (from its next step). */
+    uint32_t commits;                        /**< Number of accepted commits. */
+    int32_t last_refusal;                    /**< gl_status_t of the last refused commit (0 if none). */
+} gl_mav_params_t;
+
+/**
+ * @brief Build the table and set both sets to `gains`.
+ * @param[out] table  Table.
+ * @param[in]  gains  Initial (committed) set; its crc32 must be valid.
+ */
+void gl_mav_params_init(gl_mav_params_t *table, const gl_gains_t *gains);
+
+/**
+ * @brief Index of a parameter by id.
+ * @param[in] table  Table.
+ * @param[in] id     Id, at most 16 characters, need not be NUL-terminated when 16 long.
+ * @return Its index, or -1.
+ */
+int32_t gl_mav_params_find(const gl_mav_params_t *table, const char *id);
+
+/**
+ * @brief The four param_value bytes of a parameter (bytewise encoding for integers).
+ * @param[in] table  Table.
+ * @param[in] index  Parameter index (< count).
+ * @return The value's bits as a float (integers: their bytes).
+ */
+float gl_mav_params_value(const gl_mav_params_t *table, uint16_t index);
+
+/**
+ * @brief Set a parameter from a PARAM_SET.
+ * @param[in,out] table  Table.
+ * @param[in]     index  Parameter index (< count).
+ * @param[in]     value  param_value as received (integers bytewise).
+ * @param[in]     type   param_type as received.
+ * @return GL_MAV_SET_OK or why it was refused (nothing changed then).
+ */
+gl_mav_set_result_t gl_mav_params_set(gl_mav_params_t *table, uint16_t index, float value, uint8_t type);
+
+/**
+ * @brief Replace both sets (a reload or a reset); `gains` must pass gl_gains_check().
+ * @param[in,out] table  Table.
+ * @param[in]     gains  New committed set.
+ * @return GL_OK, or the check's error and nothing changed.
+ */
+gl_status_t gl_mav_params_replace(gl_mav_params_t *table, const gl_gains_t *gains);
+
+#endif /* GL_MAV_PARAMS_H */

@@ -1,0 +1,1 @@
+"""Building and running the gainlink firmware: CMake driver, size report, QEMU runner, PIL."""
