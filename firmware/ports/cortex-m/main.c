@@ -1,0 +1,148 @@
+/**
+ * @file main.c
+ * @brief Cortex-M4F image: the control loop fed through semihosting files (replay and PIL), UART banner.
+ *
+ * Prints `gainlink NAME BOARD sha256:HEX` on the UART. Then opens `gl_in.bin` (a file or a FIFO) in
+ * the simulator's working directory. Without it, the UART smoke test runs: one step with y = 0.5, r = 0,
+ * printed as `u0=0xBITS ...`, exit 0. With it, `gl_out.bin` is opened for writing and the stream is:
+ *
+ * in:  header {uint32 magic 'GLI1', count, block, watchdog_periods}, then `count` records
+ *      {uint32 tag (0 step, 1 idle), float y[GL_P], float r[GL_QA]}
+ * out: header {uint32 magic 'GLO1', count, n, m, p, q, crc32 of the running gains, 0}, then one record per
+ *      input {int32 status, uint32 sat_mask, float u[GL_M], float xh[GL_N], float z[GL_QA]}
+ *
+ * Records are read `block` at a time (use block 1 for a closed loop through FIFOs). All little-endian.
+ */
+#include <stdint.h>
+#include <string.h>
+
+#include "board.h"
+#include "gainlink/gl_loop.h"
+#include "semihost.h"
+
+#define GL_IN_MAGIC 0x31494C47u  /* "GLI1" */
+#define GL_OUT_MAGIC 0x314F4C47u /* "GLO1" */
+#define GL_MAX_BLOCK 64u
+#define GL_TAG_STEP 0u
+#define GL_TAG_IDLE 1u
+
+typedef struct {
+    uint32_t tag;
+    float y[GL_P];
+    float r[GL_QA];
+} in_record_t;
+
+typedef struct {
+    int32_t status;
+    uint32_t sat_mask;
+    float u[GL_M];
+    float xh[GL_N];
+    float z[GL_QA];
+} out_record_t;
+
+_Static_assert(sizeof(in_record_t) == 4u * (1u + GL_P + GL_QA), "in_record_t must be packed");
+_Static_assert(sizeof(out_record_t) == 4u * (2u + GL_M + GL_N + GL_QA), "out_record_t must be packed");
+
+static gl_loop_t loop;
+static in_record_t in_buf[GL_MAX_BLOCK];
+static out_record_t out_buf[GL_MAX_BLOCK];
+
+static void uart_puts(const char *s)
+{
+    while (*s != '\0') {
+        gl_board_uart_putc(*s++);
+    }
+}
+
+static void uart_hex(uint32_t v)
+{
+    static const char digits[] = "0123456789ABCDEF";
+    uart_puts("0x");
+    for (int shift = 28; shift >= 0; shift -= 4) {
+        gl_board_uart_putc(digits[(v >> shift) & 0xFu]);
+    }
+}
+
+static int uart_smoke(void)
+{
+    float y[GL_P];
+    float r[GL_QA];
+    float u[GL_M];
+    for (unsigned i = 0; i < GL_P; ++i) {
+        y[i] = 0.5f;
+    }
+    memset(r, 0, sizeof r);
+    gl_status_t st = gl_loop_step(&loop, y, r, u);
+    uart_puts("step ");
+    uart_hex((uint32_t)st);
+    for (unsigned i = 0; i < GL_M; ++i) {
+        uint32_t bits;
+        memcpy(&bits, &u[i], sizeof bits);
+        uart_puts(" u=");
+        uart_hex(bits);
+    }
+    uart_puts("\n");
+    return GL_EXIT_OK;
+}
+
+int main(void)
+{
+    gl_board_uart_init();
+    uart_puts("gainlink " GL_NAME " ");
+    uart_puts(gl_board_name);
+    uart_puts(" sha256:" GL_ARTIFACT_SHA256 "\n");
+
+    int32_t fin = gl_sh_open("gl_in.bin", GL_SH_MODE_RB);
+    if (fin < 0) {
+        if (gl_loop_init(&loop, &gl_gains_default, GL_WATCHDOG_PERIODS_DEFAULT) != GL_OK) {
+            return GL_EXIT_GAINS;
+        }
+        return uart_smoke();
+    }
+    uint32_t hdr[4];
+    if (gl_sh_read_all(fin, hdr, sizeof hdr) != 0) {
+        return GL_EXIT_IO;
+    }
+    if (hdr[0] != GL_IN_MAGIC || hdr[2] == 0u || hdr[2] > GL_MAX_BLOCK || hdr[3] == 0u) {
+        return GL_EXIT_BAD_INPUT;
+    }
+    if (gl_loop_init(&loop, &gl_gains_default, hdr[3]) != GL_OK) {
+        return GL_EXIT_GAINS;
+    }
+    int32_t fout = gl_sh_open("gl_out.bin", GL_SH_MODE_WB);
+    if (fout < 0) {
+        return GL_EXIT_IO;
+    }
+    const uint32_t count = hdr[1];
+    const uint32_t block = hdr[2];
+    const uint32_t out_hdr[8] = {GL_OUT_MAGIC, count, GL_N, GL_M, GL_P, GL_Q, gl_loop_active_crc32(&loop), 0u};
+    if (gl_sh_write_all(fout, out_hdr, sizeof out_hdr) != 0) {
+        return GL_EXIT_IO;
+    }
+    for (uint32_t done = 0; done < count;) {
+        uint32_t chunk = (count - done) < block ? (count - done) : block;
+        if (gl_sh_read_all(fin, in_buf, chunk * sizeof(in_record_t)) != 0) {
+            return GL_EXIT_IO;
+        }
+        for (uint32_t k = 0; k < chunk; ++k) {
+            out_record_t *o = &out_buf[k];
+            gl_status_t st;
+            if (in_buf[k].tag == GL_TAG_IDLE) {
+                st = gl_loop_idle(&loop, o->u);
+            } else {
+                st = gl_loop_step(&loop, in_buf[k].y, in_buf[k].r, o->u);
+            }
+            o->status = (int32_t)st;
+            o->sat_mask = loop.sat_mask;
+            memcpy(o->xh, loop.xh, sizeof o->xh);
+            memcpy(o->z, loop.z, sizeof o->z);
+        }
+        if (gl_sh_write_all(fout, out_buf, chunk * sizeof(out_record_t)) != 0) {
+            return GL_EXIT_IO;
+        }
+        done += chunk;
+    }
+    gl_sh_close(fout);
+    gl_sh_close(fin);
+    return GL_EXIT_OK;
+}

@@ -1,0 +1,49 @@
+/**
+ * @file semihost.h
+ * @brief ARM semihosting (bkpt 0xAB) for the Cortex-M port: file I/O with the host and a clean exit.
+ */
+#ifndef GAINLINK_SEMIHOST_H
+#define GAINLINK_SEMIHOST_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+/** Exit statuses of the image (seen as QEMU's exit status). */
+enum gl_exit {
+    GL_EXIT_OK = 0,          /**< Done. */
+    GL_EXIT_BAD_INPUT = 1,   /**< The input stream's header is malformed. */
+    GL_EXIT_IO = 2,          /**< A semihosting read/write failed or came up short. */
+    GL_EXIT_GAINS = 4,       /**< The built-in gain set was rejected by gl_loop_init(). */
+    GL_EXIT_FPU = 8,         /**< Startup self-test: FPU not enabled (GL_ERR_FPU). */
+    GL_EXIT_FAULT = 9        /**< A HardFault / UsageFault / other fault occurred. */
+};
+
+/** Semihosting open modes (subset). */
+#define GL_SH_MODE_RB 1
+#define GL_SH_MODE_WB 5
+
+/**
+ * @brief Open a host file. @param[in] path NUL-terminated name. @param[in] mode GL_SH_MODE_*.
+ * @return A handle >= 0, or -1.
+ */
+int32_t gl_sh_open(const char *path, uint32_t mode);
+
+/**
+ * @brief Read exactly `len` bytes (loops over short reads). @param[in] fd Handle. @param[out] buf Buffer.
+ * @param[in] len Bytes. @return 0 on success, -1 on error or end of file.
+ */
+int32_t gl_sh_read_all(int32_t fd, void *buf, size_t len);
+
+/**
+ * @brief Write `len` bytes. @param[in] fd Handle. @param[in] buf Data. @param[in] len Bytes.
+ * @return 0 on success, -1 otherwise.
+ */
+int32_t gl_sh_write_all(int32_t fd, const void *buf, size_t len);
+
+/** @brief Close a handle. @param[in] fd Handle. */
+void gl_sh_close(int32_t fd);
+
+/** @brief Stop the simulator with `code` (SYS_EXIT_EXTENDED); never returns. @param[in] code Status. */
+void gl_sh_exit(uint32_t code) __attribute__((noreturn));
+
+#endif /* GAINLINK_SEMIHOST_H */

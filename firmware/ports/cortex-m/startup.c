@@ -1,0 +1,60 @@
+/**
+ * @file startup.c
+ * @brief Cortex-M4F start-up: vector table, .data/.bss set-up, FPU enable and self-test, fault exits.
+ *
+ * The FPU is enabled (CPACR CP10/CP11 full access) before any float instruction can run. The self-test
+ * reads CPACR back and stops the simulator with GL_EXIT_FPU if the FPU is still disabled, instead of
+ * letting the first float instruction fault (GL_SKIP_FPU_ENABLE builds exercise this path). Every fault
+ * handler stops the simulator with GL_EXIT_FAULT rather than spinning.
+ */
+#include <stdint.h>
+
+#include "semihost.h"
+
+#define SCB_CPACR (*(volatile uint32_t *)0xE000ED88u)
+#define CPACR_CP10_CP11_FULL (0xFu << 20)
+
+extern uint32_t _data_load, _data_start, _data_end, _bss_start, _bss_end, _stack_top;
+int main(void);
+void gl_reset_handler(void);
+void gl_fault_handler(void);
+
+void gl_fault_handler(void)
+{
+    gl_sh_exit(GL_EXIT_FAULT);
+}
+
+void gl_reset_handler(void)
+{
+    const volatile uint32_t *src = &_data_load;
+    for (volatile uint32_t *dst = &_data_start; dst < &_data_end;) {
+        *dst++ = *src++;
+    }
+    for (volatile uint32_t *dst = &_bss_start; dst < &_bss_end;) {
+        *dst++ = 0u;
+    }
+#ifndef GL_SKIP_FPU_ENABLE
+    SCB_CPACR |= CPACR_CP10_CP11_FULL;
+    __asm__ volatile("dsb\n\tisb" ::: "memory");
+#endif
+    if ((SCB_CPACR & CPACR_CP10_CP11_FULL) != CPACR_CP10_CP11_FULL) {
+        gl_sh_exit(GL_EXIT_FPU);
+    }
+    gl_sh_exit((uint32_t)main());
+}
+
+typedef void (*gl_vector_t)(void);
+
+__attribute__((section(".isr_vector"), used)) static const gl_vector_t vectors[16] = {
+    [0] = (gl_vector_t)(uintptr_t)&_stack_top,
+    [1] = gl_reset_handler,
+    [2] = gl_fault_handler,  /* NMI */
+    [3] = gl_fault_handler,  /* HardFault */
+    [4] = gl_fault_handler,  /* MemManage */
+    [5] = gl_fault_handler,  /* BusFault */
+    [6] = gl_fault_handler,  /* UsageFault */
+    [11] = gl_fault_handler, /* SVCall */
+    [12] = gl_fault_handler, /* DebugMonitor */
+    [14] = gl_fault_handler, /* PendSV */
+    [15] = gl_fault_handler, /* SysTick */
+};
