@@ -1,0 +1,338 @@
+"""Upload a gain artifact to a vehicle over MAVLink: diff, verified pipelined sets, commit, persist,
+and rollback of every changed parameter on any failure.
+
+The steps of :func:`upload`:
+
+1. wait for a vehicle HEARTBEAT (:class:`~gainlink.errors.PeerTimeoutError` when none comes);
+2. ask for AUTOPILOT_VERSION and pick the integer encoding (bytewise or C-cast) it advertises;
+3. read the current value of every target parameter and compute the diff;
+4. set the changed ones, a bounded window in flight, each verified by its echo, retried on timeout;
+5. for the gainlink firmware, commit the staged set by setting ``GL_HASH`` (the loop swaps sets
+   atomically between steps);
+6. with ``persist``, send MAV_CMD_PREFLIGHT_STORAGE and check the COMMAND_ACK.
+
+When any step after the first set fails, every parameter that was sent is set back to the value
+read in step 3 (and the old hash re-committed), and :class:`UploadFailed` lists what happened.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from pymavlink.dialects.v20 import common as mavlink2
+
+from gainlink.artifact import Artifact
+from gainlink.errors import ParameterError, PeerTimeoutError
+
+from .mavlink_link import MavLink
+from .mavlink_params import (
+    DIMENSION_IDS,
+    HASH_ID,
+    INT32,
+    REAL32,
+    Encoding,
+    Mapping,
+    ParamSpec,
+    firmware_params,
+    load_mapping,
+    mapped_params,
+    same_value,
+    type_name,
+)
+from .mavlink_session import ParamSession, ParamValue
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ParamChange:
+    """One parameter whose vehicle value differs from the artifact's."""
+
+    name: str
+    source: str
+    ptype: int
+    old: float | int
+    new: float | int
+
+
+@dataclass(frozen=True)
+class UploadResult:
+    """What an upload did.
+
+    Attributes
+    ----------
+    target : tuple of int
+        (system id, component id) of the vehicle.
+    encoding : Encoding
+        Integer encoding used.
+    changes : tuple of ParamChange
+        The diff between the vehicle and the artifact (what was, or with ``dry_run`` would be, set).
+    unchanged : int
+        Parameters that already held the artifact's value.
+    verified : int
+        Sets verified by their echo (the commit included).
+    sent : int
+        PARAM_SETs sent, retries included.
+    retries : int
+        Re-sends after a timeout or a mismatched echo.
+    committed : bool
+        Whether a GL_HASH commit applied the set to the loop.
+    persisted : bool
+        Whether MAV_CMD_PREFLIGHT_STORAGE was acknowledged.
+    dry_run : bool
+        Whether nothing was written.
+    seconds : float
+        Wall time of the whole upload.
+    """
+
+    target: tuple[int, int]
+    encoding: Encoding
+    changes: tuple[ParamChange, ...]
+    unchanged: int
+    verified: int
+    sent: int
+    retries: int
+    committed: bool
+    persisted: bool
+    dry_run: bool
+    seconds: float
+
+
+class UploadFailed(ParameterError):
+    """An upload failed; ``events`` says what happened, ``rolled_back`` whether every change was undone."""
+
+    def __init__(self, message: str, *, events: tuple[str, ...], rolled_back: bool):
+        super().__init__(message)
+        self.events = events
+        self.rolled_back = rolled_back
+
+
+@dataclass(frozen=True)
+class _Plan:
+    specs: tuple[ParamSpec, ...]
+    commit: bool
+    checks: tuple[ParamSpec, ...]
+    new_hash: int | None
+
+
+def _plan(artifact: Artifact, mapping: Mapping | None) -> _Plan:
+    if mapping is None:
+        every = firmware_params(artifact)
+        dims = tuple(s for s in every if s.name in DIMENSION_IDS)
+        gains = tuple(s for s in every if s.ptype == REAL32)
+        (h,) = (int(s.value) for s in every if s.name == HASH_ID)
+        return _Plan(specs=gains, commit=True, checks=dims, new_hash=h)
+    return _Plan(specs=mapped_params(artifact, mapping), commit=False, checks=(), new_hash=None)
+
+
+def _fmt(v: float | int, ptype: int) -> str:
+    return f"{v:.9g}" if ptype == REAL32 else str(int(v))
+
+
+def format_changes(changes: tuple[ParamChange, ...]) -> list[str]:
+    """One line per change: ``id  source  old -> new``."""
+    return [f"{c.name:<16} {c.source:<12} {_fmt(c.old, c.ptype)} -> {_fmt(c.new, c.ptype)}" for c in changes]
+
+
+def detect_encoding(session: ParamSession) -> Encoding:
+    """Integer encoding advertised in AUTOPILOT_VERSION (C-cast when the vehicle does not say)."""
+    msg = session.request_message(msg_id=mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, wait=max(0.3, 2 * session.timeout))
+    if msg is None:
+        log.warning("no AUTOPILOT_VERSION from the vehicle: assuming C-cast integer parameters")
+        return Encoding.C_CAST
+    if msg.capabilities & mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE:
+        return Encoding.BYTEWISE
+    if not msg.capabilities & mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST:
+        log.warning("AUTOPILOT_VERSION names no parameter encoding: assuming C-cast")
+    return Encoding.C_CAST
+
+
+def upload(
+    artifact: Artifact,
+    *,
+    connect: str,
+    mapping: Mapping | str | Path | None = None,
+    persist: bool = False,
+    dry_run: bool = False,
+    window: int = 16,
+    timeout: float = 0.25,
+    retries: int = 10,
+    heartbeat_timeout: float = 5.0,
+    link: MavLink | None = None,
+) -> UploadResult:
+    """Upload ``artifact``'s gains to the vehicle at ``connect``.
+
+    Parameters
+    ----------
+    artifact : Artifact
+        The gain set.
+    connect : str
+        pymavlink connection URL (``udpout:127.0.0.1:14550``, ``udpin:0.0.0.0:14550``, serial device).
+    mapping : Mapping or path, optional
+        Map gains to the vehicle's own parameter names; without it the gainlink firmware scheme is used.
+    persist : bool
+        Send MAV_CMD_PREFLIGHT_STORAGE (write) after the set is applied, and check the ack.
+    dry_run : bool
+        Read and diff only.
+    window : int
+        PARAM_SETs in flight at most.
+    timeout : float
+        Seconds before a request is re-sent.
+    retries : int
+        Re-sends per parameter before it counts as failed.
+    heartbeat_timeout : float
+        Seconds to wait for the vehicle's heartbeat.
+    link : MavLink, optional
+        An already open link to use instead of opening ``connect`` (it is not closed).
+
+    Returns
+    -------
+    UploadResult
+
+    Raises
+    ------
+    PeerTimeoutError
+        No heartbeat within ``heartbeat_timeout``.
+    ParameterError
+        Before anything was written: a parameter is missing, has another type, or the firmware
+        runs a loop of other dimensions.
+    UploadFailed
+        After something was written: the set, commit or persist failed; every change was rolled back
+        (``rolled_back``) or the events say which could not be.
+    """
+    if mapping is not None and not isinstance(mapping, Mapping):
+        mapping = load_mapping(mapping)
+    plan = _plan(artifact, mapping)
+    t0 = time.perf_counter()
+    own = link is None
+    link = link or MavLink(connect)
+    try:
+        hb = link.wait_heartbeat(timeout=heartbeat_timeout)
+        target = (hb.get_srcSystem(), hb.get_srcComponent())
+        session = ParamSession(
+            link, target_system=target[0], target_component=target[1], encoding=Encoding.C_CAST,
+            window=window, timeout=timeout, retries=retries,
+        )
+        session.encoding = detect_encoding(session)
+        log.info("vehicle %d/%d, %s integer parameters", target[0], target[1], session.encoding.value)
+        return _upload(session, plan=plan, persist=persist, dry_run=dry_run, t0=t0, target=target)
+    finally:
+        if own:
+            link.close()
+
+
+def _read_current(session: ParamSession, plan: _Plan) -> dict[str, ParamValue]:
+    names = [s.name for s in plan.checks] + [s.name for s in plan.specs] + ([HASH_ID] if plan.commit else [])
+    values, missing = session.read(names)
+    if missing:
+        listed = ", ".join(f"{n} ({why})" for n, why in sorted(missing.items()))
+        raise ParameterError(f"vehicle lacks {len(missing)} parameter(s): {listed}; nothing was changed")
+    for s in plan.checks:
+        if int(values[s.name].value) != int(s.value):
+            dims = " ".join(f"{d}={int(values[d].value)}" for d in DIMENSION_IDS)
+            want = " ".join(f"{c.name}={int(c.value)}" for c in plan.checks)
+            raise ParameterError(f"the firmware runs a loop of other dimensions ({dims}; artifact {want}); nothing was changed")
+    for s in plan.specs:
+        got = values[s.name].ptype
+        if got != s.ptype:
+            raise ParameterError(
+                f"parameter {s.name} is {type_name(got)} on the vehicle, {type_name(s.ptype)} in the plan; nothing was changed"
+            )
+    return values
+
+
+def _upload(session: ParamSession, *, plan: _Plan, persist: bool, dry_run: bool, t0: float, target: tuple[int, int]) -> UploadResult:
+    current = _read_current(session, plan)
+    changes = tuple(
+        ParamChange(name=s.name, source=s.source, ptype=s.ptype, old=current[s.name].value, new=s.value)
+        for s in plan.specs
+        if not same_value(a=current[s.name].value, b=s.value, ptype=s.ptype)
+    )
+    new_hash = plan.new_hash
+    old_hash = int(current[HASH_ID].value) if plan.commit else None
+    need_commit = plan.commit and (bool(changes) or old_hash != new_hash)
+
+    def result(*, verified: int, sent: int, retries: int, committed: bool, persisted: bool) -> UploadResult:
+        return UploadResult(
+            target=target, encoding=session.encoding, changes=changes, unchanged=len(plan.specs) - len(changes),
+            verified=verified, sent=sent, retries=retries, committed=committed, persisted=persisted,
+            dry_run=dry_run, seconds=time.perf_counter() - t0,
+        )
+
+    if dry_run:
+        return result(verified=0, sent=0, retries=0, committed=False, persisted=False)
+
+    events: list[str] = []
+    sent = retries = verified = 0
+    committed = False
+    out = session.set([(c.name, c.ptype, c.new) for c in changes])
+    sent, retries, verified = out.sent, out.retries, len(out.verified)
+    failure = _describe(out, what="set")
+    if not failure and need_commit:
+        c = session.set([(HASH_ID, INT32, new_hash)])
+        sent, retries = sent + c.sent, retries + c.retries
+        if c.ok:
+            committed, verified = True, verified + 1
+            events.append(f"committed gain set {HASH_ID}={new_hash}")
+        else:
+            failure = _describe(c, what="commit (the firmware refused the staged set)")
+    persisted = False
+    if not failure and persist:
+        try:
+            ack = session.command(command=mavlink2.MAV_CMD_PREFLIGHT_STORAGE, params=(1.0, -1.0))
+        except PeerTimeoutError as exc:
+            ack, failure = -1, f"persist failed: {exc}"
+        if not failure and ack != mavlink2.MAV_RESULT_ACCEPTED:
+            failure = f"persist refused: COMMAND_ACK result {_result_name(ack)}"
+        persisted = not failure
+    if not failure:
+        return result(verified=verified, sent=sent, retries=retries, committed=committed, persisted=persisted)
+
+    events.insert(0, failure)
+    rolled_back = _rollback(session, changes=changes, committed=committed, old_hash=old_hash, events=events, plan=plan)
+    state = "every changed parameter was restored" if rolled_back else "ROLLBACK INCOMPLETE"
+    raise UploadFailed(f"upload failed: {failure}; {state}", events=tuple(events), rolled_back=rolled_back)
+
+
+def _describe(out, *, what: str) -> str:
+    parts = []
+    for name, (value, reason) in sorted(out.refused.items()):
+        parts.append(f"{name} refused (vehicle kept {value!r}{', ' + reason if reason else ''})")
+    for name in out.unanswered:
+        parts.append(f"{name} never echoed")
+    return f"{what}: " + "; ".join(parts) if parts else ""
+
+
+def _result_name(code: int) -> str:
+    for k, v in vars(mavlink2).items():
+        if k.startswith("MAV_RESULT_") and v == code and k != "MAV_RESULT_ENUM_END":
+            return k
+    return str(code)
+
+
+def _rollback(
+    session: ParamSession, *, changes: tuple[ParamChange, ...], committed: bool, old_hash: int | None,
+    events: list[str], plan: _Plan,
+) -> bool:
+    if not changes and not committed:
+        events.append("nothing had been changed")
+        return True
+    back = session.set([(c.name, c.ptype, c.old) for c in changes])
+    for name in back.verified:
+        events.append(f"restored {name}")
+    ok = back.ok
+    for name, (value, reason) in back.refused.items():
+        events.append(f"could NOT restore {name} (vehicle holds {value!r}{', ' + reason if reason else ''})")
+    for name in back.unanswered:
+        events.append(f"could NOT restore {name} (no echo)")
+    if committed and old_hash is not None:
+        h = session.set([(HASH_ID, INT32, old_hash)])
+        if h.ok:
+            events.append(f"re-committed the previous gain set {HASH_ID}={old_hash}")
+        else:
+            ok = False
+            events.append(f"could NOT re-commit the previous gain set {HASH_ID}={old_hash}")
+    return ok
