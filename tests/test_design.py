@@ -1,0 +1,199 @@
+"""Design results checked against independent computations (SciPy's Riccati solvers, not python-control)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import scipy.linalg
+import scipy.signal
+
+from gainlink import artifact as artifact_mod
+from gainlink.design import design, poles_match
+from gainlink.spec import load_spec, parse_spec
+
+from conftest import EXAMPLES, run_cli
+
+
+def dlqr_scipy(A, B, Q, R):
+    P = scipy.linalg.solve_discrete_are(A, B, Q, R)
+    return np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
+
+
+def kalman_predictor_scipy(Ad, Cd, W, V):
+    P = scipy.linalg.solve_discrete_are(Ad.T, Cd.T, W, V)
+    return Ad @ P @ Cd.T @ np.linalg.inv(Cd @ P @ Cd.T + V)
+
+
+def test_seed_continuous_lqr_gain_is_the_corrected_one():
+    # The seed's printed K (-3.162, -4.327, -52.40, -10.74) is wrong for its own plant and weights.
+    spec = load_spec(EXAMPLES / "pendulum.toml")
+    Q, R = np.diag([10.0, 1.0, 100.0, 1.0]), np.eye(1)
+    P = scipy.linalg.solve_continuous_are(spec.A, spec.B, Q, R)
+    K = np.linalg.solve(R, spec.B.T @ P)
+    np.testing.assert_allclose(K[0], [-3.1623, -4.4248, -39.608, -8.4795], atol=6e-4)
+    assert not np.allclose(K[0], [-3.162, -4.327, -52.40, -10.74], atol=0.05)
+    # The open-loop plant has the seed's unstable pole at +4.646 rad/s.
+    assert np.max(np.linalg.eigvals(spec.A).real) == pytest.approx(4.6457, abs=1e-3)
+
+
+def test_pendulum_gains_match_independent_dlqr_and_kalman(example_artifacts):
+    a = artifact_mod.load(example_artifacts["pendulum"])
+    plant = a.data["plant"]
+    A, B, C, D = (np.array(plant[k]) for k in "ABCD")
+    Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), a.Ts, method="zoh")
+    np.testing.assert_allclose(a.Ad, Ad, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(a.Bd, Bd, rtol=1e-12, atol=1e-14)
+    # LQI: DLQR on the plant augmented with z+ = z - Ts Ci y, with the recorded (augmented) Q and R.
+    q, n = a.q, a.n
+    Aa = np.block([[Ad, np.zeros((n, q))], [-a.Ts * a.Ci @ Cd, np.eye(q)]])
+    Ba = np.vstack([Bd, -a.Ts * a.Ci @ Dd])
+    ctl = a.data["design"]["controller"]
+    Ka = dlqr_scipy(Aa, Ba, np.array(ctl["Q"]), np.array(ctl["R"]))
+    np.testing.assert_allclose(a.K, Ka[:, :n], rtol=1e-9)
+    np.testing.assert_allclose(a.Ki, Ka[:, n:], rtol=1e-9)
+    obs = a.data["design"]["observer"]
+    L = kalman_predictor_scipy(Ad, Cd, np.array(obs["W"]), np.array(obs["V"]))
+    # Relative to the gain's norm: entries 1e-5 of the largest differ between SLICOT and SciPy in the 9th digit.
+    assert np.linalg.norm(a.L - L) <= 1e-9 * np.linalg.norm(L)
+    # The recorded Q is the spec's weights with the integrator weight appended.
+    np.testing.assert_allclose(np.diag(ctl["Q"]), [10, 1, 100, 1, 5])
+
+
+def test_combined_closed_loop_is_the_union_of_controller_and_observer(example_artifacts):
+    for path in example_artifacts.values():
+        a = artifact_mod.load(path)
+        n, q = a.n, a.q
+        # Simulate-free check: build [x; xh; z] dynamics directly from the law with r = 0.
+        N = 2 * n + q
+        Acl = np.zeros((N, N))
+        for j in range(N):
+            e = np.zeros(N)
+            e[j] = 1.0
+            x, xh, z = e[:n], e[n:2 * n], e[2 * n:]
+            u = -a.K @ xh - a.Ki @ z
+            y = a.Cd @ x + a.Dd @ u
+            Acl[:, j] = np.concatenate([a.Ad @ x + a.Bd @ u,
+                                        a.Ad @ xh + a.Bd @ u + a.L @ (y - a.Cd @ xh - a.Dd @ u),
+                                        z - a.Ts * a.Ci @ y])
+        cl = np.linalg.eigvals(Acl)
+        Aa = np.block([[a.Ad, np.zeros((n, q))], [-a.Ts * a.Ci @ a.Cd, np.eye(q)]])
+        Ba = np.vstack([a.Bd, -a.Ts * a.Ci @ a.Dd])
+        ctrl = np.linalg.eigvals(Aa - Ba @ np.hstack([a.K, a.Ki]))
+        obs = np.linalg.eigvals(a.Ad - a.L @ a.Cd)
+        assert np.max(np.abs(cl)) < 1
+        assert poles_match(cl, np.concatenate([ctrl, obs]))
+        recorded = np.array([complex(*z) for z in a.data["checks"]["closed_loop_poles"]])
+        assert poles_match(recorded, cl)
+
+
+def test_gains_recompute_from_the_file_alone(example_artifacts):
+    # Everything needed is in gains.json: quadrotor uses Bryson's rule, recorded as the Q actually used.
+    a = artifact_mod.load(example_artifacts["quadrotor_lateral"])
+    ctl = a.data["design"]["controller"]
+    np.testing.assert_allclose(np.diag(ctl["Q"])[:4], 1 / np.array([0.35, 2.0, 2.0, 0.5]) ** 2)
+    np.testing.assert_allclose(ctl["R"], [[1 / 0.2**2]])
+    Aa = np.block([[a.Ad, np.zeros((a.n, a.q))], [-a.Ts * a.Ci @ a.Cd, np.eye(a.q)]])
+    Ba = np.vstack([a.Bd, -a.Ts * a.Ci @ a.Dd])
+    Ka = dlqr_scipy(Aa, Ba, np.array(ctl["Q"]), np.array(ctl["R"]))
+    np.testing.assert_allclose(np.hstack([a.K, a.Ki]), Ka, rtol=1e-9)
+
+
+def test_wood_berry_is_mimo_with_a_fully_populated_gain(example_artifacts):
+    a = artifact_mod.load(example_artifacts["wood_berry"])
+    assert (a.m, a.p, a.q) == (2, 2, 2)
+    assert np.all(np.abs(a.K) > 1e-6), a.K
+    assert np.all(np.abs(a.Ki) > 1e-6), a.Ki
+    # Four delays with first-order Pade: more states than the 4 delay-free lags.
+    assert a.n > 4
+    # The static gain of the realisation is the Wood-Berry steady-state gain matrix.
+    A, B, C, D = (np.array(a.data["plant"][k]) for k in "ABCD")
+    np.testing.assert_allclose(D - C @ np.linalg.solve(A, B), [[12.8, -18.9], [6.6, -19.4]], rtol=1e-9)
+
+
+def test_pade_order_is_configurable():
+    spec = load_spec(EXAMPLES / "wood_berry.toml")
+    import tomllib
+
+    data = tomllib.loads((EXAMPLES / "wood_berry.toml").read_text())
+    data["plant"]["pade_order"] = 2
+    spec2 = parse_spec(data)
+    assert spec2.n > spec.n
+    z = np.linalg.eigvals(spec2.A)
+    assert np.all(z.real < 0)
+
+
+def _small_spec(**overrides) -> dict:
+    data = {
+        "name": "servo", "Ts": 0.01,
+        "plant": {"kind": "continuous", "A": [[0.0, 1.0], [0.0, -2.0]], "B": [[0.0], [4.0]],
+                  "C": [[1.0, 0.0]]},
+        "controller": {"method": "lqr", "Q_diag": [10.0, 0.1], "R_diag": [1.0]},
+        "observer": {"method": "kalman", "W_diag": [1e-4, 1e-2], "V_diag": [1e-4]},
+        "limits": {"u_min": [-5.0], "u_max": [5.0]},
+    }
+    for key, value in overrides.items():
+        data[key] = value
+    return data
+
+
+def test_pole_placement_and_luenberger_put_poles_where_asked():
+    spec = parse_spec(_small_spec(
+        controller={"method": "place", "poles": [-8.0, -9.0]},
+        observer={"method": "luenberger", "poles": [[-30.0, 5.0], [-30.0, -5.0]], "form": "current"},
+    ))
+    r = design(spec)
+    a = artifact_mod.from_dict(r.artifact)
+    want_c = np.exp(np.array([-8.0, -9.0]) * 0.01)
+    want_o = np.exp(np.array([-30 + 5j, -30 - 5j]) * 0.01)
+    assert poles_match(np.linalg.eigvals(a.Ad - a.Bd @ a.K), want_c)
+    assert poles_match(np.linalg.eigvals(a.Ad - a.L @ a.Cd), want_o)
+    np.testing.assert_allclose(a.L, a.Ad @ a.M, rtol=1e-12)
+
+
+def test_ackermann_matches_place_for_single_input():
+    r1 = design(parse_spec(_small_spec(controller={"method": "place", "poles": [-8.0, -9.0]})))
+    r2 = design(parse_spec(_small_spec(controller={"method": "ackermann", "poles": [-8.0, -9.0]})))
+    np.testing.assert_allclose(r1.artifact["K"], r2.artifact["K"], rtol=1e-8)
+    assert any("Ackermann" in w for w in r2.warnings)
+
+
+def test_tustin_gives_the_bilinear_plant():
+    r = design(parse_spec(_small_spec(discretization="tustin")))
+    a = artifact_mod.from_dict(r.artifact)
+    A, B, C, D = np.array([[0.0, 1.0], [0.0, -2.0]]), np.array([[0.0], [4.0]]), np.array([[1.0, 0.0]]), np.zeros((1, 1))
+    Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), 0.01, method="bilinear")
+    np.testing.assert_allclose(a.Ad, Ad, rtol=1e-10)
+    # Tustin's realisation differs by a state scaling between libraries; compare the transfer function.
+    H = lambda Ad, Bd, Cd, Dd, z: (Cd @ np.linalg.solve(z * np.eye(2) - Ad, Bd) + Dd)[0, 0]  # noqa: E731
+    for z in (0.5, 1.5j, -0.3 + 0.2j):
+        assert H(a.Ad, a.Bd, a.Cd, a.Dd, z) == pytest.approx(H(Ad, Bd, Cd, Dd, z), rel=1e-9)
+    assert a.data["design"]["discretization"] == "tustin"
+
+
+def test_design_is_deterministic_byte_for_byte(tmp_path):
+    for d in ("a", "b"):
+        assert run_cli("design", EXAMPLES / "pendulum.toml", "--out", tmp_path / d).code == 0
+    first, second = (tmp_path / d / "gains.json" for d in ("a", "b"))
+    assert first.read_bytes() == second.read_bytes()
+    data = json.loads(first.read_text())
+    assert "time" not in json.dumps(data).lower()
+    assert data["provenance"]["spec_sha256"]
+    assert data["sha256"] == artifact_mod.content_sha256(data)
+
+
+def test_margins_are_real_stability_boundaries(example_artifacts):
+    # Scaling the loop gain at the input just inside / outside the reported margin keeps / loses stability.
+    from gainlink.design import Discretised, closed_loop_matrix
+
+    a = artifact_mod.load(example_artifacts["pendulum"])
+    mg = a.data["checks"]["margins"][0]
+    d = Discretised(a.Ad, a.Bd, a.Cd, a.Dd, "zoh")
+    A, B, C = closed_loop_matrix(d, K=a.K, Ki=a.Ki, L=a.L, M=None, Ci=a.Ci, Ts=a.Ts, form="predictor", break_input=0)
+    rho = lambda k: np.max(np.abs(np.linalg.eigvals(A + k * B @ C)))  # noqa: E731
+    up, down = 10 ** (mg["gain_margin_up_db"] / 20), 10 ** (mg["gain_margin_down_db"] / 20)
+    assert rho(1.0) < 1
+    assert rho(up * 0.99) < 1 < rho(up * 1.01)
+    assert rho(down * 1.01) < 1 < rho(down * 0.99)
+    assert 0 < mg["phase_margin_deg"] < 90
