@@ -1,8 +1,22 @@
 #!/usr/bin/env bash
-# The main job, step by step with the real CLI: design the pendulum, export C, replay.
+# The main job, with the real CLI at every step: analyse and design the pendulum, record a closed-loop
+# run of its discrete plant, replay it through the float64 reference and compare.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=out/demo
+rm -rf "$out"
 mkdir -p "$out"
+step() { printf '\n== %s\n' "$*"; }
+
+step "1. analyse the plant spec"
 gainlink analyze examples/pendulum.toml
+
+step "2. design: DLQR with integral action + Kalman predictor -> $out/gains.json"
 gainlink design examples/pendulum.toml --out "$out"
+gainlink validate "$out/gains.json"
+
+step "3. record 5 s of closed loop from a 0.1 rad tilt, with sensor noise and a 0.2 m cart reference"
+gainlink simulate "$out/gains.json" --steps 500 --x0 0 0 0.1 0 --ref 0.2 --noise 0.0005 --out "$out/samples.csv"
+
+step "4. replay the record through the float64 reference of the control law"
+gainlink replay "$out/gains.json" --input "$out/samples.csv" --output "$out/reference.csv" --engine reference
