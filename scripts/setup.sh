@@ -9,6 +9,7 @@ APT_PACKAGES=(
   build-essential cmake
   gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi
   qemu-system-arm qemu-system-x86 busybox-static cpio
+  libmsgpack-dev
 )
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do

@@ -1,0 +1,205 @@
+/**
+ * @file main.c
+ * @brief `gainlink_can`: the control loop as a CAN node, for HIL runs (`gainlink firmware run --can`, `gainlink hil run`).
+ *
+ * Usage:
+ * @code
+ *   gainlink_can --backend udp --channel 239.74.163.2 [--port 43113] [--hop-limit 0] [--fd] [--base-id 256]
+ *   gainlink_can --backend socketcan --channel vcan0 [--fd] [--base-id 256]
+ * @endcode
+ * Assembles each sample (y then r) from its measurement frames by sequence number, runs gl_loop_step()
+ * once per complete, newer sample (duplicates and stale samples are ignored), and answers with the
+ * command frames carrying the same sequence number, the status bits and the saturation mask. Prints
+ * one `gainlink_can ready ...` line on stdout once the link is open; SIGTERM/SIGINT end it (exit 0).
+ */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "gainlink/gl_loop.h"
+#include "gl_can_layout.h"
+#include "gl_can_link.h"
+
+#define N_SAMPLE ((uint32_t)(GL_P + GL_Q))
+
+static volatile sig_atomic_t stop_requested;
+static gl_loop_t loop;
+
+static void on_signal(int sig)
+{
+    (void)sig;
+    stop_requested = 1;
+}
+
+static int usage(const char *why)
+{
+    fprintf(stderr,
+            "gainlink_can: %s\n"
+            "usage: gainlink_can --backend udp|socketcan --channel GROUP|IFACE [--port N] [--hop-limit N] [--fd] "
+            "[--base-id N]\n",
+            why);
+    return 2;
+}
+
+static int parse_uint(const char *text, unsigned long max, unsigned long *out)
+{
+    char *end = NULL;
+    errno = 0;
+    unsigned long v = strtoul(text, &end, 0);
+    if (errno != 0 || end == text || *end != '\0' || v > max) {
+        return -1;
+    }
+    *out = v;
+    return 0;
+}
+
+int main(int argc, char **argv)
+{
+    gl_can_config_t cfg = {.backend = GL_CAN_UDP, .channel = NULL, .port = 43113, .hop_limit = 1, .fd = 0,
+                           .rx_lo = 0, .rx_hi = 0};
+    unsigned long base_id = 0x100, v = 0;
+    for (int i = 1; i < argc; ++i) {
+        const char *a = argv[i];
+        const char *next = i + 1 < argc ? argv[i + 1] : NULL;
+        if (strcmp(a, "--fd") == 0) {
+            cfg.fd = 1;
+        } else if (next == NULL) {
+            return usage("missing value or unknown option");
+        } else if (strcmp(a, "--backend") == 0) {
+            if (strcmp(next, "udp") == 0) {
+                cfg.backend = GL_CAN_UDP;
+            } else if (strcmp(next, "socketcan") == 0) {
+                cfg.backend = GL_CAN_SOCKETCAN;
+            } else {
+                return usage("--backend must be udp or socketcan");
+            }
+            ++i;
+        } else if (strcmp(a, "--channel") == 0) {
+            cfg.channel = next;
+            ++i;
+        } else if (strcmp(a, "--port") == 0) {
+            if (parse_uint(next, 65535, &v) != 0) {
+                return usage("--port must be 0..65535");
+            }
+            cfg.port = (uint16_t)v;
+            ++i;
+        } else if (strcmp(a, "--hop-limit") == 0) {
+            if (parse_uint(next, 255, &v) != 0) {
+                return usage("--hop-limit must be 0..255");
+            }
+            cfg.hop_limit = (int)v;
+            ++i;
+        } else if (strcmp(a, "--base-id") == 0) {
+            if (parse_uint(next, 0x7FF - 0x30, &base_id) != 0) {
+                return usage("--base-id must leave room for the layout (0..0x7cf)");
+            }
+            ++i;
+        } else {
+            return usage("unknown option");
+        }
+    }
+    if (cfg.channel == NULL) {
+        return usage("--channel is required");
+    }
+
+    gl_can_layout_t layout;
+    gl_can_layout_init(&layout, (uint32_t)base_id, cfg.fd);
+    const uint32_t meas_frames = gl_can_layout_frames(&layout, N_SAMPLE);
+    const uint32_t cmd_frames = gl_can_layout_frames(&layout, GL_M);
+    const uint32_t meas_base = (uint32_t)base_id + GL_CAN_MEAS_OFFSET;
+    const uint32_t cmd_base = (uint32_t)base_id + GL_CAN_CMD_OFFSET;
+    cfg.rx_lo = meas_base;
+    cfg.rx_hi = meas_base + meas_frames - 1u;
+
+    gl_status_t st = gl_loop_init(&loop, &gl_gains_default, GL_WATCHDOG_PERIODS_DEFAULT);
+    if (st != GL_OK) {
+        fprintf(stderr, "gainlink_can: built-in gains rejected (status %d)\n", (int)st);
+        return 3;
+    }
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGTERM, &sa, NULL);
+    sigaction(SIGINT, &sa, NULL);
+
+    gl_can_link_t link;
+    if (gl_can_link_open(&link, &cfg) != 0) {
+        return 4;
+    }
+    printf("gainlink_can ready %s sha256:%s n=%d m=%d p=%d q=%d fd=%d base_id=%lu\n", GL_NAME, GL_ARTIFACT_SHA256,
+           GL_N, GL_M, GL_P, GL_Q, cfg.fd, base_id);
+    fflush(stdout);
+
+    float sample[GL_P + GL_QA];
+    float u[GL_M];
+    uint16_t cur_seq = 0, last_done = 0;
+    int have_cur = 0, have_done = 0;
+    uint32_t got = 0;
+    const uint32_t all = (meas_frames >= 32u) ? 0xFFFFFFFFu : ((1u << meas_frames) - 1u);
+    unsigned long steps = 0, stale = 0, partial_dropped = 0, send_errors = 0;
+    int rc = 0;
+    while (!stop_requested) {
+        gl_can_frame_t frame;
+        int r = gl_can_link_recv(&link, &frame, 200);
+        if (r < 0) {
+            fprintf(stderr, "gainlink_can: receive failed: %s\n", strerror(errno));
+            rc = 1;
+            break;
+        }
+        if (r == 0) {
+            continue;
+        }
+        uint32_t index = frame.id - meas_base;
+        uint16_t seq = 0;
+        float part[GL_P + GL_QA];
+        if (gl_can_layout_decode(&layout, index, &frame, &seq, part, N_SAMPLE) != 0) {
+            continue;
+        }
+        if (have_done) {
+            uint16_t ahead = (uint16_t)(seq - last_done);
+            if (ahead == 0u || ahead >= 0x8000u) {
+                ++stale;
+                continue;
+            }
+        }
+        if (!have_cur || seq != cur_seq) {
+            if (have_cur && got != 0u) {
+                ++partial_dropped;
+            }
+            cur_seq = seq;
+            have_cur = 1;
+            got = 0;
+        }
+        uint32_t first = index * layout.per_frame;
+        for (uint32_t i = first; i < first + layout.per_frame && i < N_SAMPLE; ++i) {
+            sample[i] = part[i];
+        }
+        got |= 1u << index;
+        if (got != all) {
+            continue;
+        }
+        st = gl_loop_step(&loop, sample, GL_Q > 0 ? &sample[GL_P] : NULL, u);
+        uint8_t status = st == GL_ERR_NANINF ? GL_CAN_STATUS_FAULT : 0u;
+        uint32_t sat = st == GL_SATURATED ? loop.sat_mask : 0u;
+        for (uint32_t j = 0; j < cmd_frames; ++j) {
+            gl_can_frame_t out;
+            gl_can_layout_encode(&layout, cmd_base + j, j, seq, status, sat, u, GL_M, &out);
+            if (gl_can_link_send(&link, &out) != 0) {
+                ++send_errors;
+            }
+        }
+        last_done = seq;
+        have_done = 1;
+        have_cur = 0;
+        got = 0;
+        ++steps;
+    }
+    gl_can_link_close(&link);
+    fprintf(stderr, "gainlink_can: steps=%lu stale=%lu partial_dropped=%lu send_errors=%lu filtered=%lu\n", steps,
+            stale, partial_dropped, send_errors, (unsigned long)link.rx_foreign);
+    return rc;
+}

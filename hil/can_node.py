@@ -1,0 +1,73 @@
+"""A controller node in Python speaking the gainlink CAN layout: the float64 reference law on the bus.
+
+``python -m gainlink.hil.can_node ARTIFACT --config JSON`` behaves like the firmware's
+``gainlink_can`` (same layout, same duplicate/stale handling, same ready line), with
+:class:`gainlink.reference.ReferenceLoop` as the law. The bridge uses it as ``controller =
+"reference"``: a real peer process on a real bus, without a C toolchain.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+from typing import Any
+
+import numpy as np
+
+from gainlink.artifact import load
+from gainlink.reference import ReferenceLoop
+
+from .can_transport import Assembler, FrameCodec, open_bus
+from .can_layout import layout_for
+from .transport import STATUS_FAULT
+
+
+def serve(artifact: Any, config: dict, *, out: Any = sys.stdout) -> int:
+    """Run the node until SIGTERM/SIGINT; returns the exit status."""
+    fd = bool(config.get("fd", False))
+    base = config.get("base_id", 0x100)
+    base = int(base, 0) if isinstance(base, str) else int(base)
+    layout = layout_for(artifact, fd=fd, base_id=base)
+    rx = Assembler(FrameCodec(layout.measurement, fd=fd))
+    tx = FrameCodec(layout.command, fd=fd)
+    law = ReferenceLoop(artifact)
+    p = artifact.p
+    stop = []
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+    signal.signal(signal.SIGINT, lambda *_: stop.append(1))
+    bus = open_bus(config)
+    print(f"gainlink_can ready {artifact.name} sha256:{artifact.sha256} (python reference)", file=out, flush=True)
+    last = None
+    try:
+        while not stop:
+            msg = bus.recv(0.2)
+            if msg is None:
+                continue
+            done = rx.feed(msg)
+            if done is None:
+                continue
+            seq, vals, _status, _sat = done
+            if last is not None and ((seq - last) & 0xFFFF == 0 or (seq - last) & 0xFFFF >= 0x8000):
+                continue  # duplicate or stale sample, as the firmware app does
+            res = law.step(vals[:p].astype(np.float64), vals[p:].astype(np.float64))
+            for frame in tx.encode(seq=seq, values=res.u, status=STATUS_FAULT if res.fault else 0, sat=res.saturated):
+                bus.send(frame)
+            last = seq
+    finally:
+        bus.shutdown()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point."""
+    ap = argparse.ArgumentParser(prog="python -m gainlink.hil.can_node")
+    ap.add_argument("artifact")
+    ap.add_argument("--config", required=True, help="python-can configuration as JSON")
+    args = ap.parse_args(argv)
+    return serve(load(args.artifact), json.loads(args.config))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,150 @@
+"""The controller peer process: the firmware's CAN app (or the Python reference node), started and stopped by the bridge.
+
+The bridge waits for the peer's ``ready`` line before the first sample, can pause it (the "silent
+controller" fault) and always ends it: SIGTERM, then SIGKILL after a grace period.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import selectors
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from gainlink.errors import FirmwareError, ToolchainError
+
+log = logging.getLogger(__name__)
+
+CONTROLLERS = ("firmware", "reference")
+
+
+def firmware_can_executable(artifact: Any) -> Path:
+    """Build (cached) the host firmware for ``artifact`` and return its ``gainlink_can`` executable."""
+    from gainlink.firmware.build import build
+
+    result = build(artifact, target="host")
+    exe = result.build_dir / "apps" / "can" / "gainlink_can"
+    if not exe.is_file():
+        # A build tree configured before firmware/apps/can existed: reconfigure and build the app target.
+        for cmd in (["cmake", str(result.build_dir)],
+                    ["cmake", "--build", str(result.build_dir), "--target", "gainlink_can", "-j", "2"]):
+            proc = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True)
+            if proc.returncode != 0:
+                tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-10:])
+                raise ToolchainError(f"building gainlink_can failed:\n{tail}")
+    if not exe.is_file():
+        raise ToolchainError(f"gainlink_can was not built (expected {exe})")
+    return exe
+
+
+def controller_argv(kind: str, *, artifact: Any, artifact_path: Path, transport: Any) -> list[str]:
+    """The command line of the controller peer ``kind`` for this transport."""
+    if kind == "firmware":
+        return [str(firmware_can_executable(artifact)), *transport.controller_argv()]
+    if kind == "reference":
+        return [sys.executable, "-m", "gainlink.hil.can_node", str(artifact_path),
+                "--config", json.dumps(transport.config)]
+    raise FirmwareError(f"unknown controller {kind!r} (choose from {', '.join(CONTROLLERS)})")
+
+
+class ControllerProcess:
+    """A peer process with a ready handshake and a bounded stop.
+
+    Parameters
+    ----------
+    argv : list of str
+        Command line.
+    ready_timeout : float
+        Seconds to wait for the ``ready`` line.
+    """
+
+    def __init__(self, argv: list[str], *, ready_timeout: float = 20.0) -> None:
+        self.argv = list(argv)
+        self.ready_timeout = ready_timeout
+        self.proc: subprocess.Popen | None = None
+        self._stderr = tempfile.TemporaryFile(mode="w+b")
+        self.ready_line = ""
+        self.paused = False
+
+    def start(self) -> None:
+        """Start the process and wait for its ready line; :class:`FirmwareError` if it dies or stays silent."""
+        try:
+            self.proc = subprocess.Popen(self.argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                         stderr=self._stderr, start_new_session=True)
+        except OSError as exc:
+            raise FirmwareError(f"cannot start controller {self.argv[0]}: {exc.strerror}") from None
+        sel = selectors.DefaultSelector()
+        sel.register(self.proc.stdout, selectors.EVENT_READ)
+        deadline = time.monotonic() + self.ready_timeout
+        buf = b""
+        try:
+            while b"\n" not in buf:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    self.stop()
+                    raise FirmwareError(f"controller {Path(self.argv[0]).name} sent no ready line within "
+                                        f"{self.ready_timeout:.0f} s{self._stderr_hint()}")
+                if not sel.select(timeout=left):
+                    continue
+                chunk = os.read(self.proc.stdout.fileno(), 4096)
+                if not chunk:
+                    code = self.proc.wait(timeout=5)
+                    raise FirmwareError(f"controller {Path(self.argv[0]).name} exited with status {code} before "
+                                        f"it was ready{self._stderr_hint()}")
+                buf += chunk
+        finally:
+            sel.close()
+        self.ready_line = buf.split(b"\n", 1)[0].decode(errors="replace")
+        log.debug("controller ready: %s", self.ready_line)
+
+    def _stderr_hint(self) -> str:
+        text = self.stderr_tail()
+        return f": {text}" if text else ""
+
+    def stderr_tail(self, lines: int = 3) -> str:
+        """The last lines the process wrote to stderr, joined into one line."""
+        self._stderr.seek(0)
+        tail = self._stderr.read().decode(errors="replace").strip().splitlines()[-lines:]
+        return " | ".join(t.strip() for t in tail)
+
+    def exit_status(self) -> int | None:
+        """The exit status when the process has ended, else ``None``."""
+        return None if self.proc is None else self.proc.poll()
+
+    def pause(self) -> None:
+        """Freeze the process (SIGSTOP): the controller goes silent."""
+        if self.proc is not None and self.proc.poll() is None:
+            os.kill(self.proc.pid, signal.SIGSTOP)
+            self.paused = True
+
+    def stop(self, *, grace: float = 2.0) -> int | None:
+        """End the process (SIGCONT+SIGTERM, SIGKILL after ``grace`` s); returns its exit status."""
+        proc = self.proc
+        if proc is None:
+            return None
+        if proc.poll() is None:
+            try:
+                if self.paused:
+                    os.kill(proc.pid, signal.SIGCONT)
+                proc.terminate()
+                proc.wait(timeout=grace)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(timeout=grace)
+            except ProcessLookupError:
+                pass
+        if proc.stdout is not None:
+            proc.stdout.close()
+        return proc.returncode
+
+    def close(self) -> None:
+        """Stop the process and drop its captured stderr."""
+        self.stop()
+        self._stderr.close()

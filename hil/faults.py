@@ -1,0 +1,58 @@
+"""Frame-level fault injection between the bridge and the transport (drop, delay, duplicate, reorder)."""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+from .scenario import Fault
+
+
+class FaultInjector:
+    """Decides, per sample, which frames go out now.
+
+    Parameters
+    ----------
+    faults : sequence of Fault
+        The scenario's frame faults (``silent`` is handled by the bridge, not here).
+    Ts : float
+        Sample time, to turn fault windows into sample indices.
+    """
+
+    def __init__(self, faults: Sequence[Fault], *, Ts: float) -> None:
+        self.faults = [f for f in faults if f.kind != "silent"]
+        self.Ts = Ts
+        self.held: list[tuple[int, list[Any]]] = []  # (release at sample k, frames)
+        self.counts = {"drop": 0, "delay": 0, "duplicate": 0, "reorder": 0}
+
+    def _active(self, k: int) -> Fault | None:
+        t = k * self.Ts
+        for f in self.faults:
+            if f.start <= t < f.stop:
+                first = int(round(f.start / self.Ts)) if f.start > 0 else 0
+                if (k - first) % f.every == 0:
+                    return f
+        return None
+
+    def apply(self, k: int, frames: list[Any]) -> list[Any]:
+        """The frames to send at sample ``k`` (held frames due now come after this sample's own)."""
+        fault = self._active(k) if self.faults else None
+        out: list[Any] = []
+        if fault is None:
+            out = list(frames)
+        elif fault.kind == "drop":
+            self.counts["drop"] += 1
+        elif fault.kind == "duplicate":
+            self.counts["duplicate"] += 1
+            out = list(frames) + list(frames)
+        elif fault.kind == "delay":
+            self.counts["delay"] += 1
+            self.held.append((k + fault.delay_steps, list(frames)))
+        elif fault.kind == "reorder":
+            self.counts["reorder"] += 1
+            self.held.append((k + 1, list(frames)))
+        if self.held:
+            due = [f for at, f in self.held if at <= k]
+            self.held = [(at, f) for at, f in self.held if at > k]
+            for fr in due:
+                out.extend(fr)
+        return out

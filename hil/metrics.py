@@ -1,0 +1,130 @@
+"""Run metrics: timing (latency, jitter, deadline misses), link (lost, late), control (saturation,
+integrator, overshoot, settling time, IAE)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class RunTrace:
+    """Everything recorded per step of a run (row k = sample k).
+
+    ``t`` plant time; ``y`` sampled outputs (with noise) (N, p); ``r`` references (N, q); ``u`` the
+    command applied after the sample (N, m); ``sat`` the controller's saturation flags (N, m);
+    ``got`` whether the command for this sample arrived in time; ``latency_ns`` send -> command
+    (NaN when not got); ``tick_ns`` when the sample was sent, relative to the run start;
+    ``deadline_ns`` when it was due (realtime; NaN in lockstep); ``z_ref``/``u_ref`` the float64
+    reference law fed the same samples (NaN when the shadow is off); ``x`` plant states (N, n_plant).
+    """
+
+    t: np.ndarray
+    y: np.ndarray
+    r: np.ndarray
+    u: np.ndarray
+    sat: np.ndarray
+    got: np.ndarray
+    latency_ns: np.ndarray
+    tick_ns: np.ndarray
+    deadline_ns: np.ndarray
+    u_ref: np.ndarray
+    z_ref: np.ndarray
+    x: np.ndarray
+    status: np.ndarray
+
+
+def _pct(values: np.ndarray) -> dict:
+    v = values[np.isfinite(values)]
+    if v.size == 0:
+        return {"p50": None, "p99": None, "max": None}
+    return {"p50": float(np.percentile(v, 50)), "p99": float(np.percentile(v, 99)), "max": float(v.max())}
+
+
+def tracking(t: np.ndarray, y: np.ndarray, r: np.ndarray, *, band: float = 0.02) -> dict:
+    """Overshoot (% of the last reference change, or of the initial error), settling time and IAE.
+
+    The error is ``e = r - y``. The reference's last change (or t = 0) starts the response; its
+    size ``e0`` is the error just after it. Overshoot is how far ``e`` crosses zero the other way,
+    as a percentage of ``|e0|``; settling time is when ``|e|`` last leaves ``band * |e0|``
+    (NaN when it never settles); IAE integrates ``|e|`` over the whole run.
+    """
+    dt = float(t[1] - t[0]) if t.size > 1 else 0.0
+    e = r - y
+    changes = np.flatnonzero(np.abs(np.diff(r)) > 0)
+    k0 = int(changes[-1] + 1) if changes.size else 0
+    e0 = float(e[k0])
+    iae = float(np.sum(np.abs(e)) * dt)
+    seg = e[k0:] * (np.sign(e0) if e0 != 0 else 1.0)
+    scale = abs(e0)
+    if scale < 1e-12:  # regulation: no initial error, measure against the largest excursion instead
+        scale = float(np.abs(seg).max())
+        overshoot = None
+        if scale < 1e-12:
+            return {"overshoot_pct": None, "settling_time_s": 0.0, "iae": iae, "start_s": float(t[k0])}
+    else:
+        overshoot = float(max(0.0, -seg.min()) / scale * 100.0)
+    outside = np.flatnonzero(np.abs(seg) > band * scale)
+    if outside.size == 0:
+        settle = 0.0
+    elif outside[-1] == seg.size - 1:
+        settle = float("nan")
+    else:
+        settle = float(t[k0 + outside[-1] + 1] - t[k0])
+    return {"overshoot_pct": overshoot, "settling_time_s": settle, "iae": iae, "start_s": float(t[k0])}
+
+
+def compute_metrics(trace: RunTrace, *, artifact: Any, mode: str, late: int, period_s: float) -> dict:
+    """The report's metrics from a trace (JSON-able dict; NaN becomes ``None``)."""
+    a = artifact
+    N = trace.t.size
+    lost = int(np.count_nonzero(~trace.got))
+    lat_us = trace.latency_ns / 1e3
+    if mode == "realtime":
+        jitter_us = np.abs(trace.tick_ns - trace.deadline_ns) / 1e3
+    else:
+        period = np.diff(trace.tick_ns) / 1e3
+        jitter_us = np.abs(period - np.median(period)) if period.size else np.zeros(0)
+    sig = a.signals
+    sat_frac = trace.sat.mean(axis=0) if N else np.zeros(a.m)
+    out = {
+        "steps": N,
+        "lost": lost,
+        "late": int(late),
+        "deadline_misses": lost,
+        "latency_us": _pct(lat_us),
+        "period_jitter_us": _pct(jitter_us),
+        "period_s": period_s,
+        "saturation_fraction": {name: float(v) for name, v in zip(sig["inputs"], sat_frac)},
+        "outputs_final": {name: float(v) for name, v in zip(sig["outputs"], trace.y[-1])} if N else {},
+        "inputs_peak_abs": {name: float(v) for name, v in zip(sig["inputs"], np.abs(trace.u).max(axis=0))} if N else {},
+    }
+    if N and np.all(np.isfinite(trace.z_ref)) and a.q:
+        out["peak_integrator"] = {name: float(v) for name, v in zip(sig["references"], np.abs(trace.z_ref).max(axis=0))}
+        integral_cmd = np.abs(trace.z_ref @ a.Ki.T).max(axis=0)
+        out["peak_integral_command"] = {name: float(v) for name, v in zip(sig["inputs"], integral_cmd)}
+    if N and np.all(np.isfinite(trace.u_ref)):
+        diff = np.abs(trace.u - trace.u_ref)
+        out["shadow_max_abs_du"] = {name: float(v) for name, v in zip(sig["inputs"], diff[trace.got].max(axis=0))} \
+            if trace.got.any() else {}
+    tracked = {}
+    if N:
+        if a.q:
+            for j, name in enumerate(sig["references"]):
+                yj = trace.y @ a.Ci[j]
+                tracked[name] = tracking(trace.t, yj, trace.r[:, j])
+        else:
+            for i, name in enumerate(sig["outputs"]):
+                tracked[name] = tracking(trace.t, trace.y[:, i], np.zeros(N))
+    out["tracked"] = tracked
+    return _clean(out)
+
+
+def _clean(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj

@@ -1,0 +1,134 @@
+"""The run report: ``report.json``, PNG plots (matplotlib Agg), a one-screen text summary."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gainlink.fileio import publish_files
+
+from .bridge import RunResult
+
+
+def report_json(result: RunResult) -> str:
+    """The text of ``report.json``: metrics, what ran, and the scenario (sorted keys, no timestamps)."""
+    sc = result.scenario
+    body = dict(result.metrics)
+    body["scenario"] = {"name": sc.name, "duration": sc.duration, "mode": sc.mode, "controller": sc.controller,
+                        "faults": [f.__dict__ for f in sc.faults], "seed": sc.seed}
+    body["run"] = result.info
+    return json.dumps(body, sort_keys=True, indent=2, allow_nan=False) + "\n"
+
+
+def _fmt(v: Any, unit: str = "", digits: int = 4) -> str:
+    if v is None:
+        return "n/a"
+    if isinstance(v, float):
+        return f"{v:.{digits}g}{unit}"
+    return f"{v}{unit}"
+
+
+def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
+    """A one-screen summary of a run."""
+    m = result.metrics
+    lines = [f"HIL run {result.scenario.name}: {'complete' if m['complete'] else 'INCOMPLETE'}"
+             + (f" ({m['reason']})" if m.get("reason") else "")]
+    info = result.info
+    lines.append(f"  artifact {info['artifact']['name']} sha256:{info['artifact']['sha256'][:16]}  plant "
+                 f"{info['plant']['name']}  controller {info['controller']['kind']}  transport "
+                 f"{info['transport'].get('config', {}).get('interface', info['transport'].get('kind'))}")
+    lines.append(f"  mode {m['mode']}: {m['steps']}/{m['steps_planned']} steps in {m['wall_s']:.2f} s "
+                 f"({_fmt(m['steps_per_s'], '/s', 5)}), SCHED_FIFO {'on' if m['sched_fifo'] else 'off'}")
+    lat, jit = m["latency_us"], m["period_jitter_us"]
+    lines.append(f"  latency us p50 {_fmt(lat['p50'])} p99 {_fmt(lat['p99'])} max {_fmt(lat['max'])};  "
+                 f"period jitter us p50 {_fmt(jit['p50'])} p99 {_fmt(jit['p99'])} max {_fmt(jit['max'])}")
+    lines.append(f"  lost {m['lost']}  late {m['late']}  deadline misses {m['deadline_misses']}  "
+                 f"faults injected {', '.join(f'{k} {v}' for k, v in m['faults_injected'].items() if v) or 'none'}")
+    lines.append("  saturated: " + ", ".join(f"{k} {100 * v:.1f}%" for k, v in m["saturation_fraction"].items()))
+    if "peak_integrator" in m:
+        lines.append("  peak integrator: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["peak_integrator"].items()))
+    if "shadow_max_abs_du" in m and m["shadow_max_abs_du"]:
+        lines.append("  max |u - u_reference(float64)|: "
+                     + ", ".join(f"{k} {_fmt(v)}" for k, v in m["shadow_max_abs_du"].items()))
+    for name, tr in m["tracked"].items():
+        lines.append(f"  {name}: overshoot {_fmt(tr['overshoot_pct'], '%')}, settling {_fmt(tr['settling_time_s'], ' s')}"
+                     f", IAE {_fmt(tr['iae'])}")
+    lines.append("  final outputs: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["outputs_final"].items()))
+    if report_dir is not None:
+        lines.append(f"  report: {report_dir / 'report.json'}")
+    return "\n".join(lines) + "\n"
+
+
+def _png(fig: Any) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
+    """PNG plots: outputs with references, inputs with limits, latency histogram."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tr = result.trace
+    outs = result.info["plant"]["outputs"]
+    ins = result.info["plant"]["inputs"]
+    files = {}
+    fig, axes = plt.subplots(len(outs), 1, figsize=(8, 2.2 * len(outs)), sharex=True, squeeze=False)
+    for i, name in enumerate(outs):
+        ax = axes[i, 0]
+        ax.plot(tr.t, tr.y[:, i], label=name)
+        if artifact is not None and artifact.q:
+            for j, rname in enumerate(artifact.signals["references"]):
+                if artifact.Ci[j, i] != 0:
+                    ax.plot(tr.t, tr.r[:, j], "--", label=f"reference {rname}")
+        ax.set_ylabel(name)
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", fontsize=8)
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.suptitle(f"{result.scenario.name}: outputs")
+    files["outputs.png"] = _png(fig)
+    fig, axes = plt.subplots(len(ins), 1, figsize=(8, 2.2 * len(ins)), sharex=True, squeeze=False)
+    for i, name in enumerate(ins):
+        ax = axes[i, 0]
+        ax.plot(tr.t, tr.u[:, i], label=f"{name} (controller)")
+        if np.all(np.isfinite(tr.u_ref)) and tr.u_ref.size:
+            ax.plot(tr.t, tr.u_ref[:, i], ":", label=f"{name} (float64 reference)")
+        if artifact is not None:
+            ax.axhline(artifact.u_min[i], color="r", lw=0.8, ls="--", label="limits")
+            ax.axhline(artifact.u_max[i], color="r", lw=0.8, ls="--")
+        ax.set_ylabel(name)
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", fontsize=8)
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.suptitle(f"{result.scenario.name}: inputs")
+    files["inputs.png"] = _png(fig)
+    fig, ax = plt.subplots(figsize=(8, 3))
+    lat = tr.latency_ns[np.isfinite(tr.latency_ns)] / 1e3
+    if lat.size:
+        ax.hist(lat, bins=60)
+    ax.set_xlabel("round-trip latency [us]")
+    ax.set_ylabel("steps")
+    ax.set_yscale("log")
+    ax.set_title(f"{result.scenario.name}: latency ({lat.size} commands)")
+    files["latency.png"] = _png(fig)
+    return files
+
+
+def write_report(result: RunResult, report_dir: str | Path, *, artifact: Any = None) -> Path:
+    """Compute every report file, then publish them atomically into ``report_dir``."""
+    report_dir = Path(report_dir)
+    files: dict[str, bytes | str] = {"report.json": report_json(result)}
+    files.update(plots(result, artifact=artifact))
+    files["summary.txt"] = summary_text(result, report_dir=report_dir)
+    publish_files(report_dir, files)
+    return report_dir / "report.json"

@@ -1,0 +1,229 @@
+"""HIL scenarios: a TOML file naming the artifact, plant, transport, timing, profiles and faults.
+
+Example::
+
+    name = "pendulum_udp"
+    artifact = "out/demo/gains.json"      # relative to the scenario file
+    duration = 10.0                        # s of plant time
+    mode = "lockstep"                      # lockstep | realtime
+    controller = "firmware"                # firmware (gainlink_can) | reference (Python node)
+    step_timeout = 0.05                    # lockstep: wait per command [s]
+    peer_timeout = 1.0                     # end the run when the controller is silent this long [s]
+    period = 0.01                          # realtime: tick [s] (default: the artifact's Ts)
+    sched_fifo = true                      # realtime: SCHED_FIFO when permitted
+    seed = 1
+    shadow = true                          # run the float64 reference beside the controller
+
+    [plant]        kind = "fmu", fmu = "cart_pendulum", outputs = ["x", "theta"]
+    [transport]    interface = "udp_multicast", channel = "239.74.163.2", hop_limit = 0, fd = true
+    [initial_state] theta = 0.1
+    [reference.x]  kind = "step", at = 1.0, value = 0.5     # constant | step | square | sine | ramp
+    [noise]        theta = 0.001                           # std dev per output
+    [[disturbances]] input = "F", start = 2.0, stop = 2.1, value = 5.0
+    [[faults]]     kind = "drop", start = 3.0, stop = 3.1, every = 1   # drop | delay | duplicate | reorder | silent
+
+Unknown keys anywhere are refused with one line naming them.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from gainlink.errors import ScenarioError
+
+TOP_KEYS = {"name", "artifact", "plant", "transport", "duration", "mode", "controller", "step_timeout",
+            "peer_timeout", "period", "sched_fifo", "seed", "shadow", "initial_state", "reference", "noise",
+            "disturbances", "faults", "description"}
+MODES = ("lockstep", "realtime")
+FAULT_KINDS = ("drop", "delay", "duplicate", "reorder", "silent")
+PROFILE_KEYS = {
+    "constant": {"value"},
+    "step": {"at", "value", "initial"},
+    "square": {"period", "amplitude", "offset"},
+    "sine": {"frequency", "amplitude", "offset"},
+    "ramp": {"start", "slope", "stop", "initial"},
+}
+
+
+@dataclass(frozen=True)
+class Fault:
+    """A fault injected on the plant -> controller frames (or the controller process).
+
+    ``kind``: drop (frames not sent), delay (sent ``delay_steps`` samples later), duplicate (sent
+    twice), reorder (sent after the next sample's frames), silent (controller process frozen from
+    ``start`` on). Active for samples with ``start <= t < stop``, every ``every``-th one.
+    """
+
+    kind: str
+    start: float
+    stop: float
+    every: int = 1
+    delay_steps: int = 1
+
+
+@dataclass(frozen=True)
+class Disturbance:
+    """``value`` added to plant input ``input`` for ``start <= t < stop``."""
+
+    input: str
+    start: float
+    stop: float
+    value: float
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A parsed, checked scenario (see the module docstring for the file format)."""
+
+    name: str
+    path: Path | None
+    artifact_path: Path
+    plant: dict
+    transport: dict
+    duration: float
+    mode: str = "lockstep"
+    controller: str = "firmware"
+    step_timeout: float = 0.05
+    peer_timeout: float = 1.0
+    period: float | None = None
+    sched_fifo: bool = True
+    seed: int = 0
+    shadow: bool = True
+    initial_state: dict = field(default_factory=dict)
+    reference: dict = field(default_factory=dict)
+    noise: dict = field(default_factory=dict)
+    disturbances: tuple[Disturbance, ...] = ()
+    faults: tuple[Fault, ...] = ()
+
+
+def _num(value: Any, where: str, *, positive: bool = False, minimum: float | None = None) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ScenarioError(f"scenario: {where} must be a finite number, not {value!r}")
+    if positive and value <= 0:
+        raise ScenarioError(f"scenario: {where} must be positive")
+    if minimum is not None and value < minimum:
+        raise ScenarioError(f"scenario: {where} must be >= {minimum}")
+    return float(value)
+
+
+def _table(value: Any, where: str) -> dict:
+    if not isinstance(value, Mapping):
+        raise ScenarioError(f"scenario: {where} must be a table")
+    return dict(value)
+
+
+def _check_keys(d: Mapping, allowed: set[str], where: str) -> None:
+    unknown = sorted(set(d) - allowed)
+    if unknown:
+        raise ScenarioError(f"scenario: unknown key(s) {', '.join(unknown)} in {where} "
+                            f"(allowed: {', '.join(sorted(allowed))})")
+
+
+def _profile(name: str, d: Any) -> dict:
+    if isinstance(d, (int, float)) and not isinstance(d, bool):
+        return {"kind": "constant", "value": _num(d, f"reference.{name}")}
+    d = _table(d, f"reference.{name}")
+    kind = d.get("kind")
+    if kind not in PROFILE_KEYS:
+        raise ScenarioError(f"scenario: reference.{name}.kind must be one of {', '.join(PROFILE_KEYS)}")
+    _check_keys(d, PROFILE_KEYS[kind] | {"kind"}, f"reference.{name}")
+    out = {"kind": kind}
+    for k, v in d.items():
+        if k != "kind":
+            out[k] = _num(v, f"reference.{name}.{k}")
+    return out
+
+
+def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scenario:
+    """Check a scenario mapping (as read from TOML) and return a :class:`Scenario`."""
+    data = _table(data, "top level")
+    _check_keys(data, TOP_KEYS, "the top level")
+    base = path.parent if path is not None else Path.cwd()
+    for key in ("artifact", "plant", "transport", "duration"):
+        if key not in data:
+            raise ScenarioError(f"scenario: missing required key {key}")
+    if not isinstance(data["artifact"], str):
+        raise ScenarioError("scenario: artifact must be a path string")
+    art = Path(data["artifact"])
+    art = art if art.is_absolute() else base / art
+    mode = data.get("mode", "lockstep")
+    if mode not in MODES:
+        raise ScenarioError(f"scenario: mode must be lockstep or realtime, not {mode!r}")
+    controller = data.get("controller", "firmware")
+    if controller not in ("firmware", "reference"):
+        raise ScenarioError(f"scenario: controller must be firmware or reference, not {controller!r}")
+    faults = []
+    for i, f in enumerate(data.get("faults", [])):
+        f = _table(f, f"faults[{i}]")
+        _check_keys(f, {"kind", "start", "stop", "every", "delay_steps"}, f"faults[{i}]")
+        if f.get("kind") not in FAULT_KINDS:
+            raise ScenarioError(f"scenario: faults[{i}].kind must be one of {', '.join(FAULT_KINDS)}")
+        start = _num(f.get("start", 0.0), f"faults[{i}].start", minimum=0.0)
+        stop = _num(f["stop"], f"faults[{i}].stop") if "stop" in f else 1e300
+        faults.append(Fault(kind=f["kind"], start=start, stop=stop,
+                            every=int(_num(f.get("every", 1), f"faults[{i}].every", minimum=1)),
+                            delay_steps=int(_num(f.get("delay_steps", 1), f"faults[{i}].delay_steps", minimum=1))))
+    dists = []
+    for i, d in enumerate(data.get("disturbances", [])):
+        d = _table(d, f"disturbances[{i}]")
+        _check_keys(d, {"input", "start", "stop", "value"}, f"disturbances[{i}]")
+        if not isinstance(d.get("input"), str):
+            raise ScenarioError(f"scenario: disturbances[{i}].input must name a plant input")
+        dists.append(Disturbance(input=d["input"], start=_num(d.get("start", 0.0), f"disturbances[{i}].start"),
+                                 stop=_num(d.get("stop", 1e300), f"disturbances[{i}].stop"),
+                                 value=_num(d.get("value"), f"disturbances[{i}].value")))
+    reference = {str(k): _profile(str(k), v) for k, v in _table(data.get("reference", {}), "reference").items()}
+    noise = {str(k): _num(v, f"noise.{k}", minimum=0.0) for k, v in _table(data.get("noise", {}), "noise").items()}
+    initial = {str(k): _num(v, f"initial_state.{k}")
+               for k, v in _table(data.get("initial_state", {}), "initial_state").items()}
+    name = data.get("name", path.stem if path is not None else "scenario")
+    period = data.get("period")
+    return Scenario(
+        name=str(name), path=path, artifact_path=art,
+        plant=_table(data["plant"], "plant"), transport=_table(data["transport"], "transport"),
+        duration=_num(data["duration"], "duration", positive=True), mode=mode, controller=controller,
+        step_timeout=_num(data.get("step_timeout", 0.05), "step_timeout", positive=True),
+        peer_timeout=_num(data.get("peer_timeout", 1.0), "peer_timeout", positive=True),
+        period=None if period is None else _num(period, "period", positive=True),
+        sched_fifo=bool(data.get("sched_fifo", True)), seed=int(_num(data.get("seed", 0), "seed")),
+        shadow=bool(data.get("shadow", True)), initial_state=initial, reference=reference, noise=noise,
+        disturbances=tuple(dists), faults=tuple(faults),
+    )
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and check a scenario TOML file."""
+    path = Path(path)
+    try:
+        text = path.read_text("utf-8")
+    except FileNotFoundError:
+        raise ScenarioError(f"scenario {path} not found") from None
+    except IsADirectoryError:
+        raise ScenarioError(f"scenario {path} is a directory") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"scenario {path} is not valid TOML ({exc})") from None
+    return parse_scenario(data, path=path)
+
+
+def profile_values(profile: Mapping[str, float], t: np.ndarray) -> np.ndarray:
+    """Evaluate a reference profile at times ``t``."""
+    kind = profile["kind"]
+    if kind == "constant":
+        return np.full(t.shape, profile["value"])
+    if kind == "step":
+        return np.where(t >= profile.get("at", 0.0), profile["value"], profile.get("initial", 0.0))
+    if kind == "square":
+        phase = np.floor(2.0 * t / profile["period"]).astype(int) % 2
+        return profile.get("offset", 0.0) + profile["amplitude"] * np.where(phase == 0, 1.0, -1.0)
+    if kind == "sine":
+        return profile.get("offset", 0.0) + profile["amplitude"] * np.sin(2 * np.pi * profile["frequency"] * t)
+    start, stop = profile.get("start", 0.0), profile.get("stop", np.inf)
+    return profile.get("initial", 0.0) + profile["slope"] * (np.clip(t, start, stop) - start)

@@ -1,0 +1,123 @@
+"""The transport plugin interface: how the bridge exchanges samples with the controller.
+
+The bridge (plant side) turns each sample (sequence number, outputs ``y``, references ``r``) into
+frames with :meth:`Transport.encode_sample`, may drop/delay/duplicate/reorder those frames (fault
+injection), sends them with :meth:`Transport.send_frames`, and waits for the controller's
+:class:`Command` with :meth:`Transport.receive_command`. A transport also says how the firmware
+host executable must be started to speak it (:meth:`Transport.controller_argv`), because the bridge
+starts and stops the controller process itself.
+
+Transports are registered by kind in :data:`TRANSPORTS` and built from the scenario's
+``[transport]`` table with :func:`transport_from_config`.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from gainlink.errors import TransportError
+
+from .registry import Registry
+
+TRANSPORTS: Registry["Transport"] = Registry(what="transport", error=TransportError)
+
+#: Command status bits (shared by every transport and the firmware apps).
+STATUS_FAULT = 0x01  #: the controller refused a non-finite sample and returned the safe command
+STATUS_WATCHDOG = 0x02  #: the controller's watchdog expired (no measurement) and it holds the safe command
+
+
+@dataclass(frozen=True)
+class Command:
+    """One command received from the controller.
+
+    Attributes
+    ----------
+    seq : int
+        Sequence number of the sample this command answers (modulo the transport's counter range).
+    u : numpy.ndarray
+        The command, one value per input.
+    saturated : numpy.ndarray
+        Per input, whether the controller clamped it.
+    status : int
+        Bit set of ``STATUS_*``.
+    t_ns : int
+        ``time.perf_counter_ns()`` when the command was complete.
+    """
+
+    seq: int
+    u: np.ndarray
+    saturated: np.ndarray
+    status: int
+    t_ns: int
+
+
+class Transport(ABC):
+    """Plant-side end of the link to the controller.
+
+    Attributes
+    ----------
+    seq_modulo : int
+        Sequence numbers are carried modulo this value.
+    """
+
+    seq_modulo: int = 1 << 16
+
+    @abstractmethod
+    def open(self) -> None:
+        """Open the link; raise :class:`TransportError` with one clear line if it cannot open."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Close the link (idempotent)."""
+
+    @abstractmethod
+    def encode_sample(self, *, seq: int, y: np.ndarray, r: np.ndarray) -> list[Any]:
+        """The frames carrying one sample, in sending order."""
+
+    @abstractmethod
+    def send_frames(self, frames: Sequence[Any]) -> None:
+        """Send frames produced by :meth:`encode_sample`."""
+
+    @abstractmethod
+    def receive_command(self, *, timeout: float) -> Command | None:
+        """The next complete command, or ``None`` when none completes within ``timeout`` seconds."""
+
+    @abstractmethod
+    def controller_argv(self) -> list[str]:
+        """Command-line arguments that make the firmware host executable speak this link."""
+
+    def describe(self) -> dict:
+        """A JSON-able description for the report."""
+        return {"kind": type(self).__name__}
+
+    def __enter__(self) -> "Transport":
+        self.open()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def transport_from_config(config: Mapping[str, Any], *, artifact: Any) -> Transport:
+    """Build the transport described by a scenario's ``[transport]`` table.
+
+    A table with ``kind`` names a registered transport; a table without ``kind`` but with
+    ``interface`` is a python-can configuration (kind ``can``).
+    """
+    from . import can_transport  # noqa: F401 - registers "can"
+
+    if not isinstance(config, Mapping):
+        raise TransportError("transport: expected a table")
+    kind = config.get("kind", "can" if "interface" in config else None)
+    if kind is None:
+        raise TransportError("transport: give interface (a python-can configuration) or kind")
+    if kind == "mavlink":
+        try:
+            import gainlink.hil.mavlink_transport  # noqa: F401 - registers "mavlink" when present
+        except ImportError:
+            pass
+    return TRANSPORTS.create(str(kind), config, artifact=artifact)

@@ -1,0 +1,138 @@
+"""``gainlink hil ...`` (HIL bridge, DBC, project FMUs, saturation study) and ``gainlink linearize``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ..errors import GainlinkError
+
+
+def _progress_bar(enabled: bool):
+    """A rich progress bar on stderr (a no-op when disabled or not a terminal)."""
+    from contextlib import nullcontext
+
+    if not enabled or not sys.stderr.isatty():
+        return nullcontext(None)
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    return Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                    TimeRemainingColumn(), transient=True)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from gainlink.artifact import load
+    from gainlink.hil.bridge import run_scenario
+    from gainlink.hil.report import summary_text, write_report
+    from gainlink.hil.scenario import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    with _progress_bar(not args.no_progress) as bar:
+        callback = None
+        if bar is not None:
+            task = bar.add_task(f"HIL {scenario.name}", total=None)
+            callback = lambda done, total: bar.update(task, completed=done, total=total)  # noqa: E731
+        result = run_scenario(scenario, progress=callback)
+    artifact = load(scenario.artifact_path)
+    report_dir = Path(args.report)
+    write_report(result, report_dir, artifact=artifact)
+    sys.stdout.write(summary_text(result, report_dir=report_dir))
+    return 0 if result.complete else 1
+
+
+def _dbc(args: argparse.Namespace) -> int:
+    from gainlink.artifact import load
+    from gainlink.fileio import atomic_write_text
+    from gainlink.hil.can_layout import layout_for
+
+    layout = layout_for(load(args.artifact), fd=args.fd, base_id=int(args.base_id, 0))
+    text = layout.dbc()
+    if args.out:
+        atomic_write_text(args.out, text)
+        print(f"wrote {args.out} ({len(layout.measurement)} measurement + {len(layout.command)} command frames)")
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+def _fmu(args: argparse.Namespace) -> int:
+    from gainlink.hil.fmu_build import build_fmu
+    from gainlink.hil.paths import fmu_source_names
+
+    names = args.names or fmu_source_names()
+    for name in names:
+        print(build_fmu(name, out_dir=args.out))
+    return 0
+
+
+def _study(args: argparse.Namespace) -> int:
+    from gainlink.hil.study import run_saturation_study
+
+    study = run_saturation_study(spec_path=Path(args.spec) if args.spec else None, report_dir=Path(args.report),
+                                 controller=args.controller, transport=None)
+    sys.stdout.write(study.summary)
+    return 0
+
+
+def _linearize(args: argparse.Namespace) -> int:
+    from gainlink.hil.linearize import linearize_to_spec
+
+    at = {}
+    for item in args.at:
+        if "=" not in item:
+            raise GainlinkError(f"--at expects NAME=VALUE, got {item!r}")
+        name, value = item.split("=", 1)
+        try:
+            at[name.strip()] = float(value)
+        except ValueError:
+            raise GainlinkError(f"--at {name}: {value!r} is not a number") from None
+    result = linearize_to_spec(fmu=args.fmu, at=at, out=Path(args.out), Ts=args.Ts, name=args.name,
+                               inputs=args.inputs, outputs=args.outputs, method=args.method)
+    print(f"wrote {args.out}: n={result.A.shape[0]} m={result.B.shape[1]} p={result.C.shape[0]} "
+          f"({result.method}, operating point {', '.join(f'{k}={v:g}' for k, v in result.point.items()) or 'start values'})")
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``hil`` and ``linearize`` to the gainlink CLI."""
+    hil = subparsers.add_parser("hil", help="hardware-in-the-loop bridge over CAN (FMU or built-in plants)")
+    sub = hil.add_subparsers(dest="hil_command", metavar="HIL_COMMAND")
+    sub.required = True
+
+    p = sub.add_parser("run", help="run a HIL scenario and write its report")
+    p.add_argument("scenario", help="scenario TOML")
+    p.add_argument("--report", required=True, help="report folder (report.json, PNG plots, summary.txt)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_run)
+
+    p = sub.add_parser("dbc", help="write the CAN layout of an artifact as a DBC file")
+    p.add_argument("artifact")
+    p.add_argument("--fd", action="store_true", help="CAN FD layout (else classic CAN)")
+    p.add_argument("--base-id", default="0x100", help="first 11-bit identifier (default 0x100)")
+    p.add_argument("--out", help="DBC file (default: stdout)")
+    p.set_defaults(func=_dbc)
+
+    p = sub.add_parser("fmu", help="build (cached) and validate the project's plant FMUs")
+    p.add_argument("names", nargs="*", help="FMU names (default: all)")
+    p.add_argument("--out", help="folder for the .fmu files (default .cache/fmus)")
+    p.set_defaults(func=_fmu)
+
+    p = sub.add_parser("study", help="saturation study: anti-windup none vs clamp vs backcalc")
+    p.add_argument("--spec", help="plant spec (default: examples/pendulum.toml of the checkout)")
+    p.add_argument("--controller", default="firmware", choices=("firmware", "reference"))
+    p.add_argument("--report", required=True, help="report folder")
+    p.set_defaults(func=_study)
+
+    p = subparsers.add_parser("linearize", help="linearise an FMU about an operating point into a plant spec")
+    p.add_argument("fmu", help=".fmu file, or the name of a project FMU (e.g. cart_pendulum)")
+    p.add_argument("--at", action="append", default=[], metavar="NAME=VALUE",
+                   help="operating point: state, input or parameter value (repeatable)")
+    p.add_argument("--out", required=True, help="spec TOML to write")
+    p.add_argument("--Ts", type=float, default=0.01, help="sample time written into the spec (default 0.01)")
+    p.add_argument("--name", help="spec name (default: the FMU's model name)")
+    p.add_argument("--inputs", nargs="+", help="FMU inputs to keep (default: all)")
+    p.add_argument("--outputs", nargs="+", help="FMU outputs to keep (default: all)")
+    p.add_argument("--method", choices=("auto", "directional", "differences"), default="auto",
+                   help="directional derivatives when the FMU provides them (auto), or central differences")
+    p.set_defaults(func=_linearize)
