@@ -198,6 +198,9 @@ gl_status_t gl_loop_step(gl_loop_t *loop, const float *y, const float *r, float 
         u[i] = us[i];
         loop->u[i] = us[i];
     }
+    (void)v; /* used only by back-calculation */
+    (void)z; /* used only with integral action */
+    (void)rs;
     loop->sat_mask = sat;
     return sat != 0u ? GL_SATURATED : GL_OK;
 }

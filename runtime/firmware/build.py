@@ -140,6 +140,8 @@ def build(
         cm = bdir / "cmake"
         if not (cm / "CMakeCache.txt").is_file():
             cfg = [cmake, "-S", str(src), "-B", str(cm), f"-DGL_GAINS_DIR={gen}", f"-DGL_TARGET={target}"]
+            if target == "host" and "GL_APPS" not in options:
+                cfg.append("-DGL_APPS=OFF")  # the library, shared object and loop executable only
             if target == "cortex-m4":
                 cfg += [f"-DCMAKE_TOOLCHAIN_FILE={src / 'cmake' / 'arm-none-eabi.cmake'}", f"-DGL_BOARD={board}"]
             cfg += [f"-D{k}={v}" for k, v in options.items()]

@@ -1,0 +1,168 @@
+"""Golden vectors: random stabilizable designs and sample sequences, answered by the float64 reference.
+
+Nothing here is pasted: plants are drawn from a seeded generator, designed with
+:func:`gainlink.design.design` like any user spec, and the expected outputs come from
+:class:`gainlink.reference.ReferenceLoop`. ``scripts/gen_golden.py`` writes them to files; the tests
+call :func:`random_cases` / :func:`example_cases` directly.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..artifact import Artifact, from_dict, render
+from ..design import design
+from ..errors import DesignError, SpecError
+from ..reference import ReferenceLoop, Trace
+from ..spec import load_spec, parse_spec
+
+EXAMPLES = ("pendulum", "quadrotor_lateral", "wood_berry")
+FORMS = ("predictor", "current")
+ANTI_WINDUP = ("none", "clamp", "backcalc")
+
+
+@dataclass(frozen=True)
+class GoldenCase:
+    """One artifact, its input samples and the reference's answer."""
+
+    label: str
+    artifact: Artifact
+    Y: np.ndarray  # (N, p)
+    R: np.ndarray  # (N, q)
+    expected: Trace
+
+
+def _signals(rng: np.random.Generator, *, N: int, width: int, scale: float) -> np.ndarray:
+    """Smooth random signals: a few sinusoids plus white noise, ``scale`` in amplitude."""
+    t = np.arange(N)[:, None]
+    out = np.zeros((N, width))
+    for _ in range(3):
+        freq = rng.uniform(0.002, 0.05, size=width)
+        phase = rng.uniform(0, 2 * np.pi, size=width)
+        out += rng.uniform(0.2, 1.0, size=width) * np.sin(2 * np.pi * freq * t + phase)
+    out += 0.1 * rng.standard_normal((N, width))
+    return scale * out / 3.0
+
+
+def random_spec(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_windup: str, feedthrough: bool,
+                u_limit: np.ndarray | None = None) -> dict:
+    """A random discrete plant spec (a few unstable modes) with LQR(I) + Kalman design choices."""
+    rng = np.random.default_rng(seed)
+    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    radii = rng.uniform(0.5, 1.08, size=n)
+    A = Q @ np.diag(radii) @ Q.T + 0.05 * rng.standard_normal((n, n))
+    B = rng.standard_normal((n, m))
+    C = rng.standard_normal((p, n))
+    D = 0.1 * rng.standard_normal((p, m)) if feedthrough else np.zeros((p, m))
+    limit = np.full(m, 1e6) if u_limit is None else np.asarray(u_limit)
+    spec = {
+        "name": f"rand{seed}",
+        "Ts": 0.01,
+        "plant": {"kind": "discrete", "A": A.tolist(), "B": B.tolist(), "C": C.tolist(), "D": D.tolist()},
+        "controller": {"method": "lqr", "Q_diag": [1.0] * n, "R_diag": [1.0] * m},
+        "observer": {"method": "kalman", "form": form, "W_diag": [1e-2] * n, "V_diag": [1e-2] * p},
+        "limits": {"u_min": (-limit).tolist(), "u_max": limit.tolist(), "anti_windup": anti_windup},
+    }
+    if q > 0:
+        spec["integral"] = {"outputs": sorted(rng.choice(p, size=q, replace=False).tolist()), "Q_diag": [0.5] * q}
+    return spec
+
+
+def _design(spec: dict) -> Artifact:
+    return from_dict(design(parse_spec(spec)).artifact)
+
+
+def random_case(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_windup: str, N: int = 400) -> GoldenCase:
+    """A random stabilizable design whose inputs saturate on part of the golden samples.
+
+    The plant is designed once with wide limits to see the size of the command, then again with
+    limits at 60 % of the largest unsaturated command, so the replay visits both regimes.
+    """
+    feedthrough = form == "predictor" and seed % 2 == 0
+    kw = dict(n=n, m=m, p=p, q=q, form=form, anti_windup=anti_windup, feedthrough=feedthrough)
+    wide = _design(random_spec(seed, **kw))
+    rng = np.random.default_rng(seed + 10_000)
+    Y = _signals(rng, N=N, width=p, scale=1.0)
+    R = _signals(rng, N=N, width=q, scale=1.0) if q else np.zeros((N, 0))
+    free = ReferenceLoop(wide).run(Y, R)
+    limit = 0.6 * np.max(np.abs(free.u), axis=0) + 1e-3
+    art = _design(random_spec(seed, u_limit=limit, **kw))
+    label = f"rand{seed}-n{n}m{m}p{p}q{q}-{form}-{anti_windup}"
+    return GoldenCase(label=label, artifact=art, Y=Y, R=R, expected=ReferenceLoop(art).run(Y, R))
+
+
+def random_cases(count: int = 30, *, first_seed: int = 1, N: int = 400) -> list[GoldenCase]:
+    """``count`` random designs covering n up to 12, m and p up to 4, q = 0 or more, both forms, every
+    anti-windup mode (cycled so every combination of form and mode appears)."""
+    combos = list(itertools.product(FORMS, ANTI_WINDUP))
+    cases = []
+    seed = first_seed
+    while len(cases) < count:
+        rng = np.random.default_rng(seed)
+        i = len(cases)
+        n = [2, 3, 4, 6, 8, 12][i % 6]
+        m = int(rng.integers(1, 5))
+        p = int(rng.integers(1, 5))
+        q = int(rng.integers(0, min(m, p) + 1)) if i % 3 else 0
+        form, aw = combos[i % len(combos)]
+        if q == 0 and aw != "none":
+            q = 1 if min(m, p) >= 1 else 0
+        try:
+            case = random_case(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=aw, N=N)
+        except (DesignError, SpecError):
+            case = None  # an unlucky draw (e.g. a plant zero at z = 1 with integral action)
+        if case is not None and bounded(case):
+            cases.append(case)
+        seed += 1
+    return cases
+
+
+def bounded(case: GoldenCase, *, limit: float = 1e3) -> bool:
+    """Whether the reference replay stays bounded (|xh|, |z| below ``limit`` for unit-size samples).
+
+    Replaying arbitrary measurements opens the loop; with heavy saturation and a large default
+    back-calculation gain some random controllers then have unstable internal dynamics, and comparing
+    two divergent trajectories says nothing about the implementation. Such draws are skipped.
+    """
+    e = case.expected
+    return bool(np.all(np.abs(e.xh) < limit) and np.all(np.abs(e.z) < limit))
+
+
+def example_cases(examples_dir: Path, *, N: int = 600, seed: int = 7) -> list[GoldenCase]:
+    """Golden samples for the shipped examples (``examples/*.toml``), at a scale that saturates."""
+    cases = []
+    for name in EXAMPLES:
+        art = from_dict(design(load_spec(examples_dir / f"{name}.toml")).artifact)
+        rng = np.random.default_rng(seed)
+        Y = _signals(rng, N=N, width=art.p, scale=0.5)
+        R = _signals(rng, N=N, width=art.q, scale=2.0) if art.q else np.zeros((N, 0))
+        cases.append(GoldenCase(label=name, artifact=art, Y=Y, R=R, expected=ReferenceLoop(art).run(Y, R)))
+    return cases
+
+
+def write_case(case: GoldenCase, out_dir: Path) -> Path:
+    """Write ``<label>.gains.json`` and ``<label>.npz`` (Y, R and the reference's u, sat, xh, z, fault)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / f"{case.label}.gains.json").write_text(render(case.artifact.data), "utf-8")
+    e = case.expected
+    path = out_dir / f"{case.label}.npz"
+    np.savez(path, Y=case.Y, R=case.R, u=e.u, saturated=e.saturated, xh=e.xh, z=e.z, fault=e.fault)
+    return path
+
+
+def write_index(cases: list[GoldenCase], out_dir: Path) -> Path:
+    """Write ``index.json`` listing the cases with their dimensions and artifact sha256."""
+    index = [
+        {"label": c.label, "sha256": c.artifact.sha256, "n": c.artifact.n, "m": c.artifact.m, "p": c.artifact.p,
+         "q": c.artifact.q, "observer_form": c.artifact.observer_form, "anti_windup": c.artifact.anti_windup,
+         "steps": int(c.Y.shape[0]), "saturated_steps": int(c.expected.saturated.any(axis=1).sum())}
+        for c in cases
+    ]
+    path = out_dir / "index.json"
+    path.write_text(json.dumps(index, indent=2) + "\n", "utf-8")
+    return path
