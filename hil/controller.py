@@ -47,7 +47,7 @@ def firmware_can_executable(artifact: Any) -> Path:
 def controller_argv(kind: str, *, artifact: Any, artifact_path: Path, transport: Any) -> list[str]:
     """The command line of the controller peer ``kind`` for this transport."""
     if kind == "firmware":
-        return [str(firmware_can_executable(artifact)), *transport.controller_argv()]
+        return [str(getattr(transport, "firmware_executable", firmware_can_executable)(artifact)), *transport.controller_argv()]
     if kind == "reference":
         return [sys.executable, "-m", "gainlink.hil.can_node", str(artifact_path),
                 "--config", json.dumps(transport.config)]

@@ -1,0 +1,130 @@
+"""Build and run the firmware's MAVLink host app (``firmware/apps/mavlink``, executable ``gainlink_mavlink``)."""
+
+from __future__ import annotations
+
+import logging
+import os
+import selectors
+import signal
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+from gainlink.artifact import Artifact
+from gainlink.errors import FirmwareError, ToolchainError
+
+log = logging.getLogger(__name__)
+
+EXECUTABLE = "gainlink_mavlink"
+
+
+def mavlink_executable(artifact: Artifact, *, build_root: Path | None = None) -> Path:
+    """Build (cached) the host firmware for ``artifact`` and return its ``gainlink_mavlink`` executable.
+
+    Raises
+    ------
+    ToolchainError
+        When the build fails or does not produce the app.
+    """
+    from gainlink.firmware.build import build
+
+    result = build(artifact, target="host", build_root=build_root)
+    exe = result.build_dir / EXECUTABLE
+    if not exe.is_file():
+        # A cached build tree configured before firmware/apps/mavlink existed: reconfigure, build the app.
+        for cmd in (["cmake", str(result.build_dir)],
+                    ["cmake", "--build", str(result.build_dir), "--target", EXECUTABLE, "-j", "2"]):
+            proc = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True)
+            if proc.returncode != 0:
+                tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-10:])
+                raise ToolchainError(f"building {EXECUTABLE} failed:\n{tail}")
+    if not exe.is_file():
+        raise ToolchainError(f"{EXECUTABLE} was not built (expected {exe})")
+    return exe
+
+
+def firmware_argv(exe: Path, *, url: str, storage: Path | None = None, sysid: int = 1, compid: int = 1) -> list[str]:
+    """Command line of the MAVLink app."""
+    argv = [str(exe), "--url", url, "--sysid", str(sysid), "--compid", str(compid)]
+    if storage is not None:
+        argv += ["--storage", str(storage)]
+    return argv
+
+
+class MavlinkFirmware:
+    """The MAVLink firmware app as a child process (a context manager).
+
+    Parameters
+    ----------
+    exe : Path
+        The ``gainlink_mavlink`` executable (:func:`mavlink_executable`).
+    url : str
+        Its link, e.g. ``udpin:127.0.0.1:14550``.
+    storage : Path, optional
+        Parameter file it persists to and loads at start.
+    ready_timeout : float
+        Seconds to wait for its ready line.
+    """
+
+    def __init__(self, exe: Path, *, url: str, storage: Path | None = None, ready_timeout: float = 10.0):
+        self.argv = firmware_argv(exe, url=url, storage=storage)
+        self.ready_timeout = ready_timeout
+        self.proc: subprocess.Popen | None = None
+        self.ready_line = ""
+        self._stderr = tempfile.TemporaryFile(mode="w+b")
+
+    def start(self) -> "MavlinkFirmware":
+        """Start it and wait for ``gainlink-mavlink ...`` on its stdout."""
+        try:
+            self.proc = subprocess.Popen(self.argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=self._stderr)
+        except OSError as exc:
+            raise FirmwareError(f"cannot start {self.argv[0]}: {exc.strerror}") from None
+        sel = selectors.DefaultSelector()
+        sel.register(self.proc.stdout, selectors.EVENT_READ)
+        buf = b""
+        deadline = time.monotonic() + self.ready_timeout
+        try:
+            while b"\n" not in buf:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    self.stop()
+                    raise FirmwareError(f"{EXECUTABLE} sent no ready line within {self.ready_timeout:g} s: {self.stderr_text()}")
+                if sel.select(timeout=left):
+                    chunk = os.read(self.proc.stdout.fileno(), 4096)
+                    if not chunk:
+                        code = self.proc.wait(timeout=5)
+                        raise FirmwareError(f"{EXECUTABLE} exited with status {code}: {self.stderr_text()}")
+                    buf += chunk
+        finally:
+            sel.close()
+        self.ready_line = buf.split(b"\n", 1)[0].decode(errors="replace")
+        return self
+
+    def stderr_text(self) -> str:
+        """What the app wrote to stderr so far."""
+        self._stderr.seek(0)
+        return self._stderr.read().decode(errors="replace").strip()
+
+    def stop(self, *, grace: float = 2.0) -> int | None:
+        """SIGTERM, then SIGKILL after ``grace`` seconds; returns the exit status."""
+        proc = self.proc
+        if proc is None:
+            return None
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(timeout=grace)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(timeout=grace)
+        if proc.stdout is not None:
+            proc.stdout.close()
+        return proc.returncode
+
+    def __enter__(self) -> "MavlinkFirmware":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+        self._stderr.close()

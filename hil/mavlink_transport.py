@@ -1,0 +1,217 @@
+"""The ``mavlink`` HIL transport: samples as DEBUG_FLOAT_ARRAY, commands as HIL_ACTUATOR_CONTROLS.
+
+Plant → controller: ``DEBUG_FLOAT_ARRAY`` (name ``GL_SAMPLE``, ``array_id`` 1) with
+``data = y[0..p-1], r[0..q-1]`` and ``time_usec = seq * round(Ts * 1e6)``.
+Controller → plant: ``HIL_ACTUATOR_CONTROLS`` with the same ``time_usec`` (lockstep: the answer
+names its sample), ``controls[0..m-1] = u`` and ``flags`` bit 0 fault, bit 1 watchdog, bit 2 reset
+done, bits 8+k saturation of input k (see ``firmware/apps/mavlink/main.c``).
+
+Scenario table::
+
+    [transport]
+    kind = "mavlink"
+    port = 14560                 # the controller listens on udpin:127.0.0.1:<port>
+    # or, explicitly: url = "udpout:127.0.0.1:14560" (plant side), controller_url = "udpin:127.0.0.1:14560"
+
+Framing is pymavlink's (MAVLink 2, ``common`` dialect) on a plain UDP socket.
+"""
+
+from __future__ import annotations
+
+import selectors
+import socket
+import time
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
+
+from gainlink.errors import TransportError
+
+from .registry import take_keys
+from .transport import STATUS_FAULT, STATUS_WATCHDOG, TRANSPORTS, Command, Transport
+
+ARRAY_SAMPLE = 1
+ARRAY_RESET = 2
+ARRAY_IDLE = 3
+FLAG_FAULT = 0x1
+FLAG_WATCHDOG = 0x2
+FLAG_RESET = 0x4
+SAT_SHIFT = 8
+DEFAULT_PORT = 14560
+
+
+class _DebugFloatArray(mavlink2.MAVLink_debug_float_array_message):
+    """DEBUG_FLOAT_ARRAY packed by pymavlink, with MAVLink 2's trailing-zero truncation done in C
+    (``bytes.rstrip``) instead of pymavlink's per-byte Python loop over the 58-float array."""
+
+    def pack(self, mav: "mavlink2.MAVLink", force_mavlink1: bool = False) -> bytes:
+        payload = self.unpacker.pack(self.time_usec, self.array_id, self._name_raw, *self.data)
+        return self._pack(mav, self.crc_extra, payload.rstrip(b"\0") or payload[:1], force_mavlink1=force_mavlink1)
+
+
+def _udp_endpoint(url: str, *, scheme: str) -> tuple[str, int]:
+    parts = url.split(":")
+    if len(parts) != 3 or parts[0] != scheme:
+        raise TransportError(f"mavlink transport: expected {scheme}:HOST:PORT, got {url!r}")
+    try:
+        return parts[1], int(parts[2])
+    except ValueError:
+        raise TransportError(f"mavlink transport: bad port in {url!r}") from None
+
+
+class MavlinkTransport(Transport):
+    """Plant-side end of the MAVLink HIL link (UDP).
+
+    Parameters
+    ----------
+    url : str
+        Where the controller listens, as the plant sees it: ``udpout:HOST:PORT``.
+    controller_url : str
+        The controller's own link argument: ``udpin:HOST:PORT``.
+    n_inputs, n_outputs, n_refs : int
+        m, p, q of the loop.
+    ts : float
+        Sample time (for ``time_usec``).
+    system, component : int
+        Our MAVLink ids.
+    """
+
+    seq_modulo = 1 << 32
+
+    def __init__(self, *, url: str, controller_url: str, n_inputs: int, n_outputs: int, n_refs: int, ts: float,
+                 system: int = 255, component: int = mavlink2.MAV_COMP_ID_MISSIONPLANNER):
+        if n_outputs + n_refs > 58 or n_inputs > 16:
+            raise TransportError("mavlink transport: at most 58 outputs+references and 16 inputs fit the messages")
+        self.url = url
+        self.controller_url = controller_url
+        self.dest = _udp_endpoint(url, scheme="udpout")
+        self.m, self.p, self.q = n_inputs, n_outputs, n_refs
+        self.ts_us = max(1, int(round(ts * 1e6)))
+        self.mav = mavlink2.MAVLink(None, srcSystem=system, srcComponent=component)
+        self.sock: socket.socket | None = None
+        self._sel: selectors.BaseSelector | None = None
+        self._pad = np.zeros(58, dtype=np.float32)
+        self.stats = {"sent": 0, "received": 0, "foreign": 0}
+
+    # -- lifecycle -----------------------------------------------------------------------------
+    def open(self) -> None:
+        try:
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            sock.bind(("0.0.0.0" if self.dest[0] not in ("127.0.0.1", "localhost") else "127.0.0.1", 0))
+            sock.connect(self.dest)
+        except OSError as exc:
+            raise TransportError(f"mavlink transport: cannot open {self.url}: {exc.strerror}") from None
+        sock.setblocking(False)
+        self.sock = sock
+        self._sel = selectors.DefaultSelector()
+        self._sel.register(sock, selectors.EVENT_READ)
+
+    def close(self) -> None:
+        if self._sel is not None:
+            self._sel.close()
+            self._sel = None
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None
+
+    # -- samples -------------------------------------------------------------------------------
+    def _frame(self, *, array_id: int, name: bytes, seq: int, values: np.ndarray | None = None) -> bytes:
+        data = self._pad.copy()
+        if values is not None:
+            data[: values.size] = values
+        msg = _DebugFloatArray(seq * self.ts_us, name, array_id, data.tolist())
+        return msg.pack(self.mav)
+
+    def encode_sample(self, *, seq: int, y: np.ndarray, r: np.ndarray) -> list[Any]:
+        values = np.concatenate([np.asarray(y, dtype=np.float32).ravel(), np.asarray(r, dtype=np.float32).ravel()])
+        return [self._frame(array_id=ARRAY_SAMPLE, name=b"GL_SAMPLE", seq=seq % self.seq_modulo, values=values)]
+
+    def encode_reset(self, *, seq: int) -> list[Any]:
+        """The frame that resets the controller's state (answered with the reset flag)."""
+        return [self._frame(array_id=ARRAY_RESET, name=b"GL_RESET", seq=seq % self.seq_modulo)]
+
+    def encode_idle(self, *, seq: int) -> list[Any]:
+        """The frame of a period without a measurement (the controller's watchdog counts it)."""
+        return [self._frame(array_id=ARRAY_IDLE, name=b"GL_IDLE", seq=seq % self.seq_modulo)]
+
+    def send_frames(self, frames: Sequence[Any]) -> None:
+        if self.sock is None:
+            raise TransportError("mavlink transport: not open")
+        for f in frames:
+            try:
+                self.sock.send(f)
+            except ConnectionRefusedError:
+                pass  # nobody listening yet: like a lost datagram
+            except OSError as exc:
+                raise TransportError(f"mavlink transport: send failed: {exc.strerror}") from None
+            self.stats["sent"] += 1
+
+    def receive_command(self, *, timeout: float) -> Command | None:
+        if self.sock is None:
+            raise TransportError("mavlink transport: not open")
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                data = self.sock.recv(2048)
+            except (BlockingIOError, ConnectionRefusedError):
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return None
+                self._sel.select(left)
+                continue
+            cmd = self._decode(data)
+            if cmd is not None:
+                return cmd
+
+    def _decode(self, data: bytes) -> Command | None:
+        try:
+            if len(data) > 2 and data[0] == 0xFD and len(data) == 12 + data[1]:
+                msgs = [self.mav.decode(bytearray(data))]  # one unsigned MAVLink 2 frame per datagram
+            else:
+                msgs = self.mav.parse_buffer(bytearray(data)) or []
+        except mavlink2.MAVError:
+            return None
+        for msg in msgs:
+            if msg.get_msgId() != mavlink2.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS:
+                self.stats["foreign"] += 1
+                continue
+            self.stats["received"] += 1
+            flags = int(msg.flags)
+            u = np.asarray(msg.controls[: self.m], dtype=float)
+            sat = np.array([(flags >> (SAT_SHIFT + k)) & 1 for k in range(self.m)], dtype=bool)
+            status = (STATUS_FAULT if flags & FLAG_FAULT else 0) | (STATUS_WATCHDOG if flags & FLAG_WATCHDOG else 0)
+            seq = (int(msg.time_usec) // self.ts_us) % self.seq_modulo
+            return Command(seq=seq, u=u, saturated=sat, status=status, t_ns=time.perf_counter_ns())
+        return None
+
+    def controller_argv(self) -> list[str]:
+        return ["--url", self.controller_url]
+
+    def firmware_executable(self, artifact: Any) -> Any:
+        """The firmware host executable that speaks this link (``gainlink_mavlink``, built on demand)."""
+        from .mavlink_firmware import mavlink_executable
+
+        return mavlink_executable(artifact)
+
+    @property
+    def config(self) -> dict:
+        """The transport's configuration as a scenario table."""
+        return {"kind": "mavlink", "url": self.url, "controller_url": self.controller_url}
+
+    def describe(self) -> dict:
+        return {"kind": "mavlink", "url": self.url, "controller_url": self.controller_url,
+                "messages": "DEBUG_FLOAT_ARRAY -> HIL_ACTUATOR_CONTROLS", "ts_us": self.ts_us}
+
+
+@TRANSPORTS.register("mavlink")
+def _from_config(config: Mapping[str, Any], *, artifact: Any, **_: Any) -> MavlinkTransport:
+    cfg = take_keys(config, allowed={"kind", "port", "host", "url", "controller_url"}, where="transport", error=TransportError)
+    host = str(cfg.get("host", "127.0.0.1"))
+    port = cfg.get("port", DEFAULT_PORT)
+    if not isinstance(port, int) or not 0 < port < 65536:
+        raise TransportError(f"transport: port must be an integer 1..65535, not {port!r}")
+    url = str(cfg.get("url", f"udpout:{host}:{port}"))
+    controller_url = str(cfg.get("controller_url", f"udpin:{host}:{_udp_endpoint(url, scheme='udpout')[1]}"))
+    return MavlinkTransport(url=url, controller_url=controller_url, n_inputs=artifact.m, n_outputs=artifact.p,
+                            n_refs=artifact.q, ts=float(artifact.Ts))

@@ -1,0 +1,90 @@
+"""``gainlink mavlink``: upload a gain artifact to a vehicle, or list a vehicle's parameters.
+
+Exit status of ``upload``: 0 verified (and persisted with ``--persist``); 2 nothing was changed
+(bad input, no heartbeat, missing parameter, other dimensions); 3 the upload failed after writing
+and every changed parameter was restored; 4 the upload failed and the rollback is incomplete.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+EXIT_ROLLED_BACK = 3
+EXIT_ROLLBACK_INCOMPLETE = 4
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``gainlink mavlink upload`` and ``gainlink mavlink params``."""
+    p = subparsers.add_parser("mavlink", help="MAVLink parameter upload and listing")
+    sub = p.add_subparsers(dest="mavlink_command", metavar="ACTION")
+    sub.required = True
+
+    up = sub.add_parser("upload", help="upload an artifact's gains (verified, rolled back on failure)")
+    up.add_argument("artifact", help="gains.json")
+    up.add_argument("--connect", required=True, help="pymavlink URL: udpout:HOST:PORT, udpin:HOST:PORT, /dev/ttyACM0")
+    up.add_argument("--mapping", help="TOML mapping of gains to the vehicle's own parameter names and types")
+    up.add_argument("--persist", action="store_true", help="send MAV_CMD_PREFLIGHT_STORAGE and check the ack")
+    up.add_argument("--dry-run", action="store_true", help="read and print the diff only")
+    up.add_argument("--window", type=int, default=16, help="PARAM_SETs in flight (default 16)")
+    up.add_argument("--timeout", type=float, default=0.25, help="seconds before a request is re-sent (default 0.25)")
+    up.add_argument("--retries", type=int, default=10, help="re-sends per parameter (default 10)")
+    up.add_argument("--heartbeat-timeout", type=float, default=5.0, help="seconds to wait for a heartbeat (default 5)")
+    up.set_defaults(func=_upload)
+
+    ls = sub.add_parser("params", help="list a vehicle's parameters (PARAM_REQUEST_LIST)")
+    ls.add_argument("--connect", required=True, help="pymavlink URL")
+    ls.add_argument("--heartbeat-timeout", type=float, default=5.0, help="seconds to wait for a heartbeat (default 5)")
+    ls.set_defaults(func=_params)
+
+
+def _upload(args: argparse.Namespace) -> int:
+    from gainlink.artifact import load
+    from gainlink.errors import ParameterError
+    from gainlink.hil.mavlink_upload import UploadFailed, format_changes, upload
+
+    if args.window < 1 or args.retries < 0 or args.timeout <= 0:
+        raise ParameterError("--window must be >= 1, --retries >= 0 and --timeout > 0")
+    artifact = load(args.artifact)
+    try:
+        res = upload(
+            artifact, connect=args.connect, mapping=args.mapping, persist=args.persist, dry_run=args.dry_run,
+            window=args.window, timeout=args.timeout, retries=args.retries, heartbeat_timeout=args.heartbeat_timeout,
+        )
+    except UploadFailed as exc:
+        for line in exc.events:
+            print(f"gainlink: {line}", file=sys.stderr)
+        print(f"gainlink: error: {exc}", file=sys.stderr)
+        return EXIT_ROLLED_BACK if exc.rolled_back else EXIT_ROLLBACK_INCOMPLETE
+    for line in format_changes(res.changes):
+        print(line)
+    if res.dry_run:
+        print(f"dry run: {len(res.changes)} parameter(s) would change, {res.unchanged} already match "
+              f"(vehicle {res.target[0]}/{res.target[1]}, {res.encoding.value} integers)")
+        return 0
+    what = [f"{res.verified} set(s) verified", f"{res.unchanged} unchanged"]
+    if res.committed:
+        what.append("gain set committed")
+    if res.persisted:
+        what.append("persisted")
+    print(f"uploaded {artifact.name} sha256:{artifact.sha256[:12]} to vehicle {res.target[0]}/{res.target[1]}: "
+          f"{', '.join(what)} ({res.sent} sent, {res.retries} retries, {res.seconds:.3f} s)")
+    return 0
+
+
+def _params(args: argparse.Namespace) -> int:
+    from gainlink.hil.mavlink_link import MavLink
+    from gainlink.hil.mavlink_params import REAL32
+    from gainlink.hil.mavlink_session import ParamSession
+    from gainlink.hil.mavlink_upload import detect_encoding
+    from gainlink.hil.mavlink_params import Encoding
+
+    with MavLink(args.connect) as link:
+        hb = link.wait_heartbeat(timeout=args.heartbeat_timeout)
+        session = ParamSession(link, target_system=hb.get_srcSystem(), target_component=hb.get_srcComponent(),
+                               encoding=Encoding.C_CAST)
+        session.encoding = detect_encoding(session)
+        for pv in session.read_all().values():
+            value = f"{pv.value:.9g}" if pv.ptype == REAL32 else str(int(pv.value))
+            print(f"{pv.name:<16} {value}")
+    return 0
