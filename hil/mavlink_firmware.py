@@ -29,7 +29,7 @@ def mavlink_executable(artifact: Artifact, *, build_root: Path | None = None) ->
     """
     from gainlink.firmware.build import build
 
-    result = build(artifact, target="host", build_root=build_root)
+    result = build(artifact, target="host", options={"GL_APPS": "ON"}, build_root=build_root)
     exe = result.build_dir / EXECUTABLE
     if not exe.is_file():
         # A cached build tree configured before firmware/apps/mavlink existed: reconfigure, build the app.

@@ -54,6 +54,8 @@ class SetOutcome:
         Id -> (value the vehicle kept, reason or ``""``) for sets echoed with another value.
     unanswered : tuple of str
         Ids that never got an echo.
+    skipped : tuple of str
+        Ids never sent because an earlier one failed (``stop_on_failure``).
     sent : int
         PARAM_SETs sent, retries included.
     retries : int
@@ -63,6 +65,7 @@ class SetOutcome:
     verified: tuple[str, ...]
     refused: dict = field(default_factory=dict)
     unanswered: tuple[str, ...] = ()
+    skipped: tuple[str, ...] = ()
     sent: int = 0
     retries: int = 0
 
@@ -226,11 +229,16 @@ class ParamSession:
         return {pv.name: pv for pv in sorted(by_index.values(), key=lambda p: p.index)}
 
     # -- sets ----------------------------------------------------------------------------------
-    def set(self, items: list[tuple[str, int, float | int]]) -> SetOutcome:
-        """Set parameters ``(id, type, value)`` with a bounded window, verifying every echo."""
+    def set(self, items: list[tuple[str, int, float | int]], *, stop_on_failure: bool = False) -> SetOutcome:
+        """Set parameters ``(id, type, value)`` with a bounded window, verifying every echo.
+
+        With ``stop_on_failure``, nothing new is sent once one set is refused or unanswered (those in
+        flight are still seen through); the rest are reported as ``skipped``.
+        """
         pending = deque(items)
         flying: dict[str, _Flight] = {}
         reasons: dict[str, str] = {}
+        skipped: tuple[str, ...] = ()
         verified: list[str] = []
         refused: dict = {}
         unanswered: list[str] = []
@@ -259,10 +267,16 @@ class ParamSession:
             send(f)
 
         while pending or flying:
+            if stop_on_failure and (refused or unanswered) and pending:
+                pending.clear()
+                skipped = tuple(n for n, _, _ in items if n not in flying and n not in verified
+                                and n not in refused and n not in unanswered)
             while pending and len(flying) < self.window:
                 name, ptype, value = pending.popleft()
                 raw = encode_value(value=value, ptype=ptype, encoding=self.encoding)
                 send(_Flight(name=name, deadline=0.0, attempts=1, ptype=ptype, raw=raw))
+            if not flying:
+                break
             wait = max(0.0, min(f.deadline for f in flying.values()) - time.monotonic())
             for m in self._replies(wait):
                 f = flying.get(m.param_id)
@@ -286,7 +300,8 @@ class ParamSession:
             now = time.monotonic()
             for f in [f for f in flying.values() if f.deadline <= now]:
                 give_up_or_resend(f)
-        return SetOutcome(verified=tuple(verified), refused=refused, unanswered=tuple(unanswered), sent=sent, retries=retries)
+        return SetOutcome(verified=tuple(verified), refused=refused, unanswered=tuple(unanswered), skipped=skipped,
+                          sent=sent, retries=retries)
 
     # -- commands ------------------------------------------------------------------------------
     def command(self, *, command: int, params: tuple[float, ...] = (), wait: float | None = None) -> int:

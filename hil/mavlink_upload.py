@@ -139,7 +139,8 @@ def format_changes(changes: tuple[ParamChange, ...]) -> list[str]:
 
 def detect_encoding(session: ParamSession) -> Encoding:
     """Integer encoding advertised in AUTOPILOT_VERSION (C-cast when the vehicle does not say)."""
-    msg = session.request_message(msg_id=mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, wait=max(0.3, 2 * session.timeout))
+    msg = session.request_message(msg_id=mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, wait=max(0.1, session.timeout),
+                                  tries=session.retries + 1)
     if msg is None:
         log.warning("no AUTOPILOT_VERSION from the vehicle: assuming C-cast integer parameters")
         return Encoding.C_CAST
@@ -225,21 +226,29 @@ def upload(
 
 
 def _read_current(session: ParamSession, plan: _Plan) -> dict[str, ParamValue]:
-    names = [s.name for s in plan.checks] + [s.name for s in plan.specs] + ([HASH_ID] if plan.commit else [])
-    values, missing = session.read(names)
+    values: dict[str, ParamValue] = {}
+    if plan.checks:  # the structure first: a loop of other dimensions is one clear error, not a list
+        dims, missing = session.read([s.name for s in plan.checks])
+        if missing:
+            raise ParameterError(f"the vehicle is not gainlink firmware (no {', '.join(sorted(missing))}); "
+                                 "give --mapping for other autopilots; nothing was changed")
+        if any(int(dims[s.name].value) != int(s.value) for s in plan.checks):
+            got = " ".join(f"{s.name}={int(dims[s.name].value)}" for s in plan.checks)
+            want = " ".join(f"{s.name}={int(s.value)}" for s in plan.checks)
+            raise ParameterError(f"the firmware runs a loop of other dimensions ({got}; the artifact has {want}); "
+                                 "nothing was changed")
+        values.update(dims)
+    got, missing = session.read([s.name for s in plan.specs] + ([HASH_ID] if plan.commit else []))
     if missing:
-        listed = ", ".join(f"{n} ({why})" for n, why in sorted(missing.items()))
-        raise ParameterError(f"vehicle lacks {len(missing)} parameter(s): {listed}; nothing was changed")
-    for s in plan.checks:
-        if int(values[s.name].value) != int(s.value):
-            dims = " ".join(f"{d}={int(values[d].value)}" for d in DIMENSION_IDS)
-            want = " ".join(f"{c.name}={int(c.value)}" for c in plan.checks)
-            raise ParameterError(f"the firmware runs a loop of other dimensions ({dims}; artifact {want}); nothing was changed")
+        listed = ", ".join(f"{n} ({why})" for n, why in sorted(missing.items())[:5])
+        more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
+        raise ParameterError(f"vehicle lacks {len(missing)} parameter(s): {listed}{more}; nothing was changed")
+    values.update(got)
     for s in plan.specs:
-        got = values[s.name].ptype
-        if got != s.ptype:
+        if values[s.name].ptype != s.ptype:
             raise ParameterError(
-                f"parameter {s.name} is {type_name(got)} on the vehicle, {type_name(s.ptype)} in the plan; nothing was changed"
+                f"parameter {s.name} is {type_name(values[s.name].ptype)} on the vehicle, {type_name(s.ptype)} in the "
+                "plan; nothing was changed"
             )
     return values
 
@@ -268,7 +277,7 @@ def _upload(session: ParamSession, *, plan: _Plan, persist: bool, dry_run: bool,
     events: list[str] = []
     sent = retries = verified = 0
     committed = False
-    out = session.set([(c.name, c.ptype, c.new) for c in changes])
+    out = session.set([(c.name, c.ptype, c.new) for c in changes], stop_on_failure=True)
     sent, retries, verified = out.sent, out.retries, len(out.verified)
     failure = _describe(out, what="set")
     if not failure and need_commit:
@@ -292,7 +301,8 @@ def _upload(session: ParamSession, *, plan: _Plan, persist: bool, dry_run: bool,
         return result(verified=verified, sent=sent, retries=retries, committed=committed, persisted=persisted)
 
     events.insert(0, failure)
-    rolled_back = _rollback(session, changes=changes, committed=committed, old_hash=old_hash, events=events, plan=plan)
+    touched = tuple(c for c in changes if c.name not in out.skipped)  # never-sent ones need no restore
+    rolled_back = _rollback(session, changes=touched, committed=committed, old_hash=old_hash, events=events, plan=plan)
     state = "every changed parameter was restored" if rolled_back else "ROLLBACK INCOMPLETE"
     raise UploadFailed(f"upload failed: {failure}; {state}", events=tuple(events), rolled_back=rolled_back)
 
@@ -303,6 +313,8 @@ def _describe(out, *, what: str) -> str:
         parts.append(f"{name} refused (vehicle kept {value!r}{', ' + reason if reason else ''})")
     for name in out.unanswered:
         parts.append(f"{name} never echoed")
+    if parts and out.skipped:
+        parts.append(f"{len(out.skipped)} not sent")
     return f"{what}: " + "; ".join(parts) if parts else ""
 
 

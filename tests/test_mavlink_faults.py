@@ -1,0 +1,150 @@
+"""MAVLink faults against the real firmware app: a lossy link, a refused parameter midway (rollback),
+a refused persist (rollback of a committed set), no heartbeat, non-finite values and invalid commits."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+from conftest import run_cli
+from test_mavlink_upload import closed_loop, read_params, reference_u, retuned_pendulum, start_firmware
+
+from gainlink.artifact import load
+from gainlink.codegen import gain_set, payload_crc32
+from gainlink.hil.mavlink_firmware import mavlink_executable
+from gainlink.hil.mavlink_link import MavLink
+from gainlink.hil.mavlink_params import INT32, REAL32, Encoding, as_int32
+from gainlink.hil.mavlink_relay import LossyUdpRelay
+from gainlink.hil.mavlink_session import ParamSession
+
+
+@pytest.fixture(scope="module")
+def pend(example_artifacts):
+    return example_artifacts["pendulum"]
+
+
+@pytest.fixture(scope="module")
+def retuned(tmp_path_factory):
+    return retuned_pendulum(tmp_path_factory.mktemp("retuned") / "gains.json")
+
+
+@pytest.fixture(scope="module")
+def exe(pend):
+    return mavlink_executable(load(pend))
+
+
+def values_of(port: int) -> dict:
+    return {n: p.value for n, p in read_params(port).items()}
+
+
+def test_upload_through_a_lossy_link_completes_and_verifies(exe, pend, retuned, tmp_path):
+    fw, port = start_firmware(exe, tmp_path / "params.txt")
+    try:
+        with LossyUdpRelay(upstream=("127.0.0.1", port), drop=0.2, duplicate=0.1, reorder=0.1, seed=7) as relay:
+            res = run_cli("mavlink", "upload", retuned, "--connect", relay.url, "--persist", "--timeout", "0.05",
+                          "--retries", "30")
+            assert res.code == 0, res.err
+            assert relay.stats.dropped > 0 and relay.stats.duplicated > 0 and relay.stats.reordered > 0
+        assert "persisted" in res.out
+        retries = int(res.out.rsplit(" retries", 1)[0].rsplit(" ", 1)[1])
+        assert retries > 0  # the losses were really worked around
+        new = load(retuned)
+        assert values_of(port)["GL_HASH"] & 0xFFFFFFFF == gain_set(new).crc32
+        Y, R, U = closed_loop(port, new, steps=100)
+        np.testing.assert_allclose(U, reference_u(new, Y, R), atol=1e-4)
+    finally:
+        fw.stop()
+
+
+def test_a_parameter_refused_midway_rolls_back_every_change(exe, pend, tmp_path):
+    mapping = tmp_path / "map.toml"
+    mapping.write_text(
+        '[[param]]\ngain = "K[0,0]"\nname = "GL_K_0_0"\nscale = 1.5\n'
+        '[[param]]\ngain = "K[0,1]"\nname = "GL_K_0_1"\nscale = 1.5\n'
+        '[[param]]\ngain = "u_max[0]"\nname = "GL_DIM_N"\ntype = "INT32"\n'  # read-only: the vehicle refuses it
+        '[[param]]\ngain = "K[0,2]"\nname = "GL_K_0_2"\nscale = 1.5\n'
+        '[[param]]\ngain = "L[0,0]"\nname = "GL_L_0_0"\nscale = 0.5\n'
+    )
+    fw, port = start_firmware(exe, None)
+    try:
+        before = values_of(port)
+        res = run_cli("mavlink", "upload", pend, "--connect", f"udpout:127.0.0.1:{port}", "--mapping", mapping,
+                      "--window", "1", "--retries", "2")
+        assert res.code == 3, (res.code, res.err)
+        err = res.err
+        assert "GL_DIM_N refused" in err and "read-only" in err
+        assert "restored GL_K_0_0" in err and "restored GL_K_0_1" in err
+        assert "GL_K_0_2" not in err and "GL_L_0_0" not in err  # never sent, so nothing to restore
+        assert "every changed parameter was restored" in err
+        after = values_of(port)
+        assert after == before
+    finally:
+        fw.stop()
+
+
+def test_a_refused_persist_rolls_back_the_committed_set(exe, pend, retuned):
+    fw, port = start_firmware(exe, None)  # no --storage: MAV_CMD_PREFLIGHT_STORAGE fails
+    try:
+        old = load(pend)
+        res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--persist")
+        assert res.code == 3, res.err
+        assert "persist refused: COMMAND_ACK result MAV_RESULT_FAILED" in res.err
+        assert "re-committed the previous gain set" in res.err
+        values = values_of(port)
+        assert values["GL_HASH"] & 0xFFFFFFFF == gain_set(old).crc32
+        assert values["GL_K_0_0"] == float(np.float32(old.K[0, 0]))
+        Y, R, U = closed_loop(port, old, steps=100)
+        np.testing.assert_allclose(U, reference_u(old, Y, R), atol=1e-4)
+    finally:
+        fw.stop()
+
+
+def test_no_heartbeat_is_a_clear_error_within_the_timeout(tmp_path, pend):
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:  # a bound port where nobody answers
+        silent.bind(("127.0.0.1", 0))
+        port = silent.getsockname()[1]
+        t0 = time.monotonic()
+        res = run_cli("mavlink", "upload", pend, "--connect", f"udpout:127.0.0.1:{port}", "--heartbeat-timeout", "1")
+        elapsed = time.monotonic() - t0
+    assert res.code == 2
+    assert res.err.strip() == f"gainlink: error: no heartbeat on udpout:127.0.0.1:{port} within 1 s"
+    assert elapsed < 3
+
+
+def test_non_finite_values_and_invalid_commits_are_refused_and_the_loop_keeps_its_set(exe, pend):
+    old = load(pend)
+    crc_old = gain_set(old).crc32
+    fw, port = start_firmware(exe, None)
+    try:
+        with MavLink(f"udpout:127.0.0.1:{port}") as link:
+            link.wait_heartbeat(timeout=5)
+            s = ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE, retries=1)
+            out = s.set([("GL_K_0_0", REAL32, math.nan)])
+            assert not out.ok and out.refused["GL_K_0_0"] == (float(np.float32(old.K[0, 0])), "value out of range")
+            out = s.set([("GL_K_0_0", REAL32, math.inf)])
+            assert "GL_K_0_0" in out.refused
+            # a commit whose hash is not the staged set's is refused
+            out = s.set([("GL_HASH", INT32, as_int32(crc_old ^ 1))])
+            assert out.refused["GL_HASH"][0] & 0xFFFFFFFF == crc_old
+            # a staged set with u_min > u_max is refused even with its exact CRC: the library's range check
+            gs = gain_set(old)
+            fields = {k: v.copy() for k, v in gs.fields.items()}
+            fields["u_min"][0] = np.float32(30.0)
+            bad_crc = payload_crc32(header=gs.header, fields=fields)
+            assert s.set([("GL_UMIN_0", REAL32, 30.0)]).ok  # staging alone is accepted
+            out = s.set([("GL_HASH", INT32, as_int32(bad_crc))])
+            assert out.refused["GL_HASH"][0] & 0xFFFFFFFF == crc_old
+            # unknown and read-only parameters
+            assert s.read(["GL_NOPE"])[1] == {"GL_NOPE": "does not exist"}
+            out = s.set([("GL_DIM_N", INT32, 5)])
+            assert out.refused["GL_DIM_N"] == (old.n, "read-only")
+            assert s.set([("GL_UMIN_0", REAL32, float(old.u_min[0]))]).ok
+        assert "commit refused" in fw.stderr_text()
+        Y, R, U = closed_loop(port, old, steps=100)  # still the old set, bit for bit the reference
+        np.testing.assert_allclose(U, reference_u(old, Y, R), atol=1e-4)
+    finally:
+        fw.stop()

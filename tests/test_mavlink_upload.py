@@ -1,0 +1,206 @@
+"""MAVLink upload to the real firmware app: parameter list, verified upload, commit, persist, restart,
+and the loop running on the new gains (closed loop over the HIL link against the float64 reference)."""
+
+from __future__ import annotations
+
+import math
+import re
+import socket
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import EXAMPLES, run_cli
+
+from gainlink import artifact as artifact_mod
+from gainlink.artifact import Artifact, load
+from gainlink.codegen import gain_set
+from gainlink.design import design
+from gainlink.hil.mavlink_firmware import MavlinkFirmware, mavlink_executable
+from gainlink.hil.mavlink_link import MavLink
+from gainlink.hil.mavlink_params import Encoding
+from gainlink.hil.mavlink_session import ParamSession
+from gainlink.hil.mavlink_transport import MavlinkTransport
+from gainlink.reference import ReferenceLoop
+from gainlink.spec import parse_spec
+
+STEMS = {"AD": "Ad", "BD": "Bd", "CD": "Cd", "DD": "Dd", "K": "K", "L": "L", "M": "M", "CI": "Ci", "KI": "Ki",
+         "KAW": "Kaw", "UMIN": "u_min", "UMAX": "u_max", "XH0": "xh0", "Z0": "z0"}
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def retuned_pendulum(path: Path) -> Path:
+    """The pendulum designed again with other weights: same structure, other gains."""
+    spec = tomllib.loads((EXAMPLES / "pendulum.toml").read_text())
+    spec["controller"]["Q_diag"] = [40.0, 1.0, 300.0, 2.0]
+    spec["controller"]["R_diag"] = [3.0]
+    spec["integral"]["Q_diag"] = [12.0]
+    artifact_mod.write(path, design(parse_spec(spec)).artifact)
+    return path
+
+
+@pytest.fixture(scope="module")
+def pend(example_artifacts) -> Path:
+    return example_artifacts["pendulum"]
+
+
+@pytest.fixture(scope="module")
+def retuned(tmp_path_factory) -> Path:
+    return retuned_pendulum(tmp_path_factory.mktemp("retuned") / "gains.json")
+
+
+@pytest.fixture(scope="module")
+def exe(pend) -> Path:
+    return mavlink_executable(load(pend))
+
+
+def start_firmware(exe: Path, storage: Path | None) -> tuple[MavlinkFirmware, int]:
+    port = free_udp_port()
+    fw = MavlinkFirmware(exe, url=f"udpin:127.0.0.1:{port}", storage=storage)
+    fw.start()
+    return fw, port
+
+
+def expected_value(art: Artifact, name: str) -> float:
+    """The float32 number a parameter id names, read straight from the artifact."""
+    if name == "GL_TS":
+        return float(np.float32(art.Ts))
+    m = re.fullmatch(r"GL_([A-Z0-9]+?)_(\d+)(?:_(\d+))?", name)
+    assert m, name
+    a = np.asarray(getattr(art, STEMS[m.group(1)]), dtype=float)
+    idx = (int(m.group(2)),) if m.group(3) is None else (int(m.group(2)), int(m.group(3)))
+    return float(np.float32(a[idx]))
+
+
+def read_params(port: int) -> dict:
+    with MavLink(f"udpout:127.0.0.1:{port}") as link:
+        link.wait_heartbeat(timeout=5)
+        s = ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE)
+        return s.read_all()
+
+
+def closed_loop(port: int, art: Artifact, *, steps: int = 300) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Run the artifact's own discrete plant against the firmware over the HIL link; return Y, R, U."""
+    t = MavlinkTransport(url=f"udpout:127.0.0.1:{port}", controller_url="", n_inputs=art.m, n_outputs=art.p,
+                         n_refs=art.q, ts=art.Ts)
+    x = np.zeros(art.n)
+    x[2] = 0.05  # pendulum tilted
+    Y, R, U = np.zeros((steps, art.p)), np.full((steps, art.q), 0.2), np.zeros((steps, art.m))
+    with t:
+        t.send_frames(t.encode_reset(seq=0))
+        assert t.receive_command(timeout=2.0) is not None
+        u = np.zeros(art.m)
+        for k in range(steps):
+            y = art.Cd @ x + art.Dd @ u
+            Y[k] = y.astype(np.float32)
+            t.send_frames(t.encode_sample(seq=k + 1, y=Y[k], r=R[k]))
+            c = t.receive_command(timeout=2.0)
+            assert c is not None and c.seq == k + 1
+            u = U[k] = c.u
+            x = art.Ad @ x + art.Bd @ u
+    return Y, R, U
+
+
+def reference_u(art: Artifact, Y: np.ndarray, R: np.ndarray) -> np.ndarray:
+    return ReferenceLoop(art).run(Y, R.astype(np.float32).astype(float)).u
+
+
+def test_parameter_list_is_the_artifact(exe, pend):
+    art = load(pend)
+    fw, port = start_firmware(exe, None)
+    try:
+        params = read_params(port)
+    finally:
+        fw.stop()
+    names = list(params)
+    assert names[:7] == ["GL_DIM_N", "GL_DIM_M", "GL_DIM_P", "GL_DIM_Q", "GL_FORM", "GL_AW", "GL_HASH"]
+    assert [params[n].value for n in names[:6]] == [art.n, art.m, art.p, art.q, 0, 2]
+    assert params["GL_HASH"].value & 0xFFFFFFFF == gain_set(art).crc32
+    assert [p.index for p in params.values()] == list(range(len(params)))
+    assert all(p.count == len(params) for p in params.values())
+    assert all(len(n) <= 16 for n in names)
+    floats = {n: p for n, p in params.items() if p.ptype == 9}
+    # every number of the loop: Ts, Ad Bd Cd Dd K L (no M: predictor form), Ci Ki Kaw, limits, xh0, z0
+    n, m, p, q = art.n, art.m, art.p, art.q
+    assert len(floats) == 1 + n * n + n * m + p * n + p * m + m * n + n * p + q * p + m * q + q * m + 2 * m + n + q
+    for name, pv in floats.items():
+        assert pv.value == expected_value(art, name), name
+    assert floats["GL_K_0_3"].value == float(np.float32(art.K[0, 3]))
+
+
+def test_upload_persists_survives_restart_and_the_loop_runs_the_new_gains(exe, pend, retuned, tmp_path):
+    old, new = load(pend), load(retuned)
+    assert old.n == new.n and not np.allclose(old.K, new.K)
+    storage = tmp_path / "params.txt"
+    fw, port = start_firmware(exe, storage)
+    try:
+        Y, R, U = closed_loop(port, old)
+        np.testing.assert_allclose(U, reference_u(old, Y, R), atol=1e-4)
+
+        res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--persist")
+        assert res.code == 0, res.err
+        assert "gain set committed" in res.out and "persisted" in res.out
+        assert re.search(r"^GL_K_0_0\s+K\[0,0\]\s+\S+ -> \S+$", res.out, re.M)
+
+        Y, R, U = closed_loop(port, new)
+        np.testing.assert_allclose(U, reference_u(new, Y, R), atol=1e-4)
+        assert np.max(np.abs(U - reference_u(old, Y, R))) > 1e-2  # really the new gains, not the old ones
+    finally:
+        fw.stop()
+    assert storage.is_file()
+
+    fw, port = start_firmware(exe, storage)  # a restart: values reloaded from the stored file
+    try:
+        assert "loaded parameters" in fw.stderr_text()
+        params = read_params(port)
+        assert params["GL_HASH"].value & 0xFFFFFFFF == gain_set(new).crc32
+        assert params["GL_K_0_2"].value == float(np.float32(new.K[0, 2]))
+        res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--dry-run")
+        assert res.code == 0 and "dry run: 0 parameter(s) would change" in res.out
+        Y, R, U = closed_loop(port, new)
+        np.testing.assert_allclose(U, reference_u(new, Y, R), atol=1e-4)
+    finally:
+        fw.stop()
+
+
+def test_dry_run_prints_the_diff_and_writes_nothing(exe, pend, retuned):
+    fw, port = start_firmware(exe, None)
+    try:
+        res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--dry-run")
+        assert res.code == 0, res.err
+        changed = [line.split()[0] for line in res.out.splitlines() if "->" in line]
+        assert "GL_K_0_0" in changed and "GL_TS" not in changed
+        assert read_params(port)["GL_HASH"].value & 0xFFFFFFFF == gain_set(load(pend)).crc32
+    finally:
+        fw.stop()
+
+
+def test_other_dimensions_are_refused_before_anything_is_written(exe, pend, example_artifacts):
+    fw, port = start_firmware(exe, None)
+    try:
+        res = run_cli("mavlink", "upload", example_artifacts["wood_berry"], "--connect", f"udpout:127.0.0.1:{port}")
+        assert res.code == 2
+        assert "other dimensions" in res.err and "nothing was changed" in res.err
+        assert len(res.err.strip().splitlines()) == 1
+        assert read_params(port)["GL_HASH"].value & 0xFFFFFFFF == gain_set(load(pend)).crc32
+    finally:
+        fw.stop()
+
+
+def test_params_command_lists_every_parameter(exe, pend):
+    fw, port = start_firmware(exe, None)
+    try:
+        res = run_cli("mavlink", "params", "--connect", f"udpout:127.0.0.1:{port}")
+    finally:
+        fw.stop()
+    assert res.code == 0, res.err
+    rows = dict(line.split() for line in res.out.splitlines())
+    art = load(pend)
+    assert int(rows["GL_DIM_N"]) == art.n
+    assert math.isclose(float(rows["GL_K_0_1"]), expected_value(art, "GL_K_0_1"), rel_tol=1e-8)
