@@ -107,12 +107,13 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
         stack.callback(plant.close)
         transport = transport_from_config(scenario.transport, artifact=artifact)
         argv = controller_argv(scenario.controller, artifact=artifact, artifact_path=scenario.artifact_path,
-                               transport=transport)
+                               transport=transport, executable=scenario.firmware)
         transport.open()
         stack.callback(transport.close)
         peer = ControllerProcess(argv)
         stack.callback(peer.close)
         peer.start()
+        peer.check_artifact(artifact.sha256)
         return _loop(scenario, artifact=artifact, plant=plant, transport=transport, peer=peer, progress=progress)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import re
 import selectors
 import signal
 import subprocess
@@ -72,6 +73,15 @@ class ControllerProcess:
         self._stderr = tempfile.TemporaryFile(mode="w+b")
         self.ready_line = ""
         self.paused = False
+
+    def check_artifact(self, sha256: str) -> None:
+        """Fail unless the ready line names the artifact ``sha256`` (a firmware built for other gains)."""
+        m = re.search(r"sha256:([0-9a-f]{64})", self.ready_line)
+        if m is None or m.group(1) != sha256:
+            found = m.group(1)[:16] if m else "unknown"
+            self.stop()
+            raise FirmwareError(f"controller {Path(self.argv[0]).name} runs artifact sha256:{found}..., "
+                                f"not the scenario's sha256:{sha256[:16]}...")
 
     def start(self) -> None:
         """Start the process and wait for its ready line; :class:`FirmwareError` if it dies or stays silent."""

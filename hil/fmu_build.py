@@ -7,11 +7,13 @@ build passes ``-lm`` and ``--no-undefined`` explicitly (FIELD-NOTES).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import logging
 import os
 import shutil
 import subprocess
+import sys
 import tempfile
 import zipfile
 from pathlib import Path
@@ -35,6 +37,24 @@ def _tree_files(name: str) -> list[tuple[str, Path]]:
     common = src.parent / "common"
     files += sorted((f"sources/{p.name}", p) for p in common.glob("*") if p.is_file())
     return files
+
+
+@contextlib.contextmanager
+def _quiet(log_path: Path):
+    """Send this process's stdout/stderr file descriptors (cmake's output) to ``log_path`` meanwhile."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(1), os.dup(2)
+    with open(log_path, "wb") as fh:
+        os.dup2(fh.fileno(), 1)
+        os.dup2(fh.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])
 
 
 def source_digest(name: str) -> str:
@@ -89,10 +109,13 @@ def build_fmu(name: str, *, out_dir: str | os.PathLike | None = None, force: boo
             dest.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(path, dest)
         log.info("building FMU %s with fmpy (cmake)", name)
+        log_path = Path(tmp) / "build.log"
         try:
-            build_platform_binary(unzip, build_dir=build, cmake_options=dict(CMAKE_OPTIONS))
+            with _quiet(log_path):
+                build_platform_binary(unzip, build_dir=build, cmake_options=dict(CMAKE_OPTIONS))
         except subprocess.CalledProcessError as exc:
-            raise ToolchainError(f"building FMU {name} failed: {exc}") from None
+            tail = " | ".join(log_path.read_text(errors="replace").strip().splitlines()[-5:])
+            raise ToolchainError(f"building FMU {name} failed ({exc.returncode}): {tail}") from None
         staged = Path(tmp) / f"{name}.fmu"
         with zipfile.ZipFile(staged, "w", zipfile.ZIP_DEFLATED) as zf:
             for path in sorted(unzip.rglob("*")):

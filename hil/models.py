@@ -119,25 +119,24 @@ class CartPendulum(OdePlant):
 
 
 class QuadrotorLateral(OdePlant):
-    """Lateral channel of a quadrotor holding altitude: thrust tilts with roll.
+    """Lateral channel of a quadrotor holding altitude (thrust m g / cos(phi)), as examples/quadrotor_lateral.toml.
 
-    States y, y_dot, phi, phi_dot; input roll torque tau. With thrust m g / cos(phi) (altitude hold)::
+    States phi (roll), p (roll rate), v (lateral speed), y (lateral position); input roll torque tau::
 
-        y_ddot   = g tan(phi) - (c_d / mass) y_dot
-        phi_ddot = tau / Ixx
+        phi_dot = p,  p_dot = tau / Ixx,  v_dot = g tan(phi) - (c_d / mass) v,  y_dot = v
 
-    About hover: A = [[0,1,0,0],[0,-c_d/mass,g,0],[0,0,0,1],[0,0,0,0]], B = [0,0,0,1/Ixx].
+    About hover (c_d = 0): A = [[0,1,0,0],[0,0,0,0],[g,0,0,0],[0,0,1,0]], B = [0, 1/Ixx, 0, 0].
     """
 
     name = "quadrotor_lateral"
     all_inputs = ("tau",)
-    state_names = ("y", "y_dot", "phi", "phi_dot")
-    default_outputs = ("y", "phi")
-    defaults = {"g": 9.81, "Ixx": 0.0023, "mass": 1.0, "c_d": 0.0}
+    state_names = ("phi", "p", "v", "y")
+    default_outputs = ("phi", "y")
+    defaults = {"g": 9.81, "Ixx": 0.01, "mass": 1.0, "c_d": 0.0}
 
     def derivatives(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         p = self.params
-        return np.array([x[1], p["g"] * math.tan(x[2]) - p["c_d"] / p["mass"] * x[1], x[3], u[0] / p["Ixx"]])
+        return np.array([x[1], u[0] / p["Ixx"], p["g"] * math.tan(x[0]) - p["c_d"] / p["mass"] * x[2], x[2]])
 
 
 class WoodBerry(Plant):

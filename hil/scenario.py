@@ -7,6 +7,7 @@ Example::
     duration = 10.0                        # s of plant time
     mode = "lockstep"                      # lockstep | realtime
     controller = "firmware"                # firmware (gainlink_can) | reference (Python node)
+    firmware = "path/to/gainlink_can"      # optional: a prebuilt executable (default: built for the artifact)
     step_timeout = 0.05                    # lockstep: wait per command [s]
     peer_timeout = 1.0                     # end the run when the controller is silent this long [s]
     period = 0.01                          # realtime: tick [s] (default: the artifact's Ts)
@@ -39,7 +40,7 @@ from gainlink.errors import ScenarioError
 
 TOP_KEYS = {"name", "artifact", "plant", "transport", "duration", "mode", "controller", "step_timeout",
             "peer_timeout", "period", "sched_fifo", "seed", "shadow", "initial_state", "reference", "noise",
-            "disturbances", "faults", "description"}
+            "disturbances", "faults", "description", "firmware"}
 MODES = ("lockstep", "realtime")
 FAULT_KINDS = ("drop", "delay", "duplicate", "reorder", "silent")
 PROFILE_KEYS = {
@@ -89,6 +90,7 @@ class Scenario:
     duration: float
     mode: str = "lockstep"
     controller: str = "firmware"
+    firmware: Path | None = None
     step_timeout: float = 0.05
     peer_timeout: float = 1.0
     period: float | None = None
@@ -184,10 +186,16 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
                for k, v in _table(data.get("initial_state", {}), "initial_state").items()}
     name = data.get("name", path.stem if path is not None else "scenario")
     period = data.get("period")
+    firmware = data.get("firmware")
+    if firmware is not None:
+        if not isinstance(firmware, str):
+            raise ScenarioError("scenario: firmware must be the path of a prebuilt gainlink_can executable")
+        firmware = Path(firmware) if Path(firmware).is_absolute() else base / firmware
     return Scenario(
         name=str(name), path=path, artifact_path=art,
         plant=_table(data["plant"], "plant"), transport=_table(data["transport"], "transport"),
         duration=_num(data["duration"], "duration", positive=True), mode=mode, controller=controller,
+        firmware=firmware,
         step_timeout=_num(data.get("step_timeout", 0.05), "step_timeout", positive=True),
         peer_timeout=_num(data.get("peer_timeout", 1.0), "peer_timeout", positive=True),
         period=None if period is None else _num(period, "period", positive=True),

@@ -88,7 +88,8 @@ def _linearize(args: argparse.Namespace) -> int:
         except ValueError:
             raise GainlinkError(f"--at {name}: {value!r} is not a number") from None
     result = linearize_to_spec(fmu=args.fmu, at=at, out=Path(args.out), Ts=args.Ts, name=args.name,
-                               inputs=args.inputs, outputs=args.outputs, method=args.method)
+                               inputs=args.inputs, outputs=args.outputs, method=args.method,
+                               template=Path(args.template) if args.template else None)
     print(f"wrote {args.out}: n={result.A.shape[0]} m={result.B.shape[1]} p={result.C.shape[0]} "
           f"({result.method}, operating point {', '.join(f'{k}={v:g}' for k, v in result.point.items()) or 'start values'})")
     return 0
@@ -135,4 +136,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--outputs", nargs="+", help="FMU outputs to keep (default: all)")
     p.add_argument("--method", choices=("auto", "directional", "differences"), default="auto",
                    help="directional derivatives when the FMU provides them (auto), or central differences")
+    p.add_argument("--template", help="copy controller/integral/observer/limits from this spec")
     p.set_defaults(func=_linearize)

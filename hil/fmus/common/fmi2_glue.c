@@ -299,7 +299,13 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
         double acc = 0.0;
         for (size_t j = 0; j < nKnown; j++) {
             double d = 0.0;
-            if (!model_partial(inst->r, vUnknown[i], vKnown[j], &d)) {
+            int unknown_is_state = 0;
+            for (size_t s = 0; s < MODEL_N_STATES; s++) {
+                unknown_is_state |= vUnknown[i] == model_state_vr[s];
+            }
+            if (unknown_is_state) {
+                d = vUnknown[i] == vKnown[j] ? 1.0 : 0.0; /* an output that is a state: identity */
+            } else if (!model_partial(inst->r, vUnknown[i], vKnown[j], &d)) {
                 gl_fmu_log(inst, fmi2Error, "fmi2GetDirectionalDerivative: unsupported variable pair");
                 return fmi2Error;
             }

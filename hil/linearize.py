@@ -1,0 +1,237 @@
+"""Linearise an FMU about an operating point into a plant spec that ``gainlink design`` takes.
+
+The FMU's Model Exchange interface gives ``dx/dt = f(x, u)`` and ``y = g(x, u)``. The Jacobians
+``A = df/dx, B = df/du, C = dg/dx, D = dg/du`` come from ``fmi2GetDirectionalDerivative`` when the
+FMU provides it, else from central differences (step ``1e-6 * max(1, |v|)``). fmpy has no
+linearisation of its own (FIELD-NOTES).
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from gainlink.errors import PlantError, SpecError
+from gainlink.fileio import atomic_write_text
+
+from . import toml_write
+from .fmu_plant import read_description, resolve_fmu
+
+log = logging.getLogger(__name__)
+
+DESIGN_SECTIONS = ("controller", "integral", "observer", "limits")
+
+
+@dataclass(frozen=True)
+class Linearization:
+    """``A, B, C, D`` about ``point`` (the values set), with signal names and the method used."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    states: tuple[str, ...]
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    point: dict
+    x0: np.ndarray
+    method: str
+    model_name: str
+
+
+def _fmu_path(fmu: str | Path) -> Path:
+    p = Path(fmu)
+    if p.suffix == ".fmu" or p.exists() or "/" in str(fmu):
+        return resolve_fmu(fmu=None, path=str(p))
+    return resolve_fmu(fmu=str(fmu), path=None)
+
+
+def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs: list[str] | None = None,
+              outputs: list[str] | None = None, method: str = "auto") -> Linearization:
+    """Linearise an FMU (path, or the name of a project FMU) about the point ``at``.
+
+    Parameters
+    ----------
+    fmu : str or Path
+        An ``.fmu`` file or a project FMU name (built on demand).
+    at : mapping, optional
+        Values of states, inputs or parameters at the operating point (others keep their start values).
+    inputs, outputs : list of str, optional
+        Which Real inputs/outputs to keep (default: all, in model-description order).
+    method : {"auto", "directional", "differences"}
+        Directional derivatives when provided (auto), forced, or central differences.
+    """
+    from fmpy import extract
+    from fmpy.fmi2 import FMU2Model
+
+    path = _fmu_path(fmu)
+    md = read_description(path)
+    if md.fmiVersion != "2.0":
+        raise PlantError(f"FMU {path} is FMI {md.fmiVersion}; linearize reads FMI 2.0 Model Exchange FMUs")
+    if md.modelExchange is None:
+        raise PlantError(f"FMU {path} has no Model Exchange interface; linearize needs dx/dt (Model Exchange)")
+    if not md.derivatives:
+        raise PlantError(f"FMU {path} declares no continuous states (ModelStructure/Derivatives is empty)")
+    if method not in ("auto", "directional", "differences"):
+        raise PlantError(f"unknown linearisation method {method!r}")
+    provides = bool(md.modelExchange.providesDirectionalDerivative)
+    if method == "directional" and not provides:
+        raise PlantError(f"FMU {md.modelName} does not provide directional derivatives")
+    use_dd = provides and method != "differences"
+    vars_ = {v.name: v for v in md.modelVariables}
+    states = [d.variable.derivative for d in md.derivatives]
+    ders = [d.variable for d in md.derivatives]
+    all_in = [v.name for v in md.modelVariables if v.causality == "input" and v.type == "Real"]
+    all_out = [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+    in_names = list(inputs) if inputs else all_in
+    out_names = list(outputs) if outputs else all_out
+    for what, names, pool in (("input", in_names, all_in), ("output", out_names, all_out)):
+        bad = [n for n in names if n not in pool]
+        if bad:
+            raise PlantError(f"FMU {md.modelName} has no Real {what} {', '.join(bad)} (has: {', '.join(pool)})")
+    point = dict(at or {})
+    for k in point:
+        if k not in vars_ or vars_[k].type != "Real":
+            raise PlantError(f"FMU {md.modelName} has no Real variable {k!r} for the operating point")
+    vr_x = [s.valueReference for s in states]
+    vr_dx = [d.valueReference for d in ders]
+    vr_u = [vars_[n].valueReference for n in in_names]
+    vr_y = [vars_[n].valueReference for n in out_names]
+    unzip = extract(str(path)) if path.is_file() else str(path)
+    fmu = FMU2Model(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.modelExchange.modelIdentifier,
+                    instanceName="linearize")
+    try:
+        fmu.instantiate()
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        if point:
+            fmu.setReal([vars_[k].valueReference for k in point], list(point.values()))
+        fmu.exitInitializationMode()
+        info = fmu.newDiscreteStates()
+        while info[0]:
+            info = fmu.newDiscreteStates()
+        fmu.enterContinuousTimeMode()
+        nx = len(states)
+        x0 = np.array(fmu.getReal(vr_x))
+        u0 = np.array(fmu.getReal(vr_u)) if vr_u else np.zeros(0)
+        if use_dd:
+            def jac(unknown: list[int], known: list[int]) -> np.ndarray:
+                J = np.zeros((len(unknown), len(known)))
+                for j, vr in enumerate(known):
+                    if unknown:
+                        J[:, j] = fmu.getDirectionalDerivative(unknown, [vr], [1.0])
+                return J
+
+            A, B, C, D = jac(vr_dx, vr_x), jac(vr_dx, vr_u), jac(vr_y, vr_x), jac(vr_y, vr_u)
+            name = "directional derivatives"
+        else:
+            def f(x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                fmu.setContinuousStates(fmu_real_array(x), nx)
+                if vr_u:
+                    fmu.setReal(vr_u, list(u))
+                dx = np.array(fmu.getReal(vr_dx))
+                y = np.array(fmu.getReal(vr_y)) if vr_y else np.zeros(0)
+                return dx, y
+
+            A = np.zeros((nx, nx)); C = np.zeros((len(vr_y), nx))
+            B = np.zeros((nx, len(vr_u))); D = np.zeros((len(vr_y), len(vr_u)))
+            for j in range(nx):
+                h = 1e-6 * max(1.0, abs(x0[j]))
+                e = np.zeros(nx); e[j] = h
+                (fp, yp), (fm, ym) = f(x0 + e, u0), f(x0 - e, u0)
+                A[:, j], C[:, j] = (fp - fm) / (2 * h), (yp - ym) / (2 * h)
+            for j in range(len(vr_u)):
+                h = 1e-6 * max(1.0, abs(u0[j]))
+                e = np.zeros(len(vr_u)); e[j] = h
+                (fp, yp), (fm, ym) = f(x0, u0 + e), f(x0, u0 - e)
+                B[:, j], D[:, j] = (fp - fm) / (2 * h), (yp - ym) / (2 * h)
+            name = "central differences"
+        fmu.terminate()
+    except PlantError:
+        raise
+    except Exception as exc:
+        raise PlantError(f"FMU {md.modelName}: linearisation failed ({exc})") from None
+    finally:
+        try:
+            fmu.freeInstance()
+            fmu.freeLibrary()
+        except Exception:
+            log.debug("FMU cleanup failed", exc_info=True)
+        if path.is_file():
+            shutil.rmtree(unzip, ignore_errors=True)
+    if not all(np.all(np.isfinite(M)) for M in (A, B, C, D)):
+        raise PlantError(f"FMU {md.modelName}: the Jacobian at this point holds non-finite entries")
+    return Linearization(A=A, B=B, C=C, D=D, states=tuple(s.name for s in states), inputs=tuple(in_names),
+                         outputs=tuple(out_names), point=point, x0=x0, method=name, model_name=md.modelName)
+
+
+def fmu_real_array(x: np.ndarray) -> Any:
+    """``x`` as a ctypes ``fmi2Real`` array."""
+    from fmpy.fmi2 import fmi2Real
+
+    return (fmi2Real * len(x))(*x)
+
+
+def _signal_name(name: str) -> str:
+    import re
+
+    s = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    return s if re.match(r"[A-Za-z_]", s) else f"s_{s}"
+
+
+def spec_dict(lin: Linearization, *, Ts: float, name: str | None = None,
+              template: Mapping[str, Any] | None = None) -> dict:
+    """A spec mapping for ``lin``; design sections from ``template`` or neutral defaults to edit."""
+    import re
+
+    spec_name = name or re.sub(r"[^A-Za-z0-9_]", "_", lin.model_name)
+    if not re.match(r"^[A-Za-z][A-Za-z0-9_]{0,31}$", spec_name):
+        raise SpecError(f"spec name {spec_name!r} is not a valid name (letters, digits, underscore; 32 max)")
+    n, m, p = lin.A.shape[0], lin.B.shape[1], lin.C.shape[0]
+    data: dict[str, Any] = {
+        "name": spec_name, "Ts": float(Ts), "discretization": "zoh",
+        "plant": {"kind": "continuous", "states": [_signal_name(s) for s in lin.states],
+                  "inputs": [_signal_name(s) for s in lin.inputs], "outputs": [_signal_name(s) for s in lin.outputs],
+                  "A": lin.A.tolist(), "B": lin.B.tolist(), "C": lin.C.tolist(), "D": lin.D.tolist()},
+    }
+    if template is not None:
+        for key in DESIGN_SECTIONS:
+            if key in template:
+                data[key] = template[key]
+    else:
+        data["controller"] = {"method": "lqr", "Q_diag": [1.0] * n, "R_diag": [1.0] * m}
+        data["observer"] = {"method": "kalman", "form": "predictor", "W_diag": [1e-4] * n, "V_diag": [1e-6] * p}
+        data["limits"] = {"u_min": [-1e3] * m, "u_max": [1e3] * m, "anti_windup": "clamp"}
+    return data
+
+
+def linearize_to_spec(*, fmu: str | Path, at: Mapping[str, float], out: Path, Ts: float, name: str | None = None,
+                      inputs: list[str] | None = None, outputs: list[str] | None = None, method: str = "auto",
+                      template: Path | None = None) -> Linearization:
+    """Linearise and write the spec TOML (atomically); the spec parses with :func:`gainlink.spec.parse_spec`."""
+    from gainlink.spec import parse_spec
+
+    if not Ts > 0:
+        raise SpecError("--Ts must be positive")
+    lin = linearize(fmu, at=at, inputs=inputs, outputs=outputs, method=method)
+    tmpl = None
+    if template is not None:
+        try:
+            tmpl = tomllib.loads(Path(template).read_text("utf-8"))
+        except (OSError, tomllib.TOMLDecodeError) as exc:
+            raise SpecError(f"template spec {template}: {exc}") from None
+    data = spec_dict(lin, Ts=Ts, name=name, template=tmpl)
+    parse_spec(data, source=str(out))  # refuse to write a spec design would not take
+    header = (f"Linearised from FMU {lin.model_name} by gainlink linearize ({lin.method}).\n"
+              f"Operating point: {', '.join(f'{k} = {v:g}' for k, v in lin.point.items()) or 'start values'}; "
+              f"states there: {', '.join(f'{s} = {v:g}' for s, v in zip(lin.states, lin.x0))}.\n"
+              + ("Design sections copied from the template spec." if tmpl is not None else
+                 "Design sections are neutral defaults: edit weights, noise and limits before designing."))
+    atomic_write_text(out, toml_write.dumps(data, header=header))
+    return lin
