@@ -31,3 +31,6 @@ fi
 echo "setup: installing gainlink into .venv"
 .venv/bin/python -m pip install -q --upgrade pip >/dev/null
 .venv/bin/python -m pip install -q -e '.[test]'
+# MAVProxy for the MAVLink tests, without its declared GUI/map dependencies (opencv, vtk, ...: hundreds of MB);
+# its core and parameter module need only pymavlink, numpy, pyserial and defusedxml (the test extra).
+.venv/bin/python -m pip install -q --no-deps 'MAVProxy>=1.8.75,<1.9'
