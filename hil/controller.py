@@ -30,7 +30,7 @@ def firmware_can_executable(artifact: Any) -> Path:
     """Build (cached) the host firmware for ``artifact`` and return its ``gainlink_can`` executable."""
     from gainlink.firmware.build import build
 
-    result = build(artifact, target="host")
+    result = build(artifact, target="host", options={"GL_APPS": "ON"})
     exe = result.build_dir / "apps" / "can" / "gainlink_can"
     if not exe.is_file():
         # A build tree configured before firmware/apps/can existed: reconfigure and build the app target.
@@ -45,10 +45,20 @@ def firmware_can_executable(artifact: Any) -> Path:
     return exe
 
 
-def controller_argv(kind: str, *, artifact: Any, artifact_path: Path, transport: Any) -> list[str]:
-    """The command line of the controller peer ``kind`` for this transport."""
+def controller_argv(kind: str, *, artifact: Any, artifact_path: Path, transport: Any,
+                    executable: Path | None = None) -> list[str]:
+    """The command line of the controller peer ``kind`` for this transport.
+
+    For ``firmware``: ``executable`` (a prebuilt app named by the scenario) if given, else the
+    transport's own ``firmware_executable(artifact)`` if it has one (e.g. MAVLink), else the CAN app.
+    """
     if kind == "firmware":
-        return [str(getattr(transport, "firmware_executable", firmware_can_executable)(artifact)), *transport.controller_argv()]
+        if executable is not None:
+            if not Path(executable).is_file() or not os.access(executable, os.X_OK):
+                raise FirmwareError(f"firmware executable {executable} not found or not executable")
+            return [str(executable), *transport.controller_argv()]
+        build_app = getattr(transport, "firmware_executable", firmware_can_executable)
+        return [str(build_app(artifact)), *transport.controller_argv()]
     if kind == "reference":
         return [sys.executable, "-m", "gainlink.hil.can_node", str(artifact_path),
                 "--config", json.dumps(transport.config)]

@@ -11,6 +11,7 @@ script's folder, so its results land on the host. The exit status is printed on 
 from __future__ import annotations
 
 import glob
+import hashlib
 import io
 import logging
 import lzma
@@ -49,7 +50,6 @@ mount -t overlay overlay -o lowerdir=/host,upperdir=/ovl/upper,workdir=/ovl/work
 mount -t proc proc /newroot/proc
 mount -t sysfs sys /newroot/sys
 mount -t devtmpfs dev /newroot/dev
-mount -t tmpfs tmpfs /newroot/tmp
 mount -t tmpfs tmpfs /newroot/run
 mkdir -p "/newroot$OUT"
 mount -t 9p -o trans=virtio,version=9p2000.L,msize=512000 hostout "/newroot$OUT" || echo "gainlink-vm: out mount failed"
@@ -173,7 +173,8 @@ def prepare_vm(*, cache: Path | None = None) -> VmImage:
     root = cache or cache_dir("vcan-vm")
     deb = _download_kernel_deb(root)
     version = re.sub(r"_amd64\.deb$", "", deb.name)
-    work = root / version
+    recipe = hashlib.sha256((INIT + "|".join(MODULES)).encode()).hexdigest()[:12]
+    work = root / f"{version}-{recipe}"
     kernel, initrd = work / "vmlinux", work / "initramfs.cpio"
     if kernel.is_file() and initrd.is_file():
         return VmImage(kernel=kernel, initrd=initrd, version=version)
@@ -211,7 +212,7 @@ def run_in_vm(script: str, *, workdir: Path, timeout: float = 600.0, memory_mb: 
     workdir = Path(workdir).resolve()
     workdir.mkdir(parents=True, exist_ok=True)
     (workdir / "run.sh").write_text(script, "utf-8")
-    cmd = ["qemu-system-x86_64", "-accel", "tcg", "-m", str(memory_mb), "-smp", "1", "-nodefaults",
+    cmd = ["qemu-system-x86_64", "-accel", "tcg", "-cpu", "max", "-m", str(memory_mb), "-smp", "1", "-nodefaults",
            "-display", "none", "-serial", "stdio", "-monitor", "none", "-no-reboot",
            "-kernel", str(image.kernel), "-initrd", str(image.initrd),
            "-append", f"console=ttyS0 panic=-1 quiet loglevel=3 gl_out={workdir}",
