@@ -25,6 +25,9 @@ DEFAULT_WATCHDOG_PERIODS = 10
 
 HEADER_NAME = "gl_gains.h"
 SOURCE_NAME = "gl_gains.c"
+STEP_NAME = "gl_step.h"
+CHUNK = 16  # coefficients per vldmia on the Cortex-M4F (registers s16..s31)
+STATE_CHUNK = 8  # states held in s8..s15
 
 
 @dataclass(frozen=True)
@@ -156,16 +159,113 @@ def render_source(artifact: Artifact, gains: GainSet) -> str:
     return "\n".join(lines) + "\n"
 
 
+class _Stream:
+    """Emits the loads of the coefficient stream ``w`` in chunks of :data:`CHUNK`, in consumption order."""
+
+    def __init__(self, length: int, out: list[str]) -> None:
+        self.length, self.pos, self.out = length, 0, out
+
+    def next(self) -> str:
+        k = self.pos
+        if k % CHUNK == 0:
+            count = min(CHUNK, self.length - k)
+            names = ", ".join(f"w{k + i}" for i in range(count))
+            self.out.append(f"    GL_LD{count}(w + {k}, {names});")
+        self.pos += 1
+        return f"w{k}"
+
+
+def render_step(artifact: Artifact) -> str:
+    """Text of ``gl_step.h``: the law for these fixed dimensions, fully unrolled.
+
+    It performs exactly the operations of the library's generic ``gl_step_core`` in the same order
+    (so both are bit-identical), with every coefficient read once from the stream in chunks
+    (``GL_LDk``: one ``vldmia`` per chunk on the Cortex-M4F).
+    """
+    a = artifact
+    n, m, p, q = a.n, a.m, a.p, a.q
+    current = a.observer_form == "current"
+    backcalc = a.anti_windup == "backcalc"
+    clamp = a.anti_windup == "clamp"
+    vrow = n + (p if current else 0) + q + 2
+    zrow = p + 1 + (m if backcalc else 0)
+    length = m * vrow + q * zrow + n * (n + m + p)
+    body: list[str] = []
+    st = _Stream(length, body)
+
+    # The first states in one multi-register load (registers s8..s15, kept for the whole step).
+    first = min(n, STATE_CHUNK)
+    body.append(f"    GL_LDS{first}(xh_io, " + ", ".join(f"x{j}" for j in range(first)) + ");")
+    body += [f"    const float x{j} = xh_io[{j}];" for j in range(first, n)]
+    body += [f"    const float z{j} = z_io[{j}];" for j in range(q)]
+    body += [f"    const float y{k} = ys[{k}];" for k in range(p)]
+    body += [f"    const float r{j} = rs[{j}];" for j in range(q)]
+    body.append("    uint32_t sat = 0u;")
+    for i in range(m):
+        body.append(f"    float v{i} = {st.next()} * x0;")
+        body += [f"    v{i} = GL_FMA({st.next()}, x{j}, v{i});" for j in range(1, n)]
+        if current:
+            body += [f"    v{i} = GL_FMA({st.next()}, y{k}, v{i});" for k in range(p)]
+        body += [f"    v{i} = GL_FMA({st.next()}, z{j}, v{i});" for j in range(q)]
+        lo, hi = st.next(), st.next()
+        body += [
+            f"    float u{i} = v{i};",
+            f"    if (v{i} < {lo}) {{",
+            f"        u{i} = {lo};",
+            f"        sat |= {1 << i}u;",
+            f"    }} else if (v{i} > {hi}) {{",
+            f"        u{i} = {hi};",
+            f"        sat |= {1 << i}u;",
+            "    }",
+        ]
+    for j in range(q):
+        body.append(f"    float e{j} = r{j};")
+        body += [f"    e{j} = GL_FMA({st.next()}, y{k}, e{j});" for k in range(p)]
+        body.append(f"    float zn{j} = GL_FMA({st.next()}, e{j}, z{j});")
+        if backcalc:
+            body += [f"    zn{j} = GL_FMA({st.next()}, u{k} - v{k}, zn{j});" for k in range(m)]
+        if clamp:
+            body.append(f"    zn{j} = (sat == 0u) ? zn{j} : z{j};")
+    for i in range(n):
+        body.append(f"    float xn{i} = {st.next()} * x0;")
+        body += [f"    xn{i} = GL_FMA({st.next()}, x{j}, xn{i});" for j in range(1, n)]
+        body += [f"    xn{i} = GL_FMA({st.next()}, u{k}, xn{i});" for k in range(m)]
+        body += [f"    xn{i} = GL_FMA({st.next()}, y{k}, xn{i});" for k in range(p)]
+    assert st.pos == length
+    body += [f"    xh_io[{i}] = xn{i};" for i in range(n)]
+    body += [f"    z_io[{j}] = zn{j};" for j in range(q)]
+    body += [f"    u[{i}] = u{i};" for i in range(m)]
+    if q == 0:
+        body += ["    (void)z_io;", "    (void)rs;"]
+    body.append("    return sat;")
+    return (
+        _banner(a)
+        + "/**\n * @file gl_step.h\n * @brief The control law for n=%d m=%d p=%d q=%d (%s, %s), fully unrolled.\n"
+        " *\n * Included by gl_loop.c in GL_STEP_UNROLLED builds in place of the generic loops; same operations,\n"
+        " * same order, so the results are bit-identical. Stream length %d coefficients.\n */\n"
+        % (n, m, p, q, a.observer_form, a.anti_windup, length)
+        + "#ifndef GL_STEP_H\n#define GL_STEP_H\n\n"
+        f"_Static_assert(GL_STREAM_LEN == {length}, \"gl_step.h does not match the library's stream layout\");\n\n"
+        "static inline __attribute__((always_inline)) uint32_t gl_step_core(const float *w, float *xh_io, float *z_io,\n"
+        "                                                                  const float *ys, const float *rs, float *u)\n"
+        "{\n" + "\n".join(body) + "\n}\n\n#endif /* GL_STEP_H */\n"
+    )
+
+
 def render_c(artifact: Artifact) -> dict[str, str]:
     """Render the gains header and source for ``artifact``.
 
     Returns
     -------
     dict of str to str
-        ``{"gl_gains.h": text, "gl_gains.c": text}``; identical for the same artifact.
+        ``{"gl_gains.h": ..., "gl_gains.c": ..., "gl_step.h": ...}``; identical for the same artifact.
     """
     gains = gain_set(artifact)
-    return {HEADER_NAME: render_header(artifact, gains), SOURCE_NAME: render_source(artifact, gains)}
+    return {
+        HEADER_NAME: render_header(artifact, gains),
+        SOURCE_NAME: render_source(artifact, gains),
+        STEP_NAME: render_step(artifact),
+    }
 
 
 def export(artifact: Artifact, *, out_dir: str | Path) -> list[Path]:

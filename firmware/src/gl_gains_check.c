@@ -90,37 +90,10 @@ gl_status_t gl_coeffs_derive(const gl_gains_t *g, gl_coeffs_t *c)
         return st;
     }
     int ok = 1;
-    /* Observer gain actually used: L, or Ad M in the current form (DESIGN.md: L = Ad M). */
-    double Lrow[GL_P];
-    for (size_t i = 0; i < GL_N; ++i) {
-        for (size_t k = 0; k < GL_P; ++k) {
-            double acc = (double)g->L[i][k];
-#if GL_OBSERVER_FORM == GL_FORM_CURRENT
-            acc = 0.0;
-            for (size_t l = 0; l < GL_N; ++l) {
-                acc += (double)g->Ad[i][l] * (double)g->M[l][k];
-            }
-#endif
-            Lrow[k] = acc;
-            ok &= store_finite(&c->L[i][k], acc);
-        }
-        for (size_t j = 0; j < GL_N; ++j) {
-            double acc = (double)g->Ad[i][j];
-            for (size_t k = 0; k < GL_P; ++k) {
-                acc -= Lrow[k] * (double)g->Cd[k][j];
-            }
-            ok &= store_finite(&c->F[i][j], acc);
-        }
-        for (size_t j = 0; j < GL_M; ++j) {
-            double acc = (double)g->Bd[i][j];
-            for (size_t k = 0; k < GL_P; ++k) {
-                acc -= Lrow[k] * (double)g->Dd[k][j];
-            }
-            ok &= store_finite(&c->G[i][j], acc);
-        }
-        c->xh0[i] = g->xh0[i];
-    }
-    /* Feedback, stored negated so that v is a plain sum of products. */
+    float *w = c->w;
+    memset(c->w, 0, sizeof c->w);
+
+    /* Command rows: feedback stored negated so that v is a plain sum of products. */
     for (size_t i = 0; i < GL_M; ++i) {
         double KMrow[GL_P];
         for (size_t k = 0; k < GL_P; ++k) {
@@ -131,35 +104,76 @@ gl_status_t gl_coeffs_derive(const gl_gains_t *g, gl_coeffs_t *c)
             }
 #endif
             KMrow[k] = acc;
-            ok &= store_finite(&c->Ky[i][k], -acc);
         }
-        for (size_t j = 0; j < GL_N; ++j) {
+        for (size_t j = 0; j < GL_N; ++j) { /* Kx = K (I - M Cd) = K - (K M) Cd */
             double acc = (double)g->K[i][j];
             for (size_t k = 0; k < GL_P; ++k) {
                 acc -= KMrow[k] * (double)g->Cd[k][j];
             }
-            ok &= store_finite(&c->Kx[i][j], -acc);
+            ok &= store_finite(w++, -acc);
         }
-        for (size_t j = 0; j < GL_QA; ++j) {
-            c->Ki[i][j] = -g->Ki[i][j];
+#if GL_OBSERVER_FORM == GL_FORM_CURRENT
+        for (size_t k = 0; k < GL_P; ++k) {
+            ok &= store_finite(w++, -KMrow[k]);
         }
-        c->u_min[i] = g->u_min[i];
-        c->u_max[i] = g->u_max[i];
+#endif
+        for (int j = 0; j < GL_Q; ++j) {
+            *w++ = -g->Ki[i][j];
+        }
+        *w++ = g->u_min[i];
+        *w++ = g->u_max[i];
         float safe = 0.0f;
         safe = safe < g->u_min[i] ? g->u_min[i] : safe;
         safe = safe > g->u_max[i] ? g->u_max[i] : safe;
         c->u_safe[i] = safe;
     }
-    for (size_t j = 0; j < GL_QA; ++j) {
+    /* Integrator rows: e = r + sum(-Ci y), z += Ts e [+ Kaw (u - v)]. */
+    for (int j = 0; j < GL_Q; ++j) {
         for (size_t k = 0; k < GL_P; ++k) {
-            c->Ci[j][k] = -g->Ci[j][k]; /* negated: e = r + sum(-Ci y) */
+            *w++ = -g->Ci[j][k];
         }
+        *w++ = g->Ts;
+#if GL_ANTI_WINDUP == GL_AW_BACKCALC
         for (size_t k = 0; k < GL_M; ++k) {
-            c->Kaw[j][k] = g->Kaw[j][k];
+            *w++ = g->Kaw[j][k];
         }
+#endif
+    }
+    /* Estimate rows: F = Ad - L Cd, G = Bd - L Dd, L (current form: L = Ad M, DESIGN.md). */
+    for (size_t i = 0; i < GL_N; ++i) {
+        double Lrow[GL_P];
+        for (size_t k = 0; k < GL_P; ++k) {
+            double acc = (double)g->L[i][k];
+#if GL_OBSERVER_FORM == GL_FORM_CURRENT
+            acc = 0.0;
+            for (size_t l = 0; l < GL_N; ++l) {
+                acc += (double)g->Ad[i][l] * (double)g->M[l][k];
+            }
+#endif
+            Lrow[k] = acc;
+        }
+        for (size_t j = 0; j < GL_N; ++j) {
+            double acc = (double)g->Ad[i][j];
+            for (size_t k = 0; k < GL_P; ++k) {
+                acc -= Lrow[k] * (double)g->Cd[k][j];
+            }
+            ok &= store_finite(w++, acc);
+        }
+        for (size_t j = 0; j < GL_M; ++j) {
+            double acc = (double)g->Bd[i][j];
+            for (size_t k = 0; k < GL_P; ++k) {
+                acc -= Lrow[k] * (double)g->Dd[k][j];
+            }
+            ok &= store_finite(w++, acc);
+        }
+        for (size_t k = 0; k < GL_P; ++k) {
+            ok &= store_finite(w++, Lrow[k]);
+        }
+        c->xh0[i] = g->xh0[i];
+    }
+    for (size_t j = 0; j < GL_QA; ++j) {
         c->z0[j] = g->z0[j];
     }
-    c->Ts = g->Ts;
     c->crc32 = g->crc32;
     return ok ? GL_OK : GL_ERR_NANINF;
 }

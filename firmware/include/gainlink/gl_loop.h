@@ -135,23 +135,34 @@ typedef struct gl_gains {
     uint32_t crc32;            /**< CRC-32 (IEEE 802.3, as zlib.crc32) of the payload. */
 } gl_gains_t;
 
-/** @brief Derived coefficients the step runs on (one bank of the double buffer). Internal layout. */
+/** Coefficients per command row of the stream: Kx (n), Ky (p, current form), Ki (q), u_min, u_max. */
+#define GL_VROW (GL_N + ((GL_OBSERVER_FORM) == GL_FORM_CURRENT ? GL_P : 0) + GL_Q + 2)
+/** Coefficients per integrator row of the stream: -Ci (p), Ts, Kaw (m, back-calculation only). */
+#define GL_ZROW (GL_P + 1 + ((GL_ANTI_WINDUP) == GL_AW_BACKCALC ? GL_M : 0))
+/** Coefficients per estimate row of the stream: F (n), G (m), L (p). */
+#define GL_XROW (GL_N + GL_M + GL_P)
+/** Length of the coefficient stream the step consumes. */
+#define GL_STREAM_LEN (GL_M * GL_VROW + GL_Q * GL_ZROW + GL_N * GL_XROW)
+/** Stream storage, rounded up to whole 16-float chunks (the Cortex-M step loads up to 16 at a time). */
+#define GL_STREAM_ALLOC ((((GL_STREAM_LEN) + 15) / 16) * 16)
+
+/**
+ * @brief Derived coefficients the step runs on (one bank of the double buffer).
+ *
+ * `w` holds every coefficient in the exact order gl_loop_step() consumes them, so the step reads
+ * it front to back (on the Cortex-M4F up to 16 at a time with `vldmia`):
+ * @code
+ *   for i < m:  -Kx[i][0..n)  -Ky[i][0..p) (current form)  -Ki[i][0..q)  u_min[i]  u_max[i]
+ *   for j < q:  -Ci[j][0..p)  Ts  Kaw[j][0..m) (back-calculation)
+ *   for i < n:  F[i][0..n)  G[i][0..m)  L[i][0..p)
+ * @endcode
+ */
 typedef struct gl_coeffs {
-    float Kx[GL_M][GL_N];      /**< Feedback on the estimate. */
-    float Ky[GL_M][GL_P];      /**< Feedback on the measurement (current form only). */
-    float Ki[GL_M][GL_QA];     /**< Integral gain. */
-    float u_min[GL_M];         /**< Lower limits. */
-    float u_max[GL_M];         /**< Upper limits. */
-    float u_safe[GL_M];        /**< Zero clamped into the limits. */
-    float Ci[GL_QA][GL_P];     /**< Tracked-output selector. */
-    float Ts;                  /**< Sample time. */
-    float Kaw[GL_QA][GL_M];    /**< Anti-windup gain. */
-    float F[GL_N][GL_N];       /**< Ad - L Cd. */
-    float G[GL_N][GL_M];       /**< Bd - L Dd. */
-    float L[GL_N][GL_P];       /**< Observer gain. */
-    float xh0[GL_N];           /**< Reset estimate. */
-    float z0[GL_QA];           /**< Reset integrator. */
-    uint32_t crc32;            /**< Checksum of the gain set these were derived from. */
+    float w[GL_STREAM_ALLOC]; /**< The coefficient stream (zero padded). */
+    float u_safe[GL_M];       /**< Zero clamped into the limits. */
+    float xh0[GL_N];          /**< Reset estimate. */
+    float z0[GL_QA];          /**< Reset integrator. */
+    uint32_t crc32;           /**< Checksum of the gain set these were derived from. */
 } gl_coeffs_t;
 
 /** @brief Loop instance: caller-owned (static storage), no allocation. Fields are read-only for callers. */
