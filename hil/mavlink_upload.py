@@ -137,18 +137,23 @@ def format_changes(changes: tuple[ParamChange, ...]) -> list[str]:
     return [f"{c.name:<16} {c.source:<12} {_fmt(c.old, c.ptype)} -> {_fmt(c.new, c.ptype)}" for c in changes]
 
 
-def detect_encoding(session: ParamSession) -> Encoding:
-    """Integer encoding advertised in AUTOPILOT_VERSION (C-cast when the vehicle does not say)."""
+def detect_encoding(session: ParamSession, *, autopilot: int = mavlink2.MAV_AUTOPILOT_GENERIC) -> Encoding:
+    """Integer encoding of the vehicle's parameters.
+
+    AUTOPILOT_VERSION's capability flags decide; when they name neither encoding (or the message
+    never comes) the autopilot type from HEARTBEAT does, as MAVLink's own SDK does: ArduPilot
+    C-casts, everyone else (PX4, generic autopilots, MAVSDK servers) is bytewise.
+    """
     msg = session.request_message(msg_id=mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, wait=max(0.1, session.timeout),
                                   tries=session.retries + 1)
-    if msg is None:
-        log.warning("no AUTOPILOT_VERSION from the vehicle: assuming C-cast integer parameters")
-        return Encoding.C_CAST
-    if msg.capabilities & mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE:
+    if msg is not None and msg.capabilities & mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE:
         return Encoding.BYTEWISE
-    if not msg.capabilities & mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST:
-        log.warning("AUTOPILOT_VERSION names no parameter encoding: assuming C-cast")
-    return Encoding.C_CAST
+    if msg is not None and msg.capabilities & mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST:
+        return Encoding.C_CAST
+    guess = Encoding.C_CAST if autopilot == mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA else Encoding.BYTEWISE
+    log.info("%s names no parameter encoding: %s integers (from the autopilot type %d)",
+             "AUTOPILOT_VERSION" if msg is not None else "no AUTOPILOT_VERSION arrived; it", guess.value, autopilot)
+    return guess
 
 
 def upload(
@@ -162,6 +167,7 @@ def upload(
     timeout: float = 0.25,
     retries: int = 10,
     heartbeat_timeout: float = 5.0,
+    encoding: Encoding | None = None,
     link: MavLink | None = None,
 ) -> UploadResult:
     """Upload ``artifact``'s gains to the vehicle at ``connect``.
@@ -186,6 +192,8 @@ def upload(
         Re-sends per parameter before it counts as failed.
     heartbeat_timeout : float
         Seconds to wait for the vehicle's heartbeat.
+    encoding : Encoding, optional
+        Integer encoding; by default detected (:func:`detect_encoding`).
     link : MavLink, optional
         An already open link to use instead of opening ``connect`` (it is not closed).
 
@@ -217,7 +225,7 @@ def upload(
             link, target_system=target[0], target_component=target[1], encoding=Encoding.C_CAST,
             window=window, timeout=timeout, retries=retries,
         )
-        session.encoding = detect_encoding(session)
+        session.encoding = encoding or detect_encoding(session, autopilot=hb.autopilot)
         log.info("vehicle %d/%d, %s integer parameters", target[0], target[1], session.encoding.value)
         return _upload(session, plan=plan, persist=persist, dry_run=dry_run, t0=t0, target=target)
     finally:

@@ -30,6 +30,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     up.add_argument("--timeout", type=float, default=0.25, help="seconds before a request is re-sent (default 0.25)")
     up.add_argument("--retries", type=int, default=10, help="re-sends per parameter (default 10)")
     up.add_argument("--heartbeat-timeout", type=float, default=5.0, help="seconds to wait for a heartbeat (default 5)")
+    up.add_argument("--encoding", choices=("auto", "bytewise", "c_cast"), default="auto",
+                    help="integer parameter encoding (default: from AUTOPILOT_VERSION / the autopilot type)")
     up.set_defaults(func=_upload)
 
     ls = sub.add_parser("params", help="list a vehicle's parameters (PARAM_REQUEST_LIST)")
@@ -41,6 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _upload(args: argparse.Namespace) -> int:
     from gainlink.artifact import load
     from gainlink.errors import ParameterError
+    from gainlink.hil.mavlink_params import Encoding
     from gainlink.hil.mavlink_upload import UploadFailed, format_changes, upload
 
     if args.window < 1 or args.retries < 0 or args.timeout <= 0:
@@ -50,6 +53,7 @@ def _upload(args: argparse.Namespace) -> int:
         res = upload(
             artifact, connect=args.connect, mapping=args.mapping, persist=args.persist, dry_run=args.dry_run,
             window=args.window, timeout=args.timeout, retries=args.retries, heartbeat_timeout=args.heartbeat_timeout,
+            encoding=None if args.encoding == "auto" else Encoding(args.encoding),
         )
     except UploadFailed as exc:
         for line in exc.events:
@@ -74,16 +78,15 @@ def _upload(args: argparse.Namespace) -> int:
 
 def _params(args: argparse.Namespace) -> int:
     from gainlink.hil.mavlink_link import MavLink
-    from gainlink.hil.mavlink_params import REAL32
+    from gainlink.hil.mavlink_params import REAL32, Encoding
     from gainlink.hil.mavlink_session import ParamSession
     from gainlink.hil.mavlink_upload import detect_encoding
-    from gainlink.hil.mavlink_params import Encoding
 
     with MavLink(args.connect) as link:
         hb = link.wait_heartbeat(timeout=args.heartbeat_timeout)
         session = ParamSession(link, target_system=hb.get_srcSystem(), target_component=hb.get_srcComponent(),
                                encoding=Encoding.C_CAST)
-        session.encoding = detect_encoding(session)
+        session.encoding = detect_encoding(session, autopilot=hb.autopilot)
         for pv in session.read_all().values():
             value = f"{pv.value:.9g}" if pv.ptype == REAL32 else str(int(pv.value))
             print(f"{pv.name:<16} {value}")
