@@ -1,0 +1,129 @@
+"""Benchmark: lockstep HIL steps per second over MAVLink (DEBUG_FLOAT_ARRAY -> HIL_ACTUATOR_CONTROLS).
+
+A closed loop of the pendulum artifact's own discrete plant (numpy, x+ = Ad x + Bd u) against the
+``gainlink_mavlink`` firmware app over UDP loopback, one sample in flight (lockstep). The baseline,
+measured in the same run, is the same loop with the same C control law called in-process through
+ctypes (``gainlink.engines.native.NativeLoop.step``): the ratio is what the link costs. The first
+steps of both runs must agree (the firmware's commands equal the in-process library's).
+Also runs the HIL bridge (``gainlink hil run`` machinery, cart-pendulum FMU) over MAVLink for the
+same plant time and reports its steps/s.
+
+Prints one JSON object. Usage: ``python bench/mavlink_hil.py [--steps N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import socket
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+TARGET = 10000.0
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _loop(art, controller_step, steps: int) -> tuple[float, np.ndarray]:
+    x = np.zeros(art.n)
+    x[min(2, art.n - 1)] = 0.05
+    r = np.full(art.q, 0.2, dtype=np.float32)
+    u = np.zeros(art.m)
+    U = np.zeros((steps, art.m))
+    t0 = time.perf_counter()
+    for k in range(steps):
+        y = (art.Cd @ x + art.Dd @ u).astype(np.float32)
+        u = controller_step(k, y, r)
+        U[k] = u
+        x = art.Ad @ x + art.Bd @ u
+    return steps / (time.perf_counter() - t0), U
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=20000)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+
+    from gainlink import artifact as artifact_mod
+    from gainlink.design import design
+    from gainlink.engines.native import NativeLoop
+    from gainlink.hil.bridge import run_scenario
+    from gainlink.hil.mavlink_firmware import MavlinkFirmware, mavlink_executable
+    from gainlink.hil.mavlink_transport import MavlinkTransport
+    from gainlink.hil.scenario import parse_scenario
+    from gainlink.spec import load_spec
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "gains.json"
+        artifact_mod.write(path, design(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
+        art = artifact_mod.load(path)
+        exe = mavlink_executable(art)
+        native = NativeLoop(art)
+
+        def in_process(k, y, r):
+            return native.step(y.astype(float), r.astype(float)).u
+
+        port = _free_port()
+        link = MavlinkTransport(url=f"udpout:127.0.0.1:{port}", controller_url=f"udpin:127.0.0.1:{port}",
+                                n_inputs=art.m, n_outputs=art.p, n_refs=art.q, ts=art.Ts)
+
+        def over_mavlink(k, y, r):
+            link.send_frames(link.encode_sample(seq=k, y=y, r=r))
+            c = link.receive_command(timeout=1.0)
+            if c is None or c.seq != k:
+                raise SystemExit(f"no command for step {k}")
+            return c.u
+
+        rates = {"mavlink": [], "in_process": []}
+        with MavlinkFirmware(exe, url=link.controller_url), link:
+            for _ in range(args.repeats):
+                link.send_frames(link.encode_reset(seq=0))
+                link.receive_command(timeout=1.0)
+                native.reset()
+                rate_m, U_m = _loop(art, over_mavlink, args.steps)
+                rate_n, U_n = _loop(art, in_process, args.steps)
+                rates["mavlink"].append(rate_m)
+                rates["in_process"].append(rate_n)
+                agree = float(np.max(np.abs(U_m[:500] - U_n[:500])))
+
+        scen = parse_scenario({
+            "name": "bench_mavlink", "artifact": str(path), "duration": 5.0, "mode": "lockstep",
+            "controller": "firmware", "shadow": False, "seed": 1,
+            "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]},
+            "transport": {"kind": "mavlink", "port": _free_port()}, "initial_state": {"theta": 0.1},
+        }, path=Path(tmp) / "scenario.toml")
+        bridge = run_scenario(scen)
+
+    mav = statistics.median(rates["mavlink"])
+    base = statistics.median(rates["in_process"])
+    print(json.dumps({
+        "benchmark": "mavlink_hil_lockstep",
+        "link": "UDP loopback: DEBUG_FLOAT_ARRAY -> gainlink_mavlink -> HIL_ACTUATOR_CONTROLS",
+        "steps": args.steps,
+        "repeats": args.repeats,
+        "steps_per_s": round(mav, 1),
+        "baseline_in_process_steps_per_s": round(base, 1),
+        "ratio_vs_in_process": round(mav / base, 3),
+        "round_trip_us": round(1e6 / mav, 1),
+        "max_abs_du_vs_in_process_first_500": agree,
+        "target_steps_per_s": TARGET,
+        "meets_target": mav >= TARGET,
+        "bridge_fmu_steps_per_s": round(bridge.metrics["steps_per_s"], 1),
+        "bridge_complete": bridge.complete,
+    }, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
