@@ -128,3 +128,41 @@ class MavlinkFirmware:
     def __exit__(self, *exc: object) -> None:
         self.stop()
         self._stderr.close()
+
+
+def default_param_file(artifact_path: Path) -> Path:
+    """Where ``gainlink firmware run --mavlink`` keeps persisted parameters by default: beside the artifact."""
+    return Path(artifact_path).with_name("mavlink_params.txt")
+
+
+def run_foreground(artifact_path: Path, *, url: str, param_file: Path | None = None) -> int:
+    """Build the MAVLink app for an artifact and run it in the foreground until interrupted.
+
+    Parameters
+    ----------
+    artifact_path : Path
+        gains.json.
+    url : str
+        The app's link (``udpin:HOST:PORT`` or ``udpout:HOST:PORT``).
+    param_file : Path, optional
+        Persistent parameter file (default :func:`default_param_file`); loaded at start when present.
+
+    Returns
+    -------
+    int
+        The app's exit status (0 after SIGINT/SIGTERM).
+    """
+    from gainlink.artifact import load
+
+    if not (url.startswith("udpin:") or url.startswith("udpout:")) or url.count(":") != 2:
+        raise FirmwareError(f"--mavlink takes udpin:HOST:PORT or udpout:HOST:PORT, not {url!r}")
+    artifact = load(artifact_path)
+    exe = mavlink_executable(artifact)
+    argv = firmware_argv(exe, url=url, storage=param_file or default_param_file(Path(artifact_path)))
+    log.info("running %s", " ".join(argv))
+    proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL)
+    try:
+        return proc.wait()
+    except KeyboardInterrupt:
+        proc.send_signal(signal.SIGINT)
+        return proc.wait(timeout=5)
