@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass
+from typing import Callable
 from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink2
@@ -168,6 +169,7 @@ def upload(
     retries: int = 10,
     heartbeat_timeout: float = 5.0,
     encoding: Encoding | None = None,
+    on_diff: Callable[[tuple[ParamChange, ...]], None] | None = None,
     link: MavLink | None = None,
 ) -> UploadResult:
     """Upload ``artifact``'s gains to the vehicle at ``connect``.
@@ -194,6 +196,8 @@ def upload(
         Seconds to wait for the vehicle's heartbeat.
     encoding : Encoding, optional
         Integer encoding; by default detected (:func:`detect_encoding`).
+    on_diff : callable, optional
+        Called with the diff once the current values are read, before anything is written.
     link : MavLink, optional
         An already open link to use instead of opening ``connect`` (it is not closed).
 
@@ -227,7 +231,7 @@ def upload(
         )
         session.encoding = encoding or detect_encoding(session, autopilot=hb.autopilot)
         log.info("vehicle %d/%d, %s integer parameters", target[0], target[1], session.encoding.value)
-        return _upload(session, plan=plan, persist=persist, dry_run=dry_run, t0=t0, target=target)
+        return _upload(session, plan=plan, persist=persist, dry_run=dry_run, t0=t0, target=target, on_diff=on_diff)
     finally:
         if own:
             link.close()
@@ -261,13 +265,16 @@ def _read_current(session: ParamSession, plan: _Plan) -> dict[str, ParamValue]:
     return values
 
 
-def _upload(session: ParamSession, *, plan: _Plan, persist: bool, dry_run: bool, t0: float, target: tuple[int, int]) -> UploadResult:
+def _upload(session: ParamSession, *, plan: _Plan, persist: bool, dry_run: bool, t0: float, target: tuple[int, int],
+            on_diff: Callable[[tuple[ParamChange, ...]], None] | None) -> UploadResult:
     current = _read_current(session, plan)
     changes = tuple(
         ParamChange(name=s.name, source=s.source, ptype=s.ptype, old=current[s.name].value, new=s.value)
         for s in plan.specs
         if not same_value(a=current[s.name].value, b=s.value, ptype=s.ptype)
     )
+    if on_diff is not None:
+        on_diff(changes)
     new_hash = plan.new_hash
     old_hash = int(current[HASH_ID].value) if plan.commit else None
     need_commit = plan.commit and (bool(changes) or old_hash != new_hash)

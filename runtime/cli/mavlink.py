@@ -49,19 +49,23 @@ def _upload(args: argparse.Namespace) -> int:
     if args.window < 1 or args.retries < 0 or args.timeout <= 0:
         raise ParameterError("--window must be >= 1, --retries >= 0 and --timeout > 0")
     artifact = load(args.artifact)
+
+    def show_diff(changes) -> None:
+        for line in format_changes(changes):
+            print(line)
+        sys.stdout.flush()
+
     try:
         res = upload(
             artifact, connect=args.connect, mapping=args.mapping, persist=args.persist, dry_run=args.dry_run,
             window=args.window, timeout=args.timeout, retries=args.retries, heartbeat_timeout=args.heartbeat_timeout,
-            encoding=None if args.encoding == "auto" else Encoding(args.encoding),
+            encoding=None if args.encoding == "auto" else Encoding(args.encoding), on_diff=show_diff,
         )
     except UploadFailed as exc:
         for line in exc.events:
             print(f"gainlink: {line}", file=sys.stderr)
         print(f"gainlink: error: {exc}", file=sys.stderr)
         return EXIT_ROLLED_BACK if exc.rolled_back else EXIT_ROLLBACK_INCOMPLETE
-    for line in format_changes(res.changes):
-        print(line)
     if res.dry_run:
         print(f"dry run: {len(res.changes)} parameter(s) would change, {res.unchanged} already match "
               f"(vehicle {res.target[0]}/{res.target[1]}, {res.encoding.value} integers)")
