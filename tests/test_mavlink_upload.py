@@ -204,3 +204,16 @@ def test_params_command_lists_every_parameter(exe, pend):
     art = load(pend)
     assert int(rows["GL_DIM_N"]) == art.n
     assert math.isclose(float(rows["GL_K_0_1"]), expected_value(art, "GL_K_0_1"), rel_tol=1e-8)
+
+
+def test_upload_listening_for_a_vehicle_that_sends_to_us(exe, retuned):
+    """The firmware on ``udpout:`` sends its heartbeats to the uploader's ``udpin:`` port."""
+    port = free_udp_port()
+    fw = MavlinkFirmware(exe, url=f"udpout:127.0.0.1:{port}").start()
+    try:
+        res = run_cli("mavlink", "upload", retuned, "--connect", f"udpin:127.0.0.1:{port}")
+        assert res.code == 0, res.err
+        assert "gain set committed" in res.out
+    finally:
+        fw.stop()
+    assert "committed gain set" in fw.stderr_text()
