@@ -5,7 +5,7 @@ Each engine module exposes ``run(artifact, Y, R) -> gainlink.reference.Trace``:
 - ``native``: the host build of the C library through ctypes, one call per block of samples;
 - ``qemu``: the Cortex-M4F image under ``qemu-system-arm``, samples through semihosting file I/O.
 
-:func:`register_all` registers them with ``gainlink.replay`` under those names.
+:mod:`gainlink.replay` loads them by these names on first use (``--engine native|qemu``).
 """
 
 from __future__ import annotations
@@ -23,11 +23,3 @@ def get(name: str) -> Callable:
     if name not in ENGINE_MODULES:
         raise GainlinkError(f"unknown firmware engine {name!r} (choose from {', '.join(ENGINE_MODULES)})")
     return importlib.import_module(ENGINE_MODULES[name]).run
-
-
-def register_all() -> None:
-    """Register every firmware engine with ``gainlink.replay`` (lazy: modules load on first use)."""
-    from .. import replay
-
-    for name in ENGINE_MODULES:
-        replay.register_engine(name, lambda artifact, Y, R, _name=name: get(_name)(artifact, Y, R))

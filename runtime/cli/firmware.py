@@ -1,0 +1,258 @@
+"""``gainlink firmware build|flash|run`` and ``gainlink pil run``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from ..errors import DataError, FirmwareError, GainlinkError, ToolchainError
+
+BOARDS = ("mps2-an386", "netduinoplus2")
+
+# Flashing commands for a real board: (board, probe) -> argv template ({hex}, {elf}).
+FLASH_COMMANDS = {
+    ("netduinoplus2", "pyocd"): ["pyocd", "flash", "--target", "stm32f405rg", "--format", "hex", "{hex}"],
+    ("netduinoplus2", "openocd"): ["openocd", "-f", "interface/stlink.cfg", "-f", "target/stm32f4x.cfg",
+                                   "-c", "program {elf} verify reset exit"],
+    ("mps2-an386", "pyocd"): ["pyocd", "flash", "--target", "cortex_m", "--format", "elf", "{elf}"],
+}
+
+
+# --- firmware build ---------------------------------------------------------------------------------
+
+def _build(args: argparse.Namespace) -> int:
+    from gainlink.artifact import load
+    from gainlink.fileio import publish_files
+    from gainlink.firmware.build import build
+    from gainlink.firmware.size import size_report
+
+    artifact = load(args.artifact)
+    res = build(artifact, target=args.target, board=args.board)
+    stem = f"gainlink_{artifact.name}"
+    files: dict[str, bytes | str] = {}
+    manifest = {"artifact": artifact.name, "sha256": artifact.sha256, "target": args.target, "board": res.board,
+                "files": {}}
+    if args.target == "cortex-m4":
+        for ext in ("elf", "bin", "hex", "map"):
+            files[f"{stem}.{ext}"] = res.files[ext].read_bytes()
+            manifest["files"][ext] = f"{stem}.{ext}"
+        report = size_report(res.files["elf"], board=res.board)
+        report["elf"] = f"{stem}.elf"
+        files[f"{stem}.size.json"] = json.dumps(report, indent=2) + "\n"
+        manifest["files"]["size"] = f"{stem}.size.json"
+    else:
+        for role, name in (("shared", "libgainlink_host.so"), ("static", "libgainlink_loop.a"), ("exe", "gainlink_loop_host")):
+            files[name] = res.files[role].read_bytes()
+            manifest["files"][role] = name
+    for name, text in sorted((p.name, p.read_text("utf-8")) for p in res.gains_dir.iterdir()):
+        files[f"src/{name}"] = text
+    files["firmware.json"] = json.dumps(manifest, indent=2) + "\n"
+    written = publish_files(args.out, files)
+    out = Path(args.out)
+    if args.target == "host":
+        (out / "gainlink_loop_host").chmod(0o755)
+    else:
+        print(f"flash {report['flash_bytes']} B, RAM {report['ram_bytes_without_stack']} B + stack "
+              f"({report['ram_bytes']} B total) on {res.board}")
+    print(f"built {artifact.name} for {args.target}{' / ' + res.board if res.board else ''}: "
+          + ", ".join(p.name for p in written if p.parent == out))
+    return 0
+
+
+# --- firmware flash ---------------------------------------------------------------------------------
+
+def flash_command(out_dir: Path, *, probe: str) -> list[str]:
+    """The exact flashing command for the image in ``out_dir`` (written by ``firmware build``)."""
+    manifest_path = out_dir / "firmware.json"
+    if not manifest_path.is_file():
+        raise FirmwareError(f"{out_dir} holds no firmware.json: run `gainlink firmware build ... --out {out_dir}` first")
+    manifest = json.loads(manifest_path.read_text("utf-8"))
+    if manifest.get("target") != "cortex-m4":
+        raise FirmwareError(f"{out_dir} holds a {manifest.get('target')} build; flashing needs --target cortex-m4")
+    board = manifest["board"]
+    template = FLASH_COMMANDS.get((board, probe))
+    if template is None:
+        known = ", ".join(p for b, p in FLASH_COMMANDS if b == board)
+        raise FirmwareError(f"no {probe} recipe for board {board} (use --probe {known})")
+    paths = {"hex": str((out_dir / manifest["files"]["hex"]).resolve()), "elf": str((out_dir / manifest["files"]["elf"]).resolve())}
+    for key, path in paths.items():
+        if not Path(path).is_file():
+            raise FirmwareError(f"{path} is missing (rebuild the firmware)")
+    return [part.format(**paths) for part in template]
+
+
+def _flash(args: argparse.Namespace) -> int:
+    cmd = flash_command(Path(args.dir), probe=args.probe)
+    print(shlex.join(cmd))
+    if args.dry_run:
+        return 0
+    if shutil.which(cmd[0]) is None:
+        raise ToolchainError(f"{cmd[0]} not found: install it to flash a real board (or use --dry-run)")
+    return subprocess.run(cmd, stdin=subprocess.DEVNULL).returncode
+
+
+# --- firmware run ------------------------------------------------------------------------------------
+
+def _run_host(args: argparse.Namespace) -> int:
+    """Start the host executable: replay a CSV through it, or pass stdin/stdout through."""
+    from gainlink.artifact import load
+    from gainlink.firmware.build import build
+
+    artifact = load(args.artifact)
+    exe = build(artifact, target="host").files["exe"]
+    if args.input is None:
+        return subprocess.run([str(exe)]).returncode
+    return _replay_through_process(artifact, exe, Path(args.input), Path(args.output) if args.output else None)
+
+
+def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: Path | None) -> int:
+    import numpy as np
+
+    from gainlink.fileio import atomic_write_text
+    from gainlink.reference import Trace
+    from gainlink.replay import format_trace, read_samples
+
+    a = artifact
+    samples = read_samples(input_path, a)
+    lines = [" ".join(repr(float(v)) for v in np.concatenate([samples.Y[k], samples.R[k]])) for k in range(samples.Y.shape[0])]
+    proc = subprocess.run([str(exe)], input="\n".join(lines) + "\n", capture_output=True, text=True, timeout=600)
+    if proc.returncode != 0:
+        raise FirmwareError(f"host firmware exited with status {proc.returncode}: {proc.stderr.strip()[:200]}")
+    out = proc.stdout.splitlines()[1:]  # skip the banner
+    N = len(lines)
+    U, S, XH, Z, F = np.zeros((N, a.m)), np.zeros((N, a.m), bool), np.zeros((N, a.n)), np.zeros((N, a.q)), np.zeros(N, bool)
+    for k, line in enumerate(out[:N]):
+        parts = line.split()
+        status = int(parts[1])
+        vals = [float(v) for v in parts[2:]]
+        U[k] = vals[: a.m]
+        mask = int(vals[a.m])
+        S[k] = [(mask >> i) & 1 for i in range(a.m)]
+        XH[k] = vals[a.m + 1: a.m + 1 + a.n]
+        Z[k] = vals[a.m + 1 + a.n:]
+        F[k] = status == -2
+    trace = Trace(u=U, saturated=S, xh=XH, z=Z, fault=F)
+    text = format_trace(trace, samples.t)
+    if output_path is None:
+        sys.stdout.write(text)
+    else:
+        if output_path.is_dir():
+            raise DataError(f"output {output_path} is a directory")
+        atomic_write_text(output_path, text)
+        print(f"ran {N} samples through {exe.name}: {int(S.any(axis=1).sum())} saturated, {int(F.sum())} refused")
+    return 0
+
+
+def _run(args: argparse.Namespace) -> int:
+    # Transport options (added by the CAN and MAVLink work) each select their own host application here;
+    # without one, the plain loop executable runs.
+    return _run_host(args)
+
+
+# --- pil run ---------------------------------------------------------------------------------------
+
+def _floats(text: str | None, what: str) -> list[float] | None:
+    if text is None:
+        return None
+    try:
+        return [float(v) for v in text.split(",")]
+    except ValueError:
+        raise GainlinkError(f"{what} must be comma-separated numbers, got {text!r}") from None
+
+
+def _pil(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from gainlink.artifact import load
+    from gainlink.fileio import publish_files
+    from gainlink.firmware.pil import make_plant, reference_closed_loop, run_pil
+
+    artifact = load(args.artifact)
+    ref = _floats(args.reference, "--reference")
+    if ref is not None and len(ref) != artifact.q:
+        raise GainlinkError(f"--reference needs {artifact.q} values for artifact {artifact.name}")
+    x0 = _floats(args.x0, "--x0")
+    plant = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))
+    result = run_pil(artifact, plant=plant, steps=args.steps, reference=ref, board=args.board)
+    summary = {"artifact": artifact.name, "sha256": artifact.sha256, "board": args.board, "plant": args.plant,
+               **result.summary()}
+    if args.plant in ("artifact", "linear"):
+        twin = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))
+        _, U = reference_closed_loop(artifact, plant=twin, steps=args.steps, reference=ref)
+        scale = max(float(np.max(np.abs(U))), 1e-12)
+        summary["max_rel_deviation_from_reference"] = float(np.max(np.abs(result.u - U)) / scale)
+    text = json.dumps(summary, indent=2) + "\n"
+    if args.out:
+        header = ",".join([f"y{i}" for i in range(artifact.p)] + [f"u{i}" for i in range(artifact.m)]
+                          + [f"sat{i}" for i in range(artifact.m)] + ["status"])
+        rows = [",".join([repr(float(v)) for v in result.y[k]] + [repr(float(v)) for v in result.u[k]]
+                         + [str(int(s)) for s in result.saturated[k]] + [str(int(result.status[k]))])
+                for k in range(args.steps)]
+        publish_files(args.out, {"pil.csv": header + "\n" + "\n".join(rows) + "\n", "pil.json": text})
+    sys.stdout.write(text)
+    return 0
+
+
+# --- parsers -----------------------------------------------------------------------------------------
+
+def _add_build_parser(sub) -> None:
+    p = sub.add_parser("build", help="build the firmware for an artifact (host or Cortex-M4F)",
+                       description="Build the firmware with the artifact's gains. cortex-m4 writes .elf .bin .hex "
+                       ".map and a JSON size report; host writes the shared/static libraries and the loop executable.")
+    p.add_argument("artifact", help="gains.json")
+    p.add_argument("--target", choices=("host", "cortex-m4"), required=True)
+    p.add_argument("--board", choices=BOARDS, default="mps2-an386", help="Cortex-M board (default mps2-an386)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.set_defaults(func=_build)
+
+
+def _add_flash_parser(sub) -> None:
+    p = sub.add_parser("flash", help="flash a built Cortex-M image to a real board",
+                       description="Print (and unless --dry-run, run) the flashing command for an image built by "
+                       "`gainlink firmware build --target cortex-m4 --out DIR`.")
+    p.add_argument("dir", help="folder written by `firmware build`")
+    p.add_argument("--probe", choices=("pyocd", "openocd"), required=True)
+    p.add_argument("--dry-run", action="store_true", help="only print the command")
+    p.set_defaults(func=_flash)
+
+
+def _add_run_parser(sub) -> None:
+    p = sub.add_parser("run", help="run the host firmware for an artifact",
+                       description="Build (cached) and start the host firmware. With --input, replay a CSV "
+                       "(columns y0.., r0..) through the loop executable and write the replay CSV.")
+    p.add_argument("artifact", help="gains.json")
+    p.add_argument("--input", help="replay input CSV; without it stdin/stdout are passed to the executable")
+    p.add_argument("--output", help="replay output CSV (default: stdout)")
+    # Transport options go here, one argument each (--can CONFIG, --mavlink URL), dispatched in _run.
+    p.set_defaults(func=_run)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``firmware build|flash|run`` and ``pil run``."""
+    fw = subparsers.add_parser("firmware", help="build, flash or run the firmware")
+    fw_sub = fw.add_subparsers(dest="firmware_command", metavar="ACTION", parser_class=type(fw))
+    fw_sub.required = True
+    _add_build_parser(fw_sub)
+    _add_flash_parser(fw_sub)
+    _add_run_parser(fw_sub)
+
+    pil = subparsers.add_parser("pil", help="processor-in-the-loop: firmware in QEMU, plant in Python")
+    pil_sub = pil.add_subparsers(dest="pil_command", metavar="ACTION", parser_class=type(pil))
+    pil_sub.required = True
+    p = pil_sub.add_parser("run", help="close the loop with the Cortex-M4F image in QEMU",
+                           description="Run the Cortex-M4F image in QEMU against a plant simulated in Python, one "
+                           "sample per semihosting FIFO round trip; prints a JSON summary.")
+    p.add_argument("artifact", help="gains.json")
+    p.add_argument("--plant", default="artifact",
+                   help="'artifact' (the artifact's discrete model; alias 'linear') or a gainlink.hil plant name")
+    p.add_argument("--steps", type=int, required=True, help="number of samples")
+    p.add_argument("--board", choices=BOARDS, default="mps2-an386")
+    p.add_argument("--reference", help="constant reference, comma-separated (q values)")
+    p.add_argument("--x0", help="initial plant state for the artifact plant, comma-separated (n values)")
+    p.add_argument("--out", help="folder for pil.csv and pil.json")
+    p.set_defaults(func=_pil)

@@ -1,0 +1,237 @@
+"""Processor-in-the-loop: the Cortex-M4F image in QEMU closes the loop with a plant simulated in Python.
+
+Samples travel through two FIFOs that the image opens with semihosting (``gl_in.bin``, ``gl_out.bin``),
+one record per step (see ``firmware/ports/cortex-m/main.c``). Python opens its ends read-write, so no
+open blocks, and every read waits with a deadline while checking that QEMU is still alive.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import select
+import struct
+import subprocess
+import tempfile
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..artifact import Artifact
+from ..errors import FirmwareError, PeerTimeoutError, PlantError
+from ..reference import ReferenceLoop
+from . import qemu as fwqemu
+from .build import DEFAULT_BOARD, build
+
+log = logging.getLogger(__name__)
+
+
+class DiscretePlant(ABC):
+    """A plant sampled at the controller's period: outputs now, then advance one period under ``u``."""
+
+    @abstractmethod
+    def outputs(self) -> np.ndarray:
+        """Measurement for the current sample."""
+
+    @abstractmethod
+    def advance(self, *, u: np.ndarray) -> None:
+        """Apply ``u`` for one sample period."""
+
+    @property
+    @abstractmethod
+    def state(self) -> np.ndarray:
+        """The current plant state."""
+
+
+class ArtifactPlant(DiscretePlant):
+    """The artifact's own discrete model ``x+ = Ad x + Bd u``, ``y = Cd x + Dd u_prev``.
+
+    The feed-through acts on the previous command: the controller computes ``u`` from ``y``, so ``y``
+    cannot depend on the same sample's ``u`` without an algebraic loop.
+    """
+
+    def __init__(self, artifact: Artifact, *, x0: np.ndarray) -> None:
+        self.a = artifact
+        self.x = np.asarray(x0, dtype=float).reshape(artifact.n).copy()
+        self.u_prev = np.zeros(artifact.m)
+
+    def outputs(self) -> np.ndarray:
+        return self.a.Cd @ self.x + self.a.Dd @ self.u_prev
+
+    def advance(self, *, u: np.ndarray) -> None:
+        self.x = self.a.Ad @ self.x + self.a.Bd @ u
+        self.u_prev = np.asarray(u, dtype=float).copy()
+
+    @property
+    def state(self) -> np.ndarray:
+        return self.x.copy()
+
+
+class HilPlant(DiscretePlant):
+    """A continuous plant from ``gainlink.hil``'s registry, advanced by ``Ts`` per sample."""
+
+    def __init__(self, name: str, *, artifact: Artifact) -> None:
+        from gainlink.hil.plant import PLANTS, check_dimensions
+
+        self.plant = PLANTS.create(name, {})
+        check_dimensions(self.plant, m=artifact.m, p=artifact.p, artifact=artifact.name)
+        self.Ts = artifact.Ts
+
+    def outputs(self) -> np.ndarray:
+        return np.asarray(self.plant.outputs(), dtype=float)
+
+    def advance(self, *, u: np.ndarray) -> None:
+        self.plant.advance(u=np.asarray(u, dtype=float), dt=self.Ts)
+
+    @property
+    def state(self) -> np.ndarray:
+        return np.asarray(self.plant.state(), dtype=float)
+
+
+def make_plant(name: str, *, artifact: Artifact, x0: np.ndarray | None = None) -> DiscretePlant:
+    """``artifact`` (alias ``linear``): the artifact's discrete model; any other name: a ``gainlink.hil`` plant."""
+    if name in ("artifact", "linear"):
+        start = np.full(artifact.n, 0.1) if x0 is None else np.asarray(x0, dtype=float)
+        if start.shape != (artifact.n,):
+            raise PlantError(f"--x0 needs {artifact.n} values for artifact {artifact.name}")
+        return ArtifactPlant(artifact, x0=start)
+    return HilPlant(name, artifact=artifact)
+
+
+@dataclass(frozen=True)
+class PilResult:
+    """A closed-loop PIL run: per step the measurement, the firmware's command and status, and timing."""
+
+    y: np.ndarray  # (N, p)
+    u: np.ndarray  # (N, m) float32 commands from the firmware
+    status: np.ndarray  # (N,)
+    saturated: np.ndarray  # (N, m) bool
+    plant_state: np.ndarray  # (N + 1, plant states)
+    round_trip_us: np.ndarray  # (N,)
+    steps_per_second: float
+
+    def summary(self) -> dict:
+        """Counts and timing, JSON-ready."""
+        return {
+            "steps": int(self.u.shape[0]),
+            "saturated_steps": int(self.saturated.any(axis=1).sum()),
+            "faults": int((self.status == -2).sum()),
+            "steps_per_second": round(self.steps_per_second, 1),
+            "round_trip_us_p50": round(float(np.median(self.round_trip_us)), 1),
+            "round_trip_us_p99": round(float(np.percentile(self.round_trip_us, 99)), 1),
+            "final_output": [float(v) for v in self.y[-1]],
+        }
+
+
+def _read_exact(fd: int, size: int, *, proc: subprocess.Popen, deadline_s: float) -> bytes:
+    buf = b""
+    while len(buf) < size:
+        ready, _, _ = select.select([fd], [], [], deadline_s)
+        if not ready:
+            if proc.poll() is not None:
+                raise FirmwareError(f"firmware in QEMU stopped: {fwqemu.EXIT_CODES.get(proc.returncode, proc.returncode)}")
+            raise PeerTimeoutError(f"firmware in QEMU sent nothing for {deadline_s} s")
+        buf += os.read(fd, size - len(buf))
+    return buf
+
+
+def run_pil(
+    artifact: Artifact, *, plant: DiscretePlant, steps: int, reference: np.ndarray | None = None,
+    board: str = DEFAULT_BOARD, watchdog_periods: int = 10, deadline_s: float = 10.0,
+) -> PilResult:
+    """Close the loop: firmware in QEMU, ``plant`` in Python, one FIFO round trip per sample.
+
+    Parameters
+    ----------
+    artifact : Artifact
+        Artifact whose image runs (built and cached by sha256).
+    plant : DiscretePlant
+        The plant; its outputs are sampled each period.
+    steps : int
+        Number of samples.
+    reference : ndarray, optional
+        (q,) constant reference or (steps, q) sequence; zero by default.
+    board : str
+        QEMU machine (``mps2-an386`` or ``netduinoplus2``).
+    deadline_s : float
+        How long to wait for one answer before declaring the firmware silent.
+
+    Returns
+    -------
+    PilResult
+    """
+    a = artifact
+    if steps < 1:
+        raise PlantError("--steps must be at least 1")
+    R = np.zeros((steps, a.q)) if reference is None else np.broadcast_to(np.asarray(reference, float), (steps, a.q))
+    elf = build(a, target="cortex-m4", board=board).files["elf"]
+    din, dout = fwqemu.record_dtypes(n=a.n, m=a.m, p=a.p, q=a.q)
+    Y = np.zeros((steps, a.p))
+    U = np.zeros((steps, a.m), dtype=np.float32)
+    S = np.zeros(steps, dtype=np.int32)
+    SAT = np.zeros((steps, a.m), dtype=bool)
+    X = [plant.state]
+    RT = np.zeros(steps)
+    with tempfile.TemporaryDirectory(prefix="gainlink-pil-") as tmp:
+        work = Path(tmp)
+        os.mkfifo(work / "gl_in.bin")
+        os.mkfifo(work / "gl_out.bin")
+        fin = os.open(work / "gl_in.bin", os.O_RDWR)
+        fout = os.open(work / "gl_out.bin", os.O_RDWR)
+        cmd = ["timeout", "-k", "2", str(60 + steps / 1000)] + fwqemu.qemu_command(elf, board=board, serial=f"file:{work / 'uart.log'}")
+        proc = subprocess.Popen(cmd, cwd=work, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        try:
+            os.write(fin, struct.pack("<4I", fwqemu.IN_MAGIC, steps, 1, watchdog_periods))
+            header = _read_exact(fout, 32, proc=proc, deadline_s=deadline_s)
+            magic, count, *_ = struct.unpack("<8I", header)
+            if magic != fwqemu.OUT_MAGIC or count != steps:
+                raise FirmwareError("firmware answered with a bad stream header")
+            rec = np.zeros(1, dtype=din)
+            t_start = time.perf_counter()
+            for k in range(steps):
+                y = plant.outputs()
+                Y[k] = y
+                rec["y"] = y.astype(np.float32)
+                if a.q:
+                    rec["r"][0, : a.q] = R[k].astype(np.float32)
+                t0 = time.perf_counter()
+                os.write(fin, rec.tobytes())
+                out = np.frombuffer(_read_exact(fout, dout.itemsize, proc=proc, deadline_s=deadline_s), dtype=dout)[0]
+                RT[k] = (time.perf_counter() - t0) * 1e6
+                U[k], S[k] = out["u"], out["status"]
+                SAT[k] = (int(out["sat"]) >> np.arange(a.m)) & 1
+                plant.advance(u=U[k].astype(float))
+                X.append(plant.state)
+            elapsed = time.perf_counter() - t_start
+            try:
+                proc.wait(timeout=deadline_s)
+            except subprocess.TimeoutExpired:
+                raise FirmwareError("firmware in QEMU did not exit after the last sample") from None
+            if proc.returncode != 0:
+                raise FirmwareError(f"firmware in QEMU failed: {fwqemu.EXIT_CODES.get(proc.returncode, proc.returncode)}")
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+            os.close(fin)
+            os.close(fout)
+    return PilResult(y=Y, u=U, status=S, saturated=SAT, plant_state=np.array(X), round_trip_us=RT,
+                     steps_per_second=steps / elapsed if elapsed > 0 else float("inf"))
+
+
+def reference_closed_loop(artifact: Artifact, *, plant: DiscretePlant, steps: int,
+                          reference: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The same closed loop with the float64 reference law in place of the firmware: (Y, U)."""
+    a = artifact
+    R = np.zeros((steps, a.q)) if reference is None else np.broadcast_to(np.asarray(reference, float), (steps, a.q))
+    law = ReferenceLoop(a)
+    Y = np.zeros((steps, a.p))
+    U = np.zeros((steps, a.m))
+    for k in range(steps):
+        Y[k] = plant.outputs()
+        U[k] = law.step(Y[k], R[k]).u
+        plant.advance(u=U[k])
+    return Y, U

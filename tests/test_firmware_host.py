@@ -1,0 +1,243 @@
+"""The C loop on the host (ctypes, one call per block) against the float64 reference, plus its guards.
+
+Tolerance. The C loop runs in float32 and the reference in float64. Each gain is rounded once to
+float32 (relative 6e-8) and every step rounds each multiply-add once (explicit fmaf); the observer and
+integrator carry these errors forward through dynamics whose spectral radius is at most ~0.99, i.e.
+amplified by at most ~1/(1 - 0.99) = 100 over rows of up to n + m + p = 20 terms: 6e-8 * 20 * 100 ~ 1e-4
+relative to the size of the signal. RTOL = 1e-4 of each signal's largest magnitude over the replay is
+that bound; what we measure is 1e-7..1e-5. A wrong sign, index or term gives errors of order 1.
+"""
+
+from __future__ import annotations
+
+import logging
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from gainlink.artifact import from_dict, seal
+from gainlink.engines.native import NativeLoop
+from gainlink.firmware.build import build
+from gainlink.firmware.golden import example_cases, random_cases
+from gainlink.reference import ReferenceLoop
+
+RTOL = 1e-4
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+GL_OK, GL_SATURATED, GL_ERR_NANINF, GL_ERR_CRC, GL_ERR_DIMS, GL_ERR_RANGE, GL_ERR_WATCHDOG, GL_ERR_BUSY = 0, 1, -2, -3, -4, -5, -6, -7
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _quiet_design_warnings():
+    logging.disable(logging.WARNING)
+    yield
+    logging.disable(logging.NOTSET)
+
+
+def assert_matches_reference(trace, expected, artifact, label):
+    for name in ("u", "xh", "z"):
+        got, want = getattr(trace, name), getattr(expected, name)
+        if want.size == 0:
+            continue
+        scale = max(float(np.max(np.abs(want))), 1e-9)
+        err = float(np.max(np.abs(got - want))) / scale
+        assert err <= RTOL, f"{label}: {name} differs from the reference by {err:.2e} relative (> {RTOL})"
+    # saturation flags agree except where the reference command sits on a limit within the tolerance
+    scale = max(float(np.max(np.abs(expected.u))), 1e-9)
+    near = np.minimum(np.abs(expected.u - artifact.u_min), np.abs(expected.u - artifact.u_max)) <= RTOL * scale
+    unsat_near = np.abs(expected.u - np.clip(expected.u, artifact.u_min, artifact.u_max)) <= RTOL * scale
+    assert np.all((trace.saturated == expected.saturated) | (near & unsat_near)), f"{label}: saturation flags differ"
+    assert np.array_equal(trace.fault, expected.fault), f"{label}: fault flags differ"
+
+
+def test_examples_match_reference():
+    for case in example_cases(EXAMPLES):
+        trace = NativeLoop(case.artifact).run(case.Y, case.R)
+        assert case.expected.saturated.any(), f"{case.label}: golden samples should saturate"
+        assert_matches_reference(trace, case.expected, case.artifact, case.label)
+
+
+def test_random_designs_match_reference():
+    cases = random_cases(30)
+    assert len(cases) >= 30
+    forms = {(c.artifact.observer_form, c.artifact.anti_windup) for c in cases}
+    assert len(forms) == 6, "every observer form x anti-windup mode is covered"
+    assert max(c.artifact.n for c in cases) == 12 and max(c.artifact.m for c in cases) <= 4
+    assert any(c.artifact.q > 0 for c in cases) and any(c.artifact.q == 0 for c in cases)
+    assert any(np.any(c.artifact.Dd != 0) for c in cases), "feed-through (G = Bd - L Dd) is exercised"
+    for case in cases:
+        assert case.expected.saturated.any(), f"{case.label}: golden samples should saturate"
+        trace = NativeLoop(case.artifact).run(case.Y, case.R)
+        assert_matches_reference(trace, case.expected, case.artifact, case.label)
+
+
+def test_generated_unrolled_step_is_bit_identical_to_generic_loops():
+    """gl_step.h (generated, unrolled) and the library's generic loops perform the same operations."""
+    picked = {}
+    for case in random_cases(30):
+        picked.setdefault((case.artifact.observer_form, case.artifact.anti_windup), case)
+    for case in picked.values():
+        generic = build(case.artifact, target="host", options={"GL_STEP_UNROLLED": "OFF"}).files["shared"]
+        a = NativeLoop(case.artifact).run_raw(case.Y, case.R)
+        b = NativeLoop(case.artifact, library=generic).run_raw(case.Y, case.R)
+        for key in a:
+            assert np.array_equal(a[key].view(np.uint8), b[key].view(np.uint8)), f"{case.label}: {key}"
+
+
+@pytest.fixture(scope="module")
+def pendulum():
+    return example_cases(EXAMPLES)[0]
+
+
+def test_nan_sample_leaves_state_untouched_and_returns_safe_command(pendulum):
+    a = pendulum.artifact
+    loop = NativeLoop(a)
+    Y, R = pendulum.Y[:50].copy(), pendulum.R[:50].copy()
+    Y[20, 1] = np.nan
+    R[30, 0] = np.inf
+    raw = loop.run_raw(Y, R)
+    safe = np.clip(np.zeros(a.m), a.u_min, a.u_max)
+    for k in (20, 30):
+        assert raw["fault"][k] == 1 and raw["sat"][k] == 0
+        assert np.array_equal(raw["u"][k], safe.astype(np.float32))
+        assert np.array_equal(raw["xh"][k], raw["xh"][k - 1]) and np.array_equal(raw["z"][k], raw["z"][k - 1])
+    assert raw["fault"].sum() == 2 and np.all(np.isfinite(raw["xh"]))
+    # the whole run equals the reference fed the same samples (which refuses the same two)
+    expected = ReferenceLoop(a).run(Y, R)
+    from gainlink.engines.native import trace_from_raw
+
+    assert_matches_reference(trace_from_raw(raw, m=a.m), expected, a, "nan")
+
+
+def test_watchdog_holds_then_gives_safe_command(pendulum):
+    a = pendulum.artifact
+    loop = NativeLoop(a, watchdog_periods=5)
+    last = None
+    for k in range(40):
+        last = loop.step(pendulum.Y[k], pendulum.R[k])
+    assert last.status in (GL_OK, GL_SATURATED)
+    held = [loop.idle() for _ in range(4)]
+    assert all(h.status == GL_OK and np.array_equal(h.u, last.u) for h in held), "holds the last command"
+    expired = loop.idle()
+    assert expired.status == GL_ERR_WATCHDOG
+    assert np.array_equal(expired.u, np.clip(np.zeros(a.m), a.u_min, a.u_max).astype(np.float32))
+    assert loop.idle().status == GL_ERR_WATCHDOG, "stays expired until a measurement arrives"
+    assert loop.step(pendulum.Y[40], pendulum.R[40]).status in (GL_OK, GL_SATURATED)
+    assert loop.idle().status == GL_OK, "a measurement re-arms the watchdog"
+
+
+def test_gain_update_rejections_leave_running_set_untouched(pendulum):
+    a = pendulum.artifact
+    loop, twin = NativeLoop(a), NativeLoop(a)
+    crc0 = loop.active_crc32()
+    g = loop.default_gains()
+    assert loop.crc32(g) == g.crc32 == crc0
+
+    bad_crc = loop.default_gains()
+    bad_crc.K[0][1] += 1.0  # edited but not re-sealed
+    assert loop.stage(bad_crc) == GL_ERR_CRC
+
+    wrong_dims = loop.default_gains()
+    wrong_dims.n = a.n + 1
+    wrong_dims.crc32 = loop.crc32(wrong_dims)
+    assert loop.stage(wrong_dims) == GL_ERR_DIMS
+
+    nan_gain = loop.default_gains()
+    nan_gain.L[2][0] = float("nan")
+    nan_gain.crc32 = loop.crc32(nan_gain)
+    assert loop.stage(nan_gain) == GL_ERR_NANINF
+
+    bad_limits = loop.default_gains()
+    bad_limits.u_min[0], bad_limits.u_max[0] = 1.0, -1.0
+    bad_limits.crc32 = loop.crc32(bad_limits)
+    assert loop.stage(bad_limits) == GL_ERR_RANGE
+
+    a1 = loop.run_raw(pendulum.Y, pendulum.R)
+    b1 = twin.run_raw(pendulum.Y, pendulum.R)
+    assert loop.active_crc32() == crc0
+    for key in a1:
+        assert np.array_equal(a1[key], b1[key]), "rejected updates must not change anything"
+
+
+def test_gain_update_is_staged_checked_and_swapped_between_steps(pendulum):
+    a = pendulum.artifact
+    loop = NativeLoop(a)
+    Y, R = pendulum.Y, pendulum.R
+    first = loop.run_raw(Y[:100], R[:100])
+    new = loop.default_gains()
+    new.K[0][2] *= 1.1
+    new.Ki[0][0] *= 0.9
+    new.crc32 = loop.crc32(new)
+    assert loop.stage(new) == GL_OK
+    assert loop.stage(new) == GL_ERR_BUSY, "only one update can wait"
+    assert loop.active_crc32() != new.crc32, "not applied before the next step"
+    rest = loop.run_raw(Y[100:], R[100:])
+    assert loop.active_crc32() == new.crc32
+    # expected: the reference with the new gains (artifact rebuilt from the edited numbers), continued
+    # from the state the C loop had when the swap happened
+    data = dict(a.data)
+    K = np.array(a.K)
+    K[0, 2] = float(np.float32(float(np.float32(a.K[0, 2])) * 1.1))  # what ctypes stored
+    Ki = np.array(a.Ki)
+    Ki[0, 0] = float(np.float32(float(np.float32(a.Ki[0, 0])) * 0.9))
+    data["K"], data["Ki"] = K.tolist(), Ki.tolist()
+    data["Kaw"] = a.Kaw.tolist()
+    changed = from_dict(seal(data))
+    ref = ReferenceLoop(changed)
+    ref.xh, ref.z = first["xh"][-1].astype(float), first["z"][-1].astype(float)
+    expected = ref.run(Y[100:], R[100:])
+    from gainlink.engines.native import trace_from_raw
+
+    assert_matches_reference(trace_from_raw(rest, m=a.m), expected, changed, "after swap")
+    old = ReferenceLoop(a)
+    old.xh, old.z = first["xh"][-1].astype(float), first["z"][-1].astype(float)
+    assert np.max(np.abs(old.run(Y[100:], R[100:]).u - rest["u"])) > 1e-3, "the new gains are really in use"
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_property_commands_within_limits_and_finite(pendulum, data):
+    a = pendulum.artifact
+    N = data.draw(st.integers(min_value=1, max_value=40))
+    finite = st.floats(min_value=-1e4, max_value=1e4, allow_nan=False, allow_infinity=False, width=32)
+    Y = np.array(data.draw(st.lists(st.lists(finite, min_size=a.p, max_size=a.p), min_size=N, max_size=N)))
+    R = np.array(data.draw(st.lists(st.lists(finite, min_size=a.q, max_size=a.q), min_size=N, max_size=N)))
+    raw = _property_loop(a).run_raw(Y, R)
+    assert np.all(raw["u"] >= a.u_min.astype(np.float32)) and np.all(raw["u"] <= a.u_max.astype(np.float32))
+    assert np.all(np.isfinite(raw["u"])) and np.all(np.isfinite(raw["xh"])) and np.all(np.isfinite(raw["z"]))
+    assert not raw["fault"].any()
+
+
+_PROPERTY_LOOPS: dict[str, NativeLoop] = {}
+
+
+def _property_loop(a) -> NativeLoop:
+    loop = _PROPERTY_LOOPS.setdefault(a.sha256, NativeLoop(a))
+    loop.reset()
+    return loop
+
+
+def test_host_executable_under_asan_ubsan_matches_ctypes(pendulum):
+    """The host executable built with -fsanitize=address,undefined runs clean and agrees bit for bit."""
+    a = pendulum.artifact
+    exe = build(a, target="host", options={"GL_SANITIZE": "ON"}).files["exe"]
+    Y, R = pendulum.Y[:200].copy(), pendulum.R[:200]
+    Y[50, 0] = np.nan
+    lines = [" ".join(repr(float(v)) for v in np.concatenate([Y[k], R[k]])) for k in range(200)]
+    script = lines[:100] + ["idle", "stage", "crc"] + lines[100:] + ["reset", "bogus line"]
+    proc = subprocess.run([str(exe)], input="\n".join(script) + "\n", capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "runtime error" not in proc.stderr and "AddressSanitizer" not in proc.stderr
+    out = proc.stdout.splitlines()
+    assert out[0].startswith(f"gainlink-loop {a.name} sha256:{a.sha256}")
+    steps = [line.split() for line in out[1:] if line.startswith("step ")]
+    assert len(steps) == 200
+    raw = NativeLoop(a).run_raw(Y, R)
+    u = np.array([[float(v) for v in s[2:2 + a.m]] for s in steps], dtype=np.float32)
+    xh = np.array([[float(v) for v in s[3 + a.m:3 + a.m + a.n]] for s in steps], dtype=np.float32)
+    assert np.array_equal(u, raw["u"]) and np.array_equal(xh, raw["xh"])
+    assert int(steps[50][1]) == GL_ERR_NANINF
+    assert any(line.startswith("error ") for line in out), "a malformed line is answered, not fatal"
