@@ -137,6 +137,7 @@ def _loop(scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Tr
     for d in scenario.disturbances:
         D[(t >= d.start) & (t < d.stop), plant.input_names.index(d.input)] += d.value
     silent_at = min((int(round(f.start / Ts)) for f in scenario.faults if f.kind == "silent"), default=None)
+    crash_at = min((int(round(f.start / Ts)) for f in scenario.faults if f.kind == "crash"), default=None)
     injector = FaultInjector(scenario.faults, Ts=Ts)
     shadow = ReferenceLoop(a) if scenario.shadow else None
 
@@ -163,6 +164,8 @@ def _loop(scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Tr
         for k in range(N):
             if silent_at is not None and k == silent_at:
                 peer.pause()
+            if crash_at is not None and k == crash_at:
+                peer.kill()
             if realtime:
                 due = t_start + (k + 1) * period_ns
                 now = time.perf_counter_ns()

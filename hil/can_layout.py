@@ -87,6 +87,7 @@ class CanLayout:
     def database(self) -> Any:
         """The layout as a ``cantools.database.Database``."""
         from cantools.database import Database, Message, Signal
+        from cantools.database.conversion import BaseConversion
 
         def signals(spec: FrameSpec) -> list:
             sig = [
@@ -98,8 +99,8 @@ class CanLayout:
                        comment="bit i: i-th value of this frame saturated"),
             ]
             for i, name in enumerate(spec.signals):
-                sig.append(Signal(name, start=32 + 32 * i, length=32, byte_order="little_endian",
-                                  is_signed=True, is_float=True, scale=1, offset=0))
+                sig.append(Signal(name, start=32 + 32 * i, length=32, byte_order="little_endian", is_signed=True,
+                              conversion=BaseConversion.factory(scale=1, offset=0, is_float=True)))
             return sig
 
         messages = []
@@ -108,7 +109,18 @@ class CanLayout:
                 messages.append(Message(frame_id=spec.arbitration_id, name=spec.name, length=spec.length,
                                         signals=signals(spec), senders=[role], is_fd=self.fd,
                                         comment=f"sent by the {role}"))
-        return Database(messages=messages, version="gainlink-1")
+        dbc = None
+        if self.fd:  # cantools marks frames CAN FD (VFrameFormat) when the bus type attribute says so
+            from collections import OrderedDict
+
+            from cantools.database.can.formats.dbc.dbc_attribute import DbcAttribute
+            from cantools.database.can.formats.dbc.dbc_attribute_definition import DbcAttributeDefinition
+            from cantools.database.can.formats.dbc.dbc_specifics import DbcSpecifics
+
+            bus_type = DbcAttributeDefinition("BusType", default_value="CAN", type_name="STRING")
+            dbc = DbcSpecifics(attributes=OrderedDict(BusType=DbcAttribute("CAN FD", bus_type)),
+                               attribute_definitions=OrderedDict(BusType=bus_type))
+        return Database(messages=messages, version="gainlink-1", dbc_specifics=dbc)
 
     def dbc(self) -> str:
         """The DBC text of :meth:`database`."""
@@ -146,8 +158,11 @@ def layout_for(artifact: Any, *, fd: bool = False, base_id: int = 0x100) -> CanL
         raise TransportError(f"CAN base_id {base_id:#x} leaves no room for the layout (0 .. {0x7FF - 0x30:#x})")
     sig = artifact.signals
     per_frame = FD_MAX_VALUES if fd else 1
-    meas = [f"y_{_sanitize(n)}" for n in sig["outputs"]] + [f"r_{_sanitize(n)}" for n in sig["references"]]
-    cmd = [f"u_{_sanitize(n)}" for n in sig["inputs"]]
+    def named(prefix: str, names: list[str]) -> list[str]:
+        return [s if s.startswith(prefix) else prefix + s for s in map(_sanitize, names)]
+
+    meas = named("y_", sig["outputs"]) + named("r_", sig["references"])
+    cmd = named("u_", sig["inputs"])
     if len(set(meas)) != len(meas) or len(set(cmd)) != len(cmd):
         meas = [f"y{i}" for i in range(artifact.p)] + [f"r{i}" for i in range(artifact.q)]
         cmd = [f"u{i}" for i in range(artifact.m)]

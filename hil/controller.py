@@ -144,6 +144,11 @@ class ControllerProcess:
             os.kill(self.proc.pid, signal.SIGSTOP)
             self.paused = True
 
+    def kill(self) -> None:
+        """Kill the process (SIGKILL): the controller crashes."""
+        if self.proc is not None and self.proc.poll() is None:
+            os.kill(self.proc.pid, signal.SIGKILL)
+
     def stop(self, *, grace: float = 2.0) -> int | None:
         """End the process (SIGCONT+SIGTERM, SIGKILL after ``grace`` s); returns its exit status."""
         proc = self.proc

@@ -13,13 +13,13 @@ class FaultInjector:
     Parameters
     ----------
     faults : sequence of Fault
-        The scenario's frame faults (``silent`` is handled by the bridge, not here).
+        The scenario's frame faults (``silent`` and ``crash`` act on the process: the bridge handles them).
     Ts : float
         Sample time, to turn fault windows into sample indices.
     """
 
     def __init__(self, faults: Sequence[Fault], *, Ts: float) -> None:
-        self.faults = [f for f in faults if f.kind != "silent"]
+        self.faults = [f for f in faults if f.kind not in ("silent", "crash")]
         self.Ts = Ts
         self.held: list[tuple[int, list[Any]]] = []  # (release at sample k, frames)
         self.counts = {"drop": 0, "delay": 0, "duplicate": 0, "reorder": 0}

@@ -21,7 +21,7 @@ Example::
     [reference.x]  kind = "step", at = 1.0, value = 0.5     # constant | step | square | sine | ramp
     [noise]        theta = 0.001                           # std dev per output
     [[disturbances]] input = "F", start = 2.0, stop = 2.1, value = 5.0
-    [[faults]]     kind = "drop", start = 3.0, stop = 3.1, every = 1   # drop | delay | duplicate | reorder | silent
+    [[faults]]     kind = "drop", start = 3.0, stop = 3.1, every = 1   # drop | delay | duplicate | reorder | silent | crash
 
 Unknown keys anywhere are refused with one line naming them.
 """
@@ -42,7 +42,7 @@ TOP_KEYS = {"name", "artifact", "plant", "transport", "duration", "mode", "contr
             "peer_timeout", "period", "sched_fifo", "seed", "shadow", "initial_state", "reference", "noise",
             "disturbances", "faults", "description", "firmware"}
 MODES = ("lockstep", "realtime")
-FAULT_KINDS = ("drop", "delay", "duplicate", "reorder", "silent")
+FAULT_KINDS = ("drop", "delay", "duplicate", "reorder", "silent", "crash")
 PROFILE_KEYS = {
     "constant": {"value"},
     "step": {"at", "value", "initial"},
@@ -58,7 +58,7 @@ class Fault:
 
     ``kind``: drop (frames not sent), delay (sent ``delay_steps`` samples later), duplicate (sent
     twice), reorder (sent after the next sample's frames), silent (controller process frozen from
-    ``start`` on). Active for samples with ``start <= t < stop``, every ``every``-th one.
+    ``start`` on), crash (controller process killed at ``start``). Active for samples with ``start <= t < stop``, every ``every``-th one.
     """
 
     kind: str

@@ -1,0 +1,126 @@
+"""The CAN layout: DBC from the artifact, the fast codec against cantools, the firmware app against both.
+
+The firmware's gainlink_can is exercised as a real process over python-can udp_multicast: samples go
+out through the Python transport, commands come back and are compared with the float64 reference
+law (float32 on the wire and in the C loop: relative tolerance 1e-4 of the command scale).
+"""
+
+from __future__ import annotations
+
+import math
+
+import cantools
+import numpy as np
+import pytest
+
+from gainlink.artifact import load
+from gainlink.errors import TransportError
+from gainlink.hil.can_layout import layout_for
+from gainlink.hil.can_transport import CanTransport, firmware_can_argv
+from gainlink.hil.controller import ControllerProcess
+from gainlink.hil.transport import STATUS_FAULT
+from gainlink.reference import ReferenceLoop
+
+from conftest import run_cli
+from test_hil_support import can_firmware, pendulum_gains, udp_transport  # noqa: F401
+
+
+@pytest.mark.parametrize("fd", [False, True])
+def test_dbc_round_trips_through_cantools_and_matches_the_fast_codec(pendulum_gains, fd):
+    art = load(pendulum_gains)
+    layout = layout_for(art, fd=fd, base_id=0x200)
+    db = cantools.database.load_string(layout.dbc(), database_format="dbc")
+    # Classic CAN carries one value per frame: p + q = 3 measurement frames; FD packs them in one.
+    assert len(layout.measurement) == (1 if fd else art.p + art.q)
+    assert len(layout.command) == 1
+    assert {m.frame_id for m in db.messages} == {0x200 + 0x10 + i for i in range(len(layout.measurement))} | {0x200}
+    names = [s for spec in layout.measurement for s in spec.signals]
+    assert names == ["y_x", "y_theta", "r_x"]
+    transport = CanTransport({"interface": "virtual", "fd": fd, "base_id": 0x200}, artifact=art)
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        y, r = rng.normal(size=art.p), rng.normal(size=art.q)
+        seq = int(rng.integers(0, 65536))
+        frames = transport.encode_sample(seq=seq, y=y, r=r)
+        values = dict(zip(names, np.concatenate([y, r]).astype(np.float32)))
+        for frame, spec in zip(frames, layout.measurement):
+            msg = db.get_message_by_frame_id(frame.arbitration_id)
+            assert msg.is_fd == fd and msg.length == len(frame.data)
+            decoded = msg.decode(bytes(frame.data))
+            assert decoded["seq"] == seq and decoded["status"] == 0 and decoded["sat"] == 0
+            for name in spec.signals:
+                assert decoded[name] == pytest.approx(float(values[name]), rel=0, abs=0)
+            want = {"seq": seq, "status": 0, "sat": 0, **{n: float(values[n]) for n in spec.signals}}
+            assert msg.encode(want) == bytes(frame.data)
+
+
+def test_dbc_command_writes_a_file(pendulum_gains, tmp_path):
+    out = tmp_path / "pendulum.dbc"
+    res = run_cli("hil", "dbc", pendulum_gains, "--fd", "--out", out)
+    assert res.code == 0, res.err
+    db = cantools.database.load_file(out)
+    assert sorted(m.name for m in db.messages) == ["Command0", "Measurement0"]
+
+
+def _exchange(art, transport, samples):
+    """Send each (seq, y, r) and collect the command answering it (None if it never comes)."""
+    out = []
+    for seq, y, r in samples:
+        transport.send_frames(transport.encode_sample(seq=seq, y=y, r=r))
+        cmd = None
+        while True:
+            c = transport.receive_command(timeout=2.0)
+            if c is None or c.seq == seq:
+                cmd = c
+                break
+        out.append(cmd)
+    return out
+
+
+@pytest.mark.parametrize("fd", [False, True])
+def test_firmware_can_app_runs_the_law_over_udp_multicast(pendulum_gains, can_firmware, fd):
+    art = load(pendulum_gains)
+    transport = CanTransport(udp_transport(fd=fd), artifact=art)
+    peer = ControllerProcess([str(can_firmware), *transport.controller_argv()])
+    transport.open()
+    try:
+        peer.start()
+        peer.check_artifact(art.sha256)
+        rng = np.random.default_rng(7)
+        Y = rng.normal(scale=[0.2, 0.05], size=(200, art.p)).astype(np.float32)
+        R = rng.normal(scale=0.5, size=(200, art.q)).astype(np.float32)
+        Y[50:53] *= 400.0  # drive the command into its limits for a few steps
+        cmds = _exchange(art, transport, [(k, Y[k], R[k]) for k in range(200)])
+        ref = ReferenceLoop(art).run(Y.astype(np.float64), R.astype(np.float64))
+        assert all(c is not None for c in cmds)
+        U = np.array([c.u for c in cmds])
+        scale = float(np.abs(ref.u).max())
+        np.testing.assert_allclose(U, ref.u, rtol=0, atol=1e-4 * scale)
+        assert np.array_equal(np.array([c.saturated for c in cmds]), ref.saturated)
+        assert ref.saturated.any()
+        # A non-finite sample: safe command (zero clamped), fault bit, state untouched.
+        nan_cmd = _exchange(art, transport, [(200, np.array([math.nan, 0.0]), np.zeros(art.q))])[0]
+        assert nan_cmd.status & STATUS_FAULT and np.all(nan_cmd.u == 0.0)
+        # A duplicate of an answered sample is ignored; the next sample continues the sequence.
+        transport.send_frames(transport.encode_sample(seq=199, y=Y[199], r=R[199]))
+        assert transport.receive_command(timeout=0.3) is None
+        nxt = _exchange(art, transport, [(201, Y[0], R[0])])[0]
+        loop = ReferenceLoop(art)
+        loop.run(Y.astype(np.float64), R.astype(np.float64))
+        want = loop.step(Y[0].astype(np.float64), R[0].astype(np.float64)).u
+        np.testing.assert_allclose(nxt.u, want, rtol=0, atol=1e-4 * scale)
+    finally:
+        peer.close()
+        transport.close()
+
+
+def test_firmware_argv_refuses_interfaces_the_app_cannot_speak(pendulum_gains):
+    art = load(pendulum_gains)
+    with pytest.raises(TransportError, match="firmware CAN app speaks"):
+        firmware_can_argv({"interface": "virtual"}, layout=layout_for(art))
+
+
+def test_bus_that_cannot_open_is_one_clear_error(pendulum_gains):
+    transport = CanTransport({"interface": "socketcan", "channel": "gl_no_such_can0"}, artifact=load(pendulum_gains))
+    with pytest.raises(TransportError, match=r"cannot open CAN bus \(interface=socketcan, channel=gl_no_such_can0\)"):
+        transport.open()
