@@ -1,0 +1,181 @@
+"""Plant FMUs built from the project's C sources with fmpy, the built-in models, and linearisation.
+
+Expected values are independent of the code under test: the linearisation about upright is the
+closed form from the issue (M=1, m=0.1, l=0.5, g=9.81), the examples' matrices are read from
+examples/*.toml, and the FMU is compared with the Python model it must agree with.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tomllib
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gainlink.errors import PlantError
+from gainlink.hil.fmu_plant import FmuPlant, plant_from_config
+from gainlink.hil.linearize import linearize
+from gainlink.hil.models import CartPendulum, QuadrotorLateral, WoodBerry
+
+from conftest import EXAMPLES, run_cli
+from test_hil_support import cart_fmu  # noqa: F401
+
+M, m, l, g = 1.0, 0.1, 0.5, 9.81
+A_UP = np.array([[0, 1, 0, 0], [0, 0, -m * g / M, 0], [0, 0, 0, 1], [0, 0, (M + m) * g / (M * l), 0]])
+B_UP = np.array([[0], [1 / M], [0], [-1 / (M * l)]])
+
+
+def test_fmu_builds_and_passes_fmpy_validation(cart_fmu):
+    from fmpy import read_model_description
+    from fmpy.validation import validate_fmu
+
+    assert validate_fmu(str(cart_fmu)) == []
+    md = read_model_description(str(cart_fmu))
+    assert md.coSimulation is not None and md.modelExchange is not None
+    with zipfile.ZipFile(cart_fmu) as zf:
+        assert "binaries/linux64/cart_pendulum.so" in zf.namelist()
+
+
+def test_fmu_matches_python_model_and_restores_its_state(cart_fmu):
+    fmu = FmuPlant(path=cart_fmu)
+    py = CartPendulum(step=1e-3)
+    try:
+        assert fmu.input_names == ("F",) and fmu.output_names == ("x", "theta")
+        assert fmu.state_names == ("x", "x_dot", "theta", "theta_dot")
+        rng = np.random.default_rng(3)
+        for plant in (fmu, py):
+            plant.reset(initial={"theta": 0.1, "x_dot": -0.2})
+        for k in range(300):
+            u = rng.normal(scale=2.0, size=1)
+            fmu.advance(u=u, dt=0.01)
+            py.advance(u=u, dt=0.01)
+            if k == 150:
+                snap = fmu.save_state()
+                ahead = [(fmu.advance(u=np.array([5.0]), dt=0.01), fmu.outputs())[1] for _ in range(3)]
+                fmu.restore_state(snap)
+                again = [(fmu.advance(u=np.array([5.0]), dt=0.01), fmu.outputs())[1] for _ in range(3)]
+                assert np.array_equal(np.array(ahead), np.array(again))
+                fmu.restore_state(snap)
+        np.testing.assert_allclose(fmu.state(), py.state(), rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(fmu.outputs(), py.outputs(), rtol=1e-9, atol=1e-12)
+    finally:
+        fmu.close()
+
+
+@pytest.mark.parametrize("method", ["directional", "differences"])
+def test_linearization_about_upright_equals_the_closed_form(cart_fmu, method):
+    lin = linearize(cart_fmu, at={"theta": 0.0}, method=method)
+    tol = 1e-12 if method == "directional" else 1e-7
+    np.testing.assert_allclose(lin.A, A_UP, atol=tol)
+    np.testing.assert_allclose(lin.B, B_UP, atol=tol)
+    np.testing.assert_allclose(lin.C, [[1, 0, 0, 0], [0, 0, 1, 0]], atol=tol)
+    np.testing.assert_allclose(lin.D, 0.0, atol=tol)
+    assert lin.method.startswith("directional" if method == "directional" else "central")
+
+
+def test_linearization_away_from_upright_agrees_between_methods(cart_fmu):
+    at = {"theta": 0.3, "theta_dot": 0.5, "F": 1.5}
+    dd = linearize(cart_fmu, at=at, method="directional")
+    cd = linearize(cart_fmu, at=at, method="differences")
+    for a, b in ((dd.A, cd.A), (dd.B, cd.B)):
+        np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-7)
+    assert abs(dd.A[3, 2] - A_UP[3, 2]) > 0.1 and abs(dd.A[1, 3]) > 0.01  # really a different operating point
+
+
+def test_linearize_cli_spec_designs_like_the_example(cart_fmu, tmp_path, example_artifacts):
+    import json
+
+    spec = tmp_path / "from_fmu.toml"
+    res = run_cli("linearize", cart_fmu, "--at", "theta=0", "--out", spec, "--name", "pendulum",
+                  "--template", EXAMPLES / "pendulum.toml")
+    assert res.code == 0, res.err
+    data = tomllib.loads(spec.read_text())
+    np.testing.assert_allclose(data["plant"]["A"], A_UP, atol=1e-12)
+    out = tmp_path / "design"
+    assert run_cli("design", spec, "--out", out).code == 0
+    mine = json.loads((out / "gains.json").read_text())
+    example = json.loads(example_artifacts["pendulum"].read_text())
+    for key in ("K", "Ki", "L"):
+        np.testing.assert_allclose(mine[key], example[key], rtol=1e-6, atol=1e-9)
+    # Without a template the spec still designs (neutral weights), so FMU -> firmware needs no matrices typed.
+    bare = tmp_path / "bare.toml"
+    assert run_cli("linearize", cart_fmu, "--out", bare).code == 0
+    assert run_cli("design", bare, "--out", tmp_path / "bare").code == 0
+
+
+def _numeric_jacobian(plant, n_in):
+    x0, u0 = np.zeros(len(plant.state_names)), np.zeros(n_in)
+    h = 1e-6
+    A = np.column_stack([(plant.derivatives(x0 + h * e, u0) - plant.derivatives(x0 - h * e, u0)) / (2 * h)
+                         for e in np.eye(len(x0))])
+    B = np.column_stack([(plant.derivatives(x0, u0 + h * e) - plant.derivatives(x0, u0 - h * e)) / (2 * h)
+                         for e in np.eye(n_in)])
+    return A, B
+
+
+@pytest.mark.parametrize("name, cls", [("pendulum", CartPendulum), ("quadrotor_lateral", QuadrotorLateral)])
+def test_builtin_models_linearise_to_the_example_specs(name, cls):
+    spec = tomllib.loads((EXAMPLES / f"{name}.toml").read_text())
+    plant = cls()
+    assert list(plant.state_names) == spec["plant"]["states"]
+    assert list(plant.output_names) == spec["plant"]["outputs"]
+    A, B = _numeric_jacobian(plant, 1)
+    np.testing.assert_allclose(A, spec["plant"]["A"], atol=1e-6)
+    np.testing.assert_allclose(B, spec["plant"]["B"], atol=1e-6)
+
+
+def test_wood_berry_has_its_gains_and_dead_times():
+    wb = WoodBerry(step=0.1)
+    wb.reset(initial={})
+    t, xd, xb = [], [], []
+    for k in range(2000):  # unit step on reflux R, 200 min
+        wb.advance(u=np.array([1.0, 0.0]), dt=0.1)
+        t.append((k + 1) * 0.1)
+        y = wb.outputs()
+        xd.append(y[0]); xb.append(y[1])
+    t, xd, xb = np.array(t), np.array(xd), np.array(xb)
+    assert np.all(xd[t <= 1.0 + 1e-9] == 0.0) and xd[t > 1.05][0] > 0   # 1 min dead time
+    assert np.all(xb[t <= 7.0 + 1e-9] == 0.0) and xb[t > 7.05][0] > 0   # 7 min dead time
+    assert xd[-1] == pytest.approx(12.8, rel=1e-3) and xb[-1] == pytest.approx(6.6, rel=1e-3)
+    # First-order lag: 63.2 % of the gain one time constant after the dead time.
+    assert np.interp(1.0 + 16.7, t, xd) == pytest.approx(12.8 * (1 - np.exp(-1)), rel=1e-2)
+
+
+def test_fmu_without_cosimulation_is_refused(cart_fmu, tmp_path):
+    me_only = tmp_path / "me_only.fmu"
+    with zipfile.ZipFile(cart_fmu) as src, zipfile.ZipFile(me_only, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "modelDescription.xml":
+                text = data.decode()
+                start = text.index("<CoSimulation")
+                end = text.index("</CoSimulation>") + len("</CoSimulation>")
+                data = (text[:start] + text[end:]).encode()
+            dst.writestr(item, data)
+    with pytest.raises(PlantError, match="no Co-Simulation interface"):
+        plant_from_config({"kind": "fmu", "path": str(me_only)})
+    lin = linearize(me_only, at={})  # Model Exchange is all linearize needs
+    assert lin.A.shape == (4, 4)
+
+
+def test_missing_and_broken_fmus_are_refused(tmp_path, cart_fmu):
+    with pytest.raises(PlantError, match="not found"):
+        plant_from_config({"kind": "fmu", "path": str(tmp_path / "nope.fmu")})
+    junk = tmp_path / "junk.fmu"
+    junk.write_bytes(b"this is not a zip archive")
+    with pytest.raises(PlantError, match="not a zip archive"):
+        plant_from_config({"kind": "fmu", "path": str(junk)})
+    no_binary = tmp_path / "no_binary.fmu"
+    with zipfile.ZipFile(cart_fmu) as src, zipfile.ZipFile(no_binary, "w") as dst:
+        for item in src.infolist():
+            if not item.filename.startswith("binaries/"):
+                dst.writestr(item, src.read(item))
+    with pytest.raises(PlantError, match="cannot load its binary"):
+        plant_from_config({"kind": "fmu", "path": str(no_binary)})
+    with pytest.raises(PlantError, match="unknown key"):
+        plant_from_config({"kind": "fmu", "path": str(cart_fmu), "colour": "red"})
+    with pytest.raises(PlantError, match="no Real variable"):
+        plant_from_config({"kind": "fmu", "path": str(cart_fmu), "outputs": ["x", "phi"]})
