@@ -1,0 +1,151 @@
+"""The Cortex-M4F image under qemu-system-arm: bit for bit against the host build, on both boards.
+
+Both builds use -ffp-contract=off and explicit fused multiply-adds (fmaf / vfma.f32), so every float32
+result of the image must equal the host library's exactly; comparisons here are on the raw bits.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gainlink.artifact import render
+from gainlink.engines import qemu as qemu_engine
+from gainlink.engines.native import NativeLoop
+from gainlink.firmware import qemu as fwqemu
+from gainlink.firmware.build import build
+from gainlink.firmware.golden import example_cases, random_cases
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+KEYS = ("u", "sat", "xh", "z", "fault")
+GAINLINK = str(Path(sys.executable).with_name("gainlink"))  # the console script, run as a real process
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _quiet_design_warnings():
+    logging.disable(logging.WARNING)
+    yield
+    logging.disable(logging.NOTSET)
+
+
+def assert_bit_identical(a: dict, b: dict, label: str) -> None:
+    for key in KEYS:
+        assert a[key].shape == b[key].shape, f"{label}: {key} shape"
+        assert np.array_equal(a[key].view(np.uint8), b[key].view(np.uint8)), f"{label}: {key} differs in its bits"
+
+
+@pytest.mark.parametrize("board", ["mps2-an386", "netduinoplus2"])
+def test_examples_bit_identical_to_host_on_both_boards(board):
+    for case in example_cases(EXAMPLES):
+        Y = case.Y.copy()
+        Y[17, 0] = np.nan  # a refused sample travels through both
+        host = NativeLoop(case.artifact).run_raw(Y, case.R)
+        target = qemu_engine.run_raw(case.artifact, Y, case.R, board=board)
+        assert_bit_identical(host, target, f"{case.label}/{board}")
+        assert target["fault"].sum() == 1
+
+
+def test_random_designs_bit_identical_to_host():
+    for case in random_cases(30):
+        host = NativeLoop(case.artifact).run_raw(case.Y, case.R)
+        target = qemu_engine.run_raw(case.artifact, case.Y, case.R)
+        assert_bit_identical(host, target, case.label)
+
+
+@pytest.fixture(scope="module")
+def pendulum():
+    return example_cases(EXAMPLES)[0]
+
+
+def test_watchdog_in_the_image(pendulum):
+    a = pendulum.artifact
+    elf = build(a, target="cortex-m4").files["elf"]
+    tags = np.zeros(30, dtype=np.uint32)
+    tags[10:16] = fwqemu.TAG_IDLE  # six periods without a measurement, watchdog at 4
+    rec = fwqemu.replay(elf, board="mps2-an386", n=a.n, m=a.m, p=a.p, q=a.q, Y=pendulum.Y[:30], R=pendulum.R[:30],
+                        tags=tags, watchdog_periods=4)
+    status = rec["status"].tolist()
+    assert status[10:13] == [0, 0, 0] and status[13:16] == [-6, -6, -6]
+    assert np.all(rec["u"][10:13] == rec["u"][9]), "holds the last command"
+    assert np.all(rec["u"][13:16] == np.float32(np.clip(0.0, a.u_min, a.u_max)))
+    assert status[16] in (0, 1), "a measurement re-arms it"
+
+
+def test_fpu_left_disabled_is_caught_by_the_startup_self_test(pendulum):
+    a = pendulum.artifact
+    elf = build(a, target="cortex-m4", options={"GL_SKIP_FPU_ENABLE": "ON"}).files["elf"]
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "gl_in.bin").write_bytes(fwqemu.encode_input(pendulum.Y[:5], pendulum.R[:5], n=a.n, m=a.m, p=a.p, q=a.q))
+        res = fwqemu.run_image(elf, board="mps2-an386", cwd=Path(tmp), timeout_s=10)
+    assert res.returncode == fwqemu.EXIT_FPU, f"expected the FPU self-test exit, got {res.meaning}"
+    good = build(a, target="cortex-m4").files["elf"]
+    with tempfile.TemporaryDirectory() as tmp:
+        assert fwqemu.run_image(good, board="mps2-an386", cwd=Path(tmp), timeout_s=10).returncode == 0
+
+
+@pytest.mark.parametrize("board", ["mps2-an386", "netduinoplus2"])
+def test_uart_smoke(pendulum, board):
+    """Without an input file the image prints its banner and one step's command bits on the UART."""
+    a = pendulum.artifact
+    elf = build(a, target="cortex-m4", board=board).files["elf"]
+    with tempfile.TemporaryDirectory() as tmp:
+        res = fwqemu.run_image(elf, board=board, cwd=Path(tmp), timeout_s=10)
+    assert res.returncode == 0, res.meaning
+    lines = res.uart.splitlines()
+    assert lines[0] == f"gainlink {a.name} {board} sha256:{a.sha256}"
+    host = NativeLoop(a).step(np.full(a.p, 0.5), np.zeros(a.q))
+    bits = " ".join(f"u=0x{int(v):08X}" for v in host.u.view(np.uint32))
+    assert lines[1] == f"step 0x{host.status & 0xFFFFFFFF:08X} {bits}"
+
+
+def test_cli_firmware_build_writes_images_and_size_report(tmp_path, pendulum):
+    art = tmp_path / "gains.json"
+    art.write_text(render(pendulum.artifact.data))
+    out = tmp_path / "fw"
+    for board in ("mps2-an386", "netduinoplus2"):
+        proc = subprocess.run([GAINLINK, "firmware", "build", str(art), "--target", "cortex-m4", "--board", board,
+                               "--out", str(out / board)], capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr
+        d = out / board
+        for ext in ("elf", "bin", "hex", "map"):
+            assert (d / f"gainlink_pendulum.{ext}").stat().st_size > 0
+        report = json.loads((d / "gainlink_pendulum.size.json").read_text())
+        names = {s["name"]: s for s in report["sections"]}
+        assert names[".text"]["flash"] and names[".bss"]["ram"] and not names[".bss"]["flash"]
+        assert report["flash_bytes"] == sum(s["size"] for s in report["sections"] if s["flash"])
+        assert report["symbols"]["gl_gains_default"]["size"] > 0
+        bin_size = (d / "gainlink_pendulum.bin").stat().st_size
+        assert bin_size == report["flash_bytes"], "the .bin holds exactly the flash sections"
+        # the built ELF boots and answers like the host
+        with tempfile.TemporaryDirectory() as tmp:
+            assert fwqemu.run_image(d / "gainlink_pendulum.elf", board=board, cwd=Path(tmp), timeout_s=10).returncode == 0
+    dry = subprocess.run([GAINLINK, "firmware", "flash", str(out / "netduinoplus2"), "--probe", "openocd", "--dry-run"],
+                         capture_output=True, text=True)
+    assert dry.returncode == 0
+    assert dry.stdout.strip().startswith("openocd -f interface/stlink.cfg -f target/stm32f4x.cfg -c 'program ")
+    assert str((out / "netduinoplus2" / "gainlink_pendulum.elf").resolve()) in dry.stdout
+    missing = subprocess.run([GAINLINK, "firmware", "flash", str(tmp_path), "--probe", "pyocd", "--dry-run"],
+                             capture_output=True, text=True)
+    assert missing.returncode == 2 and missing.stderr.count("\n") == 1 and "firmware.json" in missing.stderr
+
+
+def test_replay_cli_with_qemu_engine_matches_native(tmp_path, pendulum):
+    a = pendulum.artifact
+    art = tmp_path / "gains.json"
+    art.write_text(render(a.data))
+    rows = ["y0,y1,r0"] + [",".join(repr(float(v)) for v in np.concatenate([pendulum.Y[k], pendulum.R[k]])) for k in range(300)]
+    (tmp_path / "in.csv").write_text("\n".join(rows) + "\n")
+    outs = {}
+    for engine in ("native", "qemu"):
+        proc = subprocess.run([GAINLINK, "replay", str(art), "--input", str(tmp_path / "in.csv"), "--output",
+                               str(tmp_path / f"{engine}.csv"), "--engine", engine], capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr
+        outs[engine] = (tmp_path / f"{engine}.csv").read_text()
+    assert outs["native"] == outs["qemu"]
