@@ -151,6 +151,10 @@ def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: 
 def _run(args: argparse.Namespace) -> int:
     # Transport options (added by the CAN and MAVLink work) each select their own host application here;
     # without one, the plain loop executable runs.
+    if getattr(args, "can", None):
+        from gainlink.hil.firmware_can import run_firmware_can
+
+        return run_firmware_can(artifact_path=args.artifact, can=args.can)
     return _run_host(args)
 
 
@@ -229,6 +233,7 @@ def _add_run_parser(sub) -> None:
     p.add_argument("--input", help="replay input CSV; without it stdin/stdout are passed to the executable")
     p.add_argument("--output", help="replay output CSV (default: stdout)")
     # Transport options go here, one argument each (--can CONFIG, --mavlink URL), dispatched in _run.
+    p.add_argument("--can", metavar="CONFIG", help="run the CAN node on a python-can bus (TOML/JSON file or inline JSON)")
     p.set_defaults(func=_run)
 
 

@@ -1,0 +1,47 @@
+"""``gainlink firmware run ARTIFACT --can CONFIG``: the firmware's CAN node on a configured bus.
+
+CONFIG is a python-can configuration — a TOML or JSON file, or inline JSON — e.g.
+``{"interface": "socketcan", "channel": "can0", "fd": true}`` or a ``udp_multicast`` group. The
+node runs in the foreground until interrupted; a bench's bridge (``gainlink hil run``) talks to it.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from gainlink.artifact import load
+from gainlink.errors import TransportError
+
+from .can_layout import layout_for
+from .can_transport import config_from_text, firmware_can_argv
+from .controller import firmware_can_executable
+
+
+def read_can_config(text_or_path: str) -> dict:
+    """A python-can configuration from a file (TOML/JSON) or inline JSON."""
+    if text_or_path.lstrip().startswith("{"):
+        return config_from_text(text_or_path, source="--can")
+    path = Path(text_or_path)
+    try:
+        text = path.read_text("utf-8")
+    except FileNotFoundError:
+        raise TransportError(f"CAN configuration {path} not found") from None
+    except IsADirectoryError:
+        raise TransportError(f"CAN configuration {path} is a directory") from None
+    return config_from_text(text, source=str(path))
+
+
+def run_firmware_can(*, artifact_path: str, can: str) -> int:
+    """Build (cached) and exec ``gainlink_can`` for the artifact on the configured bus (does not return)."""
+    artifact = load(artifact_path)
+    config = read_can_config(can)
+    base = config.get("base_id", 0x100)
+    base = int(base, 0) if isinstance(base, str) else int(base)
+    argv = firmware_can_argv(config, layout=layout_for(artifact, fd=bool(config.get("fd", False)), base_id=base))
+    exe = firmware_can_executable(artifact)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.execv(str(exe), [str(exe), *argv])  # the node replaces this process: signals reach it directly
+    return 0  # not reached

@@ -1,0 +1,177 @@
+"""The HIL bridge end to end: the firmware's gainlink_can (a real process) over python-can udp_multicast
+against the nonlinear pendulum FMU; faults, dead and silent peers, bad inputs, real time, the report.
+
+The float64 reference law runs beside the controller on the same samples ("shadow"): the firmware's
+commands must match it to float32 accuracy (relative 1e-4 of the command scale).
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from gainlink.artifact import load
+from gainlink.hil.bridge import run_scenario
+from gainlink.hil.can_transport import CanTransport
+from gainlink.hil.scenario import parse_scenario
+
+from conftest import run_cli
+from test_hil_support import can_firmware, cart_fmu, pendulum_gains, pendulum_scenario, udp_transport, write_scenario  # noqa: F401
+
+
+def _run(data):
+    return run_scenario(parse_scenario(data))
+
+
+def test_lockstep_classic_can_stabilises_the_fmu_pendulum_and_writes_the_report(tmp_path, pendulum_gains,
+                                                                                can_firmware, cart_fmu):
+    scenario = write_scenario(tmp_path / "s.toml", pendulum_scenario(
+        gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(fd=False), duration=10.0,
+        reference={"r_x": {"kind": "step", "at": 1.0, "value": 0.2}}, noise={"theta": 1e-4}, seed=3,
+        disturbances=[{"input": "F", "start": 2.5, "stop": 2.6, "value": 2.0}]))
+    report = tmp_path / "report"
+    res = run_cli("hil", "run", scenario, "--report", report, "--no-progress")
+    assert res.code == 0, res.err
+    m = json.loads((report / "report.json").read_text())
+    for key in ("steps", "lost", "deadline_misses", "latency_us", "saturation_fraction", "outputs_final", "complete"):
+        assert key in m
+    assert m["complete"] is True and m["steps"] == 1000 and m["lost"] == 0 and m["late"] == 0
+    assert m["run"]["transport"]["frames_per_sample"] == 3  # classic CAN: one value per frame
+    assert set(m["latency_us"]) == {"p50", "p99", "max"} and 0 < m["latency_us"]["p50"] <= m["latency_us"]["max"]
+    assert abs(m["outputs_final"]["theta"]) < 0.01
+    assert m["outputs_final"]["x"] == pytest.approx(0.2, abs=0.02)  # integral action tracks the cart step
+    scale = 20.0
+    assert m["shadow_max_abs_du"]["F"] < 1e-4 * scale
+    assert m["tracked"]["r_x"]["iae"] > 0 and m["peak_integrator"]["r_x"] > 0
+    for name in ("outputs.png", "inputs.png", "latency.png"):
+        assert (report / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    summary = (report / "summary.txt").read_text()
+    assert "complete" in summary and str(report / "report.json") in summary
+    assert res.out == summary
+
+
+def test_frame_faults_are_counted_by_sequence_number(pendulum_gains, can_firmware, cart_fmu):
+    # 0.5 s windows at 100 Hz, every 10th sample: 5 samples each.
+    faults = [{"kind": "drop", "start": 0.5, "stop": 1.0, "every": 10},
+              {"kind": "duplicate", "start": 1.0, "stop": 1.5, "every": 10},
+              {"kind": "reorder", "start": 1.5, "stop": 2.0, "every": 10},
+              {"kind": "delay", "start": 2.0, "stop": 2.5, "every": 10, "delay_steps": 2}]
+    r = _run(pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(fd=True),
+                               duration=3.0, faults=faults, step_timeout=0.05))
+    m = r.metrics
+    assert m["faults_injected"] == {"drop": 5, "duplicate": 5, "reorder": 5, "delay": 5}
+    # Dropped samples never get a command; a reordered or delayed sample arrives after a newer one and
+    # the controller ignores it (stale), so it is lost too; duplicates are answered once.
+    assert m["lost"] == 15 and m["deadline_misses"] == 15
+    assert m["late"] == 0
+    lost_steps = np.flatnonzero(~r.trace.got)
+    assert list(lost_steps[:5]) == [50, 60, 70, 80, 90]
+    assert m["complete"] is True and abs(m["outputs_final"]["theta"]) < 0.05
+
+
+def test_silent_controller_ends_the_run_in_bounded_time(pendulum_gains, can_firmware, cart_fmu):
+    t0 = time.monotonic()
+    r = _run(pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=30.0,
+                               faults=[{"kind": "silent", "start": 0.5}], step_timeout=0.05, peer_timeout=0.5))
+    assert time.monotonic() - t0 < 10.0
+    assert r.complete is False and r.metrics["complete"] is False
+    assert "silent" in r.metrics["reason"] and r.metrics["steps"] < 100
+    assert r.metrics["steps"] >= 50
+
+
+def test_crashed_controller_ends_the_run_and_says_so(pendulum_gains, can_firmware, cart_fmu):
+    r = _run(pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=30.0,
+                               faults=[{"kind": "crash", "start": 0.3}], step_timeout=0.05))
+    assert r.complete is False
+    assert "exited with status -9" in r.metrics["reason"] and r.metrics["steps"] <= 32
+
+
+def test_reference_controller_node_matches_the_firmware(pendulum_gains, can_firmware, cart_fmu):
+    common = dict(gains=pendulum_gains, fmu=cart_fmu, duration=1.5)
+    fw = _run(pendulum_scenario(transport=udp_transport(), **common))
+    py = _run(pendulum_scenario(transport=udp_transport(), controller="reference", **common))
+    assert fw.complete and py.complete
+    # The node is the float64 law itself: only the float32 command on the wire rounds it.
+    assert py.metrics["shadow_max_abs_du"]["F"] <= 2.0 ** -23 * np.abs(py.trace.u).max()
+    np.testing.assert_allclose(fw.trace.u, py.trace.u, rtol=0, atol=1e-3)
+
+
+def test_realtime_mode_keeps_its_period(pendulum_gains, can_firmware, cart_fmu):
+    r = _run(pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=1.0,
+                               mode="realtime"))
+    m = r.metrics
+    assert m["complete"] is True and m["steps"] == 100
+    assert 0.95 <= m["wall_s"] <= 1.5  # paced by the clock, not as fast as possible
+    assert m["period_jitter_us"]["p50"] is not None and m["deadline_misses"] <= 5
+    assert abs(m["outputs_final"]["theta"]) < 0.05
+
+
+def _cli_error(*argv):
+    res = run_cli(*argv)
+    lines = res.err.strip().splitlines()
+    return res.code, lines
+
+
+def test_bad_inputs_get_one_line_and_a_nonzero_exit(tmp_path, pendulum_gains, cart_fmu, example_artifacts):
+    base = pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=0.5,
+                             controller="reference")
+    broken = tmp_path / "broken.fmu"
+    broken.write_bytes(b"PK\x03\x04 truncated")
+    cases = {
+        "unknown key": ({**base, "durration": 1.0}, "unknown key(s) durration"),
+        "missing fmu": ({**base, "plant": {"kind": "fmu", "path": str(tmp_path / "none.fmu")}}, "not found"),
+        "broken fmu": ({**base, "plant": {"kind": "fmu", "path": str(broken)}}, str(broken)),
+        "dimension mismatch": ({**base, "plant": {"kind": "fmu", "path": str(cart_fmu), "outputs": ["theta"]}},
+                               "expects m=1 input(s) and p=2 output(s)"),
+        "other artifact": ({**base, "artifact": str(example_artifacts["wood_berry"])}, "expects m=2"),
+        "bus cannot open": ({**base, "transport": {"interface": "socketcan", "channel": "gl_nocan0"}},
+                            "cannot open CAN bus (interface=socketcan, channel=gl_nocan0)"),
+        "bad mode": ({**base, "mode": "fast"}, "mode must be lockstep or realtime"),
+        "bad fault": ({**base, "faults": [{"kind": "gremlins"}]}, "faults[0].kind"),
+    }
+    for name, (data, needle) in cases.items():
+        path = write_scenario(tmp_path / f"{name.replace(' ', '_')}.toml", data)
+        report = tmp_path / f"report_{name.replace(' ', '_')}"
+        code, lines = _cli_error("hil", "run", path, "--report", report, "--no-progress")
+        assert code == 2, (name, lines)
+        assert len(lines) == 1 and lines[0].startswith("gainlink: error:"), (name, lines)
+        assert needle in lines[0], (name, lines)
+        assert not report.exists(), name
+    code, lines = _cli_error("hil", "run", tmp_path / "nope.toml", "--report", tmp_path / "r")
+    assert code == 2 and len(lines) == 1 and "not found" in lines[0]
+
+
+def test_firmware_run_with_can_config_serves_the_bus(tmp_path, pendulum_gains, can_firmware):
+    cfg = udp_transport(fd=False)
+    (tmp_path / "can.json").write_text(json.dumps(cfg))
+    gainlink = [sys.executable, "-c", "import sys; from gainlink.cli import main; sys.exit(main())"]
+    proc = subprocess.Popen([*gainlink, "firmware", "run", str(pendulum_gains), "--can", str(tmp_path / "can.json")],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    art = load(pendulum_gains)
+    transport = CanTransport(cfg, artifact=art)
+    try:
+        assert b"gainlink_can ready" in proc.stdout.readline()
+        transport.open()
+        from gainlink.reference import ReferenceLoop
+
+        law = ReferenceLoop(art)
+        for seq in (7, 8):  # predictor form: the first command is -K xh0 = 0, the second reacts to y
+            y = np.array([0.0, 0.1], dtype=np.float32).astype(float)
+            transport.send_frames(transport.encode_sample(seq=seq, y=y, r=np.zeros(1)))
+            cmd = transport.receive_command(timeout=3.0)
+            want = law.step(y, np.zeros(1)).u
+            assert cmd is not None and cmd.seq == seq
+            np.testing.assert_allclose(cmd.u, want, rtol=1e-4, atol=1e-6)
+        assert cmd.u[0] != 0.0
+    finally:
+        transport.close()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=5) == 0
+        proc.stdout.close()
+        proc.stderr.close()
