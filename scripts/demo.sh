@@ -20,3 +20,12 @@ gainlink simulate "$out/gains.json" --steps 500 --x0 0 0 0.1 0 --ref 0.2 --noise
 
 step "4. replay the record through the float64 reference of the control law"
 gainlink replay "$out/gains.json" --input "$out/samples.csv" --output "$out/reference.csv" --engine reference
+
+step "5. export the generated C (gains header/source, unrolled step) -> $out/c"
+gainlink export "$out/gains.json" --out "$out/c"
+
+step "6. build the host firmware (C11 library, shared object, loop executable) -> $out/fw-host"
+gainlink firmware build "$out/gains.json" --target host --out "$out/fw-host"
+
+step "7. replay the same record through the C loop (float32, ctypes, one call per block)"
+gainlink replay "$out/gains.json" --input "$out/samples.csv" --output "$out/native.csv" --engine native
