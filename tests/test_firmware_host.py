@@ -241,3 +241,48 @@ def test_host_executable_under_asan_ubsan_matches_ctypes(pendulum):
     assert np.array_equal(u, raw["u"]) and np.array_equal(xh, raw["xh"])
     assert int(steps[50][1]) == GL_ERR_NANINF
     assert any(line.startswith("error ") for line in out), "a malformed line is answered, not fatal"
+
+
+def test_golden_script_writes_files_the_c_loop_replays(tmp_path):
+    """scripts/gen_golden.py writes artifacts + reference answers; the C loop replays them within RTOL."""
+    import json
+    import runpy
+
+    from gainlink.artifact import load
+    from gainlink.reference import Trace
+
+    script = Path(__file__).resolve().parents[1] / "scripts" / "gen_golden.py"
+    assert runpy.run_path(str(script))["main"](["--out", str(tmp_path), "--random", "30"]) == 0
+    index = json.loads((tmp_path / "index.json").read_text())
+    assert len(index) == 33 and all(c["saturated_steps"] > 0 for c in index)
+    for entry in index[:3] + index[-3:]:
+        art = load(tmp_path / f"{entry['label']}.gains.json")
+        gold = np.load(tmp_path / f"{entry['label']}.npz")
+        expected = Trace(u=gold["u"], saturated=gold["saturated"], xh=gold["xh"], z=gold["z"], fault=gold["fault"])
+        assert_matches_reference(NativeLoop(art).run(gold["Y"], gold["R"]), expected, art, entry["label"])
+
+
+def test_firmware_run_replays_a_csv_through_the_host_executable(tmp_path, pendulum):
+    import sys
+
+    from gainlink.artifact import render
+
+    a = pendulum.artifact
+    art = tmp_path / "gains.json"
+    art.write_text(render(a.data))
+    Y, R = pendulum.Y[:100].copy(), pendulum.R[:100]
+    Y[7, 1] = np.inf
+    rows = ["y0,y1,r0"] + [",".join(repr(float(v)) for v in np.concatenate([Y[k], R[k]])) for k in range(100)]
+    (tmp_path / "in.csv").write_text("\n".join(rows) + "\n")
+    exe = str(Path(sys.executable).with_name("gainlink"))
+    for engine_args, name in ((["firmware", "run", str(art), "--input", str(tmp_path / "in.csv"), "--output"], "run"),
+                              (["replay", str(art), "--input", str(tmp_path / "in.csv"), "--engine", "native", "--output"], "native")):
+        proc = subprocess.run([exe, *engine_args, str(tmp_path / f"{name}.csv")], capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr
+    run_rows = (tmp_path / "run.csv").read_text().splitlines()
+    native_rows = (tmp_path / "native.csv").read_text().splitlines()
+    assert run_rows[0] == native_rows[0]
+    # the executable prints %.9g (round-trip float32), replay prints the float32 value's repr: same numbers
+    got = np.array([[float(v) for v in r.split(",")] for r in run_rows[1:]], dtype=np.float32)
+    want = np.array([[float(v) for v in r.split(",")] for r in native_rows[1:]], dtype=np.float32)
+    assert np.array_equal(got, want) and got[7, 2] == 1.0  # the fault column
