@@ -161,8 +161,14 @@ def run_foreground(artifact_path: Path, *, url: str, param_file: Path | None = N
     argv = firmware_argv(exe, url=url, storage=param_file or default_param_file(Path(artifact_path)))
     log.info("running %s", " ".join(argv))
     proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL)
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: proc.send_signal(signal.SIGTERM))
     try:
         return proc.wait()
     except KeyboardInterrupt:
         proc.send_signal(signal.SIGINT)
         return proc.wait(timeout=5)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

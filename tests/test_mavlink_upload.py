@@ -217,3 +217,39 @@ def test_upload_listening_for_a_vehicle_that_sends_to_us(exe, retuned):
     finally:
         fw.stop()
     assert "committed gain set" in fw.stderr_text()
+
+
+def test_firmware_run_mavlink_command_persists_beside_the_artifact(exe, pend, retuned, tmp_path):
+    """`gainlink firmware run ARTIFACT --mavlink URL`: upload --persist, stop, start again: values reloaded."""
+    import shutil
+    import signal
+    import subprocess
+    import sys
+
+    art_path = tmp_path / "gains.json"
+    shutil.copy(pend, art_path)
+    new = load(retuned)
+    for round_ in range(2):
+        port = free_udp_port()
+        gainlink = Path(sys.executable).parent / "gainlink"
+        proc = subprocess.Popen([str(gainlink), "firmware", "run", str(art_path), "--mavlink", f"udpin:127.0.0.1:{port}"],
+                                stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            banner = proc.stdout.readline()
+            assert banner.startswith("gainlink-mavlink pendulum sha256:"), banner + proc.stderr.read()
+            if round_ == 0:
+                res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--persist")
+                assert res.code == 0 and "persisted" in res.out, res.err
+            else:
+                res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--dry-run")
+                assert res.code == 0 and "dry run: 0 parameter(s) would change" in res.out
+                Y, R, U = closed_loop(port, new, steps=100)
+                np.testing.assert_allclose(U, reference_u(new, Y, R), atol=1e-4)
+        finally:
+            proc.send_signal(signal.SIGTERM)
+            assert proc.wait(timeout=10) == 0
+            err = proc.stderr.read()
+            proc.stdout.close()
+            proc.stderr.close()
+        assert (tmp_path / "mavlink_params.txt").is_file()
+    assert "loaded parameters from" in err

@@ -155,6 +155,10 @@ def _run(args: argparse.Namespace) -> int:
         from gainlink.hil.firmware_can import run_firmware_can
 
         return run_firmware_can(artifact_path=args.artifact, can=args.can)
+    if getattr(args, "mavlink", None):
+        from gainlink.hil.mavlink_firmware import run_foreground
+
+        return run_foreground(Path(args.artifact), url=args.mavlink, param_file=args.param_file and Path(args.param_file))
     return _run_host(args)
 
 
@@ -234,6 +238,10 @@ def _add_run_parser(sub) -> None:
     p.add_argument("--output", help="replay output CSV (default: stdout)")
     # Transport options go here, one argument each (--can CONFIG, --mavlink URL), dispatched in _run.
     p.add_argument("--can", metavar="CONFIG", help="run the CAN node on a python-can bus (TOML/JSON file or inline JSON)")
+    p.add_argument("--mavlink", metavar="URL", help="run the MAVLink app (parameter server + HIL link) on "
+                   "udpin:HOST:PORT or udpout:HOST:PORT")
+    p.add_argument("--param-file", help="with --mavlink: persisted parameters (default: mavlink_params.txt beside "
+                   "the artifact)")
     p.set_defaults(func=_run)
 
 
