@@ -253,3 +253,34 @@ def test_firmware_run_mavlink_command_persists_beside_the_artifact(exe, pend, re
             proc.stderr.close()
         assert (tmp_path / "mavlink_params.txt").is_file()
     assert "loaded parameters from" in err
+
+
+@pytest.mark.parametrize("shape", [dict(n=3, m=2, p=2, q=0, form="current", anti_windup="none"),
+                                   dict(n=5, m=2, p=3, q=2, form="current", anti_windup="clamp")])
+def test_firmware_and_python_naming_schemes_agree_for_every_structure(shape, tmp_path):
+    """Current-estimator form (M present), no integral action (q = 0: CI KI KAW Z0 absent) and q = 2."""
+    from gainlink.artifact import from_dict
+    from gainlink.hil.mavlink_params import firmware_params
+    from gainlink.random_plants import random_spec
+
+    art = from_dict(design(parse_spec(random_spec(11, **shape))).artifact)
+    fw, port = start_firmware(mavlink_executable(art), None)
+    try:
+        got = read_params(port)
+        res = run_cli("mavlink", "upload", str(_write(art, tmp_path)), "--connect", f"udpout:127.0.0.1:{port}",
+                      "--dry-run")
+    finally:
+        fw.stop()
+    want = firmware_params(art)
+    assert [(p.name, p.ptype) for p in got.values()] == [(s.name, s.ptype) for s in want]
+    for s in want:
+        if s.ptype == 9:
+            assert got[s.name].value == expected_value(art, s.name) == s.value, s.name
+    assert ("GL_M_0_0" in got) and (("GL_KI_1_1" in got) == (art.q == 2)) and (("GL_Z0_0" in got) == (art.q > 0))
+    assert res.code == 0 and "dry run: 0 parameter(s) would change" in res.out
+
+
+def _write(art: Artifact, tmp_path: Path) -> Path:
+    path = tmp_path / "gains.json"
+    artifact_mod.write(path, art.data)
+    return path
