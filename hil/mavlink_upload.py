@@ -317,7 +317,7 @@ def _upload(session: ParamSession, *, plan: _Plan, persist: bool, dry_run: bool,
 
     events.insert(0, failure)
     touched = tuple(c for c in changes if c.name not in out.skipped)  # never-sent ones need no restore
-    rolled_back = _rollback(session, changes=touched, committed=committed, old_hash=old_hash, events=events, plan=plan)
+    rolled_back = _rollback(session, changes=touched, committed=committed, old_hash=old_hash, events=events)
     state = "every changed parameter was restored" if rolled_back else "ROLLBACK INCOMPLETE"
     raise UploadFailed(f"upload failed: {failure}; {state}", events=tuple(events), rolled_back=rolled_back)
 
@@ -342,7 +342,7 @@ def _result_name(code: int) -> str:
 
 def _rollback(
     session: ParamSession, *, changes: tuple[ParamChange, ...], committed: bool, old_hash: int | None,
-    events: list[str], plan: _Plan,
+    events: list[str],
 ) -> bool:
     if not changes and not committed:
         events.append("nothing had been changed")
