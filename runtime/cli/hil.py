@@ -69,8 +69,16 @@ def _fmu(args: argparse.Namespace) -> int:
 def _study(args: argparse.Namespace) -> int:
     from gainlink.hil.study import run_saturation_study
 
+    study_desc = None
+    if args.study:
+        import tomllib
+
+        try:
+            study_desc = tomllib.loads(Path(args.study).read_text("utf-8"))
+        except (OSError, tomllib.TOMLDecodeError) as exc:
+            raise GainlinkError(f"study {args.study}: {exc}") from None
     study = run_saturation_study(spec_path=Path(args.spec) if args.spec else None, report_dir=Path(args.report),
-                                 controller=args.controller, transport=None)
+                                 controller=args.controller, study=study_desc)
     sys.stdout.write(study.summary)
     return 0
 
@@ -121,7 +129,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("study", help="saturation study: anti-windup none vs clamp vs backcalc")
     p.add_argument("--spec", help="plant spec (default: examples/pendulum.toml of the checkout)")
-    p.add_argument("--controller", default="firmware", choices=("firmware", "reference"))
+    p.add_argument("--study", help="study TOML (default: the built-in saturation_study.toml)")
+    p.add_argument("--controller", choices=("firmware", "reference"), help="override the study's controller")
     p.add_argument("--report", required=True, help="report folder")
     p.set_defaults(func=_study)
 

@@ -1,0 +1,185 @@
+"""The saturation study: one spec designed with anti-windup none, clamp and backcalc, each run
+through the bridge into actuator saturation, compared side by side (overshoot, recovery, windup).
+
+The study description is a TOML file (default: the built-in ``scenarios/saturation_study.toml``):
+``spec``, ``modes``, ``duration``, ``controller``, ``[plant]``, ``[transport]``, ``[initial_state]``,
+optionally ``[reference]``.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import tempfile
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gainlink.artifact import from_dict, write
+from gainlink.errors import ScenarioError
+from gainlink.fileio import publish_files
+
+from .bridge import RunResult, run_scenario
+from .paths import project_root
+from .report import plots, report_json, summary_text
+from .scenario import parse_scenario
+
+STUDY_KEYS = {"spec", "modes", "duration", "controller", "plant", "transport", "initial_state", "reference",
+              "step_timeout", "description"}
+MODES = ("none", "clamp", "backcalc")
+
+
+@dataclass(frozen=True)
+class StudyResult:
+    """Per-mode runs, the comparison table (mode -> metrics) and the text summary."""
+
+    runs: dict[str, RunResult]
+    table: dict[str, dict]
+    summary: str
+
+
+def default_study() -> dict:
+    """The built-in study description."""
+    text = resources.files("gainlink.hil").joinpath("scenarios/saturation_study.toml").read_text("utf-8")
+    return tomllib.loads(text)
+
+
+def _load_spec(path: Path) -> dict:
+    try:
+        return tomllib.loads(path.read_text("utf-8"))
+    except FileNotFoundError:
+        raise ScenarioError(f"study: spec {path} not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"study: spec {path} is not valid TOML ({exc})") from None
+
+
+def run_saturation_study(*, report_dir: Path, spec_path: Path | None = None, controller: str | None = None,
+                         transport: dict | None = None, study: dict | None = None) -> StudyResult:
+    """Design, run and compare the anti-windup modes; publish the reports into ``report_dir``.
+
+    Parameters
+    ----------
+    report_dir : Path
+        Output folder: ``study.json``, ``comparison.png``, ``summary.txt`` and one sub-folder per mode.
+    spec_path : Path, optional
+        Plant spec to design from (default: the study's ``spec``).
+    controller : {"firmware", "reference"}, optional
+        Overrides the study's controller.
+    transport : dict, optional
+        Overrides the study's python-can configuration.
+    study : dict, optional
+        A study description (default: :func:`default_study`).
+    """
+    from gainlink.design import design
+    from gainlink.spec import parse_spec
+
+    desc = dict(study or default_study())
+    unknown = sorted(set(desc) - STUDY_KEYS)
+    if unknown:
+        raise ScenarioError(f"study: unknown key(s) {', '.join(unknown)}")
+    if spec_path is None:
+        root = project_root() or Path.cwd()
+        spec_path = root / desc.get("spec", "examples/pendulum.toml")
+    spec = _load_spec(Path(spec_path))
+    modes = list(desc.get("modes", MODES))
+    bad = [m for m in modes if m not in MODES]
+    if bad:
+        raise ScenarioError(f"study: unknown anti-windup mode(s) {', '.join(bad)}")
+    runs: dict[str, RunResult] = {}
+    artifacts: dict[str, Any] = {}
+    files: dict[str, bytes | str] = {}
+    with tempfile.TemporaryDirectory(prefix="gainlink-study-") as tmp:
+        for mode in modes:
+            data = json.loads(json.dumps(spec))
+            data.setdefault("limits", {})["anti_windup"] = mode
+            data["name"] = f"{spec.get('name', 'plant')}_{mode}"[:32]
+            sealed = design(parse_spec(data, source=f"{spec_path} (anti_windup={mode})")).artifact
+            gains = Path(tmp) / mode / "gains.json"
+            gains.parent.mkdir()
+            write(gains, sealed)
+            artifacts[mode] = from_dict(json.loads(gains.read_text()))
+            scenario = parse_scenario({
+                "name": f"saturation_{mode}", "artifact": str(gains), "duration": desc.get("duration", 12.0),
+                "mode": "lockstep", "controller": controller or desc.get("controller", "firmware"),
+                "step_timeout": desc.get("step_timeout", 0.2), "plant": desc["plant"],
+                "transport": transport or desc["transport"], "initial_state": desc.get("initial_state", {}),
+                "reference": desc.get("reference", {}),
+            })
+            result = run_scenario(scenario)
+            runs[mode] = result
+            files[f"{mode}/gains.json"] = gains.read_text()
+            files[f"{mode}/report.json"] = report_json(result)
+            files[f"{mode}/summary.txt"] = summary_text(result)
+            for name, png in plots(result, artifact=artifacts[mode]).items():
+                files[f"{mode}/{name}"] = png
+    table = {mode: _row(r) for mode, r in runs.items()}
+    summary = _summary(table, report_dir=report_dir)
+    files["study.json"] = json.dumps({"modes": table, "initial_state": desc.get("initial_state", {}),
+                                      "spec": str(spec_path)}, sort_keys=True, indent=2, allow_nan=False) + "\n"
+    files["comparison.png"] = _comparison_png(runs, artifacts)
+    files["summary.txt"] = summary
+    publish_files(report_dir, files)
+    return StudyResult(runs=runs, table=table, summary=summary)
+
+
+def _row(r: RunResult) -> dict:
+    m = r.metrics
+    tracked = next(iter(m["tracked"].values()), {})
+    return {"complete": m["complete"], "overshoot_pct": tracked.get("overshoot_pct"),
+            "settling_time_s": tracked.get("settling_time_s"), "iae": tracked.get("iae"),
+            "saturation_fraction": m["saturation_fraction"], "peak_integrator": m.get("peak_integrator", {}),
+            "inputs_peak_abs": m["inputs_peak_abs"], "outputs_final": m["outputs_final"], "lost": m["lost"]}
+
+
+def _fmt(v: Any, unit: str = "") -> str:
+    return "n/a" if v is None else f"{v:.3g}{unit}"
+
+
+def _summary(table: dict, *, report_dir: Path) -> str:
+    lines = ["Saturation study: anti-windup none vs clamp vs backcalc",
+             f"  {'mode':<9} {'overshoot':>10} {'settling':>10} {'IAE':>8} {'saturated':>10} {'peak |z|':>9}"]
+    for mode, row in table.items():
+        sat = max(row["saturation_fraction"].values()) if row["saturation_fraction"] else 0.0
+        z = max(row["peak_integrator"].values()) if row["peak_integrator"] else None
+        lines.append(f"  {mode:<9} {_fmt(row['overshoot_pct'], '%'):>10} {_fmt(row['settling_time_s'], ' s'):>10} "
+                     f"{_fmt(row['iae']):>8} {100 * sat:>9.1f}% {_fmt(z):>9}"
+                     + ("" if row["complete"] else "  (incomplete)"))
+    for label, key in (("overshoot", "overshoot_pct"), ("settling time", "settling_time_s"), ("IAE", "iae")):
+        ranked = [(row[key], mode) for mode, row in table.items() if row[key] is not None and row["complete"]]
+        if ranked:
+            lines.append(f"  lowest {label}: {min(ranked)[1]}")
+    lines.append(f"  report: {report_dir / 'study.json'}")
+    return "\n".join(lines) + "\n"
+
+
+def _comparison_png(runs: dict[str, RunResult], artifacts: dict[str, Any]) -> bytes:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    first = next(iter(artifacts.values()))
+    j = int(np.argmax(np.abs(first.Ci[0]))) if first.q else 0
+    name = first.signals["outputs"][j]
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    for mode, r in runs.items():
+        ax1.plot(r.trace.t, r.trace.y[:, j], label=mode)
+        ax2.plot(r.trace.t, r.trace.u[:, 0], label=mode)
+    ax1.set_ylabel(name)
+    ax1.axhline(0.0, color="k", lw=0.5)
+    ax2.set_ylabel(first.signals["inputs"][0])
+    ax2.axhline(first.u_max[0], color="r", lw=0.8, ls="--")
+    ax2.axhline(first.u_min[0], color="r", lw=0.8, ls="--")
+    ax2.set_xlabel("t [s]")
+    for ax in (ax1, ax2):
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle("Saturation study: anti-windup modes")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
+    plt.close(fig)
+    return buf.getvalue()
