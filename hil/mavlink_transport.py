@@ -194,6 +194,12 @@ class MavlinkTransport(Transport):
 
         return mavlink_executable(artifact)
 
+    def reference_argv(self, artifact_path: Any) -> list[str]:
+        """The Python reference node that speaks this link (``controller = "reference"``)."""
+        import sys
+
+        return [sys.executable, "-m", "gainlink.hil.mavlink_node", str(artifact_path), "--url", self.controller_url]
+
     @property
     def config(self) -> dict:
         """The transport's configuration as a scenario table."""

@@ -70,3 +70,14 @@ def test_bad_mavlink_transport_tables_are_one_clear_error(pend):
         transport_from_config({"kind": "mavlink", "port": "x"}, artifact=art)
     with pytest.raises(TransportError, match="expected udpout:HOST:PORT"):
         transport_from_config({"kind": "mavlink", "url": "tcp:1.2.3.4:5"}, artifact=art)
+
+
+def test_the_python_reference_node_over_mavlink_matches_the_firmware(pend):
+    ref = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, controller="reference"))
+    fw = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}))
+    assert ref.complete and fw.complete, (ref.reason, fw.reason)
+    assert "gainlink.hil.mavlink_node" in ref.info["controller"]["argv"]
+    assert "python reference" in ref.info["controller"]["ready"]
+    assert ref.trace.got.all() and ref.metrics["lost"] == 0
+    np.testing.assert_allclose(ref.trace.u, ref.trace.u_ref, atol=1e-12)  # the node is the reference law
+    np.testing.assert_allclose(fw.trace.u, ref.trace.u, atol=1e-3)  # float32 firmware vs float64 node

@@ -1,0 +1,97 @@
+"""A controller node in Python speaking the gainlink MAVLink HIL link: the float64 reference law on UDP.
+
+``python -m gainlink.hil.mavlink_node ARTIFACT --url udpin:127.0.0.1:14560`` answers like the
+firmware's ``gainlink_mavlink`` does on its HIL link (DEBUG_FLOAT_ARRAY ``GL_SAMPLE``/``GL_RESET``/
+``GL_IDLE`` in, HIL_ACTUATOR_CONTROLS out with the sample's ``time_usec``), with
+:class:`gainlink.reference.ReferenceLoop` as the law. The bridge uses it as ``controller =
+"reference"`` with the ``mavlink`` transport: a real peer process on a real link, without a C
+toolchain. It serves no parameters.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import socket
+import sys
+from typing import Any
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
+
+from gainlink.artifact import load
+from gainlink.reference import ReferenceLoop
+
+from .mavlink_transport import ARRAY_IDLE, ARRAY_RESET, ARRAY_SAMPLE, FLAG_FAULT, FLAG_RESET, FLAG_WATCHDOG, SAT_SHIFT
+
+WATCHDOG_PERIODS = 10  # as the firmware's default (GL_WATCHDOG_PERIODS_DEFAULT)
+
+
+def serve(artifact: Any, *, url: str, out: Any = sys.stdout) -> int:
+    """Run the node until SIGTERM/SIGINT; returns the exit status."""
+    parts = url.split(":")
+    if len(parts) != 3 or parts[0] != "udpin":
+        print(f"gainlink.hil.mavlink_node: expected udpin:HOST:PORT, got {url!r}", file=sys.stderr)
+        return 2
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind((parts[1], int(parts[2])))
+    sock.settimeout(0.2)
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=mavlink2.MAV_COMP_ID_AUTOPILOT1)
+    law = ReferenceLoop(artifact)
+    m, p = artifact.m, artifact.p
+    safe = np.clip(np.zeros(m), artifact.u_min, artifact.u_max)
+    u, idle = safe.copy(), 0
+    stop: list[int] = []
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+    signal.signal(signal.SIGINT, lambda *_: stop.append(1))
+    print(f"gainlink-mavlink {artifact.name} sha256:{artifact.sha256} (python reference) {url}", file=out, flush=True)
+    try:
+        while not stop:
+            try:
+                data, addr = sock.recvfrom(2048)
+            except (TimeoutError, socket.timeout, InterruptedError):
+                continue
+            try:
+                msgs = mav.parse_buffer(bytearray(data)) or []
+            except mavlink2.MAVError:
+                continue
+            for msg in msgs:
+                if msg.get_msgId() != mavlink2.MAVLINK_MSG_ID_DEBUG_FLOAT_ARRAY:
+                    continue
+                flags = 0
+                values = np.asarray(msg.data, dtype=np.float32).astype(np.float64)
+                if msg.array_id == ARRAY_SAMPLE:
+                    res = law.step(values[:p], values[p : p + artifact.q])
+                    u, idle = np.asarray(res.u, dtype=float), 0
+                    flags |= FLAG_FAULT if res.fault else 0
+                    for k, sat in enumerate(np.atleast_1d(res.saturated)):
+                        flags |= int(bool(sat)) << (SAT_SHIFT + k)
+                elif msg.array_id == ARRAY_RESET:
+                    law.reset()
+                    u, idle, flags = safe.copy(), 0, FLAG_RESET
+                elif msg.array_id == ARRAY_IDLE:
+                    idle += 1
+                    if idle >= WATCHDOG_PERIODS:
+                        u, flags = safe.copy(), FLAG_WATCHDOG
+                else:
+                    continue
+                controls = np.zeros(16, dtype=np.float32)
+                controls[:m] = u
+                reply = mavlink2.MAVLink_hil_actuator_controls_message(msg.time_usec, controls.tolist(), 0, flags)
+                sock.sendto(reply.pack(mav), addr)
+    finally:
+        sock.close()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line: ``ARTIFACT --url udpin:HOST:PORT``."""
+    parser = argparse.ArgumentParser(prog="python -m gainlink.hil.mavlink_node", description=__doc__.splitlines()[0])
+    parser.add_argument("artifact")
+    parser.add_argument("--url", required=True, help="udpin:HOST:PORT")
+    args = parser.parse_args(argv)
+    return serve(load(args.artifact), url=args.url)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
