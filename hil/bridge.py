@@ -10,12 +10,11 @@ with ``complete = False`` and the reason.
 from __future__ import annotations
 
 import logging
-import os
 import time
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 
@@ -28,12 +27,12 @@ from .faults import FaultInjector
 from .fmu_plant import plant_from_config
 from .metrics import RunTrace, compute_metrics
 from .plant import Plant, check_dimensions
+from .scheduler import SPIN_NS, Pacer, set_fifo, set_other
 from .scenario import Scenario, profile_values
 from .transport import Transport, transport_from_config
 
 log = logging.getLogger(__name__)
 
-SPIN_NS = 300_000  # realtime: stop sleeping this long before a deadline and spin
 
 
 @dataclass(frozen=True)
@@ -46,21 +45,6 @@ class RunResult:
     complete: bool
     reason: str | None
     info: dict
-
-
-def _set_fifo(pid: int = 0) -> bool:
-    try:
-        os.sched_setscheduler(pid, os.SCHED_FIFO, os.sched_param(50))
-        return True
-    except (PermissionError, OSError, AttributeError):
-        return False
-
-
-def _set_other(pid: int = 0) -> None:
-    try:
-        os.sched_setscheduler(pid, os.SCHED_OTHER, os.sched_param(0))
-    except (PermissionError, OSError, AttributeError, ProcessLookupError):
-        pass
 
 
 def prepare(scenario: Scenario) -> tuple[Artifact, Plant]:
@@ -144,7 +128,8 @@ def _loop(scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Tr
     Y = np.zeros((N, a.p)); U = np.zeros((N, a.m)); SAT = np.zeros((N, a.m), dtype=bool)
     GOT = np.zeros(N, dtype=bool); LAT = np.full(N, np.nan); TICK = np.zeros(N); DUE = np.full(N, np.nan)
     UREF = np.full((N, a.m), np.nan); ZREF = np.full((N, a.q), np.nan); ST = np.zeros(N, dtype=np.int64)
-    X = np.zeros((N, len(plant.state_names)))
+    X = np.full((N, len(plant.state_names)), np.nan)
+    record_states = scenario.shadow  # the plant state costs an FMU call per step: only with the shadow on
 
     plant.reset(initial=scenario.initial_state)
     u = np.clip(np.zeros(a.m), a.u_min, a.u_max)
@@ -154,11 +139,12 @@ def _loop(scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Tr
     fifo = False
     seq_mod = transport.seq_modulo
     if realtime and scenario.sched_fifo:
-        fifo = _set_fifo()
+        fifo = set_fifo()
         if fifo and peer.proc is not None:
-            _set_fifo(peer.proc.pid)
+            set_fifo(peer.proc.pid)
     every = max(1, N // 100)
     t_start = time.perf_counter_ns()
+    pacer = Pacer(period_ns=period_ns)
     k = 0
     try:
         for k in range(N):
@@ -167,21 +153,18 @@ def _loop(scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Tr
             if crash_at is not None and k == crash_at:
                 peer.kill()
             if realtime:
-                due = t_start + (k + 1) * period_ns
-                now = time.perf_counter_ns()
-                if due - now > SPIN_NS:
-                    time.sleep((due - now - SPIN_NS) / 1e9)
-                while time.perf_counter_ns() < due:
-                    pass
-                DUE[k] = due - t_start
-                wait_until = due + period_ns - SPIN_NS // 2
+                due_rel, woke_rel = pacer.wait_next()
+                DUE[k] = due_rel + (pacer.start_ns - t_start)
+                woke = woke_rel + (pacer.start_ns - t_start)
+                wait_until = pacer.start_ns + due_rel + period_ns - SPIN_NS // 2
             y = plant.outputs() + noise[k]
             Y[k] = y
-            X[k] = plant.state()
+            if record_states:
+                X[k] = plant.state()
             seq = k % seq_mod
             frames = injector.apply(k, transport.encode_sample(seq=seq, y=y, r=R[k]))
             sent = time.perf_counter_ns()
-            TICK[k] = sent - t_start
+            TICK[k] = woke if realtime else sent - t_start
             transport.send_frames(frames)
             if shadow is not None:
                 res = shadow.step(y.astype(np.float32).astype(np.float64), R[k].astype(np.float32).astype(np.float64))
@@ -237,7 +220,7 @@ def _loop(scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Tr
             k = N
     finally:
         if fifo:
-            _set_other()
+            set_other()
     steps = k
     trace = RunTrace(t=t[:steps], y=Y[:steps], r=R[:steps], u=U[:steps], sat=SAT[:steps], got=GOT[:steps],
                      latency_ns=LAT[:steps], tick_ns=TICK[:steps], deadline_ns=DUE[:steps], u_ref=UREF[:steps],

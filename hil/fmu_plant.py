@@ -7,9 +7,7 @@ Snapshots use ``fmi2GetFMUstate`` / ``fmi2SetFMUstate`` when the FMU can.
 
 from __future__ import annotations
 
-import ctypes
 import logging
-import os
 import shutil
 import zipfile
 from pathlib import Path

@@ -16,9 +16,10 @@ class RunTrace:
     ``t`` plant time; ``y`` sampled outputs (with noise) (N, p); ``r`` references (N, q); ``u`` the
     command applied after the sample (N, m); ``sat`` the controller's saturation flags (N, m);
     ``got`` whether the command for this sample arrived in time; ``latency_ns`` send -> command
-    (NaN when not got); ``tick_ns`` when the sample was sent, relative to the run start;
+    (NaN when not got); ``tick_ns`` when the step started (realtime: the pacer's wake-up; lockstep: the
+    send), relative to the run start;
     ``deadline_ns`` when it was due (realtime; NaN in lockstep); ``z_ref``/``u_ref`` the float64
-    reference law fed the same samples (NaN when the shadow is off); ``x`` plant states (N, n_plant).
+    reference law fed the same samples and ``x`` the plant states (N, n_plant) (NaN when the shadow is off).
     """
 
     t: np.ndarray

@@ -7,10 +7,8 @@ examples/*.toml, and the FMU is compared with the Python model it must agree wit
 
 from __future__ import annotations
 
-import shutil
 import tomllib
 import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
