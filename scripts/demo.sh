@@ -29,3 +29,6 @@ gainlink firmware build "$out/gains.json" --target host --out "$out/fw-host"
 
 step "7. replay the same record through the C loop (float32, ctypes, one call per block)"
 gainlink replay "$out/gains.json" --input "$out/samples.csv" --output "$out/native.csv" --engine native
+
+step "8. HIL over CAN: the firmware's CAN node vs the nonlinear pendulum FMU, udp_multicast, lockstep, 10 s"
+gainlink hil run pendulum_fmu --artifact "$out/gains.json" --report "$out/hil"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -21,13 +22,26 @@ def _progress_bar(enabled: bool):
                     TimeRemainingColumn(), transient=True)
 
 
+def _scenario_path(name: str) -> Path:
+    """A scenario file, or the name of a built-in one (``gainlink.hil`` package ``scenarios/<name>.toml``)."""
+    path = Path(name)
+    if path.exists() or path.suffix or "/" in name:
+        return path
+    from importlib import resources
+
+    builtin = Path(str(resources.files("gainlink.hil").joinpath(f"scenarios/{name}.toml")))
+    return builtin if builtin.is_file() else path
+
+
 def _run(args: argparse.Namespace) -> int:
     from gainlink.artifact import load
     from gainlink.hil.bridge import run_scenario
     from gainlink.hil.report import summary_text, write_report
     from gainlink.hil.scenario import load_scenario
 
-    scenario = load_scenario(args.scenario)
+    scenario = load_scenario(_scenario_path(args.scenario))
+    if args.artifact:
+        scenario = dataclasses.replace(scenario, artifact_path=Path(args.artifact))
     with _progress_bar(not args.no_progress) as bar:
         callback = None
         if bar is not None:
@@ -110,7 +124,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sub.required = True
 
     p = sub.add_parser("run", help="run a HIL scenario and write its report")
-    p.add_argument("scenario", help="scenario TOML")
+    p.add_argument("scenario", help="scenario TOML, or a built-in scenario name (e.g. pendulum_fmu)")
+    p.add_argument("--artifact", help="use this gains.json instead of the scenario's artifact")
     p.add_argument("--report", required=True, help="report folder (report.json, PNG plots, summary.txt)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_run)
