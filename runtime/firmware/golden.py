@@ -97,10 +97,14 @@ def random_case(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_wi
     return GoldenCase(label=label, artifact=art, Y=Y, R=R, expected=ReferenceLoop(art).run(Y, R))
 
 
-@functools.lru_cache(maxsize=4)
-def random_cases(count: int = 30, *, first_seed: int = 1, N: int = 400) -> list[GoldenCase]:
+def random_cases(count: int = 30, *, first_seed: int = 1, N: int = 400) -> tuple[GoldenCase, ...]:
     """``count`` random designs covering n up to 12, m and p up to 4, q = 0 or more, both forms, every
     anti-windup mode (cycled so every combination of form and mode appears). Cached per arguments."""
+    return _random_cases(count, first_seed, N)
+
+
+@functools.lru_cache(maxsize=4)
+def _random_cases(count: int, first_seed: int, N: int) -> tuple[GoldenCase, ...]:
     combos = list(itertools.product(FORMS, ANTI_WINDUP))
     cases = []
     seed = first_seed
@@ -121,7 +125,7 @@ def random_cases(count: int = 30, *, first_seed: int = 1, N: int = 400) -> list[
         if case is not None and bounded(case):
             cases.append(case)
         seed += 1
-    return cases
+    return tuple(cases)
 
 
 def bounded(case: GoldenCase, *, limit: float = 1e3) -> bool:
@@ -135,9 +139,13 @@ def bounded(case: GoldenCase, *, limit: float = 1e3) -> bool:
     return bool(np.all(np.abs(e.xh) < limit) and np.all(np.abs(e.z) < limit))
 
 
-@functools.lru_cache(maxsize=4)
-def example_cases(examples_dir: Path, *, N: int = 600, seed: int = 7) -> list[GoldenCase]:
+def example_cases(examples_dir: Path, *, N: int = 600, seed: int = 7) -> tuple[GoldenCase, ...]:
     """Golden samples for the shipped examples (``examples/*.toml``), scaled up until some inputs saturate."""
+    return _example_cases(Path(examples_dir).resolve(), N, seed)
+
+
+@functools.lru_cache(maxsize=4)
+def _example_cases(examples_dir: Path, N: int, seed: int) -> tuple[GoldenCase, ...]:
     cases = []
     for name in EXAMPLES:
         art = from_dict(design(load_spec(examples_dir / f"{name}.toml")).artifact)
@@ -152,7 +160,7 @@ def example_cases(examples_dir: Path, *, N: int = 600, seed: int = 7) -> list[Go
                 break
             scale *= 2.0
         cases.append(GoldenCase(label=name, artifact=art, Y=Y, R=R, expected=expected))
-    return cases
+    return tuple(cases)
 
 
 def write_case(case: GoldenCase, out_dir: Path) -> Path:
@@ -165,7 +173,7 @@ def write_case(case: GoldenCase, out_dir: Path) -> Path:
     return path
 
 
-def write_index(cases: list[GoldenCase], out_dir: Path) -> Path:
+def write_index(cases: list[GoldenCase] | tuple[GoldenCase, ...], out_dir: Path) -> Path:
     """Write ``index.json`` listing the cases with their dimensions and artifact sha256."""
     index = [
         {"label": c.label, "sha256": c.artifact.sha256, "n": c.artifact.n, "m": c.artifact.m, "p": c.artifact.p,
