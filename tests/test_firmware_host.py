@@ -290,3 +290,16 @@ def test_firmware_run_replays_a_csv_through_the_host_executable(tmp_path, pendul
     got = np.array([[float(v) for v in r.split(",")] for r in run_rows[1:]], dtype=np.float32)
     want = np.array([[float(v) for v in r.split(",")] for r in native_rows[1:]], dtype=np.float32)
     assert np.array_equal(got, want) and got[7, 2] == 1.0  # the fault column
+
+
+def test_library_uses_no_allocation_io_or_exit(pendulum):
+    """The static library references no malloc/free/printf/exit (nm on the archive built for an artifact)."""
+    lib = build(pendulum.artifact, target="host").files["static"]
+    def symbols(*flags):
+        out = subprocess.run(["nm", *flags, str(lib)], capture_output=True, text=True, check=True).stdout
+        return {line.split()[-1] for line in out.splitlines() if line.strip() and not line.endswith(":")}
+
+    undefined = symbols("-u") - symbols("--defined-only")
+    forbidden = {"malloc", "calloc", "realloc", "free", "printf", "fprintf", "puts", "exit", "abort"}
+    assert not undefined & forbidden, f"library references {sorted(undefined & forbidden)}"
+    assert undefined <= {"fmaf", "memcpy", "memset", "__stack_chk_fail", "_GLOBAL_OFFSET_TABLE_"}, sorted(undefined)

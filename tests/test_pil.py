@@ -58,3 +58,13 @@ def test_pil_rejects_bad_arguments(example_artifacts):
         proc = subprocess.run([GAINLINK, "pil", "run", str(example_artifacts["pendulum"]), "--steps", "10", *extra],
                               capture_output=True, text=True)
         assert proc.returncode == 2 and word in proc.stderr and proc.stderr.count("\n") == 1, proc.stderr
+
+
+def test_pil_against_the_nonlinear_cart_pendulum(example_artifacts):
+    """The firmware in QEMU balances gainlink.hil's nonlinear cart-pendulum from a 0.1 rad tilt."""
+    a = load(example_artifacts["pendulum"])
+    plant = make_plant("cart_pendulum", artifact=a, x0=[0.0, 0.0, 0.1, 0.0])
+    res = run_pil(a, plant=plant, steps=800, reference=[0.2])
+    assert np.all(res.status >= 0)
+    assert abs(res.y[-1, 0] - 0.2) < 0.01 and abs(res.y[-1, 1]) < 0.01
+    assert np.max(np.abs(res.y[:, 1])) < 0.5, "never falls over"

@@ -78,8 +78,11 @@ def _run(cmd: list[str], *, cwd: Path, what: str) -> None:
     log.debug("running %s", " ".join(cmd))
     proc = subprocess.run(cmd, cwd=cwd, stdin=subprocess.DEVNULL, capture_output=True, text=True)
     if proc.returncode != 0:
-        tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-15:])
-        raise ToolchainError(f"{what} failed (exit {proc.returncode}):\n{tail}")
+        lines = (proc.stdout + proc.stderr).strip().splitlines()
+        for line in lines[-15:]:
+            log.error("%s", line)
+        first = next((ln for ln in lines if "error" in ln.lower()), lines[-1] if lines else "")
+        raise ToolchainError(f"{what} failed (exit {proc.returncode}): {first.strip()[:300]}")
 
 
 def build(

@@ -71,13 +71,18 @@ class ArtifactPlant(DiscretePlant):
 
 
 class HilPlant(DiscretePlant):
-    """A continuous plant from ``gainlink.hil``'s registry, advanced by ``Ts`` per sample."""
+    """A plant from ``gainlink.hil``'s registry (e.g. ``cart_pendulum``), advanced by ``Ts`` per sample."""
 
-    def __init__(self, name: str, *, artifact: Artifact) -> None:
+    def __init__(self, name: str, *, artifact: Artifact, x0: np.ndarray | None = None) -> None:
+        from gainlink.hil import models  # noqa: F401 - registers the built-in models
         from gainlink.hil.plant import PLANTS, check_dimensions
 
-        self.plant = PLANTS.create(name, {})
+        self.plant = PLANTS.create(name, {}, artifact=artifact)
         check_dimensions(self.plant, m=artifact.m, p=artifact.p, artifact=artifact.name)
+        names = tuple(self.plant.state_names)
+        if x0 is not None and len(x0) != len(names):
+            raise PlantError(f"--x0 needs {len(names)} values for plant {name} ({', '.join(names)})")
+        self.plant.reset(initial={} if x0 is None else dict(zip(names, (float(v) for v in x0))))
         self.Ts = artifact.Ts
 
     def outputs(self) -> np.ndarray:
@@ -98,7 +103,7 @@ def make_plant(name: str, *, artifact: Artifact, x0: np.ndarray | None = None) -
         if start.shape != (artifact.n,):
             raise PlantError(f"--x0 needs {artifact.n} values for artifact {artifact.name}")
         return ArtifactPlant(artifact, x0=start)
-    return HilPlant(name, artifact=artifact)
+    return HilPlant(name, artifact=artifact, x0=x0)
 
 
 @dataclass(frozen=True)

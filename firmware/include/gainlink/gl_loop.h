@@ -21,13 +21,17 @@
  *
  * Dimensions and structure (n, m, p, q, observer form, anti-windup mode) are compile-time macros from
  * the generated header `gl_gains.h` (`gainlink export ARTIFACT --out DIR`); the numbers are
- * run-time data (::gl_gains_t) and may be replaced while running (see "Gain updates").
+ * run-time data (::gl_gains_t) and may be replaced while running (see "Gain updates"). The export also
+ * writes `gl_step.h`, the step fully unrolled for these dimensions (CMake option GL_STEP_UNROLLED, on by
+ * default; it loads coefficients with `vldmia` on the Cortex-M4F). It performs the same operations in the
+ * same order as the library's generic loops (GL_STEP_UNROLLED=OFF), so both give bit-identical results.
  *
  * @par CMake targets (firmware/CMakeLists.txt, configure with `-DGL_GAINS_DIR=<export dir>`)
  * - `gainlink_loop`  static library: this API (links `m`).
  * - `gainlink_gains` static library: the generated `gl_gains_default` of the artifact in GL_GAINS_DIR,
  *                    PUBLIC include dirs `firmware/include` and GL_GAINS_DIR.
  * - host only: `gainlink_host` (shared library for Python ctypes), `gainlink_loop_host` (executable).
+ * - cortex-m4 only: `gainlink_image` (gainlink_image.elf/.bin/.hex/.map, boards mps2-an386, netduinoplus2).
  * - host only: apps in `firmware/apps/can` and `firmware/apps/mavlink` are added when present; they
  *   link `gainlink_loop gainlink_gains`.
  *
