@@ -177,3 +177,28 @@ def test_missing_and_broken_fmus_are_refused(tmp_path, cart_fmu):
         plant_from_config({"kind": "fmu", "path": str(cart_fmu), "colour": "red"})
     with pytest.raises(PlantError, match="no Real variable"):
         plant_from_config({"kind": "fmu", "path": str(cart_fmu), "outputs": ["x", "phi"]})
+
+
+def test_quadrotor_fmu_matches_its_model_and_the_example():
+    from fmpy.validation import validate_fmu
+
+    from gainlink.hil.fmu_build import build_fmu
+
+    path = build_fmu("quadrotor_lateral")
+    assert validate_fmu(str(path)) == []
+    spec = tomllib.loads((EXAMPLES / "quadrotor_lateral.toml").read_text())
+    lin = linearize(path, at={})
+    assert list(lin.states) == spec["plant"]["states"] and list(lin.outputs) == spec["plant"]["outputs"]
+    np.testing.assert_allclose(lin.A, spec["plant"]["A"], atol=1e-12)
+    np.testing.assert_allclose(lin.B, spec["plant"]["B"], atol=1e-12)
+    fmu, py = FmuPlant(path=path), QuadrotorLateral(step=1e-3)
+    try:
+        for plant in (fmu, py):
+            plant.reset(initial={"phi": 0.05, "y": 0.3})
+        u = np.array([0.01])
+        for _ in range(200):
+            fmu.advance(u=-u, dt=0.005)
+            py.advance(u=-u, dt=0.005)
+        np.testing.assert_allclose(fmu.state(), py.state(), rtol=1e-9, atol=1e-12)
+    finally:
+        fmu.close()
