@@ -80,6 +80,9 @@ class Assembler:
     def __init__(self, codec: FrameCodec) -> None:
         self.codec = codec
         self.partial: dict[int, list] = {}
+        self.single = len(codec.specs) == 1
+        k = codec.size
+        self._bits = [np.array([(b >> i) & 1 for i in range(k)], dtype=bool) for b in range(1 << min(k, 8))]
 
     def feed(self, msg: Any) -> tuple[int, np.ndarray, int, np.ndarray] | None:
         spec = self.codec.by_id.get(msg.arbitration_id)
@@ -89,7 +92,9 @@ class Assembler:
         if len(msg.data) < st.size:
             log.debug("short frame id %#x (%d bytes)", msg.arbitration_id, len(msg.data))
             return None
-        seq, status, bits, *vals = st.unpack_from(bytes(msg.data))
+        seq, status, bits, *vals = st.unpack_from(msg.data)
+        if self.single:  # one frame carries the whole vector (CAN FD, or a single value)
+            return seq, np.array(vals), status, self._bits[bits].copy()
         rec = self.partial.get(seq)
         if rec is None:
             if len(self.partial) > 32:
