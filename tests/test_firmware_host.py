@@ -224,27 +224,38 @@ def _property_loop(a) -> NativeLoop:
     return loop
 
 
+def _sanitized_cases(pendulum):
+    picked = {("pendulum",): pendulum}
+    for case in random_cases(30):
+        picked.setdefault((case.artifact.observer_form, case.artifact.anti_windup, case.artifact.q > 0), case)
+    return list(picked.values())
+
+
 def test_host_executable_under_asan_ubsan_matches_ctypes(pendulum):
-    """The host executable built with -fsanitize=address,undefined runs clean and agrees bit for bit."""
-    a = pendulum.artifact
-    exe = build(a, target="host", options={"GL_SANITIZE": "ON"}).files["exe"]
-    Y, R = pendulum.Y[:200].copy(), pendulum.R[:200]
-    Y[50, 0] = np.nan
-    lines = [" ".join(repr(float(v)) for v in np.concatenate([Y[k], R[k]])) for k in range(200)]
-    script = lines[:100] + ["idle", "stage", "crc"] + lines[100:] + ["reset", "bogus line"]
-    proc = subprocess.run([str(exe)], input="\n".join(script) + "\n", capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr
-    assert "runtime error" not in proc.stderr and "AddressSanitizer" not in proc.stderr
-    out = proc.stdout.splitlines()
-    assert out[0].startswith(f"gainlink-loop {a.name} sha256:{a.sha256}")
-    steps = [line.split() for line in out[1:] if line.startswith("step ")]
-    assert len(steps) == 200
-    raw = NativeLoop(a).run_raw(Y, R)
-    u = np.array([[float(v) for v in s[2:2 + a.m]] for s in steps], dtype=np.float32)
-    xh = np.array([[float(v) for v in s[3 + a.m:3 + a.m + a.n]] for s in steps], dtype=np.float32)
-    assert np.array_equal(u, raw["u"]) and np.array_equal(xh, raw["xh"])
-    assert int(steps[50][1]) == GL_ERR_NANINF
-    assert any(line.startswith("error ") for line in out), "a malformed line is answered, not fatal"
+    """Built with -fsanitize=address,undefined for every compiled variant (forms, anti-windup modes, with and
+    without integrators), the loop executable runs clean and agrees with the ctypes library bit for bit."""
+    for case in _sanitized_cases(pendulum):
+        a = case.artifact
+        exe = build(a, target="host", options={"GL_SANITIZE": "ON"}).files["exe"]
+        N = 120
+        Y, R = case.Y[:N].copy(), case.R[:N]
+        Y[50, 0] = np.nan
+        lines = [" ".join(repr(float(v)) for v in np.concatenate([Y[k], R[k]])) for k in range(N)]
+        script = lines[:60] + ["idle", "stage", "crc"] + lines[60:] + ["reset", "bogus line"]
+        proc = subprocess.run([str(exe)], input="\n".join(script) + "\n", capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        assert "runtime error" not in proc.stderr and "AddressSanitizer" not in proc.stderr, proc.stderr
+        out = proc.stdout.splitlines()
+        assert out[0].startswith(f"gainlink-loop {a.name} sha256:{a.sha256}")
+        steps = [line.split() for line in out[1:] if line.startswith("step ")]
+        assert len(steps) == N
+        raw = NativeLoop(a).run_raw(Y, R)
+        u = np.array([[float(v) for v in s[2:2 + a.m]] for s in steps], dtype=np.float32)
+        xh = np.array([[float(v) for v in s[3 + a.m:3 + a.m + a.n]] for s in steps], dtype=np.float32)
+        z = np.array([[float(v) for v in s[3 + a.m + a.n:]] for s in steps], dtype=np.float32).reshape(N, a.q)
+        assert np.array_equal(u, raw["u"]) and np.array_equal(xh, raw["xh"]) and np.array_equal(z, raw["z"]), case.label
+        assert int(steps[50][1]) == GL_ERR_NANINF
+        assert any(line.startswith("error ") for line in out), "a malformed line is answered, not fatal"
 
 
 def test_golden_script_writes_files_the_c_loop_replays(tmp_path):
