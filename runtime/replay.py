@@ -152,3 +152,44 @@ def replay(artifact: Artifact, input_path: str | Path, output_path: str | Path, 
         raise DataError(f"output folder {out.parent} does not exist")
     atomic_write_text(out, format_trace(trace, samples.t))
     return trace
+
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """How far one replay output is from another (usually the float64 reference's)."""
+
+    steps: int
+    max_abs_u: float
+    max_rel_u: float  # against each input's limit span u_max - u_min
+    sat_mismatches: int
+    fault_mismatches: int
+
+
+def compare_outputs(artifact: Artifact, trace: Trace, other_path: str | Path) -> Comparison:
+    """Compare ``trace`` with a replay output CSV written earlier from the same input.
+
+    The relative error of a command is taken against the input's limit span, the scale on which an
+    actuator error matters.
+    """
+    other_path = Path(other_path)
+    try:
+        text = other_path.read_text("utf-8")
+    except FileNotFoundError:
+        raise DataError(f"comparison file {other_path} not found") from None
+    rows = list(csv.DictReader(io.StringIO(text)))
+    N, m = trace.u.shape
+    if len(rows) != N:
+        raise DataError(f"comparison file {other_path} has {len(rows)} samples, this replay {N}")
+    try:
+        U = np.array([[float(r[f"u{i}"]) for i in range(m)] for r in rows])
+        S = np.array([[int(r[f"sat{i}"]) for i in range(m)] for r in rows], dtype=bool)
+        F = np.array([int(r["fault"]) for r in rows], dtype=bool)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise DataError(f"comparison file {other_path} is not a replay output (bad or missing {exc})") from None
+    diff = np.abs(trace.u - U)
+    span = artifact.u_max - artifact.u_min
+    return Comparison(steps=N, max_abs_u=float(diff.max(initial=0.0)),
+                      max_rel_u=float((diff / span).max(initial=0.0)),
+                      sat_mismatches=int(np.sum(trace.saturated != S)),
+                      fault_mismatches=int(np.sum(trace.fault != F)))

@@ -28,7 +28,8 @@ step "6. build the host firmware (C11 library, shared object, loop executable) -
 gainlink firmware build "$out/gains.json" --target host --out "$out/fw-host"
 
 step "7. replay the same record through the C loop (float32, ctypes, one call per block)"
-gainlink replay "$out/gains.json" --input "$out/samples.csv" --output "$out/native.csv" --engine native
+gainlink replay "$out/gains.json" --input "$out/samples.csv" --output "$out/native.csv" --engine native \
+  --compare "$out/reference.csv" --rtol 1e-4
 
 step "8. HIL over CAN: the firmware's CAN node vs the nonlinear pendulum FMU, udp_multicast, lockstep, 10 s"
 gainlink hil run pendulum_fmu --artifact "$out/gains.json" --report "$out/hil"

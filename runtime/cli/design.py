@@ -14,7 +14,7 @@ from ..analysis import analyze, complex_pairs
 from ..design import design
 from ..errors import DataError, GainlinkError
 from ..fileio import atomic_write_text, publish_files
-from ..replay import engine_names, replay
+from ..replay import compare_outputs, engine_names, replay
 from ..simulate import samples_csv, simulate_linear
 from ..spec import load_spec
 
@@ -51,6 +51,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--input", required=True, help="CSV with y0..y{p-1}, r0..r{q-1} (and optionally t)")
     p.add_argument("--output", required=True, help="CSV to write: u, sat, fault, xh, z")
     p.add_argument("--engine", default="reference", help=f"one of {', '.join(engine_names())}")
+    p.add_argument("--compare", metavar="OTHER.csv",
+                   help="another replay output of the same input (e.g. the reference's) to check against")
+    p.add_argument("--rtol", type=float, default=1e-4,
+                   help="with --compare: largest command error allowed, relative to each input's limit span")
     p.set_defaults(func=cmd_replay)
 
 
@@ -153,8 +157,18 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_replay(args: argparse.Namespace) -> int:
     """``gainlink replay ARTIFACT --input IN.csv --output OUT.csv``."""
     a = artifact_mod.load(args.artifact)
+    if args.compare and not Path(args.compare).is_file():
+        raise DataError(f"comparison file {args.compare} not found")
     trace = replay(a, args.input, args.output, engine=args.engine)
     print(f"replayed {trace.u.shape[0]} samples through {args.engine}: "
           f"{int(trace.saturated.any(axis=1).sum())} saturated, {int(trace.fault.sum())} refused as non-finite; "
-          f"wrote {args.output}", file=sys.stdout)
+          f"wrote {args.output}")
+    if not args.compare:
+        return 0
+    c = compare_outputs(a, trace, args.compare)
+    print(f"against {args.compare}: max |du| = {c.max_abs_u:.3g} ({c.max_rel_u:.3g} of the limit span), "
+          f"saturation flags differ on {c.sat_mismatches}, fault flags on {c.fault_mismatches} of {c.steps} steps")
+    if c.max_rel_u > args.rtol or c.fault_mismatches:
+        print(f"gainlink: error: {args.engine} disagrees with {args.compare} beyond rtol {args.rtol:g}", file=sys.stderr)
+        return 1
     return 0
