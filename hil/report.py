@@ -124,11 +124,12 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
     return files
 
 
-def write_report(result: RunResult, report_dir: str | Path, *, artifact: Any = None) -> Path:
+def write_report(result: RunResult, report_dir: str | Path, *, artifact: Any = None, with_plots: bool = True) -> Path:
     """Compute every report file, then publish them atomically into ``report_dir``."""
     report_dir = Path(report_dir)
     files: dict[str, bytes | str] = {"report.json": report_json(result)}
-    files.update(plots(result, artifact=artifact))
+    if with_plots:
+        files.update(plots(result, artifact=artifact))
     files["summary.txt"] = summary_text(result, report_dir=report_dir)
     publish_files(report_dir, files)
     return report_dir / "report.json"

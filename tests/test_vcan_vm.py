@@ -41,7 +41,7 @@ def test_lockstep_over_vcan0_in_vm_matches_udp_multicast(tmp_path, pendulum_gain
         gains=pendulum_gains, fmu=cart_fmu, duration=duration, firmware=str(can_firmware),
         transport={"interface": "socketcan", "channel": "vcan0", "fd": True}, step_timeout=2.0, peer_timeout=20.0))
     gainlink = Path(sys.executable).parent / "gainlink"
-    run = run_in_vm(f"{gainlink} hil run vcan.toml --report report --no-progress > hil.log 2>&1\n",
+    run = run_in_vm(f"{gainlink} hil run vcan.toml --report report --no-progress --no-plots > hil.log 2>&1\n",
                     workdir=vm_dir, timeout=900, image=image)
     log = (vm_dir / "hil.log").read_text() if (vm_dir / "hil.log").exists() else ""
     assert run.status == 0, f"VM run failed (status {run.status}):\n{log}\n{run.console[-2000:]}"

@@ -50,7 +50,7 @@ def _run(args: argparse.Namespace) -> int:
         result = run_scenario(scenario, progress=callback)
     artifact = load(scenario.artifact_path)
     report_dir = Path(args.report)
-    write_report(result, report_dir, artifact=artifact)
+    write_report(result, report_dir, artifact=artifact, with_plots=not args.no_plots)
     sys.stdout.write(summary_text(result, report_dir=report_dir))
     return 0 if result.complete else 1
 
@@ -128,6 +128,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--artifact", help="use this gains.json instead of the scenario's artifact")
     p.add_argument("--report", required=True, help="report folder (report.json, PNG plots, summary.txt)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-plots", action="store_true", help="report.json and summary.txt only (no PNG plots)")
     p.set_defaults(func=_run)
 
     p = sub.add_parser("dbc", help="write the CAN layout of an artifact as a DBC file")
