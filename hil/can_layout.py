@@ -86,28 +86,29 @@ class CanLayout:
 
     def database(self) -> Any:
         """The layout as a ``cantools.database.Database``."""
-        from cantools.database import Database, Message, Signal
+        from cantools.database import Database, Message, Node, Signal
         from cantools.database.conversion import BaseConversion
 
-        def signals(spec: FrameSpec) -> list:
+        def signals(spec: FrameSpec, receiver: str) -> list:
+            rx = [receiver]
             sig = [
-                Signal("seq", start=0, length=16, byte_order="little_endian", is_signed=False,
+                Signal("seq", start=0, length=16, byte_order="little_endian", is_signed=False, receivers=rx,
                        comment="sample counter (wraps at 65536)"),
-                Signal("status", start=16, length=8, byte_order="little_endian", is_signed=False,
+                Signal("status", start=16, length=8, byte_order="little_endian", is_signed=False, receivers=rx,
                        comment="bit0 fault (non-finite sample), bit1 watchdog"),
-                Signal("sat", start=24, length=8, byte_order="little_endian", is_signed=False,
+                Signal("sat", start=24, length=8, byte_order="little_endian", is_signed=False, receivers=rx,
                        comment="bit i: i-th value of this frame saturated"),
             ]
             for i, name in enumerate(spec.signals):
                 sig.append(Signal(name, start=32 + 32 * i, length=32, byte_order="little_endian", is_signed=True,
-                              conversion=BaseConversion.factory(scale=1, offset=0, is_float=True)))
+                                  receivers=rx, conversion=BaseConversion.factory(scale=1, offset=0, is_float=True)))
             return sig
 
         messages = []
-        for role, specs in (("controller", self.command), ("plant", self.measurement)):
+        for role, peer, specs in (("controller", "plant", self.command), ("plant", "controller", self.measurement)):
             for spec in specs:
                 messages.append(Message(frame_id=spec.arbitration_id, name=spec.name, length=spec.length,
-                                        signals=signals(spec), senders=[role], is_fd=self.fd,
+                                        signals=signals(spec, peer), senders=[role], is_fd=self.fd,
                                         comment=f"sent by the {role}"))
         dbc = None
         if self.fd:  # cantools marks frames CAN FD (VFrameFormat) when the bus type attribute says so
@@ -120,7 +121,9 @@ class CanLayout:
             bus_type = DbcAttributeDefinition("BusType", default_value="CAN", type_name="STRING")
             dbc = DbcSpecifics(attributes=OrderedDict(BusType=DbcAttribute("CAN FD", bus_type)),
                                attribute_definitions=OrderedDict(BusType=bus_type))
-        return Database(messages=messages, version="gainlink-1", dbc_specifics=dbc)
+        nodes = [Node("controller", comment="gainlink firmware (gainlink_can)"),
+                 Node("plant", comment="gainlink HIL bridge")]
+        return Database(messages=messages, nodes=nodes, version="gainlink-1", dbc_specifics=dbc)
 
     def dbc(self) -> str:
         """The DBC text of :meth:`database`."""
