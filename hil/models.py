@@ -142,8 +142,8 @@ class QuadrotorLateral(OdePlant):
 class WoodBerry(Plant):
     """The Wood-Berry distillation column: four first-order lags with pure dead times (minutes).
 
-    ``xD = 12.8 e^{-s}/(16.7 s+1) R - 18.9 e^{-3 s}/(21 s+1) S``,
-    ``xB = 6.6 e^{-7 s}/(10.9 s+1) R - 19.4 e^{-3 s}/(14.4 s+1) S``.
+    ``x_D = 12.8 e^{-s}/(16.7 s+1) reflux - 18.9 e^{-3 s}/(21 s+1) steam``,
+    ``x_B = 6.6 e^{-7 s}/(10.9 s+1) reflux - 19.4 e^{-3 s}/(14.4 s+1) steam`` (names as examples/wood_berry.toml).
     Each lag is discretised exactly (zero-order hold) at the sub-step ``step``; each dead time is an
     input history of ``round(delay / step)`` sub-steps, so choose ``step`` dividing the delays and ``Ts``.
     """
@@ -152,8 +152,8 @@ class WoodBerry(Plant):
     GAIN = np.array([[12.8, -18.9], [6.6, -19.4]])
     TAU = np.array([[16.7, 21.0], [10.9, 14.4]])
     DELAY = np.array([[1.0, 3.0], [7.0, 3.0]])
-    all_inputs = ("R", "S")
-    all_outputs = ("xD", "xB")
+    all_inputs = ("reflux", "steam")
+    all_outputs = ("x_D", "x_B")
 
     def __init__(self, *, parameters: Mapping[str, float] | None = None, inputs: Any = None,
                  outputs: Any = None, step: float = 0.1) -> None:

@@ -129,7 +129,7 @@ def test_wood_berry_has_its_gains_and_dead_times():
     wb = WoodBerry(step=0.1)
     wb.reset(initial={})
     t, xd, xb = [], [], []
-    for k in range(2000):  # unit step on reflux R, 200 min
+    for k in range(2000):  # unit step on reflux, 200 min
         wb.advance(u=np.array([1.0, 0.0]), dt=0.1)
         t.append((k + 1) * 0.1)
         y = wb.outputs()

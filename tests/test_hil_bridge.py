@@ -176,3 +176,15 @@ def test_firmware_run_with_can_config_serves_the_bus(tmp_path, pendulum_gains, c
         assert proc.wait(timeout=5) == 0
         proc.stdout.close()
         proc.stderr.close()
+
+
+def test_wood_berry_with_true_dead_times_tracks_a_step(example_artifacts):
+    # Designed on Pade approximants, run against the column's exact dead times (the built-in model).
+    r = _run({"artifact": str(example_artifacts["wood_berry"]), "duration": 150.0, "controller": "reference",
+              "plant": {"kind": "wood_berry", "step": 0.1}, "transport": udp_transport(),
+              "reference": {"r_x_D": {"kind": "step", "at": 5.0, "value": 1.0}}})
+    m = r.metrics
+    assert r.complete and m["steps"] == 150 and m["lost"] == 0
+    assert m["outputs_final"]["x_D"] == pytest.approx(1.0, abs=0.05)
+    assert m["outputs_final"]["x_B"] == pytest.approx(0.0, abs=0.05)
+    assert m["tracked"]["r_x_D"]["settling_time_s"] is not None
