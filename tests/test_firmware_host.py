@@ -213,6 +213,25 @@ def test_property_commands_within_limits_and_finite(pendulum, data):
     assert not raw["fault"].any()
 
 
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_property_non_finite_samples_never_propagate(pendulum, data):
+    """Any mix of finite and NaN/Inf samples: refused exactly where non-finite, state and commands stay finite."""
+    a = pendulum.artifact
+    N = data.draw(st.integers(min_value=1, max_value=40))
+    anything = st.floats(width=32) | st.sampled_from([np.nan, np.inf, -np.inf])
+    Y = data.draw(hnp.arrays(np.float32, (N, a.p), elements=anything))
+    R = data.draw(hnp.arrays(np.float32, (N, a.q), elements=anything))
+    with np.errstate(invalid="ignore"):  # keep finite samples within a physical range, NaN/Inf as drawn
+        Y = np.where(np.isfinite(Y) & (np.abs(Y) > 1e4), np.sign(Y) * 1e4, Y).astype(np.float32)
+        R = np.where(np.isfinite(R) & (np.abs(R) > 1e4), np.sign(R) * 1e4, R).astype(np.float32)
+    bad = ~(np.isfinite(Y).all(axis=1) & np.isfinite(R).all(axis=1))
+    raw = _property_loop(a).run_raw(Y, R)
+    assert np.array_equal(raw["fault"].astype(bool), bad)
+    assert np.all(np.isfinite(raw["u"])) and np.all(np.isfinite(raw["xh"])) and np.all(np.isfinite(raw["z"]))
+    assert np.all(raw["u"] >= a.u_min.astype(np.float32)) and np.all(raw["u"] <= a.u_max.astype(np.float32))
+
+
 _PROPERTY_LOOPS: dict[str, NativeLoop] = {}
 
 
