@@ -152,3 +152,36 @@ def test_replay_cli_with_qemu_engine_matches_native(tmp_path, pendulum):
         assert proc.returncode == 0, proc.stderr
         outs[engine] = (tmp_path / f"{engine}.csv").read_text()
     assert outs["native"] == outs["qemu"]
+
+
+def test_gain_update_on_target_matches_host(pendulum):
+    """Double-buffered update on the Cortex-M4F: a bad-checksum set is refused, a sealed set swaps in at the
+    next step; the image and the host library agree bit for bit throughout."""
+    import ctypes
+
+    a = pendulum.artifact
+    host = NativeLoop(a)
+    bad = host.default_gains()
+    bad.K[0][0] *= 1.2  # not re-sealed
+    good = host.default_gains()
+    good.K[0][0] *= 1.2
+    good.crc32 = host.crc32(good)
+    sets = [ctypes.string_at(ctypes.addressof(g), ctypes.sizeof(g)) for g in (bad, good)]
+    N = 200
+    tags = np.zeros(N, dtype=np.uint32)
+    tags[[60, 120]] = fwqemu.TAG_STAGE
+    rec = fwqemu.replay(build(a, target="cortex-m4").files["elf"], board="mps2-an386", n=a.n, m=a.m, p=a.p, q=a.q,
+                        Y=pendulum.Y[:N], R=pendulum.R[:N], tags=tags, stage_sets=sets)
+    assert rec["status"][60] == -3 and rec["status"][120] == 0
+    steps = tags == fwqemu.TAG_STEP
+    # the host: same samples, same updates at the same points
+    parts = [host.run_raw(pendulum.Y[:60], pendulum.R[:60])]
+    assert host.stage(bad) == -3
+    parts.append(host.run_raw(pendulum.Y[61:120], pendulum.R[61:120]))
+    assert host.stage(good) == 0
+    parts.append(host.run_raw(pendulum.Y[121:N], pendulum.R[121:N]))
+    u = np.concatenate([p["u"] for p in parts])
+    xh = np.concatenate([p["xh"] for p in parts])
+    assert np.array_equal(rec["u"][steps].view(np.uint32), u.view(np.uint32))
+    assert np.array_equal(rec["xh"][steps].view(np.uint32), xh.view(np.uint32))
+    assert host.active_crc32() == good.crc32

@@ -24,7 +24,7 @@ log = logging.getLogger(__name__)
 IN_MAGIC = 0x31494C47  # "GLI1"
 OUT_MAGIC = 0x314F4C47  # "GLO1"
 MAX_BLOCK = 64
-TAG_STEP, TAG_IDLE = 0, 1
+TAG_STEP, TAG_IDLE, TAG_STAGE = 0, 1, 2
 
 EXIT_CODES = {
     0: "ok",
@@ -136,13 +136,19 @@ def decode_output(blob: bytes, *, n: int, m: int, p: int, q: int) -> tuple[np.nd
 def replay(
     elf: Path, *, board: str, n: int, m: int, p: int, q: int, Y: np.ndarray, R: np.ndarray | None,
     tags: np.ndarray | None = None, watchdog_periods: int = 10, plugin: list[str] | None = None,
+    stage_sets: list[bytes] | None = None,
 ) -> np.ndarray:
-    """Run samples through the image in QEMU (semihosting file I/O); return the output records."""
+    """Run samples through the image in QEMU (semihosting file I/O); return the output records.
+
+    ``stage_sets[K]`` is the raw ``gl_gains_t`` the K-th record tagged :data:`TAG_STAGE` stages.
+    """
     blob = encode_input(Y, R, n=n, m=m, p=p, q=q, watchdog_periods=watchdog_periods, tags=tags)
     N = int(np.asarray(Y).reshape(-1, p).shape[0])
     with tempfile.TemporaryDirectory(prefix="gainlink-qemu-") as tmp:
         work = Path(tmp)
         (work / "gl_in.bin").write_bytes(blob)
+        for k, gains in enumerate(stage_sets or []):
+            (work / f"gl_stage{k}.bin").write_bytes(gains)
         res = run_image(elf, board=board, cwd=work, timeout_s=20.0 + N / 5000.0, plugin=plugin)
         if res.returncode != 0:
             raise FirmwareError(f"firmware image in QEMU ({board}) failed: {res.meaning}")

@@ -7,7 +7,9 @@
  * printed as `u0=0xBITS ...`, exit 0. With it, `gl_out.bin` is opened for writing and the stream is:
  *
  * in:  header {uint32 magic 'GLI1', count, block, watchdog_periods}, then `count` records
- *      {uint32 tag (0 step, 1 idle), float y[GL_P], float r[GL_QA]}
+ *      {uint32 tag (0 step, 1 idle, 2 stage), float y[GL_P], float r[GL_QA]}
+ *      A stage record reads a whole gl_gains_t from `gl_stageK.bin` (K = 0, 1, ... per stage record) and
+ *      hands it to gl_loop_stage(); its output record carries that status and the held command.
  * out: header {uint32 magic 'GLO1', count, n, m, p, q, crc32 of the running gains, 0}, then one record per
  *      input {int32 status, uint32 sat_mask, float u[GL_M], float xh[GL_N], float z[GL_QA]}
  *
@@ -25,6 +27,7 @@
 #define GL_MAX_BLOCK 64u
 #define GL_TAG_STEP 0u
 #define GL_TAG_IDLE 1u
+#define GL_TAG_STAGE 2u
 
 typedef struct {
     uint32_t tag;
@@ -46,6 +49,37 @@ _Static_assert(sizeof(out_record_t) == 4u * (2u + GL_M + GL_N + GL_QA), "out_rec
 static gl_loop_t loop;
 static in_record_t in_buf[GL_MAX_BLOCK];
 static out_record_t out_buf[GL_MAX_BLOCK];
+
+static gl_gains_t staged;
+static uint32_t stage_count;
+
+/** Read gl_stageK.bin (K = number of earlier stage records) into `staged` and stage it. */
+static gl_status_t stage_from_file(void)
+{
+    char name[24] = "gl_stage";
+    char digits[10];
+    size_t count = 0;
+    uint32_t k = stage_count++;
+    do {
+        digits[count++] = (char)('0' + (k % 10u));
+        k /= 10u;
+    } while (k != 0u);
+    size_t pos = 8;
+    while (count > 0u) {
+        name[pos++] = digits[--count];
+    }
+    memcpy(&name[pos], ".bin", 5);
+    int32_t fd = gl_sh_open(name, GL_SH_MODE_RB);
+    if (fd < 0) {
+        return GL_ERR_NULL;
+    }
+    gl_status_t st = GL_ERR_NULL;
+    if (gl_sh_read_all(fd, &staged, sizeof staged) == 0) {
+        st = gl_loop_stage(&loop, &staged);
+    }
+    gl_sh_close(fd);
+    return st;
+}
 
 static void uart_puts(const char *s)
 {
@@ -129,6 +163,9 @@ int main(void)
             gl_status_t st;
             if (in_buf[k].tag == GL_TAG_IDLE) {
                 st = gl_loop_idle(&loop, o->u);
+            } else if (in_buf[k].tag == GL_TAG_STAGE) {
+                st = stage_from_file();
+                memcpy(o->u, loop.u, sizeof o->u);
             } else {
                 st = gl_loop_step(&loop, in_buf[k].y, in_buf[k].r, o->u);
             }
