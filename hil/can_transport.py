@@ -1,7 +1,9 @@
 """CAN transport: python-can bus built from configuration only, frames laid out by :mod:`can_layout`.
 
 ``can.Bus(**config)`` takes the scenario's python-can table unchanged (``interface``, ``channel``,
-``fd``, ``hop_limit``, ...) except gainlink's own keys ``kind`` and ``base_id``. The same code runs
+``fd``, ``hop_limit``, ...) except gainlink's own keys: ``kind``, ``base_id`` (first CAN id) and
+``busy_poll_us`` (poll without sleeping for this long before blocking, on both ends: lower latency for
+100 % of a core while waiting; default 0). The same code runs
 on ``udp_multicast`` (no kernel CAN) and ``socketcan``/``vcan0``.
 """
 
@@ -21,7 +23,7 @@ from .transport import TRANSPORTS, Command, Transport
 
 log = logging.getLogger(__name__)
 
-GAINLINK_KEYS = {"kind", "base_id"}
+GAINLINK_KEYS = {"kind", "base_id", "busy_poll_us"}
 FIRMWARE_INTERFACES = {"udp_multicast", "socketcan"}
 
 
@@ -138,6 +140,7 @@ class CanTransport(Transport):
         self.rx = Assembler(FrameCodec(self.layout.command, fd=self.fd))
         self.bus: Any = None
         self.m = artifact.m
+        self.busy_poll_ns = int(float(self.config.get("busy_poll_us", 0)) * 1000)
 
     def open(self) -> None:
         if self.bus is None:
@@ -164,12 +167,18 @@ class CanTransport(Transport):
     def receive_command(self, *, timeout: float) -> Command | None:
         bus = self.bus
         deadline = time.perf_counter() + timeout
+        spin_until = time.perf_counter_ns() + self.busy_poll_ns
         while True:
             remaining = deadline - time.perf_counter()
             if remaining <= 0:
                 return None
             try:
-                msg = bus.recv(remaining)
+                if self.busy_poll_ns and time.perf_counter_ns() < spin_until:
+                    msg = bus.recv(0.0)
+                    if msg is None:
+                        continue
+                else:
+                    msg = bus.recv(remaining)
             except Exception as exc:
                 raise TransportError(f"CAN receive failed: {exc}") from None
             if msg is None:
@@ -197,6 +206,9 @@ def firmware_can_argv(config: Mapping[str, Any], *, layout: CanLayout) -> list[s
     argv = ["--base-id", str(layout.base_id)]
     if layout.fd:
         argv.append("--fd")
+    spin = int(float(config.get("busy_poll_us", 0)))
+    if spin > 0:
+        argv += ["--spin-us", str(spin)]
     if interface == "socketcan":
         argv += ["--backend", "socketcan", "--channel", str(config.get("channel", "can0"))]
     else:

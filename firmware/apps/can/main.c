@@ -7,6 +7,8 @@
  *   gainlink_can --backend udp --channel 239.74.163.2 [--port 43113] [--hop-limit 0] [--fd] [--base-id 256]
  *   gainlink_can --backend socketcan --channel vcan0 [--fd] [--base-id 256]
  * @endcode
+ * `--spin-us N` polls without sleeping for N us after each answered sample before blocking again
+ * (lower latency in lockstep for the price of a busy core while waiting).
  * Assembles each sample (y then r) from its measurement frames by sequence number, runs gl_loop_step()
  * once per complete, newer sample (duplicates and stale samples are ignored), and answers with the
  * command frames carrying the same sequence number, the status bits and the saturation mask. Prints
@@ -18,6 +20,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "gainlink/gl_loop.h"
 #include "gl_can_layout.h"
@@ -39,9 +42,16 @@ static int usage(const char *why)
     fprintf(stderr,
             "gainlink_can: %s\n"
             "usage: gainlink_can --backend udp|socketcan --channel GROUP|IFACE [--port N] [--hop-limit N] [--fd] "
-            "[--base-id N]\n",
+            "[--base-id N] [--spin-us N]\n",
             why);
     return 2;
+}
+
+static uint64_t now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
 }
 
 static int parse_uint(const char *text, unsigned long max, unsigned long *out)
@@ -60,7 +70,7 @@ int main(int argc, char **argv)
 {
     gl_can_config_t cfg = {.backend = GL_CAN_UDP, .channel = NULL, .port = 43113, .hop_limit = 1, .fd = 0,
                            .rx_lo = 0, .rx_hi = 0};
-    unsigned long base_id = 0x100, v = 0;
+    unsigned long base_id = 0x100, v = 0, spin_us = 0;
     for (int i = 1; i < argc; ++i) {
         const char *a = argv[i];
         const char *next = i + 1 < argc ? argv[i + 1] : NULL;
@@ -91,6 +101,11 @@ int main(int argc, char **argv)
                 return usage("--hop-limit must be 0..255");
             }
             cfg.hop_limit = (int)v;
+            ++i;
+        } else if (strcmp(a, "--spin-us") == 0) {
+            if (parse_uint(next, 1000000, &spin_us) != 0) {
+                return usage("--spin-us must be 0..1000000");
+            }
             ++i;
         } else if (strcmp(a, "--base-id") == 0) {
             if (parse_uint(next, 0x7FF - 0x30, &base_id) != 0) {
@@ -142,9 +157,10 @@ int main(int argc, char **argv)
     const uint32_t all = (meas_frames >= 32u) ? 0xFFFFFFFFu : ((1u << meas_frames) - 1u);
     unsigned long steps = 0, stale = 0, partial_dropped = 0, send_errors = 0;
     int rc = 0;
+    uint64_t spin_until = 0;
     while (!stop_requested) {
         gl_can_frame_t frame;
-        int r = gl_can_link_recv(&link, &frame, 200);
+        int r = gl_can_link_recv(&link, &frame, (spin_us > 0 && now_ns() < spin_until) ? 0 : 200);
         if (r < 0) {
             fprintf(stderr, "gainlink_can: receive failed: %s\n", strerror(errno));
             rc = 1;
@@ -193,6 +209,7 @@ int main(int argc, char **argv)
             }
         }
         last_done = seq;
+        spin_until = now_ns() + 1000ull * spin_us;
         have_done = 1;
         have_cur = 0;
         got = 0;
