@@ -188,3 +188,13 @@ def test_wood_berry_with_true_dead_times_tracks_a_step(example_artifacts):
     assert m["outputs_final"]["x_D"] == pytest.approx(1.0, abs=0.05)
     assert m["outputs_final"]["x_B"] == pytest.approx(0.0, abs=0.05)
     assert m["tracked"]["r_x_D"]["settling_time_s"] is not None
+
+
+def test_busy_polling_changes_timing_only(pendulum_gains, can_firmware, cart_fmu):
+    common = dict(gains=pendulum_gains, fmu=cart_fmu, duration=1.0)
+    plain = _run(pendulum_scenario(transport=udp_transport(), **common))
+    busy = _run(pendulum_scenario(transport={**udp_transport(), "busy_poll_us": 100}, **common))
+    assert "--spin-us" in busy.info["controller"]["argv"]
+    assert plain.complete and busy.complete
+    # Lockstep is deterministic: the same samples give the same commands, however they are waited for.
+    assert np.array_equal(plain.trace.u, busy.trace.u) and np.array_equal(plain.trace.y, busy.trace.y)
