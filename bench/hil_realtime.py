@@ -40,6 +40,13 @@ ROOT = Path(__file__).resolve().parents[1]
 PERIOD_NS = 1_000_000
 
 
+def cpu_steal() -> tuple[int, int]:
+    """(steal, total) jiffies from /proc/stat: time the hypervisor ran something else on our vCPUs."""
+    with open("/proc/stat") as fh:
+        fields = [int(v) for v in fh.readline().split()[1:]]
+    return (fields[7] if len(fields) > 7 else 0), sum(fields)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=60.0)
@@ -76,7 +83,9 @@ def main(argv: list[str] | None = None) -> int:
                                    "shadow": False, "sched_fifo": True, "peer_timeout": 5.0,
                                    "plant": {"kind": "fmu", "path": str(fmu)}, "transport": transport,
                                    "initial_state": {"theta": 0.1}})
+        steal0 = cpu_steal()
         m = run_scenario(scenario).metrics
+        steal1 = cpu_steal()
     jit = m["period_jitter_us"]
     out = {
         "benchmark": "hil_realtime_1khz_udp_multicast",
@@ -95,6 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         "targets": {"p99_jitter_us": 100, "deadline_misses": 0},
         "meets_targets": bool(jit["p99"] is not None and jit["p99"] <= 100 and m["deadline_misses"] == 0),
         "load_average_1min": os.getloadavg()[0],
+        "cpu_steal_fraction": (steal1[0] - steal0[0]) / max(1, steal1[1] - steal0[1]),
         "cpus": os.cpu_count(),
     }
     json.dump(out, sys.stdout, indent=2)
