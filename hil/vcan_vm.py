@@ -87,8 +87,14 @@ def _download_kernel_deb(dest: Path) -> Path:
         return debs[-1]
     if shutil.which("apt-get") is None or shutil.which("apt-cache") is None:
         raise ToolchainError("the vcan VM needs apt-get to download Debian's kernel package")
-    deps = subprocess.run(["apt-cache", "depends", "linux-image-amd64"], capture_output=True, text=True)
-    m = re.search(r"Depends:\s*(linux-image-6\.1\.\S+-amd64)\b", deps.stdout)
+    def lookup() -> re.Match | None:
+        deps = subprocess.run(["apt-cache", "depends", "linux-image-amd64"], capture_output=True, text=True)
+        return re.search(r"Depends:\s*(linux-image-6\.1\.\S+-amd64)\b", deps.stdout)
+
+    m = lookup()
+    if m is None:  # empty package lists on a fresh machine: refresh them once
+        subprocess.run(["apt-get", "update", "-qq"], capture_output=True, text=True)
+        m = lookup()
     if m is None:
         raise ToolchainError("apt-cache knows no linux-image-6.1.*-amd64 package (run apt-get update)")
     log.info("downloading %s for the vcan VM", m.group(1))
