@@ -242,3 +242,30 @@ def test_fmi3_cosimulation_fmu_runs_like_the_fmi2_one(tmp_path, example_artifact
         assert r.complete
         finals.append(r.trace.y)
     np.testing.assert_allclose(finals[0], finals[1], rtol=1e-9, atol=1e-12)
+
+
+def test_linearize_and_fmu_commands_refuse_bad_input_in_one_line(cart_fmu, tmp_path):
+    cs_only = tmp_path / "cs_only.fmu"
+    with zipfile.ZipFile(cart_fmu) as src, zipfile.ZipFile(cs_only, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "modelDescription.xml":
+                text = data.decode()
+                data = (text[:text.index("<ModelExchange")]
+                        + text[text.index("</ModelExchange>") + len("</ModelExchange>"):]).encode()
+            dst.writestr(item, data)
+    out = tmp_path / "spec.toml"
+    cases = [
+        (("linearize", tmp_path / "none.fmu", "--out", out), "not found"),
+        (("linearize", cart_fmu, "--at", "theta", "--out", out), "--at expects NAME=VALUE"),
+        (("linearize", cart_fmu, "--at", "theta=abc", "--out", out), "is not a number"),
+        (("linearize", cart_fmu, "--at", "psi=1", "--out", out), "no Real variable 'psi'"),
+        (("linearize", cs_only, "--out", out), "no Model Exchange interface"),
+        (("linearize", cart_fmu, "--Ts", "0", "--out", out), "--Ts must be positive"),
+        (("hil", "fmu", "no_such_plant"), "no project FMU named 'no_such_plant'"),
+    ]
+    for argv, needle in cases:
+        res = run_cli(*argv)
+        lines = res.err.strip().splitlines()
+        assert res.code == 2 and len(lines) == 1 and needle in lines[0], (argv, res.err)
+    assert not out.exists()
