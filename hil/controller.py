@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -125,6 +126,16 @@ class ControllerProcess:
             sel.close()
         self.ready_line = buf.split(b"\n", 1)[0].decode(errors="replace")
         log.debug("controller ready: %s", self.ready_line)
+        # Keep reading whatever the peer prints later, so a chatty peer never blocks on a full pipe.
+        threading.Thread(target=self._drain, args=(self.proc.stdout,), daemon=True).start()
+
+    @staticmethod
+    def _drain(stream: Any) -> None:
+        try:
+            while stream.read(65536):
+                pass
+        except (OSError, ValueError):
+            pass
 
     def _stderr_hint(self) -> str:
         text = self.stderr_tail()
