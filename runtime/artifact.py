@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ArtifactError, IntegrityError
-from .fileio import atomic_write_text
+from .fileio import atomic_write_text, read_user_file
 
 SCHEMA_VERSION = 1
 
@@ -210,12 +210,7 @@ def load(path: str | Path, *, check_hash: bool = True) -> Artifact:
         The recorded sha256 does not match the content.
     """
     path = Path(path)
-    try:
-        text = path.read_text("utf-8")
-    except FileNotFoundError:
-        raise ArtifactError(f"artifact {path} not found") from None
-    except IsADirectoryError:
-        raise ArtifactError(f"artifact {path} is a directory, not a gains.json file") from None
+    text = read_user_file(path, what="artifact", error=ArtifactError)
     try:
         data = json.loads(text, parse_constant=_reject_constant)
     except json.JSONDecodeError as exc:

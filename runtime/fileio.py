@@ -10,6 +10,24 @@ from typing import Mapping
 from .errors import GainlinkError
 
 
+def read_user_file(path: str | os.PathLike, *, what: str, error: type[GainlinkError], binary: bool = False):
+    """Read a file the user named; a missing file or a folder becomes one ``error`` naming ``what``.
+
+    Returns ``bytes`` when ``binary`` else UTF-8 text.
+    """
+    path = Path(path)
+    try:
+        return path.read_bytes() if binary else path.read_text("utf-8")
+    except FileNotFoundError:
+        raise error(f"{what} {path} not found") from None
+    except IsADirectoryError:
+        raise error(f"{what} {path} is a directory") from None
+    except PermissionError:
+        raise error(f"{what} {path} cannot be read (permission denied)") from None
+    except UnicodeDecodeError:
+        raise error(f"{what} {path} is not UTF-8 text") from None
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     """Write ``data`` to ``path`` through a temporary file in the same folder and a rename."""
     path = Path(path)

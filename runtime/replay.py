@@ -24,7 +24,7 @@ import numpy as np
 
 from .artifact import Artifact
 from .errors import DataError, GainlinkError
-from .fileio import atomic_write_text
+from .fileio import atomic_write_text, read_user_file
 from .reference import ReferenceLoop, Trace
 
 Engine = Callable[[Artifact, np.ndarray, np.ndarray], Trace]
@@ -79,12 +79,7 @@ def read_samples(path: str | Path, artifact: Artifact) -> Samples:
         Missing or unknown columns, non-numeric cells, ragged rows, or no rows.
     """
     path = Path(path)
-    try:
-        text = path.read_text("utf-8")
-    except FileNotFoundError:
-        raise DataError(f"input {path} not found") from None
-    except UnicodeDecodeError:
-        raise DataError(f"input {path} is not a UTF-8 text CSV") from None
+    text = read_user_file(path, what="input", error=DataError)
     rows = list(csv.reader(io.StringIO(text)))
     if not rows:
         raise DataError(f"input {path} is empty")
@@ -173,10 +168,7 @@ def compare_outputs(artifact: Artifact, trace: Trace, other_path: str | Path) ->
     actuator error matters.
     """
     other_path = Path(other_path)
-    try:
-        text = other_path.read_text("utf-8")
-    except FileNotFoundError:
-        raise DataError(f"comparison file {other_path} not found") from None
+    text = read_user_file(other_path, what="comparison file", error=DataError)
     rows = list(csv.DictReader(io.StringIO(text)))
     N, m = trace.u.shape
     if len(rows) != N:

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from .errors import SpecError
+from .fileio import read_user_file
 
 NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 SIGNAL_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -94,12 +95,7 @@ def load_spec(path: str | Path) -> PlantSpec:
         The file is not TOML, or any key, value or dimension is wrong.
     """
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise SpecError(f"spec {path} not found") from None
-    except IsADirectoryError:
-        raise SpecError(f"spec {path} is a directory") from None
+    raw = read_user_file(path, what="spec", error=SpecError, binary=True)
     try:
         data = tomllib.loads(raw.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
