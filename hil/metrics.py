@@ -101,6 +101,7 @@ def compute_metrics(trace: RunTrace, *, artifact: Any, mode: str, late: int, per
         "saturation_fraction": {name: float(v) for name, v in zip(sig["inputs"], sat_frac)},
         "outputs_final": {name: float(v) for name, v in zip(sig["outputs"], trace.y[-1])} if N else {},
         "inputs_peak_abs": {name: float(v) for name, v in zip(sig["inputs"], np.abs(trace.u).max(axis=0))} if N else {},
+        "outputs_peak_abs": {name: float(v) for name, v in zip(sig["outputs"], np.abs(trace.y).max(axis=0))} if N else {},
     }
     if N and np.all(np.isfinite(trace.z_ref)) and a.q:
         out["peak_integrator"] = {name: float(v) for name, v in zip(sig["references"], np.abs(trace.z_ref).max(axis=0))}

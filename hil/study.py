@@ -3,7 +3,8 @@ through the bridge into actuator saturation, compared side by side (overshoot, r
 
 The study description is a TOML file (default: the built-in ``scenarios/saturation_study.toml``):
 ``spec``, ``modes``, ``duration``, ``controller``, ``[plant]``, ``[transport]``, ``[initial_state]``,
-optionally ``[reference]``.
+optionally ``[reference]`` and ``[[disturbances]]``. Built-in: ``saturation_study`` (default: start 1 m
+off the reference) and ``saturation_kick`` (a 25 N, 0.1 s push on the cart).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from .report import plots, report_json, summary_text
 from .scenario import parse_scenario
 
 STUDY_KEYS = {"spec", "modes", "duration", "controller", "plant", "transport", "initial_state", "reference",
-              "step_timeout", "description"}
+              "disturbances", "step_timeout", "description"}
 MODES = ("none", "clamp", "backcalc")
 
 
@@ -42,10 +43,12 @@ class StudyResult:
     summary: str
 
 
-def default_study() -> dict:
-    """The built-in study description."""
-    text = resources.files("gainlink.hil").joinpath("scenarios/saturation_study.toml").read_text("utf-8")
-    return tomllib.loads(text)
+def default_study(name: str = "saturation_study") -> dict:
+    """A built-in study description (``scenarios/<name>.toml`` of the package)."""
+    path = resources.files("gainlink.hil").joinpath(f"scenarios/{name}.toml")
+    if not path.is_file():
+        raise ScenarioError(f"no built-in study {name!r} (saturation_study, saturation_kick)")
+    return tomllib.loads(path.read_text("utf-8"))
 
 
 def _load_spec(path: Path) -> dict:
@@ -107,7 +110,7 @@ def run_saturation_study(*, report_dir: Path, spec_path: Path | None = None, con
                 "mode": "lockstep", "controller": controller or desc.get("controller", "firmware"),
                 "step_timeout": desc.get("step_timeout", 0.2), "plant": desc["plant"],
                 "transport": transport or desc["transport"], "initial_state": desc.get("initial_state", {}),
-                "reference": desc.get("reference", {}),
+                "reference": desc.get("reference", {}), "disturbances": desc.get("disturbances", []),
             })
             result = run_scenario(scenario)
             runs[mode] = result
@@ -132,7 +135,8 @@ def _row(r: RunResult) -> dict:
     return {"complete": m["complete"], "overshoot_pct": tracked.get("overshoot_pct"),
             "settling_time_s": tracked.get("settling_time_s"), "iae": tracked.get("iae"),
             "saturation_fraction": m["saturation_fraction"], "peak_integrator": m.get("peak_integrator", {}),
-            "inputs_peak_abs": m["inputs_peak_abs"], "outputs_final": m["outputs_final"], "lost": m["lost"]}
+            "inputs_peak_abs": m["inputs_peak_abs"], "outputs_peak_abs": m["outputs_peak_abs"],
+            "outputs_final": m["outputs_final"], "lost": m["lost"]}
 
 
 def _fmt(v: Any, unit: str = "") -> str:
@@ -140,13 +144,16 @@ def _fmt(v: Any, unit: str = "") -> str:
 
 
 def _summary(table: dict, *, report_dir: Path) -> str:
+    outputs = list(next(iter(table.values()))["outputs_peak_abs"]) if table else []
     lines = ["Saturation study: anti-windup none vs clamp vs backcalc",
-             f"  {'mode':<9} {'overshoot':>10} {'settling':>10} {'IAE':>8} {'saturated':>10} {'peak |z|':>9}"]
+             f"  {'mode':<9} {'overshoot':>10} {'settling':>10} {'IAE':>8} {'saturated':>10} {'peak |z|':>9}"
+             + "".join(f" {'peak |' + o + '|':>12}" for o in outputs)]
     for mode, row in table.items():
         sat = max(row["saturation_fraction"].values()) if row["saturation_fraction"] else 0.0
         z = max(row["peak_integrator"].values()) if row["peak_integrator"] else None
         lines.append(f"  {mode:<9} {_fmt(row['overshoot_pct'], '%'):>10} {_fmt(row['settling_time_s'], ' s'):>10} "
                      f"{_fmt(row['iae']):>8} {100 * sat:>9.1f}% {_fmt(z):>9}"
+                     + "".join(f" {_fmt(row['outputs_peak_abs'][o]):>12}" for o in outputs)
                      + ("" if row["complete"] else "  (incomplete)"))
     for label, key in (("overshoot", "overshoot_pct"), ("settling time", "settling_time_s"), ("IAE", "iae")):
         ranked = [(row[key], mode) for mode, row in table.items() if row[key] is not None and row["complete"]]

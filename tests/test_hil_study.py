@@ -40,3 +40,16 @@ def test_backcalc_reduces_overshoot_against_none(tmp_path):
         assert (report / mode / "gains.json").is_file()
     assert (report / "comparison.png").read_bytes()[:4] == b"\x89PNG"
     assert "lowest overshoot: backcalc" in result.summary
+
+
+def test_backcalc_catches_a_kicked_pendulum_that_none_and_clamp_lose(tmp_path):
+    result = run_saturation_study(report_dir=tmp_path / "kick", transport=udp_transport(fd=True),
+                                  study=default_study("saturation_kick"))
+    table = result.table
+    for mode in ("none", "clamp"):  # the command stays pinned at a limit and the pendulum falls
+        assert table[mode]["outputs_peak_abs"]["theta"] > 1.57, mode
+        assert table[mode]["saturation_fraction"]["F"] > 0.5, mode
+    back = table["backcalc"]
+    assert back["outputs_peak_abs"]["theta"] < 1.0 and abs(back["outputs_final"]["theta"]) < 0.01
+    assert 0 < back["saturation_fraction"]["F"] < 0.05 and abs(back["outputs_final"]["x"]) < 0.05
+    assert "lowest IAE: backcalc" in result.summary

@@ -83,8 +83,12 @@ def _fmu(args: argparse.Namespace) -> int:
 def _study(args: argparse.Namespace) -> int:
     from gainlink.hil.study import run_saturation_study
 
+    from gainlink.hil.study import default_study
+
     study_desc = None
-    if args.study:
+    if args.study and not Path(args.study).exists() and "/" not in args.study and not args.study.endswith(".toml"):
+        study_desc = default_study(args.study)
+    elif args.study:
         import tomllib
 
         try:
@@ -145,7 +149,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("study", help="saturation study: anti-windup none vs clamp vs backcalc")
     p.add_argument("--spec", help="plant spec (default: examples/pendulum.toml of the checkout)")
-    p.add_argument("--study", help="study TOML (default: the built-in saturation_study.toml)")
+    p.add_argument("--study", help="study TOML, or a built-in study: saturation_study (default), saturation_kick")
     p.add_argument("--controller", choices=("firmware", "reference"), help="override the study's controller")
     p.add_argument("--report", required=True, help="report folder")
     p.set_defaults(func=_study)
