@@ -196,4 +196,13 @@ def test_margins_are_real_stability_boundaries(example_artifacts):
     assert rho(1.0) < 1
     assert rho(up * 0.99) < 1 < rho(up * 1.01)
     assert rho(down * 1.01) < 1 < rho(down * 0.99)
-    assert 0 < mg["phase_margin_deg"] < 90
+    # Phase margin: evaluate the loop C (zI - A)^-1 B on the unit circle independently and find |L| = 1.
+    w = np.linspace(1e-3, np.pi / a.Ts * 0.999, 100_000)
+    z = np.exp(1j * w * a.Ts)
+    n = A.shape[0]
+    resp = np.array([(-C @ np.linalg.solve(zz * np.eye(n) - A, B))[0, 0] for zz in z[::10]])
+    cross = np.flatnonzero(np.diff(np.sign(np.abs(resp) - 1)))
+    assert len(cross) == 1
+    pm = 180 - abs(np.degrees(np.angle(resp[cross[0]])))
+    assert mg["phase_margin_deg"] == pytest.approx(pm, abs=0.2)
+    assert mg["gain_crossover_rad_s"] == pytest.approx(w[::10][cross[0]], rel=1e-3)
