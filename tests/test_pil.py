@@ -54,7 +54,7 @@ def test_pil_cli_summary_and_files(example_artifacts, tmp_path):
 
 
 def test_pil_rejects_bad_arguments(example_artifacts):
-    for extra, word in ((["--reference", "1,2"], "--reference"), (["--plant", "no_such_plant"], "no_such_plant")):
+    for extra, word in ((["--reference", "1", "2"], "--reference"), (["--plant", "no_such_plant"], "no_such_plant")):
         proc = subprocess.run([GAINLINK, "pil", "run", str(example_artifacts["pendulum"]), "--steps", "10", *extra],
                               capture_output=True, text=True)
         assert proc.returncode == 2 and word in proc.stderr and proc.stderr.count("\n") == 1, proc.stderr

@@ -164,15 +164,6 @@ def _run(args: argparse.Namespace) -> int:
 
 # --- pil run ---------------------------------------------------------------------------------------
 
-def _floats(text: str | None, what: str) -> list[float] | None:
-    if text is None:
-        return None
-    try:
-        return [float(v) for v in text.split(",")]
-    except ValueError:
-        raise GainlinkError(f"{what} must be comma-separated numbers, got {text!r}") from None
-
-
 def _pil(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -181,10 +172,10 @@ def _pil(args: argparse.Namespace) -> int:
     from gainlink.firmware.pil import make_plant, reference_closed_loop, run_pil
 
     artifact = load(args.artifact)
-    ref = _floats(args.reference, "--reference")
+    ref = args.reference
     if ref is not None and len(ref) != artifact.q:
         raise GainlinkError(f"--reference needs {artifact.q} values for artifact {artifact.name}")
-    x0 = _floats(args.x0, "--x0")
+    x0 = args.x0
     plant = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))
     result = run_pil(artifact, plant=plant, steps=args.steps, reference=ref, board=args.board)
     summary = {"artifact": artifact.name, "sha256": artifact.sha256, "board": args.board, "plant": args.plant,
@@ -265,7 +256,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="'artifact' (the artifact's discrete model; alias 'linear') or a gainlink.hil plant name")
     p.add_argument("--steps", type=int, required=True, help="number of samples")
     p.add_argument("--board", choices=BOARDS, default="mps2-an386")
-    p.add_argument("--reference", help="constant reference, comma-separated (q values)")
-    p.add_argument("--x0", help="initial plant state for the artifact plant, comma-separated (n values)")
+    p.add_argument("--reference", type=float, nargs="+", help="constant reference (q values)")
+    p.add_argument("--x0", type=float, nargs="+", help="initial plant state (n values)")
     p.add_argument("--out", help="folder for pil.csv and pil.json")
     p.set_defaults(func=_pil)
