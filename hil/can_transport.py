@@ -9,6 +9,7 @@ on ``udp_multicast`` (no kernel CAN) and ``socketcan``/``vcan0``.
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import time
@@ -162,7 +163,12 @@ class CanTransport(Transport):
             for f in frames:
                 bus.send(f)
         except Exception as exc:
-            raise TransportError(f"CAN send failed: {exc}") from None
+            hint = ""
+            if isinstance(exc, OSError) and exc.errno == errno.ENETUNREACH and \
+                    self.config.get("interface") == "udp_multicast":
+                hint = (" (no route for multicast: on a loopback-only machine run "
+                        "'ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo')")
+            raise TransportError(f"CAN send failed: {exc}{hint}") from None
 
     def receive_command(self, *, timeout: float) -> Command | None:
         bus = self.bus
