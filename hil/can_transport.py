@@ -28,6 +28,16 @@ GAINLINK_KEYS = {"kind", "base_id", "busy_poll_us"}
 FIRMWARE_INTERFACES = {"udp_multicast", "socketcan"}
 
 
+def _multicast_hint(exc: BaseException, config: Mapping[str, Any]) -> str:
+    """A how-to-fix hint when udp_multicast fails for want of a multicast route (loopback-only machines)."""
+    cause = exc if isinstance(exc, OSError) else exc.__cause__  # python-can wraps the socket error
+    if config.get("interface") == "udp_multicast" and isinstance(cause, OSError) and \
+            cause.errno in (errno.ENETUNREACH, errno.ENODEV, errno.EADDRNOTAVAIL):
+        return (f" ({cause.strerror}: no multicast route; on a loopback-only machine run "
+                "'ip link set lo up multicast on; ip route add 224.0.0.0/4 dev lo')")
+    return ""
+
+
 def bus_kwargs(config: Mapping[str, Any]) -> dict:
     """The python-can keyword arguments of a transport table (gainlink's own keys removed)."""
     return {k: v for k, v in config.items() if k not in GAINLINK_KEYS}
@@ -44,7 +54,7 @@ def open_bus(config: Mapping[str, Any]) -> Any:
         return can.Bus(**kwargs)
     except Exception as exc:  # python-can raises CanError, OSError, ValueError, ImportError by backend
         where = ", ".join(f"{k}={kwargs[k]}" for k in ("interface", "channel") if k in kwargs)
-        raise TransportError(f"cannot open CAN bus ({where}): {exc}") from None
+        raise TransportError(f"cannot open CAN bus ({where}): {exc}{_multicast_hint(exc, kwargs)}") from None
 
 
 class FrameCodec:
@@ -163,12 +173,7 @@ class CanTransport(Transport):
             for f in frames:
                 bus.send(f)
         except Exception as exc:
-            hint = ""
-            if isinstance(exc, OSError) and exc.errno == errno.ENETUNREACH and \
-                    self.config.get("interface") == "udp_multicast":
-                hint = (" (no route for multicast: on a loopback-only machine run "
-                        "'ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo')")
-            raise TransportError(f"CAN send failed: {exc}{hint}") from None
+            raise TransportError(f"CAN send failed: {exc}{_multicast_hint(exc, self.config)}") from None
 
     def receive_command(self, *, timeout: float) -> Command | None:
         bus = self.bus

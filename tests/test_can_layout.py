@@ -124,3 +124,33 @@ def test_bus_that_cannot_open_is_one_clear_error(pendulum_gains):
     transport = CanTransport({"interface": "socketcan", "channel": "gl_no_such_can0"}, artifact=load(pendulum_gains))
     with pytest.raises(TransportError, match=r"cannot open CAN bus \(interface=socketcan, channel=gl_no_such_can0\)"):
         transport.open()
+
+
+def test_udp_multicast_without_a_route_says_how_to_add_one(pendulum_gains):
+    # A loopback-only network namespace (a real kernel one: unshare -n, as root like CI) has no multicast route.
+    import shutil
+    import subprocess
+    import sys
+
+    if shutil.which("unshare") is None:
+        pytest.skip("util-linux unshare is part of Debian's base system")
+    code = (
+        "import sys, numpy as np\n"
+        "from gainlink.artifact import load\n"
+        "from gainlink.errors import TransportError\n"
+        "from gainlink.hil.can_transport import CanTransport\n"
+        "t = CanTransport({'interface': 'udp_multicast', 'channel': '239.74.1.1', 'port': 45678, 'hop_limit': 0},"
+        " artifact=load(sys.argv[1]))\n"
+        "try:\n"
+        "    t.open(); t.send_frames(t.encode_sample(seq=0, y=np.zeros(2), r=np.zeros(1))); print('sent')\n"
+        "except TransportError as e:\n"
+        "    print(e)\n"
+        "finally:\n"
+        "    t.close()\n")
+    bare = subprocess.run(["unshare", "-n", "sh", "-c", 'ip link set lo up; exec "$0" -c "$1" "$2"',
+                           sys.executable, code, str(pendulum_gains)], capture_output=True, text=True, timeout=60)
+    assert "ip route add 224.0.0.0/4 dev lo" in bare.stdout, bare.stdout + bare.stderr
+    routed = subprocess.run(["unshare", "-n", "sh", "-c",
+                             'ip link set lo up multicast on && ip route add 224.0.0.0/4 dev lo && exec "$0" -c "$1" "$2"',
+                             sys.executable, code, str(pendulum_gains)], capture_output=True, text=True, timeout=60)
+    assert routed.stdout.strip() == "sent", routed.stdout + routed.stderr
