@@ -13,6 +13,7 @@ from pathlib import Path
 
 from gainlink.artifact import load
 from gainlink.errors import TransportError
+from gainlink.fileio import read_user_file
 
 from .can_layout import layout_for
 from .can_transport import config_from_text, firmware_can_argv
@@ -24,12 +25,7 @@ def read_can_config(text_or_path: str) -> dict:
     if text_or_path.lstrip().startswith("{"):
         return config_from_text(text_or_path, source="--can")
     path = Path(text_or_path)
-    try:
-        text = path.read_text("utf-8")
-    except FileNotFoundError:
-        raise TransportError(f"CAN configuration {path} not found") from None
-    except IsADirectoryError:
-        raise TransportError(f"CAN configuration {path} is a directory") from None
+    text = read_user_file(path, what="CAN configuration", error=TransportError)
     return config_from_text(text, source=str(path))
 
 

@@ -37,6 +37,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from gainlink.errors import ScenarioError
+from gainlink.fileio import read_user_file
 
 TOP_KEYS = {"name", "artifact", "plant", "transport", "duration", "mode", "controller", "step_timeout",
             "peer_timeout", "period", "sched_fifo", "seed", "shadow", "initial_state", "reference", "noise",
@@ -208,12 +209,7 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
 def load_scenario(path: str | Path) -> Scenario:
     """Read and check a scenario TOML file."""
     path = Path(path)
-    try:
-        text = path.read_text("utf-8")
-    except FileNotFoundError:
-        raise ScenarioError(f"scenario {path} not found") from None
-    except IsADirectoryError:
-        raise ScenarioError(f"scenario {path} is a directory") from None
+    text = read_user_file(path, what="scenario", error=ScenarioError)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -22,7 +22,7 @@ import numpy as np
 
 from gainlink.artifact import from_dict, write
 from gainlink.errors import ScenarioError
-from gainlink.fileio import publish_files
+from gainlink.fileio import publish_files, read_user_file
 
 from .bridge import RunResult, run_scenario
 from .paths import project_root
@@ -52,10 +52,9 @@ def default_study(name: str = "saturation_study") -> dict:
 
 
 def _load_spec(path: Path) -> dict:
+    text = read_user_file(path, what="study: spec", error=ScenarioError)
     try:
-        return tomllib.loads(path.read_text("utf-8"))
-    except FileNotFoundError:
-        raise ScenarioError(f"study: spec {path} not found") from None
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"study: spec {path} is not valid TOML ({exc})") from None
 
