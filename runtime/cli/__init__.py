@@ -25,7 +25,8 @@ class _OneLineParser(argparse.ArgumentParser):
     """An ArgumentParser whose usage errors are one line and exit status 2."""
 
     def error(self, message: str) -> None:  # noqa: D401 - argparse API
-        self.exit(EXIT_USAGE, f"gainlink: error: {self.prog}: {message}\n")
+        where = self.prog.removeprefix("gainlink").strip()
+        self.exit(EXIT_USAGE, f"gainlink: error: {where + ': ' if where else ''}{message}\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
