@@ -44,9 +44,15 @@ def mavlink_executable(artifact: Artifact, *, build_root: Path | None = None) ->
     return exe
 
 
-def firmware_argv(exe: Path, *, url: str, storage: Path | None = None, sysid: int = 1, compid: int = 1) -> list[str]:
-    """Command line of the MAVLink app."""
-    argv = [str(exe), "--url", url, "--sysid", str(sysid), "--compid", str(compid)]
+def spin_argv(busy_poll_us: int) -> list[str]:
+    """The app's busy-poll option for a transport's ``busy_poll_us`` (nothing when 0: block at once)."""
+    return ["--spin-us", str(int(busy_poll_us))] if busy_poll_us > 0 else []
+
+
+def firmware_argv(exe: Path, *, url: str, storage: Path | None = None, sysid: int = 1, compid: int = 1,
+                  busy_poll_us: int = 0) -> list[str]:
+    """Command line of the MAVLink app (``busy_poll_us`` > 0 adds ``--spin-us``)."""
+    argv = [str(exe), "--url", url, "--sysid", str(sysid), "--compid", str(compid), *spin_argv(busy_poll_us)]
     if storage is not None:
         argv += ["--storage", str(storage)]
     return argv
@@ -65,10 +71,14 @@ class MavlinkFirmware:
         Parameter file it persists to and loads at start.
     ready_timeout : float
         Seconds to wait for its ready line.
+    busy_poll_us : int
+        Poll without sleeping this long after each datagram before blocking again (``--spin-us``;
+        0, the default: block at once).
     """
 
-    def __init__(self, exe: Path, *, url: str, storage: Path | None = None, ready_timeout: float = 10.0):
-        self.argv = firmware_argv(exe, url=url, storage=storage)
+    def __init__(self, exe: Path, *, url: str, storage: Path | None = None, ready_timeout: float = 10.0,
+                 busy_poll_us: int = 0):
+        self.argv = firmware_argv(exe, url=url, storage=storage, busy_poll_us=busy_poll_us)
         self.ready_timeout = ready_timeout
         self.proc: subprocess.Popen | None = None
         self.ready_line = ""

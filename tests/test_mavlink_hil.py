@@ -70,6 +70,22 @@ def test_bad_mavlink_transport_tables_are_one_clear_error(pend):
         transport_from_config({"kind": "mavlink", "port": "x"}, artifact=art)
     with pytest.raises(TransportError, match="expected udpout:HOST:PORT"):
         transport_from_config({"kind": "mavlink", "url": "tcp:1.2.3.4:5"}, artifact=art)
+    with pytest.raises(TransportError, match="busy_poll_us must be an integer"):
+        transport_from_config({"kind": "mavlink", "busy_poll_us": -5}, artifact=art)
+
+
+def test_busy_polling_over_mavlink_changes_timing_only(pend):
+    common = dict(duration=1.0, shadow=False)
+    plain = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, **common))
+    busy = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port(), "busy_poll_us": 100}, **common))
+    assert "--spin-us" not in plain.info["controller"]["argv"]
+    assert busy.info["controller"]["argv"][-2:] == ["--spin-us", "100"]
+    assert busy.info["transport"]["busy_poll_us"] == 100
+    assert plain.complete and busy.complete, (plain.reason, busy.reason)
+    assert plain.metrics["lost"] == 0 and busy.metrics["lost"] == 0 and busy.metrics["steps"] == 100
+    # Lockstep is deterministic: the same samples give the same commands, however they are waited for.
+    np.testing.assert_array_equal(plain.trace.u, busy.trace.u)
+    np.testing.assert_array_equal(plain.trace.y, busy.trace.y)
 
 
 def test_the_python_reference_node_over_mavlink_matches_the_firmware(pend):
