@@ -122,6 +122,7 @@ class ParamSession:
         self.window = max(1, int(window))
         self.timeout = float(timeout)
         self.retries = int(retries)
+        self.resent = 0  # every request sent again after a timeout (reads, list, sets, commands)
 
     # -- replies -------------------------------------------------------------------------------
     def _ours(self, m) -> bool:
@@ -183,6 +184,7 @@ class ParamSession:
                         missing[name] = f"no PARAM_VALUE after {f.attempts} requests"
                         del flying[name]
                     else:
+                        self.resent += 1
                         send(name, f.attempts + 1)
         return values, missing
 
@@ -219,11 +221,13 @@ class ParamSession:
                 quiet_since = time.monotonic()
             elif count is not None and time.monotonic() - quiet_since > self.timeout:
                 for idx in [i for i in range(count) if i not in by_index][: self.window]:
+                    self.resent += 1
                     self.link.send(
                         mavlink2.MAVLink_param_request_read_message(self.target_system, self.target_component, b"", idx)
                     )
                 quiet_since = time.monotonic()
             elif count is None and time.monotonic() - quiet_since > 4 * self.timeout:
+                self.resent += 1
                 self.link.send(mavlink2.MAVLink_param_request_list_message(self.target_system, self.target_component))
                 quiet_since = time.monotonic()
         return {pv.name: pv for pv in sorted(by_index.values(), key=lambda p: p.index)}
@@ -264,6 +268,7 @@ class ParamSession:
                 return
             f.attempts += 1
             retries += 1
+            self.resent += 1
             send(f)
 
         while pending or flying:
@@ -315,6 +320,7 @@ class ParamSession:
         p = (tuple(params) + (0.0,) * 7)[:7]
         per_try = self.timeout * 4 if wait is None else wait
         for confirmation in range(self.retries + 1):
+            self.resent += confirmation > 0
             self.link.send(
                 mavlink2.MAVLink_command_long_message(self.target_system, self.target_component, command, confirmation, *p)
             )

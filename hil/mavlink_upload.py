@@ -78,7 +78,7 @@ class UploadResult:
     sent : int
         PARAM_SETs sent, retries included.
     retries : int
-        Re-sends after a timeout or a mismatched echo.
+        Requests sent again after a timeout or a mismatched echo, in every phase (reads, sets, commit, persist).
     committed : bool
         Whether a GL_HASH commit applied the set to the loop.
     persisted : bool
@@ -279,25 +279,25 @@ def _upload(session: ParamSession, *, plan: _Plan, persist: bool, dry_run: bool,
     old_hash = int(current[HASH_ID].value) if plan.commit else None
     need_commit = plan.commit and (bool(changes) or old_hash != new_hash)
 
-    def result(*, verified: int, sent: int, retries: int, committed: bool, persisted: bool) -> UploadResult:
+    def result(*, verified: int, sent: int, committed: bool, persisted: bool) -> UploadResult:
         return UploadResult(
             target=target, encoding=session.encoding, changes=changes, unchanged=len(plan.specs) - len(changes),
-            verified=verified, sent=sent, retries=retries, committed=committed, persisted=persisted,
+            verified=verified, sent=sent, retries=session.resent, committed=committed, persisted=persisted,
             dry_run=dry_run, seconds=time.perf_counter() - t0,
         )
 
     if dry_run:
-        return result(verified=0, sent=0, retries=0, committed=False, persisted=False)
+        return result(verified=0, sent=0, committed=False, persisted=False)
 
     events: list[str] = []
-    sent = retries = verified = 0
+    sent = verified = 0
     committed = False
     out = session.set([(c.name, c.ptype, c.new) for c in changes], stop_on_failure=True)
-    sent, retries, verified = out.sent, out.retries, len(out.verified)
+    sent, verified = out.sent, len(out.verified)
     failure = _describe(out, what="set")
     if not failure and need_commit:
         c = session.set([(HASH_ID, INT32, new_hash)])
-        sent, retries = sent + c.sent, retries + c.retries
+        sent += c.sent
         if c.ok:
             committed, verified = True, verified + 1
             events.append(f"committed gain set {HASH_ID}={new_hash}")
@@ -313,7 +313,7 @@ def _upload(session: ParamSession, *, plan: _Plan, persist: bool, dry_run: bool,
             failure = f"persist refused: COMMAND_ACK result {_result_name(ack)}"
         persisted = not failure
     if not failure:
-        return result(verified=verified, sent=sent, retries=retries, committed=committed, persisted=persisted)
+        return result(verified=verified, sent=sent, committed=committed, persisted=persisted)
 
     events.insert(0, failure)
     touched = tuple(c for c in changes if c.name not in out.skipped)  # never-sent ones need no restore
