@@ -107,7 +107,7 @@ def run_saturation_study(*, report_dir: Path, spec_path: Path | None = None, con
             scenario = parse_scenario({
                 "name": f"saturation_{mode}", "artifact": str(gains), "duration": desc.get("duration", 12.0),
                 "mode": "lockstep", "controller": controller or desc.get("controller", "firmware"),
-                "step_timeout": desc.get("step_timeout", 0.2), "plant": desc["plant"],
+                "step_timeout": desc.get("step_timeout", 1.0), "plant": desc["plant"],
                 "transport": transport or desc["transport"], "initial_state": desc.get("initial_state", {}),
                 "reference": desc.get("reference", {}), "disturbances": desc.get("disturbances", []),
             })

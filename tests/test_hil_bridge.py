@@ -181,6 +181,7 @@ def test_firmware_run_with_can_config_serves_the_bus(tmp_path, pendulum_gains, c
 def test_wood_berry_with_true_dead_times_tracks_a_step(example_artifacts):
     # Designed on Pade approximants, run against the column's exact dead times (the built-in model).
     r = _run({"artifact": str(example_artifacts["wood_berry"]), "duration": 150.0, "controller": "reference",
+              "step_timeout": 2.0,
               "plant": {"kind": "wood_berry", "step": 0.1}, "transport": udp_transport(),
               "reference": {"r_x_D": {"kind": "step", "at": 5.0, "value": 1.0}}})
     m = r.metrics

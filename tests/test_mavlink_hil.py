@@ -20,6 +20,7 @@ def scenario(artifact_path, transport: dict, **extra):
         "duration": 3.0,
         "mode": "lockstep",
         "controller": "firmware",
+        "step_timeout": 2.0,  # generous: elapses only on a real loss (the drop test passes its own)
         "seed": 5,
         "shadow": True,
         "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]},
