@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from gainlink.errors import FirmwareError, ToolchainError
+from gainlink.errors import FirmwareError
 
 log = logging.getLogger(__name__)
 
@@ -29,21 +29,9 @@ CONTROLLERS = ("firmware", "reference")
 
 def firmware_can_executable(artifact: Any) -> Path:
     """Build (cached) the host firmware for ``artifact`` and return its ``gainlink_can`` executable."""
-    from gainlink.firmware.build import build
+    from gainlink.firmware.build import host_app
 
-    result = build(artifact, target="host", options={"GL_APPS": "ON"})
-    exe = result.build_dir / "apps" / "can" / "gainlink_can"
-    if not exe.is_file():
-        # A build tree configured before firmware/apps/can existed: reconfigure and build the app target.
-        for cmd in (["cmake", str(result.build_dir)],
-                    ["cmake", "--build", str(result.build_dir), "--target", "gainlink_can", "-j", "2"]):
-            proc = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True)
-            if proc.returncode != 0:
-                tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-10:])
-                raise ToolchainError(f"building gainlink_can failed:\n{tail}")
-    if not exe.is_file():
-        raise ToolchainError(f"gainlink_can was not built (expected {exe})")
-    return exe
+    return host_app(artifact, target="gainlink_can", relpath="apps/can/gainlink_can")
 
 
 def controller_argv(kind: str, *, artifact: Any, artifact_path: Path, transport: Any,

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 from gainlink.artifact import Artifact
-from gainlink.errors import FirmwareError, ToolchainError
+from gainlink.errors import FirmwareError
 
 log = logging.getLogger(__name__)
 
@@ -27,21 +27,9 @@ def mavlink_executable(artifact: Artifact, *, build_root: Path | None = None) ->
     ToolchainError
         When the build fails or does not produce the app.
     """
-    from gainlink.firmware.build import build
+    from gainlink.firmware.build import host_app
 
-    result = build(artifact, target="host", options={"GL_APPS": "ON"}, build_root=build_root)
-    exe = result.build_dir / EXECUTABLE
-    if not exe.is_file():
-        # A cached build tree configured before firmware/apps/mavlink existed: reconfigure, build the app.
-        for cmd in (["cmake", str(result.build_dir)],
-                    ["cmake", "--build", str(result.build_dir), "--target", EXECUTABLE, "-j", "2"]):
-            proc = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True)
-            if proc.returncode != 0:
-                tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-10:])
-                raise ToolchainError(f"building {EXECUTABLE} failed:\n{tail}")
-    if not exe.is_file():
-        raise ToolchainError(f"{EXECUTABLE} was not built (expected {exe})")
-    return exe
+    return host_app(artifact, target=EXECUTABLE, relpath=EXECUTABLE, build_root=build_root)
 
 
 def spin_argv(busy_poll_us: int) -> list[str]:

@@ -160,3 +160,24 @@ def build(
     else:
         files = {ext: cm / f"gainlink_image.{ext}" for ext in ("elf", "bin", "hex", "map")}
     return BuildResult(artifact_sha256=artifact.sha256, target=target, board=board, build_dir=cm, gains_dir=gen, files=files)
+
+
+def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path | None = None) -> Path:
+    """Build (cached) the host firmware with its apps and return the executable ``relpath`` of app ``target``.
+
+    A cached build tree configured before that app existed is reconfigured and the app's target built.
+
+    Raises
+    ------
+    ToolchainError
+        When the build fails or does not produce the executable.
+    """
+    result = build(artifact, target="host", options={"GL_APPS": "ON"}, build_root=build_root)
+    exe = result.build_dir / relpath
+    if not exe.is_file():
+        _run(["cmake", str(result.build_dir)], cwd=result.build_dir, what=f"reconfiguring for {target}")
+        _run(["cmake", "--build", str(result.build_dir), "--target", target, "-j", "2"], cwd=result.build_dir,
+             what=f"building {target}")
+    if not exe.is_file():
+        raise ToolchainError(f"{target} was not built (expected {exe})")
+    return exe
