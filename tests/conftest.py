@@ -60,3 +60,9 @@ def pendulum_artifact(example_artifacts, tmp_path) -> Path:
     dst = tmp_path / "gains.json"
     shutil.copy(example_artifacts["pendulum"], dst)
     return dst
+
+
+@pytest.fixture(scope="session")
+def pend(example_artifacts) -> Path:
+    """The pendulum example's gains.json (shared, read-only)."""
+    return example_artifacts["pendulum"]

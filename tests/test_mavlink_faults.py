@@ -7,32 +7,16 @@ import math
 import time
 
 import numpy as np
-import pytest
 from conftest import run_cli
-from test_mavlink_upload import closed_loop, read_params, reference_u, retuned_pendulum, start_firmware
+from test_mavlink_upload import exe, retuned  # noqa: F401 (shared module-scoped fixtures)
+from test_mavlink_upload import closed_loop, read_params, reference_u, start_firmware
 
 from gainlink.artifact import load
 from gainlink.codegen import gain_set, payload_crc32
-from gainlink.hil.mavlink_firmware import mavlink_executable
 from gainlink.hil.mavlink_link import MavLink
 from gainlink.hil.mavlink_params import INT32, REAL32, Encoding, as_int32
 from gainlink.hil.mavlink_relay import LossyUdpRelay
 from gainlink.hil.mavlink_session import ParamSession
-
-
-@pytest.fixture(scope="module")
-def pend(example_artifacts):
-    return example_artifacts["pendulum"]
-
-
-@pytest.fixture(scope="module")
-def retuned(tmp_path_factory):
-    return retuned_pendulum(tmp_path_factory.mktemp("retuned") / "gains.json")
-
-
-@pytest.fixture(scope="module")
-def exe(pend):
-    return mavlink_executable(load(pend))
 
 
 def values_of(port: int) -> dict:

@@ -33,11 +33,6 @@ def scenario(artifact_path, transport: dict, **extra):
     return parse_scenario(data, path=artifact_path.parent / "scenario.toml")
 
 
-@pytest.fixture(scope="module")
-def pend(example_artifacts):
-    return example_artifacts["pendulum"]
-
-
 def test_the_same_scenario_over_mavlink_and_can_agrees_step_for_step(pend):
     mav = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}))
     can = run_scenario(scenario(pend, {"interface": "udp_multicast", "channel": "239.74.163.41", "hop_limit": 0}))

@@ -26,11 +26,6 @@ from gainlink.hil.transport import STATUS_FAULT, STATUS_WATCHDOG
 
 
 @pytest.fixture(scope="module")
-def pend(example_artifacts):
-    return example_artifacts["pendulum"]
-
-
-@pytest.fixture(scope="module")
 def sanitized_exe(pend):
     """The app alone (``--target gainlink_mavlink``), sanitized, in a cached build tree of its own."""
     art = load(pend)

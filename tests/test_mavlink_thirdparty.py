@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import run_cli
-from test_mavlink_upload import closed_loop, free_udp_port, read_params, reference_u, retuned_pendulum, start_firmware
+from test_mavlink_upload import exe, retuned  # noqa: F401 (shared module-scoped fixtures)
+from test_mavlink_upload import closed_loop, free_udp_port, read_params, reference_u, start_firmware
 
 from gainlink.artifact import load
 from gainlink.codegen import gain_set
-from gainlink.hil.mavlink_firmware import mavlink_executable
 from gainlink.hil.mavlink_params import REAL32, as_int32, firmware_params
 
 import mavsdk  # the test extra (make setup) installs it
@@ -29,21 +29,6 @@ from mavsdk.plugins.param import Param, ParamError
 from mavsdk.plugins.param_server import ParamServer
 
 MAVPROXY = Path(sys.executable).parent / "mavproxy.py"
-
-
-@pytest.fixture(scope="module")
-def pend(example_artifacts):
-    return example_artifacts["pendulum"]
-
-
-@pytest.fixture(scope="module")
-def retuned(tmp_path_factory):
-    return retuned_pendulum(tmp_path_factory.mktemp("retuned") / "gains.json")
-
-
-@pytest.fixture(scope="module")
-def exe(pend):
-    return mavlink_executable(load(pend))
 
 
 def changed_gains(old, new) -> dict[str, float]:

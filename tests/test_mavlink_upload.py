@@ -46,11 +46,6 @@ def retuned_pendulum(path: Path) -> Path:
 
 
 @pytest.fixture(scope="module")
-def pend(example_artifacts) -> Path:
-    return example_artifacts["pendulum"]
-
-
-@pytest.fixture(scope="module")
 def retuned(tmp_path_factory) -> Path:
     return retuned_pendulum(tmp_path_factory.mktemp("retuned") / "gains.json")
 
