@@ -10,6 +10,7 @@ with ``complete = False`` and the reason.
 from __future__ import annotations
 
 import logging
+import os
 import time
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -27,7 +28,7 @@ from .faults import FaultInjector
 from .fmu_plant import plant_from_config
 from .metrics import RunTrace, compute_metrics
 from .plant import Plant, check_dimensions
-from .scheduler import SPIN_NS, Pacer, set_fifo, set_other
+from .scheduler import SPIN_NS, Pacer, Placement, gc_paused, resolve_affinity, set_fifo, set_other
 from .scenario import Scenario, profile_values
 from .transport import Transport, transport_from_config
 
@@ -98,7 +99,15 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
         stack.callback(peer.close)
         peer.start()
         peer.check_artifact(artifact.sha256)
-        return _loop(scenario, artifact=artifact, plant=plant, transport=transport, peer=peer, progress=progress)
+        busy_poll = bool(scenario.transport.get("busy_poll_us", 0))
+        cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else [0]
+        placement = stack.enter_context(Placement(
+            resolve_affinity(scenario.affinity, mode=scenario.mode, busy_poll=busy_poll, cpus=cpus),
+            peer_pid=peer.proc.pid if peer.proc is not None else None))
+        stack.enter_context(gc_paused())
+        result = _loop(scenario, artifact=artifact, plant=plant, transport=transport, peer=peer, progress=progress)
+        result.metrics["cpu"] = placement.describe()
+        return result
 
 
 def _loop(scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Transport, peer: ControllerProcess,

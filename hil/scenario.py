@@ -12,6 +12,7 @@ Example::
     peer_timeout = 1.0                     # end the run when the controller is silent this long [s]
     period = 0.01                          # realtime: tick [s] (default: the artifact's Ts)
     sched_fifo = true                      # realtime: SCHED_FIFO when permitted
+    affinity = "auto"                      # auto | shared | separate | none (CPU placement, see below)
     seed = 1
     shadow = true                          # run the float64 reference beside the controller
 
@@ -22,6 +23,11 @@ Example::
     [noise]        theta = 0.001                           # std dev per output
     [[disturbances]] input = "F", start = 2.0, stop = 2.1, value = 5.0
     [[faults]]     kind = "drop", start = 3.0, stop = 3.1, every = 1   # drop | delay | duplicate | reorder | silent | crash
+
+``affinity`` places the bridge and the controller process on CPUs for the run: ``shared`` (one CPU
+for both: each hand-over is a local context switch, the fastest lockstep), ``separate`` (one CPU
+each: what two busy-polling peers need), ``none`` (the kernel decides); ``auto`` (default) is
+``shared`` in lockstep, ``separate`` with ``busy_poll_us`` in the transport, else ``none``.
 
 Unknown keys anywhere are refused with one line naming them.
 """
@@ -39,9 +45,11 @@ import numpy as np
 from gainlink.errors import ScenarioError
 from gainlink.fileio import read_user_file
 
+from .scheduler import AFFINITIES
+
 TOP_KEYS = {"name", "artifact", "plant", "transport", "duration", "mode", "controller", "step_timeout",
             "peer_timeout", "period", "sched_fifo", "seed", "shadow", "initial_state", "reference", "noise",
-            "disturbances", "faults", "description", "firmware"}
+            "disturbances", "faults", "description", "firmware", "affinity"}
 MODES = ("lockstep", "realtime")
 FAULT_KINDS = ("drop", "delay", "duplicate", "reorder", "silent", "crash")
 PROFILE_KEYS = {
@@ -96,6 +104,7 @@ class Scenario:
     peer_timeout: float = 1.0
     period: float | None = None
     sched_fifo: bool = True
+    affinity: str = "auto"
     seed: int = 0
     shadow: bool = True
     initial_state: dict = field(default_factory=dict)
@@ -158,6 +167,9 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
     mode = data.get("mode", "lockstep")
     if mode not in MODES:
         raise ScenarioError(f"scenario: mode must be lockstep or realtime, not {mode!r}")
+    affinity = data.get("affinity", "auto")
+    if affinity not in AFFINITIES:
+        raise ScenarioError(f"scenario: affinity must be one of {', '.join(AFFINITIES)}, not {affinity!r}")
     controller = data.get("controller", "firmware")
     if controller not in ("firmware", "reference"):
         raise ScenarioError(f"scenario: controller must be firmware or reference, not {controller!r}")
@@ -200,7 +212,7 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
         step_timeout=_num(data.get("step_timeout", 0.05), "step_timeout", positive=True),
         peer_timeout=_num(data.get("peer_timeout", 1.0), "peer_timeout", positive=True),
         period=None if period is None else _num(period, "period", positive=True),
-        sched_fifo=bool(data.get("sched_fifo", True)), seed=int(_num(data.get("seed", 0), "seed")),
+        sched_fifo=bool(data.get("sched_fifo", True)), affinity=affinity, seed=int(_num(data.get("seed", 0), "seed")),
         shadow=bool(data.get("shadow", True)), initial_state=initial, reference=reference, noise=noise,
         disturbances=tuple(dists), faults=tuple(faults),
     )

@@ -1,11 +1,20 @@
-"""Real-time pacing: absolute deadlines on ``perf_counter_ns``, sleep until shortly before, then spin;
-SCHED_FIFO when the process may use it (root), restored afterwards."""
+"""Scheduling of the bridge and its controller peer: real-time pacing (absolute deadlines on
+``perf_counter_ns``, sleep until shortly before, then spin), SCHED_FIFO when the process may use it
+(root), and CPU affinity — all restored afterwards.
+
+Affinity matters most in lockstep, where exactly one side runs at a time: on one shared CPU each
+hand-over is a local wake-up (a context switch), while on two CPUs every sample costs two
+cross-CPU wake-ups of an idle core, which in a virtual machine means waking a halted vCPU
+(tens of microseconds each). Busy polling is the opposite case: two spinning peers need two CPUs.
+"""
 
 from __future__ import annotations
 
+import gc
 import os
 import time
-from typing import Any
+from contextlib import contextmanager
+from typing import Any, Iterator, Sequence
 
 SPIN_NS = 300_000  #: stop sleeping this long before a deadline and spin
 
@@ -25,6 +34,88 @@ def set_other(pid: int = 0) -> None:
         os.sched_setscheduler(pid, os.SCHED_OTHER, os.sched_param(0))
     except (PermissionError, OSError, AttributeError, ProcessLookupError):
         pass
+
+
+AFFINITIES = ("auto", "shared", "separate", "none")
+
+
+def resolve_affinity(setting: str, *, mode: str, busy_poll: bool, cpus: Sequence[int]) -> str:
+    """The placement ``setting`` stands for: ``auto`` is ``shared`` for a lockstep run without busy
+    polling, ``separate`` for busy polling on two or more CPUs, else ``none``."""
+    if setting == "auto":
+        if busy_poll:
+            setting = "separate"
+        elif mode == "lockstep":
+            setting = "shared"
+        else:
+            setting = "none"
+    if setting == "separate" and len(cpus) < 2:
+        return "none"
+    return setting
+
+
+class Placement:
+    """Pins this process and the peer process for the length of a run, then restores this process.
+
+    Parameters
+    ----------
+    setting : str
+        One of :data:`AFFINITIES` after :func:`resolve_affinity`: ``shared`` puts both on the
+        highest allowed CPU, ``separate`` puts the bridge on the highest and the peer on the next
+        one, ``none`` leaves both to the kernel.
+    peer_pid : int or None
+        The controller process (not restored: it ends with the run).
+    """
+
+    def __init__(self, setting: str, *, peer_pid: int | None) -> None:
+        self.setting = setting
+        self.peer_pid = peer_pid
+        self._saved: set[int] | None = None
+        self.bridge_cpus: list[int] | None = None
+        self.peer_cpus: list[int] | None = None
+
+    def __enter__(self) -> "Placement":
+        if self.setting == "none" or not hasattr(os, "sched_setaffinity"):
+            return self
+        allowed = sorted(os.sched_getaffinity(0))
+        mine = allowed[-1]
+        peer = mine if self.setting == "shared" else allowed[-2]
+        try:
+            self._saved = set(allowed)
+            os.sched_setaffinity(0, {mine})
+            self.bridge_cpus = [mine]
+            if self.peer_pid is not None:
+                os.sched_setaffinity(self.peer_pid, {peer})
+                self.peer_cpus = [peer]
+        except OSError:  # a peer that already exited, or a CPU taken away by a cgroup: run unpinned
+            self.__exit__()
+            self.setting, self.bridge_cpus, self.peer_cpus = "none", None, None
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        if self._saved is not None:
+            try:
+                os.sched_setaffinity(0, self._saved)
+            except OSError:
+                pass
+            self._saved = None
+
+    def describe(self) -> dict:
+        """For the report: the placement used and the CPUs of each side (``None``: not pinned)."""
+        return {"placement": self.setting, "bridge_cpus": self.bridge_cpus, "controller_cpus": self.peer_cpus}
+
+
+@contextmanager
+def gc_paused() -> Iterator[None]:
+    """No cyclic garbage collection inside the block: the HIL loop makes no reference cycles, and a
+    collection in the middle of it is a stall of milliseconds."""
+    was_on = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_on:
+            gc.enable()
 
 
 class Pacer:
@@ -60,13 +151,14 @@ def pacing_jitter(*, period_ns: int, steps: int, fifo: bool, work: Any = None) -
 
     on = set_fifo() if fifo else False
     try:
-        pacer = Pacer(period_ns=period_ns)
-        late = np.empty(steps)
-        for k in range(steps):
-            due, now = pacer.wait_next()
-            late[k] = now - due
-            if work is not None:
-                work()
+        with gc_paused():
+            pacer = Pacer(period_ns=period_ns)
+            late = np.empty(steps)
+            for k in range(steps):
+                due, now = pacer.wait_next()
+                late[k] = now - due
+                if work is not None:
+                    work()
     finally:
         if on:
             set_other()

@@ -7,7 +7,9 @@ commands must match it to float32 accuracy (relative 1e-4 of the command scale).
 
 from __future__ import annotations
 
+import glob
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -126,6 +128,7 @@ def test_bad_inputs_get_one_line_and_a_nonzero_exit(tmp_path, pendulum_gains, ca
     broken.write_bytes(b"PK\x03\x04 truncated")
     cases = {
         "unknown key": ({**base, "durration": 1.0}, "unknown key(s) durration"),
+        "bad affinity": ({**base, "affinity": "pinned"}, "affinity must be one of auto, shared, separate, none"),
         "missing fmu": ({**base, "plant": {"kind": "fmu", "path": str(tmp_path / "none.fmu")}}, "not found"),
         "broken fmu": ({**base, "plant": {"kind": "fmu", "path": str(broken)}}, str(broken)),
         "dimension mismatch": ({**base, "plant": {"kind": "fmu", "path": str(cart_fmu), "outputs": ["theta"]}},
@@ -199,3 +202,55 @@ def test_busy_polling_changes_timing_only(pendulum_gains, can_firmware, cart_fmu
     assert plain.complete and busy.complete
     # Lockstep is deterministic: the same samples give the same commands, however they are waited for.
     assert np.array_equal(plain.trace.u, busy.trace.u) and np.array_equal(plain.trace.y, busy.trace.y)
+
+
+def _controller_cpus() -> set[int]:
+    """CPUs allowed to this process's gainlink_can child (read from the kernel, not from the report)."""
+    for path in glob.glob(f"/proc/{os.getpid()}/task/*/children"):
+        for pid in open(path).read().split():
+            cmdline = open(f"/proc/{pid}/cmdline", "rb").read()
+            if b"gainlink_can" in cmdline:
+                return os.sched_getaffinity(int(pid))
+    raise AssertionError("no gainlink_can child found")
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="needs sched_setaffinity")
+def test_lockstep_shares_one_cpu_with_the_controller_and_restores_the_bridge(pendulum_gains, can_firmware, cart_fmu):
+    before = os.sched_getaffinity(0)
+    seen: list[tuple[set[int], set[int]]] = []
+
+    def during(done: int, total: int) -> None:
+        if 0 < done < total:
+            seen.append((os.sched_getaffinity(0), _controller_cpus()))
+
+    common = dict(gains=pendulum_gains, fmu=cart_fmu, duration=1.0)
+    shared = run_scenario(parse_scenario(pendulum_scenario(transport=udp_transport(), **common)), progress=during)
+    assert shared.complete and seen
+    for bridge, controller in seen:
+        assert len(bridge) == 1 and bridge == controller  # one CPU, the same for both sides
+    assert shared.metrics["cpu"]["placement"] == "shared"
+    assert os.sched_getaffinity(0) == before  # the caller gets its CPUs back
+
+    free = _run(pendulum_scenario(transport=udp_transport(), affinity="none", **common))
+    assert free.metrics["cpu"] == {"placement": "none", "bridge_cpus": None, "controller_cpus": None}
+    # Placement changes timing only: lockstep traces are identical.
+    assert np.array_equal(shared.trace.u, free.trace.u) and np.array_equal(shared.trace.y, free.trace.y)
+
+    if len(before) >= 2:  # two busy-polling peers get a CPU each
+        seen.clear()
+        busy = run_scenario(parse_scenario(pendulum_scenario(
+            transport={**udp_transport(), "busy_poll_us": 100}, **common)), progress=during)
+        assert busy.metrics["cpu"]["placement"] == "separate"
+        for bridge, controller in seen:
+            assert len(bridge) == 1 and len(controller) == 1 and bridge != controller
+
+
+def test_resolve_affinity_picks_a_placement_for_the_run():
+    from gainlink.hil.scheduler import resolve_affinity
+
+    assert resolve_affinity("auto", mode="lockstep", busy_poll=False, cpus=[0, 1]) == "shared"
+    assert resolve_affinity("auto", mode="lockstep", busy_poll=True, cpus=[0, 1]) == "separate"
+    assert resolve_affinity("auto", mode="lockstep", busy_poll=True, cpus=[0]) == "none"  # cannot spin on both
+    assert resolve_affinity("auto", mode="realtime", busy_poll=False, cpus=[0, 1]) == "none"
+    assert resolve_affinity("separate", mode="realtime", busy_poll=False, cpus=[3]) == "none"
+    assert resolve_affinity("shared", mode="realtime", busy_poll=True, cpus=[0, 1]) == "shared"
