@@ -9,9 +9,9 @@ Also runs the HIL bridge (``gainlink hil run`` machinery, cart-pendulum FMU) ove
 same plant time and reports its steps/s.
 
 Every measurement is made twice, interleaved in the same run against the same baseline: the default
-link (both ends block in select/poll while waiting) and the busy-poll variant (transport
-``busy_poll_us``, firmware ``--spin-us``: both ends read without sleeping for that long before
-blocking; two busy cores, fewer wake-ups). The busy-poll commands must equal the default's.
+link (both ends block in select/poll while waiting, pinned to one shared CPU as the bridge does in
+lockstep) and the busy-poll variant (transport ``busy_poll_us``, firmware ``--spin-us``: both ends
+read without sleeping for that long before blocking; one busy CPU each, fewer wake-ups). The busy-poll commands must equal the default's.
 Target: >= 10,000 lockstep steps/s; ``meets_target`` is true when either variant reaches it and
 ``meets_target_with`` says which.
 
@@ -72,6 +72,7 @@ def main() -> int:
     from gainlink.hil.mavlink_firmware import MavlinkFirmware, mavlink_executable
     from gainlink.hil.mavlink_transport import MavlinkTransport
     from gainlink.hil.scenario import parse_scenario
+    from gainlink.hil.scheduler import Placement, resolve_affinity
     from gainlink.spec import load_spec
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -102,14 +103,19 @@ def main() -> int:
 
         rates = {"default": [], "busy_poll": [], "in_process": []}
         U = {}
-        with MavlinkFirmware(exe, url=links["default"].controller_url), links["default"], \
-                MavlinkFirmware(exe, url=links["busy_poll"].controller_url, busy_poll_us=args.busy_poll_us), \
-                links["busy_poll"]:
+        firmware = {"default": MavlinkFirmware(exe, url=links["default"].controller_url),
+                    "busy_poll": MavlinkFirmware(exe, url=links["busy_poll"].controller_url,
+                                                 busy_poll_us=args.busy_poll_us)}
+        cpus = sorted(os.sched_getaffinity(0))
+        with firmware["default"], links["default"], firmware["busy_poll"], links["busy_poll"]:
             for _ in range(args.repeats):
                 for variant, link in links.items():
                     link.send_frames(link.encode_reset(seq=0))
                     link.receive_command(timeout=1.0)
-                    rate, U[variant] = _loop(art, over(link), args.steps)
+                    # The bridge's own placement (affinity = "auto"): one CPU for both, or one each when spinning.
+                    where = resolve_affinity("auto", mode="lockstep", busy_poll=variant == "busy_poll", cpus=cpus)
+                    with Placement(where, peer_pid=firmware[variant].proc.pid):
+                        rate, U[variant] = _loop(art, over(link), args.steps)
                     rates[variant].append(rate)
                 native.reset()
                 rate_n, U_n = _loop(art, in_process, args.steps)
