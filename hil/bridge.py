@@ -152,19 +152,35 @@ def _loop(scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Tr
         if fifo and peer.proc is not None:
             set_fifo(peer.proc.pid)
     every = max(1, N // 100)
+    skip = scenario.overrun == "skip"
+    overruns = 0
     t_start = time.perf_counter_ns()
     pacer = Pacer(period_ns=period_ns)
     k = 0
     try:
-        for k in range(N):
-            if silent_at is not None and k == silent_at:
+        while k < N:
+            if silent_at is not None and k >= silent_at:
                 peer.pause()
-            if crash_at is not None and k == crash_at:
+                silent_at = None
+            if crash_at is not None and k >= crash_at:
                 peer.kill()
+                crash_at = None
             if realtime:
-                due_rel, woke_rel = pacer.wait_next()
-                DUE[k] = due_rel + (pacer.start_ns - t_start)
-                woke = woke_rel + (pacer.start_ns - t_start)
+                tick, due_rel, woke_rel = pacer.wait_next(skip=skip)
+                offset = pacer.start_ns - t_start
+                if tick > k:  # overrun: these ticks passed while the bridge was stalled; the plant ran on
+                    for j in range(k, min(tick, N)):  # under the held command, as a real one would
+                        Y[j] = plant.outputs() + noise[j]
+                        U[j] = u
+                        DUE[j] = due_rel - (tick - j) * period_ns + offset
+                        TICK[j] = np.nan  # never ran: no jitter, a miss
+                        plant.advance(u=u + D[j], dt=Ts)
+                    overruns += min(tick, N) - k
+                    k = min(tick, N)
+                    if k >= N:
+                        break
+                DUE[k] = due_rel + offset
+                woke = woke_rel + offset
                 wait_until = pacer.start_ns + due_rel + period_ns - SPIN_NS // 2
             y = plant.outputs() + noise[k]
             Y[k] = y
@@ -223,10 +239,11 @@ def _loop(scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Tr
                 complete, reason = False, f"plant failed at step {k}: {exc}"
                 k += 1
                 break
+            k += 1
             if progress is not None and k % every == 0:
                 progress(k, N)
-        else:
-            k = N
+    except PlantError as exc:  # in an overrun's held steps
+        complete, reason = False, f"plant failed at step {k}: {exc}"
     finally:
         if fifo:
             set_other()
@@ -239,6 +256,9 @@ def _loop(scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Tr
     metrics.update({"complete": complete, "steps_planned": N, "wall_s": wall,
                     "steps_per_s": steps / wall if wall > 0 else None, "sched_fifo": fifo,
                     "faults_injected": injector.counts, "mode": scenario.mode})
+    if realtime:
+        metrics["overruns"] = overruns
+        metrics["overrun_policy"] = scenario.overrun
     if reason:
         metrics["reason"] = reason
     if progress is not None:

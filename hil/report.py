@@ -46,7 +46,8 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
     lat, jit = m["latency_us"], m["period_jitter_us"]
     lines.append(f"  latency us p50 {_fmt(lat['p50'])} p99 {_fmt(lat['p99'])} max {_fmt(lat['max'])};  "
                  f"period jitter us p50 {_fmt(jit['p50'])} p99 {_fmt(jit['p99'])} max {_fmt(jit['max'])}")
-    lines.append(f"  lost {m['lost']}  late {m['late']}  deadline misses {m['deadline_misses']}  "
+    overruns = f" (overruns {m['overruns']}, {m['overrun_policy']})" if "overruns" in m else ""
+    lines.append(f"  lost {m['lost']}  late {m['late']}  deadline misses {m['deadline_misses']}{overruns}  "
                  f"faults injected {', '.join(f'{k} {v}' for k, v in m['faults_injected'].items() if v) or 'none'}")
     lines.append("  saturated: " + ", ".join(f"{k} {100 * v:.1f}%" for k, v in m["saturation_fraction"].items()))
     if "peak_integrator" in m:

@@ -12,6 +12,7 @@ Example::
     peer_timeout = 1.0                     # end the run when the controller is silent this long [s]
     period = 0.01                          # realtime: tick [s] (default: the artifact's Ts)
     sched_fifo = true                      # realtime: SCHED_FIFO when permitted
+    overrun = "skip"                       # realtime: skip | catch_up (ticks missed in a stall, see below)
     affinity = "auto"                      # auto | shared | separate | none (CPU placement, see below)
     seed = 1
     shadow = true                          # run the float64 reference beside the controller
@@ -29,6 +30,11 @@ for both: each hand-over is a local context switch, the fastest lockstep), ``sep
 each: what two busy-polling peers need), ``none`` (the kernel decides); ``auto`` (default) is
 ``shared`` in lockstep, ``separate`` with ``busy_poll_us`` in the transport, else ``none``.
 
+``overrun`` says what a realtime run does with ticks that passed while the bridge was stalled (the
+machine paused it for a period or more): ``skip`` (default) moves on to the tick now due and lets
+the plant run through the missed ones under the held command, as a physical plant would — each is
+a deadline miss and counted in ``overruns``; ``catch_up`` runs the missed ticks back to back.
+
 Unknown keys anywhere are refused with one line naming them.
 """
 
@@ -45,11 +51,11 @@ import numpy as np
 from gainlink.errors import ScenarioError
 from gainlink.fileio import read_user_file
 
-from .scheduler import AFFINITIES
+from .scheduler import AFFINITIES, OVERRUN_POLICIES
 
 TOP_KEYS = {"name", "artifact", "plant", "transport", "duration", "mode", "controller", "step_timeout",
             "peer_timeout", "period", "sched_fifo", "seed", "shadow", "initial_state", "reference", "noise",
-            "disturbances", "faults", "description", "firmware", "affinity"}
+            "disturbances", "faults", "description", "firmware", "affinity", "overrun"}
 MODES = ("lockstep", "realtime")
 FAULT_KINDS = ("drop", "delay", "duplicate", "reorder", "silent", "crash")
 PROFILE_KEYS = {
@@ -105,6 +111,7 @@ class Scenario:
     period: float | None = None
     sched_fifo: bool = True
     affinity: str = "auto"
+    overrun: str = "skip"
     seed: int = 0
     shadow: bool = True
     initial_state: dict = field(default_factory=dict)
@@ -170,6 +177,9 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
     affinity = data.get("affinity", "auto")
     if affinity not in AFFINITIES:
         raise ScenarioError(f"scenario: affinity must be one of {', '.join(AFFINITIES)}, not {affinity!r}")
+    overrun = data.get("overrun", "skip")
+    if overrun not in OVERRUN_POLICIES:
+        raise ScenarioError(f"scenario: overrun must be one of {', '.join(OVERRUN_POLICIES)}, not {overrun!r}")
     controller = data.get("controller", "firmware")
     if controller not in ("firmware", "reference"):
         raise ScenarioError(f"scenario: controller must be firmware or reference, not {controller!r}")
@@ -212,7 +222,7 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
         step_timeout=_num(data.get("step_timeout", 0.05), "step_timeout", positive=True),
         peer_timeout=_num(data.get("peer_timeout", 1.0), "peer_timeout", positive=True),
         period=None if period is None else _num(period, "period", positive=True),
-        sched_fifo=bool(data.get("sched_fifo", True)), affinity=affinity, seed=int(_num(data.get("seed", 0), "seed")),
+        sched_fifo=bool(data.get("sched_fifo", True)), affinity=affinity, overrun=overrun, seed=int(_num(data.get("seed", 0), "seed")),
         shadow=bool(data.get("shadow", True)), initial_state=initial, reference=reference, noise=noise,
         disturbances=tuple(dists), faults=tuple(faults),
     )

@@ -118,6 +118,9 @@ def gc_paused() -> Iterator[None]:
             gc.enable()
 
 
+OVERRUN_POLICIES = ("skip", "catch_up")
+
+
 class Pacer:
     """Ticks at ``start + (k + 1) * period`` for k = 0, 1, ...
 
@@ -132,36 +135,51 @@ class Pacer:
         self.start_ns = time.perf_counter_ns()
         self.k = 0
 
-    def wait_next(self) -> tuple[int, int]:
-        """Wait for the next deadline; returns ``(deadline_ns, now_ns)``, both relative to the start."""
-        self.k += 1
-        due = self.start_ns + self.k * self.period_ns
+    def wait_next(self, *, skip: bool = False) -> tuple[int, int, int]:
+        """Wait for the next tick; returns ``(tick, deadline_ns, now_ns)``, times relative to the start.
+
+        ``tick`` counts from 0. After an overrun (woken a whole period or more after the deadline),
+        ``skip`` moves on to the latest tick already due, as a real-time executive does, so ``tick``
+        jumps by the ticks missed; without it the missed ticks follow back to back (catch up).
+        """
+        due = self.start_ns + (self.k + 1) * self.period_ns
         now = time.perf_counter_ns()
         if due - now > SPIN_NS:
             time.sleep((due - now - SPIN_NS) / 1e9)
         now = time.perf_counter_ns()
         while now < due:
             now = time.perf_counter_ns()
-        return due - self.start_ns, now - self.start_ns
+        if skip and now - due >= self.period_ns:
+            self.k += (now - due) // self.period_ns
+            due = self.start_ns + (self.k + 1) * self.period_ns
+        tick = self.k
+        self.k += 1
+        return tick, due - self.start_ns, now - self.start_ns
 
 
-def pacing_jitter(*, period_ns: int, steps: int, fifo: bool, work: Any = None) -> dict:
-    """Jitter of the pacer alone (optionally calling ``work()`` each tick): the real-time baseline."""
+def pacing_jitter(*, period_ns: int, steps: int, fifo: bool, work: Any = None, skip: bool = True) -> dict:
+    """Jitter of the pacer alone (optionally calling ``work()`` each tick): the real-time baseline.
+
+    Jitter is measured on the ticks that ran; ``overruns`` counts the ticks skipped (``skip``)."""
     import numpy as np
 
     on = set_fifo() if fifo else False
     try:
         with gc_paused():
             pacer = Pacer(period_ns=period_ns)
-            late = np.empty(steps)
-            for k in range(steps):
-                due, now = pacer.wait_next()
-                late[k] = now - due
+            late = np.full(steps, np.nan)
+            k = 0
+            while k < steps:
+                tick, due, now = pacer.wait_next(skip=skip)
+                if tick >= steps:
+                    break
+                late[tick] = now - due
+                k = tick + 1
                 if work is not None:
                     work()
     finally:
         if on:
             set_other()
-    us = late / 1e3
-    return {"p50": float(np.percentile(us, 50)), "p99": float(np.percentile(us, 99)), "max": float(us.max()),
-            "sched_fifo": on}
+    ran = late[np.isfinite(late)] / 1e3
+    return {"p50": float(np.percentile(ran, 50)), "p99": float(np.percentile(ran, 99)), "max": float(ran.max()),
+            "overruns": int(steps - ran.size), "sched_fifo": on}

@@ -115,6 +115,38 @@ def test_realtime_mode_keeps_its_period(pendulum_gains, can_firmware, cart_fmu):
     assert abs(m["outputs_final"]["theta"]) < 0.05
 
 
+def _stall_once(seconds: float):
+    """A progress callback that stalls the bridge once, half way (as a hypervisor or a page fault would)."""
+    stalled = []
+
+    def progress(done: int, total: int) -> None:
+        if not stalled and done >= total // 2:
+            stalled.append(done)
+            time.sleep(seconds)
+    return progress
+
+
+def test_realtime_overrun_skips_the_missed_ticks_and_lets_the_plant_run_on(pendulum_gains, can_firmware, cart_fmu):
+    common = dict(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=2.0, mode="realtime")
+    period_us = 10_000.0  # the pendulum's Ts
+    skip = run_scenario(parse_scenario(pendulum_scenario(**common)), progress=_stall_once(0.08))
+    m = skip.metrics
+    assert m["complete"] and m["steps"] == 200 and m["overrun_policy"] == "skip"
+    # 80 ms stalled at 10 ms per tick: at least 7 ticks passed unserved; each is a deadline miss.
+    assert m["overruns"] >= 7 and m["deadline_misses"] >= m["overruns"]
+    # Skipped ticks hold the command while the plant runs on: plant time stays whole, no gap in the trace.
+    assert np.all(np.isfinite(skip.trace.y)) and np.all(np.any(skip.trace.y != 0, axis=1))
+    assert m["period_jitter_us"]["max"] < period_us  # the ticks that ran started within a period of their deadline
+    assert abs(m["outputs_final"]["theta"]) < 0.05  # an 80 ms hold does not lose the pendulum
+
+    catch_up = run_scenario(parse_scenario(pendulum_scenario(overrun="catch_up", **common)),
+                            progress=_stall_once(0.08))
+    c = catch_up.metrics
+    assert c["complete"] and c["steps"] == 200 and c["overruns"] == 0
+    # The tick after the stall ran at least 80 - 10 ms late, and the missed ones followed back to back.
+    assert c["period_jitter_us"]["max"] >= 70_000
+
+
 def _cli_error(*argv):
     res = run_cli(*argv)
     lines = res.err.strip().splitlines()
@@ -129,6 +161,7 @@ def test_bad_inputs_get_one_line_and_a_nonzero_exit(tmp_path, pendulum_gains, ca
     cases = {
         "unknown key": ({**base, "durration": 1.0}, "unknown key(s) durration"),
         "bad affinity": ({**base, "affinity": "pinned"}, "affinity must be one of auto, shared, separate, none"),
+        "bad overrun": ({**base, "overrun": "ignore"}, "overrun must be one of skip, catch_up"),
         "missing fmu": ({**base, "plant": {"kind": "fmu", "path": str(tmp_path / "none.fmu")}}, "not found"),
         "broken fmu": ({**base, "plant": {"kind": "fmu", "path": str(broken)}}, str(broken)),
         "dimension mismatch": ({**base, "plant": {"kind": "fmu", "path": str(cart_fmu), "outputs": ["theta"]}},
