@@ -2,33 +2,106 @@
 
 Every frame starts with a 4-byte header: ``seq`` (uint16, little-endian sample counter), ``status``
 (uint8, ``STATUS_*`` bits in commands, 0 in measurements) and ``sat`` (uint8, bit i set when the
-i-th value of this command frame was clamped). Values follow as IEEE float32, little-endian,
-``per_frame`` of them: 1 per classic CAN frame (8 bytes), up to 8 per CAN FD frame (the frame
-length is rounded up to a valid FD length). Command frames (controller -> plant, ``u``) use ids
-``base_id + j``; measurement frames (plant -> controller, ``y`` then ``r``) use ids
-``base_id + 0x10 + i``, so commands win arbitration. The firmware's CAN app implements exactly
-this rule; :meth:`CanLayout.dbc` documents it for any CAN tool.
+i-th value of this command frame was clamped). Values follow, little-endian, in one of two encodings:
+
+``float32`` (default)
+    IEEE float32, 1 per classic CAN frame (8 bytes), up to 8 per CAN FD frame.
+``int16``
+    Scaled integers as on a vehicle bus: ``physical = raw * factor + offset`` with, for a value whose
+    range is ``[minimum, maximum]``, ``factor = (maximum - minimum) / 65534`` and ``offset = (maximum +
+    minimum) / 2``, so raw -32767 .. 32767 spans exactly the range. Encoding rounds half to even
+    (``rint``), in float64, on both sides; values beyond the range saturate to its ends (raw +-32767);
+    raw -32768 is reserved for a non-finite value (NaN, +-inf) and decodes to NaN, so a non-finite
+    sample still reaches the controller's fault path. 2 values per classic frame, up to 8 per FD frame
+    (the ``sat`` byte has 8 bits).
+
+FD frame lengths are rounded up to a valid FD length. Command frames (controller -> plant, ``u``) use
+ids ``base_id + j``; measurement frames (plant -> controller, ``y`` then ``r``) use ids ``base_id +
+0x10 + i``, so commands win arbitration. The firmware's CAN app implements exactly this rule (its
+int16 factor/offset come from :func:`gainlink.hil.can_transport.firmware_can_argv`, i.e. from the
+same :class:`FrameSpec` data that builds the DBC); :meth:`CanLayout.dbc` documents it for any CAN tool.
 """
 
 from __future__ import annotations
 
+import math
 import re
 import struct
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Mapping
+
+import numpy as np
 
 from gainlink.errors import TransportError
 
 HEADER_BYTES = 4
 COMMAND_OFFSET = 0x00
 MEASUREMENT_OFFSET = 0x10
+MAX_COMMAND_FRAMES = MEASUREMENT_OFFSET - COMMAND_OFFSET  # ids base+0x00 .. base+0x0f
+MAX_MEASUREMENT_FRAMES = 0x20  # ids base+0x10 .. base+0x2f (the firmware tracks them in a 32-bit mask)
 FD_MAX_VALUES = 8
 FD_LENGTHS = (8, 12, 16, 20, 24, 32, 48, 64)
+ENCODINGS = ("float32", "int16")
+VALUE_BYTES = {"float32": 4, "int16": 2}
+CLASSIC_VALUES = {"float32": 1, "int16": 2}
+INT16_MAX = 32767  #: largest raw value; -INT16_MAX is the smallest
+INT16_NAN = -32768  #: reserved raw value: the value was not finite
+INT16_SPAN = 2 * INT16_MAX  #: raw steps across a range
 
 
 def _sanitize(name: str) -> str:
     s = re.sub(r"[^A-Za-z0-9_]", "_", name)
     return s if re.match(r"[A-Za-z]", s) else f"s_{s}"
+
+
+@dataclass(frozen=True)
+class SignalScale:
+    """The physical range of one int16 value and the linear map it implies.
+
+    Attributes
+    ----------
+    minimum, maximum : float
+        Physical range; raw -32767 is ``minimum`` and raw 32767 is ``maximum``.
+    """
+
+    minimum: float
+    maximum: float
+
+    @property
+    def factor(self) -> float:
+        """Physical units per raw step: ``(maximum - minimum) / 65534``."""
+        return (self.maximum - self.minimum) / INT16_SPAN
+
+    @property
+    def offset(self) -> float:
+        """Physical value of raw 0: ``(maximum + minimum) / 2``."""
+        return (self.maximum + self.minimum) / 2
+
+
+def quantise(values: np.ndarray, factors: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Raw int16 values of physical ``values`` (the rule of the module docstring).
+
+    Returns
+    -------
+    raw : numpy.ndarray of int16
+        ``rint((value - offset) / factor)`` in float64, clamped to +-32767; -32768 where not finite.
+    clipped : numpy.ndarray of bool
+        Finite values that were beyond the range (and saturated to its ends).
+    """
+    v = np.asarray(values, dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        x = np.rint((v - offsets) / factors)
+    finite = np.isfinite(v)
+    clipped = finite & (np.abs(x) > INT16_MAX)
+    raw = np.where(finite, np.clip(np.nan_to_num(x, posinf=INT16_MAX, neginf=-INT16_MAX), -INT16_MAX, INT16_MAX),
+                   INT16_NAN)
+    return raw.astype(np.int16), clipped
+
+
+def dequantise(raw: np.ndarray, factors: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Physical float64 values of raw int16 values: ``raw * factor + offset``, NaN for -32768."""
+    r = np.asarray(raw, dtype=np.float64)
+    return np.where(r == INT16_NAN, np.nan, r * factors + offsets)
 
 
 @dataclass(frozen=True)
@@ -42,11 +115,15 @@ class FrameSpec:
     arbitration_id : int
         11-bit identifier.
     signals : tuple of str
-        DBC names of the float values it carries, in order.
+        DBC names of the values it carries, in order.
     first : int
         Index of its first value in the sample (``y`` then ``r``) or command (``u``) vector.
     length : int
         Payload bytes.
+    encoding : {"float32", "int16"}
+        How the values are carried.
+    scales : tuple of SignalScale
+        With ``int16``: the range of each value (same order as ``signals``); empty with ``float32``.
     """
 
     name: str
@@ -54,12 +131,31 @@ class FrameSpec:
     signals: tuple[str, ...]
     first: int
     length: int
+    encoding: str = "float32"
+    scales: tuple[SignalScale, ...] = ()
+
+    @property
+    def value_bytes(self) -> int:
+        """Bytes per value (4 or 2)."""
+        return VALUE_BYTES[self.encoding]
 
     @property
     def struct(self) -> struct.Struct:
-        """The little-endian struct of header + values, padded to ``length``."""
-        pad = self.length - HEADER_BYTES - 4 * len(self.signals)
-        return struct.Struct(f"<HBB{len(self.signals)}f{pad}x")
+        """The little-endian struct of header + values (float32 ``f`` or raw int16 ``h``), padded to ``length``."""
+        k = len(self.signals)
+        pad = self.length - HEADER_BYTES - self.value_bytes * k
+        code = "f" if self.encoding == "float32" else "h"
+        return struct.Struct(f"<HBB{k}{code}{pad}x")
+
+    @property
+    def factors(self) -> tuple[float, ...]:
+        """Per value ``factor`` (int16), as written to the DBC."""
+        return tuple(s.factor for s in self.scales)
+
+    @property
+    def offsets(self) -> tuple[float, ...]:
+        """Per value ``offset`` (int16), as written to the DBC."""
+        return tuple(s.offset for s in self.scales)
 
 
 @dataclass(frozen=True)
@@ -76,6 +172,8 @@ class CanLayout:
         Values per frame.
     measurement, command : tuple of FrameSpec
         Plant -> controller frames (``y`` then ``r``), controller -> plant frames (``u``).
+    encoding : {"float32", "int16"}
+        How values are carried.
     """
 
     fd: bool
@@ -83,6 +181,7 @@ class CanLayout:
     per_frame: int
     measurement: tuple[FrameSpec, ...]
     command: tuple[FrameSpec, ...]
+    encoding: str = "float32"
 
     def database(self) -> Any:
         """The layout as a ``cantools.database.Database``."""
@@ -100,8 +199,19 @@ class CanLayout:
                        comment="bit i: i-th value of this frame saturated"),
             ]
             for i, name in enumerate(spec.signals):
-                sig.append(Signal(name, start=32 + 32 * i, length=32, byte_order="little_endian", is_signed=True,
-                                  receivers=rx, conversion=BaseConversion.factory(scale=1, offset=0, is_float=True)))
+                if spec.encoding == "float32":
+                    sig.append(Signal(name, start=32 + 32 * i, length=32, byte_order="little_endian",
+                                      is_signed=True, receivers=rx,
+                                      conversion=BaseConversion.factory(scale=1, offset=0, is_float=True)))
+                else:
+                    sc = spec.scales[i]
+                    sig.append(Signal(
+                        name, start=32 + 16 * i, length=16, byte_order="little_endian", is_signed=True,
+                        receivers=rx, minimum=sc.minimum, maximum=sc.maximum,
+                        conversion=BaseConversion.factory(scale=sc.factor, offset=sc.offset, is_float=False,
+                                                          choices={INT16_NAN: "not_a_number"}),
+                        comment=f"raw {-INT16_MAX}..{INT16_MAX} spans [{sc.minimum:g}, {sc.maximum:g}] "
+                                f"(beyond: saturated); raw {INT16_NAN}: not a number"))
             return sig
 
         messages = []
@@ -135,42 +245,124 @@ class CanLayout:
                 "measurement": [s.arbitration_id for s in self.measurement]}
 
 
-def _frames(names: list[str], *, prefix: str, base: int, per_frame: int, fd: bool) -> tuple[FrameSpec, ...]:
+def _frames(names: list[str], scales: list[SignalScale] | None, *, prefix: str, base: int, per_frame: int, fd: bool,
+            encoding: str, max_frames: int) -> tuple[FrameSpec, ...]:
     specs = []
+    width = VALUE_BYTES[encoding]
     for j, first in enumerate(range(0, len(names), per_frame)):
         chunk = tuple(names[first:first + per_frame])
-        need = HEADER_BYTES + 4 * len(chunk)
+        need = HEADER_BYTES + width * len(chunk)
         length = next(n for n in FD_LENGTHS if n >= need) if fd else 8
-        specs.append(FrameSpec(name=f"{prefix}{j}", arbitration_id=base + j, signals=chunk, first=first, length=length))
+        specs.append(FrameSpec(name=f"{prefix}{j}", arbitration_id=base + j, signals=chunk, first=first, length=length,
+                               encoding=encoding,
+                               scales=tuple(scales[first:first + per_frame]) if scales is not None else ()))
+    if len(specs) > max_frames:
+        raise TransportError(f"CAN layout: {len(names)} {prefix.lower()} values need {len(specs)} frames, more "
+                             f"than its {max_frames} identifiers (use fd = true or encoding = \"int16\")")
     return tuple(specs)
 
 
-def layout_for(artifact: Any, *, fd: bool = False, base_id: int = 0x100) -> CanLayout:
-    """The CAN layout of ``artifact`` (its signal names, sizes m, p, q).
+def _range(key: str, value: Any) -> SignalScale:
+    ok = isinstance(value, (list, tuple)) and len(value) == 2 and \
+        all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    if not ok or not float(value[0]) < float(value[1]):
+        raise TransportError(f"CAN transport: ranges.{key} must be [min, max] with finite min < max, not {value!r}")
+    return SignalScale(minimum=float(value[0]), maximum=float(value[1]))
+
+
+def _scales(artifact: Any, ranges: Mapping[str, Any], *, groups: list[tuple[str, list[str], list[str]]],
+            int16: bool) -> dict[str, list[SignalScale] | None]:
+    """Per group (outputs, references, inputs) the range of every value; raises on unknown or missing ones."""
+    known: dict[str, list[tuple[str, int]]] = {}
+    for group, art_names, dbc_names in groups:
+        for i, (a, d) in enumerate(zip(art_names, dbc_names)):
+            for key in {a, d}:
+                known.setdefault(key, []).append((group, i))
+    unknown = [k for k in ranges if k not in known]
+    if unknown:
+        names = ", ".join(dict.fromkeys(n for _, a, _ in groups for n in a))
+        raise TransportError(f"CAN transport: ranges name no signal of the artifact: {', '.join(map(str, unknown))} "
+                             f"(signals: {names})")
+    given: dict[tuple[str, int], SignalScale] = {}
+    for key, value in ranges.items():
+        sc = _range(key, value)
+        for where in known[key]:
+            given[where] = sc
+    if not int16:
+        return {g: None for g, _, _ in groups}
+    lo = np.asarray(artifact.u_min, dtype=float).ravel()
+    hi = np.asarray(artifact.u_max, dtype=float).ravel()
+    out: dict[str, list[SignalScale] | None] = {}
+    missing = []
+    for group, art_names, _ in groups:
+        scales = []
+        for i, name in enumerate(art_names):
+            sc = given.get((group, i))
+            if sc is None and group == "inputs" and math.isfinite(lo[i]) and math.isfinite(hi[i]) and lo[i] < hi[i]:
+                sc = SignalScale(minimum=float(lo[i]), maximum=float(hi[i]))
+            if sc is None:
+                missing.append(name)
+            scales.append(sc)
+        out[group] = scales
+    if missing:
+        raise TransportError(f"CAN encoding int16 needs a range for {', '.join(missing)}: add ranges = "
+                             f"{{ {missing[0]} = [min, max], ... }} to the transport table (inputs default to the "
+                             "artifact's finite u_min/u_max)")
+    return out
+
+
+def layout_for(artifact: Any, *, fd: bool = False, base_id: int = 0x100, encoding: str = "float32",
+               ranges: Mapping[str, Any] | None = None) -> CanLayout:
+    """The CAN layout of ``artifact`` (its signal names, sizes m, p, q, input limits).
 
     Parameters
     ----------
     artifact : gainlink.artifact.Artifact
         The gain artifact.
     fd : bool
-        CAN FD (up to 8 values per frame) instead of classic CAN (one value per frame).
+        CAN FD (up to 8 values per frame) instead of classic CAN (1 float32 or 2 int16 values per frame).
     base_id : int
         First 11-bit identifier; the layout uses ``base_id .. base_id + 0x2f``.
+    encoding : {"float32", "int16"}
+        IEEE float32 values, or scaled int16 values (see the module docstring).
+    ranges : mapping, optional
+        ``{signal: [min, max]}`` by the artifact's signal names (outputs, references, inputs) or the DBC
+        names (``y_theta``); a name shared by several values (an output and a reference) covers all of them. Needed with
+        ``int16`` for every output and reference, and for inputs whose artifact limits are not finite
+        (a range given for an input overrides its limits). Checked with either encoding.
+
+    Raises
+    ------
+    TransportError
+        A bad base_id or encoding, a range that is malformed, names no signal, or is missing.
     """
     if not 0 <= base_id <= 0x7FF - 0x30:
         raise TransportError(f"CAN base_id {base_id:#x} leaves no room for the layout (0 .. {0x7FF - 0x30:#x})")
+    if encoding not in ENCODINGS:
+        raise TransportError(f"CAN encoding must be {' or '.join(ENCODINGS)}, not {encoding!r}")
+    if ranges is None:
+        ranges = {}
+    if not isinstance(ranges, Mapping):
+        raise TransportError("CAN transport: ranges must be a table { signal = [min, max], ... }")
     sig = artifact.signals
-    per_frame = FD_MAX_VALUES if fd else 1
+    per_frame = FD_MAX_VALUES if fd else CLASSIC_VALUES[encoding]
+
     def named(prefix: str, names: list[str]) -> list[str]:
         return [s if s.startswith(prefix) else prefix + s for s in map(_sanitize, names)]
 
-    meas = named("y_", sig["outputs"]) + named("r_", sig["references"])
-    cmd = named("u_", sig["inputs"])
-    if len(set(meas)) != len(meas) or len(set(cmd)) != len(cmd):
-        meas = [f"y{i}" for i in range(artifact.p)] + [f"r{i}" for i in range(artifact.q)]
-        cmd = [f"u{i}" for i in range(artifact.m)]
+    ys, rs, us = named("y_", sig["outputs"]), named("r_", sig["references"]), named("u_", sig["inputs"])
+    if len(set(ys + rs)) != len(ys + rs) or len(set(us)) != len(us):
+        ys, rs = [f"y{i}" for i in range(artifact.p)], [f"r{i}" for i in range(artifact.q)]
+        us = [f"u{i}" for i in range(artifact.m)]
+    sc = _scales(artifact, ranges, int16=encoding == "int16",
+                 groups=[("outputs", list(sig["outputs"]), ys), ("references", list(sig["references"]), rs),
+                         ("inputs", list(sig["inputs"]), us)])
+    meas_scales = None if sc["outputs"] is None else sc["outputs"] + sc["references"]
+    common = dict(per_frame=per_frame, fd=fd, encoding=encoding)
     return CanLayout(
-        fd=fd, base_id=base_id, per_frame=per_frame,
-        measurement=_frames(meas, prefix="Measurement", base=base_id + MEASUREMENT_OFFSET, per_frame=per_frame, fd=fd),
-        command=_frames(cmd, prefix="Command", base=base_id + COMMAND_OFFSET, per_frame=per_frame, fd=fd),
+        fd=fd, base_id=base_id, per_frame=per_frame, encoding=encoding,
+        measurement=_frames(ys + rs, meas_scales, prefix="Measurement", base=base_id + MEASUREMENT_OFFSET,
+                            max_frames=MAX_MEASUREMENT_FRAMES, **common),
+        command=_frames(us, sc["inputs"], prefix="Command", base=base_id + COMMAND_OFFSET,
+                        max_frames=MAX_COMMAND_FRAMES, **common),
     )

@@ -1,7 +1,7 @@
 """A controller node in Python speaking the gainlink CAN layout: the float64 reference law on the bus.
 
 ``python -m gainlink.hil.can_node ARTIFACT --config JSON`` behaves like the firmware's
-``gainlink_can`` (same layout, same duplicate/stale handling, same ready line), with
+``gainlink_can`` (same layout and encoding, same duplicate/stale handling, same ready line), with
 :class:`gainlink.reference.ReferenceLoop` as the law. The bridge uses it as ``controller =
 "reference"``: a real peer process on a real bus, without a C toolchain.
 """
@@ -19,17 +19,14 @@ import numpy as np
 from gainlink.artifact import load
 from gainlink.reference import ReferenceLoop
 
-from .can_transport import Assembler, FrameCodec, open_bus
-from .can_layout import layout_for
+from .can_transport import Assembler, FrameCodec, layout_from_config, open_bus
 from .transport import STATUS_FAULT
 
 
 def serve(artifact: Any, config: dict, *, out: Any = sys.stdout) -> int:
     """Run the node until SIGTERM/SIGINT; returns the exit status."""
     fd = bool(config.get("fd", False))
-    base = config.get("base_id", 0x100)
-    base = int(base, 0) if isinstance(base, str) else int(base)
-    layout = layout_for(artifact, fd=fd, base_id=base)
+    layout = layout_from_config(config, artifact=artifact)
     rx = Assembler(FrameCodec(layout.measurement, fd=fd))
     tx = FrameCodec(layout.command, fd=fd)
     law = ReferenceLoop(artifact)

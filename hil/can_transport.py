@@ -1,10 +1,14 @@
 """CAN transport: python-can bus built from configuration only, frames laid out by :mod:`can_layout`.
 
 ``can.Bus(**config)`` takes the scenario's python-can table unchanged (``interface``, ``channel``,
-``fd``, ``hop_limit``, ...) except gainlink's own keys: ``kind``, ``base_id`` (first CAN id) and
+``fd``, ``hop_limit``, ...) except gainlink's own keys: ``kind``, ``base_id`` (first CAN id),
 ``busy_poll_us`` (poll without sleeping for this long before blocking, on both ends: lower latency for
-100 % of a core while waiting; default 0). The same code runs
-on ``udp_multicast`` (no kernel CAN) and ``socketcan``/``vcan0``.
+100 % of a core while waiting; default 0), ``encoding`` (``"float32"``, the default, or ``"int16"``:
+scaled integers, ``physical = raw * factor + offset``) and ``ranges`` (with int16, ``{ signal = [min,
+max], ... }`` for every output and reference, by the artifact's signal names; inputs default to the
+artifact's ``u_min``/``u_max``). With int16, values beyond their range saturate to its ends; the
+plant side counts them (``encoding_clipped`` in the report's transport description) and warns once.
+The same code runs on ``udp_multicast`` (no kernel CAN) and ``socketcan``/``vcan0``.
 """
 
 from __future__ import annotations
@@ -19,12 +23,12 @@ import numpy as np
 
 from gainlink.errors import TransportError
 
-from .can_layout import CanLayout, FrameSpec, layout_for
+from .can_layout import CanLayout, FrameSpec, dequantise, layout_for, quantise
 from .transport import TRANSPORTS, Command, Transport
 
 log = logging.getLogger(__name__)
 
-GAINLINK_KEYS = {"kind", "base_id", "busy_poll_us"}
+GAINLINK_KEYS = {"kind", "base_id", "busy_poll_us", "encoding", "ranges"}
 FIRMWARE_INTERFACES = {"udp_multicast", "socketcan"}
 
 
@@ -57,8 +61,30 @@ def open_bus(config: Mapping[str, Any]) -> Any:
         raise TransportError(f"cannot open CAN bus ({where}): {exc}{_multicast_hint(exc, kwargs)}") from None
 
 
+def layout_from_config(config: Mapping[str, Any], *, artifact: Any) -> CanLayout:
+    """The layout a transport table asks for (``fd``, ``base_id``, ``encoding``, ``ranges``).
+
+    Raises
+    ------
+    TransportError
+        A bad ``base_id``, ``encoding`` or ``ranges`` (one line naming it).
+    """
+    base = config.get("base_id", 0x100)
+    if isinstance(base, str):
+        try:
+            base = int(base, 0)
+        except ValueError:
+            raise TransportError(f"CAN transport: base_id {base!r} is not an integer") from None
+    return layout_for(artifact, fd=bool(config.get("fd", False)), base_id=int(base),
+                      encoding=config.get("encoding", "float32"), ranges=config.get("ranges"))
+
+
 class FrameCodec:
-    """Encode/decode one side's frames with structs derived from the layout (checked against cantools in tests)."""
+    """Encode/decode one side's frames with structs derived from the layout (checked against cantools in tests).
+
+    With ``int16`` the per-value factor and offset are those of the layout's :class:`FrameSpec` (the
+    numbers the DBC carries). ``clipped`` counts values this codec encoded beyond their range.
+    """
 
     def __init__(self, specs: Sequence[FrameSpec], *, fd: bool) -> None:
         import can
@@ -69,11 +95,31 @@ class FrameCodec:
         self.by_id = {s.arbitration_id: s for s in specs}
         self.structs = {s.arbitration_id: s.struct for s in specs}
         self.size = sum(len(s.signals) for s in specs)
+        self.int16 = any(s.encoding == "int16" for s in specs)
+        self.names = [n for s in specs for n in s.signals]
+        self.clipped = 0
+        if self.int16:
+            self.factors = np.array([f for s in specs for f in s.factors])
+            self.offsets = np.array([o for s in specs for o in s.offsets])
+            self._scale = {s.arbitration_id: (np.array(s.factors), np.array(s.offsets)) for s in specs}
+
+    def quantise(self, values: np.ndarray) -> np.ndarray:
+        """Raw int16 values of a whole vector; counts (and warns once about) values beyond their range."""
+        raw, clipped = quantise(values, self.factors, self.offsets)
+        if clipped.any():
+            if self.clipped == 0:
+                i = int(np.flatnonzero(clipped)[0])
+                lo, hi = self.offsets[i] - 32767 * self.factors[i], self.offsets[i] + 32767 * self.factors[i]
+                log.warning("CAN int16: %s = %g is outside its range [%g, %g] and was sent saturated; further "
+                            "clipping is counted (encoding_clipped), not logged", self.names[i],
+                            float(np.asarray(values)[i]), lo, hi)
+            self.clipped += int(clipped.sum())
+        return raw
 
     def encode(self, *, seq: int, values: np.ndarray, status: int = 0, sat: np.ndarray | None = None) -> list[Any]:
         frames = []
         seq &= 0xFFFF
-        vals = [float(v) for v in values]
+        vals = self.quantise(values).tolist() if self.int16 else [float(v) for v in values]
         for s in self.specs:
             k = len(s.signals)
             bits = 0
@@ -85,6 +131,18 @@ class FrameCodec:
             frames.append(self._Message(arbitration_id=s.arbitration_id, is_extended_id=False, data=data,
                                         is_fd=self.fd, check=False))
         return frames
+
+    def decode(self, arbitration_id: int, data: bytes) -> tuple[int, int, int, np.ndarray] | None:
+        """``(seq, status, sat bits, physical values)`` of one frame of this side, ``None`` if too short."""
+        st = self.structs[arbitration_id]
+        if len(data) < st.size:
+            log.debug("short frame id %#x (%d bytes)", arbitration_id, len(data))
+            return None
+        seq, status, bits, *vals = st.unpack_from(data)
+        if self.int16:
+            factors, offsets = self._scale[arbitration_id]
+            return seq, status, bits, dequantise(np.array(vals), factors, offsets)
+        return seq, status, bits, np.array(vals)
 
 
 class Assembler:
@@ -101,13 +159,12 @@ class Assembler:
         spec = self.codec.by_id.get(msg.arbitration_id)
         if spec is None or msg.is_extended_id:
             return None
-        st = self.codec.structs[msg.arbitration_id]
-        if len(msg.data) < st.size:
-            log.debug("short frame id %#x (%d bytes)", msg.arbitration_id, len(msg.data))
+        got = self.codec.decode(msg.arbitration_id, msg.data)
+        if got is None:
             return None
-        seq, status, bits, *vals = st.unpack_from(msg.data)
+        seq, status, bits, vals = got
         if self.single:  # one frame carries the whole vector (CAN FD, or a single value)
-            return seq, np.array(vals), status, self._bits[bits].copy()
+            return seq, vals, status, self._bits[bits].copy()
         rec = self.partial.get(seq)
         if rec is None:
             if len(self.partial) > 32:
@@ -131,22 +188,17 @@ class CanTransport(Transport):
     Parameters
     ----------
     config : mapping
-        python-can configuration (``interface``, ``channel``, ``fd``, ...) plus optional ``base_id``.
+        python-can configuration (``interface``, ``channel``, ``fd``, ...) plus gainlink's optional
+        ``base_id``, ``busy_poll_us``, ``encoding`` and ``ranges`` (see the module docstring).
     artifact : gainlink.artifact.Artifact
-        Gives the layout (sizes and signal names).
+        Gives the layout (sizes, signal names, input limits).
     """
 
     def __init__(self, config: Mapping[str, Any], *, artifact: Any) -> None:
         self.config = dict(config)
         self.config.pop("kind", None)
-        base = self.config.get("base_id", 0x100)
-        if isinstance(base, str):
-            try:
-                base = int(base, 0)
-            except ValueError:
-                raise TransportError(f"CAN transport: base_id {base!r} is not an integer") from None
         self.fd = bool(self.config.get("fd", False))
-        self.layout: CanLayout = layout_for(artifact, fd=self.fd, base_id=int(base))
+        self.layout: CanLayout = layout_from_config(self.config, artifact=artifact)
         self.tx = FrameCodec(self.layout.measurement, fd=self.fd)
         self.rx = Assembler(FrameCodec(self.layout.command, fd=self.fd))
         self.bus: Any = None
@@ -166,6 +218,18 @@ class CanTransport(Transport):
 
     def encode_sample(self, *, seq: int, y: np.ndarray, r: np.ndarray) -> list[Any]:
         return self.tx.encode(seq=seq, values=np.concatenate([y, r]))
+
+    def received_sample(self, *, y: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """What the firmware decodes from this sample (float32, after int16 quantisation), as float64.
+
+        For a shadow law that should see exactly the controller's inputs. Does not count clipping.
+        """
+        v = np.concatenate([y, r]).astype(np.float64)
+        if self.tx.int16:
+            raw, _ = quantise(v, self.tx.factors, self.tx.offsets)
+            v = dequantise(raw, self.tx.factors, self.tx.offsets)
+        v = v.astype(np.float32).astype(np.float64)
+        return v[:len(y)], v[len(y):]
 
     def send_frames(self, frames: Sequence[Any]) -> None:
         bus = self.bus
@@ -203,13 +267,25 @@ class CanTransport(Transport):
         return firmware_can_argv(self.config, layout=self.layout)
 
     def describe(self) -> dict:
-        return {"kind": "can", "config": {k: v for k, v in self.config.items()}, "fd": self.fd,
-                "base_id": self.layout.base_id, "frames_per_sample": len(self.layout.measurement),
-                "frames_per_command": len(self.layout.command)}
+        out = {"kind": "can", "config": {k: v for k, v in self.config.items()}, "fd": self.fd,
+               "base_id": self.layout.base_id, "frames_per_sample": len(self.layout.measurement),
+               "frames_per_command": len(self.layout.command), "encoding": self.layout.encoding}
+        if self.tx.int16:
+            out["encoding_clipped"] = self.tx.clipped  # measurement values sent saturated to their range
+        return out
+
+
+def _scale_arg(specs: Sequence[FrameSpec]) -> str:
+    """``factor,offset;factor,offset;...`` of every value, floats as round-trip reprs (strtod reads them exactly)."""
+    return ";".join(f"{f!r},{o!r}" for s in specs for f, o in zip(s.factors, s.offsets))
 
 
 def firmware_can_argv(config: Mapping[str, Any], *, layout: CanLayout) -> list[str]:
-    """Arguments for the firmware CAN app (``gainlink_can``) equivalent to a python-can configuration."""
+    """Arguments for the firmware CAN app (``gainlink_can``) equivalent to a python-can configuration.
+
+    With an int16 layout: ``--encoding int16 --scale-measurement F,O;... --scale-command F,O;...``,
+    the factor and offset of every value (``y`` then ``r``; ``u``) taken from the layout's frames.
+    """
     interface = config.get("interface")
     if interface not in FIRMWARE_INTERFACES:
         raise TransportError(f"the firmware CAN app speaks {' and '.join(sorted(FIRMWARE_INTERFACES))}, "
@@ -217,6 +293,9 @@ def firmware_can_argv(config: Mapping[str, Any], *, layout: CanLayout) -> list[s
     argv = ["--base-id", str(layout.base_id)]
     if layout.fd:
         argv.append("--fd")
+    if layout.encoding == "int16":
+        argv += ["--encoding", "int16", "--scale-measurement", _scale_arg(layout.measurement),
+                 "--scale-command", _scale_arg(layout.command)]
     spin = int(float(config.get("busy_poll_us", 0)))
     if spin > 0:
         argv += ["--spin-us", str(spin)]

@@ -1,7 +1,8 @@
 """``gainlink firmware run ARTIFACT --can CONFIG``: the firmware's CAN node on a configured bus.
 
 CONFIG is a python-can configuration — a TOML or JSON file, or inline JSON — e.g.
-``{"interface": "socketcan", "channel": "can0", "fd": true}`` or a ``udp_multicast`` group. The
+``{"interface": "socketcan", "channel": "can0", "fd": true}`` or a ``udp_multicast`` group, with
+gainlink's ``base_id``, ``encoding`` and ``ranges`` keys as in a scenario's transport table. The
 node runs in the foreground until interrupted; a bench's bridge (``gainlink hil run``) talks to it.
 """
 
@@ -15,8 +16,7 @@ from gainlink.artifact import load
 from gainlink.errors import TransportError
 from gainlink.fileio import read_user_file
 
-from .can_layout import layout_for
-from .can_transport import config_from_text, firmware_can_argv
+from .can_transport import config_from_text, firmware_can_argv, layout_from_config
 from .controller import firmware_can_executable
 
 
@@ -33,9 +33,7 @@ def run_firmware_can(*, artifact_path: str, can: str) -> int:
     """Build (cached) and exec ``gainlink_can`` for the artifact on the configured bus (does not return)."""
     artifact = load(artifact_path)
     config = read_can_config(can)
-    base = config.get("base_id", 0x100)
-    base = int(base, 0) if isinstance(base, str) else int(base)
-    argv = firmware_can_argv(config, layout=layout_for(artifact, fd=bool(config.get("fd", False)), base_id=base))
+    argv = firmware_can_argv(config, layout=layout_from_config(config, artifact=artifact))
     exe = firmware_can_executable(artifact)
     sys.stdout.flush()
     sys.stderr.flush()

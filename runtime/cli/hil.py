@@ -58,9 +58,15 @@ def _run(args: argparse.Namespace) -> int:
 def _dbc(args: argparse.Namespace) -> int:
     from gainlink.artifact import load
     from gainlink.fileio import atomic_write_text
-    from gainlink.hil.can_layout import layout_for
+    from gainlink.hil.can_transport import layout_from_config
+    from gainlink.hil.firmware_can import read_can_config
 
-    layout = layout_for(load(args.artifact), fd=args.fd, base_id=int(args.base_id, 0))
+    config = read_can_config(args.can) if args.can else {}
+    if args.fd:
+        config["fd"] = True
+    if args.base_id is not None:
+        config["base_id"] = args.base_id
+    layout = layout_from_config(config, artifact=load(args.artifact))
     text = layout.dbc()
     if args.out:
         atomic_write_text(args.out, text)
@@ -138,7 +144,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = sub.add_parser("dbc", help="write the CAN layout of an artifact as a DBC file")
     p.add_argument("artifact")
     p.add_argument("--fd", action="store_true", help="CAN FD layout (else classic CAN)")
-    p.add_argument("--base-id", default="0x100", help="first 11-bit identifier (default 0x100)")
+    p.add_argument("--base-id", help="first 11-bit identifier (default 0x100)")
+    p.add_argument("--can", metavar="CONFIG",
+                   help="the layout of this CAN transport table (a scenario or a TOML/JSON file with its "
+                        "[transport], or inline JSON): fd, base_id, encoding (float32 | int16) and ranges, e.g. "
+                        "'{\"interface\": \"socketcan\", \"encoding\": \"int16\", \"ranges\": "
+                        "{\"x\": [-5, 5], \"theta\": [-1, 1], \"r_x\": [-5, 5]}}'")
     p.add_argument("--out", help="DBC file (default: stdout)")
     p.set_defaults(func=_dbc)
 
