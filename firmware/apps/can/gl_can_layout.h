@@ -3,9 +3,15 @@
  * @brief The CAN layout of the artifact's samples and commands (the rule of gainlink.hil.can_layout).
  *
  * Every frame: bytes 0-1 `seq` (uint16 LE), byte 2 `status`, byte 3 `sat` (bit i: i-th value of this
- * frame saturated), then float32 LE values: 1 per classic frame (8 bytes), up to 8 per FD frame
- * (length rounded up to a valid FD length). Commands (u) use ids base+j; measurements (y then r)
- * use ids base+0x10+i.
+ * frame saturated), then the values, little-endian, in one of two encodings:
+ * - GL_CAN_FLOAT32: IEEE float32, 1 per classic frame (8 bytes), up to 8 per FD frame;
+ * - GL_CAN_INT16: scaled integers, `physical = raw * factor + offset` with a factor and offset per value
+ *   (gl_can_scale_t, from the DBC), 2 per classic frame, up to 8 per FD frame. Encoding computes
+ *   `rint((value - offset) / factor)` in double (round half to even, as Python's numpy.rint and cantools),
+ *   saturates to +-32767 and sends a non-finite value as -32768, which decodes to NaN.
+ *
+ * FD frame lengths are rounded up to a valid FD length. Commands (u) use ids base+j; measurements
+ * (y then r) use ids base+0x10+i.
  */
 #ifndef GAINLINK_GL_CAN_LAYOUT_H
 #define GAINLINK_GL_CAN_LAYOUT_H
@@ -15,26 +21,43 @@
 #include "gl_can_link.h"
 
 #define GL_CAN_HEADER 4u                /**< Header bytes. */
-#define GL_CAN_FD_VALUES 8u             /**< Values per FD frame. */
+#define GL_CAN_FD_VALUES 8u             /**< Values per FD frame (the `sat` byte has 8 bits). */
 #define GL_CAN_CMD_OFFSET 0x00u         /**< Command ids: base + this + frame index. */
 #define GL_CAN_MEAS_OFFSET 0x10u        /**< Measurement ids: base + this + frame index. */
 #define GL_CAN_STATUS_FAULT 0x01u       /**< Command status: non-finite sample refused. */
 #define GL_CAN_STATUS_WATCHDOG 0x02u    /**< Command status: watchdog expired. */
+#define GL_CAN_INT16_MAX 32767          /**< Largest raw int16 value (-GL_CAN_INT16_MAX is the smallest). */
+#define GL_CAN_INT16_NAN (-32768)       /**< Reserved raw int16 value: not a number. */
+
+/** How values are carried. */
+typedef enum gl_can_encoding {
+    GL_CAN_FLOAT32 = 0,  /**< IEEE float32. */
+    GL_CAN_INT16 = 1     /**< Scaled signed 16-bit integers. */
+} gl_can_encoding_t;
+
+/** The linear map of one int16 value: `physical = raw * factor + offset`. */
+typedef struct gl_can_scale {
+    double factor;  /**< Physical units per raw step (> 0). */
+    double offset;  /**< Physical value of raw 0. */
+} gl_can_scale_t;
 
 /** Layout parameters. */
 typedef struct gl_can_layout {
-    uint32_t base_id;    /**< First identifier. */
-    int fd;              /**< CAN FD. */
-    uint32_t per_frame;  /**< Values per frame. */
+    uint32_t base_id;             /**< First identifier. */
+    int fd;                       /**< CAN FD. */
+    gl_can_encoding_t encoding;   /**< Value encoding. */
+    uint32_t per_frame;           /**< Values per frame. */
+    uint32_t value_bytes;         /**< Bytes per value (4 or 2). */
 } gl_can_layout_t;
 
 /**
  * @brief Fill a layout.
- * @param[out] layout   Layout.
- * @param[in]  base_id  First identifier.
- * @param[in]  fd       CAN FD.
+ * @param[out] layout    Layout.
+ * @param[in]  base_id   First identifier.
+ * @param[in]  fd        CAN FD.
+ * @param[in]  encoding  Value encoding.
  */
-void gl_can_layout_init(gl_can_layout_t *layout, uint32_t base_id, int fd);
+void gl_can_layout_init(gl_can_layout_t *layout, uint32_t base_id, int fd, gl_can_encoding_t encoding);
 
 /**
  * @brief Number of frames that carry `count` values.
@@ -42,6 +65,24 @@ void gl_can_layout_init(gl_can_layout_t *layout, uint32_t base_id, int fd);
  * @return Frames.
  */
 uint32_t gl_can_layout_frames(const gl_can_layout_t *layout, uint32_t count);
+
+/**
+ * @brief Raw int16 value of a physical value.
+ * @param[in]  value    Physical value.
+ * @param[in]  scale    Its factor and offset.
+ * @param[out] clipped  Set to 1 when a finite value was beyond the range and saturated, else 0 (may be NULL).
+ * @return `rint((value - offset) / factor)` in double, clamped to +-GL_CAN_INT16_MAX; GL_CAN_INT16_NAN
+ *         for a non-finite value.
+ */
+int16_t gl_can_quantise(float value, const gl_can_scale_t *scale, int *clipped);
+
+/**
+ * @brief Physical value of a raw int16 value.
+ * @param[in] raw    Raw value.
+ * @param[in] scale  Its factor and offset.
+ * @return `(float)(raw * factor + offset)` computed in double; NaN for GL_CAN_INT16_NAN.
+ */
+float gl_can_dequantise(int16_t raw, const gl_can_scale_t *scale);
 
 /**
  * @brief Encode frame `index` of a vector of `count` values.
@@ -52,11 +93,14 @@ uint32_t gl_can_layout_frames(const gl_can_layout_t *layout, uint32_t count);
  * @param[in]  status  Status byte.
  * @param[in]  sat     Saturation mask of the whole vector (bit k: value k).
  * @param[in]  values  The vector.
+ * @param[in]  scales  Per value factor and offset (GL_CAN_INT16; ignored, may be NULL, for GL_CAN_FLOAT32).
  * @param[in]  count   Its length.
  * @param[out] frame   Encoded frame.
+ * @return Number of values of this frame that were beyond their range and saturated (0 with float32).
  */
-void gl_can_layout_encode(const gl_can_layout_t *layout, uint32_t id, uint32_t index, uint16_t seq, uint8_t status,
-                          uint32_t sat, const float *values, uint32_t count, gl_can_frame_t *frame);
+uint32_t gl_can_layout_encode(const gl_can_layout_t *layout, uint32_t id, uint32_t index, uint16_t seq,
+                              uint8_t status, uint32_t sat, const float *values, const gl_can_scale_t *scales,
+                              uint32_t count, gl_can_frame_t *frame);
 
 /**
  * @brief Decode frame `index` of a vector of `count` values into `values`.
@@ -65,10 +109,11 @@ void gl_can_layout_encode(const gl_can_layout_t *layout, uint32_t id, uint32_t i
  * @param[in]  frame   Frame.
  * @param[out] seq     Its sequence number.
  * @param[out] values  The vector (only this frame's slice is written).
+ * @param[in]  scales  Per value factor and offset (GL_CAN_INT16; ignored, may be NULL, for GL_CAN_FLOAT32).
  * @param[in]  count   Vector length.
  * @return 0, or -1 when the frame is too short.
  */
 int gl_can_layout_decode(const gl_can_layout_t *layout, uint32_t index, const gl_can_frame_t *frame, uint16_t *seq,
-                         float *values, uint32_t count);
+                         float *values, const gl_can_scale_t *scales, uint32_t count);
 
 #endif /* GAINLINK_GL_CAN_LAYOUT_H */

@@ -6,9 +6,16 @@
  * @code
  *   gainlink_can --backend udp --channel 239.74.163.2 [--port 43113] [--hop-limit 0] [--fd] [--base-id 256]
  *   gainlink_can --backend socketcan --channel vcan0 [--fd] [--base-id 256]
+ *   gainlink_can ... --encoding int16 --scale-measurement 'F,O;F,O;F,O' --scale-command 'F,O'
  * @endcode
  * `--spin-us N` polls without sleeping for N us after each answered sample before blocking again
  * (lower latency in lockstep for the price of a busy core while waiting).
+ * `--encoding float32|int16` (default float32): with int16 every value is a scaled signed 16-bit integer,
+ * `physical = raw * factor + offset`; `--scale-measurement` gives the `factor,offset` pairs of the
+ * sample (GL_P outputs then GL_Q references) and `--scale-command` those of the command (GL_M inputs),
+ * pairs separated by `;`, exactly as many as values (gainlink.hil.can_transport.firmware_can_argv writes
+ * them from the DBC's numbers). A non-finite value travels as raw -32768 and decodes to NaN, so the loop's
+ * fault path still answers it; commands beyond their range saturate to it (counted: `clipped=` at exit).
  * Assembles each sample (y then r) from its measurement frames by sequence number, runs gl_loop_step()
  * once per complete, newer sample (duplicates and stale samples are ignored), and answers with the
  * command frames carrying the same sequence number, the status bits and the saturation mask. Prints
@@ -16,6 +23,7 @@
  */
 #define _GNU_SOURCE
 #include <errno.h>
+#include <math.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -30,6 +38,8 @@
 
 static volatile sig_atomic_t stop_requested;
 static gl_loop_t loop;
+static gl_can_scale_t meas_scale[GL_P + GL_QA];
+static gl_can_scale_t cmd_scale[GL_M];
 
 static void on_signal(int sig)
 {
@@ -39,12 +49,32 @@ static void on_signal(int sig)
 
 static int usage(const char *why)
 {
-    fprintf(stderr,
-            "gainlink_can: %s\n"
-            "usage: gainlink_can --backend udp|socketcan --channel GROUP|IFACE [--port N] [--hop-limit N] [--fd] "
-            "[--base-id N] [--spin-us N]\n",
-            why);
+    fprintf(stderr, "gainlink_can: %s (gainlink_can --help lists the options)\n", why);
     return 2;
+}
+
+static int help(void)
+{
+    printf("usage: gainlink_can --backend udp|socketcan --channel GROUP|IFACE [--port N] [--hop-limit N] [--fd]\n"
+           "                    [--base-id N] [--spin-us N]\n"
+           "                    [--encoding float32|int16 --scale-measurement F,O;F,O;... --scale-command F,O;...]\n"
+           "\n"
+           "  --backend udp|socketcan  python-can udp_multicast wire format, or a SocketCAN interface\n"
+           "  --channel GROUP|IFACE    IPv4 multicast group (udp) or interface name (socketcan)\n"
+           "  --port N, --hop-limit N  udp_multicast port (default 43113) and TTL (default 1; 0 stays on the host)\n"
+           "  --fd                     CAN FD frames (up to 8 values per frame)\n"
+           "  --base-id N              first 11-bit identifier (default 0x100; commands base+j, samples base+0x10+i)\n"
+           "  --spin-us N              poll without sleeping for N us after each answer (default 0)\n"
+           "  --encoding E             float32 (default): IEEE float32 values; int16: scaled integers,\n"
+           "                           physical = raw * factor + offset, raw -32767..32767 (beyond: saturated),\n"
+           "                           raw -32768 = not a number; 2 values per classic frame\n"
+           "  --scale-measurement S    int16: factor,offset of each sample value (%d outputs then %d references),\n"
+           "                           pairs separated by ';'\n"
+           "  --scale-command S        int16: factor,offset of each command value (%d inputs)\n"
+           "\n"
+           "gainlink writes these arguments from the artifact's DBC (gainlink hil dbc; gainlink firmware run --can).\n",
+           GL_P, GL_Q, GL_M);
+    return 0;
 }
 
 static uint64_t now_ns(void)
@@ -66,15 +96,60 @@ static int parse_uint(const char *text, unsigned long max, unsigned long *out)
     return 0;
 }
 
+/**
+ * Parse exactly `count` `factor,offset` pairs separated by `;` (factor finite and > 0, offset finite).
+ * Returns 0, or -1 with a reason in `why`.
+ */
+static int parse_scales(const char *text, gl_can_scale_t *scales, uint32_t count, char *why, size_t why_len)
+{
+    const char *p = text;
+    for (uint32_t i = 0; i < count; ++i) {
+        char *end = NULL;
+        errno = 0;
+        double f = strtod(p, &end);
+        if (end == p || *end != ',' || errno != 0 || !isfinite(f) || !(f > 0.0)) {
+            snprintf(why, why_len, "pair %u: factor must be a finite number > 0", (unsigned)(i + 1u));
+            return -1;
+        }
+        p = end + 1;
+        double o = strtod(p, &end);
+        if (end == p || errno != 0 || !isfinite(o)) {
+            snprintf(why, why_len, "pair %u: offset must be a finite number", (unsigned)(i + 1u));
+            return -1;
+        }
+        scales[i].factor = f;
+        scales[i].offset = o;
+        p = end;
+        if (i + 1u < count) {
+            if (*p != ';') {
+                snprintf(why, why_len, "expected %u factor,offset pairs separated by ';', got %u", (unsigned)count,
+                         (unsigned)(i + 1u));
+                return -1;
+            }
+            ++p;
+        }
+    }
+    if (*p != '\0') {
+        snprintf(why, why_len, "expected %u factor,offset pairs separated by ';', got more or trailing text",
+                 (unsigned)count);
+        return -1;
+    }
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     gl_can_config_t cfg = {.backend = GL_CAN_UDP, .channel = NULL, .port = 43113, .hop_limit = 1, .fd = 0,
                            .rx_lo = 0, .rx_hi = 0};
     unsigned long base_id = 0x100, v = 0, spin_us = 0;
+    gl_can_encoding_t encoding = GL_CAN_FLOAT32;
+    const char *scale_meas = NULL, *scale_cmd = NULL;
     for (int i = 1; i < argc; ++i) {
         const char *a = argv[i];
         const char *next = i + 1 < argc ? argv[i + 1] : NULL;
-        if (strcmp(a, "--fd") == 0) {
+        if (strcmp(a, "--help") == 0 || strcmp(a, "-h") == 0) {
+            return help();
+        } else if (strcmp(a, "--fd") == 0) {
             cfg.fd = 1;
         } else if (next == NULL) {
             return usage("missing value or unknown option");
@@ -107,6 +182,21 @@ int main(int argc, char **argv)
                 return usage("--spin-us must be 0..1000000");
             }
             ++i;
+        } else if (strcmp(a, "--encoding") == 0) {
+            if (strcmp(next, "float32") == 0) {
+                encoding = GL_CAN_FLOAT32;
+            } else if (strcmp(next, "int16") == 0) {
+                encoding = GL_CAN_INT16;
+            } else {
+                return usage("--encoding must be float32 or int16");
+            }
+            ++i;
+        } else if (strcmp(a, "--scale-measurement") == 0) {
+            scale_meas = next;
+            ++i;
+        } else if (strcmp(a, "--scale-command") == 0) {
+            scale_cmd = next;
+            ++i;
         } else if (strcmp(a, "--base-id") == 0) {
             if (parse_uint(next, 0x7FF - 0x30, &base_id) != 0) {
                 return usage("--base-id must leave room for the layout (0..0x7cf)");
@@ -119,9 +209,26 @@ int main(int argc, char **argv)
     if (cfg.channel == NULL) {
         return usage("--channel is required");
     }
+    if (encoding == GL_CAN_INT16) {
+        char why[160], msg[240];
+        if (scale_meas == NULL || scale_cmd == NULL) {
+            return usage("--encoding int16 needs --scale-measurement and --scale-command");
+        }
+        if (parse_scales(scale_meas, meas_scale, N_SAMPLE, why, sizeof why) != 0) {
+            snprintf(msg, sizeof msg, "--scale-measurement (%u values: outputs then references): %s",
+                     (unsigned)N_SAMPLE, why);
+            return usage(msg);
+        }
+        if (parse_scales(scale_cmd, cmd_scale, GL_M, why, sizeof why) != 0) {
+            snprintf(msg, sizeof msg, "--scale-command (%u values): %s", (unsigned)GL_M, why);
+            return usage(msg);
+        }
+    } else if (scale_meas != NULL || scale_cmd != NULL) {
+        return usage("--scale-measurement and --scale-command need --encoding int16");
+    }
 
     gl_can_layout_t layout;
-    gl_can_layout_init(&layout, (uint32_t)base_id, cfg.fd);
+    gl_can_layout_init(&layout, (uint32_t)base_id, cfg.fd, encoding);
     const uint32_t meas_frames = gl_can_layout_frames(&layout, N_SAMPLE);
     const uint32_t cmd_frames = gl_can_layout_frames(&layout, GL_M);
     const uint32_t meas_base = (uint32_t)base_id + GL_CAN_MEAS_OFFSET;
@@ -145,8 +252,9 @@ int main(int argc, char **argv)
     if (gl_can_link_open(&link, &cfg) != 0) {
         return 4;
     }
-    printf("gainlink_can ready %s sha256:%s n=%d m=%d p=%d q=%d fd=%d base_id=%lu\n", GL_NAME, GL_ARTIFACT_SHA256,
-           GL_N, GL_M, GL_P, GL_Q, cfg.fd, base_id);
+    printf("gainlink_can ready %s sha256:%s n=%d m=%d p=%d q=%d fd=%d base_id=%lu encoding=%s\n", GL_NAME,
+           GL_ARTIFACT_SHA256, GL_N, GL_M, GL_P, GL_Q, cfg.fd, base_id,
+           encoding == GL_CAN_INT16 ? "int16" : "float32");
     fflush(stdout);
 
     float sample[GL_P + GL_QA];
@@ -155,7 +263,7 @@ int main(int argc, char **argv)
     int have_cur = 0, have_done = 0;
     uint32_t got = 0;
     const uint32_t all = (meas_frames >= 32u) ? 0xFFFFFFFFu : ((1u << meas_frames) - 1u);
-    unsigned long steps = 0, stale = 0, partial_dropped = 0, send_errors = 0;
+    unsigned long steps = 0, stale = 0, partial_dropped = 0, send_errors = 0, clipped = 0;
     int rc = 0;
     uint64_t spin_until = 0;
     while (!stop_requested) {
@@ -172,7 +280,7 @@ int main(int argc, char **argv)
         uint32_t index = frame.id - meas_base;
         uint16_t seq = 0;
         float part[GL_P + GL_QA];
-        if (gl_can_layout_decode(&layout, index, &frame, &seq, part, N_SAMPLE) != 0) {
+        if (gl_can_layout_decode(&layout, index, &frame, &seq, part, meas_scale, N_SAMPLE) != 0) {
             continue;
         }
         if (have_done) {
@@ -203,7 +311,7 @@ int main(int argc, char **argv)
         uint32_t sat = st == GL_SATURATED ? loop.sat_mask : 0u;
         for (uint32_t j = 0; j < cmd_frames; ++j) {
             gl_can_frame_t out;
-            gl_can_layout_encode(&layout, cmd_base + j, j, seq, status, sat, u, GL_M, &out);
+            clipped += gl_can_layout_encode(&layout, cmd_base + j, j, seq, status, sat, u, cmd_scale, GL_M, &out);
             if (gl_can_link_send(&link, &out) != 0) {
                 ++send_errors;
             }
@@ -216,7 +324,7 @@ int main(int argc, char **argv)
         ++steps;
     }
     gl_can_link_close(&link);
-    fprintf(stderr, "gainlink_can: steps=%lu stale=%lu partial_dropped=%lu send_errors=%lu filtered=%lu\n", steps,
-            stale, partial_dropped, send_errors, (unsigned long)link.rx_foreign);
+    fprintf(stderr, "gainlink_can: steps=%lu stale=%lu partial_dropped=%lu send_errors=%lu filtered=%lu clipped=%lu\n",
+            steps, stale, partial_dropped, send_errors, (unsigned long)link.rx_foreign, clipped);
     return rc;
 }
