@@ -2,7 +2,9 @@
 
 The firmware's gainlink_can is exercised as a real process over python-can udp_multicast: samples go
 out through the Python transport, commands come back and are compared with the float64 reference
-law (float32 on the wire and in the C loop: relative tolerance 1e-4 of the command scale).
+law (float32 on the wire and in the C loop: relative tolerance 1e-4 of the command scale), in both
+encodings (int16: the law is fed the quantised sample, and the command may be off by half a step).
+The int16 encoding's own tests are in test_can_scaled.py.
 """
 
 from __future__ import annotations
@@ -77,38 +79,54 @@ def _exchange(art, transport, samples):
     return out
 
 
+#: int16 ranges for the pendulum's outputs and reference (the input F takes the artifact's +-20 N).
+PENDULUM_RANGES = {"x": [-5.0, 5.0], "theta": [-1.0, 1.0], "r_x": [-5.0, 5.0]}
+
+
+@pytest.mark.parametrize("encoding", ["float32", "int16"])
 @pytest.mark.parametrize("fd", [False, True])
-def test_firmware_can_app_runs_the_law_over_udp_multicast(pendulum_gains, can_firmware, fd):
+def test_firmware_can_app_runs_the_law_over_udp_multicast(pendulum_gains, can_firmware, fd, encoding):
     art = load(pendulum_gains)
-    transport = CanTransport(udp_transport(fd=fd), artifact=art)
+    transport = CanTransport({**udp_transport(fd=fd), "encoding": encoding, "ranges": PENDULUM_RANGES}, artifact=art)
     peer = ControllerProcess([str(can_firmware), *transport.controller_argv()])
+    # int16: the command arrives quantised, within half a step of the controller's float32 u.
+    half_step_u = 0.0 if encoding == "float32" else transport.layout.command[0].factors[0] / 2
     transport.open()
     try:
         peer.start()
         peer.check_artifact(art.sha256)
+        assert f"encoding={encoding}" in peer.ready_line
         rng = np.random.default_rng(7)
         Y = rng.normal(scale=[0.2, 0.05], size=(200, art.p)).astype(np.float32)
         R = rng.normal(scale=0.5, size=(200, art.q)).astype(np.float32)
-        Y[50:53] *= 400.0  # drive the command into its limits for a few steps
+        Y[50:53] *= 400.0  # drive the command into its limits for a few steps (int16: theta also beyond its range)
         cmds = _exchange(art, transport, [(k, Y[k], R[k]) for k in range(200)])
-        ref = ReferenceLoop(art).run(Y.astype(np.float64), R.astype(np.float64))
+        # The law sees what the controller decoded: float32, and with int16 the quantised, range-clipped sample.
+        seen = [transport.received_sample(y=Y[k], r=R[k]) for k in range(200)]
+        Ys, Rs = np.array([s[0] for s in seen]), np.array([s[1] for s in seen])
+        ref = ReferenceLoop(art).run(Ys, Rs)
         assert all(c is not None for c in cmds)
         U = np.array([c.u for c in cmds])
         scale = float(np.abs(ref.u).max())
-        np.testing.assert_allclose(U, ref.u, rtol=0, atol=1e-4 * scale)
+        np.testing.assert_allclose(U, ref.u, rtol=0, atol=1e-4 * scale + half_step_u)
         assert np.array_equal(np.array([c.saturated for c in cmds]), ref.saturated)
         assert ref.saturated.any()
-        # A non-finite sample: safe command (zero clamped), fault bit, state untouched.
+        if encoding == "int16":  # samples 50..52 go beyond the (symmetric) ranges: sent saturated, and counted
+            y_hi = np.array([PENDULUM_RANGES[n][1] for n in art.signals["outputs"]])
+            r_hi = np.array([PENDULUM_RANGES[n][1] for n in art.signals["references"]])
+            beyond = int((np.abs(Y) > y_hi).sum() + (np.abs(R) > r_hi).sum())
+            assert beyond > 0 and transport.describe()["encoding_clipped"] == beyond
+        # A non-finite sample (int16: raw -32768): safe command (zero clamped), fault bit, state untouched.
         nan_cmd = _exchange(art, transport, [(200, np.array([math.nan, 0.0]), np.zeros(art.q))])[0]
-        assert nan_cmd.status & STATUS_FAULT and np.all(nan_cmd.u == 0.0)
+        assert nan_cmd.status & STATUS_FAULT and np.all(np.abs(nan_cmd.u) <= half_step_u)
         # A duplicate of an answered sample is ignored; the next sample continues the sequence.
         transport.send_frames(transport.encode_sample(seq=199, y=Y[199], r=R[199]))
         assert transport.receive_command(timeout=0.3) is None
         nxt = _exchange(art, transport, [(201, Y[0], R[0])])[0]
         loop = ReferenceLoop(art)
-        loop.run(Y.astype(np.float64), R.astype(np.float64))
-        want = loop.step(Y[0].astype(np.float64), R[0].astype(np.float64)).u
-        np.testing.assert_allclose(nxt.u, want, rtol=0, atol=1e-4 * scale)
+        loop.run(Ys, Rs)
+        want = loop.step(Ys[0], Rs[0]).u
+        np.testing.assert_allclose(nxt.u, want, rtol=0, atol=1e-4 * scale + half_step_u)
     finally:
         peer.close()
         transport.close()
