@@ -11,6 +11,16 @@
  *    derivative with respect to a state or an input; returns 0 when the pair is not supported,
  *  - MODEL_STEP_VR: value reference of the largest internal RK4 step used by fmi2DoStep.
  *
+ * A Co-Simulation-only model (one whose state is not a set of continuous states, e.g. dead times)
+ * defines GL_FMU_CS_ONLY instead of the state/derivative/partial/step items above, and provides:
+ *  - model_extra_t: state held outside the reals (e.g. delay lines), kept in the instance and
+ *    saved and restored with it by fmi2GetFMUstate / fmi2SetFMUstate,
+ *  - model_extra_reset(model_extra_t *x): its value at instantiation and fmi2Reset,
+ *  - model_do_step(double *r, model_extra_t *x, double h, char *msg, size_t msg_size): advance one
+ *    communication step of length h; on failure return non-zero with a message in msg and leave
+ *    r and x unchanged (fmi2DoStep logs the message and returns fmi2Error).
+ * The Model Exchange functions are then left out and fmi2GetDirectionalDerivative reports an error.
+ *
  * Every variable is a fmi2Real held in one array indexed by value reference. No heap memory is
  * used after fmi2Instantiate except the state copies requested through fmi2GetFMUstate.
  */
@@ -23,6 +33,9 @@
 typedef struct {
     double r[MODEL_N_REALS];
     double time;
+#ifdef GL_FMU_CS_ONLY
+    model_extra_t extra;
+#endif
     fmi2Type type;
     fmi2CallbackFunctions cb;
     fmi2String name;
@@ -32,6 +45,9 @@ typedef struct {
 typedef struct {
     double r[MODEL_N_REALS];
     double time;
+#ifdef GL_FMU_CS_ONLY
+    model_extra_t extra;
+#endif
 } gl_fmu_snapshot_t;
 
 static void gl_fmu_log(gl_fmu_t *c, fmi2Status status, const char *msg)
@@ -41,6 +57,7 @@ static void gl_fmu_log(gl_fmu_t *c, fmi2Status status, const char *msg)
     }
 }
 
+#ifndef GL_FMU_CS_ONLY
 static void gl_fmu_rhs(gl_fmu_t *c, const double *x, double *dx)
 {
     double keep[MODEL_N_STATES];
@@ -73,6 +90,17 @@ static void gl_fmu_rk4(gl_fmu_t *c, double h)
     for (size_t i = 0; i < MODEL_N_STATES; i++) {
         c->r[model_state_vr[i]] = x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
     }
+    model_derivatives(c->r);
+}
+#endif
+
+/* Back to the values at instantiation: start values and, for a CS-only model, its extra state. */
+static void gl_fmu_defaults(gl_fmu_t *c)
+{
+    model_set_defaults(c->r);
+#ifdef GL_FMU_CS_ONLY
+    model_extra_reset(&c->extra);
+#endif
     model_derivatives(c->r);
 }
 
@@ -109,8 +137,7 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
     c->name = name;
     c->time = 0.0;
     c->terminated = 0;
-    model_set_defaults(c->r);
-    model_derivatives(c->r);
+    gl_fmu_defaults(c);
     return c;
 }
 
@@ -143,8 +170,7 @@ fmi2Status fmi2Terminate(fmi2Component c) { ((gl_fmu_t *)c)->terminated = 1; ret
 fmi2Status fmi2Reset(fmi2Component c)
 {
     gl_fmu_t *inst = c;
-    model_set_defaults(inst->r);
-    model_derivatives(inst->r);
+    gl_fmu_defaults(inst);
     inst->time = 0.0;
     inst->terminated = 0;
     return fmi2OK;
@@ -232,6 +258,9 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
     }
     memcpy(s->r, inst->r, sizeof(inst->r));
     s->time = inst->time;
+#ifdef GL_FMU_CS_ONLY
+    s->extra = inst->extra;
+#endif
     return fmi2OK;
 }
 
@@ -244,6 +273,9 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
     }
     memcpy(inst->r, s->r, sizeof(inst->r));
     inst->time = s->time;
+#ifdef GL_FMU_CS_ONLY
+    inst->extra = s->extra;
+#endif
     return fmi2OK;
 }
 
@@ -294,6 +326,11 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
                                         const fmi2ValueReference vKnown[], size_t nKnown,
                                         const fmi2Real dvKnown[], fmi2Real dvUnknown[])
 {
+#ifdef GL_FMU_CS_ONLY
+    (void)vUnknown; (void)nUnknown; (void)vKnown; (void)nKnown; (void)dvKnown; (void)dvUnknown;
+    gl_fmu_log(c, fmi2Error, "fmi2GetDirectionalDerivative: not provided by this FMU");
+    return fmi2Error;
+#else
     gl_fmu_t *inst = c;
     for (size_t i = 0; i < nUnknown; i++) {
         double acc = 0.0;
@@ -314,8 +351,10 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
         dvUnknown[i] = acc;
     }
     return fmi2OK;
+#endif
 }
 
+#ifndef GL_FMU_CS_ONLY
 /* ---- Model Exchange ---- */
 
 fmi2Status fmi2EnterEventMode(fmi2Component c) { (void)c; return fmi2OK; }
@@ -397,6 +436,7 @@ fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real nominals[
     }
     return fmi2OK;
 }
+#endif /* GL_FMU_CS_ONLY */
 
 /* ---- Co-Simulation ---- */
 
@@ -422,6 +462,14 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
         gl_fmu_log(inst, fmi2Error, "fmi2DoStep: negative step");
         return fmi2Error;
     }
+#ifdef GL_FMU_CS_ONLY
+    char msg[256] = "fmi2DoStep failed";
+    if (model_do_step(inst->r, &inst->extra, h, msg, sizeof msg) != 0) {
+        gl_fmu_log(inst, fmi2Error, msg);
+        return fmi2Error;
+    }
+    model_derivatives(inst->r);
+#else
     double hmax = inst->r[MODEL_STEP_VR];
     if (!(hmax > 0.0)) {
         hmax = h;
@@ -440,6 +488,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
             return fmi2Error;
         }
     }
+#endif
     inst->time = t + h;
     return fmi2OK;
 }
