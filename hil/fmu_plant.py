@@ -4,7 +4,8 @@
 Per step the bridge calls the raw ``fmi2SetReal`` / ``fmi2DoStep`` / ``fmi2GetReal`` (FMI 3.0:
 ``fmi3SetFloat64`` / ``fmi3DoStep`` / ``fmi3GetFloat64``) with ctypes arrays built once
 (FIELD-NOTES: ~2.5 us per step instead of ~4.8 us through the list wrappers). Snapshots use
-``fmi2GetFMUstate`` / ``fmi3GetFMUState`` when the FMU can.
+``fmi2GetFMUstate`` / ``fmi3GetFMUState`` when the FMU can. An FMI 2.0 FMU's log goes to
+:mod:`logging`, and a failed call's :class:`PlantError` carries the FMU's last logged message.
 """
 
 from __future__ import annotations
@@ -39,6 +40,49 @@ def resolve_fmu(*, fmu: str | None, path: str | None, base_dir: Path | None = No
     if not p.exists():
         raise PlantError(f"FMU {p} not found")
     return p
+
+
+# FMU log messages by plant: fmpy's native logger proxy (which formats the variadic message) calls one
+# global Python logger, so there is one dispatcher, keyed by the callbacks' componentEnvironment.
+_FMI2_SINKS: dict[int, list[str]] = {}
+_FMI2_DISPATCH: Any = None
+
+
+def _fmi2_dispatch(env: Any, instance: Any, status: int, category: Any, message: bytes) -> None:
+    sink = _FMI2_SINKS.get(env or 0)
+    if sink is None:  # an FMU instantiated with fmpy's default callbacks: print as fmpy does
+        from fmpy.fmi1 import printLogMessage
+
+        printLogMessage(env, instance, status, category, message)
+        return
+    text = message.decode("utf-8", errors="replace")
+    # Errors make the FMI call fail and reach the PlantError line; warnings are only logged.
+    log.log(logging.WARNING if status == 1 else logging.DEBUG, "FMU: %s", text)
+    if status >= 1:  # fmi2Warning and worse
+        sink[:] = [text]  # the latest is the reason of a failed call
+
+
+def _fmi2_callbacks(key: int, messages: list[str]) -> Any:
+    """fmpy's FMI 2.0 callbacks whose logger keeps the FMU's warnings and errors in ``messages`` (so a
+    failed call can name the FMU's reason); ``key`` identifies the plant in the shared dispatcher."""
+    global _FMI2_DISPATCH
+    from ctypes import byref, c_void_p
+
+    from fmpy import calloc, free
+    from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                           fmi2CallbackLoggerTYPE)
+    from fmpy.logging import addLoggerProxy
+
+    if _FMI2_DISPATCH is None:
+        _FMI2_DISPATCH = fmi2CallbackLoggerTYPE(_fmi2_dispatch)
+    _FMI2_SINKS[key] = messages
+    cb = fmi2CallbackFunctions()
+    cb.logger = _FMI2_DISPATCH
+    cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    cb.componentEnvironment = c_void_p(key)
+    addLoggerProxy(byref(cb))
+    return cb
 
 
 def read_description(path: Path) -> Any:
@@ -133,6 +177,8 @@ class FmuPlant(Plant):
             self._cleanup_unzip()
             raise PlantError(f"FMU {self.path}: cannot load its binary ({exc})") from None
         self._instantiated = False
+        self._messages: list[str] = []
+        self._callbacks = None if self.v3 else _fmi2_callbacks(id(self), self._messages)
         vr = lambda names: (ValueReference * len(names))(*(self.vars[n].valueReference for n in names))  # noqa: E731
         self._vr_in, self._vr_out, self._vr_state = vr(in_names), vr(out_names), vr(list(states))
         self._val_in = (Real * len(in_names))()
@@ -149,11 +195,17 @@ class FmuPlant(Plant):
             shutil.rmtree(self._unzip, ignore_errors=True)
             self._unzip = None
 
+    def _reason(self, exc: Exception) -> str:
+        """The FMU's last logged message for a failed call (else the exception), and forget the log."""
+        reason = self._messages[-1] if self._messages else str(exc)
+        self._messages.clear()
+        return reason
+
     def _call(self, what: str, fn: Any, *args: Any) -> Any:
         try:
             return fn(*args)
         except Exception as exc:
-            raise PlantError(f"FMU {self.md.modelName}: {what} failed ({exc})") from None
+            raise PlantError(f"FMU {self.md.modelName}: {what} failed ({self._reason(exc)})") from None
 
     def reset(self, *, initial: Mapping[str, float]) -> None:
         fmu = self.fmu
@@ -161,7 +213,10 @@ class FmuPlant(Plant):
             self._call("terminate", fmu.terminate)
             self._call("reset", fmu.reset)
         else:
-            self._call("instantiate", fmu.instantiate)
+            if self.v3:
+                self._call("instantiate", fmu.instantiate)
+            else:
+                self._call("instantiate", fmu.instantiate, False, self._callbacks)
             self._instantiated = True
         if self.v3:
             self._call("enterInitializationMode", fmu.enterInitializationMode, None, 0.0)
@@ -206,7 +261,8 @@ class FmuPlant(Plant):
                 fmu.fmi2DoStep(fmu.component, self.time, dt, 1)
                 fmu.fmi2GetReal(fmu.component, self._vr_out, self._n_out, self._val_out)
         except Exception as exc:
-            raise PlantError(f"FMU {self.md.modelName}: step at t={self.time:.6g} s failed ({exc})") from None
+            raise PlantError(f"FMU {self.md.modelName}: step at t={self.time:.6g} failed ({self._reason(exc)})"
+                             ) from None
         self.time += dt
 
     def state(self) -> np.ndarray:
@@ -237,6 +293,7 @@ class FmuPlant(Plant):
             except Exception:  # closing is best effort; a broken FMU already reported its error
                 log.debug("FMU close failed", exc_info=True)
             self.fmu = None
+        _FMI2_SINKS.pop(id(self), None)
         self._cleanup_unzip()
 
 
