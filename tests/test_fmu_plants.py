@@ -269,3 +269,133 @@ def test_linearize_and_fmu_commands_refuse_bad_input_in_one_line(cart_fmu, tmp_p
         lines = res.err.strip().splitlines()
         assert res.code == 2 and len(lines) == 1 and needle in lines[0], (argv, res.err)
     assert not out.exists()
+
+
+# ---- Wood-Berry column as a Co-Simulation FMU (dead times as delay lines) ----
+
+WB_TS = tomllib.loads((EXAMPLES / "wood_berry.toml").read_text())["Ts"]
+
+
+@pytest.fixture(scope="module")
+def wood_berry_fmu():
+    from gainlink.hil.fmu_build import build_fmu
+
+    return build_fmu("wood_berry")
+
+
+def test_wood_berry_fmu_is_cosimulation_only_with_the_builtin_names(wood_berry_fmu):
+    from fmpy import read_model_description
+    from fmpy.validation import validate_fmu
+
+    assert validate_fmu(str(wood_berry_fmu)) == []
+    md = read_model_description(str(wood_berry_fmu))
+    assert md.coSimulation is not None and md.modelExchange is None
+    assert md.coSimulation.canGetAndSetFMUstate and not md.coSimulation.canHandleVariableCommunicationStepSize
+    spec = tomllib.loads((EXAMPLES / "wood_berry.toml").read_text())
+    fmu = FmuPlant(path=wood_berry_fmu)
+    try:
+        assert fmu.input_names == WoodBerry.all_inputs == tuple(spec["plant"]["inputs"])
+        assert fmu.output_names == WoodBerry.all_outputs == tuple(spec["plant"]["outputs"])
+        assert fmu.state_names == WoodBerry().state_names
+    finally:
+        fmu.close()
+
+
+def _wb_bound(dt: float, sub: float) -> float:
+    """Rounding bound between two exact ZOH discretisations of the lags: per communication step the built-in
+    model takes dt/sub sub-steps, each (like the FMU's one step) a few roundings (exp, 1 - a, two products, a
+    sum: <= 5 eps relative) of quantities below max|K| |u|; errors decay by a = exp(-dt/tau) per step, so the
+    accumulated difference is below that per-step amount over (1 - a_max)."""
+    eps, gain = np.finfo(float).eps, np.abs(WoodBerry.GAIN).max()
+    per_step = 5 * (round(dt / sub) + 1) * eps * gain
+    return per_step / (1.0 - np.exp(-dt / WoodBerry.TAU.max()))
+
+
+@pytest.mark.parametrize("dt", [WB_TS, 0.5])
+@pytest.mark.parametrize("j, name", [(0, "reflux"), (1, "steam")])
+def test_wood_berry_fmu_step_response_equals_the_builtin_model(wood_berry_fmu, dt, j, name):
+    fmu, py = FmuPlant(path=wood_berry_fmu), WoodBerry(step=0.1)
+    u = np.zeros(2)
+    u[j] = 1.0
+    try:
+        for plant in (fmu, py):
+            plant.reset(initial={})
+        n = int(round(200.0 / dt))
+        t = dt * np.arange(1, n + 1)
+        y_fmu, y_py, s_fmu, s_py = [], [], [], []
+        for _ in range(n):
+            fmu.advance(u=u, dt=dt)
+            py.advance(u=u, dt=dt)
+            y_fmu.append(fmu.outputs()); y_py.append(py.outputs())
+            s_fmu.append(fmu.state()); s_py.append(py.state())
+        y_fmu = np.array(y_fmu)
+        tol = _wb_bound(dt, 0.1)
+        assert tol < 1e-11
+        np.testing.assert_allclose(y_fmu, np.array(y_py), rtol=0, atol=tol)
+        np.testing.assert_allclose(np.array(s_fmu), np.array(s_py), rtol=0, atol=tol)
+        # Nothing moves before the dead time (exactly zero), then the lag responds.
+        for i in range(2):
+            theta = WoodBerry.DELAY[i, j]
+            assert np.all(y_fmu[t <= theta + 1e-9, i] == 0.0), (name, i)
+            assert y_fmu[t > theta + 1e-9, i][0] * np.sign(WoodBerry.GAIN[i, j]) > 0
+        np.testing.assert_allclose(y_fmu[-1], WoodBerry.GAIN[:, j], rtol=2e-3)  # 200 min >> every tau
+    finally:
+        fmu.close()
+
+
+def test_wood_berry_fmu_state_restores_the_delay_lines(wood_berry_fmu):
+    fmu = FmuPlant(path=wood_berry_fmu)
+    rng = np.random.default_rng(7)
+
+    def run(inputs):
+        out = []
+        for u in inputs:
+            fmu.advance(u=np.asarray(u, float), dt=WB_TS)
+            out.append(fmu.outputs())
+        return np.array(out)
+
+    try:
+        a = np.tile([1.0, 0.5], (10, 1))
+        run(rng.normal(size=(20, 2)))  # a history whose last 7 min still have to reach the outputs
+        snap = fmu.save_state()
+        ahead = run(a)
+        # Another history overwrites every delay-line sample the snapshot depends on; restoring must bring
+        # the old ones back, not only the lags.
+        fmu.reset(initial={})
+        run(rng.normal(size=(1100, 2)))
+        fmu.restore_state(snap)
+        assert np.array_equal(run(a), ahead)
+        # A different reflux after the restore: x_D moves only after its 1 min dead time, x_B after 7 min;
+        # steam was kept, so nothing else changes earlier.
+        fmu.restore_state(snap)
+        b = a.copy()
+        b[:, 0] = -1.0
+        other = run(b)
+        steps_before = {0: int(WoodBerry.DELAY[0, 0] / WB_TS), 1: int(WoodBerry.DELAY[1, 0] / WB_TS)}
+        for i, d in steps_before.items():
+            assert np.array_equal(other[:d, i], ahead[:d, i]), i
+            assert np.all(other[d:, i] != ahead[d:, i]), i
+    finally:
+        fmu.close()
+
+
+def test_wood_berry_fmu_refuses_a_step_that_does_not_divide_a_dead_time(wood_berry_fmu, capfd):
+    plant = plant_from_config({"kind": "fmu", "fmu": "wood_berry"})
+    try:
+        with pytest.raises(PlantError) as err:
+            plant.advance(u=np.zeros(2), dt=0.4)
+        msg = str(err.value)
+        assert "\n" not in msg
+        assert "communication step 0.4 min does not divide the dead time theta11 = 1 min" in msg
+        assert plant.outputs().tolist() == [0.0, 0.0]
+        # The refused step changed nothing: a dividing step still runs, and then the step length is fixed.
+        plant.advance(u=np.array([1.0, 0.0]), dt=WB_TS)
+        with pytest.raises(PlantError, match="communication step 0.5 min differs from the first one"):
+            plant.advance(u=np.zeros(2), dt=0.5)
+        # A dead time longer than the delay line holds is refused the same way.
+        plant.reset(initial={})
+        with pytest.raises(PlantError, match=r"theta21 = 7 min is 7000 communication steps .* hold 1024"):
+            plant.advance(u=np.zeros(2), dt=0.001)
+    finally:
+        plant.close()
+    assert "[ERROR]" not in capfd.readouterr().out  # reported through the PlantError, not printed by fmpy
