@@ -107,6 +107,9 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
         stack.enter_context(gc_paused())
         result = _loop(scenario, artifact=artifact, plant=plant, transport=transport, peer=peer, progress=progress)
         result.metrics["cpu"] = placement.describe()
+        clipped = result.info["transport"].get("encoding_clipped")
+        if clipped is not None:
+            result.metrics["encoding_clipped"] = clipped
         return result
 
 
@@ -192,7 +195,7 @@ def _loop(scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Tr
             TICK[k] = woke if realtime else sent - t_start
             transport.send_frames(frames)
             if shadow is not None:
-                res = shadow.step(y.astype(np.float32).astype(np.float64), R[k].astype(np.float32).astype(np.float64))
+                res = shadow.step(*transport.received_sample(y=y, r=R[k]))
                 UREF[k] = res.u
                 ZREF[k] = shadow.z
             deadline = wait_until if realtime else sent + int(scenario.step_timeout * 1e9)

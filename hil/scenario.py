@@ -19,6 +19,7 @@ Example::
 
     [plant]        kind = "fmu", fmu = "cart_pendulum", outputs = ["x", "theta"]
     [transport]    interface = "udp_multicast", channel = "239.74.163.2", hop_limit = 0, fd = true
+                   # optional: encoding = "int16", ranges = { x = [-5.0, 5.0], theta = [-1.0, 1.0], r_x = [-5.0, 5.0] }
     [initial_state] theta = 0.1
     [reference.x]  kind = "step", at = 1.0, value = 0.5     # constant | step | square | sine | ramp
     [noise]        theta = 0.001                           # std dev per output

@@ -86,6 +86,11 @@ class Transport(ABC):
     def receive_command(self, *, timeout: float) -> Command | None:
         """The next complete command, or ``None`` when none completes within ``timeout`` seconds."""
 
+    def received_sample(self, *, y: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The sample as the controller decodes it (as float64): what a shadow law must be fed to see
+        exactly the controller's inputs. Default: values travel as float32."""
+        return y.astype(np.float32).astype(np.float64), r.astype(np.float32).astype(np.float64)
+
     @abstractmethod
     def controller_argv(self) -> list[str]:
         """Command-line arguments that make the firmware host executable speak this link."""

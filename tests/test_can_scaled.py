@@ -331,6 +331,10 @@ def test_int16_lockstep_classic_can_stabilises_the_pendulum_close_to_float32(pen
     diff = np.abs(i16.trace.y - f32.trace.y).max(axis=0)
     assert np.all(diff <= 2 * bound), (diff, bound)
     assert np.all(diff > 0)  # the int16 run really was quantised
+    # The shadow law is fed the sample as the firmware decoded it: the commands then differ by the command's own
+    # quantisation (half a step) plus float32 accuracy (1e-4 of the command scale, as over float32).
+    f_u = transport.layout.command[0].factors[0]
+    assert m["shadow_max_abs_du"]["F"] <= f_u / 2 + 1e-4 * 20.0 and m["encoding_clipped"] == 0
 
 
 def test_reference_node_speaks_int16_like_the_firmware(pendulum_gains, can_firmware, cart_fmu):
