@@ -2,8 +2,8 @@
 
 :func:`run_scenario` builds the plant and the transport from the scenario, starts the controller
 process, runs the loop in lockstep (the plant waits for each command, up to ``step_timeout``) or in
-real time (fixed period, sleep-then-spin to absolute deadlines, SCHED_FIFO when permitted), and
-always stops the peer. A peer that dies, or stays silent for ``peer_timeout``, ends the run early
+real time (fixed period, sleep-then-spin to absolute deadlines, SCHED_FIFO and a 0 us CPU wake-up
+latency request when permitted), and always stops the peer. A peer that dies, or stays silent for ``peer_timeout``, ends the run early
 with ``complete = False`` and the reason.
 """
 
@@ -28,7 +28,7 @@ from .faults import FaultInjector
 from .fmu_plant import plant_from_config
 from .metrics import RunTrace, compute_metrics
 from .plant import Plant, check_dimensions
-from .scheduler import SPIN_NS, Pacer, Placement, gc_paused, resolve_affinity, set_fifo, set_other
+from .scheduler import SPIN_NS, Pacer, Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
 from .scenario import Scenario, profile_values
 from .transport import Transport, transport_from_config
 
@@ -105,8 +105,11 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
             resolve_affinity(scenario.affinity, mode=scenario.mode, busy_poll=busy_poll, cpus=cpus),
             peer_pid=peer.proc.pid if peer.proc is not None else None))
         stack.enter_context(gc_paused())
+        pm_qos = stack.enter_context(cpu_latency_qos()) if scenario.mode == "realtime" and scenario.pm_qos else False
         result = _loop(scenario, artifact=artifact, plant=plant, transport=transport, peer=peer, progress=progress)
         result.metrics["cpu"] = placement.describe()
+        if scenario.mode == "realtime":
+            result.metrics["pm_qos"] = pm_qos
         clipped = result.info["transport"].get("encoding_clipped")
         if clipped is not None:
             result.metrics["encoding_clipped"] = clipped

@@ -43,6 +43,7 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
                  f"{info['transport'].get('config', {}).get('interface', info['transport'].get('kind'))}")
     lines.append(f"  mode {m['mode']}: {m['steps']}/{m['steps_planned']} steps in {m['wall_s']:.2f} s "
                  f"({_fmt(m['steps_per_s'], '/s', 5)}), SCHED_FIFO {'on' if m['sched_fifo'] else 'off'}"
+                 + (f", PM QoS {'on' if m['pm_qos'] else 'off'}" if "pm_qos" in m else "")
                  + (f", CPUs {m['cpu']['placement']}" if m.get("cpu") else ""))
     lat, jit = m["latency_us"], m["period_jitter_us"]
     lines.append(f"  latency us p50 {_fmt(lat['p50'])} p99 {_fmt(lat['p99'])} max {_fmt(lat['max'])};  "

@@ -1,6 +1,7 @@
 """Scheduling of the bridge and its controller peer: real-time pacing (absolute deadlines on
-``perf_counter_ns``, sleep until shortly before, then spin), SCHED_FIFO when the process may use it
-(root), and CPU affinity — all restored afterwards.
+``perf_counter_ns``, sleep until shortly before, then spin), SCHED_FIFO and a 0 us CPU wake-up
+latency request (PM QoS) when the process may use them (root), and CPU affinity — all restored
+afterwards.
 
 Affinity matters most in lockstep, where exactly one side runs at a time: on one shared CPU each
 hand-over is a local wake-up (a context switch), while on two CPUs every sample costs two
@@ -13,7 +14,7 @@ from __future__ import annotations
 import gc
 import os
 import time
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from typing import Any, Iterator, Sequence
 
 SPIN_NS = 300_000  #: stop sleeping this long before a deadline and spin
@@ -105,6 +106,26 @@ class Placement:
         return {"placement": self.setting, "bridge_cpus": self.bridge_cpus, "controller_cpus": self.peer_cpus}
 
 
+CPU_DMA_LATENCY = "/dev/cpu_dma_latency"
+
+
+@contextmanager
+def cpu_latency_qos(path: str = CPU_DMA_LATENCY) -> Iterator[bool]:
+    """Hold the kernel's CPU wake-up latency request at 0 us for the block (PM QoS, as cyclictest does):
+    idle CPUs poll instead of halting, so a wake-up does not wait for a halted (virtual) CPU to come
+    back. Yields False when the request cannot be made (not root, no such device)."""
+    try:
+        fd = os.open(path, os.O_WRONLY)
+    except OSError:
+        yield False
+        return
+    try:
+        os.write(fd, (0).to_bytes(4, "little", signed=True))
+        yield True
+    finally:
+        os.close(fd)  # closing the file withdraws the request
+
+
 @contextmanager
 def gc_paused() -> Iterator[None]:
     """No cyclic garbage collection inside the block: the HIL loop makes no reference cycles, and a
@@ -157,7 +178,8 @@ class Pacer:
         return tick, due - self.start_ns, now - self.start_ns
 
 
-def pacing_jitter(*, period_ns: int, steps: int, fifo: bool, work: Any = None, skip: bool = True) -> dict:
+def pacing_jitter(*, period_ns: int, steps: int, fifo: bool, work: Any = None, skip: bool = True,
+                  qos: bool = True) -> dict:
     """Jitter of the pacer alone (optionally calling ``work()`` each tick): the real-time baseline.
 
     Jitter is measured on the ticks that ran; ``overruns`` counts the ticks skipped (``skip``)."""
@@ -165,7 +187,7 @@ def pacing_jitter(*, period_ns: int, steps: int, fifo: bool, work: Any = None, s
 
     on = set_fifo() if fifo else False
     try:
-        with gc_paused():
+        with gc_paused(), (cpu_latency_qos() if qos else nullcontext(False)) as qos_on:
             pacer = Pacer(period_ns=period_ns)
             late = np.full(steps, np.nan)
             k = 0
@@ -182,4 +204,4 @@ def pacing_jitter(*, period_ns: int, steps: int, fifo: bool, work: Any = None, s
             set_other()
     ran = late[np.isfinite(late)] / 1e3
     return {"p50": float(np.percentile(ran, 50)), "p99": float(np.percentile(ran, 99)), "max": float(ran.max()),
-            "overruns": int(steps - ran.size), "sched_fifo": on}
+            "overruns": int(steps - ran.size), "sched_fifo": on, "pm_qos": qos_on}

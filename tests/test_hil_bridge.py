@@ -147,6 +147,26 @@ def test_realtime_overrun_skips_the_missed_ticks_and_lets_the_plant_run_on(pendu
     assert c["period_jitter_us"]["max"] >= 70_000
 
 
+def _cpu_wakeup_latency_request() -> int:
+    """The kernel's current aggregate CPU wake-up latency request in us (PM QoS)."""
+    return int.from_bytes(open("/dev/cpu_dma_latency", "rb").read(4), "little", signed=True)
+
+
+@pytest.mark.skipif(not os.access("/dev/cpu_dma_latency", os.W_OK), reason="PM QoS needs root")
+def test_realtime_holds_a_zero_wakeup_latency_request_only_while_it_runs(pendulum_gains, can_firmware, cart_fmu):
+    before = _cpu_wakeup_latency_request()
+    seen: list[int] = []
+    common = dict(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=0.5, mode="realtime")
+    r = run_scenario(parse_scenario(pendulum_scenario(**common)),
+                     progress=lambda done, total: seen.append(_cpu_wakeup_latency_request()) if done < total else None)
+    assert r.complete and r.metrics["pm_qos"] is True and seen and set(seen) == {0}
+    assert _cpu_wakeup_latency_request() == before != 0  # withdrawn when the run ends
+    seen.clear()
+    off = run_scenario(parse_scenario(pendulum_scenario(pm_qos=False, **common)),
+                       progress=lambda done, total: seen.append(_cpu_wakeup_latency_request()))
+    assert off.complete and off.metrics["pm_qos"] is False and set(seen) == {before}
+
+
 def _cli_error(*argv):
     res = run_cli(*argv)
     lines = res.err.strip().splitlines()
