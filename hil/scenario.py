@@ -139,6 +139,13 @@ def _num(value: Any, where: str, *, positive: bool = False, minimum: float | Non
     return float(value)
 
 
+def _flag(data: Mapping, key: str, default: bool) -> bool:
+    value = data.get(key, default)
+    if not isinstance(value, bool):
+        raise ScenarioError(f"scenario: {key} must be true or false, not {value!r}")
+    return value
+
+
 def _table(value: Any, where: str) -> dict:
     if not isinstance(value, Mapping):
         raise ScenarioError(f"scenario: {where} must be a table")
@@ -230,9 +237,9 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
         step_timeout=_num(data.get("step_timeout", 0.05), "step_timeout", positive=True),
         peer_timeout=_num(data.get("peer_timeout", 1.0), "peer_timeout", positive=True),
         period=None if period is None else _num(period, "period", positive=True),
-        sched_fifo=bool(data.get("sched_fifo", True)), pm_qos=bool(data.get("pm_qos", True)), affinity=affinity, overrun=overrun, seed=int(_num(data.get("seed", 0), "seed")),
-        shadow=bool(data.get("shadow", True)), initial_state=initial, reference=reference, noise=noise,
-        disturbances=tuple(dists), faults=tuple(faults),
+        sched_fifo=_flag(data, "sched_fifo", True), pm_qos=_flag(data, "pm_qos", True), affinity=affinity,
+        overrun=overrun, seed=int(_num(data.get("seed", 0), "seed")), shadow=_flag(data, "shadow", True),
+        initial_state=initial, reference=reference, noise=noise, disturbances=tuple(dists), faults=tuple(faults),
     )
 
 

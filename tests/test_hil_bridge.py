@@ -182,6 +182,7 @@ def test_bad_inputs_get_one_line_and_a_nonzero_exit(tmp_path, pendulum_gains, ca
         "unknown key": ({**base, "durration": 1.0}, "unknown key(s) durration"),
         "bad affinity": ({**base, "affinity": "pinned"}, "affinity must be one of auto, shared, separate, none"),
         "bad overrun": ({**base, "overrun": "ignore"}, "overrun must be one of skip, catch_up"),
+        "flag not a boolean": ({**base, "pm_qos": "no"}, "pm_qos must be true or false, not 'no'"),
         "missing fmu": ({**base, "plant": {"kind": "fmu", "path": str(tmp_path / "none.fmu")}}, "not found"),
         "broken fmu": ({**base, "plant": {"kind": "fmu", "path": str(broken)}}, str(broken)),
         "dimension mismatch": ({**base, "plant": {"kind": "fmu", "path": str(cart_fmu), "outputs": ["theta"]}},
