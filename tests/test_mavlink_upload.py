@@ -164,6 +164,36 @@ def test_upload_persists_survives_restart_and_the_loop_runs_the_new_gains(exe, p
         fw.stop()
 
 
+def test_stored_set_holds_exact_bits_and_a_tampered_file_is_refused_whole(exe, pend, retuned, tmp_path):
+    """The storage file carries each float32's bits (so a reload is exact); a file whose values no longer
+    match its GL_HASH, or with a malformed line, is refused whole and the compiled set runs."""
+    old, new = load(pend), load(retuned)
+    storage = tmp_path / "params.txt"
+    fw, port = start_firmware(exe, storage)
+    try:
+        res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--persist")
+        assert res.code == 0, res.err
+    finally:
+        fw.stop()
+    text = storage.read_text("ascii")
+    rows = dict(line.split() for line in text.splitlines() if not line.startswith("#"))
+    assert int(rows.pop("GL_HASH"), 16) == gain_set(new).crc32
+    for name, bits in rows.items():
+        assert np.uint32(int(bits, 16)).view(np.float32) == np.float32(expected_value(new, name)), name
+    k02 = rows["GL_K_0_2"]
+    tampered = f"{int(k02, 16) ^ 1:08x}"  # one bit of one gain flipped: the CRC no longer matches
+    for bad, why in ((text.replace(f"GL_K_0_2 {k02}", f"GL_K_0_2 {tampered}"), "refused by the loop's checks"),
+                     (text.replace(f"GL_K_0_2 {k02}", "GL_K_0_2 1.5"), "line")):
+        storage.write_text(bad, "ascii")
+        fw, port = start_firmware(exe, storage)
+        try:
+            assert read_params(port)["GL_HASH"].value & 0xFFFFFFFF == gain_set(old).crc32
+        finally:
+            fw.stop()
+        err = fw.stderr_text()
+        assert f"ignoring {storage}" in err and why in err and "using the compiled gain set" in err, err
+
+
 def test_dry_run_prints_the_diff_and_writes_nothing(exe, pend, retuned):
     fw, port = start_firmware(exe, None)
     try:

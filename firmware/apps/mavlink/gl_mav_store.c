@@ -1,100 +1,166 @@
 /**
  * @file gl_mav_store.c
- * @brief Save and load the committed gain set as `ID VALUE` text (see gl_mav_store.h).
+ * @brief Encode and decode the committed gain set as `ID BITS` text (see gl_mav_store.h).
+ *
+ * No stdio and no float formatting: the values travel as their bit patterns, so the same code runs on
+ * the host and on a microcontroller and a stored set comes back bit for bit.
  */
-#define _POSIX_C_SOURCE 200809L
 #include "gl_mav_store.h"
 
-#include <errno.h>
-#include <stdio.h>
-#include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
-int gl_mav_store_save(const gl_mav_params_t *table, const char *path)
+static const char header[] = "# gainlink MAVLink parameters: committed gain set, float32 bits in hex\n";
+static const char hex_digits[] = "0123456789abcdef";
+
+/** Where a REAL32 parameter's committed value lives (offset counted in floats from Ts, as in gl_mav_params.c). */
+static float *committed_float(gl_gains_t *gains, uint32_t offset)
 {
-    char tmp[4096];
-    if (snprintf(tmp, sizeof tmp, "%s.tmp", path) >= (int)sizeof tmp) {
-        return -1;
+    return &gains->Ts + offset;
+}
+
+static size_t put_line(uint8_t *out, size_t at, size_t cap, const char *id, uint32_t bits)
+{
+    size_t id_len = 0;
+    while (id_len < GL_MAV_ID_LEN && id[id_len] != '\0') {
+        ++id_len;
     }
-    FILE *f = fopen(tmp, "w");
-    if (f == NULL) {
-        return -1;
+    if (at + id_len + 10u > cap) {
+        return 0;
     }
-    int bad = fprintf(f, "# gainlink MAVLink parameters (committed gain set)\n") < 0;
-    for (uint16_t k = 0; k < table->count && !bad; ++k) {
+    memcpy(&out[at], id, id_len);
+    at += id_len;
+    out[at++] = ' ';
+    for (int shift = 28; shift >= 0; shift -= 4) {
+        out[at++] = (uint8_t)hex_digits[(bits >> shift) & 0xFu];
+    }
+    out[at++] = '\n';
+    return at;
+}
+
+size_t gl_mav_store_encode(const gl_mav_params_t *table, uint8_t *buf, size_t cap)
+{
+    size_t at = sizeof header - 1u;
+    if (cap < at) {
+        return 0;
+    }
+    memcpy(buf, header, at);
+    for (uint16_t k = 0; k < table->count; ++k) {
         const gl_mav_param_t *p = &table->param[k];
-        if (p->header < 0) {
-            bad = fprintf(f, "%s %.9g\n", p->id, (double)(&table->committed.Ts)[p->offset]) < 0;
+        if (p->header >= 0) {
+            continue;
+        }
+        uint32_t bits;
+        memcpy(&bits, &table->committed.Ts + p->offset, sizeof bits);
+        at = put_line(buf, at, cap, p->id, bits);
+        if (at == 0u) {
+            return 0;
         }
     }
-    if (!bad) {
-        bad = fprintf(f, "GL_HASH %lu\n", (unsigned long)table->committed.crc32) < 0;
+    return put_line(buf, at, cap, "GL_HASH", table->committed.crc32);
+}
+
+static int hex_value(uint8_t c)
+{
+    if (c >= '0' && c <= '9') {
+        return c - '0';
     }
-    bad |= fflush(f) != 0;
-    bad |= fsync(fileno(f)) != 0;
-    bad |= fclose(f) != 0;
-    if (bad || rename(tmp, path) != 0) {
-        remove(tmp);
+    if (c >= 'a' && c <= 'f') {
+        return c - 'a' + 10;
+    }
+    if (c >= 'A' && c <= 'F') {
+        return c - 'A' + 10;
+    }
+    return -1;
+}
+
+static int parse_bits(const uint8_t *text, size_t len, uint32_t *bits)
+{
+    if (len != 8u) {
         return -1;
     }
+    uint32_t v = 0;
+    for (size_t i = 0; i < len; ++i) {
+        int d = hex_value(text[i]);
+        if (d < 0) {
+            return -1;
+        }
+        v = (v << 4) | (uint32_t)d;
+    }
+    *bits = v;
     return 0;
 }
 
-int gl_mav_store_load(gl_mav_params_t *table, const char *path, char *why, size_t why_len)
+/** Apply one `ID BITS` line to `candidate`; returns GL_MAV_STORE_OK or the line's error. */
+static gl_mav_store_error_t apply_line(const gl_mav_params_t *table, const uint8_t *line, size_t len,
+                                       gl_gains_t *candidate, int *have_hash)
 {
-    FILE *f = fopen(path, "r");
-    if (f == NULL) {
-        snprintf(why, why_len, "%s", strerror(errno));
-        return errno == ENOENT ? 1 : -1;
+    const uint8_t *space = memchr(line, ' ', len);
+    if (space == NULL || space == line || (size_t)(space - line) > GL_MAV_ID_LEN) {
+        return GL_MAV_STORE_E_SYNTAX;
     }
+    char id[GL_MAV_ID_LEN + 1] = {0};
+    memcpy(id, line, (size_t)(space - line));
+    uint32_t bits;
+    if (parse_bits(space + 1, len - (size_t)(space - line) - 1u, &bits) != 0) {
+        return GL_MAV_STORE_E_NUMBER;
+    }
+    if (strcmp(id, "GL_HASH") == 0) {
+        candidate->crc32 = bits;
+        *have_hash = 1;
+        return GL_MAV_STORE_OK;
+    }
+    int32_t k = gl_mav_params_find(table, id);
+    if (k < 0 || table->param[k].header >= 0) {
+        return GL_MAV_STORE_E_UNKNOWN;
+    }
+    memcpy(committed_float(candidate, table->param[k].offset), &bits, sizeof bits);
+    return GL_MAV_STORE_OK;
+}
+
+gl_mav_store_result_t gl_mav_store_decode(gl_mav_params_t *table, const uint8_t *buf, size_t len)
+{
+    gl_mav_store_result_t res = {.error = GL_MAV_STORE_OK, .line = 0, .status = 0};
     gl_gains_t candidate = table->committed;
     int have_hash = 0;
-    char line[256];
-    int line_no = 0;
-    int rc = 0;
-    while (rc == 0 && fgets(line, sizeof line, f) != NULL) {
-        ++line_no;
-        if (line[0] == '#' || line[0] == '\n') {
-            continue;
+    size_t at = 0;
+    while (at < len) {
+        const uint8_t *nl = memchr(&buf[at], '\n', len - at);
+        size_t end = nl != NULL ? (size_t)(nl - buf) : len;
+        res.line++;
+        size_t line_len = end - at;
+        if (line_len > 0u && buf[end - 1u] == '\r') {
+            line_len--;
         }
-        char id[GL_MAV_ID_LEN + 1];
-        char value[128];
-        if (sscanf(line, "%16s %127s", id, value) != 2) {
-            snprintf(why, why_len, "line %d: expected 'ID VALUE'", line_no);
-            rc = -1;
-            break;
-        }
-        char *end = NULL;
-        if (strcmp(id, "GL_HASH") == 0) {
-            unsigned long h = strtoul(value, &end, 10);
-            candidate.crc32 = (uint32_t)h;
-            have_hash = 1;
-        } else {
-            int32_t k = gl_mav_params_find(table, id);
-            if (k < 0 || table->param[k].header >= 0) {
-                snprintf(why, why_len, "line %d: unknown parameter %s", line_no, id);
-                rc = -1;
-                break;
+        if (line_len > 0u && buf[at] != '#') {
+            res.error = apply_line(table, &buf[at], line_len, &candidate, &have_hash);
+            if (res.error != GL_MAV_STORE_OK) {
+                return res;
             }
-            (&candidate.Ts)[table->param[k].offset] = strtof(value, &end);
         }
-        if (end == value || *end != '\0') {
-            snprintf(why, why_len, "line %d: bad number %s", line_no, value);
-            rc = -1;
-        }
+        at = end + 1u;
     }
-    fclose(f);
-    if (rc == 0 && !have_hash) {
-        snprintf(why, why_len, "no GL_HASH line");
-        rc = -1;
+    res.line = 0;
+    if (!have_hash) {
+        res.error = GL_MAV_STORE_E_NO_HASH;
+        return res;
     }
-    if (rc == 0) {
-        gl_status_t st = gl_mav_params_replace(table, &candidate);
-        if (st != GL_OK) {
-            snprintf(why, why_len, "stored set refused by the loop's checks (status %d)", (int)st);
-            rc = -1;
-        }
+    gl_status_t st = gl_mav_params_replace(table, &candidate);
+    if (st != GL_OK) {
+        res.error = GL_MAV_STORE_E_REFUSED;
+        res.status = (int32_t)st;
     }
-    return rc;
+    return res;
+}
+
+const char *gl_mav_store_strerror(gl_mav_store_error_t error)
+{
+    switch (error) {
+    case GL_MAV_STORE_OK: return "ok";
+    case GL_MAV_STORE_E_SYNTAX: return "expected 'ID BITS'";
+    case GL_MAV_STORE_E_UNKNOWN: return "unknown parameter";
+    case GL_MAV_STORE_E_NUMBER: return "value is not 8 hex digits";
+    case GL_MAV_STORE_E_NO_HASH: return "no GL_HASH line";
+    case GL_MAV_STORE_E_REFUSED: return "stored set refused by the loop's checks";
+    default: return "unknown error";
+    }
 }
