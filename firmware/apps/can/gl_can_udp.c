@@ -20,17 +20,20 @@
 
 #include <msgpack.h>
 
-#include "gl_can_link.h"
+#include "gl_can_udp.h"
 
 typedef struct {
-    char buf[256];
+    char *buf;
+    size_t cap;
     size_t len;
+    int overflow;
 } out_buf_t;
 
 static int out_write(void *data, const char *buf, size_t len)
 {
     out_buf_t *o = data;
-    if (o->len + len > sizeof o->buf) {
+    if (o->len + len > o->cap) {
+        o->overflow = 1;
         return -1;
     }
     memcpy(&o->buf[o->len], buf, len);
@@ -83,16 +86,14 @@ int gl_can_udp_open(gl_can_link_t *link)
     return 0;
 }
 
-int gl_can_udp_send(gl_can_link_t *link, const gl_can_frame_t *frame)
+size_t gl_can_udp_encode(const gl_can_frame_t *frame, double timestamp, char *buf, size_t cap)
 {
-    out_buf_t out = {.len = 0};
+    out_buf_t out = {.buf = buf, .cap = cap, .len = 0};
     msgpack_packer pk;
     msgpack_packer_init(&pk, &out, out_write);
-    struct timespec ts;
-    clock_gettime(CLOCK_REALTIME, &ts);
     msgpack_pack_map(&pk, 10);
     pack_key(&pk, "timestamp");
-    msgpack_pack_double(&pk, (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec);
+    msgpack_pack_double(&pk, timestamp);
     pack_key(&pk, "arbitration_id");
     msgpack_pack_uint32(&pk, frame->id);
     pack_key(&pk, "is_extended_id");
@@ -116,7 +117,16 @@ int gl_can_udp_send(gl_can_link_t *link, const gl_can_frame_t *frame)
     msgpack_pack_false(&pk);
     pack_key(&pk, "error_state_indicator");
     msgpack_pack_false(&pk);
-    if (out.len == 0 || out.len >= sizeof out.buf) {
+    return out.overflow ? 0u : out.len;
+}
+
+int gl_can_udp_send(gl_can_link_t *link, const gl_can_frame_t *frame)
+{
+    char buf[GL_CAN_UDP_MAX_DATAGRAM];
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    size_t len = gl_can_udp_encode(frame, (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec, buf, sizeof buf);
+    if (len == 0u) {
         return -1;
     }
     struct sockaddr_in dest;
@@ -126,7 +136,7 @@ int gl_can_udp_send(gl_can_link_t *link, const gl_can_frame_t *frame)
     if (inet_pton(AF_INET, link->cfg.channel, &dest.sin_addr) != 1) {
         return -1;
     }
-    return sendto(link->sock, out.buf, out.len, 0, (struct sockaddr *)&dest, sizeof dest) == (ssize_t)out.len ? 0 : -1;
+    return sendto(link->sock, buf, len, 0, (struct sockaddr *)&dest, sizeof dest) == (ssize_t)len ? 0 : -1;
 }
 
 static int key_is(const msgpack_object *k, const char *name)
@@ -135,10 +145,78 @@ static int key_is(const msgpack_object *k, const char *name)
     return k->type == MSGPACK_OBJECT_STR && k->via.str.size == n && memcmp(k->via.str.ptr, name, n) == 0;
 }
 
-/* Decode one datagram; 1 when it is a standard data frame, 0 to skip it. */
-static int decode(const char *buf, size_t len, gl_can_frame_t *frame, msgpack_unpacked *msg)
+/** Largest standard (11-bit) identifier. */
+#define GL_CAN_STD_ID_MAX 0x7FFu
+
+/**
+ * Bytes that follow a msgpack scalar's type byte `t` before the next item (its length field and body),
+ * or -1 for a container (array, map) or a reserved byte. `p` points at the type byte, `left` bytes remain.
+ */
+static long scalar_size(const uint8_t *p, size_t left)
+{
+    const uint8_t t = p[0];
+    if (t <= 0x7Fu || t >= 0xE0u || (t >= 0xC2u && t <= 0xC3u) || t == 0xC0u) {
+        return 0; /* fixint, nil, bool */
+    }
+    if (t >= 0xA0u && t <= 0xBFu) {
+        return t & 0x1Fu; /* fixstr */
+    }
+    static const uint8_t fixed[] = {
+        [0xCA - 0xC4] = 4, [0xCB - 0xC4] = 8, [0xCC - 0xC4] = 1, [0xCD - 0xC4] = 2, [0xCE - 0xC4] = 4,
+        [0xCF - 0xC4] = 8, [0xD0 - 0xC4] = 1, [0xD1 - 0xC4] = 2, [0xD2 - 0xC4] = 4, [0xD3 - 0xC4] = 8,
+        [0xD4 - 0xC4] = 2, [0xD5 - 0xC4] = 3, [0xD6 - 0xC4] = 5, [0xD7 - 0xC4] = 9, [0xD8 - 0xC4] = 17,
+    };
+    if (t >= 0xCAu && t <= 0xD8u) {
+        return fixed[t - 0xC4u]; /* float, (u)int, fixext */
+    }
+    size_t width;
+    switch (t) {
+    case 0xC4: case 0xC7: case 0xD9: width = 1; break; /* bin8, ext8, str8 */
+    case 0xC5: case 0xC8: case 0xDA: width = 2; break;
+    case 0xC6: case 0xC9: case 0xDB: width = 4; break;
+    default: return -1; /* arrays, maps, 0xC1 */
+    }
+    if (left < 1u + width) {
+        return -1;
+    }
+    size_t n = 0;
+    for (size_t i = 0; i < width; ++i) {
+        n = (n << 8) | p[1 + i];
+    }
+    const size_t ext = (t >= 0xC7u && t <= 0xC9u) ? 1u : 0u; /* ext carries a type byte */
+    return n > left ? -1 : (long)(width + ext + n);
+}
+
+/**
+ * Shape of a python-can frame: one fixmap (at most 15 entries) of scalars, strings and binaries, within `len`.
+ * Checked before msgpack_unpack_next(), which would otherwise allocate for whatever element count a
+ * hostile container declares (a 5-byte map32 header asks for 256 GiB).
+ */
+static int flat_map(const uint8_t *p, size_t len)
+{
+    if (len < 1u || (p[0] & 0xF0u) != 0x80u) {
+        return 0;
+    }
+    size_t at = 1;
+    for (unsigned item = 0; item < 2u * (p[0] & 0x0Fu); ++item) {
+        if (at >= len) {
+            return 0;
+        }
+        long body = scalar_size(&p[at], len - at);
+        if (body < 0 || (size_t)body > len - at - 1u) {
+            return 0;
+        }
+        at += 1u + (size_t)body;
+    }
+    return 1;
+}
+
+int gl_can_udp_decode(const char *buf, size_t len, gl_can_frame_t *frame, msgpack_unpacked *msg)
 {
     size_t off = 0;
+    if (!flat_map((const uint8_t *)buf, len)) {
+        return 0;
+    }
     if (msgpack_unpack_next(msg, buf, len, &off) != MSGPACK_UNPACK_SUCCESS || msg->data.type != MSGPACK_OBJECT_MAP) {
         return 0;
     }
@@ -149,6 +227,9 @@ static int decode(const char *buf, size_t len, gl_can_frame_t *frame, msgpack_un
         const msgpack_object *k = &map->ptr[i].key;
         const msgpack_object *v = &map->ptr[i].val;
         if (key_is(k, "arbitration_id") && v->type == MSGPACK_OBJECT_POSITIVE_INTEGER) {
+            if (v->via.u64 > GL_CAN_STD_ID_MAX) {
+                return 0; /* an extended or out-of-range id must not alias a standard one */
+            }
             frame->id = (uint32_t)v->via.u64;
             have_id = 1;
         } else if (key_is(k, "is_extended_id") && v->type == MSGPACK_OBJECT_BOOLEAN && v->via.boolean) {
@@ -168,6 +249,9 @@ static int decode(const char *buf, size_t len, gl_can_frame_t *frame, msgpack_un
             frame->len = (uint8_t)n;
             have_data = 1;
         }
+    }
+    if (!frame->fd && frame->len > 8u) {
+        return 0; /* a classic frame carries at most 8 bytes */
     }
     return have_id && have_data;
 }
@@ -194,7 +278,7 @@ int gl_can_udp_recv(gl_can_link_t *link, gl_can_frame_t *frame, int timeout_ms)
         if (n < 0) {
             return errno == EINTR ? 0 : -1;
         }
-        if (!decode(buf, (size_t)n, frame, &msg) || frame->id < link->cfg.rx_lo || frame->id > link->cfg.rx_hi) {
+        if (!gl_can_udp_decode(buf, (size_t)n, frame, &msg) || frame->id < link->cfg.rx_lo || frame->id > link->cfg.rx_hi) {
             link->rx_foreign++;
             continue;
         }

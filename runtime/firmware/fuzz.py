@@ -1,0 +1,236 @@
+"""libFuzzer harnesses of the firmware: build (clang, ASan + UBSan), seed corpora from valid traffic, runs.
+
+The harness sources live in ``firmware/fuzz/`` (one ``LLVMFuzzerTestOneInput`` each, with oracles of their
+own besides the sanitizers); they are built per artifact, like every firmware build, under
+``.cache/firmware/`` with ``GL_FUZZ=ON``. Seed corpora are never committed: :func:`write_seeds` makes them
+from traffic the real senders produce for the artifact (cantools-encoded CAN frames packed by python-can's
+``udp_multicast`` packer, the artifact's own gain set as the C struct and as PARAM_SET edits).
+:func:`run` runs one harness for a time or a number of executions and reads libFuzzer's final statistics.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import struct
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..artifact import Artifact
+from ..errors import ToolchainError
+from .build import build
+
+HARNESSES = ("can_udp", "can_layout", "gains_stage")
+"""Harness names; the executable of ``NAME`` is ``fuzz/fuzz_NAME`` in the fuzz build."""
+
+MAX_LEN = 4096
+"""Largest input libFuzzer generates (the largest seed, a whole gain set, is a few hundred bytes)."""
+
+
+@dataclass(frozen=True)
+class FuzzRun:
+    """Outcome of one libFuzzer run.
+
+    Attributes
+    ----------
+    harness : str
+        Harness name.
+    executions : int
+        Inputs executed (libFuzzer's ``number_of_executed_units``).
+    seconds : float
+        Wall time of the run.
+    cov : int
+        Coverage points (edges) reached, libFuzzer's ``cov:``.
+    ft : int
+        Features (edge, counter-bucket and comparison features), libFuzzer's ``ft:``.
+    corpus : int
+        Inputs in the corpus at the end.
+    crashes : tuple of str
+        Paths of the crash, leak, timeout or out-of-memory reproducers written (empty when none).
+    exit_code : int
+        libFuzzer's exit status (0 when nothing was found).
+    """
+
+    harness: str
+    executions: int
+    seconds: float
+    cov: int
+    ft: int
+    corpus: int
+    crashes: tuple[str, ...]
+    exit_code: int
+
+    @property
+    def exec_per_s(self) -> float:
+        """Executions per second of wall time."""
+        return self.executions / self.seconds if self.seconds > 0 else 0.0
+
+
+def clang() -> str:
+    """Path of clang, or :class:`ToolchainError` naming the package."""
+    path = shutil.which("clang")
+    if path is None:
+        raise ToolchainError("clang not found: install clang (make setup) to build the fuzz harnesses")
+    return path
+
+
+def build_harnesses(artifact: Artifact) -> dict[str, Path]:
+    """Build (cached) every harness for ``artifact``; returns name -> executable.
+
+    Raises
+    ------
+    ToolchainError
+        clang is missing or the build failed.
+    """
+    result = build(artifact, target="host", options={"GL_FUZZ": "ON", "CMAKE_C_COMPILER": clang()})
+    exes = {name: result.build_dir / "fuzz" / f"fuzz_{name}" for name in HARNESSES}
+    missing = [str(p) for p in exes.values() if not p.is_file()]
+    if missing:
+        raise ToolchainError(f"fuzz build did not produce {', '.join(missing)}")
+    return exes
+
+
+def _can_frames(artifact: Artifact) -> list[tuple[bool, str, int, bytes]]:
+    """(fd, encoding, index, payload) of measurement frames as the bridge sends them, both encodings."""
+    from gainlink.hil.can_layout import layout_for
+
+    rng = np.random.default_rng(7)
+    names = [*artifact.signals["outputs"], *artifact.signals["references"]]
+    ranges = {name: [-5.0, 5.0] for name in names}
+    out = []
+    for fd in (False, True):
+        for encoding in ("float32", "int16"):
+            layout = layout_for(artifact, fd=fd, encoding=encoding, ranges=ranges)
+            db = layout.database()
+            for seq in (0, 1, 65535):
+                values = rng.uniform(-4.0, 4.0, artifact.p + artifact.q)
+                if seq == 65535:
+                    values[0] = np.nan  # the fault path: a NaN sample (raw -32768 in int16)
+                for index, spec in enumerate(layout.measurement):
+                    signals = {"seq": seq, "status": 0, "sat": 0}
+                    for i, name in enumerate(spec.signals):
+                        v = float(values[spec.first + i])
+                        # the DBC's int16 signals name raw -32768 "not_a_number"; float32 carries NaN itself
+                        signals[name] = "not_a_number" if np.isnan(v) and encoding == "int16" else v
+                    data = db.encode_message(spec.arbitration_id, signals, scaling=True, strict=False)
+                    out.append((fd, encoding, index, bytes(data)))
+    return out
+
+
+def _seeds_can_udp(artifact: Artifact) -> list[bytes]:
+    import can
+    from can.interfaces.udp_multicast.utils import pack_message
+
+    seeds = []
+    for fd, _enc, index, data in _can_frames(artifact):
+        msg = can.Message(arbitration_id=0x110 + index, data=data, is_fd=fd, is_extended_id=False,
+                          timestamp=1.0 + index)
+        seeds.append(pack_message(msg))
+    return seeds
+
+
+def _seeds_can_layout(artifact: Artifact) -> list[bytes]:
+    count = artifact.p + artifact.q
+    seeds = []
+    for fd, enc, index, data in _can_frames(artifact):
+        config = (1 if enc == "int16" else 0) | (2 if fd else 0)
+        seeds.append(bytes([config, (count - 1) % 16, index]) + data)
+    return seeds
+
+
+def gains_struct(artifact: Artifact) -> bytes:
+    """The artifact's ``gl_gains_t`` as the C struct lays it out on a little-endian host (CRC included)."""
+    from ..codegen import gain_set
+
+    g = gain_set(artifact)
+    floats = np.concatenate([np.asarray(v, dtype="<f4").ravel() for v in g.fields.values()])
+    return struct.pack("<6I", *g.header) + floats.tobytes() + struct.pack("<I", g.crc32)
+
+
+def _seeds_gains_stage(artifact: Artifact) -> list[bytes]:
+    from ..codegen import gain_set
+
+    g = gain_set(artifact)
+    raw = gains_struct(artifact)
+    seeds = [bytes([1]) + raw, bytes([3]) + raw]  # the compiled set as sent, and sealed again
+    offsets, at = {}, 0
+    for name, value in g.fields.items():
+        offsets[name] = at
+        at += np.asarray(value).size
+    k_first, k = offsets["K"], np.asarray(g.fields["K"], dtype=np.float32).ravel()
+    retune = b"".join(struct.pack("<Hf", k_first + i, float(v) * 1.1) for i, v in enumerate(k))
+    seeds += [bytes([0]) + retune, bytes([2]) + retune]  # a retune as PARAM_SETs: unsealed, then committed
+    return seeds
+
+
+_SEEDS = {"can_udp": _seeds_can_udp, "can_layout": _seeds_can_layout, "gains_stage": _seeds_gains_stage}
+
+
+def write_seeds(harness: str, artifact: Artifact, directory: Path) -> int:
+    """Write the seed corpus of ``harness`` for ``artifact`` into ``directory``; returns the number of seeds."""
+    if harness not in _SEEDS:
+        raise ToolchainError(f"unknown fuzz harness {harness!r} (choose from {', '.join(HARNESSES)})")
+    directory.mkdir(parents=True, exist_ok=True)
+    seeds = _SEEDS[harness](artifact)
+    for i, seed in enumerate(seeds):
+        (directory / f"seed-{i:03d}").write_bytes(seed)
+    return len(seeds)
+
+
+_STAT = re.compile(r"^stat::(\w+):\s+(\d+)", re.M)
+_PROGRESS = re.compile(r"cov: (\d+) ft: (\d+) corp: (\d+)/")
+
+
+def run(harness: str, exe: Path, corpus: Path, *, seconds: float | None = None, runs: int | None = None,
+        artifacts: Path, extra: tuple[str, ...] = ()) -> FuzzRun:
+    """Run one harness on ``corpus`` (which grows) for ``seconds`` or ``runs`` executions.
+
+    Parameters
+    ----------
+    harness : str
+        Its name (for the result).
+    exe : Path
+        The harness executable.
+    corpus : Path
+        Corpus directory (seeds; new inputs are added).
+    seconds, runs : optional
+        Stop after this wall time or this many executions (at least one of them; ``runs=0`` only replays the
+        corpus).
+    artifacts : Path
+        Where crash reproducers are written.
+    extra : tuple of str
+        More libFuzzer flags.
+
+    Returns
+    -------
+    FuzzRun
+    """
+    if seconds is None and runs is None:
+        raise ToolchainError("fuzz run needs a time or an execution limit")
+    artifacts.mkdir(parents=True, exist_ok=True)
+    corpus.mkdir(parents=True, exist_ok=True)
+    before = set(artifacts.iterdir())
+    argv = [str(exe), f"-max_len={MAX_LEN}", "-timeout=10", "-rss_limit_mb=2048", "-print_final_stats=1",
+            f"-artifact_prefix={artifacts}/"]
+    if seconds is not None:
+        argv.append(f"-max_total_time={max(1, int(round(seconds)))}")
+    if runs is not None:
+        argv.append(f"-runs={runs}")
+    argv += [*extra, str(corpus)]
+    t0 = time.perf_counter()
+    proc = subprocess.run(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                          text=True, errors="replace")
+    elapsed = time.perf_counter() - t0
+    stats = {k: int(v) for k, v in _STAT.findall(proc.stderr)}
+    progress = _PROGRESS.findall(proc.stderr)
+    cov, ft, corp = (int(x) for x in progress[-1]) if progress else (0, 0, 0)
+    crashes = tuple(sorted(str(p) for p in set(artifacts.iterdir()) - before))
+    if proc.returncode != 0 and not crashes and "stat::" not in proc.stderr:
+        tail = proc.stderr.strip().splitlines()[-1:] or ["no output"]
+        raise ToolchainError(f"fuzz harness {harness} failed to run (exit {proc.returncode}): {tail[0][:200]}")
+    return FuzzRun(harness=harness, executions=stats.get("number_of_executed_units", 0), seconds=elapsed,
+                   cov=cov, ft=ft, corpus=corp, crashes=crashes, exit_code=proc.returncode)
