@@ -36,11 +36,20 @@ typedef struct gl_can_config {
     uint32_t rx_hi;            /**< Highest identifier to receive. */
 } gl_can_config_t;
 
-/** An open link. */
+/**
+ * @brief An open link and what it received.
+ *
+ * Every datagram/frame that reached the socket is in exactly one of: returned by gl_can_link_recv(),
+ * `rx_filtered`, `rx_refused`; `rx_dropped` counts those the kernel dropped before the app read them.
+ */
 typedef struct gl_can_link {
     gl_can_config_t cfg;       /**< Its configuration. */
     int sock;                  /**< Socket descriptor. */
-    uint32_t rx_foreign;       /**< Frames received but filtered out (own or foreign identifiers). */
+    uint64_t rx_read;          /**< Datagrams / frames read from the socket. */
+    uint64_t rx_filtered;      /**< Well-formed frames with identifiers outside [rx_lo, rx_hi] (our own echo too). */
+    uint64_t rx_refused;       /**< Not a standard data frame: malformed or oversized datagram, extended, remote,
+                                    error frame, or a payload too long for its kind. */
+    uint64_t rx_dropped;       /**< Dropped by the kernel on a full receive buffer (udp_multicast: SO_RXQ_OVFL). */
 } gl_can_link_t;
 
 /**

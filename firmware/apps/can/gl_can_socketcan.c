@@ -99,13 +99,14 @@ int gl_can_socketcan_recv(gl_can_link_t *link, gl_can_frame_t *frame, int timeou
         if (n < 0) {
             return errno == EINTR ? 0 : -1;
         }
+        link->rx_read++;
         if ((f.can_id & (CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_ERR_FLAG)) != 0) {
-            link->rx_foreign++;
+            link->rx_refused++;
             continue;
         }
         uint32_t id = f.can_id & CAN_SFF_MASK;
         if (id < link->cfg.rx_lo || id > link->cfg.rx_hi) {
-            link->rx_foreign++;
+            link->rx_filtered++;
             continue;
         }
         frame->id = id;

@@ -58,6 +58,7 @@ int gl_can_udp_open(gl_can_link_t *link)
     (void)setsockopt(s, SOL_SOCKET, SO_REUSEPORT, &on, sizeof on);
     int rcvbuf = 1 << 20;
     (void)setsockopt(s, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf);
+    (void)setsockopt(s, SOL_SOCKET, SO_RXQ_OVFL, &on, sizeof on); /* drops counted, not guessed */
     struct sockaddr_in addr;
     memset(&addr, 0, sizeof addr);
     addr.sin_family = AF_INET;
@@ -256,6 +257,18 @@ int gl_can_udp_decode(const char *buf, size_t len, gl_can_frame_t *frame, msgpac
     return have_id && have_data;
 }
 
+/* Kernel drop count from the SO_RXQ_OVFL control message (cumulative for the socket). */
+static void note_drops(gl_can_link_t *link, struct msghdr *mh)
+{
+    for (struct cmsghdr *c = CMSG_FIRSTHDR(mh); c != NULL; c = CMSG_NXTHDR(mh, c)) {
+        if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_RXQ_OVFL) {
+            uint32_t dropped;
+            memcpy(&dropped, CMSG_DATA(c), sizeof dropped);
+            link->rx_dropped = dropped;
+        }
+    }
+}
+
 int gl_can_udp_recv(gl_can_link_t *link, gl_can_frame_t *frame, int timeout_ms)
 {
     static msgpack_unpacked msg;
@@ -264,7 +277,11 @@ int gl_can_udp_recv(gl_can_link_t *link, gl_can_frame_t *frame, int timeout_ms)
         msgpack_unpacked_init(&msg);
         msg_ready = 1;
     }
-    char buf[512];
+    char buf[GL_CAN_UDP_MAX_DATAGRAM];
+    union {
+        char space[CMSG_SPACE(sizeof(uint32_t))];
+        struct cmsghdr align;
+    } control;
     for (;;) {
         struct pollfd pfd = {.fd = link->sock, .events = POLLIN, .revents = 0};
         int rc = poll(&pfd, 1, timeout_ms);
@@ -274,12 +291,21 @@ int gl_can_udp_recv(gl_can_link_t *link, gl_can_frame_t *frame, int timeout_ms)
         if (rc < 0) {
             return -1;
         }
-        ssize_t n = recv(link->sock, buf, sizeof buf, 0);
+        struct iovec iov = {.iov_base = buf, .iov_len = sizeof buf};
+        struct msghdr mh = {.msg_iov = &iov, .msg_iovlen = 1, .msg_control = control.space,
+                            .msg_controllen = sizeof control.space};
+        ssize_t n = recvmsg(link->sock, &mh, MSG_TRUNC | MSG_DONTWAIT);
         if (n < 0) {
-            return errno == EINTR ? 0 : -1;
+            return (errno == EINTR || errno == EAGAIN || errno == EWOULDBLOCK) ? 0 : -1;
         }
-        if (!gl_can_udp_decode(buf, (size_t)n, frame, &msg) || frame->id < link->cfg.rx_lo || frame->id > link->cfg.rx_hi) {
-            link->rx_foreign++;
+        link->rx_read++;
+        note_drops(link, &mh);
+        if ((size_t)n > sizeof buf || !gl_can_udp_decode(buf, (size_t)n, frame, &msg)) {
+            link->rx_refused++; /* longer than any frame python-can sends, or not a standard data frame */
+            continue;
+        }
+        if (frame->id < link->cfg.rx_lo || frame->id > link->cfg.rx_hi) {
+            link->rx_filtered++;
             continue;
         }
         return 1;

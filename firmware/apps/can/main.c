@@ -20,6 +20,13 @@
  * once per complete, newer sample (duplicates and stale samples are ignored), and answers with the
  * command frames carrying the same sequence number, the status bits and the saturation mask. Prints
  * one `gainlink_can ready ...` line on stdout once the link is open; SIGTERM/SIGINT end it (exit 0).
+ *
+ * Events (a refused datagram, a short frame, a failed send) go to stderr through gl_log.h: at most
+ * GL_LOG_BURST_DEFAULT lines a second plus a count of the rest, and never a write that could block the loop.
+ * The exit summary accounts for every datagram read: `read = used + short + filtered + refused` (`used`:
+ * measurement frames decoded, of which `stale` were older than the last answered sample; samples dropped
+ * half-assembled are counted in `partial_dropped`), and `dropped` is what the kernel dropped before the app
+ * read it (known at the next datagram read).
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -33,6 +40,7 @@
 #include "gainlink/gl_loop.h"
 #include "gl_can_layout.h"
 #include "gl_can_link.h"
+#include "gl_log.h"
 
 #define N_SAMPLE ((uint32_t)(GL_P + GL_Q))
 
@@ -40,6 +48,7 @@ static volatile sig_atomic_t stop_requested;
 static gl_loop_t loop;
 static gl_can_scale_t meas_scale[GL_P + GL_QA];
 static gl_can_scale_t cmd_scale[GL_M];
+static gl_log_t events;
 
 static void on_signal(int sig)
 {
@@ -248,6 +257,7 @@ int main(int argc, char **argv)
     sigaction(SIGTERM, &sa, NULL);
     sigaction(SIGINT, &sa, NULL);
 
+    gl_log_init(&events, 2, "gainlink_can", GL_LOG_BURST_DEFAULT);
     gl_can_link_t link;
     if (gl_can_link_open(&link, &cfg) != 0) {
         return 4;
@@ -263,14 +273,22 @@ int main(int argc, char **argv)
     int have_cur = 0, have_done = 0;
     uint32_t got = 0;
     const uint32_t all = (meas_frames >= 32u) ? 0xFFFFFFFFu : ((1u << meas_frames) - 1u);
-    unsigned long steps = 0, stale = 0, partial_dropped = 0, send_errors = 0, clipped = 0;
+    unsigned long steps = 0, stale = 0, partial_dropped = 0, send_errors = 0, clipped = 0, short_frames = 0;
+    unsigned long frames_used = 0;
+    uint64_t refused_seen = 0;
     int rc = 0;
     uint64_t spin_until = 0;
     while (!stop_requested) {
         gl_can_frame_t frame;
         int r = gl_can_link_recv(&link, &frame, (spin_us > 0 && now_ns() < spin_until) ? 0 : 200);
+        if (link.rx_refused != refused_seen) {
+            gl_log_event(&events, "refused %llu datagram(s) that are not standard CAN data frames",
+                         (unsigned long long)(link.rx_refused - refused_seen));
+            refused_seen = link.rx_refused;
+        }
+        gl_log_tick(&events);
         if (r < 0) {
-            fprintf(stderr, "gainlink_can: receive failed: %s\n", strerror(errno));
+            gl_log_always(&events, "receive failed: %s", strerror(errno));
             rc = 1;
             break;
         }
@@ -281,8 +299,12 @@ int main(int argc, char **argv)
         uint16_t seq = 0;
         float part[GL_P + GL_QA];
         if (gl_can_layout_decode(&layout, index, &frame, &seq, part, meas_scale, N_SAMPLE) != 0) {
+            ++short_frames;
+            gl_log_event(&events, "frame 0x%03x of %u bytes is too short for its values", (unsigned)frame.id,
+                         (unsigned)frame.len);
             continue;
         }
+        ++frames_used;
         if (have_done) {
             uint16_t ahead = (uint16_t)(seq - last_done);
             if (ahead == 0u || ahead >= 0x8000u) {
@@ -314,6 +336,7 @@ int main(int argc, char **argv)
             clipped += gl_can_layout_encode(&layout, cmd_base + j, j, seq, status, sat, u, cmd_scale, GL_M, &out);
             if (gl_can_link_send(&link, &out) != 0) {
                 ++send_errors;
+                gl_log_event(&events, "sending command frame 0x%03x failed: %s", (unsigned)out.id, strerror(errno));
             }
         }
         last_done = seq;
@@ -324,7 +347,12 @@ int main(int argc, char **argv)
         ++steps;
     }
     gl_can_link_close(&link);
-    fprintf(stderr, "gainlink_can: steps=%lu stale=%lu partial_dropped=%lu send_errors=%lu filtered=%lu clipped=%lu\n",
-            steps, stale, partial_dropped, send_errors, (unsigned long)link.rx_foreign, clipped);
+    gl_log_always(&events,
+                  "steps=%lu stale=%lu partial_dropped=%lu send_errors=%lu filtered=%llu clipped=%lu read=%llu "
+                  "used=%lu short=%lu refused=%llu dropped=%llu log_suppressed=%llu log_dropped=%llu",
+                  steps, stale, partial_dropped, send_errors, (unsigned long long)link.rx_filtered, clipped,
+                  (unsigned long long)link.rx_read, frames_used, short_frames, (unsigned long long)link.rx_refused,
+                  (unsigned long long)link.rx_dropped, (unsigned long long)events.suppressed,
+                  (unsigned long long)events.dropped);
     return rc;
 }
