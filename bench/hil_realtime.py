@@ -37,8 +37,8 @@ from gainlink import artifact as artifact_mod
 from gainlink.design import design
 from gainlink.hil.bridge import run_scenario
 from gainlink.hil.controller import firmware_can_executable
-from gainlink.hil.fmu_build import build_fmu
-from gainlink.hil.fmu_plant import FmuPlant
+from gainlink.hil.plants.build import build_fmu
+from gainlink.hil.plants.fmu import FmuPlant
 from gainlink.hil.scenario import parse_scenario
 from gainlink.hil.scheduler import pacing_jitter
 from gainlink.reference import ReferenceLoop

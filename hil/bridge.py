@@ -25,9 +25,9 @@ from gainlink.reference import ReferenceLoop
 
 from .controller import ControllerProcess, controller_argv
 from .faults import FaultInjector
-from .fmu_plant import plant_from_config
+from .plants.fmu import plant_from_config
 from .metrics import RunTrace, compute_metrics
-from .plant import Plant, check_dimensions
+from .plants.base import Plant, check_dimensions
 from .scheduler import SPIN_NS, Pacer, Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
 from .scenario import Scenario, profile_values
 from .transport import Transport, transport_from_config

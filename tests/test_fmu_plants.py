@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from gainlink.errors import PlantError
-from gainlink.hil.fmu_plant import FmuPlant, plant_from_config
-from gainlink.hil.linearize import linearize
-from gainlink.hil.models import CartPendulum, QuadrotorLateral, WoodBerry
+from gainlink.hil.plants.fmu import FmuPlant, plant_from_config
+from gainlink.hil.plants.linearize import linearize
+from gainlink.hil.plants.models import CartPendulum, QuadrotorLateral, WoodBerry
 
 from conftest import EXAMPLES, run_cli
 from test_hil_support import cart_fmu  # noqa: F401
@@ -182,7 +182,7 @@ def test_missing_and_broken_fmus_are_refused(tmp_path, cart_fmu):
 def test_quadrotor_fmu_matches_its_model_and_the_example():
     from fmpy.validation import validate_fmu
 
-    from gainlink.hil.fmu_build import build_fmu
+    from gainlink.hil.plants.build import build_fmu
 
     path = build_fmu("quadrotor_lateral")
     assert validate_fmu(str(path)) == []
@@ -209,7 +209,7 @@ def test_fmi3_cosimulation_fmu_runs_like_the_fmi2_one(tmp_path, example_artifact
     from fmpy.validation import validate_fmu
 
     from gainlink.hil.bridge import run_scenario
-    from gainlink.hil.fmu_build import build_fmu
+    from gainlink.hil.plants.build import build_fmu
     from gainlink.hil.scenario import parse_scenario
     from test_hil_support import udp_transport
 
@@ -278,7 +278,7 @@ WB_TS = tomllib.loads((EXAMPLES / "wood_berry.toml").read_text())["Ts"]
 
 @pytest.fixture(scope="module")
 def wood_berry_fmu():
-    from gainlink.hil.fmu_build import build_fmu
+    from gainlink.hil.plants.build import build_fmu
 
     return build_fmu("wood_berry")
 

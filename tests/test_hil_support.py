@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from gainlink.artifact import load
-from gainlink.hil import toml_write
+from gainlink.hil.plants import toml_write
 
 _rng = random.Random(os.getpid() ^ int.from_bytes(os.urandom(4), "little"))
 
@@ -43,7 +43,7 @@ def can_firmware(pendulum_gains) -> Path:
 @pytest.fixture(scope="session")
 def cart_fmu() -> Path:
     """The project's nonlinear cart-pendulum FMU, built from its C sources with fmpy."""
-    from gainlink.hil.fmu_build import build_fmu
+    from gainlink.hil.plants.build import build_fmu
 
     return build_fmu("cart_pendulum")
 

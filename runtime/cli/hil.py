@@ -77,7 +77,7 @@ def _dbc(args: argparse.Namespace) -> int:
 
 
 def _fmu(args: argparse.Namespace) -> int:
-    from gainlink.hil.fmu_build import build_fmu
+    from gainlink.hil.plants.build import build_fmu
     from gainlink.hil.paths import fmu_source_names
 
     names = args.names or fmu_source_names()
@@ -108,7 +108,7 @@ def _study(args: argparse.Namespace) -> int:
 
 
 def _linearize(args: argparse.Namespace) -> int:
-    from gainlink.hil.linearize import linearize_to_spec
+    from gainlink.hil.plants.linearize import linearize_to_spec
 
     at = {}
     for item in args.at:

@@ -74,8 +74,8 @@ class HilPlant(DiscretePlant):
     """A plant from ``gainlink.hil``'s registry (e.g. ``cart_pendulum``), advanced by ``Ts`` per sample."""
 
     def __init__(self, name: str, *, artifact: Artifact, x0: np.ndarray | None = None) -> None:
-        from gainlink.hil import models  # noqa: F401 - registers the built-in models
-        from gainlink.hil.plant import PLANTS, check_dimensions
+        from gainlink.hil.plants import models  # noqa: F401 - registers the built-in models
+        from gainlink.hil.plants.base import PLANTS, check_dimensions
 
         self.plant = PLANTS.create(name, {}, artifact=artifact)
         check_dimensions(self.plant, m=artifact.m, p=artifact.p, artifact=artifact.name)

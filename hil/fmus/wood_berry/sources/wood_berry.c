@@ -8,7 +8,7 @@
  *     tau_ij dy_ij/dt = -y_ij + K_ij u_j(t - theta_ij),   u = (reflux, steam),
  *     K = [[12.8, -18.9], [6.6, -19.4]], tau = [[16.7, 21.0], [10.9, 14.4]], theta = [[1, 3], [7, 3]],
  *
- * the same model as gainlink.hil.models.WoodBerry, with the same variable names.
+ * the same model as gainlink.hil.plants.models.WoodBerry, with the same variable names.
  *
  * Why Co-Simulation only: with dead times, a Model Exchange FMU would have to announce a time event
  * at every instant an input change reaches a lag (t_input + theta_ij) and keep a time-stamped input

@@ -20,8 +20,8 @@ import numpy as np
 
 from gainlink.errors import PlantError
 
-from .plant import PLANTS, Plant
-from .registry import take_keys
+from .base import PLANTS, Plant
+from ..registry import take_keys
 
 log = logging.getLogger(__name__)
 
@@ -31,7 +31,7 @@ def resolve_fmu(*, fmu: str | None, path: str | None, base_dir: Path | None = No
     if (fmu is None) == (path is None):
         raise PlantError("plant fmu: give exactly one of fmu (a project FMU name) or path (an .fmu file)")
     if fmu is not None:
-        from .fmu_build import build_fmu
+        from .build import build_fmu
 
         return build_fmu(fmu)
     p = Path(path)

@@ -21,7 +21,7 @@ from gainlink.errors import PlantError, SpecError
 from gainlink.fileio import atomic_write_text
 
 from . import toml_write
-from .fmu_plant import read_description, resolve_fmu
+from .fmu import read_description, resolve_fmu
 
 log = logging.getLogger(__name__)
 

@@ -14,8 +14,8 @@ from scipy.linalg import expm
 
 from gainlink.errors import PlantError
 
-from .plant import PLANTS, Plant, select
-from .registry import take_keys
+from .base import PLANTS, Plant, select
+from ..registry import take_keys
 
 _COMMON_KEYS = {"kind", "inputs", "outputs", "parameters", "step"}
 

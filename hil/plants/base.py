@@ -2,7 +2,7 @@
 
 A plant is simulated by the bridge: it takes the controller's command (plus disturbances),
 advances by a given time, and offers its outputs to be sampled. Implementations: FMUs through
-fmpy (:mod:`gainlink.hil.fmu_plant`) and the built-in models (:mod:`gainlink.hil.models`).
+fmpy (:mod:`gainlink.hil.plants.fmu`) and the built-in models (:mod:`gainlink.hil.plants.models`).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 
 from gainlink.errors import PlantError
 
-from .registry import Registry
+from ..registry import Registry
 
 PLANTS: Registry["Plant"] = Registry(what="plant", error=PlantError)
 

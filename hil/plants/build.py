@@ -20,7 +20,7 @@ from pathlib import Path
 
 from gainlink.errors import PlantError, ToolchainError
 
-from .paths import cache_dir, fmu_source_dir, fmu_source_names
+from ..paths import cache_dir, fmu_source_dir, fmu_source_names
 
 log = logging.getLogger(__name__)
 
