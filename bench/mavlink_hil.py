@@ -70,7 +70,7 @@ def main() -> int:
     from gainlink.engines.native import NativeLoop
     from gainlink.hil.bridge import run_scenario
     from gainlink.hil.mavlink_firmware import MavlinkFirmware, mavlink_executable
-    from gainlink.hil.mavlink_transport import MavlinkTransport
+    from gainlink.hil.links.mavlink import MavlinkTransport
     from gainlink.hil.scenario import parse_scenario
     from gainlink.hil.scheduler import Placement, resolve_affinity
     from gainlink.spec import load_spec

@@ -30,7 +30,7 @@ from .metrics import RunTrace, compute_metrics
 from .plants.base import Plant, check_dimensions
 from .scheduler import SPIN_NS, Pacer, Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
 from .scenario import Scenario, profile_values
-from .transport import Transport, transport_from_config
+from .links.base import Transport, transport_from_config
 
 log = logging.getLogger(__name__)
 

@@ -51,7 +51,7 @@ def controller_argv(kind: str, *, artifact: Any, artifact_path: Path, transport:
     if kind == "reference":
         if hasattr(transport, "reference_argv"):  # e.g. MAVLink: the transport names its own reference node
             return transport.reference_argv(artifact_path)
-        return [sys.executable, "-m", "gainlink.hil.can_node", str(artifact_path),
+        return [sys.executable, "-m", "gainlink.hil.links.can_node", str(artifact_path),
                 "--config", json.dumps(transport.config)]
     raise FirmwareError(f"unknown controller {kind!r} (choose from {', '.join(CONTROLLERS)})")
 

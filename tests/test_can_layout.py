@@ -17,10 +17,10 @@ import pytest
 
 from gainlink.artifact import load
 from gainlink.errors import TransportError
-from gainlink.hil.can_layout import layout_for
-from gainlink.hil.can_transport import CanTransport, firmware_can_argv
+from gainlink.hil.links.can_layout import layout_for
+from gainlink.hil.links.can import CanTransport, firmware_can_argv
 from gainlink.hil.controller import ControllerProcess
-from gainlink.hil.transport import STATUS_FAULT
+from gainlink.hil.links.base import STATUS_FAULT
 from gainlink.reference import ReferenceLoop
 
 from conftest import run_cli
@@ -155,7 +155,7 @@ def test_udp_multicast_without_a_route_says_how_to_add_one(pendulum_gains):
         "import sys, numpy as np\n"
         "from gainlink.artifact import load\n"
         "from gainlink.errors import TransportError\n"
-        "from gainlink.hil.can_transport import CanTransport\n"
+        "from gainlink.hil.links.can import CanTransport\n"
         "t = CanTransport({'interface': 'udp_multicast', 'channel': '239.74.1.1', 'port': 45678, 'hop_limit': 0},"
         " artifact=load(sys.argv[1]))\n"
         "try:\n"

@@ -21,8 +21,8 @@ import pytest
 from gainlink.artifact import load
 from gainlink.errors import TransportError
 from gainlink.hil.bridge import run_scenario
-from gainlink.hil.can_layout import FD_LENGTHS, INT16_MAX, INT16_NAN, dequantise, quantise
-from gainlink.hil.can_transport import Assembler, CanTransport, FrameCodec, firmware_can_argv
+from gainlink.hil.links.can_layout import FD_LENGTHS, INT16_MAX, INT16_NAN, dequantise, quantise
+from gainlink.hil.links.can import Assembler, CanTransport, FrameCodec, firmware_can_argv
 from gainlink.hil.scenario import parse_scenario
 
 from conftest import run_cli
@@ -113,7 +113,7 @@ def test_int16_values_beyond_their_range_saturate_and_are_counted(pendulum_gains
     transport = _int16(art)
     names, lo, hi = _value_ranges(art, PENDULUM_RANGES)
     rx = Assembler(FrameCodec(transport.layout.measurement, fd=False))
-    with caplog.at_level(logging.WARNING, logger="gainlink.hil.can_transport"):
+    with caplog.at_level(logging.WARNING, logger="gainlink.hil.links.can"):
         for seq, v in enumerate([hi * 3, lo * 3, hi + (hi - lo), (lo + hi) / 2]):
             done = None
             for frame in transport.encode_sample(seq=seq, y=v[:art.p], r=v[art.p:]):

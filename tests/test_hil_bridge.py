@@ -20,7 +20,7 @@ import pytest
 
 from gainlink.artifact import load
 from gainlink.hil.bridge import run_scenario
-from gainlink.hil.can_transport import CanTransport
+from gainlink.hil.links.can import CanTransport
 from gainlink.hil.scenario import parse_scenario
 
 from conftest import run_cli

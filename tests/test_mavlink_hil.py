@@ -10,7 +10,7 @@ from test_mavlink_upload import free_udp_port
 from gainlink.errors import TransportError
 from gainlink.hil.bridge import run_scenario
 from gainlink.hil.scenario import parse_scenario
-from gainlink.hil.transport import transport_from_config
+from gainlink.hil.links.base import transport_from_config
 
 
 def scenario(artifact_path, transport: dict, **extra):
@@ -88,7 +88,7 @@ def test_the_python_reference_node_over_mavlink_matches_the_firmware(pend):
     ref = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, controller="reference"))
     fw = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}))
     assert ref.complete and fw.complete, (ref.reason, fw.reason)
-    assert "gainlink.hil.mavlink_node" in ref.info["controller"]["argv"]
+    assert "gainlink.hil.links.mavlink_node" in ref.info["controller"]["argv"]
     assert "python reference" in ref.info["controller"]["ready"]
     assert ref.trace.got.all() and ref.metrics["lost"] == 0
     np.testing.assert_allclose(ref.trace.u, ref.trace.u_ref, atol=1e-12)  # the node is the reference law

@@ -21,8 +21,8 @@ from gainlink.hil.mavlink_firmware import EXECUTABLE, MavlinkFirmware
 from gainlink.hil.mavlink_link import MavLink
 from gainlink.hil.mavlink_params import REAL32, Encoding
 from gainlink.hil.mavlink_session import ParamSession
-from gainlink.hil.mavlink_transport import MavlinkTransport
-from gainlink.hil.transport import STATUS_FAULT, STATUS_WATCHDOG
+from gainlink.hil.links.mavlink import MavlinkTransport
+from gainlink.hil.links.base import STATUS_FAULT, STATUS_WATCHDOG
 
 
 @pytest.fixture(scope="module")

@@ -21,7 +21,7 @@ from gainlink.hil.mavlink_firmware import MavlinkFirmware, mavlink_executable
 from gainlink.hil.mavlink_link import MavLink
 from gainlink.hil.mavlink_params import Encoding
 from gainlink.hil.mavlink_session import ParamSession
-from gainlink.hil.mavlink_transport import MavlinkTransport
+from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import parse_spec
 

@@ -1,7 +1,7 @@
 """Real SocketCAN: the firmware's gainlink_can and the bridge on vcan0 inside a small Linux VM.
 
 The host kernel has no CAN, so the test boots qemu-system-x86_64 (TCG) with Debian's kernel, a
-busybox initramfs and the host root shared read-only over 9p (see gainlink.hil.vcan_vm), and runs the
+busybox initramfs and the host root shared read-only over 9p (see gainlink.hil.links.vcan_vm), and runs the
 same lockstep scenario there with ``interface = "socketcan", channel = "vcan0"`` that it runs on the
 host over udp_multicast. Both runs must stabilise the nonlinear pendulum FMU from 0.1 rad and agree.
 """
@@ -18,7 +18,7 @@ import pytest
 
 from gainlink.hil.bridge import run_scenario
 from gainlink.hil.scenario import load_scenario
-from gainlink.hil.vcan_vm import prepare_vm, run_in_vm
+from gainlink.hil.links.vcan_vm import prepare_vm, run_in_vm
 
 from test_hil_support import can_firmware, cart_fmu, pendulum_gains, pendulum_scenario, udp_transport, write_scenario  # noqa: F401
 

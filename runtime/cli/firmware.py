@@ -152,7 +152,7 @@ def _run(args: argparse.Namespace) -> int:
     # Transport options (added by the CAN and MAVLink work) each select their own host application here;
     # without one, the plain loop executable runs.
     if getattr(args, "can", None):
-        from gainlink.hil.firmware_can import run_firmware_can
+        from gainlink.hil.links.can_firmware import run_firmware_can
 
         return run_firmware_can(artifact_path=args.artifact, can=args.can)
     if getattr(args, "mavlink", None):

@@ -3,7 +3,7 @@
  * @brief Encoding and decoding of the gainlink CAN layout (explicit little-endian byte order).
  *
  * The int16 quantisation is done in double with rint() (round half to even in the default rounding
- * mode), exactly as gainlink.hil.can_layout.quantise does in float64 with numpy.rint, so both sides
+ * mode), exactly as gainlink.hil.links.can_layout.quantise does in float64 with numpy.rint, so both sides
  * produce the same raw values bit for bit (built with -ffp-contract=off: no fused multiply-add).
  */
 #include "gl_can_layout.h"

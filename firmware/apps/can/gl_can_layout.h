@@ -1,6 +1,6 @@
 /**
  * @file gl_can_layout.h
- * @brief The CAN layout of the artifact's samples and commands (the rule of gainlink.hil.can_layout).
+ * @brief The CAN layout of the artifact's samples and commands (the rule of gainlink.hil.links.can_layout).
  *
  * Every frame: bytes 0-1 `seq` (uint16 LE), byte 2 `status`, byte 3 `sat` (bit i: i-th value of this
  * frame saturated), then the values, little-endian, in one of two encodings:

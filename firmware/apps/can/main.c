@@ -13,7 +13,7 @@
  * `--encoding float32|int16` (default float32): with int16 every value is a scaled signed 16-bit integer,
  * `physical = raw * factor + offset`; `--scale-measurement` gives the `factor,offset` pairs of the
  * sample (GL_P outputs then GL_Q references) and `--scale-command` those of the command (GL_M inputs),
- * pairs separated by `;`, exactly as many as values (gainlink.hil.can_transport.firmware_can_argv writes
+ * pairs separated by `;`, exactly as many as values (gainlink.hil.links.can.firmware_can_argv writes
  * them from the DBC's numbers). A non-finite value travels as raw -32768 and decodes to NaN, so the loop's
  * fault path still answers it; commands beyond their range saturate to it (counted: `clipped=` at exit).
  * Assembles each sample (y then r) from its measurement frames by sequence number, runs gl_loop_step()

@@ -18,7 +18,7 @@ i-th value of this command frame was clamped). Values follow, little-endian, in 
 FD frame lengths are rounded up to a valid FD length. Command frames (controller -> plant, ``u``) use
 ids ``base_id + j``; measurement frames (plant -> controller, ``y`` then ``r``) use ids ``base_id +
 0x10 + i``, so commands win arbitration. The firmware's CAN app implements exactly this rule (its
-int16 factor/offset come from :func:`gainlink.hil.can_transport.firmware_can_argv`, i.e. from the
+int16 factor/offset come from :func:`gainlink.hil.links.can.firmware_can_argv`, i.e. from the
 same :class:`FrameSpec` data that builds the DBC); :meth:`CanLayout.dbc` documents it for any CAN tool.
 """
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from gainlink.errors import TransportError
 
-from .registry import Registry
+from ..registry import Registry
 
 TRANSPORTS: Registry["Transport"] = Registry(what="transport", error=TransportError)
 
@@ -113,7 +113,7 @@ def transport_from_config(config: Mapping[str, Any], *, artifact: Any) -> Transp
     A table with ``kind`` names a registered transport; a table without ``kind`` but with
     ``interface`` is a python-can configuration (kind ``can``).
     """
-    from . import can_transport  # noqa: F401 - registers "can"
+    from . import can as can_transport  # noqa: F401 - registers "can"
 
     if not isinstance(config, Mapping):
         raise TransportError("transport: expected a table")
@@ -122,7 +122,7 @@ def transport_from_config(config: Mapping[str, Any], *, artifact: Any) -> Transp
         raise TransportError("transport: give interface (a python-can configuration) or kind")
     if kind == "mavlink":
         try:
-            import gainlink.hil.mavlink_transport  # noqa: F401 - registers "mavlink" when present
+            import gainlink.hil.links.mavlink  # noqa: F401 - registers "mavlink" when present
         except ImportError:
             pass
     return TRANSPORTS.create(str(kind), config, artifact=artifact)

@@ -30,8 +30,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from gainlink.errors import TransportError
 
-from .registry import take_keys
-from .transport import STATUS_FAULT, STATUS_WATCHDOG, TRANSPORTS, Command, Transport
+from ..registry import take_keys
+from .base import STATUS_FAULT, STATUS_WATCHDOG, TRANSPORTS, Command, Transport
 
 ARRAY_SAMPLE = 1
 ARRAY_RESET = 2
@@ -201,13 +201,13 @@ class MavlinkTransport(Transport):
         return None
 
     def controller_argv(self) -> list[str]:
-        from .mavlink_firmware import spin_argv
+        from ..mavlink_firmware import spin_argv
 
         return ["--url", self.controller_url, *spin_argv(self.busy_poll_us)]
 
     def firmware_executable(self, artifact: Any) -> Any:
         """The firmware host executable that speaks this link (``gainlink_mavlink``, built on demand)."""
-        from .mavlink_firmware import mavlink_executable
+        from ..mavlink_firmware import mavlink_executable
 
         return mavlink_executable(artifact)
 
@@ -215,7 +215,7 @@ class MavlinkTransport(Transport):
         """The Python reference node that speaks this link (``controller = "reference"``)."""
         import sys
 
-        return [sys.executable, "-m", "gainlink.hil.mavlink_node", str(artifact_path), "--url", self.controller_url]
+        return [sys.executable, "-m", "gainlink.hil.links.mavlink_node", str(artifact_path), "--url", self.controller_url]
 
     @property
     def config(self) -> dict:

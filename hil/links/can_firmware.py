@@ -16,8 +16,8 @@ from gainlink.artifact import load
 from gainlink.errors import TransportError
 from gainlink.fileio import read_user_file
 
-from .can_transport import config_from_text, firmware_can_argv, layout_from_config
-from .controller import firmware_can_executable
+from .can import config_from_text, firmware_can_argv, layout_from_config
+from ..controller import firmware_can_executable
 
 
 def read_can_config(text_or_path: str) -> dict:

@@ -1,6 +1,6 @@
 """A controller node in Python speaking the gainlink CAN layout: the float64 reference law on the bus.
 
-``python -m gainlink.hil.can_node ARTIFACT --config JSON`` behaves like the firmware's
+``python -m gainlink.hil.links.can_node ARTIFACT --config JSON`` behaves like the firmware's
 ``gainlink_can`` (same layout and encoding, same duplicate/stale handling, same ready line), with
 :class:`gainlink.reference.ReferenceLoop` as the law. The bridge uses it as ``controller =
 "reference"``: a real peer process on a real bus, without a C toolchain.
@@ -19,8 +19,8 @@ import numpy as np
 from gainlink.artifact import load
 from gainlink.reference import ReferenceLoop
 
-from .can_transport import Assembler, FrameCodec, layout_from_config, open_bus
-from .transport import STATUS_FAULT
+from .can import Assembler, FrameCodec, layout_from_config, open_bus
+from .base import STATUS_FAULT
 
 
 def serve(artifact: Any, config: dict, *, out: Any = sys.stdout) -> int:
@@ -59,7 +59,7 @@ def serve(artifact: Any, config: dict, *, out: Any = sys.stdout) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
-    ap = argparse.ArgumentParser(prog="python -m gainlink.hil.can_node")
+    ap = argparse.ArgumentParser(prog="python -m gainlink.hil.links.can_node")
     ap.add_argument("artifact")
     ap.add_argument("--config", required=True, help="python-can configuration as JSON")
     args = ap.parse_args(argv)

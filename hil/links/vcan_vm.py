@@ -27,7 +27,7 @@ from pathlib import Path
 
 from gainlink.errors import ToolchainError
 
-from .paths import cache_dir
+from ..paths import cache_dir
 
 log = logging.getLogger(__name__)
 

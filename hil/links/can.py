@@ -24,7 +24,7 @@ import numpy as np
 from gainlink.errors import TransportError
 
 from .can_layout import CanLayout, FrameSpec, dequantise, layout_for, quantise
-from .transport import TRANSPORTS, Command, Transport
+from .base import TRANSPORTS, Command, Transport
 
 log = logging.getLogger(__name__)
 

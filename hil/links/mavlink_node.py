@@ -1,6 +1,6 @@
 """A controller node in Python speaking the gainlink MAVLink HIL link: the float64 reference law on UDP.
 
-``python -m gainlink.hil.mavlink_node ARTIFACT --url udpin:127.0.0.1:14560`` answers like the
+``python -m gainlink.hil.links.mavlink_node ARTIFACT --url udpin:127.0.0.1:14560`` answers like the
 firmware's ``gainlink_mavlink`` does on its HIL link (DEBUG_FLOAT_ARRAY ``GL_SAMPLE``/``GL_RESET``/
 ``GL_IDLE`` in, HIL_ACTUATOR_CONTROLS out with the sample's ``time_usec``), with
 :class:`gainlink.reference.ReferenceLoop` as the law. The bridge uses it as ``controller =
@@ -22,7 +22,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from gainlink.artifact import load
 from gainlink.reference import ReferenceLoop
 
-from .mavlink_transport import ARRAY_IDLE, ARRAY_RESET, ARRAY_SAMPLE, FLAG_FAULT, FLAG_RESET, FLAG_WATCHDOG, SAT_SHIFT
+from .mavlink import ARRAY_IDLE, ARRAY_RESET, ARRAY_SAMPLE, FLAG_FAULT, FLAG_RESET, FLAG_WATCHDOG, SAT_SHIFT
 
 WATCHDOG_PERIODS = 10  # as the firmware's default (GL_WATCHDOG_PERIODS_DEFAULT)
 
@@ -31,7 +31,7 @@ def serve(artifact: Any, *, url: str, out: Any = sys.stdout) -> int:
     """Run the node until SIGTERM/SIGINT; returns the exit status."""
     parts = url.split(":")
     if len(parts) != 3 or parts[0] != "udpin":
-        print(f"gainlink.hil.mavlink_node: expected udpin:HOST:PORT, got {url!r}", file=sys.stderr)
+        print(f"gainlink.hil.links.mavlink_node: expected udpin:HOST:PORT, got {url!r}", file=sys.stderr)
         return 2
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind((parts[1], int(parts[2])))
@@ -86,7 +86,7 @@ def serve(artifact: Any, *, url: str, out: Any = sys.stdout) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: ``ARTIFACT --url udpin:HOST:PORT``."""
-    parser = argparse.ArgumentParser(prog="python -m gainlink.hil.mavlink_node", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m gainlink.hil.links.mavlink_node", description=__doc__.splitlines()[0])
     parser.add_argument("artifact")
     parser.add_argument("--url", required=True, help="udpin:HOST:PORT")
     args = parser.parse_args(argv)
