@@ -68,11 +68,11 @@ def main() -> int:
     from gainlink import artifact as artifact_mod
     from gainlink.design import design
     from gainlink.engines.native import NativeLoop
-    from gainlink.hil.bridge import run_scenario
+    from gainlink.hil.run.bridge import run_scenario
     from gainlink.hil.mavlink_firmware import MavlinkFirmware, mavlink_executable
     from gainlink.hil.links.mavlink import MavlinkTransport
-    from gainlink.hil.scenario import parse_scenario
-    from gainlink.hil.scheduler import Placement, resolve_affinity
+    from gainlink.hil.run.scenario import parse_scenario
+    from gainlink.hil.run.scheduler import Placement, resolve_affinity
     from gainlink.spec import load_spec
 
     with tempfile.TemporaryDirectory() as tmp:

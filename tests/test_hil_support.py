@@ -35,7 +35,7 @@ def pendulum_gains(example_artifacts) -> Path:
 @pytest.fixture(scope="session")
 def can_firmware(pendulum_gains) -> Path:
     """The firmware's gainlink_can host executable built for the pendulum artifact."""
-    from gainlink.hil.controller import firmware_can_executable
+    from gainlink.hil.links.can_firmware import firmware_can_executable
 
     return firmware_can_executable(load(pendulum_gains))
 

@@ -1,4 +1,5 @@
-"""``gainlink firmware run ARTIFACT --can CONFIG``: the firmware's CAN node on a configured bus.
+"""The firmware's CAN node: the build of its executable, and ``gainlink firmware run ARTIFACT --can CONFIG``
+which runs it on a configured bus.
 
 CONFIG is a python-can configuration — a TOML or JSON file, or inline JSON — e.g.
 ``{"interface": "socketcan", "channel": "can0", "fd": true}`` or a ``udp_multicast`` group, with
@@ -11,13 +12,20 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 from gainlink.artifact import load
 from gainlink.errors import TransportError
 from gainlink.fileio import read_user_file
 
 from .can import config_from_text, firmware_can_argv, layout_from_config
-from ..controller import firmware_can_executable
+
+
+def firmware_can_executable(artifact: Any) -> Path:
+    """Build (cached) the host firmware for ``artifact`` and return its ``gainlink_can`` executable."""
+    from gainlink.firmware.build import host_app
+
+    return host_app(artifact, target="gainlink_can", relpath="apps/can/gainlink_can")
 
 
 def read_can_config(text_or_path: str) -> dict:

@@ -35,9 +35,9 @@ def _scenario_path(name: str) -> Path:
 
 def _run(args: argparse.Namespace) -> int:
     from gainlink.artifact import load
-    from gainlink.hil.bridge import run_scenario
-    from gainlink.hil.report import summary_text, write_report
-    from gainlink.hil.scenario import load_scenario
+    from gainlink.hil.run.bridge import run_scenario
+    from gainlink.hil.run.report import summary_text, write_report
+    from gainlink.hil.run.scenario import load_scenario
 
     scenario = load_scenario(_scenario_path(args.scenario))
     if args.artifact:
@@ -87,9 +87,9 @@ def _fmu(args: argparse.Namespace) -> int:
 
 
 def _study(args: argparse.Namespace) -> int:
-    from gainlink.hil.study import run_saturation_study
+    from gainlink.hil.run.study import run_saturation_study
 
-    from gainlink.hil.study import default_study
+    from gainlink.hil.run.study import default_study
 
     study_desc = None
     if args.study and not Path(args.study).exists() and "/" not in args.study and not args.study.endswith(".toml"):

@@ -22,16 +22,11 @@ from typing import Any
 
 from gainlink.errors import FirmwareError
 
+from ..links.can_firmware import firmware_can_executable
+
 log = logging.getLogger(__name__)
 
 CONTROLLERS = ("firmware", "reference")
-
-
-def firmware_can_executable(artifact: Any) -> Path:
-    """Build (cached) the host firmware for ``artifact`` and return its ``gainlink_can`` executable."""
-    from gainlink.firmware.build import host_app
-
-    return host_app(artifact, target="gainlink_can", relpath="apps/can/gainlink_can")
 
 
 def controller_argv(kind: str, *, artifact: Any, artifact_path: Path, transport: Any,

@@ -25,7 +25,7 @@ from gainlink.errors import ScenarioError
 from gainlink.fileio import publish_files, read_user_file
 
 from .bridge import RunResult, run_scenario
-from .paths import project_root
+from ..paths import project_root
 from .report import plots, report_json, summary_text
 from .scenario import parse_scenario
 
