@@ -69,7 +69,7 @@ def main() -> int:
     from gainlink.design import design
     from gainlink.engines.native import NativeLoop
     from gainlink.hil.run.bridge import run_scenario
-    from gainlink.hil.mavlink_firmware import MavlinkFirmware, mavlink_executable
+    from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
     from gainlink.hil.links.mavlink import MavlinkTransport
     from gainlink.hil.run.scenario import parse_scenario
     from gainlink.hil.run.scheduler import Placement, resolve_affinity

@@ -34,11 +34,11 @@ def main() -> int:
     from gainlink import artifact as artifact_mod
     from gainlink.artifact import from_dict
     from gainlink.design import design
-    from gainlink.hil.mavlink_firmware import MavlinkFirmware, mavlink_executable
-    from gainlink.hil.mavlink_link import MavLink
-    from gainlink.hil.mavlink_params import REAL32, Encoding, firmware_params
-    from gainlink.hil.mavlink_session import ParamSession
-    from gainlink.hil.mavlink_upload import upload
+    from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
+    from gainlink.mavlink.link import MavLink
+    from gainlink.mavlink.params import REAL32, Encoding, firmware_params
+    from gainlink.mavlink.session import ParamSession
+    from gainlink.mavlink.upload import upload
     from gainlink.spec import parse_spec
 
     spec = tomllib.loads((ROOT / "examples" / "wood_berry.toml").read_text())

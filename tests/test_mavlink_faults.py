@@ -13,10 +13,10 @@ from test_mavlink_upload import closed_loop, read_params, reference_u, start_fir
 
 from gainlink.artifact import load
 from gainlink.codegen import gain_set, payload_crc32
-from gainlink.hil.mavlink_link import MavLink
-from gainlink.hil.mavlink_params import INT32, REAL32, Encoding, as_int32
-from gainlink.hil.mavlink_relay import LossyUdpRelay
-from gainlink.hil.mavlink_session import ParamSession
+from gainlink.mavlink.link import MavLink
+from gainlink.mavlink.params import INT32, REAL32, Encoding, as_int32
+from gainlink.mavlink.relay import LossyUdpRelay
+from gainlink.mavlink.session import ParamSession
 
 
 def values_of(port: int) -> dict:

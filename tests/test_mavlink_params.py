@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 
 from gainlink.artifact import load
 from gainlink.errors import ParameterError
-from gainlink.hil.mavlink_link import MavLink, raw_param_value
-from gainlink.hil.mavlink_params import (
+from gainlink.mavlink.link import MavLink, raw_param_value
+from gainlink.mavlink.params import (
     INT32,
     PARAM_TYPES,
     REAL32,

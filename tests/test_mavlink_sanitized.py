@@ -17,10 +17,10 @@ from gainlink.artifact import load
 from gainlink.codegen import gain_set
 from gainlink.codegen import render_c
 from gainlink.firmware.build import cache_root, firmware_dir
-from gainlink.hil.mavlink_firmware import EXECUTABLE, MavlinkFirmware
-from gainlink.hil.mavlink_link import MavLink
-from gainlink.hil.mavlink_params import REAL32, Encoding
-from gainlink.hil.mavlink_session import ParamSession
+from gainlink.firmware.mavlink_app import EXECUTABLE, MavlinkFirmware
+from gainlink.mavlink.link import MavLink
+from gainlink.mavlink.params import REAL32, Encoding
+from gainlink.mavlink.session import ParamSession
 from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.hil.links.base import STATUS_FAULT, STATUS_WATCHDOG
 

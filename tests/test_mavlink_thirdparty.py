@@ -22,7 +22,7 @@ from test_mavlink_upload import closed_loop, free_udp_port, read_params, referen
 
 from gainlink.artifact import load
 from gainlink.codegen import gain_set
-from gainlink.hil.mavlink_params import REAL32, as_int32, firmware_params
+from gainlink.mavlink.params import REAL32, as_int32, firmware_params
 
 import mavsdk  # the test extra (make setup) installs it
 from mavsdk.plugins.param import Param, ParamError

@@ -17,10 +17,10 @@ from gainlink import artifact as artifact_mod
 from gainlink.artifact import Artifact, load
 from gainlink.codegen import gain_set
 from gainlink.design import design
-from gainlink.hil.mavlink_firmware import MavlinkFirmware, mavlink_executable
-from gainlink.hil.mavlink_link import MavLink
-from gainlink.hil.mavlink_params import Encoding
-from gainlink.hil.mavlink_session import ParamSession
+from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
+from gainlink.mavlink.link import MavLink
+from gainlink.mavlink.params import Encoding
+from gainlink.mavlink.session import ParamSession
 from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import parse_spec
@@ -285,7 +285,7 @@ def test_firmware_run_mavlink_command_persists_beside_the_artifact(exe, pend, re
 def test_firmware_and_python_naming_schemes_agree_for_every_structure(shape, tmp_path):
     """Current-estimator form (M present), no integral action (q = 0: CI KI KAW Z0 absent) and q = 2."""
     from gainlink.artifact import from_dict
-    from gainlink.hil.mavlink_params import firmware_params
+    from gainlink.mavlink.params import firmware_params
     from gainlink.random_plants import random_spec
 
     art = from_dict(design(parse_spec(random_spec(11, **shape))).artifact)

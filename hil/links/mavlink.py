@@ -201,13 +201,13 @@ class MavlinkTransport(Transport):
         return None
 
     def controller_argv(self) -> list[str]:
-        from ..mavlink_firmware import spin_argv
+        from gainlink.firmware.mavlink_app import spin_argv
 
         return ["--url", self.controller_url, *spin_argv(self.busy_poll_us)]
 
     def firmware_executable(self, artifact: Any) -> Any:
         """The firmware host executable that speaks this link (``gainlink_mavlink``, built on demand)."""
-        from ..mavlink_firmware import mavlink_executable
+        from gainlink.firmware.mavlink_app import mavlink_executable
 
         return mavlink_executable(artifact)
 

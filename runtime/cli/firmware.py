@@ -156,7 +156,7 @@ def _run(args: argparse.Namespace) -> int:
 
         return run_firmware_can(artifact_path=args.artifact, can=args.can)
     if getattr(args, "mavlink", None):
-        from gainlink.hil.mavlink_firmware import run_foreground
+        from gainlink.firmware.mavlink_app import run_foreground
 
         return run_foreground(Path(args.artifact), url=args.mavlink, param_file=args.param_file and Path(args.param_file))
     return _run_host(args)

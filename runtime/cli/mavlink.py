@@ -43,8 +43,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _upload(args: argparse.Namespace) -> int:
     from gainlink.artifact import load
     from gainlink.errors import ParameterError
-    from gainlink.hil.mavlink_params import Encoding
-    from gainlink.hil.mavlink_upload import UploadFailed, format_changes, upload
+    from gainlink.mavlink.params import Encoding
+    from gainlink.mavlink.upload import UploadFailed, format_changes, upload
 
     if args.window < 1 or args.retries < 0 or args.timeout <= 0:
         raise ParameterError("--window must be >= 1, --retries >= 0 and --timeout > 0")
@@ -81,10 +81,10 @@ def _upload(args: argparse.Namespace) -> int:
 
 
 def _params(args: argparse.Namespace) -> int:
-    from gainlink.hil.mavlink_link import MavLink
-    from gainlink.hil.mavlink_params import REAL32, Encoding
-    from gainlink.hil.mavlink_session import ParamSession
-    from gainlink.hil.mavlink_upload import detect_encoding
+    from gainlink.mavlink.link import MavLink
+    from gainlink.mavlink.params import REAL32, Encoding
+    from gainlink.mavlink.session import ParamSession
+    from gainlink.mavlink.upload import detect_encoding
 
     with MavLink(args.connect) as link:
         hb = link.wait_heartbeat(timeout=args.heartbeat_timeout)

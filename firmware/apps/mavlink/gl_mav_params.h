@@ -2,7 +2,7 @@
  * @file gl_mav_params.h
  * @brief MAVLink parameter table over a staged ::gl_gains_t, with an atomic commit through GL_HASH.
  *
- * Naming scheme (index order; see also hil/mavlink_params.py, which must agree):
+ * Naming scheme (index order; see also runtime/mavlink/params.py, which must agree):
  * - `GL_DIM_N GL_DIM_M GL_DIM_P GL_DIM_Q GL_FORM GL_AW` (INT32, read-only): compiled structure.
  * - `GL_HASH` (INT32): CRC-32 of the committed gain set (gl_gains_crc32()). Setting it to the CRC of the
  *   staged set commits that set; any other value, or a staged set that fails gl_gains_check() /

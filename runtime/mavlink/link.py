@@ -14,7 +14,7 @@ import time
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
 
-from gainlink.errors import PeerTimeoutError, TransportError
+from ..errors import PeerTimeoutError, TransportError
 
 log = logging.getLogger(__name__)
 

@@ -25,11 +25,11 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink2
 
-from gainlink.artifact import Artifact
-from gainlink.errors import ParameterError, PeerTimeoutError
+from ..artifact import Artifact
+from ..errors import ParameterError, PeerTimeoutError
 
-from .mavlink_link import MavLink
-from .mavlink_params import (
+from .link import MavLink
+from .params import (
     DIMENSION_IDS,
     HASH_ID,
     INT32,
@@ -43,7 +43,7 @@ from .mavlink_params import (
     same_value,
     type_name,
 )
-from .mavlink_session import ParamSession, ParamValue
+from .session import ParamSession, ParamValue
 
 log = logging.getLogger(__name__)
 

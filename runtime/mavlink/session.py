@@ -15,10 +15,10 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import common as mavlink2
 
-from gainlink.errors import PeerTimeoutError
+from ..errors import PeerTimeoutError
 
-from .mavlink_link import MavLink, raw_param_value
-from .mavlink_params import Encoding, decode_value, encode_value, same_value
+from .link import MavLink, raw_param_value
+from .params import Encoding, decode_value, encode_value, same_value
 
 log = logging.getLogger(__name__)
 

@@ -11,8 +11,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from gainlink.artifact import Artifact
-from gainlink.errors import FirmwareError
+from ..artifact import Artifact
+from ..errors import FirmwareError
 
 log = logging.getLogger(__name__)
 
@@ -27,7 +27,7 @@ def mavlink_executable(artifact: Artifact, *, build_root: Path | None = None) ->
     ToolchainError
         When the build fails or does not produce the app.
     """
-    from gainlink.firmware.build import host_app
+    from .build import host_app
 
     return host_app(artifact, target=EXECUTABLE, relpath=EXECUTABLE, build_root=build_root)
 
@@ -150,7 +150,7 @@ def run_foreground(artifact_path: Path, *, url: str, param_file: Path | None = N
     int
         The app's exit status (0 after SIGINT/SIGTERM).
     """
-    from gainlink.artifact import load
+    from ..artifact import load
 
     if not (url.startswith("udpin:") or url.startswith("udpout:")) or url.count(":") != 2:
         raise FirmwareError(f"--mavlink takes udpin:HOST:PORT or udpout:HOST:PORT, not {url!r}")

@@ -51,9 +51,9 @@ from pathlib import Path
 
 import numpy as np
 
-from gainlink.artifact import Artifact
-from gainlink.codegen import gain_set
-from gainlink.errors import ParameterError
+from ..artifact import Artifact
+from ..codegen import gain_set
+from ..errors import ParameterError
 
 #: MAV_PARAM_TYPE values (MAVLink common.xml).
 PARAM_TYPES: dict[str, int] = {
