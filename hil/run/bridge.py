@@ -106,7 +106,7 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
             peer_pid=peer.proc.pid if peer.proc is not None else None))
         stack.enter_context(gc_paused())
         pm_qos = stack.enter_context(cpu_latency_qos()) if scenario.mode == "realtime" and scenario.pm_qos else False
-        result = _loop(scenario, artifact=artifact, plant=plant, transport=transport, peer=peer, progress=progress)
+        result = _Loop(scenario, artifact=artifact, plant=plant, transport=transport, peer=peer).run(progress)
         result.metrics["cpu"] = placement.describe()
         if scenario.mode == "realtime":
             result.metrics["pm_qos"] = pm_qos
@@ -116,14 +116,27 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
         return result
 
 
-def _loop(scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Transport, peer: ControllerProcess,
-          progress: Callable[[int, int], None] | None) -> RunResult:
+@dataclass(frozen=True)
+class _Plan:
+    """Everything a run feeds the plant and the link, fixed before the first step."""
+
+    N: int
+    t: np.ndarray
+    R: np.ndarray  # references (N, q)
+    noise: np.ndarray  # measurement noise (N, p)
+    D: np.ndarray  # input disturbances (N, m)
+    silent_at: int | None
+    crash_at: int | None
+    period_s: float
+    realtime: bool
+
+
+def _plan(scenario: Scenario, *, artifact: Artifact, plant: Plant) -> _Plan:
+    """References, noise (from the scenario's seed), disturbances and peer faults per step."""
     a = artifact
     Ts = a.Ts
     N = int(round(scenario.duration / Ts))
     realtime = scenario.mode == "realtime"
-    period = scenario.period if (realtime and scenario.period) else Ts
-    period_ns = int(round(period * 1e9))
     rng = np.random.default_rng(scenario.seed)
     t = np.arange(N) * Ts
     R = np.zeros((N, a.q))
@@ -137,144 +150,224 @@ def _loop(scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Tr
         D[(t >= d.start) & (t < d.stop), plant.input_names.index(d.input)] += d.value
     silent_at = min((int(round(f.start / Ts)) for f in scenario.faults if f.kind == "silent"), default=None)
     crash_at = min((int(round(f.start / Ts)) for f in scenario.faults if f.kind == "crash"), default=None)
-    injector = FaultInjector(scenario.faults, Ts=Ts)
-    shadow = ReferenceLoop(a) if scenario.shadow else None
+    period = scenario.period if (realtime and scenario.period) else Ts
+    return _Plan(N=N, t=t, R=R, noise=noise, D=D, silent_at=silent_at, crash_at=crash_at, period_s=period,
+                 realtime=realtime)
 
-    Y = np.zeros((N, a.p)); U = np.zeros((N, a.m)); SAT = np.zeros((N, a.m), dtype=bool)
-    GOT = np.zeros(N, dtype=bool); LAT = np.full(N, np.nan); TICK = np.zeros(N); DUE = np.full(N, np.nan)
-    UREF = np.full((N, a.m), np.nan); ZREF = np.full((N, a.q), np.nan); ST = np.zeros(N, dtype=np.int64)
-    X = np.full((N, len(plant.state_names)), np.nan)
-    record_states = scenario.shadow  # the plant state costs an FMU call per step: only with the shadow on
 
-    plant.reset(initial=scenario.initial_state)
-    u = np.clip(np.zeros(a.m), a.u_min, a.u_max)
-    late = 0
-    silent_since_ns: int | None = None
-    complete, reason = True, None
-    fifo = False
-    seq_mod = transport.seq_modulo
-    if realtime and scenario.sched_fifo:
-        fifo = set_fifo()
-        if fifo and peer.proc is not None:
-            set_fifo(peer.proc.pid)
-    every = max(1, N // 100)
-    skip = scenario.overrun == "skip"
-    overruns = 0
-    t_start = time.perf_counter_ns()
-    pacer = Pacer(period_ns=period_ns)
-    k = 0
-    try:
-        while k < N:
-            if silent_at is not None and k >= silent_at:
-                peer.pause()
-                silent_at = None
-            if crash_at is not None and k >= crash_at:
-                peer.kill()
-                crash_at = None
-            if realtime:
-                tick, due_rel, woke_rel = pacer.wait_next(skip=skip)
-                offset = pacer.start_ns - t_start
-                if tick > k:  # overrun: these ticks passed while the bridge was stalled; the plant ran on
-                    for j in range(k, min(tick, N)):  # under the held command, as a real one would
-                        Y[j] = plant.outputs() + noise[j]
-                        U[j] = u
-                        DUE[j] = due_rel - (tick - j) * period_ns + offset
-                        TICK[j] = np.nan  # never ran: no jitter, a miss
-                        plant.advance(u=u + D[j], dt=Ts)
-                    overruns += min(tick, N) - k
-                    k = min(tick, N)
+class _Recorder:
+    """The per-step arrays of a run, filled as it goes; :meth:`trace` cuts them to the steps taken."""
+
+    def __init__(self, plan: _Plan, *, artifact: Artifact, plant: Plant) -> None:
+        N, a = plan.N, artifact
+        self.plan = plan
+        self.Y = np.zeros((N, a.p))
+        self.U = np.zeros((N, a.m))
+        self.SAT = np.zeros((N, a.m), dtype=bool)
+        self.GOT = np.zeros(N, dtype=bool)
+        self.LAT = np.full(N, np.nan)
+        self.TICK = np.zeros(N)
+        self.DUE = np.full(N, np.nan)
+        self.UREF = np.full((N, a.m), np.nan)
+        self.ZREF = np.full((N, a.q), np.nan)
+        self.ST = np.zeros(N, dtype=np.int64)
+        self.X = np.full((N, len(plant.state_names)), np.nan)
+
+    def trace(self, steps: int) -> RunTrace:
+        """The recorded run up to ``steps``."""
+        p = self.plan
+        return RunTrace(t=p.t[:steps], y=self.Y[:steps], r=p.R[:steps], u=self.U[:steps], sat=self.SAT[:steps],
+                        got=self.GOT[:steps], latency_ns=self.LAT[:steps], tick_ns=self.TICK[:steps],
+                        deadline_ns=self.DUE[:steps], u_ref=self.UREF[:steps], z_ref=self.ZREF[:steps],
+                        x=self.X[:steps], status=self.ST[:steps])
+
+
+class _Stop(Exception):
+    """Ends the loop early: the run is incomplete for ``reason`` after ``steps`` steps."""
+
+    def __init__(self, reason: str, steps: int) -> None:
+        super().__init__(reason)
+        self.reason, self.steps = reason, steps
+
+
+class _Loop:
+    """One run's loop, step by step: sample the plant, send, wait for the command, advance the plant.
+
+    State carried between steps: the command being applied, the count of late (stale) commands, when
+    the peer went silent, and the overruns of a real-time run.
+    """
+
+    def __init__(self, scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Transport,
+                 peer: ControllerProcess) -> None:
+        self.scenario, self.a, self.plant, self.transport, self.peer = scenario, artifact, plant, transport, peer
+        self.plan = _plan(scenario, artifact=artifact, plant=plant)
+        self.rec = _Recorder(self.plan, artifact=artifact, plant=plant)
+        self.injector = FaultInjector(scenario.faults, Ts=artifact.Ts)
+        self.shadow = ReferenceLoop(artifact) if scenario.shadow else None
+        self.u = np.clip(np.zeros(artifact.m), artifact.u_min, artifact.u_max)
+        self.late = 0
+        self.overruns = 0
+        self.silent_since_ns: int | None = None
+        self.period_ns = int(round(self.plan.period_s * 1e9))
+        self.silent_at, self.crash_at = self.plan.silent_at, self.plan.crash_at
+
+    def run(self, progress: Callable[[int, int], None] | None) -> RunResult:
+        """Run every planned step (or until the peer or the plant fails) and return the result."""
+        N = self.plan.N
+        self.plant.reset(initial=self.scenario.initial_state)
+        fifo = self._enter_fifo()
+        every = max(1, N // 100)
+        self.t_start = time.perf_counter_ns()
+        self.pacer = Pacer(period_ns=self.period_ns)
+        k, reason = 0, None
+        try:
+            while k < N:
+                self._peer_faults(k)
+                wait_until = None
+                if self.plan.realtime:
+                    k, wait_until = self._next_tick(k)
                     if k >= N:
                         break
-                DUE[k] = due_rel + offset
-                woke = woke_rel + offset
-                wait_until = pacer.start_ns + due_rel + period_ns - SPIN_NS // 2
-            y = plant.outputs() + noise[k]
-            Y[k] = y
-            if record_states:
-                X[k] = plant.state()
-            seq = k % seq_mod
-            frames = injector.apply(k, transport.encode_sample(seq=seq, y=y, r=R[k]))
-            sent = time.perf_counter_ns()
-            TICK[k] = woke if realtime else sent - t_start
-            transport.send_frames(frames)
-            if shadow is not None:
-                res = shadow.step(*transport.received_sample(y=y, r=R[k]))
-                UREF[k] = res.u
-                ZREF[k] = shadow.z
-            deadline = wait_until if realtime else sent + int(scenario.step_timeout * 1e9)
-            cmd = None
-            while True:
-                left = (deadline - time.perf_counter_ns()) / 1e9
-                if left <= 0:
-                    break
-                c = transport.receive_command(timeout=left)
-                if c is None:
-                    break
-                if c.seq == seq:
-                    cmd = c
-                    break
-                late += 1
-            if cmd is not None:
-                u = cmd.u
-                GOT[k] = True
-                LAT[k] = cmd.t_ns - sent
-                SAT[k] = cmd.saturated
-                ST[k] = cmd.status
-                silent_since_ns = None
-            else:
-                now = time.perf_counter_ns()
-                silent_since_ns = silent_since_ns or sent
-                code = peer.exit_status()
-                if code is not None:
-                    complete, reason = False, (f"controller exited with status {code} at step {k} "
-                                               f"(t={k * Ts:.3f} s){_tail(peer)}")
-                    U[k] = u
-                    k += 1
-                    break
-                if now - silent_since_ns >= scenario.peer_timeout * 1e9:
-                    complete, reason = False, (f"controller silent for {scenario.peer_timeout:g} s since step "
-                                               f"{int(round((silent_since_ns - t_start) / 1e9 / max(period, 1e-9)))}"
-                                               f" (no command for sample {k}, t={k * Ts:.3f} s)")
-                    U[k] = u
-                    k += 1
-                    break
-            U[k] = u
-            try:
-                plant.advance(u=u + D[k], dt=Ts)
-            except PlantError as exc:
-                complete, reason = False, f"plant failed at step {k}: {exc}"
+                self._step(k, wait_until)
                 k += 1
-                break
-            k += 1
-            if progress is not None and k % every == 0:
-                progress(k, N)
-    except PlantError as exc:  # in an overrun's held steps
-        complete, reason = False, f"plant failed at step {k}: {exc}"
-    finally:
-        if fifo:
-            set_other()
-    steps = k
-    trace = RunTrace(t=t[:steps], y=Y[:steps], r=R[:steps], u=U[:steps], sat=SAT[:steps], got=GOT[:steps],
-                     latency_ns=LAT[:steps], tick_ns=TICK[:steps], deadline_ns=DUE[:steps], u_ref=UREF[:steps],
-                     z_ref=ZREF[:steps], x=X[:steps], status=ST[:steps])
-    metrics = compute_metrics(trace, artifact=a, mode=scenario.mode, late=late, period_s=period)
-    wall = (time.perf_counter_ns() - t_start) / 1e9
-    metrics.update({"complete": complete, "steps_planned": N, "wall_s": wall,
-                    "steps_per_s": steps / wall if wall > 0 else None, "sched_fifo": fifo,
-                    "faults_injected": injector.counts, "mode": scenario.mode})
-    if realtime:
-        metrics["overruns"] = overruns
-        metrics["overrun_policy"] = scenario.overrun
-    if reason:
-        metrics["reason"] = reason
-    if progress is not None:
-        progress(steps, N)
-    info = {"artifact": {"name": a.name, "sha256": a.sha256, "path": str(scenario.artifact_path)},
-            "plant": {"name": plant.name, "inputs": list(plant.input_names), "outputs": list(plant.output_names),
-                      "states": list(plant.state_names)},
-            "transport": transport.describe(), "controller": {"kind": scenario.controller, "argv": peer.argv,
-                                                              "ready": peer.ready_line}}
-    return RunResult(scenario=scenario, metrics=metrics, trace=trace, complete=complete, reason=reason, info=info)
+                if progress is not None and k % every == 0:
+                    progress(k, N)
+        except _Stop as stop:
+            k, reason = stop.steps, stop.reason
+        except PlantError as exc:  # in an overrun's held steps
+            reason = f"plant failed at step {k}: {exc}"
+        finally:
+            if fifo:
+                set_other()
+        if progress is not None:
+            progress(k, N)
+        return self._result(k, reason=reason, fifo=fifo)
+
+    def _enter_fifo(self) -> bool:
+        if not (self.plan.realtime and self.scenario.sched_fifo):
+            return False
+        fifo = set_fifo()
+        if fifo and self.peer.proc is not None:
+            set_fifo(self.peer.proc.pid)
+        return fifo
+
+    def _peer_faults(self, k: int) -> None:
+        """Pause or kill the peer at the step the scenario's silent/crash fault names."""
+        if self.silent_at is not None and k >= self.silent_at:
+            self.peer.pause()
+            self.silent_at = None
+        if self.crash_at is not None and k >= self.crash_at:
+            self.peer.kill()
+            self.crash_at = None
+
+    def _next_tick(self, k: int) -> tuple[int, int]:
+        """Wait for the pacer's next tick; returns the step to run and when its command is due (absolute ns).
+
+        Ticks that passed while the bridge was stalled (an overrun) are held steps of the plant: it runs
+        on under the last command, as a real one would, and each is a deadline miss.
+        """
+        rec, Ts = self.rec, self.a.Ts
+        tick, due_rel, woke_rel = self.pacer.wait_next(skip=self.scenario.overrun == "skip")
+        offset = self.pacer.start_ns - self.t_start
+        if tick > k:
+            N = self.plan.N
+            for j in range(k, min(tick, N)):
+                rec.Y[j] = self.plant.outputs() + self.plan.noise[j]
+                rec.U[j] = self.u
+                rec.DUE[j] = due_rel - (tick - j) * self.period_ns + offset
+                rec.TICK[j] = np.nan  # never ran: no jitter, a miss
+                self.plant.advance(u=self.u + self.plan.D[j], dt=Ts)
+            self.overruns += min(tick, N) - k
+            k = min(tick, N)
+            if k >= N:
+                return k, 0
+        rec.DUE[k] = due_rel + offset
+        rec.TICK[k] = woke_rel + offset
+        return k, self.pacer.start_ns + due_rel + self.period_ns - SPIN_NS // 2
+
+    def _step(self, k: int, wait_until: int | None) -> None:
+        """Sample, send, wait for the command of this sample, and advance the plant by one period."""
+        rec, plan, a = self.rec, self.plan, self.a
+        y = self.plant.outputs() + plan.noise[k]
+        rec.Y[k] = y
+        if self.shadow is not None:
+            rec.X[k] = self.plant.state()  # an FMU call per step: only with the shadow on
+        seq = k % self.transport.seq_modulo
+        frames = self.injector.apply(k, self.transport.encode_sample(seq=seq, y=y, r=plan.R[k]))
+        sent = time.perf_counter_ns()
+        if wait_until is None:
+            rec.TICK[k] = sent - self.t_start
+        self.transport.send_frames(frames)
+        if self.shadow is not None:
+            res = self.shadow.step(*self.transport.received_sample(y=y, r=plan.R[k]))
+            rec.UREF[k] = res.u
+            rec.ZREF[k] = self.shadow.z
+        deadline = wait_until if wait_until is not None else sent + int(self.scenario.step_timeout * 1e9)
+        cmd = self._await_command(seq, deadline)
+        if cmd is not None:
+            self.u = cmd.u
+            rec.GOT[k], rec.LAT[k], rec.SAT[k], rec.ST[k] = True, cmd.t_ns - sent, cmd.saturated, cmd.status
+            self.silent_since_ns = None
+        else:
+            self._check_peer(k, sent)
+        rec.U[k] = self.u
+        try:
+            self.plant.advance(u=self.u + plan.D[k], dt=a.Ts)
+        except PlantError as exc:
+            raise _Stop(f"plant failed at step {k}: {exc}", k + 1) from None
+
+    def _await_command(self, seq: int, deadline: int):
+        """The command answering sample ``seq`` before ``deadline`` (ns), or None; older ones count as late."""
+        while True:
+            left = (deadline - time.perf_counter_ns()) / 1e9
+            if left <= 0:
+                return None
+            c = self.transport.receive_command(timeout=left)
+            if c is None:
+                return None
+            if c.seq == seq:
+                return c
+            self.late += 1
+
+    def _check_peer(self, k: int, sent: int) -> None:
+        """No command for step ``k``: stop the run if the peer exited or has been silent too long."""
+        Ts = self.a.Ts
+        now = time.perf_counter_ns()
+        self.silent_since_ns = self.silent_since_ns or sent
+        code = self.peer.exit_status()
+        if code is not None:
+            self.rec.U[k] = self.u
+            raise _Stop(f"controller exited with status {code} at step {k} (t={k * Ts:.3f} s){_tail(self.peer)}",
+                        k + 1)
+        timeout = self.scenario.peer_timeout
+        if now - self.silent_since_ns >= timeout * 1e9:
+            since = int(round((self.silent_since_ns - self.t_start) / 1e9 / max(self.plan.period_s, 1e-9)))
+            self.rec.U[k] = self.u
+            raise _Stop(f"controller silent for {timeout:g} s since step {since} (no command for sample {k}, "
+                        f"t={k * Ts:.3f} s)", k + 1)
+
+    def _result(self, steps: int, *, reason: str | None, fifo: bool) -> RunResult:
+        """Metrics, trace and what ran, for ``steps`` steps."""
+        a, scenario = self.a, self.scenario
+        complete = reason is None
+        trace = self.rec.trace(steps)
+        metrics = compute_metrics(trace, artifact=a, mode=scenario.mode, late=self.late, period_s=self.plan.period_s)
+        wall = (time.perf_counter_ns() - self.t_start) / 1e9
+        metrics.update({"complete": complete, "steps_planned": self.plan.N, "wall_s": wall,
+                        "steps_per_s": steps / wall if wall > 0 else None, "sched_fifo": fifo,
+                        "faults_injected": self.injector.counts, "mode": scenario.mode})
+        if self.plan.realtime:
+            metrics["overruns"] = self.overruns
+            metrics["overrun_policy"] = scenario.overrun
+        if reason:
+            metrics["reason"] = reason
+        plant = self.plant
+        info = {"artifact": {"name": a.name, "sha256": a.sha256, "path": str(scenario.artifact_path)},
+                "plant": {"name": plant.name, "inputs": list(plant.input_names), "outputs": list(plant.output_names),
+                          "states": list(plant.state_names)},
+                "transport": self.transport.describe(),
+                "controller": {"kind": scenario.controller, "argv": self.peer.argv, "ready": self.peer.ready_line}}
+        return RunResult(scenario=scenario, metrics=metrics, trace=trace, complete=complete, reason=reason, info=info)
 
 
 def _tail(peer: ControllerProcess) -> str:
