@@ -38,7 +38,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 
     gl_can_scale_t scales[MAX_VALUES];
     for (uint32_t i = 0; i < MAX_VALUES; ++i) {
-        scales[i].factor = 10.0 / 65534.0; /* range [-5, 5] as gainlink.hil.can_layout derives it */
+        scales[i].factor = 10.0 / 65534.0; /* range [-5, 5] as gainlink.hil.links.can_layout derives it */
         scales[i].offset = 0.0;
     }
     float values[MAX_VALUES];
