@@ -24,7 +24,7 @@ from ..artifact import Artifact
 from ..errors import ToolchainError
 from .build import build
 
-HARNESSES = ("can_udp", "can_layout", "gains_stage")
+HARNESSES = ("can_udp", "can_layout", "gains_stage", "mavlink_node")
 """Harness names; the executable of ``NAME`` is ``fuzz/fuzz_NAME`` in the fuzz build."""
 
 MAX_LEN = 4096
@@ -167,7 +167,74 @@ def _seeds_gains_stage(artifact: Artifact) -> list[bytes]:
     return seeds
 
 
-_SEEDS = {"can_udp": _seeds_can_udp, "can_layout": _seeds_can_layout, "gains_stage": _seeds_gains_stage}
+FUZZ_KEY = bytes(range(1, 33))
+"""The signing key of the MAVLink harness's keyed node (fuzz_mavlink_node.c: 0x01 0x02 .. 0x20)."""
+
+
+def _retune_commit(artifact: Artifact) -> tuple[str, float, float]:
+    """(param id, new value, GL_HASH value) of a one-gain retune and its commit, as an uploader sends them.
+
+    The new value is chosen so the CRC's four bytes, read as a float32, are not a NaN pattern (which a round
+    trip through a Python float could alter): the commit goes out exactly as a bytewise INT32.
+    """
+    from ..codegen import gain_set, payload_crc32
+
+    g = gain_set(artifact)
+    base = float(np.asarray(g.fields["K"]).ravel()[0])
+    for factor in (1.1, 1.2, 1.3, 1.4):
+        fields = {k: np.array(v, dtype=np.float32, copy=True) for k, v in g.fields.items()}
+        fields["K"].reshape(-1)[0] = np.float32(base * factor)
+        crc = payload_crc32(header=g.header, fields=fields)
+        (as_float,) = struct.unpack("<f", struct.pack("<I", crc))
+        if not np.isnan(as_float):
+            return "GL_K_0_0", float(np.float32(base * factor)), as_float
+    raise ToolchainError("no retune with a non-NaN CRC pattern found")  # 4 tries: (255/256)^4 odds
+
+
+def _mavlink_frames(artifact: Artifact, *, signed: bool) -> list[bytes]:
+    """One frame of each kind a ground station, an uploader and the HIL bridge send to the node."""
+    from pymavlink.dialects.v20 import common as mavlink2
+
+    mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
+    if signed:
+        mav.signing.secret_key = FUZZ_KEY
+        mav.signing.sign_outgoing = True
+        mav.signing.link_id = 1
+        mav.signing.timestamp = 1
+    name, value, commit = _retune_commit(artifact)
+    sample = [0.01 * (i + 1) for i in range(artifact.p + artifact.q)] + [0.0] * (58 - artifact.p - artifact.q)
+    msgs = [
+        mavlink2.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3),
+        mavlink2.MAVLink_param_request_list_message(1, 1),
+        mavlink2.MAVLink_param_request_read_message(1, 1, b"GL_TS", -1),
+        mavlink2.MAVLink_param_request_read_message(1, 1, b"", 3),
+        mavlink2.MAVLink_param_set_message(1, 1, name.encode(), value, mavlink2.MAV_PARAM_TYPE_REAL32),
+        mavlink2.MAVLink_param_set_message(1, 1, b"GL_HASH", commit, mavlink2.MAV_PARAM_TYPE_INT32),
+        mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_PREFLIGHT_STORAGE, 0, 1, 0, 0, 0, 0, 0, 0),
+        mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_PREFLIGHT_STORAGE, 0, 0, 0, 0, 0, 0, 0, 0),
+        mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_PREFLIGHT_STORAGE, 0, 2, 0, 0, 0, 0, 0, 0),
+        mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0, 148, 0, 0, 0, 0, 0, 0),
+        mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0, 1, 0, 0, 0, 0, 0, 0),
+        mavlink2.MAVLink_debug_float_array_message(1000, b"GL_SAMPLE", 1, sample),
+        mavlink2.MAVLink_debug_float_array_message(2000, b"GL_RESET", 2, [0.0] * 58),
+        mavlink2.MAVLink_debug_float_array_message(3000, b"GL_IDLE", 3, [0.0] * 58),
+        mavlink2.MAVLink_setup_signing_message(1, 1, list(bytes(range(101, 133))), 5),
+    ]
+    return [bytes(m.pack(mav)) for m in msgs]
+
+
+def _seeds_mavlink_node(artifact: Artifact) -> list[bytes]:
+    seeds = []
+    for mode, signed in ((0, False), (1, True), (2, False)):
+        frames = _mavlink_frames(artifact, signed=signed)
+        seeds += [bytes([mode, 0]) + f for f in frames]
+        whole = b"".join(frames[:6] + frames[6:7] + frames[11:12])  # an upload: set, commit, persist, then a step
+        seeds.append(bytes([mode, len(frames[0]) + 3]) + whole)
+    return seeds
+
+
+_SEEDS = {"can_udp": _seeds_can_udp, "can_layout": _seeds_can_layout, "gains_stage": _seeds_gains_stage,
+          "mavlink_node": _seeds_mavlink_node}
 
 
 def write_seeds(harness: str, artifact: Artifact, directory: Path) -> int:

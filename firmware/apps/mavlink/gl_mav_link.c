@@ -2,7 +2,7 @@
  * @file gl_mav_link.c
  * @brief UDP link from a URL (see gl_mav_link.h).
  */
-#define _POSIX_C_SOURCE 200809L
+#define _GNU_SOURCE /* SO_RXQ_OVFL */
 #include "gl_mav_link.h"
 
 #include <arpa/inet.h>
@@ -69,6 +69,8 @@ int gl_mav_link_open(gl_mav_link_t *link, const char *url, char *why, size_t why
     int big = 1 << 21;
     (void)setsockopt(link->fd, SOL_SOCKET, SO_RCVBUF, &big, sizeof big);
     (void)setsockopt(link->fd, SOL_SOCKET, SO_SNDBUF, &big, sizeof big);
+    int on = 1;
+    (void)setsockopt(link->fd, SOL_SOCKET, SO_RXQ_OVFL, &on, sizeof on); /* drops counted, not guessed */
     if (link->listen) {
         int one = 1;
         (void)setsockopt(link->fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
@@ -93,10 +95,22 @@ static int same_addr(const struct sockaddr_in *a, const struct sockaddr_in *b)
 
 long gl_mav_link_recv(gl_mav_link_t *link, uint8_t *buf, size_t len, struct sockaddr_in *from)
 {
-    socklen_t flen = sizeof *from;
-    ssize_t n = recvfrom(link->fd, buf, len, 0, (struct sockaddr *)from, &flen);
+    union {
+        char space[CMSG_SPACE(sizeof(uint32_t))];
+        struct cmsghdr align;
+    } control;
+    struct iovec iov = {.iov_base = buf, .iov_len = len};
+    struct msghdr mh = {.msg_name = from, .msg_namelen = sizeof *from, .msg_iov = &iov, .msg_iovlen = 1,
+                        .msg_control = control.space, .msg_controllen = sizeof control.space};
+    ssize_t n = recvmsg(link->fd, &mh, 0);
     if (n < 0) {
         return (errno == EAGAIN || errno == EWOULDBLOCK || errno == ECONNREFUSED || errno == EINTR) ? 0 : -1;
+    }
+    link->rx_datagrams++;
+    for (struct cmsghdr *c = CMSG_FIRSTHDR(&mh); c != NULL; c = CMSG_NXTHDR(&mh, c)) {
+        if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_RXQ_OVFL) {
+            memcpy(&link->rx_dropped, CMSG_DATA(c), sizeof link->rx_dropped);
+        }
     }
     if (link->listen) {
         for (size_t k = 0; k < link->peers; ++k) {

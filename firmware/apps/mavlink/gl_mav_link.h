@@ -22,6 +22,9 @@ typedef struct gl_mav_link {
     struct sockaddr_in peer[GL_MAV_MAX_PEERS];   /**< Known peers (udpout: peer[0] is the target). */
     size_t peers;                                /**< Number of known peers. */
     size_t next_slot;                            /**< Peer slot to recycle next when full. */
+    uint64_t rx_datagrams;                       /**< Datagrams received. */
+    uint32_t rx_dropped;                         /**< Datagrams the kernel dropped on a full receive buffer
+                                                      (SO_RXQ_OVFL; known at the next datagram received). */
 } gl_mav_link_t;
 
 /**

@@ -32,6 +32,17 @@ static uint16_t sat16(uint32_t v)
     return v > UINT16_MAX ? UINT16_MAX : (uint16_t)v;
 }
 
+/**
+ * The messages that stay open without a signature when a key is set (see "Signing" in gl_mav_node.h):
+ * they change nothing.
+ */
+static bool accept_unsigned(const mavlink_status_t *status, uint32_t msgid)
+{
+    (void)status;
+    return msgid == MAVLINK_MSG_ID_HEARTBEAT || msgid == MAVLINK_MSG_ID_PARAM_REQUEST_LIST ||
+           msgid == MAVLINK_MSG_ID_PARAM_REQUEST_READ;
+}
+
 static void event(const gl_mav_node_t *node, gl_mav_event_t ev, int32_t value, uint32_t detail)
 {
     if (node->cfg.port.event != NULL) {
@@ -137,6 +148,7 @@ static void handle_param_set(gl_mav_node_t *node, const mavlink_message_t *msg)
     int is_header = node->table.param[k].header >= 0;
     if (r == GL_MAV_SET_OK && is_header) {
         node->dirty = 1;
+        inc(&node->stats.commits, 1u);
         event(node, GL_MAV_EV_COMMITTED, (int32_t)node->table.committed.crc32, 0);
     }
     send_param(node, (uint16_t)k, GL_MAV_TO_ALL);
@@ -206,18 +218,52 @@ static int load_stored(gl_mav_node_t *node)
         event(node, GL_MAV_EV_STORE_IGNORED, (int32_t)res.error, res.error == GL_MAV_STORE_E_REFUSED ? (uint32_t)res.status : res.line);
         return -1;
     }
+    node->stored_crc = node->table.committed.crc32;
+    node->stored_known = 1;
     event(node, GL_MAV_EV_STORE_LOADED, (int32_t)node->table.committed.crc32, 0);
+    return 1;
+}
+
+/** Take one write from the persist rate limit (GL_MAV_PERSIST_BURST, then one per GL_MAV_PERSIST_PERIOD_US). */
+static int persist_token(gl_mav_node_t *node)
+{
+    uint64_t now = node->cfg.port.now_us(node->cfg.port.ctx);
+    while (node->persist_tokens < GL_MAV_PERSIST_BURST && now >= node->persist_refill_us) {
+        node->persist_tokens++;
+        node->persist_refill_us += GL_MAV_PERSIST_PERIOD_US;
+    }
+    if (node->persist_tokens == GL_MAV_PERSIST_BURST) {
+        node->persist_refill_us = now + GL_MAV_PERSIST_PERIOD_US; /* a full bucket does not bank time */
+    }
+    if (node->persist_tokens == 0u) {
+        uint64_t wait_s = (node->persist_refill_us - now + 999999u) / 1000000u;
+        inc(&node->stats.persist_limited, 1u);
+        event(node, GL_MAV_EV_PERSIST_LIMITED, (int32_t)wait_s, 0);
+        return 0;
+    }
+    node->persist_tokens--;
     return 1;
 }
 
 static uint8_t persist(gl_mav_node_t *node)
 {
     const gl_mav_storage_t *st = node->cfg.storage;
+    if (st != NULL && node->stored_known && node->stored_crc == node->table.committed.crc32) {
+        inc(&node->stats.persist_skipped, 1u); /* storage already holds this set: no flash cycle */
+        return MAV_RESULT_ACCEPTED;
+    }
+    if (st != NULL && !persist_token(node)) {
+        return MAV_RESULT_TEMPORARILY_REJECTED;
+    }
     size_t len = gl_mav_store_encode(&node->table, node->store_buf, sizeof node->store_buf);
     if (st == NULL || len == 0u || st->write(st->ctx, node->store_buf, len) != 0) {
+        node->stored_known = 0;
         event(node, GL_MAV_EV_STORE_WRITE_FAILED, st == NULL ? 0 : -1, 0);
         return MAV_RESULT_FAILED;
     }
+    inc(&node->stats.persist_writes, 1u);
+    node->stored_crc = node->table.committed.crc32;
+    node->stored_known = 1;
     event(node, GL_MAV_EV_STORE_WRITTEN, (int32_t)node->table.committed.crc32, (uint32_t)len);
     return MAV_RESULT_ACCEPTED;
 }
@@ -288,9 +334,28 @@ static void stage_if_dirty(gl_mav_node_t *node)
         gl_status_t st = gl_loop_stage(&node->loop, &node->table.committed);
         if (st != GL_OK) {
             event(node, GL_MAV_EV_STAGE_FAILED, (int32_t)st, 0);
+            return; /* stays dirty: tried again before the next step */
         }
         node->dirty = 0;
     }
+}
+
+/**
+ * Reset the loop state. With a committed set not yet running, the loop restarts on it (its xh0, z0): staging
+ * it and resetting would leave it pending behind the reset, and a second commit before the next step would
+ * then be refused as busy while the parameters already reported it (a reset between two commits).
+ */
+static void reset_loop(gl_mav_node_t *node)
+{
+    if (node->dirty) {
+        gl_status_t st = gl_loop_init(&node->loop, &node->table.committed, node->cfg.watchdog_periods);
+        if (st == GL_OK) {
+            node->dirty = 0;
+            return;
+        }
+        event(node, GL_MAV_EV_STAGE_FAILED, (int32_t)st, 0);
+    }
+    (void)gl_loop_reset(&node->loop);
 }
 
 static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)
@@ -308,8 +373,7 @@ static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)
         flags |= (uint64_t)node->loop.sat_mask << HIL_SAT_SHIFT;
         inc(&node->stats.samples, 1u);
     } else if (in.array_id == HIL_ARRAY_RESET) {
-        stage_if_dirty(node);
-        (void)gl_loop_reset(&node->loop);
+        reset_loop(node);
         memset(u, 0, sizeof u);
         flags |= HIL_FLAG_RESET;
     } else if (in.array_id == HIL_ARRAY_IDLE) {
@@ -327,9 +391,56 @@ static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)
     emit(node, GL_MAV_TO_SENDER, &out);
 }
 
+void gl_mav_node_set_key(gl_mav_node_t *node, const uint8_t *key, uint64_t timestamp)
+{
+    static const uint8_t zero[GL_MAV_KEY_LEN] = {0};
+    mavlink_status_t *chan = mavlink_get_channel_status(node->cfg.chan);
+    if (key == NULL || memcmp(key, zero, GL_MAV_KEY_LEN) == 0) {
+        node->keyed = 0;
+        chan->signing = NULL;
+        chan->signing_streams = NULL;
+        memset(&node->signing, 0, sizeof node->signing);
+        return;
+    }
+    memcpy(node->signing.secret_key, key, GL_MAV_KEY_LEN);
+    node->signing.flags = MAVLINK_SIGNING_FLAG_SIGN_OUTGOING;
+    node->signing.link_id = node->cfg.chan;
+    if (timestamp > node->signing.timestamp) {
+        node->signing.timestamp = timestamp;
+    }
+    node->signing.accept_unsigned_callback = accept_unsigned;
+    node->signing.last_status = MAVLINK_SIGNING_STATUS_NONE;
+    memset(&node->streams, 0, sizeof node->streams); /* a new key starts new streams */
+    chan->signing = &node->signing;
+    chan->signing_streams = &node->streams;
+    node->keyed = 1;
+}
+
+static void handle_setup_signing(gl_mav_node_t *node, const mavlink_message_t *msg)
+{
+    mavlink_setup_signing_t setup;
+    mavlink_msg_setup_signing_decode(msg, &setup);
+    if (!for_us(node, setup.target_system, setup.target_component)) {
+        return;
+    }
+    /* Keyed: the parser only lets it through correctly signed with the current key. Not keyed: only a
+     * trusted (physically private) link may set the first key. */
+    if (!node->keyed && !node->cfg.trusted_link) {
+        inc(&node->stats.setup_refused, 1u);
+        event(node, GL_MAV_EV_SETUP_REFUSED, 0, msg->sysid);
+        return;
+    }
+    gl_mav_node_set_key(node, setup.secret_key, setup.initial_timestamp);
+    if (node->cfg.port.store_key != NULL && node->cfg.port.store_key(node->cfg.port.ctx, setup.secret_key) != 0) {
+        event(node, GL_MAV_EV_STORE_WRITE_FAILED, -2, 0);
+    }
+    event(node, GL_MAV_EV_KEY_SET, node->keyed, 0);
+}
+
 static void dispatch(gl_mav_node_t *node, const mavlink_message_t *msg)
 {
     switch (msg->msgid) {
+    case MAVLINK_MSG_ID_SETUP_SIGNING: handle_setup_signing(node, msg); break;
     case MAVLINK_MSG_ID_DEBUG_FLOAT_ARRAY: handle_sample(node, msg); break;
     case MAVLINK_MSG_ID_PARAM_SET: handle_param_set(node, msg); break;
     case MAVLINK_MSG_ID_PARAM_REQUEST_READ: handle_param_read(node, msg); break;
@@ -348,24 +459,50 @@ static uint32_t frame_size(const mavlink_message_t *msg)
     return MAVLINK_NUM_NON_PAYLOAD_BYTES + msg->len + signature;
 }
 
+/** Count a frame the signing check refused, by reason, and report it. */
+static void signature_refused(gl_mav_node_t *node, const mavlink_message_t *msg)
+{
+    gl_mav_sig_refusal_t why = GL_MAV_SIG_UNSIGNED;
+    uint32_t *counter = &node->stats.sig_unsigned;
+    if (msg->incompat_flags & MAVLINK_IFLAG_SIGNED) {
+        switch (node->signing.last_status) {
+        case MAVLINK_SIGNING_STATUS_REPLAY:
+        case MAVLINK_SIGNING_STATUS_OLD_TIMESTAMP: why = GL_MAV_SIG_REPLAY; counter = &node->stats.sig_replay; break;
+        case MAVLINK_SIGNING_STATUS_TOO_MANY_STREAMS:
+        case MAVLINK_SIGNING_STATUS_NO_STREAMS: why = GL_MAV_SIG_STREAMS; counter = &node->stats.sig_streams; break;
+        default: why = GL_MAV_SIG_BAD; counter = &node->stats.sig_bad; break;
+        }
+    }
+    inc(counter, 1u);
+    event(node, GL_MAV_EV_SIGNATURE_REFUSED, (int32_t)why, msg->msgid);
+}
+
 void gl_mav_node_input(gl_mav_node_t *node, const uint8_t *bytes, size_t len)
 {
-    mavlink_status_t *chan = mavlink_get_channel_status(node->cfg.chan);
     for (size_t i = 0; i < len; ++i) {
         mavlink_message_t msg;
         mavlink_status_t st;
         inc(&node->stats.rx_bytes, 1u);
-        uint8_t ok = mavlink_parse_char(node->cfg.chan, bytes[i], &msg, &st);
-        /* Frame errors at this byte: header errors (copied into st) and a bad CRC or signature (which
-         * mavlink_parse_char leaves in the channel's parse_error; cleared so the next byte does not repeat it). */
-        inc(&node->stats.bad_frames, (uint32_t)st.packet_rx_drop_count + chan->parse_error);
-        chan->parse_error = 0;
-        if (ok == MAVLINK_FRAMING_OK) {
+        /* mavlink_frame_char (not _parse_char) tells a bad CRC from a refused signature; header errors at this
+         * byte come back in st.packet_rx_drop_count. */
+        uint8_t r = mavlink_frame_char(node->cfg.chan, bytes[i], &msg, &st);
+        inc(&node->stats.bad_frames, (uint32_t)st.packet_rx_drop_count);
+        if (r == MAVLINK_FRAMING_OK) {
             inc(&node->stats.frames, 1u);
             inc(&node->stats.frame_bytes, frame_size(&msg));
             dispatch(node, &msg);
+        } else if (r == MAVLINK_FRAMING_BAD_CRC) {
+            inc(&node->stats.bad_frames, 1u);
+        } else if (r == MAVLINK_FRAMING_BAD_SIGNATURE) {
+            inc(&node->stats.bad_frames, 1u);
+            signature_refused(node, &msg);
         }
     }
+}
+
+void gl_mav_node_resync(gl_mav_node_t *node)
+{
+    mavlink_reset_channel_status(node->cfg.chan);
 }
 
 uint64_t gl_mav_node_poll(gl_mav_node_t *node)
@@ -389,6 +526,7 @@ gl_status_t gl_mav_node_init(gl_mav_node_t *node, const gl_mav_node_config_t *cf
     memset(node, 0, sizeof *node);
     node->cfg = *cfg;
     node->list_next = -1;
+    node->persist_tokens = GL_MAV_PERSIST_BURST;
     memset(mavlink_get_channel_status(cfg->chan), 0, sizeof(mavlink_status_t));
     gl_mav_params_init(&node->table, &gl_gains_default);
     (void)load_stored(node);

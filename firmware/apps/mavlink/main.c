@@ -2,15 +2,21 @@
  * @file main.c
  * @brief Host executable `gainlink_mavlink`: the MAVLink node (gl_mav_node.h) on a UDP link.
  *
- * Usage: `gainlink_mavlink --url udpin:127.0.0.1:14550 [--storage FILE] [--sysid 1] [--compid 1] [--spin-us N]`
+ * Usage: `gainlink_mavlink --url udpin:127.0.0.1:14550 [--storage FILE] [--signing-key FILE] [--sysid 1] [--compid 1]
+ *        [--spin-us N]`
  *
  * What it speaks is the node's (gl_mav_node.h); this file only carries bytes between the UDP socket and
  * the node, keeps the storage file (gl_mav_file.h) and writes the node's events to stderr.
  * - `--spin-us N` (default 0) reads without blocking for N us after each received datagram before
  *   blocking in poll() again: lower lockstep latency for 100 % of a core while spinning.
  * - A new UDP peer gets a HEARTBEAT at once; answers go to the sender of the message they answer.
+ * - `--signing-key FILE`: MAVLink 2 signing with the 32-byte key written in FILE as 64 hex digits (see
+ *   "Signing" in gl_mav_node.h for what stays open); a SETUP_SIGNING signed with it replaces the key and FILE
+ *   (written atomically, mode 0600). UDP is not a trusted link: without a key, SETUP_SIGNING is refused.
  *
- * Prints `gainlink-mavlink NAME sha256:HEX n m p q URL` on stdout when ready; events go to stderr.
+ * Prints `gainlink-mavlink NAME sha256:HEX n m p q URL` on stdout when ready. Events go to stderr through
+ * gl_log.h (rate-limited, never blocking the loop); at exit one summary line accounts for every datagram and
+ * frame: `datagrams= dropped= frames= bad_frames= garbage_bytes= unsigned= bad_signature= replayed= ...`.
  */
 #define _POSIX_C_SOURCE 200809L
 #include <errno.h>
@@ -22,7 +28,9 @@
 #include <time.h>
 
 #include "gainlink/gl_loop.h"
+#include "gl_log.h"
 #include "gl_mav_file.h"
+#include "gl_mav_key.h"
 #include "gl_mav_link.h"
 #include "gl_mav_node.h"
 
@@ -31,11 +39,13 @@ typedef struct udp_port {
     gl_mav_link_t link;
     struct sockaddr_in from;
     const char *storage_path;
+    const char *key_path;
 } udp_port_t;
 
 static gl_mav_node_t node;
 static udp_port_t udp;
 static gl_mav_file_t store_file;
+static gl_log_t events;
 static volatile sig_atomic_t stop;
 
 static void on_signal(int sig)
@@ -63,39 +73,71 @@ static uint64_t now_us(void *ctx)
     return (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u;
 }
 
-/** The node's events as one stderr line each. */
+static void link_counters(void *ctx, uint32_t *rx_overruns, uint32_t *tx_dropped)
+{
+    const udp_port_t *u = ctx;
+    *rx_overruns = u->link.rx_dropped;
+    *tx_dropped = 0;
+}
+
+static int store_key(void *ctx, const uint8_t key[GL_MAV_KEY_LEN])
+{
+    const udp_port_t *u = ctx;
+    return u->key_path == NULL ? 0 : gl_mav_key_write(u->key_path, key);
+}
+
+static const char *const refusal_words[] = {
+    [GL_MAV_SIG_UNSIGNED] = "unsigned", [GL_MAV_SIG_BAD] = "bad signature",
+    [GL_MAV_SIG_REPLAY] = "replayed or too old", [GL_MAV_SIG_STREAMS] = "no free signing stream",
+};
+
+/** The node's events as stderr lines, through the rate-limited, non-blocking log. */
 static void log_event(void *ctx, gl_mav_event_t ev, int32_t value, uint32_t detail)
 {
     const udp_port_t *u = ctx;
     const char *path = u->storage_path != NULL ? u->storage_path : "(no --storage)";
     switch (ev) {
     case GL_MAV_EV_STORE_LOADED:
-        fprintf(stderr, "gainlink_mavlink: loaded parameters from %s (crc32 0x%08lx)\n", path, (unsigned long)(uint32_t)value);
+        gl_log_event(&events, "loaded parameters from %s (crc32 0x%08lx)", path, (unsigned long)(uint32_t)value);
         break;
     case GL_MAV_EV_STORE_IGNORED:
         if (value == GL_MAV_STORE_E_REFUSED) {
-            fprintf(stderr, "gainlink_mavlink: ignoring %s: %s (status %ld); using the compiled gain set\n", path,
+            gl_log_event(&events, "ignoring %s: %s (status %ld); using the compiled gain set", path,
                     gl_mav_store_strerror((gl_mav_store_error_t)value), (long)(int32_t)detail);
         } else {
-            fprintf(stderr, "gainlink_mavlink: ignoring %s: line %lu: %s; using the compiled gain set\n", path,
+            gl_log_event(&events, "ignoring %s: line %lu: %s; using the compiled gain set", path,
                     (unsigned long)detail, gl_mav_store_strerror((gl_mav_store_error_t)value));
         }
         break;
     case GL_MAV_EV_STORE_UNREADABLE:
-        fprintf(stderr, "gainlink_mavlink: cannot reload parameters from %s: %s\n", path,
+        gl_log_event(&events, "cannot reload parameters from %s: %s", path,
                 value == 0 ? "nothing stored" : "read error");
         break;
-    case GL_MAV_EV_STORE_WRITTEN: fprintf(stderr, "gainlink_mavlink: parameters written to %s\n", path); break;
-    case GL_MAV_EV_STORE_WRITE_FAILED: fprintf(stderr, "gainlink_mavlink: cannot write parameters to %s\n", path); break;
+    case GL_MAV_EV_STORE_WRITTEN: gl_log_event(&events, "parameters written to %s", path); break;
+    case GL_MAV_EV_STORE_WRITE_FAILED: gl_log_event(&events, "cannot write parameters to %s", path); break;
     case GL_MAV_EV_COMMITTED:
-        fprintf(stderr, "gainlink_mavlink: committed gain set crc32 0x%08lx\n", (unsigned long)(uint32_t)value);
+        gl_log_event(&events, "committed gain set crc32 0x%08lx", (unsigned long)(uint32_t)value);
         break;
-    case GL_MAV_EV_COMMIT_REFUSED: fprintf(stderr, "gainlink_mavlink: commit refused (status %ld)\n", (long)value); break;
+    case GL_MAV_EV_COMMIT_REFUSED: gl_log_event(&events, "commit refused (status %ld)", (long)value); break;
     case GL_MAV_EV_RESET:
-        fprintf(stderr, "gainlink_mavlink: back to the compiled gain set (crc32 0x%08lx)\n", (unsigned long)(uint32_t)value);
+        gl_log_event(&events, "back to the compiled gain set (crc32 0x%08lx)", (unsigned long)(uint32_t)value);
         break;
     case GL_MAV_EV_STAGE_FAILED:
-        fprintf(stderr, "gainlink_mavlink: staging the committed set failed (status %ld)\n", (long)value);
+        gl_log_event(&events, "staging the committed set failed (status %ld)", (long)value);
+        break;
+    case GL_MAV_EV_SIGNATURE_REFUSED:
+        gl_log_event(&events, "refused message %lu: %s", (unsigned long)detail,
+                (value >= 0 && value <= GL_MAV_SIG_STREAMS) ? refusal_words[value] : "signing");
+        break;
+    case GL_MAV_EV_PERSIST_LIMITED:
+        gl_log_event(&events, "persist refused by the rate limit (next write in %ld s)", (long)value);
+        break;
+    case GL_MAV_EV_KEY_SET:
+        gl_log_event(&events, "signing %s by SETUP_SIGNING", value ? "key replaced" : "turned off");
+        break;
+    case GL_MAV_EV_SETUP_REFUSED:
+        gl_log_event(&events, "SETUP_SIGNING from system %lu refused (unsigned on an untrusted link)",
+                (unsigned long)detail);
         break;
     default: break;
     }
@@ -115,8 +157,8 @@ static int parse_uint(const char *text, unsigned long max, unsigned long *out)
 
 static int usage(void)
 {
-    fprintf(stderr, "usage: gainlink_mavlink --url udpin:HOST:PORT|udpout:HOST:PORT [--storage FILE] [--sysid N] [--compid N] "
-                    "[--spin-us 0..1000000]\n");
+    fprintf(stderr, "usage: gainlink_mavlink --url udpin:HOST:PORT|udpout:HOST:PORT [--storage FILE] [--signing-key FILE] "
+                    "[--sysid N] [--compid N] [--spin-us 0..1000000]\n");
     return 2;
 }
 
@@ -130,6 +172,7 @@ static int drain_socket(void)
     while ((n = gl_mav_link_recv(&udp.link, buf, sizeof buf, &udp.from)) > 0) {
         got = 1;
         gl_mav_node_input(&node, buf, (size_t)n);
+        gl_mav_node_resync(&node); /* a frame never spans datagrams */
     }
     if (udp.link.peers != peers_before) {
         gl_mav_node_heartbeat(&node); /* a new peer hears us at once, not up to a second later */
@@ -141,14 +184,15 @@ static int serve(unsigned long spin_us)
 {
     uint64_t spin_until = 0; /* read without blocking until then (--spin-us after each datagram) */
     while (!stop) {
+        gl_log_tick(&events);
         uint64_t next = gl_mav_node_poll(&node);
         uint64_t now = now_us(NULL);
         if (!(spin_us > 0 && now < spin_until)) {
             struct pollfd pfd = {.fd = udp.link.fd, .events = POLLIN, .revents = 0};
             int wait_ms = next > now ? (int)((next - now) / 1000u) + 1 : 0;
-            int ready = poll(&pfd, 1, wait_ms);
+            int ready = poll(&pfd, 1, wait_ms > 1000 ? 1000 : wait_ms);
             if (ready < 0 && errno != EINTR) {
-                perror("gainlink_mavlink: poll");
+                gl_log_always(&events, "poll: %s", strerror(errno));
                 return 1;
             }
             if (ready <= 0) {
@@ -157,7 +201,7 @@ static int serve(unsigned long spin_us)
         }
         int got = drain_socket();
         if (got < 0) {
-            perror("gainlink_mavlink: recv");
+            gl_log_always(&events, "recv: %s", strerror(errno));
             return 1;
         }
         if (got && spin_us > 0) {
@@ -176,6 +220,8 @@ int main(int argc, char **argv)
             url = argv[++i];
         } else if (i + 1 < argc && strcmp(argv[i], "--storage") == 0) {
             udp.storage_path = argv[++i];
+        } else if (i + 1 < argc && strcmp(argv[i], "--signing-key") == 0) {
+            udp.key_path = argv[++i];
         } else if (i + 1 < argc && strcmp(argv[i], "--sysid") == 0) {
             if (parse_uint(argv[++i], 255ul, &sysid) != 0 || sysid == 0) {
                 return usage();
@@ -196,18 +242,32 @@ int main(int argc, char **argv)
     if (url == NULL) {
         return usage();
     }
+    gl_log_init(&events, 2, "gainlink_mavlink", GL_LOG_BURST_DEFAULT);
+    uint8_t key[GL_MAV_KEY_LEN];
+    if (udp.key_path != NULL) {
+        char why[200];
+        if (gl_mav_key_read(udp.key_path, key, why, sizeof why) != 0) {
+            fprintf(stderr, "gainlink_mavlink: --signing-key %s: %s\n", udp.key_path, why);
+            return 2;
+        }
+    }
     gl_mav_node_config_t cfg = {
         .sysid = (uint8_t)sysid,
         .compid = (uint8_t)compid,
         .chan = 0,
         .watchdog_periods = GL_WATCHDOG_PERIODS_DEFAULT,
-        .port = {.ctx = &udp, .send = udp_send, .room = NULL, .now_us = now_us, .event = log_event, .link_counters = NULL},
+        .port = {.ctx = &udp, .send = udp_send, .room = NULL, .now_us = now_us, .event = log_event,
+                 .link_counters = link_counters, .store_key = store_key},
         .storage = udp.storage_path != NULL ? gl_mav_file_init(&store_file, udp.storage_path) : NULL,
+        .trusted_link = 0,
     };
     gl_status_t st = gl_mav_node_init(&node, &cfg);
     if (st != GL_OK) {
         fprintf(stderr, "gainlink_mavlink: gain set rejected (status %d)\n", (int)st);
         return 3;
+    }
+    if (udp.key_path != NULL) {
+        gl_mav_node_set_key(&node, key, gl_mav_key_timestamp_now());
     }
     char why[256] = "";
     if (gl_mav_link_open(&udp.link, url, why, sizeof why) != 0) {
@@ -221,5 +281,20 @@ int main(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     printf("gainlink-mavlink %s sha256:%s %d %d %d %d %s\n", GL_NAME, GL_ARTIFACT_SHA256, GL_N, GL_M, GL_P, GL_Q, url);
     fflush(stdout);
-    return serve(spin_us);
+    int rc = serve(spin_us);
+    const gl_mav_node_stats_t *n = &node.stats;
+    gl_log_always(&events,
+                  "datagrams=%llu dropped=%lu frames=%lu bad_frames=%lu garbage_bytes=%lu unsigned=%lu bad_signature=%lu "
+                  "replayed=%lu no_stream=%lu setup_refused=%lu samples=%lu refused_sets=%lu commits=%lu "
+                  "persist_writes=%lu persist_skipped=%lu persist_limited=%lu crc32=0x%08lx signing=%d "
+                  "log_suppressed=%llu log_dropped=%llu",
+                  (unsigned long long)udp.link.rx_datagrams, (unsigned long)udp.link.rx_dropped,
+                  (unsigned long)n->frames, (unsigned long)n->bad_frames, (unsigned long)gl_mav_node_garbage(&node),
+                  (unsigned long)n->sig_unsigned, (unsigned long)n->sig_bad, (unsigned long)n->sig_replay,
+                  (unsigned long)n->sig_streams, (unsigned long)n->setup_refused, (unsigned long)n->samples,
+                  (unsigned long)n->refused_sets, (unsigned long)n->commits, (unsigned long)n->persist_writes,
+                  (unsigned long)n->persist_skipped, (unsigned long)n->persist_limited,
+                  (unsigned long)node.table.committed.crc32, node.keyed, (unsigned long long)events.suppressed,
+                  (unsigned long long)events.dropped);
+    return rc;
 }
