@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from gainlink.errors import PlantError
-from gainlink.hil.plants.fmu import FmuPlant, plant_from_config
+from gainlink.hil.plants.config import plant_from_config
+from gainlink.hil.plants.fmu import FmuPlant
 from gainlink.hil.plants.linearize import linearize
 from gainlink.hil.plants.models import CartPendulum, QuadrotorLateral, WoodBerry
 

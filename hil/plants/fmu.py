@@ -304,13 +304,3 @@ def _fmu_factory(config: Mapping[str, Any], *, base_dir: Path | None = None, **_
     path = resolve_fmu(fmu=cfg.get("fmu"), path=cfg.get("path"), base_dir=base_dir)
     return FmuPlant(path=path, inputs=cfg.get("inputs"), outputs=cfg.get("outputs"),
                     parameters=cfg.get("parameters"), states=cfg.get("states"))
-
-
-def plant_from_config(config: Mapping[str, Any], *, artifact: Any = None, base_dir: Path | None = None) -> Plant:
-    """Build a plant from its configuration table (``kind`` selects the registered plugin)."""
-    from . import models  # noqa: F401 - registers the built-in models
-
-    if not isinstance(config, Mapping) or "kind" not in config:
-        raise PlantError("plant: the [plant] table needs a kind (one of: fmu, cart_pendulum, quadrotor_lateral, "
-                         "wood_berry, linear)")
-    return PLANTS.create(str(config["kind"]), config, artifact=artifact, base_dir=base_dir)

@@ -1,5 +1,5 @@
-"""Built-in plant models: nonlinear cart pendulum, quadrotor lateral channel, Wood-Berry column,
-and a linear plant taken from the artifact itself.
+"""Built-in plant models: nonlinear cart pendulum, quadrotor lateral channel, Wood-Berry column
+(the linear plant of a spec or artifact is :mod:`gainlink.hil.plants.linear`).
 
 Continuous models integrate with fixed-step RK4 (sub-steps no longer than ``step`` seconds).
 """
@@ -10,7 +10,6 @@ import math
 from typing import Any, Mapping
 
 import numpy as np
-from scipy.linalg import expm
 
 from gainlink.errors import PlantError
 
@@ -208,65 +207,6 @@ class WoodBerry(Plant):
         self.y, self.hist, self.k = y.copy(), hist.copy(), k
 
 
-class LinearPlant(Plant):
-    """The artifact's own plant model (``artifact.data["plant"]``), simulated exactly (matrix exponential)."""
-
-    def __init__(self, *, artifact: Any) -> None:
-        pl = artifact.data["plant"]
-        self.name = f"linear({artifact.name})"
-        self.A, self.B = np.array(pl["A"], float), np.array(pl["B"], float)
-        self.C, self.D = np.array(pl["C"], float), np.array(pl["D"], float)
-        self.continuous = pl["kind"] != "discrete"
-        self.Ts = artifact.Ts
-        sig = artifact.signals
-        n = self.A.shape[0]
-        self.state_names = tuple(sig["states"]) if len(sig["states"]) == n else tuple(f"x{i}" for i in range(n))
-        self.input_names = tuple(sig["inputs"])
-        self.output_names = tuple(sig["outputs"])
-        self._disc: dict[float, tuple[np.ndarray, np.ndarray]] = {}
-        self._u = np.zeros(self.B.shape[1])
-        self.x = np.zeros(n)
-
-    def _discrete(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        if dt not in self._disc:
-            if not self.continuous:
-                if abs(dt - self.Ts) > 1e-12 * self.Ts:
-                    raise PlantError(f"discrete plant can only advance by Ts={self.Ts}, not {dt}")
-                self._disc[dt] = (self.A, self.B)
-            else:
-                n, m = self.B.shape
-                big = np.zeros((n + m, n + m))
-                big[:n, :n], big[:n, n:] = self.A, self.B
-                e = expm(big * dt)
-                self._disc[dt] = (e[:n, :n], e[:n, n:])
-        return self._disc[dt]
-
-    def reset(self, *, initial: Mapping[str, float]) -> None:
-        self.x = np.zeros(self.A.shape[0])
-        self._u = np.zeros(self.B.shape[1])
-        for key, value in initial.items():
-            if key not in self.state_names:
-                raise PlantError(f"plant {self.name} has no state {key!r} (has: {', '.join(self.state_names)})")
-            self.x[self.state_names.index(key)] = float(value)
-
-    def outputs(self) -> np.ndarray:
-        return self.C @ self.x + self.D @ self._u
-
-    def state(self) -> np.ndarray:
-        return self.x.copy()
-
-    def advance(self, *, u: np.ndarray, dt: float) -> None:
-        Ad, Bd = self._discrete(dt)
-        self._u = np.asarray(u, float)
-        self.x = Ad @ self.x + Bd @ self._u
-
-    def save_state(self) -> Any:
-        return (self.x.copy(), self._u.copy())
-
-    def restore_state(self, snapshot: Any) -> None:
-        self.x, self._u = snapshot[0].copy(), snapshot[1].copy()
-
-
 def _ode_factory(cls: type) -> Any:
     def factory(config: Mapping[str, Any], **_context: Any) -> Plant:
         cfg = take_keys(config, allowed=_COMMON_KEYS, where=f"plant {cls.name}", error=PlantError)
@@ -279,11 +219,3 @@ def _ode_factory(cls: type) -> Any:
 PLANTS.register("cart_pendulum")(_ode_factory(CartPendulum))
 PLANTS.register("quadrotor_lateral")(_ode_factory(QuadrotorLateral))
 PLANTS.register("wood_berry")(_ode_factory(WoodBerry))
-
-
-@PLANTS.register("linear")
-def _linear_factory(config: Mapping[str, Any], *, artifact: Any = None, **_context: Any) -> Plant:
-    take_keys(config, allowed={"kind"}, where="plant linear", error=PlantError)
-    if artifact is None:
-        raise PlantError("plant linear needs the artifact (it simulates the artifact's own plant model)")
-    return LinearPlant(artifact=artifact)

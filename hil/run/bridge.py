@@ -25,7 +25,7 @@ from gainlink.reference import ReferenceLoop
 
 from .controller import ControllerProcess, controller_argv
 from .faults import FaultInjector
-from ..plants.fmu import plant_from_config
+from ..plants.config import plant_from_config
 from .metrics import RunTrace, compute_metrics
 from ..plants.base import Plant, check_dimensions
 from .scheduler import SPIN_NS, Pacer, Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
