@@ -74,6 +74,9 @@ class Artifact:
 
     When there is no integral action (``q == 0``) ``Ci``, ``Ki`` and ``Kaw`` are empty arrays of
     shapes (0, p), (m, 0) and (0, m); ``M`` is ``None`` unless ``observer_form == "current"``.
+    ``u_op`` (m) and ``y_op`` (p) are the operating point, zeros when the file has none (every
+    artifact written before operating points existed keeps its meaning); ``x_op`` (n) is the state
+    there, for the record only, ``None`` when not recorded.
     """
 
     data: dict = field(repr=False)
@@ -97,6 +100,9 @@ class Artifact:
     u_max: np.ndarray
     xh0: np.ndarray
     z0: np.ndarray
+    u_op: np.ndarray
+    y_op: np.ndarray
+    x_op: np.ndarray | None
     anti_windup: str
     observer_form: str
     sha256: str
@@ -105,6 +111,21 @@ class Artifact:
     def signals(self) -> dict:
         """Names of states, inputs, outputs and references."""
         return self.data["signals"]
+
+    @property
+    def safe_command(self) -> np.ndarray:
+        """The command on a refused sample or an expired watchdog: ``u_op`` clamped into the limits."""
+        return np.minimum(np.maximum(self.u_op, self.u_min), self.u_max)
+
+    @property
+    def r_op(self) -> np.ndarray:
+        """The reference that holds the plant at its operating point: the tracked outputs there, ``Ci y_op``."""
+        return self.Ci @ self.y_op
+
+    @property
+    def has_operating_point(self) -> bool:
+        """True when ``u_op`` or ``y_op`` has a non-zero entry."""
+        return bool(np.any(self.u_op != 0.0) or np.any(self.y_op != 0.0))
 
 
 def _matrix(data: dict, key: str, shape: tuple[int, int]) -> np.ndarray:
@@ -195,6 +216,8 @@ def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
         data=data, name=data["name"], Ts=float(data["Ts"]), n=n, m=m, p=p, q=q,
         Ad=Ad, Bd=Bd, Cd=Cd, Dd=Dd, K=K, L=L, M=M, Ci=Ci, Ki=Ki, Kaw=Kaw,
         u_min=u_min, u_max=u_max, xh0=_vector(data, "xh0", n, 0.0), z0=_vector(data, "z0", q, 0.0),
+        u_op=_vector(data, "u_op", m, 0.0), y_op=_vector(data, "y_op", p, 0.0),
+        x_op=_vector(data, "x_op", n) if "x_op" in data else None,
         anti_windup=data["anti_windup"], observer_form=form, sha256=data["sha256"],
     )
 

@@ -81,6 +81,8 @@ def gain_set(artifact: Artifact) -> GainSet:
         "u_max": pad(a.u_max, (a.m,)),
         "xh0": pad(a.xh0, (a.n,)),
         "z0": pad(a.z0, (qa,)),
+        "u_op": pad(a.u_op, (a.m,)),
+        "y_op": pad(a.y_op, (a.p,)),
     }
     header = (a.n, a.m, a.p, a.q, FORM_CODES[a.observer_form], ANTI_WINDUP_CODES[a.anti_windup])
     return GainSet(header=header, fields=fields, crc32=payload_crc32(header=header, fields=fields))
@@ -187,9 +189,9 @@ def render_step(artifact: Artifact) -> str:
     current = a.observer_form == "current"
     backcalc = a.anti_windup == "backcalc"
     clamp = a.anti_windup == "clamp"
-    vrow = n + (p if current else 0) + q + 2
+    vrow = 1 + n + (p if current else 0) + q + 2
     zrow = p + 1 + (m if backcalc else 0)
-    length = m * vrow + q * zrow + n * (n + m + p)
+    length = p + m * vrow + q * zrow + n * (n + m + p)
     body: list[str] = []
     st = _Stream(length, body)
 
@@ -200,15 +202,18 @@ def render_step(artifact: Artifact) -> str:
     body += [f"    const float z{j} = z_io[{j}];" for j in range(q)]
     body += [f"    const float y{k} = ys[{k}];" for k in range(p)]
     body += [f"    const float r{j} = rs[{j}];" for j in range(q)]
+    body += [f"    const float dy{k} = y{k} - {st.next()};" for k in range(p)]
     body.append("    uint32_t sat = 0u;")
     for i in range(m):
-        body.append(f"    float v{i} = {st.next()} * x0;")
-        body += [f"    v{i} = GL_FMA({st.next()}, x{j}, v{i});" for j in range(1, n)]
+        uop = st.next()
+        body.append(f"    float dv{i} = {st.next()} * x0;")
+        body += [f"    dv{i} = GL_FMA({st.next()}, x{j}, dv{i});" for j in range(1, n)]
         if current:
-            body += [f"    v{i} = GL_FMA({st.next()}, y{k}, v{i});" for k in range(p)]
-        body += [f"    v{i} = GL_FMA({st.next()}, z{j}, v{i});" for j in range(q)]
+            body += [f"    dv{i} = GL_FMA({st.next()}, dy{k}, dv{i});" for k in range(p)]
+        body += [f"    dv{i} = GL_FMA({st.next()}, z{j}, dv{i});" for j in range(q)]
         lo, hi = st.next(), st.next()
         body += [
+            f"    const float v{i} = {uop} + dv{i};",
             f"    float u{i} = v{i};",
             f"    if (v{i} < {lo}) {{",
             f"        u{i} = {lo};",
@@ -217,6 +222,7 @@ def render_step(artifact: Artifact) -> str:
             f"        u{i} = {hi};",
             f"        sat |= {1 << i}u;",
             "    }",
+            f"    const float du{i} = u{i} - {uop};",
         ]
     for j in range(q):
         body.append(f"    float e{j} = r{j};")
@@ -229,8 +235,8 @@ def render_step(artifact: Artifact) -> str:
     for i in range(n):
         body.append(f"    float xn{i} = {st.next()} * x0;")
         body += [f"    xn{i} = GL_FMA({st.next()}, x{j}, xn{i});" for j in range(1, n)]
-        body += [f"    xn{i} = GL_FMA({st.next()}, u{k}, xn{i});" for k in range(m)]
-        body += [f"    xn{i} = GL_FMA({st.next()}, y{k}, xn{i});" for k in range(p)]
+        body += [f"    xn{i} = GL_FMA({st.next()}, du{k}, xn{i});" for k in range(m)]
+        body += [f"    xn{i} = GL_FMA({st.next()}, dy{k}, xn{i});" for k in range(p)]
     assert st.pos == length
     body += [f"    xh_io[{i}] = xn{i};" for i in range(n)]
     body += [f"    z_io[{j}] = zn{j};" for j in range(q)]

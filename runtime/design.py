@@ -180,6 +180,7 @@ def design(spec: PlantSpec) -> DesignResult:
         data["M"] = matrix_to_json(M)
     if q:
         data["Ci"], data["Ki"], data["Kaw"] = matrix_to_json(Ci), matrix_to_json(Ki), matrix_to_json(Kaw)
+    data.update(operating_point_keys(spec, u_min=u_min, u_max=u_max))
     return DesignResult(artifact=seal(data), controller_poles=ctrl_poles, observer_poles=obs_poles,
                         closed_loop_poles=cl_poles, margins=margins, warnings=warnings)
 
@@ -363,6 +364,30 @@ def provenance(spec: PlantSpec) -> dict:
 
 
 # --- pieces ---------------------------------------------------------------------------------------
+
+
+def operating_point_keys(spec: PlantSpec, *, u_min: np.ndarray, u_max: np.ndarray) -> dict:
+    """The artifact keys ``u_op``, ``y_op``, ``x_op`` for the spec's operating point.
+
+    A key is written only when it holds a non-zero entry. An absent key means zeros, so a design about
+    the origin has one form whether its spec writes a zero table or none, and every spec written before
+    operating points existed designs to exactly the artifact (and sha256) it designed then.
+
+    Raises
+    ------
+    SpecError
+        ``u_op`` lies outside the limits: the loop could not hold the plant at that point.
+    """
+    op = spec.operating_point
+    if op is None:
+        return {}
+    outside = [i for i in range(spec.m) if not u_min[i] <= op.u_op[i] <= u_max[i]]
+    if outside:
+        i = outside[0]
+        raise SpecError(f"operating_point.u_op for input {spec.inputs[i]} is {op.u_op[i]:g}, outside the limits "
+                        f"[{u_min[i]:g}, {u_max[i]:g}]: the loop could not hold the plant there")
+    keys = {"u_op": op.u_op, "y_op": op.y_op, "x_op": op.x_op}
+    return {k: vector_to_json(v) for k, v in keys.items() if v is not None and np.any(v != 0.0)}
 
 
 def _limits(spec: PlantSpec) -> tuple[np.ndarray, np.ndarray, str]:

@@ -1,7 +1,8 @@
 """The float64 reference of the gainlink control law (DESIGN.md, "The control law").
 
 This is the executable statement of the contract that the C loop (float32) and every test
-compare against. It is deliberately plain: one step is a direct transcription of the law.
+compare against. It is deliberately plain: one step is a direct transcription of the law, with the
+operating point: samples, references, limits and commands are absolute; the estimate is a deviation.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ class ReferenceLoop:
 
     def __init__(self, artifact: Artifact) -> None:
         self.a = artifact
-        self.safe_u = np.clip(np.zeros(artifact.m), artifact.u_min, artifact.u_max)
+        self.safe_u = artifact.safe_command
         self.reset()
 
     def reset(self) -> None:
@@ -53,17 +54,18 @@ class ReferenceLoop:
         self.z = self.a.z0.copy()
 
     def step(self, y: np.ndarray, r: np.ndarray | None = None) -> StepResult:
-        """Run one sample of the law on measurement ``y`` (p) and reference ``r`` (q)."""
+        """Run one sample of the law on the absolute measurement ``y`` (p) and reference ``r`` (q)."""
         a = self.a
         y = np.asarray(y, dtype=float).reshape(a.p)
         r = np.zeros(a.q) if r is None else np.asarray(r, dtype=float).reshape(a.q)
         if not (np.all(np.isfinite(y)) and np.all(np.isfinite(r))):
             return StepResult(u=self.safe_u.copy(), saturated=np.zeros(a.m, dtype=bool), fault=True)
+        dy = y - a.y_op
         if a.observer_form == "current":
-            xc = self.xh + a.M @ (y - a.Cd @ self.xh)
+            xc = self.xh + a.M @ (dy - a.Cd @ self.xh)
         else:
             xc = self.xh
-        v = -a.K @ xc - a.Ki @ self.z
+        v = a.u_op - a.K @ xc - a.Ki @ self.z
         u = np.minimum(np.maximum(v, a.u_min), a.u_max)
         saturated = u != v
         e = r - a.Ci @ y
@@ -73,10 +75,11 @@ class ReferenceLoop:
             z = self.z if saturated.any() else self.z + a.Ts * e
         else:  # backcalc
             z = self.z + a.Ts * e + a.Kaw @ (u - v)
+        du = u - a.u_op
         if a.observer_form == "current":
-            xh = a.Ad @ xc + a.Bd @ u
+            xh = a.Ad @ xc + a.Bd @ du
         else:
-            xh = a.Ad @ self.xh + a.Bd @ u + a.L @ (y - a.Cd @ self.xh - a.Dd @ u)
+            xh = a.Ad @ self.xh + a.Bd @ du + a.L @ (dy - a.Cd @ self.xh - a.Dd @ du)
         self.xh, self.z = xh, z
         return StepResult(u=u, saturated=saturated, fault=False)
 

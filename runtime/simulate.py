@@ -20,7 +20,7 @@ class Simulation:
     """Time, plant state, measurements, references and commands of a closed-loop run."""
 
     t: np.ndarray  # (N,)
-    x: np.ndarray  # (N, n) plant state at each sample
+    x: np.ndarray  # (N, n) plant state at each sample (deviation from the operating point)
     y: np.ndarray  # (N, p)
     r: np.ndarray  # (N, q)
     u: np.ndarray  # (N, m)
@@ -28,7 +28,11 @@ class Simulation:
 
 def simulate_linear(artifact: Artifact, *, steps: int, x0: np.ndarray | None = None,
                     reference: np.ndarray | None = None, noise_std: float = 0.0, seed: int = 0) -> Simulation:
-    """Run the reference loop against ``x+ = Ad x + Bd u, y = Cd x + Dd u + noise``.
+    """Run the reference loop against the artifact's plant about its operating point.
+
+    The model is in deviations, ``x+ = Ad x + Bd (u - u_op)``; the recorded ``y = y_op + Cd x +
+    Dd (u - u_op) + noise`` and ``u`` are absolute, as a sensor and an actuator see them (the same
+    as ``x+ = Ad x + Bd u``, ``y = Cd x + Dd u`` when the artifact has no operating point).
 
     Parameters
     ----------
@@ -37,9 +41,10 @@ def simulate_linear(artifact: Artifact, *, steps: int, x0: np.ndarray | None = N
     steps : int
         Number of samples.
     x0 : array, optional
-        Initial plant state (zeros by default).
+        Initial plant state, as a deviation from the operating point (zeros by default).
     reference : array, optional
-        Constant reference for the tracked outputs (q values; zeros by default).
+        Constant absolute reference for the tracked outputs (q values; by default the tracked
+        outputs' values at the operating point, ``Ci y_op``).
     noise_std : float
         Standard deviation of white measurement noise.
     seed : int
@@ -49,19 +54,19 @@ def simulate_linear(artifact: Artifact, *, steps: int, x0: np.ndarray | None = N
     if steps < 1:
         raise DataError("steps must be at least 1")
     x = np.zeros(a.n) if x0 is None else np.asarray(x0, float).reshape(a.n)
-    r = np.zeros(a.q) if reference is None else np.asarray(reference, float).reshape(a.q)
+    r = a.r_op if reference is None else np.asarray(reference, float).reshape(a.q)
     rng = np.random.default_rng(seed)
     loop = ReferenceLoop(a)
     T, X, Y, R, U = (np.empty(steps), np.empty((steps, a.n)), np.empty((steps, a.p)),
                      np.empty((steps, a.q)), np.empty((steps, a.m)))
-    u_prev = np.zeros(a.m)
+    du_prev = np.zeros(a.m)
     for k in range(steps):
         # y depends on the command applied during this sample; with Dd != 0 use the previous one
-        y = a.Cd @ x + a.Dd @ u_prev + noise_std * rng.standard_normal(a.p)
+        y = a.y_op + a.Cd @ x + a.Dd @ du_prev + noise_std * rng.standard_normal(a.p)
         u = loop.step(y, r).u
         T[k], X[k], Y[k], R[k], U[k] = k * a.Ts, x, y, r, u
-        x = a.Ad @ x + a.Bd @ u
-        u_prev = u
+        du_prev = u - a.u_op
+        x = a.Ad @ x + a.Bd @ du_prev
     return Simulation(t=T, x=X, y=Y, r=R, u=U)
 
 

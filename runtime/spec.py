@@ -23,7 +23,8 @@ from .fileio import read_user_file
 NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 SIGNAL_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
-TOP_KEYS = {"name", "Ts", "discretization", "description", "plant", "controller", "integral", "observer", "limits"}
+TOP_KEYS = {"name", "Ts", "discretization", "description", "plant", "controller", "integral", "observer", "limits",
+            "operating_point"}
 PLANT_KEYS = {
     "continuous": {"kind", "A", "B", "C", "D", "states", "inputs", "outputs"},
     "discrete": {"kind", "A", "B", "C", "D", "states", "inputs", "outputs"},
@@ -33,6 +34,21 @@ CONTROLLER_KEYS = {"method", "Q", "Q_diag", "bryson_x_max", "bryson_y_max", "R",
 INTEGRAL_KEYS = {"outputs", "Q_diag", "bryson_max", "aw_gain"}
 OBSERVER_KEYS = {"method", "form", "W", "W_diag", "V", "V_diag", "G", "poles", "poles_z"}
 LIMITS_KEYS = {"u_min", "u_max", "anti_windup"}
+OPERATING_POINT_KEYS = {"u_op", "y_op", "x_op"}
+
+
+@dataclass(frozen=True)
+class OperatingPoint:
+    """The point the plant model is a linearisation about (DESIGN.md, "The control law").
+
+    ``u_op`` (m) and ``y_op`` (p) are the absolute command and measurement there; the model, the
+    estimate and the design are deviations from them. ``x_op`` (n) is the state there, kept for the
+    record (``None`` when the spec does not give it): the law does not use it.
+    """
+
+    u_op: np.ndarray
+    y_op: np.ndarray
+    x_op: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -42,7 +58,8 @@ class PlantSpec:
     ``A, B, C, D`` are the plant as specified: continuous (``kind`` continuous, or a transfer
     function realised with Padé delays) or discrete (``kind`` discrete, sampled at ``Ts``).
     Section tables (``controller``, ``integral``, ``observer``, ``limits``) keep the user's
-    keys; :mod:`gainlink.design` interprets them.
+    keys; :mod:`gainlink.design` interprets them. ``operating_point`` is ``None`` when the spec has
+    no ``[operating_point]`` table (the plant is about the origin).
     """
 
     name: str
@@ -61,6 +78,7 @@ class PlantSpec:
     observer: dict
     limits: dict
     pade_order: int | None = None
+    operating_point: OperatingPoint | None = None
     source_sha256: str = ""
     source: str = "<dict>"
     description: str = ""
@@ -154,11 +172,12 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     _no_unknown(observer, OBSERVER_KEYS, "observer")
     limits = _table(data, "limits", required=True)
     _no_unknown(limits, LIMITS_KEYS, "limits")
+    op = _operating_point(data, states=states, inputs=inputs, outputs=outputs)
 
     return PlantSpec(
         name=name, Ts=Ts, kind=kind, discretization=disc, A=A, B=B, C=C, D=D,
         states=states, inputs=inputs, outputs=outputs, controller=controller, integral=integral,
-        observer=observer, limits=limits, pade_order=pade_order, source_sha256=source_sha256,
+        observer=observer, limits=limits, pade_order=pade_order, operating_point=op, source_sha256=source_sha256,
         source=source, description=str(data.get("description", "")),
     )
 
@@ -257,6 +276,37 @@ def _names(table: dict, key: str, count: int, prefix: str) -> tuple[str, ...]:
     if len(set(names)) != len(names):
         raise SpecError(f"plant.{key} repeats a name")
     return tuple(names)
+
+
+def _operating_point(data: dict, *, states: tuple[str, ...], inputs: tuple[str, ...],
+                     outputs: tuple[str, ...]) -> OperatingPoint | None:
+    """Parse ``[operating_point]``: each of u_op, y_op, x_op a list (one value per signal, in order) or a
+    table of signal name -> value (signals not named are 0)."""
+    table = _table(data, "operating_point", required=False)
+    if table is None:
+        return None
+    _no_unknown(table, OPERATING_POINT_KEYS, "operating_point")
+    u_op = _signal_values(table, "u_op", inputs, "input")
+    y_op = _signal_values(table, "y_op", outputs, "output")
+    x_op = _signal_values(table, "x_op", states, "state") if "x_op" in table else None
+    return OperatingPoint(u_op=u_op, y_op=y_op, x_op=x_op)
+
+
+def _signal_values(table: dict, key: str, names: tuple[str, ...], kind: str) -> np.ndarray:
+    what = f"operating_point.{key}"
+    value = table.get(key)
+    if value is None:
+        return np.zeros(len(names))
+    if not isinstance(value, dict):
+        return as_vector(value, what, len(names))
+    out = np.zeros(len(names))
+    for name, v in value.items():
+        if name not in names:
+            raise SpecError(f"{what} names {name!r}, which is not a plant {kind} (the {kind}s are: {', '.join(names)})")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+            raise SpecError(f"{what}.{name} must be a finite number, got {v!r}")
+        out[names.index(name)] = float(v)
+    return out
 
 
 def _realise_tf(plant: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:

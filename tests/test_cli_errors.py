@@ -89,6 +89,18 @@ BAD_SPECS = [
         "B = [[0.0], [4.0]]", "B = [[1.0], [1.0]]").replace("C = [[1.0, 0.0]]", "C = [[1.0, -2.0]]"),
      "integral action is not feasible"),
     ("bad-name", spec_with('name = "servo"', 'name = "9 lives"'), "'name' must be an identifier"),
+    ("op-not-a-table", GOOD_SPEC.replace('name = "servo"', 'name = "servo"\noperating_point = 3.0'),
+     "'operating_point' must be a table"),
+    ("op-unknown-key", GOOD_SPEC + "[operating_point]\nu_opp = [1.0]\n", "unknown key 'u_opp' in operating_point"),
+    ("op-u-wrong-length", GOOD_SPEC + "[operating_point]\nu_op = [1.0, 2.0]\n",
+     "operating_point.u_op has 2 entries, expected 1"),
+    ("op-x-wrong-length", GOOD_SPEC + "[operating_point]\nx_op = [1.0]\n", "operating_point.x_op has 1 entries, expected 2"),
+    ("op-y-nan", GOOD_SPEC + "[operating_point]\ny_op = [nan]\n", "operating_point.y_op holds a NaN or infinite"),
+    ("op-y-unknown-output", GOOD_SPEC + "[operating_point]\ny_op = { speed = 1.0 }\n",
+     "operating_point.y_op names 'speed', which is not a plant output"),
+    ("op-by-name-inf", GOOD_SPEC + "[operating_point]\nu_op = { u0 = inf }\n", "operating_point.u_op.u0 must be a finite"),
+    ("op-by-name-string", GOOD_SPEC + '[operating_point]\nx_op = { x1 = "fast" }\n', "x_op.x1 must be a finite number"),
+    ("op-u-outside-limits", GOOD_SPEC + "[operating_point]\nu_op = [7.5]\n", "outside the limits [-5, 5]"),
     ("improper-tf", """name = "tf"\nTs = 0.1\n[plant]\nkind = "transfer_function"\nnum = [[[1.0, 0.0, 1.0]]]
 den = [[[1.0, 1.0]]]\n[controller]\nQ_diag = [1.0]\nR_diag = [1.0]\n[observer]\nW_diag = [1.0]\nV_diag = [1.0]
 [limits]\nu_min = [-1.0]\nu_max = [1.0]\n""", "improper"),
@@ -137,6 +149,8 @@ BAD_ARTIFACTS = [
     ("missing-key", lambda d: d.pop("L"), "'L' is a required property"),
     ("bad-anti-windup", lambda d: d.__setitem__("anti_windup", "maybe"), "anti_windup"),
     ("wrong-dims", lambda d: d.__setitem__("K", [[1.0, 2.0]]), "matrix K is 1x2, expected 1x4"),
+    ("u-op-wrong-length", lambda d: d.__setitem__("u_op", [1.0, 2.0]), "vector u_op has length 2, expected 1"),
+    ("y-op-not-numbers", lambda d: d.__setitem__("y_op", [0.0, "up"]), "y_op/1: 'up' is not of type 'number'"),
 ]
 
 

@@ -48,7 +48,8 @@ def test_generated_numbers_are_the_artifacts_float32_values(example_artifacts, t
     assert export(art, tmp_path).returncode == 0
     src = (tmp_path / "gl_gains.c").read_text()
     # designated initialisers for every field, rows as [i] = {...}
-    for field in ("Ts", "Ad", "Bd", "Cd", "Dd", "K", "L", "M", "Ci", "Ki", "Kaw", "u_min", "u_max", "xh0", "z0", "crc32"):
+    for field in ("Ts", "Ad", "Bd", "Cd", "Dd", "K", "L", "M", "Ci", "Ki", "Kaw", "u_min", "u_max", "xh0", "z0", "u_op", "y_op",
+                  "crc32"):
         assert re.search(rf"^    \.{field} = ", src, re.M), f"no designated initialiser for .{field}"
     assert "[1] = {" in src
     for key in ("Ad", "K", "L", "Ki"):
@@ -73,7 +74,7 @@ def test_generated_numbers_are_the_artifacts_float32_values(example_artifacts, t
     payload += np.array([data["Ts"]], dtype="<f4").tobytes()
     for key, shape in (("Ad", (n, n)), ("Bd", (n, m)), ("Cd", (p, n)), ("Dd", (p, m)), ("K", (m, n)), ("L", (n, p)),
                        ("M", (n, p)), ("Ci", (qa, p)), ("Ki", (m, qa)), ("Kaw", (qa, m)), ("u_min", (m,)),
-                       ("u_max", (m,)), ("xh0", (n,)), ("z0", (qa,))):
+                       ("u_max", (m,)), ("xh0", (n,)), ("z0", (qa,)), ("u_op", (m,)), ("y_op", (p,))):
         payload += padded(key, shape).tobytes()
     crc = zlib.crc32(payload)
     assert f".crc32 = 0x{crc:08X}u," in src

@@ -8,12 +8,12 @@
 
 #include "gl_internal.h"
 
-/** Number of floats in the checksummed payload, from Ts through z0. */
+/** Number of floats in the checksummed payload, from Ts through y_op. */
 #define GL_PAYLOAD_FLOATS                                                                                     \
     (1 + GL_N * GL_N + GL_N * GL_M + GL_P * GL_N + GL_P * GL_M + GL_M * GL_N + 2 * GL_N * GL_P + GL_QA * GL_P + \
-     GL_M * GL_QA + GL_QA * GL_M + 2 * GL_M + GL_N + GL_QA)
+     GL_M * GL_QA + GL_QA * GL_M + 2 * GL_M + GL_N + GL_QA + GL_M + GL_P)
 
-_Static_assert(offsetof(gl_gains_t, z0) + sizeof(((gl_gains_t *)0)->z0) - offsetof(gl_gains_t, Ts) ==
+_Static_assert(offsetof(gl_gains_t, y_op) + sizeof(((gl_gains_t *)0)->y_op) - offsetof(gl_gains_t, Ts) ==
                    sizeof(float) * (GL_PAYLOAD_FLOATS),
                "gl_gains_t float payload must be contiguous (no padding)");
 
@@ -93,8 +93,13 @@ gl_status_t gl_coeffs_derive(const gl_gains_t *g, gl_coeffs_t *c)
     float *w = c->w;
     memset(c->w, 0, sizeof c->w);
 
-    /* Command rows: feedback stored negated so that v is a plain sum of products. */
+    /* The measurement's operating point, subtracted from y first (dy = y - y_op). */
+    for (size_t k = 0; k < GL_P; ++k) {
+        *w++ = g->y_op[k];
+    }
+    /* Command rows: u_op, then the feedback stored negated so that v - u_op is a plain sum of products. */
     for (size_t i = 0; i < GL_M; ++i) {
+        *w++ = g->u_op[i];
         double KMrow[GL_P];
         for (size_t k = 0; k < GL_P; ++k) {
             double acc = 0.0;
@@ -122,7 +127,7 @@ gl_status_t gl_coeffs_derive(const gl_gains_t *g, gl_coeffs_t *c)
         }
         *w++ = g->u_min[i];
         *w++ = g->u_max[i];
-        float safe = 0.0f;
+        float safe = g->u_op[i];
         safe = safe < g->u_min[i] ? g->u_min[i] : safe;
         safe = safe > g->u_max[i] ? g->u_max[i] : safe;
         c->u_safe[i] = safe;

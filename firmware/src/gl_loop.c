@@ -91,11 +91,18 @@ static inline __attribute__((always_inline)) uint32_t gl_step_core(const float *
     {
         z[j] = z_io[j];
     }
+    float dy[GL_P]; /* deviation from the operating point, before any gain multiplies it */
+    GL_UNROLL for (size_t k = 0; k < GL_P; ++k)
+    {
+        dy[k] = ys[k] - *w++;
+    }
     float v[GL_M];
+    float du[GL_M];
     uint32_t sat = 0u;
     GL_UNROLL for (size_t i = 0; i < GL_M; ++i)
     {
-        float acc = w[0] * xh[0];
+        const float uop = *w++;
+        float acc = w[0] * xh[0]; /* the feedback in deviations; u_op is added once at the end */
         w += 1;
         GL_UNROLL for (size_t j = 1; j < GL_N; ++j)
         {
@@ -104,7 +111,7 @@ static inline __attribute__((always_inline)) uint32_t gl_step_core(const float *
 #if GL_OBSERVER_FORM == GL_FORM_CURRENT
         GL_UNROLL for (size_t k = 0; k < GL_P; ++k)
         {
-            acc = GL_FMA(*w++, ys[k], acc);
+            acc = GL_FMA(*w++, dy[k], acc);
         }
 #endif
         GL_UNROLL for (int j = 0; j < GL_Q; ++j)
@@ -113,20 +120,22 @@ static inline __attribute__((always_inline)) uint32_t gl_step_core(const float *
         }
         const float lo = *w++;
         const float hi = *w++;
-        v[i] = acc;
-        float ui = acc;
-        if (acc < lo) {
+        const float vi = uop + acc;
+        v[i] = vi;
+        float ui = vi;
+        if (vi < lo) {
             ui = lo;
             sat |= 1u << i;
-        } else if (acc > hi) {
+        } else if (vi > hi) {
             ui = hi;
             sat |= 1u << i;
         }
         u[i] = ui;
+        du[i] = ui - uop;
     }
     GL_UNROLL for (int j = 0; j < GL_Q; ++j)
     {
-        float e = rs[j];
+        float e = rs[j]; /* absolute: r is in the tracked outputs' own units */
         GL_UNROLL for (size_t k = 0; k < GL_P; ++k)
         {
             e = GL_FMA(*w++, ys[k], e);
@@ -153,11 +162,11 @@ static inline __attribute__((always_inline)) uint32_t gl_step_core(const float *
         }
         GL_UNROLL for (size_t k = 0; k < GL_M; ++k)
         {
-            acc = GL_FMA(*w++, u[k], acc);
+            acc = GL_FMA(*w++, du[k], acc);
         }
         GL_UNROLL for (size_t k = 0; k < GL_P; ++k)
         {
-            acc = GL_FMA(*w++, ys[k], acc);
+            acc = GL_FMA(*w++, dy[k], acc);
         }
         xh_io[i] = acc;
     }

@@ -256,7 +256,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="'artifact' (the artifact's discrete model; alias 'linear') or a gainlink.hil plant name")
     p.add_argument("--steps", type=int, required=True, help="number of samples")
     p.add_argument("--board", choices=BOARDS, default="mps2-an386")
-    p.add_argument("--reference", type=float, nargs="+", help="constant reference (q values)")
+    p.add_argument("--reference", type=float, nargs="+", help="constant absolute reference (q values; default: the tracked outputs at the operating point)")
     p.add_argument("--x0", type=float, nargs="+", help="initial plant state (n values)")
     p.add_argument("--out", help="folder for pil.csv and pil.json")
     p.set_defaults(func=_pil)

@@ -38,7 +38,8 @@ def gains_struct(*, n: int, m: int, p: int, q: int) -> type[ctypes.Structure]:
             ("observer_form", ctypes.c_uint32), ("anti_windup", ctypes.c_uint32), ("Ts", f),
             ("Ad", mat(n, n)), ("Bd", mat(n, m)), ("Cd", mat(p, n)), ("Dd", mat(p, m)), ("K", mat(m, n)),
             ("L", mat(n, p)), ("M", mat(n, p)), ("Ci", mat(qa, p)), ("Ki", mat(m, qa)), ("Kaw", mat(qa, m)),
-            ("u_min", f * m), ("u_max", f * m), ("xh0", f * n), ("z0", f * qa), ("crc32", ctypes.c_uint32),
+            ("u_min", f * m), ("u_max", f * m), ("xh0", f * n), ("z0", f * qa), ("u_op", f * m),
+            ("y_op", f * p), ("crc32", ctypes.c_uint32),
         ]
 
     return GlGains

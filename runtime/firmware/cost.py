@@ -88,7 +88,8 @@ def law_macs(artifact: Artifact) -> int:
 
 
 def implemented_macs(artifact: Artifact) -> int:
-    """Multiply-accumulates the firmware's step performs (coefficient stream minus the 2 m limits)."""
+    """Multiply-accumulates the firmware's step performs (coefficient stream minus the 2 m limits and the
+    m + p operating-point offsets, which are subtractions)."""
     a = artifact
     n, m, p, q = a.n, a.m, a.p, a.q
     vrow = n + (p if a.observer_form == "current" else 0) + q

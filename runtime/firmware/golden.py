@@ -51,8 +51,12 @@ def _signals(rng: np.random.Generator, *, N: int, width: int, scale: float) -> n
 
 
 def random_spec(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_windup: str, feedthrough: bool,
-                u_limit: np.ndarray | None = None) -> dict:
-    """A random discrete plant spec (a few unstable modes) with LQR(I) + Kalman design choices."""
+                u_limit: np.ndarray | None = None, operating_point: dict | None = None) -> dict:
+    """A random discrete plant spec (a few unstable modes) with LQR(I) + Kalman design choices.
+
+    With ``operating_point`` (``{"u_op": [...], "y_op": [...]}``) the plant is about that point and the
+    limits are ``u_op -+ u_limit``.
+    """
     rng = np.random.default_rng(seed)
     Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
     radii = rng.uniform(0.5, 1.08, size=n)
@@ -61,14 +65,17 @@ def random_spec(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_wi
     C = rng.standard_normal((p, n))
     D = 0.1 * rng.standard_normal((p, m)) if feedthrough else np.zeros((p, m))
     limit = np.full(m, 1e6) if u_limit is None else np.asarray(u_limit)
+    centre = np.zeros(m) if operating_point is None else np.asarray(operating_point["u_op"], dtype=float)
     spec = {
         "name": f"rand{seed}",
         "Ts": 0.01,
         "plant": {"kind": "discrete", "A": A.tolist(), "B": B.tolist(), "C": C.tolist(), "D": D.tolist()},
         "controller": {"method": "lqr", "Q_diag": [1.0] * n, "R_diag": [1.0] * m},
         "observer": {"method": "kalman", "form": form, "W_diag": [1e-2] * n, "V_diag": [1e-2] * p},
-        "limits": {"u_min": (-limit).tolist(), "u_max": limit.tolist(), "anti_windup": anti_windup},
+        "limits": {"u_min": (centre - limit).tolist(), "u_max": (centre + limit).tolist(), "anti_windup": anti_windup},
     }
+    if operating_point is not None:
+        spec["operating_point"] = {k: list(map(float, v)) for k, v in operating_point.items()}
     if q > 0:
         spec["integral"] = {"outputs": sorted(rng.choice(p, size=q, replace=False).tolist()), "Q_diag": [0.5] * q}
     return spec
@@ -78,11 +85,21 @@ def _design(spec: dict) -> Artifact:
     return from_dict(design(parse_spec(spec)).artifact)
 
 
-def random_case(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_windup: str, N: int = 400) -> GoldenCase:
+def random_operating_point(seed: int, *, m: int, p: int) -> dict:
+    """A non-zero operating point drawn from ``seed``: entries of a few units, each sign."""
+    rng = np.random.default_rng(seed + 20_000)
+    return {"u_op": rng.uniform(-4.0, 4.0, size=m).tolist(), "y_op": rng.uniform(-6.0, 6.0, size=p).tolist()}
+
+
+def random_case(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_windup: str, N: int = 400,
+                operating_point: bool = False) -> GoldenCase:
     """A random stabilizable design whose inputs saturate on part of the golden samples.
 
     The plant is designed once with wide limits to see the size of the command, then again with
-    limits at 60 % of the largest unsaturated command, so the replay visits both regimes.
+    limits at 60 % of the largest unsaturated command, so the replay visits both regimes. With
+    ``operating_point`` the plant is about a random non-zero point (:func:`random_operating_point`), the
+    limits are centred on ``u_op`` and the samples are absolute: ``y_op`` plus the same signals, and
+    references ``Ci y_op`` plus the same signals.
     """
     feedthrough = form == "predictor" and seed % 2 == 0
     kw = dict(n=n, m=m, p=p, q=q, form=form, anti_windup=anti_windup, feedthrough=feedthrough)
@@ -92,14 +109,17 @@ def random_case(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_wi
     R = _signals(rng, N=N, width=q, scale=1.0) if q else np.zeros((N, 0))
     free = ReferenceLoop(wide).run(Y, R)
     limit = 0.6 * np.max(np.abs(free.u), axis=0) + 1e-3
-    art = _design(random_spec(seed, u_limit=limit, **kw))
-    label = f"rand{seed}-n{n}m{m}p{p}q{q}-{form}-{anti_windup}"
+    op = random_operating_point(seed, m=m, p=p) if operating_point else None
+    art = _design(random_spec(seed, u_limit=limit, operating_point=op, **kw))
+    Y, R = Y + art.y_op, R + art.r_op
+    label = f"rand{seed}-n{n}m{m}p{p}q{q}-{form}-{anti_windup}" + ("-op" if operating_point else "")
     return GoldenCase(label=label, artifact=art, Y=Y, R=R, expected=ReferenceLoop(art).run(Y, R))
 
 
 def random_cases(count: int = 30, *, first_seed: int = 1, N: int = 400) -> tuple[GoldenCase, ...]:
     """``count`` random designs covering n up to 12, m and p up to 4, q = 0 or more, both forms, every
-    anti-windup mode (cycled so every combination of form and mode appears). Cached per arguments."""
+    anti-windup mode (cycled so every combination of form and mode appears), every second block of six
+    about a non-zero operating point. Cached per arguments."""
     return _random_cases(count, first_seed, N)
 
 
@@ -119,7 +139,8 @@ def _random_cases(count: int, first_seed: int, N: int) -> tuple[GoldenCase, ...]
         if q == 0 and aw != "none":
             q = 1 if min(m, p) >= 1 else 0
         try:
-            case = random_case(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=aw, N=N)
+            case = random_case(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=aw, N=N,
+                               operating_point=(i // len(combos)) % 2 == 1)
         except (DesignError, SpecError):
             case = None  # an unlucky draw (e.g. a plant zero at z = 1 with integral action)
         if case is not None and bounded(case):
@@ -178,7 +199,8 @@ def write_index(cases: list[GoldenCase] | tuple[GoldenCase, ...], out_dir: Path)
     index = [
         {"label": c.label, "sha256": c.artifact.sha256, "n": c.artifact.n, "m": c.artifact.m, "p": c.artifact.p,
          "q": c.artifact.q, "observer_form": c.artifact.observer_form, "anti_windup": c.artifact.anti_windup,
-         "steps": int(c.Y.shape[0]), "saturated_steps": int(c.expected.saturated.any(axis=1).sum())}
+         "steps": int(c.Y.shape[0]), "saturated_steps": int(c.expected.saturated.any(axis=1).sum()),
+         "operating_point": c.artifact.has_operating_point}
         for c in cases
     ]
     path = out_dir / "index.json"

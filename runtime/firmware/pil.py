@@ -47,7 +47,8 @@ class DiscretePlant(ABC):
 
 
 class ArtifactPlant(DiscretePlant):
-    """The artifact's own discrete model ``x+ = Ad x + Bd u``, ``y = Cd x + Dd u_prev``.
+    """The artifact's own discrete model about its operating point, with absolute signals:
+    ``x+ = Ad x + Bd (u - u_op)``, ``y = y_op + Cd x + Dd (u_prev - u_op)`` (``x`` a deviation).
 
     The feed-through acts on the previous command: the controller computes ``u`` from ``y``, so ``y``
     cannot depend on the same sample's ``u`` without an algebraic loop.
@@ -56,14 +57,14 @@ class ArtifactPlant(DiscretePlant):
     def __init__(self, artifact: Artifact, *, x0: np.ndarray) -> None:
         self.a = artifact
         self.x = np.asarray(x0, dtype=float).reshape(artifact.n).copy()
-        self.u_prev = np.zeros(artifact.m)
+        self.du_prev = np.zeros(artifact.m)
 
     def outputs(self) -> np.ndarray:
-        return self.a.Cd @ self.x + self.a.Dd @ self.u_prev
+        return self.a.y_op + self.a.Cd @ self.x + self.a.Dd @ self.du_prev
 
     def advance(self, *, u: np.ndarray) -> None:
-        self.x = self.a.Ad @ self.x + self.a.Bd @ u
-        self.u_prev = np.asarray(u, dtype=float).copy()
+        self.du_prev = np.asarray(u, dtype=float) - self.a.u_op
+        self.x = self.a.Ad @ self.x + self.a.Bd @ self.du_prev
 
     @property
     def state(self) -> np.ndarray:
@@ -158,7 +159,8 @@ def run_pil(
     steps : int
         Number of samples.
     reference : ndarray, optional
-        (q,) constant reference or (steps, q) sequence; zero by default.
+        (q,) constant absolute reference or (steps, q) sequence; by default the tracked outputs at the
+        operating point (``Artifact.r_op``, zero without one).
     board : str
         QEMU machine (``mps2-an386`` or ``netduinoplus2``).
     deadline_s : float
@@ -171,7 +173,7 @@ def run_pil(
     a = artifact
     if steps < 1:
         raise PlantError("--steps must be at least 1")
-    R = np.zeros((steps, a.q)) if reference is None else np.broadcast_to(np.asarray(reference, float), (steps, a.q))
+    R = np.broadcast_to(a.r_op if reference is None else np.asarray(reference, float), (steps, a.q))
     elf = build(a, target="cortex-m4", board=board).files["elf"]
     din, dout = fwqemu.record_dtypes(n=a.n, m=a.m, p=a.p, q=a.q)
     Y = np.zeros((steps, a.p))
@@ -231,7 +233,7 @@ def reference_closed_loop(artifact: Artifact, *, plant: DiscretePlant, steps: in
                           reference: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The same closed loop with the float64 reference law in place of the firmware: (Y, U)."""
     a = artifact
-    R = np.zeros((steps, a.q)) if reference is None else np.broadcast_to(np.asarray(reference, float), (steps, a.q))
+    R = np.broadcast_to(a.r_op if reference is None else np.asarray(reference, float), (steps, a.q))
     law = ReferenceLoop(a)
     Y = np.zeros((steps, a.p))
     U = np.zeros((steps, a.m))

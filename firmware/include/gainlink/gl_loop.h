@@ -2,18 +2,27 @@
  * @file gl_loop.h
  * @brief gainlink control loop: the DESIGN.md law in float32, double-buffered gains, watchdog.
  *
- * The law (predictor form; the current-estimator form is folded into the same step, see below):
+ * The law (DESIGN.md, "The control law"; predictor form, the current-estimator form is folded into the same
+ * step, see below). Samples y, references r, limits and commands are absolute; the estimate xh is a deviation
+ * from the operating point (u_op, y_op), all zero for a plant specified about the origin:
  * @code
- *   v  = -K xh - Ki z                      (current form: -K xc - Ki z, xc = xh + M (y - Cd xh))
+ *   dy = y - y_op
+ *   v  = u_op - K xh - Ki z                (current form: - K xc, xc = xh + M (dy - Cd xh))
  *   u  = clamp(v, u_min, u_max)
  *   z += Ts (r - Ci y)            [+ Kaw (u - v) for back-calculation; skipped on saturation for clamp]
- *   xh = Ad xh + Bd u + L (y - Cd xh - Dd u)     (always fed the saturated u)
+ *   du = u - u_op
+ *   xh = Ad xh + Bd du + L (dy - Cd xh - Dd du)     (always fed the saturated u)
  * @endcode
  * The library evaluates it as
  * @code
- *   v  = -(Kx xh + Ky y + Ki z)      Kx = K (I - M Cd), Ky = K M   (predictor: Kx = K, no Ky term)
- *   xh = F xh + G u + L y            F = Ad - L Cd,  G = Bd - L Dd (current: L = Ad M, Dd = 0)
+ *   dy = y - y_op
+ *   v  = u_op + dv,  dv = -Kx xh - Ky dy - Ki z    Kx = K (I - M Cd), Ky = K M  (predictor: Kx = K, no Ky)
+ *   du = clamp(v, u_min, u_max) - u_op
+ *   xh = F xh + G du + L dy          F = Ad - L Cd,  G = Bd - L Dd (current: L = Ad M, Dd = 0)
  * @endcode
+ * The offsets are subtracted from the samples before any gain multiplies them, and the feedback sum is
+ * formed in deviations before u_op is added once: float32 rounding then scales with the deviations, not
+ * with the (possibly large) operating point, and no large constants are formed that would cancel.
  * with F, G, Kx, Ky derived in double precision from the artifact's matrices each time a gain set
  * is accepted (gl_loop_init() or a staged update), so the per-sample step is only multiply-adds.
  * Every multiply-add is an explicit fused `fmaf`, so a host (x86-64, SSE) build and the Cortex-M4F
@@ -55,7 +64,7 @@
  * lower-priority context than gl_loop_step(); only one update can be pending (else GL_ERR_BUSY).
  *
  * @par Faults and watchdog
- * A non-finite y or r leaves xh and z untouched, returns the safe command (zero clamped into
+ * A non-finite y or r leaves xh and z untouched, returns the safe command (u_op clamped into
  * [u_min, u_max]) and GL_ERR_NANINF. Call gl_loop_idle() in a period with no new measurement: it holds
  * the last command, and after `watchdog_periods` consecutive idle periods returns the safe command and
  * GL_ERR_WATCHDOG until the next gl_loop_step().
@@ -110,7 +119,8 @@ typedef enum gl_status {
  * @brief One complete gain set, as in the artifact (float32). May live in flash (const).
  *
  * Matrices are row-major `[rows][cols]`. Integrator-sized arrays have GL_QA rows/cols and are all zero
- * when GL_Q == 0. `M` is all zero in the predictor form. `crc32` covers every other field, serialised
+ * when GL_Q == 0. `M` is all zero in the predictor form. `u_op`, `y_op` are zero for a plant about the
+ * origin (an artifact without an operating point). `crc32` covers every other field, serialised
  * as little-endian: n, m, p, q, observer_form, anti_windup as uint32, then every float in declaration
  * order (see gl_gains_crc32()).
  */
@@ -136,17 +146,19 @@ typedef struct gl_gains {
     float u_max[GL_M];         /**< Upper command limits. */
     float xh0[GL_N];           /**< Initial estimate (gl_loop_reset()). */
     float z0[GL_QA];           /**< Initial integrator (gl_loop_reset()). */
+    float u_op[GL_M];          /**< Operating point: absolute command there. */
+    float y_op[GL_P];          /**< Operating point: absolute measurement there. */
     uint32_t crc32;            /**< CRC-32 (IEEE 802.3, as zlib.crc32) of the payload. */
 } gl_gains_t;
 
-/** Coefficients per command row of the stream: Kx (n), Ky (p, current form), Ki (q), u_min, u_max. */
-#define GL_VROW (GL_N + ((GL_OBSERVER_FORM) == GL_FORM_CURRENT ? GL_P : 0) + GL_Q + 2)
+/** Coefficients per command row of the stream: u_op, Kx (n), Ky (p, current form), Ki (q), u_min, u_max. */
+#define GL_VROW (1 + GL_N + ((GL_OBSERVER_FORM) == GL_FORM_CURRENT ? GL_P : 0) + GL_Q + 2)
 /** Coefficients per integrator row of the stream: -Ci (p), Ts, Kaw (m, back-calculation only). */
 #define GL_ZROW (GL_P + 1 + ((GL_ANTI_WINDUP) == GL_AW_BACKCALC ? GL_M : 0))
 /** Coefficients per estimate row of the stream: F (n), G (m), L (p). */
 #define GL_XROW (GL_N + GL_M + GL_P)
 /** Length of the coefficient stream the step consumes. */
-#define GL_STREAM_LEN (GL_M * GL_VROW + GL_Q * GL_ZROW + GL_N * GL_XROW)
+#define GL_STREAM_LEN (GL_P + GL_M * GL_VROW + GL_Q * GL_ZROW + GL_N * GL_XROW)
 /** Stream storage, rounded up to whole 16-float chunks (the Cortex-M step loads up to 16 at a time). */
 #define GL_STREAM_ALLOC ((((GL_STREAM_LEN) + 15) / 16) * 16)
 
@@ -156,14 +168,15 @@ typedef struct gl_gains {
  * `w` holds every coefficient in the exact order gl_loop_step() consumes them, so the step reads
  * it front to back (on the Cortex-M4F up to 16 at a time with `vldmia`):
  * @code
- *   for i < m:  -Kx[i][0..n)  -Ky[i][0..p) (current form)  -Ki[i][0..q)  u_min[i]  u_max[i]
+ *   y_op[0..p)
+ *   for i < m:  u_op[i]  -Kx[i][0..n)  -Ky[i][0..p) (current form)  -Ki[i][0..q)  u_min[i]  u_max[i]
  *   for j < q:  -Ci[j][0..p)  Ts  Kaw[j][0..m) (back-calculation)
  *   for i < n:  F[i][0..n)  G[i][0..m)  L[i][0..p)
  * @endcode
  */
 typedef struct gl_coeffs {
     float w[GL_STREAM_ALLOC]; /**< The coefficient stream (zero padded). */
-    float u_safe[GL_M];       /**< Zero clamped into the limits. */
+    float u_safe[GL_M];       /**< The safe command: u_op clamped into the limits. */
     float xh0[GL_N];          /**< Reset estimate. */
     float z0[GL_QA];          /**< Reset integrator. */
     uint32_t crc32;           /**< Checksum of the gain set these were derived from. */
@@ -197,7 +210,7 @@ extern const gl_gains_t gl_gains_default;
 gl_status_t gl_loop_init(gl_loop_t *loop, const gl_gains_t *gains, uint32_t watchdog_periods);
 
 /**
- * @brief Put xh and z back to the active set's xh0, z0; clear the watchdog and the last command.
+ * @brief Put xh and z back to the active set's xh0, z0; clear the watchdog; the last command becomes the safe one.
  * @param[in,out] loop  Loop instance.
  * @return GL_OK or GL_ERR_NULL.
  */
@@ -206,8 +219,8 @@ gl_status_t gl_loop_reset(gl_loop_t *loop);
 /**
  * @brief One sample of the control law.
  * @param[in,out] loop  Loop instance (a pending gain set is applied first).
- * @param[in]  y        Measurement, GL_P values.
- * @param[in]  r        Reference, GL_Q values (may be NULL when GL_Q == 0).
+ * @param[in]  y        Absolute measurement, GL_P values.
+ * @param[in]  r        Absolute reference of the tracked outputs, GL_Q values (may be NULL when GL_Q == 0).
  * @param[out] u        Command, GL_M values.
  * @return GL_OK, GL_SATURATED (see loop->sat_mask), GL_ERR_NANINF (state untouched, u = safe command)
  *         or GL_ERR_NULL.
