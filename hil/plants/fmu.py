@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import shutil
 import zipfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -99,6 +100,103 @@ def read_description(path: Path) -> Any:
         raise PlantError(f"FMU {path}: cannot read modelDescription.xml from the {kind} ({exc})") from None
 
 
+_INT_TYPES = ("Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Enumeration")
+
+
+@dataclass(frozen=True)
+class VariableMap:
+    """The FMU variables a plant uses: inputs, outputs and states (Real/Float64), parameters (any number type)."""
+
+    vars: dict
+    real_type: str
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    states: tuple[str, ...]
+    parameters: dict
+
+
+def _check_real(md: Any, vars_: dict, names: list[str], *, what: str, real_type: str) -> None:
+    model = md.modelName
+    for n in names:
+        v = vars_.get(n)
+        if v is None:
+            raise PlantError(f"FMU {model} has no variable named {n!r} (for {what})")
+        if v.type != real_type:
+            raise PlantError(f"FMU {model}: variable {n!r} is {v.type}, but {what} must be {real_type} variables")
+
+
+def map_variables(md: Any, *, inputs: Any = None, outputs: Any = None, states: Any = None,
+                  parameters: Mapping[str, Any] | None = None) -> VariableMap:
+    """Check a plant's variable mapping against the model description; one :class:`PlantError` line when
+    a name is unknown, a variable has the wrong type or causality, or the plant would have no input or output.
+
+    Inputs must be ``causality="input"`` variables; outputs and states any Real (Float64) variable; by
+    default the declared inputs/outputs and the continuous states (ModelStructure/Derivatives).
+    """
+    real_type = "Float64" if md.fmiVersion == "3.0" else "Real"
+    vars_ = {v.name: v for v in md.modelVariables}
+    for what, names in (("inputs", inputs), ("outputs", outputs), ("states", states)):
+        if names is not None and (not isinstance(names, (list, tuple)) or not all(isinstance(n, str) for n in names)):
+            raise PlantError(f"plant fmu: {what} must be a list of variable names")
+    declared = lambda c: [v.name for v in md.modelVariables if v.causality == c and v.type == real_type]  # noqa: E731
+    in_names = list(inputs) if inputs is not None else declared("input")
+    out_names = list(outputs) if outputs is not None else declared("output")
+    if not in_names:
+        raise PlantError(f"FMU {md.modelName} has no {real_type} input to drive (declare one, or map inputs = [...])")
+    if not out_names:
+        raise PlantError(f"FMU {md.modelName} has no {real_type} output to sample (map outputs = [...])")
+    _check_real(md, vars_, in_names, what="inputs", real_type=real_type)
+    _check_real(md, vars_, out_names, what="outputs", real_type=real_type)
+    not_inputs = [n for n in in_names if vars_[n].causality != "input"]
+    if not_inputs:
+        raise PlantError(f"FMU {md.modelName}: {', '.join(not_inputs)} is not an input (causality "
+                         f"{vars_[not_inputs[0]].causality}); set it through parameters")
+    if states is None:
+        states = [d.variable.derivative.name for d in md.derivatives] if md.derivatives else out_names
+    _check_real(md, vars_, list(states), what="states", real_type=real_type)
+    params = {}
+    for key, value in (parameters or {}).items():
+        v = vars_.get(key)
+        if v is None:
+            raise PlantError(f"FMU {md.modelName} has no variable {key!r} to set")
+        params[key] = _typed_value(md, v, value)
+    return VariableMap(vars=vars_, real_type=real_type, inputs=tuple(in_names), outputs=tuple(out_names),
+                       states=tuple(states), parameters=params)
+
+
+def _typed_value(md: Any, v: Any, value: Any) -> Any:
+    """``value`` as the variable's type (a bool for Boolean, an int for Integer), or one PlantError line."""
+    ok_number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if v.type == "Boolean":
+        if isinstance(value, bool):
+            return value
+    elif v.type in _INT_TYPES:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+    elif v.type in ("Real", "Float64", "Float32"):
+        if ok_number:
+            return float(value)
+    else:
+        raise PlantError(f"FMU {md.modelName}: variable {v.name!r} is {v.type}; the bridge sets numbers and booleans")
+    raise PlantError(f"FMU {md.modelName}: variable {v.name!r} is {v.type}; {value!r} is not a value of that type")
+
+
+def set_values(fmu: Any, md: Any, values: Mapping[str, Any], *, vars_: dict) -> None:
+    """Set typed values (:func:`_typed_value`) through the matching fmpy setter, grouped by type."""
+    v3 = md.fmiVersion == "3.0"
+    groups: dict[str, tuple[list[int], list[Any]]] = {}
+    for key, value in values.items():
+        t = vars_[key].type
+        kind = "bool" if t == "Boolean" else "int" if t in _INT_TYPES else "real"
+        refs, vals = groups.setdefault(kind, ([], []))
+        refs.append(vars_[key].valueReference)
+        vals.append(value)
+    setters = {"real": fmu.setFloat64 if v3 else fmu.setReal, "int": fmu.setInt32 if v3 else fmu.setInteger,
+               "bool": fmu.setBoolean}
+    for kind, (refs, vals) in groups.items():
+        setters[kind](refs, vals)
+
+
 class FmuPlant(Plant):
     """A Co-Simulation FMU as a plant.
 
@@ -137,36 +235,17 @@ class FmuPlant(Plant):
             self._flags = [fmi3Boolean() for _ in range(3)]
             self._last_time = Real()
             self._step_refs = tuple(byref(f) for f in self._flags) + (byref(self._last_time),)
-            real_type = "Float64"
         else:
             from fmpy.fmi2 import FMU2Slave as Slave
             from fmpy.fmi2 import fmi2Real as Real, fmi2ValueReference as ValueReference
 
-            real_type = "Real"
         if md.coSimulation is None:
-            raise PlantError(f"FMU {self.path} has no Co-Simulation interface (only Model Exchange); "
-                             "the bridge needs Co-Simulation")
-        self.vars = {v.name: v for v in md.modelVariables}
-        self.real_type = real_type
-        real = {n for n, v in self.vars.items() if v.type == real_type}
-        declared_in = [v.name for v in md.modelVariables if v.causality == "input" and v.type == real_type]
-        declared_out = [v.name for v in md.modelVariables if v.causality == "output" and v.type == real_type]
-        in_names = list(inputs) if inputs is not None else declared_in
-        out_names = list(outputs) if outputs is not None else declared_out
-        for what, names in (("input", in_names), ("output", out_names)):
-            bad = [n for n in names if n not in real]
-            if bad:
-                raise PlantError(f"FMU {md.modelName} has no {real_type} variable named {', '.join(bad)} (for {what}s)")
-        if states is None:
-            if md.derivatives:
-                states = [d.variable.derivative.name for d in md.derivatives]
-            else:
-                states = out_names
-        self.input_names, self.output_names, self.state_names = tuple(in_names), tuple(out_names), tuple(states)
-        self.parameters = dict(parameters or {})
-        for key in self.parameters:
-            if key not in real:
-                raise PlantError(f"FMU {md.modelName} has no {real_type} variable {key!r} to set")
+            raise PlantError(f"FMU {self.path} has no Co-Simulation interface (FmuModelExchangePlant runs it)")
+        mapping = map_variables(md, inputs=inputs, outputs=outputs, states=states, parameters=parameters)
+        self.vars, self.real_type = mapping.vars, mapping.real_type
+        in_names, out_names, states = mapping.inputs, mapping.outputs, mapping.states
+        self.input_names, self.output_names, self.state_names = in_names, out_names, states
+        self.parameters = mapping.parameters
         self.can_snapshot = bool(md.coSimulation.canGetAndSetFMUstate)
         self._unzip = extract(str(self.path)) if self.path.is_file() else str(self.path)
         self._own_unzip = self.path.is_file()
@@ -201,9 +280,9 @@ class FmuPlant(Plant):
         self._messages.clear()
         return reason
 
-    def _call(self, what: str, fn: Any, *args: Any) -> Any:
+    def _call(self, what: str, fn: Any, *args: Any, **kwargs: Any) -> Any:
         try:
-            return fn(*args)
+            return fn(*args, **kwargs)
         except Exception as exc:
             raise PlantError(f"FMU {self.md.modelName}: {what} failed ({self._reason(exc)})") from None
 
@@ -230,8 +309,7 @@ class FmuPlant(Plant):
                                  "initial state")
             values[key] = float(value)
         if values:
-            setter = fmu.setFloat64 if self.v3 else fmu.setReal
-            self._call("set", setter, [self.vars[k].valueReference for k in values], list(values.values()))
+            self._call("set", set_values, fmu, self.md, values, vars_=self.vars)
         self._call("exitInitializationMode", fmu.exitInitializationMode)
         if self.v3:
             self._call("enterStepMode", fmu.fmi3EnterStepMode, fmu.component)
@@ -299,8 +377,24 @@ class FmuPlant(Plant):
 
 @PLANTS.register("fmu")
 def _fmu_factory(config: Mapping[str, Any], *, base_dir: Path | None = None, **_context: Any) -> Plant:
-    cfg = take_keys(config, allowed={"kind", "fmu", "path", "inputs", "outputs", "parameters", "states"},
-                    where="plant fmu", error=PlantError)
+    cfg = take_keys(config, allowed={"kind", "fmu", "path", "inputs", "outputs", "parameters", "states", "interface",
+                                     "rtol", "max_step"}, where="plant fmu", error=PlantError)
     path = resolve_fmu(fmu=cfg.get("fmu"), path=cfg.get("path"), base_dir=base_dir)
-    return FmuPlant(path=path, inputs=cfg.get("inputs"), outputs=cfg.get("outputs"),
-                    parameters=cfg.get("parameters"), states=cfg.get("states"))
+    interface = cfg.get("interface", "auto")
+    if interface not in ("auto", "cs", "me"):
+        raise PlantError(f"plant fmu: interface must be auto, cs or me, not {interface!r}")
+    md = read_description(path)
+    if interface == "auto":
+        interface = "cs" if md.coSimulation is not None else "me"
+    common = dict(path=path, inputs=cfg.get("inputs"), outputs=cfg.get("outputs"),
+                  parameters=cfg.get("parameters"), states=cfg.get("states"))
+    if interface == "me":
+        from .fmu_me import FmuModelExchangePlant
+
+        solver = {k: float(cfg[k]) for k in ("rtol", "max_step") if k in cfg}
+        return FmuModelExchangePlant(**common, **solver)
+    if "rtol" in cfg or "max_step" in cfg:
+        raise PlantError("plant fmu: rtol and max_step set fmpy's solver, which runs only with interface = \"me\"")
+    if md.coSimulation is None:
+        raise PlantError(f"FMU {path} has no Co-Simulation interface (interface = \"me\" runs its Model Exchange)")
+    return FmuPlant(**common)
