@@ -12,3 +12,68 @@ Sub-packages, by part:
 Entry points: ``gainlink hil run|dbc|fmu|study``, ``gainlink linearize``, ``gainlink firmware run --can``.
 The vehicle-side MAVLink parameter upload is :mod:`gainlink.mavlink`.
 """
+
+from __future__ import annotations
+
+
+from pathlib import Path
+from typing import Any, Callable
+
+
+def run(scenario: Any, *, artifact: Any = None, report: str | Path | None = None, plots: bool = True,
+        progress: Callable[[int, int], None] | None = None) -> Any:
+    """Run one HIL scenario: plant on this side, the controller (firmware) on the other, and return the result.
+
+    Parameters
+    ----------
+    scenario : str, Path, dict or Scenario
+        A scenario file, the name of a built-in scenario (``pendulum_fmu``), a scenario as a dict
+        (the parsed TOML; relative paths are taken from the working directory) or a parsed Scenario.
+    artifact : str, Path or Artifact, optional
+        Replaces the scenario's artifact (an Artifact object is written to a temporary file for
+        the controller process).
+    report : str or Path, optional
+        Also write the report folder there (report.json, plots, summary).
+    plots : bool
+        With ``report``: draw the PNG plots too.
+    progress : callable, optional
+        ``progress(done, total)``, called every few hundred steps.
+
+    Returns
+    -------
+    RunResult
+        ``metrics`` (as in report.json), ``trace`` (numpy arrays per step), ``complete`` and ``reason``.
+
+    Examples
+    --------
+    >>> import gainlink as gl
+    >>> res = gl.hil.run("pendulum_fmu", artifact="out/pendulum/gains.json")  # doctest: +SKIP
+    >>> res.complete, res.trace.y.shape  # doctest: +SKIP
+    (True, (1000, 2))
+    """
+    import dataclasses
+    import tempfile
+
+    from gainlink.artifact import Artifact, load
+
+    from .run.bridge import run_scenario
+    from .run.report import write_report
+    from .run.scenario import Scenario, load_scenario, parse_scenario, resolve_scenario_path
+
+    if isinstance(scenario, Scenario):
+        sc = scenario
+    elif isinstance(scenario, dict):
+        sc = parse_scenario(scenario)
+    else:
+        sc = load_scenario(resolve_scenario_path(str(scenario)))
+    with tempfile.TemporaryDirectory(prefix="gainlink-run-") as tmp:
+        if isinstance(artifact, Artifact):
+            path = Path(tmp) / "gains.json"
+            artifact.save(path)
+            sc = dataclasses.replace(sc, artifact_path=path)
+        elif artifact is not None:
+            sc = dataclasses.replace(sc, artifact_path=Path(artifact))
+        result = run_scenario(sc, progress=progress)
+        if report is not None:
+            write_report(result, Path(report), artifact=load(sc.artifact_path), with_plots=plots)
+    return result

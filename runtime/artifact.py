@@ -127,6 +127,46 @@ class Artifact:
         """True when ``u_op`` or ``y_op`` has a non-zero entry."""
         return bool(np.any(self.u_op != 0.0) or np.any(self.y_op != 0.0))
 
+    @property
+    def provenance(self) -> dict:
+        """Versions that computed the gains, the spec's sha256, and whether the gains were given."""
+        return self.data["provenance"]
+
+    @property
+    def checks(self) -> dict:
+        """What design checked: closed-loop poles, spectral radius, margins (and more, per version)."""
+        return self.data["checks"]
+
+    @classmethod
+    def load(cls, path: str | Path, *, check_hash: bool = True) -> "Artifact":
+        """Read and check ``gains.json`` (schema, sha256, dimensions, invariants); see :func:`load`."""
+        return load(path, check_hash=check_hash)
+
+    def save(self, path: str | Path) -> None:
+        """Write the artifact to ``path`` atomically (canonical JSON, readable by everyone).
+
+        The example of :func:`gainlink.load` saves and loads one.
+        """
+        atomic_write_text(path, render(self.data))
+
+    def controller(self) -> Any:
+        """The unsaturated law as a discrete ``control.StateSpace`` from ``(y, r)`` to ``u``.
+
+        Signals are named after the artifact's outputs, references and inputs and are deviations
+        from the operating point; the sign is included (``u = C(z) [y; r]``), so the loop broken at
+        a plant input is ``-controller()[u, y] * plant``. See :mod:`gainlink.systems`.
+        """
+        from .systems import controller_system
+
+        return controller_system(self)
+
+    def closed_loop(self) -> Any:
+        """Design plant + unsaturated law as a discrete ``control.StateSpace``: inputs the references
+        and a disturbance ``d_<input>`` added at each plant input, outputs the plant outputs and commands."""
+        from .systems import closed_loop_system
+
+        return closed_loop_system(self)
+
 
 def _matrix(data: dict, key: str, shape: tuple[int, int]) -> np.ndarray:
     rows = data[key]

@@ -198,33 +198,40 @@ def closed_loop_matrix(d: Discretised, *, K, Ki, L, M, Ci, Ts: float, form: str,
                        break_input: int | None = None) -> np.ndarray | tuple:
     """State matrix of plant + observer + controller on the state ``[x; xh; z]`` (linear, r = 0).
 
-    With ``break_input = i`` returns ``(A, B, C)`` of the loop broken at plant input i: input
-    ``w`` drives plant input i, output is the controller's command for input i.
+    With ``break_input = i`` returns ``(A, B, C)`` of the loop broken at plant input i, where an
+    actuator would change it: input ``w`` drives plant input i, output is the controller's command
+    for input i, and the observer keeps being fed the controller's own command (as the C loop is:
+    it never sees the actuator). Margins of that loop are margins against actuator gain and phase.
     """
     n, m = d.Bd.shape
     q = Ci.shape[0]
     Ad, Bd, Cd, Dd = d.Ad, d.Bd, d.Cd, d.Dd
     if form == "current":
-        # xc = xh + M (Cd x - Cd xh); v = -K xc - Ki z; xh+ = Ad xc + Bd u
+        # xc = xh + M (Cd x - Cd xh); v = -K xc - Ki z; xh+ = Ad xc + Bd v
         V = np.hstack([-K @ M @ Cd, -K @ (np.eye(n) - M @ Cd), -Ki])
         Lx, Ah = Ad @ M @ Cd, Ad @ (np.eye(n) - M @ Cd)
+        obs_sees_plant_input = np.zeros((n, m))  # Dd = 0 in the current form
+        obs_own = Bd
     else:
-        # v = -K xh - Ki z; xh+ = (Ad - L Cd) xh + Bd u + L Cd x  (the Dd u terms cancel)
+        # v = -K xh - Ki z; xh+ = (Ad - L Cd) xh + L Cd x + (Bd - L Dd) v + L Dd u_plant
         V = np.hstack([np.zeros((m, n)), -K, -Ki])
         Lx, Ah = L @ Cd, Ad - L @ Cd
+        obs_sees_plant_input = L @ Dd
+        obs_own = Bd - L @ Dd
     A0 = np.block([
         [Ad, np.zeros((n, n)), np.zeros((n, q))],
         [Lx, Ah, np.zeros((n, q))],
         [-Ts * Ci @ Cd, np.zeros((q, n)), np.eye(q)],
     ])
-    Bu = np.vstack([Bd, Bd, -Ts * Ci @ Dd])
+    B_plant = np.vstack([Bd, obs_sees_plant_input, -Ts * Ci @ Dd])  # what the plant's input drives
+    B_own = np.vstack([np.zeros((n, m)), obs_own, np.zeros((q, m))])  # the observer's copy of the command
     if break_input is None:
-        return A0 + Bu @ V
+        return A0 + (B_plant + B_own) @ V
     S = np.eye(m)
     S[break_input, break_input] = 0.0
     e = np.zeros((m, 1))
     e[break_input] = 1.0
-    return A0 + Bu @ S @ V, Bu @ e, V[break_input:break_input + 1, :]
+    return A0 + B_plant @ S @ V + B_own @ V, B_plant @ e, V[break_input:break_input + 1, :]
 
 
 def check_separation(Acl: np.ndarray, A_ctrl: np.ndarray, A_obs: np.ndarray, rtol: float = 1e-9) -> None:
@@ -356,10 +363,13 @@ def provenance(spec: PlantSpec) -> dict:
         except metadata.PackageNotFoundError:
             return "absent"
 
+    given = [part for part, table in (("controller", spec.controller), ("observer", spec.observer))
+             if table.get("method") == "given"]
     return {
         "gainlink": __version__, "numpy": version("numpy"), "scipy": version("scipy"),
         "control": version("control"), "slycot": version("slycot"),
         "python": platform.python_version(), "spec_sha256": spec.source_sha256,
+        "gains": "given: " + ", ".join(given) if given else "designed",
     }
 
 
@@ -535,7 +545,38 @@ def _controller(spec: PlantSpec, Aa: np.ndarray, Ba: np.ndarray, warnings: list[
                 raise DesignError(f"pole placement failed: {str(exc).splitlines()[0]}") from None
         return np.real(np.asarray(K, complex)).astype(float), {
             "method": method, "poles": complex_pairs(poles), "augmented": bool(q)}
-    raise SpecError(f"controller.method must be lqr, place or ackermann, not {method!r}")
+    if method == "given":
+        return _given_controller(ctl, n=spec.n, m=m, q=q), {"method": "given", "augmented": bool(q)}
+    raise SpecError(f"controller.method must be lqr, place, ackermann or given, not {method!r}")
+
+
+def _given_matrix(table: dict, key: str, shape: tuple[int, int], where: str) -> np.ndarray:
+    """A user-given gain matrix of exactly ``shape`` (a 1-row or 1-column matrix may be given as a list)."""
+    if key not in table:
+        raise SpecError(f"{where}.method 'given' needs {key} ({shape[0]}x{shape[1]})")
+    raw = table[key]
+    if isinstance(raw, list) and raw and not any(isinstance(x, list) for x in raw) and 1 in shape:
+        value = as_vector(raw, f"{where}.{key}", shape[0] * shape[1]).reshape(shape)
+    else:
+        value = as_matrix(raw, f"{where}.{key}")
+    if value.shape != shape:
+        raise SpecError(f"{where}.{key} is {value.shape[0]}x{value.shape[1]}, expected {shape[0]}x{shape[1]}")
+    return value
+
+
+def _given_controller(ctl: dict, *, n: int, m: int, q: int) -> np.ndarray:
+    """``[K Ki]`` as the user gave them: discrete-time gains for the plant discretised at Ts."""
+    for key in ("Q", "Q_diag", "bryson_x_max", "bryson_y_max", "R", "R_diag", "bryson_u_max", "poles", "poles_z"):
+        if key in ctl:
+            raise SpecError(f"controller.{key} is a design setting; method 'given' takes K (and Ki) only")
+    K = _given_matrix(ctl, "K", (m, n), "controller")
+    if q:
+        Ki = _given_matrix(ctl, "Ki", (m, q), "controller")
+    elif "Ki" in ctl:
+        raise SpecError("controller.Ki is given but there is no [integral] table naming the tracked outputs")
+    else:
+        Ki = np.zeros((m, 0))
+    return np.hstack([K, Ki])
 
 
 def _observer(spec: PlantSpec, d: Discretised, warnings: list[str]):
@@ -583,9 +624,28 @@ def _observer(spec: PlantSpec, d: Discretised, warnings: list[str]):
                 raise DesignError("current-form Luenberger observer needs an invertible Ad")
             M = np.linalg.solve(d.Ad, L)
         record = {"method": "luenberger", "poles": complex_pairs(poles)}
+    elif method == "given":
+        L, M = _given_observer(obs, d, form=form)
+        record = {"method": "given"}
     else:
-        raise SpecError(f"observer.method must be kalman or luenberger, not {method!r}")
+        raise SpecError(f"observer.method must be kalman, luenberger or given, not {method!r}")
     return L, (M if form == "current" else None), record
+
+
+def _given_observer(obs: dict, d: Discretised, *, form: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """The user's observer gain: ``L`` (predictor form) or ``M`` (current form, ``L = Ad M``)."""
+    p, n = d.Cd.shape
+    for key in ("W", "W_diag", "V", "V_diag", "G", "poles", "poles_z"):
+        if key in obs:
+            raise SpecError(f"observer.{key} is a design setting; method 'given' takes L (or M) only")
+    if form == "current":
+        if "L" in obs:
+            raise SpecError("observer.form 'current' with method 'given' takes the filter gain M (L = Ad M follows)")
+        M = _given_matrix(obs, "M", (n, p), "observer")
+        return d.Ad @ M, M
+    if "M" in obs:
+        raise SpecError("observer.M is the current form's filter gain; the predictor form takes L")
+    return _given_matrix(obs, "L", (n, p), "observer"), None
 
 
 def _fmt_list(values) -> str:

@@ -28,11 +28,22 @@ def read_user_file(path: str | os.PathLike, *, what: str, error: type[GainlinkEr
         raise error(f"{what} {path} is not UTF-8 text") from None
 
 
+def _default_mode() -> int:
+    """The mode ``open()`` gives a new file: 0666 less the umask (mkstemp's 0600 would hide it from others)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename."""
+    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename.
+
+    The file gets the permissions a plain ``open()`` would give it (readable by others under the usual umask).
+    """
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        os.fchmod(fd, _default_mode())
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
         os.replace(tmp, path)

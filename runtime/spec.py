@@ -30,9 +30,10 @@ PLANT_KEYS = {
     "discrete": {"kind", "A", "B", "C", "D", "states", "inputs", "outputs"},
     "transfer_function": {"kind", "num", "den", "delay", "pade_order", "inputs", "outputs"},
 }
-CONTROLLER_KEYS = {"method", "Q", "Q_diag", "bryson_x_max", "bryson_y_max", "R", "R_diag", "bryson_u_max", "poles", "poles_z"}
+CONTROLLER_KEYS = {"method", "Q", "Q_diag", "bryson_x_max", "bryson_y_max", "R", "R_diag", "bryson_u_max", "poles", "poles_z",
+                   "K", "Ki"}
 INTEGRAL_KEYS = {"outputs", "Q_diag", "bryson_max", "aw_gain"}
-OBSERVER_KEYS = {"method", "form", "W", "W_diag", "V", "V_diag", "G", "poles", "poles_z"}
+OBSERVER_KEYS = {"method", "form", "W", "W_diag", "V", "V_diag", "G", "poles", "poles_z", "L", "M"}
 LIMITS_KEYS = {"u_min", "u_max", "anti_windup"}
 OPERATING_POINT_KEYS = {"u_op", "y_op", "x_op"}
 

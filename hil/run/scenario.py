@@ -243,6 +243,17 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
     )
 
 
+def resolve_scenario_path(name: str) -> Path:
+    """A scenario file, or the name of a built-in one (``gainlink.hil`` package ``scenarios/<name>.toml``)."""
+    path = Path(name)
+    if path.exists() or path.suffix or "/" in name:
+        return path
+    from importlib import resources
+
+    builtin = Path(str(resources.files("gainlink.hil").joinpath(f"scenarios/{name}.toml")))
+    return builtin if builtin.is_file() else path
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Read and check a scenario TOML file."""
     path = Path(path)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -22,35 +21,18 @@ def _progress_bar(enabled: bool):
                     TimeRemainingColumn(), transient=True)
 
 
-def _scenario_path(name: str) -> Path:
-    """A scenario file, or the name of a built-in one (``gainlink.hil`` package ``scenarios/<name>.toml``)."""
-    path = Path(name)
-    if path.exists() or path.suffix or "/" in name:
-        return path
-    from importlib import resources
-
-    builtin = Path(str(resources.files("gainlink.hil").joinpath(f"scenarios/{name}.toml")))
-    return builtin if builtin.is_file() else path
-
-
 def _run(args: argparse.Namespace) -> int:
-    from gainlink.artifact import load
-    from gainlink.hil.run.bridge import run_scenario
-    from gainlink.hil.run.report import summary_text, write_report
-    from gainlink.hil.run.scenario import load_scenario
+    from gainlink.hil import run
+    from gainlink.hil.run.report import summary_text
 
-    scenario = load_scenario(_scenario_path(args.scenario))
-    if args.artifact:
-        scenario = dataclasses.replace(scenario, artifact_path=Path(args.artifact))
+    report_dir = Path(args.report)
     with _progress_bar(not args.no_progress) as bar:
         callback = None
         if bar is not None:
-            task = bar.add_task(f"HIL {scenario.name}", total=None)
+            task = bar.add_task(f"HIL {args.scenario}", total=None)
             callback = lambda done, total: bar.update(task, completed=done, total=total)  # noqa: E731
-        result = run_scenario(scenario, progress=callback)
-    artifact = load(scenario.artifact_path)
-    report_dir = Path(args.report)
-    write_report(result, report_dir, artifact=artifact, with_plots=not args.no_plots)
+        result = run(args.scenario, artifact=args.artifact, report=report_dir, progress=callback,
+                     plots=not args.no_plots)
     sys.stdout.write(summary_text(result, report_dir=report_dir))
     return 0 if result.complete else 1
 
