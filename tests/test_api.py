@@ -199,3 +199,20 @@ def test_notebook_style_example_runs_untouched():
     assert g["step"].outputs[-1] == pytest.approx(1.0, abs=1e-3)
     span = float(art.u_max[0] - art.u_min[0])
     assert np.max(np.abs(g["native"].u[:50] - g["reference"].u[:50])) < 1e-4 * span
+
+
+def test_hil_run_takes_an_artifact_object_and_returns_numpy_traces(tmp_path):
+    """gl.hil.run with an in-memory artifact: the real CAN firmware node against the built-in pendulum."""
+    from test_hil_support import udp_transport
+
+    art = gl.design(EXAMPLES / "pendulum.toml")
+    scenario = {"name": "api_run", "artifact": "unused.json", "duration": 2.0, "mode": "lockstep",
+                "controller": "firmware", "step_timeout": 2.0, "plant": {"kind": "cart_pendulum"},
+                "transport": udp_transport(), "initial_state": {"theta": 0.05},
+                "reference": {"r_x": {"kind": "step", "at": 0.2, "value": 0.2}}}
+    res = gl.hil.run(scenario, artifact=art, report=tmp_path / "report", plots=False)
+    assert res.complete, res.reason
+    assert res.trace.y.shape == (200, 2) and res.trace.got.all()
+    assert res.info["artifact"]["sha256"] == art.sha256
+    assert json.loads((tmp_path / "report" / "report.json").read_text())["complete"] is True
+    assert abs(res.trace.y[-1, 1]) < 0.05  # the pendulum stays up
