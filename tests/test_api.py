@@ -216,3 +216,17 @@ def test_hil_run_takes_an_artifact_object_and_returns_numpy_traces(tmp_path):
     assert res.info["artifact"]["sha256"] == art.sha256
     assert json.loads((tmp_path / "report" / "report.json").read_text())["complete"] is True
     assert abs(res.trace.y[-1, 1]) < 0.05  # the pendulum stays up
+
+
+def test_own_gains_carry_an_operating_point():
+    """From the law's text: with xh = 0, z = 0 and y = y_op the first command is u_op, and the
+    estimate does not move (dy = 0, du = 0)."""
+    sysd = ct.c2d(_double_integrator(), 0.01)
+    K, _, _ = ct.dlqr(sysd, np.diag([10.0, 1.0]), [[1.0]])
+    L, _, _ = ct.dlqe(sysd.A, np.eye(2), sysd.C, np.diag([1e-4, 1e-3]), [[1e-5]])
+    art = gl.from_gains(sysd, K=K, L=L, u_min=[0.0], u_max=[20.0], u_op=[9.81], y_op=[2.0])
+    np.testing.assert_array_equal(art.u_op, [9.81])
+    np.testing.assert_array_equal(art.y_op, [2.0])
+    tr = gl.replay(art, np.full((3, 1), 2.0))
+    np.testing.assert_allclose(tr.u[:, 0], 9.81, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(tr.xh, 0.0)
