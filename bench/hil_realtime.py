@@ -35,12 +35,12 @@ import numpy as np
 
 from gainlink import artifact as artifact_mod
 from gainlink.design import design
-from gainlink.hil.run.bridge import run_scenario
+from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.links.can_firmware import firmware_can_executable
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.fmu import FmuPlant
-from gainlink.hil.run.scenario import parse_scenario
-from gainlink.hil.run.scheduler import pacing_jitter
+from gainlink.hil.loop.scenario import parse_scenario
+from gainlink.hil.loop.scheduler import pacing_jitter
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import parse_spec
 

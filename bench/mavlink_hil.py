@@ -68,11 +68,11 @@ def main() -> int:
     from gainlink import artifact as artifact_mod
     from gainlink.design import design
     from gainlink.engines.native import NativeLoop
-    from gainlink.hil.run.bridge import run_scenario
+    from gainlink.hil.loop.bridge import run_scenario
     from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
     from gainlink.hil.links.mavlink import MavlinkTransport
-    from gainlink.hil.run.scenario import parse_scenario
-    from gainlink.hil.run.scheduler import Placement, resolve_affinity
+    from gainlink.hil.loop.scenario import parse_scenario
+    from gainlink.hil.loop.scheduler import Placement, resolve_affinity
     from gainlink.spec import load_spec
 
     with tempfile.TemporaryDirectory() as tmp:

@@ -6,7 +6,7 @@ Sub-packages, by part:
   project's FMUs built from source, linearisation of an FMU to a spec;
 - :mod:`.links`: the transport base class and registry, CAN (python-can, DBC layout, firmware CAN
   node), MAVLink (pymavlink), reference controller nodes, a Linux VM with a real SocketCAN vcan0;
-- :mod:`.run`: scenario, faults, scheduling, the controller peer process, the bridge loop, metrics,
+- :mod:`.loop`: scenario, faults, scheduling, the controller peer process, the bridge loop, metrics,
   report and the anti-windup study.
 
 Entry points: ``gainlink hil run|dbc|fmu|study``, ``gainlink linearize``, ``gainlink firmware run --can``.
@@ -56,9 +56,9 @@ def run(scenario: Any, *, artifact: Any = None, report: str | Path | None = None
 
     from gainlink.artifact import Artifact, load
 
-    from .run.bridge import run_scenario
-    from .run.report import write_report
-    from .run.scenario import Scenario, load_scenario, parse_scenario, resolve_scenario_path
+    from .loop.bridge import run_scenario
+    from .loop.report import write_report
+    from .loop.scenario import Scenario, load_scenario, parse_scenario, resolve_scenario_path
 
     if isinstance(scenario, Scenario):
         sc = scenario

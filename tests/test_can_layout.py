@@ -19,7 +19,7 @@ from gainlink.artifact import load
 from gainlink.errors import TransportError
 from gainlink.hil.links.can_layout import layout_for
 from gainlink.hil.links.can import CanTransport, firmware_can_argv
-from gainlink.hil.run.controller import ControllerProcess
+from gainlink.hil.loop.controller import ControllerProcess
 from gainlink.hil.links.base import STATUS_FAULT
 from gainlink.reference import ReferenceLoop
 

@@ -20,10 +20,10 @@ import pytest
 
 from gainlink.artifact import load
 from gainlink.errors import TransportError
-from gainlink.hil.run.bridge import run_scenario
+from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.links.can_layout import FD_LENGTHS, INT16_MAX, INT16_NAN, dequantise, quantise
 from gainlink.hil.links.can import Assembler, CanTransport, FrameCodec, firmware_can_argv
-from gainlink.hil.run.scenario import parse_scenario
+from gainlink.hil.loop.scenario import parse_scenario
 
 from conftest import run_cli
 from test_can_layout import PENDULUM_RANGES

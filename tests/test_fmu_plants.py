@@ -234,9 +234,9 @@ def test_fmi3_cosimulation_fmu_runs_like_the_fmi2_one(tmp_path, example_artifact
     from fmpy import read_model_description
     from fmpy.validation import validate_fmu
 
-    from gainlink.hil.run.bridge import run_scenario
+    from gainlink.hil.loop.bridge import run_scenario
     from gainlink.hil.plants.build import build_fmu
-    from gainlink.hil.run.scenario import parse_scenario
+    from gainlink.hil.loop.scenario import parse_scenario
     from test_hil_support import udp_transport
 
     path = build_fmu("cart_pendulum3")

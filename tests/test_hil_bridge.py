@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 
 from gainlink.artifact import load
-from gainlink.hil.run.bridge import run_scenario
+from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.links.can import CanTransport
-from gainlink.hil.run.scenario import parse_scenario
+from gainlink.hil.loop.scenario import parse_scenario
 
 from conftest import run_cli
 from test_hil_support import can_firmware, cart_fmu, pendulum_gains, pendulum_scenario, udp_transport, write_scenario  # noqa: F401
@@ -318,7 +318,7 @@ def test_lockstep_shares_one_cpu_with_the_controller_and_restores_the_bridge(pen
 
 
 def test_resolve_affinity_picks_a_placement_for_the_run():
-    from gainlink.hil.run.scheduler import resolve_affinity
+    from gainlink.hil.loop.scheduler import resolve_affinity
 
     assert resolve_affinity("auto", mode="lockstep", busy_poll=False, cpus=[0, 1]) == "shared"
     assert resolve_affinity("auto", mode="lockstep", busy_poll=True, cpus=[0, 1]) == "separate"

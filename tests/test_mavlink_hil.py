@@ -8,8 +8,8 @@ import pytest
 from test_mavlink_upload import free_udp_port
 
 from gainlink.errors import TransportError
-from gainlink.hil.run.bridge import run_scenario
-from gainlink.hil.run.scenario import parse_scenario
+from gainlink.hil.loop.bridge import run_scenario
+from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.links.base import transport_from_config
 
 

@@ -14,8 +14,8 @@ from gainlink.artifact import load
 from gainlink.errors import PlantError
 from gainlink.hil.plants.config import plant_from_config
 from gainlink.hil.plants.linear import model_from_spec, perturb_model
-from gainlink.hil.run.bridge import run_scenario
-from gainlink.hil.run.scenario import parse_scenario
+from gainlink.hil.loop.bridge import run_scenario
+from gainlink.hil.loop.scenario import parse_scenario
 
 from conftest import EXAMPLES
 from test_hil_support import udp_transport

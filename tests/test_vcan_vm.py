@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gainlink.hil.run.bridge import run_scenario
-from gainlink.hil.run.scenario import load_scenario
+from gainlink.hil.loop.bridge import run_scenario
+from gainlink.hil.loop.scenario import load_scenario
 from gainlink.hil.links.vcan_vm import prepare_vm, run_in_vm
 
 from test_hil_support import can_firmware, cart_fmu, pendulum_gains, pendulum_scenario, udp_transport, write_scenario  # noqa: F401

@@ -23,7 +23,7 @@ def _progress_bar(enabled: bool):
 
 def _run(args: argparse.Namespace) -> int:
     from gainlink.hil import run
-    from gainlink.hil.run.report import summary_text
+    from gainlink.hil.loop.report import summary_text
 
     report_dir = Path(args.report)
     with _progress_bar(not args.no_progress) as bar:
@@ -69,9 +69,9 @@ def _fmu(args: argparse.Namespace) -> int:
 
 
 def _study(args: argparse.Namespace) -> int:
-    from gainlink.hil.run.study import run_saturation_study
+    from gainlink.hil.loop.study import run_saturation_study
 
-    from gainlink.hil.run.study import default_study
+    from gainlink.hil.loop.study import default_study
 
     study_desc = None
     if args.study and not Path(args.study).exists() and "/" not in args.study and not args.study.endswith(".toml"):
