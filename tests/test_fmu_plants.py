@@ -286,7 +286,7 @@ def test_linearize_and_fmu_commands_refuse_bad_input_in_one_line(cart_fmu, tmp_p
         (("linearize", cart_fmu, "--at", "theta", "--out", out), "--at expects NAME=VALUE"),
         (("linearize", cart_fmu, "--at", "theta=abc", "--out", out), "is not a number"),
         (("linearize", cart_fmu, "--at", "psi=1", "--out", out), "no Real variable 'psi'"),
-        (("linearize", cs_only, "--out", out), "no Model Exchange interface"),
+        (("linearize", cs_only, "--method", "directional", "--out", out), "Co-Simulation only: no directional"),
         (("linearize", cart_fmu, "--Ts", "0", "--out", out), "--Ts must be positive"),
         (("hil", "fmu", "no_such_plant"), "no project FMU named 'no_such_plant'"),
     ]

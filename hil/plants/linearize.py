@@ -3,7 +3,9 @@
 The FMU's Model Exchange interface gives ``dx/dt = f(x, u)`` and ``y = g(x, u)``. The Jacobians
 ``A = df/dx, B = df/du, C = dg/dx, D = dg/du`` come from ``fmi2GetDirectionalDerivative`` when the
 FMU provides it, else from central differences (step ``1e-6 * max(1, |v|)``). fmpy has no
-linearisation of its own (FIELD-NOTES).
+linearisation of its own (FIELD-NOTES). A Co-Simulation-only FMU gets a discrete model at the
+step ``Ts``, identified from ``doStep`` responses out of a saved state
+(:mod:`gainlink.hil.plants.identify`), or a one-line refusal when it cannot save its state.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ class Linearization:
     x0: np.ndarray
     method: str
     model_name: str
+    Ts: float | None = None  # the step of a discrete model (Co-Simulation FMUs); None: continuous
 
 
 def _fmu_path(fmu: str | Path) -> Path:
@@ -53,7 +56,8 @@ def _fmu_path(fmu: str | Path) -> Path:
 
 
 def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs: list[str] | None = None,
-              outputs: list[str] | None = None, method: str = "auto") -> Linearization:
+              outputs: list[str] | None = None, method: str = "auto", Ts: float | None = None,
+              horizon: int | None = None) -> Linearization:
     """Linearise an FMU (path, or the name of a project FMU) about the point ``at``.
 
     Parameters
@@ -66,14 +70,22 @@ def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs:
         Which Real inputs/outputs to keep (default: all, in model-description order).
     method : {"auto", "directional", "differences"}
         Directional derivatives when provided (auto), forced, or central differences.
+    Ts : float, optional
+        Co-Simulation-only FMUs: the communication step of the identified discrete model (required there).
+    horizon : int, optional
+        Co-Simulation-only FMUs: steps recorded per input pulse (default 100).
     """
     from fmpy import extract
     from fmpy.fmi2 import FMU2Model
 
     path = _fmu_path(fmu)
     md = read_description(path)
+    if md.fmiVersion in ("2.0", "3.0") and md.modelExchange is None and md.coSimulation is not None:
+        return _linearize_cosimulation(path, md, at=at or {}, inputs=inputs, outputs=outputs, method=method, Ts=Ts,
+                                       horizon=horizon)
     if md.fmiVersion != "2.0":
-        raise PlantError(f"FMU {path} is FMI {md.fmiVersion}; linearize reads FMI 2.0 Model Exchange FMUs")
+        raise PlantError(f"FMU {path} is FMI {md.fmiVersion}; linearize reads FMI 2.0 Model Exchange FMUs "
+                         "(and FMI 2.0/3.0 Co-Simulation-only FMUs)")
     if md.modelExchange is None:
         raise PlantError(f"FMU {path} has no Model Exchange interface; linearize needs dx/dt (Model Exchange)")
     if not md.derivatives:
@@ -171,6 +183,33 @@ def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs:
                          outputs=tuple(out_names), point=point, x0=x0, method=name, model_name=md.modelName)
 
 
+def _linearize_cosimulation(path: Path, md: Any, *, at: Mapping[str, float], inputs: list[str] | None,
+                            outputs: list[str] | None, method: str, Ts: float | None,
+                            horizon: int | None) -> Linearization:
+    from .identify import DEFAULT_HORIZON, identify_cosimulation
+
+    if method == "directional":
+        raise PlantError(f"FMU {md.modelName} is Co-Simulation only: no directional derivatives; linearize "
+                         "identifies it from doStep responses (method auto or differences)")
+    if Ts is None:
+        raise PlantError(f"FMU {md.modelName} is Co-Simulation only: give the communication step (--Ts) of the "
+                         "discrete model to identify")
+    if horizon is not None and (isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 4):
+        raise PlantError("linearize: --horizon must be a whole number of steps, at least 4")
+    vars_ = {v.name: v for v in md.modelVariables}
+    for k in at:
+        if k not in vars_ or vars_[k].type not in ("Real", "Float64"):
+            raise PlantError(f"FMU {md.modelName} has no Real variable {k!r} for the operating point")
+    r = identify_cosimulation(path, md=md, at=at, inputs=inputs, outputs=outputs, Ts=float(Ts),
+                              horizon=horizon or DEFAULT_HORIZON)
+    log.info("identified %s: order %d, Hankel singular values %s, Markov fit %.2g", md.modelName, r["A"].shape[0],
+             np.array2string(r["hankel"][: r["A"].shape[0] + 2], precision=3, max_line_width=10**6), r["fit"])
+    return Linearization(A=r["A"], B=r["B"], C=r["C"], D=r["D"], states=r["states"], inputs=tuple(r["inputs"]),
+                         outputs=tuple(r["outputs"]), point=dict(at), x0=np.zeros(r["A"].shape[0]),
+                         method=f"doStep pulse responses from a saved state, ERA order {r['A'].shape[0]}",
+                         model_name=md.modelName, Ts=float(Ts))
+
+
 def fmu_real_array(x: np.ndarray) -> Any:
     """``x`` as a ctypes ``fmi2Real`` array."""
     from fmpy.fmi2 import fmi2Real
@@ -194,9 +233,11 @@ def spec_dict(lin: Linearization, *, Ts: float, name: str | None = None,
     if not re.match(r"^[A-Za-z][A-Za-z0-9_]{0,31}$", spec_name):
         raise SpecError(f"spec name {spec_name!r} is not a valid name (letters, digits, underscore; 32 max)")
     n, m, p = lin.A.shape[0], lin.B.shape[1], lin.C.shape[0]
+    if lin.Ts is not None and abs(lin.Ts - Ts) > 1e-12 * lin.Ts:
+        raise SpecError(f"the identified model is discrete at the FMU's step {lin.Ts:g}; the spec's Ts must be that")
     data: dict[str, Any] = {
         "name": spec_name, "Ts": float(Ts), "discretization": "zoh",
-        "plant": {"kind": "continuous", "states": [_signal_name(s) for s in lin.states],
+        "plant": {"kind": "continuous" if lin.Ts is None else "discrete", "states": [_signal_name(s) for s in lin.states],
                   "inputs": [_signal_name(s) for s in lin.inputs], "outputs": [_signal_name(s) for s in lin.outputs],
                   "A": lin.A.tolist(), "B": lin.B.tolist(), "C": lin.C.tolist(), "D": lin.D.tolist()},
     }
@@ -213,13 +254,13 @@ def spec_dict(lin: Linearization, *, Ts: float, name: str | None = None,
 
 def linearize_to_spec(*, fmu: str | Path, at: Mapping[str, float], out: Path, Ts: float, name: str | None = None,
                       inputs: list[str] | None = None, outputs: list[str] | None = None, method: str = "auto",
-                      template: Path | None = None) -> Linearization:
+                      template: Path | None = None, horizon: int | None = None) -> Linearization:
     """Linearise and write the spec TOML (atomically); the spec parses with :func:`gainlink.spec.parse_spec`."""
     from gainlink.spec import parse_spec
 
     if not Ts > 0:
         raise SpecError("--Ts must be positive")
-    lin = linearize(fmu, at=at, inputs=inputs, outputs=outputs, method=method)
+    lin = linearize(fmu, at=at, inputs=inputs, outputs=outputs, method=method, Ts=Ts, horizon=horizon)
     tmpl = None
     if template is not None:
         try:
@@ -228,9 +269,12 @@ def linearize_to_spec(*, fmu: str | Path, at: Mapping[str, float], out: Path, Ts
             raise SpecError(f"template spec {template}: {exc}") from None
     data = spec_dict(lin, Ts=Ts, name=name, template=tmpl)
     parse_spec(data, source=str(out))  # refuse to write a spec design would not take
+    states_there = ("states are balanced coordinates of the identified discrete model (D = 0: outputs sampled "
+                    "after each step)" if lin.Ts is not None else
+                    f"states there: {', '.join(f'{s} = {v:g}' for s, v in zip(lin.states, lin.x0))}")
     header = (f"Linearised from FMU {lin.model_name} by gainlink linearize ({lin.method}).\n"
               f"Operating point: {', '.join(f'{k} = {v:g}' for k, v in lin.point.items()) or 'start values'}; "
-              f"states there: {', '.join(f'{s} = {v:g}' for s, v in zip(lin.states, lin.x0))}.\n"
+              f"{states_there}.\n"
               + ("Design sections copied from the template spec." if tmpl is not None else
                  "Design sections are neutral defaults: edit weights, noise and limits before designing."))
     atomic_write_text(out, toml_write.dumps(data, header=header))

@@ -103,7 +103,7 @@ def _linearize(args: argparse.Namespace) -> int:
             raise GainlinkError(f"--at {name}: {value!r} is not a number") from None
     result = linearize_to_spec(fmu=args.fmu, at=at, out=Path(args.out), Ts=args.Ts, name=args.name,
                                inputs=args.inputs, outputs=args.outputs, method=args.method,
-                               template=Path(args.template) if args.template else None)
+                               template=Path(args.template) if args.template else None, horizon=args.horizon)
     print(f"wrote {args.out}: n={result.A.shape[0]} m={result.B.shape[1]} p={result.C.shape[0]} "
           f"({result.method}, operating point {', '.join(f'{k}={v:g}' for k, v in result.point.items()) or 'start values'})")
     return 0
@@ -152,7 +152,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--at", action="append", default=[], metavar="NAME=VALUE",
                    help="operating point: state, input or parameter value (repeatable)")
     p.add_argument("--out", required=True, help="spec TOML to write")
-    p.add_argument("--Ts", type=float, default=0.01, help="sample time written into the spec (default 0.01)")
+    p.add_argument("--Ts", type=float, default=0.01,
+                   help="sample time written into the spec (default 0.01); for a Co-Simulation-only FMU also the "
+                        "communication step of the identified discrete model")
+    p.add_argument("--horizon", type=int, help="Co-Simulation-only FMUs: steps recorded per input pulse (default 100)")
     p.add_argument("--name", help="spec name (default: the FMU's model name)")
     p.add_argument("--inputs", nargs="+", help="FMU inputs to keep (default: all)")
     p.add_argument("--outputs", nargs="+", help="FMU outputs to keep (default: all)")
