@@ -14,8 +14,8 @@ import pytest
 
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.linearize import linearize
-from gainlink.hil.run.bridge import run_scenario
-from gainlink.hil.run.scenario import parse_scenario
+from gainlink.hil.loop.bridge import run_scenario
+from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.spec import load_spec
 
 from conftest import EXAMPLES, run_cli
