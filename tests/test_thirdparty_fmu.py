@@ -1,6 +1,7 @@
 """A third-party FMU in the bridge: OpenModelica's Mass_Damper from the gemseo-fmu wheel (fetched at test time,
 pinned by sha256). Model Exchange through fmpy's CVode, variable mapping refusals, and the whole chain:
-linearise, design, HIL against the host firmware over udp_multicast in lockstep, tracking a reference.
+linearise, design (with the FMU's operating point y_op = -0.5, and without), HIL against the host firmware over
+udp_multicast in lockstep, tracking a reference.
 
 Oracle: the model's own parameters (mass.m, spring.c with rest length spring.s_rel0, damper.d) in the
 textbook equation of a mass on a spring and a damper, m s'' = -c (s - s0) - d s' - f, for the state
@@ -9,17 +10,17 @@ s = damper.s_rel (the output is y = 0.5 - s, so that the force f pulls y up: B =
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 from scipy.linalg import expm
 
 from gainlink.errors import PlantError
+from gainlink.hil.loop.bridge import run_scenario
+from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.config import plant_from_config
 
 from conftest import run_cli
-from test_hil_support import udp_transport, write_scenario
+from test_hil_support import udp_transport
 from thirdparty import gemseo_fmu
 
 
@@ -116,7 +117,8 @@ anti_windup = "backcalc"
 """
 
 
-def test_linearise_design_and_hil_track_a_reference_on_the_thirdparty_fmu(mass_damper, tmp_path):
+@pytest.mark.parametrize("operating_point", [True, False], ids=["y_op", "no_op"])
+def test_linearise_design_and_hil_track_a_reference_on_the_thirdparty_fmu(mass_damper, tmp_path, operating_point):
     (tmp_path / "template.toml").write_text(TEMPLATE, "utf-8")
     spec = tmp_path / "mass_damper.toml"
     res = run_cli("linearize", mass_damper, "--Ts", "0.001", "--out", spec, "--template", tmp_path / "template.toml")
@@ -128,20 +130,27 @@ def test_linearise_design_and_hil_track_a_reference_on_the_thirdparty_fmu(mass_d
     np.testing.assert_allclose(s.A, A, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(s.B, B, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(s.C, [[-1.0, 0.0]], atol=1e-9)
+    if operating_point:
+        # The FMU's rest point: f = 0 holds the mass where the spring is unloaded, y = -0.5 (its output's start value).
+        with open(spec, "a", encoding="utf-8") as fh:
+            fh.write("\n[operating_point]\nu_op = [0.0]\ny_op = [-0.5]\n")
     res = run_cli("design", spec, "--out", tmp_path)
     assert res.code == 0, res.err
-    # No operating point in the artifact yet (issue 10 item 1 is on its own branch): the loop runs on the absolute
-    # output as if it were a deviation; the integrator on y still removes the offset, so y tracks r absolutely.
-    scenario = write_scenario(tmp_path / "scenario.toml", {
+    r = run_scenario(parse_scenario({
         "name": "mass_damper_hil", "artifact": str(tmp_path / "gains.json"), "duration": 1.0, "mode": "lockstep",
         "controller": "firmware", "step_timeout": 2.0, "peer_timeout": 4.0, "transport": udp_transport(),
         "plant": {"kind": "fmu", "path": str(mass_damper), "interface": "me"},
-        "reference": {"r_y": {"kind": "step", "at": 0.3, "initial": -0.5, "value": -0.45}}})
-    report = tmp_path / "report"
-    res = run_cli("hil", "run", scenario, "--report", report, "--no-progress")
-    assert res.code == 0, res.err
-    m = json.loads((report / "report.json").read_text())
-    assert m["complete"] is True and m["steps"] == 1000 and m["lost"] == 0
+        "reference": {"r_y": {"kind": "step", "at": 0.3, "initial": -0.5, "value": -0.45}}}))
+    m = r.metrics
+    assert r.complete and m["steps"] == 1000 and m["lost"] == 0
     assert m["outputs_final"]["y"] == pytest.approx(-0.45, abs=1e-3)
     assert m["tracked"]["r_y"]["settling_time_s"] is not None and m["tracked"]["r_y"]["settling_time_s"] < 0.6
     assert m["shadow_max_abs_du"]["f"] < 1e-3 * 2000.0  # the C loop is the design, to float32
+    # Holding y 0.05 m above the rest point takes the spring's force c * 0.05 = 500 N.
+    assert r.trace.u[-1, 0] == pytest.approx(1.0e4 * 0.05, rel=1e-2)
+    if operating_point:
+        assert m["saturation_fraction"]["f"] == 0.0
+    else:
+        # Without the trim the loop reads the absolute y as a deviation: the integrator still removes the offset
+        # (y tracks), but the start-up transient drives the force into its limits.
+        assert m["saturation_fraction"]["f"] > 0.01
