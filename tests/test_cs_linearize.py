@@ -12,6 +12,7 @@ import control as ct
 import numpy as np
 import pytest
 
+from gainlink.errors import PlantError
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.linearize import linearize
 from gainlink.hil.loop.bridge import run_scenario
@@ -19,7 +20,7 @@ from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.spec import load_spec
 
 from conftest import EXAMPLES, run_cli
-from test_hil_support import udp_transport
+from test_hil_support import cart_fmu, udp_transport  # noqa: F401
 
 GAIN = np.array([[12.8, -18.9], [6.6, -19.4]])   # Wood & Berry (1973), minutes
 TAU = np.array([[16.7, 21.0], [10.9, 14.4]])
@@ -124,3 +125,28 @@ def test_cosimulation_fmu_that_cannot_save_its_state_is_refused_in_one_line(wood
         assert res.code == 2, res.err
         assert message in res.err and len(res.err.strip().splitlines()) == 1, res.err
         assert not (tmp_path / "x.toml").exists()
+
+
+def test_nonlinear_cosimulation_fmu_identifies_to_the_sampled_jacobian_at_an_equilibrium(cart_fmu, tmp_path):
+    # The project's cart-pendulum FMU with its Model Exchange interface removed: identified at the unstable
+    # upright equilibrium, it must equal the ZOH sampling (python-control c2d) of the Jacobian its Model Exchange
+    # interface gives; the CS FMU integrates with RK4 inside doStep, so the match is to ~1e-10, not to rounding.
+    cs_only = tmp_path / "cs_only.fmu"
+    with zipfile.ZipFile(cart_fmu) as src, zipfile.ZipFile(cs_only, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "modelDescription.xml":
+                text = data.decode()
+                data = (text[:text.index("<ModelExchange")]
+                        + text[text.index("</ModelExchange>") + len("</ModelExchange>"):]).encode()
+            dst.writestr(item, data)
+    me = linearize(cart_fmu, outputs=["x", "theta"])
+    sampled = ct.c2d(ct.ss(me.A, me.B, me.C, me.D), 0.01, method="zoh")
+    cs = linearize(cs_only, Ts=0.01, outputs=["x", "theta"])
+    assert cs.A.shape == (4, 4)
+    expected = _markov(sampled.A, sampled.B, sampled.C, 200)
+    np.testing.assert_allclose(_markov(cs.A, cs.B, cs.C, 200), expected, rtol=0, atol=1e-9 * np.abs(expected).max())
+    # Away from an equilibrium the pendulum falls: the pulse responses are not those of one linear time-invariant
+    # model, and linearize says so instead of writing a wrong spec.
+    with pytest.raises(PlantError, match="not linear/time-invariant about this point"):
+        linearize(cs_only, Ts=0.01, outputs=["x", "theta"], at={"theta": 0.2})
