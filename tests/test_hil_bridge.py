@@ -326,3 +326,21 @@ def test_resolve_affinity_picks_a_placement_for_the_run():
     assert resolve_affinity("auto", mode="realtime", busy_poll=False, cpus=[0, 1]) == "none"
     assert resolve_affinity("separate", mode="realtime", busy_poll=False, cpus=[3]) == "none"
     assert resolve_affinity("shared", mode="realtime", busy_poll=True, cpus=[0, 1]) == "shared"
+
+
+def test_random_drop_hits_a_seeded_fraction_of_the_window():
+    from gainlink.hil.loop.faults import FaultInjector
+    from gainlink.hil.loop.scenario import Fault
+
+    fault = Fault(kind="drop", start=1.0, stop=11.0, probability=0.2)
+    def hits(seed):
+        inj = FaultInjector([fault], Ts=0.01, seed=seed)
+        return [k for k in range(1200) if inj.apply(k, ["frame"]) == []]
+    a, b, c = hits(5), hits(5), hits(6)
+    assert a == b and a != c
+    assert all(100 <= k < 1100 for k in a)
+    # 1000 Bernoulli(0.2) trials: mean 200, sd 12.6; 5 sd either way
+    assert 137 <= len(a) <= 263 and 137 <= len(c) <= 263
+    with pytest.raises(Exception, match="probability must be within"):
+        parse_scenario({"artifact": "g.json", "plant": {"kind": "linear"}, "transport": {}, "duration": 1.0,
+                        "faults": [{"kind": "drop", "probability": 1.5}]})

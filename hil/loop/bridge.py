@@ -29,7 +29,8 @@ from ..plants.config import plant_from_config
 from .metrics import RunTrace, compute_metrics
 from ..plants.base import Plant, check_dimensions
 from .scheduler import SPIN_NS, Pacer, Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
-from .scenario import Scenario, profile_values
+from .plan import Plan, Recorder, plan_run
+from .scenario import Scenario
 from ..links.base import Transport, transport_from_config
 
 log = logging.getLogger(__name__)
@@ -51,6 +52,11 @@ class RunResult:
 def prepare(scenario: Scenario) -> tuple[Artifact, Plant]:
     """Load the artifact and build the plant, checking that they fit each other."""
     artifact = load(scenario.artifact_path)
+    return artifact, build_plant(scenario, artifact=artifact)
+
+
+def build_plant(scenario: Scenario, *, artifact: Artifact) -> Plant:
+    """The scenario's plant, checked against the artifact and the scenario's signal names."""
     base = scenario.path.parent if scenario.path is not None else Path.cwd()
     plant = plant_from_config(scenario.plant, artifact=artifact, base_dir=base)
     try:
@@ -70,7 +76,7 @@ def prepare(scenario: Scenario) -> tuple[Artifact, Plant]:
     except GainlinkError:
         plant.close()
         raise
-    return artifact, plant
+    return plant
 
 
 def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | None = None) -> RunResult:
@@ -116,72 +122,6 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
         return result
 
 
-@dataclass(frozen=True)
-class _Plan:
-    """Everything a run feeds the plant and the link, fixed before the first step."""
-
-    N: int
-    t: np.ndarray
-    R: np.ndarray  # references (N, q)
-    noise: np.ndarray  # measurement noise (N, p)
-    D: np.ndarray  # input disturbances (N, m)
-    silent_at: int | None
-    crash_at: int | None
-    period_s: float
-    realtime: bool
-
-
-def _plan(scenario: Scenario, *, artifact: Artifact, plant: Plant) -> _Plan:
-    """References, noise (from the scenario's seed), disturbances and peer faults per step."""
-    a = artifact
-    Ts = a.Ts
-    N = int(round(scenario.duration / Ts))
-    realtime = scenario.mode == "realtime"
-    rng = np.random.default_rng(scenario.seed)
-    t = np.arange(N) * Ts
-    R = np.zeros((N, a.q))
-    for j, name in enumerate(a.signals["references"]):
-        if name in scenario.reference:
-            R[:, j] = profile_values(scenario.reference[name], t)
-    noise_sd = np.array([scenario.noise.get(name, 0.0) for name in plant.output_names])
-    noise = rng.standard_normal((N, a.p)) * noise_sd if noise_sd.any() else np.zeros((N, a.p))
-    D = np.zeros((N, a.m))
-    for d in scenario.disturbances:
-        D[(t >= d.start) & (t < d.stop), plant.input_names.index(d.input)] += d.value
-    silent_at = min((int(round(f.start / Ts)) for f in scenario.faults if f.kind == "silent"), default=None)
-    crash_at = min((int(round(f.start / Ts)) for f in scenario.faults if f.kind == "crash"), default=None)
-    period = scenario.period if (realtime and scenario.period) else Ts
-    return _Plan(N=N, t=t, R=R, noise=noise, D=D, silent_at=silent_at, crash_at=crash_at, period_s=period,
-                 realtime=realtime)
-
-
-class _Recorder:
-    """The per-step arrays of a run, filled as it goes; :meth:`trace` cuts them to the steps taken."""
-
-    def __init__(self, plan: _Plan, *, artifact: Artifact, plant: Plant) -> None:
-        N, a = plan.N, artifact
-        self.plan = plan
-        self.Y = np.zeros((N, a.p))
-        self.U = np.zeros((N, a.m))
-        self.SAT = np.zeros((N, a.m), dtype=bool)
-        self.GOT = np.zeros(N, dtype=bool)
-        self.LAT = np.full(N, np.nan)
-        self.TICK = np.zeros(N)
-        self.DUE = np.full(N, np.nan)
-        self.UREF = np.full((N, a.m), np.nan)
-        self.ZREF = np.full((N, a.q), np.nan)
-        self.ST = np.zeros(N, dtype=np.int64)
-        self.X = np.full((N, len(plant.state_names)), np.nan)
-
-    def trace(self, steps: int) -> RunTrace:
-        """The recorded run up to ``steps``."""
-        p = self.plan
-        return RunTrace(t=p.t[:steps], y=self.Y[:steps], r=p.R[:steps], u=self.U[:steps], sat=self.SAT[:steps],
-                        got=self.GOT[:steps], latency_ns=self.LAT[:steps], tick_ns=self.TICK[:steps],
-                        deadline_ns=self.DUE[:steps], u_ref=self.UREF[:steps], z_ref=self.ZREF[:steps],
-                        x=self.X[:steps], status=self.ST[:steps])
-
-
 class _Stop(Exception):
     """Ends the loop early: the run is incomplete for ``reason`` after ``steps`` steps."""
 
@@ -200,9 +140,9 @@ class _Loop:
     def __init__(self, scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Transport,
                  peer: ControllerProcess) -> None:
         self.scenario, self.a, self.plant, self.transport, self.peer = scenario, artifact, plant, transport, peer
-        self.plan = _plan(scenario, artifact=artifact, plant=plant)
-        self.rec = _Recorder(self.plan, artifact=artifact, plant=plant)
-        self.injector = FaultInjector(scenario.faults, Ts=artifact.Ts)
+        self.plan = plan_run(scenario, artifact=artifact, plant=plant)
+        self.rec = Recorder(self.plan, artifact=artifact, plant=plant)
+        self.injector = FaultInjector(scenario.faults, Ts=artifact.Ts, seed=scenario.seed)
         self.shadow = ReferenceLoop(artifact) if scenario.shadow else None
         self.u = np.clip(np.zeros(artifact.m), artifact.u_min, artifact.u_max)
         self.late = 0

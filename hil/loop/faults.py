@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any, Sequence
 
+import numpy as np
+
 from .scenario import Fault
 
 
@@ -16,11 +18,15 @@ class FaultInjector:
         The scenario's frame faults (``silent`` and ``crash`` act on the process: the bridge handles them).
     Ts : float
         Sample time, to turn fault windows into sample indices.
+    seed : int
+        Seeds the draws of faults with a ``probability`` below 1 (the same seed hits the same samples).
     """
 
-    def __init__(self, faults: Sequence[Fault], *, Ts: float) -> None:
+    def __init__(self, faults: Sequence[Fault], *, Ts: float, seed: int = 0) -> None:
         self.faults = [f for f in faults if f.kind not in ("silent", "crash")]
         self.Ts = Ts
+        # A stream of its own (not the noise's): adding a fault leaves the run's noise unchanged.
+        self.rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0xFA17])
         self.held: list[tuple[int, list[Any]]] = []  # (release at sample k, frames)
         self.counts = {"drop": 0, "delay": 0, "duplicate": 0, "reorder": 0}
 
@@ -29,7 +35,7 @@ class FaultInjector:
         for f in self.faults:
             if f.start <= t < f.stop:
                 first = int(round(f.start / self.Ts)) if f.start > 0 else 0
-                if (k - first) % f.every == 0:
+                if (k - first) % f.every == 0 and (f.probability >= 1.0 or self.rng.random() < f.probability):
                     return f
         return None
 

@@ -26,6 +26,8 @@ Example::
     [noise]        theta = 0.001                           # std dev per output
     [[disturbances]] input = "F", start = 2.0, stop = 2.1, value = 5.0
     [[faults]]     kind = "drop", start = 3.0, stop = 3.1, every = 1   # drop | delay | duplicate | reorder | silent | crash
+                   # probability = 0.05: each sample the window and ``every`` select is hit with this probability
+                   # (drawn from the run's seed): a random loss rate instead of a pattern
 
 ``affinity`` places the bridge and the controller process on CPUs for the run: ``shared`` (one CPU
 for both: each hand-over is a local context switch, the fastest lockstep), ``separate`` (one CPU
@@ -80,7 +82,8 @@ class Fault:
 
     ``kind``: drop (frames not sent), delay (sent ``delay_steps`` samples later), duplicate (sent
     twice), reorder (sent after the next sample's frames), silent (controller process frozen from
-    ``start`` on), crash (controller process killed at ``start``). Active for samples with ``start <= t < stop``, every ``every``-th one.
+    ``start`` on), crash (controller process killed at ``start``). Active for samples with ``start <= t < stop``, every ``every``-th one,
+    each of those hit with ``probability`` (frame faults only; drawn from the run's seed).
     """
 
     kind: str
@@ -88,6 +91,7 @@ class Fault:
     stop: float
     every: int = 1
     delay_steps: int = 1
+    probability: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -201,14 +205,18 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
     faults = []
     for i, f in enumerate(data.get("faults", [])):
         f = _table(f, f"faults[{i}]")
-        _check_keys(f, {"kind", "start", "stop", "every", "delay_steps"}, f"faults[{i}]")
+        _check_keys(f, {"kind", "start", "stop", "every", "delay_steps", "probability"}, f"faults[{i}]")
         if f.get("kind") not in FAULT_KINDS:
             raise ScenarioError(f"scenario: faults[{i}].kind must be one of {', '.join(FAULT_KINDS)}")
         start = _num(f.get("start", 0.0), f"faults[{i}].start", minimum=0.0)
         stop = _num(f["stop"], f"faults[{i}].stop") if "stop" in f else 1e300
+        probability = _num(f.get("probability", 1.0), f"faults[{i}].probability", minimum=0.0)
+        if probability > 1.0 or ("probability" in f and f["kind"] in ("silent", "crash")):
+            raise ScenarioError(f"scenario: faults[{i}].probability must be within [0, 1], on a frame fault")
         faults.append(Fault(kind=f["kind"], start=start, stop=stop,
                             every=int(_num(f.get("every", 1), f"faults[{i}].every", minimum=1)),
-                            delay_steps=int(_num(f.get("delay_steps", 1), f"faults[{i}].delay_steps", minimum=1))))
+                            delay_steps=int(_num(f.get("delay_steps", 1), f"faults[{i}].delay_steps", minimum=1)),
+                            probability=probability))
     dists = []
     for i, d in enumerate(data.get("disturbances", [])):
         d = _table(d, f"disturbances[{i}]")

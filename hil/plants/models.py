@@ -75,12 +75,16 @@ class OdePlant(Plant):
         h = dt / n
         x = self.x
         f = self.derivatives
-        for _ in range(n):
-            k1 = f(x, full)
-            k2 = f(x + 0.5 * h * k1, full)
-            k3 = f(x + 0.5 * h * k2, full)
-            k4 = f(x + h * k3, full)
-            x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        try:
+            with np.errstate(over="ignore", invalid="ignore"):
+                for _ in range(n):
+                    k1 = f(x, full)
+                    k2 = f(x + 0.5 * h * k1, full)
+                    k3 = f(x + 0.5 * h * k2, full)
+                    k4 = f(x + h * k3, full)
+                    x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        except (ValueError, OverflowError, ZeroDivisionError):  # math.sin(inf) and the like, mid-step
+            x = np.full_like(self.x, np.nan)
         if not np.all(np.isfinite(x)):
             raise PlantError(f"plant {self.name}: state became non-finite")
         self.x = x

@@ -70,6 +70,7 @@ class NativeLoop:
     def __init__(self, artifact: Artifact, *, watchdog_periods: int = 10, library: Path | None = None) -> None:
         self.artifact = artifact
         path = library or build(artifact, target="host").files["shared"]
+        self.library = Path(path)
         lib = ctypes.CDLL(str(path))
         self._lib = lib
         lib.gl_host_artifact_sha256.restype = ctypes.c_char_p

@@ -1,0 +1,82 @@
+"""What a closed-loop run feeds its plant and controller, fixed before the first step, and the per-step
+record it fills: shared by the HIL bridge (:mod:`.bridge`) and the in-process SIL loop (:mod:`.sil`),
+so both produce the same :class:`~.metrics.RunTrace` from the same scenario and seed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gainlink.artifact import Artifact
+
+from ..plants.base import Plant
+from .metrics import RunTrace
+from .scenario import Scenario, profile_values
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Everything a run feeds the plant and the link, fixed before the first step."""
+
+    N: int
+    t: np.ndarray
+    R: np.ndarray  # references (N, q)
+    noise: np.ndarray  # measurement noise (N, p)
+    D: np.ndarray  # input disturbances (N, m)
+    silent_at: int | None
+    crash_at: int | None
+    period_s: float
+    realtime: bool
+
+
+def plan_run(scenario: Scenario, *, artifact: Artifact, plant: Plant) -> Plan:
+    """References, noise (from the scenario's seed), disturbances and peer faults per step."""
+    a = artifact
+    Ts = a.Ts
+    N = int(round(scenario.duration / Ts))
+    realtime = scenario.mode == "realtime"
+    rng = np.random.default_rng(scenario.seed)
+    t = np.arange(N) * Ts
+    R = np.zeros((N, a.q))
+    for j, name in enumerate(a.signals["references"]):
+        if name in scenario.reference:
+            R[:, j] = profile_values(scenario.reference[name], t)
+    noise_sd = np.array([scenario.noise.get(name, 0.0) for name in plant.output_names])
+    noise = rng.standard_normal((N, a.p)) * noise_sd if noise_sd.any() else np.zeros((N, a.p))
+    D = np.zeros((N, a.m))
+    for d in scenario.disturbances:
+        D[(t >= d.start) & (t < d.stop), plant.input_names.index(d.input)] += d.value
+    silent_at = min((int(round(f.start / Ts)) for f in scenario.faults if f.kind == "silent"), default=None)
+    crash_at = min((int(round(f.start / Ts)) for f in scenario.faults if f.kind == "crash"), default=None)
+    period = scenario.period if (realtime and scenario.period) else Ts
+    return Plan(N=N, t=t, R=R, noise=noise, D=D, silent_at=silent_at, crash_at=crash_at, period_s=period,
+                realtime=realtime)
+
+
+class Recorder:
+    """The per-step arrays of a run, filled as it goes; :meth:`trace` cuts them to the steps taken."""
+
+    def __init__(self, plan: Plan, *, artifact: Artifact, plant: Plant) -> None:
+        N, a = plan.N, artifact
+        self.plan = plan
+        self.Y = np.zeros((N, a.p))
+        self.U = np.zeros((N, a.m))
+        self.SAT = np.zeros((N, a.m), dtype=bool)
+        self.GOT = np.zeros(N, dtype=bool)
+        self.LAT = np.full(N, np.nan)
+        self.TICK = np.zeros(N)
+        self.DUE = np.full(N, np.nan)
+        self.UREF = np.full((N, a.m), np.nan)
+        self.ZREF = np.full((N, a.q), np.nan)
+        self.ST = np.zeros(N, dtype=np.int64)
+        self.X = np.full((N, len(plant.state_names)), np.nan)
+
+    def trace(self, steps: int) -> RunTrace:
+        """The recorded run up to ``steps``."""
+        p = self.plan
+        return RunTrace(t=p.t[:steps], y=self.Y[:steps], r=p.R[:steps], u=self.U[:steps], sat=self.SAT[:steps],
+                        got=self.GOT[:steps], latency_ns=self.LAT[:steps], tick_ns=self.TICK[:steps],
+                        deadline_ns=self.DUE[:steps], u_ref=self.UREF[:steps], z_ref=self.ZREF[:steps],
+                        x=self.X[:steps], status=self.ST[:steps])
