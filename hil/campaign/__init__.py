@@ -1,0 +1,15 @@
+"""Campaigns: many SIL/HIL runs over plant uncertainty, design grids and fault matrices, on Dask.
+
+``gl.campaign.run("campaign.toml", out="DIR")`` (``gainlink campaign run``) plans the runs
+(:mod:`.config`, :mod:`.plan`), runs those without a result on a Dask LocalCluster or any scheduler
+(:mod:`.cluster`, :mod:`.runner`; the task is :func:`.worker.execute`), stores each by its content address
+(:mod:`.store`) and merges the report (:mod:`.report`): pass/fail per run (:mod:`.criteria`), percentile
+envelopes, scatter plots, a failure table. :func:`show_run` replays one run with its full HIL report.
+"""
+
+from .config import Campaign, CampaignError, Criteria, load_campaign, parse_campaign
+from .runner import CampaignResult, run
+from .show import show_run
+
+__all__ = ["Campaign", "CampaignError", "CampaignResult", "Criteria", "load_campaign", "parse_campaign", "run",
+           "show_run"]

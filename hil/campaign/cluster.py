@@ -1,0 +1,60 @@
+"""The Dask client of a campaign: a LocalCluster of process workers, or any scheduler by address.
+
+The same campaign runs on a laptop (``LocalCluster``, one single-threaded process worker per core), a
+workstation, or a cluster whose scheduler was started by dask-jobqueue, the Dask Kubernetes operator
+or ``dask scheduler`` by hand (``--scheduler tcp://HOST:8786``). On the LocalCluster a run whose worker
+dies is rescheduled once (``distributed.scheduler.allowed-failures = 1``); a second death of a worker
+under it makes it fail with ``KilledWorker``, which the campaign records. A remote scheduler applies
+its own setting (Dask's default: 3).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+from typing import Iterator
+
+from gainlink.errors import GainlinkError
+
+ALLOWED_FAILURES = 1
+
+
+class ClusterError(GainlinkError, ConnectionError):
+    """The Dask scheduler cannot be reached or the cluster cannot start."""
+
+
+@contextlib.contextmanager
+def dask_client(*, scheduler: str | None = None, workers: int | None = None,
+                timeout: float = 20.0) -> Iterator["distributed.Client"]:  # noqa: F821
+    """A connected :class:`distributed.Client` for the length of the block.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        A scheduler address (``tcp://host:8786``); default: start a LocalCluster.
+    workers : int, optional
+        LocalCluster process workers (default: the CPUs this process may use).
+    timeout : float
+        Seconds to wait for the scheduler.
+    """
+    import dask
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout=timeout)
+        except (OSError, TimeoutError) as exc:
+            raise ClusterError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+        with contextlib.closing(client):
+            yield client
+        return
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    n = cpus if workers is None else workers
+    if n < 1:
+        raise ClusterError(f"--workers must be at least 1, not {n}")
+    with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
+    with contextlib.closing(cluster), contextlib.closing(Client(cluster)) as client:
+        yield client

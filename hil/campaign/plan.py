@@ -1,0 +1,262 @@
+"""From a campaign to its runs: grid points times draws, each a pure (artifact, scenario, seed) with an id.
+
+Draw ``j`` (``0 <= j < runs``) takes its values and its run seed from ``default_rng([seed, j])``, the same
+for every grid point: grid points are compared on the same plant draws and the same noise (common
+random numbers), and raising ``runs`` keeps the earlier draws. A grid point whose axes touch the spec
+designs its own artifact (designs are shared between points with the same spec). The run id is the
+sha256 of what the run is a function of — kind, artifact sha256, scenario (FMUs by their sha256), seed
+and gainlink's version — so a result file names exactly one run and a resumed campaign finds it.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import itertools
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gainlink import __version__
+from gainlink.artifact import canonical_json, render
+from gainlink.errors import GainlinkError
+
+from ..loop.scenario import parse_scenario
+from ..loop.sil import check_sil
+from .config import Axis, Campaign, CampaignError
+
+_STEP = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[\d+\])*)")
+
+
+@dataclass(frozen=True)
+class RunPoint:
+    """One run of a campaign: its inputs and where they came from.
+
+    ``values`` maps each axis name to the value this run uses; ``grid_index`` and ``draw`` say which
+    grid point and which draw it is. ``error`` is set when the run cannot even start (its grid point's
+    design failed): it is recorded as failed with that reason, never submitted.
+    """
+
+    index: int
+    id: str
+    grid_index: int
+    draw: int
+    values: dict
+    artifact_sha256: str | None
+    scenario: dict
+    seed: int
+    error: str | None = None
+
+
+@dataclass(frozen=True)
+class CampaignPlan:
+    """Every run, the artifacts they use (sha256 -> canonical JSON bytes) and the FMUs (sha256 -> bytes)."""
+
+    campaign: Campaign
+    runs: tuple[RunPoint, ...]
+    artifacts: dict = field(default_factory=dict)
+    blobs: dict = field(default_factory=dict)
+
+
+def _steps(path: str) -> list[str | int]:
+    out: list[str | int] = []
+    for part in path.split("."):
+        m = _STEP.fullmatch(part)
+        out.append(m.group(1))
+        out += [int(i) for i in re.findall(r"\[(\d+)\]", m.group(2))]
+    return out
+
+
+def set_path(tree: dict, path: str, value: Any, *, apply: str = "set", where: str = "") -> None:
+    """Set ``path`` (dotted keys, ``[i]`` indices) in ``tree`` in place; ``scale``/``add`` need a number there."""
+    steps = _steps(path)
+    node: Any = tree
+    for i, step in enumerate(steps[:-1]):
+        nxt = steps[i + 1]
+        if isinstance(step, int):
+            if not isinstance(node, list) or step >= len(node):
+                raise CampaignError(f"campaign: {where}: {path}: no element [{step}] in the base")
+            node = node[step]
+            continue
+        if not isinstance(node, dict):
+            raise CampaignError(f"campaign: {where}: {path}: {step!r} is not inside a table")
+        if step not in node:
+            if isinstance(nxt, int):
+                raise CampaignError(f"campaign: {where}: {path}: the base has no list {step!r} to index")
+            node[step] = {}
+        node = node[step]
+    last = steps[-1]
+    container_ok = isinstance(node, list) and isinstance(last, int) and last < len(node) or isinstance(node, dict)
+    if not container_ok:
+        raise CampaignError(f"campaign: {where}: {path}: cannot set it in the base")
+    if apply != "set":
+        base = node[last] if (isinstance(node, list) or last in node) else None
+        if isinstance(base, bool) or not isinstance(base, (int, float)):
+            raise CampaignError(f"campaign: {where}: apply = \"{apply}\" needs a number at {path} in the base "
+                                f"(found {base!r})")
+        value = base * value if apply == "scale" else base + value
+    node[last] = value
+
+
+def sample(axis: Axis, rng: np.random.Generator) -> Any:
+    """One value of a draw axis (scipy.stats for the truncated normal and the log-uniform)."""
+    p = axis.params
+    dist = axis.distribution
+    if dist == "normal":
+        return float(rng.normal(p["mean"], p["std"]))
+    if dist == "uniform":
+        return float(rng.uniform(p["low"], p["high"]))
+    if dist == "choice":
+        return p["values"][int(rng.integers(len(p["values"])))]
+    from scipy import stats
+
+    if dist == "loguniform":
+        return float(stats.loguniform(p["low"], p["high"]).rvs(random_state=rng))
+    a, b = (p["low"] - p["mean"]) / p["std"], (p["high"] - p["mean"]) / p["std"]
+    return float(stats.truncnorm(a, b, loc=p["mean"], scale=p["std"]).rvs(random_state=rng))
+
+
+def draw_values(campaign: Campaign, j: int) -> tuple[int, dict]:
+    """The run seed and the draw-axis values of draw ``j``."""
+    rng = np.random.default_rng([campaign.seed, j])
+    seed = int(rng.integers(2**31 - 1))  # first, so adding an axis keeps every run's noise
+    return seed, {a.name: sample(a, rng) for a in campaign.draws}
+
+
+def _apply_axis(axis: Axis, value: Any, *, spec: dict | None, scenario: dict, window: tuple[float, float]) -> None:
+    where = f"axis {axis.name}"
+    for target in axis.targets:
+        if target == "faults.drop":
+            if value > 0:
+                scenario.setdefault("faults", []).append(
+                    {"kind": "drop", "start": window[0], "stop": window[1], "probability": float(value)})
+        elif target == "faults.delay_steps":
+            if value > 0:
+                scenario.setdefault("faults", []).append(
+                    {"kind": "delay", "start": window[0], "stop": window[1], "delay_steps": int(value)})
+        elif target.startswith("spec."):
+            set_path(spec, target[5:], copy.deepcopy(value), apply=axis.apply, where=where)
+        else:
+            set_path(scenario, target, copy.deepcopy(value), apply=axis.apply, where=where)
+
+
+def run_id(*, kind: str, artifact_sha256: str | None, scenario: dict, seed: int) -> str:
+    """The content address of a run (hex, 20 characters)."""
+    body = {"kind": kind, "artifact": artifact_sha256, "scenario": scenario, "seed": seed, "gainlink": __version__}
+    return hashlib.sha256(canonical_json(body).encode("ascii")).hexdigest()[:20]
+
+
+def _design(spec: dict, *, source: str) -> bytes:
+    from gainlink.design import design
+    from gainlink.spec import parse_spec
+
+    sealed = design(parse_spec(spec, source=source)).artifact
+    return render(sealed).encode("utf-8")
+
+
+def _fmu_blob(scenario: dict, campaign: Campaign, blobs: dict, cache: dict) -> None:
+    """An FMU plant travels as bytes: read it here, name it by sha256 (``path = "sha256:<hex>"``)."""
+    plant = scenario.get("plant")
+    if not isinstance(plant, dict) or plant.get("kind") != "fmu":
+        return
+    from ..plants.fmu import resolve_fmu
+
+    key = (plant.get("fmu"), plant.get("path"))
+    if key not in cache:
+        path = resolve_fmu(fmu=plant.get("fmu"), path=plant.get("path"), base_dir=campaign.base_dir)
+        data = Path(path).read_bytes()
+        sha = hashlib.sha256(data).hexdigest()
+        blobs[sha] = data
+        cache[key] = sha
+    plant.pop("fmu", None)
+    plant["path"] = f"sha256:{cache[key]}"
+
+
+def _check_scenario(campaign: Campaign, scenario: dict, where: str) -> None:
+    if "firmware" in scenario:
+        raise CampaignError("campaign: scenario.firmware: a campaign builds the firmware on each worker")
+    data = dict(scenario, artifact="gains.json")
+    if campaign.kind == "sil":
+        data.setdefault("transport", {})
+    try:
+        parsed = parse_scenario(data)
+        if campaign.kind == "sil":
+            check_sil(parsed)
+    except GainlinkError as exc:
+        raise CampaignError(f"campaign: {where}: {exc}") from None
+
+
+def plan_campaign(campaign: Campaign) -> CampaignPlan:
+    """Expand ``campaign`` into its runs (designing each grid point's artifact)."""
+    artifacts: dict[str, bytes] = {}
+    blobs: dict[str, bytes] = {}
+    fmu_cache: dict = {}
+    designs: dict[str, bytes | str] = {}  # canonical spec -> artifact bytes, or the design's error
+    fixed = campaign.artifact_path.read_bytes() if campaign.artifact_path is not None else None
+    draws = [draw_values(campaign, j) for j in range(campaign.runs)]
+    runs = []
+    points = list(itertools.product(*(a.values for a in campaign.grid)))
+    for g, point in enumerate(points):
+        for j, (seed, drawn) in enumerate(draws):
+            values = {a.name: v for a, v in zip(campaign.grid, point)} | drawn
+            spec = copy.deepcopy(campaign.spec) if campaign.spec is not None else None
+            scenario = copy.deepcopy(campaign.scenario)
+            for axis in (*campaign.grid, *campaign.draws):
+                _apply_axis(axis, values[axis.name], spec=spec, scenario=scenario, window=campaign.fault_window)
+            where = f"run {len(runs)} ({', '.join(f'{k}={_short(v)}' for k, v in values.items()) or 'base'})"
+            _check_scenario(campaign, scenario, where)
+            _fmu_blob(scenario, campaign, blobs, fmu_cache)
+            art, error = _artifact(campaign, spec, fixed, designs, where)
+            sha = None
+            if art is not None:
+                sha = json.loads(art)["sha256"]
+                artifacts.setdefault(sha, art)
+            rid = run_id(kind=campaign.kind, artifact_sha256=sha, scenario=scenario, seed=seed)
+            runs.append(RunPoint(index=len(runs), id=rid, grid_index=g, draw=j, values=values, artifact_sha256=sha,
+                                 scenario=scenario, seed=seed, error=error))
+    return CampaignPlan(campaign=campaign, runs=tuple(runs), artifacts=artifacts, blobs=blobs)
+
+
+def _artifact(campaign: Campaign, spec: dict | None, fixed: bytes | None, designs: dict,
+              where: str) -> tuple[bytes | None, str | None]:
+    if fixed is not None:
+        return fixed, None
+    key = canonical_json(spec)
+    if key not in designs:
+        try:
+            designs[key] = _design(spec, source=f"{campaign.spec_path} ({where})")
+        except GainlinkError as exc:
+            designs[key] = f"design failed: {exc}"
+    got = designs[key]
+    return (got, None) if isinstance(got, bytes) else (None, got)
+
+
+def _short(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    text = json.dumps(v) if not isinstance(v, str) else v
+    return text if len(text) <= 24 else text[:21] + "..."
+
+
+def describe_axes(campaign: Campaign) -> list[dict]:
+    """The axes as JSON-able dicts (for campaign.json)."""
+    out = []
+    for a in (*campaign.grid, *campaign.draws):
+        d: dict[str, Any] = {"name": a.name, "targets": list(a.targets), "apply": a.apply}
+        if a.distribution is None:
+            d["grid"] = list(a.values)
+        else:
+            d["distribution"] = a.distribution
+            d.update(a.params)
+        out.append(d)
+    return out
+
+
+def grid_size(campaign: Campaign) -> int:
+    """How many grid points the campaign has."""
+    return math.prod(len(a.values) for a in campaign.grid)

@@ -1,0 +1,283 @@
+"""The merged campaign report: ``campaign.json``, ``campaign.csv``, plots and a one-screen summary.
+
+- ``campaign.json``: the campaign (axes, criteria), counts, the pass fraction per grid point, and every
+  run — index, id, axis values, seed, status (``pass``, ``fail``, ``error``), the reasons, its metrics
+  and measures;
+- ``campaign.csv``: one row per run (axis values, status, reasons, the main metrics);
+- ``envelopes.png``: percentiles (5-95, 25-75, median) of every output and command over time across
+  the finished runs, with the failed runs' median dashed;
+- ``scatter.png``: for each drawn (or numeric grid) axis, each tracked output's IAE against it, failed
+  runs marked;
+- ``failures.txt``: the failure table (run, axis values, reasons), worst first;
+- ``summary.txt``: counts, pass fraction per grid point, the worst runs and how to replay one.
+
+Verdicts are computed here from the stored measures, so changing the criteria and merging again needs
+no run (``gainlink campaign show DIR`` re-merges).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from collections import Counter
+from typing import Any
+
+import numpy as np
+
+from gainlink.fileio import publish_files
+
+from .criteria import evaluate
+from .plan import CampaignPlan, describe_axes
+
+PERCENTILES = (5, 25, 50, 75, 95)
+
+
+def _row(point: Any, record: dict, criteria: Any) -> dict:
+    row = {"index": point.index, "id": point.id, "grid_index": point.grid_index, "draw": point.draw,
+           "values": point.values, "seed": point.seed, "artifact_sha256": point.artifact_sha256}
+    if record is None:
+        return row | {"status": "missing", "failed": ["missing"], "reasons": ["no result"]}
+    if record["status"] == "error":
+        return row | {"status": "error", "failed": ["error"], "reasons": [record["reason"]], "worker": record.get("worker")}
+    failed = evaluate(criteria, record)
+    return row | {"status": "fail" if failed else "pass", "failed": sorted({k for k, _ in failed}),
+                  "reasons": [text for _, text in failed], "complete": record["complete"],
+                  "run_reason": record.get("reason"), "metrics": record["metrics"], "measures": record["measures"],
+                  "worker": record.get("worker")}
+
+
+def rows_of(plan: CampaignPlan, store: Any) -> list[dict]:
+    """One row per planned run, with its verdict under the campaign's criteria."""
+    records: dict[str, dict | None] = {}
+    for p in plan.runs:
+        if p.id not in records:
+            records[p.id] = store.record(p.id) if store.has(p.id) else None
+    return [_row(p, records[p.id], plan.campaign.criteria) for p in plan.runs]
+
+
+def _tracked_iae(row: dict) -> float | None:
+    tr = row.get("metrics", {}).get("tracked", {})
+    vals = [v.get("iae") for v in tr.values()]
+    return None if not vals or any(v is None for v in vals) else float(sum(vals))
+
+
+def _by_point(plan: CampaignPlan, rows: list[dict]) -> list[dict]:
+    points: dict[int, dict] = {}
+    grid_names = [a.name for a in plan.campaign.grid]
+    for row in rows:
+        p = points.setdefault(row["grid_index"], {"grid_index": row["grid_index"],
+                                                  "values": {k: row["values"][k] for k in grid_names},
+                                                  "runs": 0, "pass": 0, "fail": 0, "error": 0, "iae": []})
+        p["runs"] += 1
+        p[row["status"] if row["status"] in ("pass", "fail", "error") else "error"] += 1
+        iae = _tracked_iae(row)
+        if iae is not None:
+            p["iae"].append(iae)
+    out = []
+    for p in points.values():
+        iae = p.pop("iae")
+        p["pass_fraction"] = p["pass"] / p["runs"]
+        p["iae_median"] = float(np.median(iae)) if iae else None
+        p["iae_p95"] = float(np.percentile(iae, 95)) if iae else None
+        out.append(p)
+    return out
+
+
+def _flat(value: Any) -> str:
+    return value if isinstance(value, str) else json.dumps(value)
+
+
+def campaign_csv(plan: CampaignPlan, rows: list[dict]) -> str:
+    """``campaign.csv``: one row per run."""
+    axes = [a.name for a in (*plan.campaign.grid, *plan.campaign.draws)]
+    tracked = sorted({k for r in rows for k in r.get("metrics", {}).get("tracked", {})})
+    outs = sorted({k for r in rows for k in r.get("metrics", {}).get("outputs_final", {})})
+    head = ["index", "id", "status", "reasons", *axes, "seed", "complete", "stable", "longest_saturation_s",
+            *[f"{t}_{k}" for t in tracked for k in ("iae", "overshoot_pct", "settling_time_s")],
+            *[f"{o}_final" for o in outs], "artifact_sha256"]
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(head)
+    for r in rows:
+        m, q = r.get("metrics", {}), r.get("measures", {})
+        w.writerow([r["index"], r["id"], r["status"], "; ".join(r["reasons"]), *[_flat(r["values"][a]) for a in axes],
+                    r["seed"], r.get("complete", ""), q.get("stable", ""), q.get("longest_saturation_s", ""),
+                    *[_num(m.get("tracked", {}).get(t, {}).get(k)) for t in tracked
+                      for k in ("iae", "overshoot_pct", "settling_time_s")],
+                    *[_num(m.get("outputs_final", {}).get(o)) for o in outs], r["artifact_sha256"] or ""])
+    return buf.getvalue()
+
+
+def _num(v: Any) -> str:
+    return "" if v is None else repr(v)
+
+
+def failures_text(rows: list[dict], *, limit: int = 200) -> str:
+    """The failure table: failed and erroneous runs, worst (largest IAE) first, errors last."""
+    bad = [r for r in rows if r["status"] != "pass"]
+    bad.sort(key=lambda r: (r["status"] != "fail", -(_tracked_iae(r) or math.inf if r["status"] == "fail" else 0)))
+    lines = [f"{'index':>6}  {'id':<20}  {'status':<6}  values  ->  reasons"]
+    for r in bad[:limit]:
+        vals = ", ".join(f"{k}={_short(v)}" for k, v in r["values"].items())
+        lines.append(f"{r['index']:>6}  {r['id']:<20}  {r['status']:<6}  {vals}  ->  {'; '.join(r['reasons'])}")
+    if len(bad) > limit:
+        lines.append(f"... and {len(bad) - limit} more (campaign.csv has them all)")
+    if not bad:
+        lines.append("(no failed run)")
+    return "\n".join(lines) + "\n"
+
+
+def _short(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    text = v if isinstance(v, str) else json.dumps(v)
+    return text if len(text) <= 30 else text[:27] + "..."
+
+
+def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, out: Any) -> str:
+    """A one-screen summary of the campaign."""
+    c = plan.campaign
+    counts = Counter(r["status"] for r in rows)
+    n = len(rows)
+    lines = [f"Campaign {c.name} ({c.kind}): {n} runs, {counts['pass']} passed ({100 * counts['pass'] / max(n, 1):.1f}%), "
+             f"{counts['fail']} failed, {counts['error']} errors" + (f", {counts['missing']} missing" if counts["missing"] else "")]
+    if len(points) > 1:
+        lines.append("  per grid point:")
+        for p in points:
+            vals = ", ".join(f"{k}={_short(v)}" for k, v in p["values"].items())
+            iae = "" if p["iae_median"] is None else f"  IAE median {p['iae_median']:.4g} p95 {p['iae_p95']:.4g}"
+            lines.append(f"    {vals}: {p['pass']}/{p['runs']} passed ({100 * p['pass_fraction']:.1f}%){iae}")
+    failed = Counter(k for r in rows for k in r["failed"])
+    if failed:
+        lines.append("  runs failing each criterion: " + ", ".join(f"{k} {v}" for k, v in failed.most_common()))
+    worst = sorted((r for r in rows if _tracked_iae(r) is not None), key=lambda r: -_tracked_iae(r))[:3]
+    if worst:
+        lines.append("  worst IAE: " + ", ".join(f"run {r['index']} {r['id']} ({_tracked_iae(r):.4g}, {r['status']})"
+                                                 for r in worst))
+        lines.append(f"  replay one: gainlink campaign show {out} --run {worst[0]['id']} --report REPORT_DIR")
+    lines.append(f"  report: {out / 'campaign.json'}, campaign.csv, envelopes.png, scatter.png, failures.txt")
+    return "\n".join(lines) + "\n"
+
+
+def _png(fig: Any) -> bytes:
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def envelopes_png(plan: CampaignPlan, rows: list[dict], store: Any) -> bytes:
+    """Percentile envelopes of outputs and commands over time (finished runs of the most common length)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    traces = {}
+    for r in rows:
+        if r["status"] in ("pass", "fail") and r["id"] not in traces:
+            tr = store.trace(r["id"])
+            if tr is not None:
+                traces[r["id"]] = (tr, r["status"])
+    lengths = Counter(tr["t"].size for tr, _ in traces.values())
+    size = lengths.most_common(1)[0][0] if lengths else 0
+    keep = [(tr, s) for tr, s in traces.values() if tr["t"].size == size]
+    first = next(iter(keep), (None, None))[0]
+    outs = (first["y"].shape[1] if first is not None else 0)
+    ins = (first["u"].shape[1] if first is not None else 0)
+    sig = _signals(plan)
+    fig, axes = plt.subplots(max(outs + ins, 1), 1, figsize=(9, 2.3 * max(outs + ins, 1)), sharex=True, squeeze=False)
+    if first is None:
+        axes[0, 0].text(0.5, 0.5, "no finished run", ha="center", transform=axes[0, 0].transAxes)
+        return _png(fig)
+    t = first["t"]
+    for i in range(outs + ins):
+        ax = axes[i, 0]
+        key, j = ("y", i) if i < outs else ("u", i - outs)
+        data = np.stack([tr[key][:, j] for tr, _ in keep]).astype(float)
+        pct = np.nanpercentile(data, PERCENTILES, axis=0)
+        ax.fill_between(t, pct[0], pct[4], alpha=0.2, color="C0", label="5-95 %")
+        ax.fill_between(t, pct[1], pct[3], alpha=0.35, color="C0", label="25-75 %")
+        ax.plot(t, pct[2], color="C0", lw=1.2, label="median")
+        failed = [tr[key][:, j] for tr, s in keep if s == "fail"]
+        if failed:
+            ax.plot(t, np.nanmedian(np.stack(failed), axis=0), "--", color="C3", lw=1, label=f"median of {len(failed)} failed")
+        names = sig["outputs"] if key == "y" else sig["inputs"]
+        ax.set_ylabel(names[j] if j < len(names) else f"{key}{j}")
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", fontsize=7)
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.suptitle(f"{plan.campaign.name}: outputs and commands over {len(keep)} runs")
+    return _png(fig)
+
+
+def _signals(plan: CampaignPlan) -> dict:
+    for data in plan.artifacts.values():
+        return json.loads(data)["signals"]
+    return {"outputs": [], "inputs": []}
+
+
+def scatter_png(plan: CampaignPlan, rows: list[dict]) -> bytes:
+    """IAE of each run against each numeric axis; failed runs marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    axes_ = [a.name for a in (*plan.campaign.draws, *plan.campaign.grid)
+             if all(isinstance(r["values"][a.name], (int, float)) and not isinstance(r["values"][a.name], bool)
+                    for r in rows)]
+    done = [r for r in rows if _tracked_iae(r) is not None]
+    n = max(len(axes_), 1)
+    cols = min(n, 3)
+    fig, grid = plt.subplots(math.ceil(n / cols), cols, figsize=(4.2 * cols, 3.4 * math.ceil(n / cols)), squeeze=False)
+    for k, name in enumerate(axes_ or [None]):
+        ax = grid[k // cols, k % cols]
+        if name is None or not done:
+            ax.text(0.5, 0.5, "no numeric axis" if name is None else "no finished run", ha="center",
+                    transform=ax.transAxes)
+            continue
+        for status, style in (("pass", dict(color="C0", marker="o", s=10, alpha=0.6)),
+                              ("fail", dict(color="C3", marker="x", s=22, alpha=0.9))):
+            pts = [(r["values"][name], _tracked_iae(r)) for r in done if r["status"] == status]
+            if pts:
+                x, y = zip(*pts)
+                ax.scatter(x, y, label=f"{status} ({len(pts)})", **style)
+        ax.set_xlabel(name)
+        ax.set_ylabel("IAE (sum over tracked outputs)")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    for k in range(len(axes_ or [None]), grid.size):
+        grid[k // cols, k % cols].axis("off")
+    fig.suptitle(f"{plan.campaign.name}: IAE against the varied parameters (x: failed)")
+    fig.tight_layout()
+    return _png(fig)
+
+
+def _criteria_doc(c: Any) -> dict:
+    return {k: (dict(v) if isinstance(v, dict) else v) for k, v in c.__dict__.items()}
+
+
+def merge(plan: CampaignPlan, store: Any) -> tuple[str, list[dict]]:
+    """Merge the stored runs into the report files; returns the summary text and the rows."""
+    rows = rows_of(plan, store)
+    points = _by_point(plan, rows)
+    c = plan.campaign
+    counts = Counter(r["status"] for r in rows)
+    doc = {"campaign": {"name": c.name, "kind": c.kind, "seed": c.seed, "runs_per_point": c.runs,
+                        "description": c.description, "axes": describe_axes(c), "criteria": _criteria_doc(c.criteria),
+                        "spec": str(c.spec_path) if c.spec_path else None,
+                        "artifact": str(c.artifact_path) if c.artifact_path else None},
+           "counts": {"runs": len(rows), **{k: counts.get(k, 0) for k in ("pass", "fail", "error", "missing")}},
+           "points": points, "runs": rows}
+    summary = summary_text(plan, rows, points, out=store.out)
+    files = {"campaign.json": json.dumps(doc, sort_keys=True, indent=1, allow_nan=False) + "\n",
+             "campaign.csv": campaign_csv(plan, rows), "failures.txt": failures_text(rows),
+             "envelopes.png": envelopes_png(plan, rows, store), "scatter.png": scatter_png(plan, rows),
+             "summary.txt": summary}
+    publish_files(store.out, files)
+    return summary, rows

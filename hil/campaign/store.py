@@ -1,0 +1,89 @@
+"""A campaign folder: inputs (artifacts and FMUs by sha256, the plan) and one result file per run id.
+
+::
+
+    DIR/plan.json               every run: id, index, axis values, seed, artifact sha256, scenario
+    DIR/artifacts/<sha256>.json DIR/fmus/<sha256>.fmu      what travelled to the workers
+    DIR/runs/<id>.json          one finished run (inputs, status, metrics, measures, worker)
+    DIR/runs/<id>.npz           its downsampled traces (t, y, u, r)
+    DIR/campaign.json campaign.csv summary.txt *.png           the merged report (see report.py)
+
+Every file is written to a temporary name and renamed; a run's ``.json`` is written after its ``.npz``,
+so a run counts as done exactly when its ``.json`` exists, and a campaign killed at any point resumes
+by running the ids without one.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gainlink.fileio import atomic_write_bytes, atomic_write_text, prepare_output_dir
+
+from .plan import CampaignPlan, RunPoint
+
+
+def _json(obj: Any) -> str:
+    return json.dumps(obj, sort_keys=True, indent=1, allow_nan=False) + "\n"
+
+
+class Store:
+    """The campaign folder ``out`` (created on demand)."""
+
+    def __init__(self, out: str | Path) -> None:
+        self.out = prepare_output_dir(out)
+        self.runs = self.out / "runs"
+        self.runs.mkdir(exist_ok=True)
+
+    def prepare(self, plan: CampaignPlan, *, plan_doc: dict) -> None:
+        """Write the inputs: artifacts, FMUs and ``plan.json``."""
+        for folder, items, ext in (("artifacts", plan.artifacts, "json"), ("fmus", plan.blobs, "fmu")):
+            if items:
+                (self.out / folder).mkdir(exist_ok=True)
+            for sha, data in items.items():
+                path = self.out / folder / f"{sha}.{ext}"
+                if not path.is_file():
+                    atomic_write_bytes(path, data)
+        atomic_write_text(self.out / "plan.json", _json(plan_doc))
+
+    def has(self, run_id: str) -> bool:
+        """True when run ``run_id`` has a result."""
+        return (self.runs / f"{run_id}.json").is_file()
+
+    def put(self, point: RunPoint, *, kind: str, result: dict) -> dict:
+        """Record a finished (or failed) run; returns the record written."""
+        trace = result.get("trace")
+        if trace is not None:
+            buf = io.BytesIO()
+            np.savez_compressed(buf, **trace)
+            atomic_write_bytes(self.runs / f"{point.id}.npz", buf.getvalue())
+        record = {k: v for k, v in result.items() if k != "trace"}
+        record.update({"id": point.id, "inputs": {"kind": kind, "artifact_sha256": point.artifact_sha256,
+                                                  "scenario": point.scenario, "seed": point.seed}})
+        atomic_write_text(self.runs / f"{point.id}.json", _json(record))
+        return record
+
+    def record(self, run_id: str) -> dict:
+        """The stored record of a run."""
+        return json.loads((self.runs / f"{run_id}.json").read_text("utf-8"))
+
+    def trace(self, run_id: str) -> dict[str, np.ndarray] | None:
+        """The stored downsampled traces of a run, if any."""
+        path = self.runs / f"{run_id}.npz"
+        if not path.is_file():
+            return None
+        with np.load(path) as z:
+            return {k: z[k] for k in z.files}
+
+    def artifact_bytes(self, sha: str) -> bytes:
+        """An artifact that travelled with the campaign."""
+        return (self.out / "artifacts" / f"{sha}.json").read_bytes()
+
+    def blobs(self) -> dict[str, bytes]:
+        """Every FMU that travelled with the campaign."""
+        folder = self.out / "fmus"
+        return {p.stem: p.read_bytes() for p in folder.glob("*.fmu")} if folder.is_dir() else {}

@@ -1,0 +1,220 @@
+"""What runs on a Dask worker: one campaign run as a pure function of (artifact bytes, scenario, seed).
+
+:func:`execute` is the task. Its inputs travel as bytes (the artifact's canonical JSON, FMU archives by
+sha256); the worker writes each once into a host-local cache named by sha256, builds the firmware once
+per artifact (the firmware build cache is keyed by the artifact's sha256 and serialised by a file lock
+between the processes of a host) and remembers the result for the rest of its life, so the second run
+of an artifact pays nothing for it.
+
+A HIL run takes a *bus slot* first: a file lock no other process on the host holds. The slot gives the
+run its own udp_multicast group and port (or its own CAN id base on a shared SocketCAN bus, or its own
+MAVLink UDP port) and one CPU for the bridge and its controller, so parallel HIL runs on one host never
+hear each other or fight for a core.
+
+A run-time fault the run itself reports (a plant that fails, a peer that dies: ``complete = False``)
+is a result. A :class:`~gainlink.errors.GainlinkError` before or around the run is recorded as the run's
+error. Anything else propagates, so Dask retries the run (on another worker when this one died).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import fcntl
+import json
+import os
+import socket
+import time
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from gainlink.artifact import Artifact, from_dict
+from gainlink.errors import GainlinkError, TransportError
+from gainlink.fileio import atomic_write_bytes
+
+from ..paths import cache_dir
+from ..loop.scenario import parse_scenario
+from .criteria import measure
+
+MAX_TRACE_POINTS = 600
+MAX_BUS_SLOTS = 64
+MULTICAST_GROUP = "239.74.164.{}"  # slot k uses host {k + 1} of this /24
+MULTICAST_PORT0 = 43200
+MAVLINK_PORT0 = 14600
+CAN_ID_STRIDE = 0x40
+
+_ARTIFACTS: dict[str, tuple[Artifact, Path]] = {}
+_LIBRARIES: dict[str, Path] = {}
+_EXECUTABLES: dict[tuple[str, str], Path] = {}
+_FMUS: dict[str, Path] = {}
+
+
+def _local(sub: str) -> Path:
+    return cache_dir(f"campaign/{sub}")
+
+
+def _write_once(path: Path, data: bytes) -> Path:
+    if not path.is_file():
+        atomic_write_bytes(path, data)
+    return path
+
+
+def artifact_from_bytes(data: bytes) -> tuple[Artifact, Path]:
+    """The artifact of canonical JSON bytes (validated once per process) and its host-local file."""
+    doc = json.loads(data)
+    sha = doc.get("sha256", "") if isinstance(doc, dict) else ""
+    if sha not in _ARTIFACTS:
+        art = from_dict(doc)
+        _ARTIFACTS[art.sha256] = (art, _write_once(_local("artifacts") / f"{art.sha256}.json", data))
+        sha = art.sha256
+    return _ARTIFACTS[sha]
+
+
+def _fmu_path(ref: str, blobs: dict[str, bytes]) -> Path:
+    sha = ref.removeprefix("sha256:")
+    if sha not in _FMUS:
+        if sha not in blobs:
+            raise GainlinkError(f"campaign run names FMU {sha[:12]}... but it did not travel with the run")
+        _FMUS[sha] = _write_once(_local("fmus") / f"{sha}.fmu", blobs[sha])
+    return _FMUS[sha]
+
+
+def _library(artifact: Artifact) -> Path:
+    if artifact.sha256 not in _LIBRARIES:
+        from gainlink.firmware.build import build
+
+        _LIBRARIES[artifact.sha256] = build(artifact, target="host").files["shared"]
+    return _LIBRARIES[artifact.sha256]
+
+
+def _executable(artifact: Artifact, transport: dict) -> Path:
+    kind = transport.get("kind", "can")
+    key = (artifact.sha256, kind)
+    if key not in _EXECUTABLES:
+        if kind == "mavlink":
+            from gainlink.firmware.mavlink_app import mavlink_executable
+
+            _EXECUTABLES[key] = mavlink_executable(artifact)
+        else:
+            from ..links.can_firmware import firmware_can_executable
+
+            _EXECUTABLES[key] = firmware_can_executable(artifact)
+    return _EXECUTABLES[key]
+
+
+@contextlib.contextmanager
+def bus_slot() -> Iterator[int]:
+    """A slot number no other process on this host holds until the block ends (a file lock)."""
+    folder = Path("/tmp") / f"gainlink-bus-slots-{os.getuid()}"
+    folder.mkdir(exist_ok=True)
+    for k in range(MAX_BUS_SLOTS):
+        fh = open(folder / f"{k}.lock", "w")
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.close()
+            continue
+        try:
+            yield k
+        finally:
+            fh.close()
+        return
+    raise TransportError(f"no free bus slot: {MAX_BUS_SLOTS} HIL runs already share this host")
+
+
+def isolate_transport(transport: dict, slot: int) -> dict:
+    """The transport table of a run in bus slot ``slot``: its own group and port, or CAN id base, or UDP port."""
+    t = dict(transport)
+    if t.get("kind") == "mavlink":
+        if "url" in t or "controller_url" in t:
+            raise TransportError("campaign: a MAVLink transport with explicit urls cannot be given a port per run; "
+                                 "give port (the campaign offsets it per run)")
+        t["port"] = MAVLINK_PORT0 + 2 * slot
+    elif t.get("interface") == "udp_multicast":
+        t["channel"] = MULTICAST_GROUP.format(slot + 1)
+        t["port"] = MULTICAST_PORT0 + slot
+    else:  # one shared bus (socketcan, vcan0): own identifiers
+        base = t.get("base_id", 0x100)
+        base = int(base, 0) if isinstance(base, str) else int(base)
+        t["base_id"] = base + CAN_ID_STRIDE * slot
+        if t["base_id"] + CAN_ID_STRIDE > 0x7FF:
+            raise TransportError(f"campaign: bus slot {slot} leaves no 11-bit CAN identifiers above base_id {base:#x}")
+    return t
+
+
+@contextlib.contextmanager
+def _one_cpu(slot: int) -> Iterator[None]:
+    """Confine this process (and so the bridge's shared placement) to one CPU chosen by the slot."""
+    if not hasattr(os, "sched_setaffinity"):
+        yield
+        return
+    saved = os.sched_getaffinity(0)
+    cpus = sorted(saved)
+    os.sched_setaffinity(0, {cpus[slot % len(cpus)]})
+    try:
+        yield
+    finally:
+        os.sched_setaffinity(0, saved)
+
+
+def _scenario(scenario: dict, *, artifact_path: Path, seed: int, blobs: dict, kind: str):
+    data = json.loads(json.dumps(scenario))
+    data["artifact"] = str(artifact_path)
+    data["seed"] = int(seed)
+    plant = data.get("plant", {})
+    if plant.get("kind") == "fmu" and str(plant.get("path", "")).startswith("sha256:"):
+        plant["path"] = str(_fmu_path(plant["path"], blobs))
+    if kind == "sil":
+        data.setdefault("transport", {})
+    return parse_scenario(data)
+
+
+def _downsample(trace: Any) -> dict[str, np.ndarray]:
+    N = trace.t.size
+    idx = np.unique(np.linspace(0, N - 1, min(N, MAX_TRACE_POINTS)).round().astype(int)) if N else np.zeros(0, int)
+    return {"t": trace.t[idx].astype(np.float32), "y": trace.y[idx].astype(np.float32),
+            "u": trace.u[idx].astype(np.float32), "r": trace.r[idx].astype(np.float32)}
+
+
+def run_point(kind: str, artifact: Artifact, scenario: Any) -> Any:
+    """Run one parsed scenario as SIL (in-process C loop) or HIL (the bridge, in its own bus slot)."""
+    if kind == "sil":
+        from ..loop.sil import run_sil
+
+        return run_sil(artifact, scenario, library=_library(artifact) if scenario.controller == "firmware" else None)
+    from ..loop.bridge import run_scenario
+
+    with bus_slot() as slot, _one_cpu(slot):
+        transport = isolate_transport(scenario.transport, slot)
+        firmware = _executable(artifact, transport) if scenario.controller == "firmware" else None
+        return run_scenario(dataclasses.replace(scenario, transport=transport, firmware=firmware))
+
+
+def execute(kind: str, artifact_json: bytes, scenario: dict, seed: int, blobs: dict | None = None) -> dict:
+    """One campaign run (the Dask task): a JSON-able record plus downsampled traces (``trace``: arrays).
+
+    Parameters
+    ----------
+    kind : {"sil", "hil"}
+    artifact_json : bytes
+        The artifact's canonical JSON.
+    scenario : dict
+        The run's scenario table (without ``artifact``; an FMU plant's ``path`` is ``sha256:<hex>``).
+    seed : int
+        The run's seed (noise, random faults).
+    blobs : dict, optional
+        FMU archives by sha256.
+    """
+    where = {"host": socket.gethostname(), "pid": os.getpid(), "start": time.time()}
+    try:
+        artifact, path = artifact_from_bytes(artifact_json)
+        sc = _scenario(scenario, artifact_path=path, seed=seed, blobs=blobs or {}, kind=kind)
+        result = run_point(kind, artifact, sc)
+    except GainlinkError as exc:
+        return {"status": "error", "reason": str(exc), "worker": where | {"stop": time.time()}}
+    where["stop"] = time.time()
+    return {"status": "done", "complete": result.complete, "reason": result.reason, "metrics": result.metrics,
+            "measures": measure(result, artifact), "worker": where, "link": result.info["transport"],
+            "trace": _downsample(result.trace)}

@@ -1,0 +1,70 @@
+"""``gainlink campaign run|show``: many SIL/HIL runs on Dask, and one of them replayed with its full report."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .hil import _progress_bar
+
+
+def _run(args: argparse.Namespace) -> int:
+    from gainlink.hil.campaign import load_campaign, run
+
+    campaign = load_campaign(args.campaign)
+    with _progress_bar(not args.no_progress) as bar:
+        callback = None
+        if bar is not None:
+            task = bar.add_task(f"campaign {campaign.name}", total=campaign.size)
+            failed = [0]
+
+            def callback(done: int, total: int, record: dict) -> None:
+                failed[0] += record["status"] == "error"
+                bar.update(task, completed=done, total=total,
+                           description=f"campaign {campaign.name}" + (f" ({failed[0]} errors)" if failed[0] else ""))
+
+        result = run(campaign, out=Path(args.out), scheduler=args.scheduler, workers=args.workers, progress=callback)
+    sys.stdout.write(result.summary)
+    if result.reused:
+        sys.stdout.write(f"  resumed: {result.reused} runs had results, {result.executed} ran now\n")
+    return 0
+
+
+def _show(args: argparse.Namespace) -> int:
+    from gainlink.errors import GainlinkError
+    from gainlink.hil.campaign import show_run
+    from gainlink.hil.loop.report import summary_text
+
+    out = Path(args.dir)
+    if args.run is None:
+        path = out / "summary.txt"
+        if not path.is_file():
+            raise GainlinkError(f"{out} holds no campaign report (no summary.txt)")
+        sys.stdout.write(path.read_text("utf-8"))
+        return 0
+    result, folder = show_run(out, args.run, report=args.report, plots=not args.no_plots)
+    sys.stdout.write(summary_text(result, report_dir=folder))
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``campaign`` to the gainlink CLI."""
+    p = subparsers.add_parser("campaign", help="many SIL/HIL runs over uncertainty, grids and faults (Dask)")
+    sub = p.add_subparsers(dest="campaign_command", metavar="CAMPAIGN_COMMAND")
+    sub.required = True
+
+    r = sub.add_parser("run", help="run a campaign (resumes: runs with a result in --out are not run again)")
+    r.add_argument("campaign", help="campaign TOML (see examples/campaigns/)")
+    r.add_argument("--out", required=True, help="campaign folder: results by run id, campaign.json/.csv, plots")
+    r.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (default: a LocalCluster)")
+    r.add_argument("--workers", type=int, help="LocalCluster process workers (default: one per CPU)")
+    r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    r.set_defaults(func=_run)
+
+    s = sub.add_parser("show", help="print a campaign's summary, or replay one run with its full HIL report")
+    s.add_argument("dir", help="campaign folder")
+    s.add_argument("--run", help="run id (or a unique prefix, or the run's index) to replay")
+    s.add_argument("--report", help="report folder for --run (default DIR/replay/ID)")
+    s.add_argument("--no-plots", action="store_true", help="report.json and summary.txt only")
+    s.set_defaults(func=_show)

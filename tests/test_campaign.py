@@ -1,0 +1,367 @@
+"""Campaigns on Dask: the file, the plan, the criteria, and real clusters.
+
+Real parts: a distributed.LocalCluster of process workers, and a ``dask scheduler`` with two ``dask worker``
+processes started here on TCP localhost. Oracles: every campaign run equals the SIL run called directly
+with the same artifact, scenario and seed; the scheduler+workers campaign equals the LocalCluster one
+run for run; draws follow their distributions (scipy's KS test); stability on hand-made error signals.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from gainlink.artifact import load
+from gainlink.hil.campaign import CampaignError, load_campaign, parse_campaign, run, show_run
+from gainlink.hil.campaign.criteria import growth
+from gainlink.hil.campaign.plan import plan_campaign
+from gainlink.hil.plants import toml_write
+from gainlink.hil.loop.scenario import parse_scenario
+from gainlink.hil.loop.sil import run_sil
+
+from conftest import EXAMPLES, ROOT, run_cli
+
+VENV_BIN = Path(sys.executable).parent
+# What must be equal between two executions of the same run (timing is not: wall time, C step latency).
+CONTROL_KEYS = ("tracked", "outputs_final", "outputs_peak_abs", "inputs_peak_abs", "saturation_fraction",
+                "peak_integrator", "shadow_max_abs_du", "steps", "complete")
+
+
+def small_campaign(gains: Path, **extra) -> dict:
+    """6 SIL runs of 3 s: 2 initial offsets x 3 plant draws (cart mass factor, pendulum mass)."""
+    data = {
+        "name": "small", "kind": "sil", "seed": 11, "runs": 3, "artifact": str(gains),
+        "scenario": {"duration": 3.0, "noise": {"theta": 2e-4},
+                     "plant": {"kind": "cart_pendulum", "outputs": ["x", "theta"], "step": 0.005,
+                               "parameters": {"M": 1.0, "m": 0.1}}},
+        "grid": [{"target": "initial_state.x", "values": [0.2, 1.0]}],
+        "draw": [{"name": "M_factor", "targets": ["plant.parameters.M"], "distribution": "uniform", "low": 0.7,
+                  "high": 1.3, "apply": "scale"},
+                 {"target": "plant.parameters.m", "distribution": "truncnormal", "mean": 0.1, "std": 0.02,
+                  "low": 0.07, "high": 0.13}],
+        "criteria": {"stable": True, "bounds": {"theta": [-0.5, 0.5]}, "settled_within": 2.5},
+    }
+    data.update(extra)
+    return data
+
+
+def _control(record: dict) -> dict:
+    return {k: record["metrics"].get(k) for k in CONTROL_KEYS}
+
+
+@pytest.fixture(scope="module")
+def local_run(pend, tmp_path_factory):
+    """The small campaign on a LocalCluster of 2 process workers."""
+    out = tmp_path_factory.mktemp("campaign") / "local"
+    result = run(small_campaign(pend), out=out, workers=2)
+    return result, out
+
+
+# --- the file ------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"bogus": 1}, "unknown key(s) bogus in the top level"),
+    ({"kind": "pil"}, "kind must be sil or hil"),
+    ({"spec": "x.toml"}, "exactly one of spec"),
+    ({"runs": 0}, "runs must be a whole number >= 1"),
+    ({"draw": [{"target": "plant.parameters.M", "distribution": "gamma"}]}, "distribution must be one of"),
+    ({"draw": [{"target": "plant.parameters.M", "distribution": "uniform", "low": 1.0}]}, "(missing high)"),
+    ({"draw": [{"target": "plant.parameters.M", "distribution": "uniform", "low": 2.0, "high": 1.0}]},
+     "low must be below high"),
+    ({"draw": [{"target": "plant..M", "distribution": "normal", "mean": 1.0, "std": 0.1}]}, "is not a dotted path"),
+    ({"grid": [{"targets": ["initial_state.x", "initial_state.theta"], "values": [1.0]}]}, "needs a name"),
+    ({"grid": [{"target": "spec.Ts", "values": [0.01]}]}, "spec.* axes need a spec"),
+    ({"fault_matrix": {"drop": [0.1]}}, "fault_matrix acts on a link"),
+    ({"criteria": {"overshot_below": 5}}, "unknown key(s) overshot_below in criteria"),
+])
+def test_campaign_file_mistakes_are_one_line(pend, change, words):
+    with pytest.raises(CampaignError) as err:
+        parse_campaign(small_campaign(pend, **change))
+    assert words in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_run_that_cannot_be_built_is_named_before_anything_runs(pend, tmp_path):
+    bad = small_campaign(pend, runs=20, draw=[{"target": "noise.theta", "distribution": "normal", "mean": 0.0, "std": 1.0}])
+    with pytest.raises(CampaignError, match=r"run \d+ \(.*noise.theta=.*\): scenario: noise.theta must be >= 0"):
+        plan_campaign(parse_campaign(bad))
+    scale = small_campaign(pend, draw=[{"target": "plant.parameters.l", "distribution": "uniform", "low": 0.9,
+                                        "high": 1.1, "apply": "scale"}])
+    with pytest.raises(CampaignError, match="needs a number at plant.parameters.l in the base"):
+        plan_campaign(parse_campaign(scale))
+    path = tmp_path / "c.toml"
+    path.write_text(toml_write.dumps(small_campaign(pend, kind="hil")))
+    res = run_cli("campaign", "run", path, "--out", tmp_path / "out")
+    assert res.code == 2 and res.err.strip().endswith("a hil campaign's scenario needs a transport")
+    assert not (tmp_path / "out").exists()
+
+
+# --- the plan ------------------------------------------------------------------------------------
+
+
+def test_draws_are_reproducible_shared_by_grid_points_and_kept_when_runs_grow(pend):
+    c3 = parse_campaign(small_campaign(pend))
+    p3, again = plan_campaign(c3), plan_campaign(c3)
+    assert [r.id for r in p3.runs] == [r.id for r in again.runs] and len(set(r.id for r in p3.runs)) == 6
+    by_draw = {}
+    for r in p3.runs:
+        by_draw.setdefault(r.draw, []).append(r)
+    for runs in by_draw.values():  # the same plant and noise at every grid point (common random numbers)
+        assert len({json.dumps({k: v for k, v in r.values.items() if k != "initial_state.x"}) for r in runs}) == 1
+        assert len({r.seed for r in runs}) == 1
+    for r in p3.runs:
+        assert 0.7 <= r.values["M_factor"] <= 1.3
+        assert r.scenario["plant"]["parameters"]["M"] == pytest.approx(1.0 * r.values["M_factor"])
+        assert 0.07 <= r.scenario["plant"]["parameters"]["m"] <= 0.13
+        assert r.scenario["initial_state"]["x"] == r.values["initial_state.x"]
+    p5 = plan_campaign(parse_campaign(small_campaign(pend, runs=5)))
+    ids5 = {(r.grid_index, r.draw): r.id for r in p5.runs}
+    assert all(ids5[(r.grid_index, r.draw)] == r.id for r in p3.runs)
+    other = plan_campaign(parse_campaign(small_campaign(pend, seed=12)))
+    assert not {r.id for r in other.runs} & {r.id for r in p3.runs}
+
+
+@pytest.mark.parametrize("draw, dist", [
+    ({"distribution": "uniform", "low": -1.0, "high": 3.0}, stats.uniform(-1.0, 4.0)),
+    ({"distribution": "normal", "mean": 2.0, "std": 0.5}, stats.norm(2.0, 0.5)),
+    ({"distribution": "loguniform", "low": 0.01, "high": 10.0}, stats.loguniform(0.01, 10.0)),
+    ({"distribution": "truncnormal", "mean": 1.0, "std": 1.0, "low": 0.5, "high": 4.0},
+     stats.truncnorm(-0.5, 3.0, loc=1.0, scale=1.0)),
+])
+def test_draws_follow_their_distribution(pend, draw, dist):
+    c = parse_campaign(small_campaign(pend, runs=1500, grid=[], draw=[{"target": "initial_state.x", **draw}]))
+    x = np.array([r.values["initial_state.x"] for r in plan_campaign(c).runs])
+    assert stats.kstest(x, dist.cdf).pvalue > 1e-4
+    support = dist.support()
+    assert np.all((x >= support[0]) & (x <= support[1]))
+
+
+def test_a_spec_grid_designs_one_artifact_per_point():
+    spec = EXAMPLES / "pendulum.toml"
+    c = parse_campaign({"spec": str(spec), "runs": 2, "scenario": {"duration": 1.0, "plant": {"kind": "linear"}},
+                        "grid": [{"target": "spec.limits.anti_windup", "values": ["clamp", "backcalc"]},
+                                 {"target": "spec.controller.Q_diag[2]", "values": [50.0, 100.0]}]})
+    plan = plan_campaign(c)
+    assert len(plan.runs) == 8 and len(plan.artifacts) == 4
+    for r in plan.runs:
+        art = json.loads(plan.artifacts[r.artifact_sha256])
+        assert art["anti_windup"] == r.values["spec.limits.anti_windup"]
+    # A grid point whose design fails is recorded as failed, not fatal to the campaign.
+    bad = parse_campaign({"spec": str(spec), "scenario": {"duration": 1.0, "plant": {"kind": "linear"}},
+                          "grid": [{"target": "spec.controller.R_diag[0]", "values": [1.0, -1.0]}]})
+    runs = plan_campaign(bad).runs
+    assert runs[0].error is None and runs[1].error.startswith("design failed: ")
+
+
+# --- criteria ------------------------------------------------------------------------------------
+
+
+def test_stability_is_judged_from_the_end_of_the_error():
+    t = np.linspace(0, 10, 1000)
+    assert growth(np.exp(-0.5 * t) * np.sin(5 * t))[0]  # decaying
+    assert growth(np.sin(5 * t))[0]  # steady oscillation: stable, never settles
+    ok, ratio = growth(np.exp(0.3 * t) * np.sin(5 * t))
+    assert not ok and ratio == pytest.approx(np.exp(0.3 * 2.5), rel=0.05)  # a quarter of the run apart
+    assert growth(1e-9 * np.exp(0.3 * t) + np.exp(-t))[0] is True  # grows, but below 2 % of its peak
+
+
+# --- LocalCluster --------------------------------------------------------------------------------
+
+
+def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pend, local_run):
+    result, out = local_run
+    assert result.total == 6 and result.executed == 6 and result.reused == 0 and result.errors == 0
+    doc = json.loads((out / "campaign.json").read_text())
+    assert doc["counts"]["runs"] == 6 and doc["counts"]["pass"] == result.passed
+    a = load(pend)
+    for row in doc["runs"]:
+        rec = json.loads((out / "runs" / f"{row['id']}.json").read_text())
+        sc = dict(rec["inputs"]["scenario"], artifact=str(pend), transport={})
+        direct = run_sil(a, parse_scenario(sc), seed=row["seed"])
+        assert _control(rec) == {k: direct.metrics.get(k) for k in CONTROL_KEYS}
+        assert row["status"] == ("fail" if row["reasons"] else "pass")
+        assert rec["worker"]["pid"] != os.getpid()  # it ran in a worker process
+    # The bigger initial offset takes longer to settle: the verdicts follow the metrics, per criterion.
+    for row in doc["runs"]:
+        ts = row["metrics"]["tracked"]["r_x"]["settling_time_s"]
+        assert ("settled_within" in row["failed"]) == (ts is None or ts > 2.5)
+    lines = (out / "campaign.csv").read_text().splitlines()
+    assert len(lines) == 7 and lines[0].startswith("index,id,status,reasons,initial_state.x,M_factor")
+    for png in ("envelopes.png", "scatter.png"):
+        assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "Campaign small (sil): 6 runs" in (out / "summary.txt").read_text()
+    assert (out / "failures.txt").read_text().startswith(" index")
+    assert oct((out / "campaign.json").stat().st_mode & 0o777) == "0o644"
+
+
+def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
+    result, out = local_run
+    row = result.rows[4]
+    res = run_cli("campaign", "show", out, "--run", row["id"][:8], "--report", tmp_path / "r", "--no-plots")
+    assert res.code == 0, res.err
+    report = json.loads((tmp_path / "r" / "report.json").read_text())
+    rec = json.loads((out / "runs" / f"{row['id']}.json").read_text())
+    assert {k: report.get(k) for k in CONTROL_KEYS} == _control(rec)
+    assert report["scenario"]["seed"] == row["seed"]
+    bad = run_cli("campaign", "show", out, "--run", "zzzz")
+    assert bad.code == 2 and "no run matching 'zzzz'" in bad.err
+
+
+# --- a campaign killed halfway resumes ---------------------------------------------------------------
+
+
+def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, tmp_path):
+    data = small_campaign(pend, runs=8, grid=[])
+    data["scenario"]["duration"] = 6.0
+    path = tmp_path / "c.toml"
+    path.write_text(toml_write.dumps(data))
+    out = tmp_path / "out"
+    proc = subprocess.Popen([str(VENV_BIN / "gainlink"), "campaign", "run", str(path), "--out", str(out),
+                             "--workers", "2", "--no-progress"], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 240
+        while len(list((out / "runs").glob("*.json"))) < 3 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.05)
+        os.killpg(proc.pid, signal.SIGKILL)  # the client, its LocalCluster scheduler and worker processes
+    finally:
+        proc.wait(timeout=30)
+    before = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
+    assert 3 <= len(before) < 8, "the campaign was not caught halfway"
+    assert not list(out.glob("campaign.json"))
+    res = run_cli("campaign", "run", path, "--out", out, "--workers", "2", "--no-progress")
+    assert res.code == 0, res.err
+    assert f"resumed: {len(before)} runs had results, {8 - len(before)} ran now" in res.out
+    after = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
+    assert len(after) == 8 and all(after[k] == v for k, v in before.items())
+    assert json.loads((out / "campaign.json").read_text())["counts"]["runs"] == 8
+
+
+# --- a real scheduler and two workers ---------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def dask_cluster(tmp_path_factory):
+    """``dask scheduler`` and two ``dask worker`` processes on TCP localhost (a run is retried once)."""
+    folder = tmp_path_factory.mktemp("dask")
+    info = folder / "scheduler.json"
+    env = dict(os.environ, DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES="1", PYTHONPATH=str(ROOT / "tests"))
+    common = dict(stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+                  start_new_session=True, cwd=folder)
+    procs = [subprocess.Popen([str(VENV_BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", "0",
+                               "--no-dashboard", "--scheduler-file", str(info)], **common)]
+    try:
+        deadline = time.monotonic() + 60
+        while not info.is_file() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        address = json.loads(info.read_text())["address"]
+        for i in range(2):
+            procs.append(subprocess.Popen([str(VENV_BIN / "dask"), "worker", address, "--nworkers", "1",
+                                           "--nthreads", "1", "--no-dashboard", "--name", f"w{i}",
+                                           "--local-directory", str(folder / f"w{i}")], **common))
+        from distributed import Client
+
+        with Client(address, timeout=30) as client:
+            client.wait_for_workers(2, timeout=120)
+        yield address
+    finally:
+        for p in reversed(procs):
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(p.pid, signal.SIGKILL)
+            p.wait(timeout=30)
+
+
+def test_scheduler_and_two_worker_processes_give_the_local_cluster_results(pend, local_run, dask_cluster, tmp_path):
+    _, local_out = local_run
+    path = tmp_path / "small.toml"
+    path.write_text(toml_write.dumps(small_campaign(pend)))
+    res = run_cli("campaign", "run", path, "--out", tmp_path / "dist", "--scheduler", dask_cluster, "--no-progress")
+    assert res.code == 0, res.err
+    local = json.loads((local_out / "campaign.json").read_text())["runs"]
+    dist = json.loads((tmp_path / "dist" / "campaign.json").read_text())["runs"]
+    assert [r["id"] for r in dist] == [r["id"] for r in local]
+    for a, b in zip(local, dist):
+        assert (a["status"], a["reasons"]) == (b["status"], b["reasons"])
+        assert {k: a["metrics"].get(k) for k in CONTROL_KEYS} == {k: b["metrics"].get(k) for k in CONTROL_KEYS}
+    assert {r["worker"]["pid"] for r in dist} <= _worker_pids(dask_cluster)
+
+
+def _worker_pids(address: str) -> set[int]:
+    from distributed import Client
+
+    with Client(address, timeout=30) as client:
+        return set(client.run(os.getpid).values())
+
+
+def test_a_run_whose_worker_dies_is_retried_and_recorded_as_failed_after_a_second_death(pend, dask_cluster, tmp_path):
+    from distributed import Client
+
+    data = small_campaign(pend, runs=1, draw=[], grid=[{"target": "duration", "values": [120.0, 1.0, 1.5, 2.0]}])
+    data["scenario"]["plant"]["step"] = 0.001
+    plan = plan_campaign(parse_campaign(data))
+    long_key = f"gainlink-run-{plan.runs[0].id}"
+    outcome, done = {}, []
+    thread = threading.Thread(target=lambda: outcome.update(result=run(
+        data, out=tmp_path / "out", scheduler=dask_cluster, progress=lambda *args: done.append(args[2]))))
+    kills = []
+    with Client(dask_cluster, timeout=30) as client:
+        thread.start()
+        deadline = time.monotonic() + 300
+        while len(kills) < 2 and time.monotonic() < deadline and thread.is_alive():
+            # Kill only once the short runs are stored: a worker's death also counts against the runs
+            # queued on it, and this test is about the long one.
+            where = [w for w, keys in client.processing().items() if long_key in keys] if len(done) == 3 else []
+            pid = client.run(os.getpid, workers=where, on_error="ignore").get(where[0]) if where else None
+            if pid is not None and pid not in kills:
+                os.kill(pid, signal.SIGKILL)  # the worker process running it (its nanny starts a new one)
+                kills.append(pid)
+            time.sleep(0.2)
+        thread.join(timeout=300)
+    assert len(kills) == 2, "the long run was not seen processing twice"
+    result = outcome["result"]
+    rows = {r["index"]: r for r in result.rows}
+    assert rows[0]["status"] == "error" and "KilledWorker" in rows[0]["reasons"][0]
+    assert all(rows[i]["status"] in ("pass", "fail") for i in (1, 2, 3)) and result.errors == 1
+
+
+# --- HIL campaigns ---------------------------------------------------------------------------------
+
+
+def test_a_hil_fault_matrix_runs_in_parallel_on_separate_buses(pend, tmp_path):
+    data = small_campaign(pend, kind="hil", runs=1, draw=[], grid=[],
+                          fault_matrix={"drop": [0.0, 0.1], "delay_steps": [0, 2], "start": 0.5, "stop": 1.5})
+    # A command that does not come is waited for step_timeout: short, and a peer_timeout above 100 of them.
+    data["scenario"].update(mode="lockstep", controller="firmware", step_timeout=0.05, peer_timeout=20.0, duration=2.0,
+                            initial_state={"theta": 0.05},
+                            transport={"interface": "udp_multicast", "channel": "239.74.163.2", "hop_limit": 0, "fd": True})
+    result = run(data, out=tmp_path / "out", workers=2)
+    assert result.total == 4 and result.errors == 0
+    recs = {(r["values"]["drop"], r["values"]["delay_steps"]): json.loads((tmp_path / "out" / "runs" / f"{r['id']}.json").read_text())
+            for r in result.rows}
+    clean = recs[(0.0, 0)]["metrics"]
+    assert clean["complete"] and clean["lost"] == 0 and clean["faults_injected"]["drop"] == 0
+    dropped = recs[(0.1, 0)]["metrics"]
+    # 100 samples in the window, each dropped with probability 0.1: every drop is a lost command
+    assert 2 <= dropped["faults_injected"]["drop"] <= 30 and dropped["lost"] == dropped["faults_injected"]["drop"]
+    # Every sample of the window 2 samples late: none is answered in its own step (lockstep waits for it)
+    delayed = recs[(0.0, 2)]["metrics"]
+    assert delayed["complete"] and delayed["faults_injected"]["delay"] == 100 and delayed["lost"] == 100
+    # Runs that overlapped in time used different groups and ports (the scenario's own channel is never used).
+    runs = list(recs.values())
+    link = lambda r: (r["link"]["config"]["channel"], r["link"]["config"]["port"])  # noqa: E731
+    assert all(link(r)[0].startswith("239.74.164.") for r in runs)
+    overlapping = [(a, b) for i, a in enumerate(runs) for b in runs[i + 1:]
+                   if a["worker"]["start"] < b["worker"]["stop"] and b["worker"]["start"] < a["worker"]["stop"]]
+    assert overlapping, "two workers never ran at the same time"
+    assert all(link(a) != link(b) for a, b in overlapping)
