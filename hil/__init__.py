@@ -7,7 +7,9 @@ Sub-packages, by part:
 - :mod:`.links`: the transport base class and registry, CAN (python-can, DBC layout, firmware CAN
   node), MAVLink (pymavlink), reference controller nodes, a Linux VM with a real SocketCAN vcan0;
 - :mod:`.loop`: scenario, faults, scheduling, the controller peer process, the bridge loop, metrics,
-  report and the anti-windup study.
+  report and the anti-windup study; SIL (:mod:`.loop.sil`, the host C loop in-process, no bus);
+- :mod:`.campaign`: many SIL/HIL runs over plant uncertainty, design grids and fault matrices on Dask
+  (``gainlink campaign run|show``).
 
 Entry points: ``gainlink hil run|dbc|fmu|study``, ``gainlink linearize``, ``gainlink firmware run --can``.
 The vehicle-side MAVLink parameter upload is :mod:`gainlink.mavlink`.

@@ -164,6 +164,19 @@ def test_a_spec_grid_designs_one_artifact_per_point():
     assert runs[0].error is None and runs[1].error.startswith("design failed: ")
 
 
+def test_quoted_keys_reach_spec_entries_of_a_linear_plant_and_dotted_fmu_names(pend):
+    c = parse_campaign(small_campaign(pend, grid=[], runs=4, scenario={"duration": 1.0, "plant": {"kind": "linear"}},
+                                      draw=[{"target": 'plant.perturb."A[3][2]"', "distribution": "uniform",
+                                             "low": -0.2, "high": 0.2}]))
+    for r in plan_campaign(c).runs:
+        assert r.scenario["plant"] == {"kind": "linear", "perturb": {"A[3][2]": r.values['plant.perturb."A[3][2]"']}}
+    from gainlink.hil.campaign.plan import set_path
+
+    tree = {"plant": {"parameters": {"spring.c": 4.0e3}}}
+    set_path(tree, 'plant.parameters."spring.c"', 1.1, apply="scale")
+    assert tree == {"plant": {"parameters": {"spring.c": 4.4e3}}}
+
+
 # --- criteria ------------------------------------------------------------------------------------
 
 
@@ -223,7 +236,7 @@ def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
 
 def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, tmp_path):
     data = small_campaign(pend, runs=8, grid=[])
-    data["scenario"]["duration"] = 6.0
+    data["scenario"]["duration"] = 4.0
     path = tmp_path / "c.toml"
     path.write_text(toml_write.dumps(data))
     out = tmp_path / "out"
@@ -340,23 +353,27 @@ def test_a_run_whose_worker_dies_is_retried_and_recorded_as_failed_after_a_secon
 
 def test_a_hil_fault_matrix_runs_in_parallel_on_separate_buses(pend, tmp_path):
     data = small_campaign(pend, kind="hil", runs=1, draw=[], grid=[],
-                          fault_matrix={"drop": [0.0, 0.1], "delay_steps": [0, 2], "start": 0.5, "stop": 1.5})
-    # A command that does not come is waited for step_timeout: short, and a peer_timeout above 100 of them.
-    data["scenario"].update(mode="lockstep", controller="firmware", step_timeout=0.05, peer_timeout=20.0, duration=2.0,
+                          fault_matrix={"drop": [0.0, 0.1], "encoding": ["float32", "int16"], "start": 0.5, "stop": 1.0})
+    # A lost command is waited for step_timeout: a dropped sample costs that much, a machine stall shorter than it
+    # costs nothing.
+    data["scenario"].update(mode="lockstep", controller="firmware", step_timeout=1.0, peer_timeout=10.0, duration=1.5,
                             initial_state={"theta": 0.05},
-                            transport={"interface": "udp_multicast", "channel": "239.74.163.2", "hop_limit": 0, "fd": True})
+                            transport={"interface": "udp_multicast", "channel": "239.74.163.2", "hop_limit": 0, "fd": True,
+                                       "ranges": {"x": [-2.0, 2.0], "theta": [-1.0, 1.0], "r_x": [-2.0, 2.0]}})
     result = run(data, out=tmp_path / "out", workers=2)
     assert result.total == 4 and result.errors == 0
-    recs = {(r["values"]["drop"], r["values"]["delay_steps"]): json.loads((tmp_path / "out" / "runs" / f"{r['id']}.json").read_text())
-            for r in result.rows}
-    clean = recs[(0.0, 0)]["metrics"]
-    assert clean["complete"] and clean["lost"] == 0 and clean["faults_injected"]["drop"] == 0
-    dropped = recs[(0.1, 0)]["metrics"]
-    # 100 samples in the window, each dropped with probability 0.1: every drop is a lost command
-    assert 2 <= dropped["faults_injected"]["drop"] <= 30 and dropped["lost"] == dropped["faults_injected"]["drop"]
-    # Every sample of the window 2 samples late: none is answered in its own step (lockstep waits for it)
-    delayed = recs[(0.0, 2)]["metrics"]
-    assert delayed["complete"] and delayed["faults_injected"]["delay"] == 100 and delayed["lost"] == 100
+    recs = {(r["values"]["drop"], r["values"]["encoding"]):
+            json.loads((tmp_path / "out" / "runs" / f"{r['id']}.json").read_text()) for r in result.rows}
+    for enc in ("float32", "int16"):
+        clean, dropped = recs[(0.0, enc)], recs[(0.1, enc)]
+        assert clean["link"]["encoding"] == enc and dropped["link"]["encoding"] == enc
+        assert clean["metrics"]["complete"] and clean["metrics"]["lost"] == 0
+        assert clean["metrics"]["faults_injected"]["drop"] == 0
+        # 50 samples in the window, each dropped with probability 0.1: every drop is a lost command
+        drops = dropped["metrics"]["faults_injected"]["drop"]
+        assert 1 <= drops <= 15 and dropped["metrics"]["lost"] == drops
+    # int16 quantises what the controller sees: the same run, not the same trace
+    assert recs[(0.0, "int16")]["metrics"]["outputs_final"] != recs[(0.0, "float32")]["metrics"]["outputs_final"]
     # Runs that overlapped in time used different groups and ports (the scenario's own channel is never used).
     runs = list(recs.values())
     link = lambda r: (r["link"]["config"]["channel"], r["link"]["config"]["port"])  # noqa: E731

@@ -40,8 +40,9 @@ Example (``examples/campaigns/`` has complete ones)::
     twin_deviation_below = 0.01       # max |y - y_twin| (outputs' units) against the float64 twin
 
 Paths are dotted keys into the base scenario (``plant.parameters.M``, ``initial_state.theta``,
-``reference.r_x.value``) or into the spec (``spec.controller.Q_diag[2]``, ``spec.Ts``,
-``spec.limits.u_max[0]``); a value may be a whole table (e.g. an initial-condition set). Unknown keys
+``reference.r_x.value``, ``plant.parameters."spring.c"``, ``plant.perturb."A[3][2]"``: a key holding dots
+or brackets is quoted) or into the spec (``spec.controller.Q_diag[2]``, ``spec.Ts``, ``spec.limits.u_max[0]``);
+a value may be a whole table (e.g. an initial-condition set). Unknown keys
 anywhere are refused with one line naming them.
 """
 
@@ -72,7 +73,19 @@ CRITERIA_KEYS = {"stable", "bounds", "settled_within", "overshoot_below", "satur
                  "twin_deviation_below"}
 FAULT_MATRIX_KEYS = {"drop", "delay_steps", "encoding", "start", "stop"}
 ENCODINGS = ("float32", "int16")
-_PATH = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\[\d+\])*(\.[A-Za-z_][A-Za-z0-9_]*(\[\d+\])*)*$")
+_SEGMENT = r'(?:[A-Za-z_][A-Za-z0-9_]*|"[^"]+")(?:\[\d+\])*'
+_PATH = re.compile(rf"^{_SEGMENT}(?:\.{_SEGMENT})*$")
+_STEP = re.compile(r'([A-Za-z_][A-Za-z0-9_]*|"[^"]+")((?:\[\d+\])*)(?:\.|$)')
+
+
+def path_steps(path: str) -> list[str | int]:
+    """The keys and indices of a checked path: ``plant.parameters."spring.c"`` -> plant, parameters, spring.c;
+    ``spec.controller.Q_diag[2]`` -> spec, controller, Q_diag, 2 (a quoted key may hold dots and brackets)."""
+    out: list[str | int] = []
+    for m in _STEP.finditer(path):
+        out.append(m.group(1).strip('"'))
+        out += [int(i) for i in re.findall(r"\[(\d+)\]", m.group(2))]
+    return out
 
 
 class CampaignError(ScenarioError):
@@ -167,7 +180,8 @@ def _number(v: Any, where: str, *, positive: bool = False) -> float:
 
 def _path(p: Any, where: str) -> str:
     if not isinstance(p, str) or not _PATH.match(p):
-        raise _fail(f"{where}: {p!r} is not a dotted path such as plant.parameters.M or spec.controller.Q_diag[2]")
+        raise _fail(f"{where}: {p!r} is not a dotted path such as plant.parameters.M, spec.controller.Q_diag[2] "
+                    'or plant.perturb."A[3][2]" (quote a key holding dots or brackets)')
     return p
 
 

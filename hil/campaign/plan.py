@@ -15,7 +15,6 @@ import hashlib
 import itertools
 import json
 import math
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,10 +27,7 @@ from gainlink.errors import GainlinkError
 
 from ..loop.scenario import parse_scenario
 from ..loop.sil import check_sil
-from .config import Axis, Campaign, CampaignError
-
-_STEP = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[\d+\])*)")
-
+from .config import Axis, Campaign, CampaignError, path_steps
 
 @dataclass(frozen=True)
 class RunPoint:
@@ -63,18 +59,9 @@ class CampaignPlan:
     blobs: dict = field(default_factory=dict)
 
 
-def _steps(path: str) -> list[str | int]:
-    out: list[str | int] = []
-    for part in path.split("."):
-        m = _STEP.fullmatch(part)
-        out.append(m.group(1))
-        out += [int(i) for i in re.findall(r"\[(\d+)\]", m.group(2))]
-    return out
-
-
 def set_path(tree: dict, path: str, value: Any, *, apply: str = "set", where: str = "") -> None:
     """Set ``path`` (dotted keys, ``[i]`` indices) in ``tree`` in place; ``scale``/``add`` need a number there."""
-    steps = _steps(path)
+    steps = path_steps(path)
     node: Any = tree
     for i, step in enumerate(steps[:-1]):
         nxt = steps[i + 1]
@@ -140,7 +127,7 @@ def _apply_axis(axis: Axis, value: Any, *, spec: dict | None, scenario: dict, wi
                 scenario.setdefault("faults", []).append(
                     {"kind": "delay", "start": window[0], "stop": window[1], "delay_steps": int(value)})
         elif target.startswith("spec."):
-            set_path(spec, target[5:], copy.deepcopy(value), apply=axis.apply, where=where)
+            set_path(spec, target[len("spec."):], copy.deepcopy(value), apply=axis.apply, where=where)
         else:
             set_path(scenario, target, copy.deepcopy(value), apply=axis.apply, where=where)
 
