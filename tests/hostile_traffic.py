@@ -1,6 +1,7 @@
 """Hostile traffic for the hostile-traffic tests: run as a separate process beside a HIL run.
 
     python tests/hostile_traffic.py can --group G --port P --count N [--rate R] [--seed S] --meas-lo ID --meas-hi ID
+                                    --base-id ID
     python tests/hostile_traffic.py mavlink --target HOST:PORT --count N [--rate R] [--seed S] --frames FILE
 
 Prints one JSON line at the end: ``{"sent": N, "by_kind": {...}, "seconds": T}``. Every datagram is sent once;
@@ -44,7 +45,7 @@ def _pack(arbitration_id: int, data: bytes, *, fd: bool = False, extended: bool 
 
 
 def _could_be_sample(datagram: bytes, lo: int, hi: int) -> bool:
-    """True when a datagram might decode to a measurement frame (then it is not sent: see the module doc)."""
+    """True when a datagram might decode to a frame of the layout (ids ``lo..hi``): then it is not sent."""
     unpacker = msgpack.Unpacker(raw=False, strict_map_key=False)
     unpacker.feed(datagram)
     try:
@@ -57,9 +58,9 @@ def _could_be_sample(datagram: bytes, lo: int, hi: int) -> bool:
     return isinstance(ident, int) and lo <= ident <= hi
 
 
-def can_datagram(kind: str, rng: random.Random, *, lo: int, hi: int) -> bytes:
-    """One hostile udp_multicast datagram of ``kind`` (see CAN_KINDS)."""
-    foreign = rng.choice([rng.randint(0, lo - 1) if lo > 0 else hi + 1, rng.randint(hi + 1, 0x7FF)])
+def can_datagram(kind: str, rng: random.Random, *, lo: int, hi: int, base: int) -> bytes:
+    """One hostile udp_multicast datagram of ``kind`` (see CAN_KINDS); ``base..hi`` is the whole layout."""
+    foreign = rng.choice([rng.randint(0, base - 1) if base > 0 else hi + 1, rng.randint(hi + 1, 0x7FF)])
     payload = bytes(rng.getrandbits(8) for _ in range(rng.choice([8, 8, 12, 64])))
     if kind == "foreign_id":
         return _pack(foreign, payload[:8])
@@ -97,8 +98,9 @@ def can_datagram(kind: str, rng: random.Random, *, lo: int, hi: int) -> bytes:
     return bytes(base)
 
 
-def can_datagrams(count: int, seed: int, *, lo: int, hi: int) -> tuple[list[bytes], dict[str, int]]:
-    """``count`` hostile CAN datagrams, none of which can be taken as a measurement frame with enough bytes."""
+def can_datagrams(count: int, seed: int, *, lo: int, hi: int, base: int) -> tuple[list[bytes], dict[str, int]]:
+    """``count`` hostile CAN datagrams: none can be taken as a frame of the layout (measurement ids ``lo..hi``,
+    command ids from ``base``) with enough bytes, so neither end may act on one."""
     rng = random.Random(seed)
     out, by_kind = [], dict.fromkeys(CAN_KINDS, 0)
     templates: dict[str, list[bytes]] = {}
@@ -106,16 +108,42 @@ def can_datagrams(count: int, seed: int, *, lo: int, hi: int) -> tuple[list[byte
         kind = rng.choice(CAN_KINDS)
         pool = templates.setdefault(kind, [])
         if len(pool) < 64:  # python-can's packer is slow: mutate from a pool of a few per kind
-            d = can_datagram(kind, rng, lo=lo, hi=hi)
+            d = can_datagram(kind, rng, lo=lo, hi=hi, base=base)
             pool.append(d)
         else:
             d = bytearray(rng.choice(pool))
             if kind in ("mutated", "garbage") and d:
                 d[rng.randrange(len(d))] ^= 1 << rng.randrange(8)
             d = bytes(d)
-        if kind == "mutated" and _could_be_sample(d, lo, hi):
+        if kind == "mutated" and _could_be_sample(d, base, hi):
             continue
         out.append(d)
+        by_kind[kind] += 1
+    return out, by_kind
+
+
+MAVLINK_KINDS = ("as_prepared", "bitflip", "truncated", "concatenated", "garbage")
+
+
+def mavlink_datagrams(frames_file: str, count: int, seed: int) -> tuple[list[bytes], dict[str, int]]:
+    """``count`` datagrams: the prepared frames (hex lines of ``frames_file``) as they are and mutated."""
+    rng = random.Random(seed)
+    with open(frames_file, encoding="ascii") as fh:
+        frames = [bytes.fromhex(line) for line in fh.read().split()]
+    out, by_kind = [], dict.fromkeys(MAVLINK_KINDS, 0)
+    for _ in range(count):
+        kind = rng.choice(MAVLINK_KINDS)
+        d = bytearray(rng.choice(frames))
+        if kind == "bitflip":
+            for _ in range(rng.randint(1, 3)):
+                d[rng.randrange(len(d))] ^= 1 << rng.randrange(8)
+        elif kind == "truncated":
+            del d[rng.randrange(1, len(d)):]
+        elif kind == "concatenated":
+            d += rng.choice(frames)[: rng.randint(1, 64)]
+        elif kind == "garbage":
+            d = bytearray(rng.getrandbits(8) for _ in range(rng.randint(1, 280)))
+        out.append(bytes(d))
         by_kind[kind] += 1
     return out, by_kind
 
@@ -148,6 +176,7 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--port", type=int, required=True)
     c.add_argument("--meas-lo", type=lambda s: int(s, 0), required=True)
     c.add_argument("--meas-hi", type=lambda s: int(s, 0), required=True)
+    c.add_argument("--base-id", type=lambda s: int(s, 0), required=True)
     m = sub.add_parser("mavlink")
     m.add_argument("--target", required=True)
     m.add_argument("--frames", required=True)
@@ -156,19 +185,22 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--rate", type=float, default=0.0)
         p.add_argument("--seed", type=int, default=1)
         p.add_argument("--delay", type=float, default=0.0, help="seconds to wait before sending")
+        p.add_argument("--wait-go", action="store_true", help="print 'ready' once the datagrams are made, then "
+                       "send when a line arrives on stdin")
     args = ap.parse_args(argv)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 20)
     if args.kind == "can":
         sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, struct.pack("b", 0))
-        datagrams, by_kind = can_datagrams(args.count, args.seed, lo=args.meas_lo, hi=args.meas_hi)
+        datagrams, by_kind = can_datagrams(args.count, args.seed, lo=args.meas_lo, hi=args.meas_hi, base=args.base_id)
         dest = (args.group, args.port)
     else:
-        from mavlink_hostile import mavlink_datagrams  # noqa: PLC0415 - sibling helper, MAVLink only
-
         host, port = args.target.rsplit(":", 1)
         datagrams, by_kind = mavlink_datagrams(args.frames, args.count, args.seed)
         dest = (host, int(port))
+    if args.wait_go:
+        print("ready", flush=True)
+        sys.stdin.readline()
     time.sleep(args.delay)
     seconds = send_all(sock, dest, datagrams, rate=args.rate)
     print(json.dumps({"sent": len(datagrams), "by_kind": by_kind, "seconds": round(seconds, 3)}), flush=True)

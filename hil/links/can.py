@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import errno
 import json
+import os
 import logging
 import time
 from typing import Any, Mapping, Sequence
@@ -55,10 +56,36 @@ def open_bus(config: Mapping[str, Any]) -> Any:
     if "interface" not in kwargs:
         raise TransportError("CAN transport: the configuration needs interface (e.g. udp_multicast, socketcan)")
     try:
-        return can.Bus(**kwargs)
+        bus = can.Bus(**kwargs)
     except Exception as exc:  # python-can raises CanError, OSError, ValueError, ImportError by backend
         where = ", ".join(f"{k}={kwargs[k]}" for k in ("interface", "channel") if k in kwargs)
         raise TransportError(f"cannot open CAN bus ({where}): {exc}{_multicast_hint(exc, kwargs)}") from None
+    if kwargs["interface"] == "udp_multicast":
+        _enlarge_receive_buffer(bus)
+    return bus
+
+
+RECEIVE_BUFFER = 4 << 20
+
+
+def _enlarge_receive_buffer(bus: Any) -> None:
+    """Give a udp_multicast bus's socket a 4 MiB receive buffer (beyond rmem_max when permitted, as the firmware
+    does): every member gets every datagram on the group, and a burst of foreign traffic must not push out the
+    commands of a run. Through the bus's public ``fileno()``; a refusal leaves the default."""
+    import socket
+
+    fd = bus.fileno()
+    if fd < 0:
+        return
+    with socket.socket(fileno=os.dup(fd)) as sock:
+        for option in (getattr(socket, "SO_RCVBUFFORCE", None), socket.SO_RCVBUF):
+            if option is None:
+                continue
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, option, RECEIVE_BUFFER)
+                return
+            except OSError:
+                continue
 
 
 def layout_from_config(config: Mapping[str, Any], *, artifact: Any) -> CanLayout:
@@ -157,7 +184,7 @@ class Assembler:
 
     def feed(self, msg: Any) -> tuple[int, np.ndarray, int, np.ndarray] | None:
         spec = self.codec.by_id.get(msg.arbitration_id)
-        if spec is None or msg.is_extended_id:
+        if spec is None or msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame:
             return None
         got = self.codec.decode(msg.arbitration_id, msg.data)
         if got is None:
@@ -204,6 +231,11 @@ class CanTransport(Transport):
         self.bus: Any = None
         self.m = artifact.m
         self.busy_poll_ns = int(float(self.config.get("busy_poll_us", 0)) * 1000)
+        from can import CanOperationError
+
+        self._can_error = CanOperationError
+        self.frames_sent = 0
+        self.frames_refused = 0  # datagrams python-can could not unpack (hostile or corrupt traffic on the bus)
 
     def open(self) -> None:
         if self.bus is None:
@@ -236,6 +268,7 @@ class CanTransport(Transport):
         try:
             for f in frames:
                 bus.send(f)
+                self.frames_sent += 1
         except Exception as exc:
             raise TransportError(f"CAN send failed: {exc}{_multicast_hint(exc, self.config)}") from None
 
@@ -254,6 +287,11 @@ class CanTransport(Transport):
                         continue
                 else:
                     msg = bus.recv(remaining)
+            except self._can_error as exc:
+                if isinstance(exc.__cause__, OSError) or exc.__cause__ is None:
+                    raise TransportError(f"CAN receive failed: {exc}") from None
+                self.frames_refused += 1  # a datagram that is no CAN frame: anyone can send to the group
+                continue
             except Exception as exc:
                 raise TransportError(f"CAN receive failed: {exc}") from None
             if msg is None:
@@ -269,7 +307,8 @@ class CanTransport(Transport):
     def describe(self) -> dict:
         out = {"kind": "can", "config": {k: v for k, v in self.config.items()}, "fd": self.fd,
                "base_id": self.layout.base_id, "frames_per_sample": len(self.layout.measurement),
-               "frames_per_command": len(self.layout.command), "encoding": self.layout.encoding}
+               "frames_per_command": len(self.layout.command), "encoding": self.layout.encoding,
+               "frames_sent": self.frames_sent, "frames_refused": self.frames_refused}
         if self.tx.int16:
             out["encoding_clipped"] = self.tx.clipped  # measurement values sent saturated to their range
         return out

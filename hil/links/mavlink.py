@@ -14,6 +14,8 @@ Scenario table::
     # or, explicitly: url = "udpout:127.0.0.1:14560" (plant side), controller_url = "udpin:127.0.0.1:14560"
     busy_poll_us = 0             # optional: both ends poll without sleeping this long before blocking
                                  # (the firmware app gets --spin-us N); changes timing only, not the trace
+    signing_key = "key.hex"      # optional: MAVLink 2 signing (gainlink mavlink keygen): samples are signed,
+                                 # only signed commands count, the firmware app gets --signing-key
 
 Framing is pymavlink's (MAVLink 2, ``common`` dialect) on a plain UDP socket.
 """
@@ -82,12 +84,16 @@ class MavlinkTransport(Transport):
         While waiting for a command, read without blocking for up to this long before falling back
         to a blocking wait (0, the default: block at once). Also passed to the firmware app as
         ``--spin-us``. Lower latency for 100 % of a core while waiting.
+    signing_key : Path, optional
+        MAVLink 2 signing key file: every sample is signed and only correctly signed commands are taken
+        (the firmware app gets ``--signing-key``; the Python reference node does not sign).
     """
 
     seq_modulo = 1 << 32
 
     def __init__(self, *, url: str, controller_url: str, n_inputs: int, n_outputs: int, n_refs: int, ts: float,
-                 system: int = 255, component: int = mavlink2.MAV_COMP_ID_MISSIONPLANNER, busy_poll_us: int = 0):
+                 system: int = 255, component: int = mavlink2.MAV_COMP_ID_MISSIONPLANNER, busy_poll_us: int = 0,
+                 signing_key: Any = None):
         if not 0 <= busy_poll_us <= MAX_BUSY_POLL_US:
             raise TransportError(f"mavlink transport: busy_poll_us must be 0..{MAX_BUSY_POLL_US}, not {busy_poll_us!r}")
         if n_outputs + n_refs > 58 or n_inputs > 16:
@@ -100,6 +106,14 @@ class MavlinkTransport(Transport):
         self.busy_poll_us = int(busy_poll_us)
         self._busy_poll_ns = self.busy_poll_us * 1000
         self.mav = mavlink2.MAVLink(None, srcSystem=system, srcComponent=component)
+        self.signing_key = signing_key
+        if signing_key is not None:
+            from gainlink.mavlink.signing import SigningKeyError, enable, read_key
+
+            try:
+                enable(self.mav, read_key(signing_key), link_id=2)
+            except SigningKeyError as exc:
+                raise TransportError(f"transport: {exc}") from None
         self.sock: socket.socket | None = None
         self._sel: selectors.BaseSelector | None = None
         self._pad = np.zeros(58, dtype=np.float32)
@@ -181,8 +195,8 @@ class MavlinkTransport(Transport):
 
     def _decode(self, data: bytes) -> Command | None:
         try:
-            if len(data) > 2 and data[0] == 0xFD and len(data) == 12 + data[1]:
-                msgs = [self.mav.decode(bytearray(data))]  # one unsigned MAVLink 2 frame per datagram
+            if len(data) > 2 and data[0] == 0xFD and len(data) == 12 + data[1] + (13 if data[2] & 1 else 0):
+                msgs = [self.mav.decode(bytearray(data))]  # one MAVLink 2 frame per datagram (signature checked)
             else:
                 msgs = self.mav.parse_buffer(bytearray(data)) or []
         except mavlink2.MAVError:
@@ -201,9 +215,9 @@ class MavlinkTransport(Transport):
         return None
 
     def controller_argv(self) -> list[str]:
-        from gainlink.firmware.mavlink_app import spin_argv
+        from gainlink.firmware.mavlink_app import signing_argv, spin_argv
 
-        return ["--url", self.controller_url, *spin_argv(self.busy_poll_us)]
+        return ["--url", self.controller_url, *spin_argv(self.busy_poll_us), *signing_argv(self.signing_key)]
 
     def firmware_executable(self, artifact: Any) -> Any:
         """The firmware host executable that speaks this link (``gainlink_mavlink``, built on demand)."""
@@ -215,6 +229,9 @@ class MavlinkTransport(Transport):
         """The Python reference node that speaks this link (``controller = "reference"``)."""
         import sys
 
+        if self.signing_key is not None:
+            raise TransportError("transport: signing_key needs controller = \"firmware\" (the reference node "
+                                 "does not sign)")
         return [sys.executable, "-m", "gainlink.hil.links.mavlink_node", str(artifact_path), "--url", self.controller_url]
 
     @property
@@ -223,18 +240,24 @@ class MavlinkTransport(Transport):
         cfg = {"kind": "mavlink", "url": self.url, "controller_url": self.controller_url}
         if self.busy_poll_us:
             cfg["busy_poll_us"] = self.busy_poll_us
+        if self.signing_key is not None:
+            cfg["signing_key"] = str(self.signing_key)
         return cfg
 
     def describe(self) -> dict:
         return {"kind": "mavlink", "url": self.url, "controller_url": self.controller_url,
                 "messages": "DEBUG_FLOAT_ARRAY -> HIL_ACTUATOR_CONTROLS", "ts_us": self.ts_us,
-                "busy_poll_us": self.busy_poll_us}
+                "busy_poll_us": self.busy_poll_us, "signed": self.signing_key is not None,
+                "datagrams_sent": self.stats["sent"], "commands_received": self.stats["received"],
+                "foreign_messages": self.stats["foreign"],
+                "unsigned_or_bad_answers": self.mav.signing.reject_count + self.mav.signing.badsig_count
+                if self.signing_key is not None else 0}
 
 
 @TRANSPORTS.register("mavlink")
 def _from_config(config: Mapping[str, Any], *, artifact: Any, **_: Any) -> MavlinkTransport:
-    cfg = take_keys(config, allowed={"kind", "port", "host", "url", "controller_url", "busy_poll_us"}, where="transport",
-                    error=TransportError)
+    cfg = take_keys(config, allowed={"kind", "port", "host", "url", "controller_url", "busy_poll_us", "signing_key"},
+                    where="transport", error=TransportError)
     host = str(cfg.get("host", "127.0.0.1"))
     port = cfg.get("port", DEFAULT_PORT)
     if not isinstance(port, int) or not 0 < port < 65536:
@@ -244,5 +267,8 @@ def _from_config(config: Mapping[str, Any], *, artifact: Any, **_: Any) -> Mavli
         raise TransportError(f"transport: busy_poll_us must be an integer 0..{MAX_BUSY_POLL_US} (microseconds), not {busy!r}")
     url = str(cfg.get("url", f"udpout:{host}:{port}"))
     controller_url = str(cfg.get("controller_url", f"udpin:{host}:{_udp_endpoint(url, scheme='udpout')[1]}"))
+    key = cfg.get("signing_key")
+    if key is not None and not isinstance(key, str):
+        raise TransportError(f"transport: signing_key must be a key file path, not {key!r}")
     return MavlinkTransport(url=url, controller_url=controller_url, n_inputs=artifact.m, n_outputs=artifact.p,
-                            n_refs=artifact.q, ts=float(artifact.Ts), busy_poll_us=busy)
+                            n_refs=artifact.q, ts=float(artifact.Ts), busy_poll_us=busy, signing_key=key)

@@ -113,6 +113,9 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
         stack.enter_context(gc_paused())
         pm_qos = stack.enter_context(cpu_latency_qos()) if scenario.mode == "realtime" and scenario.pm_qos else False
         result = _Loop(scenario, artifact=artifact, plant=plant, transport=transport, peer=peer).run(progress)
+        code = peer.stop()  # its exit summary counts everything it received, hostile traffic included
+        result.metrics["controller"] = {"exit_status": code, "counters": peer.counters(),
+                                        "stderr_bytes": peer.stderr_bytes()}
         result.metrics["cpu"] = placement.describe()
         if scenario.mode == "realtime":
             result.metrics["pm_qos"] = pm_qos

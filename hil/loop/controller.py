@@ -14,13 +14,13 @@ import selectors
 import signal
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from pathlib import Path
 from typing import Any
 
 from gainlink.errors import FirmwareError
+from gainlink.firmware.capture import StderrCapture
 
 from ..links.can_firmware import firmware_can_executable
 
@@ -66,7 +66,7 @@ class ControllerProcess:
         self.argv = list(argv)
         self.ready_timeout = ready_timeout
         self.proc: subprocess.Popen | None = None
-        self._stderr = tempfile.TemporaryFile(mode="w+b")
+        self._stderr: StderrCapture | None = None
         self.ready_line = ""
         self.paused = False
 
@@ -83,9 +83,10 @@ class ControllerProcess:
         """Start the process and wait for its ready line; :class:`FirmwareError` if it dies or stays silent."""
         try:
             self.proc = subprocess.Popen(self.argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                         stderr=self._stderr, start_new_session=True)
+                                         stderr=subprocess.PIPE, start_new_session=True)
         except OSError as exc:
             raise FirmwareError(f"cannot start controller {self.argv[0]}: {exc.strerror}") from None
+        self._stderr = StderrCapture(self.proc.stderr)  # drained at once, kept bounded (head + tail)
         sel = selectors.DefaultSelector()
         sel.register(self.proc.stdout, selectors.EVENT_READ)
         deadline = time.monotonic() + self.ready_timeout
@@ -102,6 +103,7 @@ class ControllerProcess:
                 chunk = os.read(self.proc.stdout.fileno(), 4096)
                 if not chunk:
                     code = self.proc.wait(timeout=5)
+                    self._stderr.join()
                     raise FirmwareError(f"controller {Path(self.argv[0]).name} exited with status {code} before "
                                         f"it was ready{self._stderr_hint()}")
                 buf += chunk
@@ -126,9 +128,17 @@ class ControllerProcess:
 
     def stderr_tail(self, lines: int = 3) -> str:
         """The last lines the process wrote to stderr, joined into one line."""
-        self._stderr.seek(0)
-        tail = self._stderr.read().decode(errors="replace").strip().splitlines()[-lines:]
-        return " | ".join(t.strip() for t in tail)
+        return "" if self._stderr is None else " | ".join(self._stderr.tail_lines(lines))
+
+    def counters(self) -> dict[str, int]:
+        """The ``key=value`` counters of the exit summary the firmware apps write (after :meth:`stop`)."""
+        return {} if self._stderr is None else self._stderr.counters()
+
+    def stderr_bytes(self) -> dict[str, int]:
+        """How much the process wrote to stderr and how much of it was not kept (the capture is bounded)."""
+        if self._stderr is None:
+            return {"total": 0, "not_kept": 0}
+        return {"total": self._stderr.total_bytes, "not_kept": self._stderr.dropped_bytes}
 
     def exit_status(self) -> int | None:
         """The exit status when the process has ended, else ``None``."""
@@ -163,9 +173,10 @@ class ControllerProcess:
                 pass
         if proc.stdout is not None:
             proc.stdout.close()
+        if self._stderr is not None:
+            self._stderr.join()  # its exit summary is in
         return proc.returncode
 
     def close(self) -> None:
-        """Stop the process and drop its captured stderr."""
+        """Stop the process."""
         self.stop()
-        self._stderr.close()

@@ -158,7 +158,8 @@ def _run(args: argparse.Namespace) -> int:
     if getattr(args, "mavlink", None):
         from gainlink.firmware.mavlink_app import run_foreground
 
-        return run_foreground(Path(args.artifact), url=args.mavlink, param_file=args.param_file and Path(args.param_file))
+        return run_foreground(Path(args.artifact), url=args.mavlink, param_file=args.param_file and Path(args.param_file),
+                              signing_key=args.signing_key and Path(args.signing_key))
     return _run_host(args)
 
 
@@ -233,6 +234,8 @@ def _add_run_parser(sub) -> None:
                    "udpin:HOST:PORT or udpout:HOST:PORT")
     p.add_argument("--param-file", help="with --mavlink: persisted parameters (default: mavlink_params.txt beside "
                    "the artifact)")
+    p.add_argument("--signing-key", metavar="FILE", help="with --mavlink: MAVLink 2 signing key file (gainlink mavlink "
+                   "keygen); PARAM_SET, COMMAND_LONG and HIL samples must then be signed with it")
     p.set_defaults(func=_run)
 
 

@@ -10,12 +10,15 @@ from __future__ import annotations
 import argparse
 import sys
 
+SIGNING_HELP = ("MAVLink 2 signing key file (64 hex digits, from `gainlink mavlink keygen`): sign every request "
+                "and take only answers signed with it")
+
 EXIT_ROLLED_BACK = 3
 EXIT_ROLLBACK_INCOMPLETE = 4
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``gainlink mavlink upload`` and ``gainlink mavlink params``."""
+    """Add ``gainlink mavlink upload``, ``gainlink mavlink params`` and ``gainlink mavlink keygen``."""
     p = subparsers.add_parser("mavlink", help="MAVLink parameter upload and listing")
     sub = p.add_subparsers(dest="mavlink_command", metavar="ACTION")
     sub.required = True
@@ -32,12 +35,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     up.add_argument("--heartbeat-timeout", type=float, default=5.0, help="seconds to wait for a heartbeat (default 5)")
     up.add_argument("--encoding", choices=("auto", "bytewise", "c_cast"), default="auto",
                     help="integer parameter encoding (default: from AUTOPILOT_VERSION / the autopilot type)")
+    up.add_argument("--signing-key", metavar="FILE", help=SIGNING_HELP)
     up.set_defaults(func=_upload)
 
     ls = sub.add_parser("params", help="list a vehicle's parameters (PARAM_REQUEST_LIST)")
     ls.add_argument("--connect", required=True, help="pymavlink URL")
     ls.add_argument("--heartbeat-timeout", type=float, default=5.0, help="seconds to wait for a heartbeat (default 5)")
+    ls.add_argument("--signing-key", metavar="FILE", help=SIGNING_HELP)
     ls.set_defaults(func=_params)
+
+    kg = sub.add_parser("keygen", help="write a new MAVLink 2 signing key file (64 hex digits, mode 0600)")
+    kg.add_argument("out", help="key file to create (an existing file is not replaced)")
+    kg.set_defaults(func=_keygen)
 
 
 def _upload(args: argparse.Namespace) -> int:
@@ -46,9 +55,12 @@ def _upload(args: argparse.Namespace) -> int:
     from gainlink.mavlink.params import Encoding
     from gainlink.mavlink.upload import UploadFailed, format_changes, upload
 
+    from gainlink.mavlink.signing import read_key
+
     if args.window < 1 or args.retries < 0 or args.timeout <= 0:
         raise ParameterError("--window must be >= 1, --retries >= 0 and --timeout > 0")
     artifact = load(args.artifact)
+    key = read_key(args.signing_key) if args.signing_key else None
 
     def show_diff(changes) -> None:
         for line in format_changes(changes):
@@ -60,6 +72,7 @@ def _upload(args: argparse.Namespace) -> int:
             artifact, connect=args.connect, mapping=args.mapping, persist=args.persist, dry_run=args.dry_run,
             window=args.window, timeout=args.timeout, retries=args.retries, heartbeat_timeout=args.heartbeat_timeout,
             encoding=None if args.encoding == "auto" else Encoding(args.encoding), on_diff=show_diff,
+            signing_key=key,
         )
     except UploadFailed as exc:
         for line in exc.events:
@@ -84,9 +97,11 @@ def _params(args: argparse.Namespace) -> int:
     from gainlink.mavlink.link import MavLink
     from gainlink.mavlink.params import REAL32, Encoding
     from gainlink.mavlink.session import ParamSession
+    from gainlink.mavlink.signing import read_key
     from gainlink.mavlink.upload import detect_encoding
 
-    with MavLink(args.connect) as link:
+    key = read_key(args.signing_key) if args.signing_key else None
+    with MavLink(args.connect, signing_key=key) as link:
         hb = link.wait_heartbeat(timeout=args.heartbeat_timeout)
         session = ParamSession(link, target_system=hb.get_srcSystem(), target_component=hb.get_srcComponent(),
                                encoding=Encoding.C_CAST)
@@ -94,4 +109,13 @@ def _params(args: argparse.Namespace) -> int:
         for pv in session.read_all().values():
             value = f"{pv.value:.9g}" if pv.ptype == REAL32 else str(int(pv.value))
             print(f"{pv.name:<16} {value}")
+    return 0
+
+
+def _keygen(args: argparse.Namespace) -> int:
+    from gainlink.mavlink.signing import new_key, write_key
+
+    path = write_key(args.out, new_key())
+    print(f"wrote a new signing key to {path} (mode 0600); give the same file to the vehicle "
+          f"(gainlink firmware run --signing-key) and to the ground tools (--signing-key)")
     return 0

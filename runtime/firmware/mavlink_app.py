@@ -7,12 +7,12 @@ import os
 import selectors
 import signal
 import subprocess
-import tempfile
 import time
 from pathlib import Path
 
 from ..artifact import Artifact
 from ..errors import FirmwareError
+from .capture import StderrCapture
 
 log = logging.getLogger(__name__)
 
@@ -37,13 +37,23 @@ def spin_argv(busy_poll_us: int) -> list[str]:
     return ["--spin-us", str(int(busy_poll_us))] if busy_poll_us > 0 else []
 
 
+def signing_argv(signing_key: Path | None) -> list[str]:
+    """The app's signing option for a key file (nothing without one); the file is checked here first."""
+    if signing_key is None:
+        return []
+    from ..mavlink.signing import read_key
+
+    read_key(signing_key)  # one clear line now rather than the app's exit status later
+    return ["--signing-key", str(signing_key)]
+
+
 def firmware_argv(exe: Path, *, url: str, storage: Path | None = None, sysid: int = 1, compid: int = 1,
-                  busy_poll_us: int = 0) -> list[str]:
-    """Command line of the MAVLink app (``busy_poll_us`` > 0 adds ``--spin-us``)."""
+                  busy_poll_us: int = 0, signing_key: Path | None = None) -> list[str]:
+    """Command line of the MAVLink app (``busy_poll_us`` > 0 adds ``--spin-us``, a key file ``--signing-key``)."""
     argv = [str(exe), "--url", url, "--sysid", str(sysid), "--compid", str(compid), *spin_argv(busy_poll_us)]
     if storage is not None:
         argv += ["--storage", str(storage)]
-    return argv
+    return argv + signing_argv(signing_key)
 
 
 class MavlinkFirmware:
@@ -62,22 +72,26 @@ class MavlinkFirmware:
     busy_poll_us : int
         Poll without sleeping this long after each datagram before blocking again (``--spin-us``;
         0, the default: block at once).
+    signing_key : Path, optional
+        MAVLink 2 signing key file (``--signing-key``).
     """
 
     def __init__(self, exe: Path, *, url: str, storage: Path | None = None, ready_timeout: float = 10.0,
-                 busy_poll_us: int = 0):
-        self.argv = firmware_argv(exe, url=url, storage=storage, busy_poll_us=busy_poll_us)
+                 busy_poll_us: int = 0, signing_key: Path | None = None):
+        self.argv = firmware_argv(exe, url=url, storage=storage, busy_poll_us=busy_poll_us, signing_key=signing_key)
         self.ready_timeout = ready_timeout
         self.proc: subprocess.Popen | None = None
         self.ready_line = ""
-        self._stderr = tempfile.TemporaryFile(mode="w+b")
+        self._stderr: StderrCapture | None = None
 
     def start(self) -> "MavlinkFirmware":
         """Start it and wait for ``gainlink-mavlink ...`` on its stdout."""
         try:
-            self.proc = subprocess.Popen(self.argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=self._stderr)
+            self.proc = subprocess.Popen(self.argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                         stderr=subprocess.PIPE)
         except OSError as exc:
             raise FirmwareError(f"cannot start {self.argv[0]}: {exc.strerror}") from None
+        self._stderr = StderrCapture(self.proc.stderr)
         sel = selectors.DefaultSelector()
         sel.register(self.proc.stdout, selectors.EVENT_READ)
         buf = b""
@@ -92,6 +106,7 @@ class MavlinkFirmware:
                     chunk = os.read(self.proc.stdout.fileno(), 4096)
                     if not chunk:
                         code = self.proc.wait(timeout=5)
+                        self._stderr.join()
                         raise FirmwareError(f"{EXECUTABLE} exited with status {code}: {self.stderr_text()}")
                     buf += chunk
         finally:
@@ -100,9 +115,12 @@ class MavlinkFirmware:
         return self
 
     def stderr_text(self) -> str:
-        """What the app wrote to stderr so far."""
-        self._stderr.seek(0)
-        return self._stderr.read().decode(errors="replace").strip()
+        """What the app wrote to stderr so far (its first 8 KiB and last 56 KiB: the capture is bounded)."""
+        return "" if self._stderr is None else self._stderr.text()
+
+    def counters(self) -> dict[str, int]:
+        """The ``key=value`` counters of the app's exit summary (after :meth:`stop`)."""
+        return {} if self._stderr is None else self._stderr.counters()
 
     def stop(self, *, grace: float = 2.0) -> int | None:
         """SIGTERM, then SIGKILL after ``grace`` seconds; returns the exit status."""
@@ -118,6 +136,8 @@ class MavlinkFirmware:
                 proc.wait(timeout=grace)
         if proc.stdout is not None:
             proc.stdout.close()
+        if self._stderr is not None:
+            self._stderr.join()
         return proc.returncode
 
     def __enter__(self) -> "MavlinkFirmware":
@@ -125,7 +145,6 @@ class MavlinkFirmware:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
-        self._stderr.close()
 
 
 def default_param_file(artifact_path: Path) -> Path:
@@ -133,7 +152,8 @@ def default_param_file(artifact_path: Path) -> Path:
     return Path(artifact_path).with_name("mavlink_params.txt")
 
 
-def run_foreground(artifact_path: Path, *, url: str, param_file: Path | None = None) -> int:
+def run_foreground(artifact_path: Path, *, url: str, param_file: Path | None = None,
+                   signing_key: Path | None = None) -> int:
     """Build the MAVLink app for an artifact and run it in the foreground until interrupted.
 
     Parameters
@@ -144,6 +164,8 @@ def run_foreground(artifact_path: Path, *, url: str, param_file: Path | None = N
         The app's link (``udpin:HOST:PORT`` or ``udpout:HOST:PORT``).
     param_file : Path, optional
         Persistent parameter file (default :func:`default_param_file`); loaded at start when present.
+    signing_key : Path, optional
+        MAVLink 2 signing key file.
 
     Returns
     -------
@@ -155,8 +177,10 @@ def run_foreground(artifact_path: Path, *, url: str, param_file: Path | None = N
     if not (url.startswith("udpin:") or url.startswith("udpout:")) or url.count(":") != 2:
         raise FirmwareError(f"--mavlink takes udpin:HOST:PORT or udpout:HOST:PORT, not {url!r}")
     artifact = load(artifact_path)
+    signing_argv(signing_key)  # a bad key file is one line before the build, not after
     exe = mavlink_executable(artifact)
-    argv = firmware_argv(exe, url=url, storage=param_file or default_param_file(Path(artifact_path)))
+    argv = firmware_argv(exe, url=url, storage=param_file or default_param_file(Path(artifact_path)),
+                         signing_key=signing_key)
     log.info("running %s", " ".join(argv))
     proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL)
     previous = signal.signal(signal.SIGTERM, lambda signum, frame: proc.send_signal(signal.SIGTERM))

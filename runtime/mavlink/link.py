@@ -15,6 +15,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
 
 from ..errors import PeerTimeoutError, TransportError
+from . import signing
 
 log = logging.getLogger(__name__)
 
@@ -58,9 +59,16 @@ class MavLink:
         Our own MAVLink ids.
     baud : int
         Baud rate for serial devices.
+    signing_key : bytes, optional
+        A 32-byte MAVLink 2 signing key (:func:`gainlink.mavlink.signing.read_key`): everything sent is signed,
+        and only correctly signed messages are taken (a vehicle's unsigned HEARTBEAT is let through only so
+        :meth:`wait_heartbeat` can say that it does not sign).
+    link_id : int
+        Signing link id of this session.
     """
 
-    def __init__(self, url: str, *, source_system: int = 255, source_component: int = GCS_COMPONENT, baud: int = 115200):
+    def __init__(self, url: str, *, source_system: int = 255, source_component: int = GCS_COMPONENT, baud: int = 115200,
+                 signing_key: bytes | None = None, link_id: int = 1):
         self.url = url
         try:
             self.conn = mavutil.mavlink_connection(
@@ -70,6 +78,9 @@ class MavLink:
             raise TransportError(f"cannot open MAVLink link {url!r}: {exc}") from None
         self.mav = mavlink2.MAVLink(self.conn, srcSystem=source_system, srcComponent=source_component)
         self.mav.robust_parsing = True
+        self.signed = signing_key is not None
+        if signing_key is not None:
+            signing.enable(self.mav, signing_key, link_id=link_id, allow_unsigned=signing.heartbeat_only)
         self.rx_count = 0
         self.tx_count = 0
 
@@ -111,6 +122,8 @@ class MavLink:
         ------
         PeerTimeoutError
             When none arrives within ``timeout`` seconds.
+        TransportError
+            With a signing key, when the vehicle's heartbeat is unsigned or signed with another key.
         """
         deadline = time.monotonic() + timeout
         next_beat = 0.0
@@ -124,6 +137,10 @@ class MavLink:
                 next_beat = now + 0.5
             for m in self.poll(min(left, 0.1)):
                 if m.get_type() == "HEARTBEAT" and not (exclude_gcs and m.type == mavlink2.MAV_TYPE_GCS):
+                    if self.signed and not m.get_signed():
+                        raise TransportError(f"vehicle {m.get_srcSystem()}/{m.get_srcComponent()} on {self.url} does "
+                                             "not sign with this key (its heartbeat is unsigned or signed with "
+                                             "another key)")
                     return m
 
     def _can_send(self) -> bool:

@@ -171,6 +171,7 @@ def upload(
     encoding: Encoding | None = None,
     on_diff: Callable[[tuple[ParamChange, ...]], None] | None = None,
     link: MavLink | None = None,
+    signing_key: bytes | None = None,
 ) -> UploadResult:
     """Upload ``artifact``'s gains to the vehicle at ``connect``.
 
@@ -200,6 +201,9 @@ def upload(
         Called with the diff once the current values are read, before anything is written.
     link : MavLink, optional
         An already open link to use instead of opening ``connect`` (it is not closed).
+    signing_key : bytes, optional
+        MAVLink 2 signing key (:func:`gainlink.mavlink.signing.read_key`) for the link opened on ``connect``:
+        every request is signed and only signed answers count.
 
     Returns
     -------
@@ -209,6 +213,8 @@ def upload(
     ------
     PeerTimeoutError
         No heartbeat within ``heartbeat_timeout``.
+    TransportError
+        With ``signing_key``: the vehicle does not sign with that key.
     ParameterError
         Before anything was written: a parameter is missing, has another type, or the firmware
         runs a loop of other dimensions.
@@ -221,7 +227,7 @@ def upload(
     plan = _plan(artifact, mapping)
     t0 = time.perf_counter()
     own = link is None
-    link = link or MavLink(connect)
+    link = link or MavLink(connect, signing_key=signing_key)
     try:
         hb = link.wait_heartbeat(timeout=heartbeat_timeout)
         target = (hb.get_srcSystem(), hb.get_srcComponent())

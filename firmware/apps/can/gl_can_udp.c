@@ -56,8 +56,10 @@ int gl_can_udp_open(gl_can_link_t *link)
     int on = 1;
     (void)setsockopt(s, SOL_SOCKET, SO_REUSEADDR, &on, sizeof on);
     (void)setsockopt(s, SOL_SOCKET, SO_REUSEPORT, &on, sizeof on);
-    int rcvbuf = 1 << 20;
-    (void)setsockopt(s, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf);
+    int rcvbuf = 4 << 20; /* a burst of hostile datagrams must not push out the samples of a run */
+    if (setsockopt(s, SOL_SOCKET, SO_RCVBUFFORCE, &rcvbuf, sizeof rcvbuf) != 0) { /* beyond rmem_max: root */
+        (void)setsockopt(s, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf);
+    }
     (void)setsockopt(s, SOL_SOCKET, SO_RXQ_OVFL, &on, sizeof on); /* drops counted, not guessed */
     struct sockaddr_in addr;
     memset(&addr, 0, sizeof addr);

@@ -66,8 +66,10 @@ int gl_mav_link_open(gl_mav_link_t *link, const char *url, char *why, size_t why
         snprintf(why, why_len, "socket: %s", strerror(errno));
         return -1;
     }
-    int big = 1 << 21;
-    (void)setsockopt(link->fd, SOL_SOCKET, SO_RCVBUF, &big, sizeof big);
+    int big = 4 << 20; /* a burst of hostile datagrams must not push out the samples of a run */
+    if (setsockopt(link->fd, SOL_SOCKET, SO_RCVBUFFORCE, &big, sizeof big) != 0) { /* beyond rmem_max: root */
+        (void)setsockopt(link->fd, SOL_SOCKET, SO_RCVBUF, &big, sizeof big);
+    }
     (void)setsockopt(link->fd, SOL_SOCKET, SO_SNDBUF, &big, sizeof big);
     int on = 1;
     (void)setsockopt(link->fd, SOL_SOCKET, SO_RXQ_OVFL, &on, sizeof on); /* drops counted, not guessed */
