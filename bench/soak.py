@@ -1,0 +1,263 @@
+"""Soak: long HIL runs (FMU plant, CAN FD over udp_multicast, the firmware's gainlink_can): memory and books.
+
+Two phases, each one long run with one bridge and one firmware process (the pendulum redesigned at 1 kHz,
+the nonlinear cart-pendulum FMU):
+  1. lockstep at full speed for --lockstep-minutes (default 30): the number of steps is set from the speed of
+     a short calibration run in the same process (the baseline: `speed_vs_calibration`);
+  2. real time at 1 kHz for --realtime-minutes (default 30), SCHED_FIFO and PM QoS when permitted.
+Every --sample-s (default 10) seconds the resident memory (RSS) of the bridge (this process) and of the
+firmware process is sampled; the JSON gives the samples and each process's least-squares slope (KiB/min,
+first minute excluded). The bridge keeps the whole trace of a run in arrays sized for it; those filled step by
+step (zero-initialised numpy arrays, touched as the run records) grow its RSS by design:
+`bridge_trace_growth_kib_per_min` is that growth (their bytes per step x steps per minute) and
+`bridge_rss_slope_minus_trace` what is left. Books: every sample the bridge sent is answered, lost or late
+(`unaccounted_bridge`), every frame the bridge sent was used by the firmware or dropped by the kernel
+(`unaccounted_firmware`, from the firmware's exit summary). Every deadline miss of the real-time phase is
+explained from the trace: the bridge itself woke late (its tick started after the deadline: the machine
+stalled it) or the command came later than one period.
+
+    .venv/bin/python bench/soak.py [--lockstep-minutes 30] [--realtime-minutes 30] [--sample-s 10]
+
+Runs at nice 10 (the machine is shared); the real-time phase runs under SCHED_FIFO where permitted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import random
+import sys
+import tempfile
+import threading
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from gainlink import artifact as artifact_mod
+from gainlink.design import design
+from gainlink.hil.links.can_firmware import firmware_can_executable
+from gainlink.hil.plants.build import build_fmu
+from gainlink.hil.run.bridge import run_scenario
+from gainlink.hil.run.scenario import parse_scenario
+from gainlink.spec import parse_spec
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGE_KIB = os.sysconf("SC_PAGE_SIZE") / 1024
+# Recorder arrays the bridge fills step by step from zeros (hil/run/bridge.py _Recorder): Y (p), U (m), SAT (m,
+# bool), GOT (bool), TICK, ST (int64); the NaN-filled ones are touched whole at allocation and do not grow.
+RECORDER_ZERO_BYTES = lambda p, m: 8 * p + 8 * m + m + 1 + 8 + 8  # noqa: E731 - bytes per step
+
+
+def rss_kib(pid: int | str = "self") -> float | None:
+    """Resident set size of a process in KiB (None when it is gone)."""
+    try:
+        with open(f"/proc/{pid}/statm") as fh:
+            return int(fh.read().split()[1]) * PAGE_KIB
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def firmware_pid(name: str = "gainlink_can") -> int | None:
+    """The pid of our child process ``name`` (the bridge starts it), if any."""
+    me = os.getpid()
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as fh:
+                stat = fh.read()
+        except OSError:
+            continue
+        comm = stat[stat.index("(") + 1: stat.rindex(")")]
+        ppid = int(stat[stat.rindex(")") + 2:].split()[1])
+        if ppid == me and comm == name:
+            return int(entry)
+    return None
+
+
+def cpu_steal() -> tuple[int, int]:
+    """(steal, total) jiffies from /proc/stat."""
+    with open("/proc/stat") as fh:
+        fields = [int(v) for v in fh.readline().split()[1:]]
+    return (fields[7] if len(fields) > 7 else 0), sum(fields)
+
+
+class Sampler:
+    """Samples the bridge's and the firmware's RSS, the load and CPU steal every ``period`` seconds."""
+
+    def __init__(self, period: float) -> None:
+        self.period = period
+        self.rows: list[dict] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self.t0 = time.monotonic()
+
+    def _run(self) -> None:
+        steal_prev = cpu_steal()
+        while not self._stop.wait(self.period):
+            pid = firmware_pid()
+            steal = cpu_steal()
+            self.rows.append({
+                "t_s": round(time.monotonic() - self.t0, 1), "bridge_rss_kib": rss_kib(),
+                "firmware_rss_kib": rss_kib(pid) if pid else None, "load1": os.getloadavg()[0],
+                "steal_fraction": round((steal[0] - steal_prev[0]) / max(1, steal[1] - steal_prev[1]), 4)})
+            steal_prev = steal
+
+    def __enter__(self) -> "Sampler":
+        self.t0 = time.monotonic()
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
+def slope_kib_per_min(rows: list[dict], key: str, *, skip_s: float = 60.0) -> float | None:
+    """Least-squares slope of ``key`` against time, after the first ``skip_s`` seconds (start-up)."""
+    pts = [(r["t_s"], r[key]) for r in rows if r[key] is not None and r["t_s"] >= skip_s]
+    if len(pts) < 3:
+        return None
+    t, v = np.array(pts, dtype=float).T
+    return float(np.polyfit(t / 60.0, v, 1)[0])
+
+
+def scenario(name: str, *, gains: Path, exe: Path, fmu: Path, transport: dict, mode: str, duration: float) -> dict:
+    data = {"name": name, "artifact": str(gains), "duration": duration, "mode": mode, "controller": "firmware",
+            "firmware": str(exe), "shadow": False, "peer_timeout": 10.0, "step_timeout": 2.0,
+            "plant": {"kind": "fmu", "path": str(fmu)}, "transport": transport, "initial_state": {"theta": 0.1},
+            "reference": {"r_x": {"kind": "step", "at": 1.0, "value": 0.2}}}
+    if mode == "realtime":
+        data["sched_fifo"] = True
+    return data
+
+
+def books(res, *, mode: str) -> dict:
+    """Every sample and frame accounted for, from the report (bridge side) and the firmware's exit summary."""
+    m, info = res.metrics, res.info["transport"]
+    c = m.get("controller", {}).get("counters", {})
+    got = int(res.trace.got.sum())
+    out = {"steps": m["steps"], "answered": got, "lost": m["lost"], "late": m["late"],
+           "unaccounted_bridge": m["steps"] - got - m["lost"],
+           "frames_sent": info.get("frames_sent"), "firmware_counters": c}
+    if c:
+        out["unaccounted_firmware"] = info["frames_sent"] - c["used"] - c["dropped"]
+        out["firmware_steps_vs_bridge_steps"] = c["steps"] - m["steps"]
+    if mode == "realtime":
+        out["overruns"] = m.get("overruns")
+    return out
+
+
+def explain_misses(res) -> dict:
+    """Each missed deadline of a real-time run, by cause, from the trace (see the module doc).
+
+    A tick that never ran (TICK is NaN) passed while the bridge itself was stalled — the machine did not run it
+    (an overrun, skipped); a tick that ran sent its sample, and its command came after the deadline (counted
+    ``late`` when it did arrive) or never. For those, how late the bridge's own tick woke is given too.
+    """
+    tr, m = res.trace, res.metrics
+    missed = np.flatnonzero(~tr.got)
+    skipped = missed[np.isnan(tr.tick_ns[missed])]
+    sent = np.setdiff1d(missed, skipped)
+    wake_us = (tr.tick_ns[sent] - tr.deadline_ns[sent]) / 1e3  # the tick's wake-up after its scheduled time
+    return {"missed": int(missed.size), "skipped_while_the_bridge_was_stalled": int(skipped.size),
+            "overruns_reported": m.get("overruns"),
+            "sample_sent_command_after_deadline": int(sent.size), "of_which_arrived_late": m["late"],
+            "of_which_never_arrived": int(sent.size) - m["late"],
+            "bridge_wake_delay_us_of_those": {"median": float(np.median(wake_us)) if wake_us.size else None,
+                                              "max": float(wake_us.max()) if wake_us.size else None},
+            "first_misses_s": [round(float(tr.t[k]), 3) for k in missed[:10]]}
+
+
+def run_phase(name: str, data: dict, *, sample_s: float) -> tuple[object, dict]:
+    with Sampler(sample_s) as sampler:
+        t0 = time.perf_counter()
+        res = run_scenario(parse_scenario(data))
+        wall = time.perf_counter() - t0
+    rows = sampler.rows
+    m = res.metrics
+    steps_per_min = m["steps"] / (wall / 60.0) if wall > 0 else 0.0
+    a = artifact_mod.load(data["artifact"])
+    growth = RECORDER_ZERO_BYTES(a.p, a.m) * steps_per_min / 1024
+    bridge_slope = slope_kib_per_min(rows, "bridge_rss_kib")
+    out = {
+        "wall_s": round(wall, 1), "steps": m["steps"], "steps_per_s": round(m["steps"] / wall, 1),
+        "complete": res.complete, "reason": res.reason,
+        "rss_samples": rows,
+        "bridge_rss_slope_kib_per_min": bridge_slope,
+        "bridge_trace_growth_kib_per_min": round(growth, 1),
+        "bridge_rss_slope_minus_trace": None if bridge_slope is None else round(bridge_slope - growth, 1),
+        "firmware_rss_slope_kib_per_min": slope_kib_per_min(rows, "firmware_rss_kib"),
+        "firmware_rss_kib_first_last": [next((r["firmware_rss_kib"] for r in rows if r["firmware_rss_kib"]), None),
+                                        next((r["firmware_rss_kib"] for r in reversed(rows) if r["firmware_rss_kib"]),
+                                             None)],
+        "books": books(res, mode=data["mode"]),
+        "latency_us": m["latency_us"], "period_jitter_us": m["period_jitter_us"],
+        "controller_stderr_bytes": m.get("controller", {}).get("stderr_bytes"),
+        "theta_final": m["outputs_final"].get("theta"),
+    }
+    if data["mode"] == "realtime":
+        out["misses"] = explain_misses(res)
+        out["sched_fifo"], out["pm_qos"] = m.get("sched_fifo"), m.get("pm_qos")
+    return res, out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--lockstep-minutes", type=float, default=30.0)
+    ap.add_argument("--realtime-minutes", type=float, default=30.0)
+    ap.add_argument("--sample-s", type=float, default=10.0)
+    ap.add_argument("--calibration-steps", type=int, default=20000)
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING)
+    os.nice(10)
+    spec = tomllib.loads((ROOT / "examples" / "pendulum.toml").read_text())
+    spec["Ts"], spec["name"] = 0.001, "pendulum_1khz"
+    rnd = random.Random(os.getpid())
+    transport = {"interface": "udp_multicast", "channel": f"239.74.{rnd.randint(1, 254)}.{rnd.randint(1, 254)}",
+                 "port": rnd.randint(40000, 60000), "hop_limit": 0, "fd": True}
+    out: dict = {"benchmark": "soak", "transport": "CAN FD over udp_multicast", "plant": "cart_pendulum FMU",
+                 "sample_s": args.sample_s, "cpus": os.cpu_count()}
+    with tempfile.TemporaryDirectory() as tmp:
+        gains = Path(tmp) / "gains.json"
+        artifact_mod.write(gains, design(parse_spec(spec)).artifact)
+        art = artifact_mod.load(gains)
+        common = dict(gains=gains, exe=firmware_can_executable(art), fmu=build_fmu("cart_pendulum"),
+                      transport=transport)
+        t0 = time.perf_counter()
+        cal = run_scenario(parse_scenario(scenario("soak_calibration", mode="lockstep",
+                                                    duration=args.calibration_steps * art.Ts, **common)))
+        rate = cal.metrics["steps"] / (time.perf_counter() - t0)
+        out["calibration"] = {"steps": cal.metrics["steps"], "steps_per_s": round(rate, 1)}
+        if args.lockstep_minutes > 0:
+            steps = int(rate * args.lockstep_minutes * 60)
+            _, ph = run_phase("lockstep", scenario("soak_lockstep", mode="lockstep", duration=steps * art.Ts,
+                                                   **common), sample_s=args.sample_s)
+            ph["speed_vs_calibration"] = round(ph["steps_per_s"] / rate, 3)
+            out["lockstep"] = ph
+        if args.realtime_minutes > 0:
+            _, ph = run_phase("realtime", scenario("soak_realtime", mode="realtime",
+                                                   duration=args.realtime_minutes * 60, **common),
+                              sample_s=args.sample_s)
+            out["realtime"] = ph
+    phases = [out[k] for k in ("lockstep", "realtime") if k in out]
+    out["summary"] = {
+        "complete": all(p["complete"] for p in phases),
+        "unaccounted_samples": sum(abs(p["books"]["unaccounted_bridge"]) + abs(p["books"].get("unaccounted_firmware", 0))
+                                   for p in phases),
+        "firmware_rss_slope_kib_per_min": {k: out[k]["firmware_rss_slope_kib_per_min"] for k in ("lockstep", "realtime")
+                                           if k in out},
+        "bridge_rss_slope_minus_trace": {k: out[k]["bridge_rss_slope_minus_trace"] for k in ("lockstep", "realtime")
+                                         if k in out},
+    }
+    json.dump(out, sys.stdout, indent=2)
+    sys.stdout.write("\n")
+    return 0 if out["summary"]["complete"] and out["summary"]["unaccounted_samples"] == 0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
