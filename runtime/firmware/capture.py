@@ -7,6 +7,7 @@ the parent's memory or a temporary file without bound. What was not kept is coun
 
 from __future__ import annotations
 
+import os
 import re
 import select
 import threading
@@ -36,19 +37,20 @@ class StderrCapture:
         self._tail = bytearray()
         self._lock = threading.Lock()
         self.total_bytes = 0
-        self._holding = False  # a chunk is read and not yet kept
+        self._reading = threading.Lock()
         self._thread = threading.Thread(target=self._drain, name="stderr-capture", daemon=True)
         self._thread.start()
 
     def _drain(self) -> None:
+        fd = self._stream.fileno()
         try:
             while True:
-                chunk = self._stream.read1(65536) if hasattr(self._stream, "read1") else self._stream.read(65536)
-                self._holding = True
-                if not chunk:
-                    break
-                self._keep(chunk)
-                self._holding = False
+                select.select([fd], [], [])  # wait without the lock; read only while holding it
+                with self._reading:
+                    chunk = os.read(fd, 65536)
+                    if not chunk:
+                        break
+                    self._keep(chunk)
         except (OSError, ValueError):
             pass
         finally:
@@ -79,14 +81,19 @@ class StderrCapture:
         self._thread.join(timeout)
 
     def _settle(self, limit: float = 0.5) -> None:
-        """Wait (briefly) until what the child wrote so far is read and kept, so callers see it."""
+        """Wait (briefly) until what the child wrote so far is read and kept, so callers see it.
+
+        Bytes leave the pipe only under ``_reading``: holding it and finding the pipe empty means every byte
+        written before this call is kept.
+        """
         deadline = time.monotonic() + limit
         while self._thread.is_alive() and time.monotonic() < deadline:
-            try:
-                pending = bool(select.select([self._stream], [], [], 0)[0])
-            except (OSError, ValueError):
-                return
-            if not pending and not self._holding:
+            with self._reading:
+                try:
+                    pending = bool(select.select([self._stream.fileno()], [], [], 0)[0])
+                except (OSError, ValueError):
+                    return
+            if not pending:
                 return
             time.sleep(0.001)
 
