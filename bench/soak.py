@@ -41,8 +41,8 @@ from gainlink import artifact as artifact_mod
 from gainlink.design import design
 from gainlink.hil.links.can_firmware import firmware_can_executable
 from gainlink.hil.plants.build import build_fmu
-from gainlink.hil.run.bridge import run_scenario
-from gainlink.hil.run.scenario import parse_scenario
+from gainlink.hil.loop.bridge import run_scenario
+from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.spec import parse_spec
 
 ROOT = Path(__file__).resolve().parents[1]

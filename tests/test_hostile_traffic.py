@@ -18,9 +18,9 @@ from test_mavlink_upload import free_udp_port
 
 from gainlink.artifact import load
 from gainlink.codegen import gain_set
-from gainlink.hil.run.bridge import run_scenario
-from gainlink.hil.run.report import report_json
-from gainlink.hil.run.scenario import parse_scenario
+from gainlink.hil.loop.bridge import run_scenario
+from gainlink.hil.loop.report import report_json
+from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.firmware.mavlink_app import firmware_argv, mavlink_executable
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
