@@ -24,8 +24,10 @@ from ..artifact import Artifact
 from ..errors import ToolchainError
 from .build import build
 
-HARNESSES = ("can_udp", "can_layout", "gains_stage", "mavlink_node")
-"""Harness names; the executable of ``NAME`` is ``fuzz/fuzz_NAME`` in the fuzz build."""
+HARNESSES = ("can_udp", "can_layout", "gains_stage", "mavlink_node") + (
+    ("slcan",) if (Path(__file__).resolve().parents[2] / "firmware" / "apps" / "can" / "gl_slcan.c").is_file() else ())
+"""Harness names; the executable of ``NAME`` is ``fuzz/fuzz_NAME`` in the fuzz build (``slcan`` where the firmware
+has the slcan adapter)."""
 
 MAX_LEN = 4096
 """Largest input libFuzzer generates (the largest seed, a whole gain set, is a few hundred bytes)."""
@@ -233,7 +235,18 @@ def _seeds_mavlink_node(artifact: Artifact) -> list[bytes]:
     return seeds
 
 
-_SEEDS = {"can_udp": _seeds_can_udp, "can_layout": _seeds_can_layout, "gains_stage": _seeds_gains_stage,
+def _seeds_slcan(artifact: Artifact) -> list[bytes]:
+    """Lawicel lines a host sends an adapter: set-up, the layout's classic frames (both encodings), queries."""
+    lines = [b"S6\r", b"O\r", b"V\r", b"N\r", b"F\r", b"Z0\r", b"C\r", b"L\r", b"T0000011F2AABB\r", b"r1108\r"]
+    frames = [f"t{0x110 + index:03X}{len(data):d}{data.hex().upper()}\r".encode()
+              for fd, _enc, index, data in _can_frames(artifact) if not fd]
+    seeds = [bytes([0]) + line for line in lines]
+    seeds += [bytes([2]) + b"O\r" + f for f in frames]  # split inside the first frame's line
+    seeds.append(bytes([5]) + b"S6\rO\r" + b"".join(frames[:4]) + b"C\r")
+    return seeds
+
+
+_SEEDS = {"slcan": _seeds_slcan, "can_udp": _seeds_can_udp, "can_layout": _seeds_can_layout, "gains_stage": _seeds_gains_stage,
           "mavlink_node": _seeds_mavlink_node}
 
 
