@@ -61,7 +61,7 @@ def write_key(path: str | os.PathLike, key: bytes, *, overwrite: bool = False) -
         raise SigningKeyError(f"a signing key has {KEY_BYTES} bytes, not {len(key)}")
     if path.exists() and not overwrite:
         raise SigningKeyError(f"{path} exists: not replacing a key file (remove it first)")
-    atomic_write_text(path, key.hex() + "\n")  # mkstemp: the file is created 0600 and stays so
+    atomic_write_text(path, key.hex() + "\n", mode=0o600)  # a secret: owner only, from the first byte
     return path
 
 
