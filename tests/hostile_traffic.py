@@ -5,7 +5,8 @@
     python tests/hostile_traffic.py mavlink --target HOST:PORT --count N [--rate R] [--seed S] --frames FILE
 
 Prints one JSON line at the end: ``{"sent": N, "by_kind": {...}, "seconds": T}``. Every datagram is sent once;
-``--rate`` (datagrams/s, 0 = as fast as possible) paces them so the receiver's socket buffer is not the test.
+``--rate`` (datagrams/s, 0 = as fast as possible) paces them; with ``--bursts`` they go out in bursts of the
+size the caller asks for on stdin (``go N``), between the steps of a run.
 
 CAN (python-can udp_multicast wire format, packed with python-can's own packer and then mutated): every
 datagram is built so that the firmware must refuse it (not a flat msgpack map of a standard data frame),
@@ -185,8 +186,8 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--rate", type=float, default=0.0)
         p.add_argument("--seed", type=int, default=1)
         p.add_argument("--delay", type=float, default=0.0, help="seconds to wait before sending")
-        p.add_argument("--wait-go", action="store_true", help="print 'ready' once the datagrams are made, then "
-                       "send when a line arrives on stdin")
+        p.add_argument("--bursts", action="store_true", help="print 'ready' once the datagrams are made, then for "
+                       "each line 'go N' on stdin send the next N and print 'sent N'")
     args = ap.parse_args(argv)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 20)
@@ -198,11 +199,21 @@ def main(argv: list[str] | None = None) -> int:
         host, port = args.target.rsplit(":", 1)
         datagrams, by_kind = mavlink_datagrams(args.frames, args.count, args.seed)
         dest = (host, int(port))
-    if args.wait_go:
+    if args.bursts:
         print("ready", flush=True)
-        sys.stdin.readline()
-    time.sleep(args.delay)
-    seconds = send_all(sock, dest, datagrams, rate=args.rate)
+        at, seconds = 0, 0.0
+        while at < len(datagrams):
+            words = sys.stdin.readline().split()
+            if len(words) != 2 or words[0] != "go":
+                break
+            chunk = datagrams[at:at + int(words[1])]
+            seconds += send_all(sock, dest, chunk, rate=args.rate)
+            at += len(chunk)
+            print(f"sent {len(chunk)}", flush=True)
+        datagrams = datagrams[:at]
+    else:
+        time.sleep(args.delay)
+        seconds = send_all(sock, dest, datagrams, rate=args.rate)
     print(json.dumps({"sent": len(datagrams), "by_kind": by_kind, "seconds": round(seconds, 3)}), flush=True)
     return 0
 
