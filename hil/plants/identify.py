@@ -30,7 +30,7 @@ from .fmu import FmuPlant
 DEFAULT_HORIZON = 100
 
 
-def _pulse_responses(plant: FmuPlant, *, u0: np.ndarray, horizon: int, rel_step: float) -> np.ndarray:
+def _pulse_responses(plant: FmuPlant, *, u0: np.ndarray, dt: float, horizon: int, rel_step: float) -> np.ndarray:
     """Markov parameters ``h[k-1] = dy_k / du_0`` (p x m) for ``k = 1..horizon``, by central differences."""
     start = plant.save_state()
     m, p = len(u0), len(plant.output_names)
@@ -44,7 +44,7 @@ def _pulse_responses(plant: FmuPlant, *, u0: np.ndarray, horizon: int, rel_step:
             u[j] += sign * delta
             ys = []
             for k in range(horizon):
-                plant.advance(u=u if k == 0 else u0, dt=plant.step)
+                plant.advance(u=u if k == 0 else u0, dt=dt)
                 ys.append(plant.outputs())
             runs.append(np.array(ys))
         h[:, :, j] = (runs[0] - runs[1]) / (2.0 * delta)
@@ -121,11 +121,10 @@ def identify_cosimulation(path: Path, *, md: Any, at: Mapping[str, float], input
     params = {k: float(v) for k, v in at.items() if k not in in_names}
     plant = FmuPlant(path=path, inputs=in_names, outputs=outputs or None, parameters=params)
     try:
-        plant.step = float(Ts)
         starts = {v.name: v.start for v in md.modelVariables}
         u0 = np.array([at_inputs.get(n, float(starts.get(n) or 0.0)) for n in plant.input_names])
         y0 = plant.outputs()
-        h = _pulse_responses(plant, u0=u0, horizon=horizon, rel_step=rel_step)
+        h = _pulse_responses(plant, u0=u0, dt=float(Ts), horizon=horizon, rel_step=rel_step)
     finally:
         plant.close()
     A, B, C, s = realize(h, rtol=rtol)
