@@ -69,7 +69,7 @@ def test_every_message_under_asan_ubsan(sanitized_exe, pend, tmp_path):
         with MavLink(f"udpout:127.0.0.1:{port}") as link:
             link.wait_heartbeat(timeout=5)
             s = ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE, retries=1)
-            assert len(s.read_all()) == 61
+            assert len(s.read_all()) == 64  # 7 header + 57 numbers of the pendulum's gl_gains_t (u_op, y_op too)
             assert s.read(["GL_NOPE", "GL_K_0_0"])[1] == {"GL_NOPE": "does not exist"}
             assert "GL_K_0_0" in s.set([("GL_K_0_0", REAL32, float("nan"))]).refused
             assert "GL_NOPE" in s.set([("GL_NOPE", REAL32, 1.0)]).unanswered

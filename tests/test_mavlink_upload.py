@@ -26,7 +26,7 @@ from gainlink.reference import ReferenceLoop
 from gainlink.spec import parse_spec
 
 STEMS = {"AD": "Ad", "BD": "Bd", "CD": "Cd", "DD": "Dd", "K": "K", "L": "L", "M": "M", "CI": "Ci", "KI": "Ki",
-         "KAW": "Kaw", "UMIN": "u_min", "UMAX": "u_max", "XH0": "xh0", "Z0": "z0"}
+         "KAW": "Kaw", "UMIN": "u_min", "UMAX": "u_max", "XH0": "xh0", "Z0": "z0", "UOP": "u_op", "YOP": "y_op"}
 
 
 def free_udp_port() -> int:
@@ -121,9 +121,10 @@ def test_parameter_list_is_the_artifact(exe, pend):
     assert all(p.count == len(params) for p in params.values())
     assert all(len(n) <= 16 for n in names)
     floats = {n: p for n, p in params.items() if p.ptype == 9}
-    # every number of the loop: Ts, Ad Bd Cd Dd K L (no M: predictor form), Ci Ki Kaw, limits, xh0, z0
+    # every number of the loop: Ts, Ad Bd Cd Dd K L (no M: predictor form), Ci Ki Kaw, limits, xh0, z0, u_op, y_op
     n, m, p, q = art.n, art.m, art.p, art.q
-    assert len(floats) == 1 + n * n + n * m + p * n + p * m + m * n + n * p + q * p + m * q + q * m + 2 * m + n + q
+    assert len(floats) == 1 + n * n + n * m + p * n + p * m + m * n + n * p + q * p + m * q + q * m + 2 * m + n + q \
+        + m + p
     for name, pv in floats.items():
         assert pv.value == expected_value(art, name), name
     assert floats["GL_K_0_3"].value == float(np.float32(art.K[0, 3]))

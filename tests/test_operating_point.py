@@ -354,3 +354,55 @@ def test_pil_closes_the_loop_about_the_operating_point():
     assert res.y[0, 0] == 12.0 and res.u[0, 0] == np.float32(6.0), "starts at the trim, bumplessly"
     assert rel_err(res.u.astype(float), U) <= RTOL and rel_err(res.y, Y) <= RTOL
     assert abs(res.y[-1, 0] - 14.0) < 1e-3
+
+
+# --- the HIL side: the linear plant about its point, references and the first command ---------------
+
+
+def test_linear_plant_is_about_the_operating_point(tmp_path):
+    """``kind = "linear"`` from an artifact with an operating point: at rest at the trim it stays there under
+    u_op; a held step of the command gives y_op plus python-control's step response of (A, B, C, D)."""
+    import control
+
+    from gainlink.hil.plants import toml_write
+    from gainlink.hil.plants.linear import LinearPlant, model_from_artifact, model_from_spec
+
+    a = from_dict(designed(motor(u_op=[6.0], y_op=[12.0])))
+    plant = LinearPlant(model=model_from_artifact(a))
+    plant.reset(initial={})
+    for _ in range(50):
+        assert plant.outputs().tolist() == [12.0]
+        plant.advance(u=np.array([6.0]), dt=0.01)
+    N, dt = 300, 0.01
+    Y = np.zeros(N)
+    for k in range(N):
+        plant.advance(u=np.array([6.5]), dt=dt)
+        Y[k] = plant.outputs()[0]
+    sys = control.ss(MOTOR["plant"]["A"], MOTOR["plant"]["B"], MOTOR["plant"]["C"], [[0.0]])
+    resp = control.forced_response(sys, T=np.arange(N + 1) * dt, U=np.full(N + 1, 0.5))
+    np.testing.assert_allclose(Y, 12.0 + resp.outputs[1:], rtol=1e-9, atol=1e-12)
+    spec = tmp_path / "motor.toml"
+    spec.write_text(toml_write.dumps(motor(u_op=[6.0], y_op=[12.0])))
+    from_spec = model_from_spec(spec)
+    assert from_spec.u_op.tolist() == [6.0] and from_spec.y_op.tolist() == [12.0]
+
+
+def test_hil_bridge_starts_at_the_trim_and_references_are_absolute(tmp_path):
+    """A HIL run (Python reference controller over udp_multicast CAN, linear plant about the point): the
+    bridge's first command is u_op (clamped), a reference without a profile holds the trim, a step profile
+    without `initial` starts from it; the loop sits exactly at 12 rad/s and 6 V until the step to 14."""
+    from gainlink.hil.run.bridge import run_scenario
+    from gainlink.hil.run.scenario import parse_scenario
+    from test_hil_support import udp_transport
+
+    art = tmp_path / "gains.json"
+    artifact_mod.write(art, designed(motor(u_op=[6.0], y_op=[12.0])))
+    base = {"artifact": str(art), "duration": 6.0, "controller": "reference", "step_timeout": 2.0,
+            "plant": {"kind": "linear"}, "transport": udp_transport()}
+    held = run_scenario(parse_scenario(base))
+    assert held.complete and held.metrics["lost"] == 0
+    assert np.all(held.trace.y == 12.0) and np.all(held.trace.u == 6.0) and np.all(held.trace.r == 12.0)
+    step = run_scenario(parse_scenario({**base, "reference": {"r_speed": {"kind": "step", "at": 1.0, "value": 14.0}}}))
+    t, y, r = step.trace.t, step.trace.y[:, 0], step.trace.r[:, 0]
+    assert np.all(r[t < 1.0] == 12.0) and np.all(r[t >= 1.0] == 14.0)
+    assert np.all(y[t < 1.0] == 12.0) and abs(y[-1] - 14.0) < 1e-2

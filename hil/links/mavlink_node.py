@@ -39,7 +39,7 @@ def serve(artifact: Any, *, url: str, out: Any = sys.stdout) -> int:
     mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=mavlink2.MAV_COMP_ID_AUTOPILOT1)
     law = ReferenceLoop(artifact)
     m, p = artifact.m, artifact.p
-    safe = np.clip(np.zeros(m), artifact.u_min, artifact.u_max)
+    safe = artifact.safe_command
     u, idle = safe.copy(), 0
     stop: list[int] = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))

@@ -147,7 +147,7 @@ class _Loop:
         self.rec = Recorder(self.plan, artifact=artifact, plant=plant)
         self.injector = FaultInjector(scenario.faults, Ts=artifact.Ts, seed=scenario.seed)
         self.shadow = ReferenceLoop(artifact) if scenario.shadow else None
-        self.u = np.clip(np.zeros(artifact.m), artifact.u_min, artifact.u_max)
+        self.u = artifact.safe_command  # until the first command: u_op clamped into the limits
         self.late = 0
         self.overruns = 0
         self.silent_since_ns: int | None = None

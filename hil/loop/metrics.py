@@ -117,9 +117,9 @@ def compute_metrics(trace: RunTrace, *, artifact: Any, mode: str, late: int, per
             for j, name in enumerate(sig["references"]):
                 yj = trace.y @ a.Ci[j]
                 tracked[name] = tracking(trace.t, yj, trace.r[:, j])
-        else:
+        else:  # a regulator: its set point is the operating point
             for i, name in enumerate(sig["outputs"]):
-                tracked[name] = tracking(trace.t, trace.y[:, i], np.zeros(N))
+                tracked[name] = tracking(trace.t, trace.y[:, i], np.full(N, a.y_op[i]))
     out["tracked"] = tracked
     return _clean(out)
 

@@ -39,10 +39,10 @@ def plan_run(scenario: Scenario, *, artifact: Artifact, plant: Plant) -> Plan:
     realtime = scenario.mode == "realtime"
     rng = np.random.default_rng(scenario.seed)
     t = np.arange(N) * Ts
-    R = np.zeros((N, a.q))
+    R = np.tile(a.r_op, (N, 1))  # absolute: the trim unless a profile says otherwise
     for j, name in enumerate(a.signals["references"]):
         if name in scenario.reference:
-            R[:, j] = profile_values(scenario.reference[name], t)
+            R[:, j] = profile_values(scenario.reference[name], t, base=float(a.r_op[j]))
     noise_sd = np.array([scenario.noise.get(name, 0.0) for name in plant.output_names])
     noise = rng.standard_normal((N, a.p)) * noise_sd if noise_sd.any() else np.zeros((N, a.p))
     D = np.zeros((N, a.m))

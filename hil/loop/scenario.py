@@ -23,6 +23,8 @@ Example::
                    # optional: encoding = "int16", ranges = { x = [-5.0, 5.0], theta = [-1.0, 1.0], r_x = [-5.0, 5.0] }
     [initial_state] theta = 0.1
     [reference.x]  kind = "step", at = 1.0, value = 0.5     # constant | step | square | sine | ramp
+                   # absolute; without a profile, or without initial/offset, a reference holds the
+                   # tracked output's value at the artifact's operating point (0 without one)
     [noise]        theta = 0.001                           # std dev per output
     [[disturbances]] input = "F", start = 2.0, stop = 2.1, value = 5.0
     [[faults]]     kind = "drop", start = 3.0, stop = 3.1, every = 1   # drop | delay | duplicate | reorder | silent | crash
@@ -273,17 +275,21 @@ def load_scenario(path: str | Path) -> Scenario:
     return parse_scenario(data, path=path)
 
 
-def profile_values(profile: Mapping[str, float], t: np.ndarray) -> np.ndarray:
-    """Evaluate a reference profile at times ``t``."""
+def profile_values(profile: Mapping[str, float], t: np.ndarray, *, base: float = 0.0) -> np.ndarray:
+    """Evaluate a reference profile at times ``t``.
+
+    References are absolute; a profile's ``initial`` (step, ramp) and ``offset`` (square, sine) default to
+    ``base``, the tracked output's value at the artifact's operating point (0 without one).
+    """
     kind = profile["kind"]
     if kind == "constant":
         return np.full(t.shape, profile["value"])
     if kind == "step":
-        return np.where(t >= profile.get("at", 0.0), profile["value"], profile.get("initial", 0.0))
+        return np.where(t >= profile.get("at", 0.0), profile["value"], profile.get("initial", base))
     if kind == "square":
         phase = np.floor(2.0 * t / profile["period"]).astype(int) % 2
-        return profile.get("offset", 0.0) + profile["amplitude"] * np.where(phase == 0, 1.0, -1.0)
+        return profile.get("offset", base) + profile["amplitude"] * np.where(phase == 0, 1.0, -1.0)
     if kind == "sine":
-        return profile.get("offset", 0.0) + profile["amplitude"] * np.sin(2 * np.pi * profile["frequency"] * t)
+        return profile.get("offset", base) + profile["amplitude"] * np.sin(2 * np.pi * profile["frequency"] * t)
     start, stop = profile.get("start", 0.0), profile.get("stop", np.inf)
-    return profile.get("initial", 0.0) + profile["slope"] * (np.clip(t, start, stop) - start)
+    return profile.get("initial", base) + profile["slope"] * (np.clip(t, start, stop) - start)

@@ -1,7 +1,9 @@
 """A linear plant from any spec or artifact, with optional parameter perturbation.
 
 ``[plant] kind = "linear"`` simulates ``A, B, C, D`` exactly (zero-order hold through the matrix
-exponential for a continuous model; a discrete model advances only by its own ``Ts``). The model
+exponential for a continuous model; a discrete model advances only by its own ``Ts``) about the model's
+operating point: its state is the deviation, its inputs and outputs are absolute
+(``dx/dt = A x + B (u - u_op)``, ``y = y_op + C x + D (u - u_op)``). The model
 comes from ``spec = "plant.toml"``, ``artifact = "gains.json"`` or, by default, the scenario's own
 artifact. Perturbation (the Monte-Carlo hook of campaigns) is :func:`perturb_model`:
 
@@ -33,7 +35,8 @@ MATRICES = ("A", "B", "C", "D")
 
 @dataclass(frozen=True)
 class LinearModel:
-    """``A, B, C, D`` with their signal names; ``Ts`` is ``None`` for a continuous model."""
+    """``A, B, C, D`` with their signal names; ``Ts`` is ``None`` for a continuous model; ``u_op``, ``y_op``
+    the operating point (``None``: the origin)."""
 
     name: str
     A: np.ndarray
@@ -44,6 +47,8 @@ class LinearModel:
     states: tuple[str, ...]
     inputs: tuple[str, ...]
     outputs: tuple[str, ...]
+    u_op: np.ndarray | None = None
+    y_op: np.ndarray | None = None
 
 
 def model_from_spec(path: str | Path) -> LinearModel:
@@ -54,9 +59,11 @@ def model_from_spec(path: str | Path) -> LinearModel:
         spec = load_spec(path)
     except GainlinkError as exc:
         raise PlantError(f"plant linear: {exc}") from None
+    op = spec.operating_point
     return LinearModel(name=spec.name, A=spec.A, B=spec.B, C=spec.C, D=spec.D,
                        Ts=None if spec.continuous else spec.Ts,
-                       states=spec.states, inputs=spec.inputs, outputs=spec.outputs)
+                       states=spec.states, inputs=spec.inputs, outputs=spec.outputs,
+                       u_op=None if op is None else op.u_op, y_op=None if op is None else op.y_op)
 
 
 def model_from_artifact(artifact: Any) -> LinearModel:
@@ -68,7 +75,8 @@ def model_from_artifact(artifact: Any) -> LinearModel:
     states = tuple(sig["states"]) if len(sig["states"]) == n else tuple(f"x{i}" for i in range(n))
     return LinearModel(name=artifact.name, A=A, B=np.array(pl["B"], float), C=np.array(pl["C"], float),
                        D=np.array(pl["D"], float), Ts=artifact.Ts if pl["kind"] == "discrete" else None,
-                       states=states, inputs=tuple(sig["inputs"]), outputs=tuple(sig["outputs"]))
+                       states=states, inputs=tuple(sig["inputs"]), outputs=tuple(sig["outputs"]),
+                       u_op=artifact.u_op, y_op=artifact.y_op)
 
 
 def _factors(table: Any, what: str) -> dict:
@@ -148,7 +156,10 @@ class LinearPlant(Plant):
         self.A, self.B, self.C, self.D = model.A, model.B, model.C, model.D
         self.state_names, self.input_names, self.output_names = model.states, model.inputs, model.outputs
         self._disc: dict[float, tuple[np.ndarray, np.ndarray]] = {}
-        self._u = np.zeros(self.B.shape[1])
+        m, p = self.B.shape[1], self.C.shape[0]
+        self.u_op = np.zeros(m) if model.u_op is None else np.asarray(model.u_op, float)
+        self.y_op = np.zeros(p) if model.y_op is None else np.asarray(model.y_op, float)
+        self._du = np.zeros(m)
         self.x = np.zeros(self.A.shape[0])
 
     def _discrete(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -167,29 +178,30 @@ class LinearPlant(Plant):
         return self._disc[dt]
 
     def reset(self, *, initial: Mapping[str, float]) -> None:
+        """Back to the operating point, then ``initial`` (state name -> deviation from it)."""
         self.x = np.zeros(self.A.shape[0])
-        self._u = np.zeros(self.B.shape[1])
+        self._du = np.zeros(self.B.shape[1])
         for key, value in initial.items():
             if key not in self.state_names:
                 raise PlantError(f"plant {self.name} has no state {key!r} (has: {', '.join(self.state_names)})")
             self.x[self.state_names.index(key)] = float(value)
 
     def outputs(self) -> np.ndarray:
-        return self.C @ self.x + self.D @ self._u
+        return self.y_op + self.C @ self.x + self.D @ self._du
 
     def state(self) -> np.ndarray:
         return self.x.copy()
 
     def advance(self, *, u: np.ndarray, dt: float) -> None:
         Ad, Bd = self._discrete(dt)
-        self._u = np.asarray(u, float)
-        self.x = Ad @ self.x + Bd @ self._u
+        self._du = np.asarray(u, float) - self.u_op
+        self.x = Ad @ self.x + Bd @ self._du
 
     def save_state(self) -> Any:
-        return (self.x.copy(), self._u.copy())
+        return (self.x.copy(), self._du.copy())
 
     def restore_state(self, snapshot: Any) -> None:
-        self.x, self._u = snapshot[0].copy(), snapshot[1].copy()
+        self.x, self._du = snapshot[0].copy(), snapshot[1].copy()
 
 
 def _source_path(value: Any, *, base_dir: Path | None, what: str) -> Path:

@@ -1,5 +1,10 @@
 """Linearise an FMU about an operating point into a plant spec that ``gainlink design`` takes.
 
+The spec's ``[operating_point]`` table records the point by signal name: ``u_op`` (the inputs there),
+``y_op`` (the outputs there) and ``x_op`` (the states there), so the designed loop works in the FMU's
+absolute units. A point that is not an equilibrium (``dx/dt != 0``) is linearised all the same, with a
+warning: the linear model about it drifts, and the loop will settle elsewhere.
+
 The FMU's Model Exchange interface gives ``dx/dt = f(x, u)`` and ``y = g(x, u)``. The Jacobians
 ``A = df/dx, B = df/du, C = dg/dx, D = dg/du`` come from ``fmi2GetDirectionalDerivative`` when the
 FMU provides it, else from central differences (step ``1e-6 * max(1, |v|)``). fmpy has no
@@ -46,6 +51,20 @@ class Linearization:
     method: str
     model_name: str
     Ts: float | None = None  # the step of a discrete model (Co-Simulation FMUs); None: continuous
+    u0: np.ndarray | None = None  # inputs at the point
+    y0: np.ndarray | None = None  # outputs at the point
+    dx0: np.ndarray | None = None  # derivatives at the point (zero at an equilibrium; continuous models only)
+
+    def operating_point(self) -> dict:
+        """The spec's ``[operating_point]`` table: u_op, y_op and (continuous models) x_op by signal name.
+
+        An identified discrete model's states are balanced coordinates, not the FMU's: no x_op then."""
+        table = {}
+        for key, names, values in (("u_op", self.inputs, self.u0), ("y_op", self.outputs, self.y0),
+                                   ("x_op", self.states, self.x0 if self.Ts is None else None)):
+            if values is not None and len(names):
+                table[key] = {_signal_name(n): float(v) for n, v in zip(names, values)}
+        return table
 
 
 def _fmu_path(fmu: str | Path) -> Path:
@@ -132,6 +151,8 @@ def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs:
         nx = len(states)
         x0 = np.array(fmu.getReal(vr_x))
         u0 = np.array(fmu.getReal(vr_u)) if vr_u else np.zeros(0)
+        y0 = np.array(fmu.getReal(vr_y)) if vr_y else np.zeros(0)
+        dx0 = np.array(fmu.getReal(vr_dx))
         if use_dd:
             def jac(unknown: list[int], known: list[int]) -> np.ndarray:
                 J = np.zeros((len(unknown), len(known)))
@@ -179,8 +200,22 @@ def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs:
             shutil.rmtree(unzip, ignore_errors=True)
     if not all(np.all(np.isfinite(M)) for M in (A, B, C, D)):
         raise PlantError(f"FMU {md.modelName}: the Jacobian at this point holds non-finite entries")
+    if not all(np.all(np.isfinite(v)) for v in (x0, u0, y0, dx0)):
+        raise PlantError(f"FMU {md.modelName}: a state, input or output at this point is not finite")
+    drift = _drift(dx0, A=A, B=B, states=tuple(s.name for s in states))
+    if drift:
+        log.warning("FMU %s: the operating point is not an equilibrium (%s); the linear model about it "
+                    "drifts: set the trim (e.g. --at INPUT=VALUE) where dx/dt = 0", md.modelName, drift)
     return Linearization(A=A, B=B, C=C, D=D, states=tuple(s.name for s in states), inputs=tuple(in_names),
-                         outputs=tuple(out_names), point=point, x0=x0, method=name, model_name=md.modelName)
+                         outputs=tuple(out_names), point=point, x0=x0, method=name, model_name=md.modelName,
+                         u0=u0, y0=y0, dx0=dx0)
+
+
+def _drift(dx0: np.ndarray, *, A: np.ndarray, B: np.ndarray, states: tuple[str, ...]) -> str:
+    """``""`` at an equilibrium, else the derivatives that are not zero (relative to the model's scale)."""
+    scale = max(1.0, float(np.max(np.abs(np.hstack([A, B])), initial=0.0)))
+    bad = [f"d{name}/dt = {v:.3g}" for name, v in zip(states, dx0) if abs(v) > 1e-6 * scale]
+    return ", ".join(bad)
 
 
 def _linearize_cosimulation(path: Path, md: Any, *, at: Mapping[str, float], inputs: list[str] | None,
@@ -207,7 +242,8 @@ def _linearize_cosimulation(path: Path, md: Any, *, at: Mapping[str, float], inp
     return Linearization(A=r["A"], B=r["B"], C=r["C"], D=r["D"], states=r["states"], inputs=tuple(r["inputs"]),
                          outputs=tuple(r["outputs"]), point=dict(at), x0=np.zeros(r["A"].shape[0]),
                          method=f"doStep pulse responses from a saved state, ERA order {r['A'].shape[0]}",
-                         model_name=md.modelName, Ts=float(Ts))
+                         model_name=md.modelName, Ts=float(Ts), u0=np.asarray(r["u0"], float),
+                         y0=np.asarray(r["y0"], float))
 
 
 def fmu_real_array(x: np.ndarray) -> Any:
@@ -241,6 +277,8 @@ def spec_dict(lin: Linearization, *, Ts: float, name: str | None = None,
                   "inputs": [_signal_name(s) for s in lin.inputs], "outputs": [_signal_name(s) for s in lin.outputs],
                   "A": lin.A.tolist(), "B": lin.B.tolist(), "C": lin.C.tolist(), "D": lin.D.tolist()},
     }
+    op = lin.operating_point()
+    u_op = np.array(list(op.get("u_op", {}).values()) or [0.0] * m)
     if template is not None:
         for key in DESIGN_SECTIONS:
             if key in template:
@@ -248,7 +286,9 @@ def spec_dict(lin: Linearization, *, Ts: float, name: str | None = None,
     else:
         data["controller"] = {"method": "lqr", "Q_diag": [1.0] * n, "R_diag": [1.0] * m}
         data["observer"] = {"method": "kalman", "form": "predictor", "W_diag": [1e-4] * n, "V_diag": [1e-6] * p}
-        data["limits"] = {"u_min": [-1e3] * m, "u_max": [1e3] * m, "anti_windup": "clamp"}
+        data["limits"] = {"u_min": (u_op - 1e3).tolist(), "u_max": (u_op + 1e3).tolist(), "anti_windup": "clamp"}
+    if op:
+        data["operating_point"] = op
     return data
 
 
@@ -272,9 +312,12 @@ def linearize_to_spec(*, fmu: str | Path, at: Mapping[str, float], out: Path, Ts
     states_there = ("states are balanced coordinates of the identified discrete model (D = 0: outputs sampled "
                     "after each step)" if lin.Ts is not None else
                     f"states there: {', '.join(f'{s} = {v:g}' for s, v in zip(lin.states, lin.x0))}")
+    drift = _drift(lin.dx0, A=lin.A, B=lin.B, states=lin.states) if lin.dx0 is not None else ""
     header = (f"Linearised from FMU {lin.model_name} by gainlink linearize ({lin.method}).\n"
               f"Operating point: {', '.join(f'{k} = {v:g}' for k, v in lin.point.items()) or 'start values'}; "
               f"{states_there}.\n"
+              "[operating_point] holds the inputs and outputs there: the loop works in absolute units.\n"
+              + (f"Not an equilibrium: {drift}.\n" if drift else "")
               + ("Design sections copied from the template spec." if tmpl is not None else
                  "Design sections are neutral defaults: edit weights, noise and limits before designing."))
     atomic_write_text(out, toml_write.dumps(data, header=header))

@@ -105,7 +105,7 @@ def cmd_design(args: argparse.Namespace) -> int:
             "artifact": str(out / "gains.json"), "sha256": a["sha256"], "K": a["K"], "L": a["L"],
             "Ki": a.get("Ki"), "controller_poles": complex_pairs(result.controller_poles),
             "observer_poles": complex_pairs(result.observer_poles), "margins": a["checks"]["margins"],
-            "warnings": result.warnings,
+            "u_op": a.get("u_op"), "y_op": a.get("y_op"), "warnings": result.warnings,
         }, indent=2))
         return 0
     print(f"{spec.name}: n={spec.n} m={spec.m} p={spec.p} q={a['q']}, Ts={spec.Ts:g} s, "
@@ -123,6 +123,10 @@ def cmd_design(args: argparse.Namespace) -> int:
         down = "-inf" if mg.gain_margin_down_db is None else f"{mg.gain_margin_down_db:.1f}"
         pm = "n/a" if mg.phase_margin_deg is None else f"{mg.phase_margin_deg:.1f} deg"
         print(f"  margins at input {mg.input}: gain {up} / {down} dB, phase {pm}")
+    if "u_op" in a or "y_op" in a:
+        op = [f"{name}={v:.6g}" for key, names in (("u_op", spec.inputs), ("y_op", spec.outputs))
+              for name, v in zip(names, a.get(key, [0.0] * len(names)))]
+        print(f"  operating point: {', '.join(op)} (samples, references and commands are absolute)")
     print(f"  wrote {out / 'gains.json'} (sha256 {a['sha256'][:16]})")
     return 0
 

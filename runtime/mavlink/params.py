@@ -15,6 +15,7 @@ id                                             type    meaning
 ``GL_M_i_j``                                   REAL32  current-estimator gain (current form only)
 ``GL_CI_i_j GL_KI_i_j GL_KAW_i_j``             REAL32  integral action (q > 0 only)
 ``GL_UMIN_i GL_UMAX_i GL_XH0_i GL_Z0_i``       REAL32  limits, initial estimate and integrator
+``GL_UOP_i GL_YOP_i``                          REAL32  operating point: command and measurement there
 =============================================  ======  ==============================================
 
 Every number of the C ``gl_gains_t`` is a parameter, so ``GL_HASH`` is fully determined by the
@@ -33,7 +34,8 @@ A mapping file (TOML) maps artifact gains to an autopilot's own parameters (each
 such vehicles; there is no commit)::
 
     [[param]]
-    gain = "K[0,1]"          # artifact matrix element (Ad Bd Cd Dd K L M Ci Ki Kaw), u_min[i], u_max[i] or Ts
+    gain = "K[0,1]"          # artifact matrix element (Ad Bd Cd Dd K L M Ci Ki Kaw), u_min[i], u_max[i],
+                             # u_op[i], y_op[i] (e.g. a hover thrust) or Ts
     name = "MC_ROLLRATE_P"   # the vehicle's parameter id (at most 16 characters)
     type = "REAL32"          # REAL32 INT32 UINT32 INT16 UINT16 INT8 UINT8
     scale = -1.0             # optional: value sent = scale * gain (integers are rounded)
@@ -92,6 +94,8 @@ BLOCKS: tuple[tuple[str, str, str], ...] = (
     ("u_max", "UMAX", "vector"),
     ("xh0", "XH0", "vector"),
     ("z0", "Z0", "vector"),
+    ("u_op", "UOP", "vector"),
+    ("y_op", "YOP", "vector"),
 )
 #: Matrices a mapping file may name.
 MATRICES: tuple[str, ...] = ("Ad", "Bd", "Cd", "Dd", "K", "L", "M", "Ci", "Ki", "Kaw")
@@ -252,7 +256,7 @@ def artifact_value(artifact: Artifact, gain: str) -> float:
     key, i, j = m.group(1), m.group(2), m.group(3)
     if key == "Ts" and i is None:
         return float(artifact.Ts)
-    if key in ("u_min", "u_max") and i is not None and j is None:
+    if key in ("u_min", "u_max", "u_op", "y_op") and i is not None and j is None:
         v = np.asarray(getattr(artifact, key), dtype=float)
         if int(i) >= v.size:
             raise ParameterError(f"mapping: {gain} is out of range ({key} has {v.size} entries)")

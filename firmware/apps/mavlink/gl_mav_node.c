@@ -374,7 +374,7 @@ static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)
         inc(&node->stats.samples, 1u);
     } else if (in.array_id == HIL_ARRAY_RESET) {
         reset_loop(node);
-        memset(u, 0, sizeof u);
+        memcpy(u, node->loop.u, sizeof u); /* after a reset: the safe command, u_op clamped */
         flags |= HIL_FLAG_RESET;
     } else if (in.array_id == HIL_ARRAY_IDLE) {
         if (gl_loop_idle(&node->loop, u) == GL_ERR_WATCHDOG) {

@@ -36,6 +36,8 @@ static const block_t blocks[] = {
     {.stem = "UMAX", .field = FIELD(u_max), .rows = GL_M, .cols = 0, .stride = 1},
     {.stem = "XH0", .field = FIELD(xh0), .rows = GL_N, .cols = 0, .stride = 1},
     {.stem = "Z0", .field = FIELD(z0), .rows = GL_Q, .cols = 0, .stride = 1},
+    {.stem = "UOP", .field = FIELD(u_op), .rows = GL_M, .cols = 0, .stride = 1},
+    {.stem = "YOP", .field = FIELD(y_op), .rows = GL_P, .cols = 0, .stride = 1},
 };
 
 static const char *const header_ids[GL_MAV_HEADER_PARAMS] = {

@@ -10,7 +10,8 @@
  * - REAL32, one per number of ::gl_gains_t in declaration order: `GL_TS`, `GL_AD_i_j`, `GL_BD_i_j`,
  *   `GL_CD_i_j`, `GL_DD_i_j`, `GL_K_i_j`, `GL_L_i_j`, `GL_M_i_j` (current-estimator form only),
  *   `GL_CI_i_j`, `GL_KI_i_j`, `GL_KAW_i_j` (q > 0 only), `GL_UMIN_i`, `GL_UMAX_i`, `GL_XH0_i`,
- *   `GL_Z0_i` (q > 0 only). Setting one stages it (non-finite values are refused); it reads back staged.
+ *   `GL_Z0_i` (q > 0 only), `GL_UOP_i`, `GL_YOP_i` (the operating point). Setting one stages it (non-finite
+ *   values are refused); it reads back staged.
  */
 #ifndef GL_MAV_PARAMS_H
 #define GL_MAV_PARAMS_H
@@ -28,7 +29,7 @@
 /** Upper bound of the number of parameters (every float of gl_gains_t plus the header ones). */
 #define GL_MAV_MAX_PARAMS                                                                                     \
     (GL_MAV_HEADER_PARAMS + 1 + GL_N * GL_N + GL_N * GL_M + GL_P * GL_N + GL_P * GL_M + GL_M * GL_N +          \
-     2 * GL_N * GL_P + GL_QA * GL_P + GL_M * GL_QA + GL_QA * GL_M + 2 * GL_M + GL_N + GL_QA)
+     2 * GL_N * GL_P + GL_QA * GL_P + GL_M * GL_QA + GL_QA * GL_M + 2 * GL_M + GL_N + GL_QA + GL_M + GL_P)
 
 _Static_assert(GL_MAV_MAX_PARAMS < 65535, "too many parameters for MAVLink's uint16 param_index");
 
