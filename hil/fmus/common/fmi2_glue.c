@@ -10,6 +10,9 @@
  *  - model_partial(const double *r, vr_unknown, vr_known, double *out): one Jacobian entry of a
  *    derivative with respect to a state or an input; returns 0 when the pair is not supported,
  *  - MODEL_STEP_VR: value reference of the largest internal RK4 step used by fmi2DoStep.
+ * Optionally, GL_FMU_CONSTRAINTS and model_constrain(double *r): state constraints (e.g. a ground
+ * contact) applied after every internal RK4 step of fmi2DoStep (Co-Simulation only; Model Exchange
+ * solvers integrate the unconstrained derivatives).
  *
  * A Co-Simulation-only model (one whose state is not a set of continuous states, e.g. dead times)
  * defines GL_FMU_CS_ONLY instead of the state/derivative/partial/step items above, and provides:
@@ -481,6 +484,10 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
     double hs = h / (double)n;
     for (long k = 0; k < n; k++) {
         gl_fmu_rk4(inst, hs);
+#ifdef GL_FMU_CONSTRAINTS
+        model_constrain(inst->r);
+        model_derivatives(inst->r);
+#endif
     }
     for (size_t i = 0; i < MODEL_N_STATES; i++) {
         if (!isfinite(inst->r[model_state_vr[i]])) {
