@@ -391,8 +391,8 @@ def test_hil_bridge_starts_at_the_trim_and_references_are_absolute(tmp_path):
     """A HIL run (Python reference controller over udp_multicast CAN, linear plant about the point): the
     bridge's first command is u_op (clamped), a reference without a profile holds the trim, a step profile
     without `initial` starts from it; the loop sits exactly at 12 rad/s and 6 V until the step to 14."""
-    from gainlink.hil.run.bridge import run_scenario
-    from gainlink.hil.run.scenario import parse_scenario
+    from gainlink.hil.loop.bridge import run_scenario
+    from gainlink.hil.loop.scenario import parse_scenario
     from test_hil_support import udp_transport
 
     art = tmp_path / "gains.json"
@@ -406,3 +406,21 @@ def test_hil_bridge_starts_at_the_trim_and_references_are_absolute(tmp_path):
     t, y, r = step.trace.t, step.trace.y[:, 0], step.trace.r[:, 0]
     assert np.all(r[t < 1.0] == 12.0) and np.all(r[t >= 1.0] == 14.0)
     assert np.all(y[t < 1.0] == 12.0) and abs(y[-1] - 14.0) < 1e-2
+
+
+def test_linearize_at_a_point_that_is_not_a_trim_says_so(tmp_path, caplog):
+    """The cart pendulum tilted 0.1 rad with no force is not at rest: the spec records that point (x_op, y_op)
+    and says it is not an equilibrium, in the log and in the spec's header, naming the derivatives."""
+    from gainlink.hil.plants.build import build_fmu
+
+    import tomllib
+
+    out = tmp_path / "tilted.toml"
+    with caplog.at_level(logging.WARNING):
+        res = run_cli("linearize", build_fmu("cart_pendulum"), "--at", "theta=0.1", "--out", out)
+    assert res.code == 0, res.err
+    assert "not an equilibrium" in caplog.text and "dtheta_dot/dt" in caplog.text
+    text = out.read_text()
+    assert "# Not an equilibrium: " in text
+    op = tomllib.loads(text)["operating_point"]
+    assert op["x_op"]["theta"] == 0.1 and op["y_op"] == {"x": 0.0, "theta": 0.1} and op["u_op"] == {"F": 0.0}

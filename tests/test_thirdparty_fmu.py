@@ -130,10 +130,17 @@ def test_linearise_design_and_hil_track_a_reference_on_the_thirdparty_fmu(mass_d
     np.testing.assert_allclose(s.A, A, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(s.B, B, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(s.C, [[-1.0, 0.0]], atol=1e-9)
-    if operating_point:
-        # The FMU's rest point: f = 0 holds the mass where the spring is unloaded, y = -0.5 (its output's start value).
-        with open(spec, "a", encoding="utf-8") as fh:
-            fh.write("\n[operating_point]\nu_op = [0.0]\ny_op = [-0.5]\n")
+    # linearize writes the FMU's rest point: f = 0 holds the mass where the spring is unloaded, y = -0.5
+    # (its output's start value)
+    import tomllib
+
+    from gainlink.hil.plants import toml_write
+
+    data = tomllib.loads(spec.read_text())
+    assert data["operating_point"]["u_op"] == {"f": 0.0} and data["operating_point"]["y_op"] == {"y": -0.5}
+    if not operating_point:  # the same spec with its [operating_point] table removed
+        del data["operating_point"]
+        spec.write_text(toml_write.dumps(data))
     res = run_cli("design", spec, "--out", tmp_path)
     assert res.code == 0, res.err
     r = run_scenario(parse_scenario({

@@ -33,8 +33,8 @@ from gainlink.codegen import c_float
 from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
 from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.hil.plants.build import build_fmu
-from gainlink.hil.run.bridge import run_scenario
-from gainlink.hil.run.scenario import parse_scenario
+from gainlink.hil.loop.bridge import run_scenario
+from gainlink.hil.loop.scenario import parse_scenario
 
 from conftest import run_cli
 from test_hil_support import udp_transport

@@ -2,8 +2,11 @@
 
 The spec's ``[operating_point]`` table records the point by signal name: ``u_op`` (the inputs there),
 ``y_op`` (the outputs there) and ``x_op`` (the states there), so the designed loop works in the FMU's
-absolute units. A point that is not an equilibrium (``dx/dt != 0``) is linearised all the same, with a
-warning: the linear model about it drifts, and the loop will settle elsewhere.
+absolute units. When ``--at`` gives no state and the FMU's start is not at rest, the point is the
+equilibrium with the inputs held (Newton's method on ``dx/dt = 0``; e.g. a mass on a spring that starts
+displaced is linearised where the spring holds it). A point that is still not an equilibrium (a state was
+given, or no equilibrium was found) is linearised all the same, with a warning: the linear model about it
+drifts, and the loop will settle elsewhere.
 
 The FMU's Model Exchange interface gives ``dx/dt = f(x, u)`` and ``y = g(x, u)``. The Jacobians
 ``A = df/dx, B = df/du, C = dg/dx, D = dg/du`` come from ``fmi2GetDirectionalDerivative`` when the
@@ -151,8 +154,25 @@ def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs:
         nx = len(states)
         x0 = np.array(fmu.getReal(vr_x))
         u0 = np.array(fmu.getReal(vr_u)) if vr_u else np.zeros(0)
-        y0 = np.array(fmu.getReal(vr_y)) if vr_y else np.zeros(0)
-        dx0 = np.array(fmu.getReal(vr_dx))
+
+        def f(x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            fmu.setContinuousStates(fmu_real_array(x), nx)
+            if vr_u:
+                fmu.setReal(vr_u, list(u))
+            dx = np.array(fmu.getReal(vr_dx))
+            y = np.array(fmu.getReal(vr_y)) if vr_y else np.zeros(0)
+            return dx, y
+
+        dx0, y0 = f(x0, u0)  # set through the states, so every FMU evaluates them at the point
+        # Not at rest and no state given: move to the equilibrium with the inputs held (the rest point an
+        # FMU's start values often only approximate); with a state given, that is the point asked for.
+        if not any(s.name in point for s in states) and np.any(np.abs(dx0) > 0.0):
+            x_eq = _equilibrium(f, x0, u0)
+            if x_eq is not None:
+                log.info("FMU %s: the start point is not an equilibrium; linearising at the equilibrium with the "
+                         "inputs held (states %s)", md.modelName, np.array2string(x_eq, precision=6))
+                x0 = x_eq
+                dx0, y0 = f(x0, u0)
         if use_dd:
             def jac(unknown: list[int], known: list[int]) -> np.ndarray:
                 J = np.zeros((len(unknown), len(known)))
@@ -164,14 +184,6 @@ def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs:
             A, B, C, D = jac(vr_dx, vr_x), jac(vr_dx, vr_u), jac(vr_y, vr_x), jac(vr_y, vr_u)
             name = "directional derivatives"
         else:
-            def f(x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-                fmu.setContinuousStates(fmu_real_array(x), nx)
-                if vr_u:
-                    fmu.setReal(vr_u, list(u))
-                dx = np.array(fmu.getReal(vr_dx))
-                y = np.array(fmu.getReal(vr_y)) if vr_y else np.zeros(0)
-                return dx, y
-
             A = np.zeros((nx, nx)); C = np.zeros((len(vr_y), nx))
             B = np.zeros((nx, len(vr_u))); D = np.zeros((len(vr_y), len(vr_u)))
             for j in range(nx):
@@ -209,6 +221,28 @@ def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs:
     return Linearization(A=A, B=B, C=C, D=D, states=tuple(s.name for s in states), inputs=tuple(in_names),
                          outputs=tuple(out_names), point=point, x0=x0, method=name, model_name=md.modelName,
                          u0=u0, y0=y0, dx0=dx0)
+
+
+def _equilibrium(f: Any, x0: np.ndarray, u0: np.ndarray, *, iterations: int = 30) -> np.ndarray | None:
+    """Newton's method on ``dx/dt = f(x, u0) = 0`` with the inputs held, from ``x0`` (Jacobian by central
+    differences); ``None`` when the Jacobian is singular or the iteration does not converge."""
+    x = x0.astype(float).copy()
+    for _ in range(iterations):
+        dx, _ = f(x, u0)
+        scale = max(1.0, float(np.max(np.abs(x))))
+        J = np.zeros((x.size, x.size))
+        for j in range(x.size):
+            h = 1e-6 * max(1.0, abs(x[j]))
+            e = np.zeros(x.size)
+            e[j] = h
+            J[:, j] = (f(x + e, u0)[0] - f(x - e, u0)[0]) / (2 * h)
+        if np.linalg.cond(J) > 1e10:
+            return None
+        step = np.linalg.solve(J, dx)
+        x = x - step
+        if np.max(np.abs(step)) <= 1e-12 * scale:
+            return x if np.all(np.isfinite(x)) else None
+    return None
 
 
 def _drift(dx0: np.ndarray, *, A: np.ndarray, B: np.ndarray, states: tuple[str, ...]) -> str:
