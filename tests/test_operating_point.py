@@ -424,3 +424,36 @@ def test_linearize_at_a_point_that_is_not_a_trim_says_so(tmp_path, caplog):
     assert "# Not an equilibrium: " in text
     op = tomllib.loads(text)["operating_point"]
     assert op["x_op"]["theta"] == 0.1 and op["y_op"] == {"x": 0.0, "theta": 0.1} and op["u_op"] == {"F": 0.0}
+
+
+def test_float32_accuracy_does_not_scale_with_a_large_operating_point():
+    """A barometric altimeter reads 350 m above sea level at the hover point; the deviations are centimetres.
+    The C subtracts y_op before any gain (and forms the feedback in deviations), so its estimate stays within
+    the float32 rounding of the deviations. Folding the offsets into constants (xh+ = F xh + G u + L y + c,
+    c = -(G u_op + L y_op)) would round each step at the scale of 350 m: emulated in numpy float32 here, that
+    is ~1e-2 of the speed estimate, against ~1e-6 for the C (measured)."""
+    spec = {"name": "baro", "Ts": 0.01, "plant": {"kind": "continuous", "A": [[0.0, 1.0], [0.0, 0.0]],
+                                                  "B": [[0.0], [28.0]], "C": [[1.0, 0.0]]},
+            "controller": {"method": "lqr", "Q_diag": [4.0, 1.0], "R_diag": [1.0]},
+            "observer": {"method": "kalman", "W_diag": [1e-6, 1e-4], "V_diag": [1e-6]},
+            "limits": {"u_min": [0.0], "u_max": [1.0]}, "operating_point": {"u_op": [0.7], "y_op": [350.0]}}
+    a = from_dict(designed(spec))
+    rng = np.random.default_rng(0)
+    N = 3000
+    Y = 350.0 + 0.05 * np.sin(np.arange(N) * 0.01) + 0.001 * rng.standard_normal(N)
+    Y32 = Y.astype(np.float32).astype(float).reshape(N, 1)
+    want = ReferenceLoop(a).run(Y32, np.zeros((N, 0)))
+    got = NativeLoop(a).run_raw(Y32, np.zeros((N, 0)))
+    err = np.max(np.abs(got["xh"] - want.xh), axis=0) / np.max(np.abs(want.xh), axis=0)
+    assert np.all(err < 1e-4), err
+    # the folded form, emulated in float32, for scale
+    f32 = np.float32
+    F, G, L = (a.Ad - a.L @ a.Cd).astype(f32), a.Bd[:, 0].astype(f32), a.L[:, 0].astype(f32)
+    c = (-(a.Bd[:, 0] * 0.7 + a.L[:, 0] * 350.0)).astype(f32)
+    xh, folded = np.zeros(2, f32), np.zeros((N, 2))
+    for k in range(N):
+        u = min(max(f32(f32(0.7) - (a.K.astype(f32) @ xh)[0]), f32(0.0)), f32(1.0))
+        xh = (F @ xh + G * f32(u) + L * f32(Y32[k, 0]) + c).astype(f32)
+        folded[k] = xh
+    folded_err = np.max(np.abs(folded - want.xh), axis=0) / np.max(np.abs(want.xh), axis=0)
+    assert folded_err[1] > 100 * err[1], (folded_err, err)
