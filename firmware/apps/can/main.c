@@ -16,9 +16,9 @@
  * pairs separated by `;`, exactly as many as values (gainlink.hil.links.can.firmware_can_argv writes
  * them from the DBC's numbers). A non-finite value travels as raw -32768 and decodes to NaN, so the loop's
  * fault path still answers it; commands beyond their range saturate to it (counted: `clipped=` at exit).
- * Assembles each sample (y then r) from its measurement frames by sequence number, runs gl_loop_step()
- * once per complete, newer sample (duplicates and stale samples are ignored), and answers with the
- * command frames carrying the same sequence number, the status bits and the saturation mask. Prints
+ * The node itself (sample assembly by sequence number, step, command frames) is gl_can_node.h, shared with
+ * the Cortex-M4F image's slcan port; this file parses the options and carries frames between the link and
+ * the node. Prints
  * one `gainlink_can ready ...` line on stdout once the link is open; SIGTERM/SIGINT end it (exit 0).
  *
  * Events (a refused datagram, a short frame, a failed send) go to stderr through gl_log.h: at most
@@ -40,15 +40,32 @@
 #include "gainlink/gl_loop.h"
 #include "gl_can_layout.h"
 #include "gl_can_link.h"
+#include "gl_can_node.h"
 #include "gl_log.h"
 
-#define N_SAMPLE ((uint32_t)(GL_P + GL_Q))
+#define N_SAMPLE GL_CAN_NODE_SAMPLE
 
 static volatile sig_atomic_t stop_requested;
-static gl_loop_t loop;
-static gl_can_scale_t meas_scale[GL_P + GL_QA];
-static gl_can_scale_t cmd_scale[GL_M];
+static gl_can_node_t node;
+static gl_can_node_config_t node_cfg;
+static gl_can_link_t can_link;
 static gl_log_t events;
+
+static int send_frame(void *ctx, const gl_can_frame_t *frame)
+{
+    return gl_can_link_send(ctx, frame);
+}
+
+static void log_event(void *ctx, gl_can_node_event_t ev, const gl_can_frame_t *frame)
+{
+    (void)ctx;
+    if (ev == GL_CAN_EV_SHORT_FRAME) {
+        gl_log_event(&events, "frame 0x%03x of %u bytes is too short for its values", (unsigned)frame->id,
+                     (unsigned)frame->len);
+    } else if (ev == GL_CAN_EV_SEND_FAILED) {
+        gl_log_event(&events, "sending command frame 0x%03x failed: %s", (unsigned)frame->id, strerror(errno));
+    }
+}
 
 static void on_signal(int sig)
 {
@@ -223,12 +240,12 @@ int main(int argc, char **argv)
         if (scale_meas == NULL || scale_cmd == NULL) {
             return usage("--encoding int16 needs --scale-measurement and --scale-command");
         }
-        if (parse_scales(scale_meas, meas_scale, N_SAMPLE, why, sizeof why) != 0) {
+        if (parse_scales(scale_meas, node_cfg.meas_scale, N_SAMPLE, why, sizeof why) != 0) {
             snprintf(msg, sizeof msg, "--scale-measurement (%u values: outputs then references): %s",
                      (unsigned)N_SAMPLE, why);
             return usage(msg);
         }
-        if (parse_scales(scale_cmd, cmd_scale, GL_M, why, sizeof why) != 0) {
+        if (parse_scales(scale_cmd, node_cfg.cmd_scale, GL_M, why, sizeof why) != 0) {
             snprintf(msg, sizeof msg, "--scale-command (%u values): %s", (unsigned)GL_M, why);
             return usage(msg);
         }
@@ -236,20 +253,19 @@ int main(int argc, char **argv)
         return usage("--scale-measurement and --scale-command need --encoding int16");
     }
 
-    gl_can_layout_t layout;
-    gl_can_layout_init(&layout, (uint32_t)base_id, cfg.fd, encoding);
-    const uint32_t meas_frames = gl_can_layout_frames(&layout, N_SAMPLE);
-    const uint32_t cmd_frames = gl_can_layout_frames(&layout, GL_M);
-    const uint32_t meas_base = (uint32_t)base_id + GL_CAN_MEAS_OFFSET;
-    const uint32_t cmd_base = (uint32_t)base_id + GL_CAN_CMD_OFFSET;
-    cfg.rx_lo = meas_base;
-    cfg.rx_hi = meas_base + meas_frames - 1u;
-
-    gl_status_t st = gl_loop_init(&loop, &gl_gains_default, GL_WATCHDOG_PERIODS_DEFAULT);
+    node_cfg.base_id = (uint32_t)base_id;
+    node_cfg.fd = cfg.fd;
+    node_cfg.encoding = encoding;
+    node_cfg.watchdog_periods = GL_WATCHDOG_PERIODS_DEFAULT;
+    node_cfg.ctx = &can_link;
+    node_cfg.send = send_frame;
+    node_cfg.event = log_event;
+    gl_status_t st = gl_can_node_init(&node, &node_cfg);
     if (st != GL_OK) {
         fprintf(stderr, "gainlink_can: built-in gains rejected (status %d)\n", (int)st);
         return 3;
     }
+    gl_can_node_rx_range(&node, &cfg.rx_lo, &cfg.rx_hi);
     struct sigaction sa;
     memset(&sa, 0, sizeof sa);
     sa.sa_handler = on_signal;
@@ -258,8 +274,7 @@ int main(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
 
     gl_log_init(&events, 2, "gainlink_can", GL_LOG_BURST_DEFAULT);
-    gl_can_link_t link;
-    if (gl_can_link_open(&link, &cfg) != 0) {
+    if (gl_can_link_open(&can_link, &cfg) != 0) {
         return 4;
     }
     printf("gainlink_can ready %s sha256:%s n=%d m=%d p=%d q=%d fd=%d base_id=%lu encoding=%s\n", GL_NAME,
@@ -267,24 +282,16 @@ int main(int argc, char **argv)
            encoding == GL_CAN_INT16 ? "int16" : "float32");
     fflush(stdout);
 
-    float sample[GL_P + GL_QA];
-    float u[GL_M];
-    uint16_t cur_seq = 0, last_done = 0;
-    int have_cur = 0, have_done = 0;
-    uint32_t got = 0;
-    const uint32_t all = (meas_frames >= 32u) ? 0xFFFFFFFFu : ((1u << meas_frames) - 1u);
-    unsigned long steps = 0, stale = 0, partial_dropped = 0, send_errors = 0, clipped = 0, short_frames = 0;
-    unsigned long frames_used = 0;
     uint64_t refused_seen = 0;
     int rc = 0;
     uint64_t spin_until = 0;
     while (!stop_requested) {
         gl_can_frame_t frame;
-        int r = gl_can_link_recv(&link, &frame, (spin_us > 0 && now_ns() < spin_until) ? 0 : 200);
-        if (link.rx_refused != refused_seen) {
+        int r = gl_can_link_recv(&can_link, &frame, (spin_us > 0 && now_ns() < spin_until) ? 0 : 200);
+        if (can_link.rx_refused != refused_seen) {
             gl_log_event(&events, "refused %llu datagram(s) that are not standard CAN data frames",
-                         (unsigned long long)(link.rx_refused - refused_seen));
-            refused_seen = link.rx_refused;
+                         (unsigned long long)(can_link.rx_refused - refused_seen));
+            refused_seen = can_link.rx_refused;
         }
         gl_log_tick(&events);
         if (r < 0) {
@@ -292,67 +299,20 @@ int main(int argc, char **argv)
             rc = 1;
             break;
         }
-        if (r == 0) {
-            continue;
+        if (r > 0 && gl_can_node_frame(&node, &frame)) {
+            spin_until = now_ns() + 1000ull * spin_us;
         }
-        uint32_t index = frame.id - meas_base;
-        uint16_t seq = 0;
-        float part[GL_P + GL_QA];
-        if (gl_can_layout_decode(&layout, index, &frame, &seq, part, meas_scale, N_SAMPLE) != 0) {
-            ++short_frames;
-            gl_log_event(&events, "frame 0x%03x of %u bytes is too short for its values", (unsigned)frame.id,
-                         (unsigned)frame.len);
-            continue;
-        }
-        ++frames_used;
-        if (have_done) {
-            uint16_t ahead = (uint16_t)(seq - last_done);
-            if (ahead == 0u || ahead >= 0x8000u) {
-                ++stale;
-                continue;
-            }
-        }
-        if (!have_cur || seq != cur_seq) {
-            if (have_cur && got != 0u) {
-                ++partial_dropped;
-            }
-            cur_seq = seq;
-            have_cur = 1;
-            got = 0;
-        }
-        uint32_t first = index * layout.per_frame;
-        for (uint32_t i = first; i < first + layout.per_frame && i < N_SAMPLE; ++i) {
-            sample[i] = part[i];
-        }
-        got |= 1u << index;
-        if (got != all) {
-            continue;
-        }
-        st = gl_loop_step(&loop, sample, GL_Q > 0 ? &sample[GL_P] : NULL, u);
-        uint8_t status = st == GL_ERR_NANINF ? GL_CAN_STATUS_FAULT : 0u;
-        uint32_t sat = st == GL_SATURATED ? loop.sat_mask : 0u;
-        for (uint32_t j = 0; j < cmd_frames; ++j) {
-            gl_can_frame_t out;
-            clipped += gl_can_layout_encode(&layout, cmd_base + j, j, seq, status, sat, u, cmd_scale, GL_M, &out);
-            if (gl_can_link_send(&link, &out) != 0) {
-                ++send_errors;
-                gl_log_event(&events, "sending command frame 0x%03x failed: %s", (unsigned)out.id, strerror(errno));
-            }
-        }
-        last_done = seq;
-        spin_until = now_ns() + 1000ull * spin_us;
-        have_done = 1;
-        have_cur = 0;
-        got = 0;
-        ++steps;
     }
-    gl_can_link_close(&link);
+    gl_can_link_close(&can_link);
+    const gl_can_node_stats_t *n = &node.stats;
     gl_log_always(&events,
                   "steps=%lu stale=%lu partial_dropped=%lu send_errors=%lu filtered=%llu clipped=%lu read=%llu "
                   "used=%lu short=%lu refused=%llu dropped=%llu log_suppressed=%llu log_dropped=%llu",
-                  steps, stale, partial_dropped, send_errors, (unsigned long long)link.rx_filtered, clipped,
-                  (unsigned long long)link.rx_read, frames_used, short_frames, (unsigned long long)link.rx_refused,
-                  (unsigned long long)link.rx_dropped, (unsigned long long)events.suppressed,
+                  (unsigned long)n->steps, (unsigned long)n->stale, (unsigned long)n->partial_dropped,
+                  (unsigned long)n->send_errors, (unsigned long long)(can_link.rx_filtered + n->foreign),
+                  (unsigned long)n->clipped, (unsigned long long)can_link.rx_read, (unsigned long)n->used,
+                  (unsigned long)n->short_frames, (unsigned long long)can_link.rx_refused,
+                  (unsigned long long)can_link.rx_dropped, (unsigned long long)events.suppressed,
                   (unsigned long long)events.dropped);
     return rc;
 }
