@@ -14,10 +14,13 @@ endif()
 set(GL_LINKER_SCRIPT "${GL_PORT_DIR}/${GL_BOARD}.ld")
 
 add_executable(gainlink_image "${GL_PORT_DIR}/startup.c" "${GL_PORT_DIR}/semihost.c" "${GL_PORT_DIR}/main.c"
-                              "${GL_BOARD_SRC}")
+                              "${GL_PORT_DIR}/gl_clock.c" "${GL_PORT_DIR}/gl_uart.c" "${GL_PORT_DIR}/serve.c"
+                              "${GL_PORT_DIR}/serve_mavlink.c" "${GL_PORT_DIR}/serve_slcan.c"
+                              "${GL_PORT_DIR}/flash_semihost.c" "${GL_PORT_DIR}/no_heap.c" "${GL_BOARD_SRC}")
 set_target_properties(gainlink_image PROPERTIES OUTPUT_NAME "gainlink_image" SUFFIX ".elf")
 target_include_directories(gainlink_image PRIVATE "${GL_PORT_DIR}")
-target_link_libraries(gainlink_image PRIVATE gainlink_loop gainlink_gains m)
+# The same MAVLink and CAN node libraries as the host apps (apps/mavlink, apps/can): no copy of protocol logic.
+target_link_libraries(gainlink_image PRIVATE gainlink_mavlink_node gainlink_can_node gainlink_loop gainlink_gains m)
 if(GL_SKIP_FPU_ENABLE)
   target_compile_definitions(gainlink_image PRIVATE GL_SKIP_FPU_ENABLE=1)
 endif()

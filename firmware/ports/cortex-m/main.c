@@ -1,10 +1,17 @@
 /**
  * @file main.c
- * @brief Cortex-M4F image: the control loop fed through semihosting files (replay and PIL), UART banner.
+ * @brief Cortex-M4F image: a bus node on its UART (MAVLink or slcan), or the loop fed through semihosting
+ *        files (replay and PIL), or a UART smoke test.
  *
- * Prints `gainlink NAME BOARD sha256:HEX` on the UART. Then opens `gl_in.bin` (a file or a FIFO) in
- * the simulator's working directory. Without it, the UART smoke test runs: one step with y = 0.5, r = 0,
- * printed as `u0=0xBITS ...`, exit 0. With it, `gl_out.bin` is opened for writing and the stream is:
+ * Starts the millisecond clock and the interrupt-driven UART (gl_uart.h) and prints
+ * `gainlink NAME BOARD sha256:HEX` on it. Then, by the simulator's command line (semihosting
+ * SYS_GET_CMDLINE; QEMU: `-semihosting-config enable=on,target=native,arg=gainlink,arg=serve,arg=mavlink`):
+ * - `serve mavlink [sysid=N] [compid=N]`: the MAVLink node on the UART (serve.h), parameters persisted
+ *   in the semihosting file gl_flash.txt (flash_semihost.h); runs until the simulator is stopped;
+ * - `serve slcan [base=ID] [encoding=float32|int16 meas=... cmd=...]`: the CAN node behind slcan (serve.h);
+ * - anything else: opens `gl_in.bin` (a file or a FIFO) in the simulator's working directory. Without it,
+ *   the UART smoke test runs: one step with y = 0.5, r = 0, printed as `u0=0xBITS ...`, exit 0. With it,
+ *   `gl_out.bin` is opened for writing and the stream is:
  *
  * in:  header {uint32 magic 'GLI1', count, block, watchdog_periods}, then `count` records
  *      {uint32 tag (0 step, 1 idle, 2 stage), float y[GL_P], float r[GL_QA]}
@@ -20,7 +27,10 @@
 
 #include "board.h"
 #include "gainlink/gl_loop.h"
+#include "gl_clock.h"
+#include "gl_uart.h"
 #include "semihost.h"
+#include "serve.h"
 
 #define GL_IN_MAGIC 0x31494C47u  /* "GLI1" */
 #define GL_OUT_MAGIC 0x314F4C47u /* "GLO1" */
@@ -28,6 +38,7 @@
 #define GL_TAG_STEP 0u
 #define GL_TAG_IDLE 1u
 #define GL_TAG_STAGE 2u
+#define GL_MAX_ARGS 16
 
 typedef struct {
     uint32_t tag;
@@ -83,18 +94,18 @@ static gl_status_t stage_from_file(void)
 
 static void uart_puts(const char *s)
 {
-    while (*s != '\0') {
-        gl_board_uart_putc(*s++);
-    }
+    (void)gl_uart_write((const uint8_t *)s, strlen(s));
 }
 
 static void uart_hex(uint32_t v)
 {
     static const char digits[] = "0123456789ABCDEF";
-    uart_puts("0x");
-    for (int shift = 28; shift >= 0; shift -= 4) {
-        gl_board_uart_putc(digits[(v >> shift) & 0xFu]);
+    char text[11] = "0x";
+    for (int i = 0; i < 8; ++i) {
+        text[2 + i] = digits[(v >> (28 - 4 * i)) & 0xFu];
     }
+    text[10] = '\0';
+    uart_puts(text);
 }
 
 static int uart_smoke(void)
@@ -116,15 +127,60 @@ static int uart_smoke(void)
         uart_hex(bits);
     }
     uart_puts("\n");
-    return GL_EXIT_OK;
+    return gl_uart_flush(1000u) == 0 ? GL_EXIT_OK : GL_EXIT_IO;
 }
 
-int main(void)
+/** Split the command line into words in place; returns their number (the first is the program name). */
+static int split_words(char *line, char *words[], int max)
 {
-    gl_board_uart_init();
+    int n = 0;
+    while (*line != '\0' && n < max) {
+        while (*line == ' ') {
+            *line++ = '\0';
+        }
+        if (*line == '\0') {
+            break;
+        }
+        words[n++] = line;
+        while (*line != '\0' && *line != ' ') {
+            ++line;
+        }
+    }
+    return n;
+}
+
+/** `serve PROTOCOL OPTIONS...` after the program name: runs the server (returns only on a bad option); else -1. */
+static int serve_if_asked(void)
+{
+    static char line[512];
+    static char *words[GL_MAX_ARGS];
+    if (gl_sh_cmdline(line, sizeof line) != 0) {
+        return -1;
+    }
+    int n = split_words(line, words, GL_MAX_ARGS);
+    if (n < 2 || strcmp(words[1], "serve") != 0) {
+        return -1;
+    }
+    if (n >= 3 && strcmp(words[2], "mavlink") == 0) {
+        return gl_serve_mavlink(n - 3, &words[3]);
+    }
+    if (n >= 3 && strcmp(words[2], "slcan") == 0) {
+        return gl_serve_slcan(n - 3, &words[3]);
+    }
+    return gl_serve_refuse("serve needs a protocol: mavlink or slcan");
+}
+
+static int run(void)
+{
+    gl_clock_init();
+    gl_uart_init();
     uart_puts("gainlink " GL_NAME " ");
     uart_puts(gl_board_name);
     uart_puts(" sha256:" GL_ARTIFACT_SHA256 "\n");
+    int served = serve_if_asked();
+    if (served >= 0) {
+        return served;
+    }
 
     int32_t fin = gl_sh_open("gl_in.bin", GL_SH_MODE_RB);
     if (fin < 0) {
@@ -182,4 +238,11 @@ int main(void)
     gl_sh_close(fout);
     gl_sh_close(fin);
     return GL_EXIT_OK;
+}
+
+int main(void)
+{
+    int rc = run();
+    (void)gl_uart_flush(1000u); /* what is still queued on the UART goes out before the simulator stops */
+    return rc;
 }

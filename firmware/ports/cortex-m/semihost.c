@@ -10,6 +10,10 @@
 #define SYS_CLOSE 0x02u
 #define SYS_WRITE 0x05u
 #define SYS_READ 0x06u
+#define SYS_FLEN 0x0Cu
+#define SYS_REMOVE 0x0Eu
+#define SYS_RENAME 0x0Fu
+#define SYS_GET_CMDLINE 0x15u
 #define SYS_EXIT_EXTENDED 0x20u
 #define ADP_STOPPED_APPLICATION_EXIT 0x20026u
 
@@ -50,6 +54,38 @@ int32_t gl_sh_write_all(int32_t fd, const void *buf, size_t len)
 {
     const uint32_t args[3] = {(uint32_t)fd, (uint32_t)(uintptr_t)buf, (uint32_t)len};
     return semihost_call(SYS_WRITE, args) == 0 ? 0 : -1;
+}
+
+int32_t gl_sh_flen(int32_t fd)
+{
+    const uint32_t args[1] = {(uint32_t)fd};
+    return semihost_call(SYS_FLEN, args);
+}
+
+int32_t gl_sh_read_some(int32_t fd, void *buf, size_t len)
+{
+    const uint32_t args[3] = {(uint32_t)fd, (uint32_t)(uintptr_t)buf, (uint32_t)len};
+    int32_t left = semihost_call(SYS_READ, args);
+    return (left < 0 || (size_t)left > len) ? -1 : (int32_t)(len - (size_t)left);
+}
+
+int32_t gl_sh_remove(const char *path)
+{
+    const uint32_t args[2] = {(uint32_t)(uintptr_t)path, (uint32_t)strlen(path)};
+    return semihost_call(SYS_REMOVE, args) == 0 ? 0 : -1;
+}
+
+int32_t gl_sh_rename(const char *from, const char *to)
+{
+    const uint32_t args[4] = {(uint32_t)(uintptr_t)from, (uint32_t)strlen(from), (uint32_t)(uintptr_t)to,
+                              (uint32_t)strlen(to)};
+    return semihost_call(SYS_RENAME, args) == 0 ? 0 : -1;
+}
+
+int32_t gl_sh_cmdline(char *buf, size_t len)
+{
+    uint32_t args[2] = {(uint32_t)(uintptr_t)buf, (uint32_t)len};
+    return semihost_call(SYS_GET_CMDLINE, args) == 0 ? 0 : -1;
 }
 
 void gl_sh_close(int32_t fd)

@@ -40,6 +40,28 @@ int32_t gl_sh_read_all(int32_t fd, void *buf, size_t len);
  */
 int32_t gl_sh_write_all(int32_t fd, const void *buf, size_t len);
 
+/**
+ * @brief Read at most `len` bytes. @param[in] fd Handle. @param[out] buf Buffer. @param[in] len Bytes.
+ * @return Bytes read (0 at end of file), or -1.
+ */
+int32_t gl_sh_read_some(int32_t fd, void *buf, size_t len);
+
+/** @brief Length of an open file. @param[in] fd Handle. @return Bytes, or -1. */
+int32_t gl_sh_flen(int32_t fd);
+
+/** @brief Delete a host file. @param[in] path Name. @return 0, or -1. */
+int32_t gl_sh_remove(const char *path);
+
+/** @brief Rename a host file (replacing `to`). @param[in] from Old name. @param[in] to New name. @return 0, or -1. */
+int32_t gl_sh_rename(const char *from, const char *to);
+
+/**
+ * @brief The simulator's command line for the image (QEMU: `-semihosting-config ...,arg=A,arg=B` gives "A B";
+ *        without arg= it is the kernel file name). NUL-terminated.
+ * @param[out] buf Buffer. @param[in] len Its size. @return 0, or -1 (e.g. too long for `buf`).
+ */
+int32_t gl_sh_cmdline(char *buf, size_t len);
+
 /** @brief Close a handle. @param[in] fd Handle. */
 void gl_sh_close(int32_t fd);
 

@@ -6,9 +6,15 @@
  * reads CPACR back and stops the simulator with GL_EXIT_FPU if the FPU is still disabled, instead of
  * letting the first float instruction fault (GL_SKIP_FPU_ENABLE builds exercise this path). Every fault
  * handler stops the simulator with GL_EXIT_FAULT rather than spinning.
+ *
+ * SysTick drives the millisecond clock (gl_clock.c); every external interrupt goes through one handler
+ * that reads its number from IPSR and hands it to the board (gl_board_irq()); one the board does not
+ * expect is a fault.
  */
 #include <stdint.h>
 
+#include "board.h"
+#include "gl_clock.h"
 #include "semihost.h"
 
 #define SCB_CPACR (*(volatile uint32_t *)0xE000ED88u)
@@ -18,6 +24,10 @@ extern uint32_t _data_load, _data_start, _data_end, _bss_start, _bss_end, _stack
 int main(void);
 void gl_reset_handler(void);
 void gl_fault_handler(void);
+void gl_irq_handler(void);
+
+/** External interrupts in the vector table (the STM32F405 has 82; QEMU models 96, the MPS2 32). */
+#define GL_EXTERNAL_IRQS 96
 
 void gl_fault_handler(void)
 {
@@ -43,9 +53,18 @@ void gl_reset_handler(void)
     gl_sh_exit((uint32_t)main());
 }
 
+void gl_irq_handler(void)
+{
+    uint32_t ipsr;
+    __asm__ volatile("mrs %0, ipsr" : "=r"(ipsr));
+    if (ipsr < 16u || gl_board_irq(ipsr - 16u) != 0) {
+        gl_sh_exit(GL_EXIT_FAULT);
+    }
+}
+
 typedef void (*gl_vector_t)(void);
 
-__attribute__((section(".isr_vector"), used)) static const gl_vector_t vectors[16] = {
+__attribute__((section(".isr_vector"), used)) static const gl_vector_t vectors[16 + GL_EXTERNAL_IRQS] = {
     [0] = (gl_vector_t)(uintptr_t)&_stack_top,
     [1] = gl_reset_handler,
     [2] = gl_fault_handler,  /* NMI */
@@ -56,5 +75,6 @@ __attribute__((section(".isr_vector"), used)) static const gl_vector_t vectors[1
     [11] = gl_fault_handler, /* SVCall */
     [12] = gl_fault_handler, /* DebugMonitor */
     [14] = gl_fault_handler, /* PendSV */
-    [15] = gl_fault_handler, /* SysTick */
+    [15] = gl_clock_isr,     /* SysTick */
+    [16 ... 16 + GL_EXTERNAL_IRQS - 1] = gl_irq_handler,
 };

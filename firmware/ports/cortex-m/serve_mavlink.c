@@ -1,0 +1,107 @@
+/**
+ * @file serve_mavlink.c
+ * @brief The MAVLink node (apps/mavlink/gl_mav_node.h) on the console UART: the same protocol code as the
+ *        host app, carried by the interrupt-driven rings of gl_uart.h.
+ *
+ * A serial link has one peer, so every answer goes to the UART whatever its destination. The node's
+ * events are not printed (the UART carries MAVLink); SYS_STATUS reports the counters.
+ */
+#include <string.h>
+
+#include "flash_semihost.h"
+#include "gl_clock.h"
+#include "gl_mav_node.h"
+#include "gl_nvic.h"
+#include "gl_uart.h"
+#include "semihost.h"
+#include "serve.h"
+
+static gl_mav_node_t node;
+
+static int uart_send(void *ctx, gl_mav_dest_t dest, const uint8_t *bytes, size_t len)
+{
+    (void)ctx;
+    (void)dest;
+    return gl_uart_write(bytes, len);
+}
+
+static size_t uart_room(void *ctx)
+{
+    (void)ctx;
+    return gl_uart_tx_room();
+}
+
+static uint64_t clock_us(void *ctx)
+{
+    (void)ctx;
+    return gl_clock_us();
+}
+
+static void uart_counters(void *ctx, uint32_t *rx_overruns, uint32_t *tx_dropped)
+{
+    (void)ctx;
+    gl_uart_stats_t s;
+    gl_uart_stats(&s);
+    *rx_overruns = s.rx_overruns;
+    *tx_dropped = s.tx_dropped;
+}
+
+static void put_number(uint32_t v)
+{
+    char digits[10];
+    size_t n = 0;
+    do {
+        digits[n++] = (char)('0' + v % 10u);
+        v /= 10u;
+    } while (v != 0u);
+    while (n > 0u) {
+        (void)gl_uart_write((const uint8_t *)&digits[--n], 1);
+    }
+}
+
+int gl_serve_mavlink(int argc, char *const argv[])
+{
+    uint32_t sysid = 1, compid = 1;
+    for (int i = 0; i < argc; ++i) {
+        const char *v;
+        if (gl_serve_option(argv[i], "sysid", &v)) {
+            if (gl_serve_number(v, 255u, &sysid) != 0 || sysid == 0u) {
+                return gl_serve_refuse("sysid must be 1..255");
+            }
+        } else if (gl_serve_option(argv[i], "compid", &v)) {
+            if (gl_serve_number(v, 255u, &compid) != 0) {
+                return gl_serve_refuse("compid must be 0..255");
+            }
+        } else {
+            return gl_serve_refuse("unknown mavlink option (sysid=N compid=N)");
+        }
+    }
+    const gl_mav_node_config_t cfg = {
+        .sysid = (uint8_t)sysid,
+        .compid = (uint8_t)compid,
+        .chan = 0,
+        .watchdog_periods = GL_WATCHDOG_PERIODS_DEFAULT,
+        .port = {.ctx = 0, .send = uart_send, .room = uart_room, .now_us = clock_us, .event = 0,
+                 .link_counters = uart_counters},
+        .storage = gl_flash_storage(),
+    };
+    if (gl_mav_node_init(&node, &cfg) != GL_OK) {
+        (void)gl_serve_refuse("gain set rejected");
+        return GL_EXIT_GAINS;
+    }
+    static const char ready[] = "ready mavlink sysid=";
+    (void)gl_uart_write((const uint8_t *)ready, sizeof ready - 1u);
+    put_number(sysid);
+    (void)gl_uart_write((const uint8_t *)" crc32=", 7);
+    put_number(node.table.committed.crc32);
+    (void)gl_uart_write((const uint8_t *)"\n", 1);
+    for (;;) {
+        uint8_t buf[64];
+        size_t n;
+        while ((n = gl_uart_read(buf, sizeof buf)) > 0u) {
+            gl_mav_node_input(&node, buf, n);
+        }
+        (void)gl_mav_node_poll(&node);
+        gl_wait_for_interrupt(gl_uart_rx_ready);
+    }
+}
