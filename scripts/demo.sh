@@ -33,3 +33,31 @@ gainlink replay "$out/gains.json" --input "$out/samples.csv" --output "$out/nati
 
 step "8. HIL over CAN: the firmware's CAN node vs the nonlinear pendulum FMU, udp_multicast, lockstep, 10 s"
 gainlink hil run pendulum_fmu --artifact "$out/gains.json" --report "$out/hil"
+
+step "9. build the Cortex-M4F image for mps2-an386 (.elf .bin .hex .map, size report) -> $out/fw-m4"
+gainlink firmware build "$out/gains.json" --target cortex-m4 --board mps2-an386 --out "$out/fw-m4"
+
+step "10. HIL with the image itself: MAVLink on its emulated UART (QEMU), vs the pendulum FMU, lockstep, 3 s"
+gainlink hil run pendulum_qemu_mavlink --artifact "$out/gains.json" --report "$out/hil-uart"
+
+step "11. upload retuned gains to the running image over its UART: verified, committed, persisted in its flash"
+sed -e 's/^Q_diag = \[10.0, 1.0, 100.0, 1.0\]/Q_diag = [40.0, 1.0, 300.0, 2.0]/' examples/pendulum.toml \
+  > "$out/pendulum_retuned.toml"
+gainlink design "$out/pendulum_retuned.toml" --out "$out/retuned" > /dev/null
+image_pid=""
+stop_image() { [ -n "$image_pid" ] && kill "$image_pid" 2>/dev/null && wait "$image_pid" 2>/dev/null; image_pid=""; }
+trap stop_image EXIT
+serve_image() {  # the image in QEMU with the demo's flash folder; waits for its ready line
+  gainlink firmware run "$out/gains.json" --target cortex-m4 --mavlink tcp:127.0.0.1:5761 \
+    --flash-dir "$out/flash" > "$out/image.log" 2>&1 &
+  image_pid=$!
+  for _ in $(seq 100); do grep -q "ready mavlink" "$out/image.log" && break; sleep 0.2; done
+  head -1 "$out/image.log"
+}
+serve_image
+gainlink mavlink upload "$out/retuned/gains.json" --connect tcp:127.0.0.1:5761 --persist
+stop_image
+printf '\n   ... the image restarted (power cycle): the gains come back from its flash\n'
+serve_image
+gainlink mavlink upload "$out/retuned/gains.json" --connect tcp:127.0.0.1:5761 --dry-run
+stop_image

@@ -68,7 +68,9 @@ def test_bad_mavlink_transport_tables_are_one_clear_error(pend):
     with pytest.raises(TransportError, match="port must be an integer"):
         transport_from_config({"kind": "mavlink", "port": "x"}, artifact=art)
     with pytest.raises(TransportError, match="expected udpout:HOST:PORT"):
-        transport_from_config({"kind": "mavlink", "url": "tcp:1.2.3.4:5"}, artifact=art)
+        transport_from_config({"kind": "mavlink", "url": "serial:/dev/ttyACM0"}, artifact=art)
+    with pytest.raises(TransportError, match="takes no port or controller_url"):
+        transport_from_config({"kind": "mavlink", "url": "tcp:127.0.0.1:5760", "port": 5}, artifact=art)
     with pytest.raises(TransportError, match="busy_poll_us must be an integer"):
         transport_from_config({"kind": "mavlink", "busy_poll_us": -5}, artifact=art)
 

@@ -9,6 +9,11 @@ max], ... }`` for every output and reference, by the artifact's signal names; in
 artifact's ``u_min``/``u_max``). With int16, values beyond their range saturate to its ends; the
 plant side counts them (``encoding_clipped`` in the report's transport description) and warns once.
 The same code runs on ``udp_multicast`` (no kernel CAN) and ``socketcan``/``vcan0``.
+
+``interface = "slcan"`` talks to a USB-CAN adapter's serial protocol (Lawicel); with ``channel =
+"socket://HOST:PORT"`` and the scenario's ``controller = "qemu"`` that is the Cortex-M4F image's UART in
+QEMU, which speaks slcan itself. slcan carries classic frames only (no ``fd``); python-can's two-second
+pause after opening the port is skipped unless ``sleep_after_open`` says otherwise.
 """
 
 from __future__ import annotations
@@ -225,6 +230,12 @@ class CanTransport(Transport):
         self.config = dict(config)
         self.config.pop("kind", None)
         self.fd = bool(self.config.get("fd", False))
+        self.slcan = self.config.get("interface") == "slcan"
+        if self.slcan:
+            if self.fd:
+                raise TransportError("CAN transport: slcan carries classic frames only (remove fd = true; the "
+                                     "int16 encoding fits two values per frame)")
+            self.config.setdefault("sleep_after_open", 0)
         self.layout: CanLayout = layout_from_config(self.config, artifact=artifact)
         self.tx = FrameCodec(self.layout.measurement, fd=self.fd)
         self.rx = Assembler(FrameCodec(self.layout.command, fd=self.fd))
@@ -293,6 +304,9 @@ class CanTransport(Transport):
                 self.frames_refused += 1  # a datagram that is no CAN frame: anyone can send to the group
                 continue
             except Exception as exc:
+                if self.slcan:  # the serial link went away (e.g. QEMU stopped): the bridge asks the peer why
+                    time.sleep(min(max(remaining, 0.0), 0.05))
+                    return None
                 raise TransportError(f"CAN receive failed: {exc}") from None
             if msg is None:
                 return None
@@ -303,6 +317,16 @@ class CanTransport(Transport):
 
     def controller_argv(self) -> list[str]:
         return firmware_can_argv(self.config, layout=self.layout)
+
+    def qemu_serve(self) -> tuple[str, str, int, list[str]]:
+        """How the Cortex-M4F image must serve this link: ``(protocol, host, port, options)``."""
+        from gainlink.firmware.uart import tcp_endpoint
+
+        if not self.slcan:
+            raise TransportError(f"controller = \"qemu\" speaks CAN through slcan on the image's UART: use "
+                                 f"interface = \"slcan\", channel = \"socket://HOST:PORT\" (not {self.config.get('interface')})")
+        host, port = tcp_endpoint(str(self.config.get("channel", "")), scheme="socket")
+        return "slcan", host, port, slcan_image_options(self.layout)
 
     def describe(self) -> dict:
         out = {"kind": "can", "config": {k: v for k, v in self.config.items()}, "fd": self.fd,
@@ -316,7 +340,7 @@ class CanTransport(Transport):
 
 def _scale_arg(specs: Sequence[FrameSpec]) -> str:
     """``factor,offset;factor,offset;...`` of every value, floats as round-trip reprs (strtod reads them exactly)."""
-    return ";".join(f"{f!r},{o!r}" for s in specs for f, o in zip(s.factors, s.offsets))
+    return ";".join(f"{f!r},{o!r}" for f, o in _value_scales(specs))
 
 
 def firmware_can_argv(config: Mapping[str, Any], *, layout: CanLayout) -> list[str]:
@@ -344,6 +368,26 @@ def firmware_can_argv(config: Mapping[str, Any], *, layout: CanLayout) -> list[s
         argv += ["--backend", "udp", "--channel", str(config.get("channel", "239.74.163.2")),
                  "--port", str(int(config.get("port", 43113))), "--hop-limit", str(int(config.get("hop_limit", 1)))]
     return argv
+
+
+def slcan_image_options(layout: CanLayout) -> list[str]:
+    """The Cortex-M4F image's ``serve slcan`` options for a layout (see ``firmware/ports/cortex-m/serve.h``).
+
+    With int16 the factor and offset of every value travel as the bits of their doubles, the same numbers
+    the DBC and the host app's ``--scale-*`` carry.
+    """
+    from gainlink.firmware.uart import scale_option
+
+    opts = [f"base={layout.base_id}", f"encoding={layout.encoding}"]
+    if layout.encoding == "int16":
+        opts += [f"meas={scale_option(_value_scales(layout.measurement))}",
+                 f"cmd={scale_option(_value_scales(layout.command))}"]
+    return opts
+
+
+def _value_scales(specs: Sequence[FrameSpec]) -> list[tuple[float, float]]:
+    """``(factor, offset)`` of every value carried by ``specs``, in order."""
+    return [(f, o) for s in specs for f, o in zip(s.factors, s.offsets)]
 
 
 def config_from_text(text: str, *, source: str) -> dict:

@@ -17,11 +17,16 @@ Scenario table::
     signing_key = "key.hex"      # optional: MAVLink 2 signing (gainlink mavlink keygen): samples are signed,
                                  # only signed commands count, the firmware app gets --signing-key
 
-Framing is pymavlink's (MAVLink 2, ``common`` dialect) on a plain UDP socket.
+    # the Cortex-M4F image on its UART (scenario controller = "qemu"): QEMU serves the UART here
+    url = "tcp:127.0.0.1:5760"
+
+Framing is pymavlink's (MAVLink 2, ``common`` dialect) on a plain UDP socket, or on the TCP byte stream of
+the image's UART (frames may then arrive split or several at once; bytes that are not a frame are skipped).
 """
 
 from __future__ import annotations
 
+import collections
 import selectors
 import socket
 import time
@@ -31,6 +36,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from gainlink.errors import TransportError
+from gainlink.firmware.uart import tcp_endpoint
 
 from ..registry import take_keys
 from .base import STATUS_FAULT, STATUS_WATCHDOG, TRANSPORTS, Command, Transport
@@ -71,9 +77,10 @@ class MavlinkTransport(Transport):
     Parameters
     ----------
     url : str
-        Where the controller listens, as the plant sees it: ``udpout:HOST:PORT``.
+        Where the controller listens, as the plant sees it: ``udpout:HOST:PORT``, or ``tcp:HOST:PORT`` for
+        the UART of the Cortex-M4F image in QEMU (a byte stream).
     controller_url : str
-        The controller's own link argument: ``udpin:HOST:PORT``.
+        The controller's own link argument: ``udpin:HOST:PORT`` (unused with ``tcp:``).
     n_inputs, n_outputs, n_refs : int
         m, p, q of the loop.
     ts : float
@@ -100,20 +107,27 @@ class MavlinkTransport(Transport):
             raise TransportError("mavlink transport: at most 58 outputs+references and 16 inputs fit the messages")
         self.url = url
         self.controller_url = controller_url
-        self.dest = _udp_endpoint(url, scheme="udpout")
+        self.stream = url.startswith("tcp:")
+        self.dest = tcp_endpoint(url) if self.stream else _udp_endpoint(url, scheme="udpout")
         self.m, self.p, self.q = n_inputs, n_outputs, n_refs
         self.ts_us = max(1, int(round(ts * 1e6)))
         self.busy_poll_us = int(busy_poll_us)
         self._busy_poll_ns = self.busy_poll_us * 1000
         self.mav = mavlink2.MAVLink(None, srcSystem=system, srcComponent=component)
         self.signing_key = signing_key
+        self._key: bytes | None = None
         if signing_key is not None:
             from gainlink.mavlink.signing import SigningKeyError, enable, read_key
 
             try:
-                enable(self.mav, read_key(signing_key), link_id=2)
+                self._key = read_key(signing_key)
+                enable(self.mav, self._key, link_id=2)
             except SigningKeyError as exc:
                 raise TransportError(f"transport: {exc}") from None
+        # on the UART's byte stream the same object also parses (it keeps a partial frame between reads)
+        self.mav.robust_parsing = self.stream
+        self._pending: collections.deque[Command] = collections.deque()
+        self._eof = False
         self.sock: socket.socket | None = None
         self._sel: selectors.BaseSelector | None = None
         self._pad = np.zeros(58, dtype=np.float32)
@@ -121,6 +135,9 @@ class MavlinkTransport(Transport):
 
     # -- lifecycle -----------------------------------------------------------------------------
     def open(self) -> None:
+        if self.stream:
+            self._open_stream()
+            return
         try:
             sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             sock.bind(("0.0.0.0" if self.dest[0] not in ("127.0.0.1", "localhost") else "127.0.0.1", 0))
@@ -128,6 +145,17 @@ class MavlinkTransport(Transport):
         except OSError as exc:
             raise TransportError(f"mavlink transport: cannot open {self.url}: {exc.strerror}") from None
         sock.setblocking(False)
+        self.sock = sock
+        self._sel = selectors.DefaultSelector()
+        self._sel.register(sock, selectors.EVENT_READ)
+
+    def _open_stream(self) -> None:
+        try:
+            sock = socket.create_connection(self.dest, timeout=5.0)
+        except OSError as exc:
+            raise TransportError(f"mavlink transport: cannot connect to {self.url}: {exc.strerror or exc}") from None
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.settimeout(None)
         self.sock = sock
         self._sel = selectors.DefaultSelector()
         self._sel.register(sock, selectors.EVENT_READ)
@@ -165,6 +193,10 @@ class MavlinkTransport(Transport):
             raise TransportError("mavlink transport: not open")
         for f in frames:
             try:
+                if self.stream:
+                    self.sock.sendall(f)
+                    self.stats["sent"] += 1
+                    continue
                 self.sock.send(f)
             except ConnectionRefusedError:
                 pass  # nobody listening yet: like a lost datagram
@@ -175,12 +207,14 @@ class MavlinkTransport(Transport):
     def receive_command(self, *, timeout: float) -> Command | None:
         if self.sock is None:
             raise TransportError("mavlink transport: not open")
+        if self._pending:
+            return self._pending.popleft()
         deadline = time.monotonic() + timeout
         spin_ns = min(self._busy_poll_ns, int(timeout * 1e9))
         spin_until = time.perf_counter_ns() + spin_ns if spin_ns > 0 else 0
         while True:
             try:
-                data = self.sock.recv(2048)
+                data = self.sock.recv(4096, socket.MSG_DONTWAIT)
             except (BlockingIOError, ConnectionRefusedError):
                 if spin_until and time.perf_counter_ns() < spin_until:
                     continue  # busy poll: read again without sleeping
@@ -189,19 +223,35 @@ class MavlinkTransport(Transport):
                     return None
                 self._sel.select(left)
                 continue
-            cmd = self._decode(data)
-            if cmd is not None:
-                return cmd
+            except OSError as exc:
+                raise TransportError(f"mavlink transport: receive failed: {exc.strerror}") from None
+            if self.stream and not data:
+                return self._closed(deadline)
+            self._pending.extend(self._decode(data))
+            if self._pending:
+                return self._pending.popleft()
 
-    def _decode(self, data: bytes) -> Command | None:
+    def _closed(self, deadline: float) -> None:
+        """The image closed the UART connection (QEMU stopped): no command; the bridge asks the peer why."""
+        self._eof = True
+        left = deadline - time.monotonic()
+        if left > 0:
+            time.sleep(min(left, 0.05))
+        return None
+
+    def _messages(self, data: bytes) -> list:
+        if self.stream:
+            return [m for m in self.mav.parse_buffer(bytearray(data)) or [] if m.get_type() != "BAD_DATA"]
         try:
             if len(data) > 2 and data[0] == 0xFD and len(data) == 12 + data[1] + (13 if data[2] & 1 else 0):
-                msgs = [self.mav.decode(bytearray(data))]  # one MAVLink 2 frame per datagram (signature checked)
-            else:
-                msgs = self.mav.parse_buffer(bytearray(data)) or []
+                return [self.mav.decode(bytearray(data))]  # one MAVLink 2 frame per datagram (signature checked)
+            return self.mav.parse_buffer(bytearray(data)) or []
         except mavlink2.MAVError:
-            return None
-        for msg in msgs:
+            return []
+
+    def _decode(self, data: bytes) -> list[Command]:
+        out = []
+        for msg in self._messages(data):
             if msg.get_msgId() != mavlink2.MAVLINK_MSG_ID_HIL_ACTUATOR_CONTROLS:
                 self.stats["foreign"] += 1
                 continue
@@ -211,28 +261,48 @@ class MavlinkTransport(Transport):
             sat = np.array([(flags >> (SAT_SHIFT + k)) & 1 for k in range(self.m)], dtype=bool)
             status = (STATUS_FAULT if flags & FLAG_FAULT else 0) | (STATUS_WATCHDOG if flags & FLAG_WATCHDOG else 0)
             seq = (int(msg.time_usec) // self.ts_us) % self.seq_modulo
-            return Command(seq=seq, u=u, saturated=sat, status=status, t_ns=time.perf_counter_ns())
-        return None
+            out.append(Command(seq=seq, u=u, saturated=sat, status=status, t_ns=time.perf_counter_ns()))
+        return out
+
+    def _not_uart(self, what: str) -> None:
+        if self.stream:
+            raise TransportError(f"mavlink transport: {self.url} is the UART of the Cortex-M4F image in QEMU; "
+                                 f"it needs controller = \"qemu\", not {what}")
 
     def controller_argv(self) -> list[str]:
         from gainlink.firmware.mavlink_app import signing_argv, spin_argv
 
+        self._not_uart("the host firmware app")
         return ["--url", self.controller_url, *spin_argv(self.busy_poll_us), *signing_argv(self.signing_key)]
 
     def firmware_executable(self, artifact: Any) -> Any:
         """The firmware host executable that speaks this link (``gainlink_mavlink``, built on demand)."""
         from gainlink.firmware.mavlink_app import mavlink_executable
 
+        self._not_uart("the host firmware app")
         return mavlink_executable(artifact)
 
     def reference_argv(self, artifact_path: Any) -> list[str]:
         """The Python reference node that speaks this link (``controller = "reference"``)."""
         import sys
 
+        self._not_uart('controller = "reference"')
         if self.signing_key is not None:
             raise TransportError("transport: signing_key needs controller = \"firmware\" (the reference node "
                                  "does not sign)")
         return [sys.executable, "-m", "gainlink.hil.links.mavlink_node", str(artifact_path), "--url", self.controller_url]
+
+    def qemu_serve(self) -> tuple[str, str, int, list[str]]:
+        """How the Cortex-M4F image must serve this link: ``(protocol, host, port, options)``."""
+        if not self.stream:
+            raise TransportError(f"controller = \"qemu\" needs the image's UART as the link: url = \"tcp:HOST:PORT\", "
+                                 f"not {self.url!r}")
+        return "mavlink", self.dest[0], self.dest[1], []
+
+    @property
+    def signing_key_bytes(self) -> bytes | None:
+        """The 32-byte signing key of this link, if it is signed (the image gets it in its flash)."""
+        return self._key
 
     @property
     def config(self) -> dict:
@@ -245,13 +315,17 @@ class MavlinkTransport(Transport):
         return cfg
 
     def describe(self) -> dict:
-        return {"kind": "mavlink", "url": self.url, "controller_url": self.controller_url,
-                "messages": "DEBUG_FLOAT_ARRAY -> HIL_ACTUATOR_CONTROLS", "ts_us": self.ts_us,
-                "busy_poll_us": self.busy_poll_us, "signed": self.signing_key is not None,
-                "datagrams_sent": self.stats["sent"], "commands_received": self.stats["received"],
-                "foreign_messages": self.stats["foreign"],
-                "unsigned_or_bad_answers": self.mav.signing.reject_count + self.mav.signing.badsig_count
-                if self.signing_key is not None else 0}
+        out = {"kind": "mavlink", "url": self.url, "controller_url": self.controller_url,
+               "messages": "DEBUG_FLOAT_ARRAY -> HIL_ACTUATOR_CONTROLS", "ts_us": self.ts_us,
+               "busy_poll_us": self.busy_poll_us, "signed": self.signing_key is not None,
+               "datagrams_sent": self.stats["sent"], "commands_received": self.stats["received"],
+               "foreign_messages": self.stats["foreign"],
+               "unsigned_or_bad_answers": self.mav.signing.reject_count + self.mav.signing.badsig_count
+               if self.signing_key is not None else 0}
+        if self.stream:
+            out["uart"] = True
+            out["sample_bytes"] = len(self.encode_sample(seq=1, y=np.zeros(self.p), r=np.zeros(self.q))[0])
+        return out
 
 
 @TRANSPORTS.register("mavlink")
@@ -266,7 +340,12 @@ def _from_config(config: Mapping[str, Any], *, artifact: Any, **_: Any) -> Mavli
     if isinstance(busy, bool) or not isinstance(busy, int) or not 0 <= busy <= MAX_BUSY_POLL_US:
         raise TransportError(f"transport: busy_poll_us must be an integer 0..{MAX_BUSY_POLL_US} (microseconds), not {busy!r}")
     url = str(cfg.get("url", f"udpout:{host}:{port}"))
-    controller_url = str(cfg.get("controller_url", f"udpin:{host}:{_udp_endpoint(url, scheme='udpout')[1]}"))
+    if url.startswith("tcp:"):
+        if "controller_url" in cfg or "port" in cfg:
+            raise TransportError("transport: url = \"tcp:...\" (the image's UART) takes no port or controller_url")
+        controller_url = ""
+    else:
+        controller_url = str(cfg.get("controller_url", f"udpin:{host}:{_udp_endpoint(url, scheme='udpout')[1]}"))
     key = cfg.get("signing_key")
     if key is not None and not isinstance(key, str):
         raise TransportError(f"transport: signing_key must be a key file path, not {key!r}")

@@ -15,7 +15,7 @@ import time
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -23,10 +23,10 @@ from gainlink.artifact import Artifact, load
 from gainlink.errors import GainlinkError, PlantError, ScenarioError
 from gainlink.reference import ReferenceLoop
 
-from .controller import ControllerProcess, controller_argv
+from .controller import ControllerProcess, controller_argv, qemu_peer
 from .faults import FaultInjector
 from ..plants.config import plant_from_config
-from .metrics import RunTrace, compute_metrics
+from .metrics import RunTrace, compute_metrics, link_capacity
 from ..plants.base import Plant, check_dimensions
 from .scheduler import SPIN_NS, Pacer, Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
 from .plan import Plan, Recorder, plan_run
@@ -97,18 +97,12 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
     with ExitStack() as stack:
         stack.callback(plant.close)
         transport = transport_from_config(scenario.transport, artifact=artifact)
-        argv = controller_argv(scenario.controller, artifact=artifact, artifact_path=scenario.artifact_path,
-                               transport=transport, executable=scenario.firmware)
-        transport.open()
-        stack.callback(transport.close)
-        peer = ControllerProcess(argv)
-        stack.callback(peer.close)
-        peer.start()
-        peer.check_artifact(artifact.sha256)
+        peer = _start_peer(scenario, artifact=artifact, transport=transport, stack=stack)
         busy_poll = bool(scenario.transport.get("busy_poll_us", 0))
         cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else [0]
+        affinity = "none" if scenario.controller == "qemu" and scenario.affinity == "auto" else scenario.affinity
         placement = stack.enter_context(Placement(
-            resolve_affinity(scenario.affinity, mode=scenario.mode, busy_poll=busy_poll, cpus=cpus),
+            resolve_affinity(affinity, mode=scenario.mode, busy_poll=busy_poll, cpus=cpus),
             peer_pid=peer.proc.pid if peer.proc is not None else None))
         stack.enter_context(gc_paused())
         pm_qos = stack.enter_context(cpu_latency_qos()) if scenario.mode == "realtime" and scenario.pm_qos else False
@@ -123,6 +117,32 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
         if clipped is not None:
             result.metrics["encoding_clipped"] = clipped
         return result
+
+
+def _start_peer(scenario: Scenario, *, artifact: Artifact, transport: Transport, stack: ExitStack) -> Any:
+    """Open the link and start the controller peer, in the order the link needs; both are closed by ``stack``.
+
+    A host process connects to a link the bridge has opened; the image in QEMU serves its UART, so QEMU
+    starts (and prints its banner) before the bridge connects.
+    """
+    if scenario.controller == "qemu":
+        peer = qemu_peer(artifact=artifact, transport=transport, board=scenario.board, elf=scenario.firmware,
+                         duration_s=scenario.duration)
+        stack.callback(peer.close)
+        peer.start()
+        peer.check_artifact(artifact.sha256)
+        transport.open()
+        stack.callback(transport.close)
+        return peer
+    argv = controller_argv(scenario.controller, artifact=artifact, artifact_path=scenario.artifact_path,
+                           transport=transport, executable=scenario.firmware)
+    transport.open()
+    stack.callback(transport.close)
+    peer = ControllerProcess(argv)
+    stack.callback(peer.close)
+    peer.start()
+    peer.check_artifact(artifact.sha256)
+    return peer
 
 
 class _Stop(Exception):
@@ -190,8 +210,8 @@ class _Loop:
         if not (self.plan.realtime and self.scenario.sched_fifo):
             return False
         fifo = set_fifo()
-        if fifo and self.peer.proc is not None:
-            set_fifo(self.peer.proc.pid)
+        if fifo and self.peer.proc is not None and self.scenario.controller != "qemu":
+            set_fifo(self.peer.proc.pid)  # QEMU's threads stay SCHED_OTHER: its vCPU must not starve its I/O thread
         return fifo
 
     def _peer_faults(self, k: int) -> None:
@@ -310,6 +330,9 @@ class _Loop:
                           "states": list(plant.state_names)},
                 "transport": self.transport.describe(),
                 "controller": {"kind": scenario.controller, "argv": self.peer.argv, "ready": self.peer.ready_line}}
+        if scenario.controller == "qemu":
+            info["controller"]["board"] = scenario.board
+            metrics["uart"] = link_capacity(trace)
         return RunResult(scenario=scenario, metrics=metrics, trace=trace, complete=complete, reason=reason, info=info)
 
 

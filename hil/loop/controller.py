@@ -1,7 +1,10 @@
-"""The controller peer process: the firmware's CAN app (or the Python reference node), started and stopped by the bridge.
+"""The controller peer process: the firmware's host app, the Python reference node, or the Cortex-M4F image
+in QEMU, started and stopped by the bridge.
 
 The bridge waits for the peer's ``ready`` line before the first sample, can pause it (the "silent
-controller" fault) and always ends it: SIGTERM, then SIGKILL after a grace period.
+controller" fault) and always ends it: SIGTERM, then SIGKILL after a grace period. The image in QEMU
+(:func:`qemu_peer`, a :class:`gainlink.firmware.uart.QemuUart`) answers the same calls; its ready line
+comes from its UART.
 """
 
 from __future__ import annotations
@@ -26,7 +29,29 @@ from ..links.can_firmware import firmware_can_executable
 
 log = logging.getLogger(__name__)
 
-CONTROLLERS = ("firmware", "reference")
+CONTROLLERS = ("firmware", "reference", "qemu")
+
+#: Upper bound of a QEMU peer's life beyond the run's own duration (QEMU is stopped at the end anyway).
+QEMU_SLACK_S = 600.0
+
+
+def qemu_peer(*, artifact: Any, transport: Any, board: str, elf: Path | None, duration_s: float) -> Any:
+    """The Cortex-M4F image in QEMU serving ``transport``'s link on its UART (not started yet).
+
+    ``elf`` is a prebuilt image; by default the image of ``gainlink firmware build --target cortex-m4``
+    for ``artifact`` and ``board`` (built and cached).
+    """
+    from gainlink.firmware.build import build
+    from gainlink.firmware.uart import QemuUart
+
+    protocol, host, port, options = transport.qemu_serve()
+    if elf is None:
+        elf = build(artifact, target="cortex-m4", board=board).files["elf"]
+    elif not Path(elf).is_file():
+        raise FirmwareError(f"firmware image {elf} not found")
+    return QemuUart(Path(elf), board=board, protocol=protocol, host=host, port=port, options=options,
+                    lifetime_s=QEMU_SLACK_S + 4.0 * duration_s,
+                    signing_key=getattr(transport, "signing_key_bytes", None))
 
 
 def controller_argv(kind: str, *, artifact: Any, artifact_path: Path, transport: Any,
@@ -48,6 +73,8 @@ def controller_argv(kind: str, *, artifact: Any, artifact_path: Path, transport:
             return transport.reference_argv(artifact_path)
         return [sys.executable, "-m", "gainlink.hil.links.can_node", str(artifact_path),
                 "--config", json.dumps(transport.config)]
+    if kind == "qemu":
+        raise FirmwareError('controller = "qemu" is not a host process: the bridge starts it with qemu_peer()')
     raise FirmwareError(f"unknown controller {kind!r} (choose from {', '.join(CONTROLLERS)})")
 
 

@@ -124,6 +124,19 @@ def compute_metrics(trace: RunTrace, *, artifact: Any, mode: str, late: int, per
     return _clean(out)
 
 
+def link_capacity(trace: RunTrace) -> dict:
+    """What the link sustained, from the round trips of the commands that came back.
+
+    ``round_trips_per_s``: one over the mean round-trip latency (the rate of a lockstep loop that does
+    nothing else); ``loop_hz_p99``: the highest loop rate whose period still covers the p99 latency.
+    """
+    lat = trace.latency_ns[trace.got & np.isfinite(trace.latency_ns)]
+    if lat.size == 0:
+        return {"round_trips_per_s": None, "loop_hz_p99": None, "commands": 0}
+    return {"round_trips_per_s": float(1e9 / lat.mean()), "loop_hz_p99": float(1e9 / np.percentile(lat, 99)),
+            "commands": int(lat.size)}
+
+
 def _clean(obj: Any) -> Any:
     if isinstance(obj, dict):
         return {k: _clean(v) for k, v in obj.items()}

@@ -51,6 +51,10 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
     overruns = f" (overruns {m['overruns']}, {m['overrun_policy']})" if "overruns" in m else ""
     lines.append(f"  lost {m['lost']}  late {m['late']}  deadline misses {m['deadline_misses']}{overruns}  "
                  f"faults injected {', '.join(f'{k} {v}' for k, v in m['faults_injected'].items() if v) or 'none'}")
+    if "uart" in m:
+        u = m["uart"]
+        lines.append(f"  emulated UART ({info['controller'].get('board')}): {_fmt(u['round_trips_per_s'], ' round trips/s', 4)}"
+                     f" at the mean latency; a loop up to {_fmt(u['loop_hz_p99'], ' Hz', 4)} covers the p99 latency")
     lines.append("  saturated: " + ", ".join(f"{k} {100 * v:.1f}%" for k, v in m["saturation_fraction"].items()))
     if "peak_integrator" in m:
         lines.append("  peak integrator: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["peak_integrator"].items()))

@@ -6,8 +6,9 @@ Example::
     artifact = "out/demo/gains.json"      # relative to the scenario file
     duration = 10.0                        # s of plant time
     mode = "lockstep"                      # lockstep | realtime
-    controller = "firmware"                # firmware (gainlink_can) | reference (Python node)
-    firmware = "path/to/gainlink_can"      # optional: a prebuilt executable (default: built for the artifact)
+    controller = "firmware"                # firmware (host app) | reference (Python node) | qemu (Cortex-M4F image)
+    firmware = "path/to/gainlink_can"      # optional: a prebuilt executable or, for qemu, ELF (default: built)
+    board = "mps2-an386"                   # qemu: mps2-an386 | netduinoplus2
     step_timeout = 0.05                    # lockstep: wait per command [s]
     peer_timeout = 1.0                     # end the run when the controller is silent this long [s]
     period = 0.01                          # realtime: tick [s] (default: the artifact's Ts)
@@ -35,6 +36,13 @@ Example::
 for both: each hand-over is a local context switch, the fastest lockstep), ``separate`` (one CPU
 each: what two busy-polling peers need), ``none`` (the kernel decides); ``auto`` (default) is
 ``shared`` in lockstep, ``separate`` with ``busy_poll_us`` in the transport, else ``none``.
+
+``controller = "qemu"`` runs the Cortex-M4F image (``gainlink firmware build --target cortex-m4``, or the
+ELF named by ``firmware``) in ``qemu-system-arm`` on ``board``, speaking on its UART, which QEMU serves as a
+TCP socket: ``[transport] kind = "mavlink", url = "tcp:HOST:PORT"`` (MAVLink) or ``interface = "slcan",
+channel = "socket://HOST:PORT"`` (CAN through slcan, classic frames). The bridge starts QEMU, waits for the
+image's banner, runs the loop and always stops QEMU. ``affinity = "auto"`` leaves QEMU's threads to the
+kernel.
 
 ``pm_qos`` asks the kernel for a 0 us CPU wake-up latency for a realtime run (``/dev/cpu_dma_latency``,
 root only, as cyclictest does): idle CPUs poll instead of halting, which on a virtual machine spares
@@ -66,7 +74,9 @@ from .scheduler import AFFINITIES, OVERRUN_POLICIES
 
 TOP_KEYS = {"name", "artifact", "plant", "transport", "duration", "mode", "controller", "step_timeout",
             "peer_timeout", "period", "sched_fifo", "seed", "shadow", "initial_state", "reference", "noise",
-            "disturbances", "faults", "description", "firmware", "affinity", "overrun", "pm_qos"}
+            "disturbances", "faults", "description", "firmware", "affinity", "overrun", "pm_qos", "board"}
+CONTROLLERS = ("firmware", "reference", "qemu")
+BOARDS = ("mps2-an386", "netduinoplus2")
 MODES = ("lockstep", "realtime")
 FAULT_KINDS = ("drop", "delay", "duplicate", "reorder", "silent", "crash")
 PROFILE_KEYS = {
@@ -119,6 +129,7 @@ class Scenario:
     mode: str = "lockstep"
     controller: str = "firmware"
     firmware: Path | None = None
+    board: str = "mps2-an386"
     step_timeout: float = 0.05
     peer_timeout: float = 1.0
     period: float | None = None
@@ -202,8 +213,13 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
     if overrun not in OVERRUN_POLICIES:
         raise ScenarioError(f"scenario: overrun must be one of {', '.join(OVERRUN_POLICIES)}, not {overrun!r}")
     controller = data.get("controller", "firmware")
-    if controller not in ("firmware", "reference"):
-        raise ScenarioError(f"scenario: controller must be firmware or reference, not {controller!r}")
+    if controller not in CONTROLLERS:
+        raise ScenarioError(f"scenario: controller must be one of {', '.join(CONTROLLERS)}, not {controller!r}")
+    board = data.get("board", BOARDS[0])
+    if board not in BOARDS:
+        raise ScenarioError(f"scenario: board must be one of {', '.join(BOARDS)}, not {board!r}")
+    if "board" in data and controller != "qemu":
+        raise ScenarioError("scenario: board applies to controller = \"qemu\" only")
     faults = []
     for i, f in enumerate(data.get("faults", [])):
         f = _table(f, f"faults[{i}]")
@@ -237,13 +253,13 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
     firmware = data.get("firmware")
     if firmware is not None:
         if not isinstance(firmware, str):
-            raise ScenarioError("scenario: firmware must be the path of a prebuilt gainlink_can executable")
+            raise ScenarioError("scenario: firmware must be the path of a prebuilt firmware executable (qemu: ELF)")
         firmware = Path(firmware) if Path(firmware).is_absolute() else base / firmware
     return Scenario(
         name=str(name), path=path, artifact_path=art,
         plant=_table(data["plant"], "plant"), transport=_table(data["transport"], "transport"),
         duration=_num(data["duration"], "duration", positive=True), mode=mode, controller=controller,
-        firmware=firmware,
+        firmware=firmware, board=board,
         step_timeout=_num(data.get("step_timeout", 0.05), "step_timeout", positive=True),
         peer_timeout=_num(data.get("peer_timeout", 1.0), "peer_timeout", positive=True),
         period=None if period is None else _num(period, "period", positive=True),

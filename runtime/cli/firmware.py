@@ -150,7 +150,9 @@ def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: 
 
 def _run(args: argparse.Namespace) -> int:
     # Transport options (added by the CAN and MAVLink work) each select their own host application here;
-    # without one, the plain loop executable runs.
+    # without one, the plain loop executable runs. --target cortex-m4 serves them from the image in QEMU.
+    if args.target == "cortex-m4":
+        return _run_image(args)
     if getattr(args, "can", None):
         from gainlink.hil.links.can_firmware import run_firmware_can
 
@@ -161,6 +163,33 @@ def _run(args: argparse.Namespace) -> int:
         return run_foreground(Path(args.artifact), url=args.mavlink, param_file=args.param_file and Path(args.param_file),
                               signing_key=args.signing_key and Path(args.signing_key))
     return _run_host(args)
+
+
+def _run_image(args: argparse.Namespace) -> int:
+    """The Cortex-M4F image in QEMU serving MAVLink (``--mavlink tcp:...``) or slcan (``--can`` slcan config)."""
+    from gainlink.firmware.uart import run_foreground
+
+    flash = Path(args.flash_dir) if args.flash_dir else None
+    if args.input or args.output:
+        raise FirmwareError("--input/--output replay through the host build (the image replays with "
+                            "`gainlink replay ... --engine qemu`)")
+    if args.mavlink and not args.can:
+        return run_foreground(Path(args.artifact), board=args.board, protocol="mavlink", url=args.mavlink,
+                              flash_dir=flash)
+    if args.can and not args.mavlink:
+        from gainlink.artifact import load
+        from gainlink.hil.links.can import layout_from_config, slcan_image_options
+        from gainlink.hil.links.can_firmware import read_can_config
+
+        config = read_can_config(args.can)
+        if config.get("interface") != "slcan" or config.get("fd"):
+            raise FirmwareError("--target cortex-m4 --can needs a classic slcan configuration "
+                                '(e.g. {"interface": "slcan", "channel": "socket://127.0.0.1:5761"})')
+        layout = layout_from_config(config, artifact=load(args.artifact))
+        return run_foreground(Path(args.artifact), board=args.board, protocol="slcan", url=str(config.get("channel", "")),
+                              options=slcan_image_options(layout), flash_dir=flash)
+    raise FirmwareError("--target cortex-m4 serves one link: --mavlink tcp:HOST:PORT or --can with an slcan "
+                        "configuration")
 
 
 # --- pil run ---------------------------------------------------------------------------------------
@@ -222,16 +251,23 @@ def _add_flash_parser(sub) -> None:
 
 
 def _add_run_parser(sub) -> None:
-    p = sub.add_parser("run", help="run the host firmware for an artifact",
+    p = sub.add_parser("run", help="run the firmware for an artifact (host build, or the Cortex-M4F image in QEMU)",
                        description="Build (cached) and start the host firmware. With --input, replay a CSV "
-                       "(columns y0.., r0..) through the loop executable and write the replay CSV.")
+                       "(columns y0.., r0..) through the loop executable and write the replay CSV. With --target "
+                       "cortex-m4, run the image in QEMU as a bus node on its UART, served as a TCP socket: "
+                       "--mavlink tcp:HOST:PORT, or --can with an slcan configuration (channel socket://HOST:PORT).")
     p.add_argument("artifact", help="gains.json")
+    p.add_argument("--target", choices=("host", "cortex-m4"), default="host",
+                   help="host (default) or cortex-m4 (the image in QEMU, on its UART)")
+    p.add_argument("--board", choices=BOARDS, default="mps2-an386", help="with --target cortex-m4: QEMU board")
+    p.add_argument("--flash-dir", help="with --target cortex-m4: the image's flash (persisted parameters; default "
+                   "flash-BOARD beside the artifact)")
     p.add_argument("--input", help="replay input CSV; without it stdin/stdout are passed to the executable")
     p.add_argument("--output", help="replay output CSV (default: stdout)")
     # Transport options go here, one argument each (--can CONFIG, --mavlink URL), dispatched in _run.
     p.add_argument("--can", metavar="CONFIG", help="run the CAN node on a python-can bus (TOML/JSON file or inline JSON)")
     p.add_argument("--mavlink", metavar="URL", help="run the MAVLink app (parameter server + HIL link) on "
-                   "udpin:HOST:PORT or udpout:HOST:PORT")
+                   "udpin:HOST:PORT or udpout:HOST:PORT; with --target cortex-m4: tcp:HOST:PORT (the image's UART)")
     p.add_argument("--param-file", help="with --mavlink: persisted parameters (default: mavlink_params.txt beside "
                    "the artifact)")
     p.add_argument("--signing-key", metavar="FILE", help="with --mavlink: MAVLink 2 signing key file (gainlink mavlink "

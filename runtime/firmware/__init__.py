@@ -1,1 +1,1 @@
-"""Building and running the gainlink firmware: CMake driver, size report, QEMU runner, PIL."""
+"""Building and running the gainlink firmware: CMake driver, size report, QEMU runner, PIL, the image on its UART."""

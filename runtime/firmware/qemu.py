@@ -47,11 +47,16 @@ def qemu_binary() -> str:
     return path
 
 
-def qemu_command(elf: Path, *, board: str, serial: str = "null", plugin: list[str] | None = None) -> list[str]:
-    """The QEMU command line for ``elf`` on ``board`` (semihosting on, no display, no monitor)."""
+def qemu_command(elf: Path, *, board: str, serial: str = "null", plugin: list[str] | None = None,
+                 semihosting_args: list[str] | None = None) -> list[str]:
+    """The QEMU command line for ``elf`` on ``board`` (semihosting on, no display, no monitor).
+
+    ``semihosting_args`` become the image's command line (``arg=`` of ``-semihosting-config``; no commas).
+    """
+    config = "enable=on,target=native" + "".join(f",arg={a}" for a in semihosting_args or [])
     cmd = [
         qemu_binary(), "-M", board, "-kernel", str(elf), "-nodefaults", "-nic", "none", "-display", "none",
-        "-monitor", "none", "-serial", serial, "-semihosting-config", "enable=on,target=native",
+        "-monitor", "none", "-serial", serial, "-semihosting-config", config,
     ]
     if plugin:
         cmd += plugin

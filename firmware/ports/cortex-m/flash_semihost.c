@@ -8,20 +8,43 @@
 
 #define TMP_FILE "gl_flash.tmp"
 
-static int flash_write(void *ctx, const uint8_t *data, size_t len)
+/** Write `len` bytes to TMP_FILE, then rename it over `name`. */
+static int replace_file(const char *name, const uint8_t *data, size_t len)
 {
-    (void)ctx;
     int32_t fd = gl_sh_open(TMP_FILE, GL_SH_MODE_WB);
     if (fd < 0) {
         return -1;
     }
     int32_t rc = gl_sh_write_all(fd, data, len);
     gl_sh_close(fd);
-    if (rc != 0 || gl_sh_rename(TMP_FILE, GL_FLASH_FILE) != 0) {
+    if (rc != 0 || gl_sh_rename(TMP_FILE, name) != 0) {
         (void)gl_sh_remove(TMP_FILE);
         return -1;
     }
     return 0;
+}
+
+static int flash_write(void *ctx, const uint8_t *data, size_t len)
+{
+    (void)ctx;
+    return replace_file(GL_FLASH_FILE, data, len);
+}
+
+int gl_flash_store_key(void *ctx, const uint8_t key[GL_MAV_KEY_LEN])
+{
+    (void)ctx;
+    return replace_file(GL_FLASH_KEY_FILE, key, GL_MAV_KEY_LEN);
+}
+
+int gl_flash_load_key(uint8_t key[GL_MAV_KEY_LEN])
+{
+    int32_t fd = gl_sh_open(GL_FLASH_KEY_FILE, GL_SH_MODE_RB);
+    if (fd < 0) {
+        return 0;
+    }
+    int ok = gl_sh_flen(fd) == (int32_t)GL_MAV_KEY_LEN && gl_sh_read_all(fd, key, GL_MAV_KEY_LEN) == 0;
+    gl_sh_close(fd);
+    return ok;
 }
 
 static long flash_read(void *ctx, uint8_t *data, size_t cap)

@@ -15,7 +15,23 @@
 /** Name of the stored set in QEMU's working directory. */
 #define GL_FLASH_FILE "gl_flash.txt"
 
+/** Name of the MAVLink signing key (32 raw bytes) in QEMU's working directory. */
+#define GL_FLASH_KEY_FILE "gl_key.bin"
+
 /** @brief The storage interface over the semihosting file. @return Static storage descriptor. */
 const gl_mav_storage_t *gl_flash_storage(void);
+
+/**
+ * @brief Keep a signing key (set by SETUP_SIGNING) for the next start: ::gl_mav_port_t::store_key.
+ * @param[in] ctx Unused. @param[in] key GL_MAV_KEY_LEN bytes. @return 0 kept, -1 failed.
+ */
+int gl_flash_store_key(void *ctx, const uint8_t key[GL_MAV_KEY_LEN]);
+
+/**
+ * @brief The kept signing key.
+ * @param[out] key GL_MAV_KEY_LEN bytes.
+ * @return 1 when a key was kept, 0 when none.
+ */
+int gl_flash_load_key(uint8_t key[GL_MAV_KEY_LEN]);
 
 #endif /* GAINLINK_FLASH_SEMIHOST_H */

@@ -4,7 +4,9 @@
  *        host app, carried by the interrupt-driven rings of gl_uart.h.
  *
  * A serial link has one peer, so every answer goes to the UART whatever its destination. The node's
- * events are not printed (the UART carries MAVLink); SYS_STATUS reports the counters.
+ * events are not printed (the UART carries MAVLink); SYS_STATUS reports the counters. The UART is a
+ * cable, so it is a trusted link for signing: an unsigned SETUP_SIGNING may set the first key, which is
+ * kept in the semihosting file gl_key.bin and loaded at the next start.
  */
 #include <string.h>
 
@@ -82,18 +84,25 @@ int gl_serve_mavlink(int argc, char *const argv[])
         .chan = 0,
         .watchdog_periods = GL_WATCHDOG_PERIODS_DEFAULT,
         .port = {.ctx = 0, .send = uart_send, .room = uart_room, .now_us = clock_us, .event = 0,
-                 .link_counters = uart_counters},
+                 .link_counters = uart_counters, .store_key = gl_flash_store_key},
         .storage = gl_flash_storage(),
+        .trusted_link = 1,
     };
     if (gl_mav_node_init(&node, &cfg) != GL_OK) {
         (void)gl_serve_refuse("gain set rejected");
         return GL_EXIT_GAINS;
+    }
+    uint8_t key[GL_MAV_KEY_LEN];
+    int keyed = gl_flash_load_key(key);
+    if (keyed) {
+        gl_mav_node_set_key(&node, key, 0); /* no wall clock: follows the newest timestamp it accepts */
     }
     static const char ready[] = "ready mavlink sysid=";
     (void)gl_uart_write((const uint8_t *)ready, sizeof ready - 1u);
     put_number(sysid);
     (void)gl_uart_write((const uint8_t *)" crc32=", 7);
     put_number(node.table.committed.crc32);
+    (void)gl_uart_write((const uint8_t *)(keyed ? " signing=on" : " signing=off"), keyed ? 11u : 12u);
     (void)gl_uart_write((const uint8_t *)"\n", 1);
     for (;;) {
         uint8_t buf[64];

@@ -1,0 +1,207 @@
+"""The Cortex-M4F image on the bus: MAVLink and slcan on its UART under QEMU, in HIL and for gain upload.
+
+The oracle of the HIL tests is the host build running the same scenario: the image and the host app are
+compiled from the same C with -ffp-contract=off, so the same samples in give the same float32 commands out,
+and the two closed loops are identical step for step. The upload test checks the loop against the float64
+reference law of the artifact it uploaded; the garbage test against the image's own clean run.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import run_cli
+from pymavlink.dialects.v20 import common as mavlink2
+from test_mavlink_upload import free_udp_port, reference_u, retuned_pendulum
+
+from gainlink.artifact import load
+from gainlink.codegen import gain_set
+from gainlink.errors import FirmwareError, ScenarioError, TransportError
+from gainlink.firmware.build import build
+from gainlink.firmware.uart import QemuUart, free_tcp_port
+from gainlink.hil.links.mavlink import MavlinkTransport
+from gainlink.hil.run.bridge import run_scenario
+from gainlink.hil.run.scenario import parse_scenario
+from gainlink.mavlink.link import MavLink
+from gainlink.mavlink.params import Encoding
+from gainlink.mavlink.session import ParamSession
+
+RANGES = {"x": [-5.0, 5.0], "theta": [-1.0, 1.0], "r_x": [-5.0, 5.0]}
+
+
+def scenario(artifact_path, transport: dict, *, controller: str, board: str | None = None, duration: float = 1.5):
+    data = {
+        "name": "pendulum_uart", "artifact": str(artifact_path), "duration": duration, "mode": "lockstep",
+        "controller": controller, "step_timeout": 2.0, "peer_timeout": 5.0, "seed": 7, "shadow": True,
+        "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]},
+        "transport": transport, "initial_state": {"theta": 0.1},
+        "reference": {"r_x": {"kind": "step", "at": 0.3, "value": 0.4}}, "noise": {"theta": 0.001},
+    }
+    if board is not None:
+        data["board"] = board
+    return parse_scenario(data, path=artifact_path.parent / "scenario.toml")
+
+
+def assert_same_closed_loop(image, host) -> None:
+    assert image.complete and host.complete, (image.reason, host.reason)
+    assert image.metrics["lost"] == 0 and image.trace.got.all()
+    assert image.trace.u.shape == host.trace.u.shape
+    np.testing.assert_array_equal(image.trace.u, host.trace.u)  # float32 commands, bit for bit
+    np.testing.assert_array_equal(image.trace.y, host.trace.y)
+
+
+@pytest.mark.parametrize("board", ["mps2-an386", "netduinoplus2"])
+def test_mavlink_on_the_uart_commands_equal_the_host_app_bit_for_bit(pend, board):
+    host = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, controller="firmware"))
+    image = run_scenario(scenario(pend, {"kind": "mavlink", "url": f"tcp:127.0.0.1:{free_tcp_port()}"},
+                                  controller="qemu", board=board))
+    assert_same_closed_loop(image, host)
+    assert image.info["controller"]["board"] == board
+    assert image.info["controller"]["ready"].startswith(f"gainlink pendulum {board} sha256:{load(pend).sha256}")
+    assert image.info["transport"]["uart"] and image.metrics["uart"]["commands"] == image.metrics["steps"]
+    assert image.metrics["uart"]["round_trips_per_s"] > 0
+
+
+@pytest.mark.parametrize("board,encoding", [("mps2-an386", "float32"), ("netduinoplus2", "int16")])
+def test_slcan_on_the_uart_commands_equal_the_host_can_app_bit_for_bit(pend, board, encoding):
+    layout = {"encoding": encoding, "ranges": RANGES} if encoding == "int16" else {}
+    group = "239.74.163.61" if encoding == "int16" else "239.74.163.62"
+    host = run_scenario(scenario(pend, {"interface": "udp_multicast", "channel": group, "hop_limit": 0, **layout},
+                                 controller="firmware"))
+    image = run_scenario(scenario(pend, {"interface": "slcan", "channel": f"socket://127.0.0.1:{free_tcp_port()}",
+                                         **layout}, controller="qemu", board=board))
+    assert_same_closed_loop(image, host)
+    assert image.info["transport"]["config"]["interface"] == "slcan"
+    assert image.info["transport"]["encoding"] == encoding
+
+
+def closed_loop(url: str, art, *, steps: int = 80, garbage=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The artifact's discrete plant against the image over its UART; ``garbage(k)`` bytes go before sample k."""
+    t = MavlinkTransport(url=url, controller_url="", n_inputs=art.m, n_outputs=art.p, n_refs=art.q, ts=art.Ts)
+    x = np.zeros(art.n)
+    x[2] = 0.05
+    Y, R, U = np.zeros((steps, art.p)), np.full((steps, art.q), 0.2), np.zeros((steps, art.m))
+    with t:
+        t.send_frames(t.encode_reset(seq=0))
+        assert t.receive_command(timeout=5.0) is not None
+        u = np.zeros(art.m)
+        for k in range(steps):
+            Y[k] = (art.Cd @ x + art.Dd @ u).astype(np.float32)
+            if garbage is not None:
+                t.send_frames([garbage(k)])
+            t.send_frames(t.encode_sample(seq=k + 1, y=Y[k], r=R[k]))
+            c = t.receive_command(timeout=5.0)
+            assert c is not None and c.seq == k + 1, k
+            u = U[k] = c.u
+            x = art.Ad @ x + art.Bd @ u
+    return Y, R, U
+
+
+def session(url: str) -> tuple[MavLink, ParamSession]:
+    link = MavLink(url)
+    link.wait_heartbeat(timeout=10)
+    return link, ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE)
+
+
+@pytest.fixture(scope="module")
+def elf(pend):
+    return build(load(pend), target="cortex-m4", board="mps2-an386").files["elf"]
+
+
+def test_upload_persists_in_flash_and_survives_a_restart_of_the_image(elf, pend, tmp_path):
+    old, new = load(pend), load(retuned_pendulum(tmp_path / "retuned.json"))
+    flash = tmp_path / "flash"
+    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash,
+                  lifetime_s=300) as image:
+        Y, R, U = closed_loop(image.url, old)
+        np.testing.assert_allclose(U, reference_u(old, Y, R), atol=1e-4)
+        res = run_cli("mavlink", "upload", tmp_path / "retuned.json", "--connect", image.url, "--persist")
+        assert res.code == 0, res.err
+        assert "gain set committed" in res.out and "persisted" in res.out
+        Y, R, U = closed_loop(image.url, new)
+        np.testing.assert_allclose(U, reference_u(new, Y, R), atol=1e-4)
+        assert np.max(np.abs(U - reference_u(old, Y, R))) > 1e-2  # really the new gains
+    assert (flash / "gl_flash.txt").is_file()
+
+    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash,
+                  lifetime_s=300) as image:  # the board powered again: the set comes back from flash
+        assert f"crc32={gain_set(new).crc32}" in image.ready_line
+        res = run_cli("mavlink", "upload", tmp_path / "retuned.json", "--connect", image.url, "--dry-run")
+        assert res.code == 0 and "dry run: 0 parameter(s) would change" in res.out, res.out + res.err
+        Y, R, U = closed_loop(image.url, new)
+        np.testing.assert_allclose(U, reference_u(new, Y, R), atol=1e-4)
+
+
+def sys_status(url: str) -> tuple[int, object]:
+    """GL_HASH and SYS_STATUS of the image."""
+    link, s = session(url)
+    with link:
+        crc = s.read(["GL_HASH"])[0]["GL_HASH"].value & 0xFFFFFFFF
+        link.send(mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0,
+                                                         float(mavlink2.MAVLINK_MSG_ID_SYS_STATUS), 0, 0, 0, 0, 0, 0))
+        for _ in range(50):
+            for m in link.poll(0.2):
+                if m.get_type() == "SYS_STATUS":
+                    return crc, m
+    raise AssertionError("no SYS_STATUS")
+
+
+def test_garbage_between_frames_is_survived_counted_and_leaves_the_gains_alone(elf, pend):
+    art = load(pend)
+    rng = np.random.default_rng(11)
+    injected = []
+
+    def garbage(k: int) -> bytes:
+        # random bytes (MAVLink start bytes among them), then enough zeros to end any bogus frame they began
+        chunk = rng.integers(0, 256, size=int(rng.integers(1, 64)), dtype=np.uint8).tobytes() + bytes(280)
+        injected.append(chunk)
+        return chunk
+
+    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), lifetime_s=300) as image:
+        crc_before, _ = sys_status(image.url)
+        Y0, _, U0 = closed_loop(image.url, art)
+        Y1, _, U1 = closed_loop(image.url, art, garbage=garbage)
+        crc_after, status = sys_status(image.url)
+        assert image.exit_status() is None
+    np.testing.assert_array_equal(U1, U0)  # every sample still stepped exactly once, on the same gains
+    np.testing.assert_array_equal(Y1, Y0)
+    assert crc_after == crc_before == gain_set(art).crc32
+    total = sum(len(c) for c in injected)
+    starts = sum(c.count(0xFD) + c.count(0xFE) for c in injected)
+    assert 10_000 < total < 65_535 and starts > 5
+    assert status.errors_count1 == total  # bytes that were not part of an accepted frame: exactly the garbage
+    assert 1 <= status.errors_comm <= starts  # bogus frames begun by a start byte, refused
+    assert status.errors_count2 == 0  # no receive overrun on the UART
+
+
+def test_qemu_scenarios_refuse_mismatched_links_in_one_line(pend, tmp_path):
+    with pytest.raises(ScenarioError, match="board applies to controller"):
+        scenario(pend, {"kind": "mavlink"}, controller="firmware", board="netduinoplus2")
+    with pytest.raises(ScenarioError, match="board must be one of"):
+        scenario(pend, {"kind": "mavlink"}, controller="qemu", board="stm32f4-discovery")
+    udp = run_scenario_error(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, controller="qemu"))
+    assert isinstance(udp, TransportError) and 'url = "tcp:HOST:PORT"' in str(udp)
+    fd = run_scenario_error(scenario(pend, {"interface": "slcan", "channel": "socket://127.0.0.1:1", "fd": True},
+                                     controller="qemu"))
+    assert isinstance(fd, TransportError) and "classic frames only" in str(fd)
+    uart = run_scenario_error(scenario(pend, {"kind": "mavlink", "url": "tcp:127.0.0.1:1"}, controller="firmware"))
+    assert isinstance(uart, TransportError) and 'needs controller = "qemu"' in str(uart)
+    res = run_cli("firmware", "run", pend, "--target", "cortex-m4", "--mavlink", "udpin:127.0.0.1:1")
+    assert res.code == 2 and "expected tcp:HOST:PORT" in res.err and res.err.count("\n") == 1
+
+
+def run_scenario_error(sc) -> Exception:
+    with pytest.raises((TransportError, FirmwareError)) as info:
+        run_scenario(sc)
+    return info.value
+
+
+def test_the_image_refuses_bad_options_with_its_own_error_line(elf):
+    image = QemuUart(elf, board="mps2-an386", protocol="slcan", port=free_tcp_port(), options=["bitrate=5"],
+                     lifetime_s=60)
+    try:
+        with pytest.raises(FirmwareError, match="refused its options: unknown slcan option"):
+            image.start()
+        assert image.exit_status() is not None  # QEMU stopped, not left running
+    finally:
+        image.close()
