@@ -81,7 +81,7 @@ def _links(art, *, board: str):
 
 def _peer(kind: str, *, art, transport, board: str, stack):
     """Start the controller of a link the way the bridge does (host process, or the image in QEMU)."""
-    from gainlink.hil.run.controller import ControllerProcess, controller_argv, qemu_peer
+    from gainlink.hil.loop.controller import ControllerProcess, controller_argv, qemu_peer
 
     if kind == "qemu":
         peer = qemu_peer(artifact=art, transport=transport, board=board, elf=None, duration_s=600)
@@ -126,7 +126,7 @@ def measure_round_trips(art, *, boards: list[str], steps: int) -> dict:
 
 def realtime_scenario(art_path: Path, transport: dict, *, controller: str, board: str, rate_hz: float,
                       duration: float):
-    from gainlink.hil.run.scenario import parse_scenario
+    from gainlink.hil.loop.scenario import parse_scenario
 
     data = {"name": f"rt_{rate_hz:g}hz", "artifact": str(art_path), "duration": duration, "mode": "realtime",
             "controller": controller, "period": 1.0 / rate_hz, "peer_timeout": 5.0, "seed": 3, "shadow": False,
@@ -140,7 +140,7 @@ def realtime_scenario(art_path: Path, transport: dict, *, controller: str, board
 def highest_rate(art, art_path: Path, *, kind: str, cfg: dict, board: str, p50_us: float,
                  seconds: float) -> dict:
     """The highest of RATES_HZ whose realtime run of ``seconds`` has no deadline miss."""
-    from gainlink.hil.run.bridge import run_scenario
+    from gainlink.hil.loop.bridge import run_scenario
 
     tried, skipped = [], []
     for rate in RATES_HZ:

@@ -20,8 +20,8 @@ from gainlink.errors import FirmwareError, ScenarioError, TransportError
 from gainlink.firmware.build import build
 from gainlink.firmware.uart import QemuUart, free_tcp_port
 from gainlink.hil.links.mavlink import MavlinkTransport
-from gainlink.hil.run.bridge import run_scenario
-from gainlink.hil.run.scenario import parse_scenario
+from gainlink.hil.loop.bridge import run_scenario
+from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession

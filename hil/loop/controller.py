@@ -26,10 +26,9 @@ from gainlink.errors import FirmwareError
 from gainlink.firmware.capture import StderrCapture
 
 from ..links.can_firmware import firmware_can_executable
+from .scenario import CONTROLLERS
 
 log = logging.getLogger(__name__)
-
-CONTROLLERS = ("firmware", "reference", "qemu")
 
 #: Upper bound of a QEMU peer's life beyond the run's own duration (QEMU is stopped at the end anyway).
 QEMU_SLACK_S = 600.0

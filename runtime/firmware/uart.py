@@ -240,7 +240,7 @@ class QemuUart:
         meaning = EXIT_CODES.get(code, f"status {code}") if code is not None else "still running"
         return f"the image stopped before it was ready ({meaning}){self._stderr_hint()}"
 
-    # -- the bridge's peer interface (as hil.run.controller.ControllerProcess) -------------------------
+    # -- the bridge's peer interface (as hil.loop.controller.ControllerProcess) -------------------------
     def check_artifact(self, sha256: str) -> None:
         """Fail unless the banner names the artifact ``sha256`` (an image built for other gains)."""
         m = re.search(r"sha256:([0-9a-f]{64})", self.banner)
