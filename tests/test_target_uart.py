@@ -205,3 +205,29 @@ def test_the_image_refuses_bad_options_with_its_own_error_line(elf):
         assert image.exit_status() is not None  # QEMU stopped, not left running
     finally:
         image.close()
+
+
+def test_the_images_slcan_adapter_answers_as_the_lawicel_protocol_says(elf):
+    """Commands and their answers by the protocol (CR: ok, BEL: refused), through the image's real UART."""
+    import socket
+    import time
+
+    exchanges = [
+        (b"V\r", b"V1013\r"), (b"N\r", b"NGL00\r"), (b"F\r", b"F00\r"), (b"Z0\r", b"\r"), (b"Z1\r", b"\a"),
+        (b"S6\r", b"\r"), (b"S9\r", b"\a"), (b"s031C\r", b"\r"),
+        (b"t1108" + b"00" * 8 + b"\r", b"\a"),  # a frame before the channel is open
+        (b"O\r", b"\r"), (b"O\r", b"\a"), (b"S6\r", b"\a"),  # open twice, bit rate while open
+        (b"t7FF0\r", b"z\r"), (b"T1FFFFFFF2ABCD\r", b"Z\r"), (b"r1230\r", b"z\r"),  # foreign id, extended, remote
+        (b"t800" b"0\r", b"\a"), (b"t1109" + b"00" * 9 + b"\r", b"\a"), (b"t1102AB\r", b"\a"),  # id > 0x7FF, dlc 9, short
+        (b"d1108" + b"00" * 8 + b"\r", b"\a"), (b"X" * 40 + b"\r", b"\a"), (b"?\r", b"\a"),  # CAN FD, over-long, unknown
+        (b"C\r", b"\r"),
+    ]
+    with QemuUart(elf, board="mps2-an386", protocol="slcan", port=free_tcp_port(), lifetime_s=120) as image:
+        with socket.create_connection((image.host, image.port), timeout=10) as s:
+            for sent, expected in exchanges:
+                s.sendall(sent)
+                got = b""
+                deadline = time.monotonic() + 10
+                while len(got) < len(expected) and time.monotonic() < deadline:
+                    got += s.recv(len(expected) - len(got))
+                assert got == expected, (sent, got)
