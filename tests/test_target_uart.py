@@ -231,3 +231,24 @@ def test_the_images_slcan_adapter_answers_as_the_lawicel_protocol_says(elf):
                 while len(got) < len(expected) and time.monotonic() < deadline:
                     got += s.recv(len(expected) - len(got))
                 assert got == expected, (sent, got)
+
+
+def test_a_signed_link_to_the_image_runs_and_unsigned_samples_are_refused(pend, elf, tmp_path):
+    from gainlink.mavlink.signing import read_key
+
+    key_file = tmp_path / "hil.key"
+    assert run_cli("mavlink", "keygen", key_file).code == 0
+    res = run_scenario(scenario(pend, {"kind": "mavlink", "url": f"tcp:127.0.0.1:{free_tcp_port()}",
+                                       "signing_key": str(key_file)}, controller="qemu", duration=0.5))
+    assert res.complete, res.reason
+    assert res.info["transport"]["signed"] and res.info["transport"]["unsigned_or_bad_answers"] == 0
+    assert "signing=on" in res.info["controller"]["ready"]  # the key went into the image's flash
+    art = load(pend)
+    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), signing_key=read_key(key_file),
+                  lifetime_s=120) as image:
+        unsigned = MavlinkTransport(url=image.url, controller_url="", n_inputs=art.m, n_outputs=art.p,
+                                    n_refs=art.q, ts=art.Ts)
+        with unsigned:
+            unsigned.send_frames(unsigned.encode_reset(seq=0))
+            unsigned.send_frames(unsigned.encode_sample(seq=1, y=np.zeros(art.p), r=np.zeros(art.q)))
+            assert unsigned.receive_command(timeout=3.0) is None  # refused, never stepped

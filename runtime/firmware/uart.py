@@ -276,6 +276,16 @@ class QemuUart:
         tail = self._stderr.read().decode(errors="replace").strip().splitlines()[-lines:]
         return " | ".join(t.strip() for t in tail)
 
+    def counters(self) -> dict[str, int]:
+        """Exit-summary counters, as the host apps write them: none (the image reports its counters over its
+        link: MAVLink SYS_STATUS, slcan ``F``)."""
+        return {}
+
+    def stderr_bytes(self) -> dict[str, int]:
+        """How much QEMU wrote to stderr (all of it kept)."""
+        self._stderr.seek(0, os.SEEK_END)
+        return {"total": self._stderr.tell(), "not_kept": 0}
+
     def _stderr_hint(self) -> str:
         text = self.stderr_tail()
         return f": {text}" if text else ""
