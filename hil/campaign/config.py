@@ -37,7 +37,7 @@ Example (``examples/campaigns/`` has complete ones)::
     overshoot_below = 25.0            # percent
     saturated_at_most = 1.0           # s: the longest stretch of a saturated command
     iae_below = 3.0                   # every tracked output
-    twin_deviation_below = 0.01       # max |y - y_twin| (outputs' units) against the float64 twin
+    twin_deviation_below = 0.01       # max |y - y_twin| / excursion of y_twin against the float64 twin
 
 Paths are dotted keys into the base scenario (``plant.parameters.M``, ``initial_state.theta``,
 ``reference.r_x.value``, ``plant.parameters."spring.c"``, ``plant.perturb."A[3][2]"``: a key holding dots

@@ -32,6 +32,7 @@ from .criteria import evaluate
 from .plan import CampaignPlan, describe_axes
 
 PERCENTILES = (5, 25, 50, 75, 95)
+MAX_POINT_LINES = 30
 
 
 def _row(point: Any, record: dict, criteria: Any) -> dict:
@@ -95,6 +96,7 @@ def campaign_csv(plan: CampaignPlan, rows: list[dict]) -> str:
     tracked = sorted({k for r in rows for k in r.get("metrics", {}).get("tracked", {})})
     outs = sorted({k for r in rows for k in r.get("metrics", {}).get("outputs_final", {})})
     head = ["index", "id", "status", "reasons", *axes, "seed", "complete", "stable", "longest_saturation_s",
+            "twin_output_deviation", "twin_command_deviation",
             *[f"{t}_{k}" for t in tracked for k in ("iae", "overshoot_pct", "settling_time_s")],
             *[f"{o}_final" for o in outs], "artifact_sha256"]
     buf = io.StringIO()
@@ -104,6 +106,7 @@ def campaign_csv(plan: CampaignPlan, rows: list[dict]) -> str:
         m, q = r.get("metrics", {}), r.get("measures", {})
         w.writerow([r["index"], r["id"], r["status"], "; ".join(r["reasons"]), *[_flat(r["values"][a]) for a in axes],
                     r["seed"], r.get("complete", ""), q.get("stable", ""), q.get("longest_saturation_s", ""),
+                    _num(q.get("twin_output_deviation")), _num(q.get("twin_command_deviation")),
                     *[_num(m.get("tracked", {}).get(t, {}).get(k)) for t in tracked
                       for k in ("iae", "overshoot_pct", "settling_time_s")],
                     *[_num(m.get("outputs_final", {}).get(o)) for o in outs], r["artifact_sha256"] or ""])
@@ -145,10 +148,12 @@ def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, ou
              f"{counts['fail']} failed, {counts['error']} errors" + (f", {counts['missing']} missing" if counts["missing"] else "")]
     if len(points) > 1:
         lines.append("  per grid point:")
-        for p in points:
+        for p in points[:MAX_POINT_LINES]:
             vals = ", ".join(f"{k}={_short(v)}" for k, v in p["values"].items())
             iae = "" if p["iae_median"] is None else f"  IAE median {p['iae_median']:.4g} p95 {p['iae_p95']:.4g}"
             lines.append(f"    {vals}: {p['pass']}/{p['runs']} passed ({100 * p['pass_fraction']:.1f}%){iae}")
+        if len(points) > MAX_POINT_LINES:
+            lines.append(f"    ... {len(points) - MAX_POINT_LINES} more grid points in campaign.json (points)")
     failed = Counter(k for r in rows for k in r["failed"])
     if failed:
         lines.append("  runs failing each criterion: " + ", ".join(f"{k} {v}" for k, v in failed.most_common()))
@@ -210,7 +215,7 @@ def envelopes_png(plan: CampaignPlan, rows: list[dict], store: Any) -> bytes:
         ax.set_ylabel(names[j] if j < len(names) else f"{key}{j}")
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=7)
-    axes[-1, 0].set_xlabel("t [s]")
+    axes[-1, 0].set_xlabel("t (the plant's time unit)")
     fig.suptitle(f"{plan.campaign.name}: outputs and commands over {len(keep)} runs")
     return _png(fig)
 
@@ -241,12 +246,15 @@ def scatter_png(plan: CampaignPlan, rows: list[dict]) -> bytes:
             ax.text(0.5, 0.5, "no numeric axis" if name is None else "no finished run", ha="center",
                     transform=ax.transAxes)
             continue
-        for status, style in (("pass", dict(color="C0", marker="o", s=10, alpha=0.6)),
-                              ("fail", dict(color="C3", marker="x", s=22, alpha=0.9))):
+        for status, style in (("fail", dict(color="C3", marker="x", s=22, alpha=0.8)),
+                              ("pass", dict(color="C0", marker="o", s=12, alpha=0.7))):
             pts = [(r["values"][name], _tracked_iae(r)) for r in done if r["status"] == status]
             if pts:
                 x, y = zip(*pts)
                 ax.scatter(x, y, label=f"{status} ({len(pts)})", **style)
+        iae = [_tracked_iae(r) for r in done]
+        if min(iae) > 0 and max(iae) > 20 * min(iae):
+            ax.set_yscale("log")
         ax.set_xlabel(name)
         ax.set_ylabel("IAE (sum over tracked outputs)")
         ax.grid(True, alpha=0.3)

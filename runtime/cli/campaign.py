@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from pathlib import Path
 
 from .hil import _progress_bar
+
+log = logging.getLogger("gainlink")
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -15,6 +18,13 @@ def _run(args: argparse.Namespace) -> int:
     campaign = load_campaign(args.campaign)
     with _progress_bar(not args.no_progress) as bar:
         callback = None
+        if bar is None and not args.no_progress:  # not a terminal: a line per tenth of the campaign
+            step = max(1, campaign.size // 10)
+
+            def callback(done: int, total: int, record: dict) -> None:
+                if done % step == 0 or done == total:
+                    log.info("campaign %s: %d/%d runs done", campaign.name, done, total)
+
         if bar is not None:
             task = bar.add_task(f"campaign {campaign.name}", total=campaign.size)
             failed = [0]
