@@ -8,6 +8,7 @@ stage, reset) plus :meth:`NativeLoop.run`, which hands a whole block of samples 
 from __future__ import annotations
 
 import ctypes
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,8 +25,10 @@ STATUS = {
 }
 
 
+@functools.lru_cache(maxsize=None)
 def gains_struct(*, n: int, m: int, p: int, q: int) -> type[ctypes.Structure]:
-    """A ctypes mirror of the C ``gl_gains_t`` for these dimensions."""
+    """A ctypes mirror of the C ``gl_gains_t`` for these dimensions (one class per shape: ctypes keeps the
+    POINTER type of every Structure class it meets forever, so a class per loop would leak one per run)."""
     qa = max(q, 1)
     f = ctypes.c_float
 
