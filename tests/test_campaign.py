@@ -189,6 +189,24 @@ def test_stability_is_judged_from_the_end_of_the_error():
     assert growth(1e-9 * np.exp(0.3 * t) + np.exp(-t))[0] is True  # grows, but below 2 % of its peak
 
 
+def test_verdicts_name_each_failed_criterion():
+    from gainlink.hil.campaign.config import Criteria
+    from gainlink.hil.campaign.criteria import evaluate
+
+    record = {"metrics": {"tracked": {"r_x": {"settling_time_s": 7.0, "overshoot_pct": 12.0, "iae": 2.0}}},
+              "measures": {"stable": True, "output_min": {"theta": -0.3}, "output_max": {"theta": 0.8},
+                           "longest_saturation_s": 0.4, "twin_output_deviation": 0.02}}
+    strict = Criteria(stable=True, bounds={"theta": (-0.7, 0.7)}, settled_within=6.0, overshoot_below=10.0,
+                      saturated_at_most=0.5, iae_below=3.0, twin_deviation_below=0.01)
+    assert [k for k, _ in evaluate(strict, record)] == ["bounds", "settled_within", "overshoot_below",
+                                                       "twin_deviation_below"]
+    loose = Criteria(stable=True, bounds={"theta": (-1.0, 1.0)}, settled_within=8.0, overshoot_below=20.0,
+                     saturated_at_most=0.5, iae_below=3.0, twin_deviation_below=0.05)
+    assert evaluate(loose, record) == []
+    record["measures"].pop("twin_output_deviation")  # a run without a twin cannot pass a twin criterion
+    assert [k for k, _ in evaluate(loose, record)] == ["twin_deviation_below"]
+
+
 # --- LocalCluster --------------------------------------------------------------------------------
 
 
