@@ -7,6 +7,7 @@ reported as ``gainlink hil run`` would (``report.json``, plots, ``summary.txt``)
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -50,6 +51,7 @@ def show_run(out: str | Path, run: str, *, report: str | Path | None = None, plo
         raise CampaignError(f"campaign {out}: the artifact of run {point['id']} is missing ({exc})") from None
     scenario = _scenario(point["scenario"], artifact_path=path, seed=point["seed"], blobs=store.blobs(),
                          kind=point["kind"])
+    scenario = dataclasses.replace(scenario, name=f"{out.name} run {point['index']} ({point['id']})")
     try:
         result = run_point(point["kind"], artifact, scenario)
     except GainlinkError as exc:
