@@ -2,8 +2,10 @@
 
 Two phases, each one long run with one bridge and one firmware process (the pendulum redesigned at 1 kHz,
 the nonlinear cart-pendulum FMU):
-  1. lockstep at full speed for --lockstep-minutes (default 30): the number of steps is set from the speed of
-     a short calibration run in the same process (the baseline: `speed_vs_calibration`);
+  1. lockstep at full speed for --lockstep-minutes (default 30): the run is planned for three times the steps a
+     short calibration run in the same process says fit (the baseline: `speed_vs_calibration`; at most 10
+     million) and ended on time by stopping the firmware with SIGTERM (it exits cleanly with its summary; the
+     one sample then in flight is `lost_at_stop`, not a loss of the link);
   2. real time at 1 kHz for --realtime-minutes (default 30), SCHED_FIFO and PM QoS when permitted.
 Every --sample-s (default 10) seconds the resident memory (RSS) of the bridge (this process) and of the
 firmware process is sampled; the JSON gives the samples and each process's least-squares slope (KiB/min,
@@ -28,6 +30,7 @@ import json
 import logging
 import os
 import random
+import signal
 import sys
 import tempfile
 import threading
@@ -136,16 +139,22 @@ def scenario(name: str, *, gains: Path, exe: Path, fmu: Path, transport: dict, m
     return data
 
 
-def books(res, *, mode: str) -> dict:
-    """Every sample and frame accounted for, from the report (bridge side) and the firmware's exit summary."""
+def books(res, *, mode: str, stopped: bool = False) -> dict:
+    """Every sample and frame accounted for, from the report (bridge side) and the firmware's exit summary.
+
+    ``stopped``: the phase was ended by stopping the firmware; the last sample was then in flight (sent, not
+    answered: ``lost_at_stop``), which is not a loss of the link.
+    """
     m, info = res.metrics, res.info["transport"]
     c = m.get("controller", {}).get("counters", {})
     got = int(res.trace.got.sum())
-    out = {"steps": m["steps"], "answered": got, "lost": m["lost"], "late": m["late"],
-           "unaccounted_bridge": m["steps"] - got - m["lost"],
-           "frames_sent": info.get("frames_sent"), "firmware_counters": c}
+    at_stop = int(stopped and not res.complete and not res.trace.got[-1])
+    out = {"steps": m["steps"], "answered": got, "lost": m["lost"] - at_stop, "lost_at_stop": at_stop,
+           "late": m["late"], "unaccounted_bridge": m["steps"] - got - m["lost"],
+           "frames_sent": info.get("frames_sent"), "firmware_counters": c, "end": res.reason or "complete"}
     if c:
-        out["unaccounted_firmware"] = info["frames_sent"] - c["used"] - c["dropped"]
+        in_flight = max(0, info["frames_sent"] - c["used"] - c["dropped"]) if at_stop else 0
+        out["unaccounted_firmware"] = info["frames_sent"] - c["used"] - c["dropped"] - min(in_flight, 1)
         out["firmware_steps_vs_bridge_steps"] = c["steps"] - m["steps"]
     if mode == "realtime":
         out["overruns"] = m.get("overruns")
@@ -173,10 +182,28 @@ def explain_misses(res) -> dict:
             "first_misses_s": [round(float(tr.t[k]), 3) for k in missed[:10]]}
 
 
-def run_phase(name: str, data: dict, *, sample_s: float) -> tuple[object, dict]:
+def _stop_firmware_after(seconds: float) -> threading.Timer:
+    """SIGTERM our firmware child after ``seconds`` (ends a lockstep phase on time)."""
+    def stop() -> None:
+        pid = firmware_pid()
+        if pid is not None:
+            os.kill(pid, signal.SIGTERM)
+
+    timer = threading.Timer(seconds, stop)
+    timer.daemon = True
+    timer.start()
+    return timer
+
+
+def run_phase(name: str, data: dict, *, sample_s: float, stop_after_s: float | None = None) -> tuple[object, dict]:
     with Sampler(sample_s) as sampler:
+        timer = _stop_firmware_after(stop_after_s) if stop_after_s else None
         t0 = time.perf_counter()
-        res = run_scenario(parse_scenario(data))
+        try:
+            res = run_scenario(parse_scenario(data))
+        finally:
+            if timer is not None:
+                timer.cancel()
         wall = time.perf_counter() - t0
     rows = sampler.rows
     m = res.metrics
@@ -195,7 +222,7 @@ def run_phase(name: str, data: dict, *, sample_s: float) -> tuple[object, dict]:
         "firmware_rss_kib_first_last": [next((r["firmware_rss_kib"] for r in rows if r["firmware_rss_kib"]), None),
                                         next((r["firmware_rss_kib"] for r in reversed(rows) if r["firmware_rss_kib"]),
                                              None)],
-        "books": books(res, mode=data["mode"]),
+        "books": books(res, mode=data["mode"], stopped=stop_after_s is not None),
         "latency_us": m["latency_us"], "period_jitter_us": m["period_jitter_us"],
         "controller_stderr_bytes": m.get("controller", {}).get("stderr_bytes"),
         "theta_final": m["outputs_final"].get("theta"),
@@ -234,9 +261,10 @@ def main(argv: list[str] | None = None) -> int:
         rate = cal.metrics["steps"] / (time.perf_counter() - t0)
         out["calibration"] = {"steps": cal.metrics["steps"], "steps_per_s": round(rate, 1)}
         if args.lockstep_minutes > 0:
-            steps = int(rate * args.lockstep_minutes * 60)
+            steps = min(int(3 * rate * args.lockstep_minutes * 60), 10_000_000)
             _, ph = run_phase("lockstep", scenario("soak_lockstep", mode="lockstep", duration=steps * art.Ts,
-                                                   **common), sample_s=args.sample_s)
+                                                   **common), sample_s=args.sample_s,
+                              stop_after_s=args.lockstep_minutes * 60)
             ph["speed_vs_calibration"] = round(ph["steps_per_s"] / rate, 3)
             out["lockstep"] = ph
         if args.realtime_minutes > 0:
@@ -246,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
             out["realtime"] = ph
     phases = [out[k] for k in ("lockstep", "realtime") if k in out]
     out["summary"] = {
-        "complete": all(p["complete"] for p in phases),
+        "complete": all(p["complete"] or p["books"]["lost_at_stop"] for p in phases),
         "unaccounted_samples": sum(abs(p["books"]["unaccounted_bridge"]) + abs(p["books"].get("unaccounted_firmware", 0))
                                    for p in phases),
         "firmware_rss_slope_kib_per_min": {k: out[k]["firmware_rss_slope_kib_per_min"] for k in ("lockstep", "realtime")
