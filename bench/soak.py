@@ -59,9 +59,10 @@ def rss_kib(pid: int | str = "self") -> float | None:
     """Resident set size of a process in KiB (None when it is gone)."""
     try:
         with open(f"/proc/{pid}/statm") as fh:
-            return int(fh.read().split()[1]) * PAGE_KIB
+            pages = int(fh.read().split()[1])
     except (OSError, IndexError, ValueError):
         return None
+    return pages * PAGE_KIB if pages else None  # 0: an exited process not yet reaped
 
 
 def firmware_pid(name: str = "gainlink_can") -> int | None:
