@@ -53,5 +53,9 @@ class ScenarioError(GainlinkError, ValueError):
     """A HIL scenario file is malformed."""
 
 
+class VerificationError(GainlinkError, RuntimeError):
+    """An implementation of the control law does not do what the float64 law does (one-step check)."""
+
+
 class ParameterError(GainlinkError, RuntimeError):
     """A parameter upload failed (refused, not verified, or rolled back)."""

@@ -16,11 +16,15 @@ from .artifact import Artifact
 
 @dataclass(frozen=True)
 class StepResult:
-    """What one step returns: the command, which inputs saturated, and whether the sample was refused."""
+    """What one step returns: the command, which inputs saturated, and whether the sample was refused.
+
+    ``v`` is the unsaturated command (equal to ``u`` on a refused sample).
+    """
 
     u: np.ndarray
     saturated: np.ndarray
     fault: bool
+    v: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -59,7 +63,7 @@ class ReferenceLoop:
         y = np.asarray(y, dtype=float).reshape(a.p)
         r = np.zeros(a.q) if r is None else np.asarray(r, dtype=float).reshape(a.q)
         if not (np.all(np.isfinite(y)) and np.all(np.isfinite(r))):
-            return StepResult(u=self.safe_u.copy(), saturated=np.zeros(a.m, dtype=bool), fault=True)
+            return StepResult(u=self.safe_u.copy(), saturated=np.zeros(a.m, dtype=bool), fault=True, v=self.safe_u.copy())
         dy = y - a.y_op
         if a.observer_form == "current":
             xc = self.xh + a.M @ (dy - a.Cd @ self.xh)
@@ -81,7 +85,7 @@ class ReferenceLoop:
         else:
             xh = a.Ad @ self.xh + a.Bd @ du + a.L @ (dy - a.Cd @ self.xh - a.Dd @ du)
         self.xh, self.z = xh, z
-        return StepResult(u=u, saturated=saturated, fault=False)
+        return StepResult(u=u, saturated=saturated, fault=False, v=v)
 
     def run(self, Y: np.ndarray, R: np.ndarray | None = None) -> Trace:
         """Run one step per row of ``Y`` (N, p) and ``R`` (N, q) from the current state."""

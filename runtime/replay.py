@@ -25,6 +25,7 @@ import numpy as np
 from .artifact import Artifact
 from .errors import DataError, GainlinkError
 from .fileio import atomic_write_text, read_user_file
+from .onestep import OneStepCheck, one_step_check  # noqa: F401 - the replay-level API
 from .reference import ReferenceLoop, Trace
 
 Engine = Callable[[Artifact, np.ndarray, np.ndarray], Trace]
@@ -149,10 +150,9 @@ def replay(artifact: Artifact, input_path: str | Path, output_path: str | Path, 
     return trace
 
 
-
 @dataclass(frozen=True)
 class Comparison:
-    """How far one replay output is from another (usually the float64 reference's)."""
+    """How far one replay output is from another, open loop (information, see :func:`one_step_check`)."""
 
     steps: int
     max_abs_u: float
@@ -161,27 +161,41 @@ class Comparison:
     fault_mismatches: int
 
 
-def compare_outputs(artifact: Artifact, trace: Trace, other_path: str | Path) -> Comparison:
-    """Compare ``trace`` with a replay output CSV written earlier from the same input.
+def read_trace(path: str | Path, artifact: Artifact) -> Trace:
+    """Read a replay output CSV (``u``, ``sat``, ``fault``, ``xh``, ``z`` columns) back into a :class:`Trace`.
 
-    The relative error of a command is taken against the input's limit span, the scale on which an
-    actuator error matters.
+    Raises
+    ------
+    DataError
+        The file is not a replay output for this artifact's dimensions.
     """
-    other_path = Path(other_path)
-    text = read_user_file(other_path, what="comparison file", error=DataError)
+    path = Path(path)
+    text = read_user_file(path, what="comparison file", error=DataError)
     rows = list(csv.DictReader(io.StringIO(text)))
-    N, m = trace.u.shape
-    if len(rows) != N:
-        raise DataError(f"comparison file {other_path} has {len(rows)} samples, this replay {N}")
+    a = artifact
     try:
-        U = np.array([[float(r[f"u{i}"]) for i in range(m)] for r in rows])
-        S = np.array([[int(r[f"sat{i}"]) for i in range(m)] for r in rows], dtype=bool)
-        F = np.array([int(r["fault"]) for r in rows], dtype=bool)
+        def cols(prefix: str, count: int, kind=float) -> np.ndarray:
+            return np.array([[kind(r[f"{prefix}{i}"]) for i in range(count)] for r in rows]).reshape(len(rows), count)
+
+        return Trace(u=cols("u", a.m), saturated=cols("sat", a.m, int).astype(bool), xh=cols("xh", a.n),
+                     z=cols("z", a.q), fault=np.array([int(r["fault"]) for r in rows], dtype=bool))
     except (KeyError, TypeError, ValueError) as exc:
-        raise DataError(f"comparison file {other_path} is not a replay output (bad or missing {exc})") from None
-    diff = np.abs(trace.u - U)
+        raise DataError(f"comparison file {path} is not a replay output of artifact {a.name} "
+                        f"(bad or missing {exc})") from None
+
+
+def compare_traces(artifact: Artifact, trace: Trace, other: Trace) -> Comparison:
+    """Open-loop difference of two replays of the same input (commands relative to the limit span).
+
+    Information only: for an unstable compensator two correct implementations drift apart like
+    ``|z|^k`` (see :mod:`gainlink.compensator`); :func:`one_step_check` is the verdict.
+    """
+    N = trace.u.shape[0]
+    if other.u.shape[0] != N:
+        raise DataError(f"comparison has {other.u.shape[0]} samples, this replay {N}")
+    diff = np.abs(trace.u - other.u)
     span = artifact.u_max - artifact.u_min
     return Comparison(steps=N, max_abs_u=float(diff.max(initial=0.0)),
                       max_rel_u=float((diff / span).max(initial=0.0)),
-                      sat_mismatches=int(np.sum(trace.saturated != S)),
-                      fault_mismatches=int(np.sum(trace.fault != F)))
+                      sat_mismatches=int(np.sum(trace.saturated != other.saturated)),
+                      fault_mismatches=int(np.sum(trace.fault != other.fault)))

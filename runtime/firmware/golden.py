@@ -103,7 +103,7 @@ def random_case(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_wi
     """
     feedthrough = form == "predictor" and seed % 2 == 0
     kw = dict(n=n, m=m, p=p, q=q, form=form, anti_windup=anti_windup, feedthrough=feedthrough)
-    wide = _design(random_spec(seed, **kw))
+    wide = _design({**random_spec(seed, **kw), "implementation": {"float32_check": False}})  # sizing only
     rng = np.random.default_rng(seed + 10_000)
     Y = _signals(rng, N=N, width=p, scale=1.0)
     R = _signals(rng, N=N, width=q, scale=1.0) if q else np.zeros((N, 0))
@@ -158,6 +158,64 @@ def bounded(case: GoldenCase, *, limit: float = 1e3) -> bool:
     """
     e = case.expected
     return bool(np.all(np.abs(e.xh) < limit) and np.all(np.abs(e.z) < limit))
+
+
+def closed_loop_case(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_windup: str,
+                     N: int = 300) -> GoldenCase:
+    """A random continuous plant (:func:`gainlink.random_plants.random_spec`), designed, and a record of
+    its own closed loop (:func:`gainlink.simulate.simulate_linear`: initial state, reference, noise).
+
+    Unlike :func:`random_cases`, nothing is filtered: such designs often have an unstable compensator.
+    The limits are set below the unsaturated run's peak command (80 %, else 90 %, else wide) so the
+    record saturates during the initial transient and still stays bounded.
+    """
+    from ..random_plants import random_spec as continuous_spec
+    from ..simulate import simulate_linear
+
+    def spec(limit: float, **extra) -> dict:
+        return {**continuous_spec(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=anti_windup, u_limit=limit,
+                                  feedthrough=form == "predictor" and seed % 2 == 0), **extra}
+
+    rng = np.random.default_rng(seed + 20_000)
+    x0, ref = rng.standard_normal(n), rng.uniform(-0.5, 0.5, size=q)
+
+    def record(art: Artifact):
+        return simulate_linear(art, steps=N, x0=x0, reference=ref, noise_std=0.01, seed=seed)
+
+    free = record(_design(spec(1e6, implementation={"float32_check": False})))
+    peak = float(np.max(np.abs(free.u)))
+    for fraction in (0.8, 0.9, None):
+        art = _design(spec(1e6 if fraction is None else fraction * peak))
+        sim = record(art)
+        if np.all(np.abs(sim.y) < 10.0 * max(1.0, float(np.max(np.abs(free.y))))):
+            break
+    label = f"loop{seed}-n{n}m{m}p{p}q{q}-{form}-{anti_windup}"
+    return GoldenCase(label=label, artifact=art, Y=sim.y, R=sim.r, expected=ReferenceLoop(art).run(sim.y, sim.r))
+
+
+def closed_loop_cases(count: int = 12, *, first_seed: int = 100, N: int = 300) -> tuple[GoldenCase, ...]:
+    """``count`` :func:`closed_loop_case` designs cycling through both forms, every anti-windup mode and
+    q = 0 / q > 0, n from 2 to 8. Cached per arguments."""
+    return _closed_loop_cases(count, first_seed, N)
+
+
+@functools.lru_cache(maxsize=2)
+def _closed_loop_cases(count: int, first_seed: int, N: int) -> tuple[GoldenCase, ...]:
+    combos = list(itertools.product(FORMS, ANTI_WINDUP))
+    cases = []
+    seed = first_seed
+    while len(cases) < count:
+        i = len(cases)
+        form, aw = combos[i % len(combos)]
+        n = [3, 5, 7, 4, 6, 8][i % 6]
+        m, p = 1 + i % 2, 2 + i % 2
+        q = 0 if (aw == "none" and i % 4 == 0) else 1 + (i % min(m, p))
+        try:
+            cases.append(closed_loop_case(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=aw, N=N))
+        except (DesignError, SpecError):
+            pass  # an unlucky draw
+        seed += 1
+    return tuple(cases)
 
 
 def example_cases(examples_dir: Path, *, N: int = 600, seed: int = 7) -> tuple[GoldenCase, ...]:

@@ -1,0 +1,145 @@
+"""The one-step (resynchronised) check: correct C builds pass whatever the compensator, a bent gain fails.
+
+Designs: random continuous plants with their own closed-loop records (golden.closed_loop_cases: forms x
+anti-windup modes, q = 0 and q > 0, saturating transients). Many have an unstable compensator, for which
+an open-loop replay of two correct implementations diverges; the one-step check must still pass on the
+host build and on the Cortex-M4F image, which equal each other bit for bit.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import sys
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gainlink import artifact as artifact_mod
+from gainlink.compensator import artifact_compensator
+from gainlink.design import design
+from gainlink.engines import qemu as qemu_engine
+from gainlink.engines.native import NativeLoop, trace_from_raw
+from gainlink.firmware.golden import closed_loop_cases
+from gainlink.random_plants import random_spec
+from gainlink.reference import ReferenceLoop
+from gainlink.replay import compare_traces, format_trace, one_step_check, read_samples
+from gainlink.spec import parse_spec
+
+from conftest import run_cli
+
+GAINLINK = str(Path(sys.executable).with_name("gainlink"))
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _quiet_design_warnings():
+    logging.disable(logging.WARNING)
+    yield
+    logging.disable(logging.NOTSET)
+
+
+def jacobian_poles(a) -> np.ndarray:
+    """Compensator poles by probing the float64 law itself (an oracle independent of gainlink.compensator):
+    with limits out of reach the map (xh, z) -> next (xh, z) at y = r = 0 is linear; its columns are the
+    images of unit states."""
+    data = dict(a.data)
+    data["u_min"], data["u_max"] = [-1e300] * a.m, [1e300] * a.m
+    wide = artifact_mod.from_dict(artifact_mod.seal(data))
+    N = a.n + a.q
+    A = np.zeros((N, N))
+    for j in range(N):
+        law = ReferenceLoop(wide)
+        e = np.eye(N)[j]
+        law.xh, law.z = e[:a.n].copy(), e[a.n:].copy()
+        law.step(np.zeros(a.p), np.zeros(a.q))
+        A[:, j] = np.concatenate([law.xh, law.z])
+    return np.linalg.eigvals(A)
+
+
+def test_random_closed_loop_designs_pass_one_step_on_host_and_qemu_bit_for_bit():
+    cases = closed_loop_cases(12)
+    assert {(c.artifact.observer_form, c.artifact.anti_windup) for c in cases} == {
+        (f, aw) for f in ("predictor", "current") for aw in ("none", "clamp", "backcalc")}
+    assert any(c.artifact.q == 0 for c in cases) and any(c.artifact.q > 0 for c in cases)
+    unstable = 0
+    for case in cases:
+        a = case.artifact
+        comp = artifact_compensator(a)
+        poles = jacobian_poles(a)
+        assert np.max(np.abs(poles)) == pytest.approx(comp.spectral_radius, rel=1e-9), case.label
+        unstable += not comp.stable
+        assert case.expected.saturated.any(), f"{case.label}: the record should saturate"
+        host = NativeLoop(a).run_raw(case.Y, case.R)
+        target = qemu_engine.run_raw(a, case.Y, case.R)
+        for key in ("u", "sat", "xh", "z", "fault"):
+            assert np.array_equal(host[key].view(np.uint8), target[key].view(np.uint8)), f"{case.label}: {key}"
+        for name, raw in (("host", host), ("qemu", target)):
+            trace = trace_from_raw(raw, m=a.m)
+            check = one_step_check(a, case.Y, case.R, trace)
+            assert check.passed, f"{case.label} on {name}: {check.first_failure.describe(name)}"
+            assert max(check.worst.values()) < 0.5, f"{case.label}: errors approach the bound ({check.worst})"
+        if not comp.stable:
+            # the open-loop replay says nothing: two correct implementations drift apart
+            drift = compare_traces(a, trace, case.expected).max_rel_u
+            assert drift > 100 * check.max_rel_u or drift > 1e-3, case.label
+    print(f"{unstable} of {len(cases)} random designs have an unstable compensator")
+    assert unstable >= 3
+
+
+@pytest.fixture(scope="module")
+def unstable_artifact(tmp_path_factory) -> Path:
+    """The issue's case: 7 states, 2 inputs, 3 outputs, LQI + Kalman predictor + back-calculation; the
+    compensator has poles at |z| = 1.9 and 1.001."""
+    path = tmp_path_factory.mktemp("unstable") / "gains.json"
+    spec = random_spec(0, n=7, m=2, p=3, q=2, anti_windup="backcalc", u_limit=100.0)
+    artifact_mod.write(path, design(parse_spec(spec)).artifact)
+    return path
+
+
+def test_replay_compare_passes_an_unstable_compensator_and_reports_the_open_loop_drift(unstable_artifact, tmp_path):
+    art = unstable_artifact
+    a = artifact_mod.load(art)
+    assert np.max(np.abs(jacobian_poles(a))) > 1.5
+    inp, ref, nat = tmp_path / "in.csv", tmp_path / "ref.csv", tmp_path / "native.csv"
+    assert run_cli("simulate", art, "--steps", "1500", "--x0", "1", "0", "0", "0", "0", "0", "0", "--ref", "0.5", "0.2",
+                   "--noise", "0.01", "--out", inp).code == 0
+    assert run_cli("replay", art, "--input", inp, "--output", ref).code == 0
+    proc = subprocess.run([GAINLINK, "replay", str(art), "--input", str(inp), "--output", str(nat), "--engine",
+                           "native", "--compare", str(ref)], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert "one-step check of native (float64 law from its own state at each step): pass" in proc.stdout
+    assert "UNSTABLE" in proc.stdout and "the one-step check is the verdict" in proc.stdout
+    # the open-loop difference printed as information is large: rounding amplified like 1.9^k
+    samples = read_samples(inp, a)
+    drift = compare_traces(a, NativeLoop(a).run(samples.Y, samples.R), ReferenceLoop(a).run(samples.Y, samples.R))
+    assert drift.max_rel_u > 0.01 and f"{drift.max_rel_u:.3g} of the limit" in proc.stdout
+
+
+def test_replay_compare_fails_when_one_c_gain_is_perturbed_1e_4(unstable_artifact, tmp_path):
+    """The largest feedback gain in the C's gain struct, times (1 + 1e-4), sealed with a fresh CRC and
+    staged into the running loop: the one-step check names the step and the quantity, exit status 2."""
+    a = artifact_mod.load(unstable_artifact)
+    inp, bent = tmp_path / "in.csv", tmp_path / "bent.csv"
+    assert run_cli("simulate", unstable_artifact, "--steps", "400", "--x0", "1", "0", "0", "0", "0", "0", "0",
+                   "--ref", "0.5", "0.2", "--noise", "0.01", "--out", inp).code == 0
+    samples = read_samples(inp, a)
+    loop = NativeLoop(a)
+    gains = loop.default_gains()
+    i, j = np.unravel_index(np.argmax(np.abs(a.K)), a.K.shape)
+    gains.K[i][j] = float(np.float32(gains.K[i][j] * (1 + 1e-4)))
+    gains.crc32 = loop.crc32(gains)
+    assert loop.stage(gains) == 0  # applied at the first step
+    bent.write_text(format_trace(loop.run(samples.Y, samples.R)))
+    res = run_cli("replay", unstable_artifact, "--input", inp, "--output", tmp_path / "ref.csv", "--compare", bent)
+    assert res.code == 2
+    assert res.err.count("\n") == 1
+    assert re.match(rf"gainlink: error: one-step check failed at step \d+: (u|xh|z)\d+ of {re.escape(str(bent))} is ",
+                    res.err), res.err
+    assert " > float32 bound " in res.err
+    # the correct build passes the same check
+    good = tmp_path / "good.csv"
+    good.write_text(format_trace(NativeLoop(a).run(samples.Y, samples.R)))
+    assert run_cli("replay", unstable_artifact, "--input", inp, "--output", tmp_path / "ref.csv",
+                   "--compare", good).code == 0
