@@ -58,6 +58,8 @@ class AnalysisReport:
     state_scale_ratio: float
     badly_scaled_states: list[str]
     warnings: list[str] = field(default_factory=list)
+    compensator: dict | None = None  # the spec's designed compensator: poles, spectral radius, stability
+    float32: dict | None = None  # float32 closed-loop fidelity of that design (gainlink.fidelity)
 
     def to_dict(self) -> dict:
         """JSON-friendly dict; complex numbers become [re, im] pairs."""
@@ -207,10 +209,15 @@ def analyze(spec: PlantSpec) -> AnalysisReport:
         warnings.append(f"non-minimum-phase zeros {', '.join(_fmt(z) for z in nmp)}{origin} limit bandwidth")
 
     bandwidth, source = 0.0, "open loop"
+    checks: dict = {}
     try:
         result = design(spec)
         bandwidth = loop_bandwidth(result.margins, result.controller_poles, spec.Ts)
         source = "closed-loop (gain crossover)"
+        checks = result.artifact["checks"]
+        for w in (result.compensator.warning(), result.float32 and result.float32.warning()):
+            if w:
+                warnings.append(w)
     except GainlinkError as exc:
         warnings.append(f"design of this spec fails: {exc}")
         bandwidth = max(pole_frequency(z, discrete=discrete, Ts=spec.Ts) for z in np.linalg.eigvals(A))
@@ -233,6 +240,7 @@ def analyze(spec: PlantSpec) -> AnalysisReport:
         transmission_zeros=[complex(z) for z in zeros], nonminimum_phase_zeros=[complex(z) for z in nmp],
         bandwidth_rad_s=bandwidth, bandwidth_source=source, sample_rate_ratio=float(ratio),
         state_scale_ratio=scale_ratio, badly_scaled_states=bad_states, warnings=warnings,
+        compensator=checks.get("compensator"), float32=checks.get("float32"),
     )
 
 

@@ -244,6 +244,9 @@ def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
         if present:
             raise ArtifactError(f"{', '.join(present)} given but q = 0")
         Ci, Ki, Kaw = np.zeros((0, p)), np.zeros((m, 0)), np.zeros((0, m))
+    if "realization" in data:
+        _check_realization(data["realization"], n=n, current=form == "current",
+                           now={"Ad": Ad, "Bd": Bd, "Cd": Cd, "K": K, "L": L, "M": M})
     u_min = _vector(data, "u_min", m)
     u_max = _vector(data, "u_max", m)
     if np.any(u_min > u_max):
@@ -260,6 +263,24 @@ def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
         x_op=_vector(data, "x_op", n) if "x_op" in data else None,
         anti_windup=data["anti_windup"], observer_form=form, sha256=data["sha256"],
     )
+
+
+def _check_realization(rec: dict, *, n: int, current: bool, now: dict) -> None:
+    """The top-level matrices must be the recorded design-coordinate ones in ``xh' = T xh``."""
+    T = _matrix(rec, "T", (n, n))
+    if np.linalg.cond(T) > 1e12:
+        raise ArtifactError("realization.T is singular")
+    Ti = np.linalg.inv(T)
+    d = rec["design"]
+    if current != ("M" in d):
+        raise ArtifactError("realization.design must hold M exactly when observer_form is 'current'")
+    expect = {k: np.array(d[k], dtype=float) for k in d if k != "xh0"}
+    expect = {"Ad": T @ expect["Ad"] @ Ti, "Bd": T @ expect["Bd"], "Cd": expect["Cd"] @ Ti, "K": expect["K"] @ Ti,
+              "L": T @ expect["L"], **({"M": T @ expect["M"]} if current else {})}
+    for key, want in expect.items():
+        got = now[key]
+        if got.shape != want.shape or np.linalg.norm(got - want) > 1e-9 * max(1.0, np.linalg.norm(want)):
+            raise ArtifactError(f"artifact {key} is not realization.T applied to realization.design.{key}")
 
 
 def load(path: str | Path, *, check_hash: bool = True) -> Artifact:

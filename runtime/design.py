@@ -70,6 +70,8 @@ class DesignResult:
     closed_loop_poles: np.ndarray
     margins: list[ChannelMargin]
     warnings: list[str] = field(default_factory=list)
+    compensator: object = None  # gainlink.compensator.CompensatorStability
+    float32: object = None  # gainlink.fidelity.Float32Fidelity, None when the check was switched off
 
 
 def discretise(spec: PlantSpec) -> Discretised:
@@ -146,8 +148,6 @@ def design(spec: PlantSpec) -> DesignResult:
     if (2 * np.pi / spec.Ts) < 10 * bandwidth:
         warnings.append(f"sampling at {2 * np.pi / spec.Ts:.3g} rad/s is less than 10x the closed-loop "
                         f"bandwidth {bandwidth:.3g} rad/s")
-    for w in warnings:
-        log.warning(w)
 
     data = {
         "schema_version": SCHEMA_VERSION,
@@ -181,8 +181,59 @@ def design(spec: PlantSpec) -> DesignResult:
     if q:
         data["Ci"], data["Ki"], data["Kaw"] = matrix_to_json(Ci), matrix_to_json(Ki), matrix_to_json(Kaw)
     data.update(operating_point_keys(spec, u_min=u_min, u_max=u_max))
+    data, compensator, fidelity = implement(data, spec.implementation or {}, warnings)
+    for w in warnings:
+        log.warning(w)
     return DesignResult(artifact=seal(data), controller_poles=ctrl_poles, observer_poles=obs_poles,
-                        closed_loop_poles=cl_poles, margins=margins, warnings=warnings)
+                        closed_loop_poles=cl_poles, margins=margins, warnings=warnings, compensator=compensator,
+                        float32=fidelity)
+
+
+def implement(data: dict, implementation: dict, warnings: list[str]):
+    """Apply the spec's ``[implementation]`` choices to a designed artifact dict and record their checks.
+
+    The estimate is put in the chosen realisation (:mod:`gainlink.realization`), then the compensator's
+    stability (:mod:`gainlink.compensator`) and, unless ``float32_check = false``, the float32 closed-loop
+    fidelity (:mod:`gainlink.fidelity`) are added to ``checks``, with their warnings.
+
+    Returns
+    -------
+    tuple
+        ``(data, CompensatorStability, Float32Fidelity or None)``; ``data`` is not sealed.
+    """
+    from .artifact import from_dict
+    from .compensator import artifact_compensator
+    from .fidelity import float32_fidelity
+    from .realization import REALIZATIONS, apply, transformation
+
+    kind = implementation.get("realization", "as_designed")
+    if kind not in REALIZATIONS:
+        raise SpecError(f"implementation.realization must be one of {', '.join(REALIZATIONS)}, not {kind!r}")
+    check = implementation.get("float32_check", True)
+    if not isinstance(check, bool):
+        raise SpecError(f"implementation.float32_check must be true or false, not {check!r}")
+    if kind != "as_designed":
+        a = from_dict(seal(data))
+        T = transformation(kind, Ad=a.Ad, Bd=a.Bd, Cd=a.Cd, Dd=a.Dd, K=a.K, L=a.L, M=a.M, form=a.observer_form)
+        data = apply(data, kind=kind, T=T)
+    data = dict(data, checks=dict(data["checks"]))
+    a = from_dict(seal(data))
+    compensator = artifact_compensator(a)
+    data["checks"]["compensator"] = compensator.to_dict()
+    if not compensator.stable:
+        warnings.append(compensator.warning())
+    fidelity = None
+    if check:
+        fidelity = float32_fidelity(a)
+        data["checks"]["float32"] = fidelity.to_dict()
+        if not fidelity.ok:
+            better = None
+            if kind == "as_designed":
+                T = transformation("balanced", Ad=a.Ad, Bd=a.Bd, Cd=a.Cd, Dd=a.Dd, K=a.K, L=a.L, M=a.M,
+                                   form=a.observer_form)
+                better = float32_fidelity(from_dict(seal(apply(data, kind="balanced", T=T)))).max_rel_u
+            warnings.append(fidelity.warning(kind, balanced=better))
+    return data, compensator, fidelity
 
 
 def augment(d: Discretised, Ci: np.ndarray, Ts: float) -> tuple[np.ndarray, np.ndarray]:

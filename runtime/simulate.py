@@ -12,6 +12,7 @@ import numpy as np
 
 from .artifact import Artifact
 from .errors import DataError
+from .realization import design_plant
 from .reference import ReferenceLoop
 
 
@@ -56,17 +57,18 @@ def simulate_linear(artifact: Artifact, *, steps: int, x0: np.ndarray | None = N
     x = np.zeros(a.n) if x0 is None else np.asarray(x0, float).reshape(a.n)
     r = a.r_op if reference is None else np.asarray(reference, float).reshape(a.q)
     rng = np.random.default_rng(seed)
+    Ad, Bd, Cd, Dd = design_plant(a)  # x0 is a plant state in the design's coordinates
     loop = ReferenceLoop(a)
     T, X, Y, R, U = (np.empty(steps), np.empty((steps, a.n)), np.empty((steps, a.p)),
                      np.empty((steps, a.q)), np.empty((steps, a.m)))
     du_prev = np.zeros(a.m)
     for k in range(steps):
         # y depends on the command applied during this sample; with Dd != 0 use the previous one
-        y = a.y_op + a.Cd @ x + a.Dd @ du_prev + noise_std * rng.standard_normal(a.p)
+        y = a.y_op + Cd @ x + Dd @ du_prev + noise_std * rng.standard_normal(a.p)
         u = loop.step(y, r).u
         T[k], X[k], Y[k], R[k], U[k] = k * a.Ts, x, y, r, u
         du_prev = u - a.u_op
-        x = a.Ad @ x + a.Bd @ du_prev
+        x = Ad @ x + Bd @ du_prev
     return Simulation(t=T, x=X, y=Y, r=R, u=U)
 
 

@@ -24,7 +24,7 @@ NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 SIGNAL_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 TOP_KEYS = {"name", "Ts", "discretization", "description", "plant", "controller", "integral", "observer", "limits",
-            "operating_point"}
+            "operating_point", "implementation"}
 PLANT_KEYS = {
     "continuous": {"kind", "A", "B", "C", "D", "states", "inputs", "outputs"},
     "discrete": {"kind", "A", "B", "C", "D", "states", "inputs", "outputs"},
@@ -50,6 +50,7 @@ class OperatingPoint:
     u_op: np.ndarray
     y_op: np.ndarray
     x_op: np.ndarray | None = None
+IMPLEMENTATION_KEYS = {"realization", "float32_check"}
 
 
 @dataclass(frozen=True)
@@ -80,6 +81,7 @@ class PlantSpec:
     limits: dict
     pade_order: int | None = None
     operating_point: OperatingPoint | None = None
+    implementation: dict | None = None
     source_sha256: str = ""
     source: str = "<dict>"
     description: str = ""
@@ -174,11 +176,15 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     limits = _table(data, "limits", required=True)
     _no_unknown(limits, LIMITS_KEYS, "limits")
     op = _operating_point(data, states=states, inputs=inputs, outputs=outputs)
+    implementation = _table(data, "implementation", required=False)
+    if implementation is not None:
+        _no_unknown(implementation, IMPLEMENTATION_KEYS, "implementation")
 
     return PlantSpec(
         name=name, Ts=Ts, kind=kind, discretization=disc, A=A, B=B, C=C, D=D,
         states=states, inputs=inputs, outputs=outputs, controller=controller, integral=integral,
-        observer=observer, limits=limits, pade_order=pade_order, operating_point=op, source_sha256=source_sha256,
+        observer=observer, limits=limits, pade_order=pade_order, operating_point=op, implementation=implementation,
+        source_sha256=source_sha256,
         source=source, description=str(data.get("description", "")),
     )
 

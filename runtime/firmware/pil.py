@@ -22,6 +22,7 @@ import numpy as np
 
 from ..artifact import Artifact
 from ..errors import FirmwareError, PeerTimeoutError, PlantError
+from ..realization import design_plant
 from ..reference import ReferenceLoop
 from . import qemu as fwqemu
 from .build import DEFAULT_BOARD, build
@@ -56,15 +57,16 @@ class ArtifactPlant(DiscretePlant):
 
     def __init__(self, artifact: Artifact, *, x0: np.ndarray) -> None:
         self.a = artifact
+        self.Ad, self.Bd, self.Cd, self.Dd = design_plant(artifact)  # x0 is in the design's coordinates
         self.x = np.asarray(x0, dtype=float).reshape(artifact.n).copy()
         self.du_prev = np.zeros(artifact.m)
 
     def outputs(self) -> np.ndarray:
-        return self.a.y_op + self.a.Cd @ self.x + self.a.Dd @ self.du_prev
+        return self.a.y_op + self.Cd @ self.x + self.Dd @ self.du_prev
 
     def advance(self, *, u: np.ndarray) -> None:
         self.du_prev = np.asarray(u, dtype=float) - self.a.u_op
-        self.x = self.a.Ad @ self.x + self.a.Bd @ self.du_prev
+        self.x = self.Ad @ self.x + self.Bd @ self.du_prev
 
     @property
     def state(self) -> np.ndarray:
