@@ -67,7 +67,7 @@ def lockstep(gains: Path, exe: Path, fmu: Path, steps: int, *, fd: bool, busy_po
         transport["busy_poll_us"] = busy_poll_us
     art = artifact_mod.load(gains)
     scenario = parse_scenario({"name": "bench", "artifact": str(gains), "duration": steps * art.Ts,
-                               "controller": "firmware", "firmware": str(exe), "shadow": False,
+                               "controller": "firmware", "firmware": str(exe), "twin": False,
                                "plant": {"kind": "fmu", "path": str(fmu)}, "transport": transport,
                                "initial_state": {"theta": 0.1}, "step_timeout": 0.5,
                                "affinity": affinity})

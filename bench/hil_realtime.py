@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
             plant.close()
         scenario = parse_scenario({"name": "bench_rt", "artifact": str(gains), "duration": args.seconds,
                                    "mode": "realtime", "controller": "firmware", "firmware": str(exe),
-                                   "shadow": False, "sched_fifo": True, "peer_timeout": 5.0,
+                                   "twin": False, "sched_fifo": True, "peer_timeout": 5.0,
                                    "affinity": args.affinity,
                                    "plant": {"kind": "fmu", "path": str(fmu)}, "transport": transport,
                                    "initial_state": {"theta": 0.1}})

@@ -127,7 +127,7 @@ def main() -> int:
         for variant, extra in (("default", {}), ("busy_poll", {"busy_poll_us": args.busy_poll_us})):
             scen = parse_scenario({
                 "name": "bench_mavlink", "artifact": str(path), "duration": 5.0, "mode": "lockstep",
-                "controller": "firmware", "shadow": False, "seed": 1,
+                "controller": "firmware", "twin": False, "seed": 1,
                 "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]},
                 "transport": {"kind": "mavlink", "port": _free_port(), **extra}, "initial_state": {"theta": 0.1},
             }, path=Path(tmp) / "scenario.toml")

@@ -3,7 +3,9 @@
 The firmware derives its coefficient stream in double from the float32 gain set and rounds each
 coefficient once to float32 (``gl_coeffs_derive`` in ``firmware/src/gl_gains_check.c``); each step is
 then a chain of float32 fused multiply-adds over that stream in a fixed order (``gl_step_core`` in
-``firmware/src/gl_loop.c``). :class:`Float32Loop` performs the same derivation and the same chain:
+``firmware/src/gl_loop.c``: ``dy = y - y_op`` first, the feedback sum in deviations, ``u_op`` added
+once, ``du = u - u_op`` into the estimate). :class:`Float32Loop` performs the same derivation and the
+same chain:
 
 - a float32 product of two float32 numbers is exact in float64 and is rounded once;
 - ``fmaf(a, b, c)`` is ``a*b`` (exact in float64) plus ``c``, rounded to float64 and then to float32.
@@ -149,16 +151,17 @@ class Float32Loop:
         self.F = round32(_ordered_sub(Ad, Lrow, Cd))
         self.G = round32(_ordered_sub(Bd, Lrow, Dd))
         self.Ly = round32(Lrow)
-        self.safe_u = np.minimum(np.maximum(np.zeros(a.m), self.lo), self.hi)
+        self.u_op, self.y_op = _g(a.u_op), _g(a.y_op)
+        self.safe_u = np.minimum(np.maximum(self.u_op, self.lo), self.hi)
         self.current = current
         self.w = self._stream()
 
     def _stream(self) -> list[float]:
         """The coefficients in the order gl_step_core consumes them."""
         a = self.a
-        w: list[float] = []
+        w: list[float] = self.y_op.tolist()
         for i in range(a.m):
-            w += self.Kx[i].tolist() + (self.Ky[i].tolist() if self.current else []) + self.Kz[i].tolist()
+            w += [float(self.u_op[i])] + self.Kx[i].tolist() + (self.Ky[i].tolist() if self.current else []) + self.Kz[i].tolist()
             w += [float(self.lo[i]), float(self.hi[i])]
         for j in range(a.q):
             w += self.Ci[j].tolist() + [self.Ts] + (self.Kaw[j].tolist() if a.anti_windup == "backcalc" else [])
@@ -193,28 +196,31 @@ class Float32Loop:
         n, m, p, q = a.n, a.m, a.p, a.q
         mul, fma = rounding.mul, rounding.fma
         w = self.w
-        pos = 0
-        v, u, sat = [0.0] * m, [0.0] * m, [False] * m
+        dy = [fma(1.0, ys[k], -w[k]) for k in range(p)]  # y - y_op, one float32 subtraction
+        pos = p
+        v, u, du, sat = [0.0] * m, [0.0] * m, [0.0] * m, [False] * m
         for i in range(m):
-            acc = mul(w[pos], xh[0])
-            pos += 1
+            uop = w[pos]
+            acc = mul(w[pos + 1], xh[0])
+            pos += 2
             for j in range(1, n):
                 acc = fma(w[pos], xh[j], acc)
                 pos += 1
             if self.current:
                 for k in range(p):
-                    acc = fma(w[pos], ys[k], acc)
+                    acc = fma(w[pos], dy[k], acc)
                     pos += 1
             for j in range(q):
                 acc = fma(w[pos], z[j], acc)
                 pos += 1
             lo, hi = w[pos], w[pos + 1]
             pos += 2
-            v[i] = u[i] = acc
-            if acc < lo:
+            v[i] = u[i] = fma(1.0, uop, acc)  # u_op added once to the deviation sum
+            if v[i] < lo:
                 u[i], sat[i] = lo, True
-            elif acc > hi:
+            elif v[i] > hi:
                 u[i], sat[i] = hi, True
+            du[i] = fma(1.0, u[i], -uop)
         zn = list(z)
         for j in range(q):
             e = rs[j]
@@ -238,10 +244,10 @@ class Float32Loop:
                 acc = fma(w[pos], xh[j], acc)
                 pos += 1
             for k in range(m):
-                acc = fma(w[pos], u[k], acc)
+                acc = fma(w[pos], du[k], acc)
                 pos += 1
             for k in range(p):
-                acc = fma(w[pos], ys[k], acc)
+                acc = fma(w[pos], dy[k], acc)
                 pos += 1
             xn[i] = acc
         return u, v, sat, xn, zn

@@ -25,8 +25,8 @@ propagated operand bounds: twice the first-order worst case, so higher-order ter
 limits (``EPS |u|`` on a clamped command) are covered. The magnitudes per quantity:
 
 ====================  ============================================================================
-``v`` (predictor)     ``|u_op| + |K||xh| + |Ki||z|``, T = n + q
-``v`` (current)       ``|u_op| + (|K| + |K||M||Cd|)|xh| + |K||M|(|y| + |y_op|) + |Ki||z|``, T = n + p + q
+``v`` (predictor)     ``|u_op| + |K||xh| + |Ki||z|``, T = n + q + 1
+``v`` (current)       ``|u_op| + (|K| + |K||M||Cd|)|xh| + |K||M|(|y| + |y_op|) + |Ki||z|``, T = n + p + q + 1
 ``z``                 ``|z| + Ts (|r| + |Ci||y|) + |Kaw||u - v|``, T = p + 2 + 2m; plus ``|Kaw|`` (bound of u + v)
 ``xh`` (predictor)    ``(|Ad| + |L||Cd|)|xh| + (|Bd| + |L||Dd|)(|u| + |u_op|) + |L|(|y| + |y_op|)``,
                       T = n + m + p; plus ``|Bd - L Dd|`` times the bound of ``u``
@@ -115,8 +115,8 @@ class _Magnitudes:
     def __init__(self, a: Artifact) -> None:
         ab = np.abs
         self.a = a
-        self.u_op = ab(_op(a, "u_op", a.m))
-        self.y_op = ab(_op(a, "y_op", a.p))
+        self.u_op = ab(a.u_op)
+        self.y_op = ab(a.y_op)
         self.Ki, self.Kaw, self.Ci = ab(a.Ki), ab(a.Kaw), ab(a.Ci)
         if a.observer_form == "current":
             KM = ab(a.K) @ ab(a.M)
@@ -124,12 +124,12 @@ class _Magnitudes:
             self.Kx, self.Ky = ab(a.K) + KM @ ab(a.Cd), KM
             self.F, self.G, self.L = ab(a.Ad) + AM @ ab(a.Cd), ab(a.Bd), AM
             self.G_exact = ab(a.Bd)
-            self.Tv = a.n + a.p + a.q
+            self.Tv = a.n + a.p + a.q + 1
         else:
             self.Kx, self.Ky = ab(a.K), np.zeros((a.m, a.p))
             self.F, self.G, self.L = ab(a.Ad) + ab(a.L) @ ab(a.Cd), ab(a.Bd) + ab(a.L) @ ab(a.Dd), ab(a.L)
             self.G_exact = ab(a.Bd - a.L @ a.Dd)
-            self.Tv = a.n + a.q
+            self.Tv = a.n + a.q + 1
         self.Tz = a.p + 2 + 2 * a.m
         self.Tx = a.n + a.m + a.p
 
@@ -152,12 +152,6 @@ class _Magnitudes:
         mu_x = self.F @ np.abs(xh) + self.G @ (np.abs(u) + self.u_op) + self.L @ (ay + self.y_op)
         bx = g(self.Tx) * mu_x + self.G_exact @ bu
         return _Bounds(u=bu, v=bv, xh=bx, z=bz)
-
-
-def _op(a: Artifact, name: str, size: int) -> np.ndarray:
-    """The artifact's operating point (zeros for an artifact about the origin)."""
-    value = getattr(a, name, None)
-    return np.zeros(size) if value is None else np.asarray(value, dtype=float)
 
 
 def one_step_check(artifact: Artifact, Y: np.ndarray, R: np.ndarray, trace: Trace) -> OneStepCheck:

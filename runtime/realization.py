@@ -81,8 +81,10 @@ def _sqrt_factor(W: np.ndarray) -> np.ndarray:
 
 def _balancing(F: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:
     """Square-root balancing of a stable ``(F, B, C)``: ``T Wc T' = T^-T Wo T^-1 = diag(hsv)``."""
-    Wc = scipy.linalg.solve_discrete_lyapunov(F, B @ B.T)
-    Wo = scipy.linalg.solve_discrete_lyapunov(F.T, C.T @ C)
+    import control
+
+    Wc = control.dlyap(F, B @ B.T)  # SLICOT's Bartels-Stewart: F W F' - W + B B' = 0
+    Wo = control.dlyap(F.T, C.T @ C)
     Rc, Ro = _sqrt_factor(Wc), _sqrt_factor(Wo)
     U, s, _ = np.linalg.svd(Ro.T @ Rc)
     s = np.maximum(s, HSV_FLOOR * s[0])

@@ -35,7 +35,7 @@ from conftest import EXAMPLES, ROOT, run_cli
 VENV_BIN = Path(sys.executable).parent
 # What must be equal between two executions of the same run (timing is not: wall time, C step latency).
 CONTROL_KEYS = ("tracked", "outputs_final", "outputs_peak_abs", "inputs_peak_abs", "saturation_fraction",
-                "peak_integrator", "shadow_max_abs_du", "steps", "complete")
+                "peak_integrator", "twin", "steps", "complete")
 
 
 def small_campaign(gains: Path, **extra) -> dict:

@@ -331,10 +331,12 @@ def test_int16_lockstep_classic_can_stabilises_the_pendulum_close_to_float32(pen
     diff = np.abs(i16.trace.y - f32.trace.y).max(axis=0)
     assert np.all(diff <= 2 * bound), (diff, bound)
     assert np.all(diff > 0)  # the int16 run really was quantised
-    # The shadow law is fed the sample as the firmware decoded it: the commands then differ by the command's own
-    # quantisation (half a step) plus float32 accuracy (1e-4 of the command scale, as over float32).
-    f_u = transport.layout.command[0].factors[0]
-    assert m["shadow_max_abs_du"]["F"] <= f_u / 2 + 1e-4 * 20.0 and m["encoding_clipped"] == 0
+    # Against the float64 twin the quantisation shows as the cost it is: the int16 run's output deviation is
+    # bounded as above (plus the float32 run's own, tiny, deviation from the twin) and far above float32's.
+    dev16 = np.array([v["max_dy"] for v in m["twin"]["outputs"].values()])
+    dev32 = np.array([v["max_dy"] for v in f32.metrics["twin"]["outputs"].values()])
+    assert np.all(dev16 <= 2 * bound + dev32) and np.all(dev16 > 10 * dev32)
+    assert m["encoding_clipped"] == 0
 
 
 def test_reference_node_speaks_int16_like_the_firmware(pendulum_gains, can_firmware, cart_fmu):

@@ -58,8 +58,10 @@ def test_float32_loop_equals_the_host_build_bit_for_bit():
     cases = list(example_cases(EXAMPLES))
     picked = {}
     for case in random_cases(30) + closed_loop_cases(12):
-        picked.setdefault((case.artifact.observer_form, case.artifact.anti_windup, case.artifact.q > 0), case)
+        a = case.artifact
+        picked.setdefault((a.observer_form, a.anti_windup, a.q > 0, a.has_operating_point), case)
     cases += list(picked.values())
+    assert any(c.artifact.has_operating_point for c in cases) and any(c.artifact.M is not None for c in cases)
     assert {(c.artifact.observer_form, c.artifact.anti_windup) for c in cases} >= {
         (f, aw) for f in ("predictor", "current") for aw in ("none", "clamp", "backcalc")}
     for case in cases:

@@ -42,8 +42,8 @@ def _quiet_design_warnings():
 
 def jacobian_poles(a) -> np.ndarray:
     """Compensator poles by probing the float64 law itself (an oracle independent of gainlink.compensator):
-    with limits out of reach the map (xh, z) -> next (xh, z) at y = r = 0 is linear; its columns are the
-    images of unit states."""
+    with limits out of reach the map (xh, z) -> next (xh, z) at the operating point (y = y_op, r = Ci y_op)
+    is linear; its columns are the images of unit states."""
     data = dict(a.data)
     data["u_min"], data["u_max"] = [-1e300] * a.m, [1e300] * a.m
     wide = artifact_mod.from_dict(artifact_mod.seal(data))
@@ -53,7 +53,7 @@ def jacobian_poles(a) -> np.ndarray:
         law = ReferenceLoop(wide)
         e = np.eye(N)[j]
         law.xh, law.z = e[:a.n].copy(), e[a.n:].copy()
-        law.step(np.zeros(a.p), np.zeros(a.q))
+        law.step(a.y_op, a.Ci @ a.y_op)
         A[:, j] = np.concatenate([law.xh, law.z])
     return np.linalg.eigvals(A)
 

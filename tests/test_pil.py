@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from gainlink.artifact import load
-from gainlink.firmware.pil import make_plant, reference_closed_loop, run_pil
+from gainlink.firmware.pil import make_plant, run_pil
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))
-RTOL = 1e-4  # float32 firmware vs float64 reference in closed loop: see tests/test_firmware_host.py
+RTOL = 1e-4  # float32 firmware vs its float64 twin in closed loop: see tests/test_firmware_host.py
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -26,14 +26,25 @@ def _quiet_design_warnings():
 
 
 @pytest.mark.parametrize("name,reference", [("pendulum", [0.5]), ("wood_berry", [1.0, -0.5])])
-def test_closed_loop_matches_reference_law(example_artifacts, name, reference):
+def test_closed_loop_matches_its_float64_twin(example_artifacts, name, reference):
     a = load(example_artifacts[name])
     steps = 1500 if name == "pendulum" else 300
-    res = run_pil(a, plant=make_plant("artifact", artifact=a), steps=steps, reference=reference)
-    Y, U = reference_closed_loop(a, plant=make_plant("artifact", artifact=a), steps=steps, reference=reference)
+    res = run_pil(a, plant=make_plant("artifact", artifact=a), steps=steps, reference=reference,
+                  twin=make_plant("artifact", artifact=a))
+    # the twin, recomputed here: the float64 law closing the loop on a fresh plant, step by step
+    from gainlink.reference import ReferenceLoop
+
+    plant, law = make_plant("artifact", artifact=a), ReferenceLoop(a)
+    for k in range(steps):
+        y = plant.outputs()
+        u = law.step(y, reference).u
+        assert np.array_equal(res.twin.y[k], y) and np.array_equal(res.twin.u[k], u), k
+        plant.advance(u=u)
+    Y, U = res.twin.y, res.twin.u
     scale = float(np.max(np.abs(U)))
     assert float(np.max(np.abs(res.u - U))) <= RTOL * scale
     assert float(np.max(np.abs(res.y - Y))) <= RTOL * max(float(np.max(np.abs(Y))), 1e-9)
+    assert 0 < res.comparison.worst_du_rel <= RTOL
     assert np.all(res.status >= 0)
     # the loop did its job: tracked outputs settle at the reference
     tracked = a.Ci @ res.y[-1]
@@ -47,10 +58,10 @@ def test_pil_cli_summary_and_files(example_artifacts, tmp_path):
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
     assert summary["steps"] == 500 and summary["faults"] == 0
-    assert summary["max_rel_deviation_from_reference"] <= RTOL
+    assert summary["twin"]["worst_du_rel"] <= RTOL and set(summary["twin"]["iae"]) == {"r_x"}
     assert json.loads((out / "pil.json").read_text()) == summary
     rows = (out / "pil.csv").read_text().splitlines()
-    assert rows[0] == "y0,y1,u0,sat0,status" and len(rows) == 501
+    assert rows[0] == "y0,y1,u0,sat0,status,twin_y0,twin_y1,twin_u0" and len(rows) == 501
 
 
 def test_pil_rejects_bad_arguments(example_artifacts):
@@ -64,7 +75,9 @@ def test_pil_against_the_nonlinear_cart_pendulum(example_artifacts):
     """The firmware in QEMU balances gainlink.hil's nonlinear cart-pendulum from a 0.1 rad tilt."""
     a = load(example_artifacts["pendulum"])
     plant = make_plant("cart_pendulum", artifact=a, x0=[0.0, 0.0, 0.1, 0.0])
-    res = run_pil(a, plant=plant, steps=800, reference=[0.2])
+    twin = make_plant("cart_pendulum", artifact=a, x0=[0.0, 0.0, 0.1, 0.0])
+    res = run_pil(a, plant=plant, steps=800, reference=[0.2], twin=twin)
+    assert 0 < res.comparison.worst_du_rel <= RTOL and res.comparison.worst_dy_rel <= RTOL
     assert np.all(res.status >= 0)
     assert abs(res.y[-1, 0] - 0.2) < 0.01 and abs(res.y[-1, 1]) < 0.01
     assert np.max(np.abs(res.y[:, 1])) < 0.5, "never falls over"

@@ -66,7 +66,9 @@ def test_predictor_and_current_forms_give_the_same_closed_loop(seed, n, m, p, q,
     q = min(q, m, p)
     results = {}
     for form in ("predictor", "current"):
-        results[form] = design(parse_spec(random_spec(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=aw)))
+        spec = random_spec(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=aw)
+        spec["implementation"] = {"float32_check": False}  # gains and poles only: skip the closed-loop runs
+        results[form] = design(parse_spec(spec))
     pred, cur = (artifact_mod.from_dict(results[f].artifact) for f in ("predictor", "current"))
     np.testing.assert_allclose(pred.K, cur.K, rtol=1e-12)
     np.testing.assert_allclose(pred.L, cur.L, rtol=1e-9, atol=1e-12)

@@ -21,7 +21,6 @@ import numpy as np
 
 from gainlink.artifact import Artifact, load
 from gainlink.errors import GainlinkError, PlantError, ScenarioError
-from gainlink.reference import ReferenceLoop
 
 from .controller import ControllerProcess, controller_argv, qemu_peer
 from .faults import FaultInjector
@@ -29,7 +28,7 @@ from ..plants.config import plant_from_config
 from .metrics import RunTrace, compute_metrics, link_capacity
 from ..plants.base import Plant, check_dimensions
 from .scheduler import SPIN_NS, Pacer, Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
-from .plan import Plan, Recorder, plan_run
+from .plan import Plan, Recorder, plan_run, start_twin
 from .scenario import Scenario
 from ..links.base import Transport, transport_from_config
 
@@ -106,7 +105,9 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
             peer_pid=peer.proc.pid if peer.proc is not None else None))
         stack.enter_context(gc_paused())
         pm_qos = stack.enter_context(cpu_latency_qos()) if scenario.mode == "realtime" and scenario.pm_qos else False
-        result = _Loop(scenario, artifact=artifact, plant=plant, transport=transport, peer=peer).run(progress)
+        loop = _Loop(scenario, artifact=artifact, plant=plant, transport=transport, peer=peer)
+        loop.twin = start_twin(scenario, artifact=artifact, plan=loop.plan, stack=stack)
+        result = loop.run(progress)
         code = peer.stop()  # its exit summary counts everything it received, hostile traffic included
         result.metrics["controller"] = {"exit_status": code, "counters": peer.counters(),
                                         "stderr_bytes": peer.stderr_bytes()}
@@ -166,7 +167,7 @@ class _Loop:
         self.plan = plan_run(scenario, artifact=artifact, plant=plant)
         self.rec = Recorder(self.plan, artifact=artifact, plant=plant)
         self.injector = FaultInjector(scenario.faults, Ts=artifact.Ts, seed=scenario.seed)
-        self.shadow = ReferenceLoop(artifact) if scenario.shadow else None
+        self.twin = None  # the float64 twin (gainlink.twin), set by run_scenario when the scenario has one
         self.u = artifact.safe_command  # until the first command: u_op clamped into the limits
         self.late = 0
         self.overruns = 0
@@ -240,6 +241,7 @@ class _Loop:
                 rec.DUE[j] = due_rel - (tick - j) * self.period_ns + offset
                 rec.TICK[j] = np.nan  # never ran: no jitter, a miss
                 self.plant.advance(u=self.u + self.plan.D[j], dt=Ts)
+                self._twin_step(j)
             self.overruns += min(tick, N) - k
             k = min(tick, N)
             if k >= N:
@@ -253,31 +255,36 @@ class _Loop:
         rec, plan, a = self.rec, self.plan, self.a
         y = self.plant.outputs() + plan.noise[k]
         rec.Y[k] = y
-        if self.shadow is not None:
-            rec.X[k] = self.plant.state()  # an FMU call per step: only with the shadow on
+        if self.twin is not None:
+            rec.X[k] = self.plant.state()  # an FMU call per step: only with the twin on
         seq = k % self.transport.seq_modulo
         frames = self.injector.apply(k, self.transport.encode_sample(seq=seq, y=y, r=plan.R[k]))
         sent = time.perf_counter_ns()
         if wait_until is None:
             rec.TICK[k] = sent - self.t_start
         self.transport.send_frames(frames)
-        if self.shadow is not None:
-            res = self.shadow.step(*self.transport.received_sample(y=y, r=plan.R[k]))
-            rec.UREF[k] = res.u
-            rec.ZREF[k] = self.shadow.z
         deadline = wait_until if wait_until is not None else sent + int(self.scenario.step_timeout * 1e9)
-        cmd = self._await_command(seq, deadline)
-        if cmd is not None:
-            self.u = cmd.u
-            rec.GOT[k], rec.LAT[k], rec.SAT[k], rec.ST[k] = True, cmd.t_ns - sent, cmd.saturated, cmd.status
-            self.silent_since_ns = None
-        else:
-            self._check_peer(k, sent)
-        rec.U[k] = self.u
         try:
-            self.plant.advance(u=self.u + plan.D[k], dt=a.Ts)
-        except PlantError as exc:
-            raise _Stop(f"plant failed at step {k}: {exc}", k + 1) from None
+            cmd = self._await_command(seq, deadline)
+            if cmd is not None:
+                self.u = cmd.u
+                rec.GOT[k], rec.LAT[k], rec.SAT[k], rec.ST[k] = True, cmd.t_ns - sent, cmd.saturated, cmd.status
+                self.silent_since_ns = None
+            else:
+                self._check_peer(k, sent)
+            rec.U[k] = self.u
+            try:
+                self.plant.advance(u=self.u + plan.D[k], dt=a.Ts)
+            except PlantError as exc:
+                raise _Stop(f"plant failed at step {k}: {exc}", k + 1) from None
+        finally:  # after the command: the twin's work never delays the controller or its measured latency
+            self._twin_step(k)
+
+    def _twin_step(self, k: int) -> None:
+        """Advance the float64 twin through sample ``k`` (same noise, reference and disturbance)."""
+        if self.twin is not None:
+            plan = self.plan
+            self.twin.step(k, noise=plan.noise[k], r=plan.R[k], d=plan.D[k])
 
     def _await_command(self, seq: int, deadline: int):
         """The command answering sample ``seq`` before ``deadline`` (ns), or None; older ones count as late."""
@@ -313,7 +320,7 @@ class _Loop:
         """Metrics, trace and what ran, for ``steps`` steps."""
         a, scenario = self.a, self.scenario
         complete = reason is None
-        trace = self.rec.trace(steps)
+        trace = self.rec.trace(steps, self.twin)
         metrics = compute_metrics(trace, artifact=a, mode=scenario.mode, late=self.late, period_s=self.plan.period_s)
         wall = (time.perf_counter_ns() - self.t_start) / 1e9
         metrics.update({"complete": complete, "steps_planned": self.plan.N, "wall_s": wall,

@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from gainlink.twin import twin_comparison
+
 
 @dataclass(frozen=True)
 class RunTrace:
@@ -18,8 +20,9 @@ class RunTrace:
     ``got`` whether the command for this sample arrived in time; ``latency_ns`` send -> command
     (NaN when not got); ``tick_ns`` when the step started (realtime: the pacer's wake-up; lockstep: the
     send), relative to the run start;
-    ``deadline_ns`` when it was due (realtime; NaN in lockstep); ``z_ref``/``u_ref`` the float64
-    reference law fed the same samples and ``x`` the plant states (N, n_plant) (NaN when the shadow is off).
+    ``deadline_ns`` when it was due (realtime; NaN in lockstep); ``x`` the plant states (N, n_plant);
+    ``twin_y``, ``twin_u``, ``twin_z`` the float64 twin's sampled outputs, commands and integrator
+    (:mod:`gainlink.twin`) (``x`` and the twin's are NaN when the twin is off).
     """
 
     t: np.ndarray
@@ -31,10 +34,16 @@ class RunTrace:
     latency_ns: np.ndarray
     tick_ns: np.ndarray
     deadline_ns: np.ndarray
-    u_ref: np.ndarray
-    z_ref: np.ndarray
     x: np.ndarray
     status: np.ndarray
+    twin_y: np.ndarray
+    twin_u: np.ndarray
+    twin_z: np.ndarray
+
+    @property
+    def has_twin(self) -> bool:
+        """True when the run had a twin (its columns are finite)."""
+        return bool(self.t.size) and bool(np.all(np.isfinite(self.twin_u)))
 
 
 def _pct(values: np.ndarray) -> dict:
@@ -103,14 +112,14 @@ def compute_metrics(trace: RunTrace, *, artifact: Any, mode: str, late: int, per
         "inputs_peak_abs": {name: float(v) for name, v in zip(sig["inputs"], np.abs(trace.u).max(axis=0))} if N else {},
         "outputs_peak_abs": {name: float(v) for name, v in zip(sig["outputs"], np.abs(trace.y).max(axis=0))} if N else {},
     }
-    if N and np.all(np.isfinite(trace.z_ref)) and a.q:
-        out["peak_integrator"] = {name: float(v) for name, v in zip(sig["references"], np.abs(trace.z_ref).max(axis=0))}
-        integral_cmd = np.abs(trace.z_ref @ a.Ki.T).max(axis=0)
-        out["peak_integral_command"] = {name: float(v) for name, v in zip(sig["inputs"], integral_cmd)}
-    if N and np.all(np.isfinite(trace.u_ref)):
-        diff = np.abs(trace.u - trace.u_ref)
-        out["shadow_max_abs_du"] = {name: float(v) for name, v in zip(sig["inputs"], diff[trace.got].max(axis=0))} \
-            if trace.got.any() else {}
+    if trace.has_twin:
+        if a.q:  # the controller's own state is not on the link: the ideal loop's integrator, from the twin
+            out["peak_integrator"] = {name: float(v) for name, v in
+                                      zip(sig["references"], np.abs(trace.twin_z).max(axis=0))}
+            integral_cmd = np.abs(trace.twin_z @ a.Ki.T).max(axis=0)
+            out["peak_integral_command"] = {name: float(v) for name, v in zip(sig["inputs"], integral_cmd)}
+        out["twin"] = twin_comparison(t=trace.t, y=trace.y, u=trace.u, r=trace.r, twin_y=trace.twin_y,
+                                      twin_u=trace.twin_u, artifact=a).to_dict()
     tracked = {}
     if N:
         if a.q:

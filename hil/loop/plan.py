@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gainlink.artifact import Artifact
+from gainlink.twin import TwinLoop
 
 from ..plants.base import Plant
 from .metrics import RunTrace
@@ -68,15 +69,36 @@ class Recorder:
         self.LAT = np.full(N, np.nan)
         self.TICK = np.zeros(N)
         self.DUE = np.full(N, np.nan)
-        self.UREF = np.full((N, a.m), np.nan)
-        self.ZREF = np.full((N, a.q), np.nan)
         self.ST = np.zeros(N, dtype=np.int64)
         self.X = np.full((N, len(plant.state_names)), np.nan)
 
-    def trace(self, steps: int) -> RunTrace:
-        """The recorded run up to ``steps``."""
+    def trace(self, steps: int, twin: TwinLoop | None = None) -> RunTrace:
+        """The recorded run up to ``steps``, with the twin's (NaN without one)."""
         p = self.plan
+        tw = twin.trace(steps) if twin is not None else None
+
+        def nan(width: int) -> np.ndarray:
+            return np.full((steps, width), np.nan)
+
         return RunTrace(t=p.t[:steps], y=self.Y[:steps], r=p.R[:steps], u=self.U[:steps], sat=self.SAT[:steps],
                         got=self.GOT[:steps], latency_ns=self.LAT[:steps], tick_ns=self.TICK[:steps],
-                        deadline_ns=self.DUE[:steps], u_ref=self.UREF[:steps], z_ref=self.ZREF[:steps],
-                        x=self.X[:steps], status=self.ST[:steps])
+                        deadline_ns=self.DUE[:steps], x=self.X[:steps], status=self.ST[:steps],
+                        twin_y=tw.y if tw else nan(self.Y.shape[1]), twin_u=tw.u if tw else nan(self.U.shape[1]),
+                        twin_z=tw.z if tw else nan(p.R.shape[1]))
+
+
+def start_twin(scenario: Scenario, *, artifact: Artifact, plan: Plan, stack) -> TwinLoop | None:
+    """The run's float64 twin (:mod:`gainlink.twin`) on a second instance of the scenario's plant (a second
+    FMU instance), reset to the same initial state; None when ``scenario.twin`` is off.
+
+    The plant is closed by ``stack`` (an :class:`contextlib.ExitStack`).
+    """
+    if not scenario.twin:
+        return None
+    from .bridge import build_plant  # the bridge builds and checks plants; it imports this module
+
+    plant = build_plant(scenario, artifact=artifact)
+    stack.callback(plant.close)
+    plant.reset(initial=scenario.initial_state)
+    return TwinLoop(artifact, outputs=plant.outputs, advance=lambda u: plant.advance(u=u, dt=artifact.Ts),
+                    steps=plan.N)

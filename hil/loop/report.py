@@ -58,9 +58,7 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
     lines.append("  saturated: " + ", ".join(f"{k} {100 * v:.1f}%" for k, v in m["saturation_fraction"].items()))
     if "peak_integrator" in m:
         lines.append("  peak integrator: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["peak_integrator"].items()))
-    if "shadow_max_abs_du" in m and m["shadow_max_abs_du"]:
-        lines.append("  max |u - u_reference(float64)|: "
-                     + ", ".join(f"{k} {_fmt(v)}" for k, v in m["shadow_max_abs_du"].items()))
+    lines += _twin_lines(m.get("twin"))
     for name, tr in m["tracked"].items():
         lines.append(f"  {name}: overshoot {_fmt(tr['overshoot_pct'], '%')}, settling {_fmt(tr['settling_time_s'], ' s')}"
                      f", IAE {_fmt(tr['iae'])}")
@@ -68,6 +66,21 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
     if report_dir is not None:
         lines.append(f"  report: {report_dir / 'report.json'}")
     return "\n".join(lines) + "\n"
+
+
+def _twin_lines(tw: dict | None) -> list[str]:
+    """The twin comparison in a few lines: what the implementation cost against the ideal loop."""
+    if not tw:
+        return []
+    out = ["  against the float64 twin (same plant, noise, references, disturbances; ideal law, no link):",
+           "    max |u - u_twin|: " + ", ".join(f"{k} {_fmt(v['max_du'])} ({_fmt(v['max_du_rel'], digits=3)} of span)"
+                                              for k, v in tw["inputs"].items()),
+           "    max |y - y_twin|: " + ", ".join(f"{k} {_fmt(v['max_dy'])} ({_fmt(v['max_dy_rel'], digits=3)} of range)"
+                                              for k, v in tw["outputs"].items())]
+    out.append("    IAE real vs twin: " + ", ".join(
+        f"{k} {_fmt(v['real'])} vs {_fmt(v['twin'])} ({'+' if (v['difference_rel'] or 0) >= 0 else ''}"
+        f"{_fmt(None if v['difference_rel'] is None else 100 * v['difference_rel'], '%', 3)})" for k, v in tw["iae"].items()))
+    return out
 
 
 def _png(fig: Any) -> bytes:
@@ -94,6 +107,8 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
     for i, name in enumerate(outs):
         ax = axes[i, 0]
         ax.plot(tr.t, tr.y[:, i], label=name)
+        if tr.has_twin:
+            ax.plot(tr.t, tr.twin_y[:, i], "--", lw=0.9, label=f"{name} (float64 twin)")
         if artifact is not None and artifact.q:
             for j, rname in enumerate(artifact.signals["references"]):
                 if artifact.Ci[j, i] != 0:
@@ -108,8 +123,8 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
     for i, name in enumerate(ins):
         ax = axes[i, 0]
         ax.plot(tr.t, tr.u[:, i], label=f"{name} (controller)")
-        if np.all(np.isfinite(tr.u_ref)) and tr.u_ref.size:
-            ax.plot(tr.t, tr.u_ref[:, i], ":", label=f"{name} (float64 reference)")
+        if tr.has_twin:
+            ax.plot(tr.t, tr.twin_u[:, i], "--", lw=0.9, label=f"{name} (float64 twin)")
         if artifact is not None:
             ax.axhline(artifact.u_min[i], color="r", lw=0.8, ls="--", label="limits")
             ax.axhline(artifact.u_max[i], color="r", lw=0.8, ls="--")
@@ -128,7 +143,30 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
     ax.set_yscale("log")
     ax.set_title(f"{result.scenario.name}: latency ({lat.size} commands)")
     files["latency.png"] = _png(fig)
+    if tr.has_twin:
+        files["twin.png"] = _twin_plot(result, outs=outs, ins=ins)
     return files
+
+
+def _twin_plot(result: RunResult, *, outs: list[str], ins: list[str]) -> bytes:
+    """The run minus its twin, per output and input: what the implementation cost, over time."""
+    import matplotlib.pyplot as plt
+
+    tr = result.trace
+    names = [(n, tr.y[:, i] - tr.twin_y[:, i]) for i, n in enumerate(outs)] + \
+            [(n, tr.u[:, i] - tr.twin_u[:, i]) for i, n in enumerate(ins)]
+    fig, axes = plt.subplots(len(names), 1, figsize=(8, 1.9 * len(names)), sharex=True, squeeze=False)
+    lost = ~tr.got
+    for ax, (name, diff) in zip(axes[:, 0], names):
+        ax.plot(tr.t, diff, lw=0.8)
+        if lost.any():
+            ax.plot(tr.t[lost], diff[lost], "r.", ms=3, label="no command in time")
+            ax.legend(loc="best", fontsize=8)
+        ax.set_ylabel(f"{name} - twin")
+        ax.grid(True, alpha=0.3)
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.suptitle(f"{result.scenario.name}: run minus its float64 twin")
+    return _png(fig)
 
 
 def write_report(result: RunResult, report_dir: str | Path, *, artifact: Any = None, with_plots: bool = True) -> Path:

@@ -17,7 +17,7 @@ Example::
     overrun = "skip"                       # realtime: skip | catch_up (ticks missed in a stall, see below)
     affinity = "auto"                      # auto | shared | separate | none (CPU placement, see below)
     seed = 1
-    shadow = true                          # run the float64 reference beside the controller
+    twin = true                            # run the float64 twin of the loop beside it (see below)
 
     [plant]        kind = "fmu", fmu = "cart_pendulum", outputs = ["x", "theta"]
     [transport]    interface = "udp_multicast", channel = "239.74.163.2", hop_limit = 0, fd = true
@@ -54,6 +54,11 @@ machine paused it for a period or more): ``skip`` (default) moves on to the tick
 the plant run through the missed ones under the held command, as a physical plant would — each is
 a deadline miss and counted in ``overruns``; ``catch_up`` runs the missed ticks back to back.
 
+``twin`` runs a float64 twin of the whole loop in step with the run (:mod:`gainlink.twin`): the reference
+law around a second instance of the same plant, same noise, references, disturbances and initial state,
+no link and no faults. The report compares the run with it (command and output deviations, IAE
+difference): what float32, the encoding, the link, timing and faults cost the closed loop.
+
 Unknown keys anywhere are refused with one line naming them.
 """
 
@@ -73,7 +78,7 @@ from gainlink.fileio import read_user_file
 from .scheduler import AFFINITIES, OVERRUN_POLICIES
 
 TOP_KEYS = {"name", "artifact", "plant", "transport", "duration", "mode", "controller", "step_timeout",
-            "peer_timeout", "period", "sched_fifo", "seed", "shadow", "initial_state", "reference", "noise",
+            "peer_timeout", "period", "sched_fifo", "seed", "twin", "initial_state", "reference", "noise",
             "disturbances", "faults", "description", "firmware", "affinity", "overrun", "pm_qos", "board"}
 CONTROLLERS = ("firmware", "reference", "qemu")
 BOARDS = ("mps2-an386", "netduinoplus2")
@@ -138,7 +143,7 @@ class Scenario:
     affinity: str = "auto"
     overrun: str = "skip"
     seed: int = 0
-    shadow: bool = True
+    twin: bool = True
     initial_state: dict = field(default_factory=dict)
     reference: dict = field(default_factory=dict)
     noise: dict = field(default_factory=dict)
@@ -264,7 +269,7 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
         peer_timeout=_num(data.get("peer_timeout", 1.0), "peer_timeout", positive=True),
         period=None if period is None else _num(period, "period", positive=True),
         sched_fifo=_flag(data, "sched_fifo", True), pm_qos=_flag(data, "pm_qos", True), affinity=affinity,
-        overrun=overrun, seed=int(_num(data.get("seed", 0), "seed")), shadow=_flag(data, "shadow", True),
+        overrun=overrun, seed=int(_num(data.get("seed", 0), "seed")), twin=_flag(data, "twin", True),
         initial_state=initial, reference=reference, noise=noise, disturbances=tuple(dists), faults=tuple(faults),
     )
 

@@ -29,7 +29,7 @@ from gainlink.reference import ReferenceLoop
 
 from .bridge import RunResult, build_plant
 from .metrics import compute_metrics
-from .plan import Recorder, plan_run
+from .plan import Recorder, plan_run, start_twin
 from .scenario import Scenario
 
 GL_SATURATED, GL_ERR_NANINF = 1, -2
@@ -75,7 +75,7 @@ def run_sil(artifact: Artifact, scenario: Scenario, *, seed: int | None = None, 
         The gain artifact (``scenario.artifact_path`` is not read).
     scenario : Scenario
         Plant, duration, references, initial state, noise, disturbances, ``controller`` (``firmware``:
-        the C loop; ``reference``: the float64 law) and ``shadow`` (the float64 law fed the same samples).
+        the C loop; ``reference``: the float64 law) and ``twin`` (the float64 twin of the loop beside it).
         Its transport is not used.
     seed : int, optional
         Noise seed (default: the scenario's).
@@ -101,7 +101,9 @@ def run_sil(artifact: Artifact, scenario: Scenario, *, seed: int | None = None, 
         else:
             law = _ReferenceController(artifact)
             kind = {"kind": "reference (float64 law)"}
-        return _SilLoop(artifact, scenario, plant=plant, law=law).run(progress, controller=kind)
+        loop = _SilLoop(artifact, scenario, plant=plant, law=law)
+        loop.twin = start_twin(scenario, artifact=artifact, plan=loop.plan, stack=stack)
+        return loop.run(progress, controller=kind)
 
 
 class _SilLoop:
@@ -111,7 +113,7 @@ class _SilLoop:
         self.a, self.scenario, self.plant, self.law = artifact, scenario, plant, law
         self.plan = plan_run(scenario, artifact=artifact, plant=plant)
         self.rec = Recorder(self.plan, artifact=artifact, plant=plant)
-        self.shadow = ReferenceLoop(artifact) if scenario.shadow else None
+        self.twin = None  # the float64 twin (gainlink.twin), set by run_sil when the scenario has one
         self.bits = np.arange(artifact.m, dtype=np.uint32)
 
     def run(self, progress: Callable[[int, int], None] | None, *, controller: dict) -> RunResult:
@@ -140,10 +142,8 @@ class _SilLoop:
         y = self.plant.outputs() + plan.noise[k]
         rec.Y[k] = y
         r = plan.R[k]
-        if self.shadow is not None:
+        if self.twin is not None:
             rec.X[k] = self.plant.state()
-            res = self.shadow.step(y, r)
-            rec.UREF[k], rec.ZREF[k] = res.u, self.shadow.z
         t0 = time.perf_counter_ns()
         out = self.law.step(y, r)
         t1 = time.perf_counter_ns()
@@ -151,11 +151,15 @@ class _SilLoop:
         rec.GOT[k], rec.LAT[k], rec.TICK[k], rec.ST[k] = True, t1 - t0, t0 - self.t_start, out.status
         rec.SAT[k] = ((out.sat_mask >> self.bits) & 1).astype(bool)
         rec.U[k] = u
-        self.plant.advance(u=u + plan.D[k], dt=self.a.Ts)
+        try:
+            self.plant.advance(u=u + plan.D[k], dt=self.a.Ts)
+        finally:
+            if self.twin is not None:
+                self.twin.step(k, noise=plan.noise[k], r=r, d=plan.D[k])
 
     def _result(self, steps: int, *, reason: str | None, wall: float, controller: dict) -> RunResult:
         a, scenario, plant = self.a, self.scenario, self.plant
-        trace = self.rec.trace(steps)
+        trace = self.rec.trace(steps, self.twin)
         metrics = compute_metrics(trace, artifact=a, mode="sil", late=0, period_s=a.Ts)
         metrics.update({"complete": reason is None, "steps_planned": self.plan.N, "wall_s": wall,
                         "steps_per_s": steps / wall if wall > 0 else None, "sched_fifo": False,

@@ -199,7 +199,7 @@ def _pil(args: argparse.Namespace) -> int:
 
     from gainlink.artifact import load
     from gainlink.fileio import publish_files
-    from gainlink.firmware.pil import make_plant, reference_closed_loop, run_pil
+    from gainlink.firmware.pil import make_plant, run_pil
 
     artifact = load(args.artifact)
     ref = args.reference
@@ -207,20 +207,19 @@ def _pil(args: argparse.Namespace) -> int:
         raise GainlinkError(f"--reference needs {artifact.q} values for artifact {artifact.name}")
     x0 = args.x0
     plant = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))
-    result = run_pil(artifact, plant=plant, steps=args.steps, reference=ref, board=args.board)
+    twin = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))  # the twin's plant
+    result = run_pil(artifact, plant=plant, steps=args.steps, reference=ref, board=args.board, twin=twin)
     summary = {"artifact": artifact.name, "sha256": artifact.sha256, "board": args.board, "plant": args.plant,
                **result.summary()}
-    if args.plant in ("artifact", "linear"):
-        twin = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))
-        _, U = reference_closed_loop(artifact, plant=twin, steps=args.steps, reference=ref)
-        scale = max(float(np.max(np.abs(U))), 1e-12)
-        summary["max_rel_deviation_from_reference"] = float(np.max(np.abs(result.u - U)) / scale)
     text = json.dumps(summary, indent=2) + "\n"
     if args.out:
         header = ",".join([f"y{i}" for i in range(artifact.p)] + [f"u{i}" for i in range(artifact.m)]
-                          + [f"sat{i}" for i in range(artifact.m)] + ["status"])
+                          + [f"sat{i}" for i in range(artifact.m)] + ["status"]
+                          + [f"twin_y{i}" for i in range(artifact.p)] + [f"twin_u{i}" for i in range(artifact.m)])
+        tw = result.twin
         rows = [",".join([repr(float(v)) for v in result.y[k]] + [repr(float(v)) for v in result.u[k]]
-                         + [str(int(s)) for s in result.saturated[k]] + [str(int(result.status[k]))])
+                         + [str(int(s)) for s in result.saturated[k]] + [str(int(result.status[k]))]
+                         + [repr(float(v)) for v in np.concatenate([tw.y[k], tw.u[k]])])
                 for k in range(args.steps)]
         publish_files(args.out, {"pil.csv": header + "\n" + "\n".join(rows) + "\n", "pil.json": text})
     sys.stdout.write(text)

@@ -161,41 +161,52 @@ def bounded(case: GoldenCase, *, limit: float = 1e3) -> bool:
 
 
 def closed_loop_case(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_windup: str,
-                     N: int = 300) -> GoldenCase:
+                     N: int = 300, operating_point: bool = False) -> GoldenCase:
     """A random continuous plant (:func:`gainlink.random_plants.random_spec`), designed, and a record of
     its own closed loop (:func:`gainlink.simulate.simulate_linear`: initial state, reference, noise).
 
     Unlike :func:`random_cases`, nothing is filtered: such designs often have an unstable compensator.
     The limits are set below the unsaturated run's peak command (80 %, else 90 %, else wide) so the
-    record saturates during the initial transient and still stays bounded.
+    record saturates during the initial transient and still stays bounded. With ``operating_point`` the
+    plant is about a random non-zero point, the limits are centred on ``u_op`` and the record is absolute.
     """
     from ..random_plants import random_spec as continuous_spec
     from ..simulate import simulate_linear
 
+    op = random_operating_point(seed, m=m, p=p) if operating_point else None
+
     def spec(limit: float, **extra) -> dict:
-        return {**continuous_spec(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=anti_windup, u_limit=limit,
-                                  feedthrough=form == "predictor" and seed % 2 == 0), **extra}
+        out = {**continuous_spec(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=anti_windup, u_limit=limit,
+                                 feedthrough=form == "predictor" and seed % 2 == 0), **extra}
+        if op is not None:
+            out["operating_point"] = op
+            out["limits"] = dict(out["limits"], u_min=[u - limit for u in op["u_op"]],
+                                 u_max=[u + limit for u in op["u_op"]])
+        return out
 
     rng = np.random.default_rng(seed + 20_000)
     x0, ref = rng.standard_normal(n), rng.uniform(-0.5, 0.5, size=q)
 
     def record(art: Artifact):
-        return simulate_linear(art, steps=N, x0=x0, reference=ref, noise_std=0.01, seed=seed)
+        return simulate_linear(art, steps=N, x0=x0, reference=art.r_op + ref, noise_std=0.01, seed=seed)
 
-    free = record(_design(spec(1e6, implementation={"float32_check": False})))
-    peak = float(np.max(np.abs(free.u)))
+    wide = _design(spec(1e6, implementation={"float32_check": False}))
+    free = record(wide)
+    peak = float(np.max(np.abs(free.u - wide.u_op)))
+    excursion = max(1.0, float(np.max(np.abs(free.y - wide.y_op))))
     for fraction in (0.8, 0.9, None):
         art = _design(spec(1e6 if fraction is None else fraction * peak))
         sim = record(art)
-        if np.all(np.abs(sim.y) < 10.0 * max(1.0, float(np.max(np.abs(free.y))))):
+        if np.all(np.abs(sim.y - art.y_op) < 10.0 * excursion):
             break
-    label = f"loop{seed}-n{n}m{m}p{p}q{q}-{form}-{anti_windup}"
+    label = f"loop{seed}-n{n}m{m}p{p}q{q}-{form}-{anti_windup}" + ("-op" if operating_point else "")
     return GoldenCase(label=label, artifact=art, Y=sim.y, R=sim.r, expected=ReferenceLoop(art).run(sim.y, sim.r))
 
 
 def closed_loop_cases(count: int = 12, *, first_seed: int = 100, N: int = 300) -> tuple[GoldenCase, ...]:
     """``count`` :func:`closed_loop_case` designs cycling through both forms, every anti-windup mode and
-    q = 0 / q > 0, n from 2 to 8. Cached per arguments."""
+    q = 0 / q > 0, n from 3 to 8; every second block of six is about a non-zero operating point. Cached
+    per arguments."""
     return _closed_loop_cases(count, first_seed, N)
 
 
@@ -211,7 +222,8 @@ def _closed_loop_cases(count: int, first_seed: int, N: int) -> tuple[GoldenCase,
         m, p = 1 + i % 2, 2 + i % 2
         q = 0 if (aw == "none" and i % 4 == 0) else 1 + (i % min(m, p))
         try:
-            cases.append(closed_loop_case(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=aw, N=N))
+            cases.append(closed_loop_case(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=aw, N=N,
+                                          operating_point=(i // len(combos)) % 2 == 1))
         except (DesignError, SpecError):
             pass  # an unlucky draw
         seed += 1

@@ -23,7 +23,7 @@ import numpy as np
 from ..artifact import Artifact
 from ..errors import FirmwareError, PeerTimeoutError, PlantError
 from ..realization import design_plant
-from ..reference import ReferenceLoop
+from ..twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
 from . import qemu as fwqemu
 from .build import DEFAULT_BOARD, build
 
@@ -120,10 +120,12 @@ class PilResult:
     plant_state: np.ndarray  # (N + 1, plant states)
     round_trip_us: np.ndarray  # (N,)
     steps_per_second: float
+    twin: TwinTrace | None = None  # the float64 twin's run (gainlink.twin), when one ran
+    comparison: TwinComparison | None = None  # the run against its twin
 
     def summary(self) -> dict:
-        """Counts and timing, JSON-ready."""
-        return {
+        """Counts, timing and the comparison with the twin, JSON-ready."""
+        out = {
             "steps": int(self.u.shape[0]),
             "saturated_steps": int(self.saturated.any(axis=1).sum()),
             "faults": int((self.status == -2).sum()),
@@ -132,6 +134,9 @@ class PilResult:
             "round_trip_us_p99": round(float(np.percentile(self.round_trip_us, 99)), 1),
             "final_output": [float(v) for v in self.y[-1]],
         }
+        if self.comparison is not None:
+            out["twin"] = self.comparison.to_dict()
+        return out
 
 
 def _read_exact(fd: int, size: int, *, proc: subprocess.Popen, deadline_s: float) -> bytes:
@@ -149,6 +154,7 @@ def _read_exact(fd: int, size: int, *, proc: subprocess.Popen, deadline_s: float
 def run_pil(
     artifact: Artifact, *, plant: DiscretePlant, steps: int, reference: np.ndarray | None = None,
     board: str = DEFAULT_BOARD, watchdog_periods: int = 10, deadline_s: float = 10.0,
+    twin: DiscretePlant | None = None,
 ) -> PilResult:
     """Close the loop: firmware in QEMU, ``plant`` in Python, one FIFO round trip per sample.
 
@@ -167,6 +173,9 @@ def run_pil(
         QEMU machine (``mps2-an386`` or ``netduinoplus2``).
     deadline_s : float
         How long to wait for one answer before declaring the firmware silent.
+    twin : DiscretePlant, optional
+        A second instance of the plant, in the same initial state: the float64 twin of the loop
+        (:mod:`gainlink.twin`) runs on it in step with the firmware, and the result compares the two.
 
     Returns
     -------
@@ -184,6 +193,7 @@ def run_pil(
     SAT = np.zeros((steps, a.m), dtype=bool)
     X = [plant.state]
     RT = np.zeros(steps)
+    tw = None if twin is None else TwinLoop(a, outputs=twin.outputs, advance=lambda u: twin.advance(u=u), steps=steps)
     with tempfile.TemporaryDirectory(prefix="gainlink-pil-") as tmp:
         work = Path(tmp)
         os.mkfifo(work / "gl_in.bin")
@@ -208,6 +218,8 @@ def run_pil(
                     rec["r"][0, : a.q] = R[k].astype(np.float32)
                 t0 = time.perf_counter()
                 os.write(fin, rec.tobytes())
+                if tw is not None:  # while the firmware computes
+                    tw.step(k, noise=np.zeros(a.p), r=R[k], d=np.zeros(a.m))
                 out = np.frombuffer(_read_exact(fout, dout.itemsize, proc=proc, deadline_s=deadline_s), dtype=dout)[0]
                 RT[k] = (time.perf_counter() - t0) * 1e6
                 U[k], S[k] = out["u"], out["status"]
@@ -227,20 +239,10 @@ def run_pil(
                 proc.wait()
             os.close(fin)
             os.close(fout)
+    twin_trace = None if tw is None else tw.trace(steps)
+    comparison = None if tw is None else twin_comparison(
+        t=np.arange(steps) * a.Ts, y=Y, u=U.astype(float), r=np.asarray(R, dtype=float), twin_y=twin_trace.y,
+        twin_u=twin_trace.u, artifact=a)
     return PilResult(y=Y, u=U, status=S, saturated=SAT, plant_state=np.array(X), round_trip_us=RT,
-                     steps_per_second=steps / elapsed if elapsed > 0 else float("inf"))
-
-
-def reference_closed_loop(artifact: Artifact, *, plant: DiscretePlant, steps: int,
-                          reference: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The same closed loop with the float64 reference law in place of the firmware: (Y, U)."""
-    a = artifact
-    R = np.broadcast_to(a.r_op if reference is None else np.asarray(reference, float), (steps, a.q))
-    law = ReferenceLoop(a)
-    Y = np.zeros((steps, a.p))
-    U = np.zeros((steps, a.m))
-    for k in range(steps):
-        Y[k] = plant.outputs()
-        U[k] = law.step(Y[k], R[k]).u
-        plant.advance(u=U[k])
-    return Y, U
+                     steps_per_second=steps / elapsed if elapsed > 0 else float("inf"), twin=twin_trace,
+                     comparison=comparison)
