@@ -218,14 +218,14 @@ def run_pil(
                     rec["r"][0, : a.q] = R[k].astype(np.float32)
                 t0 = time.perf_counter()
                 os.write(fin, rec.tobytes())
-                if tw is not None:  # while the firmware computes
-                    tw.step(k, noise=np.zeros(a.p), r=R[k], d=np.zeros(a.m))
                 out = np.frombuffer(_read_exact(fout, dout.itemsize, proc=proc, deadline_s=deadline_s), dtype=dout)[0]
                 RT[k] = (time.perf_counter() - t0) * 1e6
                 U[k], S[k] = out["u"], out["status"]
                 SAT[k] = (int(out["sat"]) >> np.arange(a.m)) & 1
                 plant.advance(u=U[k].astype(float))
                 X.append(plant.state)
+                if tw is not None:  # outside the timed round trip
+                    tw.step(k, noise=np.zeros(a.p), r=R[k], d=np.zeros(a.m))
             elapsed = time.perf_counter() - t_start
             try:
                 proc.wait(timeout=deadline_s)
