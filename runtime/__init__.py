@@ -19,6 +19,10 @@ from .errors import (ArtifactError, DataError, DesignError, GainlinkError, Integ
                      PlantError, ScenarioError, SpecError)
 from .reference import ReferenceLoop, Trace  # noqa: E402
 from .simulate import Simulation  # noqa: E402
+from .compensator import compensator_stability  # noqa: E402
+from .fidelity import float32_fidelity  # noqa: E402
+from .onestep import one_step_check  # noqa: E402
+from .twin import twin_comparison  # noqa: E402
 from . import hil  # noqa: E402
 
 __all__ = [
@@ -26,5 +30,6 @@ __all__ = [
     "Artifact", "ReferenceLoop", "Trace", "Simulation",
     "GainlinkError", "SpecError", "DesignError", "ArtifactError", "IntegrityError", "DataError",
     "PlantError", "ScenarioError",
+    "one_step_check", "compensator_stability", "float32_fidelity", "twin_comparison",
     "hil",
 ]

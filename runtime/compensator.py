@@ -7,13 +7,9 @@ state and command run away, and replaying recorded samples through two implement
 and float64) diverges like ``|z|^k`` even when both are right (compare one step at a time instead:
 :func:`gainlink.replay.one_step_check`).
 
-State ``[xh; z]``, input ``[y - y_op; r]``, output ``v - u_op`` (unsaturated, so back-calculation and
-clamping are inactive). Predictor form, with ``F = Ad - L Cd`` and ``G = Bd - L Dd``::
-
-    xh+ = (F - G K) xh - G Ki z + L dy          z+ = z + Ts (r - Ci y)        v - u_op = -K xh - Ki z
-
-Current form (``Dd = 0``): ``xc = (I - M Cd) xh + M dy``, ``xh+ = (Ad - Bd K) xc - Bd Ki z``,
-``v - u_op = -K xc - Ki z``. The integrators contribute ``q`` poles at exactly ``z = 1``.
+The compensator is :func:`gainlink.systems.controller_matrices`: state ``[xh; z]``, input
+``[y - y_op; r - Ci y_op]``, output ``v - u_op`` (unsaturated, so back-calculation and clamping are
+inactive). The integrators contribute ``q`` poles at exactly ``z = 1``.
 """
 
 from __future__ import annotations
@@ -78,41 +74,26 @@ class CompensatorStability:
                 "unstable_poles": complex_pairs(self.unstable_poles), "stable": self.stable}
 
 
-def compensator_matrices(*, Ad, Bd, Cd, Dd, K, L, M, Ki, Ci, Ts: float, form: str):
-    """``(A, B, C, D)`` of the compensator: state ``[xh; z]``, input ``[dy; r]``, output ``v - u_op``."""
-    n, m = Bd.shape
-    p, q = Cd.shape[0], Ci.shape[0]
-    if form == "current":
-        Acl = Ad - Bd @ K
-        Ax = Acl @ (np.eye(n) - M @ Cd)
-        Bx = Acl @ M
-        Az = -Bd @ Ki
-        Cx, Dy = -K @ (np.eye(n) - M @ Cd), -K @ M
-    else:
-        G = Bd - L @ Dd
-        Ax, Bx, Az = Ad - L @ Cd - G @ K, L, -G @ Ki
-        Cx, Dy = -K, np.zeros((m, p))
-    A = np.block([[Ax, Az], [np.zeros((q, n)), np.eye(q)]])
-    B = np.block([[Bx, np.zeros((n, q))], [-Ts * Ci, Ts * np.eye(q)]])
-    C = np.hstack([Cx, -Ki])
-    D = np.hstack([Dy, np.zeros((m, q))])
-    return A, B, C, D
+def compensator_stability(artifact) -> CompensatorStability:
+    """Poles and spectral radius of the compensator of a loaded :class:`~gainlink.artifact.Artifact`
+    (its matrices: :func:`gainlink.systems.controller_matrices`).
 
+    Examples
+    --------
+    >>> import control as ct, numpy as np, gainlink as gl
+    >>> art = gl.design(ct.ss([[0.9]], [[0.1]], [[1.0]], [[0.0]], 0.01), Q=[[1.0]], R=[[1.0]],
+    ...                 W=[[1e-3]], V=[[1e-4]], u_min=[-1.0], u_max=[1.0])
+    >>> comp = compensator_stability(art)
+    >>> comp.stable, round(comp.spectral_radius, 4) == round(float(abs(comp.poles[0])), 4)
+    (True, True)
+    """
+    from .systems import controller_matrices
 
-def compensator_stability(*, Ad, Bd, Cd, Dd, K, L, M, Ki, Ci, Ts: float, form: str) -> CompensatorStability:
-    """Poles and spectral radius of the compensator given its matrices (see the module docstring)."""
-    A, _, _, _ = compensator_matrices(Ad=Ad, Bd=Bd, Cd=Cd, Dd=Dd, K=K, L=L, M=M, Ki=Ki, Ci=Ci, Ts=Ts, form=form)
-    n, q = Ad.shape[0], Ci.shape[0]
+    A, _, _, _ = controller_matrices(artifact)
+    n, q = artifact.n, artifact.q
     own = np.linalg.eigvals(A[:n, :n])  # the block-triangular A: the integrators add q poles at 1
     poles = np.concatenate([own, np.ones(q, dtype=complex)])
     unstable = own[np.abs(own) > 1.0 + UNSTABLE_MARGIN]
     return CompensatorStability(poles=poles, spectral_radius=float(np.max(np.abs(poles))),
                                 unstable_poles=np.array(sorted(unstable, key=lambda z: (-abs(z), z.imag))),
                                 integrators=q)
-
-
-def artifact_compensator(artifact) -> CompensatorStability:
-    """:func:`compensator_stability` of a loaded :class:`~gainlink.artifact.Artifact`."""
-    a = artifact
-    return compensator_stability(Ad=a.Ad, Bd=a.Bd, Cd=a.Cd, Dd=a.Dd, K=a.K, L=a.L, M=a.M, Ki=a.Ki, Ci=a.Ci,
-                                 Ts=a.Ts, form=a.observer_form)

@@ -202,7 +202,7 @@ def implement(data: dict, implementation: dict, warnings: list[str]):
         ``(data, CompensatorStability, Float32Fidelity or None)``; ``data`` is not sealed.
     """
     from .artifact import from_dict
-    from .compensator import artifact_compensator
+    from .compensator import compensator_stability
     from .fidelity import float32_fidelity
     from .realization import REALIZATIONS, apply, transformation
 
@@ -218,7 +218,7 @@ def implement(data: dict, implementation: dict, warnings: list[str]):
         data = apply(data, kind=kind, T=T)
     data = dict(data, checks=dict(data["checks"]))
     a = from_dict(seal(data))
-    compensator = artifact_compensator(a)
+    compensator = compensator_stability(a)
     data["checks"]["compensator"] = compensator.to_dict()
     if not compensator.stable:
         warnings.append(compensator.warning())

@@ -125,14 +125,3 @@ def design_plant(artifact) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarr
     d = rec["design"]
     return (np.array(d["Ad"], dtype=float), np.array(d["Bd"], dtype=float), np.array(d["Cd"], dtype=float),
             artifact.Dd)
-
-
-def design_matrices(data: dict) -> dict:
-    """``Ad Bd Cd K L (M) xh0`` in the design's coordinates (the top-level ones without a realisation)."""
-    rec = data.get("realization")
-    if rec is not None:
-        return rec["design"]
-    keys = ["Ad", "Bd", "Cd", "K", "L"] + (["M"] if "M" in data else [])
-    out = {k: data[k] for k in keys}
-    out["xh0"] = data.get("xh0", [0.0] * int(data["n"]))
-    return out

@@ -47,17 +47,21 @@ def controller_system(a: "Artifact") -> "control.StateSpace":
 
     A, B, C, D = controller_matrices(a)
     sig = a.signals
-    states = [f"xh_{s}" for s in sig["states"]] + [f"z_{r}" for r in sig["references"]]
+    realised = "realization" in a.data  # the estimate in other coordinates than the plant's states
+    states = ([f"xh{i}" for i in range(a.n)] if realised else [f"xh_{s}" for s in sig["states"]]) + \
+        [f"z_{r}" for r in sig["references"]]
     return control.ss(A, B, C, D, a.Ts, name=f"{a.name}_controller", states=states,
                       inputs=list(sig["outputs"]) + list(sig["references"]), outputs=list(sig["inputs"]))
 
 
 def plant_system(a: "Artifact") -> "control.StateSpace":
-    """The artifact's discrete design plant (deviation variables) with named signals."""
+    """The artifact's discrete design plant (deviation variables, the design's coordinates) with named signals."""
     import control
 
+    from .realization import design_plant
+
     sig = a.signals
-    return control.ss(a.Ad, a.Bd, a.Cd, a.Dd, a.Ts, name=f"{a.name}_plant", states=[f"x_{s}" for s in sig["states"]],
+    return control.ss(*design_plant(a), a.Ts, name=f"{a.name}_plant", states=[f"x_{s}" for s in sig["states"]],
                       inputs=[f"{s}_plant" for s in sig["inputs"]], outputs=list(sig["outputs"]))
 
 

@@ -38,7 +38,8 @@ def test_curated_namespace_lists_what_a_user_needs():
     assert callable(gl.design) and callable(gl.hil.run)
 
 
-@pytest.mark.parametrize("module", ["gainlink.api", "gainlink.hil"])
+@pytest.mark.parametrize("module", ["gainlink.api", "gainlink.hil", "gainlink.onestep", "gainlink.twin",
+                                    "gainlink.fidelity", "gainlink.compensator"])
 def test_docstring_examples_run(module):
     import importlib
 

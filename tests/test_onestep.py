@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from gainlink import artifact as artifact_mod
-from gainlink.compensator import artifact_compensator
+from gainlink.compensator import compensator_stability
 from gainlink.design import design
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop, trace_from_raw
@@ -66,7 +66,7 @@ def test_random_closed_loop_designs_pass_one_step_on_host_and_qemu_bit_for_bit()
     unstable = 0
     for case in cases:
         a = case.artifact
-        comp = artifact_compensator(a)
+        comp = compensator_stability(a)
         poles = jacobian_poles(a)
         assert np.max(np.abs(poles)) == pytest.approx(comp.spectral_radius, rel=1e-9), case.label
         unstable += not comp.stable

@@ -13,7 +13,7 @@ from ..analysis import analyze, complex_pairs
 from ..design import design
 from ..errors import DataError, GainlinkError, VerificationError
 from ..fileio import atomic_write_text, publish_files
-from ..compensator import artifact_compensator
+from ..compensator import compensator_stability
 from ..replay import compare_traces, engine_names, one_step_check, read_samples, read_trace, replay
 from ..simulate import samples_csv, simulate_linear
 from ..spec import load_spec
@@ -193,7 +193,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     for name, check in checks.items():
         print(f"one-step check of {name} (float64 law from its own state at each step): {check.summary()}")
     c = compare_traces(a, trace, other)
-    comp = artifact_compensator(a)
+    comp = compensator_stability(a)
     why = "" if comp.stable else (f"; replayed open loop, rounding grows like {comp.radius_without_integrators:.3g}^k"
                                   ": the one-step check is the verdict")
     print(f"open loop against {args.compare} (information): max |du| = {c.max_abs_u:.3g} ({c.max_rel_u:.3g} of the "
