@@ -59,6 +59,7 @@ def test_lockstep_classic_can_stabilises_the_fmu_pendulum_and_writes_the_report(
     summary = (report / "summary.txt").read_text()
     assert "complete" in summary and str(report / "report.json") in summary
     assert "against the float64 twin" in summary and "max |u - u_twin|: F" in summary
+    assert m["run"]["artifact"]["compensator"]["stable"] and "compensator poles max |z| = 0.90" in summary
     assert res.out == summary
 
 

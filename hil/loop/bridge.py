@@ -28,7 +28,7 @@ from ..plants.config import plant_from_config
 from .metrics import RunTrace, compute_metrics, link_capacity
 from ..plants.base import Plant, check_dimensions
 from .scheduler import SPIN_NS, Pacer, Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
-from .plan import Plan, Recorder, plan_run, start_twin
+from .plan import Plan, Recorder, describe_artifact, plan_run, start_twin
 from .scenario import Scenario
 from ..links.base import Transport, transport_from_config
 
@@ -332,7 +332,7 @@ class _Loop:
         if reason:
             metrics["reason"] = reason
         plant = self.plant
-        info = {"artifact": {"name": a.name, "sha256": a.sha256, "path": str(scenario.artifact_path)},
+        info = {"artifact": describe_artifact(a, scenario.artifact_path),
                 "plant": {"name": plant.name, "inputs": list(plant.input_names), "outputs": list(plant.output_names),
                           "states": list(plant.state_names)},
                 "transport": self.transport.describe(),

@@ -87,6 +87,15 @@ class Recorder:
                         twin_z=tw.z if tw else nan(p.R.shape[1]))
 
 
+def describe_artifact(artifact: Artifact, path) -> dict:
+    """What a report says about the artifact: identity and the compensator's stability."""
+    from gainlink.compensator import compensator_stability
+
+    comp = compensator_stability(artifact)
+    return {"name": artifact.name, "sha256": artifact.sha256, "path": str(path),
+            "compensator": {**comp.to_dict(), "summary": comp.describe()}}
+
+
 def start_twin(scenario: Scenario, *, artifact: Artifact, plan: Plan, stack) -> TwinLoop | None:
     """The run's float64 twin (:mod:`gainlink.twin`) on a second instance of the scenario's plant (a second
     FMU instance), reset to the same initial state; None when ``scenario.twin`` is off.

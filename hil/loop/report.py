@@ -41,6 +41,10 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
     lines.append(f"  artifact {info['artifact']['name']} sha256:{info['artifact']['sha256'][:16]}  plant "
                  f"{info['plant']['name']}  controller {info['controller']['kind']}  transport "
                  f"{info['transport'].get('config', {}).get('interface', info['transport'].get('kind'))}")
+    comp = info["artifact"].get("compensator")
+    if comp:
+        lines.append(f"  {comp['summary']}" + ("" if comp["stable"] else
+                     ": run it only with the loop closed; a broken sensor path lets it run away"))
     lines.append(f"  mode {m['mode']}: {m['steps']}/{m['steps_planned']} steps in {m['wall_s']:.2f} s "
                  f"({_fmt(m['steps_per_s'], '/s', 5)}), SCHED_FIFO {'on' if m['sched_fifo'] else 'off'}"
                  + (f", PM QoS {'on' if m['pm_qos'] else 'off'}" if "pm_qos" in m else "")

@@ -29,7 +29,7 @@ from gainlink.reference import ReferenceLoop
 
 from .bridge import RunResult, build_plant
 from .metrics import compute_metrics
-from .plan import Recorder, plan_run, start_twin
+from .plan import Recorder, describe_artifact, plan_run, start_twin
 from .scenario import Scenario
 
 GL_SATURATED, GL_ERR_NANINF = 1, -2
@@ -166,7 +166,7 @@ class _SilLoop:
                         "faults_injected": {}, "mode": "sil"})
         if reason:
             metrics["reason"] = reason
-        info = {"artifact": {"name": a.name, "sha256": a.sha256, "path": str(scenario.artifact_path)},
+        info = {"artifact": describe_artifact(a, scenario.artifact_path),
                 "plant": {"name": plant.name, "inputs": list(plant.input_names), "outputs": list(plant.output_names),
                           "states": list(plant.state_names)},
                 "transport": {"kind": "sil (in-process, no link)"},
