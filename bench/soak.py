@@ -132,7 +132,7 @@ def slope_kib_per_min(rows: list[dict], key: str, *, skip_s: float = 60.0) -> fl
 
 def scenario(name: str, *, gains: Path, exe: Path, fmu: Path, transport: dict, mode: str, duration: float) -> dict:
     data = {"name": name, "artifact": str(gains), "duration": duration, "mode": mode, "controller": "firmware",
-            "firmware": str(exe), "shadow": False, "peer_timeout": 10.0, "step_timeout": 2.0,
+            "firmware": str(exe), "twin": False, "peer_timeout": 10.0, "step_timeout": 2.0,
             "plant": {"kind": "fmu", "path": str(fmu)}, "transport": transport, "initial_state": {"theta": 0.1},
             "reference": {"r_x": {"kind": "step", "at": 1.0, "value": 0.2}}}
     if mode == "realtime":

@@ -129,7 +129,7 @@ def realtime_scenario(art_path: Path, transport: dict, *, controller: str, board
     from gainlink.hil.loop.scenario import parse_scenario
 
     data = {"name": f"rt_{rate_hz:g}hz", "artifact": str(art_path), "duration": duration, "mode": "realtime",
-            "controller": controller, "period": 1.0 / rate_hz, "peer_timeout": 5.0, "seed": 3, "shadow": False,
+            "controller": controller, "period": 1.0 / rate_hz, "peer_timeout": 5.0, "seed": 3, "twin": False,
             "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]}, "transport": transport,
             "initial_state": {"theta": 0.05}}
     if controller == "qemu":

@@ -32,7 +32,7 @@ RANGES = {"x": [-5.0, 5.0], "theta": [-1.0, 1.0], "r_x": [-5.0, 5.0]}
 def scenario(artifact_path, transport: dict, *, controller: str, board: str | None = None, duration: float = 1.5):
     data = {
         "name": "pendulum_uart", "artifact": str(artifact_path), "duration": duration, "mode": "lockstep",
-        "controller": controller, "step_timeout": 2.0, "peer_timeout": 5.0, "seed": 7, "shadow": True,
+        "controller": controller, "step_timeout": 2.0, "peer_timeout": 5.0, "seed": 7, "twin": True,
         "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]},
         "transport": transport, "initial_state": {"theta": 0.1},
         "reference": {"r_x": {"kind": "step", "at": 0.3, "value": 0.4}}, "noise": {"theta": 0.001},

@@ -140,7 +140,7 @@ def hil_run(artifact: Path, fmu: Path, *, duration: float = 8.0):
     starting 1 m below the set point."""
     return run_scenario(parse_scenario({
         "name": "hover_trim", "artifact": str(artifact), "duration": duration, "mode": "lockstep",
-        "controller": "firmware", "step_timeout": 2.0, "peer_timeout": 4.0, "shadow": True,
+        "controller": "firmware", "step_timeout": 2.0, "peer_timeout": 4.0, "twin": True,
         "plant": {"kind": "fmu", "path": str(fmu), "outputs": ["z"]},
         "transport": udp_transport(fd=True), "initial_state": {"z": Z_SET - 1.0},
     }))
@@ -162,7 +162,7 @@ def test_hil_holds_the_trim_altitude_only_with_the_operating_point(hover):
     last = t >= t[-1] - 1.0
     assert np.max(np.abs(z[last] - Z_SET)) < 1e-3, np.max(np.abs(z[last] - Z_SET))
     assert u[-1] == pytest.approx(hover["u_hover"], abs=1e-4)
-    assert z[0] == pytest.approx(Z_SET - 1.0) and good.metrics["shadow_max_abs_du"]["throttle"] < 1e-4
+    assert z[0] == pytest.approx(Z_SET - 1.0) and good.metrics["twin"]["inputs"]["throttle"]["max_du_rel"] < 1e-4
 
     bad = hil_run(hover["blind"], hover["fmu"])
     assert bad.complete and bad.metrics["lost"] == 0
