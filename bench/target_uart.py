@@ -5,7 +5,7 @@ transports the HIL bridge uses: MAVLink (DEBUG_FLOAT_ARRAY -> HIL_ACTUATOR_CONTR
 (python-can ``slcan`` on ``socket://``, classic float32 frames) to the image in QEMU on each board, and the
 baselines measured beside them: the host MAVLink app over UDP and the host CAN app over udp_multicast
 (classic frames, the slcan layout). Reports round trips/s and latency p50/p99 for each, and each UART link's
-ratio to its host baseline. The commands of every link must equal the host MAVLink app's (same C, same samples).
+ratio to its host baseline, and whether its commands equalled the host MAVLink app's (same C, same samples).
 
 Realtime: the bridge's realtime mode (cart-pendulum FMU, ``--realtime-s`` seconds each, default 30) at
 descending loop rates; the highest rate with no deadline miss is each link's answer. Rates whose period is
