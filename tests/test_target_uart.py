@@ -29,7 +29,8 @@ from gainlink.mavlink.session import ParamSession
 RANGES = {"x": [-5.0, 5.0], "theta": [-1.0, 1.0], "r_x": [-5.0, 5.0]}
 
 
-def scenario(artifact_path, transport: dict, *, controller: str, board: str | None = None, duration: float = 1.5):
+def scenario(artifact_path, transport: dict, *, controller: str, board: str | None = None, duration: float = 1.5,
+             faults: list | None = None):
     data = {
         "name": "pendulum_uart", "artifact": str(artifact_path), "duration": duration, "mode": "lockstep",
         "controller": controller, "step_timeout": 2.0, "peer_timeout": 5.0, "seed": 7, "twin": True,
@@ -39,6 +40,8 @@ def scenario(artifact_path, transport: dict, *, controller: str, board: str | No
     }
     if board is not None:
         data["board"] = board
+    if faults is not None:
+        data["faults"] = faults
     return parse_scenario(data, path=artifact_path.parent / "scenario.toml")
 
 
@@ -254,3 +257,11 @@ def test_a_signed_link_to_the_image_runs_and_unsigned_samples_are_refused(pend, 
             unsigned.send_frames(unsigned.encode_reset(seq=0))
             unsigned.send_frames(unsigned.encode_sample(seq=1, y=np.zeros(art.p), r=np.zeros(art.q)))
             assert unsigned.receive_command(timeout=3.0) is None  # refused, never stepped
+
+
+def test_an_image_that_dies_mid_run_ends_the_run_with_its_reason(pend):
+    """The board loses power at t = 0.3 s (QEMU killed): the run stops, incomplete, saying why; nothing raises."""
+    res = run_scenario(scenario(pend, {"interface": "slcan", "channel": f"socket://127.0.0.1:{free_tcp_port()}"},
+                                controller="qemu", duration=1.0, faults=[{"kind": "crash", "start": 0.3}]))
+    assert not res.complete and "controller exited" in res.reason, res.reason
+    assert 25 <= res.metrics["steps"] <= 40 and res.trace.got[:30].all()

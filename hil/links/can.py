@@ -256,6 +256,15 @@ class CanTransport(Transport):
         if self.bus is not None:
             try:
                 self.bus.shutdown()
+            except Exception as exc:
+                if not self.slcan:
+                    raise
+                # slcan's shutdown writes "C" to the adapter first; when the adapter (the image in QEMU) is
+                # already gone that write fails and python-can leaves the port open: close it here
+                log.debug("slcan: closing a link whose other end is gone: %s", exc)
+                port = getattr(self.bus, "serialPortOrig", None)
+                if port is not None:
+                    port.close()
             finally:
                 self.bus = None
 
@@ -298,16 +307,15 @@ class CanTransport(Transport):
                         continue
                 else:
                     msg = bus.recv(remaining)
-            except self._can_error as exc:
-                if isinstance(exc.__cause__, OSError) or exc.__cause__ is None:
+            except Exception as exc:
+                if self.slcan and isinstance(exc.__cause__ or exc, OSError):
+                    # the serial link went away (e.g. QEMU stopped): no command; the bridge asks the peer why
+                    time.sleep(min(max(remaining, 0.0), 0.05))
+                    return None
+                if not isinstance(exc, self._can_error) or isinstance(exc.__cause__, OSError) or exc.__cause__ is None:
                     raise TransportError(f"CAN receive failed: {exc}") from None
                 self.frames_refused += 1  # a datagram that is no CAN frame: anyone can send to the group
                 continue
-            except Exception as exc:
-                if self.slcan:  # the serial link went away (e.g. QEMU stopped): the bridge asks the peer why
-                    time.sleep(min(max(remaining, 0.0), 0.05))
-                    return None
-                raise TransportError(f"CAN receive failed: {exc}") from None
             if msg is None:
                 return None
             done = self.rx.feed(msg)

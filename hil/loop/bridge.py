@@ -108,6 +108,8 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
         loop = _Loop(scenario, artifact=artifact, plant=plant, transport=transport, peer=peer)
         loop.twin = start_twin(scenario, artifact=artifact, plan=loop.plan, stack=stack)
         result = loop.run(progress)
+        if scenario.controller == "qemu":
+            transport.close()  # the UART's client leaves before the board powers off (slcan's close writes to it)
         code = peer.stop()  # its exit summary counts everything it received, hostile traffic included
         result.metrics["controller"] = {"exit_status": code, "counters": peer.counters(),
                                         "stderr_bytes": peer.stderr_bytes()}
