@@ -338,10 +338,11 @@ def _worker_pids(address: str) -> set[int]:
 def test_a_run_whose_worker_dies_is_retried_and_recorded_as_failed_after_a_second_death(pend, dask_cluster, tmp_path):
     from distributed import Client
 
-    data = small_campaign(pend, runs=1, draw=[], grid=[{"target": "duration", "values": [120.0, 1.0, 1.5, 2.0]}])
+    # The long run (600 s of loop: ~30 s of CPU) is submitted last, so the short ones are not queued behind it.
+    data = small_campaign(pend, runs=1, draw=[], grid=[{"target": "duration", "values": [1.0, 1.5, 2.0, 600.0]}])
     data["scenario"]["plant"]["step"] = 0.001
     plan = plan_campaign(parse_campaign(data))
-    long_key = f"gainlink-run-{plan.runs[0].id}"
+    long_key = f"gainlink-run-{plan.runs[3].id}"
     outcome, done = {}, []
     thread = threading.Thread(target=lambda: outcome.update(result=run(
         data, out=tmp_path / "out", scheduler=dask_cluster, progress=lambda *args: done.append(args[2]))))
@@ -362,8 +363,8 @@ def test_a_run_whose_worker_dies_is_retried_and_recorded_as_failed_after_a_secon
     assert len(kills) == 2, "the long run was not seen processing twice"
     result = outcome["result"]
     rows = {r["index"]: r for r in result.rows}
-    assert rows[0]["status"] == "error" and "KilledWorker" in rows[0]["reasons"][0]
-    assert all(rows[i]["status"] in ("pass", "fail") for i in (1, 2, 3)) and result.errors == 1
+    assert rows[3]["status"] == "error" and "KilledWorker" in rows[3]["reasons"][0]
+    assert all(rows[i]["status"] in ("pass", "fail") for i in (0, 1, 2)) and result.errors == 1
 
 
 # --- HIL campaigns ---------------------------------------------------------------------------------

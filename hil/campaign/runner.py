@@ -133,15 +133,15 @@ def _submit_and_store(client: Any, plan: CampaignPlan, todo: dict[str, RunPoint]
     from distributed import as_completed
 
     kind = plan.campaign.kind
-    # Inputs go to the cluster once each, as tasks returning them (not scattered data): a task's result
-    # lost with its worker is computed again from the graph, scattered data would be gone for good.
-    shas = {p.artifact_sha256 for p in todo.values()}
-    artifacts = {sha: client.submit(_data, plan.artifacts[sha], key=f"gainlink-artifact-{sha}") for sha in shas}
+    # FMU archives go to the cluster once each, as tasks returning them (not scattered data): a task's result
+    # lost with its worker is computed again from the graph, scattered data would be gone for good. Artifacts
+    # (a few kB) travel inside each run's task: a run with no dependency goes to whichever worker is free,
+    # instead of queueing on the worker that happens to hold the artifact.
     blobs = {sha: client.submit(_data, data, key=f"gainlink-fmu-{sha}") for sha, data in plan.blobs.items()}
     futures = {}
     for point in todo.values():
         needed = {s: f for s, f in blobs.items() if s in str(point.scenario.get("plant", {}).get("path", ""))}
-        fut = client.submit(execute, kind, artifacts[point.artifact_sha256], point.scenario, point.seed, needed,
+        fut = client.submit(execute, kind, plan.artifacts[point.artifact_sha256], point.scenario, point.seed, needed,
                             key=f"gainlink-run-{point.id}", retries=1, pure=False)
         futures[fut] = point
     for fut in as_completed(list(futures)):
