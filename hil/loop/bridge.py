@@ -20,7 +20,7 @@ from typing import Any, Callable
 import numpy as np
 
 from gainlink.artifact import Artifact, load
-from gainlink.errors import GainlinkError, PlantError, ScenarioError
+from gainlink.errors import GainlinkError, PlantError, ScenarioError, TransportError
 
 from .controller import ControllerProcess, controller_argv, qemu_peer
 from .faults import FaultInjector
@@ -264,7 +264,7 @@ class _Loop:
         sent = time.perf_counter_ns()
         if wait_until is None:
             rec.TICK[k] = sent - self.t_start
-        self.transport.send_frames(frames)
+        self._send(k, frames)
         deadline = wait_until if wait_until is not None else sent + int(self.scenario.step_timeout * 1e9)
         try:
             cmd = self._await_command(seq, deadline)
@@ -281,6 +281,20 @@ class _Loop:
                 raise _Stop(f"plant failed at step {k}: {exc}", k + 1) from None
         finally:  # after the command: the twin's work never delays the controller or its measured latency
             self._twin_step(k)
+
+    def _send(self, k: int, frames: list) -> None:
+        """Send sample ``k``; a link that breaks because the controller died ends the run with that reason."""
+        try:
+            self.transport.send_frames(frames)
+        except TransportError:
+            # A serial link (QEMU's UART socket) fails on write as soon as its peer is gone; the exit status
+            # follows a moment later, and is the reason the user needs.
+            until = time.monotonic() + 2.0
+            while self.peer.exit_status() is None and time.monotonic() < until:
+                time.sleep(0.01)
+            if self.peer.exit_status() is None:
+                raise
+            self._check_peer(k, time.perf_counter_ns())
 
     def _twin_step(self, k: int) -> None:
         """Advance the float64 twin through sample ``k`` (same noise, reference and disturbance)."""

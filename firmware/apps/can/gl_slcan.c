@@ -4,6 +4,8 @@
  */
 #include "gl_slcan.h"
 
+#include "gainlink/gl_hex.h"
+
 #include <string.h>
 
 static const uint8_t OK[] = "\r";
@@ -34,32 +36,14 @@ static void refuse(gl_slcan_t *s)
     reply(s, BEL, 1);
 }
 
-static int hex_value(char c)
-{
-    if (c >= '0' && c <= '9') {
-        return c - '0';
-    }
-    if (c >= 'a' && c <= 'f') {
-        return c - 'a' + 10;
-    }
-    if (c >= 'A' && c <= 'F') {
-        return c - 'A' + 10;
-    }
-    return -1;
-}
-
 /** Parse `digits` hex digits at `text`; -1 when one is not a hex digit. */
 static int parse_hex(const char *text, uint32_t digits, uint32_t *out)
 {
-    uint32_t v = 0;
-    for (uint32_t i = 0; i < digits; ++i) {
-        int d = hex_value(text[i]);
-        if (d < 0) {
-            return -1;
-        }
-        v = (v << 4) | (uint32_t)d;
+    uint64_t v;
+    if (gl_hex_parse(text, digits, &v) != 0) {
+        return -1;
     }
-    *out = v;
+    *out = (uint32_t)v;
     return 0;
 }
 

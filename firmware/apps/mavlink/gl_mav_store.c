@@ -7,6 +7,8 @@
  */
 #include "gl_mav_store.h"
 
+#include "gainlink/gl_hex.h"
+
 #include <string.h>
 
 static const char header[] = "# gainlink MAVLink parameters: committed gain set, float32 bits in hex\n";
@@ -59,34 +61,13 @@ size_t gl_mav_store_encode(const gl_mav_params_t *table, uint8_t *buf, size_t ca
     return put_line(buf, at, cap, "GL_HASH", table->committed.crc32);
 }
 
-static int hex_value(uint8_t c)
-{
-    if (c >= '0' && c <= '9') {
-        return c - '0';
-    }
-    if (c >= 'a' && c <= 'f') {
-        return c - 'a' + 10;
-    }
-    if (c >= 'A' && c <= 'F') {
-        return c - 'A' + 10;
-    }
-    return -1;
-}
-
 static int parse_bits(const uint8_t *text, size_t len, uint32_t *bits)
 {
-    if (len != 8u) {
+    uint64_t v;
+    if (len != 8u || gl_hex_parse((const char *)text, len, &v) != 0) {
         return -1;
     }
-    uint32_t v = 0;
-    for (size_t i = 0; i < len; ++i) {
-        int d = hex_value(text[i]);
-        if (d < 0) {
-            return -1;
-        }
-        v = (v << 4) | (uint32_t)d;
-    }
-    *bits = v;
+    *bits = (uint32_t)v;
     return 0;
 }
 

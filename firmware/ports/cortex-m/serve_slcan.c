@@ -7,6 +7,7 @@
 #include <math.h>
 #include <string.h>
 
+#include "gainlink/gl_hex.h"
 #include "gl_can_node.h"
 #include "gl_nvic.h"
 #include "gl_slcan.h"
@@ -44,30 +45,12 @@ static int frame_out(void *ctx, const gl_can_frame_t *frame)
     return gl_slcan_send(&slcan, frame);
 }
 
-static int hex_digit(char c)
-{
-    if (c >= '0' && c <= '9') {
-        return c - '0';
-    }
-    if (c >= 'a' && c <= 'f') {
-        return c - 'a' + 10;
-    }
-    if (c >= 'A' && c <= 'F') {
-        return c - 'A' + 10;
-    }
-    return -1;
-}
-
 /** 16 hex digits -> the double with those bits; advances `*text`. */
 static int parse_double_bits(const char **text, double *out)
 {
-    uint64_t bits = 0;
-    for (int i = 0; i < 16; ++i) {
-        int d = hex_digit((*text)[i]);
-        if (d < 0) {
-            return -1;
-        }
-        bits = (bits << 4) | (uint64_t)d;
+    uint64_t bits;
+    if (gl_hex_parse(*text, 16u, &bits) != 0) {
+        return -1;
     }
     *text += 16;
     memcpy(out, &bits, sizeof *out);
