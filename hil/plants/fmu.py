@@ -197,6 +197,25 @@ def set_values(fmu: Any, md: Any, values: Mapping[str, Any], *, vars_: dict) -> 
         setters[kind](refs, vals)
 
 
+def open_binary(path: Path, md: Any, fmpy_class: Any, model_identifier: str) -> tuple[Any, str, bool]:
+    """Load an FMU's binary as the fmpy class ``fmpy_class`` (FMU2Slave, FMU2Model, FMU3Slave).
+
+    Returns the instance, the unzip folder and whether that folder is ours to remove (``path`` was an archive,
+    not an unzipped FMU). A binary that does not load is a PlantError, and leaves no folder behind.
+    """
+    from fmpy import extract
+
+    own = path.is_file()
+    unzip = extract(str(path)) if own else str(path)
+    try:
+        fmu = fmpy_class(guid=md.guid, unzipDirectory=unzip, modelIdentifier=model_identifier, instanceName="plant")
+    except Exception as exc:
+        if own:
+            shutil.rmtree(unzip, ignore_errors=True)
+        raise PlantError(f"FMU {path}: cannot load its binary ({exc})") from None
+    return fmu, unzip, own
+
+
 class FmuPlant(Plant):
     """A Co-Simulation FMU as a plant.
 
@@ -216,8 +235,6 @@ class FmuPlant(Plant):
 
     def __init__(self, *, path: Path, inputs: Any = None, outputs: Any = None,
                  parameters: Mapping[str, float] | None = None, states: Any = None) -> None:
-        from fmpy import extract
-
         self.path = Path(path)
         md = read_description(self.path)
         self.md = md
@@ -247,14 +264,7 @@ class FmuPlant(Plant):
         self.input_names, self.output_names, self.state_names = in_names, out_names, states
         self.parameters = mapping.parameters
         self.can_snapshot = bool(md.coSimulation.canGetAndSetFMUstate)
-        self._unzip = extract(str(self.path)) if self.path.is_file() else str(self.path)
-        self._own_unzip = self.path.is_file()
-        try:
-            self.fmu = Slave(guid=md.guid, unzipDirectory=self._unzip,
-                                 modelIdentifier=md.coSimulation.modelIdentifier, instanceName="plant")
-        except Exception as exc:
-            self._cleanup_unzip()
-            raise PlantError(f"FMU {self.path}: cannot load its binary ({exc})") from None
+        self.fmu, self._unzip, self._own_unzip = open_binary(self.path, md, Slave, md.coSimulation.modelIdentifier)
         self._instantiated = False
         self._messages: list[str] = []
         self._callbacks = None if self.v3 else _fmi2_callbacks(id(self), self._messages)
@@ -272,7 +282,7 @@ class FmuPlant(Plant):
     def _cleanup_unzip(self) -> None:
         if self._own_unzip and self._unzip:
             shutil.rmtree(self._unzip, ignore_errors=True)
-            self._unzip = None
+        self._unzip = None
 
     def _reason(self, exc: Exception) -> str:
         """The FMU's last logged message for a failed call (else the exception), and forget the log."""

@@ -21,7 +21,7 @@ import numpy as np
 from gainlink.errors import PlantError
 
 from .base import Plant
-from .fmu import _fmi2_callbacks, _FMI2_SINKS, map_variables, read_description, set_values
+from .fmu import _fmi2_callbacks, _FMI2_SINKS, map_variables, open_binary, read_description, set_values
 
 log = logging.getLogger(__name__)
 
@@ -50,7 +50,6 @@ class FmuModelExchangePlant(Plant):
 
     def __init__(self, *, path: Path, inputs: Any = None, outputs: Any = None, parameters: Mapping[str, Any] | None = None,
                  states: Any = None, rtol: float = 1e-8, max_step: float | None = None) -> None:
-        from fmpy import extract
         from fmpy.fmi2 import FMU2Model
 
         self.path = Path(path)
@@ -73,14 +72,8 @@ class FmuModelExchangePlant(Plant):
         self._vr_in = [self.vars[n].valueReference for n in self.input_names]
         self._vr_out = [self.vars[n].valueReference for n in self.output_names]
         self._vr_state = [self.vars[n].valueReference for n in self.state_names]
-        self._unzip = extract(str(self.path)) if self.path.is_file() else str(self.path)
-        self._own_unzip = self.path.is_file()
-        try:
-            self.fmu = FMU2Model(guid=md.guid, unzipDirectory=self._unzip,
-                                 modelIdentifier=md.modelExchange.modelIdentifier, instanceName="plant")
-        except Exception as exc:
-            self._cleanup_unzip()
-            raise PlantError(f"FMU {self.path}: cannot load its binary ({exc})") from None
+        self.fmu, self._unzip, self._own_unzip = open_binary(self.path, md, FMU2Model,
+                                                             md.modelExchange.modelIdentifier)
         self._messages: list[str] = []
         self._callbacks = _fmi2_callbacks(id(self), self._messages)
         self._instantiated = False
@@ -92,7 +85,7 @@ class FmuModelExchangePlant(Plant):
     def _cleanup_unzip(self) -> None:
         if self._own_unzip and self._unzip:
             shutil.rmtree(self._unzip, ignore_errors=True)
-            self._unzip = None
+        self._unzip = None
 
     def _call(self, what: str, fn: Any, *args: Any, **kwargs: Any) -> Any:
         try:
