@@ -31,7 +31,7 @@ from gainlink.errors import PlantError, SpecError
 from gainlink.fileio import atomic_write_text
 
 from . import toml_write
-from .fmu import read_description, resolve_fmu
+from .fmu import open_binary, read_description, resolve_fmu
 
 log = logging.getLogger(__name__)
 
@@ -97,14 +97,24 @@ def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs:
     horizon : int, optional
         Co-Simulation-only FMUs: steps recorded per input pulse (default 100).
     """
-    from fmpy import extract
-    from fmpy.fmi2 import FMU2Model
-
     path = _fmu_path(fmu)
     md = read_description(path)
     if md.fmiVersion in ("2.0", "3.0") and md.modelExchange is None and md.coSimulation is not None:
         return _linearize_cosimulation(path, md, at=at or {}, inputs=inputs, outputs=outputs, method=method, Ts=Ts,
                                        horizon=horizon)
+    use_dd = _check_model_exchange(path, md, method)
+    sig = _signals(md, inputs=inputs, outputs=outputs, at=at)
+    lin = _evaluate(path, md, sig, use_dd=use_dd)
+    _check_finite(md, lin)
+    drift = _drift(lin.dx0, A=lin.A, B=lin.B, states=lin.states)
+    if drift:
+        log.warning("FMU %s: the operating point is not an equilibrium (%s); the linear model about it "
+                    "drifts: set the trim (e.g. --at INPUT=VALUE) where dx/dt = 0", md.modelName, drift)
+    return lin
+
+
+def _check_model_exchange(path: Path, md: Any, method: str) -> bool:
+    """What linearize needs of a Model Exchange FMU; True when directional derivatives are to be used."""
     if md.fmiVersion != "2.0":
         raise PlantError(f"FMU {path} is FMI {md.fmiVersion}; linearize reads FMI 2.0 Model Exchange FMUs "
                          "(and FMI 2.0/3.0 Co-Simulation-only FMUs)")
@@ -117,10 +127,25 @@ def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs:
     provides = bool(md.modelExchange.providesDirectionalDerivative)
     if method == "directional" and not provides:
         raise PlantError(f"FMU {md.modelName} does not provide directional derivatives")
-    use_dd = provides and method != "differences"
+    return provides and method != "differences"
+
+
+@dataclass(frozen=True)
+class _Signals:
+    """The variables a Model Exchange linearisation reads and writes."""
+
+    vars: dict
+    states: list  # fmpy ScalarVariables of the continuous states
+    derivatives: list  # and of their derivatives
+    inputs: list[str]
+    outputs: list[str]
+    point: dict
+
+
+def _signals(md: Any, *, inputs: list[str] | None, outputs: list[str] | None,
+             at: Mapping[str, float] | None) -> _Signals:
+    """Check the chosen inputs, outputs and operating-point names against the model description."""
     vars_ = {v.name: v for v in md.modelVariables}
-    states = [d.variable.derivative for d in md.derivatives]
-    ders = [d.variable for d in md.derivatives]
     all_in = [v.name for v in md.modelVariables if v.causality == "input" and v.type == "Real"]
     all_out = [v.name for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
     in_names = list(inputs) if inputs else all_in
@@ -133,40 +158,22 @@ def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs:
     for k in point:
         if k not in vars_ or vars_[k].type != "Real":
             raise PlantError(f"FMU {md.modelName} has no Real variable {k!r} for the operating point")
-    vr_x = [s.valueReference for s in states]
-    vr_dx = [d.valueReference for d in ders]
-    vr_u = [vars_[n].valueReference for n in in_names]
-    vr_y = [vars_[n].valueReference for n in out_names]
-    unzip = extract(str(path)) if path.is_file() else str(path)
-    fmu = FMU2Model(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.modelExchange.modelIdentifier,
-                    instanceName="linearize")
+    return _Signals(vars=vars_, states=[d.variable.derivative for d in md.derivatives],
+                    derivatives=[d.variable for d in md.derivatives], inputs=in_names, outputs=out_names, point=point)
+
+
+def _evaluate(path: Path, md: Any, sig: _Signals, *, use_dd: bool) -> Linearization:
+    """Instantiate the FMU at the point, move to the equilibrium when needed, and take the Jacobians."""
+    from fmpy.fmi2 import FMU2Model
+
+    fmu, unzip, own = open_binary(path, md, FMU2Model, md.modelExchange.modelIdentifier)
     try:
-        fmu.instantiate()
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
-        if point:
-            fmu.setReal([vars_[k].valueReference for k in point], list(point.values()))
-        fmu.exitInitializationMode()
-        info = fmu.newDiscreteStates()
-        while info[0]:
-            info = fmu.newDiscreteStates()
-        fmu.enterContinuousTimeMode()
-        nx = len(states)
-        x0 = np.array(fmu.getReal(vr_x))
-        u0 = np.array(fmu.getReal(vr_u)) if vr_u else np.zeros(0)
-
-        def f(x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            fmu.setContinuousStates(fmu_real_array(x), nx)
-            if vr_u:
-                fmu.setReal(vr_u, list(u))
-            dx = np.array(fmu.getReal(vr_dx))
-            y = np.array(fmu.getReal(vr_y)) if vr_y else np.zeros(0)
-            return dx, y
-
+        _initialise(fmu, sig)
+        f, x0, u0, vr = _dynamics(fmu, sig)
         dx0, y0 = f(x0, u0)  # set through the states, so every FMU evaluates them at the point
         # Not at rest and no state given: move to the equilibrium with the inputs held (the rest point an
         # FMU's start values often only approximate); with a state given, that is the point asked for.
-        if not any(s.name in point for s in states) and np.any(np.abs(dx0) > 0.0):
+        if not any(s.name in sig.point for s in sig.states) and np.any(np.abs(dx0) > 0.0):
             x_eq = _equilibrium(f, x0, u0)
             if x_eq is not None:
                 log.info("FMU %s: the start point is not an equilibrium; linearising at the equilibrium with the "
@@ -174,29 +181,9 @@ def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs:
                 x0 = x_eq
                 dx0, y0 = f(x0, u0)
         if use_dd:
-            def jac(unknown: list[int], known: list[int]) -> np.ndarray:
-                J = np.zeros((len(unknown), len(known)))
-                for j, vr in enumerate(known):
-                    if unknown:
-                        J[:, j] = fmu.getDirectionalDerivative(unknown, [vr], [1.0])
-                return J
-
-            A, B, C, D = jac(vr_dx, vr_x), jac(vr_dx, vr_u), jac(vr_y, vr_x), jac(vr_y, vr_u)
-            name = "directional derivatives"
+            (A, B, C, D), name = _directional_jacobians(fmu, vr), "directional derivatives"
         else:
-            A = np.zeros((nx, nx)); C = np.zeros((len(vr_y), nx))
-            B = np.zeros((nx, len(vr_u))); D = np.zeros((len(vr_y), len(vr_u)))
-            for j in range(nx):
-                h = 1e-6 * max(1.0, abs(x0[j]))
-                e = np.zeros(nx); e[j] = h
-                (fp, yp), (fm, ym) = f(x0 + e, u0), f(x0 - e, u0)
-                A[:, j], C[:, j] = (fp - fm) / (2 * h), (yp - ym) / (2 * h)
-            for j in range(len(vr_u)):
-                h = 1e-6 * max(1.0, abs(u0[j]))
-                e = np.zeros(len(vr_u)); e[j] = h
-                (fp, yp), (fm, ym) = f(x0, u0 + e), f(x0, u0 - e)
-                B[:, j], D[:, j] = (fp - fm) / (2 * h), (yp - ym) / (2 * h)
-            name = "central differences"
+            (A, B, C, D), name = _difference_jacobians(f, x0, u0), "central differences"
         fmu.terminate()
     except PlantError:
         raise
@@ -208,19 +195,82 @@ def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs:
             fmu.freeLibrary()
         except Exception:
             log.debug("FMU cleanup failed", exc_info=True)
-        if path.is_file():
+        if own:
             shutil.rmtree(unzip, ignore_errors=True)
-    if not all(np.all(np.isfinite(M)) for M in (A, B, C, D)):
-        raise PlantError(f"FMU {md.modelName}: the Jacobian at this point holds non-finite entries")
-    if not all(np.all(np.isfinite(v)) for v in (x0, u0, y0, dx0)):
-        raise PlantError(f"FMU {md.modelName}: a state, input or output at this point is not finite")
-    drift = _drift(dx0, A=A, B=B, states=tuple(s.name for s in states))
-    if drift:
-        log.warning("FMU %s: the operating point is not an equilibrium (%s); the linear model about it "
-                    "drifts: set the trim (e.g. --at INPUT=VALUE) where dx/dt = 0", md.modelName, drift)
-    return Linearization(A=A, B=B, C=C, D=D, states=tuple(s.name for s in states), inputs=tuple(in_names),
-                         outputs=tuple(out_names), point=point, x0=x0, method=name, model_name=md.modelName,
+    return Linearization(A=A, B=B, C=C, D=D, states=tuple(s.name for s in sig.states), inputs=tuple(sig.inputs),
+                         outputs=tuple(sig.outputs), point=sig.point, x0=x0, method=name, model_name=md.modelName,
                          u0=u0, y0=y0, dx0=dx0)
+
+
+def _initialise(fmu: Any, sig: _Signals) -> None:
+    """Instantiate and initialise with the operating point's values, into continuous-time mode."""
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    if sig.point:
+        fmu.setReal([sig.vars[k].valueReference for k in sig.point], list(sig.point.values()))
+    fmu.exitInitializationMode()
+    info = fmu.newDiscreteStates()
+    while info[0]:
+        info = fmu.newDiscreteStates()
+    fmu.enterContinuousTimeMode()
+
+
+def _dynamics(fmu: Any, sig: _Signals) -> tuple[Any, np.ndarray, np.ndarray, dict]:
+    """``f(x, u) -> (dx/dt, y)`` through the FMU, the state and input at the point, and the value references."""
+    vr = {"x": [s.valueReference for s in sig.states], "dx": [d.valueReference for d in sig.derivatives],
+          "u": [sig.vars[n].valueReference for n in sig.inputs], "y": [sig.vars[n].valueReference for n in sig.outputs]}
+    nx = len(vr["x"])
+    x0 = np.array(fmu.getReal(vr["x"]))
+    u0 = np.array(fmu.getReal(vr["u"])) if vr["u"] else np.zeros(0)
+
+    def f(x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        fmu.setContinuousStates(fmu_real_array(x), nx)
+        if vr["u"]:
+            fmu.setReal(vr["u"], list(u))
+        dx = np.array(fmu.getReal(vr["dx"]))
+        y = np.array(fmu.getReal(vr["y"])) if vr["y"] else np.zeros(0)
+        return dx, y
+
+    return f, x0, u0, vr
+
+
+def _directional_jacobians(fmu: Any, vr: dict) -> tuple[np.ndarray, ...]:
+    """A, B, C, D from the FMU's directional derivatives, one known variable at a time."""
+    def jac(unknown: list[int], known: list[int]) -> np.ndarray:
+        J = np.zeros((len(unknown), len(known)))
+        for j, ref in enumerate(known):
+            if unknown:
+                J[:, j] = fmu.getDirectionalDerivative(unknown, [ref], [1.0])
+        return J
+
+    return jac(vr["dx"], vr["x"]), jac(vr["dx"], vr["u"]), jac(vr["y"], vr["x"]), jac(vr["y"], vr["u"])
+
+
+def _central_difference(g: Any, v: np.ndarray) -> np.ndarray:
+    """Columns d g / d v_j by central differences (step 1e-6 relative, at least 1e-6); ``g`` returns a vector."""
+    cols = []
+    for j in range(v.size):
+        e = np.zeros(v.size)
+        e[j] = 1e-6 * max(1.0, abs(v[j]))
+        cols.append((g(v + e) - g(v - e)) / (2 * e[j]))
+    return np.array(cols).T if cols else np.zeros((np.asarray(g(v)).size, 0))
+
+
+def _difference_jacobians(f: Any, x0: np.ndarray, u0: np.ndarray) -> tuple[np.ndarray, ...]:
+    """A, B, C, D by central differences of ``f(x, u) -> (dx/dt, y)`` about (x0, u0)."""
+    nx = x0.size
+    stack = lambda dx_y: np.concatenate(dx_y)  # noqa: E731
+    Jx = _central_difference(lambda x: stack(f(x, u0)), x0)
+    Ju = _central_difference(lambda u: stack(f(x0, u)), u0)
+    return Jx[:nx], Ju[:nx], Jx[nx:], Ju[nx:]
+
+
+def _check_finite(md: Any, lin: Linearization) -> None:
+    if not all(np.all(np.isfinite(M)) for M in (lin.A, lin.B, lin.C, lin.D)):
+        raise PlantError(f"FMU {md.modelName}: the Jacobian at this point holds non-finite entries")
+    if not all(np.all(np.isfinite(v)) for v in (lin.x0, lin.u0, lin.y0, lin.dx0)):
+        raise PlantError(f"FMU {md.modelName}: a state, input or output at this point is not finite")
 
 
 def _equilibrium(f: Any, x0: np.ndarray, u0: np.ndarray, *, iterations: int = 30) -> np.ndarray | None:
@@ -230,12 +280,7 @@ def _equilibrium(f: Any, x0: np.ndarray, u0: np.ndarray, *, iterations: int = 30
     for _ in range(iterations):
         dx, _ = f(x, u0)
         scale = max(1.0, float(np.max(np.abs(x))))
-        J = np.zeros((x.size, x.size))
-        for j in range(x.size):
-            h = 1e-6 * max(1.0, abs(x[j]))
-            e = np.zeros(x.size)
-            e[j] = h
-            J[:, j] = (f(x + e, u0)[0] - f(x - e, u0)[0]) / (2 * h)
+        J = _central_difference(lambda v: f(v, u0)[0], x)
         if np.linalg.cond(J) > 1e10:
             return None
         step = np.linalg.solve(J, dx)
