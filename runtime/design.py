@@ -99,21 +99,49 @@ def design(spec: PlantSpec) -> DesignResult:
     """
     warnings: list[str] = []
     d = discretise(spec)
-    n, m, p = spec.n, spec.m, spec.p
+    n, m = spec.n, spec.m
     u_min, u_max, anti_windup = _limits(spec)
     Ci = _integral_selector(spec)
     q = Ci.shape[0]
     if q == 0 and anti_windup != "none":
         anti_windup = "none"
+    Aa, Ba = augment(d, Ci, spec.Ts)
+    _check_feasible(d, Aa, Ba, q)
+    Ka, controller_record = _controller(spec, Aa, Ba, warnings)
+    K, Ki = Ka[:, :n], Ka[:, n:]
+    L, M, observer_record = _observer(spec, d, warnings)
+    form = spec.observer.get("form", "predictor")
+    Kaw = _anti_windup_gain(spec, Ki, m=m, anti_windup=anti_windup, record=controller_record)
+    gains = {"K": K, "Ki": Ki, "L": L, "M": M, "Ci": Ci, "Ts": spec.Ts, "form": form}
+    cl_poles, radius = _closed_loop(d, Aa - Ba @ Ka, gains)
+    ctrl_poles = np.linalg.eigvals(Aa - Ba @ Ka)
+    obs_poles = np.linalg.eigvals(d.Ad - L @ d.Cd)
+    margins = input_margins(d, inputs=spec.inputs, **gains)
+    bandwidth = loop_bandwidth(margins, ctrl_poles, spec.Ts)
+    if (2 * np.pi / spec.Ts) < 10 * bandwidth:
+        warnings.append(f"sampling at {2 * np.pi / spec.Ts:.3g} rad/s is less than 10x the closed-loop "
+                        f"bandwidth {bandwidth:.3g} rad/s")
+    data = _artifact_data(spec, d, gains, Kaw=Kaw, u_min=u_min, u_max=u_max, anti_windup=anti_windup,
+                          design_record={"discretization": d.method, "controller": controller_record,
+                                         "observer": observer_record},
+                          checks={"closed_loop_poles": complex_pairs(sorted(cl_poles, key=lambda z: (abs(z), z.imag))),
+                                  "spectral_radius": radius, "margins": [dict(mg.__dict__) for mg in margins]})
+    data, compensator, fidelity = implement(data, spec.implementation or {}, warnings)
+    for w in warnings:
+        log.warning(w)
+    return DesignResult(artifact=seal(data), controller_poles=ctrl_poles, observer_poles=obs_poles,
+                        closed_loop_poles=cl_poles, margins=margins, warnings=warnings, compensator=compensator,
+                        float32=fidelity)
 
+
+def _check_feasible(d: Discretised, Aa: np.ndarray, Ba: np.ndarray, q: int) -> None:
+    """Stabilizable, detectable, and (with integral action) the augmented plant stabilizable: else DesignError."""
     bad = uncontrollable_unstable(d.Ad, d.Bd, discrete=True)
     if bad:
         raise DesignError(f"plant is not stabilizable: unstable mode(s) {_fmt_list(bad)} are uncontrollable")
     bad = unobservable_unstable(d.Ad, d.Cd, discrete=True)
     if bad:
         raise DesignError(f"plant is not detectable: unstable mode(s) {_fmt_list(bad)} are unobservable")
-
-    Aa, Ba = augment(d, Ci, spec.Ts)
     if q:
         bad = uncontrollable_unstable(Aa, Ba, discrete=True)
         if bad:
@@ -121,57 +149,55 @@ def design(spec: PlantSpec) -> DesignResult:
                 "integral action is not feasible: the tracked outputs cannot be driven to a constant "
                 f"reference (augmented modes {_fmt_list(bad)} uncontrollable; a plant zero at s=0 / z=1?)"
             )
-    Ka, controller_record = _controller(spec, Aa, Ba, warnings)
-    K, Ki = Ka[:, :n], Ka[:, n:]
-    L, M, observer_record = _observer(spec, d, warnings)
-    form = spec.observer.get("form", "predictor")
 
+
+def _anti_windup_gain(spec: PlantSpec, Ki: np.ndarray, *, m: int, anti_windup: str, record: dict) -> np.ndarray:
+    """Kaw: -aw_gain pinv(Ki) for back-calculation (recorded in the controller record), zeros otherwise."""
+    q = Ki.shape[1]
     aw_gain = float(spec.integral.get("aw_gain", DEFAULT_AW_GAIN)) if spec.integral else DEFAULT_AW_GAIN
-    Kaw = np.zeros((q, m))
-    if q and anti_windup == "backcalc":
-        if not 0 < aw_gain <= 1:
-            raise SpecError(f"integral.aw_gain must be in (0, 1], got {aw_gain}")
-        Kaw = -aw_gain * np.linalg.pinv(Ki)
-        controller_record["aw_gain"] = aw_gain
+    if not (q and anti_windup == "backcalc"):
+        return np.zeros((q, m))
+    if not 0 < aw_gain <= 1:
+        raise SpecError(f"integral.aw_gain must be in (0, 1], got {aw_gain}")
+    record["aw_gain"] = aw_gain
+    return -aw_gain * np.linalg.pinv(Ki)
 
-    Acl = closed_loop_matrix(d, K=K, Ki=Ki, L=L, M=M, Ci=Ci, Ts=spec.Ts, form=form)
+
+def _closed_loop(d: Discretised, A_ctrl: np.ndarray, gains: dict) -> tuple[np.ndarray, float]:
+    """Closed-loop poles and spectral radius; DesignError when unstable or the separation principle fails."""
+    Acl = closed_loop_matrix(d, **gains)
     cl_poles = np.linalg.eigvals(Acl)
-    ctrl_poles = np.linalg.eigvals(Aa - Ba @ Ka)
-    obs_poles = np.linalg.eigvals(d.Ad - L @ d.Cd)
     radius = float(np.max(np.abs(cl_poles)))
     if not radius < 1.0:
         raise DesignError(f"closed loop is unstable: spectral radius {radius:.6g} >= 1")
-    check_separation(Acl, Aa - Ba @ Ka, d.Ad - L @ d.Cd)
-    margins = input_margins(d, K=K, Ki=Ki, L=L, M=M, Ci=Ci, Ts=spec.Ts, form=form, inputs=spec.inputs)
+    check_separation(Acl, A_ctrl, d.Ad - gains["L"] @ d.Cd)
+    return cl_poles, radius
 
-    bandwidth = loop_bandwidth(margins, ctrl_poles, spec.Ts)
-    if (2 * np.pi / spec.Ts) < 10 * bandwidth:
-        warnings.append(f"sampling at {2 * np.pi / spec.Ts:.3g} rad/s is less than 10x the closed-loop "
-                        f"bandwidth {bandwidth:.3g} rad/s")
 
+def _artifact_data(spec: PlantSpec, d: Discretised, gains: dict, *, Kaw: np.ndarray, u_min: np.ndarray,
+                   u_max: np.ndarray, anti_windup: str, design_record: dict, checks: dict) -> dict:
+    """The artifact's content (unsealed, before the implementation choices)."""
+    Ci, M = gains["Ci"], gains["M"]
+    q = Ci.shape[0]
     data = {
         "schema_version": SCHEMA_VERSION,
         "name": spec.name,
         "Ts": spec.Ts,
-        "n": n, "m": m, "p": p, "q": q,
+        "n": spec.n, "m": spec.m, "p": spec.p, "q": q,
         "Ad": matrix_to_json(d.Ad), "Bd": matrix_to_json(d.Bd),
         "Cd": matrix_to_json(d.Cd), "Dd": matrix_to_json(d.Dd),
-        "K": matrix_to_json(K), "L": matrix_to_json(L),
+        "K": matrix_to_json(gains["K"]), "L": matrix_to_json(gains["L"]),
         "u_min": vector_to_json(u_min), "u_max": vector_to_json(u_max),
         "anti_windup": anti_windup,
-        "observer_form": form,
+        "observer_form": gains["form"],
         "signals": {
             "states": list(spec.states), "inputs": list(spec.inputs), "outputs": list(spec.outputs),
             "references": [f"r_{spec.outputs[int(np.argmax(row))]}" for row in Ci],
         },
         "plant": {"kind": spec.kind, "A": matrix_to_json(spec.A), "B": matrix_to_json(spec.B),
                   "C": matrix_to_json(spec.C), "D": matrix_to_json(spec.D)},
-        "design": {"discretization": d.method, "controller": controller_record, "observer": observer_record},
-        "checks": {
-            "closed_loop_poles": complex_pairs(sorted(cl_poles, key=lambda z: (abs(z), z.imag))),
-            "spectral_radius": radius,
-            "margins": [dict(mg.__dict__) for mg in margins],
-        },
+        "design": design_record,
+        "checks": checks,
         "provenance": provenance(spec),
     }
     if spec.pade_order is not None:
@@ -179,14 +205,9 @@ def design(spec: PlantSpec) -> DesignResult:
     if M is not None:
         data["M"] = matrix_to_json(M)
     if q:
-        data["Ci"], data["Ki"], data["Kaw"] = matrix_to_json(Ci), matrix_to_json(Ki), matrix_to_json(Kaw)
+        data["Ci"], data["Ki"], data["Kaw"] = matrix_to_json(Ci), matrix_to_json(gains["Ki"]), matrix_to_json(Kaw)
     data.update(operating_point_keys(spec, u_min=u_min, u_max=u_max))
-    data, compensator, fidelity = implement(data, spec.implementation or {}, warnings)
-    for w in warnings:
-        log.warning(w)
-    return DesignResult(artifact=seal(data), controller_poles=ctrl_poles, observer_poles=obs_poles,
-                        closed_loop_poles=cl_poles, margins=margins, warnings=warnings, compensator=compensator,
-                        float32=fidelity)
+    return data
 
 
 def implement(data: dict, implementation: dict, warnings: list[str]):
