@@ -216,7 +216,7 @@ def test_bad_inputs_get_one_line_and_a_nonzero_exit(tmp_path, pendulum_gains, ca
         "other artifact": ({**base, "artifact": str(example_artifacts["wood_berry"])}, "expects m=2"),
         "bus cannot open": ({**base, "transport": {"interface": "socketcan", "channel": "gl_nocan0"}},
                             "cannot open CAN bus (interface=socketcan, channel=gl_nocan0)"),
-        "bad mode": ({**base, "mode": "fast"}, "mode must be lockstep or realtime"),
+        "bad mode": ({**base, "mode": "fast"}, "mode must be one of lockstep, realtime"),
         "bad fault": ({**base, "faults": [{"kind": "gremlins"}]}, "faults[0].kind"),
     }
     for name, (data, needle) in cases.items():

@@ -208,23 +208,49 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
         raise ScenarioError("scenario: artifact must be a path string")
     art = Path(data["artifact"])
     art = art if art.is_absolute() else base / art
-    mode = data.get("mode", "lockstep")
-    if mode not in MODES:
-        raise ScenarioError(f"scenario: mode must be lockstep or realtime, not {mode!r}")
-    affinity = data.get("affinity", "auto")
-    if affinity not in AFFINITIES:
-        raise ScenarioError(f"scenario: affinity must be one of {', '.join(AFFINITIES)}, not {affinity!r}")
-    overrun = data.get("overrun", "skip")
-    if overrun not in OVERRUN_POLICIES:
-        raise ScenarioError(f"scenario: overrun must be one of {', '.join(OVERRUN_POLICIES)}, not {overrun!r}")
-    controller = data.get("controller", "firmware")
-    if controller not in CONTROLLERS:
-        raise ScenarioError(f"scenario: controller must be one of {', '.join(CONTROLLERS)}, not {controller!r}")
-    board = data.get("board", BOARDS[0])
-    if board not in BOARDS:
-        raise ScenarioError(f"scenario: board must be one of {', '.join(BOARDS)}, not {board!r}")
+    mode = _choice(data, "mode", MODES, "lockstep")
+    affinity = _choice(data, "affinity", AFFINITIES, "auto")
+    overrun = _choice(data, "overrun", OVERRUN_POLICIES, "skip")
+    controller = _choice(data, "controller", CONTROLLERS, "firmware")
+    board = _choice(data, "board", BOARDS, BOARDS[0])
     if "board" in data and controller != "qemu":
         raise ScenarioError("scenario: board applies to controller = \"qemu\" only")
+    reference = {str(k): _profile(str(k), v) for k, v in _table(data.get("reference", {}), "reference").items()}
+    noise = {str(k): _num(v, f"noise.{k}", minimum=0.0) for k, v in _table(data.get("noise", {}), "noise").items()}
+    initial = {str(k): _num(v, f"initial_state.{k}")
+               for k, v in _table(data.get("initial_state", {}), "initial_state").items()}
+    period = data.get("period")
+    return Scenario(
+        name=str(data.get("name", path.stem if path is not None else "scenario")), path=path, artifact_path=art,
+        plant=_table(data["plant"], "plant"), transport=_table(data["transport"], "transport"),
+        duration=_num(data["duration"], "duration", positive=True), mode=mode,
+        controller=controller, firmware=_firmware_path(data.get("firmware"), base), board=board,
+        step_timeout=_num(data.get("step_timeout", 0.05), "step_timeout", positive=True),
+        peer_timeout=_num(data.get("peer_timeout", 1.0), "peer_timeout", positive=True),
+        period=None if period is None else _num(period, "period", positive=True),
+        sched_fifo=_flag(data, "sched_fifo", True), pm_qos=_flag(data, "pm_qos", True), affinity=affinity,
+        overrun=overrun, seed=int(_num(data.get("seed", 0), "seed")), twin=_flag(data, "twin", True),
+        initial_state=initial, reference=reference, noise=noise, disturbances=_disturbances(data),
+        faults=_faults(data),
+    )
+
+
+def _choice(data: Mapping[str, Any], key: str, allowed: tuple, default: str) -> str:
+    value = data.get(key, default)
+    if value not in allowed:
+        raise ScenarioError(f"scenario: {key} must be one of {', '.join(allowed)}, not {value!r}")
+    return value
+
+
+def _firmware_path(firmware: Any, base: Path) -> Path | None:
+    if firmware is None:
+        return None
+    if not isinstance(firmware, str):
+        raise ScenarioError("scenario: firmware must be the path of a prebuilt firmware executable (qemu: ELF)")
+    return Path(firmware) if Path(firmware).is_absolute() else base / firmware
+
+
+def _faults(data: Mapping[str, Any]) -> tuple[Fault, ...]:
     faults = []
     for i, f in enumerate(data.get("faults", [])):
         f = _table(f, f"faults[{i}]")
@@ -240,6 +266,10 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
                             every=int(_num(f.get("every", 1), f"faults[{i}].every", minimum=1)),
                             delay_steps=int(_num(f.get("delay_steps", 1), f"faults[{i}].delay_steps", minimum=1)),
                             probability=probability))
+    return tuple(faults)
+
+
+def _disturbances(data: Mapping[str, Any]) -> tuple[Disturbance, ...]:
     dists = []
     for i, d in enumerate(data.get("disturbances", [])):
         d = _table(d, f"disturbances[{i}]")
@@ -249,29 +279,7 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
         dists.append(Disturbance(input=d["input"], start=_num(d.get("start", 0.0), f"disturbances[{i}].start"),
                                  stop=_num(d.get("stop", 1e300), f"disturbances[{i}].stop"),
                                  value=_num(d.get("value"), f"disturbances[{i}].value")))
-    reference = {str(k): _profile(str(k), v) for k, v in _table(data.get("reference", {}), "reference").items()}
-    noise = {str(k): _num(v, f"noise.{k}", minimum=0.0) for k, v in _table(data.get("noise", {}), "noise").items()}
-    initial = {str(k): _num(v, f"initial_state.{k}")
-               for k, v in _table(data.get("initial_state", {}), "initial_state").items()}
-    name = data.get("name", path.stem if path is not None else "scenario")
-    period = data.get("period")
-    firmware = data.get("firmware")
-    if firmware is not None:
-        if not isinstance(firmware, str):
-            raise ScenarioError("scenario: firmware must be the path of a prebuilt firmware executable (qemu: ELF)")
-        firmware = Path(firmware) if Path(firmware).is_absolute() else base / firmware
-    return Scenario(
-        name=str(name), path=path, artifact_path=art,
-        plant=_table(data["plant"], "plant"), transport=_table(data["transport"], "transport"),
-        duration=_num(data["duration"], "duration", positive=True), mode=mode, controller=controller,
-        firmware=firmware, board=board,
-        step_timeout=_num(data.get("step_timeout", 0.05), "step_timeout", positive=True),
-        peer_timeout=_num(data.get("peer_timeout", 1.0), "peer_timeout", positive=True),
-        period=None if period is None else _num(period, "period", positive=True),
-        sched_fifo=_flag(data, "sched_fifo", True), pm_qos=_flag(data, "pm_qos", True), affinity=affinity,
-        overrun=overrun, seed=int(_num(data.get("seed", 0), "seed")), twin=_flag(data, "twin", True),
-        initial_state=initial, reference=reference, noise=noise, disturbances=tuple(dists), faults=tuple(faults),
-    )
+    return tuple(dists)
 
 
 def resolve_scenario_path(name: str) -> Path:
