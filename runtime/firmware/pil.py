@@ -15,6 +15,7 @@ import subprocess
 import tempfile
 import time
 from abc import ABC, abstractmethod
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -186,63 +187,103 @@ def run_pil(
         raise PlantError("--steps must be at least 1")
     R = np.broadcast_to(a.r_op if reference is None else np.asarray(reference, float), (steps, a.q))
     elf = build(a, target="cortex-m4", board=board).files["elf"]
-    din, dout = fwqemu.record_dtypes(n=a.n, m=a.m, p=a.p, q=a.q)
-    Y = np.zeros((steps, a.p))
-    U = np.zeros((steps, a.m), dtype=np.float32)
-    S = np.zeros(steps, dtype=np.int32)
-    SAT = np.zeros((steps, a.m), dtype=bool)
-    X = [plant.state]
-    RT = np.zeros(steps)
     tw = None if twin is None else TwinLoop(a, outputs=twin.outputs, advance=lambda u: twin.advance(u=u), steps=steps)
+    rec = _PilRecord.empty(a, steps, x0=plant.state)
+    with _qemu_fifos(elf, board=board, steps=steps) as (proc, fin, fout):
+        _open_stream(proc, fin, fout, steps=steps, watchdog_periods=watchdog_periods, deadline_s=deadline_s)
+        t_start = time.perf_counter()
+        _exchange(a, plant, R, rec, link=(proc, fin, fout), deadline_s=deadline_s, twin=tw)
+        elapsed = time.perf_counter() - t_start
+        _await_exit(proc, deadline_s=deadline_s)
+    twin_trace = None if tw is None else tw.trace(steps)
+    comparison = None if tw is None else twin_comparison(
+        t=np.arange(steps) * a.Ts, y=rec.Y, u=rec.U.astype(float), r=np.asarray(R, dtype=float),
+        twin_y=twin_trace.y, twin_u=twin_trace.u, artifact=a)
+    return PilResult(y=rec.Y, u=rec.U, status=rec.S, saturated=rec.SAT, plant_state=np.array(rec.X),
+                     round_trip_us=rec.RT, steps_per_second=steps / elapsed if elapsed > 0 else float("inf"),
+                     twin=twin_trace, comparison=comparison)
+
+
+@dataclass
+class _PilRecord:
+    """What a PIL run records per sample."""
+
+    Y: np.ndarray
+    U: np.ndarray
+    S: np.ndarray
+    SAT: np.ndarray
+    X: list
+    RT: np.ndarray
+
+    @classmethod
+    def empty(cls, a: Artifact, steps: int, *, x0: np.ndarray) -> "_PilRecord":
+        return cls(Y=np.zeros((steps, a.p)), U=np.zeros((steps, a.m), dtype=np.float32),
+                   S=np.zeros(steps, dtype=np.int32), SAT=np.zeros((steps, a.m), dtype=bool), X=[x0],
+                   RT=np.zeros(steps))
+
+
+@contextmanager
+def _qemu_fifos(elf: Path, *, board: str, steps: int):
+    """QEMU running ``elf`` with its semihosting files gl_in.bin/gl_out.bin as FIFOs: (process, in fd, out fd)."""
     with tempfile.TemporaryDirectory(prefix="gainlink-pil-") as tmp:
         work = Path(tmp)
         os.mkfifo(work / "gl_in.bin")
         os.mkfifo(work / "gl_out.bin")
         fin = os.open(work / "gl_in.bin", os.O_RDWR)
         fout = os.open(work / "gl_out.bin", os.O_RDWR)
-        cmd = ["timeout", "-k", "2", str(60 + steps / 1000)] + fwqemu.qemu_command(elf, board=board, serial=f"file:{work / 'uart.log'}")
-        proc = subprocess.Popen(cmd, cwd=work, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        cmd = ["timeout", "-k", "2", str(60 + steps / 1000)] + fwqemu.qemu_command(
+            elf, board=board, serial=f"file:{work / 'uart.log'}")
+        proc = subprocess.Popen(cmd, cwd=work, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.PIPE)
         try:
-            os.write(fin, struct.pack("<4I", fwqemu.IN_MAGIC, steps, 1, watchdog_periods))
-            header = _read_exact(fout, 32, proc=proc, deadline_s=deadline_s)
-            magic, count, *_ = struct.unpack("<8I", header)
-            if magic != fwqemu.OUT_MAGIC or count != steps:
-                raise FirmwareError("firmware answered with a bad stream header")
-            rec = np.zeros(1, dtype=din)
-            t_start = time.perf_counter()
-            for k in range(steps):
-                y = plant.outputs()
-                Y[k] = y
-                rec["y"] = y.astype(np.float32)
-                if a.q:
-                    rec["r"][0, : a.q] = R[k].astype(np.float32)
-                t0 = time.perf_counter()
-                os.write(fin, rec.tobytes())
-                out = np.frombuffer(_read_exact(fout, dout.itemsize, proc=proc, deadline_s=deadline_s), dtype=dout)[0]
-                RT[k] = (time.perf_counter() - t0) * 1e6
-                U[k], S[k] = out["u"], out["status"]
-                SAT[k] = (int(out["sat"]) >> np.arange(a.m)) & 1
-                plant.advance(u=U[k].astype(float))
-                X.append(plant.state)
-                if tw is not None:  # outside the timed round trip
-                    tw.step(k, noise=np.zeros(a.p), r=R[k], d=np.zeros(a.m))
-            elapsed = time.perf_counter() - t_start
-            try:
-                proc.wait(timeout=deadline_s)
-            except subprocess.TimeoutExpired:
-                raise FirmwareError("firmware in QEMU did not exit after the last sample") from None
-            if proc.returncode != 0:
-                raise FirmwareError(f"firmware in QEMU failed: {fwqemu.EXIT_CODES.get(proc.returncode, proc.returncode)}")
+            yield proc, fin, fout
         finally:
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
             os.close(fin)
             os.close(fout)
-    twin_trace = None if tw is None else tw.trace(steps)
-    comparison = None if tw is None else twin_comparison(
-        t=np.arange(steps) * a.Ts, y=Y, u=U.astype(float), r=np.asarray(R, dtype=float), twin_y=twin_trace.y,
-        twin_u=twin_trace.u, artifact=a)
-    return PilResult(y=Y, u=U, status=S, saturated=SAT, plant_state=np.array(X), round_trip_us=RT,
-                     steps_per_second=steps / elapsed if elapsed > 0 else float("inf"), twin=twin_trace,
-                     comparison=comparison)
+
+
+def _open_stream(proc: subprocess.Popen, fin: int, fout: int, *, steps: int, watchdog_periods: int,
+                 deadline_s: float) -> None:
+    """Send the stream header (steps, one sample per record, watchdog) and check the firmware's answer."""
+    os.write(fin, struct.pack("<4I", fwqemu.IN_MAGIC, steps, 1, watchdog_periods))
+    header = _read_exact(fout, 32, proc=proc, deadline_s=deadline_s)
+    magic, count, *_ = struct.unpack("<8I", header)
+    if magic != fwqemu.OUT_MAGIC or count != steps:
+        raise FirmwareError("firmware answered with a bad stream header")
+
+
+def _exchange(a: Artifact, plant: DiscretePlant, R: np.ndarray, rec: _PilRecord, *, link: tuple,
+              deadline_s: float, twin: TwinLoop | None) -> None:
+    """One FIFO round trip per sample: the plant's outputs in, the command out, the plant advanced."""
+    proc, fin, fout = link
+    din, dout = fwqemu.record_dtypes(n=a.n, m=a.m, p=a.p, q=a.q)
+    sample = np.zeros(1, dtype=din)
+    for k in range(len(rec.Y)):
+        y = plant.outputs()
+        rec.Y[k] = y
+        sample["y"] = y.astype(np.float32)
+        if a.q:
+            sample["r"][0, : a.q] = R[k].astype(np.float32)
+        t0 = time.perf_counter()
+        os.write(fin, sample.tobytes())
+        out = np.frombuffer(_read_exact(fout, dout.itemsize, proc=proc, deadline_s=deadline_s), dtype=dout)[0]
+        rec.RT[k] = (time.perf_counter() - t0) * 1e6
+        rec.U[k], rec.S[k] = out["u"], out["status"]
+        rec.SAT[k] = (int(out["sat"]) >> np.arange(a.m)) & 1
+        plant.advance(u=rec.U[k].astype(float))
+        rec.X.append(plant.state)
+        if twin is not None:  # outside the timed round trip
+            twin.step(k, noise=np.zeros(a.p), r=R[k], d=np.zeros(a.m))
+
+
+def _await_exit(proc: subprocess.Popen, *, deadline_s: float) -> None:
+    """The firmware exits by itself after the last sample, with status 0."""
+    try:
+        proc.wait(timeout=deadline_s)
+    except subprocess.TimeoutExpired:
+        raise FirmwareError("firmware in QEMU did not exit after the last sample") from None
+    if proc.returncode != 0:
+        raise FirmwareError(f"firmware in QEMU failed: {fwqemu.EXIT_CODES.get(proc.returncode, proc.returncode)}")
