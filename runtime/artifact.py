@@ -196,16 +196,7 @@ def _vector(data: dict, key: str, length: int, default: float | None = None) -> 
 
 def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
     """Validate ``data`` (schema, hash, dimensions, invariants) and return an :class:`Artifact`."""
-    import jsonschema
-
-    if not isinstance(data, dict):
-        raise ArtifactError("artifact is not a JSON object")
-    validator = jsonschema.Draft202012Validator(schema())
-    errors = sorted(validator.iter_errors(data), key=lambda e: list(e.path))
-    if errors:
-        err = errors[0]
-        where = "/".join(str(p) for p in err.path) or "top level"
-        raise ArtifactError(f"artifact does not match the schema at {where}: {err.message}")
+    _check_schema(data)
     if check_hash:
         actual = content_sha256(data)
         if actual != data["sha256"]:
@@ -221,29 +212,8 @@ def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
     K = _matrix(data, "K", (m, n))
     L = _matrix(data, "L", (n, p))
     form = data["observer_form"]
-    M = None
-    if form == "current":
-        if "M" not in data:
-            raise ArtifactError("observer_form 'current' needs the filter gain M")
-        M = _matrix(data, "M", (n, p))
-        if np.any(Dd != 0.0):
-            raise ArtifactError("observer_form 'current' requires Dd = 0")
-        if not np.allclose(L, Ad @ M, rtol=1e-9, atol=1e-12):
-            raise ArtifactError("observer_form 'current' requires L = Ad M")
-    elif "M" in data:
-        raise ArtifactError("M is only used with observer_form 'current'")
-    if q > 0:
-        missing = [k for k in ("Ci", "Ki", "Kaw") if k not in data]
-        if missing:
-            raise ArtifactError(f"integral action (q={q}) needs {', '.join(missing)}")
-        Ci = _matrix(data, "Ci", (q, p))
-        Ki = _matrix(data, "Ki", (m, q))
-        Kaw = _matrix(data, "Kaw", (q, m))
-    else:
-        present = [k for k in ("Ci", "Ki", "Kaw") if k in data]
-        if present:
-            raise ArtifactError(f"{', '.join(present)} given but q = 0")
-        Ci, Ki, Kaw = np.zeros((0, p)), np.zeros((m, 0)), np.zeros((0, m))
+    M = _filter_gain(data, form, Ad=Ad, Dd=Dd, L=L)
+    Ci, Ki, Kaw = _integral_matrices(data, m=m, p=p, q=q)
     if "realization" in data:
         _check_realization(data["realization"], n=n, current=form == "current",
                            now={"Ad": Ad, "Bd": Bd, "Cd": Cd, "K": K, "L": L, "M": M})
@@ -263,6 +233,49 @@ def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
         x_op=_vector(data, "x_op", n) if "x_op" in data else None,
         anti_windup=data["anti_windup"], observer_form=form, sha256=data["sha256"],
     )
+
+
+def _check_schema(data: Any) -> None:
+    """The artifact's JSON schema; the first violation (by path) is the error."""
+    import jsonschema
+
+    if not isinstance(data, dict):
+        raise ArtifactError("artifact is not a JSON object")
+    validator = jsonschema.Draft202012Validator(schema())
+    errors = sorted(validator.iter_errors(data), key=lambda e: list(e.path))
+    if errors:
+        err = errors[0]
+        where = "/".join(str(p) for p in err.path) or "top level"
+        raise ArtifactError(f"artifact does not match the schema at {where}: {err.message}")
+
+
+def _filter_gain(data: dict, form: str, *, Ad: np.ndarray, Dd: np.ndarray, L: np.ndarray) -> np.ndarray | None:
+    """M for the current-estimator form (with its invariants Dd = 0 and L = Ad M), None for the predictor."""
+    if form != "current":
+        if "M" in data:
+            raise ArtifactError("M is only used with observer_form 'current'")
+        return None
+    if "M" not in data:
+        raise ArtifactError("observer_form 'current' needs the filter gain M")
+    M = _matrix(data, "M", L.shape)
+    if np.any(Dd != 0.0):
+        raise ArtifactError("observer_form 'current' requires Dd = 0")
+    if not np.allclose(L, Ad @ M, rtol=1e-9, atol=1e-12):
+        raise ArtifactError("observer_form 'current' requires L = Ad M")
+    return M
+
+
+def _integral_matrices(data: dict, *, m: int, p: int, q: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Ci, Ki, Kaw: required with integral action (q > 0), absent (and empty) without."""
+    if q == 0:
+        present = [k for k in ("Ci", "Ki", "Kaw") if k in data]
+        if present:
+            raise ArtifactError(f"{', '.join(present)} given but q = 0")
+        return np.zeros((0, p)), np.zeros((m, 0)), np.zeros((0, m))
+    missing = [k for k in ("Ci", "Ki", "Kaw") if k not in data]
+    if missing:
+        raise ArtifactError(f"integral action (q={q}) needs {', '.join(missing)}")
+    return _matrix(data, "Ci", (q, p)), _matrix(data, "Ki", (m, q)), _matrix(data, "Kaw", (q, m))
 
 
 def _check_realization(rec: dict, *, n: int, current: bool, now: dict) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -150,6 +151,39 @@ def test_pole_placement_and_luenberger_put_poles_where_asked():
     assert poles_match(np.linalg.eigvals(a.Ad - a.Bd @ a.K), want_c)
     assert poles_match(np.linalg.eigvals(a.Ad - a.L @ a.Cd), want_o)
     np.testing.assert_allclose(a.L, a.Ad @ a.M, rtol=1e-12)
+
+
+def _tampered(data: dict, change) -> dict:
+    out = json.loads(json.dumps(data))
+    change(out)
+    return artifact_mod.seal(out)  # a consistent hash: only the invariant under test is broken
+
+
+def _drop(*keys):
+    return lambda d: [d.pop(k) for k in keys]
+
+
+@pytest.mark.parametrize("form, change, words", [
+    ("current", _drop("M"), "observer_form 'current' needs the filter gain M"),
+    ("current", lambda d: d.update(L=[[v * 1.01 for v in row] for row in d["L"]]), "requires L = Ad M"),
+    ("current", lambda d: d.update(Dd=[[0.5]]), "requires Dd = 0"),
+    ("predictor", lambda d: d.update(M=d["L"]), "M is only used with observer_form 'current'"),
+    ("integral", _drop("Kaw"), "integral action (q=1) needs Kaw"),
+    ("predictor", lambda d: d.update(Ci=[[1.0]]), "Ci given but q = 0"),
+    ("predictor", lambda d: d.update(u_min=[6.0]), "u_min > u_max"),
+])
+def test_an_artifact_breaking_an_invariant_of_the_law_is_refused(form, change, words):
+    """Each invariant the C relies on, broken in an otherwise valid (re-sealed) artifact, is one clear error."""
+    observer = {"method": "kalman", "W_diag": [1e-4, 1e-2], "V_diag": [1e-4],
+                "form": "current" if form == "current" else "predictor"}
+    spec = _small_spec(observer=observer)
+    if form == "integral":
+        spec["plant"]["outputs"] = ["pos"]
+        spec["integral"] = {"outputs": ["pos"], "Q_diag": [5.0]}
+    data = design(parse_spec(spec)).artifact
+    artifact_mod.from_dict(data)  # the untouched one is valid
+    with pytest.raises(artifact_mod.ArtifactError, match=re.escape(words)):
+        artifact_mod.from_dict(_tampered(data, change))
 
 
 def test_ackermann_matches_place_for_single_input():
