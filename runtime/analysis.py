@@ -180,47 +180,21 @@ def state_scaling(A: np.ndarray, B: np.ndarray, C: np.ndarray, names) -> tuple[f
 
 def analyze(spec: PlantSpec) -> AnalysisReport:
     """Analyse a spec's plant; include the closed-loop bandwidth when the spec designs."""
-    from .design import design, loop_bandwidth  # analysis reports the closed-loop bandwidth of the spec's own design
-    from .errors import GainlinkError
+    import control
 
     A, B, C, D = spec.A, spec.B, spec.C, spec.D
     discrete = not spec.continuous
     n = spec.n
-    warnings: list[str] = []
-    ctrb = np.hstack([np.linalg.matrix_power(A, k) @ B for k in range(n)])
-    obsv = np.vstack([C @ np.linalg.matrix_power(A, k) for k in range(n)])
-    c_rank, c_cond = rank_and_cond(ctrb, n)
-    o_rank, o_cond = rank_and_cond(obsv, n)
+    c_rank, c_cond = rank_and_cond(control.ctrb(A, B), n)
+    o_rank, o_cond = rank_and_cond(control.obsv(A, C), n)
     mode_list = modes(A, B, C, discrete=discrete)
-    stabilizable = all(md.stable or md.controllable for md in mode_list)
-    detectable = all(md.stable or md.observable for md in mode_list)
-    for md in mode_list:
-        lam = _fmt(md.eigenvalue)
-        if not md.controllable:
-            warnings.append(f"mode {lam} is uncontrollable ({'stable' if md.stable else 'UNSTABLE'})")
-        if not md.observable:
-            warnings.append(f"mode {lam} is unobservable ({'stable' if md.stable else 'UNSTABLE'})")
-    if c_rank == n and c_cond > 1e8:
-        warnings.append(f"controllability matrix is ill-conditioned (cond {c_cond:.3g})")
+    warnings = _mode_warnings(mode_list, c_rank=c_rank, c_cond=c_cond, n=n)
     zeros = transmission_zeros(A, B, C, D)
     nmp = [z for z in zeros if not is_stable(complex(z), discrete=discrete, margin=0.0)]
     if nmp:
         origin = " (from the Padé approximation of dead time)" if spec.kind == "transfer_function" else ""
         warnings.append(f"non-minimum-phase zeros {', '.join(_fmt(z) for z in nmp)}{origin} limit bandwidth")
-
-    bandwidth, source = 0.0, "open loop"
-    checks: dict = {}
-    try:
-        result = design(spec)
-        bandwidth = loop_bandwidth(result.margins, result.controller_poles, spec.Ts)
-        source = "closed-loop (gain crossover)"
-        checks = result.artifact["checks"]
-        for w in (result.compensator.warning(), result.float32 and result.float32.warning()):
-            if w:
-                warnings.append(w)
-    except GainlinkError as exc:
-        warnings.append(f"design of this spec fails: {exc}")
-        bandwidth = max(pole_frequency(z, discrete=discrete, Ts=spec.Ts) for z in np.linalg.eigvals(A))
+    bandwidth, source, checks = _bandwidth(spec, warnings)
     ratio = (2 * np.pi / spec.Ts) / bandwidth if bandwidth > 0 else float("inf")
     if ratio < SAMPLE_RATE_FACTOR:
         warnings.append(
@@ -236,12 +210,46 @@ def analyze(spec: PlantSpec) -> AnalysisReport:
         open_loop_poles=[complex(z) for z in np.linalg.eigvals(A)], modes=mode_list,
         controllability_rank=c_rank, controllability_cond=c_cond,
         observability_rank=o_rank, observability_cond=o_cond,
-        stabilizable=stabilizable, detectable=detectable,
+        stabilizable=all(md.stable or md.controllable for md in mode_list),
+        detectable=all(md.stable or md.observable for md in mode_list),
         transmission_zeros=[complex(z) for z in zeros], nonminimum_phase_zeros=[complex(z) for z in nmp],
         bandwidth_rad_s=bandwidth, bandwidth_source=source, sample_rate_ratio=float(ratio),
         state_scale_ratio=scale_ratio, badly_scaled_states=bad_states, warnings=warnings,
         compensator=checks.get("compensator"), float32=checks.get("float32"),
     )
+
+
+def _mode_warnings(mode_list: list, *, c_rank: int, c_cond: float, n: int) -> list[str]:
+    """Uncontrollable and unobservable modes (saying which are unstable), an ill-conditioned ctrb matrix."""
+    warnings = []
+    for md in mode_list:
+        lam = _fmt(md.eigenvalue)
+        if not md.controllable:
+            warnings.append(f"mode {lam} is uncontrollable ({'stable' if md.stable else 'UNSTABLE'})")
+        if not md.observable:
+            warnings.append(f"mode {lam} is unobservable ({'stable' if md.stable else 'UNSTABLE'})")
+    if c_rank == n and c_cond > 1e8:
+        warnings.append(f"controllability matrix is ill-conditioned (cond {c_cond:.3g})")
+    return warnings
+
+
+def _bandwidth(spec: PlantSpec, warnings: list[str]) -> tuple[float, str, dict]:
+    """The closed-loop bandwidth of the spec's own design (and its checks), or the fastest open-loop pole
+    when the spec does not design (saying why)."""
+    from .design import design, loop_bandwidth  # analysis reports the closed-loop bandwidth of the spec's own design
+    from .errors import GainlinkError
+
+    try:
+        result = design(spec)
+    except GainlinkError as exc:
+        warnings.append(f"design of this spec fails: {exc}")
+        fastest = max(pole_frequency(z, discrete=not spec.continuous, Ts=spec.Ts) for z in np.linalg.eigvals(spec.A))
+        return fastest, "open loop", {}
+    for w in (result.compensator.warning(), result.float32 and result.float32.warning()):
+        if w:
+            warnings.append(w)
+    return (loop_bandwidth(result.margins, result.controller_poles, spec.Ts), "closed-loop (gain crossover)",
+            result.artifact["checks"])
 
 
 def _fmt(z: complex) -> str:
