@@ -144,41 +144,21 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     if kind not in PLANT_KEYS:
         raise SpecError(f"plant.kind must be one of {', '.join(PLANT_KEYS)}, not {kind!r}")
     _no_unknown(plant, PLANT_KEYS[kind], "plant")
-    pade_order = None
     if kind == "transfer_function":
         A, B, C, D, pade_order = _realise_tf(plant)
         states = tuple(f"x{i}" for i in range(A.shape[0]))
     else:
-        A = _matrix(plant, "A", "plant")
-        n = _square(A, "plant.A")
-        B = _matrix(plant, "B", "plant")
-        _rows(B, n, "plant.B", "rows as A")
-        C = _matrix(plant, "C", "plant")
-        if C.shape[1] != n:
-            raise SpecError(f"plant.C has {C.shape[1]} columns, expected {n} (one per state)")
-        if "D" in plant:
-            D = _matrix(plant, "D", "plant")
-            if D.shape != (C.shape[0], B.shape[1]):
-                raise SpecError(f"plant.D is {D.shape[0]}x{D.shape[1]}, expected {C.shape[0]}x{B.shape[1]}")
-        else:
-            D = np.zeros((C.shape[0], B.shape[1]))
-        states = _names(plant, "states", n, "x")
+        (A, B, C, D), pade_order = _state_space(plant), None
+        states = _names(plant, "states", A.shape[0], "x")
     inputs = _names(plant, "inputs", B.shape[1], "u")
     outputs = _names(plant, "outputs", C.shape[0], "y")
 
-    controller = _table(data, "controller", required=True)
-    _no_unknown(controller, CONTROLLER_KEYS, "controller")
-    integral = _table(data, "integral", required=False)
-    if integral is not None:
-        _no_unknown(integral, INTEGRAL_KEYS, "integral")
-    observer = _table(data, "observer", required=True)
-    _no_unknown(observer, OBSERVER_KEYS, "observer")
-    limits = _table(data, "limits", required=True)
-    _no_unknown(limits, LIMITS_KEYS, "limits")
+    controller = _checked_table(data, "controller", CONTROLLER_KEYS, required=True)
+    integral = _checked_table(data, "integral", INTEGRAL_KEYS, required=False)
+    observer = _checked_table(data, "observer", OBSERVER_KEYS, required=True)
+    limits = _checked_table(data, "limits", LIMITS_KEYS, required=True)
     op = _operating_point(data, states=states, inputs=inputs, outputs=outputs)
-    implementation = _table(data, "implementation", required=False)
-    if implementation is not None:
-        _no_unknown(implementation, IMPLEMENTATION_KEYS, "implementation")
+    implementation = _checked_table(data, "implementation", IMPLEMENTATION_KEYS, required=False)
 
     return PlantSpec(
         name=name, Ts=Ts, kind=kind, discretization=disc, A=A, B=B, C=C, D=D,
@@ -190,6 +170,30 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
 
 
 # --- helpers -------------------------------------------------------------------------------------
+
+
+def _state_space(plant: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A, B, C and D (zeros when absent) of a continuous or discrete plant table, with consistent shapes."""
+    A = _matrix(plant, "A", "plant")
+    n = _square(A, "plant.A")
+    B = _matrix(plant, "B", "plant")
+    _rows(B, n, "plant.B", "rows as A")
+    C = _matrix(plant, "C", "plant")
+    if C.shape[1] != n:
+        raise SpecError(f"plant.C has {C.shape[1]} columns, expected {n} (one per state)")
+    if "D" not in plant:
+        return A, B, C, np.zeros((C.shape[0], B.shape[1]))
+    D = _matrix(plant, "D", "plant")
+    if D.shape != (C.shape[0], B.shape[1]):
+        raise SpecError(f"plant.D is {D.shape[0]}x{D.shape[1]}, expected {C.shape[0]}x{B.shape[1]}")
+    return A, B, C, D
+
+
+def _checked_table(data: dict, key: str, allowed: set[str], *, required: bool) -> dict | None:
+    table = _table(data, key, required=required)
+    if table is not None:
+        _no_unknown(table, allowed, key)
+    return table
 
 
 def _no_unknown(table: dict, allowed: set[str], where: str) -> None:
