@@ -187,30 +187,47 @@ def render_step(artifact: Artifact) -> str:
     a = artifact
     n, m, p, q = a.n, a.m, a.p, a.q
     current = a.observer_form == "current"
-    backcalc = a.anti_windup == "backcalc"
-    clamp = a.anti_windup == "clamp"
     vrow = 1 + n + (p if current else 0) + q + 2
-    zrow = p + 1 + (m if backcalc else 0)
+    zrow = p + 1 + (m if a.anti_windup == "backcalc" else 0)
     length = p + m * vrow + q * zrow + n * (n + m + p)
     body: list[str] = []
     st = _Stream(length, body)
+    _step_inputs(a, st, body)
+    _step_commands(a, st, body)
+    _step_integrators(a, st, body)
+    _step_estimate(a, st, body)
+    assert st.pos == length
+    body += [f"    xh_io[{i}] = xn{i};" for i in range(n)]
+    body += [f"    z_io[{j}] = zn{j};" for j in range(q)]
+    body += [f"    u[{i}] = u{i};" for i in range(m)]
+    if q == 0:
+        body += ["    (void)z_io;", "    (void)rs;"]
+    body.append("    return sat;")
+    return _step_file(a, body, length)
 
+
+def _step_inputs(a: Artifact, st: _Stream, body: list[str]) -> None:
+    """States, integrators, samples and references into locals; dy = y - y_op."""
     # The first states in one multi-register load (registers s8..s15, kept for the whole step).
-    first = min(n, STATE_CHUNK)
+    first = min(a.n, STATE_CHUNK)
     body.append(f"    GL_LDS{first}(xh_io, " + ", ".join(f"x{j}" for j in range(first)) + ");")
-    body += [f"    const float x{j} = xh_io[{j}];" for j in range(first, n)]
-    body += [f"    const float z{j} = z_io[{j}];" for j in range(q)]
-    body += [f"    const float y{k} = ys[{k}];" for k in range(p)]
-    body += [f"    const float r{j} = rs[{j}];" for j in range(q)]
-    body += [f"    const float dy{k} = y{k} - {st.next()};" for k in range(p)]
+    body += [f"    const float x{j} = xh_io[{j}];" for j in range(first, a.n)]
+    body += [f"    const float z{j} = z_io[{j}];" for j in range(a.q)]
+    body += [f"    const float y{k} = ys[{k}];" for k in range(a.p)]
+    body += [f"    const float r{j} = rs[{j}];" for j in range(a.q)]
+    body += [f"    const float dy{k} = y{k} - {st.next()};" for k in range(a.p)]
     body.append("    uint32_t sat = 0u;")
-    for i in range(m):
+
+
+def _step_commands(a: Artifact, st: _Stream, body: list[str]) -> None:
+    """v = u_op + dv, clamped to the limits (saturation bits), du = u - u_op, one input at a time."""
+    for i in range(a.m):
         uop = st.next()
         body.append(f"    float dv{i} = {st.next()} * x0;")
-        body += [f"    dv{i} = GL_FMA({st.next()}, x{j}, dv{i});" for j in range(1, n)]
-        if current:
-            body += [f"    dv{i} = GL_FMA({st.next()}, dy{k}, dv{i});" for k in range(p)]
-        body += [f"    dv{i} = GL_FMA({st.next()}, z{j}, dv{i});" for j in range(q)]
+        body += [f"    dv{i} = GL_FMA({st.next()}, x{j}, dv{i});" for j in range(1, a.n)]
+        if a.observer_form == "current":
+            body += [f"    dv{i} = GL_FMA({st.next()}, dy{k}, dv{i});" for k in range(a.p)]
+        body += [f"    dv{i} = GL_FMA({st.next()}, z{j}, dv{i});" for j in range(a.q)]
         lo, hi = st.next(), st.next()
         body += [
             f"    const float v{i} = {uop} + dv{i};",
@@ -224,26 +241,31 @@ def render_step(artifact: Artifact) -> str:
             "    }",
             f"    const float du{i} = u{i} - {uop};",
         ]
-    for j in range(q):
+
+
+def _step_integrators(a: Artifact, st: _Stream, body: list[str]) -> None:
+    """zn = z + Ts (r - Ci y) with the artifact's anti-windup (back-calculation term or clamp)."""
+    for j in range(a.q):
         body.append(f"    float e{j} = r{j};")
-        body += [f"    e{j} = GL_FMA({st.next()}, y{k}, e{j});" for k in range(p)]
+        body += [f"    e{j} = GL_FMA({st.next()}, y{k}, e{j});" for k in range(a.p)]
         body.append(f"    float zn{j} = GL_FMA({st.next()}, e{j}, z{j});")
-        if backcalc:
-            body += [f"    zn{j} = GL_FMA({st.next()}, u{k} - v{k}, zn{j});" for k in range(m)]
-        if clamp:
+        if a.anti_windup == "backcalc":
+            body += [f"    zn{j} = GL_FMA({st.next()}, u{k} - v{k}, zn{j});" for k in range(a.m)]
+        if a.anti_windup == "clamp":
             body.append(f"    zn{j} = (sat == 0u) ? zn{j} : z{j};")
-    for i in range(n):
+
+
+def _step_estimate(a: Artifact, st: _Stream, body: list[str]) -> None:
+    """xn = (Ad - L Cd) xh + (Bd - L Dd) du + L dy, one row at a time."""
+    for i in range(a.n):
         body.append(f"    float xn{i} = {st.next()} * x0;")
-        body += [f"    xn{i} = GL_FMA({st.next()}, x{j}, xn{i});" for j in range(1, n)]
-        body += [f"    xn{i} = GL_FMA({st.next()}, du{k}, xn{i});" for k in range(m)]
-        body += [f"    xn{i} = GL_FMA({st.next()}, dy{k}, xn{i});" for k in range(p)]
-    assert st.pos == length
-    body += [f"    xh_io[{i}] = xn{i};" for i in range(n)]
-    body += [f"    z_io[{j}] = zn{j};" for j in range(q)]
-    body += [f"    u[{i}] = u{i};" for i in range(m)]
-    if q == 0:
-        body += ["    (void)z_io;", "    (void)rs;"]
-    body.append("    return sat;")
+        body += [f"    xn{i} = GL_FMA({st.next()}, x{j}, xn{i});" for j in range(1, a.n)]
+        body += [f"    xn{i} = GL_FMA({st.next()}, du{k}, xn{i});" for k in range(a.m)]
+        body += [f"    xn{i} = GL_FMA({st.next()}, dy{k}, xn{i});" for k in range(a.p)]
+
+
+def _step_file(a: Artifact, body: list[str], length: int) -> str:
+    n, m, p, q = a.n, a.m, a.p, a.q
     return (
         _banner(a)
         + "/**\n * @file gl_step.h\n * @brief The control law for n=%d m=%d p=%d q=%d (%s, %s), fully unrolled.\n"
