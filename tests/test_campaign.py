@@ -105,6 +105,9 @@ def test_a_run_that_cannot_be_built_is_named_before_anything_runs(pend, tmp_path
     res = run_cli("campaign", "run", path, "--out", tmp_path / "out")
     assert res.code == 2 and res.err.strip().endswith("a hil campaign's scenario needs a transport")
     assert not (tmp_path / "out").exists()
+    with pytest.raises(CampaignError, match=r"^campaign: batch must be a whole number >= 1, not 0$"):
+        run(small_campaign(pend), out=tmp_path / "batch", batch=0)
+    assert not (tmp_path / "batch").exists()
 
 
 # --- the plan ------------------------------------------------------------------------------------
@@ -365,6 +368,31 @@ def test_a_run_whose_worker_dies_is_retried_and_recorded_as_failed_after_a_secon
     rows = {r["index"]: r for r in result.rows}
     assert rows[3]["status"] == "error" and "KilledWorker" in rows[3]["reasons"][0]
     assert all(rows[i]["status"] in ("pass", "fail") for i in (0, 1, 2)) and result.errors == 1
+
+
+def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, dask_cluster, tmp_path, caplog):
+    # Four runs in one Dask task; the plant of two of them raises on every attempt (a bug, not a GainlinkError).
+    data = small_campaign(pend, runs=2, draw=small_campaign(pend)["draw"][:1],
+                          grid=[{"target": "plant.bug", "values": [False, True]}])
+    data["scenario"]["plant"] = dict(data["scenario"]["plant"], kind="python", **{"class": "campaign_plants:BuggyPendulum"})
+    with caplog.at_level("INFO", logger="gainlink.hil.campaign.runner"):
+        result = run(data, out=tmp_path / "out", scheduler=dask_cluster, batch=4)
+    assert [m for m in caplog.messages if m.startswith("a batch of 4 runs failed (RuntimeError")], caplog.messages
+    rows = {r["index"]: r for r in result.rows}
+    assert [rows[i]["values"]["plant.bug"] for i in range(4)] == [False, False, True, True]
+    for i in (2, 3):
+        assert rows[i]["status"] == "error"
+        assert rows[i]["reasons"] == ["RuntimeError: BuggyPendulum: the bug this test asked for"]
+    # The other two ran alone after the split and equal the same runs of the built-in plant called directly.
+    a = load(pend)
+    for i in (0, 1):
+        rec = json.loads((tmp_path / "out" / "runs" / f"{rows[i]['id']}.json").read_text())
+        assert rec["status"] == "done"
+        sc = dict(rec["inputs"]["scenario"], artifact=str(pend), transport={})
+        sc["plant"] = {k: v for k, v in sc["plant"].items() if k not in ("class", "bug")} | {"kind": "cart_pendulum"}
+        direct = run_sil(a, parse_scenario(sc), seed=rows[i]["seed"])
+        assert _control(rec) == {k: direct.metrics.get(k) for k in CONTROL_KEYS}
+    assert result.errors == 2 and result.total == 4
 
 
 # --- HIL campaigns ---------------------------------------------------------------------------------

@@ -1,10 +1,12 @@
 """Run a campaign: plan it, submit the runs without a result to Dask, store each as it completes, merge.
 
-Artifacts and FMUs go to the cluster once each (as tasks returning them, keyed by sha256), and every run is a task
-``execute(kind, artifact, scenario, seed, fmus)`` whose key is its run id. Results come back through
-``as_completed`` and are written one by one, so whatever finished before an interruption is kept.
-A task that raised is retried once by Dask (``retries=1``); a run still failing, or whose workers died
-under it (``KilledWorker``), is recorded as an error with the reason.
+FMUs go to the cluster once each (as tasks returning them, keyed by sha256); a task is
+``execute_batch(kind, artifacts, runs, fmus)``: a short list of runs with the artifacts they use, inline
+(SIL: up to :data:`MAX_BATCH` runs, so Dask's cost per task is shared; HIL: one run, keyed by its run id).
+Results come back through ``as_completed`` and are written one run at a time, so whatever finished before
+an interruption is kept. A task that raised is retried once by Dask (``retries=1``); a batch still failing,
+or whose workers died under it (``KilledWorker``), is submitted again one run per task, and a single run
+that fails so is recorded as an error with the reason: one bad run costs no other run its result.
 """
 
 from __future__ import annotations
@@ -15,15 +17,17 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from .cluster import dask_client
-from .config import Campaign, load_campaign, parse_campaign
+from .config import Campaign, CampaignError, load_campaign, parse_campaign
 from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign
 from .report import merge
 from .store import Store
-from .worker import execute
+from .worker import execute_batch
 
 log = logging.getLogger(__name__)
 
 Progress = Callable[[int, int, dict], None]
+MAX_BATCH = 16
+BATCHES_PER_THREAD = 4
 
 
 @dataclass(frozen=True)
@@ -70,7 +74,7 @@ def plan_doc(plan: CampaignPlan) -> dict:
 
 
 def run(campaign: Campaign | str | Path | Mapping, *, out: str | Path, scheduler: str | None = None,
-        workers: int | None = None, progress: Progress | None = None) -> CampaignResult:
+        workers: int | None = None, progress: Progress | None = None, batch: int | None = None) -> CampaignResult:
     """Run every run of a campaign that has no result in ``out`` yet, then write the merged report.
 
     Parameters
@@ -85,6 +89,9 @@ def run(campaign: Campaign | str | Path | Mapping, *, out: str | Path, scheduler
         LocalCluster process workers (default: one per CPU).
     progress : callable, optional
         ``progress(done, total, record)`` after each run is stored.
+    batch : int, optional
+        Runs per Dask task (default: :func:`batch_size`; results are still stored, retried and reported
+        per run).
 
     Returns
     -------
@@ -96,6 +103,8 @@ def run(campaign: Campaign | str | Path | Mapping, *, out: str | Path, scheduler
     >>> result = campaign.run("examples/campaigns/pendulum_mass_uncertainty.toml", out="out/c")  # doctest: +SKIP
     >>> result.passed / result.total                                                             # doctest: +SKIP
     """
+    if batch is not None and (not isinstance(batch, int) or batch < 1):
+        raise CampaignError(f"campaign: batch must be a whole number >= 1, not {batch!r}")
     campaign = as_campaign(campaign)
     plan = plan_campaign(campaign)
     store = Store(out)
@@ -114,7 +123,7 @@ def run(campaign: Campaign | str | Path | Mapping, *, out: str | Path, scheduler
     done = total - len(todo)
     if todo:
         with dask_client(scheduler=scheduler, workers=workers) as client:
-            _submit_and_store(client, plan, todo, store, done=done, total=total, progress=progress)
+            _submit_and_store(client, plan, todo, store, done=done, total=total, progress=progress, batch=batch)
     summary, rows = merge(plan, store)
     counts = {s: sum(1 for r in rows if r["status"] == s) for s in ("pass", "fail", "error")}
     return CampaignResult(out=store.out, rows=tuple(rows), passed=counts["pass"], failed=counts["fail"],
@@ -122,38 +131,78 @@ def run(campaign: Campaign | str | Path | Mapping, *, out: str | Path, scheduler
 
 
 def _data(value: bytes) -> bytes:
-    """A campaign input (artifact JSON, FMU archive) as the result of a task."""
+    """A campaign input (an FMU archive) as the result of a task."""
     return value
 
 
+def batch_size(kind: str, runs: int, threads: int, *, batch: int | None = None) -> int:
+    """Runs per Dask task: HIL 1 (a run lasts seconds); SIL enough to make Dask's share small, while
+    every worker thread still gets :data:`BATCHES_PER_THREAD` tasks (so runs spread and the tail is short),
+    at most :data:`MAX_BATCH`. ``batch`` overrides it."""
+    if batch is not None:
+        return batch
+    if kind == "hil":
+        return 1
+    return max(1, min(MAX_BATCH, runs // (max(threads, 1) * BATCHES_PER_THREAD)))
+
+
+class _Submitter:
+    """Submits batches of runs to Dask; a batch that failed is submitted again one run per task."""
+
+    def __init__(self, client: Any, plan: CampaignPlan) -> None:
+        self.client, self.plan, self.kind = client, plan, plan.campaign.kind
+        # FMU archives go to the cluster once each, as tasks returning them (not scattered data): a task's result
+        # lost with its worker is computed again from the graph, scattered data would be gone for good. Artifacts
+        # (a few kB) travel inside each task: a task with no dependency goes to whichever worker is free, instead
+        # of queueing on the worker that happens to hold the artifact.
+        self.blobs = {sha: client.submit(_data, data, key=f"gainlink-fmu-{sha}") for sha, data in plan.blobs.items()}
+
+    def submit(self, points: list[RunPoint]) -> Any:
+        """One task running ``points`` in order (retried once by Dask when it raises)."""
+        shas = {p.artifact_sha256 for p in points}
+        paths = " ".join(str(p.scenario.get("plant", {}).get("path", "")) for p in points)
+        needed = {s: f for s, f in self.blobs.items() if s in paths}
+        key = f"gainlink-run-{points[0].id}" if len(points) == 1 else \
+            f"gainlink-batch-{points[0].id[:20]}-{len(points)}"
+        return self.client.submit(execute_batch, self.kind, {s: self.plan.artifacts[s] for s in shas},
+                                  [(p.artifact_sha256, p.scenario, p.seed) for p in points], needed,
+                                  key=key, retries=1, pure=False)
+
+
 def _submit_and_store(client: Any, plan: CampaignPlan, todo: dict[str, RunPoint], store: Store, *, done: int,
-                      total: int, progress: Progress | None) -> None:
+                      total: int, progress: Progress | None, batch: int | None) -> None:
     from asyncio import CancelledError
 
     from distributed import as_completed
 
     kind = plan.campaign.kind
-    # FMU archives go to the cluster once each, as tasks returning them (not scattered data): a task's result
-    # lost with its worker is computed again from the graph, scattered data would be gone for good. Artifacts
-    # (a few kB) travel inside each run's task: a run with no dependency goes to whichever worker is free,
-    # instead of queueing on the worker that happens to hold the artifact.
-    blobs = {sha: client.submit(_data, data, key=f"gainlink-fmu-{sha}") for sha, data in plan.blobs.items()}
+    points = list(todo.values())
+    size = batch_size(kind, len(points), sum(client.nthreads().values()), batch=batch)
+    submitter = _Submitter(client, plan)
     futures = {}
-    for point in todo.values():
-        needed = {s: f for s, f in blobs.items() if s in str(point.scenario.get("plant", {}).get("path", ""))}
-        fut = client.submit(execute, kind, plan.artifacts[point.artifact_sha256], point.scenario, point.seed, needed,
-                            key=f"gainlink-run-{point.id}", retries=1, pure=False)
-        futures[fut] = point
-    for fut in as_completed(list(futures)):
-        point = futures.pop(fut)
+    for i in range(0, len(points), size):
+        futures[submitter.submit(points[i:i + size])] = points[i:i + size]
+    queue = as_completed(list(futures))
+    for fut in queue:
+        batch_points = futures.pop(fut)
         try:
-            result = fut.result()
+            results = fut.result()
         except (Exception, CancelledError) as exc:  # retried once already; KilledWorker: its workers died
-            result = {"status": "error", "reason": f"{type(exc).__name__}: {exc}"}
-        record = store.put(point, kind=kind, result=result)
+            fut.release()
+            if len(batch_points) > 1:  # each run alone: only the run at fault fails
+                log.info("a batch of %d runs failed (%s: %s); running each alone", len(batch_points),
+                         type(exc).__name__, exc)
+                for point in batch_points:
+                    single = submitter.submit([point])
+                    futures[single] = [point]
+                    queue.add(single)
+                continue
+            results = [{"status": "error", "reason": f"{type(exc).__name__}: {exc}"}]
         fut.release()
-        done += 1
-        if record["status"] == "error":
-            log.warning("run %s (%d) failed: %s", point.id, point.index, record["reason"])
-        if progress is not None:
-            progress(done, total, record)
+        for point, result in zip(batch_points, results):
+            record = store.put(point, kind=kind, result=result)
+            done += 1
+            if record["status"] == "error":
+                log.warning("run %s (%d) failed: %s", point.id, point.index, record["reason"])
+            if progress is not None:
+                progress(done, total, record)

@@ -1,6 +1,7 @@
 """What runs on a Dask worker: one campaign run as a pure function of (artifact bytes, scenario, seed).
 
-:func:`execute` is the task. Its inputs travel as bytes (the artifact's canonical JSON, FMU archives by
+:func:`execute` is one run; a Dask task is :func:`execute_batch`, a short list of runs (SIL runs are
+short, and a task per run cost more than the run's tenth in Dask's bookkeeping). Its inputs travel as bytes (the artifact's canonical JSON, FMU archives by
 sha256); the worker writes each once into a host-local cache named by sha256, builds the firmware once
 per artifact (the firmware build cache is keyed by the artifact's sha256 and serialised by a file lock
 between the processes of a host) and remembers the result for the rest of its life, so the second run
@@ -218,3 +219,23 @@ def execute(kind: str, artifact_json: bytes, scenario: dict, seed: int, blobs: d
     return {"status": "done", "complete": result.complete, "reason": result.reason, "metrics": result.metrics,
             "measures": measure(result, artifact), "worker": where, "link": result.info["transport"],
             "trace": _downsample(result.trace)}
+
+
+def execute_batch(kind: str, artifacts: dict[str, bytes], runs: list[tuple[str, dict, int]],
+                  blobs: dict | None = None) -> list[dict]:
+    """Several campaign runs, one after the other (one Dask task): their records, in order.
+
+    Parameters
+    ----------
+    kind : {"sil", "hil"}
+    artifacts : dict
+        The artifacts' canonical JSON by sha256 (each once, however many runs use it).
+    runs : list of (artifact sha256, scenario, seed)
+        As in :func:`execute`.
+    blobs : dict, optional
+        FMU archives by sha256.
+
+    An exception other than a :class:`~gainlink.errors.GainlinkError` ends the batch (the campaign
+    then runs each of its runs alone, so one bad run costs no other its result).
+    """
+    return [execute(kind, artifacts[sha], scenario, seed, blobs) for sha, scenario, seed in runs]

@@ -1,0 +1,19 @@
+"""A plant for the campaign tests that fails as a bug in a user's plant does: with an exception of its own.
+
+Imported by name (``kind = "python", class = "campaign_plants:BuggyPendulum"``) in the Dask worker
+processes of the tests, which have this folder on their ``PYTHONPATH``.
+"""
+
+from __future__ import annotations
+
+from gainlink.hil.plants.models import CartPendulum
+
+
+class BuggyPendulum(CartPendulum):
+    """The built-in cart-pendulum; with ``bug = true`` its constructor raises a RuntimeError (not a GainlinkError,
+    so the run raises on the worker, as a bug would)."""
+
+    def __init__(self, *, bug: bool = False, **options) -> None:
+        super().__init__(**options)
+        if bug:
+            raise RuntimeError("BuggyPendulum: the bug this test asked for")
