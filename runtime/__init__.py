@@ -3,8 +3,9 @@
 ``import gainlink as gl`` gives the curated API in :data:`__all__`: designs from a spec file, a dict
 or a python-control system (:func:`design`), artifacts from one's own gains (:func:`from_gains`),
 the artifact (:class:`Artifact`: ``load``, ``save``, ``controller()``, ``closed_loop()``), replay and
-simulation of the law, and the HIL bridge as :mod:`gainlink.hil` (``gl.hil.run``). The command line
-``gainlink`` is a shell over the same functions.
+simulation of the law, the HIL bridge as :mod:`gainlink.hil` (``gl.hil.run``) and campaigns on Dask as
+:mod:`gainlink.hil.campaign` (``gl.campaign.run``; imported on first use, so ``import gainlink`` loads
+neither it nor Dask). The command line ``gainlink`` is a shell over the same functions.
 """
 
 __version__ = "0.1.0"
@@ -31,5 +32,16 @@ __all__ = [
     "GainlinkError", "SpecError", "DesignError", "ArtifactError", "IntegrityError", "DataError",
     "PlantError", "ScenarioError",
     "one_step_check", "compensator_stability", "float32_fidelity", "twin_comparison",
-    "hil",
+    "hil", "campaign",
 ]
+
+
+def __getattr__(name: str):
+    # gl.campaign is gainlink.hil.campaign, imported when first asked for (PEP 562).
+    if name == "campaign":
+        import importlib
+
+        module = importlib.import_module("gainlink.hil.campaign")
+        globals()[name] = module
+        return module
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -12,6 +12,8 @@ import json
 import os
 import runpy
 import stat
+import subprocess
+import sys
 from pathlib import Path
 
 import control as ct
@@ -36,6 +38,21 @@ def test_curated_namespace_lists_what_a_user_needs():
     assert {"design", "from_gains", "load", "replay", "simulate", "Artifact", "hil"} <= set(gl.__all__)
     assert all(hasattr(gl, name) for name in gl.__all__)
     assert callable(gl.design) and callable(gl.hil.run)
+
+
+def test_campaigns_are_in_the_namespace_without_import_gainlink_loading_dask():
+    # A fresh interpreter: this one may have imported Dask for other tests.
+    code = ("import sys, gainlink as gl\n"
+            "assert 'campaign' in gl.__all__\n"
+            "assert not {'dask', 'distributed', 'gainlink.hil.campaign'} & set(sys.modules), 'imported eagerly'\n"
+            "import gainlink.hil.campaign as c\n"
+            "assert gl.campaign is c and gl.campaign.run is c.runner.run\n"
+            "from gainlink import campaign\n"
+            "assert campaign is c\n"
+            "try:\n    gl.no_such_thing\nexcept AttributeError as e:\n    print(e)\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "module 'gainlink' has no attribute 'no_such_thing'"
 
 
 @pytest.mark.parametrize("module", ["gainlink.api", "gainlink.hil", "gainlink.onestep", "gainlink.twin",
