@@ -25,7 +25,7 @@ from scipy import stats
 from gainlink.artifact import load
 from gainlink.hil.campaign import CampaignError, load_campaign, parse_campaign, run, show_run
 from gainlink.hil.campaign.criteria import growth
-from gainlink.hil.campaign.plan import plan_campaign
+from gainlink.hil.campaign.plan import draw_values, plan_campaign
 from gainlink.hil.plants import toml_write
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil import run_sil
@@ -105,8 +105,10 @@ def test_a_run_that_cannot_be_built_is_named_before_anything_runs(pend, tmp_path
     res = run_cli("campaign", "run", path, "--out", tmp_path / "out")
     assert res.code == 2 and res.err.strip().endswith("a hil campaign's scenario needs a transport")
     assert not (tmp_path / "out").exists()
-    with pytest.raises(CampaignError, match=r"^campaign: batch must be a whole number >= 1, not 0$"):
-        run(small_campaign(pend), out=tmp_path / "batch", batch=0)
+    sil = tmp_path / "sil.toml"
+    sil.write_text(toml_write.dumps(small_campaign(pend)))
+    res = run_cli("campaign", "run", sil, "--out", tmp_path / "batch", "--batch", "0")
+    assert res.code == 2 and res.err.strip().endswith("campaign: batch must be a whole number >= 1, not 0")
     assert not (tmp_path / "batch").exists()
 
 
@@ -143,8 +145,9 @@ def test_draws_are_reproducible_shared_by_grid_points_and_kept_when_runs_grow(pe
      stats.truncnorm(-0.5, 3.0, loc=1.0, scale=1.0)),
 ])
 def test_draws_follow_their_distribution(pend, draw, dist):
-    c = parse_campaign(small_campaign(pend, runs=1500, grid=[], draw=[{"target": "initial_state.x", **draw}]))
-    x = np.array([r.values["initial_state.x"] for r in plan_campaign(c).runs])
+    # draw_values is what plan_campaign puts into each run (the test above checks that it does).
+    c = parse_campaign(small_campaign(pend, runs=1000, grid=[], draw=[{"target": "initial_state.x", **draw}]))
+    x = np.array([draw_values(c, j)[1]["initial_state.x"] for j in range(c.runs)])
     assert stats.kstest(x, dist.cdf).pvalue > 1e-4
     support = dist.support()
     assert np.all((x >= support[0]) & (x <= support[1]))
@@ -255,7 +258,7 @@ def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
 # --- a campaign killed halfway resumes ---------------------------------------------------------------
 
 
-def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, tmp_path):
+def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster, tmp_path):
     data = small_campaign(pend, runs=8, grid=[])
     data["scenario"]["duration"] = 4.0
     path = tmp_path / "c.toml"
@@ -274,7 +277,9 @@ def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, tmp_path):
     before = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
     assert 3 <= len(before) < 8, "the campaign was not caught halfway"
     assert not list(out.glob("campaign.json"))
-    res = run_cli("campaign", "run", path, "--out", out, "--workers", "2", "--no-progress")
+    # Resumed on the scheduler + workers of this module (no second LocalCluster to start): results are the
+    # folder's, whichever cluster made them.
+    res = run_cli("campaign", "run", path, "--out", out, "--scheduler", dask_cluster, "--no-progress")
     assert res.code == 0, res.err
     assert f"resumed: {len(before)} runs had results, {8 - len(before)} ran now" in res.out
     after = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
@@ -320,7 +325,9 @@ def test_scheduler_and_two_worker_processes_give_the_local_cluster_results(pend,
     _, local_out = local_run
     path = tmp_path / "small.toml"
     path.write_text(toml_write.dumps(small_campaign(pend)))
-    res = run_cli("campaign", "run", path, "--out", tmp_path / "dist", "--scheduler", dask_cluster, "--no-progress")
+    # In tasks of 3 runs (the LocalCluster ran one per task): the results are the runs', whatever the batching.
+    res = run_cli("campaign", "run", path, "--out", tmp_path / "dist", "--scheduler", dask_cluster, "--batch", "3",
+                  "--no-progress")
     assert res.code == 0, res.err
     local = json.loads((local_out / "campaign.json").read_text())["runs"]
     dist = json.loads((tmp_path / "dist" / "campaign.json").read_text())["runs"]
@@ -329,6 +336,39 @@ def test_scheduler_and_two_worker_processes_give_the_local_cluster_results(pend,
         assert (a["status"], a["reasons"]) == (b["status"], b["reasons"])
         assert {k: a["metrics"].get(k) for k in CONTROL_KEYS} == {k: b["metrics"].get(k) for k in CONTROL_KEYS}
     assert {r["worker"]["pid"] for r in dist} <= _worker_pids(dask_cluster)
+
+
+def test_a_hil_fault_matrix_runs_in_parallel_on_separate_buses(pend, dask_cluster, tmp_path):
+    data = small_campaign(pend, kind="hil", runs=1, draw=[], grid=[],
+                          fault_matrix={"drop": [0.0, 0.1], "encoding": ["float32", "int16"], "start": 0.5, "stop": 0.8})
+    # A lost command is waited for step_timeout: a dropped sample costs that much, a machine stall shorter than it
+    # costs nothing.
+    data["scenario"].update(mode="lockstep", controller="firmware", step_timeout=1.0, peer_timeout=10.0, duration=1.5,
+                            initial_state={"theta": 0.05},
+                            transport={"interface": "udp_multicast", "channel": "239.74.163.2", "hop_limit": 0, "fd": True,
+                                       "ranges": {"x": [-2.0, 2.0], "theta": [-1.0, 1.0], "r_x": [-2.0, 2.0]}})
+    result = run(data, out=tmp_path / "out", scheduler=dask_cluster)  # its two workers, before any is killed
+    assert result.total == 4 and result.errors == 0
+    recs = {(r["values"]["drop"], r["values"]["encoding"]):
+            json.loads((tmp_path / "out" / "runs" / f"{r['id']}.json").read_text()) for r in result.rows}
+    for enc in ("float32", "int16"):
+        clean, dropped = recs[(0.0, enc)], recs[(0.1, enc)]
+        assert clean["link"]["encoding"] == enc and dropped["link"]["encoding"] == enc
+        assert clean["metrics"]["complete"] and clean["metrics"]["lost"] == 0
+        assert clean["metrics"]["faults_injected"]["drop"] == 0
+        # 30 samples in the window, each dropped with probability 0.1: every drop is a lost command
+        drops = dropped["metrics"]["faults_injected"]["drop"]
+        assert 1 <= drops <= 10 and dropped["metrics"]["lost"] == drops
+    # int16 quantises what the controller sees: the same run, not the same trace
+    assert recs[(0.0, "int16")]["metrics"]["outputs_final"] != recs[(0.0, "float32")]["metrics"]["outputs_final"]
+    # Runs that overlapped in time used different groups and ports (the scenario's own channel is never used).
+    runs = list(recs.values())
+    link = lambda r: (r["link"]["config"]["channel"], r["link"]["config"]["port"])  # noqa: E731
+    assert all(link(r)[0].startswith("239.74.164.") for r in runs)
+    overlapping = [(a, b) for i, a in enumerate(runs) for b in runs[i + 1:]
+                   if a["worker"]["start"] < b["worker"]["stop"] and b["worker"]["start"] < a["worker"]["stop"]]
+    assert overlapping, "two workers never ran at the same time"
+    assert all(link(a) != link(b) for a, b in overlapping)
 
 
 def _worker_pids(address: str) -> set[int]:
@@ -393,39 +433,3 @@ def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, da
         direct = run_sil(a, parse_scenario(sc), seed=rows[i]["seed"])
         assert _control(rec) == {k: direct.metrics.get(k) for k in CONTROL_KEYS}
     assert result.errors == 2 and result.total == 4
-
-
-# --- HIL campaigns ---------------------------------------------------------------------------------
-
-
-def test_a_hil_fault_matrix_runs_in_parallel_on_separate_buses(pend, tmp_path):
-    data = small_campaign(pend, kind="hil", runs=1, draw=[], grid=[],
-                          fault_matrix={"drop": [0.0, 0.1], "encoding": ["float32", "int16"], "start": 0.5, "stop": 1.0})
-    # A lost command is waited for step_timeout: a dropped sample costs that much, a machine stall shorter than it
-    # costs nothing.
-    data["scenario"].update(mode="lockstep", controller="firmware", step_timeout=1.0, peer_timeout=10.0, duration=1.5,
-                            initial_state={"theta": 0.05},
-                            transport={"interface": "udp_multicast", "channel": "239.74.163.2", "hop_limit": 0, "fd": True,
-                                       "ranges": {"x": [-2.0, 2.0], "theta": [-1.0, 1.0], "r_x": [-2.0, 2.0]}})
-    result = run(data, out=tmp_path / "out", workers=2)
-    assert result.total == 4 and result.errors == 0
-    recs = {(r["values"]["drop"], r["values"]["encoding"]):
-            json.loads((tmp_path / "out" / "runs" / f"{r['id']}.json").read_text()) for r in result.rows}
-    for enc in ("float32", "int16"):
-        clean, dropped = recs[(0.0, enc)], recs[(0.1, enc)]
-        assert clean["link"]["encoding"] == enc and dropped["link"]["encoding"] == enc
-        assert clean["metrics"]["complete"] and clean["metrics"]["lost"] == 0
-        assert clean["metrics"]["faults_injected"]["drop"] == 0
-        # 50 samples in the window, each dropped with probability 0.1: every drop is a lost command
-        drops = dropped["metrics"]["faults_injected"]["drop"]
-        assert 1 <= drops <= 15 and dropped["metrics"]["lost"] == drops
-    # int16 quantises what the controller sees: the same run, not the same trace
-    assert recs[(0.0, "int16")]["metrics"]["outputs_final"] != recs[(0.0, "float32")]["metrics"]["outputs_final"]
-    # Runs that overlapped in time used different groups and ports (the scenario's own channel is never used).
-    runs = list(recs.values())
-    link = lambda r: (r["link"]["config"]["channel"], r["link"]["config"]["port"])  # noqa: E731
-    assert all(link(r)[0].startswith("239.74.164.") for r in runs)
-    overlapping = [(a, b) for i, a in enumerate(runs) for b in runs[i + 1:]
-                   if a["worker"]["start"] < b["worker"]["stop"] and b["worker"]["start"] < a["worker"]["stop"]]
-    assert overlapping, "two workers never ran at the same time"
-    assert all(link(a) != link(b) for a, b in overlapping)
