@@ -163,127 +163,124 @@ static int parse_scales(const char *text, gl_can_scale_t *scales, uint32_t count
     return 0;
 }
 
-int main(int argc, char **argv)
+/** What the command line asks for. */
+typedef struct {
+    gl_can_config_t link;
+    unsigned long base_id;
+    unsigned long spin_us;
+    gl_can_encoding_t encoding;
+    const char *scale_meas;
+    const char *scale_cmd;
+} options_t;
+
+/** One option that takes a value (`next`); 0, or the exit status of the usage error. */
+static int parse_value_option(const char *a, const char *next, options_t *o)
 {
-    gl_can_config_t cfg = {.backend = GL_CAN_UDP, .channel = NULL, .port = 43113, .hop_limit = 1, .fd = 0,
-                           .rx_lo = 0, .rx_hi = 0};
-    unsigned long base_id = 0x100, v = 0, spin_us = 0;
-    gl_can_encoding_t encoding = GL_CAN_FLOAT32;
-    const char *scale_meas = NULL, *scale_cmd = NULL;
+    unsigned long v = 0;
+    if (strcmp(a, "--backend") == 0) {
+        if (strcmp(next, "udp") != 0 && strcmp(next, "socketcan") != 0) {
+            return usage("--backend must be udp or socketcan");
+        }
+        o->link.backend = strcmp(next, "udp") == 0 ? GL_CAN_UDP : GL_CAN_SOCKETCAN;
+    } else if (strcmp(a, "--channel") == 0) {
+        o->link.channel = next;
+    } else if (strcmp(a, "--port") == 0) {
+        if (parse_uint(next, 65535, &v) != 0) {
+            return usage("--port must be 0..65535");
+        }
+        o->link.port = (uint16_t)v;
+    } else if (strcmp(a, "--hop-limit") == 0) {
+        if (parse_uint(next, 255, &v) != 0) {
+            return usage("--hop-limit must be 0..255");
+        }
+        o->link.hop_limit = (int)v;
+    } else if (strcmp(a, "--spin-us") == 0) {
+        if (parse_uint(next, 1000000, &o->spin_us) != 0) {
+            return usage("--spin-us must be 0..1000000");
+        }
+    } else if (strcmp(a, "--encoding") == 0) {
+        if (strcmp(next, "float32") != 0 && strcmp(next, "int16") != 0) {
+            return usage("--encoding must be float32 or int16");
+        }
+        o->encoding = strcmp(next, "int16") == 0 ? GL_CAN_INT16 : GL_CAN_FLOAT32;
+    } else if (strcmp(a, "--scale-measurement") == 0) {
+        o->scale_meas = next;
+    } else if (strcmp(a, "--scale-command") == 0) {
+        o->scale_cmd = next;
+    } else if (strcmp(a, "--base-id") == 0) {
+        if (parse_uint(next, 0x7FF - 0x30, &o->base_id) != 0) {
+            return usage("--base-id must leave room for the layout (0..0x7cf)");
+        }
+    } else {
+        return usage("unknown option");
+    }
+    return 0;
+}
+
+/** The whole command line; 0, -1 after --help (exit 0), or the exit status of the usage error. */
+static int parse_options(int argc, char **argv, options_t *o)
+{
     for (int i = 1; i < argc; ++i) {
         const char *a = argv[i];
         const char *next = i + 1 < argc ? argv[i + 1] : NULL;
         if (strcmp(a, "--help") == 0 || strcmp(a, "-h") == 0) {
-            return help();
-        } else if (strcmp(a, "--fd") == 0) {
-            cfg.fd = 1;
-        } else if (next == NULL) {
+            (void)help();
+            return -1;
+        }
+        if (strcmp(a, "--fd") == 0) {
+            o->link.fd = 1;
+            continue;
+        }
+        if (next == NULL) {
             return usage("missing value or unknown option");
-        } else if (strcmp(a, "--backend") == 0) {
-            if (strcmp(next, "udp") == 0) {
-                cfg.backend = GL_CAN_UDP;
-            } else if (strcmp(next, "socketcan") == 0) {
-                cfg.backend = GL_CAN_SOCKETCAN;
-            } else {
-                return usage("--backend must be udp or socketcan");
-            }
-            ++i;
-        } else if (strcmp(a, "--channel") == 0) {
-            cfg.channel = next;
-            ++i;
-        } else if (strcmp(a, "--port") == 0) {
-            if (parse_uint(next, 65535, &v) != 0) {
-                return usage("--port must be 0..65535");
-            }
-            cfg.port = (uint16_t)v;
-            ++i;
-        } else if (strcmp(a, "--hop-limit") == 0) {
-            if (parse_uint(next, 255, &v) != 0) {
-                return usage("--hop-limit must be 0..255");
-            }
-            cfg.hop_limit = (int)v;
-            ++i;
-        } else if (strcmp(a, "--spin-us") == 0) {
-            if (parse_uint(next, 1000000, &spin_us) != 0) {
-                return usage("--spin-us must be 0..1000000");
-            }
-            ++i;
-        } else if (strcmp(a, "--encoding") == 0) {
-            if (strcmp(next, "float32") == 0) {
-                encoding = GL_CAN_FLOAT32;
-            } else if (strcmp(next, "int16") == 0) {
-                encoding = GL_CAN_INT16;
-            } else {
-                return usage("--encoding must be float32 or int16");
-            }
-            ++i;
-        } else if (strcmp(a, "--scale-measurement") == 0) {
-            scale_meas = next;
-            ++i;
-        } else if (strcmp(a, "--scale-command") == 0) {
-            scale_cmd = next;
-            ++i;
-        } else if (strcmp(a, "--base-id") == 0) {
-            if (parse_uint(next, 0x7FF - 0x30, &base_id) != 0) {
-                return usage("--base-id must leave room for the layout (0..0x7cf)");
-            }
-            ++i;
-        } else {
-            return usage("unknown option");
         }
+        int rc = parse_value_option(a, next, o);
+        if (rc != 0) {
+            return rc;
+        }
+        ++i;
     }
-    if (cfg.channel == NULL) {
-        return usage("--channel is required");
-    }
-    if (encoding == GL_CAN_INT16) {
-        char why[160], msg[240];
-        if (scale_meas == NULL || scale_cmd == NULL) {
-            return usage("--encoding int16 needs --scale-measurement and --scale-command");
-        }
-        if (parse_scales(scale_meas, node_cfg.meas_scale, N_SAMPLE, why, sizeof why) != 0) {
-            snprintf(msg, sizeof msg, "--scale-measurement (%u values: outputs then references): %s",
-                     (unsigned)N_SAMPLE, why);
-            return usage(msg);
-        }
-        if (parse_scales(scale_cmd, node_cfg.cmd_scale, GL_M, why, sizeof why) != 0) {
-            snprintf(msg, sizeof msg, "--scale-command (%u values): %s", (unsigned)GL_M, why);
-            return usage(msg);
-        }
-    } else if (scale_meas != NULL || scale_cmd != NULL) {
-        return usage("--scale-measurement and --scale-command need --encoding int16");
-    }
+    return o->link.channel == NULL ? usage("--channel is required") : 0;
+}
 
-    node_cfg.base_id = (uint32_t)base_id;
-    node_cfg.fd = cfg.fd;
-    node_cfg.encoding = encoding;
-    node_cfg.watchdog_periods = GL_WATCHDOG_PERIODS_DEFAULT;
-    node_cfg.ctx = &can_link;
-    node_cfg.send = send_frame;
-    node_cfg.event = log_event;
-    gl_status_t st = gl_can_node_init(&node, &node_cfg);
-    if (st != GL_OK) {
-        fprintf(stderr, "gainlink_can: built-in gains rejected (status %d)\n", (int)st);
-        return 3;
+/** The int16 scales into the node's configuration (both lists required with int16, refused without). */
+static int configure_encoding(const options_t *o)
+{
+    if (o->encoding != GL_CAN_INT16) {
+        return (o->scale_meas != NULL || o->scale_cmd != NULL)
+                   ? usage("--scale-measurement and --scale-command need --encoding int16")
+                   : 0;
     }
-    gl_can_node_rx_range(&node, &cfg.rx_lo, &cfg.rx_hi);
+    char why[160], msg[240];
+    if (o->scale_meas == NULL || o->scale_cmd == NULL) {
+        return usage("--encoding int16 needs --scale-measurement and --scale-command");
+    }
+    if (parse_scales(o->scale_meas, node_cfg.meas_scale, N_SAMPLE, why, sizeof why) != 0) {
+        snprintf(msg, sizeof msg, "--scale-measurement (%u values: outputs then references): %s",
+                 (unsigned)N_SAMPLE, why);
+        return usage(msg);
+    }
+    if (parse_scales(o->scale_cmd, node_cfg.cmd_scale, GL_M, why, sizeof why) != 0) {
+        snprintf(msg, sizeof msg, "--scale-command (%u values): %s", (unsigned)GL_M, why);
+        return usage(msg);
+    }
+    return 0;
+}
+
+static void install_signals(void)
+{
     struct sigaction sa;
     memset(&sa, 0, sizeof sa);
     sa.sa_handler = on_signal;
     sigemptyset(&sa.sa_mask);
     sigaction(SIGTERM, &sa, NULL);
     sigaction(SIGINT, &sa, NULL);
+}
 
-    gl_log_init(&events, 2, "gainlink_can", GL_LOG_BURST_DEFAULT);
-    if (gl_can_link_open(&can_link, &cfg) != 0) {
-        return 4;
-    }
-    printf("gainlink_can ready %s sha256:%s n=%d m=%d p=%d q=%d fd=%d base_id=%lu encoding=%s\n", GL_NAME,
-           GL_ARTIFACT_SHA256, GL_N, GL_M, GL_P, GL_Q, cfg.fd, base_id,
-           encoding == GL_CAN_INT16 ? "int16" : "float32");
-    fflush(stdout);
-
+/** Frames from the link into the node until SIGTERM/SIGINT (0) or a receive error (1). */
+static int serve(unsigned long spin_us)
+{
     uint64_t refused_seen = 0;
-    int rc = 0;
     uint64_t spin_until = 0;
     while (!stop_requested) {
         gl_can_frame_t frame;
@@ -296,14 +293,17 @@ int main(int argc, char **argv)
         gl_log_tick(&events);
         if (r < 0) {
             gl_log_always(&events, "receive failed: %s", strerror(errno));
-            rc = 1;
-            break;
+            return 1;
         }
         if (r > 0 && gl_can_node_frame(&node, &frame)) {
             spin_until = now_ns() + 1000ull * spin_us;
         }
     }
-    gl_can_link_close(&can_link);
+    return 0;
+}
+
+static void print_summary(void)
+{
     const gl_can_node_stats_t *n = &node.stats;
     gl_log_always(&events,
                   "steps=%lu stale=%lu partial_dropped=%lu send_errors=%lu filtered=%llu clipped=%lu read=%llu "
@@ -314,5 +314,46 @@ int main(int argc, char **argv)
                   (unsigned long)n->short_frames, (unsigned long long)can_link.rx_refused,
                   (unsigned long long)can_link.rx_dropped, (unsigned long long)events.suppressed,
                   (unsigned long long)events.dropped);
+}
+
+int main(int argc, char **argv)
+{
+    options_t o = {.link = {.backend = GL_CAN_UDP, .channel = NULL, .port = 43113, .hop_limit = 1, .fd = 0,
+                            .rx_lo = 0, .rx_hi = 0},
+                   .base_id = 0x100, .spin_us = 0, .encoding = GL_CAN_FLOAT32, .scale_meas = NULL,
+                   .scale_cmd = NULL};
+    int rc = parse_options(argc, argv, &o);
+    if (rc != 0) {
+        return rc < 0 ? 0 : rc;
+    }
+    rc = configure_encoding(&o);
+    if (rc != 0) {
+        return rc;
+    }
+    node_cfg.base_id = (uint32_t)o.base_id;
+    node_cfg.fd = o.link.fd;
+    node_cfg.encoding = o.encoding;
+    node_cfg.watchdog_periods = GL_WATCHDOG_PERIODS_DEFAULT;
+    node_cfg.ctx = &can_link;
+    node_cfg.send = send_frame;
+    node_cfg.event = log_event;
+    gl_status_t st = gl_can_node_init(&node, &node_cfg);
+    if (st != GL_OK) {
+        fprintf(stderr, "gainlink_can: built-in gains rejected (status %d)\n", (int)st);
+        return 3;
+    }
+    gl_can_node_rx_range(&node, &o.link.rx_lo, &o.link.rx_hi);
+    install_signals();
+    gl_log_init(&events, 2, "gainlink_can", GL_LOG_BURST_DEFAULT);
+    if (gl_can_link_open(&can_link, &o.link) != 0) {
+        return 4;
+    }
+    printf("gainlink_can ready %s sha256:%s n=%d m=%d p=%d q=%d fd=%d base_id=%lu encoding=%s\n", GL_NAME,
+           GL_ARTIFACT_SHA256, GL_N, GL_M, GL_P, GL_Q, o.link.fd, o.base_id,
+           o.encoding == GL_CAN_INT16 ? "int16" : "float32");
+    fflush(stdout);
+    rc = serve(o.spin_us);
+    gl_can_link_close(&can_link);
+    print_summary();
     return rc;
 }
