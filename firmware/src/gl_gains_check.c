@@ -83,21 +83,13 @@ static int store_finite(float *dst, double value)
     return isfinite(*dst);
 }
 
-gl_status_t gl_coeffs_derive(const gl_gains_t *g, gl_coeffs_t *c)
+/**
+ * Command rows: u_op, then the feedback stored negated so that v - u_op is a plain sum of products
+ * (Kx = K (I - M Cd), Ky = K M in the current form), Ki, the limits; and the safe command u_op clamped.
+ * Returns the stream position after them; clears `*ok` when a derived coefficient is not finite in float.
+ */
+static float *derive_command_rows(const gl_gains_t *g, gl_coeffs_t *c, float *w, int *ok)
 {
-    gl_status_t st = gl_gains_check(g);
-    if (st != GL_OK) {
-        return st;
-    }
-    int ok = 1;
-    float *w = c->w;
-    memset(c->w, 0, sizeof c->w);
-
-    /* The measurement's operating point, subtracted from y first (dy = y - y_op). */
-    for (size_t k = 0; k < GL_P; ++k) {
-        *w++ = g->y_op[k];
-    }
-    /* Command rows: u_op, then the feedback stored negated so that v - u_op is a plain sum of products. */
     for (size_t i = 0; i < GL_M; ++i) {
         *w++ = g->u_op[i];
         double KMrow[GL_P];
@@ -115,11 +107,11 @@ gl_status_t gl_coeffs_derive(const gl_gains_t *g, gl_coeffs_t *c)
             for (size_t k = 0; k < GL_P; ++k) {
                 acc -= KMrow[k] * (double)g->Cd[k][j];
             }
-            ok &= store_finite(w++, -acc);
+            *ok &= store_finite(w++, -acc);
         }
 #if GL_OBSERVER_FORM == GL_FORM_CURRENT
         for (size_t k = 0; k < GL_P; ++k) {
-            ok &= store_finite(w++, -KMrow[k]);
+            *ok &= store_finite(w++, -KMrow[k]);
         }
 #endif
         for (int j = 0; j < GL_Q; ++j) {
@@ -132,7 +124,12 @@ gl_status_t gl_coeffs_derive(const gl_gains_t *g, gl_coeffs_t *c)
         safe = safe > g->u_max[i] ? g->u_max[i] : safe;
         c->u_safe[i] = safe;
     }
-    /* Integrator rows: e = r + sum(-Ci y), z += Ts e [+ Kaw (u - v)]. */
+    return w;
+}
+
+/** Integrator rows: e = r + sum(-Ci y), z += Ts e [+ Kaw (u - v)]. Returns the stream position after them. */
+static float *derive_integrator_rows(const gl_gains_t *g, float *w)
+{
     for (int j = 0; j < GL_Q; ++j) {
         for (size_t k = 0; k < GL_P; ++k) {
             *w++ = -g->Ci[j][k];
@@ -144,7 +141,16 @@ gl_status_t gl_coeffs_derive(const gl_gains_t *g, gl_coeffs_t *c)
         }
 #endif
     }
-    /* Estimate rows: F = Ad - L Cd, G = Bd - L Dd, L (current form: L = Ad M, DESIGN.md). */
+    (void)g; /* without integral action there are no rows */
+    return w;
+}
+
+/**
+ * Estimate rows: F = Ad - L Cd, G = Bd - L Dd, L (current form: L = Ad M, DESIGN.md), in double, rounded once.
+ * Returns the stream position after them; clears `*ok` when a derived coefficient is not finite in float.
+ */
+static float *derive_estimate_rows(const gl_gains_t *g, float *w, int *ok)
+{
     for (size_t i = 0; i < GL_N; ++i) {
         double Lrow[GL_P];
         for (size_t k = 0; k < GL_P; ++k) {
@@ -162,18 +168,39 @@ gl_status_t gl_coeffs_derive(const gl_gains_t *g, gl_coeffs_t *c)
             for (size_t k = 0; k < GL_P; ++k) {
                 acc -= Lrow[k] * (double)g->Cd[k][j];
             }
-            ok &= store_finite(w++, acc);
+            *ok &= store_finite(w++, acc);
         }
         for (size_t j = 0; j < GL_M; ++j) {
             double acc = (double)g->Bd[i][j];
             for (size_t k = 0; k < GL_P; ++k) {
                 acc -= Lrow[k] * (double)g->Dd[k][j];
             }
-            ok &= store_finite(w++, acc);
+            *ok &= store_finite(w++, acc);
         }
         for (size_t k = 0; k < GL_P; ++k) {
-            ok &= store_finite(w++, Lrow[k]);
+            *ok &= store_finite(w++, Lrow[k]);
         }
+    }
+    return w;
+}
+
+gl_status_t gl_coeffs_derive(const gl_gains_t *g, gl_coeffs_t *c)
+{
+    gl_status_t st = gl_gains_check(g);
+    if (st != GL_OK) {
+        return st;
+    }
+    int ok = 1;
+    float *w = c->w;
+    memset(c->w, 0, sizeof c->w);
+    /* The measurement's operating point, subtracted from y first (dy = y - y_op). */
+    for (size_t k = 0; k < GL_P; ++k) {
+        *w++ = g->y_op[k];
+    }
+    w = derive_command_rows(g, c, w, &ok);
+    w = derive_integrator_rows(g, w);
+    (void)derive_estimate_rows(g, w, &ok);
+    for (size_t i = 0; i < GL_N; ++i) {
         c->xh0[i] = g->xh0[i];
     }
     for (size_t j = 0; j < GL_QA; ++j) {
