@@ -57,6 +57,79 @@ def _loop(art, controller_step, steps: int) -> tuple[float, np.ndarray]:
     return steps / (time.perf_counter() - t0), U
 
 
+def _links(art, busy_poll_us: int) -> dict:
+    """The default and busy-poll MAVLink links, each to a firmware of its own on a free UDP port."""
+    from gainlink.hil.links.mavlink import MavlinkTransport
+
+    links = {}
+    for variant, busy_us in (("default", 0), ("busy_poll", busy_poll_us)):
+        port = _free_port()
+        links[variant] = MavlinkTransport(url=f"udpout:127.0.0.1:{port}", controller_url=f"udpin:127.0.0.1:{port}",
+                                          n_inputs=art.m, n_outputs=art.p, n_refs=art.q, ts=art.Ts,
+                                          busy_poll_us=busy_us)
+    return links
+
+
+def _over(link):
+    """A controller step through ``link``: one sample out, its command back (lockstep)."""
+    def step(k, y, r):
+        link.send_frames(link.encode_sample(seq=k, y=y, r=r))
+        c = link.receive_command(timeout=1.0)
+        if c is None or c.seq != k:
+            raise SystemExit(f"no command for step {k}")
+        return c.u
+    return step
+
+
+def _measure(art, exe, args) -> tuple[dict, float, bool]:
+    """Steps/s of both links and of the in-process library, interleaved ``args.repeats`` times; the largest
+    command difference link vs in-process over the first 500 steps; whether busy-poll equals default."""
+    from gainlink.engines.native import NativeLoop
+    from gainlink.firmware.mavlink_app import MavlinkFirmware
+    from gainlink.hil.loop.scheduler import Placement, resolve_affinity
+
+    native = NativeLoop(art)
+    links = _links(art, args.busy_poll_us)
+    rates = {"default": [], "busy_poll": [], "in_process": []}
+    U = {}
+    firmware = {"default": MavlinkFirmware(exe, url=links["default"].controller_url),
+                "busy_poll": MavlinkFirmware(exe, url=links["busy_poll"].controller_url,
+                                             busy_poll_us=args.busy_poll_us)}
+    cpus = sorted(os.sched_getaffinity(0))
+    with firmware["default"], links["default"], firmware["busy_poll"], links["busy_poll"]:
+        for _ in range(args.repeats):
+            for variant, link in links.items():
+                link.send_frames(link.encode_reset(seq=0))
+                link.receive_command(timeout=1.0)
+                # The bridge's own placement (affinity = "auto"): one CPU for both, or one each when spinning.
+                where = resolve_affinity("auto", mode="lockstep", busy_poll=variant == "busy_poll", cpus=cpus)
+                with Placement(where, peer_pid=firmware[variant].proc.pid):
+                    rate, U[variant] = _loop(art, _over(link), args.steps)
+                rates[variant].append(rate)
+            native.reset()
+            rate_n, U_n = _loop(art, lambda k, y, r: native.step(y.astype(float), r.astype(float)).u, args.steps)
+            rates["in_process"].append(rate_n)
+    agree = float(np.max(np.abs(U["default"][:500] - U_n[:500])))
+    return rates, agree, bool(np.array_equal(U["busy_poll"], U["default"]))
+
+
+def _bridge_runs(path: Path, busy_poll_us: int) -> dict:
+    """The HIL bridge (cart-pendulum FMU) over MAVLink, 5 s of plant time, with each link variant."""
+    from gainlink.hil.loop.bridge import run_scenario
+    from gainlink.hil.loop.scenario import parse_scenario
+
+    bridge = {}
+    for variant, extra in (("default", {}), ("busy_poll", {"busy_poll_us": busy_poll_us})):
+        scen = parse_scenario({
+            "name": "bench_mavlink", "artifact": str(path), "duration": 5.0, "mode": "lockstep",
+            "controller": "firmware", "twin": False, "seed": 1,
+            "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]},
+            "transport": {"kind": "mavlink", "port": _free_port(), **extra}, "initial_state": {"theta": 0.1},
+        }, path=path.parent / "scenario.toml")
+        bridge[variant] = run_scenario(scen)
+    return bridge
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=20000)
@@ -67,71 +140,15 @@ def main() -> int:
 
     from gainlink import artifact as artifact_mod
     from gainlink.design import design
-    from gainlink.engines.native import NativeLoop
-    from gainlink.hil.loop.bridge import run_scenario
-    from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
-    from gainlink.hil.links.mavlink import MavlinkTransport
-    from gainlink.hil.loop.scenario import parse_scenario
-    from gainlink.hil.loop.scheduler import Placement, resolve_affinity
+    from gainlink.firmware.mavlink_app import mavlink_executable
     from gainlink.spec import load_spec
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "gains.json"
         artifact_mod.write(path, design(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
         art = artifact_mod.load(path)
-        exe = mavlink_executable(art)
-        native = NativeLoop(art)
-
-        def in_process(k, y, r):
-            return native.step(y.astype(float), r.astype(float)).u
-
-        def over(link):
-            def step(k, y, r):
-                link.send_frames(link.encode_sample(seq=k, y=y, r=r))
-                c = link.receive_command(timeout=1.0)
-                if c is None or c.seq != k:
-                    raise SystemExit(f"no command for step {k}")
-                return c.u
-            return step
-
-        links = {}
-        for variant, busy_us in (("default", 0), ("busy_poll", args.busy_poll_us)):
-            port = _free_port()
-            links[variant] = MavlinkTransport(url=f"udpout:127.0.0.1:{port}", controller_url=f"udpin:127.0.0.1:{port}",
-                                              n_inputs=art.m, n_outputs=art.p, n_refs=art.q, ts=art.Ts,
-                                              busy_poll_us=busy_us)
-
-        rates = {"default": [], "busy_poll": [], "in_process": []}
-        U = {}
-        firmware = {"default": MavlinkFirmware(exe, url=links["default"].controller_url),
-                    "busy_poll": MavlinkFirmware(exe, url=links["busy_poll"].controller_url,
-                                                 busy_poll_us=args.busy_poll_us)}
-        cpus = sorted(os.sched_getaffinity(0))
-        with firmware["default"], links["default"], firmware["busy_poll"], links["busy_poll"]:
-            for _ in range(args.repeats):
-                for variant, link in links.items():
-                    link.send_frames(link.encode_reset(seq=0))
-                    link.receive_command(timeout=1.0)
-                    # The bridge's own placement (affinity = "auto"): one CPU for both, or one each when spinning.
-                    where = resolve_affinity("auto", mode="lockstep", busy_poll=variant == "busy_poll", cpus=cpus)
-                    with Placement(where, peer_pid=firmware[variant].proc.pid):
-                        rate, U[variant] = _loop(art, over(link), args.steps)
-                    rates[variant].append(rate)
-                native.reset()
-                rate_n, U_n = _loop(art, in_process, args.steps)
-                rates["in_process"].append(rate_n)
-            agree = float(np.max(np.abs(U["default"][:500] - U_n[:500])))
-            busy_equals_default = bool(np.array_equal(U["busy_poll"], U["default"]))
-
-        bridge = {}
-        for variant, extra in (("default", {}), ("busy_poll", {"busy_poll_us": args.busy_poll_us})):
-            scen = parse_scenario({
-                "name": "bench_mavlink", "artifact": str(path), "duration": 5.0, "mode": "lockstep",
-                "controller": "firmware", "twin": False, "seed": 1,
-                "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]},
-                "transport": {"kind": "mavlink", "port": _free_port(), **extra}, "initial_state": {"theta": 0.1},
-            }, path=Path(tmp) / "scenario.toml")
-            bridge[variant] = run_scenario(scen)
+        rates, agree, busy_equals_default = _measure(art, mavlink_executable(art), args)
+        bridge = _bridge_runs(path, args.busy_poll_us)
 
     base = statistics.median(rates["in_process"])
     mav = {v: statistics.median(rates[v]) for v in ("default", "busy_poll")}
