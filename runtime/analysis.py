@@ -60,6 +60,7 @@ class AnalysisReport:
     warnings: list[str] = field(default_factory=list)
     compensator: dict | None = None  # the spec's designed compensator: poles, spectral radius, stability
     float32: dict | None = None  # float32 closed-loop fidelity of that design (gainlink.fidelity)
+    dead_time: dict | None = None  # that design against the exact sampled dead times (gainlink.deadtime)
 
     def to_dict(self) -> dict:
         """JSON-friendly dict; complex numbers become [re, im] pairs."""
@@ -215,7 +216,7 @@ def analyze(spec: PlantSpec) -> AnalysisReport:
         transmission_zeros=[complex(z) for z in zeros], nonminimum_phase_zeros=[complex(z) for z in nmp],
         bandwidth_rad_s=bandwidth, bandwidth_source=source, sample_rate_ratio=float(ratio),
         state_scale_ratio=scale_ratio, badly_scaled_states=bad_states, warnings=warnings,
-        compensator=checks.get("compensator"), float32=checks.get("float32"),
+        compensator=checks.get("compensator"), float32=checks.get("float32"), dead_time=checks.get("dead_time"),
     )
 
 
@@ -245,7 +246,8 @@ def _bandwidth(spec: PlantSpec, warnings: list[str]) -> tuple[float, str, dict]:
         warnings.append(f"design of this spec fails: {exc}")
         fastest = max(pole_frequency(z, discrete=not spec.continuous, Ts=spec.Ts) for z in np.linalg.eigvals(spec.A))
         return fastest, "open loop", {}
-    for w in (result.compensator.warning(), result.float32 and result.float32.warning()):
+    for w in (result.compensator.warning(), result.float32 and result.float32.warning(),
+              result.dead_time and result.dead_time.warning()):
         if w:
             warnings.append(w)
     return (loop_bandwidth(result.margins, result.controller_poles, spec.Ts), "closed-loop (gain crossover)",

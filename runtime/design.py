@@ -72,6 +72,7 @@ class DesignResult:
     warnings: list[str] = field(default_factory=list)
     compensator: object = None  # gainlink.compensator.CompensatorStability
     float32: object = None  # gainlink.fidelity.Float32Fidelity, None when the check was switched off
+    dead_time: object = None  # gainlink.deadtime.DeadTimeCheck, None unless the plant has sampled dead times
 
 
 def discretise(spec: PlantSpec) -> Discretised:
@@ -127,11 +128,26 @@ def design(spec: PlantSpec) -> DesignResult:
                           checks={"closed_loop_poles": complex_pairs(sorted(cl_poles, key=lambda z: (abs(z), z.imag))),
                                   "spectral_radius": radius, "margins": [dict(mg.__dict__) for mg in margins]})
     data, compensator, fidelity = implement(data, spec.implementation or {}, warnings)
+    dead_time = _dead_time(spec, data, warnings)
     for w in warnings:
         log.warning(w)
     return DesignResult(artifact=seal(data), controller_poles=ctrl_poles, observer_poles=obs_poles,
                         closed_loop_poles=cl_poles, margins=margins, warnings=warnings, compensator=compensator,
-                        float32=fidelity)
+                        float32=fidelity, dead_time=dead_time)
+
+
+def _dead_time(spec: PlantSpec, data: dict, warnings: list[str]):
+    """The law against the exact sampled dead times of a transfer-function spec (:mod:`gainlink.deadtime`),
+    recorded in ``checks.dead_time``; None when the spec has none."""
+    from .artifact import from_dict
+    from .deadtime import dead_time_check
+
+    check = dead_time_check(spec, from_dict(seal(data)))
+    if check is not None:
+        data["checks"]["dead_time"] = check.to_dict()
+        if not check.stable:
+            warnings.append(check.warning())
+    return check
 
 
 def _check_feasible(d: Discretised, Aa: np.ndarray, Ba: np.ndarray, q: int) -> None:

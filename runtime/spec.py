@@ -80,6 +80,7 @@ class PlantSpec:
     observer: dict
     limits: dict
     pade_order: int | None = None
+    transfer_function: dict | None = None
     operating_point: OperatingPoint | None = None
     implementation: dict | None = None
     source_sha256: str = ""
@@ -147,8 +148,11 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     if kind == "transfer_function":
         A, B, C, D, pade_order = _realise_tf(plant)
         states = tuple(f"x{i}" for i in range(A.shape[0]))
+        m = B.shape[1]
+        tf = {"num": plant["num"], "den": plant["den"],
+              "delay": plant.get("delay", [[0.0] * m for _ in range(C.shape[0])])}
     else:
-        (A, B, C, D), pade_order = _state_space(plant), None
+        (A, B, C, D), pade_order, tf = _state_space(plant), None, None
         states = _names(plant, "states", A.shape[0], "x")
     inputs = _names(plant, "inputs", B.shape[1], "u")
     outputs = _names(plant, "outputs", C.shape[0], "y")
@@ -163,7 +167,8 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     return PlantSpec(
         name=name, Ts=Ts, kind=kind, discretization=disc, A=A, B=B, C=C, D=D,
         states=states, inputs=inputs, outputs=outputs, controller=controller, integral=integral,
-        observer=observer, limits=limits, pade_order=pade_order, operating_point=op, implementation=implementation,
+        observer=observer, limits=limits, pade_order=pade_order, transfer_function=tf, operating_point=op,
+        implementation=implementation,
         source_sha256=source_sha256,
         source=source, description=str(data.get("description", "")),
     )

@@ -93,6 +93,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         f = rep.float32
         print(f"  float32 in closed loop: max |u32 - u64| {f['max_rel_u']:.3g} of the limit span "
               f"({'within' if f['max_rel_u'] <= f['threshold'] else 'ABOVE'} {f['threshold']:.3g})")
+    if rep.dead_time is not None:
+        d = rep.dead_time
+        print(f"  with the exact dead times (design: Padé order {d['pade_order']}): closed-loop spectral radius "
+              f"{d['spectral_radius']:.4f} -> {'stable' if d['stable'] else 'UNSTABLE'}")
     for w in rep.warnings:
         print(f"  warning: {w}")
     return 0
@@ -138,6 +142,8 @@ def cmd_design(args: argparse.Namespace) -> int:
               for name, v in zip(names, a.get(key, [0.0] * len(names)))]
         print(f"  operating point: {', '.join(op)} (samples, references and commands are absolute)")
     print(f"  {result.compensator.describe()}")
+    if result.dead_time is not None:
+        print(f"  {result.dead_time.describe()}")
     realization = a.get("realization", {}).get("kind", "as_designed")
     if result.float32 is not None:
         f = result.float32
