@@ -12,7 +12,7 @@ Prints JSON. Everything is measured in the same run, against a baseline of the s
   process (client and the LocalCluster's scheduler), the worker and its nanny; plan, runs, result files
   and the merged report with its plots — per run / plain loop - 1 (target <= 0.10). Beside it:
   ``overhead_ratio_without_report`` (the report's CPU, a fixed cost per campaign, taken out), the wall
-  ratio, and the runs per Dask task;
+  ratio, and the number of Dask tasks the runs took;
 - ``hil``: 40 lockstep HIL runs (firmware CAN process over udp_multicast, each in its own bus slot) on 1
   and on 2 workers;
 - ``memory``: the single worker's resident memory after 40 runs and after 40 + 400 (target: flat).
@@ -129,7 +129,7 @@ def worker_rss_mb(client) -> float:
 def main() -> int:
     logging.disable(logging.WARNING)
     from gainlink.hil.campaign.cluster import dask_client
-    from gainlink.hil.campaign.runner import batch_size
+    from gainlink.hil.campaign.runner import batch_sizes
 
     out = {"machine_cpus": len(os.sched_getaffinity(0)), "load_average_before": [round(v, 2) for v in os.getloadavg()]}
     half = SIL_RUNS // 2
@@ -146,7 +146,7 @@ def main() -> int:
                     timed_campaign(sil_campaign(MEMORY_RUNS, seed=7), client, tmp / "memory40")
                     r["rss_after_40_mb"] = worker_rss_mb(client)
                 r["sil"] = timed_campaign(sil_campaign(SIL_RUNS, seed=1), client, tmp / f"sil_{n}")
-                r["sil"]["runs_per_task"] = batch_size("sil", SIL_RUNS, n)
+                r["sil"]["dask_tasks"] = len(batch_sizes("sil", SIL_RUNS, n))
                 if n == 1:
                     r["rss_after_440_mb"] = worker_rss_mb(client)
                 r["hil"] = timed_campaign(hil_campaign(HIL_RUNS, seed=1), client, tmp / f"hil_{n}")
@@ -172,7 +172,7 @@ def main() -> int:
                                     "cpu_per_run_ms": round(1e3 * base_cpu, 2)},
                      "campaign_one_worker_per_run_ms": one["per_run_ms"],
                      "campaign_one_worker_cpu_per_run_ms": one["cpu_per_run_ms"],
-                     "report_cpu_s": one["report_cpu_s"], "runs_per_task": one["runs_per_task"],
+                     "report_cpu_s": one["report_cpu_s"], "dask_tasks": one["dask_tasks"],
                      "overhead_ratio": round(overhead, 3), "overhead_ratio_without_report": round(no_report, 3),
                      "overhead_ratio_wall": round(overhead_wall, 3),
                      "target_overhead_ratio": 0.10, "meets_target": overhead <= 0.10},

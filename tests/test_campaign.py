@@ -417,7 +417,7 @@ def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, da
     data["scenario"]["plant"] = dict(data["scenario"]["plant"], kind="python", **{"class": "campaign_plants:BuggyPendulum"})
     with caplog.at_level("INFO", logger="gainlink.hil.campaign.runner"):
         result = run(data, out=tmp_path / "out", scheduler=dask_cluster, batch=4)
-    assert [m for m in caplog.messages if m.startswith("a batch of 4 runs failed (RuntimeError")], caplog.messages
+    assert [m for m in caplog.messages if m.startswith("a batch of 4 runs failed (RuntimeError: BuggyPendulum")], caplog.messages
     rows = {r["index"]: r for r in result.rows}
     assert [rows[i]["values"]["plant.bug"] for i in range(4)] == [False, False, True, True]
     for i in (2, 3):

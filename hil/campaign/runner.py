@@ -2,7 +2,8 @@
 
 FMUs go to the cluster once each (as tasks returning them, keyed by sha256); a task is
 ``execute_batch(kind, artifacts, runs, fmus)``: a short list of runs with the artifacts they use, inline
-(SIL: up to :data:`MAX_BATCH` runs, so Dask's cost per task is shared; HIL: one run, keyed by its run id).
+(SIL: up to :data:`MAX_BATCH` runs, so Dask's cost per task is shared, smaller towards the end; HIL: one
+run, keyed by its run id).
 Results come back through ``as_completed`` and are written one run at a time, so whatever finished before
 an interruption is kept. A task that raised is retried once by Dask (``retries=1``); a batch still failing,
 or whose workers died under it (``KilledWorker``), is submitted again one run per task, and a single run
@@ -90,7 +91,7 @@ def run(campaign: Campaign | str | Path | Mapping, *, out: str | Path, scheduler
     progress : callable, optional
         ``progress(done, total, record)`` after each run is stored.
     batch : int, optional
-        Runs per Dask task (default: :func:`batch_size`; results are still stored, retried and reported
+        Runs per Dask task (default: :func:`batch_sizes`; results are still stored, retried and reported
         per run).
 
     Returns
@@ -135,15 +136,22 @@ def _data(value: bytes) -> bytes:
     return value
 
 
-def batch_size(kind: str, runs: int, threads: int, *, batch: int | None = None) -> int:
-    """Runs per Dask task: HIL 1 (a run lasts seconds); SIL enough to make Dask's share small, while
-    every worker thread still gets :data:`BATCHES_PER_THREAD` tasks (so runs spread and the tail is short),
-    at most :data:`MAX_BATCH`. ``batch`` overrides it."""
-    if batch is not None:
-        return batch
-    if kind == "hil":
-        return 1
-    return max(1, min(MAX_BATCH, runs // (max(threads, 1) * BATCHES_PER_THREAD)))
+def batch_sizes(kind: str, runs: int, threads: int, *, batch: int | None = None) -> list[int]:
+    """Runs per Dask task, in the order of submission.
+
+    HIL: 1 (a run lasts seconds). SIL: each task takes the runs left over ``threads`` x
+    :data:`BATCHES_PER_THREAD`, at least 1 and at most :data:`MAX_BATCH`: batches big enough to make Dask's
+    share of a run small, getting smaller towards the end so no worker idles long while another finishes
+    a batch. ``batch`` fixes the size instead.
+    """
+    if batch is not None or kind == "hil":
+        size = batch or 1
+        return [size] * (runs // size) + ([runs % size] if runs % size else [])
+    sizes, left = [], runs
+    while left:
+        sizes.append(max(1, min(MAX_BATCH, left // (max(threads, 1) * BATCHES_PER_THREAD))))
+        left -= sizes[-1]
+    return sizes
 
 
 class _Submitter:
@@ -163,7 +171,7 @@ class _Submitter:
         paths = " ".join(str(p.scenario.get("plant", {}).get("path", "")) for p in points)
         needed = {s: f for s, f in self.blobs.items() if s in paths}
         key = f"gainlink-run-{points[0].id}" if len(points) == 1 else \
-            f"gainlink-batch-{points[0].id[:20]}-{len(points)}"
+            f"gainlink-batch-{points[0].id}-{len(points)}"
         return self.client.submit(execute_batch, self.kind, {s: self.plan.artifacts[s] for s in shas},
                                   [(p.artifact_sha256, p.scenario, p.seed) for p in points], needed,
                                   key=key, retries=1, pure=False)
@@ -177,28 +185,27 @@ def _submit_and_store(client: Any, plan: CampaignPlan, todo: dict[str, RunPoint]
 
     kind = plan.campaign.kind
     points = list(todo.values())
-    size = batch_size(kind, len(points), sum(client.nthreads().values()), batch=batch)
     submitter = _Submitter(client, plan)
-    futures = {}
-    for i in range(0, len(points), size):
+    futures, i = {}, 0
+    for size in batch_sizes(kind, len(points), sum(client.nthreads().values()), batch=batch):
         futures[submitter.submit(points[i:i + size])] = points[i:i + size]
+        i += size
     queue = as_completed(list(futures))
     for fut in queue:
         batch_points = futures.pop(fut)
+        failed = False
         try:
             results = fut.result()
         except (Exception, CancelledError) as exc:  # retried once already; KilledWorker: its workers died
-            fut.release()
-            if len(batch_points) > 1:  # each run alone: only the run at fault fails
-                log.info("a batch of %d runs failed (%s: %s); running each alone", len(batch_points),
-                         type(exc).__name__, exc)
-                for point in batch_points:
-                    single = submitter.submit([point])
-                    futures[single] = [point]
-                    queue.add(single)
-                continue
-            results = [{"status": "error", "reason": f"{type(exc).__name__}: {exc}"}]
+            failed, results = True, [{"status": "error", "reason": f"{type(exc).__name__}: {exc}"}]
         fut.release()
+        if failed and len(batch_points) > 1:  # each run alone: only the run at fault fails
+            log.info("a batch of %d runs failed (%s); running each alone", len(batch_points), results[0]["reason"])
+            for point in batch_points:
+                single = submitter.submit([point])
+                futures[single] = [point]
+                queue.add(single)
+            continue
         for point, result in zip(batch_points, results):
             record = store.put(point, kind=kind, result=result)
             done += 1
