@@ -9,7 +9,7 @@ Prints JSON. Everything is measured in the same run, against a baseline of the s
   function (the plain loop: plan, then ``execute`` per run; no Dask, no files, no report), half before
   the 1-worker campaign and half after it (so a change of the machine's load hits both alike). Its CPU
   time per run is the baseline of ``overhead_ratio``: CPU of the whole campaign on 1 worker — this
-  process (client and the LocalCluster's scheduler), the worker and its nanny; plan, runs, result files
+  process (client, the LocalCluster's scheduler and nanny) and the worker process; plan, runs, result files
   and the merged report with its plots — per run / plain loop - 1 (target <= 0.10). Beside it:
   ``overhead_ratio_without_report`` (the report's CPU, a fixed cost per campaign, taken out), the wall
   ratio, and the number of Dask tasks the runs took;
@@ -66,16 +66,20 @@ def hil_campaign(runs: int, seed: int) -> dict:
     return c
 
 
-def _cpu_s() -> float:
+def _pid_cpu_s() -> tuple[int, float]:
     import psutil
 
     t = psutil.Process().cpu_times()
-    return t.user + t.system
+    return os.getpid(), t.user + t.system
 
 
 def _cluster_cpu_s(client) -> float:
-    """CPU seconds so far of every worker process and its nanny."""
-    return sum(client.run(_cpu_s).values()) + sum(client.run(_cpu_s, nanny=True).values())
+    """CPU seconds so far of the cluster's processes other than this one: the workers, and the nannies where
+    they have a process of their own (a LocalCluster's nannies live in this process, whose CPU is counted
+    by the caller: each process is counted once)."""
+    cpu = dict(client.run(_pid_cpu_s).values()) | dict(client.run(_pid_cpu_s, nanny=True).values())
+    cpu.pop(os.getpid(), None)
+    return sum(cpu.values())
 
 
 def timed_campaign(data: dict, client, out: Path) -> dict:
