@@ -136,8 +136,10 @@ class NativeLoop:
     def step(self, y: np.ndarray, r: np.ndarray | None = None) -> StepOutput:
         """One ``gl_loop_step`` (for tests of single samples; use :meth:`run` for blocks)."""
         a = self.artifact
-        yy = np.ascontiguousarray(np.asarray(y, dtype=np.float32).reshape(a.p))
-        rr = np.ascontiguousarray(np.zeros(self.qa, np.float32) if r is None else np.asarray(r, np.float32).reshape(a.q))
+        with np.errstate(over="ignore"):  # beyond float32 is inf, as on the wire: the C's fault path answers it
+            yy = np.ascontiguousarray(np.asarray(y, dtype=np.float32).reshape(a.p))
+            rr = np.ascontiguousarray(np.zeros(self.qa, np.float32) if r is None
+                                      else np.asarray(r, np.float32).reshape(a.q))
         u = np.zeros(a.m, dtype=np.float32)
         st = self._lib.gl_loop_step(self._loop, _fptr(yy), _fptr(rr), _fptr(u))
         return StepOutput(u=u, status=int(st), sat_mask=int(self._sat_mask()))
