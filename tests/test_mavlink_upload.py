@@ -193,6 +193,12 @@ def test_stored_set_holds_exact_bits_and_a_tampered_file_is_refused_whole(exe, p
             fw.stop()
         err = fw.stderr_text()
         assert f"ignoring {storage}" in err and why in err and "using the compiled gain set" in err, err
+    storage.write_text("\n".join(reversed(text.splitlines())) + "\n", "ascii")  # other line order: same set
+    fw, port = start_firmware(exe, storage)
+    try:
+        assert read_params(port)["GL_HASH"].value & 0xFFFFFFFF == gain_set(new).crc32
+    finally:
+        fw.stop()
 
 
 def test_dry_run_prints_the_diff_and_writes_nothing(exe, pend, retuned):

@@ -32,6 +32,16 @@ gl_status_t gl_loop_init(gl_loop_t *loop, const gl_gains_t *gains, uint32_t watc
     return gl_loop_reset(loop);
 }
 
+gl_status_t gl_loop_copy(gl_loop_t *dst, const gl_loop_t *src)
+{
+    if (dst == NULL || src == NULL || src->active == NULL || dst == src) {
+        return GL_ERR_NULL;
+    }
+    memcpy(dst, src, sizeof *dst);
+    dst->active = &dst->bank[src->active == &src->bank[0] ? 0 : 1];
+    return GL_OK;
+}
+
 gl_status_t gl_loop_reset(gl_loop_t *loop)
 {
     if (loop == NULL || loop->active == NULL) {

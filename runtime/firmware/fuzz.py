@@ -227,7 +227,8 @@ def _mavlink_frames(artifact: Artifact, *, signed: bool) -> list[bytes]:
 
 def _seeds_mavlink_node(artifact: Artifact) -> list[bytes]:
     seeds = []
-    for mode, signed in ((0, False), (1, True), (2, False)):
+    # mode byte (fuzz_mavlink_node.c): bit 0 keyed, bit 1 trusted link, bit 2 datagram link (unkeyed; else serial)
+    for mode, signed in ((0, False), (1, True), (2, False), (4, False), (6, False)):
         frames = _mavlink_frames(artifact, signed=signed)
         seeds += [bytes([mode, 0]) + f for f in frames]
         whole = b"".join(frames[:6] + frames[6:7] + frames[11:12])  # an upload: set, commit, persist, then a step

@@ -532,3 +532,23 @@ gl_status_t gl_mav_node_init(gl_mav_node_t *node, const gl_mav_node_config_t *cf
     (void)load_stored(node);
     return gl_loop_init(&node->loop, &node->table.committed, cfg->watchdog_periods);
 }
+
+gl_status_t gl_mav_node_copy(gl_mav_node_t *dst, const gl_mav_node_t *src)
+{
+    if (dst == NULL || src == NULL || dst == src) {
+        return GL_ERR_NULL;
+    }
+    memcpy(dst, src, sizeof *dst);
+    gl_status_t st = gl_loop_copy(&dst->loop, &src->loop);
+    if (st != GL_OK) {
+        return st;
+    }
+    /* The channel state lives in mavgen's per-file statics: only this file's are the node's. */
+    mavlink_status_t *chan = mavlink_get_channel_status(dst->cfg.chan);
+    memset(chan, 0, sizeof *chan);
+    if (dst->keyed) {
+        chan->signing = &dst->signing;
+        chan->signing_streams = &dst->streams;
+    }
+    return GL_OK;
+}

@@ -185,6 +185,18 @@ typedef struct gl_mav_node {
 gl_status_t gl_mav_node_init(gl_mav_node_t *node, const gl_mav_node_config_t *cfg);
 
 /**
+ * @brief Make `dst` a copy of `src` (a snapshot to restore, e.g. a fuzz harness's freshly initialised node).
+ *
+ * Parameters, loop (running on its own coefficient bank, see gl_loop_copy()), counters, key and replay state
+ * are copied; the MAVLink channel starts afresh as after gl_mav_node_init() (no frame in progress) and, with a
+ * key, checks signatures against `dst`. `src` must not be in use on the same channel afterwards.
+ * @param[out] dst Copy.
+ * @param[in]  src Node made by gl_mav_node_init() (distinct from dst).
+ * @return GL_OK, or GL_ERR_NULL.
+ */
+gl_status_t gl_mav_node_copy(gl_mav_node_t *dst, const gl_mav_node_t *src);
+
+/**
  * @brief Set or clear the signing key.
  * @param[in,out] node       Node.
  * @param[in]     key        GL_MAV_KEY_LEN bytes, or NULL / all zero to turn signing off.

@@ -71,9 +71,23 @@ static int parse_bits(const uint8_t *text, size_t len, uint32_t *bits)
     return 0;
 }
 
+/**
+ * Index of parameter `id`: `*next` first (gl_mav_store_encode() writes the lines in index order, so a stored
+ * set decodes in one pass instead of a search per line), else a search; `*next` becomes the one after it.
+ */
+static int32_t find_param(const gl_mav_params_t *table, const char *id, int32_t *next)
+{
+    int32_t k = *next;
+    if (k < 0 || k >= (int32_t)table->count || strncmp(table->param[k].id, id, GL_MAV_ID_LEN) != 0) {
+        k = gl_mav_params_find(table, id);
+    }
+    *next = k + 1;
+    return k;
+}
+
 /** Apply one `ID BITS` line to `candidate`; returns GL_MAV_STORE_OK or the line's error. */
 static gl_mav_store_error_t apply_line(const gl_mav_params_t *table, const uint8_t *line, size_t len,
-                                       gl_gains_t *candidate, int *have_hash)
+                                       gl_gains_t *candidate, int *have_hash, int32_t *next)
 {
     const uint8_t *space = memchr(line, ' ', len);
     if (space == NULL || space == line || (size_t)(space - line) > GL_MAV_ID_LEN) {
@@ -90,7 +104,7 @@ static gl_mav_store_error_t apply_line(const gl_mav_params_t *table, const uint8
         *have_hash = 1;
         return GL_MAV_STORE_OK;
     }
-    int32_t k = gl_mav_params_find(table, id);
+    int32_t k = find_param(table, id, next);
     if (k < 0 || table->param[k].header >= 0) {
         return GL_MAV_STORE_E_UNKNOWN;
     }
@@ -103,6 +117,7 @@ gl_mav_store_result_t gl_mav_store_decode(gl_mav_params_t *table, const uint8_t 
     gl_mav_store_result_t res = {.error = GL_MAV_STORE_OK, .line = 0, .status = 0};
     gl_gains_t candidate = table->committed;
     int have_hash = 0;
+    int32_t next = 0;
     size_t at = 0;
     while (at < len) {
         const uint8_t *nl = memchr(&buf[at], '\n', len - at);
@@ -113,7 +128,7 @@ gl_mav_store_result_t gl_mav_store_decode(gl_mav_params_t *table, const uint8_t 
             line_len--;
         }
         if (line_len > 0u && buf[at] != '#') {
-            res.error = apply_line(table, &buf[at], line_len, &candidate, &have_hash);
+            res.error = apply_line(table, &buf[at], line_len, &candidate, &have_hash, &next);
             if (res.error != GL_MAV_STORE_OK) {
                 return res;
             }

@@ -210,6 +210,17 @@ extern const gl_gains_t gl_gains_default;
 gl_status_t gl_loop_init(gl_loop_t *loop, const gl_gains_t *gains, uint32_t watchdog_periods);
 
 /**
+ * @brief Copy a loop instance whole (state, both banks, a staged set), e.g. to restore a snapshot.
+ *
+ * A plain struct copy would leave the copy running on the original's bank (gl_loop_t::active points into
+ * gl_loop_t::bank); this one runs on its own. Not for a loop another context may stage into meanwhile.
+ * @param[out] dst  Copy.
+ * @param[in]  src  Loop initialised by gl_loop_init() (distinct from dst).
+ * @return GL_OK, or GL_ERR_NULL (dst untouched).
+ */
+gl_status_t gl_loop_copy(gl_loop_t *dst, const gl_loop_t *src);
+
+/**
  * @brief Put xh and z back to the active set's xh0, z0; clear the watchdog; the last command becomes the safe one.
  * @param[in,out] loop  Loop instance.
  * @return GL_OK or GL_ERR_NULL.
