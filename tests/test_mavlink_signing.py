@@ -202,6 +202,7 @@ def test_key_file_errors_are_one_line(tmp_path, pend, exe):
         bad.write_text(content)
         for argv in (("mavlink", "upload", pend, "--connect", "udpout:127.0.0.1:9", "--signing-key", bad),
                      ("mavlink", "params", "--connect", "udpout:127.0.0.1:9", "--signing-key", bad),
+                     ("mavlink", "setup-signing", bad, "--connect", "udpout:127.0.0.1:9"),
                      ("firmware", "run", pend, "--mavlink", "udpin:127.0.0.1:9", "--signing-key", bad)):
             res = run_cli(*argv)
             assert res.code == 2 and len(res.err.strip().splitlines()) == 1, (content, argv, res.err)

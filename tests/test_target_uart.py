@@ -8,9 +8,13 @@ reference law of the artifact it uploaded; the garbage test against the image's 
 
 from __future__ import annotations
 
+import socket
+import time
+
 import numpy as np
 import pytest
 from conftest import run_cli
+from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
 from test_mavlink_upload import free_udp_port, reference_u, retuned_pendulum
 
@@ -25,6 +29,8 @@ from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession
+from gainlink.mavlink.keysetup import signing_timestamp
+from gainlink.mavlink.signing import enable, read_key
 
 RANGES = {"x": [-5.0, 5.0], "theta": [-1.0, 1.0], "r_x": [-5.0, 5.0]}
 
@@ -100,8 +106,8 @@ def closed_loop(url: str, art, *, steps: int = 80, garbage=None) -> tuple[np.nda
     return Y, R, U
 
 
-def session(url: str) -> tuple[MavLink, ParamSession]:
-    link = MavLink(url)
+def session(url: str, key: bytes | None = None) -> tuple[MavLink, ParamSession]:
+    link = MavLink(url, signing_key=key)
     link.wait_heartbeat(timeout=10)
     return link, ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE)
 
@@ -135,18 +141,33 @@ def test_upload_persists_in_flash_and_survives_a_restart_of_the_image(elf, pend,
         np.testing.assert_allclose(U, reference_u(new, Y, R), atol=1e-4)
 
 
-def sys_status(url: str) -> tuple[int, object]:
-    """GL_HASH and SYS_STATUS of the image."""
-    link, s = session(url)
+def request_sys_status(link: MavLink) -> object:
+    link.send(mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0,
+                                                     float(mavlink2.MAVLINK_MSG_ID_SYS_STATUS), 0, 0, 0, 0, 0, 0))
+    for _ in range(50):
+        for m in link.poll(0.2):
+            if m.get_type() == "SYS_STATUS":
+                return m
+    raise AssertionError("no SYS_STATUS")
+
+
+def sys_status(url: str, key: bytes | None = None) -> tuple[int, object]:
+    """GL_HASH and SYS_STATUS of the image (asked with signed requests when ``key`` is given)."""
+    link, s = session(url, key)
     with link:
         crc = s.read(["GL_HASH"])[0]["GL_HASH"].value & 0xFFFFFFFF
-        link.send(mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0,
-                                                         float(mavlink2.MAVLINK_MSG_ID_SYS_STATUS), 0, 0, 0, 0, 0, 0))
-        for _ in range(50):
-            for m in link.poll(0.2):
-                if m.get_type() == "SYS_STATUS":
-                    return crc, m
-    raise AssertionError("no SYS_STATUS")
+        return crc, request_sys_status(link)
+
+
+def status_around(url: str, key: bytes, frames: list[bytes]) -> tuple[object, object, int]:
+    """SYS_STATUS before and after raw ``frames`` go to the image's UART, and GL_HASH after them (one signed
+    session: the image takes the bytes in order, so the second answer has counted every frame)."""
+    link, s = session(url, key)
+    with link:
+        before = request_sys_status(link)
+        link.conn.write(b"".join(frames))
+        after = request_sys_status(link)
+        return before, after, s.read(["GL_HASH"])[0]["GL_HASH"].value & 0xFFFFFFFF
 
 
 def test_garbage_between_frames_is_survived_counted_and_leaves_the_gains_alone(elf, pend):
@@ -175,6 +196,90 @@ def test_garbage_between_frames_is_survived_counted_and_leaves_the_gains_alone(e
     assert status.errors_count1 == total  # bytes that were not part of an accepted frame: exactly the garbage
     assert 1 <= status.errors_comm <= starts  # bogus frames begun by a start byte, refused
     assert status.errors_count2 == 0  # no receive overrun on the UART
+
+
+def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(elf, pend, tmp_path, monkeypatch):
+    """The UART is the image's trusted link (a cable): `gainlink mavlink setup-signing` sends the first key in an
+    unsigned SETUP_SIGNING, the image keeps it in its flash (store_key hook) and signs with it; another unsigned
+    SETUP_SIGNING no longer changes it. A plain pymavlink connection signing with pymavlink's own code (a third
+    party) is answered signed; a signed upload commits and persists; unsigned requests (the uploader without a
+    key, and PARAM_SET / COMMAND_LONG / SETUP_SIGNING frames packed here) are refused and counted in SYS_STATUS,
+    the gains and the flash untouched; after a restart the key is back and old signed frames stay refused."""
+    old, new = load(pend), load(retuned_pendulum(tmp_path / "retuned.json"))
+    key_file = tmp_path / "link.key"
+    assert run_cli("mavlink", "keygen", key_file).code == 0
+    key = read_key(key_file)
+    flash = tmp_path / "flash"
+    monkeypatch.setenv("MAVLINK20", "1")  # pymavlink's own switch to MAVLink 2 (signing needs it)
+    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash,
+                  lifetime_s=300) as image:
+        assert "signing=off" in image.ready_line
+        res = run_cli("mavlink", "setup-signing", key_file, "--connect", image.url)
+        assert res.code == 0 and "vehicle 1/1 signs with the key" in res.out, res.out + res.err
+        assert (flash / "gl_key.bin").read_bytes() == key  # kept in the image's flash
+        other = tmp_path / "other.key"
+        assert run_cli("mavlink", "keygen", other).code == 0
+        res = run_cli("mavlink", "setup-signing", other, "--connect", image.url)  # unsigned, now that it has one
+        assert res.code == 2 and "does not sign with the new key" in res.err and res.err.count("\n") == 1, res.err
+        assert (flash / "gl_key.bin").read_bytes() == key
+
+        conn = mavutil.mavlink_connection(image.url, source_system=250, source_component=190, dialect="common")
+        try:
+            conn.setup_signing(key, sign_outgoing=True, link_id=7)  # pymavlink's own signing
+            conn.mav.command_long_send(1, 1, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0,
+                                       float(mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION), 0, 0, 0, 0, 0, 0)
+            version = conn.recv_match(type="AUTOPILOT_VERSION", blocking=True, timeout=15)
+            assert version is not None and version.get_signed() and version.uid == gain_set(old).crc32
+        finally:
+            conn.close()
+
+        res = run_cli("mavlink", "upload", tmp_path / "retuned.json", "--connect", image.url,
+                      "--signing-key", key_file, "--persist")
+        assert res.code == 0, res.out + res.err
+        assert "gain set committed" in res.out and "persisted" in res.out
+        stored = (flash / "gl_flash.txt").read_bytes()
+        crc0, status0 = sys_status(image.url, key)
+        assert crc0 == gain_set(new).crc32
+
+        res = run_cli("mavlink", "upload", pend, "--connect", image.url, "--retries", "1", "--timeout", "0.5")
+        assert res.code in (3, 4), res.out + res.err  # it reads (open) but every PARAM_SET is refused
+        crc1, status1 = sys_status(image.url, key)
+        assert crc1 == crc0 and status1.errors_comm > status0.errors_comm
+
+        mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
+        forged = [m.pack(mav) for m in (
+            mavlink2.MAVLink_param_set_message(1, 1, b"GL_K_0_0", 0.0, mavlink2.MAV_PARAM_TYPE_REAL32),
+            mavlink2.MAVLink_param_set_message(1, 1, b"GL_HASH", 0.0, mavlink2.MAV_PARAM_TYPE_INT32),
+            mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_PREFLIGHT_STORAGE, 0, 2, 0, 0, 0, 0, 0, 0),
+            mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_PREFLIGHT_STORAGE, 0, 1, 0, 0, 0, 0, 0, 0),
+            mavlink2.MAVLink_setup_signing_message(1, 1, [0] * 32, 0))]  # an unsigned attempt to turn it off
+        before, after, crc2 = status_around(image.url, key, forged)
+        assert crc2 == crc0
+        assert after.errors_comm - before.errors_comm == len(forged)  # each refused frame counted once
+        assert after.errors_count1 - before.errors_count1 == sum(map(len, forged))  # none of their bytes used
+        assert (flash / "gl_flash.txt").read_bytes() == stored and (flash / "gl_key.bin").read_bytes() == key
+
+    # correctly signed, but recorded five minutes before the key was set: replayed as the first signed frame
+    # after power-on, it must be refused although the image has no clock (its timestamp restarts from the one
+    # it kept in flash, not from 0)
+    recorded = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
+    enable(recorded, key, link_id=9)
+    recorded.signing.timestamp = signing_timestamp(time.time() - 300)
+    replay = mavlink2.MAVLink_param_set_message(1, 1, b"GL_K_0_0", 0.0, mavlink2.MAV_PARAM_TYPE_REAL32).pack(recorded)
+    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash,
+                  lifetime_s=300) as image:  # powered again: key and gains come back from flash
+        assert "signing=on" in image.ready_line and f"crc32={gain_set(new).crc32}" in image.ready_line
+        link, s = session(image.url)  # unsigned: reads stay open, and nothing here moves the image's timestamp
+        with link:
+            link.conn.write(replay)
+            staged = s.read(["GL_K_0_0"])[0]["GL_K_0_0"].value
+        assert staged == float(np.float32(new.K[0, 0]))  # the replayed set was not staged
+        res = run_cli("mavlink", "upload", tmp_path / "retuned.json", "--connect", image.url,
+                      "--signing-key", key_file, "--dry-run")
+        assert res.code == 0 and "dry run: 0 parameter(s) would change" in res.out, res.out + res.err
+        before, after, crc3 = status_around(image.url, key, forged[:2])
+        assert before.errors_comm == 1  # since power-on: the replay
+        assert crc3 == gain_set(new).crc32 and after.errors_comm - before.errors_comm == 2
 
 
 def test_qemu_scenarios_refuse_mismatched_links_in_one_line(pend, tmp_path):
@@ -212,9 +317,6 @@ def test_the_image_refuses_bad_options_with_its_own_error_line(elf):
 
 def test_the_images_slcan_adapter_answers_as_the_lawicel_protocol_says(elf):
     """Commands and their answers by the protocol (CR: ok, BEL: refused), through the image's real UART."""
-    import socket
-    import time
-
     exchanges = [
         (b"V\r", b"V1013\r"), (b"N\r", b"NGL00\r"), (b"F\r", b"F00\r"), (b"Z0\r", b"\r"), (b"Z1\r", b"\a"),
         (b"S6\r", b"\r"), (b"S9\r", b"\a"), (b"s031C\r", b"\r"),
@@ -237,8 +339,6 @@ def test_the_images_slcan_adapter_answers_as_the_lawicel_protocol_says(elf):
 
 
 def test_a_signed_link_to_the_image_runs_and_unsigned_samples_are_refused(pend, elf, tmp_path):
-    from gainlink.mavlink.signing import read_key
-
     key_file = tmp_path / "hil.key"
     assert run_cli("mavlink", "keygen", key_file).code == 0
     res = run_scenario(scenario(pend, {"kind": "mavlink", "url": f"tcp:127.0.0.1:{free_tcp_port()}",

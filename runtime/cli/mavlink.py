@@ -1,8 +1,9 @@
-"""``gainlink mavlink``: upload a gain artifact to a vehicle, or list a vehicle's parameters.
+"""``gainlink mavlink``: upload a gain artifact to a vehicle, list its parameters, give it a signing key.
 
 Exit status of ``upload``: 0 verified (and persisted with ``--persist``); 2 nothing was changed
 (bad input, no heartbeat, missing parameter, other dimensions); 3 the upload failed after writing
 and every changed parameter was restored; 4 the upload failed and the rollback is incomplete.
+``setup-signing``: 0 the vehicle answers signed with the new key; 2 it does not (or bad input, no heartbeat).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ EXIT_ROLLBACK_INCOMPLETE = 4
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``gainlink mavlink upload``, ``gainlink mavlink params`` and ``gainlink mavlink keygen``."""
+    """Add ``gainlink mavlink upload``, ``params``, ``setup-signing`` and ``keygen``."""
     p = subparsers.add_parser("mavlink", help="MAVLink parameter upload and listing")
     sub = p.add_subparsers(dest="mavlink_command", metavar="ACTION")
     sub.required = True
@@ -43,6 +44,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ls.add_argument("--heartbeat-timeout", type=float, default=5.0, help="seconds to wait for a heartbeat (default 5)")
     ls.add_argument("--signing-key", metavar="FILE", help=SIGNING_HELP)
     ls.set_defaults(func=_params)
+
+    ss = sub.add_parser("setup-signing", help="give a vehicle a signing key (SETUP_SIGNING) and check it signs with it")
+    ss.add_argument("key", help="key file to give (from `gainlink mavlink keygen`)")
+    ss.add_argument("--connect", required=True, help="pymavlink URL: tcp:HOST:PORT (the image's UART), a serial device")
+    ss.add_argument("--signing-key", metavar="FILE",
+                    help="the vehicle's current key file: sign the SETUP_SIGNING with it (a key change); without "
+                         "it the message goes unsigned, which a vehicle takes only on a trusted link (a cable)")
+    ss.add_argument("--heartbeat-timeout", type=float, default=5.0, help="seconds to wait for a heartbeat (default 5)")
+    ss.set_defaults(func=_setup_signing)
 
     kg = sub.add_parser("keygen", help="write a new MAVLink 2 signing key file (64 hex digits, mode 0600)")
     kg.add_argument("out", help="key file to create (an existing file is not replaced)")
@@ -109,6 +119,19 @@ def _params(args: argparse.Namespace) -> int:
         for pv in session.read_all().values():
             value = f"{pv.value:.9g}" if pv.ptype == REAL32 else str(int(pv.value))
             print(f"{pv.name:<16} {value}")
+    return 0
+
+
+def _setup_signing(args: argparse.Namespace) -> int:
+    from gainlink.mavlink.keysetup import setup_signing
+    from gainlink.mavlink.signing import read_key
+
+    key = read_key(args.key)
+    current = read_key(args.signing_key) if args.signing_key else None
+    res = setup_signing(args.connect, key, current=current, heartbeat_timeout=args.heartbeat_timeout)
+    print(f"vehicle {res.target[0]}/{res.target[1]} signs with the key in {args.key} "
+          f"({'replaced its key' if res.replaced else 'its first key'}); give the same file to the ground tools "
+          "(--signing-key)")
     return 0
 
 

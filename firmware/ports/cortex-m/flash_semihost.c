@@ -47,6 +47,32 @@ int gl_flash_load_key(uint8_t key[GL_MAV_KEY_LEN])
     return ok;
 }
 
+int gl_flash_store_timestamp(uint64_t timestamp)
+{
+    uint8_t bytes[8];
+    for (size_t i = 0; i < sizeof bytes; ++i) {
+        bytes[i] = (uint8_t)(timestamp >> (8u * i));
+    }
+    return replace_file(GL_FLASH_TIMESTAMP_FILE, bytes, sizeof bytes);
+}
+
+uint64_t gl_flash_load_timestamp(void)
+{
+    int32_t fd = gl_sh_open(GL_FLASH_TIMESTAMP_FILE, GL_SH_MODE_RB);
+    if (fd < 0) {
+        return 0u;
+    }
+    uint8_t bytes[8];
+    uint64_t timestamp = 0u;
+    if (gl_sh_flen(fd) == (int32_t)sizeof bytes && gl_sh_read_all(fd, bytes, sizeof bytes) == 0) {
+        for (size_t i = 0; i < sizeof bytes; ++i) {
+            timestamp |= (uint64_t)bytes[i] << (8u * i);
+        }
+    }
+    gl_sh_close(fd);
+    return timestamp;
+}
+
 static long flash_read(void *ctx, uint8_t *data, size_t cap)
 {
     (void)ctx;

@@ -18,6 +18,9 @@
 /** Name of the MAVLink signing key (32 raw bytes) in QEMU's working directory. */
 #define GL_FLASH_KEY_FILE "gl_key.bin"
 
+/** Name of the newest accepted MAVLink signing timestamp (8 bytes, little-endian) in QEMU's working directory. */
+#define GL_FLASH_TIMESTAMP_FILE "gl_sign_ts.bin"
+
 /** @brief The storage interface over the semihosting file. @return Static storage descriptor. */
 const gl_mav_storage_t *gl_flash_storage(void);
 
@@ -33,5 +36,14 @@ int gl_flash_store_key(void *ctx, const uint8_t key[GL_MAV_KEY_LEN]);
  * @return 1 when a key was kept, 0 when none.
  */
 int gl_flash_load_key(uint8_t key[GL_MAV_KEY_LEN]);
+
+/**
+ * @brief Keep the signing timestamp for the next start (a board without a wall clock restarts from it).
+ * @param[in] timestamp 10 us units since 2015-01-01 UTC. @return 0 kept, -1 failed.
+ */
+int gl_flash_store_timestamp(uint64_t timestamp);
+
+/** @brief The kept signing timestamp. @return It, or 0 when none was kept. */
+uint64_t gl_flash_load_timestamp(void);
 
 #endif /* GAINLINK_FLASH_SEMIHOST_H */

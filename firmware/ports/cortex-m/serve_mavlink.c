@@ -5,8 +5,14 @@
  *
  * A serial link has one peer, so every answer goes to the UART whatever its destination. The node's
  * events are not printed (the UART carries MAVLink); SYS_STATUS reports the counters. The UART is a
- * cable, so it is a trusted link for signing: an unsigned SETUP_SIGNING may set the first key, which is
- * kept in the semihosting file gl_key.bin and loaded at the next start.
+ * cable, so it is a trusted link for signing: an unsigned SETUP_SIGNING may set the first key (only the
+ * first: with a key, a new one must come signed with it), which the node's store_key hook keeps in flash
+ * (the semihosting file gl_key.bin) and the next start loads.
+ *
+ * The board has no wall clock, so its signing timestamp restarts from the newest one it kept: kept when a
+ * key is set and whenever the node writes flash anyway (a persist), so a signed message recorded before
+ * that point and replayed after a restart is refused as too old (more than a minute older), not accepted
+ * by a node whose timestamp restarted from 0.
  */
 #include <string.h>
 
@@ -48,6 +54,16 @@ static void uart_counters(void *ctx, uint32_t *rx_overruns, uint32_t *tx_dropped
     *tx_dropped = s.tx_dropped;
 }
 
+static void node_event(void *ctx, gl_mav_event_t ev, int32_t value, uint32_t detail)
+{
+    (void)ctx;
+    (void)value;
+    (void)detail;
+    if ((ev == GL_MAV_EV_KEY_SET || ev == GL_MAV_EV_STORE_WRITTEN) && node.keyed) {
+        (void)gl_flash_store_timestamp(node.signing.timestamp);
+    }
+}
+
 static void put_number(uint32_t v)
 {
     char digits[10];
@@ -83,7 +99,7 @@ int gl_serve_mavlink(int argc, char *const argv[])
         .compid = (uint8_t)compid,
         .chan = 0,
         .watchdog_periods = GL_WATCHDOG_PERIODS_DEFAULT,
-        .port = {.ctx = 0, .send = uart_send, .room = uart_room, .now_us = clock_us, .event = 0,
+        .port = {.ctx = 0, .send = uart_send, .room = uart_room, .now_us = clock_us, .event = node_event,
                  .link_counters = uart_counters, .store_key = gl_flash_store_key},
         .storage = gl_flash_storage(),
         .trusted_link = 1,
@@ -95,7 +111,7 @@ int gl_serve_mavlink(int argc, char *const argv[])
     uint8_t key[GL_MAV_KEY_LEN];
     int keyed = gl_flash_load_key(key);
     if (keyed) {
-        gl_mav_node_set_key(&node, key, 0); /* no wall clock: follows the newest timestamp it accepts */
+        gl_mav_node_set_key(&node, key, gl_flash_load_timestamp()); /* then follows the newest it accepts */
     }
     static const char ready[] = "ready mavlink sysid=";
     (void)gl_uart_write((const uint8_t *)ready, sizeof ready - 1u);
