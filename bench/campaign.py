@@ -101,6 +101,10 @@ def timed_campaign(data: dict, client, out: Path) -> dict:
     n = result.total
     return {"runs": n, "wall_s": round(wall, 3), "per_run_ms": round(1e3 * wall / n, 2),
             "cpu_per_run_ms": round(1e3 * cpu / n, 2), "report_cpu_s": round(c1 - last["cpu"], 3),
+            # Where the CPU went: the worker processes (the runs), and this process (client, scheduler and
+            # nannies of a LocalCluster, result files, the report).
+            "worker_cpu_per_run_ms": round(1e3 * (w1 - w0) / n, 2),
+            "client_process_cpu_per_run_ms": round(1e3 * (c1 - c0) / n, 2),
             "passed": result.passed, "failed": result.failed, "errors": result.errors}
 
 
@@ -178,6 +182,7 @@ def main() -> int:
                      "campaign_one_worker_cpu_per_run_ms": one["cpu_per_run_ms"],
                      "report_cpu_s": one["report_cpu_s"], "dask_tasks": one["dask_tasks"],
                      "overhead_ratio": round(overhead, 3), "overhead_ratio_without_report": round(no_report, 3),
+                     "worker_vs_plain_loop": round(one["worker_cpu_per_run_ms"] / 1e3 / base_cpu - 1.0, 3),
                      "overhead_ratio_wall": round(overhead_wall, 3),
                      "target_overhead_ratio": 0.10, "meets_target": overhead <= 0.10},
         "memory": {"worker_rss_after_40_runs_mb": res[1]["rss_after_40_mb"],
