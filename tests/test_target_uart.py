@@ -198,6 +198,37 @@ def test_garbage_between_frames_is_survived_counted_and_leaves_the_gains_alone(e
     assert status.errors_count2 == 0  # no receive overrun on the UART
 
 
+def _third_party_signed_request(url: str, key: bytes):
+    """A plain pymavlink connection signing with pymavlink's own code asks for AUTOPILOT_VERSION; the answer."""
+    conn = mavutil.mavlink_connection(url, source_system=250, source_component=190, dialect="common")
+    try:
+        conn.setup_signing(key, sign_outgoing=True, link_id=7)
+        conn.mav.command_long_send(1, 1, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0,
+                                   float(mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION), 0, 0, 0, 0, 0, 0)
+        return conn.recv_match(type="AUTOPILOT_VERSION", blocking=True, timeout=15)
+    finally:
+        conn.close()
+
+
+def _unsigned_frames() -> list[bytes]:
+    """Unsigned frames that would change the image: stage, commit, persist, reset, turn signing off."""
+    mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
+    return [m.pack(mav) for m in (
+        mavlink2.MAVLink_param_set_message(1, 1, b"GL_K_0_0", 0.0, mavlink2.MAV_PARAM_TYPE_REAL32),
+        mavlink2.MAVLink_param_set_message(1, 1, b"GL_HASH", 0.0, mavlink2.MAV_PARAM_TYPE_INT32),
+        mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_PREFLIGHT_STORAGE, 0, 2, 0, 0, 0, 0, 0, 0),
+        mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_PREFLIGHT_STORAGE, 0, 1, 0, 0, 0, 0, 0, 0),
+        mavlink2.MAVLink_setup_signing_message(1, 1, [0] * 32, 0))]
+
+
+def _signed_param_set_recorded_at(key: bytes, unix_time: float) -> bytes:
+    """A PARAM_SET correctly signed with ``key``, with the signing timestamp of ``unix_time``."""
+    recorded = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
+    enable(recorded, key, link_id=9)
+    recorded.signing.timestamp = signing_timestamp(unix_time)
+    return mavlink2.MAVLink_param_set_message(1, 1, b"GL_K_0_0", 0.0, mavlink2.MAV_PARAM_TYPE_REAL32).pack(recorded)
+
+
 def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(elf, pend, tmp_path, monkeypatch):
     """The UART is the image's trusted link (a cable): `gainlink mavlink setup-signing` sends the first key in an
     unsigned SETUP_SIGNING, the image keeps it in its flash (store_key hook) and signs with it; another unsigned
@@ -223,15 +254,8 @@ def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(
         assert res.code == 2 and "does not sign with the new key" in res.err and res.err.count("\n") == 1, res.err
         assert (flash / "gl_key.bin").read_bytes() == key
 
-        conn = mavutil.mavlink_connection(image.url, source_system=250, source_component=190, dialect="common")
-        try:
-            conn.setup_signing(key, sign_outgoing=True, link_id=7)  # pymavlink's own signing
-            conn.mav.command_long_send(1, 1, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0,
-                                       float(mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION), 0, 0, 0, 0, 0, 0)
-            version = conn.recv_match(type="AUTOPILOT_VERSION", blocking=True, timeout=15)
-            assert version is not None and version.get_signed() and version.uid == gain_set(old).crc32
-        finally:
-            conn.close()
+        version = _third_party_signed_request(image.url, key)
+        assert version is not None and version.get_signed() and version.uid == gain_set(old).crc32
 
         res = run_cli("mavlink", "upload", tmp_path / "retuned.json", "--connect", image.url,
                       "--signing-key", key_file, "--persist")
@@ -246,13 +270,7 @@ def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(
         crc1, status1 = sys_status(image.url, key)
         assert crc1 == crc0 and status1.errors_comm > status0.errors_comm
 
-        mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
-        forged = [m.pack(mav) for m in (
-            mavlink2.MAVLink_param_set_message(1, 1, b"GL_K_0_0", 0.0, mavlink2.MAV_PARAM_TYPE_REAL32),
-            mavlink2.MAVLink_param_set_message(1, 1, b"GL_HASH", 0.0, mavlink2.MAV_PARAM_TYPE_INT32),
-            mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_PREFLIGHT_STORAGE, 0, 2, 0, 0, 0, 0, 0, 0),
-            mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_PREFLIGHT_STORAGE, 0, 1, 0, 0, 0, 0, 0, 0),
-            mavlink2.MAVLink_setup_signing_message(1, 1, [0] * 32, 0))]  # an unsigned attempt to turn it off
+        forged = _unsigned_frames()
         before, after, crc2 = status_around(image.url, key, forged)
         assert crc2 == crc0
         assert after.errors_comm - before.errors_comm == len(forged)  # each refused frame counted once
@@ -262,10 +280,7 @@ def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(
     # correctly signed, but recorded five minutes before the key was set: replayed as the first signed frame
     # after power-on, it must be refused although the image has no clock (its timestamp restarts from the one
     # it kept in flash, not from 0)
-    recorded = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
-    enable(recorded, key, link_id=9)
-    recorded.signing.timestamp = signing_timestamp(time.time() - 300)
-    replay = mavlink2.MAVLink_param_set_message(1, 1, b"GL_K_0_0", 0.0, mavlink2.MAV_PARAM_TYPE_REAL32).pack(recorded)
+    replay = _signed_param_set_recorded_at(key, time.time() - 300)
     with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash,
                   lifetime_s=300) as image:  # powered again: key and gains come back from flash
         assert "signing=on" in image.ready_line and f"crc32={gain_set(new).crc32}" in image.ready_line

@@ -229,18 +229,24 @@ def upload(
     own = link is None
     link = link or MavLink(connect, signing_key=signing_key)
     try:
-        hb = link.wait_heartbeat(timeout=heartbeat_timeout)
-        target = (hb.get_srcSystem(), hb.get_srcComponent())
-        session = ParamSession(
-            link, target_system=target[0], target_component=target[1], encoding=Encoding.C_CAST,
-            window=window, timeout=timeout, retries=retries,
-        )
-        session.encoding = encoding or detect_encoding(session, autopilot=hb.autopilot)
-        log.info("vehicle %d/%d, %s integer parameters", target[0], target[1], session.encoding.value)
+        session, target = _open_session(link, heartbeat_timeout=heartbeat_timeout, encoding=encoding,
+                                        window=window, timeout=timeout, retries=retries)
         return _upload(session, plan=plan, persist=persist, dry_run=dry_run, t0=t0, target=target, on_diff=on_diff)
     finally:
         if own:
             link.close()
+
+
+def _open_session(link: MavLink, *, heartbeat_timeout: float, encoding: Encoding | None, window: int,
+                  timeout: float, retries: int) -> tuple[ParamSession, tuple[int, int]]:
+    """The parameter session with the first vehicle that sends a heartbeat, in its integer encoding."""
+    hb = link.wait_heartbeat(timeout=heartbeat_timeout)
+    target = (hb.get_srcSystem(), hb.get_srcComponent())
+    session = ParamSession(link, target_system=target[0], target_component=target[1], encoding=Encoding.C_CAST,
+                           window=window, timeout=timeout, retries=retries)
+    session.encoding = encoding or detect_encoding(session, autopilot=hb.autopilot)
+    log.info("vehicle %d/%d, %s integer parameters", target[0], target[1], session.encoding.value)
+    return session, target
 
 
 def _read_current(session: ParamSession, plan: _Plan) -> dict[str, ParamValue]:
