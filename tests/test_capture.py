@@ -3,6 +3,7 @@ counted; what was written before a read is seen by it."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -38,3 +39,22 @@ def test_a_flood_on_stderr_is_drained_and_kept_bounded():
     assert cap.counters() == {"steps": 7, "read": 9, "dropped": 16, "refused": 2}
     proc.stdin.close()
     proc.stdout.close()
+
+
+def test_an_exit_summary_across_the_head_tail_boundary_is_read_whole():
+    """A summary line that starts in the kept head and ends in the tail (nothing left out between them) is one
+    line: its counters all come back (the hostile-traffic test once saw only the summary's last 100 bytes)."""
+    summary = "samples=20000 commits=0 " + " ".join(f"counter_{i}=1" for i in range(30)) + " crc32=0x10\n"
+    lead = "e" * 60 + "\n"
+    count = (HEAD_BYTES - len(summary) // 2) // len(lead)  # the summary begins before HEAD_BYTES, ends after
+    child = f"import sys\nsys.stderr.write({lead!r} * {count} + {summary!r})\n"
+    proc = subprocess.run([sys.executable, "-c", child], stderr=subprocess.PIPE, timeout=30)
+    assert proc.returncode == 0
+    r, w = os.pipe()
+    with open(w, "wb") as out:
+        out.write(proc.stderr)
+    cap = StderrCapture(open(r, "rb"))
+    cap.join()
+    assert cap.total_bytes > HEAD_BYTES > cap.total_bytes - len(summary) and cap.dropped_bytes == 0
+    got = cap.counters()
+    assert got["samples"] == 20000 and got["crc32"] == 16 and len(got) == 33

@@ -110,7 +110,11 @@ class StderrCapture:
         """The last complete lines kept."""
         self._settle()
         with self._lock:
-            data = bytes(self._tail) if self._tail else bytes(self._head)
+            head, tail = bytes(self._head), bytes(self._tail)
+            gap = self.total_bytes - len(head) - len(tail)
+        # Head and tail are one stream until bytes are left out between them (a line may cross the boundary);
+        # after a gap the tail's first line may start in the middle: not a complete line.
+        data = head + tail if gap == 0 else tail.partition(b"\n")[2]
         return [t.strip() for t in data.decode(errors="replace").strip().splitlines()[-lines:]]
 
     def counters(self) -> dict[str, int]:
