@@ -229,6 +229,11 @@ def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pen
         assert _control(rec) == {k: direct.metrics.get(k) for k in CONTROL_KEYS}
         assert row["status"] == ("fail" if row["reasons"] else "pass")
         assert rec["worker"]["pid"] != os.getpid()  # it ran in a worker process
+        assert 0 < rec["worker"]["cpu_s"] <= rec["worker"]["stop"] - rec["worker"]["start"] + 0.01
+        # 3 s at 100 Hz: 300 samples, all stored (float32), readable by numpy alone
+        stored = np.load(out / "runs" / f"{row['id']}.npy")
+        for k in ("t", "y", "u", "r"):
+            assert np.array_equal(stored[k], getattr(direct.trace, k).astype(np.float32)), k
     # The bigger initial offset takes longer to settle: the verdicts follow the metrics, per criterion.
     for row in doc["runs"]:
         ts = row["metrics"]["tracked"]["r_x"]["settling_time_s"]
@@ -253,6 +258,25 @@ def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
     assert report["scenario"]["seed"] == row["seed"]
     bad = run_cli("campaign", "show", out, "--run", "zzzz")
     assert bad.code == 2 and "no run matching 'zzzz'" in bad.err
+
+
+def test_a_long_run_is_stored_as_evenly_spaced_true_samples_with_both_ends():
+    from gainlink.hil.campaign.store import decode_trace
+    from gainlink.hil.campaign.worker import MAX_TRACE_POINTS, downsampled_trace
+    from gainlink.hil.loop.metrics import RunTrace
+
+    N = 5003
+    t = np.arange(N) * 0.01
+    y = np.column_stack([np.sin(t), np.cos(3 * t)])
+    trace = RunTrace(t=t, y=y, r=np.zeros((N, 0)), u=np.tanh(t)[:, None], **{
+        k: np.zeros(N) for k in ("sat", "got", "latency_ns", "tick_ns", "deadline_ns", "x", "status", "twin_y",
+                                 "twin_u", "twin_z")})
+    got = decode_trace(downsampled_trace(trace))
+    assert got["t"].size == MAX_TRACE_POINTS and got["t"][0] == 0.0 and got["t"][-1] == np.float32(t[-1])
+    k = np.rint(got["t"].astype(float) / 0.01).astype(int)  # which samples they are, from their own times
+    assert np.all(np.diff(k) >= N // MAX_TRACE_POINTS) and np.all(np.diff(k) <= N // MAX_TRACE_POINTS + 1)
+    assert np.array_equal(got["y"], y[k].astype(np.float32)) and np.array_equal(got["u"][:, 0], np.tanh(t[k]).astype(np.float32))
+    assert got["r"].shape == (MAX_TRACE_POINTS, 0)
 
 
 # --- a campaign killed halfway resumes ---------------------------------------------------------------

@@ -22,7 +22,7 @@ from .config import Campaign, CampaignError, load_campaign, parse_campaign
 from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign
 from .report import merge
 from .store import Store
-from .worker import execute_batch
+from .worker import execute_batch, unpack_results
 
 log = logging.getLogger(__name__)
 
@@ -195,7 +195,7 @@ def _submit_and_store(client: Any, plan: CampaignPlan, todo: dict[str, RunPoint]
         batch_points = futures.pop(fut)
         failed = False
         try:
-            results = fut.result()
+            results = unpack_results(fut.result())
         except (Exception, CancelledError) as exc:  # retried once already; KilledWorker: its workers died
             failed, results = True, [{"status": "error", "reason": f"{type(exc).__name__}: {exc}"}]
         fut.release()

@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 from typing import Any, Iterator
 
+import msgpack
 import numpy as np
 
 from gainlink.artifact import Artifact, from_dict
@@ -38,6 +39,7 @@ from gainlink.fileio import atomic_write_bytes
 from ..paths import cache_dir
 from ..loop.scenario import parse_scenario
 from .criteria import measure
+from .store import encode_trace
 
 MAX_TRACE_POINTS = 600
 MAX_BUS_SLOTS = 64
@@ -172,11 +174,12 @@ def _scenario(scenario: dict, *, artifact_path: Path, seed: int, blobs: dict, ki
     return parse_scenario(data)
 
 
-def _downsample(trace: Any) -> dict[str, np.ndarray]:
+def downsampled_trace(trace: Any) -> bytes:
+    """The run's t, y, u, r at no more than :data:`MAX_TRACE_POINTS` evenly spaced samples (first and last
+    kept), encoded for the campaign folder (:func:`~.store.encode_trace`)."""
     N = trace.t.size
     idx = np.unique(np.linspace(0, N - 1, min(N, MAX_TRACE_POINTS)).round().astype(int)) if N else np.zeros(0, int)
-    return {"t": trace.t[idx].astype(np.float32), "y": trace.y[idx].astype(np.float32),
-            "u": trace.u[idx].astype(np.float32), "r": trace.r[idx].astype(np.float32)}
+    return encode_trace(trace.t[idx], trace.y[idx], trace.u[idx], trace.r[idx])
 
 
 def run_point(kind: str, artifact: Artifact, scenario: Any) -> Any:
@@ -194,7 +197,7 @@ def run_point(kind: str, artifact: Artifact, scenario: Any) -> Any:
 
 
 def execute(kind: str, artifact_json: bytes, scenario: dict, seed: int, blobs: dict | None = None) -> dict:
-    """One campaign run (the Dask task): a JSON-able record plus downsampled traces (``trace``: arrays).
+    """One campaign run: a JSON-able record plus its downsampled traces (``trace``: ``.npy`` bytes).
 
     Parameters
     ----------
@@ -209,21 +212,29 @@ def execute(kind: str, artifact_json: bytes, scenario: dict, seed: int, blobs: d
         FMU archives by sha256.
     """
     where = {"host": socket.gethostname(), "pid": os.getpid(), "start": time.time()}
+    cpu0 = time.thread_time()
     try:
         artifact, path = artifact_from_bytes(artifact_json)
         sc = _scenario(scenario, artifact_path=path, seed=seed, blobs=blobs or {}, kind=kind)
         result = run_point(kind, artifact, sc)
     except GainlinkError as exc:
-        return {"status": "error", "reason": str(exc), "worker": where | {"stop": time.time()}}
-    where["stop"] = time.time()
-    return {"status": "done", "complete": result.complete, "reason": result.reason, "metrics": result.metrics,
-            "measures": measure(result, artifact), "worker": where, "link": result.info["transport"],
-            "trace": _downsample(result.trace)}
+        return {"status": "error", "reason": str(exc), "worker": _stopped(where, cpu0)}
+    record = {"status": "done", "complete": result.complete, "reason": result.reason, "metrics": result.metrics,
+              "measures": measure(result, artifact), "link": result.info["transport"],
+              "trace": downsampled_trace(result.trace)}
+    return record | {"worker": _stopped(where, cpu0)}
+
+
+def _stopped(where: dict, cpu0: float) -> dict:
+    """``where`` with the run's end: ``stop`` (wall clock) and ``cpu_s``, the CPU time of the thread that ran it
+    (the bridge's, not a HIL run's firmware process)."""
+    return where | {"stop": time.time(), "cpu_s": time.thread_time() - cpu0}
 
 
 def execute_batch(kind: str, artifacts: dict[str, bytes], runs: list[tuple[str, dict, int]],
-                  blobs: dict | None = None) -> list[dict]:
-    """Several campaign runs, one after the other (one Dask task): their records, in order.
+                  blobs: dict | None = None) -> bytes:
+    """Several campaign runs, one after the other (one Dask task): their records, in order, as one msgpack
+    document (read back with :func:`unpack_results`).
 
     Parameters
     ----------
@@ -235,7 +246,16 @@ def execute_batch(kind: str, artifacts: dict[str, bytes], runs: list[tuple[str, 
     blobs : dict, optional
         FMU archives by sha256.
 
-    An exception other than a :class:`~gainlink.errors.GainlinkError` ends the batch (the campaign
-    then runs each of its runs alone, so one bad run costs no other its result).
+    One bytes object is what Dask moves back: a list of records (nested dicts) is sized and serialised by
+    Dask element by element, which cost 3x the worker's CPU per task and 1.6x the client's (measured with
+    16 pendulum records a task: 9.3 and 7.3 ms against 3.1 and 4.6). msgpack, not pickle: a result is data
+    and unpacking it runs no code. An exception other than a :class:`~gainlink.errors.GainlinkError` ends
+    the batch (the campaign then runs each of its runs alone, so one bad run costs no other its result).
     """
-    return [execute(kind, artifacts[sha], scenario, seed, blobs) for sha, scenario, seed in runs]
+    records = [execute(kind, artifacts[sha], scenario, seed, blobs) for sha, scenario, seed in runs]
+    return msgpack.packb(records, use_bin_type=True)
+
+
+def unpack_results(data: bytes) -> list[dict]:
+    """The records of an :func:`execute_batch` result."""
+    return msgpack.unpackb(data, raw=False, strict_map_key=False)
