@@ -183,44 +183,46 @@ def plan_campaign(campaign: Campaign) -> CampaignPlan:
     artifacts: dict[str, bytes] = {}
     blobs: dict[str, bytes] = {}
     fmu_cache: dict = {}
-    designs: dict[str, bytes | str] = {}  # canonical spec -> artifact bytes, or the design's error
-    fixed = campaign.artifact_path.read_bytes() if campaign.artifact_path is not None else None
+    designs: dict[str, tuple[bytes, str] | str] = {}  # canonical spec -> (artifact, sha256), or the design's error
+    fixed = _with_sha(campaign.artifact_path.read_bytes()) if campaign.artifact_path is not None else None
+    # Only spec.* axes change the spec: without one, every run shares the campaign's spec and its one design.
+    spec_varies = any(a.design for a in (*campaign.grid, *campaign.draws))
     draws = [draw_values(campaign, j) for j in range(campaign.runs)]
     runs = []
     points = list(itertools.product(*(a.values for a in campaign.grid)))
     for g, point in enumerate(points):
         for j, (seed, drawn) in enumerate(draws):
             values = {a.name: v for a, v in zip(campaign.grid, point)} | drawn
-            spec = copy.deepcopy(campaign.spec) if campaign.spec is not None else None
+            spec = copy.deepcopy(campaign.spec) if spec_varies else campaign.spec
             scenario = copy.deepcopy(campaign.scenario)
             for axis in (*campaign.grid, *campaign.draws):
                 _apply_axis(axis, values[axis.name], spec=spec, scenario=scenario, window=campaign.fault_window)
             where = f"run {len(runs)} ({', '.join(f'{k}={_short(v)}' for k, v in values.items()) or 'base'})"
             _check_scenario(campaign, scenario, where)
             _fmu_blob(scenario, campaign, blobs, fmu_cache)
-            art, error = _artifact(campaign, spec, fixed, designs, where)
-            sha = None
-            if art is not None:
-                sha = json.loads(art)["sha256"]
-                artifacts.setdefault(sha, art)
+            key = canonical_json(spec) if spec_varies else ""
+            got = fixed if fixed is not None else _artifact(campaign, spec, key, designs, where)
+            sha, error = (got[1], None) if isinstance(got, tuple) else (None, got)
+            if sha is not None:
+                artifacts.setdefault(sha, got[0])
             rid = run_id(kind=campaign.kind, artifact_sha256=sha, scenario=scenario, seed=seed)
             runs.append(RunPoint(index=len(runs), id=rid, grid_index=g, draw=j, values=values, artifact_sha256=sha,
                                  scenario=scenario, seed=seed, error=error))
     return CampaignPlan(campaign=campaign, runs=tuple(runs), artifacts=artifacts, blobs=blobs)
 
 
-def _artifact(campaign: Campaign, spec: dict | None, fixed: bytes | None, designs: dict,
-              where: str) -> tuple[bytes | None, str | None]:
-    if fixed is not None:
-        return fixed, None
-    key = canonical_json(spec)
+def _with_sha(art: bytes) -> tuple[bytes, str]:
+    return art, json.loads(art)["sha256"]
+
+
+def _artifact(campaign: Campaign, spec: dict, key: str, designs: dict, where: str) -> tuple[bytes, str] | str:
+    """The artifact of ``spec`` (canonical ``key``) and its sha256, designed once per key; or the design's error."""
     if key not in designs:
         try:
-            designs[key] = _design(spec, source=f"{campaign.spec_path} ({where})")
+            designs[key] = _with_sha(_design(spec, source=f"{campaign.spec_path} ({where})"))
         except GainlinkError as exc:
             designs[key] = f"design failed: {exc}"
-    got = designs[key]
-    return (got, None) if isinstance(got, bytes) else (None, got)
+    return designs[key]
 
 
 def _short(v: Any) -> str:
