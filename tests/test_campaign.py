@@ -279,6 +279,23 @@ def test_a_long_run_is_stored_as_evenly_spaced_true_samples_with_both_ends():
     assert got["r"].shape == (MAX_TRACE_POINTS, 0)
 
 
+def test_a_folder_from_before_the_npy_traces_keeps_its_traces_and_a_foreign_worker_answer_is_named(tmp_path):
+    from gainlink.errors import GainlinkError
+    from gainlink.hil.campaign.store import Store
+    from gainlink.hil.campaign.worker import unpack_results
+
+    store = Store(tmp_path)
+    rng = np.random.default_rng(3)
+    old = {"t": np.arange(5, dtype=np.float32), "y": rng.random((5, 2), dtype=np.float32),
+           "u": rng.random((5, 1), dtype=np.float32), "r": np.zeros((5, 1), np.float32)}
+    np.savez_compressed(store.runs / "oldrun.npz", **old)  # what earlier versions wrote per run
+    got = store.trace("oldrun")
+    assert got.keys() == old.keys() and all(np.array_equal(got[k], old[k]) for k in old)
+    assert store.trace("never") is None
+    with pytest.raises(GainlinkError, match=r"a worker returned list, not a batch of records: .*another gainlink version"):
+        unpack_results([{"status": "done"}])
+
+
 # --- a campaign killed halfway resumes ---------------------------------------------------------------
 
 

@@ -104,9 +104,18 @@ class Store:
         """The stored downsampled traces of a run, if any."""
         path = self.runs / f"{run_id}.npy"
         if not path.is_file():
-            return None
+            return self._npz_trace(run_id)
         with open(path, "rb") as fh:
             return decode_trace(fh)
+
+    def _npz_trace(self, run_id: str) -> dict[str, np.ndarray] | None:
+        """The traces of a run stored by an earlier gainlink, as a compressed ``.npz`` of t, y, u, r: a folder
+        resumed across the change to ``.npy`` keeps every run in its envelopes."""
+        path = self.runs / f"{run_id}.npz"
+        if not path.is_file():
+            return None
+        with np.load(path, allow_pickle=False) as z:
+            return {k: z[k] for k in TRACE_FIELDS}
 
     def artifact_bytes(self, sha: str) -> bytes:
         """An artifact that travelled with the campaign."""

@@ -32,6 +32,7 @@ from typing import Any, Iterator
 import msgpack
 import numpy as np
 
+from gainlink import __version__
 from gainlink.artifact import Artifact, from_dict
 from gainlink.errors import GainlinkError, TransportError
 from gainlink.fileio import atomic_write_bytes
@@ -257,5 +258,8 @@ def execute_batch(kind: str, artifacts: dict[str, bytes], runs: list[tuple[str, 
 
 
 def unpack_results(data: bytes) -> list[dict]:
-    """The records of an :func:`execute_batch` result."""
+    """The records of an :func:`execute_batch` result; a worker that answered something else is named."""
+    if not isinstance(data, bytes):
+        raise GainlinkError(f"a worker returned {type(data).__name__}, not a batch of records: is it running "
+                            f"another gainlink version than this client ({__version__})?")
     return msgpack.unpackb(data, raw=False, strict_map_key=False)
