@@ -7,8 +7,9 @@ Prints JSON. Everything is measured in the same run, against a baseline of the s
   1, 2, 2, 1 (a new cluster each time; seeds 1 and 2 on each side, so a drift of the machine's speed hits
   both alike): the speed-up is the ratio of the summed wall times (target >= 1.8 on 2 cores). Beside it,
   ``speedup_2_vs_1_per_run_cpu`` divides each side's wall time by the CPU its runs took (what drift is
-  left taken out), and each campaign gives ``steal_s``, the time the hypervisor gave this machine's CPUs
-  to something else;
+  left taken out), each campaign gives ``steal_s``, the time the hypervisor gave this machine's CPUs
+  to something else, and ``plain_processes`` is the same runs in 1 and in 2 plain processes started
+  together (no Dask, no files; same order and seeds): the most any scheduler makes of these CPUs now;
 - ``overhead``: the CPU the campaign machinery adds to each run (target <= 0.10). The machinery is all of the
   campaign's CPU (this process: client, the LocalCluster's scheduler and nanny, plan, result files, the merged
   report with its plots; the worker process: Dask's task handling, heartbeats, serialisation) less the runs'
@@ -35,7 +36,7 @@ created under ``/tmp`` costs 4-20x the kernel time of one created elsewhere on t
 25 us against 100-550 us), and a campaign writes two files a run. On a machine shared with
 other work, read the ratios, not the seconds; ``load_average`` is the machine's before and after.
 
-    .venv/bin/python bench/campaign.py          # ~3 min on 2 idle cores
+    .venv/bin/python bench/campaign.py          # ~3.5 min on 2 idle cores
 """
 
 from __future__ import annotations
@@ -176,6 +177,52 @@ def plain_loop_rounds(client, data: dict) -> dict:
             "worker_vs_here": round(med["worker"] / med["here"] - 1.0, 3)}
 
 
+def _plain_process(data: dict, part: slice, barrier, done) -> None:
+    """In a process of its own: plan and warm up, wait for the others, run ``part`` one after the other."""
+    from gainlink.hil.campaign import parse_campaign
+    from gainlink.hil.campaign.plan import plan_campaign
+    from gainlink.hil.campaign.worker import execute
+
+    plan = plan_campaign(parse_campaign(data))
+    runs = [(plan.artifacts[p.artifact_sha256], p.scenario, p.seed) for p in plan.runs]
+    execute(plan.campaign.kind, *runs[0], plan.blobs)
+    barrier.wait()
+    for artifact, scenario, seed in runs[part]:
+        execute(plan.campaign.kind, artifact, scenario, seed, plan.blobs)
+    done.put(part.stop - part.start)
+
+
+def plain_processes_wall(data: dict, processes: int) -> float:
+    """Wall time of the campaign's runs split over ``processes`` plain processes started together (no Dask,
+    no files): the most any scheduler can make of this machine's CPUs for these runs."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")
+    barrier, done = ctx.Barrier(processes + 1), ctx.Queue()
+    n = data["runs"]
+    parts = [slice(k * n // processes, (k + 1) * n // processes) for k in range(processes)]
+    procs = [ctx.Process(target=_plain_process, args=(data, part, barrier, done)) for part in parts]
+    for proc in procs:
+        proc.start()
+    barrier.wait()
+    t0 = time.perf_counter()
+    ran = sum(done.get() for _ in procs)
+    wall = time.perf_counter() - t0
+    for proc in procs:
+        proc.join()
+    assert ran == n
+    return wall
+
+
+def plain_processes_speedup() -> dict:
+    """2 plain processes over 1 on the same runs, in the order 1, 2, 2, 1 with seeds 1 and 2 on each side."""
+    walls: dict[int, float] = {1: 0.0, 2: 0.0}
+    for processes, seed in ((1, 1), (2, 1), (2, 2), (1, 2)):
+        walls[processes] += plain_processes_wall(sil_campaign(SIL_RUNS, seed=seed), processes)
+    return {"one_process_s": round(walls[1], 3), "two_processes_s": round(walls[2], 3),
+            "speedup_2_vs_1": round(walls[1] / walls[2], 3)}
+
+
 def worker_rss_mb(client) -> float:
     import psutil
 
@@ -258,10 +305,13 @@ def main() -> int:
         first = measure_cluster(1, Path(tmp), seeds=(1,), memory=True)
         two = measure_cluster(2, Path(tmp), seeds=(1, 2), hil=True)
         last = measure_cluster(1, Path(tmp), seeds=(2,), plain=True, hil=True)
+        ceiling = plain_processes_speedup()
     one = first["sil"] + last["sil"]
     memory_ratio = first["rss_after_440_mb"] / first["rss_after_40_mb"]
     out.update({
-        "sil": {"runs": SIL_RUNS, "one_worker": one, "two_workers": two["sil"], **speedup(one, two["sil"])},
+        "sil": {"runs": SIL_RUNS, "one_worker": one, "two_workers": two["sil"], **speedup(one, two["sil"]),
+                "plain_processes": ceiling,
+                "speedup_of_plain_processes": round(speedup(one, two["sil"])["speedup_2_vs_1"] / ceiling["speedup_2_vs_1"], 3)},
         "hil": {"runs": HIL_RUNS, "one_worker": last["hil"], "two_workers": two["hil"],
                 "speedup_2_vs_1": round(last["hil"]["wall_s"] / two["hil"]["wall_s"], 3)},
         "overhead": overhead(one, last["plain"]),
