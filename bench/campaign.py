@@ -9,7 +9,7 @@ Prints JSON. Everything is measured in the same run, against a baseline of the s
   ``speedup_2_vs_1_per_run_cpu`` divides each side's wall time by the CPU its runs took (what drift is
   left taken out), each campaign gives ``steal_s``, the time the hypervisor gave this machine's CPUs
   to something else, and ``plain_processes`` is the same runs in 1 and in 2 plain processes started
-  together (no Dask, no files; same order and seeds): the most any scheduler makes of these CPUs now;
+  together (no Dask, no files; same order and seeds): what the CPUs give with no scheduler at all;
 - ``overhead``: the CPU the campaign machinery adds to each run (target <= 0.10). The machinery is all of the
   campaign's CPU (this process: client, the LocalCluster's scheduler and nanny, plan, result files, the merged
   report with its plots; the worker process: Dask's task handling, heartbeats, serialisation) less the runs'
@@ -49,6 +49,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any, Callable
 
 # One BLAS/OpenMP thread, as Dask's nanny gives its workers (distributed.nanny.pre-spawn-environ): the plain
 # loop runs here, and idle BLAS threads spinning after each small product would bill it for CPU the workers
@@ -141,10 +142,10 @@ def timed_campaign(data: dict, client, out: Path) -> dict:
             "passed": result.passed, "failed": result.failed, "errors": result.errors}
 
 
-def plain_loop(data: dict, part: slice) -> dict:
+def plain_loop(data: dict, part: slice, *, ready: Callable[[], Any] | None = None) -> dict:
     """The runs ``part`` of campaign ``data`` through the worker's own function, one after the other in the
-    calling thread (after planning and a warm-up run, neither timed): their CPU and wall time. Runs in this
-    process, or on a worker as one Dask task."""
+    calling thread (after planning and a warm-up run, neither timed; then ``ready()``, if given): their CPU
+    and wall time. Runs in this process, in a process of its own, or on a worker as one Dask task."""
     from gainlink.hil.campaign import parse_campaign
     from gainlink.hil.campaign.plan import plan_campaign
     from gainlink.hil.campaign.worker import execute
@@ -152,6 +153,8 @@ def plain_loop(data: dict, part: slice) -> dict:
     plan = plan_campaign(parse_campaign(data))
     runs = [(plan.artifacts[p.artifact_sha256], p.scenario, p.seed) for p in plan.runs]
     execute(plan.campaign.kind, *runs[0], plan.blobs)
+    if ready is not None:
+        ready()
     t0, c0 = time.perf_counter(), time.thread_time()
     for artifact, scenario, seed in runs[part]:
         execute(plan.campaign.kind, artifact, scenario, seed, plan.blobs)
@@ -178,23 +181,13 @@ def plain_loop_rounds(client, data: dict) -> dict:
 
 
 def _plain_process(data: dict, part: slice, barrier, done) -> None:
-    """In a process of its own: plan and warm up, wait for the others, run ``part`` one after the other."""
-    from gainlink.hil.campaign import parse_campaign
-    from gainlink.hil.campaign.plan import plan_campaign
-    from gainlink.hil.campaign.worker import execute
-
-    plan = plan_campaign(parse_campaign(data))
-    runs = [(plan.artifacts[p.artifact_sha256], p.scenario, p.seed) for p in plan.runs]
-    execute(plan.campaign.kind, *runs[0], plan.blobs)
-    barrier.wait()
-    for artifact, scenario, seed in runs[part]:
-        execute(plan.campaign.kind, artifact, scenario, seed, plan.blobs)
-    done.put(part.stop - part.start)
+    """In a process of its own: the plain loop of ``part``, started when every process is warm."""
+    done.put(plain_loop(data, part, ready=barrier.wait)["runs"])
 
 
 def plain_processes_wall(data: dict, processes: int) -> float:
     """Wall time of the campaign's runs split over ``processes`` plain processes started together (no Dask,
-    no files): the most any scheduler can make of this machine's CPUs for these runs."""
+    no files): what this machine's CPUs give for these runs with no scheduler at all."""
     import multiprocessing
 
     ctx = multiprocessing.get_context("spawn")
@@ -307,11 +300,11 @@ def main() -> int:
         last = measure_cluster(1, Path(tmp), seeds=(2,), plain=True, hil=True)
         ceiling = plain_processes_speedup()
     one = first["sil"] + last["sil"]
+    sil = speedup(one, two["sil"])
     memory_ratio = first["rss_after_440_mb"] / first["rss_after_40_mb"]
     out.update({
-        "sil": {"runs": SIL_RUNS, "one_worker": one, "two_workers": two["sil"], **speedup(one, two["sil"]),
-                "plain_processes": ceiling,
-                "speedup_of_plain_processes": round(speedup(one, two["sil"])["speedup_2_vs_1"] / ceiling["speedup_2_vs_1"], 3)},
+        "sil": {"runs": SIL_RUNS, "one_worker": one, "two_workers": two["sil"], **sil, "plain_processes": ceiling,
+                "speedup_of_plain_processes": round(sil["speedup_2_vs_1"] / ceiling["speedup_2_vs_1"], 3)},
         "hil": {"runs": HIL_RUNS, "one_worker": last["hil"], "two_workers": two["hil"],
                 "speedup_2_vs_1": round(last["hil"]["wall_s"] / two["hil"]["wall_s"], 3)},
         "overhead": overhead(one, last["plain"]),
