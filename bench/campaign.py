@@ -48,8 +48,9 @@ import statistics
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 # One BLAS/OpenMP thread, as Dask's nanny gives its workers (distributed.nanny.pre-spawn-environ): the plain
 # loop runs here, and idle BLAS threads spinning after each small product would bill it for CPU the workers
@@ -64,23 +65,51 @@ PLAIN_ROUNDS, PLAIN_RUNS = 8, 50
 
 def sil_campaign(runs: int, seed: int) -> dict:
     """Pendulum SIL: cart and pendulum masses +-30 %, length +-10 %, 4 s from 0.5 m off the reference."""
-    draws = [{"name": f"{p}_factor", "targets": [f"plant.parameters.{p}"], "distribution": "uniform",
-              "low": lo, "high": hi, "apply": "scale"} for p, lo, hi in (("M", 0.7, 1.3), ("m", 0.7, 1.3),
-                                                                          ("l", 0.9, 1.1))]
-    return {"name": "bench_sil", "kind": "sil", "seed": seed, "runs": runs, "spec": str(ROOT / "examples/pendulum.toml"),
-            "scenario": {"duration": 4.0, "initial_state": {"x": 0.5}, "noise": {"theta": 5e-4},
-                         "plant": {"kind": "cart_pendulum", "outputs": ["x", "theta"], "step": 0.005,
-                                   "parameters": {"M": 1.0, "m": 0.1, "l": 0.5}}},
-            "draw": draws, "criteria": {"stable": True, "bounds": {"theta": [-0.7, 0.7]}}}
+    draws = [
+        {
+            "name": f"{p}_factor",
+            "targets": [f"plant.parameters.{p}"],
+            "distribution": "uniform",
+            "low": lo,
+            "high": hi,
+            "apply": "scale",
+        }
+        for p, lo, hi in (("M", 0.7, 1.3), ("m", 0.7, 1.3), ("l", 0.9, 1.1))
+    ]
+    return {
+        "name": "bench_sil",
+        "kind": "sil",
+        "seed": seed,
+        "runs": runs,
+        "spec": str(ROOT / "examples/pendulum.toml"),
+        "scenario": {
+            "duration": 4.0,
+            "initial_state": {"x": 0.5},
+            "noise": {"theta": 5e-4},
+            "plant": {
+                "kind": "cart_pendulum",
+                "outputs": ["x", "theta"],
+                "step": 0.005,
+                "parameters": {"M": 1.0, "m": 0.1, "l": 0.5},
+            },
+        },
+        "draw": draws,
+        "criteria": {"stable": True, "bounds": {"theta": [-0.7, 0.7]}},
+    }
 
 
 def hil_campaign(runs: int, seed: int) -> dict:
     """The SIL campaign's plants through the bridge: lockstep over CAN FD on udp_multicast, 2 s each."""
     c = sil_campaign(runs, seed)
     c.update(name="bench_hil", kind="hil")
-    c["scenario"].update(duration=2.0, mode="lockstep", controller="firmware", step_timeout=2.0, peer_timeout=4.0,
-                         transport={"interface": "udp_multicast", "channel": "239.74.164.1", "hop_limit": 0,
-                                    "fd": True})
+    c["scenario"].update(
+        duration=2.0,
+        mode="lockstep",
+        controller="firmware",
+        step_timeout=2.0,
+        peer_timeout=4.0,
+        transport={"interface": "udp_multicast", "channel": "239.74.164.1", "hop_limit": 0, "fd": True},
+    )
     return c
 
 
@@ -128,18 +157,26 @@ def timed_campaign(data: dict, client, out: Path) -> dict:
     report_cpu = c1 - last["cpu"]
     # The runs' own CPU, measured on the worker around the run function: the rest is the machinery's.
     runs_cpu = sum(r["worker"]["cpu_s"] for r in result.rows if r.get("worker"))
-    return {"runs": n, "wall_s": round(wall, 3), "per_run_ms": round(1e3 * wall / n, 2),
-            "cpu_per_run_ms": round(1e3 * cpu / n, 2), "report_cpu_s": round(report_cpu, 3),
-            # Where the CPU went: the worker processes (the runs), and this process (client, scheduler and
-            # nannies of a LocalCluster, result files, the report).
-            "worker_cpu_per_run_ms": round(1e3 * (w1 - w0) / n, 2),
-            "client_process_cpu_per_run_ms": round(1e3 * (c1 - c0) / n, 2),
-            "runs_own_cpu_per_run_ms": round(1e3 * runs_cpu / n, 2),
-            "machinery_cpu_per_run_ms": round(1e3 * (cpu - runs_cpu) / n, 2),
-            "machinery_ratio": round((cpu - runs_cpu) / runs_cpu, 4),
-            "machinery_ratio_without_report": round((cpu - report_cpu - runs_cpu) / runs_cpu, 4),
-            "wall_per_run_cpu": round(wall / runs_cpu, 5), "steal_s": round(steal, 2),
-            "passed": result.passed, "failed": result.failed, "errors": result.errors}
+    return {
+        "runs": n,
+        "wall_s": round(wall, 3),
+        "per_run_ms": round(1e3 * wall / n, 2),
+        "cpu_per_run_ms": round(1e3 * cpu / n, 2),
+        "report_cpu_s": round(report_cpu, 3),
+        # Where the CPU went: the worker processes (the runs), and this process (client, scheduler and
+        # nannies of a LocalCluster, result files, the report).
+        "worker_cpu_per_run_ms": round(1e3 * (w1 - w0) / n, 2),
+        "client_process_cpu_per_run_ms": round(1e3 * (c1 - c0) / n, 2),
+        "runs_own_cpu_per_run_ms": round(1e3 * runs_cpu / n, 2),
+        "machinery_cpu_per_run_ms": round(1e3 * (cpu - runs_cpu) / n, 2),
+        "machinery_ratio": round((cpu - runs_cpu) / runs_cpu, 4),
+        "machinery_ratio_without_report": round((cpu - report_cpu - runs_cpu) / runs_cpu, 4),
+        "wall_per_run_cpu": round(wall / runs_cpu, 5),
+        "steal_s": round(steal, 2),
+        "passed": result.passed,
+        "failed": result.failed,
+        "errors": result.errors,
+    }
 
 
 def plain_loop(data: dict, part: slice, *, ready: Callable[[], Any] | None = None) -> dict:
@@ -170,14 +207,16 @@ def plain_loop_rounds(client, data: dict) -> dict:
         part = slice(k * PLAIN_RUNS, (k + 1) * PLAIN_RUNS)
         order = ("here", "worker") if k % 2 == 0 else ("worker", "here")
         for side in order:
-            r = plain_loop(data, part) if side == "here" else \
-                client.submit(plain_loop, data, part, pure=False).result()
+            r = plain_loop(data, part) if side == "here" else client.submit(plain_loop, data, part, pure=False).result()
             sides[side].append(1e3 * r["cpu_s"] / r["runs"])
     med = {side: statistics.median(v) for side, v in sides.items()}
-    return {"rounds": PLAIN_ROUNDS, "runs_per_round": PLAIN_RUNS,
-            **{f"{side}_cpu_per_run_ms": [round(x, 2) for x in v] for side, v in sides.items()},
-            **{f"{side}_median_ms": round(m, 2) for side, m in med.items()},
-            "worker_vs_here": round(med["worker"] / med["here"] - 1.0, 3)}
+    return {
+        "rounds": PLAIN_ROUNDS,
+        "runs_per_round": PLAIN_RUNS,
+        **{f"{side}_cpu_per_run_ms": [round(x, 2) for x in v] for side, v in sides.items()},
+        **{f"{side}_median_ms": round(m, 2) for side, m in med.items()},
+        "worker_vs_here": round(med["worker"] / med["here"] - 1.0, 3),
+    }
 
 
 def _plain_process(data: dict, part: slice, barrier, done) -> None:
@@ -212,8 +251,11 @@ def plain_processes_speedup() -> dict:
     walls: dict[int, float] = {1: 0.0, 2: 0.0}
     for processes, seed in ((1, 1), (2, 1), (2, 2), (1, 2)):
         walls[processes] += plain_processes_wall(sil_campaign(SIL_RUNS, seed=seed), processes)
-    return {"one_process_s": round(walls[1], 3), "two_processes_s": round(walls[2], 3),
-            "speedup_2_vs_1": round(walls[1] / walls[2], 3)}
+    return {
+        "one_process_s": round(walls[1], 3),
+        "two_processes_s": round(walls[2], 3),
+        "speedup_2_vs_1": round(walls[1] / walls[2], 3),
+    }
 
 
 def worker_rss_mb(client) -> float:
@@ -222,8 +264,9 @@ def worker_rss_mb(client) -> float:
     return round(max(client.run(lambda: psutil.Process().memory_info().rss).values()) / 2**20, 1)
 
 
-def measure_cluster(n: int, tmp: Path, *, seeds: tuple[int, ...], memory: bool = False, plain: bool = False,
-                    hil: bool = False) -> dict:
+def measure_cluster(
+    n: int, tmp: Path, *, seeds: tuple[int, ...], memory: bool = False, plain: bool = False, hil: bool = False
+) -> dict:
     """On a new LocalCluster of ``n`` workers (warmed first): one 400-run SIL campaign per seed; with ``memory``
     the worker's memory after 40 runs and after 440, with ``plain`` the plain loop rounds, with ``hil`` the
     HIL campaign."""
@@ -255,6 +298,7 @@ def _mean(campaigns: list[dict], key: str) -> float:
 
 def speedup(one: list[dict], two: list[dict]) -> dict:
     """2 workers over 1 from the summed wall times of the same seeds; and per second of the runs' own CPU."""
+
     def wall(cs: list[dict]) -> float:
         return sum(c["wall_s"] for c in cs)
 
@@ -263,9 +307,13 @@ def speedup(one: list[dict], two: list[dict]) -> dict:
 
     raw = wall(one) / wall(two)
     per_cpu = (wall(one) / own(one)) / (wall(two) / own(two))
-    return {"speedup_2_vs_1": round(raw, 3), "target_speedup": 1.8, "meets_target": raw >= 1.8,
-            "speedup_2_vs_1_per_run_cpu": round(per_cpu, 3),
-            "speedup_2_vs_1_each_seed": [round(a["wall_s"] / b["wall_s"], 3) for a, b in zip(one, two)]}
+    return {
+        "speedup_2_vs_1": round(raw, 3),
+        "target_speedup": 1.8,
+        "meets_target": raw >= 1.8,
+        "speedup_2_vs_1_per_run_cpu": round(per_cpu, 3),
+        "speedup_2_vs_1_each_seed": [round(a["wall_s"] / b["wall_s"], 3) for a, b in zip(one, two)],
+    }
 
 
 def overhead(one: list[dict], plain: dict) -> dict:
@@ -275,17 +323,23 @@ def overhead(one: list[dict], plain: dict) -> dict:
     cpu, own, report = (_mean(one, k) for k in ("cpu_per_run_ms", "runs_own_cpu_per_run_ms", "report_cpu_s"))
     report_ms = 1e3 * report / SIL_RUNS
     ratio = (cpu - own) / own
-    return {"campaign_one_worker_cpu_per_run_ms": round(cpu, 2), "runs_own_cpu_per_run_ms": round(own, 2),
-            "machinery_cpu_per_run_ms": round(cpu - own, 2),
-            **{k: round(_mean(one, k), 2) for k in ("worker_cpu_per_run_ms", "client_process_cpu_per_run_ms")},
-            "report_cpu_s": round(report, 3), "dask_tasks": one[0]["dask_tasks"],
-            "overhead_ratio": round(ratio, 3), "overhead_ratio_each_campaign": [c["machinery_ratio"] for c in one],
-            "overhead_ratio_without_report": round((cpu - report_ms - own) / own, 3),
-            "target_overhead_ratio": 0.10, "meets_target": ratio <= 0.10,
-            "plain_loop": plain,
-            "runs_own_cpu_vs_plain_loop": round(own / here - 1.0, 3),
-            "overhead_ratio_vs_plain_loop": round(cpu / here - 1.0, 3),
-            "overhead_ratio_vs_plain_loop_without_report": round((cpu - report_ms) / here - 1.0, 3)}
+    return {
+        "campaign_one_worker_cpu_per_run_ms": round(cpu, 2),
+        "runs_own_cpu_per_run_ms": round(own, 2),
+        "machinery_cpu_per_run_ms": round(cpu - own, 2),
+        **{k: round(_mean(one, k), 2) for k in ("worker_cpu_per_run_ms", "client_process_cpu_per_run_ms")},
+        "report_cpu_s": round(report, 3),
+        "dask_tasks": one[0]["dask_tasks"],
+        "overhead_ratio": round(ratio, 3),
+        "overhead_ratio_each_campaign": [c["machinery_ratio"] for c in one],
+        "overhead_ratio_without_report": round((cpu - report_ms - own) / own, 3),
+        "target_overhead_ratio": 0.10,
+        "meets_target": ratio <= 0.10,
+        "plain_loop": plain,
+        "runs_own_cpu_vs_plain_loop": round(own / here - 1.0, 3),
+        "overhead_ratio_vs_plain_loop": round(cpu / here - 1.0, 3),
+        "overhead_ratio_vs_plain_loop_without_report": round((cpu - report_ms) / here - 1.0, 3),
+    }
 
 
 def main() -> int:
@@ -302,17 +356,32 @@ def main() -> int:
     one = first["sil"] + last["sil"]
     sil = speedup(one, two["sil"])
     memory_ratio = first["rss_after_440_mb"] / first["rss_after_40_mb"]
-    out.update({
-        "sil": {"runs": SIL_RUNS, "one_worker": one, "two_workers": two["sil"], **sil, "plain_processes": ceiling,
-                "speedup_of_plain_processes": round(sil["speedup_2_vs_1"] / ceiling["speedup_2_vs_1"], 3)},
-        "hil": {"runs": HIL_RUNS, "one_worker": last["hil"], "two_workers": two["hil"],
-                "speedup_2_vs_1": round(last["hil"]["wall_s"] / two["hil"]["wall_s"], 3)},
-        "overhead": overhead(one, last["plain"]),
-        "memory": {"worker_rss_after_40_runs_mb": first["rss_after_40_mb"],
-                   "worker_rss_after_440_runs_mb": first["rss_after_440_mb"],
-                   "ratio": round(memory_ratio, 3), "flat": memory_ratio <= 1.10},
-        "load_average_after": [round(v, 2) for v in os.getloadavg()],
-    })
+    out.update(
+        {
+            "sil": {
+                "runs": SIL_RUNS,
+                "one_worker": one,
+                "two_workers": two["sil"],
+                **sil,
+                "plain_processes": ceiling,
+                "speedup_of_plain_processes": round(sil["speedup_2_vs_1"] / ceiling["speedup_2_vs_1"], 3),
+            },
+            "hil": {
+                "runs": HIL_RUNS,
+                "one_worker": last["hil"],
+                "two_workers": two["hil"],
+                "speedup_2_vs_1": round(last["hil"]["wall_s"] / two["hil"]["wall_s"], 3),
+            },
+            "overhead": overhead(one, last["plain"]),
+            "memory": {
+                "worker_rss_after_40_runs_mb": first["rss_after_40_mb"],
+                "worker_rss_after_440_runs_mb": first["rss_after_440_mb"],
+                "ratio": round(memory_ratio, 3),
+                "flat": memory_ratio <= 1.10,
+            },
+            "load_average_after": [round(v, 2) for v in os.getloadavg()],
+        }
+    )
     json.dump(out, sys.stdout, indent=2)
     sys.stdout.write("\n")
     return 0

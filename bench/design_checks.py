@@ -20,7 +20,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-
 from gainlink.artifact import from_dict
 from gainlink.design import design
 from gainlink.float32_law import Float32Loop
@@ -52,25 +51,43 @@ def measure(label: str, spec: PlantSpec) -> dict:
     R = a.r_op + rng.standard_normal((500, a.q))
     t32 = _median_time(lambda: Float32Loop(a).run(Y, R)) / 500
     t64 = _median_time(lambda: ReferenceLoop(a).run(Y, R)) / 500
-    return {"design": label, "n": a.n, "m": a.m, "p": a.p, "q": a.q,
-            "design_s_with_float32_check": round(t_on, 4), "baseline_design_s_without": round(t_off, 4),
-            "ratio": round(t_on / t_off, 2), "check_steps": result.float32.steps,
-            "float32_law_us_per_step": round(t32 * 1e6, 1), "reference_law_us_per_step": round(t64 * 1e6, 1),
-            "float32_law_per_reference_step": round(t32 / t64, 2),
-            "max_rel_u": result.float32.max_rel_u}
+    return {
+        "design": label,
+        "n": a.n,
+        "m": a.m,
+        "p": a.p,
+        "q": a.q,
+        "design_s_with_float32_check": round(t_on, 4),
+        "baseline_design_s_without": round(t_off, 4),
+        "ratio": round(t_on / t_off, 2),
+        "check_steps": result.float32.steps,
+        "float32_law_us_per_step": round(t32 * 1e6, 1),
+        "reference_law_us_per_step": round(t64 * 1e6, 1),
+        "float32_law_per_reference_step": round(t32 / t64, 2),
+        "max_rel_u": result.float32.max_rel_u,
+    }
 
 
 def main() -> int:
     logging.disable(logging.WARNING)
-    rows = [measure(name, load_spec(ROOT / "examples" / f"{name}.toml"))
-            for name in ("pendulum", "quadrotor_lateral", "wood_berry")]
+    rows = [
+        measure(name, load_spec(ROOT / "examples" / f"{name}.toml"))
+        for name in ("pendulum", "quadrotor_lateral", "wood_berry")
+    ]
     for n in (4, 8, 12):
         spec = parse_spec(random_spec(n, n=n, m=2, p=2, q=1, anti_windup="backcalc", u_limit=5.0))
         rows.append(measure(f"random_n{n}", spec))
     added = [r["design_s_with_float32_check"] - r["baseline_design_s_without"] for r in rows]
-    json.dump({"benchmark": "design_checks", "rows": rows,
-               "median_added_s": round(statistics.median(added), 4), "max_added_s": round(max(added), 4)},
-              sys.stdout, indent=2)
+    json.dump(
+        {
+            "benchmark": "design_checks",
+            "rows": rows,
+            "median_added_s": round(statistics.median(added), 4),
+            "max_added_s": round(max(added), 4),
+        },
+        sys.stdout,
+        indent=2,
+    )
     sys.stdout.write("\n")
     return 0
 

@@ -36,15 +36,23 @@ def measure(label: str, artifact, Y, R) -> dict:
     macs = law_macs(artifact)
     sat = ReferenceLoop(artifact).run(Y, R).saturated.any(axis=1).mean()
     return {
-        "design": label, "n": artifact.n, "m": artifact.m, "p": artifact.p, "q": artifact.q,
-        "observer_form": artifact.observer_form, "anti_windup": artifact.anti_windup,
-        "steps": cost.calls, "saturated_fraction": round(float(sat), 3),
+        "design": label,
+        "n": artifact.n,
+        "m": artifact.m,
+        "p": artifact.p,
+        "q": artifact.q,
+        "observer_form": artifact.observer_form,
+        "anti_windup": artifact.anti_windup,
+        "steps": cost.calls,
+        "saturated_fraction": round(float(sat), 3),
         "instructions_per_step": round(cost.per_step, 2),
         "baseline_generic_loop_instructions_per_step": round(base.per_step, 2),
         "speedup_vs_generic": round(base.per_step / cost.per_step, 3),
-        "law_macs": macs, "implemented_macs": implemented_macs(artifact),
+        "law_macs": macs,
+        "implemented_macs": implemented_macs(artifact),
         "instructions_per_law_mac": round(cost.per_step / macs, 3),
-        "flash_bytes": size["flash_bytes"], "ram_bytes_without_stack": size["ram_bytes_without_stack"],
+        "flash_bytes": size["flash_bytes"],
+        "ram_bytes_without_stack": size["ram_bytes_without_stack"],
         "step_code_bytes": size["symbols"]["gl_loop_step"]["size"],
     }
 

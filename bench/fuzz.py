@@ -42,10 +42,17 @@ def run_one(name: str, exe: Path, artifact, out: Path, *, runs: int | None, seco
     baseline = fuzz.run(name, exe, corpus, runs=0, artifacts=crashes)
     r = fuzz.run(name, exe, corpus, runs=runs, seconds=seconds, artifacts=crashes)
     return {
-        "executions": r.executions, "seconds": round(r.seconds, 1), "exec_per_s": round(r.exec_per_s),
-        "cov": r.cov, "ft": r.ft, "corpus": r.corpus, "seeds": seeds,
-        "baseline_seed_cov": baseline.cov, "cov_vs_seeds": round(r.cov / baseline.cov, 3) if baseline.cov else None,
-        "crashes": len(r.crashes), "crash_files": [str(Path(p).relative_to(ROOT)) for p in r.crashes],
+        "executions": r.executions,
+        "seconds": round(r.seconds, 1),
+        "exec_per_s": round(r.exec_per_s),
+        "cov": r.cov,
+        "ft": r.ft,
+        "corpus": r.corpus,
+        "seeds": seeds,
+        "baseline_seed_cov": baseline.cov,
+        "cov_vs_seeds": round(r.cov / baseline.cov, 3) if baseline.cov else None,
+        "crashes": len(r.crashes),
+        "crash_files": [str(Path(p).relative_to(ROOT)) for p in r.crashes],
         "libfuzzer_exit": r.exit_code,
     }
 
@@ -63,8 +70,10 @@ def main() -> int:
     artifact = load_artifact(args.artifact)
     exes = fuzz.build_harnesses(artifact)
     out = ROOT / "out" / "fuzz"
-    results = {name: run_one(name, exes[name], artifact, out, runs=runs, seconds=args.seconds)
-               for name in (args.harness or fuzz.HARNESSES)}
+    results = {
+        name: run_one(name, exes[name], artifact, out, runs=runs, seconds=args.seconds)
+        for name in (args.harness or fuzz.HARNESSES)
+    }
     target = runs if runs is not None else TARGET_EXECUTIONS
     doc = {
         "benchmark": "fuzz",

@@ -27,14 +27,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from gainlink import artifact as artifact_mod
 from gainlink.design import design
-from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.links.can_firmware import firmware_can_executable
+from gainlink.hil.loop.bridge import run_scenario
+from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.fmu import FmuPlant
-from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import load_spec
 
@@ -58,29 +57,56 @@ def baseline(art, fmu: Path, steps: int) -> float:
         plant.close()
 
 
-def lockstep(gains: Path, exe: Path, fmu: Path, steps: int, *, fd: bool, busy_poll_us: int = 0,
-             affinity: str = "auto") -> dict:
+def lockstep(
+    gains: Path, exe: Path, fmu: Path, steps: int, *, fd: bool, busy_poll_us: int = 0, affinity: str = "auto"
+) -> dict:
     rnd = random.Random(os.getpid() + busy_poll_us + fd)
-    transport = {"interface": "udp_multicast", "channel": f"239.74.{rnd.randint(1, 254)}.{rnd.randint(1, 254)}",
-                 "port": rnd.randint(40000, 60000), "hop_limit": 0, "fd": fd}
+    transport = {
+        "interface": "udp_multicast",
+        "channel": f"239.74.{rnd.randint(1, 254)}.{rnd.randint(1, 254)}",
+        "port": rnd.randint(40000, 60000),
+        "hop_limit": 0,
+        "fd": fd,
+    }
     if busy_poll_us:
         transport["busy_poll_us"] = busy_poll_us
     art = artifact_mod.load(gains)
-    scenario = parse_scenario({"name": "bench", "artifact": str(gains), "duration": steps * art.Ts,
-                               "controller": "firmware", "firmware": str(exe), "twin": False,
-                               "plant": {"kind": "fmu", "path": str(fmu)}, "transport": transport,
-                               "initial_state": {"theta": 0.1}, "step_timeout": 0.5,
-                               "affinity": affinity})
+    scenario = parse_scenario(
+        {
+            "name": "bench",
+            "artifact": str(gains),
+            "duration": steps * art.Ts,
+            "controller": "firmware",
+            "firmware": str(exe),
+            "twin": False,
+            "plant": {"kind": "fmu", "path": str(fmu)},
+            "transport": transport,
+            "initial_state": {"theta": 0.1},
+            "step_timeout": 0.5,
+            "affinity": affinity,
+        }
+    )
     m = run_scenario(scenario).metrics
-    return {"placement": m["cpu"]["placement"], "steps": m["steps"], "complete": m["complete"], "lost": m["lost"],
-            "steps_per_s": m["steps_per_s"], "latency_us": m["latency_us"], "theta_final": m["outputs_final"]["theta"]}
+    return {
+        "placement": m["cpu"]["placement"],
+        "steps": m["steps"],
+        "complete": m["complete"],
+        "lost": m["lost"],
+        "steps_per_s": m["steps_per_s"],
+        "latency_us": m["latency_us"],
+        "theta_final": m["outputs_final"]["theta"],
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20000)
-    ap.add_argument("--busy-poll-us", type=int, default=200,
-                    help="busy_poll_us of the third run (both ends poll without sleeping this long)")
+    ap.add_argument(
+        "--busy-poll-us",
+        type=int,
+        default=200,
+        help="busy_poll_us of the third run (both ends poll without sleeping this long)",
+    )
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     with tempfile.TemporaryDirectory() as tmp:

@@ -32,15 +32,14 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
-
 from gainlink import artifact as artifact_mod
 from gainlink.design import design
-from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.links.can_firmware import firmware_can_executable
-from gainlink.hil.plants.build import build_fmu
-from gainlink.hil.plants.fmu import FmuPlant
+from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.scheduler import pacing_jitter
+from gainlink.hil.plants.build import build_fmu
+from gainlink.hil.plants.fmu import FmuPlant
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import parse_spec
 
@@ -63,8 +62,26 @@ def cyclictest(seconds: float) -> dict:
     loops = int(seconds * 1e9 / PERIOD_NS)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "cyclictest.json"
-        run = subprocess.run([exe, "-m", "-p", "80", "-i", str(PERIOD_NS // 1000), "-l", str(loops), "-q",
-                              "-t", "1", "-h", "100000", f"--json={out}"], capture_output=True, text=True)
+        run = subprocess.run(
+            [
+                exe,
+                "-m",
+                "-p",
+                "80",
+                "-i",
+                str(PERIOD_NS // 1000),
+                "-l",
+                str(loops),
+                "-q",
+                "-t",
+                "1",
+                "-h",
+                "100000",
+                f"--json={out}",
+            ],
+            capture_output=True,
+            text=True,
+        )
         if run.returncode != 0 or not out.exists():
             return {"available": False, "why": (run.stderr or run.stdout).strip().splitlines()[-1:] or "failed"}
         thread = next(iter(json.loads(out.read_text())["thread"].values()))
@@ -76,8 +93,14 @@ def cyclictest(seconds: float) -> dict:
     def pct(q: float) -> int:
         return at[int(np.searchsorted(counts, q * total))]
 
-    return {"available": True, "seconds": seconds, "p50": pct(0.50), "p99": pct(0.99), "max": thread["max"],
-            "over_100us_fraction": sum(n for us, n in hist if us > 100) / max(1, total)}
+    return {
+        "available": True,
+        "seconds": seconds,
+        "p50": pct(0.50),
+        "p99": pct(0.99),
+        "max": thread["max"],
+        "over_100us_fraction": sum(n for us, n in hist if us > 100) / max(1, total),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -91,8 +114,13 @@ def main(argv: list[str] | None = None) -> int:
     spec["Ts"] = PERIOD_NS / 1e9
     spec["name"] = "pendulum_1khz"
     rnd = random.Random(os.getpid())
-    transport = {"interface": "udp_multicast", "channel": f"239.74.{rnd.randint(1, 254)}.{rnd.randint(1, 254)}",
-                 "port": rnd.randint(40000, 60000), "hop_limit": 0, "fd": True}
+    transport = {
+        "interface": "udp_multicast",
+        "channel": f"239.74.{rnd.randint(1, 254)}.{rnd.randint(1, 254)}",
+        "port": rnd.randint(40000, 60000),
+        "hop_limit": 0,
+        "fd": True,
+    }
     with tempfile.TemporaryDirectory() as tmp:
         gains = Path(tmp) / "gains.json"
         artifact_mod.write(gains, design(parse_spec(spec)).artifact)
@@ -108,16 +136,28 @@ def main(argv: list[str] | None = None) -> int:
             plant.advance(u=law.step(plant.outputs(), r).u, dt=art.Ts)
 
         try:
-            base = pacing_jitter(period_ns=PERIOD_NS, steps=int(args.baseline_seconds * 1e9 / PERIOD_NS),
-                                 fifo=True, work=work)
+            base = pacing_jitter(
+                period_ns=PERIOD_NS, steps=int(args.baseline_seconds * 1e9 / PERIOD_NS), fifo=True, work=work
+            )
         finally:
             plant.close()
-        scenario = parse_scenario({"name": "bench_rt", "artifact": str(gains), "duration": args.seconds,
-                                   "mode": "realtime", "controller": "firmware", "firmware": str(exe),
-                                   "twin": False, "sched_fifo": True, "peer_timeout": 5.0,
-                                   "affinity": args.affinity,
-                                   "plant": {"kind": "fmu", "path": str(fmu)}, "transport": transport,
-                                   "initial_state": {"theta": 0.1}})
+        scenario = parse_scenario(
+            {
+                "name": "bench_rt",
+                "artifact": str(gains),
+                "duration": args.seconds,
+                "mode": "realtime",
+                "controller": "firmware",
+                "firmware": str(exe),
+                "twin": False,
+                "sched_fifo": True,
+                "peer_timeout": 5.0,
+                "affinity": args.affinity,
+                "plant": {"kind": "fmu", "path": str(fmu)},
+                "transport": transport,
+                "initial_state": {"theta": 0.1},
+            }
+        )
         floor = cyclictest(args.baseline_seconds)
         steal0 = cpu_steal()
         m = run_scenario(scenario).metrics
@@ -136,11 +176,16 @@ def main(argv: list[str] | None = None) -> int:
         "late": m["late"],
         "latency_us": m["latency_us"],
         "theta_final": m["outputs_final"].get("theta"),
-        "baseline": {"what": "same pacer (same SCHED_FIFO, PM QoS, overrun skip), in-process reference law + "
-                             "same FMU each tick, no bus",
-                     "seconds": args.baseline_seconds, "period_jitter_us": base},
-        "machine_floor": {"what": "cyclictest -m -p 80 -i 1000: kernel wake-up latency of a SCHED_FIFO thread",
-                          **floor},
+        "baseline": {
+            "what": "same pacer (same SCHED_FIFO, PM QoS, overrun skip), in-process reference law + "
+            "same FMU each tick, no bus",
+            "seconds": args.baseline_seconds,
+            "period_jitter_us": base,
+        },
+        "machine_floor": {
+            "what": "cyclictest -m -p 80 -i 1000: kernel wake-up latency of a SCHED_FIFO thread",
+            **floor,
+        },
         "cpu": m.get("cpu"),
         "ratio": (jit["p99"] / base["p99"]) if base["p99"] else None,
         "targets": {"p99_jitter_us": 100, "deadline_misses": 0},

@@ -64,20 +64,28 @@ def _links(art, busy_poll_us: int) -> dict:
     links = {}
     for variant, busy_us in (("default", 0), ("busy_poll", busy_poll_us)):
         port = _free_port()
-        links[variant] = MavlinkTransport(url=f"udpout:127.0.0.1:{port}", controller_url=f"udpin:127.0.0.1:{port}",
-                                          n_inputs=art.m, n_outputs=art.p, n_refs=art.q, ts=art.Ts,
-                                          busy_poll_us=busy_us)
+        links[variant] = MavlinkTransport(
+            url=f"udpout:127.0.0.1:{port}",
+            controller_url=f"udpin:127.0.0.1:{port}",
+            n_inputs=art.m,
+            n_outputs=art.p,
+            n_refs=art.q,
+            ts=art.Ts,
+            busy_poll_us=busy_us,
+        )
     return links
 
 
 def _over(link):
     """A controller step through ``link``: one sample out, its command back (lockstep)."""
+
     def step(k, y, r):
         link.send_frames(link.encode_sample(seq=k, y=y, r=r))
         c = link.receive_command(timeout=1.0)
         if c is None or c.seq != k:
             raise SystemExit(f"no command for step {k}")
         return c.u
+
     return step
 
 
@@ -92,9 +100,10 @@ def _measure(art, exe, args) -> tuple[dict, float, bool]:
     links = _links(art, args.busy_poll_us)
     rates = {"default": [], "busy_poll": [], "in_process": []}
     U = {}
-    firmware = {"default": MavlinkFirmware(exe, url=links["default"].controller_url),
-                "busy_poll": MavlinkFirmware(exe, url=links["busy_poll"].controller_url,
-                                             busy_poll_us=args.busy_poll_us)}
+    firmware = {
+        "default": MavlinkFirmware(exe, url=links["default"].controller_url),
+        "busy_poll": MavlinkFirmware(exe, url=links["busy_poll"].controller_url, busy_poll_us=args.busy_poll_us),
+    }
     cpus = sorted(os.sched_getaffinity(0))
     with firmware["default"], links["default"], firmware["busy_poll"], links["busy_poll"]:
         for _ in range(args.repeats):
@@ -120,12 +129,21 @@ def _bridge_runs(path: Path, busy_poll_us: int) -> dict:
 
     bridge = {}
     for variant, extra in (("default", {}), ("busy_poll", {"busy_poll_us": busy_poll_us})):
-        scen = parse_scenario({
-            "name": "bench_mavlink", "artifact": str(path), "duration": 5.0, "mode": "lockstep",
-            "controller": "firmware", "twin": False, "seed": 1,
-            "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]},
-            "transport": {"kind": "mavlink", "port": _free_port(), **extra}, "initial_state": {"theta": 0.1},
-        }, path=path.parent / "scenario.toml")
+        scen = parse_scenario(
+            {
+                "name": "bench_mavlink",
+                "artifact": str(path),
+                "duration": 5.0,
+                "mode": "lockstep",
+                "controller": "firmware",
+                "twin": False,
+                "seed": 1,
+                "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]},
+                "transport": {"kind": "mavlink", "port": _free_port(), **extra},
+                "initial_state": {"theta": 0.1},
+            },
+            path=path.parent / "scenario.toml",
+        )
         bridge[variant] = run_scenario(scen)
     return bridge
 
@@ -134,8 +152,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--busy-poll-us", type=int, default=200,
-                        help="busy_poll_us / --spin-us of the busy-poll variant")
+    parser.add_argument(
+        "--busy-poll-us", type=int, default=200, help="busy_poll_us / --spin-us of the busy-poll variant"
+    )
     args = parser.parse_args()
 
     from gainlink import artifact as artifact_mod
@@ -164,22 +183,27 @@ def main() -> int:
             "bridge_complete": bridge[variant].complete,
         }
 
-    print(json.dumps({
-        "benchmark": "mavlink_hil_lockstep",
-        "link": "UDP loopback: DEBUG_FLOAT_ARRAY -> gainlink_mavlink -> HIL_ACTUATOR_CONTROLS",
-        "steps": args.steps,
-        "repeats": args.repeats,
-        "baseline_in_process_steps_per_s": round(base, 1),
-        "default": report("default"),
-        "busy_poll": {"busy_poll_us": args.busy_poll_us, **report("busy_poll")},
-        "max_abs_du_vs_in_process_first_500": agree,
-        "busy_poll_commands_equal_default": busy_equals_default,
-        "target_steps_per_s": TARGET,
-        "meets_target": bool(meeting),
-        "meets_target_with": meeting,
-        "load_average_1min": round(os.getloadavg()[0], 2),
-        "cpus": os.cpu_count(),
-    }, indent=2))
+    print(
+        json.dumps(
+            {
+                "benchmark": "mavlink_hil_lockstep",
+                "link": "UDP loopback: DEBUG_FLOAT_ARRAY -> gainlink_mavlink -> HIL_ACTUATOR_CONTROLS",
+                "steps": args.steps,
+                "repeats": args.repeats,
+                "baseline_in_process_steps_per_s": round(base, 1),
+                "default": report("default"),
+                "busy_poll": {"busy_poll_us": args.busy_poll_us, **report("busy_poll")},
+                "max_abs_du_vs_in_process_first_500": agree,
+                "busy_poll_commands_equal_default": busy_equals_default,
+                "target_steps_per_s": TARGET,
+                "meets_target": bool(meeting),
+                "meets_target_with": meeting,
+                "load_average_1min": round(os.getloadavg()[0], 2),
+                "cpus": os.cpu_count(),
+            },
+            indent=2,
+        )
+    )
     return 0
 
 

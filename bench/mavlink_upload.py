@@ -58,8 +58,9 @@ def main() -> int:
             link.wait_heartbeat(timeout=5)
             for round_ in range(args.rounds):
                 for mode, window in (("windowed", 16), ("sequential", 1)):
-                    session = ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE,
-                                           window=window)
+                    session = ParamSession(
+                        link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE, window=window
+                    )
                     scale = 1.0 + 0.01 * (2 * round_ + (mode == "sequential") + 1)
                     items = [(g.name, REAL32, float(g.value) * scale + 1e-3) for g in gains]
                     t0 = time.perf_counter()
@@ -83,20 +84,30 @@ def main() -> int:
 
     windowed = statistics.median(results["windowed"])
     sequential = statistics.median(results["sequential"])
-    print(json.dumps({
-        "benchmark": "mavlink_upload",
-        "link": "UDP loopback, gainlink_mavlink firmware app",
-        "params": args.params,
-        "rounds": args.rounds,
-        "verified_params_per_s": round(windowed, 1),
-        "baseline_sequential_params_per_s": round(sequential, 1),
-        "ratio_vs_sequential": round(windowed / sequential, 2),
-        "window": 16,
-        "target_params_per_s": TARGET,
-        "meets_target": windowed >= TARGET,
-        "full_upload": {"artifact": "wood_berry retuned (bryson_u_max / 1.7)", "changed": len(full.changes),
-                        "verified": full.verified, "committed": full.committed, "seconds": round(full.seconds, 4)},
-    }, indent=2))
+    print(
+        json.dumps(
+            {
+                "benchmark": "mavlink_upload",
+                "link": "UDP loopback, gainlink_mavlink firmware app",
+                "params": args.params,
+                "rounds": args.rounds,
+                "verified_params_per_s": round(windowed, 1),
+                "baseline_sequential_params_per_s": round(sequential, 1),
+                "ratio_vs_sequential": round(windowed / sequential, 2),
+                "window": 16,
+                "target_params_per_s": TARGET,
+                "meets_target": windowed >= TARGET,
+                "full_upload": {
+                    "artifact": "wood_berry retuned (bryson_u_max / 1.7)",
+                    "changed": len(full.changes),
+                    "verified": full.verified,
+                    "committed": full.committed,
+                    "seconds": round(full.seconds, 4),
+                },
+            },
+            indent=2,
+        )
+    )
     return 0
 
 

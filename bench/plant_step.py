@@ -14,7 +14,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.config import plant_from_config
 from gainlink.hil.plants.linearize import linearize
@@ -57,13 +56,24 @@ def main() -> None:
         t0 = time.perf_counter()
         lin = linearize(wood_berry, Ts=1.0)
         ident.append(time.perf_counter() - t0)
-    print(json.dumps({
-        "benchmark": "plant_step", "steps": STEPS, "dt_s": DT, "baseline": "fmu_cs",
-        "per_step_us": {k: round(v, 2) for k, v in us.items()},
-        "ratio_to_baseline": {k: round(v / us["fmu_cs"], 2) for k, v in us.items()},
-        "identify_wood_berry_cs": {"seconds": round(statistics.median(ident), 3), "order": int(lin.A.shape[0]),
-                                   "horizon_steps": 100},
-    }, indent=2))
+    print(
+        json.dumps(
+            {
+                "benchmark": "plant_step",
+                "steps": STEPS,
+                "dt_s": DT,
+                "baseline": "fmu_cs",
+                "per_step_us": {k: round(v, 2) for k, v in us.items()},
+                "ratio_to_baseline": {k: round(v / us["fmu_cs"], 2) for k, v in us.items()},
+                "identify_wood_berry_cs": {
+                    "seconds": round(statistics.median(ident), 3),
+                    "order": int(lin.A.shape[0]),
+                    "horizon_steps": 100,
+                },
+            },
+            indent=2,
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -39,13 +39,12 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
-
 from gainlink import artifact as artifact_mod
 from gainlink.design import design
 from gainlink.hil.links.can_firmware import firmware_can_executable
-from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
+from gainlink.hil.plants.build import build_fmu
 from gainlink.spec import parse_spec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -76,8 +75,8 @@ def firmware_pid(name: str = "gainlink_can") -> int | None:
                 stat = fh.read()
         except OSError:
             continue
-        comm = stat[stat.index("(") + 1: stat.rindex(")")]
-        ppid = int(stat[stat.rindex(")") + 2:].split()[1])
+        comm = stat[stat.index("(") + 1 : stat.rindex(")")]
+        ppid = int(stat[stat.rindex(")") + 2 :].split()[1])
         if ppid == me and comm == name:
             return int(entry)
     return None
@@ -105,13 +104,18 @@ class Sampler:
         while not self._stop.wait(self.period):
             pid = firmware_pid()
             steal = cpu_steal()
-            self.rows.append({
-                "t_s": round(time.monotonic() - self.t0, 1), "bridge_rss_kib": rss_kib(),
-                "firmware_rss_kib": rss_kib(pid) if pid else None, "load1": os.getloadavg()[0],
-                "steal_fraction": round((steal[0] - steal_prev[0]) / max(1, steal[1] - steal_prev[1]), 4)})
+            self.rows.append(
+                {
+                    "t_s": round(time.monotonic() - self.t0, 1),
+                    "bridge_rss_kib": rss_kib(),
+                    "firmware_rss_kib": rss_kib(pid) if pid else None,
+                    "load1": os.getloadavg()[0],
+                    "steal_fraction": round((steal[0] - steal_prev[0]) / max(1, steal[1] - steal_prev[1]), 4),
+                }
+            )
             steal_prev = steal
 
-    def __enter__(self) -> "Sampler":
+    def __enter__(self) -> Sampler:
         self.t0 = time.monotonic()
         self._thread.start()
         return self
@@ -131,10 +135,21 @@ def slope_kib_per_min(rows: list[dict], key: str, *, skip_s: float = 60.0) -> fl
 
 
 def scenario(name: str, *, gains: Path, exe: Path, fmu: Path, transport: dict, mode: str, duration: float) -> dict:
-    data = {"name": name, "artifact": str(gains), "duration": duration, "mode": mode, "controller": "firmware",
-            "firmware": str(exe), "twin": False, "peer_timeout": 10.0, "step_timeout": 2.0,
-            "plant": {"kind": "fmu", "path": str(fmu)}, "transport": transport, "initial_state": {"theta": 0.1},
-            "reference": {"r_x": {"kind": "step", "at": 1.0, "value": 0.2}}}
+    data = {
+        "name": name,
+        "artifact": str(gains),
+        "duration": duration,
+        "mode": mode,
+        "controller": "firmware",
+        "firmware": str(exe),
+        "twin": False,
+        "peer_timeout": 10.0,
+        "step_timeout": 2.0,
+        "plant": {"kind": "fmu", "path": str(fmu)},
+        "transport": transport,
+        "initial_state": {"theta": 0.1},
+        "reference": {"r_x": {"kind": "step", "at": 1.0, "value": 0.2}},
+    }
     if mode == "realtime":
         data["sched_fifo"] = True
     return data
@@ -150,9 +165,17 @@ def books(res, *, mode: str, stopped: bool = False) -> dict:
     c = m.get("controller", {}).get("counters", {})
     got = int(res.trace.got.sum())
     at_stop = int(stopped and not res.complete and not res.trace.got[-1])
-    out = {"steps": m["steps"], "answered": got, "lost": m["lost"] - at_stop, "lost_at_stop": at_stop,
-           "late": m["late"], "unaccounted_bridge": m["steps"] - got - m["lost"],
-           "frames_sent": info.get("frames_sent"), "firmware_counters": c, "end": res.reason or "complete"}
+    out = {
+        "steps": m["steps"],
+        "answered": got,
+        "lost": m["lost"] - at_stop,
+        "lost_at_stop": at_stop,
+        "late": m["late"],
+        "unaccounted_bridge": m["steps"] - got - m["lost"],
+        "frames_sent": info.get("frames_sent"),
+        "firmware_counters": c,
+        "end": res.reason or "complete",
+    }
     if c:
         in_flight = max(0, info["frames_sent"] - c["used"] - c["dropped"]) if at_stop else 0
         out["unaccounted_firmware"] = info["frames_sent"] - c["used"] - c["dropped"] - min(in_flight, 1)
@@ -174,17 +197,24 @@ def explain_misses(res) -> dict:
     skipped = missed[np.isnan(tr.tick_ns[missed])]
     sent = np.setdiff1d(missed, skipped)
     wake_us = (tr.tick_ns[sent] - tr.deadline_ns[sent]) / 1e3  # the tick's wake-up after its scheduled time
-    return {"missed": int(missed.size), "skipped_while_the_bridge_was_stalled": int(skipped.size),
-            "overruns_reported": m.get("overruns"),
-            "sample_sent_command_after_deadline": int(sent.size), "of_which_arrived_late": m["late"],
-            "of_which_never_arrived": int(sent.size) - m["late"],
-            "bridge_wake_delay_us_of_those": {"median": float(np.median(wake_us)) if wake_us.size else None,
-                                              "max": float(wake_us.max()) if wake_us.size else None},
-            "first_misses_s": [round(float(tr.t[k]), 3) for k in missed[:10]]}
+    return {
+        "missed": int(missed.size),
+        "skipped_while_the_bridge_was_stalled": int(skipped.size),
+        "overruns_reported": m.get("overruns"),
+        "sample_sent_command_after_deadline": int(sent.size),
+        "of_which_arrived_late": m["late"],
+        "of_which_never_arrived": int(sent.size) - m["late"],
+        "bridge_wake_delay_us_of_those": {
+            "median": float(np.median(wake_us)) if wake_us.size else None,
+            "max": float(wake_us.max()) if wake_us.size else None,
+        },
+        "first_misses_s": [round(float(tr.t[k]), 3) for k in missed[:10]],
+    }
 
 
 def _stop_firmware_after(seconds: float) -> threading.Timer:
     """SIGTERM our firmware child after ``seconds`` (ends a lockstep phase on time)."""
+
     def stop() -> None:
         pid = firmware_pid()
         if pid is not None:
@@ -213,18 +243,23 @@ def run_phase(name: str, data: dict, *, sample_s: float, stop_after_s: float | N
     growth = RECORDER_ZERO_BYTES(a.p, a.m) * steps_per_min / 1024
     bridge_slope = slope_kib_per_min(rows, "bridge_rss_kib")
     out = {
-        "wall_s": round(wall, 1), "steps": m["steps"], "steps_per_s": round(m["steps"] / wall, 1),
-        "complete": res.complete, "reason": res.reason,
+        "wall_s": round(wall, 1),
+        "steps": m["steps"],
+        "steps_per_s": round(m["steps"] / wall, 1),
+        "complete": res.complete,
+        "reason": res.reason,
         "rss_samples": rows,
         "bridge_rss_slope_kib_per_min": bridge_slope,
         "bridge_trace_growth_kib_per_min": round(growth, 1),
         "bridge_rss_slope_minus_trace": None if bridge_slope is None else round(bridge_slope - growth, 1),
         "firmware_rss_slope_kib_per_min": slope_kib_per_min(rows, "firmware_rss_kib"),
-        "firmware_rss_kib_first_last": [next((r["firmware_rss_kib"] for r in rows if r["firmware_rss_kib"]), None),
-                                        next((r["firmware_rss_kib"] for r in reversed(rows) if r["firmware_rss_kib"]),
-                                             None)],
+        "firmware_rss_kib_first_last": [
+            next((r["firmware_rss_kib"] for r in rows if r["firmware_rss_kib"]), None),
+            next((r["firmware_rss_kib"] for r in reversed(rows) if r["firmware_rss_kib"]), None),
+        ],
         "books": books(res, mode=data["mode"], stopped=stop_after_s is not None),
-        "latency_us": m["latency_us"], "period_jitter_us": m["period_jitter_us"],
+        "latency_us": m["latency_us"],
+        "period_jitter_us": m["period_jitter_us"],
         "controller_stderr_bytes": m.get("controller", {}).get("stderr_bytes"),
         "theta_final": m["outputs_final"].get("theta"),
     }
@@ -246,42 +281,64 @@ def main(argv: list[str] | None = None) -> int:
     spec = tomllib.loads((ROOT / "examples" / "pendulum.toml").read_text())
     spec["Ts"], spec["name"] = 0.001, "pendulum_1khz"
     rnd = random.Random(os.getpid())
-    transport = {"interface": "udp_multicast", "channel": f"239.74.{rnd.randint(1, 254)}.{rnd.randint(1, 254)}",
-                 "port": rnd.randint(40000, 60000), "hop_limit": 0, "fd": True}
-    out: dict = {"benchmark": "soak", "transport": "CAN FD over udp_multicast", "plant": "cart_pendulum FMU",
-                 "sample_s": args.sample_s, "cpus": os.cpu_count()}
+    transport = {
+        "interface": "udp_multicast",
+        "channel": f"239.74.{rnd.randint(1, 254)}.{rnd.randint(1, 254)}",
+        "port": rnd.randint(40000, 60000),
+        "hop_limit": 0,
+        "fd": True,
+    }
+    out: dict = {
+        "benchmark": "soak",
+        "transport": "CAN FD over udp_multicast",
+        "plant": "cart_pendulum FMU",
+        "sample_s": args.sample_s,
+        "cpus": os.cpu_count(),
+    }
     with tempfile.TemporaryDirectory() as tmp:
         gains = Path(tmp) / "gains.json"
         artifact_mod.write(gains, design(parse_spec(spec)).artifact)
         art = artifact_mod.load(gains)
-        common = dict(gains=gains, exe=firmware_can_executable(art), fmu=build_fmu("cart_pendulum"),
-                      transport=transport)
+        common = dict(
+            gains=gains, exe=firmware_can_executable(art), fmu=build_fmu("cart_pendulum"), transport=transport
+        )
         t0 = time.perf_counter()
-        cal = run_scenario(parse_scenario(scenario("soak_calibration", mode="lockstep",
-                                                    duration=args.calibration_steps * art.Ts, **common)))
+        cal = run_scenario(
+            parse_scenario(
+                scenario("soak_calibration", mode="lockstep", duration=args.calibration_steps * art.Ts, **common)
+            )
+        )
         rate = cal.metrics["steps"] / (time.perf_counter() - t0)
         out["calibration"] = {"steps": cal.metrics["steps"], "steps_per_s": round(rate, 1)}
         if args.lockstep_minutes > 0:
             steps = min(int(3 * rate * args.lockstep_minutes * 60), 10_000_000)
-            _, ph = run_phase("lockstep", scenario("soak_lockstep", mode="lockstep", duration=steps * art.Ts,
-                                                   **common), sample_s=args.sample_s,
-                              stop_after_s=args.lockstep_minutes * 60)
+            _, ph = run_phase(
+                "lockstep",
+                scenario("soak_lockstep", mode="lockstep", duration=steps * art.Ts, **common),
+                sample_s=args.sample_s,
+                stop_after_s=args.lockstep_minutes * 60,
+            )
             ph["speed_vs_calibration"] = round(ph["steps_per_s"] / rate, 3)
             out["lockstep"] = ph
         if args.realtime_minutes > 0:
-            _, ph = run_phase("realtime", scenario("soak_realtime", mode="realtime",
-                                                   duration=args.realtime_minutes * 60, **common),
-                              sample_s=args.sample_s)
+            _, ph = run_phase(
+                "realtime",
+                scenario("soak_realtime", mode="realtime", duration=args.realtime_minutes * 60, **common),
+                sample_s=args.sample_s,
+            )
             out["realtime"] = ph
     phases = [out[k] for k in ("lockstep", "realtime") if k in out]
     out["summary"] = {
         "complete": all(p["complete"] or p["books"]["lost_at_stop"] for p in phases),
-        "unaccounted_samples": sum(abs(p["books"]["unaccounted_bridge"]) + abs(p["books"].get("unaccounted_firmware", 0))
-                                   for p in phases),
-        "firmware_rss_slope_kib_per_min": {k: out[k]["firmware_rss_slope_kib_per_min"] for k in ("lockstep", "realtime")
-                                           if k in out},
-        "bridge_rss_slope_minus_trace": {k: out[k]["bridge_rss_slope_minus_trace"] for k in ("lockstep", "realtime")
-                                         if k in out},
+        "unaccounted_samples": sum(
+            abs(p["books"]["unaccounted_bridge"]) + abs(p["books"].get("unaccounted_firmware", 0)) for p in phases
+        ),
+        "firmware_rss_slope_kib_per_min": {
+            k: out[k]["firmware_rss_slope_kib_per_min"] for k in ("lockstep", "realtime") if k in out
+        },
+        "bridge_rss_slope_minus_trace": {
+            k: out[k]["bridge_rss_slope_minus_trace"] for k in ("lockstep", "realtime") if k in out
+        },
     }
     json.dump(out, sys.stdout, indent=2)
     sys.stdout.write("\n")

@@ -53,8 +53,12 @@ def _round_trips(art, transport, steps: int) -> tuple[dict, np.ndarray]:
         u = U[k] = c.u
         x = art.Ad @ x + art.Bd @ u
     wall = time.perf_counter() - t0
-    stats = {"round_trips_per_s": round(steps / wall, 1), "latency_us_p50": round(float(np.median(lat)), 1),
-             "latency_us_p99": round(float(np.percentile(lat, 99)), 1), "steps": steps}
+    stats = {
+        "round_trips_per_s": round(steps / wall, 1),
+        "latency_us_p50": round(float(np.median(lat)), 1),
+        "latency_us_p99": round(float(np.percentile(lat, 99)), 1),
+        "steps": steps,
+    }
     return stats, U
 
 
@@ -71,11 +75,17 @@ def _links(art, *, board: str):
 
     return [
         ("host_mavlink_udp", "firmware", {"kind": "mavlink", "port": udp_port()}),
-        ("host_can_udp_multicast", "firmware", {"interface": "udp_multicast", "channel": "239.74.163.71",
-                                                "hop_limit": 0}),
+        (
+            "host_can_udp_multicast",
+            "firmware",
+            {"interface": "udp_multicast", "channel": "239.74.163.71", "hop_limit": 0},
+        ),
         (f"image_mavlink_uart_{board}", "qemu", {"kind": "mavlink", "url": f"tcp:127.0.0.1:{free_tcp_port()}"}),
-        (f"image_slcan_uart_{board}", "qemu", {"interface": "slcan",
-                                               "channel": f"socket://127.0.0.1:{free_tcp_port()}"}),
+        (
+            f"image_slcan_uart_{board}",
+            "qemu",
+            {"interface": "slcan", "channel": f"socket://127.0.0.1:{free_tcp_port()}"},
+        ),
     ]
 
 
@@ -124,21 +134,29 @@ def measure_round_trips(art, *, boards: list[str], steps: int) -> dict:
     return out
 
 
-def realtime_scenario(art_path: Path, transport: dict, *, controller: str, board: str, rate_hz: float,
-                      duration: float):
+def realtime_scenario(art_path: Path, transport: dict, *, controller: str, board: str, rate_hz: float, duration: float):
     from gainlink.hil.loop.scenario import parse_scenario
 
-    data = {"name": f"rt_{rate_hz:g}hz", "artifact": str(art_path), "duration": duration, "mode": "realtime",
-            "controller": controller, "period": 1.0 / rate_hz, "peer_timeout": 5.0, "seed": 3, "twin": False,
-            "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]}, "transport": transport,
-            "initial_state": {"theta": 0.05}}
+    data = {
+        "name": f"rt_{rate_hz:g}hz",
+        "artifact": str(art_path),
+        "duration": duration,
+        "mode": "realtime",
+        "controller": controller,
+        "period": 1.0 / rate_hz,
+        "peer_timeout": 5.0,
+        "seed": 3,
+        "twin": False,
+        "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]},
+        "transport": transport,
+        "initial_state": {"theta": 0.05},
+    }
     if controller == "qemu":
         data["board"] = board
     return parse_scenario(data, path=art_path.parent / "scenario.toml")
 
 
-def highest_rate(art, art_path: Path, *, kind: str, cfg: dict, board: str, p50_us: float,
-                 seconds: float) -> dict:
+def highest_rate(art, art_path: Path, *, kind: str, cfg: dict, board: str, p50_us: float, seconds: float) -> dict:
     """The highest of RATES_HZ whose realtime run of ``seconds`` has no deadline miss."""
     from gainlink.hil.loop.bridge import run_scenario
 
@@ -148,12 +166,22 @@ def highest_rate(art, art_path: Path, *, kind: str, cfg: dict, board: str, p50_u
             skipped.append(rate)
             continue
         # the plant advances Ts per tick whatever the period: only the wall-clock pacing changes
-        res = run_scenario(realtime_scenario(art_path, cfg, controller=kind, board=board, rate_hz=rate,
-                                             duration=seconds * rate * art.Ts))
+        res = run_scenario(
+            realtime_scenario(
+                art_path, cfg, controller=kind, board=board, rate_hz=rate, duration=seconds * rate * art.Ts
+            )
+        )
         m = res.metrics
-        tried.append({"rate_hz": rate, "steps": m["steps"], "deadline_misses": m["deadline_misses"],
-                      "overruns": m.get("overruns"), "latency_us_p99": m["latency_us"]["p99"],
-                      "complete": res.complete})
+        tried.append(
+            {
+                "rate_hz": rate,
+                "steps": m["steps"],
+                "deadline_misses": m["deadline_misses"],
+                "overruns": m.get("overruns"),
+                "latency_us_p99": m["latency_us"]["p99"],
+                "complete": res.complete,
+            }
+        )
         if res.complete and m["deadline_misses"] == 0:
             return {"highest_rate_hz_without_miss": rate, "tried": tried, "skipped_above_p50": skipped}
     return {"highest_rate_hz_without_miss": None, "tried": tried, "skipped_above_p50": skipped}
@@ -183,9 +211,15 @@ def main() -> int:
         realtime = {}
         for name, kind, cfg in _links(art, board=args.realtime_board):
             if name.startswith("image_") or name == "host_mavlink_udp":
-                realtime[name] = highest_rate(art, art_path, kind=kind, cfg=cfg,
-                                              board=args.realtime_board, p50_us=rt[name]["latency_us_p50"],
-                                              seconds=args.realtime_s)
+                realtime[name] = highest_rate(
+                    art,
+                    art_path,
+                    kind=kind,
+                    cfg=cfg,
+                    board=args.realtime_board,
+                    p50_us=rt[name]["latency_us_p50"],
+                    seconds=args.realtime_s,
+                )
     result = {
         "benchmark": "target_uart",
         "artifact": "pendulum (examples/pendulum.toml), n=4 m=1 p=2 q=1",

@@ -8,15 +8,19 @@ Run it: ``python examples/notebook_style.py`` (the tests run it as it is).
 """
 
 import control as ct
+import gainlink as gl
 import numpy as np
 
-import gainlink as gl
-
 # The seed's cart pendulum, linearised about upright (M = 1 kg, m = 0.1 kg, l = 0.5 m).
-plant = ct.ss([[0, 1, 0, 0], [0, 0, -0.981, 0], [0, 0, 0, 1], [0, 0, 21.582, 0]],
-              [[0], [1], [0], [-2]],
-              [[1, 0, 0, 0], [0, 0, 1, 0]], [[0], [0]],
-              states=["x", "x_dot", "theta", "theta_dot"], inputs=["F"], outputs=["x", "theta"])
+plant = ct.ss(
+    [[0, 1, 0, 0], [0, 0, -0.981, 0], [0, 0, 0, 1], [0, 0, 21.582, 0]],
+    [[0], [1], [0], [-2]],
+    [[1, 0, 0, 0], [0, 0, 1, 0]],
+    [[0], [0]],
+    states=["x", "x_dot", "theta", "theta_dot"],
+    inputs=["F"],
+    outputs=["x", "theta"],
+)
 Ts = 0.01
 plant_d = ct.c2d(plant, Ts)
 
@@ -38,8 +42,10 @@ ctrl = art.controller()
 loop = -ctrl[["F"], ["x", "theta"]] * plant_d
 w = np.logspace(-2, np.log10(np.pi / Ts), 5000)
 gm, pm, wcg, wcp = ct.margin(ct.frd(loop, w))
-print(f"python-control: phase margin {pm:.1f} deg at {wcp:.2f} rad/s; "
-      f"gainlink design check: {art.checks['margins'][0]['phase_margin_deg']:.1f} deg")
+print(
+    f"python-control: phase margin {pm:.1f} deg at {wcp:.2f} rad/s; "
+    f"gainlink design check: {art.checks['margins'][0]['phase_margin_deg']:.1f} deg"
+)
 
 # Closed-loop step of the cart-position reference.
 cl = art.closed_loop()
@@ -50,5 +56,6 @@ print(f"step in r_x: x settles at {step.outputs[-1]:.4f}")
 sim = gl.simulate(art, steps=600, x0=[0.0, 0.0, 0.05, 0.0], reference=[0.5], noise_std=1e-3, seed=1)
 native = gl.replay(art, sim.y, sim.r, engine="native")
 reference = gl.replay(art, sim.y, sim.r, engine="reference")
-print(f"C loop vs float64 law on the first 50 steps: max |du| = "
-      f"{np.max(np.abs(native.u[:50] - reference.u[:50])):.2e} N")
+print(
+    f"C loop vs float64 law on the first 50 steps: max |du| = {np.max(np.abs(native.u[:50] - reference.u[:50])):.2e} N"
+)

@@ -17,13 +17,19 @@ The vehicle-side MAVLink parameter upload is :mod:`gainlink.mavlink`.
 
 from __future__ import annotations
 
-
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 
-def run(scenario: Any, *, artifact: Any = None, report: str | Path | None = None, plots: bool = True,
-        progress: Callable[[int, int], None] | None = None) -> Any:
+def run(
+    scenario: Any,
+    *,
+    artifact: Any = None,
+    report: str | Path | None = None,
+    plots: bool = True,
+    progress: Callable[[int, int], None] | None = None,
+) -> Any:
     """Run one HIL scenario: plant on this side, the controller (firmware) on the other, and return the result.
 
     Parameters

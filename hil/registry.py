@@ -7,7 +7,8 @@ that lists what is available.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Generic, Mapping, TypeVar
+from collections.abc import Callable, Mapping
+from typing import Any, Generic, TypeVar
 
 from gainlink.errors import GainlinkError
 

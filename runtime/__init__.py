@@ -13,26 +13,53 @@ __version__ = "0.1.0"
 # The submodules design, replay and simulate are loaded first; the functions of the same names
 # then take their place as attributes of the package (``gl.design(...)``). Code inside gainlink
 # imports from the submodules (``from gainlink.design import design``), which is unaffected.
-from . import design as _design_module, replay as _replay_module, simulate as _simulate_module  # noqa: E402,F401
-from .api import design, from_gains, load, replay, simulate  # noqa: E402
-from .artifact import Artifact  # noqa: E402
-from .errors import (ArtifactError, DataError, DesignError, GainlinkError, IntegrityError,  # noqa: E402
-                     PlantError, ScenarioError, SpecError)
-from .reference import ReferenceLoop, Trace  # noqa: E402
-from .simulate import Simulation  # noqa: E402
-from .compensator import compensator_stability  # noqa: E402
-from .fidelity import float32_fidelity  # noqa: E402
-from .onestep import one_step_check  # noqa: E402
-from .twin import twin_comparison  # noqa: E402
-from . import hil  # noqa: E402
+from . import design as _design_module  # noqa: F401
+from . import hil
+from . import replay as _replay_module
+from . import simulate as _simulate_module
+from .api import design, from_gains, load, replay, simulate
+from .artifact import Artifact
+from .compensator import compensator_stability
+from .errors import (
+    ArtifactError,
+    DataError,
+    DesignError,
+    GainlinkError,
+    IntegrityError,
+    PlantError,
+    ScenarioError,
+    SpecError,
+)
+from .fidelity import float32_fidelity
+from .onestep import one_step_check
+from .reference import ReferenceLoop, Trace
+from .simulate import Simulation
+from .twin import twin_comparison
 
 __all__ = [
-    "design", "from_gains", "load", "replay", "simulate",
-    "Artifact", "ReferenceLoop", "Trace", "Simulation",
-    "GainlinkError", "SpecError", "DesignError", "ArtifactError", "IntegrityError", "DataError",
-    "PlantError", "ScenarioError",
-    "one_step_check", "compensator_stability", "float32_fidelity", "twin_comparison",
-    "hil", "campaign",
+    "Artifact",
+    "ArtifactError",
+    "DataError",
+    "DesignError",
+    "GainlinkError",
+    "IntegrityError",
+    "PlantError",
+    "ReferenceLoop",
+    "ScenarioError",
+    "Simulation",
+    "SpecError",
+    "Trace",
+    "campaign",
+    "compensator_stability",
+    "design",
+    "float32_fidelity",
+    "from_gains",
+    "hil",
+    "load",
+    "one_step_check",
+    "replay",
+    "simulate",
+    "twin_comparison",
 ]
 
 

@@ -114,22 +114,32 @@ def pbh_observable(A: np.ndarray, C: np.ndarray, lam: complex) -> bool:
 def modes(A: np.ndarray, B: np.ndarray, C: np.ndarray, *, discrete: bool) -> list[Mode]:
     """PBH verdicts for every distinct eigenvalue of A."""
     return [
-        Mode(eigenvalue=lam, stable=is_stable(lam, discrete=discrete),
-             controllable=pbh_controllable(A, B, lam), observable=pbh_observable(A, C, lam))
+        Mode(
+            eigenvalue=lam,
+            stable=is_stable(lam, discrete=discrete),
+            controllable=pbh_controllable(A, B, lam),
+            observable=pbh_observable(A, C, lam),
+        )
         for lam in distinct_eigenvalues(A)
     ]
 
 
 def uncontrollable_unstable(A: np.ndarray, B: np.ndarray, *, discrete: bool) -> list[complex]:
     """The modes that make (A, B) not stabilizable (empty when stabilizable)."""
-    return [lam for lam in distinct_eigenvalues(A)
-            if not is_stable(lam, discrete=discrete) and not pbh_controllable(A, B, lam)]
+    return [
+        lam
+        for lam in distinct_eigenvalues(A)
+        if not is_stable(lam, discrete=discrete) and not pbh_controllable(A, B, lam)
+    ]
 
 
 def unobservable_unstable(A: np.ndarray, C: np.ndarray, *, discrete: bool) -> list[complex]:
     """The modes that make (A, C) not detectable (empty when detectable)."""
-    return [lam for lam in distinct_eigenvalues(A)
-            if not is_stable(lam, discrete=discrete) and not pbh_observable(A, C, lam)]
+    return [
+        lam
+        for lam in distinct_eigenvalues(A)
+        if not is_stable(lam, discrete=discrete) and not pbh_observable(A, C, lam)
+    ]
 
 
 def rank_and_cond(M: np.ndarray, n: int) -> tuple[int, float]:
@@ -204,19 +214,36 @@ def analyze(spec: PlantSpec) -> AnalysisReport:
         )
     scale_ratio, bad_states = state_scaling(A, B, C, spec.states)
     if bad_states:
-        warnings.append(f"badly scaled states (balancing factors spread {scale_ratio:.2g}x): "
-                        f"{bad_states[0]} vs {bad_states[1]}; rescale units before design")
+        warnings.append(
+            f"badly scaled states (balancing factors spread {scale_ratio:.2g}x): "
+            f"{bad_states[0]} vs {bad_states[1]}; rescale units before design"
+        )
     return AnalysisReport(
-        name=spec.name, kind=spec.kind, n=n, m=spec.m, p=spec.p, Ts=spec.Ts,
-        open_loop_poles=[complex(z) for z in np.linalg.eigvals(A)], modes=mode_list,
-        controllability_rank=c_rank, controllability_cond=c_cond,
-        observability_rank=o_rank, observability_cond=o_cond,
+        name=spec.name,
+        kind=spec.kind,
+        n=n,
+        m=spec.m,
+        p=spec.p,
+        Ts=spec.Ts,
+        open_loop_poles=[complex(z) for z in np.linalg.eigvals(A)],
+        modes=mode_list,
+        controllability_rank=c_rank,
+        controllability_cond=c_cond,
+        observability_rank=o_rank,
+        observability_cond=o_cond,
         stabilizable=all(md.stable or md.controllable for md in mode_list),
         detectable=all(md.stable or md.observable for md in mode_list),
-        transmission_zeros=[complex(z) for z in zeros], nonminimum_phase_zeros=[complex(z) for z in nmp],
-        bandwidth_rad_s=bandwidth, bandwidth_source=source, sample_rate_ratio=float(ratio),
-        state_scale_ratio=scale_ratio, badly_scaled_states=bad_states, warnings=warnings,
-        compensator=checks.get("compensator"), float32=checks.get("float32"), dead_time=checks.get("dead_time"),
+        transmission_zeros=[complex(z) for z in zeros],
+        nonminimum_phase_zeros=[complex(z) for z in nmp],
+        bandwidth_rad_s=bandwidth,
+        bandwidth_source=source,
+        sample_rate_ratio=float(ratio),
+        state_scale_ratio=scale_ratio,
+        badly_scaled_states=bad_states,
+        warnings=warnings,
+        compensator=checks.get("compensator"),
+        float32=checks.get("float32"),
+        dead_time=checks.get("dead_time"),
     )
 
 
@@ -246,12 +273,18 @@ def _bandwidth(spec: PlantSpec, warnings: list[str]) -> tuple[float, str, dict]:
         warnings.append(f"design of this spec fails: {exc}")
         fastest = max(pole_frequency(z, discrete=not spec.continuous, Ts=spec.Ts) for z in np.linalg.eigvals(spec.A))
         return fastest, "open loop", {}
-    for w in (result.compensator.warning(), result.float32 and result.float32.warning(),
-              result.dead_time and result.dead_time.warning()):
+    for w in (
+        result.compensator.warning(),
+        result.float32 and result.float32.warning(),
+        result.dead_time and result.dead_time.warning(),
+    ):
         if w:
             warnings.append(w)
-    return (loop_bandwidth(result.margins, result.controller_poles, spec.Ts), "closed-loop (gain crossover)",
-            result.artifact["checks"])
+    return (
+        loop_bandwidth(result.margins, result.controller_poles, spec.Ts),
+        "closed-loop (gain crossover)",
+        result.artifact["checks"],
+    )
 
 
 def _fmt(z: complex) -> str:

@@ -10,8 +10,9 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -26,16 +27,34 @@ from .spec import PlantSpec, load_spec, parse_spec
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 #: Keyword shortcuts of :func:`design` and the spec table each belongs to.
-_SHORTCUTS = {"Q": "controller", "R": "controller", "W": "observer", "V": "observer",
-              "u_min": "limits", "u_max": "limits"}
+_SHORTCUTS = {
+    "Q": "controller",
+    "R": "controller",
+    "W": "observer",
+    "V": "observer",
+    "u_min": "limits",
+    "u_max": "limits",
+}
 
 
-def design(plant: Any, *, Ts: float | None = None, name: str | None = None,
-           Q: Any = None, R: Any = None, W: Any = None, V: Any = None,
-           u_min: Any = None, u_max: Any = None,
-           controller: Mapping[str, Any] | None = None, integral: Mapping[str, Any] | None = None,
-           observer: Mapping[str, Any] | None = None, limits: Mapping[str, Any] | None = None,
-           operating_point: Mapping[str, Any] | None = None, discretization: str | None = None) -> Artifact:
+def design(
+    plant: Any,
+    *,
+    Ts: float | None = None,
+    name: str | None = None,
+    Q: Any = None,
+    R: Any = None,
+    W: Any = None,
+    V: Any = None,
+    u_min: Any = None,
+    u_max: Any = None,
+    controller: Mapping[str, Any] | None = None,
+    integral: Mapping[str, Any] | None = None,
+    observer: Mapping[str, Any] | None = None,
+    limits: Mapping[str, Any] | None = None,
+    operating_point: Mapping[str, Any] | None = None,
+    discretization: str | None = None,
+) -> Artifact:
     """Design a controller and observer and return the checked, sealed artifact.
 
     Parameters
@@ -78,17 +97,35 @@ def design(plant: Any, *, Ts: float | None = None, name: str | None = None,
     (2, 1, 1, 'predictor')
     """
     data = _spec_dict(plant, Ts=Ts, name=name, discretization=discretization)
-    tables = {"controller": controller, "integral": integral, "observer": observer, "limits": limits,
-              "operating_point": operating_point}
+    tables = {
+        "controller": controller,
+        "integral": integral,
+        "observer": observer,
+        "limits": limits,
+        "operating_point": operating_point,
+    }
     shortcuts = {"Q": Q, "R": R, "W": W, "V": V, "u_min": u_min, "u_max": u_max}
     data = _merge_tables(data, tables, shortcuts)
     return _design_dict(data, source=_source_name(plant))
 
 
-def from_gains(plant: Any, *, K: Any, L: Any = None, M: Any = None, Ki: Any = None, Ci: Any = None,
-               u_min: Any, u_max: Any, u_op: Any = None, y_op: Any = None, Ts: float | None = None,
-               anti_windup: str | None = None, aw_gain: float | None = None,
-               name: str | None = None) -> Artifact:
+def from_gains(
+    plant: Any,
+    *,
+    K: Any,
+    L: Any = None,
+    M: Any = None,
+    Ki: Any = None,
+    Ci: Any = None,
+    u_min: Any,
+    u_max: Any,
+    u_op: Any = None,
+    y_op: Any = None,
+    Ts: float | None = None,
+    anti_windup: str | None = None,
+    aw_gain: float | None = None,
+    name: str | None = None,
+) -> Artifact:
     """An artifact from gains the user computed (e.g. with ``control.dlqr``), with every design check.
 
     Parameters
@@ -139,8 +176,11 @@ def from_gains(plant: Any, *, K: Any, L: Any = None, M: Any = None, Ki: Any = No
     data = _spec_dict(plant, Ts=Ts, name=name, discretization=None)
     controller: dict[str, Any] = {"method": "given", "K": _rows(K)}
     tables: dict[str, Any] = {"controller": controller, "limits": {"u_min": _list(u_min), "u_max": _list(u_max)}}
-    tables["observer"] = ({"method": "given", "form": "predictor", "L": _rows(L)} if L is not None
-                          else {"method": "given", "form": "current", "M": _rows(M)})
+    tables["observer"] = (
+        {"method": "given", "form": "predictor", "L": _rows(L)}
+        if L is not None
+        else {"method": "given", "form": "current", "M": _rows(M)}
+    )
     if (Ki is None) != (Ci is None):
         raise SpecError("from_gains: integral action needs both Ci (tracked outputs) and Ki")
     if Ki is not None:
@@ -191,8 +231,9 @@ def replay(artifact: Artifact, y: Any, r: Any = None, *, engine: str = "referenc
     return get_engine(engine)(artifact, Y, R)
 
 
-def simulate(artifact: Artifact, *, steps: int, x0: Any = None, reference: Any = None, noise_std: float = 0.0,
-             seed: int = 0) -> Simulation:
+def simulate(
+    artifact: Artifact, *, steps: int, x0: Any = None, reference: Any = None, noise_std: float = 0.0, seed: int = 0
+) -> Simulation:
     """Closed-loop run of the float64 law against the artifact's own discrete plant.
 
     Parameters
@@ -282,11 +323,15 @@ def _system_dict(sys: Any, *, Ts: float | None) -> dict:
     if isinstance(sys, control.TransferFunction):
         sys = control.ss(sys)
     if not isinstance(sys, control.StateSpace):
-        raise SpecError(f"plant must be a spec file, a spec dict or a control.StateSpace/TransferFunction, "
-                        f"not {type(sys).__name__}")
+        raise SpecError(
+            f"plant must be a spec file, a spec dict or a control.StateSpace/TransferFunction, not {type(sys).__name__}"
+        )
     plant: dict[str, Any] = {"A": _rows(sys.A), "B": _rows(sys.B), "C": _rows(sys.C), "D": _rows(sys.D)}
-    for key, labels, prefix in (("states", sys.state_labels, "x"), ("inputs", sys.input_labels, "u"),
-                                ("outputs", sys.output_labels, "y")):
+    for key, labels, prefix in (
+        ("states", sys.state_labels, "x"),
+        ("inputs", sys.input_labels, "u"),
+        ("outputs", sys.output_labels, "y"),
+    ):
         plant[key] = _identifiers(labels, prefix)
     data: dict[str, Any] = {"plant": plant}
     if sys.isdtime(strict=True):
@@ -312,8 +357,14 @@ def _identifiers(labels: list[str], prefix: str) -> list[str]:
 
 
 #: Spec keys a weight given as a full matrix replaces (one way to give each weight).
-_REPLACES = {"Q": ("Q_diag", "bryson_x_max", "bryson_y_max"), "R": ("R_diag", "bryson_u_max"),
-             "W": ("W_diag",), "V": ("V_diag",), "u_min": (), "u_max": ()}
+_REPLACES = {
+    "Q": ("Q_diag", "bryson_x_max", "bryson_y_max"),
+    "R": ("R_diag", "bryson_u_max"),
+    "W": ("W_diag",),
+    "V": ("V_diag",),
+    "u_min": (),
+    "u_max": (),
+}
 
 
 def _merge_tables(data: dict, tables: Mapping[str, Any], shortcuts: Mapping[str, Any]) -> dict:

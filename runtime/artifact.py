@@ -138,7 +138,7 @@ class Artifact:
         return self.data["checks"]
 
     @classmethod
-    def load(cls, path: str | Path, *, check_hash: bool = True) -> "Artifact":
+    def load(cls, path: str | Path, *, check_hash: bool = True) -> Artifact:
         """Read and check ``gains.json`` (schema, sha256, dimensions, invariants); see :func:`load`."""
         return load(path, check_hash=check_hash)
 
@@ -215,8 +215,12 @@ def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
     M = _filter_gain(data, form, Ad=Ad, Dd=Dd, L=L)
     Ci, Ki, Kaw = _integral_matrices(data, m=m, p=p, q=q)
     if "realization" in data:
-        _check_realization(data["realization"], n=n, current=form == "current",
-                           now={"Ad": Ad, "Bd": Bd, "Cd": Cd, "K": K, "L": L, "M": M})
+        _check_realization(
+            data["realization"],
+            n=n,
+            current=form == "current",
+            now={"Ad": Ad, "Bd": Bd, "Cd": Cd, "K": K, "L": L, "M": M},
+        )
     u_min = _vector(data, "u_min", m)
     u_max = _vector(data, "u_max", m)
     if np.any(u_min > u_max):
@@ -226,12 +230,33 @@ def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
         if len(sig[key]) != size:
             raise ArtifactError(f"signals.{key} names {len(sig[key])} signals, expected {size}")
     return Artifact(
-        data=data, name=data["name"], Ts=float(data["Ts"]), n=n, m=m, p=p, q=q,
-        Ad=Ad, Bd=Bd, Cd=Cd, Dd=Dd, K=K, L=L, M=M, Ci=Ci, Ki=Ki, Kaw=Kaw,
-        u_min=u_min, u_max=u_max, xh0=_vector(data, "xh0", n, 0.0), z0=_vector(data, "z0", q, 0.0),
-        u_op=_vector(data, "u_op", m, 0.0), y_op=_vector(data, "y_op", p, 0.0),
+        data=data,
+        name=data["name"],
+        Ts=float(data["Ts"]),
+        n=n,
+        m=m,
+        p=p,
+        q=q,
+        Ad=Ad,
+        Bd=Bd,
+        Cd=Cd,
+        Dd=Dd,
+        K=K,
+        L=L,
+        M=M,
+        Ci=Ci,
+        Ki=Ki,
+        Kaw=Kaw,
+        u_min=u_min,
+        u_max=u_max,
+        xh0=_vector(data, "xh0", n, 0.0),
+        z0=_vector(data, "z0", q, 0.0),
+        u_op=_vector(data, "u_op", m, 0.0),
+        y_op=_vector(data, "y_op", p, 0.0),
         x_op=_vector(data, "x_op", n) if "x_op" in data else None,
-        anti_windup=data["anti_windup"], observer_form=form, sha256=data["sha256"],
+        anti_windup=data["anti_windup"],
+        observer_form=form,
+        sha256=data["sha256"],
     )
 
 
@@ -288,8 +313,14 @@ def _check_realization(rec: dict, *, n: int, current: bool, now: dict) -> None:
     if current != ("M" in d):
         raise ArtifactError("realization.design must hold M exactly when observer_form is 'current'")
     expect = {k: np.array(d[k], dtype=float) for k in d if k != "xh0"}
-    expect = {"Ad": T @ expect["Ad"] @ Ti, "Bd": T @ expect["Bd"], "Cd": expect["Cd"] @ Ti, "K": expect["K"] @ Ti,
-              "L": T @ expect["L"], **({"M": T @ expect["M"]} if current else {})}
+    expect = {
+        "Ad": T @ expect["Ad"] @ Ti,
+        "Bd": T @ expect["Bd"],
+        "Cd": expect["Cd"] @ Ti,
+        "K": expect["K"] @ Ti,
+        "L": T @ expect["L"],
+        **({"M": T @ expect["M"]} if current else {}),
+    }
     for key, want in expect.items():
         got = now[key]
         if got.shape != want.shape or np.linalg.norm(got - want) > 1e-9 * max(1.0, np.linalg.norm(want)):
@@ -322,4 +353,3 @@ def _reject_constant(name: str) -> float:
 def write(path: str | Path, data: dict) -> None:
     """Seal ``data`` and write it atomically to ``path``."""
     atomic_write_text(path, render(seal(data)))
-

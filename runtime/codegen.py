@@ -273,7 +273,7 @@ def _step_file(a: Artifact, body: list[str], length: int) -> str:
         " * same order, so the results are bit-identical. Stream length %d coefficients.\n */\n"
         % (n, m, p, q, a.observer_form, a.anti_windup, length)
         + "#ifndef GL_STEP_H\n#define GL_STEP_H\n\n"
-        f"_Static_assert(GL_STREAM_LEN == {length}, \"gl_step.h does not match the library's stream layout\");\n\n"
+        f'_Static_assert(GL_STREAM_LEN == {length}, "gl_step.h does not match the library\'s stream layout");\n\n'
         "static inline __attribute__((always_inline)) uint32_t gl_step_core(const float *w, float *xh_io, float *z_io,\n"
         "                                                                  const float *ys, const float *rs, float *u)\n"
         "{\n" + "\n".join(body) + "\n}\n\n#endif /* GL_STEP_H */\n"

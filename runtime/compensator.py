@@ -58,20 +58,25 @@ class CompensatorStability:
         if self.stable:
             return None
         worst = float(np.max(np.abs(self.unstable_poles)))
-        return (f"the compensator (controller from y, r to u, unsaturated) is unstable: {self.unstable_poles.size} "
-                f"pole(s) outside the unit circle, largest |z| = {worst:.4g}. The closed loop is stable, but the "
-                "controller must only run with the loop closed: start it with the plant running and the sensors "
-                "valid, and treat a broken sensor path (stuck or disconnected measurement) as a fault that stops "
-                f"it, or its state and command run away (growing like {worst:.3g}^k per sample). Recorded samples "
-                "replayed open loop through two implementations diverge for the same reason; compare them one "
-                "step at a time (gainlink replay --compare)")
+        return (
+            f"the compensator (controller from y, r to u, unsaturated) is unstable: {self.unstable_poles.size} "
+            f"pole(s) outside the unit circle, largest |z| = {worst:.4g}. The closed loop is stable, but the "
+            "controller must only run with the loop closed: start it with the plant running and the sensors "
+            "valid, and treat a broken sensor path (stuck or disconnected measurement) as a fault that stops "
+            f"it, or its state and command run away (growing like {worst:.3g}^k per sample). Recorded samples "
+            "replayed open loop through two implementations diverge for the same reason; compare them one "
+            "step at a time (gainlink replay --compare)"
+        )
 
     def to_dict(self) -> dict:
         """JSON form for the artifact's ``checks`` and reports."""
-        return {"poles": complex_pairs(sorted(self.poles, key=lambda z: (abs(z), z.imag))),
-                "spectral_radius": self.spectral_radius,
-                "spectral_radius_without_integrators": self.radius_without_integrators,
-                "unstable_poles": complex_pairs(self.unstable_poles), "stable": self.stable}
+        return {
+            "poles": complex_pairs(sorted(self.poles, key=lambda z: (abs(z), z.imag))),
+            "spectral_radius": self.spectral_radius,
+            "spectral_radius_without_integrators": self.radius_without_integrators,
+            "unstable_poles": complex_pairs(self.unstable_poles),
+            "stable": self.stable,
+        }
 
 
 def compensator_stability(artifact) -> CompensatorStability:
@@ -94,6 +99,9 @@ def compensator_stability(artifact) -> CompensatorStability:
     own = np.linalg.eigvals(A[:n, :n])  # the block-triangular A: the integrators add q poles at 1
     poles = np.concatenate([own, np.ones(q, dtype=complex)])
     unstable = own[np.abs(own) > 1.0 + UNSTABLE_MARGIN]
-    return CompensatorStability(poles=poles, spectral_radius=float(np.max(np.abs(poles))),
-                                unstable_poles=np.array(sorted(unstable, key=lambda z: (-abs(z), z.imag))),
-                                integrators=q)
+    return CompensatorStability(
+        poles=poles,
+        spectral_radius=float(np.max(np.abs(poles))),
+        unstable_poles=np.array(sorted(unstable, key=lambda z: (-abs(z), z.imag))),
+        integrators=q,
+    )

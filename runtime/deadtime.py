@@ -42,21 +42,30 @@ class DeadTimeCheck:
     order: int  # states of the exact plant model
 
     def to_dict(self) -> dict:
-        return {"pade_order": self.pade_order, "max_delay_periods": self.max_delay_periods,
-                "spectral_radius": self.spectral_radius, "stable": self.stable, "exact_plant_order": self.order}
+        return {
+            "pade_order": self.pade_order,
+            "max_delay_periods": self.max_delay_periods,
+            "spectral_radius": self.spectral_radius,
+            "stable": self.stable,
+            "exact_plant_order": self.order,
+        }
 
     def describe(self) -> str:
         verdict = "stable" if self.stable else "UNSTABLE"
-        return (f"with the exact dead times (up to {self.max_delay_periods:.3g} periods, sampled model of order "
-                f"{self.order}; the design used Padé order {self.pade_order}): closed loop {verdict}, spectral "
-                f"radius {self.spectral_radius:.4f}")
+        return (
+            f"with the exact dead times (up to {self.max_delay_periods:.3g} periods, sampled model of order "
+            f"{self.order}; the design used Padé order {self.pade_order}): closed loop {verdict}, spectral "
+            f"radius {self.spectral_radius:.4f}"
+        )
 
     def warning(self) -> str | None:
         if self.stable:
             return None
-        return (f"the design is unstable on the plant with its true dead times (closed-loop spectral radius "
-                f"{self.spectral_radius:.4f} with the exact sampled delays; Padé order {self.pade_order} misjudges "
-                "their phase): raise plant.pade_order, or slow the loop down (Bryson limits / weights)")
+        return (
+            f"the design is unstable on the plant with its true dead times (closed-loop spectral radius "
+            f"{self.spectral_radius:.4f} with the exact sampled delays; Padé order {self.pade_order} misjudges "
+            "their phase): raise plant.pade_order, or slow the loop down (Bryson limits / weights)"
+        )
 
 
 def _zoh_integrals(A: np.ndarray, B: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
@@ -68,7 +77,7 @@ def _zoh_integrals(A: np.ndarray, B: np.ndarray, t: float) -> tuple[np.ndarray, 
     return E[:n, :n], E[:n, n:]
 
 
-def element_model(num: Any, den: Any, tau: float, Ts: float) -> "control.StateSpace":
+def element_model(num: Any, den: Any, tau: float, Ts: float) -> control.StateSpace:
     """The exact ZOH-sampled model of one SISO element ``num/den e^{-tau s}`` (discrete, ``dt = Ts``)."""
     import control
 
@@ -120,7 +129,7 @@ def _feed(Ad: np.ndarray, Bd: np.ndarray, n: int, lag: int, G: np.ndarray) -> No
         Ad[:n, n + lag - 1] += G[:, 0]
 
 
-def exact_plant(num: list, den: list, delay: list, Ts: float) -> "control.StateSpace":
+def exact_plant(num: list, den: list, delay: list, Ts: float) -> control.StateSpace:
     """The p x m transfer-function matrix with exact sampled dead times, one element model per entry
     (non-minimal: each element keeps its own states and delay line)."""
     import control
@@ -138,7 +147,7 @@ def exact_plant(num: list, den: list, delay: list, Ts: float) -> "control.StateS
     return control.ss(A, B @ T_in, T_out @ C, T_out @ D @ T_in, Ts)
 
 
-def applies(spec: "PlantSpec") -> bool:
+def applies(spec: PlantSpec) -> bool:
     """A transfer-function spec with a dead time, sampled with a zero-order hold, and stable elements (the
     element-wise exact model is non-minimal: an unstable element repeated across a row would add spurious
     unstable modes)."""
@@ -150,7 +159,7 @@ def applies(spec: "PlantSpec") -> bool:
     return all(np.all(np.roots(np.asarray(a, float)).real < 0) for row in tf["den"] for a in row)
 
 
-def dead_time_check(spec: "PlantSpec", artifact: "Artifact") -> DeadTimeCheck | None:
+def dead_time_check(spec: PlantSpec, artifact: Artifact) -> DeadTimeCheck | None:
     """Close the artifact's law (unsaturated, r = 0) around the exact sampled dead-time plant of ``spec``;
     ``None`` when :func:`applies` says the check does not apply."""
     import control
@@ -162,9 +171,14 @@ def dead_time_check(spec: "PlantSpec", artifact: "Artifact") -> DeadTimeCheck | 
     tf = spec.transfer_function
     plant = exact_plant(tf["num"], tf["den"], tf["delay"], spec.Ts)
     Ac, Bc, Cc, Dc = controller_matrices(artifact)
-    law = control.ss(Ac, Bc[:, :artifact.p], Cc, Dc[:, :artifact.p], spec.Ts)  # dy -> du
+    law = control.ss(Ac, Bc[:, : artifact.p], Cc, Dc[:, : artifact.p], spec.Ts)  # dy -> du
     loop = control.feedback(plant, law, sign=+1)  # du = law(dy): positive feedback in control's convention
     radius = float(np.max(np.abs(loop.poles())))
     longest = max(float(t) for row in tf["delay"] for t in row) / spec.Ts
-    return DeadTimeCheck(pade_order=int(spec.pade_order or 0), max_delay_periods=longest,
-                         spectral_radius=radius, stable=radius < 1.0, order=plant.nstates)
+    return DeadTimeCheck(
+        pade_order=int(spec.pade_order or 0),
+        max_delay_periods=longest,
+        spectral_radius=radius,
+        stable=radius < 1.0,
+        order=plant.nstates,
+    )

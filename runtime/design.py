@@ -17,8 +17,7 @@ from importlib import metadata
 import numpy as np
 
 from . import __version__
-from .analysis import (complex_pairs, pole_frequency, unobservable_unstable,
-                       uncontrollable_unstable)
+from .analysis import complex_pairs, pole_frequency, uncontrollable_unstable, unobservable_unstable
 from .artifact import SCHEMA_VERSION, matrix_to_json, seal, vector_to_json
 from .errors import DesignError, SpecError
 from .spec import PlantSpec, as_matrix, as_vector
@@ -83,8 +82,13 @@ def discretise(spec: PlantSpec) -> Discretised:
         return Discretised(spec.A, spec.B, spec.C, spec.D, "none")
     sysc = control.ss(spec.A, spec.B, spec.C, spec.D)
     sysd = control.c2d(sysc, spec.Ts, method=spec.discretization)
-    return Discretised(np.asarray(sysd.A, float), np.asarray(sysd.B, float), np.asarray(sysd.C, float),
-                       np.asarray(sysd.D, float), spec.discretization)
+    return Discretised(
+        np.asarray(sysd.A, float),
+        np.asarray(sysd.B, float),
+        np.asarray(sysd.C, float),
+        np.asarray(sysd.D, float),
+        spec.discretization,
+    )
 
 
 def design(spec: PlantSpec) -> DesignResult:
@@ -120,20 +124,40 @@ def design(spec: PlantSpec) -> DesignResult:
     margins = input_margins(d, inputs=spec.inputs, **gains)
     bandwidth = loop_bandwidth(margins, ctrl_poles, spec.Ts)
     if (2 * np.pi / spec.Ts) < 10 * bandwidth:
-        warnings.append(f"sampling at {2 * np.pi / spec.Ts:.3g} rad/s is less than 10x the closed-loop "
-                        f"bandwidth {bandwidth:.3g} rad/s")
-    data = _artifact_data(spec, d, gains, Kaw=Kaw, u_min=u_min, u_max=u_max, anti_windup=anti_windup,
-                          design_record={"discretization": d.method, "controller": controller_record,
-                                         "observer": observer_record},
-                          checks={"closed_loop_poles": complex_pairs(sorted(cl_poles, key=lambda z: (abs(z), z.imag))),
-                                  "spectral_radius": radius, "margins": [dict(mg.__dict__) for mg in margins]})
+        warnings.append(
+            f"sampling at {2 * np.pi / spec.Ts:.3g} rad/s is less than 10x the closed-loop "
+            f"bandwidth {bandwidth:.3g} rad/s"
+        )
+    data = _artifact_data(
+        spec,
+        d,
+        gains,
+        Kaw=Kaw,
+        u_min=u_min,
+        u_max=u_max,
+        anti_windup=anti_windup,
+        design_record={"discretization": d.method, "controller": controller_record, "observer": observer_record},
+        checks={
+            "closed_loop_poles": complex_pairs(sorted(cl_poles, key=lambda z: (abs(z), z.imag))),
+            "spectral_radius": radius,
+            "margins": [dict(mg.__dict__) for mg in margins],
+        },
+    )
     data, compensator, fidelity = implement(data, spec.implementation or {}, warnings)
     dead_time = _dead_time(spec, data, warnings)
     for w in warnings:
         log.warning(w)
-    return DesignResult(artifact=seal(data), controller_poles=ctrl_poles, observer_poles=obs_poles,
-                        closed_loop_poles=cl_poles, margins=margins, warnings=warnings, compensator=compensator,
-                        float32=fidelity, dead_time=dead_time)
+    return DesignResult(
+        artifact=seal(data),
+        controller_poles=ctrl_poles,
+        observer_poles=obs_poles,
+        closed_loop_poles=cl_poles,
+        margins=margins,
+        warnings=warnings,
+        compensator=compensator,
+        float32=fidelity,
+        dead_time=dead_time,
+    )
 
 
 def _dead_time(spec: PlantSpec, data: dict, warnings: list[str]):
@@ -190,8 +214,18 @@ def _closed_loop(d: Discretised, A_ctrl: np.ndarray, gains: dict) -> tuple[np.nd
     return cl_poles, radius
 
 
-def _artifact_data(spec: PlantSpec, d: Discretised, gains: dict, *, Kaw: np.ndarray, u_min: np.ndarray,
-                   u_max: np.ndarray, anti_windup: str, design_record: dict, checks: dict) -> dict:
+def _artifact_data(
+    spec: PlantSpec,
+    d: Discretised,
+    gains: dict,
+    *,
+    Kaw: np.ndarray,
+    u_min: np.ndarray,
+    u_max: np.ndarray,
+    anti_windup: str,
+    design_record: dict,
+    checks: dict,
+) -> dict:
     """The artifact's content (unsealed, before the implementation choices)."""
     Ci, M = gains["Ci"], gains["M"]
     q = Ci.shape[0]
@@ -199,19 +233,33 @@ def _artifact_data(spec: PlantSpec, d: Discretised, gains: dict, *, Kaw: np.ndar
         "schema_version": SCHEMA_VERSION,
         "name": spec.name,
         "Ts": spec.Ts,
-        "n": spec.n, "m": spec.m, "p": spec.p, "q": q,
-        "Ad": matrix_to_json(d.Ad), "Bd": matrix_to_json(d.Bd),
-        "Cd": matrix_to_json(d.Cd), "Dd": matrix_to_json(d.Dd),
-        "K": matrix_to_json(gains["K"]), "L": matrix_to_json(gains["L"]),
-        "u_min": vector_to_json(u_min), "u_max": vector_to_json(u_max),
+        "n": spec.n,
+        "m": spec.m,
+        "p": spec.p,
+        "q": q,
+        "Ad": matrix_to_json(d.Ad),
+        "Bd": matrix_to_json(d.Bd),
+        "Cd": matrix_to_json(d.Cd),
+        "Dd": matrix_to_json(d.Dd),
+        "K": matrix_to_json(gains["K"]),
+        "L": matrix_to_json(gains["L"]),
+        "u_min": vector_to_json(u_min),
+        "u_max": vector_to_json(u_max),
         "anti_windup": anti_windup,
         "observer_form": gains["form"],
         "signals": {
-            "states": list(spec.states), "inputs": list(spec.inputs), "outputs": list(spec.outputs),
+            "states": list(spec.states),
+            "inputs": list(spec.inputs),
+            "outputs": list(spec.outputs),
             "references": [f"r_{spec.outputs[int(np.argmax(row))]}" for row in Ci],
         },
-        "plant": {"kind": spec.kind, "A": matrix_to_json(spec.A), "B": matrix_to_json(spec.B),
-                  "C": matrix_to_json(spec.C), "D": matrix_to_json(spec.D)},
+        "plant": {
+            "kind": spec.kind,
+            "A": matrix_to_json(spec.A),
+            "B": matrix_to_json(spec.B),
+            "C": matrix_to_json(spec.C),
+            "D": matrix_to_json(spec.D),
+        },
         "design": design_record,
         "checks": checks,
         "provenance": provenance(spec),
@@ -266,8 +314,9 @@ def implement(data: dict, implementation: dict, warnings: list[str]):
         if not fidelity.ok:
             better = None
             if kind == "as_designed":
-                T = transformation("balanced", Ad=a.Ad, Bd=a.Bd, Cd=a.Cd, Dd=a.Dd, K=a.K, L=a.L, M=a.M,
-                                   form=a.observer_form)
+                T = transformation(
+                    "balanced", Ad=a.Ad, Bd=a.Bd, Cd=a.Cd, Dd=a.Dd, K=a.K, L=a.L, M=a.M, form=a.observer_form
+                )
                 better = float32_fidelity(from_dict(seal(apply(data, kind="balanced", T=T)))).max_rel_u
             warnings.append(fidelity.warning(kind, balanced=better))
     return data, compensator, fidelity
@@ -282,8 +331,9 @@ def augment(d: Discretised, Ci: np.ndarray, Ts: float) -> tuple[np.ndarray, np.n
     return Aa, Ba
 
 
-def closed_loop_matrix(d: Discretised, *, K, Ki, L, M, Ci, Ts: float, form: str,
-                       break_input: int | None = None) -> np.ndarray | tuple:
+def closed_loop_matrix(
+    d: Discretised, *, K, Ki, L, M, Ci, Ts: float, form: str, break_input: int | None = None
+) -> np.ndarray | tuple:
     """State matrix of plant + observer + controller on the state ``[x; xh; z]`` (linear, r = 0).
 
     With ``break_input = i`` returns ``(A, B, C)`` of the loop broken at plant input i, where an
@@ -306,11 +356,13 @@ def closed_loop_matrix(d: Discretised, *, K, Ki, L, M, Ci, Ts: float, form: str,
         Lx, Ah = L @ Cd, Ad - L @ Cd
         obs_sees_plant_input = L @ Dd
         obs_own = Bd - L @ Dd
-    A0 = np.block([
-        [Ad, np.zeros((n, n)), np.zeros((n, q))],
-        [Lx, Ah, np.zeros((n, q))],
-        [-Ts * Ci @ Cd, np.zeros((q, n)), np.eye(q)],
-    ])
+    A0 = np.block(
+        [
+            [Ad, np.zeros((n, n)), np.zeros((n, q))],
+            [Lx, Ah, np.zeros((n, q))],
+            [-Ts * Ci @ Cd, np.zeros((q, n)), np.eye(q)],
+        ]
+    )
     B_plant = np.vstack([Bd, obs_sees_plant_input, -Ts * Ci @ Dd])  # what the plant's input drives
     B_own = np.vstack([np.zeros((n, m)), obs_own, np.zeros((q, m))])  # the observer's copy of the command
     if break_input is None:
@@ -319,7 +371,7 @@ def closed_loop_matrix(d: Discretised, *, K, Ki, L, M, Ci, Ts: float, form: str,
     S[break_input, break_input] = 0.0
     e = np.zeros((m, 1))
     e[break_input] = 1.0
-    return A0 + B_plant @ S @ V + B_own @ V, B_plant @ e, V[break_input:break_input + 1, :]
+    return A0 + B_plant @ S @ V + B_own @ V, B_plant @ e, V[break_input : break_input + 1, :]
 
 
 def check_separation(Acl: np.ndarray, A_ctrl: np.ndarray, A_obs: np.ndarray, rtol: float = 1e-9) -> None:
@@ -336,15 +388,15 @@ def check_separation(Acl: np.ndarray, A_ctrl: np.ndarray, A_obs: np.ndarray, rto
     # [x; z; e] = T [x; xh; z]
     T = np.zeros((N, N))
     T[:n, :n] = np.eye(n)
-    T[n:n + q, 2 * n:] = np.eye(q)
-    T[n + q:, :n] = np.eye(n)
-    T[n + q:, n:2 * n] = -np.eye(n)
+    T[n : n + q, 2 * n :] = np.eye(q)
+    T[n + q :, :n] = np.eye(n)
+    T[n + q :, n : 2 * n] = -np.eye(n)
     At = T @ Acl @ np.linalg.inv(T)
     scale = max(1.0, float(np.linalg.norm(Acl)))
     errors = {
-        "controller block": np.linalg.norm(At[:n + q, :n + q] - A_ctrl),
-        "observer block": np.linalg.norm(At[n + q:, n + q:] - A_obs),
-        "coupling of the estimation error into the plant": np.linalg.norm(At[n + q:, :n + q]),
+        "controller block": np.linalg.norm(At[: n + q, : n + q] - A_ctrl),
+        "observer block": np.linalg.norm(At[n + q :, n + q :] - A_obs),
+        "coupling of the estimation error into the plant": np.linalg.norm(At[n + q :, : n + q]),
     }
     for what, err in errors.items():
         if err > rtol * scale:
@@ -359,13 +411,15 @@ def input_margins(d: Discretised, *, K, Ki, L, M, Ci, Ts, form, inputs) -> list[
         pm, wgc = _phase_margin(A, B, C, Ts)
         up = _gain_limit(A, B @ C, direction=+1)
         down = _gain_limit(A, B @ C, direction=-1)
-        out.append(ChannelMargin(
-            input=name,
-            gain_margin_up_db=None if up is None else float(20 * np.log10(up)),
-            gain_margin_down_db=None if down is None else float(20 * np.log10(down)),
-            phase_margin_deg=pm,
-            gain_crossover_rad_s=wgc,
-        ))
+        out.append(
+            ChannelMargin(
+                input=name,
+                gain_margin_up_db=None if up is None else float(20 * np.log10(up)),
+                gain_margin_down_db=None if down is None else float(20 * np.log10(down)),
+                phase_margin_deg=pm,
+                gain_crossover_rad_s=wgc,
+            )
+        )
     return out
 
 
@@ -399,6 +453,7 @@ def _phase_margin(A: np.ndarray, B: np.ndarray, C: np.ndarray, Ts: float) -> tup
 
 def _gain_limit(A: np.ndarray, BC: np.ndarray, *, direction: int, max_db: float = 60.0) -> float | None:
     """The loop-gain factor k (above or below 1) at which ``A + k BC`` first loses stability."""
+
     def stable(k: float) -> bool:
         return float(np.max(np.abs(np.linalg.eigvals(A + k * BC)))) < 1.0
 
@@ -445,18 +500,26 @@ def poles_match(a: np.ndarray, b: np.ndarray, tol: float = POLE_MATCH_TOL) -> bo
 
 def provenance(spec: PlantSpec) -> dict:
     """Versions of everything that computed the gains, and the spec's hash."""
+
     def version(dist: str) -> str:
         try:
             return metadata.version(dist)
         except metadata.PackageNotFoundError:
             return "absent"
 
-    given = [part for part, table in (("controller", spec.controller), ("observer", spec.observer))
-             if table.get("method") == "given"]
+    given = [
+        part
+        for part, table in (("controller", spec.controller), ("observer", spec.observer))
+        if table.get("method") == "given"
+    ]
     return {
-        "gainlink": __version__, "numpy": version("numpy"), "scipy": version("scipy"),
-        "control": version("control"), "slycot": version("slycot"),
-        "python": platform.python_version(), "spec_sha256": spec.source_sha256,
+        "gainlink": __version__,
+        "numpy": version("numpy"),
+        "scipy": version("scipy"),
+        "control": version("control"),
+        "slycot": version("slycot"),
+        "python": platform.python_version(),
+        "spec_sha256": spec.source_sha256,
         "gains": "given: " + ", ".join(given) if given else "designed",
     }
 
@@ -482,8 +545,10 @@ def operating_point_keys(spec: PlantSpec, *, u_min: np.ndarray, u_max: np.ndarra
     outside = [i for i in range(spec.m) if not u_min[i] <= op.u_op[i] <= u_max[i]]
     if outside:
         i = outside[0]
-        raise SpecError(f"operating_point.u_op for input {spec.inputs[i]} is {op.u_op[i]:g}, outside the limits "
-                        f"[{u_min[i]:g}, {u_max[i]:g}]: the loop could not hold the plant there")
+        raise SpecError(
+            f"operating_point.u_op for input {spec.inputs[i]} is {op.u_op[i]:g}, outside the limits "
+            f"[{u_min[i]:g}, {u_max[i]:g}]: the loop could not hold the plant there"
+        )
     keys = {"u_op": op.u_op, "y_op": op.y_op, "x_op": op.x_op}
     return {k: vector_to_json(v) for k, v in keys.items() if v is not None and np.any(v != 0.0)}
 
@@ -617,8 +682,12 @@ def _controller(spec: PlantSpec, Aa: np.ndarray, Ba: np.ndarray, warnings: list[
             K, _, _ = control.dlqr(Aa, Ba, Q, R)
         except Exception as exc:  # SLICOT/SciPy report failures with assorted exception types
             raise DesignError(f"DLQR failed: {str(exc).splitlines()[0]} (is (Q, A) detectable?)") from None
-        return np.asarray(K, float), {"method": "lqr", "Q": matrix_to_json(Q), "R": matrix_to_json(R),
-                                      "augmented": bool(q)}
+        return np.asarray(K, float), {
+            "method": "lqr",
+            "Q": matrix_to_json(Q),
+            "R": matrix_to_json(R),
+            "augmented": bool(q),
+        }
     if method in ("place", "ackermann"):
         poles = _poles(ctl, na, spec.Ts, "controller")
         if method == "ackermann":
@@ -632,7 +701,10 @@ def _controller(spec: PlantSpec, Aa: np.ndarray, Ba: np.ndarray, warnings: list[
             except Exception as exc:
                 raise DesignError(f"pole placement failed: {str(exc).splitlines()[0]}") from None
         return np.real(np.asarray(K, complex)).astype(float), {
-            "method": method, "poles": complex_pairs(poles), "augmented": bool(q)}
+            "method": method,
+            "poles": complex_pairs(poles),
+            "augmented": bool(q),
+        }
     if method == "given":
         return _given_controller(ctl, n=spec.n, m=m, q=q), {"method": "given", "augmented": bool(q)}
     raise SpecError(f"controller.method must be lqr, place, ackermann or given, not {method!r}")
@@ -676,8 +748,10 @@ def _observer(spec: PlantSpec, d: Discretised, warnings: list[str]):
     if form not in ("predictor", "current"):
         raise SpecError(f"observer.form must be predictor or current, not {form!r}")
     if form == "current" and np.any(d.Dd != 0):
-        raise SpecError("observer.form 'current' requires a plant without feedthrough (D = 0 after discretisation;"
-                        " Tustin adds feedthrough: use zoh)")
+        raise SpecError(
+            "observer.form 'current' requires a plant without feedthrough (D = 0 after discretisation;"
+            " Tustin adds feedthrough: use zoh)"
+        )
     p, n = d.Cd.shape
     if method == "kalman":
         if obs.get("G") == "B":
@@ -737,5 +811,7 @@ def _given_observer(obs: dict, d: Discretised, *, form: str) -> tuple[np.ndarray
 
 
 def _fmt_list(values) -> str:
-    return ", ".join(f"{complex(v).real:.4g}{complex(v).imag:+.4g}j" if abs(complex(v).imag) > 1e-12
-                     else f"{complex(v).real:.4g}" for v in values)
+    return ", ".join(
+        f"{complex(v).real:.4g}{complex(v).imag:+.4g}j" if abs(complex(v).imag) > 1e-12 else f"{complex(v).real:.4g}"
+        for v in values
+    )

@@ -68,11 +68,15 @@ class Float32Fidelity:
             gain = "" if balanced is None else f" (measured with it: {balanced:.3g})"
             remedy = f'set [implementation] realization = "balanced" in the spec{gain}'
         else:
-            remedy = (f'the realisation is already "{realization}": try another one, a slower sample rate, a '
-                      "slower observer, or rescaled plant units")
-        return (f"float32 changes the closed loop: the C's command deviates from the float64 law's by up to "
-                f"{self.max_rel_u:.3g} of the limit span on {self.worst_input} (threshold {self.threshold:g}) in a "
-                f"{self.steps}-step run with noise, a reference step and a saturating disturbance; {remedy}")
+            remedy = (
+                f'the realisation is already "{realization}": try another one, a slower sample rate, a '
+                "slower observer, or rescaled plant units"
+            )
+        return (
+            f"float32 changes the closed loop: the C's command deviates from the float64 law's by up to "
+            f"{self.max_rel_u:.3g} of the limit span on {self.worst_input} (threshold {self.threshold:g}) in a "
+            f"{self.steps}-step run with noise, a reference step and a saturating disturbance; {remedy}"
+        )
 
     def to_dict(self) -> dict:
         """JSON form for the artifact's ``checks``."""
@@ -134,9 +138,15 @@ def float32_fidelity(artifact: Artifact, *, seed: int = 0, implementation=Float3
     excursion = np.where(excursion > 0, excursion, 1.0)
     dy = np.abs(f32.y - ref.y) / excursion
     worst = int(np.argmax(du.max(axis=0))) if du.size else 0
-    return Float32Fidelity(steps=sc.steps, max_rel_u=float(du.max(initial=0.0)), max_rel_y=float(dy.max(initial=0.0)),
-                           threshold=THRESHOLD, saturated_fraction=float(ref.saturated.any(axis=1).mean()),
-                           disturbance_steps=sc.pulse_steps, worst_input=a.signals["inputs"][worst])
+    return Float32Fidelity(
+        steps=sc.steps,
+        max_rel_u=float(du.max(initial=0.0)),
+        max_rel_y=float(dy.max(initial=0.0)),
+        threshold=THRESHOLD,
+        saturated_fraction=float(ref.saturated.any(axis=1).mean()),
+        disturbance_steps=sc.pulse_steps,
+        worst_input=a.signals["inputs"][worst],
+    )
 
 
 def _simulate(a: Artifact, law, sc: _Scenario, *, start: tuple | None = None, stop: int | None = None):
@@ -183,24 +193,31 @@ class _LinearLoop:
         self.Vw = np.hstack([Dr, Dy, Z((m, m))])
         self.Ys = np.hstack([a.Cd, Z((p, nc)), a.Dd])
         self.Yw = np.hstack([Z((p, q)), np.eye(p), Z((p, m))])
-        self.A = np.vstack([
-            np.hstack([a.Ad, Z((n, nc)), Z((n, m))]) + a.Bd @ self.Vs,
-            np.hstack([By @ a.Cd, Ac, By @ a.Dd]),
-            self.Vs,
-        ])
-        self.B = np.vstack([
-            a.Bd @ self.Vw + np.hstack([Z((n, q + p)), a.Bd]),
-            np.hstack([Br, By, Z((nc, m))]),
-            self.Vw,
-        ])
+        self.A = np.vstack(
+            [
+                np.hstack([a.Ad, Z((n, nc)), Z((n, m))]) + a.Bd @ self.Vs,
+                np.hstack([By @ a.Cd, Ac, By @ a.Dd]),
+                self.Vs,
+            ]
+        )
+        self.B = np.vstack(
+            [
+                a.Bd @ self.Vw + np.hstack([Z((n, q + p)), a.Bd]),
+                np.hstack([Br, By, Z((nc, m))]),
+                self.Vw,
+            ]
+        )
 
-    def run(self, *, steps: int, x0, r, r_step_at: int = 0, noise=None, d=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def run(
+        self, *, steps: int, x0, r, r_step_at: int = 0, noise=None, d=None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """States, outputs (deviations) and commands (deviations ``v - u_op``) of ``steps`` samples."""
         a = self.a
         R = np.zeros((steps, a.q))
         R[r_step_at:] = r
-        W = np.hstack([R, np.zeros((steps, a.p)) if noise is None else noise,
-                       np.zeros((steps, a.m)) if d is None else d])
+        W = np.hstack(
+            [R, np.zeros((steps, a.p)) if noise is None else noise, np.zeros((steps, a.m)) if d is None else d]
+        )
         BW = W @ self.B.T
         S = np.empty((steps, self.A.shape[0]))
         s = np.concatenate([np.asarray(x0, dtype=float), np.zeros(self.A.shape[0] - a.n)])
@@ -209,7 +226,7 @@ class _LinearLoop:
             for k in range(steps):
                 S[k] = s
                 s = A @ s + BW[k]
-            return S[:, :a.n], S @ self.Ys.T + W @ self.Yw.T, S @ self.Vs.T + W @ self.Vw.T
+            return S[:, : a.n], S @ self.Ys.T + W @ self.Yw.T, S @ self.Vs.T + W @ self.Vw.T
 
 
 def _scenario_and_reference_run(a: Artifact, *, seed: int) -> tuple[_Scenario, _Run]:
@@ -227,9 +244,16 @@ def _scenario_and_reference_run(a: Artifact, *, seed: int) -> tuple[_Scenario, _
     scale = float(np.min(0.5 * room / np.maximum(np.max(np.abs(V1), axis=0), 1e-300)))
     scale = scale if np.isfinite(scale) and scale > 0 else 1.0
     noise = _noise(a, lin, steps=steps, room=room, y_excursion=scale * np.ptp(Y1, axis=0), seed=seed)
-    sc = _Scenario(steps=steps, x0=scale * unit_x0, r=scale * unit_r, r_step_at=steps // 20, noise=noise,
-                   pulse=PULSE_FACTOR * room, pulse_at=half, pulse_steps=_saturating_pulse_length(a, lin, steps,
-                                                                                                   half, room))
+    sc = _Scenario(
+        steps=steps,
+        x0=scale * unit_x0,
+        r=scale * unit_r,
+        r_step_at=steps // 20,
+        noise=noise,
+        pulse=PULSE_FACTOR * room,
+        pulse_at=half,
+        pulse_steps=_saturating_pulse_length(a, lin, steps, half, room),
+    )
     nominal, _, _ = lin.run(steps=steps, x0=sc.x0, r=sc.r, r_step_at=sc.r_step_at, noise=noise)
     excursion = max(float(np.max(np.abs(nominal))), 1e-300)
     tail = slice(-max(1, steps // 20), None)
@@ -251,7 +275,7 @@ def _linear_pulse_tail(a: Artifact, lin: _LinearLoop, sc: _Scenario, tail: slice
     """How far the unsaturated loop itself still is from its undisturbed run at the end, after this pulse."""
     window = sc.steps - sc.pulse_at
     d = np.zeros((window, a.m))
-    d[:sc.pulse_steps] = sc.pulse
+    d[: sc.pulse_steps] = sc.pulse
     X, _, _ = lin.run(steps=window, x0=np.zeros(a.n), r=np.zeros(a.q), d=d)
     return float(np.max(np.abs(X[tail])))
 
@@ -268,12 +292,13 @@ def _pulse_trials(longest: int):
     yield 0, 0.0
 
 
-def _noise(a: Artifact, lin: _LinearLoop, *, steps: int, room: np.ndarray, y_excursion: np.ndarray,
-           seed: int) -> np.ndarray:
+def _noise(
+    a: Artifact, lin: _LinearLoop, *, steps: int, room: np.ndarray, y_excursion: np.ndarray, seed: int
+) -> np.ndarray:
     """White measurement noise: ``sqrt(diag V)`` (or 1e-3 of the excursion), scaled down if it alone would
     move the command by more than a quarter of the room (3 standard deviations)."""
     V = a.data.get("design", {}).get("observer", {}).get("V")
-    sd = (np.sqrt(np.maximum(np.diag(np.asarray(V, dtype=float)), 0.0)) if V is not None else 1e-3 * y_excursion)
+    sd = np.sqrt(np.maximum(np.diag(np.asarray(V, dtype=float)), 0.0)) if V is not None else 1e-3 * y_excursion
     white = np.random.default_rng(seed).standard_normal((steps, a.p))
     _, _, Vn = lin.run(steps=steps, x0=np.zeros(a.n), r=np.zeros(a.q), noise=white * sd)
     with np.errstate(all="ignore"):
@@ -299,7 +324,7 @@ def _saturating_pulse_length(a: Artifact, lin: _LinearLoop, steps: int, pulse_at
     cumulative = np.cumsum(V, axis=0)  # the response to an l-sample pulse at step k is sum_{j<l} V[k - j]
     cap = max(1, steps // 50)
     for length in range(1, cap + 1):
-        peak = np.max(np.abs(cumulative[length - 1:] - np.vstack([np.zeros((1, a.m)), cumulative[:-length]])), axis=0)
+        peak = np.max(np.abs(cumulative[length - 1 :] - np.vstack([np.zeros((1, a.m)), cumulative[:-length]])), axis=0)
         if np.any(peak >= 2.0 * room):
             return length
     return cap

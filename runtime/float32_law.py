@@ -161,7 +161,12 @@ class Float32Loop:
         a = self.a
         w: list[float] = self.y_op.tolist()
         for i in range(a.m):
-            w += [float(self.u_op[i])] + self.Kx[i].tolist() + (self.Ky[i].tolist() if self.current else []) + self.Kz[i].tolist()
+            w += (
+                [float(self.u_op[i])]
+                + self.Kx[i].tolist()
+                + (self.Ky[i].tolist() if self.current else [])
+                + self.Kz[i].tolist()
+            )
             w += [float(self.lo[i]), float(self.hi[i])]
         for j in range(a.q):
             w += self.Ci[j].tolist() + [self.Ts] + (self.Kaw[j].tolist() if a.anti_windup == "backcalc" else [])
@@ -180,8 +185,9 @@ class Float32Loop:
         ys = round32(np.asarray(y, dtype=float).reshape(a.p))
         rs = round32(np.zeros(a.q) if r is None else np.asarray(r, dtype=float).reshape(a.q))
         if not (np.isfinite(ys).all() and np.isfinite(rs).all()):
-            return StepResult(u=self.safe_u.copy(), saturated=np.zeros(a.m, dtype=bool), fault=True,
-                              v=self.safe_u.copy())
+            return StepResult(
+                u=self.safe_u.copy(), saturated=np.zeros(a.m, dtype=bool), fault=True, v=self.safe_u.copy()
+            )
         args = (self.xh.tolist(), self.z.tolist(), ys.tolist(), rs.tolist())
         rounding = _Rounding()
         u, v, sat, xh, z = self._core(*args, rounding)
@@ -271,7 +277,7 @@ def _ordered_matmul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """``A @ B`` in double, each sum accumulated from 0.0 left to right (as the C loops do)."""
     out = np.zeros((A.shape[0], B.shape[1]))
     for k in range(A.shape[1]):
-        out = out + A[:, k:k + 1] * B[k:k + 1, :]
+        out = out + A[:, k : k + 1] * B[k : k + 1, :]
     return out
 
 
@@ -279,5 +285,5 @@ def _ordered_sub(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:
     """``A - B @ C`` in double, subtracting the products one index at a time (as the C loops do)."""
     out = A.copy()
     for k in range(B.shape[1]):
-        out = out - B[:, k:k + 1] * C[k:k + 1, :]
+        out = out - B[:, k : k + 1] * C[k : k + 1, :]
     return out

@@ -49,7 +49,7 @@ import numpy as np
 from .artifact import Artifact
 from .reference import ReferenceLoop, Trace
 
-EPS = 2.0 ** -24
+EPS = 2.0**-24
 SLACK = 2.0  # times the first-order worst case
 EXTRA_TERMS = 5  # coefficient (4 EPS) and operand (1 EPS) rounding, in units of T
 
@@ -67,11 +67,15 @@ class StepMismatch:
     def describe(self, engine: str = "the engine") -> str:
         """One line naming the step and the quantity."""
         if self.quantity.startswith("sat") or self.quantity == "fault":
-            return (f"step {self.step}: {self.quantity} of {engine} is {int(self.got)} where the float64 law from "
-                    f"its own state gives {int(self.expected)}")
-        return (f"step {self.step}: {self.quantity} of {engine} is {self.got:.9g} where the float64 law from its "
-                f"own state gives {self.expected:.9g} (difference {abs(self.got - self.expected):.3g} > float32 "
-                f"bound {self.bound:.3g})")
+            return (
+                f"step {self.step}: {self.quantity} of {engine} is {int(self.got)} where the float64 law from "
+                f"its own state gives {int(self.expected)}"
+            )
+        return (
+            f"step {self.step}: {self.quantity} of {engine} is {self.got:.9g} where the float64 law from its "
+            f"own state gives {self.expected:.9g} (difference {abs(self.got - self.expected):.3g} > float32 "
+            f"bound {self.bound:.3g})"
+        )
 
 
 @dataclass(frozen=True)
@@ -97,8 +101,10 @@ class OneStepCheck:
         """One line: pass/fail and how close to the bound the engine came."""
         worst = ", ".join(f"{k} {v:.3g}" for k, v in self.worst.items())
         head = "pass" if self.passed else f"FAIL on {self.failures} step(s)"
-        return (f"{head}, {self.steps} steps; largest error / float32 bound: {worst}; "
-                f"max |du| {self.max_rel_u:.3g} of the limit span")
+        return (
+            f"{head}, {self.steps} steps; largest error / float32 bound: {worst}; "
+            f"max |du| {self.max_rel_u:.3g} of the limit span"
+        )
 
 
 @dataclass(frozen=True)
@@ -225,8 +231,11 @@ def _compare_step(k, a, mags, res, law, xh_prev, z_prev, y, r, trace, worst) -> 
 
 def _first_over(k, worst, b: _Bounds, res, law, trace) -> StepMismatch | None:
     found = None
-    for name, got, want, bound in (("u", trace.u[k], res.u, b.u), ("xh", trace.xh[k], law.xh, b.xh),
-                                   ("z", trace.z[k], law.z, b.z)):
+    for name, got, want, bound in (
+        ("u", trace.u[k], res.u, b.u),
+        ("xh", trace.xh[k], law.xh, b.xh),
+        ("z", trace.z[k], law.z, b.z),
+    ):
         if want.size == 0:
             continue
         err = np.abs(got - want)

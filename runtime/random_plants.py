@@ -9,9 +9,19 @@ from __future__ import annotations
 import numpy as np
 
 
-def random_spec(seed: int, *, n: int, m: int, p: int, q: int = 0, form: str = "predictor",
-                anti_windup: str = "none", feedthrough: bool = False, u_limit: float = 1.0,
-                Ts: float = 0.02) -> dict:
+def random_spec(
+    seed: int,
+    *,
+    n: int,
+    m: int,
+    p: int,
+    q: int = 0,
+    form: str = "predictor",
+    anti_windup: str = "none",
+    feedthrough: bool = False,
+    u_limit: float = 1.0,
+    Ts: float = 0.02,
+) -> dict:
     """A spec dict (for :func:`gainlink.spec.parse_spec`) of a random continuous plant.
 
     Parameters

@@ -105,8 +105,13 @@ def apply(data: dict, *, kind: str, T: np.ndarray) -> dict:
     xh0 = np.array(data.get("xh0", np.zeros(n)), dtype=float)
     design = {k: data[k] for k in ("Ad", "Bd", "Cd", "K", "L")}
     design["xh0"] = vector_to_json(xh0)
-    out.update(Ad=matrix_to_json(T @ Ad @ Ti), Bd=matrix_to_json(T @ Bd), Cd=matrix_to_json(Cd @ Ti),
-               K=matrix_to_json(K @ Ti), L=matrix_to_json(T @ L))
+    out.update(
+        Ad=matrix_to_json(T @ Ad @ Ti),
+        Bd=matrix_to_json(T @ Bd),
+        Cd=matrix_to_json(Cd @ Ti),
+        K=matrix_to_json(K @ Ti),
+        L=matrix_to_json(T @ L),
+    )
     if "M" in data:
         design["M"] = data["M"]
         out["M"] = matrix_to_json(T @ np.array(data["M"], dtype=float))
@@ -123,5 +128,4 @@ def design_plant(artifact) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarr
     if rec is None:
         return artifact.Ad, artifact.Bd, artifact.Cd, artifact.Dd
     d = rec["design"]
-    return (np.array(d["Ad"], dtype=float), np.array(d["Bd"], dtype=float), np.array(d["Cd"], dtype=float),
-            artifact.Dd)
+    return (np.array(d["Ad"], dtype=float), np.array(d["Bd"], dtype=float), np.array(d["Cd"], dtype=float), artifact.Dd)

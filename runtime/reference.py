@@ -63,7 +63,9 @@ class ReferenceLoop:
         y = np.asarray(y, dtype=float).reshape(a.p)
         r = np.zeros(a.q) if r is None else np.asarray(r, dtype=float).reshape(a.q)
         if not (np.all(np.isfinite(y)) and np.all(np.isfinite(r))):
-            return StepResult(u=self.safe_u.copy(), saturated=np.zeros(a.m, dtype=bool), fault=True, v=self.safe_u.copy())
+            return StepResult(
+                u=self.safe_u.copy(), saturated=np.zeros(a.m, dtype=bool), fault=True, v=self.safe_u.copy()
+            )
         dy = y - a.y_op
         if a.observer_form == "current":
             xc = self.xh + a.M @ (dy - a.Cd @ self.xh)

@@ -16,9 +16,9 @@ import csv
 import importlib
 import io
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -89,8 +89,10 @@ def read_samples(path: str | Path, artifact: Artifact) -> Samples:
     want_r = [f"r{i}" for i in range(artifact.q)]
     missing = [c for c in want_y + want_r if c not in header]
     if missing:
-        raise DataError(f"input {path} lacks column(s) {', '.join(missing)} "
-                        f"(artifact {artifact.name} has p={artifact.p}, q={artifact.q})")
+        raise DataError(
+            f"input {path} lacks column(s) {', '.join(missing)} "
+            f"(artifact {artifact.name} has p={artifact.p}, q={artifact.q})"
+        )
     unknown = [c for c in header if c not in set(want_y + want_r + ["t"])]
     if unknown:
         raise DataError(f"input {path} has unknown column {unknown[0]!r} (expected t, {', '.join(want_y + want_r)})")
@@ -174,14 +176,21 @@ def read_trace(path: str | Path, artifact: Artifact) -> Trace:
     rows = list(csv.DictReader(io.StringIO(text)))
     a = artifact
     try:
+
         def cols(prefix: str, count: int, kind=float) -> np.ndarray:
             return np.array([[kind(r[f"{prefix}{i}"]) for i in range(count)] for r in rows]).reshape(len(rows), count)
 
-        return Trace(u=cols("u", a.m), saturated=cols("sat", a.m, int).astype(bool), xh=cols("xh", a.n),
-                     z=cols("z", a.q), fault=np.array([int(r["fault"]) for r in rows], dtype=bool))
+        return Trace(
+            u=cols("u", a.m),
+            saturated=cols("sat", a.m, int).astype(bool),
+            xh=cols("xh", a.n),
+            z=cols("z", a.q),
+            fault=np.array([int(r["fault"]) for r in rows], dtype=bool),
+        )
     except (KeyError, TypeError, ValueError) as exc:
-        raise DataError(f"comparison file {path} is not a replay output of artifact {a.name} "
-                        f"(bad or missing {exc})") from None
+        raise DataError(
+            f"comparison file {path} is not a replay output of artifact {a.name} (bad or missing {exc})"
+        ) from None
 
 
 def compare_traces(artifact: Artifact, trace: Trace, other: Trace) -> Comparison:
@@ -195,7 +204,10 @@ def compare_traces(artifact: Artifact, trace: Trace, other: Trace) -> Comparison
         raise DataError(f"comparison has {other.u.shape[0]} samples, this replay {N}")
     diff = np.abs(trace.u - other.u)
     span = artifact.u_max - artifact.u_min
-    return Comparison(steps=N, max_abs_u=float(diff.max(initial=0.0)),
-                      max_rel_u=float((diff / span).max(initial=0.0)),
-                      sat_mismatches=int(np.sum(trace.saturated != other.saturated)),
-                      fault_mismatches=int(np.sum(trace.fault != other.fault)))
+    return Comparison(
+        steps=N,
+        max_abs_u=float(diff.max(initial=0.0)),
+        max_rel_u=float((diff / span).max(initial=0.0)),
+        sat_mismatches=int(np.sum(trace.saturated != other.saturated)),
+        fault_mismatches=int(np.sum(trace.fault != other.fault)),
+    )

@@ -27,8 +27,15 @@ class Simulation:
     u: np.ndarray  # (N, m)
 
 
-def simulate_linear(artifact: Artifact, *, steps: int, x0: np.ndarray | None = None,
-                    reference: np.ndarray | None = None, noise_std: float = 0.0, seed: int = 0) -> Simulation:
+def simulate_linear(
+    artifact: Artifact,
+    *,
+    steps: int,
+    x0: np.ndarray | None = None,
+    reference: np.ndarray | None = None,
+    noise_std: float = 0.0,
+    seed: int = 0,
+) -> Simulation:
     """Run the reference loop against the artifact's plant about its operating point.
 
     The model is in deviations, ``x+ = Ad x + Bd (u - u_op)``; the recorded ``y = y_op + Cd x +
@@ -59,8 +66,13 @@ def simulate_linear(artifact: Artifact, *, steps: int, x0: np.ndarray | None = N
     rng = np.random.default_rng(seed)
     Ad, Bd, Cd, Dd = design_plant(a)  # x0 is a plant state in the design's coordinates
     loop = ReferenceLoop(a)
-    T, X, Y, R, U = (np.empty(steps), np.empty((steps, a.n)), np.empty((steps, a.p)),
-                     np.empty((steps, a.q)), np.empty((steps, a.m)))
+    T, X, Y, R, U = (
+        np.empty(steps),
+        np.empty((steps, a.n)),
+        np.empty((steps, a.p)),
+        np.empty((steps, a.q)),
+        np.empty((steps, a.m)),
+    )
     du_prev = np.zeros(a.m)
     for k in range(steps):
         # y depends on the command applied during this sample; with Dd != 0 use the previous one

@@ -23,15 +23,38 @@ from .fileio import read_user_file
 NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 SIGNAL_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
-TOP_KEYS = {"name", "Ts", "discretization", "description", "plant", "controller", "integral", "observer", "limits",
-            "operating_point", "implementation"}
+TOP_KEYS = {
+    "name",
+    "Ts",
+    "discretization",
+    "description",
+    "plant",
+    "controller",
+    "integral",
+    "observer",
+    "limits",
+    "operating_point",
+    "implementation",
+}
 PLANT_KEYS = {
     "continuous": {"kind", "A", "B", "C", "D", "states", "inputs", "outputs"},
     "discrete": {"kind", "A", "B", "C", "D", "states", "inputs", "outputs"},
     "transfer_function": {"kind", "num", "den", "delay", "pade_order", "inputs", "outputs"},
 }
-CONTROLLER_KEYS = {"method", "Q", "Q_diag", "bryson_x_max", "bryson_y_max", "R", "R_diag", "bryson_u_max", "poles", "poles_z",
-                   "K", "Ki"}
+CONTROLLER_KEYS = {
+    "method",
+    "Q",
+    "Q_diag",
+    "bryson_x_max",
+    "bryson_y_max",
+    "R",
+    "R_diag",
+    "bryson_u_max",
+    "poles",
+    "poles_z",
+    "K",
+    "Ki",
+}
 INTEGRAL_KEYS = {"outputs", "Q_diag", "bryson_max", "aw_gain"}
 OBSERVER_KEYS = {"method", "form", "W", "W_diag", "V", "V_diag", "G", "poles", "poles_z", "L", "M"}
 LIMITS_KEYS = {"u_min", "u_max", "anti_windup"}
@@ -50,6 +73,8 @@ class OperatingPoint:
     u_op: np.ndarray
     y_op: np.ndarray
     x_op: np.ndarray | None = None
+
+
 IMPLEMENTATION_KEYS = {"realization", "float32_check"}
 
 
@@ -149,8 +174,11 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
         A, B, C, D, pade_order = _realise_tf(plant)
         states = tuple(f"x{i}" for i in range(A.shape[0]))
         m = B.shape[1]
-        tf = {"num": plant["num"], "den": plant["den"],
-              "delay": plant.get("delay", [[0.0] * m for _ in range(C.shape[0])])}
+        tf = {
+            "num": plant["num"],
+            "den": plant["den"],
+            "delay": plant.get("delay", [[0.0] * m for _ in range(C.shape[0])]),
+        }
     else:
         (A, B, C, D), pade_order, tf = _state_space(plant), None, None
         states = _names(plant, "states", A.shape[0], "x")
@@ -165,12 +193,28 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     implementation = _checked_table(data, "implementation", IMPLEMENTATION_KEYS, required=False)
 
     return PlantSpec(
-        name=name, Ts=Ts, kind=kind, discretization=disc, A=A, B=B, C=C, D=D,
-        states=states, inputs=inputs, outputs=outputs, controller=controller, integral=integral,
-        observer=observer, limits=limits, pade_order=pade_order, transfer_function=tf, operating_point=op,
+        name=name,
+        Ts=Ts,
+        kind=kind,
+        discretization=disc,
+        A=A,
+        B=B,
+        C=C,
+        D=D,
+        states=states,
+        inputs=inputs,
+        outputs=outputs,
+        controller=controller,
+        integral=integral,
+        observer=observer,
+        limits=limits,
+        pade_order=pade_order,
+        transfer_function=tf,
+        operating_point=op,
         implementation=implementation,
         source_sha256=source_sha256,
-        source=source, description=str(data.get("description", "")),
+        source=source,
+        description=str(data.get("description", "")),
     )
 
 
@@ -294,8 +338,9 @@ def _names(table: dict, key: str, count: int, prefix: str) -> tuple[str, ...]:
     return tuple(names)
 
 
-def _operating_point(data: dict, *, states: tuple[str, ...], inputs: tuple[str, ...],
-                     outputs: tuple[str, ...]) -> OperatingPoint | None:
+def _operating_point(
+    data: dict, *, states: tuple[str, ...], inputs: tuple[str, ...], outputs: tuple[str, ...]
+) -> OperatingPoint | None:
     """Parse ``[operating_point]``: each of u_op, y_op, x_op a list (one value per signal, in order) or a
     table of signal name -> value (signals not named are 0)."""
     table = _table(data, "operating_point", required=False)
@@ -341,7 +386,9 @@ def _realise_tf(plant: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
     if isinstance(order, bool) or not isinstance(order, int) or not 0 <= order <= 10:
         raise SpecError("plant.pade_order must be an integer from 0 to 10")
     for key, value in (("num", num), ("den", den), ("delay", delay)):
-        if not (isinstance(value, list) and len(value) == p and all(isinstance(r, list) and len(r) == m for r in value)):
+        if not (
+            isinstance(value, list) and len(value) == p and all(isinstance(r, list) and len(r) == m for r in value)
+        ):
             raise SpecError(f"plant.{key} must be a {p}x{m} matrix like plant.num")
     nums, dens = [], []
     for i in range(p):
@@ -367,5 +414,10 @@ def _realise_tf(plant: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
         dens.append(drow)
     sys = control.ss(control.tf(nums, dens))
     sys = control.minreal(sys, verbose=False)
-    return (np.asarray(sys.A, float), np.asarray(sys.B, float), np.asarray(sys.C, float),
-            np.asarray(sys.D, float), order)
+    return (
+        np.asarray(sys.A, float),
+        np.asarray(sys.B, float),
+        np.asarray(sys.C, float),
+        np.asarray(sys.D, float),
+        order,
+    )

@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from .artifact import Artifact
 
 
-def controller_matrices(a: "Artifact") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def controller_matrices(a: Artifact) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(A, B, C, D)`` of the unsaturated law from ``[dy; dr]`` to ``du`` on the state ``[xh; z]``."""
     n, m, p, q = a.n, a.m, a.p, a.q
     if a.observer_form == "current":
@@ -34,38 +34,52 @@ def controller_matrices(a: "Artifact") -> tuple[np.ndarray, np.ndarray, np.ndarr
     # du = -K Xx xh - K Xy dy - Ki z
     Cu = np.hstack([-a.K @ Xx, -a.Ki])
     Du = np.hstack([-a.K @ Xy, np.zeros((m, q))])
-    A = np.block([[F + G @ Cu[:, :n], G @ Cu[:, n:]],
-                  [np.zeros((q, n)), np.eye(q)]])
-    B = np.block([[Ly + G @ Du[:, :p], np.zeros((n, q))],
-                  [-a.Ts * a.Ci, a.Ts * np.eye(q)]])
+    A = np.block([[F + G @ Cu[:, :n], G @ Cu[:, n:]], [np.zeros((q, n)), np.eye(q)]])
+    B = np.block([[Ly + G @ Du[:, :p], np.zeros((n, q))], [-a.Ts * a.Ci, a.Ts * np.eye(q)]])
     return A, B, Cu, Du
 
 
-def controller_system(a: "Artifact") -> "control.StateSpace":
+def controller_system(a: Artifact) -> control.StateSpace:
     """The unsaturated law as a discrete ``control.StateSpace`` from ``(y, r)`` to ``u``, named signals."""
     import control
 
     A, B, C, D = controller_matrices(a)
     sig = a.signals
     realised = "realization" in a.data  # the estimate in other coordinates than the plant's states
-    states = ([f"xh{i}" for i in range(a.n)] if realised else [f"xh_{s}" for s in sig["states"]]) + \
-        [f"z_{r}" for r in sig["references"]]
-    return control.ss(A, B, C, D, a.Ts, name=f"{a.name}_controller", states=states,
-                      inputs=list(sig["outputs"]) + list(sig["references"]), outputs=list(sig["inputs"]))
+    states = ([f"xh{i}" for i in range(a.n)] if realised else [f"xh_{s}" for s in sig["states"]]) + [
+        f"z_{r}" for r in sig["references"]
+    ]
+    return control.ss(
+        A,
+        B,
+        C,
+        D,
+        a.Ts,
+        name=f"{a.name}_controller",
+        states=states,
+        inputs=list(sig["outputs"]) + list(sig["references"]),
+        outputs=list(sig["inputs"]),
+    )
 
 
-def plant_system(a: "Artifact") -> "control.StateSpace":
+def plant_system(a: Artifact) -> control.StateSpace:
     """The artifact's discrete design plant (deviation variables, the design's coordinates) with named signals."""
     import control
 
     from .realization import design_plant
 
     sig = a.signals
-    return control.ss(*design_plant(a), a.Ts, name=f"{a.name}_plant", states=[f"x_{s}" for s in sig["states"]],
-                      inputs=[f"{s}_plant" for s in sig["inputs"]], outputs=list(sig["outputs"]))
+    return control.ss(
+        *design_plant(a),
+        a.Ts,
+        name=f"{a.name}_plant",
+        states=[f"x_{s}" for s in sig["states"]],
+        inputs=[f"{s}_plant" for s in sig["inputs"]],
+        outputs=list(sig["outputs"]),
+    )
 
 
-def closed_loop_system(a: "Artifact") -> "control.StateSpace":
+def closed_loop_system(a: Artifact) -> control.StateSpace:
     """Plant + law, unsaturated: inputs the references and an additive disturbance ``d_<input>`` at each
     plant input, outputs the plant outputs and the commands."""
     import control
@@ -75,5 +89,11 @@ def closed_loop_system(a: "Artifact") -> "control.StateSpace":
     sums = [control.summing_junction(inputs=[u, f"d_{u}"], output=f"{u}_plant", name=f"sum_{u}") for u in inputs]
     inplist = list(sig["references"]) + [f"d_{u}" for u in inputs]
     outlist = list(sig["outputs"]) + inputs
-    return control.interconnect([plant_system(a), controller_system(a), *sums], name=f"{a.name}_closed_loop",
-                                inplist=inplist, outlist=outlist, inputs=inplist, outputs=outlist)
+    return control.interconnect(
+        [plant_system(a), controller_system(a), *sums],
+        name=f"{a.name}_closed_loop",
+        inplist=inplist,
+        outlist=outlist,
+        inputs=inplist,
+        outputs=outlist,
+    )

@@ -14,8 +14,8 @@ unstable compensator).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -47,8 +47,14 @@ class TwinLoop:
         Samples planned (the trace is cut to those taken).
     """
 
-    def __init__(self, artifact: Artifact, *, outputs: Callable[[], np.ndarray],
-                 advance: Callable[[np.ndarray], None], steps: int) -> None:
+    def __init__(
+        self,
+        artifact: Artifact,
+        *,
+        outputs: Callable[[], np.ndarray],
+        advance: Callable[[np.ndarray], None],
+        steps: int,
+    ) -> None:
         self.law = ReferenceLoop(artifact)
         self._outputs, self._advance = outputs, advance
         a = artifact
@@ -95,8 +101,16 @@ class TwinComparison:
         return _clean(asdict(self) | {"worst_du_rel": self.worst_du_rel, "worst_dy_rel": self.worst_dy_rel})
 
 
-def twin_comparison(*, t: np.ndarray, y: np.ndarray, u: np.ndarray, r: np.ndarray, twin_y: np.ndarray,
-                    twin_u: np.ndarray, artifact: Artifact) -> TwinComparison:
+def twin_comparison(
+    *,
+    t: np.ndarray,
+    y: np.ndarray,
+    u: np.ndarray,
+    r: np.ndarray,
+    twin_y: np.ndarray,
+    twin_u: np.ndarray,
+    artifact: Artifact,
+) -> TwinComparison:
     """Compare a run's sampled outputs ``y`` and commands ``u`` with its twin's, sample by sample.
 
     Parameters
@@ -133,12 +147,20 @@ def twin_comparison(*, t: np.ndarray, y: np.ndarray, u: np.ndarray, r: np.ndarra
     du = np.abs(u - twin_u)
     dy = np.abs(y - twin_y)
     excursion = np.ptp(twin_y, axis=0) if N else np.zeros(a.p)
-    inputs = {name: {"max_du": float(du[:, i].max(initial=0.0)),
-                     "max_du_rel": float(du[:, i].max(initial=0.0) / span[i]) if span[i] > 0 else None}
-              for i, name in enumerate(sig["inputs"])}
-    outputs = {name: {"max_dy": float(dy[:, i].max(initial=0.0)),
-                      "max_dy_rel": float(dy[:, i].max(initial=0.0) / excursion[i]) if excursion[i] > 0 else None}
-               for i, name in enumerate(sig["outputs"])}
+    inputs = {
+        name: {
+            "max_du": float(du[:, i].max(initial=0.0)),
+            "max_du_rel": float(du[:, i].max(initial=0.0) / span[i]) if span[i] > 0 else None,
+        }
+        for i, name in enumerate(sig["inputs"])
+    }
+    outputs = {
+        name: {
+            "max_dy": float(dy[:, i].max(initial=0.0)),
+            "max_dy_rel": float(dy[:, i].max(initial=0.0) / excursion[i]) if excursion[i] > 0 else None,
+        }
+        for i, name in enumerate(sig["outputs"])
+    }
     dt = float(t[1] - t[0]) if N > 1 else 0.0
     if a.q:
         errors = {name: (r[:, j] - y @ a.Ci[j], r[:, j] - twin_y @ a.Ci[j]) for j, name in enumerate(sig["references"])}
@@ -147,8 +169,12 @@ def twin_comparison(*, t: np.ndarray, y: np.ndarray, u: np.ndarray, r: np.ndarra
     iae = {}
     for name, (e_real, e_twin) in errors.items():
         real, ideal = float(np.sum(np.abs(e_real)) * dt), float(np.sum(np.abs(e_twin)) * dt)
-        iae[name] = {"real": real, "twin": ideal, "difference": real - ideal,
-                     "difference_rel": (real - ideal) / ideal if ideal > 0 else None}
+        iae[name] = {
+            "real": real,
+            "twin": ideal,
+            "difference": real - ideal,
+            "difference_rel": (real - ideal) / ideal if ideal > 0 else None,
+        }
     return TwinComparison(steps=N, inputs=inputs, outputs=outputs, iae=iae)
 
 

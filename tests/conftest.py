@@ -9,7 +9,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-
 from gainlink import artifact as artifact_mod
 from gainlink.cli import main
 from gainlink.design import design

@@ -31,18 +31,45 @@ import time
 
 import msgpack
 
-CAN_KINDS = ("mutated", "foreign_id", "extended", "remote", "error_frame", "classic_too_long", "oversized",
-             "container_bomb", "not_a_map", "garbage", "short_measurement")
+CAN_KINDS = (
+    "mutated",
+    "foreign_id",
+    "extended",
+    "remote",
+    "error_frame",
+    "classic_too_long",
+    "oversized",
+    "container_bomb",
+    "not_a_map",
+    "garbage",
+    "short_measurement",
+)
 
 
-def _pack(arbitration_id: int, data: bytes, *, fd: bool = False, extended: bool = False, remote: bool = False,
-          error: bool = False) -> bytes:
+def _pack(
+    arbitration_id: int,
+    data: bytes,
+    *,
+    fd: bool = False,
+    extended: bool = False,
+    remote: bool = False,
+    error: bool = False,
+) -> bytes:
     import can
     from can.interfaces.udp_multicast.utils import pack_message
 
-    return pack_message(can.Message(arbitration_id=arbitration_id, data=data, is_fd=fd, is_extended_id=extended,
-                                    is_remote_frame=remote, is_error_frame=error, timestamp=time.time(),
-                                    check=False))
+    return pack_message(
+        can.Message(
+            arbitration_id=arbitration_id,
+            data=data,
+            is_fd=fd,
+            is_extended_id=extended,
+            is_remote_frame=remote,
+            is_error_frame=error,
+            timestamp=time.time(),
+            check=False,
+        )
+    )
 
 
 def _could_be_sample(datagram: bytes, lo: int, hi: int) -> bool:
@@ -51,7 +78,7 @@ def _could_be_sample(datagram: bytes, lo: int, hi: int) -> bool:
     unpacker.feed(datagram)
     try:
         obj = next(unpacker)  # the first object only: the firmware ignores trailing bytes too
-    except Exception:  # noqa: BLE001 - anything msgpack cannot read is certainly refused
+    except Exception:
         return False
     if not isinstance(obj, dict):
         return False
@@ -72,20 +99,35 @@ def can_datagram(kind: str, rng: random.Random, *, lo: int, hi: int, base: int) 
     if kind == "error_frame":
         return _pack(rng.randint(lo, hi), payload[:8], error=True)
     if kind == "classic_too_long":
-        return msgpack.packb({"arbitration_id": rng.randint(lo, hi), "is_extended_id": False, "is_fd": False,
-                              "dlc": 12, "data": payload[:12].ljust(12, b"\0")}, use_bin_type=True)
+        return msgpack.packb(
+            {
+                "arbitration_id": rng.randint(lo, hi),
+                "is_extended_id": False,
+                "is_fd": False,
+                "dlc": 12,
+                "data": payload[:12].ljust(12, b"\0"),
+            },
+            use_bin_type=True,
+        )
     if kind == "oversized":
-        return msgpack.packb({"arbitration_id": rng.randint(lo, hi), "data": bytes(8), "pad": bytes(400)},
-                             use_bin_type=True)
+        return msgpack.packb(
+            {"arbitration_id": rng.randint(lo, hi), "data": bytes(8), "pad": bytes(400)}, use_bin_type=True
+        )
     if kind == "container_bomb":
-        return rng.choice([bytes.fromhex("dfffffffff"), bytes.fromhex("dd7fffffff"),
-                           b"\x81\xa4data\xdd\x00\xff\xff\xff", b"\x81\xa1x\x91\x91\x91\x91\x90"])
+        return rng.choice(
+            [
+                bytes.fromhex("dfffffffff"),
+                bytes.fromhex("dd7fffffff"),
+                b"\x81\xa4data\xdd\x00\xff\xff\xff",
+                b"\x81\xa1x\x91\x91\x91\x91\x90",
+            ]
+        )
     if kind == "not_a_map":
         return msgpack.packb([rng.randint(lo, hi), payload[:8]], use_bin_type=True)
     if kind == "garbage":
         return bytes(rng.getrandbits(8) for _ in range(rng.randint(1, 200)))
     if kind == "short_measurement":
-        return _pack(rng.randint(lo, hi), payload[:rng.randint(0, 3)])
+        return _pack(rng.randint(lo, hi), payload[: rng.randint(0, 3)])
     # mutated: a well-formed frame of a foreign id, then bit flips / truncation / extension
     base = bytearray(_pack(foreign, payload[:8], fd=rng.random() < 0.5))
     for _ in range(rng.randint(1, 4)):
@@ -93,7 +135,7 @@ def can_datagram(kind: str, rng: random.Random, *, lo: int, hi: int, base: int) 
         if op < 0.6 and base:
             base[rng.randrange(len(base))] ^= 1 << rng.randrange(8)
         elif op < 0.8 and len(base) > 1:
-            del base[rng.randrange(1, len(base)):]
+            del base[rng.randrange(1, len(base)) :]
         else:
             base += bytes(rng.getrandbits(8) for _ in range(rng.randint(1, 16)))
     return bytes(base)
@@ -139,7 +181,7 @@ def mavlink_datagrams(frames_file: str, count: int, seed: int) -> tuple[list[byt
             for _ in range(rng.randint(1, 3)):
                 d[rng.randrange(len(d))] ^= 1 << rng.randrange(8)
         elif kind == "truncated":
-            del d[rng.randrange(1, len(d)):]
+            del d[rng.randrange(1, len(d)) :]
         elif kind == "concatenated":
             d += rng.choice(frames)[: rng.randint(1, 64)]
         elif kind == "garbage":
@@ -186,8 +228,12 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--rate", type=float, default=0.0)
         p.add_argument("--seed", type=int, default=1)
         p.add_argument("--delay", type=float, default=0.0, help="seconds to wait before sending")
-        p.add_argument("--bursts", action="store_true", help="print 'ready' once the datagrams are made, then for "
-                       "each line 'go N' on stdin send the next N and print 'sent N'")
+        p.add_argument(
+            "--bursts",
+            action="store_true",
+            help="print 'ready' once the datagrams are made, then for "
+            "each line 'go N' on stdin send the next N and print 'sent N'",
+        )
     args = ap.parse_args(argv)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 20)
@@ -206,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
             words = sys.stdin.readline().split()
             if len(words) != 2 or words[0] != "go":
                 break
-            chunk = datagrams[at:at + int(words[1])]
+            chunk = datagrams[at : at + int(words[1])]
             seconds += send_all(sock, dest, chunk, rate=args.rate)
             at += len(chunk)
             print(f"sent {len(chunk)}", flush=True)

@@ -6,11 +6,9 @@ import json
 
 import numpy as np
 import pytest
-
+from conftest import EXAMPLES, run_cli
 from gainlink.analysis import analyze, transmission_zeros
 from gainlink.spec import parse_spec
-
-from conftest import EXAMPLES, run_cli
 
 
 def spec(A, B, C, *, D=None, Ts=0.01, controller=None, observer=None):
@@ -18,12 +16,16 @@ def spec(A, B, C, *, D=None, Ts=0.01, controller=None, observer=None):
     plant = {"kind": "continuous", "A": A, "B": B, "C": C}
     if D is not None:
         plant["D"] = D
-    return parse_spec({
-        "name": "probe", "Ts": Ts, "plant": plant,
-        "controller": controller or {"method": "lqr", "Q_diag": [1.0] * n, "R_diag": [1.0] * m},
-        "observer": observer or {"method": "kalman", "W_diag": [0.01] * n, "V_diag": [0.01] * p},
-        "limits": {"u_min": [-1.0] * m, "u_max": [1.0] * m},
-    })
+    return parse_spec(
+        {
+            "name": "probe",
+            "Ts": Ts,
+            "plant": plant,
+            "controller": controller or {"method": "lqr", "Q_diag": [1.0] * n, "R_diag": [1.0] * m},
+            "observer": observer or {"method": "kalman", "W_diag": [0.01] * n, "V_diag": [0.01] * p},
+            "limits": {"u_min": [-1.0] * m, "u_max": [1.0] * m},
+        }
+    )
 
 
 def test_pbh_names_the_uncontrollable_and_unobservable_modes():
@@ -65,8 +67,15 @@ def test_zeros_of_a_non_square_plant():
 def test_slow_sampling_is_flagged_against_the_closed_loop_bandwidth():
     fast = analyze(spec([[0.0, 1.0], [0.0, 0.0]], [[0.0], [1.0]], [[1.0, 0.0]], Ts=0.01))
     # the crossover is that of the loop broken at the actuator with the observer in it (design's margins)
-    slow = analyze(spec([[0.0, 1.0], [0.0, 0.0]], [[0.0], [1.0]], [[1.0, 0.0]], Ts=1.0,
-                        controller={"method": "lqr", "Q_diag": [100.0, 1.0], "R_diag": [0.01]}))
+    slow = analyze(
+        spec(
+            [[0.0, 1.0], [0.0, 0.0]],
+            [[0.0], [1.0]],
+            [[1.0, 0.0]],
+            Ts=1.0,
+            controller={"method": "lqr", "Q_diag": [100.0, 1.0], "R_diag": [0.01]},
+        )
+    )
     assert fast.sample_rate_ratio >= 10 and not any("sample rate" in w for w in fast.warnings)
     assert slow.sample_rate_ratio < 10 and any("sample rate is only" in w for w in slow.warnings)
 

@@ -17,21 +17,26 @@ import sys
 from pathlib import Path
 
 import control as ct
+import gainlink as gl
 import numpy as np
 import pytest
 import scipy.linalg
-
-import gainlink as gl
-from gainlink.errors import DesignError, SpecError
-
 from conftest import EXAMPLES, run_cli
+from gainlink.errors import DesignError, SpecError
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _double_integrator() -> ct.StateSpace:
-    return ct.ss([[0.0, 1.0], [0.0, 0.0]], [[0.0], [1.0]], [[1.0, 0.0]], [[0.0]],
-                 states=["pos", "vel"], inputs=["force"], outputs=["pos"])
+    return ct.ss(
+        [[0.0, 1.0], [0.0, 0.0]],
+        [[0.0], [1.0]],
+        [[1.0, 0.0]],
+        [[0.0]],
+        states=["pos", "vel"],
+        inputs=["force"],
+        outputs=["pos"],
+    )
 
 
 def test_curated_namespace_lists_what_a_user_needs():
@@ -42,21 +47,25 @@ def test_curated_namespace_lists_what_a_user_needs():
 
 def test_campaigns_are_in_the_namespace_without_import_gainlink_loading_dask():
     # A fresh interpreter: this one may have imported Dask for other tests.
-    code = ("import sys, gainlink as gl\n"
-            "assert 'campaign' in gl.__all__\n"
-            "assert not {'dask', 'distributed', 'gainlink.hil.campaign'} & set(sys.modules), 'imported eagerly'\n"
-            "import gainlink.hil.campaign as c\n"
-            "assert gl.campaign is c and gl.campaign.run is c.runner.run\n"
-            "from gainlink import campaign\n"
-            "assert campaign is c\n"
-            "try:\n    gl.no_such_thing\nexcept AttributeError as e:\n    print(e)\n")
+    code = (
+        "import sys, gainlink as gl\n"
+        "assert 'campaign' in gl.__all__\n"
+        "assert not {'dask', 'distributed', 'gainlink.hil.campaign'} & set(sys.modules), 'imported eagerly'\n"
+        "import gainlink.hil.campaign as c\n"
+        "assert gl.campaign is c and gl.campaign.run is c.runner.run\n"
+        "from gainlink import campaign\n"
+        "assert campaign is c\n"
+        "try:\n    gl.no_such_thing\nexcept AttributeError as e:\n    print(e)\n"
+    )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "module 'gainlink' has no attribute 'no_such_thing'"
 
 
-@pytest.mark.parametrize("module", ["gainlink.api", "gainlink.hil", "gainlink.onestep", "gainlink.twin",
-                                    "gainlink.fidelity", "gainlink.compensator"])
+@pytest.mark.parametrize(
+    "module",
+    ["gainlink.api", "gainlink.hil", "gainlink.onestep", "gainlink.twin", "gainlink.fidelity", "gainlink.compensator"],
+)
 def test_docstring_examples_run(module):
     import importlib
 
@@ -66,11 +75,13 @@ def test_docstring_examples_run(module):
 
 def test_design_from_a_continuous_statespace_equals_scipy_dlqr():
     Q, R = np.diag([10.0, 1.0]), np.array([[0.5]])
-    art = gl.design(_double_integrator(), Ts=0.02, Q=Q, R=R, W=np.diag([1e-4, 1e-3]), V=[[1e-5]],
-                    u_min=[-3.0], u_max=[3.0])
+    art = gl.design(
+        _double_integrator(), Ts=0.02, Q=Q, R=R, W=np.diag([1e-4, 1e-3]), V=[[1e-5]], u_min=[-3.0], u_max=[3.0]
+    )
     # independent oracle: ZOH by the matrix exponential, DARE by SciPy
-    Phi = scipy.linalg.expm(np.block([[np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])],
-                                      [np.zeros((1, 3))]]) * 0.02)
+    Phi = scipy.linalg.expm(
+        np.block([[np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])], [np.zeros((1, 3))]]) * 0.02
+    )
     Ad, Bd = Phi[:2, :2], Phi[:2, 2:]
     P = scipy.linalg.solve_discrete_are(Ad, Bd, Q, R)
     K = np.linalg.solve(R + Bd.T @ P @ Bd, Bd.T @ P @ Ad)
@@ -98,8 +109,15 @@ def test_keyword_settings_replace_the_spec_file_tables():
 
 def test_own_gains_reproduce_the_designed_artifact_and_say_they_were_given():
     designed = gl.design(EXAMPLES / "pendulum.toml")
-    given = gl.from_gains(EXAMPLES / "pendulum.toml", K=designed.K, Ki=designed.Ki, Ci=designed.Ci, L=designed.L,
-                          u_min=designed.u_min, u_max=designed.u_max)
+    given = gl.from_gains(
+        EXAMPLES / "pendulum.toml",
+        K=designed.K,
+        Ki=designed.Ki,
+        Ci=designed.Ci,
+        L=designed.L,
+        u_min=designed.u_min,
+        u_max=designed.u_max,
+    )
     for key in ("K", "Ki", "L", "Kaw", "Ad", "Bd"):
         np.testing.assert_array_equal(getattr(given, key), getattr(designed, key))
     assert given.checks["closed_loop_poles"] == designed.checks["closed_loop_poles"]
@@ -136,8 +154,10 @@ def test_given_gains_get_every_design_check():
 def test_given_gains_from_a_spec_file_and_one_line_refusals(tmp_path):
     spec = (EXAMPLES / "pendulum.toml").read_text()
     designed = gl.design(EXAMPLES / "pendulum.toml")
-    given = spec.replace('method = "lqr"', f'method = "given"\nK = {json.dumps(designed.K.tolist())}\n'
-                                           f'Ki = {json.dumps(designed.Ki.tolist())}')
+    given = spec.replace(
+        'method = "lqr"',
+        f'method = "given"\nK = {json.dumps(designed.K.tolist())}\nKi = {json.dumps(designed.Ki.tolist())}',
+    )
     given = given.replace("Q_diag = [10.0, 1.0, 100.0, 1.0]", "").replace("R_diag = [1.0]", "")
     given = given.replace('method = "kalman"', f'method = "given"\nL = {json.dumps(designed.L.tolist())}')
     given = "\n".join(line for line in given.splitlines() if not line.startswith(("W_diag", "V_diag")))
@@ -146,7 +166,9 @@ def test_given_gains_from_a_spec_file_and_one_line_refusals(tmp_path):
     assert res.code == 0, res.err
     art = gl.load(tmp_path / "out" / "gains.json")
     np.testing.assert_array_equal(art.K, designed.K)
-    (tmp_path / "bad.toml").write_text(given.replace('method = "given"\nK = ', 'method = "given"\nK = [[1.0]]\nX = ', 1))
+    (tmp_path / "bad.toml").write_text(
+        given.replace('method = "given"\nK = ', 'method = "given"\nK = [[1.0]]\nX = ', 1)
+    )
     res = run_cli("design", str(tmp_path / "bad.toml"), "--out", str(tmp_path / "bad"))
     assert res.code == 2 and len(res.err.strip().splitlines()) == 1, res.err
     assert not (tmp_path / "bad").exists()
@@ -162,9 +184,13 @@ def test_margins_are_actuator_margins_of_the_law_as_implemented():
     def rho(k: float) -> float:
         n, q = a.n, a.q
         # x+ = Ad x + k Bd u;  xh+ = Ad xh + Bd u + L (Cd x - Cd xh);  z+ = z - Ts Ci Cd x;  u = -K xh - Ki z
-        Acl = np.block([[a.Ad, -k * a.Bd @ a.K, -k * a.Bd @ a.Ki],
-                        [a.L @ a.Cd, a.Ad - a.L @ a.Cd - a.Bd @ a.K, -a.Bd @ a.Ki],
-                        [-a.Ts * a.Ci @ a.Cd, np.zeros((q, n)), np.eye(q)]])
+        Acl = np.block(
+            [
+                [a.Ad, -k * a.Bd @ a.K, -k * a.Bd @ a.Ki],
+                [a.L @ a.Cd, a.Ad - a.L @ a.Cd - a.Bd @ a.K, -a.Bd @ a.Ki],
+                [-a.Ts * a.Ci @ a.Cd, np.zeros((q, n)), np.eye(q)],
+            ]
+        )
         return float(np.max(np.abs(np.linalg.eigvals(Acl))))
 
     up, down = 10 ** (mg["gain_margin_up_db"] / 20), 10 ** (mg["gain_margin_down_db"] / 20)
@@ -172,8 +198,13 @@ def test_margins_are_actuator_margins_of_the_law_as_implemented():
     assert rho(up * 0.99) < 1 < rho(up * 1.01)
     assert rho(down * 1.01) < 1 < rho(down * 0.99)
     P = ct.ss(a.Ad, a.Bd, a.Cd, a.Dd, a.Ts)
-    Cy = ct.ss(np.block([[a.Ad - a.L @ a.Cd - a.Bd @ a.K, -a.Bd @ a.Ki], [np.zeros((a.q, a.n)), np.eye(a.q)]]),
-               np.vstack([a.L, -a.Ts * a.Ci]), np.hstack([-a.K, -a.Ki]), np.zeros((a.m, a.p)), a.Ts)
+    Cy = ct.ss(
+        np.block([[a.Ad - a.L @ a.Cd - a.Bd @ a.K, -a.Bd @ a.Ki], [np.zeros((a.q, a.n)), np.eye(a.q)]]),
+        np.vstack([a.L, -a.Ts * a.Ci]),
+        np.hstack([-a.K, -a.Ki]),
+        np.zeros((a.m, a.p)),
+        a.Ts,
+    )
     w = np.logspace(-2, np.log10(np.pi / a.Ts), 20000)
     _, pm, _, wcp = ct.margin(ct.frd(-Cy * P, w))
     assert mg["phase_margin_deg"] == pytest.approx(pm, abs=0.2)
@@ -224,10 +255,18 @@ def test_hil_run_takes_an_artifact_object_and_returns_numpy_traces(tmp_path):
     from test_hil_support import udp_transport
 
     art = gl.design(EXAMPLES / "pendulum.toml")
-    scenario = {"name": "api_run", "artifact": "unused.json", "duration": 2.0, "mode": "lockstep",
-                "controller": "firmware", "step_timeout": 2.0, "plant": {"kind": "cart_pendulum"},
-                "transport": udp_transport(), "initial_state": {"theta": 0.05},
-                "reference": {"r_x": {"kind": "step", "at": 0.2, "value": 0.2}}}
+    scenario = {
+        "name": "api_run",
+        "artifact": "unused.json",
+        "duration": 2.0,
+        "mode": "lockstep",
+        "controller": "firmware",
+        "step_timeout": 2.0,
+        "plant": {"kind": "cart_pendulum"},
+        "transport": udp_transport(),
+        "initial_state": {"theta": 0.05},
+        "reference": {"r_x": {"kind": "step", "at": 0.2, "value": 0.2}},
+    }
     res = gl.hil.run(scenario, artifact=art, report=tmp_path / "report", plots=False)
     assert res.complete, res.reason
     assert res.trace.y.shape == (200, 2) and res.trace.got.all()

@@ -20,36 +20,68 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy import stats
-
+from conftest import EXAMPLES, ROOT, run_cli
 from gainlink.artifact import load
-from gainlink.hil.campaign import CampaignError, load_campaign, parse_campaign, run, show_run
+from gainlink.hil.campaign import CampaignError, parse_campaign, run
 from gainlink.hil.campaign.criteria import growth
 from gainlink.hil.campaign.plan import draw_values, plan_campaign
-from gainlink.hil.plants import toml_write
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil import run_sil
-
-from conftest import EXAMPLES, ROOT, run_cli
+from gainlink.hil.plants import toml_write
+from scipy import stats
 
 VENV_BIN = Path(sys.executable).parent
 # What must be equal between two executions of the same run (timing is not: wall time, C step latency).
-CONTROL_KEYS = ("tracked", "outputs_final", "outputs_peak_abs", "inputs_peak_abs", "saturation_fraction",
-                "peak_integrator", "twin", "steps", "complete")
+CONTROL_KEYS = (
+    "tracked",
+    "outputs_final",
+    "outputs_peak_abs",
+    "inputs_peak_abs",
+    "saturation_fraction",
+    "peak_integrator",
+    "twin",
+    "steps",
+    "complete",
+)
 
 
 def small_campaign(gains: Path, **extra) -> dict:
     """6 SIL runs of 3 s: 2 initial offsets x 3 plant draws (cart mass factor, pendulum mass)."""
     data = {
-        "name": "small", "kind": "sil", "seed": 11, "runs": 3, "artifact": str(gains),
-        "scenario": {"duration": 3.0, "noise": {"theta": 2e-4},
-                     "plant": {"kind": "cart_pendulum", "outputs": ["x", "theta"], "step": 0.005,
-                               "parameters": {"M": 1.0, "m": 0.1}}},
+        "name": "small",
+        "kind": "sil",
+        "seed": 11,
+        "runs": 3,
+        "artifact": str(gains),
+        "scenario": {
+            "duration": 3.0,
+            "noise": {"theta": 2e-4},
+            "plant": {
+                "kind": "cart_pendulum",
+                "outputs": ["x", "theta"],
+                "step": 0.005,
+                "parameters": {"M": 1.0, "m": 0.1},
+            },
+        },
         "grid": [{"target": "initial_state.x", "values": [0.2, 1.0]}],
-        "draw": [{"name": "M_factor", "targets": ["plant.parameters.M"], "distribution": "uniform", "low": 0.7,
-                  "high": 1.3, "apply": "scale"},
-                 {"target": "plant.parameters.m", "distribution": "truncnormal", "mean": 0.1, "std": 0.02,
-                  "low": 0.07, "high": 0.13}],
+        "draw": [
+            {
+                "name": "M_factor",
+                "targets": ["plant.parameters.M"],
+                "distribution": "uniform",
+                "low": 0.7,
+                "high": 1.3,
+                "apply": "scale",
+            },
+            {
+                "target": "plant.parameters.m",
+                "distribution": "truncnormal",
+                "mean": 0.1,
+                "std": 0.02,
+                "low": 0.07,
+                "high": 0.13,
+            },
+        ],
         "criteria": {"stable": True, "bounds": {"theta": [-0.5, 0.5]}, "settled_within": 2.5},
     }
     data.update(extra)
@@ -71,21 +103,26 @@ def local_run(pend, tmp_path_factory):
 # --- the file ------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("change, words", [
-    ({"bogus": 1}, "unknown key(s) bogus in the top level"),
-    ({"kind": "pil"}, "kind must be sil or hil"),
-    ({"spec": "x.toml"}, "exactly one of spec"),
-    ({"runs": 0}, "runs must be a whole number >= 1"),
-    ({"draw": [{"target": "plant.parameters.M", "distribution": "gamma"}]}, "distribution must be one of"),
-    ({"draw": [{"target": "plant.parameters.M", "distribution": "uniform", "low": 1.0}]}, "(missing high)"),
-    ({"draw": [{"target": "plant.parameters.M", "distribution": "uniform", "low": 2.0, "high": 1.0}]},
-     "low must be below high"),
-    ({"draw": [{"target": "plant..M", "distribution": "normal", "mean": 1.0, "std": 0.1}]}, "is not a dotted path"),
-    ({"grid": [{"targets": ["initial_state.x", "initial_state.theta"], "values": [1.0]}]}, "needs a name"),
-    ({"grid": [{"target": "spec.Ts", "values": [0.01]}]}, "spec.* axes need a spec"),
-    ({"fault_matrix": {"drop": [0.1]}}, "fault_matrix acts on a link"),
-    ({"criteria": {"overshot_below": 5}}, "unknown key(s) overshot_below in criteria"),
-])
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        ({"bogus": 1}, "unknown key(s) bogus in the top level"),
+        ({"kind": "pil"}, "kind must be sil or hil"),
+        ({"spec": "x.toml"}, "exactly one of spec"),
+        ({"runs": 0}, "runs must be a whole number >= 1"),
+        ({"draw": [{"target": "plant.parameters.M", "distribution": "gamma"}]}, "distribution must be one of"),
+        ({"draw": [{"target": "plant.parameters.M", "distribution": "uniform", "low": 1.0}]}, "(missing high)"),
+        (
+            {"draw": [{"target": "plant.parameters.M", "distribution": "uniform", "low": 2.0, "high": 1.0}]},
+            "low must be below high",
+        ),
+        ({"draw": [{"target": "plant..M", "distribution": "normal", "mean": 1.0, "std": 0.1}]}, "is not a dotted path"),
+        ({"grid": [{"targets": ["initial_state.x", "initial_state.theta"], "values": [1.0]}]}, "needs a name"),
+        ({"grid": [{"target": "spec.Ts", "values": [0.01]}]}, "spec.* axes need a spec"),
+        ({"fault_matrix": {"drop": [0.1]}}, "fault_matrix acts on a link"),
+        ({"criteria": {"overshot_below": 5}}, "unknown key(s) overshot_below in criteria"),
+    ],
+)
 def test_campaign_file_mistakes_are_one_line(pend, change, words):
     with pytest.raises(CampaignError) as err:
         parse_campaign(small_campaign(pend, **change))
@@ -93,11 +130,15 @@ def test_campaign_file_mistakes_are_one_line(pend, change, words):
 
 
 def test_a_run_that_cannot_be_built_is_named_before_anything_runs(pend, tmp_path):
-    bad = small_campaign(pend, runs=20, draw=[{"target": "noise.theta", "distribution": "normal", "mean": 0.0, "std": 1.0}])
+    bad = small_campaign(
+        pend, runs=20, draw=[{"target": "noise.theta", "distribution": "normal", "mean": 0.0, "std": 1.0}]
+    )
     with pytest.raises(CampaignError, match=r"run \d+ \(.*noise.theta=.*\): scenario: noise.theta must be >= 0"):
         plan_campaign(parse_campaign(bad))
-    scale = small_campaign(pend, draw=[{"target": "plant.parameters.l", "distribution": "uniform", "low": 0.9,
-                                        "high": 1.1, "apply": "scale"}])
+    scale = small_campaign(
+        pend,
+        draw=[{"target": "plant.parameters.l", "distribution": "uniform", "low": 0.9, "high": 1.1, "apply": "scale"}],
+    )
     with pytest.raises(CampaignError, match="needs a number at plant.parameters.l in the base"):
         plan_campaign(parse_campaign(scale))
     path = tmp_path / "c.toml"
@@ -137,13 +178,18 @@ def test_draws_are_reproducible_shared_by_grid_points_and_kept_when_runs_grow(pe
     assert not {r.id for r in other.runs} & {r.id for r in p3.runs}
 
 
-@pytest.mark.parametrize("draw, dist", [
-    ({"distribution": "uniform", "low": -1.0, "high": 3.0}, stats.uniform(-1.0, 4.0)),
-    ({"distribution": "normal", "mean": 2.0, "std": 0.5}, stats.norm(2.0, 0.5)),
-    ({"distribution": "loguniform", "low": 0.01, "high": 10.0}, stats.loguniform(0.01, 10.0)),
-    ({"distribution": "truncnormal", "mean": 1.0, "std": 1.0, "low": 0.5, "high": 4.0},
-     stats.truncnorm(-0.5, 3.0, loc=1.0, scale=1.0)),
-])
+@pytest.mark.parametrize(
+    "draw, dist",
+    [
+        ({"distribution": "uniform", "low": -1.0, "high": 3.0}, stats.uniform(-1.0, 4.0)),
+        ({"distribution": "normal", "mean": 2.0, "std": 0.5}, stats.norm(2.0, 0.5)),
+        ({"distribution": "loguniform", "low": 0.01, "high": 10.0}, stats.loguniform(0.01, 10.0)),
+        (
+            {"distribution": "truncnormal", "mean": 1.0, "std": 1.0, "low": 0.5, "high": 4.0},
+            stats.truncnorm(-0.5, 3.0, loc=1.0, scale=1.0),
+        ),
+    ],
+)
 def test_draws_follow_their_distribution(pend, draw, dist):
     # draw_values is what plan_campaign puts into each run (the test above checks that it does).
     c = parse_campaign(small_campaign(pend, runs=1000, grid=[], draw=[{"target": "initial_state.x", **draw}]))
@@ -155,25 +201,44 @@ def test_draws_follow_their_distribution(pend, draw, dist):
 
 def test_a_spec_grid_designs_one_artifact_per_point():
     spec = EXAMPLES / "pendulum.toml"
-    c = parse_campaign({"spec": str(spec), "runs": 2, "scenario": {"duration": 1.0, "plant": {"kind": "linear"}},
-                        "grid": [{"target": "spec.limits.anti_windup", "values": ["clamp", "backcalc"]},
-                                 {"target": "spec.controller.Q_diag[2]", "values": [50.0, 100.0]}]})
+    c = parse_campaign(
+        {
+            "spec": str(spec),
+            "runs": 2,
+            "scenario": {"duration": 1.0, "plant": {"kind": "linear"}},
+            "grid": [
+                {"target": "spec.limits.anti_windup", "values": ["clamp", "backcalc"]},
+                {"target": "spec.controller.Q_diag[2]", "values": [50.0, 100.0]},
+            ],
+        }
+    )
     plan = plan_campaign(c)
     assert len(plan.runs) == 8 and len(plan.artifacts) == 4
     for r in plan.runs:
         art = json.loads(plan.artifacts[r.artifact_sha256])
         assert art["anti_windup"] == r.values["spec.limits.anti_windup"]
     # A grid point whose design fails is recorded as failed, not fatal to the campaign.
-    bad = parse_campaign({"spec": str(spec), "scenario": {"duration": 1.0, "plant": {"kind": "linear"}},
-                          "grid": [{"target": "spec.controller.R_diag[0]", "values": [1.0, -1.0]}]})
+    bad = parse_campaign(
+        {
+            "spec": str(spec),
+            "scenario": {"duration": 1.0, "plant": {"kind": "linear"}},
+            "grid": [{"target": "spec.controller.R_diag[0]", "values": [1.0, -1.0]}],
+        }
+    )
     runs = plan_campaign(bad).runs
     assert runs[0].error is None and runs[1].error.startswith("design failed: ")
 
 
 def test_quoted_keys_reach_spec_entries_of_a_linear_plant_and_dotted_fmu_names(pend):
-    c = parse_campaign(small_campaign(pend, grid=[], runs=4, scenario={"duration": 1.0, "plant": {"kind": "linear"}},
-                                      draw=[{"target": 'plant.perturb."A[3][2]"', "distribution": "uniform",
-                                             "low": -0.2, "high": 0.2}]))
+    c = parse_campaign(
+        small_campaign(
+            pend,
+            grid=[],
+            runs=4,
+            scenario={"duration": 1.0, "plant": {"kind": "linear"}},
+            draw=[{"target": 'plant.perturb."A[3][2]"', "distribution": "uniform", "low": -0.2, "high": 0.2}],
+        )
+    )
     for r in plan_campaign(c).runs:
         assert r.scenario["plant"] == {"kind": "linear", "perturb": {"A[3][2]": r.values['plant.perturb."A[3][2]"']}}
     from gainlink.hil.campaign.plan import set_path
@@ -199,15 +264,40 @@ def test_verdicts_name_each_failed_criterion():
     from gainlink.hil.campaign.config import Criteria
     from gainlink.hil.campaign.criteria import evaluate
 
-    record = {"metrics": {"tracked": {"r_x": {"settling_time_s": 7.0, "overshoot_pct": 12.0, "iae": 2.0}}},
-              "measures": {"stable": True, "output_min": {"theta": -0.3}, "output_max": {"theta": 0.8},
-                           "longest_saturation_s": 0.4, "twin_output_deviation": 0.02}}
-    strict = Criteria(stable=True, bounds={"theta": (-0.7, 0.7)}, settled_within=6.0, overshoot_below=10.0,
-                      saturated_at_most=0.5, iae_below=3.0, twin_deviation_below=0.01)
-    assert [k for k, _ in evaluate(strict, record)] == ["bounds", "settled_within", "overshoot_below",
-                                                       "twin_deviation_below"]
-    loose = Criteria(stable=True, bounds={"theta": (-1.0, 1.0)}, settled_within=8.0, overshoot_below=20.0,
-                     saturated_at_most=0.5, iae_below=3.0, twin_deviation_below=0.05)
+    record = {
+        "metrics": {"tracked": {"r_x": {"settling_time_s": 7.0, "overshoot_pct": 12.0, "iae": 2.0}}},
+        "measures": {
+            "stable": True,
+            "output_min": {"theta": -0.3},
+            "output_max": {"theta": 0.8},
+            "longest_saturation_s": 0.4,
+            "twin_output_deviation": 0.02,
+        },
+    }
+    strict = Criteria(
+        stable=True,
+        bounds={"theta": (-0.7, 0.7)},
+        settled_within=6.0,
+        overshoot_below=10.0,
+        saturated_at_most=0.5,
+        iae_below=3.0,
+        twin_deviation_below=0.01,
+    )
+    assert [k for k, _ in evaluate(strict, record)] == [
+        "bounds",
+        "settled_within",
+        "overshoot_below",
+        "twin_deviation_below",
+    ]
+    loose = Criteria(
+        stable=True,
+        bounds={"theta": (-1.0, 1.0)},
+        settled_within=8.0,
+        overshoot_below=20.0,
+        saturated_at_most=0.5,
+        iae_below=3.0,
+        twin_deviation_below=0.05,
+    )
     assert evaluate(loose, record) == []
     record["measures"].pop("twin_output_deviation")  # a run without a twin cannot pass a twin criterion
     assert [k for k, _ in evaluate(loose, record)] == ["twin_deviation_below"]
@@ -268,14 +358,23 @@ def test_a_long_run_is_stored_as_evenly_spaced_true_samples_with_both_ends():
     N = 5003
     t = np.arange(N) * 0.01
     y = np.column_stack([np.sin(t), np.cos(3 * t)])
-    trace = RunTrace(t=t, y=y, r=np.zeros((N, 0)), u=np.tanh(t)[:, None], **{
-        k: np.zeros(N) for k in ("sat", "got", "latency_ns", "tick_ns", "deadline_ns", "x", "status", "twin_y",
-                                 "twin_u", "twin_z")})
+    trace = RunTrace(
+        t=t,
+        y=y,
+        r=np.zeros((N, 0)),
+        u=np.tanh(t)[:, None],
+        **{
+            k: np.zeros(N)
+            for k in ("sat", "got", "latency_ns", "tick_ns", "deadline_ns", "x", "status", "twin_y", "twin_u", "twin_z")
+        },
+    )
     got = decode_trace(downsampled_trace(trace))
     assert got["t"].size == MAX_TRACE_POINTS and got["t"][0] == 0.0 and got["t"][-1] == np.float32(t[-1])
     k = np.rint(got["t"].astype(float) / 0.01).astype(int)  # which samples they are, from their own times
     assert np.all(np.diff(k) >= N // MAX_TRACE_POINTS) and np.all(np.diff(k) <= N // MAX_TRACE_POINTS + 1)
-    assert np.array_equal(got["y"], y[k].astype(np.float32)) and np.array_equal(got["u"][:, 0], np.tanh(t[k]).astype(np.float32))
+    assert np.array_equal(got["y"], y[k].astype(np.float32)) and np.array_equal(
+        got["u"][:, 0], np.tanh(t[k]).astype(np.float32)
+    )
     assert got["r"].shape == (MAX_TRACE_POINTS, 0)
 
 
@@ -286,13 +385,19 @@ def test_a_folder_from_before_the_npy_traces_keeps_its_traces_and_a_foreign_work
 
     store = Store(tmp_path)
     rng = np.random.default_rng(3)
-    old = {"t": np.arange(5, dtype=np.float32), "y": rng.random((5, 2), dtype=np.float32),
-           "u": rng.random((5, 1), dtype=np.float32), "r": np.zeros((5, 1), np.float32)}
+    old = {
+        "t": np.arange(5, dtype=np.float32),
+        "y": rng.random((5, 2), dtype=np.float32),
+        "u": rng.random((5, 1), dtype=np.float32),
+        "r": np.zeros((5, 1), np.float32),
+    }
     np.savez_compressed(store.runs / "oldrun.npz", **old)  # what earlier versions wrote per run
     got = store.trace("oldrun")
     assert got.keys() == old.keys() and all(np.array_equal(got[k], old[k]) for k in old)
     assert store.trace("never") is None
-    with pytest.raises(GainlinkError, match=r"a worker returned list, not a batch of records: .*another gainlink version"):
+    with pytest.raises(
+        GainlinkError, match=r"a worker returned list, not a batch of records: .*another gainlink version"
+    ):
         unpack_results([{"status": "done"}])
 
 
@@ -305,9 +410,23 @@ def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster
     path = tmp_path / "c.toml"
     path.write_text(toml_write.dumps(data))
     out = tmp_path / "out"
-    proc = subprocess.Popen([str(VENV_BIN / "gainlink"), "campaign", "run", str(path), "--out", str(out),
-                             "--workers", "2", "--no-progress"], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, start_new_session=True)
+    proc = subprocess.Popen(
+        [
+            str(VENV_BIN / "gainlink"),
+            "campaign",
+            "run",
+            str(path),
+            "--out",
+            str(out),
+            "--workers",
+            "2",
+            "--no-progress",
+        ],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     try:
         deadline = time.monotonic() + 240
         while len(list((out / "runs").glob("*.json"))) < 3 and time.monotonic() < deadline and proc.poll() is None:
@@ -337,19 +456,55 @@ def dask_cluster(tmp_path_factory):
     folder = tmp_path_factory.mktemp("dask")
     info = folder / "scheduler.json"
     env = dict(os.environ, DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES="1", PYTHONPATH=str(ROOT / "tests"))
-    common = dict(stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
-                  start_new_session=True, cwd=folder)
-    procs = [subprocess.Popen([str(VENV_BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", "0",
-                               "--no-dashboard", "--scheduler-file", str(info)], **common)]
+    common = dict(
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
+        start_new_session=True,
+        cwd=folder,
+    )
+    procs = [
+        subprocess.Popen(
+            [
+                str(VENV_BIN / "dask"),
+                "scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                "0",
+                "--no-dashboard",
+                "--scheduler-file",
+                str(info),
+            ],
+            **common,
+        )
+    ]
     try:
         deadline = time.monotonic() + 60
         while not info.is_file() and time.monotonic() < deadline:
             time.sleep(0.1)
         address = json.loads(info.read_text())["address"]
         for i in range(2):
-            procs.append(subprocess.Popen([str(VENV_BIN / "dask"), "worker", address, "--nworkers", "1",
-                                           "--nthreads", "1", "--no-dashboard", "--name", f"w{i}",
-                                           "--local-directory", str(folder / f"w{i}")], **common))
+            procs.append(
+                subprocess.Popen(
+                    [
+                        str(VENV_BIN / "dask"),
+                        "worker",
+                        address,
+                        "--nworkers",
+                        "1",
+                        "--nthreads",
+                        "1",
+                        "--no-dashboard",
+                        "--name",
+                        f"w{i}",
+                        "--local-directory",
+                        str(folder / f"w{i}"),
+                    ],
+                    **common,
+                )
+            )
         from distributed import Client
 
         with Client(address, timeout=30) as client:
@@ -367,8 +522,18 @@ def test_scheduler_and_two_worker_processes_give_the_local_cluster_results(pend,
     path = tmp_path / "small.toml"
     path.write_text(toml_write.dumps(small_campaign(pend)))
     # In tasks of 3 runs (the LocalCluster ran one per task): the results are the runs', whatever the batching.
-    res = run_cli("campaign", "run", path, "--out", tmp_path / "dist", "--scheduler", dask_cluster, "--batch", "3",
-                  "--no-progress")
+    res = run_cli(
+        "campaign",
+        "run",
+        path,
+        "--out",
+        tmp_path / "dist",
+        "--scheduler",
+        dask_cluster,
+        "--batch",
+        "3",
+        "--no-progress",
+    )
     assert res.code == 0, res.err
     local = json.loads((local_out / "campaign.json").read_text())["runs"]
     dist = json.loads((tmp_path / "dist" / "campaign.json").read_text())["runs"]
@@ -380,18 +545,39 @@ def test_scheduler_and_two_worker_processes_give_the_local_cluster_results(pend,
 
 
 def test_a_hil_fault_matrix_runs_in_parallel_on_separate_buses(pend, dask_cluster, tmp_path):
-    data = small_campaign(pend, kind="hil", runs=1, draw=[], grid=[],
-                          fault_matrix={"drop": [0.0, 0.1], "encoding": ["float32", "int16"], "start": 0.5, "stop": 0.8})
+    data = small_campaign(
+        pend,
+        kind="hil",
+        runs=1,
+        draw=[],
+        grid=[],
+        fault_matrix={"drop": [0.0, 0.1], "encoding": ["float32", "int16"], "start": 0.5, "stop": 0.8},
+    )
     # A lost command is waited for step_timeout: a dropped sample costs that much, a machine stall shorter than it
     # costs nothing.
-    data["scenario"].update(mode="lockstep", controller="firmware", step_timeout=1.0, peer_timeout=10.0, duration=1.5,
-                            initial_state={"theta": 0.05},
-                            transport={"interface": "udp_multicast", "channel": "239.74.163.2", "hop_limit": 0, "fd": True,
-                                       "ranges": {"x": [-2.0, 2.0], "theta": [-1.0, 1.0], "r_x": [-2.0, 2.0]}})
+    data["scenario"].update(
+        mode="lockstep",
+        controller="firmware",
+        step_timeout=1.0,
+        peer_timeout=10.0,
+        duration=1.5,
+        initial_state={"theta": 0.05},
+        transport={
+            "interface": "udp_multicast",
+            "channel": "239.74.163.2",
+            "hop_limit": 0,
+            "fd": True,
+            "ranges": {"x": [-2.0, 2.0], "theta": [-1.0, 1.0], "r_x": [-2.0, 2.0]},
+        },
+    )
     result = run(data, out=tmp_path / "out", scheduler=dask_cluster)  # its two workers, before any is killed
     assert result.total == 4 and result.errors == 0
-    recs = {(r["values"]["drop"], r["values"]["encoding"]):
-            json.loads((tmp_path / "out" / "runs" / f"{r['id']}.json").read_text()) for r in result.rows}
+    recs = {
+        (r["values"]["drop"], r["values"]["encoding"]): json.loads(
+            (tmp_path / "out" / "runs" / f"{r['id']}.json").read_text()
+        )
+        for r in result.rows
+    }
     for enc in ("float32", "int16"):
         clean, dropped = recs[(0.0, enc)], recs[(0.1, enc)]
         assert clean["link"]["encoding"] == enc and dropped["link"]["encoding"] == enc
@@ -406,8 +592,12 @@ def test_a_hil_fault_matrix_runs_in_parallel_on_separate_buses(pend, dask_cluste
     runs = list(recs.values())
     link = lambda r: (r["link"]["config"]["channel"], r["link"]["config"]["port"])  # noqa: E731
     assert all(link(r)[0].startswith("239.74.164.") for r in runs)
-    overlapping = [(a, b) for i, a in enumerate(runs) for b in runs[i + 1:]
-                   if a["worker"]["start"] < b["worker"]["stop"] and b["worker"]["start"] < a["worker"]["stop"]]
+    overlapping = [
+        (a, b)
+        for i, a in enumerate(runs)
+        for b in runs[i + 1 :]
+        if a["worker"]["start"] < b["worker"]["stop"] and b["worker"]["start"] < a["worker"]["stop"]
+    ]
     assert overlapping, "two workers never ran at the same time"
     assert all(link(a) != link(b) for a, b in overlapping)
 
@@ -428,8 +618,11 @@ def test_a_run_whose_worker_dies_is_retried_and_recorded_as_failed_after_a_secon
     plan = plan_campaign(parse_campaign(data))
     long_key = f"gainlink-run-{plan.runs[3].id}"
     outcome, done = {}, []
-    thread = threading.Thread(target=lambda: outcome.update(result=run(
-        data, out=tmp_path / "out", scheduler=dask_cluster, progress=lambda *args: done.append(args[2]))))
+    thread = threading.Thread(
+        target=lambda: outcome.update(
+            result=run(data, out=tmp_path / "out", scheduler=dask_cluster, progress=lambda *args: done.append(args[2]))
+        )
+    )
     kills = []
     with Client(dask_cluster, timeout=30) as client:
         thread.start()
@@ -453,12 +646,17 @@ def test_a_run_whose_worker_dies_is_retried_and_recorded_as_failed_after_a_secon
 
 def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, dask_cluster, tmp_path, caplog):
     # Four runs in one Dask task; the plant of two of them raises on every attempt (a bug, not a GainlinkError).
-    data = small_campaign(pend, runs=2, draw=small_campaign(pend)["draw"][:1],
-                          grid=[{"target": "plant.bug", "values": [False, True]}])
-    data["scenario"]["plant"] = dict(data["scenario"]["plant"], kind="python", **{"class": "campaign_plants:BuggyPendulum"})
+    data = small_campaign(
+        pend, runs=2, draw=small_campaign(pend)["draw"][:1], grid=[{"target": "plant.bug", "values": [False, True]}]
+    )
+    data["scenario"]["plant"] = dict(
+        data["scenario"]["plant"], kind="python", **{"class": "campaign_plants:BuggyPendulum"}
+    )
     with caplog.at_level("INFO", logger="gainlink.hil.campaign.runner"):
         result = run(data, out=tmp_path / "out", scheduler=dask_cluster, batch=4)
-    assert [m for m in caplog.messages if m.startswith("a batch of 4 runs failed (RuntimeError: BuggyPendulum")], caplog.messages
+    assert [m for m in caplog.messages if m.startswith("a batch of 4 runs failed (RuntimeError: BuggyPendulum")], (
+        caplog.messages
+    )
     rows = {r["index"]: r for r in result.rows}
     assert [rows[i]["values"]["plant.bug"] for i in range(4)] == [False, False, True, True]
     for i in (2, 3):

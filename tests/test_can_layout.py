@@ -14,16 +14,14 @@ import math
 import cantools
 import numpy as np
 import pytest
-
+from conftest import run_cli
 from gainlink.artifact import load
 from gainlink.errors import TransportError
-from gainlink.hil.links.can_layout import layout_for
-from gainlink.hil.links.can import CanTransport, firmware_can_argv
-from gainlink.hil.loop.controller import ControllerProcess
 from gainlink.hil.links.base import STATUS_FAULT
+from gainlink.hil.links.can import CanTransport, firmware_can_argv
+from gainlink.hil.links.can_layout import layout_for
+from gainlink.hil.loop.controller import ControllerProcess
 from gainlink.reference import ReferenceLoop
-
-from conftest import run_cli
 from test_hil_support import can_firmware, pendulum_gains, udp_transport  # noqa: F401
 
 
@@ -163,11 +161,37 @@ def test_udp_multicast_without_a_route_says_how_to_add_one(pendulum_gains):
         "except TransportError as e:\n"
         "    print(e)\n"
         "finally:\n"
-        "    t.close()\n")
-    bare = subprocess.run(["unshare", "-n", "sh", "-c", 'ip link set lo up; exec "$0" -c "$1" "$2"',
-                           sys.executable, code, str(pendulum_gains)], capture_output=True, text=True, timeout=60)
+        "    t.close()\n"
+    )
+    bare = subprocess.run(
+        [
+            "unshare",
+            "-n",
+            "sh",
+            "-c",
+            'ip link set lo up; exec "$0" -c "$1" "$2"',
+            sys.executable,
+            code,
+            str(pendulum_gains),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert "ip route add 224.0.0.0/4 dev lo" in bare.stdout, bare.stdout + bare.stderr
-    routed = subprocess.run(["unshare", "-n", "sh", "-c",
-                             'ip link set lo up multicast on && ip route add 224.0.0.0/4 dev lo && exec "$0" -c "$1" "$2"',
-                             sys.executable, code, str(pendulum_gains)], capture_output=True, text=True, timeout=60)
+    routed = subprocess.run(
+        [
+            "unshare",
+            "-n",
+            "sh",
+            "-c",
+            'ip link set lo up multicast on && ip route add 224.0.0.0/4 dev lo && exec "$0" -c "$1" "$2"',
+            sys.executable,
+            code,
+            str(pendulum_gains),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert routed.stdout.strip() == "sent", routed.stdout + routed.stderr

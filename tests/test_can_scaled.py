@@ -17,15 +17,13 @@ import struct
 import cantools
 import numpy as np
 import pytest
-
+from conftest import run_cli
 from gainlink.artifact import load
 from gainlink.errors import TransportError
-from gainlink.hil.loop.bridge import run_scenario
-from gainlink.hil.links.can_layout import FD_LENGTHS, INT16_MAX, INT16_NAN, dequantise, quantise
 from gainlink.hil.links.can import Assembler, CanTransport, FrameCodec, firmware_can_argv
+from gainlink.hil.links.can_layout import FD_LENGTHS, INT16_MAX, INT16_NAN, dequantise, quantise
+from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
-
-from conftest import run_cli
 from test_can_layout import PENDULUM_RANGES
 from test_hil_support import can_firmware, cart_fmu, pendulum_gains, pendulum_scenario, udp_transport, write_scenario  # noqa: F401
 
@@ -58,8 +56,9 @@ def test_int16_dbc_describes_the_scaled_signals_and_matches_the_fast_codec(pendu
     db = cantools.database.load_string(layout.dbc(), database_format="dbc")
     dbc_names = [s for spec in layout.measurement for s in spec.signals]
     for dbc_name, a, b in zip(dbc_names, lo, hi):
-        sig = db.get_message_by_name(next(s.name for s in layout.measurement if dbc_name in s.signals)) \
-            .get_signal_by_name(dbc_name)
+        sig = db.get_message_by_name(
+            next(s.name for s in layout.measurement if dbc_name in s.signals)
+        ).get_signal_by_name(dbc_name)
         assert (sig.length, sig.is_signed, sig.is_float, sig.byte_order) == (16, True, False, "little_endian")
         assert (sig.scale, sig.offset, sig.minimum, sig.maximum) == ((b - a) / SPAN, (b + a) / 2, a, b)
         assert sig.choices[INT16_NAN] == "not_a_number"
@@ -69,7 +68,7 @@ def test_int16_dbc_describes_the_scaled_signals_and_matches_the_fast_codec(pendu
     rng = np.random.default_rng(3)
     samples = [rng.uniform(lo, hi) for _ in range(50)] + [lo.copy(), hi.copy(), (lo + hi) / 2]
     for i, v in enumerate(samples):
-        frames = transport.encode_sample(seq=i, y=v[:art.p], r=v[art.p:])
+        frames = transport.encode_sample(seq=i, y=v[: art.p], r=v[art.p :])
         values = dict(zip(dbc_names, v))
         for frame, spec in zip(frames, layout.measurement):
             msg = db.get_message_by_frame_id(frame.arbitration_id)
@@ -116,7 +115,7 @@ def test_int16_values_beyond_their_range_saturate_and_are_counted(pendulum_gains
     with caplog.at_level(logging.WARNING, logger="gainlink.hil.links.can"):
         for seq, v in enumerate([hi * 3, lo * 3, hi + (hi - lo), (lo + hi) / 2]):
             done = None
-            for frame in transport.encode_sample(seq=seq, y=v[:art.p], r=v[art.p:]):
+            for frame in transport.encode_sample(seq=seq, y=v[: art.p], r=v[art.p :]):
                 done = rx.feed(frame) or done
             want = np.clip(v, lo, hi)
             np.testing.assert_allclose(done[1], want, rtol=1e-12, atol=0)  # the range ends, raw +-32767
@@ -172,15 +171,20 @@ def test_cli_dbc_and_hil_run_with_int16(tmp_path, pendulum_gains, cart_fmu):
     assert res.code == 0, res.err
     db = cantools.database.load_file(out)
     assert {s.length for m in db.messages for s in m.signals if s.name not in ("seq", "status", "sat")} == {16}
-    assert db.get_message_by_name("Measurement0").get_signal_by_name("y_theta").maximum == \
-        PENDULUM_RANGES["theta"][1]
+    assert db.get_message_by_name("Measurement0").get_signal_by_name("y_theta").maximum == PENDULUM_RANGES["theta"][1]
     res = run_cli("hil", "dbc", pendulum_gains, "--can", json.dumps({**cfg, "ranges": {"x": [-5, 5]}}))
     lines = res.err.strip().splitlines()
     assert res.code == 2 and len(lines) == 1 and "needs a range for theta, r_x" in lines[0], lines
     # The same mistake in a scenario: one line, before any process starts.
-    scenario = write_scenario(tmp_path / "s.toml", pendulum_scenario(
-        gains=pendulum_gains, fmu=cart_fmu, duration=0.5,
-        transport={**udp_transport(fd=False), "encoding": "int16", "ranges": {"theta": [-1.0, 1.0]}}))
+    scenario = write_scenario(
+        tmp_path / "s.toml",
+        pendulum_scenario(
+            gains=pendulum_gains,
+            fmu=cart_fmu,
+            duration=0.5,
+            transport={**udp_transport(fd=False), "encoding": "int16", "ranges": {"theta": [-1.0, 1.0]}},
+        ),
+    )
     res = run_cli("hil", "run", scenario, "--report", tmp_path / "report", "--no-progress")
     lines = res.err.strip().splitlines()
     assert res.code == 2 and len(lines) == 1 and "needs a range for x, r_x" in lines[0], lines
@@ -194,12 +198,21 @@ def _c_codec(can_firmware):
         _fields_ = [("factor", ctypes.c_double), ("offset", ctypes.c_double)]
 
     class Layout(ctypes.Structure):
-        _fields_ = [("base_id", ctypes.c_uint32), ("fd", ctypes.c_int), ("encoding", ctypes.c_int),
-                    ("per_frame", ctypes.c_uint32), ("value_bytes", ctypes.c_uint32)]
+        _fields_ = [
+            ("base_id", ctypes.c_uint32),
+            ("fd", ctypes.c_int),
+            ("encoding", ctypes.c_int),
+            ("per_frame", ctypes.c_uint32),
+            ("value_bytes", ctypes.c_uint32),
+        ]
 
     class Frame(ctypes.Structure):
-        _fields_ = [("id", ctypes.c_uint32), ("len", ctypes.c_uint8), ("fd", ctypes.c_uint8),
-                    ("data", ctypes.c_uint8 * 64)]
+        _fields_ = [
+            ("id", ctypes.c_uint32),
+            ("len", ctypes.c_uint8),
+            ("fd", ctypes.c_uint8),
+            ("data", ctypes.c_uint8 * 64),
+        ]
 
     lib = ctypes.CDLL(str(can_firmware.parent / "libgainlink_can_layout.so"))
     lib.gl_can_quantise.restype = ctypes.c_int16
@@ -208,13 +221,28 @@ def _c_codec(can_firmware):
     lib.gl_can_dequantise.argtypes = [ctypes.c_int16, ctypes.POINTER(Scale)]
     lib.gl_can_layout_init.argtypes = [ctypes.POINTER(Layout), ctypes.c_uint32, ctypes.c_int, ctypes.c_int]
     lib.gl_can_layout_encode.restype = ctypes.c_uint32
-    lib.gl_can_layout_encode.argtypes = [ctypes.POINTER(Layout), ctypes.c_uint32, ctypes.c_uint32, ctypes.c_uint16,
-                                         ctypes.c_uint8, ctypes.c_uint32, ctypes.POINTER(ctypes.c_float),
-                                         ctypes.POINTER(Scale), ctypes.c_uint32, ctypes.POINTER(Frame)]
+    lib.gl_can_layout_encode.argtypes = [
+        ctypes.POINTER(Layout),
+        ctypes.c_uint32,
+        ctypes.c_uint32,
+        ctypes.c_uint16,
+        ctypes.c_uint8,
+        ctypes.c_uint32,
+        ctypes.POINTER(ctypes.c_float),
+        ctypes.POINTER(Scale),
+        ctypes.c_uint32,
+        ctypes.POINTER(Frame),
+    ]
     lib.gl_can_layout_decode.restype = ctypes.c_int
-    lib.gl_can_layout_decode.argtypes = [ctypes.POINTER(Layout), ctypes.c_uint32, ctypes.POINTER(Frame),
-                                         ctypes.POINTER(ctypes.c_uint16), ctypes.POINTER(ctypes.c_float),
-                                         ctypes.POINTER(Scale), ctypes.c_uint32]
+    lib.gl_can_layout_decode.argtypes = [
+        ctypes.POINTER(Layout),
+        ctypes.c_uint32,
+        ctypes.POINTER(Frame),
+        ctypes.POINTER(ctypes.c_uint16),
+        ctypes.POINTER(ctypes.c_float),
+        ctypes.POINTER(Scale),
+        ctypes.c_uint32,
+    ]
     return lib, Scale, Layout, Frame
 
 
@@ -226,8 +254,12 @@ def test_c_codec_quantises_like_python_bit_for_bit(pendulum_gains, can_firmware)
         f, o = (hi - lo) / SPAN, (hi + lo) / 2
         scale = Scale(f, o)
         width = hi - lo
-        v = np.concatenate([rng.uniform(lo - 0.2 * width, hi + 0.2 * width, 20000), [lo, hi, o, -0.0, 3e38, -3e38,
-                            1e-40, math.nan, math.inf, -math.inf]]).astype(np.float32)
+        v = np.concatenate(
+            [
+                rng.uniform(lo - 0.2 * width, hi + 0.2 * width, 20000),
+                [lo, hi, o, -0.0, 3e38, -3e38, 1e-40, math.nan, math.inf, -math.inf],
+            ]
+        ).astype(np.float32)
         if f == 0.5:
             ties = np.arange(-200, 200) / 2 + 0.25
             assert np.all(np.abs((ties - o) / f % 1 - 0.5) == 0)  # really halfway between two raw values
@@ -261,20 +293,37 @@ def test_c_codec_quantises_like_python_bit_for_bit(pendulum_gains, can_firmware)
         for seq in range(200):
             vals = rng.uniform(lo * 1.1, hi * 1.1).astype(np.float32)
             sat = int(rng.integers(0, 1 << codec.size))
-            py_frames = codec.encode(seq=seq, values=vals.astype(np.float64),
-                                     sat=np.array([(sat >> i) & 1 for i in range(codec.size)], dtype=bool))
+            py_frames = codec.encode(
+                seq=seq,
+                values=vals.astype(np.float64),
+                sat=np.array([(sat >> i) & 1 for i in range(codec.size)], dtype=bool),
+            )
             c_vals = (ctypes.c_float * codec.size)(*vals)
             for j, (spec, pf) in enumerate(zip(specs, py_frames)):
                 frame = Frame()
-                lib.gl_can_layout_encode(ctypes.byref(c_layout), spec.arbitration_id, j, seq, 0, sat, c_vals, scales,
-                                         codec.size, ctypes.byref(frame))
+                lib.gl_can_layout_encode(
+                    ctypes.byref(c_layout),
+                    spec.arbitration_id,
+                    j,
+                    seq,
+                    0,
+                    sat,
+                    c_vals,
+                    scales,
+                    codec.size,
+                    ctypes.byref(frame),
+                )
                 assert (frame.id, frame.len, frame.fd) == (spec.arbitration_id, len(pf.data), int(fd))
-                assert bytes(frame.data[:frame.len]) == bytes(pf.data), (fd, seq, j)
+                assert bytes(frame.data[: frame.len]) == bytes(pf.data), (fd, seq, j)
                 out, got_seq = (ctypes.c_float * codec.size)(), ctypes.c_uint16()
-                assert lib.gl_can_layout_decode(ctypes.byref(c_layout), j, ctypes.byref(frame), ctypes.byref(got_seq),
-                                                out, scales, codec.size) == 0
+                assert (
+                    lib.gl_can_layout_decode(
+                        ctypes.byref(c_layout), j, ctypes.byref(frame), ctypes.byref(got_seq), out, scales, codec.size
+                    )
+                    == 0
+                )
                 _, _, _, py_vals = codec.decode(spec.arbitration_id, bytes(pf.data))
-                c_out = np.array(out[spec.first:spec.first + len(spec.signals)], dtype=np.float32)
+                c_out = np.array(out[spec.first : spec.first + len(spec.signals)], dtype=np.float32)
                 assert got_seq.value == seq and np.array_equal(c_out, py_vals.astype(np.float32))
 
 
@@ -287,12 +336,16 @@ def _quantisation_peak_gain(art) -> np.ndarray:
     """
     A, B, C, K, L, Ci, Ki = art.Ad, art.Bd, art.Cd, art.K, art.L, art.Ci, art.Ki
     n, m, p, q, Ts = art.n, art.m, art.p, art.q, art.Ts
-    Acl = np.block([[A, -B @ K, -B @ Ki],
-                    [L @ C, A - B @ K - L @ C, -B @ Ki],
-                    [-Ts * Ci @ C, np.zeros((q, n)), np.eye(q)]])
-    Bw = np.block([[np.zeros((n, p)), np.zeros((n, q)), B],
-                   [L, np.zeros((n, q)), np.zeros((n, m))],
-                   [-Ts * Ci, Ts * np.eye(q), np.zeros((q, m))]])
+    Acl = np.block(
+        [[A, -B @ K, -B @ Ki], [L @ C, A - B @ K - L @ C, -B @ Ki], [-Ts * Ci @ C, np.zeros((q, n)), np.eye(q)]]
+    )
+    Bw = np.block(
+        [
+            [np.zeros((n, p)), np.zeros((n, q)), B],
+            [L, np.zeros((n, q)), np.zeros((n, m))],
+            [-Ts * Ci, Ts * np.eye(q), np.zeros((q, m))],
+        ]
+    )
     Cy = np.hstack([C, np.zeros((p, n + q))])
     assert max(abs(np.linalg.eigvals(Acl))) < 1
     gain, term = np.zeros((p, p + q + m)), Bw
@@ -343,8 +396,9 @@ def test_reference_node_speaks_int16_like_the_firmware(pendulum_gains, can_firmw
     common = dict(gains=pendulum_gains, fmu=cart_fmu, duration=1.5)
     transport = {"encoding": "int16", "ranges": PENDULUM_RANGES}
     fw = run_scenario(parse_scenario(pendulum_scenario(transport={**udp_transport(), **transport}, **common)))
-    py = run_scenario(parse_scenario(pendulum_scenario(transport={**udp_transport(), **transport},
-                                                       controller="reference", **common)))
+    py = run_scenario(
+        parse_scenario(pendulum_scenario(transport={**udp_transport(), **transport}, controller="reference", **common))
+    )
     assert fw.complete and py.complete and fw.metrics["lost"] == 0 and py.metrics["lost"] == 0
     # Both quantise the same law's command (float32 in C, float64 in Python): at most a step or so apart.
     layout = CanTransport({"interface": "virtual", **transport}, artifact=load(pendulum_gains)).layout

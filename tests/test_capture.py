@@ -21,8 +21,9 @@ sys.stdin.readline()
 
 
 def test_a_flood_on_stderr_is_drained_and_kept_bounded():
-    proc = subprocess.Popen([sys.executable, "-c", CHILD], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", CHILD], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
     cap = StderrCapture(proc.stderr)
     assert proc.stdout.readline() == b"done\n"  # it got past 2 MB of stderr: the pipe never stayed full
     seen_while_running = cap.text()  # written before the read: it is there

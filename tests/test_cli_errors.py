@@ -8,7 +8,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from conftest import run_cli
 
 GOOD_SPEC = """\
@@ -50,7 +49,11 @@ def spec_with(old: str, new: str) -> str:
 BAD_SPECS = [
     ("malformed-toml", GOOD_SPEC.replace("Ts = 0.01", "Ts = = 0.01"), "not valid TOML"),
     ("missing-plant", GOOD_SPEC.replace('[plant]\nkind = "continuous"\n', "[plant_]\n"), "unknown key 'plant_'"),
-    ("A-not-square", spec_with("A = [[0.0, 1.0], [0.0, -2.0]]", "A = [[0.0, 1.0, 0.0], [0.0, -2.0, 0.0]]"), "must be square"),
+    (
+        "A-not-square",
+        spec_with("A = [[0.0, 1.0], [0.0, -2.0]]", "A = [[0.0, 1.0, 0.0], [0.0, -2.0, 0.0]]"),
+        "must be square",
+    ),
     ("B-wrong-rows", spec_with("B = [[0.0], [4.0]]", "B = [[0.0], [4.0], [1.0]]"), "plant.B has 3 rows"),
     ("C-wrong-columns", spec_with("C = [[1.0, 0.0]]", "C = [[1.0, 0.0, 0.0]]"), "plant.C has 3 columns"),
     ("D-wrong-dims", spec_with("C = [[1.0, 0.0]]", "C = [[1.0, 0.0]]\nD = [[0.0, 0.0]]"), "plant.D is 1x2"),
@@ -65,45 +68,103 @@ BAD_SPECS = [
     ("Q-not-symmetric", spec_with("Q_diag = [10.0, 0.1]", "Q = [[1.0, 0.5], [0.0, 1.0]]"), "not symmetric"),
     ("R-not-pd", spec_with("R_diag = [1.0]", "R_diag = [0.0]"), "not positive definite"),
     ("V-not-pd", spec_with("V_diag = [1e-4]", "V_diag = [-1e-4]"), "not positive definite"),
-    ("unstabilizable", spec_with("B = [[0.0], [4.0]]", "B = [[0.0], [0.0]]").replace(
-        "A = [[0.0, 1.0], [0.0, -2.0]]", "A = [[0.5, 0.0], [0.0, -2.0]]"), "not stabilizable"),
-    ("undetectable", spec_with("A = [[0.0, 1.0], [0.0, -2.0]]", "A = [[-1.0, 0.0], [0.0, 0.5]]").replace(
-        "B = [[0.0], [4.0]]", "B = [[1.0], [1.0]]"), "not detectable"),
-    ("current-with-D", spec_with("C = [[1.0, 0.0]]", "C = [[1.0, 0.0]]\nD = [[0.5]]").replace(
-        'method = "kalman"', 'method = "kalman"\nform = "current"'), "requires a plant without feedthrough"),
+    (
+        "unstabilizable",
+        spec_with("B = [[0.0], [4.0]]", "B = [[0.0], [0.0]]").replace(
+            "A = [[0.0, 1.0], [0.0, -2.0]]", "A = [[0.5, 0.0], [0.0, -2.0]]"
+        ),
+        "not stabilizable",
+    ),
+    (
+        "undetectable",
+        spec_with("A = [[0.0, 1.0], [0.0, -2.0]]", "A = [[-1.0, 0.0], [0.0, 0.5]]").replace(
+            "B = [[0.0], [4.0]]", "B = [[1.0], [1.0]]"
+        ),
+        "not detectable",
+    ),
+    (
+        "current-with-D",
+        spec_with("C = [[1.0, 0.0]]", "C = [[1.0, 0.0]]\nD = [[0.5]]").replace(
+            'method = "kalman"', 'method = "kalman"\nform = "current"'
+        ),
+        "requires a plant without feedthrough",
+    ),
     ("unknown-top-key", GOOD_SPEC + 'colour = "blue"\n', "unknown key 'colour'"),
-    ("unknown-controller-key", spec_with("R_diag = [1.0]", "R_diag = [1.0]\nQdiag = [1.0, 1.0]"), "unknown key 'Qdiag'"),
+    (
+        "unknown-controller-key",
+        spec_with("R_diag = [1.0]", "R_diag = [1.0]\nQdiag = [1.0, 1.0]"),
+        "unknown key 'Qdiag'",
+    ),
     ("u-min-above-max", spec_with("u_min = [-5.0]", "u_min = [6.0]"), "u_min must be below"),
     ("u-max-wrong-length", spec_with("u_max = [5.0]", "u_max = [5.0, 5.0]"), "has 2 entries, expected 1"),
     ("integral-unknown-output", spec_with("outputs = [0]", 'outputs = ["speed"]'), "not an output"),
     ("bad-anti-windup", spec_with("u_max = [5.0]", 'u_max = [5.0]\nanti_windup = "sometimes"'), "anti_windup must be"),
-    ("two-Q-forms", spec_with("Q_diag = [10.0, 0.1]", "Q_diag = [10.0, 0.1]\nbryson_x_max = [1.0, 1.0]"), "only one of"),
+    (
+        "two-Q-forms",
+        spec_with("Q_diag = [10.0, 0.1]", "Q_diag = [10.0, 0.1]\nbryson_x_max = [1.0, 1.0]"),
+        "only one of",
+    ),
     ("bryson-zero", spec_with("Q_diag = [10.0, 0.1]", "bryson_x_max = [1.0, 0.0]"), "must be > 0"),
-    ("luenberger-pole-count", spec_with('method = "kalman"\nW_diag = [1e-4, 1e-2]\nV_diag = [1e-4]',
-                                        'method = "luenberger"\npoles = [-10.0]'), "gives 1 poles, expected 2"),
-    ("unstable-requested-pole", spec_with('method = "lqr"\nQ_diag = [10.0, 0.1]\nR_diag = [1.0]',
-                                          'method = "place"\npoles = [-1.0, -2.0, 3.0]'), "every pole must be stable"),
+    (
+        "luenberger-pole-count",
+        spec_with(
+            'method = "kalman"\nW_diag = [1e-4, 1e-2]\nV_diag = [1e-4]', 'method = "luenberger"\npoles = [-10.0]'
+        ),
+        "gives 1 poles, expected 2",
+    ),
+    (
+        "unstable-requested-pole",
+        spec_with(
+            'method = "lqr"\nQ_diag = [10.0, 0.1]\nR_diag = [1.0]', 'method = "place"\npoles = [-1.0, -2.0, 3.0]'
+        ),
+        "every pole must be stable",
+    ),
     ("velocity-sensor-undetectable", spec_with("C = [[1.0, 0.0]]", "C = [[0.0, 1.0]]"), "not detectable"),
     # G(s) = 1/(s+1) - 2/(s+2) = -s/((s+1)(s+2)): a zero at s = 0, so no integrator can hold its output
-    ("integral-infeasible", spec_with("A = [[0.0, 1.0], [0.0, -2.0]]", "A = [[-1.0, 0.0], [0.0, -2.0]]").replace(
-        "B = [[0.0], [4.0]]", "B = [[1.0], [1.0]]").replace("C = [[1.0, 0.0]]", "C = [[1.0, -2.0]]"),
-     "integral action is not feasible"),
+    (
+        "integral-infeasible",
+        spec_with("A = [[0.0, 1.0], [0.0, -2.0]]", "A = [[-1.0, 0.0], [0.0, -2.0]]")
+        .replace("B = [[0.0], [4.0]]", "B = [[1.0], [1.0]]")
+        .replace("C = [[1.0, 0.0]]", "C = [[1.0, -2.0]]"),
+        "integral action is not feasible",
+    ),
     ("bad-name", spec_with('name = "servo"', 'name = "9 lives"'), "'name' must be an identifier"),
-    ("op-not-a-table", GOOD_SPEC.replace('name = "servo"', 'name = "servo"\noperating_point = 3.0'),
-     "'operating_point' must be a table"),
+    (
+        "op-not-a-table",
+        GOOD_SPEC.replace('name = "servo"', 'name = "servo"\noperating_point = 3.0'),
+        "'operating_point' must be a table",
+    ),
     ("op-unknown-key", GOOD_SPEC + "[operating_point]\nu_opp = [1.0]\n", "unknown key 'u_opp' in operating_point"),
-    ("op-u-wrong-length", GOOD_SPEC + "[operating_point]\nu_op = [1.0, 2.0]\n",
-     "operating_point.u_op has 2 entries, expected 1"),
-    ("op-x-wrong-length", GOOD_SPEC + "[operating_point]\nx_op = [1.0]\n", "operating_point.x_op has 1 entries, expected 2"),
+    (
+        "op-u-wrong-length",
+        GOOD_SPEC + "[operating_point]\nu_op = [1.0, 2.0]\n",
+        "operating_point.u_op has 2 entries, expected 1",
+    ),
+    (
+        "op-x-wrong-length",
+        GOOD_SPEC + "[operating_point]\nx_op = [1.0]\n",
+        "operating_point.x_op has 1 entries, expected 2",
+    ),
     ("op-y-nan", GOOD_SPEC + "[operating_point]\ny_op = [nan]\n", "operating_point.y_op holds a NaN or infinite"),
-    ("op-y-unknown-output", GOOD_SPEC + "[operating_point]\ny_op = { speed = 1.0 }\n",
-     "operating_point.y_op names 'speed', which is not a plant output"),
-    ("op-by-name-inf", GOOD_SPEC + "[operating_point]\nu_op = { u0 = inf }\n", "operating_point.u_op.u0 must be a finite"),
+    (
+        "op-y-unknown-output",
+        GOOD_SPEC + "[operating_point]\ny_op = { speed = 1.0 }\n",
+        "operating_point.y_op names 'speed', which is not a plant output",
+    ),
+    (
+        "op-by-name-inf",
+        GOOD_SPEC + "[operating_point]\nu_op = { u0 = inf }\n",
+        "operating_point.u_op.u0 must be a finite",
+    ),
     ("op-by-name-string", GOOD_SPEC + '[operating_point]\nx_op = { x1 = "fast" }\n', "x_op.x1 must be a finite number"),
     ("op-u-outside-limits", GOOD_SPEC + "[operating_point]\nu_op = [7.5]\n", "outside the limits [-5, 5]"),
-    ("improper-tf", """name = "tf"\nTs = 0.1\n[plant]\nkind = "transfer_function"\nnum = [[[1.0, 0.0, 1.0]]]
+    (
+        "improper-tf",
+        """name = "tf"\nTs = 0.1\n[plant]\nkind = "transfer_function"\nnum = [[[1.0, 0.0, 1.0]]]
 den = [[[1.0, 1.0]]]\n[controller]\nQ_diag = [1.0]\nR_diag = [1.0]\n[observer]\nW_diag = [1.0]\nV_diag = [1.0]
-[limits]\nu_min = [-1.0]\nu_max = [1.0]\n""", "improper"),
+[limits]\nu_min = [-1.0]\nu_max = [1.0]\n""",
+        "improper",
+    ),
 ]
 
 
@@ -194,10 +255,13 @@ def test_bad_replay_inputs(pendulum_artifact, tmp_path):
         assert not out.exists()
     inp = tmp_path / "ok.csv"
     inp.write_text("y0,y1,r0\n0.1,0.0,0.0\n")
-    assert_one_clear_line(run_cli("replay", pendulum_artifact, "--input", inp, "--output", out,
-                                  "--engine", "abacus"), "unknown engine 'abacus'")
-    assert_one_clear_line(run_cli("replay", pendulum_artifact, "--input", inp, "--output",
-                                  tmp_path / "nodir" / "o.csv"), "does not exist")
+    assert_one_clear_line(
+        run_cli("replay", pendulum_artifact, "--input", inp, "--output", out, "--engine", "abacus"),
+        "unknown engine 'abacus'",
+    )
+    assert_one_clear_line(
+        run_cli("replay", pendulum_artifact, "--input", inp, "--output", tmp_path / "nodir" / "o.csv"), "does not exist"
+    )
 
 
 def test_output_path_that_is_a_file(tmp_path):
@@ -218,8 +282,9 @@ def test_real_console_script_exit_status(tmp_path):
     spec = tmp_path / "bad.toml"
     spec.write_text(spec_with("Ts = 0.01", "Ts = -1.0"))
     script = Path(sys.executable).parent / "gainlink"  # the installed console script
-    proc = subprocess.run([str(script), "design", str(spec), "--out", str(tmp_path / "o")],
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [str(script), "design", str(spec), "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == ["gainlink: error: Ts must be a finite number > 0, got -1.0"]
     assert not (tmp_path / "o").exists()

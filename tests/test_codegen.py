@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from gainlink.artifact import render
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))
@@ -48,8 +47,26 @@ def test_generated_numbers_are_the_artifacts_float32_values(example_artifacts, t
     assert export(art, tmp_path).returncode == 0
     src = (tmp_path / "gl_gains.c").read_text()
     # designated initialisers for every field, rows as [i] = {...}
-    for field in ("Ts", "Ad", "Bd", "Cd", "Dd", "K", "L", "M", "Ci", "Ki", "Kaw", "u_min", "u_max", "xh0", "z0", "u_op", "y_op",
-                  "crc32"):
+    for field in (
+        "Ts",
+        "Ad",
+        "Bd",
+        "Cd",
+        "Dd",
+        "K",
+        "L",
+        "M",
+        "Ci",
+        "Ki",
+        "Kaw",
+        "u_min",
+        "u_max",
+        "xh0",
+        "z0",
+        "u_op",
+        "y_op",
+        "crc32",
+    ):
         assert re.search(rf"^    \.{field} = ", src, re.M), f"no designated initialiser for .{field}"
     assert "[1] = {" in src
     for key in ("Ad", "K", "L", "Ki"):
@@ -69,12 +86,34 @@ def test_generated_numbers_are_the_artifacts_float32_values(example_artifacts, t
             out[tuple(slice(0, s) for s in a.shape)] = a
         return out
 
-    payload = struct.pack("<6I", n, m, p, q, {"predictor": 0, "current": 1}[data["observer_form"]],
-                          {"none": 0, "clamp": 1, "backcalc": 2}[data["anti_windup"]])
+    payload = struct.pack(
+        "<6I",
+        n,
+        m,
+        p,
+        q,
+        {"predictor": 0, "current": 1}[data["observer_form"]],
+        {"none": 0, "clamp": 1, "backcalc": 2}[data["anti_windup"]],
+    )
     payload += np.array([data["Ts"]], dtype="<f4").tobytes()
-    for key, shape in (("Ad", (n, n)), ("Bd", (n, m)), ("Cd", (p, n)), ("Dd", (p, m)), ("K", (m, n)), ("L", (n, p)),
-                       ("M", (n, p)), ("Ci", (qa, p)), ("Ki", (m, qa)), ("Kaw", (qa, m)), ("u_min", (m,)),
-                       ("u_max", (m,)), ("xh0", (n,)), ("z0", (qa,)), ("u_op", (m,)), ("y_op", (p,))):
+    for key, shape in (
+        ("Ad", (n, n)),
+        ("Bd", (n, m)),
+        ("Cd", (p, n)),
+        ("Dd", (p, m)),
+        ("K", (m, n)),
+        ("L", (n, p)),
+        ("M", (n, p)),
+        ("Ci", (qa, p)),
+        ("Ki", (m, qa)),
+        ("Kaw", (qa, m)),
+        ("u_min", (m,)),
+        ("u_max", (m,)),
+        ("xh0", (n,)),
+        ("z0", (qa,)),
+        ("u_op", (m,)),
+        ("y_op", (p,)),
+    ):
         payload += padded(key, shape).tobytes()
     crc = zlib.crc32(payload)
     assert f".crc32 = 0x{crc:08X}u," in src
@@ -97,7 +136,24 @@ def test_generated_code_compiles_standalone_with_strict_flags(example_artifacts,
     """The gains source compiles on its own against the library header with the house flags."""
     assert export(example_artifacts["quadrotor_lateral"], tmp_path).returncode == 0
     include = Path(__file__).resolve().parents[1] / "firmware" / "include"
-    proc = subprocess.run(["cc", "-std=c11", "-Wall", "-Wextra", "-Werror", "-pedantic", "-c", "-o", str(tmp_path / "g.o"),
-                           "-I", str(include), "-I", str(tmp_path), str(tmp_path / "gl_gains.c")],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [
+            "cc",
+            "-std=c11",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-pedantic",
+            "-c",
+            "-o",
+            str(tmp_path / "g.o"),
+            "-I",
+            str(include),
+            "-I",
+            str(tmp_path),
+            str(tmp_path / "gl_gains.c"),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 0, proc.stderr

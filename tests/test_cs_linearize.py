@@ -11,18 +11,16 @@ import zipfile
 import control as ct
 import numpy as np
 import pytest
-
+from conftest import EXAMPLES, run_cli
 from gainlink.errors import PlantError
-from gainlink.hil.plants.build import build_fmu
-from gainlink.hil.plants.linearize import linearize
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
+from gainlink.hil.plants.build import build_fmu
+from gainlink.hil.plants.linearize import linearize
 from gainlink.spec import load_spec
-
-from conftest import EXAMPLES, run_cli
 from test_hil_support import cart_fmu, udp_transport  # noqa: F401
 
-GAIN = np.array([[12.8, -18.9], [6.6, -19.4]])   # Wood & Berry (1973), minutes
+GAIN = np.array([[12.8, -18.9], [6.6, -19.4]])  # Wood & Berry (1973), minutes
 TAU = np.array([[16.7, 21.0], [10.9, 14.4]])
 DEAD = np.array([[1.0, 3.0], [7.0, 3.0]])
 
@@ -40,9 +38,9 @@ def _exact_markov(h: float, steps: int) -> np.ndarray:
         for j in range(2):
             lag = ct.c2d(ct.tf([GAIN[i, j]], [TAU[i, j], 1.0]), h, method="zoh")
             d = int(round(DEAD[i, j] / h))
-            delay = ct.tf([1.0], [1.0] + [0.0] * d, h)          # z^-d
+            delay = ct.tf([1.0], [1.0] + [0.0] * d, h)  # z^-d
             pulse = np.zeros(t.size)
-            pulse[0] = 1.0                                     # a unit input held over the first step
+            pulse[0] = 1.0  # a unit input held over the first step
             out[:, i, j] = ct.forced_response(lag * delay, T=t, U=pulse).outputs[1:]
     return out
 
@@ -94,10 +92,19 @@ def test_cli_spec_from_the_cosimulation_fmu_designs_and_tracks_in_hil(wood_berry
     res = run_cli("design", spec, "--out", tmp_path)
     assert res.code == 0, res.err
     # The design on the identified model (exact dead times, no Pade approximants) runs against the FMU itself.
-    r = run_scenario(parse_scenario({
-        "artifact": str(tmp_path / "gains.json"), "duration": 150.0, "controller": "reference", "step_timeout": 2.0,
-        "transport": udp_transport(), "plant": {"kind": "fmu", "fmu": "wood_berry"},
-        "reference": {"r_x_D": {"kind": "step", "at": 5.0, "value": 1.0}}}))
+    r = run_scenario(
+        parse_scenario(
+            {
+                "artifact": str(tmp_path / "gains.json"),
+                "duration": 150.0,
+                "controller": "reference",
+                "step_timeout": 2.0,
+                "transport": udp_transport(),
+                "plant": {"kind": "fmu", "fmu": "wood_berry"},
+                "reference": {"r_x_D": {"kind": "step", "at": 5.0, "value": 1.0}},
+            }
+        )
+    )
     m = r.metrics
     assert r.complete and m["steps"] == 150 and m["lost"] == 0
     assert m["outputs_final"]["x_D"] == pytest.approx(1.0, abs=0.02)
@@ -111,8 +118,11 @@ def test_cosimulation_fmu_that_cannot_save_its_state_is_refused_in_one_line(wood
         for item in src.infolist():
             data = src.read(item)
             if item.filename == "modelDescription.xml":
-                data = re.sub(rb'canGetAndSetFMUstate="true" canSerializeFMUstate="true"',
-                              b'canGetAndSetFMUstate="false" canSerializeFMUstate="false"', data)
+                data = re.sub(
+                    rb'canGetAndSetFMUstate="true" canSerializeFMUstate="true"',
+                    b'canGetAndSetFMUstate="false" canSerializeFMUstate="false"',
+                    data,
+                )
             dst.writestr(item, data)
     for argv, message in [
         ((frozen, "--Ts", "1"), "cannot save its state (canGetAndSetFMUstate=false)"),
@@ -137,8 +147,10 @@ def test_nonlinear_cosimulation_fmu_identifies_to_the_sampled_jacobian_at_an_equ
             data = src.read(item)
             if item.filename == "modelDescription.xml":
                 text = data.decode()
-                data = (text[:text.index("<ModelExchange")]
-                        + text[text.index("</ModelExchange>") + len("</ModelExchange>"):]).encode()
+                data = (
+                    text[: text.index("<ModelExchange")]
+                    + text[text.index("</ModelExchange>") + len("</ModelExchange>") :]
+                ).encode()
             dst.writestr(item, data)
     me = linearize(cart_fmu, outputs=["x", "theta"])
     sampled = ct.c2d(ct.ss(me.A, me.B, me.C, me.D), 0.01, method="zoh")

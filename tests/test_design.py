@@ -9,12 +9,10 @@ import numpy as np
 import pytest
 import scipy.linalg
 import scipy.signal
-
+from conftest import EXAMPLES, run_cli
 from gainlink import artifact as artifact_mod
 from gainlink.design import design, poles_match
 from gainlink.spec import load_spec, parse_spec
-
-from conftest import EXAMPLES, run_cli
 
 
 def dlqr_scipy(A, B, Q, R):
@@ -72,12 +70,12 @@ def test_combined_closed_loop_is_the_union_of_controller_and_observer(example_ar
         for j in range(N):
             e = np.zeros(N)
             e[j] = 1.0
-            x, xh, z = e[:n], e[n:2 * n], e[2 * n:]
+            x, xh, z = e[:n], e[n : 2 * n], e[2 * n :]
             u = -a.K @ xh - a.Ki @ z
             y = a.Cd @ x + a.Dd @ u
-            Acl[:, j] = np.concatenate([a.Ad @ x + a.Bd @ u,
-                                        a.Ad @ xh + a.Bd @ u + a.L @ (y - a.Cd @ xh - a.Dd @ u),
-                                        z - a.Ts * a.Ci @ y])
+            Acl[:, j] = np.concatenate(
+                [a.Ad @ x + a.Bd @ u, a.Ad @ xh + a.Bd @ u + a.L @ (y - a.Cd @ xh - a.Dd @ u), z - a.Ts * a.Ci @ y]
+            )
         cl = np.linalg.eigvals(Acl)
         Aa = np.block([[a.Ad, np.zeros((n, q))], [-a.Ts * a.Ci @ a.Cd, np.eye(q)]])
         Ba = np.vstack([a.Bd, -a.Ts * a.Ci @ a.Dd])
@@ -127,9 +125,9 @@ def test_pade_order_is_configurable():
 
 def _small_spec(**overrides) -> dict:
     data = {
-        "name": "servo", "Ts": 0.01,
-        "plant": {"kind": "continuous", "A": [[0.0, 1.0], [0.0, -2.0]], "B": [[0.0], [4.0]],
-                  "C": [[1.0, 0.0]]},
+        "name": "servo",
+        "Ts": 0.01,
+        "plant": {"kind": "continuous", "A": [[0.0, 1.0], [0.0, -2.0]], "B": [[0.0], [4.0]], "C": [[1.0, 0.0]]},
         "controller": {"method": "lqr", "Q_diag": [10.0, 0.1], "R_diag": [1.0]},
         "observer": {"method": "kalman", "W_diag": [1e-4, 1e-2], "V_diag": [1e-4]},
         "limits": {"u_min": [-5.0], "u_max": [5.0]},
@@ -140,10 +138,12 @@ def _small_spec(**overrides) -> dict:
 
 
 def test_pole_placement_and_luenberger_put_poles_where_asked():
-    spec = parse_spec(_small_spec(
-        controller={"method": "place", "poles": [-8.0, -9.0]},
-        observer={"method": "luenberger", "poles": [[-30.0, 5.0], [-30.0, -5.0]], "form": "current"},
-    ))
+    spec = parse_spec(
+        _small_spec(
+            controller={"method": "place", "poles": [-8.0, -9.0]},
+            observer={"method": "luenberger", "poles": [[-30.0, 5.0], [-30.0, -5.0]], "form": "current"},
+        )
+    )
     r = design(spec)
     a = artifact_mod.from_dict(r.artifact)
     want_c = np.exp(np.array([-8.0, -9.0]) * 0.01)
@@ -163,19 +163,26 @@ def _drop(*keys):
     return lambda d: [d.pop(k) for k in keys]
 
 
-@pytest.mark.parametrize("form, change, words", [
-    ("current", _drop("M"), "observer_form 'current' needs the filter gain M"),
-    ("current", lambda d: d.update(L=[[v * 1.01 for v in row] for row in d["L"]]), "requires L = Ad M"),
-    ("current", lambda d: d.update(Dd=[[0.5]]), "requires Dd = 0"),
-    ("predictor", lambda d: d.update(M=d["L"]), "M is only used with observer_form 'current'"),
-    ("integral", _drop("Kaw"), "integral action (q=1) needs Kaw"),
-    ("predictor", lambda d: d.update(Ci=[[1.0]]), "Ci given but q = 0"),
-    ("predictor", lambda d: d.update(u_min=[6.0]), "u_min > u_max"),
-])
+@pytest.mark.parametrize(
+    "form, change, words",
+    [
+        ("current", _drop("M"), "observer_form 'current' needs the filter gain M"),
+        ("current", lambda d: d.update(L=[[v * 1.01 for v in row] for row in d["L"]]), "requires L = Ad M"),
+        ("current", lambda d: d.update(Dd=[[0.5]]), "requires Dd = 0"),
+        ("predictor", lambda d: d.update(M=d["L"]), "M is only used with observer_form 'current'"),
+        ("integral", _drop("Kaw"), "integral action (q=1) needs Kaw"),
+        ("predictor", lambda d: d.update(Ci=[[1.0]]), "Ci given but q = 0"),
+        ("predictor", lambda d: d.update(u_min=[6.0]), "u_min > u_max"),
+    ],
+)
 def test_an_artifact_breaking_an_invariant_of_the_law_is_refused(form, change, words):
     """Each invariant the C relies on, broken in an otherwise valid (re-sealed) artifact, is one clear error."""
-    observer = {"method": "kalman", "W_diag": [1e-4, 1e-2], "V_diag": [1e-4],
-                "form": "current" if form == "current" else "predictor"}
+    observer = {
+        "method": "kalman",
+        "W_diag": [1e-4, 1e-2],
+        "V_diag": [1e-4],
+        "form": "current" if form == "current" else "predictor",
+    }
     spec = _small_spec(observer=observer)
     if form == "integral":
         spec["plant"]["outputs"] = ["pos"]

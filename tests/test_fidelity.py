@@ -11,7 +11,7 @@ import logging
 
 import numpy as np
 import pytest
-
+from conftest import EXAMPLES, run_cli
 from gainlink import artifact as artifact_mod
 from gainlink.design import design
 from gainlink.engines.native import NativeLoop
@@ -20,8 +20,6 @@ from gainlink.reference import ReferenceLoop, StepResult
 from gainlink.replay import one_step_check
 from gainlink.simulate import simulate_linear
 from gainlink.spec import parse_spec
-
-from conftest import EXAMPLES, run_cli
 from test_onestep import jacobian_poles
 
 
@@ -34,8 +32,9 @@ class CLoop:
     def step(self, y, r=None) -> StepResult:
         out = self.native.step(y, r)
         m = out.u.size
-        return StepResult(u=out.u.astype(float), saturated=((out.sat_mask >> np.arange(m)) & 1).astype(bool),
-                          fault=out.status == -2)
+        return StepResult(
+            u=out.u.astype(float), saturated=((out.sat_mask >> np.arange(m)) & 1).astype(bool), fault=out.status == -2
+        )
 
 
 def flexible_spec(realization: str = "as_designed") -> dict:
@@ -45,10 +44,17 @@ def flexible_spec(realization: str = "as_designed") -> dict:
     k, c, m1, m2 = 1e5, 0.2, 1.0, 0.01
     A = [[0, 0, 1, 0], [0, 0, 0, 1], [-k / m1, k / m1, -c / m1, c / m1], [k / m2, -k / m2, c / m2, -c / m2]]
     return {
-        "name": "flexible", "Ts": 2e-4,
-        "plant": {"kind": "continuous", "A": A, "B": [[0.0], [0.0], [1.0 / m1], [0.0]],
-                  "C": [[1.0, 0, 0, 0], [0, 1.0, 0, 0]], "states": ["x1", "x2", "v1", "v2"],
-                  "outputs": ["x1", "x2"], "inputs": ["F"]},
+        "name": "flexible",
+        "Ts": 2e-4,
+        "plant": {
+            "kind": "continuous",
+            "A": A,
+            "B": [[0.0], [0.0], [1.0 / m1], [0.0]],
+            "C": [[1.0, 0, 0, 0], [0, 1.0, 0, 0]],
+            "states": ["x1", "x2", "v1", "v2"],
+            "outputs": ["x1", "x2"],
+            "inputs": ["F"],
+        },
         "controller": {"method": "lqr", "Q_diag": [1.0] * 4, "R_diag": [1e-4]},
         "integral": {"outputs": ["x1"], "Q_diag": [100.0]},
         "observer": {"method": "kalman", "G": "B", "W": [[1.0]], "V_diag": [1e-6, 1e-6]},
@@ -74,8 +80,10 @@ def test_examples_record_a_stable_compensator_and_float32_within_threshold(examp
         assert comp["stable"] and comp["unstable_poles"] == []
         assert comp["spectral_radius"] == pytest.approx(np.max(np.abs(jacobian_poles(a))), rel=1e-9)
         assert f32["max_rel_u"] < THRESHOLD and f32["saturated_fraction"] > 0, name
-        print(f"{name}: float32 closed-loop deviation {f32['max_rel_u']:.3g} of the limit span, "
-              f"{f32['max_rel_y']:.3g} of the output excursion")
+        print(
+            f"{name}: float32 closed-loop deviation {f32['max_rel_u']:.3g} of the limit span, "
+            f"{f32['max_rel_y']:.3g} of the output excursion"
+        )
 
 
 def test_design_time_float32_number_is_what_the_c_does(example_artifacts):
@@ -122,8 +130,10 @@ def test_balanced_realisation_cuts_the_float32_deviation_tenfold(flexible):
     base = flexible["as_designed"][0].float32.max_rel_u
     balanced = flexible["balanced"][0].float32.max_rel_u
     schur = flexible["schur"][0].float32.max_rel_u
-    print(f"float32 closed-loop deviation (of the limit span): as_designed {base:.3g}, balanced {balanced:.3g} "
-          f"({base / balanced:.0f}x less), schur {schur:.3g}")
+    print(
+        f"float32 closed-loop deviation (of the limit span): as_designed {base:.3g}, balanced {balanced:.3g} "
+        f"({base / balanced:.0f}x less), schur {schur:.3g}"
+    )
     assert balanced * 10 <= base
     assert flexible["balanced"][0].float32.ok and not flexible["balanced"][0].warnings
     # the real C in the balanced realisation gives the same deviation in the same scenario
@@ -158,8 +168,13 @@ def test_realisation_is_recorded_and_every_gain_recomputable(flexible):
         Ti = np.linalg.inv(T)
         for key in ("Ad", "Bd", "Cd", "K", "L"):  # the design's own matrices are those of the plain design
             np.testing.assert_array_equal(np.array(rec["design"][key]), getattr(base, key), err_msg=key)
-        for key, want in (("Ad", T @ base.Ad @ Ti), ("Bd", T @ base.Bd), ("Cd", base.Cd @ Ti), ("K", base.K @ Ti),
-                          ("L", T @ base.L)):
+        for key, want in (
+            ("Ad", T @ base.Ad @ Ti),
+            ("Bd", T @ base.Bd),
+            ("Cd", base.Cd @ Ti),
+            ("K", base.K @ Ti),
+            ("L", T @ base.L),
+        ):
             np.testing.assert_allclose(getattr(a, key), want, rtol=0, atol=1e-12 * max(1.0, np.abs(want).max()))
         np.testing.assert_array_equal(a.Ki, base.Ki)
         np.testing.assert_array_equal(a.Kaw, base.Kaw)
@@ -185,9 +200,11 @@ def test_c_runs_the_realisation_it_is_given(flexible):
 
 def test_implementation_table_is_checked(tmp_path):
     text = (EXAMPLES / "pendulum.toml").read_text()
-    for extra, needle in (('[implementation]\nrealization = "modal"\n', "implementation.realization must be one of"),
-                          ("[implementation]\nfloat32_check = 1\n", "float32_check must be true or false"),
-                          ("[implementation]\nrealisation = \"balanced\"\n", "unknown key 'realisation'")):
+    for extra, needle in (
+        ('[implementation]\nrealization = "modal"\n', "implementation.realization must be one of"),
+        ("[implementation]\nfloat32_check = 1\n", "float32_check must be true or false"),
+        ('[implementation]\nrealisation = "balanced"\n', "unknown key 'realisation'"),
+    ):
         path = tmp_path / "spec.toml"
         path.write_text(text + "\n" + extra)
         res = run_cli("design", path, "--out", tmp_path / "out")

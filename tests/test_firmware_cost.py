@@ -6,7 +6,6 @@ import logging
 from pathlib import Path
 
 import pytest
-
 from gainlink.firmware.build import build
 from gainlink.firmware.cost import count_step_instructions, law_macs
 from gainlink.firmware.golden import example_cases

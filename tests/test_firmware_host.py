@@ -16,19 +16,27 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
-from hypothesis.extra import numpy as hnp
-
 from gainlink.artifact import from_dict, seal
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware.build import build
 from gainlink.firmware.golden import example_cases, random_cases
 from gainlink.reference import ReferenceLoop
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 RTOL = 1e-4
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-GL_OK, GL_SATURATED, GL_ERR_NANINF, GL_ERR_CRC, GL_ERR_DIMS, GL_ERR_RANGE, GL_ERR_WATCHDOG, GL_ERR_BUSY = 0, 1, -2, -3, -4, -5, -6, -7
+GL_OK, GL_SATURATED, GL_ERR_NANINF, GL_ERR_CRC, GL_ERR_DIMS, GL_ERR_RANGE, GL_ERR_WATCHDOG, GL_ERR_BUSY = (
+    0,
+    1,
+    -2,
+    -3,
+    -4,
+    -5,
+    -6,
+    -7,
+)
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -269,9 +277,9 @@ def test_host_executable_under_asan_ubsan_matches_ctypes(pendulum):
         steps = [line.split() for line in out[1:] if line.startswith("step ")]
         assert len(steps) == N
         raw = NativeLoop(a).run_raw(Y, R)
-        u = np.array([[float(v) for v in s[2:2 + a.m]] for s in steps], dtype=np.float32)
-        xh = np.array([[float(v) for v in s[3 + a.m:3 + a.m + a.n]] for s in steps], dtype=np.float32)
-        z = np.array([[float(v) for v in s[3 + a.m + a.n:]] for s in steps], dtype=np.float32).reshape(N, a.q)
+        u = np.array([[float(v) for v in s[2 : 2 + a.m]] for s in steps], dtype=np.float32)
+        xh = np.array([[float(v) for v in s[3 + a.m : 3 + a.m + a.n]] for s in steps], dtype=np.float32)
+        z = np.array([[float(v) for v in s[3 + a.m + a.n :]] for s in steps], dtype=np.float32).reshape(N, a.q)
         assert np.array_equal(u, raw["u"]) and np.array_equal(xh, raw["xh"]) and np.array_equal(z, raw["z"]), case.label
         assert int(steps[50][1]) == GL_ERR_NANINF
         assert any(line.startswith("error ") for line in out), "a malformed line is answered, not fatal"
@@ -309,8 +317,10 @@ def test_firmware_run_replays_a_csv_through_the_host_executable(tmp_path, pendul
     rows = ["y0,y1,r0"] + [",".join(repr(float(v)) for v in np.concatenate([Y[k], R[k]])) for k in range(100)]
     (tmp_path / "in.csv").write_text("\n".join(rows) + "\n")
     exe = str(Path(sys.executable).with_name("gainlink"))
-    for engine_args, name in ((["firmware", "run", str(art), "--input", str(tmp_path / "in.csv"), "--output"], "run"),
-                              (["replay", str(art), "--input", str(tmp_path / "in.csv"), "--engine", "native", "--output"], "native")):
+    for engine_args, name in (
+        (["firmware", "run", str(art), "--input", str(tmp_path / "in.csv"), "--output"], "run"),
+        (["replay", str(art), "--input", str(tmp_path / "in.csv"), "--engine", "native", "--output"], "native"),
+    ):
         proc = subprocess.run([exe, *engine_args, str(tmp_path / f"{name}.csv")], capture_output=True, text=True)
         assert proc.returncode == 0, proc.stderr
     run_rows = (tmp_path / "run.csv").read_text().splitlines()
@@ -325,6 +335,7 @@ def test_firmware_run_replays_a_csv_through_the_host_executable(tmp_path, pendul
 def test_library_uses_no_allocation_io_or_exit(pendulum):
     """The static library references no malloc/free/printf/exit (nm on the archive built for an artifact)."""
     lib = build(pendulum.artifact, target="host").files["static"]
+
     def symbols(*flags):
         out = subprocess.run(["nm", *flags, str(lib)], capture_output=True, text=True, check=True).stdout
         return {line.split()[-1] for line in out.splitlines() if line.strip() and not line.endswith(":")}

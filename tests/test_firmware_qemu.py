@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from gainlink.artifact import render
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
@@ -69,8 +68,18 @@ def test_watchdog_in_the_image(pendulum):
     elf = build(a, target="cortex-m4").files["elf"]
     tags = np.zeros(30, dtype=np.uint32)
     tags[10:16] = fwqemu.TAG_IDLE  # six periods without a measurement, watchdog at 4
-    rec = fwqemu.replay(elf, board="mps2-an386", n=a.n, m=a.m, p=a.p, q=a.q, Y=pendulum.Y[:30], R=pendulum.R[:30],
-                        tags=tags, watchdog_periods=4)
+    rec = fwqemu.replay(
+        elf,
+        board="mps2-an386",
+        n=a.n,
+        m=a.m,
+        p=a.p,
+        q=a.q,
+        Y=pendulum.Y[:30],
+        R=pendulum.R[:30],
+        tags=tags,
+        watchdog_periods=4,
+    )
     status = rec["status"].tolist()
     assert status[10:13] == [0, 0, 0] and status[13:16] == [-6, -6, -6]
     assert np.all(rec["u"][10:13] == rec["u"][9]), "holds the last command"
@@ -82,7 +91,9 @@ def test_fpu_left_disabled_is_caught_by_the_startup_self_test(pendulum):
     a = pendulum.artifact
     elf = build(a, target="cortex-m4", options={"GL_SKIP_FPU_ENABLE": "ON"}).files["elf"]
     with tempfile.TemporaryDirectory() as tmp:
-        (Path(tmp) / "gl_in.bin").write_bytes(fwqemu.encode_input(pendulum.Y[:5], pendulum.R[:5], n=a.n, m=a.m, p=a.p, q=a.q))
+        (Path(tmp) / "gl_in.bin").write_bytes(
+            fwqemu.encode_input(pendulum.Y[:5], pendulum.R[:5], n=a.n, m=a.m, p=a.p, q=a.q)
+        )
         res = fwqemu.run_image(elf, board="mps2-an386", cwd=Path(tmp), timeout_s=10)
     assert res.returncode == fwqemu.EXIT_FPU, f"expected the FPU self-test exit, got {res.meaning}"
     good = build(a, target="cortex-m4").files["elf"]
@@ -110,8 +121,22 @@ def test_cli_firmware_build_writes_images_and_size_report(tmp_path, pendulum):
     art.write_text(render(pendulum.artifact.data))
     out = tmp_path / "fw"
     for board in ("mps2-an386", "netduinoplus2"):
-        proc = subprocess.run([GAINLINK, "firmware", "build", str(art), "--target", "cortex-m4", "--board", board,
-                               "--out", str(out / board)], capture_output=True, text=True)
+        proc = subprocess.run(
+            [
+                GAINLINK,
+                "firmware",
+                "build",
+                str(art),
+                "--target",
+                "cortex-m4",
+                "--board",
+                board,
+                "--out",
+                str(out / board),
+            ],
+            capture_output=True,
+            text=True,
+        )
         assert proc.returncode == 0, proc.stderr
         d = out / board
         for ext in ("elf", "bin", "hex", "map"):
@@ -125,17 +150,23 @@ def test_cli_firmware_build_writes_images_and_size_report(tmp_path, pendulum):
         assert bin_size == report["flash_bytes"], "the .bin holds exactly the flash sections"
         # the ELF the command wrote boots on its board and replays the golden samples bit for bit like the host
         a = pendulum.artifact
-        rec = fwqemu.replay(d / "gainlink_pendulum.elf", board=board, n=a.n, m=a.m, p=a.p, q=a.q, Y=pendulum.Y, R=pendulum.R)
+        rec = fwqemu.replay(
+            d / "gainlink_pendulum.elf", board=board, n=a.n, m=a.m, p=a.p, q=a.q, Y=pendulum.Y, R=pendulum.R
+        )
         host = NativeLoop(a).run_raw(pendulum.Y, pendulum.R)
         assert np.array_equal(rec["u"].view(np.uint32), host["u"].view(np.uint32))
         assert np.array_equal(rec["xh"].view(np.uint32), host["xh"].view(np.uint32))
-    dry = subprocess.run([GAINLINK, "firmware", "flash", str(out / "netduinoplus2"), "--probe", "openocd", "--dry-run"],
-                         capture_output=True, text=True)
+    dry = subprocess.run(
+        [GAINLINK, "firmware", "flash", str(out / "netduinoplus2"), "--probe", "openocd", "--dry-run"],
+        capture_output=True,
+        text=True,
+    )
     assert dry.returncode == 0
     assert dry.stdout.strip().startswith("openocd -f interface/stlink.cfg -f target/stm32f4x.cfg -c 'program ")
     assert str((out / "netduinoplus2" / "gainlink_pendulum.elf").resolve()) in dry.stdout
-    missing = subprocess.run([GAINLINK, "firmware", "flash", str(tmp_path), "--probe", "pyocd", "--dry-run"],
-                             capture_output=True, text=True)
+    missing = subprocess.run(
+        [GAINLINK, "firmware", "flash", str(tmp_path), "--probe", "pyocd", "--dry-run"], capture_output=True, text=True
+    )
     assert missing.returncode == 2 and missing.stderr.count("\n") == 1 and "firmware.json" in missing.stderr
 
 
@@ -143,12 +174,27 @@ def test_replay_cli_with_qemu_engine_matches_native(tmp_path, pendulum):
     a = pendulum.artifact
     art = tmp_path / "gains.json"
     art.write_text(render(a.data))
-    rows = ["y0,y1,r0"] + [",".join(repr(float(v)) for v in np.concatenate([pendulum.Y[k], pendulum.R[k]])) for k in range(300)]
+    rows = ["y0,y1,r0"] + [
+        ",".join(repr(float(v)) for v in np.concatenate([pendulum.Y[k], pendulum.R[k]])) for k in range(300)
+    ]
     (tmp_path / "in.csv").write_text("\n".join(rows) + "\n")
     outs = {}
     for engine in ("native", "qemu"):
-        proc = subprocess.run([GAINLINK, "replay", str(art), "--input", str(tmp_path / "in.csv"), "--output",
-                               str(tmp_path / f"{engine}.csv"), "--engine", engine], capture_output=True, text=True)
+        proc = subprocess.run(
+            [
+                GAINLINK,
+                "replay",
+                str(art),
+                "--input",
+                str(tmp_path / "in.csv"),
+                "--output",
+                str(tmp_path / f"{engine}.csv"),
+                "--engine",
+                engine,
+            ],
+            capture_output=True,
+            text=True,
+        )
         assert proc.returncode == 0, proc.stderr
         outs[engine] = (tmp_path / f"{engine}.csv").read_text()
     assert outs["native"] == outs["qemu"]
@@ -170,8 +216,18 @@ def test_gain_update_on_target_matches_host(pendulum):
     N = 200
     tags = np.zeros(N, dtype=np.uint32)
     tags[[60, 120]] = fwqemu.TAG_STAGE
-    rec = fwqemu.replay(build(a, target="cortex-m4").files["elf"], board="mps2-an386", n=a.n, m=a.m, p=a.p, q=a.q,
-                        Y=pendulum.Y[:N], R=pendulum.R[:N], tags=tags, stage_sets=sets)
+    rec = fwqemu.replay(
+        build(a, target="cortex-m4").files["elf"],
+        board="mps2-an386",
+        n=a.n,
+        m=a.m,
+        p=a.p,
+        q=a.q,
+        Y=pendulum.Y[:N],
+        R=pendulum.R[:N],
+        tags=tags,
+        stage_sets=sets,
+    )
     assert rec["status"][60] == -3 and rec["status"][120] == 0
     steps = tags == fwqemu.TAG_STEP
     # the host: same samples, same updates at the same points

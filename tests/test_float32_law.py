@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware.golden import closed_loop_cases, example_cases, random_cases
 from gainlink.float32_law import Float32Loop, fma32_exact
@@ -42,7 +41,7 @@ def test_fma32_is_correctly_rounded_like_libm_fmaf():
     # Cases where a*b + c rounded to double lands on a float32 midpoint but the exact sum does not:
     # a*b = 2^-24 (1 + 2^-12)(1 - 2^-12 + 2^-24) = 2^-24 + 2^-60, so 1 + a*b is the midpoint 1 + 2^-24 plus
     # 2^-60, which double cannot hold; the correctly rounded result is 1 + 2^-23, not the tie's 1.
-    a[:64], b[:64], c[:64] = np.float32(2.0 ** -24 * (1 + 2.0 ** -12)), np.float32(1 - 2.0 ** -12 + 2.0 ** -24), 1.0
+    a[:64], b[:64], c[:64] = np.float32(2.0**-24 * (1 + 2.0**-12)), np.float32(1 - 2.0**-12 + 2.0**-24), 1.0
     a[32:64], c[32:64] = -a[32:64], -1.0
     tie_hits = 0
     for x, y, z in zip(a.tolist(), b.tolist(), c.tolist()):
@@ -63,7 +62,8 @@ def test_float32_loop_equals_the_host_build_bit_for_bit():
     cases += list(picked.values())
     assert any(c.artifact.has_operating_point for c in cases) and any(c.artifact.M is not None for c in cases)
     assert {(c.artifact.observer_form, c.artifact.anti_windup) for c in cases} >= {
-        (f, aw) for f in ("predictor", "current") for aw in ("none", "clamp", "backcalc")}
+        (f, aw) for f in ("predictor", "current") for aw in ("none", "clamp", "backcalc")
+    }
     for case in cases:
         Y = case.Y.copy()
         Y[11, 0] = np.nan  # a refused sample: the safe command, state kept

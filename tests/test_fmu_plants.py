@@ -12,14 +12,12 @@ import zipfile
 
 import numpy as np
 import pytest
-
+from conftest import EXAMPLES, run_cli
 from gainlink.errors import PlantError
 from gainlink.hil.plants.config import plant_from_config
 from gainlink.hil.plants.fmu import FmuPlant
 from gainlink.hil.plants.linearize import linearize
 from gainlink.hil.plants.models import CartPendulum, QuadrotorLateral, WoodBerry
-
-from conftest import EXAMPLES, run_cli
 from test_hil_support import cart_fmu  # noqa: F401
 
 M, m, l, g = 1.0, 0.1, 0.5, 9.81
@@ -88,8 +86,18 @@ def test_linearize_cli_spec_designs_like_the_example(cart_fmu, tmp_path, example
     import json
 
     spec = tmp_path / "from_fmu.toml"
-    res = run_cli("linearize", cart_fmu, "--at", "theta=0", "--out", spec, "--name", "pendulum",
-                  "--template", EXAMPLES / "pendulum.toml")
+    res = run_cli(
+        "linearize",
+        cart_fmu,
+        "--at",
+        "theta=0",
+        "--out",
+        spec,
+        "--name",
+        "pendulum",
+        "--template",
+        EXAMPLES / "pendulum.toml",
+    )
     assert res.code == 0, res.err
     data = tomllib.loads(spec.read_text())
     np.testing.assert_allclose(data["plant"]["A"], A_UP, atol=1e-12)
@@ -108,10 +116,12 @@ def test_linearize_cli_spec_designs_like_the_example(cart_fmu, tmp_path, example
 def _numeric_jacobian(plant, n_in):
     x0, u0 = np.zeros(len(plant.state_names)), np.zeros(n_in)
     h = 1e-6
-    A = np.column_stack([(plant.derivatives(x0 + h * e, u0) - plant.derivatives(x0 - h * e, u0)) / (2 * h)
-                         for e in np.eye(len(x0))])
-    B = np.column_stack([(plant.derivatives(x0, u0 + h * e) - plant.derivatives(x0, u0 - h * e)) / (2 * h)
-                         for e in np.eye(n_in)])
+    A = np.column_stack(
+        [(plant.derivatives(x0 + h * e, u0) - plant.derivatives(x0 - h * e, u0)) / (2 * h) for e in np.eye(len(x0))]
+    )
+    B = np.column_stack(
+        [(plant.derivatives(x0, u0 + h * e) - plant.derivatives(x0, u0 - h * e)) / (2 * h) for e in np.eye(n_in)]
+    )
     return A, B
 
 
@@ -134,10 +144,11 @@ def test_wood_berry_has_its_gains_and_dead_times():
         wb.advance(u=np.array([1.0, 0.0]), dt=0.1)
         t.append((k + 1) * 0.1)
         y = wb.outputs()
-        xd.append(y[0]); xb.append(y[1])
+        xd.append(y[0])
+        xb.append(y[1])
     t, xd, xb = np.array(t), np.array(xd), np.array(xb)
-    assert np.all(xd[t <= 1.0 + 1e-9] == 0.0) and xd[t > 1.05][0] > 0   # 1 min dead time
-    assert np.all(xb[t <= 7.0 + 1e-9] == 0.0) and xb[t > 7.05][0] > 0   # 7 min dead time
+    assert np.all(xd[t <= 1.0 + 1e-9] == 0.0) and xd[t > 1.05][0] > 0  # 1 min dead time
+    assert np.all(xb[t <= 7.0 + 1e-9] == 0.0) and xb[t > 7.05][0] > 0  # 7 min dead time
     assert xd[-1] == pytest.approx(12.8, rel=1e-3) and xb[-1] == pytest.approx(6.6, rel=1e-3)
     # First-order lag: 63.2 % of the gain one time constant after the dead time.
     assert np.interp(1.0 + 16.7, t, xd) == pytest.approx(12.8 * (1 - np.exp(-1)), rel=1e-2)
@@ -207,7 +218,6 @@ def test_missing_and_broken_fmus_are_refused(tmp_path, cart_fmu):
 
 def test_quadrotor_fmu_matches_its_model_and_the_example():
     from fmpy.validation import validate_fmu
-
     from gainlink.hil.plants.build import build_fmu
 
     path = build_fmu("quadrotor_lateral")
@@ -233,10 +243,9 @@ def test_quadrotor_fmu_matches_its_model_and_the_example():
 def test_fmi3_cosimulation_fmu_runs_like_the_fmi2_one(tmp_path, example_artifacts):
     from fmpy import read_model_description
     from fmpy.validation import validate_fmu
-
     from gainlink.hil.loop.bridge import run_scenario
-    from gainlink.hil.plants.build import build_fmu
     from gainlink.hil.loop.scenario import parse_scenario
+    from gainlink.hil.plants.build import build_fmu
     from test_hil_support import udp_transport
 
     path = build_fmu("cart_pendulum3")
@@ -262,9 +271,18 @@ def test_fmi3_cosimulation_fmu_runs_like_the_fmi2_one(tmp_path, example_artifact
     # The same lockstep HIL run (Python reference node as controller) on the FMI 2.0 and 3.0 FMUs agrees.
     finals = []
     for name in ("cart_pendulum", "cart_pendulum3"):
-        r = run_scenario(parse_scenario({
-            "artifact": str(example_artifacts["pendulum"]), "duration": 1.0, "controller": "reference",
-            "plant": {"kind": "fmu", "fmu": name}, "transport": udp_transport(), "initial_state": {"theta": 0.1}}))
+        r = run_scenario(
+            parse_scenario(
+                {
+                    "artifact": str(example_artifacts["pendulum"]),
+                    "duration": 1.0,
+                    "controller": "reference",
+                    "plant": {"kind": "fmu", "fmu": name},
+                    "transport": udp_transport(),
+                    "initial_state": {"theta": 0.1},
+                }
+            )
+        )
         assert r.complete
         finals.append(r.trace.y)
     np.testing.assert_allclose(finals[0], finals[1], rtol=1e-9, atol=1e-12)
@@ -277,8 +295,10 @@ def test_linearize_and_fmu_commands_refuse_bad_input_in_one_line(cart_fmu, tmp_p
             data = src.read(item)
             if item.filename == "modelDescription.xml":
                 text = data.decode()
-                data = (text[:text.index("<ModelExchange")]
-                        + text[text.index("</ModelExchange>") + len("</ModelExchange>"):]).encode()
+                data = (
+                    text[: text.index("<ModelExchange")]
+                    + text[text.index("</ModelExchange>") + len("</ModelExchange>") :]
+                ).encode()
             dst.writestr(item, data)
     out = tmp_path / "spec.toml"
     cases = [
@@ -352,8 +372,10 @@ def test_wood_berry_fmu_step_response_equals_the_builtin_model(wood_berry_fmu, d
         for _ in range(n):
             fmu.advance(u=u, dt=dt)
             py.advance(u=u, dt=dt)
-            y_fmu.append(fmu.outputs()); y_py.append(py.outputs())
-            s_fmu.append(fmu.state()); s_py.append(py.state())
+            y_fmu.append(fmu.outputs())
+            y_py.append(py.outputs())
+            s_fmu.append(fmu.state())
+            s_py.append(py.state())
         y_fmu = np.array(y_fmu)
         tol = _wb_bound(dt, 0.1)
         assert tol < 1e-11

@@ -6,7 +6,6 @@ from __future__ import annotations
 import subprocess
 
 import pytest
-
 from gainlink import artifact as artifact_mod
 from gainlink.firmware import fuzz
 
@@ -49,6 +48,7 @@ def test_msgpack_container_bombs_are_refused_without_allocating(harnesses, tmp_p
     for i, bomb in enumerate(bombs):
         path = tmp_path / f"bomb{i}"
         path.write_bytes(bomb)
-        proc = subprocess.run([str(exes["can_udp"]), "-rss_limit_mb=256", str(path)], capture_output=True,
-                              text=True, timeout=60)
+        proc = subprocess.run(
+            [str(exes["can_udp"]), "-rss_limit_mb=256", str(path)], capture_output=True, text=True, timeout=60
+        )
         assert proc.returncode == 0, proc.stderr[-400:]

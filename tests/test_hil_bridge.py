@@ -18,13 +18,11 @@ import time
 
 import numpy as np
 import pytest
-
-from gainlink.artifact import load
-from gainlink.hil.loop.bridge import run_scenario
-from gainlink.hil.links.can import CanTransport
-from gainlink.hil.loop.scenario import parse_scenario
-
 from conftest import run_cli
+from gainlink.artifact import load
+from gainlink.hil.links.can import CanTransport
+from gainlink.hil.loop.bridge import run_scenario
+from gainlink.hil.loop.scenario import parse_scenario
 from test_hil_support import can_firmware, cart_fmu, pendulum_gains, pendulum_scenario, udp_transport, write_scenario  # noqa: F401
 
 
@@ -32,12 +30,22 @@ def _run(data):
     return run_scenario(parse_scenario(data))
 
 
-def test_lockstep_classic_can_stabilises_the_fmu_pendulum_and_writes_the_report(tmp_path, pendulum_gains,
-                                                                                can_firmware, cart_fmu):
-    scenario = write_scenario(tmp_path / "s.toml", pendulum_scenario(
-        gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(fd=False), duration=10.0,
-        reference={"r_x": {"kind": "step", "at": 1.0, "value": 0.2}}, noise={"theta": 1e-4}, seed=3,
-        disturbances=[{"input": "F", "start": 2.5, "stop": 2.6, "value": 2.0}]))
+def test_lockstep_classic_can_stabilises_the_fmu_pendulum_and_writes_the_report(
+    tmp_path, pendulum_gains, can_firmware, cart_fmu
+):
+    scenario = write_scenario(
+        tmp_path / "s.toml",
+        pendulum_scenario(
+            gains=pendulum_gains,
+            fmu=cart_fmu,
+            transport=udp_transport(fd=False),
+            duration=10.0,
+            reference={"r_x": {"kind": "step", "at": 1.0, "value": 0.2}},
+            noise={"theta": 1e-4},
+            seed=3,
+            disturbances=[{"input": "F", "start": 2.5, "stop": 2.6, "value": 2.0}],
+        ),
+    )
     report = tmp_path / "report"
     res = run_cli("hil", "run", scenario, "--report", report, "--no-progress")
     assert res.code == 0, res.err
@@ -65,12 +73,22 @@ def test_lockstep_classic_can_stabilises_the_fmu_pendulum_and_writes_the_report(
 
 def test_frame_faults_are_counted_by_sequence_number(pendulum_gains, can_firmware, cart_fmu):
     # 0.5 s windows at 100 Hz, every 10th sample: 5 samples each.
-    faults = [{"kind": "drop", "start": 0.5, "stop": 1.0, "every": 10},
-              {"kind": "duplicate", "start": 1.0, "stop": 1.5, "every": 10},
-              {"kind": "reorder", "start": 1.5, "stop": 2.0, "every": 10},
-              {"kind": "delay", "start": 2.0, "stop": 2.5, "every": 10, "delay_steps": 2}]
-    r = _run(pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(fd=True),
-                               duration=3.0, faults=faults, step_timeout=0.2))
+    faults = [
+        {"kind": "drop", "start": 0.5, "stop": 1.0, "every": 10},
+        {"kind": "duplicate", "start": 1.0, "stop": 1.5, "every": 10},
+        {"kind": "reorder", "start": 1.5, "stop": 2.0, "every": 10},
+        {"kind": "delay", "start": 2.0, "stop": 2.5, "every": 10, "delay_steps": 2},
+    ]
+    r = _run(
+        pendulum_scenario(
+            gains=pendulum_gains,
+            fmu=cart_fmu,
+            transport=udp_transport(fd=True),
+            duration=3.0,
+            faults=faults,
+            step_timeout=0.2,
+        )
+    )
     m = r.metrics
     assert m["faults_injected"] == {"drop": 5, "duplicate": 5, "reorder": 5, "delay": 5}
     # Dropped samples never get a command; a reordered or delayed sample arrives after a newer one and
@@ -85,17 +103,27 @@ def test_frame_faults_are_counted_by_sequence_number(pendulum_gains, can_firmwar
 def test_ten_percent_drops_show_as_a_cost_against_the_twin(pendulum_gains, can_firmware, cart_fmu):
     """Every tenth sample dropped (the command is held for that period): the twin comparison measures what
     that costs the closed loop, far above the fault-free run's float32 differences."""
-    common = dict(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(fd=True), duration=4.0,
-                  reference={"r_x": {"kind": "step", "at": 0.5, "value": 0.2}}, noise={"theta": 1e-4}, seed=4)
+    common = dict(
+        gains=pendulum_gains,
+        fmu=cart_fmu,
+        transport=udp_transport(fd=True),
+        duration=4.0,
+        reference={"r_x": {"kind": "step", "at": 0.5, "value": 0.2}},
+        noise={"theta": 1e-4},
+        seed=4,
+    )
     clean = _run(pendulum_scenario(**common))
-    drops = _run(pendulum_scenario(faults=[{"kind": "drop", "start": 0.0, "stop": 4.0, "every": 10}], step_timeout=0.2,
-                                   **common))
+    drops = _run(
+        pendulum_scenario(faults=[{"kind": "drop", "start": 0.0, "stop": 4.0, "every": 10}], step_timeout=0.2, **common)
+    )
     assert clean.complete and drops.complete
     assert clean.metrics["lost"] == 0 and drops.metrics["lost"] == 40
     c, d = clean.metrics["twin"], drops.metrics["twin"]
-    print(f"against the twin: fault-free max |du| {c['worst_du_rel']:.3g} of span, |dy| {c['worst_dy_rel']:.3g} of range, "
-          f"IAE {c['iae']['r_x']['difference_rel']:+.3g}; 10 % drops {d['worst_du_rel']:.3g}, {d['worst_dy_rel']:.3g}, "
-          f"IAE {d['iae']['r_x']['difference_rel']:+.3g}")
+    print(
+        f"against the twin: fault-free max |du| {c['worst_du_rel']:.3g} of span, |dy| {c['worst_dy_rel']:.3g} of range, "
+        f"IAE {c['iae']['r_x']['difference_rel']:+.3g}; 10 % drops {d['worst_du_rel']:.3g}, {d['worst_dy_rel']:.3g}, "
+        f"IAE {d['iae']['r_x']['difference_rel']:+.3g}"
+    )
     assert c["worst_du_rel"] < 1e-4 and c["worst_dy_rel"] < 1e-4
     assert d["worst_du_rel"] > 100 * c["worst_du_rel"] and d["worst_dy_rel"] > 100 * c["worst_dy_rel"]
     assert abs(d["iae"]["r_x"]["difference"]) > 100 * abs(c["iae"]["r_x"]["difference"])
@@ -105,8 +133,17 @@ def test_ten_percent_drops_show_as_a_cost_against_the_twin(pendulum_gains, can_f
 
 def test_silent_controller_ends_the_run_in_bounded_time(pendulum_gains, can_firmware, cart_fmu):
     t0 = time.monotonic()
-    r = _run(pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=30.0,
-                               faults=[{"kind": "silent", "start": 0.5}], step_timeout=0.05, peer_timeout=0.5))
+    r = _run(
+        pendulum_scenario(
+            gains=pendulum_gains,
+            fmu=cart_fmu,
+            transport=udp_transport(),
+            duration=30.0,
+            faults=[{"kind": "silent", "start": 0.5}],
+            step_timeout=0.05,
+            peer_timeout=0.5,
+        )
+    )
     assert time.monotonic() - t0 < 10.0
     assert r.complete is False and r.metrics["complete"] is False
     assert "silent" in r.metrics["reason"] and r.metrics["steps"] < 100
@@ -114,8 +151,16 @@ def test_silent_controller_ends_the_run_in_bounded_time(pendulum_gains, can_firm
 
 
 def test_crashed_controller_ends_the_run_and_says_so(pendulum_gains, can_firmware, cart_fmu):
-    r = _run(pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=30.0,
-                               faults=[{"kind": "crash", "start": 0.3}], step_timeout=0.05))
+    r = _run(
+        pendulum_scenario(
+            gains=pendulum_gains,
+            fmu=cart_fmu,
+            transport=udp_transport(),
+            duration=30.0,
+            faults=[{"kind": "crash", "start": 0.3}],
+            step_timeout=0.05,
+        )
+    )
     assert r.complete is False
     assert "exited with status -9" in r.metrics["reason"] and r.metrics["steps"] <= 32
 
@@ -131,8 +176,9 @@ def test_reference_controller_node_matches_the_firmware(pendulum_gains, can_firm
 
 
 def test_realtime_mode_keeps_its_period(pendulum_gains, can_firmware, cart_fmu):
-    r = _run(pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=1.0,
-                               mode="realtime"))
+    r = _run(
+        pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=1.0, mode="realtime")
+    )
     m = r.metrics
     assert m["complete"] is True and m["steps"] == 100
     assert m["wall_s"] >= 0.99  # paced by the clock, not as fast as possible (lockstep takes ~0.05 s)
@@ -149,6 +195,7 @@ def _stall_once(seconds: float):
         if not stalled and done >= total // 2:
             stalled.append(done)
             time.sleep(seconds)
+
     return progress
 
 
@@ -165,8 +212,7 @@ def test_realtime_overrun_skips_the_missed_ticks_and_lets_the_plant_run_on(pendu
     assert m["period_jitter_us"]["max"] < period_us  # the ticks that ran started within a period of their deadline
     assert abs(m["outputs_final"]["theta"]) < 0.05  # an 80 ms hold does not lose the pendulum
 
-    catch_up = run_scenario(parse_scenario(pendulum_scenario(overrun="catch_up", **common)),
-                            progress=_stall_once(0.08))
+    catch_up = run_scenario(parse_scenario(pendulum_scenario(overrun="catch_up", **common)), progress=_stall_once(0.08))
     c = catch_up.metrics
     assert c["complete"] and c["steps"] == 200 and c["overruns"] == 0
     # The tick after the stall ran at least 80 - 10 ms late, and the missed ones followed back to back.
@@ -183,13 +229,17 @@ def test_realtime_holds_a_zero_wakeup_latency_request_only_while_it_runs(pendulu
     before = _cpu_wakeup_latency_request()
     seen: list[int] = []
     common = dict(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=0.5, mode="realtime")
-    r = run_scenario(parse_scenario(pendulum_scenario(**common)),
-                     progress=lambda done, total: seen.append(_cpu_wakeup_latency_request()) if done < total else None)
+    r = run_scenario(
+        parse_scenario(pendulum_scenario(**common)),
+        progress=lambda done, total: seen.append(_cpu_wakeup_latency_request()) if done < total else None,
+    )
     assert r.complete and r.metrics["pm_qos"] is True and seen and set(seen) == {0}
     assert _cpu_wakeup_latency_request() == before != 0  # withdrawn when the run ends
     seen.clear()
-    off = run_scenario(parse_scenario(pendulum_scenario(pm_qos=False, **common)),
-                       progress=lambda done, total: seen.append(_cpu_wakeup_latency_request()))
+    off = run_scenario(
+        parse_scenario(pendulum_scenario(pm_qos=False, **common)),
+        progress=lambda done, total: seen.append(_cpu_wakeup_latency_request()),
+    )
     assert off.complete and off.metrics["pm_qos"] is False and set(seen) == {before}
 
 
@@ -200,8 +250,9 @@ def _cli_error(*argv):
 
 
 def test_bad_inputs_get_one_line_and_a_nonzero_exit(tmp_path, pendulum_gains, cart_fmu, example_artifacts):
-    base = pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=0.5,
-                             controller="reference")
+    base = pendulum_scenario(
+        gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=0.5, controller="reference"
+    )
     broken = tmp_path / "broken.fmu"
     broken.write_bytes(b"PK\x03\x04 truncated")
     cases = {
@@ -211,11 +262,15 @@ def test_bad_inputs_get_one_line_and_a_nonzero_exit(tmp_path, pendulum_gains, ca
         "flag not a boolean": ({**base, "pm_qos": "no"}, "pm_qos must be true or false, not 'no'"),
         "missing fmu": ({**base, "plant": {"kind": "fmu", "path": str(tmp_path / "none.fmu")}}, "not found"),
         "broken fmu": ({**base, "plant": {"kind": "fmu", "path": str(broken)}}, str(broken)),
-        "dimension mismatch": ({**base, "plant": {"kind": "fmu", "path": str(cart_fmu), "outputs": ["theta"]}},
-                               "expects m=1 input(s) and p=2 output(s)"),
+        "dimension mismatch": (
+            {**base, "plant": {"kind": "fmu", "path": str(cart_fmu), "outputs": ["theta"]}},
+            "expects m=1 input(s) and p=2 output(s)",
+        ),
         "other artifact": ({**base, "artifact": str(example_artifacts["wood_berry"])}, "expects m=2"),
-        "bus cannot open": ({**base, "transport": {"interface": "socketcan", "channel": "gl_nocan0"}},
-                            "cannot open CAN bus (interface=socketcan, channel=gl_nocan0)"),
+        "bus cannot open": (
+            {**base, "transport": {"interface": "socketcan", "channel": "gl_nocan0"}},
+            "cannot open CAN bus (interface=socketcan, channel=gl_nocan0)",
+        ),
         "bad mode": ({**base, "mode": "fast"}, "mode must be one of lockstep, realtime"),
         "bad fault": ({**base, "faults": [{"kind": "gremlins"}]}, "faults[0].kind"),
     }
@@ -235,8 +290,12 @@ def test_firmware_run_with_can_config_serves_the_bus(tmp_path, pendulum_gains, c
     cfg = udp_transport(fd=False)
     (tmp_path / "can.json").write_text(json.dumps(cfg))
     gainlink = [sys.executable, "-c", "import sys; from gainlink.cli import main; sys.exit(main())"]
-    proc = subprocess.Popen([*gainlink, "firmware", "run", str(pendulum_gains), "--can", str(tmp_path / "can.json")],
-                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [*gainlink, "firmware", "run", str(pendulum_gains), "--can", str(tmp_path / "can.json")],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     art = load(pendulum_gains)
     transport = CanTransport(cfg, artifact=art)
     try:
@@ -263,10 +322,17 @@ def test_firmware_run_with_can_config_serves_the_bus(tmp_path, pendulum_gains, c
 
 def test_wood_berry_with_true_dead_times_tracks_a_step(example_artifacts):
     # Designed on Pade approximants, run against the column's exact dead times (the built-in model).
-    r = _run({"artifact": str(example_artifacts["wood_berry"]), "duration": 150.0, "controller": "reference",
-              "step_timeout": 2.0,
-              "plant": {"kind": "wood_berry", "step": 0.1}, "transport": udp_transport(),
-              "reference": {"r_x_D": {"kind": "step", "at": 5.0, "value": 1.0}}})
+    r = _run(
+        {
+            "artifact": str(example_artifacts["wood_berry"]),
+            "duration": 150.0,
+            "controller": "reference",
+            "step_timeout": 2.0,
+            "plant": {"kind": "wood_berry", "step": 0.1},
+            "transport": udp_transport(),
+            "reference": {"r_x_D": {"kind": "step", "at": 5.0, "value": 1.0}},
+        }
+    )
     m = r.metrics
     assert r.complete and m["steps"] == 150 and m["lost"] == 0
     assert m["outputs_final"]["x_D"] == pytest.approx(1.0, abs=0.05)
@@ -276,9 +342,14 @@ def test_wood_berry_with_true_dead_times_tracks_a_step(example_artifacts):
 
 def test_wood_berry_fmu_plant_tracks_a_step_like_the_builtin_model(example_artifacts):
     # The same run against the project FMU (FMI 2.0 CS, dead times as delay lines): a scenario swaps the plant.
-    base = {"artifact": str(example_artifacts["wood_berry"]), "duration": 150.0, "controller": "reference",
-            "step_timeout": 2.0, "transport": udp_transport(),
-            "reference": {"r_x_D": {"kind": "step", "at": 5.0, "value": 1.0}}}
+    base = {
+        "artifact": str(example_artifacts["wood_berry"]),
+        "duration": 150.0,
+        "controller": "reference",
+        "step_timeout": 2.0,
+        "transport": udp_transport(),
+        "reference": {"r_x_D": {"kind": "step", "at": 5.0, "value": 1.0}},
+    }
     builtin = _run({**base, "plant": {"kind": "wood_berry", "step": 0.1}})
     fmu = _run({**base, "plant": {"kind": "fmu", "fmu": "wood_berry"}})
     m, mb = fmu.metrics, builtin.metrics
@@ -336,8 +407,10 @@ def test_lockstep_shares_one_cpu_with_the_controller_and_restores_the_bridge(pen
 
     if len(before) >= 2:  # two busy-polling peers get a CPU each
         seen.clear()
-        busy = run_scenario(parse_scenario(pendulum_scenario(
-            transport={**udp_transport(), "busy_poll_us": 100}, **common)), progress=during)
+        busy = run_scenario(
+            parse_scenario(pendulum_scenario(transport={**udp_transport(), "busy_poll_us": 100}, **common)),
+            progress=during,
+        )
         assert busy.metrics["cpu"]["placement"] == "separate"
         for bridge, controller in seen:
             assert len(bridge) == 1 and len(controller) == 1 and bridge != controller
@@ -359,14 +432,23 @@ def test_random_drop_hits_a_seeded_fraction_of_the_window():
     from gainlink.hil.loop.scenario import Fault
 
     fault = Fault(kind="drop", start=1.0, stop=11.0, probability=0.2)
+
     def hits(seed):
         inj = FaultInjector([fault], Ts=0.01, seed=seed)
         return [k for k in range(1200) if inj.apply(k, ["frame"]) == []]
+
     a, b, c = hits(5), hits(5), hits(6)
     assert a == b and a != c
     assert all(100 <= k < 1100 for k in a)
     # 1000 Bernoulli(0.2) trials: mean 200, sd 12.6; 5 sd either way
     assert 137 <= len(a) <= 263 and 137 <= len(c) <= 263
     with pytest.raises(Exception, match="probability must be within"):
-        parse_scenario({"artifact": "g.json", "plant": {"kind": "linear"}, "transport": {}, "duration": 1.0,
-                        "faults": [{"kind": "drop", "probability": 1.5}]})
+        parse_scenario(
+            {
+                "artifact": "g.json",
+                "plant": {"kind": "linear"},
+                "transport": {},
+                "duration": 1.0,
+                "faults": [{"kind": "drop", "probability": 1.5}],
+            }
+        )

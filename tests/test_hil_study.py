@@ -11,9 +11,7 @@ from __future__ import annotations
 import json
 
 import pytest
-
 from gainlink.hil.loop.study import default_study, run_saturation_study
-
 from test_hil_support import udp_transport
 
 pytestmark = pytest.mark.slow
@@ -43,8 +41,9 @@ def test_backcalc_reduces_overshoot_against_none(tmp_path):
 
 
 def test_backcalc_catches_a_kicked_pendulum_that_none_and_clamp_lose(tmp_path):
-    result = run_saturation_study(report_dir=tmp_path / "kick", transport=udp_transport(fd=True),
-                                  study=default_study("saturation_kick"))
+    result = run_saturation_study(
+        report_dir=tmp_path / "kick", transport=udp_transport(fd=True), study=default_study("saturation_kick")
+    )
     table = result.table
     for mode in ("none", "clamp"):  # the command stays pinned at a limit and the pendulum falls
         assert table[mode]["outputs_peak_abs"]["theta"] > 1.57, mode

@@ -7,7 +7,6 @@ import random
 from pathlib import Path
 
 import pytest
-
 from gainlink.artifact import load
 from gainlink.hil.plants import toml_write
 
@@ -16,8 +15,13 @@ _rng = random.Random(os.getpid() ^ int.from_bytes(os.urandom(4), "little"))
 
 def udp_transport(*, fd: bool = True) -> dict:
     """A python-can udp_multicast configuration on a private group and port (tests may run in parallel)."""
-    return {"interface": "udp_multicast", "channel": f"239.74.{_rng.randint(1, 254)}.{_rng.randint(1, 254)}",
-            "port": _rng.randint(40000, 60000), "hop_limit": 0, "fd": fd}
+    return {
+        "interface": "udp_multicast",
+        "channel": f"239.74.{_rng.randint(1, 254)}.{_rng.randint(1, 254)}",
+        "port": _rng.randint(40000, 60000),
+        "hop_limit": 0,
+        "fd": fd,
+    }
 
 
 def write_scenario(path: Path, data: dict) -> Path:
@@ -54,9 +58,17 @@ def pendulum_scenario(*, gains: Path, fmu: Path, transport: dict, duration: floa
     The per-command wait is generous (a shared VM can stall for a few hundred ms); it only elapses when a
     command is really lost, and fault tests that lose commands on purpose pass their own short one.
     """
-    data = {"name": "pendulum_hil", "artifact": str(gains), "duration": duration, "mode": "lockstep",
-            "controller": "firmware", "step_timeout": 2.0, "peer_timeout": 4.0,
-            "plant": {"kind": "fmu", "path": str(fmu), "outputs": ["x", "theta"]},
-            "transport": transport, "initial_state": {"theta": 0.1}}
+    data = {
+        "name": "pendulum_hil",
+        "artifact": str(gains),
+        "duration": duration,
+        "mode": "lockstep",
+        "controller": "firmware",
+        "step_timeout": 2.0,
+        "peer_timeout": 4.0,
+        "plant": {"kind": "fmu", "path": str(fmu), "outputs": ["x", "theta"]},
+        "transport": transport,
+        "initial_state": {"theta": 0.1},
+    }
     data.update(extra)
     return data

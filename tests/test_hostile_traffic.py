@@ -11,20 +11,19 @@ import subprocess
 import sys
 from pathlib import Path
 
-from pymavlink.dialects.v20 import common as mavlink2
-from test_hil_support import cart_fmu, pendulum_gains, pendulum_scenario, udp_transport  # noqa: F401
-from test_mavlink_upload import free_udp_port
-
 from gainlink.artifact import load
 from gainlink.codegen import gain_set
+from gainlink.firmware.mavlink_app import firmware_argv, mavlink_executable
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.report import report_json
 from gainlink.hil.loop.scenario import parse_scenario
-from gainlink.firmware.mavlink_app import firmware_argv, mavlink_executable
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession
 from gainlink.mavlink.signing import enable, new_key, write_key
+from pymavlink.dialects.v20 import common as mavlink2
+from test_hil_support import cart_fmu, pendulum_gains, pendulum_scenario, udp_transport  # noqa: F401
+from test_mavlink_upload import free_udp_port
 
 HOSTILE = Path(__file__).with_name("hostile_traffic.py")
 COUNT = 150_000
@@ -48,8 +47,12 @@ def run_beside(data: dict, hostile_argv: list[str], *, count: int):
     datagram too and works through each burst while it waits for commands, whatever the machine's load. Every
     hostile datagram arrives while the firmware runs, so its exit summary can account for all of them.
     """
-    proc = subprocess.Popen([sys.executable, str(HOSTILE), *hostile_argv, "--count", str(count), "--bursts"],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, str(HOSTILE), *hostile_argv, "--count", str(count), "--bursts"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     left = [count]
     burst = -(-count // 90)
     try:
@@ -73,17 +76,24 @@ def run_beside(data: dict, hostile_argv: list[str], *, count: int):
     return res, json.loads(report_json(res)), sent
 
 
-def test_hostile_mavlink_traffic_during_a_signed_lockstep_run(pendulum_gains, cart_fmu, tmp_path):  # noqa: F811
+def test_hostile_mavlink_traffic_during_a_signed_lockstep_run(pendulum_gains, cart_fmu, tmp_path):
     art = load(pendulum_gains)
     key_file = write_key(tmp_path / "link.key", new_key())
     key = bytes.fromhex(key_file.read_text())
     port = free_udp_port()
     frames = hostile_mavlink_frames(art, key)
     (tmp_path / "frames.hex").write_text("\n".join(f.hex() for f in frames))
-    data = pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, duration=DURATION,
-                             transport={"kind": "mavlink", "port": port, "signing_key": str(key_file)})
-    res, report, sent = run_beside(data, ["mavlink", "--target", f"127.0.0.1:{port}", "--frames",
-                                          str(tmp_path / "frames.hex"), "--seed", "3"], count=COUNT)
+    data = pendulum_scenario(
+        gains=pendulum_gains,
+        fmu=cart_fmu,
+        duration=DURATION,
+        transport={"kind": "mavlink", "port": port, "signing_key": str(key_file)},
+    )
+    res, report, sent = run_beside(
+        data,
+        ["mavlink", "--target", f"127.0.0.1:{port}", "--frames", str(tmp_path / "frames.hex"), "--seed", "3"],
+        count=COUNT,
+    )
     m = res.metrics
     c = report["controller"]["counters"]  # what report.json carries
     assert res.complete, res.reason
@@ -128,13 +138,29 @@ def hostile_mavlink_frames(art, key: bytes) -> list[bytes]:
     return [bytes(f) for f in frames]
 
 
-def test_hostile_can_traffic_during_a_lockstep_can_fd_run(pendulum_gains, cart_fmu):  # noqa: F811
+def test_hostile_can_traffic_during_a_lockstep_can_fd_run(pendulum_gains, cart_fmu):
     transport = udp_transport(fd=True)
     data = pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=transport, duration=DURATION)
     base = 0x100
-    res, report, sent = run_beside(data, ["can", "--group", transport["channel"], "--port", str(transport["port"]),
-                                          "--meas-lo", hex(base + 0x10), "--meas-hi", hex(base + 0x1F),
-                                          "--base-id", hex(base), "--seed", "4"], count=COUNT)
+    res, report, sent = run_beside(
+        data,
+        [
+            "can",
+            "--group",
+            transport["channel"],
+            "--port",
+            str(transport["port"]),
+            "--meas-lo",
+            hex(base + 0x10),
+            "--meas-hi",
+            hex(base + 0x1F),
+            "--base-id",
+            hex(base),
+            "--seed",
+            "4",
+        ],
+        count=COUNT,
+    )
     m, info = res.metrics, res.info["transport"]
     c = report["controller"]["counters"]
     assert res.complete, res.reason
@@ -161,9 +187,24 @@ def test_a_stderr_reader_that_never_reads_does_not_stall_the_mavlink_app(pend, t
     proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:  # stderr is read only after the end
         assert b"gainlink-mavlink" in proc.stdout.readline()
-        flood = subprocess.run([sys.executable, str(HOSTILE), "mavlink", "--target", f"127.0.0.1:{port}", "--frames",
-                                str(tmp_path / "frames.hex"), "--count", "300000", "--seed", "9"],
-                               capture_output=True, text=True, timeout=300)
+        flood = subprocess.run(
+            [
+                sys.executable,
+                str(HOSTILE),
+                "mavlink",
+                "--target",
+                f"127.0.0.1:{port}",
+                "--frames",
+                str(tmp_path / "frames.hex"),
+                "--count",
+                "300000",
+                "--seed",
+                "9",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
         assert flood.returncode == 0, flood.stderr
         with MavLink(f"udpout:127.0.0.1:{port}", signing_key=bytes.fromhex(key_file.read_text())) as link:
             link.wait_heartbeat(timeout=5)

@@ -8,15 +8,13 @@ import time
 
 import numpy as np
 from conftest import run_cli
-from test_mavlink_upload import exe, retuned  # noqa: F401 (shared module-scoped fixtures)
-from test_mavlink_upload import closed_loop, read_params, reference_u, start_firmware
-
 from gainlink.artifact import load
 from gainlink.codegen import gain_set, payload_crc32
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import INT32, REAL32, Encoding, as_int32
 from gainlink.mavlink.relay import LossyUdpRelay
 from gainlink.mavlink.session import ParamSession
+from test_mavlink_upload import closed_loop, exe, read_params, reference_u, retuned, start_firmware  # noqa: F401 (shared module-scoped fixtures)
 
 
 def values_of(port: int) -> dict:
@@ -27,8 +25,18 @@ def test_upload_through_a_lossy_link_completes_and_verifies(exe, pend, retuned, 
     fw, port = start_firmware(exe, tmp_path / "params.txt")
     try:
         with LossyUdpRelay(upstream=("127.0.0.1", port), drop=0.2, duplicate=0.1, reorder=0.1, seed=7) as relay:
-            res = run_cli("mavlink", "upload", retuned, "--connect", relay.url, "--persist", "--timeout", "0.05",
-                          "--retries", "30")
+            res = run_cli(
+                "mavlink",
+                "upload",
+                retuned,
+                "--connect",
+                relay.url,
+                "--persist",
+                "--timeout",
+                "0.05",
+                "--retries",
+                "30",
+            )
             assert res.code == 0, res.err
             assert relay.stats.dropped > 0 and relay.stats.duplicated > 0 and relay.stats.reordered > 0
         assert "persisted" in res.out
@@ -54,8 +62,19 @@ def test_a_parameter_refused_midway_rolls_back_every_change(exe, pend, tmp_path)
     fw, port = start_firmware(exe, None)
     try:
         before = values_of(port)
-        res = run_cli("mavlink", "upload", pend, "--connect", f"udpout:127.0.0.1:{port}", "--mapping", mapping,
-                      "--window", "1", "--retries", "2")
+        res = run_cli(
+            "mavlink",
+            "upload",
+            pend,
+            "--connect",
+            f"udpout:127.0.0.1:{port}",
+            "--mapping",
+            mapping,
+            "--window",
+            "1",
+            "--retries",
+            "2",
+        )
         assert res.code == 3, (res.code, res.err)
         err = res.err
         assert "GL_DIM_N refused" in err and "read-only" in err

@@ -5,12 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_mavlink_upload import free_udp_port
-
 from gainlink.errors import TransportError
+from gainlink.hil.links.base import transport_from_config
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
-from gainlink.hil.links.base import transport_from_config
+from test_mavlink_upload import free_udp_port
 
 
 def scenario(artifact_path, transport: dict, **extra):
@@ -51,8 +50,15 @@ def test_the_same_scenario_over_mavlink_and_can_agrees_step_for_step(pend):
 def test_dropped_samples_over_mavlink_are_counted_and_the_loop_recovers(pend):
     # each dropped sample costs one step_timeout; 0.3 s outlasts this shared VM's stalls (30-300 ms), so
     # only the ten dropped samples go unanswered
-    res = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, step_timeout=0.3,
-                                peer_timeout=5.0, faults=[{"kind": "drop", "start": 1.0, "stop": 1.1, "every": 1}]))
+    res = run_scenario(
+        scenario(
+            pend,
+            {"kind": "mavlink", "port": free_udp_port()},
+            step_timeout=0.3,
+            peer_timeout=5.0,
+            faults=[{"kind": "drop", "start": 1.0, "stop": 1.1, "every": 1}],
+        )
+    )
     assert res.complete, res.reason
     assert res.metrics["lost"] == 10
     np.testing.assert_array_equal(np.flatnonzero(~res.trace.got), np.arange(100, 110))

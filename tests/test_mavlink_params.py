@@ -9,9 +9,6 @@ import struct
 import numpy as np
 import pytest
 from conftest import run_cli
-from hypothesis import given
-from hypothesis import strategies as st
-
 from gainlink.artifact import load
 from gainlink.errors import ParameterError
 from gainlink.mavlink.link import MavLink, raw_param_value
@@ -27,6 +24,8 @@ from gainlink.mavlink.params import (
     load_mapping,
     mapped_params,
 )
+from hypothesis import given
+from hypothesis import strategies as st
 
 
 @given(st.integers(min_value=-(2**31), max_value=2**31 - 1))
@@ -43,8 +42,9 @@ def test_c_cast_integers_are_their_float_value(v):
     assert decode_value(raw=raw, ptype=INT32, encoding=Encoding.C_CAST) == v
 
 
-@pytest.mark.parametrize("name,value", [("UINT8", 200), ("INT8", -100), ("UINT16", 60000), ("INT16", -30000),
-                                        ("UINT32", 4_000_000_000)])
+@pytest.mark.parametrize(
+    "name,value", [("UINT8", 200), ("INT8", -100), ("UINT16", 60000), ("INT16", -30000), ("UINT32", 4_000_000_000)]
+)
 def test_small_integer_types_round_trip_bytewise(name, value):
     t = PARAM_TYPES[name]
     raw = encode_value(value=value, ptype=t, encoding=Encoding.BYTEWISE)
@@ -97,38 +97,54 @@ def test_as_int32():
 def test_mapping_file_maps_gains_with_scale_and_types(tmp_path, example_artifacts):
     art = load(example_artifacts["pendulum"])
     path = tmp_path / "map.toml"
-    path.write_text('[[param]]\ngain = "K[0,2]"\nname = "ATC_ANG_RLL_P"\nscale = -0.5\n'
-                    '[[param]]\ngain = "u_max[0]"\nname = "MOT_LIM"\ntype = "int16"\nscale = 10\n'
-                    '[[param]]\ngain = "Ts"\nname = "SCHED_DT"\n')
+    path.write_text(
+        '[[param]]\ngain = "K[0,2]"\nname = "ATC_ANG_RLL_P"\nscale = -0.5\n'
+        '[[param]]\ngain = "u_max[0]"\nname = "MOT_LIM"\ntype = "int16"\nscale = 10\n'
+        '[[param]]\ngain = "Ts"\nname = "SCHED_DT"\n'
+    )
     specs = mapped_params(art, load_mapping(path))
     assert [(s.name, s.ptype) for s in specs] == [("ATC_ANG_RLL_P", REAL32), ("MOT_LIM", 4), ("SCHED_DT", REAL32)]
     assert specs[0].value == float(np.float32(-0.5 * art.K[0, 2]))
     assert specs[1].value == 200 and math.isclose(specs[2].value, 0.01, rel_tol=1e-7)
 
 
-@pytest.mark.parametrize("text,message", [
-    ('[[param]]\ngain = "K[0,9]"\nname = "X"\n', "out of range"),
-    ('[[param]]\ngain = "Q[0,0]"\nname = "X"\n', "unknown gain"),
-    ('[[param]]\ngain = "K[0,0]"\nname = "THIS_ID_IS_TOO_LONG"\n', "invalid parameter id"),
-    ('[[param]]\ngain = "K[0,0]"\nname = "X"\ntype = "REAL64"\n', "unknown type"),
-    ('[[param]]\ngain = "K[0,0]"\nname = "X"\n[[param]]\ngain = "K[0,1]"\nname = "X"\n', "mapped twice"),
-    ('[[param]]\ngain = "K[0,0]"\n', "lacks 'name'"),
-    ('[[param]]\ngain = "K[0,0]"\nname = "X"\nunit = "s"\n', "unknown key"),
-    ('[vehicle]\nx = 1\n', "unknown table"),
-    ('param = [', "not valid TOML"),
-    ('[[param]]\ngain = "u_max[0]"\nname = "X"\ntype = "INT8"\nscale = 100\n', "does not fit"),
-])
+@pytest.mark.parametrize(
+    "text,message",
+    [
+        ('[[param]]\ngain = "K[0,9]"\nname = "X"\n', "out of range"),
+        ('[[param]]\ngain = "Q[0,0]"\nname = "X"\n', "unknown gain"),
+        ('[[param]]\ngain = "K[0,0]"\nname = "THIS_ID_IS_TOO_LONG"\n', "invalid parameter id"),
+        ('[[param]]\ngain = "K[0,0]"\nname = "X"\ntype = "REAL64"\n', "unknown type"),
+        ('[[param]]\ngain = "K[0,0]"\nname = "X"\n[[param]]\ngain = "K[0,1]"\nname = "X"\n', "mapped twice"),
+        ('[[param]]\ngain = "K[0,0]"\n', "lacks 'name'"),
+        ('[[param]]\ngain = "K[0,0]"\nname = "X"\nunit = "s"\n', "unknown key"),
+        ("[vehicle]\nx = 1\n", "unknown table"),
+        ("param = [", "not valid TOML"),
+        ('[[param]]\ngain = "u_max[0]"\nname = "X"\ntype = "INT8"\nscale = 100\n', "does not fit"),
+    ],
+)
 def test_bad_mapping_files_are_one_line_errors_before_any_link(tmp_path, example_artifacts, text, message):
     path = tmp_path / "map.toml"
     path.write_text(text)
-    res = run_cli("mavlink", "upload", example_artifacts["pendulum"], "--connect", "udpout:127.0.0.1:9",
-                  "--mapping", path, "--heartbeat-timeout", "0.2")
+    res = run_cli(
+        "mavlink",
+        "upload",
+        example_artifacts["pendulum"],
+        "--connect",
+        "udpout:127.0.0.1:9",
+        "--mapping",
+        path,
+        "--heartbeat-timeout",
+        "0.2",
+    )
     assert res.code == 2
     assert len(res.err.strip().splitlines()) == 1 and message in res.err, res.err
 
 
 def test_bad_upload_arguments(example_artifacts, tmp_path):
-    res = run_cli("mavlink", "upload", example_artifacts["pendulum"], "--connect", "udpout:127.0.0.1:9", "--window", "0")
+    res = run_cli(
+        "mavlink", "upload", example_artifacts["pendulum"], "--connect", "udpout:127.0.0.1:9", "--window", "0"
+    )
     assert res.code == 2 and "--window" in res.err
     res = run_cli("mavlink", "upload", tmp_path / "missing.json", "--connect", "udpout:127.0.0.1:9")
     assert res.code == 2 and "missing.json" in res.err

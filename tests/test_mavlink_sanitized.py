@@ -10,19 +10,17 @@ import subprocess
 import numpy as np
 import pytest
 from conftest import run_cli
-from pymavlink.dialects.v20 import common as mavlink2
-from test_mavlink_upload import free_udp_port, retuned_pendulum
-
 from gainlink.artifact import load
-from gainlink.codegen import gain_set
-from gainlink.codegen import render_c
+from gainlink.codegen import gain_set, render_c
 from gainlink.firmware.build import cache_root, firmware_dir
 from gainlink.firmware.mavlink_app import EXECUTABLE, MavlinkFirmware
+from gainlink.hil.links.base import STATUS_FAULT, STATUS_WATCHDOG
+from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import REAL32, Encoding
 from gainlink.mavlink.session import ParamSession
-from gainlink.hil.links.mavlink import MavlinkTransport
-from gainlink.hil.links.base import STATUS_FAULT, STATUS_WATCHDOG
+from pymavlink.dialects.v20 import common as mavlink2
+from test_mavlink_upload import free_udp_port, retuned_pendulum
 
 
 @pytest.fixture(scope="module")
@@ -36,9 +34,24 @@ def sanitized_exe(pend):
         if not (gen / name).is_file() or (gen / name).read_text() != text:
             (gen / name).write_text(text)
     cm = bdir / "cmake"
-    steps = [] if (cm / "CMakeCache.txt").is_file() else [
-        ["cmake", "-S", str(firmware_dir()), "-B", str(cm), f"-DGL_GAINS_DIR={gen}", "-DGL_TARGET=host",
-         "-DGL_APPS=ON", "-DGL_SANITIZE=ON", "-DCMAKE_BUILD_TYPE=Debug"]]
+    steps = (
+        []
+        if (cm / "CMakeCache.txt").is_file()
+        else [
+            [
+                "cmake",
+                "-S",
+                str(firmware_dir()),
+                "-B",
+                str(cm),
+                f"-DGL_GAINS_DIR={gen}",
+                "-DGL_TARGET=host",
+                "-DGL_APPS=ON",
+                "-DGL_SANITIZE=ON",
+                "-DCMAKE_BUILD_TYPE=Debug",
+            ]
+        ]
+    )
     steps.append(["cmake", "--build", str(cm), "--target", EXECUTABLE, "-j", "2"])
     for cmd in steps:
         proc = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True)
@@ -78,16 +91,22 @@ def test_every_message_under_asan_ubsan(sanitized_exe, pend, tmp_path):
             assert s.read(["GL_HASH"])[0]["GL_HASH"].value & 0xFFFFFFFF == gain_set(load(retuned)).crc32
             assert s.command(command=mavlink2.MAV_CMD_PREFLIGHT_STORAGE, params=(2.0,)) == mavlink2.MAV_RESULT_ACCEPTED
             assert s.read(["GL_HASH"])[0]["GL_HASH"].value & 0xFFFFFFFF == gain_set(art).crc32
-            assert s.command(command=mavlink2.MAV_CMD_PREFLIGHT_STORAGE, params=(7.0,)) == mavlink2.MAV_RESULT_UNSUPPORTED
-            assert s.command(command=mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, params=(1.0,)) == mavlink2.MAV_RESULT_UNSUPPORTED
+            assert (
+                s.command(command=mavlink2.MAV_CMD_PREFLIGHT_STORAGE, params=(7.0,)) == mavlink2.MAV_RESULT_UNSUPPORTED
+            )
+            assert (
+                s.command(command=mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, params=(1.0,))
+                == mavlink2.MAV_RESULT_UNSUPPORTED
+            )
             version = s.request_message(msg_id=mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
             assert version.capabilities & mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
             assert bytes(version.flight_custom_version) == art.sha256[:8].encode()
             assert version.uid == gain_set(art).crc32
             assert s.request_message(msg_id=mavlink2.MAVLINK_MSG_ID_GPS_RAW_INT, wait=0.2, tries=1) is None
 
-        t = MavlinkTransport(url=f"udpout:127.0.0.1:{port}", controller_url="", n_inputs=1, n_outputs=2, n_refs=1,
-                             ts=art.Ts)
+        t = MavlinkTransport(
+            url=f"udpout:127.0.0.1:{port}", controller_url="", n_inputs=1, n_outputs=2, n_refs=1, ts=art.Ts
+        )
         with t:
             t.send_frames(t.encode_reset(seq=1))
             assert t.receive_command(timeout=2).seq == 1

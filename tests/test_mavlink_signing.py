@@ -12,10 +12,6 @@ import subprocess
 import numpy as np
 import pytest
 from conftest import run_cli
-from pymavlink import mavutil
-from pymavlink.dialects.v20 import common as mavlink2
-from test_mavlink_upload import free_udp_port, retuned  # noqa: F401 - fixture
-
 from gainlink.artifact import load
 from gainlink.codegen import gain_set, payload_crc32
 from gainlink.errors import TransportError
@@ -24,6 +20,9 @@ from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession
 from gainlink.mavlink.signing import enable, new_key, write_key
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink2
+from test_mavlink_upload import free_udp_port, retuned  # noqa: F401 - fixture
 
 READ = {"GL_HASH", "GL_K_0_0"}
 
@@ -56,7 +55,7 @@ def crc_of(art) -> int:
     return gain_set(art).crc32
 
 
-def test_signed_upload_works_and_unsigned_upload_is_refused(exe, pend, retuned, key_file, tmp_path):  # noqa: F811
+def test_signed_upload_works_and_unsigned_upload_is_refused(exe, pend, retuned, key_file, tmp_path):
     old, new = load(pend), load(retuned)
     fw, url = start(exe, key_file, storage=tmp_path / "params.txt")
     try:
@@ -85,8 +84,10 @@ def test_wrong_key_and_replayed_frames_are_refused_and_counted(exe, pend, key_fi
         wrong, right = (mavlink2.MAVLink(None, srcSystem=255, srcComponent=190) for _ in range(2))
         enable(wrong, new_key(), link_id=3)
         enable(right, key, link_id=4)
-        forged = [wrong.param_set_encode(1, 1, name.encode(), value, 9).pack(wrong),
-                  wrong.param_set_encode(1, 1, b"GL_HASH", commit, 6).pack(wrong)]
+        forged = [
+            wrong.param_set_encode(1, 1, name.encode(), value, 9).pack(wrong),
+            wrong.param_set_encode(1, 1, b"GL_HASH", commit, 6).pack(wrong),
+        ]
         legit = right.param_set_encode(1, 1, name.encode(), value, 9).pack(right)
         dest = ("127.0.0.1", int(url.rsplit(":", 1)[1]))
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
@@ -200,18 +201,21 @@ def test_key_file_errors_are_one_line(tmp_path, pend, exe):
     bad = tmp_path / "bad.key"
     for content in ("", "abc", "zz" * 32, "00" * 31, "00" * 33):
         bad.write_text(content)
-        for argv in (("mavlink", "upload", pend, "--connect", "udpout:127.0.0.1:9", "--signing-key", bad),
-                     ("mavlink", "params", "--connect", "udpout:127.0.0.1:9", "--signing-key", bad),
-                     ("mavlink", "setup-signing", bad, "--connect", "udpout:127.0.0.1:9"),
-                     ("firmware", "run", pend, "--mavlink", "udpin:127.0.0.1:9", "--signing-key", bad)):
+        for argv in (
+            ("mavlink", "upload", pend, "--connect", "udpout:127.0.0.1:9", "--signing-key", bad),
+            ("mavlink", "params", "--connect", "udpout:127.0.0.1:9", "--signing-key", bad),
+            ("mavlink", "setup-signing", bad, "--connect", "udpout:127.0.0.1:9"),
+            ("firmware", "run", pend, "--mavlink", "udpin:127.0.0.1:9", "--signing-key", bad),
+        ):
             res = run_cli(*argv)
             assert res.code == 2 and len(res.err.strip().splitlines()) == 1, (content, argv, res.err)
             assert "64 hex digits" in res.err
     res = run_cli("mavlink", "upload", pend, "--connect", "udpout:127.0.0.1:9", "--signing-key", tmp_path / "none")
     assert res.code == 2 and "not found" in res.err
     bad.write_text("00" * 31)
-    proc = subprocess.run([str(exe), "--url", "udpin:127.0.0.1:0", "--signing-key", str(bad)], capture_output=True,
-                          text=True, timeout=10)
+    proc = subprocess.run(
+        [str(exe), "--url", "udpin:127.0.0.1:0", "--signing-key", str(bad)], capture_output=True, text=True, timeout=10
+    )
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "hex digits" in proc.stderr
 
 

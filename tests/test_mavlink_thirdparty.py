@@ -14,19 +14,16 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+import mavsdk  # the test extra (make setup) installs it
 import numpy as np
 import pytest
 from conftest import run_cli
-from test_mavlink_upload import exe, retuned  # noqa: F401 (shared module-scoped fixtures)
-from test_mavlink_upload import closed_loop, free_udp_port, read_params, reference_u, start_firmware
-
 from gainlink.artifact import load
 from gainlink.codegen import gain_set
 from gainlink.mavlink.params import REAL32, as_int32, firmware_params
-
-import mavsdk  # the test extra (make setup) installs it
 from mavsdk.plugins.param import Param, ParamError
 from mavsdk.plugins.param_server import ParamServer
+from test_mavlink_upload import closed_loop, exe, free_udp_port, read_params, reference_u, retuned, start_firmware  # noqa: F401 (shared module-scoped fixtures)
 
 MAVPROXY = Path(sys.executable).parent / "mavproxy.py"
 
@@ -92,9 +89,20 @@ class MavProxy:
         if not MAVPROXY.is_file():
             raise AssertionError(f"MAVProxy is not installed at {MAVPROXY}: run `make setup`")
         self.proc = subprocess.Popen(
-            [sys.executable, str(MAVPROXY), f"--master=udpout:127.0.0.1:{port}", "--mav20", "--default-modules=param",
-             "--no-state"],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=cwd, text=True, bufsize=1,
+            [
+                sys.executable,
+                str(MAVPROXY),
+                f"--master=udpout:127.0.0.1:{port}",
+                "--mav20",
+                "--default-modules=param",
+                "--no-state",
+            ],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            cwd=cwd,
+            text=True,
+            bufsize=1,
         )
         self.lines: queue.Queue[str] = queue.Queue()
         self.seen: list[str] = []
@@ -221,13 +229,15 @@ def test_uploader_against_mavsdk_as_the_vehicle(pend, tmp_path):
         assert server.retrieve_param_float("MC_RATE_DT") == np.float32(art.Ts)
         assert server.retrieve_param_float("MC_OTHER") == 1.0
 
-        res = run_cli("mavlink", "upload", pend, "--connect", f"udpout:127.0.0.1:{port}", "--mapping", mapping,
-                      "--dry-run")
+        res = run_cli(
+            "mavlink", "upload", pend, "--connect", f"udpout:127.0.0.1:{port}", "--mapping", mapping, "--dry-run"
+        )
         assert res.code == 0 and "dry run: 0 parameter(s) would change, 4 already match" in res.out
 
         mapping.write_text('[[param]]\ngain = "K[0,0]"\nname = "MC_MISSING"\n')
-        res = run_cli("mavlink", "upload", pend, "--connect", f"udpout:127.0.0.1:{port}", "--mapping", mapping,
-                      "--retries", "2")
+        res = run_cli(
+            "mavlink", "upload", pend, "--connect", f"udpout:127.0.0.1:{port}", "--mapping", mapping, "--retries", "2"
+        )
         assert res.code == 2 and "vehicle lacks 1 parameter(s): MC_MISSING" in res.err
     finally:
         sdk.destroy()

@@ -12,21 +12,36 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import EXAMPLES, run_cli
-
 from gainlink import artifact as artifact_mod
 from gainlink.artifact import Artifact, load
 from gainlink.codegen import gain_set
 from gainlink.design import design
 from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
+from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession
-from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import parse_spec
 
-STEMS = {"AD": "Ad", "BD": "Bd", "CD": "Cd", "DD": "Dd", "K": "K", "L": "L", "M": "M", "CI": "Ci", "KI": "Ki",
-         "KAW": "Kaw", "UMIN": "u_min", "UMAX": "u_max", "XH0": "xh0", "Z0": "z0", "UOP": "u_op", "YOP": "y_op"}
+STEMS = {
+    "AD": "Ad",
+    "BD": "Bd",
+    "CD": "Cd",
+    "DD": "Dd",
+    "K": "K",
+    "L": "L",
+    "M": "M",
+    "CI": "Ci",
+    "KI": "Ki",
+    "KAW": "Kaw",
+    "UMIN": "u_min",
+    "UMAX": "u_max",
+    "XH0": "xh0",
+    "Z0": "z0",
+    "UOP": "u_op",
+    "YOP": "y_op",
+}
 
 
 def free_udp_port() -> int:
@@ -82,8 +97,9 @@ def read_params(port: int) -> dict:
 
 def closed_loop(port: int, art: Artifact, *, steps: int = 300) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Run the artifact's own discrete plant against the firmware over the HIL link; return Y, R, U."""
-    t = MavlinkTransport(url=f"udpout:127.0.0.1:{port}", controller_url="", n_inputs=art.m, n_outputs=art.p,
-                         n_refs=art.q, ts=art.Ts)
+    t = MavlinkTransport(
+        url=f"udpout:127.0.0.1:{port}", controller_url="", n_inputs=art.m, n_outputs=art.p, n_refs=art.q, ts=art.Ts
+    )
     x = np.zeros(art.n)
     x[2] = 0.05  # pendulum tilted
     Y, R, U = np.zeros((steps, art.p)), np.full((steps, art.q), 0.2), np.zeros((steps, art.m))
@@ -123,8 +139,9 @@ def test_parameter_list_is_the_artifact(exe, pend):
     floats = {n: p for n, p in params.items() if p.ptype == 9}
     # every number of the loop: Ts, Ad Bd Cd Dd K L (no M: predictor form), Ci Ki Kaw, limits, xh0, z0, u_op, y_op
     n, m, p, q = art.n, art.m, art.p, art.q
-    assert len(floats) == 1 + n * n + n * m + p * n + p * m + m * n + n * p + q * p + m * q + q * m + 2 * m + n + q \
-        + m + p
+    assert (
+        len(floats) == 1 + n * n + n * m + p * n + p * m + m * n + n * p + q * p + m * q + q * m + 2 * m + n + q + m + p
+    )
     for name, pv in floats.items():
         assert pv.value == expected_value(art, name), name
     assert floats["GL_K_0_3"].value == float(np.float32(art.K[0, 3]))
@@ -183,8 +200,10 @@ def test_stored_set_holds_exact_bits_and_a_tampered_file_is_refused_whole(exe, p
         assert np.uint32(int(bits, 16)).view(np.float32) == np.float32(expected_value(new, name)), name
     k02 = rows["GL_K_0_2"]
     tampered = f"{int(k02, 16) ^ 1:08x}"  # one bit of one gain flipped: the CRC no longer matches
-    for bad, why in ((text.replace(f"GL_K_0_2 {k02}", f"GL_K_0_2 {tampered}"), "refused by the loop's checks"),
-                     (text.replace(f"GL_K_0_2 {k02}", "GL_K_0_2 1.5"), "line")):
+    for bad, why in (
+        (text.replace(f"GL_K_0_2 {k02}", f"GL_K_0_2 {tampered}"), "refused by the loop's checks"),
+        (text.replace(f"GL_K_0_2 {k02}", "GL_K_0_2 1.5"), "line"),
+    ):
         storage.write_text(bad, "ascii")
         fw, port = start_firmware(exe, storage)
         try:
@@ -264,8 +283,13 @@ def test_firmware_run_mavlink_command_persists_beside_the_artifact(exe, pend, re
     for round_ in range(2):
         port = free_udp_port()
         gainlink = Path(sys.executable).parent / "gainlink"
-        proc = subprocess.Popen([str(gainlink), "firmware", "run", str(art_path), "--mavlink", f"udpin:127.0.0.1:{port}"],
-                                stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        proc = subprocess.Popen(
+            [str(gainlink), "firmware", "run", str(art_path), "--mavlink", f"udpin:127.0.0.1:{port}"],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         try:
             banner = proc.stdout.readline()
             assert banner.startswith("gainlink-mavlink pendulum sha256:"), banner + proc.stderr.read()
@@ -287,8 +311,13 @@ def test_firmware_run_mavlink_command_persists_beside_the_artifact(exe, pend, re
     assert "loaded parameters from" in err
 
 
-@pytest.mark.parametrize("shape", [dict(n=3, m=2, p=2, q=0, form="current", anti_windup="none"),
-                                   dict(n=5, m=2, p=3, q=2, form="current", anti_windup="clamp")])
+@pytest.mark.parametrize(
+    "shape",
+    [
+        dict(n=3, m=2, p=2, q=0, form="current", anti_windup="none"),
+        dict(n=5, m=2, p=3, q=2, form="current", anti_windup="clamp"),
+    ],
+)
 def test_firmware_and_python_naming_schemes_agree_for_every_structure(shape, tmp_path):
     """Current-estimator form (M present), no integral action (q = 0: CI KI KAW Z0 absent) and q = 2."""
     from gainlink.artifact import from_dict
@@ -299,8 +328,9 @@ def test_firmware_and_python_naming_schemes_agree_for_every_structure(shape, tmp
     fw, port = start_firmware(mavlink_executable(art), None)
     try:
         got = read_params(port)
-        res = run_cli("mavlink", "upload", str(_write(art, tmp_path)), "--connect", f"udpout:127.0.0.1:{port}",
-                      "--dry-run")
+        res = run_cli(
+            "mavlink", "upload", str(_write(art, tmp_path)), "--connect", f"udpout:127.0.0.1:{port}", "--dry-run"
+        )
     finally:
         fw.stop()
     want = firmware_params(art)

@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import logging
 import re
-import sys
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-
+from conftest import run_cli
 from gainlink import artifact as artifact_mod
 from gainlink.compensator import compensator_stability
 from gainlink.design import design
@@ -27,8 +27,6 @@ from gainlink.random_plants import random_spec
 from gainlink.reference import ReferenceLoop
 from gainlink.replay import compare_traces, format_trace, one_step_check, read_samples
 from gainlink.spec import parse_spec
-
-from conftest import run_cli
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))
 
@@ -52,7 +50,7 @@ def jacobian_poles(a) -> np.ndarray:
     for j in range(N):
         law = ReferenceLoop(wide)
         e = np.eye(N)[j]
-        law.xh, law.z = e[:a.n].copy(), e[a.n:].copy()
+        law.xh, law.z = e[: a.n].copy(), e[a.n :].copy()
         law.step(a.y_op, a.Ci @ a.y_op)
         A[:, j] = np.concatenate([law.xh, law.z])
     return np.linalg.eigvals(A)
@@ -61,7 +59,8 @@ def jacobian_poles(a) -> np.ndarray:
 def test_random_closed_loop_designs_pass_one_step_on_host_and_qemu_bit_for_bit():
     cases = closed_loop_cases(12)
     assert {(c.artifact.observer_form, c.artifact.anti_windup) for c in cases} == {
-        (f, aw) for f in ("predictor", "current") for aw in ("none", "clamp", "backcalc")}
+        (f, aw) for f in ("predictor", "current") for aw in ("none", "clamp", "backcalc")
+    }
     assert any(c.artifact.q == 0 for c in cases) and any(c.artifact.q > 0 for c in cases)
     unstable = 0
     for case in cases:
@@ -103,11 +102,49 @@ def test_replay_compare_passes_an_unstable_compensator_and_reports_the_open_loop
     a = artifact_mod.load(art)
     assert np.max(np.abs(jacobian_poles(a))) > 1.5
     inp, ref, nat = tmp_path / "in.csv", tmp_path / "ref.csv", tmp_path / "native.csv"
-    assert run_cli("simulate", art, "--steps", "1500", "--x0", "1", "0", "0", "0", "0", "0", "0", "--ref", "0.5", "0.2",
-                   "--noise", "0.01", "--out", inp).code == 0
+    assert (
+        run_cli(
+            "simulate",
+            art,
+            "--steps",
+            "1500",
+            "--x0",
+            "1",
+            "0",
+            "0",
+            "0",
+            "0",
+            "0",
+            "0",
+            "--ref",
+            "0.5",
+            "0.2",
+            "--noise",
+            "0.01",
+            "--out",
+            inp,
+        ).code
+        == 0
+    )
     assert run_cli("replay", art, "--input", inp, "--output", ref).code == 0
-    proc = subprocess.run([GAINLINK, "replay", str(art), "--input", str(inp), "--output", str(nat), "--engine",
-                           "native", "--compare", str(ref)], capture_output=True, text=True, timeout=600)
+    proc = subprocess.run(
+        [
+            GAINLINK,
+            "replay",
+            str(art),
+            "--input",
+            str(inp),
+            "--output",
+            str(nat),
+            "--engine",
+            "native",
+            "--compare",
+            str(ref),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert proc.returncode == 0, proc.stderr
     assert "one-step check of native (float64 law from its own state at each step): pass" in proc.stdout
     assert "UNSTABLE" in proc.stdout and "the one-step check is the verdict" in proc.stdout
@@ -122,8 +159,30 @@ def test_replay_compare_fails_when_one_c_gain_is_perturbed_1e_4(unstable_artifac
     staged into the running loop: the one-step check names the step and the quantity, exit status 2."""
     a = artifact_mod.load(unstable_artifact)
     inp, bent = tmp_path / "in.csv", tmp_path / "bent.csv"
-    assert run_cli("simulate", unstable_artifact, "--steps", "400", "--x0", "1", "0", "0", "0", "0", "0", "0",
-                   "--ref", "0.5", "0.2", "--noise", "0.01", "--out", inp).code == 0
+    assert (
+        run_cli(
+            "simulate",
+            unstable_artifact,
+            "--steps",
+            "400",
+            "--x0",
+            "1",
+            "0",
+            "0",
+            "0",
+            "0",
+            "0",
+            "0",
+            "--ref",
+            "0.5",
+            "0.2",
+            "--noise",
+            "0.01",
+            "--out",
+            inp,
+        ).code
+        == 0
+    )
     samples = read_samples(inp, a)
     loop = NativeLoop(a)
     gains = loop.default_gains()
@@ -135,11 +194,14 @@ def test_replay_compare_fails_when_one_c_gain_is_perturbed_1e_4(unstable_artifac
     res = run_cli("replay", unstable_artifact, "--input", inp, "--output", tmp_path / "ref.csv", "--compare", bent)
     assert res.code == 2
     assert res.err.count("\n") == 1
-    assert re.match(rf"gainlink: error: one-step check failed at step \d+: (u|xh|z)\d+ of {re.escape(str(bent))} is ",
-                    res.err), res.err
+    assert re.match(
+        rf"gainlink: error: one-step check failed at step \d+: (u|xh|z)\d+ of {re.escape(str(bent))} is ", res.err
+    ), res.err
     assert " > float32 bound " in res.err
     # the correct build passes the same check
     good = tmp_path / "good.csv"
     good.write_text(format_trace(NativeLoop(a).run(samples.Y, samples.R)))
-    assert run_cli("replay", unstable_artifact, "--input", inp, "--output", tmp_path / "ref.csv",
-                   "--compare", good).code == 0
+    assert (
+        run_cli("replay", unstable_artifact, "--input", inp, "--output", tmp_path / "ref.csv", "--compare", good).code
+        == 0
+    )

@@ -18,19 +18,17 @@ import math
 
 import numpy as np
 import pytest
-
+from conftest import run_cli
 from gainlink import artifact as artifact_mod
 from gainlink.artifact import from_dict, seal
 from gainlink.design import design
 from gainlink.engines import qemu as qemu_engine
-from gainlink.engines.native import NativeLoop, trace_from_raw
-from gainlink.errors import ArtifactError, SpecError
+from gainlink.engines.native import NativeLoop
+from gainlink.errors import ArtifactError
 from gainlink.firmware.golden import random_case, random_cases
 from gainlink.firmware.pil import make_plant, run_pil
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import parse_spec
-
-from conftest import run_cli
 
 GL_ERR_NANINF, GL_ERR_WATCHDOG = -2, -6
 FORMS = ("predictor", "current")
@@ -40,8 +38,15 @@ MODES = ("none", "clamp", "backcalc")
 MOTOR = {
     "name": "motor",
     "Ts": 0.01,
-    "plant": {"kind": "continuous", "A": [[-2.0, 1.0], [0.0, -10.0]], "B": [[0.0], [20.0]], "C": [[1.0, 0.0]],
-              "states": ["speed", "current"], "inputs": ["volts"], "outputs": ["speed"]},
+    "plant": {
+        "kind": "continuous",
+        "A": [[-2.0, 1.0], [0.0, -10.0]],
+        "B": [[0.0], [20.0]],
+        "C": [[1.0, 0.0]],
+        "states": ["speed", "current"],
+        "inputs": ["volts"],
+        "outputs": ["speed"],
+    },
     "controller": {"method": "lqr", "Q_diag": [1.0, 0.01], "R_diag": [0.1]},
     "integral": {"outputs": ["speed"], "Q_diag": [10.0]},
     "observer": {"method": "kalman", "W_diag": [1e-3, 1e-3], "V_diag": [1e-4]},
@@ -131,10 +136,12 @@ def test_artifact_without_operating_point_keeps_its_hash_and_means_zero(pend):
 
 def test_loader_refuses_a_malformed_operating_point(pend):
     data = json.loads(pend.read_text())
-    for key, value, words in (("u_op", [1.0, 2.0], "u_op has length 2, expected 1"),
-                              ("y_op", [1.0], "y_op has length 1, expected 2"),
-                              ("x_op", [0.0], "x_op has length 1, expected 4"),
-                              ("y_op", [1.0, "a"], "is not of type 'number'")):
+    for key, value, words in (
+        ("u_op", [1.0, 2.0], "u_op has length 2, expected 1"),
+        ("y_op", [1.0], "y_op has length 1, expected 2"),
+        ("x_op", [0.0], "x_op has length 1, expected 4"),
+        ("y_op", [1.0, "a"], "is not of type 'number'"),
+    ):
         with pytest.raises(ArtifactError, match=words):
             from_dict(seal({**data, key: value}))
 
@@ -188,8 +195,15 @@ def independent_law(data: dict, Y, R):
 def op_case(form: str, mode: str, *, N: int = 300):
     """A random saturating design about a non-zero operating point, with absolute samples (golden generator)."""
     dims = {"predictor": dict(n=4, m=2, p=3), "current": dict(n=5, m=2, p=2)}[form]
-    return random_case(300 + FORMS.index(form) * 3 + MODES.index(mode), q=0 if mode == "none" else 1,
-                       form=form, anti_windup=mode, N=N, operating_point=True, **dims)
+    return random_case(
+        300 + FORMS.index(form) * 3 + MODES.index(mode),
+        q=0 if mode == "none" else 1,
+        form=form,
+        anti_windup=mode,
+        N=N,
+        operating_point=True,
+        **dims,
+    )
 
 
 @pytest.mark.parametrize("form", FORMS)
@@ -249,7 +263,8 @@ def test_c_loop_equals_the_law_with_operating_point(form, mode):
     raw = NativeLoop(a).run_raw(Y, R)
     Y32, R32 = Y.astype(np.float32).astype(float), R.astype(np.float32).astype(float)
     want = independent_law(a.data, Y32, R32)
-    u = np.array([w[0] for w in want]); xh = np.array([w[3] for w in want])
+    u = np.array([w[0] for w in want])
+    xh = np.array([w[3] for w in want])
     z = np.array([w[4] for w in want]).reshape(len(want), a.q)
     assert rel_err(raw["u"].astype(float), u) <= RTOL
     assert rel_err(raw["xh"].astype(float), xh) <= RTOL
@@ -303,8 +318,7 @@ def test_host_and_qemu_bit_for_bit_with_operating_points():
     """The Cortex-M4F image equals the host library bit for bit on designs about non-zero operating points,
     the refused samples (safe command u_op clamped) included."""
     cases = [c for c in random_cases(30) if c.artifact.has_operating_point]
-    assert {(c.artifact.observer_form, c.artifact.anti_windup) for c in cases} == \
-        {(f, m) for f in FORMS for m in MODES}
+    assert {(c.artifact.observer_form, c.artifact.anti_windup) for c in cases} == {(f, m) for f in FORMS for m in MODES}
     for a, Y, R in [(c.artifact, c.Y, c.R) for c in cases[:6]] + [(safe_case(), *_op_samples(safe_case()))]:
         Y = Y.copy()
         Y[11, 0] = np.nan
@@ -341,8 +355,18 @@ def test_simulate_records_absolute_samples_and_replays(tmp_path):
     # at 14 rad/s the motor needs 7 V: the deviation model says du = 2 V for dy = 2 rad/s (gain 1 V per 1 rad/s)
     dc_gain = float((a.Cd @ np.linalg.solve(np.eye(a.n) - a.Ad, a.Bd))[0, 0])
     assert out["u0"][-1] == pytest.approx(6.0 + 2.0 / dc_gain, abs=1e-3)
-    res = run_cli("replay", art, "--input", step, "--output", tmp_path / "c.csv", "--engine", "native",
-                  "--compare", tmp_path / "ref.csv")
+    res = run_cli(
+        "replay",
+        art,
+        "--input",
+        step,
+        "--output",
+        tmp_path / "c.csv",
+        "--engine",
+        "native",
+        "--compare",
+        tmp_path / "ref.csv",
+    )
     assert res.code == 0, res.err
 
 
@@ -351,8 +375,13 @@ def test_pil_closes_the_loop_about_the_operating_point():
     absolute reference and equals the float64 law in the same loop."""
     a = from_dict(designed(motor(u_op=[6.0], y_op=[12.0])))
     steps, reference = 600, [14.0]
-    res = run_pil(a, plant=make_plant("artifact", artifact=a, x0=np.zeros(a.n)), steps=steps, reference=reference,
-                  twin=make_plant("artifact", artifact=a, x0=np.zeros(a.n)))
+    res = run_pil(
+        a,
+        plant=make_plant("artifact", artifact=a, x0=np.zeros(a.n)),
+        steps=steps,
+        reference=reference,
+        twin=make_plant("artifact", artifact=a, x0=np.zeros(a.n)),
+    )
     Y, U = res.twin.y, res.twin.u  # the float64 law in the same loop
     assert res.y[0, 0] == 12.0 and res.u[0, 0] == np.float32(6.0), "starts at the trim, bumplessly"
     assert rel_err(res.u.astype(float), U) <= RTOL and rel_err(res.y, Y) <= RTOL
@@ -366,7 +395,6 @@ def test_linear_plant_is_about_the_operating_point(tmp_path):
     """``kind = "linear"`` from an artifact with an operating point: at rest at the trim it stays there under
     u_op; a held step of the command gives y_op plus python-control's step response of (A, B, C, D)."""
     import control
-
     from gainlink.hil.plants import toml_write
     from gainlink.hil.plants.linear import LinearPlant, model_from_artifact, model_from_spec
 
@@ -400,8 +428,14 @@ def test_hil_bridge_starts_at_the_trim_and_references_are_absolute(tmp_path):
 
     art = tmp_path / "gains.json"
     artifact_mod.write(art, designed(motor(u_op=[6.0], y_op=[12.0])))
-    base = {"artifact": str(art), "duration": 6.0, "controller": "reference", "step_timeout": 2.0,
-            "plant": {"kind": "linear"}, "transport": udp_transport()}
+    base = {
+        "artifact": str(art),
+        "duration": 6.0,
+        "controller": "reference",
+        "step_timeout": 2.0,
+        "plant": {"kind": "linear"},
+        "transport": udp_transport(),
+    }
     held = run_scenario(parse_scenario(base))
     assert held.complete and held.metrics["lost"] == 0
     assert np.all(held.trace.y == 12.0) and np.all(held.trace.u == 6.0) and np.all(held.trace.r == 12.0)
@@ -414,9 +448,9 @@ def test_hil_bridge_starts_at_the_trim_and_references_are_absolute(tmp_path):
 def test_linearize_at_a_point_that_is_not_a_trim_says_so(tmp_path, caplog):
     """The cart pendulum tilted 0.1 rad with no force is not at rest: the spec records that point (x_op, y_op)
     and says it is not an equilibrium, in the log and in the spec's header, naming the derivatives."""
-    from gainlink.hil.plants.build import build_fmu
-
     import tomllib
+
+    from gainlink.hil.plants.build import build_fmu
 
     out = tmp_path / "tilted.toml"
     with caplog.at_level(logging.WARNING):
@@ -435,11 +469,15 @@ def test_float32_accuracy_does_not_scale_with_a_large_operating_point():
     the float32 rounding of the deviations. Folding the offsets into constants (xh+ = F xh + G u + L y + c,
     c = -(G u_op + L y_op)) would round each step at the scale of 350 m: emulated in numpy float32 here, that
     is ~1e-2 of the speed estimate, against ~1e-6 for the C (measured)."""
-    spec = {"name": "baro", "Ts": 0.01, "plant": {"kind": "continuous", "A": [[0.0, 1.0], [0.0, 0.0]],
-                                                  "B": [[0.0], [28.0]], "C": [[1.0, 0.0]]},
-            "controller": {"method": "lqr", "Q_diag": [4.0, 1.0], "R_diag": [1.0]},
-            "observer": {"method": "kalman", "W_diag": [1e-6, 1e-4], "V_diag": [1e-6]},
-            "limits": {"u_min": [0.0], "u_max": [1.0]}, "operating_point": {"u_op": [0.7], "y_op": [350.0]}}
+    spec = {
+        "name": "baro",
+        "Ts": 0.01,
+        "plant": {"kind": "continuous", "A": [[0.0, 1.0], [0.0, 0.0]], "B": [[0.0], [28.0]], "C": [[1.0, 0.0]]},
+        "controller": {"method": "lqr", "Q_diag": [4.0, 1.0], "R_diag": [1.0]},
+        "observer": {"method": "kalman", "W_diag": [1e-6, 1e-4], "V_diag": [1e-6]},
+        "limits": {"u_min": [0.0], "u_max": [1.0]},
+        "operating_point": {"u_op": [0.7], "y_op": [350.0]},
+    }
     a = from_dict(designed(spec))
     rng = np.random.default_rng(0)
     N = 3000

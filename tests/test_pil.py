@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from gainlink.artifact import load
 from gainlink.firmware.pil import make_plant, run_pil
 
@@ -29,8 +28,13 @@ def _quiet_design_warnings():
 def test_closed_loop_matches_its_float64_twin(example_artifacts, name, reference):
     a = load(example_artifacts[name])
     steps = 1500 if name == "pendulum" else 300
-    res = run_pil(a, plant=make_plant("artifact", artifact=a), steps=steps, reference=reference,
-                  twin=make_plant("artifact", artifact=a))
+    res = run_pil(
+        a,
+        plant=make_plant("artifact", artifact=a),
+        steps=steps,
+        reference=reference,
+        twin=make_plant("artifact", artifact=a),
+    )
     # the twin, recomputed here: the float64 law closing the loop on a fresh plant, step by step
     from gainlink.reference import ReferenceLoop
 
@@ -53,8 +57,24 @@ def test_closed_loop_matches_its_float64_twin(example_artifacts, name, reference
 
 def test_pil_cli_summary_and_files(example_artifacts, tmp_path):
     out = tmp_path / "pil"
-    proc = subprocess.run([GAINLINK, "pil", "run", str(example_artifacts["pendulum"]), "--plant", "artifact",
-                           "--steps", "500", "--reference", "0.2", "--out", str(out)], capture_output=True, text=True)
+    proc = subprocess.run(
+        [
+            GAINLINK,
+            "pil",
+            "run",
+            str(example_artifacts["pendulum"]),
+            "--plant",
+            "artifact",
+            "--steps",
+            "500",
+            "--reference",
+            "0.2",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
     assert summary["steps"] == 500 and summary["faults"] == 0
@@ -66,8 +86,11 @@ def test_pil_cli_summary_and_files(example_artifacts, tmp_path):
 
 def test_pil_rejects_bad_arguments(example_artifacts):
     for extra, word in ((["--reference", "1", "2"], "--reference"), (["--plant", "no_such_plant"], "no_such_plant")):
-        proc = subprocess.run([GAINLINK, "pil", "run", str(example_artifacts["pendulum"]), "--steps", "10", *extra],
-                              capture_output=True, text=True)
+        proc = subprocess.run(
+            [GAINLINK, "pil", "run", str(example_artifacts["pendulum"]), "--steps", "10", *extra],
+            capture_output=True,
+            text=True,
+        )
         assert proc.returncode == 2 and word in proc.stderr and proc.stderr.count("\n") == 1, proc.stderr
 
 

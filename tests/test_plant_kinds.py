@@ -9,15 +9,13 @@ import textwrap
 import control as ct
 import numpy as np
 import pytest
-
+from conftest import EXAMPLES
 from gainlink.artifact import load
 from gainlink.errors import PlantError
-from gainlink.hil.plants.config import plant_from_config
-from gainlink.hil.plants.linear import model_from_spec, perturb_model
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
-
-from conftest import EXAMPLES
+from gainlink.hil.plants.config import plant_from_config
+from gainlink.hil.plants.linear import model_from_spec, perturb_model
 from test_hil_support import udp_transport
 
 PENDULUM = EXAMPLES / "pendulum.toml"
@@ -44,8 +42,12 @@ def _oracle(A, B, u, dt):
 
 def test_linear_plant_from_a_spec_with_perturbed_entries_and_scaled_matrix():
     u = np.sin(np.arange(200) * 0.05)
-    config = {"kind": "linear", "spec": str(PENDULUM), "perturb": {"A[3][2]": 0.1, "A[1][2]": -0.2},
-              "scale": {"B": 1.5}}
+    config = {
+        "kind": "linear",
+        "spec": str(PENDULUM),
+        "perturb": {"A[3][2]": 0.1, "A[1][2]": -0.2},
+        "scale": {"B": 1.5},
+    }
     plant = plant_from_config(config)
     A = A_PEND.copy()
     A[3, 2] *= 1.1
@@ -63,21 +65,26 @@ def test_linear_plant_defaults_to_the_scenario_artifact_and_reads_another_one(ex
     art = load(example_artifacts["pendulum"])
     u = np.cos(np.arange(50) * 0.1)
     from_scenario = _simulate(plant_from_config({"kind": "linear"}, artifact=art), u, 0.01)
-    named = plant_from_config({"kind": "linear", "artifact": example_artifacts["pendulum"].name},
-                              base_dir=example_artifacts["pendulum"].parent)
+    named = plant_from_config(
+        {"kind": "linear", "artifact": example_artifacts["pendulum"].name},
+        base_dir=example_artifacts["pendulum"].parent,
+    )
     np.testing.assert_array_equal(_simulate(named, u, 0.01), from_scenario)
     np.testing.assert_allclose(from_scenario, _oracle(A_PEND, B_PEND, u, 0.01), rtol=1e-9, atol=1e-12)
 
 
-@pytest.mark.parametrize("config, message", [
-    ({"perturb": {"E[0][0]": 0.1}}, 'not of the form "A[i][j]"'),
-    ({"perturb": {"A[4][0]": 0.1}}, "A[4][0] is outside A (4x4"),
-    ({"perturb": {"A[0][1]": float("nan")}}, "must be a finite number"),
-    ({"perturb": {"A[0][1]": "big"}}, "must be a finite number"),
-    ({"scale": {"Q": 2.0}}, "scale names matrix 'Q'"),
-    ({"artifact": "gains.json"}, "give spec or artifact, not both"),
-    ({"colour": "red"}, "unknown key(s) colour"),
-])
+@pytest.mark.parametrize(
+    "config, message",
+    [
+        ({"perturb": {"E[0][0]": 0.1}}, 'not of the form "A[i][j]"'),
+        ({"perturb": {"A[4][0]": 0.1}}, "A[4][0] is outside A (4x4"),
+        ({"perturb": {"A[0][1]": float("nan")}}, "must be a finite number"),
+        ({"perturb": {"A[0][1]": "big"}}, "must be a finite number"),
+        ({"scale": {"Q": 2.0}}, "scale names matrix 'Q'"),
+        ({"artifact": "gains.json"}, "give spec or artifact, not both"),
+        ({"colour": "red"}, "unknown key(s) colour"),
+    ],
+)
 def test_linear_plant_refuses_bad_perturbations_in_one_line(config, message):
     with pytest.raises(PlantError) as err:
         plant_from_config({"kind": "linear", "spec": str(PENDULUM), **config})
@@ -92,12 +99,18 @@ def test_linear_plant_without_a_model_or_with_a_missing_spec_says_so(tmp_path):
 
 
 def test_hil_run_against_a_perturbed_linear_plant_tracks_and_differs_from_nominal(example_artifacts):
-    base = {"artifact": str(example_artifacts["pendulum"]), "duration": 8.0, "controller": "reference",
-            "step_timeout": 2.0, "transport": udp_transport(),
-            "reference": {"r_x": {"kind": "step", "at": 0.5, "value": 0.2}}}
+    base = {
+        "artifact": str(example_artifacts["pendulum"]),
+        "duration": 8.0,
+        "controller": "reference",
+        "step_timeout": 2.0,
+        "transport": udp_transport(),
+        "reference": {"r_x": {"kind": "step", "at": 0.5, "value": 0.2}},
+    }
     nominal = run_scenario(parse_scenario({**base, "plant": {"kind": "linear", "spec": str(PENDULUM)}}))
-    heavy = run_scenario(parse_scenario({**base, "plant": {"kind": "linear", "spec": str(PENDULUM),
-                                                            "scale": {"B": 0.7}}}))
+    heavy = run_scenario(
+        parse_scenario({**base, "plant": {"kind": "linear", "spec": str(PENDULUM), "scale": {"B": 0.7}}})
+    )
     for r in (nominal, heavy):
         assert r.complete and r.metrics["steps"] == 800
         assert r.metrics["outputs_final"]["x"] == pytest.approx(0.2, abs=0.01)
@@ -157,7 +170,9 @@ def user_package(tmp_path, monkeypatch):
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: gl-user-plants\nVersion: 1.0\n", "utf-8")
     (info / "entry_points.txt").write_text(
         "[gainlink.plants]\nuser_cart = gl_user_plants:Cart\nbroken = gl_user_plants:NotAPlant\n"
-        "gone = gl_user_plants_missing:Cart\n", "utf-8")
+        "gone = gl_user_plants_missing:Cart\n",
+        "utf-8",
+    )
     monkeypatch.syspath_prepend(str(site))
     return site
 
@@ -167,8 +182,9 @@ def _double_integrator(u, dt, mass):
     return ct.forced_response(sys, U=np.append(u, 0.0), X0=[0.0, 0.0]).outputs
 
 
-@pytest.mark.parametrize("config", [{"kind": "python", "class": "gl_user_plants:Cart", "mass": 2.0},
-                                    {"kind": "user_cart", "mass": 2.0}])
+@pytest.mark.parametrize(
+    "config", [{"kind": "python", "class": "gl_user_plants:Cart", "mass": 2.0}, {"kind": "user_cart", "mass": 2.0}]
+)
 def test_user_python_plant_by_class_or_entry_point_gets_its_config(user_package, config):
     plant = plant_from_config(config)
     assert type(plant).__module__ == "gl_user_plants" and plant.mass == 2.0
@@ -181,18 +197,21 @@ def test_user_python_plant_by_class_or_entry_point_gets_its_config(user_package,
     np.testing.assert_allclose(ys, _double_integrator(u, 0.1, 2.0), rtol=1e-10, atol=1e-12)
 
 
-@pytest.mark.parametrize("config, message", [
-    ({"kind": "python", "class": "gl_no_such_module:Cart"}, "cannot import module 'gl_no_such_module'"),
-    ({"kind": "python", "class": "gl_user_plants:Bus"}, "module 'gl_user_plants' has no class 'Bus'"),
-    ({"kind": "python", "class": "gl_user_plants:NotAPlant"}, "is not a Plant class"),
-    ({"kind": "python", "class": "gl_user_plants"}, 'must be of the form "module:Class"'),
-    ({"kind": "python"}, 'give class = "module:Class"'),
-    ({"kind": "python", "class": "gl_user_plants:Cart", "mass": -1.0}, "Cart(mass) failed: mass must be positive"),
-    ({"kind": "python", "class": "gl_user_plants:Cart", "colour": "red"}, "Cart(colour) failed"),
-    ({"kind": "broken"}, "entry point gl_user_plants:NotAPlant): it is not a Plant class"),
-    ({"kind": "gone"}, "cannot load it"),
-    ({"kind": "no_such_plant"}, "unknown plant kind 'no_such_plant' (known: "),
-])
+@pytest.mark.parametrize(
+    "config, message",
+    [
+        ({"kind": "python", "class": "gl_no_such_module:Cart"}, "cannot import module 'gl_no_such_module'"),
+        ({"kind": "python", "class": "gl_user_plants:Bus"}, "module 'gl_user_plants' has no class 'Bus'"),
+        ({"kind": "python", "class": "gl_user_plants:NotAPlant"}, "is not a Plant class"),
+        ({"kind": "python", "class": "gl_user_plants"}, 'must be of the form "module:Class"'),
+        ({"kind": "python"}, 'give class = "module:Class"'),
+        ({"kind": "python", "class": "gl_user_plants:Cart", "mass": -1.0}, "Cart(mass) failed: mass must be positive"),
+        ({"kind": "python", "class": "gl_user_plants:Cart", "colour": "red"}, "Cart(colour) failed"),
+        ({"kind": "broken"}, "entry point gl_user_plants:NotAPlant): it is not a Plant class"),
+        ({"kind": "gone"}, "cannot load it"),
+        ({"kind": "no_such_plant"}, "unknown plant kind 'no_such_plant' (known: "),
+    ],
+)
 def test_python_plant_errors_are_one_line(user_package, config, message):
     with pytest.raises(PlantError) as err:
         plant_from_config(config)

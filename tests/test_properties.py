@@ -3,16 +3,15 @@
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import given, reject, settings
-from hypothesis import strategies as st
-from hypothesis.extra.numpy import arrays
-
 from gainlink import artifact as artifact_mod
 from gainlink.design import Discretised, check_separation, closed_loop_matrix, design, poles_match
 from gainlink.errors import DesignError
 from gainlink.random_plants import random_spec
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import parse_spec
+from hypothesis import given, reject, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
 PROPERTY_SETTINGS = settings(max_examples=40, deadline=None, derandomize=True)
 
@@ -61,8 +60,14 @@ def test_non_finite_samples_never_propagate(data):
 
 
 @PROPERTY_SETTINGS
-@given(seed=st.integers(0, 10_000), n=st.integers(1, 6), m=st.integers(1, 3), p=st.integers(1, 3),
-       q=st.integers(0, 3), aw=st.sampled_from(["none", "clamp", "backcalc"]))
+@given(
+    seed=st.integers(0, 10_000),
+    n=st.integers(1, 6),
+    m=st.integers(1, 3),
+    p=st.integers(1, 3),
+    q=st.integers(0, 3),
+    aw=st.sampled_from(["none", "clamp", "backcalc"]),
+)
 def test_predictor_and_current_forms_give_the_same_closed_loop(seed, n, m, p, q, aw):
     q = min(q, m, p)
     results = {}

@@ -6,15 +6,13 @@ import math
 
 import numpy as np
 import pytest
-
+from conftest import run_cli
 from gainlink import artifact as artifact_mod
 from gainlink.design import design
 from gainlink.random_plants import random_spec
 from gainlink.reference import ReferenceLoop
 from gainlink.replay import read_samples
 from gainlink.spec import parse_spec
-
-from conftest import run_cli
 
 
 def matvec(A, x):
@@ -69,7 +67,9 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("case", CASES, ids=lambda c: f"n{c['n']}m{c['m']}p{c['p']}q{c['q']}-{c['form']}-{c['anti_windup']}")
+@pytest.mark.parametrize(
+    "case", CASES, ids=lambda c: f"n{c['n']}m{c['m']}p{c['p']}q{c['q']}-{c['form']}-{c['anti_windup']}"
+)
 def test_reference_matches_independent_law_on_random_inputs(case):
     a = artifact_mod.from_dict(design(parse_spec(random_spec(7, **case))).artifact)
     rng = np.random.default_rng(1)
@@ -124,8 +124,26 @@ def test_clamp_freezes_the_integrator_only_on_saturated_steps():
 def test_replay_cli_matches_reference_and_copies_time(example_artifacts, tmp_path):
     a = artifact_mod.load(example_artifacts["quadrotor_lateral"])
     inp, out = tmp_path / "in.csv", tmp_path / "out.csv"
-    assert run_cli("simulate", example_artifacts["quadrotor_lateral"], "--steps", "2000", "--x0", "0.2", "0", "0", "0",
-                   "--ref", "0.5", "--noise", "0.001", "--out", inp).code == 0
+    assert (
+        run_cli(
+            "simulate",
+            example_artifacts["quadrotor_lateral"],
+            "--steps",
+            "2000",
+            "--x0",
+            "0.2",
+            "0",
+            "0",
+            "0",
+            "--ref",
+            "0.5",
+            "--noise",
+            "0.001",
+            "--out",
+            inp,
+        ).code
+        == 0
+    )
     r = run_cli("replay", example_artifacts["quadrotor_lateral"], "--input", inp, "--output", out)
     assert r.code == 0, r.err
     rows = np.genfromtxt(out, delimiter=",", names=True)

@@ -11,20 +11,23 @@ from __future__ import annotations
 import control
 import numpy as np
 import pytest
-
 from gainlink.artifact import load
 from gainlink.errors import ScenarioError
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil import run_sil
-
 from test_hil_support import can_firmware, pendulum_gains, udp_transport  # noqa: F401
 
 
 def _scenario(gains, **extra) -> dict:
-    data = {"name": "sil", "artifact": str(gains), "duration": 3.0, "transport": {},
-            "plant": {"kind": "cart_pendulum", "outputs": ["x", "theta"], "step": 0.001},
-            "initial_state": {"theta": 0.05}}
+    data = {
+        "name": "sil",
+        "artifact": str(gains),
+        "duration": 3.0,
+        "transport": {},
+        "plant": {"kind": "cart_pendulum", "outputs": ["x", "theta"], "step": 0.001},
+        "initial_state": {"theta": 0.05},
+    }
     data.update(extra)
     return data
 
@@ -39,23 +42,33 @@ def _closed_loop_oracle(a, *, x0: np.ndarray, r: float, N: int) -> np.ndarray:
     # u = -K xh - Ki z;  z+ = z + Ts (r - Ci y);  xh+ = Ad xh + Bd u + L (y - Cd xh - Dd u);  y = Cp x
     F = a.Ad - a.Bd @ a.K - a.L @ a.Cd + a.L @ a.Dd @ a.K
     G = -a.Bd @ a.Ki + a.L @ a.Dd @ a.Ki
-    Acl = np.block([
-        [Ap, -Bp @ a.K, -Bp @ a.Ki],
-        [a.L @ Cp, F, G],
-        [-a.Ts * a.Ci @ Cp, np.zeros((q, n)), np.eye(q)],
-    ])
+    Acl = np.block(
+        [
+            [Ap, -Bp @ a.K, -Bp @ a.Ki],
+            [a.L @ Cp, F, G],
+            [-a.Ts * a.Ci @ Cp, np.zeros((q, n)), np.eye(q)],
+        ]
+    )
     Bcl = np.vstack([np.zeros((np_, q)), np.zeros((n, q)), a.Ts * np.eye(q)])
     Ccl = np.hstack([Cp, np.zeros((Cp.shape[0], n + q))])
     sys = control.ss(Acl, Bcl, Ccl, np.zeros((Cp.shape[0], q)), a.Ts)
-    res = control.forced_response(sys, T=np.arange(N) * a.Ts, U=np.full((q, N), r),
-                                  X0=np.concatenate([x0, np.zeros(n + q)]))
+    res = control.forced_response(
+        sys, T=np.arange(N) * a.Ts, U=np.full((q, N), r), X0=np.concatenate([x0, np.zeros(n + q)])
+    )
     return np.asarray(res.outputs).T
 
 
 def test_sil_on_the_linear_plant_follows_the_closed_loop_of_the_law(pendulum_gains):
     a = load(pendulum_gains)
-    sc = parse_scenario(_scenario(pendulum_gains, plant={"kind": "linear"}, duration=4.0,
-                                  initial_state={"theta": 0.02}, reference={"r_x": 0.05}))
+    sc = parse_scenario(
+        _scenario(
+            pendulum_gains,
+            plant={"kind": "linear"},
+            duration=4.0,
+            initial_state={"theta": 0.02},
+            reference={"r_x": 0.05},
+        )
+    )
     res = run_sil(a, sc)
     assert res.complete and res.metrics["mode"] == "sil" and not res.trace.sat.any()
     N = res.trace.t.size
@@ -74,12 +87,28 @@ def test_sil_on_the_linear_plant_follows_the_closed_loop_of_the_law(pendulum_gai
 
 def test_sil_equals_the_lockstep_hil_run_bit_for_bit(pendulum_gains, can_firmware):
     a = load(pendulum_gains)
-    common = dict(duration=2.0, noise={"theta": 1e-4}, seed=7, reference={"r_x": {"kind": "step", "at": 0.5, "value": 0.3}},
-                  disturbances=[{"input": "F", "start": 1.0, "stop": 1.05, "value": 3.0}])
+    common = dict(
+        duration=2.0,
+        noise={"theta": 1e-4},
+        seed=7,
+        reference={"r_x": {"kind": "step", "at": 0.5, "value": 0.3}},
+        disturbances=[{"input": "F", "start": 1.0, "stop": 1.05, "value": 3.0}],
+    )
     sil = run_sil(a, parse_scenario(_scenario(pendulum_gains, **common)))
-    hil = run_scenario(parse_scenario(_scenario(pendulum_gains, transport=udp_transport(fd=True), mode="lockstep",
-                                                controller="firmware", firmware=str(can_firmware), step_timeout=2.0,
-                                                peer_timeout=4.0, **common)))
+    hil = run_scenario(
+        parse_scenario(
+            _scenario(
+                pendulum_gains,
+                transport=udp_transport(fd=True),
+                mode="lockstep",
+                controller="firmware",
+                firmware=str(can_firmware),
+                step_timeout=2.0,
+                peer_timeout=4.0,
+                **common,
+            )
+        )
+    )
     assert hil.complete and hil.metrics["lost"] == 0
     assert np.array_equal(sil.trace.u, hil.trace.u)
     assert np.array_equal(sil.trace.y, hil.trace.y)
@@ -94,18 +123,26 @@ def test_sil_seed_sets_the_noise_and_a_failing_plant_ends_the_run(pendulum_gains
     assert np.array_equal(r1.trace.y, r2.trace.y) and not np.array_equal(r1.trace.y, r3.trace.y)
     # A stiff plant for its integrator step (g = 1e6: |lambda| h ~ 14, RK4 grows ~1e3 per sub-step):
     # the state overflows, the plant refuses the step, and the run ends there.
-    bad = parse_scenario(_scenario(pendulum_gains, duration=20.0, initial_state={"theta": 0.1},
-                                   plant={"kind": "cart_pendulum", "outputs": ["x", "theta"], "step": 0.01,
-                                          "parameters": {"g": 1e6}}))
+    bad = parse_scenario(
+        _scenario(
+            pendulum_gains,
+            duration=20.0,
+            initial_state={"theta": 0.1},
+            plant={"kind": "cart_pendulum", "outputs": ["x", "theta"], "step": 0.01, "parameters": {"g": 1e6}},
+        )
+    )
     res = run_sil(a, bad)
     assert not res.complete and "non-finite" in res.reason
     assert res.metrics["complete"] is False and res.metrics["steps"] < 2000
 
 
-@pytest.mark.parametrize("extra, words", [
-    ({"faults": [{"kind": "drop", "start": 0.0, "stop": 1.0}]}, r"faults \(drop\) act on a link"),
-    ({"mode": "realtime"}, "realtime"),
-])
+@pytest.mark.parametrize(
+    "extra, words",
+    [
+        ({"faults": [{"kind": "drop", "start": 0.0, "stop": 1.0}]}, r"faults \(drop\) act on a link"),
+        ({"mode": "realtime"}, "realtime"),
+    ],
+)
 def test_sil_refuses_what_needs_a_link(pendulum_gains, extra, words):
     with pytest.raises(ScenarioError, match=words):
         run_sil(load(pendulum_gains), parse_scenario(_scenario(pendulum_gains, **extra)))

@@ -14,10 +14,6 @@ import time
 import numpy as np
 import pytest
 from conftest import run_cli
-from pymavlink import mavutil
-from pymavlink.dialects.v20 import common as mavlink2
-from test_mavlink_upload import free_udp_port, reference_u, retuned_pendulum
-
 from gainlink.artifact import load
 from gainlink.codegen import gain_set
 from gainlink.errors import FirmwareError, ScenarioError, TransportError
@@ -26,23 +22,42 @@ from gainlink.firmware.uart import QemuUart, free_tcp_port
 from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
+from gainlink.mavlink.keysetup import signing_timestamp
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession
-from gainlink.mavlink.keysetup import signing_timestamp
 from gainlink.mavlink.signing import enable, read_key
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink2
+from test_mavlink_upload import free_udp_port, reference_u, retuned_pendulum
 
 RANGES = {"x": [-5.0, 5.0], "theta": [-1.0, 1.0], "r_x": [-5.0, 5.0]}
 
 
-def scenario(artifact_path, transport: dict, *, controller: str, board: str | None = None, duration: float = 1.5,
-             faults: list | None = None):
+def scenario(
+    artifact_path,
+    transport: dict,
+    *,
+    controller: str,
+    board: str | None = None,
+    duration: float = 1.5,
+    faults: list | None = None,
+):
     data = {
-        "name": "pendulum_uart", "artifact": str(artifact_path), "duration": duration, "mode": "lockstep",
-        "controller": controller, "step_timeout": 2.0, "peer_timeout": 5.0, "seed": 7, "twin": True,
+        "name": "pendulum_uart",
+        "artifact": str(artifact_path),
+        "duration": duration,
+        "mode": "lockstep",
+        "controller": controller,
+        "step_timeout": 2.0,
+        "peer_timeout": 5.0,
+        "seed": 7,
+        "twin": True,
         "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]},
-        "transport": transport, "initial_state": {"theta": 0.1},
-        "reference": {"r_x": {"kind": "step", "at": 0.3, "value": 0.4}}, "noise": {"theta": 0.001},
+        "transport": transport,
+        "initial_state": {"theta": 0.1},
+        "reference": {"r_x": {"kind": "step", "at": 0.3, "value": 0.4}},
+        "noise": {"theta": 0.001},
     }
     if board is not None:
         data["board"] = board
@@ -62,8 +77,9 @@ def assert_same_closed_loop(image, host) -> None:
 @pytest.mark.parametrize("board", ["mps2-an386", "netduinoplus2"])
 def test_mavlink_on_the_uart_commands_equal_the_host_app_bit_for_bit(pend, board):
     host = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, controller="firmware"))
-    image = run_scenario(scenario(pend, {"kind": "mavlink", "url": f"tcp:127.0.0.1:{free_tcp_port()}"},
-                                  controller="qemu", board=board))
+    image = run_scenario(
+        scenario(pend, {"kind": "mavlink", "url": f"tcp:127.0.0.1:{free_tcp_port()}"}, controller="qemu", board=board)
+    )
     assert_same_closed_loop(image, host)
     assert image.info["controller"]["board"] == board
     assert image.info["controller"]["ready"].startswith(f"gainlink pendulum {board} sha256:{load(pend).sha256}")
@@ -75,10 +91,19 @@ def test_mavlink_on_the_uart_commands_equal_the_host_app_bit_for_bit(pend, board
 def test_slcan_on_the_uart_commands_equal_the_host_can_app_bit_for_bit(pend, board, encoding):
     layout = {"encoding": encoding, "ranges": RANGES} if encoding == "int16" else {}
     group = "239.74.163.61" if encoding == "int16" else "239.74.163.62"
-    host = run_scenario(scenario(pend, {"interface": "udp_multicast", "channel": group, "hop_limit": 0, **layout},
-                                 controller="firmware"))
-    image = run_scenario(scenario(pend, {"interface": "slcan", "channel": f"socket://127.0.0.1:{free_tcp_port()}",
-                                         **layout}, controller="qemu", board=board))
+    host = run_scenario(
+        scenario(
+            pend, {"interface": "udp_multicast", "channel": group, "hop_limit": 0, **layout}, controller="firmware"
+        )
+    )
+    image = run_scenario(
+        scenario(
+            pend,
+            {"interface": "slcan", "channel": f"socket://127.0.0.1:{free_tcp_port()}", **layout},
+            controller="qemu",
+            board=board,
+        )
+    )
     assert_same_closed_loop(image, host)
     assert image.info["transport"]["config"]["interface"] == "slcan"
     assert image.info["transport"]["encoding"] == encoding
@@ -120,8 +145,9 @@ def elf(pend):
 def test_upload_persists_in_flash_and_survives_a_restart_of_the_image(elf, pend, tmp_path):
     old, new = load(pend), load(retuned_pendulum(tmp_path / "retuned.json"))
     flash = tmp_path / "flash"
-    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash,
-                  lifetime_s=300) as image:
+    with QemuUart(
+        elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash, lifetime_s=300
+    ) as image:
         Y, R, U = closed_loop(image.url, old)
         np.testing.assert_allclose(U, reference_u(old, Y, R), atol=1e-4)
         res = run_cli("mavlink", "upload", tmp_path / "retuned.json", "--connect", image.url, "--persist")
@@ -132,8 +158,9 @@ def test_upload_persists_in_flash_and_survives_a_restart_of_the_image(elf, pend,
         assert np.max(np.abs(U - reference_u(old, Y, R))) > 1e-2  # really the new gains
     assert (flash / "gl_flash.txt").is_file()
 
-    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash,
-                  lifetime_s=300) as image:  # the board powered again: the set comes back from flash
+    with QemuUart(
+        elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash, lifetime_s=300
+    ) as image:  # the board powered again: the set comes back from flash
         assert f"crc32={gain_set(new).crc32}" in image.ready_line
         res = run_cli("mavlink", "upload", tmp_path / "retuned.json", "--connect", image.url, "--dry-run")
         assert res.code == 0 and "dry run: 0 parameter(s) would change" in res.out, res.out + res.err
@@ -142,8 +169,11 @@ def test_upload_persists_in_flash_and_survives_a_restart_of_the_image(elf, pend,
 
 
 def request_sys_status(link: MavLink) -> object:
-    link.send(mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0,
-                                                     float(mavlink2.MAVLINK_MSG_ID_SYS_STATUS), 0, 0, 0, 0, 0, 0))
+    link.send(
+        mavlink2.MAVLink_command_long_message(
+            1, 1, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0, float(mavlink2.MAVLINK_MSG_ID_SYS_STATUS), 0, 0, 0, 0, 0, 0
+        )
+    )
     for _ in range(50):
         for m in link.poll(0.2):
             if m.get_type() == "SYS_STATUS":
@@ -203,8 +233,19 @@ def _third_party_signed_request(url: str, key: bytes):
     conn = mavutil.mavlink_connection(url, source_system=250, source_component=190, dialect="common")
     try:
         conn.setup_signing(key, sign_outgoing=True, link_id=7)
-        conn.mav.command_long_send(1, 1, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0,
-                                   float(mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION), 0, 0, 0, 0, 0, 0)
+        conn.mav.command_long_send(
+            1,
+            1,
+            mavlink2.MAV_CMD_REQUEST_MESSAGE,
+            0,
+            float(mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION),
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+        )
         return conn.recv_match(type="AUTOPILOT_VERSION", blocking=True, timeout=15)
     finally:
         conn.close()
@@ -213,12 +254,16 @@ def _third_party_signed_request(url: str, key: bytes):
 def _unsigned_frames() -> list[bytes]:
     """Unsigned frames that would change the image: stage, commit, persist, reset, turn signing off."""
     mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
-    return [m.pack(mav) for m in (
-        mavlink2.MAVLink_param_set_message(1, 1, b"GL_K_0_0", 0.0, mavlink2.MAV_PARAM_TYPE_REAL32),
-        mavlink2.MAVLink_param_set_message(1, 1, b"GL_HASH", 0.0, mavlink2.MAV_PARAM_TYPE_INT32),
-        mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_PREFLIGHT_STORAGE, 0, 2, 0, 0, 0, 0, 0, 0),
-        mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_PREFLIGHT_STORAGE, 0, 1, 0, 0, 0, 0, 0, 0),
-        mavlink2.MAVLink_setup_signing_message(1, 1, [0] * 32, 0))]
+    return [
+        m.pack(mav)
+        for m in (
+            mavlink2.MAVLink_param_set_message(1, 1, b"GL_K_0_0", 0.0, mavlink2.MAV_PARAM_TYPE_REAL32),
+            mavlink2.MAVLink_param_set_message(1, 1, b"GL_HASH", 0.0, mavlink2.MAV_PARAM_TYPE_INT32),
+            mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_PREFLIGHT_STORAGE, 0, 2, 0, 0, 0, 0, 0, 0),
+            mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_PREFLIGHT_STORAGE, 0, 1, 0, 0, 0, 0, 0, 0),
+            mavlink2.MAVLink_setup_signing_message(1, 1, [0] * 32, 0),
+        )
+    ]
 
 
 def _signed_param_set_recorded_at(key: bytes, unix_time: float) -> bytes:
@@ -242,8 +287,9 @@ def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(
     key = read_key(key_file)
     flash = tmp_path / "flash"
     monkeypatch.setenv("MAVLINK20", "1")  # pymavlink's own switch to MAVLink 2 (signing needs it)
-    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash,
-                  lifetime_s=300) as image:
+    with QemuUart(
+        elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash, lifetime_s=300
+    ) as image:
         assert "signing=off" in image.ready_line
         res = run_cli("mavlink", "setup-signing", key_file, "--connect", image.url)
         assert res.code == 0 and "vehicle 1/1 signs with the key" in res.out, res.out + res.err
@@ -257,8 +303,16 @@ def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(
         version = _third_party_signed_request(image.url, key)
         assert version is not None and version.get_signed() and version.uid == gain_set(old).crc32
 
-        res = run_cli("mavlink", "upload", tmp_path / "retuned.json", "--connect", image.url,
-                      "--signing-key", key_file, "--persist")
+        res = run_cli(
+            "mavlink",
+            "upload",
+            tmp_path / "retuned.json",
+            "--connect",
+            image.url,
+            "--signing-key",
+            key_file,
+            "--persist",
+        )
         assert res.code == 0, res.out + res.err
         assert "gain set committed" in res.out and "persisted" in res.out
         stored = (flash / "gl_flash.txt").read_bytes()
@@ -281,16 +335,25 @@ def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(
     # after power-on, it must be refused although the image has no clock (its timestamp restarts from the one
     # it kept in flash, not from 0)
     replay = _signed_param_set_recorded_at(key, time.time() - 300)
-    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash,
-                  lifetime_s=300) as image:  # powered again: key and gains come back from flash
+    with QemuUart(
+        elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash, lifetime_s=300
+    ) as image:  # powered again: key and gains come back from flash
         assert "signing=on" in image.ready_line and f"crc32={gain_set(new).crc32}" in image.ready_line
         link, s = session(image.url)  # unsigned: reads stay open, and nothing here moves the image's timestamp
         with link:
             link.conn.write(replay)
             staged = s.read(["GL_K_0_0"])[0]["GL_K_0_0"].value
         assert staged == float(np.float32(new.K[0, 0]))  # the replayed set was not staged
-        res = run_cli("mavlink", "upload", tmp_path / "retuned.json", "--connect", image.url,
-                      "--signing-key", key_file, "--dry-run")
+        res = run_cli(
+            "mavlink",
+            "upload",
+            tmp_path / "retuned.json",
+            "--connect",
+            image.url,
+            "--signing-key",
+            key_file,
+            "--dry-run",
+        )
         assert res.code == 0 and "dry run: 0 parameter(s) would change" in res.out, res.out + res.err
         before, after, crc3 = status_around(image.url, key, forged[:2])
         assert before.errors_comm == 1  # since power-on: the replay
@@ -304,8 +367,9 @@ def test_qemu_scenarios_refuse_mismatched_links_in_one_line(pend, tmp_path):
         scenario(pend, {"kind": "mavlink"}, controller="qemu", board="stm32f4-discovery")
     udp = run_scenario_error(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, controller="qemu"))
     assert isinstance(udp, TransportError) and 'url = "tcp:HOST:PORT"' in str(udp)
-    fd = run_scenario_error(scenario(pend, {"interface": "slcan", "channel": "socket://127.0.0.1:1", "fd": True},
-                                     controller="qemu"))
+    fd = run_scenario_error(
+        scenario(pend, {"interface": "slcan", "channel": "socket://127.0.0.1:1", "fd": True}, controller="qemu")
+    )
     assert isinstance(fd, TransportError) and "classic frames only" in str(fd)
     uart = run_scenario_error(scenario(pend, {"kind": "mavlink", "url": "tcp:127.0.0.1:1"}, controller="firmware"))
     assert isinstance(uart, TransportError) and 'needs controller = "qemu"' in str(uart)
@@ -320,8 +384,9 @@ def run_scenario_error(sc) -> Exception:
 
 
 def test_the_image_refuses_bad_options_with_its_own_error_line(elf):
-    image = QemuUart(elf, board="mps2-an386", protocol="slcan", port=free_tcp_port(), options=["bitrate=5"],
-                     lifetime_s=60)
+    image = QemuUart(
+        elf, board="mps2-an386", protocol="slcan", port=free_tcp_port(), options=["bitrate=5"], lifetime_s=60
+    )
     try:
         with pytest.raises(FirmwareError, match="refused its options: unknown slcan option"):
             image.start()
@@ -333,13 +398,27 @@ def test_the_image_refuses_bad_options_with_its_own_error_line(elf):
 def test_the_images_slcan_adapter_answers_as_the_lawicel_protocol_says(elf):
     """Commands and their answers by the protocol (CR: ok, BEL: refused), through the image's real UART."""
     exchanges = [
-        (b"V\r", b"V1013\r"), (b"N\r", b"NGL00\r"), (b"F\r", b"F00\r"), (b"Z0\r", b"\r"), (b"Z1\r", b"\a"),
-        (b"S6\r", b"\r"), (b"S9\r", b"\a"), (b"s031C\r", b"\r"),
+        (b"V\r", b"V1013\r"),
+        (b"N\r", b"NGL00\r"),
+        (b"F\r", b"F00\r"),
+        (b"Z0\r", b"\r"),
+        (b"Z1\r", b"\a"),
+        (b"S6\r", b"\r"),
+        (b"S9\r", b"\a"),
+        (b"s031C\r", b"\r"),
         (b"t1108" + b"00" * 8 + b"\r", b"\a"),  # a frame before the channel is open
-        (b"O\r", b"\r"), (b"O\r", b"\a"), (b"S6\r", b"\a"),  # open twice, bit rate while open
-        (b"t7FF0\r", b"z\r"), (b"T1FFFFFFF2ABCD\r", b"Z\r"), (b"r1230\r", b"z\r"),  # foreign id, extended, remote
-        (b"t800" b"0\r", b"\a"), (b"t1109" + b"00" * 9 + b"\r", b"\a"), (b"t1102AB\r", b"\a"),  # id > 0x7FF, dlc 9, short
-        (b"d1108" + b"00" * 8 + b"\r", b"\a"), (b"X" * 40 + b"\r", b"\a"), (b"?\r", b"\a"),  # CAN FD, over-long, unknown
+        (b"O\r", b"\r"),
+        (b"O\r", b"\a"),
+        (b"S6\r", b"\a"),  # open twice, bit rate while open
+        (b"t7FF0\r", b"z\r"),
+        (b"T1FFFFFFF2ABCD\r", b"Z\r"),
+        (b"r1230\r", b"z\r"),  # foreign id, extended, remote
+        (b"t8000\r", b"\a"),
+        (b"t1109" + b"00" * 9 + b"\r", b"\a"),
+        (b"t1102AB\r", b"\a"),  # id > 0x7FF, dlc 9, short
+        (b"d1108" + b"00" * 8 + b"\r", b"\a"),
+        (b"X" * 40 + b"\r", b"\a"),
+        (b"?\r", b"\a"),  # CAN FD, over-long, unknown
         (b"C\r", b"\r"),
     ]
     with QemuUart(elf, board="mps2-an386", protocol="slcan", port=free_tcp_port(), lifetime_s=120) as image:
@@ -356,18 +435,31 @@ def test_the_images_slcan_adapter_answers_as_the_lawicel_protocol_says(elf):
 def test_a_signed_link_to_the_image_runs_and_unsigned_samples_are_refused(pend, elf, tmp_path):
     key_file = tmp_path / "hil.key"
     assert run_cli("mavlink", "keygen", key_file).code == 0
-    res = run_scenario(scenario(pend, {"kind": "mavlink", "url": f"tcp:127.0.0.1:{free_tcp_port()}",
-                                       "signing_key": str(key_file)}, controller="qemu", duration=0.5))
+    res = run_scenario(
+        scenario(
+            pend,
+            {"kind": "mavlink", "url": f"tcp:127.0.0.1:{free_tcp_port()}", "signing_key": str(key_file)},
+            controller="qemu",
+            duration=0.5,
+        )
+    )
     assert res.complete, res.reason
     # every answer passed the ground side's signature check (a board without a clock signs from timestamp 0
     # until it accepts a signed message, so a heartbeat sent before the first sample may be refused as too old)
     assert res.info["transport"]["signed"] and res.metrics["lost"] == 0 and res.trace.got.all()
     assert "signing=on" in res.info["controller"]["ready"]  # the key went into the image's flash
     art = load(pend)
-    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), signing_key=read_key(key_file),
-                  lifetime_s=120) as image:
-        unsigned = MavlinkTransport(url=image.url, controller_url="", n_inputs=art.m, n_outputs=art.p,
-                                    n_refs=art.q, ts=art.Ts)
+    with QemuUart(
+        elf,
+        board="mps2-an386",
+        protocol="mavlink",
+        port=free_tcp_port(),
+        signing_key=read_key(key_file),
+        lifetime_s=120,
+    ) as image:
+        unsigned = MavlinkTransport(
+            url=image.url, controller_url="", n_inputs=art.m, n_outputs=art.p, n_refs=art.q, ts=art.Ts
+        )
         with unsigned:
             unsigned.send_frames(unsigned.encode_reset(seq=0))
             unsigned.send_frames(unsigned.encode_sample(seq=1, y=np.zeros(art.p), r=np.zeros(art.q)))
@@ -376,7 +468,14 @@ def test_a_signed_link_to_the_image_runs_and_unsigned_samples_are_refused(pend, 
 
 def test_an_image_that_dies_mid_run_ends_the_run_with_its_reason(pend):
     """The board loses power at t = 0.3 s (QEMU killed): the run stops, incomplete, saying why; nothing raises."""
-    res = run_scenario(scenario(pend, {"interface": "slcan", "channel": f"socket://127.0.0.1:{free_tcp_port()}"},
-                                controller="qemu", duration=1.0, faults=[{"kind": "crash", "start": 0.3}]))
+    res = run_scenario(
+        scenario(
+            pend,
+            {"interface": "slcan", "channel": f"socket://127.0.0.1:{free_tcp_port()}"},
+            controller="qemu",
+            duration=1.0,
+            faults=[{"kind": "crash", "start": 0.3}],
+        )
+    )
     assert not res.complete and "controller exited" in res.reason, res.reason
     assert 25 <= res.metrics["steps"] <= 40 and res.trace.got[:30].all()

@@ -12,14 +12,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.linalg import expm
-
+from conftest import run_cli
 from gainlink.errors import PlantError
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.config import plant_from_config
-
-from conftest import run_cli
+from scipy.linalg import expm
 from test_hil_support import udp_transport
 from thirdparty import gemseo_fmu
 
@@ -70,18 +68,21 @@ def test_model_exchange_plant_integrates_the_mass_damper_exactly(mass_damper, pa
         plant.close()
 
 
-@pytest.mark.parametrize("config, message", [
-    ({"inputs": ["force"]}, "has no variable named 'force' (for inputs)"),
-    ({"inputs": ["damper.useHeatPort"]}, "variable 'damper.useHeatPort' is Boolean, but inputs must be Real"),
-    ({"outputs": ["damper.stateSelect"]}, "variable 'damper.stateSelect' is Enumeration, but outputs must be Real"),
-    ({"inputs": ["spring.c"]}, "spring.c is not an input (causality parameter)"),
-    ({"outputs": []}, "has no Real output to sample"),
-    ({"parameters": {"mass.mass": 2.0}}, "has no variable 'mass.mass' to set"),
-    ({"parameters": {"damper.useHeatPort": 1.5}}, "'damper.useHeatPort' is Boolean; 1.5 is not a value"),
-    ({"interface": "me", "states": ["mass.m_kg"]}, "no variable named 'mass.m_kg' (for states)"),
-    ({"interface": "quantum"}, "interface must be auto, cs or me"),
-    ({"interface": "cs", "rtol": 1e-6}, "rtol and max_step set fmpy's solver"),
-])
+@pytest.mark.parametrize(
+    "config, message",
+    [
+        ({"inputs": ["force"]}, "has no variable named 'force' (for inputs)"),
+        ({"inputs": ["damper.useHeatPort"]}, "variable 'damper.useHeatPort' is Boolean, but inputs must be Real"),
+        ({"outputs": ["damper.stateSelect"]}, "variable 'damper.stateSelect' is Enumeration, but outputs must be Real"),
+        ({"inputs": ["spring.c"]}, "spring.c is not an input (causality parameter)"),
+        ({"outputs": []}, "has no Real output to sample"),
+        ({"parameters": {"mass.mass": 2.0}}, "has no variable 'mass.mass' to set"),
+        ({"parameters": {"damper.useHeatPort": 1.5}}, "'damper.useHeatPort' is Boolean; 1.5 is not a value"),
+        ({"interface": "me", "states": ["mass.m_kg"]}, "no variable named 'mass.m_kg' (for states)"),
+        ({"interface": "quantum"}, "interface must be auto, cs or me"),
+        ({"interface": "cs", "rtol": 1e-6}, "rtol and max_step set fmpy's solver"),
+    ],
+)
 def test_bad_mappings_are_refused_in_one_line(mass_damper, config, message):
     with pytest.raises(PlantError) as err:
         plant_from_config({"kind": "fmu", "path": str(mass_damper), **config})
@@ -143,11 +144,22 @@ def test_linearise_design_and_hil_track_a_reference_on_the_thirdparty_fmu(mass_d
         spec.write_text(toml_write.dumps(data))
     res = run_cli("design", spec, "--out", tmp_path)
     assert res.code == 0, res.err
-    r = run_scenario(parse_scenario({
-        "name": "mass_damper_hil", "artifact": str(tmp_path / "gains.json"), "duration": 1.0, "mode": "lockstep",
-        "controller": "firmware", "step_timeout": 2.0, "peer_timeout": 4.0, "transport": udp_transport(),
-        "plant": {"kind": "fmu", "path": str(mass_damper), "interface": "me"},
-        "reference": {"r_y": {"kind": "step", "at": 0.3, "initial": -0.5, "value": -0.45}}}))
+    r = run_scenario(
+        parse_scenario(
+            {
+                "name": "mass_damper_hil",
+                "artifact": str(tmp_path / "gains.json"),
+                "duration": 1.0,
+                "mode": "lockstep",
+                "controller": "firmware",
+                "step_timeout": 2.0,
+                "peer_timeout": 4.0,
+                "transport": udp_transport(),
+                "plant": {"kind": "fmu", "path": str(mass_damper), "interface": "me"},
+                "reference": {"r_y": {"kind": "step", "at": 0.3, "initial": -0.5, "value": -0.45}},
+            }
+        )
+    )
     m = r.metrics
     assert r.complete and m["steps"] == 1000 and m["lost"] == 0
     assert m["outputs_final"]["y"] == pytest.approx(-0.45, abs=1e-3)

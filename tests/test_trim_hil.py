@@ -21,22 +21,19 @@ from __future__ import annotations
 import json
 import logging
 import math
-import shutil
 import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
-
+from conftest import run_cli
 from gainlink.artifact import from_dict, load, render, seal
 from gainlink.codegen import c_float
 from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
 from gainlink.hil.links.mavlink import MavlinkTransport
-from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
-
-from conftest import run_cli
+from gainlink.hil.plants.build import build_fmu
 from test_hil_support import udp_transport
 from test_mavlink_upload import free_udp_port
 
@@ -88,8 +85,20 @@ def hover(tmp_path_factory) -> dict:
     u_hover = math.sqrt(par["mass"] * par["g"] / par["k_T"])
     (tmp / "template.toml").write_text(TEMPLATE)
     spec = tmp / "hover.toml"
-    res = run_cli("linearize", fmu, "--at", f"z={Z_SET!r}", "--at", f"throttle={u_hover!r}", "--name", "hover",
-                  "--template", tmp / "template.toml", "--out", spec)
+    res = run_cli(
+        "linearize",
+        fmu,
+        "--at",
+        f"z={Z_SET!r}",
+        "--at",
+        f"throttle={u_hover!r}",
+        "--name",
+        "hover",
+        "--template",
+        tmp / "template.toml",
+        "--out",
+        spec,
+    )
     assert res.code == 0, res.err
     assert run_cli("design", spec, "--out", tmp / "design").code == 0
     art = tmp / "design" / "gains.json"
@@ -107,8 +116,9 @@ def test_linearize_writes_the_operating_point_and_the_hover_model(hover):
     par = hover["par"]
     # hover: w = 0, thrust k_T u^2 = m g; d(w_dot)/du = 2 k_T u / m, drag has no slope at w = 0
     np.testing.assert_allclose(spec["plant"]["A"], [[0.0, 1.0], [0.0, 0.0]], atol=1e-12)
-    np.testing.assert_allclose(spec["plant"]["B"], [[0.0], [2.0 * par["k_T"] * hover["u_hover"] / par["mass"]]],
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        spec["plant"]["B"], [[0.0], [2.0 * par["k_T"] * hover["u_hover"] / par["mass"]]], rtol=1e-12
+    )
     a = load(hover["artifact"])
     assert a.u_op.tolist() == [hover["u_hover"]] and a.y_op.tolist() == [Z_SET] and a.q == 0
     assert a.x_op.tolist() == [Z_SET, 0.0]
@@ -138,12 +148,23 @@ def law_equilibrium(data: dict, *, u_rest: float) -> float:
 def hil_run(artifact: Path, fmu: Path, *, duration: float = 8.0):
     """Lockstep HIL: the firmware's CAN node (real host process) over udp_multicast CAN FD, the FMU plant,
     starting 1 m below the set point."""
-    return run_scenario(parse_scenario({
-        "name": "hover_trim", "artifact": str(artifact), "duration": duration, "mode": "lockstep",
-        "controller": "firmware", "step_timeout": 2.0, "peer_timeout": 4.0, "twin": True,
-        "plant": {"kind": "fmu", "path": str(fmu), "outputs": ["z"]},
-        "transport": udp_transport(fd=True), "initial_state": {"z": Z_SET - 1.0},
-    }))
+    return run_scenario(
+        parse_scenario(
+            {
+                "name": "hover_trim",
+                "artifact": str(artifact),
+                "duration": duration,
+                "mode": "lockstep",
+                "controller": "firmware",
+                "step_timeout": 2.0,
+                "peer_timeout": 4.0,
+                "twin": True,
+                "plant": {"kind": "fmu", "path": str(fmu), "outputs": ["z"]},
+                "transport": udp_transport(fd=True),
+                "initial_state": {"z": Z_SET - 1.0},
+            }
+        )
+    )
 
 
 def test_hil_holds_the_trim_altitude_only_with_the_operating_point(hover):
@@ -218,8 +239,9 @@ def read_param(conn, name: str) -> float:
 
 def trim_response(port: int, art) -> tuple[np.float32, np.float32]:
     """Over the HIL link: reset, one sample at y = y_op (the command), then a NaN sample (the safe command)."""
-    t = MavlinkTransport(url=f"udpout:127.0.0.1:{port}", controller_url="", n_inputs=art.m, n_outputs=art.p,
-                         n_refs=art.q, ts=art.Ts)
+    t = MavlinkTransport(
+        url=f"udpout:127.0.0.1:{port}", controller_url="", n_inputs=art.m, n_outputs=art.p, n_refs=art.q, ts=art.Ts
+    )
     with t:
         t.send_frames(t.encode_reset(seq=0))
         assert t.receive_command(timeout=2.0) is not None
@@ -231,7 +253,9 @@ def trim_response(port: int, art) -> tuple[np.float32, np.float32]:
     return np.float32(trim.u[0]), np.float32(safe.u[0])
 
 
-def fmu_closed_loop(data: dict, fmu: Path, *, steps: int, step_at: float, step_to: float) -> tuple[np.ndarray, np.ndarray]:
+def fmu_closed_loop(
+    data: dict, fmu: Path, *, steps: int, step_at: float, step_to: float
+) -> tuple[np.ndarray, np.ndarray]:
     """The FMU (fmpy, Co-Simulation) under the float64 law, from rest at the trim; reference steps at ``step_at``."""
     from gainlink.hil.plants.fmu import FmuPlant
     from gainlink.reference import ReferenceLoop
@@ -245,7 +269,7 @@ def fmu_closed_loop(data: dict, fmu: Path, *, steps: int, step_at: float, step_t
         for k in range(steps):
             Z[k] = plant.outputs()[0]
             U[k] = law.step([Z[k]], [step_to if k * a.Ts >= step_at else Z_SET]).u[0]
-            plant.advance(u=U[k:k + 1], dt=a.Ts)
+            plant.advance(u=U[k : k + 1], dt=a.Ts)
     finally:
         plant.close()
     return Z, U

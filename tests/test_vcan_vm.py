@@ -15,11 +15,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
+from gainlink.hil.links.vcan_vm import prepare_vm, run_in_vm
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import load_scenario
-from gainlink.hil.links.vcan_vm import prepare_vm, run_in_vm
-
 from test_hil_support import can_firmware, cart_fmu, pendulum_gains, pendulum_scenario, udp_transport, write_scenario  # noqa: F401
 
 pytestmark = pytest.mark.slow
@@ -29,20 +27,40 @@ pytestmark = pytest.mark.slow
 def test_lockstep_over_vcan0_in_vm_matches_udp_multicast(tmp_path, pendulum_gains, can_firmware, cart_fmu):
     image = prepare_vm()
     duration = 2.0
-    udp = write_scenario(tmp_path / "udp.toml", pendulum_scenario(
-        gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(fd=True), duration=duration,
-        firmware=str(can_firmware)))
+    udp = write_scenario(
+        tmp_path / "udp.toml",
+        pendulum_scenario(
+            gains=pendulum_gains,
+            fmu=cart_fmu,
+            transport=udp_transport(fd=True),
+            duration=duration,
+            firmware=str(can_firmware),
+        ),
+    )
     host = run_scenario(load_scenario(udp))
     assert host.complete, host.reason
 
     vm_dir = tmp_path / "vm"
     vm_dir.mkdir()
-    write_scenario(vm_dir / "vcan.toml", pendulum_scenario(
-        gains=pendulum_gains, fmu=cart_fmu, duration=duration, firmware=str(can_firmware),
-        transport={"interface": "socketcan", "channel": "vcan0", "fd": True}, step_timeout=2.0, peer_timeout=20.0))
+    write_scenario(
+        vm_dir / "vcan.toml",
+        pendulum_scenario(
+            gains=pendulum_gains,
+            fmu=cart_fmu,
+            duration=duration,
+            firmware=str(can_firmware),
+            transport={"interface": "socketcan", "channel": "vcan0", "fd": True},
+            step_timeout=2.0,
+            peer_timeout=20.0,
+        ),
+    )
     gainlink = Path(sys.executable).parent / "gainlink"
-    run = run_in_vm(f"{gainlink} hil run vcan.toml --report report --no-progress --no-plots > hil.log 2>&1\n",
-                    workdir=vm_dir, timeout=900, image=image)
+    run = run_in_vm(
+        f"{gainlink} hil run vcan.toml --report report --no-progress --no-plots > hil.log 2>&1\n",
+        workdir=vm_dir,
+        timeout=900,
+        image=image,
+    )
     log = (vm_dir / "hil.log").read_text() if (vm_dir / "hil.log").exists() else ""
     assert run.status == 0, f"VM run failed (status {run.status}):\n{log}\n{run.console[-2000:]}"
     vm = json.loads((vm_dir / "report" / "report.json").read_text())
@@ -58,7 +76,7 @@ def test_lockstep_over_vcan0_in_vm_matches_udp_multicast(tmp_path, pendulum_gain
         assert m["complete"] is True and m["steps"] == n and m["lost"] == 0 and m["late"] == 0
         assert abs(m["outputs_final"]["theta"]) < 0.02
     theta = host.trace.y[:, 1]
-    assert abs(theta[0] - 0.1) < 1e-12 and np.abs(theta[n // 2:]).max() < 0.05
+    assert abs(theta[0] - 0.1) < 1e-12 and np.abs(theta[n // 2 :]).max() < 0.05
     # ... and agree: same plant, same float32 firmware law, same frames -> the same trajectory.
     for name, value in host.metrics["outputs_final"].items():
         assert vm["outputs_final"][name] == pytest.approx(value, rel=1e-6, abs=1e-9)

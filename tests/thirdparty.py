@@ -37,9 +37,24 @@ def gemseo_fmu(name: str) -> Path:
         return fmu
     wheel = folder / WHEEL
     if not wheel.exists() or _sha256(wheel) != WHEEL_SHA256:
-        subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:",
-                        "gemseo-fmu==3.1.1", "-d", str(folder), "-q"], check=True, timeout=300,
-                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "pip",
+                "download",
+                "--no-deps",
+                "--only-binary=:all:",
+                "gemseo-fmu==3.1.1",
+                "-d",
+                str(folder),
+                "-q",
+            ],
+            check=True,
+            timeout=300,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+        )
     digest = _sha256(wheel)
     if digest != WHEEL_SHA256:
         raise RuntimeError(f"{wheel}: sha256 {digest} is not the pinned {WHEEL_SHA256}")

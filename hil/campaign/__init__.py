@@ -12,5 +12,13 @@ from .config import Campaign, CampaignError, Criteria, load_campaign, parse_camp
 from .runner import CampaignResult, run
 from .show import show_run
 
-__all__ = ["Campaign", "CampaignError", "CampaignResult", "Criteria", "load_campaign", "parse_campaign", "run",
-           "show_run"]
+__all__ = [
+    "Campaign",
+    "CampaignError",
+    "CampaignResult",
+    "Criteria",
+    "load_campaign",
+    "parse_campaign",
+    "run",
+    "show_run",
+]

@@ -14,7 +14,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-from typing import Iterator
+from collections.abc import Iterator
 
 from gainlink.errors import GainlinkError
 
@@ -36,8 +36,9 @@ class ClusterError(GainlinkError, ConnectionError):
 
 
 @contextlib.contextmanager
-def dask_client(*, scheduler: str | None = None, workers: int | None = None,
-                timeout: float = 20.0) -> Iterator["distributed.Client"]:  # noqa: F821
+def dask_client(
+    *, scheduler: str | None = None, workers: int | None = None, timeout: float = 20.0
+) -> Iterator[distributed.Client]:  # noqa: F821
     """A connected :class:`distributed.Client` for the length of the block.
 
     Parameters
@@ -65,7 +66,8 @@ def dask_client(*, scheduler: str | None = None, workers: int | None = None,
     if n < 1:
         raise ClusterError(f"--workers must be at least 1, not {n}")
     with dask.config.set(LOCAL_CONFIG):
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=logging.ERROR)
+        cluster = LocalCluster(
+            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
+        )
     with contextlib.closing(cluster), contextlib.closing(Client(cluster)) as client:
         yield client

@@ -51,16 +51,29 @@ from __future__ import annotations
 import math
 import re
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 from gainlink.errors import ScenarioError
 from gainlink.fileio import read_user_file
 
 KINDS = ("sil", "hil")
-TOP_KEYS = {"name", "description", "kind", "seed", "runs", "spec", "artifact", "scenario", "grid", "draw",
-            "fault_matrix", "criteria"}
+TOP_KEYS = {
+    "name",
+    "description",
+    "kind",
+    "seed",
+    "runs",
+    "spec",
+    "artifact",
+    "scenario",
+    "grid",
+    "draw",
+    "fault_matrix",
+    "criteria",
+}
 DISTRIBUTIONS = {
     "normal": {"mean", "std"},
     "uniform": {"low", "high"},
@@ -69,8 +82,15 @@ DISTRIBUTIONS = {
     "choice": {"values"},
 }
 APPLY = ("set", "scale", "add")
-CRITERIA_KEYS = {"stable", "bounds", "settled_within", "overshoot_below", "saturated_at_most", "iae_below",
-                 "twin_deviation_below"}
+CRITERIA_KEYS = {
+    "stable",
+    "bounds",
+    "settled_within",
+    "overshoot_below",
+    "saturated_at_most",
+    "iae_below",
+    "twin_deviation_below",
+}
 FAULT_MATRIX_KEYS = {"drop", "delay_steps", "encoding", "start", "stop"}
 ENCODINGS = ("float32", "int16")
 _SEGMENT = r'(?:[A-Za-z_][A-Za-z0-9_]*|"[^"]+")(?:\[\d+\])*'
@@ -180,8 +200,10 @@ def _number(v: Any, where: str, *, positive: bool = False) -> float:
 
 def _path(p: Any, where: str) -> str:
     if not isinstance(p, str) or not _PATH.match(p):
-        raise _fail(f"{where}: {p!r} is not a dotted path such as plant.parameters.M, spec.controller.Q_diag[2] "
-                    'or plant.perturb."A[3][2]" (quote a key holding dots or brackets)')
+        raise _fail(
+            f"{where}: {p!r} is not a dotted path such as plant.parameters.M, spec.controller.Q_diag[2] "
+            'or plant.perturb."A[3][2]" (quote a key holding dots or brackets)'
+        )
     return p
 
 
@@ -231,8 +253,10 @@ def _draw_axis(d: Any, i: int) -> Axis:
     extra = sorted(set(d) - allowed - {"name", "target", "targets", "distribution", "apply"})
     missing = sorted(allowed - set(d))
     if extra or missing:
-        raise _fail(f"{where}: distribution {dist} takes {', '.join(sorted(allowed))}"
-                    + (f" (missing {', '.join(missing)})" if missing else f" (not {', '.join(extra)})"))
+        raise _fail(
+            f"{where}: distribution {dist} takes {', '.join(sorted(allowed))}"
+            + (f" (missing {', '.join(missing)})" if missing else f" (not {', '.join(extra)})")
+        )
     if dist == "choice":
         if not isinstance(d["values"], list) or not d["values"]:
             raise _fail(f"{where}.values must be a non-empty list")
@@ -253,7 +277,11 @@ def _draw_axis(d: Any, i: int) -> Axis:
 def _fault_axes(d: Any) -> tuple[tuple[Axis, ...], tuple[float, float]]:
     d = _keys(d, FAULT_MATRIX_KEYS, "fault_matrix")
     axes = []
-    for key, target in (("drop", "faults.drop"), ("delay_steps", "faults.delay_steps"), ("encoding", "transport.encoding")):
+    for key, target in (
+        ("drop", "faults.drop"),
+        ("delay_steps", "faults.delay_steps"),
+        ("encoding", "transport.encoding"),
+    ):
         if key not in d:
             continue
         values = d[key]
@@ -337,7 +365,7 @@ def parse_campaign(data: Mapping[str, Any], *, path: Path | None = None) -> Camp
     window = (0.0, 1e300)
     if "fault_matrix" in data:
         if kind != "hil":
-            raise _fail("fault_matrix acts on a link: it needs kind = \"hil\"")
+            raise _fail('fault_matrix acts on a link: it needs kind = "hil"')
         faults, window = _fault_axes(data["fault_matrix"])
         grid += faults
     names = [a.name for a in (*grid, *draws)]
@@ -354,11 +382,21 @@ def parse_campaign(data: Mapping[str, Any], *, path: Path | None = None) -> Camp
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise _fail(f"seed must be a whole number >= 0, not {seed!r}")
     return Campaign(
-        name=str(data.get("name", path.stem if path is not None else "campaign")), kind=kind, seed=seed, runs=runs,
-        spec=_load_spec(spec_path) if spec_path is not None else None, spec_path=spec_path,
-        artifact_path=artifact_path, scenario=scenario, grid=tuple(grid), draws=draws,
-        criteria=_criteria(data.get("criteria", {})), fault_window=window, path=path,
-        description=str(data.get("description", "")))
+        name=str(data.get("name", path.stem if path is not None else "campaign")),
+        kind=kind,
+        seed=seed,
+        runs=runs,
+        spec=_load_spec(spec_path) if spec_path is not None else None,
+        spec_path=spec_path,
+        artifact_path=artifact_path,
+        scenario=scenario,
+        grid=tuple(grid),
+        draws=draws,
+        criteria=_criteria(data.get("criteria", {})),
+        fault_window=window,
+        path=path,
+        description=str(data.get("description", "")),
+    )
 
 
 def _list(v: Any, where: str) -> list:

@@ -49,7 +49,7 @@ def growth(e: np.ndarray) -> tuple[bool, float | None]:
     if N < 8:
         return True, None
     a = np.abs(e)
-    last, third = float(a[3 * N // 4:].max()), float(a[N // 2: 3 * N // 4].max())
+    last, third = float(a[3 * N // 4 :].max()), float(a[N // 2 : 3 * N // 4].max())
     ratio = last / third if third > 0 else (0.0 if last == 0 else float("inf"))
     return bool(last <= GROWTH * third or last <= FLOOR * float(a.max())), ratio
 
@@ -70,7 +70,9 @@ def measure(result: Any, artifact: Any) -> dict:
     sat = tr.sat.any(axis=1) if tr.sat.size else np.zeros(0, bool)
     outs = artifact.signals["outputs"]
     out = {
-        "stable": stable, "unstable_reason": None if stable else why, "growth_ratio": ratios,
+        "stable": stable,
+        "unstable_reason": None if stable else why,
+        "growth_ratio": ratios,
         "output_min": {n: float(np.nanmin(tr.y[:, i])) for i, n in enumerate(outs)} if tr.y.size else {},
         "output_max": {n: float(np.nanmax(tr.y[:, i])) for i, n in enumerate(outs)} if tr.y.size else {},
         "longest_saturation_s": _longest_true(sat) * artifact.Ts,
@@ -106,19 +108,35 @@ def evaluate(criteria: Criteria, record: dict) -> list[tuple[str, str]]:
         if criteria.settled_within is not None:
             ts = tr.get("settling_time_s")
             if ts is None or ts > criteria.settled_within:
-                failed.append(("settled_within", f"{name} " + ("never settled" if ts is None else f"settled in {ts:.3g} s")
-                               + f" > {criteria.settled_within:g} s"))
+                failed.append(
+                    (
+                        "settled_within",
+                        f"{name} "
+                        + ("never settled" if ts is None else f"settled in {ts:.3g} s")
+                        + f" > {criteria.settled_within:g} s",
+                    )
+                )
         if criteria.overshoot_below is not None and (tr.get("overshoot_pct") or 0.0) >= criteria.overshoot_below:
-            failed.append(("overshoot_below", f"{name} overshoot {tr['overshoot_pct']:.3g}% >= {criteria.overshoot_below:g}%"))
+            failed.append(
+                ("overshoot_below", f"{name} overshoot {tr['overshoot_pct']:.3g}% >= {criteria.overshoot_below:g}%")
+            )
         if criteria.iae_below is not None:
             iae = tr.get("iae")
             if iae is None or iae >= criteria.iae_below:
-                failed.append(("iae_below", f"{name} IAE {iae if iae is None else f'{iae:.3g}'} >= {criteria.iae_below:g}"))
+                failed.append(
+                    ("iae_below", f"{name} IAE {iae if iae is None else f'{iae:.3g}'} >= {criteria.iae_below:g}")
+                )
     if criteria.saturated_at_most is not None and q["longest_saturation_s"] > criteria.saturated_at_most:
-        failed.append(("saturated_at_most", f"saturated {q['longest_saturation_s']:.3g} s > {criteria.saturated_at_most:g} s"))
+        failed.append(
+            ("saturated_at_most", f"saturated {q['longest_saturation_s']:.3g} s > {criteria.saturated_at_most:g} s")
+        )
     if criteria.twin_deviation_below is not None:
         dev = q.get("twin_output_deviation")
         if dev is None or dev >= criteria.twin_deviation_below:
-            failed.append(("twin_deviation_below",
-                           f"twin deviation {dev if dev is None else f'{dev:.3g}'} >= {criteria.twin_deviation_below:g}"))
+            failed.append(
+                (
+                    "twin_deviation_below",
+                    f"twin deviation {dev if dev is None else f'{dev:.3g}'} >= {criteria.twin_deviation_below:g}",
+                )
+            )
     return failed

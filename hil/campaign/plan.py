@@ -20,7 +20,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 from gainlink import __version__
 from gainlink.artifact import canonical_json, render
 from gainlink.errors import GainlinkError
@@ -28,6 +27,7 @@ from gainlink.errors import GainlinkError
 from ..loop.scenario import parse_scenario
 from ..loop.sil import check_sil
 from .config import Axis, Campaign, CampaignError, path_steps
+
 
 @dataclass(frozen=True)
 class RunPoint:
@@ -78,14 +78,15 @@ def set_path(tree: dict, path: str, value: Any, *, apply: str = "set", where: st
             node[step] = {}
         node = node[step]
     last = steps[-1]
-    container_ok = isinstance(node, list) and isinstance(last, int) and last < len(node) or isinstance(node, dict)
+    container_ok = (isinstance(node, list) and isinstance(last, int) and last < len(node)) or isinstance(node, dict)
     if not container_ok:
         raise CampaignError(f"campaign: {where}: {path}: cannot set it in the base")
     if apply != "set":
         base = node[last] if (isinstance(node, list) or last in node) else None
         if isinstance(base, bool) or not isinstance(base, (int, float)):
-            raise CampaignError(f"campaign: {where}: apply = \"{apply}\" needs a number at {path} in the base "
-                                f"(found {base!r})")
+            raise CampaignError(
+                f'campaign: {where}: apply = "{apply}" needs a number at {path} in the base (found {base!r})'
+            )
         value = base * value if apply == "scale" else base + value
     node[last] = value
 
@@ -121,13 +122,15 @@ def _apply_axis(axis: Axis, value: Any, *, spec: dict | None, scenario: dict, wi
         if target == "faults.drop":
             if value > 0:
                 scenario.setdefault("faults", []).append(
-                    {"kind": "drop", "start": window[0], "stop": window[1], "probability": float(value)})
+                    {"kind": "drop", "start": window[0], "stop": window[1], "probability": float(value)}
+                )
         elif target == "faults.delay_steps":
             if value > 0:
                 scenario.setdefault("faults", []).append(
-                    {"kind": "delay", "start": window[0], "stop": window[1], "delay_steps": int(value)})
+                    {"kind": "delay", "start": window[0], "stop": window[1], "delay_steps": int(value)}
+                )
         elif target.startswith("spec."):
-            set_path(spec, target[len("spec."):], copy.deepcopy(value), apply=axis.apply, where=where)
+            set_path(spec, target[len("spec.") :], copy.deepcopy(value), apply=axis.apply, where=where)
         else:
             set_path(scenario, target, copy.deepcopy(value), apply=axis.apply, where=where)
 
@@ -206,8 +209,19 @@ def plan_campaign(campaign: Campaign) -> CampaignPlan:
             if sha is not None:
                 artifacts.setdefault(sha, got[0])
             rid = run_id(kind=campaign.kind, artifact_sha256=sha, scenario=scenario, seed=seed)
-            runs.append(RunPoint(index=len(runs), id=rid, grid_index=g, draw=j, values=values, artifact_sha256=sha,
-                                 scenario=scenario, seed=seed, error=error))
+            runs.append(
+                RunPoint(
+                    index=len(runs),
+                    id=rid,
+                    grid_index=g,
+                    draw=j,
+                    values=values,
+                    artifact_sha256=sha,
+                    scenario=scenario,
+                    seed=seed,
+                    error=error,
+                )
+            )
     return CampaignPlan(campaign=campaign, runs=tuple(runs), artifacts=artifacts, blobs=blobs)
 
 

@@ -25,7 +25,6 @@ from collections import Counter
 from typing import Any
 
 import numpy as np
-
 from gainlink.fileio import publish_files
 
 from .criteria import evaluate
@@ -36,17 +35,35 @@ MAX_POINT_LINES = 30
 
 
 def _row(point: Any, record: dict, criteria: Any) -> dict:
-    row = {"index": point.index, "id": point.id, "grid_index": point.grid_index, "draw": point.draw,
-           "values": point.values, "seed": point.seed, "artifact_sha256": point.artifact_sha256}
+    row = {
+        "index": point.index,
+        "id": point.id,
+        "grid_index": point.grid_index,
+        "draw": point.draw,
+        "values": point.values,
+        "seed": point.seed,
+        "artifact_sha256": point.artifact_sha256,
+    }
     if record is None:
         return row | {"status": "missing", "failed": ["missing"], "reasons": ["no result"]}
     if record["status"] == "error":
-        return row | {"status": "error", "failed": ["error"], "reasons": [record["reason"]], "worker": record.get("worker")}
+        return row | {
+            "status": "error",
+            "failed": ["error"],
+            "reasons": [record["reason"]],
+            "worker": record.get("worker"),
+        }
     failed = evaluate(criteria, record)
-    return row | {"status": "fail" if failed else "pass", "failed": sorted({k for k, _ in failed}),
-                  "reasons": [text for _, text in failed], "complete": record["complete"],
-                  "run_reason": record.get("reason"), "metrics": record["metrics"], "measures": record["measures"],
-                  "worker": record.get("worker")}
+    return row | {
+        "status": "fail" if failed else "pass",
+        "failed": sorted({k for k, _ in failed}),
+        "reasons": [text for _, text in failed],
+        "complete": record["complete"],
+        "run_reason": record.get("reason"),
+        "metrics": record["metrics"],
+        "measures": record["measures"],
+        "worker": record.get("worker"),
+    }
 
 
 def rows_of(plan: CampaignPlan, store: Any) -> list[dict]:
@@ -68,9 +85,18 @@ def _by_point(plan: CampaignPlan, rows: list[dict]) -> list[dict]:
     points: dict[int, dict] = {}
     grid_names = [a.name for a in plan.campaign.grid]
     for row in rows:
-        p = points.setdefault(row["grid_index"], {"grid_index": row["grid_index"],
-                                                  "values": {k: row["values"][k] for k in grid_names},
-                                                  "runs": 0, "pass": 0, "fail": 0, "error": 0, "iae": []})
+        p = points.setdefault(
+            row["grid_index"],
+            {
+                "grid_index": row["grid_index"],
+                "values": {k: row["values"][k] for k in grid_names},
+                "runs": 0,
+                "pass": 0,
+                "fail": 0,
+                "error": 0,
+                "iae": [],
+            },
+        )
         p["runs"] += 1
         p[row["status"] if row["status"] in ("pass", "fail", "error") else "error"] += 1
         iae = _tracked_iae(row)
@@ -95,21 +121,49 @@ def campaign_csv(plan: CampaignPlan, rows: list[dict]) -> str:
     axes = [a.name for a in (*plan.campaign.grid, *plan.campaign.draws)]
     tracked = sorted({k for r in rows for k in r.get("metrics", {}).get("tracked", {})})
     outs = sorted({k for r in rows for k in r.get("metrics", {}).get("outputs_final", {})})
-    head = ["index", "id", "status", "reasons", *axes, "seed", "complete", "stable", "longest_saturation_s",
-            "twin_output_deviation", "twin_command_deviation",
-            *[f"{t}_{k}" for t in tracked for k in ("iae", "overshoot_pct", "settling_time_s")],
-            *[f"{o}_final" for o in outs], "artifact_sha256"]
+    head = [
+        "index",
+        "id",
+        "status",
+        "reasons",
+        *axes,
+        "seed",
+        "complete",
+        "stable",
+        "longest_saturation_s",
+        "twin_output_deviation",
+        "twin_command_deviation",
+        *[f"{t}_{k}" for t in tracked for k in ("iae", "overshoot_pct", "settling_time_s")],
+        *[f"{o}_final" for o in outs],
+        "artifact_sha256",
+    ]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(head)
     for r in rows:
         m, q = r.get("metrics", {}), r.get("measures", {})
-        w.writerow([r["index"], r["id"], r["status"], "; ".join(r["reasons"]), *[_flat(r["values"][a]) for a in axes],
-                    r["seed"], r.get("complete", ""), q.get("stable", ""), q.get("longest_saturation_s", ""),
-                    _num(q.get("twin_output_deviation")), _num(q.get("twin_command_deviation")),
-                    *[_num(m.get("tracked", {}).get(t, {}).get(k)) for t in tracked
-                      for k in ("iae", "overshoot_pct", "settling_time_s")],
-                    *[_num(m.get("outputs_final", {}).get(o)) for o in outs], r["artifact_sha256"] or ""])
+        w.writerow(
+            [
+                r["index"],
+                r["id"],
+                r["status"],
+                "; ".join(r["reasons"]),
+                *[_flat(r["values"][a]) for a in axes],
+                r["seed"],
+                r.get("complete", ""),
+                q.get("stable", ""),
+                q.get("longest_saturation_s", ""),
+                _num(q.get("twin_output_deviation")),
+                _num(q.get("twin_command_deviation")),
+                *[
+                    _num(m.get("tracked", {}).get(t, {}).get(k))
+                    for t in tracked
+                    for k in ("iae", "overshoot_pct", "settling_time_s")
+                ],
+                *[_num(m.get("outputs_final", {}).get(o)) for o in outs],
+                r["artifact_sha256"] or "",
+            ]
+        )
     return buf.getvalue()
 
 
@@ -144,8 +198,11 @@ def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, ou
     c = plan.campaign
     counts = Counter(r["status"] for r in rows)
     n = len(rows)
-    lines = [f"Campaign {c.name} ({c.kind}): {n} runs, {counts['pass']} passed ({100 * counts['pass'] / max(n, 1):.1f}%), "
-             f"{counts['fail']} failed, {counts['error']} errors" + (f", {counts['missing']} missing" if counts["missing"] else "")]
+    lines = [
+        f"Campaign {c.name} ({c.kind}): {n} runs, {counts['pass']} passed ({100 * counts['pass'] / max(n, 1):.1f}%), "
+        f"{counts['fail']} failed, {counts['error']} errors"
+        + (f", {counts['missing']} missing" if counts["missing"] else "")
+    ]
     if len(points) > 1:
         lines.append("  per grid point:")
         for p in points[:MAX_POINT_LINES]:
@@ -159,8 +216,10 @@ def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, ou
         lines.append("  runs failing each criterion: " + ", ".join(f"{k} {v}" for k, v in failed.most_common()))
     worst = sorted((r for r in rows if _tracked_iae(r) is not None), key=lambda r: -_tracked_iae(r))[:3]
     if worst:
-        lines.append("  worst IAE: " + ", ".join(f"run {r['index']} {r['id']} ({_tracked_iae(r):.4g}, {r['status']})"
-                                                 for r in worst))
+        lines.append(
+            "  worst IAE: "
+            + ", ".join(f"run {r['index']} {r['id']} ({_tracked_iae(r):.4g}, {r['status']})" for r in worst)
+        )
         lines.append(f"  replay one: gainlink campaign show {out} --run {worst[0]['id']} --report REPORT_DIR")
     lines.append(f"  report: {out / 'campaign.json'}, campaign.csv, envelopes.png, scatter.png, failures.txt")
     return "\n".join(lines) + "\n"
@@ -192,8 +251,8 @@ def envelopes_png(plan: CampaignPlan, rows: list[dict], store: Any) -> bytes:
     size = lengths.most_common(1)[0][0] if lengths else 0
     keep = [(tr, s) for tr, s in traces.values() if tr["t"].size == size]
     first = next(iter(keep), (None, None))[0]
-    outs = (first["y"].shape[1] if first is not None else 0)
-    ins = (first["u"].shape[1] if first is not None else 0)
+    outs = first["y"].shape[1] if first is not None else 0
+    ins = first["u"].shape[1] if first is not None else 0
     sig = _signals(plan)
     fig, axes = plt.subplots(max(outs + ins, 1), 1, figsize=(9, 2.3 * max(outs + ins, 1)), sharex=True, squeeze=False)
     if first is None:
@@ -210,7 +269,14 @@ def envelopes_png(plan: CampaignPlan, rows: list[dict], store: Any) -> bytes:
         ax.plot(t, pct[2], color="C0", lw=1.2, label="median")
         failed = [tr[key][:, j] for tr, s in keep if s == "fail"]
         if failed:
-            ax.plot(t, np.nanmedian(np.stack(failed), axis=0), "--", color="C3", lw=1, label=f"median of {len(failed)} failed")
+            ax.plot(
+                t,
+                np.nanmedian(np.stack(failed), axis=0),
+                "--",
+                color="C3",
+                lw=1,
+                label=f"median of {len(failed)} failed",
+            )
         names = sig["outputs"] if key == "y" else sig["inputs"]
         ax.set_ylabel(names[j] if j < len(names) else f"{key}{j}")
         ax.grid(True, alpha=0.3)
@@ -233,9 +299,13 @@ def scatter_png(plan: CampaignPlan, rows: list[dict]) -> bytes:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    axes_ = [a.name for a in (*plan.campaign.draws, *plan.campaign.grid)
-             if all(isinstance(r["values"][a.name], (int, float)) and not isinstance(r["values"][a.name], bool)
-                    for r in rows)]
+    axes_ = [
+        a.name
+        for a in (*plan.campaign.draws, *plan.campaign.grid)
+        if all(
+            isinstance(r["values"][a.name], (int, float)) and not isinstance(r["values"][a.name], bool) for r in rows
+        )
+    ]
     done = [r for r in rows if _tracked_iae(r) is not None]
     n = max(len(axes_), 1)
     cols = min(n, 3)
@@ -243,11 +313,14 @@ def scatter_png(plan: CampaignPlan, rows: list[dict]) -> bytes:
     for k, name in enumerate(axes_ or [None]):
         ax = grid[k // cols, k % cols]
         if name is None or not done:
-            ax.text(0.5, 0.5, "no numeric axis" if name is None else "no finished run", ha="center",
-                    transform=ax.transAxes)
+            ax.text(
+                0.5, 0.5, "no numeric axis" if name is None else "no finished run", ha="center", transform=ax.transAxes
+            )
             continue
-        for status, style in (("fail", dict(color="C3", marker="x", s=22, alpha=0.8)),
-                              ("pass", dict(color="C0", marker="o", s=12, alpha=0.7))):
+        for status, style in (
+            ("fail", dict(color="C3", marker="x", s=22, alpha=0.8)),
+            ("pass", dict(color="C0", marker="o", s=12, alpha=0.7)),
+        ):
             pts = [(r["values"][name], _tracked_iae(r)) for r in done if r["status"] == status]
             if pts:
                 x, y = zip(*pts)
@@ -276,16 +349,30 @@ def merge(plan: CampaignPlan, store: Any) -> tuple[str, list[dict]]:
     points = _by_point(plan, rows)
     c = plan.campaign
     counts = Counter(r["status"] for r in rows)
-    doc = {"campaign": {"name": c.name, "kind": c.kind, "seed": c.seed, "runs_per_point": c.runs,
-                        "description": c.description, "axes": describe_axes(c), "criteria": _criteria_doc(c.criteria),
-                        "spec": str(c.spec_path) if c.spec_path else None,
-                        "artifact": str(c.artifact_path) if c.artifact_path else None},
-           "counts": {"runs": len(rows), **{k: counts.get(k, 0) for k in ("pass", "fail", "error", "missing")}},
-           "points": points, "runs": rows}
+    doc = {
+        "campaign": {
+            "name": c.name,
+            "kind": c.kind,
+            "seed": c.seed,
+            "runs_per_point": c.runs,
+            "description": c.description,
+            "axes": describe_axes(c),
+            "criteria": _criteria_doc(c.criteria),
+            "spec": str(c.spec_path) if c.spec_path else None,
+            "artifact": str(c.artifact_path) if c.artifact_path else None,
+        },
+        "counts": {"runs": len(rows), **{k: counts.get(k, 0) for k in ("pass", "fail", "error", "missing")}},
+        "points": points,
+        "runs": rows,
+    }
     summary = summary_text(plan, rows, points, out=store.out)
-    files = {"campaign.json": json.dumps(doc, sort_keys=True, indent=1, allow_nan=False) + "\n",
-             "campaign.csv": campaign_csv(plan, rows), "failures.txt": failures_text(rows),
-             "envelopes.png": envelopes_png(plan, rows, store), "scatter.png": scatter_png(plan, rows),
-             "summary.txt": summary}
+    files = {
+        "campaign.json": json.dumps(doc, sort_keys=True, indent=1, allow_nan=False) + "\n",
+        "campaign.csv": campaign_csv(plan, rows),
+        "failures.txt": failures_text(rows),
+        "envelopes.png": envelopes_png(plan, rows, store),
+        "scatter.png": scatter_png(plan, rows),
+        "summary.txt": summary,
+    }
     publish_files(store.out, files)
     return summary, rows

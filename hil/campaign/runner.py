@@ -13,9 +13,10 @@ that fails so is recorded as an error with the reason: one bad run costs no othe
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
 
 from .cluster import dask_client
 from .config import Campaign, CampaignError, load_campaign, parse_campaign
@@ -65,17 +66,43 @@ def as_campaign(campaign: Campaign | str | Path | Mapping) -> Campaign:
 def plan_doc(plan: CampaignPlan) -> dict:
     """``plan.json``: the campaign and every run's inputs."""
     c = plan.campaign
-    return {"campaign": {"name": c.name, "kind": c.kind, "seed": c.seed, "runs_per_point": c.runs,
-                         "spec": str(c.spec_path) if c.spec_path else None,
-                         "artifact": str(c.artifact_path) if c.artifact_path else None,
-                         "axes": describe_axes(c), "description": c.description},
-            "runs": [{"index": r.index, "id": r.id, "grid_index": r.grid_index, "draw": r.draw, "values": r.values,
-                      "seed": r.seed, "artifact_sha256": r.artifact_sha256, "scenario": r.scenario,
-                      "error": r.error} for r in plan.runs]}
+    return {
+        "campaign": {
+            "name": c.name,
+            "kind": c.kind,
+            "seed": c.seed,
+            "runs_per_point": c.runs,
+            "spec": str(c.spec_path) if c.spec_path else None,
+            "artifact": str(c.artifact_path) if c.artifact_path else None,
+            "axes": describe_axes(c),
+            "description": c.description,
+        },
+        "runs": [
+            {
+                "index": r.index,
+                "id": r.id,
+                "grid_index": r.grid_index,
+                "draw": r.draw,
+                "values": r.values,
+                "seed": r.seed,
+                "artifact_sha256": r.artifact_sha256,
+                "scenario": r.scenario,
+                "error": r.error,
+            }
+            for r in plan.runs
+        ],
+    }
 
 
-def run(campaign: Campaign | str | Path | Mapping, *, out: str | Path, scheduler: str | None = None,
-        workers: int | None = None, progress: Progress | None = None, batch: int | None = None) -> CampaignResult:
+def run(
+    campaign: Campaign | str | Path | Mapping,
+    *,
+    out: str | Path,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    progress: Progress | None = None,
+    batch: int | None = None,
+) -> CampaignResult:
     """Run every run of a campaign that has no result in ``out`` yet, then write the merged report.
 
     Parameters
@@ -127,8 +154,16 @@ def run(campaign: Campaign | str | Path | Mapping, *, out: str | Path, scheduler
             _submit_and_store(client, plan, todo, store, done=done, total=total, progress=progress, batch=batch)
     summary, rows = merge(plan, store)
     counts = {s: sum(1 for r in rows if r["status"] == s) for s in ("pass", "fail", "error")}
-    return CampaignResult(out=store.out, rows=tuple(rows), passed=counts["pass"], failed=counts["fail"],
-                          errors=counts["error"], reused=reused, executed=len(todo), summary=summary)
+    return CampaignResult(
+        out=store.out,
+        rows=tuple(rows),
+        passed=counts["pass"],
+        failed=counts["fail"],
+        errors=counts["error"],
+        reused=reused,
+        executed=len(todo),
+        summary=summary,
+    )
 
 
 def _data(value: bytes) -> bytes:
@@ -170,15 +205,30 @@ class _Submitter:
         shas = {p.artifact_sha256 for p in points}
         paths = " ".join(str(p.scenario.get("plant", {}).get("path", "")) for p in points)
         needed = {s: f for s, f in self.blobs.items() if s in paths}
-        key = f"gainlink-run-{points[0].id}" if len(points) == 1 else \
-            f"gainlink-batch-{points[0].id}-{len(points)}"
-        return self.client.submit(execute_batch, self.kind, {s: self.plan.artifacts[s] for s in shas},
-                                  [(p.artifact_sha256, p.scenario, p.seed) for p in points], needed,
-                                  key=key, retries=1, pure=False)
+        key = f"gainlink-run-{points[0].id}" if len(points) == 1 else f"gainlink-batch-{points[0].id}-{len(points)}"
+        return self.client.submit(
+            execute_batch,
+            self.kind,
+            {s: self.plan.artifacts[s] for s in shas},
+            [(p.artifact_sha256, p.scenario, p.seed) for p in points],
+            needed,
+            key=key,
+            retries=1,
+            pure=False,
+        )
 
 
-def _submit_and_store(client: Any, plan: CampaignPlan, todo: dict[str, RunPoint], store: Store, *, done: int,
-                      total: int, progress: Progress | None, batch: int | None) -> None:
+def _submit_and_store(
+    client: Any,
+    plan: CampaignPlan,
+    todo: dict[str, RunPoint],
+    store: Store,
+    *,
+    done: int,
+    total: int,
+    progress: Progress | None,
+    batch: int | None,
+) -> None:
     from asyncio import CancelledError
 
     from distributed import as_completed
@@ -188,7 +238,7 @@ def _submit_and_store(client: Any, plan: CampaignPlan, todo: dict[str, RunPoint]
     submitter = _Submitter(client, plan)
     futures, i = {}, 0
     for size in batch_sizes(kind, len(points), sum(client.nthreads().values()), batch=batch):
-        futures[submitter.submit(points[i:i + size])] = points[i:i + size]
+        futures[submitter.submit(points[i : i + size])] = points[i : i + size]
         i += size
     queue = as_completed(list(futures))
     for fut in queue:

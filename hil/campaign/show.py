@@ -30,12 +30,16 @@ def find_run(out: Path, run: str) -> dict:
         return runs[int(run)] | {"kind": plan["campaign"]["kind"]}
     hits = {r["id"]: r for r in runs if r["id"].startswith(run)}
     if len(hits) != 1:
-        raise CampaignError(f"campaign {out}: {'no run' if not hits else 'several runs'} matching {run!r} "
-                            "(give a run id from campaign.csv, or its index)")
+        raise CampaignError(
+            f"campaign {out}: {'no run' if not hits else 'several runs'} matching {run!r} "
+            "(give a run id from campaign.csv, or its index)"
+        )
     return next(iter(hits.values())) | {"kind": plan["campaign"]["kind"]}
 
 
-def show_run(out: str | Path, run: str, *, report: str | Path | None = None, plots: bool = True) -> tuple[RunResult, Path]:
+def show_run(
+    out: str | Path, run: str, *, report: str | Path | None = None, plots: bool = True
+) -> tuple[RunResult, Path]:
     """Run campaign run ``run`` again and write its full report (default ``DIR/replay/<id>``).
 
     Returns the run's result and the report folder.
@@ -49,8 +53,9 @@ def show_run(out: str | Path, run: str, *, report: str | Path | None = None, plo
         artifact, path = artifact_from_bytes(store.artifact_bytes(point["artifact_sha256"]))
     except OSError as exc:
         raise CampaignError(f"campaign {out}: the artifact of run {point['id']} is missing ({exc})") from None
-    scenario = _scenario(point["scenario"], artifact_path=path, seed=point["seed"], blobs=store.blobs(),
-                         kind=point["kind"])
+    scenario = _scenario(
+        point["scenario"], artifact_path=path, seed=point["seed"], blobs=store.blobs(), kind=point["kind"]
+    )
     scenario = dataclasses.replace(scenario, name=f"{out.name} run {point['index']} ({point['id']})")
     try:
         result = run_point(point["kind"], artifact, scenario)
@@ -59,4 +64,3 @@ def show_run(out: str | Path, run: str, *, report: str | Path | None = None, plo
     folder = Path(report) if report is not None else out / "replay" / point["id"]
     write_report(result, folder, artifact=artifact, with_plots=plots)
     return result, folder
-

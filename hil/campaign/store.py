@@ -21,11 +21,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 from gainlink.fileio import atomic_write_bytes, atomic_write_text, prepare_output_dir
 
 from .plan import CampaignPlan, RunPoint
-
 
 TRACE_FIELDS = ("t", "y", "u", "r")
 
@@ -91,8 +89,17 @@ class Store:
         if trace is not None:
             atomic_write_bytes(self.runs / f"{point.id}.npy", trace)
         record = {k: v for k, v in result.items() if k != "trace"}
-        record.update({"id": point.id, "inputs": {"kind": kind, "artifact_sha256": point.artifact_sha256,
-                                                  "scenario": point.scenario, "seed": point.seed}})
+        record.update(
+            {
+                "id": point.id,
+                "inputs": {
+                    "kind": kind,
+                    "artifact_sha256": point.artifact_sha256,
+                    "scenario": point.scenario,
+                    "seed": point.seed,
+                },
+            }
+        )
         atomic_write_text(self.runs / f"{point.id}.json", _compact_json(record))
         return record
 

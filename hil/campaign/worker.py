@@ -26,19 +26,19 @@ import json
 import os
 import socket
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import msgpack
 import numpy as np
-
 from gainlink import __version__
 from gainlink.artifact import Artifact, from_dict
 from gainlink.errors import GainlinkError, TransportError
 from gainlink.fileio import atomic_write_bytes
 
-from ..paths import cache_dir
 from ..loop.scenario import parse_scenario
+from ..paths import cache_dir
 from .criteria import measure
 from .store import encode_trace
 
@@ -133,8 +133,10 @@ def isolate_transport(transport: dict, slot: int) -> dict:
     t = dict(transport)
     if t.get("kind") == "mavlink":
         if "url" in t or "controller_url" in t:
-            raise TransportError("campaign: a MAVLink transport with explicit urls cannot be given a port per run; "
-                                 "give port (the campaign offsets it per run)")
+            raise TransportError(
+                "campaign: a MAVLink transport with explicit urls cannot be given a port per run; "
+                "give port (the campaign offsets it per run)"
+            )
         t["port"] = MAVLINK_PORT0 + 2 * slot
     elif t.get("interface") == "udp_multicast":
         t["channel"] = MULTICAST_GROUP.format(slot + 1)
@@ -220,9 +222,15 @@ def execute(kind: str, artifact_json: bytes, scenario: dict, seed: int, blobs: d
         result = run_point(kind, artifact, sc)
     except GainlinkError as exc:
         return {"status": "error", "reason": str(exc), "worker": _stopped(where, cpu0)}
-    record = {"status": "done", "complete": result.complete, "reason": result.reason, "metrics": result.metrics,
-              "measures": measure(result, artifact), "link": result.info["transport"],
-              "trace": downsampled_trace(result.trace)}
+    record = {
+        "status": "done",
+        "complete": result.complete,
+        "reason": result.reason,
+        "metrics": result.metrics,
+        "measures": measure(result, artifact),
+        "link": result.info["transport"],
+        "trace": downsampled_trace(result.trace),
+    }
     return record | {"worker": _stopped(where, cpu0)}
 
 
@@ -232,8 +240,9 @@ def _stopped(where: dict, cpu0: float) -> dict:
     return where | {"stop": time.time(), "cpu_s": time.thread_time() - cpu0}
 
 
-def execute_batch(kind: str, artifacts: dict[str, bytes], runs: list[tuple[str, dict, int]],
-                  blobs: dict | None = None) -> bytes:
+def execute_batch(
+    kind: str, artifacts: dict[str, bytes], runs: list[tuple[str, dict, int]], blobs: dict | None = None
+) -> bytes:
     """Several campaign runs, one after the other (one Dask task): their records, in order, as one msgpack
     document (read back with :func:`unpack_results`).
 
@@ -260,6 +269,8 @@ def execute_batch(kind: str, artifacts: dict[str, bytes], runs: list[tuple[str, 
 def unpack_results(data: bytes) -> list[dict]:
     """The records of an :func:`execute_batch` result; a worker that answered something else is named."""
     if not isinstance(data, bytes):
-        raise GainlinkError(f"a worker returned {type(data).__name__}, not a batch of records: is it running "
-                            f"another gainlink version than this client ({__version__})?")
+        raise GainlinkError(
+            f"a worker returned {type(data).__name__}, not a batch of records: is it running "
+            f"another gainlink version than this client ({__version__})?"
+        )
     return msgpack.unpackb(data, raw=False, strict_map_key=False)

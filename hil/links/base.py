@@ -14,16 +14,16 @@ Transports are registered by kind in :data:`TRANSPORTS` and built from the scena
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
-
 from gainlink.errors import TransportError
 
 from ..registry import Registry
 
-TRANSPORTS: Registry["Transport"] = Registry(what="transport", error=TransportError)
+TRANSPORTS: Registry[Transport] = Registry(what="transport", error=TransportError)
 
 #: Command status bits (shared by every transport and the firmware apps).
 STATUS_FAULT = 0x01  #: the controller refused a non-finite sample and returned the safe command
@@ -99,7 +99,7 @@ class Transport(ABC):
         """A JSON-able description for the report."""
         return {"kind": type(self).__name__}
 
-    def __enter__(self) -> "Transport":
+    def __enter__(self) -> Transport:
         self.open()
         return self
 

@@ -20,17 +20,17 @@ from __future__ import annotations
 
 import errno
 import json
-import os
 import logging
+import os
 import time
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
-
 from gainlink.errors import TransportError
 
-from .can_layout import CanLayout, FrameSpec, dequantise, layout_for, quantise
 from .base import TRANSPORTS, Command, Transport
+from .can_layout import CanLayout, FrameSpec, dequantise, layout_for, quantise
 
 log = logging.getLogger(__name__)
 
@@ -41,10 +41,15 @@ FIRMWARE_INTERFACES = {"udp_multicast", "socketcan"}
 def _multicast_hint(exc: BaseException, config: Mapping[str, Any]) -> str:
     """A how-to-fix hint when udp_multicast fails for want of a multicast route (loopback-only machines)."""
     cause = exc if isinstance(exc, OSError) else exc.__cause__  # python-can wraps the socket error
-    if config.get("interface") == "udp_multicast" and isinstance(cause, OSError) and \
-            cause.errno in (errno.ENETUNREACH, errno.ENODEV, errno.EADDRNOTAVAIL):
-        return (f" ({cause.strerror}: no multicast route; on a loopback-only machine run "
-                "'ip link set lo up multicast on; ip route add 224.0.0.0/4 dev lo')")
+    if (
+        config.get("interface") == "udp_multicast"
+        and isinstance(cause, OSError)
+        and cause.errno in (errno.ENETUNREACH, errno.ENODEV, errno.EADDRNOTAVAIL)
+    ):
+        return (
+            f" ({cause.strerror}: no multicast route; on a loopback-only machine run "
+            "'ip link set lo up multicast on; ip route add 224.0.0.0/4 dev lo')"
+        )
     return ""
 
 
@@ -107,8 +112,13 @@ def layout_from_config(config: Mapping[str, Any], *, artifact: Any) -> CanLayout
             base = int(base, 0)
         except ValueError:
             raise TransportError(f"CAN transport: base_id {base!r} is not an integer") from None
-    return layout_for(artifact, fd=bool(config.get("fd", False)), base_id=int(base),
-                      encoding=config.get("encoding", "float32"), ranges=config.get("ranges"))
+    return layout_for(
+        artifact,
+        fd=bool(config.get("fd", False)),
+        base_id=int(base),
+        encoding=config.get("encoding", "float32"),
+        ranges=config.get("ranges"),
+    )
 
 
 class FrameCodec:
@@ -142,9 +152,14 @@ class FrameCodec:
             if self.clipped == 0:
                 i = int(np.flatnonzero(clipped)[0])
                 lo, hi = self.offsets[i] - 32767 * self.factors[i], self.offsets[i] + 32767 * self.factors[i]
-                log.warning("CAN int16: %s = %g is outside its range [%g, %g] and was sent saturated; further "
-                            "clipping is counted (encoding_clipped), not logged", self.names[i],
-                            float(np.asarray(values)[i]), lo, hi)
+                log.warning(
+                    "CAN int16: %s = %g is outside its range [%g, %g] and was sent saturated; further "
+                    "clipping is counted (encoding_clipped), not logged",
+                    self.names[i],
+                    float(np.asarray(values)[i]),
+                    lo,
+                    hi,
+                )
             self.clipped += int(clipped.sum())
         return raw
 
@@ -159,9 +174,12 @@ class FrameCodec:
                 for i in range(k):
                     if sat[s.first + i]:
                         bits |= 1 << i
-            data = self.structs[s.arbitration_id].pack(seq, status, bits, *vals[s.first:s.first + k])
-            frames.append(self._Message(arbitration_id=s.arbitration_id, is_extended_id=False, data=data,
-                                        is_fd=self.fd, check=False))
+            data = self.structs[s.arbitration_id].pack(seq, status, bits, *vals[s.first : s.first + k])
+            frames.append(
+                self._Message(
+                    arbitration_id=s.arbitration_id, is_extended_id=False, data=data, is_fd=self.fd, check=False
+                )
+            )
         return frames
 
     def decode(self, arbitration_id: int, data: bytes) -> tuple[int, int, int, np.ndarray] | None:
@@ -203,7 +221,7 @@ class Assembler:
                 self.partial.clear()
             rec = [np.empty(self.codec.size), np.zeros(self.codec.size, dtype=bool), 0, set()]
             self.partial[seq] = rec
-        rec[0][spec.first:spec.first + len(vals)] = vals
+        rec[0][spec.first : spec.first + len(vals)] = vals
         for i in range(len(vals)):
             rec[1][spec.first + i] = bool(bits >> i & 1)
         rec[2] |= status
@@ -233,8 +251,10 @@ class CanTransport(Transport):
         self.slcan = self.config.get("interface") == "slcan"
         if self.slcan:
             if self.fd:
-                raise TransportError("CAN transport: slcan carries classic frames only (remove fd = true; the "
-                                     "int16 encoding fits two values per frame)")
+                raise TransportError(
+                    "CAN transport: slcan carries classic frames only (remove fd = true; the "
+                    "int16 encoding fits two values per frame)"
+                )
             self.config.setdefault("sleep_after_open", 0)
         self.layout: CanLayout = layout_from_config(self.config, artifact=artifact)
         self.tx = FrameCodec(self.layout.measurement, fd=self.fd)
@@ -281,7 +301,7 @@ class CanTransport(Transport):
             raw, _ = quantise(v, self.tx.factors, self.tx.offsets)
             v = dequantise(raw, self.tx.factors, self.tx.offsets)
         v = v.astype(np.float32).astype(np.float64)
-        return v[:len(y)], v[len(y):]
+        return v[: len(y)], v[len(y) :]
 
     def send_frames(self, frames: Sequence[Any]) -> None:
         bus = self.bus
@@ -331,16 +351,25 @@ class CanTransport(Transport):
         from gainlink.firmware.uart import tcp_endpoint
 
         if not self.slcan:
-            raise TransportError(f"controller = \"qemu\" speaks CAN through slcan on the image's UART: use "
-                                 f"interface = \"slcan\", channel = \"socket://HOST:PORT\" (not {self.config.get('interface')})")
+            raise TransportError(
+                f'controller = "qemu" speaks CAN through slcan on the image\'s UART: use '
+                f'interface = "slcan", channel = "socket://HOST:PORT" (not {self.config.get("interface")})'
+            )
         host, port = tcp_endpoint(str(self.config.get("channel", "")), scheme="socket")
         return "slcan", host, port, slcan_image_options(self.layout)
 
     def describe(self) -> dict:
-        out = {"kind": "can", "config": {k: v for k, v in self.config.items()}, "fd": self.fd,
-               "base_id": self.layout.base_id, "frames_per_sample": len(self.layout.measurement),
-               "frames_per_command": len(self.layout.command), "encoding": self.layout.encoding,
-               "frames_sent": self.frames_sent, "frames_refused": self.frames_refused}
+        out = {
+            "kind": "can",
+            "config": {k: v for k, v in self.config.items()},
+            "fd": self.fd,
+            "base_id": self.layout.base_id,
+            "frames_per_sample": len(self.layout.measurement),
+            "frames_per_command": len(self.layout.command),
+            "encoding": self.layout.encoding,
+            "frames_sent": self.frames_sent,
+            "frames_refused": self.frames_refused,
+        }
         if self.tx.int16:
             out["encoding_clipped"] = self.tx.clipped  # measurement values sent saturated to their range
         return out
@@ -359,22 +388,37 @@ def firmware_can_argv(config: Mapping[str, Any], *, layout: CanLayout) -> list[s
     """
     interface = config.get("interface")
     if interface not in FIRMWARE_INTERFACES:
-        raise TransportError(f"the firmware CAN app speaks {' and '.join(sorted(FIRMWARE_INTERFACES))}, "
-                             f"not interface={interface}")
+        raise TransportError(
+            f"the firmware CAN app speaks {' and '.join(sorted(FIRMWARE_INTERFACES))}, not interface={interface}"
+        )
     argv = ["--base-id", str(layout.base_id)]
     if layout.fd:
         argv.append("--fd")
     if layout.encoding == "int16":
-        argv += ["--encoding", "int16", "--scale-measurement", _scale_arg(layout.measurement),
-                 "--scale-command", _scale_arg(layout.command)]
+        argv += [
+            "--encoding",
+            "int16",
+            "--scale-measurement",
+            _scale_arg(layout.measurement),
+            "--scale-command",
+            _scale_arg(layout.command),
+        ]
     spin = int(float(config.get("busy_poll_us", 0)))
     if spin > 0:
         argv += ["--spin-us", str(spin)]
     if interface == "socketcan":
         argv += ["--backend", "socketcan", "--channel", str(config.get("channel", "can0"))]
     else:
-        argv += ["--backend", "udp", "--channel", str(config.get("channel", "239.74.163.2")),
-                 "--port", str(int(config.get("port", 43113))), "--hop-limit", str(int(config.get("hop_limit", 1)))]
+        argv += [
+            "--backend",
+            "udp",
+            "--channel",
+            str(config.get("channel", "239.74.163.2")),
+            "--port",
+            str(int(config.get("port", 43113))),
+            "--hop-limit",
+            str(int(config.get("hop_limit", 1))),
+        ]
     return argv
 
 
@@ -388,8 +432,10 @@ def slcan_image_options(layout: CanLayout) -> list[str]:
 
     opts = [f"base={layout.base_id}", f"encoding={layout.encoding}"]
     if layout.encoding == "int16":
-        opts += [f"meas={scale_option(_value_scales(layout.measurement))}",
-                 f"cmd={scale_option(_value_scales(layout.command))}"]
+        opts += [
+            f"meas={scale_option(_value_scales(layout.measurement))}",
+            f"cmd={scale_option(_value_scales(layout.command))}",
+        ]
     return opts
 
 

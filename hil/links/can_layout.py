@@ -27,11 +27,11 @@ from __future__ import annotations
 import math
 import re
 import struct
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
-
 from gainlink.errors import TransportError
 
 HEADER_BYTES = 4
@@ -93,8 +93,9 @@ def quantise(values: np.ndarray, factors: np.ndarray, offsets: np.ndarray) -> tu
         x = np.rint((v - offsets) / factors)
     finite = np.isfinite(v)
     clipped = finite & (np.abs(x) > INT16_MAX)
-    raw = np.where(finite, np.clip(np.nan_to_num(x, posinf=INT16_MAX, neginf=-INT16_MAX), -INT16_MAX, INT16_MAX),
-                   INT16_NAN)
+    raw = np.where(
+        finite, np.clip(np.nan_to_num(x, posinf=INT16_MAX, neginf=-INT16_MAX), -INT16_MAX, INT16_MAX), INT16_NAN
+    )
     return raw.astype(np.int16), clipped
 
 
@@ -191,35 +192,82 @@ class CanLayout:
         def signals(spec: FrameSpec, receiver: str) -> list:
             rx = [receiver]
             sig = [
-                Signal("seq", start=0, length=16, byte_order="little_endian", is_signed=False, receivers=rx,
-                       comment="sample counter (wraps at 65536)"),
-                Signal("status", start=16, length=8, byte_order="little_endian", is_signed=False, receivers=rx,
-                       comment="bit0 fault (non-finite sample), bit1 watchdog"),
-                Signal("sat", start=24, length=8, byte_order="little_endian", is_signed=False, receivers=rx,
-                       comment="bit i: i-th value of this frame saturated"),
+                Signal(
+                    "seq",
+                    start=0,
+                    length=16,
+                    byte_order="little_endian",
+                    is_signed=False,
+                    receivers=rx,
+                    comment="sample counter (wraps at 65536)",
+                ),
+                Signal(
+                    "status",
+                    start=16,
+                    length=8,
+                    byte_order="little_endian",
+                    is_signed=False,
+                    receivers=rx,
+                    comment="bit0 fault (non-finite sample), bit1 watchdog",
+                ),
+                Signal(
+                    "sat",
+                    start=24,
+                    length=8,
+                    byte_order="little_endian",
+                    is_signed=False,
+                    receivers=rx,
+                    comment="bit i: i-th value of this frame saturated",
+                ),
             ]
             for i, name in enumerate(spec.signals):
                 if spec.encoding == "float32":
-                    sig.append(Signal(name, start=32 + 32 * i, length=32, byte_order="little_endian",
-                                      is_signed=True, receivers=rx,
-                                      conversion=BaseConversion.factory(scale=1, offset=0, is_float=True)))
+                    sig.append(
+                        Signal(
+                            name,
+                            start=32 + 32 * i,
+                            length=32,
+                            byte_order="little_endian",
+                            is_signed=True,
+                            receivers=rx,
+                            conversion=BaseConversion.factory(scale=1, offset=0, is_float=True),
+                        )
+                    )
                 else:
                     sc = spec.scales[i]
-                    sig.append(Signal(
-                        name, start=32 + 16 * i, length=16, byte_order="little_endian", is_signed=True,
-                        receivers=rx, minimum=sc.minimum, maximum=sc.maximum,
-                        conversion=BaseConversion.factory(scale=sc.factor, offset=sc.offset, is_float=False,
-                                                          choices={INT16_NAN: "not_a_number"}),
-                        comment=f"raw {-INT16_MAX}..{INT16_MAX} spans [{sc.minimum:g}, {sc.maximum:g}] "
-                                f"(beyond: saturated); raw {INT16_NAN}: not a number"))
+                    sig.append(
+                        Signal(
+                            name,
+                            start=32 + 16 * i,
+                            length=16,
+                            byte_order="little_endian",
+                            is_signed=True,
+                            receivers=rx,
+                            minimum=sc.minimum,
+                            maximum=sc.maximum,
+                            conversion=BaseConversion.factory(
+                                scale=sc.factor, offset=sc.offset, is_float=False, choices={INT16_NAN: "not_a_number"}
+                            ),
+                            comment=f"raw {-INT16_MAX}..{INT16_MAX} spans [{sc.minimum:g}, {sc.maximum:g}] "
+                            f"(beyond: saturated); raw {INT16_NAN}: not a number",
+                        )
+                    )
             return sig
 
         messages = []
         for role, peer, specs in (("controller", "plant", self.command), ("plant", "controller", self.measurement)):
             for spec in specs:
-                messages.append(Message(frame_id=spec.arbitration_id, name=spec.name, length=spec.length,
-                                        signals=signals(spec, peer), senders=[role], is_fd=self.fd,
-                                        comment=f"sent by the {role}"))
+                messages.append(
+                    Message(
+                        frame_id=spec.arbitration_id,
+                        name=spec.name,
+                        length=spec.length,
+                        signals=signals(spec, peer),
+                        senders=[role],
+                        is_fd=self.fd,
+                        comment=f"sent by the {role}",
+                    )
+                )
         dbc = None
         if self.fd:  # cantools marks frames CAN FD (VFrameFormat) when the bus type attribute says so
             from collections import OrderedDict
@@ -229,10 +277,14 @@ class CanLayout:
             from cantools.database.can.formats.dbc.dbc_specifics import DbcSpecifics
 
             bus_type = DbcAttributeDefinition("BusType", default_value="CAN", type_name="STRING")
-            dbc = DbcSpecifics(attributes=OrderedDict(BusType=DbcAttribute("CAN FD", bus_type)),
-                               attribute_definitions=OrderedDict(BusType=bus_type))
-        nodes = [Node("controller", comment="gainlink firmware (gainlink_can)"),
-                 Node("plant", comment="gainlink HIL bridge")]
+            dbc = DbcSpecifics(
+                attributes=OrderedDict(BusType=DbcAttribute("CAN FD", bus_type)),
+                attribute_definitions=OrderedDict(BusType=bus_type),
+            )
+        nodes = [
+            Node("controller", comment="gainlink firmware (gainlink_can)"),
+            Node("plant", comment="gainlink HIL bridge"),
+        ]
         return Database(messages=messages, nodes=nodes, version="gainlink-1", dbc_specifics=dbc)
 
     def dbc(self) -> str:
@@ -241,37 +293,62 @@ class CanLayout:
 
     def ids(self) -> dict[str, list[int]]:
         """Identifiers by direction."""
-        return {"command": [s.arbitration_id for s in self.command],
-                "measurement": [s.arbitration_id for s in self.measurement]}
+        return {
+            "command": [s.arbitration_id for s in self.command],
+            "measurement": [s.arbitration_id for s in self.measurement],
+        }
 
 
-def _frames(names: list[str], scales: list[SignalScale] | None, *, prefix: str, base: int, per_frame: int, fd: bool,
-            encoding: str, max_frames: int) -> tuple[FrameSpec, ...]:
+def _frames(
+    names: list[str],
+    scales: list[SignalScale] | None,
+    *,
+    prefix: str,
+    base: int,
+    per_frame: int,
+    fd: bool,
+    encoding: str,
+    max_frames: int,
+) -> tuple[FrameSpec, ...]:
     specs = []
     width = VALUE_BYTES[encoding]
     for j, first in enumerate(range(0, len(names), per_frame)):
-        chunk = tuple(names[first:first + per_frame])
+        chunk = tuple(names[first : first + per_frame])
         need = HEADER_BYTES + width * len(chunk)
         length = next(n for n in FD_LENGTHS if n >= need) if fd else 8
-        specs.append(FrameSpec(name=f"{prefix}{j}", arbitration_id=base + j, signals=chunk, first=first, length=length,
-                               encoding=encoding,
-                               scales=tuple(scales[first:first + per_frame]) if scales is not None else ()))
+        specs.append(
+            FrameSpec(
+                name=f"{prefix}{j}",
+                arbitration_id=base + j,
+                signals=chunk,
+                first=first,
+                length=length,
+                encoding=encoding,
+                scales=tuple(scales[first : first + per_frame]) if scales is not None else (),
+            )
+        )
     if len(specs) > max_frames:
-        raise TransportError(f"CAN layout: {len(names)} {prefix.lower()} values need {len(specs)} frames, more "
-                             f"than its {max_frames} identifiers (use fd = true or encoding = \"int16\")")
+        raise TransportError(
+            f"CAN layout: {len(names)} {prefix.lower()} values need {len(specs)} frames, more "
+            f'than its {max_frames} identifiers (use fd = true or encoding = "int16")'
+        )
     return tuple(specs)
 
 
 def _range(key: str, value: Any) -> SignalScale:
-    ok = isinstance(value, (list, tuple)) and len(value) == 2 and \
-        all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    ok = (
+        isinstance(value, (list, tuple))
+        and len(value) == 2
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    )
     if not ok or not float(value[0]) < float(value[1]):
         raise TransportError(f"CAN transport: ranges.{key} must be [min, max] with finite min < max, not {value!r}")
     return SignalScale(minimum=float(value[0]), maximum=float(value[1]))
 
 
-def _scales(artifact: Any, ranges: Mapping[str, Any], *, groups: list[tuple[str, list[str], list[str]]],
-            int16: bool) -> dict[str, list[SignalScale] | None]:
+def _scales(
+    artifact: Any, ranges: Mapping[str, Any], *, groups: list[tuple[str, list[str], list[str]]], int16: bool
+) -> dict[str, list[SignalScale] | None]:
     """Per group (outputs, references, inputs) the range of every value; raises on unknown or missing ones."""
     known: dict[str, list[tuple[str, int]]] = {}
     for group, art_names, dbc_names in groups:
@@ -281,8 +358,9 @@ def _scales(artifact: Any, ranges: Mapping[str, Any], *, groups: list[tuple[str,
     unknown = [k for k in ranges if k not in known]
     if unknown:
         names = ", ".join(dict.fromkeys(n for _, a, _ in groups for n in a))
-        raise TransportError(f"CAN transport: ranges name no signal of the artifact: {', '.join(map(str, unknown))} "
-                             f"(signals: {names})")
+        raise TransportError(
+            f"CAN transport: ranges name no signal of the artifact: {', '.join(map(str, unknown))} (signals: {names})"
+        )
     given: dict[tuple[str, int], SignalScale] = {}
     for key, value in ranges.items():
         sc = _range(key, value)
@@ -305,14 +383,22 @@ def _scales(artifact: Any, ranges: Mapping[str, Any], *, groups: list[tuple[str,
             scales.append(sc)
         out[group] = scales
     if missing:
-        raise TransportError(f"CAN encoding int16 needs a range for {', '.join(missing)}: add ranges = "
-                             f"{{ {missing[0]} = [min, max], ... }} to the transport table (inputs default to the "
-                             "artifact's finite u_min/u_max)")
+        raise TransportError(
+            f"CAN encoding int16 needs a range for {', '.join(missing)}: add ranges = "
+            f"{{ {missing[0]} = [min, max], ... }} to the transport table (inputs default to the "
+            "artifact's finite u_min/u_max)"
+        )
     return out
 
 
-def layout_for(artifact: Any, *, fd: bool = False, base_id: int = 0x100, encoding: str = "float32",
-               ranges: Mapping[str, Any] | None = None) -> CanLayout:
+def layout_for(
+    artifact: Any,
+    *,
+    fd: bool = False,
+    base_id: int = 0x100,
+    encoding: str = "float32",
+    ranges: Mapping[str, Any] | None = None,
+) -> CanLayout:
     """The CAN layout of ``artifact`` (its signal names, sizes m, p, q, input limits).
 
     Parameters
@@ -354,15 +440,32 @@ def layout_for(artifact: Any, *, fd: bool = False, base_id: int = 0x100, encodin
     if len(set(ys + rs)) != len(ys + rs) or len(set(us)) != len(us):
         ys, rs = [f"y{i}" for i in range(artifact.p)], [f"r{i}" for i in range(artifact.q)]
         us = [f"u{i}" for i in range(artifact.m)]
-    sc = _scales(artifact, ranges, int16=encoding == "int16",
-                 groups=[("outputs", list(sig["outputs"]), ys), ("references", list(sig["references"]), rs),
-                         ("inputs", list(sig["inputs"]), us)])
+    sc = _scales(
+        artifact,
+        ranges,
+        int16=encoding == "int16",
+        groups=[
+            ("outputs", list(sig["outputs"]), ys),
+            ("references", list(sig["references"]), rs),
+            ("inputs", list(sig["inputs"]), us),
+        ],
+    )
     meas_scales = None if sc["outputs"] is None else sc["outputs"] + sc["references"]
     common = dict(per_frame=per_frame, fd=fd, encoding=encoding)
     return CanLayout(
-        fd=fd, base_id=base_id, per_frame=per_frame, encoding=encoding,
-        measurement=_frames(ys + rs, meas_scales, prefix="Measurement", base=base_id + MEASUREMENT_OFFSET,
-                            max_frames=MAX_MEASUREMENT_FRAMES, **common),
-        command=_frames(us, sc["inputs"], prefix="Command", base=base_id + COMMAND_OFFSET,
-                        max_frames=MAX_COMMAND_FRAMES, **common),
+        fd=fd,
+        base_id=base_id,
+        per_frame=per_frame,
+        encoding=encoding,
+        measurement=_frames(
+            ys + rs,
+            meas_scales,
+            prefix="Measurement",
+            base=base_id + MEASUREMENT_OFFSET,
+            max_frames=MAX_MEASUREMENT_FRAMES,
+            **common,
+        ),
+        command=_frames(
+            us, sc["inputs"], prefix="Command", base=base_id + COMMAND_OFFSET, max_frames=MAX_COMMAND_FRAMES, **common
+        ),
     )

@@ -15,12 +15,11 @@ import sys
 from typing import Any
 
 import numpy as np
-
 from gainlink.artifact import load
 from gainlink.reference import ReferenceLoop
 
-from .can import Assembler, FrameCodec, layout_from_config, open_bus
 from .base import STATUS_FAULT
+from .can import Assembler, FrameCodec, layout_from_config, open_bus
 
 
 def serve(artifact: Any, config: dict, *, out: Any = sys.stdout) -> int:

@@ -30,13 +30,13 @@ import collections
 import selectors
 import socket
 import time
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
-from pymavlink.dialects.v20 import common as mavlink2
-
 from gainlink.errors import TransportError
 from gainlink.firmware.uart import tcp_endpoint
+from pymavlink.dialects.v20 import common as mavlink2
 
 from ..registry import take_keys
 from .base import STATUS_FAULT, STATUS_WATCHDOG, TRANSPORTS, Command, Transport
@@ -56,7 +56,7 @@ class _DebugFloatArray(mavlink2.MAVLink_debug_float_array_message):
     """DEBUG_FLOAT_ARRAY packed by pymavlink, with MAVLink 2's trailing-zero truncation done in C
     (``bytes.rstrip``) instead of pymavlink's per-byte Python loop over the 58-float array."""
 
-    def pack(self, mav: "mavlink2.MAVLink", force_mavlink1: bool = False) -> bytes:
+    def pack(self, mav: mavlink2.MAVLink, force_mavlink1: bool = False) -> bytes:
         payload = self.unpacker.pack(self.time_usec, self.array_id, self._name_raw, *self.data)
         return self._pack(mav, self.crc_extra, payload.rstrip(b"\0") or payload[:1], force_mavlink1=force_mavlink1)
 
@@ -98,9 +98,20 @@ class MavlinkTransport(Transport):
 
     seq_modulo = 1 << 32
 
-    def __init__(self, *, url: str, controller_url: str, n_inputs: int, n_outputs: int, n_refs: int, ts: float,
-                 system: int = 255, component: int = mavlink2.MAV_COMP_ID_MISSIONPLANNER, busy_poll_us: int = 0,
-                 signing_key: Any = None):
+    def __init__(
+        self,
+        *,
+        url: str,
+        controller_url: str,
+        n_inputs: int,
+        n_outputs: int,
+        n_refs: int,
+        ts: float,
+        system: int = 255,
+        component: int = mavlink2.MAV_COMP_ID_MISSIONPLANNER,
+        busy_poll_us: int = 0,
+        signing_key: Any = None,
+    ):
         if not 0 <= busy_poll_us <= MAX_BUSY_POLL_US:
             raise TransportError(f"mavlink transport: busy_poll_us must be 0..{MAX_BUSY_POLL_US}, not {busy_poll_us!r}")
         if n_outputs + n_refs > 58 or n_inputs > 16:
@@ -266,8 +277,10 @@ class MavlinkTransport(Transport):
 
     def _not_uart(self, what: str) -> None:
         if self.stream:
-            raise TransportError(f"mavlink transport: {self.url} is the UART of the Cortex-M4F image in QEMU; "
-                                 f"it needs controller = \"qemu\", not {what}")
+            raise TransportError(
+                f"mavlink transport: {self.url} is the UART of the Cortex-M4F image in QEMU; "
+                f'it needs controller = "qemu", not {what}'
+            )
 
     def controller_argv(self) -> list[str]:
         from gainlink.firmware.mavlink_app import signing_argv, spin_argv
@@ -288,15 +301,24 @@ class MavlinkTransport(Transport):
 
         self._not_uart('controller = "reference"')
         if self.signing_key is not None:
-            raise TransportError("transport: signing_key needs controller = \"firmware\" (the reference node "
-                                 "does not sign)")
-        return [sys.executable, "-m", "gainlink.hil.links.mavlink_node", str(artifact_path), "--url", self.controller_url]
+            raise TransportError(
+                'transport: signing_key needs controller = "firmware" (the reference node does not sign)'
+            )
+        return [
+            sys.executable,
+            "-m",
+            "gainlink.hil.links.mavlink_node",
+            str(artifact_path),
+            "--url",
+            self.controller_url,
+        ]
 
     def qemu_serve(self) -> tuple[str, str, int, list[str]]:
         """How the Cortex-M4F image must serve this link: ``(protocol, host, port, options)``."""
         if not self.stream:
-            raise TransportError(f"controller = \"qemu\" needs the image's UART as the link: url = \"tcp:HOST:PORT\", "
-                                 f"not {self.url!r}")
+            raise TransportError(
+                f'controller = "qemu" needs the image\'s UART as the link: url = "tcp:HOST:PORT", not {self.url!r}'
+            )
         return "mavlink", self.dest[0], self.dest[1], []
 
     @property
@@ -315,13 +337,21 @@ class MavlinkTransport(Transport):
         return cfg
 
     def describe(self) -> dict:
-        out = {"kind": "mavlink", "url": self.url, "controller_url": self.controller_url,
-               "messages": "DEBUG_FLOAT_ARRAY -> HIL_ACTUATOR_CONTROLS", "ts_us": self.ts_us,
-               "busy_poll_us": self.busy_poll_us, "signed": self.signing_key is not None,
-               "datagrams_sent": self.stats["sent"], "commands_received": self.stats["received"],
-               "foreign_messages": self.stats["foreign"],
-               "unsigned_or_bad_answers": self.mav.signing.reject_count + self.mav.signing.badsig_count
-               if self.signing_key is not None else 0}
+        out = {
+            "kind": "mavlink",
+            "url": self.url,
+            "controller_url": self.controller_url,
+            "messages": "DEBUG_FLOAT_ARRAY -> HIL_ACTUATOR_CONTROLS",
+            "ts_us": self.ts_us,
+            "busy_poll_us": self.busy_poll_us,
+            "signed": self.signing_key is not None,
+            "datagrams_sent": self.stats["sent"],
+            "commands_received": self.stats["received"],
+            "foreign_messages": self.stats["foreign"],
+            "unsigned_or_bad_answers": self.mav.signing.reject_count + self.mav.signing.badsig_count
+            if self.signing_key is not None
+            else 0,
+        }
         if self.stream:
             out["uart"] = True
             out["sample_bytes"] = len(self.encode_sample(seq=1, y=np.zeros(self.p), r=np.zeros(self.q))[0])
@@ -330,24 +360,38 @@ class MavlinkTransport(Transport):
 
 @TRANSPORTS.register("mavlink")
 def _from_config(config: Mapping[str, Any], *, artifact: Any, **_: Any) -> MavlinkTransport:
-    cfg = take_keys(config, allowed={"kind", "port", "host", "url", "controller_url", "busy_poll_us", "signing_key"},
-                    where="transport", error=TransportError)
+    cfg = take_keys(
+        config,
+        allowed={"kind", "port", "host", "url", "controller_url", "busy_poll_us", "signing_key"},
+        where="transport",
+        error=TransportError,
+    )
     host = str(cfg.get("host", "127.0.0.1"))
     port = cfg.get("port", DEFAULT_PORT)
     if not isinstance(port, int) or not 0 < port < 65536:
         raise TransportError(f"transport: port must be an integer 1..65535, not {port!r}")
     busy = cfg.get("busy_poll_us", 0)
     if isinstance(busy, bool) or not isinstance(busy, int) or not 0 <= busy <= MAX_BUSY_POLL_US:
-        raise TransportError(f"transport: busy_poll_us must be an integer 0..{MAX_BUSY_POLL_US} (microseconds), not {busy!r}")
+        raise TransportError(
+            f"transport: busy_poll_us must be an integer 0..{MAX_BUSY_POLL_US} (microseconds), not {busy!r}"
+        )
     url = str(cfg.get("url", f"udpout:{host}:{port}"))
     if url.startswith("tcp:"):
         if "controller_url" in cfg or "port" in cfg:
-            raise TransportError("transport: url = \"tcp:...\" (the image's UART) takes no port or controller_url")
+            raise TransportError('transport: url = "tcp:..." (the image\'s UART) takes no port or controller_url')
         controller_url = ""
     else:
         controller_url = str(cfg.get("controller_url", f"udpin:{host}:{_udp_endpoint(url, scheme='udpout')[1]}"))
     key = cfg.get("signing_key")
     if key is not None and not isinstance(key, str):
         raise TransportError(f"transport: signing_key must be a key file path, not {key!r}")
-    return MavlinkTransport(url=url, controller_url=controller_url, n_inputs=artifact.m, n_outputs=artifact.p,
-                            n_refs=artifact.q, ts=float(artifact.Ts), busy_poll_us=busy, signing_key=key)
+    return MavlinkTransport(
+        url=url,
+        controller_url=controller_url,
+        n_inputs=artifact.m,
+        n_outputs=artifact.p,
+        n_refs=artifact.q,
+        ts=float(artifact.Ts),
+        busy_poll_us=busy,
+        signing_key=key,
+    )

@@ -17,10 +17,9 @@ import sys
 from typing import Any
 
 import numpy as np
-from pymavlink.dialects.v20 import common as mavlink2
-
 from gainlink.artifact import load
 from gainlink.reference import ReferenceLoop
+from pymavlink.dialects.v20 import common as mavlink2
 
 from .mavlink import ARRAY_IDLE, ARRAY_RESET, ARRAY_SAMPLE, FLAG_FAULT, FLAG_RESET, FLAG_WATCHDOG, SAT_SHIFT
 
@@ -49,7 +48,7 @@ def serve(artifact: Any, *, url: str, out: Any = sys.stdout) -> int:
         while not stop:
             try:
                 data, addr = sock.recvfrom(2048)
-            except (TimeoutError, socket.timeout, InterruptedError):
+            except (TimeoutError, InterruptedError):
                 continue
             try:
                 msgs = mav.parse_buffer(bytearray(data)) or []
@@ -86,7 +85,9 @@ def serve(artifact: Any, *, url: str, out: Any = sys.stdout) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: ``ARTIFACT --url udpin:HOST:PORT``."""
-    parser = argparse.ArgumentParser(prog="python -m gainlink.hil.links.mavlink_node", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m gainlink.hil.links.mavlink_node", description=__doc__.splitlines()[0]
+    )
     parser.add_argument("artifact")
     parser.add_argument("--url", required=True, help="udpin:HOST:PORT")
     args = parser.parse_args(argv)

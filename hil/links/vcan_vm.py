@@ -87,6 +87,7 @@ def _download_kernel_deb(dest: Path) -> Path:
         return debs[-1]
     if shutil.which("apt-get") is None or shutil.which("apt-cache") is None:
         raise ToolchainError("the vcan VM needs apt-get to download Debian's kernel package")
+
     def lookup() -> re.Match | None:
         deps = subprocess.run(["apt-cache", "depends", "linux-image-amd64"], capture_output=True, text=True)
         return re.search(r"Depends:\s*(linux-image-6\.1\.\S+-amd64)\b", deps.stdout)
@@ -108,8 +109,10 @@ def _download_kernel_deb(dest: Path) -> Path:
 def _extract(deb: Path, into: Path) -> None:
     """Unpack only the kernel image and the module folders the VM needs (``dpkg-deb --fsys-tarfile``)."""
     tar_bytes = subprocess.run(["dpkg-deb", "--fsys-tarfile", str(deb)], capture_output=True, check=True).stdout
-    wanted = re.compile(r"^\./(boot/vmlinuz-|lib/modules/[^/]+/kernel/(net/can|net/9p|fs/9p|fs/netfs|fs/fscache|"
-                        r"fs/overlayfs|drivers/virtio|drivers/net/can))")
+    wanted = re.compile(
+        r"^\./(boot/vmlinuz-|lib/modules/[^/]+/kernel/(net/can|net/9p|fs/9p|fs/netfs|fs/fscache|"
+        r"fs/overlayfs|drivers/virtio|drivers/net/can))"
+    )
     with tarfile.open(fileobj=io.BytesIO(tar_bytes)) as tf:
         members = [m for m in tf.getmembers() if (m.isfile() or m.isdir()) and wanted.match(m.name)]
         tf.extractall(into, members=members, filter="data")
@@ -121,7 +124,7 @@ def _vmlinux(vmlinuz: Path, out: Path) -> None:
     for m in re.finditer(re.escape(b"\xfd7zXZ\x00"), data):
         dec = lzma.LZMADecompressor(format=lzma.FORMAT_XZ)
         try:
-            elf = dec.decompress(data[m.start():])
+            elf = dec.decompress(data[m.start() :])
         except lzma.LZMAError:
             continue
         if elf[:4] == b"\x7fELF":
@@ -145,7 +148,7 @@ def _module_closure(root: Path) -> list[Path]:
         if path is None:
             raise ToolchainError(f"kernel module {name} not found in the kernel package")
         m = re.search(rb"depends=([^\x00]*)", path.read_bytes())
-        for dep in (m.group(1).decode().split(",") if m and m.group(1) else []):
+        for dep in m.group(1).decode().split(",") if m and m.group(1) else []:
             visit(dep)
         order.append(path)
 
@@ -206,8 +209,9 @@ def prepare_vm(*, cache: Path | None = None) -> VmImage:
     return VmImage(kernel=kernel, initrd=initrd, version=version)
 
 
-def run_in_vm(script: str, *, workdir: Path, timeout: float = 600.0, memory_mb: int = 768,
-              image: VmImage | None = None) -> VmRun:
+def run_in_vm(
+    script: str, *, workdir: Path, timeout: float = 600.0, memory_mb: int = 768, image: VmImage | None = None
+) -> VmRun:
     """Boot the VM, run ``script`` (sh) in a chroot of the host root with ``vcan0`` up, and power off.
 
     ``workdir`` (a host folder) is shared writable at the same path inside the VM and is the
@@ -218,15 +222,39 @@ def run_in_vm(script: str, *, workdir: Path, timeout: float = 600.0, memory_mb: 
     workdir = Path(workdir).resolve()
     workdir.mkdir(parents=True, exist_ok=True)
     (workdir / "run.sh").write_text(script, "utf-8")
-    cmd = ["qemu-system-x86_64", "-accel", "tcg", "-cpu", "max", "-m", str(memory_mb), "-smp", "1", "-nodefaults",
-           "-display", "none", "-serial", "stdio", "-monitor", "none", "-no-reboot",
-           "-kernel", str(image.kernel), "-initrd", str(image.initrd),
-           "-append", f"console=ttyS0 panic=-1 quiet loglevel=3 gl_out={workdir}",
-           "-virtfs", "local,path=/,mount_tag=hostroot,security_model=none,readonly=on,multidevs=remap",
-           "-virtfs", f"local,path={workdir},mount_tag=hostout,security_model=none,multidevs=remap"]
+    cmd = [
+        "qemu-system-x86_64",
+        "-accel",
+        "tcg",
+        "-cpu",
+        "max",
+        "-m",
+        str(memory_mb),
+        "-smp",
+        "1",
+        "-nodefaults",
+        "-display",
+        "none",
+        "-serial",
+        "stdio",
+        "-monitor",
+        "none",
+        "-no-reboot",
+        "-kernel",
+        str(image.kernel),
+        "-initrd",
+        str(image.initrd),
+        "-append",
+        f"console=ttyS0 panic=-1 quiet loglevel=3 gl_out={workdir}",
+        "-virtfs",
+        "local,path=/,mount_tag=hostroot,security_model=none,readonly=on,multidevs=remap",
+        "-virtfs",
+        f"local,path={workdir},mount_tag=hostout,security_model=none,multidevs=remap",
+    ]
     t0 = time.monotonic()
-    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            start_new_session=True)
+    proc = subprocess.Popen(
+        cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True
+    )
     try:
         out, _ = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:

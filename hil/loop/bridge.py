@@ -12,28 +12,27 @@ from __future__ import annotations
 import logging
 import os
 import time
+from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
-
 from gainlink.artifact import Artifact, load
 from gainlink.errors import GainlinkError, PlantError, ScenarioError, TransportError
 
+from ..links.base import Transport, transport_from_config
+from ..plants.base import Plant, check_dimensions
+from ..plants.config import plant_from_config
 from .controller import ControllerProcess, controller_argv, qemu_peer
 from .faults import FaultInjector
-from ..plants.config import plant_from_config
 from .metrics import RunTrace, compute_metrics, link_capacity
-from ..plants.base import Plant, check_dimensions
-from .scheduler import SPIN_NS, Pacer, Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
-from .plan import Plan, Recorder, describe_artifact, plan_run, start_twin
+from .plan import Recorder, describe_artifact, plan_run, start_twin
 from .scenario import Scenario
-from ..links.base import Transport, transport_from_config
+from .scheduler import SPIN_NS, Pacer, Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
 
 log = logging.getLogger(__name__)
-
 
 
 @dataclass(frozen=True)
@@ -62,16 +61,20 @@ def build_plant(scenario: Scenario, *, artifact: Artifact) -> Plant:
         check_dimensions(plant, m=artifact.m, p=artifact.p, artifact=str(scenario.artifact_path))
         for name in scenario.reference:
             if name not in artifact.signals["references"]:
-                raise ScenarioError(f"scenario: reference {name!r} is not a reference of the artifact "
-                                    f"(references: {', '.join(artifact.signals['references']) or 'none'})")
+                raise ScenarioError(
+                    f"scenario: reference {name!r} is not a reference of the artifact "
+                    f"(references: {', '.join(artifact.signals['references']) or 'none'})"
+                )
         for name in scenario.noise:
             if name not in plant.output_names:
-                raise ScenarioError(f"scenario: noise on {name!r}, which is not a plant output "
-                                    f"({', '.join(plant.output_names)})")
+                raise ScenarioError(
+                    f"scenario: noise on {name!r}, which is not a plant output ({', '.join(plant.output_names)})"
+                )
         for d in scenario.disturbances:
             if d.input not in plant.input_names:
-                raise ScenarioError(f"scenario: disturbance on {d.input!r}, which is not a plant input "
-                                    f"({', '.join(plant.input_names)})")
+                raise ScenarioError(
+                    f"scenario: disturbance on {d.input!r}, which is not a plant input ({', '.join(plant.input_names)})"
+                )
     except GainlinkError:
         plant.close()
         raise
@@ -100,9 +103,12 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
         busy_poll = bool(scenario.transport.get("busy_poll_us", 0))
         cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else [0]
         affinity = "none" if scenario.controller == "qemu" and scenario.affinity == "auto" else scenario.affinity
-        placement = stack.enter_context(Placement(
-            resolve_affinity(affinity, mode=scenario.mode, busy_poll=busy_poll, cpus=cpus),
-            peer_pid=peer.proc.pid if peer.proc is not None else None))
+        placement = stack.enter_context(
+            Placement(
+                resolve_affinity(affinity, mode=scenario.mode, busy_poll=busy_poll, cpus=cpus),
+                peer_pid=peer.proc.pid if peer.proc is not None else None,
+            )
+        )
         stack.enter_context(gc_paused())
         pm_qos = stack.enter_context(cpu_latency_qos()) if scenario.mode == "realtime" and scenario.pm_qos else False
         loop = _Loop(scenario, artifact=artifact, plant=plant, transport=transport, peer=peer)
@@ -111,8 +117,11 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
         if scenario.controller == "qemu":
             transport.close()  # the UART's client leaves before the board powers off (slcan's close writes to it)
         code = peer.stop()  # its exit summary counts everything it received, hostile traffic included
-        result.metrics["controller"] = {"exit_status": code, "counters": peer.counters(),
-                                        "stderr_bytes": peer.stderr_bytes()}
+        result.metrics["controller"] = {
+            "exit_status": code,
+            "counters": peer.counters(),
+            "stderr_bytes": peer.stderr_bytes(),
+        }
         result.metrics["cpu"] = placement.describe()
         if scenario.mode == "realtime":
             result.metrics["pm_qos"] = pm_qos
@@ -129,16 +138,26 @@ def _start_peer(scenario: Scenario, *, artifact: Artifact, transport: Transport,
     starts (and prints its banner) before the bridge connects.
     """
     if scenario.controller == "qemu":
-        peer = qemu_peer(artifact=artifact, transport=transport, board=scenario.board, elf=scenario.firmware,
-                         duration_s=scenario.duration)
+        peer = qemu_peer(
+            artifact=artifact,
+            transport=transport,
+            board=scenario.board,
+            elf=scenario.firmware,
+            duration_s=scenario.duration,
+        )
         stack.callback(peer.close)
         peer.start()
         peer.check_artifact(artifact.sha256)
         transport.open()
         stack.callback(transport.close)
         return peer
-    argv = controller_argv(scenario.controller, artifact=artifact, artifact_path=scenario.artifact_path,
-                           transport=transport, executable=scenario.firmware)
+    argv = controller_argv(
+        scenario.controller,
+        artifact=artifact,
+        artifact_path=scenario.artifact_path,
+        transport=transport,
+        executable=scenario.firmware,
+    )
     transport.open()
     stack.callback(transport.close)
     peer = ControllerProcess(argv)
@@ -163,8 +182,9 @@ class _Loop:
     the peer went silent, and the overruns of a real-time run.
     """
 
-    def __init__(self, scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Transport,
-                 peer: ControllerProcess) -> None:
+    def __init__(
+        self, scenario: Scenario, *, artifact: Artifact, plant: Plant, transport: Transport, peer: ControllerProcess
+    ) -> None:
         self.scenario, self.a, self.plant, self.transport, self.peer = scenario, artifact, plant, transport, peer
         self.plan = plan_run(scenario, artifact=artifact, plant=plant)
         self.rec = Recorder(self.plan, artifact=artifact, plant=plant)
@@ -323,14 +343,15 @@ class _Loop:
         code = self.peer.exit_status()
         if code is not None:
             self.rec.U[k] = self.u
-            raise _Stop(f"controller exited with status {code} at step {k} (t={k * Ts:.3f} s){_tail(self.peer)}",
-                        k + 1)
+            raise _Stop(f"controller exited with status {code} at step {k} (t={k * Ts:.3f} s){_tail(self.peer)}", k + 1)
         timeout = self.scenario.peer_timeout
         if now - self.silent_since_ns >= timeout * 1e9:
             since = int(round((self.silent_since_ns - self.t_start) / 1e9 / max(self.plan.period_s, 1e-9)))
             self.rec.U[k] = self.u
-            raise _Stop(f"controller silent for {timeout:g} s since step {since} (no command for sample {k}, "
-                        f"t={k * Ts:.3f} s)", k + 1)
+            raise _Stop(
+                f"controller silent for {timeout:g} s since step {since} (no command for sample {k}, t={k * Ts:.3f} s)",
+                k + 1,
+            )
 
     def _result(self, steps: int, *, reason: str | None, fifo: bool) -> RunResult:
         """Metrics, trace and what ran, for ``steps`` steps."""
@@ -339,20 +360,34 @@ class _Loop:
         trace = self.rec.trace(steps, self.twin)
         metrics = compute_metrics(trace, artifact=a, mode=scenario.mode, late=self.late, period_s=self.plan.period_s)
         wall = (time.perf_counter_ns() - self.t_start) / 1e9
-        metrics.update({"complete": complete, "steps_planned": self.plan.N, "wall_s": wall,
-                        "steps_per_s": steps / wall if wall > 0 else None, "sched_fifo": fifo,
-                        "faults_injected": self.injector.counts, "mode": scenario.mode})
+        metrics.update(
+            {
+                "complete": complete,
+                "steps_planned": self.plan.N,
+                "wall_s": wall,
+                "steps_per_s": steps / wall if wall > 0 else None,
+                "sched_fifo": fifo,
+                "faults_injected": self.injector.counts,
+                "mode": scenario.mode,
+            }
+        )
         if self.plan.realtime:
             metrics["overruns"] = self.overruns
             metrics["overrun_policy"] = scenario.overrun
         if reason:
             metrics["reason"] = reason
         plant = self.plant
-        info = {"artifact": describe_artifact(a, scenario.artifact_path),
-                "plant": {"name": plant.name, "inputs": list(plant.input_names), "outputs": list(plant.output_names),
-                          "states": list(plant.state_names)},
-                "transport": self.transport.describe(),
-                "controller": {"kind": scenario.controller, "argv": self.peer.argv, "ready": self.peer.ready_line}}
+        info = {
+            "artifact": describe_artifact(a, scenario.artifact_path),
+            "plant": {
+                "name": plant.name,
+                "inputs": list(plant.input_names),
+                "outputs": list(plant.output_names),
+                "states": list(plant.state_names),
+            },
+            "transport": self.transport.describe(),
+            "controller": {"kind": scenario.controller, "argv": self.peer.argv, "ready": self.peer.ready_line},
+        }
         if scenario.controller == "qemu":
             info["controller"]["board"] = scenario.board
             metrics["uart"] = link_capacity(trace)

@@ -48,13 +48,21 @@ def qemu_peer(*, artifact: Any, transport: Any, board: str, elf: Path | None, du
         elf = build(artifact, target="cortex-m4", board=board).files["elf"]
     elif not Path(elf).is_file():
         raise FirmwareError(f"firmware image {elf} not found")
-    return QemuUart(Path(elf), board=board, protocol=protocol, host=host, port=port, options=options,
-                    lifetime_s=QEMU_SLACK_S + 4.0 * duration_s,
-                    signing_key=getattr(transport, "signing_key_bytes", None))
+    return QemuUart(
+        Path(elf),
+        board=board,
+        protocol=protocol,
+        host=host,
+        port=port,
+        options=options,
+        lifetime_s=QEMU_SLACK_S + 4.0 * duration_s,
+        signing_key=getattr(transport, "signing_key_bytes", None),
+    )
 
 
-def controller_argv(kind: str, *, artifact: Any, artifact_path: Path, transport: Any,
-                    executable: Path | None = None) -> list[str]:
+def controller_argv(
+    kind: str, *, artifact: Any, artifact_path: Path, transport: Any, executable: Path | None = None
+) -> list[str]:
     """The command line of the controller peer ``kind`` for this transport.
 
     For ``firmware``: ``executable`` (a prebuilt app named by the scenario) if given, else the
@@ -70,8 +78,14 @@ def controller_argv(kind: str, *, artifact: Any, artifact_path: Path, transport:
     if kind == "reference":
         if hasattr(transport, "reference_argv"):  # e.g. MAVLink: the transport names its own reference node
             return transport.reference_argv(artifact_path)
-        return [sys.executable, "-m", "gainlink.hil.links.can_node", str(artifact_path),
-                "--config", json.dumps(transport.config)]
+        return [
+            sys.executable,
+            "-m",
+            "gainlink.hil.links.can_node",
+            str(artifact_path),
+            "--config",
+            json.dumps(transport.config),
+        ]
     if kind == "qemu":
         raise FirmwareError('controller = "qemu" is not a host process: the bridge starts it with qemu_peer()')
     raise FirmwareError(f"unknown controller {kind!r} (choose from {', '.join(CONTROLLERS)})")
@@ -102,14 +116,21 @@ class ControllerProcess:
         if m is None or m.group(1) != sha256:
             found = m.group(1)[:16] if m else "unknown"
             self.stop()
-            raise FirmwareError(f"controller {Path(self.argv[0]).name} runs artifact sha256:{found}..., "
-                                f"not the scenario's sha256:{sha256[:16]}...")
+            raise FirmwareError(
+                f"controller {Path(self.argv[0]).name} runs artifact sha256:{found}..., "
+                f"not the scenario's sha256:{sha256[:16]}..."
+            )
 
     def start(self) -> None:
         """Start the process and wait for its ready line; :class:`FirmwareError` if it dies or stays silent."""
         try:
-            self.proc = subprocess.Popen(self.argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                         stderr=subprocess.PIPE, start_new_session=True)
+            self.proc = subprocess.Popen(
+                self.argv,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                start_new_session=True,
+            )
         except OSError as exc:
             raise FirmwareError(f"cannot start controller {self.argv[0]}: {exc.strerror}") from None
         self._stderr = StderrCapture(self.proc.stderr)  # drained at once, kept bounded (head + tail)
@@ -122,16 +143,20 @@ class ControllerProcess:
                 left = deadline - time.monotonic()
                 if left <= 0:
                     self.stop()
-                    raise FirmwareError(f"controller {Path(self.argv[0]).name} sent no ready line within "
-                                        f"{self.ready_timeout:.0f} s{self._stderr_hint()}")
+                    raise FirmwareError(
+                        f"controller {Path(self.argv[0]).name} sent no ready line within "
+                        f"{self.ready_timeout:.0f} s{self._stderr_hint()}"
+                    )
                 if not sel.select(timeout=left):
                     continue
                 chunk = os.read(self.proc.stdout.fileno(), 4096)
                 if not chunk:
                     code = self.proc.wait(timeout=5)
                     self._stderr.join()
-                    raise FirmwareError(f"controller {Path(self.argv[0]).name} exited with status {code} before "
-                                        f"it was ready{self._stderr_hint()}")
+                    raise FirmwareError(
+                        f"controller {Path(self.argv[0]).name} exited with status {code} before "
+                        f"it was ready{self._stderr_hint()}"
+                    )
                 buf += chunk
         finally:
             sel.close()

@@ -7,7 +7,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-
 from gainlink.twin import twin_comparison
 
 
@@ -110,16 +109,20 @@ def compute_metrics(trace: RunTrace, *, artifact: Any, mode: str, late: int, per
         "saturation_fraction": {name: float(v) for name, v in zip(sig["inputs"], sat_frac)},
         "outputs_final": {name: float(v) for name, v in zip(sig["outputs"], trace.y[-1])} if N else {},
         "inputs_peak_abs": {name: float(v) for name, v in zip(sig["inputs"], np.abs(trace.u).max(axis=0))} if N else {},
-        "outputs_peak_abs": {name: float(v) for name, v in zip(sig["outputs"], np.abs(trace.y).max(axis=0))} if N else {},
+        "outputs_peak_abs": {name: float(v) for name, v in zip(sig["outputs"], np.abs(trace.y).max(axis=0))}
+        if N
+        else {},
     }
     if trace.has_twin:
         if a.q:  # the controller's own state is not on the link: the ideal loop's integrator, from the twin
-            out["peak_integrator"] = {name: float(v) for name, v in
-                                      zip(sig["references"], np.abs(trace.twin_z).max(axis=0))}
+            out["peak_integrator"] = {
+                name: float(v) for name, v in zip(sig["references"], np.abs(trace.twin_z).max(axis=0))
+            }
             integral_cmd = np.abs(trace.twin_z @ a.Ki.T).max(axis=0)
             out["peak_integral_command"] = {name: float(v) for name, v in zip(sig["inputs"], integral_cmd)}
-        out["twin"] = twin_comparison(t=trace.t, y=trace.y, u=trace.u, r=trace.r, twin_y=trace.twin_y,
-                                      twin_u=trace.twin_u, artifact=a).to_dict()
+        out["twin"] = twin_comparison(
+            t=trace.t, y=trace.y, u=trace.u, r=trace.r, twin_y=trace.twin_y, twin_u=trace.twin_u, artifact=a
+        ).to_dict()
     tracked = {}
     if N:
         if a.q:
@@ -142,8 +145,11 @@ def link_capacity(trace: RunTrace) -> dict:
     lat = trace.latency_ns[trace.got & np.isfinite(trace.latency_ns)]
     if lat.size == 0:
         return {"round_trips_per_s": None, "loop_hz_p99": None, "commands": 0}
-    return {"round_trips_per_s": float(1e9 / lat.mean()), "loop_hz_p99": float(1e9 / np.percentile(lat, 99)),
-            "commands": int(lat.size)}
+    return {
+        "round_trips_per_s": float(1e9 / lat.mean()),
+        "loop_hz_p99": float(1e9 / np.percentile(lat, 99)),
+        "commands": int(lat.size),
+    }
 
 
 def _clean(obj: Any) -> Any:

@@ -8,7 +8,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
 from gainlink.artifact import Artifact
 from gainlink.twin import TwinLoop
 
@@ -52,8 +51,9 @@ def plan_run(scenario: Scenario, *, artifact: Artifact, plant: Plant) -> Plan:
     silent_at = min((int(round(f.start / Ts)) for f in scenario.faults if f.kind == "silent"), default=None)
     crash_at = min((int(round(f.start / Ts)) for f in scenario.faults if f.kind == "crash"), default=None)
     period = scenario.period if (realtime and scenario.period) else Ts
-    return Plan(N=N, t=t, R=R, noise=noise, D=D, silent_at=silent_at, crash_at=crash_at, period_s=period,
-                realtime=realtime)
+    return Plan(
+        N=N, t=t, R=R, noise=noise, D=D, silent_at=silent_at, crash_at=crash_at, period_s=period, realtime=realtime
+    )
 
 
 class Recorder:
@@ -80,11 +80,22 @@ class Recorder:
         def nan(width: int) -> np.ndarray:
             return np.full((steps, width), np.nan)
 
-        return RunTrace(t=p.t[:steps], y=self.Y[:steps], r=p.R[:steps], u=self.U[:steps], sat=self.SAT[:steps],
-                        got=self.GOT[:steps], latency_ns=self.LAT[:steps], tick_ns=self.TICK[:steps],
-                        deadline_ns=self.DUE[:steps], x=self.X[:steps], status=self.ST[:steps],
-                        twin_y=tw.y if tw else nan(self.Y.shape[1]), twin_u=tw.u if tw else nan(self.U.shape[1]),
-                        twin_z=tw.z if tw else nan(p.R.shape[1]))
+        return RunTrace(
+            t=p.t[:steps],
+            y=self.Y[:steps],
+            r=p.R[:steps],
+            u=self.U[:steps],
+            sat=self.SAT[:steps],
+            got=self.GOT[:steps],
+            latency_ns=self.LAT[:steps],
+            tick_ns=self.TICK[:steps],
+            deadline_ns=self.DUE[:steps],
+            x=self.X[:steps],
+            status=self.ST[:steps],
+            twin_y=tw.y if tw else nan(self.Y.shape[1]),
+            twin_u=tw.u if tw else nan(self.U.shape[1]),
+            twin_z=tw.z if tw else nan(p.R.shape[1]),
+        )
 
 
 def describe_artifact(artifact: Artifact, path) -> dict:
@@ -92,8 +103,12 @@ def describe_artifact(artifact: Artifact, path) -> dict:
     from gainlink.compensator import compensator_stability
 
     comp = compensator_stability(artifact)
-    return {"name": artifact.name, "sha256": artifact.sha256, "path": str(path),
-            "compensator": {**comp.to_dict(), "summary": comp.describe()}}
+    return {
+        "name": artifact.name,
+        "sha256": artifact.sha256,
+        "path": str(path),
+        "compensator": {**comp.to_dict(), "summary": comp.describe()},
+    }
 
 
 def start_twin(scenario: Scenario, *, artifact: Artifact, plan: Plan, stack) -> TwinLoop | None:
@@ -109,5 +124,4 @@ def start_twin(scenario: Scenario, *, artifact: Artifact, plan: Plan, stack) -> 
     plant = build_plant(scenario, artifact=artifact)
     stack.callback(plant.close)
     plant.reset(initial=scenario.initial_state)
-    return TwinLoop(artifact, outputs=plant.outputs, advance=lambda u: plant.advance(u=u, dt=artifact.Ts),
-                    steps=plan.N)
+    return TwinLoop(artifact, outputs=plant.outputs, advance=lambda u: plant.advance(u=u, dt=artifact.Ts), steps=plan.N)

@@ -8,7 +8,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 from gainlink.fileio import publish_files
 
 from .bridge import RunResult
@@ -18,8 +17,14 @@ def report_json(result: RunResult) -> str:
     """The text of ``report.json``: metrics, what ran, and the scenario (sorted keys, no timestamps)."""
     sc = result.scenario
     body = dict(result.metrics)
-    body["scenario"] = {"name": sc.name, "duration": sc.duration, "mode": sc.mode, "controller": sc.controller,
-                        "faults": [f.__dict__ for f in sc.faults], "seed": sc.seed}
+    body["scenario"] = {
+        "name": sc.name,
+        "duration": sc.duration,
+        "mode": sc.mode,
+        "controller": sc.controller,
+        "faults": [f.__dict__ for f in sc.faults],
+        "seed": sc.seed,
+    }
     body["run"] = result.info
     return json.dumps(body, sort_keys=True, indent=2, allow_nan=False) + "\n"
 
@@ -35,37 +40,53 @@ def _fmt(v: Any, unit: str = "", digits: int = 4) -> str:
 def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
     """A one-screen summary of a run."""
     m = result.metrics
-    lines = [f"HIL run {result.scenario.name}: {'complete' if m['complete'] else 'INCOMPLETE'}"
-             + (f" ({m['reason']})" if m.get("reason") else "")]
+    lines = [
+        f"HIL run {result.scenario.name}: {'complete' if m['complete'] else 'INCOMPLETE'}"
+        + (f" ({m['reason']})" if m.get("reason") else "")
+    ]
     info = result.info
-    lines.append(f"  artifact {info['artifact']['name']} sha256:{info['artifact']['sha256'][:16]}  plant "
-                 f"{info['plant']['name']}  controller {info['controller']['kind']}  transport "
-                 f"{info['transport'].get('config', {}).get('interface', info['transport'].get('kind'))}")
+    lines.append(
+        f"  artifact {info['artifact']['name']} sha256:{info['artifact']['sha256'][:16]}  plant "
+        f"{info['plant']['name']}  controller {info['controller']['kind']}  transport "
+        f"{info['transport'].get('config', {}).get('interface', info['transport'].get('kind'))}"
+    )
     comp = info["artifact"].get("compensator")
     if comp:
-        lines.append(f"  {comp['summary']}" + ("" if comp["stable"] else
-                     ": run it only with the loop closed; a broken sensor path lets it run away"))
-    lines.append(f"  mode {m['mode']}: {m['steps']}/{m['steps_planned']} steps in {m['wall_s']:.2f} s "
-                 f"({_fmt(m['steps_per_s'], '/s', 5)}), SCHED_FIFO {'on' if m['sched_fifo'] else 'off'}"
-                 + (f", PM QoS {'on' if m['pm_qos'] else 'off'}" if "pm_qos" in m else "")
-                 + (f", CPUs {m['cpu']['placement']}" if m.get("cpu") else ""))
+        lines.append(
+            f"  {comp['summary']}"
+            + ("" if comp["stable"] else ": run it only with the loop closed; a broken sensor path lets it run away")
+        )
+    lines.append(
+        f"  mode {m['mode']}: {m['steps']}/{m['steps_planned']} steps in {m['wall_s']:.2f} s "
+        f"({_fmt(m['steps_per_s'], '/s', 5)}), SCHED_FIFO {'on' if m['sched_fifo'] else 'off'}"
+        + (f", PM QoS {'on' if m['pm_qos'] else 'off'}" if "pm_qos" in m else "")
+        + (f", CPUs {m['cpu']['placement']}" if m.get("cpu") else "")
+    )
     lat, jit = m["latency_us"], m["period_jitter_us"]
-    lines.append(f"  latency us p50 {_fmt(lat['p50'])} p99 {_fmt(lat['p99'])} max {_fmt(lat['max'])};  "
-                 f"period jitter us p50 {_fmt(jit['p50'])} p99 {_fmt(jit['p99'])} max {_fmt(jit['max'])}")
+    lines.append(
+        f"  latency us p50 {_fmt(lat['p50'])} p99 {_fmt(lat['p99'])} max {_fmt(lat['max'])};  "
+        f"period jitter us p50 {_fmt(jit['p50'])} p99 {_fmt(jit['p99'])} max {_fmt(jit['max'])}"
+    )
     overruns = f" (overruns {m['overruns']}, {m['overrun_policy']})" if "overruns" in m else ""
-    lines.append(f"  lost {m['lost']}  late {m['late']}  deadline misses {m['deadline_misses']}{overruns}  "
-                 f"faults injected {', '.join(f'{k} {v}' for k, v in m['faults_injected'].items() if v) or 'none'}")
+    lines.append(
+        f"  lost {m['lost']}  late {m['late']}  deadline misses {m['deadline_misses']}{overruns}  "
+        f"faults injected {', '.join(f'{k} {v}' for k, v in m['faults_injected'].items() if v) or 'none'}"
+    )
     if "uart" in m:
         u = m["uart"]
-        lines.append(f"  emulated UART ({info['controller'].get('board')}): {_fmt(u['round_trips_per_s'], ' round trips/s', 4)}"
-                     f" at the mean latency; a loop up to {_fmt(u['loop_hz_p99'], ' Hz', 4)} covers the p99 latency")
+        lines.append(
+            f"  emulated UART ({info['controller'].get('board')}): {_fmt(u['round_trips_per_s'], ' round trips/s', 4)}"
+            f" at the mean latency; a loop up to {_fmt(u['loop_hz_p99'], ' Hz', 4)} covers the p99 latency"
+        )
     lines.append("  saturated: " + ", ".join(f"{k} {100 * v:.1f}%" for k, v in m["saturation_fraction"].items()))
     if "peak_integrator" in m:
         lines.append("  peak integrator: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["peak_integrator"].items()))
     lines += _twin_lines(m.get("twin"))
     for name, tr in m["tracked"].items():
-        lines.append(f"  {name}: overshoot {_fmt(tr['overshoot_pct'], '%')}, settling {_fmt(tr['settling_time_s'], ' s')}"
-                     f", IAE {_fmt(tr['iae'])}")
+        lines.append(
+            f"  {name}: overshoot {_fmt(tr['overshoot_pct'], '%')}, settling {_fmt(tr['settling_time_s'], ' s')}"
+            f", IAE {_fmt(tr['iae'])}"
+        )
     lines.append("  final outputs: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["outputs_final"].items()))
     if report_dir is not None:
         lines.append(f"  report: {report_dir / 'report.json'}")
@@ -76,14 +97,25 @@ def _twin_lines(tw: dict | None) -> list[str]:
     """The twin comparison in a few lines: what the implementation cost against the ideal loop."""
     if not tw:
         return []
-    out = ["  against the float64 twin (same plant, noise, references, disturbances; ideal law, no link):",
-           "    max |u - u_twin|: " + ", ".join(f"{k} {_fmt(v['max_du'])} ({_fmt(v['max_du_rel'], digits=3)} of span)"
-                                              for k, v in tw["inputs"].items()),
-           "    max |y - y_twin|: " + ", ".join(f"{k} {_fmt(v['max_dy'])} ({_fmt(v['max_dy_rel'], digits=3)} of range)"
-                                              for k, v in tw["outputs"].items())]
-    out.append("    IAE real vs twin: " + ", ".join(
-        f"{k} {_fmt(v['real'])} vs {_fmt(v['twin'])} ({'+' if (v['difference_rel'] or 0) >= 0 else ''}"
-        f"{_fmt(None if v['difference_rel'] is None else 100 * v['difference_rel'], '%', 3)})" for k, v in tw["iae"].items()))
+    out = [
+        "  against the float64 twin (same plant, noise, references, disturbances; ideal law, no link):",
+        "    max |u - u_twin|: "
+        + ", ".join(
+            f"{k} {_fmt(v['max_du'])} ({_fmt(v['max_du_rel'], digits=3)} of span)" for k, v in tw["inputs"].items()
+        ),
+        "    max |y - y_twin|: "
+        + ", ".join(
+            f"{k} {_fmt(v['max_dy'])} ({_fmt(v['max_dy_rel'], digits=3)} of range)" for k, v in tw["outputs"].items()
+        ),
+    ]
+    out.append(
+        "    IAE real vs twin: "
+        + ", ".join(
+            f"{k} {_fmt(v['real'])} vs {_fmt(v['twin'])} ({'+' if (v['difference_rel'] or 0) >= 0 else ''}"
+            f"{_fmt(None if v['difference_rel'] is None else 100 * v['difference_rel'], '%', 3)})"
+            for k, v in tw["iae"].items()
+        )
+    )
     return out
 
 
@@ -157,8 +189,9 @@ def _twin_plot(result: RunResult, *, outs: list[str], ins: list[str]) -> bytes:
     import matplotlib.pyplot as plt
 
     tr = result.trace
-    names = [(n, tr.y[:, i] - tr.twin_y[:, i]) for i, n in enumerate(outs)] + \
-            [(n, tr.u[:, i] - tr.twin_u[:, i]) for i, n in enumerate(ins)]
+    names = [(n, tr.y[:, i] - tr.twin_y[:, i]) for i, n in enumerate(outs)] + [
+        (n, tr.u[:, i] - tr.twin_u[:, i]) for i, n in enumerate(ins)
+    ]
     fig, axes = plt.subplots(len(names), 1, figsize=(8, 1.9 * len(names)), sharex=True, squeeze=False)
     lost = ~tr.got
     for ax, (name, diff) in zip(axes[:, 0], names):

@@ -66,20 +66,43 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
-
 from gainlink.errors import ScenarioError
 from gainlink.fileio import read_user_file
 
 from .scheduler import AFFINITIES, OVERRUN_POLICIES
 
-TOP_KEYS = {"name", "artifact", "plant", "transport", "duration", "mode", "controller", "step_timeout",
-            "peer_timeout", "period", "sched_fifo", "seed", "twin", "initial_state", "reference", "noise",
-            "disturbances", "faults", "description", "firmware", "affinity", "overrun", "pm_qos", "board"}
+TOP_KEYS = {
+    "name",
+    "artifact",
+    "plant",
+    "transport",
+    "duration",
+    "mode",
+    "controller",
+    "step_timeout",
+    "peer_timeout",
+    "period",
+    "sched_fifo",
+    "seed",
+    "twin",
+    "initial_state",
+    "reference",
+    "noise",
+    "disturbances",
+    "faults",
+    "description",
+    "firmware",
+    "affinity",
+    "overrun",
+    "pm_qos",
+    "board",
+}
 CONTROLLERS = ("firmware", "reference", "qemu")
 BOARDS = ("mps2-an386", "netduinoplus2")
 MODES = ("lockstep", "realtime")
@@ -177,8 +200,9 @@ def _table(value: Any, where: str) -> dict:
 def _check_keys(d: Mapping, allowed: set[str], where: str) -> None:
     unknown = sorted(set(d) - allowed)
     if unknown:
-        raise ScenarioError(f"scenario: unknown key(s) {', '.join(unknown)} in {where} "
-                            f"(allowed: {', '.join(sorted(allowed))})")
+        raise ScenarioError(
+            f"scenario: unknown key(s) {', '.join(unknown)} in {where} (allowed: {', '.join(sorted(allowed))})"
+        )
 
 
 def _profile(name: str, d: Any) -> dict:
@@ -214,23 +238,37 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
     controller = _choice(data, "controller", CONTROLLERS, "firmware")
     board = _choice(data, "board", BOARDS, BOARDS[0])
     if "board" in data and controller != "qemu":
-        raise ScenarioError("scenario: board applies to controller = \"qemu\" only")
+        raise ScenarioError('scenario: board applies to controller = "qemu" only')
     reference = {str(k): _profile(str(k), v) for k, v in _table(data.get("reference", {}), "reference").items()}
     noise = {str(k): _num(v, f"noise.{k}", minimum=0.0) for k, v in _table(data.get("noise", {}), "noise").items()}
-    initial = {str(k): _num(v, f"initial_state.{k}")
-               for k, v in _table(data.get("initial_state", {}), "initial_state").items()}
+    initial = {
+        str(k): _num(v, f"initial_state.{k}") for k, v in _table(data.get("initial_state", {}), "initial_state").items()
+    }
     period = data.get("period")
     return Scenario(
-        name=str(data.get("name", path.stem if path is not None else "scenario")), path=path, artifact_path=art,
-        plant=_table(data["plant"], "plant"), transport=_table(data["transport"], "transport"),
-        duration=_num(data["duration"], "duration", positive=True), mode=mode,
-        controller=controller, firmware=_firmware_path(data.get("firmware"), base), board=board,
+        name=str(data.get("name", path.stem if path is not None else "scenario")),
+        path=path,
+        artifact_path=art,
+        plant=_table(data["plant"], "plant"),
+        transport=_table(data["transport"], "transport"),
+        duration=_num(data["duration"], "duration", positive=True),
+        mode=mode,
+        controller=controller,
+        firmware=_firmware_path(data.get("firmware"), base),
+        board=board,
         step_timeout=_num(data.get("step_timeout", 0.05), "step_timeout", positive=True),
         peer_timeout=_num(data.get("peer_timeout", 1.0), "peer_timeout", positive=True),
         period=None if period is None else _num(period, "period", positive=True),
-        sched_fifo=_flag(data, "sched_fifo", True), pm_qos=_flag(data, "pm_qos", True), affinity=affinity,
-        overrun=overrun, seed=int(_num(data.get("seed", 0), "seed")), twin=_flag(data, "twin", True),
-        initial_state=initial, reference=reference, noise=noise, disturbances=_disturbances(data),
+        sched_fifo=_flag(data, "sched_fifo", True),
+        pm_qos=_flag(data, "pm_qos", True),
+        affinity=affinity,
+        overrun=overrun,
+        seed=int(_num(data.get("seed", 0), "seed")),
+        twin=_flag(data, "twin", True),
+        initial_state=initial,
+        reference=reference,
+        noise=noise,
+        disturbances=_disturbances(data),
         faults=_faults(data),
     )
 
@@ -262,10 +300,16 @@ def _faults(data: Mapping[str, Any]) -> tuple[Fault, ...]:
         probability = _num(f.get("probability", 1.0), f"faults[{i}].probability", minimum=0.0)
         if probability > 1.0 or ("probability" in f and f["kind"] in ("silent", "crash")):
             raise ScenarioError(f"scenario: faults[{i}].probability must be within [0, 1], on a frame fault")
-        faults.append(Fault(kind=f["kind"], start=start, stop=stop,
-                            every=int(_num(f.get("every", 1), f"faults[{i}].every", minimum=1)),
-                            delay_steps=int(_num(f.get("delay_steps", 1), f"faults[{i}].delay_steps", minimum=1)),
-                            probability=probability))
+        faults.append(
+            Fault(
+                kind=f["kind"],
+                start=start,
+                stop=stop,
+                every=int(_num(f.get("every", 1), f"faults[{i}].every", minimum=1)),
+                delay_steps=int(_num(f.get("delay_steps", 1), f"faults[{i}].delay_steps", minimum=1)),
+                probability=probability,
+            )
+        )
     return tuple(faults)
 
 
@@ -276,9 +320,14 @@ def _disturbances(data: Mapping[str, Any]) -> tuple[Disturbance, ...]:
         _check_keys(d, {"input", "start", "stop", "value"}, f"disturbances[{i}]")
         if not isinstance(d.get("input"), str):
             raise ScenarioError(f"scenario: disturbances[{i}].input must name a plant input")
-        dists.append(Disturbance(input=d["input"], start=_num(d.get("start", 0.0), f"disturbances[{i}].start"),
-                                 stop=_num(d.get("stop", 1e300), f"disturbances[{i}].stop"),
-                                 value=_num(d.get("value"), f"disturbances[{i}].value")))
+        dists.append(
+            Disturbance(
+                input=d["input"],
+                start=_num(d.get("start", 0.0), f"disturbances[{i}].start"),
+                stop=_num(d.get("stop", 1e300), f"disturbances[{i}].stop"),
+                value=_num(d.get("value"), f"disturbances[{i}].value"),
+            )
+        )
     return tuple(dists)
 
 

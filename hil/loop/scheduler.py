@@ -14,8 +14,9 @@ from __future__ import annotations
 import gc
 import os
 import time
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, nullcontext
-from typing import Any, Iterator, Sequence
+from typing import Any
 
 SPIN_NS = 300_000  #: stop sleeping this long before a deadline and spin
 
@@ -75,7 +76,7 @@ class Placement:
         self.bridge_cpus: list[int] | None = None
         self.peer_cpus: list[int] | None = None
 
-    def __enter__(self) -> "Placement":
+    def __enter__(self) -> Placement:
         if self.setting == "none" or not hasattr(os, "sched_setaffinity"):
             return self
         allowed = sorted(os.sched_getaffinity(0))
@@ -178,8 +179,9 @@ class Pacer:
         return tick, due - self.start_ns, now - self.start_ns
 
 
-def pacing_jitter(*, period_ns: int, steps: int, fifo: bool, work: Any = None, skip: bool = True,
-                  qos: bool = True) -> dict:
+def pacing_jitter(
+    *, period_ns: int, steps: int, fifo: bool, work: Any = None, skip: bool = True, qos: bool = True
+) -> dict:
     """Jitter of the pacer alone (optionally calling ``work()`` each tick): the real-time baseline.
 
     Jitter is measured on the ticks that ran; ``overruns`` counts the ticks skipped (``skip``)."""
@@ -187,7 +189,7 @@ def pacing_jitter(*, period_ns: int, steps: int, fifo: bool, work: Any = None, s
 
     on = set_fifo() if fifo else False
     try:
-        with gc_paused(), (cpu_latency_qos() if qos else nullcontext(False)) as qos_on:
+        with gc_paused(), cpu_latency_qos() if qos else nullcontext(False) as qos_on:
             pacer = Pacer(period_ns=period_ns)
             late = np.full(steps, np.nan)
             k = 0
@@ -203,5 +205,11 @@ def pacing_jitter(*, period_ns: int, steps: int, fifo: bool, work: Any = None, s
         if on:
             set_other()
     ran = late[np.isfinite(late)] / 1e3
-    return {"p50": float(np.percentile(ran, 50)), "p99": float(np.percentile(ran, 99)), "max": float(ran.max()),
-            "overruns": int(steps - ran.size), "sched_fifo": on, "pm_qos": qos_on}
+    return {
+        "p50": float(np.percentile(ran, 50)),
+        "p99": float(np.percentile(ran, 99)),
+        "max": float(ran.max()),
+        "overruns": int(steps - ran.size),
+        "sched_fifo": on,
+        "pm_qos": qos_on,
+    }

@@ -16,12 +16,11 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from contextlib import ExitStack
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
-
 from gainlink.artifact import Artifact
 from gainlink.engines.native import NativeLoop
 from gainlink.errors import PlantError, ScenarioError
@@ -59,14 +58,22 @@ def check_sil(scenario: Scenario) -> None:
     """Refuse what only a HIL run can do (link and peer faults, real-time pacing), with one line."""
     if scenario.faults:
         kinds = ", ".join(sorted({f.kind for f in scenario.faults}))
-        raise ScenarioError(f"scenario {scenario.name}: faults ({kinds}) act on a link or a controller process; "
-                            "a SIL run has neither (run it as HIL)")
+        raise ScenarioError(
+            f"scenario {scenario.name}: faults ({kinds}) act on a link or a controller process; "
+            "a SIL run has neither (run it as HIL)"
+        )
     if scenario.mode == "realtime":
-        raise ScenarioError(f"scenario {scenario.name}: a SIL run is not paced; mode = \"realtime\" needs HIL")
+        raise ScenarioError(f'scenario {scenario.name}: a SIL run is not paced; mode = "realtime" needs HIL')
 
 
-def run_sil(artifact: Artifact, scenario: Scenario, *, seed: int | None = None, library: Path | None = None,
-            progress: Callable[[int, int], None] | None = None) -> RunResult:
+def run_sil(
+    artifact: Artifact,
+    scenario: Scenario,
+    *,
+    seed: int | None = None,
+    library: Path | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> RunResult:
     """Run ``scenario`` with the C loop of ``artifact`` in this process against the scenario's plant.
 
     Parameters
@@ -161,15 +168,30 @@ class _SilLoop:
         a, scenario, plant = self.a, self.scenario, self.plant
         trace = self.rec.trace(steps, self.twin)
         metrics = compute_metrics(trace, artifact=a, mode="sil", late=0, period_s=a.Ts)
-        metrics.update({"complete": reason is None, "steps_planned": self.plan.N, "wall_s": wall,
-                        "steps_per_s": steps / wall if wall > 0 else None, "sched_fifo": False,
-                        "faults_injected": {}, "mode": "sil"})
+        metrics.update(
+            {
+                "complete": reason is None,
+                "steps_planned": self.plan.N,
+                "wall_s": wall,
+                "steps_per_s": steps / wall if wall > 0 else None,
+                "sched_fifo": False,
+                "faults_injected": {},
+                "mode": "sil",
+            }
+        )
         if reason:
             metrics["reason"] = reason
-        info = {"artifact": describe_artifact(a, scenario.artifact_path),
-                "plant": {"name": plant.name, "inputs": list(plant.input_names), "outputs": list(plant.output_names),
-                          "states": list(plant.state_names)},
-                "transport": {"kind": "sil (in-process, no link)"},
-                "controller": controller}
-        return RunResult(scenario=scenario, metrics=metrics, trace=trace, complete=reason is None, reason=reason,
-                         info=info)
+        info = {
+            "artifact": describe_artifact(a, scenario.artifact_path),
+            "plant": {
+                "name": plant.name,
+                "inputs": list(plant.input_names),
+                "outputs": list(plant.output_names),
+                "states": list(plant.state_names),
+            },
+            "transport": {"kind": "sil (in-process, no link)"},
+            "controller": controller,
+        }
+        return RunResult(
+            scenario=scenario, metrics=metrics, trace=trace, complete=reason is None, reason=reason, info=info
+        )

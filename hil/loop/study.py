@@ -19,18 +19,28 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 from gainlink.artifact import from_dict, write
 from gainlink.errors import ScenarioError
 from gainlink.fileio import publish_files, read_user_file
 
-from .bridge import RunResult, run_scenario
 from ..paths import project_root
+from .bridge import RunResult, run_scenario
 from .report import plots, report_json, summary_text
 from .scenario import parse_scenario
 
-STUDY_KEYS = {"spec", "modes", "duration", "controller", "plant", "transport", "initial_state", "reference",
-              "disturbances", "step_timeout", "description"}
+STUDY_KEYS = {
+    "spec",
+    "modes",
+    "duration",
+    "controller",
+    "plant",
+    "transport",
+    "initial_state",
+    "reference",
+    "disturbances",
+    "step_timeout",
+    "description",
+}
 MODES = ("none", "clamp", "backcalc")
 
 
@@ -59,8 +69,14 @@ def _load_spec(path: Path) -> dict:
         raise ScenarioError(f"study: spec {path} is not valid TOML ({exc})") from None
 
 
-def run_saturation_study(*, report_dir: Path, spec_path: Path | None = None, controller: str | None = None,
-                         transport: dict | None = None, study: dict | None = None) -> StudyResult:
+def run_saturation_study(
+    *,
+    report_dir: Path,
+    spec_path: Path | None = None,
+    controller: str | None = None,
+    transport: dict | None = None,
+    study: dict | None = None,
+) -> StudyResult:
     """Design, run and compare the anti-windup modes; publish the reports into ``report_dir``.
 
     Parameters
@@ -104,13 +120,21 @@ def run_saturation_study(*, report_dir: Path, spec_path: Path | None = None, con
             gains.parent.mkdir()
             write(gains, sealed)
             artifacts[mode] = from_dict(json.loads(gains.read_text()))
-            scenario = parse_scenario({
-                "name": f"saturation_{mode}", "artifact": str(gains), "duration": desc.get("duration", 12.0),
-                "mode": "lockstep", "controller": controller or desc.get("controller", "firmware"),
-                "step_timeout": desc.get("step_timeout", 1.0), "plant": desc["plant"],
-                "transport": transport or desc["transport"], "initial_state": desc.get("initial_state", {}),
-                "reference": desc.get("reference", {}), "disturbances": desc.get("disturbances", []),
-            })
+            scenario = parse_scenario(
+                {
+                    "name": f"saturation_{mode}",
+                    "artifact": str(gains),
+                    "duration": desc.get("duration", 12.0),
+                    "mode": "lockstep",
+                    "controller": controller or desc.get("controller", "firmware"),
+                    "step_timeout": desc.get("step_timeout", 1.0),
+                    "plant": desc["plant"],
+                    "transport": transport or desc["transport"],
+                    "initial_state": desc.get("initial_state", {}),
+                    "reference": desc.get("reference", {}),
+                    "disturbances": desc.get("disturbances", []),
+                }
+            )
             result = run_scenario(scenario)
             runs[mode] = result
             files[f"{mode}/gains.json"] = gains.read_text()
@@ -120,8 +144,15 @@ def run_saturation_study(*, report_dir: Path, spec_path: Path | None = None, con
                 files[f"{mode}/{name}"] = png
     table = {mode: _row(r) for mode, r in runs.items()}
     summary = _summary(table, report_dir=report_dir)
-    files["study.json"] = json.dumps({"modes": table, "initial_state": desc.get("initial_state", {}),
-                                      "spec": str(spec_path)}, sort_keys=True, indent=2, allow_nan=False) + "\n"
+    files["study.json"] = (
+        json.dumps(
+            {"modes": table, "initial_state": desc.get("initial_state", {}), "spec": str(spec_path)},
+            sort_keys=True,
+            indent=2,
+            allow_nan=False,
+        )
+        + "\n"
+    )
     files["comparison.png"] = _comparison_png(runs, artifacts)
     files["summary.txt"] = summary
     publish_files(report_dir, files)
@@ -131,11 +162,18 @@ def run_saturation_study(*, report_dir: Path, spec_path: Path | None = None, con
 def _row(r: RunResult) -> dict:
     m = r.metrics
     tracked = next(iter(m["tracked"].values()), {})
-    return {"complete": m["complete"], "overshoot_pct": tracked.get("overshoot_pct"),
-            "settling_time_s": tracked.get("settling_time_s"), "iae": tracked.get("iae"),
-            "saturation_fraction": m["saturation_fraction"], "peak_integrator": m.get("peak_integrator", {}),
-            "inputs_peak_abs": m["inputs_peak_abs"], "outputs_peak_abs": m["outputs_peak_abs"],
-            "outputs_final": m["outputs_final"], "lost": m["lost"]}
+    return {
+        "complete": m["complete"],
+        "overshoot_pct": tracked.get("overshoot_pct"),
+        "settling_time_s": tracked.get("settling_time_s"),
+        "iae": tracked.get("iae"),
+        "saturation_fraction": m["saturation_fraction"],
+        "peak_integrator": m.get("peak_integrator", {}),
+        "inputs_peak_abs": m["inputs_peak_abs"],
+        "outputs_peak_abs": m["outputs_peak_abs"],
+        "outputs_final": m["outputs_final"],
+        "lost": m["lost"],
+    }
 
 
 def _fmt(v: Any, unit: str = "") -> str:
@@ -144,16 +182,20 @@ def _fmt(v: Any, unit: str = "") -> str:
 
 def _summary(table: dict, *, report_dir: Path) -> str:
     outputs = list(next(iter(table.values()))["outputs_peak_abs"]) if table else []
-    lines = ["Saturation study: anti-windup none vs clamp vs backcalc",
-             f"  {'mode':<9} {'overshoot':>10} {'settling':>10} {'IAE':>8} {'saturated':>10} {'peak |z|':>9}"
-             + "".join(f" {'peak |' + o + '|':>12}" for o in outputs)]
+    lines = [
+        "Saturation study: anti-windup none vs clamp vs backcalc",
+        f"  {'mode':<9} {'overshoot':>10} {'settling':>10} {'IAE':>8} {'saturated':>10} {'peak |z|':>9}"
+        + "".join(f" {'peak |' + o + '|':>12}" for o in outputs),
+    ]
     for mode, row in table.items():
         sat = max(row["saturation_fraction"].values()) if row["saturation_fraction"] else 0.0
         z = max(row["peak_integrator"].values()) if row["peak_integrator"] else None
-        lines.append(f"  {mode:<9} {_fmt(row['overshoot_pct'], '%'):>10} {_fmt(row['settling_time_s'], ' s'):>10} "
-                     f"{_fmt(row['iae']):>8} {100 * sat:>9.1f}% {_fmt(z):>9}"
-                     + "".join(f" {_fmt(row['outputs_peak_abs'][o]):>12}" for o in outputs)
-                     + ("" if row["complete"] else "  (incomplete)"))
+        lines.append(
+            f"  {mode:<9} {_fmt(row['overshoot_pct'], '%'):>10} {_fmt(row['settling_time_s'], ' s'):>10} "
+            f"{_fmt(row['iae']):>8} {100 * sat:>9.1f}% {_fmt(z):>9}"
+            + "".join(f" {_fmt(row['outputs_peak_abs'][o]):>12}" for o in outputs)
+            + ("" if row["complete"] else "  (incomplete)")
+        )
     for label, key in (("overshoot", "overshoot_pct"), ("settling time", "settling_time_s"), ("IAE", "iae")):
         ranked = [(row[key], mode) for mode, row in table.items() if row[key] is not None and row["complete"]]
         if ranked:

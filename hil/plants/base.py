@@ -8,15 +8,15 @@ fmpy (:mod:`gainlink.hil.plants.fmu`) and the built-in models (:mod:`gainlink.hi
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
-
 from gainlink.errors import PlantError
 
 from ..registry import Registry
 
-PLANTS: Registry["Plant"] = Registry(what="plant", error=PlantError)
+PLANTS: Registry[Plant] = Registry(what="plant", error=PlantError)
 
 
 class Plant(ABC):

@@ -33,7 +33,9 @@ CMAKE_OPTIONS = {
 def _tree_files(name: str) -> list[tuple[str, Path]]:
     src = fmu_source_dir(name)
     files = [("modelDescription.xml", src / "modelDescription.xml")]
-    files += sorted((f"sources/{p.relative_to(src / 'sources')}", p) for p in (src / "sources").rglob("*") if p.is_file())
+    files += sorted(
+        (f"sources/{p.relative_to(src / 'sources')}", p) for p in (src / "sources").rglob("*") if p.is_file()
+    )
     common = src.parent / "common"
     files += sorted((f"sources/{p.name}", p) for p in common.glob("*") if p.is_file())
     return files

@@ -13,16 +13,16 @@ from __future__ import annotations
 import logging
 import shutil
 import zipfile
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
-
 from gainlink.errors import PlantError
 
-from .base import PLANTS, Plant
 from ..registry import take_keys
+from .base import PLANTS, Plant
 
 log = logging.getLogger(__name__)
 
@@ -70,8 +70,12 @@ def _fmi2_callbacks(key: int, messages: list[str]) -> Any:
     from ctypes import byref, c_void_p
 
     from fmpy import calloc, free
-    from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                           fmi2CallbackLoggerTYPE)
+    from fmpy.fmi2 import (
+        fmi2CallbackAllocateMemoryTYPE,
+        fmi2CallbackFreeMemoryTYPE,
+        fmi2CallbackFunctions,
+        fmi2CallbackLoggerTYPE,
+    )
     from fmpy.logging import addLoggerProxy
 
     if _FMI2_DISPATCH is None:
@@ -125,8 +129,9 @@ def _check_real(md: Any, vars_: dict, names: list[str], *, what: str, real_type:
             raise PlantError(f"FMU {model}: variable {n!r} is {v.type}, but {what} must be {real_type} variables")
 
 
-def map_variables(md: Any, *, inputs: Any = None, outputs: Any = None, states: Any = None,
-                  parameters: Mapping[str, Any] | None = None) -> VariableMap:
+def map_variables(
+    md: Any, *, inputs: Any = None, outputs: Any = None, states: Any = None, parameters: Mapping[str, Any] | None = None
+) -> VariableMap:
     """Check a plant's variable mapping against the model description; one :class:`PlantError` line when
     a name is unknown, a variable has the wrong type or causality, or the plant would have no input or output.
 
@@ -149,8 +154,10 @@ def map_variables(md: Any, *, inputs: Any = None, outputs: Any = None, states: A
     _check_real(md, vars_, out_names, what="outputs", real_type=real_type)
     not_inputs = [n for n in in_names if vars_[n].causality != "input"]
     if not_inputs:
-        raise PlantError(f"FMU {md.modelName}: {', '.join(not_inputs)} is not an input (causality "
-                         f"{vars_[not_inputs[0]].causality}); set it through parameters")
+        raise PlantError(
+            f"FMU {md.modelName}: {', '.join(not_inputs)} is not an input (causality "
+            f"{vars_[not_inputs[0]].causality}); set it through parameters"
+        )
     if states is None:
         states = [d.variable.derivative.name for d in md.derivatives] if md.derivatives else out_names
     _check_real(md, vars_, list(states), what="states", real_type=real_type)
@@ -160,8 +167,14 @@ def map_variables(md: Any, *, inputs: Any = None, outputs: Any = None, states: A
         if v is None:
             raise PlantError(f"FMU {md.modelName} has no variable {key!r} to set")
         params[key] = _typed_value(md, v, value)
-    return VariableMap(vars=vars_, real_type=real_type, inputs=tuple(in_names), outputs=tuple(out_names),
-                       states=tuple(states), parameters=params)
+    return VariableMap(
+        vars=vars_,
+        real_type=real_type,
+        inputs=tuple(in_names),
+        outputs=tuple(out_names),
+        states=tuple(states),
+        parameters=params,
+    )
 
 
 def _typed_value(md: Any, v: Any, value: Any) -> Any:
@@ -191,8 +204,11 @@ def set_values(fmu: Any, md: Any, values: Mapping[str, Any], *, vars_: dict) -> 
         refs, vals = groups.setdefault(kind, ([], []))
         refs.append(vars_[key].valueReference)
         vals.append(value)
-    setters = {"real": fmu.setFloat64 if v3 else fmu.setReal, "int": fmu.setInt32 if v3 else fmu.setInteger,
-               "bool": fmu.setBoolean}
+    setters = {
+        "real": fmu.setFloat64 if v3 else fmu.setReal,
+        "int": fmu.setInt32 if v3 else fmu.setInteger,
+        "bool": fmu.setBoolean,
+    }
     for kind, (refs, vals) in groups.items():
         setters[kind](refs, vals)
 
@@ -233,28 +249,39 @@ class FmuPlant(Plant):
         structure, else the outputs).
     """
 
-    def __init__(self, *, path: Path, inputs: Any = None, outputs: Any = None,
-                 parameters: Mapping[str, float] | None = None, states: Any = None) -> None:
+    def __init__(
+        self,
+        *,
+        path: Path,
+        inputs: Any = None,
+        outputs: Any = None,
+        parameters: Mapping[str, float] | None = None,
+        states: Any = None,
+    ) -> None:
         self.path = Path(path)
         md = read_description(self.path)
         self.md = md
         self.name = f"fmu:{md.modelName}"
         if md.fmiVersion not in ("2.0", "3.0"):
-            raise PlantError(f"FMU {self.path} is FMI {md.fmiVersion}; the bridge runs FMI 2.0 and 3.0 "
-                             "Co-Simulation FMUs")
+            raise PlantError(
+                f"FMU {self.path} is FMI {md.fmiVersion}; the bridge runs FMI 2.0 and 3.0 Co-Simulation FMUs"
+            )
         self.v3 = md.fmiVersion == "3.0"
         if self.v3:
             from ctypes import byref
 
             from fmpy.fmi3 import FMU3Slave as Slave
-            from fmpy.fmi3 import fmi3Boolean, fmi3Float64 as Real, fmi3ValueReference as ValueReference
+            from fmpy.fmi3 import fmi3Boolean
+            from fmpy.fmi3 import fmi3Float64 as Real
+            from fmpy.fmi3 import fmi3ValueReference as ValueReference
 
             self._flags = [fmi3Boolean() for _ in range(3)]
             self._last_time = Real()
             self._step_refs = tuple(byref(f) for f in self._flags) + (byref(self._last_time),)
         else:
             from fmpy.fmi2 import FMU2Slave as Slave
-            from fmpy.fmi2 import fmi2Real as Real, fmi2ValueReference as ValueReference
+            from fmpy.fmi2 import fmi2Real as Real
+            from fmpy.fmi2 import fmi2ValueReference as ValueReference
 
         if md.coSimulation is None:
             raise PlantError(f"FMU {self.path} has no Co-Simulation interface (FmuModelExchangePlant runs it)")
@@ -315,8 +342,9 @@ class FmuPlant(Plant):
         values = dict(self.parameters)
         for key, value in initial.items():
             if key not in self.vars or self.vars[key].type != self.real_type:
-                raise PlantError(f"FMU {self.md.modelName} has no {self.real_type} variable {key!r} for the "
-                                 "initial state")
+                raise PlantError(
+                    f"FMU {self.md.modelName} has no {self.real_type} variable {key!r} for the initial state"
+                )
             values[key] = float(value)
         if values:
             self._call("set", set_values, fmu, self.md, values, vars_=self.vars)
@@ -349,8 +377,9 @@ class FmuPlant(Plant):
                 fmu.fmi2DoStep(fmu.component, self.time, dt, 1)
                 fmu.fmi2GetReal(fmu.component, self._vr_out, self._n_out, self._val_out)
         except Exception as exc:
-            raise PlantError(f"FMU {self.md.modelName}: step at t={self.time:.6g} failed ({self._reason(exc)})"
-                             ) from None
+            raise PlantError(
+                f"FMU {self.md.modelName}: step at t={self.time:.6g} failed ({self._reason(exc)})"
+            ) from None
         self.time += dt
 
     def state(self) -> np.ndarray:
@@ -387,8 +416,12 @@ class FmuPlant(Plant):
 
 @PLANTS.register("fmu")
 def _fmu_factory(config: Mapping[str, Any], *, base_dir: Path | None = None, **_context: Any) -> Plant:
-    cfg = take_keys(config, allowed={"kind", "fmu", "path", "inputs", "outputs", "parameters", "states", "interface",
-                                     "rtol", "max_step"}, where="plant fmu", error=PlantError)
+    cfg = take_keys(
+        config,
+        allowed={"kind", "fmu", "path", "inputs", "outputs", "parameters", "states", "interface", "rtol", "max_step"},
+        where="plant fmu",
+        error=PlantError,
+    )
     path = resolve_fmu(fmu=cfg.get("fmu"), path=cfg.get("path"), base_dir=base_dir)
     interface = cfg.get("interface", "auto")
     if interface not in ("auto", "cs", "me"):
@@ -396,15 +429,20 @@ def _fmu_factory(config: Mapping[str, Any], *, base_dir: Path | None = None, **_
     md = read_description(path)
     if interface == "auto":
         interface = "cs" if md.coSimulation is not None else "me"
-    common = dict(path=path, inputs=cfg.get("inputs"), outputs=cfg.get("outputs"),
-                  parameters=cfg.get("parameters"), states=cfg.get("states"))
+    common = dict(
+        path=path,
+        inputs=cfg.get("inputs"),
+        outputs=cfg.get("outputs"),
+        parameters=cfg.get("parameters"),
+        states=cfg.get("states"),
+    )
     if interface == "me":
         from .fmu_me import FmuModelExchangePlant
 
         solver = {k: float(cfg[k]) for k in ("rtol", "max_step") if k in cfg}
         return FmuModelExchangePlant(**common, **solver)
     if "rtol" in cfg or "max_step" in cfg:
-        raise PlantError("plant fmu: rtol and max_step set fmpy's solver, which runs only with interface = \"me\"")
+        raise PlantError('plant fmu: rtol and max_step set fmpy\'s solver, which runs only with interface = "me"')
     if md.coSimulation is None:
-        raise PlantError(f"FMU {path} has no Co-Simulation interface (interface = \"me\" runs its Model Exchange)")
+        raise PlantError(f'FMU {path} has no Co-Simulation interface (interface = "me" runs its Model Exchange)')
     return FmuPlant(**common)

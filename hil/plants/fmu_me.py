@@ -13,15 +13,15 @@ from __future__ import annotations
 import logging
 import math
 import shutil
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
-
 from gainlink.errors import PlantError
 
 from .base import Plant
-from .fmu import _fmi2_callbacks, _FMI2_SINKS, map_variables, open_binary, read_description, set_values
+from .fmu import _FMI2_SINKS, _fmi2_callbacks, map_variables, open_binary, read_description, set_values
 
 log = logging.getLogger(__name__)
 
@@ -48,16 +48,27 @@ class FmuModelExchangePlant(Plant):
         CVode's largest internal step (default: unbounded within a bridge step).
     """
 
-    def __init__(self, *, path: Path, inputs: Any = None, outputs: Any = None, parameters: Mapping[str, Any] | None = None,
-                 states: Any = None, rtol: float = 1e-8, max_step: float | None = None) -> None:
+    def __init__(
+        self,
+        *,
+        path: Path,
+        inputs: Any = None,
+        outputs: Any = None,
+        parameters: Mapping[str, Any] | None = None,
+        states: Any = None,
+        rtol: float = 1e-8,
+        max_step: float | None = None,
+    ) -> None:
         from fmpy.fmi2 import FMU2Model
 
         self.path = Path(path)
         md = read_description(self.path)
         self.md = md
         if md.fmiVersion != "2.0" or md.modelExchange is None:
-            raise PlantError(f"FMU {self.path}: the Model Exchange plant runs FMI 2.0 Model Exchange FMUs "
-                             f"(this one is FMI {md.fmiVersion}{'' if md.modelExchange else ' without Model Exchange'})")
+            raise PlantError(
+                f"FMU {self.path}: the Model Exchange plant runs FMI 2.0 Model Exchange FMUs "
+                f"(this one is FMI {md.fmiVersion}{'' if md.modelExchange else ' without Model Exchange'})"
+            )
         if not (rtol > 0 and math.isfinite(rtol)):
             raise PlantError("plant fmu: rtol must be a positive number")
         if max_step is not None and not max_step > 0:
@@ -72,8 +83,7 @@ class FmuModelExchangePlant(Plant):
         self._vr_in = [self.vars[n].valueReference for n in self.input_names]
         self._vr_out = [self.vars[n].valueReference for n in self.output_names]
         self._vr_state = [self.vars[n].valueReference for n in self.state_names]
-        self.fmu, self._unzip, self._own_unzip = open_binary(self.path, md, FMU2Model,
-                                                             md.modelExchange.modelIdentifier)
+        self.fmu, self._unzip, self._own_unzip = open_binary(self.path, md, FMU2Model, md.modelExchange.modelIdentifier)
         self._messages: list[str] = []
         self._callbacks = _fmi2_callbacks(id(self), self._messages)
         self._instantiated = False
@@ -133,11 +143,20 @@ class FmuModelExchangePlant(Plant):
         from fmpy.sundials import CVodeSolver
 
         fmu, md = self.fmu, self.md
-        return CVodeSolver(nx=md.numberOfContinuousStates, nz=md.numberOfEventIndicators,
-                           get_x=fmu.getContinuousStates, set_x=fmu.setContinuousStates, get_dx=fmu.getDerivatives,
-                           get_z=fmu.getEventIndicators, input=_HeldInput(),
-                           get_nominals=fmu.getNominalsOfContinuousStates, set_time=fmu.setTime,
-                           startTime=self.time, maxStep=self.max_step or 1e300, relativeTolerance=self.rtol)
+        return CVodeSolver(
+            nx=md.numberOfContinuousStates,
+            nz=md.numberOfEventIndicators,
+            get_x=fmu.getContinuousStates,
+            set_x=fmu.setContinuousStates,
+            get_dx=fmu.getDerivatives,
+            get_z=fmu.getEventIndicators,
+            input=_HeldInput(),
+            get_nominals=fmu.getNominalsOfContinuousStates,
+            set_time=fmu.setTime,
+            startTime=self.time,
+            maxStep=self.max_step or 1e300,
+            relativeTolerance=self.rtol,
+        )
 
     def outputs(self) -> np.ndarray:
         return self._out.copy()

@@ -18,11 +18,11 @@ the model is equal to the FMU's input/output behaviour at the step, which is wha
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
-
 from gainlink.errors import PlantError
 
 from .fmu import FmuPlant
@@ -78,9 +78,19 @@ def realize(h: np.ndarray, *, rtol: float) -> tuple[np.ndarray, np.ndarray, np.n
     return A, B, C, s
 
 
-def identify_cosimulation(path: Path, *, md: Any, at: Mapping[str, float], inputs: list[str] | None,
-                          outputs: list[str] | None, Ts: float, horizon: int = DEFAULT_HORIZON,
-                          rel_step: float = 1e-4, rtol: float = 1e-8, max_misfit: float = 1e-6) -> dict:
+def identify_cosimulation(
+    path: Path,
+    *,
+    md: Any,
+    at: Mapping[str, float],
+    inputs: list[str] | None,
+    outputs: list[str] | None,
+    Ts: float,
+    horizon: int = DEFAULT_HORIZON,
+    rel_step: float = 1e-4,
+    rtol: float = 1e-8,
+    max_misfit: float = 1e-6,
+) -> dict:
     """Discrete ``A, B, C, D`` of a Co-Simulation FMU at step ``Ts`` about the point ``at``.
 
     Parameters
@@ -110,8 +120,10 @@ def identify_cosimulation(path: Path, *, md: Any, at: Mapping[str, float], input
         misfit of the realised Markov parameters, relative to the largest).
     """
     if not md.coSimulation.canGetAndSetFMUstate:
-        raise PlantError(f"FMU {md.modelName} is Co-Simulation only and cannot save its state "
-                         "(canGetAndSetFMUstate=false): linearize perturbs doStep from one saved state and needs it")
+        raise PlantError(
+            f"FMU {md.modelName} is Co-Simulation only and cannot save its state "
+            "(canGetAndSetFMUstate=false): linearize perturbs doStep from one saved state and needs it"
+        )
     if not (Ts > 0 and np.isfinite(Ts)):
         raise PlantError("linearize: the step (--Ts) must be positive")
     real = "Float64" if md.fmiVersion == "3.0" else "Real"
@@ -130,17 +142,32 @@ def identify_cosimulation(path: Path, *, md: Any, at: Mapping[str, float], input
     A, B, C, s = realize(h, rtol=rtol)
     n = A.shape[0]
     if n == 0:
-        raise PlantError(f"FMU {md.modelName}: no input moves an output within {horizon} steps of {Ts:g}; "
-                         "nothing to identify (a longer --horizon or other inputs/outputs?)")
+        raise PlantError(
+            f"FMU {md.modelName}: no input moves an output within {horizon} steps of {Ts:g}; "
+            "nothing to identify (a longer --horizon or other inputs/outputs?)"
+        )
     if n >= min(h.shape[0] // 2 * h.shape[1], (h.shape[0] - h.shape[0] // 2 - 1) * h.shape[2]):
-        raise PlantError(f"FMU {md.modelName}: the response needs more states than {horizon} steps can show "
-                         "(raise --horizon)")
+        raise PlantError(
+            f"FMU {md.modelName}: the response needs more states than {horizon} steps can show (raise --horizon)"
+        )
     pred = np.array([C @ np.linalg.matrix_power(A, k) @ B for k in range(h.shape[0])])
     fit = float(np.max(np.abs(pred - h)) / np.max(np.abs(h)))
     if fit > max_misfit:
-        raise PlantError(f"FMU {md.modelName}: an order-{n} model misses the measured step responses by {fit:.2g} of "
-                         f"their size (more than {max_misfit:g}): the horizon of {horizon} steps is too short "
-                         "(raise --horizon) or the FMU is not linear/time-invariant about this point")
-    return {"A": A, "B": B, "C": C, "D": np.zeros((C.shape[0], B.shape[1])), "inputs": plant.input_names,
-            "outputs": plant.output_names, "states": tuple(f"x{i}" for i in range(n)), "u0": u0, "y0": y0,
-            "hankel": s, "fit": fit}
+        raise PlantError(
+            f"FMU {md.modelName}: an order-{n} model misses the measured step responses by {fit:.2g} of "
+            f"their size (more than {max_misfit:g}): the horizon of {horizon} steps is too short "
+            "(raise --horizon) or the FMU is not linear/time-invariant about this point"
+        )
+    return {
+        "A": A,
+        "B": B,
+        "C": C,
+        "D": np.zeros((C.shape[0], B.shape[1])),
+        "inputs": plant.input_names,
+        "outputs": plant.output_names,
+        "states": tuple(f"x{i}" for i in range(n)),
+        "u0": u0,
+        "y0": y0,
+        "hankel": s,
+        "fit": fit,
+    }

@@ -17,17 +17,17 @@ artifact. Perturbation (the Monte-Carlo hook of campaigns) is :func:`perturb_mod
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
+from gainlink.errors import GainlinkError, PlantError
 from scipy.linalg import expm
 
-from gainlink.errors import GainlinkError, PlantError
-
-from .base import PLANTS, Plant
 from ..registry import take_keys
+from .base import PLANTS, Plant
 
 _ENTRY = re.compile(r"^([ABCD])\[(\d+)\]\[(\d+)\]$")
 MATRICES = ("A", "B", "C", "D")
@@ -60,10 +60,19 @@ def model_from_spec(path: str | Path) -> LinearModel:
     except GainlinkError as exc:
         raise PlantError(f"plant linear: {exc}") from None
     op = spec.operating_point
-    return LinearModel(name=spec.name, A=spec.A, B=spec.B, C=spec.C, D=spec.D,
-                       Ts=None if spec.continuous else spec.Ts,
-                       states=spec.states, inputs=spec.inputs, outputs=spec.outputs,
-                       u_op=None if op is None else op.u_op, y_op=None if op is None else op.y_op)
+    return LinearModel(
+        name=spec.name,
+        A=spec.A,
+        B=spec.B,
+        C=spec.C,
+        D=spec.D,
+        Ts=None if spec.continuous else spec.Ts,
+        states=spec.states,
+        inputs=spec.inputs,
+        outputs=spec.outputs,
+        u_op=None if op is None else op.u_op,
+        y_op=None if op is None else op.y_op,
+    )
 
 
 def model_from_artifact(artifact: Any) -> LinearModel:
@@ -73,10 +82,19 @@ def model_from_artifact(artifact: Any) -> LinearModel:
     sig = artifact.signals
     n = A.shape[0]
     states = tuple(sig["states"]) if len(sig["states"]) == n else tuple(f"x{i}" for i in range(n))
-    return LinearModel(name=artifact.name, A=A, B=np.array(pl["B"], float), C=np.array(pl["C"], float),
-                       D=np.array(pl["D"], float), Ts=artifact.Ts if pl["kind"] == "discrete" else None,
-                       states=states, inputs=tuple(sig["inputs"]), outputs=tuple(sig["outputs"]),
-                       u_op=artifact.u_op, y_op=artifact.y_op)
+    return LinearModel(
+        name=artifact.name,
+        A=A,
+        B=np.array(pl["B"], float),
+        C=np.array(pl["C"], float),
+        D=np.array(pl["D"], float),
+        Ts=artifact.Ts if pl["kind"] == "discrete" else None,
+        states=states,
+        inputs=tuple(sig["inputs"]),
+        outputs=tuple(sig["outputs"]),
+        u_op=artifact.u_op,
+        y_op=artifact.y_op,
+    )
 
 
 def _factors(table: Any, what: str) -> dict:
@@ -92,8 +110,9 @@ def _factors(table: Any, what: str) -> dict:
     return out
 
 
-def perturb_model(model: LinearModel, *, perturb: Mapping[str, float] | None = None,
-                  scale: Mapping[str, float] | None = None) -> LinearModel:
+def perturb_model(
+    model: LinearModel, *, perturb: Mapping[str, float] | None = None, scale: Mapping[str, float] | None = None
+) -> LinearModel:
     """A copy of ``model`` with whole matrices scaled and single entries changed relatively.
 
     Parameters
@@ -131,8 +150,9 @@ def perturb_model(model: LinearModel, *, perturb: Mapping[str, float] | None = N
     for key, delta in _factors(perturb, "perturb").items():
         match = _ENTRY.match(key.replace(" ", ""))
         if match is None:
-            raise PlantError(f"plant linear: perturb key {key!r} is not of the form \"A[i][j]\" (B, C, D too; "
-                             "zero-based)")
+            raise PlantError(
+                f'plant linear: perturb key {key!r} is not of the form "A[i][j]" (B, C, D too; zero-based)'
+            )
         name, i, j = match.group(1), int(match.group(2)), int(match.group(3))
         rows, cols = mats[name].shape
         if i >= rows or j >= cols:
@@ -212,10 +232,12 @@ def _source_path(value: Any, *, base_dir: Path | None, what: str) -> Path:
 
 
 @PLANTS.register("linear")
-def _linear_factory(config: Mapping[str, Any], *, artifact: Any = None, base_dir: Path | None = None,
-                    **_context: Any) -> Plant:
-    cfg = take_keys(config, allowed={"kind", "spec", "artifact", "perturb", "scale"}, where="plant linear",
-                    error=PlantError)
+def _linear_factory(
+    config: Mapping[str, Any], *, artifact: Any = None, base_dir: Path | None = None, **_context: Any
+) -> Plant:
+    cfg = take_keys(
+        config, allowed={"kind", "spec", "artifact", "perturb", "scale"}, where="plant linear", error=PlantError
+    )
     if "spec" in cfg and "artifact" in cfg:
         raise PlantError("plant linear: give spec or artifact, not both")
     if "spec" in cfg:
@@ -230,8 +252,9 @@ def _linear_factory(config: Mapping[str, Any], *, artifact: Any = None, base_dir
     elif artifact is not None:
         model = model_from_artifact(artifact)
     else:
-        raise PlantError("plant linear needs a model: spec = \"plant.toml\", artifact = \"gains.json\", or the "
-                         "scenario's artifact")
+        raise PlantError(
+            'plant linear needs a model: spec = "plant.toml", artifact = "gains.json", or the scenario\'s artifact'
+        )
     if "perturb" in cfg or "scale" in cfg:
         model = perturb_model(model, perturb=cfg.get("perturb"), scale=cfg.get("scale"))
     return LinearPlant(model=model)

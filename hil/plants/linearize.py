@@ -21,12 +21,12 @@ from __future__ import annotations
 import logging
 import shutil
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
-
 from gainlink.errors import PlantError, SpecError
 from gainlink.fileio import atomic_write_text
 
@@ -63,8 +63,11 @@ class Linearization:
 
         An identified discrete model's states are balanced coordinates, not the FMU's: no x_op then."""
         table = {}
-        for key, names, values in (("u_op", self.inputs, self.u0), ("y_op", self.outputs, self.y0),
-                                   ("x_op", self.states, self.x0 if self.Ts is None else None)):
+        for key, names, values in (
+            ("u_op", self.inputs, self.u0),
+            ("y_op", self.outputs, self.y0),
+            ("x_op", self.states, self.x0 if self.Ts is None else None),
+        ):
             if values is not None and len(names):
                 table[key] = {_signal_name(n): float(v) for n, v in zip(names, values)}
         return table
@@ -77,9 +80,16 @@ def _fmu_path(fmu: str | Path) -> Path:
     return resolve_fmu(fmu=str(fmu), path=None)
 
 
-def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs: list[str] | None = None,
-              outputs: list[str] | None = None, method: str = "auto", Ts: float | None = None,
-              horizon: int | None = None) -> Linearization:
+def linearize(
+    fmu: str | Path,
+    *,
+    at: Mapping[str, float] | None = None,
+    inputs: list[str] | None = None,
+    outputs: list[str] | None = None,
+    method: str = "auto",
+    Ts: float | None = None,
+    horizon: int | None = None,
+) -> Linearization:
     """Linearise an FMU (path, or the name of a project FMU) about the point ``at``.
 
     Parameters
@@ -100,24 +110,31 @@ def linearize(fmu: str | Path, *, at: Mapping[str, float] | None = None, inputs:
     path = _fmu_path(fmu)
     md = read_description(path)
     if md.fmiVersion in ("2.0", "3.0") and md.modelExchange is None and md.coSimulation is not None:
-        return _linearize_cosimulation(path, md, at=at or {}, inputs=inputs, outputs=outputs, method=method, Ts=Ts,
-                                       horizon=horizon)
+        return _linearize_cosimulation(
+            path, md, at=at or {}, inputs=inputs, outputs=outputs, method=method, Ts=Ts, horizon=horizon
+        )
     use_dd = _check_model_exchange(path, md, method)
     sig = _signals(md, inputs=inputs, outputs=outputs, at=at)
     lin = _evaluate(path, md, sig, use_dd=use_dd)
     _check_finite(md, lin)
     drift = _drift(lin.dx0, A=lin.A, B=lin.B, states=lin.states)
     if drift:
-        log.warning("FMU %s: the operating point is not an equilibrium (%s); the linear model about it "
-                    "drifts: set the trim (e.g. --at INPUT=VALUE) where dx/dt = 0", md.modelName, drift)
+        log.warning(
+            "FMU %s: the operating point is not an equilibrium (%s); the linear model about it "
+            "drifts: set the trim (e.g. --at INPUT=VALUE) where dx/dt = 0",
+            md.modelName,
+            drift,
+        )
     return lin
 
 
 def _check_model_exchange(path: Path, md: Any, method: str) -> bool:
     """What linearize needs of a Model Exchange FMU; True when directional derivatives are to be used."""
     if md.fmiVersion != "2.0":
-        raise PlantError(f"FMU {path} is FMI {md.fmiVersion}; linearize reads FMI 2.0 Model Exchange FMUs "
-                         "(and FMI 2.0/3.0 Co-Simulation-only FMUs)")
+        raise PlantError(
+            f"FMU {path} is FMI {md.fmiVersion}; linearize reads FMI 2.0 Model Exchange FMUs "
+            "(and FMI 2.0/3.0 Co-Simulation-only FMUs)"
+        )
     if md.modelExchange is None:
         raise PlantError(f"FMU {path} has no Model Exchange interface; linearize needs dx/dt (Model Exchange)")
     if not md.derivatives:
@@ -142,8 +159,9 @@ class _Signals:
     point: dict
 
 
-def _signals(md: Any, *, inputs: list[str] | None, outputs: list[str] | None,
-             at: Mapping[str, float] | None) -> _Signals:
+def _signals(
+    md: Any, *, inputs: list[str] | None, outputs: list[str] | None, at: Mapping[str, float] | None
+) -> _Signals:
     """Check the chosen inputs, outputs and operating-point names against the model description."""
     vars_ = {v.name: v for v in md.modelVariables}
     all_in = [v.name for v in md.modelVariables if v.causality == "input" and v.type == "Real"]
@@ -158,8 +176,14 @@ def _signals(md: Any, *, inputs: list[str] | None, outputs: list[str] | None,
     for k in point:
         if k not in vars_ or vars_[k].type != "Real":
             raise PlantError(f"FMU {md.modelName} has no Real variable {k!r} for the operating point")
-    return _Signals(vars=vars_, states=[d.variable.derivative for d in md.derivatives],
-                    derivatives=[d.variable for d in md.derivatives], inputs=in_names, outputs=out_names, point=point)
+    return _Signals(
+        vars=vars_,
+        states=[d.variable.derivative for d in md.derivatives],
+        derivatives=[d.variable for d in md.derivatives],
+        inputs=in_names,
+        outputs=out_names,
+        point=point,
+    )
 
 
 def _evaluate(path: Path, md: Any, sig: _Signals, *, use_dd: bool) -> Linearization:
@@ -176,8 +200,12 @@ def _evaluate(path: Path, md: Any, sig: _Signals, *, use_dd: bool) -> Linearizat
         if not any(s.name in sig.point for s in sig.states) and np.any(np.abs(dx0) > 0.0):
             x_eq = _equilibrium(f, x0, u0)
             if x_eq is not None:
-                log.info("FMU %s: the start point is not an equilibrium; linearising at the equilibrium with the "
-                         "inputs held (states %s)", md.modelName, np.array2string(x_eq, precision=6))
+                log.info(
+                    "FMU %s: the start point is not an equilibrium; linearising at the equilibrium with the "
+                    "inputs held (states %s)",
+                    md.modelName,
+                    np.array2string(x_eq, precision=6),
+                )
                 x0 = x_eq
                 dx0, y0 = f(x0, u0)
         if use_dd:
@@ -197,9 +225,22 @@ def _evaluate(path: Path, md: Any, sig: _Signals, *, use_dd: bool) -> Linearizat
             log.debug("FMU cleanup failed", exc_info=True)
         if own:
             shutil.rmtree(unzip, ignore_errors=True)
-    return Linearization(A=A, B=B, C=C, D=D, states=tuple(s.name for s in sig.states), inputs=tuple(sig.inputs),
-                         outputs=tuple(sig.outputs), point=sig.point, x0=x0, method=name, model_name=md.modelName,
-                         u0=u0, y0=y0, dx0=dx0)
+    return Linearization(
+        A=A,
+        B=B,
+        C=C,
+        D=D,
+        states=tuple(s.name for s in sig.states),
+        inputs=tuple(sig.inputs),
+        outputs=tuple(sig.outputs),
+        point=sig.point,
+        x0=x0,
+        method=name,
+        model_name=md.modelName,
+        u0=u0,
+        y0=y0,
+        dx0=dx0,
+    )
 
 
 def _initialise(fmu: Any, sig: _Signals) -> None:
@@ -218,8 +259,12 @@ def _initialise(fmu: Any, sig: _Signals) -> None:
 
 def _dynamics(fmu: Any, sig: _Signals) -> tuple[Any, np.ndarray, np.ndarray, dict]:
     """``f(x, u) -> (dx/dt, y)`` through the FMU, the state and input at the point, and the value references."""
-    vr = {"x": [s.valueReference for s in sig.states], "dx": [d.valueReference for d in sig.derivatives],
-          "u": [sig.vars[n].valueReference for n in sig.inputs], "y": [sig.vars[n].valueReference for n in sig.outputs]}
+    vr = {
+        "x": [s.valueReference for s in sig.states],
+        "dx": [d.valueReference for d in sig.derivatives],
+        "u": [sig.vars[n].valueReference for n in sig.inputs],
+        "y": [sig.vars[n].valueReference for n in sig.outputs],
+    }
     nx = len(vr["x"])
     x0 = np.array(fmu.getReal(vr["x"]))
     u0 = np.array(fmu.getReal(vr["u"])) if vr["u"] else np.zeros(0)
@@ -237,6 +282,7 @@ def _dynamics(fmu: Any, sig: _Signals) -> tuple[Any, np.ndarray, np.ndarray, dic
 
 def _directional_jacobians(fmu: Any, vr: dict) -> tuple[np.ndarray, ...]:
     """A, B, C, D from the FMU's directional derivatives, one known variable at a time."""
+
     def jac(unknown: list[int], known: list[int]) -> np.ndarray:
         J = np.zeros((len(unknown), len(known)))
         for j, ref in enumerate(known):
@@ -297,32 +343,61 @@ def _drift(dx0: np.ndarray, *, A: np.ndarray, B: np.ndarray, states: tuple[str, 
     return ", ".join(bad)
 
 
-def _linearize_cosimulation(path: Path, md: Any, *, at: Mapping[str, float], inputs: list[str] | None,
-                            outputs: list[str] | None, method: str, Ts: float | None,
-                            horizon: int | None) -> Linearization:
+def _linearize_cosimulation(
+    path: Path,
+    md: Any,
+    *,
+    at: Mapping[str, float],
+    inputs: list[str] | None,
+    outputs: list[str] | None,
+    method: str,
+    Ts: float | None,
+    horizon: int | None,
+) -> Linearization:
     from .identify import DEFAULT_HORIZON, identify_cosimulation
 
     if method == "directional":
-        raise PlantError(f"FMU {md.modelName} is Co-Simulation only: no directional derivatives; linearize "
-                         "identifies it from doStep responses (method auto or differences)")
+        raise PlantError(
+            f"FMU {md.modelName} is Co-Simulation only: no directional derivatives; linearize "
+            "identifies it from doStep responses (method auto or differences)"
+        )
     if Ts is None:
-        raise PlantError(f"FMU {md.modelName} is Co-Simulation only: give the communication step (--Ts) of the "
-                         "discrete model to identify")
+        raise PlantError(
+            f"FMU {md.modelName} is Co-Simulation only: give the communication step (--Ts) of the "
+            "discrete model to identify"
+        )
     if horizon is not None and (isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 4):
         raise PlantError("linearize: --horizon must be a whole number of steps, at least 4")
     vars_ = {v.name: v for v in md.modelVariables}
     for k in at:
         if k not in vars_ or vars_[k].type not in ("Real", "Float64"):
             raise PlantError(f"FMU {md.modelName} has no Real variable {k!r} for the operating point")
-    r = identify_cosimulation(path, md=md, at=at, inputs=inputs, outputs=outputs, Ts=float(Ts),
-                              horizon=horizon or DEFAULT_HORIZON)
-    log.info("identified %s: order %d, Hankel singular values %s, Markov fit %.2g", md.modelName, r["A"].shape[0],
-             np.array2string(r["hankel"][: r["A"].shape[0] + 2], precision=3, max_line_width=10**6), r["fit"])
-    return Linearization(A=r["A"], B=r["B"], C=r["C"], D=r["D"], states=r["states"], inputs=tuple(r["inputs"]),
-                         outputs=tuple(r["outputs"]), point=dict(at), x0=np.zeros(r["A"].shape[0]),
-                         method=f"doStep pulse responses from a saved state, ERA order {r['A'].shape[0]}",
-                         model_name=md.modelName, Ts=float(Ts), u0=np.asarray(r["u0"], float),
-                         y0=np.asarray(r["y0"], float))
+    r = identify_cosimulation(
+        path, md=md, at=at, inputs=inputs, outputs=outputs, Ts=float(Ts), horizon=horizon or DEFAULT_HORIZON
+    )
+    log.info(
+        "identified %s: order %d, Hankel singular values %s, Markov fit %.2g",
+        md.modelName,
+        r["A"].shape[0],
+        np.array2string(r["hankel"][: r["A"].shape[0] + 2], precision=3, max_line_width=10**6),
+        r["fit"],
+    )
+    return Linearization(
+        A=r["A"],
+        B=r["B"],
+        C=r["C"],
+        D=r["D"],
+        states=r["states"],
+        inputs=tuple(r["inputs"]),
+        outputs=tuple(r["outputs"]),
+        point=dict(at),
+        x0=np.zeros(r["A"].shape[0]),
+        method=f"doStep pulse responses from a saved state, ERA order {r['A'].shape[0]}",
+        model_name=md.modelName,
+        Ts=float(Ts),
+        u0=np.asarray(r["u0"], float),
+        y0=np.asarray(r["y0"], float),
+    )
 
 
 def fmu_real_array(x: np.ndarray) -> Any:
@@ -339,8 +414,9 @@ def _signal_name(name: str) -> str:
     return s if re.match(r"[A-Za-z_]", s) else f"s_{s}"
 
 
-def spec_dict(lin: Linearization, *, Ts: float, name: str | None = None,
-              template: Mapping[str, Any] | None = None) -> dict:
+def spec_dict(
+    lin: Linearization, *, Ts: float, name: str | None = None, template: Mapping[str, Any] | None = None
+) -> dict:
     """A spec mapping for ``lin``; design sections from ``template`` or neutral defaults to edit."""
     import re
 
@@ -351,10 +427,19 @@ def spec_dict(lin: Linearization, *, Ts: float, name: str | None = None,
     if lin.Ts is not None and abs(lin.Ts - Ts) > 1e-12 * lin.Ts:
         raise SpecError(f"the identified model is discrete at the FMU's step {lin.Ts:g}; the spec's Ts must be that")
     data: dict[str, Any] = {
-        "name": spec_name, "Ts": float(Ts), "discretization": "zoh",
-        "plant": {"kind": "continuous" if lin.Ts is None else "discrete", "states": [_signal_name(s) for s in lin.states],
-                  "inputs": [_signal_name(s) for s in lin.inputs], "outputs": [_signal_name(s) for s in lin.outputs],
-                  "A": lin.A.tolist(), "B": lin.B.tolist(), "C": lin.C.tolist(), "D": lin.D.tolist()},
+        "name": spec_name,
+        "Ts": float(Ts),
+        "discretization": "zoh",
+        "plant": {
+            "kind": "continuous" if lin.Ts is None else "discrete",
+            "states": [_signal_name(s) for s in lin.states],
+            "inputs": [_signal_name(s) for s in lin.inputs],
+            "outputs": [_signal_name(s) for s in lin.outputs],
+            "A": lin.A.tolist(),
+            "B": lin.B.tolist(),
+            "C": lin.C.tolist(),
+            "D": lin.D.tolist(),
+        },
     }
     op = lin.operating_point()
     u_op = np.array(list(op.get("u_op", {}).values()) or [0.0] * m)
@@ -371,9 +456,19 @@ def spec_dict(lin: Linearization, *, Ts: float, name: str | None = None,
     return data
 
 
-def linearize_to_spec(*, fmu: str | Path, at: Mapping[str, float], out: Path, Ts: float, name: str | None = None,
-                      inputs: list[str] | None = None, outputs: list[str] | None = None, method: str = "auto",
-                      template: Path | None = None, horizon: int | None = None) -> Linearization:
+def linearize_to_spec(
+    *,
+    fmu: str | Path,
+    at: Mapping[str, float],
+    out: Path,
+    Ts: float,
+    name: str | None = None,
+    inputs: list[str] | None = None,
+    outputs: list[str] | None = None,
+    method: str = "auto",
+    template: Path | None = None,
+    horizon: int | None = None,
+) -> Linearization:
     """Linearise and write the spec TOML (atomically); the spec parses with :func:`gainlink.spec.parse_spec`."""
     from gainlink.spec import parse_spec
 
@@ -388,16 +483,23 @@ def linearize_to_spec(*, fmu: str | Path, at: Mapping[str, float], out: Path, Ts
             raise SpecError(f"template spec {template}: {exc}") from None
     data = spec_dict(lin, Ts=Ts, name=name, template=tmpl)
     parse_spec(data, source=str(out))  # refuse to write a spec design would not take
-    states_there = ("states are balanced coordinates of the identified discrete model (D = 0: outputs sampled "
-                    "after each step)" if lin.Ts is not None else
-                    f"states there: {', '.join(f'{s} = {v:g}' for s, v in zip(lin.states, lin.x0))}")
+    states_there = (
+        "states are balanced coordinates of the identified discrete model (D = 0: outputs sampled after each step)"
+        if lin.Ts is not None
+        else f"states there: {', '.join(f'{s} = {v:g}' for s, v in zip(lin.states, lin.x0))}"
+    )
     drift = _drift(lin.dx0, A=lin.A, B=lin.B, states=lin.states) if lin.dx0 is not None else ""
-    header = (f"Linearised from FMU {lin.model_name} by gainlink linearize ({lin.method}).\n"
-              f"Operating point: {', '.join(f'{k} = {v:g}' for k, v in lin.point.items()) or 'start values'}; "
-              f"{states_there}.\n"
-              "[operating_point] holds the inputs and outputs there: the loop works in absolute units.\n"
-              + (f"Not an equilibrium: {drift}.\n" if drift else "")
-              + ("Design sections copied from the template spec." if tmpl is not None else
-                 "Design sections are neutral defaults: edit weights, noise and limits before designing."))
+    header = (
+        f"Linearised from FMU {lin.model_name} by gainlink linearize ({lin.method}).\n"
+        f"Operating point: {', '.join(f'{k} = {v:g}' for k, v in lin.point.items()) or 'start values'}; "
+        f"{states_there}.\n"
+        "[operating_point] holds the inputs and outputs there: the loop works in absolute units.\n"
+        + (f"Not an equilibrium: {drift}.\n" if drift else "")
+        + (
+            "Design sections copied from the template spec."
+            if tmpl is not None
+            else "Design sections are neutral defaults: edit weights, noise and limits before designing."
+        )
+    )
     atomic_write_text(out, toml_write.dumps(data, header=header))
     return lin

@@ -7,14 +7,14 @@ Continuous models integrate with fixed-step RK4 (sub-steps no longer than ``step
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
-
 from gainlink.errors import PlantError
 
-from .base import PLANTS, Plant, select
 from ..registry import take_keys
+from .base import PLANTS, Plant, select
 
 _COMMON_KEYS = {"kind", "inputs", "outputs", "parameters", "step"}
 
@@ -29,8 +29,14 @@ class OdePlant(Plant):
     all_inputs: tuple[str, ...]
     defaults: dict[str, float]
 
-    def __init__(self, *, parameters: Mapping[str, float] | None = None, inputs: Any = None,
-                 outputs: Any = None, step: float = 1e-3) -> None:
+    def __init__(
+        self,
+        *,
+        parameters: Mapping[str, float] | None = None,
+        inputs: Any = None,
+        outputs: Any = None,
+        step: float = 1e-3,
+    ) -> None:
         params = dict(self.defaults)
         for key, value in (parameters or {}).items():
             if key not in params:
@@ -38,8 +44,9 @@ class OdePlant(Plant):
             params[key] = float(value)
         self.params = params
         self._in_idx = select(self.all_inputs, inputs, what="inputs", plant=self.name)
-        self._out_idx = select(self.state_names, outputs if outputs is not None else self.default_outputs,
-                               what="outputs", plant=self.name)
+        self._out_idx = select(
+            self.state_names, outputs if outputs is not None else self.default_outputs, what="outputs", plant=self.name
+        )
         self.input_names = tuple(self.all_inputs[i] for i in self._in_idx)
         self.output_names = tuple(self.state_names[i] for i in self._out_idx)
         if not step > 0:
@@ -158,8 +165,14 @@ class WoodBerry(Plant):
     all_inputs = ("reflux", "steam")
     all_outputs = ("x_D", "x_B")
 
-    def __init__(self, *, parameters: Mapping[str, float] | None = None, inputs: Any = None,
-                 outputs: Any = None, step: float = 0.1) -> None:
+    def __init__(
+        self,
+        *,
+        parameters: Mapping[str, float] | None = None,
+        inputs: Any = None,
+        outputs: Any = None,
+        step: float = 0.1,
+    ) -> None:
         if parameters:
             raise PlantError("plant wood_berry takes no parameters")
         if not step > 0:

@@ -14,8 +14,9 @@ The other keys of the table are passed to the class as keyword arguments.
 from __future__ import annotations
 
 import importlib
+from collections.abc import Mapping
 from importlib.metadata import entry_points
-from typing import Any, Mapping
+from typing import Any
 
 from gainlink.errors import PlantError
 
@@ -32,7 +33,7 @@ def installed_plugins() -> dict[str, Any]:
 def _load_class(target: str, *, where: str) -> type:
     module_name, sep, attr = target.partition(":")
     if not sep or not module_name or not attr:
-        raise PlantError(f"{where}: {target!r} must be of the form \"module:Class\"")
+        raise PlantError(f'{where}: {target!r} must be of the form "module:Class"')
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
@@ -66,7 +67,7 @@ def _python_factory(config: Mapping[str, Any], **_context: Any) -> Plant:
     options = {k: v for k, v in config.items() if k not in ("kind", "class")}
     target = config.get("class")
     if not isinstance(target, str):
-        raise PlantError("plant python: give class = \"module:Class\" (a gainlink.hil.plants.base.Plant subclass)")
+        raise PlantError('plant python: give class = "module:Class" (a gainlink.hil.plants.base.Plant subclass)')
     return build_plant(_load_class(target, where="plant python"), options, where="plant python")
 
 

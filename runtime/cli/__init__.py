@@ -24,7 +24,7 @@ EXIT_USAGE = 2
 class _OneLineParser(argparse.ArgumentParser):
     """An ArgumentParser whose usage errors are one line and exit status 2."""
 
-    def error(self, message: str) -> None:  # noqa: D401 - argparse API
+    def error(self, message: str) -> None:
         where = self.prog.removeprefix("gainlink").strip()
         self.exit(EXIT_USAGE, f"gainlink: error: {where + ': ' if where else ''}{message}\n")
 

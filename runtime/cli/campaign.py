@@ -37,11 +37,21 @@ def _run(args: argparse.Namespace) -> int:
 
             def callback(done: int, total: int, record: dict) -> None:
                 failed[0] += record["status"] == "error"
-                bar.update(task, completed=done, total=total,
-                           description=f"campaign {campaign.name}" + (f" ({failed[0]} errors)" if failed[0] else ""))
+                bar.update(
+                    task,
+                    completed=done,
+                    total=total,
+                    description=f"campaign {campaign.name}" + (f" ({failed[0]} errors)" if failed[0] else ""),
+                )
 
-        result = run(campaign, out=Path(args.out), scheduler=args.scheduler, workers=args.workers, progress=callback,
-                     batch=args.batch)
+        result = run(
+            campaign,
+            out=Path(args.out),
+            scheduler=args.scheduler,
+            workers=args.workers,
+            progress=callback,
+            batch=args.batch,
+        )
     sys.stdout.write(result.summary)
     if result.reused:
         sys.stdout.write(f"  resumed: {result.reused} runs had results, {result.executed} ran now\n")
@@ -76,8 +86,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     r.add_argument("--out", required=True, help="campaign folder: results by run id, campaign.json/.csv, plots")
     r.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (default: a LocalCluster)")
     r.add_argument("--workers", type=int, help="LocalCluster process workers (default: one per CPU)")
-    r.add_argument("--batch", type=int, metavar="N",
-                   help="runs per Dask task (default: SIL up to 16, at least 4 tasks per worker thread; HIL 1)")
+    r.add_argument(
+        "--batch",
+        type=int,
+        metavar="N",
+        help="runs per Dask task (default: SIL up to 16, at least 4 tasks per worker thread; HIL 1)",
+    )
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.set_defaults(func=_run)
 

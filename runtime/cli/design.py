@@ -10,10 +10,10 @@ import numpy as np
 
 from .. import artifact as artifact_mod
 from ..analysis import analyze, complex_pairs
+from ..compensator import compensator_stability
 from ..design import design
 from ..errors import DataError, GainlinkError, VerificationError
 from ..fileio import atomic_write_text, publish_files
-from ..compensator import compensator_stability
 from ..replay import compare_traces, engine_names, one_step_check, read_samples, read_trace, replay
 from ..simulate import samples_csv, simulate_linear
 from ..spec import load_spec
@@ -39,8 +39,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("simulate", help="closed-loop run on the artifact's discrete plant, written as replay input")
     p.add_argument("artifact", help="gains.json")
     p.add_argument("--steps", type=int, default=500, help="number of samples (default 500)")
-    p.add_argument("--x0", type=float, nargs="+", help="initial plant state, deviation from the operating point (n values)")
-    p.add_argument("--ref", type=float, nargs="+", help="constant absolute reference (q values; default: the tracked outputs at the operating point)")
+    p.add_argument(
+        "--x0", type=float, nargs="+", help="initial plant state, deviation from the operating point (n values)"
+    )
+    p.add_argument(
+        "--ref",
+        type=float,
+        nargs="+",
+        help="constant absolute reference (q values; default: the tracked outputs at the operating point)",
+    )
     p.add_argument("--noise", type=float, default=0.0, help="measurement noise standard deviation")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, help="output CSV (t, y0.., r0..)")
@@ -51,9 +58,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--input", required=True, help="CSV with y0..y{p-1}, r0..r{q-1} (and optionally t)")
     p.add_argument("--output", required=True, help="CSV to write: u, sat, fault, xh, z")
     p.add_argument("--engine", default="reference", help=f"one of {', '.join(engine_names())}")
-    p.add_argument("--compare", metavar="OTHER.csv",
-                   help="another replay output of the same input (e.g. the reference's): both are checked one step "
-                   "at a time against the float64 law (exit 2 on a failure); their open-loop difference is printed")
+    p.add_argument(
+        "--compare",
+        metavar="OTHER.csv",
+        help="another replay output of the same input (e.g. the reference's): both are checked one step "
+        "at a time against the float64 law (exit 2 on a failure); their open-loop difference is printed",
+    )
     p.set_defaults(func=cmd_replay)
 
 
@@ -70,33 +80,47 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     dom = "s" if rep.kind != "discrete" else "z"
     print(f"{rep.name}: {rep.kind} plant, n={rep.n} m={rep.m} p={rep.p}, Ts={rep.Ts:g} s")
     print(f"  open-loop poles ({dom}): {', '.join(_c(z) for z in rep.open_loop_poles)}")
-    print(f"  controllability: rank {rep.controllability_rank}/{rep.n}, cond {rep.controllability_cond:.3g}"
-          f"  -> {'stabilizable' if rep.stabilizable else 'NOT stabilizable'}")
-    print(f"  observability:   rank {rep.observability_rank}/{rep.n}, cond {rep.observability_cond:.3g}"
-          f"  -> {'detectable' if rep.detectable else 'NOT detectable'}")
+    print(
+        f"  controllability: rank {rep.controllability_rank}/{rep.n}, cond {rep.controllability_cond:.3g}"
+        f"  -> {'stabilizable' if rep.stabilizable else 'NOT stabilizable'}"
+    )
+    print(
+        f"  observability:   rank {rep.observability_rank}/{rep.n}, cond {rep.observability_cond:.3g}"
+        f"  -> {'detectable' if rep.detectable else 'NOT detectable'}"
+    )
     print("  PBH per mode:")
     for md in rep.modes:
-        print(f"    {_c(md.eigenvalue):>22}  {'stable  ' if md.stable else 'unstable'}"
-              f"  {'controllable' if md.controllable else 'UNCONTROLLABLE'}"
-              f"  {'observable' if md.observable else 'UNOBSERVABLE'}")
+        print(
+            f"    {_c(md.eigenvalue):>22}  {'stable  ' if md.stable else 'unstable'}"
+            f"  {'controllable' if md.controllable else 'UNCONTROLLABLE'}"
+            f"  {'observable' if md.observable else 'UNOBSERVABLE'}"
+        )
     zeros = ", ".join(_c(z) for z in rep.transmission_zeros) or "none"
     print(f"  transmission zeros: {zeros}")
-    print(f"  bandwidth ({rep.bandwidth_source}): {rep.bandwidth_rad_s:.3g} rad/s; "
-          f"sampling is {rep.sample_rate_ratio:.1f}x that")
+    print(
+        f"  bandwidth ({rep.bandwidth_source}): {rep.bandwidth_rad_s:.3g} rad/s; "
+        f"sampling is {rep.sample_rate_ratio:.1f}x that"
+    )
     print(f"  state scaling spread: {rep.state_scale_ratio:.3g}x")
     if rep.compensator is not None:
         c = rep.compensator
-        print(f"  compensator of the spec's design (y, r -> u, unsaturated): spectral radius {c['spectral_radius']:.4g}"
-              f", {c['spectral_radius_without_integrators']:.4g} without integrators -> "
-              f"{'stable' if c['stable'] else 'UNSTABLE'}")
+        print(
+            f"  compensator of the spec's design (y, r -> u, unsaturated): spectral radius {c['spectral_radius']:.4g}"
+            f", {c['spectral_radius_without_integrators']:.4g} without integrators -> "
+            f"{'stable' if c['stable'] else 'UNSTABLE'}"
+        )
     if rep.float32 is not None:
         f = rep.float32
-        print(f"  float32 in closed loop: max |u32 - u64| {f['max_rel_u']:.3g} of the limit span "
-              f"({'within' if f['max_rel_u'] <= f['threshold'] else 'ABOVE'} {f['threshold']:.3g})")
+        print(
+            f"  float32 in closed loop: max |u32 - u64| {f['max_rel_u']:.3g} of the limit span "
+            f"({'within' if f['max_rel_u'] <= f['threshold'] else 'ABOVE'} {f['threshold']:.3g})"
+        )
     if rep.dead_time is not None:
         d = rep.dead_time
-        print(f"  with the exact dead times (design: Padé order {d['pade_order']}): closed-loop spectral radius "
-              f"{d['spectral_radius']:.4f} -> {'stable' if d['stable'] else 'UNSTABLE'}")
+        print(
+            f"  with the exact dead times (design: Padé order {d['pade_order']}): closed-loop spectral radius "
+            f"{d['spectral_radius']:.4f} -> {'stable' if d['stable'] else 'UNSTABLE'}"
+        )
     for w in rep.warnings:
         print(f"  warning: {w}")
     return 0
@@ -113,33 +137,53 @@ def cmd_design(args: argparse.Namespace) -> int:
     publish_files(out, {"gains.json": artifact_mod.render(result.artifact)})
     a = result.artifact
     if args.json:
-        print(json.dumps({
-            "artifact": str(out / "gains.json"), "sha256": a["sha256"], "K": a["K"], "L": a["L"],
-            "Ki": a.get("Ki"), "controller_poles": complex_pairs(result.controller_poles),
-            "observer_poles": complex_pairs(result.observer_poles), "margins": a["checks"]["margins"],
-            "u_op": a.get("u_op"), "y_op": a.get("y_op"),
-            "compensator": a["checks"]["compensator"], "float32": a["checks"].get("float32"),
-            "realization": a.get("realization", {}).get("kind", "as_designed"), "warnings": result.warnings,
-        }, indent=2))
+        print(
+            json.dumps(
+                {
+                    "artifact": str(out / "gains.json"),
+                    "sha256": a["sha256"],
+                    "K": a["K"],
+                    "L": a["L"],
+                    "Ki": a.get("Ki"),
+                    "controller_poles": complex_pairs(result.controller_poles),
+                    "observer_poles": complex_pairs(result.observer_poles),
+                    "margins": a["checks"]["margins"],
+                    "u_op": a.get("u_op"),
+                    "y_op": a.get("y_op"),
+                    "compensator": a["checks"]["compensator"],
+                    "float32": a["checks"].get("float32"),
+                    "realization": a.get("realization", {}).get("kind", "as_designed"),
+                    "warnings": result.warnings,
+                },
+                indent=2,
+            )
+        )
         return 0
-    print(f"{spec.name}: n={spec.n} m={spec.m} p={spec.p} q={a['q']}, Ts={spec.Ts:g} s, "
-          f"{a['design']['controller']['method']} + {a['design']['observer']['method']} "
-          f"({a['observer_form']}), anti-windup {a['anti_windup']}")
+    print(
+        f"{spec.name}: n={spec.n} m={spec.m} p={spec.p} q={a['q']}, Ts={spec.Ts:g} s, "
+        f"{a['design']['controller']['method']} + {a['design']['observer']['method']} "
+        f"({a['observer_form']}), anti-windup {a['anti_windup']}"
+    )
     with np.printoptions(precision=5, suppress=True, linewidth=110):
         print(f"  K  = {np.array(a['K'])}".replace("\n", "\n       "))
         if a["q"]:
             print(f"  Ki = {np.array(a['Ki'])}".replace("\n", "\n       "))
-    print(f"  controller poles |z| max {np.max(np.abs(result.controller_poles)):.5f}, "
-          f"observer poles |z| max {np.max(np.abs(result.observer_poles)):.5f}, "
-          f"closed loop spectral radius {a['checks']['spectral_radius']:.5f}")
+    print(
+        f"  controller poles |z| max {np.max(np.abs(result.controller_poles)):.5f}, "
+        f"observer poles |z| max {np.max(np.abs(result.observer_poles)):.5f}, "
+        f"closed loop spectral radius {a['checks']['spectral_radius']:.5f}"
+    )
     for mg in result.margins:
         up = "inf" if mg.gain_margin_up_db is None else f"+{mg.gain_margin_up_db:.1f}"
         down = "-inf" if mg.gain_margin_down_db is None else f"{mg.gain_margin_down_db:.1f}"
         pm = "n/a" if mg.phase_margin_deg is None else f"{mg.phase_margin_deg:.1f} deg"
         print(f"  margins at input {mg.input}: gain {up} / {down} dB, phase {pm}")
     if "u_op" in a or "y_op" in a:
-        op = [f"{name}={v:.6g}" for key, names in (("u_op", spec.inputs), ("y_op", spec.outputs))
-              for name, v in zip(names, a.get(key, [0.0] * len(names)))]
+        op = [
+            f"{name}={v:.6g}"
+            for key, names in (("u_op", spec.inputs), ("y_op", spec.outputs))
+            for name, v in zip(names, a.get(key, [0.0] * len(names)))
+        ]
         print(f"  operating point: {', '.join(op)} (samples, references and commands are absolute)")
     print(f"  {result.compensator.describe()}")
     if result.dead_time is not None:
@@ -147,9 +191,11 @@ def cmd_design(args: argparse.Namespace) -> int:
     realization = a.get("realization", {}).get("kind", "as_designed")
     if result.float32 is not None:
         f = result.float32
-        print(f"  float32 in closed loop ({realization} realisation, {f.steps} steps, noise, reference step, "
-              f"saturating disturbance): max |u32 - u64| {f.max_rel_u:.3g} of the limit span, max |y32 - y64| "
-              f"{f.max_rel_y:.3g} of the output excursion ({'within' if f.ok else 'ABOVE'} {f.threshold:g})")
+        print(
+            f"  float32 in closed loop ({realization} realisation, {f.steps} steps, noise, reference step, "
+            f"saturating disturbance): max |u32 - u64| {f.max_rel_u:.3g} of the limit span, max |y32 - y64| "
+            f"{f.max_rel_y:.3g} of the output excursion ({'within' if f.ok else 'ABOVE'} {f.threshold:g})"
+        )
     print(f"  wrote {out / 'gains.json'} (sha256 {a['sha256'][:16]})")
     return 0
 
@@ -157,8 +203,10 @@ def cmd_design(args: argparse.Namespace) -> int:
 def cmd_validate(args: argparse.Namespace) -> int:
     """``gainlink validate ARTIFACT``."""
     a = artifact_mod.load(args.artifact)
-    print(f"{args.artifact}: valid gainlink artifact '{a.name}' (n={a.n} m={a.m} p={a.p} q={a.q}, "
-          f"{a.observer_form}, anti-windup {a.anti_windup}), sha256 {a.sha256}")
+    print(
+        f"{args.artifact}: valid gainlink artifact '{a.name}' (n={a.n} m={a.m} p={a.p} q={a.q}, "
+        f"{a.observer_form}, anti-windup {a.anti_windup}), sha256 {a.sha256}"
+    )
     return 0
 
 
@@ -176,8 +224,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if not out.parent.is_dir():
         raise DataError(f"output folder {out.parent} does not exist")
     atomic_write_text(out, samples_csv(sim))
-    print(f"wrote {args.steps} samples to {out}; final |y| = {np.abs(sim.y[-1]).max():.3g}, "
-          f"saturated {np.mean(np.any((sim.u <= a.u_min) | (sim.u >= a.u_max), axis=1)) * 100:.1f}% of steps")
+    print(
+        f"wrote {args.steps} samples to {out}; final |y| = {np.abs(sim.y[-1]).max():.3g}, "
+        f"saturated {np.mean(np.any((sim.u <= a.u_min) | (sim.u >= a.u_max), axis=1)) * 100:.1f}% of steps"
+    )
     return 0
 
 
@@ -187,24 +237,36 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.compare and not Path(args.compare).is_file():
         raise DataError(f"comparison file {args.compare} not found")
     trace = replay(a, args.input, args.output, engine=args.engine)
-    print(f"replayed {trace.u.shape[0]} samples through {args.engine}: "
-          f"{int(trace.saturated.any(axis=1).sum())} saturated, {int(trace.fault.sum())} refused as non-finite; "
-          f"wrote {args.output}")
+    print(
+        f"replayed {trace.u.shape[0]} samples through {args.engine}: "
+        f"{int(trace.saturated.any(axis=1).sum())} saturated, {int(trace.fault.sum())} refused as non-finite; "
+        f"wrote {args.output}"
+    )
     if not args.compare:
         return 0
     samples = read_samples(args.input, a)
     other = read_trace(args.compare, a)
-    checks = {args.engine: one_step_check(a, samples.Y, samples.R, trace),
-              args.compare: one_step_check(a, samples.Y, samples.R, other)}
+    checks = {
+        args.engine: one_step_check(a, samples.Y, samples.R, trace),
+        args.compare: one_step_check(a, samples.Y, samples.R, other),
+    }
     for name, check in checks.items():
         print(f"one-step check of {name} (float64 law from its own state at each step): {check.summary()}")
     c = compare_traces(a, trace, other)
     comp = compensator_stability(a)
-    why = "" if comp.stable else (f"; replayed open loop, rounding grows like {comp.radius_without_integrators:.3g}^k"
-                                  ": the one-step check is the verdict")
-    print(f"open loop against {args.compare} (information): max |du| = {c.max_abs_u:.3g} ({c.max_rel_u:.3g} of the "
-          f"limit span), saturation flags differ on {c.sat_mismatches}, fault flags on {c.fault_mismatches} of "
-          f"{c.steps} steps; {comp.describe()}{why}")
+    why = (
+        ""
+        if comp.stable
+        else (
+            f"; replayed open loop, rounding grows like {comp.radius_without_integrators:.3g}^k"
+            ": the one-step check is the verdict"
+        )
+    )
+    print(
+        f"open loop against {args.compare} (information): max |du| = {c.max_abs_u:.3g} ({c.max_rel_u:.3g} of the "
+        f"limit span), saturation flags differ on {c.sat_mismatches}, fault flags on {c.fault_mismatches} of "
+        f"{c.steps} steps; {comp.describe()}{why}"
+    )
     for name, check in checks.items():
         if not check.passed:
             raise VerificationError(f"one-step check failed at {check.first_failure.describe(name)}")

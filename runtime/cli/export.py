@@ -20,7 +20,8 @@ def _export(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``export`` command."""
     p = subparsers.add_parser(
-        "export", help="render the C gains (gl_gains.h, gl_gains.c, gl_step.h) from an artifact",
+        "export",
+        help="render the C gains (gl_gains.h, gl_gains.c, gl_step.h) from an artifact",
         description="Render the firmware's generated C from a gain artifact: dimensions as macros, the gain "
         "set as a const gl_gains_t, the fully unrolled step. Same artifact, same bytes.",
     )

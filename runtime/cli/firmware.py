@@ -17,13 +17,21 @@ BOARDS = ("mps2-an386", "netduinoplus2")
 # Flashing commands for a real board: (board, probe) -> argv template ({hex}, {elf}).
 FLASH_COMMANDS = {
     ("netduinoplus2", "pyocd"): ["pyocd", "flash", "--target", "stm32f405rg", "--format", "hex", "{hex}"],
-    ("netduinoplus2", "openocd"): ["openocd", "-f", "interface/stlink.cfg", "-f", "target/stm32f4x.cfg",
-                                   "-c", "program {elf} verify reset exit"],
+    ("netduinoplus2", "openocd"): [
+        "openocd",
+        "-f",
+        "interface/stlink.cfg",
+        "-f",
+        "target/stm32f4x.cfg",
+        "-c",
+        "program {elf} verify reset exit",
+    ],
     ("mps2-an386", "pyocd"): ["pyocd", "flash", "--target", "cortex_m", "--format", "elf", "{elf}"],
 }
 
 
 # --- firmware build ---------------------------------------------------------------------------------
+
 
 def _build(args: argparse.Namespace) -> int:
     from gainlink.artifact import load
@@ -35,8 +43,13 @@ def _build(args: argparse.Namespace) -> int:
     res = build(artifact, target=args.target, board=args.board)
     stem = f"gainlink_{artifact.name}"
     files: dict[str, bytes | str] = {}
-    manifest = {"artifact": artifact.name, "sha256": artifact.sha256, "target": args.target, "board": res.board,
-                "files": {}}
+    manifest = {
+        "artifact": artifact.name,
+        "sha256": artifact.sha256,
+        "target": args.target,
+        "board": res.board,
+        "files": {},
+    }
     if args.target == "cortex-m4":
         for ext in ("elf", "bin", "hex", "map"):
             files[f"{stem}.{ext}"] = res.files[ext].read_bytes()
@@ -46,7 +59,11 @@ def _build(args: argparse.Namespace) -> int:
         files[f"{stem}.size.json"] = json.dumps(report, indent=2) + "\n"
         manifest["files"]["size"] = f"{stem}.size.json"
     else:
-        for role, name in (("shared", "libgainlink_host.so"), ("static", "libgainlink_loop.a"), ("exe", "gainlink_loop_host")):
+        for role, name in (
+            ("shared", "libgainlink_host.so"),
+            ("static", "libgainlink_loop.a"),
+            ("exe", "gainlink_loop_host"),
+        ):
             files[name] = res.files[role].read_bytes()
             manifest["files"][role] = name
     for name, text in sorted((p.name, p.read_text("utf-8")) for p in res.gains_dir.iterdir()):
@@ -57,20 +74,27 @@ def _build(args: argparse.Namespace) -> int:
     if args.target == "host":
         (out / "gainlink_loop_host").chmod(0o755)
     else:
-        print(f"flash {report['flash_bytes']} B, RAM {report['ram_bytes_without_stack']} B + stack "
-              f"({report['ram_bytes']} B total) on {res.board}")
-    print(f"built {artifact.name} for {args.target}{' / ' + res.board if res.board else ''}: "
-          + ", ".join(p.name for p in written if p.parent == out))
+        print(
+            f"flash {report['flash_bytes']} B, RAM {report['ram_bytes_without_stack']} B + stack "
+            f"({report['ram_bytes']} B total) on {res.board}"
+        )
+    print(
+        f"built {artifact.name} for {args.target}{' / ' + res.board if res.board else ''}: "
+        + ", ".join(p.name for p in written if p.parent == out)
+    )
     return 0
 
 
 # --- firmware flash ---------------------------------------------------------------------------------
 
+
 def flash_command(out_dir: Path, *, probe: str) -> list[str]:
     """The exact flashing command for the image in ``out_dir`` (written by ``firmware build``)."""
     manifest_path = out_dir / "firmware.json"
     if not manifest_path.is_file():
-        raise FirmwareError(f"{out_dir} holds no firmware.json: run `gainlink firmware build ... --out {out_dir}` first")
+        raise FirmwareError(
+            f"{out_dir} holds no firmware.json: run `gainlink firmware build ... --out {out_dir}` first"
+        )
     manifest = json.loads(manifest_path.read_text("utf-8"))
     if manifest.get("target") != "cortex-m4":
         raise FirmwareError(f"{out_dir} holds a {manifest.get('target')} build; flashing needs --target cortex-m4")
@@ -79,7 +103,10 @@ def flash_command(out_dir: Path, *, probe: str) -> list[str]:
     if template is None:
         known = ", ".join(p for b, p in FLASH_COMMANDS if b == board)
         raise FirmwareError(f"no {probe} recipe for board {board} (use --probe {known})")
-    paths = {"hex": str((out_dir / manifest["files"]["hex"]).resolve()), "elf": str((out_dir / manifest["files"]["elf"]).resolve())}
+    paths = {
+        "hex": str((out_dir / manifest["files"]["hex"]).resolve()),
+        "elf": str((out_dir / manifest["files"]["elf"]).resolve()),
+    }
     for key, path in paths.items():
         if not Path(path).is_file():
             raise FirmwareError(f"{path} is missing (rebuild the firmware)")
@@ -98,6 +125,7 @@ def _flash(args: argparse.Namespace) -> int:
 
 # --- firmware run ------------------------------------------------------------------------------------
 
+
 def _run_host(args: argparse.Namespace) -> int:
     """Start the host executable: replay a CSV through it, or pass stdin/stdout through."""
     from gainlink.artifact import load
@@ -112,20 +140,28 @@ def _run_host(args: argparse.Namespace) -> int:
 
 def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: Path | None) -> int:
     import numpy as np
-
     from gainlink.fileio import atomic_write_text
     from gainlink.reference import Trace
     from gainlink.replay import format_trace, read_samples
 
     a = artifact
     samples = read_samples(input_path, a)
-    lines = [" ".join(repr(float(v)) for v in np.concatenate([samples.Y[k], samples.R[k]])) for k in range(samples.Y.shape[0])]
+    lines = [
+        " ".join(repr(float(v)) for v in np.concatenate([samples.Y[k], samples.R[k]]))
+        for k in range(samples.Y.shape[0])
+    ]
     proc = subprocess.run([str(exe)], input="\n".join(lines) + "\n", capture_output=True, text=True, timeout=600)
     if proc.returncode != 0:
         raise FirmwareError(f"host firmware exited with status {proc.returncode}: {proc.stderr.strip()[:200]}")
     out = proc.stdout.splitlines()[1:]  # skip the banner
     N = len(lines)
-    U, S, XH, Z, F = np.zeros((N, a.m)), np.zeros((N, a.m), bool), np.zeros((N, a.n)), np.zeros((N, a.q)), np.zeros(N, bool)
+    U, S, XH, Z, F = (
+        np.zeros((N, a.m)),
+        np.zeros((N, a.m), bool),
+        np.zeros((N, a.n)),
+        np.zeros((N, a.q)),
+        np.zeros(N, bool),
+    )
     for k, line in enumerate(out[:N]):
         parts = line.split()
         status = int(parts[1])
@@ -133,8 +169,8 @@ def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: 
         U[k] = vals[: a.m]
         mask = int(vals[a.m])
         S[k] = [(mask >> i) & 1 for i in range(a.m)]
-        XH[k] = vals[a.m + 1: a.m + 1 + a.n]
-        Z[k] = vals[a.m + 1 + a.n:]
+        XH[k] = vals[a.m + 1 : a.m + 1 + a.n]
+        Z[k] = vals[a.m + 1 + a.n :]
         F[k] = status == -2
     trace = Trace(u=U, saturated=S, xh=XH, z=Z, fault=F)
     text = format_trace(trace, samples.t)
@@ -160,8 +196,12 @@ def _run(args: argparse.Namespace) -> int:
     if getattr(args, "mavlink", None):
         from gainlink.firmware.mavlink_app import run_foreground
 
-        return run_foreground(Path(args.artifact), url=args.mavlink, param_file=args.param_file and Path(args.param_file),
-                              signing_key=args.signing_key and Path(args.signing_key))
+        return run_foreground(
+            Path(args.artifact),
+            url=args.mavlink,
+            param_file=args.param_file and Path(args.param_file),
+            signing_key=args.signing_key and Path(args.signing_key),
+        )
     return _run_host(args)
 
 
@@ -171,11 +211,14 @@ def _run_image(args: argparse.Namespace) -> int:
 
     flash = Path(args.flash_dir) if args.flash_dir else None
     if args.input or args.output:
-        raise FirmwareError("--input/--output replay through the host build (the image replays with "
-                            "`gainlink replay ... --engine qemu`)")
+        raise FirmwareError(
+            "--input/--output replay through the host build (the image replays with "
+            "`gainlink replay ... --engine qemu`)"
+        )
     if args.mavlink and not args.can:
-        return run_foreground(Path(args.artifact), board=args.board, protocol="mavlink", url=args.mavlink,
-                              flash_dir=flash)
+        return run_foreground(
+            Path(args.artifact), board=args.board, protocol="mavlink", url=args.mavlink, flash_dir=flash
+        )
     if args.can and not args.mavlink:
         from gainlink.artifact import load
         from gainlink.hil.links.can import layout_from_config, slcan_image_options
@@ -183,20 +226,29 @@ def _run_image(args: argparse.Namespace) -> int:
 
         config = read_can_config(args.can)
         if config.get("interface") != "slcan" or config.get("fd"):
-            raise FirmwareError("--target cortex-m4 --can needs a classic slcan configuration "
-                                '(e.g. {"interface": "slcan", "channel": "socket://127.0.0.1:5761"})')
+            raise FirmwareError(
+                "--target cortex-m4 --can needs a classic slcan configuration "
+                '(e.g. {"interface": "slcan", "channel": "socket://127.0.0.1:5761"})'
+            )
         layout = layout_from_config(config, artifact=load(args.artifact))
-        return run_foreground(Path(args.artifact), board=args.board, protocol="slcan", url=str(config.get("channel", "")),
-                              options=slcan_image_options(layout), flash_dir=flash)
-    raise FirmwareError("--target cortex-m4 serves one link: --mavlink tcp:HOST:PORT or --can with an slcan "
-                        "configuration")
+        return run_foreground(
+            Path(args.artifact),
+            board=args.board,
+            protocol="slcan",
+            url=str(config.get("channel", "")),
+            options=slcan_image_options(layout),
+            flash_dir=flash,
+        )
+    raise FirmwareError(
+        "--target cortex-m4 serves one link: --mavlink tcp:HOST:PORT or --can with an slcan configuration"
+    )
 
 
 # --- pil run ---------------------------------------------------------------------------------------
 
+
 def _pil(args: argparse.Namespace) -> int:
     import numpy as np
-
     from gainlink.artifact import load
     from gainlink.fileio import publish_files
     from gainlink.firmware.pil import make_plant, run_pil
@@ -209,18 +261,34 @@ def _pil(args: argparse.Namespace) -> int:
     plant = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))
     twin = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))  # the twin's plant
     result = run_pil(artifact, plant=plant, steps=args.steps, reference=ref, board=args.board, twin=twin)
-    summary = {"artifact": artifact.name, "sha256": artifact.sha256, "board": args.board, "plant": args.plant,
-               **result.summary()}
+    summary = {
+        "artifact": artifact.name,
+        "sha256": artifact.sha256,
+        "board": args.board,
+        "plant": args.plant,
+        **result.summary(),
+    }
     text = json.dumps(summary, indent=2) + "\n"
     if args.out:
-        header = ",".join([f"y{i}" for i in range(artifact.p)] + [f"u{i}" for i in range(artifact.m)]
-                          + [f"sat{i}" for i in range(artifact.m)] + ["status"]
-                          + [f"twin_y{i}" for i in range(artifact.p)] + [f"twin_u{i}" for i in range(artifact.m)])
+        header = ",".join(
+            [f"y{i}" for i in range(artifact.p)]
+            + [f"u{i}" for i in range(artifact.m)]
+            + [f"sat{i}" for i in range(artifact.m)]
+            + ["status"]
+            + [f"twin_y{i}" for i in range(artifact.p)]
+            + [f"twin_u{i}" for i in range(artifact.m)]
+        )
         tw = result.twin
-        rows = [",".join([repr(float(v)) for v in result.y[k]] + [repr(float(v)) for v in result.u[k]]
-                         + [str(int(s)) for s in result.saturated[k]] + [str(int(result.status[k]))]
-                         + [repr(float(v)) for v in np.concatenate([tw.y[k], tw.u[k]])])
-                for k in range(args.steps)]
+        rows = [
+            ",".join(
+                [repr(float(v)) for v in result.y[k]]
+                + [repr(float(v)) for v in result.u[k]]
+                + [str(int(s)) for s in result.saturated[k]]
+                + [str(int(result.status[k]))]
+                + [repr(float(v)) for v in np.concatenate([tw.y[k], tw.u[k]])]
+            )
+            for k in range(args.steps)
+        ]
         publish_files(args.out, {"pil.csv": header + "\n" + "\n".join(rows) + "\n", "pil.json": text})
     sys.stdout.write(text)
     return 0
@@ -228,10 +296,14 @@ def _pil(args: argparse.Namespace) -> int:
 
 # --- parsers -----------------------------------------------------------------------------------------
 
+
 def _add_build_parser(sub) -> None:
-    p = sub.add_parser("build", help="build the firmware for an artifact (host or Cortex-M4F)",
-                       description="Build the firmware with the artifact's gains. cortex-m4 writes .elf .bin .hex "
-                       ".map and a JSON size report; host writes the shared/static libraries and the loop executable.")
+    p = sub.add_parser(
+        "build",
+        help="build the firmware for an artifact (host or Cortex-M4F)",
+        description="Build the firmware with the artifact's gains. cortex-m4 writes .elf .bin .hex "
+        ".map and a JSON size report; host writes the shared/static libraries and the loop executable.",
+    )
     p.add_argument("artifact", help="gains.json")
     p.add_argument("--target", choices=("host", "cortex-m4"), required=True)
     p.add_argument("--board", choices=BOARDS, default="mps2-an386", help="Cortex-M board (default mps2-an386)")
@@ -240,9 +312,12 @@ def _add_build_parser(sub) -> None:
 
 
 def _add_flash_parser(sub) -> None:
-    p = sub.add_parser("flash", help="flash a built Cortex-M image to a real board",
-                       description="Print (and unless --dry-run, run) the flashing command for an image built by "
-                       "`gainlink firmware build --target cortex-m4 --out DIR`.")
+    p = sub.add_parser(
+        "flash",
+        help="flash a built Cortex-M image to a real board",
+        description="Print (and unless --dry-run, run) the flashing command for an image built by "
+        "`gainlink firmware build --target cortex-m4 --out DIR`.",
+    )
     p.add_argument("dir", help="folder written by `firmware build`")
     p.add_argument("--probe", choices=("pyocd", "openocd"), required=True)
     p.add_argument("--dry-run", action="store_true", help="only print the command")
@@ -250,27 +325,48 @@ def _add_flash_parser(sub) -> None:
 
 
 def _add_run_parser(sub) -> None:
-    p = sub.add_parser("run", help="run the firmware for an artifact (host build, or the Cortex-M4F image in QEMU)",
-                       description="Build (cached) and start the host firmware. With --input, replay a CSV "
-                       "(columns y0.., r0..) through the loop executable and write the replay CSV. With --target "
-                       "cortex-m4, run the image in QEMU as a bus node on its UART, served as a TCP socket: "
-                       "--mavlink tcp:HOST:PORT, or --can with an slcan configuration (channel socket://HOST:PORT).")
+    p = sub.add_parser(
+        "run",
+        help="run the firmware for an artifact (host build, or the Cortex-M4F image in QEMU)",
+        description="Build (cached) and start the host firmware. With --input, replay a CSV "
+        "(columns y0.., r0..) through the loop executable and write the replay CSV. With --target "
+        "cortex-m4, run the image in QEMU as a bus node on its UART, served as a TCP socket: "
+        "--mavlink tcp:HOST:PORT, or --can with an slcan configuration (channel socket://HOST:PORT).",
+    )
     p.add_argument("artifact", help="gains.json")
-    p.add_argument("--target", choices=("host", "cortex-m4"), default="host",
-                   help="host (default) or cortex-m4 (the image in QEMU, on its UART)")
+    p.add_argument(
+        "--target",
+        choices=("host", "cortex-m4"),
+        default="host",
+        help="host (default) or cortex-m4 (the image in QEMU, on its UART)",
+    )
     p.add_argument("--board", choices=BOARDS, default="mps2-an386", help="with --target cortex-m4: QEMU board")
-    p.add_argument("--flash-dir", help="with --target cortex-m4: the image's flash (persisted parameters; default "
-                   "flash-BOARD beside the artifact)")
+    p.add_argument(
+        "--flash-dir",
+        help="with --target cortex-m4: the image's flash (persisted parameters; default "
+        "flash-BOARD beside the artifact)",
+    )
     p.add_argument("--input", help="replay input CSV; without it stdin/stdout are passed to the executable")
     p.add_argument("--output", help="replay output CSV (default: stdout)")
     # Transport options go here, one argument each (--can CONFIG, --mavlink URL), dispatched in _run.
-    p.add_argument("--can", metavar="CONFIG", help="run the CAN node on a python-can bus (TOML/JSON file or inline JSON)")
-    p.add_argument("--mavlink", metavar="URL", help="run the MAVLink app (parameter server + HIL link) on "
-                   "udpin:HOST:PORT or udpout:HOST:PORT; with --target cortex-m4: tcp:HOST:PORT (the image's UART)")
-    p.add_argument("--param-file", help="with --mavlink: persisted parameters (default: mavlink_params.txt beside "
-                   "the artifact)")
-    p.add_argument("--signing-key", metavar="FILE", help="with --mavlink: MAVLink 2 signing key file (gainlink mavlink "
-                   "keygen); PARAM_SET, COMMAND_LONG and HIL samples must then be signed with it")
+    p.add_argument(
+        "--can", metavar="CONFIG", help="run the CAN node on a python-can bus (TOML/JSON file or inline JSON)"
+    )
+    p.add_argument(
+        "--mavlink",
+        metavar="URL",
+        help="run the MAVLink app (parameter server + HIL link) on "
+        "udpin:HOST:PORT or udpout:HOST:PORT; with --target cortex-m4: tcp:HOST:PORT (the image's UART)",
+    )
+    p.add_argument(
+        "--param-file", help="with --mavlink: persisted parameters (default: mavlink_params.txt beside the artifact)"
+    )
+    p.add_argument(
+        "--signing-key",
+        metavar="FILE",
+        help="with --mavlink: MAVLink 2 signing key file (gainlink mavlink "
+        "keygen); PARAM_SET, COMMAND_LONG and HIL samples must then be signed with it",
+    )
     p.set_defaults(func=_run)
 
 
@@ -286,15 +382,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     pil = subparsers.add_parser("pil", help="processor-in-the-loop: firmware in QEMU, plant in Python")
     pil_sub = pil.add_subparsers(dest="pil_command", metavar="ACTION", parser_class=type(pil))
     pil_sub.required = True
-    p = pil_sub.add_parser("run", help="close the loop with the Cortex-M4F image in QEMU",
-                           description="Run the Cortex-M4F image in QEMU against a plant simulated in Python, one "
-                           "sample per semihosting FIFO round trip; prints a JSON summary.")
+    p = pil_sub.add_parser(
+        "run",
+        help="close the loop with the Cortex-M4F image in QEMU",
+        description="Run the Cortex-M4F image in QEMU against a plant simulated in Python, one "
+        "sample per semihosting FIFO round trip; prints a JSON summary.",
+    )
     p.add_argument("artifact", help="gains.json")
-    p.add_argument("--plant", default="artifact",
-                   help="'artifact' (the artifact's discrete model; alias 'linear') or a gainlink.hil plant name")
+    p.add_argument(
+        "--plant",
+        default="artifact",
+        help="'artifact' (the artifact's discrete model; alias 'linear') or a gainlink.hil plant name",
+    )
     p.add_argument("--steps", type=int, required=True, help="number of samples")
     p.add_argument("--board", choices=BOARDS, default="mps2-an386")
-    p.add_argument("--reference", type=float, nargs="+", help="constant absolute reference (q values; default: the tracked outputs at the operating point)")
+    p.add_argument(
+        "--reference",
+        type=float,
+        nargs="+",
+        help="constant absolute reference (q values; default: the tracked outputs at the operating point)",
+    )
     p.add_argument("--x0", type=float, nargs="+", help="initial plant state (n values)")
     p.add_argument("--out", help="folder for pil.csv and pil.json")
     p.set_defaults(func=_pil)

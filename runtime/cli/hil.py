@@ -17,8 +17,13 @@ def _progress_bar(enabled: bool):
         return nullcontext(None)
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-    return Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                    TimeRemainingColumn(), transient=True)
+    return Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total}"),
+        TimeRemainingColumn(),
+        transient=True,
+    )
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -31,8 +36,9 @@ def _run(args: argparse.Namespace) -> int:
         if bar is not None:
             task = bar.add_task(f"HIL {args.scenario}", total=None)
             callback = lambda done, total: bar.update(task, completed=done, total=total)  # noqa: E731
-        result = run(args.scenario, artifact=args.artifact, report=report_dir, progress=callback,
-                     plots=not args.no_plots)
+        result = run(
+            args.scenario, artifact=args.artifact, report=report_dir, progress=callback, plots=not args.no_plots
+        )
     sys.stdout.write(summary_text(result, report_dir=report_dir))
     return 0 if result.complete else 1
 
@@ -59,8 +65,8 @@ def _dbc(args: argparse.Namespace) -> int:
 
 
 def _fmu(args: argparse.Namespace) -> int:
-    from gainlink.hil.plants.build import build_fmu
     from gainlink.hil.paths import fmu_source_names
+    from gainlink.hil.plants.build import build_fmu
 
     names = args.names or fmu_source_names()
     for name in names:
@@ -69,9 +75,7 @@ def _fmu(args: argparse.Namespace) -> int:
 
 
 def _study(args: argparse.Namespace) -> int:
-    from gainlink.hil.loop.study import run_saturation_study
-
-    from gainlink.hil.loop.study import default_study
+    from gainlink.hil.loop.study import default_study, run_saturation_study
 
     study_desc = None
     if args.study and not Path(args.study).exists() and "/" not in args.study and not args.study.endswith(".toml"):
@@ -83,8 +87,12 @@ def _study(args: argparse.Namespace) -> int:
             study_desc = tomllib.loads(Path(args.study).read_text("utf-8"))
         except (OSError, tomllib.TOMLDecodeError) as exc:
             raise GainlinkError(f"study {args.study}: {exc}") from None
-    study = run_saturation_study(spec_path=Path(args.spec) if args.spec else None, report_dir=Path(args.report),
-                                 controller=args.controller, study=study_desc)
+    study = run_saturation_study(
+        spec_path=Path(args.spec) if args.spec else None,
+        report_dir=Path(args.report),
+        controller=args.controller,
+        study=study_desc,
+    )
     sys.stdout.write(study.summary)
     return 0
 
@@ -101,11 +109,22 @@ def _linearize(args: argparse.Namespace) -> int:
             at[name.strip()] = float(value)
         except ValueError:
             raise GainlinkError(f"--at {name}: {value!r} is not a number") from None
-    result = linearize_to_spec(fmu=args.fmu, at=at, out=Path(args.out), Ts=args.Ts, name=args.name,
-                               inputs=args.inputs, outputs=args.outputs, method=args.method,
-                               template=Path(args.template) if args.template else None, horizon=args.horizon)
-    print(f"wrote {args.out}: n={result.A.shape[0]} m={result.B.shape[1]} p={result.C.shape[0]} "
-          f"({result.method}, operating point {', '.join(f'{k}={v:g}' for k, v in result.point.items()) or 'start values'})")
+    result = linearize_to_spec(
+        fmu=args.fmu,
+        at=at,
+        out=Path(args.out),
+        Ts=args.Ts,
+        name=args.name,
+        inputs=args.inputs,
+        outputs=args.outputs,
+        method=args.method,
+        template=Path(args.template) if args.template else None,
+        horizon=args.horizon,
+    )
+    print(
+        f"wrote {args.out}: n={result.A.shape[0]} m={result.B.shape[1]} p={result.C.shape[0]} "
+        f"({result.method}, operating point {', '.join(f'{k}={v:g}' for k, v in result.point.items()) or 'start values'})"
+    )
     return 0
 
 
@@ -127,11 +146,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("artifact")
     p.add_argument("--fd", action="store_true", help="CAN FD layout (else classic CAN)")
     p.add_argument("--base-id", help="first 11-bit identifier (default 0x100)")
-    p.add_argument("--can", metavar="CONFIG",
-                   help="the layout of this CAN transport table (a scenario or a TOML/JSON file with its "
-                        "[transport], or inline JSON): fd, base_id, encoding (float32 | int16) and ranges, e.g. "
-                        "'{\"interface\": \"socketcan\", \"encoding\": \"int16\", \"ranges\": "
-                        "{\"x\": [-5, 5], \"theta\": [-1, 1], \"r_x\": [-5, 5]}}'")
+    p.add_argument(
+        "--can",
+        metavar="CONFIG",
+        help="the layout of this CAN transport table (a scenario or a TOML/JSON file with its "
+        "[transport], or inline JSON): fd, base_id, encoding (float32 | int16) and ranges, e.g. "
+        '\'{"interface": "socketcan", "encoding": "int16", "ranges": '
+        '{"x": [-5, 5], "theta": [-1, 1], "r_x": [-5, 5]}}\'',
+    )
     p.add_argument("--out", help="DBC file (default: stdout)")
     p.set_defaults(func=_dbc)
 
@@ -149,17 +171,30 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     p = subparsers.add_parser("linearize", help="linearise an FMU about an operating point into a plant spec")
     p.add_argument("fmu", help=".fmu file, or the name of a project FMU (e.g. cart_pendulum)")
-    p.add_argument("--at", action="append", default=[], metavar="NAME=VALUE",
-                   help="operating point: state, input or parameter value (repeatable)")
+    p.add_argument(
+        "--at",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="operating point: state, input or parameter value (repeatable)",
+    )
     p.add_argument("--out", required=True, help="spec TOML to write")
-    p.add_argument("--Ts", type=float, default=0.01,
-                   help="sample time written into the spec (default 0.01); for a Co-Simulation-only FMU also the "
-                        "communication step of the identified discrete model")
+    p.add_argument(
+        "--Ts",
+        type=float,
+        default=0.01,
+        help="sample time written into the spec (default 0.01); for a Co-Simulation-only FMU also the "
+        "communication step of the identified discrete model",
+    )
     p.add_argument("--horizon", type=int, help="Co-Simulation-only FMUs: steps recorded per input pulse (default 100)")
     p.add_argument("--name", help="spec name (default: the FMU's model name)")
     p.add_argument("--inputs", nargs="+", help="FMU inputs to keep (default: all)")
     p.add_argument("--outputs", nargs="+", help="FMU outputs to keep (default: all)")
-    p.add_argument("--method", choices=("auto", "directional", "differences"), default="auto",
-                   help="directional derivatives when the FMU provides them (auto), or central differences")
+    p.add_argument(
+        "--method",
+        choices=("auto", "directional", "differences"),
+        default="auto",
+        help="directional derivatives when the FMU provides them (auto), or central differences",
+    )
     p.add_argument("--template", help="copy controller/integral/observer/limits from this spec")
     p.set_defaults(func=_linearize)

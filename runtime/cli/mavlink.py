@@ -11,8 +11,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-SIGNING_HELP = ("MAVLink 2 signing key file (64 hex digits, from `gainlink mavlink keygen`): sign every request "
-                "and take only answers signed with it")
+SIGNING_HELP = (
+    "MAVLink 2 signing key file (64 hex digits, from `gainlink mavlink keygen`): sign every request "
+    "and take only answers signed with it"
+)
 
 EXIT_ROLLED_BACK = 3
 EXIT_ROLLBACK_INCOMPLETE = 4
@@ -34,8 +36,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     up.add_argument("--timeout", type=float, default=0.25, help="seconds before a request is re-sent (default 0.25)")
     up.add_argument("--retries", type=int, default=10, help="re-sends per parameter (default 10)")
     up.add_argument("--heartbeat-timeout", type=float, default=5.0, help="seconds to wait for a heartbeat (default 5)")
-    up.add_argument("--encoding", choices=("auto", "bytewise", "c_cast"), default="auto",
-                    help="integer parameter encoding (default: from AUTOPILOT_VERSION / the autopilot type)")
+    up.add_argument(
+        "--encoding",
+        choices=("auto", "bytewise", "c_cast"),
+        default="auto",
+        help="integer parameter encoding (default: from AUTOPILOT_VERSION / the autopilot type)",
+    )
     up.add_argument("--signing-key", metavar="FILE", help=SIGNING_HELP)
     up.set_defaults(func=_upload)
 
@@ -48,9 +54,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ss = sub.add_parser("setup-signing", help="give a vehicle a signing key (SETUP_SIGNING) and check it signs with it")
     ss.add_argument("key", help="key file to give (from `gainlink mavlink keygen`)")
     ss.add_argument("--connect", required=True, help="pymavlink URL: tcp:HOST:PORT (the image's UART), a serial device")
-    ss.add_argument("--signing-key", metavar="FILE",
-                    help="the vehicle's current key file: sign the SETUP_SIGNING with it (a key change); without "
-                         "it the message goes unsigned, which a vehicle takes only on a trusted link (a cable)")
+    ss.add_argument(
+        "--signing-key",
+        metavar="FILE",
+        help="the vehicle's current key file: sign the SETUP_SIGNING with it (a key change); without "
+        "it the message goes unsigned, which a vehicle takes only on a trusted link (a cable)",
+    )
     ss.add_argument("--heartbeat-timeout", type=float, default=5.0, help="seconds to wait for a heartbeat (default 5)")
     ss.set_defaults(func=_setup_signing)
 
@@ -63,9 +72,8 @@ def _upload(args: argparse.Namespace) -> int:
     from gainlink.artifact import load
     from gainlink.errors import ParameterError
     from gainlink.mavlink.params import Encoding
-    from gainlink.mavlink.upload import UploadFailed, format_changes, upload
-
     from gainlink.mavlink.signing import read_key
+    from gainlink.mavlink.upload import UploadFailed, format_changes, upload
 
     if args.window < 1 or args.retries < 0 or args.timeout <= 0:
         raise ParameterError("--window must be >= 1, --retries >= 0 and --timeout > 0")
@@ -79,9 +87,17 @@ def _upload(args: argparse.Namespace) -> int:
 
     try:
         res = upload(
-            artifact, connect=args.connect, mapping=args.mapping, persist=args.persist, dry_run=args.dry_run,
-            window=args.window, timeout=args.timeout, retries=args.retries, heartbeat_timeout=args.heartbeat_timeout,
-            encoding=None if args.encoding == "auto" else Encoding(args.encoding), on_diff=show_diff,
+            artifact,
+            connect=args.connect,
+            mapping=args.mapping,
+            persist=args.persist,
+            dry_run=args.dry_run,
+            window=args.window,
+            timeout=args.timeout,
+            retries=args.retries,
+            heartbeat_timeout=args.heartbeat_timeout,
+            encoding=None if args.encoding == "auto" else Encoding(args.encoding),
+            on_diff=show_diff,
             signing_key=key,
         )
     except UploadFailed as exc:
@@ -90,16 +106,20 @@ def _upload(args: argparse.Namespace) -> int:
         print(f"gainlink: error: {exc}", file=sys.stderr)
         return EXIT_ROLLED_BACK if exc.rolled_back else EXIT_ROLLBACK_INCOMPLETE
     if res.dry_run:
-        print(f"dry run: {len(res.changes)} parameter(s) would change, {res.unchanged} already match "
-              f"(vehicle {res.target[0]}/{res.target[1]}, {res.encoding.value} integers)")
+        print(
+            f"dry run: {len(res.changes)} parameter(s) would change, {res.unchanged} already match "
+            f"(vehicle {res.target[0]}/{res.target[1]}, {res.encoding.value} integers)"
+        )
         return 0
     what = [f"{res.verified} set(s) verified", f"{res.unchanged} unchanged"]
     if res.committed:
         what.append("gain set committed")
     if res.persisted:
         what.append("persisted")
-    print(f"uploaded {artifact.name} sha256:{artifact.sha256[:12]} to vehicle {res.target[0]}/{res.target[1]}: "
-          f"{', '.join(what)} ({res.sent} sent, {res.retries} retries, {res.seconds:.3f} s)")
+    print(
+        f"uploaded {artifact.name} sha256:{artifact.sha256[:12]} to vehicle {res.target[0]}/{res.target[1]}: "
+        f"{', '.join(what)} ({res.sent} sent, {res.retries} retries, {res.seconds:.3f} s)"
+    )
     return 0
 
 
@@ -113,8 +133,9 @@ def _params(args: argparse.Namespace) -> int:
     key = read_key(args.signing_key) if args.signing_key else None
     with MavLink(args.connect, signing_key=key) as link:
         hb = link.wait_heartbeat(timeout=args.heartbeat_timeout)
-        session = ParamSession(link, target_system=hb.get_srcSystem(), target_component=hb.get_srcComponent(),
-                               encoding=Encoding.C_CAST)
+        session = ParamSession(
+            link, target_system=hb.get_srcSystem(), target_component=hb.get_srcComponent(), encoding=Encoding.C_CAST
+        )
         session.encoding = detect_encoding(session, autopilot=hb.autopilot)
         for pv in session.read_all().values():
             value = f"{pv.value:.9g}" if pv.ptype == REAL32 else str(int(pv.value))
@@ -129,9 +150,11 @@ def _setup_signing(args: argparse.Namespace) -> int:
     key = read_key(args.key)
     current = read_key(args.signing_key) if args.signing_key else None
     res = setup_signing(args.connect, key, current=current, heartbeat_timeout=args.heartbeat_timeout)
-    print(f"vehicle {res.target[0]}/{res.target[1]} signs with the key in {args.key} "
-          f"({'replaced its key' if res.replaced else 'its first key'}); give the same file to the ground tools "
-          "(--signing-key)")
+    print(
+        f"vehicle {res.target[0]}/{res.target[1]} signs with the key in {args.key} "
+        f"({'replaced its key' if res.replaced else 'its first key'}); give the same file to the ground tools "
+        "(--signing-key)"
+    )
     return 0
 
 
@@ -139,6 +162,8 @@ def _keygen(args: argparse.Namespace) -> int:
     from gainlink.mavlink.signing import new_key, write_key
 
     path = write_key(args.out, new_key())
-    print(f"wrote a new signing key to {path} (mode 0600); give the same file to the vehicle "
-          f"(gainlink firmware run --signing-key) and to the ground tools (--signing-key)")
+    print(
+        f"wrote a new signing key to {path} (mode 0600); give the same file to the vehicle "
+        f"(gainlink firmware run --signing-key) and to the ground tools (--signing-key)"
+    )
     return 0

@@ -11,7 +11,7 @@ Each engine module exposes ``run(artifact, Y, R) -> gainlink.reference.Trace``:
 from __future__ import annotations
 
 import importlib
-from typing import Callable
+from collections.abc import Callable
 
 ENGINE_MODULES = {"native": "gainlink.engines.native", "qemu": "gainlink.engines.qemu"}
 

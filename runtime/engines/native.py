@@ -20,12 +20,20 @@ from ..firmware.build import build
 from ..reference import Trace
 
 STATUS = {
-    0: "GL_OK", 1: "GL_SATURATED", -1: "GL_ERR_NULL", -2: "GL_ERR_NANINF", -3: "GL_ERR_CRC", -4: "GL_ERR_DIMS",
-    -5: "GL_ERR_RANGE", -6: "GL_ERR_WATCHDOG", -7: "GL_ERR_BUSY", -8: "GL_ERR_FPU",
+    0: "GL_OK",
+    1: "GL_SATURATED",
+    -1: "GL_ERR_NULL",
+    -2: "GL_ERR_NANINF",
+    -3: "GL_ERR_CRC",
+    -4: "GL_ERR_DIMS",
+    -5: "GL_ERR_RANGE",
+    -6: "GL_ERR_WATCHDOG",
+    -7: "GL_ERR_BUSY",
+    -8: "GL_ERR_FPU",
 }
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def gains_struct(*, n: int, m: int, p: int, q: int) -> type[ctypes.Structure]:
     """A ctypes mirror of the C ``gl_gains_t`` for these dimensions (one class per shape: ctypes keeps the
     POINTER type of every Structure class it meets forever, so a class per loop would leak one per run)."""
@@ -37,12 +45,30 @@ def gains_struct(*, n: int, m: int, p: int, q: int) -> type[ctypes.Structure]:
 
     class GlGains(ctypes.Structure):
         _fields_ = [
-            ("n", ctypes.c_uint32), ("m", ctypes.c_uint32), ("p", ctypes.c_uint32), ("q", ctypes.c_uint32),
-            ("observer_form", ctypes.c_uint32), ("anti_windup", ctypes.c_uint32), ("Ts", f),
-            ("Ad", mat(n, n)), ("Bd", mat(n, m)), ("Cd", mat(p, n)), ("Dd", mat(p, m)), ("K", mat(m, n)),
-            ("L", mat(n, p)), ("M", mat(n, p)), ("Ci", mat(qa, p)), ("Ki", mat(m, qa)), ("Kaw", mat(qa, m)),
-            ("u_min", f * m), ("u_max", f * m), ("xh0", f * n), ("z0", f * qa), ("u_op", f * m),
-            ("y_op", f * p), ("crc32", ctypes.c_uint32),
+            ("n", ctypes.c_uint32),
+            ("m", ctypes.c_uint32),
+            ("p", ctypes.c_uint32),
+            ("q", ctypes.c_uint32),
+            ("observer_form", ctypes.c_uint32),
+            ("anti_windup", ctypes.c_uint32),
+            ("Ts", f),
+            ("Ad", mat(n, n)),
+            ("Bd", mat(n, m)),
+            ("Cd", mat(p, n)),
+            ("Dd", mat(p, m)),
+            ("K", mat(m, n)),
+            ("L", mat(n, p)),
+            ("M", mat(n, p)),
+            ("Ci", mat(qa, p)),
+            ("Ki", mat(m, qa)),
+            ("Kaw", mat(qa, m)),
+            ("u_min", f * m),
+            ("u_max", f * m),
+            ("xh0", f * n),
+            ("z0", f * qa),
+            ("u_op", f * m),
+            ("y_op", f * p),
+            ("crc32", ctypes.c_uint32),
         ]
 
     return GlGains
@@ -111,7 +137,14 @@ class NativeLoop:
         lib.gl_gains_crc32.restype = ctypes.c_uint32
         lib.gl_gains_check.argtypes = [ctypes.POINTER(self.Gains)]
         self._run_block.argtypes = [
-            ctypes.c_void_p, ctypes.c_uint32, fp, fp, fp, ctypes.POINTER(ctypes.c_uint32), fp, fp,
+            ctypes.c_void_p,
+            ctypes.c_uint32,
+            fp,
+            fp,
+            fp,
+            ctypes.POINTER(ctypes.c_uint32),
+            fp,
+            fp,
             ctypes.POINTER(ctypes.c_uint8),
         ]
         status = lib.gl_loop_init(self._loop, lib.gl_host_default_gains(), watchdog_periods)
@@ -145,8 +178,9 @@ class NativeLoop:
         a = self.artifact
         with np.errstate(over="ignore"):  # beyond float32 is inf, as on the wire: the C's fault path answers it
             yy = np.ascontiguousarray(np.asarray(y, dtype=np.float32).reshape(a.p))
-            rr = np.ascontiguousarray(np.zeros(self.qa, np.float32) if r is None
-                                      else np.asarray(r, np.float32).reshape(a.q))
+            rr = np.ascontiguousarray(
+                np.zeros(self.qa, np.float32) if r is None else np.asarray(r, np.float32).reshape(a.q)
+            )
         u = np.zeros(a.m, dtype=np.float32)
         st = self._lib.gl_loop_step(self._loop, _fptr(yy), _fptr(rr), _fptr(u))
         return StepOutput(u=u, status=int(st), sat_mask=int(self._sat_mask()))
@@ -175,8 +209,15 @@ class NativeLoop:
         Z = np.zeros((N, self.qa), np.float32)
         F = np.zeros(N, np.uint8)
         st = self._run_block(
-            self._loop, N, _fptr(Y), _fptr(R), _fptr(U), S.ctypes.data_as(ctypes.POINTER(ctypes.c_uint32)),
-            _fptr(XH), _fptr(Z), F.ctypes.data_as(ctypes.POINTER(ctypes.c_uint8)),
+            self._loop,
+            N,
+            _fptr(Y),
+            _fptr(R),
+            _fptr(U),
+            S.ctypes.data_as(ctypes.POINTER(ctypes.c_uint32)),
+            _fptr(XH),
+            _fptr(Z),
+            F.ctypes.data_as(ctypes.POINTER(ctypes.c_uint8)),
         )
         if st != 0:
             raise FirmwareError(f"gl_loop_run_block failed: {STATUS.get(st, st)}")
@@ -191,8 +232,11 @@ def trace_from_raw(raw: dict[str, np.ndarray], *, m: int) -> Trace:
     """Turn float32 firmware outputs into a :class:`~gainlink.reference.Trace` (float64 values)."""
     bits = (raw["sat"][:, None] >> np.arange(m, dtype=np.uint32)[None, :]) & 1
     return Trace(
-        u=raw["u"].astype(np.float64), saturated=bits.astype(bool), xh=raw["xh"].astype(np.float64),
-        z=raw["z"].astype(np.float64), fault=raw["fault"].astype(bool),
+        u=raw["u"].astype(np.float64),
+        saturated=bits.astype(bool),
+        xh=raw["xh"].astype(np.float64),
+        z=raw["z"].astype(np.float64),
+        fault=raw["fault"].astype(bool),
     )
 
 

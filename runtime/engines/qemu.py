@@ -11,14 +11,19 @@ from ..reference import Trace
 from .native import trace_from_raw
 
 
-def run_raw(artifact: Artifact, Y: np.ndarray, R: np.ndarray | None, *, board: str = DEFAULT_BOARD) -> dict[str, np.ndarray]:
+def run_raw(
+    artifact: Artifact, Y: np.ndarray, R: np.ndarray | None, *, board: str = DEFAULT_BOARD
+) -> dict[str, np.ndarray]:
     """Replay a block through the image on ``board``; return float32 outputs (``u sat xh z fault status``)."""
     a = artifact
     res = build(a, target="cortex-m4", board=board)
     rec = fwqemu.replay(res.files["elf"], board=board, n=a.n, m=a.m, p=a.p, q=a.q, Y=Y, R=R)
     return {
-        "u": np.array(rec["u"]), "sat": np.array(rec["sat"]), "xh": np.array(rec["xh"]),
-        "z": np.array(rec["z"][:, : a.q]), "fault": (rec["status"] == -2).astype(np.uint8),
+        "u": np.array(rec["u"]),
+        "sat": np.array(rec["sat"]),
+        "xh": np.array(rec["xh"]),
+        "z": np.array(rec["z"][:, : a.q]),
+        "fault": (rec["status"] == -2).astype(np.uint8),
         "status": np.array(rec["status"]),
     }
 

@@ -156,10 +156,16 @@ def build(
         jobs = str(min(2, os.cpu_count() or 1))
         _run([cmake, "--build", str(cm), "-j", jobs], cwd=bdir, what=f"firmware build ({target})")
     if target == "host":
-        files = {"shared": cm / "libgainlink_host.so", "exe": cm / "gainlink_loop_host", "static": cm / "libgainlink_loop.a"}
+        files = {
+            "shared": cm / "libgainlink_host.so",
+            "exe": cm / "gainlink_loop_host",
+            "static": cm / "libgainlink_loop.a",
+        }
     else:
         files = {ext: cm / f"gainlink_image.{ext}" for ext in ("elf", "bin", "hex", "map")}
-    return BuildResult(artifact_sha256=artifact.sha256, target=target, board=board, build_dir=cm, gains_dir=gen, files=files)
+    return BuildResult(
+        artifact_sha256=artifact.sha256, target=target, board=board, build_dir=cm, gains_dir=gen, files=files
+    )
 
 
 def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path | None = None) -> Path:
@@ -176,8 +182,11 @@ def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path 
     exe = result.build_dir / relpath
     if not exe.is_file():
         _run(["cmake", str(result.build_dir)], cwd=result.build_dir, what=f"reconfiguring for {target}")
-        _run(["cmake", "--build", str(result.build_dir), "--target", target, "-j", "2"], cwd=result.build_dir,
-             what=f"building {target}")
+        _run(
+            ["cmake", "--build", str(result.build_dir), "--target", target, "-j", "2"],
+            cwd=result.build_dir,
+            what=f"building {target}",
+        )
     if not exe.is_file():
         raise ToolchainError(f"{target} was not built (expected {exe})")
     return exe

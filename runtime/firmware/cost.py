@@ -35,8 +35,11 @@ def build_plugin() -> Path:
         raise ToolchainError("no host C compiler (cc) to build the QEMU plugin")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_suffix(".tmp.so")
-    proc = subprocess.run([cc, "-shared", "-fPIC", "-O2", "-Wall", "-Wextra", "-Werror", "-o", str(tmp), str(src)],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [cc, "-shared", "-fPIC", "-O2", "-Wall", "-Wextra", "-Werror", "-o", str(tmp), str(src)],
+        capture_output=True,
+        text=True,
+    )
     if proc.returncode != 0:
         raise ToolchainError(f"building the QEMU plugin failed: {proc.stderr.strip()[-500:]}")
     tmp.replace(out)
@@ -56,8 +59,9 @@ class StepCost:
         return self.instructions / self.calls if self.calls else float("nan")
 
 
-def count_step_instructions(elf: Path, artifact: Artifact, *, Y: np.ndarray, R: np.ndarray,
-                            board: str = "mps2-an386") -> StepCost:
+def count_step_instructions(
+    elf: Path, artifact: Artifact, *, Y: np.ndarray, R: np.ndarray, board: str = "mps2-an386"
+) -> StepCost:
     """Replay ``Y``, ``R`` through ``elf`` in QEMU with the plugin counting inside ``gl_loop_step``."""
     sym = symbol_sizes(elf, (STEP_SYMBOL,)).get(STEP_SYMBOL)
     if sym is None:

@@ -25,7 +25,8 @@ from ..errors import ToolchainError
 from .build import build
 
 HARNESSES = ("can_udp", "can_layout", "gains_stage", "mavlink_node") + (
-    ("slcan",) if (Path(__file__).resolve().parents[2] / "firmware" / "apps" / "can" / "gl_slcan.c").is_file() else ())
+    ("slcan",) if (Path(__file__).resolve().parents[2] / "firmware" / "apps" / "can" / "gl_slcan.c").is_file() else ()
+)
 """Harness names; the executable of ``NAME`` is ``fuzz/fuzz_NAME`` in the fuzz build (``slcan`` where the firmware
 has the slcan adapter)."""
 
@@ -129,8 +130,9 @@ def _seeds_can_udp(artifact: Artifact) -> list[bytes]:
 
     seeds = []
     for fd, _enc, index, data in _can_frames(artifact):
-        msg = can.Message(arbitration_id=0x110 + index, data=data, is_fd=fd, is_extended_id=False,
-                          timestamp=1.0 + index)
+        msg = can.Message(
+            arbitration_id=0x110 + index, data=data, is_fd=fd, is_extended_id=False, timestamp=1.0 + index
+        )
         seeds.append(pack_message(msg))
     return seeds
 
@@ -239,16 +241,24 @@ def _seeds_mavlink_node(artifact: Artifact) -> list[bytes]:
 def _seeds_slcan(artifact: Artifact) -> list[bytes]:
     """Lawicel lines a host sends an adapter: set-up, the layout's classic frames (both encodings), queries."""
     lines = [b"S6\r", b"O\r", b"V\r", b"N\r", b"F\r", b"Z0\r", b"C\r", b"L\r", b"T0000011F2AABB\r", b"r1108\r"]
-    frames = [f"t{0x110 + index:03X}{len(data):d}{data.hex().upper()}\r".encode()
-              for fd, _enc, index, data in _can_frames(artifact) if not fd]
+    frames = [
+        f"t{0x110 + index:03X}{len(data):d}{data.hex().upper()}\r".encode()
+        for fd, _enc, index, data in _can_frames(artifact)
+        if not fd
+    ]
     seeds = [bytes([0]) + line for line in lines]
     seeds += [bytes([2]) + b"O\r" + f for f in frames]  # split inside the first frame's line
     seeds.append(bytes([5]) + b"S6\rO\r" + b"".join(frames[:4]) + b"C\r")
     return seeds
 
 
-_SEEDS = {"slcan": _seeds_slcan, "can_udp": _seeds_can_udp, "can_layout": _seeds_can_layout, "gains_stage": _seeds_gains_stage,
-          "mavlink_node": _seeds_mavlink_node}
+_SEEDS = {
+    "slcan": _seeds_slcan,
+    "can_udp": _seeds_can_udp,
+    "can_layout": _seeds_can_layout,
+    "gains_stage": _seeds_gains_stage,
+    "mavlink_node": _seeds_mavlink_node,
+}
 
 
 def write_seeds(harness: str, artifact: Artifact, directory: Path) -> int:
@@ -266,8 +276,16 @@ _STAT = re.compile(r"^stat::(\w+):\s+(\d+)", re.M)
 _PROGRESS = re.compile(r"cov: (\d+) ft: (\d+) corp: (\d+)/")
 
 
-def run(harness: str, exe: Path, corpus: Path, *, seconds: float | None = None, runs: int | None = None,
-        artifacts: Path, extra: tuple[str, ...] = ()) -> FuzzRun:
+def run(
+    harness: str,
+    exe: Path,
+    corpus: Path,
+    *,
+    seconds: float | None = None,
+    runs: int | None = None,
+    artifacts: Path,
+    extra: tuple[str, ...] = (),
+) -> FuzzRun:
     """Run one harness on ``corpus`` (which grows) for ``seconds`` or ``runs`` executions.
 
     Parameters
@@ -295,16 +313,23 @@ def run(harness: str, exe: Path, corpus: Path, *, seconds: float | None = None, 
     artifacts.mkdir(parents=True, exist_ok=True)
     corpus.mkdir(parents=True, exist_ok=True)
     before = set(artifacts.iterdir())
-    argv = [str(exe), f"-max_len={MAX_LEN}", "-timeout=10", "-rss_limit_mb=2048", "-print_final_stats=1",
-            f"-artifact_prefix={artifacts}/"]
+    argv = [
+        str(exe),
+        f"-max_len={MAX_LEN}",
+        "-timeout=10",
+        "-rss_limit_mb=2048",
+        "-print_final_stats=1",
+        f"-artifact_prefix={artifacts}/",
+    ]
     if seconds is not None:
         argv.append(f"-max_total_time={max(1, int(round(seconds)))}")
     if runs is not None:
         argv.append(f"-runs={runs}")
     argv += [*extra, str(corpus)]
     t0 = time.perf_counter()
-    proc = subprocess.run(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                          text=True, errors="replace")
+    proc = subprocess.run(
+        argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, errors="replace"
+    )
     elapsed = time.perf_counter() - t0
     stats = {k: int(v) for k, v in _STAT.findall(proc.stderr)}
     progress = _PROGRESS.findall(proc.stderr)
@@ -313,5 +338,13 @@ def run(harness: str, exe: Path, corpus: Path, *, seconds: float | None = None, 
     if proc.returncode != 0 and not crashes and "stat::" not in proc.stderr:
         tail = proc.stderr.strip().splitlines()[-1:] or ["no output"]
         raise ToolchainError(f"fuzz harness {harness} failed to run (exit {proc.returncode}): {tail[0][:200]}")
-    return FuzzRun(harness=harness, executions=stats.get("number_of_executed_units", 0), seconds=elapsed,
-                   cov=cov, ft=ft, corpus=corp, crashes=crashes, exit_code=proc.returncode)
+    return FuzzRun(
+        harness=harness,
+        executions=stats.get("number_of_executed_units", 0),
+        seconds=elapsed,
+        cov=cov,
+        ft=ft,
+        corpus=corp,
+        crashes=crashes,
+        exit_code=proc.returncode,
+    )

@@ -50,8 +50,19 @@ def _signals(rng: np.random.Generator, *, N: int, width: int, scale: float) -> n
     return scale * out / 3.0
 
 
-def random_spec(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_windup: str, feedthrough: bool,
-                u_limit: np.ndarray | None = None, operating_point: dict | None = None) -> dict:
+def random_spec(
+    seed: int,
+    *,
+    n: int,
+    m: int,
+    p: int,
+    q: int,
+    form: str,
+    anti_windup: str,
+    feedthrough: bool,
+    u_limit: np.ndarray | None = None,
+    operating_point: dict | None = None,
+) -> dict:
     """A random discrete plant spec (a few unstable modes) with LQR(I) + Kalman design choices.
 
     With ``operating_point`` (``{"u_op": [...], "y_op": [...]}``) the plant is about that point and the
@@ -91,8 +102,18 @@ def random_operating_point(seed: int, *, m: int, p: int) -> dict:
     return {"u_op": rng.uniform(-4.0, 4.0, size=m).tolist(), "y_op": rng.uniform(-6.0, 6.0, size=p).tolist()}
 
 
-def random_case(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_windup: str, N: int = 400,
-                operating_point: bool = False) -> GoldenCase:
+def random_case(
+    seed: int,
+    *,
+    n: int,
+    m: int,
+    p: int,
+    q: int,
+    form: str,
+    anti_windup: str,
+    N: int = 400,
+    operating_point: bool = False,
+) -> GoldenCase:
     """A random stabilizable design whose inputs saturate on part of the golden samples.
 
     The plant is designed once with wide limits to see the size of the command, then again with
@@ -139,8 +160,9 @@ def _random_cases(count: int, first_seed: int, N: int) -> tuple[GoldenCase, ...]
         if q == 0 and aw != "none":
             q = 1 if min(m, p) >= 1 else 0
         try:
-            case = random_case(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=aw, N=N,
-                               operating_point=(i // len(combos)) % 2 == 1)
+            case = random_case(
+                seed, n=n, m=m, p=p, q=q, form=form, anti_windup=aw, N=N, operating_point=(i // len(combos)) % 2 == 1
+            )
         except (DesignError, SpecError):
             case = None  # an unlucky draw (e.g. a plant zero at z = 1 with integral action)
         if case is not None and bounded(case):
@@ -160,8 +182,18 @@ def bounded(case: GoldenCase, *, limit: float = 1e3) -> bool:
     return bool(np.all(np.abs(e.xh) < limit) and np.all(np.abs(e.z) < limit))
 
 
-def closed_loop_case(seed: int, *, n: int, m: int, p: int, q: int, form: str, anti_windup: str,
-                     N: int = 300, operating_point: bool = False) -> GoldenCase:
+def closed_loop_case(
+    seed: int,
+    *,
+    n: int,
+    m: int,
+    p: int,
+    q: int,
+    form: str,
+    anti_windup: str,
+    N: int = 300,
+    operating_point: bool = False,
+) -> GoldenCase:
     """A random continuous plant (:func:`gainlink.random_plants.random_spec`), designed, and a record of
     its own closed loop (:func:`gainlink.simulate.simulate_linear`: initial state, reference, noise).
 
@@ -176,12 +208,25 @@ def closed_loop_case(seed: int, *, n: int, m: int, p: int, q: int, form: str, an
     op = random_operating_point(seed, m=m, p=p) if operating_point else None
 
     def spec(limit: float, **extra) -> dict:
-        out = {**continuous_spec(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=anti_windup, u_limit=limit,
-                                 feedthrough=form == "predictor" and seed % 2 == 0), **extra}
+        out = {
+            **continuous_spec(
+                seed,
+                n=n,
+                m=m,
+                p=p,
+                q=q,
+                form=form,
+                anti_windup=anti_windup,
+                u_limit=limit,
+                feedthrough=form == "predictor" and seed % 2 == 0,
+            ),
+            **extra,
+        }
         if op is not None:
             out["operating_point"] = op
-            out["limits"] = dict(out["limits"], u_min=[u - limit for u in op["u_op"]],
-                                 u_max=[u + limit for u in op["u_op"]])
+            out["limits"] = dict(
+                out["limits"], u_min=[u - limit for u in op["u_op"]], u_max=[u + limit for u in op["u_op"]]
+            )
         return out
 
     rng = np.random.default_rng(seed + 20_000)
@@ -222,8 +267,19 @@ def _closed_loop_cases(count: int, first_seed: int, N: int) -> tuple[GoldenCase,
         m, p = 1 + i % 2, 2 + i % 2
         q = 0 if (aw == "none" and i % 4 == 0) else 1 + (i % min(m, p))
         try:
-            cases.append(closed_loop_case(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=aw, N=N,
-                                          operating_point=(i // len(combos)) % 2 == 1))
+            cases.append(
+                closed_loop_case(
+                    seed,
+                    n=n,
+                    m=m,
+                    p=p,
+                    q=q,
+                    form=form,
+                    anti_windup=aw,
+                    N=N,
+                    operating_point=(i // len(combos)) % 2 == 1,
+                )
+            )
         except (DesignError, SpecError):
             pass  # an unlucky draw
         seed += 1
@@ -267,10 +323,19 @@ def write_case(case: GoldenCase, out_dir: Path) -> Path:
 def write_index(cases: list[GoldenCase] | tuple[GoldenCase, ...], out_dir: Path) -> Path:
     """Write ``index.json`` listing the cases with their dimensions and artifact sha256."""
     index = [
-        {"label": c.label, "sha256": c.artifact.sha256, "n": c.artifact.n, "m": c.artifact.m, "p": c.artifact.p,
-         "q": c.artifact.q, "observer_form": c.artifact.observer_form, "anti_windup": c.artifact.anti_windup,
-         "steps": int(c.Y.shape[0]), "saturated_steps": int(c.expected.saturated.any(axis=1).sum()),
-         "operating_point": c.artifact.has_operating_point}
+        {
+            "label": c.label,
+            "sha256": c.artifact.sha256,
+            "n": c.artifact.n,
+            "m": c.artifact.m,
+            "p": c.artifact.p,
+            "q": c.artifact.q,
+            "observer_form": c.artifact.observer_form,
+            "anti_windup": c.artifact.anti_windup,
+            "steps": int(c.Y.shape[0]),
+            "saturated_steps": int(c.expected.saturated.any(axis=1).sum()),
+            "operating_point": c.artifact.has_operating_point,
+        }
         for c in cases
     ]
     path = out_dir / "index.json"

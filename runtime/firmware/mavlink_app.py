@@ -47,8 +47,16 @@ def signing_argv(signing_key: Path | None) -> list[str]:
     return ["--signing-key", str(signing_key)]
 
 
-def firmware_argv(exe: Path, *, url: str, storage: Path | None = None, sysid: int = 1, compid: int = 1,
-                  busy_poll_us: int = 0, signing_key: Path | None = None) -> list[str]:
+def firmware_argv(
+    exe: Path,
+    *,
+    url: str,
+    storage: Path | None = None,
+    sysid: int = 1,
+    compid: int = 1,
+    busy_poll_us: int = 0,
+    signing_key: Path | None = None,
+) -> list[str]:
     """Command line of the MAVLink app (``busy_poll_us`` > 0 adds ``--spin-us``, a key file ``--signing-key``)."""
     argv = [str(exe), "--url", url, "--sysid", str(sysid), "--compid", str(compid), *spin_argv(busy_poll_us)]
     if storage is not None:
@@ -76,19 +84,28 @@ class MavlinkFirmware:
         MAVLink 2 signing key file (``--signing-key``).
     """
 
-    def __init__(self, exe: Path, *, url: str, storage: Path | None = None, ready_timeout: float = 10.0,
-                 busy_poll_us: int = 0, signing_key: Path | None = None):
+    def __init__(
+        self,
+        exe: Path,
+        *,
+        url: str,
+        storage: Path | None = None,
+        ready_timeout: float = 10.0,
+        busy_poll_us: int = 0,
+        signing_key: Path | None = None,
+    ):
         self.argv = firmware_argv(exe, url=url, storage=storage, busy_poll_us=busy_poll_us, signing_key=signing_key)
         self.ready_timeout = ready_timeout
         self.proc: subprocess.Popen | None = None
         self.ready_line = ""
         self._stderr: StderrCapture | None = None
 
-    def start(self) -> "MavlinkFirmware":
+    def start(self) -> MavlinkFirmware:
         """Start it and wait for ``gainlink-mavlink ...`` on its stdout."""
         try:
-            self.proc = subprocess.Popen(self.argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                         stderr=subprocess.PIPE)
+            self.proc = subprocess.Popen(
+                self.argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+            )
         except OSError as exc:
             raise FirmwareError(f"cannot start {self.argv[0]}: {exc.strerror}") from None
         self._stderr = StderrCapture(self.proc.stderr)
@@ -101,7 +118,9 @@ class MavlinkFirmware:
                 left = deadline - time.monotonic()
                 if left <= 0:
                     self.stop()
-                    raise FirmwareError(f"{EXECUTABLE} sent no ready line within {self.ready_timeout:g} s: {self.stderr_text()}")
+                    raise FirmwareError(
+                        f"{EXECUTABLE} sent no ready line within {self.ready_timeout:g} s: {self.stderr_text()}"
+                    )
                 if sel.select(timeout=left):
                     chunk = os.read(self.proc.stdout.fileno(), 4096)
                     if not chunk:
@@ -140,7 +159,7 @@ class MavlinkFirmware:
             self._stderr.join()
         return proc.returncode
 
-    def __enter__(self) -> "MavlinkFirmware":
+    def __enter__(self) -> MavlinkFirmware:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -152,8 +171,9 @@ def default_param_file(artifact_path: Path) -> Path:
     return Path(artifact_path).with_name("mavlink_params.txt")
 
 
-def run_foreground(artifact_path: Path, *, url: str, param_file: Path | None = None,
-                   signing_key: Path | None = None) -> int:
+def run_foreground(
+    artifact_path: Path, *, url: str, param_file: Path | None = None, signing_key: Path | None = None
+) -> int:
     """Build the MAVLink app for an artifact and run it in the foreground until interrupted.
 
     Parameters
@@ -179,8 +199,9 @@ def run_foreground(artifact_path: Path, *, url: str, param_file: Path | None = N
     artifact = load(artifact_path)
     signing_argv(signing_key)  # a bad key file is one line before the build, not after
     exe = mavlink_executable(artifact)
-    argv = firmware_argv(exe, url=url, storage=param_file or default_param_file(Path(artifact_path)),
-                         signing_key=signing_key)
+    argv = firmware_argv(
+        exe, url=url, storage=param_file or default_param_file(Path(artifact_path)), signing_key=signing_key
+    )
     log.info("running %s", " ".join(argv))
     proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL)
     previous = signal.signal(signal.SIGTERM, lambda signum, frame: proc.send_signal(signal.SIGTERM))

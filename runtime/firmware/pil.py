@@ -146,15 +146,23 @@ def _read_exact(fd: int, size: int, *, proc: subprocess.Popen, deadline_s: float
         ready, _, _ = select.select([fd], [], [], deadline_s)
         if not ready:
             if proc.poll() is not None:
-                raise FirmwareError(f"firmware in QEMU stopped: {fwqemu.EXIT_CODES.get(proc.returncode, proc.returncode)}")
+                raise FirmwareError(
+                    f"firmware in QEMU stopped: {fwqemu.EXIT_CODES.get(proc.returncode, proc.returncode)}"
+                )
             raise PeerTimeoutError(f"firmware in QEMU sent nothing for {deadline_s} s")
         buf += os.read(fd, size - len(buf))
     return buf
 
 
 def run_pil(
-    artifact: Artifact, *, plant: DiscretePlant, steps: int, reference: np.ndarray | None = None,
-    board: str = DEFAULT_BOARD, watchdog_periods: int = 10, deadline_s: float = 10.0,
+    artifact: Artifact,
+    *,
+    plant: DiscretePlant,
+    steps: int,
+    reference: np.ndarray | None = None,
+    board: str = DEFAULT_BOARD,
+    watchdog_periods: int = 10,
+    deadline_s: float = 10.0,
     twin: DiscretePlant | None = None,
 ) -> PilResult:
     """Close the loop: firmware in QEMU, ``plant`` in Python, one FIFO round trip per sample.
@@ -196,12 +204,30 @@ def run_pil(
         elapsed = time.perf_counter() - t_start
         _await_exit(proc, deadline_s=deadline_s)
     twin_trace = None if tw is None else tw.trace(steps)
-    comparison = None if tw is None else twin_comparison(
-        t=np.arange(steps) * a.Ts, y=rec.Y, u=rec.U.astype(float), r=np.asarray(R, dtype=float),
-        twin_y=twin_trace.y, twin_u=twin_trace.u, artifact=a)
-    return PilResult(y=rec.Y, u=rec.U, status=rec.S, saturated=rec.SAT, plant_state=np.array(rec.X),
-                     round_trip_us=rec.RT, steps_per_second=steps / elapsed if elapsed > 0 else float("inf"),
-                     twin=twin_trace, comparison=comparison)
+    comparison = (
+        None
+        if tw is None
+        else twin_comparison(
+            t=np.arange(steps) * a.Ts,
+            y=rec.Y,
+            u=rec.U.astype(float),
+            r=np.asarray(R, dtype=float),
+            twin_y=twin_trace.y,
+            twin_u=twin_trace.u,
+            artifact=a,
+        )
+    )
+    return PilResult(
+        y=rec.Y,
+        u=rec.U,
+        status=rec.S,
+        saturated=rec.SAT,
+        plant_state=np.array(rec.X),
+        round_trip_us=rec.RT,
+        steps_per_second=steps / elapsed if elapsed > 0 else float("inf"),
+        twin=twin_trace,
+        comparison=comparison,
+    )
 
 
 @dataclass
@@ -216,10 +242,15 @@ class _PilRecord:
     RT: np.ndarray
 
     @classmethod
-    def empty(cls, a: Artifact, steps: int, *, x0: np.ndarray) -> "_PilRecord":
-        return cls(Y=np.zeros((steps, a.p)), U=np.zeros((steps, a.m), dtype=np.float32),
-                   S=np.zeros(steps, dtype=np.int32), SAT=np.zeros((steps, a.m), dtype=bool), X=[x0],
-                   RT=np.zeros(steps))
+    def empty(cls, a: Artifact, steps: int, *, x0: np.ndarray) -> _PilRecord:
+        return cls(
+            Y=np.zeros((steps, a.p)),
+            U=np.zeros((steps, a.m), dtype=np.float32),
+            S=np.zeros(steps, dtype=np.int32),
+            SAT=np.zeros((steps, a.m), dtype=bool),
+            X=[x0],
+            RT=np.zeros(steps),
+        )
 
 
 @contextmanager
@@ -232,9 +263,11 @@ def _qemu_fifos(elf: Path, *, board: str, steps: int):
         fin = os.open(work / "gl_in.bin", os.O_RDWR)
         fout = os.open(work / "gl_out.bin", os.O_RDWR)
         cmd = ["timeout", "-k", "2", str(60 + steps / 1000)] + fwqemu.qemu_command(
-            elf, board=board, serial=f"file:{work / 'uart.log'}")
-        proc = subprocess.Popen(cmd, cwd=work, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.PIPE)
+            elf, board=board, serial=f"file:{work / 'uart.log'}"
+        )
+        proc = subprocess.Popen(
+            cmd, cwd=work, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+        )
         try:
             yield proc, fin, fout
         finally:
@@ -245,8 +278,9 @@ def _qemu_fifos(elf: Path, *, board: str, steps: int):
             os.close(fout)
 
 
-def _open_stream(proc: subprocess.Popen, fin: int, fout: int, *, steps: int, watchdog_periods: int,
-                 deadline_s: float) -> None:
+def _open_stream(
+    proc: subprocess.Popen, fin: int, fout: int, *, steps: int, watchdog_periods: int, deadline_s: float
+) -> None:
     """Send the stream header (steps, one sample per record, watchdog) and check the firmware's answer."""
     os.write(fin, struct.pack("<4I", fwqemu.IN_MAGIC, steps, 1, watchdog_periods))
     header = _read_exact(fout, 32, proc=proc, deadline_s=deadline_s)
@@ -255,8 +289,16 @@ def _open_stream(proc: subprocess.Popen, fin: int, fout: int, *, steps: int, wat
         raise FirmwareError("firmware answered with a bad stream header")
 
 
-def _exchange(a: Artifact, plant: DiscretePlant, R: np.ndarray, rec: _PilRecord, *, link: tuple,
-              deadline_s: float, twin: TwinLoop | None) -> None:
+def _exchange(
+    a: Artifact,
+    plant: DiscretePlant,
+    R: np.ndarray,
+    rec: _PilRecord,
+    *,
+    link: tuple,
+    deadline_s: float,
+    twin: TwinLoop | None,
+) -> None:
     """One FIFO round trip per sample: the plant's outputs in, the command out, the plant advanced."""
     proc, fin, fout = link
     din, dout = fwqemu.record_dtypes(n=a.n, m=a.m, p=a.p, q=a.q)

@@ -47,16 +47,36 @@ def qemu_binary() -> str:
     return path
 
 
-def qemu_command(elf: Path, *, board: str, serial: str = "null", plugin: list[str] | None = None,
-                 semihosting_args: list[str] | None = None) -> list[str]:
+def qemu_command(
+    elf: Path,
+    *,
+    board: str,
+    serial: str = "null",
+    plugin: list[str] | None = None,
+    semihosting_args: list[str] | None = None,
+) -> list[str]:
     """The QEMU command line for ``elf`` on ``board`` (semihosting on, no display, no monitor).
 
     ``semihosting_args`` become the image's command line (``arg=`` of ``-semihosting-config``; no commas).
     """
     config = "enable=on,target=native" + "".join(f",arg={a}" for a in semihosting_args or [])
     cmd = [
-        qemu_binary(), "-M", board, "-kernel", str(elf), "-nodefaults", "-nic", "none", "-display", "none",
-        "-monitor", "none", "-serial", serial, "-semihosting-config", config,
+        qemu_binary(),
+        "-M",
+        board,
+        "-kernel",
+        str(elf),
+        "-nodefaults",
+        "-nic",
+        "none",
+        "-display",
+        "none",
+        "-monitor",
+        "none",
+        "-serial",
+        serial,
+        "-semihosting-config",
+        config,
     ]
     if plugin:
         cmd += plugin
@@ -76,9 +96,7 @@ class QemuRun:
         return EXIT_CODES.get(self.returncode, f"exit status {self.returncode}")
 
 
-def run_image(
-    elf: Path, *, board: str, cwd: Path, timeout_s: float = 20.0, plugin: list[str] | None = None
-) -> QemuRun:
+def run_image(elf: Path, *, board: str, cwd: Path, timeout_s: float = 20.0, plugin: list[str] | None = None) -> QemuRun:
     """Boot ``elf`` in QEMU with ``cwd`` as the semihosting directory and wait for it to exit.
 
     The UART goes to ``cwd/uart.log``. The process is wrapped in ``timeout`` and killed if still alive.
@@ -108,8 +126,16 @@ def record_dtypes(*, n: int, m: int, p: int, q: int) -> tuple[np.dtype, np.dtype
 
 
 def encode_input(
-    Y: np.ndarray, R: np.ndarray | None, *, n: int, m: int, p: int, q: int, block: int = MAX_BLOCK,
-    watchdog_periods: int = 10, tags: np.ndarray | None = None,
+    Y: np.ndarray,
+    R: np.ndarray | None,
+    *,
+    n: int,
+    m: int,
+    p: int,
+    q: int,
+    block: int = MAX_BLOCK,
+    watchdog_periods: int = 10,
+    tags: np.ndarray | None = None,
 ) -> bytes:
     """The ``gl_in.bin`` stream for samples ``Y`` (N, p), ``R`` (N, q)."""
     din, _ = record_dtypes(n=n, m=m, p=p, q=q)
@@ -139,8 +165,18 @@ def decode_output(blob: bytes, *, n: int, m: int, p: int, q: int) -> tuple[np.nd
 
 
 def replay(
-    elf: Path, *, board: str, n: int, m: int, p: int, q: int, Y: np.ndarray, R: np.ndarray | None,
-    tags: np.ndarray | None = None, watchdog_periods: int = 10, plugin: list[str] | None = None,
+    elf: Path,
+    *,
+    board: str,
+    n: int,
+    m: int,
+    p: int,
+    q: int,
+    Y: np.ndarray,
+    R: np.ndarray | None,
+    tags: np.ndarray | None = None,
+    watchdog_periods: int = 10,
+    plugin: list[str] | None = None,
     stage_sets: list[bytes] | None = None,
 ) -> np.ndarray:
     """Run samples through the image in QEMU (semihosting file I/O); return the output records.

@@ -30,8 +30,8 @@ import struct
 import subprocess
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 from ..errors import FirmwareError, TransportError
 from .qemu import EXIT_CODES, qemu_command
@@ -56,9 +56,9 @@ def tcp_endpoint(url: str, *, scheme: str = "tcp") -> tuple[str, int]:
     TransportError
         When ``url`` has another form (one line naming the expected one).
     """
-    text = url[len("socket://"):] if scheme == "socket" and url.startswith("socket://") else None
+    text = url[len("socket://") :] if scheme == "socket" and url.startswith("socket://") else None
     if scheme == "tcp" and url.startswith("tcp:"):
-        text = url[len("tcp:"):]
+        text = url[len("tcp:") :]
     form = "tcp:HOST:PORT" if scheme == "tcp" else "socket://HOST:PORT"
     if text is None or text.count(":") != 1:
         raise TransportError(f"expected {form}, got {url!r}")
@@ -128,9 +128,20 @@ class QemuUart:
         The banner and the image's ``ready ...`` line, joined by a space.
     """
 
-    def __init__(self, elf: Path, *, board: str, protocol: str, host: str = "127.0.0.1", port: int,
-                 options: Sequence[str] = (), flash_dir: Path | None = None, ready_timeout: float = 20.0,
-                 lifetime_s: float = 0.0, signing_key: bytes | None = None) -> None:
+    def __init__(
+        self,
+        elf: Path,
+        *,
+        board: str,
+        protocol: str,
+        host: str = "127.0.0.1",
+        port: int,
+        options: Sequence[str] = (),
+        flash_dir: Path | None = None,
+        ready_timeout: float = 20.0,
+        lifetime_s: float = 0.0,
+        signing_key: bytes | None = None,
+    ) -> None:
         self.elf, self.board, self.protocol = Path(elf), board, protocol
         self.host, self.port = host, int(port)
         self.ready_timeout = ready_timeout
@@ -138,7 +149,8 @@ class QemuUart:
         self.flash_dir = Path(flash_dir) if flash_dir is not None else Path(self._tmp.name)
         serial = f"tcp:{host}:{self.port},server=on,wait=on,nodelay=on"
         self.argv = ["timeout", "-k", "2", f"{max(0.0, lifetime_s):g}"] + qemu_command(
-            self.elf, board=board, serial=serial, semihosting_args=serve_arguments(protocol, options))
+            self.elf, board=board, serial=serial, semihosting_args=serve_arguments(protocol, options)
+        )
         if signing_key is not None and len(signing_key) != 32:
             raise FirmwareError("a MAVLink signing key has 32 bytes")
         self.signing_key = signing_key
@@ -158,7 +170,7 @@ class QemuUart:
         """The UART as pyserial (python-can ``slcan``) opens it: ``socket://HOST:PORT``."""
         return f"socket://{self.host}:{self.port}"
 
-    def start(self) -> "QemuUart":
+    def start(self) -> QemuUart:
         """Start QEMU, read the banner and the ready line, and leave the UART free for the client.
 
         Raises
@@ -173,9 +185,15 @@ class QemuUart:
             key_file.chmod(0o600)
         log.debug("qemu: %s", " ".join(self.argv))
         try:
-            self.proc = subprocess.Popen(self.argv, cwd=self.flash_dir, stdin=subprocess.DEVNULL,
-                                         stdout=subprocess.DEVNULL, stderr=self._stderr, start_new_session=True,
-                                         preexec_fn=_term_with_parent)
+            self.proc = subprocess.Popen(
+                self.argv,
+                cwd=self.flash_dir,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                stderr=self._stderr,
+                start_new_session=True,
+                preexec_fn=_term_with_parent,
+            )
         except OSError as exc:
             raise FirmwareError(f"cannot start {self.argv[0]}: {exc.strerror}") from None
         try:
@@ -193,11 +211,13 @@ class QemuUart:
                 return socket.create_connection((self.host, self.port), timeout=1.0)
             except OSError:
                 if self.proc.poll() is not None:
-                    raise FirmwareError(f"QEMU exited with status {self.proc.returncode} before its UART listened"
-                                        f"{self._stderr_hint()}") from None
+                    raise FirmwareError(
+                        f"QEMU exited with status {self.proc.returncode} before its UART listened{self._stderr_hint()}"
+                    ) from None
                 if time.monotonic() > deadline:
-                    raise FirmwareError(f"QEMU's UART at {self.url} did not listen within {self.ready_timeout:g} s") \
-                        from None
+                    raise FirmwareError(
+                        f"QEMU's UART at {self.url} did not listen within {self.ready_timeout:g} s"
+                    ) from None
                 time.sleep(0.02)
 
     def _read_banner(self, deadline: float) -> list[str]:
@@ -209,8 +229,10 @@ class QemuUart:
                 while buf.count(b"\n") < 2:
                     left = deadline - time.monotonic()
                     if left <= 0 or not sel.select(timeout=left):
-                        raise FirmwareError(f"the image on {self.board} sent no ready line within "
-                                            f"{self.ready_timeout:g} s (UART so far: {buf[:120]!r})")
+                        raise FirmwareError(
+                            f"the image on {self.board} sent no ready line within "
+                            f"{self.ready_timeout:g} s (UART so far: {buf[:120]!r})"
+                        )
                     chunk = sock.recv(4096)
                     if not chunk:
                         self._wait_exit()
@@ -235,7 +257,7 @@ class QemuUart:
         text = buf.decode("latin-1")
         err = next((ln for ln in text.splitlines() if ln.startswith("error: ")), None)
         if err is not None:
-            return f"the image refused its options: {err[len('error: '):]}"
+            return f"the image refused its options: {err[len('error: ') :]}"
         code = self.proc.poll()
         meaning = EXIT_CODES.get(code, f"status {code}") if code is not None else "still running"
         return f"the image stopped before it was ready ({meaning}){self._stderr_hint()}"
@@ -314,7 +336,7 @@ class QemuUart:
             self._tmp.cleanup()
             self._tmp = None
 
-    def __enter__(self) -> "QemuUart":
+    def __enter__(self) -> QemuUart:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -326,8 +348,15 @@ def default_flash_dir(artifact_path: Path, *, board: str) -> Path:
     return Path(artifact_path).with_name(f"flash-{board}")
 
 
-def run_foreground(artifact_path: Path, *, board: str, protocol: str, url: str, options: Sequence[str] = (),
-                   flash_dir: Path | None = None) -> int:
+def run_foreground(
+    artifact_path: Path,
+    *,
+    board: str,
+    protocol: str,
+    url: str,
+    options: Sequence[str] = (),
+    flash_dir: Path | None = None,
+) -> int:
     """Build the image for an artifact and serve ``protocol`` on its UART at ``url`` until interrupted.
 
     Parameters
@@ -364,8 +393,9 @@ def run_foreground(artifact_path: Path, *, board: str, protocol: str, url: str, 
 
     previous = signal.signal(signal.SIGTERM, on_term)
     try:
-        with QemuUart(elf, board=board, protocol=protocol, host=host, port=port, options=options,
-                      flash_dir=flash) as image:
+        with QemuUart(
+            elf, board=board, protocol=protocol, host=host, port=port, options=options, flash_dir=flash
+        ) as image:
             print(f"{image.ready_line}; UART at {url} (flash: {flash}); Ctrl-C stops it", flush=True)
             while not stop["now"] and image.exit_status() is None:
                 time.sleep(0.2)

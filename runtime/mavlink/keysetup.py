@@ -49,8 +49,9 @@ def signing_timestamp(now: float | None = None) -> int:
     return max(0, int(((time.time() if now is None else now) - MAVLINK_EPOCH_S) * 100_000))
 
 
-def setup_signing(connect: str, key: bytes, *, current: bytes | None = None, heartbeat_timeout: float = 5.0,
-                  timeout: float = 2.0) -> KeySetup:
+def setup_signing(
+    connect: str, key: bytes, *, current: bytes | None = None, heartbeat_timeout: float = 5.0, timeout: float = 2.0
+) -> KeySetup:
     """Send SETUP_SIGNING with ``key`` to the vehicle on ``connect`` and check that it signs with it.
 
     Parameters
@@ -91,5 +92,6 @@ def setup_signing(connect: str, key: bytes, *, current: bytes | None = None, hea
         raise KeyNotTakenError(
             f"vehicle {target[0]}/{target[1]} on {connect} does not sign with the new key after a SETUP_SIGNING "
             f"sent {how} (a first key is taken only on a trusted link, e.g. the image's UART; to replace a key, "
-            "give the current one with --signing-key)")
+            "give the current one with --signing-key)"
+        )
     return KeySetup(target=target, replaced=current is not None)

@@ -31,12 +31,14 @@ class _ParamSetRaw(mavlink2.MAVLink_param_set_message):
         super().__init__(target_system, target_component, param_id.encode("ascii"), 0.0, param_type)
         self._raw = bytes(raw[:4]).ljust(4, b"\0")
 
-    def pack(self, mav: "mavlink2.MAVLink", force_mavlink1: bool = False) -> bytes:
-        payload = self._raw + struct.pack("<BB16sB", self.target_system, self.target_component, self._param_id_raw, self.param_type)
+    def pack(self, mav: mavlink2.MAVLink, force_mavlink1: bool = False) -> bytes:
+        payload = self._raw + struct.pack(
+            "<BB16sB", self.target_system, self.target_component, self._param_id_raw, self.param_type
+        )
         return self._pack(mav, self.crc_extra, payload, force_mavlink1=force_mavlink1)
 
 
-def raw_param_value(msg: "mavlink2.MAVLink_param_value_message") -> bytes:
+def raw_param_value(msg: mavlink2.MAVLink_param_value_message) -> bytes:
     """The four ``param_value`` bytes of a received PARAM_VALUE, exactly as sent.
 
     Read from the frame itself (pymavlink's ``get_payload()`` assumes a MAVLink 1 header).
@@ -67,8 +69,16 @@ class MavLink:
         Signing link id of this session.
     """
 
-    def __init__(self, url: str, *, source_system: int = 255, source_component: int = GCS_COMPONENT, baud: int = 115200,
-                 signing_key: bytes | None = None, link_id: int = 1):
+    def __init__(
+        self,
+        url: str,
+        *,
+        source_system: int = 255,
+        source_component: int = GCS_COMPONENT,
+        baud: int = 115200,
+        signing_key: bytes | None = None,
+        link_id: int = 1,
+    ):
         self.url = url
         try:
             self.conn = mavutil.mavlink_connection(
@@ -84,7 +94,7 @@ class MavLink:
         self.rx_count = 0
         self.tx_count = 0
 
-    def send(self, msg: "mavlink2.MAVLink_message") -> None:
+    def send(self, msg: mavlink2.MAVLink_message) -> None:
         """Frame and send one message."""
         try:
             self.mav.send(msg)
@@ -92,9 +102,19 @@ class MavLink:
             raise TransportError(f"MAVLink send on {self.url!r} failed: {exc}") from None
         self.tx_count += 1
 
-    def send_param_set(self, *, target_system: int, target_component: int, name: str, raw: bytes, param_type: int) -> None:
+    def send_param_set(
+        self, *, target_system: int, target_component: int, name: str, raw: bytes, param_type: int
+    ) -> None:
         """Send PARAM_SET with the exact four value bytes ``raw``."""
-        self.send(_ParamSetRaw(target_system=target_system, target_component=target_component, param_id=name, raw=raw, param_type=param_type))
+        self.send(
+            _ParamSetRaw(
+                target_system=target_system,
+                target_component=target_component,
+                param_id=name,
+                raw=raw,
+                param_type=param_type,
+            )
+        )
 
     def poll(self, timeout: float) -> list:
         """Return the messages that arrive within ``timeout`` seconds (as soon as there is at least one)."""
@@ -115,7 +135,7 @@ class MavLink:
         self.rx_count += len(out)
         return out
 
-    def wait_heartbeat(self, *, timeout: float, exclude_gcs: bool = True) -> "mavlink2.MAVLink_heartbeat_message":
+    def wait_heartbeat(self, *, timeout: float, exclude_gcs: bool = True) -> mavlink2.MAVLink_heartbeat_message:
         """Wait for a HEARTBEAT from a vehicle (not a ground station) and return it.
 
         Raises
@@ -138,9 +158,11 @@ class MavLink:
             for m in self.poll(min(left, 0.1)):
                 if m.get_type() == "HEARTBEAT" and not (exclude_gcs and m.type == mavlink2.MAV_TYPE_GCS):
                     if self.signed and not m.get_signed():
-                        raise TransportError(f"vehicle {m.get_srcSystem()}/{m.get_srcComponent()} on {self.url} does "
-                                             "not sign with this key (its heartbeat is unsigned or signed with "
-                                             "another key)")
+                        raise TransportError(
+                            f"vehicle {m.get_srcSystem()}/{m.get_srcComponent()} on {self.url} does "
+                            "not sign with this key (its heartbeat is unsigned or signed with "
+                            "another key)"
+                        )
                     return m
 
     def _can_send(self) -> bool:
@@ -158,7 +180,7 @@ class MavLink:
         except OSError:
             pass
 
-    def __enter__(self) -> "MavLink":
+    def __enter__(self) -> MavLink:
         return self
 
     def __exit__(self, *exc: object) -> None:

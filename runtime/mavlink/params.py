@@ -69,7 +69,14 @@ PARAM_TYPES: dict[str, int] = {
 }
 _TYPE_NAMES = {v: k for k, v in PARAM_TYPES.items()}
 _INT_FORMATS = {1: "<B", 2: "<b", 3: "<H", 4: "<h", 5: "<I", 6: "<i"}
-_INT_RANGES = {1: (0, 255), 2: (-128, 127), 3: (0, 65535), 4: (-32768, 32767), 5: (0, 2**32 - 1), 6: (-(2**31), 2**31 - 1)}
+_INT_RANGES = {
+    1: (0, 255),
+    2: (-128, 127),
+    3: (0, 65535),
+    4: (-32768, 32767),
+    5: (0, 2**32 - 1),
+    6: (-(2**31), 2**31 - 1),
+}
 REAL32 = PARAM_TYPES["REAL32"]
 INT32 = PARAM_TYPES["INT32"]
 
@@ -195,7 +202,10 @@ def _block_params(field: str, stem: str, kind: str, values: np.ndarray, artifact
     if kind == "scalar":
         return [ParamSpec(name=f"GL_{stem}", ptype=REAL32, value=float(values.ravel()[0]), source=field)]
     if kind == "vector":
-        return [ParamSpec(name=f"GL_{stem}_{i}", ptype=REAL32, value=float(v), source=f"{field}[{i}]") for i, v in enumerate(values)]
+        return [
+            ParamSpec(name=f"GL_{stem}_{i}", ptype=REAL32, value=float(v), source=f"{field}[{i}]")
+            for i, v in enumerate(values)
+        ]
     rows, cols = values.shape
     if field == "Ki":
         cols = artifact.q  # stored with max(q, 1) columns
@@ -316,7 +326,9 @@ def load_mapping(path: str | Path) -> Mapping:
         check_param_id(name)
         tname = str(row.get("type", "REAL32")).upper()
         if tname not in PARAM_TYPES:
-            raise ParameterError(f"mapping {path}: param {name}: unknown type {tname!r} (one of {', '.join(PARAM_TYPES)})")
+            raise ParameterError(
+                f"mapping {path}: param {name}: unknown type {tname!r} (one of {', '.join(PARAM_TYPES)})"
+            )
         scale = row.get("scale", 1.0)
         if not isinstance(scale, (int, float)) or not math.isfinite(scale):
             raise ParameterError(f"mapping {path}: param {name}: scale must be a finite number")

@@ -41,8 +41,16 @@ class LossyUdpRelay:
         Address the relay listens on (its port is chosen by the system: see :attr:`port`).
     """
 
-    def __init__(self, *, upstream: tuple[str, int], drop: float = 0.2, duplicate: float = 0.1, reorder: float = 0.1,
-                 seed: int = 1, host: str = "127.0.0.1"):
+    def __init__(
+        self,
+        *,
+        upstream: tuple[str, int],
+        drop: float = 0.2,
+        duplicate: float = 0.1,
+        reorder: float = 0.1,
+        seed: int = 1,
+        host: str = "127.0.0.1",
+    ):
         self.upstream = upstream
         self.drop, self.duplicate, self.reorder = drop, duplicate, reorder
         self.rng = random.Random(seed)
@@ -112,7 +120,7 @@ class LossyUdpRelay:
         if dest is not None:
             sock.sendto(data, dest)
 
-    def start(self) -> "LossyUdpRelay":
+    def start(self) -> LossyUdpRelay:
         """Start the relay thread."""
         self._thread.start()
         return self
@@ -125,7 +133,7 @@ class LossyUdpRelay:
         self.front.close()
         self.back.close()
 
-    def __enter__(self) -> "LossyUdpRelay":
+    def __enter__(self) -> LossyUdpRelay:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:

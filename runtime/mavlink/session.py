@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import common as mavlink2
 
 from ..errors import PeerTimeoutError
-
 from .link import MavLink, raw_param_value
 from .params import Encoding, decode_value, encode_value, same_value
 
@@ -152,7 +151,9 @@ class ParamSession:
 
         def send(name: str, attempts: int) -> None:
             self.link.send(
-                mavlink2.MAVLink_param_request_read_message(self.target_system, self.target_component, name.encode("ascii"), -1)
+                mavlink2.MAVLink_param_request_read_message(
+                    self.target_system, self.target_component, name.encode("ascii"), -1
+                )
             )
             flying[name] = _Flight(name=name, deadline=time.monotonic() + self.timeout, attempts=attempts)
 
@@ -205,7 +206,9 @@ class ParamSession:
             now = time.monotonic()
             if now > deadline:
                 got = len(by_index)
-                raise PeerTimeoutError(f"parameter list incomplete after {timeout:g} s ({got} of {count if count is not None else '?'})")
+                raise PeerTimeoutError(
+                    f"parameter list incomplete after {timeout:g} s ({got} of {count if count is not None else '?'})"
+                )
             got_any = False
             for m in self._replies(0.05):
                 if m.get_type() != "PARAM_VALUE":
@@ -214,8 +217,11 @@ class ParamSession:
                 count = m.param_count
                 raw = raw_param_value(m)
                 by_index[m.param_index] = ParamValue(
-                    name=m.param_id, ptype=m.param_type, value=decode_value(raw=raw, ptype=m.param_type, encoding=self.encoding),
-                    index=m.param_index, count=m.param_count,
+                    name=m.param_id,
+                    ptype=m.param_type,
+                    value=decode_value(raw=raw, ptype=m.param_type, encoding=self.encoding),
+                    index=m.param_index,
+                    count=m.param_count,
                 )
             if got_any:
                 quiet_since = time.monotonic()
@@ -251,7 +257,11 @@ class ParamSession:
         def send(f: _Flight) -> None:
             nonlocal sent
             self.link.send_param_set(
-                target_system=self.target_system, target_component=self.target_component, name=f.name, raw=f.raw, param_type=f.ptype
+                target_system=self.target_system,
+                target_component=self.target_component,
+                name=f.name,
+                raw=f.raw,
+                param_type=f.ptype,
             )
             sent += 1
             f.deadline = time.monotonic() + self.timeout
@@ -274,8 +284,11 @@ class ParamSession:
         while pending or flying:
             if stop_on_failure and (refused or unanswered) and pending:
                 pending.clear()
-                skipped = tuple(n for n, _, _ in items if n not in flying and n not in verified
-                                and n not in refused and n not in unanswered)
+                skipped = tuple(
+                    n
+                    for n, _, _ in items
+                    if n not in flying and n not in verified and n not in refused and n not in unanswered
+                )
             while pending and len(flying) < self.window:
                 name, ptype, value = pending.popleft()
                 raw = encode_value(value=value, ptype=ptype, encoding=self.encoding)
@@ -305,8 +318,14 @@ class ParamSession:
             now = time.monotonic()
             for f in [f for f in flying.values() if f.deadline <= now]:
                 give_up_or_resend(f)
-        return SetOutcome(verified=tuple(verified), refused=refused, unanswered=tuple(unanswered), skipped=skipped,
-                          sent=sent, retries=retries)
+        return SetOutcome(
+            verified=tuple(verified),
+            refused=refused,
+            unanswered=tuple(unanswered),
+            skipped=skipped,
+            sent=sent,
+            retries=retries,
+        )
 
     # -- commands ------------------------------------------------------------------------------
     def command(self, *, command: int, params: tuple[float, ...] = (), wait: float | None = None) -> int:
@@ -322,7 +341,9 @@ class ParamSession:
         for confirmation in range(self.retries + 1):
             self.resent += confirmation > 0
             self.link.send(
-                mavlink2.MAVLink_command_long_message(self.target_system, self.target_component, command, confirmation, *p)
+                mavlink2.MAVLink_command_long_message(
+                    self.target_system, self.target_component, command, confirmation, *p
+                )
             )
             deadline = time.monotonic() + per_try
             while (left := deadline - time.monotonic()) > 0:
@@ -339,7 +360,17 @@ class ParamSession:
         for _ in range(tries):
             self.link.send(
                 mavlink2.MAVLink_command_long_message(
-                    self.target_system, self.target_component, mavlink2.MAV_CMD_REQUEST_MESSAGE, 0, float(msg_id), 0, 0, 0, 0, 0, 0
+                    self.target_system,
+                    self.target_component,
+                    mavlink2.MAV_CMD_REQUEST_MESSAGE,
+                    0,
+                    float(msg_id),
+                    0,
+                    0,
+                    0,
+                    0,
+                    0,
+                    0,
                 )
             )
             deadline = time.monotonic() + wait

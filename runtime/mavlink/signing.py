@@ -13,8 +13,8 @@ from __future__ import annotations
 import os
 import secrets
 import types
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
@@ -24,8 +24,13 @@ from ..fileio import atomic_write_text, read_user_file
 
 KEY_BYTES = 32
 
-OPEN_MESSAGES = frozenset({mavlink2.MAVLINK_MSG_ID_HEARTBEAT, mavlink2.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
-                           mavlink2.MAVLINK_MSG_ID_PARAM_REQUEST_READ})
+OPEN_MESSAGES = frozenset(
+    {
+        mavlink2.MAVLINK_MSG_ID_HEARTBEAT,
+        mavlink2.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
+        mavlink2.MAVLINK_MSG_ID_PARAM_REQUEST_READ,
+    }
+)
 """What the firmware answers unsigned when it has a key (they change nothing; see gl_mav_node.h)."""
 
 
@@ -44,8 +49,10 @@ def read_key(path: str | os.PathLike) -> bytes:
     text = read_user_file(path, what="signing key file", error=SigningKeyError)
     digits = text.strip()
     if len(digits) != 2 * KEY_BYTES or any(c not in "0123456789abcdefABCDEF" for c in digits):
-        raise SigningKeyError(f"signing key file {path}: expected exactly {2 * KEY_BYTES} hex digits (a 32-byte key, "
-                              f"as `gainlink mavlink keygen` writes), found {len(digits)} characters")
+        raise SigningKeyError(
+            f"signing key file {path}: expected exactly {2 * KEY_BYTES} hex digits (a 32-byte key, "
+            f"as `gainlink mavlink keygen` writes), found {len(digits)} characters"
+        )
     return bytes.fromhex(digits)
 
 
@@ -65,8 +72,13 @@ def write_key(path: str | os.PathLike, key: bytes, *, overwrite: bool = False) -
     return path
 
 
-def enable(mav: "mavlink2.MAVLink", key: bytes, *, link_id: int = 1,
-           allow_unsigned: Callable[["mavlink2.MAVLink", int], bool] | None = None) -> None:
+def enable(
+    mav: mavlink2.MAVLink,
+    key: bytes,
+    *,
+    link_id: int = 1,
+    allow_unsigned: Callable[[mavlink2.MAVLink, int], bool] | None = None,
+) -> None:
     """Sign everything ``mav`` sends and accept only correctly signed messages (plus ``allow_unsigned``'s).
 
     Uses pymavlink's own ``setup_signing`` (its initial timestamp is the time since 2015 in 10 us units, so a
@@ -74,10 +86,11 @@ def enable(mav: "mavlink2.MAVLink", key: bytes, *, link_id: int = 1,
     """
     if len(key) != KEY_BYTES:
         raise SigningKeyError(f"a signing key has {KEY_BYTES} bytes, not {len(key)}")
-    mavutil.mavfile.setup_signing(types.SimpleNamespace(mav=mav), key, sign_outgoing=True,
-                                  allow_unsigned_callback=allow_unsigned, link_id=link_id)
+    mavutil.mavfile.setup_signing(
+        types.SimpleNamespace(mav=mav), key, sign_outgoing=True, allow_unsigned_callback=allow_unsigned, link_id=link_id
+    )
 
 
-def heartbeat_only(_mav: "mavlink2.MAVLink", msgid: int) -> bool:
+def heartbeat_only(_mav: mavlink2.MAVLink, msgid: int) -> bool:
     """An ``allow_unsigned`` that lets a vehicle's HEARTBEAT through (to say it does not sign), nothing else."""
     return msgid == mavlink2.MAVLINK_MSG_ID_HEARTBEAT

@@ -19,15 +19,14 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink2
 
 from ..artifact import Artifact
 from ..errors import ParameterError, PeerTimeoutError
-
 from .link import MavLink
 from .params import (
     DIMENSION_IDS,
@@ -145,15 +144,20 @@ def detect_encoding(session: ParamSession, *, autopilot: int = mavlink2.MAV_AUTO
     never comes) the autopilot type from HEARTBEAT does, as MAVLink's own SDK does: ArduPilot
     C-casts, everyone else (PX4, generic autopilots, MAVSDK servers) is bytewise.
     """
-    msg = session.request_message(msg_id=mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, wait=max(0.1, session.timeout),
-                                  tries=session.retries + 1)
+    msg = session.request_message(
+        msg_id=mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, wait=max(0.1, session.timeout), tries=session.retries + 1
+    )
     if msg is not None and msg.capabilities & mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE:
         return Encoding.BYTEWISE
     if msg is not None and msg.capabilities & mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST:
         return Encoding.C_CAST
     guess = Encoding.C_CAST if autopilot == mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA else Encoding.BYTEWISE
-    log.info("%s names no parameter encoding: %s integers (from the autopilot type %d)",
-             "AUTOPILOT_VERSION" if msg is not None else "no AUTOPILOT_VERSION arrived; it", guess.value, autopilot)
+    log.info(
+        "%s names no parameter encoding: %s integers (from the autopilot type %d)",
+        "AUTOPILOT_VERSION" if msg is not None else "no AUTOPILOT_VERSION arrived; it",
+        guess.value,
+        autopilot,
+    )
     return guess
 
 
@@ -229,21 +233,35 @@ def upload(
     own = link is None
     link = link or MavLink(connect, signing_key=signing_key)
     try:
-        session, target = _open_session(link, heartbeat_timeout=heartbeat_timeout, encoding=encoding,
-                                        window=window, timeout=timeout, retries=retries)
+        session, target = _open_session(
+            link,
+            heartbeat_timeout=heartbeat_timeout,
+            encoding=encoding,
+            window=window,
+            timeout=timeout,
+            retries=retries,
+        )
         return _upload(session, plan=plan, persist=persist, dry_run=dry_run, t0=t0, target=target, on_diff=on_diff)
     finally:
         if own:
             link.close()
 
 
-def _open_session(link: MavLink, *, heartbeat_timeout: float, encoding: Encoding | None, window: int,
-                  timeout: float, retries: int) -> tuple[ParamSession, tuple[int, int]]:
+def _open_session(
+    link: MavLink, *, heartbeat_timeout: float, encoding: Encoding | None, window: int, timeout: float, retries: int
+) -> tuple[ParamSession, tuple[int, int]]:
     """The parameter session with the first vehicle that sends a heartbeat, in its integer encoding."""
     hb = link.wait_heartbeat(timeout=heartbeat_timeout)
     target = (hb.get_srcSystem(), hb.get_srcComponent())
-    session = ParamSession(link, target_system=target[0], target_component=target[1], encoding=Encoding.C_CAST,
-                           window=window, timeout=timeout, retries=retries)
+    session = ParamSession(
+        link,
+        target_system=target[0],
+        target_component=target[1],
+        encoding=Encoding.C_CAST,
+        window=window,
+        timeout=timeout,
+        retries=retries,
+    )
     session.encoding = encoding or detect_encoding(session, autopilot=hb.autopilot)
     log.info("vehicle %d/%d, %s integer parameters", target[0], target[1], session.encoding.value)
     return session, target
@@ -254,13 +272,16 @@ def _read_current(session: ParamSession, plan: _Plan) -> dict[str, ParamValue]:
     if plan.checks:  # the structure first: a loop of other dimensions is one clear error, not a list
         dims, missing = session.read([s.name for s in plan.checks])
         if missing:
-            raise ParameterError(f"the vehicle is not gainlink firmware (no {', '.join(sorted(missing))}); "
-                                 "give --mapping for other autopilots; nothing was changed")
+            raise ParameterError(
+                f"the vehicle is not gainlink firmware (no {', '.join(sorted(missing))}); "
+                "give --mapping for other autopilots; nothing was changed"
+            )
         if any(int(dims[s.name].value) != int(s.value) for s in plan.checks):
             got = " ".join(f"{s.name}={int(dims[s.name].value)}" for s in plan.checks)
             want = " ".join(f"{s.name}={int(s.value)}" for s in plan.checks)
-            raise ParameterError(f"the firmware runs a loop of other dimensions ({got}; the artifact has {want}); "
-                                 "nothing was changed")
+            raise ParameterError(
+                f"the firmware runs a loop of other dimensions ({got}; the artifact has {want}); nothing was changed"
+            )
         values.update(dims)
     got, missing = session.read([s.name for s in plan.specs] + ([HASH_ID] if plan.commit else []))
     if missing:
@@ -277,8 +298,16 @@ def _read_current(session: ParamSession, plan: _Plan) -> dict[str, ParamValue]:
     return values
 
 
-def _upload(session: ParamSession, *, plan: _Plan, persist: bool, dry_run: bool, t0: float, target: tuple[int, int],
-            on_diff: Callable[[tuple[ParamChange, ...]], None] | None) -> UploadResult:
+def _upload(
+    session: ParamSession,
+    *,
+    plan: _Plan,
+    persist: bool,
+    dry_run: bool,
+    t0: float,
+    target: tuple[int, int],
+    on_diff: Callable[[tuple[ParamChange, ...]], None] | None,
+) -> UploadResult:
     current = _read_current(session, plan)
     changes = tuple(
         ParamChange(name=s.name, source=s.source, ptype=s.ptype, old=current[s.name].value, new=s.value)
@@ -293,9 +322,17 @@ def _upload(session: ParamSession, *, plan: _Plan, persist: bool, dry_run: bool,
 
     def result(*, verified: int, sent: int, committed: bool, persisted: bool) -> UploadResult:
         return UploadResult(
-            target=target, encoding=session.encoding, changes=changes, unchanged=len(plan.specs) - len(changes),
-            verified=verified, sent=sent, retries=session.resent, committed=committed, persisted=persisted,
-            dry_run=dry_run, seconds=time.perf_counter() - t0,
+            target=target,
+            encoding=session.encoding,
+            changes=changes,
+            unchanged=len(plan.specs) - len(changes),
+            verified=verified,
+            sent=sent,
+            retries=session.resent,
+            committed=committed,
+            persisted=persisted,
+            dry_run=dry_run,
+            seconds=time.perf_counter() - t0,
         )
 
     if dry_run:
@@ -353,7 +390,11 @@ def _result_name(code: int) -> str:
 
 
 def _rollback(
-    session: ParamSession, *, changes: tuple[ParamChange, ...], committed: bool, old_hash: int | None,
+    session: ParamSession,
+    *,
+    changes: tuple[ParamChange, ...],
+    committed: bool,
+    old_hash: int | None,
     events: list[str],
 ) -> bool:
     if not changes and not committed:
