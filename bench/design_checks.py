@@ -21,11 +21,11 @@ from pathlib import Path
 
 import numpy as np
 from gainlink.artifact import from_dict
-from gainlink.design import design
 from gainlink.float32_law import Float32Loop
 from gainlink.random_plants import random_spec
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import PlantSpec, load_spec, parse_spec
+from gainlink.synthesis import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 REPEAT = 3
@@ -41,10 +41,10 @@ def _median_time(fn) -> float:
 
 
 def measure(label: str, spec: PlantSpec) -> dict:
-    without = replace(spec, implementation={**(spec.implementation or {}), "float32_check": False})
-    t_on = _median_time(lambda: design(spec))
-    t_off = _median_time(lambda: design(without))
-    result = design(spec)
+    without = replace(spec, implementation=replace(spec.implementation, float32_check=False))
+    t_on = _median_time(lambda: synthesize(spec))
+    t_off = _median_time(lambda: synthesize(without))
+    result = synthesize(spec)
     a = from_dict(result.artifact)
     rng = np.random.default_rng(0)
     Y = a.y_op + rng.standard_normal((500, a.p))

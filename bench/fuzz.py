@@ -19,9 +19,9 @@ import sys
 from pathlib import Path
 
 from gainlink import artifact as artifact_mod
-from gainlink.design import design
 from gainlink.firmware import fuzz
 from gainlink.spec import load_spec
+from gainlink.synthesis import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET_EXECUTIONS = 10_000_000
@@ -30,7 +30,7 @@ TARGET_EXECUTIONS = 10_000_000
 def load_artifact(path: str | None):
     if path:
         return artifact_mod.load(path)
-    result = design(load_spec(ROOT / "examples" / "pendulum.toml"))
+    result = synthesize(load_spec(ROOT / "examples" / "pendulum.toml"))
     return artifact_mod.from_dict(result.artifact)
 
 

@@ -28,7 +28,6 @@ from pathlib import Path
 
 import numpy as np
 from gainlink import artifact as artifact_mod
-from gainlink.design import design
 from gainlink.hil.links.can_firmware import firmware_can_executable
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
@@ -36,6 +35,7 @@ from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.fmu import FmuPlant
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import load_spec
+from gainlink.synthesis import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -111,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING)
     with tempfile.TemporaryDirectory() as tmp:
         gains = Path(tmp) / "gains.json"
-        artifact_mod.write(gains, design(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
+        artifact_mod.write(gains, synthesize(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
         art = artifact_mod.load(gains)
         exe = firmware_can_executable(art)
         fmu = build_fmu("cart_pendulum")

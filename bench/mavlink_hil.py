@@ -158,13 +158,13 @@ def main() -> int:
     args = parser.parse_args()
 
     from gainlink import artifact as artifact_mod
-    from gainlink.design import design
     from gainlink.firmware.mavlink_app import mavlink_executable
     from gainlink.spec import load_spec
+    from gainlink.synthesis import synthesize
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "gains.json"
-        artifact_mod.write(path, design(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
+        artifact_mod.write(path, synthesize(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
         art = artifact_mod.load(path)
         rates, agree, busy_equals_default = _measure(art, mavlink_executable(art), args)
         bridge = _bridge_runs(path, args.busy_poll_us)

@@ -33,16 +33,16 @@ def main() -> int:
 
     from gainlink import artifact as artifact_mod
     from gainlink.artifact import from_dict
-    from gainlink.design import design
     from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
     from gainlink.mavlink.link import MavLink
     from gainlink.mavlink.params import REAL32, Encoding, firmware_params
     from gainlink.mavlink.session import ParamSession
     from gainlink.mavlink.upload import upload
     from gainlink.spec import parse_spec
+    from gainlink.synthesis import synthesize
 
     spec = tomllib.loads((ROOT / "examples" / "wood_berry.toml").read_text())
-    art = from_dict(design(parse_spec(spec)).artifact)
+    art = from_dict(synthesize(parse_spec(spec)).artifact)
     gains = [s for s in firmware_params(art) if s.ptype == REAL32][: args.params]
     if len(gains) < args.params:
         raise SystemExit(f"the Wood-Berry firmware has only {len(gains)} REAL32 parameters")
@@ -73,7 +73,7 @@ def main() -> int:
             session.set([(g.name, REAL32, float(g.value)) for g in gains])  # back to the compiled set
 
         spec["controller"]["bryson_u_max"] = [v / 1.7 for v in spec["controller"]["bryson_u_max"]]
-        retuned_dict = design(parse_spec(spec)).artifact
+        retuned_dict = synthesize(parse_spec(spec)).artifact
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "gains.json"
             artifact_mod.write(path, retuned_dict)

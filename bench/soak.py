@@ -40,12 +40,12 @@ from pathlib import Path
 
 import numpy as np
 from gainlink import artifact as artifact_mod
-from gainlink.design import design
 from gainlink.hil.links.can_firmware import firmware_can_executable
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.build import build_fmu
 from gainlink.spec import parse_spec
+from gainlink.synthesis import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGE_KIB = os.sysconf("SC_PAGE_SIZE") / 1024
@@ -297,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     with tempfile.TemporaryDirectory() as tmp:
         gains = Path(tmp) / "gains.json"
-        artifact_mod.write(gains, design(parse_spec(spec)).artifact)
+        artifact_mod.write(gains, synthesize(parse_spec(spec)).artifact)
         art = artifact_mod.load(gains)
         common = dict(
             gains=gains, exe=firmware_can_executable(art), fmu=build_fmu("cart_pendulum"), transport=transport

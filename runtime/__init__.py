@@ -10,16 +10,13 @@ neither it nor Dask). The command line ``gainlink`` is a shell over the same fun
 
 __version__ = "0.1.0"
 
-# The submodules design, replay and simulate are loaded first; the functions of the same names
-# then take their place as attributes of the package (``gl.design(...)``). Code inside gainlink
-# imports from the submodules (``from gainlink.design import design``), which is unaffected.
-from . import design as _design_module  # noqa: F401
+# The submodules replay and simulate are loaded first; the functions of the same names
+# then take their place as attributes of the package (``gl.replay(...)``).
 from . import hil
 from . import replay as _replay_module
 from . import simulate as _simulate_module
 from .api import design, from_gains, load, replay, simulate
 from .artifact import Artifact
-from .compensator import compensator_stability
 from .errors import (
     ArtifactError,
     DataError,
@@ -34,6 +31,7 @@ from .fidelity import float32_fidelity
 from .onestep import one_step_check
 from .reference import ReferenceLoop, Trace
 from .simulate import Simulation
+from .synthesis.compensator import compensator_stability
 from .twin import twin_comparison
 
 __all__ = [

@@ -17,12 +17,12 @@ from typing import Any
 import numpy as np
 
 from .artifact import Artifact, from_dict
-from .design import design as _design_spec
 from .errors import SpecError
 from .reference import Trace
 from .replay import get_engine
 from .simulate import Simulation, simulate_linear
 from .spec import PlantSpec, load_spec, parse_spec
+from .synthesis import synthesize
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -387,7 +387,7 @@ def _merge_tables(data: dict, tables: Mapping[str, Any], shortcuts: Mapping[str,
 def _design_dict(data: dict, *, source: str) -> Artifact:
     digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
     spec: PlantSpec = parse_spec(data, source=source, source_sha256=digest)
-    return from_dict(_design_spec(spec).artifact)
+    return from_dict(synthesize(spec).artifact)
 
 
 def _source_name(plant: Any) -> str:

@@ -1,9 +1,11 @@
-"""Atomic file output: nothing half-written, nothing written at all when a step fails."""
+"""Files the user names: reading them (text, TOML) with one-line errors, and atomic output (nothing
+half-written, nothing written at all when a step fails)."""
 
 from __future__ import annotations
 
 import os
 import tempfile
+import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -26,6 +28,20 @@ def read_user_file(path: str | os.PathLike, *, what: str, error: type[GainlinkEr
         raise error(f"{what} {path} cannot be read (permission denied)") from None
     except UnicodeDecodeError:
         raise error(f"{what} {path} is not UTF-8 text") from None
+
+
+def parse_toml(text: str | bytes, *, what: str, error: type[GainlinkError]) -> dict:
+    """Parse TOML text; a syntax error (or bytes that are not UTF-8) becomes one ``error`` naming ``what``."""
+    try:
+        return tomllib.loads(text.decode("utf-8") if isinstance(text, bytes) else text)
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise error(f"{what} is not valid TOML: {exc}") from None
+
+
+def read_toml(path: str | os.PathLike, *, what: str, error: type[GainlinkError]) -> tuple[dict, bytes]:
+    """Read and parse a TOML file the user named: ``(data, raw bytes)``; every failure is one ``error`` line."""
+    raw = read_user_file(path, what=what, error=error, binary=True)
+    return parse_toml(raw, what=f"{what} {path}", error=error), raw
 
 
 def _default_mode() -> int:

@@ -9,10 +9,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from gainlink.synthesis.realization import design_plant
 
 from .artifact import Artifact
 from .errors import DataError
-from .realization import design_plant
 from .reference import ReferenceLoop
 
 

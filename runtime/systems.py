@@ -65,8 +65,7 @@ def controller_system(a: Artifact) -> control.StateSpace:
 def plant_system(a: Artifact) -> control.StateSpace:
     """The artifact's discrete design plant (deviation variables, the design's coordinates) with named signals."""
     import control
-
-    from .realization import design_plant
+    from gainlink.synthesis.realization import design_plant
 
     sig = a.signals
     return control.ss(

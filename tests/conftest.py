@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 from gainlink import artifact as artifact_mod
 from gainlink.cli import main
-from gainlink.design import design
 from gainlink.spec import load_spec
+from gainlink.synthesis import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
@@ -45,7 +45,7 @@ def example_artifacts(tmp_path_factory) -> dict[str, Path]:
     base = tmp_path_factory.mktemp("examples")
     paths = {}
     for name in EXAMPLE_NAMES:
-        result = design(load_spec(EXAMPLES / f"{name}.toml"))
+        result = synthesize(load_spec(EXAMPLES / f"{name}.toml"))
         path = base / name / "gains.json"
         path.parent.mkdir()
         artifact_mod.write(path, result.artifact)

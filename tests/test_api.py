@@ -64,7 +64,14 @@ def test_campaigns_are_in_the_namespace_without_import_gainlink_loading_dask():
 
 @pytest.mark.parametrize(
     "module",
-    ["gainlink.api", "gainlink.hil", "gainlink.onestep", "gainlink.twin", "gainlink.fidelity", "gainlink.compensator"],
+    [
+        "gainlink.api",
+        "gainlink.hil",
+        "gainlink.onestep",
+        "gainlink.twin",
+        "gainlink.fidelity",
+        "gainlink.synthesis.compensator",
+    ],
 )
 def test_docstring_examples_run(module):
     import importlib

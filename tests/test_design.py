@@ -11,8 +11,10 @@ import scipy.linalg
 import scipy.signal
 from conftest import EXAMPLES, run_cli
 from gainlink import artifact as artifact_mod
-from gainlink.design import design, poles_match
+from gainlink.errors import DesignError
 from gainlink.spec import load_spec, parse_spec
+from gainlink.synthesis import synthesize
+from gainlink.synthesis.loop import poles_match
 
 
 def dlqr_scipy(A, B, Q, R):
@@ -29,12 +31,12 @@ def test_seed_continuous_lqr_gain_is_the_corrected_one():
     # The seed's printed K (-3.162, -4.327, -52.40, -10.74) is wrong for its own plant and weights.
     spec = load_spec(EXAMPLES / "pendulum.toml")
     Q, R = np.diag([10.0, 1.0, 100.0, 1.0]), np.eye(1)
-    P = scipy.linalg.solve_continuous_are(spec.A, spec.B, Q, R)
-    K = np.linalg.solve(R, spec.B.T @ P)
+    P = scipy.linalg.solve_continuous_are(spec.plant.A, spec.plant.B, Q, R)
+    K = np.linalg.solve(R, spec.plant.B.T @ P)
     np.testing.assert_allclose(K[0], [-3.1623, -4.4248, -39.608, -8.4795], atol=6e-4)
     assert not np.allclose(K[0], [-3.162, -4.327, -52.40, -10.74], atol=0.05)
     # The open-loop plant has the seed's unstable pole at +4.646 rad/s.
-    assert np.max(np.linalg.eigvals(spec.A).real) == pytest.approx(4.6457, abs=1e-3)
+    assert np.max(np.linalg.eigvals(spec.plant.A).real) == pytest.approx(4.6457, abs=1e-3)
 
 
 def test_pendulum_gains_match_independent_dlqr_and_kalman(example_artifacts):
@@ -116,10 +118,10 @@ def test_pade_order_is_configurable():
     import tomllib
 
     data = tomllib.loads((EXAMPLES / "wood_berry.toml").read_text())
-    data["plant"]["pade_order"] = spec.pade_order + 1
+    data["plant"]["pade_order"] = spec.plant.pade_order + 1
     spec2 = parse_spec(data)
-    assert spec2.n > spec.n
-    z = np.linalg.eigvals(spec2.A)
+    assert spec2.plant.n > spec.plant.n
+    z = np.linalg.eigvals(spec2.plant.A)
     assert np.all(z.real < 0)
 
 
@@ -144,7 +146,7 @@ def test_pole_placement_and_luenberger_put_poles_where_asked():
             observer={"method": "luenberger", "poles": [[-30.0, 5.0], [-30.0, -5.0]], "form": "current"},
         )
     )
-    r = design(spec)
+    r = synthesize(spec)
     a = artifact_mod.from_dict(r.artifact)
     want_c = np.exp(np.array([-8.0, -9.0]) * 0.01)
     want_o = np.exp(np.array([-30 + 5j, -30 - 5j]) * 0.01)
@@ -187,21 +189,21 @@ def test_an_artifact_breaking_an_invariant_of_the_law_is_refused(form, change, w
     if form == "integral":
         spec["plant"]["outputs"] = ["pos"]
         spec["integral"] = {"outputs": ["pos"], "Q_diag": [5.0]}
-    data = design(parse_spec(spec)).artifact
+    data = synthesize(parse_spec(spec)).artifact
     artifact_mod.from_dict(data)  # the untouched one is valid
     with pytest.raises(artifact_mod.ArtifactError, match=re.escape(words)):
         artifact_mod.from_dict(_tampered(data, change))
 
 
 def test_ackermann_matches_place_for_single_input():
-    r1 = design(parse_spec(_small_spec(controller={"method": "place", "poles": [-8.0, -9.0]})))
-    r2 = design(parse_spec(_small_spec(controller={"method": "ackermann", "poles": [-8.0, -9.0]})))
+    r1 = synthesize(parse_spec(_small_spec(controller={"method": "place", "poles": [-8.0, -9.0]})))
+    r2 = synthesize(parse_spec(_small_spec(controller={"method": "ackermann", "poles": [-8.0, -9.0]})))
     np.testing.assert_allclose(r1.artifact["K"], r2.artifact["K"], rtol=1e-8)
     assert any("Ackermann" in w for w in r2.warnings)
 
 
 def test_tustin_gives_the_bilinear_plant():
-    r = design(parse_spec(_small_spec(discretization="tustin")))
+    r = synthesize(parse_spec(_small_spec(discretization="tustin")))
     a = artifact_mod.from_dict(r.artifact)
     A, B, C, D = np.array([[0.0, 1.0], [0.0, -2.0]]), np.array([[0.0], [4.0]]), np.array([[1.0, 0.0]]), np.zeros((1, 1))
     Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), 0.01, method="bilinear")
@@ -222,3 +224,74 @@ def test_design_is_deterministic_byte_for_byte(tmp_path):
     assert "time" not in json.dumps(data).lower()
     assert data["provenance"]["spec_sha256"]
     assert data["sha256"] == artifact_mod.content_sha256(data)
+
+
+def _stiff_spec(integral_weight: float) -> dict:
+    """A stiff two-mass plant (1000 rad/s coupling) at 1 kHz with integral action weighted ``integral_weight``."""
+    return {
+        "name": "stiff",
+        "Ts": 0.001,
+        "plant": {
+            "A": [[0, 1, 0, 0], [-1e6, -20, 1e6, 0], [0, 0, 0, 1], [1e5, 0, -1e5, -0.1]],
+            "B": [[0], [1000.0], [0], [0]],
+            "C": [[0, 0, 1, 0]],
+        },
+        "controller": {"Q_diag": [1, 1e-6, 1, 1e-3], "R_diag": [1.0]},
+        "integral": {"outputs": [0], "Q_diag": [integral_weight]},
+        "observer": {"W_diag": [1e-6] * 4, "V_diag": [1e-6]},
+        "limits": {"u_min": [-100.0], "u_max": [100.0]},
+        "implementation": {"float32_check": False},
+    }
+
+
+def test_badly_scaled_lqr_weights_are_solved_by_scaling_the_problem():
+    """An integrator weighted 1e11 beside states weighted 1e-6 made SLICOT's DARE fail ('is (Q, A) detectable?');
+    the scaled problem gives the gain SciPy's DARE computes for the unscaled one."""
+    r = synthesize(parse_spec(_stiff_spec(1e11)))
+    a = r.artifact
+    Ad, Bd, Cd = (np.array(a[k]) for k in ("Ad", "Bd", "Cd"))
+    Aa = np.block([[Ad, np.zeros((4, 1))], [-0.001 * Cd, np.eye(1)]])
+    Ba = np.vstack([Bd, [[0.0]]])
+    P = scipy.linalg.solve_discrete_are(Aa, Ba, np.diag([1, 1e-6, 1, 1e-3, 1e11]), np.eye(1))
+    K = np.linalg.solve(np.eye(1) + Ba.T @ P @ Ba, Ba.T @ P @ Aa)
+    np.testing.assert_allclose(np.hstack([a["K"], a["Ki"]]), K, rtol=1e-7)
+    assert any("rescaled" in w for w in r.warnings)
+
+
+def test_a_marginal_mode_the_weights_cannot_see_is_named():
+    with pytest.raises(DesignError, match=r"mode at z = 1 \(mostly integral of y0\).*give it a weight in Q"):
+        synthesize(parse_spec(_stiff_spec(0.0)))
+
+
+@pytest.mark.parametrize(
+    ("break_controller", "break_observer", "part"),
+    [(True, False, "the controller with the plant"), (False, True, "the observer"), (True, True, "; and the observer")],
+)
+def test_given_gains_that_leave_the_loop_unstable_name_the_part_and_its_eigenvalue(
+    break_controller, break_observer, part
+):
+    """K = 0 leaves the pendulum's unstable pole (exp(sqrt(21.582) Ts), from the continuous A) in A - B K; L = 0
+    leaves it in A - L C."""
+    import control
+
+    spec = load_spec(EXAMPLES / "pendulum.toml")
+    sysd = control.c2d(control.ss(spec.plant.A, spec.plant.B, spec.plant.C, 0), 0.01)
+    K = np.zeros((1, 4)) if break_controller else control.dlqr(sysd.A, sysd.B, np.eye(4), np.eye(1))[0]
+    L = np.zeros((4, 2)) if break_observer else control.place(sysd.A.T, sysd.C.T, [0.5, 0.55, 0.6, 0.65]).T
+    data = {
+        "name": "p", "Ts": 0.01,
+        "plant": {"A": spec.plant.A.tolist(), "B": spec.plant.B.tolist(), "C": spec.plant.C.tolist()},
+        "controller": {"method": "given", "K": K.tolist()},
+        "observer": {"method": "given", "L": L.tolist()},
+        "limits": {"u_min": [-20.0], "u_max": [20.0]},
+    }  # fmt: skip
+    unstable = np.exp(np.sqrt(21.582) * 0.01)
+    with pytest.raises(DesignError) as err:
+        synthesize(parse_spec(data))
+    msg = str(err.value)
+    assert part in msg
+    assert f"|z| = {unstable:.6g}" in msg
+    if not break_observer:
+        assert "the observer" not in msg
+    if not break_controller:
+        assert "controller with the plant" not in msg

@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 from conftest import EXAMPLES, run_cli
 from gainlink import artifact as artifact_mod
-from gainlink.design import design
 from gainlink.engines.native import NativeLoop
 from gainlink.fidelity import THRESHOLD, float32_fidelity
 from gainlink.reference import ReferenceLoop, StepResult
 from gainlink.replay import one_step_check
 from gainlink.simulate import simulate_linear
 from gainlink.spec import parse_spec
+from gainlink.synthesis import synthesize
 from test_onestep import jacobian_poles
 
 
@@ -68,7 +68,7 @@ def flexible():
     """name -> (DesignResult, Artifact) for the three realisations."""
     out = {}
     for kind in ("as_designed", "balanced", "schur"):
-        result = design(parse_spec(flexible_spec(kind)))
+        result = synthesize(parse_spec(flexible_spec(kind)))
         out[kind] = (result, artifact_mod.from_dict(result.artifact))
     return out
 
@@ -100,7 +100,7 @@ def test_unstable_compensator_is_reported_in_design_analyze_and_checks(tmp_path)
     from gainlink.random_plants import random_spec
 
     spec = random_spec(0, n=7, m=2, p=3, q=2, anti_windup="backcalc", u_limit=100.0)
-    result = design(parse_spec(spec))
+    result = synthesize(parse_spec(spec))
     comp = result.artifact["checks"]["compensator"]
     assert not comp["stable"] and max(abs(complex(*z)) for z in comp["unstable_poles"]) > 1.5
     warning = next(w for w in result.warnings if "compensator" in w)

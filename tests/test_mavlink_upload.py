@@ -15,7 +15,6 @@ from conftest import EXAMPLES, run_cli
 from gainlink import artifact as artifact_mod
 from gainlink.artifact import Artifact, load
 from gainlink.codegen import gain_set
-from gainlink.design import design
 from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
 from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.mavlink.link import MavLink
@@ -23,6 +22,7 @@ from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import parse_spec
+from gainlink.synthesis import synthesize
 
 STEMS = {
     "AD": "Ad",
@@ -56,7 +56,7 @@ def retuned_pendulum(path: Path) -> Path:
     spec["controller"]["Q_diag"] = [40.0, 1.0, 300.0, 2.0]
     spec["controller"]["R_diag"] = [3.0]
     spec["integral"]["Q_diag"] = [12.0]
-    artifact_mod.write(path, design(parse_spec(spec)).artifact)
+    artifact_mod.write(path, synthesize(parse_spec(spec)).artifact)
     return path
 
 
@@ -324,7 +324,7 @@ def test_firmware_and_python_naming_schemes_agree_for_every_structure(shape, tmp
     from gainlink.mavlink.params import firmware_params
     from gainlink.random_plants import random_spec
 
-    art = from_dict(design(parse_spec(random_spec(11, **shape))).artifact)
+    art = from_dict(synthesize(parse_spec(random_spec(11, **shape))).artifact)
     fw, port = start_firmware(mavlink_executable(art), None)
     try:
         got = read_params(port)

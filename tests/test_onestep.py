@@ -18,8 +18,6 @@ import numpy as np
 import pytest
 from conftest import run_cli
 from gainlink import artifact as artifact_mod
-from gainlink.compensator import compensator_stability
-from gainlink.design import design
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop, trace_from_raw
 from gainlink.firmware.golden import closed_loop_cases
@@ -27,6 +25,8 @@ from gainlink.random_plants import random_spec
 from gainlink.reference import ReferenceLoop
 from gainlink.replay import compare_traces, format_trace, one_step_check, read_samples
 from gainlink.spec import parse_spec
+from gainlink.synthesis import synthesize
+from gainlink.synthesis.compensator import compensator_stability
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))
 
@@ -93,7 +93,7 @@ def unstable_artifact(tmp_path_factory) -> Path:
     compensator has poles at |z| = 1.9 and 1.001."""
     path = tmp_path_factory.mktemp("unstable") / "gains.json"
     spec = random_spec(0, n=7, m=2, p=3, q=2, anti_windup="backcalc", u_limit=100.0)
-    artifact_mod.write(path, design(parse_spec(spec)).artifact)
+    artifact_mod.write(path, synthesize(parse_spec(spec)).artifact)
     return path
 
 

@@ -21,7 +21,6 @@ import pytest
 from conftest import run_cli
 from gainlink import artifact as artifact_mod
 from gainlink.artifact import from_dict, seal
-from gainlink.design import design
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.errors import ArtifactError
@@ -29,6 +28,7 @@ from gainlink.firmware.golden import random_case, random_cases
 from gainlink.firmware.pil import make_plant, run_pil
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import parse_spec
+from gainlink.synthesis import synthesize
 
 GL_ERR_NANINF, GL_ERR_WATCHDOG = -2, -6
 FORMS = ("predictor", "current")
@@ -69,7 +69,7 @@ def motor(**op) -> dict:
 
 
 def designed(spec: dict) -> dict:
-    return design(parse_spec(spec)).artifact
+    return synthesize(parse_spec(spec)).artifact
 
 
 # --- spec and artifact ---------------------------------------------------------------------------------

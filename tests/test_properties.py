@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 from gainlink import artifact as artifact_mod
-from gainlink.design import Discretised, check_separation, closed_loop_matrix, design, poles_match
 from gainlink.errors import DesignError
 from gainlink.random_plants import random_spec
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import parse_spec
+from gainlink.synthesis import synthesize
+from gainlink.synthesis.discretize import Discretised
+from gainlink.synthesis.loop import check_separation, closed_loop_matrix, poles_match
 from hypothesis import given, reject, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
@@ -23,7 +25,7 @@ def _artifacts():
         random_spec(13, n=5, m=2, p=3, q=1, anti_windup="backcalc", feedthrough=True),
         random_spec(14, n=4, m=3, p=2, q=0),
     ]
-    return [artifact_mod.from_dict(design(parse_spec(s)).artifact) for s in specs]
+    return [artifact_mod.from_dict(synthesize(parse_spec(s)).artifact) for s in specs]
 
 
 ARTIFACTS = _artifacts()
@@ -75,7 +77,7 @@ def test_predictor_and_current_forms_give_the_same_closed_loop(seed, n, m, p, q,
         spec = random_spec(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=aw)
         spec["implementation"] = {"float32_check": False}  # gains and poles only: skip the closed-loop runs
         try:
-            results[form] = design(parse_spec(spec))
+            results[form] = synthesize(parse_spec(spec))
         except DesignError:
             reject()  # an infeasible draw (e.g. two integrators on a one-state plant), whichever the form
     pred, cur = (artifact_mod.from_dict(results[f].artifact) for f in ("predictor", "current"))

@@ -281,13 +281,13 @@ def test_with_integral_action_both_settle_and_the_operating_point_buys_the_start
     throttle itself. The operating point then decides the start: with it the vehicle, at rest at the trim,
     gets exactly u_hover and does not move; blind, it gets zero throttle and drops (0.19 m here) before the
     integrator has wound up the hover throttle."""
-    from gainlink.design import design
     from gainlink.spec import parse_spec
+    from gainlink.synthesis import synthesize
 
     spec = tomllib.loads(hover["spec"].read_text())
     spec["integral"] = {"outputs": ["z"], "Q_diag": [4.0]}
     spec["limits"]["anti_windup"] = "backcalc"
-    data = design(parse_spec(spec)).artifact
+    data = synthesize(parse_spec(spec)).artifact
     blind = seal({k: v for k, v in data.items() if k not in ("u_op", "y_op", "x_op")})
     steps, step_at = 1500, 5.0
     Z, U = fmu_closed_loop(data, hover["fmu"], steps=steps, step_at=step_at, step_to=Z_SET + 0.5)

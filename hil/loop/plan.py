@@ -100,7 +100,7 @@ class Recorder:
 
 def describe_artifact(artifact: Artifact, path) -> dict:
     """What a report says about the artifact: identity and the compensator's stability."""
-    from gainlink.compensator import compensator_stability
+    from gainlink.synthesis.compensator import compensator_stability
 
     comp = compensator_stability(artifact)
     return {

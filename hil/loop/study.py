@@ -92,8 +92,8 @@ def run_saturation_study(
     study : dict, optional
         A study description (default: :func:`default_study`).
     """
-    from gainlink.design import design
     from gainlink.spec import parse_spec
+    from gainlink.synthesis import synthesize
 
     desc = dict(study or default_study())
     unknown = sorted(set(desc) - STUDY_KEYS)
@@ -115,7 +115,7 @@ def run_saturation_study(
             data = json.loads(json.dumps(spec))
             data.setdefault("limits", {})["anti_windup"] = mode
             data["name"] = f"{spec.get('name', 'plant')}_{mode}"[:32]
-            sealed = design(parse_spec(data, source=f"{spec_path} (anti_windup={mode})")).artifact
+            sealed = synthesize(parse_spec(data, source=f"{spec_path} (anti_windup={mode})")).artifact
             gains = Path(tmp) / mode / "gains.json"
             gains.parent.mkdir()
             write(gains, sealed)

@@ -62,14 +62,14 @@ def model_from_spec(path: str | Path) -> LinearModel:
     op = spec.operating_point
     return LinearModel(
         name=spec.name,
-        A=spec.A,
-        B=spec.B,
-        C=spec.C,
-        D=spec.D,
-        Ts=None if spec.continuous else spec.Ts,
-        states=spec.states,
-        inputs=spec.inputs,
-        outputs=spec.outputs,
+        A=spec.plant.A,
+        B=spec.plant.B,
+        C=spec.plant.C,
+        D=spec.plant.D,
+        Ts=None if spec.plant.continuous else spec.Ts,
+        states=spec.plant.states,
+        inputs=spec.plant.inputs,
+        outputs=spec.plant.outputs,
         u_op=None if op is None else op.u_op,
         y_op=None if op is None else op.y_op,
     )

@@ -9,14 +9,15 @@ from pathlib import Path
 import numpy as np
 
 from .. import artifact as artifact_mod
-from ..analysis import analyze, complex_pairs
-from ..compensator import compensator_stability
-from ..design import design
 from ..errors import DataError, GainlinkError, VerificationError
 from ..fileio import atomic_write_text, publish_files
 from ..replay import compare_traces, engine_names, one_step_check, read_samples, read_trace, replay
 from ..simulate import samples_csv, simulate_linear
 from ..spec import load_spec
+from ..synthesis import synthesize
+from ..synthesis.analysis import complex_pairs
+from ..synthesis.compensator import compensator_stability
+from ..synthesis.plant_report import analyze
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -132,7 +133,7 @@ def cmd_design(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise GainlinkError(f"output path {out} exists and is not a directory")
-    result = design(spec)
+    result = synthesize(spec)
     artifact_mod.from_dict(result.artifact)  # the written file must load: check before publishing
     publish_files(out, {"gains.json": artifact_mod.render(result.artifact)})
     a = result.artifact
@@ -160,7 +161,7 @@ def cmd_design(args: argparse.Namespace) -> int:
         )
         return 0
     print(
-        f"{spec.name}: n={spec.n} m={spec.m} p={spec.p} q={a['q']}, Ts={spec.Ts:g} s, "
+        f"{spec.name}: n={spec.plant.n} m={spec.plant.m} p={spec.plant.p} q={a['q']}, Ts={spec.Ts:g} s, "
         f"{a['design']['controller']['method']} + {a['design']['observer']['method']} "
         f"({a['observer_form']}), anti-windup {a['anti_windup']}"
     )
@@ -181,7 +182,7 @@ def cmd_design(args: argparse.Namespace) -> int:
     if "u_op" in a or "y_op" in a:
         op = [
             f"{name}={v:.6g}"
-            for key, names in (("u_op", spec.inputs), ("y_op", spec.outputs))
+            for key, names in (("u_op", spec.plant.inputs), ("y_op", spec.plant.outputs))
             for name, v in zip(names, a.get(key, [0.0] * len(names)))
         ]
         print(f"  operating point: {', '.join(op)} (samples, references and commands are absolute)")

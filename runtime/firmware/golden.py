@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 
 from ..artifact import Artifact, from_dict, render
-from ..design import design
 from ..errors import DesignError, SpecError
 from ..reference import ReferenceLoop, Trace
 from ..spec import load_spec, parse_spec
+from ..synthesis import synthesize
 
 EXAMPLES = ("pendulum", "quadrotor_lateral", "wood_berry")
 FORMS = ("predictor", "current")
@@ -93,7 +93,7 @@ def random_spec(
 
 
 def _design(spec: dict) -> Artifact:
-    return from_dict(design(parse_spec(spec)).artifact)
+    return from_dict(synthesize(parse_spec(spec)).artifact)
 
 
 def random_operating_point(seed: int, *, m: int, p: int) -> dict:
@@ -295,7 +295,7 @@ def example_cases(examples_dir: Path, *, N: int = 600, seed: int = 7) -> tuple[G
 def _example_cases(examples_dir: Path, N: int, seed: int) -> tuple[GoldenCase, ...]:
     cases = []
     for name in EXAMPLES:
-        art = from_dict(design(load_spec(examples_dir / f"{name}.toml")).artifact)
+        art = from_dict(synthesize(load_spec(examples_dir / f"{name}.toml")).artifact)
         rng = np.random.default_rng(seed)
         Y0 = _signals(rng, N=N, width=art.p, scale=1.0)
         R0 = _signals(rng, N=N, width=art.q, scale=1.0) if art.q else np.zeros((N, 0))

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..artifact import Artifact
 from ..errors import FirmwareError, PeerTimeoutError, PlantError
-from ..realization import design_plant
+from ..synthesis.realization import design_plant
 from ..twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
 from . import qemu as fwqemu
 from .build import DEFAULT_BOARD, build

@@ -92,7 +92,7 @@ def compensator_stability(artifact) -> CompensatorStability:
     >>> comp.stable, round(comp.spectral_radius, 4) == round(float(abs(comp.poles[0])), 4)
     (True, True)
     """
-    from .systems import controller_matrices
+    from ..systems import controller_matrices
 
     A, _, _, _ = controller_matrices(artifact)
     n, q = artifact.n, artifact.q

@@ -27,8 +27,8 @@ import scipy.linalg
 if TYPE_CHECKING:
     import control
 
-    from .artifact import Artifact
-    from .spec import PlantSpec
+    from ..artifact import Artifact
+    from ..spec import PlantSpec
 
 
 @dataclass(frozen=True)
@@ -151,12 +151,12 @@ def applies(spec: PlantSpec) -> bool:
     """A transfer-function spec with a dead time, sampled with a zero-order hold, and stable elements (the
     element-wise exact model is non-minimal: an unstable element repeated across a row would add spurious
     unstable modes)."""
-    tf = spec.transfer_function
-    if spec.kind != "transfer_function" or tf is None or spec.discretization != "zoh":
+    tf = spec.plant.transfer_function
+    if spec.plant.kind != "transfer_function" or tf is None or spec.discretization != "zoh":
         return False
-    if not any(float(t) > 0 for row in tf["delay"] for t in row):
+    if not any(float(t) > 0 for row in tf.delay for t in row):
         return False
-    return all(np.all(np.roots(np.asarray(a, float)).real < 0) for row in tf["den"] for a in row)
+    return all(np.all(np.roots(np.asarray(a, float)).real < 0) for row in tf.den for a in row)
 
 
 def dead_time_check(spec: PlantSpec, artifact: Artifact) -> DeadTimeCheck | None:
@@ -164,19 +164,19 @@ def dead_time_check(spec: PlantSpec, artifact: Artifact) -> DeadTimeCheck | None
     ``None`` when :func:`applies` says the check does not apply."""
     import control
 
-    from .systems import controller_matrices
+    from ..systems import controller_matrices
 
     if not applies(spec):
         return None
-    tf = spec.transfer_function
-    plant = exact_plant(tf["num"], tf["den"], tf["delay"], spec.Ts)
+    tf = spec.plant.transfer_function
+    plant = exact_plant(tf.num, tf.den, tf.delay, spec.Ts)
     Ac, Bc, Cc, Dc = controller_matrices(artifact)
     law = control.ss(Ac, Bc[:, : artifact.p], Cc, Dc[:, : artifact.p], spec.Ts)  # dy -> du
     loop = control.feedback(plant, law, sign=+1)  # du = law(dy): positive feedback in control's convention
     radius = float(np.max(np.abs(loop.poles())))
-    longest = max(float(t) for row in tf["delay"] for t in row) / spec.Ts
+    longest = max(float(t) for row in tf.delay for t in row) / spec.Ts
     return DeadTimeCheck(
-        pade_order=int(spec.pade_order or 0),
+        pade_order=int(spec.plant.pade_order or 0),
         max_delay_periods=longest,
         spectral_radius=radius,
         stable=radius < 1.0,

@@ -1,0 +1,179 @@
+"""The typed spec: frozen dataclasses that a spec file is parsed into once, and that design and analysis take.
+
+Every table of a spec has its class here, holding values that are already checked and in the form the design
+uses (weights as matrices, poles in the z-plane, the tracked outputs as a selector matrix). Nothing downstream
+reads the user's raw tables again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TransferFunctionSource:
+    """A transfer-function plant as the user wrote it (p x m numerators, denominators and dead times in seconds)."""
+
+    num: list
+    den: list
+    delay: list
+
+
+@dataclass(frozen=True)
+class PlantModel:
+    """The plant as specified: ``A, B, C, D`` continuous (``kind`` continuous, or a transfer function realised with
+    Padé delays) or discrete (``kind`` discrete, sampled at the spec's ``Ts``), with its signal names."""
+
+    kind: str
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    states: tuple[str, ...]
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    pade_order: int | None = None
+    transfer_function: TransferFunctionSource | None = None
+
+    @property
+    def n(self) -> int:
+        """Number of states."""
+        return self.A.shape[0]
+
+    @property
+    def m(self) -> int:
+        """Number of inputs."""
+        return self.B.shape[1]
+
+    @property
+    def p(self) -> int:
+        """Number of outputs."""
+        return self.C.shape[0]
+
+    @property
+    def continuous(self) -> bool:
+        """True when A, B, C, D are continuous-time."""
+        return self.kind != "discrete"
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """``[controller]``: how the state-feedback gain is obtained.
+
+    ``lqr``: ``Q`` (n x n, on the plant state; from Q, Q_diag, Bryson's state maxima or ``C' diag(1/y_max^2) C``) and
+    ``R`` (m x m). ``place``/``ackermann``: ``poles_z``, the n + q closed-loop poles in the z-plane. ``given``: the
+    user's discrete-time ``K`` (m x n) and ``Ki`` (m x q).
+    """
+
+    method: str
+    Q: np.ndarray | None = None
+    R: np.ndarray | None = None
+    poles_z: np.ndarray | None = None
+    K: np.ndarray | None = None
+    Ki: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class IntegralSpec:
+    """``[integral]``: integral action on the tracked outputs.
+
+    ``Ci`` (q x p) selects the tracked outputs (``outputs`` are their indices); ``Qz`` (q x q) weighs the integrators
+    in an LQR design (None when the controller does not use weights); ``aw_gain`` is the back-calculation gain.
+    """
+
+    outputs: tuple[int, ...]
+    Ci: np.ndarray
+    Qz: np.ndarray | None
+    aw_gain: float
+
+    @property
+    def q(self) -> int:
+        """Number of integrators."""
+        return self.Ci.shape[0]
+
+
+@dataclass(frozen=True)
+class ObserverSpec:
+    """``[observer]``: how the estimate is formed.
+
+    ``kalman``: ``W`` (process noise covariance, size of the noise input), ``V`` (p x p), ``G`` (n x w) or
+    ``G_is_B`` (noise enters with the inputs: G = Bd, known only after discretisation). ``luenberger``:
+    ``poles_z`` (n). ``given``: ``L`` (predictor) or ``M`` (current form, ``L = Ad M``).
+    """
+
+    method: str
+    form: str
+    W: np.ndarray | None = None
+    V: np.ndarray | None = None
+    G: np.ndarray | None = None
+    G_is_B: bool = False
+    G_given: bool = False
+    poles_z: np.ndarray | None = None
+    L: np.ndarray | None = None
+    M: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class LimitsSpec:
+    """``[limits]``: absolute actuator limits and the anti-windup mode (none | clamp | backcalc)."""
+
+    u_min: np.ndarray
+    u_max: np.ndarray
+    anti_windup: str
+
+
+@dataclass(frozen=True)
+class OperatingPoint:
+    """The point the plant model is a linearisation about (docs/design.md, "The control law").
+
+    ``u_op`` (m) and ``y_op`` (p) are the absolute command and measurement there; the model, the
+    estimate and the design are deviations from them. ``x_op`` (n) is the state there, kept for the
+    record (``None`` when the spec does not give it): the law does not use it.
+    """
+
+    u_op: np.ndarray
+    y_op: np.ndarray
+    x_op: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class ImplementationSpec:
+    """``[implementation]``: how the C runs the design (coordinates of the estimate, the float32 check)."""
+
+    realization: str = "as_designed"
+    float32_check: bool = True
+
+
+@dataclass(frozen=True)
+class PlantSpec:
+    """A validated plant spec: the plant and every design choice, typed.
+
+    ``integral`` is ``None`` without integral action; ``operating_point`` is ``None`` when the spec has no
+    ``[operating_point]`` table (the plant is about the origin).
+    """
+
+    name: str
+    Ts: float
+    discretization: str
+    plant: PlantModel
+    controller: ControllerSpec
+    integral: IntegralSpec | None
+    observer: ObserverSpec
+    limits: LimitsSpec
+    operating_point: OperatingPoint | None = None
+    implementation: ImplementationSpec = ImplementationSpec()
+    source_sha256: str = ""
+    source: str = "<dict>"
+    description: str = ""
+
+    @property
+    def q(self) -> int:
+        """Number of integrators (0 without integral action)."""
+        return 0 if self.integral is None else self.integral.q
+
+    @property
+    def Ci(self) -> np.ndarray:
+        """The tracked-output selector (q x p; 0 x p without integral action)."""
+        return np.zeros((0, self.plant.p)) if self.integral is None else self.integral.Ci

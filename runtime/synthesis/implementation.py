@@ -1,0 +1,46 @@
+"""The spec's ``[implementation]`` choices applied to a designed artifact: the realisation of the estimate, then
+the compensator's stability and the float32 closed-loop fidelity recorded in ``checks`` with their warnings."""
+
+from __future__ import annotations
+
+from ..artifact import Artifact, from_dict, seal
+from ..fidelity import Float32Fidelity, float32_fidelity
+from ..spec import ImplementationSpec
+from .compensator import CompensatorStability, compensator_stability
+from .realization import apply, transformation
+
+
+def implement(
+    data: dict, implementation: ImplementationSpec, warnings: list[str]
+) -> tuple[dict, CompensatorStability, Float32Fidelity | None]:
+    """Apply the implementation choices to a designed artifact dict and record their checks.
+
+    Returns ``(data, compensator stability, float32 fidelity or None when the check is off)``; ``data`` is not
+    sealed.
+    """
+    kind = implementation.realization
+    if kind != "as_designed":
+        data = _realised(data, kind)
+    data = dict(data, checks=dict(data["checks"]))
+    a = from_dict(seal(data))
+    compensator = compensator_stability(a)
+    data["checks"]["compensator"] = compensator.to_dict()
+    if not compensator.stable:
+        warnings.append(compensator.warning())
+    fidelity = None
+    if implementation.float32_check:
+        fidelity = float32_fidelity(a)
+        data["checks"]["float32"] = fidelity.to_dict()
+        if not fidelity.ok:
+            better = None
+            if kind == "as_designed":
+                better = float32_fidelity(from_dict(seal(_realised(data, "balanced")))).max_rel_u
+            warnings.append(fidelity.warning(kind, balanced=better))
+    return data, compensator, fidelity
+
+
+def _realised(data: dict, kind: str) -> dict:
+    """``data`` with the estimate in the realisation ``kind`` (from the design's coordinates)."""
+    a: Artifact = from_dict(seal(data))
+    T = transformation(kind, Ad=a.Ad, Bd=a.Bd, Cd=a.Cd, Dd=a.Dd, K=a.K, L=a.L, M=a.M, form=a.observer_form)
+    return apply(data, kind=kind, T=T)
