@@ -3,7 +3,7 @@
 Prints JSON. For the three examples and random designs with n = 4, 8, 12 (m = p = 2, one integrator):
 the median wall time of `design` with the float32 check and without it (the baseline, measured in the
 same run; `ratio` is their quotient), and the time per step of the numpy statement of the C's float32
-arithmetic (gainlink.float32_law) against the float64 reference law on the same samples. Target: the
+arithmetic (gainlink.proof.float32_law) against the float64 reference law on the same samples. Target: the
 check adds at most a few tenths of a second to a design of n <= 12 (ratio reported, no absolute gate).
 
     .venv/bin/python bench/design_checks.py
@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 from gainlink.artifact import from_dict
-from gainlink.float32_law import Float32Loop
+from gainlink.proof.float32_law import Float32Loop
+from gainlink.proof.reference import ReferenceLoop
 from gainlink.random_plants import random_spec
-from gainlink.reference import ReferenceLoop
 from gainlink.spec import PlantSpec, load_spec, parse_spec
 from gainlink.synthesis import synthesize
 

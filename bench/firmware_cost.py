@@ -21,7 +21,7 @@ from gainlink.firmware.build import build
 from gainlink.firmware.cost import count_step_instructions, implemented_macs, law_macs
 from gainlink.firmware.golden import example_cases, random_case
 from gainlink.firmware.size import size_report
-from gainlink.reference import ReferenceLoop
+from gainlink.proof.reference import ReferenceLoop
 
 ROOT = Path(__file__).resolve().parents[1]
 STEPS = 2000

@@ -39,7 +39,7 @@ from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.scheduler import pacing_jitter
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.fmu import FmuPlant
-from gainlink.reference import ReferenceLoop
+from gainlink.proof.reference import ReferenceLoop
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 

@@ -10,11 +10,7 @@ neither it nor Dask). The command line ``gainlink`` is a shell over the same fun
 
 __version__ = "0.1.0"
 
-# The submodules replay and simulate are loaded first; the functions of the same names
-# then take their place as attributes of the package (``gl.replay(...)``).
 from . import hil
-from . import replay as _replay_module
-from . import simulate as _simulate_module
 from .api import design, from_gains, load, replay, simulate
 from .artifact import Artifact
 from .errors import (
@@ -27,12 +23,12 @@ from .errors import (
     ScenarioError,
     SpecError,
 )
-from .fidelity import float32_fidelity
-from .onestep import one_step_check
-from .reference import ReferenceLoop, Trace
-from .simulate import Simulation
+from .proof.fidelity import float32_fidelity
+from .proof.onestep import one_step_check
+from .proof.reference import ReferenceLoop, Trace
+from .proof.simulation import Simulation
+from .proof.twin import twin_comparison
 from .synthesis.compensator import compensator_stability
-from .twin import twin_comparison
 
 __all__ = [
     "Artifact",

@@ -18,9 +18,9 @@ import numpy as np
 
 from .artifact import Artifact, from_dict
 from .errors import SpecError
-from .reference import Trace
-from .replay import get_engine
-from .simulate import Simulation, simulate_linear
+from .proof.reference import Trace
+from .proof.replay_io import get_engine
+from .proof.simulation import Simulation, simulate_linear
 from .spec import PlantSpec, load_spec, parse_spec
 from .synthesis import synthesize
 

@@ -127,6 +127,15 @@ class Artifact:
         """True when ``u_op`` or ``y_op`` has a non-zero entry."""
         return bool(np.any(self.u_op != 0.0) or np.any(self.y_op != 0.0))
 
+    def design_plant(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The discrete plant ``(Ad, Bd, Cd, Dd)`` in the design's coordinates (those of a plant state a user
+        gives, e.g. ``simulate --x0``), whatever the realisation of the estimate (``realization.design``)."""
+        rec = self.data.get("realization")
+        if rec is None:
+            return self.Ad, self.Bd, self.Cd, self.Dd
+        d = rec["design"]
+        return tuple(np.array(d[k], dtype=float) for k in ("Ad", "Bd", "Cd")) + (self.Dd,)
+
     @property
     def provenance(self) -> dict:
         """Versions that computed the gains, the spec's sha256, and whether the gains were given."""

@@ -65,11 +65,10 @@ def controller_system(a: Artifact) -> control.StateSpace:
 def plant_system(a: Artifact) -> control.StateSpace:
     """The artifact's discrete design plant (deviation variables, the design's coordinates) with named signals."""
     import control
-    from gainlink.synthesis.realization import design_plant
 
     sig = a.signals
     return control.ss(
-        *design_plant(a),
+        *a.design_plant(),
         a.Ts,
         name=f"{a.name}_plant",
         states=[f"x_{s}" for s in sig["states"]],

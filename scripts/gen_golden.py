@@ -3,7 +3,7 @@
 
 Each case gets <label>.gains.json (the artifact) and <label>.npz (samples Y, R and the float64
 reference's u, saturated, xh, z, fault), plus index.json. Nothing is pasted: plants are drawn from a
-seeded generator, designed by gainlink.design, answered by gainlink.reference.
+seeded generator, designed by gainlink.synthesis, answered by gainlink.proof.reference.
 
     .venv/bin/python scripts/gen_golden.py [--out .cache/golden] [--random 30] [--steps 400]
 """

@@ -67,9 +67,9 @@ def test_campaigns_are_in_the_namespace_without_import_gainlink_loading_dask():
     [
         "gainlink.api",
         "gainlink.hil",
-        "gainlink.onestep",
-        "gainlink.twin",
-        "gainlink.fidelity",
+        "gainlink.proof.onestep",
+        "gainlink.proof.twin",
+        "gainlink.proof.fidelity",
         "gainlink.synthesis.compensator",
     ],
 )

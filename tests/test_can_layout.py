@@ -21,7 +21,7 @@ from gainlink.hil.links.base import STATUS_FAULT
 from gainlink.hil.links.can import CanTransport, firmware_can_argv
 from gainlink.hil.links.can_layout import layout_for
 from gainlink.hil.loop.controller import ControllerProcess
-from gainlink.reference import ReferenceLoop
+from gainlink.proof.reference import ReferenceLoop
 from test_hil_support import can_firmware, pendulum_gains, udp_transport  # noqa: F401
 
 

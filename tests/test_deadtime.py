@@ -1,4 +1,4 @@
-"""Designs against the exact sampled dead times (gainlink.deadtime), checked against hand-derived models."""
+"""Designs against the exact sampled dead times (gainlink.synthesis.deadtime), checked against hand-derived models."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import EXAMPLES, run_cli
 from gainlink import artifact as artifact_mod
-from gainlink.reference import ReferenceLoop
+from gainlink.proof.reference import ReferenceLoop
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.deadtime import element_model

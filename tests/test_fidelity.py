@@ -14,10 +14,10 @@ import pytest
 from conftest import EXAMPLES, run_cli
 from gainlink import artifact as artifact_mod
 from gainlink.engines.native import NativeLoop
-from gainlink.fidelity import THRESHOLD, float32_fidelity
-from gainlink.reference import ReferenceLoop, StepResult
-from gainlink.replay import one_step_check
-from gainlink.simulate import simulate_linear
+from gainlink.proof.fidelity import THRESHOLD, float32_fidelity
+from gainlink.proof.reference import ReferenceLoop, StepResult
+from gainlink.proof.replay_io import one_step_check
+from gainlink.proof.simulation import simulate_linear
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from test_onestep import jacobian_poles

@@ -20,7 +20,7 @@ from gainlink.artifact import from_dict, seal
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware.build import build
 from gainlink.firmware.golden import example_cases, random_cases
-from gainlink.reference import ReferenceLoop
+from gainlink.proof.reference import ReferenceLoop
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
@@ -291,7 +291,7 @@ def test_golden_script_writes_files_the_c_loop_replays(tmp_path):
     import runpy
 
     from gainlink.artifact import load
-    from gainlink.reference import Trace
+    from gainlink.proof.reference import Trace
 
     script = Path(__file__).resolve().parents[1] / "scripts" / "gen_golden.py"
     assert runpy.run_path(str(script))["main"](["--out", str(tmp_path), "--random", "30"]) == 0

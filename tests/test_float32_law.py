@@ -1,4 +1,4 @@
-"""The numpy statement of the C's float32 arithmetic (gainlink.float32_law) against the real host build.
+"""The numpy statement of the C's float32 arithmetic (gainlink.proof.float32_law) against the real host build.
 
 Oracles: the C library through ctypes (bit for bit) and libm's own fmaf (for the rounding primitive).
 """
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware.golden import closed_loop_cases, example_cases, random_cases
-from gainlink.float32_law import Float32Loop, fma32_exact
+from gainlink.proof.float32_law import Float32Loop, fma32_exact
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 

@@ -301,7 +301,7 @@ def test_firmware_run_with_can_config_serves_the_bus(tmp_path, pendulum_gains, c
     try:
         assert b"gainlink_can ready" in proc.stdout.readline()
         transport.open()
-        from gainlink.reference import ReferenceLoop
+        from gainlink.proof.reference import ReferenceLoop
 
         law = ReferenceLoop(art)
         for seq in (7, 8):  # predictor form: the first command is -K xh0 = 0, the second reacts to y

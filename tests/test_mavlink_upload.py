@@ -20,7 +20,7 @@ from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession
-from gainlink.reference import ReferenceLoop
+from gainlink.proof.reference import ReferenceLoop
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 

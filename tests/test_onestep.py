@@ -21,9 +21,9 @@ from gainlink import artifact as artifact_mod
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop, trace_from_raw
 from gainlink.firmware.golden import closed_loop_cases
+from gainlink.proof.reference import ReferenceLoop
+from gainlink.proof.replay_io import compare_traces, format_trace, one_step_check, read_samples
 from gainlink.random_plants import random_spec
-from gainlink.reference import ReferenceLoop
-from gainlink.replay import compare_traces, format_trace, one_step_check, read_samples
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.compensator import compensator_stability
@@ -39,7 +39,7 @@ def _quiet_design_warnings():
 
 
 def jacobian_poles(a) -> np.ndarray:
-    """Compensator poles by probing the float64 law itself (an oracle independent of gainlink.compensator):
+    """Compensator poles by probing the float64 law itself (an oracle independent of gainlink.synthesis.compensator):
     with limits out of reach the map (xh, z) -> next (xh, z) at the operating point (y = y_op, r = Ci y_op)
     is linear; its columns are the images of unit states."""
     data = dict(a.data)

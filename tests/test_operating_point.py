@@ -26,7 +26,7 @@ from gainlink.engines.native import NativeLoop
 from gainlink.errors import ArtifactError
 from gainlink.firmware.golden import random_case, random_cases
 from gainlink.firmware.pil import make_plant, run_pil
-from gainlink.reference import ReferenceLoop
+from gainlink.proof.reference import ReferenceLoop
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 

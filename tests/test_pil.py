@@ -36,7 +36,7 @@ def test_closed_loop_matches_its_float64_twin(example_artifacts, name, reference
         twin=make_plant("artifact", artifact=a),
     )
     # the twin, recomputed here: the float64 law closing the loop on a fresh plant, step by step
-    from gainlink.reference import ReferenceLoop
+    from gainlink.proof.reference import ReferenceLoop
 
     plant, law = make_plant("artifact", artifact=a), ReferenceLoop(a)
     for k in range(steps):

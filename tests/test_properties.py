@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from gainlink import artifact as artifact_mod
 from gainlink.errors import DesignError
+from gainlink.proof.reference import ReferenceLoop
 from gainlink.random_plants import random_spec
-from gainlink.reference import ReferenceLoop
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.discretize import Discretised

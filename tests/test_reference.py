@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from conftest import run_cli
 from gainlink import artifact as artifact_mod
+from gainlink.proof.reference import ReferenceLoop
+from gainlink.proof.replay_io import read_samples
 from gainlink.random_plants import random_spec
-from gainlink.reference import ReferenceLoop
-from gainlink.replay import read_samples
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 

@@ -258,7 +258,7 @@ def fmu_closed_loop(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The FMU (fmpy, Co-Simulation) under the float64 law, from rest at the trim; reference steps at ``step_at``."""
     from gainlink.hil.plants.fmu import FmuPlant
-    from gainlink.reference import ReferenceLoop
+    from gainlink.proof.reference import ReferenceLoop
 
     a = from_dict(data)
     law = ReferenceLoop(a)

@@ -12,7 +12,7 @@ changed and the report merged again without running anything twice (:func:`evalu
   after the last reference change; never settled fails), overshoot (%) and IAE, as in the HIL report;
 - ``saturated_at_most``: the longest stretch of consecutive samples with any command saturated, in s;
 - ``twin_deviation_below``: the largest deviation of an output from the float64 closed-loop twin's, relative
-  to the twin's excursion (``worst_dy_rel`` of :func:`gainlink.twin.twin_comparison`, which the run's metrics
+  to the twin's excursion (``worst_dy_rel`` of :func:`gainlink.proof.twin.twin_comparison`, which the run's metrics
   carry as ``twin``): what float32, the link and the faults cost the loop.
 """
 
@@ -77,7 +77,7 @@ def measure(result: Any, artifact: Any) -> dict:
         "output_max": {n: float(np.nanmax(tr.y[:, i])) for i, n in enumerate(outs)} if tr.y.size else {},
         "longest_saturation_s": _longest_true(sat) * artifact.Ts,
     }
-    twin = result.metrics.get("twin")  # gainlink.twin.twin_comparison of the run and its float64 twin
+    twin = result.metrics.get("twin")  # gainlink.proof.twin.twin_comparison of the run and its float64 twin
     if isinstance(twin, dict):
         out["twin_output_deviation"] = twin.get("worst_dy_rel")
         out["twin_command_deviation"] = twin.get("worst_du_rel")

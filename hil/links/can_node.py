@@ -2,7 +2,7 @@
 
 ``python -m gainlink.hil.links.can_node ARTIFACT --config JSON`` behaves like the firmware's
 ``gainlink_can`` (same layout and encoding, same duplicate/stale handling, same ready line), with
-:class:`gainlink.reference.ReferenceLoop` as the law. The bridge uses it as ``controller =
+:class:`gainlink.proof.reference.ReferenceLoop` as the law. The bridge uses it as ``controller =
 "reference"``: a real peer process on a real bus, without a C toolchain.
 """
 
@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 from gainlink.artifact import load
-from gainlink.reference import ReferenceLoop
+from gainlink.proof.reference import ReferenceLoop
 
 from .base import STATUS_FAULT
 from .can import Assembler, FrameCodec, layout_from_config, open_bus

@@ -3,7 +3,7 @@
 ``python -m gainlink.hil.links.mavlink_node ARTIFACT --url udpin:127.0.0.1:14560`` answers like the
 firmware's ``gainlink_mavlink`` does on its HIL link (DEBUG_FLOAT_ARRAY ``GL_SAMPLE``/``GL_RESET``/
 ``GL_IDLE`` in, HIL_ACTUATOR_CONTROLS out with the sample's ``time_usec``), with
-:class:`gainlink.reference.ReferenceLoop` as the law. The bridge uses it as ``controller =
+:class:`gainlink.proof.reference.ReferenceLoop` as the law. The bridge uses it as ``controller =
 "reference"`` with the ``mavlink`` transport: a real peer process on a real link, without a C
 toolchain. It serves no parameters.
 """
@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 from gainlink.artifact import load
-from gainlink.reference import ReferenceLoop
+from gainlink.proof.reference import ReferenceLoop
 from pymavlink.dialects.v20 import common as mavlink2
 
 from .mavlink import ARRAY_IDLE, ARRAY_RESET, ARRAY_SAMPLE, FLAG_FAULT, FLAG_RESET, FLAG_WATCHDOG, SAT_SHIFT

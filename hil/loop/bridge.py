@@ -189,7 +189,7 @@ class _Loop:
         self.plan = plan_run(scenario, artifact=artifact, plant=plant)
         self.rec = Recorder(self.plan, artifact=artifact, plant=plant)
         self.injector = FaultInjector(scenario.faults, Ts=artifact.Ts, seed=scenario.seed)
-        self.twin = None  # the float64 twin (gainlink.twin), set by run_scenario when the scenario has one
+        self.twin = None  # the float64 twin (gainlink.proof.twin), set by run_scenario when the scenario has one
         self.u = artifact.safe_command  # until the first command: u_op clamped into the limits
         self.late = 0
         self.overruns = 0

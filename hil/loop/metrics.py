@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from gainlink.twin import twin_comparison
+from gainlink.proof.twin import twin_comparison
 
 
 @dataclass(frozen=True)
@@ -21,7 +21,7 @@ class RunTrace:
     send), relative to the run start;
     ``deadline_ns`` when it was due (realtime; NaN in lockstep); ``x`` the plant states (N, n_plant);
     ``twin_y``, ``twin_u``, ``twin_z`` the float64 twin's sampled outputs, commands and integrator
-    (:mod:`gainlink.twin`) (``x`` and the twin's are NaN when the twin is off).
+    (:mod:`gainlink.proof.twin`) (``x`` and the twin's are NaN when the twin is off).
     """
 
     t: np.ndarray

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from gainlink.artifact import Artifact
-from gainlink.twin import TwinLoop
+from gainlink.proof.twin import TwinLoop
 
 from ..plants.base import Plant
 from .metrics import RunTrace
@@ -112,7 +112,7 @@ def describe_artifact(artifact: Artifact, path) -> dict:
 
 
 def start_twin(scenario: Scenario, *, artifact: Artifact, plan: Plan, stack) -> TwinLoop | None:
-    """The run's float64 twin (:mod:`gainlink.twin`) on a second instance of the scenario's plant (a second
+    """The run's float64 twin (:mod:`gainlink.proof.twin`) on a second instance of the scenario's plant (a second
     FMU instance), reset to the same initial state; None when ``scenario.twin`` is off.
 
     The plant is closed by ``stack`` (an :class:`contextlib.ExitStack`).

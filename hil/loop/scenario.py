@@ -54,7 +54,7 @@ machine paused it for a period or more): ``skip`` (default) moves on to the tick
 the plant run through the missed ones under the held command, as a physical plant would — each is
 a deadline miss and counted in ``overruns``; ``catch_up`` runs the missed ticks back to back.
 
-``twin`` runs a float64 twin of the whole loop in step with the run (:mod:`gainlink.twin`): the reference
+``twin`` runs a float64 twin of the whole loop in step with the run (:mod:`gainlink.proof.twin`): the reference
 law around a second instance of the same plant, same noise, references, disturbances and initial state,
 no link and no faults. The report compares the run with it (command and output deviations, IAE
 difference): what float32, the encoding, the link, timing and faults cost the closed loop.

@@ -24,7 +24,7 @@ import numpy as np
 from gainlink.artifact import Artifact
 from gainlink.engines.native import NativeLoop
 from gainlink.errors import PlantError, ScenarioError
-from gainlink.reference import ReferenceLoop
+from gainlink.proof.reference import ReferenceLoop
 
 from .bridge import RunResult, build_plant
 from .metrics import compute_metrics
@@ -120,7 +120,7 @@ class _SilLoop:
         self.a, self.scenario, self.plant, self.law = artifact, scenario, plant, law
         self.plan = plan_run(scenario, artifact=artifact, plant=plant)
         self.rec = Recorder(self.plan, artifact=artifact, plant=plant)
-        self.twin = None  # the float64 twin (gainlink.twin), set by run_sil when the scenario has one
+        self.twin = None  # the float64 twin (gainlink.proof.twin), set by run_sil when the scenario has one
         self.bits = np.arange(artifact.m, dtype=np.uint32)
 
     def run(self, progress: Callable[[int, int], None] | None, *, controller: dict) -> RunResult:

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 from gainlink.errors import GainlinkError, PlantError
+from gainlink.proof.sampled_plant import SampledPlant
 from scipy.linalg import expm
 
 from ..registry import take_keys
@@ -176,11 +177,8 @@ class LinearPlant(Plant):
         self.A, self.B, self.C, self.D = model.A, model.B, model.C, model.D
         self.state_names, self.input_names, self.output_names = model.states, model.inputs, model.outputs
         self._disc: dict[float, tuple[np.ndarray, np.ndarray]] = {}
-        m, p = self.B.shape[1], self.C.shape[0]
-        self.u_op = np.zeros(m) if model.u_op is None else np.asarray(model.u_op, float)
-        self.y_op = np.zeros(p) if model.y_op is None else np.asarray(model.y_op, float)
-        self._du = np.zeros(m)
-        self.x = np.zeros(self.A.shape[0])
+        # Stepped with the transition of each step's length (a continuous model is sampled per dt).
+        self._sampled = SampledPlant(self.A, self.B, self.C, self.D, u_op=model.u_op, y_op=model.y_op)
 
     def _discrete(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
         if dt not in self._disc:
@@ -199,29 +197,27 @@ class LinearPlant(Plant):
 
     def reset(self, *, initial: Mapping[str, float]) -> None:
         """Back to the operating point, then ``initial`` (state name -> deviation from it)."""
-        self.x = np.zeros(self.A.shape[0])
-        self._du = np.zeros(self.B.shape[1])
+        x0 = np.zeros(self.A.shape[0])
         for key, value in initial.items():
             if key not in self.state_names:
                 raise PlantError(f"plant {self.name} has no state {key!r} (has: {', '.join(self.state_names)})")
-            self.x[self.state_names.index(key)] = float(value)
+            x0[self.state_names.index(key)] = float(value)
+        self._sampled.reset(x0)
 
     def outputs(self) -> np.ndarray:
-        return self.y_op + self.C @ self.x + self.D @ self._du
+        return self._sampled.outputs()
 
     def state(self) -> np.ndarray:
-        return self.x.copy()
+        return self._sampled.state
 
     def advance(self, *, u: np.ndarray, dt: float) -> None:
-        Ad, Bd = self._discrete(dt)
-        self._du = np.asarray(u, float) - self.u_op
-        self.x = Ad @ self.x + Bd @ self._du
+        self._sampled.advance(u, transition=self._discrete(dt))
 
     def save_state(self) -> Any:
-        return (self.x.copy(), self._du.copy())
+        return self._sampled.save()
 
     def restore_state(self, snapshot: Any) -> None:
-        self.x, self._du = snapshot[0].copy(), snapshot[1].copy()
+        self._sampled.restore(snapshot)
 
 
 def _source_path(value: Any, *, base_dir: Path | None, what: str) -> Path:

@@ -141,8 +141,8 @@ def _run_host(args: argparse.Namespace) -> int:
 def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: Path | None) -> int:
     import numpy as np
     from gainlink.fileio import atomic_write_text
-    from gainlink.reference import Trace
-    from gainlink.replay import format_trace, read_samples
+    from gainlink.proof.reference import Trace
+    from gainlink.proof.replay_io import format_trace, read_samples
 
     a = artifact
     samples = read_samples(input_path, a)

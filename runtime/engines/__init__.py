@@ -1,11 +1,11 @@
 """Replay engines that run the compiled firmware instead of the Python reference.
 
-Each engine module exposes ``run(artifact, Y, R) -> gainlink.reference.Trace``:
+Each engine module exposes ``run(artifact, Y, R) -> gainlink.proof.reference.Trace``:
 
 - ``native``: the host build of the C library through ctypes, one call per block of samples;
 - ``qemu``: the Cortex-M4F image under ``qemu-system-arm``, samples through semihosting file I/O.
 
-:mod:`gainlink.replay` loads them by these names on first use (``--engine native|qemu``).
+:mod:`gainlink.proof.replay_io` loads them by these names on first use (``--engine native|qemu``).
 """
 
 from __future__ import annotations

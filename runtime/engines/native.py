@@ -17,7 +17,7 @@ import numpy as np
 from ..artifact import Artifact
 from ..errors import FirmwareError
 from ..firmware.build import build
-from ..reference import Trace
+from ..proof.reference import Trace
 
 STATUS = {
     0: "GL_OK",
@@ -229,7 +229,7 @@ class NativeLoop:
 
 
 def trace_from_raw(raw: dict[str, np.ndarray], *, m: int) -> Trace:
-    """Turn float32 firmware outputs into a :class:`~gainlink.reference.Trace` (float64 values)."""
+    """Turn float32 firmware outputs into a :class:`~gainlink.proof.reference.Trace` (float64 values)."""
     bits = (raw["sat"][:, None] >> np.arange(m, dtype=np.uint32)[None, :]) & 1
     return Trace(
         u=raw["u"].astype(np.float64),

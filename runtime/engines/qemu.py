@@ -7,7 +7,7 @@ import numpy as np
 from ..artifact import Artifact
 from ..firmware import qemu as fwqemu
 from ..firmware.build import DEFAULT_BOARD, build
-from ..reference import Trace
+from ..proof.reference import Trace
 from .native import trace_from_raw
 
 

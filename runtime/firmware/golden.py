@@ -2,7 +2,7 @@
 
 Nothing here is pasted: plants are drawn from a seeded generator, designed with
 :func:`gainlink.design.design` like any user spec, and the expected outputs come from
-:class:`gainlink.reference.ReferenceLoop`. ``scripts/gen_golden.py`` writes them to files; the tests
+:class:`gainlink.proof.reference.ReferenceLoop`. ``scripts/gen_golden.py`` writes them to files; the tests
 call :func:`random_cases` / :func:`example_cases` directly.
 """
 
@@ -18,7 +18,7 @@ import numpy as np
 
 from ..artifact import Artifact, from_dict, render
 from ..errors import DesignError, SpecError
-from ..reference import ReferenceLoop, Trace
+from ..proof.reference import ReferenceLoop, Trace
 from ..spec import load_spec, parse_spec
 from ..synthesis import synthesize
 
@@ -195,15 +195,15 @@ def closed_loop_case(
     operating_point: bool = False,
 ) -> GoldenCase:
     """A random continuous plant (:func:`gainlink.random_plants.random_spec`), designed, and a record of
-    its own closed loop (:func:`gainlink.simulate.simulate_linear`: initial state, reference, noise).
+    its own closed loop (:func:`gainlink.proof.simulation.simulate_linear`: initial state, reference, noise).
 
     Unlike :func:`random_cases`, nothing is filtered: such designs often have an unstable compensator.
     The limits are set below the unsaturated run's peak command (80 %, else 90 %, else wide) so the
     record saturates during the initial transient and still stays bounded. With ``operating_point`` the
     plant is about a random non-zero point, the limits are centred on ``u_op`` and the record is absolute.
     """
+    from ..proof.simulation import simulate_linear
     from ..random_plants import random_spec as continuous_spec
-    from ..simulate import simulate_linear
 
     op = random_operating_point(seed, m=m, p=p) if operating_point else None
 

@@ -23,8 +23,8 @@ import numpy as np
 
 from ..artifact import Artifact
 from ..errors import FirmwareError, PeerTimeoutError, PlantError
-from ..synthesis.realization import design_plant
-from ..twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
+from ..proof.sampled_plant import SampledPlant
+from ..proof.twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
 from . import qemu as fwqemu
 from .build import DEFAULT_BOARD, build
 
@@ -57,21 +57,17 @@ class ArtifactPlant(DiscretePlant):
     """
 
     def __init__(self, artifact: Artifact, *, x0: np.ndarray) -> None:
-        self.a = artifact
-        self.Ad, self.Bd, self.Cd, self.Dd = design_plant(artifact)  # x0 is in the design's coordinates
-        self.x = np.asarray(x0, dtype=float).reshape(artifact.n).copy()
-        self.du_prev = np.zeros(artifact.m)
+        self.model = SampledPlant.from_artifact(artifact, x0=x0)  # x0 is in the design's coordinates
 
     def outputs(self) -> np.ndarray:
-        return self.a.y_op + self.Cd @ self.x + self.Dd @ self.du_prev
+        return self.model.outputs()
 
     def advance(self, *, u: np.ndarray) -> None:
-        self.du_prev = np.asarray(u, dtype=float) - self.a.u_op
-        self.x = self.Ad @ self.x + self.Bd @ self.du_prev
+        self.model.advance(u)
 
     @property
     def state(self) -> np.ndarray:
-        return self.x.copy()
+        return self.model.state
 
 
 class HilPlant(DiscretePlant):
@@ -121,7 +117,7 @@ class PilResult:
     plant_state: np.ndarray  # (N + 1, plant states)
     round_trip_us: np.ndarray  # (N,)
     steps_per_second: float
-    twin: TwinTrace | None = None  # the float64 twin's run (gainlink.twin), when one ran
+    twin: TwinTrace | None = None  # the float64 twin's run (gainlink.proof.twin), when one ran
     comparison: TwinComparison | None = None  # the run against its twin
 
     def summary(self) -> dict:
@@ -184,7 +180,7 @@ def run_pil(
         How long to wait for one answer before declaring the firmware silent.
     twin : DiscretePlant, optional
         A second instance of the plant, in the same initial state: the float64 twin of the loop
-        (:mod:`gainlink.twin`) runs on it in step with the firmware, and the result compares the two.
+        (:mod:`gainlink.proof.twin`) runs on it in step with the firmware, and the result compares the two.
 
     Returns
     -------

@@ -5,7 +5,7 @@ has no reason to be stable). That is harmless while the loop is closed, but it c
 do with it: the controller must not be started or left running open loop, a broken sensor path lets its
 state and command run away, and replaying recorded samples through two implementations of it (float32
 and float64) diverges like ``|z|^k`` even when both are right (compare one step at a time instead:
-:func:`gainlink.replay.one_step_check`).
+:func:`gainlink.proof.replay_io.one_step_check`).
 
 The compensator is :func:`gainlink.systems.controller_matrices`: state ``[xh; z]``, input
 ``[y - y_op; r - Ci y_op]``, output ``v - u_op`` (unsaturated, so back-calculation and clamping are

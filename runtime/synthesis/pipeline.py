@@ -13,7 +13,7 @@ import numpy as np
 
 from ..artifact import from_dict, seal
 from ..errors import DesignError
-from ..fidelity import Float32Fidelity
+from ..proof.fidelity import Float32Fidelity
 from ..spec import PlantSpec
 from .analysis import complex_pairs, uncontrollable_unstable, unobservable_unstable
 from .compensator import CompensatorStability

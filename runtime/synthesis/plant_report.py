@@ -53,8 +53,8 @@ class AnalysisReport:
     badly_scaled_states: list[str]
     warnings: list[str] = field(default_factory=list)
     compensator: dict | None = None  # the spec's designed compensator: poles, spectral radius, stability
-    float32: dict | None = None  # float32 closed-loop fidelity of that design (gainlink.fidelity)
-    dead_time: dict | None = None  # that design against the exact sampled dead times (gainlink.deadtime)
+    float32: dict | None = None  # float32 closed-loop fidelity of that design (gainlink.proof.fidelity)
+    dead_time: dict | None = None  # that design against the exact sampled dead times (gainlink.synthesis.deadtime)
 
     def to_dict(self) -> dict:
         """JSON-friendly dict; complex numbers become [re, im] pairs."""

@@ -119,13 +119,3 @@ def apply(data: dict, *, kind: str, T: np.ndarray) -> dict:
         out["xh0"] = vector_to_json(T @ xh0)
     out["realization"] = {"kind": kind, "T": matrix_to_json(T), "design": design}
     return out
-
-
-def design_plant(artifact) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The artifact's discrete plant ``(Ad, Bd, Cd, Dd)`` in the design's coordinates (those of a plant state
-    a user gives, e.g. ``simulate --x0``), whatever the realisation of the estimate."""
-    rec = artifact.data.get("realization")
-    if rec is None:
-        return artifact.Ad, artifact.Bd, artifact.Cd, artifact.Dd
-    d = rec["design"]
-    return (np.array(d["Ad"], dtype=float), np.array(d["Bd"], dtype=float), np.array(d["Cd"], dtype=float), artifact.Dd)

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .artifact import Artifact
-from .errors import DataError, GainlinkError
-from .fileio import atomic_write_text, read_user_file
+from ..artifact import Artifact
+from ..errors import DataError, GainlinkError
+from ..fileio import atomic_write_text, read_user_file
 from .onestep import OneStepCheck, one_step_check  # noqa: F401 - the replay-level API
 from .reference import ReferenceLoop, Trace
 
@@ -197,7 +197,7 @@ def compare_traces(artifact: Artifact, trace: Trace, other: Trace) -> Comparison
     """Open-loop difference of two replays of the same input (commands relative to the limit span).
 
     Information only: for an unstable compensator two correct implementations drift apart like
-    ``|z|^k`` (see :mod:`gainlink.compensator`); :func:`one_step_check` is the verdict.
+    ``|z|^k`` (see :mod:`gainlink.synthesis.compensator`); :func:`one_step_check` is the verdict.
     """
     N = trace.u.shape[0]
     if other.u.shape[0] != N:

@@ -24,7 +24,7 @@ from array import array
 
 import numpy as np
 
-from .artifact import Artifact
+from ..artifact import Artifact
 from .reference import StepResult, Trace
 
 _F32 = np.float32
@@ -118,7 +118,7 @@ def _g(x: np.ndarray) -> np.ndarray:
 class Float32Loop:
     """The C loop's arithmetic for ``artifact``: coefficients derived in double, steps in float32.
 
-    Same interface as :class:`gainlink.reference.ReferenceLoop` (``step``, ``run``, ``xh``, ``z``,
+    Same interface as :class:`gainlink.proof.reference.ReferenceLoop` (``step``, ``run``, ``xh``, ``z``,
     ``reset``), so either can close a loop.
 
     Parameters
@@ -259,7 +259,7 @@ class Float32Loop:
         return u, v, sat, xn, zn
 
     def run(self, Y: np.ndarray, R: np.ndarray | None = None) -> Trace:
-        """Run one step per row of ``Y`` (N, p) and ``R`` (N, q); returns a :class:`~gainlink.reference.Trace`."""
+        """Run one step per row of ``Y`` (N, p) and ``R`` (N, q); returns a :class:`~gainlink.proof.reference.Trace`."""
         a = self.a
         Y = np.asarray(Y, dtype=float).reshape(-1, a.p)
         N = Y.shape[0]

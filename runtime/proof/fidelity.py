@@ -1,9 +1,9 @@
 """float32 fidelity at design time: the C's arithmetic and the float64 law, each closing its own loop.
 
 ``gainlink design`` runs the law twice against the design plant (the artifact's discrete model, one copy
-per loop): once as the C computes it (:class:`~gainlink.float32_law.Float32Loop`: coefficients derived in
+per loop): once as the C computes it (:class:`~gainlink.proof.float32_law.Float32Loop`: coefficients derived in
 double from the float32 gain set, a float32 fused multiply-add chain per step, bit for bit the host and
-Cortex-M4F builds) and once in float64 (:class:`~gainlink.reference.ReferenceLoop`). Both see the same
+Cortex-M4F builds) and once in float64 (:class:`~gainlink.proof.reference.ReferenceLoop`). Both see the same
 scenario:
 
 - measurement noise (standard deviation ``sqrt(diag V)`` of a Kalman design, otherwise 1e-3 of each
@@ -29,9 +29,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .artifact import Artifact
+from ..artifact import Artifact
 from .float32_law import Float32Loop
 from .reference import ReferenceLoop
+from .sampled_plant import SampledPlant
 
 THRESHOLD = 1.0 / 4096
 MIN_STEPS, MAX_STEPS = 400, 800
@@ -114,7 +115,7 @@ def float32_fidelity(artifact: Artifact, *, seed: int = 0, implementation=Float3
         Seed of the measurement noise.
     implementation : callable
         Builds the loop under test from the artifact (anything with ``step(y, r)`` returning a
-        :class:`~gainlink.reference.StepResult`); the default is the C's arithmetic in numpy.
+        :class:`~gainlink.proof.reference.StepResult`); the default is the C's arithmetic in numpy.
 
     Returns
     -------
@@ -153,23 +154,27 @@ def _simulate(a: Artifact, law, sc: _Scenario, *, start: tuple | None = None, st
     """Close ``law`` around ``x+ = Ad x + Bd (u - u_op + d)``, ``y = y_op + Cd x + Dd (u_prev - u_op) + noise``.
 
     Runs steps ``start[0]`` (0 by default) to ``stop`` (the end) from the plant state of ``start``
-    (``(k, x, du_prev)``; the law carries its own state). Returns the run and the state to resume from.
+    (``(k, plant snapshot)``; the law carries its own state). Returns the run and the state to resume from.
     """
-    u_op, y_op = a.u_op, a.y_op
-    k0, x, du_prev = (0, sc.x0.copy(), np.zeros(a.m)) if start is None else start
+    plant = SampledPlant(a.Ad, a.Bd, a.Cd, a.Dd, u_op=a.u_op, y_op=a.y_op)
+    if start is None:
+        k0 = 0
+        plant.reset(sc.x0)
+    else:
+        k0 = start[0]
+        plant.restore(start[1])
     k1 = sc.steps if stop is None else stop
     N = k1 - k0
     X, Y, U, S = np.empty((N, a.n)), np.empty((N, a.p)), np.empty((N, a.m)), np.empty((N, a.m), dtype=bool)
     r0, r1 = a.r_op, a.r_op + sc.r  # references are absolute: the step is taken from the operating point
     for i in range(N):
         k = k0 + i
-        y = y_op + a.Cd @ x + a.Dd @ du_prev + sc.noise[k]
+        y = plant.outputs() + sc.noise[k]
         res = law.step(y, r1 if k >= sc.r_step_at else r0)
-        X[i], Y[i], U[i], S[i] = x, y, res.u, res.saturated
-        du_prev = res.u - u_op
+        X[i], Y[i], U[i], S[i] = plant.x, y, res.u, res.saturated
         d = sc.pulse if sc.pulse_at <= k < sc.pulse_at + sc.pulse_steps else 0.0
-        x = a.Ad @ x + a.Bd @ (du_prev + d)
-    return _Run(x=X, y=Y, u=U, saturated=S), (k1, x, du_prev)
+        plant.advance(res.u, d=d)
+    return _Run(x=X, y=Y, u=U, saturated=S), (k1, plant.save())
 
 
 class _LinearLoop:
@@ -180,7 +185,7 @@ class _LinearLoop:
     """
 
     def __init__(self, a: Artifact) -> None:
-        from .systems import controller_matrices
+        from ..systems import controller_matrices
 
         self.a = a
         Ac, Bc, Cc, Dc = controller_matrices(a)

@@ -1,9 +1,9 @@
 """The one-step (resynchronised) check: an engine's every step against the float64 law from the same state.
 
 Replaying recorded samples open loop through a float32 and a float64 implementation of an unstable
-compensator amplifies rounding like ``|z|^k`` (see :mod:`gainlink.compensator`), so two correct
+compensator amplifies rounding like ``|z|^k`` (see :mod:`gainlink.synthesis.compensator`), so two correct
 implementations "disagree" after a few dozen steps. Here, before each step ``k`` the float64 law
-(:class:`~gainlink.reference.ReferenceLoop`) is put into the engine's own state after step ``k - 1``
+(:class:`~gainlink.proof.reference.ReferenceLoop`) is put into the engine's own state after step ``k - 1``
 (``xh``, ``z``; the artifact's initial state for step 0), runs step ``k`` on the same ``y`` and ``r``, and its
 command ``u``, saturation flags, fault flag and next state ``xh``, ``z`` must match the engine's within a
 float32 bound computed from the magnitudes in that step. This is valid whatever the compensator.
@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .artifact import Artifact
+from ..artifact import Artifact
 from .reference import ReferenceLoop, Trace
 
 EPS = 2.0**-24
@@ -184,7 +184,7 @@ def one_step_check(artifact: Artifact, Y: np.ndarray, R: np.ndarray, trace: Trac
     >>> import control as ct, numpy as np, gainlink as gl
     >>> art = gl.design(ct.ss([[0.9]], [[0.1]], [[1.0]], [[0.0]], 0.01), Q=[[1.0]], R=[[1.0]],
     ...                 W=[[1e-3]], V=[[1e-4]], u_min=[-1.0], u_max=[1.0])
-    >>> from gainlink.float32_law import Float32Loop
+    >>> from gainlink.proof.float32_law import Float32Loop
     >>> Y = np.linspace(0.0, 20.0, 50).reshape(-1, 1)
     >>> check = one_step_check(art, Y, None, Float32Loop(art).run(Y))  # the C's arithmetic
     >>> check.passed, check.worst["u"] < 0.5

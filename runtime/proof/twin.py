@@ -1,7 +1,7 @@
 """The closed-loop twin: what the implementation costs against the ideal design.
 
 Beside a SIL, HIL or PIL run, a float64 twin of the whole loop runs in step: the reference law
-(:class:`~gainlink.reference.ReferenceLoop`) closing the loop around a second instance of the same
+(:class:`~gainlink.proof.reference.ReferenceLoop`) closing the loop around a second instance of the same
 plant, fed the same measurement noise, references and input disturbances from the same initial
 state, with every sample arriving at once and no faults. Whatever separates the real run from the
 twin is what the implementation costs the closed loop: float32 arithmetic, the link's encoding
@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .artifact import Artifact
+from ..artifact import Artifact
 from .reference import ReferenceLoop
 
 

@@ -9,11 +9,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from gainlink.synthesis.realization import design_plant
 
-from .artifact import Artifact
-from .errors import DataError
+from ..artifact import Artifact
+from ..errors import DataError
 from .reference import ReferenceLoop
+from .sampled_plant import SampledPlant
 
 
 @dataclass(frozen=True)
@@ -61,10 +61,9 @@ def simulate_linear(
     a = artifact
     if steps < 1:
         raise DataError("steps must be at least 1")
-    x = np.zeros(a.n) if x0 is None else np.asarray(x0, float).reshape(a.n)
     r = a.r_op if reference is None else np.asarray(reference, float).reshape(a.q)
     rng = np.random.default_rng(seed)
-    Ad, Bd, Cd, Dd = design_plant(a)  # x0 is a plant state in the design's coordinates
+    plant = SampledPlant.from_artifact(a, x0=x0)  # x0 is a plant state in the design's coordinates
     loop = ReferenceLoop(a)
     T, X, Y, R, U = (
         np.empty(steps),
@@ -73,14 +72,11 @@ def simulate_linear(
         np.empty((steps, a.q)),
         np.empty((steps, a.m)),
     )
-    du_prev = np.zeros(a.m)
     for k in range(steps):
-        # y depends on the command applied during this sample; with Dd != 0 use the previous one
-        y = a.y_op + Cd @ x + Dd @ du_prev + noise_std * rng.standard_normal(a.p)
+        y = plant.outputs() + noise_std * rng.standard_normal(a.p)
         u = loop.step(y, r).u
-        T[k], X[k], Y[k], R[k], U[k] = k * a.Ts, x, y, r, u
-        du_prev = u - a.u_op
-        x = Ad @ x + Bd @ du_prev
+        T[k], X[k], Y[k], R[k], U[k] = k * a.Ts, plant.x, y, r, u
+        plant.advance(u)
     return Simulation(t=T, x=X, y=Y, r=R, u=U)
 
 
