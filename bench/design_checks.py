@@ -20,12 +20,12 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from gainlink.artifact import from_dict
 from gainlink.proof.float32_law import Float32Loop
 from gainlink.proof.reference import ReferenceLoop
-from gainlink.random_plants import random_spec
+from gainlink.shipping.artifact import from_dict
 from gainlink.spec import PlantSpec, load_spec, parse_spec
 from gainlink.synthesis import synthesize
+from gainlink.synthesis.random_plants import random_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 REPEAT = 3

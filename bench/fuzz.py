@@ -18,8 +18,8 @@ import shutil
 import sys
 from pathlib import Path
 
-from gainlink import artifact as artifact_mod
 from gainlink.firmware import fuzz
+from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import load_spec
 from gainlink.synthesis import synthesize
 

@@ -27,13 +27,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-from gainlink import artifact as artifact_mod
 from gainlink.hil.links.can_firmware import firmware_can_executable
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.fmu import FmuPlant
 from gainlink.proof.reference import ReferenceLoop
+from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import load_spec
 from gainlink.synthesis import synthesize
 

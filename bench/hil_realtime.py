@@ -32,7 +32,6 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
-from gainlink import artifact as artifact_mod
 from gainlink.hil.links.can_firmware import firmware_can_executable
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
@@ -40,6 +39,7 @@ from gainlink.hil.loop.scheduler import pacing_jitter
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.fmu import FmuPlant
 from gainlink.proof.reference import ReferenceLoop
+from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 

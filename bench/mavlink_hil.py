@@ -157,8 +157,8 @@ def main() -> int:
     )
     args = parser.parse_args()
 
-    from gainlink import artifact as artifact_mod
     from gainlink.firmware.mavlink_app import mavlink_executable
+    from gainlink.shipping import artifact as artifact_mod
     from gainlink.spec import load_spec
     from gainlink.synthesis import synthesize
 

@@ -31,13 +31,13 @@ def main() -> int:
     parser.add_argument("--params", type=int, default=100)
     args = parser.parse_args()
 
-    from gainlink import artifact as artifact_mod
-    from gainlink.artifact import from_dict
     from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
     from gainlink.mavlink.link import MavLink
     from gainlink.mavlink.params import REAL32, Encoding, firmware_params
     from gainlink.mavlink.session import ParamSession
     from gainlink.mavlink.upload import upload
+    from gainlink.shipping import artifact as artifact_mod
+    from gainlink.shipping.artifact import from_dict
     from gainlink.spec import parse_spec
     from gainlink.synthesis import synthesize
 

@@ -39,11 +39,11 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
-from gainlink import artifact as artifact_mod
 from gainlink.hil.links.can_firmware import firmware_can_executable
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.build import build_fmu
+from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 

@@ -197,7 +197,7 @@ def main() -> int:
 
     import logging
 
-    from gainlink import artifact as artifact_mod
+    from gainlink.shipping import artifact as artifact_mod
     from gainlink.spec import load_spec
     from gainlink.synthesis import synthesize
 

@@ -62,7 +62,7 @@ def run(
     import dataclasses
     import tempfile
 
-    from gainlink.artifact import Artifact, load
+    from gainlink.shipping.artifact import Artifact, load
 
     from .loop.bridge import run_scenario
     from .loop.report import write_report

@@ -12,7 +12,6 @@ __version__ = "0.1.0"
 
 from . import hil
 from .api import design, from_gains, load, replay, simulate
-from .artifact import Artifact
 from .errors import (
     ArtifactError,
     DataError,
@@ -28,6 +27,7 @@ from .proof.onestep import one_step_check
 from .proof.reference import ReferenceLoop, Trace
 from .proof.simulation import Simulation
 from .proof.twin import twin_comparison
+from .shipping.artifact import Artifact
 from .synthesis.compensator import compensator_stability
 
 __all__ = [

@@ -1,7 +1,7 @@
 """The Python API for a python-control user in a notebook: designs from a spec, a dict or a
 ``control.StateSpace``/``TransferFunction``, artifacts from one's own gains, replay and simulation.
 
-Everything here returns a loaded :class:`~gainlink.artifact.Artifact` or a frozen dataclass of numpy
+Everything here returns a loaded :class:`~gainlink.shipping.artifact.Artifact` or a frozen dataclass of numpy
 arrays; the command line calls the same functions. Names follow python-control where they exist.
 """
 
@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from .artifact import Artifact, from_dict
 from .errors import SpecError
 from .proof.reference import Trace
 from .proof.replay_io import get_engine
 from .proof.simulation import Simulation, simulate_linear
+from .shipping.artifact import Artifact, from_dict
 from .spec import PlantSpec, load_spec, parse_spec
 from .synthesis import synthesize
 

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from gainlink import artifact as artifact_mod
 from gainlink.cli import main
+from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import load_spec
 from gainlink.synthesis import synthesize
 

@@ -21,13 +21,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import EXAMPLES, ROOT, run_cli
-from gainlink.artifact import load
 from gainlink.hil.campaign import CampaignError, parse_campaign, run
 from gainlink.hil.campaign.criteria import growth
 from gainlink.hil.campaign.plan import draw_values, plan_campaign
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil import run_sil
 from gainlink.hil.plants import toml_write
+from gainlink.shipping.artifact import load
 from scipy import stats
 
 VENV_BIN = Path(sys.executable).parent

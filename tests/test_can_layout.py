@@ -15,13 +15,13 @@ import cantools
 import numpy as np
 import pytest
 from conftest import run_cli
-from gainlink.artifact import load
 from gainlink.errors import TransportError
 from gainlink.hil.links.base import STATUS_FAULT
 from gainlink.hil.links.can import CanTransport, firmware_can_argv
 from gainlink.hil.links.can_layout import layout_for
 from gainlink.hil.loop.controller import ControllerProcess
 from gainlink.proof.reference import ReferenceLoop
+from gainlink.shipping.artifact import load
 from test_hil_support import can_firmware, pendulum_gains, udp_transport  # noqa: F401
 
 
@@ -151,7 +151,7 @@ def test_udp_multicast_without_a_route_says_how_to_add_one(pendulum_gains):
     assert shutil.which("unshare"), "util-linux unshare (Debian's base system) is needed for a loopback-only namespace"
     code = (
         "import sys, numpy as np\n"
-        "from gainlink.artifact import load\n"
+        "from gainlink.shipping.artifact import load\n"
         "from gainlink.errors import TransportError\n"
         "from gainlink.hil.links.can import CanTransport\n"
         "t = CanTransport({'interface': 'udp_multicast', 'channel': '239.74.1.1', 'port': 45678, 'hop_limit': 0},"

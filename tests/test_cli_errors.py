@@ -220,7 +220,7 @@ def test_bad_artifact_is_refused(case, pendulum_artifact, tmp_path):
     _, fn, words = case
     _tamper(pendulum_artifact, fn)
     if words != "sha256 mismatch":  # fix the hash so the structural check is what fires
-        from gainlink.artifact import seal
+        from gainlink.shipping.artifact import seal
 
         data = json.loads(pendulum_artifact.read_text())
         pendulum_artifact.write_text(json.dumps(seal(data)))

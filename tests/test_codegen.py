@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gainlink.artifact import render
+from gainlink.shipping.artifact import render
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))
 FLOAT = r"-?\d+(?:\.\d*)?(?:e[-+]?\d+)?f"

@@ -10,8 +10,8 @@ import pytest
 import scipy.linalg
 import scipy.signal
 from conftest import EXAMPLES, run_cli
-from gainlink import artifact as artifact_mod
 from gainlink.errors import DesignError
+from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import load_spec, parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.loop import poles_match

@@ -12,12 +12,12 @@ import logging
 import numpy as np
 import pytest
 from conftest import EXAMPLES, run_cli
-from gainlink import artifact as artifact_mod
 from gainlink.engines.native import NativeLoop
 from gainlink.proof.fidelity import THRESHOLD, float32_fidelity
 from gainlink.proof.reference import ReferenceLoop, StepResult
 from gainlink.proof.replay_io import one_step_check
 from gainlink.proof.simulation import simulate_linear
+from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from test_onestep import jacobian_poles
@@ -97,7 +97,7 @@ def test_design_time_float32_number_is_what_the_c_does(example_artifacts):
 
 
 def test_unstable_compensator_is_reported_in_design_analyze_and_checks(tmp_path):
-    from gainlink.random_plants import random_spec
+    from gainlink.synthesis.random_plants import random_spec
 
     spec = random_spec(0, n=7, m=2, p=3, q=2, anti_windup="backcalc", u_limit=100.0)
     result = synthesize(parse_spec(spec))

@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gainlink.artifact import from_dict, seal
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware.build import build
 from gainlink.firmware.golden import example_cases, random_cases
 from gainlink.proof.reference import ReferenceLoop
+from gainlink.shipping.artifact import from_dict, seal
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
@@ -290,8 +290,8 @@ def test_golden_script_writes_files_the_c_loop_replays(tmp_path):
     import json
     import runpy
 
-    from gainlink.artifact import load
     from gainlink.proof.reference import Trace
+    from gainlink.shipping.artifact import load
 
     script = Path(__file__).resolve().parents[1] / "scripts" / "gen_golden.py"
     assert runpy.run_path(str(script))["main"](["--out", str(tmp_path), "--random", "30"]) == 0
@@ -307,7 +307,7 @@ def test_golden_script_writes_files_the_c_loop_replays(tmp_path):
 def test_firmware_run_replays_a_csv_through_the_host_executable(tmp_path, pendulum):
     import sys
 
-    from gainlink.artifact import render
+    from gainlink.shipping.artifact import render
 
     a = pendulum.artifact
     art = tmp_path / "gains.json"

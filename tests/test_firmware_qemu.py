@@ -15,12 +15,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gainlink.artifact import render
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware import qemu as fwqemu
 from gainlink.firmware.build import build
 from gainlink.firmware.golden import example_cases, random_cases
+from gainlink.shipping.artifact import render
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 KEYS = ("u", "sat", "xh", "z", "fault")

@@ -6,8 +6,8 @@ from __future__ import annotations
 import subprocess
 
 import pytest
-from gainlink import artifact as artifact_mod
 from gainlink.firmware import fuzz
+from gainlink.shipping import artifact as artifact_mod
 
 SECONDS = 15  # per harness: the suite's share; bench/fuzz.py does the long runs
 

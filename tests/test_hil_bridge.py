@@ -19,10 +19,10 @@ import time
 import numpy as np
 import pytest
 from conftest import run_cli
-from gainlink.artifact import load
 from gainlink.hil.links.can import CanTransport
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
+from gainlink.shipping.artifact import load
 from test_hil_support import can_firmware, cart_fmu, pendulum_gains, pendulum_scenario, udp_transport, write_scenario  # noqa: F401
 
 

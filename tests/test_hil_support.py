@@ -7,8 +7,8 @@ import random
 from pathlib import Path
 
 import pytest
-from gainlink.artifact import load
 from gainlink.hil.plants import toml_write
+from gainlink.shipping.artifact import load
 
 _rng = random.Random(os.getpid() ^ int.from_bytes(os.urandom(4), "little"))
 

@@ -11,8 +11,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-from gainlink.artifact import load
-from gainlink.codegen import gain_set
 from gainlink.firmware.mavlink_app import firmware_argv, mavlink_executable
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.report import report_json
@@ -21,6 +19,8 @@ from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession
 from gainlink.mavlink.signing import enable, new_key, write_key
+from gainlink.shipping.artifact import load
+from gainlink.shipping.codegen import gain_set
 from pymavlink.dialects.v20 import common as mavlink2
 from test_hil_support import cart_fmu, pendulum_gains, pendulum_scenario, udp_transport  # noqa: F401
 from test_mavlink_upload import free_udp_port

@@ -8,12 +8,12 @@ import time
 
 import numpy as np
 from conftest import run_cli
-from gainlink.artifact import load
-from gainlink.codegen import gain_set, payload_crc32
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import INT32, REAL32, Encoding, as_int32
 from gainlink.mavlink.relay import LossyUdpRelay
 from gainlink.mavlink.session import ParamSession
+from gainlink.shipping.artifact import load
+from gainlink.shipping.codegen import gain_set, payload_crc32
 from test_mavlink_upload import closed_loop, exe, read_params, reference_u, retuned, start_firmware  # noqa: F401 (shared module-scoped fixtures)
 
 

@@ -66,7 +66,7 @@ def test_dropped_samples_over_mavlink_are_counted_and_the_loop_recovers(pend):
 
 
 def test_bad_mavlink_transport_tables_are_one_clear_error(pend):
-    from gainlink.artifact import load
+    from gainlink.shipping.artifact import load
 
     art = load(pend)
     with pytest.raises(TransportError, match="unknown key"):

@@ -9,7 +9,6 @@ import struct
 import numpy as np
 import pytest
 from conftest import run_cli
-from gainlink.artifact import load
 from gainlink.errors import ParameterError
 from gainlink.mavlink.link import MavLink, raw_param_value
 from gainlink.mavlink.params import (
@@ -24,6 +23,7 @@ from gainlink.mavlink.params import (
     load_mapping,
     mapped_params,
 )
+from gainlink.shipping.artifact import load
 from hypothesis import given
 from hypothesis import strategies as st
 

@@ -10,8 +10,6 @@ import subprocess
 import numpy as np
 import pytest
 from conftest import run_cli
-from gainlink.artifact import load
-from gainlink.codegen import gain_set, render_c
 from gainlink.firmware.build import cache_root, firmware_dir
 from gainlink.firmware.mavlink_app import EXECUTABLE, MavlinkFirmware
 from gainlink.hil.links.base import STATUS_FAULT, STATUS_WATCHDOG
@@ -19,6 +17,8 @@ from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import REAL32, Encoding
 from gainlink.mavlink.session import ParamSession
+from gainlink.shipping.artifact import load
+from gainlink.shipping.codegen import gain_set, render_c
 from pymavlink.dialects.v20 import common as mavlink2
 from test_mavlink_upload import free_udp_port, retuned_pendulum
 

@@ -12,14 +12,14 @@ import subprocess
 import numpy as np
 import pytest
 from conftest import run_cli
-from gainlink.artifact import load
-from gainlink.codegen import gain_set, payload_crc32
 from gainlink.errors import TransportError
 from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession
 from gainlink.mavlink.signing import enable, new_key, write_key
+from gainlink.shipping.artifact import load
+from gainlink.shipping.codegen import gain_set, payload_crc32
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
 from test_mavlink_upload import free_udp_port, retuned  # noqa: F401 - fixture

@@ -18,9 +18,9 @@ import mavsdk  # the test extra (make setup) installs it
 import numpy as np
 import pytest
 from conftest import run_cli
-from gainlink.artifact import load
-from gainlink.codegen import gain_set
 from gainlink.mavlink.params import REAL32, as_int32, firmware_params
+from gainlink.shipping.artifact import load
+from gainlink.shipping.codegen import gain_set
 from mavsdk.plugins.param import Param, ParamError
 from mavsdk.plugins.param_server import ParamServer
 from test_mavlink_upload import closed_loop, exe, free_udp_port, read_params, reference_u, retuned, start_firmware  # noqa: F401 (shared module-scoped fixtures)

@@ -12,15 +12,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import EXAMPLES, run_cli
-from gainlink import artifact as artifact_mod
-from gainlink.artifact import Artifact, load
-from gainlink.codegen import gain_set
 from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
 from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession
 from gainlink.proof.reference import ReferenceLoop
+from gainlink.shipping import artifact as artifact_mod
+from gainlink.shipping.artifact import Artifact, load
+from gainlink.shipping.codegen import gain_set
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 
@@ -320,9 +320,9 @@ def test_firmware_run_mavlink_command_persists_beside_the_artifact(exe, pend, re
 )
 def test_firmware_and_python_naming_schemes_agree_for_every_structure(shape, tmp_path):
     """Current-estimator form (M present), no integral action (q = 0: CI KI KAW Z0 absent) and q = 2."""
-    from gainlink.artifact import from_dict
     from gainlink.mavlink.params import firmware_params
-    from gainlink.random_plants import random_spec
+    from gainlink.shipping.artifact import from_dict
+    from gainlink.synthesis.random_plants import random_spec
 
     art = from_dict(synthesize(parse_spec(random_spec(11, **shape))).artifact)
     fw, port = start_firmware(mavlink_executable(art), None)

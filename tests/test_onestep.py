@@ -17,16 +17,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import run_cli
-from gainlink import artifact as artifact_mod
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop, trace_from_raw
 from gainlink.firmware.golden import closed_loop_cases
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.proof.replay_io import compare_traces, format_trace, one_step_check, read_samples
-from gainlink.random_plants import random_spec
+from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.compensator import compensator_stability
+from gainlink.synthesis.random_plants import random_spec
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))
 

@@ -19,14 +19,14 @@ import math
 import numpy as np
 import pytest
 from conftest import run_cli
-from gainlink import artifact as artifact_mod
-from gainlink.artifact import from_dict, seal
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.errors import ArtifactError
 from gainlink.firmware.golden import random_case, random_cases
 from gainlink.firmware.pil import make_plant, run_pil
 from gainlink.proof.reference import ReferenceLoop
+from gainlink.shipping import artifact as artifact_mod
+from gainlink.shipping.artifact import from_dict, seal
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 

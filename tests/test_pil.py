@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gainlink.artifact import load
 from gainlink.firmware.pil import make_plant, run_pil
+from gainlink.shipping.artifact import load
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))
 RTOL = 1e-4  # float32 firmware vs its float64 twin in closed loop: see tests/test_firmware_host.py

@@ -10,12 +10,12 @@ import control as ct
 import numpy as np
 import pytest
 from conftest import EXAMPLES
-from gainlink.artifact import load
 from gainlink.errors import PlantError
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.config import plant_from_config
 from gainlink.hil.plants.linear import model_from_spec, perturb_model
+from gainlink.shipping.artifact import load
 from test_hil_support import udp_transport
 
 PENDULUM = EXAMPLES / "pendulum.toml"

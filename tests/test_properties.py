@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
-from gainlink import artifact as artifact_mod
 from gainlink.errors import DesignError
 from gainlink.proof.reference import ReferenceLoop
-from gainlink.random_plants import random_spec
+from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.discretize import Discretised
 from gainlink.synthesis.loop import check_separation, closed_loop_matrix, poles_match
+from gainlink.synthesis.random_plants import random_spec
 from hypothesis import given, reject, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays

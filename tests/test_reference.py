@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 from conftest import run_cli
-from gainlink import artifact as artifact_mod
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.proof.replay_io import read_samples
-from gainlink.random_plants import random_spec
+from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
+from gainlink.synthesis.random_plants import random_spec
 
 
 def matvec(A, x):

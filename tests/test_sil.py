@@ -11,11 +11,11 @@ from __future__ import annotations
 import control
 import numpy as np
 import pytest
-from gainlink.artifact import load
 from gainlink.errors import ScenarioError
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil import run_sil
+from gainlink.shipping.artifact import load
 from test_hil_support import can_firmware, pendulum_gains, udp_transport  # noqa: F401
 
 

@@ -14,8 +14,6 @@ import time
 import numpy as np
 import pytest
 from conftest import run_cli
-from gainlink.artifact import load
-from gainlink.codegen import gain_set
 from gainlink.errors import FirmwareError, ScenarioError, TransportError
 from gainlink.firmware.build import build
 from gainlink.firmware.uart import QemuUart, free_tcp_port
@@ -27,6 +25,8 @@ from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession
 from gainlink.mavlink.signing import enable, read_key
+from gainlink.shipping.artifact import load
+from gainlink.shipping.codegen import gain_set
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
 from test_mavlink_upload import free_udp_port, reference_u, retuned_pendulum

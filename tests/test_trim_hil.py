@@ -27,13 +27,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import run_cli
-from gainlink.artifact import from_dict, load, render, seal
-from gainlink.codegen import c_float
 from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
 from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.build import build_fmu
+from gainlink.shipping.artifact import from_dict, load, render, seal
+from gainlink.shipping.codegen import c_float
 from test_hil_support import udp_transport
 from test_mavlink_upload import free_udp_port
 

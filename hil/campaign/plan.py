@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 from gainlink import __version__
-from gainlink.artifact import canonical_json, render
 from gainlink.errors import GainlinkError
+from gainlink.shipping.artifact import canonical_json, render
 
 from ..loop.scenario import parse_scenario
 from ..loop.sil import check_sil

@@ -240,7 +240,7 @@ class CanTransport(Transport):
     config : mapping
         python-can configuration (``interface``, ``channel``, ``fd``, ...) plus gainlink's optional
         ``base_id``, ``busy_poll_us``, ``encoding`` and ``ranges`` (see the module docstring).
-    artifact : gainlink.artifact.Artifact
+    artifact : gainlink.shipping.artifact.Artifact
         Gives the layout (sizes, signal names, input limits).
     """
 

@@ -14,9 +14,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from gainlink.artifact import load
 from gainlink.errors import TransportError
 from gainlink.fileio import read_user_file
+from gainlink.shipping.artifact import load
 
 from .can import config_from_text, firmware_can_argv, layout_from_config
 

@@ -403,7 +403,7 @@ def layout_for(
 
     Parameters
     ----------
-    artifact : gainlink.artifact.Artifact
+    artifact : gainlink.shipping.artifact.Artifact
         The gain artifact.
     fd : bool
         CAN FD (up to 8 values per frame) instead of classic CAN (1 float32 or 2 int16 values per frame).

@@ -15,8 +15,8 @@ import sys
 from typing import Any
 
 import numpy as np
-from gainlink.artifact import load
 from gainlink.proof.reference import ReferenceLoop
+from gainlink.shipping.artifact import load
 
 from .base import STATUS_FAULT
 from .can import Assembler, FrameCodec, layout_from_config, open_bus

@@ -17,8 +17,8 @@ import sys
 from typing import Any
 
 import numpy as np
-from gainlink.artifact import load
 from gainlink.proof.reference import ReferenceLoop
+from gainlink.shipping.artifact import load
 from pymavlink.dialects.v20 import common as mavlink2
 
 from .mavlink import ARRAY_IDLE, ARRAY_RESET, ARRAY_SAMPLE, FLAG_FAULT, FLAG_RESET, FLAG_WATCHDOG, SAT_SHIFT

@@ -19,8 +19,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gainlink.artifact import Artifact, load
 from gainlink.errors import GainlinkError, PlantError, ScenarioError, TransportError
+from gainlink.shipping.artifact import Artifact, load
 
 from ..links.base import Transport, transport_from_config
 from ..plants.base import Plant, check_dimensions

@@ -8,8 +8,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from gainlink.artifact import Artifact
 from gainlink.proof.twin import TwinLoop
+from gainlink.shipping.artifact import Artifact
 
 from ..plants.base import Plant
 from .metrics import RunTrace

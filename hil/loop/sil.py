@@ -21,10 +21,10 @@ from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
-from gainlink.artifact import Artifact
 from gainlink.engines.native import NativeLoop
 from gainlink.errors import PlantError, ScenarioError
 from gainlink.proof.reference import ReferenceLoop
+from gainlink.shipping.artifact import Artifact
 
 from .bridge import RunResult, build_plant
 from .metrics import compute_metrics

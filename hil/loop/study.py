@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gainlink.artifact import from_dict, write
 from gainlink.errors import ScenarioError
 from gainlink.fileio import publish_files, read_user_file
+from gainlink.shipping.artifact import from_dict, write
 
 from ..paths import project_root
 from .bridge import RunResult, run_scenario

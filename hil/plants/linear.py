@@ -239,7 +239,7 @@ def _linear_factory(
     if "spec" in cfg:
         model = model_from_spec(_source_path(cfg["spec"], base_dir=base_dir, what="spec"))
     elif "artifact" in cfg:
-        from gainlink.artifact import load
+        from gainlink.shipping.artifact import load
 
         try:
             model = model_from_artifact(load(_source_path(cfg["artifact"], base_dir=base_dir, what="artifact")))

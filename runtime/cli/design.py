@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import artifact as artifact_mod
 from ..errors import DataError, GainlinkError, VerificationError
 from ..fileio import atomic_write_text, publish_files
 from ..proof.replay_io import compare_traces, engine_names, one_step_check, read_samples, read_trace, replay
 from ..proof.simulation import samples_csv, simulate_linear
+from ..shipping import artifact as artifact_mod
 from ..spec import load_spec
 from ..synthesis import synthesize
 from ..synthesis.analysis import complex_pairs

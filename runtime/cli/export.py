@@ -6,9 +6,9 @@ import argparse
 
 
 def _export(args: argparse.Namespace) -> int:
-    from gainlink.artifact import load
-    from gainlink.codegen import render_c
     from gainlink.fileio import publish_files
+    from gainlink.shipping.artifact import load
+    from gainlink.shipping.codegen import render_c
 
     artifact = load(args.artifact)
     files = render_c(artifact)  # everything computed before anything is written

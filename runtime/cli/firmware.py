@@ -34,10 +34,10 @@ FLASH_COMMANDS = {
 
 
 def _build(args: argparse.Namespace) -> int:
-    from gainlink.artifact import load
     from gainlink.fileio import publish_files
     from gainlink.firmware.build import build
     from gainlink.firmware.size import size_report
+    from gainlink.shipping.artifact import load
 
     artifact = load(args.artifact)
     res = build(artifact, target=args.target, board=args.board)
@@ -128,8 +128,8 @@ def _flash(args: argparse.Namespace) -> int:
 
 def _run_host(args: argparse.Namespace) -> int:
     """Start the host executable: replay a CSV through it, or pass stdin/stdout through."""
-    from gainlink.artifact import load
     from gainlink.firmware.build import build
+    from gainlink.shipping.artifact import load
 
     artifact = load(args.artifact)
     exe = build(artifact, target="host").files["exe"]
@@ -220,9 +220,9 @@ def _run_image(args: argparse.Namespace) -> int:
             Path(args.artifact), board=args.board, protocol="mavlink", url=args.mavlink, flash_dir=flash
         )
     if args.can and not args.mavlink:
-        from gainlink.artifact import load
         from gainlink.hil.links.can import layout_from_config, slcan_image_options
         from gainlink.hil.links.can_firmware import read_can_config
+        from gainlink.shipping.artifact import load
 
         config = read_can_config(args.can)
         if config.get("interface") != "slcan" or config.get("fd"):
@@ -249,9 +249,9 @@ def _run_image(args: argparse.Namespace) -> int:
 
 def _pil(args: argparse.Namespace) -> int:
     import numpy as np
-    from gainlink.artifact import load
     from gainlink.fileio import publish_files
     from gainlink.firmware.pil import make_plant, run_pil
+    from gainlink.shipping.artifact import load
 
     artifact = load(args.artifact)
     ref = args.reference

@@ -44,10 +44,10 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _dbc(args: argparse.Namespace) -> int:
-    from gainlink.artifact import load
     from gainlink.fileio import atomic_write_text
     from gainlink.hil.links.can import layout_from_config
     from gainlink.hil.links.can_firmware import read_can_config
+    from gainlink.shipping.artifact import load
 
     config = read_can_config(args.can) if args.can else {}
     if args.fd:

@@ -69,11 +69,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _upload(args: argparse.Namespace) -> int:
-    from gainlink.artifact import load
     from gainlink.errors import ParameterError
     from gainlink.mavlink.params import Encoding
     from gainlink.mavlink.signing import read_key
     from gainlink.mavlink.upload import UploadFailed, format_changes, upload
+    from gainlink.shipping.artifact import load
 
     if args.window < 1 or args.retries < 0 or args.timeout <= 0:
         raise ParameterError("--window must be >= 1, --retries >= 0 and --timeout > 0")

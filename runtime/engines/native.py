@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..artifact import Artifact
 from ..errors import FirmwareError
 from ..firmware.build import build
 from ..proof.reference import Trace
+from ..shipping.artifact import Artifact
 
 STATUS = {
     0: "GL_OK",

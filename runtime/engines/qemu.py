@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..artifact import Artifact
 from ..firmware import qemu as fwqemu
 from ..firmware.build import DEFAULT_BOARD, build
 from ..proof.reference import Trace
+from ..shipping.artifact import Artifact
 from .native import trace_from_raw
 
 

@@ -17,9 +17,9 @@ import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..artifact import Artifact
-from ..codegen import render_c
 from ..errors import ToolchainError
+from ..shipping.artifact import Artifact
+from ..shipping.codegen import render_c
 
 log = logging.getLogger(__name__)
 

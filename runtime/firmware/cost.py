@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..artifact import Artifact
 from ..errors import FirmwareError, ToolchainError
+from ..shipping.artifact import Artifact
 from . import qemu as fwqemu
 from .build import cache_root, firmware_dir
 from .size import symbol_sizes

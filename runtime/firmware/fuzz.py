@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..artifact import Artifact
 from ..errors import ToolchainError
+from ..shipping.artifact import Artifact
 from .build import build
 
 HARNESSES = ("can_udp", "can_layout", "gains_stage", "mavlink_node") + (
@@ -148,7 +148,7 @@ def _seeds_can_layout(artifact: Artifact) -> list[bytes]:
 
 def gains_struct(artifact: Artifact) -> bytes:
     """The artifact's ``gl_gains_t`` as the C struct lays it out on a little-endian host (CRC included)."""
-    from ..codegen import gain_set
+    from ..shipping.codegen import gain_set
 
     g = gain_set(artifact)
     floats = np.concatenate([np.asarray(v, dtype="<f4").ravel() for v in g.fields.values()])
@@ -156,7 +156,7 @@ def gains_struct(artifact: Artifact) -> bytes:
 
 
 def _seeds_gains_stage(artifact: Artifact) -> list[bytes]:
-    from ..codegen import gain_set
+    from ..shipping.codegen import gain_set
 
     g = gain_set(artifact)
     raw = gains_struct(artifact)
@@ -181,7 +181,7 @@ def _retune_commit(artifact: Artifact) -> tuple[str, float, float]:
     The new value is chosen so the CRC's four bytes, read as a float32, are not a NaN pattern (which a round
     trip through a Python float could alter): the commit goes out exactly as a bytewise INT32.
     """
-    from ..codegen import gain_set, payload_crc32
+    from ..shipping.codegen import gain_set, payload_crc32
 
     g = gain_set(artifact)
     base = float(np.asarray(g.fields["K"]).ravel()[0])

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..artifact import Artifact, from_dict, render
 from ..errors import DesignError, SpecError
 from ..proof.reference import ReferenceLoop, Trace
+from ..shipping.artifact import Artifact, from_dict, render
 from ..spec import load_spec, parse_spec
 from ..synthesis import synthesize
 
@@ -194,7 +194,7 @@ def closed_loop_case(
     N: int = 300,
     operating_point: bool = False,
 ) -> GoldenCase:
-    """A random continuous plant (:func:`gainlink.random_plants.random_spec`), designed, and a record of
+    """A random continuous plant (:func:`gainlink.synthesis.random_plants.random_spec`), designed, and a record of
     its own closed loop (:func:`gainlink.proof.simulation.simulate_linear`: initial state, reference, noise).
 
     Unlike :func:`random_cases`, nothing is filtered: such designs often have an unstable compensator.
@@ -203,7 +203,7 @@ def closed_loop_case(
     plant is about a random non-zero point, the limits are centred on ``u_op`` and the record is absolute.
     """
     from ..proof.simulation import simulate_linear
-    from ..random_plants import random_spec as continuous_spec
+    from ..synthesis.random_plants import random_spec as continuous_spec
 
     op = random_operating_point(seed, m=m, p=p) if operating_point else None
 

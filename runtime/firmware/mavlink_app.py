@@ -10,8 +10,8 @@ import subprocess
 import time
 from pathlib import Path
 
-from ..artifact import Artifact
 from ..errors import FirmwareError
+from ..shipping.artifact import Artifact
 from .capture import StderrCapture
 
 log = logging.getLogger(__name__)
@@ -192,7 +192,7 @@ def run_foreground(
     int
         The app's exit status (0 after SIGINT/SIGTERM).
     """
-    from ..artifact import load
+    from ..shipping.artifact import load
 
     if not (url.startswith("udpin:") or url.startswith("udpout:")) or url.count(":") != 2:
         raise FirmwareError(f"--mavlink takes udpin:HOST:PORT or udpout:HOST:PORT, not {url!r}")

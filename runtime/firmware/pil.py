@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..artifact import Artifact
 from ..errors import FirmwareError, PeerTimeoutError, PlantError
 from ..proof.sampled_plant import SampledPlant
 from ..proof.twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
+from ..shipping.artifact import Artifact
 from . import qemu as fwqemu
 from .build import DEFAULT_BOARD, build
 

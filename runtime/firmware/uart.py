@@ -379,7 +379,7 @@ def run_foreground(
     int
         0 after SIGINT/SIGTERM, else QEMU's exit status.
     """
-    from ..artifact import load
+    from ..shipping.artifact import load
     from .build import build
 
     host, port = tcp_endpoint(url, scheme="tcp" if protocol == "mavlink" else "socket")

@@ -19,7 +19,7 @@ id                                             type    meaning
 =============================================  ======  ==============================================
 
 Every number of the C ``gl_gains_t`` is a parameter, so ``GL_HASH`` is fully determined by the
-parameters: it is :func:`gainlink.codegen.gain_set`'s ``crc32`` for the artifact they came from.
+parameters: it is :func:`gainlink.shipping.codegen.gain_set`'s ``crc32`` for the artifact they came from.
 ``PARAM_SET`` of a REAL32 parameter only *stages* the value (it reads back as staged; non-finite
 values are refused). Setting ``GL_HASH`` to the CRC-32 of the staged set commits it: the firmware
 runs the library's whole check (dimensions, CRC, finiteness, ``u_min <= u_max``, ``Ts > 0``,
@@ -53,9 +53,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..artifact import Artifact
-from ..codegen import gain_set
 from ..errors import ParameterError
+from ..shipping.artifact import Artifact
+from ..shipping.codegen import gain_set
 
 #: MAV_PARAM_TYPE values (MAVLink common.xml).
 PARAM_TYPES: dict[str, int] = {

@@ -25,8 +25,8 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink2
 
-from ..artifact import Artifact
 from ..errors import ParameterError, PeerTimeoutError
+from ..shipping.artifact import Artifact
 from .link import MavLink
 from .params import (
     DIMENSION_IDS,

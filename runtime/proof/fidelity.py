@@ -29,7 +29,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..artifact import Artifact
+from ..shipping.artifact import Artifact
 from .float32_law import Float32Loop
 from .reference import ReferenceLoop
 from .sampled_plant import SampledPlant
@@ -185,7 +185,7 @@ class _LinearLoop:
     """
 
     def __init__(self, a: Artifact) -> None:
-        from ..systems import controller_matrices
+        from ..shipping.systems import controller_matrices
 
         self.a = a
         Ac, Bc, Cc, Dc = controller_matrices(a)

@@ -24,7 +24,7 @@ from array import array
 
 import numpy as np
 
-from ..artifact import Artifact
+from ..shipping.artifact import Artifact
 from .reference import StepResult, Trace
 
 _F32 = np.float32

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..artifact import Artifact
+from ..shipping.artifact import Artifact
 from .reference import ReferenceLoop, Trace
 
 EPS = 2.0**-24

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..artifact import Artifact
+from ..shipping.artifact import Artifact
 
 
 @dataclass(frozen=True)

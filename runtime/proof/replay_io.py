@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..artifact import Artifact
 from ..errors import DataError, GainlinkError
 from ..fileio import atomic_write_text, read_user_file
+from ..shipping.artifact import Artifact
 from .onestep import OneStepCheck, one_step_check  # noqa: F401 - the replay-level API
 from .reference import ReferenceLoop, Trace
 

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..artifact import Artifact
 from ..errors import DataError
+from ..shipping.artifact import Artifact
 from .reference import ReferenceLoop
 from .sampled_plant import SampledPlant
 

@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..artifact import Artifact
+from ..shipping.artifact import Artifact
 from .reference import ReferenceLoop
 
 

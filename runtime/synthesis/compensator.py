@@ -7,7 +7,7 @@ state and command run away, and replaying recorded samples through two implement
 and float64) diverges like ``|z|^k`` even when both are right (compare one step at a time instead:
 :func:`gainlink.proof.replay_io.one_step_check`).
 
-The compensator is :func:`gainlink.systems.controller_matrices`: state ``[xh; z]``, input
+The compensator is :func:`gainlink.shipping.systems.controller_matrices`: state ``[xh; z]``, input
 ``[y - y_op; r - Ci y_op]``, output ``v - u_op`` (unsaturated, so back-calculation and clamping are
 inactive). The integrators contribute ``q`` poles at exactly ``z = 1``.
 """
@@ -80,8 +80,8 @@ class CompensatorStability:
 
 
 def compensator_stability(artifact) -> CompensatorStability:
-    """Poles and spectral radius of the compensator of a loaded :class:`~gainlink.artifact.Artifact`
-    (its matrices: :func:`gainlink.systems.controller_matrices`).
+    """Poles and spectral radius of the compensator of a loaded :class:`~gainlink.shipping.artifact.Artifact`
+    (its matrices: :func:`gainlink.shipping.systems.controller_matrices`).
 
     Examples
     --------
@@ -92,7 +92,7 @@ def compensator_stability(artifact) -> CompensatorStability:
     >>> comp.stable, round(comp.spectral_radius, 4) == round(float(abs(comp.poles[0])), 4)
     (True, True)
     """
-    from ..systems import controller_matrices
+    from ..shipping.systems import controller_matrices
 
     A, _, _, _ = controller_matrices(artifact)
     n, q = artifact.n, artifact.q

@@ -27,7 +27,7 @@ import scipy.linalg
 if TYPE_CHECKING:
     import control
 
-    from ..artifact import Artifact
+    from ..shipping.artifact import Artifact
     from ..spec import PlantSpec
 
 
@@ -164,7 +164,7 @@ def dead_time_check(spec: PlantSpec, artifact: Artifact) -> DeadTimeCheck | None
     ``None`` when :func:`applies` says the check does not apply."""
     import control
 
-    from ..systems import controller_matrices
+    from ..shipping.systems import controller_matrices
 
     if not applies(spec):
         return None

@@ -3,8 +3,8 @@ the compensator's stability and the float32 closed-loop fidelity recorded in ``c
 
 from __future__ import annotations
 
-from ..artifact import Artifact, from_dict, seal
 from ..proof.fidelity import Float32Fidelity, float32_fidelity
+from ..shipping.artifact import Artifact, from_dict, seal
 from ..spec import ImplementationSpec
 from .compensator import CompensatorStability, compensator_stability
 from .realization import apply, transformation

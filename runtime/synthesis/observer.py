@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..artifact import matrix_to_json
 from ..errors import DesignError, SpecError
+from ..shipping.artifact import matrix_to_json
 from ..spec import PlantSpec
 from .analysis import complex_pairs
 from .controller import check_psd

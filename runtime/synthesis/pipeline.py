@@ -11,9 +11,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..artifact import from_dict, seal
 from ..errors import DesignError
 from ..proof.fidelity import Float32Fidelity
+from ..shipping.artifact import from_dict, seal
 from ..spec import PlantSpec
 from .analysis import complex_pairs, uncontrollable_unstable, unobservable_unstable
 from .compensator import CompensatorStability

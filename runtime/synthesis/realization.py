@@ -43,8 +43,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ..artifact import matrix_to_json, vector_to_json
 from ..errors import SpecError
+from ..shipping.artifact import matrix_to_json, vector_to_json
 
 REALIZATIONS = ("as_designed", "balanced", "schur")
 HSV_FLOOR = 1e-10

@@ -10,7 +10,7 @@ from importlib import metadata
 import numpy as np
 
 from .. import __version__
-from ..artifact import SCHEMA_VERSION, matrix_to_json, vector_to_json
+from ..shipping.artifact import SCHEMA_VERSION, matrix_to_json, vector_to_json
 from ..spec import PlantSpec
 from .discretize import Discretised
 

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ArtifactError, IntegrityError
-from .fileio import atomic_write_text, read_user_file
+from ..errors import ArtifactError, IntegrityError
+from ..fileio import atomic_write_text, read_user_file
 
 SCHEMA_VERSION = 1
 
@@ -26,7 +26,7 @@ SCHEMA_VERSION = 1
 @lru_cache(maxsize=1)
 def schema() -> dict:
     """Return the artifact's JSON Schema (``gainlink/schema/gains.schema.json``)."""
-    text = resources.files("gainlink").joinpath("schema/gains.schema.json").read_text("utf-8")
+    text = resources.files("gainlink.shipping").joinpath("schema/gains.schema.json").read_text("utf-8")
     return json.loads(text)
 
 
@@ -163,7 +163,7 @@ class Artifact:
 
         Signals are named after the artifact's outputs, references and inputs and are deviations
         from the operating point; the sign is included (``u = C(z) [y; r]``), so the loop broken at
-        a plant input is ``-controller()[u, y] * plant``. See :mod:`gainlink.systems`.
+        a plant input is ``-controller()[u, y] * plant``. See :mod:`gainlink.shipping.systems`.
         """
         from .systems import controller_system
 

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..fileio import publish_files
 from .artifact import Artifact
-from .fileio import publish_files
 
 FORM_CODES = {"predictor": 0, "current": 1}
 ANTI_WINDUP_CODES = {"none": 0, "clamp": 1, "backcalc": 2}
