@@ -18,10 +18,10 @@ from conftest import run_cli
 from gainlink.errors import TransportError
 from gainlink.hil.links.base import STATUS_FAULT
 from gainlink.hil.links.can import CanTransport, firmware_can_argv
-from gainlink.hil.links.can_layout import layout_for
 from gainlink.hil.loop.controller import ControllerProcess
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping.artifact import load
+from gainlink.shipping.can_layout import layout_for
 from test_hil_support import can_firmware, pendulum_gains, udp_transport  # noqa: F401
 
 

@@ -20,10 +20,10 @@ import pytest
 from conftest import run_cli
 from gainlink.errors import TransportError
 from gainlink.hil.links.can import Assembler, CanTransport, FrameCodec, firmware_can_argv
-from gainlink.hil.links.can_layout import FD_LENGTHS, INT16_MAX, INT16_NAN, dequantise, quantise
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.shipping.artifact import load
+from gainlink.shipping.can_layout import FD_LENGTHS, INT16_MAX, INT16_NAN, dequantise, quantise
 from test_can_layout import PENDULUM_RANGES
 from test_hil_support import can_firmware, cart_fmu, pendulum_gains, pendulum_scenario, udp_transport, write_scenario  # noqa: F401
 

@@ -23,7 +23,7 @@ from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.errors import ArtifactError
 from gainlink.firmware.golden import random_case, random_cases
-from gainlink.firmware.pil import make_plant, run_pil
+from gainlink.hil.loop.pil import make_plant, run_pil
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import from_dict, seal

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gainlink.firmware.pil import make_plant, run_pil
+from gainlink.hil.loop.pil import make_plant, run_pil
 from gainlink.shipping.artifact import load
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))

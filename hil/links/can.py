@@ -28,9 +28,9 @@ from typing import Any
 
 import numpy as np
 from gainlink.errors import TransportError
+from gainlink.shipping.can_layout import CanLayout, FrameSpec, dequantise, layout_for, quantise
 
 from .base import TRANSPORTS, Command, Transport
-from .can_layout import CanLayout, FrameSpec, dequantise, layout_for, quantise
 
 log = logging.getLogger(__name__)
 

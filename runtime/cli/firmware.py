@@ -250,7 +250,7 @@ def _run_image(args: argparse.Namespace) -> int:
 def _pil(args: argparse.Namespace) -> int:
     import numpy as np
     from gainlink.fileio import publish_files
-    from gainlink.firmware.pil import make_plant, run_pil
+    from gainlink.hil.loop.pil import make_plant, run_pil
     from gainlink.shipping.artifact import load
 
     artifact = load(args.artifact)

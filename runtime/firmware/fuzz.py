@@ -99,7 +99,7 @@ def build_harnesses(artifact: Artifact) -> dict[str, Path]:
 
 def _can_frames(artifact: Artifact) -> list[tuple[bool, str, int, bytes]]:
     """(fd, encoding, index, payload) of measurement frames as the bridge sends them, both encodings."""
-    from gainlink.hil.links.can_layout import layout_for
+    from gainlink.shipping.can_layout import layout_for
 
     rng = np.random.default_rng(7)
     names = [*artifact.signals["outputs"], *artifact.signals["references"]]

@@ -20,13 +20,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-from ..errors import FirmwareError, PeerTimeoutError, PlantError
-from ..proof.sampled_plant import SampledPlant
-from ..proof.twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
-from ..shipping.artifact import Artifact
-from . import qemu as fwqemu
-from .build import DEFAULT_BOARD, build
+from gainlink.errors import FirmwareError, PeerTimeoutError, PlantError
+from gainlink.firmware import qemu as fwqemu
+from gainlink.firmware.build import DEFAULT_BOARD, build
+from gainlink.proof.sampled_plant import SampledPlant
+from gainlink.proof.twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
+from gainlink.shipping.artifact import Artifact
 
 log = logging.getLogger(__name__)
 
@@ -74,8 +73,8 @@ class HilPlant(DiscretePlant):
     """A plant from ``gainlink.hil``'s registry (e.g. ``cart_pendulum``), advanced by ``Ts`` per sample."""
 
     def __init__(self, name: str, *, artifact: Artifact, x0: np.ndarray | None = None) -> None:
-        from gainlink.hil.plants import models  # noqa: F401 - registers the built-in models
-        from gainlink.hil.plants.base import PLANTS, check_dimensions
+        from ..plants import models  # noqa: F401 - registers the built-in models
+        from ..plants.base import PLANTS, check_dimensions
 
         self.plant = PLANTS.create(name, {}, artifact=artifact)
         check_dimensions(self.plant, m=artifact.m, p=artifact.p, artifact=artifact.name)
