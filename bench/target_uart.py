@@ -111,7 +111,7 @@ def _peer(kind: str, *, art, transport, board: str, stack):
 def measure_round_trips(art, *, boards: list[str], steps: int) -> dict:
     from contextlib import ExitStack
 
-    from gainlink.hil.links.base import transport_from_config
+    from gainlink.hil.links.config import transport_from_config
 
     out: dict = {}
     reference = None

@@ -8,7 +8,7 @@ simulation of the law, the HIL bridge as :mod:`gainlink.hil` (``gl.hil.run``) an
 neither it nor Dask). The command line ``gainlink`` is a shell over the same functions.
 """
 
-__version__ = "0.1.0"
+from .version import __version__ as __version__
 
 from . import hil
 from .api import design, from_gains, load, replay, simulate

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from gainlink.errors import TransportError
-from gainlink.hil.links.base import transport_from_config
+from gainlink.hil.links.config import transport_from_config
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from test_mavlink_upload import free_udp_port

@@ -20,9 +20,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gainlink import __version__
 from gainlink.errors import GainlinkError
 from gainlink.shipping.artifact import canonical_json, render
+from gainlink.version import __version__
 
 from ..loop.scenario import parse_scenario
 from ..loop.sil import check_sil

@@ -32,10 +32,10 @@ from typing import Any
 
 import msgpack
 import numpy as np
-from gainlink import __version__
 from gainlink.errors import GainlinkError, TransportError
 from gainlink.fileio import atomic_write_bytes
 from gainlink.shipping.artifact import Artifact, from_dict
+from gainlink.version import __version__
 
 from ..loop.scenario import parse_scenario
 from ..paths import cache_dir

@@ -8,13 +8,13 @@ host executable must be started to speak it (:meth:`Transport.controller_argv`),
 starts and stops the controller process itself.
 
 Transports are registered by kind in :data:`TRANSPORTS` and built from the scenario's
-``[transport]`` table with :func:`transport_from_config`.
+``[transport]`` table with :func:`gainlink.hil.links.config.transport_from_config`.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -105,24 +105,3 @@ class Transport(ABC):
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
-
-
-def transport_from_config(config: Mapping[str, Any], *, artifact: Any) -> Transport:
-    """Build the transport described by a scenario's ``[transport]`` table.
-
-    A table with ``kind`` names a registered transport; a table without ``kind`` but with
-    ``interface`` is a python-can configuration (kind ``can``).
-    """
-    from . import can as can_transport  # noqa: F401 - registers "can"
-
-    if not isinstance(config, Mapping):
-        raise TransportError("transport: expected a table")
-    kind = config.get("kind", "can" if "interface" in config else None)
-    if kind is None:
-        raise TransportError("transport: give interface (a python-can configuration) or kind")
-    if kind == "mavlink":
-        try:
-            import gainlink.hil.links.mavlink  # noqa: F401 - registers "mavlink" when present
-        except ImportError:
-            pass
-    return TRANSPORTS.create(str(kind), config, artifact=artifact)

@@ -15,21 +15,21 @@ import time
 from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gainlink.errors import GainlinkError, PlantError, ScenarioError, TransportError
+from gainlink.errors import PlantError, TransportError
 from gainlink.shipping.artifact import Artifact, load
 
-from ..links.base import Transport, transport_from_config
-from ..plants.base import Plant, check_dimensions
-from ..plants.config import plant_from_config
+from ..links.base import Transport
+from ..links.config import transport_from_config
+from ..plants.base import Plant
 from .controller import ControllerProcess, controller_argv, qemu_peer
 from .faults import FaultInjector
 from .metrics import RunTrace, compute_metrics, link_capacity
 from .plan import Recorder, describe_artifact, plan_run, start_twin
 from .scenario import Scenario
+from .scenario_plant import build_plant
 from .scheduler import SPIN_NS, Pacer, Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
 
 log = logging.getLogger(__name__)
@@ -51,34 +51,6 @@ def prepare(scenario: Scenario) -> tuple[Artifact, Plant]:
     """Load the artifact and build the plant, checking that they fit each other."""
     artifact = load(scenario.artifact_path)
     return artifact, build_plant(scenario, artifact=artifact)
-
-
-def build_plant(scenario: Scenario, *, artifact: Artifact) -> Plant:
-    """The scenario's plant, checked against the artifact and the scenario's signal names."""
-    base = scenario.path.parent if scenario.path is not None else Path.cwd()
-    plant = plant_from_config(scenario.plant, artifact=artifact, base_dir=base)
-    try:
-        check_dimensions(plant, m=artifact.m, p=artifact.p, artifact=str(scenario.artifact_path))
-        for name in scenario.reference:
-            if name not in artifact.signals["references"]:
-                raise ScenarioError(
-                    f"scenario: reference {name!r} is not a reference of the artifact "
-                    f"(references: {', '.join(artifact.signals['references']) or 'none'})"
-                )
-        for name in scenario.noise:
-            if name not in plant.output_names:
-                raise ScenarioError(
-                    f"scenario: noise on {name!r}, which is not a plant output ({', '.join(plant.output_names)})"
-                )
-        for d in scenario.disturbances:
-            if d.input not in plant.input_names:
-                raise ScenarioError(
-                    f"scenario: disturbance on {d.input!r}, which is not a plant input ({', '.join(plant.input_names)})"
-                )
-    except GainlinkError:
-        plant.close()
-        raise
-    return plant
 
 
 def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | None = None) -> RunResult:

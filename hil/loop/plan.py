@@ -14,6 +14,7 @@ from gainlink.shipping.artifact import Artifact
 from ..plants.base import Plant
 from .metrics import RunTrace
 from .scenario import Scenario, profile_values
+from .scenario_plant import build_plant
 
 
 @dataclass(frozen=True)
@@ -119,8 +120,6 @@ def start_twin(scenario: Scenario, *, artifact: Artifact, plan: Plan, stack) -> 
     """
     if not scenario.twin:
         return None
-    from .bridge import build_plant  # the bridge builds and checks plants; it imports this module
-
     plant = build_plant(scenario, artifact=artifact)
     stack.callback(plant.close)
     plant.reset(initial=scenario.initial_state)

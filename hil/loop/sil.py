@@ -26,10 +26,11 @@ from gainlink.errors import PlantError, ScenarioError
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping.artifact import Artifact
 
-from .bridge import RunResult, build_plant
+from .bridge import RunResult
 from .metrics import compute_metrics
 from .plan import Recorder, describe_artifact, plan_run, start_twin
 from .scenario import Scenario
+from .scenario_plant import build_plant
 
 GL_SATURATED, GL_ERR_NANINF = 1, -2
 

@@ -13,7 +13,7 @@ import logging
 import pkgutil
 import sys
 
-from .. import __version__
+from ..version import __version__
 from ..errors import GainlinkError
 
 log = logging.getLogger("gainlink")

@@ -9,7 +9,7 @@ from importlib import metadata
 
 import numpy as np
 
-from .. import __version__
+from ..version import __version__
 from ..shipping.artifact import SCHEMA_VERSION, matrix_to_json, vector_to_json
 from ..spec import PlantSpec
 from .discretize import Discretised
