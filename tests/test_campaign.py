@@ -347,7 +347,41 @@ def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
     assert {k: report.get(k) for k in CONTROL_KEYS} == _control(rec)
     assert report["scenario"]["seed"] == row["seed"]
     bad = run_cli("campaign", "show", out, "--run", "zzzz")
-    assert bad.code == 2 and "no run matching 'zzzz'" in bad.err
+    assert bad.code == 2 and "no run id matching 'zzzz'" in bad.err
+
+
+def test_show_takes_a_run_by_index_or_by_id_never_guessing_which(local_run, tmp_path):
+    from gainlink.hil.campaign.show import find_run
+
+    result, out = local_run
+    ids = [r["id"] for r in result.rows]
+    by_index = run_cli("campaign", "show", out, "--index", "3", "--report", tmp_path / "r", "--no-plots")
+    assert by_index.code == 0, by_index.err
+    report = json.loads((tmp_path / "r" / "report.json").read_text())
+    assert report["scenario"]["name"].endswith(f"run 3 ({ids[3]})")
+    for i in range(len(ids)):
+        assert find_run(out, index=i)["id"] == ids[i]
+    # Digits after --run are the start of an id, whether or not they could also be an index: a number that
+    # starts no id is refused with the flag that takes an index (before, "--run 4" meant index 4 unless some id
+    # happened to start with "4").
+    digits = next(
+        s
+        for s in [*map(str, range(len(ids))), *(f"0{i}" for i in range(len(ids)))]
+        if not any(i.startswith(s) for i in ids)
+    )
+    with pytest.raises(CampaignError, match=rf"no run id matching '{digits}' \(for the run at index {int(digits)}, "):
+        find_run(out, run=digits)
+    for i in ids:  # the shortest prefix that is unique names its id, digits only or not
+        prefix = next(i[:k] for k in range(1, 21) if sum(j.startswith(i[:k]) for j in ids) == 1)
+        assert find_run(out, run=prefix)["id"] == i
+    res = run_cli("campaign", "show", out, "--index", str(len(ids)))
+    assert res.code == 2 and res.err.strip().endswith(
+        f"has {len(ids)} runs (index 0 to {len(ids) - 1}), not {len(ids)}"
+    )
+    res = run_cli("campaign", "show", out, "--index", "-1")
+    assert res.code == 2 and "not -1" in res.err
+    res = run_cli("campaign", "show", out, "--index", "1", "--run", ids[1])
+    assert res.code == 2 and "not allowed with argument" in res.err and len(res.err.strip().splitlines()) == 1
 
 
 def test_a_long_run_is_stored_as_evenly_spaced_true_samples_with_both_ends():

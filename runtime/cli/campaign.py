@@ -64,13 +64,13 @@ def _show(args: argparse.Namespace) -> int:
     from gainlink.hil.loop.report import summary_text
 
     out = Path(args.dir)
-    if args.run is None:
+    if args.run is None and args.index is None:
         path = out / "summary.txt"
         if not path.is_file():
             raise GainlinkError(f"{out} holds no campaign report (no summary.txt)")
         sys.stdout.write(path.read_text("utf-8"))
         return 0
-    result, folder = show_run(out, args.run, report=args.report, plots=not args.no_plots)
+    result, folder = show_run(out, args.run, index=args.index, report=args.report, plots=not args.no_plots)
     sys.stdout.write(summary_text(result, report_dir=folder))
     return 0
 
@@ -97,7 +97,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     s = sub.add_parser("show", help="print a campaign's summary, or replay one run with its full HIL report")
     s.add_argument("dir", help="campaign folder")
-    s.add_argument("--run", help="run id (or a unique prefix, or the run's index) to replay")
-    s.add_argument("--report", help="report folder for --run (default DIR/replay/ID)")
+    which = s.add_mutually_exclusive_group()
+    which.add_argument("--run", metavar="ID", help="replay the run with this id (or a start of it no other id shares)")
+    which.add_argument("--index", type=int, metavar="N", help="replay the run at this index (its row in campaign.csv)")
+    s.add_argument("--report", help="report folder of the replayed run (default DIR/replay/ID)")
     s.add_argument("--no-plots", action="store_true", help="report.json and summary.txt only")
     s.set_defaults(func=_show)
