@@ -12,10 +12,12 @@ import contextlib
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -94,10 +96,18 @@ def _control(record: dict) -> dict:
 
 @pytest.fixture(scope="module")
 def local_run(pend, tmp_path_factory):
-    """The small campaign on a LocalCluster of 2 process workers."""
+    """The small campaign on a LocalCluster of 2 process workers, started while port 8787 (Dask's dashboard
+    port) is taken; returns the result, the folder and the warnings raised meanwhile."""
     out = tmp_path_factory.mktemp("campaign") / "local"
-    result = run(small_campaign(pend), out=out, workers=2)
-    return result, out
+    with contextlib.ExitStack() as stack:
+        holder = stack.enter_context(socket.socket())
+        with contextlib.suppress(OSError):  # taken already (another cluster on this host): as good
+            holder.bind(("127.0.0.1", 8787))
+            holder.listen()
+        caught = stack.enter_context(warnings.catch_warnings(record=True))
+        warnings.simplefilter("always")
+        result = run(small_campaign(pend), out=out, workers=2)
+    return result, out, [str(w.message) for w in caught]
 
 
 # --- the file ------------------------------------------------------------------------------------
@@ -151,6 +161,14 @@ def test_a_run_that_cannot_be_built_is_named_before_anything_runs(pend, tmp_path
     res = run_cli("campaign", "run", sil, "--out", tmp_path / "batch", "--batch", "0")
     assert res.code == 2 and res.err.strip().endswith("campaign: batch must be a whole number >= 1, not 0")
     assert not (tmp_path / "batch").exists()
+
+
+def test_a_refused_worker_count_writes_nothing(pend, tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text(toml_write.dumps(small_campaign(pend)))
+    res = run_cli("campaign", "run", path, "--out", tmp_path / "out", "--workers", "0")
+    assert res.code == 2 and res.err.strip() == "gainlink: error: campaign: workers must be a whole number >= 1, not 0"
+    assert not (tmp_path / "out").exists()
 
 
 # --- the plan ------------------------------------------------------------------------------------
@@ -307,7 +325,7 @@ def test_verdicts_name_each_failed_criterion():
 
 
 def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pend, local_run):
-    result, out = local_run
+    result, out, _ = local_run
     assert result.total == 6 and result.executed == 6 and result.reused == 0 and result.errors == 0
     doc = json.loads((out / "campaign.json").read_text())
     assert doc["counts"]["runs"] == 6 and doc["counts"]["pass"] == result.passed
@@ -337,8 +355,14 @@ def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pen
     assert oct((out / "campaign.json").stat().st_mode & 0o777) == "0o644"
 
 
+def test_a_local_cluster_without_dashboard_says_nothing_about_a_taken_dashboard_port(local_run):
+    # Dask's scheduler serves its HTTP routes (health, metrics) even without a dashboard, on port 8787 by default,
+    # and warned "Port 8787 is already in use" whenever another cluster held it.
+    assert [w for w in local_run[2] if "8787" in w or "in use" in w] == []
+
+
 def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
-    result, out = local_run
+    result, out, _ = local_run
     row = result.rows[4]
     res = run_cli("campaign", "show", out, "--run", row["id"][:8], "--report", tmp_path / "r", "--no-plots")
     assert res.code == 0, res.err
@@ -353,7 +377,7 @@ def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
 def test_show_takes_a_run_by_index_or_by_id_never_guessing_which(local_run, tmp_path):
     from gainlink.hil.campaign.show import find_run
 
-    result, out = local_run
+    result, out, _ = local_run
     ids = [r["id"] for r in result.rows]
     by_index = run_cli("campaign", "show", out, "--index", "3", "--report", tmp_path / "r", "--no-plots")
     assert by_index.code == 0, by_index.err
@@ -552,7 +576,7 @@ def dask_cluster(tmp_path_factory):
 
 
 def test_scheduler_and_two_worker_processes_give_the_local_cluster_results(pend, local_run, dask_cluster, tmp_path):
-    _, local_out = local_run
+    _, local_out, _ = local_run
     path = tmp_path / "small.toml"
     path.write_text(toml_write.dumps(small_campaign(pend)))
     # In tasks of 3 runs (the LocalCluster ran one per task): the results are the runs', whatever the batching.

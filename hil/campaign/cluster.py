@@ -30,6 +30,11 @@ LOCAL_CONFIG = {
     "distributed.worker.memory.monitor-interval": "1s",
 }
 
+# Without a dashboard the scheduler still serves its HTTP routes (health, metrics), by default on port 8787, and warns
+# "Port 8787 is already in use" when another cluster on the host has it: a port of the system's choosing instead,
+# on loopback like the rest of the LocalCluster.
+SCHEDULER_HTTP = "127.0.0.1:0"
+
 
 class ClusterError(GainlinkError, ConnectionError):
     """The Dask scheduler cannot be reached or the cluster cannot start."""
@@ -67,7 +72,12 @@ def dask_client(
         raise ClusterError(f"--workers must be at least 1, not {n}")
     with dask.config.set(LOCAL_CONFIG):
         cluster = LocalCluster(
-            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+            scheduler_kwargs={"dashboard_address": SCHEDULER_HTTP},
         )
     with contextlib.closing(cluster), contextlib.closing(Client(cluster)) as client:
         yield client

@@ -131,8 +131,9 @@ def run(
     >>> result = campaign.run("examples/campaigns/pendulum_mass_uncertainty.toml", out="out/c")  # doctest: +SKIP
     >>> result.passed / result.total                                                             # doctest: +SKIP
     """
-    if batch is not None and (not isinstance(batch, int) or batch < 1):
-        raise CampaignError(f"campaign: batch must be a whole number >= 1, not {batch!r}")
+    for name, value in (("batch", batch), ("workers", workers)):  # before anything is planned or written
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+            raise CampaignError(f"campaign: {name} must be a whole number >= 1, not {value!r}")
     campaign = as_campaign(campaign)
     plan = plan_campaign(campaign)
     store = Store(out)
