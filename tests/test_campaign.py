@@ -171,6 +171,52 @@ def test_a_refused_worker_count_writes_nothing(pend, tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize(
+    "axis, words",
+    [
+        (
+            {"target": "spec.controlr.R", "values": [1.0, 2.0]},
+            ("run 0 (spec.controlr.R=1, M_factor=", "): unknown key 'controlr' in spec (allowed: Ts, controller,"),
+        ),
+        (
+            {"target": "plant.parameters.M", "values": [1.0, "heavy"]},
+            "axis plant.parameters.M: plant.parameters.M is a number in the scenario (1.0), so the axis cannot set it "
+            'to "heavy"',
+        ),
+        (
+            {"name": "outs", "targets": ["plant.outputs"], "values": [["x", "theta"], "theta"]},
+            'axis outs: plant.outputs is a list in the scenario (["x", "theta"]), so the axis cannot set it to "theta"',
+        ),
+        ({"target": "plant.parameters.Mass", "values": [1.0]}, "plant cart_pendulum has no parameter 'Mass'"),
+        ({"target": "plant.parametrs.M", "values": [1.0]}, "plant cart_pendulum: unknown key(s) parametrs"),
+        ({"target": "initial_state.thta", "values": [0.1, 0.2]}, "plant cart_pendulum has no state 'thta'"),
+        ({"target": "noise.thta", "values": [0.001]}, "noise on 'thta', which is not a plant output"),
+        # not in the base scenario (the plant's default): the plant's own complaint, for the run that first has it
+        (
+            {"target": "plant.parameters.g", "values": [9.81, "low"]},
+            ("run 2 (plant.parameters.g=low, M_factor=", "): could not convert string to float: 'low'"),
+        ),
+    ],
+)
+def test_a_misspelt_path_or_a_value_of_another_kind_is_refused_before_any_run(pend, axis, words):
+    data = small_campaign(pend, grid=[axis], runs=2)
+    if axis.get("target", "").startswith("spec."):
+        data.pop("artifact")
+        data["spec"] = str(EXAMPLES / "pendulum.toml")
+    with pytest.raises(CampaignError) as err:
+        plan_campaign(parse_campaign(data))
+    words = (words,) if isinstance(words, str) else words
+    assert all(w in str(err.value) for w in words) and "\n" not in str(err.value), str(err.value)
+
+
+def test_a_refused_plan_writes_nothing_and_exits_2(pend, tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text(toml_write.dumps(small_campaign(pend, grid=[{"target": "initial_state.thta", "values": [0.1]}])))
+    res = run_cli("campaign", "run", path, "--out", tmp_path / "out")
+    assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and "has no state 'thta'" in res.err
+    assert not (tmp_path / "out").exists()
+
+
 # --- the plan ------------------------------------------------------------------------------------
 
 
@@ -700,6 +746,45 @@ def test_a_run_whose_worker_dies_is_retried_and_recorded_as_failed_after_a_secon
     rows = {r["index"]: r for r in result.rows}
     assert rows[3]["status"] == "error" and "KilledWorker" in rows[3]["reasons"][0]
     assert all(rows[i]["status"] in ("pass", "fail") for i in (0, 1, 2)) and result.errors == 1
+
+
+def test_runs_that_errored_fail_the_campaign_and_only_they_run_again_on_resume(pend, dask_cluster, tmp_path):
+    broken = tmp_path / "broken"  # the plant of half the runs refuses to start while this file exists
+    broken.write_text("")
+    data = small_campaign(
+        pend,
+        runs=2,
+        draw=small_campaign(pend)["draw"][:1],
+        grid=[{"target": "plant.broken_while", "values": ["", str(broken)]}],
+    )
+    data["scenario"]["duration"] = 1.0
+    data["scenario"]["plant"] = dict(
+        data["scenario"]["plant"], kind="python", **{"class": "campaign_plants:BuggyPendulum"}
+    )
+    path, out = tmp_path / "c.toml", tmp_path / "out"
+    path.write_text(toml_write.dumps(data))
+    argv = ("campaign", "run", path, "--out", out, "--scheduler", dask_cluster, "--no-progress")
+    first = run_cli(*argv)
+    assert first.code == 3, first.err
+    assert first.err.strip().splitlines()[-1] == (
+        f"gainlink: error: 2 of 4 runs errored (reasons in {out / 'failures.txt'}); the same command runs them "
+        "again, and only them, once the cause is fixed"
+    )
+    assert "4 runs, " in first.out and ", 2 errors" in first.out and "resumed" not in first.out
+    rows = json.loads((out / "campaign.json").read_text())["runs"]
+    assert [r["status"] == "error" for r in rows] == [False, False, True, True]
+    assert rows[2]["reasons"] == [f"BuggyPendulum: broken while {broken} exists"]
+    kept = {r["id"]: (out / "runs" / f"{r['id']}.json").stat().st_mtime_ns for r in rows[:2]}
+    broken.unlink()  # the cause fixed: the same command
+    second = run_cli(*argv)
+    assert second.code == 0, second.err
+    assert "resumed: 2 runs had results, 2 ran now" in second.out
+    doc = json.loads((out / "campaign.json").read_text())
+    assert doc["counts"]["runs"] == 4 and doc["counts"].get("error", 0) == 0
+    assert all(r["status"] in ("pass", "fail") for r in doc["runs"])
+    assert {i: (out / "runs" / f"{i}.json").stat().st_mtime_ns for i in kept} == kept  # not run again
+    third = run_cli(*argv)
+    assert third.code == 0 and "resumed: 4 runs had results, 0 ran now" in third.out
 
 
 def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, dask_cluster, tmp_path, caplog):

@@ -36,7 +36,9 @@ BATCHES_PER_THREAD = 4
 class CampaignResult:
     """A finished campaign: where its report is, its runs (one row each) and the counts.
 
-    ``reused`` runs had a result before this call (a resumed campaign); ``executed`` ran now.
+    ``reused`` runs had a result before this call (a resumed campaign; an error is not a result, so a run that
+    errored is run again); ``executed`` ran now. Both count distinct runs (a run planned twice with the same
+    inputs runs once); with the runs whose design failed they make up every distinct run.
     """
 
     out: Path
@@ -138,17 +140,17 @@ def run(
     plan = plan_campaign(campaign)
     store = Store(out)
     store.prepare(plan, plan_doc=plan_doc(plan))
+    unique = {p.id: p for p in reversed(plan.runs)}  # a run planned twice (same inputs) runs once: its first point
+    reused = {i for i in unique if store.finished(i)}  # before anything is stored, so the count is this call's
     todo: dict[str, RunPoint] = {}
-    reused = 0
-    for point in plan.runs:
-        if store.has(point.id) or point.id in todo:
-            reused += store.has(point.id)
+    for point in sorted(unique.values(), key=lambda p: p.index):
+        if point.id in reused:
             continue
         if point.error is not None:
             store.put(point, kind=campaign.kind, result={"status": "error", "reason": point.error})
             continue
         todo[point.id] = point
-    total = len({p.id for p in plan.runs})
+    total = len(unique)
     done = total - len(todo)
     if todo:
         with dask_client(scheduler=scheduler, workers=workers) as client:
@@ -161,7 +163,7 @@ def run(
         passed=counts["pass"],
         failed=counts["fail"],
         errors=counts["error"],
-        reused=reused,
+        reused=len(reused),
         executed=len(todo),
         summary=summary,
     )

@@ -1,4 +1,9 @@
-"""``gainlink campaign run|show``: many SIL/HIL runs on Dask, and one of them replayed with its full report."""
+"""``gainlink campaign run|show``: many SIL/HIL runs on Dask, and one of them replayed with its full report.
+
+Exit status of ``run``: 0 every run has a result (pass or fail: see the summary); 2 the campaign file or an option
+is wrong (nothing written); 3 some runs errored (the summary and ``failures.txt`` say why; the same command runs
+them again, and only them).
+"""
 
 from __future__ import annotations
 
@@ -10,6 +15,8 @@ from pathlib import Path
 from .hil import _progress_bar
 
 log = logging.getLogger("gainlink")
+
+EXIT_RUNS_ERRORED = 3
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -55,6 +62,13 @@ def _run(args: argparse.Namespace) -> int:
     sys.stdout.write(result.summary)
     if result.reused:
         sys.stdout.write(f"  resumed: {result.reused} runs had results, {result.executed} ran now\n")
+    if result.errors:
+        print(
+            f"gainlink: error: {result.errors} of {result.total} runs errored (reasons in "
+            f"{result.out / 'failures.txt'}); the same command runs them again, and only them, once the cause is fixed",
+            file=sys.stderr,
+        )
+        return EXIT_RUNS_ERRORED
     return 0
 
 
