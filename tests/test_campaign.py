@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shlex
 import signal
 import socket
 import subprocess
@@ -544,6 +545,58 @@ def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster
     # Resumed on the scheduler + workers of this module (no second LocalCluster to start): results are the
     # folder's, whichever cluster made them.
     res = run_cli("campaign", "run", path, "--out", out, "--scheduler", dask_cluster, "--no-progress")
+    assert res.code == 0, res.err
+    assert f"resumed: {len(before)} runs had results, {8 - len(before)} ran now" in res.out
+    after = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
+    assert len(after) == 8 and all(after[k] == v for k, v in before.items())
+    assert json.loads((out / "campaign.json").read_text())["counts"]["runs"] == 8
+
+
+def _group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_command_that_resumes(pend, tmp_path):
+    data = small_campaign(pend, runs=8, grid=[])
+    data["scenario"]["duration"] = 4.0
+    path, out = tmp_path / "c.toml", tmp_path / "out"
+    path.write_text(toml_write.dumps(data))
+    argv = ["campaign", "run", str(path), "--out", str(out), "--workers", "2", "--no-progress"]
+    proc = subprocess.Popen(
+        [str(VENV_BIN / "gainlink"), *argv],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 240
+        while len(list((out / "runs").glob("*.json"))) < 2 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.02)
+        os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the client and the LocalCluster's processes
+        _, err = proc.communicate(timeout=120)
+        deadline = time.monotonic() + 30
+        while _group_alive(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _group_alive(proc.pid), "a process of the campaign outlived it"
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    before = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
+    assert 2 <= len(before) < 8, "the campaign was not caught mid-run"
+    assert proc.returncode == 130
+    assert err.splitlines() == [
+        f"gainlink: interrupted: {len(before)} of 8 runs have a result in {out} (kept); resume with: gainlink "
+        f"campaign run {path} --out {out} --workers 2"
+    ]
+    # the resume command, as printed
+    res = run_cli(*shlex.split(err.split("resume with: ", 1)[1])[1:])
     assert res.code == 0, res.err
     assert f"resumed: {len(before)} runs had results, {8 - len(before)} ran now" in res.out
     after = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}

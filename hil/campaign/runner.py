@@ -56,6 +56,18 @@ class CampaignResult:
         return len(self.rows)
 
 
+class CampaignInterrupted(KeyboardInterrupt):
+    """A campaign stopped by an interrupt (Ctrl-C): its cluster is stopped, every run stored so far is kept.
+
+    ``finished`` of the ``total`` distinct runs have a result in ``out``; running the campaign again runs the
+    others.
+    """
+
+    def __init__(self, *, out: Path, finished: int, total: int) -> None:
+        super().__init__(f"campaign interrupted: {finished} of {total} runs have a result in {out}")
+        self.out, self.finished, self.total = out, finished, total
+
+
 def as_campaign(campaign: Campaign | str | Path | Mapping) -> Campaign:
     """A :class:`Campaign` from a parsed one, a TOML file path, or a mapping."""
     if isinstance(campaign, Campaign):
@@ -127,6 +139,13 @@ def run(
     -------
     CampaignResult
 
+    Raises
+    ------
+    CampaignError
+        The campaign file or an option is wrong (nothing written).
+    CampaignInterrupted
+        On an interrupt (a ``KeyboardInterrupt``): the cluster is stopped and every run stored so far is kept.
+
     Examples
     --------
     >>> import gainlink.hil.campaign as campaign
@@ -153,8 +172,12 @@ def run(
     total = len(unique)
     done = total - len(todo)
     if todo:
-        with dask_client(scheduler=scheduler, workers=workers) as client:
-            _submit_and_store(client, plan, todo, store, done=done, total=total, progress=progress, batch=batch)
+        try:
+            with dask_client(scheduler=scheduler, workers=workers) as client:
+                _submit_and_store(client, plan, todo, store, done=done, total=total, progress=progress, batch=batch)
+        except KeyboardInterrupt:  # the block closed the client (and the LocalCluster) on its way out
+            finished = sum(store.finished(i) for i in unique)
+            raise CampaignInterrupted(out=store.out, finished=finished, total=total) from None
     summary, rows = merge(plan, store)
     counts = {s: sum(1 for r in rows if r["status"] == s) for s in ("pass", "fail", "error")}
     return CampaignResult(

@@ -2,13 +2,15 @@
 
 Exit status of ``run``: 0 every run has a result (pass or fail: see the summary); 2 the campaign file or an option
 is wrong (nothing written); 3 some runs errored (the summary and ``failures.txt`` say why; the same command runs
-them again, and only them).
+them again, and only them); 130 interrupted (Ctrl-C: the cluster is stopped, every finished run kept, and one line
+gives the command that resumes).
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import shlex
 import sys
 from pathlib import Path
 
@@ -17,9 +19,33 @@ from .hil import _progress_bar
 log = logging.getLogger("gainlink")
 
 EXIT_RUNS_ERRORED = 3
+EXIT_INTERRUPTED = 130
+
+
+def _resume_command(args: argparse.Namespace) -> str:
+    """The ``campaign run`` command line that continues this one (the same campaign, folder and cluster)."""
+    argv = ["gainlink", "campaign", "run", args.campaign, "--out", args.out]
+    for flag, value in (("--scheduler", args.scheduler), ("--workers", args.workers), ("--batch", args.batch)):
+        if value is not None:
+            argv += [flag, str(value)]
+    return shlex.join(argv)
 
 
 def _run(args: argparse.Namespace) -> int:
+    from gainlink.hil.campaign import CampaignInterrupted
+
+    try:
+        return _run_campaign(args)
+    except CampaignInterrupted as stop:
+        print(
+            f"gainlink: interrupted: {stop.finished} of {stop.total} runs have a result in {stop.out} (kept); "
+            f"resume with: {_resume_command(args)}",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
+
+
+def _run_campaign(args: argparse.Namespace) -> int:
     from gainlink.hil.campaign import load_campaign, run
 
     campaign = load_campaign(args.campaign)
