@@ -8,8 +8,6 @@ simulation of the law, the HIL bridge as :mod:`gainlink.hil` (``gl.hil.run``) an
 neither it nor Dask). The command line ``gainlink`` is a shell over the same functions.
 """
 
-from .version import __version__ as __version__
-
 from . import hil
 from .api import design, from_gains, load, replay, simulate
 from .errors import (
@@ -29,6 +27,7 @@ from .proof.simulation import Simulation
 from .proof.twin import twin_comparison
 from .shipping.artifact import Artifact
 from .synthesis.compensator import compensator_stability
+from .version import __version__ as __version__
 
 __all__ = [
     "Artifact",

@@ -6,14 +6,20 @@ processes of the tests, which have this folder on their ``PYTHONPATH``.
 
 from __future__ import annotations
 
+from pathlib import Path
+
+from gainlink.errors import PlantError
 from gainlink.hil.plants.models import CartPendulum
 
 
 class BuggyPendulum(CartPendulum):
     """The built-in cart-pendulum; with ``bug = true`` its constructor raises a RuntimeError (not a GainlinkError,
-    so the run raises on the worker, as a bug would)."""
+    so the run raises on the worker, as a bug would); with ``broken_while = PATH`` it refuses to start (a
+    PlantError: the run's error) as long as that file exists."""
 
-    def __init__(self, *, bug: bool = False, **options) -> None:
+    def __init__(self, *, bug: bool = False, broken_while: str = "", **options) -> None:
         super().__init__(**options)
         if bug:
             raise RuntimeError("BuggyPendulum: the bug this test asked for")
+        if broken_while and Path(broken_while).exists():
+            raise PlantError(f"BuggyPendulum: broken while {broken_while} exists")

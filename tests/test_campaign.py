@@ -11,11 +11,14 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shlex
 import signal
+import socket
 import subprocess
 import sys
 import threading
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -94,10 +97,18 @@ def _control(record: dict) -> dict:
 
 @pytest.fixture(scope="module")
 def local_run(pend, tmp_path_factory):
-    """The small campaign on a LocalCluster of 2 process workers."""
+    """The small campaign on a LocalCluster of 2 process workers, started while port 8787 (Dask's dashboard
+    port) is taken; returns the result, the folder and the warnings raised meanwhile."""
     out = tmp_path_factory.mktemp("campaign") / "local"
-    result = run(small_campaign(pend), out=out, workers=2)
-    return result, out
+    with contextlib.ExitStack() as stack:
+        holder = stack.enter_context(socket.socket())
+        with contextlib.suppress(OSError):  # taken already (another cluster on this host): as good
+            holder.bind(("127.0.0.1", 8787))
+            holder.listen()
+        caught = stack.enter_context(warnings.catch_warnings(record=True))
+        warnings.simplefilter("always")
+        result = run(small_campaign(pend), out=out, workers=2)
+    return result, out, [str(w.message) for w in caught]
 
 
 # --- the file ------------------------------------------------------------------------------------
@@ -151,6 +162,60 @@ def test_a_run_that_cannot_be_built_is_named_before_anything_runs(pend, tmp_path
     res = run_cli("campaign", "run", sil, "--out", tmp_path / "batch", "--batch", "0")
     assert res.code == 2 and res.err.strip().endswith("campaign: batch must be a whole number >= 1, not 0")
     assert not (tmp_path / "batch").exists()
+
+
+def test_a_refused_worker_count_writes_nothing(pend, tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text(toml_write.dumps(small_campaign(pend)))
+    res = run_cli("campaign", "run", path, "--out", tmp_path / "out", "--workers", "0")
+    assert res.code == 2 and res.err.strip() == "gainlink: error: campaign: workers must be a whole number >= 1, not 0"
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "axis, words",
+    [
+        (
+            {"target": "spec.controlr.R", "values": [1.0, 2.0]},
+            ("run 0 (spec.controlr.R=1, M_factor=", "): unknown key 'controlr' in spec (allowed: Ts, controller,"),
+        ),
+        (
+            {"target": "plant.parameters.M", "values": [1.0, "heavy"]},
+            "axis plant.parameters.M: plant.parameters.M is a number in the scenario (1.0), so the axis cannot set it "
+            'to "heavy"',
+        ),
+        (
+            {"name": "outs", "targets": ["plant.outputs"], "values": [["x", "theta"], "theta"]},
+            'axis outs: plant.outputs is a list in the scenario (["x", "theta"]), so the axis cannot set it to "theta"',
+        ),
+        ({"target": "plant.parameters.Mass", "values": [1.0]}, "plant cart_pendulum has no parameter 'Mass'"),
+        ({"target": "plant.parametrs.M", "values": [1.0]}, "plant cart_pendulum: unknown key(s) parametrs"),
+        ({"target": "initial_state.thta", "values": [0.1, 0.2]}, "plant cart_pendulum has no state 'thta'"),
+        ({"target": "noise.thta", "values": [0.001]}, "noise on 'thta', which is not a plant output"),
+        # not in the base scenario (the plant's default): the plant's own complaint, for the run that first has it
+        (
+            {"target": "plant.parameters.g", "values": [9.81, "low"]},
+            ("run 2 (plant.parameters.g=low, M_factor=", "): could not convert string to float: 'low'"),
+        ),
+    ],
+)
+def test_a_misspelt_path_or_a_value_of_another_kind_is_refused_before_any_run(pend, axis, words):
+    data = small_campaign(pend, grid=[axis], runs=2)
+    if axis.get("target", "").startswith("spec."):
+        data.pop("artifact")
+        data["spec"] = str(EXAMPLES / "pendulum.toml")
+    with pytest.raises(CampaignError) as err:
+        plan_campaign(parse_campaign(data))
+    words = (words,) if isinstance(words, str) else words
+    assert all(w in str(err.value) for w in words) and "\n" not in str(err.value), str(err.value)
+
+
+def test_a_refused_plan_writes_nothing_and_exits_2(pend, tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text(toml_write.dumps(small_campaign(pend, grid=[{"target": "initial_state.thta", "values": [0.1]}])))
+    res = run_cli("campaign", "run", path, "--out", tmp_path / "out")
+    assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and "has no state 'thta'" in res.err
+    assert not (tmp_path / "out").exists()
 
 
 # --- the plan ------------------------------------------------------------------------------------
@@ -307,7 +372,7 @@ def test_verdicts_name_each_failed_criterion():
 
 
 def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pend, local_run):
-    result, out = local_run
+    result, out, _ = local_run
     assert result.total == 6 and result.executed == 6 and result.reused == 0 and result.errors == 0
     doc = json.loads((out / "campaign.json").read_text())
     assert doc["counts"]["runs"] == 6 and doc["counts"]["pass"] == result.passed
@@ -337,8 +402,14 @@ def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pen
     assert oct((out / "campaign.json").stat().st_mode & 0o777) == "0o644"
 
 
+def test_a_local_cluster_without_dashboard_says_nothing_about_a_taken_dashboard_port(local_run):
+    # Dask's scheduler serves its HTTP routes (health, metrics) even without a dashboard, on port 8787 by default,
+    # and warned "Port 8787 is already in use" whenever another cluster held it.
+    assert [w for w in local_run[2] if "8787" in w or "in use" in w] == []
+
+
 def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
-    result, out = local_run
+    result, out, _ = local_run
     row = result.rows[4]
     res = run_cli("campaign", "show", out, "--run", row["id"][:8], "--report", tmp_path / "r", "--no-plots")
     assert res.code == 0, res.err
@@ -347,7 +418,41 @@ def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
     assert {k: report.get(k) for k in CONTROL_KEYS} == _control(rec)
     assert report["scenario"]["seed"] == row["seed"]
     bad = run_cli("campaign", "show", out, "--run", "zzzz")
-    assert bad.code == 2 and "no run matching 'zzzz'" in bad.err
+    assert bad.code == 2 and "no run id matching 'zzzz'" in bad.err
+
+
+def test_show_takes_a_run_by_index_or_by_id_never_guessing_which(local_run, tmp_path):
+    from gainlink.hil.campaign.show import find_run
+
+    result, out, _ = local_run
+    ids = [r["id"] for r in result.rows]
+    by_index = run_cli("campaign", "show", out, "--index", "3", "--report", tmp_path / "r", "--no-plots")
+    assert by_index.code == 0, by_index.err
+    report = json.loads((tmp_path / "r" / "report.json").read_text())
+    assert report["scenario"]["name"].endswith(f"run 3 ({ids[3]})")
+    for i in range(len(ids)):
+        assert find_run(out, index=i)["id"] == ids[i]
+    # Digits after --run are the start of an id, whether or not they could also be an index: a number that
+    # starts no id is refused with the flag that takes an index (before, "--run 4" meant index 4 unless some id
+    # happened to start with "4").
+    digits = next(
+        s
+        for s in [*map(str, range(len(ids))), *(f"0{i}" for i in range(len(ids)))]
+        if not any(i.startswith(s) for i in ids)
+    )
+    with pytest.raises(CampaignError, match=rf"no run id matching '{digits}' \(for the run at index {int(digits)}, "):
+        find_run(out, run=digits)
+    for i in ids:  # the shortest prefix that is unique names its id, digits only or not
+        prefix = next(i[:k] for k in range(1, 21) if sum(j.startswith(i[:k]) for j in ids) == 1)
+        assert find_run(out, run=prefix)["id"] == i
+    res = run_cli("campaign", "show", out, "--index", str(len(ids)))
+    assert res.code == 2 and res.err.strip().endswith(
+        f"has {len(ids)} runs (index 0 to {len(ids) - 1}), not {len(ids)}"
+    )
+    res = run_cli("campaign", "show", out, "--index", "-1")
+    assert res.code == 2 and "not -1" in res.err
+    res = run_cli("campaign", "show", out, "--index", "1", "--run", ids[1])
+    assert res.code == 2 and "not allowed with argument" in res.err and len(res.err.strip().splitlines()) == 1
 
 
 def test_a_long_run_is_stored_as_evenly_spaced_true_samples_with_both_ends():
@@ -447,6 +552,58 @@ def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster
     assert json.loads((out / "campaign.json").read_text())["counts"]["runs"] == 8
 
 
+def _group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_command_that_resumes(pend, tmp_path):
+    data = small_campaign(pend, runs=8, grid=[])
+    data["scenario"]["duration"] = 4.0
+    path, out = tmp_path / "c.toml", tmp_path / "out"
+    path.write_text(toml_write.dumps(data))
+    argv = ["campaign", "run", str(path), "--out", str(out), "--workers", "2", "--no-progress"]
+    proc = subprocess.Popen(
+        [str(VENV_BIN / "gainlink"), *argv],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 240
+        while len(list((out / "runs").glob("*.json"))) < 2 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.02)
+        os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the client and the LocalCluster's processes
+        _, err = proc.communicate(timeout=120)
+        deadline = time.monotonic() + 30
+        while _group_alive(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _group_alive(proc.pid), "a process of the campaign outlived it"
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    before = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
+    assert 2 <= len(before) < 8, "the campaign was not caught mid-run"
+    assert proc.returncode == 130
+    assert err.splitlines() == [
+        f"gainlink: interrupted: {len(before)} of 8 runs have a result in {out} (kept); resume with: gainlink "
+        f"campaign run {path} --out {out} --workers 2"
+    ]
+    # the resume command, as printed
+    res = run_cli(*shlex.split(err.split("resume with: ", 1)[1])[1:])
+    assert res.code == 0, res.err
+    assert f"resumed: {len(before)} runs had results, {8 - len(before)} ran now" in res.out
+    after = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
+    assert len(after) == 8 and all(after[k] == v for k, v in before.items())
+    assert json.loads((out / "campaign.json").read_text())["counts"]["runs"] == 8
+
+
 # --- a real scheduler and two workers ---------------------------------------------------------------
 
 
@@ -518,7 +675,7 @@ def dask_cluster(tmp_path_factory):
 
 
 def test_scheduler_and_two_worker_processes_give_the_local_cluster_results(pend, local_run, dask_cluster, tmp_path):
-    _, local_out = local_run
+    _, local_out, _ = local_run
     path = tmp_path / "small.toml"
     path.write_text(toml_write.dumps(small_campaign(pend)))
     # In tasks of 3 runs (the LocalCluster ran one per task): the results are the runs', whatever the batching.
@@ -642,6 +799,45 @@ def test_a_run_whose_worker_dies_is_retried_and_recorded_as_failed_after_a_secon
     rows = {r["index"]: r for r in result.rows}
     assert rows[3]["status"] == "error" and "KilledWorker" in rows[3]["reasons"][0]
     assert all(rows[i]["status"] in ("pass", "fail") for i in (0, 1, 2)) and result.errors == 1
+
+
+def test_runs_that_errored_fail_the_campaign_and_only_they_run_again_on_resume(pend, dask_cluster, tmp_path):
+    broken = tmp_path / "broken"  # the plant of half the runs refuses to start while this file exists
+    broken.write_text("")
+    data = small_campaign(
+        pend,
+        runs=2,
+        draw=small_campaign(pend)["draw"][:1],
+        grid=[{"target": "plant.broken_while", "values": ["", str(broken)]}],
+    )
+    data["scenario"]["duration"] = 1.0
+    data["scenario"]["plant"] = dict(
+        data["scenario"]["plant"], kind="python", **{"class": "campaign_plants:BuggyPendulum"}
+    )
+    path, out = tmp_path / "c.toml", tmp_path / "out"
+    path.write_text(toml_write.dumps(data))
+    argv = ("campaign", "run", path, "--out", out, "--scheduler", dask_cluster, "--no-progress")
+    first = run_cli(*argv)
+    assert first.code == 3, first.err
+    assert first.err.strip().splitlines()[-1] == (
+        f"gainlink: error: 2 of 4 runs errored (reasons in {out / 'failures.txt'}); the same command runs them "
+        "again, and only them, once the cause is fixed"
+    )
+    assert "4 runs, " in first.out and ", 2 errors" in first.out and "resumed" not in first.out
+    rows = json.loads((out / "campaign.json").read_text())["runs"]
+    assert [r["status"] == "error" for r in rows] == [False, False, True, True]
+    assert rows[2]["reasons"] == [f"BuggyPendulum: broken while {broken} exists"]
+    kept = {r["id"]: (out / "runs" / f"{r['id']}.json").stat().st_mtime_ns for r in rows[:2]}
+    broken.unlink()  # the cause fixed: the same command
+    second = run_cli(*argv)
+    assert second.code == 0, second.err
+    assert "resumed: 2 runs had results, 2 ran now" in second.out
+    doc = json.loads((out / "campaign.json").read_text())
+    assert doc["counts"]["runs"] == 4 and doc["counts"].get("error", 0) == 0
+    assert all(r["status"] in ("pass", "fail") for r in doc["runs"])
+    assert {i: (out / "runs" / f"{i}.json").stat().st_mtime_ns for i in kept} == kept  # not run again
+    third = run_cli(*argv)
+    assert third.code == 0 and "resumed: 4 runs had results, 0 ran now" in third.out
 
 
 def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, dask_cluster, tmp_path, caplog):

@@ -62,13 +62,18 @@ def test_signed_upload_works_and_unsigned_upload_is_refused(exe, pend, retuned, 
         res = run_cli("mavlink", "upload", retuned, "--connect", url, "--signing-key", key_file, "--persist")
         assert res.code == 0, res.err
         assert "gain set committed" in res.out and "persisted" in res.out
-        # an upload without the key reads (open) but every set is refused: nothing changes
+        # an upload without the key reads (open) but every set is refused: nothing changes, and it says why
         res = run_cli("mavlink", "upload", pend, "--connect", url, "--retries", "1", "--timeout", "0.1")
-        assert res.code in (3, 4), res.out + res.err
         got = params(url, bytes.fromhex(key_file.read_text()))
     finally:
         fw.stop()
+    assert res.code == 2, res.out + res.err
+    assert res.err.splitlines() == [
+        "gainlink: error: the vehicle requires MAVLink 2 signing (--signing-key): it ignored every unsigned parameter "
+        "set (its own messages are signed); nothing was changed"
+    ]
     assert got["GL_HASH"] & 0xFFFFFFFF == crc_of(new) != crc_of(old)
+    assert got["GL_K_0_0"] == gain_set(new).fields["K"].reshape(-1)[0] != gain_set(old).fields["K"].reshape(-1)[0]
     c = fw.counters()
     assert c["signing"] == 1 and c["commits"] == 1 and c["persist_writes"] == 1
     assert c["unsigned"] >= 2  # the refused PARAM_SETs (sent and re-sent) are counted

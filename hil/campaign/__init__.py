@@ -9,12 +9,13 @@
 """
 
 from .config import Campaign, CampaignError, Criteria, load_campaign, parse_campaign
-from .runner import CampaignResult, run
+from .runner import CampaignInterrupted, CampaignResult, run
 from .show import show_run
 
 __all__ = [
     "Campaign",
     "CampaignError",
+    "CampaignInterrupted",
     "CampaignResult",
     "Criteria",
     "load_campaign",

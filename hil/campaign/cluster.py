@@ -6,7 +6,8 @@ or ``dask scheduler`` by hand (``--scheduler tcp://HOST:8786``). On the LocalClu
 dies is rescheduled once (``distributed.scheduler.allowed-failures = 1``); a second death of a worker
 under it makes it fail with ``KilledWorker``, which the campaign records. A remote scheduler applies
 its own setting (Dask's default: 3). The LocalCluster also turns off Dask's background work that only
-a dashboard would show (:data:`LOCAL_CONFIG`); a cluster of yours keeps its own configuration.
+a dashboard would show (:data:`LOCAL_CONFIG`), and its worker processes ignore a Ctrl-C, which the client
+alone handles (:mod:`.local_worker`); a cluster of yours keeps its own configuration.
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ import os
 from collections.abc import Iterator
 
 from gainlink.errors import GainlinkError
+
+log = logging.getLogger(__name__)
 
 ALLOWED_FAILURES = 1
 # The LocalCluster's own settings. Dask's defaults sample every worker's stack 100 times a second (for a
@@ -29,6 +32,19 @@ LOCAL_CONFIG = {
     "distributed.admin.system-monitor.interval": "2s",
     "distributed.worker.memory.monitor-interval": "1s",
 }
+
+# Without a dashboard the scheduler still serves its HTTP routes (health, metrics), by default on port 8787, and warns
+# "Port 8787 is already in use" when another cluster on the host has it: a port of the system's choosing instead,
+# on loopback like the rest of the LocalCluster.
+SCHEDULER_HTTP = "127.0.0.1:0"
+WORKER_SETUP = "gainlink.hil.campaign.local_worker"
+
+
+def _dask_log_level() -> int:
+    """The level of Dask's own logs in the LocalCluster's processes: its errors only when this module logs at DEBUG
+    (``gainlink -v``). Every failed run is the campaign's to report (with its reason), and a Ctrl-C stops workers
+    in the middle of a run, which then log heartbeats the closing scheduler no longer answers, with tracebacks."""
+    return logging.WARNING if log.isEnabledFor(logging.DEBUG) else logging.CRITICAL
 
 
 class ClusterError(GainlinkError, ConnectionError):
@@ -67,7 +83,13 @@ def dask_client(
         raise ClusterError(f"--workers must be at least 1, not {n}")
     with dask.config.set(LOCAL_CONFIG):
         cluster = LocalCluster(
-            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=_dask_log_level(),
+            scheduler_kwargs={"dashboard_address": SCHEDULER_HTTP},
+            preload=[WORKER_SETUP],  # each worker process ignores SIGINT: the client stops them
         )
     with contextlib.closing(cluster), contextlib.closing(Client(cluster)) as client:
         yield client

@@ -20,13 +20,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gainlink.errors import GainlinkError
+from gainlink.errors import GainlinkError, SpecError
 from gainlink.shipping.artifact import canonical_json, render
 from gainlink.version import __version__
 
-from ..loop.scenario import parse_scenario
+from ..loop.scenario import Scenario, parse_scenario
 from ..loop.sil import check_sil
 from .config import Axis, Campaign, CampaignError, path_steps
+from .preflight import DryBuild, check_axis_values
 
 
 @dataclass(frozen=True)
@@ -167,7 +168,7 @@ def _fmu_blob(scenario: dict, campaign: Campaign, blobs: dict, cache: dict) -> N
     plant["path"] = f"sha256:{cache[key]}"
 
 
-def _check_scenario(campaign: Campaign, scenario: dict, where: str) -> None:
+def _check_scenario(campaign: Campaign, scenario: dict, where: str) -> Scenario:
     if "firmware" in scenario:
         raise CampaignError("campaign: scenario.firmware: a campaign builds the firmware on each worker")
     data = dict(scenario, artifact="gains.json")
@@ -179,10 +180,19 @@ def _check_scenario(campaign: Campaign, scenario: dict, where: str) -> None:
             check_sil(parsed)
     except GainlinkError as exc:
         raise CampaignError(f"campaign: {where}: {exc}") from None
+    return parsed
 
 
 def plan_campaign(campaign: Campaign) -> CampaignPlan:
-    """Expand ``campaign`` into its runs (designing each grid point's artifact)."""
+    """Expand ``campaign`` into its runs (designing each grid point's artifact).
+
+    A mistake of the campaign file is refused here, before any run (:class:`CampaignError`, one line naming the
+    key): a value of another kind than the scenario holds (:func:`.preflight.check_axis_values`), a spec the spec
+    parser refuses at any grid point, a plant that cannot be built for one run of each shape
+    (:class:`.preflight.DryBuild`). A design that fails at a grid point (``DesignError``) is that point's result.
+    """
+    check_axis_values(campaign)
+    dry = DryBuild(campaign)
     artifacts: dict[str, bytes] = {}
     blobs: dict[str, bytes] = {}
     fmu_cache: dict = {}
@@ -201,13 +211,14 @@ def plan_campaign(campaign: Campaign) -> CampaignPlan:
             for axis in (*campaign.grid, *campaign.draws):
                 _apply_axis(axis, values[axis.name], spec=spec, scenario=scenario, window=campaign.fault_window)
             where = f"run {len(runs)} ({', '.join(f'{k}={_short(v)}' for k, v in values.items()) or 'base'})"
-            _check_scenario(campaign, scenario, where)
-            _fmu_blob(scenario, campaign, blobs, fmu_cache)
+            parsed = _check_scenario(campaign, scenario, where)
             key = canonical_json(spec) if spec_varies else ""
             got = fixed if fixed is not None else _artifact(campaign, spec, key, designs, where)
             sha, error = (got[1], None) if isinstance(got, tuple) else (None, got)
             if sha is not None:
                 artifacts.setdefault(sha, got[0])
+                dry.check(parsed, scenario, artifact_json=got[0], sha=sha, where=where)
+            _fmu_blob(scenario, campaign, blobs, fmu_cache)
             rid = run_id(kind=campaign.kind, artifact_sha256=sha, scenario=scenario, seed=seed)
             runs.append(
                 RunPoint(
@@ -234,6 +245,8 @@ def _artifact(campaign: Campaign, spec: dict, key: str, designs: dict, where: st
     if key not in designs:
         try:
             designs[key] = _with_sha(_design(spec, source=f"{campaign.spec_path} ({where})"))
+        except SpecError as exc:  # the campaign's spec or its spec.* axes are wrong, at every run alike
+            raise CampaignError(f"campaign: {where}: {exc}") from None
         except GainlinkError as exc:
             designs[key] = f"design failed: {exc}"
     return designs[key]

@@ -36,7 +36,9 @@ BATCHES_PER_THREAD = 4
 class CampaignResult:
     """A finished campaign: where its report is, its runs (one row each) and the counts.
 
-    ``reused`` runs had a result before this call (a resumed campaign); ``executed`` ran now.
+    ``reused`` runs had a result before this call (a resumed campaign; an error is not a result, so a run that
+    errored is run again); ``executed`` ran now. Both count distinct runs (a run planned twice with the same
+    inputs runs once); with the runs whose design failed they make up every distinct run.
     """
 
     out: Path
@@ -52,6 +54,18 @@ class CampaignResult:
     def total(self) -> int:
         """Every run of the campaign."""
         return len(self.rows)
+
+
+class CampaignInterrupted(KeyboardInterrupt):
+    """A campaign stopped by an interrupt (Ctrl-C): its cluster is stopped, every run stored so far is kept.
+
+    ``finished`` of the ``total`` distinct runs have a result in ``out``; running the campaign again runs the
+    others.
+    """
+
+    def __init__(self, *, out: Path, finished: int, total: int) -> None:
+        super().__init__(f"campaign interrupted: {finished} of {total} runs have a result in {out}")
+        self.out, self.finished, self.total = out, finished, total
 
 
 def as_campaign(campaign: Campaign | str | Path | Mapping) -> Campaign:
@@ -125,33 +139,45 @@ def run(
     -------
     CampaignResult
 
+    Raises
+    ------
+    CampaignError
+        The campaign file or an option is wrong (nothing written).
+    CampaignInterrupted
+        On an interrupt (a ``KeyboardInterrupt``): the cluster is stopped and every run stored so far is kept.
+
     Examples
     --------
     >>> import gainlink.hil.campaign as campaign
     >>> result = campaign.run("examples/campaigns/pendulum_mass_uncertainty.toml", out="out/c")  # doctest: +SKIP
     >>> result.passed / result.total                                                             # doctest: +SKIP
     """
-    if batch is not None and (not isinstance(batch, int) or batch < 1):
-        raise CampaignError(f"campaign: batch must be a whole number >= 1, not {batch!r}")
+    for name, value in (("batch", batch), ("workers", workers)):  # before anything is planned or written
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+            raise CampaignError(f"campaign: {name} must be a whole number >= 1, not {value!r}")
     campaign = as_campaign(campaign)
     plan = plan_campaign(campaign)
     store = Store(out)
     store.prepare(plan, plan_doc=plan_doc(plan))
+    unique = {p.id: p for p in reversed(plan.runs)}  # a run planned twice (same inputs) runs once: its first point
+    reused = {i for i in unique if store.finished(i)}  # before anything is stored, so the count is this call's
     todo: dict[str, RunPoint] = {}
-    reused = 0
-    for point in plan.runs:
-        if store.has(point.id) or point.id in todo:
-            reused += store.has(point.id)
+    for point in sorted(unique.values(), key=lambda p: p.index):
+        if point.id in reused:
             continue
         if point.error is not None:
             store.put(point, kind=campaign.kind, result={"status": "error", "reason": point.error})
             continue
         todo[point.id] = point
-    total = len({p.id for p in plan.runs})
+    total = len(unique)
     done = total - len(todo)
     if todo:
-        with dask_client(scheduler=scheduler, workers=workers) as client:
-            _submit_and_store(client, plan, todo, store, done=done, total=total, progress=progress, batch=batch)
+        try:
+            with dask_client(scheduler=scheduler, workers=workers) as client:
+                _submit_and_store(client, plan, todo, store, done=done, total=total, progress=progress, batch=batch)
+        except KeyboardInterrupt:  # the block closed the client (and the LocalCluster) on its way out
+            finished = sum(store.finished(i) for i in unique)
+            raise CampaignInterrupted(out=store.out, finished=finished, total=total) from None
     summary, rows = merge(plan, store)
     counts = {s: sum(1 for r in rows if r["status"] == s) for s in ("pass", "fail", "error")}
     return CampaignResult(
@@ -160,7 +186,7 @@ def run(
         passed=counts["pass"],
         failed=counts["fail"],
         errors=counts["error"],
-        reused=reused,
+        reused=len(reused),
         executed=len(todo),
         summary=summary,
     )

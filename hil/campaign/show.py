@@ -21,31 +21,64 @@ from .store import Store
 from .worker import _scenario, artifact_from_bytes, run_point
 
 
-def find_run(out: Path, run: str) -> dict:
-    """The planned run ``run`` (an id, a unique id prefix, or an index) of the campaign in ``out``."""
+def find_run(out: Path, run: str | None = None, *, index: int | None = None) -> dict:
+    """The planned run of the campaign in ``out`` whose id starts with ``run``, or the one at ``index``.
+
+    Exactly one of the two. ``run`` is always the start of an id, even when it is all digits (ids are hex:
+    a number can be both an id prefix and an index, so the two are never guessed from one string).
+    """
+    if (run is None) == (index is None):
+        raise CampaignError("campaign show: give a run id (or its unique start) or an index, not both or neither")
     text = read_user_file(out / "plan.json", what="campaign plan", error=CampaignError)
     plan = json.loads(text)
-    runs = plan["runs"]
-    if run.isdigit() and int(run) < len(runs) and not any(r["id"].startswith(run) for r in runs):
-        return runs[int(run)] | {"kind": plan["campaign"]["kind"]}
+    runs, kind = plan["runs"], plan["campaign"]["kind"]
+    if index is not None:
+        if not 0 <= index < len(runs):
+            raise CampaignError(f"campaign {out} has {len(runs)} runs (index 0 to {len(runs) - 1}), not {index}")
+        return runs[index] | {"kind": kind}
     hits = {r["id"]: r for r in runs if r["id"].startswith(run)}
     if len(hits) != 1:
+        hint = "give more of the id"
+        if not hits:
+            hint = "ids are in campaign.csv"
+            if run.isdigit() and int(run) < len(runs):
+                hint = f"for the run at index {int(run)}, give --index {int(run)}"
         raise CampaignError(
-            f"campaign {out}: {'no run' if not hits else 'several runs'} matching {run!r} "
-            "(give a run id from campaign.csv, or its index)"
+            f"campaign {out}: {'no run id' if not hits else f'{len(hits)} run ids'} matching {run!r} ({hint})"
         )
-    return next(iter(hits.values())) | {"kind": plan["campaign"]["kind"]}
+    return next(iter(hits.values())) | {"kind": kind}
 
 
 def show_run(
-    out: str | Path, run: str, *, report: str | Path | None = None, plots: bool = True
+    out: str | Path,
+    run: str | None = None,
+    *,
+    index: int | None = None,
+    report: str | Path | None = None,
+    plots: bool = True,
 ) -> tuple[RunResult, Path]:
-    """Run campaign run ``run`` again and write its full report (default ``DIR/replay/<id>``).
+    """Run a campaign's run again and write its full report (default ``DIR/replay/<id>``).
 
-    Returns the run's result and the report folder.
+    Parameters
+    ----------
+    out : path
+        The campaign folder.
+    run : str, optional
+        The run's id, or a start of it that no other id shares.
+    index : int, optional
+        The run's index instead (its row in ``campaign.csv``).
+    report : path, optional
+        The report folder.
+    plots : bool
+        Write the plots too.
+
+    Returns
+    -------
+    tuple of (RunResult, Path)
+        The run's result and the report folder.
     """
     out = Path(out)
-    point = find_run(out, run)
+    point = find_run(out, run, index=index)
     if point.get("error"):
         raise CampaignError(f"run {point['id']} never ran: {point['error']}")
     store = Store(out)

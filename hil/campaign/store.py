@@ -10,7 +10,8 @@
 
 Every file is written to a temporary name and renamed; a run's ``.json`` is written after its ``.npy``,
 so a run counts as done exactly when its ``.json`` exists, and a campaign killed at any point resumes
-by running the ids without one.
+by running the ids without one, and those whose record is an error (an error is not a result: run the
+campaign again once its cause is fixed).
 """
 
 from __future__ import annotations
@@ -80,8 +81,15 @@ class Store:
         atomic_write_text(self.out / "plan.json", _json(plan_doc))
 
     def has(self, run_id: str) -> bool:
-        """True when run ``run_id`` has a result."""
+        """True when run ``run_id`` has a record (a result or an error)."""
         return (self.runs / f"{run_id}.json").is_file()
+
+    def finished(self, run_id: str) -> bool:
+        """True when run ``run_id`` has a result: a record that is not an error (errors are run again)."""
+        try:
+            return self.record(run_id).get("status") != "error"
+        except (OSError, ValueError):
+            return False
 
     def put(self, point: RunPoint, *, kind: str, result: dict) -> dict:
         """Record a finished (or failed) run; returns the record written."""

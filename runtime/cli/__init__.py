@@ -13,8 +13,8 @@ import logging
 import pkgutil
 import sys
 
-from ..version import __version__
 from ..errors import GainlinkError
+from ..version import __version__
 
 log = logging.getLogger("gainlink")
 

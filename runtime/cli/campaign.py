@@ -1,9 +1,16 @@
-"""``gainlink campaign run|show``: many SIL/HIL runs on Dask, and one of them replayed with its full report."""
+"""``gainlink campaign run|show``: many SIL/HIL runs on Dask, and one of them replayed with its full report.
+
+Exit status of ``run``: 0 every run has a result (pass or fail: see the summary); 2 the campaign file or an option
+is wrong (nothing written); 3 some runs errored (the summary and ``failures.txt`` say why; the same command runs
+them again, and only them); 130 interrupted (Ctrl-C: the cluster is stopped, every finished run kept, and one line
+gives the command that resumes).
+"""
 
 from __future__ import annotations
 
 import argparse
 import logging
+import shlex
 import sys
 from pathlib import Path
 
@@ -11,8 +18,34 @@ from .hil import _progress_bar
 
 log = logging.getLogger("gainlink")
 
+EXIT_RUNS_ERRORED = 3
+EXIT_INTERRUPTED = 130
+
+
+def _resume_command(args: argparse.Namespace) -> str:
+    """The ``campaign run`` command line that continues this one (the same campaign, folder and cluster)."""
+    argv = ["gainlink", "campaign", "run", args.campaign, "--out", args.out]
+    for flag, value in (("--scheduler", args.scheduler), ("--workers", args.workers), ("--batch", args.batch)):
+        if value is not None:
+            argv += [flag, str(value)]
+    return shlex.join(argv)
+
 
 def _run(args: argparse.Namespace) -> int:
+    from gainlink.hil.campaign import CampaignInterrupted
+
+    try:
+        return _run_campaign(args)
+    except CampaignInterrupted as stop:
+        print(
+            f"gainlink: interrupted: {stop.finished} of {stop.total} runs have a result in {stop.out} (kept); "
+            f"resume with: {_resume_command(args)}",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
+
+
+def _run_campaign(args: argparse.Namespace) -> int:
     from gainlink.hil.campaign import load_campaign, run
 
     campaign = load_campaign(args.campaign)
@@ -55,6 +88,13 @@ def _run(args: argparse.Namespace) -> int:
     sys.stdout.write(result.summary)
     if result.reused:
         sys.stdout.write(f"  resumed: {result.reused} runs had results, {result.executed} ran now\n")
+    if result.errors:
+        print(
+            f"gainlink: error: {result.errors} of {result.total} runs errored (reasons in "
+            f"{result.out / 'failures.txt'}); the same command runs them again, and only them, once the cause is fixed",
+            file=sys.stderr,
+        )
+        return EXIT_RUNS_ERRORED
     return 0
 
 
@@ -64,13 +104,13 @@ def _show(args: argparse.Namespace) -> int:
     from gainlink.hil.loop.report import summary_text
 
     out = Path(args.dir)
-    if args.run is None:
+    if args.run is None and args.index is None:
         path = out / "summary.txt"
         if not path.is_file():
             raise GainlinkError(f"{out} holds no campaign report (no summary.txt)")
         sys.stdout.write(path.read_text("utf-8"))
         return 0
-    result, folder = show_run(out, args.run, report=args.report, plots=not args.no_plots)
+    result, folder = show_run(out, args.run, index=args.index, report=args.report, plots=not args.no_plots)
     sys.stdout.write(summary_text(result, report_dir=folder))
     return 0
 
@@ -97,7 +137,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     s = sub.add_parser("show", help="print a campaign's summary, or replay one run with its full HIL report")
     s.add_argument("dir", help="campaign folder")
-    s.add_argument("--run", help="run id (or a unique prefix, or the run's index) to replay")
-    s.add_argument("--report", help="report folder for --run (default DIR/replay/ID)")
+    which = s.add_mutually_exclusive_group()
+    which.add_argument("--run", metavar="ID", help="replay the run with this id (or a start of it no other id shares)")
+    which.add_argument("--index", type=int, metavar="N", help="replay the run at this index (its row in campaign.csv)")
+    s.add_argument("--report", help="report folder of the replayed run (default DIR/replay/ID)")
     s.add_argument("--no-plots", action="store_true", help="report.json and summary.txt only")
     s.set_defaults(func=_show)

@@ -1,7 +1,8 @@
 """``gainlink mavlink``: upload a gain artifact to a vehicle, list its parameters, give it a signing key.
 
 Exit status of ``upload``: 0 verified (and persisted with ``--persist``); 2 nothing was changed
-(bad input, no heartbeat, missing parameter, other dimensions); 3 the upload failed after writing
+(bad input, no heartbeat, missing parameter, other dimensions, a vehicle that requires signing and was
+given no ``--signing-key``); 3 the upload failed after writing
 and every changed parameter was restored; 4 the upload failed and the rollback is incomplete.
 ``setup-signing``: 0 the vehicle answers signed with the new key; 2 it does not (or bad input, no heartbeat).
 """

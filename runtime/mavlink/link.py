@@ -49,6 +49,12 @@ def raw_param_value(msg: mavlink2.MAVLink_param_value_message) -> bytes:
     return (payload + bytes(4))[:4]
 
 
+def carries_signature(msg: mavlink2.MAVLink_message) -> bool:
+    """Whether ``msg`` arrived with a MAVLink 2 signature, checked or not (``get_signed()`` is true only for a
+    signature checked with our key; a link without a key takes signed messages unchecked)."""
+    return bool(msg.get_header().incompat_flags & mavlink2.MAVLINK_IFLAG_SIGNED)
+
+
 class MavLink:
     """One MAVLink 2 endpoint.
 

@@ -13,6 +13,11 @@ The steps of :func:`upload`:
 
 When any step after the first set fails, every parameter that was sent is set back to the value
 read in step 3 (and the old hash re-committed), and :class:`UploadFailed` lists what happened.
+
+A vehicle that requires signing (its messages carry signatures) but is spoken to without a key may
+answer reads and ignore every set: when no set is answered at all and reading the parameters back
+shows them unchanged, the upload fails with :data:`SIGNING_REQUIRED` (nothing was changed, nothing
+to roll back).
 """
 
 from __future__ import annotations
@@ -22,12 +27,13 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NoReturn
 
 from pymavlink.dialects.v20 import common as mavlink2
 
 from ..errors import ParameterError, PeerTimeoutError
 from ..shipping.artifact import Artifact
-from .link import MavLink
+from .link import MavLink, carries_signature
 from .params import (
     DIMENSION_IDS,
     HASH_ID,
@@ -45,6 +51,8 @@ from .params import (
 from .session import ParamSession, ParamValue
 
 log = logging.getLogger(__name__)
+
+SIGNING_REQUIRED = "the vehicle requires MAVLink 2 signing (--signing-key)"
 
 
 @dataclass(frozen=True)
@@ -233,7 +241,7 @@ def upload(
     own = link is None
     link = link or MavLink(connect, signing_key=signing_key)
     try:
-        session, target = _open_session(
+        session, target, needs_key = _open_session(
             link,
             heartbeat_timeout=heartbeat_timeout,
             encoding=encoding,
@@ -241,7 +249,16 @@ def upload(
             timeout=timeout,
             retries=retries,
         )
-        return _upload(session, plan=plan, persist=persist, dry_run=dry_run, t0=t0, target=target, on_diff=on_diff)
+        return _upload(
+            session,
+            plan=plan,
+            persist=persist,
+            dry_run=dry_run,
+            t0=t0,
+            target=target,
+            on_diff=on_diff,
+            needs_key=needs_key,
+        )
     finally:
         if own:
             link.close()
@@ -249,8 +266,9 @@ def upload(
 
 def _open_session(
     link: MavLink, *, heartbeat_timeout: float, encoding: Encoding | None, window: int, timeout: float, retries: int
-) -> tuple[ParamSession, tuple[int, int]]:
-    """The parameter session with the first vehicle that sends a heartbeat, in its integer encoding."""
+) -> tuple[ParamSession, tuple[int, int], bool]:
+    """The parameter session with the first vehicle that sends a heartbeat, in its integer encoding, and whether
+    that vehicle signs its messages while this link has no key (it may then ignore what we send)."""
     hb = link.wait_heartbeat(timeout=heartbeat_timeout)
     target = (hb.get_srcSystem(), hb.get_srcComponent())
     session = ParamSession(
@@ -264,13 +282,15 @@ def _open_session(
     )
     session.encoding = encoding or detect_encoding(session, autopilot=hb.autopilot)
     log.info("vehicle %d/%d, %s integer parameters", target[0], target[1], session.encoding.value)
-    return session, target
+    return session, target, carries_signature(hb) and not link.signed
 
 
-def _read_current(session: ParamSession, plan: _Plan) -> dict[str, ParamValue]:
+def _read_current(session: ParamSession, plan: _Plan, *, needs_key: bool) -> dict[str, ParamValue]:
     values: dict[str, ParamValue] = {}
     if plan.checks:  # the structure first: a loop of other dimensions is one clear error, not a list
         dims, missing = session.read([s.name for s in plan.checks])
+        if needs_key and not dims:
+            raise ParameterError(f"{SIGNING_REQUIRED}: it answered no unsigned parameter read; nothing was changed")
         if missing:
             raise ParameterError(
                 f"the vehicle is not gainlink firmware (no {', '.join(sorted(missing))}); "
@@ -284,6 +304,8 @@ def _read_current(session: ParamSession, plan: _Plan) -> dict[str, ParamValue]:
             )
         values.update(dims)
     got, missing = session.read([s.name for s in plan.specs] + ([HASH_ID] if plan.commit else []))
+    if needs_key and not got:
+        raise ParameterError(f"{SIGNING_REQUIRED}: it answered no unsigned parameter read; nothing was changed")
     if missing:
         listed = ", ".join(f"{n} ({why})" for n, why in sorted(missing.items())[:5])
         more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
@@ -307,8 +329,9 @@ def _upload(
     t0: float,
     target: tuple[int, int],
     on_diff: Callable[[tuple[ParamChange, ...]], None] | None,
+    needs_key: bool,
 ) -> UploadResult:
-    current = _read_current(session, plan)
+    current = _read_current(session, plan, needs_key=needs_key)
     changes = tuple(
         ParamChange(name=s.name, source=s.source, ptype=s.ptype, old=current[s.name].value, new=s.value)
         for s in plan.specs
@@ -342,10 +365,12 @@ def _upload(
     sent = verified = 0
     committed = False
     out = session.set([(c.name, c.ptype, c.new) for c in changes], stop_on_failure=True)
+    outcomes = [out]
     sent, verified = out.sent, len(out.verified)
     failure = _describe(out, what="set")
     if not failure and need_commit:
         c = session.set([(HASH_ID, INT32, new_hash)])
+        outcomes.append(c)
         sent += c.sent
         if c.ok:
             committed, verified = True, verified + 1
@@ -366,7 +391,38 @@ def _upload(
 
     events.insert(0, failure)
     touched = tuple(c for c in changes if c.name not in out.skipped)  # never-sent ones need no restore
-    rolled_back = _rollback(session, changes=touched, committed=committed, old_hash=old_hash, events=events)
+    sent_hash = old_hash if len(outcomes) > 1 else None
+    if needs_key and _all_ignored(session, outcomes, changes=touched, old_hash=sent_hash):
+        raise ParameterError(
+            f"{SIGNING_REQUIRED}: it ignored every unsigned parameter set (its own messages are signed); "
+            "nothing was changed"
+        )
+    _fail(session, failure, changes=touched, committed=committed, old_hash=old_hash, events=events)
+
+
+def _all_ignored(
+    session: ParamSession, outcomes: list, *, changes: tuple[ParamChange, ...], old_hash: int | None
+) -> bool:
+    """Whether the vehicle answered none of the sets and, read again, still holds the old value of every parameter
+    that was sent (``GL_HASH`` too when ``old_hash`` is given)."""
+    if any(o.verified or o.refused for o in outcomes):
+        return False
+    items = [(c.name, c.ptype, c.old) for c in changes] + ([(HASH_ID, INT32, old_hash)] if old_hash is not None else [])
+    got, missing = session.read([name for name, _, _ in items])
+    return not missing and all(same_value(a=got[name].value, b=old, ptype=t) for name, t, old in items)
+
+
+def _fail(
+    session: ParamSession,
+    failure: str,
+    *,
+    changes: tuple[ParamChange, ...],
+    committed: bool,
+    old_hash: int | None,
+    events: list[str],
+) -> NoReturn:
+    """Roll ``changes`` (and a commit) back and raise :class:`UploadFailed` saying whether that worked."""
+    rolled_back = _rollback(session, changes=changes, committed=committed, old_hash=old_hash, events=events)
     state = "every changed parameter was restored" if rolled_back else "ROLLBACK INCOMPLETE"
     raise UploadFailed(f"upload failed: {failure}; {state}", events=tuple(events), rolled_back=rolled_back)
 

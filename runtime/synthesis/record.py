@@ -9,9 +9,9 @@ from importlib import metadata
 
 import numpy as np
 
-from ..version import __version__
 from ..shipping.artifact import SCHEMA_VERSION, matrix_to_json, vector_to_json
 from ..spec import PlantSpec
+from ..version import __version__
 from .discretize import Discretised
 
 
