@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .artifact import Artifact
+from .errors import DataError
 from .reference import ReferenceLoop, Trace
 
 EPS = 2.0**-24
@@ -179,6 +180,11 @@ def one_step_check(artifact: Artifact, Y: np.ndarray, R: np.ndarray, trace: Trac
         Failures (with the first one named), the largest error relative to its bound per quantity, and
         the largest command error relative to the limit span.
 
+    Raises
+    ------
+    DataError
+        ``trace`` does not hold one step per sample.
+
     Examples
     --------
     >>> import control as ct, numpy as np, gainlink as gl
@@ -194,6 +200,8 @@ def one_step_check(artifact: Artifact, Y: np.ndarray, R: np.ndarray, trace: Trac
     Y = np.asarray(Y, dtype=float).reshape(-1, a.p)
     N = Y.shape[0]
     R = np.zeros((N, a.q)) if R is None or a.q == 0 else np.asarray(R, dtype=float).reshape(N, a.q)
+    if trace.u.shape[0] != N:
+        raise DataError(f"the trace has {trace.u.shape[0]} steps, the samples {N}")
     mags = _Magnitudes(a)
     law = ReferenceLoop(a)
     span = np.where(a.u_max > a.u_min, a.u_max - a.u_min, 1.0)
