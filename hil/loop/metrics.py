@@ -107,6 +107,11 @@ def compute_metrics(trace: RunTrace, *, artifact: Any, mode: str, late: int, per
         "period_jitter_us": _pct(jitter_us),
         "period_s": period_s,
         "saturation_fraction": {name: float(v) for name, v in zip(sig["inputs"], sat_frac)},
+        # steps in which any input saturated (at most ``steps``), and per input (these may add up to more)
+        "saturated_steps": int(np.count_nonzero(trace.sat.any(axis=1))) if N else 0,
+        "saturated_steps_per_input": {
+            name: int(v) for name, v in zip(sig["inputs"], trace.sat.sum(axis=0) if N else np.zeros(a.m))
+        },
         "outputs_final": {name: float(v) for name, v in zip(sig["outputs"], trace.y[-1])} if N else {},
         "inputs_peak_abs": {name: float(v) for name, v in zip(sig["inputs"], np.abs(trace.u).max(axis=0))} if N else {},
         "outputs_peak_abs": {name: float(v) for name, v in zip(sig["outputs"], np.abs(trace.y).max(axis=0))}

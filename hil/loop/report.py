@@ -78,7 +78,7 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
             f"  emulated UART ({info['controller'].get('board')}): {_fmt(u['round_trips_per_s'], ' round trips/s', 4)}"
             f" at the mean latency; a loop up to {_fmt(u['loop_hz_p99'], ' Hz', 4)} covers the p99 latency"
         )
-    lines.append("  saturated: " + ", ".join(f"{k} {100 * v:.1f}%" for k, v in m["saturation_fraction"].items()))
+    lines.append(_saturation_line(m))
     if "peak_integrator" in m:
         lines.append("  peak integrator: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["peak_integrator"].items()))
     lines += _twin_lines(m.get("twin"))
@@ -91,6 +91,15 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
     if report_dir is not None:
         lines.append(f"  report: {report_dir / 'report.json'}")
     return "\n".join(lines) + "\n"
+
+
+def _saturation_line(m: dict) -> str:
+    """Steps in which any input saturated, of all steps; then each input's own count."""
+    per_input = m["saturated_steps_per_input"]
+    steps = max(m["steps"], 1)
+    return f"  saturated {m['saturated_steps']} of {m['steps']} steps (any input); per input: " + ", ".join(
+        f"{k} {v} ({100 * v / steps:.1f}%)" for k, v in per_input.items()
+    )
 
 
 def _twin_lines(tw: dict | None) -> list[str]:

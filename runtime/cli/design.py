@@ -271,8 +271,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
     )
     print(
         f"open loop against {args.compare} (information): max |du| = {c.max_abs_u:.3g} ({c.max_rel_u:.3g} of the "
-        f"limit span), saturation flags differ on {c.sat_mismatches}, fault flags on {c.fault_mismatches} of "
-        f"{c.steps} steps; {comp.describe()}{why}"
+        f"limit span), saturation flags differ on {c.sat_mismatches} (per input: "
+        f"{', '.join(f'{name} {k}' for name, k in zip(a.signals['inputs'], c.sat_mismatches_per_input))}), "
+        f"fault flags on {c.fault_mismatches} of {c.steps} steps; {comp.describe()}{why}"
     )
     for name, check in checks.items():
         if not check.passed:
