@@ -73,11 +73,7 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
         f"faults injected {', '.join(f'{k} {v}' for k, v in m['faults_injected'].items() if v) or 'none'}"
     )
     if "uart" in m:
-        u = m["uart"]
-        lines.append(
-            f"  emulated UART ({info['controller'].get('board')}): {_fmt(u['round_trips_per_s'], ' round trips/s', 4)}"
-            f" at the mean latency; a loop up to {_fmt(u['loop_hz_p99'], ' Hz', 4)} covers the p99 latency"
-        )
+        lines += _uart_lines(m["uart"], board=info["controller"].get("board"))
     lines.append(_saturation_line(m))
     if "peak_integrator" in m:
         lines.append("  peak integrator: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["peak_integrator"].items()))
@@ -91,6 +87,18 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
     if report_dir is not None:
         lines.append(f"  report: {report_dir / 'report.json'}")
     return "\n".join(lines) + "\n"
+
+
+def _uart_lines(u: dict, *, board: str | None) -> list[str]:
+    """What the emulated UART sustained, from the service time of every answered sample (late ones too)."""
+    svc = u["service_us"]
+    return [
+        f"  emulated UART ({board}): a loop up to {_fmt(u['loop_hz_p99'], ' Hz', 4)} covers the p99 service time "
+        f"({_fmt(svc['p99'], ' us')}; p50 {_fmt(svc['p50'], ' us')}), {_fmt(u['round_trips_per_s'], '', 4)} "
+        "round trips/s back to back",
+        f"    service time = command back minus the later of its sample's send and the previous command, over "
+        f"{u['answered']} answered samples ({u['late_answers']} late); {u['unanswered']} never answered",
+    ]
 
 
 def _saturation_line(m: dict) -> str:
