@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import io
 import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from gainlink.fileio import publish_files
+from gainlink.twin_plot import png_bytes, twin_difference_figure
 
 from .bridge import RunResult
 
@@ -136,15 +136,6 @@ def _twin_lines(tw: dict | None) -> list[str]:
     return out
 
 
-def _png(fig: Any) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
-    return buf.getvalue()
-
-
 def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
     """PNG plots: outputs with references, inputs with limits, latency histogram."""
     import matplotlib
@@ -171,7 +162,7 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
         ax.legend(loc="best", fontsize=8)
     axes[-1, 0].set_xlabel("t [s]")
     fig.suptitle(f"{result.scenario.name}: outputs")
-    files["outputs.png"] = _png(fig)
+    files["outputs.png"] = png_bytes(fig)
     fig, axes = plt.subplots(len(ins), 1, figsize=(8, 2.2 * len(ins)), sharex=True, squeeze=False)
     for i, name in enumerate(ins):
         ax = axes[i, 0]
@@ -186,7 +177,7 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
         ax.legend(loc="best", fontsize=8)
     axes[-1, 0].set_xlabel("t [s]")
     fig.suptitle(f"{result.scenario.name}: inputs")
-    files["inputs.png"] = _png(fig)
+    files["inputs.png"] = png_bytes(fig)
     fig, ax = plt.subplots(figsize=(8, 3))
     lat = tr.latency_ns[np.isfinite(tr.latency_ns)] / 1e3
     if lat.size:
@@ -195,7 +186,7 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
     ax.set_ylabel("steps")
     ax.set_yscale("log")
     ax.set_title(f"{result.scenario.name}: latency ({lat.size} commands)")
-    files["latency.png"] = _png(fig)
+    files["latency.png"] = png_bytes(fig)
     if tr.has_twin:
         files["twin.png"] = _twin_plot(result, outs=outs, ins=ins)
     return files
@@ -203,24 +194,20 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
 
 def _twin_plot(result: RunResult, *, outs: list[str], ins: list[str]) -> bytes:
     """The run minus its twin, per output and input: what the implementation cost, over time."""
-    import matplotlib.pyplot as plt
-
     tr = result.trace
-    names = [(n, tr.y[:, i] - tr.twin_y[:, i]) for i, n in enumerate(outs)] + [
-        (n, tr.u[:, i] - tr.twin_u[:, i]) for i, n in enumerate(ins)
-    ]
-    fig, axes = plt.subplots(len(names), 1, figsize=(8, 1.9 * len(names)), sharex=True, squeeze=False)
-    lost = ~tr.got
-    for ax, (name, diff) in zip(axes[:, 0], names):
-        ax.plot(tr.t, diff, lw=0.8)
-        if lost.any():
-            ax.plot(tr.t[lost], diff[lost], "r.", ms=3, label="no command in time")
-            ax.legend(loc="best", fontsize=8)
-        ax.set_ylabel(f"{name} - twin")
-        ax.grid(True, alpha=0.3)
-    axes[-1, 0].set_xlabel("t [s]")
-    fig.suptitle(f"{result.scenario.name}: run minus its float64 twin")
-    return _png(fig)
+    fig = twin_difference_figure(
+        tr.t,
+        y=tr.y,
+        twin_y=tr.twin_y,
+        u=tr.u,
+        twin_u=tr.twin_u,
+        outputs=outs,
+        inputs=ins,
+        title=result.scenario.name,
+        marked=~tr.got,
+        marked_label="no command in time",
+    )
+    return png_bytes(fig)
 
 
 def write_report(result: RunResult, report_dir: str | Path, *, artifact: Any = None, with_plots: bool = True) -> Path:

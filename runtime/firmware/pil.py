@@ -18,6 +18,7 @@ from abc import ABC, abstractmethod
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -25,10 +26,13 @@ from ..artifact import Artifact
 from ..errors import FirmwareError, PeerTimeoutError, PlantError
 from ..realization import design_plant
 from ..twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
+from ..twin_plot import twin_difference_figure
 from . import qemu as fwqemu
 from .build import DEFAULT_BOARD, build
 
 log = logging.getLogger(__name__)
+
+FAULT_STATUS = -2  # GL_ERR_NANINF: the firmware refused a non-finite sample
 
 
 class DiscretePlant(ABC):
@@ -129,7 +133,7 @@ class PilResult:
         out = {
             "steps": int(self.u.shape[0]),
             "saturated_steps": int(self.saturated.any(axis=1).sum()),
-            "faults": int((self.status == -2).sum()),
+            "faults": int((self.status == FAULT_STATUS).sum()),
             "steps_per_second": round(self.steps_per_second, 1),
             "round_trip_us_p50": round(float(np.median(self.round_trip_us)), 1),
             "round_trip_us_p99": round(float(np.percentile(self.round_trip_us, 99)), 1),
@@ -138,6 +142,32 @@ class PilResult:
         if self.comparison is not None:
             out["twin"] = self.comparison.to_dict()
         return out
+
+
+def twin_figure(result: PilResult, artifact: Artifact, *, title: str | None = None) -> Any:
+    """The run minus its float64 twin per output and input, as the HIL report's ``twin.png`` shows it
+    (:func:`gainlink.twin_plot.twin_difference_figure`); refused (non-finite) samples are marked.
+
+    Raises
+    ------
+    PlantError
+        The run had no twin (``run_pil(..., twin=None)``).
+    """
+    if result.twin is None:
+        raise PlantError("this PIL run had no twin to plot against (run_pil(twin=...))")
+    sig = artifact.signals
+    return twin_difference_figure(
+        np.arange(result.u.shape[0]) * artifact.Ts,
+        y=result.y,
+        twin_y=result.twin.y,
+        u=result.u.astype(float),
+        twin_u=result.twin.u,
+        outputs=list(sig["outputs"]),
+        inputs=list(sig["inputs"]),
+        title=title or f"PIL {artifact.name}",
+        marked=result.status == FAULT_STATUS,
+        marked_label="sample refused (non-finite)",
+    )
 
 
 def _read_exact(fd: int, size: int, *, proc: subprocess.Popen, deadline_s: float) -> bytes:
