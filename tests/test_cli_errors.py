@@ -288,3 +288,28 @@ def test_real_console_script_exit_status(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == ["gainlink: error: Ts must be a finite number > 0, got -1.0"]
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("rows", [29, 51], ids=["fewer-rows", "more-rows"])
+def test_replay_compare_with_a_different_number_of_rows_is_one_line(rows, pendulum_artifact, tmp_path):
+    """A comparison file of another length (a truncated recording, another input) is refused before the
+    replay writes anything: one line naming both lengths, exit 2 (was: an IndexError traceback)."""
+    inp, ref, out = tmp_path / "in.csv", tmp_path / "ref.csv", tmp_path / "out.csv"
+    assert run_cli("simulate", pendulum_artifact, "--steps", "50", "--out", inp).code == 0
+    assert run_cli("replay", pendulum_artifact, "--input", inp, "--output", ref).code == 0
+    lines = ref.read_text().splitlines(keepends=True)
+    other = tmp_path / "other.csv"
+    other.write_text("".join(lines[: rows + 1] if rows < 50 else lines + lines[1 : rows - 50 + 1]))
+    res = run_cli("replay", pendulum_artifact, "--input", inp, "--output", out, "--compare", other)
+    assert_one_clear_line(res, f"has {rows} samples")
+    assert "50" in res.err
+    assert not out.exists()
+    # the library call refuses it the same way
+    from gainlink.errors import DataError
+    from gainlink.proof.replay_io import one_step_check, read_samples, read_trace
+    from gainlink.shipping.artifact import load
+
+    a = load(pendulum_artifact)
+    samples = read_samples(inp, a)
+    with pytest.raises(DataError, match=f"the trace has {rows} steps, the samples 50"):
+        one_step_check(a, samples.Y, samples.R, read_trace(other, a))

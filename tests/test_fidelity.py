@@ -222,3 +222,18 @@ def _quiet_design_warnings():
     logging.disable(logging.WARNING)
     yield
     logging.disable(logging.NOTSET)
+
+
+def test_module_docstring_figures_are_what_the_examples_measure(example_artifacts):
+    """fidelity's docstring quotes the float32 closed-loop deviation of each example: each figure must be the
+    one the example's design records today, to the two digits printed (wood_berry said 6.2e-7 on main; 8.9e-7)."""
+    import re
+
+    import gainlink.proof.fidelity as fidelity
+
+    text = " ".join(fidelity.__doc__.split())
+    quoted = dict(re.findall(r"(\w+) (\d\.\de-\d+)", text[text.index("Measured on the examples") :]))
+    assert set(quoted) == set(example_artifacts), quoted
+    for name, path in example_artifacts.items():
+        measured = artifact_mod.load(path).data["checks"]["float32"]["max_rel_u"]
+        assert float(quoted[name]) == float(f"{measured:.1e}"), (name, quoted[name], measured)

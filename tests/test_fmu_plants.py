@@ -317,6 +317,32 @@ def test_linearize_and_fmu_commands_refuse_bad_input_in_one_line(cart_fmu, tmp_p
     assert not out.exists()
 
 
+def test_linearize_refuses_a_value_outside_the_fmus_declared_range(cart_fmu, tmp_path):
+    """The model description bounds the cart mass (min 1e-6 kg) and the multirotor's throttle (max 1): a
+    negative mass, a throttle above full or a non-finite value is refused in one line naming the variable and
+    its range, exit 2, nothing written (was: a spec linearised at M = -1). A value inside the range passes."""
+    from gainlink.hil.plants.build import build_fmu
+
+    multirotor = build_fmu("multirotor_vertical")
+    out = tmp_path / "spec.toml"
+    cases = [
+        ((cart_fmu, "--at", "M=-1"), "M = -1 is outside the range the FMU declares for it (min 1e-06)"),
+        ((cart_fmu, "--at", "l=0"), "l = 0 is outside the range"),
+        ((cart_fmu, "--at", "theta=nan"), "theta = nan is not a finite number"),
+        (
+            (multirotor, "--at", "throttle=1.5"),
+            "throttle = 1.5 is outside the range the FMU declares for it (min 0, max 1)",
+        ),
+        ((multirotor, "--at", "mass=-2", "--at", "z=2"), "mass = -2 is outside the range"),
+    ]
+    for args, needle in cases:
+        res = run_cli("linearize", *args, "--Ts", "0.01", "--out", out)
+        lines = res.err.strip().splitlines()
+        assert res.code == 2 and len(lines) == 1 and needle in lines[0], (args, res.err)
+        assert not out.exists()
+    assert run_cli("linearize", cart_fmu, "--at", "M=2", "--Ts", "0.01", "--out", out).code == 0
+
+
 # ---- Wood-Berry column as a Co-Simulation FMU (dead times as delay lines) ----
 
 WB_TS = tomllib.loads((EXAMPLES / "wood_berry.toml").read_text())["Ts"]

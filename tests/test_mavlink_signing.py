@@ -4,10 +4,13 @@ pymavlink connection signs as a third party; key files and SETUP_SIGNING; the pe
 
 from __future__ import annotations
 
+import re
 import socket
 import stat
 import struct
 import subprocess
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -200,6 +203,71 @@ def test_persist_writes_only_changes_and_at_most_four_at_once(exe, pend, key_fil
     assert results == [ok] * 5 + [later]
     c = fw.counters()
     assert (c["persist_writes"], c["persist_skipped"], c["persist_limited"], c["commits"]) == (4, 1, 1, 5)
+
+
+@pytest.fixture(scope="module")
+def clock_shift(tmp_path_factory) -> Path:
+    """tests/clock_shift.c built as an LD_PRELOAD library (see its header)."""
+    src = Path(__file__).with_name("clock_shift.c")
+    out = tmp_path_factory.mktemp("clock_shift") / "libclock_shift.so"
+    subprocess.run(
+        ["cc", "-shared", "-fPIC", "-O2", "-Wall", "-Wextra", "-Werror", "-o", str(out), str(src), "-ldl"],
+        check=True,
+        capture_output=True,
+    )
+    return out
+
+
+def test_persist_rate_limit_refills_one_write_a_minute_up_to_four(exe, pend, clock_shift, tmp_path, monkeypatch):
+    """The persist rate limit's refill, on the real app process over UDP, without waiting in wall time: the app
+    takes its time from CLOCK_MONOTONIC, which tests/clock_shift.c (LD_PRELOAD) moves forward by what the test
+    writes into a file; nothing in the firmware changes for the test. gl_mav_node.h: at most 4 writes in a
+    burst, then one per minute (GL_MAV_PERSIST_PERIOD_US), a full bucket banks no time. So: 4 writes, the 5th
+    refused; 45 s later still refused; a minute after the burst began one write, and only one; ten minutes on
+    the bucket holds 4 again, not 10."""
+    art = load(pend)
+    shift = tmp_path / "clock_shift_us"
+    shift.write_bytes(struct.pack("=q", 0))
+    monkeypatch.setenv("LD_PRELOAD", str(clock_shift))
+    monkeypatch.setenv("GL_CLOCK_SHIFT_FILE", str(shift))
+    fw, url = start(exe, storage=tmp_path / "params.txt")
+    monkeypatch.delenv("LD_PRELOAD")
+    factors = iter(1.0 + 0.01 * i for i in range(1, 20))  # every set new: no persist is skipped as a repeat
+    try:
+        with MavLink(url) as link:
+            link.wait_heartbeat(timeout=5)
+            s = ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE)
+
+            def commit_and_persist() -> int:
+                name, value, _, crc = _retune(art, factor=next(factors), avoid_nan=False)
+                out = s.set([(name, 9, value), ("GL_HASH", 6, struct.unpack("<i", struct.pack("<I", crc))[0])])
+                assert out.ok, out
+                return s.command(command=mavlink2.MAV_CMD_PREFLIGHT_STORAGE, params=(1,))
+
+            def move_clock(seconds: float) -> None:  # in place: the app has the file mapped
+                with shift.open("r+b") as f:
+                    f.write(struct.pack("=q", int(seconds * 1e6)))
+
+            t0 = time.monotonic()
+            burst = [commit_and_persist() for _ in range(5)]
+            move_clock(45.0)  # the refill is due 60 s after the burst's first write
+            assert time.monotonic() - t0 < 15.0, "the machine is too slow for the 45 s step to mean 'before'"
+            early = commit_and_persist()
+            move_clock(61.0)
+            refill = [commit_and_persist() for _ in range(2)]
+            move_clock(661.0)
+            after_ten_minutes = [commit_and_persist() for _ in range(5)]
+    finally:
+        fw.stop()
+    ok, later = mavlink2.MAV_RESULT_ACCEPTED, mavlink2.MAV_RESULT_TEMPORARILY_REJECTED
+    assert burst == [ok] * 4 + [later]
+    assert early == later
+    assert refill == [ok, later]
+    assert after_ten_minutes == [ok] * 4 + [later]
+    c = fw.counters()
+    assert (c["persist_writes"], c["persist_limited"], c["commits"]) == (9, 4, 13), c
+    waits = [int(w) for w in re.findall(r"next write in (\d+) s", fw.stderr_text())]
+    assert len(waits) == 4 and 0 < waits[1] <= 15, waits  # 45 s (plus the seconds the test took) into 60
 
 
 def test_key_file_errors_are_one_line(tmp_path, pend, exe):

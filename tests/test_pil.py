@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import struct
 import subprocess
 import sys
 from pathlib import Path
@@ -82,6 +83,40 @@ def test_pil_cli_summary_and_files(example_artifacts, tmp_path):
     assert json.loads((out / "pil.json").read_text()) == summary
     rows = (out / "pil.csv").read_text().splitlines()
     assert rows[0] == "y0,y1,u0,sat0,status,twin_y0,twin_y1,twin_u0" and len(rows) == 501
+    # the report's twin plot, as a HIL report has it: one panel per output and input (2 + 1, 1.9 in each at 90 dpi)
+    png = (out / "twin.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height = struct.unpack(">II", png[16:24])
+    assert (width, height) == (8 * 90, round(3 * 1.9 * 90))
+
+
+def test_pil_twin_plot_shows_the_run_minus_its_twin(example_artifacts):
+    """Each panel of the PIL twin plot is that signal of the run minus the twin's, over t = k Ts."""
+    from gainlink.hil.loop.pil import twin_figure
+
+    a = load(example_artifacts["wood_berry"])
+    res = run_pil(
+        a,
+        plant=make_plant("artifact", artifact=a),
+        steps=120,
+        reference=[1.0, -0.5],
+        twin=make_plant("artifact", artifact=a),
+    )
+    fig = twin_figure(res, a)
+    try:
+        panels = list(fig.axes)
+        assert [ax.get_ylabel() for ax in panels] == ["x_D - twin", "x_B - twin", "reflux - twin", "steam - twin"]
+        expected = [res.y[:, 0] - res.twin.y[:, 0], res.y[:, 1] - res.twin.y[:, 1]]
+        expected += [res.u[:, 0] - res.twin.u[:, 0], res.u[:, 1] - res.twin.u[:, 1]]
+        for ax, diff in zip(panels, expected):
+            line = ax.get_lines()[0]
+            np.testing.assert_array_equal(line.get_xdata(), np.arange(120) * a.Ts)
+            np.testing.assert_array_equal(line.get_ydata(), diff)
+        assert np.any(expected[2] != 0), "float32 is not free: the plot has something to show"
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
 
 
 def test_pil_rejects_bad_arguments(example_artifacts):

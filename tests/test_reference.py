@@ -174,3 +174,28 @@ def test_replay_compare_checks_both_files_one_step_at_a_time(example_artifacts, 
     assert res.code == 2
     assert res.err.count("\n") == 1 and "step 4: u0 of " in res.err and str(bent) in res.err
     assert "0.01 of the limit span" in res.out  # the open-loop difference is printed as information
+
+
+def test_replay_compare_counts_steps_with_a_differing_saturation_flag_not_flags(example_artifacts, tmp_path):
+    """Two inputs (Wood-Berry): the comparison file's flags of both inputs flipped on steps 10-19 and the
+    steam flag alone on 30-34. Flags differ on 15 steps of the run (reflux 10, steam 15): the line says
+    "15 of N steps" (was 25, per flag, and could exceed N)."""
+    art = example_artifacts["wood_berry"]
+    inp, ref, other = tmp_path / "in.csv", tmp_path / "ref.csv", tmp_path / "other.csv"
+    assert run_cli("simulate", art, "--steps", "60", "--out", inp).code == 0
+    assert run_cli("replay", art, "--input", inp, "--output", ref).code == 0
+    lines = ref.read_text().splitlines()
+    head = lines[0].split(",")
+    for k, cols in [(k, ("sat0", "sat1")) for k in range(10, 20)] + [(k, ("sat1",)) for k in range(30, 35)]:
+        cells = lines[k + 1].split(",")
+        for c in cols:
+            cells[head.index(c)] = str(1 - int(cells[head.index(c)]))
+        lines[k + 1] = ",".join(cells)
+    other.write_text("\n".join(lines) + "\n")
+    res = run_cli("replay", art, "--input", inp, "--output", tmp_path / "again.csv", "--compare", other)
+    assert "saturation flags differ on 15 (per input: reflux 10, steam 15), fault flags on 0 of 60 steps" in res.out
+    from gainlink.proof.replay_io import compare_traces, read_trace
+
+    a = artifact_mod.load(art)
+    c = compare_traces(a, read_trace(ref, a), read_trace(other, a))
+    assert (c.sat_mismatches, c.sat_mismatches_per_input, c.steps) == (15, (10, 15), 60)

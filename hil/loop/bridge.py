@@ -257,12 +257,14 @@ class _Loop:
         if wait_until is None:
             rec.TICK[k] = sent - self.t_start
         self._send(k, frames)
+        rec.SENT[k] = sent - self.t_start
         deadline = wait_until if wait_until is not None else sent + int(self.scenario.step_timeout * 1e9)
         try:
-            cmd = self._await_command(seq, deadline)
+            cmd = self._await_command(k, seq, deadline)
             if cmd is not None:
                 self.u = cmd.u
                 rec.GOT[k], rec.LAT[k], rec.SAT[k], rec.ST[k] = True, cmd.t_ns - sent, cmd.saturated, cmd.status
+                rec.BACK[k] = cmd.t_ns - self.t_start
                 self.silent_since_ns = None
             else:
                 self._check_peer(k, sent)
@@ -294,8 +296,9 @@ class _Loop:
             plan = self.plan
             self.twin.step(k, noise=plan.noise[k], r=plan.R[k], d=plan.D[k])
 
-    def _await_command(self, seq: int, deadline: int):
-        """The command answering sample ``seq`` before ``deadline`` (ns), or None; older ones count as late."""
+    def _await_command(self, k: int, seq: int, deadline: int):
+        """The command answering sample ``k`` (``seq`` on the link) before ``deadline`` (ns), or None; older ones
+        count as late, and their arrival is recorded for the service time (:func:`~.metrics.link_capacity`)."""
         while True:
             left = (deadline - time.perf_counter_ns()) / 1e9
             if left <= 0:
@@ -306,6 +309,9 @@ class _Loop:
             if c.seq == seq:
                 return c
             self.late += 1
+            j = k - (seq - c.seq) % self.transport.seq_modulo  # the latest earlier sample with that seq
+            if 0 <= j < k and np.isnan(self.rec.BACK[j]):
+                self.rec.BACK[j] = c.t_ns - self.t_start
 
     def _check_peer(self, k: int, sent: int) -> None:
         """No command for step ``k``: stop the run if the peer exited or has been silent too long."""
@@ -362,7 +368,7 @@ class _Loop:
         }
         if scenario.controller == "qemu":
             info["controller"]["board"] = scenario.board
-            metrics["uart"] = link_capacity(trace)
+            metrics["uart"] = link_capacity(self.rec.SENT[:steps], self.rec.BACK[:steps], answered_in_time=trace.got)
         return RunResult(scenario=scenario, metrics=metrics, trace=trace, complete=complete, reason=reason, info=info)
 
 

@@ -107,6 +107,11 @@ def compute_metrics(trace: RunTrace, *, artifact: Any, mode: str, late: int, per
         "period_jitter_us": _pct(jitter_us),
         "period_s": period_s,
         "saturation_fraction": {name: float(v) for name, v in zip(sig["inputs"], sat_frac)},
+        # steps in which any input saturated (at most ``steps``), and per input (these may add up to more)
+        "saturated_steps": int(np.count_nonzero(trace.sat.any(axis=1))) if N else 0,
+        "saturated_steps_per_input": {
+            name: int(v) for name, v in zip(sig["inputs"], trace.sat.sum(axis=0) if N else np.zeros(a.m))
+        },
         "outputs_final": {name: float(v) for name, v in zip(sig["outputs"], trace.y[-1])} if N else {},
         "inputs_peak_abs": {name: float(v) for name, v in zip(sig["inputs"], np.abs(trace.u).max(axis=0))} if N else {},
         "outputs_peak_abs": {name: float(v) for name, v in zip(sig["outputs"], np.abs(trace.y).max(axis=0))}
@@ -136,19 +141,45 @@ def compute_metrics(trace: RunTrace, *, artifact: Any, mode: str, late: int, per
     return _clean(out)
 
 
-def link_capacity(trace: RunTrace) -> dict:
-    """What the link sustained, from the round trips of the commands that came back.
+def link_capacity(sent_ns: np.ndarray, back_ns: np.ndarray, *, answered_in_time: np.ndarray) -> dict:
+    """What the link and the controller sustained: the service time of every answered sample.
 
-    ``round_trips_per_s``: one over the mean round-trip latency (the rate of a lockstep loop that does
-    nothing else); ``loop_hz_p99``: the highest loop rate whose period still covers the p99 latency.
+    Parameters
+    ----------
+    sent_ns, back_ns : ndarray
+        Per step, when the sample was sent and when its command came back, in time or late (ns, NaN: never).
+    answered_in_time : ndarray of bool
+        Per step, whether the command came back before the step's deadline.
+
+    Returns
+    -------
+    dict
+        ``service_us`` (p50, p99, max) of the service time ``back_k - max(sent_k, back_prev)``: a sample sent
+        while the previous one is still being answered waits in the link, and that wait is not its service
+        (in lockstep each sample waits for the previous command, so the service time is the round trip);
+        ``loop_hz_p99``: the highest loop rate whose period covers the p99 service time; ``round_trips_per_s``:
+        one over the mean service time (back to back); ``answered``, ``commands`` (in time), ``late_answers``
+        and ``unanswered`` (sent, never answered: lost, or still in the link when the run ended).
     """
-    lat = trace.latency_ns[trace.got & np.isfinite(trace.latency_ns)]
-    if lat.size == 0:
-        return {"round_trips_per_s": None, "loop_hz_p99": None, "commands": 0}
+    was_sent = np.isfinite(sent_ns)
+    answered = was_sent & np.isfinite(back_ns)
+    counts = {
+        "answered": int(np.count_nonzero(answered)),
+        "commands": int(np.count_nonzero(answered_in_time)),
+        "late_answers": int(np.count_nonzero(answered & ~answered_in_time)),
+        "unanswered": int(np.count_nonzero(was_sent & ~answered)),
+    }
+    if not answered.any():
+        return {**counts, "service_us": _pct(np.zeros(0)), "round_trips_per_s": None, "loop_hz_p99": None}
+    order = np.argsort(back_ns[answered], kind="stable")
+    back, sent = back_ns[answered][order], sent_ns[answered][order]
+    previous = np.concatenate([[-np.inf], back[:-1]])
+    service = back - np.maximum(sent, previous)
     return {
-        "round_trips_per_s": float(1e9 / lat.mean()),
-        "loop_hz_p99": float(1e9 / np.percentile(lat, 99)),
-        "commands": int(lat.size),
+        **counts,
+        "service_us": _pct(service / 1e3),
+        "round_trips_per_s": float(1e9 / service.mean()),
+        "loop_hz_p99": float(1e9 / np.percentile(service, 99)),
     }
 
 

@@ -18,6 +18,7 @@ from abc import ABC, abstractmethod
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from gainlink.errors import FirmwareError, PeerTimeoutError, PlantError
@@ -25,9 +26,12 @@ from gainlink.firmware import qemu as fwqemu
 from gainlink.firmware.build import DEFAULT_BOARD, build
 from gainlink.proof.sampled_plant import SampledPlant
 from gainlink.proof.twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
+from gainlink.proof.twin_plot import twin_difference_figure
 from gainlink.shipping.artifact import Artifact
 
 log = logging.getLogger(__name__)
+
+FAULT_STATUS = -2  # GL_ERR_NANINF: the firmware refused a non-finite sample
 
 
 class DiscretePlant(ABC):
@@ -124,7 +128,7 @@ class PilResult:
         out = {
             "steps": int(self.u.shape[0]),
             "saturated_steps": int(self.saturated.any(axis=1).sum()),
-            "faults": int((self.status == -2).sum()),
+            "faults": int((self.status == FAULT_STATUS).sum()),
             "steps_per_second": round(self.steps_per_second, 1),
             "round_trip_us_p50": round(float(np.median(self.round_trip_us)), 1),
             "round_trip_us_p99": round(float(np.percentile(self.round_trip_us, 99)), 1),
@@ -133,6 +137,32 @@ class PilResult:
         if self.comparison is not None:
             out["twin"] = self.comparison.to_dict()
         return out
+
+
+def twin_figure(result: PilResult, artifact: Artifact, *, title: str | None = None) -> Any:
+    """The run minus its float64 twin per output and input, as the HIL report's ``twin.png`` shows it
+    (:func:`gainlink.twin_plot.twin_difference_figure`); refused (non-finite) samples are marked.
+
+    Raises
+    ------
+    PlantError
+        The run had no twin (``run_pil(..., twin=None)``).
+    """
+    if result.twin is None:
+        raise PlantError("this PIL run had no twin to plot against (run_pil(twin=...))")
+    sig = artifact.signals
+    return twin_difference_figure(
+        np.arange(result.u.shape[0]) * artifact.Ts,
+        y=result.y,
+        twin_y=result.twin.y,
+        u=result.u.astype(float),
+        twin_u=result.twin.u,
+        outputs=list(sig["outputs"]),
+        inputs=list(sig["inputs"]),
+        title=title or f"PIL {artifact.name}",
+        marked=result.status == FAULT_STATUS,
+        marked_label="sample refused (non-finite)",
+    )
 
 
 def _read_exact(fd: int, size: int, *, proc: subprocess.Popen, deadline_s: float) -> bytes:

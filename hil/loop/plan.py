@@ -68,6 +68,8 @@ class Recorder:
         self.SAT = np.zeros((N, a.m), dtype=bool)
         self.GOT = np.zeros(N, dtype=bool)
         self.LAT = np.full(N, np.nan)
+        self.SENT = np.full(N, np.nan)  # when sample k was sent, ns from the run start (NaN: never sent)
+        self.BACK = np.full(N, np.nan)  # when its command came back, in time or late (NaN: never)
         self.TICK = np.zeros(N)
         self.DUE = np.full(N, np.nan)
         self.ST = np.zeros(N, dtype=np.int64)

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import io
 import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from gainlink.fileio import publish_files
+from gainlink.proof.twin_plot import png_bytes, twin_difference_figure
 
 from .bridge import RunResult
 
@@ -73,12 +73,8 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
         f"faults injected {', '.join(f'{k} {v}' for k, v in m['faults_injected'].items() if v) or 'none'}"
     )
     if "uart" in m:
-        u = m["uart"]
-        lines.append(
-            f"  emulated UART ({info['controller'].get('board')}): {_fmt(u['round_trips_per_s'], ' round trips/s', 4)}"
-            f" at the mean latency; a loop up to {_fmt(u['loop_hz_p99'], ' Hz', 4)} covers the p99 latency"
-        )
-    lines.append("  saturated: " + ", ".join(f"{k} {100 * v:.1f}%" for k, v in m["saturation_fraction"].items()))
+        lines += _uart_lines(m["uart"], board=info["controller"].get("board"))
+    lines.append(_saturation_line(m))
     if "peak_integrator" in m:
         lines.append("  peak integrator: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["peak_integrator"].items()))
     lines += _twin_lines(m.get("twin"))
@@ -91,6 +87,27 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
     if report_dir is not None:
         lines.append(f"  report: {report_dir / 'report.json'}")
     return "\n".join(lines) + "\n"
+
+
+def _uart_lines(u: dict, *, board: str | None) -> list[str]:
+    """What the emulated UART sustained, from the service time of every answered sample (late ones too)."""
+    svc = u["service_us"]
+    return [
+        f"  emulated UART ({board}): a loop up to {_fmt(u['loop_hz_p99'], ' Hz', 4)} covers the p99 service time "
+        f"({_fmt(svc['p99'], ' us')}; p50 {_fmt(svc['p50'], ' us')}), {_fmt(u['round_trips_per_s'], '', 4)} "
+        "round trips/s back to back",
+        f"    service time = command back minus the later of its sample's send and the previous command, over "
+        f"{u['answered']} answered samples ({u['late_answers']} late); {u['unanswered']} never answered",
+    ]
+
+
+def _saturation_line(m: dict) -> str:
+    """Steps in which any input saturated, of all steps; then each input's own count."""
+    per_input = m["saturated_steps_per_input"]
+    steps = max(m["steps"], 1)
+    return f"  saturated {m['saturated_steps']} of {m['steps']} steps (any input); per input: " + ", ".join(
+        f"{k} {v} ({100 * v / steps:.1f}%)" for k, v in per_input.items()
+    )
 
 
 def _twin_lines(tw: dict | None) -> list[str]:
@@ -119,15 +136,6 @@ def _twin_lines(tw: dict | None) -> list[str]:
     return out
 
 
-def _png(fig: Any) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
-    return buf.getvalue()
-
-
 def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
     """PNG plots: outputs with references, inputs with limits, latency histogram."""
     import matplotlib
@@ -154,7 +162,7 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
         ax.legend(loc="best", fontsize=8)
     axes[-1, 0].set_xlabel("t [s]")
     fig.suptitle(f"{result.scenario.name}: outputs")
-    files["outputs.png"] = _png(fig)
+    files["outputs.png"] = png_bytes(fig)
     fig, axes = plt.subplots(len(ins), 1, figsize=(8, 2.2 * len(ins)), sharex=True, squeeze=False)
     for i, name in enumerate(ins):
         ax = axes[i, 0]
@@ -169,7 +177,7 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
         ax.legend(loc="best", fontsize=8)
     axes[-1, 0].set_xlabel("t [s]")
     fig.suptitle(f"{result.scenario.name}: inputs")
-    files["inputs.png"] = _png(fig)
+    files["inputs.png"] = png_bytes(fig)
     fig, ax = plt.subplots(figsize=(8, 3))
     lat = tr.latency_ns[np.isfinite(tr.latency_ns)] / 1e3
     if lat.size:
@@ -178,7 +186,7 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
     ax.set_ylabel("steps")
     ax.set_yscale("log")
     ax.set_title(f"{result.scenario.name}: latency ({lat.size} commands)")
-    files["latency.png"] = _png(fig)
+    files["latency.png"] = png_bytes(fig)
     if tr.has_twin:
         files["twin.png"] = _twin_plot(result, outs=outs, ins=ins)
     return files
@@ -186,24 +194,20 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
 
 def _twin_plot(result: RunResult, *, outs: list[str], ins: list[str]) -> bytes:
     """The run minus its twin, per output and input: what the implementation cost, over time."""
-    import matplotlib.pyplot as plt
-
     tr = result.trace
-    names = [(n, tr.y[:, i] - tr.twin_y[:, i]) for i, n in enumerate(outs)] + [
-        (n, tr.u[:, i] - tr.twin_u[:, i]) for i, n in enumerate(ins)
-    ]
-    fig, axes = plt.subplots(len(names), 1, figsize=(8, 1.9 * len(names)), sharex=True, squeeze=False)
-    lost = ~tr.got
-    for ax, (name, diff) in zip(axes[:, 0], names):
-        ax.plot(tr.t, diff, lw=0.8)
-        if lost.any():
-            ax.plot(tr.t[lost], diff[lost], "r.", ms=3, label="no command in time")
-            ax.legend(loc="best", fontsize=8)
-        ax.set_ylabel(f"{name} - twin")
-        ax.grid(True, alpha=0.3)
-    axes[-1, 0].set_xlabel("t [s]")
-    fig.suptitle(f"{result.scenario.name}: run minus its float64 twin")
-    return _png(fig)
+    fig = twin_difference_figure(
+        tr.t,
+        y=tr.y,
+        twin_y=tr.twin_y,
+        u=tr.u,
+        twin_u=tr.twin_u,
+        outputs=outs,
+        inputs=ins,
+        title=result.scenario.name,
+        marked=~tr.got,
+        marked_label="no command in time",
+    )
+    return png_bytes(fig)
 
 
 def write_report(result: RunResult, report_dir: str | Path, *, artifact: Any = None, with_plots: bool = True) -> Path:

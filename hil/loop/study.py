@@ -168,6 +168,7 @@ def _row(r: RunResult) -> dict:
         "settling_time_s": tracked.get("settling_time_s"),
         "iae": tracked.get("iae"),
         "saturation_fraction": m["saturation_fraction"],
+        "saturated_fraction_any": m["saturated_steps"] / m["steps"] if m["steps"] else 0.0,
         "peak_integrator": m.get("peak_integrator", {}),
         "inputs_peak_abs": m["inputs_peak_abs"],
         "outputs_peak_abs": m["outputs_peak_abs"],
@@ -188,7 +189,7 @@ def _summary(table: dict, *, report_dir: Path) -> str:
         + "".join(f" {'peak |' + o + '|':>12}" for o in outputs),
     ]
     for mode, row in table.items():
-        sat = max(row["saturation_fraction"].values()) if row["saturation_fraction"] else 0.0
+        sat = row["saturated_fraction_any"]  # steps in which any input saturated
         z = max(row["peak_integrator"].values()) if row["peak_integrator"] else None
         lines.append(
             f"  {mode:<9} {_fmt(row['overshoot_pct'], '%'):>10} {_fmt(row['settling_time_s'], ' s'):>10} "

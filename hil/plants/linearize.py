@@ -109,6 +109,7 @@ def linearize(
     """
     path = _fmu_path(fmu)
     md = read_description(path)
+    _check_declared_ranges(md, at or {})
     if md.fmiVersion in ("2.0", "3.0") and md.modelExchange is None and md.coSimulation is not None:
         return _linearize_cosimulation(
             path, md, at=at or {}, inputs=inputs, outputs=outputs, method=method, Ts=Ts, horizon=horizon
@@ -126,6 +127,36 @@ def linearize(
             drift,
         )
     return lin
+
+
+def _check_declared_ranges(md: Any, at: Mapping[str, float]) -> None:
+    """Refuse an operating-point value that is not finite or lies outside the variable's declared min/max
+    (on the variable, else on its declared type): a negative mass is not a point to linearise about."""
+    vars_ = {v.name: v for v in md.modelVariables}
+    for name, value in at.items():
+        v = vars_.get(name)
+        if v is None:
+            continue  # unknown names are refused with the list of variables further on
+        if not np.isfinite(value):
+            raise PlantError(f"FMU {md.modelName}: operating point {name} = {value} is not a finite number")
+        lo, hi = (_declared(v, key) for key in ("min", "max"))
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            declared = ", ".join(f"{k} {b:g}" for k, b in (("min", lo), ("max", hi)) if b is not None)
+            raise PlantError(
+                f"FMU {md.modelName}: operating point {name} = {value:g} is outside the range the FMU declares for it "
+                f"({declared})"
+            )
+
+
+def _declared(v: Any, key: str) -> float | None:
+    """A variable's declared bound ``key`` ("min"/"max") as a float, from the variable or its declared type."""
+    raw = getattr(v, key, None)
+    if raw is None and getattr(v, "declaredType", None) is not None:
+        raw = getattr(v.declaredType, key, None)
+    try:
+        return None if raw is None else float(raw)
+    except (TypeError, ValueError):
+        return None
 
 
 def _check_model_exchange(path: Path, md: Any, method: str) -> bool:

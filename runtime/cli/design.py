@@ -235,18 +235,25 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_replay(args: argparse.Namespace) -> int:
     """``gainlink replay ARTIFACT --input IN.csv --output OUT.csv [--compare OTHER.csv]``."""
     a = artifact_mod.load(args.artifact)
-    if args.compare and not Path(args.compare).is_file():
-        raise DataError(f"comparison file {args.compare} not found")
+    other = None
+    if args.compare:  # read and checked before the replay writes anything
+        if not Path(args.compare).is_file():
+            raise DataError(f"comparison file {args.compare} not found")
+        other = read_trace(args.compare, a)
+        steps = read_samples(args.input, a).Y.shape[0]
+        if other.u.shape[0] != steps:
+            raise DataError(
+                f"comparison file {args.compare} has {other.u.shape[0]} samples, input {args.input} has {steps}"
+            )
     trace = replay(a, args.input, args.output, engine=args.engine)
     print(
         f"replayed {trace.u.shape[0]} samples through {args.engine}: "
         f"{int(trace.saturated.any(axis=1).sum())} saturated, {int(trace.fault.sum())} refused as non-finite; "
         f"wrote {args.output}"
     )
-    if not args.compare:
+    if other is None:
         return 0
     samples = read_samples(args.input, a)
-    other = read_trace(args.compare, a)
     checks = {
         args.engine: one_step_check(a, samples.Y, samples.R, trace),
         args.compare: one_step_check(a, samples.Y, samples.R, other),
@@ -265,8 +272,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
     )
     print(
         f"open loop against {args.compare} (information): max |du| = {c.max_abs_u:.3g} ({c.max_rel_u:.3g} of the "
-        f"limit span), saturation flags differ on {c.sat_mismatches}, fault flags on {c.fault_mismatches} of "
-        f"{c.steps} steps; {comp.describe()}{why}"
+        f"limit span), saturation flags differ on {c.sat_mismatches} (per input: "
+        f"{', '.join(f'{name} {k}' for name, k in zip(a.signals['inputs'], c.sat_mismatches_per_input))}), "
+        f"fault flags on {c.fault_mismatches} of {c.steps} steps; {comp.describe()}{why}"
     )
     for name, check in checks.items():
         if not check.passed:

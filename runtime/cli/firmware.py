@@ -250,7 +250,8 @@ def _run_image(args: argparse.Namespace) -> int:
 def _pil(args: argparse.Namespace) -> int:
     import numpy as np
     from gainlink.fileio import publish_files
-    from gainlink.hil.loop.pil import make_plant, run_pil
+    from gainlink.hil.loop.pil import make_plant, run_pil, twin_figure
+    from gainlink.proof.twin_plot import png_bytes
     from gainlink.shipping.artifact import load
 
     artifact = load(args.artifact)
@@ -289,7 +290,15 @@ def _pil(args: argparse.Namespace) -> int:
             )
             for k in range(args.steps)
         ]
-        publish_files(args.out, {"pil.csv": header + "\n" + "\n".join(rows) + "\n", "pil.json": text})
+        title = f"PIL {artifact.name} on {args.board}, plant {args.plant}"
+        publish_files(
+            args.out,
+            {
+                "pil.csv": header + "\n" + "\n".join(rows) + "\n",
+                "pil.json": text,
+                "twin.png": png_bytes(twin_figure(result, artifact, title=title)),
+            },
+        )
     sys.stdout.write(text)
     return 0
 
@@ -403,5 +412,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="constant absolute reference (q values; default: the tracked outputs at the operating point)",
     )
     p.add_argument("--x0", type=float, nargs="+", help="initial plant state (n values)")
-    p.add_argument("--out", help="folder for pil.csv and pil.json")
+    p.add_argument("--out", help="folder for pil.csv, pil.json and twin.png (the run minus its float64 twin)")
     p.set_defaults(func=_pil)

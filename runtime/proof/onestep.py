@@ -36,8 +36,15 @@ limits (``EPS |u|`` on a clamped command) are covered. The magnitudes per quanti
 Saturation flags may differ only where the law's unsaturated command lies within its bound of a limit;
 with ``anti_windup = "clamp"`` the integrator may then have held or integrated, so its bound widens by
 ``Ts |r - Ci y|`` on that step. A refused (non-finite) sample must be refused by both, with the safe
-command and the state unchanged. Measured on correct C builds the largest error is a few percent of
-the bound; a gain perturbed by 1e-4 relative exceeds it.
+command and the state unchanged.
+
+What it catches (tests/test_onestep.py). On correct host builds, over the examples' golden records and
+twelve random closed-loop records, the largest error stays below 15 % of the bound. The bound counts
+every term by its magnitude, so how small a wrong gain it catches depends on that gain's share of a
+step's magnitudes: the largest entry of one gain matrix bent by 1e-4 relative in the C's gain set is
+caught for every matrix of the pendulum and quadrotor_lateral records, and for ``Ad`` and ``Cd`` on all of
+them; not always for the other matrices (missed, for instance, for ``K`` on one random record and for
+Wood-Berry's small back-calculation gain ``Kaw``).
 """
 
 from __future__ import annotations
@@ -46,6 +53,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import DataError
 from ..shipping.artifact import Artifact
 from .reference import ReferenceLoop, Trace
 
@@ -179,6 +187,11 @@ def one_step_check(artifact: Artifact, Y: np.ndarray, R: np.ndarray, trace: Trac
         Failures (with the first one named), the largest error relative to its bound per quantity, and
         the largest command error relative to the limit span.
 
+    Raises
+    ------
+    DataError
+        ``trace`` does not hold one step per sample.
+
     Examples
     --------
     >>> import control as ct, numpy as np, gainlink as gl
@@ -194,6 +207,8 @@ def one_step_check(artifact: Artifact, Y: np.ndarray, R: np.ndarray, trace: Trac
     Y = np.asarray(Y, dtype=float).reshape(-1, a.p)
     N = Y.shape[0]
     R = np.zeros((N, a.q)) if R is None or a.q == 0 else np.asarray(R, dtype=float).reshape(N, a.q)
+    if trace.u.shape[0] != N:
+        raise DataError(f"the trace has {trace.u.shape[0]} steps, the samples {N}")
     mags = _Magnitudes(a)
     law = ReferenceLoop(a)
     span = np.where(a.u_max > a.u_min, a.u_max - a.u_min, 1.0)

@@ -159,8 +159,9 @@ class Comparison:
     steps: int
     max_abs_u: float
     max_rel_u: float  # against each input's limit span u_max - u_min
-    sat_mismatches: int
+    sat_mismatches: int  # steps in which any input's saturation flag differs (at most ``steps``)
     fault_mismatches: int
+    sat_mismatches_per_input: tuple[int, ...] = ()  # steps in which input i's flag differs
 
 
 def read_trace(path: str | Path, artifact: Artifact) -> Trace:
@@ -208,6 +209,7 @@ def compare_traces(artifact: Artifact, trace: Trace, other: Trace) -> Comparison
         steps=N,
         max_abs_u=float(diff.max(initial=0.0)),
         max_rel_u=float((diff / span).max(initial=0.0)),
-        sat_mismatches=int(np.sum(trace.saturated != other.saturated)),
+        sat_mismatches=int(np.count_nonzero((trace.saturated != other.saturated).any(axis=1))),
         fault_mismatches=int(np.sum(trace.fault != other.fault)),
+        sat_mismatches_per_input=tuple(int(v) for v in (trace.saturated != other.saturated).sum(axis=0)),
     )
