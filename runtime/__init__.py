@@ -9,7 +9,7 @@ neither it nor Dask). The command line ``gainlink`` is a shell over the same fun
 """
 
 from . import hil
-from .api import design, from_gains, load, replay, simulate
+from .api import analyze, design, design_report, from_gains, load, replay, simulate
 from .errors import (
     ArtifactError,
     DataError,
@@ -42,9 +42,11 @@ __all__ = [
     "Simulation",
     "SpecError",
     "Trace",
+    "analyze",
     "campaign",
     "compensator_stability",
     "design",
+    "design_report",
     "float32_fidelity",
     "from_gains",
     "hil",

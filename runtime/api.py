@@ -22,7 +22,9 @@ from .proof.replay_io import get_engine
 from .proof.simulation import Simulation, simulate_linear
 from .shipping.artifact import Artifact, from_dict
 from .spec import PlantSpec, load_spec, parse_spec
-from .synthesis import synthesize
+from .synthesis import DesignResult, synthesize
+from .synthesis.plant_report import AnalysisReport
+from .synthesis.plant_report import analyze as analyze_spec
 
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -96,7 +98,62 @@ def design(
     >>> art.n, art.m, art.p, art.observer_form
     (2, 1, 1, 'predictor')
     """
-    data = _spec_dict(plant, Ts=Ts, name=name, discretization=discretization)
+    report = design_report(
+        plant,
+        Ts=Ts,
+        name=name,
+        Q=Q,
+        R=R,
+        W=W,
+        V=V,
+        u_min=u_min,
+        u_max=u_max,
+        controller=controller,
+        integral=integral,
+        observer=observer,
+        limits=limits,
+        operating_point=operating_point,
+        discretization=discretization,
+    )
+    return from_dict(report.artifact)
+
+
+def design_report(
+    plant: Any,
+    *,
+    Ts: float | None = None,
+    name: str | None = None,
+    Q: Any = None,
+    R: Any = None,
+    W: Any = None,
+    V: Any = None,
+    u_min: Any = None,
+    u_max: Any = None,
+    controller: Mapping[str, Any] | None = None,
+    integral: Mapping[str, Any] | None = None,
+    observer: Mapping[str, Any] | None = None,
+    limits: Mapping[str, Any] | None = None,
+    operating_point: Mapping[str, Any] | None = None,
+    discretization: str | None = None,
+) -> DesignResult:
+    """:func:`design` with the numbers behind its checks: what ``gainlink design`` prints.
+
+    Takes the parameters of :func:`design`. A spec file given alone is read as ``gainlink design`` reads it
+    (its ``provenance.spec_sha256`` is the file's own sha256); with options, the hash is that of the merged spec.
+
+    Returns
+    -------
+    DesignResult
+        ``artifact`` (the sealed dict), controller, observer and closed-loop poles, margins, warnings, and the
+        compensator, float32 and dead-time checks.
+
+    Examples
+    --------
+    >>> import gainlink as gl
+    >>> r = gl.design_report("examples/pendulum.toml")
+    >>> r.artifact["sha256"] == gl.design("examples/pendulum.toml").sha256, bool(max(abs(r.closed_loop_poles)) < 1)
+    (True, True)
+    """
     tables = {
         "controller": controller,
         "integral": integral,
@@ -105,8 +162,27 @@ def design(
         "operating_point": operating_point,
     }
     shortcuts = {"Q": Q, "R": R, "W": W, "V": V, "u_min": u_min, "u_max": u_max}
-    data = _merge_tables(data, tables, shortcuts)
-    return _design_dict(data, source=_source_name(plant))
+    given = [v for v in (Ts, name, discretization, *tables.values(), *shortcuts.values()) if v is not None]
+    if isinstance(plant, (str, Path)) and not given:
+        return synthesize(load_spec(plant))
+    data = _merge_tables(_spec_dict(plant, Ts=Ts, name=name, discretization=discretization), tables, shortcuts)
+    return synthesize(_parse(data, source=_source_name(plant)))
+
+
+def analyze(spec: str | Path | Mapping[str, Any]) -> AnalysisReport:
+    """Structural analysis of a spec's plant, with the checks of the spec's own design: what ``gainlink analyze``
+    prints (poles, PBH per mode, zeros, bandwidth against the sample rate, scaling, warnings).
+
+    Examples
+    --------
+    >>> import gainlink as gl
+    >>> rep = gl.analyze("examples/pendulum.toml")
+    >>> rep.n, rep.stabilizable, rep.detectable
+    (4, True, True)
+    """
+    if isinstance(spec, (str, Path)):
+        return analyze_spec(load_spec(spec))
+    return analyze_spec(_parse(json.loads(json.dumps(spec)), source="<dict>"))
 
 
 def from_gains(
@@ -195,7 +271,7 @@ def from_gains(
     for key in ("controller", "observer", "integral"):
         data.pop(key, None)
     data.update(tables)
-    return _design_dict(data, source=_source_name(plant))
+    return from_dict(synthesize(_parse(data, source=_source_name(plant))).artifact)
 
 
 def replay(artifact: Artifact, y: Any, r: Any = None, *, engine: str = "reference") -> Trace:
@@ -384,10 +460,10 @@ def _merge_tables(data: dict, tables: Mapping[str, Any], shortcuts: Mapping[str,
     return data
 
 
-def _design_dict(data: dict, *, source: str) -> Artifact:
+def _parse(data: dict, *, source: str) -> PlantSpec:
+    """The typed spec of a spec dict, hashed by its canonical JSON (there is no file to hash)."""
     digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
-    spec: PlantSpec = parse_spec(data, source=source, source_sha256=digest)
-    return from_dict(synthesize(spec).artifact)
+    return parse_spec(data, source=source, source_sha256=digest)
 
 
 def _source_name(plant: Any) -> str:

@@ -8,16 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import api
 from ..errors import DataError, GainlinkError, VerificationError
 from ..fileio import atomic_write_text, publish_files
-from ..proof.replay_io import compare_traces, engine_names, one_step_check, read_samples, read_trace, replay
-from ..proof.simulation import samples_csv, simulate_linear
+from ..proof.replay_io import compare_traces, engine_names, one_step_check, read_samples, read_trace, write_trace
+from ..proof.simulation import samples_csv
 from ..shipping import artifact as artifact_mod
-from ..spec import load_spec
-from ..synthesis import synthesize
 from ..synthesis.analysis import complex_pairs
 from ..synthesis.compensator import compensator_stability
-from ..synthesis.plant_report import analyze
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -74,7 +72,7 @@ def _c(z: complex) -> str:
 
 def cmd_analyze(args: argparse.Namespace) -> int:
     """``gainlink analyze SPEC``."""
-    rep = analyze(load_spec(args.spec))
+    rep = api.analyze(args.spec)
     if args.json:
         print(json.dumps(rep.to_dict(), indent=2, default=str))
         return 0
@@ -129,11 +127,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 def cmd_design(args: argparse.Namespace) -> int:
     """``gainlink design SPEC --out DIR``."""
-    spec = load_spec(args.spec)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise GainlinkError(f"output path {out} exists and is not a directory")
-    result = synthesize(spec)
+    result = api.design_report(args.spec)
     artifact_mod.from_dict(result.artifact)  # the written file must load: check before publishing
     publish_files(out, {"gains.json": artifact_mod.render(result.artifact)})
     a = result.artifact
@@ -161,7 +158,7 @@ def cmd_design(args: argparse.Namespace) -> int:
         )
         return 0
     print(
-        f"{spec.name}: n={spec.plant.n} m={spec.plant.m} p={spec.plant.p} q={a['q']}, Ts={spec.Ts:g} s, "
+        f"{a['name']}: n={a['n']} m={a['m']} p={a['p']} q={a['q']}, Ts={a['Ts']:g} s, "
         f"{a['design']['controller']['method']} + {a['design']['observer']['method']} "
         f"({a['observer_form']}), anti-windup {a['anti_windup']}"
     )
@@ -182,7 +179,7 @@ def cmd_design(args: argparse.Namespace) -> int:
     if "u_op" in a or "y_op" in a:
         op = [
             f"{name}={v:.6g}"
-            for key, names in (("u_op", spec.plant.inputs), ("y_op", spec.plant.outputs))
+            for key, names in (("u_op", a["signals"]["inputs"]), ("y_op", a["signals"]["outputs"]))
             for name, v in zip(names, a.get(key, [0.0] * len(names)))
         ]
         print(f"  operating point: {', '.join(op)} (samples, references and commands are absolute)")
@@ -203,7 +200,7 @@ def cmd_design(args: argparse.Namespace) -> int:
 
 def cmd_validate(args: argparse.Namespace) -> int:
     """``gainlink validate ARTIFACT``."""
-    a = artifact_mod.load(args.artifact)
+    a = api.load(args.artifact)
     print(
         f"{args.artifact}: valid gainlink artifact '{a.name}' (n={a.n} m={a.m} p={a.p} q={a.q}, "
         f"{a.observer_form}, anti-windup {a.anti_windup}), sha256 {a.sha256}"
@@ -213,14 +210,14 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """``gainlink simulate ARTIFACT --out CSV``."""
-    a = artifact_mod.load(args.artifact)
+    a = api.load(args.artifact)
     if args.x0 is not None and len(args.x0) != a.n:
         raise DataError(f"--x0 needs {a.n} values (one per state), got {len(args.x0)}")
     if args.ref is not None and len(args.ref) != a.q:
         raise DataError(f"--ref needs {a.q} values (one per tracked output), got {len(args.ref)}")
     if args.noise < 0 or not np.isfinite(args.noise):
         raise DataError("--noise must be a finite number >= 0")
-    sim = simulate_linear(a, steps=args.steps, x0=args.x0, reference=args.ref, noise_std=args.noise, seed=args.seed)
+    sim = api.simulate(a, steps=args.steps, x0=args.x0, reference=args.ref, noise_std=args.noise, seed=args.seed)
     out = Path(args.out)
     if not out.parent.is_dir():
         raise DataError(f"output folder {out.parent} does not exist")
@@ -234,7 +231,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """``gainlink replay ARTIFACT --input IN.csv --output OUT.csv [--compare OTHER.csv]``."""
-    a = artifact_mod.load(args.artifact)
+    a = api.load(args.artifact)
     other = None
     if args.compare:  # read and checked before the replay writes anything
         if not Path(args.compare).is_file():
@@ -245,7 +242,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
             raise DataError(
                 f"comparison file {args.compare} has {other.u.shape[0]} samples, input {args.input} has {steps}"
             )
-    trace = replay(a, args.input, args.output, engine=args.engine)
+    samples = read_samples(args.input, a)
+    trace = api.replay(a, samples.Y, samples.R, engine=args.engine)
+    write_trace(args.output, trace, samples.t)
     print(
         f"replayed {trace.u.shape[0]} samples through {args.engine}: "
         f"{int(trace.saturated.any(axis=1).sum())} saturated, {int(trace.fault.sum())} refused as non-finite; "
@@ -253,7 +252,6 @@ def cmd_replay(args: argparse.Namespace) -> int:
     )
     if other is None:
         return 0
-    samples = read_samples(args.input, a)
     checks = {
         args.engine: one_step_check(a, samples.Y, samples.R, trace),
         args.compare: one_step_check(a, samples.Y, samples.R, other),

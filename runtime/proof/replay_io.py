@@ -138,18 +138,14 @@ def _num(v: float) -> str:
     return repr(v) if math.isfinite(v) else ("nan" if math.isnan(v) else ("inf" if v > 0 else "-inf"))
 
 
-def replay(artifact: Artifact, input_path: str | Path, output_path: str | Path, *, engine: str = "reference") -> Trace:
-    """Replay ``input_path`` through ``engine`` and write ``output_path`` atomically."""
-    fn = get_engine(engine)
-    samples = read_samples(input_path, artifact)
-    trace = fn(artifact, samples.Y, samples.R)
-    out = Path(output_path)
+def write_trace(path: str | Path, trace: Trace, t: np.ndarray | None = None) -> None:
+    """Write a replay's output CSV (``u``, ``sat``, ``fault``, ``xh``, ``z`` per step) atomically."""
+    out = Path(path)
     if out.is_dir():
         raise DataError(f"output {out} is a directory")
     if not out.parent.exists():
         raise DataError(f"output folder {out.parent} does not exist")
-    atomic_write_text(out, format_trace(trace, samples.t))
-    return trace
+    atomic_write_text(out, format_trace(trace, t))
 
 
 @dataclass(frozen=True)
