@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from .errors import SpecError
+from .fileio import read_toml
 from .proof.reference import Trace
 from .proof.replay_io import get_engine
 from .proof.simulation import Simulation, simulate_linear
@@ -384,11 +385,8 @@ def _spec_dict(plant: Any, *, Ts: float | None, name: str | None, discretization
 
 
 def _spec_file_dict(path: Path) -> dict:
-    import tomllib
-
-    spec = load_spec(path)  # one place reports a missing or malformed file
-    data = tomllib.loads(path.read_text("utf-8"))
-    data.setdefault("name", spec.name)
+    data, _ = read_toml(path, what="spec", error=SpecError)
+    data.setdefault("name", load_spec(path).name)  # every key checked as gainlink design checks it
     return data
 
 

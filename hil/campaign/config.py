@@ -50,14 +50,13 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from gainlink.errors import ScenarioError
-from gainlink.fileio import read_user_file
+from gainlink.fileio import read_toml
 
 KINDS = ("sil", "hil")
 TOP_KEYS = {
@@ -335,11 +334,7 @@ def _file(data: dict, key: str, base: Path) -> Path | None:
 
 
 def _load_spec(path: Path) -> dict:
-    text = read_user_file(path, what="campaign: spec", error=CampaignError)
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise _fail(f"spec {path} is not valid TOML ({exc})") from None
+    return read_toml(path, what="campaign: spec", error=CampaignError)[0]
 
 
 def parse_campaign(data: Mapping[str, Any], *, path: Path | None = None) -> Campaign:
@@ -408,9 +403,5 @@ def _list(v: Any, where: str) -> list:
 def load_campaign(path: str | Path) -> Campaign:
     """Read and check a campaign TOML file."""
     path = Path(path)
-    text = read_user_file(path, what="campaign", error=CampaignError)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise _fail(f"{path} is not valid TOML ({exc})") from None
+    data, _ = read_toml(path, what="campaign", error=CampaignError)
     return parse_campaign(data, path=path)

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 from gainlink.errors import TransportError
+from gainlink.fileio import parse_toml
 from gainlink.shipping.can_layout import CanLayout, FrameSpec, dequantise, layout_for, quantise
 
 from .base import TRANSPORTS, Command, Transport
@@ -446,13 +447,14 @@ def _value_scales(specs: Sequence[FrameSpec]) -> list[tuple[float, float]]:
 
 def config_from_text(text: str, *, source: str) -> dict:
     """A python-can configuration from JSON or TOML text (for ``--can CONFIG``)."""
-    import tomllib
-
     text = text.strip()
-    try:
-        data = json.loads(text) if text.startswith("{") else tomllib.loads(text)
-    except (ValueError, tomllib.TOMLDecodeError) as exc:
-        raise TransportError(f"CAN configuration {source} is neither JSON nor TOML ({exc})") from None
+    if text.startswith("{"):
+        try:
+            data = json.loads(text)
+        except ValueError as exc:
+            raise TransportError(f"CAN configuration {source} is not valid JSON ({exc})") from None
+    else:
+        data = parse_toml(text, what=f"CAN configuration {source}", error=TransportError)
     if "transport" in data and isinstance(data["transport"], dict):
         data = data["transport"]
     if not isinstance(data, dict) or "interface" not in data:

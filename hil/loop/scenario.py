@@ -65,7 +65,6 @@ Unknown keys anywhere are refused with one line naming them.
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -73,7 +72,7 @@ from typing import Any
 
 import numpy as np
 from gainlink.errors import ScenarioError
-from gainlink.fileio import read_user_file
+from gainlink.fileio import read_toml
 
 from .scheduler import AFFINITIES, OVERRUN_POLICIES
 
@@ -345,11 +344,7 @@ def resolve_scenario_path(name: str) -> Path:
 def load_scenario(path: str | Path) -> Scenario:
     """Read and check a scenario TOML file."""
     path = Path(path)
-    text = read_user_file(path, what="scenario", error=ScenarioError)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"scenario {path} is not valid TOML ({exc})") from None
+    data, _ = read_toml(path, what="scenario", error=ScenarioError)
     return parse_scenario(data, path=path)
 
 

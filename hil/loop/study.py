@@ -12,7 +12,6 @@ from __future__ import annotations
 import io
 import json
 import tempfile
-import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -20,7 +19,7 @@ from typing import Any
 
 import numpy as np
 from gainlink.errors import ScenarioError
-from gainlink.fileio import publish_files, read_user_file
+from gainlink.fileio import parse_toml, publish_files, read_toml
 from gainlink.shipping.artifact import from_dict, write
 
 from ..paths import project_root
@@ -58,15 +57,11 @@ def default_study(name: str = "saturation_study") -> dict:
     path = resources.files("gainlink.hil").joinpath(f"scenarios/{name}.toml")
     if not path.is_file():
         raise ScenarioError(f"no built-in study {name!r} (saturation_study, saturation_kick)")
-    return tomllib.loads(path.read_text("utf-8"))
+    return parse_toml(path.read_text("utf-8"), what=f"built-in study {name}", error=ScenarioError)
 
 
 def _load_spec(path: Path) -> dict:
-    text = read_user_file(path, what="study: spec", error=ScenarioError)
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"study: spec {path} is not valid TOML ({exc})") from None
+    return read_toml(path, what="study: spec", error=ScenarioError)[0]
 
 
 def run_saturation_study(

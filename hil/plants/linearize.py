@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import logging
 import shutil
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +27,7 @@ from typing import Any
 
 import numpy as np
 from gainlink.errors import PlantError, SpecError
-from gainlink.fileio import atomic_write_text
+from gainlink.fileio import atomic_write_text, read_toml
 
 from . import toml_write
 from .fmu import open_binary, read_description, resolve_fmu
@@ -508,10 +507,7 @@ def linearize_to_spec(
     lin = linearize(fmu, at=at, inputs=inputs, outputs=outputs, method=method, Ts=Ts, horizon=horizon)
     tmpl = None
     if template is not None:
-        try:
-            tmpl = tomllib.loads(Path(template).read_text("utf-8"))
-        except (OSError, tomllib.TOMLDecodeError) as exc:
-            raise SpecError(f"template spec {template}: {exc}") from None
+        tmpl, _ = read_toml(template, what="template spec", error=SpecError)
     data = spec_dict(lin, Ts=Ts, name=name, template=tmpl)
     parse_spec(data, source=str(out))  # refuse to write a spec design would not take
     states_there = (

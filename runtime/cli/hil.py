@@ -81,12 +81,9 @@ def _study(args: argparse.Namespace) -> int:
     if args.study and not Path(args.study).exists() and "/" not in args.study and not args.study.endswith(".toml"):
         study_desc = default_study(args.study)
     elif args.study:
-        import tomllib
+        from gainlink.fileio import read_toml
 
-        try:
-            study_desc = tomllib.loads(Path(args.study).read_text("utf-8"))
-        except (OSError, tomllib.TOMLDecodeError) as exc:
-            raise GainlinkError(f"study {args.study}: {exc}") from None
+        study_desc, _ = read_toml(args.study, what="study", error=GainlinkError)
     study = run_saturation_study(
         spec_path=Path(args.spec) if args.spec else None,
         report_dir=Path(args.report),

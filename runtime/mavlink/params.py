@@ -47,13 +47,13 @@ import enum
 import math
 import re
 import struct
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import ParameterError
+from ..fileio import read_toml
 from ..shipping.artifact import Artifact
 from ..shipping.codegen import gain_set
 
@@ -303,10 +303,7 @@ def load_mapping(path: str | Path) -> Mapping:
         When the file is malformed: unknown keys, bad ids or types, duplicate names.
     """
     path = Path(path)
-    try:
-        doc = tomllib.loads(path.read_text("utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise ParameterError(f"mapping {path}: not valid TOML ({exc})") from None
+    doc, _ = read_toml(path, what="mapping", error=ParameterError)
     unknown = set(doc) - {"param"}
     if unknown:
         raise ParameterError(f"mapping {path}: unknown table(s) {sorted(unknown)} (only [[param]])")
