@@ -133,30 +133,38 @@ def cmd_design(args: argparse.Namespace) -> int:
     result = api.design_report(args.spec)
     artifact_mod.from_dict(result.artifact)  # the written file must load: check before publishing
     publish_files(out, {"gains.json": artifact_mod.render(result.artifact)})
-    a = result.artifact
     if args.json:
-        print(
-            json.dumps(
-                {
-                    "artifact": str(out / "gains.json"),
-                    "sha256": a["sha256"],
-                    "K": a["K"],
-                    "L": a["L"],
-                    "Ki": a.get("Ki"),
-                    "controller_poles": complex_pairs(result.controller_poles),
-                    "observer_poles": complex_pairs(result.observer_poles),
-                    "margins": a["checks"]["margins"],
-                    "u_op": a.get("u_op"),
-                    "y_op": a.get("y_op"),
-                    "compensator": a["checks"]["compensator"],
-                    "float32": a["checks"].get("float32"),
-                    "realization": a.get("realization", {}).get("kind", "as_designed"),
-                    "warnings": result.warnings,
-                },
-                indent=2,
-            )
-        )
+        print(json.dumps(_design_json(result, out / "gains.json"), indent=2))
         return 0
+    _print_gains(result)
+    _print_checks(result)
+    print(f"  wrote {out / 'gains.json'} (sha256 {result.artifact['sha256'][:16]})")
+    return 0
+
+
+def _design_json(result, path: Path) -> dict:
+    a = result.artifact
+    return {
+        "artifact": str(path),
+        "sha256": a["sha256"],
+        "K": a["K"],
+        "L": a["L"],
+        "Ki": a.get("Ki"),
+        "controller_poles": complex_pairs(result.controller_poles),
+        "observer_poles": complex_pairs(result.observer_poles),
+        "margins": a["checks"]["margins"],
+        "u_op": a.get("u_op"),
+        "y_op": a.get("y_op"),
+        "compensator": a["checks"]["compensator"],
+        "float32": a["checks"].get("float32"),
+        "realization": a.get("realization", {}).get("kind", "as_designed"),
+        "warnings": result.warnings,
+    }
+
+
+def _print_gains(result) -> None:
+    """The design's summary line, gains, poles and margins."""
+    a = result.artifact
     print(
         f"{a['name']}: n={a['n']} m={a['m']} p={a['p']} q={a['q']}, Ts={a['Ts']:g} s, "
         f"{a['design']['controller']['method']} + {a['design']['observer']['method']} "
@@ -176,6 +184,11 @@ def cmd_design(args: argparse.Namespace) -> int:
         down = "-inf" if mg.gain_margin_down_db is None else f"{mg.gain_margin_down_db:.1f}"
         pm = "n/a" if mg.phase_margin_deg is None else f"{mg.phase_margin_deg:.1f} deg"
         print(f"  margins at input {mg.input}: gain {up} / {down} dB, phase {pm}")
+
+
+def _print_checks(result) -> None:
+    """The operating point and the implementation checks: compensator, dead times, float32."""
+    a = result.artifact
     if "u_op" in a or "y_op" in a:
         op = [
             f"{name}={v:.6g}"
@@ -194,8 +207,6 @@ def cmd_design(args: argparse.Namespace) -> int:
             f"saturating disturbance): max |u32 - u64| {f.max_rel_u:.3g} of the limit span, max |y32 - y64| "
             f"{f.max_rel_y:.3g} of the output excursion ({'within' if f.ok else 'ABOVE'} {f.threshold:g})"
         )
-    print(f"  wrote {out / 'gains.json'} (sha256 {a['sha256'][:16]})")
-    return 0
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
