@@ -31,7 +31,7 @@ from gainlink.errors import PlantError, SpecError
 from gainlink.fileio import atomic_write_text
 
 from . import toml_write
-from .fmu import open_binary, read_description, resolve_fmu
+from .fmi import open_binary, read_description, resolve_fmu
 
 log = logging.getLogger(__name__)
 
