@@ -35,6 +35,7 @@ TOP_KEYS = {
     "limits",
     "operating_point",
     "implementation",
+    "linearization",
 }
 PLANT_KEYS = {
     "continuous": {"kind", "A", "B", "C", "D", "states", "inputs", "outputs"},
@@ -76,6 +77,21 @@ class OperatingPoint:
 
 
 IMPLEMENTATION_KEYS = {"realization", "float32_check"}
+# [linearization]: the record ``gainlink linearize`` writes (which interface runs use and why, the model's fit to
+# the FMU); kept as written, for the artifact's provenance.
+LINEARIZATION_KEYS = {
+    "fmu",
+    "fmu_sha256",
+    "method",
+    "Ts",
+    "interface",
+    "interface_reason",
+    "interface_check",
+    "fit_steps",
+    "fit_amplitude",
+    "fit",
+    "fit_warning",
+}
 
 
 @dataclass(frozen=True)
@@ -111,6 +127,7 @@ class PlantSpec:
     source_sha256: str = ""
     source: str = "<dict>"
     description: str = ""
+    linearization: dict | None = None
 
     @property
     def n(self) -> int:
@@ -191,6 +208,7 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     limits = _checked_table(data, "limits", LIMITS_KEYS, required=True)
     op = _operating_point(data, states=states, inputs=inputs, outputs=outputs)
     implementation = _checked_table(data, "implementation", IMPLEMENTATION_KEYS, required=False)
+    linearization = _checked_table(data, "linearization", LINEARIZATION_KEYS, required=False)
 
     return PlantSpec(
         name=name,
@@ -215,6 +233,7 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
         source_sha256=source_sha256,
         source=source,
         description=str(data.get("description", "")),
+        linearization=linearization,
     )
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import re
 import shutil
 import zipfile
 from collections.abc import Mapping
@@ -254,3 +255,16 @@ def fmu_sha256(path: Path) -> str:
     for p in sorted(q for q in path.rglob("*") if q.is_file()):
         h.update(p.relative_to(path).as_posix().encode() + b"\0" + p.read_bytes() + b"\0")
     return h.hexdigest()
+
+
+def signal_name(name: str) -> str:
+    """An FMU variable's name as a spec's signal name (``damper.s_rel`` -> ``damper_s_rel``)."""
+    s = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    return s if re.match(r"[A-Za-z_]", s) else f"s_{s}"
+
+
+def settable_at_start(md: Any, name: str) -> bool:
+    """Whether the FMU takes a start value for ``name`` in initialisation mode (a parameter, an input, or a
+    variable with ``initial`` exact or approx; a calculated one is the FMU's to compute)."""
+    v = next((v for v in md.modelVariables if v.name == name), None)
+    return v is not None and (v.causality in ("parameter", "input") or v.initial in ("exact", "approx"))

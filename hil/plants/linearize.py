@@ -29,9 +29,10 @@ from gainlink.errors import PlantError, SpecError
 from gainlink.fileio import atomic_write_text
 
 from . import toml_write
-from .fmi import read_description, resolve_fmu
+from .fmi import read_description, resolve_fmu, signal_name
 from .fmi_me import check_model_exchange, provides_directional
 from .jacobian import Signals, jacobians, signals
+from .validity import Validity, check_linearization
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +70,7 @@ class Linearization:
             ("x_op", self.states, self.x0 if self.Ts is None else None),
         ):
             if values is not None and len(names):
-                table[key] = {_signal_name(n): float(v) for n, v in zip(names, values)}
+                table[key] = {signal_name(n): float(v) for n, v in zip(names, values)}
         return table
 
 
@@ -233,13 +234,6 @@ def _linearize_cosimulation(
     )
 
 
-def _signal_name(name: str) -> str:
-    import re
-
-    s = re.sub(r"[^A-Za-z0-9_]", "_", name)
-    return s if re.match(r"[A-Za-z_]", s) else f"s_{s}"
-
-
 def spec_dict(
     lin: Linearization, *, Ts: float, name: str | None = None, template: Mapping[str, Any] | None = None
 ) -> dict:
@@ -258,9 +252,9 @@ def spec_dict(
         "discretization": "zoh",
         "plant": {
             "kind": "continuous" if lin.Ts is None else "discrete",
-            "states": [_signal_name(s) for s in lin.states],
-            "inputs": [_signal_name(s) for s in lin.inputs],
-            "outputs": [_signal_name(s) for s in lin.outputs],
+            "states": [signal_name(s) for s in lin.states],
+            "inputs": [signal_name(s) for s in lin.inputs],
+            "outputs": [signal_name(s) for s in lin.outputs],
             "A": lin.A.tolist(),
             "B": lin.B.tolist(),
             "C": lin.C.tolist(),
@@ -282,6 +276,26 @@ def spec_dict(
     return data
 
 
+@dataclass(frozen=True)
+class SpecWritten:
+    """What ``linearize`` wrote: the linearisation, and the check of it (interface, fit) the spec records."""
+
+    lin: Linearization
+    validity: Validity
+
+    def to_json(self) -> dict:
+        """``linearize --json``: sizes, method, operating point and the ``[linearization]`` record."""
+        lin = self.lin
+        return {
+            "n": int(lin.A.shape[0]),
+            "m": int(lin.B.shape[1]),
+            "p": int(lin.C.shape[0]),
+            "method": lin.method,
+            "operating_point": lin.operating_point(),
+            "linearization": self.validity.record,
+        }
+
+
 def linearize_to_spec(
     *,
     fmu: str | Path,
@@ -294,38 +308,62 @@ def linearize_to_spec(
     method: str = "auto",
     template: Path | None = None,
     horizon: int | None = None,
-) -> Linearization:
-    """Linearise and write the spec TOML (atomically); the spec parses with :func:`gainlink.spec.parse_spec`."""
+    interface: str = "auto",
+) -> SpecWritten:
+    """Linearise, check the model against the FMU (:mod:`.validity`: the interface runs at ``Ts`` will use, the
+    fit through it) and write the spec TOML with its ``[linearization]`` record (atomically); the spec parses
+    with :func:`gainlink.spec.parse_spec`. A poor fit is logged as one warning line."""
     from gainlink.spec import parse_spec
 
     if not Ts > 0:
         raise SpecError("--Ts must be positive")
+    if interface not in ("auto", "cs", "me"):
+        raise PlantError(f"linearize: --interface must be auto, cs or me, not {interface!r}")
     lin = linearize(fmu, at=at, inputs=inputs, outputs=outputs, method=method, Ts=Ts, horizon=horizon)
-    tmpl = None
-    if template is not None:
-        try:
-            tmpl = tomllib.loads(Path(template).read_text("utf-8"))
-        except (OSError, tomllib.TOMLDecodeError) as exc:
-            raise SpecError(f"template spec {template}: {exc}") from None
+    tmpl = _template(template)
     data = spec_dict(lin, Ts=Ts, name=name, template=tmpl)
     parse_spec(data, source=str(out))  # refuse to write a spec design would not take
+    path = _fmu_path(fmu)
+    validity = check_linearization(lin, path=path, md=read_description(path), Ts=Ts, interface=interface)
+    data["linearization"] = validity.record
+    parse_spec(data, source=str(out))
+    if validity.warning():
+        log.warning("FMU %s: %s", lin.model_name, validity.warning())
+    atomic_write_text(out, toml_write.dumps(data, header=_header(lin, validity, template=tmpl is not None)))
+    return SpecWritten(lin=lin, validity=validity)
+
+
+def _template(template: Path | None) -> dict | None:
+    if template is None:
+        return None
+    try:
+        return tomllib.loads(Path(template).read_text("utf-8"))
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise SpecError(f"template spec {template}: {exc}") from None
+
+
+def _header(lin: Linearization, validity: Validity, *, template: bool) -> str:
+    """The comment at the top of the spec: where it came from, the point, and what was checked."""
     states_there = (
         "states are balanced coordinates of the identified discrete model (D = 0: outputs sampled after each step)"
         if lin.Ts is not None
         else f"states there: {', '.join(f'{s} = {v:g}' for s, v in zip(lin.states, lin.x0))}"
     )
     drift = _drift(lin.dx0, A=lin.A, B=lin.B, states=lin.states) if lin.dx0 is not None else ""
-    header = (
+    fit = validity.fit
+    return (
         f"Linearised from FMU {lin.model_name} by gainlink linearize ({lin.method}).\n"
         f"Operating point: {', '.join(f'{k} = {v:g}' for k, v in lin.point.items()) or 'start values'}; "
         f"{states_there}.\n"
         "[operating_point] holds the inputs and outputs there: the loop works in absolute units.\n"
         + (f"Not an equilibrium: {drift}.\n" if drift else "")
+        + f"Runs at Ts = {fit.Ts:g} s simulate the FMU through {validity.choice.interface}: "
+        f"{validity.choice.reason}.\n"
+        + f"Fit of the model to the FMU there (worst NRMSE or final error): {fit.worst:.2g}"
+        + (" - POOR, see fit_warning.\n" if fit.poor else ".\n")
         + (
             "Design sections copied from the template spec."
-            if tmpl is not None
+            if template
             else "Design sections are neutral defaults: edit weights, noise and limits before designing."
         )
     )
-    atomic_write_text(out, toml_write.dumps(data, header=header))
-    return lin
