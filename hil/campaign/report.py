@@ -133,6 +133,8 @@ def campaign_csv(plan: CampaignPlan, rows: list[dict]) -> str:
         "longest_saturation_s",
         "twin_output_deviation",
         "twin_command_deviation",
+        "model_mismatch",
+        "model_iae_ratio",
         *[f"{t}_{k}" for t in tracked for k in ("iae", "overshoot_pct", "settling_time_s")],
         *[f"{o}_final" for o in outs],
         "artifact_sha256",
@@ -155,6 +157,8 @@ def campaign_csv(plan: CampaignPlan, rows: list[dict]) -> str:
                 q.get("longest_saturation_s", ""),
                 _num(q.get("twin_output_deviation")),
                 _num(q.get("twin_command_deviation")),
+                _num(q.get("model_mismatch")),
+                _num(q.get("model_iae_ratio")),
                 *[
                     _num(m.get("tracked", {}).get(t, {}).get(k))
                     for t in tracked
@@ -214,6 +218,7 @@ def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, ou
     failed = Counter(k for r in rows for k in r["failed"])
     if failed:
         lines.append("  runs failing each criterion: " + ", ".join(f"{k} {v}" for k, v in failed.most_common()))
+    lines += _model_lines(rows)
     worst = sorted((r for r in rows if _tracked_iae(r) is not None), key=lambda r: -_tracked_iae(r))[:3]
     if worst:
         lines.append(
@@ -223,6 +228,21 @@ def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, ou
         lines.append(f"  replay one: gainlink campaign show {out} --run {worst[0]['id']} --report REPORT_DIR")
     lines.append(f"  report: {out / 'campaign.json'}, campaign.csv, envelopes.png, scatter.png, failures.txt")
     return "\n".join(lines) + "\n"
+
+
+def _model_lines(rows: list[dict]) -> list[str]:
+    """The model mismatch over the runs (gainlink.hil.loop.model_twin): largest, and how many runs it flagged."""
+    values = [
+        (r, r["measures"]["model_mismatch"]) for r in rows if r.get("measures", {}).get("model_mismatch") is not None
+    ]
+    if not values:
+        return []
+    r, worst = max(values, key=lambda rv: rv[1])
+    flagged = sum(1 for r_ in rows if r_.get("measures", {}).get("model_warning"))
+    return [
+        f"  model mismatch (plant against the design's model): largest {worst:.3g} of an output's range "
+        f"(run {r['index']} {r['id']}); {flagged} run(s) above the warning threshold"
+    ]
 
 
 def _png(fig: Any) -> bytes:

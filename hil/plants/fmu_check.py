@@ -77,12 +77,13 @@ class CheckSetup:
     solver: dict
 
 
-def check_cosimulation(md: Any, setup: CheckSetup, *, step: float) -> InterfaceCheck:
-    """Whether Co-Simulation reproduces Model Exchange at ``step`` (cached; see the module docstring)."""
+def check_cosimulation(md: Any, setup: CheckSetup, *, step: float, use_cache: bool = True) -> InterfaceCheck:
+    """Whether Co-Simulation reproduces Model Exchange at ``step`` (cached; see the module docstring).
+    ``use_cache = False`` checks afresh (and still records the verdict)."""
     path = Path(setup.plant_args["path"])
     sha = fmu_sha256(path)
     key = _cache_key(sha, setup, step)
-    cached = _read_cache(key)
+    cached = _read_cache(key) if use_cache else None
     if cached is not None:
         return cached
     t0 = time.perf_counter()
