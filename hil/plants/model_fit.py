@@ -17,7 +17,7 @@ solver or step (its Co-Simulation solver when that is what ran).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -54,7 +54,6 @@ class ModelFit:
     interface: str
     cause: str | None = None
     worst_quarter: float | None = None
-    extra: dict = field(default_factory=dict)
 
     @property
     def worst(self) -> float:
@@ -158,4 +157,4 @@ def _diagnose(fit: ModelFit, plant: Any, plan: StepPlan, model: np.ndarray, star
             f"the FMU's own solver or step (the error stays at {small:.2g} with a quarter of the amplitude): "
             "check its solver settings, or a model that is not smooth at the point"
         )
-    return ModelFit(**{**vars(fit), "cause": cause, "worst_quarter": small})
+    return replace(fit, cause=cause, worst_quarter=small)
