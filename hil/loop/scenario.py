@@ -58,9 +58,9 @@ a deadline miss and counted in ``overruns``; ``catch_up`` runs the missed ticks 
 ``twin`` runs a float64 twin of the whole loop in step with the run (:mod:`gainlink.twin`): the reference
 law around a second instance of the same plant, same noise, references, disturbances and initial state,
 no link and no faults. The report compares the run with it (command and output deviations, IAE
-difference): what float32, the encoding, the link, timing and faults cost the closed loop. ``model_twin`` runs the same law around the design's own linear model
-(:mod:`.model_twin`), started where the plant starts: the report gives how far the plant departs from
-the model the controller believes in.
+difference): what float32, the encoding, the link, timing and faults cost the closed loop.
+``model_twin`` runs the same law around the design's own linear model (:mod:`.model_twin`), started where
+the plant starts: the report gives how far the plant departs from the model the controller believes in.
 
 Unknown keys anywhere are refused with one line naming them.
 """
