@@ -12,6 +12,8 @@ twin; hand-computed numbers for the mismatch figures.
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -119,9 +121,12 @@ def test_the_choice_without_a_check(mass_damper):
 
 
 def _linearize_json(fmu: Path, out: Path, *extra: str):
-    res = run_cli("linearize", fmu, "--Ts", str(TS), "--out", out, "--json", *extra)
-    assert res.code == 0, res.err
-    return json.loads(res.out)["linearization"], res.err
+    """The real command (a process of its own: its log lines reach its own stderr): the record and stderr."""
+    gainlink = Path(sys.executable).parent / "gainlink"
+    argv = [str(gainlink), "linearize", str(fmu), "--Ts", str(TS), "--out", str(out), "--json", *extra]
+    res = subprocess.run(argv, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout)["linearization"], res.stderr
 
 
 def test_linearize_through_model_exchange_fits_and_records_why(mass_damper, tmp_path):
