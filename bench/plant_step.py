@@ -45,7 +45,7 @@ def main() -> None:
     cart = str(build_fmu("cart_pendulum"))
     wood_berry = build_fmu("wood_berry")
     kinds = {
-        "fmu_cs": {"kind": "fmu", "path": cart, "outputs": ["x", "theta"]},
+        "fmu_cs": {"kind": "fmu", "path": cart, "outputs": ["x", "theta"], "interface": "cs"},
         "fmu_me_cvode": {"kind": "fmu", "path": cart, "outputs": ["x", "theta"], "interface": "me"},
         "linear_spec": {"kind": "linear", "spec": str(ROOT / "examples" / "pendulum.toml")},
         "builtin_cart_pendulum": {"kind": "cart_pendulum", "outputs": ["x", "theta"]},

@@ -168,7 +168,7 @@ def test_model_exchange_only_fmu_runs_through_fmpys_solver_like_cosimulation(car
     with pytest.raises(PlantError, match="no Co-Simulation interface"):
         plant_from_config({"kind": "fmu", "path": str(me_only), "interface": "cs"})
     me = plant_from_config({"kind": "fmu", "path": str(me_only), "outputs": ["x", "theta"]})
-    cs = plant_from_config({"kind": "fmu", "path": str(cart_fmu), "outputs": ["x", "theta"]})
+    cs = plant_from_config({"kind": "fmu", "path": str(cart_fmu), "outputs": ["x", "theta"], "interface": "cs"})
     model = CartPendulum(outputs=["x", "theta"], step=1e-4)
     try:
         assert type(me).__name__ == "FmuModelExchangePlant"

@@ -82,7 +82,9 @@ def test_pil_cli_summary_and_files(example_artifacts, tmp_path):
     assert summary["twin"]["worst_du_rel"] <= RTOL and set(summary["twin"]["iae"]) == {"r_x"}
     assert json.loads((out / "pil.json").read_text()) == summary
     rows = (out / "pil.csv").read_text().splitlines()
-    assert rows[0] == "y0,y1,u0,sat0,status,twin_y0,twin_y1,twin_u0" and len(rows) == 501
+    assert rows[0] == "y0,y1,u0,sat0,status,twin_y0,twin_y1,twin_u0,model_y0,model_y1,model_u0" and len(rows) == 501
+    # the plant is the artifact's own model: the model twin differs only by the firmware's float32
+    assert summary["model_twin"]["worst"] < 1e-4 and not summary["model_twin"]["warning"]
     # the report's twin plot, as a HIL report has it: one panel per output and input (2 + 1, 1.9 in each at 90 dpi)
     png = (out / "twin.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n"

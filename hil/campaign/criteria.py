@@ -14,6 +14,10 @@ changed and the report merged again without running anything twice (:func:`evalu
 - ``twin_deviation_below``: the largest deviation of an output from the float64 closed-loop twin's, relative
   to the twin's excursion (``worst_dy_rel`` of :func:`gainlink.proof.twin.twin_comparison`, which the run's metrics
   carry as ``twin``): what float32, the link and the faults cost the loop.
+
+Every run also records its model mismatch (``model_mismatch``: the largest output deviation from the model twin,
+relative to the output's range; ``model_iae_ratio``: the tracked IAE of the plant over the model twin's, the one
+farthest from 1; ``model_warning``), from :mod:`gainlink.hil.loop.model_twin`.
 """
 
 from __future__ import annotations
@@ -81,6 +85,12 @@ def measure(result: Any, artifact: Any) -> dict:
     if isinstance(twin, dict):
         out["twin_output_deviation"] = twin.get("worst_dy_rel")
         out["twin_command_deviation"] = twin.get("worst_du_rel")
+    model = result.metrics.get("model_twin")  # gainlink.hil.loop.model_twin: the plant against the design's model
+    if isinstance(model, dict):
+        out["model_mismatch"] = model.get("worst")
+        ratios = [v.get("ratio") for v in model.get("iae", {}).values() if v.get("ratio") is not None]
+        out["model_iae_ratio"] = max(ratios, key=lambda x: abs(np.log(x)) if x > 0 else np.inf, default=None)
+        out["model_warning"] = bool(model.get("warning"))
     return _clean(out)
 
 

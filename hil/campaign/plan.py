@@ -155,7 +155,7 @@ def _fmu_blob(scenario: dict, campaign: Campaign, blobs: dict, cache: dict) -> N
     plant = scenario.get("plant")
     if not isinstance(plant, dict) or plant.get("kind") != "fmu":
         return
-    from ..plants.fmu import resolve_fmu
+    from ..plants.fmi import resolve_fmu
 
     key = (plant.get("fmu"), plant.get("path"))
     if key not in cache:

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 from gainlink.fileio import publish_files
+from gainlink.proof.twin_plot import png_bytes
 
 from .criteria import evaluate
 from .plan import CampaignPlan, describe_axes
@@ -133,6 +134,8 @@ def campaign_csv(plan: CampaignPlan, rows: list[dict]) -> str:
         "longest_saturation_s",
         "twin_output_deviation",
         "twin_command_deviation",
+        "model_mismatch",
+        "model_iae_ratio",
         *[f"{t}_{k}" for t in tracked for k in ("iae", "overshoot_pct", "settling_time_s")],
         *[f"{o}_final" for o in outs],
         "artifact_sha256",
@@ -155,6 +158,8 @@ def campaign_csv(plan: CampaignPlan, rows: list[dict]) -> str:
                 q.get("longest_saturation_s", ""),
                 _num(q.get("twin_output_deviation")),
                 _num(q.get("twin_command_deviation")),
+                _num(q.get("model_mismatch")),
+                _num(q.get("model_iae_ratio")),
                 *[
                     _num(m.get("tracked", {}).get(t, {}).get(k))
                     for t in tracked
@@ -214,6 +219,7 @@ def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, ou
     failed = Counter(k for r in rows for k in r["failed"])
     if failed:
         lines.append("  runs failing each criterion: " + ", ".join(f"{k} {v}" for k, v in failed.most_common()))
+    lines += _model_lines(rows)
     worst = sorted((r for r in rows if _tracked_iae(r) is not None), key=lambda r: -_tracked_iae(r))[:3]
     if worst:
         lines.append(
@@ -225,16 +231,22 @@ def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, ou
     return "\n".join(lines) + "\n"
 
 
-def _png(fig: Any) -> bytes:
-    import matplotlib.pyplot as plt
+def _model_lines(rows: list[dict]) -> list[str]:
+    """The model mismatch over the runs (gainlink.hil.loop.model_twin): largest, and how many runs it flagged."""
+    values = [
+        (r, r["measures"]["model_mismatch"]) for r in rows if r.get("measures", {}).get("model_mismatch") is not None
+    ]
+    if not values:
+        return []
+    r, worst = max(values, key=lambda rv: rv[1])
+    flagged = sum(1 for r_ in rows if r_.get("measures", {}).get("model_warning"))
+    return [
+        f"  model mismatch (plant against the design's model): largest {worst:.3g} of an output's range "
+        f"(run {r['index']} {r['id']}); {flagged} run(s) above the warning threshold"
+    ]
 
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
-    plt.close(fig)
-    return buf.getvalue()
 
-
-def envelopes_png(plan: CampaignPlan, rows: list[dict], store: Any) -> bytes:
+def envelopespng_bytes(plan: CampaignPlan, rows: list[dict], store: Any) -> bytes:
     """Percentile envelopes of outputs and commands over time (finished runs of the most common length)."""
     import matplotlib
 
@@ -257,7 +269,7 @@ def envelopes_png(plan: CampaignPlan, rows: list[dict], store: Any) -> bytes:
     fig, axes = plt.subplots(max(outs + ins, 1), 1, figsize=(9, 2.3 * max(outs + ins, 1)), sharex=True, squeeze=False)
     if first is None:
         axes[0, 0].text(0.5, 0.5, "no finished run", ha="center", transform=axes[0, 0].transAxes)
-        return _png(fig)
+        return png_bytes(fig)
     t = first["t"]
     for i in range(outs + ins):
         ax = axes[i, 0]
@@ -283,7 +295,7 @@ def envelopes_png(plan: CampaignPlan, rows: list[dict], store: Any) -> bytes:
         ax.legend(loc="best", fontsize=7)
     axes[-1, 0].set_xlabel("t (the plant's time unit)")
     fig.suptitle(f"{plan.campaign.name}: outputs and commands over {len(keep)} runs")
-    return _png(fig)
+    return png_bytes(fig)
 
 
 def _signals(plan: CampaignPlan) -> dict:
@@ -292,7 +304,7 @@ def _signals(plan: CampaignPlan) -> dict:
     return {"outputs": [], "inputs": []}
 
 
-def scatter_png(plan: CampaignPlan, rows: list[dict]) -> bytes:
+def scatterpng_bytes(plan: CampaignPlan, rows: list[dict]) -> bytes:
     """IAE of each run against each numeric axis; failed runs marked."""
     import matplotlib
 
@@ -336,7 +348,7 @@ def scatter_png(plan: CampaignPlan, rows: list[dict]) -> bytes:
         grid[k // cols, k % cols].axis("off")
     fig.suptitle(f"{plan.campaign.name}: IAE against the varied parameters (x: failed)")
     fig.tight_layout()
-    return _png(fig)
+    return png_bytes(fig)
 
 
 def _criteria_doc(c: Any) -> dict:
@@ -370,8 +382,8 @@ def merge(plan: CampaignPlan, store: Any) -> tuple[str, list[dict]]:
         "campaign.json": json.dumps(doc, sort_keys=True, indent=1, allow_nan=False) + "\n",
         "campaign.csv": campaign_csv(plan, rows),
         "failures.txt": failures_text(rows),
-        "envelopes.png": envelopes_png(plan, rows, store),
-        "scatter.png": scatter_png(plan, rows),
+        "envelopes.png": envelopespng_bytes(plan, rows, store),
+        "scatter.png": scatterpng_bytes(plan, rows),
         "summary.txt": summary,
     }
     publish_files(store.out, files)

@@ -27,7 +27,7 @@ from ..plants.base import Plant
 from .controller import ControllerProcess, controller_argv, qemu_peer
 from .faults import FaultInjector
 from .metrics import RunTrace, compute_metrics, link_capacity
-from .plan import Recorder, describe_artifact, plan_run, start_twin
+from .plan import Recorder, describe_artifact, describe_plant, plan_run, start_model_twin, start_twin, step_twins
 from .scenario import Scenario
 from .scenario_plant import build_plant
 from .scheduler import SPIN_NS, Pacer, Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
@@ -162,6 +162,7 @@ class _Loop:
         self.rec = Recorder(self.plan, artifact=artifact, plant=plant)
         self.injector = FaultInjector(scenario.faults, Ts=artifact.Ts, seed=scenario.seed)
         self.twin = None  # the float64 twin (gainlink.proof.twin), set by run_scenario when the scenario has one
+        self.model_twin, self.model_start = None, ""  # the model twin (.model_twin), started with the run
         self.u = artifact.safe_command  # until the first command: u_op clamped into the limits
         self.late = 0
         self.overruns = 0
@@ -173,6 +174,9 @@ class _Loop:
         """Run every planned step (or until the peer or the plant fails) and return the result."""
         N = self.plan.N
         self.plant.reset(initial=self.scenario.initial_state)
+        self.model_twin, self.model_start = start_model_twin(
+            self.scenario, artifact=self.a, plan=self.plan, plant=self.plant
+        )
         fifo = self._enter_fifo()
         every = max(1, N // 100)
         self.t_start = time.perf_counter_ns()
@@ -291,10 +295,8 @@ class _Loop:
             self._check_peer(k, time.perf_counter_ns())
 
     def _twin_step(self, k: int) -> None:
-        """Advance the float64 twin through sample ``k`` (same noise, reference and disturbance)."""
-        if self.twin is not None:
-            plan = self.plan
-            self.twin.step(k, noise=plan.noise[k], r=plan.R[k], d=plan.D[k])
+        """Advance the float64 twin and the model twin through sample ``k`` (same noise, reference, disturbance)."""
+        step_twins((self.twin, self.model_twin), k, self.plan)
 
     def _await_command(self, k: int, seq: int, deadline: int):
         """The command answering sample ``k`` (``seq`` on the link) before ``deadline`` (ns), or None; older ones
@@ -335,8 +337,15 @@ class _Loop:
         """Metrics, trace and what ran, for ``steps`` steps."""
         a, scenario = self.a, self.scenario
         complete = reason is None
-        trace = self.rec.trace(steps, self.twin)
-        metrics = compute_metrics(trace, artifact=a, mode=scenario.mode, late=self.late, period_s=self.plan.period_s)
+        trace = self.rec.trace(steps, self.twin, self.model_twin)
+        metrics = compute_metrics(
+            trace,
+            artifact=a,
+            mode=scenario.mode,
+            late=self.late,
+            period_s=self.plan.period_s,
+            model_start=self.model_start,
+        )
         wall = (time.perf_counter_ns() - self.t_start) / 1e9
         metrics.update(
             {
@@ -357,12 +366,7 @@ class _Loop:
         plant = self.plant
         info = {
             "artifact": describe_artifact(a, scenario.artifact_path),
-            "plant": {
-                "name": plant.name,
-                "inputs": list(plant.input_names),
-                "outputs": list(plant.output_names),
-                "states": list(plant.state_names),
-            },
+            "plant": describe_plant(plant),
             "transport": self.transport.describe(),
             "controller": {"kind": scenario.controller, "argv": self.peer.argv, "ready": self.peer.ready_line},
         }

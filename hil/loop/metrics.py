@@ -9,6 +9,8 @@ from typing import Any
 import numpy as np
 from gainlink.proof.twin import twin_comparison
 
+from .model_twin import model_mismatch
+
 
 @dataclass(frozen=True)
 class RunTrace:
@@ -21,7 +23,8 @@ class RunTrace:
     send), relative to the run start;
     ``deadline_ns`` when it was due (realtime; NaN in lockstep); ``x`` the plant states (N, n_plant);
     ``twin_y``, ``twin_u``, ``twin_z`` the float64 twin's sampled outputs, commands and integrator
-    (:mod:`gainlink.proof.twin`) (``x`` and the twin's are NaN when the twin is off).
+    (:mod:`gainlink.proof.twin`) (``x`` and the twin's are NaN when the twin is off); ``model_y``, ``model_u`` the
+    model twin's (:mod:`.model_twin`; None when it is off).
     """
 
     t: np.ndarray
@@ -38,11 +41,18 @@ class RunTrace:
     twin_y: np.ndarray
     twin_u: np.ndarray
     twin_z: np.ndarray
+    model_y: np.ndarray | None = None
+    model_u: np.ndarray | None = None
 
     @property
     def has_twin(self) -> bool:
         """True when the run had a twin (its columns are finite)."""
         return bool(self.t.size) and bool(np.all(np.isfinite(self.twin_u)))
+
+    @property
+    def has_model_twin(self) -> bool:
+        """True when the run had a model twin (:mod:`.model_twin`)."""
+        return self.model_u is not None and bool(self.t.size) and bool(np.all(np.isfinite(self.model_u)))
 
 
 def _pct(values: np.ndarray) -> dict:
@@ -85,8 +95,11 @@ def tracking(t: np.ndarray, y: np.ndarray, r: np.ndarray, *, band: float = 0.02)
     return {"overshoot_pct": overshoot, "settling_time_s": settle, "iae": iae, "start_s": float(t[k0])}
 
 
-def compute_metrics(trace: RunTrace, *, artifact: Any, mode: str, late: int, period_s: float) -> dict:
-    """The report's metrics from a trace (JSON-able dict; NaN becomes ``None``)."""
+def compute_metrics(
+    trace: RunTrace, *, artifact: Any, mode: str, late: int, period_s: float, model_start: str = ""
+) -> dict:
+    """The report's metrics from a trace (JSON-able dict; NaN becomes ``None``); ``model_start`` says where the
+    model twin started."""
     a = artifact
     N = trace.t.size
     lost = int(np.count_nonzero(~trace.got))
@@ -127,6 +140,10 @@ def compute_metrics(trace: RunTrace, *, artifact: Any, mode: str, late: int, per
             out["peak_integral_command"] = {name: float(v) for name, v in zip(sig["inputs"], integral_cmd)}
         out["twin"] = twin_comparison(
             t=trace.t, y=trace.y, u=trace.u, r=trace.r, twin_y=trace.twin_y, twin_u=trace.twin_u, artifact=a
+        ).to_dict()
+    if trace.has_model_twin:
+        out["model_twin"] = model_mismatch(
+            t=trace.t, y=trace.y, r=trace.r, model_y=trace.model_y, artifact=a, start=model_start
         ).to_dict()
     tracked = {}
     if N:

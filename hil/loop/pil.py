@@ -122,6 +122,8 @@ class PilResult:
     steps_per_second: float
     twin: TwinTrace | None = None  # the float64 twin's run (gainlink.proof.twin), when one ran
     comparison: TwinComparison | None = None  # the run against its twin
+    model_twin: TwinTrace | None = None  # the law around the artifact's own model (model_twin), when one ran
+    reference: np.ndarray | None = None  # (N, q) the references the run tracked
 
     def summary(self) -> dict:
         """Counts, timing and the comparison with the twin, JSON-ready."""
@@ -189,6 +191,7 @@ def run_pil(
     watchdog_periods: int = 10,
     deadline_s: float = 10.0,
     twin: DiscretePlant | None = None,
+    model_twin: DiscretePlant | None = None,
 ) -> PilResult:
     """Close the loop: firmware in QEMU, ``plant`` in Python, one FIFO round trip per sample.
 
@@ -210,6 +213,9 @@ def run_pil(
     twin : DiscretePlant, optional
         A second instance of the plant, in the same initial state: the float64 twin of the loop
         (:mod:`gainlink.proof.twin`) runs on it in step with the firmware, and the result compares the two.
+    model_twin : DiscretePlant, optional
+        The artifact's own model (:class:`ArtifactPlant`) started where the plant starts: the float64 law runs
+        around it too, and the result holds its trace (the model twin of ``gainlink.hil.loop.model_twin``).
 
     Returns
     -------
@@ -221,11 +227,16 @@ def run_pil(
     R = np.broadcast_to(a.r_op if reference is None else np.asarray(reference, float), (steps, a.q))
     elf = build(a, target="cortex-m4", board=board).files["elf"]
     tw = None if twin is None else TwinLoop(a, outputs=twin.outputs, advance=lambda u: twin.advance(u=u), steps=steps)
+    mt = (
+        None
+        if model_twin is None
+        else TwinLoop(a, outputs=model_twin.outputs, advance=lambda u: model_twin.advance(u=u), steps=steps)
+    )
     rec = _PilRecord.empty(a, steps, x0=plant.state)
     with _qemu_fifos(elf, board=board, steps=steps) as (proc, fin, fout):
         _open_stream(proc, fin, fout, steps=steps, watchdog_periods=watchdog_periods, deadline_s=deadline_s)
         t_start = time.perf_counter()
-        _exchange(a, plant, R, rec, link=(proc, fin, fout), deadline_s=deadline_s, twin=tw)
+        _exchange(a, plant, R, rec, link=(proc, fin, fout), deadline_s=deadline_s, twins=(tw, mt))
         elapsed = time.perf_counter() - t_start
         _await_exit(proc, deadline_s=deadline_s)
     twin_trace = None if tw is None else tw.trace(steps)
@@ -252,6 +263,8 @@ def run_pil(
         steps_per_second=steps / elapsed if elapsed > 0 else float("inf"),
         twin=twin_trace,
         comparison=comparison,
+        model_twin=None if mt is None else mt.trace(steps),
+        reference=np.array(R, dtype=float),
     )
 
 
@@ -322,7 +335,7 @@ def _exchange(
     *,
     link: tuple,
     deadline_s: float,
-    twin: TwinLoop | None,
+    twins: tuple[TwinLoop | None, ...],
 ) -> None:
     """One FIFO round trip per sample: the plant's outputs in, the command out, the plant advanced."""
     proc, fin, fout = link
@@ -342,8 +355,9 @@ def _exchange(
         rec.SAT[k] = (int(out["sat"]) >> np.arange(a.m)) & 1
         plant.advance(u=rec.U[k].astype(float))
         rec.X.append(plant.state)
-        if twin is not None:  # outside the timed round trip
-            twin.step(k, noise=np.zeros(a.p), r=R[k], d=np.zeros(a.m))
+        for twin in twins:  # outside the timed round trip
+            if twin is not None:
+                twin.step(k, noise=np.zeros(a.p), r=R[k], d=np.zeros(a.m))
 
 
 def _await_exit(proc: subprocess.Popen, *, deadline_s: float) -> None:

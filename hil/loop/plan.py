@@ -75,10 +75,11 @@ class Recorder:
         self.ST = np.zeros(N, dtype=np.int64)
         self.X = np.full((N, len(plant.state_names)), np.nan)
 
-    def trace(self, steps: int, twin: TwinLoop | None = None) -> RunTrace:
-        """The recorded run up to ``steps``, with the twin's (NaN without one)."""
+    def trace(self, steps: int, twin: TwinLoop | None = None, model: TwinLoop | None = None) -> RunTrace:
+        """The recorded run up to ``steps``, with the twin's (NaN without one) and the model twin's (None)."""
         p = self.plan
         tw = twin.trace(steps) if twin is not None else None
+        mt = model.trace(steps) if model is not None else None
 
         def nan(width: int) -> np.ndarray:
             return np.full((steps, width), np.nan)
@@ -98,20 +99,59 @@ class Recorder:
             twin_y=tw.y if tw else nan(self.Y.shape[1]),
             twin_u=tw.u if tw else nan(self.U.shape[1]),
             twin_z=tw.z if tw else nan(p.R.shape[1]),
+            model_y=mt.y if mt else None,
+            model_u=mt.u if mt else None,
         )
 
 
 def describe_artifact(artifact: Artifact, path) -> dict:
-    """What a report says about the artifact: identity and the compensator's stability."""
+    """What a report says about the artifact: identity, the compensator's stability and, for a model
+    ``linearize`` wrote, the interface it was checked through and its fit (from the provenance)."""
     from gainlink.synthesis.compensator import compensator_stability
 
     comp = compensator_stability(artifact)
-    return {
+    out = {
         "name": artifact.name,
         "sha256": artifact.sha256,
         "path": str(path),
         "compensator": {**comp.to_dict(), "summary": comp.describe()},
     }
+    model = {k: artifact.provenance[k] for k in ("plant_interface", "plant_fit") if k in artifact.provenance}
+    if model:
+        out["model"] = model
+    return out
+
+
+def describe_plant(plant: Plant) -> dict:
+    """What a report says about the plant: its signals and, for an FMU, the interface that ran and why."""
+    from ..plants.fmu_interface import describe_interface
+
+    return {
+        "name": plant.name,
+        "inputs": list(plant.input_names),
+        "outputs": list(plant.output_names),
+        "states": list(plant.state_names),
+        **describe_interface(plant),
+    }
+
+
+def start_model_twin(
+    scenario: Scenario, *, artifact: Artifact, plan: Plan, plant: Plant
+) -> tuple[TwinLoop | None, str]:
+    """The run's model twin (:mod:`.model_twin`) started where ``plant`` (just reset) is, and a note on where
+    that is; (None, "") when ``scenario.model_twin`` is off."""
+    if not scenario.model_twin:
+        return None, ""
+    from .model_twin import start_model_twin as start
+
+    return start(artifact, plant=plant, steps=plan.N)
+
+
+def step_twins(twins: tuple, k: int, plan: Plan) -> None:
+    """Advance the run's twins (those that run) through sample ``k``: same noise, reference and disturbance."""
+    for twin in twins:
+        if twin is not None:
+            twin.step(k, noise=plan.noise[k], r=plan.R[k], d=plan.D[k])
 
 
 def start_twin(scenario: Scenario, *, artifact: Artifact, plan: Plan, stack) -> TwinLoop | None:

@@ -50,6 +50,7 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
         f"{info['plant']['name']}  controller {info['controller']['kind']}  transport "
         f"{info['transport'].get('config', {}).get('interface', info['transport'].get('kind'))}"
     )
+    lines += _plant_lines(info, mode=m["mode"])
     comp = info["artifact"].get("compensator")
     if comp:
         lines.append(
@@ -78,6 +79,7 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
     if "peak_integrator" in m:
         lines.append("  peak integrator: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["peak_integrator"].items()))
     lines += _twin_lines(m.get("twin"))
+    lines += _model_lines(m.get("model_twin"))
     for name, tr in m["tracked"].items():
         lines.append(
             f"  {name}: overshoot {_fmt(tr['overshoot_pct'], '%')}, settling {_fmt(tr['settling_time_s'], ' s')}"
@@ -110,6 +112,23 @@ def _saturation_line(m: dict) -> str:
     )
 
 
+def _plant_lines(info: dict, *, mode: str) -> list[str]:
+    """Which interface of an FMU ran and why, against the one the design's model was checked through."""
+    plant, model = info["plant"], info["artifact"].get("model", {})
+    if "interface" not in plant:
+        return []
+    out = [f"  plant interface {plant['interface']}: {plant['interface_reason']}"]
+    checked = model.get("plant_interface", "")
+    if checked and not checked.startswith(plant["interface"] + ":"):
+        out.append(
+            f"  WARNING: the design's model was checked through {checked.split(':')[0]}, this run used "
+            f"{plant['interface']}: compare the model twin below"
+        )
+    if mode == "realtime" and plant["interface"] == "me":
+        out.append("  Model Exchange (CVode) costs ~30x a Co-Simulation step: check the deadline misses below")
+    return out
+
+
 def _twin_lines(tw: dict | None) -> list[str]:
     """The twin comparison in a few lines: what the implementation cost against the ideal loop."""
     if not tw:
@@ -133,6 +152,30 @@ def _twin_lines(tw: dict | None) -> list[str]:
             for k, v in tw["iae"].items()
         )
     )
+    return out
+
+
+def _model_lines(mt: dict | None) -> list[str]:
+    """The model twin in a few lines: how far the plant departs from the design's own linear model."""
+    if not mt:
+        return []
+    worst = mt["worst"]
+    out = [
+        f"  against the model twin (the same law around the design's linear model, from {mt['start']}):",
+        "    max |y - y_model|: "
+        + ", ".join(
+            f"{k} {_fmt(v['max_dy'])} ({_fmt(v['max_dy_rel'], digits=3)} of range)" for k, v in mt["outputs"].items()
+        ),
+        "    IAE plant / model: "
+        + ", ".join(
+            f"{k} {_fmt(v['plant'])} / {_fmt(v['model'])} = {_fmt(v['ratio'], digits=3)}" for k, v in mt["iae"].items()
+        ),
+    ]
+    if mt["warning"]:
+        out.append(
+            f"  WARNING: the plant departs from the design's model by {_fmt(worst, digits=3)} of an output's range "
+            f"(threshold {mt['threshold']:g}): the design's predictions do not hold for this plant"
+        )
     return out
 
 
@@ -189,7 +232,38 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
     files["latency.png"] = png_bytes(fig)
     if tr.has_twin:
         files["twin.png"] = _twin_plot(result, outs=outs, ins=ins)
+    if tr.has_model_twin:
+        files["model_twin.png"] = _model_twin_plot(result, outs=outs, artifact=artifact)
     return files
+
+
+def _model_twin_plot(result: RunResult, *, outs: list[str], artifact: Any) -> bytes:
+    """Per output: the plant, the model twin and the closed-loop twin, with the references it tracks."""
+    import matplotlib.pyplot as plt
+
+    tr = result.trace
+    fig, axes = plt.subplots(len(outs), 1, figsize=(8, 2.4 * len(outs)), sharex=True, squeeze=False)
+    for i, name in enumerate(outs):
+        ax = axes[i, 0]
+        ax.plot(tr.t, tr.y[:, i], lw=1.2, label=f"{name} (plant)")
+        ax.plot(tr.t, tr.model_y[:, i], "--", lw=1.0, label=f"{name} (model twin: the design's linear model)")
+        if tr.has_twin:
+            ax.plot(tr.t, tr.twin_y[:, i], ":", lw=1.0, label=f"{name} (closed-loop twin: the plant, ideal law)")
+        if artifact is not None and artifact.q:
+            for j, rname in enumerate(artifact.signals["references"]):
+                if artifact.Ci[j, i] != 0:
+                    ax.plot(tr.t, tr.r[:, j], color="0.5", lw=0.8, label=f"reference {rname}")
+        ax.set_ylabel(name)
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", fontsize=7)
+    axes[-1, 0].set_xlabel("t [s]")
+    mt = result.metrics.get("model_twin") or {}
+    worst = mt.get("worst")
+    fig.suptitle(
+        f"{result.scenario.name}: plant, model twin and closed-loop twin"
+        + (f" (mismatch {worst:.3g} of range)" if worst is not None else "")
+    )
+    return png_bytes(fig)
 
 
 def _twin_plot(result: RunResult, *, outs: list[str], ins: list[str]) -> bytes:

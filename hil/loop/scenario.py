@@ -18,6 +18,7 @@ Example::
     affinity = "auto"                      # auto | shared | separate | none (CPU placement, see below)
     seed = 1
     twin = true                            # run the float64 twin of the loop beside it (see below)
+    model_twin = true                      # and the law around the design's own linear model (see below)
 
     [plant]        kind = "fmu", fmu = "cart_pendulum", outputs = ["x", "theta"]
     [transport]    interface = "udp_multicast", channel = "239.74.163.2", hop_limit = 0, fd = true
@@ -58,6 +59,8 @@ a deadline miss and counted in ``overruns``; ``catch_up`` runs the missed ticks 
 law around a second instance of the same plant, same noise, references, disturbances and initial state,
 no link and no faults. The report compares the run with it (command and output deviations, IAE
 difference): what float32, the encoding, the link, timing and faults cost the closed loop.
+``model_twin`` runs the same law around the design's own linear model (:mod:`.model_twin`), started where
+the plant starts: the report gives how far the plant departs from the model the controller believes in.
 
 Unknown keys anywhere are refused with one line naming them.
 """
@@ -90,6 +93,7 @@ TOP_KEYS = {
     "sched_fifo",
     "seed",
     "twin",
+    "model_twin",
     "initial_state",
     "reference",
     "noise",
@@ -166,6 +170,7 @@ class Scenario:
     overrun: str = "skip"
     seed: int = 0
     twin: bool = True
+    model_twin: bool = True
     initial_state: dict = field(default_factory=dict)
     reference: dict = field(default_factory=dict)
     noise: dict = field(default_factory=dict)
@@ -264,6 +269,7 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
         overrun=overrun,
         seed=int(_num(data.get("seed", 0), "seed")),
         twin=_flag(data, "twin", True),
+        model_twin=_flag(data, "model_twin", True),
         initial_state=initial,
         reference=reference,
         noise=noise,

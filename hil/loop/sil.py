@@ -28,7 +28,7 @@ from gainlink.shipping.artifact import Artifact
 
 from .bridge import RunResult
 from .metrics import compute_metrics
-from .plan import Recorder, describe_artifact, plan_run, start_twin
+from .plan import Recorder, describe_artifact, describe_plant, plan_run, start_model_twin, start_twin, step_twins
 from .scenario import Scenario
 from .scenario_plant import build_plant
 
@@ -122,12 +122,16 @@ class _SilLoop:
         self.plan = plan_run(scenario, artifact=artifact, plant=plant)
         self.rec = Recorder(self.plan, artifact=artifact, plant=plant)
         self.twin = None  # the float64 twin (gainlink.proof.twin), set by run_sil when the scenario has one
+        self.model_twin, self.model_start = None, ""  # the model twin (.model_twin), started with the run
         self.bits = np.arange(artifact.m, dtype=np.uint32)
 
     def run(self, progress: Callable[[int, int], None] | None, *, controller: dict) -> RunResult:
         """Every planned step, or until the plant fails."""
         N, reason, k = self.plan.N, None, 0
         self.plant.reset(initial=self.scenario.initial_state)
+        self.model_twin, self.model_start = start_model_twin(
+            self.scenario, artifact=self.a, plan=self.plan, plant=self.plant
+        )
         every = max(1, N // 100)
         t_start = time.perf_counter_ns()
         self.t_start = t_start
@@ -162,13 +166,12 @@ class _SilLoop:
         try:
             self.plant.advance(u=u + plan.D[k], dt=self.a.Ts)
         finally:
-            if self.twin is not None:
-                self.twin.step(k, noise=plan.noise[k], r=r, d=plan.D[k])
+            step_twins((self.twin, self.model_twin), k, plan)
 
     def _result(self, steps: int, *, reason: str | None, wall: float, controller: dict) -> RunResult:
         a, scenario, plant = self.a, self.scenario, self.plant
-        trace = self.rec.trace(steps, self.twin)
-        metrics = compute_metrics(trace, artifact=a, mode="sil", late=0, period_s=a.Ts)
+        trace = self.rec.trace(steps, self.twin, self.model_twin)
+        metrics = compute_metrics(trace, artifact=a, mode="sil", late=0, period_s=a.Ts, model_start=self.model_start)
         metrics.update(
             {
                 "complete": reason is None,
@@ -184,12 +187,7 @@ class _SilLoop:
             metrics["reason"] = reason
         info = {
             "artifact": describe_artifact(a, scenario.artifact_path),
-            "plant": {
-                "name": plant.name,
-                "inputs": list(plant.input_names),
-                "outputs": list(plant.output_names),
-                "states": list(plant.state_names),
-            },
+            "plant": describe_plant(plant),
             "transport": {"kind": "sil (in-process, no link)"},
             "controller": controller,
         }

@@ -12,224 +12,17 @@ from __future__ import annotations
 
 import logging
 import shutil
-import zipfile
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from gainlink.errors import PlantError
 
-from ..registry import take_keys
-from .base import PLANTS, Plant
+from .base import Plant
+from .fmi import fmi2_callbacks, forget_log, map_variables, open_binary, read_description, set_values
 
 log = logging.getLogger(__name__)
-
-
-def resolve_fmu(*, fmu: str | None, path: str | None, base_dir: Path | None = None) -> Path:
-    """The FMU file named by a plant config: ``fmu = "<project FMU name>"`` (built on demand) or ``path``."""
-    if (fmu is None) == (path is None):
-        raise PlantError("plant fmu: give exactly one of fmu (a project FMU name) or path (an .fmu file)")
-    if fmu is not None:
-        from .build import build_fmu
-
-        return build_fmu(fmu)
-    p = Path(path)
-    if not p.is_absolute() and base_dir is not None:
-        p = base_dir / p
-    if not p.exists():
-        raise PlantError(f"FMU {p} not found")
-    return p
-
-
-# FMU log messages by plant: fmpy's native logger proxy (which formats the variadic message) calls one
-# global Python logger, so there is one dispatcher, keyed by the callbacks' componentEnvironment.
-_FMI2_SINKS: dict[int, list[str]] = {}
-_FMI2_DISPATCH: Any = None
-
-
-def _fmi2_dispatch(env: Any, instance: Any, status: int, category: Any, message: bytes) -> None:
-    sink = _FMI2_SINKS.get(env or 0)
-    if sink is None:  # an FMU instantiated with fmpy's default callbacks: print as fmpy does
-        from fmpy.fmi1 import printLogMessage
-
-        printLogMessage(env, instance, status, category, message)
-        return
-    text = message.decode("utf-8", errors="replace")
-    # Errors make the FMI call fail and reach the PlantError line; warnings are only logged.
-    log.log(logging.WARNING if status == 1 else logging.DEBUG, "FMU: %s", text)
-    if status >= 1:  # fmi2Warning and worse
-        sink[:] = [text]  # the latest is the reason of a failed call
-
-
-def _fmi2_callbacks(key: int, messages: list[str]) -> Any:
-    """fmpy's FMI 2.0 callbacks whose logger keeps the FMU's warnings and errors in ``messages`` (so a
-    failed call can name the FMU's reason); ``key`` identifies the plant in the shared dispatcher."""
-    global _FMI2_DISPATCH
-    from ctypes import byref, c_void_p
-
-    from fmpy import calloc, free
-    from fmpy.fmi2 import (
-        fmi2CallbackAllocateMemoryTYPE,
-        fmi2CallbackFreeMemoryTYPE,
-        fmi2CallbackFunctions,
-        fmi2CallbackLoggerTYPE,
-    )
-    from fmpy.logging import addLoggerProxy
-
-    if _FMI2_DISPATCH is None:
-        _FMI2_DISPATCH = fmi2CallbackLoggerTYPE(_fmi2_dispatch)
-    _FMI2_SINKS[key] = messages
-    cb = fmi2CallbackFunctions()
-    cb.logger = _FMI2_DISPATCH
-    cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-    cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-    cb.componentEnvironment = c_void_p(key)
-    addLoggerProxy(byref(cb))
-    return cb
-
-
-def read_description(path: Path) -> Any:
-    """fmpy's model description of ``path``; a clear :class:`PlantError` when it is not an FMU."""
-    from fmpy import read_model_description
-
-    if p_is_zip := path.is_file():
-        if not zipfile.is_zipfile(path):
-            raise PlantError(f"FMU {path} is not a zip archive (broken or not an FMU)")
-    try:
-        return read_model_description(str(path), validate=True)
-    except Exception as exc:  # fmpy raises plain Exceptions, lxml errors, KeyError, zipfile errors
-        kind = "archive" if p_is_zip else "folder"
-        raise PlantError(f"FMU {path}: cannot read modelDescription.xml from the {kind} ({exc})") from None
-
-
-_INT_TYPES = ("Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Enumeration")
-
-
-@dataclass(frozen=True)
-class VariableMap:
-    """The FMU variables a plant uses: inputs, outputs and states (Real/Float64), parameters (any number type)."""
-
-    vars: dict
-    real_type: str
-    inputs: tuple[str, ...]
-    outputs: tuple[str, ...]
-    states: tuple[str, ...]
-    parameters: dict
-
-
-def _check_real(md: Any, vars_: dict, names: list[str], *, what: str, real_type: str) -> None:
-    model = md.modelName
-    for n in names:
-        v = vars_.get(n)
-        if v is None:
-            raise PlantError(f"FMU {model} has no variable named {n!r} (for {what})")
-        if v.type != real_type:
-            raise PlantError(f"FMU {model}: variable {n!r} is {v.type}, but {what} must be {real_type} variables")
-
-
-def map_variables(
-    md: Any, *, inputs: Any = None, outputs: Any = None, states: Any = None, parameters: Mapping[str, Any] | None = None
-) -> VariableMap:
-    """Check a plant's variable mapping against the model description; one :class:`PlantError` line when
-    a name is unknown, a variable has the wrong type or causality, or the plant would have no input or output.
-
-    Inputs must be ``causality="input"`` variables; outputs and states any Real (Float64) variable; by
-    default the declared inputs/outputs and the continuous states (ModelStructure/Derivatives).
-    """
-    real_type = "Float64" if md.fmiVersion == "3.0" else "Real"
-    vars_ = {v.name: v for v in md.modelVariables}
-    for what, names in (("inputs", inputs), ("outputs", outputs), ("states", states)):
-        if names is not None and (not isinstance(names, (list, tuple)) or not all(isinstance(n, str) for n in names)):
-            raise PlantError(f"plant fmu: {what} must be a list of variable names")
-    declared = lambda c: [v.name for v in md.modelVariables if v.causality == c and v.type == real_type]  # noqa: E731
-    in_names = list(inputs) if inputs is not None else declared("input")
-    out_names = list(outputs) if outputs is not None else declared("output")
-    if not in_names:
-        raise PlantError(f"FMU {md.modelName} has no {real_type} input to drive (declare one, or map inputs = [...])")
-    if not out_names:
-        raise PlantError(f"FMU {md.modelName} has no {real_type} output to sample (map outputs = [...])")
-    _check_real(md, vars_, in_names, what="inputs", real_type=real_type)
-    _check_real(md, vars_, out_names, what="outputs", real_type=real_type)
-    not_inputs = [n for n in in_names if vars_[n].causality != "input"]
-    if not_inputs:
-        raise PlantError(
-            f"FMU {md.modelName}: {', '.join(not_inputs)} is not an input (causality "
-            f"{vars_[not_inputs[0]].causality}); set it through parameters"
-        )
-    if states is None:
-        states = [d.variable.derivative.name for d in md.derivatives] if md.derivatives else out_names
-    _check_real(md, vars_, list(states), what="states", real_type=real_type)
-    params = {}
-    for key, value in (parameters or {}).items():
-        v = vars_.get(key)
-        if v is None:
-            raise PlantError(f"FMU {md.modelName} has no variable {key!r} to set")
-        params[key] = _typed_value(md, v, value)
-    return VariableMap(
-        vars=vars_,
-        real_type=real_type,
-        inputs=tuple(in_names),
-        outputs=tuple(out_names),
-        states=tuple(states),
-        parameters=params,
-    )
-
-
-def _typed_value(md: Any, v: Any, value: Any) -> Any:
-    """``value`` as the variable's type (a bool for Boolean, an int for Integer), or one PlantError line."""
-    ok_number = isinstance(value, (int, float)) and not isinstance(value, bool)
-    if v.type == "Boolean":
-        if isinstance(value, bool):
-            return value
-    elif v.type in _INT_TYPES:
-        if isinstance(value, int) and not isinstance(value, bool):
-            return value
-    elif v.type in ("Real", "Float64", "Float32"):
-        if ok_number:
-            return float(value)
-    else:
-        raise PlantError(f"FMU {md.modelName}: variable {v.name!r} is {v.type}; the bridge sets numbers and booleans")
-    raise PlantError(f"FMU {md.modelName}: variable {v.name!r} is {v.type}; {value!r} is not a value of that type")
-
-
-def set_values(fmu: Any, md: Any, values: Mapping[str, Any], *, vars_: dict) -> None:
-    """Set typed values (:func:`_typed_value`) through the matching fmpy setter, grouped by type."""
-    v3 = md.fmiVersion == "3.0"
-    groups: dict[str, tuple[list[int], list[Any]]] = {}
-    for key, value in values.items():
-        t = vars_[key].type
-        kind = "bool" if t == "Boolean" else "int" if t in _INT_TYPES else "real"
-        refs, vals = groups.setdefault(kind, ([], []))
-        refs.append(vars_[key].valueReference)
-        vals.append(value)
-    setters = {
-        "real": fmu.setFloat64 if v3 else fmu.setReal,
-        "int": fmu.setInt32 if v3 else fmu.setInteger,
-        "bool": fmu.setBoolean,
-    }
-    for kind, (refs, vals) in groups.items():
-        setters[kind](refs, vals)
-
-
-def open_binary(path: Path, md: Any, fmpy_class: Any, model_identifier: str) -> tuple[Any, str, bool]:
-    """Load an FMU's binary as the fmpy class ``fmpy_class`` (FMU2Slave, FMU2Model, FMU3Slave).
-
-    Returns the instance, the unzip folder and whether that folder is ours to remove (``path`` was an archive,
-    not an unzipped FMU). A binary that does not load is a PlantError, and leaves no folder behind.
-    """
-    from fmpy import extract
-
-    own = path.is_file()
-    unzip = extract(str(path)) if own else str(path)
-    try:
-        fmu = fmpy_class(guid=md.guid, unzipDirectory=unzip, modelIdentifier=model_identifier, instanceName="plant")
-    except Exception as exc:
-        if own:
-            shutil.rmtree(unzip, ignore_errors=True)
-        raise PlantError(f"FMU {path}: cannot load its binary ({exc})") from None
-    return fmu, unzip, own
 
 
 class FmuPlant(Plant):
@@ -248,6 +41,8 @@ class FmuPlant(Plant):
         Variables reported as the plant state (default: continuous states from the model
         structure, else the outputs).
     """
+
+    interface = "cs"
 
     def __init__(
         self,
@@ -294,7 +89,7 @@ class FmuPlant(Plant):
         self.fmu, self._unzip, self._own_unzip = open_binary(self.path, md, Slave, md.coSimulation.modelIdentifier)
         self._instantiated = False
         self._messages: list[str] = []
-        self._callbacks = None if self.v3 else _fmi2_callbacks(id(self), self._messages)
+        self._callbacks = None if self.v3 else fmi2_callbacks(id(self), self._messages)
         vr = lambda names: (ValueReference * len(names))(*(self.vars[n].valueReference for n in names))  # noqa: E731
         self._vr_in, self._vr_out, self._vr_state = vr(in_names), vr(out_names), vr(list(states))
         self._val_in = (Real * len(in_names))()
@@ -410,39 +205,5 @@ class FmuPlant(Plant):
             except Exception:  # closing is best effort; a broken FMU already reported its error
                 log.debug("FMU close failed", exc_info=True)
             self.fmu = None
-        _FMI2_SINKS.pop(id(self), None)
+        forget_log(id(self))
         self._cleanup_unzip()
-
-
-@PLANTS.register("fmu")
-def _fmu_factory(config: Mapping[str, Any], *, base_dir: Path | None = None, **_context: Any) -> Plant:
-    cfg = take_keys(
-        config,
-        allowed={"kind", "fmu", "path", "inputs", "outputs", "parameters", "states", "interface", "rtol", "max_step"},
-        where="plant fmu",
-        error=PlantError,
-    )
-    path = resolve_fmu(fmu=cfg.get("fmu"), path=cfg.get("path"), base_dir=base_dir)
-    interface = cfg.get("interface", "auto")
-    if interface not in ("auto", "cs", "me"):
-        raise PlantError(f"plant fmu: interface must be auto, cs or me, not {interface!r}")
-    md = read_description(path)
-    if interface == "auto":
-        interface = "cs" if md.coSimulation is not None else "me"
-    common = dict(
-        path=path,
-        inputs=cfg.get("inputs"),
-        outputs=cfg.get("outputs"),
-        parameters=cfg.get("parameters"),
-        states=cfg.get("states"),
-    )
-    if interface == "me":
-        from .fmu_me import FmuModelExchangePlant
-
-        solver = {k: float(cfg[k]) for k in ("rtol", "max_step") if k in cfg}
-        return FmuModelExchangePlant(**common, **solver)
-    if "rtol" in cfg or "max_step" in cfg:
-        raise PlantError('plant fmu: rtol and max_step set fmpy\'s solver, which runs only with interface = "me"')
-    if md.coSimulation is None:
-        raise PlantError(f'FMU {path} has no Co-Simulation interface (interface = "me" runs its Model Exchange)')
-    return FmuPlant(**common)

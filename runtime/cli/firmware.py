@@ -261,46 +261,88 @@ def _pil(args: argparse.Namespace) -> int:
     x0 = args.x0
     plant = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))
     twin = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))  # the twin's plant
-    result = run_pil(artifact, plant=plant, steps=args.steps, reference=ref, board=args.board, twin=twin)
+    model, start = _pil_model_twin(artifact, plant)
+    result = run_pil(
+        artifact, plant=plant, steps=args.steps, reference=ref, board=args.board, twin=twin, model_twin=model
+    )
     summary = {
         "artifact": artifact.name,
         "sha256": artifact.sha256,
         "board": args.board,
         "plant": args.plant,
         **result.summary(),
+        "model_twin": _pil_model_mismatch(artifact, result, start=start),
     }
     text = json.dumps(summary, indent=2) + "\n"
     if args.out:
-        header = ",".join(
-            [f"y{i}" for i in range(artifact.p)]
-            + [f"u{i}" for i in range(artifact.m)]
-            + [f"sat{i}" for i in range(artifact.m)]
-            + ["status"]
-            + [f"twin_y{i}" for i in range(artifact.p)]
-            + [f"twin_u{i}" for i in range(artifact.m)]
-        )
-        tw = result.twin
-        rows = [
-            ",".join(
-                [repr(float(v)) for v in result.y[k]]
-                + [repr(float(v)) for v in result.u[k]]
-                + [str(int(s)) for s in result.saturated[k]]
-                + [str(int(result.status[k]))]
-                + [repr(float(v)) for v in np.concatenate([tw.y[k], tw.u[k]])]
-            )
-            for k in range(args.steps)
-        ]
         title = f"PIL {artifact.name} on {args.board}, plant {args.plant}"
         publish_files(
             args.out,
             {
-                "pil.csv": header + "\n" + "\n".join(rows) + "\n",
+                "pil.csv": _pil_csv(artifact, result, steps=args.steps),
                 "pil.json": text,
                 "twin.png": png_bytes(twin_figure(result, artifact, title=title)),
             },
         )
     sys.stdout.write(text)
     return 0
+
+
+def _pil_model_twin(artifact, plant):
+    """The model twin's plant (the artifact's own model) started where ``plant`` starts, and a note on where."""
+    import numpy as np
+    from gainlink.hil.loop.model_twin import initial_deviation
+    from gainlink.hil.loop.pil import ArtifactPlant, HilPlant
+
+    if not isinstance(plant, HilPlant):  # the artifact's own model: the same coordinates
+        return ArtifactPlant(artifact, x0=plant.state), "the plant's initial state"
+    initial, note = initial_deviation(artifact, plant.plant)
+    x0 = np.array([initial.get(s, 0.0) for s in artifact.signals["states"]]) if initial else np.zeros(artifact.n)
+    return ArtifactPlant(artifact, x0=x0), note
+
+
+def _pil_model_mismatch(artifact, result, *, start: str) -> dict:
+    """The plant against the model twin (gainlink.hil.loop.model_twin.model_mismatch), JSON-ready."""
+    import numpy as np
+    from gainlink.hil.loop.model_twin import model_mismatch
+
+    steps = result.y.shape[0]
+    return model_mismatch(
+        t=np.arange(steps) * artifact.Ts,
+        y=result.y,
+        r=result.reference,
+        model_y=result.model_twin.y,
+        artifact=artifact,
+        start=start,
+    ).to_dict()
+
+
+def _pil_csv(artifact, result, *, steps: int) -> str:
+    """pil.csv: per step the samples, commands, flags, and the closed-loop and model twins'."""
+    import numpy as np
+
+    header = ",".join(
+        [f"y{i}" for i in range(artifact.p)]
+        + [f"u{i}" for i in range(artifact.m)]
+        + [f"sat{i}" for i in range(artifact.m)]
+        + ["status"]
+        + [f"twin_y{i}" for i in range(artifact.p)]
+        + [f"twin_u{i}" for i in range(artifact.m)]
+        + [f"model_y{i}" for i in range(artifact.p)]
+        + [f"model_u{i}" for i in range(artifact.m)]
+    )
+    tw, mt = result.twin, result.model_twin
+    rows = [
+        ",".join(
+            [repr(float(v)) for v in result.y[k]]
+            + [repr(float(v)) for v in result.u[k]]
+            + [str(int(s)) for s in result.saturated[k]]
+            + [str(int(result.status[k]))]
+            + [repr(float(v)) for v in np.concatenate([tw.y[k], tw.u[k], mt.y[k], mt.u[k]])]
+        )
+        for k in range(steps)
+    ]
+    return header + "\n" + "\n".join(rows) + "\n"
 
 
 # --- parsers -----------------------------------------------------------------------------------------

@@ -117,10 +117,23 @@ def _linearize(args: argparse.Namespace) -> int:
         method=args.method,
         template=Path(args.template) if args.template else None,
         horizon=args.horizon,
+        interface=args.interface,
     )
+    if args.json:
+        import json
+
+        sys.stdout.write(json.dumps({"spec": args.out, **result.to_json()}, indent=2, sort_keys=True) + "\n")
+        return 0
+    lin, validity = result.lin, result.validity
     print(
-        f"wrote {args.out}: n={result.A.shape[0]} m={result.B.shape[1]} p={result.C.shape[0]} "
-        f"({result.method}, operating point {', '.join(f'{k}={v:g}' for k, v in result.point.items()) or 'start values'})"
+        f"wrote {args.out}: n={lin.A.shape[0]} m={lin.B.shape[1]} p={lin.C.shape[0]} "
+        f"({lin.method}, operating point {', '.join(f'{k}={v:g}' for k, v in lin.point.items()) or 'start values'})"
+    )
+    print(f"  runs at Ts = {args.Ts:g} s use {validity.choice.interface}: {validity.choice.reason}")
+    print(
+        "  fit to the FMU: "
+        + ", ".join(f"{k} NRMSE {f.nrmse:.2g} final {f.final_error:.2g}" for k, f in validity.fit.outputs.items())
+        + (" - POOR (see the warning)" if validity.fit.poor else "")
     )
     return 0
 
@@ -194,4 +207,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="directional derivatives when the FMU provides them (auto), or central differences",
     )
     p.add_argument("--template", help="copy controller/integral/observer/limits from this spec")
+    p.add_argument(
+        "--interface",
+        choices=("auto", "cs", "me"),
+        default="auto",
+        help="the FMU interface the model is checked through (default auto: Co-Simulation where it reproduces "
+        "the Model Exchange derivatives at --Ts, as runs choose)",
+    )
+    p.add_argument("--json", action="store_true", help="print the result and the [linearization] record as JSON")
     p.set_defaults(func=_linearize)

@@ -167,6 +167,7 @@ class PlantSpec:
     source_sha256: str = ""
     source: str = "<dict>"
     description: str = ""
+    linearization: dict | None = None  # the record `gainlink linearize` wrote, as written (for the provenance)
 
     @property
     def q(self) -> int:

@@ -22,6 +22,7 @@ from .tables import (
     IMPLEMENTATION_KEYS,
     INTEGRAL_KEYS,
     LIMITS_KEYS,
+    LINEARIZATION_KEYS,
     OBSERVER_KEYS,
     parse_controller,
     parse_implementation,
@@ -36,7 +37,7 @@ NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 
 TOP_KEYS = {
     "name", "Ts", "discretization", "description", "plant", "controller", "integral", "observer", "limits",
-    "operating_point", "implementation",
+    "operating_point", "implementation", "linearization",
 }  # fmt: skip
 
 
@@ -87,4 +88,5 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
         source_sha256=source_sha256,
         source=source,
         description=str(data.get("description", "")),
+        linearization=checked_table(data, "linearization", LINEARIZATION_KEYS, required=False),
     )

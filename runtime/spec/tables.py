@@ -26,6 +26,12 @@ OBSERVER_KEYS = {"method", "form", "W", "W_diag", "V", "V_diag", "G", "poles", "
 LIMITS_KEYS = {"u_min", "u_max", "anti_windup"}
 OPERATING_POINT_KEYS = {"u_op", "y_op", "x_op"}
 IMPLEMENTATION_KEYS = {"realization", "float32_check"}
+# [linearization]: the record ``gainlink linearize`` writes (which interface runs use and why, the model's fit to
+# the FMU); kept as written, for the artifact's provenance.
+LINEARIZATION_KEYS = {
+    "fmu", "fmu_sha256", "method", "Ts", "interface", "interface_reason", "interface_check", "fit_steps",
+    "fit_amplitude", "fit", "fit_warning",
+}  # fmt: skip
 REALIZATIONS = ("as_designed", "balanced", "schur")
 
 # Back-calculation sheds this fraction of the command excess from the integral term per saturated

@@ -123,4 +123,23 @@ def provenance(spec: PlantSpec) -> dict:
         "python": platform.python_version(),
         "spec_sha256": spec.source_sha256,
         "gains": "given: " + ", ".join(given) if given else "designed",
+        **_plant_model_provenance(spec.linearization),
     }
+
+
+def _plant_model_provenance(record: dict | None) -> dict:
+    """From a spec's ``[linearization]`` record (``gainlink linearize``): which interface of the FMU runs use and
+    why (``plant_interface``), and the model's fit to the FMU there (``plant_fit``); nothing without one."""
+    if not record:
+        return {}
+    out = {"plant_interface": f"{record.get('interface')}: {record.get('interface_reason')}"}
+    fit = record.get("fit")
+    if isinstance(fit, dict) and fit:
+        parts = [
+            f"{name} NRMSE {f.get('nrmse', float('nan')):.2g}, final off by {f.get('final_error', float('nan')):.2g}"
+            for name, f in fit.items()
+            if isinstance(f, dict)
+        ]
+        poor = "; POOR: " + str(record["fit_warning"]) if record.get("fit_warning") else ""
+        out["plant_fit"] = f"at Ts = {record.get('Ts')} s through {record.get('interface')}: {'; '.join(parts)}{poor}"
+    return out

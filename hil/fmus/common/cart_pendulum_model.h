@@ -25,11 +25,9 @@ enum { VR_X = 0, VR_XD, VR_TH, VR_THD, VR_DX, VR_DXD, VR_DTH, VR_DTHD, VR_F, VR_
 static const unsigned int model_state_vr[MODEL_N_STATES] = {VR_X, VR_XD, VR_TH, VR_THD};
 static const unsigned int model_der_vr[MODEL_N_STATES] = {VR_DX, VR_DXD, VR_DTH, VR_DTHD};
 
+/* Start values (the glue zeroes every real first). */
 static void model_set_defaults(double *r)
 {
-    for (int i = 0; i < MODEL_N_REALS; i++) {
-        r[i] = 0.0;
-    }
     r[VR_M] = 1.0;
     r[VR_MP] = 0.1;
     r[VR_L] = 0.5;

@@ -1,21 +1,11 @@
 /**
  * @file fmi2_glue.c
- * @brief Generic FMI 2.0 Model Exchange + Co-Simulation glue for gainlink's plant FMUs.
+ * @brief Generic FMI 2.0 Model Exchange + Co-Simulation glue for gainlink's plant FMUs, on gl_fmu_core.h.
  *
- * A model source defines, before including this file:
- *  - MODEL_GUID, MODEL_N_REALS, MODEL_N_STATES,
- *  - model_state_vr[] / model_der_vr[] (value references of the states and of their derivatives),
- *  - model_set_defaults(double *r): start values of every real,
- *  - model_derivatives(double *r): fill the derivative reals from states, inputs and parameters,
- *  - model_partial(const double *r, vr_unknown, vr_known, double *out): one Jacobian entry of a
- *    derivative with respect to a state or an input; returns 0 when the pair is not supported,
- *  - MODEL_STEP_VR: value reference of the largest internal RK4 step used by fmi2DoStep.
- * Optionally, GL_FMU_CONSTRAINTS and model_constrain(double *r): state constraints (e.g. a ground
- * contact) applied after every internal RK4 step of fmi2DoStep (Co-Simulation only; Model Exchange
- * solvers integrate the unconstrained derivatives).
+ * A model source defines what gl_fmu_core.h lists, plus MODEL_GUID, before including this file.
  *
  * A Co-Simulation-only model (one whose state is not a set of continuous states, e.g. dead times)
- * defines GL_FMU_CS_ONLY instead of the state/derivative/partial/step items above, and provides:
+ * defines GL_FMU_CS_ONLY instead of the state/derivative/partial/step items, and provides:
  *  - model_extra_t: state held outside the reals (e.g. delay lines), kept in the instance and
  *    saved and restored with it by fmi2GetFMUstate / fmi2SetFMUstate,
  *  - model_extra_reset(model_extra_t *x): its value at instantiation and fmi2Reset,
@@ -24,14 +14,13 @@
  *    r and x unchanged (fmi2DoStep logs the message and returns fmi2Error).
  * The Model Exchange functions are then left out and fmi2GetDirectionalDerivative reports an error.
  *
- * Every variable is a fmi2Real held in one array indexed by value reference. No heap memory is
- * used after fmi2Instantiate except the state copies requested through fmi2GetFMUstate.
+ * No heap memory is used after fmi2Instantiate except the state copies requested through fmi2GetFMUstate.
  */
 #include <stddef.h>
 #include <string.h>
-#include <math.h>
 
 #include "fmi2Functions.h"
+#include "gl_fmu_core.h"
 
 typedef struct {
     double r[MODEL_N_REALS];
@@ -60,46 +49,10 @@ static void gl_fmu_log(gl_fmu_t *c, fmi2Status status, const char *msg)
     }
 }
 
-#ifndef GL_FMU_CS_ONLY
-static void gl_fmu_rhs(gl_fmu_t *c, const double *x, double *dx)
-{
-    double keep[MODEL_N_STATES];
-    for (size_t i = 0; i < MODEL_N_STATES; i++) {
-        keep[i] = c->r[model_state_vr[i]];
-        c->r[model_state_vr[i]] = x[i];
-    }
-    model_derivatives(c->r);
-    for (size_t i = 0; i < MODEL_N_STATES; i++) {
-        dx[i] = c->r[model_der_vr[i]];
-        c->r[model_state_vr[i]] = keep[i];
-    }
-}
-
-/* One classical RK4 step of length h from the current states. */
-static void gl_fmu_rk4(gl_fmu_t *c, double h)
-{
-    double x[MODEL_N_STATES], k1[MODEL_N_STATES], k2[MODEL_N_STATES], k3[MODEL_N_STATES], k4[MODEL_N_STATES];
-    double t[MODEL_N_STATES];
-    for (size_t i = 0; i < MODEL_N_STATES; i++) {
-        x[i] = c->r[model_state_vr[i]];
-    }
-    gl_fmu_rhs(c, x, k1);
-    for (size_t i = 0; i < MODEL_N_STATES; i++) { t[i] = x[i] + 0.5 * h * k1[i]; }
-    gl_fmu_rhs(c, t, k2);
-    for (size_t i = 0; i < MODEL_N_STATES; i++) { t[i] = x[i] + 0.5 * h * k2[i]; }
-    gl_fmu_rhs(c, t, k3);
-    for (size_t i = 0; i < MODEL_N_STATES; i++) { t[i] = x[i] + h * k3[i]; }
-    gl_fmu_rhs(c, t, k4);
-    for (size_t i = 0; i < MODEL_N_STATES; i++) {
-        c->r[model_state_vr[i]] = x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-    }
-    model_derivatives(c->r);
-}
-#endif
-
 /* Back to the values at instantiation: start values and, for a CS-only model, its extra state. */
 static void gl_fmu_defaults(gl_fmu_t *c)
 {
+    gl_core_zero(c->r);
     model_set_defaults(c->r);
 #ifdef GL_FMU_CS_ONLY
     model_extra_reset(&c->extra);
@@ -181,28 +134,19 @@ fmi2Status fmi2Reset(fmi2Component c)
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
-    gl_fmu_t *inst = c;
-    for (size_t i = 0; i < nvr; i++) {
-        if (vr[i] >= MODEL_N_REALS) {
-            gl_fmu_log(inst, fmi2Error, "fmi2GetReal: unknown value reference");
-            return fmi2Error;
-        }
-        value[i] = inst->r[vr[i]];
+    if (gl_core_get(((gl_fmu_t *)c)->r, vr, nvr, value) != 0) {
+        gl_fmu_log(c, fmi2Error, "fmi2GetReal: unknown value reference");
+        return fmi2Error;
     }
     return fmi2OK;
 }
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
 {
-    gl_fmu_t *inst = c;
-    for (size_t i = 0; i < nvr; i++) {
-        if (vr[i] >= MODEL_N_REALS) {
-            gl_fmu_log(inst, fmi2Error, "fmi2SetReal: unknown value reference");
-            return fmi2Error;
-        }
-        inst->r[vr[i]] = value[i];
+    if (gl_core_set(((gl_fmu_t *)c)->r, vr, nvr, value) != 0) {
+        gl_fmu_log(c, fmi2Error, "fmi2SetReal: unknown value reference");
+        return fmi2Error;
     }
-    model_derivatives(inst->r);
     return fmi2OK;
 }
 
@@ -334,24 +278,10 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
     gl_fmu_log(c, fmi2Error, "fmi2GetDirectionalDerivative: not provided by this FMU");
     return fmi2Error;
 #else
-    gl_fmu_t *inst = c;
-    for (size_t i = 0; i < nUnknown; i++) {
-        double acc = 0.0;
-        for (size_t j = 0; j < nKnown; j++) {
-            double d = 0.0;
-            int unknown_is_state = 0;
-            for (size_t s = 0; s < MODEL_N_STATES; s++) {
-                unknown_is_state |= vUnknown[i] == model_state_vr[s];
-            }
-            if (unknown_is_state) {
-                d = vUnknown[i] == vKnown[j] ? 1.0 : 0.0; /* an output that is a state: identity */
-            } else if (!model_partial(inst->r, vUnknown[i], vKnown[j], &d)) {
-                gl_fmu_log(inst, fmi2Error, "fmi2GetDirectionalDerivative: unsupported variable pair");
-                return fmi2Error;
-            }
-            acc += d * dvKnown[j];
-        }
-        dvUnknown[i] = acc;
+    const char *err = gl_core_directional(((gl_fmu_t *)c)->r, vUnknown, nUnknown, vKnown, nKnown, dvKnown, dvUnknown);
+    if (err != NULL) {
+        gl_fmu_log(c, fmi2Error, err);
+        return fmi2Error;
     }
     return fmi2OK;
 #endif
@@ -389,27 +319,19 @@ fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time) { ((gl_fmu_t *)c)->time =
 
 fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx)
 {
-    gl_fmu_t *inst = c;
     if (nx != MODEL_N_STATES) {
         return fmi2Error;
     }
-    for (size_t i = 0; i < nx; i++) {
-        inst->r[model_state_vr[i]] = x[i];
-    }
-    model_derivatives(inst->r);
+    gl_core_set_states(((gl_fmu_t *)c)->r, x);
     return fmi2OK;
 }
 
 fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real dx[], size_t nx)
 {
-    gl_fmu_t *inst = c;
     if (nx != MODEL_N_STATES) {
         return fmi2Error;
     }
-    model_derivatives(inst->r);
-    for (size_t i = 0; i < nx; i++) {
-        dx[i] = inst->r[model_der_vr[i]];
-    }
+    gl_core_get_derivatives(((gl_fmu_t *)c)->r, dx);
     return fmi2OK;
 }
 
@@ -421,13 +343,10 @@ fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real z[], size_t nz)
 
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)
 {
-    gl_fmu_t *inst = c;
     if (nx != MODEL_N_STATES) {
         return fmi2Error;
     }
-    for (size_t i = 0; i < nx; i++) {
-        x[i] = inst->r[model_state_vr[i]];
-    }
+    gl_core_get_states(((gl_fmu_t *)c)->r, x);
     return fmi2OK;
 }
 
@@ -461,39 +380,22 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
 {
     gl_fmu_t *inst = c;
     (void)noSetFMUStatePriorToCurrentPoint;
+#ifdef GL_FMU_CS_ONLY
+    char msg[256] = "fmi2DoStep failed";
     if (!(h >= 0.0)) {
         gl_fmu_log(inst, fmi2Error, "fmi2DoStep: negative step");
         return fmi2Error;
     }
-#ifdef GL_FMU_CS_ONLY
-    char msg[256] = "fmi2DoStep failed";
     if (model_do_step(inst->r, &inst->extra, h, msg, sizeof msg) != 0) {
         gl_fmu_log(inst, fmi2Error, msg);
         return fmi2Error;
     }
     model_derivatives(inst->r);
 #else
-    double hmax = inst->r[MODEL_STEP_VR];
-    if (!(hmax > 0.0)) {
-        hmax = h;
-    }
-    long n = (long)ceil(h / hmax - 1e-9);
-    if (n < 1) {
-        n = 1;
-    }
-    double hs = h / (double)n;
-    for (long k = 0; k < n; k++) {
-        gl_fmu_rk4(inst, hs);
-#ifdef GL_FMU_CONSTRAINTS
-        model_constrain(inst->r);
-        model_derivatives(inst->r);
-#endif
-    }
-    for (size_t i = 0; i < MODEL_N_STATES; i++) {
-        if (!isfinite(inst->r[model_state_vr[i]])) {
-            gl_fmu_log(inst, fmi2Error, "fmi2DoStep: state became non-finite");
-            return fmi2Error;
-        }
+    const char *err = gl_core_do_step(inst->r, h);
+    if (err != NULL) {
+        gl_fmu_log(inst, fmi2Error, err);
+        return fmi2Error;
     }
 #endif
     inst->time = t + h;

@@ -1,17 +1,18 @@
 /**
  * @file fmi3_glue.c
- * @brief Generic FMI 3.0 Co-Simulation glue for gainlink's plant FMUs (Float64 variables only).
+ * @brief Generic FMI 3.0 Model Exchange + Co-Simulation glue for gainlink's plant FMUs (Float64 variables only),
+ *        on gl_fmu_core.h.
  *
- * A model source defines, before including this file, the same items as for fmi2_glue.c
- * (MODEL_N_REALS, MODEL_N_STATES, MODEL_STEP_VR, model_state_vr, model_der_vr, model_set_defaults,
- * model_derivatives) plus MODEL_TOKEN, the instantiation token. Every function of the FMI 3.0 API is
- * defined (fmpy resolves all of them); what the FMU does not support returns fmi3Error.
+ * A model source defines what gl_fmu_core.h lists, plus MODEL_TOKEN (the instantiation token), before including
+ * this file; GL_FMU_ME_ONLY makes fmi3InstantiateCoSimulation refuse (for an FMU whose modelDescription.xml
+ * declares Model Exchange only). Every function of the FMI 3.0 API is defined (fmpy resolves all of them); what
+ * the FMU does not support returns fmi3Error.
  */
-#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "fmi3Functions.h"
+#include "gl_fmu_core.h"
 
 typedef struct {
     double r[MODEL_N_REALS];
@@ -32,36 +33,25 @@ static void gl3_log(gl_fmu3_t *c, fmi3Status status, const char *msg)
     }
 }
 
-static void gl3_rhs(double *r, const double *x, double *dx)
+/* An instance at its start values (both interfaces), or NULL when the token does not match. */
+static gl_fmu3_t *gl3_instantiate(fmi3String token, fmi3InstanceEnvironment env, fmi3LogMessageCallback logMessage)
 {
-    double keep[MODEL_N_STATES];
-    for (size_t i = 0; i < MODEL_N_STATES; i++) {
-        keep[i] = r[model_state_vr[i]];
-        r[model_state_vr[i]] = x[i];
+    if (token == NULL || strcmp(token, MODEL_TOKEN) != 0) {
+        if (logMessage != NULL) {
+            logMessage(env, fmi3Error, "logStatusError", "instantiation token mismatch");
+        }
+        return NULL;
     }
-    model_derivatives(r);
-    for (size_t i = 0; i < MODEL_N_STATES; i++) {
-        dx[i] = r[model_der_vr[i]];
-        r[model_state_vr[i]] = keep[i];
+    gl_fmu3_t *c = calloc(1, sizeof *c);
+    if (c == NULL) {
+        return NULL;
     }
-}
-
-static void gl3_rk4(double *r, double h)
-{
-    double x[MODEL_N_STATES], k1[MODEL_N_STATES], k2[MODEL_N_STATES], k3[MODEL_N_STATES], k4[MODEL_N_STATES];
-    double t[MODEL_N_STATES];
-    for (size_t i = 0; i < MODEL_N_STATES; i++) { x[i] = r[model_state_vr[i]]; }
-    gl3_rhs(r, x, k1);
-    for (size_t i = 0; i < MODEL_N_STATES; i++) { t[i] = x[i] + 0.5 * h * k1[i]; }
-    gl3_rhs(r, t, k2);
-    for (size_t i = 0; i < MODEL_N_STATES; i++) { t[i] = x[i] + 0.5 * h * k2[i]; }
-    gl3_rhs(r, t, k3);
-    for (size_t i = 0; i < MODEL_N_STATES; i++) { t[i] = x[i] + h * k3[i]; }
-    gl3_rhs(r, t, k4);
-    for (size_t i = 0; i < MODEL_N_STATES; i++) {
-        r[model_state_vr[i]] = x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-    }
-    model_derivatives(r);
+    c->env = env;
+    c->log = logMessage;
+    gl_core_zero(c->r);
+    model_set_defaults(c->r);
+    model_derivatives(c->r);
+    return c;
 }
 
 #define GL3_UNSUPPORTED(inst) do { gl3_log((gl_fmu3_t *)(inst), fmi3Error, "not supported by this FMU"); \
@@ -81,11 +71,8 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage)
 {
-    (void)instanceName; (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
-    if (logMessage != NULL) {
-        logMessage(instanceEnvironment, fmi3Error, "logStatusError", "this FMU has no Model Exchange interface");
-    }
-    return NULL;
+    (void)instanceName; (void)resourcePath; (void)visible; (void)loggingOn;
+    return gl3_instantiate(instantiationToken, instanceEnvironment, logMessage);
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
@@ -100,21 +87,15 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     (void)instanceName; (void)resourcePath; (void)visible; (void)loggingOn; (void)eventModeUsed;
     (void)earlyReturnAllowed; (void)requiredIntermediateVariables; (void)nRequiredIntermediateVariables;
     (void)intermediateUpdate;
-    if (instantiationToken == NULL || strcmp(instantiationToken, MODEL_TOKEN) != 0) {
-        if (logMessage != NULL) {
-            logMessage(instanceEnvironment, fmi3Error, "logStatusError", "instantiation token mismatch");
-        }
-        return NULL;
+#ifdef GL_FMU_ME_ONLY
+    (void)instantiationToken;
+    if (logMessage != NULL) {
+        logMessage(instanceEnvironment, fmi3Error, "logStatusError", "this FMU has no Co-Simulation interface");
     }
-    gl_fmu3_t *c = calloc(1, sizeof *c);
-    if (c == NULL) {
-        return NULL;
-    }
-    c->env = instanceEnvironment;
-    c->log = logMessage;
-    model_set_defaults(c->r);
-    model_derivatives(c->r);
-    return c;
+    return NULL;
+#else
+    return gl3_instantiate(instantiationToken, instanceEnvironment, logMessage);
+#endif
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
@@ -154,6 +135,7 @@ fmi3Status fmi3Terminate(fmi3Instance instance) { (void)instance; return fmi3OK;
 fmi3Status fmi3Reset(fmi3Instance instance)
 {
     gl_fmu3_t *c = instance;
+    gl_core_zero(c->r);
     model_set_defaults(c->r);
     model_derivatives(c->r);
     c->time = 0.0;
@@ -167,12 +149,9 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
     if (nValues < nvr) {
         GL3_UNSUPPORTED(instance);
     }
-    for (size_t i = 0; i < nvr; i++) {
-        if (vr[i] >= MODEL_N_REALS) {
-            gl3_log(c, fmi3Error, "fmi3GetFloat64: unknown value reference");
-            return fmi3Error;
-        }
-        values[i] = c->r[vr[i]];
+    if (gl_core_get(c->r, vr, nvr, values) != 0) {
+        gl3_log(c, fmi3Error, "fmi3GetFloat64: unknown value reference");
+        return fmi3Error;
     }
     return fmi3OK;
 }
@@ -184,14 +163,10 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
     if (nValues < nvr) {
         GL3_UNSUPPORTED(instance);
     }
-    for (size_t i = 0; i < nvr; i++) {
-        if (vr[i] >= MODEL_N_REALS) {
-            gl3_log(c, fmi3Error, "fmi3SetFloat64: unknown value reference");
-            return fmi3Error;
-        }
-        c->r[vr[i]] = values[i];
+    if (gl_core_set(c->r, vr, nvr, values) != 0) {
+        gl3_log(c, fmi3Error, "fmi3SetFloat64: unknown value reference");
+        return fmi3Error;
     }
-    model_derivatives(c->r);
     return fmi3OK;
 }
 
@@ -343,9 +318,17 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueRe
                                         const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
                                         size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity)
 {
-    (void)unknowns; (void)nUnknowns; (void)knowns; (void)nKnowns; (void)seed; (void)nSeed; (void)sensitivity;
-    (void)nSensitivity;
-    GL3_UNSUPPORTED(instance);
+    gl_fmu3_t *c = instance;
+    if (nSeed != nKnowns || nSensitivity != nUnknowns) {
+        gl3_log(c, fmi3Error, "fmi3GetDirectionalDerivative: one seed per known, one sensitivity per unknown");
+        return fmi3Error;
+    }
+    const char *err = gl_core_directional(c->r, unknowns, nUnknowns, knowns, nKnowns, seed, sensitivity);
+    if (err != NULL) {
+        gl3_log(c, fmi3Error, err);
+        return fmi3Error;
+    }
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,
@@ -424,44 +407,77 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
     return fmi3OK;
 }
 
-fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) { GL3_UNSUPPORTED(instance); }
+/* ---- Model Exchange ---- */
+
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) { (void)instance; return fmi3OK; }
 
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation)
 {
-    (void)noSetFMUStatePriorToCurrentPoint; (void)enterEventMode; (void)terminateSimulation;
-    GL3_UNSUPPORTED(instance);
+    (void)instance; (void)noSetFMUStatePriorToCurrentPoint;
+    *enterEventMode = fmi3False;
+    *terminateSimulation = fmi3False;
+    return fmi3OK;
 }
 
-fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) { (void)time; GL3_UNSUPPORTED(instance); }
+fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) { ((gl_fmu3_t *)instance)->time = time; return fmi3OK; }
 
 fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 x[], size_t n)
 {
-    (void)x; (void)n; GL3_UNSUPPORTED(instance);
+    if (n != MODEL_N_STATES) {
+        GL3_UNSUPPORTED(instance);
+    }
+    gl_core_set_states(((gl_fmu3_t *)instance)->r, x);
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 dx[], size_t n)
 {
-    (void)dx; (void)n; GL3_UNSUPPORTED(instance);
+    if (n != MODEL_N_STATES) {
+        GL3_UNSUPPORTED(instance);
+    }
+    gl_core_get_derivatives(((gl_fmu3_t *)instance)->r, dx);
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 z[], size_t n)
 {
-    (void)z; (void)n; GL3_UNSUPPORTED(instance);
+    (void)z;
+    if (n != 0) {
+        GL3_UNSUPPORTED(instance);
+    }
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 x[], size_t n)
 {
-    (void)x; (void)n; GL3_UNSUPPORTED(instance);
+    if (n != MODEL_N_STATES) {
+        GL3_UNSUPPORTED(instance);
+    }
+    gl_core_get_states(((gl_fmu3_t *)instance)->r, x);
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[], size_t n)
 {
-    (void)nominals; (void)n; GL3_UNSUPPORTED(instance);
+    (void)instance;
+    for (size_t i = 0; i < n; i++) {
+        nominals[i] = 1.0;
+    }
+    return fmi3OK;
 }
 
-fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *n) { (void)n; GL3_UNSUPPORTED(instance); }
-fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *n) { (void)n; GL3_UNSUPPORTED(instance); }
+fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *n) { (void)instance; *n = 0; return fmi3OK; }
+
+fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *n)
+{
+    (void)instance;
+    *n = MODEL_N_STATES;
+    return fmi3OK;
+}
+
+/* ---- Co-Simulation ---- */
+
 fmi3Status fmi3EnterStepMode(fmi3Instance instance) { (void)instance; return fmi3OK; }
 
 fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
@@ -477,33 +493,16 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
 {
     gl_fmu3_t *c = instance;
     (void)noSetFMUStatePriorToCurrentPoint;
-    const double h = communicationStepSize;
-    if (!(h >= 0.0)) {
-        gl3_log(c, fmi3Error, "fmi3DoStep: negative step");
-        return fmi3Error;
-    }
-    double hmax = c->r[MODEL_STEP_VR];
-    if (!(hmax > 0.0)) {
-        hmax = h;
-    }
-    long n = (long)ceil(h / hmax - 1e-9);
-    if (n < 1) {
-        n = 1;
-    }
-    for (long k = 0; k < n; k++) {
-        gl3_rk4(c->r, h / (double)n);
-    }
     *eventHandlingNeeded = fmi3False;
     *terminateSimulation = fmi3False;
     *earlyReturn = fmi3False;
-    for (size_t i = 0; i < MODEL_N_STATES; i++) {
-        if (!isfinite(c->r[model_state_vr[i]])) {
-            gl3_log(c, fmi3Error, "fmi3DoStep: state became non-finite");
-            *lastSuccessfulTime = c->time;
-            return fmi3Error;
-        }
+    const char *err = gl_core_do_step(c->r, communicationStepSize);
+    if (err != NULL) {
+        gl3_log(c, fmi3Error, err);
+        *lastSuccessfulTime = c->time;
+        return fmi3Error;
     }
-    c->time = currentCommunicationPoint + h;
+    c->time = currentCommunicationPoint + communicationStepSize;
     *lastSuccessfulTime = c->time;
     return fmi3OK;
 }

@@ -56,14 +56,12 @@ typedef struct {
 static const char *const wb_lag_name[4] = {"11 (reflux -> x_D)", "12 (steam -> x_D)", "21 (reflux -> x_B)",
                                            "22 (steam -> x_B)"};
 
+/* Start values (the glue zeroes every real first). */
 static void model_set_defaults(double *r)
 {
     static const double K[4] = {12.8, -18.9, 6.6, -19.4};
     static const double tau[4] = {16.7, 21.0, 10.9, 14.4};
     static const double theta[4] = {1.0, 3.0, 7.0, 3.0};
-    for (int i = 0; i < MODEL_N_REALS; i++) {
-        r[i] = 0.0;
-    }
     for (int l = 0; l < 4; l++) {
         r[VR_K11 + l] = K[l];
         r[VR_TAU11 + l] = tau[l];
