@@ -88,7 +88,7 @@ def test_cli_spec_from_the_cosimulation_fmu_designs_and_tracks_in_hil(wood_berry
     assert res.code == 0, res.err
     assert "n=14 m=2 p=2" in res.out and "ERA order 14" in res.out
     s = load_spec(spec)
-    assert s.kind == "discrete" and s.Ts == 1.0
+    assert s.plant.kind == "discrete" and s.Ts == 1.0
     res = run_cli("design", spec, "--out", tmp_path)
     assert res.code == 0, res.err
     # The design on the identified model (exact dead times, no Pade approximants) runs against the FMU itself.

@@ -103,7 +103,7 @@ def test_the_cli_writes_a_spec_from_it(msd3, tmp_path):
     from gainlink.spec import load_spec
 
     spec = load_spec(tmp_path / "msd.toml")
-    np.testing.assert_allclose(spec.A, physics()[0], rtol=1e-8)
+    np.testing.assert_allclose(spec.plant.A, physics()[0], rtol=1e-8)
     assert spec.operating_point.y_op.tolist() == [S0]
 
 

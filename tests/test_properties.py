@@ -83,7 +83,7 @@ def test_predictor_and_current_forms_give_the_same_closed_loop(seed, n, m, p, q,
     pred, cur = (artifact_mod.from_dict(results[f].artifact) for f in ("predictor", "current"))
     np.testing.assert_allclose(pred.K, cur.K, rtol=1e-12)
     np.testing.assert_allclose(pred.L, cur.L, rtol=1e-9, atol=1e-12)
-    d = Discretised(cur.Ad, cur.Bd, cur.Cd, cur.Dd, "zoh")
+    d = Discretised(A=cur.Ad, B=cur.Bd, C=cur.Cd, D=cur.Dd, method="zoh", Ts=cur.Ts)
     Aa = np.block([[cur.Ad, np.zeros((n, q))], [-cur.Ts * cur.Ci @ cur.Cd, np.eye(q)]])
     Ba = np.vstack([cur.Bd, np.zeros((q, m))])
     A_ctrl, A_obs = Aa - Ba @ np.hstack([cur.K, cur.Ki]), cur.Ad - cur.L @ cur.Cd

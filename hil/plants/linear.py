@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 from gainlink.errors import GainlinkError, PlantError
+from gainlink.lti import StateSpaceModel
 from gainlink.proof.sampled_plant import SampledPlant
 from scipy.linalg import expm
 
@@ -34,20 +35,12 @@ _ENTRY = re.compile(r"^([ABCD])\[(\d+)\]\[(\d+)\]$")
 MATRICES = ("A", "B", "C", "D")
 
 
-@dataclass(frozen=True)
-class LinearModel:
-    """``A, B, C, D`` with their signal names; ``Ts`` is ``None`` for a continuous model; ``u_op``, ``y_op``
-    the operating point (``None``: the origin)."""
+@dataclass(frozen=True, kw_only=True)
+class LinearModel(StateSpaceModel):
+    """A linear plant model (``Ts`` is ``None`` for a continuous one) about its operating point ``u_op``, ``y_op``
+    (``None``: the origin)."""
 
     name: str
-    A: np.ndarray
-    B: np.ndarray
-    C: np.ndarray
-    D: np.ndarray
-    Ts: float | None
-    states: tuple[str, ...]
-    inputs: tuple[str, ...]
-    outputs: tuple[str, ...]
     u_op: np.ndarray | None = None
     y_op: np.ndarray | None = None
 

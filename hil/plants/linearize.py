@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from gainlink.errors import PlantError, SpecError
 from gainlink.fileio import atomic_write_text, read_toml
+from gainlink.lti import StateSpaceModel
 
 from . import toml_write
 from .fmi import read_description, resolve_fmu, signal_name
@@ -38,22 +39,15 @@ log = logging.getLogger(__name__)
 DESIGN_SECTIONS = ("controller", "integral", "observer", "limits")
 
 
-@dataclass(frozen=True)
-class Linearization:
-    """``A, B, C, D`` about ``point`` (the values set), with signal names and the method used."""
+@dataclass(frozen=True, kw_only=True)
+class Linearization(StateSpaceModel):
+    """A model about ``point`` (the values set) with the method used; ``Ts`` is the step of a discrete model
+    (Co-Simulation FMUs), None for a continuous one."""
 
-    A: np.ndarray
-    B: np.ndarray
-    C: np.ndarray
-    D: np.ndarray
-    states: tuple[str, ...]
-    inputs: tuple[str, ...]
-    outputs: tuple[str, ...]
     point: dict
     x0: np.ndarray
     method: str
     model_name: str
-    Ts: float | None = None  # the step of a discrete model (Co-Simulation FMUs); None: continuous
     u0: np.ndarray | None = None  # inputs at the point
     y0: np.ndarray | None = None  # outputs at the point
     dx0: np.ndarray | None = None  # derivatives at the point (zero at an equilibrium; continuous models only)

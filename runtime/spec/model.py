@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..lti import StateSpaceModel
+
 
 @dataclass(frozen=True)
 class TransferFunctionSource:
@@ -21,41 +23,14 @@ class TransferFunctionSource:
     delay: list
 
 
-@dataclass(frozen=True)
-class PlantModel:
+@dataclass(frozen=True, kw_only=True)
+class PlantModel(StateSpaceModel):
     """The plant as specified: ``A, B, C, D`` continuous (``kind`` continuous, or a transfer function realised with
-    Padé delays) or discrete (``kind`` discrete, sampled at the spec's ``Ts``), with its signal names."""
+    Padé delays; ``Ts`` None) or discrete (``kind`` discrete, sampled at the spec's ``Ts``), with its signal names."""
 
     kind: str
-    A: np.ndarray
-    B: np.ndarray
-    C: np.ndarray
-    D: np.ndarray
-    states: tuple[str, ...]
-    inputs: tuple[str, ...]
-    outputs: tuple[str, ...]
     pade_order: int | None = None
     transfer_function: TransferFunctionSource | None = None
-
-    @property
-    def n(self) -> int:
-        """Number of states."""
-        return self.A.shape[0]
-
-    @property
-    def m(self) -> int:
-        """Number of inputs."""
-        return self.B.shape[1]
-
-    @property
-    def p(self) -> int:
-        """Number of outputs."""
-        return self.C.shape[0]
-
-    @property
-    def continuous(self) -> bool:
-        """True when A, B, C, D are continuous-time."""
-        return self.kind != "discrete"
 
 
 @dataclass(frozen=True)

@@ -65,7 +65,7 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     disc = data.get("discretization", "zoh")
     if disc not in ("zoh", "tustin"):
         raise SpecError(f"discretization must be 'zoh' or 'tustin', not {disc!r}")
-    plant = parse_plant(table(data, "plant", required=True))
+    plant = parse_plant(table(data, "plant", required=True), Ts=Ts)
     ctl = checked_table(data, "controller", CONTROLLER_KEYS, required=True)
     integral = parse_integral(
         checked_table(data, "integral", INTEGRAL_KEYS, required=False),

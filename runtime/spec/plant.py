@@ -16,8 +16,8 @@ PLANT_KEYS = {
 }
 
 
-def parse_plant(plant: dict) -> PlantModel:
-    """A checked :class:`PlantModel` from the ``[plant]`` table."""
+def parse_plant(plant: dict, *, Ts: float) -> PlantModel:
+    """A checked :class:`PlantModel` from the ``[plant]`` table (a discrete plant is sampled at ``Ts``)."""
     kind = plant.get("kind", "continuous")
     if kind not in PLANT_KEYS:
         raise SpecError(f"plant.kind must be one of {', '.join(PLANT_KEYS)}, not {kind!r}")
@@ -43,6 +43,7 @@ def parse_plant(plant: dict) -> PlantModel:
         outputs=signal_names(plant, "outputs", C.shape[0], "y"),
         pade_order=pade_order,
         transfer_function=tf,
+        Ts=Ts if kind == "discrete" else None,
     )
 
 

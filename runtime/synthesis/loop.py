@@ -20,9 +20,9 @@ def closed_loop_matrix(
     for input i, and the observer keeps being fed the controller's own command (as the C loop is:
     it never sees the actuator). Margins of that loop are margins against actuator gain and phase.
     """
-    n, m = d.Bd.shape
+    n, m = d.B.shape
     q = Ci.shape[0]
-    Ad, Bd, Cd, Dd = d.Ad, d.Bd, d.Cd, d.Dd
+    Ad, Bd, Cd, Dd = d.A, d.B, d.C, d.D
     if form == "current":
         # xc = xh + M (Cd x - Cd xh); v = -K xc - Ki z; xh+ = Ad xc + Bd v
         V = np.hstack([-K @ M @ Cd, -K @ (np.eye(n) - M @ Cd), -Ki])
@@ -92,7 +92,7 @@ def closed_loop_poles(d: Discretised, A_ctrl: np.ndarray, gains: dict) -> tuple[
         raise DesignError(
             f"closed loop is unstable: spectral radius {radius:.6g} >= 1 ({_unstable_parts(d, A_ctrl, gains)})"
         )
-    check_separation(Acl, A_ctrl, d.Ad - gains["L"] @ d.Cd)
+    check_separation(Acl, A_ctrl, d.A - gains["L"] @ d.C)
     return cl_poles, radius
 
 
@@ -101,7 +101,7 @@ def _unstable_parts(d: Discretised, A_ctrl: np.ndarray, gains: dict) -> str:
     parts = []
     for what, A in (
         ("the controller with the plant (A - B K)", A_ctrl),
-        ("the observer (A - L C)", d.Ad - gains["L"] @ d.Cd),
+        ("the observer (A - L C)", d.A - gains["L"] @ d.C),
     ):
         eig = np.linalg.eigvals(A)
         worst = eig[int(np.argmax(np.abs(eig)))]

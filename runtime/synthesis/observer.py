@@ -16,7 +16,7 @@ from .discretize import Discretised
 def observer_gain(spec: PlantSpec, d: Discretised) -> tuple[np.ndarray, np.ndarray | None, dict]:
     """``(L, M, record)``: ``M`` only in the current form; ``record`` is the artifact's design record."""
     obs = spec.observer
-    if obs.form == "current" and np.any(d.Dd != 0):
+    if obs.form == "current" and np.any(d.D != 0):
         raise SpecError(
             "observer.form 'current' requires a plant without feedthrough (D = 0 after discretisation;"
             " Tustin adds feedthrough: use zoh)"
@@ -26,7 +26,7 @@ def observer_gain(spec: PlantSpec, d: Discretised) -> tuple[np.ndarray, np.ndarr
     elif obs.method == "luenberger":
         L, M, record = _luenberger(spec, d)
     elif obs.form == "current":
-        L, M, record = d.Ad @ obs.M, obs.M, {"method": "given"}
+        L, M, record = d.A @ obs.M, obs.M, {"method": "given"}
     else:
         L, M, record = obs.L, None, {"method": "given"}
     return L, (M if obs.form == "current" else None), record
@@ -36,20 +36,20 @@ def _kalman(spec: PlantSpec, d: Discretised) -> tuple[np.ndarray, np.ndarray, di
     import control
 
     obs = spec.observer
-    n = d.Ad.shape[0]
-    G = d.Bd if obs.G_is_B else (np.eye(n) if obs.G is None else obs.G)
+    n = d.A.shape[0]
+    G = d.B if obs.G_is_B else (np.eye(n) if obs.G is None else obs.G)
     check_psd(obs.W, "observer W (process noise covariance)", definite=False)
     check_psd(obs.V, "observer V (measurement noise covariance)", definite=True)
     try:
-        P, _, _ = control.dare(d.Ad.T, d.Cd.T, G @ obs.W @ G.T, obs.V)
+        P, _, _ = control.dare(d.A.T, d.C.T, G @ obs.W @ G.T, obs.V)
     except Exception as exc:  # SLICOT/SciPy report failures with assorted exception types
         raise DesignError(f"Kalman DARE failed: {str(exc).splitlines()[0]} (is (A, G) stabilizable?)") from None
     P = np.asarray(P, float)
-    M = P @ d.Cd.T @ np.linalg.inv(d.Cd @ P @ d.Cd.T + obs.V)
+    M = P @ d.C.T @ np.linalg.inv(d.C @ P @ d.C.T + obs.V)
     record = {"method": "kalman", "W": matrix_to_json(obs.W), "V": matrix_to_json(obs.V)}
     if obs.G_given:
         record["G"] = matrix_to_json(G)
-    return d.Ad @ M, M, record
+    return d.A @ M, M, record
 
 
 def _luenberger(spec: PlantSpec, d: Discretised) -> tuple[np.ndarray, np.ndarray | None, dict]:
@@ -57,12 +57,12 @@ def _luenberger(spec: PlantSpec, d: Discretised) -> tuple[np.ndarray, np.ndarray
 
     poles = spec.observer.poles_z
     try:
-        L = np.real(np.asarray(control.place(d.Ad.T, d.Cd.T, poles), complex)).T
+        L = np.real(np.asarray(control.place(d.A.T, d.C.T, poles), complex)).T
     except Exception as exc:  # python-control reports placement failures with assorted exception types
         raise DesignError(f"observer pole placement failed: {str(exc).splitlines()[0]}") from None
     M = None
     if spec.observer.form == "current":
-        if np.linalg.cond(d.Ad) > 1e12:
+        if np.linalg.cond(d.A) > 1e12:
             raise DesignError("current-form Luenberger observer needs an invertible Ad")
-        M = np.linalg.solve(d.Ad, L)
+        M = np.linalg.solve(d.A, L)
     return L, M, {"method": "luenberger", "poles": complex_pairs(poles)}

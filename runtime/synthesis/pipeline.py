@@ -82,7 +82,7 @@ def synthesize(spec: PlantSpec) -> DesignResult:
     return DesignResult(
         artifact=seal(data),
         controller_poles=ctrl_poles,
-        observer_poles=np.linalg.eigvals(d.Ad - L @ d.Cd),
+        observer_poles=np.linalg.eigvals(d.A - L @ d.C),
         closed_loop_poles=cl_poles,
         margins=margins,
         warnings=warnings,
@@ -94,10 +94,10 @@ def synthesize(spec: PlantSpec) -> DesignResult:
 
 def _check_feasible(d: Discretised, Aa: np.ndarray, Ba: np.ndarray, q: int) -> None:
     """Stabilizable, detectable, and (with integral action) the augmented plant stabilizable: else DesignError."""
-    bad = uncontrollable_unstable(d.Ad, d.Bd, discrete=True)
+    bad = uncontrollable_unstable(d.A, d.B, discrete=True)
     if bad:
         raise DesignError(f"plant is not stabilizable: unstable mode(s) {_fmt_list(bad)} are uncontrollable")
-    bad = unobservable_unstable(d.Ad, d.Cd, discrete=True)
+    bad = unobservable_unstable(d.A, d.C, discrete=True)
     if bad:
         raise DesignError(f"plant is not detectable: unstable mode(s) {_fmt_list(bad)} are unobservable")
     if q:
