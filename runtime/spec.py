@@ -63,7 +63,7 @@ OPERATING_POINT_KEYS = {"u_op", "y_op", "x_op"}
 
 @dataclass(frozen=True)
 class OperatingPoint:
-    """The point the plant model is a linearisation about (DESIGN.md, "The control law").
+    """The point the plant model is a linearisation about (docs/design.md, "The control law").
 
     ``u_op`` (m) and ``y_op`` (p) are the absolute command and measurement there; the model, the
     estimate and the design are deviations from them. ``x_op`` (n) is the state there, kept for the

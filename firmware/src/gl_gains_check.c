@@ -141,7 +141,8 @@ static float *derive_integrator_rows(const gl_gains_t *g, float *w)
 }
 
 /**
- * Estimate rows: F = Ad - L Cd, G = Bd - L Dd, L (current form: L = Ad M, DESIGN.md), in double, rounded once.
+ * Estimate rows: F = Ad - L Cd, G = Bd - L Dd, L (current form: L = Ad M, docs/design.md "The control law"),
+ * in double, rounded once.
  * Returns the stream position after them; clears `*ok` when a derived coefficient is not finite in float.
  */
 static float *derive_estimate_rows(const gl_gains_t *g, float *w, int *ok)

@@ -1,9 +1,9 @@
 /**
  * @file gl_loop.h
- * @brief gainlink control loop: the DESIGN.md law in float32, double-buffered gains, watchdog.
+ * @brief gainlink control loop: the law of docs/design.md in float32, double-buffered gains, watchdog.
  *
- * The law (DESIGN.md, "The control law"; predictor form, the current-estimator form is folded into the same
- * step, see below). Samples y, references r, limits and commands are absolute; the estimate xh is a deviation
+ * The law (docs/design.md, "The control law"; predictor form, the current-estimator form is folded into the
+ * same step, see below). Samples y, references r, limits and commands are absolute; the estimate xh is a deviation
  * from the operating point (u_op, y_op), all zero for a plant specified about the origin:
  * @code
  *   dy = y - y_op
@@ -26,7 +26,8 @@
  * with F, G, Kx, Ky derived in double precision from the artifact's matrices each time a gain set
  * is accepted (gl_loop_init() or a staged update), so the per-sample step is only multiply-adds.
  * Every multiply-add is an explicit fused `fmaf`, so a host (x86-64, SSE) build and the Cortex-M4F
- * build (`vfma.f32`) give bit-identical results; both are compiled with `-ffp-contract=off`.
+ * build (`vfma.f32`) give bit-identical results; both are compiled with `-ffp-contract=off` (docs/design.md,
+ * "How the C is proved to be the design").
  *
  * Dimensions and structure (n, m, p, q, observer form, anti-windup mode) are compile-time macros from
  * the generated header `gl_gains.h` (`gainlink export ARTIFACT --out DIR`); the numbers are
