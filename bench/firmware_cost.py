@@ -3,9 +3,9 @@
 Prints JSON. Designs: the pendulum example (Kalman, integral action on position, back-calculation) and
 random designs with n = 4, 8, 12, 16 (m = p = 2, one integrator). For each: instructions per step of
 the shipped build (generated unrolled step) and of the generic-loop build measured in the same run
-(the baseline; `speedup` is their ratio), the multiply-accumulates of the law as DESIGN.md writes it,
-the ratio instructions / MACs, and flash/RAM from the size report. Targets: pendulum <= 100
-instructions per step; <= 2x the MAC count at n = 12.
+(the baseline; `speedup` is their ratio), the multiply-accumulates of the law as docs/design.md writes
+it ("The control law"), the ratio instructions / MACs, and flash/RAM from the size report. Targets:
+pendulum <= 100 instructions per step; <= 2x the MAC count at n = 12.
 
     .venv/bin/python bench/firmware_cost.py
 """

@@ -29,7 +29,7 @@ def test_export_is_reproducible_and_names_the_artifact(example_artifacts, tmp_pa
     assert export(art, tmp_path / "a").returncode == 0
     assert export(art, tmp_path / "b").returncode == 0
     files = sorted(p.name for p in (tmp_path / "a").iterdir())
-    assert files == ["gl_gains.c", "gl_gains.h", "gl_step.h"]
+    assert files == ["gl_gains.c", "gl_gains.h", "gl_gains_layout.h", "gl_step.h"]
     for f in files:
         text = (tmp_path / "a" / f).read_text("utf-8")
         assert text == (tmp_path / "b" / f).read_text("utf-8"), f"{f} differs between two exports"

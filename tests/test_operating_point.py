@@ -1,7 +1,8 @@
 """The operating point (``u_op``, ``y_op``; ``x_op`` for the record): spec, artifact, float64 law, C loop, PIL.
 
 Oracles, none of them the code under test:
-- an independent transcription of DESIGN.md's law with the operating point, in lists and loops;
+- an independent transcription of the law in docs/design.md ("The control law") with the operating point,
+  in lists and loops;
 - the law's shift invariance, read off its text: a design about (u_op, y_op) fed ``y_op + s`` and references
   ``Ci y_op + rho`` has the same estimate and integrator as the same design about the origin fed ``s``, ``rho``,
   and commands ``u_op`` plus that design's command (its limits shifted by ``u_op`` too);
@@ -154,7 +155,7 @@ def matvec(A, x):
 
 
 def independent_law(data: dict, Y, R):
-    """DESIGN.md's step with the operating point, in lists and loops, from the artifact's JSON dict.
+    """The step of docs/design.md with the operating point, in lists and loops, from the artifact's JSON dict.
 
     Returns per step (u, saturated, fault, xh, z)."""
     n, m, p, q = data["n"], data["m"], data["p"], data["q"]

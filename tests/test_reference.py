@@ -1,4 +1,5 @@
-"""The float64 reference loop against an independent pure-Python transcription of DESIGN.md's law."""
+"""The float64 reference loop against an independent pure-Python transcription of the law in docs/design.md
+("The control law")."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ def matvec(A, x):
 
 
 def independent_law(data: dict, Y, R):
-    """DESIGN.md's step written with lists and loops only, from the artifact's JSON dict."""
+    """The step of docs/design.md written with lists and loops only, from the artifact's JSON dict."""
     n, m, p, q = data["n"], data["m"], data["p"], data["q"]
     Ad, Bd, Cd, Dd, K, L = (data[k] for k in ("Ad", "Bd", "Cd", "Dd", "K", "L"))
     Ci = data.get("Ci", [])

@@ -1,9 +1,9 @@
 """SIL: the host C loop through ctypes against the plant in-process.
 
-Oracles: the closed loop of the artifact's own linear plant written out by hand from DESIGN.md's law and
-simulated by python-control (no saturation, so the law is linear); and the lockstep HIL run of the same
-scenario over a real bus with the firmware's CAN process, which must give the same trace bit for bit
-(both C loops see the same float32 samples).
+Oracles: the closed loop of the artifact's own linear plant written out by hand from the law in docs/design.md
+("The control law") and simulated by python-control (no saturation, so the law is linear); and the lockstep
+HIL run of the same scenario over a real bus with the firmware's CAN process, which must give the same trace
+bit for bit (both C loops see the same float32 samples).
 """
 
 from __future__ import annotations

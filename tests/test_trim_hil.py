@@ -11,9 +11,9 @@ so a design with one settles on its reference whether the artifact carries the o
 operating point then only buys the start (no drop while the integrator winds up). The last test here shows
 exactly that, with numbers. The regulator is where the operating point decides the steady state: blind to
 ``y_op`` it regulates the absolute altitude towards zero, blind to ``u_op`` it needs an altitude error to
-make any thrust at all. Solving DESIGN.md's law at rest (observer fixed point plus thrust = weight) gives
-its equilibrium below the ground, so the blind design lands; with the operating point the same equations
-give exactly 2 m.
+make any thrust at all. Solving the law of docs/design.md ("The control law") at rest (observer fixed point
+plus thrust = weight) gives its equilibrium below the ground, so the blind design lands; with the operating
+point the same equations give exactly 2 m.
 """
 
 from __future__ import annotations
@@ -125,7 +125,7 @@ def test_linearize_writes_the_operating_point_and_the_hover_model(hover):
 
 
 def law_equilibrium(data: dict, *, u_rest: float) -> float:
-    """The measured altitude at which DESIGN.md's law (q = 0, predictor form) is at rest commanding ``u_rest``.
+    """The measured altitude at which docs/design.md's law (q = 0, predictor form) rests commanding ``u_rest``.
 
     At rest ``xh = Ad xh + Bd du + L (dy - Cd xh)`` with ``dy = z - y_op``, ``du = u_rest - u_op``, and
     ``u_rest = u_op - K xh``: n + 1 linear equations in ``xh`` and ``z``, solved with numpy.

@@ -17,7 +17,7 @@
 
 #include "gainlink/gl_loop.h"
 
-#define PAYLOAD_FLOATS ((sizeof(gl_gains_t) - offsetof(gl_gains_t, Ts) - sizeof(uint32_t)) / sizeof(float))
+#define PAYLOAD_FLOATS ((size_t)(GL_GAINS_FLOATS))
 
 static gl_loop_t loop;
 

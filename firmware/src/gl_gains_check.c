@@ -8,14 +8,10 @@
 
 #include "gl_internal.h"
 
-/** Number of floats in the checksummed payload, from Ts through y_op. */
-#define GL_PAYLOAD_FLOATS                                                                                     \
-    (1 + GL_N * GL_N + GL_N * GL_M + GL_P * GL_N + GL_P * GL_M + GL_M * GL_N + 2 * GL_N * GL_P + GL_QA * GL_P + \
-     GL_M * GL_QA + GL_QA * GL_M + 2 * GL_M + GL_N + GL_QA + GL_M + GL_P)
-
-_Static_assert(offsetof(gl_gains_t, y_op) + sizeof(((gl_gains_t *)0)->y_op) - offsetof(gl_gains_t, Ts) ==
-                   sizeof(float) * (GL_PAYLOAD_FLOATS),
-               "gl_gains_t float payload must be contiguous (no padding)");
+/* The field lists below (GL_GAINS_STRUCTURE, GL_GAINS_FLOATS from Ts on) come from gl_gains_layout.h, generated
+ * from the field table gainlink.shipping.gains_layout. */
+#define GL_STRUCTURE_WORD(field, compiled, param) gains->field,
+#define GL_STRUCTURE_DIFFERS(field, compiled, param) || gains->field != (uint32_t)(compiled)
 
 static uint32_t crc32_update(uint32_t crc, uint32_t word)
 {
@@ -34,12 +30,12 @@ uint32_t gl_gains_crc32(const gl_gains_t *gains)
         return 0u;
     }
     uint32_t crc = 0xFFFFFFFFu;
-    const uint32_t header[6] = {gains->n, gains->m, gains->p, gains->q, gains->observer_form, gains->anti_windup};
-    for (size_t i = 0; i < 6u; ++i) {
+    const uint32_t header[GL_GAINS_STRUCTURE_FIELDS] = {GL_GAINS_STRUCTURE(GL_STRUCTURE_WORD)};
+    for (size_t i = 0; i < GL_GAINS_STRUCTURE_FIELDS; ++i) {
         crc = crc32_update(crc, header[i]);
     }
     const float *payload = &gains->Ts;
-    for (size_t i = 0; i < (size_t)(GL_PAYLOAD_FLOATS); ++i) {
+    for (size_t i = 0; i < (size_t)(GL_GAINS_FLOATS); ++i) {
         uint32_t bits;
         memcpy(&bits, &payload[i], sizeof bits);
         crc = crc32_update(crc, bits);
@@ -52,15 +48,14 @@ gl_status_t gl_gains_check(const gl_gains_t *gains)
     if (gains == NULL) {
         return GL_ERR_NULL;
     }
-    if (gains->n != GL_N || gains->m != GL_M || gains->p != GL_P || gains->q != GL_Q ||
-        gains->observer_form != GL_OBSERVER_FORM || gains->anti_windup != GL_ANTI_WINDUP) {
+    if (0 GL_GAINS_STRUCTURE(GL_STRUCTURE_DIFFERS)) {
         return GL_ERR_DIMS;
     }
     if (gains->crc32 != gl_gains_crc32(gains)) {
         return GL_ERR_CRC;
     }
     const float *payload = &gains->Ts;
-    for (size_t i = 0; i < (size_t)(GL_PAYLOAD_FLOATS); ++i) {
+    for (size_t i = 0; i < (size_t)(GL_GAINS_FLOATS); ++i) {
         if (!isfinite(payload[i])) {
             return GL_ERR_NANINF;
         }
@@ -146,7 +141,8 @@ static float *derive_integrator_rows(const gl_gains_t *g, float *w)
 }
 
 /**
- * Estimate rows: F = Ad - L Cd, G = Bd - L Dd, L (current form: L = Ad M, DESIGN.md), in double, rounded once.
+ * Estimate rows: F = Ad - L Cd, G = Bd - L Dd, L (current form: L = Ad M, docs/design.md "The control law"),
+ * in double, rounded once.
  * Returns the stream position after them; clears `*ok` when a derived coefficient is not finite in float.
  */
 static float *derive_estimate_rows(const gl_gains_t *g, float *w, int *ok)

@@ -8,7 +8,6 @@ stage, reset) plus :meth:`NativeLoop.run`, which hands a whole block of samples 
 from __future__ import annotations
 
 import ctypes
-import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,7 +16,9 @@ import numpy as np
 from ..errors import FirmwareError
 from ..firmware.build import build
 from ..proof.reference import Trace
+from ..shipping import gains_layout
 from ..shipping.artifact import Artifact
+from ..shipping.codegen import shape_of
 
 STATUS = {
     0: "GL_OK",
@@ -31,47 +32,6 @@ STATUS = {
     -7: "GL_ERR_BUSY",
     -8: "GL_ERR_FPU",
 }
-
-
-@functools.cache
-def gains_struct(*, n: int, m: int, p: int, q: int) -> type[ctypes.Structure]:
-    """A ctypes mirror of the C ``gl_gains_t`` for these dimensions (one class per shape: ctypes keeps the
-    POINTER type of every Structure class it meets forever, so a class per loop would leak one per run)."""
-    qa = max(q, 1)
-    f = ctypes.c_float
-
-    def mat(r: int, c: int):
-        return (f * c) * r
-
-    class GlGains(ctypes.Structure):
-        _fields_ = [
-            ("n", ctypes.c_uint32),
-            ("m", ctypes.c_uint32),
-            ("p", ctypes.c_uint32),
-            ("q", ctypes.c_uint32),
-            ("observer_form", ctypes.c_uint32),
-            ("anti_windup", ctypes.c_uint32),
-            ("Ts", f),
-            ("Ad", mat(n, n)),
-            ("Bd", mat(n, m)),
-            ("Cd", mat(p, n)),
-            ("Dd", mat(p, m)),
-            ("K", mat(m, n)),
-            ("L", mat(n, p)),
-            ("M", mat(n, p)),
-            ("Ci", mat(qa, p)),
-            ("Ki", mat(m, qa)),
-            ("Kaw", mat(qa, m)),
-            ("u_min", f * m),
-            ("u_max", f * m),
-            ("xh0", f * n),
-            ("z0", f * qa),
-            ("u_op", f * m),
-            ("y_op", f * p),
-            ("crc32", ctypes.c_uint32),
-        ]
-
-    return GlGains
 
 
 @dataclass(frozen=True)
@@ -116,7 +76,7 @@ class NativeLoop:
         lib.gl_host_loop_size.restype = ctypes.c_size_t
         lib.gl_host_gains_size.restype = ctypes.c_size_t
         a = artifact
-        self.Gains = gains_struct(n=a.n, m=a.m, p=a.p, q=a.q)
+        self.Gains = gains_layout.GAINS.ctypes_struct(shape_of(a))  # the build asserts the C layout equals it
         if ctypes.sizeof(self.Gains) != lib.gl_host_gains_size():
             raise FirmwareError("gl_gains_t layout of the library differs from the Python mirror")
         lib.gl_host_default_gains.restype = ctypes.POINTER(self.Gains)

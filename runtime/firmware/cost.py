@@ -78,7 +78,8 @@ def count_step_instructions(
 
 
 def law_macs(artifact: Artifact) -> int:
-    """Multiply-accumulates of one step of the law as DESIGN.md writes it (matrix-vector products)."""
+    """Multiply-accumulates of one step of the law as docs/design.md writes it ("The control law"): matrix-vector
+    products."""
     a = artifact
     n, m, p, q = a.n, a.m, a.p, a.q
     macs = m * n + m * q + q * p + q  # K xh (or K xc), Ki z, Ci y, Ts e

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ToolchainError
+from ..shipping import gains_layout
 from ..shipping.artifact import Artifact
 from .build import build
 
@@ -148,24 +149,19 @@ def _seeds_can_layout(artifact: Artifact) -> list[bytes]:
 
 def gains_struct(artifact: Artifact) -> bytes:
     """The artifact's ``gl_gains_t`` as the C struct lays it out on a little-endian host (CRC included)."""
-    from ..shipping.codegen import gain_set
+    from ..shipping.codegen import gain_set, shape_of
 
-    g = gain_set(artifact)
-    floats = np.concatenate([np.asarray(v, dtype="<f4").ravel() for v in g.fields.values()])
-    return struct.pack("<6I", *g.header) + floats.tobytes() + struct.pack("<I", g.crc32)
+    return gains_layout.GAINS.pack(shape_of(artifact), gain_set(artifact).fields)
 
 
 def _seeds_gains_stage(artifact: Artifact) -> list[bytes]:
-    from ..shipping.codegen import gain_set
+    from ..shipping.codegen import shape_of
 
-    g = gain_set(artifact)
     raw = gains_struct(artifact)
     seeds = [bytes([1]) + raw, bytes([3]) + raw]  # the compiled set as sent, and sealed again
-    offsets, at = {}, 0
-    for name, value in g.fields.items():
-        offsets[name] = at
-        at += np.asarray(value).size
-    k_first, k = offsets["K"], np.asarray(g.fields["K"], dtype=np.float32).ravel()
+    places = gains_layout.GAINS.offsets(shape_of(artifact))
+    k_first = (places["K"][0] - places["Ts"][0]) // 4  # the harness's edits index floats from Ts
+    k = np.frombuffer(raw, dtype="<f4", count=places["K"][1] // 4, offset=places["K"][0])
     retune = b"".join(struct.pack("<Hf", k_first + i, float(v) * 1.1) for i, v in enumerate(k))
     seeds += [bytes([0]) + retune, bytes([2]) + retune]  # a retune as PARAM_SETs: unsealed, then committed
     return seeds

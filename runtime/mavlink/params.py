@@ -1,6 +1,7 @@
 """MAVLink parameters of a gain set: naming scheme, value encoding, gain-set hash, mapping files.
 
-Naming scheme of the gainlink firmware (``firmware/apps/mavlink``, which must agree), in index order:
+Naming scheme of the gainlink firmware (``firmware/apps/mavlink``; both read the field table
+:mod:`gainlink.shipping.gains_layout`), in index order:
 
 =============================================  ======  ==============================================
 id                                             type    meaning
@@ -54,8 +55,9 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..fileio import read_toml
+from ..shipping import gains_layout as layout
 from ..shipping.artifact import Artifact
-from ..shipping.codegen import gain_set
+from ..shipping.codegen import gain_set, shape_of
 
 #: MAV_PARAM_TYPE values (MAVLink common.xml).
 PARAM_TYPES: dict[str, int] = {
@@ -83,30 +85,9 @@ INT32 = PARAM_TYPES["INT32"]
 #: Maximum length of a MAVLink parameter id.
 PARAM_ID_LEN = 16
 
-#: Blocks of ``gl_gains_t`` that are parameters, in index order: (GainSet field, id stem, kind).
-#: kind: "scalar", "vector", "matrix"; blocks sized by q are left out when q == 0, M unless current form.
-BLOCKS: tuple[tuple[str, str, str], ...] = (
-    ("Ts", "TS", "scalar"),
-    ("Ad", "AD", "matrix"),
-    ("Bd", "BD", "matrix"),
-    ("Cd", "CD", "matrix"),
-    ("Dd", "DD", "matrix"),
-    ("K", "K", "matrix"),
-    ("L", "L", "matrix"),
-    ("M", "M", "matrix"),
-    ("Ci", "CI", "matrix"),
-    ("Ki", "KI", "matrix"),
-    ("Kaw", "KAW", "matrix"),
-    ("u_min", "UMIN", "vector"),
-    ("u_max", "UMAX", "vector"),
-    ("xh0", "XH0", "vector"),
-    ("z0", "Z0", "vector"),
-    ("u_op", "UOP", "vector"),
-    ("y_op", "YOP", "vector"),
-)
-#: Matrices a mapping file may name.
-MATRICES: tuple[str, ...] = ("Ad", "Bd", "Cd", "Dd", "K", "L", "M", "Ci", "Ki", "Kaw")
-DIMENSION_IDS: tuple[str, ...] = ("GL_DIM_N", "GL_DIM_M", "GL_DIM_P", "GL_DIM_Q", "GL_FORM", "GL_AW")
+#: Matrices a mapping file may name; the firmware's ids come from the field table (:mod:`gainlink.shipping.gains_layout`).
+MATRICES: tuple[str, ...] = tuple(f.name for f in layout.NUMBERS if len(f.dims) == 2)
+DIMENSION_IDS: tuple[str, ...] = tuple(f.param for f in layout.STRUCTURE)
 HASH_ID = "GL_HASH"
 
 
@@ -190,29 +171,20 @@ def as_int32(value: int) -> int:
     return value - (1 << 32) if value >= 1 << 31 else value
 
 
-def _exposed(field: str, artifact: Artifact) -> bool:
-    if field == "M":
-        return artifact.observer_form == "current"
-    if field in ("Ci", "Ki", "Kaw", "z0"):
-        return artifact.q > 0
-    return True
-
-
-def _block_params(field: str, stem: str, kind: str, values: np.ndarray, artifact: Artifact) -> list[ParamSpec]:
-    if kind == "scalar":
-        return [ParamSpec(name=f"GL_{stem}", ptype=REAL32, value=float(values.ravel()[0]), source=field)]
-    if kind == "vector":
+def _block_params(field: layout.Field, values: np.ndarray, shape: layout.Shape) -> list[ParamSpec]:
+    if not field.dims:
+        return [ParamSpec(name=f"GL_{field.param}", ptype=REAL32, value=float(values), source=field.name)]
+    exposed = field.exposed_shape(shape)  # integrator arrays are stored with max(q, 1) rows or columns
+    if len(field.dims) == 1:
         return [
-            ParamSpec(name=f"GL_{stem}_{i}", ptype=REAL32, value=float(v), source=f"{field}[{i}]")
-            for i, v in enumerate(values)
+            ParamSpec(name=f"GL_{field.param}_{i}", ptype=REAL32, value=float(values[i]), source=f"{field.name}[{i}]")
+            for i in range(exposed[0])
         ]
-    rows, cols = values.shape
-    if field == "Ki":
-        cols = artifact.q  # stored with max(q, 1) columns
-    if field in ("Ci", "Kaw"):
-        rows = artifact.q
+    rows, cols = exposed
     return [
-        ParamSpec(name=f"GL_{stem}_{i}_{j}", ptype=REAL32, value=float(values[i, j]), source=f"{field}[{i},{j}]")
+        ParamSpec(
+            name=f"GL_{field.param}_{i}_{j}", ptype=REAL32, value=float(values[i, j]), source=f"{field.name}[{i},{j}]"
+        )
         for i in range(rows)
         for j in range(cols)
     ]
@@ -224,14 +196,15 @@ def firmware_params(artifact: Artifact) -> tuple[ParamSpec, ...]:
     REAL32 values are the float32 numbers the C ``gl_gains_t`` holds; ``GL_HASH`` is its CRC-32.
     """
     gs = gain_set(artifact)
+    shape = shape_of(artifact)
     out = [
-        ParamSpec(name=name, ptype=INT32, value=int(v), source=src)
-        for name, v, src in zip(DIMENSION_IDS, gs.header, ("n", "m", "p", "q", "observer_form", "anti_windup"))
+        ParamSpec(name=f.param, ptype=INT32, value=int(v), source=f.name)
+        for f, v in zip(layout.STRUCTURE, gs.header, strict=True)
     ]
     out.append(ParamSpec(name=HASH_ID, ptype=INT32, value=as_int32(gs.crc32), source="crc32"))
-    for field, stem, kind in BLOCKS:
-        if _exposed(field, artifact):
-            out.extend(_block_params(field, stem, kind, np.asarray(gs.fields[field]), artifact))
+    for field in layout.NUMBERS:
+        if field.param:
+            out.extend(_block_params(field, np.asarray(gs.fields[field.name]), shape))
     for spec in out:
         check_param_id(spec.name)
     return tuple(out)

@@ -1,4 +1,4 @@
-"""The float64 reference of the gainlink control law (DESIGN.md, "The control law").
+"""The float64 reference of the gainlink control law (docs/design.md, "The control law").
 
 This is the executable statement of the contract that the C loop (float32) and every test
 compare against. It is deliberately plain: one step is a direct transcription of the law, with the

@@ -1,7 +1,8 @@
 """C code generation: the gains header and source that the firmware library is built with.
 
-``render_c(artifact)`` returns ``{"gl_gains.h": ..., "gl_gains.c": ...}``: the dimensions and structure
-as macros with ``_Static_assert``s, and the whole gain set as one ``const gl_gains_t`` with designated
+``render_c(artifact)`` returns ``{"gl_gains.h": ..., "gl_gains_layout.h": ..., "gl_gains.c": ...,
+"gl_step.h": ...}``: the dimensions and structure as macros with ``_Static_assert``s, the ``gl_gains_t`` struct
+from the field table (:mod:`gainlink.shipping.gains_layout`), and the whole gain set as one ``const gl_gains_t`` with designated
 initialisers, every float printed round-trip (``%.9g`` + ``f``) and the payload's CRC-32 computed here
 the same way the C library computes it (``gl_gains_crc32``). The same artifact always gives the same
 bytes: no timestamps, no paths, nothing from the environment.
@@ -9,14 +10,13 @@ bytes: no timestamps, no paths, nothing from the environment.
 
 from __future__ import annotations
 
-import struct
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..fileio import publish_files
+from . import gains_layout as layout
 from .artifact import Artifact
 
 FORM_CODES = {"predictor": 0, "current": 1}
@@ -34,13 +34,26 @@ STATE_CHUNK = 8  # states held in s8..s15
 class GainSet:
     """The artifact's numbers exactly as the C ``gl_gains_t`` holds them (float32, integrator arrays padded).
 
-    ``fields`` maps each C field name to a float32 array in declaration order; ``header`` holds the six
-    uint32 structure fields. ``crc32`` is the checksum of that payload.
+    ``fields`` maps each number field of :data:`gainlink.shipping.gains_layout.NUMBERS` to a float32 array of its C shape,
+    in declaration order; ``header`` holds the uint32 structure fields. ``crc32`` is the checksum of that payload.
     """
 
-    header: tuple[int, int, int, int, int, int]
+    header: tuple[int, ...]
     fields: dict[str, np.ndarray]
     crc32: int
+
+
+def shape_of(artifact: Artifact) -> layout.Shape:
+    """The compiled structure of ``artifact`` (the structure fields of its ``gl_gains_t``)."""
+    a = artifact
+    return layout.Shape(
+        n=a.n,
+        m=a.m,
+        p=a.p,
+        q=a.q,
+        observer_form=FORM_CODES[a.observer_form],
+        anti_windup=ANTI_WINDUP_CODES[a.anti_windup],
+    )
 
 
 def gain_set(artifact: Artifact) -> GainSet:
@@ -56,43 +69,22 @@ def gain_set(artifact: Artifact) -> GainSet:
     GainSet
         Float32 fields in C declaration order and the checksum ``gl_gains_crc32`` will compute.
     """
-    a = artifact
-    qa = max(a.q, 1)
-
-    def pad(x: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-        out = np.zeros(shape, dtype=np.float32)
-        x = np.asarray(x, dtype=np.float64)
-        out[tuple(slice(0, s) for s in x.shape)] = x.astype(np.float32)
-        return out
-
-    fields = {
-        "Ts": np.array([a.Ts], dtype=np.float32),
-        "Ad": pad(a.Ad, (a.n, a.n)),
-        "Bd": pad(a.Bd, (a.n, a.m)),
-        "Cd": pad(a.Cd, (a.p, a.n)),
-        "Dd": pad(a.Dd, (a.p, a.m)),
-        "K": pad(a.K, (a.m, a.n)),
-        "L": pad(a.L, (a.n, a.p)),
-        "M": pad(a.M if a.M is not None else np.zeros((a.n, a.p)), (a.n, a.p)),
-        "Ci": pad(a.Ci, (qa, a.p)),
-        "Ki": pad(a.Ki, (a.m, qa)),
-        "Kaw": pad(a.Kaw, (qa, a.m)),
-        "u_min": pad(a.u_min, (a.m,)),
-        "u_max": pad(a.u_max, (a.m,)),
-        "xh0": pad(a.xh0, (a.n,)),
-        "z0": pad(a.z0, (qa,)),
-        "u_op": pad(a.u_op, (a.m,)),
-        "y_op": pad(a.y_op, (a.p,)),
-    }
-    header = (a.n, a.m, a.p, a.q, FORM_CODES[a.observer_form], ANTI_WINDUP_CODES[a.anti_windup])
+    shape = shape_of(artifact)
+    fields = {}
+    for f in layout.NUMBERS:
+        value = getattr(artifact, f.name)  # every number is the artifact's attribute of that name
+        out = np.zeros(f.shape(shape), dtype=f.type.dtype)
+        if value is not None:  # an artifact without M (predictor form): zeros
+            x = np.asarray(value, dtype=np.float64)
+            out[tuple(slice(0, s) for s in x.shape)] = x.astype(out.dtype)
+        fields[f.name] = out
+    header = layout.GAINS.structure_values(shape)
     return GainSet(header=header, fields=fields, crc32=payload_crc32(header=header, fields=fields))
 
 
 def payload_crc32(*, header: tuple[int, ...], fields: dict[str, np.ndarray]) -> int:
     """CRC-32 (zlib) of the little-endian serialisation the C library checksums."""
-    blob = struct.pack(f"<{len(header)}I", *header)
-    blob += b"".join(np.ascontiguousarray(v, dtype="<f4").tobytes() for v in fields.values())
-    return zlib.crc32(blob) & 0xFFFFFFFF
+    return layout.GAINS.crc32(layout.Shape(*header), fields)
 
 
 def c_float(x: float) -> str:
@@ -136,7 +128,7 @@ def render_header(artifact: Artifact, gains: GainSet) -> str:
 def render_source(artifact: Artifact, gains: GainSet) -> str:
     """Text of ``gl_gains.c``: the artifact's gain set as one const ``gl_gains_t``."""
     a = artifact
-    n, m, p, q, form, aw = gains.header
+    n, m, p, q, form, aw = gains.header[:6]
     lines = [
         _banner(a),
         '#include "gainlink/gl_loop.h"\n',
@@ -144,19 +136,12 @@ def render_source(artifact: Artifact, gains: GainSet) -> str:
         f'_Static_assert(GL_OBSERVER_FORM == {form} && GL_ANTI_WINDUP == {aw}, "gl_gains.h does not match");',
         "",
         "const gl_gains_t gl_gains_default = {",
-        f"    .n = {n}u,",
-        f"    .m = {m}u,",
-        f"    .p = {p}u,",
-        f"    .q = {q}u,",
-        f"    .observer_form = {form}u,",
-        f"    .anti_windup = {aw}u,",
     ]
+    lines += [f"    .{f.name} = {v}u," for f, v in zip(layout.STRUCTURE, gains.header, strict=True)]
     for name, value in gains.fields.items():
-        if name == "Ts":
-            lines.append(f"    .Ts = {c_float(value[0])},")
-        else:
-            lines.append(f"    .{name} = {_c_array(value, '    ')},")
-    lines.append(f"    .crc32 = 0x{gains.crc32:08X}u,")
+        text = c_float(value) if value.ndim == 0 else _c_array(value, "    ")
+        lines.append(f"    .{name} = {text},")
+    lines.append(f"    .{layout.CHECKSUM.name} = 0x{gains.crc32:08X}u,")
     lines.append("};")
     return "\n".join(lines) + "\n"
 
@@ -286,11 +271,13 @@ def render_c(artifact: Artifact) -> dict[str, str]:
     Returns
     -------
     dict of str to str
-        ``{"gl_gains.h": ..., "gl_gains.c": ..., "gl_step.h": ...}``; identical for the same artifact.
+        ``{"gl_gains.h": ..., "gl_gains_layout.h": ..., "gl_gains.c": ..., "gl_step.h": ...}``; identical for
+        the same artifact.
     """
     gains = gain_set(artifact)
     return {
         HEADER_NAME: render_header(artifact, gains),
+        layout.HEADER_NAME: layout.GAINS.render_header(banner=_banner(artifact), shape=shape_of(artifact)),
         SOURCE_NAME: render_source(artifact, gains),
         STEP_NAME: render_step(artifact),
     }

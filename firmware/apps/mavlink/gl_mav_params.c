@@ -11,41 +11,26 @@
 
 /** One block of floats of gl_gains_t that is exposed as parameters. */
 typedef struct block {
-    const char *stem;  /**< Id stem after "GL_". */
-    size_t field;      /**< offsetof the field in gl_gains_t. */
-    uint32_t rows;     /**< Rows exposed. */
-    uint32_t cols;     /**< Columns exposed (0 for a vector). */
-    uint32_t stride;   /**< Declared columns (row stride in floats). */
+    const char *stem; /**< Id stem after "GL_". */
+    size_t field;     /**< offsetof the field in gl_gains_t. */
+    uint32_t rank;    /**< 0 scalar (GL_<stem>), 1 vector (GL_<stem>_i), 2 matrix (GL_<stem>_i_j). */
+    uint32_t rows;    /**< Rows (vector: elements) exposed; 0 when the block is not a parameter in this build. */
+    uint32_t cols;    /**< Columns exposed (1 for a scalar or vector). */
+    uint32_t stride;  /**< Declared columns (row stride in floats). */
 } block_t;
 
 #define FIELD(name) offsetof(gl_gains_t, name)
 
-static const block_t blocks[] = {
-    {.stem = "TS", .field = FIELD(Ts), .rows = 1, .cols = 0, .stride = 1},
-    {.stem = "AD", .field = FIELD(Ad), .rows = GL_N, .cols = GL_N, .stride = GL_N},
-    {.stem = "BD", .field = FIELD(Bd), .rows = GL_N, .cols = GL_M, .stride = GL_M},
-    {.stem = "CD", .field = FIELD(Cd), .rows = GL_P, .cols = GL_N, .stride = GL_N},
-    {.stem = "DD", .field = FIELD(Dd), .rows = GL_P, .cols = GL_M, .stride = GL_M},
-    {.stem = "K", .field = FIELD(K), .rows = GL_M, .cols = GL_N, .stride = GL_N},
-    {.stem = "L", .field = FIELD(L), .rows = GL_N, .cols = GL_P, .stride = GL_P},
-    {.stem = "M", .field = FIELD(M), .rows = (GL_OBSERVER_FORM == GL_FORM_CURRENT) ? GL_N : 0, .cols = GL_P, .stride = GL_P},
-    {.stem = "CI", .field = FIELD(Ci), .rows = GL_Q, .cols = GL_P, .stride = GL_P},
-    {.stem = "KI", .field = FIELD(Ki), .rows = (GL_Q > 0) ? GL_M : 0, .cols = GL_Q, .stride = GL_QA},
-    {.stem = "KAW", .field = FIELD(Kaw), .rows = GL_Q, .cols = GL_M, .stride = GL_M},
-    {.stem = "UMIN", .field = FIELD(u_min), .rows = GL_M, .cols = 0, .stride = 1},
-    {.stem = "UMAX", .field = FIELD(u_max), .rows = GL_M, .cols = 0, .stride = 1},
-    {.stem = "XH0", .field = FIELD(xh0), .rows = GL_N, .cols = 0, .stride = 1},
-    {.stem = "Z0", .field = FIELD(z0), .rows = GL_Q, .cols = 0, .stride = 1},
-    {.stem = "UOP", .field = FIELD(u_op), .rows = GL_M, .cols = 0, .stride = 1},
-    {.stem = "YOP", .field = FIELD(y_op), .rows = GL_P, .cols = 0, .stride = 1},
-};
+/* Both lists come from the field table gainlink.shipping.gains_layout (gl_gains_layout.h), as do runtime/mavlink/params.py's. */
+#define GL_BLOCK(name, stem_, rank_, rows_, cols_, stride_) \
+    {.stem = stem_, .field = FIELD(name), .rank = rank_, .rows = rows_, .cols = cols_, .stride = stride_},
+static const block_t blocks[] = {GL_GAINS_PARAMS(GL_BLOCK)};
 
-static const char *const header_ids[GL_MAV_HEADER_PARAMS] = {
-    "GL_DIM_N", "GL_DIM_M", "GL_DIM_P", "GL_DIM_Q", "GL_FORM", "GL_AW", "GL_HASH",
-};
+#define GL_HEADER_ID(field, compiled, param) param,
+static const char *const header_ids[GL_MAV_HEADER_PARAMS] = {GL_GAINS_STRUCTURE(GL_HEADER_ID) "GL_HASH"};
 
 /** Index of the GL_HASH entry among the header parameters. */
-#define HASH_HEADER 6
+#define HASH_HEADER GL_GAINS_STRUCTURE_FIELDS
 
 static float *gain_float(gl_gains_t *gains, uint32_t offset)
 {
@@ -70,14 +55,13 @@ void gl_mav_params_init(gl_mav_params_t *table, const gl_gains_t *gains)
     for (size_t b = 0; b < sizeof blocks / sizeof blocks[0]; ++b) {
         const block_t *blk = &blocks[b];
         uint32_t base = (uint32_t)((blk->field - FIELD(Ts)) / sizeof(float));
-        uint32_t cols = blk->cols == 0u ? 1u : blk->cols;
         for (uint32_t i = 0; i < blk->rows; ++i) {
-            for (uint32_t j = 0; j < cols; ++j) {
+            for (uint32_t j = 0; j < blk->cols; ++j) {
                 gl_mav_param_t *p = &table->param[k++];
                 char name[48]; /* i, j < 64: every id fits the 16 characters (checked below) */
-                if (blk->cols == 0u && blk->rows == 1u && strcmp(blk->stem, "TS") == 0) {
+                if (blk->rank == 0u) {
                     snprintf(name, sizeof name, "GL_%s", blk->stem);
-                } else if (blk->cols == 0u) {
+                } else if (blk->rank == 1u) {
                     snprintf(name, sizeof name, "GL_%s_%u", blk->stem, (unsigned)i);
                 } else {
                     snprintf(name, sizeof name, "GL_%s_%u_%u", blk->stem, (unsigned)i, (unsigned)j);
@@ -119,16 +103,15 @@ float gl_mav_params_value(const gl_mav_params_t *table, uint16_t index)
 {
     const gl_mav_param_t *p = &table->param[index];
     const gl_gains_t *c = &table->committed;
-    switch (p->header) {
-    case 0: return int_bits(c->n);
-    case 1: return int_bits(c->m);
-    case 2: return int_bits(c->p);
-    case 3: return int_bits(c->q);
-    case 4: return int_bits(c->observer_form);
-    case 5: return int_bits(c->anti_windup);
-    case HASH_HEADER: return int_bits(c->crc32);
-    default: return *gain_float_const(&table->staged, p->offset);
+    if (p->header >= 0 && p->header < GL_GAINS_STRUCTURE_FIELDS) {
+#define GL_STRUCTURE_WORD(field, compiled, param) c->field,
+        const uint32_t words[GL_GAINS_STRUCTURE_FIELDS] = {GL_GAINS_STRUCTURE(GL_STRUCTURE_WORD)};
+        return int_bits(words[p->header]);
     }
+    if (p->header == HASH_HEADER) {
+        return int_bits(c->crc32);
+    }
+    return *gain_float_const(&table->staged, p->offset);
 }
 
 gl_mav_set_result_t gl_mav_params_set(gl_mav_params_t *table, uint16_t index, float value, uint8_t type)

@@ -2,7 +2,8 @@
  * @file gl_mav_params.h
  * @brief MAVLink parameter table over a staged ::gl_gains_t, with an atomic commit through GL_HASH.
  *
- * Naming scheme (index order; see also runtime/mavlink/params.py, which must agree):
+ * Naming scheme (index order; the ids come from the field table gainlink.shipping.gains_layout, which
+ * runtime/mavlink/params.py reads too):
  * - `GL_DIM_N GL_DIM_M GL_DIM_P GL_DIM_Q GL_FORM GL_AW` (INT32, read-only): compiled structure.
  * - `GL_HASH` (INT32): CRC-32 of the committed gain set (gl_gains_crc32()). Setting it to the CRC of the
  *   staged set commits that set; any other value, or a staged set that fails gl_gains_check() /
@@ -24,12 +25,10 @@
 #define GL_MAV_ID_LEN 16
 
 /** Read-only structure parameters plus GL_HASH. */
-#define GL_MAV_HEADER_PARAMS 7
+#define GL_MAV_HEADER_PARAMS (GL_GAINS_STRUCTURE_FIELDS + 1)
 
 /** Upper bound of the number of parameters (every float of gl_gains_t plus the header ones). */
-#define GL_MAV_MAX_PARAMS                                                                                     \
-    (GL_MAV_HEADER_PARAMS + 1 + GL_N * GL_N + GL_N * GL_M + GL_P * GL_N + GL_P * GL_M + GL_M * GL_N +          \
-     2 * GL_N * GL_P + GL_QA * GL_P + GL_M * GL_QA + GL_QA * GL_M + 2 * GL_M + GL_N + GL_QA + GL_M + GL_P)
+#define GL_MAV_MAX_PARAMS (GL_MAV_HEADER_PARAMS + GL_GAINS_FLOATS)
 
 _Static_assert(GL_MAV_MAX_PARAMS < 65535, "too many parameters for MAVLink's uint16 param_index");
 
@@ -50,7 +49,7 @@ typedef enum gl_mav_set_result {
 typedef struct gl_mav_param {
     char id[GL_MAV_ID_LEN + 1]; /**< NUL-terminated id. */
     uint8_t type;               /**< GL_MAV_TYPE_*. */
-    int32_t header;             /**< 0..5 structure field, 6 GL_HASH, -1 for a float of the gain set. */
+    int32_t header;             /**< Structure field index, GL_GAINS_STRUCTURE_FIELDS for GL_HASH, -1 a float. */
     uint32_t offset;            /**< Float index from gl_gains_t::Ts (floats only). */
 } gl_mav_param_t;
 

@@ -211,27 +211,35 @@ static int serve(unsigned long spin_us)
     return 0;
 }
 
-int main(int argc, char **argv)
+/** The command line: --url and the numbers; --storage and --signing-key go into the port (udp). */
+typedef struct options {
+    const char *url;
+    unsigned long spin_us;
+    unsigned long sysid;
+    unsigned long compid;
+} options_t;
+
+/** Parse the command line into `opt`; returns 0, or the exit status of a usage error (after saying why). */
+static int parse_options(int argc, char **argv, options_t *opt)
 {
-    const char *url = NULL;
-    unsigned long spin_us = 0, sysid = 1, compid = 1;
+    *opt = (options_t){.url = NULL, .spin_us = 0, .sysid = 1, .compid = 1};
     for (int i = 1; i < argc; ++i) {
         if (i + 1 < argc && strcmp(argv[i], "--url") == 0) {
-            url = argv[++i];
+            opt->url = argv[++i];
         } else if (i + 1 < argc && strcmp(argv[i], "--storage") == 0) {
             udp.storage_path = argv[++i];
         } else if (i + 1 < argc && strcmp(argv[i], "--signing-key") == 0) {
             udp.key_path = argv[++i];
         } else if (i + 1 < argc && strcmp(argv[i], "--sysid") == 0) {
-            if (parse_uint(argv[++i], 255ul, &sysid) != 0 || sysid == 0) {
+            if (parse_uint(argv[++i], 255ul, &opt->sysid) != 0 || opt->sysid == 0) {
                 return usage();
             }
         } else if (i + 1 < argc && strcmp(argv[i], "--compid") == 0) {
-            if (parse_uint(argv[++i], 255ul, &compid) != 0) {
+            if (parse_uint(argv[++i], 255ul, &opt->compid) != 0) {
                 return usage();
             }
         } else if (i + 1 < argc && strcmp(argv[i], "--spin-us") == 0) {
-            if (parse_uint(argv[++i], 1000000ul, &spin_us) != 0) {
+            if (parse_uint(argv[++i], 1000000ul, &opt->spin_us) != 0) {
                 fprintf(stderr, "gainlink_mavlink: --spin-us must be 0..1000000\n");
                 return usage();
             }
@@ -239,21 +247,16 @@ int main(int argc, char **argv)
             return usage();
         }
     }
-    if (url == NULL) {
-        return usage();
-    }
-    gl_log_init(&events, 2, "gainlink_mavlink", GL_LOG_BURST_DEFAULT);
-    uint8_t key[GL_MAV_KEY_LEN];
-    if (udp.key_path != NULL) {
-        char why[200];
-        if (gl_mav_key_read(udp.key_path, key, why, sizeof why) != 0) {
-            fprintf(stderr, "gainlink_mavlink: --signing-key %s: %s\n", udp.key_path, why);
-            return 2;
-        }
-    }
+    return opt->url == NULL ? usage() : 0;
+}
+
+/** Start the node on the compiled gain set (and the storage file), keyed with `key` when --signing-key was given,
+ * and open the UDP link; returns 0 or the exit status (3: gain set rejected, 2: bad link). */
+static int start_node(const options_t *opt, const uint8_t key[GL_MAV_KEY_LEN])
+{
     gl_mav_node_config_t cfg = {
-        .sysid = (uint8_t)sysid,
-        .compid = (uint8_t)compid,
+        .sysid = (uint8_t)opt->sysid,
+        .compid = (uint8_t)opt->compid,
         .chan = 0,
         .watchdog_periods = GL_WATCHDOG_PERIODS_DEFAULT,
         .port = {.ctx = &udp, .send = udp_send, .room = NULL, .now_us = now_us, .event = log_event,
@@ -270,18 +273,26 @@ int main(int argc, char **argv)
         gl_mav_node_set_key(&node, key, gl_mav_key_timestamp_now());
     }
     char why[256] = "";
-    if (gl_mav_link_open(&udp.link, url, why, sizeof why) != 0) {
+    if (gl_mav_link_open(&udp.link, opt->url, why, sizeof why) != 0) {
         fprintf(stderr, "gainlink_mavlink: %s\n", why);
         return 2;
     }
+    return 0;
+}
+
+/** SIGTERM and SIGINT end serve() after the message in hand. */
+static void catch_stop_signals(void)
+{
     struct sigaction sa;
     memset(&sa, 0, sizeof sa);
     sa.sa_handler = on_signal;
     sigaction(SIGTERM, &sa, NULL);
     sigaction(SIGINT, &sa, NULL);
-    printf("gainlink-mavlink %s sha256:%s %d %d %d %d %s\n", GL_NAME, GL_ARTIFACT_SHA256, GL_N, GL_M, GL_P, GL_Q, url);
-    fflush(stdout);
-    int rc = serve(spin_us);
+}
+
+/** The exit line accounting for every datagram and frame (see the file comment). */
+static void log_summary(void)
+{
     const gl_mav_node_stats_t *n = &node.stats;
     gl_log_always(&events,
                   "datagrams=%llu dropped=%lu frames=%lu bad_frames=%lu garbage_bytes=%lu unsigned=%lu bad_signature=%lu "
@@ -296,5 +307,33 @@ int main(int argc, char **argv)
                   (unsigned long)n->persist_skipped, (unsigned long)n->persist_limited,
                   (unsigned long)node.table.committed.crc32, node.keyed, (unsigned long long)events.suppressed,
                   (unsigned long long)events.dropped);
+}
+
+int main(int argc, char **argv)
+{
+    options_t opt;
+    int rc = parse_options(argc, argv, &opt);
+    if (rc != 0) {
+        return rc;
+    }
+    gl_log_init(&events, 2, "gainlink_mavlink", GL_LOG_BURST_DEFAULT);
+    uint8_t key[GL_MAV_KEY_LEN] = {0};
+    if (udp.key_path != NULL) {
+        char why[200];
+        if (gl_mav_key_read(udp.key_path, key, why, sizeof why) != 0) {
+            fprintf(stderr, "gainlink_mavlink: --signing-key %s: %s\n", udp.key_path, why);
+            return 2;
+        }
+    }
+    rc = start_node(&opt, key);
+    if (rc != 0) {
+        return rc;
+    }
+    catch_stop_signals();
+    printf("gainlink-mavlink %s sha256:%s %d %d %d %d %s\n", GL_NAME, GL_ARTIFACT_SHA256, GL_N, GL_M, GL_P, GL_Q,
+           opt.url);
+    fflush(stdout);
+    rc = serve(opt.spin_us);
+    log_summary();
     return rc;
 }

@@ -1,9 +1,9 @@
 /**
  * @file gl_loop.h
- * @brief gainlink control loop: the DESIGN.md law in float32, double-buffered gains, watchdog.
+ * @brief gainlink control loop: the law of docs/design.md in float32, double-buffered gains, watchdog.
  *
- * The law (DESIGN.md, "The control law"; predictor form, the current-estimator form is folded into the same
- * step, see below). Samples y, references r, limits and commands are absolute; the estimate xh is a deviation
+ * The law (docs/design.md, "The control law"; predictor form, the current-estimator form is folded into the
+ * same step, see below). Samples y, references r, limits and commands are absolute; the estimate xh is a deviation
  * from the operating point (u_op, y_op), all zero for a plant specified about the origin:
  * @code
  *   dy = y - y_op
@@ -26,7 +26,8 @@
  * with F, G, Kx, Ky derived in double precision from the artifact's matrices each time a gain set
  * is accepted (gl_loop_init() or a staged update), so the per-sample step is only multiply-adds.
  * Every multiply-add is an explicit fused `fmaf`, so a host (x86-64, SSE) build and the Cortex-M4F
- * build (`vfma.f32`) give bit-identical results; both are compiled with `-ffp-contract=off`.
+ * build (`vfma.f32`) give bit-identical results; both are compiled with `-ffp-contract=off` (docs/design.md,
+ * "How the C is proved to be the design").
  *
  * Dimensions and structure (n, m, p, q, observer form, anti-windup mode) are compile-time macros from
  * the generated header `gl_gains.h` (`gainlink export ARTIFACT --out DIR`); the numbers are
@@ -115,41 +116,10 @@ typedef enum gl_status {
     GL_ERR_FPU = -8         /**< Startup self-test: the FPU is not enabled (Cortex-M port). */
 } gl_status_t;
 
-/**
- * @brief One complete gain set, as in the artifact (float32). May live in flash (const).
- *
- * Matrices are row-major `[rows][cols]`. Integrator-sized arrays have GL_QA rows/cols and are all zero
- * when GL_Q == 0. `M` is all zero in the predictor form. `u_op`, `y_op` are zero for a plant about the
- * origin (an artifact without an operating point). `crc32` covers every other field, serialised
- * as little-endian: n, m, p, q, observer_form, anti_windup as uint32, then every float in declaration
- * order (see gl_gains_crc32()).
- */
-typedef struct gl_gains {
-    uint32_t n;                /**< States; must equal GL_N. */
-    uint32_t m;                /**< Inputs; must equal GL_M. */
-    uint32_t p;                /**< Outputs; must equal GL_P. */
-    uint32_t q;                /**< Integrators; must equal GL_Q. */
-    uint32_t observer_form;    /**< GL_FORM_*; must equal GL_OBSERVER_FORM. */
-    uint32_t anti_windup;      /**< GL_AW_*; must equal GL_ANTI_WINDUP. */
-    float Ts;                  /**< Sample time [s], > 0. */
-    float Ad[GL_N][GL_N];      /**< Discrete state matrix. */
-    float Bd[GL_N][GL_M];      /**< Discrete input matrix. */
-    float Cd[GL_P][GL_N];      /**< Output matrix. */
-    float Dd[GL_P][GL_M];      /**< Feed-through matrix (zero in the current form). */
-    float K[GL_M][GL_N];       /**< State feedback gain. */
-    float L[GL_N][GL_P];       /**< Observer (predictor) gain; L = Ad M in the current form. */
-    float M[GL_N][GL_P];       /**< Current-estimator filter gain (zero in the predictor form). */
-    float Ci[GL_QA][GL_P];     /**< Tracked-output selector. */
-    float Ki[GL_M][GL_QA];     /**< Integral gain. */
-    float Kaw[GL_QA][GL_M];    /**< Back-calculation anti-windup gain. */
-    float u_min[GL_M];         /**< Lower command limits. */
-    float u_max[GL_M];         /**< Upper command limits. */
-    float xh0[GL_N];           /**< Initial estimate (gl_loop_reset()). */
-    float z0[GL_QA];           /**< Initial integrator (gl_loop_reset()). */
-    float u_op[GL_M];          /**< Operating point: absolute command there. */
-    float y_op[GL_P];          /**< Operating point: absolute measurement there. */
-    uint32_t crc32;            /**< CRC-32 (IEEE 802.3, as zlib.crc32) of the payload. */
-} gl_gains_t;
+/* gl_gains_t, one complete gain set (float32; may live in flash), is generated from the field table
+ * gainlink.shipping.gains_layout into the export folder with gl_gains.h, so that the C struct, the Python binding and the
+ * packers cannot drift apart. */
+#include "gl_gains_layout.h"
 
 /** Coefficients per command row of the stream: u_op, Kx (n), Ky (p, current form), Ki (q), u_min, u_max. */
 #define GL_VROW (1 + GL_N + ((GL_OBSERVER_FORM) == GL_FORM_CURRENT ? GL_P : 0) + GL_Q + 2)

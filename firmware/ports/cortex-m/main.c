@@ -170,25 +170,27 @@ static int serve_if_asked(void)
     return gl_serve_refuse("serve needs a protocol: mavlink or slcan");
 }
 
-static int run(void)
+/** One input record through the loop into its output record (a step, an idle period or a staged gain set). */
+static void replay_record(const in_record_t *in, out_record_t *o)
 {
-    gl_clock_init();
-    gl_uart_init();
-    uart_puts("gainlink " GL_NAME " ");
-    uart_puts(gl_board_name);
-    uart_puts(" sha256:" GL_ARTIFACT_SHA256 "\n");
-    int served = serve_if_asked();
-    if (served >= 0) {
-        return served;
+    gl_status_t st;
+    if (in->tag == GL_TAG_IDLE) {
+        st = gl_loop_idle(&loop, o->u);
+    } else if (in->tag == GL_TAG_STAGE) {
+        st = stage_from_file();
+        memcpy(o->u, loop.u, sizeof o->u);
+    } else {
+        st = gl_loop_step(&loop, in->y, in->r, o->u);
     }
+    o->status = (int32_t)st;
+    o->sat_mask = loop.sat_mask;
+    memcpy(o->xh, loop.xh, sizeof o->xh);
+    memcpy(o->z, loop.z, sizeof o->z);
+}
 
-    int32_t fin = gl_sh_open("gl_in.bin", GL_SH_MODE_RB);
-    if (fin < 0) {
-        if (gl_loop_init(&loop, &gl_gains_default, GL_WATCHDOG_PERIODS_DEFAULT) != GL_OK) {
-            return GL_EXIT_GAINS;
-        }
-        return uart_smoke();
-    }
+/** The replay stream (see the file comment): the header of gl_in.bin, then `count` records, `block` at a time. */
+static int replay_file(int32_t fin)
+{
     uint32_t hdr[4];
     if (gl_sh_read_all(fin, hdr, sizeof hdr) != 0) {
         return GL_EXIT_IO;
@@ -215,20 +217,7 @@ static int run(void)
             return GL_EXIT_IO;
         }
         for (uint32_t k = 0; k < chunk; ++k) {
-            out_record_t *o = &out_buf[k];
-            gl_status_t st;
-            if (in_buf[k].tag == GL_TAG_IDLE) {
-                st = gl_loop_idle(&loop, o->u);
-            } else if (in_buf[k].tag == GL_TAG_STAGE) {
-                st = stage_from_file();
-                memcpy(o->u, loop.u, sizeof o->u);
-            } else {
-                st = gl_loop_step(&loop, in_buf[k].y, in_buf[k].r, o->u);
-            }
-            o->status = (int32_t)st;
-            o->sat_mask = loop.sat_mask;
-            memcpy(o->xh, loop.xh, sizeof o->xh);
-            memcpy(o->z, loop.z, sizeof o->z);
+            replay_record(&in_buf[k], &out_buf[k]);
         }
         if (gl_sh_write_all(fout, out_buf, chunk * sizeof(out_record_t)) != 0) {
             return GL_EXIT_IO;
@@ -236,8 +225,30 @@ static int run(void)
         done += chunk;
     }
     gl_sh_close(fout);
-    gl_sh_close(fin);
     return GL_EXIT_OK;
+}
+
+static int run(void)
+{
+    gl_clock_init();
+    gl_uart_init();
+    uart_puts("gainlink " GL_NAME " ");
+    uart_puts(gl_board_name);
+    uart_puts(" sha256:" GL_ARTIFACT_SHA256 "\n");
+    int served = serve_if_asked();
+    if (served >= 0) {
+        return served;
+    }
+    int32_t fin = gl_sh_open("gl_in.bin", GL_SH_MODE_RB);
+    if (fin < 0) {
+        if (gl_loop_init(&loop, &gl_gains_default, GL_WATCHDOG_PERIODS_DEFAULT) != GL_OK) {
+            return GL_EXIT_GAINS;
+        }
+        return uart_smoke();
+    }
+    int rc = replay_file(fin);
+    gl_sh_close(fin);
+    return rc;
 }
 
 int main(void)

@@ -26,8 +26,9 @@ const char *gl_host_artifact_sha256(void)
 
 uint32_t gl_host_dims(uint32_t which)
 {
-    static const uint32_t dims[6] = {GL_N, GL_M, GL_P, GL_Q, GL_OBSERVER_FORM, GL_ANTI_WINDUP};
-    return which < 6u ? dims[which] : 0u;
+#define GL_COMPILED(field, compiled, param) (uint32_t)(compiled),
+    static const uint32_t dims[GL_GAINS_STRUCTURE_FIELDS] = {GL_GAINS_STRUCTURE(GL_COMPILED)};
+    return which < GL_GAINS_STRUCTURE_FIELDS ? dims[which] : 0u;
 }
 
 uint32_t gl_host_sat_mask(const gl_loop_t *loop)
