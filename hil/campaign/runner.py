@@ -152,23 +152,14 @@ def run(
     >>> result = campaign.run("examples/campaigns/pendulum_mass_uncertainty.toml", out="out/c")  # doctest: +SKIP
     >>> result.passed / result.total                                                             # doctest: +SKIP
     """
-    for name, value in (("batch", batch), ("workers", workers)):  # before anything is planned or written
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
-            raise CampaignError(f"campaign: {name} must be a whole number >= 1, not {value!r}")
+    _check_counts(batch=batch, workers=workers)  # before anything is planned or written
     campaign = as_campaign(campaign)
     plan = plan_campaign(campaign)
     store = Store(out)
     store.prepare(plan, plan_doc=plan_doc(plan))
     unique = {p.id: p for p in reversed(plan.runs)}  # a run planned twice (same inputs) runs once: its first point
     reused = {i for i in unique if store.finished(i)}  # before anything is stored, so the count is this call's
-    todo: dict[str, RunPoint] = {}
-    for point in sorted(unique.values(), key=lambda p: p.index):
-        if point.id in reused:
-            continue
-        if point.error is not None:
-            store.put(point, kind=campaign.kind, result={"status": "error", "reason": point.error})
-            continue
-        todo[point.id] = point
+    todo = _runs_to_do(unique, reused=reused, store=store, kind=campaign.kind)
     total = len(unique)
     done = total - len(todo)
     if todo:
@@ -178,6 +169,32 @@ def run(
         except KeyboardInterrupt:  # the block closed the client (and the LocalCluster) on its way out
             finished = sum(store.finished(i) for i in unique)
             raise CampaignInterrupted(out=store.out, finished=finished, total=total) from None
+    return _result(plan, store, reused=len(reused), executed=len(todo))
+
+
+def _check_counts(*, batch: int | None, workers: int | None) -> None:
+    """``batch`` and ``workers`` are whole numbers >= 1 when given."""
+    for name, value in (("batch", batch), ("workers", workers)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+            raise CampaignError(f"campaign: {name} must be a whole number >= 1, not {value!r}")
+
+
+def _runs_to_do(unique: dict[str, RunPoint], *, reused: set[str], store: Store, kind: str) -> dict[str, RunPoint]:
+    """The runs to submit, by id in plan order: those without a result, except the ones whose design failed,
+    which are stored as errors here."""
+    todo: dict[str, RunPoint] = {}
+    for point in sorted(unique.values(), key=lambda p: p.index):
+        if point.id in reused:
+            continue
+        if point.error is not None:
+            store.put(point, kind=kind, result={"status": "error", "reason": point.error})
+            continue
+        todo[point.id] = point
+    return todo
+
+
+def _result(plan: CampaignPlan, store: Store, *, reused: int, executed: int) -> CampaignResult:
+    """Merge the stored runs into the campaign report and count them."""
     summary, rows = merge(plan, store)
     counts = {s: sum(1 for r in rows if r["status"] == s) for s in ("pass", "fail", "error")}
     return CampaignResult(
@@ -186,8 +203,8 @@ def run(
         passed=counts["pass"],
         failed=counts["fail"],
         errors=counts["error"],
-        reused=len(reused),
-        executed=len(todo),
+        reused=reused,
+        executed=executed,
         summary=summary,
     )
 

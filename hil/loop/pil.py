@@ -239,20 +239,7 @@ def run_pil(
         _exchange(a, plant, R, rec, link=(proc, fin, fout), deadline_s=deadline_s, twins=(tw, mt))
         elapsed = time.perf_counter() - t_start
         _await_exit(proc, deadline_s=deadline_s)
-    twin_trace = None if tw is None else tw.trace(steps)
-    comparison = (
-        None
-        if tw is None
-        else twin_comparison(
-            t=np.arange(steps) * a.Ts,
-            y=rec.Y,
-            u=rec.U.astype(float),
-            r=np.asarray(R, dtype=float),
-            twin_y=twin_trace.y,
-            twin_u=twin_trace.u,
-            artifact=a,
-        )
-    )
+    twin_trace, comparison = (None, None) if tw is None else _compare_with_twin(a, tw, rec, R=R, steps=steps)
     return PilResult(
         y=rec.Y,
         u=rec.U,
@@ -266,6 +253,23 @@ def run_pil(
         model_twin=None if mt is None else mt.trace(steps),
         reference=np.array(R, dtype=float),
     )
+
+
+def _compare_with_twin(
+    a: Artifact, tw: TwinLoop, rec: _PilRecord, *, R: np.ndarray, steps: int
+) -> tuple[TwinTrace, TwinComparison]:
+    """The twin's trace and its comparison with what the firmware did."""
+    twin_trace = tw.trace(steps)
+    comparison = twin_comparison(
+        t=np.arange(steps) * a.Ts,
+        y=rec.Y,
+        u=rec.U.astype(float),
+        r=np.asarray(R, dtype=float),
+        twin_y=twin_trace.y,
+        twin_u=twin_trace.u,
+        artifact=a,
+    )
+    return twin_trace, comparison
 
 
 @dataclass

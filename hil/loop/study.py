@@ -25,7 +25,7 @@ from gainlink.shipping.artifact import from_dict, write
 from ..paths import project_root
 from .bridge import RunResult, run_scenario
 from .report import plots, report_json, summary_text
-from .scenario import parse_scenario
+from .scenario import Scenario, parse_scenario
 
 STUDY_KEYS = {
     "spec",
@@ -87,71 +87,99 @@ def run_saturation_study(
     study : dict, optional
         A study description (default: :func:`default_study`).
     """
-    from gainlink.spec import parse_spec
-    from gainlink.synthesis import synthesize
-
-    desc = dict(study or default_study())
-    unknown = sorted(set(desc) - STUDY_KEYS)
-    if unknown:
-        raise ScenarioError(f"study: unknown key(s) {', '.join(unknown)}")
+    desc = _checked_study(study)
     if spec_path is None:
         root = project_root() or Path.cwd()
         spec_path = root / desc.get("spec", "examples/pendulum.toml")
     spec = _load_spec(Path(spec_path))
-    modes = list(desc.get("modes", MODES))
-    bad = [m for m in modes if m not in MODES]
-    if bad:
-        raise ScenarioError(f"study: unknown anti-windup mode(s) {', '.join(bad)}")
+    modes = _checked_modes(desc)
     runs: dict[str, RunResult] = {}
     artifacts: dict[str, Any] = {}
     files: dict[str, bytes | str] = {}
     with tempfile.TemporaryDirectory(prefix="gainlink-study-") as tmp:
         for mode in modes:
-            data = json.loads(json.dumps(spec))
-            data.setdefault("limits", {})["anti_windup"] = mode
-            data["name"] = f"{spec.get('name', 'plant')}_{mode}"[:32]
-            sealed = synthesize(parse_spec(data, source=f"{spec_path} (anti_windup={mode})")).artifact
-            gains = Path(tmp) / mode / "gains.json"
-            gains.parent.mkdir()
-            write(gains, sealed)
+            gains = _design_mode(spec, mode=mode, spec_path=spec_path, folder=Path(tmp) / mode)
             artifacts[mode] = from_dict(json.loads(gains.read_text()))
-            scenario = parse_scenario(
-                {
-                    "name": f"saturation_{mode}",
-                    "artifact": str(gains),
-                    "duration": desc.get("duration", 12.0),
-                    "mode": "lockstep",
-                    "controller": controller or desc.get("controller", "firmware"),
-                    "step_timeout": desc.get("step_timeout", 1.0),
-                    "plant": desc["plant"],
-                    "transport": transport or desc["transport"],
-                    "initial_state": desc.get("initial_state", {}),
-                    "reference": desc.get("reference", {}),
-                    "disturbances": desc.get("disturbances", []),
-                }
-            )
-            result = run_scenario(scenario)
-            runs[mode] = result
-            files[f"{mode}/gains.json"] = gains.read_text()
-            files[f"{mode}/report.json"] = report_json(result)
-            files[f"{mode}/summary.txt"] = summary_text(result)
-            for name, png in plots(result, artifact=artifacts[mode]).items():
-                files[f"{mode}/{name}"] = png
+            scenario = _mode_scenario(desc, mode=mode, gains=gains, controller=controller, transport=transport)
+            runs[mode] = run_scenario(scenario)
+            files.update(_mode_files(runs[mode], mode=mode, gains=gains, artifact=artifacts[mode]))
     table = {mode: _row(r) for mode, r in runs.items()}
     summary = _summary(table, report_dir=report_dir)
-    files["study.json"] = (
-        json.dumps(
-            {"modes": table, "initial_state": desc.get("initial_state", {}), "spec": str(spec_path)},
-            sort_keys=True,
-            indent=2,
-            allow_nan=False,
-        )
-        + "\n"
-    )
+    files["study.json"] = _study_json(table, desc=desc, spec_path=spec_path)
     files["comparison.png"] = _comparison_png(runs, artifacts)
     files["summary.txt"] = summary
     publish_files(report_dir, files)
     return StudyResult(runs=runs, table=table, summary=summary)
+
+
+def _checked_study(study: dict | None) -> dict:
+    """A copy of the study description (the default one when none is given), its keys checked."""
+    desc = dict(study or default_study())
+    unknown = sorted(set(desc) - STUDY_KEYS)
+    if unknown:
+        raise ScenarioError(f"study: unknown key(s) {', '.join(unknown)}")
+    return desc
+
+
+def _checked_modes(desc: dict) -> list[str]:
+    """The study's anti-windup modes (all of :data:`MODES` by default), checked."""
+    modes = list(desc.get("modes", MODES))
+    bad = [m for m in modes if m not in MODES]
+    if bad:
+        raise ScenarioError(f"study: unknown anti-windup mode(s) {', '.join(bad)}")
+    return modes
+
+
+def _design_mode(spec: dict, *, mode: str, spec_path: Path, folder: Path) -> Path:
+    """Design ``spec`` with anti-windup ``mode`` and write the sealed artifact to ``folder/gains.json``."""
+    from gainlink.spec import parse_spec
+    from gainlink.synthesis import synthesize
+
+    data = json.loads(json.dumps(spec))
+    data.setdefault("limits", {})["anti_windup"] = mode
+    data["name"] = f"{spec.get('name', 'plant')}_{mode}"[:32]
+    sealed = synthesize(parse_spec(data, source=f"{spec_path} (anti_windup={mode})")).artifact
+    gains = folder / "gains.json"
+    gains.parent.mkdir()
+    write(gains, sealed)
+    return gains
+
+
+def _mode_scenario(desc: dict, *, mode: str, gains: Path, controller: str | None, transport: dict | None) -> Scenario:
+    """The lockstep scenario that runs one mode's artifact as the study describes."""
+    return parse_scenario(
+        {
+            "name": f"saturation_{mode}",
+            "artifact": str(gains),
+            "duration": desc.get("duration", 12.0),
+            "mode": "lockstep",
+            "controller": controller or desc.get("controller", "firmware"),
+            "step_timeout": desc.get("step_timeout", 1.0),
+            "plant": desc["plant"],
+            "transport": transport or desc["transport"],
+            "initial_state": desc.get("initial_state", {}),
+            "reference": desc.get("reference", {}),
+            "disturbances": desc.get("disturbances", []),
+        }
+    )
+
+
+def _mode_files(result: RunResult, *, mode: str, gains: Path, artifact: Any) -> dict[str, bytes | str]:
+    """One mode's report files (artifact, report.json, summary, plots) by their path in the report folder."""
+    files: dict[str, bytes | str] = {
+        f"{mode}/gains.json": gains.read_text(),
+        f"{mode}/report.json": report_json(result),
+        f"{mode}/summary.txt": summary_text(result),
+    }
+    for name, png in plots(result, artifact=artifact).items():
+        files[f"{mode}/{name}"] = png
+    return files
+
+
+def _study_json(table: dict, *, desc: dict, spec_path: Path) -> str:
+    """``study.json``: the comparison table, the initial state and the spec it was designed from."""
+    doc = {"modes": table, "initial_state": desc.get("initial_state", {}), "spec": str(spec_path)}
+    return json.dumps(doc, sort_keys=True, indent=2, allow_nan=False) + "\n"
 
 
 def _row(r: RunResult) -> dict:

@@ -138,12 +138,8 @@ def _linearize(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``hil`` and ``linearize`` to the gainlink CLI."""
-    hil = subparsers.add_parser("hil", help="hardware-in-the-loop bridge over CAN (FMU or built-in plants)")
-    sub = hil.add_subparsers(dest="hil_command", metavar="HIL_COMMAND")
-    sub.required = True
-
+def _add_run_parser(sub: argparse._SubParsersAction) -> None:
+    """``hil run``: a HIL scenario and its report."""
     p = sub.add_parser("run", help="run a HIL scenario and write its report")
     p.add_argument("scenario", help="scenario TOML, or a built-in scenario name (e.g. pendulum_fmu)")
     p.add_argument("--artifact", help="use this gains.json instead of the scenario's artifact")
@@ -152,6 +148,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-plots", action="store_true", help="report.json and summary.txt only (no PNG plots)")
     p.set_defaults(func=_run)
 
+
+def _add_dbc_parser(sub: argparse._SubParsersAction) -> None:
+    """``hil dbc``: the CAN layout of an artifact as a DBC file."""
     p = sub.add_parser("dbc", help="write the CAN layout of an artifact as a DBC file")
     p.add_argument("artifact")
     p.add_argument("--fd", action="store_true", help="CAN FD layout (else classic CAN)")
@@ -167,11 +166,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", help="DBC file (default: stdout)")
     p.set_defaults(func=_dbc)
 
+
+def _add_fmu_parser(sub: argparse._SubParsersAction) -> None:
+    """``hil fmu``: build and validate the project's plant FMUs."""
     p = sub.add_parser("fmu", help="build (cached) and validate the project's plant FMUs")
     p.add_argument("names", nargs="*", help="FMU names (default: all)")
     p.add_argument("--out", help="folder for the .fmu files (default .cache/fmus)")
     p.set_defaults(func=_fmu)
 
+
+def _add_study_parser(sub: argparse._SubParsersAction) -> None:
+    """``hil study``: the saturation study."""
     p = sub.add_parser("study", help="saturation study: anti-windup none vs clamp vs backcalc")
     p.add_argument("--spec", help="plant spec (default: examples/pendulum.toml of the checkout)")
     p.add_argument("--study", help="study TOML, or a built-in study: saturation_study (default), saturation_kick")
@@ -179,6 +184,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--report", required=True, help="report folder")
     p.set_defaults(func=_study)
 
+
+def _add_linearize_parser(subparsers: argparse._SubParsersAction) -> None:
+    """``linearize``: an FMU linearised into a plant spec."""
     p = subparsers.add_parser("linearize", help="linearise an FMU about an operating point into a plant spec")
     p.add_argument("fmu", help=".fmu file, or the name of a project FMU (e.g. cart_pendulum)")
     p.add_argument(
@@ -216,3 +224,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--json", action="store_true", help="print the result and the [linearization] record as JSON")
     p.set_defaults(func=_linearize)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``hil`` and ``linearize`` to the gainlink CLI."""
+    hil = subparsers.add_parser("hil", help="hardware-in-the-loop bridge over CAN (FMU or built-in plants)")
+    sub = hil.add_subparsers(dest="hil_command", metavar="HIL_COMMAND")
+    sub.required = True
+    _add_run_parser(sub)
+    _add_dbc_parser(sub)
+    _add_fmu_parser(sub)
+    _add_study_parser(sub)
+    _add_linearize_parser(subparsers)

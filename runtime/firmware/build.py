@@ -117,14 +117,7 @@ def build(
     ToolchainError
         A tool is missing, or configure/build failed (the compiler's last lines are in the message).
     """
-    if target not in TARGETS:
-        raise ToolchainError(f"unknown target {target!r} (choose from {', '.join(TARGETS)})")
-    if target == "host":
-        board = None
-    else:
-        board = board or DEFAULT_BOARD
-        if board not in BOARDS:
-            raise ToolchainError(f"unknown board {board!r} (choose from {', '.join(BOARDS)})")
+    board = _checked_board(target, board)
     options = dict(sorted((options or {}).items()))
     cmake = _which("cmake", "install cmake (make setup)")
     if target == "cortex-m4":
@@ -132,40 +125,75 @@ def build(
     src = firmware_dir()
     key_text = "|".join([artifact.sha256, target, board or "", repr(options)])
     key = hashlib.sha256(key_text.encode()).hexdigest()[:16]
-    root = build_root or cache_root()
-    bdir = root / f"{artifact.name}-{target}-{key}"
+    bdir = (build_root or cache_root()) / f"{artifact.name}-{target}-{key}"
     gen = bdir / "gen"
+    cm = bdir / "cmake"
     gen.mkdir(parents=True, exist_ok=True)
     with open(bdir / ".lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         for name, text in render_c(artifact).items():
             _write_if_changed(gen / name, text)
-        cm = bdir / "cmake"
         if not (cm / "CMakeCache.txt").is_file():
-            cfg = [cmake, "-S", str(src), "-B", str(cm), f"-DGL_GAINS_DIR={gen}", f"-DGL_TARGET={target}"]
-            if target == "host" and "GL_APPS" not in options:
-                cfg.append("-DGL_APPS=OFF")  # the library, shared object and loop executable only
-            if target == "cortex-m4":
-                cfg += [f"-DCMAKE_TOOLCHAIN_FILE={src / 'cmake' / 'arm-none-eabi.cmake'}", f"-DGL_BOARD={board}"]
-            cfg += [f"-D{k}={v}" for k, v in options.items()]
-            try:
-                _run(cfg, cwd=bdir, what=f"CMake configure ({target})")
-            except ToolchainError:
-                shutil.rmtree(cm, ignore_errors=True)
-                raise
+            _configure(cmake, src=src, bdir=bdir, gen=gen, cm=cm, target=target, board=board, options=options)
         jobs = str(min(2, os.cpu_count() or 1))
         _run([cmake, "--build", str(cm), "-j", jobs], cwd=bdir, what=f"firmware build ({target})")
+    return BuildResult(
+        artifact_sha256=artifact.sha256,
+        target=target,
+        board=board,
+        build_dir=cm,
+        gains_dir=gen,
+        files=_outputs(target, cm),
+    )
+
+
+def _checked_board(target: str, board: str | None) -> str | None:
+    """The board a build of ``target`` is for: none for the host, ``board`` or the default for the Cortex-M."""
+    if target not in TARGETS:
+        raise ToolchainError(f"unknown target {target!r} (choose from {', '.join(TARGETS)})")
     if target == "host":
-        files = {
+        return None
+    board = board or DEFAULT_BOARD
+    if board not in BOARDS:
+        raise ToolchainError(f"unknown board {board!r} (choose from {', '.join(BOARDS)})")
+    return board
+
+
+def _configure(
+    cmake: str,
+    *,
+    src: Path,
+    bdir: Path,
+    gen: Path,
+    cm: Path,
+    target: str,
+    board: str | None,
+    options: dict[str, str],
+) -> None:
+    """CMake configure of the sources ``src`` with the gains in ``gen`` into ``cm`` (removed again when configuring
+    fails, so the next build starts afresh)."""
+    cfg = [cmake, "-S", str(src), "-B", str(cm), f"-DGL_GAINS_DIR={gen}", f"-DGL_TARGET={target}"]
+    if target == "host" and "GL_APPS" not in options:
+        cfg.append("-DGL_APPS=OFF")  # the library, shared object and loop executable only
+    if target == "cortex-m4":
+        cfg += [f"-DCMAKE_TOOLCHAIN_FILE={src / 'cmake' / 'arm-none-eabi.cmake'}", f"-DGL_BOARD={board}"]
+    cfg += [f"-D{k}={v}" for k, v in options.items()]
+    try:
+        _run(cfg, cwd=bdir, what=f"CMake configure ({target})")
+    except ToolchainError:
+        shutil.rmtree(cm, ignore_errors=True)
+        raise
+
+
+def _outputs(target: str, cm: Path) -> dict[str, Path]:
+    """What a build of ``target`` in ``cm`` produces, by role."""
+    if target == "host":
+        return {
             "shared": cm / "libgainlink_host.so",
             "exe": cm / "gainlink_loop_host",
             "static": cm / "libgainlink_loop.a",
         }
-    else:
-        files = {ext: cm / f"gainlink_image.{ext}" for ext in ("elf", "bin", "hex", "map")}
-    return BuildResult(
-        artifact_sha256=artifact.sha256, target=target, board=board, build_dir=cm, gains_dir=gen, files=files
-    )
+    return {ext: cm / f"gainlink_image.{ext}" for ext in ("elf", "bin", "hex", "map")}
 
 
 def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path | None = None) -> Path:

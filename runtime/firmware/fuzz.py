@@ -309,6 +309,23 @@ def run(
     artifacts.mkdir(parents=True, exist_ok=True)
     corpus.mkdir(parents=True, exist_ok=True)
     before = set(artifacts.iterdir())
+    argv = _libfuzzer_argv(exe, corpus, seconds=seconds, runs=runs, artifacts=artifacts, extra=extra)
+    t0 = time.perf_counter()
+    proc = subprocess.run(
+        argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, errors="replace"
+    )
+    elapsed = time.perf_counter() - t0
+    crashes = tuple(sorted(str(p) for p in set(artifacts.iterdir()) - before))
+    if proc.returncode != 0 and not crashes and "stat::" not in proc.stderr:
+        tail = proc.stderr.strip().splitlines()[-1:] or ["no output"]
+        raise ToolchainError(f"fuzz harness {harness} failed to run (exit {proc.returncode}): {tail[0][:200]}")
+    return _fuzz_run(harness, proc.stderr, seconds=elapsed, crashes=crashes, exit_code=proc.returncode)
+
+
+def _libfuzzer_argv(
+    exe: Path, corpus: Path, *, seconds: float | None, runs: int | None, artifacts: Path, extra: tuple[str, ...]
+) -> list[str]:
+    """The harness's command line: libFuzzer's limits, reproducers into ``artifacts``, final statistics printed."""
     argv = [
         str(exe),
         f"-max_len={MAX_LEN}",
@@ -321,26 +338,22 @@ def run(
         argv.append(f"-max_total_time={max(1, int(round(seconds)))}")
     if runs is not None:
         argv.append(f"-runs={runs}")
-    argv += [*extra, str(corpus)]
-    t0 = time.perf_counter()
-    proc = subprocess.run(
-        argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, errors="replace"
-    )
-    elapsed = time.perf_counter() - t0
-    stats = {k: int(v) for k, v in _STAT.findall(proc.stderr)}
-    progress = _PROGRESS.findall(proc.stderr)
+    return argv + [*extra, str(corpus)]
+
+
+def _fuzz_run(harness: str, stderr: str, *, seconds: float, crashes: tuple[str, ...], exit_code: int) -> FuzzRun:
+    """The run's outcome from libFuzzer's output: executions from the final statistics, coverage, features and
+    corpus size from the last progress line."""
+    stats = {k: int(v) for k, v in _STAT.findall(stderr)}
+    progress = _PROGRESS.findall(stderr)
     cov, ft, corp = (int(x) for x in progress[-1]) if progress else (0, 0, 0)
-    crashes = tuple(sorted(str(p) for p in set(artifacts.iterdir()) - before))
-    if proc.returncode != 0 and not crashes and "stat::" not in proc.stderr:
-        tail = proc.stderr.strip().splitlines()[-1:] or ["no output"]
-        raise ToolchainError(f"fuzz harness {harness} failed to run (exit {proc.returncode}): {tail[0][:200]}")
     return FuzzRun(
         harness=harness,
         executions=stats.get("number_of_executed_units", 0),
-        seconds=elapsed,
+        seconds=seconds,
         cov=cov,
         ft=ft,
         corpus=corp,
         crashes=crashes,
-        exit_code=proc.returncode,
+        exit_code=exit_code,
     )

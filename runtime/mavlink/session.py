@@ -245,87 +245,17 @@ class ParamSession:
         With ``stop_on_failure``, nothing new is sent once one set is refused or unanswered (those in
         flight are still seen through); the rest are reported as ``skipped``.
         """
-        pending = deque(items)
-        flying: dict[str, _Flight] = {}
-        reasons: dict[str, str] = {}
-        skipped: tuple[str, ...] = ()
-        verified: list[str] = []
-        refused: dict = {}
-        unanswered: list[str] = []
-        sent = retries = 0
-
-        def send(f: _Flight) -> None:
-            nonlocal sent
-            self.link.send_param_set(
-                target_system=self.target_system,
-                target_component=self.target_component,
-                name=f.name,
-                raw=f.raw,
-                param_type=f.ptype,
-            )
-            sent += 1
-            f.deadline = time.monotonic() + self.timeout
-            flying[f.name] = f
-
-        def give_up_or_resend(f: _Flight) -> None:
-            nonlocal retries
-            del flying[f.name]
-            if f.attempts > self.retries:
-                if f.mismatch is not None:
-                    refused[f.name] = (f.mismatch, reasons.get(f.name, ""))
-                else:
-                    unanswered.append(f.name)
-                return
-            f.attempts += 1
-            retries += 1
-            self.resent += 1
-            send(f)
-
-        while pending or flying:
-            if stop_on_failure and (refused or unanswered) and pending:
-                pending.clear()
-                skipped = tuple(
-                    n
-                    for n, _, _ in items
-                    if n not in flying and n not in verified and n not in refused and n not in unanswered
-                )
-            while pending and len(flying) < self.window:
-                name, ptype, value = pending.popleft()
-                raw = encode_value(value=value, ptype=ptype, encoding=self.encoding)
-                send(_Flight(name=name, deadline=0.0, attempts=1, ptype=ptype, raw=raw))
-            if not flying:
+        batch = _SetBatch(self, items)
+        while batch.pending or batch.flying:
+            if stop_on_failure:
+                batch.skip_rest_after_failure()
+            batch.fill_window()
+            if not batch.flying:
                 break
-            wait = max(0.0, min(f.deadline for f in flying.values()) - time.monotonic())
-            for m in self._replies(wait):
-                f = flying.get(m.param_id)
-                if f is None:
-                    continue
-                if m.get_type() == "PARAM_ERROR":
-                    reasons[f.name] = _PARAM_ERRORS.get(m.error, f"error {m.error}")
-                    continue
-                got = raw_param_value(m)
-                if m.param_type == f.ptype and same_value(
-                    a=decode_value(raw=got, ptype=f.ptype, encoding=self.encoding),
-                    b=decode_value(raw=f.raw, ptype=f.ptype, encoding=self.encoding),
-                    ptype=f.ptype,
-                ):
-                    verified.append(f.name)
-                    del flying[f.name]
-                else:
-                    f.mismatch = decode_value(raw=got, ptype=m.param_type, encoding=self.encoding)
-                    log.debug("echo of %s is %r, not the value sent", f.name, f.mismatch)
-                    give_up_or_resend(f)
-            now = time.monotonic()
-            for f in [f for f in flying.values() if f.deadline <= now]:
-                give_up_or_resend(f)
-        return SetOutcome(
-            verified=tuple(verified),
-            refused=refused,
-            unanswered=tuple(unanswered),
-            skipped=skipped,
-            sent=sent,
-            retries=retries,
-        )
+            for m in self._replies(batch.wait()):
+                batch.take_echo(m)
+            batch.retry_overdue()
+        return batch.outcome()
 
     # -- commands ------------------------------------------------------------------------------
     def command(self, *, command: int, params: tuple[float, ...] = (), wait: float | None = None) -> int:
@@ -379,3 +309,112 @@ class ParamSession:
                     if m.get_msgId() == msg_id and self._ours(m):
                         return m
         return None
+
+
+class _SetBatch:
+    """One batch of PARAM_SETs of a :class:`ParamSession`: what is still to send, what is in flight, what is
+    settled (verified, refused, unanswered, skipped), and the counts."""
+
+    def __init__(self, session: ParamSession, items: list[tuple[str, int, float | int]]):
+        self.session = session
+        self.items = items
+        self.pending = deque(items)
+        self.flying: dict[str, _Flight] = {}
+        self.reasons: dict[str, str] = {}
+        self.skipped: tuple[str, ...] = ()
+        self.verified: list[str] = []
+        self.refused: dict = {}
+        self.unanswered: list[str] = []
+        self.sent = self.retries = 0
+
+    def send(self, f: _Flight) -> None:
+        """Send ``f``'s PARAM_SET and put it in flight with a new deadline."""
+        s = self.session
+        s.link.send_param_set(
+            target_system=s.target_system,
+            target_component=s.target_component,
+            name=f.name,
+            raw=f.raw,
+            param_type=f.ptype,
+        )
+        self.sent += 1
+        f.deadline = time.monotonic() + s.timeout
+        self.flying[f.name] = f
+
+    def give_up_or_resend(self, f: _Flight) -> None:
+        """Take ``f`` out of flight: send it again, or with its retries used up, settle it as refused (an echo
+        with another value came) or unanswered."""
+        del self.flying[f.name]
+        if f.attempts > self.session.retries:
+            if f.mismatch is not None:
+                self.refused[f.name] = (f.mismatch, self.reasons.get(f.name, ""))
+            else:
+                self.unanswered.append(f.name)
+            return
+        f.attempts += 1
+        self.retries += 1
+        self.session.resent += 1
+        self.send(f)
+
+    def skip_rest_after_failure(self) -> None:
+        """Once a set failed, send nothing new: what is still pending is skipped."""
+        if (self.refused or self.unanswered) and self.pending:
+            self.pending.clear()
+            self.skipped = tuple(
+                n
+                for n, _, _ in self.items
+                if n not in self.flying
+                and n not in self.verified
+                and n not in self.refused
+                and n not in self.unanswered
+            )
+
+    def fill_window(self) -> None:
+        """Send pending sets until the window is full."""
+        while self.pending and len(self.flying) < self.session.window:
+            name, ptype, value = self.pending.popleft()
+            raw = encode_value(value=value, ptype=ptype, encoding=self.session.encoding)
+            self.send(_Flight(name=name, deadline=0.0, attempts=1, ptype=ptype, raw=raw))
+
+    def wait(self) -> float:
+        """Seconds until the first deadline of those in flight."""
+        return max(0.0, min(f.deadline for f in self.flying.values()) - time.monotonic())
+
+    def take_echo(self, m) -> None:
+        """A PARAM_VALUE or PARAM_ERROR: verify the set it answers, or note why it failed and resend it."""
+        f = self.flying.get(m.param_id)
+        if f is None:
+            return
+        if m.get_type() == "PARAM_ERROR":
+            self.reasons[f.name] = _PARAM_ERRORS.get(m.error, f"error {m.error}")
+            return
+        encoding = self.session.encoding
+        got = raw_param_value(m)
+        if m.param_type == f.ptype and same_value(
+            a=decode_value(raw=got, ptype=f.ptype, encoding=encoding),
+            b=decode_value(raw=f.raw, ptype=f.ptype, encoding=encoding),
+            ptype=f.ptype,
+        ):
+            self.verified.append(f.name)
+            del self.flying[f.name]
+        else:
+            f.mismatch = decode_value(raw=got, ptype=m.param_type, encoding=encoding)
+            log.debug("echo of %s is %r, not the value sent", f.name, f.mismatch)
+            self.give_up_or_resend(f)
+
+    def retry_overdue(self) -> None:
+        """Resend (or give up on) every set in flight past its deadline."""
+        now = time.monotonic()
+        for f in [f for f in self.flying.values() if f.deadline <= now]:
+            self.give_up_or_resend(f)
+
+    def outcome(self) -> SetOutcome:
+        """The batch's :class:`SetOutcome`."""
+        return SetOutcome(
+            verified=tuple(self.verified),
+            refused=self.refused,
+            unanswered=tuple(self.unanswered),
+            skipped=self.skipped,
+            sent=self.sent,
+            retries=self.retries,
+        )

@@ -25,7 +25,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NoReturn
 
@@ -48,7 +48,7 @@ from .params import (
     same_value,
     type_name,
 )
-from .session import ParamSession, ParamValue
+from .session import ParamSession, ParamValue, SetOutcome
 
 log = logging.getLogger(__name__)
 
@@ -332,72 +332,116 @@ def _upload(
     needs_key: bool,
 ) -> UploadResult:
     current = _read_current(session, plan, needs_key=needs_key)
-    changes = tuple(
+    changes = _diff(plan, current)
+    if on_diff is not None:
+        on_diff(changes)
+    old_hash = int(current[HASH_ID].value) if plan.commit else None
+    need_commit = plan.commit and (bool(changes) or old_hash != plan.new_hash)
+    writes = _Writes() if dry_run else _write(session, plan=plan, changes=changes, commit=need_commit, persist=persist)
+    if writes.failure:
+        _give_up(session, writes, changes=changes, old_hash=old_hash, needs_key=needs_key)
+    return UploadResult(
+        target=target,
+        encoding=session.encoding,
+        changes=changes,
+        unchanged=len(plan.specs) - len(changes),
+        verified=writes.verified,
+        sent=writes.sent,
+        retries=session.resent,
+        committed=writes.committed,
+        persisted=writes.persisted,
+        dry_run=dry_run,
+        seconds=time.perf_counter() - t0,
+    )
+
+
+def _diff(plan: _Plan, current: dict[str, ParamValue]) -> tuple[ParamChange, ...]:
+    """The planned parameters whose vehicle value differs from the artifact's."""
+    return tuple(
         ParamChange(name=s.name, source=s.source, ptype=s.ptype, old=current[s.name].value, new=s.value)
         for s in plan.specs
         if not same_value(a=current[s.name].value, b=s.value, ptype=s.ptype)
     )
-    if on_diff is not None:
-        on_diff(changes)
-    new_hash = plan.new_hash
-    old_hash = int(current[HASH_ID].value) if plan.commit else None
-    need_commit = plan.commit and (bool(changes) or old_hash != new_hash)
 
-    def result(*, verified: int, sent: int, committed: bool, persisted: bool) -> UploadResult:
-        return UploadResult(
-            target=target,
-            encoding=session.encoding,
-            changes=changes,
-            unchanged=len(plan.specs) - len(changes),
-            verified=verified,
-            sent=sent,
-            retries=session.resent,
-            committed=committed,
-            persisted=persisted,
-            dry_run=dry_run,
-            seconds=time.perf_counter() - t0,
-        )
 
-    if dry_run:
-        return result(verified=0, sent=0, committed=False, persisted=False)
+@dataclass
+class _Writes:
+    """What the writing steps did: every set outcome (the changes first, then the commit), the counts, the first
+    failure (``""`` when none) and the events so far."""
 
-    events: list[str] = []
-    sent = verified = 0
-    committed = False
+    outcomes: list[SetOutcome] = field(default_factory=list)
+    sent: int = 0
+    verified: int = 0
+    committed: bool = False
+    persisted: bool = False
+    failure: str = ""
+    events: list[str] = field(default_factory=list)
+
+
+def _write(
+    session: ParamSession, *, plan: _Plan, changes: tuple[ParamChange, ...], commit: bool, persist: bool
+) -> _Writes:
+    """Set the changes, then commit and persist as asked, stopping at the first failure."""
     out = session.set([(c.name, c.ptype, c.new) for c in changes], stop_on_failure=True)
-    outcomes = [out]
-    sent, verified = out.sent, len(out.verified)
-    failure = _describe(out, what="set")
-    if not failure and need_commit:
-        c = session.set([(HASH_ID, INT32, new_hash)])
-        outcomes.append(c)
-        sent += c.sent
-        if c.ok:
-            committed, verified = True, verified + 1
-            events.append(f"committed gain set {HASH_ID}={new_hash}")
-        else:
-            failure = _describe(c, what="commit (the firmware refused the staged set)")
-    persisted = False
-    if not failure and persist:
-        try:
-            ack = session.command(command=mavlink2.MAV_CMD_PREFLIGHT_STORAGE, params=(1.0, -1.0))
-        except PeerTimeoutError as exc:
-            ack, failure = -1, f"persist failed: {exc}"
-        if not failure and ack != mavlink2.MAV_RESULT_ACCEPTED:
-            failure = f"persist refused: COMMAND_ACK result {_result_name(ack)}"
-        persisted = not failure
-    if not failure:
-        return result(verified=verified, sent=sent, committed=committed, persisted=persisted)
+    writes = _Writes(outcomes=[out], sent=out.sent, verified=len(out.verified), failure=_describe(out, what="set"))
+    if not writes.failure and commit:
+        _commit(session, writes, new_hash=plan.new_hash)
+    if not writes.failure and persist:
+        _persist(session, writes)
+    return writes
 
-    events.insert(0, failure)
-    touched = tuple(c for c in changes if c.name not in out.skipped)  # never-sent ones need no restore
-    sent_hash = old_hash if len(outcomes) > 1 else None
-    if needs_key and _all_ignored(session, outcomes, changes=touched, old_hash=sent_hash):
+
+def _commit(session: ParamSession, writes: _Writes, *, new_hash: int | None) -> None:
+    """Set ``GL_HASH``: the firmware applies the staged set to the loop."""
+    c = session.set([(HASH_ID, INT32, new_hash)])
+    writes.outcomes.append(c)
+    writes.sent += c.sent
+    if c.ok:
+        writes.committed, writes.verified = True, writes.verified + 1
+        writes.events.append(f"committed gain set {HASH_ID}={new_hash}")
+    else:
+        writes.failure = _describe(c, what="commit (the firmware refused the staged set)")
+
+
+def _persist(session: ParamSession, writes: _Writes) -> None:
+    """MAV_CMD_PREFLIGHT_STORAGE (write), acknowledged as accepted."""
+    try:
+        ack = session.command(command=mavlink2.MAV_CMD_PREFLIGHT_STORAGE, params=(1.0, -1.0))
+    except PeerTimeoutError as exc:
+        writes.failure = f"persist failed: {exc}"
+        return
+    if ack != mavlink2.MAV_RESULT_ACCEPTED:
+        writes.failure = f"persist refused: COMMAND_ACK result {_result_name(ack)}"
+        return
+    writes.persisted = True
+
+
+def _give_up(
+    session: ParamSession,
+    writes: _Writes,
+    *,
+    changes: tuple[ParamChange, ...],
+    old_hash: int | None,
+    needs_key: bool,
+) -> NoReturn:
+    """Raise for a failed write: the signing refusal when the vehicle ignored every set, else roll back."""
+    writes.events.insert(0, writes.failure)
+    skipped = writes.outcomes[0].skipped
+    touched = tuple(c for c in changes if c.name not in skipped)  # never-sent ones need no restore
+    sent_hash = old_hash if len(writes.outcomes) > 1 else None
+    if needs_key and _all_ignored(session, writes.outcomes, changes=touched, old_hash=sent_hash):
         raise ParameterError(
             f"{SIGNING_REQUIRED}: it ignored every unsigned parameter set (its own messages are signed); "
             "nothing was changed"
         )
-    _fail(session, failure, changes=touched, committed=committed, old_hash=old_hash, events=events)
+    _fail(
+        session,
+        writes.failure,
+        changes=touched,
+        committed=writes.committed,
+        old_hash=old_hash,
+        events=writes.events,
+    )
 
 
 def _all_ignored(

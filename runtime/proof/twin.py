@@ -140,32 +140,59 @@ def twin_comparison(
     >>> round(cmp.worst_du_rel, 6), cmp.worst_dy_rel
     (0.005, 0.0)
     """
-    a = artifact
-    sig = a.signals
     N = int(t.size)
-    span = a.u_max - a.u_min
+    dt = float(t[1] - t[0]) if N > 1 else 0.0
+    return TwinComparison(
+        steps=N,
+        inputs=_input_differences(u, twin_u, artifact=artifact),
+        outputs=_output_differences(y, twin_y, artifact=artifact, steps=N),
+        iae=_iae(_tracking_errors(y=y, r=r, twin_y=twin_y, artifact=artifact), dt=dt),
+    )
+
+
+def _input_differences(u: np.ndarray, twin_u: np.ndarray, *, artifact: Artifact) -> dict:
+    """Per input the largest command difference, absolute and relative to the input's range (``None`` when the
+    range is not positive)."""
+    span = artifact.u_max - artifact.u_min
     du = np.abs(u - twin_u)
-    dy = np.abs(y - twin_y)
-    excursion = np.ptp(twin_y, axis=0) if N else np.zeros(a.p)
-    inputs = {
+    return {
         name: {
             "max_du": float(du[:, i].max(initial=0.0)),
             "max_du_rel": float(du[:, i].max(initial=0.0) / span[i]) if span[i] > 0 else None,
         }
-        for i, name in enumerate(sig["inputs"])
+        for i, name in enumerate(artifact.signals["inputs"])
     }
-    outputs = {
+
+
+def _output_differences(y: np.ndarray, twin_y: np.ndarray, *, artifact: Artifact, steps: int) -> dict:
+    """Per output the largest difference, absolute and relative to the twin's excursion (``None`` when the twin's
+    output stays constant)."""
+    dy = np.abs(y - twin_y)
+    excursion = np.ptp(twin_y, axis=0) if steps else np.zeros(artifact.p)
+    return {
         name: {
             "max_dy": float(dy[:, i].max(initial=0.0)),
             "max_dy_rel": float(dy[:, i].max(initial=0.0) / excursion[i]) if excursion[i] > 0 else None,
         }
-        for i, name in enumerate(sig["outputs"])
+        for i, name in enumerate(artifact.signals["outputs"])
     }
-    dt = float(t[1] - t[0]) if N > 1 else 0.0
+
+
+def _tracking_errors(
+    *, y: np.ndarray, r: np.ndarray, twin_y: np.ndarray, artifact: Artifact
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per reference the tracking error of the run and of the twin; per output without references (regulation about
+    the operating point), its distance from ``y_op``."""
+    a = artifact
+    sig = a.signals
     if a.q:
-        errors = {name: (r[:, j] - y @ a.Ci[j], r[:, j] - twin_y @ a.Ci[j]) for j, name in enumerate(sig["references"])}
-    else:  # regulation about the operating point
-        errors = {name: (a.y_op[i] - y[:, i], a.y_op[i] - twin_y[:, i]) for i, name in enumerate(sig["outputs"])}
+        return {name: (r[:, j] - y @ a.Ci[j], r[:, j] - twin_y @ a.Ci[j]) for j, name in enumerate(sig["references"])}
+    return {name: (a.y_op[i] - y[:, i], a.y_op[i] - twin_y[:, i]) for i, name in enumerate(sig["outputs"])}
+
+
+def _iae(errors: dict[str, tuple[np.ndarray, np.ndarray]], *, dt: float) -> dict:
+    """Integral of the absolute error of the run and of the twin, and their difference (absolute and relative to
+    the twin's)."""
     iae = {}
     for name, (e_real, e_twin) in errors.items():
         real, ideal = float(np.sum(np.abs(e_real)) * dt), float(np.sum(np.abs(e_twin)) * dt)
@@ -175,7 +202,7 @@ def twin_comparison(
             "difference": real - ideal,
             "difference_rel": (real - ideal) / ideal if ideal > 0 else None,
         }
-    return TwinComparison(steps=N, inputs=inputs, outputs=outputs, iae=iae)
+    return iae
 
 
 def _clean(obj):

@@ -186,105 +186,18 @@ class CanLayout:
 
     def database(self) -> Any:
         """The layout as a ``cantools.database.Database``."""
-        from cantools.database import Database, Message, Node, Signal
-        from cantools.database.conversion import BaseConversion
+        from cantools.database import Database, Node
 
-        def signals(spec: FrameSpec, receiver: str) -> list:
-            rx = [receiver]
-            sig = [
-                Signal(
-                    "seq",
-                    start=0,
-                    length=16,
-                    byte_order="little_endian",
-                    is_signed=False,
-                    receivers=rx,
-                    comment="sample counter (wraps at 65536)",
-                ),
-                Signal(
-                    "status",
-                    start=16,
-                    length=8,
-                    byte_order="little_endian",
-                    is_signed=False,
-                    receivers=rx,
-                    comment="bit0 fault (non-finite sample), bit1 watchdog",
-                ),
-                Signal(
-                    "sat",
-                    start=24,
-                    length=8,
-                    byte_order="little_endian",
-                    is_signed=False,
-                    receivers=rx,
-                    comment="bit i: i-th value of this frame saturated",
-                ),
-            ]
-            for i, name in enumerate(spec.signals):
-                if spec.encoding == "float32":
-                    sig.append(
-                        Signal(
-                            name,
-                            start=32 + 32 * i,
-                            length=32,
-                            byte_order="little_endian",
-                            is_signed=True,
-                            receivers=rx,
-                            conversion=BaseConversion.factory(scale=1, offset=0, is_float=True),
-                        )
-                    )
-                else:
-                    sc = spec.scales[i]
-                    sig.append(
-                        Signal(
-                            name,
-                            start=32 + 16 * i,
-                            length=16,
-                            byte_order="little_endian",
-                            is_signed=True,
-                            receivers=rx,
-                            minimum=sc.minimum,
-                            maximum=sc.maximum,
-                            conversion=BaseConversion.factory(
-                                scale=sc.factor, offset=sc.offset, is_float=False, choices={INT16_NAN: "not_a_number"}
-                            ),
-                            comment=f"raw {-INT16_MAX}..{INT16_MAX} spans [{sc.minimum:g}, {sc.maximum:g}] "
-                            f"(beyond: saturated); raw {INT16_NAN}: not a number",
-                        )
-                    )
-            return sig
-
-        messages = []
-        for role, peer, specs in (("controller", "plant", self.command), ("plant", "controller", self.measurement)):
-            for spec in specs:
-                messages.append(
-                    Message(
-                        frame_id=spec.arbitration_id,
-                        name=spec.name,
-                        length=spec.length,
-                        signals=signals(spec, peer),
-                        senders=[role],
-                        is_fd=self.fd,
-                        comment=f"sent by the {role}",
-                    )
-                )
-        dbc = None
-        if self.fd:  # cantools marks frames CAN FD (VFrameFormat) when the bus type attribute says so
-            from collections import OrderedDict
-
-            from cantools.database.can.formats.dbc.dbc_attribute import DbcAttribute
-            from cantools.database.can.formats.dbc.dbc_attribute_definition import DbcAttributeDefinition
-            from cantools.database.can.formats.dbc.dbc_specifics import DbcSpecifics
-
-            bus_type = DbcAttributeDefinition("BusType", default_value="CAN", type_name="STRING")
-            dbc = DbcSpecifics(
-                attributes=OrderedDict(BusType=DbcAttribute("CAN FD", bus_type)),
-                attribute_definitions=OrderedDict(BusType=bus_type),
-            )
+        messages = [
+            _message(spec, sender=role, receiver=peer, fd=self.fd)
+            for role, peer, specs in (("controller", "plant", self.command), ("plant", "controller", self.measurement))
+            for spec in specs
+        ]
         nodes = [
             Node("controller", comment="gainlink firmware (gainlink_can)"),
             Node("plant", comment="gainlink HIL bridge"),
         ]
+        dbc = _fd_bus_type() if self.fd else None
         return Database(messages=messages, nodes=nodes, version="gainlink-1", dbc_specifics=dbc)
 
     def dbc(self) -> str:
@@ -297,6 +210,116 @@ class CanLayout:
             "command": [s.arbitration_id for s in self.command],
             "measurement": [s.arbitration_id for s in self.measurement],
         }
+
+
+def _message(spec: FrameSpec, *, sender: str, receiver: str, fd: bool) -> Any:
+    """The cantools message of one frame."""
+    from cantools.database import Message
+
+    return Message(
+        frame_id=spec.arbitration_id,
+        name=spec.name,
+        length=spec.length,
+        signals=_header_signals([receiver]) + _value_signals(spec, [receiver]),
+        senders=[sender],
+        is_fd=fd,
+        comment=f"sent by the {sender}",
+    )
+
+
+def _header_signals(rx: list[str]) -> list:
+    """The header every frame starts with: ``seq``, ``status``, ``sat``."""
+    from cantools.database import Signal
+
+    return [
+        Signal(
+            "seq",
+            start=0,
+            length=16,
+            byte_order="little_endian",
+            is_signed=False,
+            receivers=rx,
+            comment="sample counter (wraps at 65536)",
+        ),
+        Signal(
+            "status",
+            start=16,
+            length=8,
+            byte_order="little_endian",
+            is_signed=False,
+            receivers=rx,
+            comment="bit0 fault (non-finite sample), bit1 watchdog",
+        ),
+        Signal(
+            "sat",
+            start=24,
+            length=8,
+            byte_order="little_endian",
+            is_signed=False,
+            receivers=rx,
+            comment="bit i: i-th value of this frame saturated",
+        ),
+    ]
+
+
+def _value_signals(spec: FrameSpec, rx: list[str]) -> list:
+    """The values a frame carries after its header, in its encoding."""
+    if spec.encoding == "float32":
+        return [_float32_signal(name, i, rx) for i, name in enumerate(spec.signals)]
+    return [_int16_signal(name, i, spec.scales[i], rx) for i, name in enumerate(spec.signals)]
+
+
+def _float32_signal(name: str, i: int, rx: list[str]) -> Any:
+    """The ``i``-th value of a frame as an IEEE float32."""
+    from cantools.database import Signal
+    from cantools.database.conversion import BaseConversion
+
+    return Signal(
+        name,
+        start=32 + 32 * i,
+        length=32,
+        byte_order="little_endian",
+        is_signed=True,
+        receivers=rx,
+        conversion=BaseConversion.factory(scale=1, offset=0, is_float=True),
+    )
+
+
+def _int16_signal(name: str, i: int, sc: SignalScale, rx: list[str]) -> Any:
+    """The ``i``-th value of a frame as a scaled int16 over the range ``sc`` (raw -32768: not a number)."""
+    from cantools.database import Signal
+    from cantools.database.conversion import BaseConversion
+
+    return Signal(
+        name,
+        start=32 + 16 * i,
+        length=16,
+        byte_order="little_endian",
+        is_signed=True,
+        receivers=rx,
+        minimum=sc.minimum,
+        maximum=sc.maximum,
+        conversion=BaseConversion.factory(
+            scale=sc.factor, offset=sc.offset, is_float=False, choices={INT16_NAN: "not_a_number"}
+        ),
+        comment=f"raw {-INT16_MAX}..{INT16_MAX} spans [{sc.minimum:g}, {sc.maximum:g}] "
+        f"(beyond: saturated); raw {INT16_NAN}: not a number",
+    )
+
+
+def _fd_bus_type() -> Any:
+    """DBC attributes that say the bus is CAN FD (cantools marks the frames CAN FD, VFrameFormat, from them)."""
+    from collections import OrderedDict
+
+    from cantools.database.can.formats.dbc.dbc_attribute import DbcAttribute
+    from cantools.database.can.formats.dbc.dbc_attribute_definition import DbcAttributeDefinition
+    from cantools.database.can.formats.dbc.dbc_specifics import DbcSpecifics
+
+    bus_type = DbcAttributeDefinition("BusType", default_value="CAN", type_name="STRING")
+    return DbcSpecifics(
+        attributes=OrderedDict(BusType=DbcAttribute("CAN FD", bus_type)),
+        attribute_definitions=OrderedDict(BusType=bus_type),
+    )
 
 
 def _frames(
@@ -422,24 +445,10 @@ def layout_for(
     TransportError
         A bad base_id or encoding, a range that is malformed, names no signal, or is missing.
     """
-    if not 0 <= base_id <= 0x7FF - 0x30:
-        raise TransportError(f"CAN base_id {base_id:#x} leaves no room for the layout (0 .. {0x7FF - 0x30:#x})")
-    if encoding not in ENCODINGS:
-        raise TransportError(f"CAN encoding must be {' or '.join(ENCODINGS)}, not {encoding!r}")
-    if ranges is None:
-        ranges = {}
-    if not isinstance(ranges, Mapping):
-        raise TransportError("CAN transport: ranges must be a table { signal = [min, max], ... }")
+    ranges = _checked_options(base_id=base_id, encoding=encoding, ranges=ranges)
     sig = artifact.signals
     per_frame = FD_MAX_VALUES if fd else CLASSIC_VALUES[encoding]
-
-    def named(prefix: str, names: list[str]) -> list[str]:
-        return [s if s.startswith(prefix) else prefix + s for s in map(_sanitize, names)]
-
-    ys, rs, us = named("y_", sig["outputs"]), named("r_", sig["references"]), named("u_", sig["inputs"])
-    if len(set(ys + rs)) != len(ys + rs) or len(set(us)) != len(us):
-        ys, rs = [f"y{i}" for i in range(artifact.p)], [f"r{i}" for i in range(artifact.q)]
-        us = [f"u{i}" for i in range(artifact.m)]
+    ys, rs, us = _dbc_names(artifact)
     sc = _scales(
         artifact,
         ranges,
@@ -469,3 +478,31 @@ def layout_for(
             us, sc["inputs"], prefix="Command", base=base_id + COMMAND_OFFSET, max_frames=MAX_COMMAND_FRAMES, **common
         ),
     )
+
+
+def _checked_options(*, base_id: int, encoding: str, ranges: Mapping[str, Any] | None) -> Mapping[str, Any]:
+    """The ranges (empty when none), once ``base_id``, ``encoding`` and the ranges' form are checked."""
+    if not 0 <= base_id <= 0x7FF - 0x30:
+        raise TransportError(f"CAN base_id {base_id:#x} leaves no room for the layout (0 .. {0x7FF - 0x30:#x})")
+    if encoding not in ENCODINGS:
+        raise TransportError(f"CAN encoding must be {' or '.join(ENCODINGS)}, not {encoding!r}")
+    if ranges is None:
+        ranges = {}
+    if not isinstance(ranges, Mapping):
+        raise TransportError("CAN transport: ranges must be a table { signal = [min, max], ... }")
+    return ranges
+
+
+def _dbc_names(artifact: Any) -> tuple[list[str], list[str], list[str]]:
+    """DBC signal names of the outputs, references and inputs: the artifact's names made valid and prefixed
+    (``y_``, ``r_``, ``u_``), or ``y0``, ``r0``, ``u0``, ... when that makes two of them equal."""
+    sig = artifact.signals
+
+    def named(prefix: str, names: list[str]) -> list[str]:
+        return [s if s.startswith(prefix) else prefix + s for s in map(_sanitize, names)]
+
+    ys, rs, us = named("y_", sig["outputs"]), named("r_", sig["references"]), named("u_", sig["inputs"])
+    if len(set(ys + rs)) != len(ys + rs) or len(set(us)) != len(us):
+        ys, rs = [f"y{i}" for i in range(artifact.p)], [f"r{i}" for i in range(artifact.q)]
+        us = [f"u{i}" for i in range(artifact.m)]
+    return ys, rs, us
