@@ -119,6 +119,29 @@ def identify_cosimulation(
         ``A, B, C, D, inputs, outputs, states, u0, y0, hankel`` (the singular values), ``fit`` (largest
         misfit of the realised Markov parameters, relative to the largest).
     """
+    _check_identifiable(md, Ts)
+    h, u0, y0, names = _measure(path, md=md, at=at, inputs=inputs, outputs=outputs, Ts=Ts, horizon=horizon,
+                                rel_step=rel_step)  # fmt: skip
+    A, B, C, s = realize(h, rtol=rtol)
+    fit = _checked_realisation(md, h, A, B, C, horizon=horizon, Ts=Ts, max_misfit=max_misfit)
+    n = A.shape[0]
+    return {
+        "A": A,
+        "B": B,
+        "C": C,
+        "D": np.zeros((C.shape[0], B.shape[1])),
+        "inputs": names[0],
+        "outputs": names[1],
+        "states": tuple(f"x{i}" for i in range(n)),
+        "u0": u0,
+        "y0": y0,
+        "hankel": s,
+        "fit": fit,
+    }
+
+
+def _check_identifiable(md: Any, Ts: float) -> None:
+    """The FMU can save its state (pulses start from one saved state) and the step is positive."""
     if not md.coSimulation.canGetAndSetFMUstate:
         raise PlantError(
             f"FMU {md.modelName} is Co-Simulation only and cannot save its state "
@@ -126,6 +149,20 @@ def identify_cosimulation(
         )
     if not (Ts > 0 and np.isfinite(Ts)):
         raise PlantError("linearize: the step (--Ts) must be positive")
+
+
+def _measure(
+    path: Path,
+    *,
+    md: Any,
+    at: Mapping[str, float],
+    inputs: list[str] | None,
+    outputs: list[str] | None,
+    Ts: float,
+    horizon: int,
+    rel_step: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[list[str], list[str]]]:
+    """Pulse responses of the FMU about the point, with the inputs and outputs there and the signal names."""
     real = "Float64" if md.fmiVersion == "3.0" else "Real"
     declared_in = [v.name for v in md.modelVariables if v.causality == "input" and v.type == real]
     in_names = list(inputs) if inputs else declared_in
@@ -139,7 +176,21 @@ def identify_cosimulation(
         h = _pulse_responses(plant, u0=u0, dt=float(Ts), horizon=horizon, rel_step=rel_step)
     finally:
         plant.close()
-    A, B, C, s = realize(h, rtol=rtol)
+    return h, u0, y0, (plant.input_names, plant.output_names)
+
+
+def _checked_realisation(
+    md: Any,
+    h: np.ndarray,
+    A: np.ndarray,
+    B: np.ndarray,
+    C: np.ndarray,
+    *,
+    horizon: int,
+    Ts: float,
+    max_misfit: float,
+) -> float:
+    """The realisation's misfit to the measured Markov parameters, or PlantError when it cannot be trusted."""
     n = A.shape[0]
     if n == 0:
         raise PlantError(
@@ -158,16 +209,4 @@ def identify_cosimulation(
             f"their size (more than {max_misfit:g}): the horizon of {horizon} steps is too short "
             "(raise --horizon) or the FMU is not linear/time-invariant about this point"
         )
-    return {
-        "A": A,
-        "B": B,
-        "C": C,
-        "D": np.zeros((C.shape[0], B.shape[1])),
-        "inputs": plant.input_names,
-        "outputs": plant.output_names,
-        "states": tuple(f"x{i}" for i in range(n)),
-        "u0": u0,
-        "y0": y0,
-        "hankel": s,
-        "fit": fit,
-    }
+    return fit
