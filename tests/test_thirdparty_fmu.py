@@ -128,9 +128,9 @@ def test_linearise_design_and_hil_track_a_reference_on_the_thirdparty_fmu(mass_d
 
     s = load_spec(spec)
     A, B = _physics()
-    np.testing.assert_allclose(s.A, A, rtol=1e-6, atol=1e-6)
-    np.testing.assert_allclose(s.B, B, rtol=1e-6, atol=1e-9)
-    np.testing.assert_allclose(s.C, [[-1.0, 0.0]], atol=1e-9)
+    np.testing.assert_allclose(s.plant.A, A, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(s.plant.B, B, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(s.plant.C, [[-1.0, 0.0]], atol=1e-9)
     # linearize writes the FMU's rest point: f = 0 holds the mass where the spring is unloaded, y = -0.5
     # (its output's start value)
     import tomllib
