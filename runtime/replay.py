@@ -1,9 +1,9 @@
 """Replay recorded measurements through an engine that runs the control law.
 
 Engines share one signature, ``run(artifact, Y, R) -> Trace``: ``reference`` is the float64
-Python law; ``native`` (host C library) and ``qemu`` (Cortex-M4F image under QEMU) are provided
-by :mod:`gainlink.engines` and loaded on first use, so replay never imports a toolchain it does
-not need.
+Python law; ``native`` (host C library) and ``qemu`` (a Cortex-M image under QEMU; ``target`` and
+``board`` choose which, cortex-m4 on mps2-an386 by default) are provided by :mod:`gainlink.engines`
+and loaded on first use, so replay never imports a toolchain it does not need.
 
 Input CSV: a header with ``y0..y{p-1}`` and ``r0..r{q-1}`` (a ``t`` column is allowed and copied
 through). Output CSV: ``t`` if given, ``u0..``, ``sat0..`` (1 where that input saturated),
@@ -138,9 +138,38 @@ def _num(v: float) -> str:
     return repr(v) if math.isfinite(v) else ("nan" if math.isnan(v) else ("inf" if v > 0 else "-inf"))
 
 
-def replay(artifact: Artifact, input_path: str | Path, output_path: str | Path, *, engine: str = "reference") -> Trace:
-    """Replay ``input_path`` through ``engine`` and write ``output_path`` atomically."""
+def engine_with_image(engine: str, *, target: str | None = None, board: str | None = None) -> Engine:
+    """The engine ``engine``; ``target`` and ``board`` choose the Cortex-M image of ``qemu`` (checked here,
+    before anything runs).
+
+    Raises
+    ------
+    GainlinkError
+        An unknown engine, target or board, a board without that core, or a target for another engine.
+    """
     fn = get_engine(engine)
+    if target is None and board is None:
+        return fn
+    if engine != "qemu":
+        raise GainlinkError(f"--target and --board choose the image of --engine qemu, not of {engine}")
+    from .firmware.targets import resolve_cortex_m
+
+    platform = resolve_cortex_m(target, board)
+    return lambda artifact, Y, R: fn(artifact, Y, R, target=platform.target.name, board=platform.board.name)
+
+
+def replay(
+    artifact: Artifact,
+    input_path: str | Path,
+    output_path: str | Path,
+    *,
+    engine: str = "reference",
+    target: str | None = None,
+    board: str | None = None,
+) -> Trace:
+    """Replay ``input_path`` through ``engine`` (``qemu``: the image of ``target`` on ``board``) and write
+    ``output_path`` atomically."""
+    fn = engine_with_image(engine, target=target, board=board)
     samples = read_samples(input_path, artifact)
     trace = fn(artifact, samples.Y, samples.R)
     out = Path(output_path)
