@@ -14,6 +14,10 @@
  *   24 bits (or to the subnormal grid) is the rounding of the exact value;
  * - zeros, infinities and NaNs go through the FPU-less float operations, whose results are exact there.
  *
+ * Normal operands (the usual case) take constant shifts instead of leading-zero counts, and a normal
+ * result is rounded in the upper 32-bit word; ARMv6-M forms the product from 16-bit halves (it has no
+ * 32 x 32 -> 64 multiply, and GCC would call the general 64 x 64 one). GL_FMAF_SPLIT_MULTIPLY selects that
+ * form on any compiler, so the host check (firmware/tools/gl_fmaf_check.c) covers it too.
  * Only round-to-nearest is implemented (the only mode the library uses); no exception flags are raised.
  */
 #include <stdint.h>
@@ -56,6 +60,34 @@ static int clz64(uint64_t v)
     return hi != 0u ? __builtin_clz(hi) : 32 + __builtin_clz((uint32_t)v);
 }
 
+/** Index of the leading one of a non-zero word; after an addition it is usually 60, 61 or 62. */
+static int32_t lead_index(uint64_t v)
+{
+    const uint32_t hi = (uint32_t)(v >> 32);
+    if ((hi >> 30) != 0u) {
+        return (hi >> 31) != 0u ? 63 : 62;
+    }
+    if ((hi >> 28) != 0u) {
+        return (hi >> 29) != 0u ? 61 : 60;
+    }
+    return 63 - clz64(v);
+}
+
+/** The exact 48-bit product of two 24-bit significands. */
+static uint64_t mul24(uint32_t a, uint32_t b)
+{
+#if defined(__ARM_ARCH_6M__) || defined(GL_FMAF_SPLIT_MULTIPLY)
+    const uint32_t al = a & 0xFFFFu, ah = a >> 16, bl = b & 0xFFFFu, bh = b >> 16;
+    const uint32_t lo = al * bl;
+    const uint32_t mid = al * bh + ah * bl; /* < 2^25: ah, bh < 2^8 */
+    const uint32_t low = lo + (mid << 16);
+    const uint32_t high = ah * bh + (mid >> 16) + (low < lo ? 1u : 0u);
+    return ((uint64_t)high << 32) | low;
+#else
+    return (uint64_t)a * b;
+#endif
+}
+
 /** Shift the significand so that its leading one sits at bit GL_TOP_BIT (exactly, no bits are lost). */
 static void normalise(gl_unpacked_t *u)
 {
@@ -80,6 +112,41 @@ static gl_unpacked_t unpack(uint32_t b)
     return u;
 }
 
+/** The product a * b of finite, non-zero floats, exact and normalised (leading one at GL_TOP_BIT). */
+static gl_unpacked_t product(uint32_t ab, uint32_t bb)
+{
+    const uint32_t ea = (ab >> 23) & GL_F32_EXP_MASK;
+    const uint32_t eb = (bb >> 23) & GL_F32_EXP_MASK;
+    gl_unpacked_t p;
+    p.neg = (ab ^ bb) >> 31;
+    if (ea != 0u && eb != 0u) { /* normal: the product of two 24-bit significands is in [2^46, 2^48) */
+        p.sig = mul24((ab & GL_F32_FRAC_MASK) | GL_F32_HIDDEN, (bb & GL_F32_FRAC_MASK) | GL_F32_HIDDEN);
+        const int32_t shift = (p.sig >> 47) != 0u ? GL_TOP_BIT - 47 : GL_TOP_BIT - 46;
+        p.sig <<= shift;
+        p.exp = (int32_t)(ea + eb) - 300 - shift;
+        return p;
+    }
+    gl_unpacked_t a = unpack(ab);
+    gl_unpacked_t b = unpack(bb);
+    p.sig = mul24((uint32_t)a.sig, (uint32_t)b.sig);
+    p.exp = a.exp + b.exp;
+    normalise(&p);
+    return p;
+}
+
+/** A finite, non-zero addend, normalised (leading one at GL_TOP_BIT). */
+static gl_unpacked_t addend(uint32_t cb)
+{
+    gl_unpacked_t c = unpack(cb);
+    if (((cb >> 23) & GL_F32_EXP_MASK) != 0u) {
+        c.sig <<= GL_TOP_BIT - 23;
+        c.exp -= GL_TOP_BIT - 23;
+    } else {
+        normalise(&c);
+    }
+    return c;
+}
+
 /** Shift right by `d` >= 0 bits, ORing everything shifted out into bit 0. */
 static uint64_t shift_right_sticky(uint64_t v, int32_t d)
 {
@@ -96,6 +163,18 @@ static uint64_t shift_right_sticky(uint64_t v, int32_t d)
 /** Shift right by `d` >= 1 bits, rounding to nearest with ties to even. */
 static uint64_t shift_right_round(uint64_t v, int32_t d)
 {
+    if (d > 32 && d < 64) { /* a normal result (d = 37 to 39): the upper word, and whether the lower is 0 */
+        const uint32_t hi = (uint32_t)(v >> 32);
+        const uint32_t lo = (uint32_t)v;
+        const int32_t sh = d - 32;
+        uint32_t q = hi >> sh;
+        const uint32_t rem = hi & ((1u << sh) - 1u);
+        const uint32_t half = 1u << (sh - 1);
+        if (rem > half || (rem == half && (lo != 0u || (q & 1u) != 0u))) {
+            ++q;
+        }
+        return q;
+    }
     if (d > 63) {
         return 0u; /* v < 2^63 <= half of 2^d: below half the quantum */
     }
@@ -111,7 +190,7 @@ static uint64_t shift_right_round(uint64_t v, int32_t d)
 /** Round (-1)^neg * sig * 2^exp (sig != 0) to the nearest float (ties to even) and return its bits. */
 static uint32_t round_pack(uint32_t neg, uint64_t sig, int32_t exp)
 {
-    const int32_t lead = 63 - clz64(sig);  /* index of the leading one */
+    const int32_t lead = lead_index(sig);
     const int32_t e_unb = lead + exp;       /* the value is in [2^e_unb, 2^(e_unb + 1)) */
     const uint32_t sign = neg << 31;
     if (e_unb > 127) {
@@ -140,12 +219,8 @@ static uint32_t round_pack(uint32_t neg, uint64_t sig, int32_t exp)
 /** a * b + c for finite, non-zero a, b, c. */
 static uint32_t fma_finite(uint32_t ab, uint32_t bb, uint32_t cb)
 {
-    gl_unpacked_t a = unpack(ab);
-    gl_unpacked_t b = unpack(bb);
-    gl_unpacked_t p = {.neg = a.neg ^ b.neg, .exp = a.exp + b.exp, .sig = a.sig * b.sig};
-    gl_unpacked_t c = unpack(cb);
-    normalise(&p);
-    normalise(&c);
+    gl_unpacked_t p = product(ab, bb);
+    gl_unpacked_t c = addend(cb);
     gl_unpacked_t *big = &p;
     gl_unpacked_t *small = &c;
     if (c.exp > p.exp || (c.exp == p.exp && c.sig > p.sig)) {
