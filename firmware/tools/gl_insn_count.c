@@ -7,7 +7,7 @@
  *
  * Every executed instruction increments one inline counter. A call opens at the function's entry
  * (`entry=ADDR`) and closes at one of its return addresses (`ret=ADDR`, the instruction after each call
- * site, up to 16); what the counter advanced in between is that call's cost: the function's own code
+ * site, up to 256); what the counter advanced in between is that call's cost: the function's own code
  * and everything it calls (soft-float and libgcc routines, gl_fmaf, memcpy), which lie outside its
  * symbol. Instructions inside [lo, hi) (`lo=ADDR hi=ADDR`, optional: the function's own symbol) are also
  * counted apart, so a report can show how much of the cost is the callees'. Interrupt handlers that ran
@@ -61,7 +61,7 @@ __attribute__((visibility("default"))) int qemu_plugin_install(qemu_plugin_id_t 
                                                                int argc, char **argv);
 /* ---- end of API declarations ---- */
 
-#define MAX_RETURNS 16
+#define MAX_RETURNS 256
 
 static uint64_t range_lo, range_hi, entry_addr;
 static uint64_t return_addrs[MAX_RETURNS];

@@ -90,12 +90,20 @@ def count_step_instructions(
     elf: Path, artifact: Artifact, *, Y: np.ndarray, R: np.ndarray, board: str = DEFAULT_BOARD
 ) -> StepCost:
     """Replay ``Y``, ``R`` through ``elf`` on ``board`` in QEMU, counting every call of ``gl_loop_step``."""
-    sym = symbol_sizes(elf, (STEP_SYMBOL,)).get(STEP_SYMBOL)
+    return count_calls(elf, artifact, symbol=STEP_SYMBOL, Y=Y, R=R, board=board)
+
+
+def count_calls(
+    elf: Path, artifact: Artifact, *, symbol: str, Y: np.ndarray, R: np.ndarray, board: str = DEFAULT_BOARD
+) -> StepCost:
+    """Replay ``Y``, ``R`` through ``elf`` on ``board``, counting every direct call of the function ``symbol``
+    (e.g. ``gl_fmaf`` on a soft-float core) from its entry to its return, callees included."""
+    sym = symbol_sizes(elf, (symbol,)).get(symbol)
     if sym is None:
-        raise FirmwareError(f"{elf} has no {STEP_SYMBOL} symbol")
-    returns = return_addresses(elf, STEP_SYMBOL)
+        raise FirmwareError(f"{elf} has no {symbol} symbol")
+    returns = return_addresses(elf, symbol)
     if not returns:
-        raise FirmwareError(f"{elf} never calls {STEP_SYMBOL} directly: no return address to close a count")
+        raise FirmwareError(f"{elf} never calls {symbol} directly: no return address to close a count")
     lo, hi = sym["address"], sym["address"] + sym["size"]
     plugin = build_plugin()
     with tempfile.TemporaryDirectory(prefix="gainlink-cost-") as tmp:
