@@ -14,7 +14,6 @@ import json
 import logging
 import shutil
 import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
@@ -33,7 +32,6 @@ from gainlink.firmware.targets import BOARDS, CORTEX_M_TARGETS, TARGETS
 
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = ("u", "sat", "xh", "z", "fault")
-GAINLINK = str(Path(sys.executable).with_name("gainlink"))
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -212,10 +210,9 @@ def test_unknown_or_mismatched_target_or_board_is_one_line_exit_2_and_nothing_wr
     csv = tmp_path / "in.csv"
     csv.write_text("y0,y1,r0\n0.1,0.0,0.2\n")
     out = tmp_path / "out"
-    args = [a.format(art=pend, out=out, csv=csv) for a in argv]
-    proc = subprocess.run([GAINLINK, *args], capture_output=True, text=True)
-    assert proc.returncode == 2, proc.stderr
-    assert proc.stderr.count("\n") == 1 and word in proc.stderr, proc.stderr
+    res = run_cli(*(a.format(art=pend, out=out, csv=csv) for a in argv))
+    assert res.code == 2, res.err
+    assert res.err.count("\n") == 1 and word in res.err, res.err
     assert not out.exists(), "nothing written"
 
 
