@@ -165,6 +165,15 @@ def test_firmware_build_for_a_soft_float_target_writes_its_image(pend, tmp_path)
         out / "gainlink_pendulum.elf", board="microbit", n=a.n, m=a.m, p=a.p, q=a.q, Y=[[0.1, 0.0]], R=[[0.2]]
     )
     assert rec["status"][0] >= 0
+    dry = run_cli("firmware", "flash", out, "--probe", "pyocd", "--dry-run")
+    assert dry.code == 0 and dry.out.startswith("pyocd flash --target nrf51 --format hex "), dry.out
+
+
+def test_flashing_an_fpga_board_image_names_its_loader_in_one_line(pend, tmp_path):
+    out = tmp_path / "fw"
+    assert run_cli("firmware", "build", pend, "--target", "cortex-m33", "--out", out).code == 0
+    res = run_cli("firmware", "flash", out, "--probe", "pyocd", "--dry-run")
+    assert res.code == 2 and res.err.count("\n") == 1 and "mps2-an505" in res.err and ".bin" in res.err, res.err
 
 
 @pytest.mark.parametrize(

@@ -109,6 +109,10 @@ def flash_command(out_dir: Path, *, probe: str) -> list[str]:
     template = FLASH_COMMANDS.get((board, probe))
     if template is None:
         known = ", ".join(p for b, p in FLASH_COMMANDS if b == board)
+        if not known:  # the MPS2/MPS3 FPGA boards load images from their USB mass storage (images.txt)
+            raise FirmwareError(
+                f"no flashing recipe for board {board}: copy {manifest['files']['bin']} with the board's own loader"
+            )
         raise FirmwareError(f"no {probe} recipe for board {board} (use --probe {known})")
     paths = {
         "hex": str((out_dir / manifest["files"]["hex"]).resolve()),
