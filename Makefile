@@ -1,10 +1,12 @@
 # The two entry points of the README: `make demo` (the main job) and `make test` (the whole suite).
 # Both set the machine up first (scripts/setup.sh), once per change of pyproject.toml or the script.
+# `make test-matrix`: the exhaustive target matrix (every example and law on every Cortex-M board), run
+# before resolving an issue that touches the law or the targets.
 VENV  := .venv
 PY    := $(VENV)/bin/python
 STAMP := $(VENV)/.gainlink-setup
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test test-matrix bench clean
 
 setup: $(STAMP)
 
@@ -17,6 +19,9 @@ demo: setup
 
 test: setup
 	$(PY) -m pytest -q
+
+test-matrix: setup
+	$(PY) -m pytest -q -m matrix
 
 bench: setup
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh

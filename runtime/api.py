@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from .engines import engine_with_image
 from .errors import SpecError
 from .fileio import read_toml
 from .proof.reference import Trace
-from .proof.replay_io import get_engine
 from .proof.simulation import Simulation, simulate_linear
 from .shipping.artifact import Artifact, from_dict
 from .spec import PlantSpec, load_spec, parse_spec
@@ -275,7 +275,15 @@ def from_gains(
     return from_dict(synthesize(_parse(data, source=_source_name(plant))).artifact)
 
 
-def replay(artifact: Artifact, y: Any, r: Any = None, *, engine: str = "reference") -> Trace:
+def replay(
+    artifact: Artifact,
+    y: Any,
+    r: Any = None,
+    *,
+    engine: str = "reference",
+    target: str | None = None,
+    board: str | None = None,
+) -> Trace:
     """Run recorded samples through an implementation of the control law, from its initial state.
 
     Parameters
@@ -287,7 +295,12 @@ def replay(artifact: Artifact, y: Any, r: Any = None, *, engine: str = "referenc
     r : array_like (N, q), optional
         References (absolute), zeros by default.
     engine : {"reference", "native", "qemu"}
-        The float64 law, the host C library (built on first use), or the Cortex-M4F image in QEMU.
+        The float64 law, the host C library (built on first use), or a Cortex-M image in QEMU.
+    target : str, optional
+        With ``engine="qemu"``: the core whose image runs, ``cortex-m0``, ``cortex-m3``, ``cortex-m4``
+        (default), ``cortex-m7``, ``cortex-m33`` or ``cortex-m55``.
+    board : str, optional
+        With ``engine="qemu"``: its QEMU board (default: the target's; a board alone implies its core).
 
     Returns
     -------
@@ -305,7 +318,7 @@ def replay(artifact: Artifact, y: Any, r: Any = None, *, engine: str = "referenc
     """
     Y = np.asarray(y, dtype=float).reshape(-1, artifact.p)
     R = np.zeros((Y.shape[0], artifact.q)) if r is None else np.asarray(r, dtype=float).reshape(Y.shape[0], artifact.q)
-    return get_engine(engine)(artifact, Y, R)
+    return engine_with_image(engine, target=target, board=board)(artifact, Y, R)
 
 
 def simulate(

@@ -35,17 +35,18 @@ QEMU_SLACK_S = 600.0
 
 
 def qemu_peer(*, artifact: Any, transport: Any, board: str, elf: Path | None, duration_s: float) -> Any:
-    """The Cortex-M4F image in QEMU serving ``transport``'s link on its UART (not started yet).
+    """The Cortex-M image in QEMU serving ``transport``'s link on its UART (not started yet).
 
-    ``elf`` is a prebuilt image; by default the image of ``gainlink firmware build --target cortex-m4``
-    for ``artifact`` and ``board`` (built and cached).
+    ``elf`` is a prebuilt image; by default the image of ``gainlink firmware build --board BOARD`` (the
+    board's core) for ``artifact`` (built and cached).
     """
     from gainlink.firmware.build import build
+    from gainlink.firmware.targets import BOARDS
     from gainlink.firmware.uart import QemuUart
 
     protocol, host, port, options = transport.qemu_serve()
     if elf is None:
-        elf = build(artifact, target="cortex-m4", board=board).files["elf"]
+        elf = build(artifact, target=BOARDS[board].core, board=board).files["elf"]
     elif not Path(elf).is_file():
         raise FirmwareError(f"firmware image {elf} not found")
     return QemuUart(

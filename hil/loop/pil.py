@@ -1,4 +1,4 @@
-"""Processor-in-the-loop: the Cortex-M4F image in QEMU closes the loop with a plant simulated in Python.
+"""Processor-in-the-loop: a Cortex-M image in QEMU closes the loop with a plant simulated in Python.
 
 Samples travel through two FIFOs that the image opens with semihosting (``gl_in.bin``, ``gl_out.bin``),
 one record per step (see ``firmware/ports/cortex-m/main.c``). Python opens its ends read-write, so no
@@ -23,7 +23,8 @@ from typing import Any
 import numpy as np
 from gainlink.errors import FirmwareError, PeerTimeoutError, PlantError
 from gainlink.firmware import qemu as fwqemu
-from gainlink.firmware.build import DEFAULT_BOARD, build
+from gainlink.firmware.build import build
+from gainlink.firmware.targets import resolve_cortex_m
 from gainlink.proof.sampled_plant import SampledPlant
 from gainlink.proof.twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
 from gainlink.proof.twin_plot import twin_difference_figure
@@ -187,7 +188,8 @@ def run_pil(
     plant: DiscretePlant,
     steps: int,
     reference: np.ndarray | None = None,
-    board: str = DEFAULT_BOARD,
+    target: str | None = None,
+    board: str | None = None,
     watchdog_periods: int = 10,
     deadline_s: float = 10.0,
     twin: DiscretePlant | None = None,
@@ -206,8 +208,11 @@ def run_pil(
     reference : ndarray, optional
         (q,) constant absolute reference or (steps, q) sequence; by default the tracked outputs at the
         operating point (``Artifact.r_op``, zero without one).
-    board : str
-        QEMU machine (``mps2-an386`` or ``netduinoplus2``).
+    target : str, optional
+        The core whose image runs: ``cortex-m0``, ``cortex-m3``, ``cortex-m4`` (default), ``cortex-m7``,
+        ``cortex-m33`` or ``cortex-m55`` (see :mod:`gainlink.firmware.targets`).
+    board : str, optional
+        Its QEMU machine (default: the target's; a board alone implies its core).
     deadline_s : float
         How long to wait for one answer before declaring the firmware silent.
     twin : DiscretePlant, optional
@@ -224,8 +229,10 @@ def run_pil(
     a = artifact
     if steps < 1:
         raise PlantError("--steps must be at least 1")
+    platform = resolve_cortex_m(target, board)
+    board = platform.board.name
     R = np.broadcast_to(a.r_op if reference is None else np.asarray(reference, float), (steps, a.q))
-    elf = build(a, target="cortex-m4", board=board).files["elf"]
+    elf = build(a, target=platform.target.name, board=board).files["elf"]
     tw = None if twin is None else TwinLoop(a, outputs=twin.outputs, advance=lambda u: twin.advance(u=u), steps=steps)
     mt = (
         None

@@ -6,9 +6,9 @@ Example::
     artifact = "out/demo/gains.json"      # relative to the scenario file
     duration = 10.0                        # s of plant time
     mode = "lockstep"                      # lockstep | realtime
-    controller = "firmware"                # firmware (host app) | reference (Python node) | qemu (Cortex-M4F image)
+    controller = "firmware"                # firmware (host app) | reference (Python node) | qemu (Cortex-M image)
     firmware = "path/to/gainlink_can"      # optional: a prebuilt executable or, for qemu, ELF (default: built)
-    board = "mps2-an386"                   # qemu: mps2-an386 | netduinoplus2
+    board = "mps2-an386"                   # qemu: a board whose image serves its UART (not microbit)
     step_timeout = 0.05                    # lockstep: wait per command [s]
     peer_timeout = 1.0                     # end the run when the controller is silent this long [s]
     period = 0.01                          # realtime: tick [s] (default: the artifact's Ts)
@@ -38,8 +38,9 @@ for both: each hand-over is a local context switch, the fastest lockstep), ``sep
 each: what two busy-polling peers need), ``none`` (the kernel decides); ``auto`` (default) is
 ``shared`` in lockstep, ``separate`` with ``busy_poll_us`` in the transport, else ``none``.
 
-``controller = "qemu"`` runs the Cortex-M4F image (``gainlink firmware build --target cortex-m4``, or the
-ELF named by ``firmware``) in ``qemu-system-arm`` on ``board``, speaking on its UART, which QEMU serves as a
+``controller = "qemu"`` runs the Cortex-M image of ``board``'s core (``gainlink firmware build --target cortex-mN
+--board BOARD``, or the ELF named by ``firmware``) in ``qemu-system-arm`` on ``board`` (mps2-an386 by default;
+any board of gainlink.firmware.targets whose image carries the bus nodes), speaking on its UART, which QEMU serves as a
 TCP socket: ``[transport] kind = "mavlink", url = "tcp:HOST:PORT"`` (MAVLink) or ``interface = "slcan",
 channel = "socket://HOST:PORT"`` (CAN through slcan, classic frames). The bridge starts QEMU, waits for the
 image's banner, runs the loop and always stops QEMU. ``affinity = "auto"`` leaves QEMU's threads to the
@@ -76,6 +77,7 @@ from typing import Any
 import numpy as np
 from gainlink.errors import ScenarioError
 from gainlink.fileio import read_toml
+from gainlink.firmware.targets import BOARDS as _FIRMWARE_BOARDS
 
 from .scheduler import AFFINITIES, OVERRUN_POLICIES
 
@@ -107,7 +109,7 @@ TOP_KEYS = {
     "board",
 }
 CONTROLLERS = ("firmware", "reference", "qemu")
-BOARDS = ("mps2-an386", "netduinoplus2")
+BOARDS = tuple(sorted((b.name for b in _FIRMWARE_BOARDS.values() if b.serves), key=lambda n: n != "mps2-an386"))
 MODES = ("lockstep", "realtime")
 FAULT_KINDS = ("drop", "delay", "duplicate", "reorder", "silent", "crash")
 PROFILE_KEYS = {

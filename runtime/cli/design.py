@@ -58,6 +58,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--output", required=True, help="CSV to write: u, sat, fault, xh, z")
     p.add_argument("--engine", default="reference", help=f"one of {', '.join(engine_names())}")
     p.add_argument(
+        "--target",
+        help="with --engine qemu: the Cortex-M core whose image runs (cortex-m0|m3|m4|m7|m33|m55; default cortex-m4)",
+    )
+    p.add_argument("--board", help="with --engine qemu: its QEMU board (default: the target's)")
+    p.add_argument(
         "--compare",
         metavar="OTHER.csv",
         help="another replay output of the same input (e.g. the reference's): both are checked one step "
@@ -254,10 +259,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
                 f"comparison file {args.compare} has {other.u.shape[0]} samples, input {args.input} has {steps}"
             )
     samples = read_samples(args.input, a)
-    trace = api.replay(a, samples.Y, samples.R, engine=args.engine)
+    trace = api.replay(a, samples.Y, samples.R, engine=args.engine, target=args.target, board=args.board)
     write_trace(args.output, trace, samples.t)
+    where = f" ({'/'.join(x for x in (args.target, args.board) if x)})" if args.target or args.board else ""
     print(
-        f"replayed {trace.u.shape[0]} samples through {args.engine}: "
+        f"replayed {trace.u.shape[0]} samples through {args.engine}{where}: "
         f"{int(trace.saturated.any(axis=1).sum())} saturated, {int(trace.fault.sum())} refused as non-finite; "
         f"wrote {args.output}"
     )

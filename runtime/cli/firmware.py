@@ -11,8 +11,11 @@ import sys
 from pathlib import Path
 
 from ..errors import DataError, FirmwareError, GainlinkError, ToolchainError
+from ..firmware.targets import BOARDS, CORTEX_M_TARGETS, TARGETS, resolve, resolve_cortex_m
 
-BOARDS = ("mps2-an386", "netduinoplus2")
+_BOARD_HELP = "QEMU board of the Cortex-M image (default: the target's first): " + ", ".join(
+    f"{b.name} ({b.core})" for b in BOARDS.values()
+)
 
 # Flashing commands for a real board: (board, probe) -> argv template ({hex}, {elf}).
 FLASH_COMMANDS = {
@@ -27,6 +30,7 @@ FLASH_COMMANDS = {
         "program {elf} verify reset exit",
     ],
     ("mps2-an386", "pyocd"): ["pyocd", "flash", "--target", "cortex_m", "--format", "elf", "{elf}"],
+    ("microbit", "pyocd"): ["pyocd", "flash", "--target", "nrf51", "--format", "hex", "{hex}"],
 }
 
 
@@ -39,8 +43,9 @@ def _build(args: argparse.Namespace) -> int:
     from gainlink.firmware.size import size_report
     from gainlink.shipping.artifact import load
 
+    platform = resolve(args.target, args.board)  # a wrong target or board is refused before any work
     artifact = load(args.artifact)
-    res = build(artifact, target=args.target, board=args.board)
+    res = build(artifact, target=platform.target.name, board=platform.board.name if platform.board else None)
     stem = f"gainlink_{artifact.name}"
     files: dict[str, bytes | str] = {}
     manifest = {
@@ -50,7 +55,7 @@ def _build(args: argparse.Namespace) -> int:
         "board": res.board,
         "files": {},
     }
-    if args.target == "cortex-m4":
+    if platform.board is not None:
         for ext in ("elf", "bin", "hex", "map"):
             files[f"{stem}.{ext}"] = res.files[ext].read_bytes()
             manifest["files"][ext] = f"{stem}.{ext}"
@@ -96,18 +101,24 @@ def flash_command(out_dir: Path, *, probe: str) -> list[str]:
             f"{out_dir} holds no firmware.json: run `gainlink firmware build ... --out {out_dir}` first"
         )
     manifest = json.loads(manifest_path.read_text("utf-8"))
-    if manifest.get("target") != "cortex-m4":
-        raise FirmwareError(f"{out_dir} holds a {manifest.get('target')} build; flashing needs --target cortex-m4")
+    if manifest.get("target") not in CORTEX_M_TARGETS:
+        raise FirmwareError(
+            f"{out_dir} holds a {manifest.get('target')} build; flashing needs a Cortex-M image (--target cortex-mN)"
+        )
     board = manifest["board"]
     template = FLASH_COMMANDS.get((board, probe))
     if template is None:
         known = ", ".join(p for b, p in FLASH_COMMANDS if b == board)
+        if not known:  # the MPS2/MPS3 FPGA boards load images from their USB mass storage (images.txt)
+            raise FirmwareError(
+                f"no flashing recipe for board {board}: copy {manifest['files']['bin']} with the board's own loader"
+            )
         raise FirmwareError(f"no {probe} recipe for board {board} (use --probe {known})")
     paths = {
         "hex": str((out_dir / manifest["files"]["hex"]).resolve()),
         "elf": str((out_dir / manifest["files"]["elf"]).resolve()),
     }
-    for key, path in paths.items():
+    for path in paths.values():
         if not Path(path).is_file():
             raise FirmwareError(f"{path} is missing (rebuild the firmware)")
     return [part.format(**paths) for part in template]
@@ -186,8 +197,8 @@ def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: 
 
 def _run(args: argparse.Namespace) -> int:
     # Transport options (added by the CAN and MAVLink work) each select their own host application here;
-    # without one, the plain loop executable runs. --target cortex-m4 serves them from the image in QEMU.
-    if args.target == "cortex-m4":
+    # without one, the plain loop executable runs. --target cortex-mN serves them from the image in QEMU.
+    if args.target != "host" or args.board is not None:
         return _run_image(args)
     if getattr(args, "can", None):
         from gainlink.hil.links.can_firmware import run_firmware_can
@@ -206,9 +217,11 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _run_image(args: argparse.Namespace) -> int:
-    """The Cortex-M4F image in QEMU serving MAVLink (``--mavlink tcp:...``) or slcan (``--can`` slcan config)."""
+    """A Cortex-M image in QEMU serving MAVLink (``--mavlink tcp:...``) or slcan (``--can`` slcan config)."""
     from gainlink.firmware.uart import run_foreground
 
+    platform = resolve_cortex_m(args.target, args.board)
+    image = {"target": platform.target.name, "board": platform.board.name}
     flash = Path(args.flash_dir) if args.flash_dir else None
     if args.input or args.output:
         raise FirmwareError(
@@ -216,9 +229,7 @@ def _run_image(args: argparse.Namespace) -> int:
             "`gainlink replay ... --engine qemu`)"
         )
     if args.mavlink and not args.can:
-        return run_foreground(
-            Path(args.artifact), board=args.board, protocol="mavlink", url=args.mavlink, flash_dir=flash
-        )
+        return run_foreground(Path(args.artifact), **image, protocol="mavlink", url=args.mavlink, flash_dir=flash)
     if args.can and not args.mavlink:
         from gainlink.hil.links.can import layout_from_config, slcan_image_options
         from gainlink.hil.links.can_firmware import read_can_config
@@ -227,20 +238,20 @@ def _run_image(args: argparse.Namespace) -> int:
         config = read_can_config(args.can)
         if config.get("interface") != "slcan" or config.get("fd"):
             raise FirmwareError(
-                "--target cortex-m4 --can needs a classic slcan configuration "
+                f"--target {platform.target.name} --can needs a classic slcan configuration "
                 '(e.g. {"interface": "slcan", "channel": "socket://127.0.0.1:5761"})'
             )
         layout = layout_from_config(config, artifact=load(args.artifact))
         return run_foreground(
             Path(args.artifact),
-            board=args.board,
+            **image,
             protocol="slcan",
             url=str(config.get("channel", "")),
             options=slcan_image_options(layout),
             flash_dir=flash,
         )
     raise FirmwareError(
-        "--target cortex-m4 serves one link: --mavlink tcp:HOST:PORT or --can with an slcan configuration"
+        f"--target {platform.target.name} serves one link: --mavlink tcp:HOST:PORT or --can with an slcan configuration"
     )
 
 
@@ -254,6 +265,7 @@ def _pil(args: argparse.Namespace) -> int:
     from gainlink.proof.twin_plot import png_bytes
     from gainlink.shipping.artifact import load
 
+    platform = resolve_cortex_m(args.target, args.board)
     artifact = load(args.artifact)
     ref = args.reference
     if ref is not None and len(ref) != artifact.q:
@@ -263,12 +275,20 @@ def _pil(args: argparse.Namespace) -> int:
     twin = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))  # the twin's plant
     model, start = _pil_model_twin(artifact, plant)
     result = run_pil(
-        artifact, plant=plant, steps=args.steps, reference=ref, board=args.board, twin=twin, model_twin=model
+        artifact,
+        plant=plant,
+        steps=args.steps,
+        reference=ref,
+        target=platform.target.name,
+        board=platform.board.name,
+        twin=twin,
+        model_twin=model,
     )
     summary = {
         "artifact": artifact.name,
         "sha256": artifact.sha256,
-        "board": args.board,
+        "target": platform.target.name,
+        "board": platform.board.name,
         "plant": args.plant,
         **result.summary(),
         "model_twin": _pil_model_mismatch(artifact, result, start=start),
@@ -351,13 +371,13 @@ def _pil_csv(artifact, result, *, steps: int) -> str:
 def _add_build_parser(sub) -> None:
     p = sub.add_parser(
         "build",
-        help="build the firmware for an artifact (host or Cortex-M4F)",
-        description="Build the firmware with the artifact's gains. cortex-m4 writes .elf .bin .hex "
+        help="build the firmware for an artifact (host or a Cortex-M core)",
+        description="Build the firmware with the artifact's gains. A Cortex-M target writes .elf .bin .hex "
         ".map and a JSON size report; host writes the shared/static libraries and the loop executable.",
     )
     p.add_argument("artifact", help="gains.json")
-    p.add_argument("--target", choices=("host", "cortex-m4"), required=True)
-    p.add_argument("--board", choices=BOARDS, default="mps2-an386", help="Cortex-M board (default mps2-an386)")
+    p.add_argument("--target", choices=tuple(TARGETS), required=True)
+    p.add_argument("--board", choices=tuple(BOARDS), help=_BOARD_HELP)
     p.add_argument("--out", required=True, help="output folder")
     p.set_defaults(func=_build)
 
@@ -367,7 +387,7 @@ def _add_flash_parser(sub) -> None:
         "flash",
         help="flash a built Cortex-M image to a real board",
         description="Print (and unless --dry-run, run) the flashing command for an image built by "
-        "`gainlink firmware build --target cortex-m4 --out DIR`.",
+        "`gainlink firmware build --target cortex-mN --out DIR`.",
     )
     p.add_argument("dir", help="folder written by `firmware build`")
     p.add_argument("--probe", choices=("pyocd", "openocd"), required=True)
@@ -378,23 +398,23 @@ def _add_flash_parser(sub) -> None:
 def _add_run_parser(sub) -> None:
     p = sub.add_parser(
         "run",
-        help="run the firmware for an artifact (host build, or the Cortex-M4F image in QEMU)",
+        help="run the firmware for an artifact (host build, or a Cortex-M image in QEMU)",
         description="Build (cached) and start the host firmware. With --input, replay a CSV "
-        "(columns y0.., r0..) through the loop executable and write the replay CSV. With --target "
-        "cortex-m4, run the image in QEMU as a bus node on its UART, served as a TCP socket: "
+        "(columns y0.., r0..) through the loop executable and write the replay CSV. With a Cortex-M "
+        "--target (or --board), run the image in QEMU as a bus node on its UART, served as a TCP socket: "
         "--mavlink tcp:HOST:PORT, or --can with an slcan configuration (channel socket://HOST:PORT).",
     )
     p.add_argument("artifact", help="gains.json")
     p.add_argument(
         "--target",
-        choices=("host", "cortex-m4"),
+        choices=tuple(TARGETS),
         default="host",
-        help="host (default) or cortex-m4 (the image in QEMU, on its UART)",
+        help="host (default) or a Cortex-M core (the image in QEMU, on its UART)",
     )
-    p.add_argument("--board", choices=BOARDS, default="mps2-an386", help="with --target cortex-m4: QEMU board")
+    p.add_argument("--board", choices=tuple(BOARDS), help=_BOARD_HELP)
     p.add_argument(
         "--flash-dir",
-        help="with --target cortex-m4: the image's flash (persisted parameters; default "
+        help="with a Cortex-M target: the image's flash (persisted parameters; default "
         "flash-BOARD beside the artifact)",
     )
     p.add_argument("--input", help="replay input CSV; without it stdin/stdout are passed to the executable")
@@ -407,7 +427,7 @@ def _add_run_parser(sub) -> None:
         "--mavlink",
         metavar="URL",
         help="run the MAVLink app (parameter server + HIL link) on "
-        "udpin:HOST:PORT or udpout:HOST:PORT; with --target cortex-m4: tcp:HOST:PORT (the image's UART)",
+        "udpin:HOST:PORT or udpout:HOST:PORT; with a Cortex-M target: tcp:HOST:PORT (the image's UART)",
     )
     p.add_argument(
         "--param-file", help="with --mavlink: persisted parameters (default: mavlink_params.txt beside the artifact)"
@@ -435,8 +455,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     pil_sub.required = True
     p = pil_sub.add_parser(
         "run",
-        help="close the loop with the Cortex-M4F image in QEMU",
-        description="Run the Cortex-M4F image in QEMU against a plant simulated in Python, one "
+        help="close the loop with a Cortex-M image in QEMU",
+        description="Run a Cortex-M image in QEMU against a plant simulated in Python, one "
         "sample per semihosting FIFO round trip; prints a JSON summary.",
     )
     p.add_argument("artifact", help="gains.json")
@@ -446,7 +466,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="'artifact' (the artifact's discrete model; alias 'linear') or a gainlink.hil plant name",
     )
     p.add_argument("--steps", type=int, required=True, help="number of samples")
-    p.add_argument("--board", choices=BOARDS, default="mps2-an386")
+    p.add_argument(
+        "--target",
+        choices=CORTEX_M_TARGETS,
+        help="the core whose image runs (default cortex-m4, or the core of --board)",
+    )
+    p.add_argument("--board", choices=tuple(BOARDS), help=_BOARD_HELP)
     p.add_argument(
         "--reference",
         type=float,

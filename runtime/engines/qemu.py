@@ -1,23 +1,26 @@
-"""The ``qemu`` engine: the Cortex-M4F image under ``qemu-system-arm``, samples via semihosting files."""
+"""The ``qemu`` engine: a Cortex-M image under ``qemu-system-arm``, samples via semihosting files."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..firmware import qemu as fwqemu
-from ..firmware.build import DEFAULT_BOARD, build
+from ..firmware.build import build
+from ..firmware.targets import resolve_cortex_m
 from ..proof.reference import Trace
 from ..shipping.artifact import Artifact
 from .native import trace_from_raw
 
 
 def run_raw(
-    artifact: Artifact, Y: np.ndarray, R: np.ndarray | None, *, board: str = DEFAULT_BOARD
+    artifact: Artifact, Y: np.ndarray, R: np.ndarray | None, *, target: str | None = None, board: str | None = None
 ) -> dict[str, np.ndarray]:
-    """Replay a block through the image on ``board``; return float32 outputs (``u sat xh z fault status``)."""
+    """Replay a block through the image of ``target`` on ``board``; return float32 outputs
+    (``u sat xh z fault status``). Default: cortex-m4 on mps2-an386; a board alone implies its core."""
     a = artifact
-    res = build(a, target="cortex-m4", board=board)
-    rec = fwqemu.replay(res.files["elf"], board=board, n=a.n, m=a.m, p=a.p, q=a.q, Y=Y, R=R)
+    platform = resolve_cortex_m(target, board)
+    res = build(a, target=platform.target.name, board=platform.board.name)
+    rec = fwqemu.replay(res.files["elf"], board=platform.board.name, n=a.n, m=a.m, p=a.p, q=a.q, Y=Y, R=R)
     return {
         "u": np.array(rec["u"]),
         "sat": np.array(rec["sat"]),
@@ -28,8 +31,10 @@ def run_raw(
     }
 
 
-def run(artifact: Artifact, Y: np.ndarray, R: np.ndarray, *, board: str = DEFAULT_BOARD) -> Trace:
-    """Replay ``Y`` (N, p) and ``R`` (N, q) through the Cortex-M4F image in QEMU.
+def run(
+    artifact: Artifact, Y: np.ndarray, R: np.ndarray, *, target: str | None = None, board: str | None = None
+) -> Trace:
+    """Replay ``Y`` (N, p) and ``R`` (N, q) through a Cortex-M image in QEMU.
 
     Parameters
     ----------
@@ -37,12 +42,14 @@ def run(artifact: Artifact, Y: np.ndarray, R: np.ndarray, *, board: str = DEFAUL
         The artifact (its image is built and cached on first use).
     Y, R : ndarray
         Measurements and references, one row per step (cast to float32).
-    board : str
-        ``mps2-an386`` (default) or ``netduinoplus2``.
+    target : str, optional
+        ``cortex-m0``, ``cortex-m3``, ``cortex-m4`` (default), ``cortex-m7``, ``cortex-m33`` or ``cortex-m55``.
+    board : str, optional
+        Its QEMU board (default: the target's, see :mod:`gainlink.firmware.targets`).
 
     Returns
     -------
     Trace
         The firmware's outputs (float32 values as float64 arrays).
     """
-    return trace_from_raw(run_raw(artifact, Y, R, board=board), m=artifact.m)
+    return trace_from_raw(run_raw(artifact, Y, R, target=target, board=board), m=artifact.m)

@@ -1,9 +1,10 @@
 """CMake driver for the firmware: export the gains, configure, build, cache by artifact sha256.
 
-Builds live under ``<repo>/.cache/firmware/<name>-<key>/`` where the key hashes the artifact's sha256,
-the target, the board and the build options, so tests and commands reuse a build of the same artifact
-(CMake itself rebuilds what changed in the C sources). Concurrent builds of one key are serialised with
-a file lock.
+Builds live under ``<repo>/.cache/firmware/<name>-<target>-<key>/`` where the key hashes the artifact's
+sha256, the target, the board and the build options, so tests and commands reuse a build of the same
+artifact and two targets or boards never share a folder (CMake itself rebuilds what changed in the C
+sources). Concurrent builds of one key are serialised with a file lock. Targets and boards:
+:mod:`gainlink.firmware.targets`.
 """
 
 from __future__ import annotations
@@ -20,12 +21,13 @@ from pathlib import Path
 from ..errors import ToolchainError
 from ..shipping.artifact import Artifact
 from ..shipping.codegen import render_c
+from . import targets as _targets
 
 log = logging.getLogger(__name__)
 
-TARGETS = ("host", "cortex-m4")
-BOARDS = ("mps2-an386", "netduinoplus2")
-DEFAULT_BOARD = "mps2-an386"
+TARGETS = tuple(_targets.TARGETS)  # host and every Cortex-M core
+BOARDS = tuple(_targets.BOARDS)
+DEFAULT_BOARD = _targets.DEFAULT_BOARD
 
 
 def repo_root() -> Path:
@@ -99,10 +101,11 @@ def build(
     ----------
     artifact : Artifact
         The artifact whose gains are compiled in.
-    target : {"host", "cortex-m4"}
-        Host libraries and executable, or the Cortex-M4F image.
-    board : {"mps2-an386", "netduinoplus2"}, optional
-        Cortex-M board (default mps2-an386); ignored for the host.
+    target : {"host", "cortex-m0", "cortex-m3", "cortex-m4", "cortex-m7", "cortex-m33", "cortex-m55"}
+        Host libraries and executable, or the image for that Cortex-M core.
+    board : str, optional
+        QEMU board of a Cortex-M image (default: the target's first, e.g. mps2-an386 for cortex-m4; see
+        :mod:`gainlink.firmware.targets`); must be None for the host.
     options : dict, optional
         Extra CMake cache entries (e.g. ``{"GL_SANITIZE": "ON"}``); part of the cache key.
     build_root : Path, optional
@@ -115,26 +118,28 @@ def build(
     Raises
     ------
     ToolchainError
-        A tool is missing, or configure/build failed (the compiler's last lines are in the message).
+        An unknown target or board, a board without that core, a missing tool, or a failed configure or
+        build (the compiler's last lines are in the message).
     """
-    board = _checked_board(target, board)
+    platform = _targets.resolve(target, board, default_target=_targets.HOST)
     options = dict(sorted((options or {}).items()))
     cmake = _which("cmake", "install cmake (make setup)")
-    if target == "cortex-m4":
+    if platform.board is not None:
         _which("arm-none-eabi-gcc", "install gcc-arm-none-eabi and libnewlib-arm-none-eabi (make setup)")
-    src = firmware_dir()
+    board = platform.board.name if platform.board else None
     key_text = "|".join([artifact.sha256, target, board or "", repr(options)])
     key = hashlib.sha256(key_text.encode()).hexdigest()[:16]
     bdir = (build_root or cache_root()) / f"{artifact.name}-{target}-{key}"
     gen = bdir / "gen"
     cm = bdir / "cmake"
     gen.mkdir(parents=True, exist_ok=True)
+    cm = bdir / "cmake"
     with open(bdir / ".lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         for name, text in render_c(artifact).items():
             _write_if_changed(gen / name, text)
         if not (cm / "CMakeCache.txt").is_file():
-            _configure(cmake, src=src, bdir=bdir, gen=gen, cm=cm, target=target, board=board, options=options)
+            _configure(cmake, cm, gen=gen, platform=platform, options=options)
         jobs = str(min(2, os.cpu_count() or 1))
         _run([cmake, "--build", str(cm), "-j", jobs], cwd=bdir, what=f"firmware build ({target})")
     return BuildResult(
@@ -143,51 +148,33 @@ def build(
         board=board,
         build_dir=cm,
         gains_dir=gen,
-        files=_outputs(target, cm),
+        files=_outputs(cm, platform),
     )
 
 
-def _checked_board(target: str, board: str | None) -> str | None:
-    """The board a build of ``target`` is for: none for the host, ``board`` or the default for the Cortex-M."""
-    if target not in TARGETS:
-        raise ToolchainError(f"unknown target {target!r} (choose from {', '.join(TARGETS)})")
-    if target == "host":
-        return None
-    board = board or DEFAULT_BOARD
-    if board not in BOARDS:
-        raise ToolchainError(f"unknown board {board!r} (choose from {', '.join(BOARDS)})")
-    return board
-
-
-def _configure(
-    cmake: str,
-    *,
-    src: Path,
-    bdir: Path,
-    gen: Path,
-    cm: Path,
-    target: str,
-    board: str | None,
-    options: dict[str, str],
-) -> None:
-    """CMake configure of the sources ``src`` with the gains in ``gen`` into ``cm`` (removed again when configuring
-    fails, so the next build starts afresh)."""
+def _configure(cmake: str, cm: Path, *, gen: Path, platform: _targets.Platform, options: dict[str, str]) -> None:
+    """Configure the CMake tree ``cm`` for ``platform`` (removed again when configuring fails)."""
+    src = firmware_dir()
+    target = platform.target.name
     cfg = [cmake, "-S", str(src), "-B", str(cm), f"-DGL_GAINS_DIR={gen}", f"-DGL_TARGET={target}"]
-    if target == "host" and "GL_APPS" not in options:
+    if platform.board is None and "GL_APPS" not in options:
         cfg.append("-DGL_APPS=OFF")  # the library, shared object and loop executable only
-    if target == "cortex-m4":
-        cfg += [f"-DCMAKE_TOOLCHAIN_FILE={src / 'cmake' / 'arm-none-eabi.cmake'}", f"-DGL_BOARD={board}"]
+    if platform.board is not None:
+        cfg += [
+            f"-DCMAKE_TOOLCHAIN_FILE={src / 'cmake' / 'arm-none-eabi.cmake'}",
+            f"-DGL_BOARD={platform.board.name}",
+        ]
     cfg += [f"-D{k}={v}" for k, v in options.items()]
     try:
-        _run(cfg, cwd=bdir, what=f"CMake configure ({target})")
+        _run(cfg, cwd=cm.parent, what=f"CMake configure ({platform.name})")
     except ToolchainError:
         shutil.rmtree(cm, ignore_errors=True)
         raise
 
 
-def _outputs(target: str, cm: Path) -> dict[str, Path]:
-    """What a build of ``target`` in ``cm`` produces, by role."""
-    if target == "host":
+def _outputs(cm: Path, platform: _targets.Platform) -> dict[str, Path]:
+    """What a build in ``cm`` produced, by role."""
+    if platform.board is None:
         return {
             "shared": cm / "libgainlink_host.so",
             "exe": cm / "gainlink_loop_host",

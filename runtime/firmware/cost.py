@@ -1,12 +1,16 @@
 """Instructions per control step, counted by this project's QEMU TCG plugin (``firmware/tools/gl_insn_count.c``).
 
-DWT's cycle counter is not emulated, so the cost is measured as guest instructions executed inside
-``gl_loop_step`` (its symbol range in the ELF; the step inlines everything it calls). The count is
-exact and deterministic.
+DWT's cycle counter is not emulated, so the cost is measured as guest instructions executed from the
+entry of ``gl_loop_step`` to its return, callees included: on the soft-float cores (M0, M3) most of the
+work is in libgcc's float routines and gl_fmaf, outside the step's own symbol, and counting inside the
+symbol only would flatter them. The instructions inside the symbol are reported beside it (``own``).
+The image masks interrupts around each step it replays, so no handler is counted. The count is exact
+and deterministic.
 """
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import tempfile
@@ -18,10 +22,11 @@ import numpy as np
 from ..errors import FirmwareError, ToolchainError
 from ..shipping.artifact import Artifact
 from . import qemu as fwqemu
-from .build import cache_root, firmware_dir
-from .size import symbol_sizes
+from .build import DEFAULT_BOARD, cache_root, firmware_dir
+from .size import symbol_sizes, tool
 
 STEP_SYMBOL = "gl_loop_step"
+_CALL = re.compile(r"^\s*([0-9a-f]+):\s+(?:[0-9a-f]{4}\s+){2}bl\s+[0-9a-f]+ <(\S+)>$")
 
 
 def build_plugin() -> Path:
@@ -48,33 +53,73 @@ def build_plugin() -> Path:
 
 @dataclass(frozen=True)
 class StepCost:
-    """Instructions executed inside the step over a replay."""
+    """Instructions executed by the calls of the step over a replay.
+
+    ``instructions``: from each call's entry to its return, callees included, summed over ``calls``;
+    ``own``: those inside the step's own symbol; ``cheapest`` and ``dearest``: the fewest and most
+    instructions one call took.
+    """
 
     instructions: int
     calls: int
+    own: int = 0
+    cheapest: int = 0
+    dearest: int = 0
 
     @property
     def per_step(self) -> float:
-        """Mean instructions per call."""
+        """Mean instructions per call, callees included."""
         return self.instructions / self.calls if self.calls else float("nan")
+
+    @property
+    def own_per_step(self) -> float:
+        """Mean instructions per call inside the step's own symbol."""
+        return self.own / self.calls if self.calls else float("nan")
+
+
+def return_addresses(elf: Path, symbol: str) -> list[int]:
+    """Addresses right after every direct call (``bl``) of ``symbol`` in ``elf``: where its calls return."""
+    out = subprocess.run(
+        [tool("arm-none-eabi-objdump"), "-d", str(elf)], capture_output=True, text=True, check=True
+    ).stdout
+    sites = [int(m.group(1), 16) for m in map(_CALL.match, out.splitlines()) if m and m.group(2) == symbol]
+    return [site + 4 for site in sites]  # a Thumb-2 bl is 4 bytes
 
 
 def count_step_instructions(
-    elf: Path, artifact: Artifact, *, Y: np.ndarray, R: np.ndarray, board: str = "mps2-an386"
+    elf: Path, artifact: Artifact, *, Y: np.ndarray, R: np.ndarray, board: str = DEFAULT_BOARD
 ) -> StepCost:
-    """Replay ``Y``, ``R`` through ``elf`` in QEMU with the plugin counting inside ``gl_loop_step``."""
-    sym = symbol_sizes(elf, (STEP_SYMBOL,)).get(STEP_SYMBOL)
+    """Replay ``Y``, ``R`` through ``elf`` on ``board`` in QEMU, counting every call of ``gl_loop_step``."""
+    return count_calls(elf, artifact, symbol=STEP_SYMBOL, Y=Y, R=R, board=board)
+
+
+def count_calls(
+    elf: Path, artifact: Artifact, *, symbol: str, Y: np.ndarray, R: np.ndarray, board: str = DEFAULT_BOARD
+) -> StepCost:
+    """Replay ``Y``, ``R`` through ``elf`` on ``board``, counting every direct call of the function ``symbol``
+    (e.g. ``gl_fmaf`` on a soft-float core) from its entry to its return, callees included."""
+    sym = symbol_sizes(elf, (symbol,)).get(symbol)
     if sym is None:
-        raise FirmwareError(f"{elf} has no {STEP_SYMBOL} symbol")
+        raise FirmwareError(f"{elf} has no {symbol} symbol")
+    returns = return_addresses(elf, symbol)
+    if not returns:
+        raise FirmwareError(f"{elf} never calls {symbol} directly: no return address to close a count")
     lo, hi = sym["address"], sym["address"] + sym["size"]
     plugin = build_plugin()
     with tempfile.TemporaryDirectory(prefix="gainlink-cost-") as tmp:
         result = Path(tmp) / "count.txt"
-        args = ["-plugin", f"{plugin},lo={lo:#x},hi={hi:#x},entry={lo:#x},out={result}"]
+        spec = [f"{plugin}", f"lo={lo:#x}", f"hi={hi:#x}", f"entry={lo:#x}", f"out={result}"]
+        spec += [f"ret={r:#x}" for r in returns]
         a = artifact
-        fwqemu.replay(elf, board=board, n=a.n, m=a.m, p=a.p, q=a.q, Y=Y, R=R, plugin=args)
-        fields = dict(item.split("=") for item in result.read_text().split())
-    return StepCost(instructions=int(fields["insns"]), calls=int(fields["calls"]))
+        fwqemu.replay(elf, board=board, n=a.n, m=a.m, p=a.p, q=a.q, Y=Y, R=R, plugin=["-plugin", ",".join(spec)])
+        fields = {k: int(v) for k, v in (item.split("=") for item in result.read_text().split())}
+    return StepCost(
+        instructions=fields["insns"],
+        calls=fields["calls"],
+        own=fields["own"],
+        cheapest=fields["min"],
+        dearest=fields["max"],
+    )
 
 
 def law_macs(artifact: Artifact) -> int:

@@ -13,7 +13,8 @@ RAM_BASE = 0x20000000
 _SECTION = re.compile(r"^\s*\d+\s+(\S+)\s+([0-9a-f]+)\s+([0-9a-f]+)\s+([0-9a-f]+)\s+[0-9a-f]+\s+\S+\s*$")
 
 
-def _tool(name: str) -> str:
+def tool(name: str) -> str:
+    """Path of the binutils program ``name`` (arm-none-eabi-*)."""
     path = shutil.which(name)
     if path is None:
         raise ToolchainError(f"{name} not found: install binutils-arm-none-eabi (make setup)")
@@ -22,7 +23,7 @@ def _tool(name: str) -> str:
 
 def symbol_sizes(elf: Path, names: tuple[str, ...]) -> dict[str, dict]:
     """Address and size of the named symbols (``arm-none-eabi-nm -S``); absent names are left out."""
-    out = subprocess.run([_tool("arm-none-eabi-nm"), "-S", str(elf)], capture_output=True, text=True, check=True)
+    out = subprocess.run([tool("arm-none-eabi-nm"), "-S", str(elf)], capture_output=True, text=True, check=True)
     found = {}
     for line in out.stdout.splitlines():
         parts = line.split()
@@ -38,7 +39,7 @@ def size_report(elf: Path, *, board: str) -> dict:
     the initial values of ``.data``), towards RAM when it lives at or above 0x20000000 (``.data``,
     ``.bss``, the stack).
     """
-    out = subprocess.run([_tool("arm-none-eabi-objdump"), "-h", str(elf)], capture_output=True, text=True, check=True)
+    out = subprocess.run([tool("arm-none-eabi-objdump"), "-h", str(elf)], capture_output=True, text=True, check=True)
     lines = out.stdout.splitlines()
     sections = []
     for i, line in enumerate(lines):

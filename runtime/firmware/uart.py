@@ -344,14 +344,15 @@ class QemuUart:
 
 
 def default_flash_dir(artifact_path: Path, *, board: str) -> Path:
-    """Where ``gainlink firmware run --target cortex-m4`` keeps the image's flash: beside the artifact."""
+    """Where ``gainlink firmware run --target cortex-mN`` keeps the image's flash: beside the artifact."""
     return Path(artifact_path).with_name(f"flash-{board}")
 
 
 def run_foreground(
     artifact_path: Path,
     *,
-    board: str,
+    target: str | None = None,
+    board: str | None = None,
     protocol: str,
     url: str,
     options: Sequence[str] = (),
@@ -363,8 +364,10 @@ def run_foreground(
     ----------
     artifact_path : Path
         gains.json.
-    board : str
-        QEMU machine.
+    target : str, optional
+        Cortex-M core (default cortex-m4; a board alone implies its core).
+    board : str, optional
+        QEMU machine (default: the target's first board).
     protocol : {"mavlink", "slcan"}
         What the image speaks.
     url : str
@@ -381,10 +384,15 @@ def run_foreground(
     """
     from ..shipping.artifact import load
     from .build import build
+    from .targets import resolve_cortex_m
 
+    platform = resolve_cortex_m(target, board)
+    board = platform.board.name
+    if not platform.board.serves:
+        raise FirmwareError(f"the {board} image carries no bus node on its UART (16 KiB of RAM); choose another board")
     host, port = tcp_endpoint(url, scheme="tcp" if protocol == "mavlink" else "socket")
     artifact = load(artifact_path)
-    elf = build(artifact, target="cortex-m4", board=board).files["elf"]
+    elf = build(artifact, target=platform.target.name, board=board).files["elf"]
     flash = flash_dir or default_flash_dir(Path(artifact_path), board=board)
     stop = {"now": False}
 

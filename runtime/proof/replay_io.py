@@ -1,9 +1,9 @@
 """Replay recorded measurements through an engine that runs the control law.
 
 Engines share one signature, ``run(artifact, Y, R) -> Trace``: ``reference`` is the float64
-Python law; ``native`` (host C library) and ``qemu`` (Cortex-M4F image under QEMU) are provided
-by :mod:`gainlink.engines` and loaded on first use, so replay never imports a toolchain it does
-not need.
+Python law; ``native`` (host C library) and ``qemu`` (a Cortex-M image under QEMU; ``target`` and
+``board`` choose which, cortex-m4 on mps2-an386 by default) are provided by :mod:`gainlink.engines`
+and loaded on first use, so replay never imports a toolchain it does not need.
 
 Input CSV: a header with ``y0..y{p-1}`` and ``r0..r{q-1}`` (a ``t`` column is allowed and copied
 through). Output CSV: ``t`` if given, ``u0..``, ``sat0..`` (1 where that input saturated),

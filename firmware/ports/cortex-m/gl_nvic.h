@@ -1,6 +1,6 @@
 /**
  * @file gl_nvic.h
- * @brief The few NVIC and PRIMASK operations the port needs (ARMv7-M system control space).
+ * @brief The few NVIC and PRIMASK operations the port needs (the same on ARMv6-M, ARMv7-M and ARMv8-M).
  */
 #ifndef GAINLINK_GL_NVIC_H
 #define GAINLINK_GL_NVIC_H

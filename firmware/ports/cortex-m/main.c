@@ -1,6 +1,6 @@
 /**
  * @file main.c
- * @brief Cortex-M4F image: a bus node on its UART (MAVLink or slcan), or the loop fed through semihosting
+ * @brief Cortex-M image: a bus node on its UART (MAVLink or slcan), or the loop fed through semihosting
  *        files (replay and PIL), or a UART smoke test.
  *
  * Starts the millisecond clock and the interrupt-driven UART (gl_uart.h) and prints
@@ -9,6 +9,7 @@
  * - `serve mavlink [sysid=N] [compid=N]`: the MAVLink node on the UART (serve.h), parameters persisted
  *   in the semihosting file gl_flash.txt (flash_semihost.h); runs until the simulator is stopped;
  * - `serve slcan [base=ID] [encoding=float32|int16 meas=... cmd=...]`: the CAN node behind slcan (serve.h);
+ *   (images built with GL_IMAGE_SERVE only; the others answer `serve` with exit status GL_EXIT_BAD_INPUT);
  * - anything else: opens `gl_in.bin` (a file or a FIFO) in the simulator's working directory. Without it,
  *   the UART smoke test runs: one step with y = 0.5, r = 0, printed as `u0=0xBITS ...`, exit 0. With it,
  *   `gl_out.bin` is opened for writing and the stream is:
@@ -20,7 +21,12 @@
  * out: header {uint32 magic 'GLO1', count, n, m, p, q, crc32 of the running gains, 0}, then one record per
  *      input {int32 status, uint32 sat_mask, float u[GL_M], float xh[GL_N], float z[GL_QA]}
  *
- * Records are read `block` at a time (use block 1 for a closed loop through FIFOs). All little-endian.
+ * Records are read up to `block` at a time (use block 1 for a closed loop through FIFOs); the image reads
+ * fewer when its buffers are smaller (GL_IMAGE_MAX_BLOCK). All little-endian.
+ *
+ * Each gl_loop_step() of the replay runs with interrupts masked: the step's instruction count
+ * (gainlink.firmware.cost, from the call to its return) then holds the step alone, never the SysTick or
+ * UART handler that happened to interrupt it. The pending interrupt runs right after.
  */
 #include <stdint.h>
 #include <string.h>
@@ -28,13 +34,19 @@
 #include "board.h"
 #include "gainlink/gl_loop.h"
 #include "gl_clock.h"
+#include "gl_nvic.h"
 #include "gl_uart.h"
 #include "semihost.h"
+#if GL_IMAGE_SERVE
 #include "serve.h"
+#endif
 
 #define GL_IN_MAGIC 0x31494C47u  /* "GLI1" */
 #define GL_OUT_MAGIC 0x314F4C47u /* "GLO1" */
-#define GL_MAX_BLOCK 64u
+#ifndef GL_IMAGE_MAX_BLOCK
+#define GL_IMAGE_MAX_BLOCK 64
+#endif
+#define GL_MAX_BLOCK ((uint32_t)GL_IMAGE_MAX_BLOCK)
 #define GL_TAG_STEP 0u
 #define GL_TAG_IDLE 1u
 #define GL_TAG_STAGE 2u
@@ -161,6 +173,10 @@ static int serve_if_asked(void)
     if (n < 2 || strcmp(words[1], "serve") != 0) {
         return -1;
     }
+#if !GL_IMAGE_SERVE
+    uart_puts("error: this image carries no bus node (built without GL_IMAGE_SERVE)\n");
+    return GL_EXIT_BAD_INPUT;
+#else
     if (n >= 3 && strcmp(words[2], "mavlink") == 0) {
         return gl_serve_mavlink(n - 3, &words[3]);
     }
@@ -168,6 +184,7 @@ static int serve_if_asked(void)
         return gl_serve_slcan(n - 3, &words[3]);
     }
     return gl_serve_refuse("serve needs a protocol: mavlink or slcan");
+#endif
 }
 
 /** One input record through the loop into its output record (a step, an idle period or a staged gain set). */
@@ -180,7 +197,9 @@ static void replay_record(const in_record_t *in, out_record_t *o)
         st = stage_from_file();
         memcpy(o->u, loop.u, sizeof o->u);
     } else {
+        const uint32_t primask = gl_irq_save();
         st = gl_loop_step(&loop, in->y, in->r, o->u);
+        gl_irq_restore(primask);
     }
     o->status = (int32_t)st;
     o->sat_mask = loop.sat_mask;
@@ -195,7 +214,7 @@ static int replay_file(int32_t fin)
     if (gl_sh_read_all(fin, hdr, sizeof hdr) != 0) {
         return GL_EXIT_IO;
     }
-    if (hdr[0] != GL_IN_MAGIC || hdr[2] == 0u || hdr[2] > GL_MAX_BLOCK || hdr[3] == 0u) {
+    if (hdr[0] != GL_IN_MAGIC || hdr[2] == 0u || hdr[3] == 0u) {
         return GL_EXIT_BAD_INPUT;
     }
     if (gl_loop_init(&loop, &gl_gains_default, hdr[3]) != GL_OK) {
@@ -206,7 +225,7 @@ static int replay_file(int32_t fin)
         return GL_EXIT_IO;
     }
     const uint32_t count = hdr[1];
-    const uint32_t block = hdr[2];
+    const uint32_t block = hdr[2] < GL_MAX_BLOCK ? hdr[2] : GL_MAX_BLOCK;
     const uint32_t out_hdr[8] = {GL_OUT_MAGIC, count, GL_N, GL_M, GL_P, GL_Q, gl_loop_active_crc32(&loop), 0u};
     if (gl_sh_write_all(fout, out_hdr, sizeof out_hdr) != 0) {
         return GL_EXIT_IO;

@@ -1,0 +1,37 @@
+/**
+ * @file board_mps2_an385.c
+ * @brief Arm MPS2 AN385 (Cortex-M3, no FPU): CMSDK APB UART0 (gl_cmsdk_uart.c), interrupt driven.
+ *
+ * UART0's receive interrupt is IRQ 0 and its transmit interrupt IRQ 1 (QEMU's mps2.c, as the FPGA image);
+ * CMSDK timer 1 (unused otherwise) wakes the emulator.
+ */
+#include <stdint.h>
+
+#include "board.h"
+#include "gl_cmsdk_uart.h"
+
+static const gl_cmsdk_uart_t uart0 = {
+    .base = 0x40004000u,
+    .irq_rx = 0u,
+    .irq_tx = 1u,
+    .bauddiv = 16u,
+    .wake_timer = 0x40001000u,
+};
+
+const char gl_board_name[] = "mps2-an385";
+const uint32_t gl_board_core_hz = 25000000u;
+
+void gl_board_uart_init(void)
+{
+    gl_cmsdk_uart_init(&uart0);
+}
+
+void gl_board_uart_start_tx(void)
+{
+    gl_cmsdk_uart_start_tx(&uart0);
+}
+
+int gl_board_irq(uint32_t irq)
+{
+    return gl_cmsdk_uart_irq(&uart0, irq);
+}
