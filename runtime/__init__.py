@@ -15,8 +15,8 @@ __version__ = "0.1.0"
 # imports from the submodules (``from gainlink.design import design``), which is unaffected.
 from . import design as _design_module  # noqa: F401
 from . import hil
-from . import replay as _replay_module
-from . import simulate as _simulate_module
+from . import replay as _replay_module  # noqa: F401
+from . import simulate as _simulate_module  # noqa: F401
 from .api import design, from_gains, load, replay, simulate
 from .artifact import Artifact
 from .compensator import compensator_stability

@@ -97,7 +97,7 @@ def payload_crc32(*, header: tuple[int, ...], fields: dict[str, np.ndarray]) -> 
 
 def c_float(x: float) -> str:
     """A float32 as a C literal that reads back to the same float (``%.9g`` + ``f``)."""
-    text = "%.9g" % float(np.float32(x))
+    text = f"{float(np.float32(x)):.9g}"
     if not any(ch in text for ch in ".e"):
         text += ".0"
     return text + "f"
@@ -118,8 +118,8 @@ def render_header(artifact: Artifact, gains: GainSet) -> str:
     """Text of ``gl_gains.h``: dimensions, structure and identity of the artifact as macros."""
     a = artifact
     return (
-        _banner(a)
-        + "/**\n * @file gl_gains.h\n * @brief Dimensions and structure of the artifact the firmware is built for.\n */\n"
+        _banner(a) + "/**\n * @file gl_gains.h\n"
+        " * @brief Dimensions and structure of the artifact the firmware is built for.\n */\n"
         "#ifndef GL_GAINS_H\n#define GL_GAINS_H\n\n"
         f'#define GL_NAME "{a.name}"\n'
         f'#define GL_ARTIFACT_SHA256 "{a.sha256}"\n'
@@ -264,18 +264,21 @@ def _step_estimate(a: Artifact, st: _Stream, body: list[str]) -> None:
         body += [f"    xn{i} = GL_FMA({st.next()}, dy{k}, xn{i});" for k in range(a.p)]
 
 
+# how firmware/src/gl_loop.c opens the generic gl_step_core; the generated one keeps its layout
+_STEP_CORE_OPEN = "static inline __attribute__((always_inline)) uint32_t gl_step_core("
+
+
 def _step_file(a: Artifact, body: list[str], length: int) -> str:
     n, m, p, q = a.n, a.m, a.p, a.q
     return (
-        _banner(a)
-        + "/**\n * @file gl_step.h\n * @brief The control law for n=%d m=%d p=%d q=%d (%s, %s), fully unrolled.\n"
+        _banner(a) + "/**\n * @file gl_step.h\n"
+        f" * @brief The control law for n={n} m={m} p={p} q={q} ({a.observer_form}, {a.anti_windup}), fully unrolled.\n"
         " *\n * Included by gl_loop.c in GL_STEP_UNROLLED builds in place of the generic loops; same operations,\n"
-        " * same order, so the results are bit-identical. Stream length %d coefficients.\n */\n"
-        % (n, m, p, q, a.observer_form, a.anti_windup, length)
+        f" * same order, so the results are bit-identical. Stream length {length} coefficients.\n */\n"
         + "#ifndef GL_STEP_H\n#define GL_STEP_H\n\n"
         f'_Static_assert(GL_STREAM_LEN == {length}, "gl_step.h does not match the library\'s stream layout");\n\n'
-        "static inline __attribute__((always_inline)) uint32_t gl_step_core(const float *w, float *xh_io, float *z_io,\n"
-        "                                                                  const float *ys, const float *rs, float *u)\n"
+        f"{_STEP_CORE_OPEN}const float *w, float *xh_io, float *z_io,\n"
+        f"{' ' * (len(_STEP_CORE_OPEN) - 1)}const float *ys, const float *rs, float *u)\n"
         "{\n" + "\n".join(body) + "\n}\n\n#endif /* GL_STEP_H */\n"
     )
 

@@ -324,7 +324,7 @@ def implement(data: dict, implementation: dict, warnings: list[str]):
 
 def augment(d: Discretised, Ci: np.ndarray, Ts: float) -> tuple[np.ndarray, np.ndarray]:
     """The plant augmented with ``z+ = z + Ts (r - Ci y)`` (taken at r = 0) for integral action."""
-    n, m = d.Bd.shape
+    n = d.Bd.shape[0]
     q = Ci.shape[0]
     Aa = np.block([[d.Ad, np.zeros((n, q))], [-Ts * Ci @ d.Cd, np.eye(q)]])
     Ba = np.vstack([d.Bd, -Ts * Ci @ d.Dd])

@@ -139,7 +139,7 @@ def test_a_run_that_cannot_be_built_is_named_before_anything_runs(pend, tmp_path
         pend,
         draw=[{"target": "plant.parameters.l", "distribution": "uniform", "low": 0.9, "high": 1.1, "apply": "scale"}],
     )
-    with pytest.raises(CampaignError, match="needs a number at plant.parameters.l in the base"):
+    with pytest.raises(CampaignError, match=r"needs a number at plant\.parameters\.l in the base"):
         plan_campaign(parse_campaign(scale))
     path = tmp_path / "c.toml"
     path.write_text(toml_write.dumps(small_campaign(pend, kind="hil")))

@@ -438,7 +438,7 @@ def test_wood_berry_fmu_refuses_a_step_that_does_not_divide_a_dead_time(wood_ber
         assert plant.outputs().tolist() == [0.0, 0.0]
         # The refused step changed nothing: a dividing step still runs, and then the step length is fixed.
         plant.advance(u=np.array([1.0, 0.0]), dt=WB_TS)
-        with pytest.raises(PlantError, match="communication step 0.5 min differs from the first one"):
+        with pytest.raises(PlantError, match=r"communication step 0\.5 min differs from the first one"):
             plant.advance(u=np.zeros(2), dt=0.5)
         # A dead time longer than the delay line holds is refused the same way.
         plant.reset(initial={})

@@ -120,7 +120,8 @@ def test_ten_percent_drops_show_as_a_cost_against_the_twin(pendulum_gains, can_f
     assert clean.metrics["lost"] == 0 and drops.metrics["lost"] == 40
     c, d = clean.metrics["twin"], drops.metrics["twin"]
     print(
-        f"against the twin: fault-free max |du| {c['worst_du_rel']:.3g} of span, |dy| {c['worst_dy_rel']:.3g} of range, "
+        f"against the twin: fault-free max |du| {c['worst_du_rel']:.3g} of span, "
+        f"|dy| {c['worst_dy_rel']:.3g} of range, "
         f"IAE {c['iae']['r_x']['difference_rel']:+.3g}; 10 % drops {d['worst_du_rel']:.3g}, {d['worst_dy_rel']:.3g}, "
         f"IAE {d['iae']['r_x']['difference_rel']:+.3g}"
     )

@@ -94,7 +94,7 @@ def test_linear_plant_refuses_bad_perturbations_in_one_line(config, message):
 def test_linear_plant_without_a_model_or_with_a_missing_spec_says_so(tmp_path):
     with pytest.raises(PlantError, match="needs a model"):
         plant_from_config({"kind": "linear"})
-    with pytest.raises(PlantError, match="plant linear: .*nope.toml"):
+    with pytest.raises(PlantError, match=r"plant linear: .*nope\.toml"):
         plant_from_config({"kind": "linear", "spec": "nope.toml"}, base_dir=tmp_path)
 
 

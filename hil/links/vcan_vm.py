@@ -43,10 +43,12 @@ mount -t sysfs sys /sys
 mount -t devtmpfs dev /dev
 for m in $(cat /modules.order); do insmod /lib/modules/$m || echo "gainlink-vm: insmod $m failed"; done
 OUT=$(sed -n 's/.*gl_out=\([^ ]*\).*/\1/p' /proc/cmdline)
-mount -t 9p -o trans=virtio,version=9p2000.L,ro,msize=512000,cache=loose hostroot /host || echo "gainlink-vm: 9p mount failed"
+mount -t 9p -o trans=virtio,version=9p2000.L,ro,msize=512000,cache=loose hostroot /host \
+  || echo "gainlink-vm: 9p mount failed"
 mount -t tmpfs -o size=256m tmpfs /ovl
 mkdir -p /ovl/upper /ovl/work
-mount -t overlay overlay -o lowerdir=/host,upperdir=/ovl/upper,workdir=/ovl/work /newroot || echo "gainlink-vm: overlay failed"
+mount -t overlay overlay -o lowerdir=/host,upperdir=/ovl/upper,workdir=/ovl/work /newroot \
+  || echo "gainlink-vm: overlay failed"
 mount -t proc proc /newroot/proc
 mount -t sysfs sys /newroot/sys
 mount -t devtmpfs dev /newroot/dev

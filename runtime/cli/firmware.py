@@ -107,7 +107,7 @@ def flash_command(out_dir: Path, *, probe: str) -> list[str]:
         "hex": str((out_dir / manifest["files"]["hex"]).resolve()),
         "elf": str((out_dir / manifest["files"]["elf"]).resolve()),
     }
-    for key, path in paths.items():
+    for path in paths.values():
         if not Path(path).is_file():
             raise FirmwareError(f"{path} is missing (rebuild the firmware)")
     return [part.format(**paths) for part in template]

@@ -121,9 +121,10 @@ def _linearize(args: argparse.Namespace) -> int:
         template=Path(args.template) if args.template else None,
         horizon=args.horizon,
     )
+    point = ", ".join(f"{k}={v:g}" for k, v in result.point.items()) or "start values"
     print(
         f"wrote {args.out}: n={result.A.shape[0]} m={result.B.shape[1]} p={result.C.shape[0]} "
-        f"({result.method}, operating point {', '.join(f'{k}={v:g}' for k, v in result.point.items()) or 'start values'})"
+        f"({result.method}, operating point {point})"
     )
     return 0
 
