@@ -2,13 +2,13 @@
 
 Builds live under ``<repo>/.cache/firmware/<name>-<key>/`` where the key hashes the artifact's sha256,
 the target, the board and the build options, so tests and commands reuse a build of the same artifact
-(CMake itself rebuilds what changed in the C sources). Concurrent builds of one key are serialised with
-a file lock.
+(CMake itself rebuilds what changed in the C sources). Everything that writes into a build folder runs
+under its file lock (``<build>/.lock``), so concurrent builds of one key (pytest-xdist workers, Dask workers)
+build it once and the others then find it done.
 """
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import logging
 import os
@@ -20,6 +20,7 @@ from pathlib import Path
 from ..artifact import Artifact
 from ..codegen import render_c
 from ..errors import ToolchainError
+from ..fileio import exclusive_lock
 
 log = logging.getLogger(__name__)
 
@@ -136,8 +137,7 @@ def build(
     bdir = root / f"{artifact.name}-{target}-{key}"
     gen = bdir / "gen"
     gen.mkdir(parents=True, exist_ok=True)
-    with open(bdir / ".lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
+    with exclusive_lock(bdir / ".lock"):
         for name, text in render_c(artifact).items():
             _write_if_changed(gen / name, text)
         cm = bdir / "cmake"
@@ -180,13 +180,14 @@ def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path 
     """
     result = build(artifact, target="host", options={"GL_APPS": "ON"}, build_root=build_root)
     exe = result.build_dir / relpath
-    if not exe.is_file():
-        _run(["cmake", str(result.build_dir)], cwd=result.build_dir, what=f"reconfiguring for {target}")
-        _run(
-            ["cmake", "--build", str(result.build_dir), "--target", target, "-j", "2"],
-            cwd=result.build_dir,
-            what=f"building {target}",
-        )
+    with exclusive_lock(result.build_dir.parent / ".lock"):
+        if not exe.is_file():
+            _run(["cmake", str(result.build_dir)], cwd=result.build_dir, what=f"reconfiguring for {target}")
+            _run(
+                ["cmake", "--build", str(result.build_dir), "--target", target, "-j", "2"],
+                cwd=result.build_dir,
+                what=f"building {target}",
+            )
     if not exe.is_file():
         raise ToolchainError(f"{target} was not built (expected {exe})")
     return exe
