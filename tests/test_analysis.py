@@ -6,9 +6,10 @@ import json
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES, run_cli
 from gainlink.analysis import analyze, transmission_zeros
 from gainlink.spec import parse_spec
+from support.cli import run_cli
+from support.paths import EXAMPLES
 
 
 def spec(A, B, C, *, D=None, Ts=0.01, controller=None, observer=None):

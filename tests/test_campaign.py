@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES, ROOT, run_cli
 from gainlink.artifact import load
 from gainlink.hil.campaign import CampaignError, parse_campaign, run
 from gainlink.hil.campaign.criteria import growth
@@ -29,6 +28,8 @@ from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil import run_sil
 from gainlink.hil.plants import toml_write
 from scipy import stats
+from support.cli import run_cli
+from support.paths import EXAMPLES, ROOT
 
 VENV_BIN = Path(sys.executable).parent
 # What must be equal between two executions of the same run (timing is not: wall time, C step latency).
@@ -650,7 +651,7 @@ def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, da
         pend, runs=2, draw=small_campaign(pend)["draw"][:1], grid=[{"target": "plant.bug", "values": [False, True]}]
     )
     data["scenario"]["plant"] = dict(
-        data["scenario"]["plant"], kind="python", **{"class": "campaign_plants:BuggyPendulum"}
+        data["scenario"]["plant"], kind="python", **{"class": "support.campaign_plants:BuggyPendulum"}
     )
     with caplog.at_level("INFO", logger="gainlink.hil.campaign.runner"):
         result = run(data, out=tmp_path / "out", scheduler=dask_cluster, batch=4)

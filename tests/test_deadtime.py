@@ -6,12 +6,13 @@ import tomllib
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES, run_cli
 from gainlink import artifact as artifact_mod
 from gainlink.deadtime import element_model
 from gainlink.design import design
 from gainlink.reference import ReferenceLoop
 from gainlink.spec import parse_spec
+from support.cli import run_cli
+from support.paths import EXAMPLES
 
 
 def _step_response(sys, steps: int) -> np.ndarray:

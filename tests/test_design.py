@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 import scipy.linalg
 import scipy.signal
-from conftest import EXAMPLES, run_cli
 from gainlink import artifact as artifact_mod
 from gainlink.design import design, poles_match
 from gainlink.spec import load_spec, parse_spec
+from support.cli import run_cli
+from support.paths import EXAMPLES
 
 
 def dlqr_scipy(A, B, Q, R):

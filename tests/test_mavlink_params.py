@@ -8,7 +8,6 @@ import struct
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.artifact import load
 from gainlink.errors import ParameterError
 from gainlink.mavlink.link import MavLink, raw_param_value
@@ -26,6 +25,7 @@ from gainlink.mavlink.params import (
 )
 from hypothesis import given
 from hypothesis import strategies as st
+from support.cli import run_cli
 
 
 @given(st.integers(min_value=-(2**31), max_value=2**31 - 1))

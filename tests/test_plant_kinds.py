@@ -9,14 +9,14 @@ import textwrap
 import control as ct
 import numpy as np
 import pytest
-from conftest import EXAMPLES
 from gainlink.artifact import load
 from gainlink.errors import PlantError
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.config import plant_from_config
 from gainlink.hil.plants.linear import model_from_spec, perturb_model
-from test_hil_support import udp_transport
+from support.hil import udp_transport
+from support.paths import EXAMPLES
 
 PENDULUM = EXAMPLES / "pendulum.toml"
 # The pendulum spec's matrices, written out here as the oracle (examples/pendulum.toml's header derives them).

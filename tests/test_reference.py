@@ -6,13 +6,13 @@ import math
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink import artifact as artifact_mod
 from gainlink.design import design
 from gainlink.random_plants import random_spec
 from gainlink.reference import ReferenceLoop
 from gainlink.replay import read_samples
 from gainlink.spec import parse_spec
+from support.cli import run_cli
 
 
 def matvec(A, x):
