@@ -10,6 +10,8 @@ neither it nor Dask). The command line ``gainlink`` is a shell over the same fun
 
 __version__ = "0.1.0"
 
+import types as _types
+
 # The submodules design, replay and simulate are loaded first; the functions of the same names
 # then take their place as attributes of the package (``gl.design(...)``). Code inside gainlink
 # imports from the submodules (``from gainlink.design import design``), which is unaffected.
@@ -63,7 +65,7 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> _types.ModuleType:
     # gl.campaign is gainlink.hil.campaign, imported when first asked for (PEP 562).
     if name == "campaign":
         import importlib

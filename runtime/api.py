@@ -287,8 +287,9 @@ def load(path: str | Path) -> Artifact:
 # --- plants to spec dicts ---------------------------------------------------------------------------
 
 
-def _spec_dict(plant: Any, *, Ts: float | None, name: str | None, discretization: str | None) -> dict:
+def _spec_dict(plant: Any, *, Ts: float | None, name: str | None, discretization: str | None) -> dict[str, Any]:
     """A spec dict (the parsed-TOML shape) for ``plant``, with ``Ts``, ``name`` and ``discretization`` set."""
+    data: dict[str, Any]
     if isinstance(plant, (str, Path)):
         data = _spec_file_dict(Path(plant))
     elif isinstance(plant, Mapping):
@@ -307,7 +308,7 @@ def _spec_dict(plant: Any, *, Ts: float | None, name: str | None, discretization
     return data
 
 
-def _spec_file_dict(path: Path) -> dict:
+def _spec_file_dict(path: Path) -> dict[str, Any]:
     import tomllib
 
     spec = load_spec(path)  # one place reports a missing or malformed file
@@ -316,7 +317,7 @@ def _spec_file_dict(path: Path) -> dict:
     return data
 
 
-def _system_dict(sys: Any, *, Ts: float | None) -> dict:
+def _system_dict(sys: Any, *, Ts: float | None) -> dict[str, Any]:
     """The ``[plant]`` table and ``Ts`` of a python-control system, with its signal names where they are identifiers."""
     import control
 
@@ -367,7 +368,7 @@ _REPLACES = {
 }
 
 
-def _merge_tables(data: dict, tables: Mapping[str, Any], shortcuts: Mapping[str, Any]) -> dict:
+def _merge_tables(data: dict[str, Any], tables: Mapping[str, Any], shortcuts: Mapping[str, Any]) -> dict[str, Any]:
     """``data`` with the given tables' keys replaced, then the keyword shortcuts put in their tables."""
     for key, table in tables.items():
         if table is not None:
@@ -384,7 +385,7 @@ def _merge_tables(data: dict, tables: Mapping[str, Any], shortcuts: Mapping[str,
     return data
 
 
-def _design_dict(data: dict, *, source: str) -> Artifact:
+def _design_dict(data: dict[str, Any], *, source: str) -> Artifact:
     digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
     spec: PlantSpec = parse_spec(data, source=source, source_sha256=digest)
     return from_dict(_design_spec(spec).artifact)
@@ -394,7 +395,7 @@ def _source_name(plant: Any) -> str:
     return str(plant) if isinstance(plant, (str, Path)) else f"<{type(plant).__name__}>"
 
 
-def _output_count(data: dict) -> int:
+def _output_count(data: Mapping[str, Any]) -> int:
     plant = data.get("plant", {})
     if "C" in plant:
         return len(plant["C"])
