@@ -17,10 +17,10 @@ Prints JSON. Everything is measured in the same run, against a baseline of the s
   ``overhead_ratio`` = machinery / the runs' own CPU, both from the same 400-run campaigns on 1 worker:
   on this shared machine the CPU time of the same code drifts by 5-15 % from one minute to the next,
   more than the target, and a ratio of two measurements taken at different times inherits that drift.
-  The plain loop: the worker's own function called run after run (``execute``; no Dask, no files, no
-  report), :data:`PLAIN_ROUNDS` rounds of :data:`PLAIN_RUNS` runs in this process and the same runs as one
-  task on the last 1-worker cluster's worker, alternating. ``plain_loop.worker_vs_here`` shows that a run costs the same in a
-  Dask worker as here (the median of rounds, within the drift), so the runs' own CPU is the plain loop's;
+  The plain loop: the worker's own function called run after run (``execute``; no Dask, no files, no report),
+  :data:`PLAIN_ROUNDS` rounds of :data:`PLAIN_RUNS` runs in this process and the same runs as one task on the last
+  1-worker cluster's worker, alternating. ``plain_loop.worker_vs_here`` shows that a run costs the same in a Dask worker
+  as here (the median of rounds, within the drift), so the runs' own CPU is the plain loop's;
   ``overhead_ratio_vs_plain_loop`` = campaign CPU per run / the plain loop here (median) - 1 compares
   measurements taken a minute apart, with the drift in it. ``overhead_ratio_without_report`` takes the
   report (a fixed cost per campaign) out;

@@ -7,7 +7,8 @@ Prints JSON. Instructions are counted from each call of gl_loop_step to its retu
   back-calculation) and random designs with n = 4, 8, 12, 16 (m = p = 2, one integrator). For each:
   instructions per step of the shipped build (generated unrolled step) and of the generic-loop build
   measured in the same run (the baseline; `speedup` is their ratio), the multiply-accumulates of the law
-  as docs/design.md writes it ("The control law"), the ratio instructions / MACs, and flash/RAM from the size report. Targets:
+  as docs/design.md writes it ("The control law"), the ratio instructions / MACs, and flash/RAM from the size
+  report. Targets:
   pendulum <= 100 instructions per step; <= 2x the MAC count at n = 12.
 - ``per_target``: the pendulum on every core (float32; ``numeric`` names the law, for the fixed-point
   columns to come): instructions per step (mean, dearest step, and the part inside gl_loop_step's own

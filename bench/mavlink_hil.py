@@ -11,7 +11,8 @@ same plant time and reports its steps/s.
 Every measurement is made twice, interleaved in the same run against the same baseline: the default
 link (both ends block in select/poll while waiting, pinned to one shared CPU as the bridge does in
 lockstep) and the busy-poll variant (transport ``busy_poll_us``, firmware ``--spin-us``: both ends
-read without sleeping for that long before blocking; one busy CPU each, fewer wake-ups). The busy-poll commands must equal the default's.
+read without sleeping for that long before blocking; one busy CPU each, fewer wake-ups). The busy-poll
+commands must equal the default's.
 Target: >= 10,000 lockstep steps/s; ``meets_target`` is true when either variant reaches it and
 ``meets_target_with`` says which.
 

@@ -8,6 +8,8 @@ simulation of the law, the HIL bridge as :mod:`gainlink.hil` (``gl.hil.run``) an
 neither it nor Dask). The command line ``gainlink`` is a shell over the same functions.
 """
 
+import types as _types
+
 from . import hil
 from .api import analyze, design, design_report, from_gains, load, replay, simulate
 from .errors import (
@@ -58,7 +60,7 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> _types.ModuleType:
     # gl.campaign is gainlink.hil.campaign, imported when first asked for (PEP 562).
     if name == "campaign":
         import importlib

@@ -318,7 +318,8 @@ def replay(
     """
     Y = np.asarray(y, dtype=float).reshape(-1, artifact.p)
     R = np.zeros((Y.shape[0], artifact.q)) if r is None else np.asarray(r, dtype=float).reshape(Y.shape[0], artifact.q)
-    return engine_with_image(engine, target=target, board=board)(artifact, Y, R)
+    trace: Trace = engine_with_image(engine, target=target, board=board)(artifact, Y, R)
+    return trace
 
 
 def simulate(
@@ -377,8 +378,9 @@ def load(path: str | Path) -> Artifact:
 # --- plants to spec dicts ---------------------------------------------------------------------------
 
 
-def _spec_dict(plant: Any, *, Ts: float | None, name: str | None, discretization: str | None) -> dict:
+def _spec_dict(plant: Any, *, Ts: float | None, name: str | None, discretization: str | None) -> dict[str, Any]:
     """A spec dict (the parsed-TOML shape) for ``plant``, with ``Ts``, ``name`` and ``discretization`` set."""
+    data: dict[str, Any]
     if isinstance(plant, (str, Path)):
         data = _spec_file_dict(Path(plant))
     elif isinstance(plant, Mapping):
@@ -397,13 +399,13 @@ def _spec_dict(plant: Any, *, Ts: float | None, name: str | None, discretization
     return data
 
 
-def _spec_file_dict(path: Path) -> dict:
+def _spec_file_dict(path: Path) -> dict[str, Any]:
     data, _ = read_toml(path, what="spec", error=SpecError)
     data.setdefault("name", load_spec(path).name)  # every key checked as gainlink design checks it
     return data
 
 
-def _system_dict(sys: Any, *, Ts: float | None) -> dict:
+def _system_dict(sys: Any, *, Ts: float | None) -> dict[str, Any]:
     """The ``[plant]`` table and ``Ts`` of a python-control system, with its signal names where they are identifiers."""
     import control
 
@@ -454,7 +456,7 @@ _REPLACES = {
 }
 
 
-def _merge_tables(data: dict, tables: Mapping[str, Any], shortcuts: Mapping[str, Any]) -> dict:
+def _merge_tables(data: dict[str, Any], tables: Mapping[str, Any], shortcuts: Mapping[str, Any]) -> dict[str, Any]:
     """``data`` with the given tables' keys replaced, then the keyword shortcuts put in their tables."""
     for key, table in tables.items():
         if table is not None:
@@ -471,7 +473,7 @@ def _merge_tables(data: dict, tables: Mapping[str, Any], shortcuts: Mapping[str,
     return data
 
 
-def _parse(data: dict, *, source: str) -> PlantSpec:
+def _parse(data: dict[str, Any], *, source: str) -> PlantSpec:
     """The typed spec of a spec dict, hashed by its canonical JSON (there is no file to hash)."""
     digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
     return parse_spec(data, source=source, source_sha256=digest)
@@ -481,7 +483,7 @@ def _source_name(plant: Any) -> str:
     return str(plant) if isinstance(plant, (str, Path)) else f"<{type(plant).__name__}>"
 
 
-def _output_count(data: dict) -> int:
+def _output_count(data: Mapping[str, Any]) -> int:
     plant = data.get("plant", {})
     if "C" in plant:
         return len(plant["C"])

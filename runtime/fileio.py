@@ -1,18 +1,28 @@
-"""Files the user names: reading them (text, TOML) with one-line errors, and atomic output (nothing
-half-written, nothing written at all when a step fails)."""
+"""Files the user names: reading them (text, TOML) with one-line errors, atomic output (nothing half-written,
+nothing written at all when a step fails), and a host-wide lock for caches that processes fill concurrently."""
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import os
 import tempfile
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
+from typing import Any, Literal, TypeAlias, overload
 
 from .errors import GainlinkError
 
+#: A path as the functions here take it: a string or an ``os.PathLike`` of one (``pathlib.Path``).
+StrPath: TypeAlias = str | os.PathLike[str]
 
-def read_user_file(path: str | os.PathLike, *, what: str, error: type[GainlinkError], binary: bool = False):
+
+@overload
+def read_user_file(path: StrPath, *, what: str, error: type[GainlinkError], binary: Literal[False] = False) -> str: ...
+@overload
+def read_user_file(path: StrPath, *, what: str, error: type[GainlinkError], binary: Literal[True]) -> bytes: ...
+def read_user_file(path: StrPath, *, what: str, error: type[GainlinkError], binary: bool = False) -> str | bytes:
     """Read a file the user named; a missing file or a folder becomes one ``error`` naming ``what``.
 
     Returns ``bytes`` when ``binary`` else UTF-8 text.
@@ -30,7 +40,7 @@ def read_user_file(path: str | os.PathLike, *, what: str, error: type[GainlinkEr
         raise error(f"{what} {path} is not UTF-8 text") from None
 
 
-def parse_toml(text: str | bytes, *, what: str, error: type[GainlinkError]) -> dict:
+def parse_toml(text: str | bytes, *, what: str, error: type[GainlinkError]) -> dict[str, Any]:
     """Parse TOML text; a syntax error (or bytes that are not UTF-8) becomes one ``error`` naming ``what``."""
     try:
         return tomllib.loads(text.decode("utf-8") if isinstance(text, bytes) else text)
@@ -38,7 +48,7 @@ def parse_toml(text: str | bytes, *, what: str, error: type[GainlinkError]) -> d
         raise error(f"{what} is not valid TOML: {exc}") from None
 
 
-def read_toml(path: str | os.PathLike, *, what: str, error: type[GainlinkError]) -> tuple[dict, bytes]:
+def read_toml(path: StrPath, *, what: str, error: type[GainlinkError]) -> tuple[dict[str, Any], bytes]:
     """Read and parse a TOML file the user named: ``(data, raw bytes)``; every failure is one ``error`` line."""
     raw = read_user_file(path, what=what, error=error, binary=True)
     return parse_toml(raw, what=f"{what} {path}", error=error), raw
@@ -51,7 +61,7 @@ def _default_mode() -> int:
     return 0o666 & ~mask
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes, *, mode: int | None = None) -> None:
+def atomic_write_bytes(path: StrPath, data: bytes, *, mode: int | None = None) -> None:
     """Write ``data`` to ``path`` through a temporary file in the same folder and a rename.
 
     The file gets the permissions a plain ``open()`` would give it (readable by others under the usual umask),
@@ -69,12 +79,12 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, *, mode: int | None
         raise
 
 
-def atomic_write_text(path: str | os.PathLike, text: str, *, mode: int | None = None) -> None:
+def atomic_write_text(path: StrPath, text: str, *, mode: int | None = None) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically (``mode`` as in :func:`atomic_write_bytes`)."""
     atomic_write_bytes(path, text.encode("utf-8"), mode=mode)
 
 
-def prepare_output_dir(out_dir: str | os.PathLike) -> Path:
+def prepare_output_dir(out_dir: StrPath) -> Path:
     """Return ``out_dir`` as a Path, creating it; fail with one clear line if it is not a folder."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -86,7 +96,7 @@ def prepare_output_dir(out_dir: str | os.PathLike) -> Path:
     return out
 
 
-def publish_files(out_dir: str | os.PathLike, files: Mapping[str, bytes | str]) -> list[Path]:
+def publish_files(out_dir: StrPath, files: Mapping[str, bytes | str]) -> list[Path]:
     """Write every file of ``files`` (name -> content) into ``out_dir``, each atomically.
 
     Callers compute all content first and publish last, so a failing step leaves the folder untouched.
@@ -100,3 +110,22 @@ def publish_files(out_dir: str | os.PathLike, files: Mapping[str, bytes | str]) 
         atomic_write_bytes(target, data)
         written.append(target)
     return written
+
+
+@contextlib.contextmanager
+def exclusive_lock(path: StrPath) -> Iterator[None]:
+    """Hold an exclusive ``flock`` on ``path`` (created if missing) while the block runs.
+
+    One process of the host at a time runs a block under the same lock file (other processes wait). Cache fills
+    (a firmware build in its shared folder, an FMU, the vcan VM image, a download) take it around the work, check
+    again inside whether another process finished it meanwhile, and publish with an atomic rename, so readers of a
+    finished result never need the lock. Not reentrant: a process must not take the same lock twice.
+    """
+    lock = Path(path)
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    with open(lock, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)

@@ -1,46 +1,33 @@
-"""Shared fixtures: example specs designed once per session, and an in-process CLI runner."""
+"""Fixtures shared by the test modules: the examples designed once, the firmware apps and FMUs they run against.
+
+Helpers that are not fixtures live in ``tests/support/`` (``from support.cli import run_cli``). Session fixtures
+run once per pytest-xdist worker; what they build is cached on disk (``.cache/``) with a file lock, so workers that
+ask at the same time build it once.
+"""
 
 from __future__ import annotations
 
-import io
+import logging
+import os
 import shutil
-from contextlib import redirect_stderr, redirect_stdout
-from dataclasses import dataclass
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from gainlink.cli import main
+from gainlink.fileio import exclusive_lock
+from gainlink.firmware.golden import GoldenCase, closed_loop_cases, random_cases
 from gainlink.shipping import artifact as artifact_mod
+from gainlink.shipping.artifact import load
 from gainlink.spec import load_spec
 from gainlink.synthesis import synthesize
-
-ROOT = Path(__file__).resolve().parents[1]
-EXAMPLES = ROOT / "examples"
-EXAMPLE_NAMES = ("pendulum", "quadrotor_lateral", "wood_berry")
-
-
-@dataclass(frozen=True)
-class CliResult:
-    """Exit status and captured output of one in-process ``gainlink`` call."""
-
-    code: int
-    out: str
-    err: str
-
-
-def run_cli(*argv: str) -> CliResult:
-    """Run ``gainlink`` in-process; any uncaught exception fails the calling test."""
-    out, err = io.StringIO(), io.StringIO()
-    with redirect_stdout(out), redirect_stderr(err):
-        try:
-            code = main([str(a) for a in argv])
-        except SystemExit as exc:  # argparse usage errors
-            code = exc.code if isinstance(exc.code, int) else 1
-    return CliResult(code=code, out=out.getvalue(), err=err.getvalue())
+from support.mavlink import retuned_pendulum
+from support.paths import EXAMPLE_NAMES, EXAMPLES
+from support.shared import once_per_run
 
 
 @pytest.fixture(scope="session")
-def example_artifacts(tmp_path_factory) -> dict[str, Path]:
+def example_artifacts(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """gains.json of each example, designed once per session: name -> path."""
     base = tmp_path_factory.mktemp("examples")
     paths = {}
@@ -53,8 +40,21 @@ def example_artifacts(tmp_path_factory) -> dict[str, Path]:
     return paths
 
 
+@pytest.fixture(scope="session")
+def random_designs(tmp_path_factory: pytest.TempPathFactory) -> tuple[GoldenCase, ...]:
+    """The 30 random golden designs (``golden.random_cases(30)``: every form and anti-windup mode, n up to 12,
+    operating points), computed once per run and shared by the workers."""
+    return once_per_run(tmp_path_factory, "random_designs", lambda: random_cases(30))
+
+
+@pytest.fixture(scope="session")
+def closed_loop_designs(tmp_path_factory: pytest.TempPathFactory) -> tuple[GoldenCase, ...]:
+    """The 12 random designs with closed-loop records (``golden.closed_loop_cases(12)``), once per run."""
+    return once_per_run(tmp_path_factory, "closed_loop_designs", lambda: closed_loop_cases(12))
+
+
 @pytest.fixture
-def pendulum_artifact(example_artifacts, tmp_path) -> Path:
+def pendulum_artifact(example_artifacts: dict[str, Path], tmp_path: Path) -> Path:
     """A private copy of the pendulum artifact (tests may tamper with it)."""
     dst = tmp_path / "gains.json"
     shutil.copy(example_artifacts["pendulum"], dst)
@@ -62,6 +62,57 @@ def pendulum_artifact(example_artifacts, tmp_path) -> Path:
 
 
 @pytest.fixture(scope="session")
-def pend(example_artifacts) -> Path:
+def pend(example_artifacts: dict[str, Path]) -> Path:
     """The pendulum example's gains.json (shared, read-only)."""
     return example_artifacts["pendulum"]
+
+
+@pytest.fixture(scope="session")
+def retuned(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The pendulum designed again with other weights (shared, read-only): a second set to upload."""
+    return retuned_pendulum(tmp_path_factory.mktemp("retuned") / "gains.json")
+
+
+@pytest.fixture(scope="session")
+def can_firmware(pend: Path) -> Path:
+    """The firmware's gainlink_can host executable built for the pendulum artifact."""
+    from gainlink.hil.links.can_firmware import firmware_can_executable
+
+    return firmware_can_executable(load(pend))
+
+
+@pytest.fixture(scope="session")
+def mavlink_exe(pend: Path) -> Path:
+    """The firmware's MAVLink app (gainlink_mavlink) built for the pendulum artifact."""
+    from gainlink.firmware.mavlink_app import mavlink_executable
+
+    return mavlink_executable(load(pend))
+
+
+@pytest.fixture(scope="session")
+def cart_fmu() -> Path:
+    """The project's nonlinear cart-pendulum FMU, built from its C sources with fmpy."""
+    from gainlink.hil.plants.build import build_fmu
+
+    return build_fmu("cart_pendulum")
+
+
+@pytest.fixture(scope="module")
+def quiet_design_warnings() -> Iterator[None]:
+    """Design warnings (a compensator unstable by itself, ...) silenced for a module that designs many laws on
+    purpose: ``pytestmark = pytest.mark.usefixtures("quiet_design_warnings")``."""
+    logging.disable(logging.WARNING)
+    yield
+    logging.disable(logging.NOTSET)
+
+
+@pytest.fixture
+def realtime_alone() -> Iterator[None]:
+    """Run the test with no other realtime HIL run of any suite on this host (a host-wide file lock).
+
+    A realtime run holds the kernel's CPU wake-up latency request (``/dev/cpu_dma_latency``, global to the host)
+    and runs under SCHED_FIFO: a test that reads that request, or measures ticks against their deadlines, must
+    not overlap another one. Other tests still run beside it (pytest-xdist workers); only realtime runs queue.
+    """
+    with exclusive_lock(Path(tempfile.gettempdir()) / f"gainlink-realtime-{os.getuid()}.lock"):
+        yield

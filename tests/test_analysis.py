@@ -6,10 +6,11 @@ import json
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES, run_cli
 from gainlink.spec import parse_spec
 from gainlink.synthesis.analysis import transmission_zeros
 from gainlink.synthesis.plant_report import analyze
+from support.cli import run_cli
+from support.paths import EXAMPLES
 
 
 def spec(A, B, C, *, D=None, Ts=0.01, controller=None, observer=None):

@@ -14,17 +14,15 @@ import runpy
 import stat
 import subprocess
 import sys
-from pathlib import Path
 
 import control as ct
 import gainlink as gl
 import numpy as np
 import pytest
 import scipy.linalg
-from conftest import EXAMPLES, run_cli
 from gainlink.errors import DesignError, SpecError
-
-ROOT = Path(__file__).resolve().parents[1]
+from support.cli import run_cli
+from support.paths import EXAMPLES, ROOT
 
 
 def _double_integrator() -> ct.StateSpace:
@@ -259,7 +257,7 @@ def test_notebook_style_example_runs_untouched():
 
 def test_hil_run_takes_an_artifact_object_and_returns_numpy_traces(tmp_path):
     """gl.hil.run with an in-memory artifact: the real CAN firmware node against the built-in pendulum."""
-    from test_hil_support import udp_transport
+    from support.hil import udp_transport
 
     art = gl.design(EXAMPLES / "pendulum.toml")
     scenario = {

@@ -23,7 +23,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES, ROOT, run_cli
 from gainlink.hil.campaign import CampaignError, parse_campaign, run
 from gainlink.hil.campaign.criteria import growth
 from gainlink.hil.campaign.plan import draw_values, plan_campaign
@@ -32,6 +31,8 @@ from gainlink.hil.loop.sil import run_sil
 from gainlink.hil.plants import toml_write
 from gainlink.shipping.artifact import load
 from scipy import stats
+from support.cli import run_cli
+from support.paths import EXAMPLES, ROOT
 
 VENV_BIN = Path(sys.executable).parent
 # What must be equal between two executions of the same run (timing is not: wall time, C step latency).
@@ -150,7 +151,7 @@ def test_a_run_that_cannot_be_built_is_named_before_anything_runs(pend, tmp_path
         pend,
         draw=[{"target": "plant.parameters.l", "distribution": "uniform", "low": 0.9, "high": 1.1, "apply": "scale"}],
     )
-    with pytest.raises(CampaignError, match="needs a number at plant.parameters.l in the base"):
+    with pytest.raises(CampaignError, match=r"needs a number at plant\.parameters\.l in the base"):
         plan_campaign(parse_campaign(scale))
     path = tmp_path / "c.toml"
     path.write_text(toml_write.dumps(small_campaign(pend, kind="hil")))
@@ -846,7 +847,7 @@ def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, da
         pend, runs=2, draw=small_campaign(pend)["draw"][:1], grid=[{"target": "plant.bug", "values": [False, True]}]
     )
     data["scenario"]["plant"] = dict(
-        data["scenario"]["plant"], kind="python", **{"class": "campaign_plants:BuggyPendulum"}
+        data["scenario"]["plant"], kind="python", **{"class": "support.campaign_plants:BuggyPendulum"}
     )
     with caplog.at_level("INFO", logger="gainlink.hil.campaign.runner"):
         result = run(data, out=tmp_path / "out", scheduler=dask_cluster, batch=4)

@@ -14,7 +14,6 @@ import math
 import cantools
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.errors import TransportError
 from gainlink.hil.links.base import STATUS_FAULT
 from gainlink.hil.links.can import CanTransport, firmware_can_argv
@@ -22,12 +21,13 @@ from gainlink.hil.loop.controller import ControllerProcess
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping.artifact import load
 from gainlink.shipping.can_layout import layout_for
-from test_hil_support import can_firmware, pendulum_gains, udp_transport  # noqa: F401
+from support.cli import run_cli
+from support.hil import PENDULUM_RANGES, udp_transport
 
 
 @pytest.mark.parametrize("fd", [False, True])
-def test_dbc_round_trips_through_cantools_and_matches_the_fast_codec(pendulum_gains, fd):
-    art = load(pendulum_gains)
+def test_dbc_round_trips_through_cantools_and_matches_the_fast_codec(pend, fd):
+    art = load(pend)
     layout = layout_for(art, fd=fd, base_id=0x200)
     db = cantools.database.load_string(layout.dbc(), database_format="dbc")
     # Classic CAN carries one value per frame: p + q = 3 measurement frames; FD packs them in one.
@@ -54,9 +54,9 @@ def test_dbc_round_trips_through_cantools_and_matches_the_fast_codec(pendulum_ga
             assert msg.encode(want) == bytes(frame.data)
 
 
-def test_dbc_command_writes_a_file(pendulum_gains, tmp_path):
+def test_dbc_command_writes_a_file(pend, tmp_path):
     out = tmp_path / "pendulum.dbc"
-    res = run_cli("hil", "dbc", pendulum_gains, "--fd", "--out", out)
+    res = run_cli("hil", "dbc", pend, "--fd", "--out", out)
     assert res.code == 0, res.err
     db = cantools.database.load_file(out)
     assert sorted(m.name for m in db.messages) == ["Command0", "Measurement0"]
@@ -77,14 +77,10 @@ def _exchange(art, transport, samples):
     return out
 
 
-#: int16 ranges for the pendulum's outputs and reference (the input F takes the artifact's +-20 N).
-PENDULUM_RANGES = {"x": [-5.0, 5.0], "theta": [-1.0, 1.0], "r_x": [-5.0, 5.0]}
-
-
 @pytest.mark.parametrize("encoding", ["float32", "int16"])
 @pytest.mark.parametrize("fd", [False, True])
-def test_firmware_can_app_runs_the_law_over_udp_multicast(pendulum_gains, can_firmware, fd, encoding):
-    art = load(pendulum_gains)
+def test_firmware_can_app_runs_the_law_over_udp_multicast(pend, can_firmware, fd, encoding):
+    art = load(pend)
     transport = CanTransport({**udp_transport(fd=fd), "encoding": encoding, "ranges": PENDULUM_RANGES}, artifact=art)
     peer = ControllerProcess([str(can_firmware), *transport.controller_argv()])
     # int16: the command arrives quantised, within half a step of the controller's float32 u.
@@ -130,19 +126,19 @@ def test_firmware_can_app_runs_the_law_over_udp_multicast(pendulum_gains, can_fi
         transport.close()
 
 
-def test_firmware_argv_refuses_interfaces_the_app_cannot_speak(pendulum_gains):
-    art = load(pendulum_gains)
+def test_firmware_argv_refuses_interfaces_the_app_cannot_speak(pend):
+    art = load(pend)
     with pytest.raises(TransportError, match="firmware CAN app speaks"):
         firmware_can_argv({"interface": "virtual"}, layout=layout_for(art))
 
 
-def test_bus_that_cannot_open_is_one_clear_error(pendulum_gains):
-    transport = CanTransport({"interface": "socketcan", "channel": "gl_no_such_can0"}, artifact=load(pendulum_gains))
+def test_bus_that_cannot_open_is_one_clear_error(pend):
+    transport = CanTransport({"interface": "socketcan", "channel": "gl_no_such_can0"}, artifact=load(pend))
     with pytest.raises(TransportError, match=r"cannot open CAN bus \(interface=socketcan, channel=gl_no_such_can0\)"):
         transport.open()
 
 
-def test_udp_multicast_without_a_route_says_how_to_add_one(pendulum_gains):
+def test_udp_multicast_without_a_route_says_how_to_add_one(pend):
     # A loopback-only network namespace (a real kernel one: unshare -n, as root like CI) has no multicast route.
     import shutil
     import subprocess
@@ -172,7 +168,7 @@ def test_udp_multicast_without_a_route_says_how_to_add_one(pendulum_gains):
             'ip link set lo up; exec "$0" -c "$1" "$2"',
             sys.executable,
             code,
-            str(pendulum_gains),
+            str(pend),
         ],
         capture_output=True,
         text=True,
@@ -188,7 +184,7 @@ def test_udp_multicast_without_a_route_says_how_to_add_one(pendulum_gains):
             'ip link set lo up multicast on && ip route add 224.0.0.0/4 dev lo && exec "$0" -c "$1" "$2"',
             sys.executable,
             code,
-            str(pendulum_gains),
+            str(pend),
         ],
         capture_output=True,
         text=True,

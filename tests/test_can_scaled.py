@@ -17,15 +17,14 @@ import struct
 import cantools
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.errors import TransportError
 from gainlink.hil.links.can import Assembler, CanTransport, FrameCodec, firmware_can_argv
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.shipping.artifact import load
 from gainlink.shipping.can_layout import FD_LENGTHS, INT16_MAX, INT16_NAN, dequantise, quantise
-from test_can_layout import PENDULUM_RANGES
-from test_hil_support import can_firmware, cart_fmu, pendulum_gains, pendulum_scenario, udp_transport, write_scenario  # noqa: F401
+from support.cli import run_cli
+from support.hil import PENDULUM_RANGES, pendulum_scenario, udp_transport, write_scenario
 
 SPAN = 2 * INT16_MAX  # raw steps across a range
 
@@ -43,8 +42,8 @@ def _value_ranges(art, ranges: dict) -> tuple[list[str], np.ndarray, np.ndarray]
 
 
 @pytest.mark.parametrize("fd", [False, True])
-def test_int16_dbc_describes_the_scaled_signals_and_matches_the_fast_codec(pendulum_gains, fd):
-    art = load(pendulum_gains)
+def test_int16_dbc_describes_the_scaled_signals_and_matches_the_fast_codec(pend, fd):
+    art = load(pend)
     transport = _int16(art, fd=fd)
     layout = transport.layout
     names, lo, hi = _value_ranges(art, PENDULUM_RANGES)
@@ -92,8 +91,8 @@ def test_int16_dbc_describes_the_scaled_signals_and_matches_the_fast_codec(pendu
         assert seq == i and status == 0 and sat[0] == (i % 2 == 0) and abs(got[0] - u[0]) <= f_u / 2 * (1 + 1e-9)
 
 
-def test_int16_non_finite_values_travel_as_the_reserved_raw_value(pendulum_gains):
-    art = load(pendulum_gains)
+def test_int16_non_finite_values_travel_as_the_reserved_raw_value(pend):
+    art = load(pend)
     transport = _int16(art, fd=True)
     (spec,) = transport.layout.measurement
     db = cantools.database.load_string(transport.layout.dbc(), database_format="dbc")
@@ -107,8 +106,8 @@ def test_int16_non_finite_values_travel_as_the_reserved_raw_value(pendulum_gains
     assert np.isnan(values).all()
 
 
-def test_int16_values_beyond_their_range_saturate_and_are_counted(pendulum_gains, caplog):
-    art = load(pendulum_gains)
+def test_int16_values_beyond_their_range_saturate_and_are_counted(pend, caplog):
+    art = load(pend)
     transport = _int16(art)
     names, lo, hi = _value_ranges(art, PENDULUM_RANGES)
     rx = Assembler(FrameCodec(transport.layout.measurement, fd=False))
@@ -124,8 +123,8 @@ def test_int16_values_beyond_their_range_saturate_and_are_counted(pendulum_gains
     assert len(warnings) == 1  # warned once, counted always
 
 
-def test_float32_stays_the_default_and_byte_identical(pendulum_gains):
-    art = load(pendulum_gains)
+def test_float32_stays_the_default_and_byte_identical(pend):
+    art = load(pend)
     plain = CanTransport({"interface": "virtual"}, artifact=art)
     explicit = CanTransport({"interface": "virtual", "encoding": "float32", "ranges": PENDULUM_RANGES}, artifact=art)
     assert plain.layout == explicit.layout and plain.layout.dbc() == explicit.layout.dbc()
@@ -137,8 +136,8 @@ def test_float32_stays_the_default_and_byte_identical(pendulum_gains):
     assert plain.describe()["encoding"] == "float32" and "encoding_clipped" not in plain.describe()
 
 
-def test_missing_or_bad_ranges_are_one_line_errors(pendulum_gains):
-    art = load(pendulum_gains)
+def test_missing_or_bad_ranges_are_one_line_errors(pend):
+    art = load(pend)
     cases = {
         "no ranges": ({}, "needs a range for x, theta, r_x"),
         "one missing": ({"x": [-1, 1], "theta": [-1, 1]}, "needs a range for r_x:"),
@@ -163,23 +162,23 @@ def test_missing_or_bad_ranges_are_one_line_errors(pendulum_gains):
         assert spec.factors == (20.0 / SPAN,) and spec.offsets == (5.0,)
 
 
-def test_cli_dbc_and_hil_run_with_int16(tmp_path, pendulum_gains, cart_fmu):
-    art = load(pendulum_gains)
+def test_cli_dbc_and_hil_run_with_int16(tmp_path, pend, cart_fmu):
+    art = load(pend)
     cfg = {"interface": "udp_multicast", "encoding": "int16", "ranges": PENDULUM_RANGES}
     out = tmp_path / "int16.dbc"
-    res = run_cli("hil", "dbc", pendulum_gains, "--can", json.dumps(cfg), "--out", out)
+    res = run_cli("hil", "dbc", pend, "--can", json.dumps(cfg), "--out", out)
     assert res.code == 0, res.err
     db = cantools.database.load_file(out)
     assert {s.length for m in db.messages for s in m.signals if s.name not in ("seq", "status", "sat")} == {16}
     assert db.get_message_by_name("Measurement0").get_signal_by_name("y_theta").maximum == PENDULUM_RANGES["theta"][1]
-    res = run_cli("hil", "dbc", pendulum_gains, "--can", json.dumps({**cfg, "ranges": {"x": [-5, 5]}}))
+    res = run_cli("hil", "dbc", pend, "--can", json.dumps({**cfg, "ranges": {"x": [-5, 5]}}))
     lines = res.err.strip().splitlines()
     assert res.code == 2 and len(lines) == 1 and "needs a range for theta, r_x" in lines[0], lines
     # The same mistake in a scenario: one line, before any process starts.
     scenario = write_scenario(
         tmp_path / "s.toml",
         pendulum_scenario(
-            gains=pendulum_gains,
+            gains=pend,
             fmu=cart_fmu,
             duration=0.5,
             transport={**udp_transport(fd=False), "encoding": "int16", "ranges": {"theta": [-1.0, 1.0]}},
@@ -246,7 +245,7 @@ def _c_codec(can_firmware):
     return lib, Scale, Layout, Frame
 
 
-def test_c_codec_quantises_like_python_bit_for_bit(pendulum_gains, can_firmware):
+def test_c_codec_quantises_like_python_bit_for_bit(pend, can_firmware):
     lib, Scale, Layout, Frame = _c_codec(can_firmware)
     rng = np.random.default_rng(11)
     # (min, max): the pendulum's ranges, an asymmetric one, and one with factor 0.5 where k/2 + 1/4 are exact ties.
@@ -280,7 +279,7 @@ def test_c_codec_quantises_like_python_bit_for_bit(pendulum_gains, can_firmware)
         assert np.array_equal(c_phys.view(np.uint32)[1:], py_phys.view(np.uint32)[1:]) and np.isnan(c_phys[0])
 
     # Whole frames of the pendulum's layout: C encodes what the Python codec encodes, and decodes it back alike.
-    art = load(pendulum_gains)
+    art = load(pend)
     for fd in (False, True):
         layout = _int16(art, fd=fd).layout
         specs = layout.measurement
@@ -358,9 +357,9 @@ def _quantisation_peak_gain(art) -> np.ndarray:
     return gain
 
 
-def test_int16_lockstep_classic_can_stabilises_the_pendulum_close_to_float32(pendulum_gains, can_firmware, cart_fmu):
-    art = load(pendulum_gains)
-    common = dict(gains=pendulum_gains, fmu=cart_fmu, duration=8.0)
+def test_int16_lockstep_classic_can_stabilises_the_pendulum_close_to_float32(pend, can_firmware, cart_fmu):
+    art = load(pend)
+    common = dict(gains=pend, fmu=cart_fmu, duration=8.0)
     runs = {}
     for encoding in ("float32", "int16"):
         transport = {**udp_transport(fd=False), "encoding": encoding, "ranges": PENDULUM_RANGES}
@@ -392,8 +391,8 @@ def test_int16_lockstep_classic_can_stabilises_the_pendulum_close_to_float32(pen
     assert m["encoding_clipped"] == 0
 
 
-def test_reference_node_speaks_int16_like_the_firmware(pendulum_gains, can_firmware, cart_fmu):
-    common = dict(gains=pendulum_gains, fmu=cart_fmu, duration=1.5)
+def test_reference_node_speaks_int16_like_the_firmware(pend, can_firmware, cart_fmu):
+    common = dict(gains=pend, fmu=cart_fmu, duration=1.5)
     transport = {"encoding": "int16", "ranges": PENDULUM_RANGES}
     fw = run_scenario(parse_scenario(pendulum_scenario(transport={**udp_transport(), **transport}, **common)))
     py = run_scenario(
@@ -401,6 +400,6 @@ def test_reference_node_speaks_int16_like_the_firmware(pendulum_gains, can_firmw
     )
     assert fw.complete and py.complete and fw.metrics["lost"] == 0 and py.metrics["lost"] == 0
     # Both quantise the same law's command (float32 in C, float64 in Python): at most a step or so apart.
-    layout = CanTransport({"interface": "virtual", **transport}, artifact=load(pendulum_gains)).layout
+    layout = CanTransport({"interface": "virtual", **transport}, artifact=load(pend)).layout
     f_u = layout.command[0].factors[0]
     np.testing.assert_allclose(fw.trace.u, py.trace.u, rtol=0, atol=1e-3 + 2 * f_u)

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import run_cli
+from support.cli import run_cli
 
 GOOD_SPEC = """\
 name = "servo"
@@ -265,7 +265,7 @@ def test_bad_replay_inputs(pendulum_artifact, tmp_path):
 
 
 def test_output_path_that_is_a_file(tmp_path):
-    from conftest import EXAMPLES
+    from support.paths import EXAMPLES
 
     f = tmp_path / "taken"
     f.write_text("keep me")

@@ -11,14 +11,15 @@ import zipfile
 import control as ct
 import numpy as np
 import pytest
-from conftest import EXAMPLES, run_cli
 from gainlink.errors import PlantError
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.linearize import linearize
 from gainlink.spec import load_spec
-from test_hil_support import cart_fmu, udp_transport  # noqa: F401
+from support.cli import run_cli
+from support.hil import udp_transport
+from support.paths import EXAMPLES
 
 GAIN = np.array([[12.8, -18.9], [6.6, -19.4]])  # Wood & Berry (1973), minutes
 TAU = np.array([[16.7, 21.0], [10.9, 14.4]])

@@ -6,12 +6,13 @@ import tomllib
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES, run_cli
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.deadtime import element_model
+from support.cli import run_cli
+from support.paths import EXAMPLES
 
 
 def _step_response(sys, steps: int) -> np.ndarray:

@@ -9,12 +9,13 @@ import numpy as np
 import pytest
 import scipy.linalg
 import scipy.signal
-from conftest import EXAMPLES, run_cli
 from gainlink.errors import DesignError
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import load_spec, parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.loop import poles_match
+from support.cli import run_cli
+from support.paths import EXAMPLES
 
 
 def dlqr_scipy(A, B, Q, R):

@@ -7,11 +7,8 @@ the observer's conditioning, and a transformation recomputed here from the recor
 
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 import pytest
-from conftest import EXAMPLES, run_cli
 from gainlink.engines.native import NativeLoop
 from gainlink.proof.fidelity import THRESHOLD, float32_fidelity
 from gainlink.proof.reference import ReferenceLoop, StepResult
@@ -20,7 +17,9 @@ from gainlink.proof.simulation import simulate_linear
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
-from test_onestep import jacobian_poles
+from support.cli import run_cli
+from support.oracles import jacobian_poles
+from support.paths import EXAMPLES
 
 
 class CLoop:
@@ -217,11 +216,7 @@ def test_implementation_table_is_checked(tmp_path):
     assert a.data["realization"]["kind"] == "balanced" and "float32" not in a.data["checks"]
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _quiet_design_warnings():
-    logging.disable(logging.WARNING)
-    yield
-    logging.disable(logging.NOTSET)
+pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
 
 def test_module_docstring_figures_are_what_the_examples_measure(example_artifacts):

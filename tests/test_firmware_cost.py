@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import logging
-from pathlib import Path
 
 import pytest
 from gainlink.firmware.build import build
 from gainlink.firmware.cost import count_step_instructions, law_macs
 from gainlink.firmware.golden import example_cases
-
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+from support.paths import EXAMPLES
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,6 @@ result of the image must equal the host library's exactly; comparisons here are 
 from __future__ import annotations
 
 import json
-import logging
 import subprocess
 import sys
 import tempfile
@@ -19,19 +18,15 @@ from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware import qemu as fwqemu
 from gainlink.firmware.build import build
-from gainlink.firmware.golden import example_cases, random_cases
+from gainlink.firmware.golden import example_cases
 from gainlink.shipping.artifact import render
+from support.paths import EXAMPLES
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 KEYS = ("u", "sat", "xh", "z", "fault")
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))  # the console script, run as a real process
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _quiet_design_warnings():
-    logging.disable(logging.WARNING)
-    yield
-    logging.disable(logging.NOTSET)
+pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
 
 def assert_bit_identical(a: dict, b: dict, label: str) -> None:
@@ -51,11 +46,12 @@ def test_examples_bit_identical_to_host_on_both_boards(board):
         assert target["fault"].sum() == 1
 
 
-def test_random_designs_bit_identical_to_host():
-    for case in random_cases(30):
-        host = NativeLoop(case.artifact).run_raw(case.Y, case.R)
-        target = qemu_engine.run_raw(case.artifact, case.Y, case.R)
-        assert_bit_identical(host, target, case.label)
+@pytest.mark.parametrize("index", range(30))  # conftest's random_designs, one test each: built in parallel
+def test_random_design_bit_identical_to_host(random_designs, index):
+    case = random_designs[index]
+    host = NativeLoop(case.artifact).run_raw(case.Y, case.R)
+    target = qemu_engine.run_raw(case.artifact, case.Y, case.R)
+    assert_bit_identical(host, target, case.label)
 
 
 @pytest.fixture(scope="module")

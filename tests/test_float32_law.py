@@ -7,23 +7,15 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
-import logging
-from pathlib import Path
 
 import numpy as np
 import pytest
 from gainlink.engines.native import NativeLoop
-from gainlink.firmware.golden import closed_loop_cases, example_cases, random_cases
+from gainlink.firmware.golden import example_cases
 from gainlink.proof.float32_law import Float32Loop, fma32_exact
+from support.paths import EXAMPLES
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _quiet_design_warnings():
-    logging.disable(logging.WARNING)
-    yield
-    logging.disable(logging.NOTSET)
+pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
 
 def _bits(a: np.ndarray) -> np.ndarray:
@@ -53,10 +45,10 @@ def test_fma32_is_correctly_rounded_like_libm_fmaf():
     assert tie_hits >= 64, "the double-rounding cases were exercised (plain rounding from double gets them wrong)"
 
 
-def test_float32_loop_equals_the_host_build_bit_for_bit():
+def test_float32_loop_equals_the_host_build_bit_for_bit(random_designs, closed_loop_designs):
     cases = list(example_cases(EXAMPLES))
     picked = {}
-    for case in random_cases(30) + closed_loop_cases(12):
+    for case in random_designs + closed_loop_designs:
         a = case.artifact
         picked.setdefault((a.observer_form, a.anti_windup, a.q > 0, a.has_operating_point), case)
     cases += list(picked.values())

@@ -12,13 +12,13 @@ import zipfile
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES, run_cli
 from gainlink.errors import PlantError
 from gainlink.hil.plants.config import plant_from_config
 from gainlink.hil.plants.fmu import FmuPlant
 from gainlink.hil.plants.linearize import linearize
 from gainlink.hil.plants.models import CartPendulum, QuadrotorLateral, WoodBerry
-from test_hil_support import cart_fmu  # noqa: F401
+from support.cli import run_cli
+from support.paths import EXAMPLES
 
 M, m, l, g = 1.0, 0.1, 0.5, 9.81
 A_UP = np.array([[0, 1, 0, 0], [0, 0, -m * g / M, 0], [0, 0, 0, 1], [0, 0, (M + m) * g / (M * l), 0]])
@@ -246,7 +246,7 @@ def test_fmi3_cosimulation_fmu_runs_like_the_fmi2_one(tmp_path, example_artifact
     from gainlink.hil.loop.bridge import run_scenario
     from gainlink.hil.loop.scenario import parse_scenario
     from gainlink.hil.plants.build import build_fmu
-    from test_hil_support import udp_transport
+    from support.hil import udp_transport
 
     path = build_fmu("cart_pendulum3")
     assert validate_fmu(str(path)) == []
@@ -464,7 +464,7 @@ def test_wood_berry_fmu_refuses_a_step_that_does_not_divide_a_dead_time(wood_ber
         assert plant.outputs().tolist() == [0.0, 0.0]
         # The refused step changed nothing: a dividing step still runs, and then the step length is fixed.
         plant.advance(u=np.array([1.0, 0.0]), dt=WB_TS)
-        with pytest.raises(PlantError, match="communication step 0.5 min differs from the first one"):
+        with pytest.raises(PlantError, match=r"communication step 0\.5 min differs from the first one"):
             plant.advance(u=np.zeros(2), dt=0.5)
         # A dead time longer than the delay line holds is refused the same way.
         plant.reset(initial={})

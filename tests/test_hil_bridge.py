@@ -18,25 +18,23 @@ import time
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.hil.links.can import CanTransport
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.shipping.artifact import load
-from test_hil_support import can_firmware, cart_fmu, pendulum_gains, pendulum_scenario, udp_transport, write_scenario  # noqa: F401
+from support.cli import run_cli
+from support.hil import pendulum_scenario, udp_transport, write_scenario
 
 
 def _run(data):
     return run_scenario(parse_scenario(data))
 
 
-def test_lockstep_classic_can_stabilises_the_fmu_pendulum_and_writes_the_report(
-    tmp_path, pendulum_gains, can_firmware, cart_fmu
-):
+def test_lockstep_classic_can_stabilises_the_fmu_pendulum_and_writes_the_report(tmp_path, pend, can_firmware, cart_fmu):
     scenario = write_scenario(
         tmp_path / "s.toml",
         pendulum_scenario(
-            gains=pendulum_gains,
+            gains=pend,
             fmu=cart_fmu,
             transport=udp_transport(fd=False),
             duration=10.0,
@@ -71,7 +69,7 @@ def test_lockstep_classic_can_stabilises_the_fmu_pendulum_and_writes_the_report(
     assert res.out == summary
 
 
-def test_frame_faults_are_counted_by_sequence_number(pendulum_gains, can_firmware, cart_fmu):
+def test_frame_faults_are_counted_by_sequence_number(pend, can_firmware, cart_fmu):
     # 0.5 s windows at 100 Hz, every 10th sample: 5 samples each.
     faults = [
         {"kind": "drop", "start": 0.5, "stop": 1.0, "every": 10},
@@ -81,7 +79,7 @@ def test_frame_faults_are_counted_by_sequence_number(pendulum_gains, can_firmwar
     ]
     r = _run(
         pendulum_scenario(
-            gains=pendulum_gains,
+            gains=pend,
             fmu=cart_fmu,
             transport=udp_transport(fd=True),
             duration=3.0,
@@ -100,11 +98,11 @@ def test_frame_faults_are_counted_by_sequence_number(pendulum_gains, can_firmwar
     assert m["complete"] is True and abs(m["outputs_final"]["theta"]) < 0.05
 
 
-def test_ten_percent_drops_show_as_a_cost_against_the_twin(pendulum_gains, can_firmware, cart_fmu):
+def test_ten_percent_drops_show_as_a_cost_against_the_twin(pend, can_firmware, cart_fmu):
     """Every tenth sample dropped (the command is held for that period): the twin comparison measures what
     that costs the closed loop, far above the fault-free run's float32 differences."""
     common = dict(
-        gains=pendulum_gains,
+        gains=pend,
         fmu=cart_fmu,
         transport=udp_transport(fd=True),
         duration=4.0,
@@ -120,7 +118,8 @@ def test_ten_percent_drops_show_as_a_cost_against_the_twin(pendulum_gains, can_f
     assert clean.metrics["lost"] == 0 and drops.metrics["lost"] == 40
     c, d = clean.metrics["twin"], drops.metrics["twin"]
     print(
-        f"against the twin: fault-free max |du| {c['worst_du_rel']:.3g} of span, |dy| {c['worst_dy_rel']:.3g} of range, "
+        f"against the twin: fault-free max |du| {c['worst_du_rel']:.3g} of span, "
+        f"|dy| {c['worst_dy_rel']:.3g} of range, "
         f"IAE {c['iae']['r_x']['difference_rel']:+.3g}; 10 % drops {d['worst_du_rel']:.3g}, {d['worst_dy_rel']:.3g}, "
         f"IAE {d['iae']['r_x']['difference_rel']:+.3g}"
     )
@@ -131,11 +130,11 @@ def test_ten_percent_drops_show_as_a_cost_against_the_twin(pendulum_gains, can_f
     np.testing.assert_array_equal(clean.trace.twin_u, drops.trace.twin_u)
 
 
-def test_silent_controller_ends_the_run_in_bounded_time(pendulum_gains, can_firmware, cart_fmu):
+def test_silent_controller_ends_the_run_in_bounded_time(pend, can_firmware, cart_fmu):
     t0 = time.monotonic()
     r = _run(
         pendulum_scenario(
-            gains=pendulum_gains,
+            gains=pend,
             fmu=cart_fmu,
             transport=udp_transport(),
             duration=30.0,
@@ -150,10 +149,10 @@ def test_silent_controller_ends_the_run_in_bounded_time(pendulum_gains, can_firm
     assert r.metrics["steps"] >= 50
 
 
-def test_crashed_controller_ends_the_run_and_says_so(pendulum_gains, can_firmware, cart_fmu):
+def test_crashed_controller_ends_the_run_and_says_so(pend, can_firmware, cart_fmu):
     r = _run(
         pendulum_scenario(
-            gains=pendulum_gains,
+            gains=pend,
             fmu=cart_fmu,
             transport=udp_transport(),
             duration=30.0,
@@ -165,8 +164,8 @@ def test_crashed_controller_ends_the_run_and_says_so(pendulum_gains, can_firmwar
     assert "exited with status -9" in r.metrics["reason"] and r.metrics["steps"] <= 32
 
 
-def test_reference_controller_node_matches_the_firmware(pendulum_gains, can_firmware, cart_fmu):
-    common = dict(gains=pendulum_gains, fmu=cart_fmu, duration=1.5)
+def test_reference_controller_node_matches_the_firmware(pend, can_firmware, cart_fmu):
+    common = dict(gains=pend, fmu=cart_fmu, duration=1.5)
     fw = _run(pendulum_scenario(transport=udp_transport(), **common))
     py = _run(pendulum_scenario(transport=udp_transport(), controller="reference", **common))
     assert fw.complete and py.complete
@@ -175,10 +174,8 @@ def test_reference_controller_node_matches_the_firmware(pendulum_gains, can_firm
     np.testing.assert_allclose(fw.trace.u, py.trace.u, rtol=0, atol=1e-3)
 
 
-def test_realtime_mode_keeps_its_period(pendulum_gains, can_firmware, cart_fmu):
-    r = _run(
-        pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=1.0, mode="realtime")
-    )
+def test_realtime_mode_keeps_its_period(pend, can_firmware, cart_fmu, realtime_alone):
+    r = _run(pendulum_scenario(gains=pend, fmu=cart_fmu, transport=udp_transport(), duration=1.0, mode="realtime"))
     m = r.metrics
     assert m["complete"] is True and m["steps"] == 100
     assert m["wall_s"] >= 0.99  # paced by the clock, not as fast as possible (lockstep takes ~0.05 s)
@@ -199,8 +196,10 @@ def _stall_once(seconds: float):
     return progress
 
 
-def test_realtime_overrun_skips_the_missed_ticks_and_lets_the_plant_run_on(pendulum_gains, can_firmware, cart_fmu):
-    common = dict(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=2.0, mode="realtime")
+def test_realtime_overrun_skips_the_missed_ticks_and_lets_the_plant_run_on(
+    pend, can_firmware, cart_fmu, realtime_alone
+):
+    common = dict(gains=pend, fmu=cart_fmu, transport=udp_transport(), duration=2.0, mode="realtime")
     period_us = 10_000.0  # the pendulum's Ts
     skip = run_scenario(parse_scenario(pendulum_scenario(**common)), progress=_stall_once(0.08))
     m = skip.metrics
@@ -225,10 +224,10 @@ def _cpu_wakeup_latency_request() -> int:
 
 
 @pytest.mark.skipif(not os.access("/dev/cpu_dma_latency", os.W_OK), reason="PM QoS needs root")
-def test_realtime_holds_a_zero_wakeup_latency_request_only_while_it_runs(pendulum_gains, can_firmware, cart_fmu):
+def test_realtime_holds_a_zero_wakeup_latency_request_only_while_it_runs(pend, can_firmware, cart_fmu, realtime_alone):
     before = _cpu_wakeup_latency_request()
     seen: list[int] = []
-    common = dict(gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=0.5, mode="realtime")
+    common = dict(gains=pend, fmu=cart_fmu, transport=udp_transport(), duration=0.5, mode="realtime")
     r = run_scenario(
         parse_scenario(pendulum_scenario(**common)),
         progress=lambda done, total: seen.append(_cpu_wakeup_latency_request()) if done < total else None,
@@ -249,10 +248,8 @@ def _cli_error(*argv):
     return res.code, lines
 
 
-def test_bad_inputs_get_one_line_and_a_nonzero_exit(tmp_path, pendulum_gains, cart_fmu, example_artifacts):
-    base = pendulum_scenario(
-        gains=pendulum_gains, fmu=cart_fmu, transport=udp_transport(), duration=0.5, controller="reference"
-    )
+def test_bad_inputs_get_one_line_and_a_nonzero_exit(tmp_path, pend, cart_fmu, example_artifacts):
+    base = pendulum_scenario(gains=pend, fmu=cart_fmu, transport=udp_transport(), duration=0.5, controller="reference")
     broken = tmp_path / "broken.fmu"
     broken.write_bytes(b"PK\x03\x04 truncated")
     cases = {
@@ -286,17 +283,17 @@ def test_bad_inputs_get_one_line_and_a_nonzero_exit(tmp_path, pendulum_gains, ca
     assert code == 2 and len(lines) == 1 and "not found" in lines[0]
 
 
-def test_firmware_run_with_can_config_serves_the_bus(tmp_path, pendulum_gains, can_firmware):
+def test_firmware_run_with_can_config_serves_the_bus(tmp_path, pend, can_firmware):
     cfg = udp_transport(fd=False)
     (tmp_path / "can.json").write_text(json.dumps(cfg))
     gainlink = [sys.executable, "-c", "import sys; from gainlink.cli import main; sys.exit(main())"]
     proc = subprocess.Popen(
-        [*gainlink, "firmware", "run", str(pendulum_gains), "--can", str(tmp_path / "can.json")],
+        [*gainlink, "firmware", "run", str(pend), "--can", str(tmp_path / "can.json")],
         stdin=subprocess.DEVNULL,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )
-    art = load(pendulum_gains)
+    art = load(pend)
     transport = CanTransport(cfg, artifact=art)
     try:
         assert b"gainlink_can ready" in proc.stdout.readline()
@@ -363,8 +360,8 @@ def test_wood_berry_fmu_plant_tracks_a_step_like_the_builtin_model(example_artif
     np.testing.assert_allclose(fmu.trace.u, builtin.trace.u, rtol=0, atol=1e-5)
 
 
-def test_busy_polling_changes_timing_only(pendulum_gains, can_firmware, cart_fmu):
-    common = dict(gains=pendulum_gains, fmu=cart_fmu, duration=1.0)
+def test_busy_polling_changes_timing_only(pend, can_firmware, cart_fmu):
+    common = dict(gains=pend, fmu=cart_fmu, duration=1.0)
     plain = _run(pendulum_scenario(transport=udp_transport(), **common))
     busy = _run(pendulum_scenario(transport={**udp_transport(), "busy_poll_us": 100}, **common))
     assert "--spin-us" in busy.info["controller"]["argv"]
@@ -384,7 +381,7 @@ def _controller_cpus() -> set[int]:
 
 
 @pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="needs sched_setaffinity")
-def test_lockstep_shares_one_cpu_with_the_controller_and_restores_the_bridge(pendulum_gains, can_firmware, cart_fmu):
+def test_lockstep_shares_one_cpu_with_the_controller_and_restores_the_bridge(pend, can_firmware, cart_fmu):
     before = os.sched_getaffinity(0)
     seen: list[tuple[set[int], set[int]]] = []
 
@@ -392,7 +389,7 @@ def test_lockstep_shares_one_cpu_with_the_controller_and_restores_the_bridge(pen
         if 0 < done < total:
             seen.append((os.sched_getaffinity(0), _controller_cpus()))
 
-    common = dict(gains=pendulum_gains, fmu=cart_fmu, duration=1.0)
+    common = dict(gains=pend, fmu=cart_fmu, duration=1.0)
     shared = run_scenario(parse_scenario(pendulum_scenario(transport=udp_transport(), **common)), progress=during)
     assert shared.complete and seen
     for bridge, controller in seen:

@@ -12,7 +12,7 @@ import json
 
 import pytest
 from gainlink.hil.loop.study import default_study, run_saturation_study
-from test_hil_support import udp_transport
+from support.hil import udp_transport
 
 pytestmark = pytest.mark.slow
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 from gainlink.firmware.mavlink_app import firmware_argv, mavlink_executable
 from gainlink.hil.loop.bridge import run_scenario
@@ -22,10 +21,11 @@ from gainlink.mavlink.signing import enable, new_key, write_key
 from gainlink.shipping.artifact import load
 from gainlink.shipping.codegen import gain_set
 from pymavlink.dialects.v20 import common as mavlink2
-from test_hil_support import cart_fmu, pendulum_gains, pendulum_scenario, udp_transport  # noqa: F401
-from test_mavlink_upload import free_udp_port
+from support.hil import pendulum_scenario, udp_transport
+from support.net import udp_port
+from support.paths import TESTS
 
-HOSTILE = Path(__file__).with_name("hostile_traffic.py")
+HOSTILE = TESTS / "support" / "hostile_traffic.py"
 COUNT = 150_000
 DURATION = 200.0  # simulated seconds: 20,000 lockstep steps
 # On udp_multicast every member gets every datagram: the bridge (Python, python-can) reads the whole flood too,
@@ -38,7 +38,7 @@ CAN_COUNT = 120_000
 
 
 def run_beside(data: dict, hostile_argv: list[str], *, count: int):
-    """Run the scenario while tests/hostile_traffic.py sends ``count`` datagrams; returns (result, report dict,
+    """Run the scenario while tests/support/hostile_traffic.py sends ``count`` datagrams; returns (result, report dict,
     hostile summary).
 
     The sender makes its datagrams first; at each of the run's progress reports (every 1 % of the steps, between
@@ -76,15 +76,15 @@ def run_beside(data: dict, hostile_argv: list[str], *, count: int):
     return res, json.loads(report_json(res)), sent
 
 
-def test_hostile_mavlink_traffic_during_a_signed_lockstep_run(pendulum_gains, cart_fmu, tmp_path):
-    art = load(pendulum_gains)
+def test_hostile_mavlink_traffic_during_a_signed_lockstep_run(pend, cart_fmu, tmp_path):
+    art = load(pend)
     key_file = write_key(tmp_path / "link.key", new_key())
     key = bytes.fromhex(key_file.read_text())
-    port = free_udp_port()
+    port = udp_port()
     frames = hostile_mavlink_frames(art, key)
     (tmp_path / "frames.hex").write_text("\n".join(f.hex() for f in frames))
     data = pendulum_scenario(
-        gains=pendulum_gains,
+        gains=pend,
         fmu=cart_fmu,
         duration=DURATION,
         transport={"kind": "mavlink", "port": port, "signing_key": str(key_file)},
@@ -138,9 +138,9 @@ def hostile_mavlink_frames(art, key: bytes) -> list[bytes]:
     return [bytes(f) for f in frames]
 
 
-def test_hostile_can_traffic_during_a_lockstep_can_fd_run(pendulum_gains, cart_fmu):
+def test_hostile_can_traffic_during_a_lockstep_can_fd_run(pend, cart_fmu):
     transport = udp_transport(fd=True)
-    data = pendulum_scenario(gains=pendulum_gains, fmu=cart_fmu, transport=transport, duration=DURATION)
+    data = pendulum_scenario(gains=pend, fmu=cart_fmu, transport=transport, duration=DURATION)
     base = 0x100
     res, report, sent = run_beside(
         data,
@@ -182,7 +182,7 @@ def test_a_stderr_reader_that_never_reads_does_not_stall_the_mavlink_app(pend, t
     key_file = write_key(tmp_path / "link.key", new_key())
     frames = hostile_mavlink_frames(art, bytes.fromhex(key_file.read_text()))
     (tmp_path / "frames.hex").write_text("\n".join(f.hex() for f in frames))
-    port = free_udp_port()
+    port = udp_port()
     argv = firmware_argv(mavlink_executable(art), url=f"udpin:127.0.0.1:{port}", signing_key=key_file)
     proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:  # stderr is read only after the end

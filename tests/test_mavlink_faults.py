@@ -7,22 +7,22 @@ import math
 import time
 
 import numpy as np
-from conftest import run_cli
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import INT32, REAL32, Encoding, as_int32
 from gainlink.mavlink.relay import LossyUdpRelay
 from gainlink.mavlink.session import ParamSession
 from gainlink.shipping.artifact import load
 from gainlink.shipping.codegen import gain_set, payload_crc32
-from test_mavlink_upload import closed_loop, exe, read_params, reference_u, retuned, start_firmware  # noqa: F401 (shared module-scoped fixtures)
+from support.cli import run_cli
+from support.mavlink import closed_loop, read_params, reference_u, start_firmware
 
 
 def values_of(port: int) -> dict:
     return {n: p.value for n, p in read_params(port).items()}
 
 
-def test_upload_through_a_lossy_link_completes_and_verifies(exe, pend, retuned, tmp_path):
-    fw, port = start_firmware(exe, tmp_path / "params.txt")
+def test_upload_through_a_lossy_link_completes_and_verifies(mavlink_exe, pend, retuned, tmp_path):
+    fw, port = start_firmware(mavlink_exe, tmp_path / "params.txt")
     try:
         with LossyUdpRelay(upstream=("127.0.0.1", port), drop=0.2, duplicate=0.1, reorder=0.1, seed=7) as relay:
             res = run_cli(
@@ -50,7 +50,7 @@ def test_upload_through_a_lossy_link_completes_and_verifies(exe, pend, retuned, 
         fw.stop()
 
 
-def test_a_parameter_refused_midway_rolls_back_every_change(exe, pend, tmp_path):
+def test_a_parameter_refused_midway_rolls_back_every_change(mavlink_exe, pend, tmp_path):
     mapping = tmp_path / "map.toml"
     mapping.write_text(
         '[[param]]\ngain = "K[0,0]"\nname = "GL_K_0_0"\nscale = 1.5\n'
@@ -59,7 +59,7 @@ def test_a_parameter_refused_midway_rolls_back_every_change(exe, pend, tmp_path)
         '[[param]]\ngain = "K[0,2]"\nname = "GL_K_0_2"\nscale = 1.5\n'
         '[[param]]\ngain = "L[0,0]"\nname = "GL_L_0_0"\nscale = 0.5\n'
     )
-    fw, port = start_firmware(exe, None)
+    fw, port = start_firmware(mavlink_exe, None)
     try:
         before = values_of(port)
         res = run_cli(
@@ -87,8 +87,8 @@ def test_a_parameter_refused_midway_rolls_back_every_change(exe, pend, tmp_path)
         fw.stop()
 
 
-def test_a_refused_persist_rolls_back_the_committed_set(exe, pend, retuned):
-    fw, port = start_firmware(exe, None)  # no --storage: MAV_CMD_PREFLIGHT_STORAGE fails
+def test_a_refused_persist_rolls_back_the_committed_set(mavlink_exe, pend, retuned):
+    fw, port = start_firmware(mavlink_exe, None)  # no --storage: MAV_CMD_PREFLIGHT_STORAGE fails
     try:
         old = load(pend)
         res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--persist")
@@ -118,10 +118,10 @@ def test_no_heartbeat_is_a_clear_error_within_the_timeout(tmp_path, pend):
     assert elapsed < 3
 
 
-def test_non_finite_values_and_invalid_commits_are_refused_and_the_loop_keeps_its_set(exe, pend):
+def test_non_finite_values_and_invalid_commits_are_refused_and_the_loop_keeps_its_set(mavlink_exe, pend):
     old = load(pend)
     crc_old = gain_set(old).crc32
-    fw, port = start_firmware(exe, None)
+    fw, port = start_firmware(mavlink_exe, None)
     try:
         with MavLink(f"udpout:127.0.0.1:{port}") as link:
             link.wait_heartbeat(timeout=5)

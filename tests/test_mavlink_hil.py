@@ -9,7 +9,8 @@ from gainlink.errors import TransportError
 from gainlink.hil.links.config import transport_from_config
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
-from test_mavlink_upload import free_udp_port
+from support.hil import udp_transport
+from support.net import udp_port
 
 
 def scenario(artifact_path, transport: dict, **extra):
@@ -33,8 +34,8 @@ def scenario(artifact_path, transport: dict, **extra):
 
 
 def test_the_same_scenario_over_mavlink_and_can_agrees_step_for_step(pend):
-    mav = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}))
-    can = run_scenario(scenario(pend, {"interface": "udp_multicast", "channel": "239.74.163.41", "hop_limit": 0}))
+    mav = run_scenario(scenario(pend, {"kind": "mavlink", "port": udp_port()}))
+    can = run_scenario(scenario(pend, udp_transport(fd=False)))
     assert mav.complete and can.complete, (mav.reason, can.reason)
     assert mav.info["transport"]["kind"] == "mavlink"
     assert "gainlink_mavlink" in mav.info["controller"]["argv"][0]
@@ -53,7 +54,7 @@ def test_dropped_samples_over_mavlink_are_counted_and_the_loop_recovers(pend):
     res = run_scenario(
         scenario(
             pend,
-            {"kind": "mavlink", "port": free_udp_port()},
+            {"kind": "mavlink", "port": udp_port()},
             step_timeout=0.3,
             peer_timeout=5.0,
             faults=[{"kind": "drop", "start": 1.0, "stop": 1.1, "every": 1}],
@@ -83,8 +84,8 @@ def test_bad_mavlink_transport_tables_are_one_clear_error(pend):
 
 def test_busy_polling_over_mavlink_changes_timing_only(pend):
     common = dict(duration=1.0, twin=False)
-    plain = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, **common))
-    busy = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port(), "busy_poll_us": 100}, **common))
+    plain = run_scenario(scenario(pend, {"kind": "mavlink", "port": udp_port()}, **common))
+    busy = run_scenario(scenario(pend, {"kind": "mavlink", "port": udp_port(), "busy_poll_us": 100}, **common))
     assert "--spin-us" not in plain.info["controller"]["argv"]
     assert busy.info["controller"]["argv"][-2:] == ["--spin-us", "100"]
     assert busy.info["transport"]["busy_poll_us"] == 100
@@ -96,8 +97,8 @@ def test_busy_polling_over_mavlink_changes_timing_only(pend):
 
 
 def test_the_python_reference_node_over_mavlink_matches_the_firmware(pend):
-    ref = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, controller="reference"))
-    fw = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}))
+    ref = run_scenario(scenario(pend, {"kind": "mavlink", "port": udp_port()}, controller="reference"))
+    fw = run_scenario(scenario(pend, {"kind": "mavlink", "port": udp_port()}))
     assert ref.complete and fw.complete, (ref.reason, fw.reason)
     assert "gainlink.hil.links.mavlink_node" in ref.info["controller"]["argv"]
     assert "python reference" in ref.info["controller"]["ready"]

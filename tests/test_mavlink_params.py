@@ -8,7 +8,6 @@ import struct
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.errors import ParameterError
 from gainlink.mavlink.link import MavLink, raw_param_value
 from gainlink.mavlink.params import (
@@ -26,6 +25,7 @@ from gainlink.mavlink.params import (
 from gainlink.shipping.artifact import load
 from hypothesis import given
 from hypothesis import strategies as st
+from support.cli import run_cli
 
 
 @given(st.integers(min_value=-(2**31), max_value=2**31 - 1))

@@ -9,7 +9,6 @@ import subprocess
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.firmware.build import cache_root, firmware_dir
 from gainlink.firmware.mavlink_app import EXECUTABLE, MavlinkFirmware
 from gainlink.hil.links.base import STATUS_FAULT, STATUS_WATCHDOG
@@ -20,7 +19,9 @@ from gainlink.mavlink.session import ParamSession
 from gainlink.shipping.artifact import load
 from gainlink.shipping.codegen import gain_set, render_c
 from pymavlink.dialects.v20 import common as mavlink2
-from test_mavlink_upload import free_udp_port, retuned_pendulum
+from support.cli import run_cli
+from support.mavlink import retuned_pendulum
+from support.net import udp_port
 
 
 @pytest.fixture(scope="module")
@@ -65,7 +66,7 @@ def test_every_message_under_asan_ubsan(sanitized_exe, pend, tmp_path):
     art = load(pend)
     retuned = retuned_pendulum(tmp_path / "retuned.json")
     storage = tmp_path / "params.txt"
-    port = free_udp_port()
+    port = udp_port()
     fw = MavlinkFirmware(sanitized_exe, url=f"udpin:127.0.0.1:{port}", storage=storage).start()
     try:
         # garbage, truncated frames and a foreign message first: the parser must shrug them off

@@ -14,9 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.errors import TransportError
-from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
+from gainlink.firmware.mavlink_app import MavlinkFirmware
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession
@@ -25,14 +24,10 @@ from gainlink.shipping.artifact import load
 from gainlink.shipping.codegen import gain_set, payload_crc32
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
-from test_mavlink_upload import free_udp_port, retuned  # noqa: F401 - fixture
+from support.cli import run_cli
+from support.net import udp_port
 
 READ = {"GL_HASH", "GL_K_0_0"}
-
-
-@pytest.fixture(scope="module")
-def exe(pend):
-    return mavlink_executable(load(pend))
 
 
 @pytest.fixture
@@ -40,9 +35,9 @@ def key_file(tmp_path):
     return write_key(tmp_path / "vehicle.key", new_key())
 
 
-def start(exe, key_file=None, storage=None) -> tuple[MavlinkFirmware, str]:
-    port = free_udp_port()
-    fw = MavlinkFirmware(exe, url=f"udpin:127.0.0.1:{port}", storage=storage, signing_key=key_file)
+def start(mavlink_exe, key_file=None, storage=None) -> tuple[MavlinkFirmware, str]:
+    port = udp_port()
+    fw = MavlinkFirmware(mavlink_exe, url=f"udpin:127.0.0.1:{port}", storage=storage, signing_key=key_file)
     fw.start()
     return fw, f"udpout:127.0.0.1:{port}"
 
@@ -58,9 +53,9 @@ def crc_of(art) -> int:
     return gain_set(art).crc32
 
 
-def test_signed_upload_works_and_unsigned_upload_is_refused(exe, pend, retuned, key_file, tmp_path):
+def test_signed_upload_works_and_unsigned_upload_is_refused(mavlink_exe, pend, retuned, key_file, tmp_path):
     old, new = load(pend), load(retuned)
-    fw, url = start(exe, key_file, storage=tmp_path / "params.txt")
+    fw, url = start(mavlink_exe, key_file, storage=tmp_path / "params.txt")
     try:
         res = run_cli("mavlink", "upload", retuned, "--connect", url, "--signing-key", key_file, "--persist")
         assert res.code == 0, res.err
@@ -83,11 +78,11 @@ def test_signed_upload_works_and_unsigned_upload_is_refused(exe, pend, retuned, 
     assert c["bad_frames"] >= c["unsigned"] + c["bad_signature"] + c["replayed"]
 
 
-def test_wrong_key_and_replayed_frames_are_refused_and_counted(exe, pend, key_file):
+def test_wrong_key_and_replayed_frames_are_refused_and_counted(mavlink_exe, pend, key_file):
     art = load(pend)
     key = bytes.fromhex(key_file.read_text())
     name, value, commit, _ = _retune(art)
-    fw, url = start(exe, key_file)
+    fw, url = start(mavlink_exe, key_file)
     try:
         wrong, right = (mavlink2.MAVLink(None, srcSystem=255, srcComponent=190) for _ in range(2))
         enable(wrong, new_key(), link_id=3)
@@ -113,13 +108,15 @@ def test_wrong_key_and_replayed_frames_are_refused_and_counted(exe, pend, key_fi
     assert c["bad_signature"] == 2 and c["replayed"] == 5 and c["commits"] == 0
 
 
-def test_pymavlink_signs_as_a_third_party_and_the_answers_are_signed(exe, pend, key_file, tmp_path, monkeypatch):
+def test_pymavlink_signs_as_a_third_party_and_the_answers_are_signed(
+    mavlink_exe, pend, key_file, tmp_path, monkeypatch
+):
     """A plain pymavlink connection with its own setup_signing (not gainlink's link) sets, commits and
     persists; the firmware's answers carry valid signatures."""
     art = load(pend)
     key = bytes.fromhex(key_file.read_text())
     name, value, commit, _ = _retune(art)
-    fw, url = start(exe, key_file, storage=tmp_path / "params.txt")
+    fw, url = start(mavlink_exe, key_file, storage=tmp_path / "params.txt")
     monkeypatch.setenv("MAVLINK20", "1")  # pymavlink's own switch to MAVLink 2 (signing needs it)
     try:
         conn = mavutil.mavlink_connection(url, source_system=250, source_component=190, dialect="common")
@@ -142,9 +139,9 @@ def test_pymavlink_signs_as_a_third_party_and_the_answers_are_signed(exe, pend, 
     assert fw.counters()["commits"] == 1 and fw.counters()["persist_writes"] == 1
 
 
-def test_setup_signing_replaces_the_key_only_when_signed(exe, pend, key_file):
+def test_setup_signing_replaces_the_key_only_when_signed(mavlink_exe, pend, key_file):
     key, rotated = bytes.fromhex(key_file.read_text()), new_key()
-    fw, url = start(exe, key_file)
+    fw, url = start(mavlink_exe, key_file)
     try:
         with MavLink(url) as unsigned:  # unsigned SETUP_SIGNING: refused (as any unsigned command)
             unsigned.wait_heartbeat(timeout=5)
@@ -162,8 +159,8 @@ def test_setup_signing_replaces_the_key_only_when_signed(exe, pend, key_file):
     assert fw.counters()["unsigned"] >= 1
 
 
-def test_udp_without_a_key_refuses_setup_signing(exe):
-    fw, url = start(exe)
+def test_udp_without_a_key_refuses_setup_signing(mavlink_exe):
+    fw, url = start(mavlink_exe)
     try:
         with MavLink(url) as link:
             link.wait_heartbeat(timeout=5)
@@ -175,11 +172,11 @@ def test_udp_without_a_key_refuses_setup_signing(exe):
     assert c["setup_refused"] == 1 and c["signing"] == 0
 
 
-def test_persist_writes_only_changes_and_at_most_four_at_once(exe, pend, key_file, tmp_path):
+def test_persist_writes_only_changes_and_at_most_four_at_once(mavlink_exe, pend, key_file, tmp_path):
     """Flash wear: a persist of the set storage already holds writes nothing; at most 4 writes in a burst."""
     art = load(pend)
     key = bytes.fromhex(key_file.read_text())
-    fw, url = start(exe, key_file, storage=tmp_path / "params.txt")
+    fw, url = start(mavlink_exe, key_file, storage=tmp_path / "params.txt")
     results = []
     try:
         with MavLink(url, signing_key=key) as link:
@@ -218,7 +215,9 @@ def clock_shift(tmp_path_factory) -> Path:
     return out
 
 
-def test_persist_rate_limit_refills_one_write_a_minute_up_to_four(exe, pend, clock_shift, tmp_path, monkeypatch):
+def test_persist_rate_limit_refills_one_write_a_minute_up_to_four(
+    mavlink_exe, pend, clock_shift, tmp_path, monkeypatch
+):
     """The persist rate limit's refill, on the real app process over UDP, without waiting in wall time: the app
     takes its time from CLOCK_MONOTONIC, which tests/clock_shift.c (LD_PRELOAD) moves forward by what the test
     writes into a file; nothing in the firmware changes for the test. gl_mav_node.h: at most 4 writes in a
@@ -230,7 +229,7 @@ def test_persist_rate_limit_refills_one_write_a_minute_up_to_four(exe, pend, clo
     shift.write_bytes(struct.pack("=q", 0))
     monkeypatch.setenv("LD_PRELOAD", str(clock_shift))
     monkeypatch.setenv("GL_CLOCK_SHIFT_FILE", str(shift))
-    fw, url = start(exe, storage=tmp_path / "params.txt")
+    fw, url = start(mavlink_exe, storage=tmp_path / "params.txt")
     monkeypatch.delenv("LD_PRELOAD")
     factors = iter(1.0 + 0.01 * i for i in range(1, 20))  # every set new: no persist is skipped as a repeat
     try:
@@ -270,7 +269,7 @@ def test_persist_rate_limit_refills_one_write_a_minute_up_to_four(exe, pend, clo
     assert len(waits) == 4 and 0 < waits[1] <= 15, waits  # 45 s (plus the seconds the test took) into 60
 
 
-def test_key_file_errors_are_one_line(tmp_path, pend, exe):
+def test_key_file_errors_are_one_line(tmp_path, pend, mavlink_exe):
     bad = tmp_path / "bad.key"
     for content in ("", "abc", "zz" * 32, "00" * 31, "00" * 33):
         bad.write_text(content)
@@ -287,7 +286,10 @@ def test_key_file_errors_are_one_line(tmp_path, pend, exe):
     assert res.code == 2 and "not found" in res.err
     bad.write_text("00" * 31)
     proc = subprocess.run(
-        [str(exe), "--url", "udpin:127.0.0.1:0", "--signing-key", str(bad)], capture_output=True, text=True, timeout=10
+        [str(mavlink_exe), "--url", "udpin:127.0.0.1:0", "--signing-key", str(bad)],
+        capture_output=True,
+        text=True,
+        timeout=10,
     )
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "hex digits" in proc.stderr
 

@@ -17,13 +17,14 @@ from pathlib import Path
 import mavsdk  # the test extra (make setup) installs it
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.mavlink.params import REAL32, as_int32, firmware_params
 from gainlink.shipping.artifact import load
 from gainlink.shipping.codegen import gain_set
 from mavsdk.plugins.param import Param, ParamError
 from mavsdk.plugins.param_server import ParamServer
-from test_mavlink_upload import closed_loop, exe, free_udp_port, read_params, reference_u, retuned, start_firmware  # noqa: F401 (shared module-scoped fixtures)
+from support.cli import run_cli
+from support.mavlink import closed_loop, read_params, reference_u, start_firmware
+from support.net import udp_port
 
 MAVPROXY = Path(sys.executable).parent / "mavproxy.py"
 
@@ -48,9 +49,9 @@ def mavsdk_ground_station(port: int):
         cfg.destroy()
 
 
-def test_mavsdk_reads_the_same_list_and_sets_gains_that_the_loop_then_runs(exe, pend, retuned):
+def test_mavsdk_reads_the_same_list_and_sets_gains_that_the_loop_then_runs(mavlink_exe, pend, retuned):
     old, new = load(pend), load(retuned)
-    fw, port = start_firmware(exe, None)
+    fw, port = start_firmware(mavlink_exe, None)
     try:
         reference = read_params(port)  # pymavlink
         with mavsdk_ground_station(port) as param:
@@ -151,9 +152,9 @@ def float_bits_as_int32(value: float) -> int:
     return struct.unpack("<i", struct.pack("<f", value))[0]
 
 
-def test_mavproxy_reads_the_same_list_and_sets_gains(exe, pend, retuned, tmp_path):
+def test_mavproxy_reads_the_same_list_and_sets_gains(mavlink_exe, pend, retuned, tmp_path):
     old, new = load(pend), load(retuned)
-    fw, port = start_firmware(exe, None)
+    fw, port = start_firmware(mavlink_exe, None)
     mp = MavProxy(port, tmp_path)
     try:
         reference = read_params(port)
@@ -201,7 +202,7 @@ def test_mavproxy_reads_the_same_list_and_sets_gains(exe, pend, retuned, tmp_pat
 
 def test_uploader_against_mavsdk_as_the_vehicle(pend, tmp_path):
     art = load(pend)
-    port = free_udp_port()
+    port = udp_port()
     mapping = tmp_path / "px4_style.toml"
     mapping.write_text(
         '[[param]]\ngain = "K[0,0]"\nname = "MC_ROLLRATE_P"\nscale = -0.1\n'

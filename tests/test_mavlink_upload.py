@@ -5,24 +5,19 @@ from __future__ import annotations
 
 import math
 import re
-import socket
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES, run_cli
 from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
-from gainlink.hil.links.mavlink import MavlinkTransport
-from gainlink.mavlink.link import MavLink
-from gainlink.mavlink.params import Encoding
-from gainlink.mavlink.session import ParamSession
-from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import Artifact, load
 from gainlink.shipping.codegen import gain_set
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
+from support.cli import run_cli
+from support.mavlink import closed_loop, read_params, reference_u, start_firmware
+from support.net import udp_port
 
 STEMS = {
     "AD": "Ad",
@@ -44,39 +39,6 @@ STEMS = {
 }
 
 
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def retuned_pendulum(path: Path) -> Path:
-    """The pendulum designed again with other weights: same structure, other gains."""
-    spec = tomllib.loads((EXAMPLES / "pendulum.toml").read_text())
-    spec["controller"]["Q_diag"] = [40.0, 1.0, 300.0, 2.0]
-    spec["controller"]["R_diag"] = [3.0]
-    spec["integral"]["Q_diag"] = [12.0]
-    artifact_mod.write(path, synthesize(parse_spec(spec)).artifact)
-    return path
-
-
-@pytest.fixture(scope="module")
-def retuned(tmp_path_factory) -> Path:
-    return retuned_pendulum(tmp_path_factory.mktemp("retuned") / "gains.json")
-
-
-@pytest.fixture(scope="module")
-def exe(pend) -> Path:
-    return mavlink_executable(load(pend))
-
-
-def start_firmware(exe: Path, storage: Path | None) -> tuple[MavlinkFirmware, int]:
-    port = free_udp_port()
-    fw = MavlinkFirmware(exe, url=f"udpin:127.0.0.1:{port}", storage=storage)
-    fw.start()
-    return fw, port
-
-
 def expected_value(art: Artifact, name: str) -> float:
     """The float32 number a parameter id names, read straight from the artifact."""
     if name == "GL_TS":
@@ -88,43 +50,9 @@ def expected_value(art: Artifact, name: str) -> float:
     return float(np.float32(a[idx]))
 
 
-def read_params(port: int) -> dict:
-    with MavLink(f"udpout:127.0.0.1:{port}") as link:
-        link.wait_heartbeat(timeout=5)
-        s = ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE)
-        return s.read_all()
-
-
-def closed_loop(port: int, art: Artifact, *, steps: int = 300) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Run the artifact's own discrete plant against the firmware over the HIL link; return Y, R, U."""
-    t = MavlinkTransport(
-        url=f"udpout:127.0.0.1:{port}", controller_url="", n_inputs=art.m, n_outputs=art.p, n_refs=art.q, ts=art.Ts
-    )
-    x = np.zeros(art.n)
-    x[2] = 0.05  # pendulum tilted
-    Y, R, U = np.zeros((steps, art.p)), np.full((steps, art.q), 0.2), np.zeros((steps, art.m))
-    with t:
-        t.send_frames(t.encode_reset(seq=0))
-        assert t.receive_command(timeout=2.0) is not None
-        u = np.zeros(art.m)
-        for k in range(steps):
-            y = art.Cd @ x + art.Dd @ u
-            Y[k] = y.astype(np.float32)
-            t.send_frames(t.encode_sample(seq=k + 1, y=Y[k], r=R[k]))
-            c = t.receive_command(timeout=2.0)
-            assert c is not None and c.seq == k + 1
-            u = U[k] = c.u
-            x = art.Ad @ x + art.Bd @ u
-    return Y, R, U
-
-
-def reference_u(art: Artifact, Y: np.ndarray, R: np.ndarray) -> np.ndarray:
-    return ReferenceLoop(art).run(Y, R.astype(np.float32).astype(float)).u
-
-
-def test_parameter_list_is_the_artifact(exe, pend):
+def test_parameter_list_is_the_artifact(mavlink_exe, pend):
     art = load(pend)
-    fw, port = start_firmware(exe, None)
+    fw, port = start_firmware(mavlink_exe, None)
     try:
         params = read_params(port)
     finally:
@@ -147,11 +75,11 @@ def test_parameter_list_is_the_artifact(exe, pend):
     assert floats["GL_K_0_3"].value == float(np.float32(art.K[0, 3]))
 
 
-def test_upload_persists_survives_restart_and_the_loop_runs_the_new_gains(exe, pend, retuned, tmp_path):
+def test_upload_persists_survives_restart_and_the_loop_runs_the_new_gains(mavlink_exe, pend, retuned, tmp_path):
     old, new = load(pend), load(retuned)
     assert old.n == new.n and not np.allclose(old.K, new.K)
     storage = tmp_path / "params.txt"
-    fw, port = start_firmware(exe, storage)
+    fw, port = start_firmware(mavlink_exe, storage)
     try:
         Y, R, U = closed_loop(port, old)
         np.testing.assert_allclose(U, reference_u(old, Y, R), atol=1e-4)
@@ -168,7 +96,7 @@ def test_upload_persists_survives_restart_and_the_loop_runs_the_new_gains(exe, p
         fw.stop()
     assert storage.is_file()
 
-    fw, port = start_firmware(exe, storage)  # a restart: values reloaded from the stored file
+    fw, port = start_firmware(mavlink_exe, storage)  # a restart: values reloaded from the stored file
     try:
         assert "loaded parameters" in fw.stderr_text()
         params = read_params(port)
@@ -182,12 +110,12 @@ def test_upload_persists_survives_restart_and_the_loop_runs_the_new_gains(exe, p
         fw.stop()
 
 
-def test_stored_set_holds_exact_bits_and_a_tampered_file_is_refused_whole(exe, pend, retuned, tmp_path):
+def test_stored_set_holds_exact_bits_and_a_tampered_file_is_refused_whole(mavlink_exe, pend, retuned, tmp_path):
     """The storage file carries each float32's bits (so a reload is exact); a file whose values no longer
     match its GL_HASH, or with a malformed line, is refused whole and the compiled set runs."""
     old, new = load(pend), load(retuned)
     storage = tmp_path / "params.txt"
-    fw, port = start_firmware(exe, storage)
+    fw, port = start_firmware(mavlink_exe, storage)
     try:
         res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--persist")
         assert res.code == 0, res.err
@@ -205,7 +133,7 @@ def test_stored_set_holds_exact_bits_and_a_tampered_file_is_refused_whole(exe, p
         (text.replace(f"GL_K_0_2 {k02}", "GL_K_0_2 1.5"), "line"),
     ):
         storage.write_text(bad, "ascii")
-        fw, port = start_firmware(exe, storage)
+        fw, port = start_firmware(mavlink_exe, storage)
         try:
             assert read_params(port)["GL_HASH"].value & 0xFFFFFFFF == gain_set(old).crc32
         finally:
@@ -213,15 +141,15 @@ def test_stored_set_holds_exact_bits_and_a_tampered_file_is_refused_whole(exe, p
         err = fw.stderr_text()
         assert f"ignoring {storage}" in err and why in err and "using the compiled gain set" in err, err
     storage.write_text("\n".join(reversed(text.splitlines())) + "\n", "ascii")  # other line order: same set
-    fw, port = start_firmware(exe, storage)
+    fw, port = start_firmware(mavlink_exe, storage)
     try:
         assert read_params(port)["GL_HASH"].value & 0xFFFFFFFF == gain_set(new).crc32
     finally:
         fw.stop()
 
 
-def test_dry_run_prints_the_diff_and_writes_nothing(exe, pend, retuned):
-    fw, port = start_firmware(exe, None)
+def test_dry_run_prints_the_diff_and_writes_nothing(mavlink_exe, pend, retuned):
+    fw, port = start_firmware(mavlink_exe, None)
     try:
         res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--dry-run")
         assert res.code == 0, res.err
@@ -232,8 +160,8 @@ def test_dry_run_prints_the_diff_and_writes_nothing(exe, pend, retuned):
         fw.stop()
 
 
-def test_other_dimensions_are_refused_before_anything_is_written(exe, pend, example_artifacts):
-    fw, port = start_firmware(exe, None)
+def test_other_dimensions_are_refused_before_anything_is_written(mavlink_exe, pend, example_artifacts):
+    fw, port = start_firmware(mavlink_exe, None)
     try:
         res = run_cli("mavlink", "upload", example_artifacts["wood_berry"], "--connect", f"udpout:127.0.0.1:{port}")
         assert res.code == 2
@@ -244,8 +172,8 @@ def test_other_dimensions_are_refused_before_anything_is_written(exe, pend, exam
         fw.stop()
 
 
-def test_params_command_lists_every_parameter(exe, pend):
-    fw, port = start_firmware(exe, None)
+def test_params_command_lists_every_parameter(mavlink_exe, pend):
+    fw, port = start_firmware(mavlink_exe, None)
     try:
         res = run_cli("mavlink", "params", "--connect", f"udpout:127.0.0.1:{port}")
     finally:
@@ -257,10 +185,10 @@ def test_params_command_lists_every_parameter(exe, pend):
     assert math.isclose(float(rows["GL_K_0_1"]), expected_value(art, "GL_K_0_1"), rel_tol=1e-8)
 
 
-def test_upload_listening_for_a_vehicle_that_sends_to_us(exe, retuned):
+def test_upload_listening_for_a_vehicle_that_sends_to_us(mavlink_exe, retuned):
     """The firmware on ``udpout:`` sends its heartbeats to the uploader's ``udpin:`` port."""
-    port = free_udp_port()
-    fw = MavlinkFirmware(exe, url=f"udpout:127.0.0.1:{port}").start()
+    port = udp_port()
+    fw = MavlinkFirmware(mavlink_exe, url=f"udpout:127.0.0.1:{port}").start()
     try:
         res = run_cli("mavlink", "upload", retuned, "--connect", f"udpin:127.0.0.1:{port}")
         assert res.code == 0, res.err
@@ -270,7 +198,7 @@ def test_upload_listening_for_a_vehicle_that_sends_to_us(exe, retuned):
     assert "committed gain set" in fw.stderr_text()
 
 
-def test_firmware_run_mavlink_command_persists_beside_the_artifact(exe, pend, retuned, tmp_path):
+def test_firmware_run_mavlink_command_persists_beside_the_artifact(mavlink_exe, pend, retuned, tmp_path):
     """`gainlink firmware run ARTIFACT --mavlink URL`: upload --persist, stop, start again: values reloaded."""
     import shutil
     import signal
@@ -281,7 +209,7 @@ def test_firmware_run_mavlink_command_persists_beside_the_artifact(exe, pend, re
     shutil.copy(pend, art_path)
     new = load(retuned)
     for round_ in range(2):
-        port = free_udp_port()
+        port = udp_port()
         gainlink = Path(sys.executable).parent / "gainlink"
         proc = subprocess.Popen(
             [str(gainlink), "firmware", "run", str(art_path), "--mavlink", f"udpin:127.0.0.1:{port}"],

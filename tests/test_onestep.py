@@ -8,7 +8,6 @@ host build and on the Cortex-M4F image, which equal each other bit for bit.
 
 from __future__ import annotations
 
-import logging
 import re
 import subprocess
 import sys
@@ -16,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop, trace_from_raw
 from gainlink.firmware.golden import closed_loop_cases
@@ -27,64 +25,50 @@ from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.compensator import compensator_stability
 from gainlink.synthesis.random_plants import random_spec
+from support.cli import run_cli
+from support.oracles import jacobian_poles
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))
+CLOSED_LOOP_DESIGNS = 12  # conftest's closed_loop_designs
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _quiet_design_warnings():
-    logging.disable(logging.WARNING)
-    yield
-    logging.disable(logging.NOTSET)
+pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
 
-def jacobian_poles(a) -> np.ndarray:
-    """Compensator poles by probing the float64 law itself (an oracle independent of gainlink.synthesis.compensator):
-    with limits out of reach the map (xh, z) -> next (xh, z) at the operating point (y = y_op, r = Ci y_op)
-    is linear; its columns are the images of unit states."""
-    data = dict(a.data)
-    data["u_min"], data["u_max"] = [-1e300] * a.m, [1e300] * a.m
-    wide = artifact_mod.from_dict(artifact_mod.seal(data))
-    N = a.n + a.q
-    A = np.zeros((N, N))
-    for j in range(N):
-        law = ReferenceLoop(wide)
-        e = np.eye(N)[j]
-        law.xh, law.z = e[: a.n].copy(), e[a.n :].copy()
-        law.step(a.y_op, a.Ci @ a.y_op)
-        A[:, j] = np.concatenate([law.xh, law.z])
-    return np.linalg.eigvals(A)
-
-
-def test_random_closed_loop_designs_pass_one_step_on_host_and_qemu_bit_for_bit():
-    cases = closed_loop_cases(12)
+def test_random_closed_loop_designs_cover_every_form_and_unstable_compensators(closed_loop_designs):
+    cases = closed_loop_designs
+    assert len(cases) == CLOSED_LOOP_DESIGNS
     assert {(c.artifact.observer_form, c.artifact.anti_windup) for c in cases} == {
         (f, aw) for f in ("predictor", "current") for aw in ("none", "clamp", "backcalc")
     }
     assert any(c.artifact.q == 0 for c in cases) and any(c.artifact.q > 0 for c in cases)
     unstable = 0
     for case in cases:
-        a = case.artifact
-        comp = compensator_stability(a)
-        poles = jacobian_poles(a)
+        comp = compensator_stability(case.artifact)
+        poles = jacobian_poles(case.artifact)
         assert np.max(np.abs(poles)) == pytest.approx(comp.spectral_radius, rel=1e-9), case.label
         unstable += not comp.stable
-        assert case.expected.saturated.any(), f"{case.label}: the record should saturate"
-        host = NativeLoop(a).run_raw(case.Y, case.R)
-        target = qemu_engine.run_raw(a, case.Y, case.R)
-        for key in ("u", "sat", "xh", "z", "fault"):
-            assert np.array_equal(host[key].view(np.uint8), target[key].view(np.uint8)), f"{case.label}: {key}"
-        for name, raw in (("host", host), ("qemu", target)):
-            trace = trace_from_raw(raw, m=a.m)
-            check = one_step_check(a, case.Y, case.R, trace)
-            assert check.passed, f"{case.label} on {name}: {check.first_failure.describe(name)}"
-            assert max(check.worst.values()) < 0.5, f"{case.label}: errors approach the bound ({check.worst})"
-        if not comp.stable:
-            # the open-loop replay says nothing: two correct implementations drift apart
-            drift = compare_traces(a, trace, case.expected).max_rel_u
-            assert drift > 100 * check.max_rel_u or drift > 1e-3, case.label
-    print(f"{unstable} of {len(cases)} random designs have an unstable compensator")
-    assert unstable >= 3
+    assert unstable >= 3, f"{unstable} of {len(cases)} random designs have an unstable compensator"
+
+
+@pytest.mark.parametrize("index", range(CLOSED_LOOP_DESIGNS))  # one test each: the workers build them in parallel
+def test_random_closed_loop_design_passes_one_step_on_host_and_qemu_bit_for_bit(closed_loop_designs, index):
+    case = closed_loop_designs[index]
+    a = case.artifact
+    assert case.expected.saturated.any(), f"{case.label}: the record should saturate"
+    host = NativeLoop(a).run_raw(case.Y, case.R)
+    target = qemu_engine.run_raw(a, case.Y, case.R)
+    for key in ("u", "sat", "xh", "z", "fault"):
+        assert np.array_equal(host[key].view(np.uint8), target[key].view(np.uint8)), f"{case.label}: {key}"
+    for name, raw in (("host", host), ("qemu", target)):
+        trace = trace_from_raw(raw, m=a.m)
+        check = one_step_check(a, case.Y, case.R, trace)
+        assert check.passed, f"{case.label} on {name}: {check.first_failure.describe(name)}"
+        assert max(check.worst.values()) < 0.5, f"{case.label}: errors approach the bound ({check.worst})"
+    if not compensator_stability(a).stable:
+        # the open-loop replay says nothing: two correct implementations drift apart
+        drift = compare_traces(a, trace, case.expected).max_rel_u
+        assert drift > 100 * check.max_rel_u or drift > 1e-3, case.label
 
 
 @pytest.fixture(scope="module")

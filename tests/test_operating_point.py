@@ -19,17 +19,17 @@ import math
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.errors import ArtifactError
-from gainlink.firmware.golden import random_case, random_cases
+from gainlink.firmware.golden import random_case
 from gainlink.hil.loop.pil import make_plant, run_pil
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import from_dict, seal
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
+from support.cli import run_cli
 
 GL_ERR_NANINF, GL_ERR_WATCHDOG = -2, -6
 FORMS = ("predictor", "current")
@@ -55,11 +55,7 @@ MOTOR = {
 }
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _quiet_design_warnings():
-    logging.disable(logging.WARNING)
-    yield
-    logging.disable(logging.NOTSET)
+pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
 
 def motor(**op) -> dict:
@@ -315,10 +311,10 @@ def test_safe_command_is_u_op_clamped():
     assert res.fault and np.array_equal(res.u, expected)
 
 
-def test_host_and_qemu_bit_for_bit_with_operating_points():
+def test_host_and_qemu_bit_for_bit_with_operating_points(random_designs):
     """The Cortex-M4F image equals the host library bit for bit on designs about non-zero operating points,
     the refused samples (safe command u_op clamped) included."""
-    cases = [c for c in random_cases(30) if c.artifact.has_operating_point]
+    cases = [c for c in random_designs if c.artifact.has_operating_point]
     assert {(c.artifact.observer_form, c.artifact.anti_windup) for c in cases} == {(f, m) for f in FORMS for m in MODES}
     for a, Y, R in [(c.artifact, c.Y, c.R) for c in cases[:6]] + [(safe_case(), *_op_samples(safe_case()))]:
         Y = Y.copy()
@@ -425,7 +421,7 @@ def test_hil_bridge_starts_at_the_trim_and_references_are_absolute(tmp_path):
     without `initial` starts from it; the loop sits exactly at 12 rad/s and 6 V until the step to 14."""
     from gainlink.hil.loop.bridge import run_scenario
     from gainlink.hil.loop.scenario import parse_scenario
-    from test_hil_support import udp_transport
+    from support.hil import udp_transport
 
     art = tmp_path / "gains.json"
     artifact_mod.write(art, designed(motor(u_op=[6.0], y_op=[12.0])))

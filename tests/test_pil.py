@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import logging
 import struct
 import subprocess
 import sys
@@ -18,11 +17,7 @@ GAINLINK = str(Path(sys.executable).with_name("gainlink"))
 RTOL = 1e-4  # float32 firmware vs its float64 twin in closed loop: see tests/test_firmware_host.py
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _quiet_design_warnings():
-    logging.disable(logging.WARNING)
-    yield
-    logging.disable(logging.NOTSET)
+pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
 
 @pytest.mark.parametrize("name,reference", [("pendulum", [0.5]), ("wood_berry", [1.0, -0.5])])

@@ -9,14 +9,14 @@ import textwrap
 import control as ct
 import numpy as np
 import pytest
-from conftest import EXAMPLES
 from gainlink.errors import PlantError
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.config import plant_from_config
 from gainlink.hil.plants.linear import model_from_spec, perturb_model
 from gainlink.shipping.artifact import load
-from test_hil_support import udp_transport
+from support.hil import udp_transport
+from support.paths import EXAMPLES
 
 PENDULUM = EXAMPLES / "pendulum.toml"
 # The pendulum spec's matrices, written out here as the oracle (examples/pendulum.toml's header derives them).
@@ -94,7 +94,7 @@ def test_linear_plant_refuses_bad_perturbations_in_one_line(config, message):
 def test_linear_plant_without_a_model_or_with_a_missing_spec_says_so(tmp_path):
     with pytest.raises(PlantError, match="needs a model"):
         plant_from_config({"kind": "linear"})
-    with pytest.raises(PlantError, match="plant linear: .*nope.toml"):
+    with pytest.raises(PlantError, match=r"plant linear: .*nope\.toml"):
         plant_from_config({"kind": "linear", "spec": "nope.toml"}, base_dir=tmp_path)
 
 

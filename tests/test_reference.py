@@ -7,13 +7,13 @@ import math
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.proof.replay_io import read_samples
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.random_plants import random_spec
+from support.cli import run_cli
 
 
 def matvec(A, x):

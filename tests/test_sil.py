@@ -16,7 +16,7 @@ from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil import run_sil
 from gainlink.shipping.artifact import load
-from test_hil_support import can_firmware, pendulum_gains, udp_transport  # noqa: F401
+from support.hil import udp_transport
 
 
 def _scenario(gains, **extra) -> dict:
@@ -58,11 +58,11 @@ def _closed_loop_oracle(a, *, x0: np.ndarray, r: float, N: int) -> np.ndarray:
     return np.asarray(res.outputs).T
 
 
-def test_sil_on_the_linear_plant_follows_the_closed_loop_of_the_law(pendulum_gains):
-    a = load(pendulum_gains)
+def test_sil_on_the_linear_plant_follows_the_closed_loop_of_the_law(pend):
+    a = load(pend)
     sc = parse_scenario(
         _scenario(
-            pendulum_gains,
+            pend,
             plant={"kind": "linear"},
             duration=4.0,
             initial_state={"theta": 0.02},
@@ -85,8 +85,8 @@ def test_sil_on_the_linear_plant_follows_the_closed_loop_of_the_law(pendulum_gai
     assert res.metrics["twin"]["worst_du_rel"] <= 1e-4 and res.metrics["twin"]["worst_dy_rel"] <= 1e-4
 
 
-def test_sil_equals_the_lockstep_hil_run_bit_for_bit(pendulum_gains, can_firmware):
-    a = load(pendulum_gains)
+def test_sil_equals_the_lockstep_hil_run_bit_for_bit(pend, can_firmware):
+    a = load(pend)
     common = dict(
         duration=2.0,
         noise={"theta": 1e-4},
@@ -94,11 +94,11 @@ def test_sil_equals_the_lockstep_hil_run_bit_for_bit(pendulum_gains, can_firmwar
         reference={"r_x": {"kind": "step", "at": 0.5, "value": 0.3}},
         disturbances=[{"input": "F", "start": 1.0, "stop": 1.05, "value": 3.0}],
     )
-    sil = run_sil(a, parse_scenario(_scenario(pendulum_gains, **common)))
+    sil = run_sil(a, parse_scenario(_scenario(pend, **common)))
     hil = run_scenario(
         parse_scenario(
             _scenario(
-                pendulum_gains,
+                pend,
                 transport=udp_transport(fd=True),
                 mode="lockstep",
                 controller="firmware",
@@ -116,16 +116,16 @@ def test_sil_equals_the_lockstep_hil_run_bit_for_bit(pendulum_gains, can_firmwar
     assert sil.metrics["tracked"] == hil.metrics["tracked"]
 
 
-def test_sil_seed_sets_the_noise_and_a_failing_plant_ends_the_run(pendulum_gains):
-    a = load(pendulum_gains)
-    sc = parse_scenario(_scenario(pendulum_gains, noise={"theta": 1e-3}, duration=1.0))
+def test_sil_seed_sets_the_noise_and_a_failing_plant_ends_the_run(pend):
+    a = load(pend)
+    sc = parse_scenario(_scenario(pend, noise={"theta": 1e-3}, duration=1.0))
     r1, r2, r3 = run_sil(a, sc, seed=1), run_sil(a, sc, seed=1), run_sil(a, sc, seed=2)
     assert np.array_equal(r1.trace.y, r2.trace.y) and not np.array_equal(r1.trace.y, r3.trace.y)
     # A stiff plant for its integrator step (g = 1e6: |lambda| h ~ 14, RK4 grows ~1e3 per sub-step):
     # the state overflows, the plant refuses the step, and the run ends there.
     bad = parse_scenario(
         _scenario(
-            pendulum_gains,
+            pend,
             duration=20.0,
             initial_state={"theta": 0.1},
             plant={"kind": "cart_pendulum", "outputs": ["x", "theta"], "step": 0.01, "parameters": {"g": 1e6}},
@@ -143,9 +143,9 @@ def test_sil_seed_sets_the_noise_and_a_failing_plant_ends_the_run(pendulum_gains
         ({"mode": "realtime"}, "realtime"),
     ],
 )
-def test_sil_refuses_what_needs_a_link(pendulum_gains, extra, words):
+def test_sil_refuses_what_needs_a_link(pend, extra, words):
     with pytest.raises(ScenarioError, match=words):
-        run_sil(load(pendulum_gains), parse_scenario(_scenario(pendulum_gains, **extra)))
+        run_sil(load(pend), parse_scenario(_scenario(pend, **extra)))
 
 
 def test_saturation_counts_steps_with_any_input_saturated_and_each_input(example_artifacts):

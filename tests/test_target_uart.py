@@ -14,10 +14,9 @@ import time
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.errors import FirmwareError, ScenarioError, TransportError
 from gainlink.firmware.build import build
-from gainlink.firmware.uart import QemuUart, free_tcp_port
+from gainlink.firmware.uart import QemuUart
 from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.report import summary_text
@@ -31,7 +30,10 @@ from gainlink.shipping.artifact import load
 from gainlink.shipping.codegen import gain_set
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
-from test_mavlink_upload import free_udp_port, reference_u, retuned_pendulum
+from support.cli import run_cli
+from support.hil import udp_transport
+from support.mavlink import reference_u, retuned_pendulum
+from support.net import tcp_port, udp_port
 
 RANGES = {"x": [-5.0, 5.0], "theta": [-1.0, 1.0], "r_x": [-5.0, 5.0]}
 
@@ -78,9 +80,9 @@ def assert_same_closed_loop(image, host) -> None:
 
 @pytest.mark.parametrize("board", ["mps2-an386", "netduinoplus2"])
 def test_mavlink_on_the_uart_commands_equal_the_host_app_bit_for_bit(pend, board):
-    host = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, controller="firmware"))
+    host = run_scenario(scenario(pend, {"kind": "mavlink", "port": udp_port()}, controller="firmware"))
     image = run_scenario(
-        scenario(pend, {"kind": "mavlink", "url": f"tcp:127.0.0.1:{free_tcp_port()}"}, controller="qemu", board=board)
+        scenario(pend, {"kind": "mavlink", "url": f"tcp:127.0.0.1:{tcp_port()}"}, controller="qemu", board=board)
     )
     assert_same_closed_loop(image, host)
     assert image.info["controller"]["board"] == board
@@ -92,16 +94,11 @@ def test_mavlink_on_the_uart_commands_equal_the_host_app_bit_for_bit(pend, board
 @pytest.mark.parametrize("board,encoding", [("mps2-an386", "float32"), ("netduinoplus2", "int16")])
 def test_slcan_on_the_uart_commands_equal_the_host_can_app_bit_for_bit(pend, board, encoding):
     layout = {"encoding": encoding, "ranges": RANGES} if encoding == "int16" else {}
-    group = "239.74.163.61" if encoding == "int16" else "239.74.163.62"
-    host = run_scenario(
-        scenario(
-            pend, {"interface": "udp_multicast", "channel": group, "hop_limit": 0, **layout}, controller="firmware"
-        )
-    )
+    host = run_scenario(scenario(pend, {**udp_transport(fd=False), **layout}, controller="firmware"))
     image = run_scenario(
         scenario(
             pend,
-            {"interface": "slcan", "channel": f"socket://127.0.0.1:{free_tcp_port()}", **layout},
+            {"interface": "slcan", "channel": f"socket://127.0.0.1:{tcp_port()}", **layout},
             controller="qemu",
             board=board,
         )
@@ -120,7 +117,7 @@ def test_uart_capacity_comes_from_the_service_time_of_every_answer(pend):
     missed 361 of 400 deadlines). In lockstep each sample waits for the previous command, so the service time
     is the round trip: X is one over the p99 of the recorded latencies."""
     rate = 1000.0
-    url = f"tcp:127.0.0.1:{free_tcp_port()}"
+    url = f"tcp:127.0.0.1:{tcp_port()}"
     rt = scenario(pend, {"kind": "mavlink", "url": url}, controller="qemu", board="mps2-an386", duration=3.0)
     rt = dataclasses.replace(rt, mode="realtime", period=1.0 / rate, twin=False)
     res = run_scenario(rt)
@@ -133,7 +130,7 @@ def test_uart_capacity_comes_from_the_service_time_of_every_answer(pend):
     assert "service time" in line and "late" in line, line
 
     lock = run_scenario(
-        scenario(pend, {"kind": "mavlink", "url": f"tcp:127.0.0.1:{free_tcp_port()}"}, controller="qemu", duration=0.5)
+        scenario(pend, {"kind": "mavlink", "url": f"tcp:127.0.0.1:{tcp_port()}"}, controller="qemu", duration=0.5)
     )
     lat = lock.trace.latency_ns[lock.trace.got]
     assert lock.metrics["uart"]["answered"] == lock.metrics["steps"] == lat.size
@@ -177,7 +174,7 @@ def test_upload_persists_in_flash_and_survives_a_restart_of_the_image(elf, pend,
     old, new = load(pend), load(retuned_pendulum(tmp_path / "retuned.json"))
     flash = tmp_path / "flash"
     with QemuUart(
-        elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash, lifetime_s=300
+        elf, board="mps2-an386", protocol="mavlink", port=tcp_port(), flash_dir=flash, lifetime_s=300
     ) as image:
         Y, R, U = closed_loop(image.url, old)
         np.testing.assert_allclose(U, reference_u(old, Y, R), atol=1e-4)
@@ -190,7 +187,7 @@ def test_upload_persists_in_flash_and_survives_a_restart_of_the_image(elf, pend,
     assert (flash / "gl_flash.txt").is_file()
 
     with QemuUart(
-        elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash, lifetime_s=300
+        elf, board="mps2-an386", protocol="mavlink", port=tcp_port(), flash_dir=flash, lifetime_s=300
     ) as image:  # the board powered again: the set comes back from flash
         assert f"crc32={gain_set(new).crc32}" in image.ready_line
         res = run_cli("mavlink", "upload", tmp_path / "retuned.json", "--connect", image.url, "--dry-run")
@@ -242,7 +239,7 @@ def test_garbage_between_frames_is_survived_counted_and_leaves_the_gains_alone(e
         injected.append(chunk)
         return chunk
 
-    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), lifetime_s=300) as image:
+    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=tcp_port(), lifetime_s=300) as image:
         crc_before, _ = sys_status(image.url)
         Y0, _, U0 = closed_loop(image.url, art)
         Y1, _, U1 = closed_loop(image.url, art, garbage=garbage)
@@ -319,7 +316,7 @@ def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(
     flash = tmp_path / "flash"
     monkeypatch.setenv("MAVLINK20", "1")  # pymavlink's own switch to MAVLink 2 (signing needs it)
     with QemuUart(
-        elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash, lifetime_s=300
+        elf, board="mps2-an386", protocol="mavlink", port=tcp_port(), flash_dir=flash, lifetime_s=300
     ) as image:
         assert "signing=off" in image.ready_line
         res = run_cli("mavlink", "setup-signing", key_file, "--connect", image.url)
@@ -368,7 +365,7 @@ def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(
     # it kept in flash, not from 0)
     replay = _signed_param_set_recorded_at(key, time.time() - 300)
     with QemuUart(
-        elf, board="mps2-an386", protocol="mavlink", port=free_tcp_port(), flash_dir=flash, lifetime_s=300
+        elf, board="mps2-an386", protocol="mavlink", port=tcp_port(), flash_dir=flash, lifetime_s=300
     ) as image:  # powered again: key and gains come back from flash
         assert "signing=on" in image.ready_line and f"crc32={gain_set(new).crc32}" in image.ready_line
         link, s = session(image.url)  # unsigned: reads stay open, and nothing here moves the image's timestamp
@@ -397,7 +394,7 @@ def test_qemu_scenarios_refuse_mismatched_links_in_one_line(pend, tmp_path):
         scenario(pend, {"kind": "mavlink"}, controller="firmware", board="netduinoplus2")
     with pytest.raises(ScenarioError, match="board must be one of"):
         scenario(pend, {"kind": "mavlink"}, controller="qemu", board="stm32f4-discovery")
-    udp = run_scenario_error(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, controller="qemu"))
+    udp = run_scenario_error(scenario(pend, {"kind": "mavlink", "port": udp_port()}, controller="qemu"))
     assert isinstance(udp, TransportError) and 'url = "tcp:HOST:PORT"' in str(udp)
     fd = run_scenario_error(
         scenario(pend, {"interface": "slcan", "channel": "socket://127.0.0.1:1", "fd": True}, controller="qemu")
@@ -416,9 +413,7 @@ def run_scenario_error(sc) -> Exception:
 
 
 def test_the_image_refuses_bad_options_with_its_own_error_line(elf):
-    image = QemuUart(
-        elf, board="mps2-an386", protocol="slcan", port=free_tcp_port(), options=["bitrate=5"], lifetime_s=60
-    )
+    image = QemuUart(elf, board="mps2-an386", protocol="slcan", port=tcp_port(), options=["bitrate=5"], lifetime_s=60)
     try:
         with pytest.raises(FirmwareError, match="refused its options: unknown slcan option"):
             image.start()
@@ -453,7 +448,7 @@ def test_the_images_slcan_adapter_answers_as_the_lawicel_protocol_says(elf):
         (b"?\r", b"\a"),  # CAN FD, over-long, unknown
         (b"C\r", b"\r"),
     ]
-    with QemuUart(elf, board="mps2-an386", protocol="slcan", port=free_tcp_port(), lifetime_s=120) as image:
+    with QemuUart(elf, board="mps2-an386", protocol="slcan", port=tcp_port(), lifetime_s=120) as image:
         with socket.create_connection((image.host, image.port), timeout=10) as s:
             for sent, expected in exchanges:
                 s.sendall(sent)
@@ -470,7 +465,7 @@ def test_a_signed_link_to_the_image_runs_and_unsigned_samples_are_refused(pend, 
     res = run_scenario(
         scenario(
             pend,
-            {"kind": "mavlink", "url": f"tcp:127.0.0.1:{free_tcp_port()}", "signing_key": str(key_file)},
+            {"kind": "mavlink", "url": f"tcp:127.0.0.1:{tcp_port()}", "signing_key": str(key_file)},
             controller="qemu",
             duration=0.5,
         )
@@ -485,7 +480,7 @@ def test_a_signed_link_to_the_image_runs_and_unsigned_samples_are_refused(pend, 
         elf,
         board="mps2-an386",
         protocol="mavlink",
-        port=free_tcp_port(),
+        port=tcp_port(),
         signing_key=read_key(key_file),
         lifetime_s=120,
     ) as image:
@@ -503,7 +498,7 @@ def test_an_image_that_dies_mid_run_ends_the_run_with_its_reason(pend):
     res = run_scenario(
         scenario(
             pend,
-            {"interface": "slcan", "channel": f"socket://127.0.0.1:{free_tcp_port()}"},
+            {"interface": "slcan", "channel": f"socket://127.0.0.1:{tcp_port()}"},
             controller="qemu",
             duration=1.0,
             faults=[{"kind": "crash", "start": 0.3}],

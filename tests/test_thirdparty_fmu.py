@@ -12,14 +12,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.errors import PlantError
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.config import plant_from_config
 from scipy.linalg import expm
-from test_hil_support import udp_transport
-from thirdparty import gemseo_fmu
+from support.cli import run_cli
+from support.hil import udp_transport
+from support.thirdparty import gemseo_fmu
 
 
 @pytest.fixture(scope="module")

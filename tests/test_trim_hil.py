@@ -19,14 +19,12 @@ point the same equations give exactly 2 m.
 from __future__ import annotations
 
 import json
-import logging
 import math
 import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
 from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.hil.loop.bridge import run_scenario
@@ -34,8 +32,9 @@ from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.build import build_fmu
 from gainlink.shipping.artifact import from_dict, load, render, seal
 from gainlink.shipping.codegen import c_float
-from test_hil_support import udp_transport
-from test_mavlink_upload import free_udp_port
+from support.cli import run_cli
+from support.hil import udp_transport
+from support.net import udp_port
 
 Z_SET = 2.0  # m: the altitude the plant is linearised at, the regulator's set point
 
@@ -60,11 +59,7 @@ u_max = [1.0]
 """
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _quiet_design_warnings():
-    logging.disable(logging.WARNING)
-    yield
-    logging.disable(logging.NOTSET)
+pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
 
 def fmu_parameters(fmu: Path) -> dict:
@@ -210,7 +205,7 @@ def test_firmware_build_and_mavlink_upload_carry_the_operating_point(hover, tmp_
     src = (out / "src" / "gl_gains.c").read_text()
     assert f".u_op = {{{c_float(art.u_op[0])}}}," in src and f".y_op = {{{c_float(Z_SET)}}}," in src
 
-    port = free_udp_port()
+    port = udp_port()
     fw = MavlinkFirmware(mavlink_executable(blind), url=f"udpin:127.0.0.1:{port}")
     fw.start()
     try:

@@ -18,19 +18,19 @@ import pytest
 from gainlink.hil.links.vcan_vm import prepare_vm, run_in_vm
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import load_scenario
-from test_hil_support import can_firmware, cart_fmu, pendulum_gains, pendulum_scenario, udp_transport, write_scenario  # noqa: F401
+from support.hil import pendulum_scenario, udp_transport, write_scenario
 
 pytestmark = pytest.mark.slow
 
 
 @pytest.mark.skipif(shutil.which("qemu-system-x86_64") is None, reason="qemu-system-x86 is installed by make setup")
-def test_lockstep_over_vcan0_in_vm_matches_udp_multicast(tmp_path, pendulum_gains, can_firmware, cart_fmu):
+def test_lockstep_over_vcan0_in_vm_matches_udp_multicast(tmp_path, pend, can_firmware, cart_fmu):
     image = prepare_vm()
     duration = 2.0
     udp = write_scenario(
         tmp_path / "udp.toml",
         pendulum_scenario(
-            gains=pendulum_gains,
+            gains=pend,
             fmu=cart_fmu,
             transport=udp_transport(fd=True),
             duration=duration,
@@ -45,7 +45,7 @@ def test_lockstep_over_vcan0_in_vm_matches_udp_multicast(tmp_path, pendulum_gain
     write_scenario(
         vm_dir / "vcan.toml",
         pendulum_scenario(
-            gains=pendulum_gains,
+            gains=pend,
             fmu=cart_fmu,
             duration=duration,
             firmware=str(can_firmware),

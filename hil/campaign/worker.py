@@ -1,11 +1,11 @@
 """What runs on a Dask worker: one campaign run as a pure function of (artifact bytes, scenario, seed).
 
-:func:`execute` is one run; a Dask task is :func:`execute_batch`, a short list of runs (SIL runs are
-short, and a task per run cost more than the run's tenth in Dask's bookkeeping). Its inputs travel as bytes (the artifact's canonical JSON, FMU archives by
-sha256); the worker writes each once into a host-local cache named by sha256, builds the firmware once
-per artifact (the firmware build cache is keyed by the artifact's sha256 and serialised by a file lock
-between the processes of a host) and remembers the result for the rest of its life, so the second run
-of an artifact pays nothing for it.
+:func:`execute` is one run; a Dask task is :func:`execute_batch`, a short list of runs (SIL runs are short, and a task
+per run cost more than the run's tenth in Dask's bookkeeping). Its inputs travel as bytes (the artifact's canonical
+JSON, FMU archives by sha256); the worker writes each once into a host-local cache named by sha256, builds the firmware
+once per artifact (the firmware build cache is keyed by the artifact's sha256 and serialised by a file lock between the
+processes of a host) and remembers the result for the rest of its life, so the second run of an artifact pays nothing
+for it.
 
 A HIL run takes a *bus slot* first: a file lock no other process on the host holds. The slot gives the
 run its own udp_multicast group and port (or its own CAN id base on a shared SocketCAN bus, or its own

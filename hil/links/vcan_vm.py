@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gainlink.errors import ToolchainError
+from gainlink.fileio import exclusive_lock
 
 from ..paths import cache_dir
 
@@ -43,10 +44,12 @@ mount -t sysfs sys /sys
 mount -t devtmpfs dev /dev
 for m in $(cat /modules.order); do insmod /lib/modules/$m || echo "gainlink-vm: insmod $m failed"; done
 OUT=$(sed -n 's/.*gl_out=\([^ ]*\).*/\1/p' /proc/cmdline)
-mount -t 9p -o trans=virtio,version=9p2000.L,ro,msize=512000,cache=loose hostroot /host || echo "gainlink-vm: 9p mount failed"
+mount -t 9p -o trans=virtio,version=9p2000.L,ro,msize=512000,cache=loose hostroot /host \
+  || echo "gainlink-vm: 9p mount failed"
 mount -t tmpfs -o size=256m tmpfs /ovl
 mkdir -p /ovl/upper /ovl/work
-mount -t overlay overlay -o lowerdir=/host,upperdir=/ovl/upper,workdir=/ovl/work /newroot || echo "gainlink-vm: overlay failed"
+mount -t overlay overlay -o lowerdir=/host,upperdir=/ovl/upper,workdir=/ovl/work /newroot \
+  || echo "gainlink-vm: overlay failed"
 mount -t proc proc /newroot/proc
 mount -t sysfs sys /newroot/sys
 mount -t devtmpfs dev /newroot/dev
@@ -99,11 +102,13 @@ def _download_kernel_deb(dest: Path) -> Path:
     if m is None:
         raise ToolchainError("apt-cache knows no linux-image-6.1.*-amd64 package (run apt-get update)")
     log.info("downloading %s for the vcan VM", m.group(1))
-    proc = subprocess.run(["apt-get", "download", m.group(1)], cwd=dest, capture_output=True, text=True)
-    debs = sorted(dest.glob("linux-image-6.1.*-amd64_*.deb"))
-    if proc.returncode != 0 or not debs:
-        raise ToolchainError(f"apt-get download {m.group(1)} failed: {proc.stderr.strip()[-300:]}")
-    return debs[-1]
+    with tempfile.TemporaryDirectory(dir=dest) as tmp:  # the .deb appears under its name only when complete
+        proc = subprocess.run(["apt-get", "download", m.group(1)], cwd=tmp, capture_output=True, text=True)
+        debs = sorted(Path(tmp).glob("linux-image-6.1.*-amd64_*.deb"))
+        if proc.returncode != 0 or not debs:
+            raise ToolchainError(f"apt-get download {m.group(1)} failed: {proc.stderr.strip()[-300:]}")
+        os.replace(debs[-1], dest / debs[-1].name)
+    return dest / debs[-1].name
 
 
 def _extract(deb: Path, into: Path) -> None:
@@ -180,6 +185,12 @@ def prepare_vm(*, cache: Path | None = None) -> VmImage:
     if shutil.which("qemu-system-x86_64") is None:
         raise ToolchainError("the vcan VM needs qemu-system-x86 (qemu-system-x86_64)")
     root = cache or cache_dir("vcan-vm")
+    with exclusive_lock(root / ".lock"):  # one process downloads and assembles; the others wait and reuse it
+        return _assemble(root, busybox)
+
+
+def _assemble(root: Path, busybox: Path) -> VmImage:
+    """The VM's kernel and initramfs in ``root`` (downloaded and built there unless already done)."""
     deb = _download_kernel_deb(root)
     version = re.sub(r"_amd64\.deb$", "", deb.name)
     recipe = hashlib.sha256((INIT + "|".join(MODULES)).encode()).hexdigest()[:12]

@@ -3,8 +3,8 @@
 :func:`run_scenario` builds the plant and the transport from the scenario, starts the controller
 process, runs the loop in lockstep (the plant waits for each command, up to ``step_timeout``) or in
 real time (fixed period, sleep-then-spin to absolute deadlines, SCHED_FIFO and a 0 us CPU wake-up
-latency request when permitted), and always stops the peer. A peer that dies, or stays silent for ``peer_timeout``, ends the run early
-with ``complete = False`` and the reason.
+latency request when permitted), and always stops the peer. A peer that dies, or stays silent for
+``peer_timeout``, ends the run early with ``complete = False`` and the reason.
 """
 
 from __future__ import annotations

@@ -29,7 +29,8 @@ Example::
                    # tracked output's value at the artifact's operating point (0 without one)
     [noise]        theta = 0.001                           # std dev per output
     [[disturbances]] input = "F", start = 2.0, stop = 2.1, value = 5.0
-    [[faults]]     kind = "drop", start = 3.0, stop = 3.1, every = 1   # drop | delay | duplicate | reorder | silent | crash
+    [[faults]]     kind = "drop", start = 3.0, stop = 3.1, every = 1
+                   # kind: drop | delay | duplicate | reorder | silent | crash
                    # probability = 0.05: each sample the window and ``every`` select is hit with this probability
                    # (drawn from the run's seed): a random loss rate instead of a pattern
 
@@ -125,10 +126,10 @@ PROFILE_KEYS = {
 class Fault:
     """A fault injected on the plant -> controller frames (or the controller process).
 
-    ``kind``: drop (frames not sent), delay (sent ``delay_steps`` samples later), duplicate (sent
-    twice), reorder (sent after the next sample's frames), silent (controller process frozen from
-    ``start`` on), crash (controller process killed at ``start``). Active for samples with ``start <= t < stop``, every ``every``-th one,
-    each of those hit with ``probability`` (frame faults only; drawn from the run's seed).
+    ``kind``: drop (frames not sent), delay (sent ``delay_steps`` samples later), duplicate (sent twice), reorder (sent
+    after the next sample's frames), silent (controller process frozen from ``start`` on), crash (controller process
+    killed at ``start``). Active for samples with ``start <= t < stop``, every ``every``-th one, each of those hit with
+    ``probability`` (frame faults only; drawn from the run's seed).
     """
 
     kind: str

@@ -59,8 +59,8 @@ class Plant(ABC):
     def restore_state(self, snapshot: Any) -> None:
         """Return to a snapshot taken by :meth:`save_state`."""
 
-    def close(self) -> None:
-        """Release resources (FMU instances, libraries)."""
+    def close(self) -> None:  # noqa: B027 - an optional hook: plants that hold nothing need not override it
+        """Release resources (FMU instances, libraries); the default holds none and does nothing."""
 
 
 def select(names: tuple[str, ...], wanted: Any, *, what: str, plant: str) -> list[int]:

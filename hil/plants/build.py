@@ -19,6 +19,7 @@ import zipfile
 from pathlib import Path
 
 from gainlink.errors import PlantError, ToolchainError
+from gainlink.fileio import exclusive_lock
 
 from ..paths import cache_dir, fmu_source_dir, fmu_source_names
 
@@ -92,8 +93,6 @@ def build_fmu(name: str, *, out_dir: str | os.PathLike | None = None, force: boo
     """
     if name not in fmu_source_names():
         raise PlantError(f"no project FMU named {name!r} (available: {', '.join(fmu_source_names())})")
-    from fmpy.build import build_platform_binary
-
     digest = source_digest(name)[:16]
     out = Path(out_dir) if out_dir is not None else cache_dir("fmus")
     out.mkdir(parents=True, exist_ok=True)
@@ -102,6 +101,17 @@ def build_fmu(name: str, *, out_dir: str | os.PathLike | None = None, force: boo
         return target
     if shutil.which("cmake") is None:
         raise ToolchainError("cmake is needed to build the plant FMUs (apt-get install cmake)")
+    with exclusive_lock(out / f".{target.name}.lock"):  # one build per FMU; the others wait and reuse it
+        if target.is_file() and not force:
+            return target
+        _build_into(name, target)
+    return target
+
+
+def _build_into(name: str, target: Path) -> None:
+    """Build FMU ``name`` in a temporary folder, validate it and move it to ``target`` (atomically)."""
+    from fmpy.build import build_platform_binary
+
     with tempfile.TemporaryDirectory(prefix=f"gainlink-fmu-{name}-") as tmp:
         unzip = Path(tmp) / "fmu"
         build = Path(tmp) / "build"
@@ -130,4 +140,3 @@ def build_fmu(name: str, *, out_dir: str | os.PathLike | None = None, force: boo
         tmp_target = target.with_suffix(f".{os.getpid()}.tmp")
         shutil.copyfile(staged, tmp_target)
         os.replace(tmp_target, target)
-    return target

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from gainlink.errors import PlantError
@@ -27,7 +27,7 @@ class OdePlant(Plant):
     """
 
     all_inputs: tuple[str, ...]
-    defaults: dict[str, float]
+    defaults: ClassVar[Mapping[str, float]]
 
     def __init__(
         self,
@@ -118,7 +118,7 @@ class CartPendulum(OdePlant):
     all_inputs = ("F",)
     state_names = ("x", "x_dot", "theta", "theta_dot")
     default_outputs = ("x", "theta")
-    defaults = {"M": 1.0, "m": 0.1, "l": 0.5, "g": 9.81}
+    defaults: ClassVar[Mapping[str, float]] = {"M": 1.0, "m": 0.1, "l": 0.5, "g": 9.81}
 
     def derivatives(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         M, m, l, g = self.params["M"], self.params["m"], self.params["l"], self.params["g"]
@@ -142,7 +142,7 @@ class QuadrotorLateral(OdePlant):
     all_inputs = ("tau",)
     state_names = ("phi", "p", "v", "y")
     default_outputs = ("phi", "y")
-    defaults = {"g": 9.81, "Ixx": 0.01, "mass": 1.0, "c_d": 0.0}
+    defaults: ClassVar[Mapping[str, float]] = {"g": 9.81, "Ixx": 0.01, "mass": 1.0, "c_d": 0.0}
 
     def derivatives(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         p = self.params

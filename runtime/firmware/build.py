@@ -3,13 +3,14 @@
 Builds live under ``<repo>/.cache/firmware/<name>-<target>-<key>/`` where the key hashes the artifact's
 sha256, the target, the board and the build options, so tests and commands reuse a build of the same
 artifact and two targets or boards never share a folder (CMake itself rebuilds what changed in the C
-sources). Concurrent builds of one key are serialised with a file lock. Targets and boards:
+sources). Everything that writes into a build folder runs
+under its file lock (``<build>/.lock``), so concurrent builds of one key (pytest-xdist workers, Dask workers)
+build it once and the others then find it done. Targets and boards:
 :mod:`gainlink.firmware.targets`.
 """
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import logging
 import os
@@ -19,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import ToolchainError
+from ..fileio import exclusive_lock
 from ..shipping.artifact import Artifact
 from ..shipping.codegen import render_c
 from . import targets as _targets
@@ -134,8 +136,7 @@ def build(
     cm = bdir / "cmake"
     gen.mkdir(parents=True, exist_ok=True)
     cm = bdir / "cmake"
-    with open(bdir / ".lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
+    with exclusive_lock(bdir / ".lock"):
         for name, text in render_c(artifact).items():
             _write_if_changed(gen / name, text)
         if not (cm / "CMakeCache.txt").is_file():
@@ -195,13 +196,14 @@ def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path 
     """
     result = build(artifact, target="host", options={"GL_APPS": "ON"}, build_root=build_root)
     exe = result.build_dir / relpath
-    if not exe.is_file():
-        _run(["cmake", str(result.build_dir)], cwd=result.build_dir, what=f"reconfiguring for {target}")
-        _run(
-            ["cmake", "--build", str(result.build_dir), "--target", target, "-j", "2"],
-            cwd=result.build_dir,
-            what=f"building {target}",
-        )
+    with exclusive_lock(result.build_dir.parent / ".lock"):
+        if not exe.is_file():
+            _run(["cmake", str(result.build_dir)], cwd=result.build_dir, what=f"reconfiguring for {target}")
+            _run(
+                ["cmake", "--build", str(result.build_dir), "--target", target, "-j", "2"],
+                cwd=result.build_dir,
+                what=f"building {target}",
+            )
     if not exe.is_file():
         raise ToolchainError(f"{target} was not built (expected {exe})")
     return exe

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FirmwareError, ToolchainError
+from ..fileio import exclusive_lock
 from ..shipping.artifact import Artifact
 from . import qemu as fwqemu
 from .build import DEFAULT_BOARD, cache_root, firmware_dir
@@ -33,22 +34,28 @@ def build_plugin() -> Path:
     """Compile the instruction-count plugin (cached; rebuilt when its source changes)."""
     src = firmware_dir() / "tools" / "gl_insn_count.c"
     out = cache_root() / "plugin" / "libgl_insn_count.so"
-    if out.is_file() and out.stat().st_mtime >= src.stat().st_mtime:
+    if _fresh(out, src):
         return out
     cc = shutil.which("cc") or shutil.which("gcc")
     if cc is None:
         raise ToolchainError("no host C compiler (cc) to build the QEMU plugin")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp.so")
-    proc = subprocess.run(
-        [cc, "-shared", "-fPIC", "-O2", "-Wall", "-Wextra", "-Werror", "-o", str(tmp), str(src)],
-        capture_output=True,
-        text=True,
-    )
-    if proc.returncode != 0:
-        raise ToolchainError(f"building the QEMU plugin failed: {proc.stderr.strip()[-500:]}")
-    tmp.replace(out)
+    with exclusive_lock(out.with_name(".lock")):  # another process may have built it while this one waited
+        if _fresh(out, src):
+            return out
+        tmp = out.with_suffix(".tmp.so")
+        proc = subprocess.run(
+            [cc, "-shared", "-fPIC", "-O2", "-Wall", "-Wextra", "-Werror", "-o", str(tmp), str(src)],
+            capture_output=True,
+            text=True,
+        )
+        if proc.returncode != 0:
+            raise ToolchainError(f"building the QEMU plugin failed: {proc.stderr.strip()[-500:]}")
+        tmp.replace(out)
     return out
+
+
+def _fresh(out: Path, src: Path) -> bool:
+    return out.is_file() and out.stat().st_mtime >= src.stat().st_mtime
 
 
 @dataclass(frozen=True)

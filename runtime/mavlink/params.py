@@ -85,7 +85,8 @@ INT32 = PARAM_TYPES["INT32"]
 #: Maximum length of a MAVLink parameter id.
 PARAM_ID_LEN = 16
 
-#: Matrices a mapping file may name; the firmware's ids come from the field table (:mod:`gainlink.shipping.gains_layout`).
+#: Matrices a mapping file may name; the firmware's ids come from the field table
+#: (:mod:`gainlink.shipping.gains_layout`).
 MATRICES: tuple[str, ...] = tuple(f.name for f in layout.NUMBERS if len(f.dims) == 2)
 DIMENSION_IDS: tuple[str, ...] = tuple(f.param for f in layout.STRUCTURE)
 HASH_ID = "GL_HASH"

@@ -2,8 +2,8 @@
 
 ``render_c(artifact)`` returns ``{"gl_gains.h": ..., "gl_gains_layout.h": ..., "gl_gains.c": ...,
 "gl_step.h": ...}``: the dimensions and structure as macros with ``_Static_assert``s, the ``gl_gains_t`` struct
-from the field table (:mod:`gainlink.shipping.gains_layout`), and the whole gain set as one ``const gl_gains_t`` with designated
-initialisers, every float printed round-trip (``%.9g`` + ``f``) and the payload's CRC-32 computed here
+from the field table (:mod:`gainlink.shipping.gains_layout`), and the whole gain set as one ``const gl_gains_t``
+with designated initialisers, every float printed round-trip (``%.9g`` + ``f``) and the payload's CRC-32 computed here
 the same way the C library computes it (``gl_gains_crc32``). The same artifact always gives the same
 bytes: no timestamps, no paths, nothing from the environment.
 """
@@ -34,8 +34,9 @@ STATE_CHUNK = 8  # states held in s8..s15
 class GainSet:
     """The artifact's numbers exactly as the C ``gl_gains_t`` holds them (float32, integrator arrays padded).
 
-    ``fields`` maps each number field of :data:`gainlink.shipping.gains_layout.NUMBERS` to a float32 array of its C shape,
-    in declaration order; ``header`` holds the uint32 structure fields. ``crc32`` is the checksum of that payload.
+    ``fields`` maps each number field of :data:`gainlink.shipping.gains_layout.NUMBERS` to a float32 array of its C
+    shape, in declaration order; ``header`` holds the uint32 structure fields. ``crc32`` is the checksum of that
+    payload.
     """
 
     header: tuple[int, ...]
@@ -89,7 +90,7 @@ def payload_crc32(*, header: tuple[int, ...], fields: dict[str, np.ndarray]) -> 
 
 def c_float(x: float) -> str:
     """A float32 as a C literal that reads back to the same float (``%.9g`` + ``f``)."""
-    text = "%.9g" % float(np.float32(x))
+    text = f"{float(np.float32(x)):.9g}"
     if not any(ch in text for ch in ".e"):
         text += ".0"
     return text + "f"
@@ -110,8 +111,8 @@ def render_header(artifact: Artifact, gains: GainSet) -> str:
     """Text of ``gl_gains.h``: dimensions, structure and identity of the artifact as macros."""
     a = artifact
     return (
-        _banner(a)
-        + "/**\n * @file gl_gains.h\n * @brief Dimensions and structure of the artifact the firmware is built for.\n */\n"
+        _banner(a) + "/**\n * @file gl_gains.h\n"
+        " * @brief Dimensions and structure of the artifact the firmware is built for.\n */\n"
         "#ifndef GL_GAINS_H\n#define GL_GAINS_H\n\n"
         f'#define GL_NAME "{a.name}"\n'
         f'#define GL_ARTIFACT_SHA256 "{a.sha256}"\n'
@@ -249,18 +250,21 @@ def _step_estimate(a: Artifact, st: _Stream, body: list[str]) -> None:
         body += [f"    xn{i} = GL_FMA({st.next()}, dy{k}, xn{i});" for k in range(a.p)]
 
 
+# how firmware/src/gl_loop.c opens the generic gl_step_core; the generated one keeps its layout
+_STEP_CORE_OPEN = "static inline __attribute__((always_inline)) uint32_t gl_step_core("
+
+
 def _step_file(a: Artifact, body: list[str], length: int) -> str:
     n, m, p, q = a.n, a.m, a.p, a.q
     return (
-        _banner(a)
-        + "/**\n * @file gl_step.h\n * @brief The control law for n=%d m=%d p=%d q=%d (%s, %s), fully unrolled.\n"
+        _banner(a) + "/**\n * @file gl_step.h\n"
+        f" * @brief The control law for n={n} m={m} p={p} q={q} ({a.observer_form}, {a.anti_windup}), fully unrolled.\n"
         " *\n * Included by gl_loop.c in GL_STEP_UNROLLED builds in place of the generic loops; same operations,\n"
-        " * same order, so the results are bit-identical. Stream length %d coefficients.\n */\n"
-        % (n, m, p, q, a.observer_form, a.anti_windup, length)
+        f" * same order, so the results are bit-identical. Stream length {length} coefficients.\n */\n"
         + "#ifndef GL_STEP_H\n#define GL_STEP_H\n\n"
         f'_Static_assert(GL_STREAM_LEN == {length}, "gl_step.h does not match the library\'s stream layout");\n\n'
-        "static inline __attribute__((always_inline)) uint32_t gl_step_core(const float *w, float *xh_io, float *z_io,\n"
-        "                                                                  const float *ys, const float *rs, float *u)\n"
+        f"{_STEP_CORE_OPEN}const float *w, float *xh_io, float *z_io,\n"
+        f"{' ' * (len(_STEP_CORE_OPEN) - 1)}const float *ys, const float *rs, float *u)\n"
         "{\n" + "\n".join(body) + "\n}\n\n#endif /* GL_STEP_H */\n"
     )
 

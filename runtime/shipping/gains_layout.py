@@ -396,7 +396,7 @@ class Layout:
         """``_Static_assert``s that the compiler lays the struct out as the ctypes mirror does for ``shape``."""
         t = f"{self.struct}_t"
         lines = [
-            "/* The layout gainlink.shipping.gains_layout computes for this artifact (its ctypes mirror and packers). */",
+            "/* The layout gainlink.shipping.gains_layout computes for this artifact (ctypes mirror and packers). */",
             f"_Static_assert(sizeof({t}) == {ctypes.sizeof(self.ctypes_struct(shape))}u, "
             f'"{t}: size differs from gainlink.shipping.gains_layout");',
         ]

@@ -1,6 +1,6 @@
 """A plant for the campaign tests that fails as a bug in a user's plant does: with an exception of its own.
 
-Imported by name (``kind = "python", class = "campaign_plants:BuggyPendulum"``) in the Dask worker
+Imported by name (``kind = "python", class = "support.campaign_plants:BuggyPendulum"``) in the Dask worker
 processes of the tests, which have this folder on their ``PYTHONPATH``.
 """
 

@@ -1,8 +1,8 @@
 """Hostile traffic for the hostile-traffic tests: run as a separate process beside a HIL run.
 
-    python tests/hostile_traffic.py can --group G --port P --count N [--rate R] [--seed S] --meas-lo ID --meas-hi ID
-                                    --base-id ID
-    python tests/hostile_traffic.py mavlink --target HOST:PORT --count N [--rate R] [--seed S] --frames FILE
+    python tests/support/hostile_traffic.py can --group G --port P --count N [--rate R] [--seed S]
+                                            --meas-lo ID --meas-hi ID --base-id ID
+    python tests/support/hostile_traffic.py mavlink --target HOST:PORT --count N [--rate R] [--seed S] --frames FILE
 
 Prints one JSON line at the end: ``{"sent": N, "by_kind": {...}, "seconds": T}``. Every datagram is sent once;
 ``--rate`` (datagrams/s, 0 = as fast as possible) paces them; with ``--bursts`` they go out in bursts of the

@@ -8,12 +8,14 @@ Co-Simulation. The wheel and the FMU are pinned by sha256.
 from __future__ import annotations
 
 import hashlib
+import os
 import subprocess
 import sys
+import tempfile
 import zipfile
 from pathlib import Path
 
-from gainlink.fileio import atomic_write_bytes
+from gainlink.fileio import atomic_write_bytes, exclusive_lock
 from gainlink.hil.paths import cache_dir
 
 WHEEL = "gemseo_fmu-3.1.1-py3-none-any.whl"
@@ -29,38 +31,46 @@ def _sha256(path: Path) -> str:
 
 
 def gemseo_fmu(name: str) -> Path:
-    """``name`` (e.g. ``Mass_Damper.fmu``) from the pinned gemseo-fmu wheel, downloaded once with pip."""
+    """``name`` (e.g. ``Mass_Damper.fmu``) from the pinned gemseo-fmu wheel, downloaded once with pip.
+
+    Safe when several test processes ask at once: one downloads and extracts under a file lock, into temporary
+    names renamed when complete; the others wait and find the result.
+    """
     folder = cache_dir("thirdparty")
     fmu = folder / name
     expected = FMUS[name]
     if fmu.exists() and _sha256(fmu) == expected:
         return fmu
+    with exclusive_lock(folder / ".lock"):
+        if not (fmu.exists() and _sha256(fmu) == expected):
+            _extract(_wheel(folder), name, expected, fmu)
+    return fmu
+
+
+def _wheel(folder: Path) -> Path:
+    """The pinned wheel in ``folder``, downloaded with pip unless it is already there."""
     wheel = folder / WHEEL
-    if not wheel.exists() or _sha256(wheel) != WHEEL_SHA256:
+    if wheel.exists() and _sha256(wheel) == WHEEL_SHA256:
+        return wheel
+    with tempfile.TemporaryDirectory(dir=folder) as tmp:
         subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "pip",
-                "download",
-                "--no-deps",
-                "--only-binary=:all:",
-                "gemseo-fmu==3.1.1",
-                "-d",
-                str(folder),
-                "-q",
-            ],
+            [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:", "gemseo-fmu==3.1.1"]
+            + ["-d", tmp, "-q"],
             check=True,
             timeout=300,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE,
         )
-    digest = _sha256(wheel)
-    if digest != WHEEL_SHA256:
-        raise RuntimeError(f"{wheel}: sha256 {digest} is not the pinned {WHEEL_SHA256}")
+        digest = _sha256(Path(tmp) / WHEEL)
+        if digest != WHEEL_SHA256:
+            raise RuntimeError(f"{WHEEL}: sha256 {digest} is not the pinned {WHEEL_SHA256}")
+        os.replace(Path(tmp) / WHEEL, wheel)
+    return wheel
+
+
+def _extract(wheel: Path, name: str, expected: str, fmu: Path) -> None:
     with zipfile.ZipFile(wheel) as z:
         data = z.read(f"gemseo_fmu/problems/fmu_files/linux/{name}")
     if hashlib.sha256(data).hexdigest() != expected:
         raise RuntimeError(f"{name} in {wheel} does not have the pinned sha256 {expected}")
     atomic_write_bytes(fmu, data)
-    return fmu

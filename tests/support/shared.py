@@ -1,0 +1,33 @@
+"""A value computed once per test run and shared by every pytest-xdist worker of the run.
+
+Session fixtures run once per worker; a costly, deterministic value (the random golden designs take some 20 s of
+CPU) would be computed by each. :func:`once_per_run` computes it in the first worker that asks, under a file lock
+in the run's shared temporary folder, and the others read it back (pickle).
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+from collections.abc import Callable
+from typing import TypeVar
+
+import pytest
+from gainlink.fileio import atomic_write_bytes, exclusive_lock
+
+T = TypeVar("T")
+
+
+def once_per_run(factory: pytest.TempPathFactory, name: str, make: Callable[[], T]) -> T:
+    """``make()``, computed by one process of this run (directly when the run is not distributed)."""
+    if "PYTEST_XDIST_WORKER" not in os.environ:
+        return make()
+    root = factory.getbasetemp().parent  # the run's folder, above every worker's own
+    path = root / f"{name}.pickle"
+    with exclusive_lock(root / f"{name}.lock"):
+        if path.is_file():
+            value: T = pickle.loads(path.read_bytes())
+            return value
+        value = make()
+        atomic_write_bytes(path, pickle.dumps(value))
+        return value

@@ -1,0 +1,41 @@
+"""The code's health as part of the test command: ruff's lint and format check, mypy on the public API, and the
+import layers (import-linter's contracts in pyproject.toml: layers one way, no import cycles).
+
+Each runs as a subprocess over the whole checkout (configured in pyproject.toml), so under pytest-xdist they run
+beside the rest of the suite. A failure shows the tool's own report.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+from support.paths import ROOT
+
+
+def run_tool(*argv: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, *argv], cwd=ROOT, capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=600
+    )
+
+
+def test_ruff_lint_is_clean():
+    proc = run_tool("-m", "ruff", "check", "--no-cache", "--output-format", "concise", ".")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_ruff_format_leaves_every_file_unchanged():
+    proc = run_tool("-m", "ruff", "format", "--no-cache", "--check", "--diff", ".")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_mypy_passes_on_the_public_api_strictly():
+    proc = run_tool(str(ROOT / "scripts" / "typecheck.py"))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "Success: no issues found" in proc.stdout
+
+
+def test_import_layers_point_one_way_and_nothing_imports_in_a_cycle():
+    proc = run_tool(str(ROOT / "scripts" / "lint_imports.py"))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "0 broken" in proc.stdout or "broken" not in proc.stdout, proc.stdout
