@@ -5,6 +5,7 @@ the integers, and an unbounded peak gain is refused in one line."""
 from __future__ import annotations
 
 import copy
+import json
 
 import numpy as np
 import pytest
@@ -51,6 +52,9 @@ def test_artifact_rebuilds_the_certified_integers(pendulum_q31):
         assert np.array_equal(getattr(g, name).C, getattr(h, name).C), name
         assert np.array_equal(getattr(g, name).E, getattr(h, name).E), name
     assert a.checks["fixed_point"]["signature"] == cert.signature
+    table = json.loads(json.dumps(g.integers()))  # what the C step takes: plain integers
+    for name in ("KX", "KY", "KZ", "TR", "TY", "KAW", "F", "G", "LY"):
+        assert np.abs(np.array(table[name])).max(initial=0) < 2**31 and np.min(table[f"{name}_shift"], initial=0) >= 0
 
 
 @pytest.mark.parametrize("name", ["pendulum", "quadrotor_lateral", "wood_berry"])

@@ -141,6 +141,21 @@ class FixedGains:
         """The safe command (``u_op`` clamped into the limits) in the command formats."""
         return np.minimum(np.maximum(self.UOP_U, self.LO_U), self.HI_U)
 
+    def integers(self) -> dict:
+        """Everything the C holds, as plain lists: each block's mantissas and left shifts (``KX`` and ``KX_shift``,
+        ...), the rounding shifts per output, the operating point, limits, safe command and initial state as
+        integers, and the samples' and commands' fractional bits (quantisation and scaling)."""
+        out: dict = {}
+        for name in ("KX", "KY", "KZ", "TR", "TY", "KAW", "F", "G", "LY"):
+            block = getattr(self, name)
+            out[name], out[f"{name}_shift"] = block.C.tolist(), block.E.tolist()
+        for name in ("shift_v", "shift_z", "shift_x", "shift_u", "U_SAFE"):
+            out[name] = getattr(self, name).tolist()
+        for name in ("YOP", "UOP_V", "UOP_U", "LO_V", "HI_V", "LO_U", "HI_U", "XH0", "Z0"):
+            out[name] = getattr(self, name).tolist()
+        out["frac"] = {k: self.formats.frac(k).tolist() for k in ("y", "r", "u", "v", "xh", "z")}
+        return out
+
 
 BLOCKS = {"v": ("KX", "KY", "KZ"), "z": ("TR", "TY", "KAW"), "x": ("F", "G", "LY")}
 
