@@ -91,3 +91,29 @@ def test_q31_spec_designs_and_records_its_certificate(tmp_path):
     assert max(fp["error"]["fraction_of_span"]) <= 1.0 / 4096
     assert fp["measured"]["within_bound"] and not fp["measured"]["overflow"]
     assert run_cli("validate", tmp_path / "out" / "gains.json").code == 0
+
+
+def _toml(spec: dict) -> str:
+    """A spec dict as TOML (JSON arrays, numbers and strings are TOML values)."""
+    lines = [f"{k} = {json.dumps(v)}" for k, v in spec.items() if not isinstance(v, dict)]
+    for table, values in spec.items():
+        if isinstance(values, dict):
+            lines += [f"\n[{table}]"] + [f"{k} = {json.dumps(v)}" for k, v in values.items()]
+    return "\n".join(lines) + "\n"
+
+
+def test_estimator_made_unstable_by_q15_coefficients_is_refused(tmp_path):
+    """An unbounded peak gain: this design's F has eigenvalues up to |z| = 0.994 made of entries up to 63 that
+    cancel (eigenvector condition number 730); with 16-bit coefficients it leaves the unit circle and no format
+    can bound the estimate."""
+    from gainlink.synthesis.random_plants import random_spec
+
+    spec = random_spec(11, n=3, m=1, p=1, q=1, anti_windup="backcalc")
+    spec["limits"] |= {"y_min": [-2.0], "y_max": [2.0], "r_min": [-1.0], "r_max": [1.0]}
+    spec["implementation"] = {"numeric": "q15", "float32_check": False}
+    path = tmp_path / "spec.toml"
+    path.write_text(_toml(spec))
+    out = tmp_path / "out"
+    res = run_cli("design", path, "--out", out)
+    assert_one_clear_line(res, "with the q15 coefficients the estimate's recursion F is unstable")
+    assert 'use numeric = "q31"' in res.err and not out.exists()
