@@ -130,3 +130,17 @@ def test_q15_keeps_states_32_bit_and_samples_16():
     for name in ("KX", "F", "G", "LY", "KAW"):
         C = getattr(cert.quantised.gains, name).C
         assert np.abs(C).max() < 2**15
+
+
+def test_the_artifacts_integers_are_used_as_stored(pendulum_q31):
+    """The C is rendered from the integers the design certified, never from a recomputation (a BLAS could round
+    a derived coefficient differently): an edited mantissa is what the law then runs; a shift that no longer
+    matches its formats is refused."""
+    from gainlink.errors import ArtifactError
+
+    data = copy.deepcopy(pendulum_q31.artifact)
+    data["checks"]["fixed_point"]["integers"]["KX"][0][0] += 1
+    assert FixedPointLoop(from_dict(seal(data))).g.KX.C[0, 0] == pendulum_q31.fixed_point.quantised.gains.KX.C[0, 0] + 1
+    data["checks"]["fixed_point"]["integers"]["shift_v"][0] += 1
+    with pytest.raises(ArtifactError, match="integers is inconsistent"):
+        gains_from_artifact(from_dict(seal(data)))

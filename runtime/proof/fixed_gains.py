@@ -229,12 +229,42 @@ def quantise_law(law: DerivedLaw, fm: SignalFormats, acc: dict[str, np.ndarray])
         "Z0": quantise(law.z0, fz),
     }
     _check_words(ints, fm)
-    ideal = _ideal(law, fm, accs, blocks, ints, uop_c=uop_c, lo_c=lo_c, hi_c=hi_c, fc=fc)
+    ranges = {"y_min": law.y_min, "y_max": law.y_max, "r_min": law.r_min, "r_max": law.r_max}
+    ideal = _ideal(fm, accs, blocks, ints, anti_windup=law.anti_windup, ranges=ranges)
     return FixedGains(formats=fm, acc_v=accs["v"], acc_z=accs["z"], acc_x=accs["x"], ideal=ideal, **blocks, **ints)
 
 
-def _ideal(law, fm, accs, blocks, ints, *, uop_c, lo_c, hi_c, fc) -> DerivedLaw:
-    """The real values the integers mean."""
+def from_integers(table: dict, fm: SignalFormats, acc: dict, *, anti_windup: str, ranges: dict) -> FixedGains:
+    """The :class:`FixedGains` of a stored :meth:`FixedGains.integers` table (what an artifact carries), checked
+    against its formats: the integers are taken as they are, never recomputed."""
+    accs = {k: np.asarray(acc[k], dtype=np.int64) for k in ("v", "z", "x")}
+    blocks = {}
+    for name, shape in _block_shapes(fm).items():
+        C = np.array(table[name], dtype=np.int64).reshape(shape)
+        blocks[name] = Block(C=C, E=np.array(table[f"{name}_shift"], dtype=np.int64).reshape(shape))
+    keys = ("YOP", "UOP_V", "UOP_U", "LO_V", "HI_V", "LO_U", "HI_U", "XH0", "Z0")
+    ints = {k: np.array(table[k], dtype=np.int64) for k in keys}
+    _check_words(ints, fm)
+    ranges = {k: None if ranges.get(k) is None else np.asarray(ranges[k], dtype=float) for k in RANGE_KEYS}
+    ideal = _ideal(fm, accs, blocks, ints, anti_windup=anti_windup, ranges=ranges)
+    g = FixedGains(formats=fm, acc_v=accs["v"], acc_z=accs["z"], acc_x=accs["x"], ideal=ideal, **blocks, **ints)
+    derived = ("shift_v", "shift_z", "shift_x", "shift_u", "U_SAFE")
+    if any(table[k] != g.integers()[k] for k in derived):
+        raise ValueError("the stored shifts or safe command do not match their formats")
+    return g
+
+
+RANGE_KEYS = ("y_min", "y_max", "r_min", "r_max")
+
+
+def _block_shapes(fm: SignalFormats) -> dict[str, tuple[int, int]]:
+    n, m, p, q = len(fm.xh), len(fm.u), len(fm.y), len(fm.z)
+    shapes = {"KX": (m, n), "KY": (m, p), "KZ": (m, q), "TR": (q, q), "TY": (q, p), "KAW": (q, m)}
+    return shapes | {"F": (n, n), "G": (n, m), "LY": (n, p)}
+
+
+def _ideal(fm, accs, blocks, ints, *, anti_windup: str, ranges: dict) -> DerivedLaw:
+    """The real values the integers mean (``u_op`` and the limits exactly from their v-format integers)."""
     fy, fr, fu, fv, fx, fz = (fm.frac(k) for k in ("y", "r", "u", "v", "xh", "z"))
     av, az, ax = accs["v"], accs["z"], accs["x"]
     return DerivedLaw(
@@ -247,17 +277,14 @@ def _ideal(law, fm, accs, blocks, ints, *, uop_c, lo_c, hi_c, fc) -> DerivedLaw:
         Tr=np.diag(blocks["TR"].value(az, fr)).copy(),
         Ty=blocks["TY"].value(az, fy),
         Kaw=blocks["KAW"].value(az, fv),
-        u_op=real(uop_c, fc),
+        u_op=real(ints["UOP_V"], fv),
         y_op=real(ints["YOP"], fy),
-        lo=real(lo_c, fc),
-        hi=real(hi_c, fc),
+        lo=real(ints["LO_V"], fv),
+        hi=real(ints["HI_V"], fv),
         xh0=real(ints["XH0"], fx),
         z0=real(ints["Z0"], fz),
-        anti_windup=law.anti_windup,
-        y_min=law.y_min,
-        y_max=law.y_max,
-        r_min=law.r_min,
-        r_max=law.r_max,
+        anti_windup=anti_windup,
+        **ranges,
     )
 
 

@@ -44,10 +44,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ArtifactError
 from ..shipping.artifact import Artifact
-from .derived_law import derive
 from .fixed_format import WORDS, quantise, real
-from .fixed_gains import Block, FixedGains, SignalFormats, quantise_law
+from .fixed_gains import Block, FixedGains, SignalFormats, from_integers
 from .reference import StepResult, Trace
 
 _INT64 = 1 << 63
@@ -69,13 +69,16 @@ class FixedStep:
 
 
 def gains_from_artifact(a: Artifact) -> FixedGains:
-    """The integers of a fixed-point artifact (its ``checks.fixed_point`` formats and ranges)."""
+    """The integers a fixed-point artifact carries (``checks.fixed_point.integers``, with its formats and ranges),
+    as they are: the C is rendered from these, never from a recomputation."""
     fp = a.checks.get("fixed_point")
     if fp is None:
-        raise ValueError(f"artifact {a.name} is not a fixed-point design (no checks.fixed_point)")
+        raise ArtifactError(f"artifact {a.name} is not a fixed-point design (no checks.fixed_point)")
     fm = SignalFormats.from_dict(fp["numeric"], fp["formats"])
-    acc = {k: np.array(fp["accumulators"][k], dtype=np.int64) for k in ("v", "z", "x")}
-    return quantise_law(derive(a).with_ranges(fp["ranges"]), fm, acc)
+    try:
+        return from_integers(fp["integers"], fm, fp["accumulators"], anti_windup=a.anti_windup, ranges=fp["ranges"])
+    except (KeyError, ValueError) as exc:
+        raise ArtifactError(f"artifact {a.name}: checks.fixed_point.integers is inconsistent ({exc})") from None
 
 
 def rshift_round(a: int, s: int) -> int:

@@ -173,6 +173,7 @@ def certificate_dict(cert: FixedPointCertificate) -> dict:
         "ranges": cert.ranges,
         "formats": g.formats.to_dict(),
         "accumulators": _acc(g),
+        "integers": g.integers(),
         "variables": _variables(cert),
         "accumulator_headroom_bits": {
             k: [float(63 - np.log2(max(b, 1.0))) for b in v] for k, v in qz.acc_bounds.items()

@@ -182,7 +182,7 @@ def _nonnegative_inverse(M):
         inv = None
     if inv is None or any(inv[i, j] < 0 for i in range(inv.nrows()) for j in range(inv.ncols())):
         raise DesignError(
-            "the back-calculation integrator does not contract in fixed point (rho(|I - Kaw Ki|) >= 1): raise "
-            "integral.aw_gain"
+            "the back-calculation integrator does not contract in fixed point (rho(|I - Kaw Ki|) >= 1: Ki lacks full "
+            'column rank, or the quantised Kaw Ki is too far from aw_gain I): use anti_windup = "clamp" or q31'
         )
     return inv
