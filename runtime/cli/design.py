@@ -16,6 +16,7 @@ from ..proof.simulation import samples_csv
 from ..shipping import artifact as artifact_mod
 from ..synthesis.analysis import complex_pairs
 from ..synthesis.compensator import compensator_stability
+from ..synthesis.fixed_point import describe as describe_fixed_point
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -143,6 +144,8 @@ def cmd_design(args: argparse.Namespace) -> int:
         return 0
     _print_gains(result)
     _print_checks(result)
+    if result.fixed_point is not None:
+        _print_fixed_point(result.fixed_point, result.artifact["checks"]["fixed_point"]["measured"])
     print(f"  wrote {out / 'gains.json'} (sha256 {result.artifact['sha256'][:16]})")
     return 0
 
@@ -162,6 +165,7 @@ def _design_json(result, path: Path) -> dict:
         "y_op": a.get("y_op"),
         "compensator": a["checks"]["compensator"],
         "float32": a["checks"].get("float32"),
+        "fixed_point": a["checks"].get("fixed_point"),
         "realization": a.get("realization", {}).get("kind", "as_designed"),
         "warnings": result.warnings,
     }
@@ -212,6 +216,24 @@ def _print_checks(result) -> None:
             f"saturating disturbance): max |u32 - u64| {f.max_rel_u:.3g} of the limit span, max |y32 - y64| "
             f"{f.max_rel_y:.3g} of the output excursion ({'within' if f.ok else 'ABOVE'} {f.threshold:g})"
         )
+
+
+def _print_fixed_point(cert, measured: dict) -> None:
+    """The certificate's lines, and the deviation measured in closed loop beside the certified bound."""
+    for line in describe_fixed_point(cert):
+        print(f"  {line}")
+    worst = ", ".join(
+        f"{name} {got:.3g} (bound {bound:.3g})"
+        for name, got, bound in zip(cert.names["u"], measured["max_abs_u_unsaturated"], measured["bound_closed_loop"])
+    )
+    print(
+        f"    measured in closed loop ({measured['steps']} steps, noise, reference step, saturating disturbance): "
+        f"unsaturated |u - u64| {worst} over {measured['unsaturated_steps']} steps; whole run "
+        f"{measured['max_rel_u_quantised']:.3g} of the span against the float64 law with the same coefficients and "
+        f"clip, {measured['max_rel_u']:.3g} against the design's"
+        + (f" ({measured['clipped_steps']} steps clipped to the ranges)" if measured["clipped_steps"] else "")
+        + ("" if not measured["overflow"] else f"; SECOND-LINE SATURATION on {', '.join(measured['overflow'])}")
+    )
 
 
 def cmd_validate(args: argparse.Namespace) -> int:

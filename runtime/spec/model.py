@@ -92,11 +92,20 @@ class ObserverSpec:
 
 @dataclass(frozen=True)
 class LimitsSpec:
-    """``[limits]``: absolute actuator limits and the anti-windup mode (none | clamp | backcalc)."""
+    """``[limits]``: absolute actuator limits, the anti-windup mode (none | clamp | backcalc) and the declared ranges.
+
+    ``y_min``/``y_max`` (p) and ``r_min``/``r_max`` (q) are the absolute ranges of the samples and references (None
+    when not declared). A fixed-point law needs them: every bound of its certificate holds for inputs within them,
+    and samples outside are clipped to them and flagged.
+    """
 
     u_min: np.ndarray
     u_max: np.ndarray
     anti_windup: str
+    y_min: np.ndarray | None = None
+    y_max: np.ndarray | None = None
+    r_min: np.ndarray | None = None
+    r_max: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -115,10 +124,24 @@ class OperatingPoint:
 
 @dataclass(frozen=True)
 class ImplementationSpec:
-    """``[implementation]``: how the C runs the design (coordinates of the estimate, the float32 check)."""
+    """``[implementation]``: how the C runs the design (coordinates of the estimate, the float32 check, the number
+    format).
+
+    ``numeric`` is ``float32`` (the float C law) or a fixed-point law, ``q31`` (32-bit words) or ``q15`` (16-bit
+    coefficients, samples and commands; 32-bit states). ``fixed_point_max_error`` is the largest certified
+    deviation of a fixed-point command from the float64 law that the design accepts, as a fraction of each input's
+    limit span (default 1/4096: one step of a 12-bit actuator command).
+    """
 
     realization: str = "as_designed"
     float32_check: bool = True
+    numeric: str = "float32"
+    fixed_point_max_error: float = 1.0 / 4096
+
+    @property
+    def fixed_point(self) -> bool:
+        """True for a fixed-point law (q31, q15)."""
+        return self.numeric != "float32"
 
 
 @dataclass(frozen=True)

@@ -13,10 +13,13 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import SpecError
 from ..fileio import read_toml
 from .model import PlantSpec
 from .plant import parse_plant
+from .ranges import check_ranges
 from .tables import (
     CONTROLLER_KEYS,
     IMPLEMENTATION_KEYS,
@@ -73,7 +76,10 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
         lqr=ctl.get("method", "lqr") == "lqr",
     )
     q = 0 if integral is None else integral.q
-    limits = parse_limits(checked_table(data, "limits", LIMITS_KEYS, required=True), plant, integral=q > 0)
+    limits = parse_limits(checked_table(data, "limits", LIMITS_KEYS, required=True), plant, q=q)
+    operating_point = parse_operating_point(table(data, "operating_point", required=False), plant, limits)
+    implementation = parse_implementation(checked_table(data, "implementation", IMPLEMENTATION_KEYS, required=False))
+    check_ranges(limits, operating_point, integral.Ci if integral else np.zeros((0, plant.p)), plant, implementation)
     return PlantSpec(
         name=name,
         Ts=Ts,
@@ -83,8 +89,8 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
         integral=integral,
         observer=parse_observer(checked_table(data, "observer", OBSERVER_KEYS, required=True), plant, Ts=Ts),
         limits=limits,
-        operating_point=parse_operating_point(table(data, "operating_point", required=False), plant, limits),
-        implementation=parse_implementation(checked_table(data, "implementation", IMPLEMENTATION_KEYS, required=False)),
+        operating_point=operating_point,
+        implementation=implementation,
         source_sha256=source_sha256,
         source=source,
         description=str(data.get("description", "")),

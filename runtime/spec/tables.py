@@ -15,6 +15,7 @@ from .model import (
     OperatingPoint,
     PlantModel,
 )
+from .ranges import parse_numeric, parse_ranges
 from .values import as_matrix, as_vector, given_matrix, no_unknown, poles_z, weight
 
 CONTROLLER_KEYS = {
@@ -23,9 +24,9 @@ CONTROLLER_KEYS = {
 }  # fmt: skip
 INTEGRAL_KEYS = {"outputs", "Q_diag", "bryson_max", "aw_gain"}
 OBSERVER_KEYS = {"method", "form", "W", "W_diag", "V", "V_diag", "G", "poles", "poles_z", "L", "M"}
-LIMITS_KEYS = {"u_min", "u_max", "anti_windup"}
+LIMITS_KEYS = {"u_min", "u_max", "anti_windup", "y_min", "y_max", "r_min", "r_max"}
 OPERATING_POINT_KEYS = {"u_op", "y_op", "x_op"}
-IMPLEMENTATION_KEYS = {"realization", "float32_check"}
+IMPLEMENTATION_KEYS = {"realization", "float32_check", "numeric", "fixed_point_max_error"}
 # [linearization]: the record ``gainlink linearize`` writes (which interface runs use and why, the model's fit to
 # the FMU); kept as written, for the artifact's provenance.
 LINEARIZATION_KEYS = {
@@ -160,8 +161,9 @@ def _given_observer(tbl: dict, plant: PlantModel, *, form: str) -> ObserverSpec:
     return ObserverSpec(method="given", form=form, L=given_matrix(tbl, "L", shape, "observer"))
 
 
-def parse_limits(tbl: dict, plant: PlantModel, *, integral: bool) -> LimitsSpec:
-    """``[limits]``: absolute limits below one another, and the anti-windup mode (none without integral action)."""
+def parse_limits(tbl: dict, plant: PlantModel, *, q: int) -> LimitsSpec:
+    """``[limits]``: absolute limits below one another, the anti-windup mode (none without integral action) and
+    the declared ranges of samples and references."""
     for key in ("u_min", "u_max"):
         if key not in tbl:
             raise SpecError(f"limits lacks {key}")
@@ -169,10 +171,11 @@ def parse_limits(tbl: dict, plant: PlantModel, *, integral: bool) -> LimitsSpec:
     u_max = as_vector(tbl["u_max"], "limits.u_max", plant.m)
     if np.any(u_min >= u_max):
         raise SpecError("limits.u_min must be below limits.u_max for every input")
-    aw = tbl.get("anti_windup", "backcalc" if integral else "none")
+    aw = tbl.get("anti_windup", "backcalc" if q else "none")
     if aw not in ("none", "clamp", "backcalc"):
         raise SpecError(f"limits.anti_windup must be none, clamp or backcalc, not {aw!r}")
-    return LimitsSpec(u_min=u_min, u_max=u_max, anti_windup=aw if integral else "none")
+    ranges = parse_ranges(tbl, plant, q=q)
+    return LimitsSpec(u_min=u_min, u_max=u_max, anti_windup=aw if q else "none", **ranges)
 
 
 def parse_operating_point(tbl: dict | None, plant: PlantModel, limits: LimitsSpec) -> OperatingPoint | None:
@@ -221,4 +224,4 @@ def parse_implementation(tbl: dict | None) -> ImplementationSpec:
     check = tbl.get("float32_check", True)
     if not isinstance(check, bool):
         raise SpecError(f"implementation.float32_check must be true or false, not {check!r}")
-    return ImplementationSpec(realization=kind, float32_check=check)
+    return ImplementationSpec(realization=kind, float32_check=check, **parse_numeric(tbl))

@@ -1,22 +1,26 @@
 """The spec's ``[implementation]`` choices applied to a designed artifact: the realisation of the estimate, then
-the compensator's stability and the float32 closed-loop fidelity recorded in ``checks`` with their warnings."""
+the compensator's stability and the float32 closed-loop fidelity (or, for a fixed-point law, its certificate and
+measured fidelity) recorded in ``checks`` with their warnings."""
 
 from __future__ import annotations
 
 from ..proof.fidelity import Float32Fidelity, float32_fidelity
+from ..proof.fixed_fidelity import fixed_point_fidelity
 from ..shipping.artifact import Artifact, from_dict, seal
 from ..spec import ImplementationSpec
 from .compensator import CompensatorStability, compensator_stability
+from .fixed_point import FixedPointCertificate, certificate_dict, certify
 from .realization import apply, transformation
 
 
 def implement(
-    data: dict, implementation: ImplementationSpec, warnings: list[str]
-) -> tuple[dict, CompensatorStability, Float32Fidelity | None]:
+    data: dict, implementation: ImplementationSpec, warnings: list[str], *, ranges: dict | None = None
+) -> tuple[dict, CompensatorStability, Float32Fidelity | None, FixedPointCertificate | None]:
     """Apply the implementation choices to a designed artifact dict and record their checks.
 
-    Returns ``(data, compensator stability, float32 fidelity or None when the check is off)``; ``data`` is not
-    sealed.
+    Returns ``(data, compensator stability, float32 fidelity or None when the check is off or the law is fixed
+    point, fixed-point certificate or None)``; ``data`` is not sealed. ``ranges`` (y_min, y_max, r_min, r_max)
+    are the declared ranges a fixed-point law is certified for.
     """
     kind = implementation.realization
     if kind != "as_designed":
@@ -27,6 +31,8 @@ def implement(
     data["checks"]["compensator"] = compensator.to_dict()
     if not compensator.stable:
         warnings.append(compensator.warning())
+    if implementation.fixed_point:
+        return (data, compensator, None, _fixed_point(data, a, implementation, ranges or {}))
     fidelity = None
     if implementation.float32_check:
         fidelity = float32_fidelity(a)
@@ -36,7 +42,16 @@ def implement(
             if kind == "as_designed":
                 better = float32_fidelity(from_dict(seal(_realised(data, "balanced")))).max_rel_u
             warnings.append(fidelity.warning(kind, balanced=better))
-    return data, compensator, fidelity
+    return data, compensator, fidelity, None
+
+
+def _fixed_point(data: dict, a: Artifact, implementation: ImplementationSpec, ranges: dict) -> FixedPointCertificate:
+    """Certify the fixed-point law, record it in ``checks.fixed_point`` with the measured closed-loop deviation."""
+    cert = certify(a, ranges, numeric=implementation.numeric, max_error=implementation.fixed_point_max_error)
+    data["checks"]["fixed_point"] = certificate_dict(cert)
+    measured = fixed_point_fidelity(from_dict(seal(data)))
+    data["checks"]["fixed_point"]["measured"] = measured.to_dict()
+    return cert
 
 
 def _realised(data: dict, kind: str) -> dict:

@@ -20,6 +20,7 @@ from .compensator import CompensatorStability
 from .controller import controller_gain
 from .deadtime import DeadTimeCheck, dead_time_check
 from .discretize import Discretised, augment, discretise
+from .fixed_point import FixedPointCertificate
 from .implementation import implement
 from .loop import closed_loop_poles
 from .margins import ChannelMargin, input_margins, loop_bandwidth
@@ -42,6 +43,7 @@ class DesignResult:
     compensator: CompensatorStability | None = None
     float32: Float32Fidelity | None = None  # None when the check was switched off
     dead_time: DeadTimeCheck | None = None  # None unless the plant has sampled dead times
+    fixed_point: FixedPointCertificate | None = None  # None unless [implementation] numeric is q31 or q15
 
 
 def synthesize(spec: PlantSpec) -> DesignResult:
@@ -75,7 +77,7 @@ def synthesize(spec: PlantSpec) -> DesignResult:
     }
     record = {"discretization": d.method, "controller": controller_record, "observer": observer_record}
     data = artifact_data(spec, d, gains, design_record=record, checks=checks)
-    data, compensator, fidelity = implement(data, spec.implementation, warnings)
+    data, compensator, fidelity, fixed = implement(data, spec.implementation, warnings, ranges=_ranges(spec))
     dead_time = _dead_time(spec, data, warnings)
     for w in warnings:
         log.warning(w)
@@ -89,7 +91,14 @@ def synthesize(spec: PlantSpec) -> DesignResult:
         compensator=compensator,
         float32=fidelity,
         dead_time=dead_time,
+        fixed_point=fixed,
     )
+
+
+def _ranges(spec: PlantSpec) -> dict:
+    """The declared ranges of samples and references (None where not declared)."""
+    lim = spec.limits
+    return {"y_min": lim.y_min, "y_max": lim.y_max, "r_min": lim.r_min, "r_max": lim.r_max}
 
 
 def _check_feasible(d: Discretised, Aa: np.ndarray, Ba: np.ndarray, q: int) -> None:

@@ -1,0 +1,125 @@
+"""How far the fixed-point command can be from the float64 law, from the rounding at every quantisation point
+(DESIGN.md, "Fixed point": the command's error).
+
+The float64 law compared against has the same quantised coefficients, operating point and limits, and clips its
+samples to the same ranges (:class:`~gainlink.proof.derived_law.DerivedLoop` on ``FixedGains.ideal``); the
+integer law differs from it only by rounding: each sample and reference quantised (half a unit of its format),
+and each output of a sum of products rounded once (half a unit of ``v``, ``u``, ``z``, ``xh``). Three bounds:
+
+- **per step**, from the same state (the one-step, resynchronised check): ``|du| <= |Ky| h_y + h_v + h_u``, for
+  every compensator. The next state likewise (the integrator with clamping: when both laws take the same
+  clamping decision).
+- **open loop over time**, for a stable compensator without integrators, while no input saturates: the rounding
+  drives the compensator's own dynamics ``F + G Kx``; the WCPG of that error system bounds the command error for
+  ever.
+- **closed loop around the design model**, while no input saturates and no sample is clipped: the rounding drives
+  the loop (plant model + law), stable by design and re-checked with the quantised coefficients; its WCPG bounds
+  the command error for ever, whatever the compensator (integrators and unstable compensators included).
+
+Coefficient quantisation is a separate term: the WCPG of the difference between the design's law and the
+quantised one, driven by the same inputs (open loop: the samples within their ranges; closed loop: the
+references within theirs, with the rounded operating point as constant offsets).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import DesignError
+from ..proof.derived_law import DerivedLaw
+from .fixed_loops import LinearSystem, closed_loop, difference, open_loop
+from .fixed_ranges import Rounding
+from .wcpg import spectral_radius, wcpg
+
+
+@dataclass(frozen=True)
+class PerStep:
+    """One-step bounds (same state before the step): the command ``u`` (m), next ``xh`` (n) and ``z`` (q)."""
+
+    u: np.ndarray
+    xh: np.ndarray
+    z: np.ndarray
+
+
+def per_step(law: DerivedLaw, h: Rounding) -> PerStep:
+    """The resynchronised bounds (module docstring)."""
+    dv = np.abs(law.Ky) @ h.y + h.v
+    du = dv + h.u
+    xh = np.abs(law.G) @ du + np.abs(law.Ly) @ h.y + h.x
+    kaw = np.abs(law.Kaw) @ dv if law.anti_windup == "backcalc" else 0.0
+    z = np.abs(law.Tr) * h.r + np.abs(law.Ty) @ h.y + kaw + h.z
+    up = 1 + 1e-12
+    return PerStep(u=du * up, xh=xh * up, z=np.asarray(z) * up)
+
+
+def _rounding_weights(h: Rounding, *, loop: bool) -> dict[str, np.ndarray]:
+    weights = {"ny": h.y, "rv": h.v, "ru": h.u, "rx": h.x}
+    if loop:
+        weights |= {"nr": h.r, "rz": h.z}
+    return weights
+
+
+def _bound(system: LinearSystem, weights: dict[str, np.ndarray], what: str) -> np.ndarray:
+    B, D = system.columns(weights)
+    return wcpg(system.A, B, system.C, D, what=what).upper.sum(axis=1)
+
+
+def compensator_radius(law: DerivedLaw) -> float:
+    """Spectral radius of the compensator without its integrators, ``F + G Kx``."""
+    return spectral_radius(law.F + law.G @ law.Kx)
+
+
+def open_loop_bound(law: DerivedLaw, h: Rounding) -> np.ndarray | None:
+    """The open-loop bound, or None when it does not apply (integrators, or an unstable compensator)."""
+    if law.q or not compensator_radius(law) < 1.0:
+        return None
+    return _bound(open_loop(law), _rounding_weights(h, loop=False), "the compensator's rounding error")
+
+
+def check_quantised_loop(law: DerivedLaw, plant: tuple, numeric: str) -> float:
+    """The closed loop's spectral radius with the quantised coefficients; DesignError when it is not stable."""
+    radius = spectral_radius(closed_loop(law, plant).A)
+    if not radius < 1.0:
+        raise DesignError(
+            f"the closed loop is unstable with the {numeric} coefficients (spectral radius {radius:.6g} >= 1): "
+            'use numeric = "q31"' + ("" if numeric == "q15" else " with narrower declared ranges")
+        )
+    return radius
+
+
+def closed_loop_bound(law: DerivedLaw, plant: tuple, h: Rounding) -> np.ndarray:
+    """The closed-loop bound (module docstring)."""
+    system = closed_loop(law, plant)
+    return _bound(system, _rounding_weights(h, loop=True), "the closed loop with the quantised coefficients")
+
+
+def coefficient_terms(
+    design: DerivedLaw, ideal: DerivedLaw, plant: tuple, ranges: dict
+) -> tuple[np.ndarray | None, np.ndarray]:
+    """``(open loop or None, closed loop)`` bounds of the command difference between the design's law and the
+    quantised one (module docstring). ``ranges`` holds the real y_min/y_max (p) and r_min/r_max (q)."""
+    offsets = {"nop": np.abs(design.y_op - ideal.y_op), "d": np.abs(ideal.u_op - design.u_op)}
+    closed = difference(closed_loop(design, plant), closed_loop(ideal, plant), shared=("r",))
+    weights = dict(offsets)
+    if design.q:
+        r_op = -design.Ty @ design.y_op / design.Tr  # Ci y_op
+        lo, hi = np.asarray(ranges["r_min"]) - r_op, np.asarray(ranges["r_max"]) - r_op
+        centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        closed = _with_centre(closed, "r", centre)
+        weights |= {"r": half, "r_centre": np.ones(1)}
+    closed_bound = _bound(closed, weights, "the difference of the design's and the quantised closed loops")
+    if design.q or not (compensator_radius(design) < 1.0 and compensator_radius(ideal) < 1.0):
+        return None, closed_bound
+    lo, hi = np.asarray(ranges["y_min"]) - design.y_op, np.asarray(ranges["y_max"]) - design.y_op
+    diff = _with_centre(difference(open_loop(design), open_loop(ideal), shared=("ny",)), "ny", 0.5 * (lo + hi))
+    weights = offsets | {"ny": 0.5 * (hi - lo), "ny_centre": np.ones(1)}
+    return _bound(diff, weights, "the difference of the design's and the quantised compensators"), closed_bound
+
+
+def _with_centre(system: LinearSystem, name: str, centre: np.ndarray) -> LinearSystem:
+    """``system`` with one more input column, ``name_centre``: the constant ``centre`` of input ``name``."""
+    B = dict(system.B, **{f"{name}_centre": system.B[name] @ centre[:, None]})
+    D = dict(system.D, **{f"{name}_centre": system.D[name] @ centre[:, None]})
+    return LinearSystem(A=system.A, B=B, C=system.C, D=D)

@@ -1,0 +1,244 @@
+"""The fixed-point certificate of a design: formats, no overflow, and how far the command can be from the float64
+law (DESIGN.md, "Fixed point"; the parts: :mod:`.wcpg`, :mod:`.fixed_ranges`, :mod:`.fixed_formats`,
+:mod:`.fixed_error`).
+
+What it covers, recorded in ``checks.fixed_point.covers``:
+
+- **no overflow**, for any compensator: every sample within ``[y_min, y_max]`` and reference within
+  ``[r_min, r_max]`` (others are clipped to them and flagged), any history, any saturation: the estimate, the
+  integrator, the unsaturated command and every accumulator stay within their formats;
+- **the command's error per step** (from the same state), for any compensator;
+- **over time, open loop**: only for a stable compensator without integrators, while no input saturates;
+- **over time, in closed loop around the design model**: for any compensator, while no input saturates and no
+  sample is clipped; under saturation the deviation is measured (the design-time fidelity run), not certified;
+- **coefficient quantisation** as a separate term (the design's law against the quantised one), and the closed
+  loop's stability re-checked with the quantised coefficients.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import DesignError
+from ..proof.derived_law import derive
+from ..shipping.artifact import Artifact
+from .fixed_error import (
+    PerStep,
+    check_quantised_loop,
+    closed_loop_bound,
+    coefficient_terms,
+    compensator_radius,
+    open_loop_bound,
+    per_step,
+)
+from .fixed_formats import Quantised, choose
+
+COVERS = {
+    "no_overflow": "every variable and accumulator within its format for samples in [y_min, y_max] and references "
+    "in [r_min, r_max] (others are clipped and flagged), any history, saturated or not, whatever the compensator",
+    "per_step": "the command from the same state (one step, resynchronised): every compensator",
+    "closed_loop": "over time around the design model while no input saturates and no sample is clipped: every "
+    "compensator (integrators and unstable compensators included); under saturation measured, not certified",
+    "coefficients": "the design's law against the quantised one: closed loop around the design model for references "
+    "within their ranges (disturbances and noise not covered); open loop for samples within their ranges",
+}
+
+
+@dataclass(frozen=True)
+class FixedPointCertificate:
+    """A fixed-point law and what is proved about it (module docstring); bounds are in each signal's units."""
+
+    numeric: str
+    quantised: Quantised
+    per_step: PerStep
+    open_loop: np.ndarray | None
+    closed_loop: np.ndarray
+    coefficients_open_loop: np.ndarray | None
+    coefficients_closed_loop: np.ndarray
+    loop_radius: float
+    compensator_radius: float
+    integrators: int
+    span: np.ndarray
+    max_error: float
+    ranges: dict
+    names: dict
+
+    @property
+    def certified(self) -> np.ndarray:
+        """The command's certified deviation from the design's float64 law per input (rounding + coefficients),
+        in the closed loop around the design model while unsaturated (the per-step bound if larger)."""
+        rounding = np.maximum(self.per_step.u, self.closed_loop)
+        return rounding + self.coefficients_closed_loop
+
+    @property
+    def fraction(self) -> np.ndarray:
+        """:attr:`certified` as a fraction of each input's limit span."""
+        return self.certified / self.span
+
+    @property
+    def case(self) -> str:
+        """Which over-time bound applies to a replay: the compensator open loop, or only the closed loop."""
+        if self.open_loop is not None:
+            return "open_loop"
+        why = "integrators" if self.integrators else "an unstable compensator"
+        return f"closed_loop (open loop not certified: {why})"
+
+    @property
+    def signature(self) -> str:
+        """32-bit signature of the number formats (the C's ``gl_gains_t`` carries it; uploads must match)."""
+        g = self.quantised.gains
+        body = {"numeric": self.numeric, "formats": g.formats.to_dict(), "accumulators": _acc(g)}
+        return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:8]
+
+
+def _acc(g) -> dict:
+    return {"v": g.acc_v.tolist(), "z": g.acc_z.tolist(), "x": g.acc_x.tolist()}
+
+
+def certify(a: Artifact, ranges: dict, *, numeric: str, max_error: float) -> FixedPointCertificate:
+    """Choose the formats of ``a``'s law in ``numeric`` for inputs in ``ranges`` (y_min, y_max, r_min, r_max) and
+    prove its bounds.
+
+    Raises
+    ------
+    DesignError
+        An unstable estimator (``F``), an integrator that cannot be bounded, a closed loop that the quantised
+        coefficients destabilise, or a certified deviation above ``max_error`` of some input's span (naming the
+        remedy).
+    """
+    design = derive(a).with_ranges(ranges)
+    qz = choose(design, numeric)
+    ideal, h = qz.gains.ideal, qz.rounding
+    plant = (a.Ad, a.Bd, a.Cd, a.Dd)
+    radius = check_quantised_loop(ideal, plant, numeric)
+    coeff_open, coeff_closed = coefficient_terms(design, ideal, plant, ranges)
+    cert = FixedPointCertificate(
+        numeric=numeric,
+        quantised=qz,
+        per_step=per_step(ideal, h),
+        open_loop=open_loop_bound(ideal, h),
+        closed_loop=closed_loop_bound(ideal, plant, h),
+        coefficients_open_loop=coeff_open,
+        coefficients_closed_loop=coeff_closed,
+        loop_radius=radius,
+        compensator_radius=compensator_radius(ideal),
+        integrators=a.q,
+        span=a.u_max - a.u_min,
+        max_error=max_error,
+        ranges={k: np.asarray(v, dtype=float).tolist() for k, v in ranges.items() if v is not None},
+        names={
+            "xh": a.signals["states"],
+            "u": a.signals["inputs"],
+            "y": a.signals["outputs"],
+            "r": a.signals["references"],
+        },
+    )
+    _check_max_error(cert)
+    return cert
+
+
+def _check_max_error(cert: FixedPointCertificate) -> None:
+    worst = int(np.argmax(cert.fraction))
+    if cert.fraction[worst] <= cert.max_error:
+        return
+    remedy = (
+        'use numeric = "q31"'
+        if cert.numeric == "q15"
+        else 'narrow the declared ranges (limits.y_min/y_max, r_min/r_max), try realization = "balanced"'
+    )
+    rounding = max(cert.per_step.u[worst], cert.closed_loop[worst])
+    raise DesignError(
+        f"no {cert.numeric} format meets fixed_point_max_error = {cert.max_error:.3g} on input "
+        f"{cert.names['u'][worst]}: certified deviation {cert.fraction[worst]:.3g} of the span (rounding "
+        f"{rounding / cert.span[worst]:.3g}, coefficients {cert.coefficients_closed_loop[worst] / cert.span[worst]:.3g}"
+        f"); {remedy}, or raise fixed_point_max_error"
+    )
+
+
+def certificate_dict(cert: FixedPointCertificate) -> dict:
+    """The artifact's ``checks.fixed_point``."""
+    qz = cert.quantised
+    g = qz.gains
+
+    def vec(x):
+        return None if x is None else [float(v) for v in np.asarray(x).ravel()]
+
+    return {
+        "numeric": cert.numeric,
+        "signature": cert.signature,
+        "ranges": cert.ranges,
+        "formats": g.formats.to_dict(),
+        "accumulators": _acc(g),
+        "integers": g.integers(),
+        "variables": _variables(cert),
+        "accumulator_headroom_bits": {
+            k: [float(63 - np.log2(max(b, 1.0))) for b in v] for k, v in qz.acc_bounds.items()
+        },
+        "error": {
+            "per_step": vec(cert.per_step.u),
+            "open_loop": vec(cert.open_loop),
+            "closed_loop": vec(cert.closed_loop),
+            "coefficients_closed_loop": vec(cert.coefficients_closed_loop),
+            "coefficients_open_loop": vec(cert.coefficients_open_loop),
+            "certified": vec(cert.certified),
+            "fraction_of_span": vec(cert.fraction),
+            "max_error": cert.max_error,
+        },
+        "case": cert.case,
+        "covers": dict(COVERS),
+        "closed_loop_spectral_radius": cert.loop_radius,
+        "compensator_spectral_radius": cert.compensator_radius,
+        "wcpg": {"method": qz.bounds.gain.method, "terms": qz.bounds.gain.terms},
+    }
+
+
+def _variables(cert: FixedPointCertificate) -> list[dict]:
+    """Each state-word variable's format, certified bound and headroom."""
+    qz, names = cert.quantised, cert.names
+    b, fm = qz.bounds, qz.gains.formats
+    rows = []
+    groups = (
+        ("xh", names["xh"], b.xh, fm.xh),
+        ("z", names["r"], b.z, fm.z),
+        ("v", names["u"], np.maximum(b.v, b.w), fm.v),
+    )
+    for group, labels, bounds, formats in groups:
+        for label, bound, f in zip(labels, bounds, formats):
+            rows.append(
+                {
+                    "name": f"{group}[{label}]",
+                    **f.to_dict(),
+                    "bound": float(bound),
+                    "headroom_bits": float(f.headroom_bits(float(bound))),
+                }
+            )
+    for group, labels, formats in (("y", names["y"], fm.y), ("r", names["r"], fm.r), ("u", names["u"], fm.u)):
+        rows.extend({"name": f"{group}[{label}]", **f.to_dict()} for label, f in zip(labels, formats))
+    return rows
+
+
+def describe(cert: FixedPointCertificate) -> list[str]:
+    """Lines for ``gainlink design``."""
+    qz = cert.quantised
+    lines = [
+        f"fixed point {cert.numeric} (signature {cert.signature}): formats "
+        + ", ".join(f"{v['name']} {v['q']}" for v in _variables(cert))
+    ]
+    lines.append(
+        "  no overflow for samples and references within their declared ranges (estimate bound by WCPG, "
+        f"{qz.bounds.gain.method} certificate, {qz.bounds.gain.terms} terms); least headroom "
+        f"{min(v['headroom_bits'] for v in _variables(cert) if 'headroom_bits' in v):.2f} bits"
+    )
+    for i, name in enumerate(cert.names["u"]):
+        ol = "n/a" if cert.open_loop is None else f"{cert.open_loop[i]:.3g}"
+        lines.append(
+            f"  |u - u64| on {name}: per step {cert.per_step.u[i]:.3g}, closed loop {cert.closed_loop[i]:.3g}, "
+            f"open loop {ol}, coefficients {cert.coefficients_closed_loop[i]:.3g} -> {cert.fraction[i]:.3g} of the "
+            f"span (max {cert.max_error:.3g})"
+        )
+    lines.append(f"  over time: {cert.case}; under saturation measured, not certified")
+    return lines

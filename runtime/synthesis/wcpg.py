@@ -1,0 +1,296 @@
+"""The worst-case peak gain (WCPG) of a stable discrete system, with a rigorous upper bound.
+
+For ``x+ = A x + B w``, ``s = C x + D w`` started at rest, ``|s_i(k)| <= sum_j W_ij max_k |w_j(k)|`` with
+``W = |D| + sum_{k>=0} |C A^k B|`` (entrywise), and the bound is reached by some input of that size: it is the
+tightest bound on a signal of a linear recursion driven by bounded inputs. Following Volkova, Hilaire and Lauter
+("Reliable evaluation of the worst-case peak gain matrix in multiple precision", ARITH 2015):
+
+- a **verified decomposition** of ``A`` bounds ``|C A^k B|`` for all k at once. Preferably its eigendecomposition
+  ``A = V diag(l) V^-1``, enclosed in ball arithmetic (python-flint, Rump's method): then
+  ``|C A^k B| <= sum_l |R_l| rho_l^k`` with ``R_l = (C v_l)(w_l B)`` and ``rho_l >= |l_l|``. When the eigenvalues
+  cannot be isolated or the basis is ill-conditioned, a **Lyapunov matrix** ``P`` with ``A' P A <= gamma^2 P``
+  (checked positive semidefinite in ball arithmetic) gives ``|C_i A^k B_j| <= |C_i| |B_j| kappa gamma^k``,
+  ``kappa = sqrt(lambda_max(P) / lambda_min(P))``.
+- the **tail** ``sum_{k>=N} |C A^k B|`` is then at most ``sum_l |R_l| rho_l^N / (1 - rho_l)`` (or
+  ``|C_i| |B_j| kappa gamma^N / (1 - gamma)``); N grows until the tail is below ``rel_tol`` of the sum.
+- the **head** ``sum_{k<N} |C A^k B|`` is computed in float64 (``X_k = A X_{k-1}``) with an error budget: the
+  rounding of each product is at most ``gamma_n |A| |X_{k-1}|`` (Higham, Thm 3.5, any summation order, with or
+  without FMA), and the error it leaves in later ``X_k`` is propagated through the same decomposition (in
+  eigen-coordinates, each contracting by ``rho_l``; or in the P-norm, by ``gamma``). The bounds computed in
+  float64 from these are inflated by a factor ``1 + 1e-9`` to cover their own rounding.
+
+The result is an upper bound (and a lower bound: the head minus its error) of every entry of ``W``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from ..errors import DesignError
+
+UNIT = 2.0**-53
+INFLATE = 1.0 + 1e-9  # covers the float64 rounding of the error bounds' own arithmetic
+EIGEN_MAX_COND = 1e8  # above this basis condition number the Lyapunov certificate is used
+PREC = 128  # bits of the ball arithmetic
+BLOCK = 64  # steps between tail checks
+
+
+@dataclass(frozen=True)
+class PeakGain:
+    """A WCPG matrix bounded from above and below.
+
+    ``upper`` (p x m) bounds ``|D| + sum_k |C A^k B|``; ``lower`` is below it; ``terms`` head terms were summed,
+    leaving ``tail``; ``head_error`` bounds the float64 rounding of the head; ``method`` is the certificate
+    (``eigen`` or ``lyapunov``); ``converged`` is False when the term budget ran out before the tail fell below
+    the tolerance (the bound still holds, only looser).
+    """
+
+    upper: np.ndarray
+    lower: np.ndarray
+    terms: int
+    tail: np.ndarray
+    head_error: np.ndarray
+    method: str
+    converged: bool
+
+
+def spectral_radius(A: np.ndarray) -> float:
+    """Largest eigenvalue magnitude (float64 estimate)."""
+    return float(np.max(np.abs(np.linalg.eigvals(A)))) if A.size else 0.0
+
+
+def wcpg(
+    A: np.ndarray,
+    B: np.ndarray,
+    C: np.ndarray,
+    D: np.ndarray | None = None,
+    *,
+    what: str = "the system",
+    rel_tol: float = 1e-7,
+    max_terms: int = 200_000,
+) -> PeakGain:
+    """Rigorous bounds on the worst-case peak gain of ``(A, B, C, D)`` (module docstring).
+
+    Raises
+    ------
+    DesignError
+        ``A`` is not stable (its peak gain is unbounded) or no certificate of its stability could be verified;
+        the message names ``what``.
+    """
+    A, B, C = (np.atleast_2d(np.asarray(x, dtype=np.float64)) for x in (A, B, C))
+    D = np.zeros((C.shape[0], B.shape[1])) if D is None else np.asarray(D, dtype=np.float64)
+    rho = spectral_radius(A)
+    if not rho < 1.0:
+        raise DesignError(f"the peak gain of {what} is unbounded: its state matrix has spectral radius {rho:.6g} >= 1")
+    cert = decay_certificate(A, B, C, what=what)
+    head = _Head(A, B, C, cert)
+    scale_floor = np.abs(D).max(axis=1, initial=0.0)
+    converged = False
+    while head.k < max_terms:
+        head.advance(BLOCK)
+        tail = cert.tail(head.k)
+        row = np.maximum(head.S.max(axis=1, initial=0.0), scale_floor)
+        if np.all(tail <= rel_tol * row[:, None]) or not np.any(head.X):
+            converged = True
+            break
+    tail = cert.tail(head.k)
+    S_up = head.S / (1.0 - _gamma(head.k + 1))
+    err = head.error() * INFLATE
+    upper = (np.abs(D) + S_up + err + tail) * INFLATE
+    lower = np.maximum(np.abs(D) + head.S * (1.0 - _gamma(head.k + 1)) - err, 0.0)
+    return PeakGain(upper, lower, head.k, tail, err, cert.method, converged)
+
+
+def _gamma(n: int) -> float:
+    """Higham's gamma_n = n u / (1 - n u)."""
+    return n * UNIT / (1.0 - n * UNIT)
+
+
+class _Head:
+    """The float64 head sum with its running error bound."""
+
+    def __init__(self, A: np.ndarray, B: np.ndarray, C: np.ndarray, cert) -> None:
+        self.A, self.C, self.cert = A, C, cert
+        self.absA, self.absC = np.abs(A), np.abs(C)
+        self.gn, self.gc = _gamma(A.shape[0]), _gamma(max(C.shape[1], 1))
+        self.X = B.copy()
+        self.S = np.zeros((C.shape[0], B.shape[1]))
+        self.err = np.zeros_like(self.S)
+        self.state = cert.error_state(B.shape[1])
+        self.k = 0
+
+    def advance(self, steps: int) -> None:
+        """Add ``steps`` terms ``|C A^k B|`` and their error bounds."""
+        A, C, absA, absC, cert = self.A, self.C, self.absA, self.absC, self.cert
+        for _ in range(steps):
+            absX = np.abs(self.X)
+            self.S += np.abs(C @ self.X)
+            # |fl(C X) - C X| and the propagated error of X itself
+            self.err += self.gc * (absC @ absX) + cert.output_error(self.state)
+            eta = self.gn * (absA @ absX)  # rounding of the next product A X
+            self.state = cert.propagate(self.state, eta)
+            self.X = A @ self.X
+            self.k += 1
+
+    def error(self) -> np.ndarray:
+        """The head's error bound (with the summation's own rounding left to the caller)."""
+        return self.err
+
+
+def decay_certificate(A: np.ndarray, B: np.ndarray, C: np.ndarray, *, what: str = "the system"):
+    """The verified decomposition that bounds ``|C A^k B|`` for every k: the eigendecomposition when it can be
+    enclosed with a basis condition number up to :data:`EIGEN_MAX_COND`, else a Lyapunov matrix. Its
+    ``tail(N)`` bounds ``sum_{k>=N} |C A^k B|``; ``method`` names it."""
+    try:
+        cert = _EigenCertificate.verify(A, B, C)
+        if cert.condition <= EIGEN_MAX_COND:
+            return cert
+    except (ValueError, ZeroDivisionError):
+        pass
+    cert = _LyapunovCertificate.verify(A, B, C)
+    if cert is None:
+        raise DesignError(f"could not verify that {what} is stable (no certificate of its peak gain)")
+    return cert
+
+
+def _up(x) -> float:
+    """A float64 at or above the upper end of the absolute value of a flint ball (arb or acb)."""
+    from flint import acb
+
+    u = (abs(x) if isinstance(x, acb) else x).abs_upper()
+    man, exp = u.man_exp()
+    man = int(man)
+    value = math.ldexp(float(man), int(exp))
+    return float(np.nextafter(value, np.inf)) if man.bit_length() > 53 else value
+
+
+def _up_matrix(M) -> np.ndarray:
+    return np.array([[_up(M[i, j]) for j in range(M.ncols())] for i in range(M.nrows())]).reshape(M.nrows(), M.ncols())
+
+
+@dataclass(frozen=True)
+class _EigenCertificate:
+    """``A = V diag(l) V^-1`` enclosed in balls: ``rho`` bounds |l|, the others bound |C V|, |V^-1 B|, |V^-1|."""
+
+    rho: np.ndarray
+    absCV: np.ndarray
+    absWB: np.ndarray
+    absW: np.ndarray
+    condition: float
+    method: str = "eigen"
+
+    @classmethod
+    def verify(cls, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> _EigenCertificate:
+        from flint import acb_mat, ctx
+
+        old, ctx.prec = ctx.prec, PREC
+        try:
+            E, V = acb_mat(A.tolist()).eig(right=True, algorithm="rump")
+            W = V.inv()
+            rho = np.array([_up(e) for e in E])
+            if not np.all(rho < 1.0):
+                raise ValueError("an eigenvalue enclosure reaches the unit circle")
+            absV, absW = _up_matrix(V), _up_matrix(W)
+            absCV = _up_matrix(acb_mat(C.tolist()) * V)
+            absWB = _up_matrix(W * acb_mat(B.tolist()))
+        finally:
+            ctx.prec = old
+        condition = float(np.linalg.norm(absV, 2) * np.linalg.norm(absW, 2))
+        return cls(rho=rho, absCV=absCV, absWB=absWB, absW=absW, condition=condition)
+
+    def tail(self, N: int) -> np.ndarray:
+        """Bound on ``sum_{k>=N} |C A^k B|``: ``sum_l |R_l| rho_l^N / (1 - rho_l)``."""
+        weight = self.rho**N / (1.0 - self.rho)
+        return (self.absCV * weight[None, :]) @ self.absWB * INFLATE
+
+    def error_state(self, m: int) -> np.ndarray:
+        return np.zeros((self.rho.size, m))
+
+    def propagate(self, xi: np.ndarray, eta: np.ndarray) -> np.ndarray:
+        """Eigen-coordinates of the error: each contracts by rho_l; the new rounding enters through |V^-1|."""
+        return self.rho[:, None] * xi + self.absW @ eta
+
+    def output_error(self, xi: np.ndarray) -> np.ndarray:
+        return self.absCV @ xi
+
+
+@dataclass(frozen=True)
+class _LyapunovCertificate:
+    """``A' P A <= gamma^2 P`` with ``lambda_min(P) >= lmin``, ``lambda_max(P) <= lmax`` (verified)."""
+
+    gamma: float
+    lmin: float
+    lmax: float
+    normC: np.ndarray
+    normB: np.ndarray
+    method: str = "lyapunov"
+
+    @classmethod
+    def verify(cls, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> _LyapunovCertificate | None:
+        from flint import arb_mat, ctx
+
+        rho = spectral_radius(A)
+        for gamma in (rho + 0.25 * (1.0 - rho), rho + 0.5 * (1.0 - rho), rho + 0.75 * (1.0 - rho)):
+            P = scipy.linalg.solve_discrete_lyapunov((A / gamma).T, np.eye(A.shape[0]))
+            P = 0.5 * (P + P.T)
+            old, ctx.prec = ctx.prec, PREC
+            try:
+                Pa, Aa = arb_mat(P.tolist()), arb_mat(A.tolist())
+                lmin = _verified_lambda_min(Pa)
+                dissipation = _verified_lambda_min(Pa * (gamma * gamma) - Aa.transpose() * Pa * Aa)
+                lmax = float(np.linalg.norm(P, "fro")) * INFLATE  # P is exact: its Frobenius norm bounds lambda_max
+            finally:
+                ctx.prec = old
+            if lmin > 0.0 and dissipation >= 0.0:
+                normC = np.linalg.norm(C, axis=1) * INFLATE
+                normB = np.linalg.norm(B, axis=0) * INFLATE
+                return cls(gamma=gamma, lmin=lmin, lmax=lmax, normC=normC, normB=normB)
+        return None
+
+    @property
+    def kappa(self) -> float:
+        return math.sqrt(self.lmax / self.lmin) * INFLATE
+
+    def tail(self, N: int) -> np.ndarray:
+        """Bound on ``sum_{k>=N} |C A^k B|``: ``|C_i| |B_j| kappa gamma^N / (1 - gamma)``."""
+        return np.outer(self.normC, self.normB) * (self.kappa * self.gamma**N / (1.0 - self.gamma)) * INFLATE
+
+    def error_state(self, m: int) -> np.ndarray:
+        return np.zeros(m)
+
+    def propagate(self, e: np.ndarray, eta: np.ndarray) -> np.ndarray:
+        """P-norm of each column's error: contracts by gamma; the new rounding enters with sqrt(lambda_max)."""
+        return self.gamma * e + math.sqrt(self.lmax) * np.linalg.norm(eta, axis=0) * INFLATE
+
+    def output_error(self, e: np.ndarray) -> np.ndarray:
+        return np.outer(self.normC, e) / math.sqrt(self.lmin) * INFLATE
+
+
+def _verified_lambda_min(M) -> float:
+    """A lower bound of the smallest eigenvalue of the symmetric ball matrix ``M`` (-inf when not positive).
+
+    Rump's test: with ``delta`` half the approximate smallest eigenvalue and ``L`` the float Cholesky factor of
+    ``mid(M) - delta I``, every matrix in ``M`` is ``L L' + delta I + E`` with ``|E|_2 <= |E|_F``; if that is below
+    ``delta``, the smallest eigenvalue is at least ``delta - |E|_F``.
+    """
+    from flint import arb_mat
+
+    n = M.nrows()
+    mid = np.array([[float(M[i, j].mid()) for j in range(n)] for i in range(n)])
+    mid = 0.5 * (mid + mid.T)
+    approx = float(np.linalg.eigvalsh(mid).min())
+    if not approx > 0.0:
+        return -math.inf
+    delta = 0.5 * approx
+    try:
+        L = np.linalg.cholesky(mid - delta * np.eye(n))
+    except np.linalg.LinAlgError:
+        return -math.inf
+    La = arb_mat(L.tolist())
+    E = M - La * La.transpose() - arb_mat(np.eye(n).tolist()) * delta
+    frob = math.sqrt(sum(_up(E[i, j]) ** 2 for i in range(n) for j in range(n))) * INFLATE
+    return delta - frob if frob < delta else -math.inf
