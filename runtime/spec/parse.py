@@ -17,6 +17,7 @@ from ..errors import SpecError
 from ..fileio import read_toml
 from .model import PlantSpec
 from .plant import parse_plant
+from .schedule import check_schedule_table, parse_schedule, point_plants
 from .tables import (
     CONTROLLER_KEYS,
     IMPLEMENTATION_KEYS,
@@ -36,7 +37,7 @@ NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 
 TOP_KEYS = {
     "name", "Ts", "discretization", "description", "plant", "controller", "integral", "observer", "limits",
-    "operating_point", "implementation",
+    "operating_point", "implementation", "schedule",
 }  # fmt: skip
 
 
@@ -64,7 +65,9 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     disc = data.get("discretization", "zoh")
     if disc not in ("zoh", "tustin"):
         raise SpecError(f"discretization must be 'zoh' or 'tustin', not {disc!r}")
-    plant = parse_plant(table(data, "plant", required=True))
+    sched = table(data, "schedule", required=False)
+    plants = _plants(table(data, "plant", required=True), sched)
+    plant = plants[0]
     ctl = checked_table(data, "controller", CONTROLLER_KEYS, required=True)
     integral = parse_integral(
         checked_table(data, "integral", INTEGRAL_KEYS, required=False),
@@ -72,19 +75,53 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
         lqr=ctl.get("method", "lqr") == "lqr",
     )
     q = 0 if integral is None else integral.q
-    limits = parse_limits(checked_table(data, "limits", LIMITS_KEYS, required=True), plant, integral=q > 0)
+    limits_table = checked_table(data, "limits", LIMITS_KEYS, required=True)
+    limits = parse_limits(limits_table, plant, integral=q > 0, scheduled=sched is not None)
+    controllers = tuple(parse_controller(ctl, p, q=q, Ts=Ts) for p in plants)
+    implementation = parse_implementation(checked_table(data, "implementation", IMPLEMENTATION_KEYS, required=False))
+    schedule = None
+    if sched is not None:
+        _check_schedulable(data, q=q, m=plant.m, realization=implementation.realization)
+        points = check_schedule_table(sched)
+        schedule = parse_schedule(sched, plants, points, limits=limits, controllers=controllers)
     return PlantSpec(
         name=name,
         Ts=Ts,
         discretization=disc,
         plant=plant,
-        controller=parse_controller(ctl, plant, q=q, Ts=Ts),
+        controller=controllers[0],
         integral=integral,
         observer=parse_observer(checked_table(data, "observer", OBSERVER_KEYS, required=True), plant, Ts=Ts),
         limits=limits,
-        operating_point=parse_operating_point(table(data, "operating_point", required=False), plant, limits),
-        implementation=parse_implementation(checked_table(data, "implementation", IMPLEMENTATION_KEYS, required=False)),
+        operating_point=(
+            schedule.operating_points[0]
+            if schedule
+            else parse_operating_point(table(data, "operating_point", required=False), plant, limits)
+        ),
+        implementation=implementation,
         source_sha256=source_sha256,
         source=source,
         description=str(data.get("description", "")),
+        schedule=schedule,
     )
+
+
+def _plants(plant: dict, sched: dict | None) -> tuple:
+    """The plant of an unscheduled spec (a 1-tuple), or one per point of a ``[schedule]``."""
+    if sched is None:
+        return (parse_plant(plant),)
+    points = check_schedule_table(sched)
+    return point_plants(plant, sched["plant"], points)
+
+
+def _check_schedulable(data: dict, *, q: int, m: int, realization: str) -> None:
+    """What the velocity form needs of the rest of a scheduled spec (DESIGN.md, "Scheduled law")."""
+    if "operating_point" in data:
+        raise SpecError("with a [schedule], each [[schedule.plant]] gives its own u_op, y_op, x_op: "
+                        "drop [operating_point]")  # fmt: skip
+    if q < m:
+        raise SpecError(f"a [schedule] needs integral action on every input ([integral] on {m} outputs, has {q}): "
+                        "the velocity form integrates its command, and without it the trim drifts")  # fmt: skip
+    if realization != "as_designed":
+        raise SpecError(f"implementation.realization {realization!r} cannot be scheduled: the points' estimates "
+                        "must stay in the same coordinates (use as_designed)")  # fmt: skip
