@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..shipping.artifact import matrix_to_json
 from ..shipping.scheduled import Schedule
 from .lpv import bernstein_vertices, lambda_polynomial, velocity_loop
 from .lyapunov import Certificate, common_lyapunov, rate_certificate
@@ -45,7 +46,13 @@ class VariationCheck:
             "rate_max": self.rate_max,
             "rate_max_source": self.rate_max_source,
             "confirmed_by_simulation": _confirmed(self),
+            "certificate": None if cert is None else _certificate_record(cert),
         }
+
+
+def _certificate_record(cert: Certificate) -> dict:
+    """The Lyapunov matrices themselves, so that anyone can re-check them: P at each node (one: a common P)."""
+    return {"nodes": [float(v) for v in cert.nodes], "P": [matrix_to_json(P) for P in cert.P]}
 
 
 def _radius_at(scan: RateScan) -> float | None:
