@@ -1,5 +1,5 @@
-"""Stability of the scheduled loop while sigma moves: quadratic Lyapunov functions found as LMIs (cvxpy with
-Clarabel, SCS as the fallback) and re-checked by eigenvalues in float64.
+"""Stability of the scheduled loop while sigma moves: quadratic Lyapunov functions found as LMIs (solved by
+Clarabel, SCS as the fallback, :mod:`.lmi`) and re-checked by eigenvalues in float64.
 
 The velocity loop on an interval is a matrix polynomial in lambda (:mod:`.lpv`), not affine, so a Lyapunov matrix
 that works at the points proves nothing between them (DESIGN.md). Its Bernstein coefficients on each interval
@@ -18,16 +18,15 @@ the verdict); a solver that fails outright raises :class:`DesignError` in one li
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import DesignError
+from .lmi import LmiFamily
 
 #: Relative margin a re-checked certificate must keep: ``eig(P - V' P V) >= MARGIN * eig_max(P)``.
 MARGIN = 1e-9
-BISECTION_STEPS = 10
+BISECTION_STEPS = 6
 
 
 @dataclass(frozen=True)
@@ -44,7 +43,10 @@ class Certificate:
 
 def common_lyapunov(vertices: list[np.ndarray]) -> Certificate | None:
     """One ``P`` with ``V' P V < P`` for every vertex, re-checked; None when the LMI has no solution."""
-    Ps, solver = _solve(vertices_by_piece=[vertices], pairs=[(0, 0, [(0.0, 0.0)])], nodes=1, common=True)
+    lmi = LmiFamily(N=vertices[0].shape[0], nodes=1)
+    for V in vertices:
+        lmi.decrease(np.ones(1), np.ones(1), V)
+    Ps, solver = lmi.solve()
     if Ps is None:
         return None
     margin = _recheck([(Ps[0], Ps[0], V) for V in vertices])
@@ -53,14 +55,18 @@ def common_lyapunov(vertices: list[np.ndarray]) -> Certificate | None:
 
 def rate_certificate(nodes: np.ndarray, vertices_by_piece: list[list[np.ndarray]], *, Ts: float,
                      rate_hi: float) -> Certificate | None:  # fmt: skip
-    """The largest rate (bisection, log scale, from ``rate_hi`` down) for which a piecewise-linear ``P(sigma)``
-    certifies the loop; None when none does even for a frozen sigma."""
+    """The largest rate below ``rate_hi`` (bisection on a log scale over three decades, :data:`BISECTION_STEPS`
+    steps) for which a piecewise-linear ``P(sigma)`` certifies the loop; None when none does even for a frozen
+    sigma. ``rate_hi`` is best a rate known to be unstable (the simulated scan's first): nothing above it can be
+    certified."""
     attempt = lambda rate: _rate_attempt(nodes, vertices_by_piece, Ts * rate, rate)  # noqa: E731
-    low = attempt(0.0)
-    if low is None:
+    best = attempt(0.0)
+    if best is None:
         return None
-    best = low
-    lo, hi = np.log(max(rate_hi, 1e-12)) - np.log(1e4), np.log(max(rate_hi, 1e-12))
+    lo, hi = np.log(rate_hi) - np.log(1e3), np.log(rate_hi)
+    if (first := attempt(float(np.exp(lo)))) is None:
+        return best
+    best = first
     for _ in range(BISECTION_STEPS):
         mid = 0.5 * (lo + hi)
         cert = attempt(float(np.exp(mid)))
@@ -72,18 +78,26 @@ def rate_certificate(nodes: np.ndarray, vertices_by_piece: list[list[np.ndarray]
 
 
 def _rate_attempt(nodes, vertices_by_piece, step: float, rate: float) -> Certificate | None:
-    pairs = _piece_pairs(nodes, step)
-    Ps, solver = _solve(vertices_by_piece=vertices_by_piece, pairs=pairs, nodes=len(nodes), common=False,
-                        node_sigmas=nodes)  # fmt: skip
+    corners = [(j, s, s2) for j, _k, pts in _piece_pairs(nodes, step) for s, s2 in pts]
+    lmi = LmiFamily(N=vertices_by_piece[0][0].shape[0], nodes=len(nodes))
+    for j, s, s2 in corners:
+        for V in vertices_by_piece[j]:
+            lmi.decrease(_weights(nodes, s), _weights(nodes, s2), V)
+    Ps, solver = lmi.solve()
     if Ps is None:
         return None
-    checks = []
-    for j, _k, corners in pairs:
-        for s, s2 in corners:
-            P_s, P_s2 = _at(nodes, Ps, s), _at(nodes, Ps, s2)
-            checks += [(P_s, P_s2, V) for V in vertices_by_piece[j]]
-    margin = _recheck(checks)
+    at = lambda s: sum(w * P for w, P in zip(_weights(nodes, s), Ps))  # noqa: E731
+    margin = _recheck([(at(s), at(s2), V) for j, s, s2 in corners for V in vertices_by_piece[j]])
     return None if margin is None else Certificate(nodes, Ps, rate, margin, solver)
+
+
+def _weights(nodes: np.ndarray, s: float) -> np.ndarray:
+    """The node weights of ``P(s)``: linear between the two nodes around s."""
+    w = np.zeros(len(nodes))
+    j = int(np.clip(np.searchsorted(nodes, s, side="right") - 1, 0, len(nodes) - 2))
+    t = float((s - nodes[j]) / (nodes[j + 1] - nodes[j]))
+    w[j], w[j + 1] = 1.0 - t, t
+    return w
 
 
 def _piece_pairs(nodes: np.ndarray, step: float) -> list[tuple[int, int, list[tuple[float, float]]]]:
@@ -111,58 +125,6 @@ def _polygon(a: float, b: float, c: float, d: float, step: float) -> list[tuple[
         if inside and all(abs(s - u) > tol or abs(s2 - v) > tol for u, v in keep):
             keep.append((float(np.clip(s, a, b)), float(np.clip(s2, c, d))))
     return keep
-
-
-def _at(nodes: np.ndarray, Ps: list, s: float):
-    """``P(s)``, linear between nodes (works on arrays and cvxpy expressions alike)."""
-    if len(Ps) == 1:
-        return Ps[0]
-    j = int(np.clip(np.searchsorted(nodes, s, side="right") - 1, 0, len(nodes) - 2))
-    t = float((s - nodes[j]) / (nodes[j + 1] - nodes[j]))
-    return Ps[j] if t == 0.0 else (Ps[j + 1] if t == 1.0 else (1 - t) * Ps[j] + t * Ps[j + 1])
-
-
-def _solve(*, vertices_by_piece, pairs, nodes: int, common: bool, node_sigmas=None) -> tuple[list | None, str]:
-    """The LMI ``P_i >= I``, ``V' P(s') V - P(s) <= -I`` at every pair corner; ``P`` scaled to the smallest
-    largest eigenvalue. None when infeasible; DesignError when the solvers fail."""
-    import cvxpy as cp
-
-    N = vertices_by_piece[0][0].shape[0]
-    Ps = [cp.Variable((N, N), symmetric=True) for _ in range(nodes)]
-    t = cp.Variable()
-    I = np.eye(N)
-    cons = [P >> I for P in Ps] + [P << t * I for P in Ps]
-    for j, _k, corners in pairs:
-        for s, s2 in corners:
-            P_s = Ps[0] if common else _at(node_sigmas, Ps, s)
-            P_s2 = Ps[0] if common else _at(node_sigmas, Ps, s2)
-            for V in vertices_by_piece[j]:
-                M = V.T @ P_s2 @ V - P_s
-                cons.append((M + M.T) / 2 << -I)
-    problem = cp.Problem(cp.Minimize(t), cons)
-    status, solver = _run(problem)
-    if status not in ("optimal", "optimal_inaccurate"):
-        return None, solver
-    return [np.asarray((P.value + P.value.T) / 2) for P in Ps], solver
-
-
-def _run(problem) -> tuple[str, str]:
-    """Solve with Clarabel, then SCS; the status, or DesignError when both fail to return one."""
-    import cvxpy as cp
-
-    errors = []
-    for solver in ("CLARABEL", "SCS"):
-        try:
-            with warnings.catch_warnings():  # "may be inaccurate": every certificate is re-checked anyway
-                warnings.simplefilter("ignore", UserWarning)
-                problem.solve(solver=solver)
-        except (cp.error.SolverError, ArithmeticError, ValueError) as exc:
-            errors.append(f"{solver}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}")
-            continue
-        if problem.status in ("optimal", "optimal_inaccurate", "infeasible", "infeasible_inaccurate"):
-            return problem.status, solver
-        errors.append(f"{solver}: status {problem.status}")
-    raise DesignError(f"the LMI solver failed on the scheduled loop's Lyapunov problem ({'; '.join(errors)})")
 
 
 def _recheck(checks: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> float | None:

@@ -108,10 +108,11 @@ def variation_check(s: Schedule, *, Ci: np.ndarray, Ts: float, spec_rate_max: fl
     rate (or, with no certificate at all, to the simulated stable rate)."""
     nodes, pieces = hull(s, Ci)
     common = common_lyapunov([V for piece in pieces for V in piece])
+    scan = scan_rates(loops_at(s, Ci), s.points, Ts)
     certified = None
     if common is None:
-        certified = rate_certificate(nodes, pieces, Ts=Ts, rate_hi=float(s.points[-1] - s.points[0]) / Ts)
-    scan = scan_rates(loops_at(s, Ci), s.points, Ts)
+        unstable = scan.rates[-1] if scan.stable_rate is not None else float(s.points[-1] - s.points[0]) / Ts
+        certified = rate_certificate(nodes, pieces, Ts=Ts, rate_hi=float(unstable))
     if common is not None:
         bound, source = None, "common Lyapunov function: any rate"
     elif certified is not None:
