@@ -16,6 +16,7 @@ from ..proof.simulation import samples_csv
 from ..shipping import artifact as artifact_mod
 from ..synthesis.analysis import complex_pairs
 from ..synthesis.compensator import compensator_stability
+from ..synthesis.schedule import describe_schedule
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -120,6 +121,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             f"  with the exact dead times (design: Padé order {d['pade_order']}): closed-loop spectral radius "
             f"{d['spectral_radius']:.4f} -> {'stable' if d['stable'] else 'UNSTABLE'}"
         )
+    if rep.schedule is not None:
+        print(f"  scheduled on {rep.schedule['sigma']} (the plant above is the first point's):")
+        for line in describe_schedule(rep.schedule):
+            print(f"    {line}")
     for w in rep.warnings:
         print(f"  warning: {w}")
     return 0
@@ -134,6 +139,8 @@ def cmd_design(args: argparse.Namespace) -> int:
     artifact_mod.from_dict(result.artifact)  # the written file must load: check before publishing
     publish_files(out, {"gains.json": artifact_mod.render(result.artifact)})
     a = result.artifact
+    if result.schedule is not None:
+        return _print_scheduled(result, out, as_json=args.json)
     if args.json:
         print(
             json.dumps(
@@ -195,6 +202,28 @@ def cmd_design(args: argparse.Namespace) -> int:
             f"{f.max_rel_y:.3g} of the output excursion ({'within' if f.ok else 'ABOVE'} {f.threshold:g})"
         )
     print(f"  wrote {out / 'gains.json'} (sha256 {a['sha256'][:16]})")
+    return 0
+
+
+def _print_scheduled(result, out: Path, *, as_json: bool) -> int:
+    """``gainlink design`` of a scheduled spec: every point, the grid, the verdict on a moving sigma."""
+    a = result.artifact
+    sch = a["checks"]["schedule"]
+    if as_json:
+        print(json.dumps({"artifact": str(out / "gains.json"), "sha256": a["sha256"], "schedule": sch,
+                          "rate_max": a["schedule"]["rate_max"], "warnings": result.warnings}, indent=2))  # fmt: skip
+        return 0
+    s = a["schedule"]
+    print(
+        f"{a['name']}: n={a['n']} m={a['m']} p={a['p']} q={a['q']}, Ts={a['Ts']:g} s, scheduled on {sch['sigma']} "
+        f"({s['sigma']['source']}) at {', '.join(f'{v:g}' for v in s['points'])}: "
+        f"{a['design']['controller']['method']} + {a['design']['observer']['method']} ({a['observer_form']}) per "
+        "point, velocity form"
+    )
+    for line in describe_schedule(sch):
+        print(f"  {line}")
+    print(f"  coefficients that vary between points (interpolated by the C): {', '.join(s['varying']) or 'none'}")
+    print(f"  wrote {out / 'gains.json'} (schema 2, sha256 {a['sha256'][:16]})")
     return 0
 
 

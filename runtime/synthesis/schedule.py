@@ -48,7 +48,7 @@ def synthesize_scheduled(spec: PlantSpec, design_point: Callable) -> tuple[dict,
     grid = grid_check(sched, Ci=spec.Ci, Ts=spec.Ts, inputs=spec.plant.inputs)
     variation = variation_check(sched, Ci=spec.Ci, Ts=spec.Ts, spec_rate_max=s.rate_max)
     data["schedule"]["rate_max"] = variation.rate_max
-    data["checks"] = _checks(s.points, results, grid, variation)
+    data["checks"] = _checks(s.sigma, s.points, results, grid, variation)
     if variation.common is None:
         warnings.append(_rate_warning(spec, variation))
     for w in warnings:
@@ -139,7 +139,7 @@ def _varying(points_data: list[dict]) -> list[str]:
     return [k for k in names if any(p[k] != points_data[0][k] for p in points_data[1:])]
 
 
-def _checks(points: np.ndarray, results: list, grid: GridCheck, variation: VariationCheck) -> dict:
+def _checks(sigma: str, points: np.ndarray, results: list, grid: GridCheck, variation: VariationCheck) -> dict:
     worst = int(np.argmax([r.artifact["checks"]["spectral_radius"] for r in results]))
     per_point = [
         {"sigma": float(sigma)}
@@ -149,7 +149,7 @@ def _checks(points: np.ndarray, results: list, grid: GridCheck, variation: Varia
     return {
         "closed_loop_poles": results[worst].artifact["checks"]["closed_loop_poles"],
         "spectral_radius": float(grid.radius.max()),
-        "schedule": {"points": per_point, "grid": grid.to_dict(), "variation": variation.to_dict()},
+        "schedule": {"sigma": sigma, "points": per_point, "grid": grid.to_dict(), "variation": variation.to_dict()},
     }
 
 
@@ -160,3 +160,53 @@ def _rate_warning(spec: PlantSpec, v: VariationCheck) -> str:
         f"limits the {spec.schedule.sigma} it uses ({rate}, from the {v.rate_max_source}), but only a "
         "rate-limited reference or a slow external signal keeps the plant within that rate"
     )
+
+
+def describe_schedule(checks: dict) -> list[str]:
+    """The lines ``gainlink design`` and ``analyze`` print for ``checks.schedule``."""
+    sigma = checks["sigma"]
+    lines = []
+    for pt in checks["points"]:
+        mg = "; ".join(_margin_text(m) for m in pt["margins"])
+        lines.append(f"at {sigma} = {pt['sigma']:g}: closed-loop spectral radius {pt['spectral_radius']:.5f}, {mg}")
+    g = checks["grid"]
+    lines.append(
+        f"between points ({g['per_interval']} steps per interval, {g['sigma_count']} values of {sigma}, the law the "
+        f"C runs): spectral radius at most {g['max_spectral_radius']:.5f} (at {sigma} = {g['worst_sigma']:.4g}), "
+        f"gain margin at least +{_db(g['min_gain_margin_up_db'])} dB, phase margin at least "
+        f"{_deg(g['min_phase_margin_deg'])}"
+    )
+    v = checks["variation"]
+    if v["common_lyapunov"]:
+        proof = (
+            f"a common quadratic Lyapunov function proves stability for any rate of {sigma} "
+            f"(margin {v['certificate_margin']:.3g}, {v['solver']})"
+        )
+    elif v["certified_rate"] is not None:
+        proof = (
+            f"no common Lyapunov function; a {sigma}-dependent one certifies |d{sigma}/dt| <= "
+            f"{v['certified_rate']:.4g}/s"
+        )
+    else:
+        proof = "no Lyapunov certificate found"
+    sim = v["simulated_stable_rate"]
+    sim_text = "stable at every rate tried" if sim is None else f"stable up to {sim:.4g}/s"
+    rate = "not limited" if v["rate_max"] is None else f"{v['rate_max']:.4g}/s"
+    lines.append(f"moving {sigma}: {proof}; simulation (ramps and steps across the envelope): {sim_text}")
+    lines.append(f"rate_max the law enforces on {sigma}: {rate} ({v['rate_max_source']})")
+    return lines
+
+
+def _margin_text(m: dict) -> str:
+    return (
+        f"margins at {m['input']}: gain +{_db(m['gain_margin_up_db'])} / -{_db(m['gain_margin_down_db'], neg=True)} dB,"
+        f" phase {_deg(m['phase_margin_deg'])}"
+    )
+
+
+def _db(v: float | None, neg: bool = False) -> str:
+    return "inf" if v is None else f"{abs(v):.1f}" if neg else f"{v:.1f}"
+
+
+def _deg(v: float | None) -> str:
+    return "n/a" if v is None else f"{v:.1f} deg"
