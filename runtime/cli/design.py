@@ -205,6 +205,19 @@ def cmd_design(args: argparse.Namespace) -> int:
     return 0
 
 
+def _compensator_note(a) -> str:
+    """What the compensator's stability says about an open-loop comparison (scheduled: see each point's)."""
+    if a.schedule is not None:
+        return "the scheduled law's compensator at each point is in checks.schedule.points"
+    comp = compensator_stability(a)
+    if comp.stable:
+        return comp.describe()
+    return (
+        f"{comp.describe()}; replayed open loop, rounding grows like {comp.radius_without_integrators:.3g}^k"
+        ": the one-step check is the verdict"
+    )
+
+
 def _print_scheduled(result, out: Path, *, as_json: bool) -> int:
     """``gainlink design`` of a scheduled spec: every point, the grid, the verdict on a moving sigma."""
     a = result.artifact
@@ -272,8 +285,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
                 f"comparison file {args.compare} has {other.u.shape[0]} samples, input {args.input} has {steps}"
             )
     samples = read_samples(args.input, a)
-    trace = api.replay(a, samples.Y, samples.R, engine=args.engine)
-    write_trace(args.output, trace, samples.t)
+    trace = api.replay(a, samples.Y, samples.R, s=samples.S, engine=args.engine)
+    write_trace(args.output, trace, samples.t, artifact=a)
     print(
         f"replayed {trace.u.shape[0]} samples through {args.engine}: "
         f"{int(trace.saturated.any(axis=1).sum())} saturated, {int(trace.fault.sum())} refused as non-finite; "
@@ -282,26 +295,17 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if other is None:
         return 0
     checks = {
-        args.engine: one_step_check(a, samples.Y, samples.R, trace),
-        args.compare: one_step_check(a, samples.Y, samples.R, other),
+        args.engine: one_step_check(a, samples.Y, samples.R, trace, S=samples.S),
+        args.compare: one_step_check(a, samples.Y, samples.R, other, S=samples.S),
     }
     for name, check in checks.items():
         print(f"one-step check of {name} (float64 law from its own state at each step): {check.summary()}")
     c = compare_traces(a, trace, other)
-    comp = compensator_stability(a)
-    why = (
-        ""
-        if comp.stable
-        else (
-            f"; replayed open loop, rounding grows like {comp.radius_without_integrators:.3g}^k"
-            ": the one-step check is the verdict"
-        )
-    )
     print(
         f"open loop against {args.compare} (information): max |du| = {c.max_abs_u:.3g} ({c.max_rel_u:.3g} of the "
         f"limit span), saturation flags differ on {c.sat_mismatches} (per input: "
         f"{', '.join(f'{name} {k}' for name, k in zip(a.signals['inputs'], c.sat_mismatches_per_input))}), "
-        f"fault flags on {c.fault_mismatches} of {c.steps} steps; {comp.describe()}{why}"
+        f"fault flags on {c.fault_mismatches} of {c.steps} steps; {_compensator_note(a)}"
     )
     for name, check in checks.items():
         if not check.passed:

@@ -45,4 +45,5 @@ def run(artifact: Artifact, Y: np.ndarray, R: np.ndarray, *, board: str = DEFAUL
     Trace
         The firmware's outputs (float32 values as float64 arrays).
     """
+    artifact.require_unscheduled("the qemu engine")
     return trace_from_raw(run_raw(artifact, Y, R, board=board), m=artifact.m)

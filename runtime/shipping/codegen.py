@@ -288,6 +288,7 @@ def render_c(artifact: Artifact) -> dict[str, str]:
     dict of str to str
         ``{"gl_gains.h": ..., "gl_gains.c": ..., "gl_step.h": ...}``; identical for the same artifact.
     """
+    artifact.require_unscheduled("codegen")
     gains = gain_set(artifact)
     return {
         HEADER_NAME: render_header(artifact, gains),
