@@ -106,6 +106,8 @@ def _linearize(args: argparse.Namespace) -> int:
             at[name.strip()] = float(value)
         except ValueError:
             raise GainlinkError(f"--at {name}: {value!r} is not a number") from None
+    if args.schedule:
+        return _linearize_schedule(args, at)
     result = linearize_to_spec(
         fmu=args.fmu,
         at=at,
@@ -121,6 +123,38 @@ def _linearize(args: argparse.Namespace) -> int:
     print(
         f"wrote {args.out}: n={result.A.shape[0]} m={result.B.shape[1]} p={result.C.shape[0]} "
         f"({result.method}, operating point {', '.join(f'{k}={v:g}' for k, v in result.point.items()) or 'start values'})"
+    )
+    return 0
+
+
+def _linearize_schedule(args: argparse.Namespace, at: dict) -> int:
+    """``linearize FMU --schedule NAME=v1,v2,...``: trim at each value and write the scheduled spec."""
+    from gainlink.hil.plants.trim import trim_schedule_to_spec
+
+    name, _, values = args.schedule.partition("=")
+    try:
+        points = [float(v) for v in values.split(",") if v.strip()]
+    except ValueError:
+        raise GainlinkError(f"--schedule expects NAME=v1,v2,... (numbers), got {args.schedule!r}") from None
+    if not name.strip() or not points:
+        raise GainlinkError(f"--schedule expects NAME=v1,v2,..., got {args.schedule!r}")
+    trims = trim_schedule_to_spec(
+        fmu=args.fmu,
+        sigma=name.strip(),
+        values=points,
+        at=at,
+        out=Path(args.out),
+        Ts=args.Ts,
+        name=args.name,
+        inputs=args.inputs,
+        outputs=args.outputs,
+        method=args.method,
+        template=Path(args.template) if args.template else None,
+    )
+    print(
+        f"wrote {args.out}: scheduled on {name.strip()} at {', '.join(f'{t.sigma:g}' for t in trims)}, each point "
+        f"trimmed (Newton steps {', '.join(str(t.iterations) for t in trims)}; "
+        f"max residual {max(t.residual for t in trims):.2g})"
     )
     return 0
 
@@ -194,4 +228,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="directional derivatives when the FMU provides them (auto), or central differences",
     )
     p.add_argument("--template", help="copy controller/integral/observer/limits from this spec")
+    p.add_argument(
+        "--schedule",
+        metavar="NAME=v1,v2,...",
+        help="a scheduled spec: trim the FMU at each value of NAME (an output, a state or a parameter; --at values "
+        "are held at every point) and linearise there",
+    )
     p.set_defaults(func=_linearize)
