@@ -14,8 +14,10 @@ The law, one step (given the absolute measurement ``y`` (p), reference ``r`` (q)
         c = clip(raw, S1, SN)                                         # flag CLIPPED when c != raw
         if not started: sigma_f = c;  sigma = c                       # the first valid sample starts there
         else:
-            sigma_f = sigma_f + alpha (c - sigma_f)                   # alpha = 1 - exp(-Ts / filter_tau), or 1
-            sigma = sigma_held + clip(sigma_f - sigma_held, -Ts rate_max, Ts rate_max)   # flag RATE when limited
+            sigma_f = sigma_f + alpha (c - sigma_f)                   # alpha = 1 - exp(-Ts / filter_tau);
+                                                                      #   no filter (alpha = 1): sigma_f = c
+            d = sigma_f - sigma_held                                  # rate limit (none: rate_max null)
+            sigma = sigma_f if |d| <= Ts rate_max else sigma_held + sign(d) Ts rate_max   # flag RATE
     sigma_held = sigma
     # 3. coefficients: i with Si <= sigma <= Si+1 (the last interval at SN), lam = (sigma - Si) / (Si+1 - Si),
     #    X = X_i + lam (X_i+1 - X_i) for X in Kx Ky Kz F G Ly (and u_op, only to start and for the safe command)
@@ -160,13 +162,13 @@ class ScheduledLoop:
         if not st.started:
             st.sigma_f = st.sigma = c
             return c, flags
-        st.sigma_f = st.sigma_f + S.filter_alpha * (c - st.sigma_f)
+        st.sigma_f = c if S.filter_alpha == 1.0 else st.sigma_f + S.filter_alpha * (c - st.sigma_f)
         change = st.sigma_f - st.sigma
-        if S.rate_max is not None:
-            limit = self.a.Ts * S.rate_max
-            if abs(change) > limit:
-                change, flags = float(np.clip(change, -limit, limit)), flags | SIGMA_RATE
-        st.sigma = st.sigma + change
+        limit = np.inf if S.rate_max is None else self.a.Ts * S.rate_max
+        if abs(change) > limit:
+            st.sigma, flags = st.sigma + (limit if change > 0 else -limit), flags | SIGMA_RATE
+        else:
+            st.sigma = st.sigma_f
         return st.sigma, flags
 
     def run(self, Y, R=None, Sx=None) -> ScheduledTrace:

@@ -121,8 +121,8 @@ class Artifact:
         positional law)."""
         if self.schedule is not None:
             raise ArtifactError(
-                f"{what} runs the unscheduled law; artifact {self.name} is scheduled on {self.schedule.sigma} "
-                "(schema 2, velocity form): use gainlink.proof.scheduled_reference"
+                f"{what} is for unscheduled artifacts; {self.name} is scheduled on {self.schedule.sigma} (schema 2, "
+                "velocity form), which only the design side and the float64 reference run so far"
             )
 
     @property
@@ -133,21 +133,25 @@ class Artifact:
     @property
     def safe_command(self) -> np.ndarray:
         """The command on a refused sample or an expired watchdog: ``u_op`` clamped into the limits."""
+        self.require_unscheduled("safe_command")
         return np.minimum(np.maximum(self.u_op, self.u_min), self.u_max)
 
     @property
     def r_op(self) -> np.ndarray:
         """The reference that holds the plant at its operating point: the tracked outputs there, ``Ci y_op``."""
+        self.require_unscheduled("r_op")
         return self.Ci @ self.y_op
 
     @property
     def has_operating_point(self) -> bool:
         """True when ``u_op`` or ``y_op`` has a non-zero entry."""
+        self.require_unscheduled("has_operating_point")
         return bool(np.any(self.u_op != 0.0) or np.any(self.y_op != 0.0))
 
     def design_plant(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The discrete plant ``(Ad, Bd, Cd, Dd)`` in the design's coordinates (those of a plant state a user
         gives, e.g. ``simulate --x0``), whatever the realisation of the estimate (``realization.design``)."""
+        self.require_unscheduled("design_plant")
         rec = self.data.get("realization")
         if rec is None:
             return self.Ad, self.Bd, self.Cd, self.Dd

@@ -56,6 +56,7 @@ def gain_set(artifact: Artifact) -> GainSet:
     GainSet
         Float32 fields in C declaration order and the checksum ``gl_gains_crc32`` will compute.
     """
+    artifact.require_unscheduled("the C gain set")
     a = artifact
     qa = max(a.q, 1)
 
