@@ -28,3 +28,23 @@ def external_tank(*, form: str = "predictor", rate_max: float | None = None, fil
         data["schedule"]["rate_max"] = rate_max
     data["observer"]["form"] = form
     return data
+
+
+def spring(k_end: float = 400.0) -> dict:
+    """A mass on a spring whose stiffness is scheduled from 1 to ``k_end`` (an external sigma from 0 to 1): the
+    frozen loops are stable everywhere, no Lyapunov certificate is found, and sigma moving fast destabilises it."""
+    return {
+        "name": "spring",
+        "Ts": 0.02,
+        "plant": {"kind": "continuous", "states": ["x", "v"], "inputs": ["F"], "outputs": ["x"]},
+        "schedule": {
+            "sigma": "k",
+            "external": ["k"],
+            "points": [0.0, 1.0],
+            "plant": [{"A": [[0.0, 1.0], [-k, -0.1]], "B": [[0.0], [1.0]], "C": [[1.0, 0.0]]} for k in (1.0, k_end)],
+        },
+        "controller": {"method": "lqr", "Q_diag": [100.0, 1.0], "R_diag": [0.01]},
+        "integral": {"outputs": ["x"], "Q_diag": [1000.0]},
+        "observer": {"method": "kalman", "W_diag": [1e-4, 1e-2], "V_diag": [1e-6]},
+        "limits": {"u_min": [-1e3], "u_max": [1e3]},
+    }
