@@ -17,9 +17,10 @@ from typing import Any
 import numpy as np
 
 from .engines import engine_with_image
-from .errors import SpecError
+from .errors import ArtifactError, DataError, SpecError
 from .fileio import read_toml
 from .proof.reference import Trace
+from .proof.replay_io import run_reference
 from .proof.simulation import Simulation, simulate_linear
 from .shipping.artifact import Artifact, from_dict
 from .spec import PlantSpec, load_spec, parse_spec
@@ -57,6 +58,7 @@ def design(
     limits: Mapping[str, Any] | None = None,
     operating_point: Mapping[str, Any] | None = None,
     discretization: str | None = None,
+    schedule: Mapping[str, Any] | None = None,
 ) -> Artifact:
     """Design a controller and observer and return the checked, sealed artifact.
 
@@ -80,6 +82,11 @@ def design(
         a Kalman predictor.
     discretization : {"zoh", "tustin"}, optional
         How a continuous plant is sampled (default ``zoh``).
+    schedule : dict, optional
+        The ``[schedule]`` table (README, "Scheduled law"): ``sigma``, ``points``, optional ``external``,
+        ``rate_max``, ``filter_tau``, and ``plant``: one entry per point, each a ``control.StateSpace`` (about
+        the origin) or a dict of ``A B C D u_op y_op x_op``. ``plant`` then gives only the shared kind and
+        names (a python-control system's own matrices are dropped). The artifact is scheduled (schema 2).
 
     Returns
     -------
@@ -98,6 +105,16 @@ def design(
     ...                 W=np.diag([1e-4, 1e-4]), V=[[1e-6]], u_min=[-5.0], u_max=[5.0])
     >>> art.n, art.m, art.p, art.observer_form
     (2, 1, 1, 'predictor')
+
+    A plant whose time constant changes tenfold, scheduled on an external signal ``load``:
+
+    >>> family = [ct.ss([[-a]], [[a]], [[1.0]], [[0.0]]) for a in (1.0, 3.0, 10.0)]
+    >>> sched = gl.design(family[0], Ts=0.01, Q=[[1.0]], R=[[1.0]], W=[[1e-3]], V=[[1e-4]],
+    ...                   u_min=[-5.0], u_max=[5.0], integral={"outputs": [0], "Q_diag": [10.0]},
+    ...                   schedule={"sigma": "load", "external": ["load"], "points": [0.0, 0.5, 1.0],
+    ...                             "plant": family})
+    >>> sched.anti_windup, sched.schedule.points.tolist(), sched.controller(sigma=0.25).nstates
+    ('velocity', [0.0, 0.5, 1.0], 2)
     """
     report = design_report(
         plant,
@@ -115,6 +132,7 @@ def design(
         limits=limits,
         operating_point=operating_point,
         discretization=discretization,
+        schedule=schedule,
     )
     return from_dict(report.artifact)
 
@@ -136,6 +154,7 @@ def design_report(
     limits: Mapping[str, Any] | None = None,
     operating_point: Mapping[str, Any] | None = None,
     discretization: str | None = None,
+    schedule: Mapping[str, Any] | None = None,
 ) -> DesignResult:
     """:func:`design` with the numbers behind its checks: what ``gainlink design`` prints.
 
@@ -161,12 +180,16 @@ def design_report(
         "observer": observer,
         "limits": limits,
         "operating_point": operating_point,
+        "schedule": None if schedule is None else _schedule_table(schedule),
     }
     shortcuts = {"Q": Q, "R": R, "W": W, "V": V, "u_min": u_min, "u_max": u_max}
     given = [v for v in (Ts, name, discretization, *tables.values(), *shortcuts.values()) if v is not None]
     if isinstance(plant, (str, Path)) and not given:
         return synthesize(load_spec(plant))
     data = _merge_tables(_spec_dict(plant, Ts=Ts, name=name, discretization=discretization), tables, shortcuts)
+    if schedule is not None:  # the points hold the matrices; [plant] keeps the shared kind and names
+        data["plant"] = {k: v for k, v in data["plant"].items() if k in ("kind", "states", "inputs", "outputs")}
+        data.pop("operating_point", None)
     return synthesize(_parse(data, source=_source_name(plant)))
 
 
@@ -280,6 +303,7 @@ def replay(
     y: Any,
     r: Any = None,
     *,
+    s: Any = None,
     engine: str = "reference",
     target: str | None = None,
     board: str | None = None,
@@ -294,6 +318,8 @@ def replay(
         Measurements (absolute), one row per sample; non-finite rows are refused by the law.
     r : array_like (N, q), optional
         References (absolute), zeros by default.
+    s : array_like (N, e), optional
+        A scheduled artifact's external scheduling signals (``schedule.external``, in order).
     engine : {"reference", "native", "qemu"}
         The float64 law, the host C library (built on first use), or a Cortex-M image in QEMU.
     target : str, optional
@@ -305,7 +331,8 @@ def replay(
     Returns
     -------
     Trace
-        Commands, saturation flags, faults and the state after each step.
+        Commands, saturation flags, faults and the state after each step (a scheduled artifact:
+        :class:`~gainlink.proof.scheduled_reference.ScheduledTrace`, with the sigma each step used).
 
     Examples
     --------
@@ -318,8 +345,17 @@ def replay(
     """
     Y = np.asarray(y, dtype=float).reshape(-1, artifact.p)
     R = np.zeros((Y.shape[0], artifact.q)) if r is None else np.asarray(r, dtype=float).reshape(Y.shape[0], artifact.q)
-    trace: Trace = engine_with_image(engine, target=target, board=board)(artifact, Y, R)
-    return trace
+    if artifact.schedule is None:
+        trace: Trace = engine_with_image(engine, target=target, board=board)(artifact, Y, R)
+        return trace
+    if engine != "reference":
+        raise ArtifactError(f"engine {engine!r} does not run the scheduled law yet; use engine 'reference'")
+    e = len(artifact.schedule.external)
+    S = None if s is None else np.asarray(s, dtype=float).reshape(Y.shape[0], e)
+    if e and S is None:
+        raise DataError(f"artifact {artifact.name} is scheduled on {artifact.schedule.sigma}: give s (N, {e})")
+    scheduled: Trace = run_reference(artifact, Y, R, S)
+    return scheduled
 
 
 def simulate(
@@ -436,6 +472,23 @@ def _system_dict(sys: Any, *, Ts: float | None) -> dict[str, Any]:
     data["controller"] = {"method": "lqr"}
     data["observer"] = {"method": "kalman"}
     return data
+
+
+def _schedule_table(schedule: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``[schedule]`` table with each point's plant as a spec table (a ``control.StateSpace`` becomes its
+    matrices)."""
+    import control
+
+    table = dict(schedule)
+    points = table.get("plant")
+    if isinstance(points, (list, tuple)):
+        table["plant"] = [
+            {"A": _rows(p.A), "B": _rows(p.B), "C": _rows(p.C), "D": _rows(p.D)}
+            if isinstance(p, control.StateSpace)
+            else {k: _jsonable(v) for k, v in dict(p).items()}
+            for p in points
+        ]
+    return table
 
 
 def _identifiers(labels: list[str], prefix: str) -> list[str]:

@@ -17,6 +17,7 @@ from ..shipping import artifact as artifact_mod
 from ..synthesis.analysis import complex_pairs
 from ..synthesis.compensator import compensator_stability
 from ..synthesis.fixed_point import describe as describe_fixed_point
+from ..synthesis.schedule import describe_schedule
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -126,6 +127,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             f"  with the exact dead times (design: Padé order {d['pade_order']}): closed-loop spectral radius "
             f"{d['spectral_radius']:.4f} -> {'stable' if d['stable'] else 'UNSTABLE'}"
         )
+    if rep.schedule is not None:
+        print(f"  scheduled on {rep.schedule['sigma']} (the plant above is the first point's):")
+        for line in describe_schedule(rep.schedule):
+            print(f"    {line}")
     for w in rep.warnings:
         print(f"  warning: {w}")
     return 0
@@ -139,6 +144,8 @@ def cmd_design(args: argparse.Namespace) -> int:
     result = api.design_report(args.spec)
     artifact_mod.from_dict(result.artifact)  # the written file must load: check before publishing
     publish_files(out, {"gains.json": artifact_mod.render(result.artifact)})
+    if result.schedule is not None:
+        return _print_scheduled(result, out, as_json=args.json)
     if args.json:
         print(json.dumps(_design_json(result, out / "gains.json"), indent=2))
         return 0
@@ -236,6 +243,41 @@ def _print_fixed_point(cert, measured: dict) -> None:
     )
 
 
+def _compensator_note(a) -> str:
+    """What the compensator's stability says about an open-loop comparison (scheduled: see each point's)."""
+    if a.schedule is not None:
+        return "the scheduled law's compensator at each point is in checks.schedule.points"
+    comp = compensator_stability(a)
+    if comp.stable:
+        return comp.describe()
+    return (
+        f"{comp.describe()}; replayed open loop, rounding grows like {comp.radius_without_integrators:.3g}^k"
+        ": the one-step check is the verdict"
+    )
+
+
+def _print_scheduled(result, out: Path, *, as_json: bool) -> int:
+    """``gainlink design`` of a scheduled spec: every point, the grid, the verdict on a moving sigma."""
+    a = result.artifact
+    sch = a["checks"]["schedule"]
+    if as_json:
+        print(json.dumps({"artifact": str(out / "gains.json"), "sha256": a["sha256"], "schedule": sch,
+                          "rate_max": a["schedule"]["rate_max"], "warnings": result.warnings}, indent=2))  # fmt: skip
+        return 0
+    s = a["schedule"]
+    print(
+        f"{a['name']}: n={a['n']} m={a['m']} p={a['p']} q={a['q']}, Ts={a['Ts']:g} s, scheduled on {sch['sigma']} "
+        f"({s['sigma']['source']}) at {', '.join(f'{v:g}' for v in s['points'])}: "
+        f"{a['design']['controller']['method']} + {a['design']['observer']['method']} ({a['observer_form']}) per "
+        "point, velocity form"
+    )
+    for line in describe_schedule(sch):
+        print(f"  {line}")
+    print(f"  coefficients that vary between points (interpolated by the C): {', '.join(s['varying']) or 'none'}")
+    print(f"  wrote {out / 'gains.json'} (schema 2, sha256 {a['sha256'][:16]})")
+    return 0
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
     """``gainlink validate ARTIFACT``."""
     a = api.load(args.artifact)
@@ -281,8 +323,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
                 f"comparison file {args.compare} has {other.u.shape[0]} samples, input {args.input} has {steps}"
             )
     samples = read_samples(args.input, a)
-    trace = api.replay(a, samples.Y, samples.R, engine=args.engine, target=args.target, board=args.board)
-    write_trace(args.output, trace, samples.t)
+    trace = api.replay(a, samples.Y, samples.R, s=samples.S, engine=args.engine, target=args.target, board=args.board)
+    write_trace(args.output, trace, samples.t, artifact=a)
     where = f" ({'/'.join(x for x in (args.target, args.board) if x)})" if args.target or args.board else ""
     print(
         f"replayed {trace.u.shape[0]} samples through {args.engine}{where}: "
@@ -292,26 +334,17 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if other is None:
         return 0
     checks = {
-        args.engine: one_step_check(a, samples.Y, samples.R, trace),
-        args.compare: one_step_check(a, samples.Y, samples.R, other),
+        args.engine: one_step_check(a, samples.Y, samples.R, trace, S=samples.S),
+        args.compare: one_step_check(a, samples.Y, samples.R, other, S=samples.S),
     }
     for name, check in checks.items():
         print(f"one-step check of {name} (float64 law from its own state at each step): {check.summary()}")
     c = compare_traces(a, trace, other)
-    comp = compensator_stability(a)
-    why = (
-        ""
-        if comp.stable
-        else (
-            f"; replayed open loop, rounding grows like {comp.radius_without_integrators:.3g}^k"
-            ": the one-step check is the verdict"
-        )
-    )
     print(
         f"open loop against {args.compare} (information): max |du| = {c.max_abs_u:.3g} ({c.max_rel_u:.3g} of the "
         f"limit span), saturation flags differ on {c.sat_mismatches} (per input: "
         f"{', '.join(f'{name} {k}' for name, k in zip(a.signals['inputs'], c.sat_mismatches_per_input))}), "
-        f"fault flags on {c.fault_mismatches} of {c.steps} steps; {comp.describe()}{why}"
+        f"fault flags on {c.fault_mismatches} of {c.steps} steps; {_compensator_note(a)}"
     )
     for name, check in checks.items():
         if not check.passed:

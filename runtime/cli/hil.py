@@ -106,6 +106,8 @@ def _linearize(args: argparse.Namespace) -> int:
             at[name.strip()] = float(value)
         except ValueError:
             raise GainlinkError(f"--at {name}: {value!r} is not a number") from None
+    if args.schedule:
+        return _linearize_schedule(args, at)
     result = linearize_to_spec(
         fmu=args.fmu,
         at=at,
@@ -134,6 +136,38 @@ def _linearize(args: argparse.Namespace) -> int:
         "  fit to the FMU: "
         + ", ".join(f"{k} NRMSE {f.nrmse:.2g} final {f.final_error:.2g}" for k, f in validity.fit.outputs.items())
         + (" - POOR (see the warning)" if validity.fit.poor else "")
+    )
+    return 0
+
+
+def _linearize_schedule(args: argparse.Namespace, at: dict) -> int:
+    """``linearize FMU --schedule NAME=v1,v2,...``: trim at each value and write the scheduled spec."""
+    from gainlink.hil.plants.trim import trim_schedule_to_spec
+
+    name, _, values = args.schedule.partition("=")
+    try:
+        points = [float(v) for v in values.split(",") if v.strip()]
+    except ValueError:
+        raise GainlinkError(f"--schedule expects NAME=v1,v2,... (numbers), got {args.schedule!r}") from None
+    if not name.strip() or not points:
+        raise GainlinkError(f"--schedule expects NAME=v1,v2,..., got {args.schedule!r}")
+    trims = trim_schedule_to_spec(
+        fmu=args.fmu,
+        sigma=name.strip(),
+        values=points,
+        at=at,
+        out=Path(args.out),
+        Ts=args.Ts,
+        name=args.name,
+        inputs=args.inputs,
+        outputs=args.outputs,
+        method=args.method,
+        template=Path(args.template) if args.template else None,
+    )
+    print(
+        f"wrote {args.out}: scheduled on {name.strip()} at {', '.join(f'{t.sigma:g}' for t in trims)}, each point "
+        f"trimmed (Newton steps {', '.join(str(t.iterations) for t in trims)}; "
+        f"max residual {max(t.residual for t in trims):.2g})"
     )
     return 0
 
@@ -223,6 +257,12 @@ def _add_linearize_parser(subparsers: argparse._SubParsersAction) -> None:
         "the Model Exchange derivatives at --Ts, as runs choose)",
     )
     p.add_argument("--json", action="store_true", help="print the result and the [linearization] record as JSON")
+    p.add_argument(
+        "--schedule",
+        metavar="NAME=v1,v2,...",
+        help="a scheduled spec: trim the FMU at each value of NAME (an output, a state or a parameter; --at values "
+        "are held at every point) and linearise there",
+    )
     p.set_defaults(func=_linearize)
 
 

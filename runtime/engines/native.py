@@ -57,6 +57,7 @@ class NativeLoop:
     """
 
     def __init__(self, artifact: Artifact, *, watchdog_periods: int = 10, library: Path | None = None) -> None:
+        artifact.require_unscheduled("the native engine")
         self.artifact = artifact
         path = library or build(artifact, target="host").files["shared"]
         self.library = Path(path)

@@ -52,4 +52,5 @@ def run(
     Trace
         The firmware's outputs (float32 values as float64 arrays).
     """
+    artifact.require_unscheduled("the qemu engine")
     return trace_from_raw(run_raw(artifact, Y, R, target=target, board=board), m=artifact.m)

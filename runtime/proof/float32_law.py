@@ -128,6 +128,7 @@ class Float32Loop:
     """
 
     def __init__(self, artifact: Artifact) -> None:
+        artifact.require_unscheduled("the float32 law")
         self.a = artifact
         self._derive()
         self.reset()

@@ -48,6 +48,7 @@ class ReferenceLoop:
     """
 
     def __init__(self, artifact: Artifact) -> None:
+        artifact.require_unscheduled("ReferenceLoop")
         self.a = artifact
         self.safe_u = artifact.safe_command
         self.reset()

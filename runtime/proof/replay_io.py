@@ -6,8 +6,9 @@ Python law; ``native`` (host C library) and ``qemu`` (a Cortex-M image under QEM
 and loaded on first use, so replay never imports a toolchain it does not need.
 
 Input CSV: a header with ``y0..y{p-1}`` and ``r0..r{q-1}`` (a ``t`` column is allowed and copied
-through). Output CSV: ``t`` if given, ``u0..``, ``sat0..`` (1 where that input saturated),
-``fault`` (1 where the sample was refused as non-finite), ``xh0..`` and ``z0..`` (state after the step).
+through), and ``s0..`` for the external scheduling signals of a scheduled artifact. Output CSV: ``t`` if
+given, ``u0..``, ``sat0..`` (1 where that input saturated), ``fault`` (1 where the sample was refused as
+non-finite), ``xh0..`` and ``z0..`` (state after the step); a scheduled artifact's: :mod:`.scheduled_replay`.
 """
 
 from __future__ import annotations
@@ -25,8 +26,11 @@ import numpy as np
 from ..errors import DataError, GainlinkError
 from ..fileio import atomic_write_text, read_user_file
 from ..shipping.artifact import Artifact
-from .onestep import OneStepCheck, one_step_check  # noqa: F401 - the replay-level API
+from . import scheduled_replay
+from .onestep import OneStepCheck
+from .onestep import one_step_check as _unscheduled_one_step_check
 from .reference import ReferenceLoop, Trace
+from .scheduled_reference import ScheduledLoop, ScheduledTrace
 
 Engine = Callable[[Artifact, np.ndarray, np.ndarray], Trace]
 
@@ -54,9 +58,21 @@ def get_engine(name: str) -> Engine:
     return _ENGINES[name]
 
 
-def run_reference(artifact: Artifact, Y: np.ndarray, R: np.ndarray) -> Trace:
-    """The float64 reference engine."""
+def run_reference(artifact: Artifact, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None = None) -> Trace:
+    """The float64 reference engine (a scheduled artifact: the scheduled law, with the external signals ``S``)."""
+    if artifact.schedule is not None:
+        return ScheduledLoop(artifact).run(Y, R, S)
     return ReferenceLoop(artifact).run(Y, R)
+
+
+def one_step_check(
+    artifact: Artifact, Y: np.ndarray, R: np.ndarray, trace, *, S: np.ndarray | None = None
+) -> OneStepCheck:
+    """:func:`gainlink.proof.onestep.one_step_check`, or for a scheduled artifact
+    :func:`gainlink.proof.scheduled_replay.one_step_check` (with the external signals ``S``)."""
+    if artifact.schedule is not None:
+        return scheduled_replay.one_step_check(artifact, Y, R, S, trace)
+    return _unscheduled_one_step_check(artifact, Y, R, trace)
 
 
 register_engine("reference", run_reference)
@@ -69,6 +85,7 @@ class Samples:
     Y: np.ndarray  # (N, p)
     R: np.ndarray  # (N, q)
     t: np.ndarray | None
+    S: np.ndarray | None = None  # (N, e): a scheduled artifact's external scheduling signals
 
 
 def read_samples(path: str | Path, artifact: Artifact) -> Samples:
@@ -87,15 +104,18 @@ def read_samples(path: str | Path, artifact: Artifact) -> Samples:
     header = [h.strip() for h in rows[0]]
     want_y = [f"y{i}" for i in range(artifact.p)]
     want_r = [f"r{i}" for i in range(artifact.q)]
-    missing = [c for c in want_y + want_r if c not in header]
+    want_s = [f"s{i}" for i in range(len(artifact.schedule.external))] if artifact.schedule is not None else []
+    missing = [c for c in want_y + want_r + want_s if c not in header]
     if missing:
         raise DataError(
             f"input {path} lacks column(s) {', '.join(missing)} "
             f"(artifact {artifact.name} has p={artifact.p}, q={artifact.q})"
         )
-    unknown = [c for c in header if c not in set(want_y + want_r + ["t"])]
+    unknown = [c for c in header if c not in set(want_y + want_r + want_s + ["t"])]
     if unknown:
-        raise DataError(f"input {path} has unknown column {unknown[0]!r} (expected t, {', '.join(want_y + want_r)})")
+        raise DataError(
+            f"input {path} has unknown column {unknown[0]!r} (expected t, {', '.join(want_y + want_r + want_s)})"
+        )
     if len(set(header)) != len(header):
         raise DataError(f"input {path} repeats a column name")
     body = rows[1:]
@@ -114,7 +134,8 @@ def read_samples(path: str | Path, artifact: Artifact) -> Samples:
     Y = data[:, [col[c] for c in want_y]]
     R = data[:, [col[c] for c in want_r]] if want_r else np.zeros((len(body), 0))
     t = data[:, col["t"]] if "t" in col else None
-    return Samples(Y=Y, R=R, t=t)
+    S = data[:, [col[c] for c in want_s]] if want_s else None
+    return Samples(Y=Y, R=R, t=t, S=S)
 
 
 def format_trace(trace: Trace, t: np.ndarray | None = None) -> str:
@@ -138,14 +159,20 @@ def _num(v: float) -> str:
     return repr(v) if math.isfinite(v) else ("nan" if math.isnan(v) else ("inf" if v > 0 else "-inf"))
 
 
-def write_trace(path: str | Path, trace: Trace, t: np.ndarray | None = None) -> None:
-    """Write a replay's output CSV (``u``, ``sat``, ``fault``, ``xh``, ``z`` per step) atomically."""
+def write_trace(
+    path: str | Path, trace: Trace, t: np.ndarray | None = None, *, artifact: Artifact | None = None
+) -> None:
+    """Write a replay's output CSV (``u``, ``sat``, ``fault``, ``xh``, ``z`` per step; a scheduled trace: the
+    columns of :mod:`.scheduled_replay`, which needs its ``artifact``) atomically."""
     out = Path(path)
     if out.is_dir():
         raise DataError(f"output {out} is a directory")
     if not out.parent.exists():
         raise DataError(f"output folder {out.parent} does not exist")
-    atomic_write_text(out, format_trace(trace, t))
+    if isinstance(trace, ScheduledTrace):
+        atomic_write_text(out, scheduled_replay.format_trace(artifact, trace, t))
+    else:
+        atomic_write_text(out, format_trace(trace, t))
 
 
 @dataclass(frozen=True)
@@ -168,6 +195,8 @@ def read_trace(path: str | Path, artifact: Artifact) -> Trace:
     DataError
         The file is not a replay output for this artifact's dimensions.
     """
+    if artifact.schedule is not None:
+        return scheduled_replay.read_trace(path, artifact)
     path = Path(path)
     text = read_user_file(path, what="comparison file", error=DataError)
     rows = list(csv.DictReader(io.StringIO(text)))

@@ -39,7 +39,8 @@ class SampledPlant:
     @classmethod
     def from_artifact(cls, artifact: Any, *, x0: np.ndarray | None = None) -> SampledPlant:
         """The artifact's own plant in the design's coordinates (those of a state a user gives), about its
-        operating point."""
+        operating point (a scheduled artifact has one per point: ArtifactError)."""
+        artifact.require_unscheduled("the artifact's own plant")
         return cls(*artifact.design_plant(), u_op=artifact.u_op, y_op=artifact.y_op, x0=x0)
 
     def reset(self, x0: np.ndarray | None = None) -> None:

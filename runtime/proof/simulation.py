@@ -59,6 +59,7 @@ def simulate_linear(
         Seed of the noise generator.
     """
     a = artifact
+    a.require_unscheduled("the closed-loop simulation")
     if steps < 1:
         raise DataError("steps must be at least 1")
     r = a.r_op if reference is None else np.asarray(reference, float).reshape(a.q)

@@ -19,8 +19,11 @@ import numpy as np
 
 from ..errors import ArtifactError, IntegrityError
 from ..fileio import atomic_write_text, read_user_file
+from .scheduled import Schedule, load_schedule
 
 SCHEMA_VERSION = 1
+#: A scheduled artifact (``schedule`` holds the points; DESIGN.md, "Scheduled law").
+SCHEDULED_SCHEMA_VERSION = 2
 
 
 @lru_cache(maxsize=1)
@@ -77,6 +80,11 @@ class Artifact:
     ``u_op`` (m) and ``y_op`` (p) are the operating point, zeros when the file has none (every
     artifact written before operating points existed keeps its meaning); ``x_op`` (n) is the state
     there, for the record only, ``None`` when not recorded.
+
+    A scheduled artifact (schema 2, ``anti_windup == "velocity"``) has its per-point design in ``schedule``
+    (:class:`~gainlink.shipping.scheduled.Schedule`) and no single ``Ad Bd Cd Dd K L M Ki Kaw xh0 z0 u_op y_op``:
+    those fields are ``None``, so that nothing runs one point's positional law by mistake
+    (:meth:`require_unscheduled`).
     """
 
     data: dict = field(repr=False)
@@ -106,6 +114,16 @@ class Artifact:
     anti_windup: str
     observer_form: str
     sha256: str
+    schedule: Schedule | None = None
+
+    def require_unscheduled(self, what: str) -> None:
+        """Raise :class:`ArtifactError` naming ``what`` when this artifact is scheduled (it does not run one
+        positional law)."""
+        if self.schedule is not None:
+            raise ArtifactError(
+                f"{what} is for unscheduled artifacts; {self.name} is scheduled on {self.schedule.sigma} (schema 2, "
+                "velocity form), which only the design side and the float64 reference run so far"
+            )
 
     @property
     def signals(self) -> dict:
@@ -115,21 +133,25 @@ class Artifact:
     @property
     def safe_command(self) -> np.ndarray:
         """The command on a refused sample or an expired watchdog: ``u_op`` clamped into the limits."""
+        self.require_unscheduled("safe_command")
         return np.minimum(np.maximum(self.u_op, self.u_min), self.u_max)
 
     @property
     def r_op(self) -> np.ndarray:
         """The reference that holds the plant at its operating point: the tracked outputs there, ``Ci y_op``."""
+        self.require_unscheduled("r_op")
         return self.Ci @ self.y_op
 
     @property
     def has_operating_point(self) -> bool:
         """True when ``u_op`` or ``y_op`` has a non-zero entry."""
+        self.require_unscheduled("has_operating_point")
         return bool(np.any(self.u_op != 0.0) or np.any(self.y_op != 0.0))
 
     def design_plant(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The discrete plant ``(Ad, Bd, Cd, Dd)`` in the design's coordinates (those of a plant state a user
         gives, e.g. ``simulate --x0``), whatever the realisation of the estimate (``realization.design``)."""
+        self.require_unscheduled("design_plant")
         rec = self.data.get("realization")
         if rec is None:
             return self.Ad, self.Bd, self.Cd, self.Dd
@@ -158,16 +180,24 @@ class Artifact:
         """
         atomic_write_text(path, render(self.data))
 
-    def controller(self) -> Any:
+    def controller(self, sigma: float | None = None) -> Any:
         """The unsaturated law as a discrete ``control.StateSpace`` from ``(y, r)`` to ``u``.
 
         Signals are named after the artifact's outputs, references and inputs and are deviations
         from the operating point; the sign is included (``u = C(z) [y; r]``), so the loop broken at
         a plant input is ``-controller()[u, y] * plant``. See :mod:`gainlink.shipping.systems`.
+
+        A scheduled artifact needs ``sigma``: the frozen-point law there (the coefficients interpolated at sigma,
+        in the positional form whose increments the velocity form runs); an unscheduled one takes none.
         """
         from .systems import controller_system
 
-        return controller_system(self)
+        if (sigma is None) != (self.schedule is None):
+            raise ArtifactError(
+                "controller(sigma=...) takes sigma exactly when the artifact is scheduled"
+                + (f" (on {self.schedule.sigma})" if self.schedule is not None else "")
+            )
+        return controller_system(self, sigma=sigma)
 
     def closed_loop(self) -> Any:
         """Design plant + unsaturated law as a discrete ``control.StateSpace``: inputs the references
@@ -213,6 +243,8 @@ def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
                 f"artifact sha256 mismatch: recorded {data['sha256'][:12]}..., content hashes to {actual[:12]}... "
                 "(the file was edited after design)"
             )
+    if data["schema_version"] == SCHEDULED_SCHEMA_VERSION:
+        return _scheduled(data)
     n, m, p, q = (int(data[k]) for k in "nmpq")
     Ad = _matrix(data, "Ad", (n, n))
     Bd = _matrix(data, "Bd", (n, m))
@@ -234,10 +266,7 @@ def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
     u_max = _vector(data, "u_max", m)
     if np.any(u_min > u_max):
         raise ArtifactError("artifact has u_min > u_max for some input")
-    sig = data["signals"]
-    for key, size in (("states", n), ("inputs", m), ("outputs", p), ("references", q)):
-        if len(sig[key]) != size:
-            raise ArtifactError(f"signals.{key} names {len(sig[key])} signals, expected {size}")
+    _check_signals(data["signals"], n=n, m=m, p=p, q=q)
     return Artifact(
         data=data,
         name=data["name"],
@@ -267,6 +296,28 @@ def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
         observer_form=form,
         sha256=data["sha256"],
     )
+
+
+def _scheduled(data: dict) -> Artifact:
+    """A schema-2 artifact: shared keys here, the points in :func:`~gainlink.shipping.scheduled.load_schedule`."""
+    n, m, p, q = (int(data[k]) for k in "nmpq")
+    if q != m:
+        raise ArtifactError(f"a scheduled artifact needs integral action on every input (q = m), has q={q}, m={m}")
+    sched = load_schedule(data, n=n, m=m, p=p, q=q, form=data["observer_form"])
+    u_min, u_max = _vector(data, "u_min", m), _vector(data, "u_max", m)
+    if np.any(u_min > u_max):
+        raise ArtifactError("artifact has u_min > u_max for some input")
+    _check_signals(data["signals"], n=n, m=m, p=p, q=q)
+    none = dict.fromkeys(("Ad", "Bd", "Cd", "Dd", "K", "L", "M", "Ki", "Kaw", "xh0", "z0", "u_op", "y_op", "x_op"))
+    return Artifact(data=data, name=data["name"], Ts=float(data["Ts"]), n=n, m=m, p=p, q=q,
+                    Ci=_matrix(data, "Ci", (q, p)), u_min=u_min, u_max=u_max, anti_windup=data["anti_windup"],
+                    observer_form=data["observer_form"], sha256=data["sha256"], schedule=sched, **none)  # fmt: skip
+
+
+def _check_signals(sig: dict, *, n: int, m: int, p: int, q: int) -> None:
+    for key, size in (("states", n), ("inputs", m), ("outputs", p), ("references", q)):
+        if len(sig[key]) != size:
+            raise ArtifactError(f"signals.{key} names {len(sig[key])} signals, expected {size}")
 
 
 def _check_schema(data: Any) -> None:

@@ -70,6 +70,7 @@ def gain_set(artifact: Artifact) -> GainSet:
     GainSet
         Float32 fields in C declaration order and the checksum ``gl_gains_crc32`` will compute.
     """
+    artifact.require_unscheduled("the C gain set")
     shape = shape_of(artifact)
     fields = {}
     for f in layout.NUMBERS:
@@ -278,6 +279,7 @@ def render_c(artifact: Artifact) -> dict[str, str]:
         ``{"gl_gains.h": ..., "gl_gains_layout.h": ..., "gl_gains.c": ..., "gl_step.h": ...}``; identical for
         the same artifact.
     """
+    artifact.require_unscheduled("codegen")
     gains = gain_set(artifact)
     return {
         HEADER_NAME: render_header(artifact, gains),

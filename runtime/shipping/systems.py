@@ -15,35 +15,45 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .scheduled import law_coefficients
+
 if TYPE_CHECKING:
     import control
 
     from .artifact import Artifact
 
 
-def controller_matrices(a: Artifact) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``(A, B, C, D)`` of the unsaturated law from ``[dy; dr]`` to ``du`` on the state ``[xh; z]``."""
-    n, m, p, q = a.n, a.m, a.p, a.q
-    if a.observer_form == "current":
-        Xy = a.M  # xc = Xx xh + Xy dy
-        Xx = np.eye(n) - a.M @ a.Cd
-        F, G, Ly = a.Ad @ Xx, a.Bd, a.Ad @ a.M  # xh+ = F xh + G du + Ly dy
-    else:
-        Xx, Xy = np.eye(n), np.zeros((n, p))
-        F, G, Ly = a.Ad - a.L @ a.Cd, a.Bd - a.L @ a.Dd, a.L
-    # du = -K Xx xh - K Xy dy - Ki z
-    Cu = np.hstack([-a.K @ Xx, -a.Ki])
-    Du = np.hstack([-a.K @ Xy, np.zeros((m, q))])
+def controller_matrices(
+    a: Artifact, sigma: float | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(A, B, C, D)`` of the unsaturated law from ``[dy; dr]`` to ``du`` on the state ``[xh; z]`` (a scheduled
+    artifact: the frozen-point law at ``sigma``, its coefficients interpolated there)."""
+    if a.schedule is not None:
+        c = a.schedule.coefficients_at(sigma)
+        return coefficient_law(c["F"], c["G"], c["Ly"], c["Kx"], c["Ky"], c["Kz"] / a.Ts, Ci=a.Ci, Ts=a.Ts)
+    c = law_coefficients(
+        Ad=a.Ad, Bd=a.Bd, Cd=a.Cd, Dd=a.Dd, K=a.K, L=a.L, M=a.M, Ki=a.Ki, Ts=a.Ts, form=a.observer_form
+    )
+    return coefficient_law(c["F"], c["G"], c["Ly"], c["Kx"], c["Ky"], a.Ki, Ci=a.Ci, Ts=a.Ts)
+
+
+def coefficient_law(F, G, Ly, Kx, Ky, Ki, *, Ci, Ts: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(A, B, C, D)`` of ``du = -Kx xh - Ky dy - Ki z``, ``xh+ = F xh + G du + Ly dy``, ``z+ = z + Ts (dr - Ci dy)``
+    from ``[dy; dr]`` to ``du`` on the state ``[xh; z]``."""
+    n, q = F.shape[0], Ci.shape[0]
+    Cu = np.hstack([-Kx, -Ki])
+    Du = np.hstack([-Ky, np.zeros((Kx.shape[0], q))])
     A = np.block([[F + G @ Cu[:, :n], G @ Cu[:, n:]], [np.zeros((q, n)), np.eye(q)]])
-    B = np.block([[Ly + G @ Du[:, :p], np.zeros((n, q))], [-a.Ts * a.Ci, a.Ts * np.eye(q)]])
+    B = np.block([[Ly + G @ Du[:, : Ly.shape[1]], np.zeros((n, q))], [-Ts * Ci, Ts * np.eye(q)]])
     return A, B, Cu, Du
 
 
-def controller_system(a: Artifact) -> control.StateSpace:
-    """The unsaturated law as a discrete ``control.StateSpace`` from ``(y, r)`` to ``u``, named signals."""
+def controller_system(a: Artifact, sigma: float | None = None) -> control.StateSpace:
+    """The unsaturated law as a discrete ``control.StateSpace`` from ``(y, r)`` to ``u``, named signals (a
+    scheduled artifact: frozen at ``sigma``)."""
     import control
 
-    A, B, C, D = controller_matrices(a)
+    A, B, C, D = controller_matrices(a, sigma)
     sig = a.signals
     realised = "realization" in a.data  # the estimate in other coordinates than the plant's states
     states = ([f"xh{i}" for i in range(a.n)] if realised else [f"xh_{s}" for s in sig["states"]]) + [

@@ -10,6 +10,7 @@ from .model import (
     OperatingPoint,
     PlantModel,
     PlantSpec,
+    ScheduleSpec,
     TransferFunctionSource,
 )
 from .parse import load_spec, parse_spec
@@ -24,6 +25,7 @@ __all__ = [
     "OperatingPoint",
     "PlantModel",
     "PlantSpec",
+    "ScheduleSpec",
     "TransferFunctionSource",
     "as_matrix",
     "as_vector",

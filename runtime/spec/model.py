@@ -7,7 +7,7 @@ reads the user's raw tables again.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -145,11 +145,42 @@ class ImplementationSpec:
 
 
 @dataclass(frozen=True)
+class ScheduleSpec:
+    """``[schedule]`` with its ``[[schedule.plant]]`` entries: the law scheduled on a variable sigma.
+
+    ``sigma`` names a measured output (``source == "output"``, ``index`` into the plant's outputs) or one of the
+    ``external`` scheduling signals (``source == "external"``, ``index`` into ``external``). ``points`` (N >= 2,
+    increasing) are where the plant is given: ``plants[i]`` (same names and state coordinates everywhere),
+    ``operating_points[i]`` and ``controllers[i]`` (the controller table parsed against that point's plant: shared
+    weights, or Bryson's output maxima giving each point its own ``Q``). ``rate_max`` (sigma units per second,
+    None: not limited by the spec) and ``filter_tau`` (seconds, 0: no filter) shape sigma before the law uses it.
+    """
+
+    sigma: str
+    source: str
+    index: int
+    external: tuple[str, ...]
+    points: np.ndarray
+    plants: tuple[PlantModel, ...]
+    operating_points: tuple[OperatingPoint, ...]
+    controllers: tuple[ControllerSpec, ...]
+    rate_max: float | None = None
+    filter_tau: float = 0.0
+
+    @property
+    def size(self) -> int:
+        """Number of points N."""
+        return len(self.points)
+
+
+@dataclass(frozen=True)
 class PlantSpec:
     """A validated plant spec: the plant and every design choice, typed.
 
     ``integral`` is ``None`` without integral action; ``operating_point`` is ``None`` when the spec has no
-    ``[operating_point]`` table (the plant is about the origin).
+    ``[operating_point]`` table (the plant is about the origin). With a ``[schedule]``, ``schedule`` holds every
+    point, and ``plant``, ``operating_point`` and ``controller`` are those of the first point (:meth:`at_point`
+    gives the unscheduled spec of any point).
     """
 
     name: str
@@ -166,6 +197,18 @@ class PlantSpec:
     source: str = "<dict>"
     description: str = ""
     linearization: dict | None = None  # the record `gainlink linearize` wrote, as written (for the provenance)
+    schedule: ScheduleSpec | None = None
+
+    def at_point(self, i: int) -> PlantSpec:
+        """The unscheduled spec of schedule point ``i``: its plant, operating point and controller weights."""
+        s = self.schedule
+        return replace(
+            self,
+            plant=s.plants[i],
+            operating_point=s.operating_points[i],
+            controller=s.controllers[i],
+            schedule=None,
+        )
 
     @property
     def q(self) -> int:

@@ -17,9 +17,10 @@ import numpy as np
 
 from ..errors import SpecError
 from ..fileio import read_toml
-from .model import PlantSpec
+from .model import ImplementationSpec, PlantSpec
 from .plant import parse_plant
 from .ranges import check_ranges
+from .schedule import check_schedule_table, parse_schedule, point_plants
 from .tables import (
     CONTROLLER_KEYS,
     IMPLEMENTATION_KEYS,
@@ -40,7 +41,7 @@ NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 
 TOP_KEYS = {
     "name", "Ts", "discretization", "description", "plant", "controller", "integral", "observer", "limits",
-    "operating_point", "implementation", "linearization",
+    "operating_point", "implementation", "linearization", "schedule",
 }  # fmt: skip
 
 
@@ -68,7 +69,9 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     disc = data.get("discretization", "zoh")
     if disc not in ("zoh", "tustin"):
         raise SpecError(f"discretization must be 'zoh' or 'tustin', not {disc!r}")
-    plant = parse_plant(table(data, "plant", required=True), Ts=Ts)
+    sched = table(data, "schedule", required=False)
+    plants = _plants(table(data, "plant", required=True), sched, Ts=Ts)
+    plant = plants[0]
     ctl = checked_table(data, "controller", CONTROLLER_KEYS, required=True)
     integral = parse_integral(
         checked_table(data, "integral", INTEGRAL_KEYS, required=False),
@@ -76,16 +79,27 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
         lqr=ctl.get("method", "lqr") == "lqr",
     )
     q = 0 if integral is None else integral.q
-    limits = parse_limits(checked_table(data, "limits", LIMITS_KEYS, required=True), plant, q=q)
-    operating_point = parse_operating_point(table(data, "operating_point", required=False), plant, limits)
+    limits_table = checked_table(data, "limits", LIMITS_KEYS, required=True)
+    limits = parse_limits(limits_table, plant, q=q, scheduled=sched is not None)
+    controllers = tuple(parse_controller(ctl, p, q=q, Ts=Ts) for p in plants)
     implementation = parse_implementation(checked_table(data, "implementation", IMPLEMENTATION_KEYS, required=False))
-    check_ranges(limits, operating_point, integral.Ci if integral else np.zeros((0, plant.p)), plant, implementation)
+    schedule = None
+    if sched is not None:
+        _check_schedulable(data, q=q, m=plant.m, implementation=implementation)
+        points = check_schedule_table(sched)
+        schedule = parse_schedule(sched, plants, points, limits=limits, controllers=controllers)
+        operating_point = schedule.operating_points[0]
+    else:
+        operating_point = parse_operating_point(table(data, "operating_point", required=False), plant, limits)
+        check_ranges(
+            limits, operating_point, integral.Ci if integral else np.zeros((0, plant.p)), plant, implementation
+        )
     return PlantSpec(
         name=name,
         Ts=Ts,
         discretization=disc,
         plant=plant,
-        controller=parse_controller(ctl, plant, q=q, Ts=Ts),
+        controller=controllers[0],
         integral=integral,
         observer=parse_observer(checked_table(data, "observer", OBSERVER_KEYS, required=True), plant, Ts=Ts),
         limits=limits,
@@ -95,4 +109,32 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
         source=source,
         description=str(data.get("description", "")),
         linearization=checked_table(data, "linearization", LINEARIZATION_KEYS, required=False),
+        schedule=schedule,
     )
+
+
+def _plants(plant: dict, sched: dict | None, *, Ts: float) -> tuple:
+    """The plant of an unscheduled spec (a 1-tuple), or one per point of a ``[schedule]``."""
+    if sched is None:
+        return (parse_plant(plant, Ts=Ts),)
+    points = check_schedule_table(sched)
+    return point_plants(plant, sched["plant"], points, Ts=Ts)
+
+
+def _check_schedulable(data: dict, *, q: int, m: int, implementation: ImplementationSpec) -> None:
+    """What the velocity form needs of the rest of a scheduled spec (DESIGN.md, "Scheduled law")."""
+    if "operating_point" in data:
+        raise SpecError("with a [schedule], each [[schedule.plant]] gives its own u_op, y_op, x_op: "
+                        "drop [operating_point]")  # fmt: skip
+    if q < m:
+        raise SpecError(f"a [schedule] needs integral action on every input ([integral] on {m} outputs, has {q}): "
+                        "the velocity form integrates its command, and without it the trim drifts")  # fmt: skip
+    realization = implementation.realization
+    if realization != "as_designed":
+        raise SpecError(f"implementation.realization {realization!r} cannot be scheduled: the points' estimates "
+                        "must stay in the same coordinates (use as_designed)")  # fmt: skip
+    if implementation.numeric != "float32":
+        raise SpecError(
+            f"implementation.numeric {implementation.numeric!r} cannot be scheduled: a scheduled law is time-varying, "
+            "where the fixed-point certificate (worst-case peak gain) does not apply"
+        )

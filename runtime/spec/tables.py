@@ -161,9 +161,10 @@ def _given_observer(tbl: dict, plant: PlantModel, *, form: str) -> ObserverSpec:
     return ObserverSpec(method="given", form=form, L=given_matrix(tbl, "L", shape, "observer"))
 
 
-def parse_limits(tbl: dict, plant: PlantModel, *, q: int) -> LimitsSpec:
-    """``[limits]``: absolute limits below one another, the anti-windup mode (none without integral action) and
-    the declared ranges of samples and references."""
+def parse_limits(tbl: dict, plant: PlantModel, *, q: int, scheduled: bool = False) -> LimitsSpec:
+    """``[limits]``: absolute limits below one another, the anti-windup mode (none without integral action;
+    ``velocity``, the scheduled law's own, exactly when the spec has a ``[schedule]``) and the declared ranges of
+    samples and references."""
     for key in ("u_min", "u_max"):
         if key not in tbl:
             raise SpecError(f"limits lacks {key}")
@@ -171,11 +172,25 @@ def parse_limits(tbl: dict, plant: PlantModel, *, q: int) -> LimitsSpec:
     u_max = as_vector(tbl["u_max"], "limits.u_max", plant.m)
     if np.any(u_min >= u_max):
         raise SpecError("limits.u_min must be below limits.u_max for every input")
+    if scheduled:
+        return LimitsSpec(u_min=u_min, u_max=u_max, anti_windup=_scheduled_anti_windup(tbl))
     aw = tbl.get("anti_windup", "backcalc" if q else "none")
+    if aw == "velocity":
+        raise SpecError("limits.anti_windup 'velocity' is the scheduled law's: it needs a [schedule]")
     if aw not in ("none", "clamp", "backcalc"):
         raise SpecError(f"limits.anti_windup must be none, clamp or backcalc, not {aw!r}")
     ranges = parse_ranges(tbl, plant, q=q)
     return LimitsSpec(u_min=u_min, u_max=u_max, anti_windup=aw if q else "none", **ranges)
+
+
+def _scheduled_anti_windup(tbl: dict) -> str:
+    aw = tbl.get("anti_windup", "velocity")
+    if aw != "velocity":
+        raise SpecError(
+            f"limits.anti_windup must be 'velocity' with a [schedule], not {aw!r}: the velocity form integrates its "
+            "own saturated command, which is its anti-windup"
+        )
+    return aw
 
 
 def parse_operating_point(tbl: dict | None, plant: PlantModel, limits: LimitsSpec) -> OperatingPoint | None:

@@ -35,19 +35,22 @@ def input_margins(d: Discretised, *, K, Ki, L, M, Ci, Ts, form, inputs) -> list[
     out = []
     for i, name in enumerate(inputs):
         A, B, C = closed_loop_matrix(d, K=K, Ki=Ki, L=L, M=M, Ci=Ci, Ts=Ts, form=form, break_input=i)
-        pm, wgc = _phase_margin(A, B, C, Ts)
-        up = _gain_limit(A, B @ C, direction=+1)
-        down = _gain_limit(A, B @ C, direction=-1)
-        out.append(
-            ChannelMargin(
-                input=name,
-                gain_margin_up_db=None if up is None else float(20 * np.log10(up)),
-                gain_margin_down_db=None if down is None else float(20 * np.log10(down)),
-                phase_margin_deg=pm,
-                gain_crossover_rad_s=wgc,
-            )
-        )
+        out.append(broken_loop_margin(name, A, B, C, Ts))
     return out
+
+
+def broken_loop_margin(name: str, A: np.ndarray, B: np.ndarray, C: np.ndarray, Ts: float) -> ChannelMargin:
+    """Gain and phase margins of the loop ``(A, B, C)`` broken at input ``name`` (loop gain ``-C (zI - A)^-1 B``)."""
+    pm, wgc = _phase_margin(A, B, C, Ts)
+    up = _gain_limit(A, B @ C, direction=+1)
+    down = _gain_limit(A, B @ C, direction=-1)
+    return ChannelMargin(
+        input=name,
+        gain_margin_up_db=None if up is None else float(20 * np.log10(up)),
+        gain_margin_down_db=None if down is None else float(20 * np.log10(down)),
+        phase_margin_deg=pm,
+        gain_crossover_rad_s=wgc,
+    )
 
 
 def _phase_margin(A: np.ndarray, B: np.ndarray, C: np.ndarray, Ts: float) -> tuple[float | None, float | None]:

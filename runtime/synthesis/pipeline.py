@@ -26,6 +26,7 @@ from .loop import closed_loop_poles
 from .margins import ChannelMargin, input_margins, loop_bandwidth
 from .observer import observer_gain
 from .record import Gains, artifact_data
+from .schedule import ScheduleDesign, synthesize_scheduled
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +45,8 @@ class DesignResult:
     float32: Float32Fidelity | None = None  # None when the check was switched off
     dead_time: DeadTimeCheck | None = None  # None unless the plant has sampled dead times
     fixed_point: FixedPointCertificate | None = None  # None unless [implementation] numeric is q31 or q15
+    schedule: ScheduleDesign | None = None  # a scheduled spec: every point's result and the verdicts; the fields
+    # above are then those of the first point
 
 
 def synthesize(spec: PlantSpec) -> DesignResult:
@@ -55,8 +58,11 @@ def synthesize(spec: PlantSpec) -> DesignResult:
         A design setting is inconsistent with the discretised plant (e.g. the current form with feedthrough).
     DesignError
         The plant is not stabilizable/detectable, weights are not (semi)definite, or the resulting closed loop
-        is not stable (naming the part that is not).
+        is not stable (naming the part that is not); with a schedule, also a point, the grid between points, or
+        the LMI solver.
     """
+    if spec.schedule is not None:
+        return _scheduled(spec)
     warnings: list[str] = []
     d = discretise(spec)
     Aa, Ba = augment(d, spec.Ci, spec.Ts)
@@ -99,6 +105,22 @@ def _ranges(spec: PlantSpec) -> dict:
     """The declared ranges of samples and references (None where not declared)."""
     lim = spec.limits
     return {"y_min": lim.y_min, "y_max": lim.y_max, "r_min": lim.r_min, "r_max": lim.r_max}
+
+
+def _scheduled(spec: PlantSpec) -> DesignResult:
+    """Every point through :func:`synthesize`, then the scheduled checks (:mod:`.schedule`)."""
+    artifact, design, warnings = synthesize_scheduled(spec, synthesize)
+    first = design.results[0]
+    return DesignResult(
+        artifact=artifact,
+        controller_poles=first.controller_poles,
+        observer_poles=first.observer_poles,
+        closed_loop_poles=first.closed_loop_poles,
+        margins=first.margins,
+        warnings=warnings,
+        compensator=first.compensator,
+        schedule=design,
+    )
 
 
 def _check_feasible(d: Discretised, Aa: np.ndarray, Ba: np.ndarray, q: int) -> None:

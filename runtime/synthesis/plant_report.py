@@ -55,6 +55,7 @@ class AnalysisReport:
     compensator: dict | None = None  # the spec's designed compensator: poles, spectral radius, stability
     float32: dict | None = None  # float32 closed-loop fidelity of that design (gainlink.proof.fidelity)
     dead_time: dict | None = None  # that design against the exact sampled dead times (gainlink.synthesis.deadtime)
+    schedule: dict | None = None  # a scheduled spec: checks.schedule of its design (the plant above: first point)
 
     def to_dict(self) -> dict:
         """JSON-friendly dict; complex numbers become [re, im] pairs."""
@@ -124,6 +125,7 @@ def analyze(spec: PlantSpec) -> AnalysisReport:
         compensator=checks.get("compensator"),
         float32=checks.get("float32"),
         dead_time=checks.get("dead_time"),
+        schedule=checks.get("schedule"),
     )
 
 

@@ -1,0 +1,129 @@
+"""``gainlink linearize FMU --schedule NAME=v1,v2,...``: the FMU trimmed at each point (solved, not only
+evaluated) against hand-derived trims, the scheduled spec it writes designs, and its bad inputs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import run_cli
+from gainlink.errors import PlantError
+from gainlink.fileio import read_toml
+from gainlink.hil.plants.build import build_fmu
+from gainlink.hil.plants.trim import solve
+
+TEMPLATE = """\
+name = "hover"
+Ts = 0.01
+
+[controller]
+method = "lqr"
+Q_diag = [10.0, 1.0]
+R_diag = [1.0]
+
+[integral]
+outputs = ["z"]
+Q_diag = [10.0]
+
+[observer]
+method = "kalman"
+W_diag = [1e-4, 1e-2]
+V_diag = [1e-6]
+
+[limits]
+u_min = [0.0]
+u_max = [1.0]
+anti_windup = "velocity"
+"""
+
+
+def test_newton_trims_a_tank_by_hand():
+    """The tank of examples/tank_scheduled.toml at level h: q = u = c sqrt(h) solves dq/dt = dh/dt = 0 (c = 0.4);
+    from a guess of zero flow, where the equations do not depend on u yet."""
+    c, tau, h = 0.4, 0.1, 0.36
+
+    def evaluate(z):
+        q, u = z
+        g = np.array([(u - q) / tau, q - c * np.sqrt(h)])
+        return g, np.array([[-1 / tau, 1 / tau], [1.0, 0.0]])
+
+    z, _, res = solve(evaluate, np.array([0.0, 0.0]))
+    assert np.allclose(z, [c * np.sqrt(h)] * 2, rtol=1e-12) and res < 1e-10
+    with pytest.raises(PlantError, match="did not converge"):
+        solve(lambda z: (np.array([z[0] ** 2 + 1.0]), np.array([[2 * z[0]]])), np.array([1.0]))
+
+
+@pytest.fixture(scope="module")
+def multirotor():
+    """The project's multirotor_vertical FMU and its parameters read from its model description."""
+    from fmpy import read_model_description
+
+    path = build_fmu("multirotor_vertical")
+    start = {v.name: float(v.start) for v in read_model_description(str(path)).modelVariables if v.start is not None}
+    return path, start
+
+
+def test_schedule_on_a_parameter_trims_hover_throttle(multirotor, tmp_path):
+    """Scheduled on the mass (a parameter: sigma is external) with the altitude held: at each mass the throttle
+    is sqrt(m g / k_T) and B = [0, 2 k_T u / m] (the model's own hand-derived hover, from its parameters), and
+    the spec designs a schema-2 artifact."""
+    path, p = multirotor
+    tmpl = tmp_path / "tmpl.toml"
+    tmpl.write_text(TEMPLATE)
+    spec = tmp_path / "spec.toml"
+    masses = [0.8, 1.0, 1.5]
+    res = run_cli("linearize", path, "--schedule", "mass=" + ",".join(map(str, masses)), "--at", "z=2",
+                  "--template", tmpl, "--out", spec)  # fmt: skip
+    assert res.code == 0, res.err
+    data, _ = read_toml(spec, what="spec", error=ValueError)
+    sched = data["schedule"]
+    assert sched["sigma"] == "mass" and sched["external"] == ["mass"] and sched["points"] == masses
+    for m, pt in zip(masses, sched["plant"]):
+        u = np.sqrt(m * p["g"] / p["k_T"])
+        assert pt["u_op"][0] == pytest.approx(u, rel=1e-9)
+        assert pt["x_op"] == pytest.approx([2.0, 0.0], abs=1e-9) and pt["y_op"] == pytest.approx([2.0])
+        assert np.allclose(pt["B"], [[0.0], [2 * p["k_T"] * u / m]], rtol=1e-6)
+    out = tmp_path / "design"
+    assert run_cli("design", spec, "--out", out).code == 0
+    assert '"schema_version": 2' in (out / "gains.json").read_text()
+
+
+def test_schedule_on_an_output_state(multirotor, tmp_path):
+    """Scheduled on the altitude z (an output that is a state: held there): hover at every altitude."""
+    path, p = multirotor
+    spec = tmp_path / "spec.toml"
+    res = run_cli("linearize", path, "--schedule", "z=1,2,5", "--out", spec)
+    assert res.code == 0, res.err
+    data, _ = read_toml(spec, what="spec", error=ValueError)
+    assert data["schedule"]["sigma"] == "z" and data["schedule"]["external"] == []
+    for z, pt in zip((1.0, 2.0, 5.0), data["schedule"]["plant"]):
+        assert pt["x_op"] == pytest.approx([z, 0.0], abs=1e-9)
+        assert pt["u_op"][0] == pytest.approx(np.sqrt(p["mass"] * p["g"] / p["k_T"]), rel=1e-9)
+    assert data["limits"]["anti_windup"] == "velocity" and data["integral"]["outputs"] == ["z"]
+
+
+@pytest.mark.parametrize(
+    ("schedule", "extra", "message"),
+    [
+        ("throttle=0.5,0.6", [], "an input is what the trim solves for"),
+        ("mass=1.0,0.8", ["--at", "z=2"], "strictly increasing"),
+        ("mass=1.0", ["--at", "z=2"], "at least two"),
+        ("mass=1,x", [], "NAME=v1,v2"),
+        ("payload=1,2", [], "payload"),
+    ],
+)
+def test_bad_schedule_is_one_line_exit_2(multirotor, tmp_path, schedule, extra, message):
+    path, _ = multirotor
+    out = tmp_path / "spec.toml"
+    res = run_cli("linearize", path, "--schedule", schedule, *extra, "--out", out)
+    assert res.code == 2 and message in res.err and res.err.count("\n") == 1, res
+    assert not out.exists()
+
+
+def test_trim_outside_the_limits_is_refused(multirotor, tmp_path):
+    """Limits that cannot hold the heaviest point (throttle 0.70 above u_max 0.6): refused, nothing written."""
+    path, _ = multirotor
+    tmpl = tmp_path / "tmpl.toml"
+    tmpl.write_text(TEMPLATE.replace("u_max = [1.0]", "u_max = [0.6]"))
+    out = tmp_path / "spec.toml"
+    res = run_cli("linearize", path, "--schedule", "mass=0.8,1.5", "--at", "z=2", "--template", tmpl, "--out", out)
+    assert res.code == 2 and "outside the limits" in res.err and not out.exists()
