@@ -8,36 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from support.cli import run_cli
-
-GOOD_SPEC = """\
-name = "servo"
-Ts = 0.01
-
-[plant]
-kind = "continuous"
-A = [[0.0, 1.0], [0.0, -2.0]]
-B = [[0.0], [4.0]]
-C = [[1.0, 0.0]]
-
-[controller]
-method = "lqr"
-Q_diag = [10.0, 0.1]
-R_diag = [1.0]
-
-[integral]
-outputs = [0]
-Q_diag = [1.0]
-
-[observer]
-method = "kalman"
-W_diag = [1e-4, 1e-2]
-V_diag = [1e-4]
-
-[limits]
-u_min = [-5.0]
-u_max = [5.0]
-"""
+from support.cli import GOOD_SPEC, assert_one_clear_line, run_cli
 
 
 def spec_with(old: str, new: str) -> str:
@@ -166,15 +137,6 @@ den = [[[1.0, 1.0]]]\n[controller]\nQ_diag = [1.0]\nR_diag = [1.0]\n[observer]\n
         "improper",
     ),
 ]
-
-
-def assert_one_clear_line(res, words: str) -> None:
-    assert res.code == 2, (res.code, res.err)
-    lines = [ln for ln in res.err.splitlines() if ln.strip()]
-    assert len(lines) == 1, res.err
-    assert lines[0].startswith("gainlink: error:"), lines[0]
-    assert words in lines[0], lines[0]
-    assert "Traceback" not in res.err
 
 
 @pytest.mark.parametrize("case", BAD_SPECS, ids=[c[0] for c in BAD_SPECS])

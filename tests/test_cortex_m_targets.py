@@ -19,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware import qemu as fwqemu
@@ -29,6 +28,7 @@ from gainlink.firmware.golden import example_cases
 from gainlink.firmware.targets import BOARDS, CORTEX_M_TARGETS, TARGETS
 from gainlink.hil.loop.pil import make_plant, run_pil
 from gainlink.shipping.artifact import load
+from support.cli import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = ("u", "sat", "xh", "z", "fault")

@@ -9,7 +9,6 @@ import json
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES
 from gainlink.errors import DesignError
 from gainlink.fileio import read_toml
 from gainlink.proof.fixed_format import quantise
@@ -18,6 +17,7 @@ from gainlink.shipping.artifact import from_dict, seal
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.fixed_point import certify
+from support.paths import EXAMPLES
 
 
 def _example(name: str, numeric: str, **implementation) -> dict:

@@ -6,8 +6,7 @@ from __future__ import annotations
 import json
 
 import pytest
-from conftest import run_cli
-from test_cli_errors import GOOD_SPEC, assert_one_clear_line
+from support.cli import GOOD_SPEC, assert_one_clear_line, run_cli
 
 RANGES = "y_min = [-2.0]\ny_max = [2.0]\nr_min = [-1.0]\nr_max = [1.0]\n"
 Q31 = GOOD_SPEC + RANGES + '\n[implementation]\nnumeric = "q31"\n'

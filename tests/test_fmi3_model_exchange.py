@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.errors import PlantError
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.config import plant_from_config
 from gainlink.hil.plants.linearize import linearize
 from scipy.linalg import expm
+from support.cli import run_cli
 
 MASS, C, D, S0 = 2.0, 50.0, 3.0, 0.5
 

@@ -18,7 +18,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.errors import SpecError
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.model_twin import MISMATCH_WARN, model_mismatch
@@ -32,8 +31,9 @@ from gainlink.hil.plants.fmu_interface import check_setup, choose_interface
 from gainlink.shipping.artifact import load
 from gainlink.spec import load_spec, parse_spec
 from scipy.linalg import expm
-from test_hil_support import udp_transport
-from test_thirdparty_fmu import TEMPLATE
+from support.cli import run_cli
+from support.hil import udp_transport
+from support.thirdparty import TEMPLATE
 from thirdparty import gemseo_fmu
 
 TS = 1e-3

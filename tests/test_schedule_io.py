@@ -11,13 +11,13 @@ import control as ct
 import gainlink as gl
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.errors import ArtifactError, DataError
 from gainlink.fileio import atomic_write_text
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from schedule_cases import TANK, external_tank, tank_dict
+from support.cli import run_cli
 
 
 def _toml(data: dict) -> str:

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from gainlink.errors import PlantError
 from gainlink.fileio import read_toml
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.trim import solve
+from support.cli import run_cli
 
 TEMPLATE = """\
 name = "hover"

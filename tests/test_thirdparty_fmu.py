@@ -19,7 +19,7 @@ from gainlink.hil.plants.config import plant_from_config
 from scipy.linalg import expm
 from support.cli import run_cli
 from support.hil import udp_transport
-from support.thirdparty import gemseo_fmu
+from support.thirdparty import TEMPLATE, gemseo_fmu
 
 
 @pytest.fixture(scope="module")
@@ -93,29 +93,6 @@ def test_an_fmu_without_an_input_is_refused():
     with pytest.raises(PlantError) as err:
         plant_from_config({"kind": "fmu", "path": str(gemseo_fmu("ramp.fmu"))})
     assert "FMU ramp has no Real input to drive" in str(err.value)
-
-
-TEMPLATE = """
-[controller]
-method = "lqr"
-Q_diag = [100.0, 0.0]
-R_diag = [1.0e-4]
-
-[integral]
-outputs = ["y"]
-Q_diag = [1.0e6]
-
-[observer]
-method = "kalman"
-form = "predictor"
-W_diag = [1.0e-4, 1.0e-2]
-V_diag = [1.0e-8]
-
-[limits]
-u_min = [-2000.0]
-u_max = [2000.0]
-anti_windup = "backcalc"
-"""
 
 
 @pytest.mark.parametrize("operating_point", [True, False], ids=["y_op", "no_op"])

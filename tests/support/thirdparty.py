@@ -74,3 +74,27 @@ def _extract(wheel: Path, name: str, expected: str, fmu: Path) -> None:
     if hashlib.sha256(data).hexdigest() != expected:
         raise RuntimeError(f"{name} in {wheel} does not have the pinned sha256 {expected}")
     atomic_write_bytes(fmu, data)
+
+
+#: The design tables a spec linearised from Mass_Damper.fmu takes (``linearize --template``).
+TEMPLATE = """
+[controller]
+method = "lqr"
+Q_diag = [100.0, 0.0]
+R_diag = [1.0e-4]
+
+[integral]
+outputs = ["y"]
+Q_diag = [1.0e6]
+
+[observer]
+method = "kalman"
+form = "predictor"
+W_diag = [1.0e-4, 1.0e-2]
+V_diag = [1.0e-8]
+
+[limits]
+u_min = [-2000.0]
+u_max = [2000.0]
+anti_windup = "backcalc"
+"""
