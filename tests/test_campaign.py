@@ -813,7 +813,7 @@ def test_runs_that_errored_fail_the_campaign_and_only_they_run_again_on_resume(p
     )
     data["scenario"]["duration"] = 1.0
     data["scenario"]["plant"] = dict(
-        data["scenario"]["plant"], kind="python", **{"class": "campaign_plants:BuggyPendulum"}
+        data["scenario"]["plant"], kind="python", **{"class": "support.campaign_plants:BuggyPendulum"}
     )
     path, out = tmp_path / "c.toml", tmp_path / "out"
     path.write_text(toml_write.dumps(data))
