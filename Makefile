@@ -4,7 +4,7 @@ VENV  := .venv
 PY    := $(VENV)/bin/python
 STAMP := $(VENV)/.gainlink-setup
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test bench bench-fuzz bench-soak clean
 
 setup: $(STAMP)
 
@@ -21,8 +21,16 @@ TEST_WORKERS ?= 4
 test: setup
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist worksteal --durations=10
 
+# The quick benchmarks (minutes); the long ones (an hour each) have their own targets. Each records its JSON
+# as the README's figures (scripts/readme_figures.py).
 bench: setup
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh
+
+bench-fuzz: setup
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh fuzz
+
+bench-soak: setup
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh soak
 
 clean:
 	rm -rf build out .cache

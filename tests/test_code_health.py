@@ -1,4 +1,5 @@
-"""The code's health as part of the test command: ruff's lint and format check, and mypy on the public API.
+"""The code's health as part of the test command: ruff's lint and format check, mypy on the public API, and the
+README's figures against the recorded benchmark results (scripts/readme_figures.py --check).
 
 Each runs as a subprocess over the whole checkout (configured in pyproject.toml), so under pytest-xdist they run
 beside the rest of the suite. A failure shows the tool's own report.
@@ -33,3 +34,7 @@ def test_mypy_passes_on_the_public_api_strictly():
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "Success: no issues found" in proc.stdout
 
+
+def test_readme_figures_are_the_recorded_benchmark_results():
+    proc = run_tool(str(ROOT / "scripts" / "readme_figures.py"), "--check")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
