@@ -130,7 +130,7 @@ def fuzz_block() -> str:
                 f"`{name}`",
                 num(r["executions"]),
                 f"{num(r['seconds'])} s ({num(r['exec_per_s'])}/s)",
-                f"{r['cov']} vs {r['baseline_seed_cov']} ({r['cov_vs_seeds']:.2f}x)",
+                f"{r['cov']} vs {r['baseline_seed_cov']} ({num(r.get('cov_vs_seeds'), 2)}x)",
                 f"{r.get('ft', '—')} / {r.get('corpus', '—')}",
                 str(r["crashes"]),
             ]
