@@ -6,7 +6,7 @@ VENV  := .venv
 PY    := $(VENV)/bin/python
 STAMP := $(VENV)/.gainlink-setup
 
-.PHONY: setup demo test test-matrix bench clean
+.PHONY: setup demo test test-matrix bench bench-fuzz bench-soak clean
 
 setup: $(STAMP)
 
@@ -26,8 +26,16 @@ test: setup
 test-matrix: setup
 	$(PY) -m pytest -q -m matrix
 
+# The quick benchmarks (minutes); the long ones (an hour each) have their own targets. Each records its JSON
+# as the README's figures (scripts/readme_figures.py).
 bench: setup
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh
+
+bench-fuzz: setup
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh fuzz
+
+bench-soak: setup
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh soak
 
 clean:
 	rm -rf build out .cache

@@ -1,16 +1,32 @@
 #!/usr/bin/env bash
-# Runs every benchmark in bench/ (each prints one JSON document with its baseline ratio) and keeps the
-# JSON in out/bench/NAME.json. A benchmark that fails is reported and the others still run.
+# Runs benchmarks of bench/ (each prints one JSON document with its baseline ratio), keeps the JSON in
+# out/bench/NAME.json, then records the ones that succeeded as the README's figures
+# (scripts/readme_figures.py --record: bench/results/NAME.json and the marked blocks of README.md).
+#
+#   scripts/bench.sh            the quick benchmarks: every bench/*.py but the long ones (minutes)
+#   scripts/bench.sh NAME ...   these (bench/NAME.py), e.g. `fuzz` or `soak` (an hour each)
+#
+# A benchmark that fails is reported and the others still run.
 set -uo pipefail
 cd "$(dirname "$0")/.."
+LONG=(fuzz soak)  # their own make targets: bench-fuzz, bench-soak
+
+names=("$@")
+if ((${#names[@]} == 0)); then
+  for script in bench/*.py; do
+    name=$(basename "$script" .py)
+    [[ " ${LONG[*]} " == *" $name "* ]] || names+=("$name")
+  done
+fi
 mkdir -p out/bench
 status=0
-for script in bench/*.py; do
-  name=$(basename "$script" .py)
+done_ok=()
+for name in "${names[@]}"; do
   printf '\n== %s\n' "$name"
-  if python "$script" > "out/bench/$name.json.tmp"; then
+  if python "bench/$name.py" > "out/bench/$name.json.tmp"; then
     mv "out/bench/$name.json.tmp" "out/bench/$name.json"
     cat "out/bench/$name.json"
+    done_ok+=("$name")
   else
     rm -f "out/bench/$name.json.tmp"
     echo "bench: $name failed" >&2
@@ -18,4 +34,7 @@ for script in bench/*.py; do
   fi
 done
 printf '\nJSON kept in out/bench/\n'
+if ((${#done_ok[@]})); then
+  python scripts/readme_figures.py --record "${done_ok[@]}" || status=1
+fi
 exit $status
