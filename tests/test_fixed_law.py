@@ -103,7 +103,7 @@ def test_rshift_round_is_round_half_up():
 @pytest.mark.parametrize("form", ["predictor", "current"])
 @pytest.mark.parametrize("aw", ["none", "clamp", "backcalc"])
 def test_derived_law_is_the_reference_law(form, aw):
-    """The C's form of the law (one sum of products per output) is the float64 law of DESIGN.md."""
+    """The C's form of the law (one sum of products per output) is the float64 law of docs/design.md."""
     spec = _no_float32(random_spec(3, n=4, m=2, p=2, q=1, form=form, anti_windup=aw))
     a = from_dict(synthesize(parse_spec(spec)).artifact)
     rng = np.random.default_rng(1)

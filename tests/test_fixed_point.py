@@ -33,7 +33,7 @@ def pendulum_q31():
 
 
 def test_pendulum_certifies_in_q31_with_its_integrator(pendulum_q31):
-    """DESIGN.md: an integrator or an unstable compensator is not a reason to refuse; the pendulum must certify."""
+    """docs/design.md: an integrator or an unstable compensator is not a reason to refuse; the pendulum must certify."""
     r = pendulum_q31
     fp = r.artifact["checks"]["fixed_point"]
     assert fp["numeric"] == "q31" and fp["case"].startswith("closed_loop")

@@ -1,4 +1,4 @@
-"""No hidden coupling (DESIGN.md, "Scheduled law"): the scheduled law on the nonlinear tank, scheduled on its own
+"""No hidden coupling (docs/design.md, scheduled law): the scheduled law on the nonlinear tank, scheduled on its own
 measured level, linearised numerically about an equilibrium between the points, is the frozen-point design there
 (its eigenvalues are those of the velocity loop with the tank's exact linearisation and the coefficients at that
 level, plus zeros). The positional form with interpolated trims is not (the contrast that shows the test can

@@ -53,7 +53,7 @@ BAD = {
 
 @pytest.mark.parametrize("case", sorted(BAD))
 def test_bad_scheduled_spec_is_one_line_exit_2(case, tmp_path):
-    """Each bad input of issue 18 (and the refusals DESIGN.md adds): one line naming it, exit 2, nothing written."""
+    """Each bad input of issue 18 and of the design document: one line naming it, exit 2, nothing written."""
     import re
 
     edit, pattern = BAD[case]

@@ -20,7 +20,7 @@ import numpy as np
 
 ACC_BITS = 64
 
-# Word lengths per role (DESIGN.md, "Fixed point"): q15 keeps states, integrators, the unsaturated command and
+# Word lengths per role (docs/design.md, fixed point): q15 keeps states, integrators, the unsaturated command and
 # the accumulators wide (16-bit states would miss 1/4096 of the span and put a dead zone in the integrator).
 WORDS = {
     "q31": {"coefficient": 32, "sample": 32, "command": 32, "state": 32},

@@ -1,4 +1,4 @@
-"""The float64 reference of the scheduled law (DESIGN.md, "Scheduled law"): the velocity form on coefficients
+"""The float64 reference of the scheduled law (docs/design.md, scheduled law): the velocity form on coefficients
 interpolated linearly in sigma. The C loop, its float32 model and every test of a schema-2 artifact compare
 against this.
 

@@ -22,7 +22,7 @@ from ..fileio import atomic_write_text, read_user_file
 from .scheduled import Schedule, load_schedule
 
 SCHEMA_VERSION = 1
-#: A scheduled artifact (``schedule`` holds the points; DESIGN.md, "Scheduled law").
+#: A scheduled artifact (``schedule`` holds the points; docs/design.md, scheduled law).
 SCHEDULED_SCHEMA_VERSION = 2
 
 

@@ -1,5 +1,5 @@
 """The scheduled part of a schema-2 artifact: the points, sigma's source and shaping, and per point the
-coefficients the velocity-form law runs (DESIGN.md, "Scheduled law").
+coefficients the velocity-form law runs (docs/design.md, scheduled law).
 
 Per point ``i`` the design gives the positional law in deviations (predictor or current form, one shape)::
 

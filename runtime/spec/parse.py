@@ -122,7 +122,7 @@ def _plants(plant: dict, sched: dict | None, *, Ts: float) -> tuple:
 
 
 def _check_schedulable(data: dict, *, q: int, m: int, implementation: ImplementationSpec) -> None:
-    """What the velocity form needs of the rest of a scheduled spec (DESIGN.md, "Scheduled law")."""
+    """What the velocity form needs of the rest of a scheduled spec (docs/design.md, scheduled law)."""
     if "operating_point" in data:
         raise SpecError("with a [schedule], each [[schedule.plant]] gives its own u_op, y_op, x_op: "
                         "drop [operating_point]")  # fmt: skip

@@ -1,5 +1,5 @@
 """How far the fixed-point command can be from the float64 law, from the rounding at every quantisation point
-(DESIGN.md, "Fixed point": the command's error).
+(docs/design.md, fixed point: the command's error).
 
 The float64 law compared against has the same quantised coefficients, operating point and limits, and clips its
 samples to the same ranges (:class:`~gainlink.proof.derived_law.DerivedLoop` on ``FixedGains.ideal``); the

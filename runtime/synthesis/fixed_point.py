@@ -1,5 +1,5 @@
 """The fixed-point certificate of a design: formats, no overflow, and how far the command can be from the float64
-law (DESIGN.md, "Fixed point"; the parts: :mod:`.wcpg`, :mod:`.fixed_ranges`, :mod:`.fixed_formats`,
+law (docs/design.md, fixed point; the parts: :mod:`.wcpg`, :mod:`.fixed_ranges`, :mod:`.fixed_formats`,
 :mod:`.fixed_error`).
 
 What it covers, recorded in ``checks.fixed_point.covers``:

@@ -1,5 +1,5 @@
 """Range bounds of every variable of the fixed-point law, for any inputs within the declared ranges and any
-history (DESIGN.md, "Fixed point": no overflow, for any compensator).
+history (docs/design.md, fixed point: no overflow, for any compensator).
 
 - **Estimate.** The observer is fed the saturated command, so ``xh+ = F xh + G du + Ly dy + rho_x`` with ``du``
   within the limits, ``dy`` within the sample ranges and ``|rho_x|`` at most the estimate's rounding: the WCPG of

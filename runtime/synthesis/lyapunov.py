@@ -2,7 +2,7 @@
 Clarabel, SCS as the fallback, :mod:`.lmi`) and re-checked by eigenvalues in float64.
 
 The velocity loop on an interval is a matrix polynomial in lambda (:mod:`.lpv`), not affine, so a Lyapunov matrix
-that works at the points proves nothing between them (DESIGN.md). Its Bernstein coefficients on each interval
+that works at the points proves nothing between them (docs/design.md). Its Bernstein coefficients on each interval
 (split in ``pieces`` parts for a tighter hull) are vertices whose convex hull holds the loop's matrix for every
 sigma there. ``A' P A`` is convex in ``A`` for ``P >= 0``, so ``V' P V < P`` at every vertex gives it for every
 sigma:

@@ -1,4 +1,4 @@
-"""A scheduled design (DESIGN.md, "Scheduled law"): every point designed and checked as today, the law the C
+"""A scheduled design (docs/design.md, scheduled law): every point designed and checked as today, the law the C
 runs (each point's velocity-form coefficients, interpolated linearly in sigma) checked frozen on a dense grid and
 under a moving sigma, and the schema-2 artifact that carries it all."""
 

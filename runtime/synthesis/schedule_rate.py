@@ -5,7 +5,7 @@ is stable exactly when its spectral radius is below one).
 
 Rates are scanned from slow to fast on a log grid; the answer is the fastest rate below which every rate tested
 was stable (None when every rate was, up to sigma crossing the whole envelope in one step). It confirms a
-certificate; it does not replace one (DESIGN.md, "Frozen stability is not stability").
+certificate; it does not replace one (docs/design.md, scheduled law).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The verdict on a moving sigma: a common quadratic Lyapunov function (any rate), else the rate a sigma-dependent
 one certifies, and the fastest rate that stays stable in simulation; and from them the ``rate_max`` the law
-enforces (DESIGN.md, "Frozen stability is not stability")."""
+enforces (docs/design.md, scheduled law)."""
 
 from __future__ import annotations
 
