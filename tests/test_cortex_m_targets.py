@@ -297,12 +297,12 @@ def test_pil_cli_with_a_board_alone_runs_that_boards_core(pend, tmp_path):
 
 def test_mavlink_hil_through_the_m33_images_uart_equals_the_host_app(pend):
     """The AN505 (Secure image, its own UART lines and timer): the same closed loop as the host app, bit for bit."""
-    from gainlink.firmware.uart import free_tcp_port
     from gainlink.hil.loop.bridge import run_scenario
-    from test_target_uart import assert_same_closed_loop, free_udp_port, scenario
+    from support.net import tcp_port, udp_port
+    from support.uart import assert_same_closed_loop, scenario
 
-    host = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, controller="firmware"))
-    url = f"tcp:127.0.0.1:{free_tcp_port()}"
+    host = run_scenario(scenario(pend, {"kind": "mavlink", "port": udp_port()}, controller="firmware"))
+    url = f"tcp:127.0.0.1:{tcp_port()}"
     image = run_scenario(scenario(pend, {"kind": "mavlink", "url": url}, controller="qemu", board="mps2-an505"))
     assert_same_closed_loop(image, host)
     assert image.info["controller"]["ready"].startswith("gainlink pendulum mps2-an505 ")

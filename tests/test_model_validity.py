@@ -33,8 +33,7 @@ from gainlink.spec import load_spec, parse_spec
 from scipy.linalg import expm
 from support.cli import run_cli
 from support.hil import udp_transport
-from support.thirdparty import TEMPLATE
-from thirdparty import gemseo_fmu
+from support.thirdparty import TEMPLATE, gemseo_fmu
 
 TS = 1e-3
 C_SPRING, D_DAMP, MASS = 1.0e4, 10.0, 1.0

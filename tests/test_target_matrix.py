@@ -90,12 +90,12 @@ SERVING = [b.name for b in BOARDS.values() if b.serves]
 @pytest.mark.parametrize("board", SERVING)
 def test_the_image_on_every_serving_board_is_a_mavlink_and_slcan_node(pend, board):
     """HIL through the image's UART (MAVLink, then slcan) equals the host apps' closed loop bit for bit."""
-    from gainlink.firmware.uart import free_tcp_port
     from gainlink.hil.loop.bridge import run_scenario
-    from test_target_uart import assert_same_closed_loop, free_udp_port, scenario
+    from support.net import tcp_port, udp_port
+    from support.uart import assert_same_closed_loop, scenario
 
-    host = run_scenario(scenario(pend, {"kind": "mavlink", "port": free_udp_port()}, controller="firmware"))
-    url = f"tcp:127.0.0.1:{free_tcp_port()}"
+    host = run_scenario(scenario(pend, {"kind": "mavlink", "port": udp_port()}, controller="firmware"))
+    url = f"tcp:127.0.0.1:{tcp_port()}"
     image = run_scenario(scenario(pend, {"kind": "mavlink", "url": url}, controller="qemu", board=board))
     assert_same_closed_loop(image, host)
     can_host = run_scenario(
@@ -103,6 +103,6 @@ def test_the_image_on_every_serving_board_is_a_mavlink_and_slcan_node(pend, boar
             pend, {"interface": "udp_multicast", "channel": "239.74.163.63", "hop_limit": 0}, controller="firmware"
         )
     )
-    channel = f"socket://127.0.0.1:{free_tcp_port()}"
+    channel = f"socket://127.0.0.1:{tcp_port()}"
     can_image = run_scenario(scenario(pend, {"interface": "slcan", "channel": channel}, controller="qemu", board=board))
     assert_same_closed_loop(can_image, can_host)

@@ -20,7 +20,6 @@ from gainlink.firmware.uart import QemuUart
 from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.report import summary_text
-from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.mavlink.keysetup import signing_timestamp
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
@@ -34,48 +33,7 @@ from support.cli import run_cli
 from support.hil import udp_transport
 from support.mavlink import reference_u, retuned_pendulum
 from support.net import tcp_port, udp_port
-
-RANGES = {"x": [-5.0, 5.0], "theta": [-1.0, 1.0], "r_x": [-5.0, 5.0]}
-
-
-def scenario(
-    artifact_path,
-    transport: dict,
-    *,
-    controller: str,
-    board: str | None = None,
-    duration: float = 1.5,
-    faults: list | None = None,
-):
-    data = {
-        "name": "pendulum_uart",
-        "artifact": str(artifact_path),
-        "duration": duration,
-        "mode": "lockstep",
-        "controller": controller,
-        "step_timeout": 2.0,
-        "peer_timeout": 5.0,
-        "seed": 7,
-        "twin": True,
-        "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]},
-        "transport": transport,
-        "initial_state": {"theta": 0.1},
-        "reference": {"r_x": {"kind": "step", "at": 0.3, "value": 0.4}},
-        "noise": {"theta": 0.001},
-    }
-    if board is not None:
-        data["board"] = board
-    if faults is not None:
-        data["faults"] = faults
-    return parse_scenario(data, path=artifact_path.parent / "scenario.toml")
-
-
-def assert_same_closed_loop(image, host) -> None:
-    assert image.complete and host.complete, (image.reason, host.reason)
-    assert image.metrics["lost"] == 0 and image.trace.got.all()
-    assert image.trace.u.shape == host.trace.u.shape
-    np.testing.assert_array_equal(image.trace.u, host.trace.u)  # float32 commands, bit for bit
-    np.testing.assert_array_equal(image.trace.y, host.trace.y)
+from support.uart import RANGES, assert_same_closed_loop, scenario
 
 
 @pytest.mark.parametrize("board", ["mps2-an386", "netduinoplus2"])
