@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware.build import build
-from gainlink.firmware.golden import example_cases
+from gainlink.firmware.golden import example_cases, random_cases
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping.artifact import from_dict, seal
 from hypothesis import HealthCheck, given, settings
@@ -26,7 +26,7 @@ from hypothesis.extra import numpy as hnp
 from support.paths import EXAMPLES
 
 RTOL = 1e-4
-RANDOM_DESIGNS = 30  # conftest's random_designs
+RANDOM_DESIGNS = 12  # conftest's random_designs; the matrix runs the other 18 of golden.random_cases(30)
 GL_OK, GL_SATURATED, GL_ERR_NANINF, GL_ERR_CRC, GL_ERR_DIMS, GL_ERR_RANGE, GL_ERR_WATCHDOG, GL_ERR_BUSY = (
     0,
     1,
@@ -73,11 +73,22 @@ def test_random_designs_cover_every_form_and_size(random_designs):
     assert max(c.artifact.n for c in cases) == 12 and max(c.artifact.m for c in cases) <= 4
     assert any(c.artifact.q > 0 for c in cases) and any(c.artifact.q == 0 for c in cases)
     assert any(np.any(c.artifact.Dd != 0) for c in cases), "feed-through (G = Bd - L Dd) is exercised"
+    about_op = {(c.artifact.observer_form, c.artifact.anti_windup) for c in cases if c.artifact.has_operating_point}
+    assert about_op == forms, "every form and mode also about a non-zero operating point"
 
 
 @pytest.mark.parametrize("index", range(RANDOM_DESIGNS))  # one test each: the workers build them in parallel
 def test_random_design_matches_reference(random_designs, index):
-    case = random_designs[index]
+    assert_case_matches_reference(random_designs[index])
+
+
+@pytest.mark.matrix
+@pytest.mark.parametrize("index", range(RANDOM_DESIGNS, 30))
+def test_more_random_designs_match_reference(index):
+    assert_case_matches_reference(random_cases(30)[index])
+
+
+def assert_case_matches_reference(case) -> None:
     assert case.expected.saturated.any(), f"{case.label}: golden samples should saturate"
     trace = NativeLoop(case.artifact).run(case.Y, case.R)
     assert_matches_reference(trace, case.expected, case.artifact, case.label)

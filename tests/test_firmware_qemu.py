@@ -18,7 +18,7 @@ from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware import qemu as fwqemu
 from gainlink.firmware.build import build
-from gainlink.firmware.golden import example_cases
+from gainlink.firmware.golden import example_cases, random_cases
 from gainlink.shipping.artifact import render
 from support.paths import EXAMPLES
 
@@ -46,12 +46,29 @@ def test_examples_bit_identical_to_host_on_both_boards(board):
         assert target["fault"].sum() == 1
 
 
-@pytest.mark.parametrize("index", range(30))  # conftest's random_designs, one test each: built in parallel
-def test_random_design_bit_identical_to_host(random_designs, index):
-    case = random_designs[index]
-    host = NativeLoop(case.artifact).run_raw(case.Y, case.R)
-    target = qemu_engine.run_raw(case.artifact, case.Y, case.R)
+RANDOM_DESIGNS = 12  # conftest's random_designs; the matrix runs the other 18 of golden.random_cases(30)
+
+
+def assert_image_equals_host(case) -> None:
+    """The M4F image replays the case bit for bit as the host library, a refused sample (the safe command:
+    u_op clamped into the limits) included."""
+    Y = case.Y.copy()
+    Y[11, 0] = np.nan
+    host = NativeLoop(case.artifact).run_raw(Y, case.R)
+    target = qemu_engine.run_raw(case.artifact, Y, case.R)
     assert_bit_identical(host, target, case.label)
+    assert np.array_equal(target["u"][11], case.artifact.safe_command.astype(np.float32)), case.label
+
+
+@pytest.mark.parametrize("index", range(RANDOM_DESIGNS))  # one test each: the workers build them in parallel
+def test_random_design_bit_identical_to_host(random_designs, index):
+    assert_image_equals_host(random_designs[index])
+
+
+@pytest.mark.matrix
+@pytest.mark.parametrize("index", range(RANDOM_DESIGNS, 30))
+def test_more_random_designs_bit_identical_to_host(index):
+    assert_image_equals_host(random_cases(30)[index])
 
 
 @pytest.fixture(scope="module")
