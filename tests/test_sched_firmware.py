@@ -1,0 +1,142 @@
+"""The scheduled law in C (firmware/src/gl_sched.c): its export, its float32 model against the float64 reference,
+and the host build against the model bit for bit with sigma moving across the whole envelope (held on a
+non-finite sigma, clipped outside it, rate-limited, filtered)."""
+
+from __future__ import annotations
+
+import itertools
+import re
+import tomllib
+
+import numpy as np
+import pytest
+from gainlink.engines.sched_native import NativeScheduledLoop
+from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
+from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop
+from gainlink.shipping import codegen
+from gainlink.shipping.artifact import from_dict
+from gainlink.shipping.codegen_scheduled import render_export, tables
+from gainlink.spec import parse_spec
+from gainlink.synthesis import synthesize
+from schedule_cases import external_tank, tank_dict
+from support.cli import GOOD_SPEC, run_cli
+
+FLOAT = r"-?\d+(?:\.\d*)?(?:e[-+]?\d+)?f"
+
+
+@pytest.fixture(scope="module")
+def level_data():
+    """The example tank's artifact dict, scheduled on its measured level (predictor form, no filter, no rate
+    limit)."""
+    return synthesize(parse_spec(tank_dict())).artifact
+
+
+@pytest.fixture(scope="module")
+def level(level_data):
+    """The example tank's artifact."""
+    return from_dict(level_data)
+
+
+@pytest.fixture(scope="module")
+def external():
+    """The tank scheduled on an external signal, current form, sigma filtered (tau 0.1 s) and rate-limited (4/s)."""
+    return from_dict(synthesize(parse_spec(external_tank(form="current", rate_max=4.0, filter_tau=0.1))).artifact)
+
+
+def _samples(a, N: int = 600):
+    """Samples that move sigma across the whole envelope and beyond it, with steps of the reference (so the
+    command saturates), a refused sample, and (external sigma) steps of sigma, a NaN and an inf sigma."""
+    rng = np.random.default_rng(7)
+    t = np.arange(N) * a.Ts
+    lo, hi = a.schedule.points[0], a.schedule.points[-1]
+    sweep = lo + (hi - lo) * (0.5 - 0.65 * np.cos(2 * np.pi * t / (N * a.Ts / 2)))  # beyond both ends, twice
+    R = np.where((t // 4.0) % 2 == 0, 0.1, 0.9).reshape(N, 1)
+    if a.schedule.source == "output":
+        Y = (sweep + 0.002 * rng.standard_normal(N)).reshape(N, 1)
+        S = None
+    else:
+        Y = (0.5 + 0.3 * np.sin(t) + 0.002 * rng.standard_normal(N)).reshape(N, 1)
+        jumps = np.where((t // 3.0) % 3 == 1, 0.6, 0.0)  # steps of sigma faster than the rate limit
+        S = (np.clip(sweep, lo - 0.1, hi + 0.1) + jumps).reshape(N, 1)
+        S[200, 0], S[201, 0], S[202, 0] = np.nan, np.inf, -np.inf
+    Y[150, 0] = np.nan
+    return Y, R, S
+
+
+def _bits(x: np.ndarray) -> np.ndarray:
+    return np.asarray(x, dtype=np.float64).view(np.uint64)
+
+
+def test_scheduled_export_holds_the_tables_and_an_unscheduled_one_is_unchanged(level, external):
+    """The export of a schema-2 artifact: gl_gains.h with the macros of the scheduled loop, gl_sched_gains.c with
+    every per-point coefficient as its float32 value; same artifact, same bytes. An unscheduled artifact's export
+    is codegen.render_c's, byte for byte."""
+    files = render_export(external)
+    assert sorted(files) == ["gl_gains.h", "gl_sched_gains.c"] and files == render_export(external)
+    h = files["gl_gains.h"]
+    for macro in ("GL_SCHEDULED 1", "GL_NPTS 3", "GL_E 1", "GL_SIGMA_EXTERNAL 1", "GL_SIGMA_INDEX 0",
+                  "GL_SIGMA_FILTERED 1", "GL_SIGMA_RATE_LIMITED 1", "GL_OBSERVER_FORM 1"):  # fmt: skip
+        assert f"#define {macro}" in h
+    assert "#define GL_E 0" in render_export(level)["gl_gains.h"]
+    assert "#define GL_SIGMA_RATE_LIMITED 0" in render_export(level)["gl_gains.h"]
+    src = files["gl_sched_gains.c"]
+    t = tables(external)
+    S = external.schedule
+    for name in ("Kx", "Ky", "Kz", "F", "G", "Ly"):
+        block = re.search(rf"\.{name} = \{{(.*?)\n    \}},", src, re.S).group(1)
+        got = np.array([float(v[:-1]) for v in re.findall(FLOAT, block)], dtype=np.float32)
+        want = S.coef[name].reshape(-1).astype(np.float32)
+        assert np.array_equal(got, want) and np.array_equal(t[name].reshape(-1), want), name
+    assert float(t["rate_step"]) == np.float32(external.Ts * 4.0)
+    assert float(t["alpha"]) == np.float32(-np.expm1(-external.Ts / 0.1))
+    plain = from_dict(synthesize(parse_spec(tomllib.loads(GOOD_SPEC))).artifact)
+    assert render_export(plain) == codegen.render_c(plain)
+
+
+def test_export_cli_writes_the_scheduled_tables(level_data, tmp_path):
+    from gainlink.shipping import artifact as artifact_mod
+
+    path = tmp_path / "gains.json"
+    artifact_mod.write(path, level_data)
+    res = run_cli("export", path, "--out", tmp_path / "out")
+    assert res.code == 0, res.err
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["gl_gains.h", "gl_sched_gains.c"]
+
+
+@pytest.mark.parametrize("case", ["level", "external"])
+def test_float32_model_is_close_to_the_float64_law(case, request):
+    """The float32 model of the C follows the float64 reference: same flags and faults, commands and states within
+    float32 rounding of the command's span."""
+    a = request.getfixturevalue(case)
+    Y, R, S = _samples(a)
+    ref = ScheduledLoop(a).run(Y, R, S)
+    f32 = ScheduledFloat32Loop(a).run(Y, R, S)
+    assert np.array_equal(ref.fault, f32.fault) and np.array_equal(ref.sigma_flags, f32.sigma_flags)
+    assert np.array_equal(ref.saturated, f32.saturated)
+    assert np.max(np.abs(ref.u - f32.u)) < 1e-5 * float(a.u_max[0] - a.u_min[0])
+    assert np.max(np.abs(ref.sigma - f32.sigma)) < 1e-6
+    assert np.max(np.abs(ref.state - f32.state)) < 1e-5
+
+
+@pytest.mark.parametrize("case", ["level", "external"])
+def test_host_c_is_the_float32_model_bit_for_bit(case, request):
+    """The host build of gl_sched.c and the numpy model agree bit for bit on every command, flag and state, with
+    sigma sweeping the whole envelope (every interval, both ends clipped), held on NaN and inf, rate-limited and
+    filtered (external), and a refused sample leaving the state untouched."""
+    a = request.getfixturevalue(case)
+    Y, R, S = _samples(a)
+    c = NativeScheduledLoop(a).run(Y, R, S)
+    m = ScheduledFloat32Loop(a).run(Y, R, S)
+    for name in ("u", "sigma", "state"):
+        assert np.array_equal(_bits(getattr(c, name)), _bits(getattr(m, name))), name
+    for name in ("saturated", "fault", "sigma_flags"):
+        assert np.array_equal(getattr(c, name), getattr(m, name)), name
+    pts = a.schedule.points.astype(np.float32)
+    assert abs(c.sigma.min() - pts[0]) < 1e-6 and abs(c.sigma.max() - pts[-1]) < 1e-6  # the filter approaches
+    assert all(np.any((c.sigma > lo) & (c.sigma < hi)) for lo, hi in itertools.pairwise(pts))
+    assert np.any(c.sigma_flags & SIGMA_CLIPPED) and c.saturated.any() and c.fault[150]
+    assert np.array_equal(_bits(c.state[150]), _bits(c.state[149]))  # the refused sample changed nothing
+    if case == "external":
+        assert np.all(c.sigma_flags[200:203] & SIGMA_HELD) and np.any(c.sigma_flags & SIGMA_RATE)
+        assert c.sigma[200] == c.sigma[199] == c.sigma[202]
+        assert np.max(np.abs(np.diff(c.sigma))) <= np.float32(a.Ts * 4.0) * (1 + 1e-6)
