@@ -38,9 +38,16 @@ def level(level_data):
 
 
 @pytest.fixture(scope="module")
-def external():
-    """The tank scheduled on an external signal, current form, sigma filtered (tau 0.1 s) and rate-limited (4/s)."""
-    return from_dict(synthesize(parse_spec(external_tank(form="current", rate_max=4.0, filter_tau=0.1))).artifact)
+def external_data():
+    """The tank scheduled on an external signal, current form, sigma filtered (tau 0.1 s) and rate-limited (4/s):
+    its artifact dict."""
+    return synthesize(parse_spec(external_tank(form="current", rate_max=4.0, filter_tau=0.1))).artifact
+
+
+@pytest.fixture(scope="module")
+def external(external_data):
+    """That artifact."""
+    return from_dict(external_data)
 
 
 def _samples(a, N: int = 600):
@@ -156,3 +163,25 @@ def test_cortex_m4f_in_qemu_is_the_host_bit_for_bit(external):
         assert np.array_equal(getattr(m4, name), getattr(host, name)), name
     flags = np.bitwise_or.reduce(m4.sigma_flags)
     assert flags == SIGMA_HELD | SIGMA_CLIPPED | SIGMA_RATE and m4.fault.sum() == 1
+
+
+def test_replay_cli_runs_the_scheduled_c_on_host_and_qemu(external_data, external, tmp_path):
+    """``gainlink replay --engine native|qemu`` on a scheduled artifact with s0: both write the output of the
+    float32 model, byte for byte (the same CSV text); an engine flag that does not apply is one line, exit 2."""
+    from gainlink.proof.scheduled_replay import format_trace
+    from gainlink.shipping import artifact as artifact_mod
+
+    path, inp = tmp_path / "gains.json", tmp_path / "in.csv"
+    artifact_mod.write(path, external_data)
+    Y, R, S = _samples(external, N=300)
+    rows = ["y0,r0,s0"] + [",".join(repr(float(v)) for v in (Y[k, 0], R[k, 0], S[k, 0])) for k in range(len(Y))]
+    inp.write_text("\n".join(rows) + "\n")
+    want = format_trace(external, ScheduledFloat32Loop(external).run(Y, R, S))
+    for engine in ("native", "qemu"):
+        out = tmp_path / f"{engine}.csv"
+        res = run_cli("replay", path, "--input", inp, "--output", out, "--engine", engine)
+        assert res.code == 0, res.err
+        assert out.read_text() == want, engine
+    res = run_cli("replay", path, "--input", inp, "--output", tmp_path / "x.csv", "--engine", "native",
+                  "--target", "cortex-m4")  # fmt: skip
+    assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and not (tmp_path / "x.csv").exists()
