@@ -51,23 +51,27 @@ def external(external_data):
 
 
 def _samples(a, N: int = 600):
-    """Samples that move sigma across the whole envelope and beyond it, with steps of the reference (so the
-    command saturates), a refused sample, and (external sigma) steps of sigma, a NaN and an inf sigma."""
+    """A closed loop of the float64 law around the nonlinear tank (``examples/tank_scheduled.toml``), recorded for
+    open-loop replay: the reference sweeps the level below, across and above the envelope (sigma, the level or an
+    external copy of it, moves across all of it and is clipped at both ends), a reference jump saturates the pump,
+    one sample is refused; an external sigma also jumps faster than its rate limit and is NaN or inf on three
+    samples."""
     rng = np.random.default_rng(7)
     t = np.arange(N) * a.Ts
-    lo, hi = a.schedule.points[0], a.schedule.points[-1]
-    sweep = lo + (hi - lo) * (0.5 - 0.65 * np.cos(2 * np.pi * t / (N * a.Ts / 2)))  # beyond both ends, twice
-    R = np.where((t // 4.0) % 2 == 0, 0.1, 0.9).reshape(N, 1)
-    if a.schedule.source == "output":
-        Y = (sweep + 0.002 * rng.standard_normal(N)).reshape(N, 1)
-        S = None
-    else:
-        Y = (0.5 + 0.3 * np.sin(t) + 0.002 * rng.standard_normal(N)).reshape(N, 1)
-        jumps = np.where((t // 3.0) % 3 == 1, 0.6, 0.0)  # steps of sigma faster than the rate limit
-        S = (np.clip(sweep, lo - 0.1, hi + 0.1) + jumps).reshape(N, 1)
-        S[200, 0], S[201, 0], S[202, 0] = np.nan, np.inf, -np.inf
-    Y[150, 0] = np.nan
-    return Y, R, S
+    ref = 0.02 + 1.2 * (1 - np.abs(1 - 2 * np.arange(N) / N))  # a triangle from 0.02 up to 1.22 and back
+    ref[N // 2 - 60 : N // 2 - 40] = 0.05  # a jump down and back up: the pump saturates
+    law = ScheduledLoop(a)
+    q, h = 0.08, 0.04
+    Y, R, S = np.zeros((N, 1)), ref.reshape(N, 1), np.zeros((N, 1))
+    for k in range(N):
+        Y[k, 0] = np.nan if k == 150 else h + 0.002 * rng.standard_normal()
+        S[k, 0] = h + (0.6 if (t[k] // 3.0) % 3 == 1 else 0.0)  # external sigma: the level with jumps
+        if k in (200, 201, 202):
+            S[k, 0] = (np.nan, np.inf, -np.inf)[k - 200]
+        u = float(law.step(Y[k], R[k], S[k] if a.schedule.external else None).u[0])
+        for _ in range(10):  # the nonlinear tank, Euler at Ts / 10
+            q, h = q + a.Ts / 10 * (u - q) / 0.1, max(h + a.Ts / 10 * (q - 0.4 * np.sqrt(max(h, 0.0))), 0.0)
+    return Y, R, (S if a.schedule.external else None)
 
 
 def _bits(x: np.ndarray) -> np.ndarray:
@@ -182,6 +186,12 @@ def test_replay_cli_runs_the_scheduled_c_on_host_and_qemu(external_data, externa
         res = run_cli("replay", path, "--input", inp, "--output", out, "--engine", engine)
         assert res.code == 0, res.err
         assert out.read_text() == want, engine
+    ref = tmp_path / "ref.csv"
+    assert run_cli("replay", path, "--input", inp, "--output", ref).code == 0
+    res = run_cli("replay", path, "--input", inp, "--output", tmp_path / "c.csv", "--engine", "native",
+                  "--compare", ref)  # fmt: skip
+    assert res.code == 0, res.err
+    assert "native (the C's float32 arithmetic, bit for bit, from its own state at each step): pass," in res.out
     res = run_cli("replay", path, "--input", inp, "--output", tmp_path / "x.csv", "--engine", "native",
                   "--target", "cortex-m4")  # fmt: skip
     assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and not (tmp_path / "x.csv").exists()

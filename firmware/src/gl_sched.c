@@ -161,11 +161,13 @@ static float next_sigma(gl_sched_t *loop, float raw)
 }
 
 /** Step 3: the coefficients at sigma into loop->c (kept while sigma does not change). */
-static void interpolate(gl_sched_t *loop, float sigma, uint32_t i, float lam)
+static void interpolate(gl_sched_t *loop, float sigma)
 {
     if (loop->c_valid != 0u && loop->c_sigma == sigma) {
         return;
     }
+    float lam;
+    const uint32_t i = interval(loop->t->S, sigma, &lam);
     const gl_sched_tables_t *t = loop->t;
     gl_sched_coeffs_t *c = &loop->c;
     lerp(c->Kx, t->Kx[i], t->Kx[i + 1u], GL_M * GL_N, lam);
@@ -262,8 +264,10 @@ static void remember(gl_sched_t *loop, const float *y, const float *r, const flo
 }
 
 /** The first valid sample after a reset starts the law where it is: no kick. */
-static void start(gl_sched_t *loop, const float *y, uint32_t i, float lam)
+static void start(gl_sched_t *loop, const float *y, float sigma)
 {
+    float lam;
+    const uint32_t i = interval(loop->t->S, sigma, &lam);
     memcpy(loop->y_prev, y, sizeof loop->y_prev);
     trim(loop->t, i, lam, loop->u_prev);
     memset(loop->e_prev, 0, sizeof loop->e_prev);
@@ -298,12 +302,10 @@ gl_sched_status_t gl_sched_step(gl_sched_t *loop, const float *y, const float *r
     (void)s;
     const float sigma = next_sigma(loop, y[GL_SIGMA_INDEX]);
 #endif
-    float lam;
-    const uint32_t i = interval(loop->t->S, sigma, &lam);
     if (loop->started == 0u) {
-        start(loop, y, i, lam);
+        start(loop, y, sigma);
     }
-    interpolate(loop, sigma, i, lam);
+    interpolate(loop, sigma);
     float dy[GL_P];
     float du[GL_M];
     GL_UNROLL
