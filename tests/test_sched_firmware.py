@@ -195,3 +195,19 @@ def test_replay_cli_runs_the_scheduled_c_on_host_and_qemu(external_data, externa
     res = run_cli("replay", path, "--input", inp, "--output", tmp_path / "x.csv", "--engine", "native",
                   "--target", "cortex-m4")  # fmt: skip
     assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and not (tmp_path / "x.csv").exists()
+
+
+def test_firmware_commands_on_a_scheduled_artifact(external_data, tmp_path):
+    """``firmware build --target host`` ships the scheduled loop's libraries (no stdin/stdout executable);
+    ``firmware run`` and ``pil run``, which speak the unscheduled loop's protocol, refuse it in one line, exit 2."""
+    from gainlink.shipping import artifact as artifact_mod
+
+    path = tmp_path / "gains.json"
+    artifact_mod.write(path, external_data)
+    res = run_cli("firmware", "build", path, "--target", "host", "--out", tmp_path / "fw")
+    assert res.code == 0, res.err
+    shipped = {p.name for p in (tmp_path / "fw").iterdir()}
+    assert {"libgainlink_host.so", "libgainlink_loop.a", "firmware.json"} <= shipped
+    for argv in (("firmware", "run", path, "--mavlink", "tcp:127.0.0.1:1"), ("pil", "run", path, "--steps", "5")):
+        res = run_cli(*argv)
+        assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and "scheduled on load" in res.err, argv

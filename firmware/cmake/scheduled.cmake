@@ -2,13 +2,15 @@
 # gl_gains.h with GL_SCHEDULED 1 and gl_sched_gains.c; see include/gainlink/gl_sched.h).
 #
 # Targets (the same names as for an unscheduled artifact, so gainlink.firmware.build finds them):
-#   gainlink_sched   static library: src/gl_sched.c and the generated tables gl_sched_default
+#   gainlink_sched   static library libgainlink_loop.a: src/gl_sched.c and the generated tables gl_sched_default
 #   host:      gainlink_host (shared, for Python ctypes: ports/host/gl_sched_host.c)
 #   cortex-m*: gainlink_image (ELF + .bin/.hex/.map): replay over semihosting (ports/cortex-m/main_sched.c)
 # The bus nodes (MAVLink, CAN), PIL and gain updates are not built for a scheduled artifact.
 add_library(gainlink_sched STATIC src/gl_sched.c src/gl_fmaf.c "${GL_GAINS_DIR}/gl_sched_gains.c")
 target_link_libraries(gainlink_sched PUBLIC gainlink_config)
 target_compile_options(gainlink_sched PRIVATE -Wvla -Wshadow -Wstrict-prototypes)
+# Shipped as the loop's static library (libgainlink_loop.a, as for an unscheduled artifact).
+set_target_properties(gainlink_sched PROPERTIES OUTPUT_NAME gainlink_loop)
 
 if(GL_TARGET STREQUAL "host")
   target_link_libraries(gainlink_sched PUBLIC m)

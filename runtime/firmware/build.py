@@ -194,6 +194,7 @@ def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path 
     ToolchainError
         When the build fails or does not produce the executable.
     """
+    artifact.require_unscheduled("the host apps (CAN node, MAVLink server)")
     result = build(artifact, target="host", options={"GL_APPS": "ON"}, build_root=build_root)
     exe = result.build_dir / relpath
     with exclusive_lock(result.build_dir.parent / ".lock"):
