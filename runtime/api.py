@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 
 from .engines import engine_with_image
-from .errors import ArtifactError, DataError, SpecError
+from .engines.scheduled import scheduled_engine
+from .errors import DataError, SpecError
 from .fileio import read_toml
 from .proof.reference import Trace
 from .proof.replay_io import run_reference
@@ -321,7 +322,8 @@ def replay(
     s : array_like (N, e), optional
         A scheduled artifact's external scheduling signals (``schedule.external``, in order).
     engine : {"reference", "native", "qemu"}
-        The float64 law, the host C library (built on first use), or a Cortex-M image in QEMU.
+        The float64 law, the host C library (built on first use), or a Cortex-M image in QEMU (a scheduled
+        artifact: its scheduled loop, ``gl_sched.c``).
     target : str, optional
         With ``engine="qemu"``: the core whose image runs, ``cortex-m0``, ``cortex-m3``, ``cortex-m4``
         (default), ``cortex-m7``, ``cortex-m33`` or ``cortex-m55``.
@@ -348,13 +350,12 @@ def replay(
     if artifact.schedule is None:
         trace: Trace = engine_with_image(engine, target=target, board=board)(artifact, Y, R)
         return trace
-    if engine != "reference":
-        raise ArtifactError(f"engine {engine!r} does not run the scheduled law yet; use engine 'reference'")
+    run = run_reference if engine == "reference" else scheduled_engine(engine, target=target, board=board)
     e = len(artifact.schedule.external)
     S = None if s is None else np.asarray(s, dtype=float).reshape(Y.shape[0], e)
     if e and S is None:
         raise DataError(f"artifact {artifact.name} is scheduled on {artifact.schedule.sigma}: give s (N, {e})")
-    scheduled: Trace = run_reference(artifact, Y, R, S)
+    scheduled: Trace = run(artifact, Y, R, S)
     return scheduled
 
 

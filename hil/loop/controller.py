@@ -46,6 +46,7 @@ def qemu_peer(*, artifact: Any, transport: Any, board: str, elf: Path | None, du
 
     protocol, host, port, options = transport.qemu_serve()
     if elf is None:
+        artifact.require_unscheduled("a bus node on the image's UART")
         elf = build(artifact, target=BOARDS[board].core, board=board).files["elf"]
     elif not Path(elf).is_file():
         raise FirmwareError(f"firmware image {elf} not found")

@@ -227,6 +227,7 @@ def run_pil(
     PilResult
     """
     a = artifact
+    a.require_unscheduled("PIL")  # the scheduled image replays files only (firmware/ports/cortex-m/main_sched.c)
     if steps < 1:
         raise PlantError("--steps must be at least 1")
     platform = resolve_cortex_m(target, board)

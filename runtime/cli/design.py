@@ -333,12 +333,14 @@ def cmd_replay(args: argparse.Namespace) -> int:
     )
     if other is None:
         return 0
+    c32 = a.schedule is not None and args.engine != "reference"  # the scheduled C: against its float32 model
     checks = {
-        args.engine: one_step_check(a, samples.Y, samples.R, trace, S=samples.S),
+        args.engine: one_step_check(a, samples.Y, samples.R, trace, S=samples.S, c_engine=c32),
         args.compare: one_step_check(a, samples.Y, samples.R, other, S=samples.S),
     }
     for name, check in checks.items():
-        print(f"one-step check of {name} (float64 law from its own state at each step): {check.summary()}")
+        law = "the C's float32 arithmetic, bit for bit," if c32 and name == args.engine else "float64 law"
+        print(f"one-step check of {name} ({law} from its own state at each step): {check.summary()}")
     c = compare_traces(a, trace, other)
     print(
         f"open loop against {args.compare} (information): max |du| = {c.max_abs_u:.3g} ({c.max_rel_u:.3g} of the "

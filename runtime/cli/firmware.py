@@ -69,6 +69,8 @@ def _build(args: argparse.Namespace) -> int:
             ("static", "libgainlink_loop.a"),
             ("exe", "gainlink_loop_host"),
         ):
+            if role == "exe" and artifact.schedule is not None:
+                continue  # the scheduled loop has no stdin/stdout executable
             files[name] = res.files[role].read_bytes()
             manifest["files"][role] = name
     for name, text in sorted((p.name, p.read_text("utf-8")) for p in res.gains_dir.iterdir()):
@@ -77,7 +79,8 @@ def _build(args: argparse.Namespace) -> int:
     written = publish_files(args.out, files)
     out = Path(args.out)
     if args.target == "host":
-        (out / "gainlink_loop_host").chmod(0o755)
+        if artifact.schedule is None:
+            (out / "gainlink_loop_host").chmod(0o755)
     else:
         print(
             f"flash {report['flash_bytes']} B, RAM {report['ram_bytes_without_stack']} B + stack "
@@ -198,6 +201,9 @@ def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: 
 def _run(args: argparse.Namespace) -> int:
     # Transport options (added by the CAN and MAVLink work) each select their own host application here;
     # without one, the plain loop executable runs. --target cortex-mN serves them from the image in QEMU.
+    from gainlink.shipping.artifact import load
+
+    load(args.artifact).require_unscheduled("gainlink firmware run")
     if args.target != "host" or args.board is not None:
         return _run_image(args)
     if getattr(args, "can", None):

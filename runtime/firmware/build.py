@@ -22,7 +22,7 @@ from pathlib import Path
 from ..errors import ToolchainError
 from ..fileio import exclusive_lock
 from ..shipping.artifact import Artifact
-from ..shipping.codegen import render_c
+from ..shipping.codegen_scheduled import render_export
 from . import targets as _targets
 
 log = logging.getLogger(__name__)
@@ -137,7 +137,7 @@ def build(
     gen.mkdir(parents=True, exist_ok=True)
     cm = bdir / "cmake"
     with exclusive_lock(bdir / ".lock"):
-        for name, text in render_c(artifact).items():
+        for name, text in render_export(artifact).items():
             _write_if_changed(gen / name, text)
         if not (cm / "CMakeCache.txt").is_file():
             _configure(cmake, cm, gen=gen, platform=platform, options=options)
@@ -194,6 +194,7 @@ def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path 
     ToolchainError
         When the build fails or does not produce the executable.
     """
+    artifact.require_unscheduled("the host apps (CAN node, MAVLink server)")
     result = build(artifact, target="host", options={"GL_APPS": "ON"}, build_root=build_root)
     exe = result.build_dir / relpath
     with exclusive_lock(result.build_dir.parent / ".lock"):

@@ -90,6 +90,7 @@ def build_harnesses(artifact: Artifact) -> dict[str, Path]:
     ToolchainError
         clang is missing or the build failed.
     """
+    artifact.require_unscheduled("the fuzz harnesses")
     result = build(artifact, target="host", options={"GL_FUZZ": "ON", "CMAKE_C_COMPILER": clang()})
     exes = {name: result.build_dir / "fuzz" / f"fuzz_{name}" for name in HARNESSES}
     missing = [str(p) for p in exes.values() if not p.is_file()]

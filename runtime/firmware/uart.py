@@ -392,6 +392,7 @@ def run_foreground(
         raise FirmwareError(f"the {board} image carries no bus node on its UART (16 KiB of RAM); choose another board")
     host, port = tcp_endpoint(url, scheme="tcp" if protocol == "mavlink" else "socket")
     artifact = load(artifact_path)
+    artifact.require_unscheduled("a bus node on the image's UART")
     elf = build(artifact, target=platform.target.name, board=board).files["elf"]
     flash = flash_dir or default_flash_dir(Path(artifact_path), board=board)
     stop = {"now": False}

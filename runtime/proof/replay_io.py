@@ -66,12 +66,13 @@ def run_reference(artifact: Artifact, Y: np.ndarray, R: np.ndarray, S: np.ndarra
 
 
 def one_step_check(
-    artifact: Artifact, Y: np.ndarray, R: np.ndarray, trace, *, S: np.ndarray | None = None
+    artifact: Artifact, Y: np.ndarray, R: np.ndarray, trace, *, S: np.ndarray | None = None, c_engine: bool = False
 ) -> OneStepCheck:
     """:func:`gainlink.proof.onestep.one_step_check`, or for a scheduled artifact
-    :func:`gainlink.proof.scheduled_replay.one_step_check` (with the external signals ``S``)."""
+    :func:`gainlink.proof.scheduled_replay.one_step_check` (with the external signals ``S``; a trace of the C,
+    ``c_engine``, against the C's float32 arithmetic bit for bit)."""
     if artifact.schedule is not None:
-        return scheduled_replay.one_step_check(artifact, Y, R, S, trace)
+        return scheduled_replay.one_step_check(artifact, Y, R, S, trace, float32=c_engine)
     return _unscheduled_one_step_check(artifact, Y, R, trace)
 
 

@@ -122,7 +122,8 @@ class Artifact:
         if self.schedule is not None:
             raise ArtifactError(
                 f"{what} is for unscheduled artifacts; {self.name} is scheduled on {self.schedule.sigma} (schema 2, "
-                "velocity form), which only the design side and the float64 reference run so far"
+                "velocity form): it runs in the design, the float64 reference, export and its own C loop (gainlink "
+                "replay --engine native|qemu), not yet in the links, PIL or campaigns"
             )
 
     @property

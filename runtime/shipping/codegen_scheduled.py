@@ -1,0 +1,100 @@
+"""C code generation for a scheduled (schema-2) artifact: the per-point tables of the velocity-form law.
+
+``render_scheduled(artifact)`` returns ``{"gl_gains.h": ..., "gl_sched_gains.c": ...}``: the dimensions and the
+shape of sigma as macros (``GL_SCHEDULED 1``, ``GL_NPTS``, ``GL_E``, ``GL_SIGMA_*``) and the tables as one
+``const gl_sched_tables_t gl_sched_default`` (``firmware/include/gainlink/gl_sched.h``), every float printed
+round-trip. The firmware's CMake builds the scheduled loop (``firmware/src/gl_sched.c``) when the export folder
+holds ``gl_sched_gains.c``. :func:`render_export` is what ``gainlink export`` and the firmware build call: an
+unscheduled artifact gets :func:`gainlink.shipping.codegen.render_c`, unchanged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import codegen
+from .artifact import Artifact
+from .scheduled import COEFFICIENTS
+
+SOURCE_NAME = "gl_sched_gains.c"
+FORM_CODES = {"predictor": 0, "current": 1}
+_MISMATCH = '"gl_gains.h does not match"'
+
+
+def tables(artifact: Artifact) -> dict[str, np.ndarray]:
+    """The tables exactly as ``gl_sched_default`` holds them (float32, each point's matrices row-major).
+
+    Keys in ``gl_sched_tables_t`` order: ``S``, ``Kx Ky Kz F G Ly`` (N, rows * cols), ``u_op`` (N, m), ``u_min``,
+    ``u_max``, ``Ci`` (q * p), ``alpha``, ``rate_step`` (``Ts rate_max``; without a limit the envelope's width,
+    unused).
+    """
+    a = artifact
+    S = a.schedule
+    npts = S.points.size
+    f32 = lambda x: np.asarray(x, dtype=np.float64).astype(np.float32)  # noqa: E731
+    out = {"S": f32(S.points)}
+    out.update({k: f32(S.coef[k].reshape(npts, -1)) for k in COEFFICIENTS})
+    out["u_op"] = f32(S.u_op)
+    out["u_min"], out["u_max"] = f32(a.u_min), f32(a.u_max)
+    out["Ci"] = f32(a.Ci.reshape(-1))
+    out["alpha"] = f32(S.filter_alpha)
+    width = float(S.points[-1] - S.points[0])
+    out["rate_step"] = f32(width if S.rate_max is None else a.Ts * S.rate_max)
+    return out
+
+
+def render_header(artifact: Artifact) -> str:
+    """Text of the scheduled ``gl_gains.h``: dimensions, the shape of sigma and identity as macros."""
+    a = artifact
+    S = a.schedule
+    external = S.source == "external"
+    return (
+        codegen._banner(a) + "/**\n * @file gl_gains.h\n"
+        " * @brief Dimensions and the shape of sigma of the scheduled artifact the firmware is built for.\n */\n"
+        "#ifndef GL_GAINS_H\n#define GL_GAINS_H\n\n"
+        "#define GL_SCHEDULED 1\n"
+        f'#define GL_NAME "{a.name}"\n'
+        f'#define GL_ARTIFACT_SHA256 "{a.sha256}"\n'
+        f"#define GL_N {a.n}\n#define GL_M {a.m}\n#define GL_P {a.p}\n#define GL_Q {a.q}\n"
+        f"#define GL_NPTS {S.points.size}\n#define GL_E {len(S.external)}\n"
+        f"#define GL_OBSERVER_FORM {FORM_CODES[a.observer_form]} /* {a.observer_form} */\n"
+        f"#define GL_SIGMA_EXTERNAL {int(external)} /* sigma = {S.sigma} ({S.source}) */\n"
+        f"#define GL_SIGMA_INDEX {S.index}\n"
+        f"#define GL_SIGMA_FILTERED {int(S.filter_alpha != 1.0)}\n"
+        f"#define GL_SIGMA_RATE_LIMITED {int(S.rate_max is not None)}\n"
+        f"#define GL_TS_SECONDS {codegen.c_float(a.Ts)}\n\n"
+        "#endif /* GL_GAINS_H */\n"
+    )
+
+
+def render_source(artifact: Artifact) -> str:
+    """Text of ``gl_sched_gains.c``: the tables as one const ``gl_sched_tables_t``."""
+    a = artifact
+    S = a.schedule
+    lines = [
+        codegen._banner(a),
+        '#include "gainlink/gl_sched.h"\n',
+        f"_Static_assert(GL_N == {a.n} && GL_M == {a.m} && GL_P == {a.p} && GL_Q == {a.q}, {_MISMATCH});",
+        f"_Static_assert(GL_NPTS == {S.points.size} && GL_E == {len(S.external)}, {_MISMATCH});",
+        "",
+        "const gl_sched_tables_t gl_sched_default = {",
+    ]
+    for name, value in tables(a).items():
+        text = codegen.c_float(value) if value.ndim == 0 else codegen._c_array(value, "    ")
+        lines.append(f"    .{name} = {text},")
+    lines.append("};")
+    return "\n".join(lines) + "\n"
+
+
+def render_scheduled(artifact: Artifact) -> dict[str, str]:
+    """The export of a scheduled artifact: ``{"gl_gains.h": ..., "gl_sched_gains.c": ...}``; same artifact, same
+    bytes."""
+    if artifact.schedule is None:
+        raise ValueError(f"artifact {artifact.name} is not scheduled: use gainlink.shipping.codegen.render_c")
+    return {codegen.HEADER_NAME: render_header(artifact), SOURCE_NAME: render_source(artifact)}
+
+
+def render_export(artifact: Artifact) -> dict[str, str]:
+    """The C files of ``artifact``'s export: :func:`render_scheduled` for a scheduled artifact, else today's
+    :func:`gainlink.shipping.codegen.render_c` (byte for byte)."""
+    return codegen.render_c(artifact) if artifact.schedule is None else render_scheduled(artifact)
