@@ -22,7 +22,7 @@ import pytest
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware import qemu as fwqemu
-from gainlink.firmware.build import build, firmware_dir
+from gainlink.firmware.build import firmware_dir, replay_image
 from gainlink.firmware.cost import count_step_instructions
 from gainlink.firmware.golden import example_cases
 from gainlink.firmware.targets import BOARDS, CORTEX_M_TARGETS, TARGETS
@@ -113,7 +113,7 @@ def test_every_target_equals_the_host_bit_for_bit(pendulum, target):
 def test_uart_banner_and_one_step_on_every_board(pendulum, board):
     """Without an input file each image prints its banner and one step's command bits on its console UART."""
     a = pendulum.artifact
-    elf = build(a, target=BOARDS[board].core, board=board).files["elf"]
+    elf = replay_image(a, target=BOARDS[board].core, board=board)
     with tempfile.TemporaryDirectory() as tmp:
         res = fwqemu.run_image(elf, board=board, cwd=Path(tmp), timeout_s=10)
     assert res.returncode == 0, res.meaning
@@ -130,8 +130,8 @@ def test_uart_banner_and_one_step_on_every_board(pendulum, board):
 @pytest.mark.parametrize("target", CORTEX_M_TARGETS)
 def test_step_cost_counts_every_instruction_of_the_call(pendulum, target):
     a, N = pendulum.artifact, 200
-    elf = build(a, target=target).files["elf"]
     board = TARGETS[target].default_board
+    elf = replay_image(a, target=target, board=board)
     cost = count_step_instructions(elf, a, Y=pendulum.Y[:N], R=pendulum.R[:N], board=board)
     assert cost.calls == N, "one count per gl_loop_step call"
     assert cost.cheapest * N <= cost.instructions <= cost.dearest * N

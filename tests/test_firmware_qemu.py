@@ -17,7 +17,7 @@ import pytest
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware import qemu as fwqemu
-from gainlink.firmware.build import build
+from gainlink.firmware.build import build, replay_image
 from gainlink.firmware.golden import example_cases, random_cases
 from gainlink.shipping.artifact import render
 from support.paths import EXAMPLES
@@ -78,7 +78,7 @@ def pendulum():
 
 def test_watchdog_in_the_image(pendulum):
     a = pendulum.artifact
-    elf = build(a, target="cortex-m4").files["elf"]
+    elf = replay_image(a, target="cortex-m4", board="mps2-an386")
     tags = np.zeros(30, dtype=np.uint32)
     tags[10:16] = fwqemu.TAG_IDLE  # six periods without a measurement, watchdog at 4
     rec = fwqemu.replay(
@@ -102,14 +102,14 @@ def test_watchdog_in_the_image(pendulum):
 
 def test_fpu_left_disabled_is_caught_by_the_startup_self_test(pendulum):
     a = pendulum.artifact
-    elf = build(a, target="cortex-m4", options={"GL_SKIP_FPU_ENABLE": "ON"}).files["elf"]
+    elf = build(a, target="cortex-m4", options={"GL_SKIP_FPU_ENABLE": "ON", "GL_IMAGE_SERVE": "OFF"}).files["elf"]
     with tempfile.TemporaryDirectory() as tmp:
         (Path(tmp) / "gl_in.bin").write_bytes(
             fwqemu.encode_input(pendulum.Y[:5], pendulum.R[:5], n=a.n, m=a.m, p=a.p, q=a.q)
         )
         res = fwqemu.run_image(elf, board="mps2-an386", cwd=Path(tmp), timeout_s=10)
     assert res.returncode == fwqemu.EXIT_FPU, f"expected the FPU self-test exit, got {res.meaning}"
-    good = build(a, target="cortex-m4").files["elf"]
+    good = replay_image(a, target="cortex-m4", board="mps2-an386")
     with tempfile.TemporaryDirectory() as tmp:
         assert fwqemu.run_image(good, board="mps2-an386", cwd=Path(tmp), timeout_s=10).returncode == 0
 
@@ -118,7 +118,7 @@ def test_fpu_left_disabled_is_caught_by_the_startup_self_test(pendulum):
 def test_uart_smoke(pendulum, board):
     """Without an input file the image prints its banner and one step's command bits on the UART."""
     a = pendulum.artifact
-    elf = build(a, target="cortex-m4", board=board).files["elf"]
+    elf = replay_image(a, target="cortex-m4", board=board)
     with tempfile.TemporaryDirectory() as tmp:
         res = fwqemu.run_image(elf, board=board, cwd=Path(tmp), timeout_s=10)
     assert res.returncode == 0, res.meaning
@@ -230,7 +230,7 @@ def test_gain_update_on_target_matches_host(pendulum):
     tags = np.zeros(N, dtype=np.uint32)
     tags[[60, 120]] = fwqemu.TAG_STAGE
     rec = fwqemu.replay(
-        build(a, target="cortex-m4").files["elf"],
+        replay_image(a, target="cortex-m4", board="mps2-an386"),
         board="mps2-an386",
         n=a.n,
         m=a.m,

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from gainlink.errors import FirmwareError, PeerTimeoutError, PlantError
 from gainlink.firmware import qemu as fwqemu
-from gainlink.firmware.build import build
+from gainlink.firmware.build import replay_image
 from gainlink.firmware.targets import resolve_cortex_m
 from gainlink.proof.sampled_plant import SampledPlant
 from gainlink.proof.twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
@@ -233,7 +233,7 @@ def run_pil(
     platform = resolve_cortex_m(target, board)
     board = platform.board.name
     R = np.broadcast_to(a.r_op if reference is None else np.asarray(reference, float), (steps, a.q))
-    elf = build(a, target=platform.target.name, board=board).files["elf"]
+    elf = replay_image(a, target=platform.target.name, board=board)
     tw = None if twin is None else TwinLoop(a, outputs=twin.outputs, advance=lambda u: twin.advance(u=u), steps=steps)
     mt = (
         None

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..firmware import qemu as fwqemu
-from ..firmware.build import build
+from ..firmware.build import replay_image
 from ..firmware.targets import resolve_cortex_m
 from ..proof.reference import Trace
 from ..shipping.artifact import Artifact
@@ -19,8 +19,8 @@ def run_raw(
     (``u sat xh z fault status``). Default: cortex-m4 on mps2-an386; a board alone implies its core."""
     a = artifact
     platform = resolve_cortex_m(target, board)
-    res = build(a, target=platform.target.name, board=platform.board.name)
-    rec = fwqemu.replay(res.files["elf"], board=platform.board.name, n=a.n, m=a.m, p=a.p, q=a.q, Y=Y, R=R)
+    elf = replay_image(a, target=platform.target.name, board=platform.board.name)
+    rec = fwqemu.replay(elf, board=platform.board.name, n=a.n, m=a.m, p=a.p, q=a.q, Y=Y, R=R)
     return {
         "u": np.array(rec["u"]),
         "sat": np.array(rec["sat"]),

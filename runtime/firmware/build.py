@@ -184,6 +184,12 @@ def _outputs(cm: Path, platform: _targets.Platform) -> dict[str, Path]:
     return {ext: cm / f"gainlink_image.{ext}" for ext in ("elf", "bin", "hex", "map")}
 
 
+def replay_image(artifact: Artifact, *, target: str, board: str) -> Path:
+    """The Cortex-M image that replays recorded samples and runs PIL over semihosting, without the bus nodes on
+    its UART (``GL_IMAGE_SERVE=OFF``: the same loop, built in a third of the time); returns the ELF (cached)."""
+    return build(artifact, target=target, board=board, options={"GL_IMAGE_SERVE": "OFF"}).files["elf"]
+
+
 def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path | None = None) -> Path:
     """Build (cached) the host firmware with its apps and return the executable ``relpath`` of app ``target``.
 
