@@ -115,7 +115,11 @@ def test_ten_percent_drops_show_as_a_cost_against_the_twin(pend, can_firmware, c
         pendulum_scenario(faults=[{"kind": "drop", "start": 0.0, "stop": 4.0, "every": 10}], step_timeout=0.2, **common)
     )
     assert clean.complete and drops.complete
-    assert clean.metrics["lost"] == 0 and drops.metrics["lost"] == 40
+    assert clean.metrics["lost"] == 0
+    lost = np.flatnonzero(~drops.trace.got)
+    assert set(range(0, 400, 10)) <= set(lost.tolist()), "every dropped sample is lost"
+    # a reply later than the 0.2 s step timeout on a loaded machine also counts as lost: allow a stray one or two
+    assert len(lost) <= 42, f"{len(lost)} lost beyond the 40 dropped"
     c, d = clean.metrics["twin"], drops.metrics["twin"]
     print(
         f"against the twin: fault-free max |du| {c['worst_du_rel']:.3g} of span, "
