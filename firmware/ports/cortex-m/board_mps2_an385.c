@@ -10,7 +10,7 @@
 #include "board.h"
 #include "gl_cmsdk_uart.h"
 
-static const gl_cmsdk_uart_t uart0 = {
+const gl_cmsdk_uart_t gl_board_console = {
     .base = 0x40004000u,
     .irq_rx = 0u,
     .irq_tx = 1u,
@@ -20,18 +20,3 @@ static const gl_cmsdk_uart_t uart0 = {
 
 const char gl_board_name[] = "mps2-an385";
 const uint32_t gl_board_core_hz = 25000000u;
-
-void gl_board_uart_init(void)
-{
-    gl_cmsdk_uart_init(&uart0);
-}
-
-void gl_board_uart_start_tx(void)
-{
-    gl_cmsdk_uart_start_tx(&uart0);
-}
-
-int gl_board_irq(uint32_t irq)
-{
-    return gl_cmsdk_uart_irq(&uart0, irq);
-}

@@ -2,6 +2,7 @@
  * @file gl_cmsdk_uart.c
  * @brief The Arm CMSDK APB UART, interrupt driven (see gl_cmsdk_uart.h).
  */
+#include "board.h"
 #include "gl_cmsdk_uart.h"
 
 #include "gl_nvic.h"
@@ -102,4 +103,20 @@ int gl_cmsdk_uart_irq(const gl_cmsdk_uart_t *u, uint32_t irq)
         tx_interrupt(u);
     }
     return 0;
+}
+
+/* The board hooks of board.h for every CMSDK board: its console UART is the one the board file describes. */
+void gl_board_uart_init(void)
+{
+    gl_cmsdk_uart_init(&gl_board_console);
+}
+
+void gl_board_uart_start_tx(void)
+{
+    gl_cmsdk_uart_start_tx(&gl_board_console);
+}
+
+int gl_board_irq(uint32_t irq)
+{
+    return gl_cmsdk_uart_irq(&gl_board_console, irq);
 }

@@ -21,6 +21,10 @@ typedef struct gl_cmsdk_uart {
     uintptr_t wake_timer; /**< A CMSDK APB timer the driver may rearm to wake the emulator (0: none). */
 } gl_cmsdk_uart_t;
 
+/** The board's console UART, defined by its board file (board_mps*.c); the board hooks of board.h
+ * (gl_board_uart_init(), gl_board_uart_start_tx(), gl_board_irq()) serve it, in gl_cmsdk_uart.c. */
+extern const gl_cmsdk_uart_t gl_board_console;
+
 /** @brief Enable transmit, receive and both interrupts, in the UART and the NVIC. @param[in] u The UART. */
 void gl_cmsdk_uart_init(const gl_cmsdk_uart_t *u);
 
