@@ -1,7 +1,8 @@
 # The fixed-point loop (included from firmware/CMakeLists.txt when GL_GAINS_DIR holds gl_fixed_gains.c, i.e. the
 # artifact is a fixed-point design: `[implementation] numeric = "q31" | "q15"`).
 #   gainlink_fixed         static library: src/gl_fixed.c and the generated gl_fixed_gains_default
-#   host:      gainlink_fixed_host (shared, for Python ctypes: gainlink.firmware.fixed)
+#   host:      gainlink_fixed_host (shared, for Python ctypes: gainlink.firmware.fixed), gainlink_fixed_loop_host
+#              (executable, text in and out: the ASan/UBSan runs)
 #   cortex-m*: gainlink_fixed_image (.elf/.bin/.hex/.map): replay over semihosting (ports/cortex-m/main_fixed.c)
 # The float32 targets are built beside them from the same export, unchanged.
 add_library(gainlink_fixed STATIC src/gl_fixed.c "${GL_GAINS_DIR}/gl_fixed_gains.c")
@@ -17,6 +18,8 @@ if(GL_TARGET STREQUAL "host")
   add_library(gainlink_fixed_host SHARED ports/host/gl_fixed_host.c)
   target_link_libraries(gainlink_fixed_host PRIVATE gainlink_fixed)
   target_link_options(gainlink_fixed_host PRIVATE -Wl,--no-undefined)
+  add_executable(gainlink_fixed_loop_host ports/host/fixed_main.c) # text in and out (runs under GL_SANITIZE)
+  target_link_libraries(gainlink_fixed_loop_host PRIVATE gainlink_fixed)
 elseif(GL_TARGET IN_LIST GL_CORTEX_M_TARGETS)
   set(GL_FIXED_IMAGE_SOURCES startup.c semihost.c main_fixed.c gl_clock.c gl_uart.c no_heap.c)
   if(GL_BOARD MATCHES "^mps")
