@@ -6,7 +6,10 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
+from gainlink.firmware.fixed import replay_image, run_host
+from gainlink.shipping.artifact import load
 from support.cli import GOOD_SPEC, assert_one_clear_line, run_cli
 from support.paths import EXAMPLES
 
@@ -49,3 +52,19 @@ def test_replay_engines_of_a_fixed_point_artifact_agree_byte_for_byte(pendulum_q
     ref = d / "reference.csv"
     assert run_cli("replay", gains, "--input", d / "in.csv", "--output", ref).code == 0
     assert ref.read_text() != outs["native"]  # the float64 law is not what the fixed-point artifact runs
+
+
+def test_firmware_build_ships_the_fixed_point_image(pendulum_q31, tmp_path):
+    """`firmware build` of a fixed-point artifact writes the integer image beside the float32 one, and the written
+    ELF is the one that runs (replayed from the output folder, equal to the host build)."""
+    _, gains = pendulum_q31
+    res = run_cli("firmware", "build", gains, "--target", "cortex-m0", "--out", tmp_path / "fw")
+    assert res.code == 0, res.err
+    manifest = json.loads((tmp_path / "fw" / "firmware.json").read_text())
+    assert manifest["fixed_point"]["elf"] == "gainlink_pendulum_fixed.elf"
+    assert (tmp_path / "fw" / "src" / "gl_fixed_gains.c").is_file()
+    a = load(gains)
+    Y = np.tile(np.array([[0.1, -0.02]], dtype=np.float32), (50, 1))
+    R = np.full((50, 1), 0.3, dtype=np.float32)
+    image = replay_image(tmp_path / "fw" / "gainlink_pendulum_fixed.elf", a, Y, R, board="microbit")
+    assert np.array_equal(image.U, run_host(a, Y, R).U) and np.array_equal(image.XH, run_host(a, Y, R).XH)
