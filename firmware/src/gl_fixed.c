@@ -159,7 +159,7 @@ static int32_t quantise(float x, int frac)
     return (int32_t)rshift_round(signed_mant, exp < -62 ? 62 : -exp);
 }
 
-/* Step 1: clip to the declared range (order keys) and quantise; clip bits from `bit0`. */
+/* Step 1 for one value: clip to its declared range (order keys; `bit` into *clip when clipped) and quantise. */
 static gl_fx_word_t sample(float x, int32_t key_lo, int32_t key_hi, gl_fx_word_t lo, gl_fx_word_t hi, int frac,
                            uint32_t bit, uint32_t *clip)
 {

@@ -28,6 +28,12 @@
  *
  * Words (q31 / q15): coefficients, samples and commands 32 / 16 bits (::gl_fx_coef_t, ::gl_fx_word_t); estimate,
  * integrators and the unsaturated command 32 bits; accumulators 64 bits.
+ *
+ * @par CMake targets (firmware/cmake/gl_fixed.cmake; present when the export holds gl_fixed_gains.c)
+ * - `gainlink_fixed`: this API and the generated gains (GL_FIXED_UNROLLED, on by default: the row sums of the
+ *   generated gl_fixed_step.h; off: the generic table-driven loop, bit for bit the same).
+ * - host: `gainlink_fixed_host` (shared, Python ctypes), `gainlink_fixed_loop_host` (text in and out).
+ * - cortex-m*: `gainlink_fixed_image` (replay over semihosting, ports/cortex-m/main_fixed.c).
  */
 #ifndef GAINLINK_GL_FIXED_H
 #define GAINLINK_GL_FIXED_H
