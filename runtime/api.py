@@ -60,6 +60,7 @@ def design(
     operating_point: Mapping[str, Any] | None = None,
     discretization: str | None = None,
     schedule: Mapping[str, Any] | None = None,
+    implementation: Mapping[str, Any] | None = None,
 ) -> Artifact:
     """Design a controller and observer and return the checked, sealed artifact.
 
@@ -88,6 +89,9 @@ def design(
         ``rate_max``, ``filter_tau``, and ``plant``: one entry per point, each a ``control.StateSpace`` (about
         the origin) or a dict of ``A B C D u_op y_op x_op``. ``plant`` then gives only the shared kind and
         names (a python-control system's own matrices are dropped). The artifact is scheduled (schema 2).
+    implementation : dict, optional
+        The ``[implementation]`` table, e.g. ``{"numeric": "q31"}`` for the fixed-point law (README, "Fixed
+        point"; needs the ranges ``y_min y_max r_min r_max`` in ``limits``); given keys replace the spec's.
 
     Returns
     -------
@@ -134,6 +138,7 @@ def design(
         operating_point=operating_point,
         discretization=discretization,
         schedule=schedule,
+        implementation=implementation,
     )
     return from_dict(report.artifact)
 
@@ -156,6 +161,7 @@ def design_report(
     operating_point: Mapping[str, Any] | None = None,
     discretization: str | None = None,
     schedule: Mapping[str, Any] | None = None,
+    implementation: Mapping[str, Any] | None = None,
 ) -> DesignResult:
     """:func:`design` with the numbers behind its checks: what ``gainlink design`` prints.
 
@@ -182,6 +188,7 @@ def design_report(
         "limits": limits,
         "operating_point": operating_point,
         "schedule": None if schedule is None else _schedule_table(schedule),
+        "implementation": implementation,
     }
     shortcuts = {"Q": Q, "R": R, "W": W, "V": V, "u_min": u_min, "u_max": u_max}
     given = [v for v in (Ts, name, discretization, *tables.values(), *shortcuts.values()) if v is not None]

@@ -251,7 +251,35 @@ def target_uart_block() -> str:
     return table(head, rows) + "\n" + provenance(doc) + "\n"
 
 
+def fixed_point_cost_block() -> str:
+    doc = result("fixed_point_cost")
+    if doc is None:
+        return missing("fixed-point cost", "python bench/fixed_point_cost.py")
+    rows = []
+    for r in doc["per_target"]:
+        plain = r.get("float32_plain_fma_instructions_per_step")
+        ratio = f"{r['ratio_float32_to_q31']:g}x"
+        if plain is not None:
+            ratio += f" / {r['ratio_float32_plain_to_q31']:g}x"
+        q, f = r["q31_image"], r["float32_image"]
+        rows.append(
+            [
+                f"{r['target']} ({r['board']})",
+                num(r["q31_instructions_per_step"]),
+                num(r["float32_instructions_per_step"]),
+                "—" if plain is None else num(plain),
+                ratio,
+                f"{num(q['flash_bytes'])} / {num(f['flash_bytes'])} B",
+                f"{num(q['ram_bytes_without_stack'])} / {num(f['ram_bytes_without_stack'])} B",
+            ]
+        )
+    head = ["core (board)", "q31", "float32 as built", "float32 plain multiply-add", "float32 / q31"]
+    head += ["flash q31 / float32 image", "RAM (no stack) q31 / float32 image"]
+    return table(head, rows) + "\n" + provenance(doc) + "\n"
+
+
 BLOCKS: dict[str, Callable[[], str]] = {
+    "fixed_point_cost": fixed_point_cost_block,
     "fuzz": fuzz_block,
     "soak": soak_block,
     "campaign": campaign_block,

@@ -31,6 +31,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("spec", help="plant spec (TOML)")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
+    p.add_argument(
+        "--numeric",
+        choices=("float32", "q31", "q15"),
+        help="the law's arithmetic, overriding [implementation] numeric (q31/q15: fixed point, needs declared ranges)",
+    )
     p.set_defaults(func=cmd_design)
 
     p = sub.add_parser("validate", help="check a gain artifact against its schema, hash and invariants")
@@ -141,7 +146,8 @@ def cmd_design(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise GainlinkError(f"output path {out} exists and is not a directory")
-    result = api.design_report(args.spec)
+    numeric = None if args.numeric is None else {"numeric": args.numeric}
+    result = api.design_report(args.spec, implementation=numeric)
     artifact_mod.from_dict(result.artifact)  # the written file must load: check before publishing
     publish_files(out, {"gains.json": artifact_mod.render(result.artifact)})
     if result.schedule is not None:

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from ..errors import DataError, FirmwareError, GainlinkError, ToolchainError
 from ..firmware.targets import BOARDS, CORTEX_M_TARGETS, TARGETS, resolve, resolve_cortex_m
+from ..shipping.codegen_fixed import is_fixed
 
 _BOARD_HELP = "QEMU board of the Cortex-M image (default: the target's first): " + ", ".join(
     f"{b.name} ({b.core})" for b in BOARDS.values()
@@ -73,6 +74,8 @@ def _build(args: argparse.Namespace) -> int:
                 continue  # the scheduled loop has no stdin/stdout executable
             files[name] = res.files[role].read_bytes()
             manifest["files"][role] = name
+    if is_fixed(artifact):
+        _add_fixed(files, manifest, res, stem=stem)
     for name, text in sorted((p.name, p.read_text("utf-8")) for p in res.gains_dir.iterdir()):
         files[f"src/{name}"] = text
     files["firmware.json"] = json.dumps(manifest, indent=2) + "\n"
@@ -81,6 +84,8 @@ def _build(args: argparse.Namespace) -> int:
     if args.target == "host":
         if artifact.schedule is None:
             (out / "gainlink_loop_host").chmod(0o755)
+        if is_fixed(artifact):
+            (out / "gainlink_fixed_loop_host").chmod(0o755)
     else:
         print(
             f"flash {report['flash_bytes']} B, RAM {report['ram_bytes_without_stack']} B + stack "
@@ -91,6 +96,28 @@ def _build(args: argparse.Namespace) -> int:
         + ", ".join(p.name for p in written if p.parent == out)
     )
     return 0
+
+
+def _add_fixed(files: dict, manifest: dict, res, *, stem: str) -> None:
+    """A fixed-point artifact's integer loop beside the float32 one: the image ``{stem}_fixed.*`` (replay over
+    semihosting, firmware/ports/cortex-m/main_fixed.c) or the host library and executable."""
+    from gainlink.firmware.size import size_report
+
+    cm = res.build_dir
+    fixed: dict[str, str] = {}
+    if res.board is not None:
+        for ext in ("elf", "bin", "hex", "map"):
+            files[f"{stem}_fixed.{ext}"] = (cm / f"gainlink_fixed_image.{ext}").read_bytes()
+            fixed[ext] = f"{stem}_fixed.{ext}"
+        report = size_report(cm / "gainlink_fixed_image.elf", board=res.board)
+        report["elf"] = f"{stem}_fixed.elf"
+        files[f"{stem}_fixed.size.json"] = json.dumps(report, indent=2) + "\n"
+        fixed["size"] = f"{stem}_fixed.size.json"
+    else:
+        for role, name in (("shared", "libgainlink_fixed_host.so"), ("exe", "gainlink_fixed_loop_host")):
+            files[name] = (cm / name).read_bytes()
+            fixed[role] = name
+    manifest["fixed_point"] = fixed
 
 
 # --- firmware flash ---------------------------------------------------------------------------------

@@ -19,6 +19,8 @@ from ..proof.reference import Trace
 from ..shipping import gains_layout
 from ..shipping.artifact import Artifact
 from ..shipping.codegen import shape_of
+from ..shipping.codegen_fixed import is_fixed
+from . import fixed as fixed_engine
 
 STATUS = {
     0: "GL_OK",
@@ -218,6 +220,9 @@ def run(artifact: Artifact, Y: np.ndarray, R: np.ndarray) -> Trace:
     Returns
     -------
     Trace
-        The C loop's outputs (float32 values as float64 arrays).
+        The C loop's outputs (float32 values as float64 arrays); for a fixed-point artifact, the integer
+        loop's (:mod:`gainlink.engines.fixed`).
     """
+    if is_fixed(artifact):
+        return fixed_engine.run_native(artifact, Y, R)
     return NativeLoop(artifact).run(Y, R)

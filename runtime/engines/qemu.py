@@ -9,6 +9,8 @@ from ..firmware.build import replay_image
 from ..firmware.targets import resolve_cortex_m
 from ..proof.reference import Trace
 from ..shipping.artifact import Artifact
+from ..shipping.codegen_fixed import is_fixed
+from . import fixed as fixed_engine
 from .native import trace_from_raw
 
 
@@ -53,4 +55,6 @@ def run(
         The firmware's outputs (float32 values as float64 arrays).
     """
     artifact.require_unscheduled("the qemu engine")
+    if is_fixed(artifact):  # its implementation is the integer law: the fixed-point image
+        return fixed_engine.run_qemu(artifact, Y, R, target=target, board=board)
     return trace_from_raw(run_raw(artifact, Y, R, target=target, board=board), m=artifact.m)

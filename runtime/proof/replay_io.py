@@ -1,8 +1,9 @@
 """Replay recorded measurements through an engine that runs the control law.
 
 Engines share one signature, ``run(artifact, Y, R) -> Trace``: ``reference`` is the float64
-Python law; ``native`` (host C library) and ``qemu`` (a Cortex-M image under QEMU; ``target`` and
-``board`` choose which, cortex-m4 on mps2-an386 by default) are provided by :mod:`gainlink.engines`
+Python law; ``fixed`` the bit-exact integer model of a fixed-point artifact; ``native`` (host C library) and
+``qemu`` (a Cortex-M image under QEMU; ``target`` and ``board`` choose which, cortex-m4 on mps2-an386 by
+default; for a fixed-point artifact both run the integer C) are provided by :mod:`gainlink.engines`
 and loaded on first use, so replay never imports a toolchain it does not need.
 
 Input CSV: a header with ``y0..y{p-1}`` and ``r0..r{q-1}`` (a ``t`` column is allowed and copied
@@ -27,6 +28,7 @@ from ..errors import DataError, GainlinkError
 from ..fileio import atomic_write_text, read_user_file
 from ..shipping.artifact import Artifact
 from . import scheduled_replay
+from .fixed_law import FixedPointLoop
 from .onestep import OneStepCheck
 from .onestep import one_step_check as _unscheduled_one_step_check
 from .reference import ReferenceLoop, Trace
@@ -76,7 +78,17 @@ def one_step_check(
     return _unscheduled_one_step_check(artifact, Y, R, trace)
 
 
+def run_fixed(artifact: Artifact, Y: np.ndarray, R: np.ndarray) -> Trace:
+    """The bit-exact integer model of a fixed-point artifact (:mod:`.fixed_law`) on float32 samples, as the C
+    takes them: the trace ``native`` and ``qemu`` give for it, bit for bit."""
+    loop = FixedPointLoop(artifact)
+    Y32 = np.asarray(Y, dtype=np.float32).astype(np.float64)
+    R32 = np.asarray(R, dtype=np.float32).astype(np.float64)
+    return loop.run(Y32, R32)
+
+
 register_engine("reference", run_reference)
+register_engine("fixed", run_fixed)
 
 
 @dataclass(frozen=True)

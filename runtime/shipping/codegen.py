@@ -18,6 +18,7 @@ import numpy as np
 from ..fileio import publish_files
 from . import gains_layout as layout
 from .artifact import Artifact
+from .codegen_fixed import is_fixed, render_fixed
 
 FORM_CODES = {"predictor": 0, "current": 1}
 ANTI_WINDUP_CODES = {"none": 0, "clamp": 1, "backcalc": 2}
@@ -276,17 +277,21 @@ def render_c(artifact: Artifact) -> dict[str, str]:
     Returns
     -------
     dict of str to str
-        ``{"gl_gains.h": ..., "gl_gains_layout.h": ..., "gl_gains.c": ..., "gl_step.h": ...}``; identical for
+        ``{"gl_gains.h": ..., "gl_gains_layout.h": ..., "gl_gains.c": ..., "gl_step.h": ...}``, and for a
+        fixed-point artifact ``gl_fixed_gains.h`` and ``gl_fixed_gains.c`` (:mod:`.codegen_fixed`); identical for
         the same artifact.
     """
     artifact.require_unscheduled("codegen")
     gains = gain_set(artifact)
-    return {
+    files = {
         HEADER_NAME: render_header(artifact, gains),
         layout.HEADER_NAME: layout.GAINS.render_header(banner=_banner(artifact), shape=shape_of(artifact)),
         SOURCE_NAME: render_source(artifact, gains),
         STEP_NAME: render_step(artifact),
     }
+    if is_fixed(artifact):  # plus the certified integers (codegen_fixed); a float32 artifact's files are unchanged
+        files |= render_fixed(artifact)
+    return files
 
 
 def export(artifact: Artifact, *, out_dir: str | Path) -> list[Path]:

@@ -1,0 +1,80 @@
+"""Fixed-point designs for the C tests and the reference model's run in the same shape as the C's records."""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+from gainlink.fileio import read_toml
+from gainlink.proof.fixed_law import FixedPointLoop
+from gainlink.shipping.artifact import Artifact, from_dict
+from gainlink.spec import parse_spec
+from gainlink.synthesis import synthesize
+from gainlink.synthesis.random_plants import random_spec
+
+from support.paths import EXAMPLES
+
+_CACHE: dict = {}
+
+
+def example(name: str, numeric: str) -> Artifact:
+    """The example ``name`` designed with ``[implementation] numeric`` (cached for the session)."""
+    key = (name, numeric)
+    if key not in _CACHE:
+        data, _ = read_toml(EXAMPLES / f"{name}.toml", what="spec", error=ValueError)
+        data = copy.deepcopy(data)
+        data["implementation"] = {"numeric": numeric}
+        _CACHE[key] = from_dict(synthesize(parse_spec(data)).artifact)
+    return _CACHE[key]
+
+
+def random_design(seed: int, numeric: str, y_range: float = 2.0, r_range: float = 1.0, **kw) -> Artifact:
+    """A seeded random design (gainlink.synthesis.random_plants) certified in ``numeric`` with ranges +-y_range,
+    +-r_range."""
+    key = (seed, numeric, repr(sorted(kw.items())))
+    if key not in _CACHE:
+        spec = random_spec(seed, **kw)
+        p, q = kw["p"], kw.get("q", 0)
+        spec["limits"] = spec.get("limits", {}) | {"y_min": [-y_range] * p, "y_max": [y_range] * p}
+        if q:
+            spec["limits"] |= {"r_min": [-r_range] * q, "r_max": [r_range] * q}
+        spec["implementation"] = {"numeric": numeric, "float32_check": False, "fixed_point_max_error": 0.5}
+        _CACHE[key] = from_dict(synthesize(parse_spec(spec)).artifact)
+    return _CACHE[key]
+
+
+@dataclass(frozen=True)
+class ModelRun:
+    """The integer model's steps: as gainlink.firmware.fixed.FixedRun (masks as bit masks, overflow as names)."""
+
+    U: np.ndarray
+    V: np.ndarray
+    XH: np.ndarray
+    Z: np.ndarray
+    sat: np.ndarray
+    clip: np.ndarray
+    fault: np.ndarray
+    overflow: list
+
+
+def model_run(a: Artifact, Y, R) -> ModelRun:
+    """Run float32 samples through gainlink.proof.fixed_law (widened exactly to double, as the C does)."""
+    loop = FixedPointLoop(a)
+    Y = np.asarray(Y, dtype=np.float32).reshape(-1, a.p)
+    R = np.asarray(R, dtype=np.float32).reshape(Y.shape[0], a.q)
+    out: dict[str, list] = {k: [] for k in ("U", "V", "XH", "Z", "sat", "clip", "fault", "overflow")}
+    for k in range(Y.shape[0]):
+        s = loop.step_samples(Y[k].astype(np.float64), R[k].astype(np.float64))
+        out["U"].append(s.U)
+        out["V"].append(s.V)
+        out["XH"].append(list(loop.XH))
+        out["Z"].append(list(loop.Z))
+        out["sat"].append(sum(1 << i for i, b in enumerate(s.saturated) if b))
+        bits = list(s.clipped_y) + list(s.clipped_r)
+        out["clip"].append(sum(1 << i for i, b in enumerate(bits) if b))
+        out["fault"].append(s.fault)
+        out["overflow"].append(set(s.overflow))
+    arr = {k: np.array(v, dtype=np.int64) for k, v in out.items() if k not in ("overflow", "fault")}
+    Z = arr["Z"].reshape(Y.shape[0], a.q)
+    return ModelRun(arr["U"], arr["V"], arr["XH"], Z, arr["sat"], arr["clip"], np.array(out["fault"]), out["overflow"])

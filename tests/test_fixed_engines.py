@@ -1,0 +1,70 @@
+"""`design --numeric` and the replay engines of a fixed-point artifact: `fixed` (the bit-exact model), `native`
+(the host C) and `qemu` (the Cortex-M image) write the same trace, byte for byte; the flag overrides the spec's
+`[implementation] numeric`, and a fixed-point design without declared ranges is one line, exit 2, nothing written."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from gainlink.firmware.fixed import replay_image, run_host
+from gainlink.shipping.artifact import load
+from support.cli import GOOD_SPEC, assert_one_clear_line, run_cli
+from support.paths import EXAMPLES
+
+
+@pytest.fixture(scope="module")
+def pendulum_q31(tmp_path_factory) -> tuple:
+    d = tmp_path_factory.mktemp("fixed-engines")
+    res = run_cli("design", EXAMPLES / "pendulum.toml", "--out", d / "design", "--numeric", "q31")
+    assert res.code == 0, res.err
+    assert "fixed point q31" in res.out
+    gains = d / "design" / "gains.json"
+    sim = run_cli("simulate", gains, "--steps", "300", "--noise", "0.01", "--out", d / "in.csv")
+    assert sim.code == 0, sim.err
+    return d, gains
+
+
+def test_numeric_flag_overrides_the_spec(pendulum_q31):
+    _, gains = pendulum_q31
+    data = json.loads(gains.read_text())
+    assert data["checks"]["fixed_point"]["numeric"] == "q31"
+
+
+def test_fixed_point_without_ranges_is_one_line(tmp_path):
+    spec = tmp_path / "servo.toml"
+    spec.write_text(GOOD_SPEC)
+    res = run_cli("design", spec, "--out", tmp_path / "out", "--numeric", "q31")
+    assert_one_clear_line(res, "range")
+    assert not (tmp_path / "out").exists()
+
+
+def test_replay_engines_of_a_fixed_point_artifact_agree_byte_for_byte(pendulum_q31):
+    d, gains = pendulum_q31
+    outs = {}
+    for engine, extra in (("fixed", ()), ("native", ()), ("qemu", ("--target", "cortex-m3"))):
+        out = d / f"{engine}.csv"
+        res = run_cli("replay", gains, "--input", d / "in.csv", "--output", out, "--engine", engine, *extra)
+        assert res.code == 0, res.err
+        outs[engine] = out.read_text()
+    assert outs["fixed"] == outs["native"] == outs["qemu"]
+    ref = d / "reference.csv"
+    assert run_cli("replay", gains, "--input", d / "in.csv", "--output", ref).code == 0
+    assert ref.read_text() != outs["native"]  # the float64 law is not what the fixed-point artifact runs
+
+
+def test_firmware_build_ships_the_fixed_point_image(pendulum_q31, tmp_path):
+    """`firmware build` of a fixed-point artifact writes the integer image beside the float32 one, and the written
+    ELF is the one that runs (replayed from the output folder, equal to the host build)."""
+    _, gains = pendulum_q31
+    res = run_cli("firmware", "build", gains, "--target", "cortex-m0", "--out", tmp_path / "fw")
+    assert res.code == 0, res.err
+    manifest = json.loads((tmp_path / "fw" / "firmware.json").read_text())
+    assert manifest["fixed_point"]["elf"] == "gainlink_pendulum_fixed.elf"
+    assert (tmp_path / "fw" / "src" / "gl_fixed_gains.c").is_file()
+    a = load(gains)
+    Y = np.tile(np.array([[0.1, -0.02]], dtype=np.float32), (50, 1))
+    R = np.full((50, 1), 0.3, dtype=np.float32)
+    image = replay_image(tmp_path / "fw" / "gainlink_pendulum_fixed.elf", a, Y, R, board="microbit")
+    assert np.array_equal(image.U, run_host(a, Y, R).U) and np.array_equal(image.XH, run_host(a, Y, R).XH)
