@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 
 from gainlink.firmware.mavlink_app import firmware_argv, mavlink_executable
 from gainlink.hil.loop.bridge import run_scenario
@@ -184,6 +185,7 @@ def test_a_stderr_reader_that_never_reads_does_not_stall_the_mavlink_app(pend, t
     (tmp_path / "frames.hex").write_text("\n".join(f.hex() for f in frames))
     port = udp_port()
     argv = firmware_argv(mavlink_executable(art), url=f"udpin:127.0.0.1:{port}", signing_key=key_file)
+    started = time.monotonic()
     proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:  # stderr is read only after the end
         assert b"gainlink-mavlink" in proc.stdout.readline()
@@ -214,8 +216,11 @@ def test_a_stderr_reader_that_never_reads_does_not_stall_the_mavlink_app(pend, t
         proc.terminate()
         _, err = proc.communicate(timeout=10)
     assert proc.returncode == 0
+    seconds = time.monotonic() - started
     lines = err.decode().splitlines()
-    assert len(err) < 64 * 1024 and len(lines) < 300, len(lines)  # not one line per refusal
+    # not one line per refusal: at most 20 lines and a summary per one-second window (gl_log.h), however long
+    # the flood took on this machine, and less than the pipe holds
+    assert len(err) < 64 * 1024 and len(lines) <= 21 * (seconds + 2), (len(lines), seconds)
     summary = dict(kv.split("=") for kv in lines[-1].split(": ", 1)[1].split())
     refused = sum(int(summary[k]) for k in ("unsigned", "bad_signature", "replayed"))
     assert refused > 50_000 and int(summary["log_suppressed"]) > 0 and int(summary["commits"]) == 0
