@@ -45,17 +45,28 @@ def test_fma32_is_correctly_rounded_like_libm_fmaf():
     assert tie_hits >= 64, "the double-rounding cases were exercised (plain rounding from double gets them wrong)"
 
 
-def test_float32_loop_equals_the_host_build_bit_for_bit(random_designs, closed_loop_designs):
-    cases = list(example_cases(EXAMPLES))
+def _structures(cases) -> list:
+    """One case per compiled structure (form, anti-windup mode, integrators, operating point)."""
     picked = {}
-    for case in random_designs + closed_loop_designs:
+    for case in cases:
         a = case.artifact
         picked.setdefault((a.observer_form, a.anti_windup, a.q > 0, a.has_operating_point), case)
-    cases += list(picked.values())
+    return list(picked.values())
+
+
+def test_the_compared_cases_cover_every_structure(random_designs, closed_loop_designs):
+    cases = _structures(random_designs) + _structures(closed_loop_designs)
     assert any(c.artifact.has_operating_point for c in cases) and any(c.artifact.M is not None for c in cases)
     assert {(c.artifact.observer_form, c.artifact.anti_windup) for c in cases} >= {
         (f, aw) for f in ("predictor", "current") for aw in ("none", "clamp", "backcalc")
     }
+
+
+@pytest.mark.parametrize("source", ["examples", "random_designs", "closed_loop_designs"])  # three workers
+def test_float32_loop_equals_the_host_build_bit_for_bit(source, request):
+    """The numpy float32 model equals the host build bit for bit (a refused sample included), on the examples
+    and on one random design per compiled structure."""
+    cases = example_cases(EXAMPLES) if source == "examples" else _structures(request.getfixturevalue(source))
     for case in cases:
         Y = case.Y.copy()
         Y[11, 0] = np.nan  # a refused sample: the safe command, state kept
