@@ -156,20 +156,13 @@ def compute_metrics(
                 tracked[name] = tracking(trace.t, yj, trace.r[:, j])
         else:  # a regulator: its set point is the operating point
             for i, name in enumerate(sig["outputs"]):
-                tracked[name] = tracking(trace.t, trace.y[:, i], _setpoint(trace, a, i))
+                tracked[name] = tracking(trace.t, trace.y[:, i], np.full(N, a.y_op[i]))
     out["tracked"] = tracked
     if trace.sigma is not None:
         from .sched_metrics import schedule_metrics
 
         out["schedule"] = schedule_metrics(trace, artifact=a)
     return _clean(out)
-
-
-def _setpoint(trace: RunTrace, a: Any, i: int) -> np.ndarray:
-    """A regulator's set point for output ``i``: ``y_op``, or for a scheduled one ``y_op`` at each step's sigma."""
-    if a.schedule is None or trace.sigma is None:
-        return np.full(trace.t.size, a.y_op[i])
-    return np.array([a.schedule.trim_at(s)[1][i] for s in trace.sigma])
 
 
 def link_capacity(sent_ns: np.ndarray, back_ns: np.ndarray, *, answered_in_time: np.ndarray) -> dict:
