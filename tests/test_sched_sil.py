@@ -20,6 +20,8 @@ from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict
+from support.cli import run_cli
+from support.shared import once_per_run
 
 pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 C_ORIFICE = 0.4  # the tank's orifice coefficient: equilibrium q = u = c sqrt(h)
@@ -36,14 +38,25 @@ def single_point(i: int) -> dict:
     return data
 
 
-@pytest.fixture(scope="module")
-def tank():
-    return from_dict(synthesize(parse_spec(tank_dict())).artifact)
+def _designed(factory, name: str, spec: dict):
+    """The artifact of ``spec``, designed once per test run (the scheduled verdicts take seconds)."""
+    return from_dict(once_per_run(factory, f"sched_sil_{name}", lambda: synthesize(parse_spec(spec)).artifact))
 
 
 @pytest.fixture(scope="module")
-def singles():
-    return [from_dict(synthesize(parse_spec(single_point(i))).artifact) for i in range(3)]
+def tank(tmp_path_factory):
+    return _designed(tmp_path_factory, "tank", tank_dict())
+
+
+@pytest.fixture(scope="module")
+def singles(tmp_path_factory):
+    return [_designed(tmp_path_factory, f"single{i}", single_point(i)) for i in range(3)]
+
+
+@pytest.fixture(scope="module")
+def external(tmp_path_factory):
+    """The tank scheduled on an external signal: limited to 0.05 /s, and free."""
+    return {r: _designed(tmp_path_factory, f"external_{r}", external_tank(rate_max=r)) for r in (0.05, None)}
 
 
 def _scenario(duration: float, h0: float, reference: dict, **extra) -> object:
@@ -110,12 +123,8 @@ def test_about_a_schedule_point_the_scheduled_design_is_that_points_design(tank,
     assert _step_iae(tank, 0.25, 0.3) == pytest.approx(_step_iae(singles[1], 0.25, 0.3), rel=5e-3)
 
 
-def _external(rate_max: float | None = 0.05):
-    return from_dict(synthesize(parse_spec(external_tank(rate_max=rate_max))).artifact)
-
-
-def test_an_external_sigma_follows_its_profile_clipped_and_rate_limited(tmp_path):
-    art = _external()
+def test_an_external_sigma_follows_its_profile_clipped_and_rate_limited(external, tmp_path):
+    art = external[0.05]
     signal = {"kind": "sweep", "low": 0.0, "high": 1.2, "rate": 0.2, "start": 1.0}
     data = {"artifact": "unused.json", "transport": {}, "plant": {"kind": "tank", "step": 0.005}, "duration": 20.0,
             "initial_state": {"q": 0.08, "h": 0.04}, "schedule_signal": {"load": signal}}  # fmt: skip
@@ -144,8 +153,42 @@ def test_an_external_sigma_follows_its_profile_clipped_and_rate_limited(tmp_path
         ("external", {"schedule_signal": {"load": {"kind": "sweep", "low": 0.0}}}, "a sweep needs low, high and"),
     ],
 )
-def test_a_wrong_scheduling_signal_is_one_line(tank, singles, which, change, words):
-    art = {"external": _external(None), "output": tank, "single": singles[0]}[which]
+def test_a_wrong_scheduling_signal_is_one_line(tank, singles, external, which, change, words):
+    art = {"external": external[None], "output": tank, "single": singles[0]}[which]
     with pytest.raises(ScenarioError, match=None) as exc:
         run_sil(art, _scenario(1.0, 0.04, 0.04, **change))
     assert words in str(exc.value) and "\n" not in str(exc.value)
+
+
+SCENARIO = """\
+name = "tank_sweep"
+artifact = "gains.json"
+duration = 6.0
+controller = "reference"
+[plant]
+kind = "tank"
+step = 0.005
+[transport]
+interface = "virtual"
+[initial_state]
+q = 0.08
+h = 0.04
+[reference.r_h]
+kind = "sweep"
+low = 0.04
+high = 0.3
+rate = 0.1
+"""
+
+
+def test_gainlink_hil_run_runs_a_scheduled_artifact_as_sil_and_refuses_a_bad_signal_in_one_line(tank, tmp_path):
+    tank.save(tmp_path / "gains.json")
+    (tmp_path / "s.toml").write_text(SCENARIO)
+    res = run_cli("hil", "run", tmp_path / "s.toml", "--report", tmp_path / "rep", "--no-progress", "--no-plots")
+    assert res.code == 0, res.err
+    assert "transport sil (in-process, no link)" in res.out and "sigma h (output): covered [0.04, " in res.out
+    assert (tmp_path / "rep" / "sigma.csv").is_file()
+    (tmp_path / "bad.toml").write_text(SCENARIO + '[schedule_signal.load]\nkind = "constant"\nvalue = 0.5\n')
+    res = run_cli("hil", "run", tmp_path / "bad.toml", "--report", tmp_path / "rep2", "--no-progress")
+    assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and "schedule_signal.load is not" in res.err
+    assert not (tmp_path / "rep2").exists()
