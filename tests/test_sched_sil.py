@@ -9,6 +9,7 @@ or the scenario's profile (clip and rate limit written out by hand); the single-
 from __future__ import annotations
 
 import copy
+import json
 
 import gainlink.hil
 import numpy as np
@@ -183,11 +184,15 @@ rate = 0.1
 
 def test_gainlink_hil_run_runs_a_scheduled_artifact_as_sil_and_refuses_a_bad_signal_in_one_line(tank, tmp_path):
     tank.save(tmp_path / "gains.json")
-    (tmp_path / "s.toml").write_text(SCENARIO)
-    res = run_cli("hil", "run", tmp_path / "s.toml", "--report", tmp_path / "rep", "--no-progress", "--no-plots")
+    argv = ("--artifact", tmp_path / "gains.json", "--report", tmp_path / "rep", "--no-progress", "--no-plots")
+    res = run_cli("hil", "run", "tank_sweep", *argv)  # the built-in sweep, with the host C
     assert res.code == 0, res.err
     assert "transport sil (in-process, no link)" in res.out and "sigma h (output): covered [0.04, " in res.out
+    report = json.loads((tmp_path / "rep" / "report.json").read_text())
+    assert report["schedule"]["coverage"] > 0.95 and report["run"]["controller"]["kind"].startswith("firmware")
+    assert report["twin"]["worst_du_rel"] < 1e-5 and not report["model_twin"]["warning"]
     assert (tmp_path / "rep" / "sigma.csv").is_file()
+    (tmp_path / "s.toml").write_text(SCENARIO)
     (tmp_path / "bad.toml").write_text(SCENARIO + '[schedule_signal.load]\nkind = "constant"\nvalue = 0.5\n')
     res = run_cli("hil", "run", tmp_path / "bad.toml", "--report", tmp_path / "rep2", "--no-progress")
     assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and "schedule_signal.load is not" in res.err
