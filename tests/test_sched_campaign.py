@@ -1,4 +1,5 @@
-"""A campaign over a scheduled artifact's sigma rate and range (SIL, a LocalCluster of one worker).
+"""A campaign over a scheduled artifact's sigma rate and range (SIL with the scheduled C, a LocalCluster of one
+worker).
 
 The plant is the spring of schedule_cases (stiffness scheduled 1 -> 400 on an external sigma; no common Lyapunov
 function: the design's verdict is a simulated ``rate_max``) run as ``kind = "scheduled_model"``, whose dynamics
@@ -51,7 +52,7 @@ def _campaign(path, rate_max: float) -> dict:
         "artifact": str(path),
         "scenario": {
             "duration": 10.0,
-            "controller": "reference",
+            "controller": "firmware",  # the scheduled C of the host library, built on the worker
             "twin": False,
             "model_twin": False,
             "plant": {"kind": "scheduled_model"},
@@ -86,7 +87,7 @@ def test_a_campaign_over_sigma_rate_and_range_finds_where_stability_stops(spring
         sch = rec["metrics"]["schedule"]
         step = row["values"]["sigma_rate"] * 0.02  # sigma per sample (Ts = 0.02 s): the turn falls between samples
         assert row["values"]["sigma_high"] - step <= sch["sigma_max"] <= row["values"]["sigma_high"]
-        assert sch["max_rate"] == pytest.approx(row["values"]["sigma_rate"], rel=1e-6)
+        assert sch["max_rate"] == pytest.approx(row["values"]["sigma_rate"], rel=1e-5)  # sigma in float32
         direct = run_sil(from_dict(json.loads(path.read_text())),
                          parse_scenario(dict(rec["inputs"]["scenario"], artifact=str(path), transport={})),
                          seed=row["seed"])  # fmt: skip
