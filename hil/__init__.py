@@ -52,6 +52,10 @@ def run(
     RunResult
         ``metrics`` (as in report.json), ``trace`` (numpy arrays per step), ``complete`` and ``reason``.
 
+    A scheduled artifact (schema 2) runs as software in the loop in this process
+    (:mod:`gainlink.hil.loop.sil_scheduled`: its transport is not used, ``controller`` is ``firmware``, the host
+    build of the scheduled C, or ``reference``), sigma from its measured output or ``[schedule_signal]``.
+
     Examples
     --------
     >>> import gainlink as gl
@@ -81,7 +85,13 @@ def run(
             sc = dataclasses.replace(sc, artifact_path=path)
         elif artifact is not None:
             sc = dataclasses.replace(sc, artifact_path=Path(artifact))
-        result = run_scenario(sc, progress=progress)
+        loaded = load(sc.artifact_path)
+        if loaded.schedule is not None:  # the links do not carry sigma yet: a scheduled artifact runs as SIL
+            from .loop.sil import run_sil
+
+            result = run_sil(loaded, sc, progress=progress)
+        else:
+            result = run_scenario(sc, progress=progress)
         if report is not None:
-            write_report(result, Path(report), artifact=load(sc.artifact_path), with_plots=plots)
+            write_report(result, Path(report), artifact=loaded, with_plots=plots)
     return result

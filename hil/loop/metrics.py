@@ -24,7 +24,8 @@ class RunTrace:
     ``deadline_ns`` when it was due (realtime; NaN in lockstep); ``x`` the plant states (N, n_plant);
     ``twin_y``, ``twin_u``, ``twin_z`` the float64 twin's sampled outputs, commands and integrator
     (:mod:`gainlink.proof.twin`) (``x`` and the twin's are NaN when the twin is off); ``model_y``, ``model_u`` the
-    model twin's (:mod:`.model_twin`; None when it is off).
+    model twin's (:mod:`.model_twin`; None when it is off); ``sigma``, ``sigma_flags`` the scheduled law's sigma
+    and its flags per step (:mod:`.sil_scheduled`; None for an unscheduled artifact).
     """
 
     t: np.ndarray
@@ -43,6 +44,8 @@ class RunTrace:
     twin_z: np.ndarray
     model_y: np.ndarray | None = None
     model_u: np.ndarray | None = None
+    sigma: np.ndarray | None = None
+    sigma_flags: np.ndarray | None = None
 
     @property
     def has_twin(self) -> bool:
@@ -132,7 +135,7 @@ def compute_metrics(
         else {},
     }
     if trace.has_twin:
-        if a.q:  # the controller's own state is not on the link: the ideal loop's integrator, from the twin
+        if a.q and a.schedule is None:  # the controller's state is not on the link: the twin's integrator
             out["peak_integrator"] = {
                 name: float(v) for name, v in zip(sig["references"], np.abs(trace.twin_z).max(axis=0))
             }
@@ -155,6 +158,10 @@ def compute_metrics(
             for i, name in enumerate(sig["outputs"]):
                 tracked[name] = tracking(trace.t, trace.y[:, i], np.full(N, a.y_op[i]))
     out["tracked"] = tracked
+    if trace.sigma is not None:
+        from .sched_metrics import schedule_metrics
+
+        out["schedule"] = schedule_metrics(trace, artifact=a)
     return _clean(out)
 
 

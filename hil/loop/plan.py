@@ -32,18 +32,20 @@ class Plan:
     realtime: bool
 
 
-def plan_run(scenario: Scenario, *, artifact: Artifact, plant: Plant) -> Plan:
-    """References, noise (from the scenario's seed), disturbances and peer faults per step."""
+def plan_run(scenario: Scenario, *, artifact: Artifact, plant: Plant, r_op: np.ndarray | None = None) -> Plan:
+    """References, noise (from the scenario's seed), disturbances and peer faults per step; a reference without a
+    profile holds ``r_op`` (default: the artifact's, which a scheduled artifact gives per point)."""
     a = artifact
+    r_op = a.r_op if r_op is None else np.asarray(r_op, dtype=float)
     Ts = a.Ts
     N = int(round(scenario.duration / Ts))
     realtime = scenario.mode == "realtime"
     rng = np.random.default_rng(scenario.seed)
     t = np.arange(N) * Ts
-    R = np.tile(a.r_op, (N, 1))  # absolute: the trim unless a profile says otherwise
+    R = np.tile(r_op, (N, 1))  # absolute: the trim unless a profile says otherwise
     for j, name in enumerate(a.signals["references"]):
         if name in scenario.reference:
-            R[:, j] = profile_values(scenario.reference[name], t, base=float(a.r_op[j]))
+            R[:, j] = profile_values(scenario.reference[name], t, base=float(r_op[j]))
     noise_sd = np.array([scenario.noise.get(name, 0.0) for name in plant.output_names])
     noise = rng.standard_normal((N, a.p)) * noise_sd if noise_sd.any() else np.zeros((N, a.p))
     D = np.zeros((N, a.m))

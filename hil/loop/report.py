@@ -11,6 +11,7 @@ from gainlink.fileio import publish_files
 from gainlink.proof.twin_plot import png_bytes, twin_difference_figure
 
 from .bridge import RunResult
+from .sched_report import schedule_lines, sigma_csv, sigma_plot
 
 
 def report_json(result: RunResult) -> str:
@@ -80,6 +81,7 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
         lines.append("  peak integrator: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["peak_integrator"].items()))
     lines += _twin_lines(m.get("twin"))
     lines += _model_lines(m.get("model_twin"))
+    lines += schedule_lines(m.get("schedule"))
     for name, tr in m["tracked"].items():
         lines.append(
             f"  {name}: overshoot {_fmt(tr['overshoot_pct'], '%')}, settling {_fmt(tr['settling_time_s'], ' s')}"
@@ -290,6 +292,10 @@ def write_report(result: RunResult, report_dir: str | Path, *, artifact: Any = N
     files: dict[str, bytes | str] = {"report.json": report_json(result)}
     if with_plots:
         files.update(plots(result, artifact=artifact))
+    if result.trace.sigma is not None:  # a scheduled run: sigma per step
+        files["sigma.csv"] = sigma_csv(result.trace)
+        if with_plots:
+            files["sigma.png"] = sigma_plot(result)
     files["summary.txt"] = summary_text(result, report_dir=report_dir)
     publish_files(report_dir, files)
     return report_dir / "report.json"

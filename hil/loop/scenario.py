@@ -24,7 +24,7 @@ Example::
     [transport]    interface = "udp_multicast", channel = "239.74.163.2", hop_limit = 0, fd = true
                    # optional: encoding = "int16", ranges = { x = [-5.0, 5.0], theta = [-1.0, 1.0], r_x = [-5.0, 5.0] }
     [initial_state] theta = 0.1
-    [reference.x]  kind = "step", at = 1.0, value = 0.5     # constant | step | square | sine | ramp
+    [reference.x]  kind = "step", at = 1.0, value = 0.5     # constant | step | square | sine | ramp | sweep
                    # absolute; without a profile, or without initial/offset, a reference holds the
                    # tracked output's value at the artifact's operating point (0 without one)
     [noise]        theta = 0.001                           # std dev per output
@@ -63,6 +63,12 @@ no link and no faults. The report compares the run with it (command and output d
 difference): what float32, the encoding, the link, timing and faults cost the closed loop.
 ``model_twin`` runs the same law around the design's own linear model (:mod:`.model_twin`), started where
 the plant starts: the report gives how far the plant departs from the model the controller believes in.
+
+A scheduled artifact (SIL only, :mod:`.sil_scheduled`) takes its sigma from the measured output the schedule
+names or, when sigma is an external signal, from a profile per external signal, written like a reference's::
+
+    [schedule_signal.load]  kind = "sweep", low = 0.04, high = 1.0, rate = 0.1, start = 2.0, cycles = 1
+                   # sweep: low until start, to high at rate (units/s) and back at once (cycles times), then low
 
 Unknown keys anywhere are refused with one line naming them.
 """
@@ -108,6 +114,7 @@ TOP_KEYS = {
     "overrun",
     "pm_qos",
     "board",
+    "schedule_signal",
 }
 CONTROLLERS = ("firmware", "reference", "qemu")
 BOARDS = tuple(sorted((b.name for b in _FIRMWARE_BOARDS.values() if b.serves), key=lambda n: n != "mps2-an386"))
@@ -119,6 +126,7 @@ PROFILE_KEYS = {
     "square": {"period", "amplitude", "offset"},
     "sine": {"frequency", "amplitude", "offset"},
     "ramp": {"start", "slope", "stop", "initial"},
+    "sweep": {"low", "high", "rate", "start", "cycles"},
 }
 
 
@@ -179,6 +187,7 @@ class Scenario:
     noise: dict = field(default_factory=dict)
     disturbances: tuple[Disturbance, ...] = ()
     faults: tuple[Fault, ...] = ()
+    schedule_signal: dict = field(default_factory=dict)
 
 
 def _num(value: Any, where: str, *, positive: bool = False, minimum: float | None = None) -> float:
@@ -212,18 +221,20 @@ def _check_keys(d: Mapping, allowed: set[str], where: str) -> None:
         )
 
 
-def _profile(name: str, d: Any) -> dict:
+def _profile(name: str, d: Any, table: str = "reference") -> dict:
     if isinstance(d, (int, float)) and not isinstance(d, bool):
-        return {"kind": "constant", "value": _num(d, f"reference.{name}")}
-    d = _table(d, f"reference.{name}")
+        return {"kind": "constant", "value": _num(d, f"{table}.{name}")}
+    d = _table(d, f"{table}.{name}")
     kind = d.get("kind")
     if kind not in PROFILE_KEYS:
-        raise ScenarioError(f"scenario: reference.{name}.kind must be one of {', '.join(PROFILE_KEYS)}")
-    _check_keys(d, PROFILE_KEYS[kind] | {"kind"}, f"reference.{name}")
+        raise ScenarioError(f"scenario: {table}.{name}.kind must be one of {', '.join(PROFILE_KEYS)}")
+    _check_keys(d, PROFILE_KEYS[kind] | {"kind"}, f"{table}.{name}")
     out = {"kind": kind}
     for k, v in d.items():
         if k != "kind":
-            out[k] = _num(v, f"reference.{name}.{k}")
+            out[k] = _num(v, f"{table}.{name}.{k}")
+    if kind == "sweep" and not ("low" in out and "high" in out and out.get("rate", 0.0) > 0):
+        raise ScenarioError(f"scenario: {table}.{name}: a sweep needs low, high and a positive rate")
     return out
 
 
@@ -247,6 +258,8 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
     if "board" in data and controller != "qemu":
         raise ScenarioError('scenario: board applies to controller = "qemu" only')
     reference = {str(k): _profile(str(k), v) for k, v in _table(data.get("reference", {}), "reference").items()}
+    signals = _table(data.get("schedule_signal", {}), "schedule_signal")
+    schedule_signal = {str(k): _profile(str(k), v, "schedule_signal") for k, v in signals.items()}
     noise = {str(k): _num(v, f"noise.{k}", minimum=0.0) for k, v in _table(data.get("noise", {}), "noise").items()}
     initial = {
         str(k): _num(v, f"initial_state.{k}") for k, v in _table(data.get("initial_state", {}), "initial_state").items()
@@ -278,6 +291,7 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
         noise=noise,
         disturbances=_disturbances(data),
         faults=_faults(data),
+        schedule_signal=schedule_signal,
     )
 
 
@@ -373,5 +387,22 @@ def profile_values(profile: Mapping[str, float], t: np.ndarray, *, base: float =
         return profile.get("offset", base) + profile["amplitude"] * np.where(phase == 0, 1.0, -1.0)
     if kind == "sine":
         return profile.get("offset", base) + profile["amplitude"] * np.sin(2 * np.pi * profile["frequency"] * t)
+    if kind == "sweep":
+        return sweep_values(profile, t)
     start, stop = profile.get("start", 0.0), profile.get("stop", np.inf)
     return profile.get("initial", base) + profile["slope"] * (np.clip(t, start, stop) - start)
+
+
+def sweep_values(profile: Mapping[str, float], t: np.ndarray) -> np.ndarray:
+    """A sweep across a range and back: ``low`` until ``start`` (default 0), then a ramp at ``rate`` (units per
+    second, > 0) to ``high``, at once a ramp back to ``low`` at the same rate, then ``low`` (``high < low`` sweeps
+    down first). Made for moving an operating point (a reference or a scheduling signal) across an envelope at a
+    given speed: the campaign axes ``rate`` and ``high`` are the sigma rate and range. ``cycles`` (default 1) round
+    trips, back to back."""
+    low, high, rate = profile["low"], profile["high"], profile["rate"]
+    span = abs(high - low)
+    tau = np.clip(t - profile.get("start", 0.0), 0.0, None) * rate  # distance travelled
+    tau = np.minimum(tau, 2 * span * max(profile.get("cycles", 1.0), 0.0))
+    phase = np.mod(tau, 2 * span) if span > 0 else np.zeros_like(tau)
+    along = np.where(phase <= span, phase, 2 * span - phase)
+    return low + np.sign(high - low) * along

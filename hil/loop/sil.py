@@ -9,7 +9,7 @@ C step call itself. With ``controller = "reference"`` the float64 law steps inst
 
 SIL is what a campaign runs by default: a pendulum run of 1000 steps takes a fraction of a second.
 Link faults (drop, delay, ...), a silent or crashed controller and real-time pacing need a HIL run and
-are refused with one line.
+are refused with one line. A scheduled artifact runs its scheduled law (:mod:`.sil_scheduled`).
 """
 
 from __future__ import annotations
@@ -100,6 +100,12 @@ def run_sil(
     if seed is not None:
         scenario = dataclasses.replace(scenario, seed=int(seed))
     check_sil(scenario)
+    if artifact.schedule is not None:
+        from .sil_scheduled import run_scheduled_sil
+
+        return run_scheduled_sil(artifact, scenario, library=library, progress=progress)
+    if scenario.schedule_signal:
+        raise ScenarioError(f"scenario {scenario.name}: schedule_signal is for a scheduled artifact")
     plant = build_plant(scenario, artifact=artifact)
     with ExitStack() as stack:
         stack.callback(plant.close)

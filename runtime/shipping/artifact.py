@@ -123,7 +123,7 @@ class Artifact:
             raise ArtifactError(
                 f"{what} is for unscheduled artifacts; {self.name} is scheduled on {self.schedule.sigma} (schema 2, "
                 "velocity form): it runs in the design, the float64 reference, export and its own C loop (gainlink "
-                "replay --engine native|qemu), not yet in the links, PIL or campaigns"
+                "replay --engine native|qemu) and SIL (gainlink hil run, SIL campaigns), not yet in the links or PIL"
             )
 
     @property

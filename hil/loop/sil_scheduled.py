@@ -1,0 +1,191 @@
+"""Software in the loop for a scheduled artifact (schema 2): :func:`~.sil.run_sil` hands it here.
+
+Per step the plant is sampled (plus noise), sigma comes from the measured output the schedule names or, when it
+is an external signal, from the scenario's ``[schedule_signal.NAME]`` profile, the scheduled law computes the
+command — the float64 reference (``controller = "reference"``) or the scheduled C of the host library through
+ctypes (``firmware``) — and the plant advances under it for one ``Ts``. The trace records sigma and its flags per
+step; the report's ``schedule`` block (:mod:`.sched_metrics`) the range sigma covered. The closed-loop twin runs
+the float64 scheduled law on a second instance of the plant, the model twin the same law around the design's model
+at the sigma it runs at (:mod:`.sched_law`). A plant with a ``schedule(s)`` method (``kind = "scheduled_model"``)
+is handed the external signals before each sample: its dynamics follow them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from contextlib import ExitStack
+from pathlib import Path
+
+import numpy as np
+from gainlink.errors import PlantError, ScenarioError
+from gainlink.shipping.artifact import Artifact
+
+from ..plants.base import Plant
+from .bridge import RunResult
+from .metrics import compute_metrics
+from .plan import Plan, Recorder, describe_plant, plan_run
+from .scenario import Scenario, profile_values
+from .scenario_plant import build_plant
+from .sched_law import NativeScheduled, ReferenceScheduled, ScheduledTwin, start_scheduled_model_twin
+
+
+def external_signals(scenario: Scenario, *, artifact: Artifact, t: np.ndarray) -> np.ndarray:
+    """The external scheduling signals per step (N, e) from ``[schedule_signal.NAME]``; one line when one is
+    missing or a profile names no external signal of the artifact."""
+    names = artifact.schedule.external
+    for name in scenario.schedule_signal:
+        if name not in names:
+            raise ScenarioError(
+                f"scenario: schedule_signal.{name} is not an external scheduling signal of the artifact "
+                f"(external: {', '.join(names) or 'none'}; sigma {artifact.schedule.sigma} is a measured output)"
+            )
+    missing = [n for n in names if n not in scenario.schedule_signal]
+    if missing:
+        raise ScenarioError(f"scenario: the artifact is scheduled on {', '.join(missing)}: give [schedule_signal.NAME]")
+    return np.column_stack([profile_values(scenario.schedule_signal[n], t) for n in names] or [np.zeros((t.size, 0))])
+
+
+def start_sigma(artifact: Artifact, *, plant: Plant, S: np.ndarray) -> float:
+    """Where sigma starts: the schedule's output at the plant's reset state, or the external signal at t = 0,
+    clipped into the envelope."""
+    sch = artifact.schedule
+    raw = plant.outputs()[sch.index] if sch.source == "output" else (S[0, sch.index] if S.shape[0] else sch.points[0])
+    return sch.clip(float(raw))
+
+
+def describe_scheduled(artifact: Artifact, path) -> dict:
+    """What a report says about a scheduled artifact: identity and its schedule."""
+    S = artifact.schedule
+    return {
+        "name": artifact.name,
+        "sha256": artifact.sha256,
+        "path": str(path),
+        "schedule": {
+            "sigma": S.sigma,
+            "source": S.source,
+            "points": [float(v) for v in S.points],
+            "rate_max": S.rate_max,
+            "filter_tau": S.filter_tau,
+        },
+    }
+
+
+def run_scheduled_sil(
+    artifact: Artifact,
+    scenario: Scenario,
+    *,
+    library: Path | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> RunResult:
+    """Run ``scenario`` with the scheduled law of ``artifact`` in this process (module docstring); the arguments
+    are :func:`~.sil.run_sil`'s, already checked."""
+    if scenario.controller not in ("firmware", "reference"):
+        raise ScenarioError(
+            f'scenario {scenario.name}: a scheduled artifact runs as SIL with controller = "firmware" (the host C) '
+            f'or "reference", not "{scenario.controller}"'
+        )
+    plant = build_plant(scenario, artifact=artifact)
+    with ExitStack() as stack:
+        stack.callback(plant.close)
+        reference = scenario.controller == "reference"
+        law = ReferenceScheduled(artifact) if reference else NativeScheduled(artifact, library=library)
+        loop = _ScheduledSil(artifact, scenario, plant=plant, law=law)
+        if scenario.twin:
+            loop.twin = _closed_loop_twin(scenario, artifact=artifact, steps=loop.plan.N, stack=stack)
+        return loop.run(progress)
+
+
+def _closed_loop_twin(scenario: Scenario, *, artifact: Artifact, steps: int, stack: ExitStack) -> ScheduledTwin:
+    """The float64 scheduled law on a second instance of the scenario's plant, reset to the same state."""
+    plant = build_plant(scenario, artifact=artifact)
+    stack.callback(plant.close)
+    plant.reset(initial=scenario.initial_state)
+    return ScheduledTwin(artifact, outputs=plant.outputs, advance=lambda u: plant.advance(u=u, dt=artifact.Ts),
+                         steps=steps, on_signals=getattr(plant, "schedule", None))  # fmt: skip
+
+
+class _ScheduledSil:
+    """One scheduled SIL run, step by step: sample, law step (sigma with it), advance."""
+
+    def __init__(self, artifact: Artifact, scenario: Scenario, *, plant: Plant, law) -> None:
+        self.a, self.scenario, self.plant, self.law = artifact, scenario, plant, law
+        plant.reset(initial=scenario.initial_state)
+        N = int(round(scenario.duration / artifact.Ts))
+        self.S = external_signals(scenario, artifact=artifact, t=np.arange(N) * artifact.Ts)
+        if N and hasattr(plant, "schedule"):
+            plant.schedule(self.S[0])
+        self.sigma0 = start_sigma(artifact, plant=plant, S=self.S)
+        r_op = artifact.Ci @ artifact.schedule.trim_at(self.sigma0)[1]
+        self.plan: Plan = plan_run(scenario, artifact=artifact, plant=plant, r_op=r_op)
+        self.rec = Recorder(self.plan, artifact=artifact, plant=plant)
+        self.SIG, self.FLAGS = np.zeros(N), np.zeros(N, dtype=np.int64)
+        self.twin: ScheduledTwin | None = None
+        self.model_twin, self.model_start = None, ""
+        self.bits = np.arange(artifact.m, dtype=np.uint32)
+        self.follows = getattr(plant, "schedule", None)  # a plant whose dynamics follow the external signals
+
+    def run(self, progress: Callable[[int, int], None] | None) -> RunResult:
+        """Every planned step, or until the plant fails."""
+        N, reason, k = self.plan.N, None, 0
+        if self.scenario.model_twin:
+            self.model_twin, self.model_start = start_scheduled_model_twin(
+                self.a, plant=self.plant, steps=N, sigma0=self.sigma0
+            )
+        every = max(1, N // 100)
+        self.t_start = time.perf_counter_ns()
+        try:
+            for k in range(N):
+                self._step(k)
+                if progress is not None and (k + 1) % every == 0:
+                    progress(k + 1, N)
+            k = N
+        except PlantError as exc:
+            reason = f"plant failed at step {k}: {exc}"
+            k += 1
+        wall = (time.perf_counter_ns() - self.t_start) / 1e9
+        return self._result(k, reason=reason, wall=wall)
+
+    def _step(self, k: int) -> None:
+        rec, plan = self.rec, self.plan
+        if self.follows is not None:
+            self.follows(self.S[k])
+        y = self.plant.outputs() + plan.noise[k]
+        rec.Y[k] = y
+        if self.twin is not None:
+            rec.X[k] = self.plant.state()
+        t0 = time.perf_counter_ns()
+        out = self.law.step(y, plan.R[k], self.S[k])
+        t1 = time.perf_counter_ns()
+        rec.GOT[k], rec.LAT[k], rec.TICK[k], rec.ST[k] = True, t1 - t0, t0 - self.t_start, out.status
+        rec.SAT[k] = ((out.sat_mask >> self.bits) & 1).astype(bool)
+        rec.U[k], self.SIG[k], self.FLAGS[k] = out.u, out.sigma, out.sigma_flags
+        try:
+            self.plant.advance(u=np.asarray(out.u, float) + plan.D[k], dt=self.a.Ts)
+        finally:
+            for twin in (self.twin, self.model_twin):
+                if twin is not None:
+                    twin.step(k, noise=plan.noise[k], r=plan.R[k], d=plan.D[k], s=self.S[k])
+
+    def _result(self, steps: int, *, reason: str | None, wall: float) -> RunResult:
+        a, scenario = self.a, self.scenario
+        trace = self.rec.trace(steps, self.twin, self.model_twin)
+        trace = dataclasses.replace(trace, sigma=self.SIG[:steps].copy(), sigma_flags=self.FLAGS[:steps].copy())
+        metrics = compute_metrics(trace, artifact=a, mode="sil", late=0, period_s=a.Ts, model_start=self.model_start)
+        metrics.update({"complete": reason is None, "steps_planned": self.plan.N, "wall_s": wall,
+                        "steps_per_s": steps / wall if wall > 0 else None, "sched_fifo": False,
+                        "faults_injected": {}, "mode": "sil"})  # fmt: skip
+        if reason:
+            metrics["reason"] = reason
+        if self.scenario.model_twin and self.model_twin is None:
+            metrics["model_twin_off"] = self.model_start
+        info = {
+            "artifact": describe_scheduled(a, scenario.artifact_path),
+            "plant": describe_plant(self.plant),
+            "transport": {"kind": "sil (in-process, no link)"},
+            "controller": self.law.kind,
+        }
+        return RunResult(
+            scenario=scenario, metrics=metrics, trace=trace, complete=reason is None, reason=reason, info=info
+        )
