@@ -372,6 +372,7 @@ def test_verdicts_name_each_failed_criterion():
 # --- LocalCluster --------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pend, local_run):
     result, out, _ = local_run
     assert result.total == 6 and result.executed == 6 and result.reused == 0 and result.errors == 0
@@ -510,6 +511,7 @@ def test_a_folder_from_before_the_npy_traces_keeps_its_traces_and_a_foreign_work
 # --- a campaign killed halfway resumes ---------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster, tmp_path):
     data = small_campaign(pend, runs=8, grid=[])
     data["scenario"]["duration"] = 4.0
@@ -561,6 +563,7 @@ def _group_alive(pgid: int) -> bool:
     return True
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_command_that_resumes(pend, tmp_path):
     data = small_campaign(pend, runs=8, grid=[])
     data["scenario"]["duration"] = 4.0

@@ -295,6 +295,7 @@ def test_pil_cli_with_a_board_alone_runs_that_boards_core(pend, tmp_path):
 # --- the image as a bus node on another core's board --------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_mavlink_hil_through_the_m33_images_uart_equals_the_host_app(pend):
     """The AN505 (Secure image, its own UART lines and timer): the same closed loop as the host app, bit for bit."""
     from gainlink.hil.loop.bridge import run_scenario

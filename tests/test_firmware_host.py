@@ -271,6 +271,7 @@ def _sanitized_cases(pendulum, random_designs):
 
 
 @pytest.mark.parametrize("share", range(3))  # the variants in three shares, built on three workers
+@pytest.mark.slow
 def test_host_executable_under_asan_ubsan_matches_ctypes(pendulum, random_designs, share):
     """Built with -fsanitize=address,undefined for every compiled variant (forms, anti-windup modes, with and
     without integrators), the loop executable runs clean and agrees with the ctypes library bit for bit."""
@@ -301,6 +302,7 @@ def test_host_executable_under_asan_ubsan_matches_ctypes(pendulum, random_design
         assert any(line.startswith("error ") for line in out), "a malformed line is answered, not fatal"
 
 
+@pytest.mark.slow
 def test_golden_script_writes_files_the_c_loop_replays(tmp_path):
     """scripts/gen_golden.py writes artifacts + reference answers; the C loop replays them within RTOL."""
     import json

@@ -63,6 +63,7 @@ def test_the_compared_cases_cover_every_structure(random_designs, closed_loop_de
 
 
 @pytest.mark.parametrize("source", ["examples", "random_designs", "closed_loop_designs"])  # three workers
+@pytest.mark.slow
 def test_float32_loop_equals_the_host_build_bit_for_bit(source, request):
     """The numpy float32 model equals the host build bit for bit (a refused sample included), on the examples
     and on one random design per compiled structure."""

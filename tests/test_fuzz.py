@@ -9,6 +9,8 @@ import pytest
 from gainlink.firmware import fuzz
 from gainlink.shipping import artifact as artifact_mod
 
+pytestmark = pytest.mark.slow  # started first (tests/conftest.py)
+
 SECONDS = 5  # per harness: the suite's share (a smoke run; bench/fuzz.py does the long runs)
 
 

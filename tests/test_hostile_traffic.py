@@ -11,6 +11,7 @@ import subprocess
 import sys
 import time
 
+import pytest
 from gainlink.firmware.mavlink_app import firmware_argv, mavlink_executable
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.report import report_json
@@ -25,6 +26,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 from support.hil import pendulum_scenario, udp_transport
 from support.net import udp_port
 from support.paths import TESTS
+
+pytestmark = pytest.mark.slow  # started first (tests/conftest.py)
 
 HOSTILE = TESTS / "support" / "hostile_traffic.py"
 COUNT = 50_000

@@ -246,6 +246,7 @@ def test_firmware_run_mavlink_command_persists_beside_the_artifact(mavlink_exe, 
         dict(n=5, m=2, p=3, q=2, form="current", anti_windup="clamp"),
     ],
 )
+@pytest.mark.slow
 def test_firmware_and_python_naming_schemes_agree_for_every_structure(shape, tmp_path):
     """Current-estimator form (M present), no integral action (q = 0: CI KI KAW Z0 absent) and q = 2."""
     from gainlink.mavlink.params import firmware_params

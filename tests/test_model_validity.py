@@ -234,6 +234,7 @@ def _scenario(gains: Path, fmu: Path, *, interface: str | None = None, **extra) 
     }
 
 
+@pytest.mark.slow
 def test_done_when_the_default_path_tracks_in_hil_and_agrees_with_its_model(designed, mass_damper, tmp_path):
     sc = _scenario(
         designed,
@@ -285,6 +286,7 @@ def test_the_model_twin_is_the_designed_closed_loop(designed, mass_damper):
     np.testing.assert_allclose(tr.model_y[:, 0], art.y_op[0] + resp.outputs[0], atol=1e-9)
 
 
+@pytest.mark.slow
 def test_campaign_runs_record_the_mismatch(designed, mass_damper, tmp_path):
     from gainlink.hil.campaign import run
 

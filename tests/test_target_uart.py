@@ -260,6 +260,7 @@ def _signed_param_set_recorded_at(key: bytes, unix_time: float) -> bytes:
     return mavlink2.MAVLink_param_set_message(1, 1, b"GL_K_0_0", 0.0, mavlink2.MAV_PARAM_TYPE_REAL32).pack(recorded)
 
 
+@pytest.mark.slow
 def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(elf, pend, tmp_path, monkeypatch):
     """The UART is the image's trusted link (a cable): `gainlink mavlink setup-signing` sends the first key in an
     unsigned SETUP_SIGNING, the image keeps it in its flash (store_key hook) and signs with it; another unsigned

@@ -21,6 +21,8 @@ from support.cli import run_cli
 from support.hil import udp_transport
 from support.thirdparty import TEMPLATE, gemseo_fmu
 
+pytestmark = pytest.mark.slow  # started first (tests/conftest.py)
+
 
 @pytest.fixture(scope="module")
 def mass_damper():

@@ -166,6 +166,7 @@ def hil_run(artifact: Path, fmu: Path, *, duration: float = 8.0):
     )
 
 
+@pytest.mark.slow
 def test_hil_holds_the_trim_altitude_only_with_the_operating_point(hover):
     """With u_op, y_op: from 1 m the vehicle climbs to 2 m and holds it (error < 1 mm over the last second),
     the throttle settles at u_hover. The same gains blind to the operating point land the vehicle: the law's
@@ -298,6 +299,7 @@ def test_with_integral_action_both_settle_and_the_operating_point_buys_the_start
     assert Ub[0] == 0.0 and Z_SET - np.min(Zb[before]) > 0.1, Z_SET - np.min(Zb[before])  # 0.19 m measured
 
 
+@pytest.mark.slow
 def test_hil_with_integral_action_tracks_a_reference_off_the_trim_with_a_heavier_vehicle(hover, tmp_path):
     """The case that matters for integral action, over HIL (the firmware's CAN node process, the FMU, a real
     bus): the vehicle carries a payload the design does not know (1.65 kg against the 1.5 kg it was linearised
