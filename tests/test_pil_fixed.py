@@ -13,7 +13,9 @@ import json
 import numpy as np
 import pytest
 from gainlink.errors import PlantError
+from gainlink.firmware.fixed import FAULT, FixedRun, run_host
 from gainlink.hil.loop.pil import make_plant, run_pil
+from gainlink.hil.loop.pil_fixed import first_difference, model_records
 from gainlink.proof.derived_law import DerivedLoop
 from gainlink.proof.fixed_law import gains_from_artifact
 from gainlink.shipping.artifact import from_dict, seal
@@ -92,3 +94,28 @@ def test_a_quantised_twin_needs_a_fixed_point_artifact():
     a = from_dict(seal(data))  # the same design, float32
     with pytest.raises(PlantError, match="quantised twin"):
         run_pil(a, plant=make_plant("artifact", artifact=a), steps=5, quantised_twin=make_plant("artifact", artifact=a))
+
+
+@pytest.mark.parametrize("name,numeric", [("pendulum", "q31"), ("wood_berry", "q15")])
+def test_the_oracle_writes_the_records_the_host_c_writes(name, numeric):
+    """PIL's bit-for-bit oracle (model_records) against the host build, with samples past their ranges and a NaN:
+    equal in every field, and first_difference finds a flipped bit where it is."""
+    a = example(name, numeric)
+    rng = np.random.default_rng(3)
+    ranges = a.checks["fixed_point"]["ranges"]
+    lo, hi = np.array(ranges["y_min"]), np.array(ranges["y_max"])
+    Y = (lo + (hi - lo) * rng.uniform(-0.2, 1.2, (120, a.p))).astype(np.float32)
+    rlo, rhi = np.array(ranges["r_min"]), np.array(ranges["r_max"])
+    R = (rlo + (rhi - rlo) * rng.uniform(-0.2, 1.2, (120, a.q))).astype(np.float32)
+    Y[50, 0] = np.nan
+    model = model_records(a, Y, R)
+    host = run_host(a, Y, R)
+    mine = FixedRun.from_records(model, a.q)
+    for field in ("U", "V", "XH", "Z", "flags", "sat", "clip", "overflow"):
+        assert np.array_equal(getattr(mine, field), getattr(host, field)), field
+    assert np.array_equal(mine.u.view(np.uint32), host.u.view(np.uint32))
+    assert np.any(host.clip) and host.flags[50] & FAULT
+    assert first_difference(model, model.copy()) is None
+    flipped = model.copy()
+    flipped["XH"][77, 0] ^= 1
+    assert first_difference(flipped, model) == {"step": 77, "field": "XH"}
