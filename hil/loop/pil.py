@@ -2,7 +2,9 @@
 
 Samples travel through two FIFOs that the image opens with semihosting (``gl_in.bin``, ``gl_out.bin``),
 one record per step (see ``firmware/ports/cortex-m/main.c``). Python opens its ends read-write, so no
-open blocks, and every read waits with a deadline while checking that QEMU is still alive.
+open blocks, and every read waits with a deadline while checking that QEMU is still alive. A fixed-point
+artifact runs its integer image (``main_fixed.c``, the same stream; its records are
+``gainlink.firmware.fixed``'s) and is checked by :mod:`.pil_fixed`.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from typing import Any
 
 import numpy as np
 from gainlink.errors import FirmwareError, PeerTimeoutError, PlantError
+from gainlink.firmware import fixed as fwfixed
 from gainlink.firmware import qemu as fwqemu
 from gainlink.firmware.build import replay_image
 from gainlink.firmware.targets import resolve_cortex_m
@@ -29,6 +32,9 @@ from gainlink.proof.sampled_plant import SampledPlant
 from gainlink.proof.twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
 from gainlink.proof.twin_plot import twin_difference_figure
 from gainlink.shipping.artifact import Artifact
+from gainlink.shipping.codegen_fixed import is_fixed
+
+from .pil_fixed import FixedPilCheck, QuantisedTwin, fixed_pil_check, step_status
 
 log = logging.getLogger(__name__)
 
@@ -125,6 +131,8 @@ class PilResult:
     comparison: TwinComparison | None = None  # the run against its twin
     model_twin: TwinTrace | None = None  # the law around the artifact's own model (model_twin), when one ran
     reference: np.ndarray | None = None  # (N, q) the references the run tracked
+    fixed_point: FixedPilCheck | None = None  # a fixed-point artifact's oracle (gainlink.hil.loop.pil_fixed)
+    fixed_run: fwfixed.FixedRun | None = None  # a fixed-point image's records (words, estimate, flags) per step
 
     def summary(self) -> dict:
         """Counts, timing and the comparison with the twin, JSON-ready."""
@@ -139,6 +147,8 @@ class PilResult:
         }
         if self.comparison is not None:
             out["twin"] = self.comparison.to_dict()
+        if self.fixed_point is not None:
+            out["fixed_point"] = self.fixed_point.to_dict()
         return out
 
 
@@ -194,6 +204,7 @@ def run_pil(
     deadline_s: float = 10.0,
     twin: DiscretePlant | None = None,
     model_twin: DiscretePlant | None = None,
+    quantised_twin: DiscretePlant | None = None,
 ) -> PilResult:
     """Close the loop: firmware in QEMU, ``plant`` in Python, one FIFO round trip per sample.
 
@@ -221,10 +232,16 @@ def run_pil(
     model_twin : DiscretePlant, optional
         The artifact's own model (:class:`ArtifactPlant`) started where the plant starts: the float64 law runs
         around it too, and the result holds its trace (the model twin of ``gainlink.hil.loop.model_twin``).
+    quantised_twin : DiscretePlant, optional
+        A fixed-point artifact only: a third instance of the plant, in the same initial state, on which the
+        float64 law with the artifact's quantised coefficients closes the loop (the law the certified rounding
+        bound compares with; :mod:`gainlink.hil.loop.pil_fixed`).
 
     Returns
     -------
     PilResult
+        For a fixed-point artifact, ``fixed_point`` holds the oracle: the image bit for bit the model on the
+        samples it received, and the deviation from the quantised twin beside the certified bound.
     """
     a = artifact
     a.require_unscheduled("PIL")  # the scheduled image replays files only (firmware/ports/cortex-m/main_sched.c)
@@ -233,21 +250,32 @@ def run_pil(
     platform = resolve_cortex_m(target, board)
     board = platform.board.name
     R = np.broadcast_to(a.r_op if reference is None else np.asarray(reference, float), (steps, a.q))
-    elf = replay_image(a, target=platform.target.name, board=board)
+    fixed = is_fixed(a)
+    if quantised_twin is not None and not fixed:
+        raise PlantError(f"artifact {a.name} is float32: no quantised twin (a fixed-point artifact has one)")
+    elf, magic = _image(a, target=platform.target.name, board=board)
+    qt = None if quantised_twin is None else QuantisedTwin(a, plant=quantised_twin, steps=steps)
     tw = None if twin is None else TwinLoop(a, outputs=twin.outputs, advance=lambda u: twin.advance(u=u), steps=steps)
     mt = (
         None
         if model_twin is None
         else TwinLoop(a, outputs=model_twin.outputs, advance=lambda u: model_twin.advance(u=u), steps=steps)
     )
-    rec = _PilRecord.empty(a, steps, x0=plant.state)
+    rec = _PilRecord.empty(a, steps, x0=plant.state, fixed=fixed)
     with _qemu_fifos(elf, board=board, steps=steps) as (proc, fin, fout):
-        _open_stream(proc, fin, fout, steps=steps, watchdog_periods=watchdog_periods, deadline_s=deadline_s)
+        _open_stream(
+            proc, fin, fout, steps=steps, watchdog_periods=watchdog_periods, deadline_s=deadline_s, magic=magic
+        )
         t_start = time.perf_counter()
-        _exchange(a, plant, R, rec, link=(proc, fin, fout), deadline_s=deadline_s, twins=(tw, mt))
+        _exchange(a, plant, R, rec, link=(proc, fin, fout), deadline_s=deadline_s, twins=(tw, mt, qt))
         elapsed = time.perf_counter() - t_start
         _await_exit(proc, deadline_s=deadline_s)
     twin_trace, comparison = (None, None) if tw is None else _compare_with_twin(a, tw, rec, R=R, steps=steps)
+    check = None
+    if fixed:
+        design_u = None if twin_trace is None else twin_trace.u
+        model_plant = isinstance(plant, ArtifactPlant)  # the design model: the loop the certificate is about
+        check = fixed_pil_check(a, rec.raw, Y=rec.Y, R=R, quantised=qt, design_u=design_u, model_plant=model_plant)
     return PilResult(
         y=rec.Y,
         u=rec.U,
@@ -260,7 +288,18 @@ def run_pil(
         comparison=comparison,
         model_twin=None if mt is None else mt.trace(steps),
         reference=np.array(R, dtype=float),
+        fixed_point=check,
+        fixed_run=fwfixed.FixedRun.from_records(rec.raw, a.q) if fixed else None,
     )
+
+
+def _image(a: Artifact, *, target: str, board: str) -> tuple[Path, int]:
+    """The image PIL runs (built and cached) and the first word of its answer: a fixed-point artifact's integer
+    image (``main_fixed.c``), else the float image (``main.c``); both speak the stream of ``gl_stream.h``."""
+    if is_fixed(a):
+        elf, _ = fwfixed.image(a, target=target, board=board, options=fwfixed.REPLAY_OPTIONS)
+        return elf, fwfixed.OUT_MAGIC
+    return replay_image(a, target=target, board=board), fwqemu.OUT_MAGIC
 
 
 def _compare_with_twin(
@@ -290,9 +329,11 @@ class _PilRecord:
     SAT: np.ndarray
     X: list
     RT: np.ndarray
+    raw: np.ndarray  # the image's output records as they came
 
     @classmethod
-    def empty(cls, a: Artifact, steps: int, *, x0: np.ndarray) -> _PilRecord:
+    def empty(cls, a: Artifact, steps: int, *, x0: np.ndarray, fixed: bool = False) -> _PilRecord:
+        dout = fwfixed.record_dtype(a) if fixed else fwqemu.record_dtypes(n=a.n, m=a.m, p=a.p, q=a.q)[1]
         return cls(
             Y=np.zeros((steps, a.p)),
             U=np.zeros((steps, a.m), dtype=np.float32),
@@ -300,6 +341,7 @@ class _PilRecord:
             SAT=np.zeros((steps, a.m), dtype=bool),
             X=[x0],
             RT=np.zeros(steps),
+            raw=np.zeros(steps, dtype=dout),
         )
 
 
@@ -329,13 +371,14 @@ def _qemu_fifos(elf: Path, *, board: str, steps: int):
 
 
 def _open_stream(
-    proc: subprocess.Popen, fin: int, fout: int, *, steps: int, watchdog_periods: int, deadline_s: float
+    proc: subprocess.Popen, fin: int, fout: int, *, steps: int, watchdog_periods: int, deadline_s: float, magic: int
 ) -> None:
-    """Send the stream header (steps, one sample per record, watchdog) and check the firmware's answer."""
+    """Send the stream header (steps, one sample per record, watchdog) and check the firmware's answer (its
+    header's first word ``magic``: the float or the fixed-point image's)."""
     os.write(fin, struct.pack("<4I", fwqemu.IN_MAGIC, steps, 1, watchdog_periods))
     header = _read_exact(fout, 32, proc=proc, deadline_s=deadline_s)
-    magic, count, *_ = struct.unpack("<8I", header)
-    if magic != fwqemu.OUT_MAGIC or count != steps:
+    got, count, *_ = struct.unpack("<8I", header)
+    if got != magic or count != steps:
         raise FirmwareError("firmware answered with a bad stream header")
 
 
@@ -351,7 +394,9 @@ def _exchange(
 ) -> None:
     """One FIFO round trip per sample: the plant's outputs in, the command out, the plant advanced."""
     proc, fin, fout = link
-    din, dout = fwqemu.record_dtypes(n=a.n, m=a.m, p=a.p, q=a.q)
+    din, _ = fwqemu.record_dtypes(n=a.n, m=a.m, p=a.p, q=a.q)
+    dout = rec.raw.dtype
+    fixed = "flags" in dout.names
     sample = np.zeros(1, dtype=din)
     for k in range(len(rec.Y)):
         y = plant.outputs()
@@ -363,7 +408,9 @@ def _exchange(
         os.write(fin, sample.tobytes())
         out = np.frombuffer(_read_exact(fout, dout.itemsize, proc=proc, deadline_s=deadline_s), dtype=dout)[0]
         rec.RT[k] = (time.perf_counter() - t0) * 1e6
-        rec.U[k], rec.S[k] = out["u"], out["status"]
+        rec.raw[k] = out
+        rec.U[k] = out["u"]
+        rec.S[k] = step_status(int(out["flags"]), int(out["sat"])) if fixed else out["status"]
         rec.SAT[k] = (int(out["sat"]) >> np.arange(a.m)) & 1
         plant.advance(u=rec.U[k].astype(float))
         rec.X.append(plant.state)

@@ -30,6 +30,9 @@ OUT_MAGIC = 0x31464C47  # "GLF1"
 STEP_SYMBOL = "gl_fixed_step"
 FAULT, CLIPPED, OVERFLOW = 1, 2, 4
 OVERFLOW_BITS = {"dY": 1, "V": 2, "dU": 4, "Uv-V": 8, "Z": 16, "XH": 32}  # GL_FX_OVF_* of gl_fixed.h
+# Replay and PIL build the tree without the float image's bus nodes (the fixed image never carries them): the
+# float replay image's tree (gainlink.firmware.build.replay_image), built once for both.
+REPLAY_OPTIONS = {"GL_IMAGE_SERVE": "OFF"}
 
 
 def record_dtype(a: Artifact) -> np.dtype:
@@ -157,7 +160,7 @@ def replay_image(elf: Path, a: Artifact, Y, R=None, *, board: str, plugin: list[
 
 def run_qemu(a: Artifact, Y, R=None, *, target: str, board: str | None = None) -> FixedRun:
     """Build (cached) and replay the fixed-point image of ``a`` on ``target`` under QEMU."""
-    elf, board_name = image(a, target=target, board=board)
+    elf, board_name = image(a, target=target, board=board, options=REPLAY_OPTIONS)
     return replay_image(elf, a, Y, R, board=board_name)
 
 

@@ -42,7 +42,7 @@ string(REPLACE "-" "_" GL_BOARD_STEM "${GL_BOARD}")
 set(GL_BOARD_SRC "${GL_PORT_DIR}/board_${GL_BOARD_STEM}.c")
 set(GL_LINKER_SCRIPT "${GL_PORT_DIR}/${GL_BOARD}.ld")
 
-set(GL_IMAGE_SOURCES startup.c semihost.c main.c gl_clock.c gl_uart.c no_heap.c)
+set(GL_IMAGE_SOURCES startup.c semihost.c main.c gl_stream.c gl_clock.c gl_uart.c no_heap.c)
 if(GL_BOARD MATCHES "^mps")
   list(APPEND GL_IMAGE_SOURCES gl_cmsdk_uart.c)
 endif()

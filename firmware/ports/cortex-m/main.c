@@ -22,7 +22,8 @@
  *      input {int32 status, uint32 sat_mask, float u[GL_M], float xh[GL_N], float z[GL_QA]}
  *
  * Records are read up to `block` at a time (use block 1 for a closed loop through FIFOs); the image reads
- * fewer when its buffers are smaller (GL_IMAGE_MAX_BLOCK). All little-endian.
+ * fewer when its buffers are smaller (GL_IMAGE_MAX_BLOCK). All little-endian. The stream's reading and writing
+ * is gl_stream.c, shared with the fixed-point image (main_fixed.c).
  *
  * Each gl_loop_step() of the replay runs with interrupts masked: the step's instruction count
  * (gainlink.firmware.cost, from the call to its return) then holds the step alone, never the SysTick or
@@ -35,6 +36,7 @@
 #include "gainlink/gl_loop.h"
 #include "gl_clock.h"
 #include "gl_nvic.h"
+#include "gl_stream.h"
 #include "gl_uart.h"
 #include "semihost.h"
 #if GL_IMAGE_SERVE
@@ -188,8 +190,10 @@ static int serve_if_asked(void)
 }
 
 /** One input record through the loop into its output record (a step, an idle period or a staged gain set). */
-static void replay_record(const in_record_t *in, out_record_t *o)
+static void replay_record(const void *in_record, void *out_record)
 {
+    const in_record_t *in = (const in_record_t *)in_record;
+    out_record_t *o = (out_record_t *)out_record;
     gl_status_t st;
     if (in->tag == GL_TAG_IDLE) {
         st = gl_loop_idle(&loop, o->u);
@@ -207,45 +211,31 @@ static void replay_record(const in_record_t *in, out_record_t *o)
     memcpy(o->z, loop.z, sizeof o->z);
 }
 
-/** The replay stream (see the file comment): the header of gl_in.bin, then `count` records, `block` at a time. */
-static int replay_file(int32_t fin)
+/** The stream's start: a watchdog of at least one period, the built-in gains; the output header's words. */
+static int replay_begin(const uint32_t in_hdr[4], uint32_t out_hdr[8])
 {
-    uint32_t hdr[4];
-    if (gl_sh_read_all(fin, hdr, sizeof hdr) != 0) {
-        return GL_EXIT_IO;
-    }
-    if (hdr[0] != GL_IN_MAGIC || hdr[2] == 0u || hdr[3] == 0u) {
+    if (in_hdr[3] == 0u) {
         return GL_EXIT_BAD_INPUT;
     }
-    if (gl_loop_init(&loop, &gl_gains_default, hdr[3]) != GL_OK) {
+    if (gl_loop_init(&loop, &gl_gains_default, in_hdr[3]) != GL_OK) {
         return GL_EXIT_GAINS;
     }
-    int32_t fout = gl_sh_open("gl_out.bin", GL_SH_MODE_WB);
-    if (fout < 0) {
-        return GL_EXIT_IO;
-    }
-    const uint32_t count = hdr[1];
-    const uint32_t block = hdr[2] < GL_MAX_BLOCK ? hdr[2] : GL_MAX_BLOCK;
-    const uint32_t out_hdr[8] = {GL_OUT_MAGIC, count, GL_N, GL_M, GL_P, GL_Q, gl_loop_active_crc32(&loop), 0u};
-    if (gl_sh_write_all(fout, out_hdr, sizeof out_hdr) != 0) {
-        return GL_EXIT_IO;
-    }
-    for (uint32_t done = 0; done < count;) {
-        uint32_t chunk = (count - done) < block ? (count - done) : block;
-        if (gl_sh_read_all(fin, in_buf, chunk * sizeof(in_record_t)) != 0) {
-            return GL_EXIT_IO;
-        }
-        for (uint32_t k = 0; k < chunk; ++k) {
-            replay_record(&in_buf[k], &out_buf[k]);
-        }
-        if (gl_sh_write_all(fout, out_buf, chunk * sizeof(out_record_t)) != 0) {
-            return GL_EXIT_IO;
-        }
-        done += chunk;
-    }
-    gl_sh_close(fout);
+    const uint32_t words[6] = {GL_N, GL_M, GL_P, GL_Q, gl_loop_active_crc32(&loop), 0u};
+    memcpy(&out_hdr[2], words, sizeof words);
     return GL_EXIT_OK;
 }
+
+static const gl_stream_t replay_stream = {
+    .in_magic = GL_IN_MAGIC,
+    .out_magic = GL_OUT_MAGIC,
+    .in_size = sizeof(in_record_t),
+    .out_size = sizeof(out_record_t),
+    .max_block = GL_MAX_BLOCK,
+    .in_buf = in_buf,
+    .out_buf = out_buf,
+    .begin = replay_begin,
+    .record = replay_record,
+};
 
 static int run(void)
 {
@@ -265,7 +255,7 @@ static int run(void)
         }
         return uart_smoke();
     }
-    int rc = replay_file(fin);
+    int rc = gl_stream_replay(fin, &replay_stream);
     gl_sh_close(fin);
     return rc;
 }

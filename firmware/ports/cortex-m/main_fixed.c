@@ -1,11 +1,13 @@
 /**
  * @file main_fixed.c
- * @brief Cortex-M image of the fixed-point loop (gl_fixed.h): replay through semihosting files.
+ * @brief Cortex-M image of the fixed-point loop (gl_fixed.h): replay and PIL through semihosting files.
  *
  * Prints `gainlink NAME BOARD sha256:HEX q31|q15` on the UART, then reads `gl_in.bin` in the simulator's working
- * directory (the float image's input stream, main.c: header {'GLI1', count, block, watchdog_periods}, records
- * {uint32 tag, float y[GL_FX_P], float r[GL_FX_QA]}; every record is a step) and writes `gl_out.bin`:
- * header {uint32 'GLF1', count, n, m, p, q, 0, 0}, then one gl_fixed_record_t per step (gl_fixed_record.h).
+ * directory (a file or a FIFO) and writes `gl_out.bin`, through the float image's stream code (gl_stream.c), so
+ * replay and PIL (gainlink.hil.loop.pil, one record per FIFO round trip) drive both images alike. in: the float
+ * image's stream (main.c: header {'GLI1', count, block, watchdog_periods}, records {uint32 tag, float y[GL_FX_P],
+ * float r[GL_FX_QA]}; every record is a step, the watchdog word is ignored); out: header {uint32 'GLF1', count, n,
+ * m, p, q, 0, 0}, then one gl_fixed_record_t per step (gl_fixed_record.h).
  * Without gl_in.bin: one step with y = 0, r = 0 and exit 0. Each gl_fixed_step() runs with interrupts masked,
  * so its instruction count (gainlink.firmware.cost) holds the step alone.
  */
@@ -16,6 +18,7 @@
 #include "gl_clock.h"
 #include "gl_fixed_record.h"
 #include "gl_nvic.h"
+#include "gl_stream.h"
 #include "gl_uart.h"
 #include "semihost.h"
 
@@ -48,50 +51,37 @@ static void uart_puts(const char *s)
     (void)gl_uart_write((const uint8_t *)s, strlen(s));
 }
 
-static void replay_record(const in_record_t *in, gl_fixed_record_t *o)
+/** One input record (every record is a step) through the integer law into its output record. */
+static void replay_record(const void *in_record, void *out_record)
 {
+    const in_record_t *in = (const in_record_t *)in_record;
     float u[GL_FX_M];
     const uint32_t primask = gl_irq_save();
     (void)gl_fixed_step(&loop, in->y, in->r, u);
     gl_irq_restore(primask);
-    gl_fixed_record(&loop, u, o);
+    gl_fixed_record(&loop, u, (gl_fixed_record_t *)out_record);
 }
 
-static int replay_file(int32_t fin)
+/** The stream's start (the loop was started by run(); no watchdog: header word 3 is ignored). */
+static int replay_begin(const uint32_t in_hdr[4], uint32_t out_hdr[8])
 {
-    uint32_t hdr[4];
-    if (gl_sh_read_all(fin, hdr, sizeof hdr) != 0) {
-        return GL_EXIT_IO;
-    }
-    if (hdr[0] != GL_IN_MAGIC || hdr[2] == 0u) {
-        return GL_EXIT_BAD_INPUT;
-    }
-    int32_t fout = gl_sh_open("gl_out.bin", GL_SH_MODE_WB);
-    if (fout < 0) {
-        return GL_EXIT_IO;
-    }
-    const uint32_t count = hdr[1];
-    const uint32_t block = hdr[2] < GL_MAX_BLOCK ? hdr[2] : GL_MAX_BLOCK;
-    const uint32_t out_hdr[8] = {GL_OUT_MAGIC, count, GL_FX_N, GL_FX_M, GL_FX_P, GL_FX_Q, 0u, 0u};
-    if (gl_sh_write_all(fout, out_hdr, sizeof out_hdr) != 0) {
-        return GL_EXIT_IO;
-    }
-    for (uint32_t done = 0; done < count;) {
-        const uint32_t chunk = (count - done) < block ? (count - done) : block;
-        if (gl_sh_read_all(fin, in_buf, chunk * sizeof(in_record_t)) != 0) {
-            return GL_EXIT_IO;
-        }
-        for (uint32_t k = 0; k < chunk; ++k) {
-            replay_record(&in_buf[k], &out_buf[k]);
-        }
-        if (gl_sh_write_all(fout, out_buf, chunk * sizeof(gl_fixed_record_t)) != 0) {
-            return GL_EXIT_IO;
-        }
-        done += chunk;
-    }
-    gl_sh_close(fout);
+    (void)in_hdr;
+    const uint32_t words[6] = {GL_FX_N, GL_FX_M, GL_FX_P, GL_FX_Q, 0u, 0u};
+    memcpy(&out_hdr[2], words, sizeof words);
     return GL_EXIT_OK;
 }
+
+static const gl_stream_t replay_stream = {
+    .in_magic = GL_IN_MAGIC,
+    .out_magic = GL_OUT_MAGIC,
+    .in_size = sizeof(in_record_t),
+    .out_size = sizeof(gl_fixed_record_t),
+    .max_block = GL_MAX_BLOCK,
+    .in_buf = in_buf,
+    .out_buf = out_buf,
+    .begin = replay_begin,
+    .record = replay_record,
+};
 
 static int run(void)
 {
@@ -108,7 +98,7 @@ static int run(void)
         replay_record(&zero, &out_buf[0]);
         return GL_EXIT_OK;
     }
-    int rc = replay_file(fin);
+    int rc = gl_stream_replay(fin, &replay_stream);
     gl_sh_close(fin);
     return rc;
 }
