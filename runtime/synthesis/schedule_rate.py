@@ -1,10 +1,20 @@
-"""How fast sigma may move, found by simulation: the velocity loop driven by periodic sigma trajectories at a
-rate rho (ramps across the whole envelope and across each interval, and rate-limited steps that dwell at the
-ends), each judged exactly by its monodromy matrix (the loop's transition over one period: the periodic system
-is stable exactly when its spectral radius is below one).
+"""How fast sigma may move, found by simulation: the velocity loop (the frozen-point matrices interpolated at each
+sample's sigma, no saturation) driven by periodic sigma trajectories at a rate rho, each judged exactly by its
+monodromy matrix (the loop's transition over one period: the periodic system is stable exactly when its spectral
+radius is below one).
 
-Rates are scanned from slow to fast on a log grid; the answer is the fastest rate below which every rate tested
-was stable (None when every rate was, up to sigma crossing the whole envelope in one step). It confirms a
+The trajectories at a rate (:func:`trajectories`): a triangle between every pair of :func:`sweep_nodes` (the
+schedule's points, the envelope cut in eight, the middle of each interval), so periodic sweeps over the whole
+envelope, over each interval and over every sub-range on that grid, within an interval or across; and rate-limited
+steps across the whole envelope that dwell 1 and 25 samples at its ends. Stability is not monotone in the rate (a
+sweep's period is a parametric excitation: the example spring is unstable over half its envelope at 1.6/s and
+stable there at 4.7/s), so rates are not bisected: they are scanned from slow to fast on a fixed log grid
+(:data:`RATE_GRID` rates over four decades below a one-step crossing of the envelope) and the answer is the fastest
+scanned rate below which every scanned rate was stable (None when every rate was).
+
+What that covers: those trajectories at those rates, in the linear loop. What it does not: rates between the grid's
+(a resonance narrower than one grid ratio, 10^(1/4), could be missed), sweeps whose ends are not on the node grid,
+other shapes (several ranges in turn, non-periodic motion), saturation and the plant's nonlinearity. It confirms a
 certificate; it does not replace one (docs/design.md, scheduled law).
 """
 
@@ -16,14 +26,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .schedule_sweeps import product, radius, sweep_nodes, sweep_radii
+
 RATE_GRID = 17  # rates over four decades below a one-step crossing of the envelope
 DWELLS = (1, 25)  # samples held at each end of a rate-limited step
 
 
 @dataclass(frozen=True)
 class RateScan:
-    """The scan: the rates tried (slow to fast), the worst monodromy spectral radius at each, and the fastest
-    rate below which all were stable (None: all were)."""
+    """The scan: the rates tried (slow to fast, up to the first unstable one), the worst monodromy spectral radius
+    at each, and the fastest rate at and below which all tried were stable (None: all were)."""
 
     rates: np.ndarray
     radius: np.ndarray
@@ -31,14 +43,21 @@ class RateScan:
 
 
 def trajectories(points: np.ndarray, step: float) -> list[np.ndarray]:
-    """One period of each periodic sigma trajectory at ``step`` per sample."""
+    """One period of each periodic sigma trajectory at ``step`` per sample: first the triangle over the whole
+    envelope, then a triangle between every other pair of :func:`sweep_nodes` (every sub-range on that grid,
+    within an interval and across), then the rate-limited steps across the envelope that dwell at its ends."""
     lo, hi = float(points[0]), float(points[-1])
     out = [_triangle(lo, hi, step)]
-    out += [_triangle(float(a), float(b), step) for a, b in itertools.pairwise(points)]
-    for dwell in DWELLS:
-        up = _ramp(lo, hi, step)
-        out.append(np.concatenate([np.full(dwell, lo), up, np.full(dwell, hi), up[::-1]]))
-    return out
+    pairs = itertools.combinations(sweep_nodes(points), 2)
+    out += [_triangle(float(a), float(b), step) for a, b in pairs if (a, b) != (lo, hi)]
+    return out + dwell_steps(points, step)
+
+
+def dwell_steps(points: np.ndarray, step: float) -> list[np.ndarray]:
+    """One period of each rate-limited step across the envelope that dwells :data:`DWELLS` samples at its ends."""
+    lo, hi = float(points[0]), float(points[-1])
+    up = _ramp(lo, hi, step)
+    return [np.concatenate([np.full(d, lo), up, np.full(d, hi), up[::-1]]) for d in DWELLS]
 
 
 def _ramp(a: float, b: float, step: float) -> np.ndarray:
@@ -54,29 +73,21 @@ def _triangle(a: float, b: float, step: float) -> np.ndarray:
 def monodromy_radius(loops_at: Callable[[np.ndarray], np.ndarray], sigma: np.ndarray) -> float:
     """Spectral radius of the loop's transition over one period: ``loops_at(sigma)`` gives the (K, N, N) matrices
     of the steps, multiplied in pairs level by level, each product renormalised (its log-norm kept aside)."""
-    mats = loops_at(np.asarray(sigma, dtype=float))
-    log_scale = 0.0
-    while mats.shape[0] > 1:
-        if mats.shape[0] % 2:
-            mats = np.concatenate([mats, np.eye(mats.shape[1])[None]])
-        mats = mats[1::2] @ mats[0::2]  # later steps on the left
-        norms = np.linalg.norm(mats, axis=(1, 2))
-        if np.any(norms == 0.0):
-            return 0.0
-        mats = mats / norms[:, None, None]
-        log_scale += float(np.sum(np.log(norms)))
-    rho = float(np.max(np.abs(np.linalg.eigvals(mats[0]))))
-    return 0.0 if rho == 0.0 else float(np.exp(min(np.log(rho) + log_scale, 700.0)))
+    return radius(*product(loops_at(np.asarray(sigma, dtype=float))))
 
 
 def scan_rates(loops_at: Callable[[np.ndarray], np.ndarray], points: np.ndarray, Ts: float) -> RateScan:
-    """Scan rates from slow to fast; stop at the first whose trajectories are not all stable."""
+    """Scan :data:`RATE_GRID` rates from slow to fast; stop at the first at which some trajectory is not stable:
+    ``stable_rate`` is the rate before it (every scanned rate up to it stable; 0 when the slowest is not), whatever
+    faster rates would give."""
     span = float(points[-1] - points[0])
     fastest = span / Ts  # the whole envelope in one step
     rates = fastest * np.logspace(-4, 0, RATE_GRID)
     radius = []
     for rate in rates:
-        worst = max(monodromy_radius(loops_at, traj) for traj in trajectories(points, rate * Ts))
+        step = rate * Ts
+        steps = [monodromy_radius(loops_at, traj) for traj in dwell_steps(points, step)]
+        worst = max(float(np.max(sweep_radii(loops_at, sweep_nodes(points), step))), *steps)
         radius.append(worst)
         if not worst < 1.0:
             stable = float(rates[len(radius) - 2]) if len(radius) > 1 else 0.0

@@ -13,6 +13,7 @@ from ..shipping.scheduled import Schedule
 from .lpv import bernstein_vertices, lambda_polynomial, velocity_loop
 from .lyapunov import Certificate, common_lyapunov, rate_certificate
 from .schedule_rate import RateScan, scan_rates
+from .schedule_sweeps import SWEEP_PIECES
 
 #: Each interval is split in this many parts for the Bernstein hull (a tighter hull, more vertices).
 HULL_PIECES = 2
@@ -34,8 +35,9 @@ class VariationCheck:
         cert = self.common or self.certified
         return {
             "method": "quadratic Lyapunov function over the Bernstein hull of the velocity loop on each interval "
-            f"({HULL_PIECES} pieces per interval), re-checked by eigenvalues; periodic sigma trajectories judged "
-            "by their monodromy matrix",
+            f"({HULL_PIECES} pieces per interval), re-checked by eigenvalues; periodic sigma trajectories (triangles "
+            f"between every pair of {SWEEP_PIECES + 1} envelope nodes, the points and the intervals' middles; "
+            "rate-limited steps across the envelope) judged by their monodromy matrix on a log grid of rates",
             "common_lyapunov": self.common is not None,
             "certified_rate": None if self.certified is None else self.certified.rate,
             "certificate_margin": None if cert is None else cert.margin,
