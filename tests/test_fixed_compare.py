@@ -75,6 +75,7 @@ def test_one_lsb_on_one_command_is_caught_at_its_step(pendulum, tmp_path):
     assert re.search(r"is word (-?\d+) where the integer law from its own state gives (-?\d+)", res.err)
     got, want = (int(v) for v in re.search(r"word (-?\d+) where .* gives (-?\d+)", res.err).groups())
     assert got - want == 1
+    assert f"one-step check of {bent}: FAIL on 1 step(s), 300 steps" in res.out  # the next step starts from its state
 
 
 def test_a_state_without_its_words_is_quantised_and_said(pendulum, tmp_path):
