@@ -11,9 +11,11 @@ import numpy as np
 from .. import api
 from ..errors import DataError, GainlinkError, VerificationError
 from ..fileio import atomic_write_text, publish_files
+from ..proof.fixed_onestep import fixed_one_step_check, trace_words
 from ..proof.replay_io import compare_traces, engine_names, one_step_check, read_samples, read_trace, write_trace
 from ..proof.simulation import samples_csv
 from ..shipping import artifact as artifact_mod
+from ..shipping.codegen_fixed import is_fixed
 from ..synthesis.analysis import complex_pairs
 from ..synthesis.compensator import compensator_stability
 from ..synthesis.fixed_point import describe as describe_fixed_point
@@ -318,11 +320,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_replay(args: argparse.Namespace) -> int:
     """``gainlink replay ARTIFACT --input IN.csv --output OUT.csv [--compare OTHER.csv]``."""
     a = api.load(args.artifact)
-    other = None
+    other = words = None
     if args.compare:  # read and checked before the replay writes anything
         if not Path(args.compare).is_file():
             raise DataError(f"comparison file {args.compare} not found")
         other = read_trace(args.compare, a)
+        if is_fixed(a):  # a fixed-point trace: its words, refused when they are not this artifact's
+            words = trace_words(a, other, f"comparison file {args.compare}")
         steps = read_samples(args.input, a).Y.shape[0]
         if other.u.shape[0] != steps:
             raise DataError(
@@ -339,6 +343,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     )
     if other is None:
         return 0
+    if is_fixed(a):
+        return _compare_fixed(a, args, samples, trace, other, words)
     c32 = a.schedule is not None and args.engine != "reference"  # the scheduled C: against its float32 model
     checks = {
         args.engine: one_step_check(a, samples.Y, samples.R, trace, S=samples.S, c_engine=c32),
@@ -347,6 +353,25 @@ def cmd_replay(args: argparse.Namespace) -> int:
     for name, check in checks.items():
         law = "the C's float32 arithmetic, bit for bit," if c32 and name == args.engine else "float64 law"
         print(f"one-step check of {name} ({law} from its own state at each step): {check.summary()}")
+    return _report_compare(a, args, trace, other, checks)
+
+
+def _compare_fixed(a, args: argparse.Namespace, samples, trace, other, words) -> int:
+    """``--compare`` on a fixed-point artifact: both traces bit for bit against the integer law (the ``reference``
+    engine's own trace, the float64 law, against its float32 bound)."""
+    mine = (
+        one_step_check(a, samples.Y, samples.R, trace)
+        if args.engine == "reference"
+        else fixed_one_step_check(a, samples.Y, samples.R, trace_words(a, trace, f"the trace of engine {args.engine}"))
+    )
+    checks = {args.engine: mine, args.compare: fixed_one_step_check(a, samples.Y, samples.R, words)}
+    for name, check in checks.items():
+        law = " (float64 law from its own state at each step)" if check is mine and args.engine == "reference" else ""
+        print(f"one-step check of {name}{law}: {check.summary()}")
+    return _report_compare(a, args, trace, other, checks)
+
+
+def _report_compare(a, args: argparse.Namespace, trace, other, checks: dict) -> int:
     c = compare_traces(a, trace, other)
     print(
         f"open loop against {args.compare} (information): max |du| = {c.max_abs_u:.3g} ({c.max_rel_u:.3g} of the "

@@ -1,0 +1,115 @@
+"""`replay --compare` on a fixed-point artifact: the trace, step by step from its own XH, Z words, against the
+bit-exact integer law (the oracle: gainlink.proof.fixed_law), command words equal bit for bit. The host C's trace
+passes; one command moved by one LSB is caught at its step; a trace of another numeric format is refused."""
+
+from __future__ import annotations
+
+import csv
+import io
+import re
+
+import pytest
+from gainlink.proof.fixed_onestep import fixed_one_step_check, trace_words
+from gainlink.proof.replay_io import read_samples, read_trace
+from gainlink.shipping.artifact import load
+from support.cli import assert_one_clear_line, run_cli
+from support.paths import EXAMPLES
+
+BENT_STEP = 137
+
+
+@pytest.fixture(scope="module")
+def pendulum(tmp_path_factory) -> tuple:
+    """The pendulum designed in q31 and q15, 300 noisy samples, and the host C's (native) trace of the q31 one."""
+    d = tmp_path_factory.mktemp("fixed-compare")
+    q15 = d / "pendulum_q15.toml"  # q15 meets a coarser error than the default 1/4096 on the pendulum
+    q15.write_text((EXAMPLES / "pendulum.toml").read_text() + "\n[implementation]\nfixed_point_max_error = 0.01\n")
+    gains = {}
+    for numeric, spec in (("q31", EXAMPLES / "pendulum.toml"), ("q15", q15)):
+        res = run_cli("design", spec, "--out", d / numeric, "--numeric", numeric)
+        assert res.code == 0, res.err
+        gains[numeric] = d / numeric / "gains.json"
+    sim = run_cli("simulate", gains["q31"], "--steps", "300", "--noise", "0.01", "--out", d / "in.csv")
+    assert sim.code == 0, sim.err
+    res = run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", d / "native.csv", "--engine", "native")
+    assert res.code == 0, res.err
+    return d, gains
+
+
+def _rewrite(src, dst, edit) -> None:
+    """``src`` (a replay CSV) with ``edit(row_index, row)`` applied to each row, written to ``dst``."""
+    rows = list(csv.DictReader(io.StringIO(src.read_text())))
+    for k, row in enumerate(rows):
+        edit(k, row)
+    out = io.StringIO()
+    w = csv.DictWriter(out, fieldnames=list(rows[0]), lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    dst.write_text(out.getvalue())
+
+
+def test_host_c_trace_passes_bit_for_bit(pendulum):
+    d, gains = pendulum
+    res = run_cli(
+        "replay", gains["q31"], "--input", d / "in.csv", "--output", d / "fixed.csv", "--engine", "fixed",
+        "--compare", d / "native.csv",
+    )  # fmt: skip
+    assert res.code == 0, res.err
+    line = next(ln for ln in res.out.splitlines() if ln.startswith(f"one-step check of {d / 'native.csv'}"))
+    assert "pass, 300 steps bit for bit against the q31 integer law from the trace's own XH, Z words" in line
+    assert "one-step check of fixed: pass" in res.out
+
+
+def test_one_lsb_on_one_command_is_caught_at_its_step(pendulum, tmp_path):
+    d, gains = pendulum
+    lsb = 2.0 ** -load(gains["q31"]).checks["fixed_point"]["formats"]["u"][0]
+
+    def bend(k, row):
+        if k == BENT_STEP:
+            row["u0"] = repr(float(row["u0"]) + lsb)
+
+    bent = tmp_path / "bent.csv"
+    _rewrite(d / "native.csv", bent, bend)
+    res = run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", bent)
+    assert_one_clear_line(res, f"one-step check failed at step {BENT_STEP}: u0 of {bent} is word ")
+    assert re.search(r"is word (-?\d+) where the integer law from its own state gives (-?\d+)", res.err)
+    got, want = (int(v) for v in re.search(r"word (-?\d+) where .* gives (-?\d+)", res.err).groups())
+    assert got - want == 1
+    assert f"one-step check of {bent}: FAIL on 1 step(s), 300 steps" in res.out  # the next step starts from its state
+
+
+def test_a_state_without_its_words_is_quantised_and_said(pendulum, tmp_path):
+    """A trace written with twelve significant digits no longer holds the state words: the check starts each step
+    from the state quantised to the state formats, says so, and still passes (twelve digits recover the words)."""
+    d, gains = pendulum
+    a = load(gains["q31"])
+
+    def round12(k, row):
+        for key in row:
+            if key.startswith(("xh", "z")):
+                row[key] = f"{float(row[key]):.12g}"
+
+    short = tmp_path / "short.csv"
+    _rewrite(d / "native.csv", short, round12)
+    samples = read_samples(d / "in.csv", a)
+    check = fixed_one_step_check(a, samples.Y, samples.R, trace_words(a, read_trace(short, a), "short"))
+    assert check.passed and not check.state_words
+    assert "quantised to the state formats" in check.summary()
+
+
+def test_a_trace_of_another_numeric_format_is_refused_in_one_line(pendulum, tmp_path):
+    d, gains = pendulum
+    res = run_cli(
+        "replay", gains["q15"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare",
+        d / "native.csv",
+    )  # fmt: skip
+    assert_one_clear_line(res, f"comparison file {d / 'native.csv'} is not a trace of q15 artifact")
+    assert not (tmp_path / "out.csv").exists()
+    # the float64 law's trace (what a float32 artifact's replay holds) is not one either
+    assert run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "ref.csv").code == 0
+    res = run_cli(
+        "replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare",
+        tmp_path / "ref.csv",
+    )  # fmt: skip
+    assert_one_clear_line(res, "is not a trace of q31 artifact")
+    assert not (tmp_path / "out.csv").exists()
