@@ -127,3 +127,55 @@ def test_trim_outside_the_limits_is_refused(multirotor, tmp_path):
     out = tmp_path / "spec.toml"
     res = run_cli("linearize", path, "--schedule", "mass=0.8,1.5", "--at", "z=2", "--template", tmpl, "--out", out)
     assert res.code == 2 and "outside the limits" in res.err and not out.exists()
+
+
+# --- the fit of each point (issue 18, 1b per point) ----------------------------------------------------------
+
+
+def _schedule_json(path, out, *extra):
+    import json
+
+    tmpl = out.with_name("tmpl.toml")
+    tmpl.write_text(TEMPLATE)
+    res = run_cli("linearize", path, "--schedule", "mass=0.8,1.0,1.5", "--at", "z=2", "--template", tmpl,
+                  "--out", out, "--json", *extra)  # fmt: skip
+    assert res.code == 0, res.err
+    return json.loads(res.out), res.err
+
+
+def test_each_point_records_its_fit_and_it_is_good(multirotor, tmp_path):
+    """Each point's model fits the FMU (small steps from its trim through the interface runs use): NRMSE and final
+    error far below 5 %, recorded next to the point's plant in the spec and per point in --json, no warning."""
+    path, _ = multirotor
+    spec = tmp_path / "spec.toml"
+    js, err = _schedule_json(path, spec)
+    assert "poorly" not in err
+    data, _ = read_toml(spec, what="spec", error=ValueError)
+    assert data["linearization"]["interface"] == js["linearization"]["interface"] and "fit" not in data["linearization"]
+    assert [p["sigma"] for p in js["points"]] == [0.8, 1.0, 1.5]
+    for point, pt in zip(js["points"], data["schedule"]["plant"]):
+        assert point["fit"] == pt["fit"] and point["fit_steps"] == pt["fit_steps"] > 0
+        assert pt["fit"]["z"]["nrmse"] < 1e-3 and pt["fit"]["z"]["final_error"] < 1e-3, pt["fit"]
+        assert pt["fit_amplitude"]["throttle"] > 0 and "fit_warning" not in pt
+    assert run_cli("design", spec, "--out", tmp_path / "design").code == 0  # the record does not stop a design
+
+
+def test_a_poor_fit_at_a_point_warns_naming_the_point(multirotor, monkeypatch, caplog, tmp_path):
+    """Steps far too large for a linear model (as the single-point test provokes it, here 5x the output's value):
+    the thrust k_T u^2 bends most where the hover throttle is lowest, so the lightest point fits poorly and warns
+    in one line that names it, with the plant's nonlinearity as the cause; the heavier points stay under 5 %."""
+    from gainlink.hil.plants import step_response
+
+    monkeypatch.setattr(step_response, "LEVEL", 5.0)
+    path, _ = multirotor
+    spec = tmp_path / "spec.toml"
+    js, _ = _schedule_json(path, spec)
+    data, _ = read_toml(spec, what="spec", error=ValueError)
+    warnings = [r.getMessage() for r in caplog.records if "fits the FMU poorly" in r.getMessage()]
+    assert len(warnings) == 1 and "\n" not in warnings[0] and "at mass = 0.8:" in warnings[0], warnings
+    assert "likely cause: the plant's nonlinearity at that amplitude" in warnings[0]
+    light, *heavy = data["schedule"]["plant"]
+    assert light["fit_warning"] in warnings[0] and js["points"][0]["fit_warning"] == light["fit_warning"]
+    assert light["fit"]["z"]["final_error"] > 0.05
+    assert all("fit_warning" not in pt and pt["fit"]["z"]["final_error"] < 0.05 for pt in heavy)
+    assert "POOR at mass = 0.8" in spec.read_text().splitlines()[1]

@@ -67,7 +67,8 @@ class Linearization(StateSpaceModel):
         return table
 
 
-def _fmu_path(fmu: str | Path) -> Path:
+def fmu_path(fmu: str | Path) -> Path:
+    """The FMU file of ``fmu``: a path, or the name of one of the project's FMUs (built when missing)."""
     p = Path(fmu)
     if p.suffix == ".fmu" or p.exists() or "/" in str(fmu):
         return resolve_fmu(fmu=None, path=str(p))
@@ -101,7 +102,7 @@ def linearize(
     horizon : int, optional
         Co-Simulation-only FMUs: steps recorded per input pulse (default 100).
     """
-    path = _fmu_path(fmu)
+    path = fmu_path(fmu)
     md = read_description(path)
     _check_declared_ranges(md, at or {})
     if md.fmiVersion in ("2.0", "3.0") and md.modelExchange is None and md.coSimulation is not None:
@@ -347,7 +348,7 @@ def linearize_to_spec(
     tmpl = _template(template)
     data = spec_dict(lin, Ts=Ts, name=name, template=tmpl)
     parse_spec(data, source=str(out))  # refuse to write a spec design would not take
-    path = _fmu_path(fmu)
+    path = fmu_path(fmu)
     validity = check_linearization(lin, path=path, md=read_description(path), Ts=Ts, interface=interface)
     data["linearization"] = validity.record
     parse_spec(data, source=str(out))

@@ -23,7 +23,8 @@ from gainlink.errors import PlantError, SpecError
 from gainlink.fileio import atomic_write_text, read_toml
 
 from . import toml_write
-from .linearize import Linearization, linearize
+from .linearize import Linearization, fmu_path, linearize
+from .schedule_fit import PointFit, fit_schedule, shared_record
 
 log = logging.getLogger(__name__)
 
@@ -201,28 +202,64 @@ def _design_sections(template: Mapping | None, trims: list[Trim], outputs: list[
     }
 
 
+@dataclass(frozen=True)
+class ScheduleWritten:
+    """What ``linearize --schedule`` wrote: the trims and each point's fit (:mod:`.schedule_fit`)."""
+
+    trims: list[Trim]
+    fits: list[PointFit]
+
+    def to_json(self) -> dict:
+        """``linearize --schedule --json``: sigma, per point its value, Newton's figures and its fit record;
+        and the shared ``[linearization]`` record."""
+        return {
+            "sigma": self.fits[0].sigma,
+            "points": [
+                {"sigma": t.sigma, "iterations": t.iterations, "residual": t.residual, **f.record()}
+                for t, f in zip(self.trims, self.fits)
+            ],
+            "linearization": shared_record(self.fits),
+        }
+
+
 def trim_schedule_to_spec(*, fmu, sigma: str, values: Sequence[float], at: Mapping[str, float], out: Path, Ts: float,
                           name: str | None = None, inputs=None, outputs=None, method: str = "auto",
-                          template: Path | None = None) -> list[Trim]:  # fmt: skip
-    """Trim at every value, check that the spec designs' parser takes it, and write it atomically."""
+                          template: Path | None = None, interface: str = "auto") -> ScheduleWritten:  # fmt: skip
+    """Trim at every value, check that the spec designs' parser takes it, fit each point's model to the FMU
+    (:mod:`.schedule_fit`; a poor fit warns naming the point) and write it atomically."""
     from gainlink.spec import parse_spec
 
     if not Ts > 0:
         raise SpecError("--Ts must be positive")
+    if interface not in ("auto", "cs", "me"):
+        raise PlantError(f"linearize: --interface must be auto, cs or me, not {interface!r}")
     trims = trim_schedule(fmu, sigma=sigma, values=values, at=at, inputs=inputs, outputs=outputs, method=method)
     tmpl = read_toml(template, what="template spec", error=SpecError)[0] if template is not None else None
     spec_name = name or re.sub(r"[^A-Za-z0-9_]", "_", trims[0].lin.model_name)
     data = schedule_spec_dict(trims, sigma=sigma, Ts=Ts, name=spec_name, template=tmpl)
     parse_spec(data, source=str(out))  # refuse to write a spec design would not take (e.g. a trim outside limits)
-    header = (
+    fits = fit_schedule(trims, sigma=sigma, path=fmu_path(fmu), Ts=Ts, interface=interface)
+    data["linearization"] = shared_record(fits)
+    for point, f in zip(data["schedule"]["plant"], fits):
+        point.update(f.record())
+    parse_spec(data, source=str(out))
+    atomic_write_text(out, toml_write.dumps(data, header=_header(trims, fits, sigma=sigma, at=at, template=tmpl)))
+    return ScheduleWritten(trims=trims, fits=fits)
+
+
+def _header(trims: list[Trim], fits: list[PointFit], *, sigma: str, at: Mapping[str, float], template) -> str:
+    """The comment at the top of the scheduled spec: where it came from, what was held, and the fit per point."""
+    poor = [f"{f.value:g}" for f in fits if f.validity.fit.poor]
+    return (
         f"Scheduled on {sigma} by gainlink linearize --schedule: FMU {trims[0].lin.model_name} trimmed at "
         f"{', '.join(f'{t.sigma:g}' for t in trims)} ({trims[0].lin.method}); held: "
         f"{', '.join(f'{k} = {v:g}' for k, v in at.items()) or 'nothing else'}.\n"
+        f"Each point's model is fitted to the FMU at Ts = {fits[0].validity.fit.Ts:g} s through "
+        f"{fits[0].validity.choice.interface} (its [[schedule.plant]] fit): "
+        + (f"POOR at {sigma} = {', '.join(poor)} (see fit_warning).\n" if poor else "good at every point.\n")
         + (
             "Design sections copied from the template spec."
-            if tmpl is not None
+            if template is not None
             else "Design sections are neutral defaults: edit weights, noise and limits before designing."
         )
     )
-    atomic_write_text(out, toml_write.dumps(data, header=header))
-    return trims

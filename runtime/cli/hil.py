@@ -151,7 +151,7 @@ def _linearize_schedule(args: argparse.Namespace, at: dict) -> int:
         raise GainlinkError(f"--schedule expects NAME=v1,v2,... (numbers), got {args.schedule!r}") from None
     if not name.strip() or not points:
         raise GainlinkError(f"--schedule expects NAME=v1,v2,..., got {args.schedule!r}")
-    trims = trim_schedule_to_spec(
+    written = trim_schedule_to_spec(
         fmu=args.fmu,
         sigma=name.strip(),
         values=points,
@@ -163,12 +163,26 @@ def _linearize_schedule(args: argparse.Namespace, at: dict) -> int:
         outputs=args.outputs,
         method=args.method,
         template=Path(args.template) if args.template else None,
+        interface=args.interface,
     )
+    if args.json:
+        import json
+
+        sys.stdout.write(json.dumps({"spec": args.out, **written.to_json()}, indent=2, sort_keys=True) + "\n")
+        return 0
+    trims = written.trims
     print(
         f"wrote {args.out}: scheduled on {name.strip()} at {', '.join(f'{t.sigma:g}' for t in trims)}, each point "
         f"trimmed (Newton steps {', '.join(str(t.iterations) for t in trims)}; "
         f"max residual {max(t.residual for t in trims):.2g})"
     )
+    for f in written.fits:
+        fit = f.validity.fit
+        print(
+            f"  fit at {f.sigma} = {f.value:g} (through {fit.interface}): "
+            + ", ".join(f"{k} NRMSE {o.nrmse:.2g} final {o.final_error:.2g}" for k, o in fit.outputs.items())
+            + (" - POOR (see the warning)" if fit.poor else "")
+        )
     return 0
 
 
@@ -256,7 +270,11 @@ def _add_linearize_parser(subparsers: argparse._SubParsersAction) -> None:
         help="the FMU interface the model is checked through (default auto: Co-Simulation where it reproduces "
         "the Model Exchange derivatives at --Ts, as runs choose)",
     )
-    p.add_argument("--json", action="store_true", help="print the result and the [linearization] record as JSON")
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print the result and the [linearization] record as JSON (with --schedule: each point's fit too)",
+    )
     p.add_argument(
         "--schedule",
         metavar="NAME=v1,v2,...",

@@ -18,7 +18,10 @@ from .tables import parse_operating_point
 from .values import SIGNAL_RE, as_vector, no_unknown, positive_number
 
 SCHEDULE_KEYS = {"sigma", "external", "points", "rate_max", "filter_tau", "plant"}
-POINT_KEYS = {"A", "B", "C", "D", "states", "inputs", "outputs", "u_op", "y_op", "x_op"}
+# the fit keys: each point's fit to its FMU, written by ``linearize --schedule`` (kept as written, not used)
+POINT_KEYS = {"A", "B", "C", "D", "states", "inputs", "outputs", "u_op", "y_op", "x_op"} | {
+    "fit_steps", "fit_amplitude", "fit", "fit_warning",
+}  # fmt: skip
 SHARED_PLANT_KEYS = {"kind", "states", "inputs", "outputs"}
 _NAMES = ("states", "inputs", "outputs")
 
