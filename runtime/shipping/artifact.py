@@ -238,14 +238,23 @@ def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
     """Validate ``data`` (schema, hash, dimensions, invariants) and return an :class:`Artifact`."""
     _check_schema(data)
     if check_hash:
-        actual = content_sha256(data)
-        if actual != data["sha256"]:
-            raise IntegrityError(
-                f"artifact sha256 mismatch: recorded {data['sha256'][:12]}..., content hashes to {actual[:12]}... "
-                "(the file was edited after design)"
-            )
+        _check_hash(data)
     if data["schema_version"] == SCHEDULED_SCHEMA_VERSION:
         return _scheduled(data)
+    return _positional(data)
+
+
+def _check_hash(data: dict) -> None:
+    actual = content_sha256(data)
+    if actual != data["sha256"]:
+        raise IntegrityError(
+            f"artifact sha256 mismatch: recorded {data['sha256'][:12]}..., content hashes to {actual[:12]}... "
+            "(the file was edited after design)"
+        )
+
+
+def _positional(data: dict) -> Artifact:
+    """A schema-1 artifact: one positional law (matrices checked against their dimensions and invariants)."""
     n, m, p, q = (int(data[k]) for k in "nmpq")
     Ad = _matrix(data, "Ad", (n, n))
     Bd = _matrix(data, "Bd", (n, m))
