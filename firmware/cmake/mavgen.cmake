@@ -1,7 +1,19 @@
 # MAVLink 2 C headers generated at build time by pymavlink's mavgen from the common.xml pymavlink
 # ships (into the build tree; never committed). Defines the target `gainlink_mavlink_headers` and the
 # variable GL_MAVLINK_GEN (the include directory holding common/mavlink.h).
+# GL_MAVLINK_HEADERS: a folder already holding mavgen's output for that common.xml (gainlink's build driver
+# generates it once per pymavlink version and shares it between builds); the build then uses it as it is.
 include_guard(GLOBAL)
+
+set(GL_MAVLINK_HEADERS "" CACHE PATH "Pre-generated MAVLink 2 C headers (holding common/mavlink.h); generated here when empty")
+if(GL_MAVLINK_HEADERS)
+  if(NOT EXISTS "${GL_MAVLINK_HEADERS}/common/mavlink.h")
+    message(FATAL_ERROR "GL_MAVLINK_HEADERS (${GL_MAVLINK_HEADERS}) holds no common/mavlink.h")
+  endif()
+  set(GL_MAVLINK_GEN "${GL_MAVLINK_HEADERS}")
+  add_custom_target(gainlink_mavlink_headers)
+  return()
+endif()
 
 set(GL_PYTHON "" CACHE FILEPATH "Python interpreter with pymavlink (for mavgen); found automatically when empty")
 if(NOT GL_PYTHON)

@@ -16,6 +16,7 @@ import logging
 import os
 import shutil
 import subprocess
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -78,9 +79,22 @@ def _write_if_changed(path: Path, text: str) -> None:
     path.write_text(text, "utf-8")
 
 
+def _compiler_cache_env() -> dict[str, str]:
+    """The environment of configure and build: ccache's cache in ``.cache/ccache`` of the checkout, with paths
+    under the checkout hashed relative to the build folder, so builds of different artifacts share every
+    translation unit that does not depend on the artifact (ignored when ccache is not installed)."""
+    env = dict(os.environ)
+    env.setdefault("CCACHE_DIR", str(repo_root() / ".cache" / "ccache"))
+    env.setdefault("CCACHE_BASEDIR", str(repo_root()))
+    env.setdefault("CCACHE_NOHASHDIR", "1")
+    return env
+
+
 def _run(cmd: list[str], *, cwd: Path, what: str) -> None:
     log.debug("running %s", " ".join(cmd))
-    proc = subprocess.run(cmd, cwd=cwd, stdin=subprocess.DEVNULL, capture_output=True, text=True)
+    proc = subprocess.run(
+        cmd, cwd=cwd, stdin=subprocess.DEVNULL, capture_output=True, text=True, env=_compiler_cache_env()
+    )
     if proc.returncode != 0:
         lines = (proc.stdout + proc.stderr).strip().splitlines()
         for line in lines[-15:]:
@@ -158,6 +172,12 @@ def _configure(cmake: str, cm: Path, *, gen: Path, platform: _targets.Platform, 
     src = firmware_dir()
     target = platform.target.name
     cfg = [cmake, "-S", str(src), "-B", str(cm), f"-DGL_GAINS_DIR={gen}", f"-DGL_TARGET={target}"]
+    if shutil.which("ninja") is not None:  # Ninja and ccache are installed by `make setup`: faster, same output
+        cfg.append("-GNinja")
+    if shutil.which("ccache") is not None:
+        cfg.append("-DCMAKE_C_COMPILER_LAUNCHER=ccache")
+    if _uses_mavlink(platform, options):
+        cfg.append(f"-DGL_MAVLINK_HEADERS={mavlink_headers()}")
     if platform.board is None and "GL_APPS" not in options:
         cfg.append("-DGL_APPS=OFF")  # the library, shared object and loop executable only
     if platform.board is not None:
@@ -171,6 +191,35 @@ def _configure(cmake: str, cm: Path, *, gen: Path, platform: _targets.Platform, 
     except ToolchainError:
         shutil.rmtree(cm, ignore_errors=True)
         raise
+
+
+def _uses_mavlink(platform: _targets.Platform, options: dict[str, str]) -> bool:
+    """Whether the configuration builds the MAVLink node (the host apps, a serving image, the fuzz harnesses)."""
+    if options.get("GL_FUZZ") == "ON":
+        return True
+    if platform.board is None:
+        return options.get("GL_APPS") == "ON"
+    return options.get("GL_IMAGE_SERVE", "ON") == "ON"
+
+
+def mavlink_headers() -> Path:
+    """mavgen's MAVLink 2 C headers for the common.xml of the installed pymavlink (cached, generated once per
+    pymavlink version and shared by every build: generating them is most of a host app build's time)."""
+    import pymavlink
+
+    xml = Path(pymavlink.__file__).parent / "dialects" / "v20" / "common.xml"
+    key = hashlib.sha256(xml.read_bytes()).hexdigest()[:16]
+    root = repo_root() / ".cache" / "mavlink-c" / f"{pymavlink.__version__}-{key}"
+    if (root / "common" / "mavlink.h").is_file():
+        return root
+    with exclusive_lock(root.parent / ".lock"):
+        if not (root / "common" / "mavlink.h").is_file():
+            staging = root.with_name(root.name + ".tmp")
+            shutil.rmtree(staging, ignore_errors=True)
+            cmd = [sys.executable, "-m", "pymavlink.tools.mavgen", "--lang=C", "--wire-protocol=2.0"]
+            _run([*cmd, f"--output={staging}", str(xml)], cwd=root.parent, what="mavgen (MAVLink C headers)")
+            os.replace(staging, root)
+    return root
 
 
 def _outputs(cm: Path, platform: _targets.Platform) -> dict[str, Path]:
