@@ -18,11 +18,12 @@ demo: setup
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/demo.sh
 
 # The suite in parallel (pytest-xdist; tests are isolated by port, multicast group and folder, caches are filled
-# under file locks), the tests marked slow first and handed out one at a time (tests/conftest.py), then pytest's
-# ten slowest. TEST_WORKERS=0 runs it in one process.
+# under file locks), the tests marked slow first (tests/conftest.py), handed out a few at a time except those
+# marked xdist_group (tests sharing an expensive module fixture: one worker makes it once), then pytest's ten
+# slowest. TEST_WORKERS=0 runs it in one process.
 TEST_WORKERS ?= 4
 test: setup
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist load --maxschedchunk 1 --durations=10
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder --durations=10
 
 test-matrix: setup
 	$(PY) -m pytest -q -m matrix

@@ -28,8 +28,9 @@ from support.shared import once_per_run
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """The tests marked ``slow`` (builds, VMs, long closed loops) run first, the rest keep their order: with
-    `make test`'s one-at-a-time scheduling (``--dist load --maxschedchunk 1``) the long ones spread over the
-    workers from the start instead of ending the run on one of them."""
+    `make test`'s scheduling (``--dist loadgroup --no-loadscope-reorder``: tests a few at a time in this order,
+    those of one ``xdist_group`` together) the long ones spread over the workers from the start instead of
+    ending the run on one of them."""
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 

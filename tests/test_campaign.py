@@ -96,6 +96,11 @@ def _control(record: dict) -> dict:
     return {k: record["metrics"].get(k) for k in CONTROL_KEYS}
 
 
+#: The tests on this module's clusters (local_run, dask_cluster) run on one worker (make test: --dist loadgroup),
+#: so each cluster and the campaign on it are started once, not once per worker.
+ON_THE_CLUSTERS = pytest.mark.xdist_group("campaign-clusters")
+
+
 @pytest.fixture(scope="module")
 def local_run(pend, tmp_path_factory):
     """The small campaign on a LocalCluster of 2 process workers, started while port 8787 (Dask's dashboard
@@ -373,6 +378,7 @@ def test_verdicts_name_each_failed_criterion():
 
 
 @pytest.mark.slow
+@ON_THE_CLUSTERS
 def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pend, local_run):
     result, out, _ = local_run
     assert result.total == 6 and result.executed == 6 and result.reused == 0 and result.errors == 0
@@ -404,12 +410,14 @@ def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pen
     assert oct((out / "campaign.json").stat().st_mode & 0o777) == "0o644"
 
 
+@ON_THE_CLUSTERS
 def test_a_local_cluster_without_dashboard_says_nothing_about_a_taken_dashboard_port(local_run):
     # Dask's scheduler serves its HTTP routes (health, metrics) even without a dashboard, on port 8787 by default,
     # and warned "Port 8787 is already in use" whenever another cluster held it.
     assert [w for w in local_run[2] if "8787" in w or "in use" in w] == []
 
 
+@ON_THE_CLUSTERS
 def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
     result, out, _ = local_run
     row = result.rows[4]
@@ -423,6 +431,7 @@ def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
     assert bad.code == 2 and "no run id matching 'zzzz'" in bad.err
 
 
+@ON_THE_CLUSTERS
 def test_show_takes_a_run_by_index_or_by_id_never_guessing_which(local_run, tmp_path):
     from gainlink.hil.campaign.show import find_run
 
@@ -512,6 +521,7 @@ def test_a_folder_from_before_the_npy_traces_keeps_its_traces_and_a_foreign_work
 
 
 @pytest.mark.slow
+@ON_THE_CLUSTERS
 def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster, tmp_path):
     data = small_campaign(pend, runs=8, grid=[])
     data["scenario"]["duration"] = 4.0
@@ -678,6 +688,7 @@ def dask_cluster(tmp_path_factory):
             p.wait(timeout=30)
 
 
+@ON_THE_CLUSTERS
 def test_scheduler_and_two_worker_processes_give_the_local_cluster_results(pend, local_run, dask_cluster, tmp_path):
     _, local_out, _ = local_run
     path = tmp_path / "small.toml"
@@ -705,6 +716,7 @@ def test_scheduler_and_two_worker_processes_give_the_local_cluster_results(pend,
     assert {r["worker"]["pid"] for r in dist} <= _worker_pids(dask_cluster)
 
 
+@ON_THE_CLUSTERS
 def test_a_hil_fault_matrix_runs_in_parallel_on_separate_buses(pend, dask_cluster, tmp_path):
     data = small_campaign(
         pend,
@@ -770,6 +782,7 @@ def _worker_pids(address: str) -> set[int]:
         return set(client.run(os.getpid).values())
 
 
+@ON_THE_CLUSTERS
 def test_a_run_whose_worker_dies_is_retried_and_recorded_as_failed_after_a_second_death(pend, dask_cluster, tmp_path):
     from distributed import Client
 
@@ -805,6 +818,7 @@ def test_a_run_whose_worker_dies_is_retried_and_recorded_as_failed_after_a_secon
     assert all(rows[i]["status"] in ("pass", "fail") for i in (0, 1, 2)) and result.errors == 1
 
 
+@ON_THE_CLUSTERS
 def test_runs_that_errored_fail_the_campaign_and_only_they_run_again_on_resume(pend, dask_cluster, tmp_path):
     broken = tmp_path / "broken"  # the plant of half the runs refuses to start while this file exists
     broken.write_text("")
@@ -844,6 +858,7 @@ def test_runs_that_errored_fail_the_campaign_and_only_they_run_again_on_resume(p
     assert third.code == 0 and "resumed: 4 runs had results, 0 ran now" in third.out
 
 
+@ON_THE_CLUSTERS
 def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, dask_cluster, tmp_path, caplog):
     # Four runs in one Dask task; the plant of two of them raises on every attempt (a bug, not a GainlinkError).
     data = small_campaign(

@@ -15,6 +15,9 @@ from gainlink.shipping.artifact import load
 from support.cli import assert_one_clear_line, run_cli
 from support.paths import EXAMPLES
 
+# One worker runs this module (make test: --dist loadgroup): the fixed-point pendulum and its builds, made once.
+pytestmark = pytest.mark.xdist_group("test_fixed_compare")
+
 BENT_STEP = 137
 
 

@@ -35,6 +35,9 @@ from support.cli import run_cli
 from support.hil import udp_transport
 from support.thirdparty import TEMPLATE, gemseo_fmu
 
+# One worker runs this module (make test: --dist loadgroup): the mass-damper FMU and its design, made once.
+pytestmark = pytest.mark.xdist_group("test_model_validity")
+
 TS = 1e-3
 C_SPRING, D_DAMP, MASS = 1.0e4, 10.0, 1.0
 

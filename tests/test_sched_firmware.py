@@ -21,6 +21,9 @@ from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict
 from support.cli import GOOD_SPEC, run_cli
 
+# One worker runs this module (make test: --dist loadgroup): the scheduled builds, made once.
+pytestmark = pytest.mark.xdist_group("test_sched_firmware")
+
 FLOAT = r"-?\d+(?:\.\d*)?(?:e[-+]?\d+)?f"
 
 

@@ -24,7 +24,8 @@ from schedule_cases import external_tank, tank_dict
 from support.cli import run_cli
 from support.shared import once_per_run
 
-pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
+# One worker runs this module (make test: --dist loadgroup): the tank designs, made once.
+pytestmark = [pytest.mark.usefixtures("quiet_design_warnings"), pytest.mark.xdist_group("test_sched_sil")]
 C_ORIFICE = 0.4  # the tank's orifice coefficient: equilibrium q = u = c sqrt(h)
 
 

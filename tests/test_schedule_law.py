@@ -14,6 +14,9 @@ from gainlink.synthesis import synthesize
 from gainlink.synthesis.lpv import velocity_loop
 from schedule_cases import external_tank
 
+# One worker runs this module (make test: --dist loadgroup): the scheduled designs, made once.
+pytestmark = pytest.mark.xdist_group("test_schedule_law")
+
 
 @pytest.fixture(scope="module", params=["predictor", "current"])
 def scheduled(request):
