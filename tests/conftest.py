@@ -7,8 +7,10 @@ ask at the same time build it once.
 
 from __future__ import annotations
 
+import json
 import logging
 import os
+import resource
 import shutil
 import tempfile
 from collections.abc import Iterator
@@ -32,6 +34,28 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     those of one ``xdist_group`` together) the long ones spread over the workers from the start instead of
     ending the run on one of them."""
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
+def _cpu_seconds() -> float:
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    """With ``GAINLINK_TEST_CPU=FILE``, append each test's CPU seconds (the worker's and its reaped child
+    processes': builds, QEMU, firmware, Dask workers) to FILE as a JSON line: on a 2-core machine the suite's
+    time is its CPU over two, so this, not ``--durations``' wall time under contention, says what to make
+    cheaper (``scripts/test_cpu.py FILE`` sums it per test module)."""
+    path = os.environ.get("GAINLINK_TEST_CPU")
+    start = _cpu_seconds()
+    try:
+        return (yield)
+    finally:
+        if path:
+            record = {"test": item.nodeid, "cpu": round(_cpu_seconds() - start, 3)}
+            with open(path, "a") as fh:
+                fh.write(json.dumps(record) + "\n")
 
 
 @pytest.fixture(scope="session")
