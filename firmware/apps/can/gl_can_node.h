@@ -2,8 +2,8 @@
  * @file gl_can_node.h
  * @brief The CAN node of the loop, independent of its link: frames in, frames out.
  *
- * Assembles each sample (y then r) from its measurement frames by sequence number, runs gl_loop_step()
- * once per complete, newer sample (duplicates and stale samples are ignored and counted), and answers
+ * Assembles each sample (y then r) from its measurement frames by sequence number, steps the artifact's law
+ * (gl_can_law.h: the float32 loop, or the fixed-point loop of a fixed-point export) once per complete, newer sample (duplicates and stale samples are ignored and counted), and answers
  * with the command frames carrying the same sequence number, the status bits and the saturation mask
  * (layout in gl_can_layout.h). The host app `gainlink_can` feeds it from SocketCAN or udp_multicast,
  * the Cortex-M4F image from slcan on its UART (gl_slcan.h).
@@ -14,6 +14,7 @@
 #include <stdint.h>
 
 #include "gainlink/gl_loop.h"
+#include "gl_can_law.h"
 #include "gl_can_layout.h"
 #include "gl_can_link.h"
 
@@ -57,7 +58,7 @@ typedef struct gl_can_node_stats {
 typedef struct gl_can_node {
     gl_can_node_config_t cfg;          /**< Configuration. */
     gl_can_layout_t layout;            /**< Frame layout. */
-    gl_loop_t loop;                    /**< The control loop. */
+    gl_can_law_t loop;                 /**< The control law (gl_can_law.h). */
     gl_can_node_stats_t stats;         /**< Counters. */
     uint32_t meas_base;                /**< First measurement identifier. */
     uint32_t meas_frames;              /**< Frames per sample. */
@@ -71,7 +72,7 @@ typedef struct gl_can_node {
 } gl_can_node_t;
 
 /**
- * @brief Initialise the node and its loop on the compiled gain set.
+ * @brief Initialise the node and its law on the compiled gain set.
  * @param[out] node Node.
  * @param[in]  cfg  Configuration (copied).
  * @return GL_OK, or the loop's refusal of the compiled gains.

@@ -1,0 +1,42 @@
+/**
+ * @file gl_can_law.c
+ * @brief The float32 or the fixed-point law behind the CAN node (see gl_can_law.h).
+ */
+#include "gl_can_law.h"
+
+#include "gl_can_layout.h"
+
+#if defined(GL_CAN_LAW_FIXED) && GL_CAN_LAW_FIXED
+
+gl_status_t gl_can_law_init(gl_can_law_t *law, uint32_t watchdog_periods)
+{
+    (void)watchdog_periods; /* the node steps only on a sample: there is no idle period to count */
+    return gl_fixed_init(law, &gl_fixed_gains_default) == 0 ? GL_OK : GL_ERR_NULL;
+}
+
+uint32_t gl_can_law_step(gl_can_law_t *law, const float *y, const float *r, float *u, uint8_t *status)
+{
+    uint32_t flags = gl_fixed_step(law, y, r, u);
+    uint8_t s = 0u;
+    s |= (flags & GL_FX_FAULT) ? GL_CAN_STATUS_FAULT : 0u;
+    s |= (flags & GL_FX_CLIPPED) ? GL_CAN_STATUS_CLIPPED : 0u;
+    s |= (flags & GL_FX_OVERFLOW) ? GL_CAN_STATUS_OVERFLOW : 0u;
+    *status = s;
+    return (flags & GL_FX_FAULT) ? 0u : law->sat_mask;
+}
+
+#else
+
+gl_status_t gl_can_law_init(gl_can_law_t *law, uint32_t watchdog_periods)
+{
+    return gl_loop_init(law, &gl_gains_default, watchdog_periods);
+}
+
+uint32_t gl_can_law_step(gl_can_law_t *law, const float *y, const float *r, float *u, uint8_t *status)
+{
+    gl_status_t st = gl_loop_step(law, y, r, u);
+    *status = st == GL_ERR_NANINF ? GL_CAN_STATUS_FAULT : 0u;
+    return st == GL_SATURATED ? law->sat_mask : 0u;
+}
+
+#endif
