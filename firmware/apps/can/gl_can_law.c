@@ -4,9 +4,30 @@
  */
 #include "gl_can_law.h"
 
+#include <stddef.h>
+
 #include "gl_can_layout.h"
 
-#if defined(GL_CAN_LAW_FIXED) && GL_CAN_LAW_FIXED
+#if defined(GL_SCHEDULED) && GL_SCHEDULED
+
+gl_status_t gl_can_law_init(gl_can_law_t *law, uint32_t watchdog_periods)
+{
+    (void)watchdog_periods;
+    return gl_sched_init(law, &gl_sched_default);
+}
+
+uint32_t gl_can_law_step(gl_can_law_t *law, const float *y, const float *r, float *u, uint8_t *status)
+{
+    gl_sched_status_t st = gl_sched_step(law, y, r, NULL, u);
+    uint8_t s = st == GL_SCHED_ERR_NANINF ? GL_CAN_STATUS_FAULT : 0u;
+    s |= (law->sigma_flags & GL_SIGMA_HELD) ? GL_CAN_STATUS_SIGMA_HELD : 0u;
+    s |= (law->sigma_flags & GL_SIGMA_CLIPPED) ? GL_CAN_STATUS_SIGMA_CLIPPED : 0u;
+    s |= (law->sigma_flags & GL_SIGMA_RATE) ? GL_CAN_STATUS_SIGMA_RATE : 0u;
+    *status = s;
+    return st == GL_SCHED_SATURATED ? law->sat_mask : 0u;
+}
+
+#elif defined(GL_CAN_LAW_FIXED) && GL_CAN_LAW_FIXED
 
 gl_status_t gl_can_law_init(gl_can_law_t *law, uint32_t watchdog_periods)
 {

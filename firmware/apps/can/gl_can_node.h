@@ -13,8 +13,7 @@
 
 #include <stdint.h>
 
-#include "gainlink/gl_loop.h"
-#include "gl_can_law.h"
+#include "gl_can_law.h" /* the law, and gl_loop.h (or its stand-ins for a scheduled law) */
 #include "gl_can_layout.h"
 #include "gl_can_link.h"
 

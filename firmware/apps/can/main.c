@@ -37,7 +37,7 @@
 #include <string.h>
 #include <time.h>
 
-#include "gainlink/gl_loop.h"
+#include "gl_can_law.h"
 #include "gl_can_layout.h"
 #include "gl_can_link.h"
 #include "gl_can_node.h"
@@ -46,7 +46,7 @@
 #define N_SAMPLE GL_CAN_NODE_SAMPLE
 
 /* The ready line names a law other than float32 (the float32 node's line is as it always was). */
-#if defined(GL_CAN_LAW_FIXED) && GL_CAN_LAW_FIXED
+#if (defined(GL_CAN_LAW_FIXED) && GL_CAN_LAW_FIXED) || (defined(GL_SCHEDULED) && GL_SCHEDULED)
 #define LAW_FIELD " law=" GL_CAN_LAW_NAME
 #else
 #define LAW_FIELD ""
