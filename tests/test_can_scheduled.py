@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from gainlink.errors import GainlinkError
 from gainlink.hil import run as hil_run
+from gainlink.hil.loop.scenario import parse_scenario
+from gainlink.hil.loop.sil_scheduled import external_signals
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
+from gainlink.shipping.can_layout import layout_for
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict
@@ -34,7 +36,7 @@ def tank(tmp_path_factory):
 
 def _sweep_scenario(path, **extra) -> dict:
     """tank_sweep, shortened: the level's reference climbs 0.04 -> 1 m at 0.2 m/s from t = 1 s."""
-    data = {
+    data: dict = {
         "name": "tank_sweep_can",
         "artifact": str(path),
         "duration": 6.0,
@@ -67,7 +69,18 @@ def test_the_can_node_runs_the_scheduled_law_bit_for_bit_as_sigma_crosses_the_po
     assert "udp_multicast" in summary and "law=" not in summary
 
 
-def test_an_external_sigma_is_refused_for_the_can_link_in_one_line(tmp_path_factory, tmp_path):
-    path = _designed(tmp_path_factory, "external", external_tank(rate_max=0.05), tmp_path)[1]
-    with pytest.raises(GainlinkError, match="external signal load, which the CAN layout does not carry"):
-        hil_run(_sweep_scenario(path, schedule_signal={"load": {"kind": "constant", "value": 0.5}}))
+def test_an_external_sigma_travels_after_the_references_and_the_node_runs_on_it(tmp_path_factory, tmp_path):
+    a, path = _designed(tmp_path_factory, "external", external_tank(), tmp_path)
+    layout = layout_for(a)
+    assert [list(s.signals) for s in layout.measurement] == [["y_h"], ["r_h"], ["s_load"]]  # classic: one value a frame
+    signal = {"kind": "sweep", "low": 0.0, "high": 1.2, "rate": 0.4, "start": 0.5}
+    data = _sweep_scenario(path, schedule_signal={"load": signal}, duration=4.0)
+    res = hil_run(data)
+    tr = res.trace
+    assert res.complete and res.metrics["lost"] == 0 and res.metrics["schedule"]["source"] == "external"
+    S = external_signals(parse_scenario(data), artifact=a, t=tr.t).astype(np.float32).astype(np.float64)
+    Y, R = tr.y.astype(np.float32).astype(np.float64), tr.r.astype(np.float32).astype(np.float64)
+    model = ScheduledFloat32Loop(a).run(Y, R, S)
+    np.testing.assert_array_equal(tr.u.astype(np.float32).view(np.uint32), model.u.astype(np.float32).view(np.uint32))
+    np.testing.assert_array_equal(tr.sigma_flags, model.sigma_flags)  # clipped at 0 and above 1: from the node
+    assert np.any(model.sigma_flags & 2) and tr.sigma.min() < 0.05 and tr.sigma.max() > 0.9

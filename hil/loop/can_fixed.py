@@ -27,10 +27,8 @@ from gainlink.proof.fixed_format import real
 from gainlink.proof.fixed_law import FixedPointLoop
 from gainlink.shipping.artifact import Artifact
 
+from ..links.base import STATUS_CLIPPED, STATUS_FAULT, STATUS_OVERFLOW
 from .pil_fixed import model_records
-
-#: Status bits of the CAN command frames (firmware/apps/can/gl_can_layout.h).
-STATUS_FAULT, STATUS_CLIPPED, STATUS_OVERFLOW = 0x01, 0x04, 0x08
 
 
 def law_of(ready_line: str) -> str:

@@ -4,11 +4,12 @@
 The run is the scheduled SIL's loop (:mod:`.sil_scheduled`: plant, sigma trace, closed-loop and model twins, the
 report's ``schedule`` block) with the law behind the link: per step the sample (y then r) goes out in the CAN
 layout, the command with the same sequence number comes back (the plant waits up to ``step_timeout``; a lost
-command holds the last one). Sigma is the node's own (its flags come back in the status byte: held 0x10, clipped
-0x20, rate-limited 0x40); its value is not on the bus, so the trace's sigma is the scheduled float32 model's
+command holds the last one). The external scheduling signals (``[schedule_signal.NAME]``), when the artifact has
+any, travel in the sample after the references (``s_NAME`` in the layout and the DBC). Sigma is the node's own
+(its flags come back in the status byte: held 0x10, clipped 0x20, rate-limited 0x40); its value is not on the bus,
+so the trace's sigma is the scheduled float32 model's
 (:class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`, bit for bit the C) on the samples the node
-received. Lockstep, without injected faults; sigma must be a measured output (an external sigma is not carried
-in the CAN layout: refused in one line).
+received. Lockstep, without injected faults.
 """
 
 from __future__ import annotations
@@ -21,8 +22,10 @@ from contextlib import ExitStack
 import numpy as np
 from gainlink.errors import ScenarioError
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
+from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE
 from gainlink.shipping.artifact import Artifact
 
+from ..links.base import STATUS_FAULT, STATUS_SIGMA_CLIPPED, STATUS_SIGMA_HELD, STATUS_SIGMA_RATE
 from ..links.can import CanTransport
 from ..links.config import transport_from_config
 from .bridge import RunResult
@@ -32,18 +35,12 @@ from .scenario_plant import build_plant
 from .sched_law import GL_ERR_NANINF, GL_SATURATED, SchedOut
 from .sil_scheduled import _closed_loop_twin, _ScheduledSil
 
-#: Status bits of the scheduled node's command frames (firmware/apps/can/gl_can_layout.h) and sigma's flags.
-STATUS_FAULT, SIGMA_BITS = 0x01, ((0x10, 1), (0x20, 2), (0x40, 4))
+#: The scheduled node's status bits (firmware/apps/can/gl_can_layout.h) and the sigma flags they carry.
+SIGMA_BITS = ((STATUS_SIGMA_HELD, SIGMA_HELD), (STATUS_SIGMA_CLIPPED, SIGMA_CLIPPED), (STATUS_SIGMA_RATE, SIGMA_RATE))
 
 
 def check_scheduled_can(artifact: Artifact, scenario: Scenario) -> None:
     """One line when the scheduled artifact or the scenario cannot run over the CAN link."""
-    S = artifact.schedule
-    if S.source != "output":
-        raise ScenarioError(
-            f"scenario {scenario.name}: {artifact.name} is scheduled on the external signal {S.sigma}, which the CAN "
-            'layout does not carry: run it with controller = "reference" or as SIL (gainlink.hil.loop.sil.run_sil)'
-        )
     if scenario.mode != "lockstep" or scenario.faults:
         raise ScenarioError(
             f"scenario {scenario.name}: a scheduled artifact runs over CAN in lockstep without injected faults "
@@ -76,9 +73,10 @@ class _BusLaw:
         """Send sample ``y``, ``r``; the node's answer, or None when it did not come within ``step_timeout``."""
         seq = self.k % self.transport.seq_modulo
         self.k += 1
-        ys, rs = self.transport.received_sample(y=y, r=r)
-        sigma = self.shadow.step(ys, rs).sigma
-        self.transport.send_frames(self.transport.encode_sample(seq=seq, y=y, r=r))
+        rs = np.concatenate([r, s])  # the external scheduling signals travel after the references
+        ys, rx = self.transport.received_sample(y=y, r=rs)
+        sigma = self.shadow.step(ys, rx[: r.size], rx[r.size :]).sigma
+        self.transport.send_frames(self.transport.encode_sample(seq=seq, y=y, r=rs))
         deadline = time.monotonic() + self.timeout
         while (left := deadline - time.monotonic()) > 0:
             c = self.transport.receive_command(timeout=left)

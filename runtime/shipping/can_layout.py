@@ -16,10 +16,11 @@ i-th value of this command frame was clamped). Values follow, little-endian, in 
     (the ``sat`` byte has 8 bits).
 
 FD frame lengths are rounded up to a valid FD length. Command frames (controller -> plant, ``u``) use
-ids ``base_id + j``; measurement frames (plant -> controller, ``y`` then ``r``) use ids ``base_id +
-0x10 + i``, so commands win arbitration. The firmware's CAN app implements exactly this rule (its
-int16 factor/offset come from :func:`gainlink.hil.links.can.firmware_can_argv`, i.e. from the
-same :class:`FrameSpec` data that builds the DBC); :meth:`CanLayout.dbc` documents it for any CAN tool.
+ids ``base_id + j``; measurement frames (plant -> controller, ``y`` then ``r``, then a scheduled artifact's
+external scheduling signals ``s_NAME``) use ids ``base_id + 0x10 + i``, so commands win arbitration. The firmware's
+CAN app implements exactly this rule (its int16 factor/offset come from
+:func:`gainlink.hil.links.can.firmware_can_argv`, i.e. from the same :class:`FrameSpec` data that builds the DBC);
+:meth:`CanLayout.dbc` documents it for any CAN tool.
 """
 
 from __future__ import annotations
@@ -449,17 +450,16 @@ def layout_for(
     sig = artifact.signals
     per_frame = FD_MAX_VALUES if fd else CLASSIC_VALUES[encoding]
     ys, rs, us = _dbc_names(artifact)
-    sc = _scales(
-        artifact,
-        ranges,
-        int16=encoding == "int16",
-        groups=[
-            ("outputs", list(sig["outputs"]), ys),
-            ("references", list(sig["references"]), rs),
-            ("inputs", list(sig["inputs"]), us),
-        ],
-    )
-    meas_scales = None if sc["outputs"] is None else sc["outputs"] + sc["references"]
+    external, ss = _external_signals(artifact)
+    groups = [
+        ("outputs", list(sig["outputs"]), ys),
+        ("references", list(sig["references"]), rs),
+        ("inputs", list(sig["inputs"]), us),
+    ]
+    if external:
+        groups.append(("external", external, ss))
+    sc = _scales(artifact, ranges, int16=encoding == "int16", groups=groups)
+    meas_scales = None if sc["outputs"] is None else sc["outputs"] + sc["references"] + (sc.get("external") or [])
     common = dict(per_frame=per_frame, fd=fd, encoding=encoding)
     return CanLayout(
         fd=fd,
@@ -467,7 +467,7 @@ def layout_for(
         per_frame=per_frame,
         encoding=encoding,
         measurement=_frames(
-            ys + rs,
+            ys + rs + ss,
             meas_scales,
             prefix="Measurement",
             base=base_id + MEASUREMENT_OFFSET,
@@ -478,6 +478,14 @@ def layout_for(
             us, sc["inputs"], prefix="Command", base=base_id + COMMAND_OFFSET, max_frames=MAX_COMMAND_FRAMES, **common
         ),
     )
+
+
+def _external_signals(artifact: Any) -> tuple[list[str], list[str]]:
+    """A scheduled artifact's external scheduling signals (sent after the references, ``s_`` in the DBC): their
+    names and DBC names; none for an unscheduled artifact or a sigma read from an output."""
+    S = getattr(artifact, "schedule", None)
+    names = list(S.external) if S is not None else []
+    return names, [s if s.startswith("s_") else "s_" + s for s in map(_sanitize, names)]
 
 
 def _checked_options(*, base_id: int, encoding: str, ranges: Mapping[str, Any] | None) -> Mapping[str, Any]:

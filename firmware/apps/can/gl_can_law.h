@@ -2,7 +2,8 @@
  * @file gl_can_law.h
  * @brief The law the CAN node runs, chosen when it is compiled from what the export holds:
  *        - a scheduled artifact's export (gl_gains.h with GL_SCHEDULED 1): the scheduled loop (gl_sched.h), its
- *          sigma read from the measured output the schedule names (an external sigma is not carried: refused);
+ *          sigma read from the measured output the schedule names or from the external scheduling signals, which
+ *          a sample then carries after its references (GL_CAN_EXTRA values);
  *        - a fixed-point export (gl_fixed_gains.c, `[implementation] numeric = "q31" | "q15"`; apps/can/CMakeLists.txt
  *          then defines GL_CAN_LAW_FIXED=1 on the host): the integer loop (gl_fixed.h) the artifact certifies;
  *        - otherwise the float32 loop (gl_loop.h), as it always was.
@@ -23,9 +24,8 @@
 
 #if defined(GL_SCHEDULED) && GL_SCHEDULED
 #include "gainlink/gl_sched.h"
-#if GL_SIGMA_EXTERNAL
-#error "the CAN node carries the samples and references only: a sigma from an external signal is not on the bus"
-#endif
+/** Values a sample carries after the references: the external scheduling signals (GL_E, sigma's among them). */
+#define GL_CAN_EXTRA GL_E
 /** The law's state: the scheduled loop. */
 typedef gl_sched_t gl_can_law_t;
 /** The node's status type and codes (gl_sched_status_t has gl_status_t's values). */
@@ -35,6 +35,7 @@ typedef gl_sched_status_t gl_status_t;
 #define GL_WATCHDOG_PERIODS_DEFAULT 1u      /**< unused: the node steps only on a sample */
 #define GL_CAN_LAW_NAME "scheduled-float32" /**< What the ready line names (law=). */
 #elif defined(GL_CAN_LAW_FIXED) && GL_CAN_LAW_FIXED
+#define GL_CAN_EXTRA 0
 #include "gainlink/gl_loop.h"
 #include "gainlink/gl_fixed.h"
 /** The law's state: the integer loop. */
@@ -45,6 +46,7 @@ typedef gl_fixed_loop_t gl_can_law_t;
 #define GL_CAN_LAW_NAME "q15"
 #endif
 #else
+#define GL_CAN_EXTRA 0
 #include "gainlink/gl_loop.h"
 /** The law's state: the float32 loop. */
 typedef gl_loop_t gl_can_law_t;
@@ -64,10 +66,12 @@ gl_status_t gl_can_law_init(gl_can_law_t *law, uint32_t watchdog_periods);
  * @param[in,out] law    The law.
  * @param[in]     y      GL_P outputs.
  * @param[in]     r      GL_Q references (NULL when GL_Q is 0).
+ * @param[in]     s      GL_CAN_EXTRA external scheduling signals (NULL when there are none).
  * @param[out]    u      GL_M commands.
  * @param[out]    status The command frames' status byte (GL_CAN_STATUS_* bits).
  * @return The saturation mask of the command frames (bit j: input j clamped).
  */
-uint32_t gl_can_law_step(gl_can_law_t *law, const float *y, const float *r, float *u, uint8_t *status);
+uint32_t gl_can_law_step(gl_can_law_t *law, const float *y, const float *r, const float *s, float *u,
+                         uint8_t *status);
 
 #endif /* GAINLINK_GL_CAN_LAW_H */

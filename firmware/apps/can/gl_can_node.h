@@ -17,8 +17,10 @@
 #include "gl_can_layout.h"
 #include "gl_can_link.h"
 
-/** Values of one sample: the outputs, then the references. */
-#define GL_CAN_NODE_SAMPLE ((uint32_t)(GL_P + GL_Q))
+/** Values of one sample: the outputs, then the references (then a scheduled law's external signals). */
+#define GL_CAN_NODE_SAMPLE ((uint32_t)(GL_P + GL_Q + GL_CAN_EXTRA))
+/** Array length of a sample (GL_QA: no zero-length arrays). */
+#define GL_CAN_NODE_SAMPLE_A (GL_P + GL_QA + GL_CAN_EXTRA)
 
 /** What the node reports through gl_can_node_config_t::event. */
 typedef enum gl_can_node_event {
@@ -31,7 +33,7 @@ typedef struct gl_can_node_config {
     uint32_t base_id;                        /**< First identifier (commands base+j, samples base+0x10+i). */
     int fd;                                  /**< CAN FD frames. */
     gl_can_encoding_t encoding;              /**< Value encoding. */
-    gl_can_scale_t meas_scale[GL_P + GL_QA]; /**< int16: factor and offset of each sample value. */
+    gl_can_scale_t meas_scale[GL_CAN_NODE_SAMPLE_A]; /**< int16: factor and offset of each sample value. */
     gl_can_scale_t cmd_scale[GL_M];          /**< int16: factor and offset of each command value. */
     uint32_t watchdog_periods;               /**< Idle periods before the loop's safe command. */
     void *ctx;                               /**< Passed back to send(). */
@@ -62,7 +64,7 @@ typedef struct gl_can_node {
     uint32_t meas_base;                /**< First measurement identifier. */
     uint32_t meas_frames;              /**< Frames per sample. */
     uint32_t cmd_frames;               /**< Frames per command. */
-    float sample[GL_P + GL_QA];        /**< Sample being assembled. */
+    float sample[GL_CAN_NODE_SAMPLE_A];        /**< Sample being assembled. */
     uint32_t got;                      /**< Frames of it received (bit per frame). */
     uint16_t cur_seq;                  /**< Its sequence number. */
     uint16_t last_done;                /**< Sequence number last answered. */
