@@ -5,9 +5,15 @@ bit for bit the C) on the float32 samples the run recorded: the same commands, s
 
 from __future__ import annotations
 
+import json
+import signal
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from gainlink.hil import run as hil_run
+from gainlink.hil.links.can import CanTransport
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil_scheduled import external_signals
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
@@ -84,3 +90,30 @@ def test_an_external_sigma_travels_after_the_references_and_the_node_runs_on_it(
     np.testing.assert_array_equal(tr.u.astype(np.float32).view(np.uint32), model.u.astype(np.float32).view(np.uint32))
     np.testing.assert_array_equal(tr.sigma_flags, model.sigma_flags)  # clipped at 0 and above 1: from the node
     assert np.any(model.sigma_flags & 2) and tr.sigma.min() < 0.05 and tr.sigma.max() > 0.9
+
+
+def test_firmware_run_can_serves_a_scheduled_artifact_on_the_bus(tank, tmp_path):
+    a, path = tank
+    cfg = udp_transport(fd=True)
+    (tmp_path / "can.json").write_text(json.dumps(cfg))
+    gainlink = [sys.executable, "-c", "import sys; from gainlink.cli import main; sys.exit(main())"]
+    argv = [*gainlink, "firmware", "run", str(path), "--can", str(tmp_path / "can.json")]
+    proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    transport = CanTransport(cfg, artifact=a)
+    model = ScheduledFloat32Loop(a)
+    try:
+        assert b"law=scheduled-float32" in proc.stdout.readline()
+        transport.open()
+        for seq, h in ((3, 0.1), (4, 0.3), (5, 0.6)):  # sigma = h moves across the middle point
+            y, r = np.array([h]), np.array([0.5])
+            transport.send_frames(transport.encode_sample(seq=seq, y=y, r=r))
+            cmd = transport.receive_command(timeout=3.0)
+            want = model.step(y, r)
+            assert cmd is not None and cmd.seq == seq
+            assert np.float32(cmd.u[0]) == np.float32(want.u[0])
+    finally:
+        transport.close()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=5) == 0
+        proc.stdout.close()
+        proc.stderr.close()
