@@ -13,6 +13,8 @@ from gainlink.hil import run as hil_run
 from gainlink.proof.fixed_format import real
 from gainlink.proof.fixed_law import FixedPointLoop
 from gainlink.proof.float32_law import Float32Loop
+from gainlink.shipping.artifact import load
+from gainlink.shipping.can_layout import layout_for
 from support.fixed import example, model_run
 from support.hil import pendulum_scenario, udp_transport
 
@@ -84,3 +86,9 @@ def test_a_float32_artifact_names_no_law_and_gets_no_fixed_point_block(pend, can
     res = hil_run(pendulum_scenario(gains=pend, fmu=cart_fmu, transport=udp_transport(fd=True), duration=0.3))
     assert res.complete and "law=" not in res.info["controller"]["ready"]
     assert "fixed_point" not in res.metrics
+
+
+def test_the_dbc_names_the_status_bits_of_the_law_the_node_runs(pend_q31, pend):
+    fixed = layout_for(pend_q31[0]).dbc()
+    assert "bit2 a sample clipped to its range, bit3 second-line saturation (fixed point)" in fixed
+    assert "bit2" not in layout_for(load(pend)).dbc()  # a float32 artifact's DBC is as it was
