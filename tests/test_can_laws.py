@@ -92,3 +92,17 @@ def test_the_dbc_names_the_status_bits_of_the_law_the_node_runs(pend_q31, pend):
     fixed = layout_for(pend_q31[0]).dbc()
     assert "bit2 a sample clipped to its range, bit3 second-line saturation (fixed point)" in fixed
     assert "bit2" not in layout_for(load(pend)).dbc()  # a float32 artifact's DBC is as it was
+
+
+def test_q15_on_the_design_model_is_bit_exact_and_within_the_certified_bounds(tmp_path):
+    """wood_berry q15 against its own linear model (the loop the certificate is about), 60 steps with a step."""
+    a = example("wood_berry", "q15")
+    a.save(tmp_path / "gains.json")
+    step = {a.signals["references"][0]: {"kind": "step", "at": 5 * a.Ts, "value": 0.5}}
+    data = {"name": "wood_berry_q15", "artifact": str(tmp_path / "gains.json"), "duration": 60 * a.Ts,
+            "controller": "firmware", "step_timeout": 2.0, "plant": {"kind": "linear"},
+            "transport": udp_transport(fd=True), "reference": step}  # fmt: skip
+    fx = hil_run(data).metrics["fixed_point"]
+    assert fx["law"] == "q15" and fx["bit_exact"] is True and fx["certificate_applies"] is True
+    assert fx["unsaturated_steps"] == 60 and fx["within_per_step"]
+    assert np.all(np.array(fx["measured_du_design"]) <= np.array(fx["certified_du_design"]))
