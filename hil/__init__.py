@@ -52,9 +52,11 @@ def run(
     RunResult
         ``metrics`` (as in report.json), ``trace`` (numpy arrays per step), ``complete`` and ``reason``.
 
-    A scheduled artifact (schema 2) runs as software in the loop in this process
-    (:mod:`gainlink.hil.loop.sil_scheduled`: its transport is not used, ``controller`` is ``firmware``, the host
-    build of the scheduled C, or ``reference``), sigma from its measured output or ``[schedule_signal]``.
+    A scheduled artifact (schema 2) with ``controller = "firmware"`` and a CAN transport runs the firmware's CAN
+    node on the scheduled law over the bus (:mod:`gainlink.hil.loop.can_scheduled`, in lockstep; external scheduling
+    signals travel after the references); otherwise (``controller = "reference"``, another transport) it runs as
+    software in the loop in this process (:mod:`gainlink.hil.loop.sil_scheduled`: the transport is not used), sigma
+    from its measured output or ``[schedule_signal]``.
 
     Examples
     --------
@@ -86,10 +88,14 @@ def run(
         elif artifact is not None:
             sc = dataclasses.replace(sc, artifact_path=Path(artifact))
         loaded = load(sc.artifact_path)
-        if loaded.schedule is not None:  # the links do not carry sigma yet: a scheduled artifact runs as SIL
+        if loaded.schedule is not None:
+            from .loop.can_scheduled import over_can, run_scheduled_can
             from .loop.sil import run_sil
 
-            result = run_sil(loaded, sc, progress=progress)
+            if over_can(sc):  # the firmware's CAN node on the scheduled law, over the bus
+                result = run_scheduled_can(loaded, sc, progress=progress)
+            else:
+                result = run_sil(loaded, sc, progress=progress)
         else:
             result = run_scenario(sc, progress=progress)
         if report is not None:

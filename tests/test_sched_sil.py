@@ -15,13 +15,15 @@ import gainlink.hil
 import numpy as np
 import pytest
 from gainlink.errors import ScenarioError
-from gainlink.hil.loop.scenario import parse_scenario
+from gainlink.fileio import read_toml
+from gainlink.hil.loop.scenario import parse_scenario, resolve_scenario_path
 from gainlink.hil.loop.sil import run_sil
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict
 from support.cli import run_cli
+from support.hil import udp_transport, write_scenario
 from support.shared import once_per_run
 
 # One worker runs this module (make test: --dist loadgroup): the tank designs, made once.
@@ -183,14 +185,19 @@ rate = 0.1
 """
 
 
-def test_gainlink_hil_run_runs_a_scheduled_artifact_as_sil_and_refuses_a_bad_signal_in_one_line(tank, tmp_path):
+def test_gainlink_hil_run_runs_a_scheduled_artifact_over_can_and_refuses_a_bad_signal_in_one_line(tank, tmp_path):
     tank.save(tmp_path / "gains.json")
     argv = ("--artifact", tmp_path / "gains.json", "--report", tmp_path / "rep", "--no-progress", "--no-plots")
-    res = run_cli("hil", "run", "tank_sweep", *argv)  # the built-in sweep, with the host C
+    # The built-in sweep (the firmware's CAN node over the bus) on a udp port of this test's own
+    sweep = read_toml(resolve_scenario_path("tank_sweep"), what="scenario", error=ValueError)[0]
+    sweep["transport"] = udp_transport(fd=False)
+    write_scenario(tmp_path / "tank_sweep.toml", sweep)
+    res = run_cli("hil", "run", tmp_path / "tank_sweep.toml", *argv)
     assert res.code == 0, res.err
-    assert "transport sil (in-process, no link)" in res.out and "sigma h (output): covered [0.04, " in res.out
+    assert "transport udp_multicast" in res.out and "sigma h (output): covered [0.04, " in res.out
     report = json.loads((tmp_path / "rep" / "report.json").read_text())
     assert report["schedule"]["coverage"] > 0.95 and report["run"]["controller"]["kind"].startswith("firmware")
+    assert "law=scheduled-float32" in report["run"]["controller"]["ready"] and report["lost"] == 0
     assert report["twin"]["worst_du_rel"] < 1e-5 and not report["model_twin"]["warning"]
     assert (tmp_path / "rep" / "sigma.csv").is_file()
     (tmp_path / "s.toml").write_text(SCENARIO)

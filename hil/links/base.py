@@ -28,6 +28,11 @@ TRANSPORTS: Registry[Transport] = Registry(what="transport", error=TransportErro
 #: Command status bits (shared by every transport and the firmware apps).
 STATUS_FAULT = 0x01  #: the controller refused a non-finite sample and returned the safe command
 STATUS_WATCHDOG = 0x02  #: the controller's watchdog expired (no measurement) and it holds the safe command
+STATUS_CLIPPED = 0x04  #: the fixed-point law clipped a sample or reference to its declared range
+STATUS_OVERFLOW = 0x08  #: the fixed-point law's second-line saturation fired
+STATUS_SIGMA_HELD = 0x10  #: the scheduled law held its last sigma (the new one was not finite)
+STATUS_SIGMA_CLIPPED = 0x20  #: the scheduled law clipped sigma to its points
+STATUS_SIGMA_RATE = 0x40  #: the scheduled law limited sigma's change
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,8 @@ from .can import config_from_text, firmware_can_argv, layout_from_config
 
 
 def firmware_can_executable(artifact: Any) -> Path:
-    """Build (cached) the host firmware for ``artifact`` and return its ``gainlink_can`` executable."""
+    """Build (cached) the host firmware for ``artifact`` and return its ``gainlink_can`` executable (the artifact's
+    own law: float32, fixed point or scheduled)."""
     from gainlink.firmware.build import host_app
 
     return host_app(artifact, target="gainlink_can", relpath="apps/can/gainlink_can")

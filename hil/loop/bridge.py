@@ -20,10 +20,12 @@ from typing import Any
 import numpy as np
 from gainlink.errors import PlantError, TransportError
 from gainlink.shipping.artifact import Artifact, load
+from gainlink.shipping.codegen_fixed import is_fixed
 
 from ..links.base import Transport
 from ..links.config import transport_from_config
 from ..plants.base import Plant
+from .can_fixed import fixed_can_check
 from .controller import ControllerProcess, controller_argv, qemu_peer
 from .faults import FaultInjector
 from .metrics import RunTrace, compute_metrics, link_capacity
@@ -100,7 +102,17 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
         clipped = result.info["transport"].get("encoding_clipped")
         if clipped is not None:
             result.metrics["encoding_clipped"] = clipped
+        if is_fixed(artifact):  # which law answered, checked against the integer model and the float64 law
+            result.metrics["fixed_point"] = fixed_can_check(
+                artifact, result.trace, ready_line=peer.ready_line, model_plant=_design_model(scenario)
+            )
         return result
+
+
+def _design_model(scenario: Scenario) -> bool:
+    """Whether the plant is the artifact's own model (``kind = "linear"`` from the scenario's artifact, unperturbed):
+    the loop a fixed-point certificate's closed-loop bounds are about."""
+    return scenario.plant.get("kind") == "linear" and set(scenario.plant) <= {"kind"}
 
 
 def _start_peer(scenario: Scenario, *, artifact: Artifact, transport: Transport, stack: ExitStack) -> Any:

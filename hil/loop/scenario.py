@@ -64,7 +64,8 @@ difference): what float32, the encoding, the link, timing and faults cost the cl
 ``model_twin`` runs the same law around the design's own linear model (:mod:`.model_twin`), started where
 the plant starts: the report gives how far the plant departs from the model the controller believes in.
 
-A scheduled artifact (SIL only, :mod:`.sil_scheduled`) takes its sigma from the measured output the schedule
+A scheduled artifact (SIL, :mod:`.sil_scheduled`; with ``controller = "firmware"`` and a CAN transport the firmware's
+CAN node over the bus, :mod:`.can_scheduled`) takes its sigma from the measured output the schedule
 names or, when sigma is an external signal, from a profile per external signal, written like a reference's::
 
     [schedule_signal.load]  kind = "sweep", low = 0.04, high = 1.0, rate = 0.1, start = 2.0, cycles = 1

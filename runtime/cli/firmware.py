@@ -230,8 +230,10 @@ def _run(args: argparse.Namespace) -> int:
     # without one, the plain loop executable runs. --target cortex-mN serves them from the image in QEMU.
     from gainlink.shipping.artifact import load
 
-    load(args.artifact).require_unscheduled("gainlink firmware run")
-    if args.target != "host" or args.board is not None:
+    on_host = args.target == "host" and args.board is None
+    if not (on_host and getattr(args, "can", None)):  # the host CAN node also runs a scheduled law
+        load(args.artifact).require_unscheduled("gainlink firmware run")
+    if not on_host:
         return _run_image(args)
     if getattr(args, "can", None):
         from gainlink.hil.links.can_firmware import run_firmware_can

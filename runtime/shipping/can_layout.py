@@ -16,10 +16,11 @@ i-th value of this command frame was clamped). Values follow, little-endian, in 
     (the ``sat`` byte has 8 bits).
 
 FD frame lengths are rounded up to a valid FD length. Command frames (controller -> plant, ``u``) use
-ids ``base_id + j``; measurement frames (plant -> controller, ``y`` then ``r``) use ids ``base_id +
-0x10 + i``, so commands win arbitration. The firmware's CAN app implements exactly this rule (its
-int16 factor/offset come from :func:`gainlink.hil.links.can.firmware_can_argv`, i.e. from the
-same :class:`FrameSpec` data that builds the DBC); :meth:`CanLayout.dbc` documents it for any CAN tool.
+ids ``base_id + j``; measurement frames (plant -> controller, ``y`` then ``r``, then a scheduled artifact's
+external scheduling signals ``s_NAME``) use ids ``base_id + 0x10 + i``, so commands win arbitration. The firmware's
+CAN app implements exactly this rule (its int16 factor/offset come from
+:func:`gainlink.hil.links.can.firmware_can_argv`, i.e. from the same :class:`FrameSpec` data that builds the DBC);
+:meth:`CanLayout.dbc` documents it for any CAN tool.
 """
 
 from __future__ import annotations
@@ -42,6 +43,10 @@ MAX_MEASUREMENT_FRAMES = 0x20  # ids base+0x10 .. base+0x2f (the firmware tracks
 FD_MAX_VALUES = 8
 FD_LENGTHS = (8, 12, 16, 20, 24, 32, 48, 64)
 ENCODINGS = ("float32", "int16")
+#: The status bits every law sets, and those of the fixed-point and the scheduled law (firmware/apps/can/gl_can_law.h).
+STATUS_BITS = "bit0 fault (non-finite sample), bit1 watchdog"
+STATUS_BITS_FIXED = STATUS_BITS + ", bit2 a sample clipped to its range, bit3 second-line saturation (fixed point)"
+STATUS_BITS_SCHEDULED = STATUS_BITS + ", bit4 sigma held, bit5 sigma clipped, bit6 sigma rate-limited"
 VALUE_BYTES = {"float32": 4, "int16": 2}
 CLASSIC_VALUES = {"float32": 1, "int16": 2}
 INT16_MAX = 32767  #: largest raw value; -INT16_MAX is the smallest
@@ -175,6 +180,8 @@ class CanLayout:
         Plant -> controller frames (``y`` then ``r``), controller -> plant frames (``u``).
     encoding : {"float32", "int16"}
         How values are carried.
+    status_bits : str
+        What the command frames' status bits mean for the artifact's law (the DBC's comment on ``status``).
     """
 
     fd: bool
@@ -183,13 +190,14 @@ class CanLayout:
     measurement: tuple[FrameSpec, ...]
     command: tuple[FrameSpec, ...]
     encoding: str = "float32"
+    status_bits: str = STATUS_BITS
 
     def database(self) -> Any:
         """The layout as a ``cantools.database.Database``."""
         from cantools.database import Database, Node
 
         messages = [
-            _message(spec, sender=role, receiver=peer, fd=self.fd)
+            _message(spec, sender=role, receiver=peer, fd=self.fd, status_bits=self.status_bits)
             for role, peer, specs in (("controller", "plant", self.command), ("plant", "controller", self.measurement))
             for spec in specs
         ]
@@ -212,7 +220,7 @@ class CanLayout:
         }
 
 
-def _message(spec: FrameSpec, *, sender: str, receiver: str, fd: bool) -> Any:
+def _message(spec: FrameSpec, *, sender: str, receiver: str, fd: bool, status_bits: str = "") -> Any:
     """The cantools message of one frame."""
     from cantools.database import Message
 
@@ -220,14 +228,14 @@ def _message(spec: FrameSpec, *, sender: str, receiver: str, fd: bool) -> Any:
         frame_id=spec.arbitration_id,
         name=spec.name,
         length=spec.length,
-        signals=_header_signals([receiver]) + _value_signals(spec, [receiver]),
+        signals=_header_signals([receiver], status_bits=status_bits or STATUS_BITS) + _value_signals(spec, [receiver]),
         senders=[sender],
         is_fd=fd,
         comment=f"sent by the {sender}",
     )
 
 
-def _header_signals(rx: list[str]) -> list:
+def _header_signals(rx: list[str], *, status_bits: str = "") -> list:
     """The header every frame starts with: ``seq``, ``status``, ``sat``."""
     from cantools.database import Signal
 
@@ -248,7 +256,7 @@ def _header_signals(rx: list[str]) -> list:
             byte_order="little_endian",
             is_signed=False,
             receivers=rx,
-            comment="bit0 fault (non-finite sample), bit1 watchdog",
+            comment=status_bits or STATUS_BITS,
         ),
         Signal(
             "sat",
@@ -449,17 +457,16 @@ def layout_for(
     sig = artifact.signals
     per_frame = FD_MAX_VALUES if fd else CLASSIC_VALUES[encoding]
     ys, rs, us = _dbc_names(artifact)
-    sc = _scales(
-        artifact,
-        ranges,
-        int16=encoding == "int16",
-        groups=[
-            ("outputs", list(sig["outputs"]), ys),
-            ("references", list(sig["references"]), rs),
-            ("inputs", list(sig["inputs"]), us),
-        ],
-    )
-    meas_scales = None if sc["outputs"] is None else sc["outputs"] + sc["references"]
+    external, ss = _external_signals(artifact)
+    groups = [
+        ("outputs", list(sig["outputs"]), ys),
+        ("references", list(sig["references"]), rs),
+        ("inputs", list(sig["inputs"]), us),
+    ]
+    if external:
+        groups.append(("external", external, ss))
+    sc = _scales(artifact, ranges, int16=encoding == "int16", groups=groups)
+    meas_scales = None if sc["outputs"] is None else sc["outputs"] + sc["references"] + (sc.get("external") or [])
     common = dict(per_frame=per_frame, fd=fd, encoding=encoding)
     return CanLayout(
         fd=fd,
@@ -467,7 +474,7 @@ def layout_for(
         per_frame=per_frame,
         encoding=encoding,
         measurement=_frames(
-            ys + rs,
+            ys + rs + ss,
             meas_scales,
             prefix="Measurement",
             base=base_id + MEASUREMENT_OFFSET,
@@ -477,7 +484,24 @@ def layout_for(
         command=_frames(
             us, sc["inputs"], prefix="Command", base=base_id + COMMAND_OFFSET, max_frames=MAX_COMMAND_FRAMES, **common
         ),
+        status_bits=_status_bits(artifact),
     )
+
+
+def _status_bits(artifact: Any) -> str:
+    """What the status bits mean for the law the artifact's CAN node runs."""
+    if getattr(artifact, "schedule", None) is not None:
+        return STATUS_BITS_SCHEDULED
+    checks = getattr(artifact, "checks", None) or {}
+    return STATUS_BITS_FIXED if checks.get("fixed_point") is not None else STATUS_BITS
+
+
+def _external_signals(artifact: Any) -> tuple[list[str], list[str]]:
+    """A scheduled artifact's external scheduling signals (sent after the references, ``s_`` in the DBC): their
+    names and DBC names; none for an unscheduled artifact or a sigma read from an output."""
+    S = getattr(artifact, "schedule", None)
+    names = list(S.external) if S is not None else []
+    return names, [s if s.startswith("s_") else "s_" + s for s in map(_sanitize, names)]
 
 
 def _checked_options(*, base_id: int, encoding: str, ranges: Mapping[str, Any] | None) -> Mapping[str, Any]:

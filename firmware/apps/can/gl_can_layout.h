@@ -26,6 +26,11 @@
 #define GL_CAN_MEAS_OFFSET 0x10u        /**< Measurement ids: base + this + frame index. */
 #define GL_CAN_STATUS_FAULT 0x01u       /**< Command status: non-finite sample refused. */
 #define GL_CAN_STATUS_WATCHDOG 0x02u    /**< Command status: watchdog expired. */
+#define GL_CAN_STATUS_CLIPPED 0x04u     /**< Command status (fixed-point law): a sample clipped to its range. */
+#define GL_CAN_STATUS_OVERFLOW 0x08u    /**< Command status (fixed-point law): its second-line saturation fired. */
+#define GL_CAN_STATUS_SIGMA_HELD 0x10u  /**< Command status (scheduled law): sigma not finite, the last one held. */
+#define GL_CAN_STATUS_SIGMA_CLIPPED 0x20u /**< Command status (scheduled law): sigma clipped to the points. */
+#define GL_CAN_STATUS_SIGMA_RATE 0x40u  /**< Command status (scheduled law): sigma's change rate-limited. */
 #define GL_CAN_INT16_MAX 32767          /**< Largest raw int16 value (-GL_CAN_INT16_MAX is the smallest). */
 #define GL_CAN_INT16_NAN (-32768)       /**< Reserved raw int16 value: not a number. */
 

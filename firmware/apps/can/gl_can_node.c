@@ -26,7 +26,7 @@ gl_status_t gl_can_node_init(gl_can_node_t *node, const gl_can_node_config_t *cf
     node->meas_frames = gl_can_layout_frames(&node->layout, GL_CAN_NODE_SAMPLE);
     node->cmd_frames = gl_can_layout_frames(&node->layout, GL_M);
     node->meas_base = cfg->base_id + GL_CAN_MEAS_OFFSET;
-    return gl_loop_init(&node->loop, &gl_gains_default, cfg->watchdog_periods);
+    return gl_can_law_init(&node->loop, cfg->watchdog_periods);
 }
 
 void gl_can_node_rx_range(const gl_can_node_t *node, uint32_t *lo, uint32_t *hi)
@@ -39,9 +39,10 @@ void gl_can_node_rx_range(const gl_can_node_t *node, uint32_t *lo, uint32_t *hi)
 static void answer(gl_can_node_t *node, uint16_t seq)
 {
     float u[GL_M];
-    gl_status_t st = gl_loop_step(&node->loop, node->sample, GL_Q > 0 ? &node->sample[GL_P] : NULL, u);
-    uint8_t status = st == GL_ERR_NANINF ? GL_CAN_STATUS_FAULT : 0u;
-    uint32_t sat = st == GL_SATURATED ? node->loop.sat_mask : 0u;
+    uint8_t status = 0u;
+    const float *r = GL_Q > 0 ? &node->sample[GL_P] : NULL;
+    const float *s = GL_CAN_EXTRA > 0 ? &node->sample[GL_P + GL_Q] : NULL;
+    uint32_t sat = gl_can_law_step(&node->loop, node->sample, r, s, u, &status);
     uint32_t cmd_base = node->cfg.base_id + GL_CAN_CMD_OFFSET;
     for (uint32_t j = 0; j < node->cmd_frames; ++j) {
         gl_can_frame_t out;
@@ -67,7 +68,7 @@ int gl_can_node_frame(gl_can_node_t *node, const gl_can_frame_t *frame)
     }
     uint32_t index = frame->id - node->meas_base;
     uint16_t seq = 0;
-    float part[GL_P + GL_QA];
+    float part[GL_CAN_NODE_SAMPLE_A];
     if (gl_can_layout_decode(&node->layout, index, frame, &seq, part, node->cfg.meas_scale, GL_CAN_NODE_SAMPLE) != 0) {
         inc(&node->stats.short_frames, 1u);
         event(node, GL_CAN_EV_SHORT_FRAME, frame);

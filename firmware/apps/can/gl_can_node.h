@@ -2,8 +2,8 @@
  * @file gl_can_node.h
  * @brief The CAN node of the loop, independent of its link: frames in, frames out.
  *
- * Assembles each sample (y then r) from its measurement frames by sequence number, runs gl_loop_step()
- * once per complete, newer sample (duplicates and stale samples are ignored and counted), and answers
+ * Assembles each sample (y then r) from its measurement frames by sequence number, steps the artifact's law
+ * (gl_can_law.h: the float32 loop, or the fixed-point loop of a fixed-point export) once per complete, newer sample (duplicates and stale samples are ignored and counted), and answers
  * with the command frames carrying the same sequence number, the status bits and the saturation mask
  * (layout in gl_can_layout.h). The host app `gainlink_can` feeds it from SocketCAN or udp_multicast,
  * the Cortex-M4F image from slcan on its UART (gl_slcan.h).
@@ -13,12 +13,14 @@
 
 #include <stdint.h>
 
-#include "gainlink/gl_loop.h"
+#include "gl_can_law.h" /* the law, and gl_loop.h (or its stand-ins for a scheduled law) */
 #include "gl_can_layout.h"
 #include "gl_can_link.h"
 
-/** Values of one sample: the outputs, then the references. */
-#define GL_CAN_NODE_SAMPLE ((uint32_t)(GL_P + GL_Q))
+/** Values of one sample: the outputs, then the references (then a scheduled law's external signals). */
+#define GL_CAN_NODE_SAMPLE ((uint32_t)(GL_P + GL_Q + GL_CAN_EXTRA))
+/** Array length of a sample (GL_QA: no zero-length arrays). */
+#define GL_CAN_NODE_SAMPLE_A (GL_P + GL_QA + GL_CAN_EXTRA)
 
 /** What the node reports through gl_can_node_config_t::event. */
 typedef enum gl_can_node_event {
@@ -31,7 +33,7 @@ typedef struct gl_can_node_config {
     uint32_t base_id;                        /**< First identifier (commands base+j, samples base+0x10+i). */
     int fd;                                  /**< CAN FD frames. */
     gl_can_encoding_t encoding;              /**< Value encoding. */
-    gl_can_scale_t meas_scale[GL_P + GL_QA]; /**< int16: factor and offset of each sample value. */
+    gl_can_scale_t meas_scale[GL_CAN_NODE_SAMPLE_A]; /**< int16: factor and offset of each sample value. */
     gl_can_scale_t cmd_scale[GL_M];          /**< int16: factor and offset of each command value. */
     uint32_t watchdog_periods;               /**< Idle periods before the loop's safe command. */
     void *ctx;                               /**< Passed back to send(). */
@@ -57,12 +59,12 @@ typedef struct gl_can_node_stats {
 typedef struct gl_can_node {
     gl_can_node_config_t cfg;          /**< Configuration. */
     gl_can_layout_t layout;            /**< Frame layout. */
-    gl_loop_t loop;                    /**< The control loop. */
+    gl_can_law_t loop;                 /**< The control law (gl_can_law.h). */
     gl_can_node_stats_t stats;         /**< Counters. */
     uint32_t meas_base;                /**< First measurement identifier. */
     uint32_t meas_frames;              /**< Frames per sample. */
     uint32_t cmd_frames;               /**< Frames per command. */
-    float sample[GL_P + GL_QA];        /**< Sample being assembled. */
+    float sample[GL_CAN_NODE_SAMPLE_A];        /**< Sample being assembled. */
     uint32_t got;                      /**< Frames of it received (bit per frame). */
     uint16_t cur_seq;                  /**< Its sequence number. */
     uint16_t last_done;                /**< Sequence number last answered. */
@@ -71,7 +73,7 @@ typedef struct gl_can_node {
 } gl_can_node_t;
 
 /**
- * @brief Initialise the node and its loop on the compiled gain set.
+ * @brief Initialise the node and its law on the compiled gain set.
  * @param[out] node Node.
  * @param[in]  cfg  Configuration (copied).
  * @return GL_OK, or the loop's refusal of the compiled gains.

@@ -1,0 +1,150 @@
+"""HIL over CAN for a scheduled artifact: the firmware's CAN node (``gainlink_can`` built on the scheduled loop,
+``firmware/apps/can/gl_can_law.h``) answers each sample over the scenario's bus, as it does for an unscheduled one.
+
+The run is the scheduled SIL's loop (:mod:`.sil_scheduled`: plant, sigma trace, closed-loop and model twins, the
+report's ``schedule`` block) with the law behind the link: per step the sample (y then r) goes out in the CAN
+layout, the command with the same sequence number comes back (the plant waits up to ``step_timeout``; a lost
+command holds the last one). The external scheduling signals (``[schedule_signal.NAME]``), when the artifact has
+any, travel in the sample after the references (``s_NAME`` in the layout and the DBC). Sigma is the node's own
+(its flags come back in the status byte: held 0x10, clipped 0x20, rate-limited 0x40); its value is not on the bus,
+so the trace's sigma is the scheduled float32 model's
+(:class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`, bit for bit the C) on the samples the node
+received. Lockstep, without injected faults.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from contextlib import ExitStack
+
+import numpy as np
+from gainlink.errors import ScenarioError
+from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
+from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE
+from gainlink.shipping.artifact import Artifact
+
+from ..links.base import STATUS_FAULT, STATUS_SIGMA_CLIPPED, STATUS_SIGMA_HELD, STATUS_SIGMA_RATE
+from ..links.can import CanTransport
+from ..links.config import transport_from_config
+from .bridge import RunResult
+from .controller import ControllerProcess, controller_argv
+from .scenario import Scenario
+from .scenario_plant import build_plant
+from .sched_law import GL_ERR_NANINF, GL_SATURATED, SchedOut
+from .sil_scheduled import _closed_loop_twin, _ScheduledSil
+
+#: The scheduled node's status bits (firmware/apps/can/gl_can_layout.h) and the sigma flags they carry.
+SIGMA_BITS = ((STATUS_SIGMA_HELD, SIGMA_HELD), (STATUS_SIGMA_CLIPPED, SIGMA_CLIPPED), (STATUS_SIGMA_RATE, SIGMA_RATE))
+
+
+def check_scheduled_can(artifact: Artifact, scenario: Scenario) -> None:
+    """One line when the scheduled artifact or the scenario cannot run over the CAN link."""
+    if scenario.mode != "lockstep" or scenario.faults:
+        raise ScenarioError(
+            f"scenario {scenario.name}: a scheduled artifact runs over CAN in lockstep without injected faults "
+            '(mode = "lockstep", no [[faults]])'
+        )
+
+
+class _BusLaw:
+    """The node behind the link, one sample a step (the interface of :class:`.sched_law.NativeScheduled`)."""
+
+    def __init__(self, artifact: Artifact, scenario: Scenario, *, stack: ExitStack) -> None:
+        transport = transport_from_config(scenario.transport, artifact=artifact)
+        if not isinstance(transport, CanTransport):
+            raise ScenarioError(f"scenario {scenario.name}: a scheduled artifact runs over a CAN transport only")
+        argv = controller_argv("firmware", artifact=artifact, artifact_path=scenario.artifact_path,
+                               transport=transport, executable=scenario.firmware)  # fmt: skip
+        transport.open()
+        stack.callback(transport.close)
+        self.peer = ControllerProcess(argv)
+        stack.callback(self.peer.close)
+        self.peer.start()
+        self.peer.check_artifact(artifact.sha256)
+        self.transport, self.timeout = transport, scenario.step_timeout
+        self.shadow = ScheduledFloat32Loop(artifact)  # sigma's value (not on the bus)
+        self.u = np.asarray(artifact.schedule.trim_at(artifact.schedule.points[0])[0], dtype=float)
+        self.k, self.late = 0, 0
+        self.kind = {"kind": "firmware (gainlink_can, scheduled law, over the link)", "argv": argv}
+
+    def step(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> SchedOut | None:
+        """Send sample ``y``, ``r``; the node's answer, or None when it did not come within ``step_timeout``."""
+        seq = self.k % self.transport.seq_modulo
+        self.k += 1
+        rs = np.concatenate([r, s])  # the external scheduling signals travel after the references
+        ys, rx = self.transport.received_sample(y=y, r=rs)
+        sigma = self.shadow.step(ys, rx[: r.size], rx[r.size :]).sigma
+        self.transport.send_frames(self.transport.encode_sample(seq=seq, y=y, r=rs))
+        deadline = time.monotonic() + self.timeout
+        while (left := deadline - time.monotonic()) > 0:
+            c = self.transport.receive_command(timeout=left)
+            if c is None:
+                break
+            if c.seq != seq:
+                self.late += 1
+                continue
+            self.u = np.asarray(c.u, dtype=float)
+            status = int(c.status)
+            code = GL_ERR_NANINF if status & STATUS_FAULT else (GL_SATURATED if np.any(c.saturated) else 0)
+            mask = int(np.sum(np.asarray(c.saturated, dtype=np.int64) << np.arange(len(c.saturated))))
+            flags = sum(f for bit, f in SIGMA_BITS if status & bit)
+            return SchedOut(u=self.u, status=code, sat_mask=mask, sigma=sigma, sigma_flags=flags)
+        return None
+
+
+class _ScheduledCan(_ScheduledSil):
+    """The scheduled SIL loop with the law behind the link: a lost command holds the last one."""
+
+    def _step(self, k: int) -> None:
+        rec, plan = self.rec, self.plan
+        y = self.plant.outputs() + plan.noise[k]
+        rec.Y[k] = y
+        if self.twin is not None:
+            rec.X[k] = self.plant.state()
+        t0 = time.perf_counter_ns()
+        out = self.law.step(y, plan.R[k], self.S[k])
+        t1 = time.perf_counter_ns()
+        rec.TICK[k] = t0 - self.t_start
+        if out is not None:
+            rec.GOT[k], rec.LAT[k], rec.ST[k] = True, t1 - t0, out.status
+            rec.SAT[k] = ((out.sat_mask >> self.bits) & 1).astype(bool)
+            self.SIG[k], self.FLAGS[k] = out.sigma, out.sigma_flags
+        else:
+            self.SIG[k] = self.SIG[k - 1] if k else self.sigma0
+        rec.U[k] = self.law.u
+        try:
+            self.plant.advance(u=np.asarray(self.law.u, float) + plan.D[k], dt=self.a.Ts)
+        finally:
+            for twin in (self.twin, self.model_twin):
+                if twin is not None:
+                    twin.step(k, noise=plan.noise[k], r=plan.R[k], d=plan.D[k], s=self.S[k])
+
+
+def over_can(scenario: Scenario) -> bool:
+    """Whether a scheduled artifact's scenario runs the firmware's CAN node over its bus (else in process)."""
+    config = scenario.transport
+    kind = config.get("kind", "can" if "interface" in config else None)
+    return scenario.controller == "firmware" and kind == "can"
+
+
+def run_scheduled_can(
+    artifact: Artifact, scenario: Scenario, *, progress: Callable[[int, int], None] | None = None
+) -> RunResult:
+    """Run ``scenario`` with the scheduled law in the firmware's CAN node over its bus (module docstring)."""
+    check_scheduled_can(artifact, scenario)
+    plant = build_plant(scenario, artifact=artifact)
+    with ExitStack() as stack:
+        stack.callback(plant.close)
+        law = _BusLaw(artifact, scenario, stack=stack)
+        loop = _ScheduledCan(artifact, scenario, plant=plant, law=law)
+        if scenario.twin:
+            loop.twin = _closed_loop_twin(scenario, artifact=artifact, steps=loop.plan.N, stack=stack)
+        result = loop.run(progress)
+        code = law.peer.stop()
+    m = dict(result.metrics, mode="lockstep", late=law.late)
+    m["controller"] = {"exit_status": code, "counters": law.peer.counters(), "stderr_bytes": law.peer.stderr_bytes()}
+    info = dict(result.info, transport=law.transport.describe())
+    info["controller"] = dict(law.kind, ready=law.peer.ready_line)
+    return dataclasses.replace(result, metrics=m, info=info)
