@@ -296,7 +296,7 @@ def sched_showcase_block() -> str:
                 label,
                 f"{r['sweep_iae']:.3f}",
                 f"{r['sweep_max_abs_e']:.3f} m",
-                f"{r['sweep_hold_max_abs_e']:.4f} m",
+                f"{r['sweep_hold_max_abs_e']:.2g} m",
                 *(_step(r, step) for step in doc["steps"]),
                 f"{r['model_twin_worst']:.4f}" + (" (warns)" if r["model_twin_warning"] else ""),
                 f"{r['twin_worst_du_rel']:.1e}",

@@ -2,9 +2,9 @@
 examples/tank_showcase_load.toml, external sigma) with sigma swept periodically across the whole envelope at rates
 around the design's ``rate_max``, the law's own rate limit off (``sigma_rate_limit = false``).
 
-Oracles: the design's verdict (certified ``rate_max`` 0.986/s, simulated stable up to 2.8/s) and its monodromy
-radius of the whole-envelope triangle at each rate (0.10 at 2.8/s, 1.33 at 7/s), computed here from the law's
-loop matrices; the run at 7/s grows from 1 cm past 5 cm, the others decay.
+Oracles: the design's verdict (no Lyapunov certificate; ``rate_max`` 2.8/s from its scan of periodic sweeps) and
+the monodromy radius of the whole-envelope triangle at each rate (0.10 at 2.8/s, 1.24 at 7/s), computed here from
+the law's loop matrices; the run at 7/s grows from 1 cm past 5 cm, the others decay.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
 @pytest.fixture(scope="module")
 def artifact(tmp_path_factory):
-    """examples/tank_showcase_load.toml designed once per test run (its verdict takes ~40 s), saved."""
+    """examples/tank_showcase_load.toml designed once per test run, saved."""
     made = once_per_run(tmp_path_factory, "tank_showcase_load",
                         lambda: synthesize(load_spec(EXAMPLES / "tank_showcase_load.toml")).artifact)  # fmt: skip
     path = tmp_path_factory.mktemp("tank_load") / "gains.json"
@@ -52,18 +52,18 @@ def test_the_example_campaign_holds_up_to_the_verdicts_rates_and_fails_above(art
     art = load(artifact)
     v = art.checks["schedule"]["variation"]
     rate_max = art.schedule.rate_max
-    assert rate_max == v["certified_rate"] == pytest.approx(0.986, abs=1e-3) and v["simulated_stable_rate"] == 2.8
+    assert v["certified_rate"] is None and rate_max == v["simulated_stable_rate"] == 2.8
     data, _ = read_toml(CAMPAIGN, what="campaign", error=ValueError)
     assert data["scenario"]["sigma_rate_limit"] is False and data["grid"][0]["values"][-1] == 7.0
     del data["spec"]
     data["artifact"] = str(artifact)
     data["scenario"]["duration"] = 10.0  # small: 200 steps a run
-    data["grid"][0]["values"] = [rate_max, 2.8, 7.0]
+    data["grid"][0]["values"] = [rate_max, 4.0, 7.0]
     result = run(data, out=tmp_path / "out", workers=1)
     assert result.total == 3 and result.errors == 0
     doc = json.loads((tmp_path / "out" / "campaign.json").read_text())
     status = {row["values"]["sigma_rate"]: row["status"] for row in doc["runs"]}
-    assert status == {rate_max: "pass", 2.8: "pass", 7.0: "fail"}
+    assert status == {rate_max: "pass", 4.0: "pass", 7.0: "fail"}
     assert _radius(art, 2.8) < 0.2 and _radius(art, 7.0) > 1.2  # the verdict's own measure of the same sweeps
     for row in doc["runs"]:
         rec = json.loads((tmp_path / "out" / "runs" / f"{row['id']}.json").read_text())
