@@ -52,6 +52,9 @@ def test_both_twins_are_in_the_report_and_the_model_twin_flags_the_single_point(
     sweep = json.loads((report / "scheduled" / "sweep" / "report.json").read_text())
     assert sweep["run"]["plant"]["name"] == "fmu:tank" and "model_twin" in sweep and "twin" in sweep
     assert (report / "comparison.png").read_bytes()[:4] == b"\x89PNG"
+    assert (report / "scheduled" / "sweep" / "model_twin.png").is_file()
+    assert (report / "scheduled" / "sweep" / "sigma.csv").is_file()
+    assert not (report / "single" / "sweep" / "sigma.csv").exists()  # an unscheduled run has no sigma
 
 
 def test_report_json_holds_the_numbers_summary_txt_prints(showcase):

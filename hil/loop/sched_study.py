@@ -27,6 +27,7 @@ from ..paths import project_root
 from .bridge import RunResult
 from .report import plots, report_json, summary_text
 from .scenario import parse_scenario
+from .sched_report import sigma_csv, sigma_plot
 from .sched_study_report import comparison_png, showcase_summary
 from .sil import run_sil
 
@@ -161,14 +162,19 @@ def _scenario(desc: dict, name: str, duration: float, h0: float, reference: dict
 
 
 def _design_files(runs: dict[str, RunResult], *, design: str, artifact: Artifact) -> dict[str, bytes | str]:
-    """Each run's HIL report (report.json, summary.txt; the sweep's plots, twins included) under design/run/."""
+    """Each run's HIL report (report.json, summary.txt; the sweep's plots, twins included, and for the scheduled
+    design its sigma.csv and sigma.png) under design/run/."""
     files: dict[str, bytes | str] = {}
     for name, res in runs.items():
         files[f"{design}/{name}/report.json"] = report_json(res)
         files[f"{design}/{name}/summary.txt"] = summary_text(res)
-        if name == "sweep":
-            for png, data in plots(res, artifact=artifact).items():
-                files[f"{design}/{name}/{png}"] = data
+        if name != "sweep":
+            continue
+        for png, data in plots(res, artifact=artifact).items():
+            files[f"{design}/{name}/{png}"] = data
+        if res.trace.sigma is not None:
+            files[f"{design}/{name}/sigma.csv"] = sigma_csv(res.trace)
+            files[f"{design}/{name}/sigma.png"] = sigma_plot(res)
     return files
 
 
