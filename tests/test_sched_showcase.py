@@ -13,18 +13,29 @@ away from its point) and not the scheduled one (0.0037). Asserted with margin be
 from __future__ import annotations
 
 import json
+import os
+from types import SimpleNamespace
 
 import pytest
 from gainlink.hil.loop.sched_study import default_showcase, run_showcase
 from support.cli import run_cli
+from support.shared import once_per_run
 
 pytestmark = [pytest.mark.slow, pytest.mark.usefixtures("quiet_design_warnings")]
 
 
 @pytest.fixture(scope="module")
 def showcase(tmp_path_factory):
-    report = tmp_path_factory.mktemp("showcase") / "report"
-    return run_showcase(report_dir=report), report
+    """The built-in showcase, run once per test run (its table and summary shared by every worker) and its report
+    folder in the run's shared temporary folder."""
+    base = tmp_path_factory.getbasetemp()
+    report = (base.parent if "PYTEST_XDIST_WORKER" in os.environ else base) / "sched_showcase_report"  # this run's
+
+    def make():
+        result = run_showcase(report_dir=report)
+        return SimpleNamespace(table=result.table, summary=result.summary)
+
+    return once_per_run(tmp_path_factory, "sched_showcase", make), report
 
 
 def test_the_scheduled_design_holds_damping_and_tracking_where_the_single_point_does_not(showcase):
