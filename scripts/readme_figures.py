@@ -278,7 +278,38 @@ def fixed_point_cost_block() -> str:
     return table(head, rows) + "\n" + provenance(doc) + "\n"
 
 
+def _step(row: Doc, name: str) -> str:
+    st = row[f"step_{name}"]
+    tail = "" if st["settled"] else ", not settled (a limit cycle)"
+    return f"{st['overshoot_pct']:.1f} % / {st['settling_time_s']:.2f} s{tail}"
+
+
+def sched_showcase_block() -> str:
+    doc = result("sched_showcase")
+    if doc is None:
+        return missing("scheduled showcase", "python bench/sched_showcase.py")
+    rows = []
+    for name, label in (("single", f"single point ({doc['single_point']:g} m)"), ("scheduled", "scheduled")):
+        r = doc["designs"][name]
+        rows.append(
+            [
+                label,
+                f"{r['sweep_iae']:.3f}",
+                f"{r['sweep_max_abs_e']:.3f} m",
+                f"{r['sweep_hold_max_abs_e']:.2g} m",
+                *(_step(r, step) for step in doc["steps"]),
+                f"{r['model_twin_worst']:.4f}" + (" (warns)" if r["model_twin_warning"] else ""),
+                f"{r['twin_worst_du_rel']:.1e}",
+            ]
+        )
+    head = ["design", "sweep IAE", "sweep max abs e", "held at the low end, max abs e"]
+    head += [f"step {s['from']:g} → {s['to']:g} m: overshoot / settling" for s in doc["steps"].values()]
+    head += ["model twin mismatch", "C vs float64 twin (du)"]
+    return table(head, rows) + "\n" + provenance(doc) + "\n"
+
+
 BLOCKS: dict[str, Callable[[], str]] = {
+    "sched_showcase": sched_showcase_block,
     "fixed_point_cost": fixed_point_cost_block,
     "fuzz": fuzz_block,
     "soak": soak_block,

@@ -71,6 +71,10 @@ names or, when sigma is an external signal, from a profile per external signal, 
     [schedule_signal.load]  kind = "sweep", low = 0.04, high = 1.0, rate = 0.1, start = 2.0, cycles = 1
                    # sweep: low until start, to high at rate (units/s) and back at once (cycles times), then low
 
+``sigma_rate_limit = false`` runs a scheduled artifact's law without its ``rate_max`` (a copy re-sealed without
+it; the report's ``run.artifact`` says so): a probe of the design's verdict on a moving sigma, as the campaign
+over sigma rate (``examples/campaigns/tank_sigma_rate.toml``) runs it; never a way to fly.
+
 Unknown keys anywhere are refused with one line naming them.
 """
 
@@ -116,6 +120,7 @@ TOP_KEYS = {
     "pm_qos",
     "board",
     "schedule_signal",
+    "sigma_rate_limit",
 }
 CONTROLLERS = ("firmware", "reference", "qemu")
 BOARDS = tuple(sorted((b.name for b in _FIRMWARE_BOARDS.values() if b.serves), key=lambda n: n != "mps2-an386"))
@@ -189,6 +194,7 @@ class Scenario:
     disturbances: tuple[Disturbance, ...] = ()
     faults: tuple[Fault, ...] = ()
     schedule_signal: dict = field(default_factory=dict)
+    sigma_rate_limit: bool = True
 
 
 def _num(value: Any, where: str, *, positive: bool = False, minimum: float | None = None) -> float:
@@ -293,6 +299,7 @@ def parse_scenario(data: Mapping[str, Any], *, path: Path | None = None) -> Scen
         disturbances=_disturbances(data),
         faults=_faults(data),
         schedule_signal=schedule_signal,
+        sigma_rate_limit=_flag(data, "sigma_rate_limit", True),
     )
 
 

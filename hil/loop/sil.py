@@ -104,8 +104,9 @@ def run_sil(
         from .sil_scheduled import run_scheduled_sil
 
         return run_scheduled_sil(artifact, scenario, library=library, progress=progress)
-    if scenario.schedule_signal:
-        raise ScenarioError(f"scenario {scenario.name}: schedule_signal is for a scheduled artifact")
+    if scenario.schedule_signal or not scenario.sigma_rate_limit:
+        what = "schedule_signal" if scenario.schedule_signal else "sigma_rate_limit"
+        raise ScenarioError(f"scenario {scenario.name}: {what} is for a scheduled artifact")
     plant = build_plant(scenario, artifact=artifact)
     with ExitStack() as stack:
         stack.callback(plant.close)

@@ -58,7 +58,7 @@ def start_sigma(artifact: Artifact, *, plant: Plant, S: np.ndarray) -> float:
 def describe_scheduled(artifact: Artifact, path) -> dict:
     """What a report says about a scheduled artifact: identity and its schedule."""
     S = artifact.schedule
-    return {
+    out = {
         "name": artifact.name,
         "sha256": artifact.sha256,
         "path": str(path),
@@ -70,6 +70,22 @@ def describe_scheduled(artifact: Artifact, path) -> dict:
             "filter_tau": S.filter_tau,
         },
     }
+    removed = artifact.data.get("provenance", {}).get("rate_limit_removed")
+    if removed:  # sigma_rate_limit = false: the law runs without the designed rate_max
+        out["rate_limit_removed"] = removed
+    return out
+
+
+def without_rate_limit(artifact: Artifact) -> Artifact:
+    """A copy of a scheduled artifact whose law does not limit sigma's rate (``rate_max`` removed, re-sealed; its
+    provenance's ``rate_limit_removed`` says which ``rate_max`` of which artifact): the scenario's
+    ``sigma_rate_limit = false``."""
+    from gainlink.shipping.artifact import from_dict, seal
+
+    data = dict(artifact.data, schedule=dict(artifact.data["schedule"], rate_max=None))
+    removed = f"rate_max {artifact.schedule.rate_max!r} of sha256:{artifact.sha256}"
+    data["provenance"] = dict(data.get("provenance", {}), rate_limit_removed=removed)
+    return from_dict(seal(data))
 
 
 def run_scheduled_sil(
@@ -86,6 +102,8 @@ def run_scheduled_sil(
             f'scenario {scenario.name}: a scheduled artifact runs as SIL with controller = "firmware" (the host C) '
             f'or "reference", not "{scenario.controller}"'
         )
+    if not scenario.sigma_rate_limit:  # another artifact: a library built for the given one does not serve it
+        artifact, library = without_rate_limit(artifact), None
     plant = build_plant(scenario, artifact=artifact)
     with ExitStack() as stack:
         stack.callback(plant.close)

@@ -88,13 +88,15 @@ def check_setup(
 
 def start_from_artifact(md: Any, artifact: Any, *, inputs: Any, outputs: Any) -> dict:
     """The artifact's operating point in the FMU's names: ``x_op`` on states whose spec name matches, ``u_op`` on
-    the mapped inputs (zeros without an operating point; empty without an artifact)."""
+    the mapped inputs (zeros without an operating point; empty without an artifact). A scheduled artifact has no
+    single operating point: its first point's ``u_op`` stands for it."""
     if artifact is None:
         return {}
     mapping = map_variables(md, inputs=inputs, outputs=outputs)
     start = {}
+    u_op = artifact.u_op if artifact.schedule is None else artifact.schedule.u_op[0]
     if len(mapping.inputs) == artifact.m:
-        start.update({name: float(v) for name, v in zip(mapping.inputs, artifact.u_op)})
+        start.update({name: float(v) for name, v in zip(mapping.inputs, u_op)})
     if artifact.x_op is not None:
         x_op = dict(zip(artifact.signals["states"], np.asarray(artifact.x_op, float)))
         states = [d.variable.derivative.name for d in md.derivatives] if md.derivatives else []

@@ -1,10 +1,12 @@
 """A tank drained through an orifice and filled by a pump with a first-order lag: the nonlinear plant of
 ``examples/tank_scheduled.toml``, whose level's time constant ``2 sqrt(h) / c`` grows 5x across its envelope::
 
-    dq/dt = (u - q) / tau_p          dh/dt = q - c sqrt(max(h, 0))
+    dq/dt = (u - q) / tau_p          dh/dt = (q - c sqrt(h+)) / (area + flare h+),   h+ = max(h, 0)
 
-(area 1 m^2; ``q`` pump flow, ``h`` level, ``u`` pump command). A drained tank stays at ``h >= 0``: the orifice
-passes nothing below empty, and a negative level is clamped to zero after each sample.
+(``q`` pump flow, ``h`` level, ``u`` pump command; the section ``area`` 1 m^2 and ``flare`` 0 by default, a
+cylinder; ``examples/tank_showcase.toml`` widens with its level). The project's FMU ``tank`` is the same model.
+A drained tank stays at ``h >= 0``: the orifice passes nothing below empty, and a negative level is clamped to
+zero after each sample.
 """
 
 from __future__ import annotations
@@ -20,17 +22,20 @@ from .models import OdePlant, _ode_factory
 
 
 class Tank(OdePlant):
-    """The orifice tank (module docstring); parameters ``c`` (m^2.5/s) and ``tau_p`` (s)."""
+    """The orifice tank (module docstring); parameters ``c`` (m^2.5/s), ``tau_p`` (s), ``area`` (m^2) and
+    ``flare`` (m^2 per m of level)."""
 
     name = "tank"
     all_inputs = ("u",)
     state_names = ("q", "h")
     default_outputs = ("h",)
-    defaults: ClassVar[Mapping[str, float]] = {"c": 0.4, "tau_p": 0.1}
+    defaults: ClassVar[Mapping[str, float]] = {"c": 0.4, "tau_p": 0.1, "area": 1.0, "flare": 0.0}
 
     def derivatives(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         c, tau = self.params["c"], self.params["tau_p"]
-        return np.array([(u[0] - x[0]) / tau, x[0] - c * math.sqrt(max(float(x[1]), 0.0))])
+        h = max(float(x[1]), 0.0)
+        section = self.params["area"] + self.params["flare"] * h
+        return np.array([(u[0] - x[0]) / tau, (x[0] - c * math.sqrt(h)) / section])
 
     def advance(self, *, u: np.ndarray, dt: float) -> None:
         super().advance(u=u, dt=dt)

@@ -1,4 +1,5 @@
-"""``gainlink hil ...`` (HIL bridge, DBC, project FMUs, saturation study) and ``gainlink linearize``."""
+"""``gainlink hil ...`` (HIL bridge, DBC, project FMUs, saturation study, scheduled showcase) and
+``gainlink linearize``."""
 
 from __future__ import annotations
 
@@ -91,6 +92,16 @@ def _study(args: argparse.Namespace) -> int:
         study=study_desc,
     )
     sys.stdout.write(study.summary)
+    return 0
+
+
+def _showcase(args: argparse.Namespace) -> int:
+    from gainlink.hil.loop.sched_study import run_showcase
+
+    result = run_showcase(
+        spec_path=Path(args.spec) if args.spec else None, report_dir=Path(args.report), controller=args.controller
+    )
+    sys.stdout.write(result.summary)
     return 0
 
 
@@ -233,6 +244,15 @@ def _add_study_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_study)
 
 
+def _add_showcase_parser(sub: argparse._SubParsersAction) -> None:
+    """``hil showcase``: the scheduled design against its single point across the envelope."""
+    p = sub.add_parser("showcase", help="scheduled vs single-point design across the envelope (tank FMU)")
+    p.add_argument("--spec", help="scheduled spec (default: examples/tank_showcase.toml of the checkout)")
+    p.add_argument("--controller", choices=("firmware", "reference"), help="override the controller (firmware)")
+    p.add_argument("--report", required=True, help="report folder")
+    p.set_defaults(func=_showcase)
+
+
 def _add_linearize_parser(subparsers: argparse._SubParsersAction) -> None:
     """``linearize``: an FMU linearised into a plant spec."""
     p = subparsers.add_parser("linearize", help="linearise an FMU about an operating point into a plant spec")
@@ -293,4 +313,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _add_dbc_parser(sub)
     _add_fmu_parser(sub)
     _add_study_parser(sub)
+    _add_showcase_parser(sub)
     _add_linearize_parser(subparsers)

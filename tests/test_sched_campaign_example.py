@@ -1,0 +1,87 @@
+"""examples/campaigns/tank_sigma_rate.toml, run small: the showcase tank's scheduled law (the LPV model of
+examples/tank_showcase_load.toml, external sigma) with sigma swept periodically across the whole envelope at rates
+around the design's ``rate_max``, the law's own rate limit off (``sigma_rate_limit = false``).
+
+Oracles: the design's verdict (no Lyapunov certificate; ``rate_max`` 2.8/s from its scan of periodic sweeps) and
+the monodromy radius of the whole-envelope triangle at each rate (0.10 at 2.8/s, 1.24 at 7/s), computed here from
+the law's loop matrices; the run at 7/s grows from 1 cm past 5 cm, the others decay.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from gainlink.errors import ScenarioError
+from gainlink.fileio import read_toml
+from gainlink.hil.campaign import run
+from gainlink.hil.loop.scenario import parse_scenario
+from gainlink.hil.loop.sil import run_sil
+from gainlink.hil.loop.sil_scheduled import without_rate_limit
+from gainlink.shipping.artifact import from_dict, load
+from gainlink.spec import load_spec
+from gainlink.synthesis import synthesize
+from support.paths import EXAMPLES
+from support.shared import once_per_run
+
+CAMPAIGN = EXAMPLES / "campaigns" / "tank_sigma_rate.toml"
+pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
+
+
+@pytest.fixture(scope="module")
+def artifact(tmp_path_factory):
+    """examples/tank_showcase_load.toml designed once per test run, saved."""
+    made = once_per_run(tmp_path_factory, "tank_showcase_load",
+                        lambda: synthesize(load_spec(EXAMPLES / "tank_showcase_load.toml")).artifact)  # fmt: skip
+    path = tmp_path_factory.mktemp("tank_load") / "gains.json"
+    from_dict(made).save(path)
+    return path
+
+
+def _radius(art, rate: float) -> float:
+    from gainlink.synthesis.schedule_rate import monodromy_radius
+    from gainlink.synthesis.schedule_variation import loops_at
+
+    up = np.minimum(0.04 + rate * art.Ts * np.arange(1, 1 + int(np.ceil(1.4 / (rate * art.Ts) - 1e-9))), 1.44)
+    return monodromy_radius(loops_at(art.schedule, art.Ci), np.concatenate([up, up[::-1][1:], [0.04]]))
+
+
+@pytest.mark.slow
+def test_the_example_campaign_holds_up_to_the_verdicts_rates_and_fails_above(artifact, tmp_path):
+    art = load(artifact)
+    v = art.checks["schedule"]["variation"]
+    rate_max = art.schedule.rate_max
+    assert v["certified_rate"] is None and rate_max == v["simulated_stable_rate"] == 2.8
+    data, _ = read_toml(CAMPAIGN, what="campaign", error=ValueError)
+    assert data["scenario"]["sigma_rate_limit"] is False and data["grid"][0]["values"][-1] == 7.0
+    del data["spec"]
+    data["artifact"] = str(artifact)
+    data["scenario"]["duration"] = 10.0  # small: 200 steps a run
+    data["grid"][0]["values"] = [rate_max, 4.0, 7.0]
+    result = run(data, out=tmp_path / "out", workers=1)
+    assert result.total == 3 and result.errors == 0
+    doc = json.loads((tmp_path / "out" / "campaign.json").read_text())
+    status = {row["values"]["sigma_rate"]: row["status"] for row in doc["runs"]}
+    assert status == {rate_max: "pass", 4.0: "pass", 7.0: "fail"}
+    assert _radius(art, 2.8) < 0.2 and _radius(art, 7.0) > 1.2  # the verdict's own measure of the same sweeps
+    for row in doc["runs"]:
+        rec = json.loads((tmp_path / "out" / "runs" / f"{row['id']}.json").read_text())
+        sch = rec["metrics"]["schedule"]
+        assert sch["rate_max"] is None and sch["max_rate"] == pytest.approx(row["values"]["sigma_rate"], rel=1e-4)
+        assert rec["inputs"]["scenario"]["sigma_rate_limit"] is False
+
+
+def test_sigma_rate_limit_false_runs_the_law_without_its_rate_max(artifact, example_artifacts):
+    """The copy differs only in rate_max (and provenance); the scenario's key is refused for an unscheduled
+    artifact in one line."""
+    art = load(artifact)
+    free = without_rate_limit(art)
+    assert free.schedule.rate_max is None and free.sha256 != art.sha256
+    assert free.data["provenance"]["rate_limit_removed"] == f"rate_max {art.schedule.rate_max!r} of sha256:{art.sha256}"
+    assert np.array_equal(free.schedule.coef["F"], art.schedule.coef["F"]) and free.Ts == art.Ts
+    sc = {"artifact": "x", "transport": {}, "duration": 1.0, "plant": {"kind": "cart_pendulum"},
+          "sigma_rate_limit": False}  # fmt: skip
+    with pytest.raises(ScenarioError) as exc:
+        run_sil(load(example_artifacts["pendulum"]), parse_scenario(sc))
+    assert "sigma_rate_limit is for a scheduled artifact" in str(exc.value) and "\n" not in str(exc.value)
