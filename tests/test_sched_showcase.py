@@ -1,6 +1,7 @@
 """The scheduled-law showcase (``gainlink hil showcase``, issue 18 item 6): examples/tank_showcase.toml designed
-scheduled on its level and as one unscheduled design at its middle point, both run as SIL (the host C) against
-the project's tank FMU across the whole envelope.
+scheduled on its level and as one unscheduled design at its middle point, both run against
+the project's tank FMU across the whole envelope, as hardware in the loop: the firmware's CAN node on each law,
+in lockstep over a udp_multicast bus.
 
 Measured (the built-in description, firmware): low-end step overshoot 17.3 % and a limit cycle (settling 15 s,
 never within 5 %) for the single point against 0 % and 1.5 s scheduled; high-end step 7.9 % / 3.35 s against
@@ -14,11 +15,13 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 from gainlink.hil.loop.sched_study import default_showcase, run_showcase
 from support.cli import run_cli
+from support.hil import udp_transport
 from support.shared import once_per_run
 
 pytestmark = [pytest.mark.slow, pytest.mark.usefixtures("quiet_design_warnings")]
@@ -32,7 +35,8 @@ def showcase(tmp_path_factory):
     report = (base.parent if "PYTEST_XDIST_WORKER" in os.environ else base) / "sched_showcase_report"  # this run's
 
     def make():
-        result = run_showcase(report_dir=report)
+        desc = default_showcase() | {"transport": udp_transport(fd=True)}  # the built-in, on a bus of this run's
+        result = run_showcase(report_dir=report, showcase=desc)
         return SimpleNamespace(table=result.table, summary=result.summary)
 
     return once_per_run(tmp_path_factory, "sched_showcase", make), report
@@ -62,6 +66,10 @@ def test_both_twins_are_in_the_report_and_the_model_twin_flags_the_single_point(
         assert row["twin_worst_du_rel"] < 1e-4  # the host C against its float64 twin
     sweep = json.loads((report / "scheduled" / "sweep" / "report.json").read_text())
     assert sweep["run"]["plant"]["name"] == "fmu:tank" and "model_twin" in sweep and "twin" in sweep
+    for design in ("single", "scheduled"):  # hardware in the loop: each law in the firmware's CAN node, on the bus
+        run = json.loads((report / design / "sweep" / "report.json").read_text())["run"]
+        assert run["transport"]["config"]["interface"] == "udp_multicast", design
+        assert Path(run["controller"]["argv"][0]).name == "gainlink_can", design
     assert (report / "comparison.png").read_bytes()[:4] == b"\x89PNG"
     assert (report / "scheduled" / "sweep" / "model_twin.png").is_file()
     assert (report / "scheduled" / "sweep" / "sigma.csv").is_file()

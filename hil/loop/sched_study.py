@@ -4,15 +4,19 @@ same nonlinear plant, with both twins; compared on tracking (IAE and max |e| ove
 (overshoot and settling time of the steps).
 
 The description is a TOML file (default: the built-in ``scenarios/tank_showcase.toml``): ``spec``,
-``single_point``, ``controller``, ``[plant]``, ``[sweep]`` (``low``, ``high``, ``rate``, ``start``, ``duration``)
-and ``[steps.NAME]`` (``from``, ``to``, ``at``, ``duration``). Every run is software in the loop
-(:func:`~.sil.run_sil`): a scheduled artifact runs its scheduled law in process.
+``single_point``, ``controller``, ``[plant]``, ``[sweep]`` (``low``, ``high``, ``rate``, ``start``, ``duration``),
+``[steps.NAME]`` (``from``, ``to``, ``at``, ``duration``) and ``[transport]``. With a CAN ``[transport]`` and
+``controller = "firmware"`` every run is hardware in the loop: the firmware's CAN node over the bus, on the
+scheduled law (:func:`~.can_scheduled.run_scheduled_can`) or the single-point one (:func:`~.bridge.run_scenario`);
+without one, software in the loop in process (:func:`~.sil.run_sil`).
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
+import tempfile
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -24,14 +28,15 @@ from gainlink.fileio import parse_toml, publish_files, read_toml
 from gainlink.shipping.artifact import Artifact, from_dict, render
 
 from ..paths import project_root
-from .bridge import RunResult
+from .bridge import RunResult, run_scenario
+from .can_scheduled import over_can, run_scheduled_can
 from .report import plots, report_json, summary_text
-from .scenario import parse_scenario
+from .scenario import Scenario, parse_scenario
 from .sched_report import sigma_csv, sigma_plot
 from .sched_study_report import comparison_png, showcase_summary
 from .sil import run_sil
 
-SHOWCASE_KEYS = {"spec", "single_point", "controller", "plant", "sweep", "steps", "description"}
+SHOWCASE_KEYS = {"spec", "single_point", "controller", "plant", "sweep", "steps", "transport", "description"}
 DESIGNS = ("single", "scheduled")
 SETTLE_BAND = 0.05  # settling: within 5 % of the step's size for good
 
@@ -133,12 +138,25 @@ def _run_design(art: Artifact, desc: dict, *, controller: str) -> dict[str, RunR
     """The sweep (with both twins) and each step (without) of one design."""
     sw = desc["sweep"]
     sweep = {"kind": "sweep", **{k: sw[k] for k in ("low", "high", "rate", "start")}}
-    out = {"sweep": run_sil(art, _scenario(desc, "sweep", sw["duration"], sw["low"], sweep, controller, twins=True))}
+    out = {"sweep": _run(art, _scenario(desc, "sweep", sw["duration"], sw["low"], sweep, controller, twins=True))}
     for name, st in desc["steps"].items():
         ref = {"kind": "step", "initial": st["from"], "value": st["to"], "at": st["at"]}
-        out[f"step_{name}"] = run_sil(art, _scenario(desc, f"step_{name}", st["duration"], st["from"], ref,
-                                                     controller, twins=False))  # fmt: skip
+        out[f"step_{name}"] = _run(art, _scenario(desc, f"step_{name}", st["duration"], st["from"], ref,
+                                                  controller, twins=False))  # fmt: skip
     return out
+
+
+def _run(art: Artifact, scenario: Scenario) -> RunResult:
+    """One run: over the CAN bus against the firmware's node when the scenario has a CAN transport and the
+    firmware controller, else in process."""
+    if not over_can(scenario):
+        return run_sil(art, scenario)
+    if art.schedule is not None:
+        return run_scheduled_can(art, scenario)
+    with tempfile.TemporaryDirectory(prefix="gainlink-showcase-") as tmp:
+        path = Path(tmp) / "gains.json"
+        art.save(path)
+        return run_scenario(dataclasses.replace(scenario, artifact_path=path))
 
 
 def _scenario(desc: dict, name: str, duration: float, h0: float, reference: dict, controller: str, *, twins: bool):
@@ -149,7 +167,7 @@ def _scenario(desc: dict, name: str, duration: float, h0: float, reference: dict
         {
             "name": f"showcase_{name}",
             "artifact": "unused.json",
-            "transport": {},
+            "transport": dict(desc.get("transport", {})),
             "plant": desc["plant"],
             "duration": float(duration),
             "controller": controller,
