@@ -21,6 +21,9 @@
 
 _Static_assert(GL_P + GL_Q <= 58, "DEBUG_FLOAT_ARRAY carries at most 58 values (y and r)");
 _Static_assert(GL_M <= 16, "HIL_ACTUATOR_CONTROLS carries at most 16 commands");
+_Static_assert(HIL_FLAG_FAULT == GL_MAV_FLAG_FAULT && HIL_FLAG_WATCHDOG == GL_MAV_FLAG_WATCHDOG &&
+                   HIL_FLAG_RESET == GL_MAV_FLAG_RESET && HIL_SAT_SHIFT == GL_MAV_SAT_SHIFT,
+               "the laws' HIL flags (gl_mav_law.h) are the node's");
 
 static void inc(uint32_t *counter, uint32_t by)
 {
@@ -63,7 +66,7 @@ void gl_mav_node_heartbeat(gl_mav_node_t *node)
 {
     mavlink_message_t msg;
     mavlink_msg_heartbeat_pack_chan(node->cfg.sysid, node->cfg.compid, node->cfg.chan, &msg, MAV_TYPE_GENERIC,
-                                    MAV_AUTOPILOT_GENERIC, 0, 0, MAV_STATE_ACTIVE);
+                                    MAV_AUTOPILOT_GENERIC, 0, GL_MAV_LAW_ID, MAV_STATE_ACTIVE);
     emit(node, GL_MAV_TO_ALL, &msg);
 }
 
@@ -358,12 +361,37 @@ static void reset_loop(gl_mav_node_t *node)
     (void)gl_loop_reset(&node->loop);
 }
 
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+/** A HIL message for the integer law: its command and flags; 0 when it is not one. */
+static int fixed_sample(gl_mav_node_t *node, const mavlink_debug_float_array_t *in, float *u, uint64_t *flags)
+{
+    if (in->array_id == HIL_ARRAY_SAMPLE) {
+        stage_if_dirty(node);
+        *flags = gl_mav_fixed_step(&node->fixed, &in->data[0], GL_Q > 0 ? &in->data[GL_P] : NULL, u);
+        inc(&node->stats.samples, 1u);
+    } else if (in->array_id == HIL_ARRAY_RESET) {
+        reset_loop(node);
+        *flags = gl_mav_fixed_reset(&node->fixed, u);
+    } else if (in->array_id == HIL_ARRAY_IDLE) {
+        *flags = gl_mav_fixed_idle(&node->fixed, u);
+    } else {
+        return 0;
+    }
+    return 1;
+}
+#endif
+
 static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)
 {
     mavlink_debug_float_array_t in;
     mavlink_msg_debug_float_array_decode(msg, &in);
     float u[GL_M];
     uint64_t flags = 0;
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+    if (!fixed_sample(node, &in, u, &flags)) {
+        return;
+    }
+#else
     if (in.array_id == HIL_ARRAY_SAMPLE) {
         stage_if_dirty(node);
         gl_status_t st = gl_loop_step(&node->loop, &in.data[0], GL_Q > 0 ? &in.data[GL_P] : NULL, u);
@@ -383,6 +411,7 @@ static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)
     } else {
         return;
     }
+#endif
     float controls[16] = {0};
     memcpy(controls, u, sizeof u);
     mavlink_message_t out;
@@ -530,6 +559,11 @@ gl_status_t gl_mav_node_init(gl_mav_node_t *node, const gl_mav_node_config_t *cf
     memset(mavlink_get_channel_status(cfg->chan), 0, sizeof(mavlink_status_t));
     gl_mav_params_init(&node->table, &gl_gains_default);
     (void)load_stored(node);
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+    if (gl_mav_fixed_init(&node->fixed, &gl_fixed_gains_default, cfg->watchdog_periods) != 0) {
+        return GL_ERR_NULL;
+    }
+#endif
     return gl_loop_init(&node->loop, &node->table.committed, cfg->watchdog_periods);
 }
 
