@@ -287,7 +287,7 @@ static uint8_t storage_command(gl_mav_node_t *node, float action)
         return MAV_RESULT_ACCEPTED;
     }
     if (action == 2.0f) {
-        if (gl_mav_params_replace(&node->table, &gl_gains_default) != GL_OK) {
+        if (gl_mav_params_replace(&node->table, GL_MAV_DEFAULT_SET) != GL_OK) {
             return MAV_RESULT_FAILED;
         }
         node->dirty = 1;
@@ -333,6 +333,9 @@ static void handle_command(gl_mav_node_t *node, const mavlink_message_t *msg)
 
 static void stage_if_dirty(gl_mav_node_t *node)
 {
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+    node->dirty = 0; /* the integer law reads the committed set itself: a commit is in force from the next step */
+#else
     if (node->dirty) {
         gl_status_t st = gl_loop_stage(&node->loop, &node->table.committed);
         if (st != GL_OK) {
@@ -341,6 +344,7 @@ static void stage_if_dirty(gl_mav_node_t *node)
         }
         node->dirty = 0;
     }
+#endif
 }
 
 /**
@@ -350,6 +354,9 @@ static void stage_if_dirty(gl_mav_node_t *node)
  */
 static void reset_loop(gl_mav_node_t *node)
 {
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+    node->dirty = 0; /* the integer law resets itself (fixed_sample) */
+#else
     if (node->dirty) {
         gl_status_t st = gl_loop_init(&node->loop, &node->table.committed, node->cfg.watchdog_periods);
         if (st == GL_OK) {
@@ -359,6 +366,7 @@ static void reset_loop(gl_mav_node_t *node)
         event(node, GL_MAV_EV_STAGE_FAILED, (int32_t)st, 0);
     }
     (void)gl_loop_reset(&node->loop);
+#endif
 }
 
 #if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
@@ -557,14 +565,17 @@ gl_status_t gl_mav_node_init(gl_mav_node_t *node, const gl_mav_node_config_t *cf
     node->list_next = -1;
     node->persist_tokens = GL_MAV_PERSIST_BURST;
     memset(mavlink_get_channel_status(cfg->chan), 0, sizeof(mavlink_status_t));
-    gl_mav_params_init(&node->table, &gl_gains_default);
+    gl_mav_params_init(&node->table, GL_MAV_DEFAULT_SET);
     (void)load_stored(node);
 #if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
-    if (gl_mav_fixed_init(&node->fixed, &gl_fixed_gains_default, cfg->watchdog_periods) != 0) {
+    /* the integer law runs on the table's committed set; the float loop of the same export only idles beside it */
+    if (gl_mav_fixed_init(&node->fixed, &node->table.committed.g, cfg->watchdog_periods) != 0) {
         return GL_ERR_NULL;
     }
-#endif
+    return gl_loop_init(&node->loop, &gl_gains_default, cfg->watchdog_periods);
+#else
     return gl_loop_init(&node->loop, &node->table.committed, cfg->watchdog_periods);
+#endif
 }
 
 gl_status_t gl_mav_node_copy(gl_mav_node_t *dst, const gl_mav_node_t *src)
@@ -577,6 +588,9 @@ gl_status_t gl_mav_node_copy(gl_mav_node_t *dst, const gl_mav_node_t *src)
     if (st != GL_OK) {
         return st;
     }
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+    dst->fixed.loop.g = &dst->table.committed.g; /* the copy runs on its own table */
+#endif
     /* The channel state lives in mavgen's per-file statics: only this file's are the node's. */
     mavlink_status_t *chan = mavlink_get_channel_status(dst->cfg.chan);
     memset(chan, 0, sizeof *chan);
