@@ -211,3 +211,25 @@ def test_a_set_the_target_refuses_is_rolled_back_whole(q31_app, pend_q31, retune
         np.testing.assert_array_equal(u.view(np.uint32), _model_u(pend_q31[0], Y, R).view(np.uint32))
     finally:
         fw.stop()
+
+
+def test_q15_on_its_design_model_over_mavlink_is_bit_exact_and_its_table_holds_its_integers(tmp_path):
+    """wood_berry q15 against its own linear model, 60 lockstep steps with a step; then its parameter table."""
+    from gainlink.firmware.mavlink_app import mavlink_executable
+
+    a = example("wood_berry", "q15")
+    a.save(tmp_path / "gains.json")
+    step = {a.signals["references"][0]: {"kind": "step", "at": 5 * a.Ts, "value": 0.5}}
+    data = {"name": "wood_berry_q15", "artifact": str(tmp_path / "gains.json"), "duration": 60 * a.Ts,
+            "mode": "lockstep", "controller": "firmware", "step_timeout": 2.0, "plant": {"kind": "linear"},
+            "transport": {"kind": "mavlink", "port": udp_port()}, "reference": step}  # fmt: skip
+    res = run_scenario(parse_scenario(data, path=tmp_path / "scenario.toml"))
+    fx = res.metrics["fixed_point"]
+    assert res.complete and fx["law"] == "q15" and fx["bit_exact"] is True and fx["certificate_applies"] is True
+    assert fx["unsaturated_steps"] == 60 and fx["within_per_step"]
+    assert np.all(np.array(fx["measured_du_design"]) <= np.array(fx["certified_du_design"]))
+    fw, port = start_firmware(mavlink_executable(a), None)
+    try:
+        assert _integers(port) == {s.name: int(s.value) for s in fixed_firmware_params(a)}
+    finally:
+        fw.stop()
