@@ -187,8 +187,12 @@ static const char *term_block(unsigned row, unsigned signal, unsigned *i, unsign
 static void add_param(gl_mav_params_t *table, const char *name, int32_t header, uint32_t offset)
 {
     gl_mav_param_t *p = &table->param[table->count++];
-    memcpy(p->id, name, GL_MAV_ID_LEN);
-    p->id[GL_MAV_ID_LEN] = '\0';
+    size_t len = 0u; /* at most the 16 characters of an id, and no further than the name's NUL */
+    while (len < GL_MAV_ID_LEN && name[len] != '\0') {
+        ++len;
+    }
+    memcpy(p->id, name, len);
+    p->id[len] = '\0';
     p->type = GL_MAV_TYPE_INT32;
     p->header = header;
     p->offset = offset;
