@@ -122,6 +122,7 @@ class ParamSession:
         self.timeout = float(timeout)
         self.retries = int(retries)
         self.resent = 0  # every request sent again after a timeout (reads, list, sets, commands)
+        self.custom_mode = 0  # the vehicle HEARTBEAT's custom_mode (the gainlink firmware: the law it runs)
 
     # -- replies -------------------------------------------------------------------------------
     def _ours(self, m) -> bool:

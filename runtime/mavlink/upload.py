@@ -33,6 +33,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from ..errors import ParameterError, PeerTimeoutError
 from ..shipping.artifact import Artifact
+from ..shipping.codegen_fixed import is_fixed
+from .fixed_params import SIGNATURE_ID, STRUCTURE_ID, fixed_firmware_params, law_name, law_of
 from .link import MavLink, carries_signature
 from .params import (
     DIMENSION_IDS,
@@ -124,15 +126,19 @@ class _Plan:
     commit: bool
     checks: tuple[ParamSpec, ...]
     new_hash: int | None
+    law: str | None = None  # the law the gainlink firmware must run (HEARTBEAT custom_mode)
+    formats: tuple[ParamSpec, ...] = ()  # a fixed-point law's GL_FX_SIG and GL_FX_STRUCT
 
 
 def _plan(artifact: Artifact, mapping: Mapping | None) -> _Plan:
     if mapping is None:
-        every = firmware_params(artifact)
+        every = fixed_firmware_params(artifact) if is_fixed(artifact) else firmware_params(artifact)
+        formats = tuple(s for s in every if s.name in (SIGNATURE_ID, STRUCTURE_ID))
         dims = tuple(s for s in every if s.name in DIMENSION_IDS)
-        gains = tuple(s for s in every if s.ptype == REAL32)
+        header = {s.name for s in dims + formats} | {HASH_ID}
+        gains = tuple(s for s in every if s.name not in header)  # REAL32 (float32) or INT32 (fixed point)
         (h,) = (int(s.value) for s in every if s.name == HASH_ID)
-        return _Plan(specs=gains, commit=True, checks=dims, new_hash=h)
+        return _Plan(specs=gains, commit=True, checks=dims, new_hash=h, law=law_of(artifact), formats=formats)
     return _Plan(specs=mapped_params(artifact, mapping), commit=False, checks=(), new_hash=None)
 
 
@@ -282,7 +288,30 @@ def _open_session(
     )
     session.encoding = encoding or detect_encoding(session, autopilot=hb.autopilot)
     log.info("vehicle %d/%d, %s integer parameters", target[0], target[1], session.encoding.value)
+    session.custom_mode = int(hb.custom_mode)
     return session, target, carries_signature(hb) and not link.signed
+
+
+def _check_law(session: ParamSession, plan: _Plan) -> None:
+    """Refuse, before anything is written, a set the gainlink firmware's law cannot run: another law (its HEARTBEAT's
+    custom_mode), or a fixed-point law with other number formats or structure (GL_FX_SIG, GL_FX_STRUCT)."""
+    runs = law_name(session.custom_mode)
+    if plan.law is not None and runs != plan.law:
+        raise ParameterError(
+            f"the firmware runs the {runs} law and the artifact is a {plan.law} design: its gains cannot run there "
+            "(build the firmware from it); nothing was changed"
+        )
+    if not plan.formats:
+        return
+    got, missing = session.read([s.name for s in plan.formats])
+    bad = [s for s in plan.formats if s.name in missing or int(got[s.name].value) != int(s.value)]
+    if bad:
+        what = "number formats" if bad[0].name == SIGNATURE_ID else "structure (non-zero terms, declared ranges)"
+        have = "missing" if bad[0].name in missing else f"{int(got[bad[0].name].value) & 0xFFFFFFFF:08x}"
+        raise ParameterError(
+            f"the firmware's {runs} law has other {what} ({bad[0].name} {have}, the artifact's "
+            f"{int(bad[0].value) & 0xFFFFFFFF:08x}): its integers would not mean the same there; nothing was changed"
+        )
 
 
 def _read_current(session: ParamSession, plan: _Plan, *, needs_key: bool) -> dict[str, ParamValue]:
@@ -303,6 +332,7 @@ def _read_current(session: ParamSession, plan: _Plan, *, needs_key: bool) -> dic
                 f"the firmware runs a loop of other dimensions ({got}; the artifact has {want}); nothing was changed"
             )
         values.update(dims)
+        _check_law(session, plan)
     got, missing = session.read([s.name for s in plan.specs] + ([HASH_ID] if plan.commit else []))
     if needs_key and not got:
         raise ParameterError(f"{SIGNING_REQUIRED}: it answered no unsigned parameter read; nothing was changed")

@@ -21,6 +21,9 @@
 
 _Static_assert(GL_P + GL_Q <= 58, "DEBUG_FLOAT_ARRAY carries at most 58 values (y and r)");
 _Static_assert(GL_M <= 16, "HIL_ACTUATOR_CONTROLS carries at most 16 commands");
+_Static_assert(HIL_FLAG_FAULT == GL_MAV_FLAG_FAULT && HIL_FLAG_WATCHDOG == GL_MAV_FLAG_WATCHDOG &&
+                   HIL_FLAG_RESET == GL_MAV_FLAG_RESET && HIL_SAT_SHIFT == GL_MAV_SAT_SHIFT,
+               "the laws' HIL flags (gl_mav_law.h) are the node's");
 
 static void inc(uint32_t *counter, uint32_t by)
 {
@@ -63,7 +66,7 @@ void gl_mav_node_heartbeat(gl_mav_node_t *node)
 {
     mavlink_message_t msg;
     mavlink_msg_heartbeat_pack_chan(node->cfg.sysid, node->cfg.compid, node->cfg.chan, &msg, MAV_TYPE_GENERIC,
-                                    MAV_AUTOPILOT_GENERIC, 0, 0, MAV_STATE_ACTIVE);
+                                    MAV_AUTOPILOT_GENERIC, 0, GL_MAV_LAW_ID, MAV_STATE_ACTIVE);
     emit(node, GL_MAV_TO_ALL, &msg);
 }
 
@@ -284,7 +287,7 @@ static uint8_t storage_command(gl_mav_node_t *node, float action)
         return MAV_RESULT_ACCEPTED;
     }
     if (action == 2.0f) {
-        if (gl_mav_params_replace(&node->table, &gl_gains_default) != GL_OK) {
+        if (gl_mav_params_replace(&node->table, GL_MAV_DEFAULT_SET) != GL_OK) {
             return MAV_RESULT_FAILED;
         }
         node->dirty = 1;
@@ -330,6 +333,9 @@ static void handle_command(gl_mav_node_t *node, const mavlink_message_t *msg)
 
 static void stage_if_dirty(gl_mav_node_t *node)
 {
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+    node->dirty = 0; /* the integer law reads the committed set itself: a commit is in force from the next step */
+#else
     if (node->dirty) {
         gl_status_t st = gl_loop_stage(&node->loop, &node->table.committed);
         if (st != GL_OK) {
@@ -338,6 +344,7 @@ static void stage_if_dirty(gl_mav_node_t *node)
         }
         node->dirty = 0;
     }
+#endif
 }
 
 /**
@@ -347,6 +354,9 @@ static void stage_if_dirty(gl_mav_node_t *node)
  */
 static void reset_loop(gl_mav_node_t *node)
 {
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+    node->dirty = 0; /* the integer law resets itself (fixed_sample) */
+#else
     if (node->dirty) {
         gl_status_t st = gl_loop_init(&node->loop, &node->table.committed, node->cfg.watchdog_periods);
         if (st == GL_OK) {
@@ -356,7 +366,28 @@ static void reset_loop(gl_mav_node_t *node)
         event(node, GL_MAV_EV_STAGE_FAILED, (int32_t)st, 0);
     }
     (void)gl_loop_reset(&node->loop);
+#endif
 }
+
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+/** A HIL message for the integer law: its command and flags; 0 when it is not one. */
+static int fixed_sample(gl_mav_node_t *node, const mavlink_debug_float_array_t *in, float *u, uint64_t *flags)
+{
+    if (in->array_id == HIL_ARRAY_SAMPLE) {
+        stage_if_dirty(node);
+        *flags = gl_mav_fixed_step(&node->fixed, &in->data[0], GL_Q > 0 ? &in->data[GL_P] : NULL, u);
+        inc(&node->stats.samples, 1u);
+    } else if (in->array_id == HIL_ARRAY_RESET) {
+        reset_loop(node);
+        *flags = gl_mav_fixed_reset(&node->fixed, u);
+    } else if (in->array_id == HIL_ARRAY_IDLE) {
+        *flags = gl_mav_fixed_idle(&node->fixed, u);
+    } else {
+        return 0;
+    }
+    return 1;
+}
+#endif
 
 static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)
 {
@@ -364,6 +395,11 @@ static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)
     mavlink_msg_debug_float_array_decode(msg, &in);
     float u[GL_M];
     uint64_t flags = 0;
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+    if (!fixed_sample(node, &in, u, &flags)) {
+        return;
+    }
+#else
     if (in.array_id == HIL_ARRAY_SAMPLE) {
         stage_if_dirty(node);
         gl_status_t st = gl_loop_step(&node->loop, &in.data[0], GL_Q > 0 ? &in.data[GL_P] : NULL, u);
@@ -383,6 +419,7 @@ static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)
     } else {
         return;
     }
+#endif
     float controls[16] = {0};
     memcpy(controls, u, sizeof u);
     mavlink_message_t out;
@@ -528,9 +565,17 @@ gl_status_t gl_mav_node_init(gl_mav_node_t *node, const gl_mav_node_config_t *cf
     node->list_next = -1;
     node->persist_tokens = GL_MAV_PERSIST_BURST;
     memset(mavlink_get_channel_status(cfg->chan), 0, sizeof(mavlink_status_t));
-    gl_mav_params_init(&node->table, &gl_gains_default);
+    gl_mav_params_init(&node->table, GL_MAV_DEFAULT_SET);
     (void)load_stored(node);
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+    /* the integer law runs on the table's committed set; the float loop of the same export only idles beside it */
+    if (gl_mav_fixed_init(&node->fixed, &node->table.committed.g, cfg->watchdog_periods) != 0) {
+        return GL_ERR_NULL;
+    }
+    return gl_loop_init(&node->loop, &gl_gains_default, cfg->watchdog_periods);
+#else
     return gl_loop_init(&node->loop, &node->table.committed, cfg->watchdog_periods);
+#endif
 }
 
 gl_status_t gl_mav_node_copy(gl_mav_node_t *dst, const gl_mav_node_t *src)
@@ -543,6 +588,9 @@ gl_status_t gl_mav_node_copy(gl_mav_node_t *dst, const gl_mav_node_t *src)
     if (st != GL_OK) {
         return st;
     }
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+    dst->fixed.loop.g = &dst->table.committed.g; /* the copy runs on its own table */
+#endif
     /* The channel state lives in mavgen's per-file statics: only this file's are the node's. */
     mavlink_status_t *chan = mavlink_get_channel_status(dst->cfg.chan);
     memset(chan, 0, sizeof *chan);

@@ -7,7 +7,8 @@
  * feeds them to gl_mav_node_input() and gets the answers through ::gl_mav_port_t::send. It speaks:
  *
  * - HEARTBEAT at 1 Hz (gl_mav_node_poll()) and on demand (gl_mav_node_heartbeat(), e.g. to a new peer):
- *   MAV_TYPE_GENERIC, MAV_AUTOPILOT_GENERIC.
+ *   MAV_TYPE_GENERIC, MAV_AUTOPILOT_GENERIC, custom_mode = the law it runs (GL_MAV_LAW_ID: 0 float32, 31 q31,
+ *   15 q15; gl_mav_law.h).
  * - AUTOPILOT_VERSION on MAV_CMD_REQUEST_MESSAGE(148) or MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
  *   capabilities MAVLINK2 | PARAM_ENCODE_BYTEWISE, flight_custom_version = first 8 hex digits of the
  *   artifact's sha256, uid = CRC-32 of the committed gain set.
@@ -19,7 +20,8 @@
  *   the compiled set; COMMAND_ACK each.
  * - HIL: DEBUG_FLOAT_ARRAY array_id 1 (`GL_SAMPLE`, data = y then r) answered by HIL_ACTUATOR_CONTROLS
  *   with the same time_usec, controls = u, flags bit 0 fault, bit 1 watchdog, bit 2 reset done, bits 8+k
- *   saturation of input k; array_id 2 resets the loop state, 3 is a period without a measurement.
+ *   saturation of input k (a fixed-point law also bit 3 a sample clipped to its range, bit 4 its second-line
+ *   saturation); array_id 2 resets the loop state, 3 is a period without a measurement.
  *   A committed gain set is staged into the loop right before the next step.
  *
  * Events (storage loaded, commit, refusal, ...) go to one hook, ::gl_mav_port_t::event, never to a
@@ -53,6 +55,7 @@
 
 #include "common/mavlink.h"
 #include "gainlink/gl_loop.h"
+#include "gl_mav_law.h"
 #include "gl_mav_params.h"
 #include "gl_mav_store.h"
 
@@ -160,7 +163,10 @@ typedef struct gl_mav_node_config {
 typedef struct gl_mav_node {
     gl_mav_node_config_t cfg;          /**< Configuration. */
     gl_mav_params_t table;             /**< Parameters over the staged and committed sets. */
-    gl_loop_t loop;                    /**< The control loop. */
+    gl_loop_t loop;                    /**< The control loop (float32; with a fixed-point law, the float gains'). */
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+    gl_mav_fixed_t fixed;              /**< The integer law the node runs (gl_mav_law.h). */
+#endif
     gl_mav_node_stats_t stats;         /**< Counters. */
     int dirty;                         /**< A committed set waits to be staged into the loop. */
     uint64_t next_beat_us;             /**< When the next HEARTBEAT is due. */

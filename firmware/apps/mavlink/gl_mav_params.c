@@ -42,7 +42,7 @@ static const float *gain_float_const(const gl_gains_t *gains, uint32_t offset)
     return &gains->Ts + offset;
 }
 
-void gl_mav_params_init(gl_mav_params_t *table, const gl_gains_t *gains)
+void gl_mav_params_init(gl_mav_params_t *table, const gl_mav_set_t *gains)
 {
     memset(table, 0, sizeof *table);
     uint16_t k = 0;
@@ -144,7 +144,7 @@ gl_mav_set_result_t gl_mav_params_set(gl_mav_params_t *table, uint16_t index, fl
     return GL_MAV_SET_OK;
 }
 
-gl_status_t gl_mav_params_replace(gl_mav_params_t *table, const gl_gains_t *gains)
+gl_status_t gl_mav_params_replace(gl_mav_params_t *table, const gl_mav_set_t *gains)
 {
     static gl_loop_t probe;
     gl_status_t st = gl_loop_init(&probe, gains, 1u);
@@ -155,4 +155,16 @@ gl_status_t gl_mav_params_replace(gl_mav_params_t *table, const gl_gains_t *gain
     table->committed = *gains;
     table->commits++;
     return GL_OK;
+}
+
+uint32_t gl_mav_params_bits(const gl_mav_set_t *set, uint32_t offset)
+{
+    uint32_t bits;
+    memcpy(&bits, gain_float_const(set, offset), sizeof bits);
+    return bits;
+}
+
+void gl_mav_params_put_bits(gl_mav_set_t *set, uint32_t offset, uint32_t bits)
+{
+    memcpy(gain_float(set, offset), &bits, sizeof bits);
 }

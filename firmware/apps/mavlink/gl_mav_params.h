@@ -13,6 +13,8 @@
  *   `GL_CI_i_j`, `GL_KI_i_j`, `GL_KAW_i_j` (q > 0 only), `GL_UMIN_i`, `GL_UMAX_i`, `GL_XH0_i`,
  *   `GL_Z0_i` (q > 0 only), `GL_UOP_i`, `GL_YOP_i` (the operating point). Setting one stages it (non-finite
  *   values are refused); it reads back staged.
+ * A fixed-point law's build (GL_MAV_LAW_FIXED) has the table of gl_mav_fxset.h instead (gl_mav_fxparams.c, the same
+ * functions over ::gl_mav_set_t, its integers).
  */
 #ifndef GL_MAV_PARAMS_H
 #define GL_MAV_PARAMS_H
@@ -24,11 +26,28 @@
 /** Length of a MAVLink parameter id (not NUL-terminated when full). */
 #define GL_MAV_ID_LEN 16
 
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+/* A fixed-point law: the table holds its integers (gl_mav_fxparams.c; naming in gl_mav_fxset.h). */
+#include "gl_mav_fxset.h"
+/** Read-only structure parameters, GL_FX_SIG, GL_FX_STRUCT, plus GL_HASH. */
+#define GL_MAV_HEADER_PARAMS (GL_GAINS_STRUCTURE_FIELDS + 3)
+/** Number of parameters (every integer gain plus the header ones). */
+#define GL_MAV_MAX_PARAMS (GL_MAV_HEADER_PARAMS + GL_MAV_FX_VALUES)
+/** A gain set of the table: the integers, their parameter values and their CRC-32. */
+typedef gl_mav_fx_set_t gl_mav_set_t;
+/** The compiled set. */
+#define GL_MAV_DEFAULT_SET gl_mav_fx_default()
+#else
 /** Read-only structure parameters plus GL_HASH. */
 #define GL_MAV_HEADER_PARAMS (GL_GAINS_STRUCTURE_FIELDS + 1)
 
 /** Upper bound of the number of parameters (every float of gl_gains_t plus the header ones). */
 #define GL_MAV_MAX_PARAMS (GL_MAV_HEADER_PARAMS + GL_GAINS_FLOATS)
+/** A gain set of the table: the float32 loop's. */
+typedef gl_gains_t gl_mav_set_t;
+/** The compiled set. */
+#define GL_MAV_DEFAULT_SET (&gl_gains_default)
+#endif
 
 _Static_assert(GL_MAV_MAX_PARAMS < 65535, "too many parameters for MAVLink's uint16 param_index");
 
@@ -50,15 +69,15 @@ typedef struct gl_mav_param {
     char id[GL_MAV_ID_LEN + 1]; /**< NUL-terminated id. */
     uint8_t type;               /**< GL_MAV_TYPE_*. */
     int32_t header;             /**< Structure field index, GL_GAINS_STRUCTURE_FIELDS for GL_HASH, -1 a float. */
-    uint32_t offset;            /**< Float index from gl_gains_t::Ts (floats only). */
+    uint32_t offset;            /**< Float index from gl_gains_t::Ts (floats only; fixed point: index into v). */
 } gl_mav_param_t;
 
 /** The table and the two gain sets it works on. Caller-owned (static storage). */
 typedef struct gl_mav_params {
     gl_mav_param_t param[GL_MAV_MAX_PARAMS]; /**< Parameters in index order. */
     uint16_t count;                          /**< Number of parameters. */
-    gl_gains_t staged;                       /**< Values as set, not yet committed. */
-    gl_gains_t committed;                    /**< The set the loop runs on (from its next step). */
+    gl_mav_set_t staged;                     /**< Values as set, not yet committed. */
+    gl_mav_set_t committed;                  /**< The set the loop runs on (from its next step). */
     uint32_t commits;                        /**< Number of accepted commits. */
     int32_t last_refusal;                    /**< gl_status_t of the last refused commit (0 if none). */
 } gl_mav_params_t;
@@ -68,7 +87,7 @@ typedef struct gl_mav_params {
  * @param[out] table  Table.
  * @param[in]  gains  Initial (committed) set; its crc32 must be valid.
  */
-void gl_mav_params_init(gl_mav_params_t *table, const gl_gains_t *gains);
+void gl_mav_params_init(gl_mav_params_t *table, const gl_mav_set_t *gains);
 
 /**
  * @brief Index of a parameter by id.
@@ -102,6 +121,18 @@ gl_mav_set_result_t gl_mav_params_set(gl_mav_params_t *table, uint16_t index, fl
  * @param[in]     gains  New committed set.
  * @return GL_OK, or the check's error and nothing changed.
  */
-gl_status_t gl_mav_params_replace(gl_mav_params_t *table, const gl_gains_t *gains);
+gl_status_t gl_mav_params_replace(gl_mav_params_t *table, const gl_mav_set_t *gains);
+
+/**
+ * @brief The stored bits of a gain parameter (gl_mav_store.c): a float's or an integer's 32 bits.
+ * @param[in] set A gain set. @param[in] offset The parameter's ::gl_mav_param_t::offset. @return The bits.
+ */
+uint32_t gl_mav_params_bits(const gl_mav_set_t *set, uint32_t offset);
+
+/**
+ * @brief Put a gain parameter's stored bits into a set (gl_mav_store.c; checked when the set is committed).
+ * @param[in,out] set A gain set. @param[in] offset The parameter's offset. @param[in] bits The bits.
+ */
+void gl_mav_params_put_bits(gl_mav_set_t *set, uint32_t offset, uint32_t bits);
 
 #endif /* GL_MAV_PARAMS_H */

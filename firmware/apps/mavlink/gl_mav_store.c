@@ -11,14 +11,12 @@
 
 #include <string.h>
 
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+static const char header[] = "# gainlink MAVLink parameters: committed gain set, int32 bits in hex\n";
+#else
 static const char header[] = "# gainlink MAVLink parameters: committed gain set, float32 bits in hex\n";
+#endif
 static const char hex_digits[] = "0123456789abcdef";
-
-/** Where a REAL32 parameter's committed value lives (offset counted in floats from Ts, as in gl_mav_params.c). */
-static float *committed_float(gl_gains_t *gains, uint32_t offset)
-{
-    return &gains->Ts + offset;
-}
 
 static size_t put_line(uint8_t *out, size_t at, size_t cap, const char *id, uint32_t bits)
 {
@@ -51,9 +49,7 @@ size_t gl_mav_store_encode(const gl_mav_params_t *table, uint8_t *buf, size_t ca
         if (p->header >= 0) {
             continue;
         }
-        uint32_t bits;
-        memcpy(&bits, &table->committed.Ts + p->offset, sizeof bits);
-        at = put_line(buf, at, cap, p->id, bits);
+        at = put_line(buf, at, cap, p->id, gl_mav_params_bits(&table->committed, p->offset));
         if (at == 0u) {
             return 0;
         }
@@ -87,7 +83,7 @@ static int32_t find_param(const gl_mav_params_t *table, const char *id, int32_t 
 
 /** Apply one `ID BITS` line to `candidate`; returns GL_MAV_STORE_OK or the line's error. */
 static gl_mav_store_error_t apply_line(const gl_mav_params_t *table, const uint8_t *line, size_t len,
-                                       gl_gains_t *candidate, int *have_hash, int32_t *next)
+                                       gl_mav_set_t *candidate, int *have_hash, int32_t *next)
 {
     const uint8_t *space = memchr(line, ' ', len);
     if (space == NULL || space == line || (size_t)(space - line) > GL_MAV_ID_LEN) {
@@ -108,14 +104,14 @@ static gl_mav_store_error_t apply_line(const gl_mav_params_t *table, const uint8
     if (k < 0 || table->param[k].header >= 0) {
         return GL_MAV_STORE_E_UNKNOWN;
     }
-    memcpy(committed_float(candidate, table->param[k].offset), &bits, sizeof bits);
+    gl_mav_params_put_bits(candidate, table->param[k].offset, bits);
     return GL_MAV_STORE_OK;
 }
 
 gl_mav_store_result_t gl_mav_store_decode(gl_mav_params_t *table, const uint8_t *buf, size_t len)
 {
     gl_mav_store_result_t res = {.error = GL_MAV_STORE_OK, .line = 0, .status = 0};
-    gl_gains_t candidate = table->committed;
+    gl_mav_set_t candidate = table->committed;
     int have_hash = 0;
     int32_t next = 0;
     size_t at = 0;

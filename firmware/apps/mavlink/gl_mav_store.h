@@ -3,8 +3,8 @@
  * @brief The committed gain set as persistent bytes: encode for storage, decode and check on load.
  *
  * Format (ASCII text, one line per item, LF endings): an optional `#` comment line, then one
- * `ID BITS` line per REAL32 parameter of the committed set, where BITS is the float's IEEE-754
- * binary32 pattern as exactly 8 lowercase hex digits (exact, and needs no printf/strtof on a
+ * `ID BITS` line per gain parameter of the committed set, where BITS is the float's IEEE-754
+ * binary32 pattern (a fixed-point law's table: the int32's bits) as exactly 8 lowercase hex digits (exact, and needs no printf/strtof on a
  * microcontroller), and a last line `GL_HASH BITS` with the set's CRC-32. Loading rebuilds a whole
  * gain set from the bytes and accepts it only if it passes the library's checks (dimensions, CRC,
  * finiteness, limits, derivation); on any error nothing changes.
@@ -30,7 +30,7 @@
 typedef enum gl_mav_store_error {
     GL_MAV_STORE_OK = 0,        /**< Accepted. */
     GL_MAV_STORE_E_SYNTAX = 1,  /**< A line is not `ID BITS` (see the line number). */
-    GL_MAV_STORE_E_UNKNOWN = 2, /**< An id that is not a REAL32 parameter of this build. */
+    GL_MAV_STORE_E_UNKNOWN = 2, /**< An id that is not a gain parameter of this build. */
     GL_MAV_STORE_E_NUMBER = 3,  /**< BITS is not 8 hex digits. */
     GL_MAV_STORE_E_NO_HASH = 4, /**< No `GL_HASH` line. */
     GL_MAV_STORE_E_REFUSED = 5, /**< The set failed the loop's checks (see the status). */

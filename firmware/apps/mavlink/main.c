@@ -14,7 +14,8 @@
  *   "Signing" in gl_mav_node.h for what stays open); a SETUP_SIGNING signed with it replaces the key and FILE
  *   (written atomically, mode 0600). UDP is not a trusted link: without a key, SETUP_SIGNING is refused.
  *
- * Prints `gainlink-mavlink NAME sha256:HEX n m p q URL` on stdout when ready. Events go to stderr through
+ * Prints `gainlink-mavlink NAME sha256:HEX n m p q URL` on stdout when ready (followed by ` law=q31` or ` law=q15`
+ * when it runs a fixed-point law, gl_mav_law.h). Events go to stderr through
  * gl_log.h (rate-limited, never blocking the loop); at exit one summary line accounts for every datagram and
  * frame: `datagrams= dropped= frames= bad_frames= garbage_bytes= unsigned= bad_signature= replayed= ...`.
  */
@@ -41,6 +42,13 @@ typedef struct udp_port {
     const char *storage_path;
     const char *key_path;
 } udp_port_t;
+
+/* The ready line names a law other than float32 (the float32 app's line is as it always was). */
+#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+#define LAW_FIELD " law=" GL_MAV_LAW_NAME
+#else
+#define LAW_FIELD ""
+#endif
 
 static gl_mav_node_t node;
 static udp_port_t udp;
@@ -330,8 +338,8 @@ int main(int argc, char **argv)
         return rc;
     }
     catch_stop_signals();
-    printf("gainlink-mavlink %s sha256:%s %d %d %d %d %s\n", GL_NAME, GL_ARTIFACT_SHA256, GL_N, GL_M, GL_P, GL_Q,
-           opt.url);
+    printf("gainlink-mavlink %s sha256:%s %d %d %d %d %s%s\n", GL_NAME, GL_ARTIFACT_SHA256, GL_N, GL_M, GL_P, GL_Q,
+           opt.url, LAW_FIELD);
     fflush(stdout);
     rc = serve(opt.spin_us);
     log_summary();
