@@ -12,7 +12,6 @@ import re
 
 import numpy as np
 import pytest
-from gainlink.fileio import read_toml
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.mavlink.fixed_params import fixed_firmware_params
@@ -21,14 +20,11 @@ from gainlink.mavlink.upload import UploadFailed, upload
 from gainlink.proof.fixed_format import real
 from gainlink.proof.fixed_law import FixedPointLoop
 from gainlink.proof.float32_law import Float32Loop
-from gainlink.shipping.artifact import Artifact, from_dict
-from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
+from gainlink.shipping.artifact import Artifact
 from support.cli import run_cli
-from support.fixed import example, model_run
+from support.fixed import example, model_run, pendulum_design
 from support.mavlink import closed_loop, read_params, start_firmware
 from support.net import udp_port
-from support.paths import EXAMPLES
 
 
 @pytest.fixture(scope="module")
@@ -82,22 +78,6 @@ def test_q31_over_mavlink_is_the_integer_law_bit_for_bit_on_the_recorded_samples
 # -- the integer gains in the parameter table: upload, verify, commit, roll back ------------------------------------
 
 
-def _design(numeric: str, q_diag=None, r_diag=None) -> Artifact:
-    """The pendulum in ``numeric`` with other weights (``None``: the example's)."""
-    key = (numeric, repr(q_diag), repr(r_diag))
-    if key not in _DESIGNS:
-        data, _ = read_toml(EXAMPLES / "pendulum.toml", what="spec", error=ValueError)
-        data = copy.deepcopy(data)
-        data["implementation"] = {"numeric": numeric} | ({"fixed_point_max_error": 0.01} if numeric == "q15" else {})
-        data["controller"]["Q_diag"] = q_diag or data["controller"]["Q_diag"]
-        data["controller"]["R_diag"] = r_diag or data["controller"]["R_diag"]
-        _DESIGNS[key] = from_dict(synthesize(parse_spec(data)).artifact)
-    return _DESIGNS[key]
-
-
-_DESIGNS: dict = {}
-
-
 @pytest.fixture(scope="module")
 def q31_app(pend_q31):
     """The MAVLink app built from the q31 pendulum."""
@@ -109,7 +89,7 @@ def q31_app(pend_q31):
 @pytest.fixture(scope="module")
 def retuned_q31(tmp_path_factory):
     """The q31 pendulum designed again with slightly other weights: the same formats and structure, other integers."""
-    a = _design("q31", [12.0, 1.0, 110.0, 1.0])
+    a = pendulum_design("q31", [12.0, 1.0, 110.0, 1.0])
     path = tmp_path_factory.mktemp("retuned_q31") / "gains.json"
     a.save(path)
     return a, path
@@ -167,8 +147,8 @@ def test_upload_of_a_redesigned_q31_set_commits_persists_and_the_loop_runs_it_bi
 def test_a_set_for_another_law_or_other_formats_is_refused_in_one_line_and_nothing_changes(
     q31_app, mavlink_exe, pend, pend_q31, tmp_path
 ):
-    q15 = _design("q15")
-    other_formats = _design("q31", [40.0, 1.0, 300.0, 2.0], [3.0])
+    q15 = pendulum_design("q15")
+    other_formats = pendulum_design("q31", [40.0, 1.0, 300.0, 2.0], [3.0])
     assert other_formats.checks["fixed_point"]["signature"] != pend_q31[0].checks["fixed_point"]["signature"]
     for art, name in ((q15, "q15.json"), (other_formats, "formats.json")):
         art.save(tmp_path / name)

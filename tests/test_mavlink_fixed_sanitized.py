@@ -21,9 +21,8 @@ from gainlink.mavlink.session import ParamSession
 from gainlink.shipping.codegen import render_c
 from pymavlink.dialects.v20 import common as mavlink2
 from support.cli import run_cli
-from support.fixed import example
+from support.fixed import example, pendulum_design
 from support.net import udp_port
-from test_mavlink_fixed import _design
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +85,7 @@ def _hil(port: int, art) -> None:
 
 def test_the_fixed_point_app_under_asan_ubsan(q31_asan, tmp_path):
     art, exe = q31_asan
-    new = _design("q31", [12.0, 1.0, 110.0, 1.0])
+    new = pendulum_design("q31", [12.0, 1.0, 110.0, 1.0])
     new.save(tmp_path / "new.json")
     port = udp_port()
     fw = MavlinkFirmware(exe, url=f"udpin:127.0.0.1:{port}", storage=tmp_path / "params.txt").start()

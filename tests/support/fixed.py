@@ -78,3 +78,19 @@ def model_run(a: Artifact, Y, R) -> ModelRun:
     arr = {k: np.array(v, dtype=np.int64) for k, v in out.items() if k not in ("overflow", "fault")}
     Z = arr["Z"].reshape(Y.shape[0], a.q)
     return ModelRun(arr["U"], arr["V"], arr["XH"], Z, arr["sat"], arr["clip"], np.array(out["fault"]), out["overflow"])
+
+
+_PENDULUM_DESIGNS: dict = {}
+
+
+def pendulum_design(numeric: str, q_diag=None, r_diag=None) -> Artifact:
+    """The pendulum in ``numeric`` with other weights (``None``: the example's)."""
+    key = (numeric, repr(q_diag), repr(r_diag))
+    if key not in _PENDULUM_DESIGNS:
+        data, _ = read_toml(EXAMPLES / "pendulum.toml", what="spec", error=ValueError)
+        data = copy.deepcopy(data)
+        data["implementation"] = {"numeric": numeric} | ({"fixed_point_max_error": 0.01} if numeric == "q15" else {})
+        data["controller"]["Q_diag"] = q_diag or data["controller"]["Q_diag"]
+        data["controller"]["R_diag"] = r_diag or data["controller"]["R_diag"]
+        _PENDULUM_DESIGNS[key] = from_dict(synthesize(parse_spec(data)).artifact)
+    return _PENDULUM_DESIGNS[key]
