@@ -110,6 +110,7 @@ def build(
     board: str | None = None,
     options: dict[str, str] | None = None,
     build_root: Path | None = None,
+    only: str | None = None,
 ) -> BuildResult:
     """Build the firmware for ``artifact`` (cached).
 
@@ -126,6 +127,8 @@ def build(
         Extra CMake cache entries (e.g. ``{"GL_SANITIZE": "ON"}``); part of the cache key.
     build_root : Path, optional
         Cache folder (default :func:`cache_root`).
+    only : str, optional
+        Build only this CMake target of the tree (e.g. one host app), not all of them.
 
     Returns
     -------
@@ -156,7 +159,8 @@ def build(
         if not (cm / "CMakeCache.txt").is_file():
             _configure(cmake, cm, gen=gen, platform=platform, options=options)
         jobs = str(min(2, os.cpu_count() or 1))
-        _run([cmake, "--build", str(cm), "-j", jobs], cwd=bdir, what=f"firmware build ({target})")
+        what = f"firmware build ({target}{', ' + only if only else ''})"
+        _run([cmake, "--build", str(cm), "-j", jobs, *(["--target", only] if only else [])], cwd=bdir, what=what)
     return BuildResult(
         artifact_sha256=artifact.sha256,
         target=target,
@@ -240,7 +244,8 @@ def replay_image(artifact: Artifact, *, target: str, board: str) -> Path:
 
 
 def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path | None = None) -> Path:
-    """Build (cached) the host firmware with its apps and return the executable ``relpath`` of app ``target``.
+    """Build (cached) app ``target`` of the host firmware (its tree configured with the apps; only that app is
+    built) and return its executable ``relpath``.
 
     A cached build tree configured before that app existed is reconfigured and the app's target built.
 
@@ -251,7 +256,7 @@ def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path 
     """
     if target != "gainlink_can":  # the CAN node also runs a scheduled law (apps/can/gl_can_law.h)
         artifact.require_unscheduled("the host apps (MAVLink server)")
-    result = build(artifact, target="host", options={"GL_APPS": "ON"}, build_root=build_root)
+    result = build(artifact, target="host", options={"GL_APPS": "ON"}, build_root=build_root, only=target)
     exe = result.build_dir / relpath
     with exclusive_lock(result.build_dir.parent / ".lock"):
         if not exe.is_file():
