@@ -5,7 +5,8 @@
  *          sigma read from the measured output the schedule names or from the external scheduling signals, which
  *          a sample then carries after its references (GL_CAN_EXTRA values);
  *        - a fixed-point export (gl_fixed_gains.c, `[implementation] numeric = "q31" | "q15"`; apps/can/CMakeLists.txt
- *          then defines GL_CAN_LAW_FIXED=1 on the host): the integer loop (gl_fixed.h) the artifact certifies;
+ *          then defines GL_CAN_LAW_FIXED=1, for the host app and the Cortex-M images' slcan node): the integer loop
+ *          (gl_fixed.h) the artifact certifies;
  *        - otherwise the float32 loop (gl_loop.h), as it always was.
  *
  * All take the same float samples and return float commands; what they report becomes the command frames' status

@@ -2,7 +2,8 @@
  * @file serve_slcan.c
  * @brief The CAN node (apps/can/gl_can_node.h) behind an slcan adapter (apps/can/gl_slcan.h) on the
  *        console UART: `can.Bus(interface="slcan", channel="socket://HOST:PORT")` exchanges the same DBC
- *        frames with it as with the host CAN app (classic frames: slcan has no CAN FD).
+ *        frames with it as with the host CAN app (classic frames: slcan has no CAN FD). It runs the law the host
+ *        app runs (gl_can_law.h): a fixed-point export's integer law, which its ready line names (`law=q31`).
  */
 #include <math.h>
 #include <string.h>
@@ -14,6 +15,13 @@
 #include "gl_uart.h"
 #include "semihost.h"
 #include "serve.h"
+
+/* The ready line names a law other than float32, as the host app's does (a float32 image's line is as it was). */
+#if defined(GL_CAN_LAW_FIXED) && GL_CAN_LAW_FIXED
+#define LAW_FIELD " law=" GL_CAN_LAW_NAME
+#else
+#define LAW_FIELD ""
+#endif
 
 static gl_can_node_t node;
 static gl_slcan_t slcan;
@@ -133,8 +141,8 @@ int gl_serve_slcan(int argc, char *const argv[])
     }
     const gl_slcan_port_t port = {.ctx = 0, .write = uart_write, .frame = frame_in, .overruns = uart_overruns};
     gl_slcan_init(&slcan, &port);
-    static const char ready_f32[] = "ready slcan encoding=float32\n";
-    static const char ready_i16[] = "ready slcan encoding=int16\n";
+    static const char ready_f32[] = "ready slcan encoding=float32" LAW_FIELD "\n";
+    static const char ready_i16[] = "ready slcan encoding=int16" LAW_FIELD "\n";
     if (cfg.encoding == GL_CAN_INT16) {
         (void)gl_uart_write((const uint8_t *)ready_i16, sizeof ready_i16 - 1u);
     } else {
