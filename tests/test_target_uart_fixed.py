@@ -1,16 +1,21 @@
 """The Cortex-M image's slcan node runs a fixed-point artifact's integer law, not the float law of the same export.
 
-On the M3 (mps2-an385, no FPU: where fixed point matters) the q31 pendulum is served by the image over slcan in
-QEMU, in closed loop with the cart-pendulum FMU. Oracles: the host CAN app on the same scenario (the same C, so the
-same closed loop bit for bit), and the bit-exact integer model (``gainlink.proof.fixed_law``) on the samples the
-image received. The micro:bit (M0) carries no bus node: its 16 KiB of RAM hold the replay image only.
+On the cores without an FPU, where fixed point matters (M3: mps2-an385; M0: the micro:bit, whose 16 KiB of RAM
+hold the slcan node of a fixed-point export but not the MAVLink node), the q31 pendulum is served by the image over
+slcan in QEMU, in closed loop with the cart-pendulum FMU. Oracles: the host CAN app on the same scenario (the same C,
+so the same closed loop bit for bit), and the bit-exact integer model (``gainlink.proof.fixed_law``) on the samples
+the image received.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
+from gainlink.errors import FirmwareError
 from gainlink.firmware.build import build
+from gainlink.firmware.uart import QemuUart
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.proof.fixed_format import real
 from gainlink.proof.fixed_law import FixedPointLoop
@@ -20,28 +25,29 @@ from support.hil import udp_transport
 from support.net import tcp_port
 from support.uart import assert_same_closed_loop, scenario
 
-BOARD = "mps2-an385"
+CORES = {"mps2-an385": "cortex-m3", "microbit": "cortex-m0"}
 
 
 @pytest.fixture(scope="module")
 def q31(tmp_path_factory):
-    """The pendulum designed in q31, saved, with its M3 serving image built (cached)."""
+    """The pendulum designed in q31, saved, and its host CAN app's run of the scenario (the oracle)."""
     a = example("pendulum", "q31")
     path = tmp_path_factory.mktemp("q31img") / "gains.json"
     a.save(path)
-    build(a, target="cortex-m3", board=BOARD)
-    return a, path
-
-
-def _slcan(path):
-    return {"interface": "slcan", "channel": f"socket://127.0.0.1:{tcp_port()}"}
-
-
-def test_the_m3_images_slcan_node_runs_the_integer_law_bit_for_bit(q31):
-    a, path = q31
-    image = run_scenario(scenario(path, _slcan(path), controller="qemu", board=BOARD, duration=1.0))
     host = run_scenario(scenario(path, udp_transport(fd=False), controller="firmware", duration=1.0))
+    return a, path, host
+
+
+@pytest.mark.parametrize("board", list(CORES))
+def test_the_images_slcan_node_runs_the_integer_law_bit_for_bit(q31, board):
+    a, path, host = q31
+    build(a, target=CORES[board], board=board)  # cached
+    slcan = {"interface": "slcan", "channel": f"socket://127.0.0.1:{tcp_port()}"}
+    # The scenario offers the boards whose image serves every link; the micro:bit's serves slcan for fixed point.
+    sc = dataclasses.replace(scenario(path, slcan, controller="qemu", duration=1.0), board=board)
+    image = run_scenario(sc)
     assert_same_closed_loop(image, host)  # the host CAN app, which runs the integer law (tests/test_can_laws.py)
+    assert image.info["controller"]["ready"].startswith(f"gainlink pendulum {board} sha256:{a.sha256}")
     assert "law=q31" in image.info["controller"]["ready"]
     Y, R = image.trace.y.astype(np.float32), image.trace.r.astype(np.float32)
     model = model_run(a, Y, R)
@@ -54,3 +60,15 @@ def test_the_m3_images_slcan_node_runs_the_integer_law_bit_for_bit(q31):
     fx = image.metrics["fixed_point"]
     assert fx["law"] == "q31" and fx["bit_exact"] is True and fx["overflow_steps"] == 0
     assert fx["within_per_step"] and fx["unsaturated_steps"] > 50
+
+
+def test_the_microbits_image_refuses_mavlink_in_one_line(q31):
+    """Its 16 KiB hold the slcan node of a fixed-point export, not the MAVLink node: `serve mavlink` says so."""
+    elf = build(q31[0], target="cortex-m0", board="microbit").files["elf"]
+    image = QemuUart(elf, board="microbit", protocol="mavlink", port=tcp_port(), lifetime_s=60)
+    try:
+        with pytest.raises(FirmwareError, match="refused its options: this image carries the slcan node only"):
+            image.start()
+        assert image.exit_status() is not None
+    finally:
+        image.close()

@@ -4,24 +4,36 @@
 include("${CMAKE_CURRENT_LIST_DIR}/board-image.cmake")
 
 # The MAVLink and slcan nodes (serve_*.c, apps/mavlink, apps/can) need ~9 KiB of RAM beyond the loop; the
-# micro:bit's 16 KiB holds the loop, replay/PIL over semihosting and the UART banner, not the nodes.
+# micro:bit's 16 KiB holds the loop, replay/PIL over semihosting and the UART banner, and for a fixed-point export
+# (whose integer law is the one an M0 runs) the slcan node too, not the MAVLink node.
 # GL_IMAGE_SERVE OFF builds the replay-only image (the loop, replay/PIL over semihosting, the UART banner): what
 # `replay --engine qemu` and PIL run; it compiles in a third of the time of the serving one.
 option(GL_IMAGE_SERVE "Carry the MAVLink and slcan nodes on the UART (boards with the RAM for them)" ON)
+set(GL_IMAGE_SERVE_MAVLINK ${GL_IMAGE_SERVE})
 if(GL_BOARD STREQUAL "microbit")
-  set(GL_IMAGE_SERVE OFF)
+  set(GL_IMAGE_SERVE_MAVLINK OFF)
+  if(NOT EXISTS "${GL_GAINS_DIR}/gl_fixed_gains.c")
+    set(GL_IMAGE_SERVE OFF)
+  endif()
 endif()
 
 set(GL_IMAGE_SOURCES main.c gl_stream.c)
 set(GL_IMAGE_LIBS gainlink_loop gainlink_gains m)
-if(GL_IMAGE_SERVE)
+# The same MAVLink and CAN node libraries as the host apps (apps/mavlink, apps/can): no copy of protocol logic.
+if(GL_IMAGE_SERVE_MAVLINK)
   add_subdirectory(apps/mavlink) # the node libraries the image carries on its UART
   add_subdirectory(apps/can)
   list(APPEND GL_IMAGE_SOURCES serve.c serve_mavlink.c serve_slcan.c flash_semihost.c)
-  # The same MAVLink and CAN node libraries as the host apps (apps/mavlink, apps/can): no copy of protocol logic.
   list(PREPEND GL_IMAGE_LIBS gainlink_mavlink_node gainlink_can_node)
+elseif(GL_IMAGE_SERVE)
+  add_subdirectory(apps/can)
+  list(APPEND GL_IMAGE_SOURCES serve.c serve_slcan.c)
+  list(PREPEND GL_IMAGE_LIBS gainlink_can_node)
 endif()
 gl_add_image(gainlink_image SOURCES ${GL_IMAGE_SOURCES} LIBS ${GL_IMAGE_LIBS})
 if(GL_IMAGE_SERVE)
   target_compile_definitions(gainlink_image PRIVATE GL_IMAGE_SERVE=1)
+endif()
+if(GL_IMAGE_SERVE_MAVLINK)
+  target_compile_definitions(gainlink_image PRIVATE GL_IMAGE_SERVE_MAVLINK=1)
 endif()

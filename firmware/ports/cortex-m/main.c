@@ -9,7 +9,8 @@
  * - `serve mavlink [sysid=N] [compid=N]`: the MAVLink node on the UART (serve.h), parameters persisted
  *   in the semihosting file gl_flash.txt (flash_semihost.h); runs until the simulator is stopped;
  * - `serve slcan [base=ID] [encoding=float32|int16 meas=... cmd=...]`: the CAN node behind slcan (serve.h);
- *   (images built with GL_IMAGE_SERVE only; the others answer `serve` with exit status GL_EXIT_BAD_INPUT);
+ *   (images built with GL_IMAGE_SERVE only; the others answer `serve` with exit status GL_EXIT_BAD_INPUT;
+ *   the micro:bit's image of a fixed-point export carries the slcan node only, GL_IMAGE_SERVE_MAVLINK off);
  * - anything else: opens `gl_in.bin` (a file or a FIFO) in the simulator's working directory. Without it,
  *   the UART smoke test runs: one step with y = 0.5, r = 0, printed as `u0=0xBITS ...`, exit 0. With it,
  *   `gl_out.bin` is opened for writing and the stream is:
@@ -180,7 +181,11 @@ static int serve_if_asked(void)
     return GL_EXIT_BAD_INPUT;
 #else
     if (n >= 3 && strcmp(words[2], "mavlink") == 0) {
+#if GL_IMAGE_SERVE_MAVLINK
         return gl_serve_mavlink(n - 3, &words[3]);
+#else
+        return gl_serve_refuse("this image carries the slcan node only (the micro:bit's RAM)");
+#endif
     }
     if (n >= 3 && strcmp(words[2], "slcan") == 0) {
         return gl_serve_slcan(n - 3, &words[3]);
