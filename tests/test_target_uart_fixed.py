@@ -22,7 +22,7 @@ from gainlink.proof.fixed_law import FixedPointLoop
 from gainlink.proof.float32_law import Float32Loop
 from support.fixed import example, model_run
 from support.hil import udp_transport
-from support.net import tcp_port
+from support.net import tcp_port, udp_port
 from support.uart import assert_same_closed_loop, scenario
 
 CORES = {"mps2-an385": "cortex-m3", "microbit": "cortex-m0"}
@@ -72,3 +72,18 @@ def test_the_microbits_image_refuses_mavlink_in_one_line(q31):
         assert image.exit_status() is not None
     finally:
         image.close()
+
+
+def test_the_m3_images_mavlink_node_runs_the_integer_law_bit_for_bit(q31):
+    """The MAVLink node of the M3's image, against the host MAVLink app of the same export and the integer model."""
+    a, path, _ = q31
+    url = f"tcp:127.0.0.1:{tcp_port()}"
+    image = run_scenario(scenario(path, {"kind": "mavlink", "url": url}, controller="qemu", board="mps2-an385"))
+    host = run_scenario(scenario(path, {"kind": "mavlink", "port": udp_port()}, controller="firmware"))
+    assert_same_closed_loop(image, host)
+    assert "law=q31" in image.info["controller"]["ready"] and "law=q31" in host.info["controller"]["ready"]
+    Y, R = image.trace.y.astype(np.float32), image.trace.r.astype(np.float32)
+    u_model = real(model_run(a, Y, R).U, FixedPointLoop(a).f["u"]).astype(np.float32)
+    np.testing.assert_array_equal(image.trace.u.astype(np.float32).view(np.uint32), u_model.view(np.uint32))
+    fx = image.metrics["fixed_point"]
+    assert fx["law"] == "q31" and fx["bit_exact"] is True and fx["within_per_step"]

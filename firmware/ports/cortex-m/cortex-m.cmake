@@ -30,6 +30,9 @@ elseif(GL_IMAGE_SERVE)
   list(APPEND GL_IMAGE_SOURCES serve.c serve_slcan.c)
   list(PREPEND GL_IMAGE_LIBS gainlink_can_node)
 endif()
+# A fixed-point export's nodes both run the integer law (apps/can, apps/mavlink). With both in the image, one
+# src/gl_fixed.c is linked: the MAVLink node's generic loop, first on the link line, which the slcan node then runs
+# too (bit for bit the unrolled loop, which the micro:bit's slcan-only image runs: tests/test_target_uart_fixed.py).
 gl_add_image(gainlink_image SOURCES ${GL_IMAGE_SOURCES} LIBS ${GL_IMAGE_LIBS})
 if(GL_IMAGE_SERVE)
   target_compile_definitions(gainlink_image PRIVATE GL_IMAGE_SERVE=1)
