@@ -9,8 +9,6 @@ the image received.
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 from gainlink.errors import FirmwareError
@@ -20,6 +18,7 @@ from gainlink.hil.loop.bridge import run_scenario
 from gainlink.proof.fixed_format import real
 from gainlink.proof.fixed_law import FixedPointLoop
 from gainlink.proof.float32_law import Float32Loop
+from support.cli import run_cli
 from support.fixed import example, model_run
 from support.hil import udp_transport
 from support.net import tcp_port, udp_port
@@ -29,11 +28,18 @@ CORES = {"mps2-an385": "cortex-m3", "microbit": "cortex-m0"}
 
 
 @pytest.fixture(scope="module")
-def q31(tmp_path_factory):
-    """The pendulum designed in q31, saved, and its host CAN app's run of the scenario (the oracle)."""
+def q31_saved(tmp_path_factory):
+    """The pendulum designed in q31, saved."""
     a = example("pendulum", "q31")
     path = tmp_path_factory.mktemp("q31img") / "gains.json"
     a.save(path)
+    return a, path
+
+
+@pytest.fixture(scope="module")
+def q31(q31_saved):
+    """The q31 pendulum and its host CAN app's run of the scenario (the oracle)."""
+    a, path = q31_saved
     host = run_scenario(scenario(path, udp_transport(fd=False), controller="firmware", duration=1.0))
     return a, path, host
 
@@ -43,9 +49,7 @@ def test_the_images_slcan_node_runs_the_integer_law_bit_for_bit(q31, board):
     a, path, host = q31
     build(a, target=CORES[board], board=board)  # cached
     slcan = {"interface": "slcan", "channel": f"socket://127.0.0.1:{tcp_port()}"}
-    # The scenario offers the boards whose image serves every link; the micro:bit's serves slcan for fixed point.
-    sc = dataclasses.replace(scenario(path, slcan, controller="qemu", duration=1.0), board=board)
-    image = run_scenario(sc)
+    image = run_scenario(scenario(path, slcan, controller="qemu", board=board, duration=1.0))
     assert_same_closed_loop(image, host)  # the host CAN app, which runs the integer law (tests/test_can_laws.py)
     assert image.info["controller"]["ready"].startswith(f"gainlink pendulum {board} sha256:{a.sha256}")
     assert "law=q31" in image.info["controller"]["ready"]
@@ -62,9 +66,9 @@ def test_the_images_slcan_node_runs_the_integer_law_bit_for_bit(q31, board):
     assert fx["within_per_step"] and fx["unsaturated_steps"] > 50
 
 
-def test_the_microbits_image_refuses_mavlink_in_one_line(q31):
+def test_the_microbits_image_refuses_mavlink_in_one_line(q31_saved):
     """Its 16 KiB hold the slcan node of a fixed-point export, not the MAVLink node: `serve mavlink` says so."""
-    elf = build(q31[0], target="cortex-m0", board="microbit").files["elf"]
+    elf = build(q31_saved[0], target="cortex-m0", board="microbit").files["elf"]
     image = QemuUart(elf, board="microbit", protocol="mavlink", port=tcp_port(), lifetime_s=60)
     try:
         with pytest.raises(FirmwareError, match="refused its options: this image carries the slcan node only"):
@@ -74,9 +78,9 @@ def test_the_microbits_image_refuses_mavlink_in_one_line(q31):
         image.close()
 
 
-def test_the_m3_images_mavlink_node_runs_the_integer_law_bit_for_bit(q31):
+def test_the_m3_images_mavlink_node_runs_the_integer_law_bit_for_bit(q31_saved):
     """The MAVLink node of the M3's image, against the host MAVLink app of the same export and the integer model."""
-    a, path, _ = q31
+    a, path = q31_saved
     url = f"tcp:127.0.0.1:{tcp_port()}"
     image = run_scenario(scenario(path, {"kind": "mavlink", "url": url}, controller="qemu", board="mps2-an385"))
     host = run_scenario(scenario(path, {"kind": "mavlink", "port": udp_port()}, controller="firmware"))
@@ -87,3 +91,14 @@ def test_the_m3_images_mavlink_node_runs_the_integer_law_bit_for_bit(q31):
     np.testing.assert_array_equal(image.trace.u.astype(np.float32).view(np.uint32), u_model.view(np.uint32))
     fx = image.metrics["fixed_point"]
     assert fx["law"] == "q31" and fx["bit_exact"] is True and fx["within_per_step"]
+
+
+def test_the_microbit_serves_only_a_fixed_point_artifact_over_slcan_and_says_so(q31_saved, pend):
+    mav = scenario(q31_saved[1], {"kind": "mavlink", "url": "tcp:127.0.0.1:1"}, controller="qemu", board="microbit")
+    slcan = {"interface": "slcan", "channel": "socket://127.0.0.1:1"}
+    for sc in (mav, scenario(pend, slcan, controller="qemu", board="microbit")):  # MAVLink; a float32 artifact
+        with pytest.raises(FirmwareError, match=r"no bus node for this artifact and link .* fixed-point"):
+            run_scenario(sc)
+    can = '{"interface": "slcan", "channel": "socket://127.0.0.1:1"}'
+    res = run_cli("firmware", "run", pend, "--target", "cortex-m0", "--can", can)
+    assert res.code == 2 and "the slcan node of a fixed-point artifact" in res.err and res.err.count("\n") == 1

@@ -43,8 +43,12 @@ def qemu_peer(*, artifact: Any, transport: Any, board: str, elf: Path | None, du
     from gainlink.firmware.build import build
     from gainlink.firmware.targets import BOARDS
     from gainlink.firmware.uart import QemuUart
+    from gainlink.shipping.codegen_fixed import is_fixed
 
     protocol, host, port, options = transport.qemu_serve()
+    refusal = BOARDS[board].serving_refusal(protocol, fixed=is_fixed(artifact))
+    if refusal is not None:
+        raise FirmwareError(refusal)
     if elf is None:
         artifact.require_unscheduled("a bus node on the image's UART")
         elf = build(artifact, target=BOARDS[board].core, board=board).files["elf"]

@@ -8,7 +8,7 @@ Example::
     mode = "lockstep"                      # lockstep | realtime
     controller = "firmware"                # firmware (host app) | reference (Python node) | qemu (Cortex-M image)
     firmware = "path/to/gainlink_can"      # optional: a prebuilt executable or, for qemu, ELF (default: built)
-    board = "mps2-an386"                   # qemu: a board whose image serves its UART (not microbit)
+    board = "mps2-an386"                   # qemu: a board whose image serves its UART (microbit: fixed point, slcan)
     step_timeout = 0.05                    # lockstep: wait per command [s]
     peer_timeout = 1.0                     # end the run when the controller is silent this long [s]
     period = 0.01                          # realtime: tick [s] (default: the artifact's Ts)
@@ -41,7 +41,8 @@ each: what two busy-polling peers need), ``none`` (the kernel decides); ``auto``
 
 ``controller = "qemu"`` runs the Cortex-M image of ``board``'s core (``gainlink firmware build --target cortex-mN
 --board BOARD``, or the ELF named by ``firmware``) in ``qemu-system-arm`` on ``board`` (mps2-an386 by default;
-any board of gainlink.firmware.targets whose image carries the bus nodes), speaking on its UART, which QEMU serves as a
+any board of gainlink.firmware.targets whose image carries the bus nodes; the micro:bit's only the slcan node of a
+fixed-point artifact), speaking on its UART, which QEMU serves as a
 TCP socket: ``[transport] kind = "mavlink", url = "tcp:HOST:PORT"`` (MAVLink) or ``interface = "slcan",
 channel = "socket://HOST:PORT"`` (CAN through slcan, classic frames). The bridge starts QEMU, waits for the
 image's banner, runs the loop and always stops QEMU. ``affinity = "auto"`` leaves QEMU's threads to the
@@ -123,7 +124,12 @@ TOP_KEYS = {
     "sigma_rate_limit",
 }
 CONTROLLERS = ("firmware", "reference", "qemu")
-BOARDS = tuple(sorted((b.name for b in _FIRMWARE_BOARDS.values() if b.serves), key=lambda n: n != "mps2-an386"))
+BOARDS = tuple(
+    sorted(
+        (b.name for b in _FIRMWARE_BOARDS.values() if b.serves or b.serves_fixed_slcan),
+        key=lambda n: n != "mps2-an386",
+    )
+)
 MODES = ("lockstep", "realtime")
 FAULT_KINDS = ("drop", "delay", "duplicate", "reorder", "silent", "crash")
 PROFILE_KEYS = {

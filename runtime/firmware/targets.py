@@ -35,12 +35,25 @@ class Board:
     """A QEMU machine (``-M name``) that runs a Cortex-M image.
 
     ``serves``: the image carries the MAVLink and slcan nodes on its UART (``firmware run --target``);
-    the micro:bit's 16 KiB of RAM holds the loop, replay and PIL but not the nodes.
+    the micro:bit's 16 KiB of RAM holds the loop, replay and PIL but not both nodes. ``serves_fixed_slcan``: its
+    image of a fixed-point export carries the slcan node (the integer law's node is small), not the MAVLink node.
     """
 
     name: str
     core: str
     serves: bool = True
+    serves_fixed_slcan: bool = False
+
+    def serving_refusal(self, protocol: str, *, fixed: bool) -> str | None:
+        """Why this board's image cannot serve ``protocol`` for an export (None: it can)."""
+        if self.serves or (fixed and protocol == "slcan" and self.serves_fixed_slcan):
+            return None
+        if self.serves_fixed_slcan:
+            return (
+                f"the {self.name} image carries no bus node for this artifact and link (its 16 KiB of RAM hold only "
+                "the slcan node of a fixed-point artifact); choose another board"
+            )
+        return f"the {self.name} image carries no bus node on its UART; choose another board"
 
 
 @dataclass(frozen=True)
@@ -65,7 +78,7 @@ class Target:
 BOARDS: dict[str, Board] = {
     b.name: b
     for b in (
-        Board("microbit", "cortex-m0", serves=False),
+        Board("microbit", "cortex-m0", serves=False, serves_fixed_slcan=True),
         Board("mps2-an385", "cortex-m3"),
         Board("mps2-an386", "cortex-m4"),
         Board("netduinoplus2", "cortex-m4"),

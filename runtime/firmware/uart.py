@@ -383,15 +383,17 @@ def run_foreground(
         0 after SIGINT/SIGTERM, else QEMU's exit status.
     """
     from ..shipping.artifact import load
+    from ..shipping.codegen_fixed import is_fixed
     from .build import build
     from .targets import resolve_cortex_m
 
     platform = resolve_cortex_m(target, board)
     board = platform.board.name
-    if not platform.board.serves:
-        raise FirmwareError(f"the {board} image carries no bus node on its UART (16 KiB of RAM); choose another board")
-    host, port = tcp_endpoint(url, scheme="tcp" if protocol == "mavlink" else "socket")
     artifact = load(artifact_path)
+    refusal = platform.board.serving_refusal(protocol, fixed=is_fixed(artifact))
+    if refusal is not None:
+        raise FirmwareError(refusal)
+    host, port = tcp_endpoint(url, scheme="tcp" if protocol == "mavlink" else "socket")
     artifact.require_unscheduled("a bus node on the image's UART")
     elf = build(artifact, target=platform.target.name, board=board).files["elf"]
     flash = flash_dir or default_flash_dir(Path(artifact_path), board=board)
