@@ -87,6 +87,29 @@ def test_schedule_on_a_parameter_trims_hover_throttle(multirotor, tmp_path):
     assert '"schema_version": 2' in (out / "gains.json").read_text()
 
 
+def test_the_default_spec_of_a_slow_loop_designs_its_certificate_proved_in_float64(multirotor, tmp_path):
+    """The spec `linearize --schedule` writes without a template (the multirotor on its mass) needs a Lyapunov
+    matrix with a condition number near 1e7: Clarabel stops short of its tolerances (InsufficientProgress) and the
+    design was refused ("the LMI solver failed"). The candidate is now kept when the float64 re-check proves it;
+    proved again here, independently, on a dense grid of masses (not only the hull's vertices)."""
+    from gainlink.shipping.artifact import load
+    from gainlink.synthesis.lpv import velocity_loop
+
+    path, _ = multirotor
+    spec, out = tmp_path / "spec.toml", tmp_path / "design"
+    assert run_cli("linearize", path, "--schedule", "mass=0.8,1.2,1.6", "--at", "z=2", "--out", spec).code == 0
+    res = run_cli("design", spec, "--out", out)
+    assert res.code == 0, res.err
+    art = load(out / "gains.json")
+    var = art.checks["schedule"]["variation"]
+    assert var["common_lyapunov"] and var["rate_max"] is None
+    P = np.array(var["certificate"]["P"][0])
+    S = art.schedule
+    for mass in np.linspace(S.points[0], S.points[-1], 201):
+        A = velocity_loop(S.plant_at(mass), S.coefficients_at(mass), Ci=art.Ci)
+        assert np.linalg.eigvalsh(P - A.T @ P @ A)[0] > 0, mass
+
+
 def test_schedule_on_an_output_state(multirotor, tmp_path):
     """Scheduled on the altitude z (an output that is a state: held there): hover at every altitude."""
     path, p = multirotor

@@ -86,10 +86,16 @@ def _fmu_path(ref: str, blobs: dict[str, bytes]) -> Path:
 
 
 def _library(artifact: Artifact) -> Path:
+    """The host library SIL runs: the integer loop's for a fixed-point artifact, else the float loop's."""
     if artifact.sha256 not in _LIBRARIES:
         from gainlink.firmware.build import build
+        from gainlink.firmware.fixed import host_library
+        from gainlink.shipping.codegen_fixed import is_fixed
 
-        _LIBRARIES[artifact.sha256] = build(artifact, target="host").files["shared"]
+        if is_fixed(artifact):
+            _LIBRARIES[artifact.sha256] = host_library(artifact)
+        else:
+            _LIBRARIES[artifact.sha256] = build(artifact, target="host").files["shared"]
     return _LIBRARIES[artifact.sha256]
 
 

@@ -104,12 +104,12 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
             result.metrics["encoding_clipped"] = clipped
         if is_fixed(artifact):  # which law answered, checked against the integer model and the float64 law
             result.metrics["fixed_point"] = fixed_can_check(
-                artifact, result.trace, ready_line=peer.ready_line, model_plant=_design_model(scenario)
+                artifact, result.trace, ready_line=peer.ready_line, model_plant=is_design_model(scenario)
             )
         return result
 
 
-def _design_model(scenario: Scenario) -> bool:
+def is_design_model(scenario: Scenario) -> bool:
     """Whether the plant is the artifact's own model (``kind = "linear"`` from the scenario's artifact, unperturbed):
     the loop a fixed-point certificate's closed-loop bounds are about."""
     return scenario.plant.get("kind") == "linear" and set(scenario.plant) <= {"kind"}

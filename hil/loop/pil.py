@@ -27,6 +27,7 @@ from gainlink.errors import FirmwareError, PeerTimeoutError, PlantError
 from gainlink.firmware import fixed as fwfixed
 from gainlink.firmware import qemu as fwqemu
 from gainlink.firmware.build import replay_image
+from gainlink.firmware.fixed import step_status
 from gainlink.firmware.targets import resolve_cortex_m
 from gainlink.proof.sampled_plant import SampledPlant
 from gainlink.proof.twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
@@ -34,7 +35,7 @@ from gainlink.proof.twin_plot import twin_difference_figure
 from gainlink.shipping.artifact import Artifact
 from gainlink.shipping.codegen_fixed import is_fixed
 
-from .pil_fixed import FixedPilCheck, QuantisedTwin, fixed_pil_check, step_status
+from .pil_fixed import FixedPilCheck, QuantisedTwin, fixed_pil_check
 
 log = logging.getLogger(__name__)
 

@@ -27,15 +27,6 @@ from gainlink.proof.fixed_law import FixedPointLoop
 from gainlink.shipping.artifact import Artifact
 from gainlink.synthesis.fixed_link import bound_float32_link
 
-GL_OK, GL_SATURATED, GL_ERR_NANINF = 0, 1, -2  # gl_status_t: the float image's status, for the same PIL record
-
-
-def step_status(flags: int, sat: int) -> int:
-    """The float image's status for a fixed-point step: refused (fault), saturated, or done."""
-    if flags & fwfixed.FAULT:
-        return GL_ERR_NANINF
-    return GL_SATURATED if sat else GL_OK
-
 
 class QuantisedTwin:
     """The float64 law with the artifact's quantised coefficients (and sample clip) closing the loop on its own

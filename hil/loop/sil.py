@@ -9,7 +9,10 @@ C step call itself. With ``controller = "reference"`` the float64 law steps inst
 
 SIL is what a campaign runs by default: a pendulum run of 1000 steps takes a fraction of a second.
 Link faults (drop, delay, ...), a silent or crashed controller and real-time pacing need a HIL run and
-are refused with one line. A scheduled artifact runs its scheduled law (:mod:`.sil_scheduled`).
+are refused with one line. A scheduled artifact runs its scheduled law (:mod:`.sil_scheduled`); a fixed-point
+artifact the integer law it certifies (:class:`~gainlink.engines.fixed_native.FixedNativeLoop`: ``gl_fixed_step``),
+its report's ``fixed_point`` block checking it bit for bit against the integer model and beside the certified
+bounds, as over CAN (:mod:`.can_fixed`).
 """
 
 from __future__ import annotations
@@ -21,12 +24,15 @@ from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
+from gainlink.engines.fixed_native import FixedNativeLoop
 from gainlink.engines.native import NativeLoop
 from gainlink.errors import PlantError, ScenarioError
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping.artifact import Artifact
+from gainlink.shipping.codegen_fixed import is_fixed
 
-from .bridge import RunResult
+from .bridge import RunResult, is_design_model
+from .can_fixed import fixed_can_check
 from .metrics import compute_metrics
 from .plan import Recorder, describe_artifact, describe_plant, plan_run, start_model_twin, start_twin, step_twins
 from .scenario import Scenario
@@ -110,7 +116,10 @@ def run_sil(
     plant = build_plant(scenario, artifact=artifact)
     with ExitStack() as stack:
         stack.callback(plant.close)
-        if scenario.controller == "firmware":
+        if scenario.controller == "firmware" and is_fixed(artifact):  # the integer law the artifact certifies
+            law = FixedNativeLoop(artifact, library=library)
+            kind = {"kind": f"firmware (host C {law.law} fixed-point loop, ctypes)", "library": str(law.library)}
+        elif scenario.controller == "firmware":
             law = NativeLoop(artifact, library=library)
             kind = {"kind": "firmware (host C loop, ctypes)", "library": str(law.library)}
         else:
@@ -118,7 +127,12 @@ def run_sil(
             kind = {"kind": "reference (float64 law)"}
         loop = _SilLoop(artifact, scenario, plant=plant, law=law)
         loop.twin = start_twin(scenario, artifact=artifact, plan=loop.plan, stack=stack)
-        return loop.run(progress, controller=kind)
+        result = loop.run(progress, controller=kind)
+    if isinstance(law, FixedNativeLoop):  # the integer law checked against its model and the float64 law
+        ready = f"law={law.law}"
+        result.metrics["fixed_point"] = fixed_can_check(artifact, result.trace, ready_line=ready,
+                                                        model_plant=is_design_model(scenario))  # fmt: skip
+    return result
 
 
 class _SilLoop:

@@ -29,6 +29,16 @@ from .size import symbol_sizes
 OUT_MAGIC = 0x31464C47  # "GLF1"
 STEP_SYMBOL = "gl_fixed_step"
 FAULT, CLIPPED, OVERFLOW = 1, 2, 4
+GL_OK, GL_SATURATED, GL_ERR_NANINF = 0, 1, -2  # gl_status_t: the float loop's status codes
+
+
+def step_status(flags: int, sat: int) -> int:
+    """The float loop's status (gl_status_t) for a fixed-point step: refused (fault), saturated, or done."""
+    if flags & FAULT:
+        return GL_ERR_NANINF
+    return GL_SATURATED if sat else GL_OK
+
+
 OVERFLOW_BITS = {"dY": 1, "V": 2, "dU": 4, "Uv-V": 8, "Z": 16, "XH": 32}  # GL_FX_OVF_* of gl_fixed.h
 # Replay and PIL build the tree without the float image's bus nodes (the fixed image never carries them): the
 # float replay image's tree (gainlink.firmware.build.replay_image), built once for both.

@@ -10,6 +10,7 @@ constraint: a modelling layer such as cvxpy canonicalises each constraint on its
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -86,8 +87,14 @@ class LmiFamily:
         self.rows.append(-block)
         self.rhs.append(-offset)
 
-    def solve(self) -> tuple[list[np.ndarray] | None, str]:
-        """``(P_0 .. P_K, solver)``: the matrices, or None when infeasible; DesignError when both solvers fail."""
+    def solve(self, proves: Callable[[list[np.ndarray]], bool]) -> tuple[list[np.ndarray] | None, str]:
+        """``(P_0 .. P_K, solver)``: the matrices, or None when infeasible; DesignError when both solvers fail.
+
+        ``proves(Ps)`` is the caller's float64 re-check of a solution. A solver that stops short of its tolerances
+        (Clarabel's InsufficientProgress or MaxIterations, SCS's inaccurate) often holds a valid certificate on an
+        ill-conditioned problem (a slow loop needs a P with a condition number near 1e7): its candidate is kept
+        when ``proves`` accepts it, and the next solver is tried when not. Only when no solver answers and no
+        candidate is proved is it a failure."""
         self._bounds()
         A = sp.csc_matrix(np.vstack(self.rows))
         b = np.concatenate(self.rhs)
@@ -102,10 +109,19 @@ class LmiFamily:
                 continue
             if status == "infeasible":
                 return None, name
+            Ps = self._matrices(x)
             if status == "solved":
-                return [smat(x[k * self.nb : (k + 1) * self.nb], self.N) for k in range(self.nodes)], name
+                return Ps, name
+            if Ps is not None and proves(Ps):
+                return Ps, f"{name} ({status}; its candidate re-checked)"
             errors.append(f"{name}: {status}")
         raise DesignError(f"the LMI solver failed on the scheduled loop's Lyapunov problem ({'; '.join(errors)})")
+
+    def _matrices(self, x: np.ndarray) -> list[np.ndarray] | None:
+        """``P_0 .. P_K`` from a solver's x, None when it holds none (or not finite numbers)."""
+        if x.size < self.nodes * self.nb or not np.all(np.isfinite(x)):
+            return None
+        return [smat(x[k * self.nb : (k + 1) * self.nb], self.N) for k in range(self.nodes)]
 
 
 def _clarabel(A, b, c, *, cones: int, N: int) -> tuple[str, np.ndarray]:
@@ -121,7 +137,7 @@ def _clarabel(A, b, c, *, cones: int, N: int) -> tuple[str, np.ndarray]:
         return "solved", np.array(sol.x)
     if status in ("PrimalInfeasible", "AlmostPrimalInfeasible", "DualInfeasible", "AlmostDualInfeasible"):
         return "infeasible", np.zeros(0)
-    return status, np.zeros(0)
+    return status, np.array(sol.x)  # stopped short: the candidate, for the caller's re-check
 
 
 def _scs(A, b, c, *, cones: int, N: int) -> tuple[str, np.ndarray]:
@@ -133,11 +149,11 @@ def _scs(A, b, c, *, cones: int, N: int) -> tuple[str, np.ndarray]:
     data = {"A": sp.csc_matrix(A[perm]), "b": b[perm], "c": c}
     sol = scs.SCS(data, {"s": [N] * cones}, verbose=False, eps_abs=1e-9, eps_rel=1e-9).solve()
     status = sol["info"]["status"]
-    if status in ("solved", "solved_inaccurate"):
+    if status == "solved":
         return "solved", np.array(sol["x"])
     if "infeasible" in status:
         return "infeasible", np.zeros(0)
-    return status, np.zeros(0)
+    return status, np.array(sol["x"])  # inaccurate: the candidate, for the caller's re-check
 
 
 def _scs_order(N: int) -> np.ndarray:

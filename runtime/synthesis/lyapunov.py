@@ -46,10 +46,11 @@ def common_lyapunov(vertices: list[np.ndarray]) -> Certificate | None:
     lmi = LmiFamily(N=vertices[0].shape[0], nodes=1)
     for V in vertices:
         lmi.decrease(np.ones(1), np.ones(1), V)
-    Ps, solver = lmi.solve()
+    checks = lambda Ps: [(Ps[0], Ps[0], V) for V in vertices]  # noqa: E731
+    Ps, solver = lmi.solve(proves=lambda Ps: _recheck(checks(Ps)) is not None)
     if Ps is None:
         return None
-    margin = _recheck([(Ps[0], Ps[0], V) for V in vertices])
+    margin = _recheck(checks(Ps))
     return None if margin is None else Certificate(np.zeros(1), Ps, None, margin, solver)
 
 
@@ -83,11 +84,15 @@ def _rate_attempt(nodes, vertices_by_piece, step: float, rate: float) -> Certifi
     for j, s, s2 in corners:
         for V in vertices_by_piece[j]:
             lmi.decrease(_weights(nodes, s), _weights(nodes, s2), V)
-    Ps, solver = lmi.solve()
+
+    def checks(Ps: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        at = lambda s: sum(w * P for w, P in zip(_weights(nodes, s), Ps))  # noqa: E731
+        return [(at(s), at(s2), V) for j, s, s2 in corners for V in vertices_by_piece[j]]
+
+    Ps, solver = lmi.solve(proves=lambda Ps: _recheck(checks(Ps)) is not None)
     if Ps is None:
         return None
-    at = lambda s: sum(w * P for w, P in zip(_weights(nodes, s), Ps))  # noqa: E731
-    margin = _recheck([(at(s), at(s2), V) for j, s, s2 in corners for V in vertices_by_piece[j]])
+    margin = _recheck(checks(Ps))
     return None if margin is None else Certificate(nodes, Ps, rate, margin, solver)
 
 
