@@ -14,14 +14,20 @@
  *   `GL_Z0_i` (q > 0 only), `GL_UOP_i`, `GL_YOP_i` (the operating point). Setting one stages it (non-finite
  *   values are refused); it reads back staged.
  * A fixed-point law's build (GL_MAV_LAW_FIXED) has the table of gl_mav_fxset.h instead (gl_mav_fxparams.c, the same
- * functions over ::gl_mav_set_t, its integers).
+ * functions over ::gl_mav_set_t, its integers). A scheduled law's build (GL_MAV_LAW_SCHED) has a read-only table
+ * (gl_mav_schedparams.c): `GL_DIM_N GL_DIM_M GL_DIM_P GL_DIM_Q GL_NPTS GL_DIM_E` and `GL_HASH`, the CRC-32 of its
+ * compiled tables (the bytes of gl_sched_default); every set is refused (read-only), a stored set must name the
+ * same CRC.
  */
 #ifndef GL_MAV_PARAMS_H
 #define GL_MAV_PARAMS_H
 
 #include <stdint.h>
 
+#include "gl_mav_law.h"
+#if !(defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED)
 #include "gainlink/gl_loop.h"
+#endif
 
 /** Length of a MAVLink parameter id (not NUL-terminated when full). */
 #define GL_MAV_ID_LEN 16
@@ -37,6 +43,19 @@
 typedef gl_mav_fx_set_t gl_mav_set_t;
 /** The compiled set. */
 #define GL_MAV_DEFAULT_SET gl_mav_fx_default()
+#elif defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
+/** Structure (n, m, p, q, points, external signals) plus GL_HASH, all read-only. */
+#define GL_MAV_HEADER_PARAMS 7
+/** Number of parameters: no gain is a parameter yet. */
+#define GL_MAV_MAX_PARAMS GL_MAV_HEADER_PARAMS
+/** A gain set of the table: the compiled tables and their CRC-32. */
+typedef struct gl_mav_sched_set {
+    const gl_sched_tables_t *t; /**< The tables (gl_sched_default). */
+    uint32_t crc32;             /**< CRC-32 of their bytes (GL_HASH). */
+} gl_mav_set_t;
+/** @brief The compiled set. @return It. */
+const gl_mav_set_t *gl_mav_sched_default_set(void);
+#define GL_MAV_DEFAULT_SET gl_mav_sched_default_set()
 #else
 /** Read-only structure parameters plus GL_HASH. */
 #define GL_MAV_HEADER_PARAMS (GL_GAINS_STRUCTURE_FIELDS + 1)
