@@ -6,16 +6,25 @@ bit the C) on the float32 samples the run recorded: the same commands, saturatio
 
 from __future__ import annotations
 
+import zlib
+
 import numpy as np
 import pytest
+from gainlink.firmware.mavlink_app import mavlink_executable
 from gainlink.hil import run as hil_run
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil_scheduled import external_signals
+from gainlink.mavlink.link import MavLink
+from gainlink.mavlink.params import INT32, Encoding
+from gainlink.mavlink.session import ParamSession
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
+from gainlink.shipping.codegen_scheduled import tables
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict
+from support.cli import run_cli
+from support.mavlink import read_params, start_firmware
 from support.net import udp_port
 from support.shared import once_per_run
 
@@ -83,3 +92,29 @@ def test_an_external_sigma_travels_after_the_references_over_mavlink(tmp_path_fa
     S = external_signals(parse_scenario(data), artifact=a, t=tr.t).astype(np.float32).astype(np.float64)
     model = _model_check(a, tr, S)
     assert np.any(model.sigma_flags & 2) and tr.sigma.min() < 0.05 and tr.sigma.max() > 0.9  # clipped at both ends
+
+
+def test_the_scheduled_table_is_read_only_and_its_hash_is_the_crc_of_the_compiled_tables(tank):
+    a, _ = tank
+    fw, port = start_firmware(mavlink_executable(a), None)
+    try:
+        got = read_params(port)
+        with MavLink(f"udpout:127.0.0.1:{port}") as link:
+            hb = link.wait_heartbeat(timeout=5)
+            s = ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE)
+            outcome = s.set([("GL_HASH", INT32, 0)])
+    finally:
+        fw.stop()
+    assert int(hb.custom_mode) == 256  # the scheduled float32 law
+    blob = b"".join(np.asarray(v, dtype="<f4").tobytes() for v in tables(a).values())
+    want = {"GL_DIM_N": a.n, "GL_DIM_M": a.m, "GL_DIM_P": a.p, "GL_DIM_Q": a.q, "GL_NPTS": a.schedule.points.size}
+    assert {k: int(got[k].value) for k in want} == want and int(got["GL_DIM_E"].value) == 0
+    assert int(got["GL_HASH"].value) & 0xFFFFFFFF == zlib.crc32(blob) and len(got) == 7
+    assert not outcome.ok and "GL_HASH" in outcome.refused  # read-only: refused, nothing changed
+
+
+def test_mavlink_upload_of_a_scheduled_artifact_is_refused_in_one_line(tank):
+    _, path = tank
+    res = run_cli("mavlink", "upload", path, "--connect", f"udpout:127.0.0.1:{udp_port()}")
+    assert res.code == 2 and res.out == ""
+    assert res.err.count("\n") == 1 and "scheduled artifact" in res.err and "nothing was changed" in res.err

@@ -131,6 +131,11 @@ class _Plan:
 
 
 def _plan(artifact: Artifact, mapping: Mapping | None) -> _Plan:
+    if artifact.schedule is not None:  # the MAVLink app's table of a scheduled law is read-only (gl_mav_schedparams.c)
+        raise ParameterError(
+            f"{artifact.name} is a scheduled artifact: uploading its points over MAVLink is not supported (its "
+            "tables are compiled into the firmware built from it); nothing was changed"
+        )
     if mapping is None:
         every = fixed_firmware_params(artifact) if is_fixed(artifact) else firmware_params(artifact)
         formats = tuple(s for s in every if s.name in (SIGNATURE_ID, STRUCTURE_ID))
