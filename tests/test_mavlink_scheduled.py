@@ -2,24 +2,23 @@
 MAVLink transport; firmware/apps/mavlink/gl_mav_law.h): the tank of examples/tank_scheduled.toml, scheduled on its
 measured level (and on an external signal carried after the references), swept across its envelope through the real
 gainlink_mavlink process over UDP. Oracle: the scheduled float32 model (gainlink.proof.scheduled_float32, bit for
-bit the C) on the float32 samples the run recorded: the same commands, saturation and sigma flags."""
+bit the C) on the float32 samples the run recorded: the same commands, saturation and sigma flags. Its parameter table
+holds every point's gains, and `gainlink mavlink upload` commits them all as one set (gainlink.mavlink.sched_params)."""
 
 from __future__ import annotations
-
-import zlib
 
 import numpy as np
 import pytest
 from gainlink.firmware.mavlink_app import mavlink_executable
 from gainlink.hil import run as hil_run
+from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil_scheduled import external_signals
-from gainlink.mavlink.link import MavLink
-from gainlink.mavlink.params import INT32, Encoding
-from gainlink.mavlink.session import ParamSession
+from gainlink.mavlink.params import INT32
+from gainlink.mavlink.sched_params import scheduled_firmware_params
+from gainlink.mavlink.upload import upload
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
-from gainlink.shipping.codegen_scheduled import tables
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict
@@ -94,27 +93,58 @@ def test_an_external_sigma_travels_after_the_references_over_mavlink(tmp_path_fa
     assert np.any(model.sigma_flags & 2) and tr.sigma.min() < 0.05 and tr.sigma.max() > 0.9  # clipped at both ends
 
 
-def test_the_scheduled_table_is_read_only_and_its_hash_is_the_crc_of_the_compiled_tables(tank):
+def _retuned() -> dict:
+    spec = tank_dict()
+    spec["controller"]["bryson_y_max"] = [0.04]  # the same structure, other gains at every point
+    return spec
+
+
+def _two_points() -> dict:
+    spec = tank_dict()
+    spec["schedule"]["points"] = [0.04, 1.0]
+    spec["schedule"]["plant"] = [spec["schedule"]["plant"][0], spec["schedule"]["plant"][2]]
+    return spec
+
+
+def _table(port: int) -> list[tuple[str, float]]:
+    got = read_params(port)
+    return [(k, float(got[k].value)) for k in sorted(got, key=lambda k: got[k].index)]
+
+
+def _expected(a) -> list[tuple[str, float]]:
+    specs = scheduled_firmware_params(a)
+    return [(s.name, int(s.value) if s.ptype == INT32 else float(np.float32(s.value))) for s in specs]
+
+
+def test_the_scheduled_table_holds_every_point_and_an_upload_commits_them_all_as_one_set(tank, tmp_path_factory):
     a, _ = tank
+    b, _ = _designed(tmp_path_factory, "retuned", _retuned())
+    _, c_path = _designed(tmp_path_factory, "two_points", _two_points())
     fw, port = start_firmware(mavlink_executable(a), None)
     try:
-        got = read_params(port)
-        with MavLink(f"udpout:127.0.0.1:{port}") as link:
-            hb = link.wait_heartbeat(timeout=5)
-            s = ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE)
-            outcome = s.set([("GL_HASH", INT32, 0)])
+        assert _table(port) == _expected(a)  # every point's gains, GL_HASH the CRC-32 of the compiled tables
+        url = f"udpout:127.0.0.1:{port}"
+        refused = run_cli("mavlink", "upload", c_path, "--connect", url)  # another number of points
+        assert refused.code == 2 and "GL_NPTS" in refused.err and refused.err.count("\n") == 1
+        assert _table(port) == _expected(a)  # nothing changed
+        res = upload(b, connect=url)
+        assert res.committed and {ch.name.split("_")[2] for ch in res.changes} == {"0", "1", "2"}  # every point
+        assert _table(port) == _expected(b)  # all points at once
+        with MavlinkTransport(url=url, controller_url="", n_inputs=1, n_outputs=1, n_refs=1, ts=a.Ts) as link:
+            model = ScheduledFloat32Loop(b)
+            for seq, h in enumerate((0.1, 0.3, 0.6, 0.9)):  # sigma = h across the middle point
+                y, r = np.array([h]), np.array([0.5])
+                link.send_frames(link.encode_sample(seq=seq, y=y, r=r))
+                cmd = link.receive_command(timeout=3.0)
+                assert cmd is not None and np.float32(cmd.u[0]) == np.float32(model.step(y, r).u[0])
     finally:
         fw.stop()
-    assert int(hb.custom_mode) == 256  # the scheduled float32 law
-    blob = b"".join(np.asarray(v, dtype="<f4").tobytes() for v in tables(a).values())
-    want = {"GL_DIM_N": a.n, "GL_DIM_M": a.m, "GL_DIM_P": a.p, "GL_DIM_Q": a.q, "GL_NPTS": a.schedule.points.size}
-    assert {k: int(got[k].value) for k in want} == want and int(got["GL_DIM_E"].value) == 0
-    assert int(got["GL_HASH"].value) & 0xFFFFFFFF == zlib.crc32(blob) and len(got) == 7
-    assert not outcome.ok and "GL_HASH" in outcome.refused  # read-only: refused, nothing changed
 
 
-def test_mavlink_upload_of_a_scheduled_artifact_is_refused_in_one_line(tank):
+def test_mavlink_upload_of_a_scheduled_artifact_through_a_mapping_is_refused_in_one_line(tank, tmp_path):
     _, path = tank
-    res = run_cli("mavlink", "upload", path, "--connect", f"udpout:127.0.0.1:{udp_port()}")
+    (tmp_path / "map.toml").write_text('[[param]]\ngain = "u_max[0]"\nname = "MOT_MAX"\n')
+    res = run_cli("mavlink", "upload", path, "--connect", f"udpout:127.0.0.1:{udp_port()}", "--mapping",
+                  tmp_path / "map.toml")  # fmt: skip
     assert res.code == 2 and res.out == ""
     assert res.err.count("\n") == 1 and "scheduled artifact" in res.err and "nothing was changed" in res.err

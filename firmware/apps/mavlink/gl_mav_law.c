@@ -66,14 +66,19 @@ uint64_t gl_mav_fixed_idle(gl_mav_fixed_t *law, float *u)
 
 #elif defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
 
-gl_status_t gl_mav_sched_init(gl_mav_sched_t *law, uint32_t watchdog_periods)
+gl_status_t gl_mav_sched_init(gl_mav_sched_t *law, const gl_sched_tables_t *t, uint32_t watchdog_periods)
 {
     if (law == NULL) {
         return GL_SCHED_ERR_NULL;
     }
     law->missed = 0u;
     law->watchdog_periods = watchdog_periods;
-    return gl_sched_init(&law->loop, &gl_sched_default);
+    return gl_sched_init(&law->loop, t);
+}
+
+void gl_mav_sched_retable(gl_mav_sched_t *law)
+{
+    law->loop.c_valid = 0u; /* the coefficients at the held sigma come from the new tables */
 }
 
 static uint64_t sigma_flags(uint32_t f)

@@ -103,11 +103,16 @@ typedef struct gl_mav_sched {
 } gl_mav_sched_t;
 
 /**
- * @brief Start the law on the compiled tables (gl_sched_default).
- * @param[out] law The law. @param[in] watchdog_periods Idle periods before the safe command.
+ * @brief Start the law on tables `t`.
+ * @param[out] law The law. @param[in] t The tables (kept by reference: must outlive the law; a committed set replaces
+ * them in place between two steps, then gl_mav_sched_retable()).
+ * @param[in] watchdog_periods Idle periods before the safe command.
  * @return GL_SCHED_OK, or gl_sched_init()'s refusal of the tables.
  */
-gl_status_t gl_mav_sched_init(gl_mav_sched_t *law, uint32_t watchdog_periods);
+gl_status_t gl_mav_sched_init(gl_mav_sched_t *law, const gl_sched_tables_t *t, uint32_t watchdog_periods);
+
+/** @brief Its tables changed in place (a commit): interpolate them anew at the next step, state kept. @param law */
+void gl_mav_sched_retable(gl_mav_sched_t *law);
 
 /**
  * @brief One step on a sample. @param[in,out] law The law. @param[in] y GL_P outputs.

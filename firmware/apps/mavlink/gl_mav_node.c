@@ -333,7 +333,12 @@ static void handle_command(gl_mav_node_t *node, const mavlink_message_t *msg)
 
 static void stage_if_dirty(gl_mav_node_t *node)
 {
-#if (defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED) || (defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED)
+#if defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
+    if (node->dirty) { /* the law runs on the committed tables in place: a commit is in force from this step */
+        gl_mav_sched_retable(&node->sched);
+        node->dirty = 0;
+    }
+#elif defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
     node->dirty = 0; /* the integer law reads the committed set itself: a commit is in force from the next step */
 #else
     if (node->dirty) {
@@ -597,7 +602,7 @@ gl_status_t gl_mav_node_init(gl_mav_node_t *node, const gl_mav_node_config_t *cf
     }
     return gl_loop_init(&node->loop, &gl_gains_default, cfg->watchdog_periods);
 #elif defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
-    return gl_mav_sched_init(&node->sched, cfg->watchdog_periods);
+    return gl_mav_sched_init(&node->sched, &node->table.committed.t, cfg->watchdog_periods);
 #else
     return gl_loop_init(&node->loop, &node->table.committed, cfg->watchdog_periods);
 #endif
@@ -609,7 +614,7 @@ gl_status_t gl_mav_node_copy(gl_mav_node_t *dst, const gl_mav_node_t *src)
         return GL_ERR_NULL;
     }
     memcpy(dst, src, sizeof *dst);
-#if !(defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED) /* the scheduled loop holds no pointer into itself */
+#if !(defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED) /* the scheduled loop's one pointer is repointed below */
     gl_status_t st = gl_loop_copy(&dst->loop, &src->loop);
     if (st != GL_OK) {
         return st;
@@ -617,6 +622,8 @@ gl_status_t gl_mav_node_copy(gl_mav_node_t *dst, const gl_mav_node_t *src)
 #endif
 #if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
     dst->fixed.loop.g = &dst->table.committed.g; /* the copy runs on its own table */
+#elif defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
+    dst->sched.loop.t = &dst->table.committed.t; /* the copy runs on its own table */
 #endif
     /* The channel state lives in mavgen's per-file statics: only this file's are the node's. */
     mavlink_status_t *chan = mavlink_get_channel_status(dst->cfg.chan);
