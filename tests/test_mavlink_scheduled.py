@@ -7,6 +7,8 @@ holds every point's gains, and `gainlink mavlink upload` commits them all as one
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from gainlink.firmware.mavlink_app import mavlink_executable
@@ -14,9 +16,10 @@ from gainlink.hil import run as hil_run
 from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil_scheduled import external_signals
+from gainlink.mavlink import upload as upload_mod
 from gainlink.mavlink.params import INT32
 from gainlink.mavlink.sched_params import scheduled_firmware_params
-from gainlink.mavlink.upload import upload
+from gainlink.mavlink.upload import UploadFailed, upload
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
@@ -148,3 +151,30 @@ def test_mavlink_upload_of_a_scheduled_artifact_through_a_mapping_is_refused_in_
                   tmp_path / "map.toml")  # fmt: skip
     assert res.code == 2 and res.out == ""
     assert res.err.count("\n") == 1 and "scheduled artifact" in res.err and "nothing was changed" in res.err
+
+
+def test_a_refused_scheduled_commit_is_rolled_back_and_a_committed_one_persists(tank, tmp_path_factory, monkeypatch):
+    a, _ = tank
+    b, _ = _designed(tmp_path_factory, "retuned", _retuned())
+    exe, store = mavlink_executable(a), tmp_path_factory.mktemp("store") / "params.txt"
+
+    def wrong_hash(art):  # the node's own check refuses the commit: the uploader must undo every staged value
+        specs = scheduled_firmware_params(art)
+        return tuple(s if s.name != "GL_HASH" else dataclasses.replace(s, value=int(s.value) ^ 1) for s in specs)
+
+    fw, port = start_firmware(exe, store)
+    try:
+        url = f"udpout:127.0.0.1:{port}"
+        with monkeypatch.context() as m:
+            m.setattr(upload_mod, "scheduled_firmware_params", wrong_hash)
+            with pytest.raises(UploadFailed) as failed:
+                upload(b, connect=url)
+        assert failed.value.rolled_back and _table(port) == _expected(a)  # none of it
+        assert upload(b, connect=url, persist=True).persisted
+    finally:
+        fw.stop()
+    fw, port = start_firmware(exe, store)  # the stored set is loaded at start
+    try:
+        assert _table(port) == _expected(b)
+    finally:
+        fw.stop()
