@@ -8,6 +8,9 @@ holds every point's gains, and `gainlink mavlink upload` commits them all as one
 from __future__ import annotations
 
 import dataclasses
+import signal
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -178,3 +181,20 @@ def test_a_refused_scheduled_commit_is_rolled_back_and_a_committed_one_persists(
         assert _table(port) == _expected(b)
     finally:
         fw.stop()
+
+
+def test_firmware_run_serves_a_scheduled_artifact_over_mavlink(tank, tmp_path):
+    a, path = tank
+    port = udp_port()
+    gainlink = [sys.executable, "-c", "import sys; from gainlink.cli import main; sys.exit(main())"]
+    argv = [*gainlink, "firmware", "run", str(path), "--mavlink", f"udpin:127.0.0.1:{port}", "--param-file",
+            str(tmp_path / "params.txt")]  # fmt: skip
+    proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        assert b"law=scheduled-float32" in proc.stdout.readline()
+        assert _table(port) == _expected(a)
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=5) == 0
+        proc.stdout.close()
+        proc.stderr.close()
