@@ -89,10 +89,10 @@ def run(
             sc = dataclasses.replace(sc, artifact_path=Path(artifact))
         loaded = load(sc.artifact_path)
         if loaded.schedule is not None:
-            from .loop.can_scheduled import over_can, run_scheduled_can
+            from .loop.can_scheduled import over_link, run_scheduled_can
             from .loop.sil import run_sil
 
-            if over_can(sc):  # the firmware's CAN node on the scheduled law, over the bus
+            if over_link(sc):  # the firmware's CAN or MAVLink node on the scheduled law, over the link
                 result = run_scheduled_can(loaded, sc, progress=progress)
             else:
                 result = run_sil(loaded, sc, progress=progress)

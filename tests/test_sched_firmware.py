@@ -202,7 +202,9 @@ def test_replay_cli_runs_the_scheduled_c_on_host_and_qemu(external_data, externa
 
 def test_firmware_commands_on_a_scheduled_artifact(external_data, tmp_path):
     """``firmware build --target host`` ships the scheduled loop's libraries (no stdin/stdout executable);
-    ``firmware run`` and ``pil run``, which speak the unscheduled loop's protocol, refuse it in one line, exit 2."""
+    ``firmware run`` (its stdin/stdout loop; the host CAN and MAVLink nodes do run it: test_can_scheduled,
+    test_mavlink_scheduled) and ``pil run``, which speak the unscheduled loop's protocol, refuse it in one line,
+    exit 2."""
     from gainlink.shipping import artifact as artifact_mod
 
     path = tmp_path / "gains.json"
@@ -211,6 +213,6 @@ def test_firmware_commands_on_a_scheduled_artifact(external_data, tmp_path):
     assert res.code == 0, res.err
     shipped = {p.name for p in (tmp_path / "fw").iterdir()}
     assert {"libgainlink_host.so", "libgainlink_loop.a", "firmware.json"} <= shipped
-    for argv in (("firmware", "run", path, "--mavlink", "tcp:127.0.0.1:1"), ("pil", "run", path, "--steps", "5")):
+    for argv in (("firmware", "run", path), ("pil", "run", path, "--steps", "5")):
         res = run_cli(*argv)
         assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and "scheduled on load" in res.err, argv

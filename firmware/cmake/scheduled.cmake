@@ -5,8 +5,8 @@
 #   gainlink_sched   static library libgainlink_loop.a: src/gl_sched.c and the generated tables gl_sched_default
 #   host:      gainlink_host (shared, for Python ctypes: ports/host/gl_sched_host.c)
 #   cortex-m*: gainlink_image (ELF + .bin/.hex/.map): replay over semihosting (ports/cortex-m/main_sched.c)
-# host, GL_APPS: the CAN node (apps/can) on the scheduled law. The MAVLink node, PIL and gain updates are not built
-# for a scheduled artifact.
+# host, GL_APPS: the CAN node (apps/can) and the MAVLink node (apps/mavlink) on the scheduled law. PIL and gain
+# updates are not built for a scheduled artifact.
 add_library(gainlink_sched STATIC src/gl_sched.c src/gl_fmaf.c "${GL_GAINS_DIR}/gl_sched_gains.c")
 target_link_libraries(gainlink_sched PUBLIC gainlink_config)
 target_compile_options(gainlink_sched PRIVATE -Wvla -Wshadow -Wstrict-prototypes)
@@ -21,6 +21,10 @@ if(GL_TARGET STREQUAL "host")
   # The CAN node runs the scheduled law too (apps/can/gl_can_law.h; sigma a measured output).
   if(GL_APPS AND EXISTS "${CMAKE_CURRENT_SOURCE_DIR}/apps/can/CMakeLists.txt")
     add_subdirectory(apps/can)
+  endif()
+  # The MAVLink node too (apps/mavlink/gl_mav_law.h; sigma a measured output or carried after the references).
+  if(GL_APPS AND EXISTS "${CMAKE_CURRENT_SOURCE_DIR}/apps/mavlink/CMakeLists.txt")
+    add_subdirectory(apps/mavlink)
   endif()
 elseif(GL_TARGET IN_LIST GL_CORTEX_M_TARGETS)
   include("${CMAKE_CURRENT_SOURCE_DIR}/cmake/cortex-m-cpu.cmake")

@@ -4,8 +4,9 @@ Plant → controller: ``DEBUG_FLOAT_ARRAY`` (name ``GL_SAMPLE``, ``array_id`` 1)
 ``data = y[0..p-1], r[0..q-1]`` and ``time_usec = seq * round(Ts * 1e6)``.
 Controller → plant: ``HIL_ACTUATOR_CONTROLS`` with the same ``time_usec`` (lockstep: the answer
 names its sample), ``controls[0..m-1] = u`` and ``flags`` bit 0 fault, bit 1 watchdog, bit 2 reset
-done, bit 3 a sample clipped and bit 4 the second-line saturation (a fixed-point law), bits 8+k saturation of
-input k (see ``firmware/apps/mavlink/gl_mav_law.h``).
+done, bit 3 a sample clipped and bit 4 the second-line saturation (a fixed-point law), bits 5, 6, 7 sigma held,
+clipped and rate-limited (a scheduled law, whose sample carries its external scheduling signals after ``r``), bits
+8+k saturation of input k (see ``firmware/apps/mavlink/gl_mav_law.h``).
 
 Scenario table::
 
@@ -40,7 +41,18 @@ from gainlink.firmware.uart import tcp_endpoint
 from pymavlink.dialects.v20 import common as mavlink2
 
 from ..registry import take_keys
-from .base import STATUS_CLIPPED, STATUS_FAULT, STATUS_OVERFLOW, STATUS_WATCHDOG, TRANSPORTS, Command, Transport
+from .base import (
+    STATUS_CLIPPED,
+    STATUS_FAULT,
+    STATUS_OVERFLOW,
+    STATUS_SIGMA_CLIPPED,
+    STATUS_SIGMA_HELD,
+    STATUS_SIGMA_RATE,
+    STATUS_WATCHDOG,
+    TRANSPORTS,
+    Command,
+    Transport,
+)
 
 ARRAY_SAMPLE = 1
 ARRAY_RESET = 2
@@ -50,6 +62,8 @@ FLAG_WATCHDOG = 0x2
 FLAG_RESET = 0x4
 FLAG_CLIPPED = 0x8
 FLAG_OVERFLOW = 0x10
+#: A scheduled law's sigma flags and the status bits they become.
+SIGMA_FLAGS = ((0x20, STATUS_SIGMA_HELD), (0x40, STATUS_SIGMA_CLIPPED), (0x80, STATUS_SIGMA_RATE))
 SAT_SHIFT = 8
 DEFAULT_PORT = 14560
 MAX_BUSY_POLL_US = 1_000_000
@@ -276,6 +290,7 @@ class MavlinkTransport(Transport):
             status = (STATUS_FAULT if flags & FLAG_FAULT else 0) | (STATUS_WATCHDOG if flags & FLAG_WATCHDOG else 0)
             status |= STATUS_CLIPPED if flags & FLAG_CLIPPED else 0
             status |= STATUS_OVERFLOW if flags & FLAG_OVERFLOW else 0
+            status |= sum(bit for flag, bit in SIGMA_FLAGS if flags & flag)
             seq = (int(msg.time_usec) // self.ts_us) % self.seq_modulo
             out.append(Command(seq=seq, u=u, saturated=sat, status=status, t_ns=time.perf_counter_ns()))
         return out

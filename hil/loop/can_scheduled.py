@@ -10,6 +10,10 @@ any, travel in the sample after the references (``s_NAME`` in the layout and the
 so the trace's sigma is the scheduled float32 model's
 (:class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`, bit for bit the C) on the samples the node
 received. Lockstep, without injected faults.
+
+A MAVLink transport runs the same loop through the firmware's MAVLink node (``gainlink_mavlink`` on the scheduled
+loop, ``firmware/apps/mavlink/gl_mav_law.h``): the HIL sample carries y, r and then the external scheduling signals;
+the sigma flags come back in HIL_ACTUATOR_CONTROLS' flags (bits 5, 6, 7), decoded to the same status bits.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from gainlink.shipping.artifact import Artifact
 from ..links.base import STATUS_FAULT, STATUS_SIGMA_CLIPPED, STATUS_SIGMA_HELD, STATUS_SIGMA_RATE
 from ..links.can import CanTransport
 from ..links.config import transport_from_config
+from ..links.mavlink import MavlinkTransport
 from .bridge import RunResult
 from .controller import ControllerProcess, controller_argv
 from .scenario import Scenario
@@ -53,8 +58,10 @@ class _BusLaw:
 
     def __init__(self, artifact: Artifact, scenario: Scenario, *, stack: ExitStack) -> None:
         transport = transport_from_config(scenario.transport, artifact=artifact)
-        if not isinstance(transport, CanTransport):
-            raise ScenarioError(f"scenario {scenario.name}: a scheduled artifact runs over a CAN transport only")
+        if not isinstance(transport, (CanTransport, MavlinkTransport)):
+            raise ScenarioError(
+                f"scenario {scenario.name}: a scheduled artifact runs over a CAN or MAVLink transport only"
+            )
         argv = controller_argv("firmware", artifact=artifact, artifact_path=scenario.artifact_path,
                                transport=transport, executable=scenario.firmware)  # fmt: skip
         transport.open()
@@ -67,7 +74,8 @@ class _BusLaw:
         self.shadow = ScheduledFloat32Loop(artifact)  # sigma's value (not on the bus)
         self.u = np.asarray(artifact.schedule.trim_at(artifact.schedule.points[0])[0], dtype=float)
         self.k, self.late = 0, 0
-        self.kind = {"kind": "firmware (gainlink_can, scheduled law, over the link)", "argv": argv}
+        node = "gainlink_can" if isinstance(transport, CanTransport) else "gainlink_mavlink"
+        self.kind = {"kind": f"firmware ({node}, scheduled law, over the link)", "argv": argv}
 
     def step(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> SchedOut | None:
         """Send sample ``y``, ``r``; the node's answer, or None when it did not come within ``step_timeout``."""
@@ -129,10 +137,19 @@ def over_can(scenario: Scenario) -> bool:
     return scenario.controller == "firmware" and kind == "can"
 
 
+def over_link(scenario: Scenario) -> bool:
+    """Whether a scheduled artifact's scenario runs a firmware node (CAN or MAVLink) over its link (else in
+    process)."""
+    config = scenario.transport
+    kind = config.get("kind", "can" if "interface" in config else None)
+    return scenario.controller == "firmware" and kind in ("can", "mavlink")
+
+
 def run_scheduled_can(
     artifact: Artifact, scenario: Scenario, *, progress: Callable[[int, int], None] | None = None
 ) -> RunResult:
-    """Run ``scenario`` with the scheduled law in the firmware's CAN node over its bus (module docstring)."""
+    """Run ``scenario`` with the scheduled law in the firmware's CAN (or MAVLink) node over its link (module
+    docstring)."""
     check_scheduled_can(artifact, scenario)
     plant = build_plant(scenario, artifact=artifact)
     with ExitStack() as stack:

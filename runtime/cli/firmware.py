@@ -231,7 +231,8 @@ def _run(args: argparse.Namespace) -> int:
     from gainlink.shipping.artifact import load
 
     on_host = args.target == "host" and args.board is None
-    if not (on_host and getattr(args, "can", None)):  # the host CAN node also runs a scheduled law
+    bus_node = getattr(args, "can", None) or getattr(args, "mavlink", None)
+    if not (on_host and bus_node):  # the host CAN and MAVLink nodes also run a scheduled law
         load(args.artifact).require_unscheduled("gainlink firmware run")
     if not on_host:
         return _run_image(args)

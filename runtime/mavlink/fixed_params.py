@@ -37,7 +37,7 @@ from ..shipping.codegen_fixed import ROWS, is_fixed, quantise, range_keys, terms
 from .params import HASH_ID, INT32, ParamSpec, as_int32, check_param_id
 
 #: What the HEARTBEAT's custom_mode says the gainlink MAVLink app runs.
-LAW_IDS = {"float32": 0, "q31": 31, "q15": 15}
+LAW_IDS = {"float32": 0, "q31": 31, "q15": 15, "scheduled-float32": 256}
 SIGNATURE_ID = "GL_FX_SIG"
 STRUCTURE_ID = "GL_FX_STRUCT"
 

@@ -50,6 +50,9 @@ from .params import (
     same_value,
     type_name,
 )
+from .sched_params import DIMENSION_IDS as SCHED_DIMENSION_IDS
+from .sched_params import LAW as SCHED_LAW
+from .sched_params import scheduled_firmware_params
 from .session import ParamSession, ParamValue, SetOutcome
 
 log = logging.getLogger(__name__)
@@ -131,6 +134,8 @@ class _Plan:
 
 
 def _plan(artifact: Artifact, mapping: Mapping | None) -> _Plan:
+    if artifact.schedule is not None:
+        return _scheduled_plan(artifact, mapping)
     if mapping is None:
         every = fixed_firmware_params(artifact) if is_fixed(artifact) else firmware_params(artifact)
         formats = tuple(s for s in every if s.name in (SIGNATURE_ID, STRUCTURE_ID))
@@ -140,6 +145,20 @@ def _plan(artifact: Artifact, mapping: Mapping | None) -> _Plan:
         (h,) = (int(s.value) for s in every if s.name == HASH_ID)
         return _Plan(specs=gains, commit=True, checks=dims, new_hash=h, law=law_of(artifact), formats=formats)
     return _Plan(specs=mapped_params(artifact, mapping), commit=False, checks=(), new_hash=None)
+
+
+def _scheduled_plan(artifact: Artifact, mapping: Mapping | None) -> _Plan:
+    """Every point's gains as one set, committed through GL_HASH (all or none: gl_mav_schedparams.c)."""
+    if mapping is not None:
+        raise ParameterError(
+            f"{artifact.name} is a scheduled artifact: a --mapping names one gain set, not its points; "
+            "nothing was changed"
+        )
+    every = scheduled_firmware_params(artifact)
+    dims = tuple(s for s in every if s.name in SCHED_DIMENSION_IDS)
+    gains = tuple(s for s in every if s.name not in SCHED_DIMENSION_IDS and s.name != HASH_ID)
+    (h,) = (int(s.value) for s in every if s.name == HASH_ID)
+    return _Plan(specs=gains, commit=True, checks=dims, new_hash=h, law=SCHED_LAW)
 
 
 def _fmt(v: float | int, ptype: int) -> str:

@@ -19,7 +19,7 @@
 /** Room kept free while streaming a parameter list, so a HIL answer always fits beside it. */
 #define LIST_HEADROOM (2u * MAVLINK_MAX_PACKET_LEN)
 
-_Static_assert(GL_P + GL_Q <= 58, "DEBUG_FLOAT_ARRAY carries at most 58 values (y and r)");
+_Static_assert(GL_P + GL_Q + GL_MAV_EXTRA <= 58, "DEBUG_FLOAT_ARRAY carries at most 58 values (y, r and s)");
 _Static_assert(GL_M <= 16, "HIL_ACTUATOR_CONTROLS carries at most 16 commands");
 _Static_assert(HIL_FLAG_FAULT == GL_MAV_FLAG_FAULT && HIL_FLAG_WATCHDOG == GL_MAV_FLAG_WATCHDOG &&
                    HIL_FLAG_RESET == GL_MAV_FLAG_RESET && HIL_SAT_SHIFT == GL_MAV_SAT_SHIFT,
@@ -333,7 +333,12 @@ static void handle_command(gl_mav_node_t *node, const mavlink_message_t *msg)
 
 static void stage_if_dirty(gl_mav_node_t *node)
 {
-#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+#if defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
+    if (node->dirty) { /* the law runs on the committed tables in place: a commit is in force from this step */
+        gl_mav_sched_retable(&node->sched);
+        node->dirty = 0;
+    }
+#elif defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
     node->dirty = 0; /* the integer law reads the committed set itself: a commit is in force from the next step */
 #else
     if (node->dirty) {
@@ -354,7 +359,7 @@ static void stage_if_dirty(gl_mav_node_t *node)
  */
 static void reset_loop(gl_mav_node_t *node)
 {
-#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+#if (defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED) || (defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED)
     node->dirty = 0; /* the integer law resets itself (fixed_sample) */
 #else
     if (node->dirty) {
@@ -387,6 +392,25 @@ static int fixed_sample(gl_mav_node_t *node, const mavlink_debug_float_array_t *
     }
     return 1;
 }
+#elif defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
+/** A HIL message for the scheduled law (data = y, r, s): its command and flags; 0 when it is not one. */
+static int sched_sample(gl_mav_node_t *node, const mavlink_debug_float_array_t *in, float *u, uint64_t *flags)
+{
+    if (in->array_id == HIL_ARRAY_SAMPLE) {
+        stage_if_dirty(node);
+        const float *s = GL_MAV_EXTRA > 0 ? &in->data[GL_P + GL_Q] : NULL;
+        *flags = gl_mav_sched_step(&node->sched, &in->data[0], &in->data[GL_P], s, u);
+        inc(&node->stats.samples, 1u);
+    } else if (in->array_id == HIL_ARRAY_RESET) {
+        reset_loop(node);
+        *flags = gl_mav_sched_reset(&node->sched, u);
+    } else if (in->array_id == HIL_ARRAY_IDLE) {
+        *flags = gl_mav_sched_idle(&node->sched, u);
+    } else {
+        return 0;
+    }
+    return 1;
+}
 #endif
 
 static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)
@@ -397,6 +421,10 @@ static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)
     uint64_t flags = 0;
 #if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
     if (!fixed_sample(node, &in, u, &flags)) {
+        return;
+    }
+#elif defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
+    if (!sched_sample(node, &in, u, &flags)) {
         return;
     }
 #else
@@ -573,6 +601,8 @@ gl_status_t gl_mav_node_init(gl_mav_node_t *node, const gl_mav_node_config_t *cf
         return GL_ERR_NULL;
     }
     return gl_loop_init(&node->loop, &gl_gains_default, cfg->watchdog_periods);
+#elif defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
+    return gl_mav_sched_init(&node->sched, &node->table.committed.t, cfg->watchdog_periods);
 #else
     return gl_loop_init(&node->loop, &node->table.committed, cfg->watchdog_periods);
 #endif
@@ -584,12 +614,16 @@ gl_status_t gl_mav_node_copy(gl_mav_node_t *dst, const gl_mav_node_t *src)
         return GL_ERR_NULL;
     }
     memcpy(dst, src, sizeof *dst);
+#if !(defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED) /* the scheduled loop's one pointer is repointed below */
     gl_status_t st = gl_loop_copy(&dst->loop, &src->loop);
     if (st != GL_OK) {
         return st;
     }
+#endif
 #if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
     dst->fixed.loop.g = &dst->table.committed.g; /* the copy runs on its own table */
+#elif defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
+    dst->sched.loop.t = &dst->table.committed.t; /* the copy runs on its own table */
 #endif
     /* The channel state lives in mavgen's per-file statics: only this file's are the node's. */
     mavlink_status_t *chan = mavlink_get_channel_status(dst->cfg.chan);

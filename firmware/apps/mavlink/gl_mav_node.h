@@ -21,7 +21,8 @@
  * - HIL: DEBUG_FLOAT_ARRAY array_id 1 (`GL_SAMPLE`, data = y then r) answered by HIL_ACTUATOR_CONTROLS
  *   with the same time_usec, controls = u, flags bit 0 fault, bit 1 watchdog, bit 2 reset done, bits 8+k
  *   saturation of input k (a fixed-point law also bit 3 a sample clipped to its range, bit 4 its second-line
- *   saturation); array_id 2 resets the loop state, 3 is a period without a measurement.
+ *   saturation; a scheduled law data = y, r, then its GL_E external scheduling signals, and bits 5, 6, 7 its
+ *   sigma held, clipped, rate-limited); array_id 2 resets the loop state, 3 is a period without a measurement.
  *   A committed gain set is staged into the loop right before the next step.
  *
  * Events (storage loaded, commit, refusal, ...) go to one hook, ::gl_mav_port_t::event, never to a
@@ -54,8 +55,10 @@
 #include <stdint.h>
 
 #include "common/mavlink.h"
-#include "gainlink/gl_loop.h"
 #include "gl_mav_law.h"
+#if !(defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED)
+#include "gainlink/gl_loop.h"
+#endif
 #include "gl_mav_params.h"
 #include "gl_mav_store.h"
 
@@ -163,7 +166,11 @@ typedef struct gl_mav_node_config {
 typedef struct gl_mav_node {
     gl_mav_node_config_t cfg;          /**< Configuration. */
     gl_mav_params_t table;             /**< Parameters over the staged and committed sets. */
+#if defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
+    gl_mav_sched_t sched;              /**< The scheduled law the node runs (gl_mav_law.h). */
+#else
     gl_loop_t loop;                    /**< The control loop (float32; with a fixed-point law, the float gains'). */
+#endif
 #if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
     gl_mav_fixed_t fixed;              /**< The integer law the node runs (gl_mav_law.h). */
 #endif

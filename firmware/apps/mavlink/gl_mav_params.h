@@ -14,14 +14,22 @@
  *   `GL_Z0_i` (q > 0 only), `GL_UOP_i`, `GL_YOP_i` (the operating point). Setting one stages it (non-finite
  *   values are refused); it reads back staged.
  * A fixed-point law's build (GL_MAV_LAW_FIXED) has the table of gl_mav_fxset.h instead (gl_mav_fxparams.c, the same
- * functions over ::gl_mav_set_t, its integers).
+ * functions over ::gl_mav_set_t, its integers). A scheduled law's build (GL_MAV_LAW_SCHED) has the table of
+ * gl_mav_schedparams.c: `GL_DIM_N GL_DIM_M GL_DIM_P GL_DIM_Q GL_NPTS GL_DIM_E` (INT32, read-only), `GL_HASH` (the
+ * CRC-32 of the bytes of its tables, gl_sched_tables_t), then REAL32 every float of the tables in declaration order:
+ * `GL_S_k`, per point k `GL_KX_k_i_j GL_KY_k_i_j GL_KZ_k_i_j GL_F_k_i_j GL_G_k_i_j GL_LY_k_i_j` (each block for every
+ * point before the next block), `GL_UOP_k_i`, then `GL_UMIN_i GL_UMAX_i GL_CI_i_j GL_ALPHA GL_RATE`. Committing
+ * through GL_HASH checks the CRC and gl_sched_init() on the staged tables: all points change together, or none.
  */
 #ifndef GL_MAV_PARAMS_H
 #define GL_MAV_PARAMS_H
 
 #include <stdint.h>
 
+#include "gl_mav_law.h"
+#if !(defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED)
 #include "gainlink/gl_loop.h"
+#endif
 
 /** Length of a MAVLink parameter id (not NUL-terminated when full). */
 #define GL_MAV_ID_LEN 16
@@ -37,6 +45,19 @@
 typedef gl_mav_fx_set_t gl_mav_set_t;
 /** The compiled set. */
 #define GL_MAV_DEFAULT_SET gl_mav_fx_default()
+#elif defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
+/** Structure (n, m, p, q, points, external signals; read-only) plus GL_HASH. */
+#define GL_MAV_HEADER_PARAMS 7
+/** Number of parameters: every float of the tables plus the header ones. */
+#define GL_MAV_MAX_PARAMS (GL_MAV_HEADER_PARAMS + (int)(sizeof(gl_sched_tables_t) / sizeof(float)))
+/** A gain set of the table: the tables (by value: the loop runs on the committed ones) and their CRC-32. */
+typedef struct gl_mav_sched_set {
+    gl_sched_tables_t t; /**< The tables. */
+    uint32_t crc32;      /**< CRC-32 of their bytes (GL_HASH). */
+} gl_mav_set_t;
+/** @brief The compiled set (gl_sched_default). @return It. */
+const gl_mav_set_t *gl_mav_sched_default_set(void);
+#define GL_MAV_DEFAULT_SET gl_mav_sched_default_set()
 #else
 /** Read-only structure parameters plus GL_HASH. */
 #define GL_MAV_HEADER_PARAMS (GL_GAINS_STRUCTURE_FIELDS + 1)

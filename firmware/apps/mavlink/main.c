@@ -28,7 +28,6 @@
 #include <string.h>
 #include <time.h>
 
-#include "gainlink/gl_loop.h"
 #include "gl_log.h"
 #include "gl_mav_file.h"
 #include "gl_mav_key.h"
@@ -44,7 +43,7 @@ typedef struct udp_port {
 } udp_port_t;
 
 /* The ready line names a law other than float32 (the float32 app's line is as it always was). */
-#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+#if (defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED) || (defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED)
 #define LAW_FIELD " law=" GL_MAV_LAW_NAME
 #else
 #define LAW_FIELD ""
