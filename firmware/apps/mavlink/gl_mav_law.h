@@ -2,12 +2,13 @@
  * @file gl_mav_law.h
  * @brief The law the MAVLink node runs, chosen when it is compiled from what the export holds:
  *        - a fixed-point export (gl_fixed_gains.c, `[implementation] numeric = "q31" | "q15"`; apps/mavlink/
- *          CMakeLists.txt then defines GL_MAV_LAW_FIXED=1 on the host): the integer loop (gl_fixed.h) the artifact
- *          certifies, on the integers of its parameter table (gl_mav_fixed_params.h);
+ *          CMakeLists.txt then defines GL_MAV_LAW_FIXED=1, for the host app and the Cortex-M image alike): the
+ *          integer loop (gl_fixed.h) the artifact certifies, on the integers of its parameter table (gl_mav_fxset.h);
  *        - a scheduled artifact's export (gl_gains.h with GL_SCHEDULED 1): the scheduled loop (gl_sched.h), its
  *          sigma read from the measured output the schedule names or from the external scheduling signals, which
  *          the HIL sample then carries after its references (data = y, r, s: GL_MAV_EXTRA values); its parameter
- *          table is read-only (gl_mav_schedparams.c: the structure, GL_NPTS and GL_HASH, the CRC-32 of its tables);
+ *          table (gl_mav_schedparams.c) holds every point's gains, staged and committed through GL_HASH (the CRC-32
+ *          of its tables) as one set;
  *        - otherwise the float32 loop (gl_loop.h), as it always was (the node calls it directly: nothing here).
  *
  * The integer law takes the same float samples and returns float commands; its HIL answer carries the float
