@@ -13,11 +13,13 @@ import json
 import logging
 import math
 import struct
+from pathlib import Path
 
 import cantools
 import numpy as np
 import pytest
 from gainlink.errors import TransportError
+from gainlink.firmware.build import host_app
 from gainlink.hil.links.can import Assembler, CanTransport, FrameCodec, firmware_can_argv
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
@@ -190,8 +192,9 @@ def test_cli_dbc_and_hil_run_with_int16(tmp_path, pend, cart_fmu):
     assert art.signals["outputs"] == ["x", "theta"]  # the names used above
 
 
-def _c_codec(can_firmware):
-    """The firmware's gl_can_layout.c, built by the firmware's CMake as a shared library, through ctypes."""
+def _c_codec(pend: Path):
+    """The firmware's gl_can_layout.c, built by the firmware's CMake as a shared library (the host apps' tree's
+    target gainlink_can_layout), through ctypes."""
 
     class Scale(ctypes.Structure):
         _fields_ = [("factor", ctypes.c_double), ("offset", ctypes.c_double)]
@@ -213,7 +216,8 @@ def _c_codec(can_firmware):
             ("data", ctypes.c_uint8 * 64),
         ]
 
-    lib = ctypes.CDLL(str(can_firmware.parent / "libgainlink_can_layout.so"))
+    so = host_app(load(pend), target="gainlink_can_layout", relpath="apps/can/libgainlink_can_layout.so")
+    lib = ctypes.CDLL(str(so))
     lib.gl_can_quantise.restype = ctypes.c_int16
     lib.gl_can_quantise.argtypes = [ctypes.c_float, ctypes.POINTER(Scale), ctypes.POINTER(ctypes.c_int)]
     lib.gl_can_dequantise.restype = ctypes.c_float
@@ -245,8 +249,8 @@ def _c_codec(can_firmware):
     return lib, Scale, Layout, Frame
 
 
-def test_c_codec_quantises_like_python_bit_for_bit(pend, can_firmware):
-    lib, Scale, Layout, Frame = _c_codec(can_firmware)
+def test_c_codec_quantises_like_python_bit_for_bit(pend):
+    lib, Scale, Layout, Frame = _c_codec(pend)
     rng = np.random.default_rng(11)
     # (min, max): the pendulum's ranges, an asymmetric one, and one with factor 0.5 where k/2 + 1/4 are exact ties.
     for lo, hi in [(-1.0, 1.0), (-5.0, 5.0), (-0.3, 1.7), (-SPAN / 4, SPAN / 4)]:
