@@ -761,15 +761,15 @@ def test_a_hil_fault_matrix_runs_in_parallel_on_separate_buses(pend, dask_cluste
         assert 1 <= drops <= 10 and dropped["metrics"]["lost"] == drops
     # int16 quantises what the controller sees: the same run, not the same trace
     assert recs[(0.0, "int16")]["metrics"]["outputs_final"] != recs[(0.0, "float32")]["metrics"]["outputs_final"]
-    # Runs that overlapped in time used different groups and ports (the scenario's own channel is never used).
+    # Runs that held their bus at the same time used different groups and ports (the scenario's own channel is
+    # never used); a run's record also spans its set-up and the trace's downsampling, outside its bus's hold.
     runs = list(recs.values())
     link = lambda r: (r["link"]["config"]["channel"], r["link"]["config"]["port"])  # noqa: E731
     assert all(link(r)[0].startswith("239.74.164.") for r in runs)
+    held = lambda r: (r["link"]["bus_slot"]["start"], r["link"]["bus_slot"]["stop"])  # noqa: E731
+    assert all(r["worker"]["start"] <= held(r)[0] < held(r)[1] <= r["worker"]["stop"] for r in runs)
     overlapping = [
-        (a, b)
-        for i, a in enumerate(runs)
-        for b in runs[i + 1 :]
-        if a["worker"]["start"] < b["worker"]["stop"] and b["worker"]["start"] < a["worker"]["stop"]
+        (a, b) for i, a in enumerate(runs) for b in runs[i + 1 :] if held(a)[0] < held(b)[1] and held(b)[0] < held(a)[1]
     ]
     assert overlapping, "two workers never ran at the same time"
     assert all(link(a) != link(b) for a, b in overlapping)

@@ -200,9 +200,13 @@ def run_point(kind: str, artifact: Artifact, scenario: Any) -> Any:
     from ..loop.bridge import run_scenario
 
     with bus_slot() as slot, _one_cpu(slot):
+        held = time.time()
         transport = isolate_transport(scenario.transport, slot)
         firmware = _executable(artifact, transport) if scenario.controller == "firmware" else None
-        return run_scenario(dataclasses.replace(scenario, transport=transport, firmware=firmware))
+        result = run_scenario(dataclasses.replace(scenario, transport=transport, firmware=firmware))
+        # when this run held its slot (its bus): runs whose holds overlap never share a bus
+        result.info["transport"]["bus_slot"] = {"slot": slot, "start": held, "stop": time.time()}
+        return result
 
 
 def execute(kind: str, artifact_json: bytes, scenario: dict, seed: int, blobs: dict | None = None) -> dict:
