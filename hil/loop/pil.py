@@ -256,12 +256,7 @@ def run_pil(
         raise PlantError(f"artifact {a.name} is float32: no quantised twin (a fixed-point artifact has one)")
     elf, magic = _image(a, target=platform.target.name, board=board)
     qt = None if quantised_twin is None else QuantisedTwin(a, plant=quantised_twin, steps=steps)
-    tw = None if twin is None else TwinLoop(a, outputs=twin.outputs, advance=lambda u: twin.advance(u=u), steps=steps)
-    mt = (
-        None
-        if model_twin is None
-        else TwinLoop(a, outputs=model_twin.outputs, advance=lambda u: model_twin.advance(u=u), steps=steps)
-    )
+    tw, mt = _twin_loop(a, twin, steps), _twin_loop(a, model_twin, steps)
     rec = _PilRecord.empty(a, steps, x0=plant.state, fixed=fixed)
     with _qemu_fifos(elf, board=board, steps=steps) as (proc, fin, fout):
         _open_stream(
@@ -277,6 +272,22 @@ def run_pil(
         design_u = None if twin_trace is None else twin_trace.u
         model_plant = isinstance(plant, ArtifactPlant)  # the design model: the loop the certificate is about
         check = fixed_pil_check(a, rec.raw, Y=rec.Y, R=R, quantised=qt, design_u=design_u, model_plant=model_plant)
+    return _result(a, rec, R=R, elapsed=elapsed, twin=(twin_trace, comparison), model_twin=mt, check=check)
+
+
+def _twin_loop(a: Artifact, plant: DiscretePlant | None, steps: int) -> TwinLoop | None:
+    """The float64 law closing the loop on ``plant`` beside the run (None without a plant)."""
+    if plant is None:
+        return None
+    return TwinLoop(a, outputs=plant.outputs, advance=lambda u: plant.advance(u=u), steps=steps)
+
+
+def _result(a: Artifact, rec, *, R, elapsed: float, twin: tuple, model_twin, check) -> PilResult:
+    """The PIL result from the run's record, its twins (the twin's trace and comparison; the model twin) and the
+    fixed-point check."""
+    twin_trace, comparison = twin
+    steps = rec.Y.shape[0]
+    fixed = check is not None
     return PilResult(
         y=rec.Y,
         u=rec.U,
@@ -287,7 +298,7 @@ def run_pil(
         steps_per_second=steps / elapsed if elapsed > 0 else float("inf"),
         twin=twin_trace,
         comparison=comparison,
-        model_twin=None if mt is None else mt.trace(steps),
+        model_twin=None if model_twin is None else model_twin.trace(steps),
         reference=np.array(R, dtype=float),
         fixed_point=check,
         fixed_run=fwfixed.FixedRun.from_records(rec.raw, a.q) if fixed else None,
