@@ -70,6 +70,7 @@ def test_both_twins_are_in_the_report_and_the_model_twin_flags_the_single_point(
         run = json.loads((report / design / "sweep" / "report.json").read_text())["run"]
         assert run["transport"]["config"]["interface"] == "udp_multicast", design
         assert Path(run["controller"]["argv"][0]).name == "gainlink_can", design
+        assert json.loads((report / design / "sweep" / "report.json").read_text())["lost"] == 0, design
     assert (report / "comparison.png").read_bytes()[:4] == b"\x89PNG"
     assert (report / "scheduled" / "sweep" / "model_twin.png").is_file()
     assert (report / "scheduled" / "sweep" / "sigma.csv").is_file()

@@ -5,7 +5,8 @@ same nonlinear plant, with both twins; compared on tracking (IAE and max |e| ove
 
 The description is a TOML file (default: the built-in ``scenarios/tank_showcase.toml``): ``spec``,
 ``single_point``, ``controller``, ``[plant]``, ``[sweep]`` (``low``, ``high``, ``rate``, ``start``, ``duration``),
-``[steps.NAME]`` (``from``, ``to``, ``at``, ``duration``) and ``[transport]``. With a CAN ``[transport]`` and
+``[steps.NAME]`` (``from``, ``to``, ``at``, ``duration``), ``[transport]`` and ``step_timeout`` (s each lockstep
+step waits for the node's command, default 1). With a CAN ``[transport]`` and
 ``controller = "firmware"`` every run is hardware in the loop: the firmware's CAN node over the bus, on the
 scheduled law (:func:`~.can_scheduled.run_scheduled_can`) or the single-point one (:func:`~.bridge.run_scenario`);
 without one, software in the loop in process (:func:`~.sil.run_sil`).
@@ -36,7 +37,17 @@ from .sched_report import sigma_csv, sigma_plot
 from .sched_study_report import comparison_png, showcase_summary
 from .sil import run_sil
 
-SHOWCASE_KEYS = {"spec", "single_point", "controller", "plant", "sweep", "steps", "transport", "description"}
+SHOWCASE_KEYS = {
+    "spec",
+    "single_point",
+    "controller",
+    "plant",
+    "sweep",
+    "steps",
+    "transport",
+    "step_timeout",
+    "description",
+}
 DESIGNS = ("single", "scheduled")
 SETTLE_BAND = 0.05  # settling: within 5 % of the step's size for good
 
@@ -168,6 +179,7 @@ def _scenario(desc: dict, name: str, duration: float, h0: float, reference: dict
             "name": f"showcase_{name}",
             "artifact": "unused.json",
             "transport": dict(desc.get("transport", {})),
+            "step_timeout": float(desc.get("step_timeout", 1.0)),
             "plant": desc["plant"],
             "duration": float(duration),
             "controller": controller,
