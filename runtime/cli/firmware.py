@@ -232,7 +232,7 @@ def _run(args: argparse.Namespace) -> int:
 
     on_host = args.target == "host" and args.board is None
     bus_node = getattr(args, "can", None) or getattr(args, "mavlink", None)
-    if not (on_host and bus_node):  # the host CAN and MAVLink nodes also run a scheduled law
+    if not bus_node:  # the CAN and MAVLink nodes (host apps, and the image's on its UART) also run a scheduled law
         load(args.artifact).require_unscheduled("gainlink firmware run")
     if not on_host:
         return _run_image(args)
