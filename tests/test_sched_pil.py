@@ -110,6 +110,15 @@ def test_scheduled_pil_with_an_external_sigma_held_clipped_and_rate_limited(exte
     assert np.array_equal(_f32_bits(res.u), _f32_bits(host["u"]))
 
 
+def test_scheduled_pil_on_the_m0_without_an_fpu_is_bit_for_bit_too(level):
+    """The micro:bit's Cortex-M0 computes every fmaf in software (gl_fmaf, rounded once): the same records."""
+    N = 200
+    plant = make_plant("tank", artifact=level, x0=np.array([0.08, 0.04]))
+    res = run_scheduled_pil(level, plant=plant, steps=N, reference=_triangle(N), board="microbit")
+    assert res.scheduled.bit_exact_model and res.scheduled.bit_exact_host, res.scheduled
+    assert res.scheduled.schedule["coverage"] > 0.99
+
+
 def test_the_check_finds_a_record_that_differs(level):
     """The oracle is not vacuous: one flipped bit of a command, or a sigma flag, is found at its step."""
     N = 50
