@@ -52,9 +52,10 @@ def run(
     RunResult
         ``metrics`` (as in report.json), ``trace`` (numpy arrays per step), ``complete`` and ``reason``.
 
-    A scheduled artifact (schema 2) with ``controller = "firmware"`` and a CAN transport runs the firmware's CAN
-    node on the scheduled law over the bus (:mod:`gainlink.hil.loop.can_scheduled`, in lockstep; external scheduling
-    signals travel after the references); otherwise (``controller = "reference"``, another transport) it runs as
+    A scheduled artifact (schema 2) with ``controller = "firmware"`` (or ``"qemu"``: the Cortex-M image's node) and a
+    CAN or MAVLink transport runs the firmware's node on the scheduled law over the link
+    (:mod:`gainlink.hil.loop.can_scheduled`, in lockstep; external scheduling signals travel after the references);
+    otherwise (``controller = "reference"``, another transport) it runs as
     software in the loop in this process (:mod:`gainlink.hil.loop.sil_scheduled`: the transport is not used), sigma
     from its measured output or ``[schedule_signal]``.
 

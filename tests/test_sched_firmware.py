@@ -203,8 +203,8 @@ def test_replay_cli_runs_the_scheduled_c_on_host_and_qemu(external_data, externa
 def test_firmware_commands_on_a_scheduled_artifact(external_data, tmp_path):
     """``firmware build --target host`` ships the scheduled loop's libraries (no stdin/stdout executable);
     ``firmware run`` (its stdin/stdout loop; the host CAN and MAVLink nodes do run it: test_can_scheduled,
-    test_mavlink_scheduled) and ``pil run``, which speak the unscheduled loop's protocol, refuse it in one line,
-    exit 2."""
+    test_mavlink_scheduled), which speaks the unscheduled loop's protocol, refuses it in one line, exit 2; so does
+    ``pil run`` without the external sigma's signal (it runs the scheduled image: test_sched_pil)."""
     from gainlink.shipping import artifact as artifact_mod
 
     path = tmp_path / "gains.json"

@@ -4,9 +4,9 @@
 # Targets (the same names as for an unscheduled artifact, so gainlink.firmware.build finds them):
 #   gainlink_sched   static library libgainlink_loop.a: src/gl_sched.c and the generated tables gl_sched_default
 #   host:      gainlink_host (shared, for Python ctypes: ports/host/gl_sched_host.c)
-#   cortex-m*: gainlink_image (ELF + .bin/.hex/.map): replay over semihosting (ports/cortex-m/main_sched.c)
-# host, GL_APPS: the CAN node (apps/can) and the MAVLink node (apps/mavlink) on the scheduled law. PIL and gain
-# updates are not built for a scheduled artifact.
+#   cortex-m*: gainlink_image (ELF + .bin/.hex/.map): replay and PIL over semihosting (ports/cortex-m/main_sched.c),
+#              with GL_IMAGE_SERVE the MAVLink and slcan nodes on its UART (ports/cortex-m/sched-image.cmake)
+# host, GL_APPS: the CAN node (apps/can) and the MAVLink node (apps/mavlink) on the scheduled law.
 add_library(gainlink_sched STATIC src/gl_sched.c src/gl_fmaf.c "${GL_GAINS_DIR}/gl_sched_gains.c")
 target_link_libraries(gainlink_sched PUBLIC gainlink_config)
 target_compile_options(gainlink_sched PRIVATE -Wvla -Wshadow -Wstrict-prototypes)

@@ -11,6 +11,9 @@ so the trace's sigma is the scheduled float32 model's
 (:class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`, bit for bit the C) on the samples the node
 received. Lockstep, without injected faults.
 
+With ``controller = "qemu"`` the node is the Cortex-M image's on its UART (slcan or MAVLink over a TCP socket;
+``ports/cortex-m/sched-image.cmake``), the same node libraries on the same scheduled loop.
+
 A MAVLink transport runs the same loop through the firmware's MAVLink node (``gainlink_mavlink`` on the scheduled
 loop, ``firmware/apps/mavlink/gl_mav_law.h``): the HIL sample carries y, r and then the external scheduling signals;
 the sigma flags come back in HIL_ACTUATOR_CONTROLS' flags (bits 5, 6, 7), decoded to the same status bits.
@@ -34,7 +37,7 @@ from ..links.can import CanTransport
 from ..links.config import transport_from_config
 from ..links.mavlink import MavlinkTransport
 from .bridge import RunResult
-from .controller import ControllerProcess, controller_argv
+from .controller import ControllerProcess, controller_argv, qemu_peer
 from .scenario import Scenario
 from .scenario_plant import build_plant
 from .sched_law import GL_ERR_NANINF, GL_SATURATED, SchedOut
@@ -62,19 +65,24 @@ class _BusLaw:
             raise ScenarioError(
                 f"scenario {scenario.name}: a scheduled artifact runs over a CAN or MAVLink transport only"
             )
-        argv = controller_argv("firmware", artifact=artifact, artifact_path=scenario.artifact_path,
-                               transport=transport, executable=scenario.firmware)  # fmt: skip
-        transport.open()
-        stack.callback(transport.close)
-        self.peer = ControllerProcess(argv)
-        stack.callback(self.peer.close)
-        self.peer.start()
-        self.peer.check_artifact(artifact.sha256)
+        if scenario.controller == "qemu":  # the image's node on its UART: QEMU serves, then the link connects
+            self.peer, argv = _image_peer(artifact, scenario, transport=transport, stack=stack), None
+        else:
+            argv = controller_argv("firmware", artifact=artifact, artifact_path=scenario.artifact_path,
+                                   transport=transport, executable=scenario.firmware)  # fmt: skip
+            transport.open()
+            stack.callback(transport.close)
+            self.peer = ControllerProcess(argv)
+            stack.callback(self.peer.close)
+            self.peer.start()
+            self.peer.check_artifact(artifact.sha256)
         self.transport, self.timeout = transport, scenario.step_timeout
         self.shadow = ScheduledFloat32Loop(artifact)  # sigma's value (not on the bus)
         self.u = np.asarray(artifact.schedule.trim_at(artifact.schedule.points[0])[0], dtype=float)
         self.k, self.late = 0, 0
         node = "gainlink_can" if isinstance(transport, CanTransport) else "gainlink_mavlink"
+        if argv is None:
+            node = f"the {scenario.board} image's {'slcan' if isinstance(transport, CanTransport) else 'MAVLink'} node"
         self.kind = {"kind": f"firmware ({node}, scheduled law, over the link)", "argv": argv}
 
     def step(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> SchedOut | None:
@@ -100,6 +108,18 @@ class _BusLaw:
             flags = sum(f for bit, f in SIGMA_BITS if status & bit)
             return SchedOut(u=self.u, status=code, sat_mask=mask, sigma=sigma, sigma_flags=flags)
         return None
+
+
+def _image_peer(artifact: Artifact, scenario: Scenario, *, transport, stack: ExitStack):
+    """The Cortex-M image in QEMU serving the link on its UART (started, checked), then the link opened."""
+    peer = qemu_peer(artifact=artifact, transport=transport, board=scenario.board, elf=scenario.firmware,
+                     duration_s=scenario.duration)  # fmt: skip
+    stack.callback(peer.close)
+    peer.start()
+    peer.check_artifact(artifact.sha256)
+    transport.open()
+    stack.callback(transport.close)
+    return peer
 
 
 class _ScheduledCan(_ScheduledSil):
@@ -138,11 +158,11 @@ def over_can(scenario: Scenario) -> bool:
 
 
 def over_link(scenario: Scenario) -> bool:
-    """Whether a scheduled artifact's scenario runs a firmware node (CAN or MAVLink) over its link (else in
-    process)."""
+    """Whether a scheduled artifact's scenario runs a firmware node (CAN or MAVLink: the host app, or with
+    ``controller = "qemu"`` the Cortex-M image's on its UART) over its link (else in process)."""
     config = scenario.transport
     kind = config.get("kind", "can" if "interface" in config else None)
-    return scenario.controller == "firmware" and kind in ("can", "mavlink")
+    return scenario.controller in ("firmware", "qemu") and kind in ("can", "mavlink")
 
 
 def run_scheduled_can(
@@ -160,8 +180,9 @@ def run_scheduled_can(
             loop.twin = _closed_loop_twin(scenario, artifact=artifact, steps=loop.plan.N, stack=stack)
         result = loop.run(progress)
         code = law.peer.stop()
+        peer = {"exit_status": code, "counters": law.peer.counters(), "stderr_bytes": law.peer.stderr_bytes()}
     m = dict(result.metrics, mode="lockstep", late=law.late)
-    m["controller"] = {"exit_status": code, "counters": law.peer.counters(), "stderr_bytes": law.peer.stderr_bytes()}
+    m["controller"] = peer  # read before the peer is closed (an image's QEMU drops its stderr then)
     info = dict(result.info, transport=law.transport.describe())
     info["controller"] = dict(law.kind, ready=law.peer.ready_line)
     return dataclasses.replace(result, metrics=m, info=info)

@@ -4,7 +4,8 @@ Samples travel through two FIFOs that the image opens with semihosting (``gl_in.
 one record per step (see ``firmware/ports/cortex-m/main.c``). Python opens its ends read-write, so no
 open blocks, and every read waits with a deadline while checking that QEMU is still alive. A fixed-point
 artifact runs its integer image (``main_fixed.c``, the same stream; its records are
-``gainlink.firmware.fixed``'s) and is checked by :mod:`.pil_fixed`.
+``gainlink.firmware.fixed``'s) and is checked by :mod:`.pil_fixed`; a scheduled artifact runs its scheduled image
+(``main_sched.c``) through :mod:`.pil_scheduled`.
 """
 
 from __future__ import annotations
@@ -108,7 +109,11 @@ class HilPlant(DiscretePlant):
 
 
 def make_plant(name: str, *, artifact: Artifact, x0: np.ndarray | None = None) -> DiscretePlant:
-    """``artifact`` (alias ``linear``): the artifact's discrete model; any other name: a ``gainlink.hil`` plant."""
+    """``artifact`` (alias ``linear``): the artifact's discrete model (a scheduled artifact's: its points' models
+    interpolated at a moving sigma, the ``scheduled_model`` plant, ``x0`` absolute); any other name: a
+    ``gainlink.hil`` plant."""
+    if name in ("artifact", "linear") and artifact.schedule is not None:
+        name = "scheduled_model"
     if name in ("artifact", "linear"):
         start = np.full(artifact.n, 0.1) if x0 is None else np.asarray(x0, dtype=float)
         if start.shape != (artifact.n,):
@@ -134,6 +139,9 @@ class PilResult:
     reference: np.ndarray | None = None  # (N, q) the references the run tracked
     fixed_point: FixedPilCheck | None = None  # a fixed-point artifact's oracle (gainlink.hil.loop.pil_fixed)
     fixed_run: fwfixed.FixedRun | None = None  # a fixed-point image's records (words, estimate, flags) per step
+    scheduled: Any = None  # a scheduled artifact's check (gainlink.hil.loop.pil_scheduled.ScheduledPilCheck)
+    sigma: np.ndarray | None = None  # (N,) a scheduled image's sigma per step
+    sigma_flags: np.ndarray | None = None  # (N,) its flags (held 1, clipped 2, rate-limited 4)
 
     def summary(self) -> dict:
         """Counts, timing and the comparison with the twin, JSON-ready."""
@@ -150,6 +158,9 @@ class PilResult:
             out["twin"] = self.comparison.to_dict()
         if self.fixed_point is not None:
             out["fixed_point"] = self.fixed_point.to_dict()
+        if self.scheduled is not None:
+            out["law"] = self.scheduled.law
+            out["scheduled"] = self.scheduled.to_dict()
         return out
 
 
@@ -245,7 +256,9 @@ def run_pil(
         samples it received, and the deviation from the quantised twin beside the certified bound.
     """
     a = artifact
-    a.require_unscheduled("PIL")  # the scheduled image replays files only (firmware/ports/cortex-m/main_sched.c)
+    if a.schedule is not None:  # its image speaks the scheduled stream (main_sched.c)
+        raise PlantError(f"artifact {a.name} is scheduled on {a.schedule.sigma}: its PIL is "
+                         "gainlink.hil.loop.pil_scheduled.run_scheduled_pil (gainlink pil run runs it)")  # fmt: skip
     if steps < 1:
         raise PlantError("--steps must be at least 1")
     platform = resolve_cortex_m(target, board)

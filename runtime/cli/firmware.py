@@ -232,7 +232,7 @@ def _run(args: argparse.Namespace) -> int:
 
     on_host = args.target == "host" and args.board is None
     bus_node = getattr(args, "can", None) or getattr(args, "mavlink", None)
-    if not (on_host and bus_node):  # the host CAN and MAVLink nodes also run a scheduled law
+    if not bus_node:  # the CAN and MAVLink nodes (host apps, and the image's on its UART) also run a scheduled law
         load(args.artifact).require_unscheduled("gainlink firmware run")
     if not on_host:
         return _run_image(args)
@@ -306,6 +306,12 @@ def _pil(args: argparse.Namespace) -> int:
     ref = args.reference
     if ref is not None and len(ref) != artifact.q:
         raise GainlinkError(f"--reference needs {artifact.q} values for artifact {artifact.name}")
+    if artifact.schedule is not None:  # the scheduled image (gl_sched_step), sigma moving with the run
+        from .pil_scheduled import run as run_scheduled
+
+        return run_scheduled(args, artifact, platform)
+    if args.schedule_signal:
+        raise GainlinkError(f"--schedule-signal is for a scheduled artifact; {artifact.name} is not scheduled")
     x0 = args.x0
     plant = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))
     twin = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))  # the twin's plant
@@ -500,7 +506,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "sample per semihosting FIFO round trip; prints a JSON summary. A fixed-point artifact runs its integer "
         "image; the summary's fixed_point block says whether it equals the bit-exact model on the samples it "
         "received and its deviation from the float64 law with the quantised coefficients beside the certified "
-        "bound.",
+        "bound. A scheduled artifact runs its scheduled image (gl_sched_step, sigma from its output or "
+        "--schedule-signal); the summary's scheduled block says whether every record equals the float32 model's "
+        "and the host C's, and how often sigma was held, clipped or rate-limited.",
     )
     p.add_argument("artifact", help="gains.json")
     p.add_argument(
@@ -522,5 +530,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="constant absolute reference (q values; default: the tracked outputs at the operating point)",
     )
     p.add_argument("--x0", type=float, nargs="+", help="initial plant state (n values)")
+    p.add_argument(
+        "--schedule-signal",
+        action="append",
+        metavar="NAME=START[,END]",
+        help="a scheduled artifact's external scheduling signal: constant, or a linear ramp over the run",
+    )
     p.add_argument("--out", help="folder for pil.csv, pil.json and twin.png (the run minus its float64 twin)")
     p.set_defaults(func=_pil)

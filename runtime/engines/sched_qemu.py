@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..firmware import qemu_sched
-from ..firmware.build import build
+from ..firmware.build import replay_image
 from ..firmware.targets import resolve_cortex_m
 from ..proof.scheduled_reference import ScheduledTrace
 from ..shipping.artifact import Artifact
@@ -36,10 +36,10 @@ def run(
     """
     a = artifact
     platform = resolve_cortex_m(target, board)
-    res = build(a, target=platform.target.name, board=platform.board.name)
+    elf = replay_image(a, target=platform.target.name, board=platform.board.name)  # without the bus nodes
     N = np.asarray(Y).reshape(-1, a.p).shape[0]
     R = np.zeros((N, a.q)) if R is None else R
-    rec = qemu_sched.replay(res.files["elf"], board=platform.board.name, dims=dims(a),
+    rec = qemu_sched.replay(elf, board=platform.board.name, dims=dims(a),
                             npts=a.schedule.points.size, Y=Y, R=R, S=S)  # fmt: skip
     raw = {k: np.array(rec[k]) for k in ("u", "sat", "sflags", "state", "status")}
     return scheduled_trace_from_raw(raw, a=a)

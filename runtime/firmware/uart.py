@@ -394,7 +394,6 @@ def run_foreground(
     if refusal is not None:
         raise FirmwareError(refusal)
     host, port = tcp_endpoint(url, scheme="tcp" if protocol == "mavlink" else "socket")
-    artifact.require_unscheduled("a bus node on the image's UART")
     elf = build(artifact, target=platform.target.name, board=board).files["elf"]
     flash = flash_dir or default_flash_dir(Path(artifact_path), board=board)
     stop = {"now": False}

@@ -11,8 +11,13 @@
  *      {int32 status, uint32 sat_mask, uint32 sigma_flags, float u[GL_M], float state[GL_SCHED_STATE_LEN]}
  *      (state: gl_sched_state() after the step; its sigma is the one the step used)
  *
- * Records are read up to `block` at a time. Each gl_sched_step() runs with interrupts masked, so its instruction
- * count (gainlink.firmware.cost) holds the step alone.
+ * Records are read up to `block` at a time (block 1 for a closed loop through FIFOs: gainlink.hil.loop.pil_scheduled).
+ * Each gl_sched_step() runs with interrupts masked, so its instruction count (gainlink.firmware.cost) holds the step
+ * alone.
+ *
+ * Built with GL_IMAGE_SERVE (sched-image.cmake: the boards with the RAM), the command line `serve mavlink ...` or
+ * `serve slcan ...` (as main.c's) runs the MAVLink or the CAN node on the UART instead, on the scheduled law
+ * (apps/mavlink/gl_mav_law.h, apps/can/gl_can_law.h pick it from gl_gains.h; ready line ` law=scheduled-float32`).
  */
 #include <stdint.h>
 #include <string.h>
@@ -23,6 +28,9 @@
 #include "gl_nvic.h"
 #include "gl_uart.h"
 #include "semihost.h"
+#if GL_IMAGE_SERVE
+#include "serve.h"
+#endif
 
 #define GL_SIN_MAGIC 0x31534C47u  /* "GLS1" */
 #define GL_SOUT_MAGIC 0x31544C47u /* "GLT1" */
@@ -109,6 +117,51 @@ static int replay_file(int32_t fin)
     return GL_EXIT_OK;
 }
 
+/** Split the command line into words in place (as main.c); returns their number (the first: the program name). */
+static int split_words(char *line, char *words[], int max)
+{
+    int n = 0;
+    while (*line != '\0' && n < max) {
+        while (*line == ' ') {
+            *line++ = '\0';
+        }
+        if (*line == '\0') {
+            break;
+        }
+        words[n++] = line;
+        while (*line != '\0' && *line != ' ') {
+            ++line;
+        }
+    }
+    return n;
+}
+
+/** `serve PROTOCOL OPTIONS...` after the program name: runs that node (returns only on a bad option); else -1. */
+static int serve_if_asked(void)
+{
+    static char line[512];
+    static char *words[16];
+    if (gl_sh_cmdline(line, sizeof line) != 0) {
+        return -1;
+    }
+    int n = split_words(line, words, 16);
+    if (n < 2 || strcmp(words[1], "serve") != 0) {
+        return -1;
+    }
+#if GL_IMAGE_SERVE
+    if (n >= 3 && strcmp(words[2], "mavlink") == 0) {
+        return gl_serve_mavlink(n - 3, &words[3]);
+    }
+    if (n >= 3 && strcmp(words[2], "slcan") == 0) {
+        return gl_serve_slcan(n - 3, &words[3]);
+    }
+    return gl_serve_refuse("serve needs a protocol: mavlink or slcan");
+#else
+    uart_puts("error: this image carries no bus node (built without GL_IMAGE_SERVE)\n");
+    return GL_EXIT_BAD_INPUT;
+#endif
+}
+
 static int run(void)
 {
     gl_clock_init();
@@ -116,6 +169,10 @@ static int run(void)
     uart_puts("gainlink " GL_NAME " ");
     uart_puts(gl_board_name);
     uart_puts(" sha256:" GL_ARTIFACT_SHA256 " scheduled\n");
+    int served = serve_if_asked();
+    if (served >= 0) {
+        return served;
+    }
     int32_t fin = gl_sh_open("gl_in.bin", GL_SH_MODE_RB);
     if (fin < 0) {
         return GL_EXIT_BAD_INPUT;

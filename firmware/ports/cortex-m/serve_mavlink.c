@@ -2,8 +2,9 @@
  * @file serve_mavlink.c
  * @brief The MAVLink node (apps/mavlink/gl_mav_node.h) on the console UART: the same protocol code as the
  *        host app, carried by the interrupt-driven rings of gl_uart.h. It runs the law the host app runs
- *        (gl_mav_law.h): a fixed-point export's integer law, with its integers in the parameter table, which the
- *        ready line names (` law=q31`; a float32 image's line is as it was).
+ *        (gl_mav_law.h): a fixed-point export's integer law, with its integers in the parameter table, or a
+ *        scheduled export's scheduled law (sigma external: after the references in the HIL sample), which the
+ *        ready line names (` law=q31`, ` law=scheduled-float32`; a float32 image's line is as it was).
  *
  * A serial link has one peer, so every answer goes to the UART whatever its destination. The node's
  * events are not printed (the UART carries MAVLink); SYS_STATUS reports the counters. The UART is a
@@ -121,7 +122,7 @@ int gl_serve_mavlink(int argc, char *const argv[])
     (void)gl_uart_write((const uint8_t *)" crc32=", 7);
     put_number(node.table.committed.crc32);
     (void)gl_uart_write((const uint8_t *)(keyed ? " signing=on" : " signing=off"), keyed ? 11u : 12u);
-#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
+#if (defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED) || (defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED)
     (void)gl_uart_write((const uint8_t *)" law=" GL_MAV_LAW_NAME, sizeof " law=" GL_MAV_LAW_NAME - 1u);
 #endif
     (void)gl_uart_write((const uint8_t *)"\n", 1);

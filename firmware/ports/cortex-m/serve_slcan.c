@@ -3,7 +3,8 @@
  * @brief The CAN node (apps/can/gl_can_node.h) behind an slcan adapter (apps/can/gl_slcan.h) on the
  *        console UART: `can.Bus(interface="slcan", channel="socket://HOST:PORT")` exchanges the same DBC
  *        frames with it as with the host CAN app (classic frames: slcan has no CAN FD). It runs the law the host
- *        app runs (gl_can_law.h): a fixed-point export's integer law, which its ready line names (`law=q31`).
+ *        app runs (gl_can_law.h): a fixed-point export's integer law or a scheduled export's scheduled law, which
+ *        its ready line names (`law=q31`, `law=scheduled-float32`; sigma external: after the references).
  */
 #include <math.h>
 #include <string.h>
@@ -17,7 +18,7 @@
 #include "serve.h"
 
 /* The ready line names a law other than float32, as the host app's does (a float32 image's line is as it was). */
-#if defined(GL_CAN_LAW_FIXED) && GL_CAN_LAW_FIXED
+#if (defined(GL_CAN_LAW_FIXED) && GL_CAN_LAW_FIXED) || (defined(GL_SCHEDULED) && GL_SCHEDULED)
 #define LAW_FIELD " law=" GL_CAN_LAW_NAME
 #else
 #define LAW_FIELD ""

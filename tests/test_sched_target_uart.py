@@ -1,0 +1,156 @@
+"""The Cortex-M4F image of a scheduled export serves its scheduled law on its UART: the slcan and MAVLink nodes
+(firmware/ports/cortex-m/sched-image.cmake, main_sched.c `serve ...`) run gl_sched_step, as the host apps do.
+
+The tank of examples/tank_scheduled.toml in closed loop in QEMU on mps2-an386 (HIL, controller = "qemu"), its level
+swept across the envelope; over MAVLink also the tank scheduled on an external signal, which the HIL sample carries
+after the references. Oracles: the host app of the same export on the same scenario (the same closed loop bit for
+bit), and the scheduled float32 model (gainlink.proof.scheduled_float32) on the samples the image received:
+commands, saturation and sigma flags (from the node's status bits)."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from gainlink.errors import FirmwareError
+from gainlink.firmware.build import build
+from gainlink.hil import run as hil_run
+from gainlink.hil.links.can import CanTransport
+from gainlink.hil.loop.scenario import parse_scenario
+from gainlink.hil.loop.sil_scheduled import external_signals
+from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
+from gainlink.shipping.artifact import from_dict
+from gainlink.spec import parse_spec
+from gainlink.synthesis import synthesize
+from schedule_cases import external_tank, tank_dict
+from support.hil import udp_transport
+from support.net import tcp_port, udp_port
+
+pytestmark = [pytest.mark.usefixtures("quiet_design_warnings"), pytest.mark.xdist_group("test_sched_target_uart")]
+
+BOARD = "mps2-an386"
+
+
+def _saved(spec: dict, tmp):
+    a = from_dict(synthesize(parse_spec(spec)).artifact)
+    path = tmp / "gains.json"
+    a.save(path)
+    build(a, target="cortex-m4", board=BOARD)  # the serving image, built once
+    return a, path
+
+
+@pytest.fixture(scope="module")
+def level(tmp_path_factory):
+    """The example tank on its measured level, saved, its serving image built."""
+    return _saved(tank_dict(), tmp_path_factory.mktemp("level"))
+
+
+@pytest.fixture(scope="module")
+def external(tmp_path_factory):
+    """The tank on an external sigma ``load``, saved, its serving image built."""
+    return _saved(external_tank(), tmp_path_factory.mktemp("external"))
+
+
+def _sweep(path, transport: dict, *, controller: str, **extra) -> dict:
+    """The level's reference climbs 0.04 -> 1 m at 0.4 m/s from t = 0.5 s, in lockstep (80 steps)."""
+    data = {
+        "name": "tank_sweep_uart",
+        "artifact": str(path),
+        "duration": 4.0,
+        "controller": controller,
+        "step_timeout": 2.0,
+        "peer_timeout": 5.0,
+        "plant": {"kind": "tank", "step": 0.005},
+        "transport": transport,
+        "initial_state": {"q": 0.08, "h": 0.04},
+        "reference": {"r_h": {"kind": "sweep", "low": 0.04, "high": 1.0, "rate": 0.4, "start": 0.5}},
+    }
+    if controller == "qemu":
+        data["board"] = BOARD
+    return data | extra
+
+
+def _assert_model(a, res, S=None) -> None:
+    """The image's commands, saturation and sigma flags are the scheduled float32 model's on its samples."""
+    tr = res.trace
+    assert res.complete and res.metrics["lost"] == 0 and tr.got.all()
+    Y, R = tr.y.astype(np.float32).astype(np.float64), tr.r.astype(np.float32).astype(np.float64)
+    model = ScheduledFloat32Loop(a).run(Y, R, S)
+    np.testing.assert_array_equal(tr.u.astype(np.float32).view(np.uint32), model.u.astype(np.float32).view(np.uint32))
+    np.testing.assert_array_equal(tr.sat, model.saturated)
+    np.testing.assert_array_equal(tr.sigma_flags, model.sigma_flags)
+
+
+def _assert_same(image, host) -> None:
+    np.testing.assert_array_equal(image.trace.u, host.trace.u)
+    np.testing.assert_array_equal(image.trace.y, host.trace.y)
+    np.testing.assert_array_equal(image.trace.sigma_flags, host.trace.sigma_flags)
+
+
+def test_the_images_slcan_node_runs_the_scheduled_law_bit_for_bit(level):
+    a, path = level
+    slcan = {"interface": "slcan", "channel": f"socket://127.0.0.1:{tcp_port()}"}
+    image = hil_run(_sweep(path, slcan, controller="qemu"))
+    ready = image.info["controller"]["ready"]
+    assert ready.startswith(f"gainlink tank_scheduled {BOARD} sha256:{a.sha256} scheduled")
+    assert ready.endswith("ready slcan encoding=float32 law=scheduled-float32")
+    _assert_model(a, image)
+    assert image.trace.sigma.min() < 0.05 and image.trace.sigma.max() > 0.8  # across the middle point
+    host = hil_run(_sweep(path, udp_transport(fd=False), controller="firmware"))
+    _assert_same(image, host)
+
+
+def test_the_images_mavlink_node_runs_the_scheduled_law_on_an_external_sigma(external):
+    a, path = external
+    signal = {"kind": "sweep", "low": 0.0, "high": 1.2, "rate": 0.4, "start": 0.5}
+    mav = {"kind": "mavlink", "url": f"tcp:127.0.0.1:{tcp_port()}"}
+    image = hil_run(_sweep(path, mav, controller="qemu", schedule_signal={"load": signal}))
+    assert "law=scheduled-float32" in image.info["controller"]["ready"]
+    S = external_signals(parse_scenario(_sweep(path, mav, controller="qemu", schedule_signal={"load": signal})),
+                         artifact=a, t=image.trace.t).astype(np.float32).astype(np.float64)  # fmt: skip
+    _assert_model(a, image, S)
+    assert np.any(image.trace.sigma_flags & 2)  # clipped at 0 and above 1.0: from the node
+    host = hil_run(_sweep(path, {"kind": "mavlink", "port": udp_port()}, controller="firmware",
+                          schedule_signal={"load": signal}))  # fmt: skip
+    _assert_same(image, host)
+
+
+def test_the_microbit_serves_no_scheduled_law_and_says_so(level):
+    """Its 16 KiB of RAM hold no bus node beside a scheduled law: one line, before QEMU starts."""
+    _, path = level
+    slcan = {"interface": "slcan", "channel": "socket://127.0.0.1:1"}
+    with pytest.raises(FirmwareError, match=r"microbit image carries no bus node for this artifact") as exc:
+        hil_run(_sweep(path, slcan, controller="qemu") | {"board": "microbit"})
+    assert "\n" not in str(exc.value)
+
+
+def test_firmware_run_serves_the_scheduled_law_over_slcan_from_the_image(level, tmp_path):
+    """``gainlink firmware run --target cortex-m4 --can SLCAN`` of a scheduled artifact: the image's node answers
+    the scheduled float32 model's commands as sigma moves across the middle point."""
+    a, path = level
+    cfg = {"interface": "slcan", "channel": f"socket://127.0.0.1:{tcp_port()}"}
+    gainlink = [sys.executable, "-c", "import sys; from gainlink.cli import main; sys.exit(main())"]
+    argv = [*gainlink, "firmware", "run", str(path), "--target", "cortex-m4", "--can", json.dumps(cfg),
+            "--flash-dir", str(tmp_path / "flash")]  # fmt: skip
+    proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    transport = CanTransport(cfg, artifact=a)
+    model = ScheduledFloat32Loop(a)
+    try:
+        assert b"law=scheduled-float32" in proc.stdout.readline()
+        transport.open()
+        for seq, h in ((3, 0.1), (4, 0.3), (5, 0.6)):
+            y, r = np.array([h]), np.array([0.5])
+            transport.send_frames(transport.encode_sample(seq=seq, y=y, r=r))
+            cmd = transport.receive_command(timeout=5.0)
+            assert cmd is not None and cmd.seq == seq
+            assert np.float32(cmd.u[0]).view(np.uint32) == np.float32(model.step(y, r).u[0]).view(np.uint32)
+    finally:
+        transport.close()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 0
+        proc.stdout.close()
+        proc.stderr.close()
