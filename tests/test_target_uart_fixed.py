@@ -31,6 +31,9 @@ from support.net import tcp_port, udp_port
 from support.uart import assert_same_closed_loop, scenario
 
 CORES = {"mps2-an385": "cortex-m3", "microbit": "cortex-m0"}
+# The one fixed-point library each serving image links (ports/cortex-m/cortex-m.cmake names it): the MAVLink node's
+# generic loop where the image carries that node (the slcan node runs it too), the unrolled one on the micro:bit.
+FIXED_LIBRARY = {"mps2-an385": "libgainlink_fixed_generic.a", "microbit": "libgainlink_fixed.a"}
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +56,8 @@ def q31(q31_saved):
 @pytest.mark.parametrize("board", list(CORES))
 def test_the_images_slcan_node_runs_the_integer_law_bit_for_bit(q31, board):
     a, path, host = q31
-    build(a, target=CORES[board], board=board)  # cached
+    image_map = build(a, target=CORES[board], board=board).files["map"].read_text()  # cached
+    assert set(re.findall(r"(lib\w+\.a)\(gl_fixed\.c\.obj\)", image_map)) == {FIXED_LIBRARY[board]}
     slcan = {"interface": "slcan", "channel": f"socket://127.0.0.1:{tcp_port()}"}
     image = run_scenario(scenario(path, slcan, controller="qemu", board=board, duration=1.0))
     assert_same_closed_loop(image, host)  # the host CAN app, which runs the integer law (tests/test_can_laws.py)
