@@ -1,6 +1,7 @@
 """`replay --compare` on a fixed-point artifact: the trace, step by step from its own XH, Z words, against the
 bit-exact integer law (the oracle: gainlink.proof.fixed_law), command words equal bit for bit. The host C's trace
-passes; one command moved by one LSB is caught at its step; a trace of another numeric format is refused."""
+passes; one command moved by one LSB is caught at its step; a trace of another numeric format is refused (by the
+format line a recorded trace carries, and by its words when it has none)."""
 
 from __future__ import annotations
 
@@ -40,11 +41,15 @@ def pendulum(tmp_path_factory) -> tuple:
 
 
 def _rewrite(src, dst, edit) -> None:
-    """``src`` (a replay CSV) with ``edit(row_index, row)`` applied to each row, written to ``dst``."""
-    rows = list(csv.DictReader(io.StringIO(src.read_text())))
+    """``src`` (a replay CSV) with ``edit(row_index, row)`` applied to each row, written to ``dst`` (after the same
+    ``# numeric=...`` line)."""
+    meta, _, body = src.read_text().partition("\n")
+    assert meta.startswith("# numeric=q"), meta
+    rows = list(csv.DictReader(io.StringIO(body)))
     for k, row in enumerate(rows):
         edit(k, row)
     out = io.StringIO()
+    out.write(meta + "\n")
     w = csv.DictWriter(out, fieldnames=list(rows[0]), lineterminator="\n")
     w.writeheader()
     w.writerows(rows)
@@ -100,19 +105,63 @@ def test_a_state_without_its_words_is_quantised_and_said(pendulum, tmp_path):
     assert "quantised to the state formats" in check.summary()
 
 
+def _without_format_line(src, dst):
+    """``src`` as a trace recorded before replay outputs named their format."""
+    dst.write_text(src.read_text().partition("\n")[2])
+    return dst
+
+
 def test_a_trace_of_another_numeric_format_is_refused_in_one_line(pendulum, tmp_path):
+    """By its words, when it does not name its format (a trace recorded before the format line)."""
     d, gains = pendulum
+    native = _without_format_line(d / "native.csv", tmp_path / "native.csv")
     res = run_cli(
-        "replay", gains["q15"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare",
-        d / "native.csv",
+        "replay", gains["q15"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", native
     )  # fmt: skip
-    assert_one_clear_line(res, f"comparison file {d / 'native.csv'} is not a trace of q15 artifact")
+    assert_one_clear_line(res, f"comparison file {native} is not a trace of q15 artifact")
     assert not (tmp_path / "out.csv").exists()
     # the float64 law's trace (what a float32 artifact's replay holds) is not one either
     assert run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "ref.csv").code == 0
+    ref = _without_format_line(tmp_path / "ref.csv", tmp_path / "ref_old.csv")
     res = run_cli(
-        "replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare",
-        tmp_path / "ref.csv",
+        "replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", ref
     )  # fmt: skip
     assert_one_clear_line(res, "is not a trace of q31 artifact")
     assert not (tmp_path / "out.csv").exists()
+
+
+def test_a_recorded_trace_names_its_format_and_one_of_another_format_is_refused_in_one_line(pendulum, pend, tmp_path):
+    """A q15 trace against the q31 artifact: its words are q31 words too (q15's commands have fewer fractional
+    bits), so without its format it would fail the one-step check at step 0; its first line refuses it."""
+    d, gains = pendulum
+    assert (d / "native.csv").read_text().startswith("# numeric=q31\nt,u0,")
+    q15 = tmp_path / "q15.csv"
+    res = run_cli("replay", gains["q15"], "--input", d / "in.csv", "--output", q15, "--engine", "fixed")
+    assert res.code == 0, res.err
+    assert q15.read_text().startswith("# numeric=q15\n")
+    res = run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", q15)
+    assert_one_clear_line(res, f"comparison file {q15} is a trace of a q15 law and artifact ")
+    assert "is a q31 design" in res.err
+    assert not (tmp_path / "out.csv").exists()
+    old = _without_format_line(q15, tmp_path / "q15_old.csv")  # what the line saves it from
+    res = run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "old.csv", "--compare", old)
+    assert res.code == 2 and re.search(rf"one-step check failed at step 0: \w+ of {re.escape(str(old))}", res.err)
+    # the float64 law's trace of the q31 artifact says what it is, and is refused by that line too
+    assert run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "ref.csv").code == 0
+    assert (tmp_path / "ref.csv").read_text().startswith("# numeric=float64\n")
+    res = run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare",
+                  tmp_path / "ref.csv")  # fmt: skip
+    assert_one_clear_line(res, "is a trace of a float64 law and artifact pendulum is a q31 design")
+    assert not (tmp_path / "out.csv").exists()
+    # a float32 artifact's output is as it was: no format line
+    assert run_cli("replay", pend, "--input", d / "in.csv", "--output", tmp_path / "f.csv").code == 0
+    assert (tmp_path / "f.csv").read_text().startswith("t,u0,")
+
+
+def test_a_trace_without_the_format_line_is_read_as_before(pendulum, tmp_path):
+    """Traces recorded before the line existed: the one-step check is still the verdict (here: a pass)."""
+    d, gains = pendulum
+    old = _without_format_line(d / "native.csv", tmp_path / "old.csv")
+    res = run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", old)
+    assert res.code == 0, res.err
+    assert f"one-step check of {old}: pass, 300 steps bit for bit" in res.out

@@ -1,8 +1,8 @@
 """The MAVLink host app runs a fixed-point artifact's own law: the integer law it certifies (not the float law of the
 same export), checked in lockstep HIL over MAVLink against the bit-exact integer model (gainlink.proof.fixed_law) on
 the samples the run recorded; its parameter table holds the integers it runs, and `gainlink mavlink upload` of a
-re-designed set (same formats and structure) writes, verifies, commits and persists them, refuses a set for another
-law or other formats in one line, and rolls back a set the target refuses."""
+re-designed set (same formats and structure; q31 and q15) writes, verifies, commits and persists them, refuses a set
+for another law or other formats in one line, and rolls back a set the target refuses."""
 
 from __future__ import annotations
 
@@ -211,5 +211,26 @@ def test_q15_on_its_design_model_over_mavlink_is_bit_exact_and_its_table_holds_i
     fw, port = start_firmware(mavlink_executable(a), None)
     try:
         assert _integers(port) == {s.name: int(s.value) for s in fixed_firmware_params(a)}
+    finally:
+        fw.stop()
+
+
+def test_upload_of_a_redesigned_q15_set_commits_and_the_loop_runs_it_bit_for_bit(tmp_path):
+    """q15 (16-bit coefficients and commands): the pendulum with the q31 redesign's weights keeps its formats."""
+    from gainlink.firmware.mavlink_app import mavlink_executable
+
+    old, new = pendulum_design("q15"), pendulum_design("q15", [12.0, 1.0, 110.0, 1.0])
+    assert new.checks["fixed_point"]["signature"] == old.checks["fixed_point"]["signature"]
+    new.save(tmp_path / "gains.json")
+    fw, port = start_firmware(mavlink_executable(old), None)
+    try:
+        res = run_cli("mavlink", "upload", tmp_path / "gains.json", "--connect", f"udpout:127.0.0.1:{port}")
+        assert res.code == 0, res.err
+        assert "gain set committed" in res.out
+        assert _integers(port) == {s.name: int(s.value) for s in fixed_firmware_params(new)}
+        Y, R, U = closed_loop(port, new, steps=150)
+        u = U.astype(np.float32)
+        np.testing.assert_array_equal(u.view(np.uint32), _model_u(new, Y, R).view(np.uint32))
+        assert np.any(u != _model_u(old, Y, R))  # really the new integers
     finally:
         fw.stop()

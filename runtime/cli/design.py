@@ -334,7 +334,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
             )
     samples = read_samples(args.input, a)
     trace = api.replay(a, samples.Y, samples.R, s=samples.S, engine=args.engine, target=args.target, board=args.board)
-    write_trace(args.output, trace, samples.t, artifact=a)
+    write_trace(args.output, trace, samples.t, artifact=a, engine=args.engine)
     where = f" ({'/'.join(x for x in (args.target, args.board) if x)})" if args.target or args.board else ""
     print(
         f"replayed {trace.u.shape[0]} samples through {args.engine}{where}: "

@@ -10,6 +10,9 @@ Input CSV: a header with ``y0..y{p-1}`` and ``r0..r{q-1}`` (a ``t`` column is al
 through), and ``s0..`` for the external scheduling signals of a scheduled artifact. Output CSV: ``t`` if
 given, ``u0..``, ``sat0..`` (1 where that input saturated), ``fault`` (1 where the sample was refused as
 non-finite), ``xh0..`` and ``z0..`` (state after the step); a scheduled artifact's: :mod:`.scheduled_replay`.
+A fixed-point artifact's output starts with the line ``# numeric=q31`` (or ``q15``; ``float64`` from the
+``reference`` engine): ``--compare`` refuses a trace of another format in one line (a file without the line is read
+as before); a float32 artifact's output has no such line.
 """
 
 from __future__ import annotations
@@ -151,13 +154,25 @@ def read_samples(path: str | Path, artifact: Artifact) -> Samples:
     return Samples(Y=Y, R=R, t=t, S=S)
 
 
-def format_trace(trace: Trace, t: np.ndarray | None = None) -> str:
-    """The output CSV text for a trace (round-trip float formatting)."""
+def trace_numeric(artifact: Artifact, engine: str | None = None) -> str | None:
+    """The numeric format of ``artifact``'s law through ``engine`` that its replay output names: a fixed-point
+    artifact's (``q31``, ``q15``), ``float64`` through its ``reference`` engine; ``None`` for a float32 artifact."""
+    fp = artifact.checks.get("fixed_point")
+    if not fp:
+        return None
+    return "float64" if engine == "reference" else str(fp["numeric"])
+
+
+def format_trace(trace: Trace, t: np.ndarray | None = None, *, numeric: str | None = None) -> str:
+    """The output CSV text for a trace (round-trip float formatting), after a ``# numeric=...`` line when
+    ``numeric`` is given."""
     N, m = trace.u.shape
     n, q = trace.xh.shape[1], trace.z.shape[1]
     header = (["t"] if t is not None else []) + [f"u{i}" for i in range(m)] + [f"sat{i}" for i in range(m)]
     header += ["fault"] + [f"xh{i}" for i in range(n)] + [f"z{i}" for i in range(q)]
     out = io.StringIO()
+    if numeric is not None:
+        out.write(f"# numeric={numeric}\n")
     out.write(",".join(header) + "\n")
     for k in range(N):
         cells = ([_num(t[k])] if t is not None else []) + [_num(v) for v in trace.u[k]]
@@ -173,10 +188,16 @@ def _num(v: float) -> str:
 
 
 def write_trace(
-    path: str | Path, trace: Trace, t: np.ndarray | None = None, *, artifact: Artifact | None = None
+    path: str | Path,
+    trace: Trace,
+    t: np.ndarray | None = None,
+    *,
+    artifact: Artifact | None = None,
+    engine: str | None = None,
 ) -> None:
     """Write a replay's output CSV (``u``, ``sat``, ``fault``, ``xh``, ``z`` per step; a scheduled trace: the
-    columns of :mod:`.scheduled_replay`, which needs its ``artifact``) atomically."""
+    columns of :mod:`.scheduled_replay`, which needs its ``artifact``; a fixed-point ``artifact``'s trace through
+    ``engine`` names its format first, see :func:`trace_numeric`) atomically."""
     out = Path(path)
     if out.is_dir():
         raise DataError(f"output {out} is a directory")
@@ -185,7 +206,7 @@ def write_trace(
     if isinstance(trace, ScheduledTrace):
         atomic_write_text(out, scheduled_replay.format_trace(artifact, trace, t))
     else:
-        atomic_write_text(out, format_trace(trace, t))
+        atomic_write_text(out, format_trace(trace, t, numeric=trace_numeric(artifact, engine) if artifact else None))
 
 
 @dataclass(frozen=True)
@@ -206,12 +227,12 @@ def read_trace(path: str | Path, artifact: Artifact) -> Trace:
     Raises
     ------
     DataError
-        The file is not a replay output for this artifact's dimensions.
+        The file is not a replay output for this artifact's dimensions, or it names another numeric format.
     """
     if artifact.schedule is not None:
         return scheduled_replay.read_trace(path, artifact)
     path = Path(path)
-    text = read_user_file(path, what="comparison file", error=DataError)
+    text = _same_numeric(path, read_user_file(path, what="comparison file", error=DataError), artifact)
     rows = list(csv.DictReader(io.StringIO(text)))
     a = artifact
     try:
@@ -230,6 +251,23 @@ def read_trace(path: str | Path, artifact: Artifact) -> Trace:
         raise DataError(
             f"comparison file {path} is not a replay output of artifact {a.name} (bad or missing {exc})"
         ) from None
+
+
+def _same_numeric(path: Path, text: str, artifact: Artifact) -> str:
+    """``text`` without its ``# key=value`` lines, refused when their ``numeric`` is not the artifact's format (a
+    trace without the line is taken as before: the one-step check is its verdict)."""
+    lines = text.splitlines(keepends=True)
+    head = 0
+    while head < len(lines) and lines[head].startswith("#"):
+        head += 1
+    meta = dict(ln[1:].strip().partition("=")[::2] for ln in lines[:head])
+    recorded, own = meta.get("numeric"), trace_numeric(artifact) or "float32"
+    if recorded is not None and recorded.strip() != own:
+        raise DataError(
+            f"comparison file {path} is a trace of a {recorded.strip()} law and artifact {artifact.name} is a "
+            f"{own} design: compare traces of the same numeric format"
+        )
+    return "".join(lines[head:])
 
 
 def compare_traces(artifact: Artifact, trace: Trace, other: Trace) -> Comparison:

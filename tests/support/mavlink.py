@@ -40,31 +40,38 @@ def start_firmware(exe: Path, storage: Path | None) -> tuple[MavlinkFirmware, in
     return fw, port
 
 
-def read_params(port: int) -> dict[str, ParamValue]:
-    """Every parameter of the app listening on ``port`` (bytewise encoding, as the app packs them)."""
-    with MavLink(f"udpout:127.0.0.1:{port}") as link:
+def _url(port: int | str) -> str:
+    """A UDP port of the host app, or a node's own URL (an image's ``tcp:`` UART) as it is."""
+    return port if isinstance(port, str) else f"udpout:127.0.0.1:{port}"
+
+
+def read_params(port: int | str) -> dict[str, ParamValue]:
+    """Every parameter of the app listening on ``port`` (or at the URL ``port``; bytewise encoding, as the app
+    packs them)."""
+    with MavLink(_url(port)) as link:
         link.wait_heartbeat(timeout=5)
         s = ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE)
         return s.read_all()
 
 
-def closed_loop(port: int, art: Artifact, *, steps: int = 300) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Run the artifact's own discrete plant against the firmware over the HIL link; return Y, R, U."""
-    t = MavlinkTransport(
-        url=f"udpout:127.0.0.1:{port}", controller_url="", n_inputs=art.m, n_outputs=art.p, n_refs=art.q, ts=art.Ts
-    )
+def closed_loop(
+    port: int | str, art: Artifact, *, steps: int = 300, timeout: float = 2.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Run the artifact's own discrete plant against the firmware over the HIL link (``port``: as read_params);
+    return Y, R, U."""
+    t = MavlinkTransport(url=_url(port), controller_url="", n_inputs=art.m, n_outputs=art.p, n_refs=art.q, ts=art.Ts)
     x = np.zeros(art.n)
     x[2] = 0.05  # pendulum tilted
     Y, R, U = np.zeros((steps, art.p)), np.full((steps, art.q), 0.2), np.zeros((steps, art.m))
     with t:
         t.send_frames(t.encode_reset(seq=0))
-        assert t.receive_command(timeout=2.0) is not None
+        assert t.receive_command(timeout=timeout) is not None
         u = np.zeros(art.m)
         for k in range(steps):
             y = art.Cd @ x + art.Dd @ u
             Y[k] = y.astype(np.float32)
             t.send_frames(t.encode_sample(seq=k + 1, y=Y[k], r=R[k]))
-            c = t.receive_command(timeout=2.0)
+            c = t.receive_command(timeout=timeout)
             assert c is not None and c.seq == k + 1
             u = U[k] = c.u
             x = art.Ad @ x + art.Bd @ u

@@ -17,6 +17,15 @@ if(GL_BOARD STREQUAL "microbit")
   endif()
 endif()
 
+# A fixed-point export's nodes both run the integer law (apps/can, apps/mavlink), from one fixed-point library, named
+# here (cmake/gl_fixed.cmake): with the MAVLink node, its generic loop gainlink_fixed_generic (its gains all data, as
+# an uploaded set needs), which the slcan node links too; without it (the micro:bit), the unrolled gainlink_fixed. Bit
+# for bit the same law (tests/test_target_uart_fixed.py).
+if(GL_IMAGE_SERVE_MAVLINK)
+  set(GL_FIXED_STEP_LIB gainlink_fixed_generic)
+else()
+  set(GL_FIXED_STEP_LIB gainlink_fixed)
+endif()
 set(GL_IMAGE_SOURCES main.c gl_stream.c)
 set(GL_IMAGE_LIBS gainlink_loop gainlink_gains m)
 # The same MAVLink and CAN node libraries as the host apps (apps/mavlink, apps/can): no copy of protocol logic.
@@ -30,9 +39,6 @@ elseif(GL_IMAGE_SERVE)
   list(APPEND GL_IMAGE_SOURCES serve.c serve_slcan.c)
   list(PREPEND GL_IMAGE_LIBS gainlink_can_node)
 endif()
-# A fixed-point export's nodes both run the integer law (apps/can, apps/mavlink). With both in the image, one
-# src/gl_fixed.c is linked: the MAVLink node's generic loop, first on the link line, which the slcan node then runs
-# too (bit for bit the unrolled loop, which the micro:bit's slcan-only image runs: tests/test_target_uart_fixed.py).
 gl_add_image(gainlink_image SOURCES ${GL_IMAGE_SOURCES} LIBS ${GL_IMAGE_LIBS})
 if(GL_IMAGE_SERVE)
   target_compile_definitions(gainlink_image PRIVATE GL_IMAGE_SERVE=1)
