@@ -21,12 +21,15 @@ demo: setup
 # under file locks), the tests marked slow first (tests/conftest.py), handed out a few at a time except those
 # marked xdist_group (tests sharing an expensive module fixture: one worker makes it once), then pytest's ten
 # slowest. TEST_WORKERS=0 runs it in one process.
+# Bytecode is written even where PYTHONDONTWRITEBYTECODE is set (it is on the project's CI machines): without
+# it every process the suite starts (the xdist workers, Dask workers, the CLI run as a subprocess) compiles the
+# package again, and every worker rewrites the asserts of all ~75 test modules to collect them (~7 CPU-s each).
 TEST_WORKERS ?= 4
 test: setup
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder --durations=10
+	env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder --durations=10
 
 test-matrix: setup
-	$(PY) -m pytest -q -m matrix
+	env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -q -m matrix
 
 # The quick benchmarks (minutes); the long ones (an hour each) have their own targets. Each records its JSON
 # as the README's figures (scripts/readme_figures.py).

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from gainlink.errors import DesignError
 from gainlink.proof.reference import ReferenceLoop
@@ -18,7 +20,10 @@ from hypothesis.extra.numpy import arrays
 PROPERTY_SETTINGS = settings(max_examples=40, deadline=None, derandomize=True)
 
 
+@functools.cache
 def _artifacts():
+    """The four designs the properties draw from: made on first use, not at import (every xdist worker imports
+    this module to collect it; only the one running these tests needs them)."""
     specs = [
         random_spec(11, n=3, m=1, p=1, q=1, anti_windup="none"),
         random_spec(12, n=4, m=2, p=2, q=2, form="current", anti_windup="clamp"),
@@ -28,13 +33,10 @@ def _artifacts():
     return [artifact_mod.from_dict(synthesize(parse_spec(s)).artifact) for s in specs]
 
 
-ARTIFACTS = _artifacts()
-
-
 @PROPERTY_SETTINGS
 @given(data=st.data())
 def test_commands_stay_within_limits_and_finite_for_any_finite_input(data):
-    a = ARTIFACTS[data.draw(st.integers(0, len(ARTIFACTS) - 1), label="artifact")]
+    a = _artifacts()[data.draw(st.integers(0, len(_artifacts()) - 1), label="artifact")]
     N = data.draw(st.integers(1, 150), label="steps")
     finite = st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False)
     Y = data.draw(arrays(np.float64, (N, a.p), elements=finite), label="Y")
@@ -48,7 +50,7 @@ def test_commands_stay_within_limits_and_finite_for_any_finite_input(data):
 @PROPERTY_SETTINGS
 @given(data=st.data())
 def test_non_finite_samples_never_propagate(data):
-    a = ARTIFACTS[data.draw(st.integers(0, len(ARTIFACTS) - 1), label="artifact")]
+    a = _artifacts()[data.draw(st.integers(0, len(_artifacts()) - 1), label="artifact")]
     N = data.draw(st.integers(1, 60), label="steps")
     bounded = st.one_of(st.floats(-1e4, 1e4), st.sampled_from([np.nan, np.inf, -np.inf]))
     Y = data.draw(arrays(np.float64, (N, a.p), elements=bounded), label="Y")
