@@ -60,16 +60,21 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
 
 @pytest.fixture(scope="session")
 def example_artifacts(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """gains.json of each example, designed once per session: name -> path."""
-    base = tmp_path_factory.mktemp("examples")
-    paths = {}
-    for name in EXAMPLE_NAMES:
-        result = synthesize(load_spec(EXAMPLES / f"{name}.toml"))
-        path = base / name / "gains.json"
-        path.parent.mkdir()
-        artifact_mod.write(path, result.artifact)
-        paths[name] = path
-    return paths
+    """gains.json of each example, designed once per run (by one worker; the others read its files): name ->
+    path. Shared: read only."""
+
+    def make() -> dict[str, Path]:
+        base = tmp_path_factory.mktemp("examples")
+        paths = {}
+        for name in EXAMPLE_NAMES:
+            result = synthesize(load_spec(EXAMPLES / f"{name}.toml"))
+            path = base / name / "gains.json"
+            path.parent.mkdir()
+            artifact_mod.write(path, result.artifact)
+            paths[name] = path
+        return paths
+
+    return once_per_run(tmp_path_factory, "example_artifacts", make)
 
 
 @pytest.fixture(scope="session")
