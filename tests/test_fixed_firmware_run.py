@@ -4,11 +4,13 @@
 With --input the replay CSV starts with the `# numeric=q31|q15` line `gainlink replay` writes for the artifact, and
 its commands, estimate and integrators are the integer words of the bit-exact numpy model
 (gainlink.proof.fixed_law, the oracle) in real units, bit for bit, and not the float32 law's; without --input the
-executable answers stdin lines with the model's words. On the q31 pendulum and the q15 Wood-Berry column, samples
-about the middle of their declared ranges, one past its range (clipped and flagged) and one NaN (refused)."""
+executable answers stdin lines with the model's words, each as it comes (a program may drive it line by line). On
+the q31 pendulum and the q15 Wood-Berry column, samples about the middle of their declared ranges, one past its range
+(clipped and flagged) and one NaN (refused)."""
 
 from __future__ import annotations
 
+import select
 import subprocess
 import sys
 from pathlib import Path
@@ -102,3 +104,29 @@ def test_firmware_run_without_input_is_the_integer_loop_on_stdin(saved):
         assert [sat, clip, bool(flags & 1)] == [model.sat[k], model.clip[k], model.fault[k]], k
         assert words == [*model.U[k], *model.V[k], *model.XH[k], *model.Z[k]], k
     assert len(steps) == 40 and np.any(real(model.U, fu) != Float32Loop(a).run(Y[:40], R[:40]).u)
+
+
+def _answer(proc: subprocess.Popen, timeout: float) -> str:
+    """The next line the process writes, within ``timeout`` seconds (unbuffered pipe: nothing is read ahead)."""
+    ready, _, _ = select.select([proc.stdout], [], [], timeout)
+    assert ready, f"no answer within {timeout} s"
+    return proc.stdout.readline().decode()
+
+
+def test_the_integer_loop_answers_each_line_before_the_next_is_sent(saved):
+    """Driven through pipes one line at a time, as a program talking to the firmware would: every answer is flushed
+    as it is made, not when stdin closes."""
+    a, path, Y, R = saved
+    model = model_run(a, Y[:3], R[:3])
+    proc = subprocess.Popen([GAINLINK, "firmware", "run", str(path)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            bufsize=0)  # fmt: skip
+    try:
+        assert _answer(proc, 300).startswith(f"gainlink-fixed {a.name} ")  # after the (cached) build
+        for k in range(3):
+            proc.stdin.write((" ".join(repr(float(v)) for v in np.concatenate([Y[k], R[k]])) + "\n").encode())
+            words = [int(v) for v in _answer(proc, 30).split()[5 : 5 + a.m]]
+            assert words == list(model.U[k]), k
+    finally:
+        proc.stdin.close()
+        assert proc.wait(timeout=30) == 0
+        proc.stdout.close()
