@@ -5,29 +5,42 @@ The tank of examples/tank_scheduled.toml in closed loop in QEMU on mps2-an386 (H
 swept across the envelope; over MAVLink also the tank scheduled on an external signal, which the HIL sample carries
 after the references. Oracles: the host app of the same export on the same scenario (the same closed loop bit for
 bit), and the scheduled float32 model (gainlink.proof.scheduled_float32) on the samples the image received:
-commands, saturation and sigma flags (from the node's status bits)."""
+commands, saturation and sigma flags (from the node's status bits). A retuned schedule uploaded to the image's
+MAVLink node (every point's gains as one set, `gainlink mavlink upload --persist`) runs bit for bit the retuned model
+and comes back from the image's flash after a restart; a commit the image refuses is rolled back, point by point."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import re
 import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 from gainlink.errors import FirmwareError
 from gainlink.firmware.build import build
+from gainlink.firmware.uart import QemuUart
 from gainlink.hil import run as hil_run
 from gainlink.hil.links.can import CanTransport
+from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil_scheduled import external_signals
+from gainlink.mavlink import upload as upload_mod
+from gainlink.mavlink.params import INT32
+from gainlink.mavlink.sched_params import scheduled_firmware_params, table_hash
+from gainlink.mavlink.upload import UploadFailed, upload
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict
+from support.cli import run_cli
 from support.hil import udp_transport
+from support.mavlink import read_params
 from support.net import tcp_port, udp_port
 
 pytestmark = [pytest.mark.usefixtures("quiet_design_warnings"), pytest.mark.xdist_group("test_sched_target_uart")]
@@ -154,3 +167,100 @@ def test_firmware_run_serves_the_scheduled_law_over_slcan_from_the_image(level, 
         assert proc.wait(timeout=10) == 0
         proc.stdout.close()
         proc.stderr.close()
+
+
+# -- a retuned schedule uploaded to the image's MAVLink node ---------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def retuned(tmp_path_factory):
+    """The example tank designed again with a tighter level weight: the same points and structure, other gains at
+    every point (as tests/test_mavlink_scheduled.py uploads to the host app)."""
+    spec = tank_dict()
+    spec["controller"]["bryson_y_max"] = [0.04]
+    a = from_dict(synthesize(parse_spec(spec)).artifact)
+    path = tmp_path_factory.mktemp("retuned") / "retuned.json"
+    a.save(path)
+    return a, path
+
+
+def _mav_image(a, flash) -> QemuUart:
+    elf = build(a, target="cortex-m4", board=BOARD).files["elf"]  # cached: the module's serving image
+    return QemuUart(elf, board=BOARD, protocol="mavlink", port=tcp_port(), flash_dir=flash, lifetime_s=300)
+
+
+def _table(url: str) -> list[tuple[str, float]]:
+    got = read_params(url)
+    return [(k, float(got[k].value)) for k in sorted(got, key=lambda k: got[k].index)]
+
+
+def _expected(a) -> list[tuple[str, float]]:
+    specs = scheduled_firmware_params(a)
+    return [(s.name, int(s.value) if s.ptype == INT32 else float(np.float32(s.value))) for s in specs]
+
+
+UPLOAD_TIMEOUT = 1.0  # s before a request is re-sent (10 retries): generous, a loaded machine stalls QEMU
+LEVELS = np.concatenate([np.linspace(0.05, 0.95, 30), np.linspace(0.95, 0.2, 15)])  # sigma = h across the points
+
+
+def _image_u(url: str, a) -> np.ndarray:
+    """The image's float32 commands for the levels LEVELS (reference 0.5 m) after a reset of its loop."""
+    link = MavlinkTransport(url=url, controller_url="", n_inputs=a.m, n_outputs=a.p, n_refs=a.q, ts=a.Ts)
+    U = np.zeros((LEVELS.size, a.m), dtype=np.float32)
+    with link:
+        link.send_frames(link.encode_reset(seq=0))
+        assert link.receive_command(timeout=15.0) is not None  # generous: a loaded VM stalls QEMU
+        for k, h in enumerate(LEVELS):
+            link.send_frames(link.encode_sample(seq=k + 1, y=np.array([h]), r=np.array([0.5])))
+            cmd = link.receive_command(timeout=15.0)
+            assert cmd is not None and cmd.seq == k + 1, k
+            U[k] = cmd.u
+    return U
+
+
+def _model_u(a) -> np.ndarray:
+    Y = LEVELS.astype(np.float32).astype(np.float64)[:, None]
+    return ScheduledFloat32Loop(a).run(Y, np.full((LEVELS.size, 1), 0.5)).u.astype(np.float32)
+
+
+def _wrong_hash(art):
+    """The retuned set with a GL_HASH one bit off: the image's own check (the tables' CRC) refuses the commit."""
+    specs = scheduled_firmware_params(art)
+    return tuple(s if s.name != "GL_HASH" else dataclasses.replace(s, value=int(s.value) ^ 1) for s in specs)
+
+
+def test_a_retuned_schedule_uploaded_to_the_images_mavlink_node_commits_runs_bit_for_bit_and_survives_a_restart(
+    level, retuned, tmp_path, monkeypatch
+):
+    (old, _), (new, new_path) = level, retuned
+    assert _expected(new) != _expected(old)
+    flash = tmp_path / "flash"
+    with _mav_image(old, flash) as image:
+        assert image.ready_line.endswith(f"crc32={table_hash(old) & 0xFFFFFFFF} signing=off law=scheduled-float32")
+        assert _table(image.url) == _expected(old)
+        with monkeypatch.context() as m:  # a commit the image refuses: every staged value is undone, none kept
+            m.setattr(upload_mod, "scheduled_firmware_params", _wrong_hash)
+            with pytest.raises(UploadFailed) as failed:
+                upload(new, connect=image.url, persist=True, timeout=UPLOAD_TIMEOUT)
+        assert failed.value.rolled_back and _table(image.url) == _expected(old)
+        assert not (flash / "gl_flash.txt").exists()
+        t0 = time.monotonic()
+        res = run_cli("mavlink", "upload", new_path, "--connect", image.url, "--persist", "--timeout", UPLOAD_TIMEOUT)
+        took = time.monotonic() - t0
+        assert res.code == 0, res.err
+        assert "gain set committed" in res.out and "persisted" in res.out, res.out
+        changed = re.findall(r"^GL_\w+ .* -> \S+$", res.out, re.M)
+        print(f"scheduled upload to the M4 image: {len(changed)} of {len(_expected(new))} parameters, {took:.2f} s")
+        assert {c.split()[0].split("_")[2] for c in changed if c.startswith(("GL_KX_", "GL_KZ_"))} == {"0", "1", "2"}
+        assert _table(image.url) == _expected(new)  # every point's gains at once
+        u = _image_u(image.url, new)
+        np.testing.assert_array_equal(u.view(np.uint32), _model_u(new).view(np.uint32))
+        assert np.any(u != _model_u(old))  # really the retuned gains
+    assert (flash / "gl_flash.txt").is_file()
+
+    with _mav_image(old, flash) as image:  # the board powered again: the retuned set comes back from flash
+        assert f"crc32={table_hash(new) & 0xFFFFFFFF} " in image.ready_line, image.ready_line
+        res = run_cli("mavlink", "upload", new_path, "--connect", image.url, "--dry-run", "--timeout", UPLOAD_TIMEOUT)
+        assert res.code == 0 and "dry run: 0 parameter(s) would change" in res.out, res.out + res.err
+        u = _image_u(image.url, new)
+        np.testing.assert_array_equal(u.view(np.uint32), _model_u(new).view(np.uint32))

@@ -168,12 +168,23 @@ def _flash(args: argparse.Namespace) -> int:
 
 
 def _run_host(args: argparse.Namespace) -> int:
-    """Start the host executable: replay a CSV through it, or pass stdin/stdout through."""
+    """Start the host executable: replay a CSV through it, or pass stdin/stdout through (a fixed-point artifact's:
+    the integer loop, :mod:`.fixed_run`)."""
     from gainlink.firmware.build import build
     from gainlink.shipping.artifact import load
 
     artifact = load(args.artifact)
-    exe = build(artifact, target="host").files["exe"]
+    res = build(artifact, target="host")
+    if is_fixed(artifact):  # the integer law the artifact certifies, not the float32 loop of the same export
+        from .fixed_run import run_fixed_host
+
+        return run_fixed_host(
+            artifact,
+            res.build_dir,
+            input_path=None if args.input is None else Path(args.input),
+            output_path=Path(args.output) if args.output else None,
+        )
+    exe = res.files["exe"]
     if args.input is None:
         return subprocess.run([str(exe)]).returncode
     return _replay_through_process(artifact, exe, Path(args.input), Path(args.output) if args.output else None)
@@ -446,7 +457,8 @@ def _add_run_parser(sub) -> None:
         "run",
         help="run the firmware for an artifact (host build, or a Cortex-M image in QEMU)",
         description="Build (cached) and start the host firmware. With --input, replay a CSV "
-        "(columns y0.., r0..) through the loop executable and write the replay CSV. With a Cortex-M "
+        "(columns y0.., r0..) through the loop executable and write the replay CSV (a fixed-point artifact: "
+        "the integer loop, its CSV after a '# numeric=q31|q15' line, as replay writes it). With a Cortex-M "
         "--target (or --board), run the image in QEMU as a bus node on its UART, served as a TCP socket: "
         "--mavlink tcp:HOST:PORT, or --can with an slcan configuration (channel socket://HOST:PORT).",
     )

@@ -4,7 +4,8 @@
  *
  * Each input line holds GL_FX_P samples then GL_FX_Q references (decimal, read as float; `nan`, `inf` allowed);
  * each step prints `step FLAGS SAT CLIP OVERFLOW U.. V.. XH.. Z..` (integers). `reset` restarts the loop from its
- * initial state; any other line is answered `error ...` and skipped.
+ * initial state; any other line is answered `error ...` and skipped. Every answer is flushed at once, as the float
+ * loop's main.c does, so that a program can drive it line by line through pipes (`gainlink firmware run`).
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -43,17 +44,19 @@ static void print_record(const gl_fixed_record_t *o)
         printf(" %ld", (long)o->Z[i]);
     }
     printf("\n");
+    fflush(stdout);
 }
 
 int main(void)
 {
     static gl_fixed_loop_t loop;
-    char line[1024];
+    char line[4096]; /* as main.c's */
     float vals[GL_FX_P + GL_FX_QA];
     float u[GL_FX_M];
     gl_fixed_record_t rec;
     (void)gl_fixed_init(&loop, &gl_fixed_gains_default);
     printf("gainlink-fixed %s sha256:%s\n", GL_FX_NAME, GL_FX_ARTIFACT_SHA256);
+    fflush(stdout);
     while (fgets(line, sizeof line, stdin) != NULL) {
         if (strncmp(line, "reset", 5) == 0) {
             gl_fixed_reset(&loop);
@@ -61,6 +64,7 @@ int main(void)
         }
         if (parse(line, vals, GL_FX_P + GL_FX_Q) != 0) {
             printf("error unreadable line\n");
+            fflush(stdout);
             continue;
         }
         (void)gl_fixed_step(&loop, vals, &vals[GL_FX_P], u);
