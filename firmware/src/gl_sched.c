@@ -111,7 +111,7 @@ gl_sched_status_t gl_sched_reset(gl_sched_t *loop)
     memcpy(loop->u, loop->u_prev, sizeof loop->u);
     loop->sat_mask = 0u;
     loop->sigma_flags = 0u;
-    loop->c_valid = 0u;
+    loop->c_valid = 0u; /* the start may land in any interval: nothing cached */
     return GL_SCHED_OK;
 }
 
@@ -137,17 +137,24 @@ static float shape_sigma(gl_sched_t *loop, float c, uint32_t *flags)
     return loop->sigma_f;
 }
 
-/** Step 2 of the law: the sigma this step uses (held, clipped, filtered, rate-limited); updates the held sigma. */
+/** Step 2 of the law: the sigma this step uses (held, clipped, filtered, rate-limited); updates the held sigma.
+ *  A sigma read from the measurement is finite already (the step refused the sample otherwise). */
 static float next_sigma(gl_sched_t *loop, float raw)
 {
     const float *S = loop->t->S;
     uint32_t flags = 0u;
     float sigma = loop->sigma;
-    if (!isfinite(raw)) {
+    if (GL_SIGMA_EXTERNAL && !isfinite(raw)) {
         flags = GL_SIGMA_HELD;
     } else {
-        float c = raw < S[0] ? S[0] : (raw > S[GL_NPTS - 1] ? S[GL_NPTS - 1] : raw);
-        flags = (c != raw) ? GL_SIGMA_CLIPPED : 0u;
+        float c = raw; /* clipped exactly when raw lies outside [S1, SN] (c != raw then) */
+        if (raw < S[0]) {
+            c = S[0];
+            flags = GL_SIGMA_CLIPPED;
+        } else if (raw > S[GL_NPTS - 1]) {
+            c = S[GL_NPTS - 1];
+            flags = GL_SIGMA_CLIPPED;
+        }
         if (loop->started == 0u) {
             loop->sigma_f = c;
             sigma = c;
@@ -160,107 +167,230 @@ static float next_sigma(gl_sched_t *loop, float raw)
     return sigma;
 }
 
-/** Step 3: the coefficients at sigma into loop->c (kept while sigma does not change). */
-static void interpolate(gl_sched_t *loop, float sigma)
+/** out[k] = X1[k] - X0[k]: the differences the interpolation multiplies, computed once per interval. */
+static void diff(float *out, const float *X0, const float *X1, uint32_t count)
 {
-    if (loop->c_valid != 0u && loop->c_sigma == sigma) {
-        return;
+    for (uint32_t k = 0; k < count; ++k) {
+        out[k] = X1[k] - X0[k];
     }
-    float lam;
-    const uint32_t i = interval(loop->t->S, sigma, &lam);
-    const gl_sched_tables_t *t = loop->t;
-    gl_sched_coeffs_t *c = &loop->c;
-    lerp(c->Kx, t->Kx[i], t->Kx[i + 1u], GL_M * GL_N, lam);
-#if GL_OBSERVER_FORM == GL_SCHED_FORM_CURRENT
-    lerp(c->Ky, t->Ky[i], t->Ky[i + 1u], GL_M * GL_P, lam);
-#endif
-    lerp(c->Kz, t->Kz[i], t->Kz[i + 1u], GL_M * GL_Q, lam);
-    lerp(c->F, t->F[i], t->F[i + 1u], GL_N * GL_N, lam);
-    lerp(c->G, t->G[i], t->G[i + 1u], GL_N * GL_M, lam);
-    lerp(c->Ly, t->Ly[i], t->Ly[i + 1u], GL_N * GL_P, lam);
-    loop->c_sigma = sigma;
-    loop->c_valid = 1u;
 }
 
-/** The command: v = u_prev - (Kx delta + Ky dy + Kz e_prev), clamped; du = u - u_prev. Returns the saturation bits. */
-static uint32_t command(gl_sched_t *loop, const float *dy, float *u, float *du)
+/** Step 3's interval i for sigma into the cache (x0 = X[i], d = X[i+1] - X[i], the bounds that keep it). */
+static void enter_interval(gl_sched_t *loop, float sigma)
 {
-    const gl_sched_coeffs_t *c = &loop->c;
+    const gl_sched_tables_t *t = loop->t;
+    float lam;
+    const uint32_t i = interval(t->S, sigma, &lam);
+    gl_sched_coeffs_t *x0 = &loop->x0;
+    gl_sched_coeffs_t *d = &loop->d;
+    memcpy(x0->Kx, t->Kx[i], sizeof x0->Kx);
+    diff(d->Kx, t->Kx[i], t->Kx[i + 1u], GL_M * GL_N);
+#if GL_OBSERVER_FORM == GL_SCHED_FORM_CURRENT
+    memcpy(x0->Ky, t->Ky[i], sizeof x0->Ky);
+    diff(d->Ky, t->Ky[i], t->Ky[i + 1u], GL_M * GL_P);
+#endif
+    memcpy(x0->Kz, t->Kz[i], sizeof x0->Kz);
+    diff(d->Kz, t->Kz[i], t->Kz[i + 1u], GL_M * GL_Q);
+    memcpy(x0->F, t->F[i], sizeof x0->F);
+    diff(d->F, t->F[i], t->F[i + 1u], GL_N * GL_N);
+    memcpy(x0->G, t->G[i], sizeof x0->G);
+    diff(d->G, t->G[i], t->G[i + 1u], GL_N * GL_M);
+    memcpy(x0->Ly, t->Ly[i], sizeof x0->Ly);
+    diff(d->Ly, t->Ly[i], t->Ly[i + 1u], GL_N * GL_P);
+    loop->ci = i;
+    loop->c_lo = (i == 0u) ? -INFINITY : t->S[i];
+    loop->c_hi = (i + 2u == GL_NPTS) ? INFINITY : t->S[i + 1u];
+    loop->c_s0 = t->S[i];
+    loop->c_width = t->S[i + 1u] - t->S[i];
+    loop->c_valid |= GL_SCHED_C_INTERVAL;
+}
+
+/** lam of sigma in its interval, (sigma - S[i]) / (S[i+1] - S[i]) as interval() computes it; enters the interval
+ *  when sigma left the cached one (the one interval() finds: c_lo <= sigma < c_hi). */
+static float lambda(gl_sched_t *loop, float sigma)
+{
+    if ((loop->c_valid & GL_SCHED_C_INTERVAL) == 0u || !(sigma >= loop->c_lo && sigma < loop->c_hi)) {
+        enter_interval(loop, sigma);
+    }
+    return (sigma - loop->c_s0) / loop->c_width;
+}
+
+/** out[k] = fmaf(lam, D[k], X0[k]): lerp() on the cached differences. */
+static void lerp_d(float *out, const float *X0, const float *D, uint32_t count, float lam)
+{
+    for (uint32_t k = 0; k < count; ++k) {
+        out[k] = GL_FMA(lam, D[k], X0[k]);
+    }
+}
+
+/** c = fmaf(lam, d, x0), every coefficient: what the law runs while sigma stands. */
+static void fill(gl_sched_t *loop, float lam)
+{
+    gl_sched_coeffs_t *c = &loop->c;
+    const gl_sched_coeffs_t *x0 = &loop->x0;
+    const gl_sched_coeffs_t *d = &loop->d;
+    lerp_d(c->Kx, x0->Kx, d->Kx, GL_M * GL_N, lam);
+#if GL_OBSERVER_FORM == GL_SCHED_FORM_CURRENT
+    lerp_d(c->Ky, x0->Ky, d->Ky, GL_M * GL_P, lam);
+#endif
+    lerp_d(c->Kz, x0->Kz, d->Kz, GL_M * GL_Q, lam);
+    lerp_d(c->F, x0->F, d->F, GL_N * GL_N, lam);
+    lerp_d(c->G, x0->G, d->G, GL_N * GL_M, lam);
+    lerp_d(c->Ly, x0->Ly, d->Ly, GL_N * GL_P, lam);
+}
+
+/* The law reads its coefficients either from c (fused = 0: sigma stands, c holds them) or interpolates each where
+ * it multiplies (fused = 1: fmaf(lam, d, x0), the same float32 value as c's, never stored): a moving sigma costs
+ * one load and one fused multiply-add per coefficient. Both are inlined with fused constant: two specialised
+ * copies of the law. */
+#define GL_INLINE static inline __attribute__((always_inline))
+
+/** Coefficient k of a group: a[k] (cached), or fmaf(lam, b[k], a[k]) (fused: a = x0, b = d). */
+GL_INLINE float coef(const float *a, const float *b, float lam, int fused, uint32_t k)
+{
+    return fused ? GL_FMA(lam, b[k], a[k]) : a[k];
+}
+
+/** The loop's state the law reads, in locals (the outputs may alias nothing it still needs). */
+typedef struct gl_sched_now {
+    float delta[GL_N];
+    float u_prev[GL_M];
+    float dy[GL_P];
+    float e_prev[GL_Q];
+} gl_sched_now_t;
+
+/** The command: v = u_prev - (Kx delta + Ky dy + Kz e_prev), clamped; du = u - u_prev. Returns the saturation bits. */
+GL_INLINE uint32_t command(const gl_sched_t *loop, const gl_sched_coeffs_t *a, const gl_sched_coeffs_t *b,
+                           float lam, int fused, const gl_sched_now_t *x, float *u, float *du)
+{
     const gl_sched_tables_t *t = loop->t;
     uint32_t sat = 0u;
     GL_UNROLL
     for (uint32_t i = 0; i < GL_M; ++i) {
-        float acc = c->Kx[i * GL_N] * loop->delta[0];
+        float acc = coef(a->Kx, b->Kx, lam, fused, i * GL_N) * x->delta[0];
         GL_UNROLL
         for (uint32_t j = 1; j < GL_N; ++j) {
-            acc = GL_FMA(c->Kx[i * GL_N + j], loop->delta[j], acc);
+            acc = GL_FMA(coef(a->Kx, b->Kx, lam, fused, i * GL_N + j), x->delta[j], acc);
         }
 #if GL_OBSERVER_FORM == GL_SCHED_FORM_CURRENT
         GL_UNROLL
         for (uint32_t k = 0; k < GL_P; ++k) {
-            acc = GL_FMA(c->Ky[i * GL_P + k], dy[k], acc);
+            acc = GL_FMA(coef(a->Ky, b->Ky, lam, fused, i * GL_P + k), x->dy[k], acc);
         }
-#else
-        (void)dy;
 #endif
         GL_UNROLL
         for (uint32_t j = 0; j < GL_Q; ++j) {
-            acc = GL_FMA(c->Kz[i * GL_Q + j], loop->e_prev[j], acc);
+            acc = GL_FMA(coef(a->Kz, b->Kz, lam, fused, i * GL_Q + j), x->e_prev[j], acc);
         }
-        const float v = loop->u_prev[i] - acc;
-        u[i] = v;
+        const float v = x->u_prev[i] - acc;
+        float ui = v;
         if (v < t->u_min[i]) {
-            u[i] = t->u_min[i];
+            ui = t->u_min[i];
             sat |= 1u << i;
         } else if (v > t->u_max[i]) {
-            u[i] = t->u_max[i];
+            ui = t->u_max[i];
             sat |= 1u << i;
         }
-        du[i] = u[i] - loop->u_prev[i];
+        u[i] = ui;
+        du[i] = ui - x->u_prev[i];
     }
     return sat;
 }
 
-/** delta = F delta + G du + Ly dy, one row at a time. */
-static void estimate(gl_sched_t *loop, const float *du, const float *dy)
+/** delta = F delta + G du + Ly dy, one row at a time (into loop->delta: x holds the old delta). */
+GL_INLINE void estimate(gl_sched_t *loop, const gl_sched_coeffs_t *a, const gl_sched_coeffs_t *b, float lam,
+                        int fused, const gl_sched_now_t *x, const float *du)
 {
-    const gl_sched_coeffs_t *c = &loop->c;
-    float next[GL_N];
     GL_UNROLL
     for (uint32_t i = 0; i < GL_N; ++i) {
-        float acc = c->F[i * GL_N] * loop->delta[0];
+        float acc = coef(a->F, b->F, lam, fused, i * GL_N) * x->delta[0];
         GL_UNROLL
         for (uint32_t j = 1; j < GL_N; ++j) {
-            acc = GL_FMA(c->F[i * GL_N + j], loop->delta[j], acc);
+            acc = GL_FMA(coef(a->F, b->F, lam, fused, i * GL_N + j), x->delta[j], acc);
         }
         GL_UNROLL
         for (uint32_t k = 0; k < GL_M; ++k) {
-            acc = GL_FMA(c->G[i * GL_M + k], du[k], acc);
+            acc = GL_FMA(coef(a->G, b->G, lam, fused, i * GL_M + k), du[k], acc);
         }
         GL_UNROLL
         for (uint32_t k = 0; k < GL_P; ++k) {
-            acc = GL_FMA(c->Ly[i * GL_P + k], dy[k], acc);
+            acc = GL_FMA(coef(a->Ly, b->Ly, lam, fused, i * GL_P + k), x->dy[k], acc);
         }
-        next[i] = acc;
+        loop->delta[i] = acc;
     }
-    memcpy(loop->delta, next, sizeof next);
 }
 
 /** e_prev = r - Ci y, y_prev = y, u_prev = u. */
-static void remember(gl_sched_t *loop, const float *y, const float *r, const float *u)
+GL_INLINE void remember(gl_sched_t *loop, const float *ys, const float *rs, const float *u)
 {
     const float *Ci = loop->t->Ci;
     GL_UNROLL
     for (uint32_t j = 0; j < GL_Q; ++j) {
-        float e = r[j];
+        float e = rs[j];
         GL_UNROLL
         for (uint32_t k = 0; k < GL_P; ++k) {
-            e = GL_FMA(-Ci[j * GL_P + k], y[k], e);
+            e = GL_FMA(-Ci[j * GL_P + k], ys[k], e);
         }
         loop->e_prev[j] = e;
     }
-    memcpy(loop->y_prev, y, sizeof loop->y_prev);
-    memcpy(loop->u_prev, u, sizeof loop->u_prev);
+    GL_UNROLL
+    for (uint32_t k = 0; k < GL_P; ++k) {
+        loop->y_prev[k] = ys[k];
+    }
+    GL_UNROLL
+    for (uint32_t i = 0; i < GL_M; ++i) {
+        loop->u_prev[i] = u[i];
+    }
+}
+
+/** Step 4 on the finite samples ys, rs with the coefficients of (a, b, lam, fused): the command into u, the
+ *  state updated. Returns the saturation bits. */
+GL_INLINE uint32_t law(gl_sched_t *loop, const gl_sched_coeffs_t *a, const gl_sched_coeffs_t *b, float lam,
+                       int fused, const float *ys, const float *rs, float *u)
+{
+    gl_sched_now_t x; /* element by element: registers, not a copy through the stack */
+    GL_UNROLL
+    for (uint32_t j = 0; j < GL_N; ++j) {
+        x.delta[j] = loop->delta[j];
+    }
+    GL_UNROLL
+    for (uint32_t i = 0; i < GL_M; ++i) {
+        x.u_prev[i] = loop->u_prev[i];
+    }
+    GL_UNROLL
+    for (uint32_t j = 0; j < GL_Q; ++j) {
+        x.e_prev[j] = loop->e_prev[j];
+    }
+    GL_UNROLL
+    for (uint32_t k = 0; k < GL_P; ++k) {
+        x.dy[k] = ys[k] - loop->y_prev[k];
+    }
+    float du[GL_M];
+    const uint32_t sat = command(loop, a, b, lam, fused, &x, u, du);
+    estimate(loop, a, b, lam, fused, &x, du);
+    remember(loop, ys, rs, u);
+    return sat;
+}
+
+/** Steps 3 and 4: the coefficients at sigma (c while sigma stands, interpolated in place while it moves). */
+static uint32_t law_at(gl_sched_t *loop, float sigma, const float *ys, const float *rs, float *u)
+{
+    uint32_t bits;
+    memcpy(&bits, &sigma, sizeof bits);
+    uint32_t last;
+    memcpy(&last, &loop->c_sigma, sizeof last);
+    if (bits == last && (loop->c_valid & GL_SCHED_C_COEFFS) != 0u) {
+        return law(loop, &loop->c, &loop->c, 0.0f, 0, ys, rs, u);
+    }
+    const float lam = lambda(loop, sigma);
+    if (bits == last) { /* sigma stood still since the last step: keep its coefficients from now on */
+        fill(loop, lam);
+        loop->c_valid |= GL_SCHED_C_COEFFS;
+        return law(loop, &loop->c, &loop->c, 0.0f, 0, ys, rs, u);
+    }
+    loop->c_sigma = sigma;
+    loop->c_valid &= ~GL_SCHED_C_COEFFS;
+    return law(loop, &loop->x0, &loop->d, lam, 1, ys, rs, u);
 }
 
 /** The first valid sample after a reset starts the law where it is: no kick. */
@@ -288,34 +418,51 @@ static gl_sched_status_t refuse(gl_sched_t *loop, float *u)
     return GL_SCHED_ERR_NANINF;
 }
 
+/** ys = y, rs = r (locals the law reads); 0 when any of them is not finite. The probe y0 - y0 is 0 for a finite
+ *  y0 and NaN otherwise; fmaf(x, probe, probe) keeps it 0 only while every further x is finite (as gl_loop_step). */
+static int load_finite(const float *y, const float *r, float *ys, float *rs)
+{
+    ys[0] = y[0];
+    float probe = ys[0] - ys[0];
+    GL_UNROLL
+    for (uint32_t k = 1; k < GL_P; ++k) {
+        ys[k] = y[k];
+        probe = GL_FMA(ys[k], probe, probe);
+    }
+    GL_UNROLL
+    for (uint32_t j = 0; j < GL_Q; ++j) {
+        rs[j] = r[j];
+        probe = GL_FMA(rs[j], probe, probe);
+    }
+    return probe == probe;
+}
+
 gl_sched_status_t gl_sched_step(gl_sched_t *loop, const float *y, const float *r, const float *s, float *u)
 {
     if (loop == NULL || loop->t == NULL || y == NULL || r == NULL || u == NULL || (GL_E > 0 && s == NULL)) {
         return GL_SCHED_ERR_NULL;
     }
-    if (!all_finite(y, GL_P) || !all_finite(r, GL_Q)) {
+    float ys[GL_P];
+    float rs[GL_Q];
+    if (!load_finite(y, r, ys, rs)) {
         return refuse(loop, u);
     }
 #if GL_SIGMA_EXTERNAL
     const float sigma = next_sigma(loop, s[GL_SIGMA_INDEX]);
 #else
     (void)s;
-    const float sigma = next_sigma(loop, y[GL_SIGMA_INDEX]);
+    const float sigma = next_sigma(loop, ys[GL_SIGMA_INDEX]);
 #endif
     if (loop->started == 0u) {
-        start(loop, y, sigma);
+        start(loop, ys, sigma);
     }
-    interpolate(loop, sigma);
-    float dy[GL_P];
-    float du[GL_M];
+    float us[GL_M];
+    const uint32_t sat = law_at(loop, sigma, ys, rs, us);
     GL_UNROLL
-    for (uint32_t k = 0; k < GL_P; ++k) {
-        dy[k] = y[k] - loop->y_prev[k];
+    for (uint32_t i = 0; i < GL_M; ++i) {
+        u[i] = us[i];
+        loop->u[i] = us[i];
     }
-    const uint32_t sat = command(loop, dy, u, du);
-    estimate(loop, du, dy);
-    remember(loop, y, r, u);
-    memcpy(loop->u, u, sizeof loop->u);
     loop->sat_mask = sat;
     return sat != 0u ? GL_SCHED_SATURATED : GL_SCHED_OK;
 }
