@@ -111,7 +111,7 @@ gl_sched_status_t gl_sched_reset(gl_sched_t *loop)
     memcpy(loop->u, loop->u_prev, sizeof loop->u);
     loop->sat_mask = 0u;
     loop->sigma_flags = 0u;
-    loop->c_valid = 0u; /* the start may land in any interval: nothing cached */
+    gl_sched_retable(loop); /* the start may land in any interval: nothing cached */
     return GL_SCHED_OK;
 }
 
@@ -175,7 +175,7 @@ static void diff(float *out, const float *X0, const float *X1, uint32_t count)
     }
 }
 
-/** Step 3's interval i for sigma into the cache (x0 = X[i], d = X[i+1] - X[i], the bounds that keep it). */
+/** Step 3's interval i for sigma into the cache (x0 = X[i], d = X[i+1] - X[i], S[i], S[i+1] - S[i]). */
 static void enter_interval(gl_sched_t *loop, float sigma)
 {
     const gl_sched_tables_t *t = loop->t;
@@ -197,22 +197,27 @@ static void enter_interval(gl_sched_t *loop, float sigma)
     diff(d->G, t->G[i], t->G[i + 1u], GL_N * GL_M);
     memcpy(x0->Ly, t->Ly[i], sizeof x0->Ly);
     diff(d->Ly, t->Ly[i], t->Ly[i + 1u], GL_N * GL_P);
-    loop->ci = i;
-    loop->c_lo = (i == 0u) ? -INFINITY : t->S[i];
-    loop->c_hi = (i + 2u == GL_NPTS) ? INFINITY : t->S[i + 1u];
     loop->c_s0 = t->S[i];
     loop->c_width = t->S[i + 1u] - t->S[i];
-    loop->c_valid |= GL_SCHED_C_INTERVAL;
+    /* lam's bits as an unsigned integer are below 0x3f800000 exactly for +0 <= lam < 1, and (sigma - S[i]) and the
+     * division round monotonically: sigma < S[i] gives lam < 0 or -0, sigma >= S[i+1] gives lam >= 1. So the test
+     * keeps only sigmas of this interval (the last one also holds S[N]: lam = 1). A width that overflowed keeps
+     * nothing: every step searches again. A sigma it turns away (-0 at S[i] = 0) is searched for again: same i. */
+    loop->c_limit = isfinite(loop->c_width) ? (i + 2u == GL_NPTS ? 0x3f800001u : 0x3f800000u) : 0u;
 }
 
-/** lam of sigma in its interval, (sigma - S[i]) / (S[i+1] - S[i]) as interval() computes it; enters the interval
- *  when sigma left the cached one (the one interval() finds: c_lo <= sigma < c_hi). */
+/** lam of sigma in its interval, (sigma - S[i]) / (S[i+1] - S[i]) as interval() computes it (the same float32
+ *  operations on the same values); enters the interval first when sigma left the cached one. */
 static float lambda(gl_sched_t *loop, float sigma)
 {
-    if ((loop->c_valid & GL_SCHED_C_INTERVAL) == 0u || !(sigma >= loop->c_lo && sigma < loop->c_hi)) {
+    float lam = (sigma - loop->c_s0) / loop->c_width;
+    uint32_t bits;
+    memcpy(&bits, &lam, sizeof bits);
+    if (bits >= loop->c_limit) {
         enter_interval(loop, sigma);
+        lam = (sigma - loop->c_s0) / loop->c_width;
     }
-    return (sigma - loop->c_s0) / loop->c_width;
+    return lam;
 }
 
 /** out[k] = fmaf(lam, D[k], X0[k]): lerp() on the cached differences. */
@@ -372,25 +377,33 @@ GL_INLINE uint32_t law(gl_sched_t *loop, const gl_sched_coeffs_t *a, const gl_sc
     return sat;
 }
 
-/** Steps 3 and 4: the coefficients at sigma (c while sigma stands, interpolated in place while it moves). */
-static uint32_t law_at(gl_sched_t *loop, float sigma, const float *ys, const float *rs, float *u)
+/** Steps 3 and 4: the coefficients at sigma (c while sigma stands, interpolated in place while it moves); held is
+ *  the sigma of the last valid step (c holds its coefficients when c_valid). */
+static uint32_t law_at(gl_sched_t *loop, float sigma, float held, const float *ys, const float *rs, float *u)
 {
     uint32_t bits;
     memcpy(&bits, &sigma, sizeof bits);
     uint32_t last;
-    memcpy(&last, &loop->c_sigma, sizeof last);
-    if (bits == last && (loop->c_valid & GL_SCHED_C_COEFFS) != 0u) {
+    memcpy(&last, &held, sizeof last);
+    if (bits == last && loop->c_valid != 0u) {
         return law(loop, &loop->c, &loop->c, 0.0f, 0, ys, rs, u);
     }
     const float lam = lambda(loop, sigma);
     if (bits == last) { /* sigma stood still since the last step: keep its coefficients from now on */
         fill(loop, lam);
-        loop->c_valid |= GL_SCHED_C_COEFFS;
+        loop->c_valid = 1u;
         return law(loop, &loop->c, &loop->c, 0.0f, 0, ys, rs, u);
     }
-    loop->c_sigma = sigma;
-    loop->c_valid &= ~GL_SCHED_C_COEFFS;
+    loop->c_valid = 0u;
     return law(loop, &loop->x0, &loop->d, lam, 1, ys, rs, u);
+}
+
+void gl_sched_retable(gl_sched_t *loop)
+{
+    if (loop != NULL) {
+        loop->c_valid = 0u;
+        loop->c_limit = 0u;
+    }
 }
 
 /** The first valid sample after a reset starts the law where it is: no kick. */
@@ -447,6 +460,7 @@ gl_sched_status_t gl_sched_step(gl_sched_t *loop, const float *y, const float *r
     if (!load_finite(y, r, ys, rs)) {
         return refuse(loop, u);
     }
+    const float held = loop->sigma;
 #if GL_SIGMA_EXTERNAL
     const float sigma = next_sigma(loop, s[GL_SIGMA_INDEX]);
 #else
@@ -457,7 +471,7 @@ gl_sched_status_t gl_sched_step(gl_sched_t *loop, const float *y, const float *r
         start(loop, ys, sigma);
     }
     float us[GL_M];
-    const uint32_t sat = law_at(loop, sigma, ys, rs, us);
+    const uint32_t sat = law_at(loop, sigma, held, ys, rs, us);
     GL_UNROLL
     for (uint32_t i = 0; i < GL_M; ++i) {
         u[i] = us[i];

@@ -107,23 +107,16 @@ typedef struct gl_sched_coeffs {
     float Ly[GL_N * GL_P];
 } gl_sched_coeffs_t;
 
-/** gl_sched_t::c_valid bits: c holds the coefficients at c_sigma; x0, d, ci... hold an interval. */
-#define GL_SCHED_C_COEFFS 1u
-#define GL_SCHED_C_INTERVAL 2u
-
 /** @brief Scheduled loop instance: caller-owned (static storage), no allocation. Fields are read-only for callers. */
 typedef struct gl_sched {
     const gl_sched_tables_t *t; /**< The tables it runs on. */
-    gl_sched_coeffs_t c;        /**< Coefficients interpolated at c_sigma (while sigma stands). */
-    gl_sched_coeffs_t x0;       /**< The cached interval's coefficients at its first point, X[ci]. */
-    gl_sched_coeffs_t d;        /**< And their differences X[ci+1] - X[ci] (float32, as the law computes them). */
-    float c_sigma;              /**< The sigma of the last step that ran the law (c holds its coefficients when valid). */
-    uint32_t c_valid;           /**< GL_SCHED_C_* bits; 0 invalidates every cache (after changing the tables in place). */
-    uint32_t ci;                /**< The cached interval i: S[i] <= sigma <= S[i+1]. */
-    float c_lo;                 /**< It holds the sigmas with c_lo <= sigma < c_hi (-inf, +inf at the envelope's ends). */
-    float c_hi;                 /**< See c_lo. */
-    float c_s0;                 /**< S[ci]. */
-    float c_width;              /**< S[ci+1] - S[ci]. */
+    gl_sched_coeffs_t c;        /**< Coefficients interpolated at the held sigma (kept while sigma stands). */
+    gl_sched_coeffs_t x0;       /**< The cached interval's coefficients at its first point, X[i]. */
+    gl_sched_coeffs_t d;        /**< And their differences X[i+1] - X[i] (float32, as the law computes them). */
+    uint32_t c_valid;           /**< 1 when c holds the coefficients at the held sigma. */
+    uint32_t c_limit;           /**< The cached interval holds sigma when lam's bits are below it (0: none cached). */
+    float c_s0;                 /**< S[i] of the cached interval. */
+    float c_width;              /**< S[ci+1] - S[i] of the cached interval. */
     float delta[GL_N];          /**< The estimate's increment xh[k] - xh[k-1]. */
     float u_prev[GL_M];         /**< Last applied (saturated) command. */
     float y_prev[GL_P];         /**< Last valid measurement. */
@@ -154,6 +147,13 @@ gl_sched_status_t gl_sched_init(gl_sched_t *loop, const gl_sched_tables_t *table
  * @return GL_SCHED_OK or GL_SCHED_ERR_NULL.
  */
 gl_sched_status_t gl_sched_reset(gl_sched_t *loop);
+
+/**
+ * @brief Forget every coefficient the loop keeps (interpolated, or of its interval): call it after changing the
+ *        tables it runs on in place (the next step interpolates from them again). The law's state is untouched.
+ * @param[in,out] loop  Loop instance.
+ */
+void gl_sched_retable(gl_sched_t *loop);
 
 /**
  * @brief One sample of the scheduled law (see the file comment).
