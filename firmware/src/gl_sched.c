@@ -12,6 +12,8 @@
 
 /* Fixed dimensions let the compiler unroll every loop of the step completely. */
 #define GL_UNROLL _Pragma("GCC unroll 64")
+/* A branch the step rarely takes (laid out off the straight path). */
+#define GL_UNLIKELY(x) __builtin_expect(!!(x), 0)
 
 static int all_finite(const float *x, uint32_t count)
 {
@@ -167,57 +169,41 @@ static float next_sigma(gl_sched_t *loop, float raw)
     return sigma;
 }
 
-/** out[k] = X1[k] - X0[k]: the differences the interpolation multiplies, computed once per interval. */
-static void diff(float *out, const float *X0, const float *X1, uint32_t count)
+/** x0[k] = X0[k] and d[k] = X1[k] - X0[k]: the interval's start and the differences the interpolation multiplies,
+ *  once per interval entered. */
+static inline void split(float *x0, float *d, const float *X0, const float *X1, uint32_t count)
 {
+    GL_UNROLL
     for (uint32_t k = 0; k < count; ++k) {
-        out[k] = X1[k] - X0[k];
+        x0[k] = X0[k];
+        d[k] = X1[k] - X0[k];
     }
 }
 
 /** Step 3's interval i for sigma into the cache (x0 = X[i], d = X[i+1] - X[i], S[i], S[i+1] - S[i]). */
-static void enter_interval(gl_sched_t *loop, float sigma)
+static __attribute__((noinline)) void enter_interval(gl_sched_t *loop, float sigma)
 {
     const gl_sched_tables_t *t = loop->t;
     float lam;
     const uint32_t i = interval(t->S, sigma, &lam);
     gl_sched_coeffs_t *x0 = &loop->x0;
     gl_sched_coeffs_t *d = &loop->d;
-    memcpy(x0->Kx, t->Kx[i], sizeof x0->Kx);
-    diff(d->Kx, t->Kx[i], t->Kx[i + 1u], GL_M * GL_N);
+    split(x0->Kx, d->Kx, t->Kx[i], t->Kx[i + 1u], GL_M * GL_N);
 #if GL_OBSERVER_FORM == GL_SCHED_FORM_CURRENT
-    memcpy(x0->Ky, t->Ky[i], sizeof x0->Ky);
-    diff(d->Ky, t->Ky[i], t->Ky[i + 1u], GL_M * GL_P);
+    split(x0->Ky, d->Ky, t->Ky[i], t->Ky[i + 1u], GL_M * GL_P);
 #endif
-    memcpy(x0->Kz, t->Kz[i], sizeof x0->Kz);
-    diff(d->Kz, t->Kz[i], t->Kz[i + 1u], GL_M * GL_Q);
-    memcpy(x0->F, t->F[i], sizeof x0->F);
-    diff(d->F, t->F[i], t->F[i + 1u], GL_N * GL_N);
-    memcpy(x0->G, t->G[i], sizeof x0->G);
-    diff(d->G, t->G[i], t->G[i + 1u], GL_N * GL_M);
-    memcpy(x0->Ly, t->Ly[i], sizeof x0->Ly);
-    diff(d->Ly, t->Ly[i], t->Ly[i + 1u], GL_N * GL_P);
+    split(x0->Kz, d->Kz, t->Kz[i], t->Kz[i + 1u], GL_M * GL_Q);
+    split(x0->F, d->F, t->F[i], t->F[i + 1u], GL_N * GL_N);
+    split(x0->G, d->G, t->G[i], t->G[i + 1u], GL_N * GL_M);
+    split(x0->Ly, d->Ly, t->Ly[i], t->Ly[i + 1u], GL_N * GL_P);
     loop->c_s0 = t->S[i];
     loop->c_width = t->S[i + 1u] - t->S[i];
     /* lam's bits as an unsigned integer are below 0x3f800000 exactly for +0 <= lam < 1, and (sigma - S[i]) and the
      * division round monotonically: sigma < S[i] gives lam < 0 or -0, sigma >= S[i+1] gives lam >= 1. So the test
      * keeps only sigmas of this interval (the last one also holds S[N]: lam = 1). A width that overflowed keeps
      * nothing: every step searches again. A sigma it turns away (-0 at S[i] = 0) is searched for again: same i. */
-    loop->c_limit = isfinite(loop->c_width) ? (i + 2u == GL_NPTS ? 0x3f800001u : 0x3f800000u) : 0u;
-}
-
-/** lam of sigma in its interval, (sigma - S[i]) / (S[i+1] - S[i]) as interval() computes it (the same float32
- *  operations on the same values); enters the interval first when sigma left the cached one. */
-static float lambda(gl_sched_t *loop, float sigma)
-{
-    float lam = (sigma - loop->c_s0) / loop->c_width;
-    uint32_t bits;
-    memcpy(&bits, &lam, sizeof bits);
-    if (bits >= loop->c_limit) {
-        enter_interval(loop, sigma);
-        lam = (sigma - loop->c_s0) / loop->c_width;
-    }
-    return lam;
+    loop->c_span = isfinite(loop->c_width) ? (i + 2u == GL_NPTS ? 0x3f800001u : 0x3f800000u) : 0u;
+    loop->c_limit = loop->fixed_ok != 0u ? loop->c_span : 0u; /* else every moving step interpolates all */
 }
 
 /** out[k] = fmaf(lam, D[k], X0[k]): lerp() on the cached differences. */
@@ -244,16 +230,24 @@ static void fill(gl_sched_t *loop, float lam)
     lerp_d(c->Ly, x0->Ly, d->Ly, GL_N * GL_P, lam);
 }
 
-/* The law reads its coefficients either from c (fused = 0: sigma stands, c holds them) or interpolates each where
- * it multiplies (fused = 1: fmaf(lam, d, x0), the same float32 value as c's, never stored): a moving sigma costs
- * one load and one fused multiply-add per coefficient. Both are inlined with fused constant: two specialised
- * copies of the law. */
+/* The law reads its coefficients from c (fused = GL_LERP_NONE: sigma stands, c holds them) or interpolates them
+ * where it multiplies (fmaf(lam, d, x0), the same float32 value as c's, never stored): every one (GL_LERP_ALL), or
+ * only those that vary between the points (GL_LERP_VARYING: a coefficient of a GL_SCHED_FIXED_* mask is x0's, and
+ * fmaf(lam, +0, x) == x exactly for such an x, the same at every point and not -0). Inlined with fused constant:
+ * specialised copies of the law, a moving sigma costing one load and one fused multiply-add per varying
+ * coefficient. */
 #define GL_INLINE static inline __attribute__((always_inline))
+#define GL_LERP_NONE 0
+#define GL_LERP_ALL 1
+#define GL_LERP_VARYING 2
 
-/** Coefficient k of a group: a[k] (cached), or fmaf(lam, b[k], a[k]) (fused: a = x0, b = d). */
-GL_INLINE float coef(const float *a, const float *b, float lam, int fused, uint32_t k)
+/** Coefficient k of a group: a[k], or fmaf(lam, b[k], a[k]) (a = x0, b = d) as fused and fixed (the group's mask)
+ *  say. */
+GL_INLINE float coef(const float *a, const float *b, float lam, int fused, uint32_t fixed, uint32_t k)
 {
-    return fused ? GL_FMA(lam, b[k], a[k]) : a[k];
+    const int is_fixed = k < 32u && ((fixed >> k) & 1u) != 0u;
+    const int varies = fused == GL_LERP_ALL || (fused == GL_LERP_VARYING && !is_fixed);
+    return varies ? GL_FMA(lam, b[k], a[k]) : a[k];
 }
 
 /** The loop's state the law reads, in locals (the outputs may alias nothing it still needs). */
@@ -272,20 +266,20 @@ GL_INLINE uint32_t command(const gl_sched_t *loop, const gl_sched_coeffs_t *a, c
     uint32_t sat = 0u;
     GL_UNROLL
     for (uint32_t i = 0; i < GL_M; ++i) {
-        float acc = coef(a->Kx, b->Kx, lam, fused, i * GL_N) * x->delta[0];
+        float acc = coef(a->Kx, b->Kx, lam, fused, GL_SCHED_FIXED_KX, i * GL_N) * x->delta[0];
         GL_UNROLL
         for (uint32_t j = 1; j < GL_N; ++j) {
-            acc = GL_FMA(coef(a->Kx, b->Kx, lam, fused, i * GL_N + j), x->delta[j], acc);
+            acc = GL_FMA(coef(a->Kx, b->Kx, lam, fused, GL_SCHED_FIXED_KX, i * GL_N + j), x->delta[j], acc);
         }
 #if GL_OBSERVER_FORM == GL_SCHED_FORM_CURRENT
         GL_UNROLL
         for (uint32_t k = 0; k < GL_P; ++k) {
-            acc = GL_FMA(coef(a->Ky, b->Ky, lam, fused, i * GL_P + k), x->dy[k], acc);
+            acc = GL_FMA(coef(a->Ky, b->Ky, lam, fused, GL_SCHED_FIXED_KY, i * GL_P + k), x->dy[k], acc);
         }
 #endif
         GL_UNROLL
         for (uint32_t j = 0; j < GL_Q; ++j) {
-            acc = GL_FMA(coef(a->Kz, b->Kz, lam, fused, i * GL_Q + j), x->e_prev[j], acc);
+            acc = GL_FMA(coef(a->Kz, b->Kz, lam, fused, GL_SCHED_FIXED_KZ, i * GL_Q + j), x->e_prev[j], acc);
         }
         const float v = x->u_prev[i] - acc;
         float ui = v;
@@ -308,18 +302,18 @@ GL_INLINE void estimate(gl_sched_t *loop, const gl_sched_coeffs_t *a, const gl_s
 {
     GL_UNROLL
     for (uint32_t i = 0; i < GL_N; ++i) {
-        float acc = coef(a->F, b->F, lam, fused, i * GL_N) * x->delta[0];
+        float acc = coef(a->F, b->F, lam, fused, GL_SCHED_FIXED_F, i * GL_N) * x->delta[0];
         GL_UNROLL
         for (uint32_t j = 1; j < GL_N; ++j) {
-            acc = GL_FMA(coef(a->F, b->F, lam, fused, i * GL_N + j), x->delta[j], acc);
+            acc = GL_FMA(coef(a->F, b->F, lam, fused, GL_SCHED_FIXED_F, i * GL_N + j), x->delta[j], acc);
         }
         GL_UNROLL
         for (uint32_t k = 0; k < GL_M; ++k) {
-            acc = GL_FMA(coef(a->G, b->G, lam, fused, i * GL_M + k), du[k], acc);
+            acc = GL_FMA(coef(a->G, b->G, lam, fused, GL_SCHED_FIXED_G, i * GL_M + k), du[k], acc);
         }
         GL_UNROLL
         for (uint32_t k = 0; k < GL_P; ++k) {
-            acc = GL_FMA(coef(a->Ly, b->Ly, lam, fused, i * GL_P + k), x->dy[k], acc);
+            acc = GL_FMA(coef(a->Ly, b->Ly, lam, fused, GL_SCHED_FIXED_LY, i * GL_P + k), x->dy[k], acc);
         }
         loop->delta[i] = acc;
     }
@@ -377,32 +371,91 @@ GL_INLINE uint32_t law(gl_sched_t *loop, const gl_sched_coeffs_t *a, const gl_sc
     return sat;
 }
 
+/** lam the slow way, when the fast test failed: sigma left the cached interval (searched again), or the tables break
+ *  the GL_SCHED_FIXED_* masks (c_limit 0: the caller interpolates every coefficient). */
+static __attribute__((noinline)) float searched(gl_sched_t *loop, float sigma)
+{
+    float lam = (sigma - loop->c_s0) / loop->c_width;
+    uint32_t bits;
+    memcpy(&bits, &lam, sizeof bits);
+    if (bits >= loop->c_span) {
+        enter_interval(loop, sigma);
+        lam = (sigma - loop->c_s0) / loop->c_width;
+    }
+    return lam;
+}
+
+/** c_sigma when c holds no coefficients: a NaN's bits, never those of a sigma (always finite). */
+#define GL_SCHED_C_NONE 0x7fc00000u
+
 /** Steps 3 and 4: the coefficients at sigma (c while sigma stands, interpolated in place while it moves); held is
- *  the sigma of the last valid step (c holds its coefficients when c_valid). */
+ *  the sigma of the last valid step. lam is (sigma - S[i]) / (S[i+1] - S[i]) as interval() computes it (the same
+ *  float32 operations on the same values). */
 static uint32_t law_at(gl_sched_t *loop, float sigma, float held, const float *ys, const float *rs, float *u)
 {
     uint32_t bits;
     memcpy(&bits, &sigma, sizeof bits);
     uint32_t last;
     memcpy(&last, &held, sizeof last);
-    if (bits == last && loop->c_valid != 0u) {
-        return law(loop, &loop->c, &loop->c, 0.0f, 0, ys, rs, u);
+    const int stands = bits == last;
+    if (!stands || loop->c_sigma != bits) {
+        float lam = (sigma - loop->c_s0) / loop->c_width;
+        uint32_t lbits;
+        memcpy(&lbits, &lam, sizeof lbits);
+        const int fast = lbits < loop->c_limit; /* in the cached interval, and the tables hold the masks */
+        if (!fast) {
+            lam = searched(loop, sigma);
+        }
+        if (!stands) {
+            if (fast) {
+                return law(loop, &loop->x0, &loop->d, lam, GL_LERP_VARYING, ys, rs, u);
+            }
+            return law(loop, &loop->x0, &loop->d, lam, GL_LERP_ALL, ys, rs, u);
+        }
+        fill(loop, lam); /* sigma stood still since the last step: keep its coefficients from now on */
+        loop->c_sigma = bits;
     }
-    const float lam = lambda(loop, sigma);
-    if (bits == last) { /* sigma stood still since the last step: keep its coefficients from now on */
-        fill(loop, lam);
-        loop->c_valid = 1u;
-        return law(loop, &loop->c, &loop->c, 0.0f, 0, ys, rs, u);
+    return law(loop, &loop->c, &loop->c, 0.0f, GL_LERP_NONE, ys, rs, u);
+}
+
+/** 1 when the coefficients mask names (bit k, k < 32) are the same float32 at every point and not -0. */
+static int fixed_group(const float *X, uint32_t count, uint32_t mask)
+{
+    for (uint32_t k = 0; k < count && k < 32u; ++k) {
+        if (((mask >> k) & 1u) == 0u) {
+            continue;
+        }
+        uint32_t b0;
+        memcpy(&b0, &X[k], sizeof b0);
+        for (uint32_t i = 1; i < GL_NPTS; ++i) {
+            uint32_t bi;
+            memcpy(&bi, &X[i * count + k], sizeof bi);
+            if (bi != b0 || b0 == 0x80000000u) {
+                return 0;
+            }
+        }
     }
-    loop->c_valid = 0u;
-    return law(loop, &loop->x0, &loop->d, lam, 1, ys, rs, u);
+    return 1;
+}
+
+/** 1 when the tables hold the GL_SCHED_FIXED_* masks the step was compiled with. */
+static int fixed_hold(const gl_sched_tables_t *t)
+{
+    return fixed_group(&t->Kx[0][0], GL_M * GL_N, GL_SCHED_FIXED_KX) &&
+           fixed_group(&t->Ky[0][0], GL_M * GL_P, GL_SCHED_FIXED_KY) &&
+           fixed_group(&t->Kz[0][0], GL_M * GL_Q, GL_SCHED_FIXED_KZ) &&
+           fixed_group(&t->F[0][0], GL_N * GL_N, GL_SCHED_FIXED_F) &&
+           fixed_group(&t->G[0][0], GL_N * GL_M, GL_SCHED_FIXED_G) &&
+           fixed_group(&t->Ly[0][0], GL_N * GL_P, GL_SCHED_FIXED_LY);
 }
 
 void gl_sched_retable(gl_sched_t *loop)
 {
-    if (loop != NULL) {
-        loop->c_valid = 0u;
+    if (loop != NULL && loop->t != NULL) {
+        loop->c_sigma = GL_SCHED_C_NONE;
         loop->c_limit = 0u;
+        loop->c_span = 0u;
+        loop->fixed_ok = (uint32_t)fixed_hold(loop->t);
     }
 }
 
