@@ -485,7 +485,8 @@ static gl_sched_status_t refuse(gl_sched_t *loop, float *u)
 }
 
 /** ys = y, rs = r (locals the law reads); 0 when any of them is not finite. The probe y0 - y0 is 0 for a finite
- *  y0 and NaN otherwise; fmaf(x, probe, probe) keeps it 0 only while every further x is finite (as gl_loop_step). */
+ *  y0 and NaN otherwise; probe * x stays 0 only while every further x is finite (0 * inf is NaN): one subtraction
+ *  and a multiplication per further value, no fmaf (a library call on a host without FMA instructions). */
 static int load_finite(const float *y, const float *r, float *ys, float *rs)
 {
     ys[0] = y[0];
@@ -493,12 +494,12 @@ static int load_finite(const float *y, const float *r, float *ys, float *rs)
     GL_UNROLL
     for (uint32_t k = 1; k < GL_P; ++k) {
         ys[k] = y[k];
-        probe = GL_FMA(ys[k], probe, probe);
+        probe = probe * ys[k];
     }
     GL_UNROLL
     for (uint32_t j = 0; j < GL_Q; ++j) {
         rs[j] = r[j];
-        probe = GL_FMA(rs[j], probe, probe);
+        probe = probe * rs[j];
     }
     return probe == probe;
 }
