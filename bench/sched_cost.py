@@ -65,14 +65,16 @@ def samples(N: int, *, standing: bool = False):
     return Y, R, h.reshape(N, 1)
 
 
-def host_ns_per_step(run, N: int) -> float:
-    """Best of three block calls of ``N`` steps, in nanoseconds per step."""
-    best = np.inf
-    for _ in range(3):
-        t0 = time.perf_counter()
-        run()
-        best = min(best, time.perf_counter() - t0)
-    return best / N * 1e9
+def host_ns_per_step(runs: dict, N: int, rounds: int = 5) -> dict:
+    """Per run, the best of ``rounds`` block calls of ``N`` steps in nanoseconds per step; the runs take turns in
+    each round, so a loaded machine slows them alike."""
+    best = dict.fromkeys(runs, np.inf)
+    for _ in range(rounds):
+        for name, run in runs.items():
+            t0 = time.perf_counter()
+            run()
+            best[name] = min(best[name], time.perf_counter() - t0)
+    return {name: t / N * 1e9 for name, t in best.items()}
 
 
 def main() -> int:
@@ -95,10 +97,10 @@ def main() -> int:
     external = count_sched_step_instructions(elf_e, ext, Y=Y, R=R, S=H)
     Yh, Rh, _ = samples(HOST_STEPS)
     nat_p, nat_s = NativeLoop(plain), NativeScheduledLoop(sched)
-    host_p = host_ns_per_step(lambda: nat_p.run_raw(Yh, Rh), HOST_STEPS)
-    host_s = host_ns_per_step(lambda: nat_s.run_raw(Yh, Rh), HOST_STEPS)
     Yhs, _, _ = samples(HOST_STEPS, standing=True)
-    host_st = host_ns_per_step(lambda: nat_s.run_raw(Yhs, Rh), HOST_STEPS)
+    host = host_ns_per_step({"plain": lambda: nat_p.run_raw(Yh, Rh), "moving": lambda: nat_s.run_raw(Yh, Rh),
+                             "standing": lambda: nat_s.run_raw(Yhs, Rh)}, HOST_STEPS)  # fmt: skip
+    host_p, host_s, host_st = host["plain"], host["moving"], host["standing"]
     size_s = size_report(elf_s, board="mps2-an386")
     m4 = {
         "unscheduled_instructions_per_step": round(base.per_step, 2),
