@@ -56,10 +56,13 @@ def tank_spec(points=LEVELS, external: bool = False) -> dict:
 
 
 def samples(N: int, *, standing: bool = False):
-    """Level samples sweeping the envelope twice with noise (or standing above it), reference steps."""
+    """Level samples sweeping the envelope twice with noise, inside it on every step (never clipped: sigma moves on
+    every step), or standing above it; reference steps."""
     rng = np.random.default_rng(3)
     t = np.arange(N)
-    h = 0.52 - 0.5 * np.cos(2 * np.pi * t / (N / 2)) + 0.002 * rng.standard_normal(N)
+    h = 0.52 - 0.47 * np.cos(2 * np.pi * t / (N / 2)) + 0.002 * rng.standard_normal(N)
+    inside = (h.astype(np.float32) > np.float32(LEVELS[0])) & (h.astype(np.float32) < np.float32(LEVELS[-1]))
+    assert inside.all() and np.all(np.diff(h) != 0), "the sweep must move inside the envelope on every step"
     Y = (np.full(N, 1.5) if standing else h).reshape(N, 1)
     R = np.where((t // 300) % 2 == 0, 0.3, 0.7).reshape(N, 1)
     return Y, R, h.reshape(N, 1)

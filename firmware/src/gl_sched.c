@@ -12,8 +12,6 @@
 
 /* Fixed dimensions let the compiler unroll every loop of the step completely. */
 #define GL_UNROLL _Pragma("GCC unroll 64")
-/* A branch the step rarely takes (laid out off the straight path). */
-#define GL_UNLIKELY(x) __builtin_expect(!!(x), 0)
 
 static int all_finite(const float *x, uint32_t count)
 {
@@ -117,14 +115,20 @@ gl_sched_status_t gl_sched_reset(gl_sched_t *loop)
     return GL_SCHED_OK;
 }
 
+/* Without a filter and a rate limit, sigma_f is sigma on every step: the step keeps sigma only, and
+ * gl_sched_state() reports it as sigma_f too. */
+#define GL_SIGMA_SHAPED (GL_SIGMA_FILTERED || GL_SIGMA_RATE_LIMITED)
+
 /** Sigma after the filter and the rate limit (steps 2 of the law; started loops only). */
 static float shape_sigma(gl_sched_t *loop, float c, uint32_t *flags)
 {
     const gl_sched_tables_t *t = loop->t;
 #if GL_SIGMA_FILTERED
     loop->sigma_f = GL_FMA(t->alpha, c - loop->sigma_f, loop->sigma_f);
-#else
+#elif GL_SIGMA_SHAPED
     loop->sigma_f = c;
+#else
+    return c;
 #endif
 #if GL_SIGMA_RATE_LIMITED
     const float d = loop->sigma_f - loop->sigma;
@@ -158,7 +162,9 @@ static float next_sigma(gl_sched_t *loop, float raw)
             flags = GL_SIGMA_CLIPPED;
         }
         if (loop->started == 0u) {
-            loop->sigma_f = c;
+            if (GL_SIGMA_SHAPED) {
+                loop->sigma_f = c;
+            }
             sigma = c;
         } else {
             sigma = shape_sigma(loop, c, &flags);
@@ -460,7 +466,7 @@ void gl_sched_retable(gl_sched_t *loop)
 }
 
 /** The first valid sample after a reset starts the law where it is: no kick. */
-static void start(gl_sched_t *loop, const float *y, float sigma)
+static __attribute__((noinline)) void start(gl_sched_t *loop, const float *y, float sigma)
 {
     float lam;
     const uint32_t i = interval(loop->t->S, sigma, &lam);
@@ -472,7 +478,7 @@ static void start(gl_sched_t *loop, const float *y, float sigma)
 }
 
 /** The safe command on a refused sample: u_op at the held sigma, clamped. */
-static gl_sched_status_t refuse(gl_sched_t *loop, float *u)
+static __attribute__((noinline)) gl_sched_status_t refuse(gl_sched_t *loop, float *u)
 {
     float lam;
     const uint32_t i = interval(loop->t->S, loop->sigma, &lam);
@@ -522,7 +528,7 @@ gl_sched_status_t gl_sched_step(gl_sched_t *loop, const float *y, const float *r
     const float sigma = next_sigma(loop, ys[GL_SIGMA_INDEX]);
 #endif
     if (loop->started == 0u) {
-        start(loop, ys, sigma);
+        start(loop, y, sigma); /* y: ys is a copy the law keeps in registers */
     }
     float us[GL_M];
     const uint32_t sat = law_at(loop, sigma, held, ys, rs, us);
@@ -546,7 +552,7 @@ void gl_sched_state(const gl_sched_t *loop, float *out)
     memcpy(out, loop->e_prev, sizeof loop->e_prev);
     out += GL_Q;
     out[0] = loop->sigma;
-    out[1] = loop->sigma_f;
+    out[1] = GL_SIGMA_SHAPED ? loop->sigma_f : loop->sigma;
     out[2] = (loop->started != 0u) ? 1.0f : 0.0f;
 }
 
