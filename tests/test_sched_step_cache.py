@@ -96,3 +96,17 @@ def test_tables_changed_in_place_are_run_as_changed_even_where_the_export_fixed_
     lib.gl_sched_retable(c._loop)
     m.t["F"] = F.astype(np.float64)
     _same(*_run(ext, sig[half:], c, m))
+
+
+def test_the_cortex_m4f_runs_every_cache_path_as_the_host(ext):
+    """The same sigma sequence through the Cortex-M4F image in QEMU (where the step takes its shortest path for a
+    sigma that moves inside the cached interval): bit for bit the host build."""
+    from gainlink.engines import sched_qemu
+
+    sig = _sigmas(ext)
+    N = sig.size
+    Y = 0.3 + 0.01 * np.sin(np.arange(N)).reshape(N, 1)
+    R = np.where(np.arange(N) % 9 < 4, 0.3, 0.6).reshape(N, 1)
+    host = NativeScheduledLoop(ext).run(Y, R, sig.reshape(N, 1))
+    m4 = sched_qemu.run(ext, Y, R, sig.reshape(N, 1))
+    _same(m4, host)

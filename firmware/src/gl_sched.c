@@ -210,6 +210,7 @@ static __attribute__((noinline)) void enter_interval(gl_sched_t *loop, float sig
      * nothing: every step searches again. A sigma it turns away (-0 at S[i] = 0) is searched for again: same i. */
     loop->c_span = isfinite(loop->c_width) ? (i + 2u == GL_NPTS ? 0x3f800001u : 0x3f800000u) : 0u;
     loop->c_limit = loop->fixed_ok != 0u ? loop->c_span : 0u; /* else every moving step interpolates all */
+    loop->c_inner = loop->c_limit != 0u ? 0x3f800000u : 0u;    /* lam < 1: S[i] <= sigma < S[i+1] */
 }
 
 /** out[k] = fmaf(lam, D[k], X0[k]): lerp() on the cached differences. */
@@ -460,6 +461,7 @@ void gl_sched_retable(gl_sched_t *loop)
     if (loop != NULL && loop->t != NULL) {
         loop->c_sigma = GL_SCHED_C_NONE;
         loop->c_limit = 0u;
+        loop->c_inner = 0u;
         loop->c_span = 0u;
         loop->fixed_ok = (uint32_t)fixed_hold(loop->t);
     }
@@ -510,6 +512,30 @@ static int load_finite(const float *y, const float *r, float *ys, float *rs)
     return probe == probe;
 }
 
+/** Steps 2 to 4 for a sigma without filter or rate limit that moved and lies in the cached interval (then inside
+ *  the envelope: not clipped, sigma = raw): what next_sigma() and law_at() would do, without their tests. lam < 1
+ *  on every interval here (the last one's lam = 1 may be a clipped raw). Returns 0, nothing done, otherwise. */
+GL_INLINE int moving(gl_sched_t *loop, float raw, const float *ys, const float *rs, float *u, uint32_t *sat)
+{
+    uint32_t bits;
+    memcpy(&bits, &raw, sizeof bits);
+    uint32_t last;
+    memcpy(&last, &loop->sigma, sizeof last);
+    if (GL_SIGMA_SHAPED || bits == last) { /* a standing sigma: its coefficients may be kept */
+        return 0;
+    }
+    const float lam = (raw - loop->c_s0) / loop->c_width;
+    uint32_t lbits;
+    memcpy(&lbits, &lam, sizeof lbits);
+    if (lbits < loop->c_inner && loop->started != 0u) {
+        loop->sigma = raw;
+        loop->sigma_flags = 0u;
+        *sat = law(loop, &loop->x0, &loop->d, lam, GL_LERP_VARYING, ys, rs, u);
+        return 1;
+    }
+    return 0;
+}
+
 gl_sched_status_t gl_sched_step(gl_sched_t *loop, const float *y, const float *r, const float *s, float *u)
 {
     if (loop == NULL || loop->t == NULL || y == NULL || r == NULL || u == NULL || (GL_E > 0 && s == NULL)) {
@@ -520,18 +546,22 @@ gl_sched_status_t gl_sched_step(gl_sched_t *loop, const float *y, const float *r
     if (!load_finite(y, r, ys, rs)) {
         return refuse(loop, u);
     }
-    const float held = loop->sigma;
 #if GL_SIGMA_EXTERNAL
-    const float sigma = next_sigma(loop, s[GL_SIGMA_INDEX]);
+    const float raw = s[GL_SIGMA_INDEX];
 #else
     (void)s;
-    const float sigma = next_sigma(loop, ys[GL_SIGMA_INDEX]);
+    const float raw = ys[GL_SIGMA_INDEX];
 #endif
-    if (loop->started == 0u) {
-        start(loop, y, sigma); /* y: ys is a copy the law keeps in registers */
-    }
     float us[GL_M];
-    const uint32_t sat = law_at(loop, sigma, held, ys, rs, us);
+    uint32_t sat;
+    if (!moving(loop, raw, ys, rs, us, &sat)) {
+        const float held = loop->sigma;
+        const float sigma = next_sigma(loop, raw);
+        if (loop->started == 0u) {
+            start(loop, y, sigma); /* y: ys is a copy the law keeps in registers */
+        }
+        sat = law_at(loop, sigma, held, ys, rs, us);
+    }
     GL_UNROLL
     for (uint32_t i = 0; i < GL_M; ++i) {
         u[i] = us[i];

@@ -144,6 +144,7 @@ typedef struct gl_sched {
     uint32_t c_sigma;           /**< The bits of the sigma whose coefficients c holds (a NaN's: none). */
     uint32_t c_span;            /**< The cached interval holds sigma when lam's bits are below it (0: none cached). */
     uint32_t c_limit;           /**< c_span when fixed_ok, else 0 (the step interpolates every coefficient). */
+    uint32_t c_inner;           /**< 0x3f800000 (lam < 1) when c_limit is not 0, else 0. */
     uint32_t fixed_ok;          /**< 1 when the tables hold the GL_SCHED_FIXED_* masks (checked at init, retable). */
     float c_s0;                 /**< S[i] of the cached interval. */
     float c_width;              /**< S[ci+1] - S[i] of the cached interval. */
