@@ -35,7 +35,8 @@
  * sigma that stands (kept in c from its second step), and, while sigma moves, each coefficient interpolated where
  * it multiplies, except those the export found equal at every point (GL_SCHED_FIXED_*: fmaf(lam, +0, x) == x for
  * such an x, not -0; the step checks the tables against the masks at init and gl_sched_retable() and
- * interpolates every coefficient when they do not hold).
+ * interpolates every coefficient when they do not hold). Without a filter and a rate limit, a sigma that moved and
+ * lies in the kept interval (then inside the envelope: not clipped) goes straight to the law.
  *
  * The trims u_op only start the law and give its safe command; the law itself holds no trim, and a moving sigma
  * never steps the command (docs/design.md: "no hidden coupling").
