@@ -12,6 +12,9 @@
 
 /* Fixed dimensions let the compiler unroll every loop of the step completely. */
 #define GL_UNROLL _Pragma("GCC unroll 64")
+/* Rare work (a reset's first sample, a refused one, entering an interval) kept out of the step's body: inlined, it
+ * would cost every step a stack frame and spills. */
+#define GL_COLD __attribute__((noinline))
 
 static int all_finite(const float *x, uint32_t count)
 {
@@ -187,7 +190,7 @@ static inline void split(float *x0, float *d, const float *X0, const float *X1, 
 }
 
 /** Step 3's interval i for sigma into the cache (x0 = X[i], d = X[i+1] - X[i], S[i], S[i+1] - S[i]). */
-static __attribute__((noinline)) void enter_interval(gl_sched_t *loop, float sigma)
+static GL_COLD void enter_interval(gl_sched_t *loop, float sigma)
 {
     const gl_sched_tables_t *t = loop->t;
     float lam;
@@ -380,7 +383,7 @@ GL_INLINE uint32_t law(gl_sched_t *loop, const gl_sched_coeffs_t *a, const gl_sc
 
 /** lam the slow way, when the fast test failed: sigma left the cached interval (searched again), or the tables break
  *  the GL_SCHED_FIXED_* masks (c_limit 0: the caller interpolates every coefficient). */
-static __attribute__((noinline)) float searched(gl_sched_t *loop, float sigma)
+static GL_COLD float searched(gl_sched_t *loop, float sigma)
 {
     float lam = (sigma - loop->c_s0) / loop->c_width;
     uint32_t bits;
@@ -468,7 +471,7 @@ void gl_sched_retable(gl_sched_t *loop)
 }
 
 /** The first valid sample after a reset starts the law where it is: no kick. */
-static __attribute__((noinline)) void start(gl_sched_t *loop, const float *y, float sigma)
+static GL_COLD void start(gl_sched_t *loop, const float *y, float sigma)
 {
     float lam;
     const uint32_t i = interval(loop->t->S, sigma, &lam);
@@ -480,7 +483,7 @@ static __attribute__((noinline)) void start(gl_sched_t *loop, const float *y, fl
 }
 
 /** The safe command on a refused sample: u_op at the held sigma, clamped. */
-static __attribute__((noinline)) gl_sched_status_t refuse(gl_sched_t *loop, float *u)
+static GL_COLD gl_sched_status_t refuse(gl_sched_t *loop, float *u)
 {
     float lam;
     const uint32_t i = interval(loop->t->S, loop->sigma, &lam);
