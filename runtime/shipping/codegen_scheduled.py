@@ -43,6 +43,19 @@ def tables(artifact: Artifact) -> dict[str, np.ndarray]:
     return out
 
 
+def fixed_masks(artifact: Artifact) -> dict[str, int]:
+    """Per coefficient group, bit k (k < 32) set when coefficient k is the same float32 at every point and not -0.0:
+    the scheduled step does not interpolate it (``fmaf(lam, +0, x) == x`` for such an ``x``; gl_sched.c checks the
+    tables it runs on against these masks at init)."""
+    t = tables(artifact)
+    out = {}
+    for name in COEFFICIENTS:
+        bits = np.ascontiguousarray(t[name]).view(np.uint32)
+        fixed = np.all(bits == bits[0], axis=0) & (bits[0] != 0x80000000)
+        out[name] = sum(1 << int(k) for k in np.flatnonzero(fixed[:32]))
+    return out
+
+
 def render_header(artifact: Artifact) -> str:
     """Text of the scheduled ``gl_gains.h``: dimensions, the shape of sigma and identity as macros."""
     a = artifact
@@ -62,8 +75,9 @@ def render_header(artifact: Artifact) -> str:
         f"#define GL_SIGMA_INDEX {S.index}\n"
         f"#define GL_SIGMA_FILTERED {int(S.filter_alpha != 1.0)}\n"
         f"#define GL_SIGMA_RATE_LIMITED {int(S.rate_max is not None)}\n"
-        f"#define GL_TS_SECONDS {codegen.c_float(a.Ts)}\n\n"
-        "#endif /* GL_GAINS_H */\n"
+        f"#define GL_TS_SECONDS {codegen.c_float(a.Ts)}\n"
+        + "".join(f"#define GL_SCHED_FIXED_{k.upper()} {v:#010x}u\n" for k, v in fixed_masks(a).items())
+        + "\n#endif /* GL_GAINS_H */\n"
     )
 
 

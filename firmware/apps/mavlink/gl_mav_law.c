@@ -78,7 +78,7 @@ gl_status_t gl_mav_sched_init(gl_mav_sched_t *law, const gl_sched_tables_t *t, u
 
 void gl_mav_sched_retable(gl_mav_sched_t *law)
 {
-    law->loop.c_valid = 0u; /* the coefficients at the held sigma come from the new tables */
+    gl_sched_retable(&law->loop); /* the coefficients at the held sigma come from the new tables */
 }
 
 static uint64_t sigma_flags(uint32_t f)

@@ -18,7 +18,7 @@
  *                  else sigma = sigma_f
  *      sigma_held = sigma
  *   3. i with Si <= sigma <= Si+1 (the last interval at SN), lam = (sigma - Si) / (Si+1 - Si)
- *      X = fmaf(lam, X[i+1] - X[i], X[i]) for X in Kx Ky Kz F G Ly (recomputed only when sigma changed)
+ *      X = fmaf(lam, X[i+1] - X[i], X[i]) for X in Kx Ky Kz F G Ly
  *   4. first valid step after a reset: y_prev = y, u_prev = clamp(u_op(sigma)), e_prev = 0, delta = 0
  *      dy = y - y_prev
  *      v  = u_prev - (Kx delta + Ky dy + Kz e_prev)          (Ky only in the current form; Kz = Ts Ki)
@@ -29,6 +29,14 @@
  * Every sum starts with a product of its first terms and adds the others with one fused multiply-add each
  * (GL_FMA: `vfma.f32` on the Cortex-M4F, `fmaf` on the host, both built with `-ffp-contract=off`), in the order
  * written above, so the host and the Cortex-M4F give the same bits. No allocation; the loop is caller-owned.
+ *
+ * What the step keeps to cost less changes no bit: X[i] and X[i+1] - X[i] of the interval it is in (computed once
+ * per interval entered; the interval is kept while +0 <= lam < 1, or <= 1 on the last), the coefficients of a
+ * sigma that stands (kept in c from its second step), and, while sigma moves, each coefficient interpolated where
+ * it multiplies, except those the export found equal at every point (GL_SCHED_FIXED_*: fmaf(lam, +0, x) == x for
+ * such an x, not -0; the step checks the tables against the masks at init and gl_sched_retable() and
+ * interpolates every coefficient when they do not hold). Without a filter and a rate limit, a sigma that moved and
+ * lies in the kept interval (then inside the envelope: not clipped) goes straight to the law.
  *
  * The trims u_op only start the law and give its safe command; the law itself holds no trim, and a moving sigma
  * never steps the command (docs/design.md: "no hidden coupling").
@@ -63,6 +71,27 @@ _Static_assert(GL_SIGMA_INDEX >= 0 && GL_SIGMA_INDEX < (GL_SIGMA_EXTERNAL ? GL_E
 
 /** Current-estimator form (Ky is used); predictor form has Ky = 0 and skips it. */
 #define GL_SCHED_FORM_CURRENT 1
+/* Bit k (k < 32) of GL_SCHED_FIXED_<X>: coefficient k of X is the same float32 at every point (and not -0), so the
+ * step does not interpolate it (gl_gains.h of `gainlink export` defines them; checked against the tables at init). */
+#ifndef GL_SCHED_FIXED_KX
+#define GL_SCHED_FIXED_KX 0u
+#endif
+#ifndef GL_SCHED_FIXED_KY
+#define GL_SCHED_FIXED_KY 0u
+#endif
+#ifndef GL_SCHED_FIXED_KZ
+#define GL_SCHED_FIXED_KZ 0u
+#endif
+#ifndef GL_SCHED_FIXED_F
+#define GL_SCHED_FIXED_F 0u
+#endif
+#ifndef GL_SCHED_FIXED_G
+#define GL_SCHED_FIXED_G 0u
+#endif
+#ifndef GL_SCHED_FIXED_LY
+#define GL_SCHED_FIXED_LY 0u
+#endif
+
 /** Array length for external-signal arrays (C has no zero-length arrays; unused when GL_E == 0). */
 #define GL_EA ((GL_E) > 0 ? (GL_E) : 1)
 
@@ -110,9 +139,16 @@ typedef struct gl_sched_coeffs {
 /** @brief Scheduled loop instance: caller-owned (static storage), no allocation. Fields are read-only for callers. */
 typedef struct gl_sched {
     const gl_sched_tables_t *t; /**< The tables it runs on. */
-    gl_sched_coeffs_t c;        /**< Coefficients interpolated at c_sigma. */
-    float c_sigma;              /**< The sigma of c. */
-    uint32_t c_valid;           /**< 1 when c holds the coefficients at c_sigma. */
+    gl_sched_coeffs_t c;        /**< Coefficients interpolated at c_sigma (kept while sigma stands). */
+    gl_sched_coeffs_t x0;       /**< The cached interval's coefficients at its first point, X[i]. */
+    gl_sched_coeffs_t d;        /**< And their differences X[i+1] - X[i] (float32, as the law computes them). */
+    uint32_t c_sigma;           /**< The bits of the sigma whose coefficients c holds (a NaN's: none). */
+    uint32_t c_span;            /**< The cached interval holds sigma when lam's bits are below it (0: none cached). */
+    uint32_t c_limit;           /**< c_span when fixed_ok, else 0 (the step interpolates every coefficient). */
+    uint32_t c_inner;           /**< 0x3f800000 (lam < 1) when c_limit is not 0, else 0. */
+    uint32_t fixed_ok;          /**< 1 when the tables hold the GL_SCHED_FIXED_* masks (checked at init, retable). */
+    float c_s0;                 /**< S[i] of the cached interval. */
+    float c_width;              /**< S[ci+1] - S[i] of the cached interval. */
     float delta[GL_N];          /**< The estimate's increment xh[k] - xh[k-1]. */
     float u_prev[GL_M];         /**< Last applied (saturated) command. */
     float y_prev[GL_P];         /**< Last valid measurement. */
@@ -143,6 +179,13 @@ gl_sched_status_t gl_sched_init(gl_sched_t *loop, const gl_sched_tables_t *table
  * @return GL_SCHED_OK or GL_SCHED_ERR_NULL.
  */
 gl_sched_status_t gl_sched_reset(gl_sched_t *loop);
+
+/**
+ * @brief Forget every coefficient the loop keeps (interpolated, or of its interval): call it after changing the
+ *        tables it runs on in place (the next step interpolates from them again). The law's state is untouched.
+ * @param[in,out] loop  Loop instance.
+ */
+void gl_sched_retable(gl_sched_t *loop);
 
 /**
  * @brief One sample of the scheduled law (see the file comment).
