@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from gainlink.errors import PlantError, TransportError
+from gainlink.errors import PlantError, ScenarioError, TransportError
 from gainlink.shipping.artifact import Artifact, load
 from gainlink.shipping.codegen_fixed import is_fixed
 
@@ -27,7 +27,7 @@ from ..links.config import transport_from_config
 from ..plants.base import Plant
 from .can_fixed import fixed_can_check
 from .controller import ControllerProcess, controller_argv, qemu_peer
-from .faults import FaultInjector
+from .faults import SAMPLE_FAULTS, FaultInjector
 from .metrics import RunTrace, compute_metrics, link_capacity
 from .plan import Recorder, describe_artifact, describe_plant, plan_run, start_model_twin, start_twin, step_twins
 from .scenario import Scenario
@@ -69,6 +69,8 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
     -------
     RunResult
     """
+    if any(f.kind in SAMPLE_FAULTS for f in scenario.faults):
+        raise ScenarioError(f"scenario {scenario.name}: nan faults run with a scheduled artifact over its link only")
     artifact, plant = prepare(scenario)
     with ExitStack() as stack:
         stack.callback(plant.close)

@@ -9,7 +9,11 @@ any, travel in the sample after the references (``s_NAME`` in the layout and the
 (its flags come back in the status byte: held 0x10, clipped 0x20, rate-limited 0x40); its value is not on the bus,
 so the trace's sigma is the scheduled float32 model's
 (:class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`, bit for bit the C) on the samples the node
-received. Lockstep, without injected faults.
+received. Lockstep; the faults ``drop`` (the sample's frames not sent: no command, the last one held) and ``nan``
+(its measured outputs sent as NaN: the node refuses the sample whole, answers u_op at the held sigma with its fault
+bit, and raises no sigma flag) are injected by the bridge's :class:`~.faults.FaultInjector`, counted in
+``faults_injected``; ``refused_steps`` counts the answers with the fault bit; the trace records the plant's own
+sample.
 
 With ``controller = "qemu"`` the node is the Cortex-M image's on its UART (slcan or MAVLink over a TCP socket;
 ``ports/cortex-m/sched-image.cmake``), the same node libraries on the same scheduled loop.
@@ -38,10 +42,16 @@ from ..links.config import transport_from_config
 from ..links.mavlink import MavlinkTransport
 from .bridge import RunResult
 from .controller import ControllerProcess, controller_argv, qemu_peer
+from .faults import FaultInjector
 from .scenario import Scenario
 from .scenario_plant import build_plant
 from .sched_law import GL_ERR_NANINF, GL_SATURATED, SchedOut
 from .sil_scheduled import _closed_loop_twin, _ScheduledSil
+
+#: The faults a scheduled run injects (:class:`.faults.FaultInjector`): the sample's frames not sent, its measured
+#: outputs sent as NaN. The others change the order in which the node sees samples, which the sigma shadow does not
+#: follow yet.
+SCHEDULED_FAULTS = ("drop", "nan")
 
 #: The scheduled node's status bits (firmware/apps/can/gl_can_layout.h) and the sigma flags they carry.
 SIGMA_BITS = ((STATUS_SIGMA_HELD, SIGMA_HELD), (STATUS_SIGMA_CLIPPED, SIGMA_CLIPPED), (STATUS_SIGMA_RATE, SIGMA_RATE))
@@ -49,11 +59,16 @@ SIGMA_BITS = ((STATUS_SIGMA_HELD, SIGMA_HELD), (STATUS_SIGMA_CLIPPED, SIGMA_CLIP
 
 def check_scheduled_can(artifact: Artifact, scenario: Scenario) -> None:
     """One line when the scheduled artifact or the scenario cannot run over the CAN link."""
-    if scenario.mode != "lockstep" or scenario.faults:
+    kinds = sorted({f.kind for f in scenario.faults} - set(SCHEDULED_FAULTS))
+    if scenario.mode != "lockstep" or kinds:
         raise ScenarioError(
-            f"scenario {scenario.name}: a scheduled artifact runs over CAN in lockstep without injected faults "
-            '(mode = "lockstep", no [[faults]])'
+            f"scenario {scenario.name}: a scheduled artifact runs over its link in lockstep, with faults "
+            f'{" and ".join(SCHEDULED_FAULTS)} only (mode = "{scenario.mode}"'
+            + (f", faults {', '.join(kinds)})" if kinds else ")")
         )
+    encoding = scenario.transport.get("encoding", "float32")
+    if encoding != "float32" and any(f.kind == "nan" for f in scenario.faults):
+        raise ScenarioError(f'scenario {scenario.name}: a nan fault needs encoding = "float32" (not "{encoding}")')
 
 
 class _BusLaw:
@@ -77,6 +92,7 @@ class _BusLaw:
             self.peer.start()
             self.peer.check_artifact(artifact.sha256)
         self.transport, self.timeout = transport, scenario.step_timeout
+        self.injector = FaultInjector(scenario.faults, Ts=artifact.Ts, seed=scenario.seed)
         self.shadow = ScheduledFloat32Loop(artifact)  # sigma's value (not on the bus)
         self.u = np.asarray(artifact.schedule.trim_at(artifact.schedule.points[0])[0], dtype=float)
         self.k, self.late = 0, 0
@@ -86,13 +102,18 @@ class _BusLaw:
         self.kind = {"kind": f"firmware ({node}, scheduled law, over the link)", "argv": argv}
 
     def step(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> SchedOut | None:
-        """Send sample ``y``, ``r``; the node's answer, or None when it did not come within ``step_timeout``."""
-        seq = self.k % self.transport.seq_modulo
+        """Send sample ``y``, ``r`` (through the scenario's faults); the node's answer, or None when it did not come
+        within ``step_timeout`` or the sample was dropped (lockstep: no answer can come, so none is waited for)."""
+        k, seq = self.k, self.k % self.transport.seq_modulo
         self.k += 1
+        y = self.injector.corrupt(k, y)
         rs = np.concatenate([r, s])  # the external scheduling signals travel after the references
+        frames = self.injector.apply(k, self.transport.encode_sample(seq=seq, y=y, r=rs))
+        if not frames:  # dropped: the node (and its sigma) never sees this sample
+            return None
         ys, rx = self.transport.received_sample(y=y, r=rs)
         sigma = self.shadow.step(ys, rx[: r.size], rx[r.size :]).sigma
-        self.transport.send_frames(self.transport.encode_sample(seq=seq, y=y, r=rs))
+        self.transport.send_frames(frames)
         deadline = time.monotonic() + self.timeout
         while (left := deadline - time.monotonic()) > 0:
             c = self.transport.receive_command(timeout=left)
@@ -181,7 +202,8 @@ def run_scheduled_can(
         result = loop.run(progress)
         code = law.peer.stop()
         peer = {"exit_status": code, "counters": law.peer.counters(), "stderr_bytes": law.peer.stderr_bytes()}
-    m = dict(result.metrics, mode="lockstep", late=law.late)
+    m = dict(result.metrics, mode="lockstep", late=law.late, faults_injected=law.injector.counts)
+    m["refused_steps"] = int(np.count_nonzero(result.trace.status == GL_ERR_NANINF))  # answered with the fault bit
     m["controller"] = peer  # read before the peer is closed (an image's QEMU drops its stderr then)
     info = dict(result.info, transport=law.transport.describe())
     info["controller"] = dict(law.kind, ready=law.peer.ready_line)

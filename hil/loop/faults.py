@@ -1,4 +1,5 @@
-"""Frame-level fault injection between the bridge and the transport (drop, delay, duplicate, reorder)."""
+"""Fault injection between the bridge and the transport: on the frames (drop, delay, duplicate, reorder) and on the
+sample's values (nan: every measured output of the sample sent as NaN)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,10 @@ import numpy as np
 
 from .scenario import Fault
 
+#: Faults on the process (the bridge pauses or kills the peer) and on the sample's values (:meth:`corrupt`).
+PROCESS_FAULTS = ("silent", "crash")
+SAMPLE_FAULTS = ("nan",)
+
 
 class FaultInjector:
     """Decides, per sample, which frames go out now.
@@ -16,7 +21,8 @@ class FaultInjector:
     Parameters
     ----------
     faults : sequence of Fault
-        The scenario's frame faults (``silent`` and ``crash`` act on the process: the bridge handles them).
+        The scenario's faults: the frame faults act in :meth:`apply`, ``nan`` in :meth:`corrupt` (``silent`` and
+        ``crash`` act on the process: the bridge handles them).
     Ts : float
         Sample time, to turn fault windows into sample indices.
     seed : int
@@ -24,21 +30,32 @@ class FaultInjector:
     """
 
     def __init__(self, faults: Sequence[Fault], *, Ts: float, seed: int = 0) -> None:
-        self.faults = [f for f in faults if f.kind not in ("silent", "crash")]
+        self.faults = [f for f in faults if f.kind not in PROCESS_FAULTS + SAMPLE_FAULTS]
+        self.sample_faults = [f for f in faults if f.kind in SAMPLE_FAULTS]
         self.Ts = Ts
         # A stream of its own (not the noise's): adding a fault leaves the run's noise unchanged.
         self.rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0xFA17])
         self.held: list[tuple[int, list[Any]]] = []  # (release at sample k, frames)
         self.counts = {"drop": 0, "delay": 0, "duplicate": 0, "reorder": 0}
+        if self.sample_faults:  # only then: a report without them reads as before
+            self.counts["nan"] = 0
+
+    def _hits(self, f: Fault, k: int) -> bool:
+        """Whether fault ``f`` hits sample ``k``: in its window, on its ``every``-th sample, with its probability."""
+        if not f.start <= k * self.Ts < f.stop:
+            return False
+        first = int(round(f.start / self.Ts)) if f.start > 0 else 0
+        return (k - first) % f.every == 0 and (f.probability >= 1.0 or self.rng.random() < f.probability)
 
     def _active(self, k: int) -> Fault | None:
-        t = k * self.Ts
-        for f in self.faults:
-            if f.start <= t < f.stop:
-                first = int(round(f.start / self.Ts)) if f.start > 0 else 0
-                if (k - first) % f.every == 0 and (f.probability >= 1.0 or self.rng.random() < f.probability):
-                    return f
-        return None
+        return next((f for f in self.faults if self._hits(f, k)), None)
+
+    def corrupt(self, k: int, y: np.ndarray) -> np.ndarray:
+        """The measured outputs sample ``k`` carries: ``y``, or all NaN when a ``nan`` fault hits it (counted)."""
+        if not any(self._hits(f, k) for f in self.sample_faults):
+            return y
+        self.counts["nan"] += 1
+        return np.full_like(np.asarray(y, dtype=float), np.nan)
 
     def apply(self, k: int, frames: list[Any]) -> list[Any]:
         """The frames to send at sample ``k`` (held frames due now come after this sample's own)."""

@@ -30,7 +30,8 @@ Example::
     [noise]        theta = 0.001                           # std dev per output
     [[disturbances]] input = "F", start = 2.0, stop = 2.1, value = 5.0
     [[faults]]     kind = "drop", start = 3.0, stop = 3.1, every = 1
-                   # kind: drop | delay | duplicate | reorder | silent | crash
+                   # kind: drop | delay | duplicate | reorder | silent | crash | nan
+                   # nan: the sample's measured outputs sent as NaN (a scheduled artifact over its link only)
                    # probability = 0.05: each sample the window and ``every`` select is hit with this probability
                    # (drawn from the run's seed): a random loss rate instead of a pattern
 
@@ -131,7 +132,7 @@ BOARDS = tuple(
     )
 )
 MODES = ("lockstep", "realtime")
-FAULT_KINDS = ("drop", "delay", "duplicate", "reorder", "silent", "crash")
+FAULT_KINDS = ("drop", "delay", "duplicate", "reorder", "silent", "crash", "nan")
 PROFILE_KEYS = {
     "constant": {"value"},
     "step": {"at", "value", "initial"},
@@ -148,8 +149,9 @@ class Fault:
 
     ``kind``: drop (frames not sent), delay (sent ``delay_steps`` samples later), duplicate (sent twice), reorder (sent
     after the next sample's frames), silent (controller process frozen from ``start`` on), crash (controller process
-    killed at ``start``). Active for samples with ``start <= t < stop``, every ``every``-th one, each of those hit with
-    ``probability`` (frame faults only; drawn from the run's seed).
+    killed at ``start``), nan (the sample's measured outputs sent as NaN). Active for samples with
+    ``start <= t < stop``, every ``every``-th one, each of those hit with ``probability`` (frame and nan faults only;
+    drawn from the run's seed).
     """
 
     kind: str

@@ -1,0 +1,116 @@
+"""Injected faults in the HIL of a scheduled artifact over its link (gainlink.hil.loop.can_scheduled): the tank of
+examples/tank_scheduled.toml, scheduled on its measured level, through the real gainlink_can process on python-can
+udp_multicast, with a window of NaN samples and a window of dropped samples. Oracle: the scheduled float32 model
+(gainlink.proof.scheduled_float32, bit for bit the C) fed the samples the node received, rebuilt here from the
+scenario's windows (NaN rows in, dropped rows out): the same commands, sigma flags and refusals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from gainlink.errors import ScenarioError
+from gainlink.hil import run as hil_run
+from gainlink.hil.loop.sched_law import GL_ERR_NANINF
+from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
+from gainlink.proof.scheduled_reference import SIGMA_HELD
+from gainlink.shipping.artifact import from_dict
+from gainlink.spec import parse_spec
+from gainlink.synthesis import synthesize
+from schedule_cases import tank_dict
+from support.hil import udp_transport
+from support.shared import once_per_run
+
+pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
+
+NAN = (2.0, 2.3)  # s: the level's sample sent as NaN (sigma = h with it: the sample is refused, sigma held)
+DROP = (3.0, 3.15)  # s: the sample's frames not sent
+
+
+@pytest.fixture(scope="module")
+def tank(tmp_path_factory):
+    design = once_per_run(tmp_path_factory, "can_sched_tank", lambda: synthesize(parse_spec(tank_dict())).artifact)
+    a = from_dict(design)
+    path = tmp_path_factory.mktemp("tank") / "tank.json"
+    a.save(path)
+    return a, path
+
+
+def _scenario(path, **extra) -> dict:
+    """The tank's level climbing 0.04 -> 1 m from t = 1 s, with a NaN window and a drop window."""
+    data: dict = {
+        "name": "tank_faults_can",
+        "artifact": str(path),
+        "duration": 4.0,
+        "controller": "firmware",
+        "step_timeout": 2.0,
+        "peer_timeout": 4.0,
+        "plant": {"kind": "tank", "step": 0.005},
+        "transport": udp_transport(fd=False),
+        "initial_state": {"q": 0.08, "h": 0.04},
+        "reference": {"r_h": {"kind": "sweep", "low": 0.04, "high": 1.0, "rate": 0.2, "start": 1.0}},
+        "faults": [
+            {"kind": "nan", "start": NAN[0], "stop": NAN[1]},
+            {"kind": "drop", "start": DROP[0], "stop": DROP[1]},
+        ],
+    }
+    return data | extra
+
+
+def test_nan_and_dropped_samples_reach_the_node_as_the_model_is_fed_and_the_report_counts_them(tank, tmp_path):
+    a, path = tank
+    res = hil_run(_scenario(path), report=tmp_path / "report", plots=False)
+    tr, m = res.trace, res.metrics
+    t = tr.t
+    nan = (t >= NAN[0]) & (t < NAN[1])
+    drop = (t >= DROP[0]) & (t < DROP[1])
+    assert res.complete and tr.t.size == 80 and nan.sum() == 6 and drop.sum() == 3
+    assert m["faults_injected"] == {"drop": 3, "delay": 0, "duplicate": 0, "reorder": 0, "nan": 6}
+    assert m["lost"] == 3 and not tr.got[drop].any() and tr.got[~drop].all()
+
+    Y, R = tr.y.astype(np.float32).astype(np.float64), tr.r.astype(np.float32).astype(np.float64)
+    Y[nan] = np.nan  # what the node received on those steps; the dropped ones it never saw
+    keep = ~drop
+    model = ScheduledFloat32Loop(a).run(Y[keep], R[keep])
+    u = tr.u.astype(np.float32).view(np.uint32)
+    np.testing.assert_array_equal(u[keep], model.u.astype(np.float32).view(np.uint32))
+    np.testing.assert_array_equal(tr.sigma_flags[keep], model.sigma_flags)  # from the node's status byte
+    first = int(np.flatnonzero(drop)[0])
+    assert np.all(u[drop] == u[first - 1])  # a lost command holds the last one
+
+    # sigma = h is a measured output: a NaN sample is refused whole (DESIGN.md, "Scheduled law"): the node answers
+    # with its fault bit and u_op at the held sigma; sigma keeps its last valid value and no sigma flag is raised
+    assert np.all(tr.status[nan] == GL_ERR_NANINF) and not np.any(tr.status[keep & ~nan] == GL_ERR_NANINF)
+    assert m["refused_steps"] == 6
+    assert np.all(tr.sigma[nan] == tr.sigma[int(np.flatnonzero(nan)[0]) - 1])
+    assert not np.any(tr.sigma_flags[nan] & SIGMA_HELD) and m["schedule"]["held_steps"] == 0
+    summary = (tmp_path / "report" / "summary.txt").read_text()
+    assert "nan 6" in summary and "drop 3" in summary
+
+
+@pytest.mark.parametrize(
+    ("extra", "match"),
+    [
+        ({"faults": [{"kind": "delay", "start": 1.0, "stop": 1.2}]}, "faults delay"),
+        ({"mode": "realtime"}, 'mode = "realtime"'),
+    ],
+)
+def test_what_a_scheduled_run_does_not_inject_is_refused_in_one_line(tank, extra, match):
+    _, path = tank
+    with pytest.raises(ScenarioError, match=match):
+        hil_run(_scenario(path, **extra))
+
+
+def test_a_nan_fault_needs_float32_values_on_the_link(tank):
+    _, path = tank
+    transport = dict(udp_transport(fd=False), encoding="int16")
+    with pytest.raises(ScenarioError, match='encoding = "float32"'):
+        hil_run(_scenario(path, transport=transport))
+
+
+def test_the_unscheduled_bridge_refuses_a_nan_fault_in_one_line(tank):
+    from gainlink.hil.loop.bridge import run_scenario
+    from gainlink.hil.loop.scenario import parse_scenario
+
+    _, path = tank
+    with pytest.raises(ScenarioError, match="nan faults run with a scheduled artifact over its link only"):
+        run_scenario(parse_scenario(_scenario(path)))
