@@ -54,7 +54,8 @@ def run(
 
     A scheduled artifact (schema 2) with ``controller = "firmware"`` (or ``"qemu"``: the Cortex-M image's node) and a
     CAN or MAVLink transport runs the firmware's node on the scheduled law over the link
-    (:mod:`gainlink.hil.loop.can_scheduled`, in lockstep; external scheduling signals travel after the references);
+    (:mod:`gainlink.hil.loop.can_scheduled`, in lockstep or real time; external scheduling signals travel after the
+    references);
     otherwise (``controller = "reference"``, another transport) it runs as
     software in the loop in this process (:mod:`gainlink.hil.loop.sil_scheduled`: the transport is not used), sigma
     from its measured output or ``[schedule_signal]``.

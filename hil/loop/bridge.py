@@ -32,7 +32,17 @@ from .metrics import RunTrace, compute_metrics, link_capacity
 from .plan import Recorder, describe_artifact, describe_plant, plan_run, start_model_twin, start_twin, step_twins
 from .scenario import Scenario
 from .scenario_plant import build_plant
-from .scheduler import SPIN_NS, Pacer, Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
+from .scheduler import (
+    SPIN_NS,
+    Pacer,
+    Placement,
+    cpu_latency_qos,
+    gc_paused,
+    next_tick,
+    resolve_affinity,
+    set_fifo,
+    set_other,
+)
 
 log = logging.getLogger(__name__)
 
@@ -242,25 +252,26 @@ class _Loop:
         Ticks that passed while the bridge was stalled (an overrun) are held steps of the plant: it runs
         on under the last command, as a real one would, and each is a deadline miss.
         """
-        rec, Ts = self.rec, self.a.Ts
-        tick, due_rel, woke_rel = self.pacer.wait_next(skip=self.scenario.overrun == "skip")
         offset = self.pacer.start_ns - self.t_start
-        if tick > k:
-            N = self.plan.N
-            for j in range(k, min(tick, N)):
-                rec.Y[j] = self.plant.outputs() + self.plan.noise[j]
-                rec.U[j] = self.u
-                rec.DUE[j] = due_rel - (tick - j) * self.period_ns + offset
-                rec.TICK[j] = np.nan  # never ran: no jitter, a miss
-                self.plant.advance(u=self.u + self.plan.D[j], dt=Ts)
-                self._twin_step(j)
-            self.overruns += min(tick, N) - k
-            k = min(tick, N)
-            if k >= N:
-                return k, 0
-        rec.DUE[k] = due_rel + offset
-        rec.TICK[k] = woke_rel + offset
+        start, N = k, self.plan.N
+        k, due_rel, woke_rel = next_tick(self.pacer, k, steps=N, skip=self.scenario.overrun == "skip",
+                                         hold=lambda j, due: self._hold(j, due + offset))  # fmt: skip
+        self.overruns += k - start
+        if k >= N:
+            return k, 0
+        self.rec.DUE[k] = due_rel + offset
+        self.rec.TICK[k] = woke_rel + offset
         return k, self.pacer.start_ns + due_rel + self.period_ns - SPIN_NS // 2
+
+    def _hold(self, j: int, due: int) -> None:
+        """A tick missed in an overrun: the plant runs on under the last command (never sent: no jitter, a miss)."""
+        rec = self.rec
+        rec.Y[j] = self.plant.outputs() + self.plan.noise[j]
+        rec.U[j] = self.u
+        rec.DUE[j] = due
+        rec.TICK[j] = np.nan
+        self.plant.advance(u=self.u + self.plan.D[j], dt=self.a.Ts)
+        self._twin_step(j)
 
     def _step(self, k: int, wait_until: int | None) -> None:
         """Sample, send, wait for the command of this sample, and advance the plant by one period."""

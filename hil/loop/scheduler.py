@@ -14,7 +14,7 @@ from __future__ import annotations
 import gc
 import os
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager, nullcontext
 from typing import Any
 
@@ -177,6 +177,22 @@ class Pacer:
         tick = self.k
         self.k += 1
         return tick, due - self.start_ns, now - self.start_ns
+
+
+def next_tick(
+    pacer: Pacer, k: int, *, steps: int, skip: bool, hold: Callable[[int, int], None]
+) -> tuple[int, int, int]:
+    """Wait for ``pacer``'s next tick from step ``k``: ``(step to run, its deadline, when woken)``, times relative to
+    the pacer's start; the step is ``steps`` or more when the run is over.
+
+    Ticks that passed while the loop was stalled (an overrun, with ``skip``) are held steps: ``hold(j, due_j)``
+    runs each (``j < steps``, ``due_j`` its deadline) before the step returned; their count is the step's distance
+    from ``k``.
+    """
+    tick, due, woke = pacer.wait_next(skip=skip)
+    for j in range(k, min(tick, steps)):
+        hold(j, due - (tick - j) * pacer.period_ns)
+    return max(k, min(tick, steps)), due, woke
 
 
 def pacing_jitter(

@@ -143,6 +143,7 @@ class _ScheduledSil:
         self.model_twin, self.model_start = None, ""
         self.bits = np.arange(artifact.m, dtype=np.uint32)
         self.follows = getattr(plant, "schedule", None)  # a plant whose dynamics follow the external signals
+        self.mode = "sil"  # the timing compute_metrics reads (realtime: ticks against their deadlines)
 
     def run(self, progress: Callable[[int, int], None] | None) -> RunResult:
         """Every planned step, or until the plant fails."""
@@ -154,16 +155,24 @@ class _ScheduledSil:
         every = max(1, N // 100)
         self.t_start = time.perf_counter_ns()
         try:
-            for k in range(N):
+            while k < N:
+                k = self._tick(k)
+                if k >= N:
+                    break
                 self._step(k)
-                if progress is not None and (k + 1) % every == 0:
-                    progress(k + 1, N)
+                k += 1
+                if progress is not None and k % every == 0:
+                    progress(k, N)
             k = N
         except PlantError as exc:
             reason = f"plant failed at step {k}: {exc}"
             k += 1
         wall = (time.perf_counter_ns() - self.t_start) / 1e9
         return self._result(k, reason=reason, wall=wall)
+
+    def _tick(self, k: int) -> int:
+        """The step to run next, from ``k`` (a paced run waits for it here)."""
+        return k
 
     def _step(self, k: int) -> None:
         rec, plan = self.rec, self.plan
@@ -190,7 +199,8 @@ class _ScheduledSil:
         a, scenario = self.a, self.scenario
         trace = self.rec.trace(steps, self.twin, self.model_twin)
         trace = dataclasses.replace(trace, sigma=self.SIG[:steps].copy(), sigma_flags=self.FLAGS[:steps].copy())
-        metrics = compute_metrics(trace, artifact=a, mode="sil", late=0, period_s=a.Ts, model_start=self.model_start)
+        metrics = compute_metrics(trace, artifact=a, mode=self.mode, late=0, period_s=self.plan.period_s,
+                                  model_start=self.model_start)  # fmt: skip
         metrics.update({"complete": reason is None, "steps_planned": self.plan.N, "wall_s": wall,
                         "steps_per_s": steps / wall if wall > 0 else None, "sched_fifo": False,
                         "faults_injected": {}, "mode": "sil"})  # fmt: skip
