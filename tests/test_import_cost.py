@@ -10,7 +10,18 @@ import sys
 
 from support.hil import pendulum_scenario, udp_transport, write_scenario
 
-HEAVY = ("scipy", "control", "slycot", "matplotlib", "dask", "clarabel", "scs", "flint", "gainlink.api")
+HEAVY = (
+    "scipy",
+    "control",
+    "slycot",
+    "matplotlib",
+    "dask",
+    "clarabel",
+    "scs",
+    "flint",
+    "gainlink.api",
+    "gainlink.firmware.build",
+)
 
 #: Runs the command line in a fresh interpreter, then prints which heavy modules it had imported.
 PROBE = (
