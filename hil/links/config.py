@@ -1,16 +1,19 @@
-"""A transport from a scenario's ``[transport]`` table: every transport module registers itself here by being
-imported, so the base class never imports its subclasses."""
+"""A transport from a scenario's ``[transport]`` table: every transport module registers itself in
+:data:`~gainlink.hil.links.base.TRANSPORTS` by being imported, so the base class never imports its subclasses.
+The module of a kind is imported when a scenario names it (a CAN run does not load pymavlink's dialects)."""
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Mapping
 from typing import Any
 
 from gainlink.errors import TransportError
 
-from . import can as _can  # noqa: F401 - registers "can"
-from . import mavlink as _mavlink  # noqa: F401 - registers "mavlink"
 from .base import TRANSPORTS, Transport
+
+#: The module that registers each transport kind.
+MODULES = {"can": "gainlink.hil.links.can", "mavlink": "gainlink.hil.links.mavlink"}
 
 
 def transport_from_config(config: Mapping[str, Any], *, artifact: Any) -> Transport:
@@ -24,4 +27,6 @@ def transport_from_config(config: Mapping[str, Any], *, artifact: Any) -> Transp
     kind = config.get("kind", "can" if "interface" in config else None)
     if kind is None:
         raise TransportError("transport: give interface (a python-can configuration) or kind")
+    for name in [str(kind)] if str(kind) in MODULES else MODULES:  # an unknown kind: the error lists every one
+        importlib.import_module(MODULES[name])
     return TRANSPORTS.create(str(kind), config, artifact=artifact)

@@ -243,6 +243,8 @@ def run_in_vm(
     workdir = Path(workdir).resolve()
     workdir.mkdir(parents=True, exist_ok=True)
     (workdir / "run.sh").write_text(script, "utf-8")
+    # TCG even where /dev/kvm opens: a sandbox's KVM may be PVM (kvm_pvm: nested, without hardware virtualisation),
+    # on which Debian's kernel never boots (no console output at all; with -cpu max QEMU aborts setting MSR 0x10a).
     cmd = [
         "qemu-system-x86_64",
         "-accel",

@@ -25,7 +25,6 @@ from gainlink.shipping.codegen_fixed import is_fixed
 from ..links.base import Transport
 from ..links.config import transport_from_config
 from ..plants.base import Plant
-from .can_fixed import fixed_can_check
 from .controller import ControllerProcess, controller_argv, qemu_peer
 from .faults import SAMPLE_FAULTS, FaultInjector
 from .metrics import RunTrace, compute_metrics, link_capacity
@@ -115,6 +114,8 @@ def run_scenario(scenario: Scenario, *, progress: Callable[[int, int], None] | N
         if clipped is not None:
             result.metrics["encoding_clipped"] = clipped
         if is_fixed(artifact):  # which law answered, checked against the integer model and the float64 law
+            from .can_fixed import fixed_can_check  # (and the firmware tooling it needs: only for a fixed artifact)
+
             result.metrics["fixed_point"] = fixed_can_check(
                 artifact, result.trace, ready_line=peer.ready_line, model_plant=is_design_model(scenario)
             )

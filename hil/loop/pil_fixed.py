@@ -25,7 +25,6 @@ from gainlink.proof.derived_law import DerivedLoop
 from gainlink.proof.fixed_format import real
 from gainlink.proof.fixed_law import FixedPointLoop
 from gainlink.shipping.artifact import Artifact
-from gainlink.synthesis.fixed_link import bound_float32_link
 
 
 class QuantisedTwin:
@@ -168,6 +167,8 @@ def fixed_pil_check(
     model_plant : bool
         Whether the plant is the design model (the certificate's premise).
     """
+    from gainlink.synthesis.fixed_link import bound_float32_link  # SciPy: not imported by a float32 run
+
     fp = a.checks["fixed_point"]
     err = fp["error"]
     model = model_records(a, Y.astype(np.float32), R.astype(np.float32))

@@ -11,7 +11,6 @@ from gainlink.fileio import publish_files
 from gainlink.proof.twin_plot import png_bytes, twin_difference_figure
 
 from .bridge import RunResult
-from .can_fixed import summary_lines as fixed_summary_lines
 from .sched_report import schedule_lines, sigma_csv, sigma_plot
 
 
@@ -81,7 +80,10 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
     if "peak_integrator" in m:
         lines.append("  peak integrator: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["peak_integrator"].items()))
     lines += _twin_lines(m.get("twin"))
-    lines += fixed_summary_lines(m.get("fixed_point"))
+    if m.get("fixed_point"):
+        from .can_fixed import summary_lines as fixed_summary_lines
+
+        lines += fixed_summary_lines(m["fixed_point"])
     lines += _model_lines(m.get("model_twin"))
     lines += schedule_lines(m.get("schedule"))
     for name, tr in m["tracked"].items():

@@ -26,7 +26,6 @@ import numpy as np
 from gainlink.errors import GainlinkError, PlantError
 from gainlink.lti import StateSpaceModel
 from gainlink.proof.sampled_plant import SampledPlant
-from scipy.linalg import expm
 
 from ..registry import take_keys
 from .base import PLANTS, Plant
@@ -181,6 +180,8 @@ class LinearPlant(Plant):
                     raise PlantError(f"discrete plant can only advance by Ts={Ts}, not {dt}")
                 self._disc[dt] = (self.A, self.B)
             else:
+                from scipy.linalg import expm  # only a continuous model needs it: imported here
+
                 n, m = self.B.shape
                 big = np.zeros((n + m, n + m))
                 big[:n, :n], big[:n, n:] = self.A, self.B

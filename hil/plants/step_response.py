@@ -18,7 +18,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm
 
 from .base import Plant
 
@@ -47,6 +46,8 @@ class StepRuns:
 
 def discretise(A: np.ndarray, B: np.ndarray, Ts: float) -> tuple[np.ndarray, np.ndarray]:
     """Zero-order-hold ``Ad, Bd`` of a continuous ``A, B`` at ``Ts`` (the matrix exponential)."""
+    from scipy.linalg import expm  # here: a HIL run imports this module but checks its FMU only when not cached
+
     n, m = B.shape
     big = np.zeros((n + m, n + m))
     big[:n, :n], big[:n, n:] = A, B

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import api
 from ..errors import DataError, GainlinkError, VerificationError
 from ..fileio import atomic_write_text, publish_files
 from ..proof.fixed_onestep import fixed_one_step_check, trace_words
@@ -16,10 +15,9 @@ from ..proof.replay_io import compare_traces, engine_names, one_step_check, read
 from ..proof.simulation import samples_csv
 from ..shipping import artifact as artifact_mod
 from ..shipping.codegen_fixed import is_fixed
-from ..synthesis.analysis import complex_pairs
-from ..synthesis.compensator import compensator_stability
-from ..synthesis.fixed_point import describe as describe_fixed_point
-from ..synthesis.schedule import describe_schedule
+
+# The API and the design side (SciPy, python-control) are imported by the commands that use them, not when the
+# parser is built: every command builds it, ``gainlink hil run`` too, which uses none of them.
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -86,6 +84,9 @@ def _c(z: complex) -> str:
 
 def cmd_analyze(args: argparse.Namespace) -> int:
     """``gainlink analyze SPEC``."""
+    from .. import api
+    from ..synthesis.schedule import describe_schedule
+
     rep = api.analyze(args.spec)
     if args.json:
         print(json.dumps(rep.to_dict(), indent=2, default=str))
@@ -145,6 +146,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
 def cmd_design(args: argparse.Namespace) -> int:
     """``gainlink design SPEC --out DIR``."""
+    from .. import api
+
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise GainlinkError(f"output path {out} exists and is not a directory")
@@ -166,6 +169,8 @@ def cmd_design(args: argparse.Namespace) -> int:
 
 
 def _design_json(result, path: Path) -> dict:
+    from ..synthesis.analysis import complex_pairs
+
     a = result.artifact
     return {
         "artifact": str(path),
@@ -235,6 +240,8 @@ def _print_checks(result) -> None:
 
 def _print_fixed_point(cert, measured: dict) -> None:
     """The certificate's lines, and the deviation measured in closed loop beside the certified bound."""
+    from ..synthesis.fixed_point import describe as describe_fixed_point
+
     for line in describe_fixed_point(cert):
         print(f"  {line}")
     worst = ", ".join(
@@ -253,6 +260,8 @@ def _print_fixed_point(cert, measured: dict) -> None:
 
 def _compensator_note(a) -> str:
     """What the compensator's stability says about an open-loop comparison (scheduled: see each point's)."""
+    from ..synthesis.compensator import compensator_stability
+
     if a.schedule is not None:
         return "the scheduled law's compensator at each point is in checks.schedule.points"
     comp = compensator_stability(a)
@@ -266,6 +275,8 @@ def _compensator_note(a) -> str:
 
 def _print_scheduled(result, out: Path, *, as_json: bool) -> int:
     """``gainlink design`` of a scheduled spec: every point, the grid, the verdict on a moving sigma."""
+    from ..synthesis.schedule import describe_schedule
+
     a = result.artifact
     sch = a["checks"]["schedule"]
     if as_json:
@@ -288,6 +299,8 @@ def _print_scheduled(result, out: Path, *, as_json: bool) -> int:
 
 def cmd_validate(args: argparse.Namespace) -> int:
     """``gainlink validate ARTIFACT``."""
+    from .. import api
+
     a = api.load(args.artifact)
     print(
         f"{args.artifact}: valid gainlink artifact '{a.name}' (n={a.n} m={a.m} p={a.p} q={a.q}, "
@@ -298,6 +311,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """``gainlink simulate ARTIFACT --out CSV``."""
+    from .. import api
+
     a = api.load(args.artifact)
     if args.x0 is not None and len(args.x0) != a.n:
         raise DataError(f"--x0 needs {a.n} values (one per state), got {len(args.x0)}")
@@ -319,6 +334,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """``gainlink replay ARTIFACT --input IN.csv --output OUT.csv [--compare OTHER.csv]``."""
+    from .. import api
+
     a = api.load(args.artifact)
     other = words = None
     if args.compare:  # read and checked before the replay writes anything

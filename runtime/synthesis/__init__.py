@@ -6,6 +6,20 @@ about a plant; :mod:`.compensator`, :mod:`.deadtime` and :mod:`.realization` are
 choices the pipeline records.
 """
 
-from .pipeline import DesignResult, synthesize
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .pipeline import DesignResult as DesignResult
+    from .pipeline import synthesize as synthesize
 
 __all__ = ["DesignResult", "synthesize"]
+
+
+def __getattr__(name: str) -> Any:
+    # The pipeline (SciPy, python-control, the LMI solvers) is imported on first use (PEP 562), not by every
+    # import of a submodule: the HIL bridge uses .compensator and must not pay for it.
+    if name in __all__:
+        from . import pipeline
+
+        return getattr(pipeline, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 RANK_RTOL = 1e-9
 BADLY_SCALED_RATIO = 1e4
@@ -113,6 +112,8 @@ def transmission_zeros(A, B, C, D) -> np.ndarray:
         import control
 
         return np.asarray(control.ss(A, B, C, D).zeros())
+    import scipy.linalg  # here, not at the top: the HIL bridge imports this module for complex_pairs only
+
     pencil_a = np.block([[A, B], [C, D]])
     pencil_b = np.block([[np.eye(n), np.zeros((n, m))], [np.zeros((p, n)), np.zeros((p, m))]])
     with np.errstate(all="ignore"):
@@ -129,6 +130,8 @@ def pole_frequency(pole: complex, *, discrete: bool, Ts: float) -> float:
 
 def state_scaling(A: np.ndarray, B: np.ndarray, C: np.ndarray, names) -> tuple[float, list[str]]:
     """Spread of the balancing scale factors of the system matrix and the states at its extremes."""
+    import scipy.linalg
+
     n = A.shape[0]
     big = np.zeros((n + 1, n + 1))
     big[:n, :n] = A
