@@ -96,6 +96,22 @@ def _control(record: dict) -> dict:
     return {k: record["metrics"].get(k) for k in CONTROL_KEYS}
 
 
+def slow_campaign(gains: Path) -> dict:
+    """8 runs of 4 s of a pendulum asleep 2.5 ms a step (about 1 s of wall time each, no CPU): long enough to be
+    caught halfway by a test that a loaded machine stalls for a while."""
+    data = small_campaign(gains, runs=8, grid=[])
+    data["scenario"]["duration"] = 4.0
+    plant = data["scenario"]["plant"]
+    data["scenario"]["plant"] = dict(
+        plant, kind="python", pause=0.0025, **{"class": "support.campaign_plants:SlowPendulum"}
+    )
+    return data
+
+
+#: The environment of a campaign run as a subprocess whose workers import a test plant (support.campaign_plants).
+TESTS_ON_PATH = dict(os.environ, PYTHONPATH=str(ROOT / "tests"))
+
+
 #: The tests on this module's clusters (local_run, dask_cluster) run on one worker (make test: --dist loadgroup),
 #: so each cluster and the campaign on it are started once, not once per worker.
 ON_THE_CLUSTERS = pytest.mark.xdist_group("campaign-clusters")
@@ -523,8 +539,7 @@ def test_a_folder_from_before_the_npy_traces_keeps_its_traces_and_a_foreign_work
 @pytest.mark.slow
 @ON_THE_CLUSTERS
 def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster, tmp_path):
-    data = small_campaign(pend, runs=8, grid=[])
-    data["scenario"]["duration"] = 4.0
+    data = slow_campaign(pend)
     path = tmp_path / "c.toml"
     path.write_text(toml_write.dumps(data))
     out = tmp_path / "out"
@@ -543,6 +558,7 @@ def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster
         stdin=subprocess.DEVNULL,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
+        env=TESTS_ON_PATH,
         start_new_session=True,
     )
     try:
@@ -575,8 +591,7 @@ def _group_alive(pgid: int) -> bool:
 
 @pytest.mark.slow
 def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_command_that_resumes(pend, tmp_path):
-    data = small_campaign(pend, runs=8, grid=[])
-    data["scenario"]["duration"] = 4.0
+    data = slow_campaign(pend)
     path, out = tmp_path / "c.toml", tmp_path / "out"
     path.write_text(toml_write.dumps(data))
     argv = ["campaign", "run", str(path), "--out", str(out), "--workers", "2", "--no-progress"]
@@ -586,6 +601,7 @@ def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_comman
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        env=TESTS_ON_PATH,
         start_new_session=True,
     )
     try:

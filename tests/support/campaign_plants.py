@@ -1,4 +1,5 @@
-"""A plant for the campaign tests that fails as a bug in a user's plant does: with an exception of its own.
+"""Plants for the campaign tests: one that fails as a bug in a user's plant does (with an exception of its own),
+one that takes its time.
 
 Imported by name (``kind = "python", class = "support.campaign_plants:BuggyPendulum"``) in the Dask worker
 processes of the tests, which have this folder on their ``PYTHONPATH``.
@@ -6,6 +7,7 @@ processes of the tests, which have this folder on their ``PYTHONPATH``.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 from gainlink.errors import PlantError
@@ -23,3 +25,18 @@ class BuggyPendulum(CartPendulum):
             raise RuntimeError("BuggyPendulum: the bug this test asked for")
         if broken_while and Path(broken_while).exists():
             raise PlantError(f"BuggyPendulum: broken while {broken_while} exists")
+
+
+class SlowPendulum(CartPendulum):
+    """The built-in cart-pendulum, asleep ``pause`` seconds in every step (wall time, no CPU): a campaign of it
+    lasts long enough to be interrupted halfway even when a loaded machine stalls the test for a second or two
+    (the plain pendulum's runs took a few tenths of a second each, and such a stall let a whole campaign end
+    before the test's interrupt)."""
+
+    def __init__(self, *, pause: float = 0.0, **options) -> None:
+        super().__init__(**options)
+        self.pause = pause
+
+    def advance(self, *, u, dt: float) -> None:
+        time.sleep(self.pause)
+        super().advance(u=u, dt=dt)
