@@ -145,34 +145,12 @@ static int uart_smoke(void)
     return gl_uart_flush(1000u) == 0 ? GL_EXIT_OK : GL_EXIT_IO;
 }
 
-/** Split the command line into words in place; returns their number (the first is the program name). */
-static int split_words(char *line, char *words[], int max)
-{
-    int n = 0;
-    while (*line != '\0' && n < max) {
-        while (*line == ' ') {
-            *line++ = '\0';
-        }
-        if (*line == '\0') {
-            break;
-        }
-        words[n++] = line;
-        while (*line != '\0' && *line != ' ') {
-            ++line;
-        }
-    }
-    return n;
-}
-
 /** `serve PROTOCOL OPTIONS...` after the program name: runs the server (returns only on a bad option); else -1. */
 static int serve_if_asked(void)
 {
     static char line[512];
     static char *words[GL_MAX_ARGS];
-    if (gl_sh_cmdline(line, sizeof line) != 0) {
-        return -1;
-    }
-    int n = split_words(line, words, GL_MAX_ARGS);
+    int n = gl_sh_cmdline_words(line, sizeof line, words, GL_MAX_ARGS);
     if (n < 2 || strcmp(words[1], "serve") != 0) {
         return -1;
     }

@@ -117,34 +117,12 @@ static int replay_file(int32_t fin)
     return GL_EXIT_OK;
 }
 
-/** Split the command line into words in place (as main.c); returns their number (the first: the program name). */
-static int split_words(char *line, char *words[], int max)
-{
-    int n = 0;
-    while (*line != '\0' && n < max) {
-        while (*line == ' ') {
-            *line++ = '\0';
-        }
-        if (*line == '\0') {
-            break;
-        }
-        words[n++] = line;
-        while (*line != '\0' && *line != ' ') {
-            ++line;
-        }
-    }
-    return n;
-}
-
 /** `serve PROTOCOL OPTIONS...` after the program name: runs that node (returns only on a bad option); else -1. */
 static int serve_if_asked(void)
 {
     static char line[512];
     static char *words[16];
-    if (gl_sh_cmdline(line, sizeof line) != 0) {
-        return -1;
-    }
-    int n = split_words(line, words, 16);
+    int n = gl_sh_cmdline_words(line, sizeof line, words, 16);
     if (n < 2 || strcmp(words[1], "serve") != 0) {
         return -1;
     }

@@ -88,6 +88,28 @@ int32_t gl_sh_cmdline(char *buf, size_t len)
     return semihost_call(SYS_GET_CMDLINE, args) == 0 ? 0 : -1;
 }
 
+int gl_sh_cmdline_words(char *buf, size_t len, char *words[], int max)
+{
+    if (gl_sh_cmdline(buf, len) != 0) {
+        return -1;
+    }
+    int n = 0;
+    char *at = buf;
+    while (*at != '\0' && n < max) {
+        while (*at == ' ') {
+            *at++ = '\0';
+        }
+        if (*at == '\0') {
+            break;
+        }
+        words[n++] = at;
+        while (*at != '\0' && *at != ' ') {
+            ++at;
+        }
+    }
+    return n;
+}
+
 void gl_sh_close(int32_t fd)
 {
     const uint32_t args[1] = {(uint32_t)fd};

@@ -62,6 +62,14 @@ int32_t gl_sh_rename(const char *from, const char *to);
  */
 int32_t gl_sh_cmdline(char *buf, size_t len);
 
+/**
+ * @brief The simulator's command line split into words in place (spaces become NULs).
+ * @param[out] buf Buffer for the line. @param[in] len Its size.
+ * @param[out] words The words (the first: the program name). @param[in] max Room in `words`.
+ * @return The number of words, or -1 when the line cannot be read.
+ */
+int gl_sh_cmdline_words(char *buf, size_t len, char *words[], int max);
+
 /** @brief Close a handle. @param[in] fd Handle. */
 void gl_sh_close(int32_t fd);
 
