@@ -603,11 +603,16 @@ def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_comman
         text=True,
         env=TESTS_ON_PATH,
         start_new_session=True,
+        # a terminal's program takes Ctrl-C by default, whatever the test runner's disposition (a shell's
+        # background job, as `make test &`, starts with SIGINT ignored, and Python then keeps it ignored)
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     try:
         deadline = time.monotonic() + 240
         while len(list((out / "runs").glob("*.json"))) < 2 and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.02)
+        seen = sorted(p.stat().st_mtime for p in (out / "runs").glob("*.json"))
+        interrupted = time.time()
         os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the client and the LocalCluster's processes
         _, err = proc.communicate(timeout=120)
         deadline = time.monotonic() + 30
@@ -619,7 +624,8 @@ def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_comman
             os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=30)
     before = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
-    assert 2 <= len(before) < 8, "the campaign was not caught mid-run"
+    stored = sorted(p.stat().st_mtime - interrupted for p in (out / "runs").glob("*.json"))
+    assert 2 <= len(before) < 8, f"not caught mid-run: runs stored at {stored} s of the interrupt (saw {len(seen)})"
     assert proc.returncode == 130
     assert err.splitlines() == [
         f"gainlink: interrupted: {len(before)} of 8 runs have a result in {out} (kept); resume with: gainlink "

@@ -29,9 +29,8 @@ class BuggyPendulum(CartPendulum):
 
 class SlowPendulum(CartPendulum):
     """The built-in cart-pendulum, asleep ``pause`` seconds in every step (wall time, no CPU): a campaign of it
-    lasts long enough to be interrupted halfway even when a loaded machine stalls the test for a second or two
-    (the plain pendulum's runs took a few tenths of a second each, and such a stall let a whole campaign end
-    before the test's interrupt)."""
+    lasts long enough to be interrupted or killed halfway even when a loaded machine stalls the test for a while
+    (the plain pendulum's runs take a few tenths of a second each)."""
 
     def __init__(self, *, pause: float = 0.0, **options) -> None:
         super().__init__(**options)
