@@ -30,13 +30,16 @@ class _OneLineParser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """Build the full parser from every command module of this package."""
+    """Build the full parser from every command module of this package (``_name`` modules are helpers of the
+    commands, imported by them when they run: not here, so building the parser stays cheap)."""
     parser = _OneLineParser(prog="gainlink", description="State-space design to verified firmware.")
     parser.add_argument("--version", action="version", version=f"gainlink {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug detail")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_OneLineParser)
     sub.required = True
     for info in sorted(pkgutil.iter_modules(__path__), key=lambda i: i.name):
+        if info.name.startswith("_"):
+            continue
         module = importlib.import_module(f"{__name__}.{info.name}")
         register = getattr(module, "register", None)
         if register is not None:

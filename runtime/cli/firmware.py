@@ -169,14 +169,14 @@ def _flash(args: argparse.Namespace) -> int:
 
 def _run_host(args: argparse.Namespace) -> int:
     """Start the host executable: replay a CSV through it, or pass stdin/stdout through (a fixed-point artifact's:
-    the integer loop, :mod:`.fixed_run`)."""
+    the integer loop, :mod:`._fixed_run`)."""
     from gainlink.firmware.build import build
     from gainlink.shipping.artifact import load
 
     artifact = load(args.artifact)
     res = build(artifact, target="host")
     if is_fixed(artifact):  # the integer law the artifact certifies, not the float32 loop of the same export
-        from .fixed_run import run_fixed_host
+        from ._fixed_run import run_fixed_host
 
         return run_fixed_host(
             artifact,
@@ -318,7 +318,7 @@ def _pil(args: argparse.Namespace) -> int:
     if ref is not None and len(ref) != artifact.q:
         raise GainlinkError(f"--reference needs {artifact.q} values for artifact {artifact.name}")
     if artifact.schedule is not None:  # the scheduled image (gl_sched_step), sigma moving with the run
-        from .pil_scheduled import run as run_scheduled
+        from ._pil_scheduled import run as run_scheduled
 
         return run_scheduled(args, artifact, platform)
     if args.schedule_signal:
