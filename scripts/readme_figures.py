@@ -308,7 +308,32 @@ def sched_showcase_block() -> str:
     return table(head, rows) + "\n" + provenance(doc) + "\n"
 
 
+def sched_cost_block() -> str:
+    doc = result("sched_cost")
+    if doc is None:
+        return missing("scheduled step cost", "python bench/sched_cost.py")
+    m4, host = doc["cortex_m4"], doc["host"]
+    rows = [
+        [
+            "Cortex-M4F (instructions per step)",
+            num(m4["unscheduled_instructions_per_step"]),
+            f"{num(m4['scheduled_sigma_moving_instructions_per_step'])} ({m4['ratio_sigma_moving']:.2f}x)",
+            f"{num(m4['scheduled_sigma_standing_instructions_per_step'])} ({m4['ratio_sigma_standing']:.2f}x)",
+        ],
+        [
+            "host (ns per step)",
+            f"{host['unscheduled_ns_per_step']:g}",
+            f"{host['scheduled_sigma_moving_ns_per_step']:g} ({host['ratio_sigma_moving']:.2f}x)",
+            f"{host['scheduled_sigma_standing_ns_per_step']:g} ({host['ratio_sigma_standing']:.2f}x)",
+        ],
+    ]
+    head = ["tank, 5 points", "unscheduled", "scheduled, sigma moving", "scheduled, sigma standing"]
+    target = f"Target: at most {doc['targets']['ratio_max']:g}x the unscheduled step (DESIGN.md).\n\n"
+    return target + table(head, rows) + "\n" + provenance(doc) + "\n"
+
+
 BLOCKS: dict[str, Callable[[], str]] = {
+    "sched_cost": sched_cost_block,
     "sched_showcase": sched_showcase_block,
     "fixed_point_cost": fixed_point_cost_block,
     "fuzz": fuzz_block,
