@@ -23,6 +23,7 @@ from ..firmware.fixed import CLIPPED, FAULT, OVERFLOW, FixedRun
 from ..proof.fixed_format import real
 from ..proof.replay_io import format_trace, read_samples, trace_numeric
 from ..shipping.artifact import Artifact
+from ._host_exec import answer_samples
 
 EXECUTABLE = "gainlink_fixed_loop_host"
 
@@ -38,14 +39,8 @@ def run_fixed_host(artifact: Artifact, build_dir: Path, *, input_path: Path | No
 
 def _replay(a: Artifact, exe: Path, input_path: Path, output_path: Path | None) -> int:
     samples = read_samples(input_path, a)
-    lines = [
-        " ".join(repr(float(v)) for v in np.concatenate([samples.Y[k], samples.R[k]]))
-        for k in range(samples.Y.shape[0])
-    ]
-    proc = subprocess.run([str(exe)], input="\n".join(lines) + "\n", capture_output=True, text=True, timeout=600)
-    if proc.returncode != 0:
-        raise FirmwareError(f"host firmware exited with status {proc.returncode}: {proc.stderr.strip()[:200]}")
-    run = parse_steps(a, proc.stdout, count=len(lines))
+    stdout, count = answer_samples(exe, samples.Y, samples.R)
+    run = parse_steps(a, stdout, count=count)
     text = format_trace(trace_from_run(a, run), samples.t, numeric=trace_numeric(a))
     if output_path is None:
         sys.stdout.write(text)
@@ -54,7 +49,7 @@ def _replay(a: Artifact, exe: Path, input_path: Path, output_path: Path | None) 
         raise DataError(f"output {output_path} is a directory")
     atomic_write_text(output_path, text)
     print(
-        f"ran {len(lines)} samples through {exe.name} ({trace_numeric(a)} integer law): "
+        f"ran {count} samples through {exe.name} ({trace_numeric(a)} integer law): "
         f"{int((run.sat != 0).sum())} saturated, {int(((run.flags & FAULT) != 0).sum())} refused, "
         f"{int(((run.flags & CLIPPED) != 0).sum())} clipped, {int(((run.flags & OVERFLOW) != 0).sum())} overflowed"
     )

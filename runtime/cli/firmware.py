@@ -196,17 +196,12 @@ def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: 
     from gainlink.proof.reference import Trace
     from gainlink.proof.replay_io import format_trace, read_samples
 
+    from ._host_exec import answer_samples
+
     a = artifact
     samples = read_samples(input_path, a)
-    lines = [
-        " ".join(repr(float(v)) for v in np.concatenate([samples.Y[k], samples.R[k]]))
-        for k in range(samples.Y.shape[0])
-    ]
-    proc = subprocess.run([str(exe)], input="\n".join(lines) + "\n", capture_output=True, text=True, timeout=600)
-    if proc.returncode != 0:
-        raise FirmwareError(f"host firmware exited with status {proc.returncode}: {proc.stderr.strip()[:200]}")
-    out = proc.stdout.splitlines()[1:]  # skip the banner
-    N = len(lines)
+    stdout, N = answer_samples(exe, samples.Y, samples.R)
+    out = stdout.splitlines()[1:]  # skip the banner
     U, S, XH, Z, F = (
         np.zeros((N, a.m)),
         np.zeros((N, a.m), bool),
