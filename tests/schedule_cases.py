@@ -18,6 +18,24 @@ def tank_dict() -> dict:
     return copy.deepcopy(data)
 
 
+def tank_hil_scenario(path, *, name: str, transport: dict, rate: float = 0.2, start: float = 1.0, **extra) -> dict:
+    """A lockstep HIL scenario of the scheduled tank (artifact at ``path``) on ``transport``: from rest at 0.04 m,
+    the level's reference climbs to 1 m at ``rate`` m/s from ``start`` (6 s; ``extra`` keys replace or add)."""
+    data: dict = {
+        "name": name,
+        "artifact": str(path),
+        "duration": 6.0,
+        "controller": "firmware",
+        "step_timeout": 2.0,
+        "peer_timeout": 4.0,
+        "plant": {"kind": "tank", "step": 0.005},
+        "transport": transport,
+        "initial_state": {"q": 0.08, "h": 0.04},
+        "reference": {"r_h": {"kind": "sweep", "low": 0.04, "high": 1.0, "rate": rate, "start": start}},
+    }
+    return data | extra
+
+
 def external_tank(*, form: str = "predictor", rate_max: float | None = None, filter_tau: float = 0.0) -> dict:
     """The tank scheduled on an external signal ``load`` (a frozen sigma is then a constant input)."""
     data = tank_dict()

@@ -21,7 +21,7 @@ from gainlink.shipping.artifact import from_dict
 from gainlink.shipping.can_layout import layout_for
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
-from schedule_cases import external_tank, tank_dict
+from schedule_cases import external_tank, tank_dict, tank_hil_scenario
 from support.hil import udp_transport
 from support.shared import once_per_run
 
@@ -42,19 +42,7 @@ def tank(tmp_path_factory):
 
 def _sweep_scenario(path, **extra) -> dict:
     """tank_sweep, shortened: the level's reference climbs 0.04 -> 1 m at 0.2 m/s from t = 1 s."""
-    data: dict = {
-        "name": "tank_sweep_can",
-        "artifact": str(path),
-        "duration": 6.0,
-        "controller": "firmware",
-        "step_timeout": 2.0,
-        "peer_timeout": 4.0,
-        "plant": {"kind": "tank", "step": 0.005},
-        "transport": udp_transport(fd=False),
-        "initial_state": {"q": 0.08, "h": 0.04},
-        "reference": {"r_h": {"kind": "sweep", "low": 0.04, "high": 1.0, "rate": 0.2, "start": 1.0}},
-    }
-    return data | extra
+    return tank_hil_scenario(path, name="tank_sweep_can", transport=udp_transport(fd=False), **extra)
 
 
 def test_the_can_node_runs_the_scheduled_law_bit_for_bit_as_sigma_crosses_the_points(tank, tmp_path):

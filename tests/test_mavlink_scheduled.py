@@ -27,7 +27,7 @@ from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
-from schedule_cases import external_tank, tank_dict
+from schedule_cases import external_tank, tank_dict, tank_hil_scenario
 from support.cli import run_cli
 from support.mavlink import read_params, start_firmware
 from support.net import udp_port
@@ -50,19 +50,8 @@ def tank(tmp_path_factory):
 
 def _sweep_scenario(path, **extra) -> dict:
     """tank_sweep, shortened: the level's reference climbs 0.04 -> 1 m at 0.2 m/s from t = 1 s."""
-    data: dict = {
-        "name": "tank_sweep_mavlink",
-        "artifact": str(path),
-        "duration": 6.0,
-        "controller": "firmware",
-        "step_timeout": 2.0,
-        "peer_timeout": 4.0,
-        "plant": {"kind": "tank", "step": 0.005},
-        "transport": {"kind": "mavlink", "port": udp_port()},
-        "initial_state": {"q": 0.08, "h": 0.04},
-        "reference": {"r_h": {"kind": "sweep", "low": 0.04, "high": 1.0, "rate": 0.2, "start": 1.0}},
-    }
-    return data | extra
+    transport = {"kind": "mavlink", "port": udp_port()}
+    return tank_hil_scenario(path, name="tank_sweep_mavlink", transport=transport, **extra)
 
 
 def _model_check(a, tr, S=None):

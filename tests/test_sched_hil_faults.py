@@ -16,7 +16,7 @@ from gainlink.proof.scheduled_reference import SIGMA_HELD
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
-from schedule_cases import tank_dict
+from schedule_cases import tank_dict, tank_hil_scenario
 from support.hil import udp_transport
 from support.shared import once_per_run
 
@@ -37,23 +37,9 @@ def tank(tmp_path_factory):
 
 def _scenario(path, **extra) -> dict:
     """The tank's level climbing 0.04 -> 1 m from t = 1 s, with a NaN window and a drop window."""
-    data: dict = {
-        "name": "tank_faults_can",
-        "artifact": str(path),
-        "duration": 4.0,
-        "controller": "firmware",
-        "step_timeout": 2.0,
-        "peer_timeout": 4.0,
-        "plant": {"kind": "tank", "step": 0.005},
-        "transport": udp_transport(fd=False),
-        "initial_state": {"q": 0.08, "h": 0.04},
-        "reference": {"r_h": {"kind": "sweep", "low": 0.04, "high": 1.0, "rate": 0.2, "start": 1.0}},
-        "faults": [
-            {"kind": "nan", "start": NAN[0], "stop": NAN[1]},
-            {"kind": "drop", "start": DROP[0], "stop": DROP[1]},
-        ],
-    }
-    return data | extra
+    faults = [{"kind": "nan", "start": NAN[0], "stop": NAN[1]}, {"kind": "drop", "start": DROP[0], "stop": DROP[1]}]
+    data = {"transport": udp_transport(fd=False), "duration": 4.0, "faults": faults} | extra
+    return tank_hil_scenario(path, name="tank_faults_can", **data)
 
 
 def test_nan_and_dropped_samples_reach_the_node_as_the_model_is_fed_and_the_report_counts_them(tank, tmp_path):

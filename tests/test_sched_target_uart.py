@@ -37,7 +37,7 @@ from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
-from schedule_cases import external_tank, tank_dict
+from schedule_cases import external_tank, tank_dict, tank_hil_scenario
 from support.cli import run_cli
 from support.hil import udp_transport
 from support.mavlink import read_params
@@ -70,21 +70,10 @@ def external(tmp_path_factory):
 
 def _sweep(path, transport: dict, *, controller: str, **extra) -> dict:
     """The level's reference climbs 0.04 -> 1 m at 0.4 m/s from t = 0.5 s, in lockstep (80 steps)."""
-    data = {
-        "name": "tank_sweep_uart",
-        "artifact": str(path),
-        "duration": 4.0,
-        "controller": controller,
-        "step_timeout": 2.0,
-        "peer_timeout": 5.0,
-        "plant": {"kind": "tank", "step": 0.005},
-        "transport": transport,
-        "initial_state": {"q": 0.08, "h": 0.04},
-        "reference": {"r_h": {"kind": "sweep", "low": 0.04, "high": 1.0, "rate": 0.4, "start": 0.5}},
-    }
+    data = {"duration": 4.0, "controller": controller, "peer_timeout": 5.0}
     if controller == "qemu":
         data["board"] = BOARD
-    return data | extra
+    return tank_hil_scenario(path, name="tank_sweep_uart", transport=transport, rate=0.4, start=0.5, **(data | extra))
 
 
 def _assert_model(a, res, S=None) -> None:
