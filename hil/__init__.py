@@ -72,16 +72,9 @@ def run(
 
     from gainlink.shipping.artifact import Artifact, load
 
-    from .loop.bridge import run_scenario
     from .loop.report import write_report
-    from .loop.scenario import Scenario, load_scenario, parse_scenario, resolve_scenario_path
 
-    if isinstance(scenario, Scenario):
-        sc = scenario
-    elif isinstance(scenario, dict):
-        sc = parse_scenario(scenario)
-    else:
-        sc = load_scenario(resolve_scenario_path(str(scenario)))
+    sc = _as_scenario(scenario)
     with tempfile.TemporaryDirectory(prefix="gainlink-run-") as tmp:
         if isinstance(artifact, Artifact):
             path = Path(tmp) / "gains.json"
@@ -90,16 +83,33 @@ def run(
         elif artifact is not None:
             sc = dataclasses.replace(sc, artifact_path=Path(artifact))
         loaded = load(sc.artifact_path)
-        if loaded.schedule is not None:
-            from .loop.can_scheduled import over_link, run_scheduled_can
-            from .loop.sil import run_sil
-
-            if over_link(sc):  # the firmware's CAN or MAVLink node on the scheduled law, over the link
-                result = run_scheduled_can(loaded, sc, progress=progress)
-            else:
-                result = run_sil(loaded, sc, progress=progress)
-        else:
-            result = run_scenario(sc, progress=progress)
+        result = _run_loaded(loaded, sc, progress=progress)
         if report is not None:
             write_report(result, Path(report), artifact=loaded, with_plots=plots)
     return result
+
+
+def _as_scenario(scenario: Any) -> Any:
+    """A parsed Scenario from a Scenario, a dict, a file or a built-in scenario's name."""
+    from .loop.scenario import Scenario, load_scenario, parse_scenario, resolve_scenario_path
+
+    if isinstance(scenario, Scenario):
+        return scenario
+    if isinstance(scenario, dict):
+        return parse_scenario(scenario)
+    return load_scenario(resolve_scenario_path(str(scenario)))
+
+
+def _run_loaded(artifact: Any, sc: Any, *, progress: Callable[[int, int], None] | None) -> Any:
+    """The run of ``sc`` with its artifact loaded: a scheduled law over its link (or in process without one), else
+    the bridge."""
+    if artifact.schedule is None:
+        from .loop.bridge import run_scenario
+
+        return run_scenario(sc, progress=progress)
+    from .loop.can_scheduled import over_link, run_scheduled_can
+    from .loop.sil import run_sil
+
+    if over_link(sc):  # the firmware's CAN or MAVLink node on the scheduled law, over the link
+        return run_scheduled_can(artifact, sc, progress=progress)
+    return run_sil(artifact, sc, progress=progress)

@@ -256,17 +256,11 @@ def run_pil(
         samples it received, and the deviation from the quantised twin beside the certified bound.
     """
     a = artifact
-    if a.schedule is not None:  # its image speaks the scheduled stream (main_sched.c)
-        raise PlantError(f"artifact {a.name} is scheduled on {a.schedule.sigma}: its PIL is "
-                         "gainlink.hil.loop.pil_scheduled.run_scheduled_pil (gainlink pil run runs it)")  # fmt: skip
-    if steps < 1:
-        raise PlantError("--steps must be at least 1")
+    _check_request(a, steps=steps, quantised_twin=quantised_twin)
     platform = resolve_cortex_m(target, board)
     board = platform.board.name
     R = np.broadcast_to(a.r_op if reference is None else np.asarray(reference, float), (steps, a.q))
     fixed = is_fixed(a)
-    if quantised_twin is not None and not fixed:
-        raise PlantError(f"artifact {a.name} is float32: no quantised twin (a fixed-point artifact has one)")
     elf, magic = _image(a, target=platform.target.name, board=board)
     qt = None if quantised_twin is None else QuantisedTwin(a, plant=quantised_twin, steps=steps)
     tw, mt = _twin_loop(a, twin, steps), _twin_loop(a, model_twin, steps)
@@ -282,10 +276,22 @@ def run_pil(
     twin_trace, comparison = (None, None) if tw is None else _compare_with_twin(a, tw, rec, R=R, steps=steps)
     check = None
     if fixed:
-        design_u = None if twin_trace is None else twin_trace.u
         model_plant = isinstance(plant, ArtifactPlant)  # the design model: the loop the certificate is about
+        design_u = None if twin_trace is None else twin_trace.u
         check = fixed_pil_check(a, rec.raw, Y=rec.Y, R=R, quantised=qt, design_u=design_u, model_plant=model_plant)
     return _result(a, rec, R=R, elapsed=elapsed, twin=(twin_trace, comparison), model_twin=mt, check=check)
+
+
+def _check_request(a: Artifact, *, steps: int, quantised_twin: DiscretePlant | None) -> None:
+    """What :func:`run_pil` refuses before anything is built: a scheduled artifact (its PIL is
+    :func:`~.pil_scheduled.run_scheduled_pil`), no steps, a quantised twin for a float32 artifact."""
+    if a.schedule is not None:  # its image speaks the scheduled stream (main_sched.c)
+        raise PlantError(f"artifact {a.name} is scheduled on {a.schedule.sigma}: its PIL is "
+                         "gainlink.hil.loop.pil_scheduled.run_scheduled_pil (gainlink pil run runs it)")  # fmt: skip
+    if steps < 1:
+        raise PlantError("--steps must be at least 1")
+    if quantised_twin is not None and not is_fixed(a):
+        raise PlantError(f"artifact {a.name} is float32: no quantised twin (a fixed-point artifact has one)")
 
 
 def _twin_loop(a: Artifact, plant: DiscretePlant | None, steps: int) -> TwinLoop | None:
