@@ -640,6 +640,37 @@ def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_comman
     assert json.loads((out / "campaign.json").read_text())["counts"]["runs"] == 8
 
 
+# A run stuck in C code that holds the GIL (here a libc sleep of 8 s) when Ctrl-C comes: its worker cannot stop, and
+# the nanny kills it after 4 s, with a warning of Dask's that the stop the user asked for is not worth.
+_STUCK_RUN_INTERRUPTED = """
+import ctypes, logging, time
+from gainlink.hil.campaign.cluster import dask_client, quiet_dask_logs
+
+def stuck():
+    ctypes.PyDLL(None).sleep(8)
+
+if __name__ == "__main__":
+    logging.basicConfig(format="gainlink: %(levelname)s: %(message)s")
+    quiet_dask_logs(logging.WARNING)  # as gainlink campaign run does
+    try:
+        with dask_client(workers=1) as client:
+            future = client.submit(stuck, pure=False)
+            while not client.processing()[next(iter(client.scheduler_info()["workers"]))]:
+                time.sleep(0.05)
+            raise KeyboardInterrupt
+    except KeyboardInterrupt:
+        print("stopped")
+"""
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_a_run_stuck_in_c_code_stops_the_cluster_without_dask_s_warnings(tmp_path):
+    script = tmp_path / "stuck.py"
+    script.write_text(_STUCK_RUN_INTERRUPTED)
+    res = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert (res.returncode, res.stdout, res.stderr) == (0, "stopped\n", "")
+
+
 # --- a real scheduler and two workers ---------------------------------------------------------------
 
 

@@ -47,14 +47,11 @@ def _run(args: argparse.Namespace) -> int:
 
 def _run_campaign(args: argparse.Namespace) -> int:
     from gainlink.hil.campaign import load_campaign, run
+    from gainlink.hil.campaign.cluster import quiet_dask_logs
 
     campaign = load_campaign(args.campaign)
     if not args.verbose:  # Dask's connection chatter is not the user's business
-        import distributed  # noqa: F401 - creates its loggers, which set their own levels
-
-        for name in list(logging.root.manager.loggerDict):
-            if name.split(".")[0] == "distributed":
-                logging.getLogger(name).setLevel(logging.WARNING)
+        quiet_dask_logs(logging.WARNING)
     with _progress_bar(not args.no_progress) as bar:
         callback = None
         if bar is None and not args.no_progress:  # not a terminal: a line per tenth of the campaign
