@@ -24,12 +24,15 @@ demo: setup
 # Bytecode is written even where PYTHONDONTWRITEBYTECODE is set (it is on the project's CI machines): without
 # it every process the suite starts (the xdist workers, Dask workers, the CLI run as a subprocess) compiles the
 # package again, and every worker rewrites the asserts of all ~75 test modules to collect them (~7 CPU-s each).
+# One BLAS thread per process (OPENBLAS_NUM_THREADS=1, as Dask sets for its workers): the suite's processes
+# already fill the cores, and idle OpenBLAS threads spin; with them the design-heavy modules took twice the CPU.
+TEST_ENV := env -u PYTHONDONTWRITEBYTECODE OPENBLAS_NUM_THREADS=1
 TEST_WORKERS ?= 4
 test: setup
-	env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder --durations=10
+	$(TEST_ENV) $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder --durations=10
 
 test-matrix: setup
-	env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -q -m matrix
+	$(TEST_ENV) $(PY) -m pytest -q -m matrix
 
 # The quick benchmarks (minutes); the long ones (an hour each) have their own targets. Each records its JSON
 # as the README's figures (scripts/readme_figures.py).

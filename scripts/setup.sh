@@ -30,8 +30,15 @@ if [ ! -x .venv/bin/python ]; then
   "$PYTHON" -m venv .venv
 fi
 echo "setup: installing gainlink into .venv"
-.venv/bin/python -m pip install -q --upgrade pip >/dev/null
-.venv/bin/python -m pip install -q -e '.[test]'
+# uv resolves and installs the same pinned ranges as pip in a fraction of the time (about 15 s instead of 50 s
+# on a fresh 2-core machine; it is part of every fresh `make test`); pip remains the fallback.
+if .venv/bin/python -m pip install -q 'uv==0.13.9' >/dev/null 2>&1; then
+  install=(.venv/bin/uv pip install -q --compile-bytecode --python .venv/bin/python)
+else
+  .venv/bin/python -m pip install -q --upgrade pip >/dev/null
+  install=(.venv/bin/python -m pip install -q)
+fi
+"${install[@]}" -e '.[test]'
 # MAVProxy for the MAVLink tests, without its declared GUI/map dependencies (opencv, vtk, ...: hundreds of MB);
 # its core and parameter module need only pymavlink, numpy, pyserial and defusedxml (the test extra).
-.venv/bin/python -m pip install -q --no-deps 'MAVProxy>=1.8.75,<1.9'
+"${install[@]}" --no-deps 'MAVProxy>=1.8.75,<1.9'

@@ -10,8 +10,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import pkgutil
 import sys
+
+# gainlink's matrices are small (tens of states): a BLAS thread pool does not speed them up, and its threads spin
+# between calls, taking a core from the firmware, QEMU and the plant beside the loop (it doubled a design's CPU
+# time on 2 cores). One thread, as Dask gives its workers, unless the user set it. Before numpy is imported.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from ..errors import GainlinkError
 from ..version import __version__
