@@ -23,6 +23,7 @@ from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import load
 from gainlink.spec import load_spec
 from gainlink.synthesis import synthesize
+from support import designs
 from support.mavlink import retuned_pendulum
 from support.paths import EXAMPLE_NAMES, EXAMPLES
 from support.shared import once_per_run
@@ -56,6 +57,12 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
             record = {"test": item.nodeid, "cpu": round(_cpu_seconds() - start, 3)}
             with open(path, "a") as fh:
                 fh.write(json.dumps(record) + "\n")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _shared_designs(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Gives :func:`support.designs.designed` the run's shared folder (autouse: before any module's fixtures)."""
+    designs.register(tmp_path_factory)
 
 
 @pytest.fixture(scope="session")

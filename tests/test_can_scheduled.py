@@ -19,17 +19,15 @@ from gainlink.hil.loop.sil_scheduled import external_signals
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from gainlink.shipping.can_layout import layout_for
-from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict, tank_hil_scenario
+from support.designs import designed
 from support.hil import udp_transport
-from support.shared import once_per_run
 
 pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
 
 def _designed(factory, name: str, spec: dict, tmp):
-    a = from_dict(once_per_run(factory, f"can_sched_{name}", lambda: synthesize(parse_spec(spec)).artifact))
+    a = from_dict(designed(spec))
     path = tmp / f"{name}.json"
     a.save(path)
     return a, path

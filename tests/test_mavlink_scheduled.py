@@ -25,19 +25,17 @@ from gainlink.mavlink.sched_params import scheduled_firmware_params
 from gainlink.mavlink.upload import UploadFailed, upload
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
-from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict, tank_hil_scenario
 from support.cli import run_cli
+from support.designs import designed
 from support.mavlink import read_params, start_firmware
 from support.net import udp_port
-from support.shared import once_per_run
 
 pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
 
 def _designed(factory, name: str, spec: dict):
-    a = from_dict(once_per_run(factory, f"mav_sched_{name}", lambda: synthesize(parse_spec(spec)).artifact))
+    a = from_dict(designed(spec))
     path = factory.mktemp(name) / f"{name}.json"
     a.save(path)
     return a, path

@@ -20,6 +20,7 @@ from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict
 from support.cli import GOOD_SPEC, run_cli
+from support.designs import designed
 
 # One worker runs this module (make test: --dist loadgroup): the scheduled builds, made once.
 pytestmark = pytest.mark.xdist_group("test_sched_firmware")
@@ -31,7 +32,7 @@ FLOAT = r"-?\d+(?:\.\d*)?(?:e[-+]?\d+)?f"
 def level_data():
     """The example tank's artifact dict, scheduled on its measured level (predictor form, no filter, no rate
     limit)."""
-    return synthesize(parse_spec(tank_dict())).artifact
+    return designed(tank_dict())
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +45,7 @@ def level(level_data):
 def external_data():
     """The tank scheduled on an external signal, current form, sigma filtered (tau 0.1 s) and rate-limited (4/s):
     its artifact dict."""
-    return synthesize(parse_spec(external_tank(form="current", rate_max=4.0, filter_tau=0.1))).artifact
+    return designed(external_tank(form="current", rate_max=4.0, filter_tau=0.1))
 
 
 @pytest.fixture(scope="module")

@@ -14,11 +14,9 @@ from gainlink.hil.loop.sched_law import GL_ERR_NANINF
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.proof.scheduled_reference import SIGMA_HELD
 from gainlink.shipping.artifact import from_dict
-from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from schedule_cases import tank_dict, tank_hil_scenario
+from support.designs import designed
 from support.hil import udp_transport
-from support.shared import once_per_run
 
 pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
@@ -28,7 +26,7 @@ DROP = (3.0, 3.15)  # s: the sample's frames not sent
 
 @pytest.fixture(scope="module")
 def tank(tmp_path_factory):
-    design = once_per_run(tmp_path_factory, "can_sched_tank", lambda: synthesize(parse_spec(tank_dict())).artifact)
+    design = designed(tank_dict())
     a = from_dict(design)
     path = tmp_path_factory.mktemp("tank") / "tank.json"
     a.save(path)

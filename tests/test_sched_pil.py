@@ -21,10 +21,9 @@ from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import from_dict
-from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict
 from support.cli import run_cli
+from support.designs import designed
 
 pytestmark = pytest.mark.xdist_group("test_sched_pil")  # one worker: the images are built once
 
@@ -34,7 +33,7 @@ STEPS = 400
 @pytest.fixture(scope="module")
 def level_data():
     """The example tank scheduled on its measured level: its artifact dict."""
-    return synthesize(parse_spec(tank_dict())).artifact
+    return designed(tank_dict())
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +47,7 @@ def level(level_data):
 @pytest.fixture(scope="module")
 def external():
     """The tank on an external sigma, current form, sigma filtered (0.1 s) and rate-limited (4/s); image built."""
-    a = from_dict(synthesize(parse_spec(external_tank(form="current", rate_max=4.0, filter_tau=0.1))).artifact)
+    a = from_dict(designed(external_tank(form="current", rate_max=4.0, filter_tau=0.1)))
     replay_image(a, target="cortex-m4", board="mps2-an386")
     return a
 
@@ -160,7 +159,7 @@ def test_pil_cli_bad_schedule_signals(level_data, pend, tmp_path):
     """An external sigma without --schedule-signal, an unknown signal, a malformed one, or one for an unscheduled
     artifact: one line, exit 2, nothing written."""
     ext = tmp_path / "ext.json"
-    artifact_mod.write(ext, synthesize(parse_spec(external_tank())).artifact)
+    artifact_mod.write(ext, designed(external_tank()))
     lvl = tmp_path / "level.json"
     artifact_mod.write(lvl, level_data)
     out = tmp_path / "out"

@@ -19,12 +19,10 @@ from gainlink.fileio import read_toml
 from gainlink.hil.loop.scenario import parse_scenario, resolve_scenario_path
 from gainlink.hil.loop.sil import run_sil
 from gainlink.shipping.artifact import from_dict
-from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict
 from support.cli import run_cli
+from support.designs import designed
 from support.hil import udp_transport, write_scenario
-from support.shared import once_per_run
 
 # One worker runs this module (make test: --dist loadgroup): the tank designs, made once.
 pytestmark = [pytest.mark.usefixtures("quiet_design_warnings"), pytest.mark.xdist_group("test_sched_sil")]
@@ -42,25 +40,20 @@ def single_point(i: int) -> dict:
     return data
 
 
-def _designed(factory, name: str, spec: dict):
-    """The artifact of ``spec``, designed once per test run (the scheduled verdicts take seconds)."""
-    return from_dict(once_per_run(factory, f"sched_sil_{name}", lambda: synthesize(parse_spec(spec)).artifact))
+@pytest.fixture(scope="module")
+def tank():
+    return from_dict(designed(tank_dict()))
 
 
 @pytest.fixture(scope="module")
-def tank(tmp_path_factory):
-    return _designed(tmp_path_factory, "tank", tank_dict())
+def singles():
+    return [from_dict(designed(single_point(i))) for i in range(3)]
 
 
 @pytest.fixture(scope="module")
-def singles(tmp_path_factory):
-    return [_designed(tmp_path_factory, f"single{i}", single_point(i)) for i in range(3)]
-
-
-@pytest.fixture(scope="module")
-def external(tmp_path_factory):
+def external():
     """The tank scheduled on an external signal: limited to 0.05 /s, and free."""
-    return {r: _designed(tmp_path_factory, f"external_{r}", external_tank(rate_max=r)) for r in (0.05, None)}
+    return {r: from_dict(designed(external_tank(rate_max=r))) for r in (0.05, None)}
 
 
 def _scenario(duration: float, h0: float, reference: dict, **extra) -> object:

@@ -14,9 +14,8 @@ from gainlink.engines.sched_native import NativeScheduledLoop
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from gainlink.shipping.codegen_scheduled import fixed_masks, render_export, tables
-from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from schedule_cases import external_tank
+from support.designs import designed
 
 pytestmark = pytest.mark.xdist_group("test_sched_step_cache")
 
@@ -24,7 +23,7 @@ pytestmark = pytest.mark.xdist_group("test_sched_step_cache")
 @pytest.fixture(scope="module")
 def ext():
     """The tank scheduled on an external sigma (predictor form, no filter, no rate limit: sigma is what it is given)."""
-    return from_dict(synthesize(parse_spec(external_tank())).artifact)
+    return from_dict(designed(external_tank()))
 
 
 def _sigmas(a) -> np.ndarray:

@@ -35,10 +35,9 @@ from gainlink.mavlink.sched_params import scheduled_firmware_params, table_hash
 from gainlink.mavlink.upload import UploadFailed, upload
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
-from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict, tank_hil_scenario
 from support.cli import run_cli
+from support.designs import designed
 from support.hil import udp_transport
 from support.mavlink import read_params
 from support.net import tcp_port, udp_port
@@ -49,7 +48,7 @@ BOARD = "mps2-an386"
 
 
 def _saved(spec: dict, tmp):
-    a = from_dict(synthesize(parse_spec(spec)).artifact)
+    a = from_dict(designed(spec))
     path = tmp / "gains.json"
     a.save(path)
     build(a, target="cortex-m4", board=BOARD)  # the serving image, built once
@@ -167,7 +166,7 @@ def retuned(tmp_path_factory):
     every point (as tests/test_mavlink_scheduled.py uploads to the host app)."""
     spec = tank_dict()
     spec["controller"]["bryson_y_max"] = [0.04]
-    a = from_dict(synthesize(parse_spec(spec)).artifact)
+    a = from_dict(designed(spec))
     path = tmp_path_factory.mktemp("retuned") / "retuned.json"
     a.save(path)
     return a, path

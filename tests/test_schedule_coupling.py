@@ -11,10 +11,9 @@ import numpy as np
 import pytest
 from gainlink.proof.scheduled_reference import ScheduledLoop
 from gainlink.shipping.artifact import from_dict
-from gainlink.spec import load_spec, parse_spec
-from gainlink.synthesis import synthesize
 from gainlink.synthesis.lpv import velocity_loop
-from schedule_cases import TANK, external_tank
+from schedule_cases import external_tank, tank_dict
+from support.designs import designed
 
 C_ORIFICE, TAU_PUMP = 0.4, 0.1  # examples/tank_scheduled.toml's model
 
@@ -34,7 +33,7 @@ def _tank_step(x: np.ndarray, u: float, Ts: float, substeps: int = 200) -> np.nd
 
 @pytest.fixture(scope="module")
 def tank():
-    return from_dict(synthesize(load_spec(TANK)).artifact)
+    return from_dict(designed(tank_dict()))
 
 
 def _closed_loop_map(art, h0: float):
@@ -136,7 +135,7 @@ def _match(a, b, tol) -> bool:
 
 def test_a_moving_sigma_never_steps_the_command():
     """At rest, sigma jumping across the whole envelope leaves the command exactly where it was."""
-    art = from_dict(synthesize(parse_spec(external_tank())).artifact)
+    art = from_dict(designed(external_tank()))
     loop = ScheduledLoop(art)
     u0 = loop.step([0.25], [0.25], [0.04]).u
     for s in (1.0, 0.04, 0.5, 0.9, 0.04):

@@ -18,6 +18,7 @@ from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from schedule_cases import TANK, external_tank, tank_dict
 from support.cli import run_cli
+from support.designs import designed
 
 
 def _toml(data: dict) -> str:
@@ -97,7 +98,7 @@ def test_lmi_solver_failure_is_one_line_exit_2(tmp_path, monkeypatch):
 def external(tmp_path_factory):
     """The external-sigma tank designed and written: (path, artifact)."""
     path = tmp_path_factory.mktemp("sched") / "gains.json"
-    artifact_mod.write(path, synthesize(parse_spec(external_tank(rate_max=2.0))).artifact)
+    artifact_mod.write(path, designed(external_tank(rate_max=2.0)))
     return path, artifact_mod.load(path)
 
 

@@ -13,6 +13,7 @@ from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.lpv import velocity_loop
 from schedule_cases import external_tank
+from support.designs import designed
 
 # One worker runs this module (make test: --dist loadgroup): the scheduled designs, made once.
 pytestmark = pytest.mark.xdist_group("test_schedule_law")
@@ -166,7 +167,7 @@ def test_velocity_loop_is_the_step_map_of_the_law(scheduled):
 def test_sigma_hold_clip_rate_and_filter():
     """Sigma non-finite: held and flagged; outside the envelope: clipped and flagged; its change limited to
     Ts * rate_max; filtered first (alpha = 1 - exp(-Ts / tau))."""
-    art = from_dict(synthesize(parse_spec(external_tank(rate_max=0.5, filter_tau=0.2))).artifact)
+    art = from_dict(designed(external_tank(rate_max=0.5, filter_tau=0.2)))
     loop, Ts = ScheduledLoop(art), art.Ts
     y0 = np.array([0.25])
     first = loop.step(y0, [0.25], [0.25])

@@ -9,12 +9,13 @@ import numpy as np
 import pytest
 from gainlink.errors import DesignError
 from gainlink.shipping.artifact import from_dict
-from gainlink.spec import load_spec, parse_spec
+from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.lpv import bernstein_vertices, velocity_loop
 from gainlink.synthesis.lyapunov import common_lyapunov, rate_certificate
 from gainlink.synthesis.schedule_rate import RATE_GRID, monodromy_radius, trajectories
-from schedule_cases import TANK, external_tank
+from schedule_cases import external_tank, tank_dict
+from support.designs import designed
 
 
 def _rot(theta: float) -> np.ndarray:
@@ -110,7 +111,7 @@ def test_bernstein_hull_holds_the_curve():
 
 @pytest.fixture(scope="module")
 def tank():
-    return from_dict(synthesize(load_spec(TANK)).artifact)
+    return from_dict(designed(tank_dict()))
 
 
 def test_tank_certificate_rechecked_on_a_dense_grid(tank):
@@ -157,7 +158,7 @@ def test_unstable_between_points_is_refused():
 
 def test_spec_rate_max_is_kept_and_recorded():
     """A spec's rate_max is what the law enforces when the verdict allows any rate."""
-    art = from_dict(synthesize(parse_spec(external_tank(rate_max=0.3))).artifact)
+    art = from_dict(designed(external_tank(rate_max=0.3)))
     assert art.schedule.rate_max == 0.3
     assert art.checks["schedule"]["variation"]["rate_max_source"].startswith("spec")
 
