@@ -9,23 +9,22 @@ import numpy as np
 from gainlink.fileio import read_toml
 from gainlink.proof.fixed_law import FixedPointLoop
 from gainlink.shipping.artifact import Artifact, from_dict
-from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from gainlink.synthesis.random_plants import random_spec
 
+from support.designs import designed
 from support.paths import EXAMPLES
 
 _CACHE: dict = {}
 
 
 def example(name: str, numeric: str) -> Artifact:
-    """The example ``name`` designed with ``[implementation] numeric`` (cached for the session)."""
+    """The example ``name`` designed with ``[implementation] numeric`` (once per test run)."""
     key = (name, numeric)
     if key not in _CACHE:
         data, _ = read_toml(EXAMPLES / f"{name}.toml", what="spec", error=ValueError)
         data = copy.deepcopy(data)
         data["implementation"] = {"numeric": numeric}
-        _CACHE[key] = from_dict(synthesize(parse_spec(data)).artifact)
+        _CACHE[key] = from_dict(designed(data))
     return _CACHE[key]
 
 
@@ -40,7 +39,7 @@ def random_design(seed: int, numeric: str, y_range: float = 2.0, r_range: float 
         if q:
             spec["limits"] |= {"r_min": [-r_range] * q, "r_max": [r_range] * q}
         spec["implementation"] = {"numeric": numeric, "float32_check": False, "fixed_point_max_error": 0.5}
-        _CACHE[key] = from_dict(synthesize(parse_spec(spec)).artifact)
+        _CACHE[key] = from_dict(designed(spec))
     return _CACHE[key]
 
 
@@ -92,5 +91,5 @@ def pendulum_design(numeric: str, q_diag=None, r_diag=None) -> Artifact:
         data["implementation"] = {"numeric": numeric} | ({"fixed_point_max_error": 0.01} if numeric == "q15" else {})
         data["controller"]["Q_diag"] = q_diag or data["controller"]["Q_diag"]
         data["controller"]["R_diag"] = r_diag or data["controller"]["R_diag"]
-        _PENDULUM_DESIGNS[key] = from_dict(synthesize(parse_spec(data)).artifact)
+        _PENDULUM_DESIGNS[key] = from_dict(designed(data))
     return _PENDULUM_DESIGNS[key]
