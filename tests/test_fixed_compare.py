@@ -14,7 +14,7 @@ from gainlink.proof.fixed_onestep import fixed_one_step_check, trace_words
 from gainlink.proof.replay_io import read_samples, read_trace
 from gainlink.shipping.artifact import load
 from support.cli import assert_one_clear_line, run_cli
-from support.paths import EXAMPLES
+from support.fixed import pendulum_design
 
 # One worker runs this module (make test: --dist loadgroup): the fixed-point pendulum and its builds, made once.
 pytestmark = pytest.mark.xdist_group("test_fixed_compare")
@@ -26,13 +26,11 @@ BENT_STEP = 137
 def pendulum(tmp_path_factory) -> tuple:
     """The pendulum designed in q31 and q15, 300 noisy samples, and the host C's (native) trace of the q31 one."""
     d = tmp_path_factory.mktemp("fixed-compare")
-    q15 = d / "pendulum_q15.toml"  # q15 meets a coarser error than the default 1/4096 on the pendulum
-    q15.write_text((EXAMPLES / "pendulum.toml").read_text() + "\n[implementation]\nfixed_point_max_error = 0.01\n")
     gains = {}
-    for numeric, spec in (("q31", EXAMPLES / "pendulum.toml"), ("q15", q15)):
-        res = run_cli("design", spec, "--out", d / numeric, "--numeric", numeric)
-        assert res.code == 0, res.err
+    for numeric in ("q31", "q15"):  # q15 meets a coarser error (0.01) than the default 1/4096 on the pendulum
         gains[numeric] = d / numeric / "gains.json"
+        gains[numeric].parent.mkdir()
+        pendulum_design(numeric).save(gains[numeric])
     sim = run_cli("simulate", gains["q31"], "--steps", "300", "--noise", "0.01", "--out", d / "in.csv")
     assert sim.code == 0, sim.err
     res = run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", d / "native.csv", "--engine", "native")
