@@ -23,10 +23,9 @@ from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import load
 from gainlink.spec import load_spec
 from gainlink.synthesis import synthesize
-from support import designs
 from support.mavlink import retuned_pendulum
 from support.paths import EXAMPLE_NAMES, EXAMPLES
-from support.shared import once_per_run
+from support.shared import once_per_run, register_run
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
@@ -60,9 +59,10 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
 
 
 @pytest.fixture(scope="session", autouse=True)
-def _shared_designs(tmp_path_factory: pytest.TempPathFactory) -> None:
-    """Gives :func:`support.designs.designed` the run's shared folder (autouse: before any module's fixtures)."""
-    designs.register(tmp_path_factory)
+def _shared_run(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Gives :func:`support.shared.once` (and so :func:`support.designs.designed`) the run's shared folder (autouse:
+    before any module's fixtures)."""
+    register_run(tmp_path_factory)
 
 
 @pytest.fixture(scope="session")

@@ -30,6 +30,7 @@ from gainlink.shipping.artifact import from_dict, seal
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from support.cli import run_cli
+from support.shared import once
 
 GL_ERR_NANINF, GL_ERR_WATCHDOG = -2, -6
 FORMS = ("predictor", "current")
@@ -192,14 +193,17 @@ def independent_law(data: dict, Y, R):
 def op_case(form: str, mode: str, *, N: int = 300):
     """A random saturating design about a non-zero operating point, with absolute samples (golden generator)."""
     dims = {"predictor": dict(n=4, m=2, p=3), "current": dict(n=5, m=2, p=2)}[form]
-    return random_case(
-        300 + FORMS.index(form) * 3 + MODES.index(mode),
-        q=0 if mode == "none" else 1,
-        form=form,
-        anti_windup=mode,
-        N=N,
-        operating_point=True,
-        **dims,
+    return once(
+        f"op_case-{form}-{mode}-{N}",
+        lambda: random_case(
+            300 + FORMS.index(form) * 3 + MODES.index(mode),
+            q=0 if mode == "none" else 1,
+            form=form,
+            anti_windup=mode,
+            N=N,
+            operating_point=True,
+            **dims,
+        ),
     )
 
 

@@ -13,19 +13,12 @@ import hashlib
 import json
 from typing import Any
 
-import pytest
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 
-from .shared import once_per_run
+from .shared import once
 
-_FACTORY: list[pytest.TempPathFactory] = []  # the run's, registered by conftest before any test
 _LOCAL: dict[str, dict] = {}  # this process's copies
-
-
-def register(factory: pytest.TempPathFactory) -> None:
-    """Called once per process by the session fixture of ``conftest.py``."""
-    _FACTORY[:] = [factory]
 
 
 def designed(spec: dict) -> dict[str, Any]:
@@ -34,6 +27,5 @@ def designed(spec: dict) -> dict[str, Any]:
     text = json.dumps(data, sort_keys=True, default=str)
     key = "design-" + hashlib.sha256(text.encode()).hexdigest()[:16]
     if key not in _LOCAL:
-        make = lambda: synthesize(parse_spec(data)).artifact  # noqa: E731
-        _LOCAL[key] = once_per_run(_FACTORY[0], key, make) if _FACTORY else make()  # no factory: not in a test
+        _LOCAL[key] = once(key, lambda: synthesize(parse_spec(data)).artifact)
     return copy.deepcopy(_LOCAL[key])

@@ -17,6 +17,8 @@ from gainlink.fileio import atomic_write_bytes, exclusive_lock
 
 T = TypeVar("T")
 
+_RUN: list[pytest.TempPathFactory] = []  # the run's factory, registered by conftest before any test
+
 
 def once_per_run(factory: pytest.TempPathFactory, name: str, make: Callable[[], T]) -> T:
     """``make()``, computed by one process of this run (directly when the run is not distributed)."""
@@ -31,3 +33,13 @@ def once_per_run(factory: pytest.TempPathFactory, name: str, make: Callable[[], 
         value = make()
         atomic_write_bytes(path, pickle.dumps(value))
         return value
+
+
+def register_run(factory: pytest.TempPathFactory) -> None:
+    """Called once per process by the autouse session fixture of ``conftest.py``."""
+    _RUN[:] = [factory]
+
+
+def once(name: str, make: Callable[[], T]) -> T:
+    """:func:`once_per_run` for helpers called without fixtures (computed here when no test runs)."""
+    return once_per_run(_RUN[0], name, make) if _RUN else make()
