@@ -81,26 +81,32 @@ def _phase_margin(A: np.ndarray, B: np.ndarray, C: np.ndarray, Ts: float) -> tup
     return float(margins[k]), float(w_c[k])
 
 
+GRID_STEP_DB = 0.25  # the scan for the first unstable gain, before the bisection
+SCAN_CHUNK = 24  # grid gains whose eigenvalues are computed in one call (6 dB)
+BISECTION_RTOL = 1e-10
+
+
 def _gain_limit(A: np.ndarray, BC: np.ndarray, *, direction: int, max_db: float = 60.0) -> float | None:
-    """The loop-gain factor k (above or below 1) at which ``A + k BC`` first loses stability."""
+    """The loop-gain factor k (above or below 1) at which ``A + k BC`` first loses stability: the first unstable
+    gain of a quarter-dB grid (its eigenvalues a chunk at a time), then bisection between it and the one before."""
 
-    def stable(k: float) -> bool:
-        return float(np.max(np.abs(np.linalg.eigvals(A + k * BC)))) < 1.0
+    def radii(ks: np.ndarray) -> np.ndarray:
+        return np.max(np.abs(np.linalg.eigvals(A + ks[:, None, None] * BC)), axis=1)
 
-    step = 10 ** (direction * 0.25 / 20)  # quarter-dB grid, then bisection
-    inside, k = 1.0, 1.0
-    limit = 10 ** (direction * max_db / 20)
-    while True:
-        k *= step
-        if (direction > 0 and k > limit) or (direction < 0 and k < limit):
-            return None
-        if not stable(k):
+    grid = 10 ** (direction * GRID_STEP_DB * np.arange(1, int(round(max_db / GRID_STEP_DB)) + 1) / 20)
+    inside = 1.0
+    for start in range(0, grid.size, SCAN_CHUNK):
+        ks = grid[start : start + SCAN_CHUNK]
+        unstable = np.flatnonzero(radii(ks) >= 1.0)
+        if unstable.size:
+            j = start + int(unstable[0])
+            inside, outside = (grid[j - 1] if j else 1.0), float(grid[j])
             break
-        inside = k
-    outside = k
-    for _ in range(40):
+    else:
+        return None
+    while abs(outside / inside - 1.0) > BISECTION_RTOL:
         mid = np.sqrt(inside * outside)
-        inside, outside = (mid, outside) if stable(mid) else (inside, mid)
+        inside, outside = (mid, outside) if radii(np.array([mid]))[0] < 1.0 else (inside, mid)
     return float(outside)
 
 
