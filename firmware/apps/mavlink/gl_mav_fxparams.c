@@ -24,7 +24,6 @@ _Static_assert(OFF_Z0 + GL_FX_Q == GL_MAV_FX_VALUES, "value layout");
 #define WORD_MAX ((int32_t)((1ul << (GL_FX_WORD_BITS - 1)) - 1ul))
 #define HEADER_SIG GL_GAINS_STRUCTURE_FIELDS
 #define HEADER_STRUCT (GL_GAINS_STRUCTURE_FIELDS + 1)
-#define HASH_HEADER (GL_GAINS_STRUCTURE_FIELDS + 2)
 
 #define GL_HEADER_ID(field, compiled, param) param,
 static const char *const header_ids[GL_MAV_HEADER_PARAMS] = {
@@ -243,44 +242,24 @@ void gl_mav_params_init(gl_mav_params_t *table, const gl_mav_set_t *gains)
     table->committed = *gains;
 }
 
-int32_t gl_mav_params_find(const gl_mav_params_t *table, const char *id)
-{
-    char key[GL_MAV_ID_LEN + 1];
-    memcpy(key, id, GL_MAV_ID_LEN);
-    key[GL_MAV_ID_LEN] = '\0';
-    for (uint16_t k = 0; k < table->count; ++k) {
-        if (strncmp(table->param[k].id, key, GL_MAV_ID_LEN) == 0) {
-            return (int32_t)k;
-        }
-    }
-    return -1;
-}
-
-static float int_bits(uint32_t v)
-{
-    float f;
-    memcpy(&f, &v, sizeof f);
-    return f;
-}
-
 float gl_mav_params_value(const gl_mav_params_t *table, uint16_t index)
 {
     const gl_mav_param_t *p = &table->param[index];
     if (p->header >= 0 && p->header < GL_GAINS_STRUCTURE_FIELDS) {
 #define GL_STRUCTURE_WORD(field, compiled, param) (uint32_t)(compiled),
         const uint32_t words[GL_GAINS_STRUCTURE_FIELDS] = {GL_GAINS_STRUCTURE(GL_STRUCTURE_WORD)};
-        return int_bits(words[p->header]);
+        return gl_mav_float_of_bits(words[p->header]);
     }
     if (p->header == HEADER_SIG) {
-        return int_bits(signature_word());
+        return gl_mav_float_of_bits(signature_word());
     }
     if (p->header == HEADER_STRUCT) {
-        return int_bits(structure_crc(&table->committed.g));
+        return gl_mav_float_of_bits(structure_crc(&table->committed.g));
     }
-    if (p->header == HASH_HEADER) {
-        return int_bits(table->committed.crc32);
+    if (p->header == GL_MAV_HASH_HEADER) {
+        return gl_mav_float_of_bits(table->committed.crc32);
     }
-    return int_bits((uint32_t)table->staged.v[p->offset]);
+    return gl_mav_float_of_bits((uint32_t)table->staged.v[p->offset]);
 }
 
 /** Check a candidate set and build its integers: GL_OK, GL_ERR_CRC or GL_ERR_RANGE (then `set` is unusable). */
@@ -294,32 +273,6 @@ static gl_status_t check_set(gl_mav_set_t *set)
     }
     apply_values(set->v, &set->g);
     return GL_OK;
-}
-
-gl_mav_set_result_t gl_mav_params_set(gl_mav_params_t *table, uint16_t index, float value, uint8_t type)
-{
-    const gl_mav_param_t *p = &table->param[index];
-    if (type != p->type) {
-        return GL_MAV_SET_BAD_TYPE;
-    }
-    if (p->header >= 0 && p->header != HASH_HEADER) {
-        return GL_MAV_SET_READ_ONLY;
-    }
-    uint32_t bits;
-    memcpy(&bits, &value, sizeof bits);
-    if (p->header == HASH_HEADER) { /* commit the staged values when `bits` is their CRC and they pass the checks */
-        static gl_mav_set_t candidate;
-        candidate = table->staged;
-        candidate.crc32 = bits;
-        gl_status_t st = gl_mav_params_replace(table, &candidate);
-        if (st != GL_OK) {
-            table->last_refusal = (int32_t)st;
-            return GL_MAV_SET_BAD_VALUE;
-        }
-        return GL_MAV_SET_OK;
-    }
-    table->staged.v[p->offset] = (int32_t)bits;
-    return GL_MAV_SET_OK;
 }
 
 gl_status_t gl_mav_params_replace(gl_mav_params_t *table, const gl_mav_set_t *gains)

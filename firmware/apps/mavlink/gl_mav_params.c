@@ -4,7 +4,6 @@
  */
 #include "gl_mav_params.h"
 
-#include <math.h>
 #include <stddef.h>
 #include <stdio.h>
 #include <string.h>
@@ -29,8 +28,6 @@ static const block_t blocks[] = {GL_GAINS_PARAMS(GL_BLOCK)};
 #define GL_HEADER_ID(field, compiled, param) param,
 static const char *const header_ids[GL_MAV_HEADER_PARAMS] = {GL_GAINS_STRUCTURE(GL_HEADER_ID) "GL_HASH"};
 
-/** Index of the GL_HASH entry among the header parameters. */
-#define HASH_HEADER GL_GAINS_STRUCTURE_FIELDS
 
 static float *gain_float(gl_gains_t *gains, uint32_t offset)
 {
@@ -79,26 +76,6 @@ void gl_mav_params_init(gl_mav_params_t *table, const gl_mav_set_t *gains)
     table->committed = *gains;
 }
 
-int32_t gl_mav_params_find(const gl_mav_params_t *table, const char *id)
-{
-    char key[GL_MAV_ID_LEN + 1];
-    memcpy(key, id, GL_MAV_ID_LEN);
-    key[GL_MAV_ID_LEN] = '\0';
-    for (uint16_t k = 0; k < table->count; ++k) {
-        if (strncmp(table->param[k].id, key, GL_MAV_ID_LEN) == 0) {
-            return (int32_t)k;
-        }
-    }
-    return -1;
-}
-
-static float int_bits(uint32_t v)
-{
-    float f;
-    memcpy(&f, &v, sizeof f);
-    return f;
-}
-
 float gl_mav_params_value(const gl_mav_params_t *table, uint16_t index)
 {
     const gl_mav_param_t *p = &table->param[index];
@@ -106,42 +83,12 @@ float gl_mav_params_value(const gl_mav_params_t *table, uint16_t index)
     if (p->header >= 0 && p->header < GL_GAINS_STRUCTURE_FIELDS) {
 #define GL_STRUCTURE_WORD(field, compiled, param) c->field,
         const uint32_t words[GL_GAINS_STRUCTURE_FIELDS] = {GL_GAINS_STRUCTURE(GL_STRUCTURE_WORD)};
-        return int_bits(words[p->header]);
+        return gl_mav_float_of_bits(words[p->header]);
     }
-    if (p->header == HASH_HEADER) {
-        return int_bits(c->crc32);
+    if (p->header == GL_MAV_HASH_HEADER) {
+        return gl_mav_float_of_bits(c->crc32);
     }
     return *gain_float_const(&table->staged, p->offset);
-}
-
-gl_mav_set_result_t gl_mav_params_set(gl_mav_params_t *table, uint16_t index, float value, uint8_t type)
-{
-    const gl_mav_param_t *p = &table->param[index];
-    if (type != p->type) {
-        return GL_MAV_SET_BAD_TYPE;
-    }
-    if (p->header >= 0 && p->header != HASH_HEADER) {
-        return GL_MAV_SET_READ_ONLY;
-    }
-    if (p->header == HASH_HEADER) {
-        static gl_loop_t probe; /* full check and derivation without touching the running loop */
-        gl_gains_t candidate = table->staged;
-        memcpy(&candidate.crc32, &value, sizeof candidate.crc32);
-        gl_status_t st = gl_loop_init(&probe, &candidate, 1u);
-        if (st != GL_OK) {
-            table->last_refusal = (int32_t)st;
-            return GL_MAV_SET_BAD_VALUE;
-        }
-        table->committed = candidate;
-        table->staged = candidate;
-        table->commits++;
-        return GL_MAV_SET_OK;
-    }
-    if (!isfinite(value)) {
-        return GL_MAV_SET_BAD_VALUE;
-    }
-    *gain_float(&table->staged, p->offset) = value;
-    return GL_MAV_SET_OK;
 }
 
 gl_status_t gl_mav_params_replace(gl_mav_params_t *table, const gl_mav_set_t *gains)

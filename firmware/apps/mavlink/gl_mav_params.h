@@ -70,6 +70,9 @@ typedef gl_gains_t gl_mav_set_t;
 #define GL_MAV_DEFAULT_SET (&gl_gains_default)
 #endif
 
+/** Index of GL_HASH among the header parameters: the last of them, in every law's table. */
+#define GL_MAV_HASH_HEADER (GL_MAV_HEADER_PARAMS - 1)
+
 _Static_assert(GL_MAV_MAX_PARAMS < 65535, "too many parameters for MAVLink's uint16 param_index");
 
 /** MAV_PARAM_TYPE values used here. */
@@ -117,6 +120,12 @@ void gl_mav_params_init(gl_mav_params_t *table, const gl_mav_set_t *gains);
  * @return Its index, or -1.
  */
 int32_t gl_mav_params_find(const gl_mav_params_t *table, const char *id);
+
+/**
+ * @brief A word's 32 bits as a float (a param_value carrying an integer bytewise).
+ * @param[in] bits The bits. @return The float with those bits.
+ */
+float gl_mav_float_of_bits(uint32_t bits);
 
 /**
  * @brief The four param_value bytes of a parameter (bytewise encoding for integers).

@@ -4,14 +4,11 @@
  *        point's gains), staged, checked and committed through GL_HASH as one set. The same API as gl_mav_params.c,
  *        which an unscheduled float32 build compiles instead.
  */
-#include <math.h>
 #include <stddef.h>
 #include <stdio.h>
 #include <string.h>
 
 #include "gl_mav_params.h"
-
-#define HASH_HEADER (GL_MAV_HEADER_PARAMS - 1)
 
 static const char *const header_ids[GL_MAV_HEADER_PARAMS] = {"GL_DIM_N", "GL_DIM_M", "GL_DIM_P", "GL_DIM_Q",
                                                              "GL_NPTS",  "GL_DIM_E", "GL_HASH"};
@@ -111,19 +108,6 @@ void gl_mav_params_init(gl_mav_params_t *table, const gl_mav_set_t *gains)
     table->committed = *gains;
 }
 
-int32_t gl_mav_params_find(const gl_mav_params_t *table, const char *id)
-{
-    char key[GL_MAV_ID_LEN + 1];
-    memcpy(key, id, GL_MAV_ID_LEN);
-    key[GL_MAV_ID_LEN] = '\0';
-    for (uint16_t k = 0; k < table->count; ++k) {
-        if (strncmp(table->param[k].id, key, GL_MAV_ID_LEN) == 0) {
-            return (int32_t)k;
-        }
-    }
-    return -1;
-}
-
 static float *gain_float(gl_mav_set_t *set, uint32_t offset)
 {
     return (float *)(void *)&set->t + offset;
@@ -151,35 +135,6 @@ static gl_status_t check_set(const gl_mav_set_t *set)
         return GL_SCHED_ERR_RANGE;
     }
     return gl_sched_init(&probe, &set->t);
-}
-
-gl_mav_set_result_t gl_mav_params_set(gl_mav_params_t *table, uint16_t index, float value, uint8_t type)
-{
-    const gl_mav_param_t *p = &table->param[index];
-    if (type != p->type) {
-        return GL_MAV_SET_BAD_TYPE;
-    }
-    if (p->header >= 0 && p->header != HASH_HEADER) {
-        return GL_MAV_SET_READ_ONLY;
-    }
-    if (p->header == HASH_HEADER) {
-        gl_mav_set_t candidate = table->staged;
-        memcpy(&candidate.crc32, &value, sizeof candidate.crc32);
-        gl_status_t st = check_set(&candidate);
-        if (st != GL_OK) {
-            table->last_refusal = (int32_t)st;
-            return GL_MAV_SET_BAD_VALUE;
-        }
-        table->committed = candidate;
-        table->staged = candidate;
-        table->commits++;
-        return GL_MAV_SET_OK;
-    }
-    if (!isfinite(value)) {
-        return GL_MAV_SET_BAD_VALUE;
-    }
-    *gain_float(&table->staged, p->offset) = value;
-    return GL_MAV_SET_OK;
 }
 
 gl_status_t gl_mav_params_replace(gl_mav_params_t *table, const gl_mav_set_t *gains)
