@@ -30,15 +30,16 @@ if [ ! -x .venv/bin/python ]; then
   "$PYTHON" -m venv .venv
 fi
 echo "setup: installing gainlink into .venv"
-# uv resolves and installs the same pinned ranges as pip in a fraction of the time (about 15 s instead of 50 s
-# on a fresh 2-core machine; it is part of every fresh `make test`); pip remains the fallback.
-if .venv/bin/python -m pip install -q 'uv==0.13.9' >/dev/null 2>&1; then
-  install=(.venv/bin/uv pip install -q --compile-bytecode --python .venv/bin/python)
-else
-  .venv/bin/python -m pip install -q --upgrade pip >/dev/null
-  install=(.venv/bin/python -m pip install -q)
-fi
-"${install[@]}" -e '.[test]'
-# MAVProxy for the MAVLink tests, without its declared GUI/map dependencies (opencv, vtk, ...: hundreds of MB);
+# uv resolves and installs the same pinned ranges as pip in about half the time (bytecode compiled, as pip does; the
+# set-up is part of every fresh `make test`); pip is the fallback when uv cannot be had or fails.
+# MAVProxy for the MAVLink tests comes without its declared GUI/map dependencies (opencv, vtk, ...: hundreds of MB):
 # its core and parameter module need only pymavlink, numpy, pyserial and defusedxml (the test extra).
-"${install[@]}" --no-deps 'MAVProxy>=1.8.75,<1.9'
+install_with() {
+  "$@" -e '.[test]' && "$@" --no-deps 'MAVProxy>=1.8.75,<1.9'
+}
+if ! { .venv/bin/python -m pip install -q 'uv==0.13.9' >/dev/null 2>&1 &&
+  install_with .venv/bin/uv pip install -q --compile-bytecode --python .venv/bin/python; }; then
+  echo "setup: uv unavailable or failed; installing with pip"
+  .venv/bin/python -m pip install -q --upgrade pip >/dev/null
+  install_with .venv/bin/python -m pip install -q
+fi
