@@ -105,7 +105,8 @@ def dask_client(
         try:
             yield client
         except KeyboardInterrupt:
-            # the nannies then stop workers in the middle of a run, and warn that they kill the ones still busy
-            # after 4 s: the stop the user asked for, not news (the campaign says what it kept)
-            quiet_dask_logs(max(_dask_log_level(), logging.ERROR))
+            # the nannies then stop workers in the middle of a run, warn that they kill the ones still busy after
+            # 4 s, and the closing comms may log errors: the stop the user asked for, not news (the campaign says
+            # what it kept); shown with -v
+            quiet_dask_logs(_dask_log_level())
             raise
