@@ -654,9 +654,12 @@ if __name__ == "__main__":
     quiet_dask_logs(logging.WARNING)  # as gainlink campaign run does
     try:
         with dask_client(workers=1) as client:
+            client.wait_for_workers(1, timeout=60)
             future = client.submit(stuck, pure=False)
-            while not client.processing()[next(iter(client.scheduler_info()["workers"]))]:
+            deadline = time.monotonic() + 60
+            while not any(client.processing().values()) and time.monotonic() < deadline:
                 time.sleep(0.05)
+            time.sleep(0.5)  # the worker's thread is in the libc sleep, holding the GIL
             raise KeyboardInterrupt
     except KeyboardInterrupt:
         print("stopped")
