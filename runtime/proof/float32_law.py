@@ -20,6 +20,7 @@ compiler (the check runs for every design; building the firmware takes seconds).
 
 from __future__ import annotations
 
+import math
 from array import array
 
 import numpy as np
@@ -183,13 +184,15 @@ class Float32Loop:
     def step(self, y: np.ndarray, r: np.ndarray | None = None) -> StepResult:
         """One C step on measurement ``y`` and reference ``r`` (cast to float32 as the C API does)."""
         a = self.a
-        ys = round32(np.asarray(y, dtype=float).reshape(a.p))
-        rs = round32(np.zeros(a.q) if r is None else np.asarray(r, dtype=float).reshape(a.q))
-        if not (np.isfinite(ys).all() and np.isfinite(rs).all()):
+        # Python floats holding float32 values: the step below is scalar code, where numpy's per-call cost would
+        # dominate (this runs in every design's float32 check)
+        ys = np.asarray(y, dtype=float).reshape(a.p).astype(_F32).tolist()
+        rs = [0.0] * a.q if r is None else np.asarray(r, dtype=float).reshape(a.q).astype(_F32).tolist()
+        if not all(map(math.isfinite, ys + rs)):
             return StepResult(
                 u=self.safe_u.copy(), saturated=np.zeros(a.m, dtype=bool), fault=True, v=self.safe_u.copy()
             )
-        args = (self.xh.tolist(), self.z.tolist(), ys.tolist(), rs.tolist())
+        args = (self.xh.tolist(), self.z.tolist(), ys, rs)
         rounding = _Rounding()
         u, v, sat, xh, z = self._core(*args, rounding)
         if not rounding.exact():
