@@ -26,7 +26,8 @@ from support.hil import udp_transport
 pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
 
-def _designed(factory, name: str, spec: dict, tmp):
+def _saved(name: str, spec: dict, tmp):
+    """The artifact of ``spec`` (designed once per run) and its copy ``tmp/<name>.json``."""
     a = from_dict(designed(spec))
     path = tmp / f"{name}.json"
     a.save(path)
@@ -35,7 +36,7 @@ def _designed(factory, name: str, spec: dict, tmp):
 
 @pytest.fixture(scope="module")
 def tank(tmp_path_factory):
-    return _designed(tmp_path_factory, "tank", tank_dict(), tmp_path_factory.mktemp("tank"))
+    return _saved("tank", tank_dict(), tmp_path_factory.mktemp("tank"))
 
 
 def _sweep_scenario(path, **extra) -> dict:
@@ -61,8 +62,8 @@ def test_the_can_node_runs_the_scheduled_law_bit_for_bit_as_sigma_crosses_the_po
     assert "udp_multicast" in summary and "law=" not in summary
 
 
-def test_an_external_sigma_travels_after_the_references_and_the_node_runs_on_it(tmp_path_factory, tmp_path):
-    a, path = _designed(tmp_path_factory, "external", external_tank(), tmp_path)
+def test_an_external_sigma_travels_after_the_references_and_the_node_runs_on_it(tmp_path):
+    a, path = _saved("external", external_tank(), tmp_path)
     layout = layout_for(a)
     assert [list(s.signals) for s in layout.measurement] == [["y_h"], ["r_h"], ["s_load"]]  # classic: one value a frame
     signal = {"kind": "sweep", "low": 0.0, "high": 1.2, "rate": 0.4, "start": 0.5}
