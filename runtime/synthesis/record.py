@@ -3,6 +3,7 @@ the checks, the operating point and the provenance (versions and the spec's hash
 
 from __future__ import annotations
 
+import functools
 import platform
 from dataclasses import dataclass
 from importlib import metadata
@@ -104,15 +105,19 @@ def operating_point_keys(spec: PlantSpec) -> dict:
     return {k: vector_to_json(v) for k, v in keys.items() if v is not None and np.any(v != 0.0)}
 
 
+@functools.cache
+def _version(dist: str) -> str:
+    """The installed version of ``dist`` (read once per process: each lookup scans the installed packages'
+    metadata, a quarter of a small design's time when read on every design)."""
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return "absent"
+
+
 def provenance(spec: PlantSpec) -> dict:
     """Versions of everything that computed the gains, and the spec's hash."""
-
-    def version(dist: str) -> str:
-        try:
-            return metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            return "absent"
-
+    version = _version
     given = [part for part, s in (("controller", spec.controller), ("observer", spec.observer)) if s.method == "given"]
     return {
         "gainlink": __version__,
