@@ -37,8 +37,19 @@ def _hand_coefficients(art_i, Ts: float) -> dict:
             "Ky": np.zeros((art_i.m, art_i.p)), "Ki": art_i.Ki}  # fmt: skip
 
 
+_POINTS: dict[str, list] = {}  # spec name/observer form -> its points' artifacts
+
+
 def _points(spec):
-    """Each point designed on its own (schema 1, today's pipeline) with the same per-point settings."""
+    """Each point designed on its own (schema 1, today's pipeline) with the same per-point settings (once per
+    observer form: twelve tests of each form compare against them)."""
+    key = f"{spec.name}/{spec.observer.form}"
+    if key not in _POINTS:
+        _POINTS[key] = _design_points(spec)
+    return _POINTS[key]
+
+
+def _design_points(spec):
     from dataclasses import replace
 
     out = []

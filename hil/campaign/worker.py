@@ -95,7 +95,7 @@ def _library(artifact: Artifact) -> Path:
         if is_fixed(artifact):
             _LIBRARIES[artifact.sha256] = host_library(artifact)
         else:
-            _LIBRARIES[artifact.sha256] = build(artifact, target="host").files["shared"]
+            _LIBRARIES[artifact.sha256] = build(artifact, target="host", only="gainlink_host").files["shared"]
     return _LIBRARIES[artifact.sha256]
 
 

@@ -61,7 +61,7 @@ class NativeLoop:
     def __init__(self, artifact: Artifact, *, watchdog_periods: int = 10, library: Path | None = None) -> None:
         artifact.require_unscheduled("the native engine")
         self.artifact = artifact
-        path = library or build(artifact, target="host").files["shared"]
+        path = library or build(artifact, target="host", only="gainlink_host").files["shared"]
         self.library = Path(path)
         # The per-step functions take microseconds: called through PyDLL they keep the GIL. Through CDLL
         # each call releases and retakes it, and a thread waiting for the GIL (a Dask worker's event loop)

@@ -43,7 +43,7 @@ class NativeScheduledLoop:
             raise FirmwareError(f"artifact {artifact.name} is not scheduled: use gainlink.engines.native")
         self.artifact = artifact
         self.e = len(artifact.schedule.external)
-        path = Path(library or build(artifact, target="host").files["shared"])
+        path = Path(library or build(artifact, target="host", only="gainlink_host").files["shared"])
         lib = ctypes.PyDLL(str(path))  # short calls keep the GIL (see gainlink.engines.native)
         self._lib = lib
         lib.gl_host_artifact_sha256.restype = ctypes.c_char_p

@@ -114,7 +114,8 @@ def host_library(a: Artifact, *, options: dict | None = None, build_root: Path |
     """Build (cached) the host firmware of fixed-point artifact ``a``; the path of ``libgainlink_fixed_host.so``.
     ``options``: extra CMake cache entries (e.g. ``{"GL_FIXED_UNROLLED": "OFF"}``: the generic loop)."""
     require_fixed(a)
-    return build(a, target="host", options=options, build_root=build_root).build_dir / "libgainlink_fixed_host.so"
+    res = build(a, target="host", options=options, build_root=build_root, only="gainlink_fixed_host")
+    return res.build_dir / "libgainlink_fixed_host.so"
 
 
 def run_host(a: Artifact, Y, R=None, *, options: dict | None = None, build_root: Path | None = None) -> FixedRun:
