@@ -14,19 +14,23 @@ $(STAMP): pyproject.toml scripts/setup.sh
 	bash scripts/setup.sh
 	touch $@
 
+# Bytecode is written even where PYTHONDONTWRITEBYTECODE is set (it is on the project's CI machines): the set-up
+# does not compile it, and without it every process would compile the modules it imports again.
+PYC_ENV := env -u PYTHONDONTWRITEBYTECODE
+
 demo: setup
-	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/demo.sh
+	$(PYC_ENV) PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/demo.sh
 
 # The suite in parallel (pytest-xdist; tests are isolated by port, multicast group and folder, caches are filled
 # under file locks), the tests marked slow first (tests/conftest.py), handed out a few at a time except those
 # marked xdist_group (tests sharing an expensive module fixture: one worker makes it once), then pytest's ten
 # slowest. TEST_WORKERS=0 runs it in one process.
-# Bytecode is written even where PYTHONDONTWRITEBYTECODE is set (it is on the project's CI machines): without
-# it every process the suite starts (the xdist workers, Dask workers, the CLI run as a subprocess) compiles the
-# package again, and every worker rewrites the asserts of all ~75 test modules to collect them (~7 CPU-s each).
+# Bytecode is written (PYC_ENV): without it every process the suite starts (the xdist workers, Dask workers, the
+# CLI run as a subprocess) compiles the package again, and every worker rewrites the asserts of all ~75 test
+# modules to collect them (~7 CPU-s each).
 # One BLAS thread per process (OPENBLAS_NUM_THREADS=1, as Dask sets for its workers): the suite's processes
 # already fill the cores, and idle OpenBLAS threads spin; with them the design-heavy modules took twice the CPU.
-TEST_ENV := env -u PYTHONDONTWRITEBYTECODE OPENBLAS_NUM_THREADS=1
+TEST_ENV := $(PYC_ENV) OPENBLAS_NUM_THREADS=1
 TEST_WORKERS ?= 4
 test: setup
 	$(TEST_ENV) $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder --durations=10
@@ -37,13 +41,13 @@ test-matrix: setup
 # The quick benchmarks (minutes); the long ones (an hour each) have their own targets. Each records its JSON
 # as the README's figures (scripts/readme_figures.py).
 bench: setup
-	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh
+	$(PYC_ENV) PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh
 
 bench-fuzz: setup
-	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh fuzz
+	$(PYC_ENV) PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh fuzz
 
 bench-soak: setup
-	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh soak
+	$(PYC_ENV) PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh soak
 
 clean:
 	rm -rf build out .cache

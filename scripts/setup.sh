@@ -30,15 +30,17 @@ if [ ! -x .venv/bin/python ]; then
   "$PYTHON" -m venv .venv
 fi
 echo "setup: installing gainlink into .venv"
-# uv resolves and installs the same pinned ranges as pip in about half the time (bytecode compiled, as pip does; the
-# set-up is part of every fresh `make test`); pip is the fallback when uv cannot be had or fails.
+# uv resolves and installs the same pinned ranges as pip in about half the time; pip is the fallback when uv cannot be
+# had or fails. Bytecode is not compiled at install (pip does, uv need not): compiling all of site-packages was 25 of
+# the set-up's 40 s, and each module is compiled instead when first imported (make test and make demo write the
+# .pyc files), most of them never are.
 # MAVProxy for the MAVLink tests comes without its declared GUI/map dependencies (opencv, vtk, ...: hundreds of MB):
 # its core and parameter module need only pymavlink, numpy, pyserial and defusedxml (the test extra).
 install_with() {
   "$@" -e '.[test]' && "$@" --no-deps 'MAVProxy>=1.8.75,<1.9'
 }
 if ! { .venv/bin/python -m pip install -q 'uv==0.13.9' >/dev/null 2>&1 &&
-  install_with .venv/bin/uv pip install -q --compile-bytecode --python .venv/bin/python; }; then
+  install_with .venv/bin/uv pip install -q --python .venv/bin/python; }; then
   echo "setup: uv unavailable or failed; installing with pip"
   .venv/bin/python -m pip install -q --upgrade pip >/dev/null
   install_with .venv/bin/python -m pip install -q
