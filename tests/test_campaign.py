@@ -12,6 +12,7 @@ import contextlib
 import json
 import os
 import shlex
+import shutil
 import signal
 import socket
 import subprocess
@@ -448,6 +449,22 @@ def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
 
 
 @ON_THE_CLUSTERS
+def test_no_plots_merges_the_report_without_pngs_and_removes_those_of_an_earlier_merge(pend, local_run, tmp_path):
+    _, out, _ = local_run
+    folder = tmp_path / "copy"
+    shutil.copytree(out, folder)
+    path = tmp_path / "c.toml"
+    path.write_text(toml_write.dumps(small_campaign(pend)))
+    res = run_cli("campaign", "run", path, "--out", folder, "--no-plots", "--no-progress")
+    assert res.code == 0, res.err
+    assert "resumed: 6 runs had results, 0 ran now" in res.out  # every run kept: no cluster, only the merge
+    assert not (folder / "envelopes.png").exists() and not (folder / "scatter.png").exists()
+    assert ".png" not in (folder / "summary.txt").read_text() and ".png" in (out / "summary.txt").read_text()
+    rows = json.loads((folder / "campaign.json").read_text())["runs"]
+    assert rows == json.loads((out / "campaign.json").read_text())["runs"]
+
+
+@ON_THE_CLUSTERS
 def test_show_takes_a_run_by_index_or_by_id_never_guessing_which(local_run, tmp_path):
     from gainlink.hil.campaign.show import find_run
 
@@ -573,7 +590,7 @@ def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster
     assert not list(out.glob("campaign.json"))
     # Resumed on the scheduler + workers of this module (no second LocalCluster to start): results are the
     # folder's, whichever cluster made them.
-    res = run_cli("campaign", "run", path, "--out", out, "--scheduler", dask_cluster, "--no-progress")
+    res = run_cli("campaign", "run", path, "--out", out, "--scheduler", dask_cluster, "--no-progress", "--no-plots")
     assert res.code == 0, res.err
     assert f"resumed: {len(before)} runs had results, {8 - len(before)} ran now" in res.out
     after = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
@@ -799,7 +816,9 @@ def test_a_hil_fault_matrix_runs_in_parallel_on_separate_buses(pend, dask_cluste
             "ranges": {"x": [-2.0, 2.0], "theta": [-1.0, 1.0], "r_x": [-2.0, 2.0]},
         },
     )
-    result = run(data, out=tmp_path / "out", scheduler=dask_cluster)  # its two workers, before any is killed
+    result = run(
+        data, out=tmp_path / "out", scheduler=dask_cluster, plots=False
+    )  # its two workers, before any is killed
     assert result.total == 4 and result.errors == 0
     recs = {
         (r["values"]["drop"], r["values"]["encoding"]): json.loads(
@@ -850,7 +869,13 @@ def test_a_run_whose_worker_dies_is_retried_and_recorded_as_failed_after_a_secon
     outcome, done = {}, []
     thread = threading.Thread(
         target=lambda: outcome.update(
-            result=run(data, out=tmp_path / "out", scheduler=dask_cluster, progress=lambda *args: done.append(args[2]))
+            result=run(
+                data,
+                out=tmp_path / "out",
+                scheduler=dask_cluster,
+                progress=lambda *args: done.append(args[2]),
+                plots=False,
+            )
         )
     )
     kills = []
@@ -890,7 +915,7 @@ def test_runs_that_errored_fail_the_campaign_and_only_they_run_again_on_resume(p
     )
     path, out = tmp_path / "c.toml", tmp_path / "out"
     path.write_text(toml_write.dumps(data))
-    argv = ("campaign", "run", path, "--out", out, "--scheduler", dask_cluster, "--no-progress")
+    argv = ("campaign", "run", path, "--out", out, "--scheduler", dask_cluster, "--no-progress", "--no-plots")
     first = run_cli(*argv)
     assert first.code == 3, first.err
     assert first.err.strip().splitlines()[-1] == (
@@ -924,7 +949,7 @@ def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, da
         data["scenario"]["plant"], kind="python", **{"class": "support.campaign_plants:BuggyPendulum"}
     )
     with caplog.at_level("INFO", logger="gainlink.hil.campaign.runner"):
-        result = run(data, out=tmp_path / "out", scheduler=dask_cluster, batch=4)
+        result = run(data, out=tmp_path / "out", scheduler=dask_cluster, batch=4, plots=False)
     assert [m for m in caplog.messages if m.startswith("a batch of 4 runs failed (RuntimeError: BuggyPendulum")], (
         caplog.messages
     )

@@ -88,7 +88,7 @@ def test_a_campaign_of_a_q31_artifact_runs_the_integer_law_on_its_workers(pend_q
         "criteria": {"bounds": {"theta": [-0.5, 0.5]}},
     }
     out = tmp_path / "out"
-    result = run_campaign(data, out=out, workers=1)
+    result = run_campaign(data, out=out, workers=1, plots=False)
     doc = json.loads((out / "campaign.json").read_text())
     assert doc["counts"]["runs"] == 2 and doc["counts"]["error"] == 0, result
     for rec in (json.loads(p.read_text()) for p in (out / "runs").glob("*.json")):

@@ -305,7 +305,7 @@ def test_campaign_runs_record_the_mismatch(designed, mass_damper, tmp_path):
         },
         "grid": [{"target": "plant.interface", "values": ["auto", "cs"]}],
     }
-    run(data, out=tmp_path / "out", workers=1)
+    run(data, out=tmp_path / "out", workers=1, plots=False)
     rows = {
         r["values"]["plant.interface"]: r for r in json.loads((tmp_path / "out" / "campaign.json").read_text())["runs"]
     }

@@ -71,7 +71,7 @@ def _campaign(path, rate_max: float) -> dict:
 
 def test_a_campaign_over_sigma_rate_and_range_finds_where_stability_stops(spring_free, tmp_path):
     path, rate_max = spring_free
-    result = run(_campaign(path, rate_max), out=tmp_path / "out", workers=1)
+    result = run(_campaign(path, rate_max), out=tmp_path / "out", workers=1, plots=False)
     assert result.total == 4 and result.errors == 0
     doc = json.loads((tmp_path / "out" / "campaign.json").read_text())
     verdict = {(row["values"]["sigma_rate"], row["values"]["sigma_high"]): row["status"] for row in doc["runs"]}

@@ -59,7 +59,7 @@ def test_the_example_campaign_holds_up_to_the_verdicts_rates_and_fails_above(art
     data["artifact"] = str(artifact)
     data["scenario"]["duration"] = 10.0  # small: 200 steps a run
     data["grid"][0]["values"] = [rate_max, 4.0, 7.0]
-    result = run(data, out=tmp_path / "out", workers=1)
+    result = run(data, out=tmp_path / "out", workers=1, plots=False)
     assert result.total == 3 and result.errors == 0
     doc = json.loads((tmp_path / "out" / "campaign.json").read_text())
     status = {row["values"]["sigma_rate"]: row["status"] for row in doc["runs"]}

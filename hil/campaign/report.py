@@ -198,8 +198,8 @@ def _short(v: Any) -> str:
     return text if len(text) <= 30 else text[:27] + "..."
 
 
-def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, out: Any) -> str:
-    """A one-screen summary of the campaign."""
+def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, out: Any, plots: bool = True) -> str:
+    """A one-screen summary of the campaign (``plots``: whether the report has its PNGs)."""
     c = plan.campaign
     counts = Counter(r["status"] for r in rows)
     n = len(rows)
@@ -227,7 +227,8 @@ def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, ou
             + ", ".join(f"run {r['index']} {r['id']} ({_tracked_iae(r):.4g}, {r['status']})" for r in worst)
         )
         lines.append(f"  replay one: gainlink campaign show {out} --run {worst[0]['id']} --report REPORT_DIR")
-    lines.append(f"  report: {out / 'campaign.json'}, campaign.csv, envelopes.png, scatter.png, failures.txt")
+    pngs = " envelopes.png, scatter.png," if plots else ""
+    lines.append(f"  report: {out / 'campaign.json'}, campaign.csv,{pngs} failures.txt")
     return "\n".join(lines) + "\n"
 
 
@@ -355,8 +356,13 @@ def _criteria_doc(c: Any) -> dict:
     return {k: (dict(v) if isinstance(v, dict) else v) for k, v in c.__dict__.items()}
 
 
-def merge(plan: CampaignPlan, store: Any) -> tuple[str, list[dict]]:
-    """Merge the stored runs into the report files; returns the summary text and the rows."""
+PLOTS = ("envelopes.png", "scatter.png")
+
+
+def merge(plan: CampaignPlan, store: Any, *, plots: bool = True) -> tuple[str, list[dict]]:
+    """Merge the stored runs into the report files; returns the summary text and the rows. Without ``plots``,
+    the PNGs are not drawn (about a second per merge) and those of an earlier merge are removed: a report never
+    shows plots of other runs than its own."""
     rows = rows_of(plan, store)
     points = _by_point(plan, rows)
     c = plan.campaign
@@ -377,14 +383,18 @@ def merge(plan: CampaignPlan, store: Any) -> tuple[str, list[dict]]:
         "points": points,
         "runs": rows,
     }
-    summary = summary_text(plan, rows, points, out=store.out)
-    files = {
+    summary = summary_text(plan, rows, points, out=store.out, plots=plots)
+    files: dict[str, bytes | str] = {
         "campaign.json": json.dumps(doc, sort_keys=True, indent=1, allow_nan=False) + "\n",
         "campaign.csv": campaign_csv(plan, rows),
         "failures.txt": failures_text(rows),
-        "envelopes.png": envelopespng_bytes(plan, rows, store),
-        "scatter.png": scatterpng_bytes(plan, rows),
         "summary.txt": summary,
     }
+    if plots:
+        files["envelopes.png"] = envelopespng_bytes(plan, rows, store)
+        files["scatter.png"] = scatterpng_bytes(plan, rows)
+    else:
+        for name in PLOTS:
+            (store.out / name).unlink(missing_ok=True)
     publish_files(store.out, files)
     return summary, rows

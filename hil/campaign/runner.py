@@ -116,6 +116,7 @@ def run(
     workers: int | None = None,
     progress: Progress | None = None,
     batch: int | None = None,
+    plots: bool = True,
 ) -> CampaignResult:
     """Run every run of a campaign that has no result in ``out`` yet, then write the merged report.
 
@@ -134,6 +135,9 @@ def run(
     batch : int, optional
         Runs per Dask task (default: :func:`batch_sizes`; results are still stored, retried and reported
         per run).
+    plots : bool
+        Draw the report's PNGs (``envelopes.png``, ``scatter.png``); without, the report is its JSON, CSV and
+        text only.
 
     Returns
     -------
@@ -169,7 +173,7 @@ def run(
         except KeyboardInterrupt:  # the block closed the client (and the LocalCluster) on its way out
             finished = sum(store.finished(i) for i in unique)
             raise CampaignInterrupted(out=store.out, finished=finished, total=total) from None
-    return _result(plan, store, reused=len(reused), executed=len(todo))
+    return _result(plan, store, reused=len(reused), executed=len(todo), plots=plots)
 
 
 def _check_counts(*, batch: int | None, workers: int | None) -> None:
@@ -193,9 +197,9 @@ def _runs_to_do(unique: dict[str, RunPoint], *, reused: set[str], store: Store, 
     return todo
 
 
-def _result(plan: CampaignPlan, store: Store, *, reused: int, executed: int) -> CampaignResult:
+def _result(plan: CampaignPlan, store: Store, *, reused: int, executed: int, plots: bool) -> CampaignResult:
     """Merge the stored runs into the campaign report and count them."""
-    summary, rows = merge(plan, store)
+    summary, rows = merge(plan, store, plots=plots)
     counts = {s: sum(1 for r in rows if r["status"] == s) for s in ("pass", "fail", "error")}
     return CampaignResult(
         out=store.out,

@@ -28,7 +28,7 @@ def _resume_command(args: argparse.Namespace) -> str:
     for flag, value in (("--scheduler", args.scheduler), ("--workers", args.workers), ("--batch", args.batch)):
         if value is not None:
             argv += [flag, str(value)]
-    return shlex.join(argv)
+    return shlex.join(argv + (["--no-plots"] if args.no_plots else []))
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -81,6 +81,7 @@ def _run_campaign(args: argparse.Namespace) -> int:
             workers=args.workers,
             progress=callback,
             batch=args.batch,
+            plots=not args.no_plots,
         )
     sys.stdout.write(result.summary)
     if result.reused:
@@ -130,6 +131,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="runs per Dask task (default: SIL up to 16, at least 4 tasks per worker thread; HIL 1)",
     )
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    r.add_argument(
+        "--no-plots", action="store_true", help="no envelopes.png and scatter.png (about a second less per campaign)"
+    )
     r.set_defaults(func=_run)
 
     s = sub.add_parser("show", help="print a campaign's summary, or replay one run with its full HIL report")
