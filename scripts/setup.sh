@@ -31,17 +31,18 @@ if [ ! -x .venv/bin/python ]; then
 fi
 echo "setup: installing gainlink into .venv"
 # uv resolves and installs the same pinned ranges as pip in about half the time; pip is the fallback when uv cannot be
-# had or fails. Bytecode is not compiled at install (pip does, uv need not): compiling all of site-packages was 25 of
-# the set-up's 40 s, and each module is compiled instead when first imported (make test and make demo write the
-# .pyc files), most of them never are.
+# had or fails. uv does not compile bytecode here (compiling all of site-packages took 55 CPU-s, most of it never
+# imported): scripts/warm_bytecode.py imports what gainlink and its tests use, once, which writes theirs (28 CPU-s).
 # MAVProxy for the MAVLink tests comes without its declared GUI/map dependencies (opencv, vtk, ...: hundreds of MB):
 # its core and parameter module need only pymavlink, numpy, pyserial and defusedxml (the test extra).
 install_with() {
   "$@" -e '.[test]' && "$@" --no-deps 'MAVProxy>=1.8.75,<1.9'
 }
-if ! { .venv/bin/python -m pip install -q 'uv==0.13.9' >/dev/null 2>&1 &&
+if { .venv/bin/python -m pip install -q 'uv==0.13.9' >/dev/null 2>&1 &&
   install_with .venv/bin/uv pip install -q --python .venv/bin/python; }; then
+  env -u PYTHONDONTWRITEBYTECODE .venv/bin/python scripts/warm_bytecode.py
+else
   echo "setup: uv unavailable or failed; installing with pip"
   .venv/bin/python -m pip install -q --upgrade pip >/dev/null
-  install_with .venv/bin/python -m pip install -q
+  install_with .venv/bin/python -m pip install -q  # pip compiles the bytecode itself
 fi
