@@ -174,7 +174,9 @@ def _run_host(args: argparse.Namespace) -> int:
     from gainlink.shipping.artifact import load
 
     artifact = load(args.artifact)
-    res = build(artifact, target="host")
+    res = build(
+        artifact, target="host", only="gainlink_fixed_loop_host" if is_fixed(artifact) else "gainlink_loop_host"
+    )
     if is_fixed(artifact):  # the integer law the artifact certifies, not the float32 loop of the same export
         from ._fixed_run import run_fixed_host
 
