@@ -196,6 +196,23 @@ def test_an_artifact_breaking_an_invariant_of_the_law_is_refused(form, change, w
         artifact_mod.from_dict(_tampered(data, change))
 
 
+def test_a_schema_violation_is_refused_after_the_same_artifact_passed_and_before_it_passes_again():
+    """The schema's verdict is remembered by content (a design validates its artifact three times): an artifact
+    edited after passing, even the same dict in place, is checked again, and the untouched one still passes."""
+    data = synthesize(parse_spec(_small_spec())).artifact
+    artifact_mod.from_dict(data)
+    bad = json.loads(json.dumps(data))
+    bad["anti_windup"] = "sometimes"
+    with pytest.raises(artifact_mod.ArtifactError, match="does not match the schema at anti_windup"):
+        artifact_mod.from_dict(bad, check_hash=False)
+    saved = data["observer_form"]
+    data["observer_form"] = "both"
+    with pytest.raises(artifact_mod.ArtifactError, match="does not match the schema at observer_form"):
+        artifact_mod.from_dict(data, check_hash=False)
+    data["observer_form"] = saved
+    assert artifact_mod.from_dict(data).sha256 == data["sha256"]
+
+
 def test_ackermann_matches_place_for_single_input():
     r1 = synthesize(parse_spec(_small_spec(controller={"method": "place", "poles": [-8.0, -9.0]})))
     r2 = synthesize(parse_spec(_small_spec(controller={"method": "ackermann", "poles": [-8.0, -9.0]})))
