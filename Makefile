@@ -14,8 +14,8 @@ $(STAMP): pyproject.toml scripts/setup.sh
 	bash scripts/setup.sh
 	touch $@
 
-# Bytecode is written even where PYTHONDONTWRITEBYTECODE is set (it is on the project's CI machines): the set-up
-# does not compile it, and without it every process would compile the modules it imports again.
+# Bytecode is written even where PYTHONDONTWRITEBYTECODE is set (it is on the project's CI machines): a module the
+# set-up did not compile (scripts/warm_bytecode.py) is then compiled once, by the first process that imports it.
 PYC_ENV := env -u PYTHONDONTWRITEBYTECODE
 
 demo: setup
