@@ -11,6 +11,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
 from support.paths import ROOT
 
 
@@ -45,3 +46,13 @@ def test_import_layers_point_one_way_and_nothing_imports_in_a_cycle():
 def test_readme_figures_are_the_recorded_benchmark_results():
     proc = run_tool(str(ROOT / "scripts" / "readme_figures.py"), "--check")
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+@pytest.mark.xdist_group("test_code_health_probe")
+def test_an_xdist_group_reaches_the_scheduler(request):
+    """`make test` keeps the tests of one xdist_group on one worker (their module fixtures made once) only if
+    pytest-xdist can tag their ids with the group: with pytest 9 it could not, and the groups were silently spread
+    over every worker (pytest is pinned below 9 for this)."""
+    if not getattr(request.config.option, "loadgroup", False):
+        pytest.skip("only under --dist loadgroup (make test)")
+    assert request.node.nodeid.endswith("@test_code_health_probe"), request.node.nodeid
