@@ -359,12 +359,11 @@ def _check_schema(data: Any) -> None:
 
 
 def _json_key(data: dict) -> str | None:
-    """sha256 of ``data`` as canonical JSON (None when it is not plain JSON: then it is always checked)."""
+    """sha256 of ``data``'s :func:`canonical_json` (None when it has none, e.g. a NaN: then it is always checked)."""
     try:
-        text = json.dumps(data, sort_keys=True, separators=(",", ":"))
-    except (TypeError, ValueError):
+        return hashlib.sha256(canonical_json(data).encode("ascii")).hexdigest()
+    except (TypeError, ArtifactError):
         return None
-    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def _filter_gain(data: dict, form: str, *, Ad: np.ndarray, Dd: np.ndarray, L: np.ndarray) -> np.ndarray | None:
