@@ -8,10 +8,10 @@ beside the rest of the suite. A failure shows the tool's own report.
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
-import pytest
 from support.paths import ROOT
 
 
@@ -48,11 +48,45 @@ def test_readme_figures_are_the_recorded_benchmark_results():
     assert proc.returncode == 0, proc.stdout + proc.stderr
 
 
-@pytest.mark.xdist_group("test_code_health_probe")
-def test_an_xdist_group_reaches_the_scheduler(request):
+PROBE = """
+import os
+import pytest
+
+@pytest.mark.xdist_group("probe")
+@pytest.mark.parametrize("k", range(6))
+def test_member(request, k):
+    with open(os.environ["PROBE_OUT"], "a") as fh:
+        fh.write(f"{os.environ['PYTEST_XDIST_WORKER']} {request.node.nodeid}\\n")
+"""
+
+
+def test_an_xdist_group_reaches_one_worker(tmp_path):
     """`make test` keeps the tests of one xdist_group on one worker (their module fixtures made once) only if
-    pytest-xdist can tag their ids with the group: with pytest 9 it could not, and the groups were silently spread
-    over every worker (pytest is pinned below 9 for this)."""
-    if not getattr(request.config.option, "loadgroup", False):
-        pytest.skip("only under --dist loadgroup (make test)")
-    assert request.node.nodeid.endswith("@test_code_health_probe"), request.node.nodeid
+    pytest-xdist can tag their ids with the group: under pytest 9 it could not, and every group was silently spread
+    over all the workers (pytest is pinned below 9 for this). Six grouped tests on three workers: one worker, tagged."""
+    (tmp_path / "test_probe.py").write_text(PROBE)
+    out = tmp_path / "ran.txt"
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-q",
+            "-n",
+            "3",
+            "--dist",
+            "loadgroup",
+            "-p",
+            "no:cacheprovider",
+            "test_probe.py",
+        ],
+        cwd=tmp_path,
+        env={**os.environ, "PROBE_OUT": str(out)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    ran = [line.split(" ", 1) for line in out.read_text().splitlines()]
+    assert len(ran) == 6 and len({worker for worker, _ in ran}) == 1, ran
+    assert all(nodeid.endswith("@probe") for _, nodeid in ran), ran
