@@ -57,17 +57,16 @@ def fixed_masks(artifact: Artifact) -> dict[str, int]:
 
 
 def render_header(artifact: Artifact) -> str:
-    """Text of the scheduled ``gl_gains.h``: dimensions, the shape of sigma and identity as macros."""
+    """Text of the scheduled ``gl_gains.h``: dimensions and the shape of sigma as macros."""
     a = artifact
     S = a.schedule
     external = S.source == "external"
     return (
-        codegen._banner(a) + "/**\n * @file gl_gains.h\n"
-        " * @brief Dimensions and the shape of sigma of the scheduled artifact the firmware is built for.\n */\n"
+        codegen.structure_banner(SOURCE_NAME) + "/**\n * @file gl_gains.h\n"
+        " * @brief Dimensions and the shape of sigma of the scheduled artifact the firmware is built for (its name,\n"
+        " *        sha256 and tables: gl_sched_gains.c, gainlink/gl_artifact.h).\n */\n"
         "#ifndef GL_GAINS_H\n#define GL_GAINS_H\n\n"
         "#define GL_SCHEDULED 1\n"
-        f'#define GL_NAME "{a.name}"\n'
-        f'#define GL_ARTIFACT_SHA256 "{a.sha256}"\n'
         f"#define GL_N {a.n}\n#define GL_M {a.m}\n#define GL_P {a.p}\n#define GL_Q {a.q}\n"
         f"#define GL_NPTS {S.points.size}\n#define GL_E {len(S.external)}\n"
         f"#define GL_OBSERVER_FORM {FORM_CODES[a.observer_form]} /* {a.observer_form} */\n"
@@ -75,7 +74,6 @@ def render_header(artifact: Artifact) -> str:
         f"#define GL_SIGMA_INDEX {S.index}\n"
         f"#define GL_SIGMA_FILTERED {int(S.filter_alpha != 1.0)}\n"
         f"#define GL_SIGMA_RATE_LIMITED {int(S.rate_max is not None)}\n"
-        f"#define GL_TS_SECONDS {codegen.c_float(a.Ts)}\n"
         + "".join(f"#define GL_SCHED_FIXED_{k.upper()} {v:#010x}u\n" for k, v in fixed_masks(a).items())
         + "\n#endif /* GL_GAINS_H */\n"
     )
@@ -86,10 +84,12 @@ def render_source(artifact: Artifact) -> str:
     a = artifact
     S = a.schedule
     lines = [
-        codegen._banner(a),
+        codegen.source_banner(a),
         '#include "gainlink/gl_sched.h"\n',
         f"_Static_assert(GL_N == {a.n} && GL_M == {a.m} && GL_P == {a.p} && GL_Q == {a.q}, {_MISMATCH});",
         f"_Static_assert(GL_NPTS == {S.points.size} && GL_E == {len(S.external)}, {_MISMATCH});",
+        "",
+        *codegen.identity_lines(a),
         "",
         "const gl_sched_tables_t gl_sched_default = {",
     ]

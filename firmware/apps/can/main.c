@@ -355,8 +355,8 @@ int main(int argc, char **argv)
     if (gl_can_link_open(&can_link, &o.link) != 0) {
         return 4;
     }
-    printf("gainlink_can ready %s sha256:%s n=%d m=%d p=%d q=%d fd=%d base_id=%lu encoding=%s%s\n", GL_NAME,
-           GL_ARTIFACT_SHA256, GL_N, GL_M, GL_P, GL_Q, o.link.fd, o.base_id,
+    printf("gainlink_can ready %s sha256:%s n=%d m=%d p=%d q=%d fd=%d base_id=%lu encoding=%s%s\n", gl_artifact_name,
+           gl_artifact_sha256, GL_N, GL_M, GL_P, GL_Q, o.link.fd, o.base_id,
            o.encoding == GL_CAN_INT16 ? "int16" : "float32", LAW_FIELD);
     fflush(stdout);
     rc = serve(o.spin_us);

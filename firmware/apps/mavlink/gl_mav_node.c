@@ -102,7 +102,7 @@ static void send_ack(gl_mav_node_t *node, const mavlink_message_t *req, uint16_t
 static void send_version(gl_mav_node_t *node)
 {
     uint8_t custom[8];
-    memcpy(custom, GL_ARTIFACT_SHA256, sizeof custom);
+    memcpy(custom, gl_artifact_sha256, sizeof custom);
     const uint8_t none[8] = {0};
     const uint8_t uid2[18] = {0};
     mavlink_message_t msg;

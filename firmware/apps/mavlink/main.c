@@ -337,7 +337,7 @@ int main(int argc, char **argv)
         return rc;
     }
     catch_stop_signals();
-    printf("gainlink-mavlink %s sha256:%s %d %d %d %d %s%s\n", GL_NAME, GL_ARTIFACT_SHA256, GL_N, GL_M, GL_P, GL_Q,
+    printf("gainlink-mavlink %s sha256:%s %d %d %d %d %s%s\n", gl_artifact_name, gl_artifact_sha256, GL_N, GL_M, GL_P, GL_Q,
            opt.url, LAW_FIELD);
     fflush(stdout);
     rc = serve(opt.spin_us);

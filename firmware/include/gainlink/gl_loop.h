@@ -76,6 +76,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "gl_artifact.h" /* gl_artifact_name, gl_artifact_sha256 */
 #include "gl_gains.h" /* generated: GL_N, GL_M, GL_P, GL_Q, GL_OBSERVER_FORM, GL_ANTI_WINDUP, ... */
 
 #ifdef __cplusplus

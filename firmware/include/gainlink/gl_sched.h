@@ -51,6 +51,7 @@
 
 #include <stdint.h>
 
+#include "gl_artifact.h" /* gl_artifact_name, gl_artifact_sha256 */
 #include "gl_gains.h" /* generated for a scheduled artifact */
 
 #ifdef __cplusplus

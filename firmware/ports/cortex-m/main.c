@@ -224,9 +224,13 @@ static int run(void)
 {
     gl_clock_init();
     gl_uart_init();
-    uart_puts("gainlink " GL_NAME " ");
+    uart_puts("gainlink ");
+    uart_puts(gl_artifact_name);
+    uart_puts(" ");
     uart_puts(gl_board_name);
-    uart_puts(" sha256:" GL_ARTIFACT_SHA256 "\n");
+    uart_puts(" sha256:");
+    uart_puts(gl_artifact_sha256);
+    uart_puts("\n");
     int served = serve_if_asked();
     if (served >= 0) {
         return served;

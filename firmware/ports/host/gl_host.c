@@ -21,7 +21,7 @@ const gl_gains_t *gl_host_default_gains(void)
 
 const char *gl_host_artifact_sha256(void)
 {
-    return GL_ARTIFACT_SHA256;
+    return gl_artifact_sha256;
 }
 
 uint32_t gl_host_dims(uint32_t which)

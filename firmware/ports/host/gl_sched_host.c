@@ -26,5 +26,5 @@ const gl_sched_tables_t *gl_host_sched_default(void)
 
 const char *gl_host_artifact_sha256(void)
 {
-    return GL_ARTIFACT_SHA256;
+    return gl_artifact_sha256;
 }

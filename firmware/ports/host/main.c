@@ -49,7 +49,7 @@ int main(void)
         fprintf(stderr, "gainlink_loop_host: built-in gains rejected (status %d)\n", (int)st);
         return 3;
     }
-    printf("gainlink-loop %s sha256:%s %d %d %d %d\n", GL_NAME, GL_ARTIFACT_SHA256, GL_N, GL_M, GL_P, GL_Q);
+    printf("gainlink-loop %s sha256:%s %d %d %d %d\n", gl_artifact_name, gl_artifact_sha256, GL_N, GL_M, GL_P, GL_Q);
     fflush(stdout);
     char line[4096];
     float sample[GL_P + GL_QA];
