@@ -45,6 +45,36 @@ def test_fma32_is_correctly_rounded_like_libm_fmaf():
     assert tie_hits >= 64, "the double-rounding cases were exercised (plain rounding from double gets them wrong)"
 
 
+def test_a_step_whose_fmaf_sum_sits_on_a_midpoint_is_redone_with_one_rounding(pend):
+    """The unrolled fast step (gainlink.proof.float32_step) rounds each fmaf twice (to double, then to float32); when
+    a double sum sits on a float32 midpoint that the exact sum does not, the step is redone exactly. Here the first
+    command's sum is 1 + a*b with a*b = 2^-24 + 2^-60 (the case of the test above): libm's fmaf gives 1 + 2^-23,
+    the double rounding 1."""
+    from gainlink.proof.float32_step import compile_step
+    from gainlink.shipping.artifact import load
+
+    a = load(pend)
+    assert a.observer_form == "predictor"
+    libm = ctypes.CDLL(ctypes.util.find_library("m"))
+    libm.fmaf.argtypes = [ctypes.c_float] * 3
+    libm.fmaf.restype = ctypes.c_float
+    gain, state = float(np.float32(2.0**-24 * (1 + 2.0**-12))), float(np.float32(1 - 2.0**-12 + 2.0**-24))
+    loop = Float32Loop(a)
+    w = [0.0] * len(loop.w)  # y_op = 0, u_op = 0, every other coefficient 0 except the first command's
+    first = a.p  # u_op of the first command row, then its state gains Kx[0, :], integrator gains, lo, hi
+    w[first + 1], w[first + 2] = 1.0, gain
+    w[first + 1 + a.n + a.q], w[first + 2 + a.n + a.q] = -10.0, 10.0
+    loop.w = w
+    loop._fast = compile_step(w, n=a.n, m=a.m, p=a.p, q=a.q, current=False, anti_windup=a.anti_windup)
+    xh = [1.0, state] + [0.0] * (a.n - 2)
+    loop.xh = np.array(xh)
+    *_, inexact = loop._fast(xh, [0.0] * a.q, [0.0] * a.p, [0.0] * a.q)
+    assert inexact, "the fast step flags its double rounding"
+    u = loop.step(np.zeros(a.p), np.zeros(a.q)).u
+    assert float(np.float32(1.0 + gain * state)) == 1.0, "double rounding alone gets this wrong"
+    assert _bits(u[0]) == _bits(libm.fmaf(gain, state, 1.0)) == _bits(1.0 + 2.0**-23)
+
+
 def _structures(cases) -> list:
     """One case per compiled structure (form, anti-windup mode, integrators, operating point)."""
     picked = {}

@@ -10,9 +10,12 @@ same chain:
 - a float32 product of two float32 numbers is exact in float64 and is rounded once;
 - ``fmaf(a, b, c)`` is ``a*b`` (exact in float64) plus ``c``, rounded to float64 and then to float32.
   The two roundings differ from one correctly rounded ``fmaf`` only when the float64 sum lands exactly
-  on a float32 rounding midpoint while the exact sum does not; that case is detected and corrected
-  (:func:`fma32`), so results are those of the C bit for bit for normal numbers (tested against the
-  host build). float32 subnormal results (below 1.2e-38) are not treated specially.
+  on a float32 rounding midpoint while the exact sum does not; a step with a sum on a midpoint is redone with
+  correctly rounded operations (:func:`fma32_exact`), so results are those of the C bit for bit for normal
+  numbers (tested against the host build). float32 subnormal results (below 1.2e-38) are not treated specially.
+
+Each step runs as straight-line Python written for the artifact's dimensions (:mod:`.float32_step`, as the export's
+``gl_step.h``); the term-by-term interpreter (:meth:`Float32Loop._core`) is the exact path.
 
 It exists so that ``gainlink design`` can measure what float32 costs a design in closed loop without a
 compiler (the check runs for every design; building the firmware takes seconds).
@@ -26,11 +29,10 @@ from array import array
 import numpy as np
 
 from ..shipping.artifact import Artifact
+from .float32_step import MID_HALF, MID_MASK, compile_step
 from .reference import StepResult, Trace
 
 _F32 = np.float32
-_MID_MASK = np.uint64((1 << 29) - 1)  # float64 significand bits below float32's precision
-_MID_HALF = np.uint64(1 << 28)  # ... equal to this: the value sits exactly on a float32 midpoint
 
 
 def round32(x: np.ndarray | float) -> np.ndarray:
@@ -54,50 +56,11 @@ def fma32_exact(a: float, b: float, c: float) -> float:
 
 
 def _is_midpoint(s: float) -> bool:
-    return bool((np.float64(s).view(np.uint64) & _MID_MASK) == _MID_HALF)
-
-
-class _Rounding:
-    """float32 multiply and fmaf on Python floats; records each fmaf's operands for :meth:`exact`.
-
-    The fast path rounds ``a*b + c`` from float64, which equals a correctly rounded ``fmaf`` unless
-    the float64 sum sits on a float32 midpoint that the exact sum does not; :meth:`exact` finds out
-    afterwards, in one vectorised pass over the step, whether that happened.
-    """
-
-    def __init__(self) -> None:
-        self.buf = array("f", [0.0])
-        self.prods: list[float] = []
-        self.addends: list[float] = []
-
-    def mul(self, a: float, b: float) -> float:
-        self.buf[0] = a * b
-        return self.buf[0]
-
-    def fma(self, a: float, b: float, c: float) -> float:
-        prod = a * b
-        self.prods.append(prod)
-        self.addends.append(c)
-        self.buf[0] = prod + c
-        return self.buf[0]
-
-    def exact(self) -> bool:
-        """True when every fmaf of the step was rounded as a single rounding would have."""
-        if not self.prods:
-            return True
-        prod, c = np.array(self.prods), np.array(self.addends)
-        s = prod + c
-        tie = (s.view(np.uint64) & _MID_MASK) == _MID_HALF
-        if not tie.any():
-            return True
-        prod, c, s = prod[tie], c[tie], s[tie]
-        bb = s - prod
-        err = (prod - (s - bb)) + (c - bb)
-        return not np.any(err != 0.0)
+    return bool((np.float64(s).view(np.uint64) & MID_MASK) == MID_HALF)
 
 
 class _ExactRounding:
-    """The slow, always-correct variant of :class:`_Rounding`."""
+    """float32 multiply and a correctly rounded fmaf on Python floats: the exact path of :meth:`Float32Loop._core`."""
 
     def __init__(self) -> None:
         self.buf = array("f", [0.0])
@@ -157,6 +120,7 @@ class Float32Loop:
         self.safe_u = np.minimum(np.maximum(self.u_op, self.lo), self.hi)
         self.current = current
         self.w = self._stream()
+        self._fast = compile_step(self.w, n=a.n, m=a.m, p=a.p, q=a.q, current=current, anti_windup=a.anti_windup)
 
     def _stream(self) -> list[float]:
         """The coefficients in the order gl_step_core consumes them."""
@@ -193,15 +157,15 @@ class Float32Loop:
                 u=self.safe_u.copy(), saturated=np.zeros(a.m, dtype=bool), fault=True, v=self.safe_u.copy()
             )
         args = (self.xh.tolist(), self.z.tolist(), ys, rs)
-        rounding = _Rounding()
-        u, v, sat, xh, z = self._core(*args, rounding)
-        if not rounding.exact():
+        u, v, sat, xh, z, inexact = self._fast(*args)  # gl_step_core unrolled (float32_step)
+        if inexact:  # an fmaf sum on a float32 midpoint: double rounding may differ from fmaf's one rounding
             u, v, sat, xh, z = self._core(*args, _ExactRounding())
         self.xh, self.z = np.array(xh), np.array(z)
         return StepResult(u=np.array(u), saturated=np.array(sat, dtype=bool), fault=False, v=np.array(v))
 
     def _core(self, xh: list, z: list, ys: list, rs: list, rounding) -> tuple[list, list, list, list, list]:
-        """gl_step_core: the same operations in the same order over the coefficient stream."""
+        """gl_step_core: the same operations in the same order over the coefficient stream, interpreted term by
+        term (with :class:`_ExactRounding`: the step that :mod:`.float32_step`'s fast path falls back to)."""
         a = self.a
         n, m, p, q = a.n, a.m, a.p, a.q
         mul, fma = rounding.mul, rounding.fma
