@@ -366,3 +366,22 @@ def test_library_uses_no_allocation_io_or_exit(pendulum):
     forbidden = {"malloc", "calloc", "realloc", "free", "printf", "fprintf", "puts", "exit", "abort"}
     assert not undefined & forbidden, f"library references {sorted(undefined & forbidden)}"
     assert undefined <= {"fmaf", "memcpy", "memset", "__stack_chk_fail", "_GLOBAL_OFFSET_TABLE_"}, sorted(undefined)
+
+
+def test_a_finished_build_is_not_run_again_until_a_product_is_missing(pendulum, tmp_path, monkeypatch):
+    """build() of a target it finished from the same sources starts no CMake; once a product of the tree is gone,
+    it builds again and the product is back."""
+    from gainlink.firmware import build as build_mod
+
+    a = pendulum.artifact
+    first = build(a, build_root=tmp_path, only="gainlink_host")
+    library = first.files["shared"]
+    assert library.is_file()
+    calls: list[list[str]] = []
+    real_run = build_mod._run
+    monkeypatch.setattr(build_mod, "_run", lambda cmd, **kw: (calls.append(cmd), real_run(cmd, **kw))[1])
+    assert build(a, build_root=tmp_path, only="gainlink_host").files["shared"] == library
+    assert calls == []
+    library.unlink()
+    build(a, build_root=tmp_path, only="gainlink_host")
+    assert [cmd[1] for cmd in calls] == ["--build"] and library.is_file()

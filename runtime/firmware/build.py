@@ -3,9 +3,9 @@
 Builds live under ``<repo>/.cache/firmware/<name>-<target>-<key>/`` where the key hashes the artifact's
 sha256, the target, the board and the build options, so tests and commands reuse a build of the same
 artifact and two targets or boards never share a folder (CMake itself rebuilds what changed in the C
-sources). Everything that writes into a build folder runs
-under its file lock (``<build>/.lock``), so concurrent builds of one key (pytest-xdist workers, Dask workers)
-build it once and the others then find it done. Targets and boards:
+sources; a build is not started at all while the sources and the tree's products are as the last build left them).
+Everything that writes into a build folder runs under its file lock (``<build>/.lock``), so concurrent builds of one
+key (pytest-xdist workers, Dask workers) build it once and the others then find it done. Targets and boards:
 :mod:`gainlink.firmware.targets`.
 """
 
@@ -73,10 +73,29 @@ def _which(tool: str, hint: str) -> str:
     return path
 
 
-def _write_if_changed(path: Path, text: str) -> None:
+def _write_if_changed(path: Path, text: str) -> bool:
+    """Write ``text`` unless ``path`` holds it already; True when it wrote."""
     if path.is_file() and path.read_text("utf-8") == text:
-        return
+        return False
     path.write_text(text, "utf-8")
+    return True
+
+
+def _build_stamp(cm: Path) -> str:
+    """What a finished build was made from and made: the path, size and modification time of every firmware source
+    and of every file at the top of the tree ``cm`` (its products), hashed. A millisecond, where ``cmake --build``
+    of a finished tree takes a tenth of a second to find nothing to do."""
+    digest = hashlib.sha256()
+    for root, dirs, files in os.walk(firmware_dir()):
+        dirs.sort()
+        for name in sorted(files):
+            st = os.stat(os.path.join(root, name))
+            digest.update(f"{root}/{name} {st.st_size} {st.st_mtime_ns}\n".encode())
+    for entry in sorted(os.scandir(cm), key=lambda e: e.name):
+        if entry.is_file():
+            st = entry.stat()
+            digest.update(f"{entry.name} {st.st_size} {st.st_mtime_ns}\n".encode())
+    return digest.hexdigest()
 
 
 def _compiler_cache_env() -> dict[str, str]:
@@ -154,13 +173,18 @@ def build(
     gen.mkdir(parents=True, exist_ok=True)
     cm = bdir / "cmake"
     with exclusive_lock(bdir / ".lock"):
-        for name, text in render_export(artifact).items():
-            _write_if_changed(gen / name, text)
+        written = [_write_if_changed(gen / name, text) for name, text in render_export(artifact).items()]
         if not (cm / "CMakeCache.txt").is_file():
             _configure(cmake, cm, gen=gen, platform=platform, options=options)
-        jobs = str(min(2, os.cpu_count() or 1))
-        what = f"firmware build ({target}{', ' + only if only else ''})"
-        _run([cmake, "--build", str(cm), "-j", jobs, *(["--target", only] if only else [])], cwd=bdir, what=what)
+        # A build of this target is not run again while the sources, the export and the tree's products are as
+        # the last one left them.
+        done = bdir / f".built-{only or 'all'}"
+        if any(written) or not done.is_file() or done.read_text() != _build_stamp(cm):
+            done.unlink(missing_ok=True)
+            jobs = str(min(2, os.cpu_count() or 1))
+            what = f"firmware build ({target}{', ' + only if only else ''})"
+            _run([cmake, "--build", str(cm), "-j", jobs, *(["--target", only] if only else [])], cwd=bdir, what=what)
+            done.write_text(_build_stamp(cm))
     return BuildResult(
         artifact_sha256=artifact.sha256,
         target=target,
