@@ -5,7 +5,7 @@
 #ifndef GL_MAV_FILE_H
 #define GL_MAV_FILE_H
 
-#include "gl_mav_node.h"
+#include "gl_mav_platform.h" /* gl_mav_storage_t, GL_MAV_KEY_LEN */
 
 /** A storage file. */
 typedef struct gl_mav_file {

@@ -11,7 +11,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "gl_mav_node.h"
+#include "gl_mav_platform.h" /* gl_mav_storage_t, GL_MAV_KEY_LEN */
 
 /**
  * @brief Read a key file.

@@ -60,6 +60,7 @@
 #include "gainlink/gl_loop.h"
 #endif
 #include "gl_mav_params.h"
+#include "gl_mav_platform.h" /* gl_mav_storage_t, GL_MAV_KEY_LEN */
 #include "gl_mav_store.h"
 
 /** Where an answer goes. */
@@ -93,9 +94,6 @@ typedef enum gl_mav_sig_refusal {
     GL_MAV_SIG_STREAMS = 3    /**< Too many signing streams (MAVLINK_MAX_SIGNING_STREAMS). */
 } gl_mav_sig_refusal_t;
 
-/** Length of a signing key. */
-#define GL_MAV_KEY_LEN 32u
-
 /** Persist rate limit: writes allowed in a burst ... */
 #define GL_MAV_PERSIST_BURST 4u
 /** ... then one more per this period (us). */
@@ -120,18 +118,6 @@ typedef struct gl_mav_node_stats {
     uint32_t persist_skipped; /**< Persist requests answered without a write (storage already holds the set). */
     uint32_t persist_limited; /**< Persist requests refused by the rate limit. */
 } gl_mav_node_stats_t;
-
-/**
- * Persistent storage of the committed set: whole-blob read and atomic replace. A host supplies a file,
- * the QEMU image a semihosting file standing for flash, a board a flash sector (see firmware/README.md).
- */
-typedef struct gl_mav_storage {
-    void *ctx; /**< Passed back to both functions. */
-    /** Replace the stored bytes atomically (an interrupted write keeps the old ones); 0 ok, -1 failed. */
-    int (*write)(void *ctx, const uint8_t *data, size_t len);
-    /** Read the stored bytes into `data` (at most `cap`); bytes read, 0 when nothing is stored, -1 on error. */
-    long (*read)(void *ctx, uint8_t *data, size_t cap);
-} gl_mav_storage_t;
 
 /** What the node needs from its transport and platform. */
 typedef struct gl_mav_port {

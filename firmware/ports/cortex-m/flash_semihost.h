@@ -10,7 +10,7 @@
 #ifndef GAINLINK_FLASH_SEMIHOST_H
 #define GAINLINK_FLASH_SEMIHOST_H
 
-#include "gl_mav_node.h"
+#include "gl_mav_platform.h" /* gl_mav_storage_t, GL_MAV_KEY_LEN */
 
 /** Name of the stored set in QEMU's working directory. */
 #define GL_FLASH_FILE "gl_flash.txt"
