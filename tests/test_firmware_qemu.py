@@ -254,3 +254,36 @@ def test_gain_update_on_target_matches_host(pendulum):
     assert np.array_equal(rec["u"][steps].view(np.uint32), u.view(np.uint32))
     assert np.array_equal(rec["xh"][steps].view(np.uint32), xh.view(np.uint32))
     assert host.active_crc32() == good.crc32
+
+
+def test_a_tree_configured_from_a_kept_compiler_detection_builds_the_same_firmware(tmp_path, monkeypatch):
+    """CMake's compiler detection is kept per configuration (gainlink.firmware.build.seed_root) and planted into the
+    next tree of that configuration: that tree skips the detection, compiles with the same commands and links the
+    same bytes (a Cortex-M4 image and the host library, each configured once without and once with the seed)."""
+    from gainlink.firmware import build as build_mod
+
+    a = example_cases(EXAMPLES)[0].artifact
+    monkeypatch.setattr(build_mod, "seed_root", lambda: tmp_path / "seeds")
+    configures: list[list[str]] = []
+    real_run = build_mod._run
+    monkeypatch.setattr(
+        build_mod, "_run", lambda cmd, **kw: (configures.append(cmd) if "-S" in cmd else None, real_run(cmd, **kw))[1]
+    )
+    for target, options, only, product in [
+        ("cortex-m4", {"GL_IMAGE_SERVE": "OFF"}, None, "bin"),
+        ("host", None, "gainlink_host", "shared"),
+    ]:
+        first, second = (
+            build(a, target=target, options=options, only=only, build_root=tmp_path / f"{target}-{k}") for k in (1, 2)
+        )
+        seeded = ["-DCMAKE_PLATFORM_INFO_INITIALIZED=1" in cmd for cmd in configures[-2:]]
+        assert seeded == [False, True], target
+        commands = [
+            subprocess.run(
+                ["ninja", "-t", "commands"], cwd=r.build_dir, capture_output=True, text=True, check=True
+            ).stdout.replace(str(r.build_dir.parent), "TREE")
+            for r in (first, second)
+        ]
+        assert commands[0] == commands[1] and "-O2" in commands[0], target
+        if target != "host":  # a shared object carries its build-id; an image is the same bytes
+            assert first.files[product].read_bytes() == second.files[product].read_bytes(), target
