@@ -611,7 +611,7 @@ def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_comman
     data = slow_campaign(pend)
     path, out = tmp_path / "c.toml", tmp_path / "out"
     path.write_text(toml_write.dumps(data))
-    argv = ["campaign", "run", str(path), "--out", str(out), "--workers", "2", "--no-progress"]
+    argv = ["campaign", "run", str(path), "--out", str(out), "--workers", "2", "--no-progress", "--no-plots"]
     proc = subprocess.Popen(
         [str(VENV_BIN / "gainlink"), *argv],
         stdin=subprocess.DEVNULL,
@@ -646,7 +646,7 @@ def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_comman
     assert proc.returncode == 130
     assert err.splitlines() == [
         f"gainlink: interrupted: {len(before)} of 8 runs have a result in {out} (kept); resume with: gainlink "
-        f"campaign run {path} --out {out} --workers 2"
+        f"campaign run {path} --out {out} --workers 2 --no-plots"
     ]
     # the resume command, as printed
     res = run_cli(*shlex.split(err.split("resume with: ", 1)[1])[1:])
@@ -778,6 +778,7 @@ def test_scheduler_and_two_worker_processes_give_the_local_cluster_results(pend,
         "--batch",
         "3",
         "--no-progress",
+        "--no-plots",
     )
     assert res.code == 0, res.err
     local = json.loads((local_out / "campaign.json").read_text())["runs"]
