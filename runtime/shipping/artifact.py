@@ -337,17 +337,22 @@ _SCHEMA_PASSED: set[str] = set()
 _SCHEMA_PASSED_MAX = 1024
 
 
-def _check_schema(data: Any) -> None:
-    """The artifact's JSON schema; the first violation (by path) is the error."""
+@lru_cache(maxsize=1)
+def _validator() -> Any:
+    """The schema's validator, made once (a third of a check's time was making it)."""
     import jsonschema
 
+    return jsonschema.Draft202012Validator(schema())
+
+
+def _check_schema(data: Any) -> None:
+    """The artifact's JSON schema; the first violation (by path) is the error."""
     if not isinstance(data, dict):
         raise ArtifactError("artifact is not a JSON object")
     key = _json_key(data)
     if key in _SCHEMA_PASSED:
         return
-    validator = jsonschema.Draft202012Validator(schema())
-    errors = sorted(validator.iter_errors(data), key=lambda e: list(e.path))
+    errors = sorted(_validator().iter_errors(data), key=lambda e: list(e.path))
     if errors:
         err = errors[0]
         where = "/".join(str(p) for p in err.path) or "top level"
