@@ -7,6 +7,8 @@ result of the image must equal the host library's exactly; comparisons here are 
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -256,26 +258,36 @@ def test_gain_update_on_target_matches_host(pendulum):
     assert host.active_crc32() == good.crc32
 
 
-def test_a_tree_configured_from_a_kept_compiler_detection_builds_the_same_firmware(tmp_path, monkeypatch):
+def test_a_tree_configured_from_a_kept_compiler_detection_builds_the_same_firmware(pend, tmp_path, monkeypatch):
     """CMake's compiler detection is kept per configuration (gainlink.firmware.build.seed_root) and planted into the
     next tree of that configuration: that tree skips the detection, compiles with the same commands and links the
     same bytes (a Cortex-M4 image and the host library, each configured once without and once with the seed)."""
     from gainlink.firmware import build as build_mod
+    from gainlink.shipping.artifact import load
 
-    a = example_cases(EXAMPLES)[0].artifact
+    a = load(pend)
     monkeypatch.setattr(build_mod, "seed_root", lambda: tmp_path / "seeds")
     configures: list[list[str]] = []
     real_run = build_mod._run
     monkeypatch.setattr(
         build_mod, "_run", lambda cmd, **kw: (configures.append(cmd) if "-S" in cmd else None, real_run(cmd, **kw))[1]
     )
+    # The trees sit as deep in the checkout's .cache as its own builds: ccache then serves their units (paths
+    # relative to the checkout), and only the configure and the link are new.
+    roots = [build_mod.cache_root().parent / f"seed-test-{os.getpid()}-{k}" for k in (1, 2)]
+    try:
+        _compare_seeded_builds(a, roots, configures)
+    finally:
+        for root in roots:
+            shutil.rmtree(root, ignore_errors=True)
+
+
+def _compare_seeded_builds(a, roots: list[Path], configures: list[list[str]]) -> None:
     for target, options, only, product in [
         ("cortex-m4", {"GL_IMAGE_SERVE": "OFF"}, None, "bin"),
         ("host", None, "gainlink_host", "shared"),
     ]:
-        first, second = (
-            build(a, target=target, options=options, only=only, build_root=tmp_path / f"{target}-{k}") for k in (1, 2)
-        )
+        first, second = (build(a, target=target, options=options, only=only, build_root=root) for root in roots)
         seeded = ["-DCMAKE_PLATFORM_INFO_INITIALIZED=1" in cmd for cmd in configures[-2:]]
         assert seeded == [False, True], target
         commands = [
