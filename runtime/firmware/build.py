@@ -238,8 +238,8 @@ def _platform_seed(cmake: str, platform: _targets.Platform, options: dict[str, s
     target, board and set of options (the compiler, its ABI and implicit libraries), and takes four fifths of a
     configure (0.25 of 0.3 CPU-s). The key names the CMake and compiler binaries by path, size and time, so an
     upgraded toolchain is detected anew."""
-    compiler = "arm-none-eabi-gcc" if platform.board else os.environ.get("CC", "cc")
-    tools = [cmake, shutil.which(compiler), options.get("CMAKE_C_COMPILER")]
+    compilers = ["arm-none-eabi-gcc" if platform.board else os.environ.get("CC", "cc"), options.get("CMAKE_C_COMPILER")]
+    tools = [cmake] + [shutil.which(c) for c in compilers if c]  # an unknown compiler fails the configure itself
     stats = [f"{tool} {os.stat(tool).st_size} {os.stat(tool).st_mtime_ns}" for tool in tools if tool]
     toolchain = (firmware_dir() / "cmake" / "arm-none-eabi.cmake").read_bytes() if platform.board else b""
     text = "|".join([platform.name, repr(sorted(options.items())), *stats]) + hashlib.sha256(toolchain).hexdigest()
