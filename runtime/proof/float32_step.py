@@ -14,6 +14,7 @@ interpreter's, and this check runs for every design.
 from __future__ import annotations
 
 import functools
+import math
 from array import array
 from collections.abc import Callable
 
@@ -31,9 +32,9 @@ class _Writer:
         self.lines: list[str] = []
 
     def coef(self) -> str:
-        text = repr(self.w[self.pos])
+        value = self.w[self.pos]
         self.pos += 1
-        return f"({text})"
+        return f"({value!r})" if math.isfinite(value) else f"float('{value!r}')"
 
     def rounded(self, expr: str, name: str | None = None) -> str:
         if name is None:
