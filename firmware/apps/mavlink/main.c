@@ -337,8 +337,8 @@ int main(int argc, char **argv)
         return rc;
     }
     catch_stop_signals();
-    printf("gainlink-mavlink %s sha256:%s %d %d %d %d %s%s\n", gl_artifact_name, gl_artifact_sha256, GL_N, GL_M, GL_P, GL_Q,
-           opt.url, LAW_FIELD);
+    printf("gainlink-mavlink %s sha256:%s %d %d %d %d %s%s\n", gl_artifact_name, gl_artifact_sha256, GL_N, GL_M, GL_P,
+           GL_Q, opt.url, LAW_FIELD);
     fflush(stdout);
     rc = serve(opt.spin_us);
     log_summary();
