@@ -26,13 +26,15 @@ demo: setup
 # marked xdist_group (tests sharing an expensive module fixture: one worker makes it once), then pytest's ten
 # slowest. TEST_WORKERS=0 runs it in one process.
 # Bytecode is written (PYC_ENV): without it every process the suite starts (the xdist workers, Dask workers, the
-# CLI run as a subprocess) compiles the package again, and every worker rewrites the asserts of all ~75 test
-# modules to collect them (~7 CPU-s each).
+# CLI run as a subprocess) compiles the package again. The test modules' rewritten asserts are written first, once
+# (scripts/warm_test_asserts.py, 2 s): otherwise each of the workers, started together, rewrites all ~80 modules to
+# collect them (~7 CPU-s each).
 # One BLAS thread per process (OPENBLAS_NUM_THREADS=1, as Dask sets for its workers): the suite's processes
 # already fill the cores, and idle OpenBLAS threads spin; with them the design-heavy modules took twice the CPU.
 TEST_ENV := $(PYC_ENV) OPENBLAS_NUM_THREADS=1
 TEST_WORKERS ?= 4
 test: setup
+	$(TEST_ENV) $(PY) scripts/warm_test_asserts.py
 	$(TEST_ENV) $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder --durations=10
 
 test-matrix: setup

@@ -90,3 +90,47 @@ def test_an_xdist_group_reaches_one_worker(tmp_path):
     ran = [line.split(" ", 1) for line in out.read_text().splitlines()]
     assert len(ran) == 6 and len({worker for worker, _ in ran}) == 1, ran
     assert all(nodeid.endswith("@probe") for _, nodeid in ran), ran
+
+
+FAILING = """
+def test_compares():
+    seen = [1, 2]
+    assert seen == [1, 3]
+"""
+
+
+def test_the_warmed_rewritten_asserts_are_the_ones_pytest_runs(tmp_path):
+    """`make test` writes the rewritten asserts once (scripts/warm_test_asserts.py) so that its workers do not each
+    rewrite every module. pytest must take that pyc as current (not rewrite again: the file is untouched) and it must
+    be pytest's rewrite (the failure explains the comparison, which a plain assert would not)."""
+    (tmp_path / "test_warm.py").write_text(FAILING)
+    env = {key: value for key, value in os.environ.items() if key != "PYTHONDONTWRITEBYTECODE"}
+    warm = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "warm_test_asserts.py"), str(tmp_path)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert warm.returncode == 0 and "rewrote the asserts of 1 of 1" in warm.stdout, warm.stdout + warm.stderr
+    (pyc,) = (tmp_path / "__pycache__").glob("test_warm.*-pytest-*.pyc")
+    written = pyc.stat().st_mtime_ns
+    again = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "warm_test_asserts.py"), str(tmp_path)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert again.returncode == 0 and "rewrote" not in again.stdout, again.stdout
+    proc = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "test_warm.py"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "At index 1 diff: 2 != 3" in proc.stdout, proc.stdout
+    assert pyc.stat().st_mtime_ns == written
