@@ -48,7 +48,7 @@ if install_uv && install_with .venv/bin/uv pip install -q --python .venv/bin/pyt
   env -u PYTHONDONTWRITEBYTECODE .venv/bin/python scripts/warm_bytecode.py
 else
   echo "setup: uv unavailable or failed; installing with pip"
-  .venv/bin/python -m pip --version >/dev/null 2>&1 || .venv/bin/python -m ensurepip -q
+  .venv/bin/python -m pip --version >/dev/null 2>&1 || .venv/bin/python -m ensurepip >/dev/null
   .venv/bin/python -m pip install -q --upgrade pip >/dev/null
   install_with .venv/bin/python -m pip install -q  # pip compiles the bytecode itself
 fi
