@@ -39,10 +39,11 @@ echo "setup: installing gainlink into .venv"
 install_with() {
   "$@" -e '.[test]' && "$@" --no-deps 'MAVProxy>=1.8.75,<1.9'
 }
-# uv goes into the venv with the machine's own pip (pip >= 22.3 has --python), or with the venv's when it has one.
+# uv goes into the venv with the machine's own pip (pip >= 22.3 has --python), else with the venv's (made if need be).
 install_uv() {
-  "$PYTHON" -m pip --python .venv/bin/python install -q 'uv==0.13.9' >/dev/null 2>&1 ||
-    .venv/bin/python -m pip install -q 'uv==0.13.9' >/dev/null 2>&1
+  "$PYTHON" -m pip --python .venv/bin/python install -q 'uv==0.13.9' >/dev/null 2>&1 && return
+  .venv/bin/python -m pip --version >/dev/null 2>&1 || .venv/bin/python -m ensurepip >/dev/null 2>&1
+  .venv/bin/python -m pip install -q 'uv==0.13.9' >/dev/null 2>&1
 }
 if install_uv && install_with .venv/bin/uv pip install -q --python .venv/bin/python; then
   env -u PYTHONDONTWRITEBYTECODE .venv/bin/python scripts/warm_bytecode.py
