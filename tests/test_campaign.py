@@ -969,3 +969,22 @@ def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, da
         direct = run_sil(a, parse_scenario(sc), seed=rows[i]["seed"])
         assert _control(rec) == {k: direct.metrics.get(k) for k in CONTROL_KEYS}
     assert result.errors == 2 and result.total == 4
+
+
+def _worker_view() -> tuple[int, bool]:
+    return os.getppid(), "gainlink.hil.campaign.worker" in sys.modules
+
+
+def test_local_cluster_workers_are_forked_from_a_server_that_imported_the_runner():
+    """Each LocalCluster worker started afresh imported Dask, numpy and gainlink's runner again (2-3 CPU-s each):
+    they are forked from one server process that imported them once. A spawned worker is a child of this process
+    and has not imported the runner before its first run."""
+    from gainlink.hil.campaign.cluster import dask_client
+
+    with dask_client(workers=2) as client:
+        client.wait_for_workers(2, timeout=60)
+        views = list(client.run(_worker_view).values())
+    assert len(views) == 2
+    parents = {ppid for ppid, _ in views}
+    assert len(parents) == 1 and os.getpid() not in parents, views
+    assert all(imported for _, imported in views), views
