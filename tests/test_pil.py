@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from gainlink.hil.loop.pil import make_plant, run_pil
 from gainlink.shipping.artifact import load
+from support.cli import assert_one_clear_line, run_cli
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))
 RTOL = 1e-4  # float32 firmware vs its float64 twin in closed loop: see tests/test_firmware_host.py
@@ -118,12 +119,7 @@ def test_pil_twin_plot_shows_the_run_minus_its_twin(example_artifacts):
 
 def test_pil_rejects_bad_arguments(example_artifacts):
     for extra, word in ((["--reference", "1", "2"], "--reference"), (["--plant", "no_such_plant"], "no_such_plant")):
-        proc = subprocess.run(
-            [GAINLINK, "pil", "run", str(example_artifacts["pendulum"]), "--steps", "10", *extra],
-            capture_output=True,
-            text=True,
-        )
-        assert proc.returncode == 2 and word in proc.stderr and proc.stderr.count("\n") == 1, proc.stderr
+        assert_one_clear_line(run_cli("pil", "run", example_artifacts["pendulum"], "--steps", "10", *extra), word)
 
 
 def test_pil_against_the_nonlinear_cart_pendulum(example_artifacts):
