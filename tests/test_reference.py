@@ -200,3 +200,24 @@ def test_replay_compare_counts_steps_with_a_differing_saturation_flag_not_flags(
     a = artifact_mod.load(art)
     c = compare_traces(a, read_trace(ref, a), read_trace(other, a))
     assert (c.sat_mismatches, c.sat_mismatches_per_input, c.steps) == (15, (10, 15), 60)
+
+
+def test_the_compiled_step_is_shared_by_equal_laws_and_never_by_laws_that_differ_in_one_gain():
+    """The law's step is compiled once per law (keyed by its matrices, not by the sha256 a design in progress has
+    yet to get): a copy of an artifact shares it, one gain changed in its twelfth digit gets its own."""
+    from gainlink.proof.reference_step import compile_reference_step
+
+    a = artifact_mod.from_dict(synthesize(parse_spec(random_spec(7, **CASES[2]))).artifact)
+    same = artifact_mod.from_dict(dict(a.data))
+    data = dict(a.data)
+    data["K"] = [list(row) for row in data["K"]]
+    data["K"][0][0] *= 1.0 + 1e-12
+    other = artifact_mod.from_dict(artifact_mod.seal({k: v for k, v in data.items() if k != "sha256"}))
+    assert compile_reference_step(same) is compile_reference_step(a)
+    assert compile_reference_step(other) is not compile_reference_step(a)
+    y, r = (a.y_op + 0.3).tolist(), (a.r_op + 0.1).tolist()
+    xh = [1.0] * a.n
+    assert (
+        compile_reference_step(other)(xh, a.z0.tolist(), y, r)[1]
+        != compile_reference_step(a)(xh, a.z0.tolist(), y, r)[1]
+    )

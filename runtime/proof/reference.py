@@ -1,17 +1,20 @@
 """The float64 reference of the gainlink control law (docs/design.md, "The control law").
 
 This is the executable statement of the contract that the C loop (float32) and every test
-compare against. It is deliberately plain: one step is a direct transcription of the law, with the
-operating point: samples, references, limits and commands are absolute; the estimate is a deviation.
+compare against, with the operating point: samples, references, limits and commands are absolute; the estimate is a
+deviation. One step is the law's products written out term by term for the artifact (:mod:`.reference_step`, where
+the law is stated in order), in float64.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..shipping.artifact import Artifact
+from .reference_step import compile_reference_step
 
 
 @dataclass(frozen=True)
@@ -51,6 +54,7 @@ class ReferenceLoop:
         artifact.require_unscheduled("ReferenceLoop")
         self.a = artifact
         self.safe_u = artifact.safe_command
+        self._step = compile_reference_step(artifact)
         self.reset()
 
     def reset(self) -> None:
@@ -61,33 +65,15 @@ class ReferenceLoop:
     def step(self, y: np.ndarray, r: np.ndarray | None = None) -> StepResult:
         """Run one sample of the law on the absolute measurement ``y`` (p) and reference ``r`` (q)."""
         a = self.a
-        y = np.asarray(y, dtype=float).reshape(a.p)
-        r = np.zeros(a.q) if r is None else np.asarray(r, dtype=float).reshape(a.q)
-        if not (np.all(np.isfinite(y)) and np.all(np.isfinite(r))):
+        ys = np.asarray(y, dtype=float).reshape(a.p).tolist()
+        rs = [0.0] * a.q if r is None else np.asarray(r, dtype=float).reshape(a.q).tolist()
+        if not (all(map(math.isfinite, ys)) and all(map(math.isfinite, rs))):
             return StepResult(
                 u=self.safe_u.copy(), saturated=np.zeros(a.m, dtype=bool), fault=True, v=self.safe_u.copy()
             )
-        dy = y - a.y_op
-        if a.observer_form == "current":
-            xc = self.xh + a.M @ (dy - a.Cd @ self.xh)
-        else:
-            xc = self.xh
-        v = a.u_op - a.K @ xc - a.Ki @ self.z
-        u = np.minimum(np.maximum(v, a.u_min), a.u_max)
-        saturated = u != v
-        e = r - a.Ci @ y
-        if a.anti_windup == "none":
-            z = self.z + a.Ts * e
-        elif a.anti_windup == "clamp":
-            z = self.z if saturated.any() else self.z + a.Ts * e
-        else:  # backcalc
-            z = self.z + a.Ts * e + a.Kaw @ (u - v)
-        du = u - a.u_op
-        if a.observer_form == "current":
-            xh = a.Ad @ xc + a.Bd @ du
-        else:
-            xh = a.Ad @ self.xh + a.Bd @ du + a.L @ (dy - a.Cd @ self.xh - a.Dd @ du)
-        self.xh, self.z = xh, z
+        u, v, saturated, xh, z = self._step(self.xh.tolist(), self.z.tolist(), ys, rs)
+        self.xh, self.z = np.array(xh), np.array(z, dtype=float)
+        u, v, saturated = np.array(u), np.array(v), np.array(saturated, dtype=bool)
         return StepResult(u=u, saturated=saturated, fault=False, v=v)
 
     def run(self, Y: np.ndarray, R: np.ndarray | None = None) -> Trace:
