@@ -63,7 +63,7 @@ def test_member(request, k):
 def test_an_xdist_group_reaches_one_worker(tmp_path):
     """`make test` keeps the tests of one xdist_group on one worker (their module fixtures made once) only if
     pytest-xdist can tag their ids with the group: under pytest 9 it could not, and every group was silently spread
-    over all the workers (pytest is pinned below 9 for this). Six grouped tests on three workers: one worker, tagged."""
+    over all the workers (pytest is pinned below 9 for this). Six grouped tests on two workers: one worker, tagged."""
     (tmp_path / "test_probe.py").write_text(PROBE)
     out = tmp_path / "ran.txt"
     proc = subprocess.run(
@@ -73,7 +73,7 @@ def test_an_xdist_group_reaches_one_worker(tmp_path):
             "pytest",
             "-q",
             "-n",
-            "3",
+            "2",
             "--dist",
             "loadgroup",
             "-p",
