@@ -90,6 +90,7 @@ def _study(args: argparse.Namespace) -> int:
         report_dir=Path(args.report),
         controller=args.controller,
         study=study_desc,
+        plots=not args.no_plots,
     )
     sys.stdout.write(study.summary)
     return 0
@@ -241,6 +242,7 @@ def _add_study_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--study", help="study TOML, or a built-in study: saturation_study (default), saturation_kick")
     p.add_argument("--controller", choices=("firmware", "reference"), help="override the study's controller")
     p.add_argument("--report", required=True, help="report folder")
+    p.add_argument("--no-plots", action="store_true", help="study.json and the text files only (no PNG plots)")
     p.set_defaults(func=_study)
 
 
