@@ -13,11 +13,17 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import statistics
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+
+# One BLAS thread, as the gainlink CLI sets for its users (and `make test` for the suite): idle OpenBLAS threads
+# spinning after each small product took a core from the timed loop (per-step figures varied 2x between runs).
+# Set before numpy is imported.
+os.environ["OPENBLAS_NUM_THREADS"] = "1"
 
 import numpy as np
 from gainlink.proof.float32_law import Float32Loop
