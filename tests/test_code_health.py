@@ -105,23 +105,16 @@ def test_the_warmed_rewritten_asserts_are_the_ones_pytest_runs(tmp_path):
     be pytest's rewrite (the failure explains the comparison, which a plain assert would not)."""
     (tmp_path / "test_warm.py").write_text(FAILING)
     env = {key: value for key, value in os.environ.items() if key != "PYTHONDONTWRITEBYTECODE"}
-    warm = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "warm_test_asserts.py"), str(tmp_path)],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert warm.returncode == 0 and "rewrote the asserts of 1 of 1" in warm.stdout, warm.stdout + warm.stderr
+
+    def warm() -> subprocess.CompletedProcess[str]:
+        script = str(ROOT / "scripts" / "warm_test_asserts.py")
+        return subprocess.run([sys.executable, script, str(tmp_path)], env=env, capture_output=True, text=True)
+
+    first = warm()
+    assert first.returncode == 0 and "rewrote the asserts of 1 of 1" in first.stdout, first.stdout + first.stderr
     (pyc,) = (tmp_path / "__pycache__").glob("test_warm.*-pytest-*.pyc")
     written = pyc.stat().st_mtime_ns
-    again = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "warm_test_asserts.py"), str(tmp_path)],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    again = warm()
     assert again.returncode == 0 and "rewrote" not in again.stdout, again.stdout
     proc = subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "test_warm.py"],
