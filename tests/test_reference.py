@@ -203,8 +203,8 @@ def test_replay_compare_counts_steps_with_a_differing_saturation_flag_not_flags(
 
 
 def test_the_compiled_step_is_shared_by_equal_laws_and_never_by_laws_that_differ_in_one_gain():
-    """The law's step is compiled once per law (keyed by its matrices, not by the sha256 a design in progress has
-    yet to get): a copy of an artifact shares it, one gain changed in its twelfth digit gets its own."""
+    """The law's step is compiled once per law (keyed by what it is written from): a copy of an artifact shares it,
+    one gain changed in its twelfth digit gets its own."""
     from gainlink.proof.reference_step import compile_reference_step
 
     a = artifact_mod.from_dict(synthesize(parse_spec(random_spec(7, **CASES[2]))).artifact)

@@ -51,9 +51,9 @@ _TERMS = ("y_op", "u_op", "u_min", "u_max", "K", "Ki", "M", "Cd", "Ci", "Kaw", "
 
 def compile_reference_step(artifact: Artifact) -> Callable:
     """``step(xh, z, y, r) -> (u, v, saturated, xh_next, z_next)`` on lists of Python floats, for a finite sample
-    (the caller refuses the others), as :meth:`ReferenceLoop.step` defines it; compiled once per law in a process
-    (keyed by its forms, Ts and the bytes of its matrices, not by the sha256, which a design in progress has yet to
-    get)."""
+    (the caller refuses the others), as :meth:`ReferenceLoop.step` defines it; compiled once per law in a process,
+    keyed by everything the step is written from (the forms, Ts and the bytes of the matrices), so two artifacts share
+    a step only when they compute the same law."""
     a = artifact
     key = (a.observer_form, a.anti_windup, a.Ts, *((np.shape(getattr(a, t)), _bytes(getattr(a, t))) for t in _TERMS))
     step = _CACHE.get(key)
