@@ -80,7 +80,9 @@ def main() -> int:
     ]
     failed = _import_all([*names, *THIRD_PARTY])
     out, _ = second.communicate()
-    report = json.loads(out) if second.returncode == 0 else {"modules": [], "failed": list(SECOND_HALF)}
+    # the report is the last line: a package may print something of its own as it is imported
+    last = out.strip().splitlines()[-1:] if second.returncode == 0 else []
+    report = json.loads(last[0]) if last else {"modules": [], "failed": list(SECOND_HALF)}
     modules = set(sys.modules) | set(report["modules"])
     failed += report["failed"]
     print(f"setup: bytecode of {len(modules)} modules written" + (f" ({len(failed)} not importable)" if failed else ""))

@@ -49,6 +49,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folder", type=Path, nargs="?", default=TESTS, help="the tests (default: tests/)")
     args = parser.parse_args()
+    if not args.folder.is_dir():
+        sys.exit(f"warm_test_asserts: {args.folder} is not a folder")
     if sys.dont_write_bytecode:
         print("warm_test_asserts: PYTHONDONTWRITEBYTECODE is set, nothing written")
         return 0
