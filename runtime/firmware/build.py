@@ -181,9 +181,8 @@ def build(
         done = bdir / f".built-{only or 'all'}"
         if any(written) or not done.is_file() or done.read_text() != _build_stamp(cm):
             done.unlink(missing_ok=True)
-            jobs = str(min(2, os.cpu_count() or 1))
             what = f"firmware build ({target}{', ' + only if only else ''})"
-            _run([cmake, "--build", str(cm), "-j", jobs, *(["--target", only] if only else [])], cwd=bdir, what=what)
+            _run(_build_command(cmake, cm, only), cwd=bdir, what=what)
             done.write_text(_build_stamp(cm))
     return BuildResult(
         artifact_sha256=artifact.sha256,
@@ -193,6 +192,17 @@ def build(
         gains_dir=gen,
         files=_outputs(cm, platform),
     )
+
+
+def _build_command(cmake: str, cm: Path, only: str | None) -> list[str]:
+    """The command that builds the tree ``cm`` (all of it, or the CMake target ``only``): Ninja itself when the tree
+    is Ninja's (it reruns CMake when a CMakeLists changed, as ``cmake --build`` would, without a CMake process in
+    front of every build), else ``cmake --build``."""
+    jobs = str(min(2, os.cpu_count() or 1))
+    ninja = shutil.which("ninja")
+    if ninja is not None and (cm / "build.ninja").is_file():
+        return [ninja, "-C", str(cm), "-j", jobs, *([only] if only else [])]
+    return [cmake, "--build", str(cm), "-j", jobs, *(["--target", only] if only else [])]
 
 
 def _configure(cmake: str, cm: Path, *, gen: Path, platform: _targets.Platform, options: dict[str, str]) -> None:
@@ -340,11 +350,7 @@ def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path 
     with exclusive_lock(result.build_dir.parent / ".lock"):
         if not exe.is_file():
             _run(["cmake", str(result.build_dir)], cwd=result.build_dir, what=f"reconfiguring for {target}")
-            _run(
-                ["cmake", "--build", str(result.build_dir), "--target", target, "-j", "2"],
-                cwd=result.build_dir,
-                what=f"building {target}",
-            )
+            _run(_build_command("cmake", result.build_dir, target), cwd=result.build_dir, what=f"building {target}")
     if not exe.is_file():
         raise ToolchainError(f"{target} was not built (expected {exe})")
     return exe
