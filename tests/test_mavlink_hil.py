@@ -3,12 +3,15 @@ transport and over CAN (udp_multicast), and the two runs agree step for step."""
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 from gainlink.errors import TransportError
 from gainlink.hil.links.config import transport_from_config
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
+from gainlink.mavlink.signing import new_key, write_key
 from support.hil import udp_transport
 from support.net import udp_port
 
@@ -64,6 +67,25 @@ def test_dropped_samples_over_mavlink_are_counted_and_the_loop_recovers(pend):
     assert res.metrics["lost"] == 10
     np.testing.assert_array_equal(np.flatnonzero(~res.trace.got), np.arange(100, 110))
     assert abs(res.metrics["outputs_final"]["theta"]) < 0.05
+
+
+def test_a_controller_with_another_key_stops_the_run_saying_its_messages_were_refused(pend, mavlink_exe, tmp_path):
+    """The host app signs with a key that is not the link's: it refuses every sample and the bridge every
+    message of it; the run ends as a silent controller, and its reason says what the link heard."""
+    link_key, app_key = write_key(tmp_path / "link.key", new_key()), write_key(tmp_path / "app.key", new_key())
+    app = tmp_path / "app_with_another_key"  # the real app, its --signing-key argument swapped
+    app.write_text(
+        f"#!{sys.executable}\nimport os, sys\nargv = sys.argv[1:]\n"
+        f"argv[argv.index('--signing-key') + 1] = {str(app_key)!r}\n"
+        f"os.execv({str(mavlink_exe)!r}, [{str(mavlink_exe)!r}, *argv])\n"
+    )
+    app.chmod(0o755)
+    link = {"kind": "mavlink", "port": udp_port(), "signing_key": str(link_key)}
+    res = run_scenario(scenario(pend, link, firmware=str(app), step_timeout=0.2, peer_timeout=1.5))
+    assert not res.complete and res.metrics["steps"] < 20 and not res.trace.got.any()
+    assert "controller silent for 1.5 s since step 0" in res.reason, res.reason
+    assert "the link got 0 command(s) and" in res.reason and "refused for a missing or wrong signature" in res.reason
+    assert res.info["transport"]["unsigned_or_bad_answers"] > 0
 
 
 def test_bad_mavlink_transport_tables_are_one_clear_error(pend):

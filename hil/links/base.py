@@ -104,6 +104,11 @@ class Transport(ABC):
         """A JSON-able description for the report."""
         return {"kind": type(self).__name__}
 
+    def silence_hint(self) -> str:
+        """What the link heard from a controller that sends no commands, as a clause for the run's reason
+        (e.g. answers refused for their signature); empty when the link has nothing to add."""
+        return ""
+
     def __enter__(self) -> Transport:
         self.open()
         return self

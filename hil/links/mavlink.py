@@ -356,6 +356,19 @@ class MavlinkTransport(Transport):
             cfg["signing_key"] = str(self.signing_key)
         return cfg
 
+    def _refused(self) -> int:
+        """Messages refused for a missing or wrong signature (0 on an unsigned link)."""
+        return self.mav.signing.reject_count + self.mav.signing.badsig_count if self.signing_key is not None else 0
+
+    def silence_hint(self) -> str:
+        heard = []
+        if self._refused():
+            heard.append(f"{self._refused()} message(s) refused for a missing or wrong signature (not the link's key?)")
+        if self.stats["foreign"]:
+            heard.append(f"{self.stats['foreign']} message(s) that are not commands")
+        other = " and ".join(heard) if heard else "nothing else"
+        return f"; in the run the link got {self.stats['received']} command(s) and {other}"
+
     def describe(self) -> dict:
         out = {
             "kind": "mavlink",
@@ -368,9 +381,7 @@ class MavlinkTransport(Transport):
             "datagrams_sent": self.stats["sent"],
             "commands_received": self.stats["received"],
             "foreign_messages": self.stats["foreign"],
-            "unsigned_or_bad_answers": self.mav.signing.reject_count + self.mav.signing.badsig_count
-            if self.signing_key is not None
-            else 0,
+            "unsigned_or_bad_answers": self._refused(),
         }
         if self.stream:
             out["uart"] = True

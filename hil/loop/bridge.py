@@ -355,7 +355,8 @@ class _Loop:
             since = int(round((self.silent_since_ns - self.t_start) / 1e9 / max(self.plan.period_s, 1e-9)))
             self.rec.U[k] = self.u
             raise _Stop(
-                f"controller silent for {timeout:g} s since step {since} (no command for sample {k}, t={k * Ts:.3f} s)",
+                f"controller silent for {timeout:g} s since step {since} (no command for sample {k}, t={k * Ts:.3f} s)"
+                + self.transport.silence_hint(),
                 k + 1,
             )
 
