@@ -13,6 +13,7 @@ from pathlib import Path
 from ..errors import FirmwareError
 from ..shipping.artifact import Artifact
 from .capture import StderrCapture
+from .foreground import run_in_foreground
 
 log = logging.getLogger(__name__)
 
@@ -203,31 +204,4 @@ def run_foreground(
         exe, url=url, storage=param_file or default_param_file(Path(artifact_path)), signing_key=signing_key
     )
     log.info("running %s", " ".join(argv))
-    # The handler is in place before the app starts: a SIGTERM that comes as soon as the app is ready (its ready
-    # line is already out) must reach it, not kill this process and leave the app running.
-    app: list[subprocess.Popen] = []
-    termed: list[int] = []
-
-    def on_term(signum: int, frame: object) -> None:
-        termed.append(signum)
-        if app:
-            app[0].send_signal(signal.SIGTERM)
-
-    previous = signal.signal(signal.SIGTERM, on_term)
-    proc: subprocess.Popen | None = None
-    try:
-        proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL)
-        app.append(proc)
-        if termed:  # it came while the app was starting
-            proc.send_signal(signal.SIGTERM)
-        return proc.wait()
-    except KeyboardInterrupt:
-        if proc is None:
-            return 0
-        proc.send_signal(signal.SIGINT)
-        return proc.wait(timeout=5)
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-        if proc is not None and proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    return run_in_foreground(argv, stdin=subprocess.DEVNULL)
