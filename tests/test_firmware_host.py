@@ -326,6 +326,37 @@ def test_golden_script_writes_files_the_c_loop_replays(tmp_path):
         assert_matches_reference(NativeLoop(art).run(gold["Y"], gold["R"]), expected, art, entry["label"])
 
 
+def _children(pid: int) -> list[int]:
+    return [int(c) for t in Path(f"/proc/{pid}/task").iterdir() for c in (t / "children").read_text().split()]
+
+
+def test_a_sigterm_to_firmware_run_stops_the_loop_it_started_and_leaves_nothing_running(pend):
+    """`gainlink firmware run` hands its stdin/stdout to the host loop; a SIGTERM sent to the command alone (a
+    supervisor, `kill PID`) reaches the loop too, and the command exits 0 (asked to stop, it did)."""
+    import os
+    import signal
+    import sys
+
+    exe = str(Path(sys.executable).with_name("gainlink"))
+    proc = subprocess.Popen(
+        [exe, "firmware", "run", str(pend)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    loop = None
+    try:
+        assert proc.stdout.readline().startswith(b"gainlink-loop pendulum ")  # the loop is up; its stdin stays open
+        (loop,) = _children(proc.pid)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 0
+        assert not Path(f"/proc/{loop}").exists()  # stopped and reaped, not left reading a pipe nobody closes
+    finally:
+        for pid in (proc.pid, loop):  # on a failure, neither is left behind
+            if pid is not None and Path(f"/proc/{pid}").exists():
+                os.kill(pid, signal.SIGKILL)
+        proc.wait()
+        for f in (proc.stdin, proc.stdout, proc.stderr):
+            f.close()
+
+
 def test_firmware_run_replays_a_csv_through_the_host_executable(tmp_path, pendulum):
     import sys
 

@@ -188,7 +188,9 @@ def _run_host(args: argparse.Namespace) -> int:
         )
     exe = res.files["exe"]
     if args.input is None:
-        return subprocess.run([str(exe)]).returncode
+        from gainlink.firmware.foreground import run_in_foreground
+
+        return run_in_foreground([str(exe)])
     return _replay_through_process(artifact, exe, Path(args.input), Path(args.output) if args.output else None)
 
 
