@@ -83,7 +83,7 @@ def test_a_controller_with_another_key_stops_the_run_saying_its_messages_were_re
     link = {"kind": "mavlink", "port": udp_port(), "signing_key": str(link_key)}
     res = run_scenario(scenario(pend, link, firmware=str(app), step_timeout=0.2, peer_timeout=1.5))
     assert not res.complete and res.metrics["steps"] < 20 and not res.trace.got.any()
-    assert "controller silent for 1.5 s since step 0" in res.reason, res.reason
+    assert res.reason.startswith("controller silent for 1.5 s since step "), res.reason
     assert "the link got 0 command(s) and" in res.reason and "refused for a missing or wrong signature" in res.reason
     assert res.info["transport"]["unsigned_or_bad_answers"] > 0
 
