@@ -361,9 +361,9 @@ class MavlinkTransport(Transport):
         return self.mav.signing.reject_count + self.mav.signing.badsig_count if self.signing_key is not None else 0
 
     def silence_hint(self) -> str:
-        heard = []
-        if self._refused():
-            heard.append(f"{self._refused()} message(s) refused for a missing or wrong signature (not the link's key?)")
+        heard, refused = [], self._refused()
+        if refused:
+            heard.append(f"{refused} message(s) refused for a missing or wrong signature (not the link's key?)")
         if self.stats["foreign"]:
             heard.append(f"{self.stats['foreign']} message(s) that are not commands")
         other = " and ".join(heard) if heard else "nothing else"
