@@ -59,6 +59,8 @@ def main() -> None:
     parser.add_argument("--cache", type=Path, default=ROOT / ".cache", help="the folder holding the build trees")
     parser.add_argument("--top", type=int, default=20)
     args = parser.parse_args()
+    if not args.cache.is_dir():
+        parser.error(f"{args.cache} is not a folder (the build trees are under the checkout's .cache/)")
     edges = read_logs(args.cache)
     trees = len(list(args.cache.glob("**/.ninja_log")))
     kinds: Counter[str] = Counter()
