@@ -20,13 +20,13 @@ import argparse
 import json
 import logging
 import os
-import random
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from _setups import multicast_transport
 from gainlink.hil.links.can_firmware import firmware_can_executable
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
@@ -60,14 +60,7 @@ def baseline(art, fmu: Path, steps: int) -> float:
 def lockstep(
     gains: Path, exe: Path, fmu: Path, steps: int, *, fd: bool, busy_poll_us: int = 0, affinity: str = "auto"
 ) -> dict:
-    rnd = random.Random(os.getpid() + busy_poll_us + fd)
-    transport = {
-        "interface": "udp_multicast",
-        "channel": f"239.74.{rnd.randint(1, 254)}.{rnd.randint(1, 254)}",
-        "port": rnd.randint(40000, 60000),
-        "hop_limit": 0,
-        "fd": fd,
-    }
+    transport = multicast_transport(fd=fd, salt=busy_poll_us + fd)
     if busy_poll_us:
         transport["busy_poll_us"] = busy_poll_us
     art = artifact_mod.load(gains)

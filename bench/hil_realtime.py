@@ -23,15 +23,14 @@ import argparse
 import json
 import logging
 import os
-import random
 import shutil
 import subprocess
 import sys
 import tempfile
-import tomllib
 from pathlib import Path
 
 import numpy as np
+from _setups import multicast_transport, pendulum_1khz
 from gainlink.hil.links.can_firmware import firmware_can_executable
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
@@ -40,10 +39,7 @@ from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.fmu import FmuPlant
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping import artifact as artifact_mod
-from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 
-ROOT = Path(__file__).resolve().parents[1]
 PERIOD_NS = 1_000_000
 
 
@@ -103,67 +99,50 @@ def cyclictest(seconds: float) -> dict:
     }
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seconds", type=float, default=60.0)
-    ap.add_argument("--baseline-seconds", type=float, default=10.0)
-    ap.add_argument("--affinity", default="auto", help="the scenario's affinity (auto, shared, separate, none)")
-    args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.WARNING)
-    spec = tomllib.loads((ROOT / "examples" / "pendulum.toml").read_text())
-    spec["Ts"] = PERIOD_NS / 1e9
-    spec["name"] = "pendulum_1khz"
-    rnd = random.Random(os.getpid())
-    transport = {
-        "interface": "udp_multicast",
-        "channel": f"239.74.{rnd.randint(1, 254)}.{rnd.randint(1, 254)}",
-        "port": rnd.randint(40000, 60000),
-        "hop_limit": 0,
-        "fd": True,
-    }
-    with tempfile.TemporaryDirectory() as tmp:
-        gains = Path(tmp) / "gains.json"
-        artifact_mod.write(gains, synthesize(parse_spec(spec)).artifact)
-        art = artifact_mod.load(gains)
-        exe = firmware_can_executable(art)
-        fmu = build_fmu("cart_pendulum")
+def in_process_jitter(art, fmu: Path, seconds: float) -> dict:
+    """The baseline: the same pacer (SCHED_FIFO, PM QoS, overrun skip) stepping the reference law and the FMU in
+    this process each tick, no bus."""
+    plant, law = FmuPlant(path=fmu), ReferenceLoop(art)
+    plant.reset(initial={"theta": 0.1})
+    r = np.zeros(art.q)
 
-        plant, law = FmuPlant(path=fmu), ReferenceLoop(art)
-        plant.reset(initial={"theta": 0.1})
-        r = np.zeros(art.q)
+    def work() -> None:
+        plant.advance(u=law.step(plant.outputs(), r).u, dt=art.Ts)
 
-        def work() -> None:
-            plant.advance(u=law.step(plant.outputs(), r).u, dt=art.Ts)
+    try:
+        return pacing_jitter(period_ns=PERIOD_NS, steps=int(seconds * 1e9 / PERIOD_NS), fifo=True, work=work)
+    finally:
+        plant.close()
 
-        try:
-            base = pacing_jitter(
-                period_ns=PERIOD_NS, steps=int(args.baseline_seconds * 1e9 / PERIOD_NS), fifo=True, work=work
-            )
-        finally:
-            plant.close()
-        scenario = parse_scenario(
-            {
-                "name": "bench_rt",
-                "artifact": str(gains),
-                "duration": args.seconds,
-                "mode": "realtime",
-                "controller": "firmware",
-                "firmware": str(exe),
-                "twin": False,
-                "sched_fifo": True,
-                "peer_timeout": 5.0,
-                "affinity": args.affinity,
-                "plant": {"kind": "fmu", "path": str(fmu)},
-                "transport": transport,
-                "initial_state": {"theta": 0.1},
-            }
-        )
-        floor = cyclictest(args.baseline_seconds)
-        steal0 = cpu_steal()
-        m = run_scenario(scenario).metrics
-        steal1 = cpu_steal()
+
+def realtime_scenario(gains: Path, exe: Path, fmu: Path, *, seconds: float, affinity: str):
+    """The measured run: the firmware executable against the FMU over CAN FD on udp_multicast, at 1 kHz."""
+    return parse_scenario(
+        {
+            "name": "bench_rt",
+            "artifact": str(gains),
+            "duration": seconds,
+            "mode": "realtime",
+            "controller": "firmware",
+            "firmware": str(exe),
+            "twin": False,
+            "sched_fifo": True,
+            "peer_timeout": 5.0,
+            "affinity": affinity,
+            "plant": {"kind": "fmu", "path": str(fmu)},
+            "transport": multicast_transport(),
+            "initial_state": {"theta": 0.1},
+        }
+    )
+
+
+def result(
+    args: argparse.Namespace, m: dict, base: dict, floor: dict, steal: tuple[tuple[int, int], tuple[int, int]]
+) -> dict:
+    """The benchmark's JSON: the run's jitter and books against the in-process baseline and the machine's floor."""
     jit = m["period_jitter_us"]
-    out = {
+    (stolen0, total0), (stolen1, total1) = steal
+    return {
         "benchmark": "hil_realtime_1khz_udp_multicast",
         "seconds": args.seconds,
         "steps": m["steps"],
@@ -191,10 +170,30 @@ def main(argv: list[str] | None = None) -> int:
         "targets": {"p99_jitter_us": 100, "deadline_misses": 0},
         "meets_targets": bool(jit["p99"] is not None and jit["p99"] <= 100 and m["deadline_misses"] == 0),
         "load_average_1min": os.getloadavg()[0],
-        "cpu_steal_fraction": (steal1[0] - steal0[0]) / max(1, steal1[1] - steal0[1]),
+        "cpu_steal_fraction": (stolen1 - stolen0) / max(1, total1 - total0),
         "cpus": os.cpu_count(),
     }
-    json.dump(out, sys.stdout, indent=2)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=60.0)
+    ap.add_argument("--baseline-seconds", type=float, default=10.0)
+    ap.add_argument("--affinity", default="auto", help="the scenario's affinity (auto, shared, separate, none)")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING)
+    with tempfile.TemporaryDirectory() as tmp:
+        gains = pendulum_1khz(Path(tmp))
+        art = artifact_mod.load(gains)
+        exe = firmware_can_executable(art)
+        fmu = build_fmu("cart_pendulum")
+        base = in_process_jitter(art, fmu, args.baseline_seconds)
+        scenario = realtime_scenario(gains, exe, fmu, seconds=args.seconds, affinity=args.affinity)
+        floor = cyclictest(args.baseline_seconds)
+        steal0 = cpu_steal()
+        m = run_scenario(scenario).metrics
+        steal1 = cpu_steal()
+    json.dump(result(args, m, base, floor, (steal0, steal1)), sys.stdout, indent=2)
     sys.stdout.write("\n")
     return 0
 

@@ -25,60 +25,85 @@ ROOT = Path(__file__).resolve().parents[1]
 TARGET = 5000.0
 
 
+def wood_berry(spec: dict, params: int):
+    """The Wood-Berry design, its firmware app and the first ``params`` REAL32 gains of its parameter table."""
+    from gainlink.firmware.mavlink_app import mavlink_executable
+    from gainlink.mavlink.params import REAL32, firmware_params
+    from gainlink.shipping.artifact import from_dict
+    from gainlink.spec import parse_spec
+    from gainlink.synthesis import synthesize
+
+    art = from_dict(synthesize(parse_spec(spec)).artifact)
+    gains = [s for s in firmware_params(art) if s.ptype == REAL32][:params]
+    if len(gains) < params:
+        raise SystemExit(f"the Wood-Berry firmware has only {len(gains)} REAL32 parameters")
+    return gains, mavlink_executable(art)
+
+
+def set_rates(link, gains: list, rounds: int) -> dict[str, list[float]]:
+    """Verified parameters per second of each round, windowed (16 in flight) and sequential, each round writing
+    new values; the compiled values are set back at the end."""
+    from gainlink.mavlink.params import REAL32, Encoding
+    from gainlink.mavlink.session import ParamSession
+
+    results: dict[str, list[float]] = {"windowed": [], "sequential": []}
+    for round_ in range(rounds):
+        for mode, window in (("windowed", 16), ("sequential", 1)):
+            session = ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE, window=window)
+            scale = 1.0 + 0.01 * (2 * round_ + (mode == "sequential") + 1)
+            items = [(g.name, REAL32, float(g.value) * scale + 1e-3) for g in gains]
+            t0 = time.perf_counter()
+            out = session.set(items)
+            dt = time.perf_counter() - t0
+            if not out.ok or len(out.verified) != len(items):
+                raise SystemExit(f"{mode} upload did not verify: {out}")
+            results[mode].append(len(items) / dt)
+    session = ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE)
+    session.set([(g.name, REAL32, float(g.value)) for g in gains])
+    return results
+
+
+def retuned_upload(spec: dict, port: int):
+    """``upload()`` of the Wood-Berry design retuned (bryson_u_max / 1.7) to the app on ``port``: read, diff, set,
+    commit."""
+    from gainlink.mavlink.upload import upload
+    from gainlink.shipping import artifact as artifact_mod
+    from gainlink.spec import parse_spec
+    from gainlink.synthesis import synthesize
+
+    spec = dict(spec, controller=dict(spec["controller"]))
+    spec["controller"]["bryson_u_max"] = [v / 1.7 for v in spec["controller"]["bryson_u_max"]]
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "gains.json"
+        artifact_mod.write(path, synthesize(parse_spec(spec)).artifact)
+        retuned = artifact_mod.load(path)
+    return upload(retuned, connect=f"udpout:127.0.0.1:{port}")
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=15)
     parser.add_argument("--params", type=int, default=100)
     args = parser.parse_args()
 
-    from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
+    from gainlink.firmware.mavlink_app import MavlinkFirmware
     from gainlink.mavlink.link import MavLink
-    from gainlink.mavlink.params import REAL32, Encoding, firmware_params
-    from gainlink.mavlink.session import ParamSession
-    from gainlink.mavlink.upload import upload
-    from gainlink.shipping import artifact as artifact_mod
-    from gainlink.shipping.artifact import from_dict
-    from gainlink.spec import parse_spec
-    from gainlink.synthesis import synthesize
 
     spec = tomllib.loads((ROOT / "examples" / "wood_berry.toml").read_text())
-    art = from_dict(synthesize(parse_spec(spec)).artifact)
-    gains = [s for s in firmware_params(art) if s.ptype == REAL32][: args.params]
-    if len(gains) < args.params:
-        raise SystemExit(f"the Wood-Berry firmware has only {len(gains)} REAL32 parameters")
-    exe = mavlink_executable(art)
-
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    gains, exe = wood_berry(spec, args.params)
+    port = free_udp_port()
     fw = MavlinkFirmware(exe, url=f"udpin:127.0.0.1:{port}").start()
-    results: dict[str, list[float]] = {"windowed": [], "sequential": []}
     try:
         with MavLink(f"udpout:127.0.0.1:{port}") as link:
             link.wait_heartbeat(timeout=5)
-            for round_ in range(args.rounds):
-                for mode, window in (("windowed", 16), ("sequential", 1)):
-                    session = ParamSession(
-                        link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE, window=window
-                    )
-                    scale = 1.0 + 0.01 * (2 * round_ + (mode == "sequential") + 1)
-                    items = [(g.name, REAL32, float(g.value) * scale + 1e-3) for g in gains]
-                    t0 = time.perf_counter()
-                    out = session.set(items)
-                    dt = time.perf_counter() - t0
-                    if not out.ok or len(out.verified) != len(items):
-                        raise SystemExit(f"{mode} upload did not verify: {out}")
-                    results[mode].append(len(items) / dt)
-            session = ParamSession(link, target_system=1, target_component=1, encoding=Encoding.BYTEWISE)
-            session.set([(g.name, REAL32, float(g.value)) for g in gains])  # back to the compiled set
-
-        spec["controller"]["bryson_u_max"] = [v / 1.7 for v in spec["controller"]["bryson_u_max"]]
-        retuned_dict = synthesize(parse_spec(spec)).artifact
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "gains.json"
-            artifact_mod.write(path, retuned_dict)
-            retuned = artifact_mod.load(path)
-        full = upload(retuned, connect=f"udpout:127.0.0.1:{port}")
+            results = set_rates(link, gains, args.rounds)
+        full = retuned_upload(spec, port)
     finally:
         fw.stop()
 

@@ -29,25 +29,21 @@ import argparse
 import json
 import logging
 import os
-import random
 import signal
 import sys
 import tempfile
 import threading
 import time
-import tomllib
 from pathlib import Path
 
 import numpy as np
+from _setups import multicast_transport, pendulum_1khz
 from gainlink.hil.links.can_firmware import firmware_can_executable
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.build import build_fmu
 from gainlink.shipping import artifact as artifact_mod
-from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 
-ROOT = Path(__file__).resolve().parents[1]
 PAGE_KIB = os.sysconf("SC_PAGE_SIZE") / 1024
 # Recorder arrays the bridge fills step by step from zeros (hil/run/bridge.py _Recorder): Y (p), U (m), SAT (m,
 # bool), GOT (bool), TICK, ST (int64); the NaN-filled ones are touched whole at allocation and do not grow.
@@ -269,6 +265,50 @@ def run_phase(name: str, data: dict, *, sample_s: float, stop_after_s: float | N
     return res, out
 
 
+def calibrate(common: dict, steps: int, Ts: float) -> dict:
+    """A short lockstep run at full speed: the steps per second the lockstep phase is sized from."""
+    t0 = time.perf_counter()
+    cal = run_scenario(parse_scenario(scenario("soak_calibration", mode="lockstep", duration=steps * Ts, **common)))
+    return {"steps": cal.metrics["steps"], "steps_per_s": round(cal.metrics["steps"] / (time.perf_counter() - t0), 1)}
+
+
+def run_phases(args: argparse.Namespace, common: dict, Ts: float, rate: float) -> dict:
+    """The lockstep phase (planned at three times the calibrated rate, stopped by the clock) and the real-time
+    phase, each as ``run_phase`` reports it; a phase of 0 minutes is left out."""
+    phases = {}
+    if args.lockstep_minutes > 0:
+        steps = min(int(3 * rate * args.lockstep_minutes * 60), 10_000_000)
+        _, ph = run_phase(
+            "lockstep",
+            scenario("soak_lockstep", mode="lockstep", duration=steps * Ts, **common),
+            sample_s=args.sample_s,
+            stop_after_s=args.lockstep_minutes * 60,
+        )
+        ph["speed_vs_calibration"] = round(ph["steps_per_s"] / rate, 3)
+        phases["lockstep"] = ph
+    if args.realtime_minutes > 0:
+        _, ph = run_phase(
+            "realtime",
+            scenario("soak_realtime", mode="realtime", duration=args.realtime_minutes * 60, **common),
+            sample_s=args.sample_s,
+        )
+        phases["realtime"] = ph
+    return phases
+
+
+def summary(phases: dict) -> dict:
+    """Whether every phase ran to its end with its books balanced, and the memory slopes side by side."""
+    return {
+        "complete": all(p["complete"] or p["books"]["lost_at_stop"] for p in phases.values()),
+        "unaccounted_samples": sum(
+            abs(p["books"]["unaccounted_bridge"]) + abs(p["books"].get("unaccounted_firmware", 0))
+            for p in phases.values()
+        ),
+        "firmware_rss_slope_kib_per_min": {k: p["firmware_rss_slope_kib_per_min"] for k, p in phases.items()},
+        "bridge_rss_slope_minus_trace": {k: p["bridge_rss_slope_minus_trace"] for k, p in phases.items()},
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--lockstep-minutes", type=float, default=30.0)
@@ -278,16 +318,6 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     os.nice(10)
-    spec = tomllib.loads((ROOT / "examples" / "pendulum.toml").read_text())
-    spec["Ts"], spec["name"] = 0.001, "pendulum_1khz"
-    rnd = random.Random(os.getpid())
-    transport = {
-        "interface": "udp_multicast",
-        "channel": f"239.74.{rnd.randint(1, 254)}.{rnd.randint(1, 254)}",
-        "port": rnd.randint(40000, 60000),
-        "hop_limit": 0,
-        "fd": True,
-    }
     out: dict = {
         "benchmark": "soak",
         "transport": "CAN FD over udp_multicast",
@@ -296,50 +326,18 @@ def main(argv: list[str] | None = None) -> int:
         "cpus": os.cpu_count(),
     }
     with tempfile.TemporaryDirectory() as tmp:
-        gains = Path(tmp) / "gains.json"
-        artifact_mod.write(gains, synthesize(parse_spec(spec)).artifact)
+        gains = pendulum_1khz(Path(tmp))
         art = artifact_mod.load(gains)
         common = dict(
-            gains=gains, exe=firmware_can_executable(art), fmu=build_fmu("cart_pendulum"), transport=transport
+            gains=gains,
+            exe=firmware_can_executable(art),
+            fmu=build_fmu("cart_pendulum"),
+            transport=multicast_transport(),
         )
-        t0 = time.perf_counter()
-        cal = run_scenario(
-            parse_scenario(
-                scenario("soak_calibration", mode="lockstep", duration=args.calibration_steps * art.Ts, **common)
-            )
-        )
-        rate = cal.metrics["steps"] / (time.perf_counter() - t0)
-        out["calibration"] = {"steps": cal.metrics["steps"], "steps_per_s": round(rate, 1)}
-        if args.lockstep_minutes > 0:
-            steps = min(int(3 * rate * args.lockstep_minutes * 60), 10_000_000)
-            _, ph = run_phase(
-                "lockstep",
-                scenario("soak_lockstep", mode="lockstep", duration=steps * art.Ts, **common),
-                sample_s=args.sample_s,
-                stop_after_s=args.lockstep_minutes * 60,
-            )
-            ph["speed_vs_calibration"] = round(ph["steps_per_s"] / rate, 3)
-            out["lockstep"] = ph
-        if args.realtime_minutes > 0:
-            _, ph = run_phase(
-                "realtime",
-                scenario("soak_realtime", mode="realtime", duration=args.realtime_minutes * 60, **common),
-                sample_s=args.sample_s,
-            )
-            out["realtime"] = ph
-    phases = [out[k] for k in ("lockstep", "realtime") if k in out]
-    out["summary"] = {
-        "complete": all(p["complete"] or p["books"]["lost_at_stop"] for p in phases),
-        "unaccounted_samples": sum(
-            abs(p["books"]["unaccounted_bridge"]) + abs(p["books"].get("unaccounted_firmware", 0)) for p in phases
-        ),
-        "firmware_rss_slope_kib_per_min": {
-            k: out[k]["firmware_rss_slope_kib_per_min"] for k in ("lockstep", "realtime") if k in out
-        },
-        "bridge_rss_slope_minus_trace": {
-            k: out[k]["bridge_rss_slope_minus_trace"] for k in ("lockstep", "realtime") if k in out
-        },
-    }
+        out["calibration"] = calibrate(common, args.calibration_steps, art.Ts)
+        phases = run_phases(args, common, art.Ts, out["calibration"]["steps_per_s"])
+    out.update(phases)
+    out["summary"] = summary(phases)
     json.dump(out, sys.stdout, indent=2)
     sys.stdout.write("\n")
     return 0 if out["summary"]["complete"] and out["summary"]["unaccounted_samples"] == 0 else 1

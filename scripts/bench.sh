@@ -13,7 +13,7 @@ LONG=(fuzz soak)  # their own make targets: bench-fuzz, bench-soak
 
 names=("$@")
 if ((${#names[@]} == 0)); then
-  for script in bench/*.py; do
+  for script in bench/[!_]*.py; do  # bench/_*.py: modules they share
     name=$(basename "$script" .py)
     [[ " ${LONG[*]} " == *" $name "* ]] || names+=("$name")
   done

@@ -1,0 +1,36 @@
+"""What several benchmarks set up the same way (a module, not a benchmark: scripts/bench.sh skips ``_*.py``)."""
+
+from __future__ import annotations
+
+import os
+import random
+import tomllib
+from pathlib import Path
+
+from gainlink.shipping import artifact as artifact_mod
+from gainlink.spec import parse_spec
+from gainlink.synthesis import synthesize
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def multicast_transport(*, fd: bool = True, salt: int = 0) -> dict:
+    """A udp_multicast transport on a group and port of this process's own (two benchmarks running at once, or a
+    test run beside one, do not hear each other), confined to the host (hop limit 0)."""
+    rnd = random.Random(os.getpid() + salt)
+    return {
+        "interface": "udp_multicast",
+        "channel": f"239.74.{rnd.randint(1, 254)}.{rnd.randint(1, 254)}",
+        "port": rnd.randint(40000, 60000),
+        "hop_limit": 0,
+        "fd": fd,
+    }
+
+
+def pendulum_1khz(folder: Path) -> Path:
+    """The pendulum example designed again at a 1 ms period, written to ``folder/gains.json``."""
+    spec = tomllib.loads((ROOT / "examples" / "pendulum.toml").read_text())
+    spec["Ts"], spec["name"] = 0.001, "pendulum_1khz"
+    path = Path(folder) / "gains.json"
+    artifact_mod.write(path, synthesize(parse_spec(spec)).artifact)
+    return path
