@@ -3,7 +3,7 @@
 # out/bench/NAME.json, then records the ones that succeeded as the README's figures
 # (scripts/readme_figures.py --record: bench/results/NAME.json and the marked blocks of README.md).
 #
-#   scripts/bench.sh            the quick benchmarks: every bench/*.py but the long ones (minutes)
+#   scripts/bench.sh            the quick benchmarks: every bench/*.py but the long ones and _*.py (minutes)
 #   scripts/bench.sh NAME ...   these (bench/NAME.py), e.g. `fuzz` or `soak` (an hour each)
 #
 # A benchmark that fails is reported and the others still run.
