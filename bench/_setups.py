@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import random
+import socket
 import tomllib
 from pathlib import Path
 
@@ -25,6 +26,13 @@ def multicast_transport(*, fd: bool = True, salt: int = 0) -> dict:
         "hop_limit": 0,
         "fd": fd,
     }
+
+
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 that nothing holds now (the system's choice)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 def pendulum_1khz(folder: Path) -> Path:

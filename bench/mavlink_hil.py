@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import socket
 import statistics
 import sys
 import tempfile
@@ -32,15 +31,10 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _setups import free_udp_port
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = 10000.0
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _loop(art, controller_step, steps: int) -> tuple[float, np.ndarray]:
@@ -64,7 +58,7 @@ def _links(art, busy_poll_us: int) -> dict:
 
     links = {}
     for variant, busy_us in (("default", 0), ("busy_poll", busy_poll_us)):
-        port = _free_port()
+        port = free_udp_port()
         links[variant] = MavlinkTransport(
             url=f"udpout:127.0.0.1:{port}",
             controller_url=f"udpin:127.0.0.1:{port}",
@@ -140,7 +134,7 @@ def _bridge_runs(path: Path, busy_poll_us: int) -> dict:
                 "twin": False,
                 "seed": 1,
                 "plant": {"kind": "fmu", "fmu": "cart_pendulum", "outputs": ["x", "theta"]},
-                "transport": {"kind": "mavlink", "port": _free_port(), **extra},
+                "transport": {"kind": "mavlink", "port": free_udp_port(), **extra},
                 "initial_state": {"theta": 0.1},
             },
             path=path.parent / "scenario.toml",

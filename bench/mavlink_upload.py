@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import socket
 import statistics
 import sys
 import tempfile
 import time
 import tomllib
 from pathlib import Path
+
+from _setups import free_udp_port
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = 5000.0
@@ -78,12 +79,6 @@ def retuned_upload(spec: dict, port: int):
         artifact_mod.write(path, synthesize(parse_spec(spec)).artifact)
         retuned = artifact_mod.load(path)
     return upload(retuned, connect=f"udpout:127.0.0.1:{port}")
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def main() -> int:

@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _setups import free_udp_port
 
 ROOT = Path(__file__).resolve().parents[1]
 RATES_HZ = (1000, 500, 200, 100, 50, 25, 10)
@@ -66,15 +67,8 @@ def _links(art, *, board: str):
     """(name, controller factory, transport config) of every link measured, baselines first."""
     from gainlink.firmware.uart import free_tcp_port
 
-    def udp_port() -> int:
-        import socket
-
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            s.bind(("127.0.0.1", 0))
-            return s.getsockname()[1]
-
     return [
-        ("host_mavlink_udp", "firmware", {"kind": "mavlink", "port": udp_port()}),
+        ("host_mavlink_udp", "firmware", {"kind": "mavlink", "port": free_udp_port()}),
         (
             "host_can_udp_multicast",
             "firmware",
