@@ -15,7 +15,7 @@ from gainlink.shipping.artifact import Artifact, load
 from gainlink.shipping.codegen import gain_set
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
-from support.cli import run_cli
+from support.cli import gainlink_process, run_cli
 from support.mavlink import closed_loop, read_params, reference_u, start_firmware
 from support.net import udp_port
 
@@ -237,6 +237,29 @@ def test_firmware_run_mavlink_command_persists_beside_the_artifact(mavlink_exe, 
             proc.stderr.close()
         assert (tmp_path / "mavlink_params.txt").is_file()
     assert "loaded parameters from" in err
+
+
+def test_a_forced_encoding_that_contradicts_the_vehicles_is_refused_before_any_write(mavlink_exe, pend, retuned):
+    """The app advertises bytewise integers: --encoding c_cast would write GL_HASH (and a fixed-point law's gains)
+    as other numbers. One line, exit 2, nothing written."""
+    fw, port = start_firmware(mavlink_exe, None)
+    try:
+        before = read_params(port)
+        res = gainlink_process(
+            "mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--encoding", "c_cast"
+        )
+        assert res.code == 2, (res.code, res.err)
+        assert res.err.count("\n") == 1, res.err
+        assert "--encoding c_cast contradicts the vehicle's AUTOPILOT_VERSION, which advertises bytewise" in res.err
+        after = read_params(port)
+        assert {n: p.value for n, p in after.items()} == {n: p.value for n, p in before.items()}
+        res = gainlink_process(
+            "mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--encoding", "bytewise"
+        )
+        assert res.code == 0 and "gain set committed" in res.out, res.err
+    finally:
+        fw.stop()
+    assert fw.counters()["refused_sets"] == 0
 
 
 @pytest.mark.parametrize(

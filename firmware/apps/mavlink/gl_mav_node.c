@@ -103,13 +103,14 @@ static void send_version(gl_mav_node_t *node)
 {
     uint8_t custom[8];
     memcpy(custom, gl_artifact_sha256, sizeof custom);
+    const uint8_t mark[8] = {'g', 'a', 'i', 'n', 'l', 'i', 'n', 'k'}; /* a gainlink node: uid is the set it runs */
     const uint8_t none[8] = {0};
     const uint8_t uid2[18] = {0};
     mavlink_message_t msg;
     mavlink_msg_autopilot_version_pack_chan(
         node->cfg.sysid, node->cfg.compid, node->cfg.chan, &msg,
         MAV_PROTOCOL_CAPABILITY_MAVLINK2 | MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE, 0x00010000u, 0, 0, 0, custom,
-        none, none, 0, 0, node->table.committed.crc32, uid2);
+        mark, none, 0, 0, node->table.committed.crc32, uid2);
     emit(node, GL_MAV_TO_SENDER, &msg);
 }
 

@@ -11,7 +11,9 @@
  *   15 q15; gl_mav_law.h).
  * - AUTOPILOT_VERSION on MAV_CMD_REQUEST_MESSAGE(148) or MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
  *   capabilities MAVLINK2 | PARAM_ENCODE_BYTEWISE, flight_custom_version = first 8 hex digits of the
- *   artifact's sha256, uid = CRC-32 of the committed gain set.
+ *   artifact's sha256, middleware_custom_version = "gainlink" (how an uploader tells a gainlink node, whose uid
+ *   it may read as a gain set, from other autopilots, whose uid is a hardware id), uid = CRC-32 of the committed
+ *   gain set.
  * - SYS_STATUS on MAV_CMD_REQUEST_MESSAGE(1): the link's error counters (see gl_mav_node_stats_t).
  * - The parameter protocol over the gain set (naming in gl_mav_params.h): PARAM_REQUEST_LIST (streamed as
  *   the transport has room), PARAM_REQUEST_READ by id or index (PARAM_ERROR when unknown), PARAM_SET
