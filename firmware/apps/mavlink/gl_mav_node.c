@@ -595,7 +595,7 @@ gl_status_t gl_mav_node_init(gl_mav_node_t *node, const gl_mav_node_config_t *cf
     node->persist_tokens = GL_MAV_PERSIST_BURST;
     memset(mavlink_get_channel_status(cfg->chan), 0, sizeof(mavlink_status_t));
     gl_mav_params_init(&node->table, GL_MAV_DEFAULT_SET);
-    (void)load_stored(node);
+    node->started_stored = cfg->ignore_stored ? 0 : load_stored(node) == 1;
 #if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
     /* the integer law runs on the table's committed set; the float loop of the same export only idles beside it */
     if (gl_mav_fixed_init(&node->fixed, &node->table.committed.g, cfg->watchdog_periods) != 0) {
