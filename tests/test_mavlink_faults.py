@@ -15,6 +15,7 @@ from gainlink.shipping.artifact import load
 from gainlink.shipping.codegen import gain_set, payload_crc32
 from support.cli import run_cli
 from support.mavlink import closed_loop, read_params, reference_u, start_firmware
+from support.race import ResetAfterCommit
 
 
 def values_of(port: int) -> dict:
@@ -148,6 +149,30 @@ def test_non_finite_values_and_invalid_commits_are_refused_and_the_loop_keeps_it
             assert s.set([("GL_UMIN_0", REAL32, float(old.u_min[0]))]).ok
         assert "commit refused" in fw.stderr_text()
         Y, R, U = closed_loop(port, old, steps=100)  # still the old set, bit for bit the reference
+        np.testing.assert_allclose(U, reference_u(old, Y, R), atol=1e-4)
+    finally:
+        fw.stop()
+
+
+def test_a_commit_the_node_does_not_run_is_not_confirmed_and_is_rolled_back(mavlink_exe, pend, retuned):
+    """Another ground station resets the node to its compiled set right after the commit's echo: GL_HASH was
+    echoed, but the node's AUTOPILOT_VERSION uid (the CRC-32 of the set it runs) is the old set's. The upload
+    must not say "committed": it fails, restores every parameter, and the loop runs the old gains."""
+    old, new = load(pend), load(retuned)
+    fw, port = start_firmware(mavlink_exe, None)
+    try:
+        with ResetAfterCommit(node_port=port, crc=gain_set(new).crc32) as race:
+            res = run_cli("mavlink", "upload", retuned, "--connect", race.url)
+        assert race.reset_result == 0  # MAV_RESULT_ACCEPTED: the race really happened
+        assert res.code == 3, (res.code, res.out, res.err)
+        assert "gain set committed" not in res.out
+        want = f"uid says it runs 0x{gain_set(old).crc32:x}, not crc32 0x{gain_set(new).crc32:08x}"
+        assert "commit not confirmed" in res.err and want in res.err, res.err
+        assert "every changed parameter was restored" in res.err
+        after = values_of(port)
+        assert after["GL_HASH"] & 0xFFFFFFFF == gain_set(old).crc32
+        assert after["GL_K_0_0"] == np.float32(old.K[0, 0])
+        Y, R, U = closed_loop(port, old, steps=100)
         np.testing.assert_allclose(U, reference_u(old, Y, R), atol=1e-4)
     finally:
         fw.stop()

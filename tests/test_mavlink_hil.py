@@ -124,6 +124,12 @@ def test_the_python_reference_node_over_mavlink_matches_the_firmware(pend):
     assert ref.complete and fw.complete, (ref.reason, fw.reason)
     assert "gainlink.hil.links.mavlink_node" in ref.info["controller"]["argv"]
     assert "python reference" in ref.info["controller"]["ready"]
+    # the report names the set the firmware ran: the artifact's (its CRC-32 from the gain set, not from the app)
+    from gainlink.shipping.artifact import load
+    from gainlink.shipping.codegen import gain_set
+
+    crc = gain_set(load(pend)).crc32
+    assert fw.info["controller"]["gains"] == {"set": "artifact", "crc32": crc, "format": "float32"}
     assert ref.trace.got.all() and ref.metrics["lost"] == 0
     # the node is the reference law: only the link's float32 values separate its loop from the float64 twin
     assert ref.metrics["twin"]["worst_du_rel"] < 1e-5

@@ -67,8 +67,9 @@ def test_signed_upload_works_and_unsigned_upload_is_refused(mavlink_exe, pend, r
         fw.stop()
     assert res.code == 2, res.out + res.err
     assert res.err.splitlines() == [
-        "gainlink: error: the vehicle requires MAVLink 2 signing (--signing-key): it ignored every unsigned parameter "
-        "set (its own messages are signed); nothing was changed"
+        "gainlink: error: vehicle 1/1 (MAV_AUTOPILOT_GENERIC, sent no AUTOPILOT_VERSION): the vehicle requires "
+        "MAVLink 2 signing (--signing-key): it ignored every unsigned parameter set (its own messages are signed); "
+        "nothing was changed"
     ]
     assert got["GL_HASH"] & 0xFFFFFFFF == crc_of(new) != crc_of(old)
     assert got["GL_K_0_0"] == gain_set(new).fields["K"].reshape(-1)[0] != gain_set(old).fields["K"].reshape(-1)[0]

@@ -17,14 +17,16 @@ from pathlib import Path
 import mavsdk  # the test extra (make setup) installs it
 import numpy as np
 import pytest
+from gainlink.firmware.mavlink_app import MavlinkFirmware
 from gainlink.mavlink.params import REAL32, as_int32, firmware_params
 from gainlink.shipping.artifact import load
 from gainlink.shipping.codegen import gain_set
 from mavsdk.plugins.param import Param, ParamError
 from mavsdk.plugins.param_server import ParamServer
-from support.cli import run_cli
+from support.cli import gainlink_process, run_cli
 from support.mavlink import closed_loop, read_params, reference_u, start_firmware
 from support.net import udp_port
+from support.vehicle import as_served, mavsdk_vehicle
 
 MAVPROXY = Path(sys.executable).parent / "mavproxy.py"
 
@@ -243,3 +245,65 @@ def test_uploader_against_mavsdk_as_the_vehicle(pend, tmp_path):
     finally:
         sdk.destroy()
         cfg.destroy()
+
+
+def test_a_vehicle_whose_gl_hash_is_real32_is_refused_in_one_line_before_any_write(pend, retuned):
+    """Every parameter's type is checked against the vehicle's, GL_HASH included, before the first PARAM_SET: one
+    stderr line (none of the uploader's INFO chatter before it), exit 2, every gain still the old one."""
+    old, new = load(pend), load(retuned)
+    port = udp_port()
+    served = as_served(firmware_params(old), GL_HASH=REAL32)
+    with mavsdk_vehicle(f"udpin://127.0.0.1:{port}", served) as server:
+        res = gainlink_process("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--retries", "2")
+        assert res.code == 2, (res.code, res.err)
+        assert res.err.count("\n") == 1, res.err
+        assert "GL_HASH is REAL32 on the vehicle, INT32 in the plan; nothing was changed" in res.err
+        assert "vehicle 1/1 (MAV_AUTOPILOT_GENERIC, not a gainlink node)" in res.err
+        for name in changed_gains(old, new):
+            assert server.retrieve_param_float(name) == served[name][1], name
+
+
+def test_a_third_party_vehicle_with_the_gainlink_names_is_never_said_to_run_the_set(pend, retuned):
+    """MAVSDK serving every GL_* parameter with the right types only stores what it is sent: the uploader may say
+    that it holds the values and GL_HASH (each echo verified), never that a gain set was committed."""
+    old, new = load(pend), load(retuned)
+    port = udp_port()
+    with mavsdk_vehicle(f"udpin://127.0.0.1:{port}", as_served(firmware_params(old))) as server:
+        res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}")
+        assert res.code == 0, res.err
+        assert "gain set committed" not in res.out
+        assert "GL_HASH echoed, commit NOT confirmed (the vehicle does not identify as a gainlink node" in res.out
+        assert "vehicle 1/1 (MAV_AUTOPILOT_GENERIC, not a gainlink node)" in res.out
+        # what it does claim is true: the vehicle holds every new value and the new hash
+        for name, value in changed_gains(old, new).items():
+            assert server.retrieve_param_float(name) == value, name
+        assert server.retrieve_param_int("GL_HASH") == as_int32(gain_set(new).crc32)
+
+
+def test_target_system_chooses_among_two_vehicles_and_the_choice_is_named(mavlink_exe, pend, retuned):
+    """Two vehicles send to the uploader's port: gainlink's host app (1/1) and a MAVSDK vehicle (7/1). The target
+    options pick one and the summary names it; the other is never written to. An absent target is one line."""
+    new = load(retuned)
+    port = udp_port()
+    fw = MavlinkFirmware(mavlink_exe, url=f"udpout:127.0.0.1:{port}").start()
+    try:
+        with mavsdk_vehicle(f"udpout://127.0.0.1:{port}", {"MC_ROLLRATE_P": (REAL32, 0.15)}, system_id=7) as server:
+            url = f"udpin:127.0.0.1:{port}"
+            res = run_cli("mavlink", "upload", retuned, "--connect", url, "--target-system", "1")
+            assert res.code == 0, res.err
+            assert "to vehicle 1/1 (MAV_AUTOPILOT_GENERIC, a gainlink node)" in res.out
+            assert "gain set committed" in res.out
+            assert server.retrieve_param_float("MC_ROLLRATE_P") == np.float32(0.15)
+
+            res = run_cli("mavlink", "upload", pend, "--connect", url, "--target-system", "7", "--retries", "1")
+            assert res.code == 2 and "vehicle 7/1 (MAV_AUTOPILOT_GENERIC, not a gainlink node)" in res.err, res.err
+            assert "is not gainlink firmware" in res.err
+
+            res = gainlink_process(
+                "mavlink", "upload", pend, "--connect", url, "--target-system", "9", "--heartbeat-timeout", "1.5"
+            )
+            assert res.code == 2 and res.err.count("\n") == 1, res.err
+            assert "no heartbeat from vehicle 9/* on" in res.err and "1/1" in res.err and "7/1" in res.err
+    finally:
+        fw.stop()
+    assert f"committed gain set crc32 0x{gain_set(new).crc32:08x}" in fw.stderr_text()

@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import math
 import re
+import shutil
+import signal
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +18,7 @@ from gainlink.shipping.artifact import Artifact, load
 from gainlink.shipping.codegen import gain_set
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
-from support.cli import run_cli
+from support.cli import GAINLINK, gainlink_process, run_cli
 from support.mavlink import closed_loop, read_params, reference_u, start_firmware
 from support.net import udp_port
 
@@ -199,20 +202,22 @@ def test_upload_listening_for_a_vehicle_that_sends_to_us(mavlink_exe, retuned):
 
 
 def test_firmware_run_mavlink_command_persists_beside_the_artifact(mavlink_exe, pend, retuned, tmp_path):
-    """`gainlink firmware run ARTIFACT --mavlink URL`: upload --persist, stop, start again: values reloaded."""
-    import shutil
-    import signal
-    import subprocess
-    import sys
-
+    """`gainlink firmware run ARTIFACT --mavlink URL`: upload --persist, stop, start again: values reloaded, and the
+    start-up line says that the persisted set runs, not the artifact's; --from-artifact starts on the artifact's
+    set and leaves the persisted one stored."""
     art_path = tmp_path / "gains.json"
     shutil.copy(pend, art_path)
-    new = load(retuned)
-    for round_ in range(2):
+    old, new = load(pend), load(retuned)
+    url = "udpout:127.0.0.1:{port}"
+    rounds = (
+        ([], gain_set(old), "artifact"),
+        ([], gain_set(new), "persisted"),
+        (["--from-artifact"], gain_set(old), "artifact"),
+    )
+    for round_, (extra, runs, which) in enumerate(rounds):
         port = udp_port()
-        gainlink = Path(sys.executable).parent / "gainlink"
         proc = subprocess.Popen(
-            [str(gainlink), "firmware", "run", str(art_path), "--mavlink", f"udpin:127.0.0.1:{port}"],
+            [str(GAINLINK), "firmware", "run", str(art_path), "--mavlink", f"udpin:127.0.0.1:{port}", *extra],
             stdin=subprocess.DEVNULL,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
@@ -221,14 +226,15 @@ def test_firmware_run_mavlink_command_persists_beside_the_artifact(mavlink_exe, 
         try:
             banner = proc.stdout.readline()
             assert banner.startswith("gainlink-mavlink pendulum sha256:"), banner + proc.stderr.read()
+            assert banner.rstrip().endswith(f" gains={which} crc32={runs.crc32} format=float32"), banner
             if round_ == 0:
-                res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--persist")
+                res = run_cli("mavlink", "upload", retuned, "--connect", url.format(port=port), "--persist")
                 assert res.code == 0 and "persisted" in res.out, res.err
             else:
-                res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--dry-run")
-                assert res.code == 0 and "dry run: 0 parameter(s) would change" in res.out
-                Y, R, U = closed_loop(port, new, steps=100)
-                np.testing.assert_allclose(U, reference_u(new, Y, R), atol=1e-4)
+                art = new if which == "persisted" else old
+                Y, R, U = closed_loop(port, art, steps=100)
+                np.testing.assert_allclose(U, reference_u(art, Y, R), atol=1e-4)
+                assert read_params(port)["GL_HASH"].value & 0xFFFFFFFF == runs.crc32
         finally:
             proc.send_signal(signal.SIGTERM)
             assert proc.wait(timeout=10) == 0
@@ -236,7 +242,32 @@ def test_firmware_run_mavlink_command_persists_beside_the_artifact(mavlink_exe, 
             proc.stdout.close()
             proc.stderr.close()
         assert (tmp_path / "mavlink_params.txt").is_file()
-    assert "loaded parameters from" in err
+        assert ("loaded parameters from" in err) == (which == "persisted"), err
+    stored = (tmp_path / "mavlink_params.txt").read_text("ascii")
+    assert f"GL_HASH {gain_set(new).crc32:08x}" in stored  # --from-artifact kept the persisted set
+
+
+def test_a_forced_encoding_that_contradicts_the_vehicles_is_refused_before_any_write(mavlink_exe, pend, retuned):
+    """The app advertises bytewise integers: --encoding c_cast would write GL_HASH (and a fixed-point law's gains)
+    as other numbers. One line, exit 2, nothing written."""
+    fw, port = start_firmware(mavlink_exe, None)
+    try:
+        before = read_params(port)
+        res = gainlink_process(
+            "mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--encoding", "c_cast"
+        )
+        assert res.code == 2, (res.code, res.err)
+        assert res.err.count("\n") == 1, res.err
+        assert "--encoding c_cast contradicts the vehicle's AUTOPILOT_VERSION, which advertises bytewise" in res.err
+        after = read_params(port)
+        assert {n: p.value for n, p in after.items()} == {n: p.value for n, p in before.items()}
+        res = gainlink_process(
+            "mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--encoding", "bytewise"
+        )
+        assert res.code == 0 and "gain set committed" in res.out, res.err
+    finally:
+        fw.stop()
+    assert fw.counters()["refused_sets"] == 0
 
 
 @pytest.mark.parametrize(

@@ -9,7 +9,9 @@ reference law of the artifact it uploaded; the garbage test against the image's 
 from __future__ import annotations
 
 import dataclasses
+import signal
 import socket
+import subprocess
 import time
 
 import numpy as np
@@ -29,7 +31,7 @@ from gainlink.shipping.artifact import load
 from gainlink.shipping.codegen import gain_set
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
-from support.cli import run_cli
+from support.cli import GAINLINK, run_cli
 from support.hil import udp_transport
 from support.mavlink import reference_u, retuned_pendulum
 from support.net import tcp_port, udp_port
@@ -146,12 +148,63 @@ def test_upload_persists_in_flash_and_survives_a_restart_of_the_image(elf, pend,
 
     with QemuUart(
         elf, board="mps2-an386", protocol="mavlink", port=tcp_port(), flash_dir=flash, lifetime_s=300
-    ) as image:  # the board powered again: the set comes back from flash
-        assert f"crc32={gain_set(new).crc32}" in image.ready_line
+    ) as image:  # the board powered again: the set comes back from flash, and the ready line says so
+        assert f"format=float32 gains=persisted crc32={gain_set(new).crc32} " in image.ready_line, image.ready_line
         res = run_cli("mavlink", "upload", tmp_path / "retuned.json", "--connect", image.url, "--dry-run")
         assert res.code == 0 and "dry run: 0 parameter(s) would change" in res.out, res.out + res.err
         Y, R, U = closed_loop(image.url, new)
         np.testing.assert_allclose(U, reference_u(new, Y, R), atol=1e-4)
+    stored = (flash / "gl_flash.txt").read_bytes()
+
+    with QemuUart(
+        elf,
+        board="mps2-an386",
+        protocol="mavlink",
+        port=tcp_port(),
+        flash_dir=flash,
+        lifetime_s=300,
+        options=("gains=artifact",),
+    ) as image:  # started on the artifact's set: the flash keeps the persisted one
+        assert f"gains=artifact crc32={gain_set(old).crc32} " in image.ready_line, image.ready_line
+        link, s = session(image.url)
+        with link:
+            got, _ = s.read(["GL_HASH", "GL_K_0_0"])
+        assert got["GL_HASH"].value & 0xFFFFFFFF == gain_set(old).crc32
+        assert got["GL_K_0_0"].value == np.float32(old.K[0, 0])
+    assert (flash / "gl_flash.txt").read_bytes() == stored
+
+
+@pytest.mark.parametrize("from_artifact", [False, True])
+def test_firmware_run_of_the_image_says_which_gain_set_runs(elf, pend, tmp_path, from_artifact):
+    """`gainlink firmware run ART --target cortex-m4 --mavlink tcp:...` (the demo's last step) over a flash that
+    holds a persisted set: its start-up line names that set, not the artifact's, or with --from-artifact the
+    artifact's."""
+    new = load(retuned_pendulum(tmp_path / "retuned.json"))
+    flash = tmp_path / "flash"
+    with QemuUart(elf, board="mps2-an386", protocol="mavlink", port=tcp_port(), flash_dir=flash, lifetime_s=300) as im:
+        res = run_cli("mavlink", "upload", tmp_path / "retuned.json", "--connect", im.url, "--persist")
+        assert res.code == 0 and "persisted" in res.out, res.err
+    url = f"tcp:127.0.0.1:{tcp_port()}"
+    argv = ["firmware", "run", str(pend), "--target", "cortex-m4", "--mavlink", url, "--flash-dir", str(flash)]
+    proc = subprocess.Popen(
+        [str(GAINLINK), *argv, *(["--from-artifact"] if from_artifact else [])],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        line = proc.stdout.readline()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=20) == 0
+        proc.stdout.close()
+        proc.stderr.close()
+    if from_artifact:
+        assert f"; runs the artifact's gain set (float32, crc32 0x{gain_set(load(pend)).crc32:08x});" in line, line
+    else:
+        want = f"; runs the gain set persisted by an earlier upload (float32, crc32 0x{gain_set(new).crc32:08x}), NOT"
+        assert want in line, line
 
 
 def request_sys_status(link: MavLink) -> object:

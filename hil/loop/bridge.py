@@ -397,6 +397,11 @@ class _Loop:
             "transport": self.transport.describe(),
             "controller": {"kind": scenario.controller, "argv": self.peer.argv, "ready": self.peer.ready_line},
         }
+        from gainlink.firmware.uart import gains_of
+
+        gains = gains_of(self.peer.ready_line)
+        if gains is not None:  # the set the node said it runs (a MAVLink node: always the artifact's, checked at start)
+            info["controller"]["gains"] = gains
         if scenario.controller == "qemu":
             info["controller"]["board"] = scenario.board
             metrics["uart"] = link_capacity(self.rec.SENT[:steps], self.rec.BACK[:steps], answered_in_time=trace.got)

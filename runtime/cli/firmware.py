@@ -242,6 +242,8 @@ def _run(args: argparse.Namespace) -> int:
 
     on_host = args.target == "host" and args.board is None
     bus_node = getattr(args, "can", None) or getattr(args, "mavlink", None)
+    if args.from_artifact and not getattr(args, "mavlink", None):
+        raise FirmwareError("--from-artifact is for the MAVLink node (--mavlink), the one that persists gain sets")
     if not bus_node:  # the CAN and MAVLink nodes (host apps, and the image's on its UART) also run a scheduled law
         load(args.artifact).require_unscheduled("gainlink firmware run")
     if not on_host:
@@ -258,6 +260,7 @@ def _run(args: argparse.Namespace) -> int:
             url=args.mavlink,
             param_file=args.param_file and Path(args.param_file),
             signing_key=args.signing_key and Path(args.signing_key),
+            from_artifact=args.from_artifact,
         )
     return _run_host(args)
 
@@ -275,7 +278,14 @@ def _run_image(args: argparse.Namespace) -> int:
             "`gainlink replay ... --engine qemu`)"
         )
     if args.mavlink and not args.can:
-        return run_foreground(Path(args.artifact), **image, protocol="mavlink", url=args.mavlink, flash_dir=flash)
+        return run_foreground(
+            Path(args.artifact),
+            **image,
+            protocol="mavlink",
+            url=args.mavlink,
+            options=("gains=artifact",) if args.from_artifact else (),
+            flash_dir=flash,
+        )
     if args.can and not args.mavlink:
         from gainlink.hil.links.can import layout_from_config, slcan_image_options
         from gainlink.hil.links.can_firmware import read_can_config
@@ -494,6 +504,13 @@ def _add_run_parser(sub) -> None:
         metavar="FILE",
         help="with --mavlink: MAVLink 2 signing key file (gainlink mavlink "
         "keygen); PARAM_SET, COMMAND_LONG and HIL samples must then be signed with it",
+    )
+    p.add_argument(
+        "--from-artifact",
+        action="store_true",
+        help="with --mavlink: start on the artifact's gain set even when a set persisted by an earlier upload is "
+        "stored (the param file or the image's flash: kept until the next persist); without it the persisted set "
+        "runs, and the start-up line says which (gains=persisted|artifact crc32=...)",
     )
     p.set_defaults(func=_run)
 

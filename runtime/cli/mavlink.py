@@ -1,9 +1,11 @@
 """``gainlink mavlink``: upload a gain artifact to a vehicle, list its parameters, give it a signing key.
 
-Exit status of ``upload``: 0 verified (and persisted with ``--persist``); 2 nothing was changed
-(bad input, no heartbeat, missing parameter, other dimensions, a vehicle that requires signing and was
-given no ``--signing-key``); 3 the upload failed after writing
-and every changed parameter was restored; 4 the upload failed and the rollback is incomplete.
+Exit status of ``upload``: 0 every set verified by its echo (on a gainlink node the commit confirmed by its
+AUTOPILOT_VERSION uid; on another vehicle, which cannot show that its loop runs the set, the summary says so), and
+persisted with ``--persist``; 2 nothing was changed (bad input, no heartbeat, missing parameter or one of another
+type, other dimensions, an ``--encoding`` that contradicts the vehicle's, a vehicle that requires signing and was
+given no ``--signing-key``); 3 the upload failed after writing and every changed parameter was restored; 4 the upload
+failed and the rollback is incomplete. Without ``-v`` stderr carries nothing but an error's lines.
 ``setup-signing``: 0 the vehicle answers signed with the new key; 2 it does not (or bad input, no heartbeat).
 """
 
@@ -44,6 +46,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="integer parameter encoding (default: from AUTOPILOT_VERSION / the autopilot type)",
     )
     up.add_argument("--signing-key", metavar="FILE", help=SIGNING_HELP)
+    up.add_argument(
+        "--target-system",
+        type=int,
+        metavar="N",
+        help="upload to the vehicle with this system id (default: the first vehicle heard, not a ground station)",
+    )
+    up.add_argument("--target-component", type=int, metavar="N", help="and this component id (default: any)")
     up.set_defaults(func=_upload)
 
     ls = sub.add_parser("params", help="list a vehicle's parameters (PARAM_REQUEST_LIST)")
@@ -78,6 +87,12 @@ def _upload(args: argparse.Namespace) -> int:
 
     if args.window < 1 or args.retries < 0 or args.timeout <= 0:
         raise ParameterError("--window must be >= 1, --retries >= 0 and --timeout > 0")
+    for name, value, low in (
+        ("--target-system", args.target_system, 1),
+        ("--target-component", args.target_component, 0),
+    ):
+        if value is not None and not low <= value <= 255:
+            raise ParameterError(f"{name} must be {low}..255, not {value}")
     artifact = load(args.artifact)
     key = read_key(args.signing_key) if args.signing_key else None
 
@@ -100,28 +115,41 @@ def _upload(args: argparse.Namespace) -> int:
             encoding=None if args.encoding == "auto" else Encoding(args.encoding),
             on_diff=show_diff,
             signing_key=key,
+            target_system=args.target_system,
+            target_component=args.target_component,
         )
     except UploadFailed as exc:
         for line in exc.events:
             print(f"gainlink: {line}", file=sys.stderr)
         print(f"gainlink: error: {exc}", file=sys.stderr)
         return EXIT_ROLLED_BACK if exc.rolled_back else EXIT_ROLLBACK_INCOMPLETE
+    vehicle = res.vehicle.describe()
     if res.dry_run:
         print(
             f"dry run: {len(res.changes)} parameter(s) would change, {res.unchanged} already match "
-            f"(vehicle {res.target[0]}/{res.target[1]}, {res.encoding.value} integers)"
+            f"(vehicle {vehicle}, {res.encoding.value} integers)"
         )
         return 0
-    what = [f"{res.verified} set(s) verified", f"{res.unchanged} unchanged"]
-    if res.committed:
-        what.append("gain set committed")
+    what = [f"{res.verified} set(s) verified", f"{res.unchanged} unchanged", *_commit_words(res)]
     if res.persisted:
         what.append("persisted")
     print(
-        f"uploaded {artifact.name} sha256:{artifact.sha256[:12]} to vehicle {res.target[0]}/{res.target[1]}: "
+        f"uploaded {artifact.name} sha256:{artifact.sha256[:12]} to vehicle {vehicle}: "
         f"{', '.join(what)} ({res.sent} sent, {res.retries} retries, {res.seconds:.3f} s)"
     )
     return 0
+
+
+def _commit_words(res) -> list[str]:
+    """What the summary may say of the commit: confirmed by a gainlink node, or only echoed by another vehicle."""
+    if res.committed:
+        return ["gain set committed (the node's AUTOPILOT_VERSION uid is its CRC-32)"]
+    if res.hash_set:
+        return [
+            "GL_HASH echoed, commit NOT confirmed (the vehicle does not identify as a gainlink node: it holds the "
+            "values, nothing shows that its loop runs them)"
+        ]
+    return []
 
 
 def _params(args: argparse.Namespace) -> int:

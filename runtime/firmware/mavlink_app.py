@@ -57,11 +57,13 @@ def firmware_argv(
     compid: int = 1,
     busy_poll_us: int = 0,
     signing_key: Path | None = None,
+    from_artifact: bool = False,
 ) -> list[str]:
-    """Command line of the MAVLink app (``busy_poll_us`` > 0 adds ``--spin-us``, a key file ``--signing-key``)."""
+    """Command line of the MAVLink app (``busy_poll_us`` > 0 adds ``--spin-us``, a key file ``--signing-key``,
+    ``from_artifact`` with a ``storage`` file ``--from-artifact``: start on the artifact's set, not the stored one)."""
     argv = [str(exe), "--url", url, "--sysid", str(sysid), "--compid", str(compid), *spin_argv(busy_poll_us)]
     if storage is not None:
-        argv += ["--storage", str(storage)]
+        argv += ["--storage", str(storage)] + (["--from-artifact"] if from_artifact else [])
     return argv + signing_argv(signing_key)
 
 
@@ -83,6 +85,13 @@ class MavlinkFirmware:
         0, the default: block at once).
     signing_key : Path, optional
         MAVLink 2 signing key file (``--signing-key``).
+    from_artifact : bool
+        Start on the artifact's gain set even when ``storage`` holds a persisted one (``--from-artifact``).
+
+    Attributes
+    ----------
+    ready_line : str
+        The app's start-up line; its ``gains=artifact|persisted crc32=... format=...`` name the set in force.
     """
 
     def __init__(
@@ -94,8 +103,16 @@ class MavlinkFirmware:
         ready_timeout: float = 10.0,
         busy_poll_us: int = 0,
         signing_key: Path | None = None,
+        from_artifact: bool = False,
     ):
-        self.argv = firmware_argv(exe, url=url, storage=storage, busy_poll_us=busy_poll_us, signing_key=signing_key)
+        self.argv = firmware_argv(
+            exe,
+            url=url,
+            storage=storage,
+            busy_poll_us=busy_poll_us,
+            signing_key=signing_key,
+            from_artifact=from_artifact,
+        )
         self.ready_timeout = ready_timeout
         self.proc: subprocess.Popen | None = None
         self.ready_line = ""
@@ -173,7 +190,12 @@ def default_param_file(artifact_path: Path) -> Path:
 
 
 def run_foreground(
-    artifact_path: Path, *, url: str, param_file: Path | None = None, signing_key: Path | None = None
+    artifact_path: Path,
+    *,
+    url: str,
+    param_file: Path | None = None,
+    signing_key: Path | None = None,
+    from_artifact: bool = False,
 ) -> int:
     """Build the MAVLink app for an artifact and run it in the foreground until interrupted.
 
@@ -187,6 +209,9 @@ def run_foreground(
         Persistent parameter file (default :func:`default_param_file`); loaded at start when present.
     signing_key : Path, optional
         MAVLink 2 signing key file.
+    from_artifact : bool
+        Start on the artifact's gain set even when ``param_file`` holds a persisted one (kept until the next
+        persist). Either way the app's start-up line names the set in force (``gains=artifact|persisted``).
 
     Returns
     -------
@@ -201,7 +226,11 @@ def run_foreground(
     signing_argv(signing_key)  # a bad key file is one line before the build, not after
     exe = mavlink_executable(artifact)
     argv = firmware_argv(
-        exe, url=url, storage=param_file or default_param_file(Path(artifact_path)), signing_key=signing_key
+        exe,
+        url=url,
+        storage=param_file or default_param_file(Path(artifact_path)),
+        signing_key=signing_key,
+        from_artifact=from_artifact,
     )
     log.info("running %s", " ".join(argv))
     return run_in_foreground(argv, stdin=subprocess.DEVNULL)

@@ -264,12 +264,14 @@ class QemuUart:
 
     # -- the bridge's peer interface (as hil.loop.controller.ControllerProcess) -------------------------
     def check_artifact(self, sha256: str) -> None:
-        """Fail unless the banner names the artifact ``sha256`` (an image built for other gains)."""
+        """Fail unless the banner names the artifact ``sha256`` (an image built for other gains) and the image runs
+        that artifact's set (not one persisted in its flash)."""
         m = re.search(r"sha256:([0-9a-f]{64})", self.banner)
         if m is None or m.group(1) != sha256:
             found = m.group(1)[:16] if m else "unknown"
             self.stop()
             raise FirmwareError(f"the image runs artifact sha256:{found}..., not sha256:{sha256[:16]}...")
+        refuse_persisted(self.ready_line, what="the image", stop=self.stop)
 
     def exit_status(self) -> int | None:
         """QEMU's exit status when it has ended (the image's semihosting exit code), else ``None``."""
@@ -343,6 +345,43 @@ class QemuUart:
         self.close()
 
 
+def gains_of(ready_line: str) -> dict | None:
+    """The gain set a MAVLink node's start-up line (host app or image) says is in force: ``{"set": "artifact" or
+    "persisted", "crc32": int, "format": "float32"...}``; ``None`` for a line that names none (an slcan node, the
+    Python reference node)."""
+    m = re.search(r"\bgains=(artifact|persisted) crc32=(\d+)", ready_line)
+    if m is None:
+        return None
+    fmt = re.search(r"\bformat=(\S+)", ready_line)
+    return {"set": m.group(1), "crc32": int(m.group(2)), "format": fmt.group(1) if fmt else None}
+
+
+def refuse_persisted(ready_line: str, *, what: str, stop) -> None:
+    """Stop the node (``stop()``) and raise :class:`FirmwareError` when its start-up line says that a persisted gain
+    set runs, not its artifact's: a run compared against the artifact would be compared against other gains."""
+    gains = gains_of(ready_line)
+    if gains is not None and gains["set"] != "artifact":
+        stop()
+        raise FirmwareError(
+            f"{what} {gains_in_force(ready_line)}: it would not be the artifact's gains under test (start it from "
+            "the artifact)"
+        )
+
+
+def gains_in_force(ready_line: str) -> str:
+    """:func:`gains_of` in words: ``runs the artifact's gain set (float32, crc32 0x...)`` or ``runs the gain set
+    persisted by an earlier upload (...), NOT the artifact's``; ``""`` for a line that names none."""
+    gains = gains_of(ready_line)
+    if gains is None:
+        return ""
+    crc = f"{gains['format'] + ', ' if gains['format'] else ''}crc32 0x{gains['crc32']:08x}"
+    if gains["set"] == "artifact":
+        return f"runs the artifact's gain set ({crc})"
+    return (
+        f"runs the gain set persisted by an earlier upload ({crc}), NOT the artifact's (--from-artifact starts on it)"
+    )
+
+
 def default_flash_dir(artifact_path: Path, *, board: str) -> Path:
     """Where ``gainlink firmware run --target cortex-mN`` keeps the image's flash: beside the artifact."""
     return Path(artifact_path).with_name(f"flash-{board}")
@@ -406,7 +445,11 @@ def run_foreground(
         with QemuUart(
             elf, board=board, protocol=protocol, host=host, port=port, options=options, flash_dir=flash
         ) as image:
-            print(f"{image.ready_line}; UART at {url} (flash: {flash}); Ctrl-C stops it", flush=True)
+            runs = gains_in_force(image.ready_line)
+            print(
+                f"{image.ready_line}; UART at {url} (flash: {flash}){'; ' + runs if runs else ''}; Ctrl-C stops it",
+                flush=True,
+            )
             while not stop["now"] and image.exit_status() is None:
                 time.sleep(0.2)
             code = image.exit_status()

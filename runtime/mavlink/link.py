@@ -55,6 +55,17 @@ def carries_signature(msg: mavlink2.MAVLink_message) -> bool:
     return bool(msg.get_header().incompat_flags & mavlink2.MAVLINK_IFLAG_SIGNED)
 
 
+def _no_heartbeat(
+    url: str, timeout: float, system: int | None, component: int | None, heard: set[tuple[int, int]]
+) -> str:
+    """Why :meth:`MavLink.wait_heartbeat` gave up: the vehicle asked for and the others heard instead."""
+    if system is None and component is None:
+        return f"no heartbeat on {url} within {timeout:g} s"
+    want = f"{'*' if system is None else system}/{'*' if component is None else component}"
+    others = ", ".join(f"{s}/{c}" for s, c in sorted(heard)) or "none"
+    return f"no heartbeat from vehicle {want} on {url} within {timeout:g} s (other vehicles heard: {others})"
+
+
 class MavLink:
     """One MAVLink 2 endpoint.
 
@@ -141,35 +152,49 @@ class MavLink:
         self.rx_count += len(out)
         return out
 
-    def wait_heartbeat(self, *, timeout: float, exclude_gcs: bool = True) -> mavlink2.MAVLink_heartbeat_message:
-        """Wait for a HEARTBEAT from a vehicle (not a ground station) and return it.
+    def wait_heartbeat(
+        self,
+        *,
+        timeout: float,
+        exclude_gcs: bool = True,
+        system: int | None = None,
+        component: int | None = None,
+    ) -> mavlink2.MAVLink_heartbeat_message:
+        """Wait for a HEARTBEAT from a vehicle (not a ground station), of ``system`` / ``component`` when given,
+        and return it.
 
         Raises
         ------
         PeerTimeoutError
-            When none arrives within ``timeout`` seconds.
+            When none arrives within ``timeout`` seconds (the message names the vehicles heard instead).
         TransportError
             With a signing key, when the vehicle's heartbeat is unsigned or signed with another key.
         """
         deadline = time.monotonic() + timeout
         next_beat = 0.0
+        heard: set[tuple[int, int]] = set()
         while True:
             now = time.monotonic()
             left = deadline - now
             if left <= 0:
-                raise PeerTimeoutError(f"no heartbeat on {self.url} within {timeout:g} s")
+                raise PeerTimeoutError(_no_heartbeat(self.url, timeout, system, component, heard))
             if now >= next_beat and self._can_send():
                 self.send_heartbeat()
                 next_beat = now + 0.5
             for m in self.poll(min(left, 0.1)):
-                if m.get_type() == "HEARTBEAT" and not (exclude_gcs and m.type == mavlink2.MAV_TYPE_GCS):
-                    if self.signed and not m.get_signed():
-                        raise TransportError(
-                            f"vehicle {m.get_srcSystem()}/{m.get_srcComponent()} on {self.url} does "
-                            "not sign with this key (its heartbeat is unsigned or signed with "
-                            "another key)"
-                        )
-                    return m
+                if m.get_type() != "HEARTBEAT" or (exclude_gcs and m.type == mavlink2.MAV_TYPE_GCS):
+                    continue
+                source = (m.get_srcSystem(), m.get_srcComponent())
+                if (system is not None and source[0] != system) or (component is not None and source[1] != component):
+                    heard.add(source)
+                    continue
+                if self.signed and not m.get_signed():
+                    raise TransportError(
+                        f"vehicle {source[0]}/{source[1]} on {self.url} does "
+                        "not sign with this key (its heartbeat is unsigned or signed with "
+                        "another key)"
+                    )
+                return m
 
     def _can_send(self) -> bool:
         # a udpin link learns its peer from the first datagram; until then it has nobody to send to

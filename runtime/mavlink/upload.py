@@ -3,16 +3,23 @@ and rollback of every changed parameter on any failure.
 
 The steps of :func:`upload`:
 
-1. wait for a vehicle HEARTBEAT (:class:`~gainlink.errors.PeerTimeoutError` when none comes);
-2. ask for AUTOPILOT_VERSION and pick the integer encoding (bytewise or C-cast) it advertises;
-3. read the current value of every target parameter and compute the diff;
+1. wait for a vehicle HEARTBEAT (the first that is not a ground station's, or the one of the given target system
+   and component; :class:`~gainlink.errors.PeerTimeoutError` when none comes);
+2. ask for AUTOPILOT_VERSION: the integer encoding (bytewise or C-cast) it advertises, and whether the vehicle
+   identifies as a gainlink node (``middleware_custom_version`` is ``gainlink``); a forced encoding that
+   contradicts the advertised one is refused;
+3. read the current value of every target parameter, check that each has the type the plan writes (``GL_HASH``
+   and the read-only structure included), and compute the diff;
 4. set the changed ones, a bounded window in flight, each verified by its echo, retried on timeout;
-5. for the gainlink firmware, commit the staged set by setting ``GL_HASH`` (the loop swaps sets
-   atomically between steps);
+5. for the gainlink scheme, commit the staged set by setting ``GL_HASH`` (the loop swaps sets atomically between
+   steps); on a gainlink node the commit is confirmed by AUTOPILOT_VERSION's ``uid``, the CRC-32 of the set the
+   node runs (a mismatch is a failure). A vehicle that does not identify as a gainlink node only shows that it
+   holds every value and ``GL_HASH``: that is all the result claims (``committed`` stays false);
 6. with ``persist``, send MAV_CMD_PREFLIGHT_STORAGE and check the COMMAND_ACK.
 
-When any step after the first set fails, every parameter that was sent is set back to the value
-read in step 3 (and the old hash re-committed), and :class:`UploadFailed` lists what happened.
+Everything refused in steps 1-3 is refused before anything is written. When any step after the first set fails,
+every parameter that was sent is set back to the value read in step 3 (and the old hash re-committed), and
+:class:`UploadFailed` lists what happened.
 
 A vehicle that requires signing (its messages carry signatures) but is spoken to without a key may
 answer reads and ignore every set: when no set is answered at all and reading the parameters back
@@ -59,6 +66,49 @@ log = logging.getLogger(__name__)
 
 SIGNING_REQUIRED = "the vehicle requires MAVLink 2 signing (--signing-key)"
 
+#: What a gainlink node puts in AUTOPILOT_VERSION's ``middleware_custom_version`` (``gl_mav_node.c``); such a node's
+#: ``uid`` is the CRC-32 of the gain set it runs. Other autopilots' ``uid`` is a hardware id: never read as a set.
+GAINLINK_NODE_MARK = b"gainlink"
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """The vehicle an upload talks to, as its HEARTBEAT and AUTOPILOT_VERSION describe it.
+
+    Attributes
+    ----------
+    system, component : int
+        Its MAVLink system and component ids.
+    autopilot : int
+        ``MAV_AUTOPILOT`` of its HEARTBEAT.
+    gainlink : bool
+        Whether it identifies as a gainlink node (:data:`GAINLINK_NODE_MARK`): then a commit is confirmed by the
+        CRC-32 in AUTOPILOT_VERSION's ``uid``.
+    advertised : Encoding or None
+        The integer encoding its AUTOPILOT_VERSION advertises; ``None`` when it names none or never came.
+    versioned : bool
+        Whether it answered the request for AUTOPILOT_VERSION at all.
+    """
+
+    system: int
+    component: int
+    autopilot: int
+    gainlink: bool
+    advertised: Encoding | None
+    versioned: bool = True
+
+    def describe(self) -> str:
+        """``1/1 (MAV_AUTOPILOT_GENERIC, a gainlink node)``, ``... not a gainlink node)`` or ``... sent no
+        AUTOPILOT_VERSION)``."""
+        kind = "a gainlink node" if self.gainlink else "not a gainlink node"
+        kind = kind if self.versioned else "sent no AUTOPILOT_VERSION"
+        return f"{self.system}/{self.component} ({_enum_name('MAV_AUTOPILOT', self.autopilot)}, {kind})"
+
+
+def _enum_name(enum: str, value: int) -> str:
+    entry = mavlink2.enums.get(enum, {}).get(value)
+    return entry.name if entry is not None else f"{enum} {value}"
+
 
 @dataclass(frozen=True)
 class ParamChange:
@@ -77,8 +127,8 @@ class UploadResult:
 
     Attributes
     ----------
-    target : tuple of int
-        (system id, component id) of the vehicle.
+    vehicle : Vehicle
+        The vehicle written to (or read, with ``dry_run``).
     encoding : Encoding
         Integer encoding used.
     changes : tuple of ParamChange
@@ -91,8 +141,12 @@ class UploadResult:
         PARAM_SETs sent, retries included.
     retries : int
         Requests sent again after a timeout or a mismatched echo, in every phase (reads, sets, commit, persist).
+    hash_set : bool
+        Whether ``GL_HASH`` was set and echoed (the commit request of the gainlink scheme).
     committed : bool
-        Whether a GL_HASH commit applied the set to the loop.
+        Whether the commit is confirmed: ``GL_HASH`` echoed and the gainlink node's AUTOPILOT_VERSION ``uid`` is the
+        new set's CRC-32. Always false on a vehicle that does not identify as a gainlink node: it can show that it
+        holds the values, not that its loop runs them.
     persisted : bool
         Whether MAV_CMD_PREFLIGHT_STORAGE was acknowledged.
     dry_run : bool
@@ -101,13 +155,14 @@ class UploadResult:
         Wall time of the whole upload.
     """
 
-    target: tuple[int, int]
+    vehicle: Vehicle
     encoding: Encoding
     changes: tuple[ParamChange, ...]
     unchanged: int
     verified: int
     sent: int
     retries: int
+    hash_set: bool
     committed: bool
     persisted: bool
     dry_run: bool
@@ -170,24 +225,40 @@ def format_changes(changes: tuple[ParamChange, ...]) -> list[str]:
     return [f"{c.name:<16} {c.source:<12} {_fmt(c.old, c.ptype)} -> {_fmt(c.new, c.ptype)}" for c in changes]
 
 
-def detect_encoding(session: ParamSession, *, autopilot: int = mavlink2.MAV_AUTOPILOT_GENERIC) -> Encoding:
-    """Integer encoding of the vehicle's parameters.
-
-    AUTOPILOT_VERSION's capability flags decide; when they name neither encoding (or the message
-    never comes) the autopilot type from HEARTBEAT does, as MAVLink's own SDK does: ArduPilot
-    C-casts, everyone else (PX4, generic autopilots, MAVSDK servers) is bytewise.
-    """
-    msg = session.request_message(
+def request_version(session: ParamSession):
+    """The vehicle's AUTOPILOT_VERSION (MAV_CMD_REQUEST_MESSAGE, retried as the session's requests are), or
+    ``None`` when it never comes."""
+    return session.request_message(
         msg_id=mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, wait=max(0.1, session.timeout), tries=session.retries + 1
     )
-    if msg is not None and msg.capabilities & mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE:
+
+
+def advertised_encoding(version) -> Encoding | None:
+    """The integer encoding AUTOPILOT_VERSION's capability flags advertise (``None``: none, or no message)."""
+    if version is not None and version.capabilities & mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE:
         return Encoding.BYTEWISE
-    if msg is not None and msg.capabilities & mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST:
+    if version is not None and version.capabilities & mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST:
         return Encoding.C_CAST
+    return None
+
+
+def detect_encoding(
+    session: ParamSession, *, autopilot: int = mavlink2.MAV_AUTOPILOT_GENERIC, version=None
+) -> Encoding:
+    """Integer encoding of the vehicle's parameters.
+
+    AUTOPILOT_VERSION's capability flags decide (``version``, asked for when not given); when they name neither
+    encoding (or the message never comes) the autopilot type from HEARTBEAT does, as MAVLink's own SDK does:
+    ArduPilot C-casts, everyone else (PX4, generic autopilots, MAVSDK servers) is bytewise.
+    """
+    version = version if version is not None else request_version(session)
+    advertised = advertised_encoding(version)
+    if advertised is not None:
+        return advertised
     guess = Encoding.C_CAST if autopilot == mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA else Encoding.BYTEWISE
-    log.info(
+    log.debug(
         "%s names no parameter encoding: %s integers (from the autopilot type %d)",
-        "AUTOPILOT_VERSION" if msg is not None else "no AUTOPILOT_VERSION arrived; it",
+        "AUTOPILOT_VERSION" if version is not None else "no AUTOPILOT_VERSION arrived; it",
         guess.value,
         autopilot,
     )
@@ -209,6 +280,8 @@ def upload(
     on_diff: Callable[[tuple[ParamChange, ...]], None] | None = None,
     link: MavLink | None = None,
     signing_key: bytes | None = None,
+    target_system: int | None = None,
+    target_component: int | None = None,
 ) -> UploadResult:
     """Upload ``artifact``'s gains to the vehicle at ``connect``.
 
@@ -233,7 +306,8 @@ def upload(
     heartbeat_timeout : float
         Seconds to wait for the vehicle's heartbeat.
     encoding : Encoding, optional
-        Integer encoding; by default detected (:func:`detect_encoding`).
+        Integer encoding; by default detected (:func:`detect_encoding`). One that contradicts the encoding the
+        vehicle's AUTOPILOT_VERSION advertises is refused.
     on_diff : callable, optional
         Called with the diff once the current values are read, before anything is written.
     link : MavLink, optional
@@ -241,6 +315,9 @@ def upload(
     signing_key : bytes, optional
         MAVLink 2 signing key (:func:`gainlink.mavlink.signing.read_key`) for the link opened on ``connect``:
         every request is signed and only signed answers count.
+    target_system, target_component : int, optional
+        Upload to the vehicle with these ids; by default to the first that sends a HEARTBEAT and is not a ground
+        station (logged at DEBUG level, and named in the result and in every error).
 
     Returns
     -------
@@ -253,8 +330,8 @@ def upload(
     TransportError
         With ``signing_key``: the vehicle does not sign with that key.
     ParameterError
-        Before anything was written: a parameter is missing, has another type, or the firmware
-        runs a loop of other dimensions.
+        Before anything was written: a parameter is missing or has another type (``GL_HASH`` and the structure
+        included), the firmware runs a loop of other dimensions, or ``encoding`` contradicts the vehicle's.
     UploadFailed
         After something was written: the set, commit or persist failed; every change was rolled back
         (``rolled_back``) or the events say which could not be.
@@ -266,49 +343,70 @@ def upload(
     own = link is None
     link = link or MavLink(connect, signing_key=signing_key)
     try:
-        session, target, needs_key = _open_session(
+        hb = link.wait_heartbeat(
+            timeout=heartbeat_timeout, system=target_system, component=target_component, exclude_gcs=True
+        )
+        session = ParamSession(
             link,
-            heartbeat_timeout=heartbeat_timeout,
-            encoding=encoding,
+            target_system=hb.get_srcSystem(),
+            target_component=hb.get_srcComponent(),
+            encoding=Encoding.C_CAST,
             window=window,
             timeout=timeout,
             retries=retries,
         )
-        return _upload(
-            session,
-            plan=plan,
-            persist=persist,
-            dry_run=dry_run,
-            t0=t0,
-            target=target,
-            on_diff=on_diff,
-            needs_key=needs_key,
-        )
+        vehicle = _identify(session, hb)
+        try:
+            return _upload(
+                session,
+                plan=plan,
+                persist=persist,
+                dry_run=dry_run,
+                t0=t0,
+                vehicle=vehicle,
+                encoding=encoding,
+                on_diff=on_diff,
+                needs_key=carries_signature(hb) and not link.signed,
+            )
+        except UploadFailed as exc:
+            raise UploadFailed(
+                f"vehicle {vehicle.describe()}: {exc}", events=exc.events, rolled_back=exc.rolled_back
+            ) from None
+        except ParameterError as exc:
+            raise ParameterError(f"vehicle {vehicle.describe()}: {exc}") from None
     finally:
         if own:
             link.close()
 
 
-def _open_session(
-    link: MavLink, *, heartbeat_timeout: float, encoding: Encoding | None, window: int, timeout: float, retries: int
-) -> tuple[ParamSession, tuple[int, int], bool]:
-    """The parameter session with the first vehicle that sends a heartbeat, in its integer encoding, and whether
-    that vehicle signs its messages while this link has no key (it may then ignore what we send)."""
-    hb = link.wait_heartbeat(timeout=heartbeat_timeout)
-    target = (hb.get_srcSystem(), hb.get_srcComponent())
-    session = ParamSession(
-        link,
-        target_system=target[0],
-        target_component=target[1],
-        encoding=Encoding.C_CAST,
-        window=window,
-        timeout=timeout,
-        retries=retries,
+def _identify(session: ParamSession, hb) -> Vehicle:
+    """The vehicle of heartbeat ``hb``, described by its AUTOPILOT_VERSION (asked for once)."""
+    version = request_version(session)
+    vehicle = Vehicle(
+        system=hb.get_srcSystem(),
+        component=hb.get_srcComponent(),
+        autopilot=int(hb.autopilot),
+        gainlink=version is not None and bytes(version.middleware_custom_version) == GAINLINK_NODE_MARK,
+        advertised=advertised_encoding(version),
+        versioned=version is not None,
     )
-    session.encoding = encoding or detect_encoding(session, autopilot=hb.autopilot)
-    log.info("vehicle %d/%d, %s integer parameters", target[0], target[1], session.encoding.value)
+    session.encoding = detect_encoding(session, autopilot=vehicle.autopilot, version=version)
     session.custom_mode = int(hb.custom_mode)
-    return session, target, carries_signature(hb) and not link.signed
+    log.debug("vehicle %s", vehicle.describe())
+    return vehicle
+
+
+def _use_encoding(session: ParamSession, vehicle: Vehicle, forced: Encoding | None) -> None:
+    """Speak ``forced`` when given, unless the vehicle advertises another encoding (then its integers would be
+    written as other numbers while every echo still looked right)."""
+    if forced is None:
+        return
+    if vehicle.advertised is not None and forced is not vehicle.advertised:
+        raise ParameterError(
+            f"--encoding {forced.value} contradicts the vehicle's AUTOPILOT_VERSION, which advertises "
+            f"{vehicle.advertised.value} integer parameters; nothing was changed"
+        )
+    session.encoding = forced
 
 
 def _check_law(session: ParamSession, plan: _Plan) -> None:
@@ -323,6 +421,7 @@ def _check_law(session: ParamSession, plan: _Plan) -> None:
     if not plan.formats:
         return
     got, missing = session.read([s.name for s in plan.formats])
+    _check_types(plan.formats, got)
     bad = [s for s in plan.formats if s.name in missing or int(got[s.name].value) != int(s.value)]
     if bad:
         what = "number formats" if bad[0].name == SIGNATURE_ID else "structure (non-zero terms, declared ranges)"
@@ -344,6 +443,7 @@ def _read_current(session: ParamSession, plan: _Plan, *, needs_key: bool) -> dic
                 f"the vehicle is not gainlink firmware (no {', '.join(sorted(missing))}); "
                 "give --mapping for other autopilots; nothing was changed"
             )
+        _check_types(plan.checks, dims)
         if any(int(dims[s.name].value) != int(s.value) for s in plan.checks):
             got = " ".join(f"{s.name}={int(dims[s.name].value)}" for s in plan.checks)
             want = " ".join(f"{s.name}={int(s.value)}" for s in plan.checks)
@@ -360,13 +460,20 @@ def _read_current(session: ParamSession, plan: _Plan, *, needs_key: bool) -> dic
         more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
         raise ParameterError(f"vehicle lacks {len(missing)} parameter(s): {listed}{more}; nothing was changed")
     values.update(got)
-    for s in plan.specs:
-        if values[s.name].ptype != s.ptype:
+    _check_types(
+        plan.specs + ((ParamSpec(name=HASH_ID, ptype=INT32, value=0, source="crc32"),) if plan.commit else ()), got
+    )
+    return values
+
+
+def _check_types(specs: tuple[ParamSpec, ...], got: dict[str, ParamValue]) -> None:
+    """Refuse, before anything is written, a parameter the vehicle holds with another type than the plan's."""
+    for s in specs:
+        if s.name in got and got[s.name].ptype != s.ptype:
             raise ParameterError(
-                f"parameter {s.name} is {type_name(values[s.name].ptype)} on the vehicle, {type_name(s.ptype)} in the "
+                f"parameter {s.name} is {type_name(got[s.name].ptype)} on the vehicle, {type_name(s.ptype)} in the "
                 "plan; nothing was changed"
             )
-    return values
 
 
 def _upload(
@@ -376,27 +483,34 @@ def _upload(
     persist: bool,
     dry_run: bool,
     t0: float,
-    target: tuple[int, int],
+    vehicle: Vehicle,
+    encoding: Encoding | None,
     on_diff: Callable[[tuple[ParamChange, ...]], None] | None,
     needs_key: bool,
 ) -> UploadResult:
+    _use_encoding(session, vehicle, encoding)
     current = _read_current(session, plan, needs_key=needs_key)
     changes = _diff(plan, current)
     if on_diff is not None:
         on_diff(changes)
     old_hash = int(current[HASH_ID].value) if plan.commit else None
     need_commit = plan.commit and (bool(changes) or old_hash != plan.new_hash)
-    writes = _Writes() if dry_run else _write(session, plan=plan, changes=changes, commit=need_commit, persist=persist)
+    writes = (
+        _Writes()
+        if dry_run
+        else _write(session, plan=plan, changes=changes, commit=need_commit, confirm=vehicle.gainlink, persist=persist)
+    )
     if writes.failure:
         _give_up(session, writes, changes=changes, old_hash=old_hash, needs_key=needs_key)
     return UploadResult(
-        target=target,
+        vehicle=vehicle,
         encoding=session.encoding,
         changes=changes,
         unchanged=len(plan.specs) - len(changes),
         verified=writes.verified,
         sent=writes.sent,
         retries=session.resent,
+        hash_set=writes.hash_set,
         committed=writes.committed,
         persisted=writes.persisted,
         dry_run=dry_run,
@@ -421,6 +535,7 @@ class _Writes:
     outcomes: list[SetOutcome] = field(default_factory=list)
     sent: int = 0
     verified: int = 0
+    hash_set: bool = False
     committed: bool = False
     persisted: bool = False
     failure: str = ""
@@ -428,13 +543,22 @@ class _Writes:
 
 
 def _write(
-    session: ParamSession, *, plan: _Plan, changes: tuple[ParamChange, ...], commit: bool, persist: bool
+    session: ParamSession,
+    *,
+    plan: _Plan,
+    changes: tuple[ParamChange, ...],
+    commit: bool,
+    confirm: bool,
+    persist: bool,
 ) -> _Writes:
-    """Set the changes, then commit and persist as asked, stopping at the first failure."""
+    """Set the changes, then commit (confirmed by the node when ``confirm``) and persist as asked, stopping at the
+    first failure."""
     out = session.set([(c.name, c.ptype, c.new) for c in changes], stop_on_failure=True)
     writes = _Writes(outcomes=[out], sent=out.sent, verified=len(out.verified), failure=_describe(out, what="set"))
     if not writes.failure and commit:
         _commit(session, writes, new_hash=plan.new_hash)
+    if not writes.failure and commit and confirm:
+        _confirm_commit(session, writes, new_hash=plan.new_hash)
     if not writes.failure and persist:
         _persist(session, writes)
     return writes
@@ -446,10 +570,26 @@ def _commit(session: ParamSession, writes: _Writes, *, new_hash: int | None) -> 
     writes.outcomes.append(c)
     writes.sent += c.sent
     if c.ok:
-        writes.committed, writes.verified = True, writes.verified + 1
-        writes.events.append(f"committed gain set {HASH_ID}={new_hash}")
+        writes.hash_set, writes.verified = True, writes.verified + 1
+        writes.events.append(f"set {HASH_ID}={new_hash} (echoed)")
     else:
         writes.failure = _describe(c, what="commit (the firmware refused the staged set)")
+
+
+def _confirm_commit(session: ParamSession, writes: _Writes, *, new_hash: int | None) -> None:
+    """On a gainlink node: the CRC-32 in AUTOPILOT_VERSION's ``uid`` (the set the node runs) is the new set's."""
+    want = (new_hash or 0) & 0xFFFFFFFF
+    version = request_version(session)
+    if version is None:
+        writes.failure = "commit not confirmed: the gainlink node sent no AUTOPILOT_VERSION after the commit"
+    elif version.uid != want:
+        writes.failure = (
+            f"commit not confirmed: {HASH_ID} was echoed, but the node's AUTOPILOT_VERSION uid says it runs "
+            f"0x{version.uid:x}, not crc32 0x{want:08x}"
+        )
+    else:
+        writes.committed = True
+        writes.events.append(f"commit confirmed: the node runs crc32 0x{want:08x} (AUTOPILOT_VERSION uid)")
 
 
 def _persist(session: ParamSession, writes: _Writes) -> None:
@@ -487,7 +627,7 @@ def _give_up(
         session,
         writes.failure,
         changes=touched,
-        committed=writes.committed,
+        committed=writes.hash_set,
         old_hash=old_hash,
         events=writes.events,
     )

@@ -3,10 +3,16 @@
 from __future__ import annotations
 
 import io
+import subprocess
+import sys
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass
+from pathlib import Path
 
 from gainlink.cli import main
+
+#: The installed console script (a process of its own: its logging configured as a user's is).
+GAINLINK = Path(sys.executable).parent / "gainlink"
 
 
 @dataclass(frozen=True)
@@ -27,6 +33,14 @@ def run_cli(*argv: object) -> CliResult:
         except SystemExit as exc:  # argparse usage errors
             code = exc.code if isinstance(exc.code, int) else 1
     return CliResult(code=code, out=out.getvalue(), err=err.getvalue())
+
+
+def gainlink_process(*argv: object, timeout: float = 120.0) -> CliResult:
+    """Run the installed ``gainlink`` console script as its own process (its logging configured as a user's is)."""
+    proc = subprocess.run(
+        [str(GAINLINK), *map(str, argv)], capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL
+    )
+    return CliResult(code=proc.returncode, out=proc.stdout, err=proc.stderr)
 
 
 #: A valid spec (the pendulum in compact form) that the bad-input tests bend one key at a time.

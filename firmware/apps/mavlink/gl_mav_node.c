@@ -103,13 +103,14 @@ static void send_version(gl_mav_node_t *node)
 {
     uint8_t custom[8];
     memcpy(custom, gl_artifact_sha256, sizeof custom);
+    const uint8_t mark[8] = {'g', 'a', 'i', 'n', 'l', 'i', 'n', 'k'}; /* a gainlink node: uid is the set it runs */
     const uint8_t none[8] = {0};
     const uint8_t uid2[18] = {0};
     mavlink_message_t msg;
     mavlink_msg_autopilot_version_pack_chan(
         node->cfg.sysid, node->cfg.compid, node->cfg.chan, &msg,
         MAV_PROTOCOL_CAPABILITY_MAVLINK2 | MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE, 0x00010000u, 0, 0, 0, custom,
-        none, none, 0, 0, node->table.committed.crc32, uid2);
+        mark, none, 0, 0, node->table.committed.crc32, uid2);
     emit(node, GL_MAV_TO_SENDER, &msg);
 }
 
@@ -594,7 +595,7 @@ gl_status_t gl_mav_node_init(gl_mav_node_t *node, const gl_mav_node_config_t *cf
     node->persist_tokens = GL_MAV_PERSIST_BURST;
     memset(mavlink_get_channel_status(cfg->chan), 0, sizeof(mavlink_status_t));
     gl_mav_params_init(&node->table, GL_MAV_DEFAULT_SET);
-    (void)load_stored(node);
+    node->started_stored = cfg->ignore_stored ? 0 : load_stored(node) == 1;
 #if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
     /* the integer law runs on the table's committed set; the float loop of the same export only idles beside it */
     if (gl_mav_fixed_init(&node->fixed, &node->table.committed.g, cfg->watchdog_periods) != 0) {

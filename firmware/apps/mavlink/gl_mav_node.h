@@ -11,7 +11,9 @@
  *   15 q15; gl_mav_law.h).
  * - AUTOPILOT_VERSION on MAV_CMD_REQUEST_MESSAGE(148) or MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
  *   capabilities MAVLINK2 | PARAM_ENCODE_BYTEWISE, flight_custom_version = first 8 hex digits of the
- *   artifact's sha256, uid = CRC-32 of the committed gain set.
+ *   artifact's sha256, middleware_custom_version = "gainlink" (how an uploader tells a gainlink node, whose uid
+ *   it may read as a gain set, from other autopilots, whose uid is a hardware id), uid = CRC-32 of the committed
+ *   gain set.
  * - SYS_STATUS on MAV_CMD_REQUEST_MESSAGE(1): the link's error counters (see gl_mav_node_stats_t).
  * - The parameter protocol over the gain set (naming in gl_mav_params.h): PARAM_REQUEST_LIST (streamed as
  *   the transport has room), PARAM_REQUEST_READ by id or index (PARAM_ERROR when unknown), PARAM_SET
@@ -146,6 +148,8 @@ typedef struct gl_mav_node_config {
     const gl_mav_storage_t *storage;   /**< Persistent storage, or NULL (then PREFLIGHT_STORAGE 0/1 fail). */
     int trusted_link;                  /**< 1: the link is physically private (a cable): an unsigned SETUP_SIGNING
                                             may set the first key. 0 for network links. */
+    int ignore_stored;                 /**< 1: start on the compiled set, not the stored one (storage is kept
+                                            as it is until the next persist). 0: load it (the default). */
 } gl_mav_node_config_t;
 
 /** The node. Large (it holds the loop and the parameter table): give it static storage. */
@@ -172,11 +176,14 @@ typedef struct gl_mav_node {
     uint64_t persist_refill_us;        /**< When the next token is due. */
     uint32_t stored_crc;               /**< crc32 of the set storage holds (valid when stored_known). */
     int stored_known;                  /**< 1 when storage is known to hold stored_crc. */
+    int started_stored;                /**< 1 when the set in force at start came from storage, 0 the compiled
+                                            set (what a start-up line must name). */
 } gl_mav_node_t;
 
 /**
- * @brief Initialise the node: parameters from the compiled set, then the stored set when there is one
- *        and it passes the checks (events report which), then the loop.
+ * @brief Initialise the node: parameters from the compiled set, then (unless `ignore_stored`) the stored set
+ *        when there is one and it passes the checks (events report which; `started_stored` says which set is
+ *        in force), then the loop.
  * @param[out] node  Node.
  * @param[in]  cfg   Configuration (copied).
  * @return GL_OK, or the loop's refusal of the gain set (the node is then unusable).

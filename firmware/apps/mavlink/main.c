@@ -2,8 +2,8 @@
  * @file main.c
  * @brief Host executable `gainlink_mavlink`: the MAVLink node (gl_mav_node.h) on a UDP link.
  *
- * Usage: `gainlink_mavlink --url udpin:127.0.0.1:14550 [--storage FILE] [--signing-key FILE] [--sysid 1] [--compid 1]
- *        [--spin-us N]`
+ * Usage: `gainlink_mavlink --url udpin:127.0.0.1:14550 [--storage FILE [--from-artifact]] [--signing-key FILE]
+ *        [--sysid 1] [--compid 1] [--spin-us N]`
  *
  * What it speaks is the node's (gl_mav_node.h); this file only carries bytes between the UDP socket and
  * the node, keeps the storage file (gl_mav_file.h) and writes the node's events to stderr.
@@ -14,8 +14,13 @@
  *   "Signing" in gl_mav_node.h for what stays open); a SETUP_SIGNING signed with it replaces the key and FILE
  *   (written atomically, mode 0600). UDP is not a trusted link: without a key, SETUP_SIGNING is refused.
  *
+ * - `--from-artifact`: start on the compiled set (the artifact's) even when FILE holds a persisted one; FILE is
+ *   kept as it is until the next persist.
+ *
  * Prints `gainlink-mavlink NAME sha256:HEX n m p q URL` on stdout when ready (followed by ` law=q31` or ` law=q15`
- * when it runs a fixed-point law, gl_mav_law.h). Events go to stderr through
+ * when it runs a fixed-point law, gl_mav_law.h), then the set in force: ` gains=artifact` (the compiled set of
+ * artifact sha256:HEX) or ` gains=persisted` (the set FILE held), ` crc32=DECIMAL format=float32|q31|q15|
+ * scheduled-float32`. Events go to stderr through
  * gl_log.h (rate-limited, never blocking the loop); at exit one summary line accounts for every datagram and
  * frame: `datagrams= dropped= frames= bad_frames= garbage_bytes= unsigned= bad_signature= replayed= ...`.
  */
@@ -40,6 +45,7 @@ typedef struct udp_port {
     struct sockaddr_in from;
     const char *storage_path;
     const char *key_path;
+    int from_artifact;
 } udp_port_t;
 
 /* The ready line names a law other than float32 (the float32 app's line is as it always was). */
@@ -164,8 +170,8 @@ static int parse_uint(const char *text, unsigned long max, unsigned long *out)
 
 static int usage(void)
 {
-    fprintf(stderr, "usage: gainlink_mavlink --url udpin:HOST:PORT|udpout:HOST:PORT [--storage FILE] [--signing-key FILE] "
-                    "[--sysid N] [--compid N] [--spin-us 0..1000000]\n");
+    fprintf(stderr, "usage: gainlink_mavlink --url udpin:HOST:PORT|udpout:HOST:PORT [--storage FILE [--from-artifact]] "
+                    "[--signing-key FILE] [--sysid N] [--compid N] [--spin-us 0..1000000]\n");
     return 2;
 }
 
@@ -235,6 +241,8 @@ static int parse_options(int argc, char **argv, options_t *opt)
             opt->url = argv[++i];
         } else if (i + 1 < argc && strcmp(argv[i], "--storage") == 0) {
             udp.storage_path = argv[++i];
+        } else if (strcmp(argv[i], "--from-artifact") == 0) {
+            udp.from_artifact = 1;
         } else if (i + 1 < argc && strcmp(argv[i], "--signing-key") == 0) {
             udp.key_path = argv[++i];
         } else if (i + 1 < argc && strcmp(argv[i], "--sysid") == 0) {
@@ -270,6 +278,7 @@ static int start_node(const options_t *opt, const uint8_t key[GL_MAV_KEY_LEN])
                  .link_counters = link_counters, .store_key = store_key},
         .storage = udp.storage_path != NULL ? gl_mav_file_init(&store_file, udp.storage_path) : NULL,
         .trusted_link = 0,
+        .ignore_stored = udp.from_artifact,
     };
     gl_status_t st = gl_mav_node_init(&node, &cfg);
     if (st != GL_OK) {
@@ -337,8 +346,9 @@ int main(int argc, char **argv)
         return rc;
     }
     catch_stop_signals();
-    printf("gainlink-mavlink %s sha256:%s %d %d %d %d %s%s\n", gl_artifact_name, gl_artifact_sha256, GL_N, GL_M, GL_P,
-           GL_Q, opt.url, LAW_FIELD);
+    printf("gainlink-mavlink %s sha256:%s %d %d %d %d %s%s gains=%s crc32=%lu format=%s\n", gl_artifact_name,
+           gl_artifact_sha256, GL_N, GL_M, GL_P, GL_Q, opt.url, LAW_FIELD, node.started_stored ? "persisted" : "artifact",
+           (unsigned long)node.table.committed.crc32, GL_MAV_LAW_NAME);
     fflush(stdout);
     rc = serve(opt.spin_us);
     log_summary();

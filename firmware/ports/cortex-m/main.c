@@ -6,7 +6,7 @@
  * Starts the millisecond clock and the interrupt-driven UART (gl_uart.h) and prints
  * `gainlink NAME BOARD sha256:HEX` on it. Then, by the simulator's command line (semihosting
  * SYS_GET_CMDLINE; QEMU: `-semihosting-config enable=on,target=native,arg=gainlink,arg=serve,arg=mavlink`):
- * - `serve mavlink [sysid=N] [compid=N]`: the MAVLink node on the UART (serve.h), parameters persisted
+ * - `serve mavlink [sysid=N] [compid=N] [gains=artifact]`: the MAVLink node on the UART (serve.h), parameters persisted
  *   in the semihosting file gl_flash.txt (flash_semihost.h); runs until the simulator is stopped;
  * - `serve slcan [base=ID] [encoding=float32|int16 meas=... cmd=...]`: the CAN node behind slcan (serve.h);
  *   (images built with GL_IMAGE_SERVE only; the others answer `serve` with exit status GL_EXIT_BAD_INPUT;

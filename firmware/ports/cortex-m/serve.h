@@ -16,7 +16,8 @@
 /**
  * @brief MAVLink node on the UART, parameters persisted through flash_semihost.h.
  * @param[in] argc Option count.
- * @param[in] argv `sysid=1..255`, `compid=0..255` (defaults 1 and 1).
+ * @param[in] argv `sysid=1..255`, `compid=0..255` (defaults 1 and 1), `gains=artifact` (start on the compiled
+ *                 set even when the flash holds a persisted one; the ready line's `gains=` names which runs).
  * @return Only on a bad option: GL_EXIT_BAD_INPUT.
  */
 int gl_serve_mavlink(int argc, char *const argv[]);

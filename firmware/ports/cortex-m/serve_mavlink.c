@@ -4,7 +4,10 @@
  *        host app, carried by the interrupt-driven rings of gl_uart.h. It runs the law the host app runs
  *        (gl_mav_law.h): a fixed-point export's integer law, with its integers in the parameter table, or a
  *        scheduled export's scheduled law (sigma external: after the references in the HIL sample), which the
- *        ready line names (` law=q31`, ` law=scheduled-float32`; a float32 image's line is as it was).
+ *        ready line names (` law=q31`, ` law=scheduled-float32`; a float32 image's line names none), after the set in
+ *        force: ` format=float32|q31|q15|scheduled-float32`, ` gains=persisted` (the one its flash held) or
+ *        ` gains=artifact` (the compiled one; option `gains=artifact` starts on it whatever the flash holds) and its
+ *        ` crc32=`.
  *
  * A serial link has one peer, so every answer goes to the UART whatever its destination. The node's
  * events are not printed (the UART carries MAVLink); SYS_STATUS reports the counters. The UART is a
@@ -83,6 +86,7 @@ static void put_number(uint32_t v)
 int gl_serve_mavlink(int argc, char *const argv[])
 {
     uint32_t sysid = 1, compid = 1;
+    int from_artifact = 0; /* gains=artifact: start on the compiled set even when the flash holds one */
     for (int i = 0; i < argc; ++i) {
         const char *v;
         if (gl_serve_option(argv[i], "sysid", &v)) {
@@ -93,8 +97,13 @@ int gl_serve_mavlink(int argc, char *const argv[])
             if (gl_serve_number(v, 255u, &compid) != 0) {
                 return gl_serve_refuse("compid must be 0..255");
             }
+        } else if (gl_serve_option(argv[i], "gains", &v)) {
+            if (strcmp(v, "artifact") != 0) {
+                return gl_serve_refuse("gains takes artifact");
+            }
+            from_artifact = 1;
         } else {
-            return gl_serve_refuse("unknown mavlink option (sysid=N compid=N)");
+            return gl_serve_refuse("unknown mavlink option (sysid=N compid=N gains=artifact)");
         }
     }
     const gl_mav_node_config_t cfg = {
@@ -106,6 +115,7 @@ int gl_serve_mavlink(int argc, char *const argv[])
                  .link_counters = uart_counters, .store_key = gl_flash_store_key},
         .storage = gl_flash_storage(),
         .trusted_link = 1,
+        .ignore_stored = from_artifact,
     };
     if (gl_mav_node_init(&node, &cfg) != GL_OK) {
         (void)gl_serve_refuse("gain set rejected");
@@ -119,6 +129,10 @@ int gl_serve_mavlink(int argc, char *const argv[])
     static const char ready[] = "ready mavlink sysid=";
     (void)gl_uart_write((const uint8_t *)ready, sizeof ready - 1u);
     put_number(sysid);
+    static const char format[] = " format=" GL_MAV_LAW_NAME;
+    (void)gl_uart_write((const uint8_t *)format, sizeof format - 1u);
+    static const char *const gains[2] = {" gains=artifact", " gains=persisted"};
+    (void)gl_uart_write((const uint8_t *)gains[node.started_stored], strlen(gains[node.started_stored]));
     (void)gl_uart_write((const uint8_t *)" crc32=", 7);
     put_number(node.table.committed.crc32);
     (void)gl_uart_write((const uint8_t *)(keyed ? " signing=on" : " signing=off"), keyed ? 11u : 12u);
