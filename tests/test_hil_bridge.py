@@ -22,7 +22,7 @@ from gainlink.hil.links.can import CanTransport
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.shipping.artifact import load
-from support.cli import run_cli
+from support.cli import assert_refused, run_cli
 from support.hil import pendulum_scenario, udp_transport, write_scenario
 
 
@@ -260,12 +260,6 @@ def test_realtime_holds_a_zero_wakeup_latency_request_only_while_it_runs(pend, c
     assert off.complete and off.metrics["pm_qos"] is False and set(seen) == {before}
 
 
-def _cli_error(*argv):
-    res = run_cli(*argv)
-    lines = res.err.strip().splitlines()
-    return res.code, lines
-
-
 def test_bad_inputs_get_one_line_and_a_nonzero_exit(tmp_path, pend, cart_fmu, example_artifacts):
     base = pendulum_scenario(gains=pend, fmu=cart_fmu, transport=udp_transport(), duration=0.5, controller="reference")
     broken = tmp_path / "broken.fmu"
@@ -292,13 +286,8 @@ def test_bad_inputs_get_one_line_and_a_nonzero_exit(tmp_path, pend, cart_fmu, ex
     for name, (data, needle) in cases.items():
         path = write_scenario(tmp_path / f"{name.replace(' ', '_')}.toml", data)
         report = tmp_path / f"report_{name.replace(' ', '_')}"
-        code, lines = _cli_error("hil", "run", path, "--report", report, "--no-progress")
-        assert code == 2, (name, lines)
-        assert len(lines) == 1 and lines[0].startswith("gainlink: error:"), (name, lines)
-        assert needle in lines[0], (name, lines)
-        assert not report.exists(), name
-    code, lines = _cli_error("hil", "run", tmp_path / "nope.toml", "--report", tmp_path / "r")
-    assert code == 2 and len(lines) == 1 and "not found" in lines[0]
+        assert_refused(("hil", "run", path, "--report", report, "--no-progress"), needle, tmp_path)
+    assert_refused(("hil", "run", tmp_path / "nope.toml", "--report", tmp_path / "r"), "not found", tmp_path)
 
 
 def test_firmware_run_with_can_config_serves_the_bus(tmp_path, pend, can_firmware):

@@ -23,7 +23,7 @@ from gainlink.shipping.artifact import load
 from gainlink.shipping.codegen import gain_set, payload_crc32
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
-from support.cli import run_cli
+from support.cli import assert_refused, run_cli
 from support.net import udp_port
 
 READ = {"GL_HASH", "GL_K_0_0"}
@@ -60,15 +60,15 @@ def test_signed_upload_works_and_unsigned_upload_is_refused(mavlink_exe, pend, r
         assert res.code == 0, res.err
         assert "gain set committed" in res.out and "persisted" in res.out
         # an upload without the key reads (open) but every set is refused: nothing changes, and it says why
-        res = run_cli("mavlink", "upload", pend, "--connect", url, "--retries", "1", "--timeout", "0.1")
+        argv = ("mavlink", "upload", pend, "--connect", url, "--retries", "1", "--timeout", "0.1")
+        res = assert_refused(argv, "the vehicle requires MAVLink 2 signing", tmp_path)
         got = params(url, bytes.fromhex(key_file.read_text()))
     finally:
         fw.stop()
-    assert res.code == 2, res.out + res.err
-    assert res.err.splitlines() == [
+    assert res.err == (
         "gainlink: error: the vehicle requires MAVLink 2 signing (--signing-key): it ignored every unsigned parameter "
-        "set (its own messages are signed); nothing was changed"
-    ]
+        "set (its own messages are signed); nothing was changed\n"
+    )
     assert got["GL_HASH"] & 0xFFFFFFFF == crc_of(new) != crc_of(old)
     assert got["GL_K_0_0"] == gain_set(new).fields["K"].reshape(-1)[0] != gain_set(old).fields["K"].reshape(-1)[0]
     c = fw.counters()
@@ -278,19 +278,12 @@ def test_key_file_errors_are_one_line(tmp_path, pend, mavlink_exe):
             ("mavlink", "setup-signing", bad, "--connect", "udpout:127.0.0.1:9"),
             ("firmware", "run", pend, "--mavlink", "udpin:127.0.0.1:9", "--signing-key", bad),
         ):
-            res = run_cli(*argv)
-            assert res.code == 2 and len(res.err.strip().splitlines()) == 1, (content, argv, res.err)
-            assert "64 hex digits" in res.err
-    res = run_cli("mavlink", "upload", pend, "--connect", "udpout:127.0.0.1:9", "--signing-key", tmp_path / "none")
-    assert res.code == 2 and "not found" in res.err
+            assert_refused(argv, "64 hex digits", tmp_path)
+    none = ("mavlink", "upload", pend, "--connect", "udpout:127.0.0.1:9", "--signing-key", tmp_path / "none")
+    assert_refused(none, "not found", tmp_path)
     bad.write_text("00" * 31)
-    proc = subprocess.run(
-        [str(mavlink_exe), "--url", "udpin:127.0.0.1:0", "--signing-key", str(bad)],
-        capture_output=True,
-        text=True,
-        timeout=10,
-    )
-    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "hex digits" in proc.stderr
+    app = [mavlink_exe, "--url", "udpin:127.0.0.1:0", "--signing-key", bad]
+    assert_refused(app, "hex digits", tmp_path, process=True, prefix="")
 
 
 def test_keygen_writes_a_private_key_and_never_replaces_one(tmp_path):
@@ -298,9 +291,7 @@ def test_keygen_writes_a_private_key_and_never_replaces_one(tmp_path):
     res = run_cli("mavlink", "keygen", out)
     assert res.code == 0, res.err
     assert len(bytes.fromhex(out.read_text())) == 32 and stat.S_IMODE(out.stat().st_mode) == 0o600
-    first = out.read_text()
-    res = run_cli("mavlink", "keygen", out)
-    assert res.code == 2 and "exists" in res.err and out.read_text() == first
+    assert_refused(("mavlink", "keygen", out), "exists", tmp_path)
 
 
 def _retune(art, *, factor: float = 1.1, avoid_nan: bool = True) -> tuple[str, float, float, int]:

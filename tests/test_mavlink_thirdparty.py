@@ -22,7 +22,7 @@ from gainlink.shipping.artifact import load
 from gainlink.shipping.codegen import gain_set
 from mavsdk.plugins.param import Param, ParamError
 from mavsdk.plugins.param_server import ParamServer
-from support.cli import run_cli
+from support.cli import assert_refused, run_cli
 from support.mavlink import closed_loop, read_params, reference_u, start_firmware
 from support.net import udp_port
 
@@ -236,10 +236,8 @@ def test_uploader_against_mavsdk_as_the_vehicle(pend, tmp_path):
         assert res.code == 0 and "dry run: 0 parameter(s) would change, 4 already match" in res.out
 
         mapping.write_text('[[param]]\ngain = "K[0,0]"\nname = "MC_MISSING"\n')
-        res = run_cli(
-            "mavlink", "upload", pend, "--connect", f"udpout:127.0.0.1:{port}", "--mapping", mapping, "--retries", "2"
-        )
-        assert res.code == 2 and "vehicle lacks 1 parameter(s): MC_MISSING" in res.err
+        argv = ("mavlink", "upload", pend, "--connect", f"udpout:127.0.0.1:{port}", "--mapping", mapping)
+        assert_refused((*argv, "--retries", "2"), "vehicle lacks 1 parameter(s): MC_MISSING", mapping.parent)
     finally:
         sdk.destroy()
         cfg.destroy()
