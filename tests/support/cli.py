@@ -6,7 +6,7 @@ from __future__ import annotations
 import hashlib
 import io
 import subprocess
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass
 from pathlib import Path
@@ -84,15 +84,20 @@ def _files(folders: Sequence[Path]) -> dict[str, str]:
 
 
 def assert_refused(
-    argv: Sequence[object], phrase: str, *folders: Path, process: bool = False, prefix: str = "gainlink: error: "
+    argv: Sequence[object],
+    phrase: str,
+    *folders: Path,
+    process: bool = False,
+    prefix: str = "gainlink: error: ",
+    env: Mapping[str, str] | None = None,
 ) -> CliResult:
-    """Run ``gainlink argv`` in-process (``process=True``: the command line ``argv`` as its own process), given bad
-    input, and check it was refused as the house rule says: exit status 2, stderr exactly one line, starting with
-    ``prefix`` and containing ``phrase`` (so no traceback, no warning or progress line beside it), and nothing
-    created, changed or removed under ``folders`` (hidden temporary files such as ``.NAME.*.tmp`` included).
+    """Run ``gainlink argv`` in-process (``process=True``: the command line ``argv`` as its own process, in ``env``),
+    given bad input, and check it was refused as the house rule says: exit status 2, stderr exactly one line,
+    starting with ``prefix`` and containing ``phrase`` (so no traceback, no warning or progress line beside it), and
+    nothing created, changed or removed under ``folders`` (hidden temporary files such as ``.NAME.*.tmp`` included).
     Returns the result."""
     before = _files(folders)
-    res = run_process(argv) if process else run_cli(*argv)
+    res = run_process(argv, env=env) if process else run_cli(*argv)
     assert res.code == 2, f"exit status {res.code}, not 2: {res.err!r}"
     assert res.err.endswith("\n") and res.err.count("\n") == 1, f"stderr is not one line: {res.err!r}"
     assert res.err.startswith(prefix) and phrase in res.err, f"{res.err!r} does not say {phrase!r}"
