@@ -33,8 +33,12 @@ from support.status import (
     mavlink_link,
 )
 
-# One worker runs this module (make test: --dist loadgroup): its laws' nodes are built once.
-pytestmark = [pytest.mark.usefixtures("quiet_design_warnings"), pytest.mark.xdist_group("test_status_bits")]
+# One worker runs this module (make test: --dist loadgroup), first: its laws' nodes are built once.
+pytestmark = [
+    pytest.mark.usefixtures("quiet_design_warnings"),
+    pytest.mark.xdist_group("test_status_bits"),
+    pytest.mark.slow,  # builds: started first (tests/conftest.py)
+]
 
 NAN = float("nan")
 
