@@ -171,14 +171,14 @@ def test_mavproxy_reads_the_same_list_and_sets_gains(mavlink_exe, pend, retuned,
         for name, value in changes.items():
             mp.command(f"param set {name} {value!r}")
         mp.command("param set GL_DIM_N 5")
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + 60  # a hang guard: MAVProxy paces its sets at ~10/s
         while True:  # MAVProxy sends its sets from a queue: wait until the firmware holds them all
             after = read_params(port)
             if all(after[name].value == value for name, value in changes.items()) or time.monotonic() > deadline:
                 break
             time.sleep(0.2)
         for name, value in changes.items():
-            assert after[name].value == value, name
+            assert after[name].value == value, f"{name}: the firmware did not get MAVProxy's set within 60 s (hung?)"
         assert after["GL_DIM_N"].value == old.n  # read-only: refused
         for name, value in changes.items():
             mp.command(f"param fetch {name}")

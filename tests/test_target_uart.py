@@ -414,9 +414,10 @@ def test_the_images_slcan_adapter_answers_as_the_lawicel_protocol_says(elf):
             for sent, expected in exchanges:
                 s.sendall(sent)
                 got = b""
-                deadline = time.monotonic() + 10
+                deadline = time.monotonic() + 10  # a hang guard (recv has its own 10 s timeout)
                 while len(got) < len(expected) and time.monotonic() < deadline:
                     got += s.recv(len(expected) - len(got))
+                assert len(got) == len(expected), f"{sent!r}: no whole answer within 10 s (hung?): {got!r}"
                 assert got == expected, (sent, got)
 
 
