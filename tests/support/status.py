@@ -46,8 +46,6 @@ class Expected:
 class Float32Oracle:
     """The float32 law's bit-exact model (gainlink.proof.float32_law): fault on a refused sample, saturation."""
 
-    bits = FAULT
-
     def __init__(self, a: Artifact) -> None:
         self.a, self.loop = a, Float32Loop(a)
 
@@ -66,8 +64,6 @@ class Float32Oracle:
 class FixedOracle:
     """The integer law's bit-exact model (gainlink.proof.fixed_law): fault, a sample or reference clipped to its
     declared range, the second-line saturation (any variable it clipped), saturation."""
-
-    bits = FAULT | CLIPPED | OVERFLOW
 
     def __init__(self, a: Artifact) -> None:
         self.loop = FixedPointLoop(a)
@@ -93,8 +89,6 @@ class FixedOracle:
 class ScheduledOracle:
     """The scheduled law's float32 model (gainlink.proof.scheduled_float32): fault, and sigma held, clipped and
     rate-limited, saturation."""
-
-    bits = FAULT | sum(SIGMA_BITS.values())
 
     def __init__(self, a: Artifact) -> None:
         self.loop = ScheduledFloat32Loop(a)
