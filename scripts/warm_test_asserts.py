@@ -50,7 +50,8 @@ def main() -> int:
     parser.add_argument("folder", type=Path, nargs="?", default=TESTS, help="the tests (default: tests/)")
     args = parser.parse_args()
     if not args.folder.is_dir():
-        sys.exit(f"warm_test_asserts: {args.folder} is not a folder")
+        print(f"warm_test_asserts: {args.folder} is not a folder", file=sys.stderr)
+        return 2
     if sys.dont_write_bytecode:
         print("warm_test_asserts: PYTHONDONTWRITEBYTECODE is set, nothing written")
         return 0

@@ -32,7 +32,7 @@ from gainlink.hil.loop.sil import run_sil
 from gainlink.hil.plants import toml_write
 from gainlink.shipping.artifact import load
 from scipy import stats
-from support.cli import run_cli
+from support.cli import assert_refused, run_cli
 from support.paths import EXAMPLES, ROOT
 
 VENV_BIN = Path(sys.executable).parent
@@ -177,22 +177,19 @@ def test_a_run_that_cannot_be_built_is_named_before_anything_runs(pend, tmp_path
         plan_campaign(parse_campaign(scale))
     path = tmp_path / "c.toml"
     path.write_text(toml_write.dumps(small_campaign(pend, kind="hil")))
-    res = run_cli("campaign", "run", path, "--out", tmp_path / "out")
-    assert res.code == 2 and res.err.strip().endswith("a hil campaign's scenario needs a transport")
-    assert not (tmp_path / "out").exists()
+    res = assert_refused(("campaign", "run", path, "--out", tmp_path / "out"), "needs a transport", tmp_path)
+    assert res.err.strip().endswith("a hil campaign's scenario needs a transport")
     sil = tmp_path / "sil.toml"
     sil.write_text(toml_write.dumps(small_campaign(pend)))
-    res = run_cli("campaign", "run", sil, "--out", tmp_path / "batch", "--batch", "0")
-    assert res.code == 2 and res.err.strip().endswith("campaign: batch must be a whole number >= 1, not 0")
-    assert not (tmp_path / "batch").exists()
+    res = assert_refused(("campaign", "run", sil, "--out", tmp_path / "batch", "--batch", "0"), "batch", tmp_path)
+    assert res.err.strip().endswith("campaign: batch must be a whole number >= 1, not 0")
 
 
 def test_a_refused_worker_count_writes_nothing(pend, tmp_path):
     path = tmp_path / "c.toml"
     path.write_text(toml_write.dumps(small_campaign(pend)))
-    res = run_cli("campaign", "run", path, "--out", tmp_path / "out", "--workers", "0")
-    assert res.code == 2 and res.err.strip() == "gainlink: error: campaign: workers must be a whole number >= 1, not 0"
-    assert not (tmp_path / "out").exists()
+    res = assert_refused(("campaign", "run", path, "--out", tmp_path / "out", "--workers", "0"), "workers", tmp_path)
+    assert res.err == "gainlink: error: campaign: workers must be a whole number >= 1, not 0\n"
 
 
 @pytest.mark.parametrize(
@@ -236,9 +233,7 @@ def test_a_misspelt_path_or_a_value_of_another_kind_is_refused_before_any_run(pe
 def test_a_refused_plan_writes_nothing_and_exits_2(pend, tmp_path):
     path = tmp_path / "c.toml"
     path.write_text(toml_write.dumps(small_campaign(pend, grid=[{"target": "initial_state.thta", "values": [0.1]}])))
-    res = run_cli("campaign", "run", path, "--out", tmp_path / "out")
-    assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and "has no state 'thta'" in res.err
-    assert not (tmp_path / "out").exists()
+    assert_refused(("campaign", "run", path, "--out", tmp_path / "out"), "has no state 'thta'", tmp_path)
 
 
 # --- the plan ------------------------------------------------------------------------------------
@@ -444,8 +439,7 @@ def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
     rec = json.loads((out / "runs" / f"{row['id']}.json").read_text())
     assert {k: report.get(k) for k in CONTROL_KEYS} == _control(rec)
     assert report["scenario"]["seed"] == row["seed"]
-    bad = run_cli("campaign", "show", out, "--run", "zzzz")
-    assert bad.code == 2 and "no run id matching 'zzzz'" in bad.err
+    assert_refused(("campaign", "show", out, "--run", "zzzz"), "no run id matching 'zzzz'", out, tmp_path)
 
 
 @ON_THE_CLUSTERS
@@ -489,14 +483,10 @@ def test_show_takes_a_run_by_index_or_by_id_never_guessing_which(local_run, tmp_
     for i in ids:  # the shortest prefix that is unique names its id, digits only or not
         prefix = next(i[:k] for k in range(1, 21) if sum(j.startswith(i[:k]) for j in ids) == 1)
         assert find_run(out, run=prefix)["id"] == i
-    res = run_cli("campaign", "show", out, "--index", str(len(ids)))
-    assert res.code == 2 and res.err.strip().endswith(
-        f"has {len(ids)} runs (index 0 to {len(ids) - 1}), not {len(ids)}"
-    )
-    res = run_cli("campaign", "show", out, "--index", "-1")
-    assert res.code == 2 and "not -1" in res.err
-    res = run_cli("campaign", "show", out, "--index", "1", "--run", ids[1])
-    assert res.code == 2 and "not allowed with argument" in res.err and len(res.err.strip().splitlines()) == 1
+    many = f"has {len(ids)} runs (index 0 to {len(ids) - 1}), not {len(ids)}\n"
+    assert assert_refused(("campaign", "show", out, "--index", str(len(ids))), many, out).err.endswith(many)
+    assert_refused(("campaign", "show", out, "--index", "-1"), "not -1", out)
+    assert_refused(("campaign", "show", out, "--index", "1", "--run", ids[1]), "not allowed with argument", out)
 
 
 def test_a_long_run_is_stored_as_evenly_spaced_true_samples_with_both_ends():

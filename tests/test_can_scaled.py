@@ -25,7 +25,7 @@ from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.shipping.artifact import load
 from gainlink.shipping.can_layout import FD_LENGTHS, INT16_MAX, INT16_NAN, dequantise, quantise
-from support.cli import run_cli
+from support.cli import assert_refused, run_cli
 from support.hil import PENDULUM_RANGES, pendulum_scenario, udp_transport, write_scenario
 
 SPAN = 2 * INT16_MAX  # raw steps across a range
@@ -173,9 +173,8 @@ def test_cli_dbc_and_hil_run_with_int16(tmp_path, pend, cart_fmu):
     db = cantools.database.load_file(out)
     assert {s.length for m in db.messages for s in m.signals if s.name not in ("seq", "status", "sat")} == {16}
     assert db.get_message_by_name("Measurement0").get_signal_by_name("y_theta").maximum == PENDULUM_RANGES["theta"][1]
-    res = run_cli("hil", "dbc", pend, "--can", json.dumps({**cfg, "ranges": {"x": [-5, 5]}}))
-    lines = res.err.strip().splitlines()
-    assert res.code == 2 and len(lines) == 1 and "needs a range for theta, r_x" in lines[0], lines
+    bad = json.dumps({**cfg, "ranges": {"x": [-5, 5]}})
+    assert_refused(("hil", "dbc", pend, "--can", bad), "needs a range for theta, r_x", tmp_path)
     # The same mistake in a scenario: one line, before any process starts.
     scenario = write_scenario(
         tmp_path / "s.toml",
@@ -186,9 +185,8 @@ def test_cli_dbc_and_hil_run_with_int16(tmp_path, pend, cart_fmu):
             transport={**udp_transport(fd=False), "encoding": "int16", "ranges": {"theta": [-1.0, 1.0]}},
         ),
     )
-    res = run_cli("hil", "run", scenario, "--report", tmp_path / "report", "--no-progress")
-    lines = res.err.strip().splitlines()
-    assert res.code == 2 and len(lines) == 1 and "needs a range for x, r_x" in lines[0], lines
+    argv = ("hil", "run", scenario, "--report", tmp_path / "report", "--no-progress")
+    assert_refused(argv, "needs a range for x, r_x", tmp_path)
     assert art.signals["outputs"] == ["x", "theta"]  # the names used above
 
 

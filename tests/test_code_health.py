@@ -12,6 +12,7 @@ import os
 import subprocess
 import sys
 
+from support.cli import assert_refused
 from support.paths import ROOT
 
 
@@ -127,12 +128,6 @@ def test_the_warmed_rewritten_asserts_are_the_ones_pytest_runs(tmp_path):
     assert proc.returncode == 1, proc.stdout + proc.stderr
     assert "At index 1 diff: 2 != 3" in proc.stdout, proc.stdout
     assert pyc.stat().st_mtime_ns == written
-    missing = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "warm_test_asserts.py"), str(tmp_path / "nowhere")],
-        env=env,
-        capture_output=True,
-        text=True,
-    )
-    assert missing.returncode != 0 and missing.stderr.strip().splitlines() == [
-        f"warm_test_asserts: {tmp_path / 'nowhere'} is not a folder"
-    ], missing.stderr
+    argv = [sys.executable, ROOT / "scripts" / "warm_test_asserts.py", tmp_path / "nowhere"]
+    res = assert_refused(argv, "is not a folder", tmp_path, process=True, prefix="warm_test_asserts: ", env=env)
+    assert res.err == f"warm_test_asserts: {tmp_path / 'nowhere'} is not a folder\n"

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from gainlink.shipping.artifact import render, seal
-from support.cli import CliResult, assert_one_clear_line, run_cli
+from support.cli import CliResult, assert_refused, run_cli
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))
 FLOAT = r"-?\d+(?:\.\d*)?(?:e[-+]?\d+)?f"
@@ -154,10 +154,7 @@ def test_export_rejects_a_tampered_artifact_without_writing(example_artifacts, t
     data["K"][0][0] += 1.0
     bad = tmp_path / "gains.json"
     bad.write_text(render(data))
-    out = tmp_path / "out"
-    res = export(bad, out)
-    assert_one_clear_line(res, "sha256")
-    assert not out.exists() or not any(out.iterdir())
+    assert_refused(("export", bad, "--out", tmp_path / "out"), "sha256", tmp_path)
 
 
 def test_generated_code_compiles_standalone_with_strict_flags(example_artifacts, tmp_path):

@@ -22,6 +22,7 @@ from gainlink.firmware import qemu as fwqemu
 from gainlink.firmware.build import build, replay_image
 from gainlink.firmware.golden import example_cases, random_cases
 from gainlink.shipping.artifact import render
+from support.cli import assert_refused
 from support.paths import EXAMPLES
 
 KEYS = ("u", "sat", "xh", "z", "fault")
@@ -179,10 +180,8 @@ def test_cli_firmware_build_writes_images_and_size_report(tmp_path, pendulum):
     assert dry.returncode == 0
     assert dry.stdout.strip().startswith("openocd -f interface/stlink.cfg -f target/stm32f4x.cfg -c 'program ")
     assert str((out / "netduinoplus2" / "gainlink_pendulum.elf").resolve()) in dry.stdout
-    missing = subprocess.run(
-        [GAINLINK, "firmware", "flash", str(tmp_path), "--probe", "pyocd", "--dry-run"], capture_output=True, text=True
-    )
-    assert missing.returncode == 2 and missing.stderr.count("\n") == 1 and "firmware.json" in missing.stderr
+    argv = [GAINLINK, "firmware", "flash", tmp_path, "--probe", "pyocd", "--dry-run"]
+    assert_refused(argv, "firmware.json", tmp_path, process=True)
 
 
 def test_replay_cli_with_qemu_engine_matches_native(tmp_path, pendulum):

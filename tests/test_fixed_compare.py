@@ -13,7 +13,7 @@ import pytest
 from gainlink.proof.fixed_onestep import fixed_one_step_check, trace_words
 from gainlink.proof.replay_io import read_samples, read_trace
 from gainlink.shipping.artifact import load
-from support.cli import assert_one_clear_line, run_cli
+from support.cli import assert_refused, run_cli
 from support.fixed import pendulum_design
 
 # One worker runs this module (make test: --dist loadgroup): the fixed-point pendulum and its builds, made once.
@@ -76,8 +76,9 @@ def test_one_lsb_on_one_command_is_caught_at_its_step(pendulum, tmp_path):
 
     bent = tmp_path / "bent.csv"
     _rewrite(d / "native.csv", bent, bend)
-    res = run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", bent)
-    assert_one_clear_line(res, f"one-step check failed at step {BENT_STEP}: u0 of {bent} is word ")
+    argv = ("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", bent)
+    # a failed check, not a refusal: the replay's output is written, the verdict is one line and exit 2
+    res = assert_refused(argv, f"one-step check failed at step {BENT_STEP}: u0 of {bent} is word ")
     assert re.search(r"is word (-?\d+) where the integer law from its own state gives (-?\d+)", res.err)
     got, want = (int(v) for v in re.search(r"word (-?\d+) where .* gives (-?\d+)", res.err).groups())
     assert got - want == 1
@@ -113,19 +114,13 @@ def test_a_trace_of_another_numeric_format_is_refused_in_one_line(pendulum, tmp_
     """By its words, when it does not name its format (a trace recorded before the format line)."""
     d, gains = pendulum
     native = _without_format_line(d / "native.csv", tmp_path / "native.csv")
-    res = run_cli(
-        "replay", gains["q15"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", native
-    )  # fmt: skip
-    assert_one_clear_line(res, f"comparison file {native} is not a trace of q15 artifact")
-    assert not (tmp_path / "out.csv").exists()
+    argv = ("replay", gains["q15"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", native)
+    assert_refused(argv, f"comparison file {native} is not a trace of q15 artifact", tmp_path)
     # the float64 law's trace (what a float32 artifact's replay holds) is not one either
     assert run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "ref.csv").code == 0
     ref = _without_format_line(tmp_path / "ref.csv", tmp_path / "ref_old.csv")
-    res = run_cli(
-        "replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", ref
-    )  # fmt: skip
-    assert_one_clear_line(res, "is not a trace of q31 artifact")
-    assert not (tmp_path / "out.csv").exists()
+    argv = ("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", ref)
+    assert_refused(argv, "is not a trace of q31 artifact", tmp_path)
 
 
 def test_a_recorded_trace_names_its_format_and_one_of_another_format_is_refused_in_one_line(pendulum, pend, tmp_path):
@@ -137,20 +132,19 @@ def test_a_recorded_trace_names_its_format_and_one_of_another_format_is_refused_
     res = run_cli("replay", gains["q15"], "--input", d / "in.csv", "--output", q15, "--engine", "fixed")
     assert res.code == 0, res.err
     assert q15.read_text().startswith("# numeric=q15\n")
-    res = run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", q15)
-    assert_one_clear_line(res, f"comparison file {q15} is a trace of a q15 law and artifact ")
+    argv = ("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", q15)
+    res = assert_refused(argv, f"comparison file {q15} is a trace of a q15 law and artifact ", tmp_path)
     assert "is a q31 design" in res.err
-    assert not (tmp_path / "out.csv").exists()
     old = _without_format_line(q15, tmp_path / "q15_old.csv")  # what the line saves it from
-    res = run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "old.csv", "--compare", old)
-    assert res.code == 2 and re.search(rf"one-step check failed at step 0: \w+ of {re.escape(str(old))}", res.err)
+    argv = ("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "old.csv", "--compare", old)
+    res = assert_refused(argv, "one-step check failed at step 0: ")  # a failed check: the output is written
+    assert re.search(rf"one-step check failed at step 0: \w+ of {re.escape(str(old))}", res.err)
     # the float64 law's trace of the q31 artifact says what it is, and is refused by that line too
     assert run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "ref.csv").code == 0
     assert (tmp_path / "ref.csv").read_text().startswith("# numeric=float64\n")
-    res = run_cli("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare",
-                  tmp_path / "ref.csv")  # fmt: skip
-    assert_one_clear_line(res, "is a trace of a float64 law and artifact pendulum is a q31 design")
-    assert not (tmp_path / "out.csv").exists()
+    argv = ("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare",
+            tmp_path / "ref.csv")  # fmt: skip
+    assert_refused(argv, "is a trace of a float64 law and artifact pendulum is a q31 design", tmp_path)
     # a float32 artifact's output is as it was: no format line
     assert run_cli("replay", pend, "--input", d / "in.csv", "--output", tmp_path / "f.csv").code == 0
     assert (tmp_path / "f.csv").read_text().startswith("t,u0,")

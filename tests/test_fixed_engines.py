@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from gainlink.firmware.fixed import replay_image, run_host
 from gainlink.shipping.artifact import load
-from support.cli import GOOD_SPEC, assert_one_clear_line, run_cli
+from support.cli import GOOD_SPEC, assert_refused, run_cli
 from support.paths import EXAMPLES
 
 
@@ -35,9 +35,7 @@ def test_numeric_flag_overrides_the_spec(pendulum_q31):
 def test_fixed_point_without_ranges_is_one_line(tmp_path):
     spec = tmp_path / "servo.toml"
     spec.write_text(GOOD_SPEC)
-    res = run_cli("design", spec, "--out", tmp_path / "out", "--numeric", "q31")
-    assert_one_clear_line(res, "range")
-    assert not (tmp_path / "out").exists()
+    assert_refused(("design", spec, "--out", tmp_path / "out", "--numeric", "q31"), "range", tmp_path)
 
 
 def test_replay_engines_of_a_fixed_point_artifact_agree_byte_for_byte(pendulum_q31):

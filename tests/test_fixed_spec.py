@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 
 import pytest
-from support.cli import GOOD_SPEC, assert_one_clear_line, run_cli
+from support.cli import GOOD_SPEC, assert_refused, run_cli
 
 RANGES = "y_min = [-2.0]\ny_max = [2.0]\nr_min = [-1.0]\nr_max = [1.0]\n"
 Q31 = GOOD_SPEC + RANGES + '\n[implementation]\nnumeric = "q31"\n'
@@ -57,10 +57,7 @@ def test_bad_fixed_point_spec_is_refused_without_writing(case, tmp_path):
     _, text, words = case
     spec = tmp_path / "spec.toml"
     spec.write_text(text)
-    out = tmp_path / "out"
-    res = run_cli("design", spec, "--out", out)
-    assert_one_clear_line(res, words)
-    assert not out.exists()
+    assert_refused(("design", spec, "--out", tmp_path / "out"), words, tmp_path)
 
 
 def test_float32_spec_with_ranges_designs_the_same_law(tmp_path):
@@ -112,7 +109,9 @@ def test_estimator_made_unstable_by_q15_coefficients_is_refused(tmp_path):
     spec["implementation"] = {"numeric": "q15", "float32_check": False}
     path = tmp_path / "spec.toml"
     path.write_text(_toml(spec))
-    out = tmp_path / "out"
-    res = run_cli("design", path, "--out", out)
-    assert_one_clear_line(res, "with the q15 coefficients the estimate's recursion F is unstable")
-    assert 'use numeric = "q31"' in res.err and not out.exists()
+    res = assert_refused(
+        ("design", path, "--out", tmp_path / "out"),
+        "with the q15 coefficients the estimate's recursion F is unstable",
+        tmp_path,
+    )
+    assert 'use numeric = "q31"' in res.err

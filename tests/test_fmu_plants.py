@@ -17,7 +17,7 @@ from gainlink.hil.plants.config import plant_from_config
 from gainlink.hil.plants.fmu import FmuPlant
 from gainlink.hil.plants.linearize import linearize
 from gainlink.hil.plants.models import CartPendulum, QuadrotorLateral, WoodBerry
-from support.cli import run_cli
+from support.cli import assert_refused, run_cli
 from support.paths import EXAMPLES
 
 M, m, l, g = 1.0, 0.1, 0.5, 9.81
@@ -311,10 +311,7 @@ def test_linearize_and_fmu_commands_refuse_bad_input_in_one_line(cart_fmu, tmp_p
         (("hil", "fmu", "no_such_plant"), "no project FMU named 'no_such_plant'"),
     ]
     for argv, needle in cases:
-        res = run_cli(*argv)
-        lines = res.err.strip().splitlines()
-        assert res.code == 2 and len(lines) == 1 and needle in lines[0], (argv, res.err)
-    assert not out.exists()
+        assert_refused(argv, needle, tmp_path)
 
 
 def test_linearize_refuses_a_value_outside_the_fmus_declared_range(cart_fmu, tmp_path):
@@ -336,10 +333,7 @@ def test_linearize_refuses_a_value_outside_the_fmus_declared_range(cart_fmu, tmp
         ((multirotor, "--at", "mass=-2", "--at", "z=2"), "mass = -2 is outside the range"),
     ]
     for args, needle in cases:
-        res = run_cli("linearize", *args, "--Ts", "0.01", "--out", out)
-        lines = res.err.strip().splitlines()
-        assert res.code == 2 and len(lines) == 1 and needle in lines[0], (args, res.err)
-        assert not out.exists()
+        assert_refused(("linearize", *args, "--Ts", "0.01", "--out", out), needle, tmp_path)
     assert run_cli("linearize", cart_fmu, "--at", "M=2", "--Ts", "0.01", "--out", out).code == 0
 
 

@@ -21,7 +21,7 @@ from gainlink.proof.fixed_format import real
 from gainlink.proof.fixed_law import FixedPointLoop
 from gainlink.proof.float32_law import Float32Loop
 from gainlink.shipping.artifact import Artifact
-from support.cli import run_cli
+from support.cli import assert_refused, run_cli
 from support.fixed import example, model_run, pendulum_design
 from support.mavlink import closed_loop, read_params, start_firmware
 from support.net import udp_port
@@ -160,16 +160,15 @@ def test_a_set_for_another_law_or_other_formats_is_refused_in_one_line_and_nothi
             (tmp_path / "q15.json", "the firmware runs the q31 law and the artifact is a q15 design"),
             (tmp_path / "formats.json", "the firmware's q31 law has other number formats (GL_FX_SIG "),
         ):
-            res = run_cli("mavlink", "upload", path, "--connect", f"udpout:127.0.0.1:{port}")
-            assert res.code == 2 and why in res.err and "nothing was changed" in res.err, res.err
-            assert len(res.err.strip().splitlines()) == 1
+            res = assert_refused(("mavlink", "upload", path, "--connect", f"udpout:127.0.0.1:{port}"), why, tmp_path)
+            assert "nothing was changed" in res.err, res.err
         assert _integers(port) == before
     finally:
         fw.stop()
     fw, port = start_firmware(mavlink_exe, None)  # and a q31 set to a float32 target
     try:
-        res = run_cli("mavlink", "upload", pend_q31[1], "--connect", f"udpout:127.0.0.1:{port}")
-        assert res.code == 2 and "the firmware runs the float32 law and the artifact is a q31 design" in res.err
+        argv = ("mavlink", "upload", pend_q31[1], "--connect", f"udpout:127.0.0.1:{port}")
+        assert_refused(argv, "the firmware runs the float32 law and the artifact is a q31 design", tmp_path)
     finally:
         fw.stop()
 

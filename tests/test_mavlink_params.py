@@ -25,7 +25,7 @@ from gainlink.mavlink.params import (
 from gainlink.shipping.artifact import load
 from hypothesis import given
 from hypothesis import strategies as st
-from support.cli import run_cli
+from support.cli import assert_refused
 
 
 @given(st.integers(min_value=-(2**31), max_value=2**31 - 1))
@@ -126,27 +126,15 @@ def test_mapping_file_maps_gains_with_scale_and_types(tmp_path, example_artifact
 def test_bad_mapping_files_are_one_line_errors_before_any_link(tmp_path, example_artifacts, text, message):
     path = tmp_path / "map.toml"
     path.write_text(text)
-    res = run_cli(
-        "mavlink",
-        "upload",
-        example_artifacts["pendulum"],
-        "--connect",
-        "udpout:127.0.0.1:9",
-        "--mapping",
-        path,
-        "--heartbeat-timeout",
-        "0.2",
-    )
-    assert res.code == 2
-    assert len(res.err.strip().splitlines()) == 1 and message in res.err, res.err
+    argv = ("mavlink", "upload", example_artifacts["pendulum"], "--connect", "udpout:127.0.0.1:9", "--mapping", path)
+    assert_refused((*argv, "--heartbeat-timeout", "0.2"), message, tmp_path)
 
 
 def test_bad_upload_arguments(example_artifacts, tmp_path):
-    res = run_cli(
-        "mavlink", "upload", example_artifacts["pendulum"], "--connect", "udpout:127.0.0.1:9", "--window", "0"
+    pend = example_artifacts["pendulum"]
+    assert_refused(
+        ("mavlink", "upload", pend, "--connect", "udpout:127.0.0.1:9", "--window", "0"), "--window", tmp_path
     )
-    assert res.code == 2 and "--window" in res.err
-    res = run_cli("mavlink", "upload", tmp_path / "missing.json", "--connect", "udpout:127.0.0.1:9")
-    assert res.code == 2 and "missing.json" in res.err
-    res = run_cli("mavlink", "upload", example_artifacts["pendulum"])
-    assert res.code == 2 and "--connect" in res.err
+    missing = ("mavlink", "upload", tmp_path / "missing.json", "--connect", "udpout:127.0.0.1:9")
+    assert_refused(missing, "missing.json", tmp_path)
+    assert_refused(("mavlink", "upload", pend), "--connect", tmp_path)

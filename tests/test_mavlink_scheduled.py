@@ -26,7 +26,7 @@ from gainlink.mavlink.upload import UploadFailed, upload
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import external_tank, tank_dict, tank_hil_scenario
-from support.cli import run_cli
+from support.cli import assert_refused
 from support.designs import designed
 from support.mavlink import read_params, start_firmware
 from support.net import udp_port
@@ -117,8 +117,7 @@ def test_the_scheduled_table_holds_every_point_and_an_upload_commits_them_all_as
     try:
         assert _table(port) == _expected(a)  # every point's gains, GL_HASH the CRC-32 of the compiled tables
         url = f"udpout:127.0.0.1:{port}"
-        refused = run_cli("mavlink", "upload", c_path, "--connect", url)  # another number of points
-        assert refused.code == 2 and "GL_NPTS" in refused.err and refused.err.count("\n") == 1
+        assert_refused(("mavlink", "upload", c_path, "--connect", url), "GL_NPTS", c_path.parent)  # another N
         assert _table(port) == _expected(a)  # nothing changed
         res = upload(b, connect=url)
         assert res.committed and {ch.name.split("_")[2] for ch in res.changes} == {"0", "1", "2"}  # every point
@@ -137,10 +136,17 @@ def test_the_scheduled_table_holds_every_point_and_an_upload_commits_them_all_as
 def test_mavlink_upload_of_a_scheduled_artifact_through_a_mapping_is_refused_in_one_line(tank, tmp_path):
     _, path = tank
     (tmp_path / "map.toml").write_text('[[param]]\ngain = "u_max[0]"\nname = "MOT_MAX"\n')
-    res = run_cli("mavlink", "upload", path, "--connect", f"udpout:127.0.0.1:{udp_port()}", "--mapping",
-                  tmp_path / "map.toml")  # fmt: skip
-    assert res.code == 2 and res.out == ""
-    assert res.err.count("\n") == 1 and "scheduled artifact" in res.err and "nothing was changed" in res.err
+    argv = (
+        "mavlink",
+        "upload",
+        path,
+        "--connect",
+        f"udpout:127.0.0.1:{udp_port()}",
+        "--mapping",
+        tmp_path / "map.toml",
+    )
+    res = assert_refused(argv, "scheduled artifact", tmp_path, path.parent)
+    assert res.out == "" and "nothing was changed" in res.err
 
 
 def test_a_refused_scheduled_commit_is_rolled_back_and_a_committed_one_persists(tank, tmp_path_factory, monkeypatch):

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from gainlink.hil.loop.pil import make_plant, run_pil
 from gainlink.shipping.artifact import load
-from support.cli import assert_one_clear_line, run_cli
+from support.cli import assert_refused
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))
 RTOL = 1e-4  # float32 firmware vs its float64 twin in closed loop: see tests/test_firmware_host.py
@@ -117,9 +117,10 @@ def test_pil_twin_plot_shows_the_run_minus_its_twin(example_artifacts):
         plt.close(fig)
 
 
-def test_pil_rejects_bad_arguments(example_artifacts):
+def test_pil_rejects_bad_arguments(example_artifacts, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # where a run would write by default
     for extra, word in ((["--reference", "1", "2"], "--reference"), (["--plant", "no_such_plant"], "no_such_plant")):
-        assert_one_clear_line(run_cli("pil", "run", example_artifacts["pendulum"], "--steps", "10", *extra), word)
+        assert_refused(("pil", "run", example_artifacts["pendulum"], "--steps", "10", *extra), word, tmp_path)
 
 
 def test_pil_against_the_nonlinear_cart_pendulum(example_artifacts):

@@ -19,7 +19,7 @@ from gainlink.shipping.codegen_scheduled import render_export, tables
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict
-from support.cli import GOOD_SPEC, run_cli
+from support.cli import GOOD_SPEC, assert_refused, run_cli
 from support.designs import designed
 
 # One worker runs this module (make test: --dist loadgroup): the scheduled builds, made once.
@@ -157,6 +157,39 @@ def test_host_c_is_the_float32_model_bit_for_bit(case, request):
         assert np.max(np.abs(np.diff(c.sigma))) <= np.float32(a.Ts * 4.0) * (1 + 1e-6)
 
 
+#: Where in an interval sigma is put (lam): every hundredth from end to end and the middle itself, never on a point.
+INSIDE = (*np.linspace(0.005, 0.995, 100), 0.5)
+
+
+def test_start_and_safe_commands_are_u_op_interpolated_where_sigma_is_inside_an_interval(level):
+    """The first command after a reset is the start command clamp(u_op(sigma)) (the velocity form starts there: no
+    kick), and a refused sample's is the safe command clamp(u_op(sigma held)), with sigma strictly inside every
+    interval, a hundredth apart (an interpolation replaced only near the middle of an interval, or only near its
+    ends, is seen). Oracle: the points' own trims interpolated linearly in sigma by numpy.interp (the law's
+    definition, docs/design.md), in float64 from the float32 sigma the C was given; the C runs float32, so they
+    agree to rounding, far closer than the trim's change across a hundredth of an interval."""
+    a = level
+    points, u_op = a.schedule.points, a.schedule.u_op[:, 0]
+    assert np.all(np.diff(u_op) != 0)  # the trim moves across every interval: where sigma is matters
+
+    def trim(sigma: np.float32) -> float:
+        return float(np.clip(np.interp(float(sigma), points, u_op), a.u_min[0], a.u_max[0]))
+
+    loop = NativeScheduledLoop(a)
+    tol = 1e-6 * float(a.u_max[0] - a.u_min[0])
+    for i, lam in itertools.product(range(points.size - 1), INSIDE):
+        start = np.float32(points[i] + lam * (points[i + 1] - points[i]))  # sigma is the level: y[0]
+        moved = np.float32(points[-2 - i] + (1 - lam) * (points[-1 - i] - points[-2 - i]))  # another interval
+        loop.reset()
+        # the start at `start` (reference = level: no error), a step to `moved`, then a refused sample
+        Y = np.array([[start], [moved], [np.nan]], dtype=np.float32)
+        R = np.array([[start], [moved], [moved]], dtype=np.float32)
+        c = loop.run(Y, R)
+        assert not c.fault[0] and c.sigma[1] == moved and c.fault[2], (i, lam)
+        assert abs(c.u[0, 0] - trim(start)) <= tol, (i, lam, c.u[0, 0], trim(start))
+        assert abs(c.u[2, 0] - trim(moved)) <= tol, (i, lam, c.u[2, 0], trim(moved))
+
+
 def test_cortex_m4f_in_qemu_is_the_host_bit_for_bit(external):
     """One replay through the Cortex-M4F image (mps2-an386) in QEMU: every command, flag and state equals the host
     build's bit for bit, with the external sigma moving across the envelope, held, clipped and rate-limited."""
@@ -196,9 +229,19 @@ def test_replay_cli_runs_the_scheduled_c_on_host_and_qemu(external_data, externa
                   "--compare", ref)  # fmt: skip
     assert res.code == 0, res.err
     assert "native (the C's float32 arithmetic, bit for bit, from its own state at each step): pass," in res.out
-    res = run_cli("replay", path, "--input", inp, "--output", tmp_path / "x.csv", "--engine", "native",
-                  "--target", "cortex-m4")  # fmt: skip
-    assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and not (tmp_path / "x.csv").exists()
+    argv = (
+        "replay",
+        path,
+        "--input",
+        inp,
+        "--output",
+        tmp_path / "x.csv",
+        "--engine",
+        "native",
+        "--target",
+        "cortex-m4",
+    )
+    assert_refused(argv, "--target", tmp_path)
 
 
 def test_firmware_commands_on_a_scheduled_artifact(external_data, tmp_path):
@@ -215,5 +258,4 @@ def test_firmware_commands_on_a_scheduled_artifact(external_data, tmp_path):
     shipped = {p.name for p in (tmp_path / "fw").iterdir()}
     assert {"libgainlink_host.so", "libgainlink_loop.a", "firmware.json"} <= shipped
     for argv in (("firmware", "run", path), ("pil", "run", path, "--steps", "5")):
-        res = run_cli(*argv)
-        assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and "scheduled on load" in res.err, argv
+        assert_refused(argv, "scheduled on load", tmp_path)

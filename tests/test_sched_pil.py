@@ -22,7 +22,7 @@ from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import external_tank, tank_dict
-from support.cli import run_cli
+from support.cli import assert_refused, run_cli
 from support.designs import designed
 
 pytestmark = pytest.mark.xdist_group("test_sched_pil")  # one worker: the images are built once
@@ -171,6 +171,4 @@ def test_pil_cli_bad_schedule_signals(level_data, pend, tmp_path):
         ((pend, "--schedule-signal", "load=0.5"), "is not scheduled"),
     ):
         plant = "artifact" if argv[0] == pend else "tank"
-        res = run_cli("pil", "run", *argv, "--plant", plant, "--steps", 5, "--out", out)
-        assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and said in res.err, (argv, res.err)
-        assert not out.exists()
+        assert_refused(("pil", "run", *argv, "--plant", plant, "--steps", 5, "--out", out), said, tmp_path)

@@ -20,7 +20,7 @@ from types import SimpleNamespace
 
 import pytest
 from gainlink.hil.loop.sched_study import default_showcase, run_showcase
-from support.cli import run_cli
+from support.cli import assert_refused
 from support.hil import udp_transport
 from support.shared import once_per_run
 
@@ -92,6 +92,5 @@ def test_report_json_holds_the_numbers_summary_txt_prints(showcase):
 def test_the_cli_refuses_a_spec_without_a_schedule_in_one_line(tmp_path):
     spec = tmp_path / "s.toml"
     spec.write_text('name = "x"\nTs = 0.1\n')
-    res = run_cli("hil", "showcase", "--spec", spec, "--report", tmp_path / "rep")
-    assert res.code == 2 and "has no [schedule]" in res.err and res.err.count("\n") == 1
-    assert not (tmp_path / "rep").exists() and default_showcase()["single_point"] == 0.49
+    assert_refused(("hil", "showcase", "--spec", spec, "--report", tmp_path / "rep"), "has no [schedule]", tmp_path)
+    assert default_showcase()["single_point"] == 0.49

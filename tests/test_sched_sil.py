@@ -20,7 +20,7 @@ from gainlink.hil.loop.scenario import parse_scenario, resolve_scenario_path
 from gainlink.hil.loop.sil import run_sil
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import external_tank, tank_dict
-from support.cli import run_cli
+from support.cli import assert_refused, run_cli
 from support.designs import designed
 from support.hil import udp_transport, write_scenario
 
@@ -195,6 +195,5 @@ def test_gainlink_hil_run_runs_a_scheduled_artifact_over_can_and_refuses_a_bad_s
     assert (tmp_path / "rep" / "sigma.csv").is_file()
     (tmp_path / "s.toml").write_text(SCENARIO)
     (tmp_path / "bad.toml").write_text(SCENARIO + '[schedule_signal.load]\nkind = "constant"\nvalue = 0.5\n')
-    res = run_cli("hil", "run", tmp_path / "bad.toml", "--report", tmp_path / "rep2", "--no-progress")
-    assert res.code == 2 and len(res.err.strip().splitlines()) == 1 and "schedule_signal.load is not" in res.err
-    assert not (tmp_path / "rep2").exists()
+    argv = ("hil", "run", tmp_path / "bad.toml", "--report", tmp_path / "rep2", "--no-progress")
+    assert_refused(argv, "schedule_signal.load is not", tmp_path)

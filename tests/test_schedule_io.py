@@ -17,7 +17,7 @@ from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from schedule_cases import TANK, external_tank, tank_dict
-from support.cli import run_cli
+from support.cli import assert_refused, run_cli
 from support.designs import designed
 
 
@@ -62,12 +62,8 @@ def test_bad_scheduled_spec_is_one_line_exit_2(case, tmp_path):
     edit(data)
     spec = tmp_path / "spec.toml"
     spec.write_text(_toml(data))
-    out = tmp_path / "out"
-    res = run_cli("design", spec, "--out", out)
-    assert res.code == 2, res
-    lines = [line for line in res.err.splitlines() if line.strip()]
-    assert len(lines) == 1 and re.search(pattern, lines[0]), lines
-    assert not out.exists()
+    res = assert_refused(("design", spec, "--out", tmp_path / "out"), "", tmp_path)
+    assert re.search(pattern, res.err), res.err
 
 
 def test_velocity_without_schedule_is_refused(tmp_path):
@@ -76,8 +72,7 @@ def test_velocity_without_schedule_is_refused(tmp_path):
     data["plant"].update({k: sched["plant"][0][k] for k in ("A", "B", "C")})
     spec = tmp_path / "spec.toml"
     spec.write_text(_toml(data))
-    res = run_cli("design", spec, "--out", tmp_path / "out")
-    assert res.code == 2 and "needs a [schedule]" in res.err and not (tmp_path / "out").exists()
+    assert_refused(("design", spec, "--out", tmp_path / "out"), "needs a [schedule]", tmp_path)
 
 
 def test_lmi_solver_failure_is_one_line_exit_2(tmp_path, monkeypatch):
@@ -89,9 +84,7 @@ def test_lmi_solver_failure_is_one_line_exit_2(tmp_path, monkeypatch):
 
     monkeypatch.setattr(lmi, "_clarabel", broken)
     monkeypatch.setattr(lmi, "_scs", broken)
-    res = run_cli("design", TANK, "--out", tmp_path / "out")
-    assert res.code == 2 and res.err.count("\n") == 1 and "LMI solver failed" in res.err
-    assert not (tmp_path / "out").exists()
+    assert_refused(("design", TANK, "--out", tmp_path / "out"), "LMI solver failed", tmp_path)
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +105,7 @@ def test_scheduled_artifact_validates_and_is_sealed(external, tmp_path):
     tampered["schedule"]["point"][1]["Kx"][0][0] *= 1.0001
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps(tampered))
-    assert run_cli("validate", bad).code == 2
+    assert_refused(("validate", bad), "sha256 mismatch", tmp_path)
     atomic_write_text(bad, artifact_mod.render(artifact_mod.seal(tampered)))
     with pytest.raises(ArtifactError, match=r"schedule.point\[1\].Kx is not the coefficient"):
         artifact_mod.load(bad)
@@ -169,16 +162,14 @@ def test_replay_with_external_sigma_and_one_step_check(external, tmp_path):
     body[200][1] = repr(float(body[200][1]) + 1e-6)
     bent = tmp_path / "bent.csv"
     bent.write_text("\n".join([",".join(header)] + [",".join(r) for r in body]) + "\n")
-    res = run_cli("replay", path, "--input", inp, "--output", tmp_path / "o3.csv", "--compare", bent)
-    assert res.code == 2 and "step 200: u0" in res.err
+    assert_refused(("replay", path, "--input", inp, "--output", tmp_path / "o3.csv", "--compare", bent), "step 200: u0")
 
 
 def test_replay_without_s_columns_is_refused(external, tmp_path):
     path, _ = external
     inp = tmp_path / "in.csv"
     inp.write_text("y0,r0\n0.1,0.1\n")
-    res = run_cli("replay", path, "--input", inp, "--output", tmp_path / "out.csv")
-    assert res.code == 2 and "lacks column(s) s0" in res.err and not (tmp_path / "out.csv").exists()
+    assert_refused(("replay", path, "--input", inp, "--output", tmp_path / "out.csv"), "lacks column(s) s0", tmp_path)
 
 
 def test_api_replay_and_controller_at_sigma(external):

@@ -9,7 +9,7 @@ from gainlink.errors import PlantError
 from gainlink.fileio import read_toml
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.trim import solve
-from support.cli import run_cli
+from support.cli import assert_refused, run_cli
 
 TEMPLATE = """\
 name = "hover"
@@ -137,9 +137,7 @@ def test_schedule_on_an_output_state(multirotor, tmp_path):
 def test_bad_schedule_is_one_line_exit_2(multirotor, tmp_path, schedule, extra, message):
     path, _ = multirotor
     out = tmp_path / "spec.toml"
-    res = run_cli("linearize", path, "--schedule", schedule, *extra, "--out", out)
-    assert res.code == 2 and message in res.err and res.err.count("\n") == 1, res
-    assert not out.exists()
+    assert_refused(("linearize", path, "--schedule", schedule, *extra, "--out", out), message, tmp_path)
 
 
 def test_trim_outside_the_limits_is_refused(multirotor, tmp_path):
@@ -148,8 +146,8 @@ def test_trim_outside_the_limits_is_refused(multirotor, tmp_path):
     tmpl = tmp_path / "tmpl.toml"
     tmpl.write_text(TEMPLATE.replace("u_max = [1.0]", "u_max = [0.6]"))
     out = tmp_path / "spec.toml"
-    res = run_cli("linearize", path, "--schedule", "mass=0.8,1.5", "--at", "z=2", "--template", tmpl, "--out", out)
-    assert res.code == 2 and "outside the limits" in res.err and not out.exists()
+    argv = ("linearize", path, "--schedule", "mass=0.8,1.5", "--at", "z=2", "--template", tmpl, "--out", out)
+    assert_refused(argv, "outside the limits", tmp_path)
 
 
 # --- the fit of each point (issue 18, 1b per point) ----------------------------------------------------------

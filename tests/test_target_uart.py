@@ -31,7 +31,7 @@ from gainlink.shipping.artifact import load
 from gainlink.shipping.codegen import gain_set
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
-from support.cli import GAINLINK, run_cli
+from support.cli import GAINLINK, assert_refused, run_cli
 from support.hil import udp_transport
 from support.mavlink import reference_u, retuned_pendulum
 from support.net import tcp_port, udp_port
@@ -336,8 +336,8 @@ def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(
         assert (flash / "gl_key.bin").read_bytes() == key  # kept in the image's flash
         other = tmp_path / "other.key"
         assert run_cli("mavlink", "keygen", other).code == 0
-        res = run_cli("mavlink", "setup-signing", other, "--connect", image.url)  # unsigned, now that it has one
-        assert res.code == 2 and "does not sign with the new key" in res.err and res.err.count("\n") == 1, res.err
+        argv = ("mavlink", "setup-signing", other, "--connect", image.url)  # unsigned, now that it has one
+        assert_refused(argv, "does not sign with the new key", tmp_path)
         assert (flash / "gl_key.bin").read_bytes() == key
 
         version = _third_party_signed_request(image.url, key)
@@ -359,9 +359,10 @@ def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(
         crc0, status0 = sys_status(image.url, key)
         assert crc0 == gain_set(new).crc32
 
-        res = run_cli("mavlink", "upload", pend, "--connect", image.url, "--retries", "1", "--timeout", "0.5")
-        assert res.code == 2, res.out + res.err  # it reads (open) but every PARAM_SET is refused, and says why
-        assert "requires MAVLink 2 signing (--signing-key)" in res.err and "nothing was changed" in res.err
+        argv = ("mavlink", "upload", pend, "--connect", image.url, "--retries", "1", "--timeout", "0.5")
+        # it reads (open) but every PARAM_SET is refused, and says why
+        res = assert_refused(argv, "requires MAVLink 2 signing (--signing-key)", tmp_path)
+        assert "nothing was changed" in res.err
         crc1, status1 = sys_status(image.url, key)
         assert crc1 == crc0 and status1.errors_comm > status0.errors_comm
 
@@ -402,7 +403,7 @@ def test_a_key_set_over_the_uart_guards_the_images_gains_and_survives_a_restart(
         assert crc3 == gain_set(new).crc32 and after.errors_comm - before.errors_comm == 2
 
 
-def test_qemu_scenarios_refuse_mismatched_links_in_one_line(pend, tmp_path):
+def test_qemu_scenarios_refuse_mismatched_links_in_one_line(pend, pendulum_artifact, tmp_path):
     with pytest.raises(ScenarioError, match="board applies to controller"):
         scenario(pend, {"kind": "mavlink"}, controller="firmware", board="netduinoplus2")
     with pytest.raises(ScenarioError, match="board must be one of"):
@@ -415,8 +416,8 @@ def test_qemu_scenarios_refuse_mismatched_links_in_one_line(pend, tmp_path):
     assert isinstance(fd, TransportError) and "classic frames only" in str(fd)
     uart = run_scenario_error(scenario(pend, {"kind": "mavlink", "url": "tcp:127.0.0.1:1"}, controller="firmware"))
     assert isinstance(uart, TransportError) and 'needs controller = "qemu"' in str(uart)
-    res = run_cli("firmware", "run", pend, "--target", "cortex-m4", "--mavlink", "udpin:127.0.0.1:1")
-    assert res.code == 2 and "expected tcp:HOST:PORT" in res.err and res.err.count("\n") == 1
+    argv = ("firmware", "run", pendulum_artifact, "--target", "cortex-m4", "--mavlink", "udpin:127.0.0.1:1")
+    assert_refused(argv, "expected tcp:HOST:PORT", tmp_path)
 
 
 def run_scenario_error(sc) -> Exception:
@@ -466,9 +467,10 @@ def test_the_images_slcan_adapter_answers_as_the_lawicel_protocol_says(elf):
             for sent, expected in exchanges:
                 s.sendall(sent)
                 got = b""
-                deadline = time.monotonic() + 10
+                deadline = time.monotonic() + 10  # a hang guard (recv has its own 10 s timeout)
                 while len(got) < len(expected) and time.monotonic() < deadline:
                     got += s.recv(len(expected) - len(got))
+                assert len(got) == len(expected), f"{sent!r}: no whole answer within 10 s (hung?): {got!r}"
                 assert got == expected, (sent, got)
 
 

@@ -192,6 +192,7 @@ class _Loop:
         self.late = 0
         self.overruns = 0
         self.silent_since_ns: int | None = None
+        self.silent_since_step = 0  # the first sample of the current silence (lockstep runs faster than Ts)
         self.period_ns = int(round(self.plan.period_s * 1e9))
         self.silent_at, self.crash_at = self.plan.silent_at, self.plan.crash_at
 
@@ -345,18 +346,18 @@ class _Loop:
         """No command for step ``k``: stop the run if the peer exited or has been silent too long."""
         Ts = self.a.Ts
         now = time.perf_counter_ns()
-        self.silent_since_ns = self.silent_since_ns or sent
+        if self.silent_since_ns is None:
+            self.silent_since_ns, self.silent_since_step = sent, k
         code = self.peer.exit_status()
         if code is not None:
             self.rec.U[k] = self.u
             raise _Stop(f"controller exited with status {code} at step {k} (t={k * Ts:.3f} s){_tail(self.peer)}", k + 1)
         timeout = self.scenario.peer_timeout
         if now - self.silent_since_ns >= timeout * 1e9:
-            since = int(round((self.silent_since_ns - self.t_start) / 1e9 / max(self.plan.period_s, 1e-9)))
             self.rec.U[k] = self.u
             raise _Stop(
-                f"controller silent for {timeout:g} s since step {since} (no command for sample {k}, t={k * Ts:.3f} s)"
-                + self.transport.silence_hint(),
+                f"controller silent for {timeout:g} s since step {self.silent_since_step} (no command for sample {k}, "
+                f"t={k * Ts:.3f} s)" + self.transport.silence_hint(),
                 k + 1,
             )
 

@@ -1,10 +1,13 @@
-"""``gainlink`` run in-process, its exit status and output captured."""
+"""``gainlink`` run in-process (or any command as its own process), its exit status and output captured, and the
+check every bad-input test makes of a refusal."""
 
 from __future__ import annotations
 
+import hashlib
 import io
 import subprocess
 import sys
+from collections.abc import Mapping, Sequence
 from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,10 +40,7 @@ def run_cli(*argv: object) -> CliResult:
 
 def gainlink_process(*argv: object, timeout: float = 120.0) -> CliResult:
     """Run the installed ``gainlink`` console script as its own process (its logging configured as a user's is)."""
-    proc = subprocess.run(
-        [str(GAINLINK), *map(str, argv)], capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL
-    )
-    return CliResult(code=proc.returncode, out=proc.stdout, err=proc.stderr)
+    return run_process([GAINLINK, *argv], timeout=timeout)
 
 
 #: A valid spec (the pendulum in compact form) that the bad-input tests bend one key at a time.
@@ -74,11 +74,43 @@ u_max = [5.0]
 """
 
 
-def assert_one_clear_line(res: CliResult, words: str) -> None:
-    """Exit status 2 and exactly one line on stderr, ``gainlink: error: ...`` containing ``words``."""
-    assert res.code == 2, (res.code, res.err)
-    lines = [ln for ln in res.err.splitlines() if ln.strip()]
-    assert len(lines) == 1, res.err
-    assert lines[0].startswith("gainlink: error:"), lines[0]
-    assert words in lines[0], lines[0]
-    assert "Traceback" not in res.err
+def run_process(argv: Sequence[object], *, timeout: float = 120.0, **kw) -> CliResult:
+    """Run ``argv`` as its own process (stdin from /dev/null); ``timeout`` is a hang guard."""
+    proc = subprocess.run(
+        [str(a) for a in argv], stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout, **kw
+    )
+    return CliResult(code=proc.returncode, out=proc.stdout, err=proc.stderr)
+
+
+def _files(folders: Sequence[Path]) -> dict[str, str]:
+    """Every file and folder under ``folders`` (hidden ones included), with a digest of each file's bytes."""
+    state = {}
+    for folder in folders:
+        for path in [folder, *sorted(Path(folder).rglob("*"))] if Path(folder).exists() else []:
+            digest = hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else "folder"
+            state[str(path)] = digest
+    return state
+
+
+def assert_refused(
+    argv: Sequence[object],
+    phrase: str,
+    *folders: Path,
+    process: bool = False,
+    prefix: str = "gainlink: error: ",
+    env: Mapping[str, str] | None = None,
+) -> CliResult:
+    """Run ``gainlink argv`` in-process (``process=True``: the command line ``argv`` as its own process, in ``env``),
+    given bad input, and check it was refused as the house rule says: exit status 2, stderr exactly one line,
+    starting with ``prefix`` and containing ``phrase`` (so no traceback, no warning or progress line beside it), and
+    nothing created, changed or removed under ``folders`` (hidden temporary files such as ``.NAME.*.tmp`` included).
+    Returns the result."""
+    before = _files(folders)
+    res = run_process(argv, env=env) if process else run_cli(*argv)
+    assert res.code == 2, f"exit status {res.code}, not 2: {res.err!r}"
+    assert res.err.endswith("\n") and res.err.count("\n") == 1, f"stderr is not one line: {res.err!r}"
+    assert res.err.startswith(prefix) and phrase in res.err, f"{res.err!r} does not say {phrase!r}"
+    after = _files(folders)
+    written = sorted(p for p in after if before.get(p) != after[p]) + sorted(p for p in before if p not in after)
+    assert not written, f"the refused call wrote or removed {written}"
+    return res
