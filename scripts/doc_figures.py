@@ -1,38 +1,128 @@
-"""README figures from the benchmarks' JSON: never typed in by hand.
+"""Figures in the docs, from the benchmarks' JSON and from fresh builds: never typed in by hand.
 
-README.md holds marked blocks, ``<!-- figures:NAME -->`` ... ``<!-- /figures:NAME -->``; this script writes each
-block from the recorded results in ``bench/results/*.json`` (committed: the measurements the README shows).
+The README and the pages under docs/ hold marked blocks, ``<!-- figures:NAME -->`` ... ``<!-- /figures:NAME -->``; this
+script writes each block from the recorded results in ``bench/results/*.json`` (committed: the measurements the docs
+show) and, for the figures a build measures cheaply (image sizes), from the firmware built now (cached builds).
 
-    .venv/bin/python scripts/readme_figures.py                 rewrite the blocks from bench/results/
-    .venv/bin/python scripts/readme_figures.py --record NAME   first copy out/bench/NAME.json (a fresh `make bench`)
-                                                              into bench/results/ with when and where it ran
-    .venv/bin/python scripts/readme_figures.py --check         exit 1 if a block differs from what the results say
+    .venv/bin/python scripts/doc_figures.py                 rewrite the blocks
+    .venv/bin/python scripts/doc_figures.py --record NAME   first copy out/bench/NAME.json (a fresh `make bench`)
+                                                           into bench/results/ with when, where and at which commit
+    .venv/bin/python scripts/doc_figures.py --check         exit 1 if a block differs from what it should say now
 
 ``scripts/bench.sh`` (``make bench``, ``make bench-fuzz``, ``make bench-soak``) records every benchmark that
-succeeded; the test suite runs ``--check``. A result whose ``recorded`` entry says ``from`` README was carried over
-from figures typed in before this script existed (its JSON was not kept); the block says so.
+succeeded; the test suite runs ``--check`` (tests/test_docs.py). A result whose ``recorded`` entry says ``from``
+README was carried over from figures typed in before this script existed (its JSON was not kept); the block says so.
+
+A figure older than the code it describes is flagged, in the docs themselves. :data:`SOURCES` names, per benchmark,
+the files whose change can change its figures; a recording stores the sha256 of their content
+(``recorded.sources_sha256``) and the commit it ran at. When their content now differs, the block says so (which
+files changed since that commit, and the command that records it again), and ``--check`` fails until the block says
+it: re-record the benchmark, or run this script to mark the figure as older than the code. Code the benchmark does
+not measure can change freely: only these files count.
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime
+import functools
+import hashlib
 import json
 import os
 import re
+import subprocess
 import sys
 import textwrap
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
-README = ROOT / "README.md"
 RESULTS = ROOT / "bench" / "results"
 OUT = ROOT / "out" / "bench"
 BLOCK = re.compile(r"(<!-- figures:(?P<name>[a-z_]+) -->\n)(?P<body>.*?)(<!-- /figures:(?P=name) -->)", re.S)
 
 Doc = dict[str, Any]
+
+# The files each benchmark's figures depend on (folders are taken whole; __pycache__ aside).
+_FIRMWARE_C = (
+    "firmware/CMakeLists.txt",
+    "firmware/cmake",
+    "firmware/include",
+    "firmware/src",
+    "firmware/ports/cortex-m",
+    "runtime/shipping",
+)
+_HOST_LINKS = ("hil/loop", "hil/links", "firmware/apps", "firmware/ports/host")
+SOURCES: dict[str, tuple[str, ...]] = {
+    "campaign": ("hil/campaign", "hil/loop/sil.py", "bench/campaign.py"),
+    "firmware_cost": (*_FIRMWARE_C, "runtime/firmware/cost.py", "bench/firmware_cost.py"),
+    "fixed_point_cost": (*_FIRMWARE_C, "runtime/synthesis/fixed_point.py", "bench/fixed_point_cost.py"),
+    "fuzz": ("firmware/fuzz", "firmware/apps", "firmware/src", "bench/fuzz.py"),
+    "hil_lockstep": (*_HOST_LINKS, "bench/hil_lockstep.py"),
+    "hil_realtime": (*_HOST_LINKS, "bench/hil_realtime.py"),
+    "mavlink_hil": (*_HOST_LINKS, "bench/mavlink_hil.py"),
+    "sched_cost": (*_FIRMWARE_C, "firmware/ports/host", "bench/sched_cost.py"),
+    "sched_showcase": (
+        "runtime/synthesis",
+        "hil/loop",
+        "hil/fmus/tank",
+        "examples/tank_showcase.toml",
+        "hil/scenarios/tank_showcase.toml",
+        "bench/sched_showcase.py",
+    ),
+    "soak": (*_HOST_LINKS, "bench/soak.py"),
+    "target_uart": ("firmware/apps", "firmware/ports/cortex-m", "hil/links", "bench/target_uart.py"),
+}
+
+
+def pages() -> list[Path]:
+    """The pages that may hold figures: README.md and every Markdown page of docs/ (not its build)."""
+    docs = sorted(p for p in (ROOT / "docs").rglob("*.md") if "_build" not in p.relative_to(ROOT / "docs").parts)
+    return [ROOT / "README.md", *docs]
+
+
+# --- how old a figure is ----------------------------------------------------------------------------------------
+
+
+def _source_files(paths: Iterable[str]) -> list[Path]:
+    files: list[Path] = []
+    for rel in paths:
+        path = ROOT / rel
+        found = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
+        files += [p for p in found if "__pycache__" not in p.parts and p.suffix != ".pyc"]
+    return files
+
+
+def sources_digest(name: str) -> str:
+    """sha256 over the paths and contents of the files :data:`SOURCES` names for benchmark ``name``."""
+    digest = hashlib.sha256()
+    for path in _source_files(SOURCES.get(name, ())):
+        digest.update(f"{path.relative_to(ROOT).as_posix()}\0".encode())
+        digest.update(hashlib.sha256(path.read_bytes()).digest())
+    return digest.hexdigest()
+
+
+def _git(*argv: str) -> str | None:
+    try:
+        proc = subprocess.run(["git", *argv], cwd=ROOT, capture_output=True, text=True, stdin=subprocess.DEVNULL)
+    except OSError:
+        return None
+    return proc.stdout.strip() if proc.returncode == 0 else None
+
+
+def staleness(name: str, doc: Doc) -> str | None:
+    """None when the files benchmark ``name`` measures are as they were when it was recorded (or the recording
+    does not say: see :func:`provenance`); else which of them changed."""
+    rec = doc.get("recorded", {})
+    recorded = rec.get("sources_sha256")
+    if recorded is None or recorded == sources_digest(name):
+        return None
+    commit = rec.get("commit")
+    changed = _git("diff", "--name-only", commit, "--", *SOURCES[name]) if commit else None
+    files = ", ".join(f"`{f}`" for f in changed.splitlines()[:6]) if changed else "the files it measures"
+    more = " and more" if changed and len(changed.splitlines()) > 6 else ""
+    return f"{files}{more} changed since it was recorded"
 
 
 # --- reading and recording --------------------------------------------------------------------------------------
@@ -45,7 +135,8 @@ def result(name: str) -> Doc | None:
 
 
 def record(name: str) -> Path:
-    """Copy out/bench/NAME.json to bench/results/NAME.json, stamped with the date and the machine's load."""
+    """Copy out/bench/NAME.json to bench/results/NAME.json, stamped with the date, the machine's load, the commit
+    and the state of the files it measures."""
     src = OUT / f"{name}.json"
     doc = json.loads(src.read_text("utf-8"))
     stamp = {
@@ -53,6 +144,8 @@ def record(name: str) -> Path:
         "date": datetime.date.today().isoformat(),
         "cpus": os.cpu_count(),
         "load_average_at_record": round(os.getloadavg()[0], 2),
+        "commit": _git("rev-parse", "HEAD"),
+        "sources_sha256": sources_digest(name),
     }
     RESULTS.mkdir(parents=True, exist_ok=True)
     dst = RESULTS / f"{name}.json"
@@ -63,13 +156,14 @@ def record(name: str) -> Path:
 
 
 def prose(text: str, indent: str = "") -> str:
-    """``text`` wrapped at the README's 120 columns (continuation lines indented by ``indent``)."""
+    """``text`` wrapped at the docs' 120 columns (continuation lines indented by ``indent``)."""
     return "\n".join(textwrap.wrap(text, 120, subsequent_indent=indent, break_on_hyphens=False))
 
 
 def provenance(doc: Doc) -> str:
-    """A sentence saying where a result comes from."""
+    """Sentences saying where a result comes from, and whether it is older than the code it describes."""
     rec = doc.get("recorded", {})
+    name = rec.get("from", "").removeprefix("bench/").removesuffix(".py")
     if "README" in rec.get("from", ""):
         return prose(
             f"Recorded result carried over from the README (its JSON was not kept): {rec.get('conditions', '')}."
@@ -79,7 +173,14 @@ def provenance(doc: Doc) -> str:
         where = f"{rec.get('cpus', '?')} CPUs; the benchmark saw a load average of {load:.1f}"
     else:
         where = f"{rec.get('cpus', '?')} CPUs, load average {rec.get('load_average_at_record', 0):g} when recorded"
-    return prose(f"`{rec.get('from', '?')}`, recorded {rec.get('date', '?')} ({where}).")
+    at = f" at commit {rec['commit'][:10]}" if rec.get("commit") else ""
+    text = f"`{rec.get('from', '?')}`, recorded {rec.get('date', '?')}{at} ({where})."
+    stale = staleness(name, doc)
+    if rec.get("sources_sha256") is None:
+        text += " Not dated against the code it measures (recorded before recordings said which)."
+    elif stale is not None:
+        text += f" **Older than the code it describes**: {stale}; `scripts/bench.sh {name}` records it again."
+    return prose(text)
 
 
 def run_load(doc: Doc) -> float | None:
@@ -93,6 +194,42 @@ def run_load(doc: Doc) -> float | None:
 
 def missing(what: str, target: str) -> str:
     return f"No {what} recorded yet: `{target}` measures it.\n"
+
+
+# --- image sizes, measured now ----------------------------------------------------------------------------------
+
+
+@functools.cache
+def image_sizes() -> dict[tuple[str, str], Doc]:
+    """Flash and RAM of the pendulum's images, built now (cached builds, as the test suite's): the float32 image on
+    every core (``("float32", target)``) and, for the cores of ``bench/fixed_point_cost.py``, both images of its q31
+    design (``("q31", target)``, ``("q31-float32", target)``)."""
+    import logging
+
+    from gainlink.firmware import fixed
+    from gainlink.firmware.build import build
+    from gainlink.firmware.size import size_report
+    from gainlink.firmware.targets import CORTEX_M_TARGETS, TARGETS
+    from gainlink.shipping.artifact import from_dict
+    from gainlink.spec import load_spec
+    from gainlink.synthesis import synthesize
+
+    sys.path.insert(0, str(ROOT / "bench"))
+    from fixed_point_cost import CORES, pendulum_q31
+
+    logging.disable(logging.WARNING)
+    pendulum = from_dict(synthesize(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
+    sizes: dict[tuple[str, str], Doc] = {}
+    for target in CORTEX_M_TARGETS:
+        board = TARGETS[target].default_board
+        sizes["float32", target] = size_report(build(pendulum, target=target).files["elf"], board=board)
+    q31 = pendulum_q31()
+    for target in CORES:
+        board = TARGETS[target].default_board
+        elf_q, _ = fixed.image(q31, target=target)
+        sizes["q31", target] = size_report(elf_q, board=board)
+        sizes["q31-float32", target] = size_report(build(q31, target=target).files["elf"], board=board)
+    return sizes
 
 
 # --- formatting helpers -----------------------------------------------------------------------------------------
@@ -251,6 +388,11 @@ def target_uart_block() -> str:
     return table(head, rows) + "\n" + provenance(doc) + "\n"
 
 
+def _flash_ram(kind: str, target: str) -> tuple[str, str]:
+    size = image_sizes()[kind, target]
+    return num(size["flash_bytes"]), num(size["ram_bytes_without_stack"])
+
+
 def fixed_point_cost_block() -> str:
     doc = result("fixed_point_cost")
     if doc is None:
@@ -261,7 +403,7 @@ def fixed_point_cost_block() -> str:
         ratio = f"{r['ratio_float32_to_q31']:g}x"
         if plain is not None:
             ratio += f" / {r['ratio_float32_plain_to_q31']:g}x"
-        q, f = r["q31_image"], r["float32_image"]
+        (q_flash, q_ram), (f_flash, f_ram) = _flash_ram("q31", r["target"]), _flash_ram("q31-float32", r["target"])
         rows.append(
             [
                 f"{r['target']} ({r['board']})",
@@ -269,13 +411,55 @@ def fixed_point_cost_block() -> str:
                 num(r["float32_instructions_per_step"]),
                 "—" if plain is None else num(plain),
                 ratio,
-                f"{num(q['flash_bytes'])} / {num(f['flash_bytes'])} B",
-                f"{num(q['ram_bytes_without_stack'])} / {num(f['ram_bytes_without_stack'])} B",
+                f"{q_flash} / {f_flash} B",
+                f"{q_ram} / {f_ram} B",
             ]
         )
     head = ["core (board)", "q31", "float32 as built", "float32 plain multiply-add", "float32 / q31"]
     head += ["flash q31 / float32 image", "RAM (no stack) q31 / float32 image"]
-    return table(head, rows) + "\n" + provenance(doc) + "\n"
+    sizes = "Flash and RAM: the images built now (the docs' test builds them and compares)."
+    return table(head, rows) + "\n" + provenance(doc) + "\n" + sizes + "\n"
+
+
+FPU = {"cortex-m0": "none", "cortex-m3": "none", "cortex-m4": "FPv4-SP", "cortex-m7": "FPv5-DP"}
+FPU |= {"cortex-m33": "FPv5-SP", "cortex-m55": "FPv5-DP + Helium"}
+
+
+def cortex_m_targets_block() -> str:
+    """The pendulum's float32 step on every core: instructions (bench/firmware_cost.py's per_target) and the sizes
+    of the images built now."""
+    doc = result("firmware_cost")
+    if doc is None or "per_target" not in doc:
+        return missing("per-core cost", "python bench/firmware_cost.py")
+    rows = []
+    for r in doc["per_target"]:
+        size = image_sizes()["float32", r["target"]]
+        stack = size["ram_bytes"] - size["ram_bytes_without_stack"]
+        rows.append(
+            [
+                r["target"],
+                r["board"],
+                FPU.get(r["target"], "?"),
+                f"{r['instructions_per_step']:g} ({r['dearest_step_instructions']})",
+                f"{r['own_instructions_per_step']:g}",
+                f"{num(size['flash_bytes'])} B",
+                f"{num(size['ram_bytes_without_stack'])} + {num(stack)} B",
+            ]
+        )
+    head = ["target", "board", "FPU", "instructions per step (dearest)", "inside `gl_loop_step`", "flash"]
+    head += ["RAM + stack"]
+    soft = {r["target"]: r for r in doc["per_target"] if "gl_fmaf_instructions_per_call" in r}
+    words = []
+    for target, r in soft.items():
+        words.append(
+            f"on the {target.removeprefix('cortex-').upper()} `gl_fmaf` costs {r['gl_fmaf_instructions_per_call']:g} "
+            f"instructions per call ({r['gl_fmaf_calls_per_step']:g} calls per step), the same step with newlib's "
+            f"`fmaf` {num(r['baseline_newlib_fma_instructions_per_step'])} instructions (not bit for bit) and with a "
+            f"plain multiply then add {num(r['baseline_plain_fma_instructions_per_step'])}"
+        )
+    fmaf = prose("Soft-float cores: " + "; ".join(words) + ".") + "\n" if words else ""
+    sizes = "Flash and RAM: the images built now (the docs' test builds them and compares)."
+    return table(head, rows) + "\n" + fmaf + "\n" + provenance(doc) + "\n" + sizes + "\n"
 
 
 def _step(row: Doc, name: str) -> str:
@@ -336,6 +520,7 @@ BLOCKS: dict[str, Callable[[], str]] = {
     "sched_cost": sched_cost_block,
     "sched_showcase": sched_showcase_block,
     "fixed_point_cost": fixed_point_cost_block,
+    "cortex_m_targets": cortex_m_targets_block,
     "fuzz": fuzz_block,
     "soak": soak_block,
     "campaign": campaign_block,
@@ -344,43 +529,66 @@ BLOCKS: dict[str, Callable[[], str]] = {
 }
 
 
-# --- the README -------------------------------------------------------------------------------------------------
+# --- the pages --------------------------------------------------------------------------------------------------
 
 
-def render(text: str) -> str:
+def render(text: str, page: Path) -> str:
     """``text`` with every marked block rewritten; an unknown block name is an error."""
 
     def body(m: re.Match[str]) -> str:
         name = m["name"]
         if name not in BLOCKS:
-            raise SystemExit(f"readme_figures: README.md has a block {name!r} this script does not know")
+            raise SystemExit(f"doc_figures: {page.relative_to(ROOT)} has a block {name!r} this script does not know")
         return m.group(1) + BLOCKS[name]() + m.group(4)
 
     return BLOCK.sub(body, text)
 
 
+def check(texts: dict[Path, str], rendered: dict[Path, str]) -> list[str]:
+    """One line per block that is not what it should say now, and per block missing or written twice."""
+    problems, seen = [], []
+    for page, text in texts.items():
+        for old, new in zip(BLOCK.finditer(text), BLOCK.finditer(rendered[page])):
+            seen.append(old["name"])
+            if old.group(0) != new.group(0):
+                doc = result(SOURCE_OF.get(old["name"], old["name"]))
+                stale = staleness(SOURCE_OF.get(old["name"], old["name"]), doc) if doc else None
+                why = f" ({stale})" if stale else ""
+                problems.append(
+                    f"doc_figures: {page.relative_to(ROOT)}: the figures {old['name']} differ from what the results "
+                    f"and the builds say now{why}: run scripts/doc_figures.py (or record the benchmark again)"
+                )
+    for name in sorted(set(BLOCKS) - set(seen)):
+        problems.append(f"doc_figures: no page has the figures {name}")
+    for name in sorted({n for n in seen if seen.count(n) > 1}):
+        problems.append(f"doc_figures: the figures {name} are on more than one page")
+    return problems
+
+
+#: the benchmark a block's figures come from, where the names differ
+SOURCE_OF = {"cortex_m_targets": "firmware_cost", "loop_rates": "hil_lockstep"}
+
+
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--record", nargs="+", metavar="NAME", help="copy out/bench/NAME.json to bench/results first")
-    ap.add_argument("--check", action="store_true", help="only check that README.md's blocks are up to date")
+    ap.add_argument("--check", action="store_true", help="only check that the blocks say what they should now")
     args = ap.parse_args(argv)
     for name in args.record or ():
-        print(f"readme_figures: recorded {record(name).relative_to(ROOT)}")
-    text = README.read_text("utf-8")
-    new = render(text)
-    found = {m["name"] for m in BLOCK.finditer(text)}
+        print(f"doc_figures: recorded {record(name).relative_to(ROOT)}")
+    texts = {page: page.read_text("utf-8") for page in pages()}
+    rendered = {page: render(text, page) for page, text in texts.items()}
     if args.check:
-        stale = [m["name"] for m, n in zip(BLOCK.finditer(text), BLOCK.finditer(new)) if m.group(0) != n.group(0)]
-        if stale or found != set(BLOCKS):
-            absent = sorted(set(BLOCKS) - found)
-            print(f"readme_figures: stale blocks {stale}, missing blocks {absent}: run scripts/readme_figures.py")
-            return 1
-        return 0
-    if new != text:
-        tmp = README.with_suffix(".md.tmp")
-        tmp.write_text(new, "utf-8")
-        os.replace(tmp, README)
-        print("readme_figures: README.md updated")
+        problems = check(texts, rendered)
+        for line in problems:
+            print(line, file=sys.stderr)
+        return 1 if problems else 0
+    for page, text in texts.items():
+        if rendered[page] != text:
+            tmp = page.with_name(f".{page.name}.tmp")
+            tmp.write_text(rendered[page], "utf-8")
+            os.replace(tmp, page)
+            print(f"doc_figures: {page.relative_to(ROOT)} updated")
     return 0
 
 
