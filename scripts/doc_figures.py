@@ -113,16 +113,17 @@ def _git(*argv: str) -> str | None:
 
 def staleness(name: str, doc: Doc) -> str | None:
     """None when the files benchmark ``name`` measures are as they were when it was recorded (or the recording
-    does not say: see :func:`provenance`); else which of them changed."""
+    does not say: see :func:`provenance`); else which of them changed (for messages: the docs say it in words that
+    do not change with every later change, so that a figure flagged once stays flagged without another edit)."""
     rec = doc.get("recorded", {})
     recorded = rec.get("sources_sha256")
     if recorded is None or recorded == sources_digest(name):
         return None
     commit = rec.get("commit")
     changed = _git("diff", "--name-only", commit, "--", *SOURCES[name]) if commit else None
-    files = ", ".join(f"`{f}`" for f in changed.splitlines()[:6]) if changed else "the files it measures"
-    more = " and more" if changed and len(changed.splitlines()) > 6 else ""
-    return f"{files}{more} changed since it was recorded"
+    files = changed.splitlines() if changed else []
+    listed = ", ".join(files[:6]) + (f" and {len(files) - 6} more" if len(files) > 6 else "")
+    return f"{listed or 'the files it measures'} changed since it was recorded"
 
 
 # --- reading and recording --------------------------------------------------------------------------------------
@@ -179,7 +180,10 @@ def provenance(doc: Doc) -> str:
     if rec.get("sources_sha256") is None:
         text += " Not dated against the code it measures (recorded before recordings said which)."
     elif stale is not None:
-        text += f" **Older than the code it describes**: {stale}; `scripts/bench.sh {name}` records it again."
+        text += (
+            " **Older than the code it describes**: files it measures (`SOURCES` in `scripts/doc_figures.py`) changed"
+            f" since it was recorded; `scripts/bench.sh {name}` records it again."
+        )
     return prose(text)
 
 
@@ -551,18 +555,27 @@ def check(texts: dict[Path, str], rendered: dict[Path, str]) -> list[str]:
         for old, new in zip(BLOCK.finditer(text), BLOCK.finditer(rendered[page])):
             seen.append(old["name"])
             if old.group(0) != new.group(0):
-                doc = result(SOURCE_OF.get(old["name"], old["name"]))
-                stale = staleness(SOURCE_OF.get(old["name"], old["name"]), doc) if doc else None
-                why = f" ({stale})" if stale else ""
-                problems.append(
-                    f"doc_figures: {page.relative_to(ROOT)}: the figures {old['name']} differ from what the results "
-                    f"and the builds say now{why}: run scripts/doc_figures.py (or record the benchmark again)"
-                )
+                problems.append(_difference(page, old["name"], old.group(0), new.group(0)))
     for name in sorted(set(BLOCKS) - set(seen)):
         problems.append(f"doc_figures: no page has the figures {name}")
     for name in sorted({n for n in seen if seen.count(n) > 1}):
         problems.append(f"doc_figures: the figures {name} are on more than one page")
     return problems
+
+
+def _difference(page: Path, name: str, old: str, new: str) -> str:
+    """The line saying why a block is not what it should say now, and what to do."""
+    bench = SOURCE_OF.get(name, name)
+    doc = result(bench)
+    stale = staleness(bench, doc) if doc else None
+    where = f"doc_figures: {page.relative_to(ROOT)}: the figures {name}"
+    flag = "Older than the code it describes"
+    if stale is not None and flag in " ".join(new.split()) and flag not in " ".join(old.split()):
+        return (
+            f"{where} are older than the code they describe ({stale}): record them again (scripts/bench.sh {bench}), "
+            "or run scripts/doc_figures.py to say so in the docs"
+        )
+    return f"{where} are not what the results and the builds say now (an image size?): run scripts/doc_figures.py"
 
 
 #: the benchmark a block's figures come from, where the names differ

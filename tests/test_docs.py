@@ -209,3 +209,37 @@ def test_the_figures_are_what_the_results_and_the_builds_say_now():
         timeout=1200,
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def _doc_figures():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("doc_figures", ROOT / "scripts" / "doc_figures.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_recorded_figure_is_flagged_once_the_files_it_measures_change_and_only_then(tmp_path, monkeypatch):
+    """The rule of scripts/doc_figures.py on a tree made here: a recording stores the sha256 of the files its
+    benchmark measures; a change elsewhere leaves the figure as it is, a change to one of them flags it, in words
+    that a later change does not alter (a figure flagged once stays flagged without another edit)."""
+    figures = _doc_figures()
+    monkeypatch.setattr(figures, "ROOT", tmp_path)
+    for rel in ("hil/campaign/runner.py", "hil/loop/sil.py", "bench/campaign.py", "runtime/api.py"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(f"# {rel}\n")
+    stamp = {"from": "bench/campaign.py", "date": "2026-11-29", "cpus": 2, "load_average_at_record": 1.0}
+    doc = {"recorded": {**stamp, "sources_sha256": figures.sources_digest("campaign")}}
+    assert figures.staleness("campaign", doc) is None and "Older" not in figures.provenance(doc)
+    (tmp_path / "runtime/api.py").write_text("# changed, but no campaign figure measures it\n")
+    assert figures.staleness("campaign", doc) is None
+    (tmp_path / "hil/campaign/runner.py").write_text("# changed\n")
+    assert figures.staleness("campaign", doc) is not None
+    flagged = " ".join(figures.provenance(doc).split())
+    assert "**Older than the code it describes**" in flagged and "`scripts/bench.sh campaign`" in flagged
+    (tmp_path / "hil/loop/sil.py").write_text("# changed too\n")
+    assert " ".join(figures.provenance(doc).split()) == flagged
+    undated = {"recorded": stamp}
+    assert figures.staleness("campaign", undated) is None
+    assert "Not dated against the code it measures" in " ".join(figures.provenance(undated).split())
