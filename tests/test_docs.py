@@ -6,12 +6,14 @@ Marks (the line right before a fenced block; docs/contributing.md, "The document
 runs in ``make test``, ``<!-- run: matrix -->`` in ``make test-matrix``, ``<!-- run: never: WHY -->`` never (and
 says why), ``<!-- file: NAME -->`` writes the block to NAME for the blocks after it, ``<!-- prints -->`` is an
 excerpt of what the run block before it printed. A page's blocks run in order in one folder (``examples/`` linked
-into it), ``sh`` through bash with the venv first on PATH, ``python`` as a script. The oracle is the real run: the
-commands' exit status and what they print.
+into it), ``sh`` through bash with the venv first on PATH, ``python`` as a script, each in a network namespace of
+its own where one can be made (:func:`private_network`). The oracle is the real run: the commands' exit status and
+what they print.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import shutil
@@ -113,6 +115,25 @@ def test_the_readme_and_the_guide_run_something_in_make_test():
     assert {"python.md", "specs.md", "firmware.md", "hil.md", "campaigns.md", "fixed_point.md"} <= guide, guide
 
 
+LOOPBACK = "ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo"
+
+
+@functools.cache
+def private_network() -> tuple[str, ...]:
+    """A prefix that runs a command in a network namespace of its own, with nothing but a loopback that carries
+    multicast (FIELD-NOTES), when this machine lets the suite make one (root: unshare -n).
+
+    The pages' commands use the built-in scenarios as written, on their fixed ports (python-can's 43113, TCP 5760):
+    in the host's namespace they would share them with each other, with the suite's other tests and with other
+    checkouts' suites on this host (tests/support/net.py keeps every other test off them). In a namespace of its own
+    each block has its ports to itself, and no network at all: nothing it runs can fetch anything."""
+    unshare = shutil.which("unshare")
+    prefix = (unshare or "unshare", "-n", "bash", "-c", f'{LOOPBACK} && exec "$0" "$@"')
+    if unshare and subprocess.run([*prefix, "true"], capture_output=True).returncode == 0:
+        return prefix
+    return ()
+
+
 def _run(block: Block, folder: Path, tier: str) -> str:
     env = {**os.environ, "PATH": f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}", "OPENBLAS_NUM_THREADS": "1"}
     if block.lang == "python":
@@ -122,7 +143,13 @@ def _run(block: Block, folder: Path, tier: str) -> str:
     else:
         argv = ["bash", "-euo", "pipefail", "-c", block.text]
     proc = subprocess.run(
-        argv, cwd=folder, env=env, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=TIMEOUT[tier]
+        [*private_network(), *argv],
+        cwd=folder,
+        env=env,
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT[tier],
     )
     output = proc.stdout + proc.stderr
     assert proc.returncode == 0, f"{block.where}: exited {proc.returncode}:\n{output[-4000:]}"
@@ -165,21 +192,12 @@ def test_the_long_blocks_of_a_page_run_as_written(page, tmp_path):
     run_page(page, tmp_path, ("test", "matrix"))
 
 
-def _offline() -> list[str]:
-    """A prefix that runs a command with no network at all (a network namespace of its own), when this machine
-    lets us make one."""
-    unshare = shutil.which("unshare")
-    if unshare and subprocess.run([unshare, "-n", "true"], capture_output=True).returncode == 0:
-        return [unshare, "-n"]
-    return []
-
-
 @pytest.mark.slow
 def test_the_site_builds_offline_with_warnings_as_errors(tmp_path):
     """``make docs``'s build (Sphinx, -W), in a network namespace without network where one can be made: nothing
     is fetched. Its pages include the architecture page, the API reference of every name of gl.__all__ and the
     command line's reference."""
-    cmd = [*_offline(), sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html", "docs"]
+    cmd = [*private_network(), sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html", "docs"]
     proc = subprocess.run(
         [*cmd, str(tmp_path / "html")], cwd=ROOT, capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=600
     )
