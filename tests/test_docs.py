@@ -135,7 +135,8 @@ def private_network() -> tuple[str, ...]:
 
 
 def _run(block: Block, folder: Path, tier: str) -> str:
-    env = {**os.environ, "PATH": f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}", "OPENBLAS_NUM_THREADS": "1"}
+    path = f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}"
+    env = {**os.environ, "PATH": path, "OPENBLAS_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
     if block.lang == "python":
         script = folder / f"block_{block.line}.py"
         script.write_text(block.text)
@@ -147,11 +148,12 @@ def _run(block: Block, folder: Path, tier: str) -> str:
         cwd=folder,
         env=env,
         stdin=subprocess.DEVNULL,
-        capture_output=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,  # one stream, in the order it was written
         text=True,
         timeout=TIMEOUT[tier],
     )
-    output = proc.stdout + proc.stderr
+    output = proc.stdout
     assert proc.returncode == 0, f"{block.where}: exited {proc.returncode}:\n{output[-4000:]}"
     return output
 
