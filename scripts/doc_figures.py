@@ -51,7 +51,10 @@ _FIRMWARE_C = (
     "firmware/include",
     "firmware/src",
     "firmware/ports/cortex-m",
-    "runtime/shipping",
+    "runtime/shipping/codegen.py",
+    "runtime/shipping/codegen_fixed.py",
+    "runtime/shipping/codegen_scheduled.py",
+    "runtime/shipping/gains_layout.py",
 )
 _HOST_LINKS = ("hil/loop", "hil/links", "firmware/apps", "firmware/ports/host")
 SOURCES: dict[str, tuple[str, ...]] = {
@@ -86,12 +89,19 @@ def pages() -> list[Path]:
 
 
 def _source_files(paths: Iterable[str]) -> list[Path]:
-    files: list[Path] = []
+    """The files under ``paths`` that git tracks (what a build or a test run writes there is not code), or, outside a
+    git checkout, every file under them but bytecode."""
+    paths = list(paths)
+    tracked = _git("ls-files", "-z", "--", *paths)
+    if tracked is not None:
+        names = sorted({name for name in tracked.split("\0") if name})
+        return [ROOT / name for name in names if (ROOT / name).is_file()]
+    files: set[Path] = set()
     for rel in paths:
         path = ROOT / rel
-        found = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
-        files += [p for p in found if "__pycache__" not in p.parts and p.suffix != ".pyc"]
-    return files
+        found = [path] if path.is_file() else [p for p in path.rglob("*") if p.is_file()]
+        files |= {p for p in found if "__pycache__" not in p.parts and p.suffix != ".pyc"}
+    return sorted(files, key=lambda p: p.relative_to(ROOT).as_posix())
 
 
 def sources_digest(name: str) -> str:
