@@ -6,7 +6,7 @@ VENV  := .venv
 PY    := $(VENV)/bin/python
 STAMP := $(VENV)/.gainlink-setup
 
-.PHONY: setup demo test test-matrix bench bench-fuzz bench-soak clean
+.PHONY: setup demo test test-matrix docs bench bench-fuzz bench-soak clean
 
 setup: $(STAMP)
 
@@ -40,8 +40,14 @@ test: setup
 test-matrix: setup
 	$(TEST_ENV) $(PY) -m pytest -q -m matrix
 
+# The documentation site into docs/_build/html (ignored), warnings as errors as the suite builds it
+# (tests/test_docs.py); offline: nothing is fetched.
+docs: setup
+	$(PYC_ENV) $(PY) -m sphinx -W -q -b html docs docs/_build/html
+	@echo "docs: docs/_build/html/index.html"
+
 # The quick benchmarks (minutes); the long ones (an hour each) have their own targets. Each records its JSON
-# as the README's figures (scripts/readme_figures.py).
+# as the docs' figures (scripts/doc_figures.py).
 bench: setup
 	$(PYC_ENV) PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh
 
@@ -52,4 +58,4 @@ bench-soak: setup
 	$(PYC_ENV) PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash scripts/bench.sh soak
 
 clean:
-	rm -rf build out .cache
+	rm -rf build out .cache docs/_build

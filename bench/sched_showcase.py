@@ -1,9 +1,9 @@
-"""The scheduled-law showcase's numbers for the README (issue 18 item 6): ``gainlink hil showcase`` with its
-built-in description (examples/tank_showcase.toml scheduled and at its middle point, HIL: the firmware's CAN
-node on each law against the tank FMU), its report.json printed with the machine's load.
+"""The scheduled-law showcase's numbers for the docs (docs/guide/scheduled.md; issue 18 item 6): ``gainlink hil
+showcase`` with its built-in description (examples/tank_showcase.toml scheduled and at its middle point, HIL: the
+firmware's CAN node on each law against the tank FMU), its report.json printed with the machine's load.
 
     .venv/bin/python bench/sched_showcase.py > out/bench/sched_showcase.json
-    .venv/bin/python scripts/readme_figures.py --record sched_showcase && .venv/bin/python scripts/readme_figures.py
+    .venv/bin/python scripts/doc_figures.py --record sched_showcase && .venv/bin/python scripts/doc_figures.py
 """
 
 from __future__ import annotations

@@ -79,19 +79,20 @@ def design(
     u_min, u_max : array_like, optional
         Actuator limits (absolute), filling the ``limits`` table.
     controller, integral, observer, limits, operating_point : dict, optional
-        Spec tables with the keys of a spec file (README, "Plant specs"); given keys replace the
+        Spec tables with the keys of a spec file (docs/guide/specs.md); given keys replace the
         spec's. With a python-control system, ``controller`` defaults to LQR and ``observer`` to
         a Kalman predictor.
     discretization : {"zoh", "tustin"}, optional
         How a continuous plant is sampled (default ``zoh``).
     schedule : dict, optional
-        The ``[schedule]`` table (README, "Scheduled law"): ``sigma``, ``points``, optional ``external``,
+        The ``[schedule]`` table (docs/guide/scheduled.md): ``sigma``, ``points``, optional ``external``,
         ``rate_max``, ``filter_tau``, and ``plant``: one entry per point, each a ``control.StateSpace`` (about
         the origin) or a dict of ``A B C D u_op y_op x_op``. ``plant`` then gives only the shared kind and
         names (a python-control system's own matrices are dropped). The artifact is scheduled (schema 2).
     implementation : dict, optional
-        The ``[implementation]`` table, e.g. ``{"numeric": "q31"}`` for the fixed-point law (README, "Fixed
-        point"; needs the ranges ``y_min y_max r_min r_max`` in ``limits``); given keys replace the spec's.
+        The ``[implementation]`` table, e.g. ``{"numeric": "q31"}`` for the fixed-point law
+        (docs/guide/fixed_point.md; needs the ranges ``y_min y_max r_min r_max`` in ``limits``); given keys
+        replace the spec's.
 
     Returns
     -------

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs benchmarks of bench/ (each prints one JSON document with its baseline ratio), keeps the JSON in
-# out/bench/NAME.json, then records the ones that succeeded as the README's figures
-# (scripts/readme_figures.py --record: bench/results/NAME.json and the marked blocks of README.md).
+# out/bench/NAME.json, then records the ones that succeeded as the docs' figures
+# (scripts/doc_figures.py --record: bench/results/NAME.json and the marked blocks of the README and docs/).
 #
 #   scripts/bench.sh            the quick benchmarks: every bench/*.py but the long ones and _*.py (minutes)
 #   scripts/bench.sh NAME ...   these (bench/NAME.py), e.g. `fuzz` or `soak` (an hour each)
@@ -35,6 +35,6 @@ for name in "${names[@]}"; do
 done
 printf '\nJSON kept in out/bench/\n'
 if ((${#done_ok[@]})); then
-  python scripts/readme_figures.py --record "${done_ok[@]}" || status=1
+  python scripts/doc_figures.py --record "${done_ok[@]}" || status=1
 fi
 exit $status

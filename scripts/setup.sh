@@ -2,7 +2,7 @@
 # Installs everything gainlink needs on a fresh Debian machine: the apt packages that are missing
 # (ARM toolchain, QEMU for Cortex-M PIL and for the vcan VM, busybox for its initramfs, rt-tests'
 # cyclictest for the real-time benchmark's machine floor, clang for the libFuzzer harnesses, Ninja and ccache
-# for quicker firmware builds) and a virtualenv in .venv with the project installed in editable mode with its test extras.
+# for quicker firmware builds) and a virtualenv in .venv with the project installed in editable mode with its test and docs extras.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -37,7 +37,7 @@ echo "setup: installing gainlink into .venv"
 # MAVProxy for the MAVLink tests comes without its declared GUI/map dependencies (opencv, vtk, ...: hundreds of MB):
 # its core and parameter module need only pymavlink, numpy, pyserial and defusedxml (the test extra).
 install_with() {
-  "$@" -e '.[test]' && "$@" --no-deps 'MAVProxy>=1.8.75,<1.9'
+  "$@" -e '.[test,docs]' && "$@" --no-deps 'MAVProxy>=1.8.75,<1.9'
 }
 # uv goes into the venv with the machine's own pip (pip >= 22.3 has --python), else with the venv's (made if need be).
 install_uv() {

@@ -47,6 +47,12 @@ SECOND_HALF = (
     "mavsdk",
     "defusedxml",
     "xdist",
+    # the documentation's build (tests/test_docs.py, make docs)
+    "sphinx.application",
+    "myst_parser.sphinx_ext",
+    "numpydoc.numpydoc",
+    "sphinxarg.ext",
+    "furo",
 )
 
 

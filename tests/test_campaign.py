@@ -192,6 +192,54 @@ def test_a_refused_worker_count_writes_nothing(pend, tmp_path):
     assert res.err == "gainlink: error: campaign: workers must be a whole number >= 1, not 0\n"
 
 
+UNGUARDED = """
+import gainlink as gl
+print("top level ran", flush=True)
+gl.campaign.run(CAMPAIGN, out="out", workers=WORKERS)
+"""
+GUARDED = """
+import gainlink as gl
+print("top level ran", flush=True)
+
+
+def main():
+    gl.campaign.run(CAMPAIGN, out="out", workers=WORKERS)
+
+
+if __name__ == "__main__":
+    main()
+"""
+
+
+def _script_calling_run(folder: Path, body: str, campaign: Path, workers: int) -> subprocess.CompletedProcess[str]:
+    script = folder / "study.py"
+    script.write_text(body.replace("CAMPAIGN", repr(str(campaign))).replace("WORKERS", str(workers)))
+    return subprocess.run(
+        [sys.executable, str(script)], cwd=folder, capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=120
+    )
+
+
+def test_a_script_calling_run_outside_a_main_guard_is_refused_before_any_worker_starts(pend, tmp_path):
+    """A LocalCluster's workers import the calling script again (as ``__mp_main__``): unguarded, each would run its
+    top level again, this call included, and fail to start ("Nanny failed to start", hundreds of lines). The call
+    is refused in one line naming the fix, before anything is planned or written; the same call under the guard
+    gets past the check (here to the next refusal, a worker count of 0, so that no cluster starts)."""
+    campaign = tmp_path / "c.toml"
+    campaign.write_text(toml_write.dumps(small_campaign(pend)))
+    proc = _script_calling_run(tmp_path, UNGUARDED, campaign, workers=1)
+    assert proc.returncode == 1 and proc.stdout == "top level ran\n", proc.stdout + proc.stderr
+    last = proc.stderr.strip().splitlines()[-1]
+    assert last == (
+        f"gainlink.hil.campaign.cluster.UnguardedMainError: campaign: run() is called from the top level of "
+        f"{tmp_path / 'study.py'} (line 4), which each worker process of the LocalCluster imports again and would run "
+        'again: put the call under `if __name__ == "__main__":`'
+    ), proc.stderr
+    assert not (tmp_path / "out").exists()
+    guarded = _script_calling_run(tmp_path, GUARDED, campaign, workers=0)
+    assert guarded.stderr.strip().endswith("campaign: workers must be a whole number >= 1, not 0"), guarded.stderr
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize(
     "axis, words",
     [

@@ -1,6 +1,6 @@
 """The code's health as part of the test command: ruff's lint and format check, mypy on the public API, and the
-import layers (import-linter's contracts in pyproject.toml: layers one way, no import cycles), and the README's
-figures against the recorded benchmark results (scripts/readme_figures.py --check).
+import layers (import-linter's contracts in pyproject.toml: layers one way, no import cycles). The documentation's
+checks (its build, its code, its figures) are tests/test_docs.py.
 
 Each runs as a subprocess over the whole checkout (configured in pyproject.toml), so under pytest-xdist they run
 beside the rest of the suite. A failure shows the tool's own report.
@@ -42,11 +42,6 @@ def test_import_layers_point_one_way_and_nothing_imports_in_a_cycle():
     proc = run_tool(str(ROOT / "scripts" / "lint_imports.py"))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "0 broken" in proc.stdout or "broken" not in proc.stdout, proc.stdout
-
-
-def test_readme_figures_are_the_recorded_benchmark_results():
-    proc = run_tool(str(ROOT / "scripts" / "readme_figures.py"), "--check")
-    assert proc.returncode == 0, proc.stdout + proc.stderr
 
 
 PROBE = """

@@ -6,8 +6,12 @@
 :func:`.worker.execute`), stores each run by its content address (:mod:`.store`) and merges the report
 (:mod:`.report`): pass/fail per run (:mod:`.criteria`), percentile envelopes, scatter plots, a failure table.
 :func:`show_run` replays one run with its full HIL report.
+
+From a script, call :func:`run` under ``if __name__ == "__main__":``: the LocalCluster's worker processes import
+the script again, and :func:`run` refuses an unguarded call (:class:`UnguardedMainError`) before any starts.
 """
 
+from .cluster import UnguardedMainError
 from .config import Campaign, CampaignError, Criteria, load_campaign, parse_campaign
 from .runner import CampaignInterrupted, CampaignResult, run
 from .show import show_run
@@ -18,6 +22,7 @@ __all__ = [
     "CampaignInterrupted",
     "CampaignResult",
     "Criteria",
+    "UnguardedMainError",
     "load_campaign",
     "parse_campaign",
     "run",

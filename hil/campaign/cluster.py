@@ -12,10 +12,13 @@ alone handles (:mod:`.local_worker`); a cluster of yours keeps its own configura
 
 from __future__ import annotations
 
+import ast
 import contextlib
 import logging
 import os
+import sys
 from collections.abc import Iterator
+from pathlib import Path
 
 from gainlink.errors import GainlinkError
 
@@ -75,6 +78,85 @@ def _preload_worker_modules() -> None:
 
 class ClusterError(GainlinkError, ConnectionError):
     """The Dask scheduler cannot be reached or the cluster cannot start."""
+
+
+class UnguardedMainError(GainlinkError, RuntimeError):
+    """A LocalCluster asked for from a script's top level outside ``if __name__ == "__main__":``.
+
+    Its worker processes start by importing the script again (as ``__mp_main__``, as every ``multiprocessing``
+    start method but fork does): unguarded, that import would run the script's top level again in each worker,
+    its designs, runs and this very call included, and the workers would fail to start.
+    """
+
+
+def check_main_guard() -> None:
+    """Refuse, before any worker starts, a LocalCluster asked for from the unguarded top level of a script.
+
+    The script is the ``__main__`` module a worker would import again (one run as ``python script.py`` or
+    ``python -m module``; not an interactive session, a notebook, ``python -c`` or a package's ``__main__``); the
+    call is unguarded when the top-level statement running it is not inside an ``if __name__ == "__main__":``
+    block.
+
+    Raises
+    ------
+    UnguardedMainError
+        Naming the script, the line and the fix.
+    """
+    main = sys.modules.get("__main__")
+    path = _reimported_main_path(main)
+    line = _top_level_line(main)
+    if path is None or line is None or _inside_main_guard(path, line):
+        return
+    raise UnguardedMainError(
+        f"campaign: run() is called from the top level of {path} (line {line}), which each worker process of the "
+        f'LocalCluster imports again and would run again: put the call under `if __name__ == "__main__":`'
+    )
+
+
+def _reimported_main_path(main: object) -> Path | None:
+    """The file of ``__main__`` when a worker process imports it again (multiprocessing.spawn's rule), else None."""
+    name = getattr(getattr(main, "__spec__", None), "name", None)
+    if name is not None and (name == "__main__" or name.endswith(".__main__")):
+        return None  # a package's __main__ is not imported again
+    file = getattr(main, "__file__", None)
+    if file is None or Path(file).stem == "ipython":
+        return None
+    return Path(file)
+
+
+def _top_level_line(main: object) -> int | None:
+    """The line of ``__main__``'s top-level code being run now on this thread's stack (None if it is not on it)."""
+    namespace = getattr(main, "__dict__", None)
+    line, frame = None, sys._getframe(1)
+    while frame is not None:
+        if frame.f_globals is namespace and frame.f_code.co_name == "<module>":
+            line = frame.f_lineno
+        frame = frame.f_back
+    return line
+
+
+def _is_main_test(node: ast.expr) -> bool:
+    """``__name__ == "__main__"`` (either way round)."""
+    if not (isinstance(node, ast.Compare) and len(node.ops) == 1 and isinstance(node.ops[0], ast.Eq)):
+        return False
+    sides = [node.left, node.comparators[0]]
+    names = {s.id for s in sides if isinstance(s, ast.Name)}
+    texts = {s.value for s in sides if isinstance(s, ast.Constant)}
+    return names == {"__name__"} and texts == {"__main__"}
+
+
+def _inside_main_guard(path: Path, line: int) -> bool:
+    """Whether ``line`` of the script is in the body of an ``if __name__ == "__main__":`` (True when the script
+    cannot be read or parsed: nothing is refused on a guess)."""
+    try:
+        tree = ast.parse(path.read_text("utf-8"), filename=str(path))
+    except (OSError, SyntaxError, UnicodeDecodeError, ValueError):
+        return True
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and _is_main_test(node.test):
+            if node.body[0].lineno <= line <= (node.body[-1].end_lineno or node.body[-1].lineno):
+                return True
+    return False
 
 
 @contextlib.contextmanager

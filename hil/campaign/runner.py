@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .cluster import dask_client
+from .cluster import check_main_guard, dask_client
 from .config import Campaign, CampaignError, load_campaign, parse_campaign
 from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign
 from .report import merge
@@ -147,6 +147,9 @@ def run(
     ------
     CampaignError
         The campaign file or an option is wrong (nothing written).
+    UnguardedMainError
+        Called, for a LocalCluster (no ``scheduler``), from a script's top level outside
+        ``if __name__ == "__main__":`` (its workers would run the script again): refused before anything is planned.
     CampaignInterrupted
         On an interrupt (a ``KeyboardInterrupt``): the cluster is stopped and every run stored so far is kept.
 
@@ -156,6 +159,8 @@ def run(
     >>> result = campaign.run("examples/campaigns/pendulum_mass_uncertainty.toml", out="out/c")  # doctest: +SKIP
     >>> result.passed / result.total                                                             # doctest: +SKIP
     """
+    if scheduler is None:  # a LocalCluster's workers import the calling script again
+        check_main_guard()
     _check_counts(batch=batch, workers=workers)  # before anything is planned or written
     campaign = as_campaign(campaign)
     plan = plan_campaign(campaign)
