@@ -12,12 +12,16 @@ import subprocess
 
 import numpy as np
 import pytest
+from gainlink.fileio import read_toml
 from gainlink.firmware.build import build
 from gainlink.firmware.fixed import CLIPPED, FAULT, OVERFLOW, OVERFLOW_BITS, run_host, run_qemu
-from gainlink.proof.fixed_format import real
+from gainlink.proof.fixed_format import WORDS, real
+from gainlink.proof.fixed_law import gains_from_artifact
 from gainlink.shipping.artifact import from_dict, seal
 from gainlink.shipping.codegen import render_c
+from support.designs import designed
 from support.fixed import example, model_run, random_design
+from support.paths import EXAMPLES as SPECS
 
 EXAMPLES = [("pendulum", "q31"), ("quadrotor_lateral", "q31"), ("wood_berry", "q31"), ("wood_berry", "q15")]
 RANDOM = [  # (seed, options, numeric): both forms, clamp and back-calculation, q31 and q15
@@ -149,6 +153,24 @@ def test_second_line_saturation_is_flagged_as_the_model_flags_it():
     run = run_host(a, Y, R)
     assert (run.overflow & OVERFLOW_BITS["V"]).any() and ((run.flags & OVERFLOW) != 0).any()
     assert_same(a, run, model_run(a, Y, R))
+
+
+def test_a_u_op_at_a_limit_leaves_the_command_deviation_within_its_word():
+    """The pendulum in q31 with limits +-16 and u_op = -16 + 2^-25: u_op rounded in the coarser of the command's two
+    formats lands on -16, so HI_U - UOP_U was 2^31, one past the command word, and the C flagged GL_FX_OVERFLOW
+    (dU) at step 1 on samples and a reference within their ranges. The command's format now holds every deviation
+    as the integers hold them."""
+    data, _ = read_toml(SPECS / "pendulum.toml", what="spec", error=ValueError)
+    data["limits"] |= {"u_min": [-16.0], "u_max": [16.0]}
+    data["operating_point"] = {"u_op": [-16.0 + 2.0**-25], "y_op": [0.0, 0.0]}
+    data["implementation"] = {"numeric": "q31"}
+    a = from_dict(designed(data))
+    Y, R = np.tile([0.0, 0.5], (3, 1)), np.full((3, 1), -1.0)
+    run = run_host(a, Y, R)
+    g = gains_from_artifact(a)
+    assert list(run.U[1:, 0]) == [g.HI_U[0]] * 2  # the command at its upper limit: the deviation's extreme
+    assert not (run.flags & OVERFLOW).any(), [{k for k, b in OVERFLOW_BITS.items() if m & b} for m in run.overflow]
+    assert g.HI_U[0] - g.UOP_U[0] < 2 ** (WORDS["q31"]["command"] - 1)
 
 
 @pytest.mark.parametrize("target", ["cortex-m0", "cortex-m3"])

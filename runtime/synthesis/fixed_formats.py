@@ -13,7 +13,14 @@ import numpy as np
 from ..errors import DesignError
 from ..proof.derived_law import DerivedLaw
 from ..proof.fixed_format import WORDS, Format, format_for, quantise, real
-from ..proof.fixed_gains import FixedGains, SignalFormats, finest_accumulator_fracs, quantise_law
+from ..proof.fixed_gains import (
+    FixedGains,
+    SignalFormats,
+    command_integers,
+    deviation_fits,
+    finest_accumulator_fracs,
+    quantise_law,
+)
 from .fixed_ranges import InputRanges, RangeBounds, Rounding, range_bounds
 from .wcpg import spectral_radius
 
@@ -114,6 +121,7 @@ def choose(design: DerivedLaw, numeric: str) -> Quantised:
     fm = SignalFormats(numeric, **input_formats(design, numeric), **_state_formats(estimate, design))
     caps: dict[str, np.ndarray] = {}
     for _ in range(MAX_ROUNDS):
+        fm = _fit_command_deviation(design, fm)
         acc = finest_accumulator_fracs(design, fm)
         acc = {k: np.minimum(v, caps[k]) if k in caps else v for k, v in acc.items()}
         g = quantise_law(design, fm, acc)
@@ -127,6 +135,20 @@ def choose(design: DerivedLaw, numeric: str) -> Quantised:
             return Quantised(gains=g, rounding=h, ranges=inputs, bounds=bounds, acc_bounds=acc_bounds)
         fm, caps = grown, new_caps
     raise DesignError(f"the {numeric} formats did not settle in {MAX_ROUNDS} rounds (bounds keep growing)")
+
+
+def _fit_command_deviation(law: DerivedLaw, fm: SignalFormats) -> SignalFormats:
+    """``fm`` with each command format coarsened until every command's deviation from ``u_op`` fits the command
+    word as the integers hold them: ``u_op`` and the limits are rounded in the coarser of the command's two
+    formats, which can move ``u_op`` by up to half a unit of that format (a ``u_op`` at a limit then leaves
+    ``HI_U - UOP_U`` one past the word). Ends at the latest when the command's format is the coarser one, where
+    :func:`_interval_format` made it fit."""
+    while True:
+        fits = deviation_fits(command_integers(law, fm), fm)
+        if fits.all():
+            return fm
+        u = tuple(f if ok else Format(f.word, f.frac - 1) for f, ok in zip(fm.u, fits))
+        fm = replace(fm, u=u)
 
 
 def _check_quantised_estimate(law: DerivedLaw, numeric: str) -> None:
