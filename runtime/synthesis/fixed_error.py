@@ -19,6 +19,9 @@ and each output of a sum of products rounded once (half a unit of ``v``, ``u``, 
 Coefficient quantisation is a separate term: the WCPG of the difference between the design's law and the
 quantised one, driven by the same inputs (open loop: the samples within their ranges; closed loop: the
 references within theirs, with the rounded operating point as constant offsets).
+
+Every peak gain is of matrices formed in balls (:mod:`gainlink.proof.ball`), through
+:func:`~.wcpg.wcpg_ball`: the float64 rounding of forming them is covered.
 """
 
 from __future__ import annotations
@@ -28,10 +31,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import DesignError
+from ..proof.ball import abs_upper, balls, mid, precise
 from ..proof.derived_law import DerivedLaw
 from .fixed_loops import LinearSystem, closed_loop, difference, open_loop
-from .fixed_ranges import Rounding
-from .wcpg import spectral_radius, wcpg
+from .fixed_ranges import Rounding, centre_half
+from .wcpg import spectral_radius, wcpg_ball
 
 
 @dataclass(frozen=True)
@@ -63,14 +67,15 @@ def _rounding_weights(h: Rounding, *, loop: bool) -> dict[str, np.ndarray]:
 
 def _bound(system: LinearSystem, weights: dict[str, np.ndarray], what: str) -> np.ndarray:
     B, D = system.columns(weights)
-    return wcpg(system.A, B, system.C, D, what=what).upper.sum(axis=1)
+    return wcpg_ball(system.A, B, system.C, D, what=what).total
 
 
 def compensator_radius(law: DerivedLaw) -> float:
-    """Spectral radius of the compensator without its integrators, ``F + G Kx``."""
-    return spectral_radius(law.F + law.G @ law.Kx)
+    """Spectral radius of the compensator without its integrators, ``F + G Kx`` (an estimate)."""
+    return spectral_radius(mid(law.F) + mid(law.G) @ mid(law.Kx))
 
 
+@precise
 def open_loop_bound(law: DerivedLaw, h: Rounding) -> np.ndarray | None:
     """The open-loop bound, or None when it does not apply (integrators, or an unstable compensator)."""
     if law.q or not compensator_radius(law) < 1.0:
@@ -80,7 +85,7 @@ def open_loop_bound(law: DerivedLaw, h: Rounding) -> np.ndarray | None:
 
 def check_quantised_loop(law: DerivedLaw, plant: tuple, numeric: str) -> float:
     """The closed loop's spectral radius with the quantised coefficients; DesignError when it is not stable."""
-    radius = spectral_radius(closed_loop(law, plant).A)
+    radius = spectral_radius(mid(closed_loop(law, plant).A))
     if not radius < 1.0:
         raise DesignError(
             f"the closed loop is unstable with the {numeric} coefficients (spectral radius {radius:.6g} >= 1): "
@@ -89,33 +94,41 @@ def check_quantised_loop(law: DerivedLaw, plant: tuple, numeric: str) -> float:
     return radius
 
 
+@precise
 def closed_loop_bound(law: DerivedLaw, plant: tuple, h: Rounding) -> np.ndarray:
     """The closed-loop bound (module docstring)."""
     system = closed_loop(law, plant)
     return _bound(system, _rounding_weights(h, loop=True), "the closed loop with the quantised coefficients")
 
 
+@precise
 def coefficient_terms(
     design: DerivedLaw, ideal: DerivedLaw, plant: tuple, ranges: dict
 ) -> tuple[np.ndarray | None, np.ndarray]:
-    """``(open loop or None, closed loop)`` bounds of the command difference between the design's law and the
-    quantised one (module docstring). ``ranges`` holds the real y_min/y_max (p) and r_min/r_max (q)."""
-    offsets = {"nop": np.abs(design.y_op - ideal.y_op), "d": np.abs(ideal.u_op - design.u_op)}
+    """``(open loop or None, closed loop)`` bounds of the command difference between the design's law (in balls)
+    and the quantised one from rest, driven by references (open loop: samples) within ``ranges`` only (module
+    docstring). ``ranges`` holds the real y_min/y_max (p) and r_min/r_max (q)."""
+    offsets = {"nop": _gap(design.y_op, ideal.y_op), "d": _gap(ideal.u_op, design.u_op)}
     closed = difference(closed_loop(design, plant), closed_loop(ideal, plant), shared=("r",))
     weights = dict(offsets)
     if design.q:
-        r_op = -design.Ty @ design.y_op / design.Tr  # Ci y_op
-        lo, hi = np.asarray(ranges["r_min"]) - r_op, np.asarray(ranges["r_max"]) - r_op
-        centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        r_op = -(balls(design.Ty) @ balls(design.y_op)) / balls(design.Tr)  # Ci y_op
+        centre, half = centre_half((balls(ranges["r_min"]) - r_op, balls(ranges["r_max"]) - r_op))
         closed = _with_centre(closed, "r", centre)
-        weights |= {"r": half, "r_centre": np.ones(1)}
+        weights |= {"r": abs_upper(half), "r_centre": np.ones(1)}
     closed_bound = _bound(closed, weights, "the difference of the design's and the quantised closed loops")
     if design.q or not (compensator_radius(design) < 1.0 and compensator_radius(ideal) < 1.0):
         return None, closed_bound
-    lo, hi = np.asarray(ranges["y_min"]) - design.y_op, np.asarray(ranges["y_max"]) - design.y_op
-    diff = _with_centre(difference(open_loop(design), open_loop(ideal), shared=("ny",)), "ny", 0.5 * (lo + hi))
-    weights = offsets | {"ny": 0.5 * (hi - lo), "ny_centre": np.ones(1)}
+    y_op = balls(design.y_op)
+    centre, half = centre_half((balls(ranges["y_min"]) - y_op, balls(ranges["y_max"]) - y_op))
+    diff = _with_centre(difference(open_loop(design), open_loop(ideal), shared=("ny",)), "ny", centre)
+    weights = offsets | {"ny": abs_upper(half), "ny_centre": np.ones(1)}
     return _bound(diff, weights, "the difference of the design's and the quantised compensators"), closed_bound
+
+
+def _gap(x, y) -> np.ndarray:
+    """``|x - y|`` rounded up (exact differences of float64 numbers)."""
+    return abs_upper(balls(x) - balls(y))
 
 
 def _with_centre(system: LinearSystem, name: str, centre: np.ndarray) -> LinearSystem:

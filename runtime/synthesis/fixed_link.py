@@ -18,11 +18,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..proof.ball import precise
 from ..proof.fixed_law import gains_from_artifact
 from ..shipping.artifact import Artifact
 from .fixed_formats import rounding
 from .fixed_loops import closed_loop
-from .wcpg import wcpg
+from .wcpg import wcpg_ball
 
 
 def float32_half_ulp(lo, hi) -> np.ndarray:
@@ -32,6 +33,7 @@ def float32_half_ulp(lo, hi) -> np.ndarray:
     return np.spacing(top.astype(np.float32)).astype(np.float64) / 2.0
 
 
+@precise
 def bound_float32_link(a: Artifact) -> np.ndarray:
     """Per input, the bound of ``|u - u_q|`` (``u``: the float32 command of the integer law fed float32 samples
     and references; ``u_q``: the float64 law with the same quantised coefficients, sampling exactly) in closed loop
@@ -51,4 +53,4 @@ def bound_float32_link(a: Artifact) -> np.ndarray:
     system = closed_loop(g.ideal, (a.Ad, a.Bd, a.Cd, a.Dd))
     B, D = system.columns(weights)
     what = "the closed loop with the quantised coefficients and a float32 link"
-    return wcpg(system.A, B, system.C, D, what=what).upper.sum(axis=1)
+    return wcpg_ball(system.A, B, system.C, D, what=what).total

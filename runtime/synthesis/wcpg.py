@@ -294,3 +294,68 @@ def _verified_lambda_min(M) -> float:
     E = M - La * La.transpose() - arb_mat(np.eye(n).tolist()) * delta
     frob = math.sqrt(sum(_up(E[i, j]) ** 2 for i in range(n) for j in range(n))) * INFLATE
     return delta - frob if frob < delta else -math.inf
+
+
+@dataclass(frozen=True)
+class BallPeak:
+    """The peak bound of a system formed in balls (:func:`wcpg_ball`): ``upper`` (p x m) the peak gain of the
+    float64 system nearest the balls, per input column; ``formed`` (p) what the entries' rounding can add for
+    inputs ``|w_j| <= 1`` on every column; ``gain`` the float64 system's :class:`PeakGain` (its ``method`` and
+    ``terms``)."""
+
+    upper: np.ndarray
+    formed: np.ndarray
+    gain: PeakGain
+
+    @property
+    def total(self) -> np.ndarray:
+        """Every output's bound for inputs ``|w_j| <= 1``."""
+        return (self.upper.sum(axis=1) + self.formed) * INFLATE
+
+
+def wcpg_ball(A, B, C, D=None, *, what: str = "the system") -> BallPeak:
+    """The peak gain of ``(A, B, C, D)`` given as balls (numpy object arrays of python-flint ``arb``,
+    :mod:`gainlink.proof.ball`; float arrays are taken as exact), with what their rounding to float64 can add.
+
+    The peak gain is taken of the float64 matrices ``Â, B̂, Ĉ, D̂`` nearest the balls; the rest (at most
+    ``Ā, B̄, C̄, D̄`` entrywise) is an injection ``ε = (A - Â) x + (B - B̂) w`` into the state and a term
+    ``(C - Ĉ) x + (D - D̂) w`` on the output. With ``G`` the peak gain of ``(Â, [B̂ I], [Ĉ; I], [D̂ 0; 0 0])``, the
+    state's peak ``s`` obeys ``s <= G_xw 1 + G_xI (B̄ 1 + Ā s)``; when ``μ = max row sum of G_xI Ā < 1`` that gives
+    ``|s|_inf <= |v|_inf / (1 - μ)``, ``v = G_xw 1 + G_xI B̄ 1``, hence ``s``, and every output is at most
+    ``G_ow 1 + G_oI (B̄ 1 + Ā s) + C̄ s + D̄ 1`` (a small-gain argument, valid over every finite horizon).
+
+    Raises
+    ------
+    DesignError
+        ``Â`` is not stable, or the entries' rounding is not small against the loop's peak gain (``μ >= 1``).
+    """
+    from ..proof.ball import split
+
+    Ah, Ab = split(A)
+    Bh, Bb = split(B)
+    Ch, Cb = split(C)
+    n, mw, p = Ah.shape[0], Bh.shape[1], Ch.shape[0]
+    Dh, Db = (np.zeros((p, mw)), np.zeros((p, mw))) if D is None else split(D)
+    if not (Ab.any() or Cb.any() or Bb.any()):  # float64 exactly
+        g = wcpg(Ah, Bh, Ch, Dh, what=what)
+        return BallPeak(upper=g.upper, formed=Db.sum(axis=1) * INFLATE, gain=g)
+    if not (Ab.any() or Cb.any()):  # the state's own peak is not needed
+        g = wcpg(Ah, np.hstack([Bh, np.eye(n)]), Ch, np.hstack([Dh, np.zeros((p, n))]), what=what)
+        formed = g.upper[:, mw:] @ Bb.sum(axis=1) + Db.sum(axis=1)
+        return BallPeak(upper=g.upper[:, :mw], formed=formed * INFLATE, gain=g)
+    Dx = np.zeros((p + n, mw + n))
+    Dx[:p, :mw] = Dh
+    g = wcpg(Ah, np.hstack([Bh, np.eye(n)]), np.vstack([Ch, np.eye(n)]), Dx, what=what)
+    G_ow, G_oI, G_xw, G_xI = g.upper[:p, :mw], g.upper[:p, mw:], g.upper[p:, :mw], g.upper[p:, mw:]
+    M = (G_xI @ Ab) * INFLATE
+    mu = float(M.sum(axis=1).max(initial=0.0)) * INFLATE
+    if not mu < 1.0:
+        raise DesignError(
+            f"the rounding of the matrices of {what} is not small against its peak gain (small-gain factor "
+            f"{mu:.3g} >= 1): its bound cannot be certified"
+        )
+    v = (G_xw.sum(axis=1) + G_xI @ Bb.sum(axis=1)) * INFLATE
+    s = (v + M.sum(axis=1) * (float(v.max(initial=0.0)) / (1.0 - mu))) * INFLATE
+    injection = (Bb.sum(axis=1) + Ab @ s) * INFLATE
+    formed = (G_oI @ injection + Cb @ s + Db.sum(axis=1)) * INFLATE
+    return BallPeak(upper=G_ow, formed=formed, gain=g)
