@@ -4,10 +4,12 @@
 The float64 law compared against has the same quantised coefficients, operating point and limits, and clips its
 samples to the same ranges (:class:`~gainlink.proof.derived_law.DerivedLoop` on ``FixedGains.ideal``); the
 integer law differs from it only by rounding: each sample and reference quantised (half a unit of its format),
-and each output of a sum of products rounded once (half a unit of ``v``, ``u``, ``z``, ``xh``). Three bounds:
+each output of a sum of products rounded once (half a unit of ``v``, ``u``, ``z``, ``xh``), and the float the C
+returns, ``(float)U`` times a power of two (exact in q15; within half a float32 unit of the largest command word
+in q31: ``c``, at the plant's input). Three bounds:
 
-- **per step**, from the same state (the one-step, resynchronised check): ``|du| <= |Ky| h_y + h_v + h_u``, for
-  every compensator. The next state likewise (the integrator with clamping: when both laws take the same
+- **per step**, from the same state (the one-step, resynchronised check): ``|du| <= |Ky| h_y + h_v + h_u + c``,
+  for every compensator. The next state likewise (the integrator with clamping: when both laws take the same
   clamping decision).
 - **open loop over time**, for a stable compensator without integrators, while no input saturates: the rounding
   drives the compensator's own dynamics ``F + G Kx``; the WCPG of that error system bounds the command error for
@@ -40,7 +42,8 @@ from .wcpg import spectral_radius, wcpg_ball
 
 @dataclass(frozen=True)
 class PerStep:
-    """One-step bounds (same state before the step): the command ``u`` (m), next ``xh`` (n) and ``z`` (q)."""
+    """One-step bounds against the quantised law (same state before the step): the command ``u`` (m, the float
+    the C returns), next ``xh`` (n) and ``z`` (q)."""
 
     u: np.ndarray
     xh: np.ndarray
@@ -50,8 +53,8 @@ class PerStep:
 def per_step(law: DerivedLaw, h: Rounding) -> PerStep:
     """The resynchronised bounds (module docstring)."""
     dv = np.abs(law.Ky) @ h.y + h.v
-    du = dv + h.u
-    xh = np.abs(law.G) @ du + np.abs(law.Ly) @ h.y + h.x
+    du = dv + h.u + h.c
+    xh = np.abs(law.G) @ (dv + h.u) + np.abs(law.Ly) @ h.y + h.x
     kaw = np.abs(law.Kaw) @ dv if law.anti_windup == "backcalc" else 0.0
     z = np.abs(law.Tr) * h.r + np.abs(law.Ty) @ h.y + kaw + h.z
     up = 1 + 1e-12
@@ -59,7 +62,7 @@ def per_step(law: DerivedLaw, h: Rounding) -> PerStep:
 
 
 def _rounding_weights(h: Rounding, *, loop: bool) -> dict[str, np.ndarray]:
-    weights = {"ny": h.y, "rv": h.v, "ru": h.u, "rx": h.x}
+    weights = {"ny": h.y, "rv": h.v, "ru": h.u, "rx": h.x, "d": h.c}
     if loop:
         weights |= {"nr": h.r, "rz": h.z}
     return weights

@@ -86,7 +86,20 @@ def rounding(g: FixedGains) -> Rounding:
         u=half(fm.frac("u"), g.shift_u),
         z=half(fm.frac("z"), g.shift_z),
         x=half(fm.frac("xh"), g.shift_x),
+        c=command_float_error(g),
     )
+
+
+def command_float_error(g: FixedGains) -> np.ndarray:
+    """Per input, a bound of ``|(float)U 2^-f_u - U 2^-f_u|`` over the command words ``LO_U..HI_U`` (the C
+    returns ``(float)U`` times the power of two ``2^-f_u``, exactly): 0 when every such word is a float32
+    (``|U| <= 2^24``), else half the float32 spacing at the largest, ``2^(e - 24)`` units for ``2^e <= |U| <
+    2^(e+1)``; plus half the least subnormal where a product could be one (``f_u > 126``)."""
+    top = np.maximum(np.abs(g.LO_U), np.abs(g.HI_U)).astype(np.int64)
+    e = np.array([int(t).bit_length() - 1 for t in top], dtype=np.int64)
+    frac = g.formats.frac("u")
+    units = np.where(top > 1 << 24, np.ldexp(1.0, np.maximum(e - 24, 0)), 0.0)
+    return np.ldexp(units, -frac) + np.where(frac > 126, np.ldexp(1.0, -150), 0.0)
 
 
 def _real_inputs(law: DerivedLaw) -> InputRanges:
@@ -116,7 +129,7 @@ def choose(design: DerivedLaw, numeric: str) -> Quantised:
     DesignError
         ``F`` is unstable, the integrator cannot be bounded, or the formats do not settle.
     """
-    zero = Rounding(*(np.zeros(k) for k in (design.p, design.q, design.m, design.m, design.q, design.n)))
+    zero = Rounding(*(np.zeros(k) for k in (design.p, design.q, design.m, design.m, design.q, design.n, design.m)))
     estimate = range_bounds(design, _real_inputs(design), zero)
     fm = SignalFormats(numeric, **input_formats(design, numeric), **_state_formats(estimate, design))
     caps: dict[str, np.ndarray] = {}

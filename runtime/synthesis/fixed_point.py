@@ -46,6 +46,8 @@ COVERS = {
     "compensator (integrators and unstable compensators included); under saturation measured, not certified",
     "coefficients": "the design's law against the quantised one: closed loop around the design model for references "
     "within their ranges (disturbances and noise not covered); open loop for samples within their ranges",
+    "float": "every command figure is of the float the C returns, (float)U 2^-f_u: exact in q15, within half a "
+    "float32 unit of the largest command word in q31 (error.command_float)",
     "rigour": "peak gains (WCPG) with a verified tail, of matrices formed in ball arithmetic: the float64 rounding of "
     "forming them is covered",
 }
@@ -194,6 +196,7 @@ def certificate_dict(cert: FixedPointCertificate) -> dict:
             "certified": vec(cert.certified),
             "fraction_of_span": vec(cert.fraction),
             "max_error": cert.max_error,
+            "command_float": vec(qz.rounding.c),
         },
         "case": cert.case,
         "covers": dict(COVERS),

@@ -45,7 +45,9 @@ class InputRanges:
 @dataclass(frozen=True)
 class Rounding:
     """Half a unit in the last place of each rounding point (0 where there is no rounding): the samples ``y``
-    (p) and references ``r`` (q), the unsaturated command ``v`` and the command ``u`` (m), ``z`` (q), ``xh`` (n)."""
+    (p) and references ``r`` (q), the unsaturated command ``v`` and the command ``u`` (m), ``z`` (q), ``xh`` (n);
+    and ``c`` (m), how far the float the C returns can be from the command word's value (``(float)U``: 0 when
+    every word of the command's range is a float32)."""
 
     y: np.ndarray
     r: np.ndarray
@@ -53,6 +55,7 @@ class Rounding:
     u: np.ndarray
     z: np.ndarray
     x: np.ndarray
+    c: np.ndarray
 
 
 @dataclass(frozen=True)
