@@ -12,12 +12,16 @@ import subprocess
 
 import numpy as np
 import pytest
+from gainlink.fileio import read_toml
 from gainlink.firmware.build import build
 from gainlink.firmware.fixed import CLIPPED, FAULT, OVERFLOW, OVERFLOW_BITS, run_host, run_qemu
-from gainlink.proof.fixed_format import real
+from gainlink.proof.fixed_format import WORDS, real
+from gainlink.proof.fixed_law import gains_from_artifact
 from gainlink.shipping.artifact import from_dict, seal
 from gainlink.shipping.codegen import render_c
-from support.fixed import example, model_run, random_design
+from support.designs import designed
+from support.fixed import DesignLaw, example, model_run, random_design
+from support.paths import EXAMPLES as SPECS
 
 EXAMPLES = [("pendulum", "q31"), ("quadrotor_lateral", "q31"), ("wood_berry", "q31"), ("wood_berry", "q15")]
 RANDOM = [  # (seed, options, numeric): both forms, clamp and back-calculation, q31 and q15
@@ -149,6 +153,48 @@ def test_second_line_saturation_is_flagged_as_the_model_flags_it():
     run = run_host(a, Y, R)
     assert (run.overflow & OVERFLOW_BITS["V"]).any() and ((run.flags & OVERFLOW) != 0).any()
     assert_same(a, run, model_run(a, Y, R))
+
+
+def test_a_u_op_at_a_limit_leaves_the_command_deviation_within_its_word():
+    """The pendulum in q31 with limits +-16 and u_op = -16 + 2^-25: u_op rounded in the coarser of the command's two
+    formats lands on -16, so HI_U - UOP_U was 2^31, one past the command word, and the C flagged GL_FX_OVERFLOW
+    (dU) at step 1 on samples and a reference within their ranges. The command's format now holds every deviation
+    as the integers hold them."""
+    data, _ = read_toml(SPECS / "pendulum.toml", what="spec", error=ValueError)
+    data["limits"] |= {"u_min": [-16.0], "u_max": [16.0]}
+    data["operating_point"] = {"u_op": [-16.0 + 2.0**-25], "y_op": [0.0, 0.0]}
+    data["implementation"] = {"numeric": "q31"}
+    a = from_dict(designed(data))
+    Y, R = np.tile([0.0, 0.5], (3, 1)), np.full((3, 1), -1.0)
+    run = run_host(a, Y, R)
+    g = gains_from_artifact(a)
+    assert list(run.U[1:, 0]) == [g.HI_U[0]] * 2  # the command at its upper limit: the deviation's extreme
+    assert not (run.flags & OVERFLOW).any(), [{k for k, b in OVERFLOW_BITS.items() if m & b} for m in run.overflow]
+    assert g.HI_U[0] - g.UOP_U[0] < 2 ** (WORDS["q31"]["command"] - 1)
+
+
+@pytest.mark.parametrize("name,numeric", [("pendulum", "q31"), ("wood_berry", "q15")])
+def test_the_float_the_c_returns_is_within_the_per_step_bound(name, numeric):
+    """Resynchronised: before each step the design's float64 law (written from the contract, with the design's own
+    coefficients) takes the host C's state; the float command the C returns (``(float)U`` times ``2^-f_u``) is
+    within ``error.per_step`` of it. In q31 that float is up to half a float32 unit of the command word away from
+    the word's value (4x the rounding alone on the pendulum), and the coefficients' quantisation moves the command
+    too: both are in the bound (and, on saturated steps, how far the quantised limits moved)."""
+    a = example(name, numeric)
+    fp = a.checks["fixed_point"]
+    Y, R = _samples(a, STEPS, seed=9, beyond=0.9)
+    run = run_host(a, Y, R)
+    law = DesignLaw(a)
+    f_xh, f_z = np.array(fp["formats"]["xh"]), np.array(fp["formats"]["z"])
+    worst = np.zeros(a.m)
+    for k in range(STEPS):
+        if k:
+            law.xh, law.z = real(run.XH[k - 1], f_xh), real(run.Z[k - 1], f_z)
+        u, _ = law.step(Y[k].astype(np.float64), R[k].astype(np.float64))
+        worst = np.maximum(worst, np.abs(run.u[k].astype(np.float64) - u))
+    bound = np.array(fp["error"]["per_step"])
+    assert np.all(worst <= bound), f"{worst} > {bound}"
+    assert np.any(worst > 0.1 * bound)  # the bound is of the size of what happens
 
 
 @pytest.mark.parametrize("target", ["cortex-m0", "cortex-m3"])

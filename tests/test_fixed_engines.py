@@ -23,11 +23,22 @@ def pendulum_q31(tmp_path_factory) -> tuple:
     gains = d / "design" / "gains.json"
     sim = run_cli("simulate", gains, "--steps", "300", "--noise", "0.01", "--out", d / "in.csv")
     assert sim.code == 0, sim.err
-    return d, gains
+    return d, gains, res.out
+
+
+def test_design_prints_each_figure_with_the_words_the_artifact_records(pendulum_q31):
+    """The headline's scope and the sharper figures' are printed in the words of checks.fixed_point.covers, and the
+    printed headline is the recorded one (docs/design.md uses the same words)."""
+    _, gains, out = pendulum_q31
+    fp = json.loads(gains.read_text())["checks"]["fixed_point"]
+    assert fp["covers"]["certified"] in out
+    assert "beside it, covering less: from rest driven by references only" in out
+    line = next(x for x in out.splitlines() if x.strip().startswith("F:") and "of the span" in x)
+    assert f"{fp['error']['certified'][0]:.3g} = {fp['error']['fraction_of_span'][0]:.3g} of the span" in line
 
 
 def test_numeric_flag_overrides_the_spec(pendulum_q31):
-    _, gains = pendulum_q31
+    _, gains, _ = pendulum_q31
     data = json.loads(gains.read_text())
     assert data["checks"]["fixed_point"]["numeric"] == "q31"
 
@@ -39,7 +50,7 @@ def test_fixed_point_without_ranges_is_one_line(tmp_path):
 
 
 def test_replay_engines_of_a_fixed_point_artifact_agree_byte_for_byte(pendulum_q31):
-    d, gains = pendulum_q31
+    d, gains, _ = pendulum_q31
     outs = {}
     for engine, extra in (("fixed", ()), ("native", ()), ("qemu", ("--target", "cortex-m3"))):
         out = d / f"{engine}.csv"
@@ -55,7 +66,7 @@ def test_replay_engines_of_a_fixed_point_artifact_agree_byte_for_byte(pendulum_q
 def test_firmware_build_ships_the_fixed_point_image(pendulum_q31, tmp_path):
     """`firmware build` of a fixed-point artifact writes the integer image beside the float32 one, and the written
     ELF is the one that runs (replayed from the output folder, equal to the host build)."""
-    _, gains = pendulum_q31
+    _, gains, _ = pendulum_q31
     res = run_cli("firmware", "build", gains, "--target", "cortex-m0", "--out", tmp_path / "fw")
     assert res.code == 0, res.err
     manifest = json.loads((tmp_path / "fw" / "firmware.json").read_text())

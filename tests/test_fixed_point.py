@@ -17,13 +17,14 @@ from gainlink.shipping.artifact import from_dict, seal
 from gainlink.spec import parse_spec
 from gainlink.synthesis import synthesize
 from gainlink.synthesis.fixed_point import certify
+from support.designs import designed
 from support.paths import EXAMPLES
 
 
 def _example(name: str, numeric: str, **implementation) -> dict:
     data, _ = read_toml(EXAMPLES / f"{name}.toml", what="spec", error=ValueError)
     data = copy.deepcopy(data)
-    data["implementation"] = {"numeric": numeric, **implementation}
+    data["implementation"] = data.get("implementation", {}) | {"numeric": numeric, **implementation}
     return data
 
 
@@ -144,3 +145,22 @@ def test_the_artifacts_integers_are_used_as_stored(pendulum_q31):
     data["checks"]["fixed_point"]["integers"]["shift_v"][0] += 1
     with pytest.raises(ArtifactError, match="integers is inconsistent"):
         gains_from_artifact(from_dict(seal(data)))
+
+
+@pytest.mark.parametrize("name", ["pendulum", "quadrotor_lateral"])
+def test_q15_examples_are_refused_naming_the_remedy(name):
+    """The headline in operation of the pendulum and the quadrotor in q15 is above the default 1/4096 of the span
+    (1.8e-3 and 7.4e-3): refused in one line that names the figure, its parts and the remedies."""
+    with pytest.raises(DesignError) as exc:
+        synthesize(parse_spec(_example(name, "q15")))
+    text = str(exc.value)
+    assert "\n" not in text and "certified deviation in operation" in text and "from rest" in text
+    for remedy in ('use numeric = "q31"', "narrow the declared ranges", "raise fixed_point_max_error"):
+        assert remedy in text
+
+
+def test_wood_berry_declares_what_it_accepts_in_q15():
+    """wood_berry's spec accepts 1/1024 of a flow's span (its q15 headline is 3.7e-4 of it); q31 is far within."""
+    for numeric, within in (("q15", 1 / 1024), ("q31", 1e-6)):
+        err = designed(_example("wood_berry", numeric))["checks"]["fixed_point"]["error"]
+        assert err["max_error"] == 1 / 1024 and max(err["fraction_of_span"]) <= within

@@ -59,7 +59,7 @@ def test_sil_of_a_q31_artifact_is_the_integer_law_bit_for_bit(pend_q31):
     assert np.any(f32.u.astype(np.float32) != tr.u.astype(np.float32))  # not the float law of the same export
     fx = res.metrics["fixed_point"]
     assert fx["law"] == "q31" and fx["bit_exact"] is True and fx["within_per_step"]
-    assert 0 < fx["measured_du_per_step"][0] <= a.checks["fixed_point"]["error"]["per_step"][0]
+    assert 0 < fx["measured_du_per_step"][0] <= a.checks["fixed_point"]["error"]["per_step_rounding"][0]
 
 
 def test_a_non_finite_sample_is_refused_with_the_float_loops_status_and_the_models_command(pend_q31):

@@ -84,3 +84,36 @@ def test_unbounded_peak_gain_is_refused_in_one_line(A):
     with pytest.raises(DesignError, match="the peak gain of the estimate is unbounded") as exc:
         wcpg(np.array(A), np.ones((len(A), 1)), np.ones((1, len(A))), what="the estimate")
     assert "\n" not in str(exc.value)
+
+
+def test_the_closed_loop_bound_covers_the_rounding_of_forming_its_matrices():
+    """A law whose closed loop has an entry formed with cancellation: ``a = F + G Kx`` of floats near 1e8 cancel
+    to about 0.999, which float64 rounds by up to half a unit of 1e8 (7e-9), moving the peak gain
+    ``|Kx| / (1 - a)`` by 7e-6 of itself, far past what the WCPG's own margin (1e-9) holds. The certificate's
+    closed-loop bound is at least the exact peak gain (in rationals, an independent closed form)."""
+    from dataclasses import fields
+    from fractions import Fraction
+
+    from gainlink.proof.derived_law import DerivedLaw
+    from gainlink.synthesis.fixed_error import closed_loop_bound
+    from gainlink.synthesis.fixed_ranges import Rounding
+
+    G, Kx = 1e4 + 3 * 2.0**-39, -(1e4 + 5 * 2.0**-39)
+    F = 1e8 + 0.999
+    a_exact = Fraction(F) + Fraction(G) * Fraction(Kx)
+    assert F + G * Kx < a_exact  # float64 forming rounds it down: a smaller peak gain
+    law = DerivedLaw(
+        F=np.array([[F]]), G=np.array([[G]]), Ly=np.zeros((1, 1)), Kx=np.array([[Kx]]), Ky=np.zeros((1, 1)),
+        Kz=np.zeros((1, 0)), Tr=np.zeros(0), Ty=np.zeros((0, 1)), Kaw=np.zeros((0, 1)), u_op=np.zeros(1),
+        y_op=np.zeros(1), lo=np.full(1, -1e9), hi=np.full(1, 1e9), xh0=np.zeros(1), z0=np.zeros(0),
+        anti_windup="none",
+    )  # fmt: skip
+    plant = (np.array([[0.5]]), np.array([[1e-4]]), np.array([[1.0]]), np.zeros((1, 1)))
+    sizes = {"y": 1, "r": 0, "v": 1, "u": 1, "z": 0, "x": 1, "c": 1}
+    h = Rounding(**{f.name: np.zeros(sizes[f.name]) for f in fields(Rounding)})
+    h = Rounding(**{f.name: getattr(h, f.name) for f in fields(Rounding)} | {"x": np.ones(1)})
+    # only xh's rounding drives the loop; the command is Kx xh, and xh+ = a xh + rho (Ly = 0: the plant is not seen)
+    exact = abs(Fraction(Kx)) / (1 - a_exact)
+    bound = closed_loop_bound(law, plant, h)[0]
+    assert Fraction(bound) >= exact
+    assert Fraction(bound) <= exact * (1 + Fraction(1, 10**6))  # and no looser than it needs to be

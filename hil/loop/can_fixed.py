@@ -9,10 +9,12 @@ its ready line (``law=q31`` or ``law=q15``; a float node names none). After the 
 - **per step, resynchronised**: before each step the float64 law with the artifact's quantised coefficients
   (:class:`~gainlink.proof.derived_law.DerivedLoop` on ``FixedGains.ideal``) is put into the integer law's state
   (the model's, which is the node's when the first check holds) and steps the same sample; ``|U 2^-f_u - u|`` is
-  what ``checks.fixed_point.error.per_step`` bounds for every compensator, on unsaturated, unclipped steps;
+  what ``checks.fixed_point.error.per_step_rounding`` bounds for every compensator (``per_step`` in an artifact
+  from before that figure, the same one), on unsaturated, unclipped steps;
 - **in closed loop**: ``|u - u_twin|`` against the run's float64 twin of the design law (the report's ``twin``)
-  while nothing saturates or clips, beside ``error.certified`` (about the design model: ``certificate_applies``
-  says whether the plant is it).
+  while nothing saturates or clips, beside ``error.certified`` (the headline: any history in the declared ranges,
+  initial states and disturbances included, about the design model: ``certificate_applies`` says whether the
+  plant is it).
 """
 
 from __future__ import annotations
@@ -94,7 +96,7 @@ def fixed_can_check(a: Artifact, trace: Any, *, ready_line: str, model_plant: bo
     span = a.u_max - a.u_min
     out["unsaturated_steps"] = window
     out["measured_du_per_step"] = _floats(per_step_deviation(a, Y, R, window))
-    out["certified_du_per_step"] = _floats(err["per_step"])
+    out["certified_du_per_step"] = _floats(err.get("per_step_rounding", err["per_step"]))
     design = None
     if trace.has_twin:
         design = np.abs(trace.u[:window] - trace.twin_u[:window]).max(axis=0, initial=0.0)
@@ -122,7 +124,8 @@ def summary_lines(fx: dict | None) -> list[str]:
     }[fx["bit_exact"]]
     lines = [f"  law ran: {fx['law']} (artifact {fx['numeric']}): {exact} on the recorded samples"]
     lines.append(
-        f"    vs the float64 law, per step (resynchronised, {fx['unsaturated_steps']} unsaturated steps): max |du| "
+        f"    vs the float64 law with the quantised coefficients, per step (resynchronised, {fx['unsaturated_steps']} "
+        "unsaturated steps): max |du| "
         + ", ".join(f"{m:.3g}" for m in fx["measured_du_per_step"])
         + " (certified <= "
         + ", ".join(f"{c:.3g}" for c in fx["certified_du_per_step"])
@@ -133,7 +136,7 @@ def summary_lines(fx: dict | None) -> list[str]:
         lines.append(
             "    vs the float64 twin, closed loop: max |du| "
             + ", ".join(f"{m:.3g}" for m in fx["measured_du_design"])
-            + " (certified around the design model <= "
+            + " (certified in operation around the design model <= "
             + ", ".join(f"{c:.3g}" for c in fx["certified_du_design"])
             + applies
             + ")"

@@ -64,9 +64,9 @@ class FixedPilCheck:
       twin's; beside ``certified_du_rounding`` (``checks.fixed_point.error.closed_loop``) and
       ``bound_du_float32_link`` (that bound with the link's float32 roundings: the oracle).
     - ``measured_du_design``: max ``|u - u64|`` against the design's float64 twin (the run's ``twin``), beside
-      ``certified_du_design`` (``error.certified``: rounding plus coefficient quantisation; its coefficient term
-      is for references within their ranges from the design's initial state, without the float32 link); both
-      also as fractions of each input's limit span.
+      ``certified_du_design`` (``error.certified``, the headline: any history in the declared ranges, initial
+      states and disturbances included, without the float32 link's sample roundings); both also as fractions of
+      each input's limit span.
     - ``certificate_applies``: the plant is the design model, the loop the bounds are about.
     """
 

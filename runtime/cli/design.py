@@ -250,7 +250,8 @@ def _print_fixed_point(cert, measured: dict) -> None:
     )
     print(
         f"    measured in closed loop ({measured['steps']} steps, noise, reference step, saturating disturbance): "
-        f"unsaturated |u - u64| {worst} over {measured['unsaturated_steps']} steps; whole run "
+        f"unsaturated, against the float64 law with the quantised coefficients (the rounding alone, closed loop) "
+        f"{worst} over {measured['unsaturated_steps']} steps; whole run "
         f"{measured['max_rel_u_quantised']:.3g} of the span against the float64 law with the same coefficients and "
         f"clip, {measured['max_rel_u']:.3g} against the design's"
         + (f" ({measured['clipped_steps']} steps clipped to the ranges)" if measured["clipped_steps"] else "")

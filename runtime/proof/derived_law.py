@@ -11,7 +11,8 @@
                                                current: F = Ad - Ad M Cd, G = Bd, Ly = Ad M)
 
 :func:`derive` gives these coefficients from an artifact in float64 (with them, :class:`DerivedLoop` is
-:class:`~gainlink.proof.reference.ReferenceLoop`, tested); the fixed-point law quantises them
+:class:`~gainlink.proof.reference.ReferenceLoop`, tested), or exactly, in balls (what the fixed-point certificate
+measures the quantised coefficients against); the fixed-point law quantises the float64 ones
 (:mod:`gainlink.proof.fixed_gains`), and :class:`DerivedLoop` on the quantised values, with the samples clipped to
 the declared ranges, is the float64 law the fixed-point certificate bounds the integer law against.
 """
@@ -23,6 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..shipping.artifact import Artifact
+from .ball import balls, precise
 from .reference import StepResult, Trace
 
 
@@ -78,24 +80,37 @@ class DerivedLaw:
         return replace(self, **values)
 
 
-def derive(a: Artifact) -> DerivedLaw:
-    """The law's coefficients, in float64, from an artifact (either observer form)."""
+def derive(a: Artifact, *, exact: bool = False) -> DerivedLaw:
+    """The law's coefficients from an artifact (either observer form): in float64, or with ``exact`` in balls
+    (:mod:`.ball`), each containing the exact value of the formulas on the artifact's numbers (the law the design
+    means; the float64 products and differences are rounded)."""
+    return _derive_balls(a) if exact else _derive(a, np.asarray)
+
+
+@precise
+def _derive_balls(a: Artifact) -> DerivedLaw:
+    return _derive(a, balls)
+
+
+def _derive(a: Artifact, conv) -> DerivedLaw:
+    Ad, Bd, Cd, Dd, K, L = (conv(x) for x in (a.Ad, a.Bd, a.Cd, a.Dd, a.K, a.L))
     if a.observer_form == "current":
-        KM = a.K @ a.M
-        Kx, Ky = -(a.K - KM @ a.Cd), -KM
-        Lrow = a.Ad @ a.M
-        F, G = a.Ad - Lrow @ a.Cd, a.Bd.copy()
+        M = conv(a.M)
+        KM = K @ M
+        Kx, Ky = -(K - KM @ Cd), -KM
+        Lrow = Ad @ M
+        F, G = Ad - Lrow @ Cd, Bd.copy()
     else:
-        Kx, Ky = -a.K, np.zeros((a.m, a.p))
-        Lrow = a.L
-        F, G = a.Ad - a.L @ a.Cd, a.Bd - a.L @ a.Dd
+        Kx, Ky = -K, np.zeros((a.m, a.p))
+        Lrow = L
+        F, G = Ad - L @ Cd, Bd - L @ Dd
     return DerivedLaw(
         F=F,
         G=G,
         Ly=Lrow.copy(),
         Kx=Kx,
         Ky=Ky,
-        Kz=-a.Ki,
+        Kz=-conv(a.Ki),
         Tr=np.full(a.q, a.Ts),
         Ty=-a.Ts * a.Ci,
         Kaw=a.Kaw if a.anti_windup == "backcalc" else np.zeros((a.q, a.m)),

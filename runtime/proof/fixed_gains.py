@@ -15,7 +15,8 @@ cap allows loses those bits (it is tiny next to the row's largest term).
 ``Ts`` appears twice in an integrator's row (with the reference and with the sample, whose formats differ); it is
 one mantissa with two shifts, so both products mean the same real ``Ts``. The limits are rounded inward and
 ``u_op`` to nearest, both in the coarser of the command's two formats (``v``, 32-bit, and ``u``, the command
-word), so that they are exact in both.
+word), so that they are exact in both; the command's format must then hold the deviation of every command within
+the limits from that ``u_op`` (:func:`deviation_fits`; the certificate coarsens it until it does).
 """
 
 from __future__ import annotations
@@ -213,25 +214,37 @@ def quantise_law(law: DerivedLaw, fm: SignalFormats, acc: dict[str, np.ndarray])
         for name, c, fsig in items:
             blocks[name] = _block(c, fsig, accs[row], word)
     blocks["TR"], blocks["TY"] = _sampling_time(law, fm, accs["z"])
-    fy, fu, fv, fx, fz = (fm.frac(k) for k in ("y", "u", "v", "xh", "z"))
-    fc = np.minimum(fu, fv)  # u_op and the limits are exact in both command formats
+    fy, fx, fz = (fm.frac(k) for k in ("y", "xh", "z"))
+    ints = {"YOP": quantise(law.y_op, fy), **command_integers(law, fm)}
+    ints |= {"XH0": quantise(law.xh0, fx), "Z0": quantise(law.z0, fz)}
+    _check_words(ints, fm)
+    ranges = {"y_min": law.y_min, "y_max": law.y_max, "r_min": law.r_min, "r_max": law.r_max}
+    ideal = _ideal(fm, accs, blocks, ints, anti_windup=law.anti_windup, ranges=ranges)
+    return FixedGains(formats=fm, acc_v=accs["v"], acc_z=accs["z"], acc_x=accs["x"], ideal=ideal, **blocks, **ints)
+
+
+def command_integers(law: DerivedLaw, fm: SignalFormats) -> dict[str, np.ndarray]:
+    """``u_op`` (to nearest) and the limits (inward) in the coarser of the command's two formats, so that they are
+    exact in both, as integers of each: ``UOP_V``, ``LO_V``, ``HI_V``, ``UOP_U``, ``LO_U``, ``HI_U``."""
+    fu, fv = fm.frac("u"), fm.frac("v")
+    fc = np.minimum(fu, fv)
     uop_c = quantise(law.u_op, fc)
     lo_c, hi_c = quantise_inward(law.lo, law.hi, fc)
-    ints = {
-        "YOP": quantise(law.y_op, fy),
+    return {
         "UOP_V": np.left_shift(uop_c, fv - fc),
         "UOP_U": np.left_shift(uop_c, fu - fc),
         "LO_V": np.left_shift(lo_c, fv - fc),
         "HI_V": np.left_shift(hi_c, fv - fc),
         "LO_U": np.left_shift(lo_c, fu - fc),
         "HI_U": np.left_shift(hi_c, fu - fc),
-        "XH0": quantise(law.xh0, fx),
-        "Z0": quantise(law.z0, fz),
     }
-    _check_words(ints, fm)
-    ranges = {"y_min": law.y_min, "y_max": law.y_max, "r_min": law.r_min, "r_max": law.r_max}
-    ideal = _ideal(fm, accs, blocks, ints, anti_windup=law.anti_windup, ranges=ranges)
-    return FixedGains(formats=fm, acc_v=accs["v"], acc_z=accs["z"], acc_x=accs["x"], ideal=ideal, **blocks, **ints)
+
+
+def deviation_fits(ints: dict, fm: SignalFormats) -> np.ndarray:
+    """Per input, whether every command deviation ``dU = U - UOP_U`` with ``LO_U <= U <= HI_U`` fits the command
+    word (the C forms it there: the command is clamped, then shifted exactly into the limits' multiples)."""
+    top = np.maximum(ints["HI_U"] - ints["UOP_U"], ints["UOP_U"] - ints["LO_U"])
+    return np.array([t <= f.max_int for t, f in zip(top, fm.u)], dtype=bool)
 
 
 def from_integers(table: dict, fm: SignalFormats, acc: dict, *, anti_windup: str, ranges: dict) -> FixedGains:
@@ -310,8 +323,11 @@ def _sampling_time(law: DerivedLaw, fm: SignalFormats, az: np.ndarray) -> tuple[
 
 
 def _check_words(ints: dict, fm: SignalFormats) -> None:
-    """The operating point, limits and initial state fit their signals' words."""
+    """The operating point, limits and initial state fit their signals' words, and so does every command's
+    deviation from the operating point (:func:`deviation_fits`)."""
     for key, group in (("YOP", "y"), ("UOP_U", "u"), ("LO_U", "u"), ("HI_U", "u"), ("UOP_V", "v"), ("XH0", "xh")):
         formats = getattr(fm, group)
         if formats and np.max(np.abs(ints[key])) > formats[0].max_int:
             raise ValueError(f"{key} does not fit its {formats[0].word}-bit format")
+    if not deviation_fits(ints, fm).all():
+        raise ValueError("a command's deviation from u_op (HI_U - UOP_U or UOP_U - LO_U) does not fit the command word")

@@ -13,7 +13,14 @@ import numpy as np
 from ..errors import DesignError
 from ..proof.derived_law import DerivedLaw
 from ..proof.fixed_format import WORDS, Format, format_for, quantise, real
-from ..proof.fixed_gains import FixedGains, SignalFormats, finest_accumulator_fracs, quantise_law
+from ..proof.fixed_gains import (
+    FixedGains,
+    SignalFormats,
+    command_integers,
+    deviation_fits,
+    finest_accumulator_fracs,
+    quantise_law,
+)
 from .fixed_ranges import InputRanges, RangeBounds, Rounding, range_bounds
 from .wcpg import spectral_radius
 
@@ -79,7 +86,20 @@ def rounding(g: FixedGains) -> Rounding:
         u=half(fm.frac("u"), g.shift_u),
         z=half(fm.frac("z"), g.shift_z),
         x=half(fm.frac("xh"), g.shift_x),
+        c=command_float_error(g),
     )
+
+
+def command_float_error(g: FixedGains) -> np.ndarray:
+    """Per input, a bound of ``|(float)U 2^-f_u - U 2^-f_u|`` over the command words ``LO_U..HI_U`` (the C
+    returns ``(float)U`` times the power of two ``2^-f_u``, exactly): 0 when every such word is a float32
+    (``|U| <= 2^24``), else half the float32 spacing at the largest, ``2^(e - 24)`` units for ``2^e <= |U| <
+    2^(e+1)``; plus half the least subnormal where a product could be one (``f_u > 126``)."""
+    top = np.maximum(np.abs(g.LO_U), np.abs(g.HI_U)).astype(np.int64)
+    e = np.array([int(t).bit_length() - 1 for t in top], dtype=np.int64)
+    frac = g.formats.frac("u")
+    units = np.where(top > 1 << 24, np.ldexp(1.0, np.maximum(e - 24, 0)), 0.0)
+    return np.ldexp(units, -frac) + np.where(frac > 126, np.ldexp(1.0, -150), 0.0)
 
 
 def _real_inputs(law: DerivedLaw) -> InputRanges:
@@ -109,11 +129,12 @@ def choose(design: DerivedLaw, numeric: str) -> Quantised:
     DesignError
         ``F`` is unstable, the integrator cannot be bounded, or the formats do not settle.
     """
-    zero = Rounding(*(np.zeros(k) for k in (design.p, design.q, design.m, design.m, design.q, design.n)))
+    zero = Rounding(*(np.zeros(k) for k in (design.p, design.q, design.m, design.m, design.q, design.n, design.m)))
     estimate = range_bounds(design, _real_inputs(design), zero)
     fm = SignalFormats(numeric, **input_formats(design, numeric), **_state_formats(estimate, design))
     caps: dict[str, np.ndarray] = {}
     for _ in range(MAX_ROUNDS):
+        fm = _fit_command_deviation(design, fm)
         acc = finest_accumulator_fracs(design, fm)
         acc = {k: np.minimum(v, caps[k]) if k in caps else v for k, v in acc.items()}
         g = quantise_law(design, fm, acc)
@@ -127,6 +148,20 @@ def choose(design: DerivedLaw, numeric: str) -> Quantised:
             return Quantised(gains=g, rounding=h, ranges=inputs, bounds=bounds, acc_bounds=acc_bounds)
         fm, caps = grown, new_caps
     raise DesignError(f"the {numeric} formats did not settle in {MAX_ROUNDS} rounds (bounds keep growing)")
+
+
+def _fit_command_deviation(law: DerivedLaw, fm: SignalFormats) -> SignalFormats:
+    """``fm`` with each command format coarsened until every command's deviation from ``u_op`` fits the command
+    word as the integers hold them: ``u_op`` and the limits are rounded in the coarser of the command's two
+    formats, which can move ``u_op`` by up to half a unit of that format (a ``u_op`` at a limit then leaves
+    ``HI_U - UOP_U`` one past the word). Ends at the latest when the command's format is the coarser one, where
+    :func:`_interval_format` made it fit."""
+    while True:
+        fits = deviation_fits(command_integers(law, fm), fm)
+        if fits.all():
+            return fm
+        u = tuple(f if ok else Format(f.word, f.frac - 1) for f, ok in zip(fm.u, fits))
+        fm = replace(fm, u=u)
 
 
 def _check_quantised_estimate(law: DerivedLaw, numeric: str) -> None:

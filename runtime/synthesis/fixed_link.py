@@ -1,28 +1,29 @@
-"""The certificate's closed-loop rounding bound when the law's samples, references and commands cross a float32
-link (docs/design.md, fixed point: PIL).
+"""The certificate's closed-loop rounding bound when the law's samples and references cross a float32 link
+(docs/design.md, fixed point: PIL).
 
 The fixed-point C takes its samples and references as floats and returns its commands as floats
 (``gl_fixed_step``), and the certificate is about the integer law between those floats: its rounding budget
-holds the quantisation of a float sample to the sample's format (half a unit of ``f_y``, ``f_r``) and the
-command word's rounding (half a unit of ``f_u``). Where the floats are float32 roundings of finer values (PIL:
-the plant is simulated in float64, its samples travel as float32, and the float32 command drives it, while the
-float64 twin samples its plant exactly and drives it with the exact command), each sample and reference
-carries one more error, at most half a float32 ulp of the largest magnitude in its declared range, and each
-command one more, half a float32 ulp of its largest limit, applied at the plant's input. In q31 these are far
-more than half a unit of the formats (a float32 has 24 significant bits). :func:`bound_float32_link` is the
-certificate's closed-loop bound (:func:`~.fixed_error.closed_loop_bound`: the same quantised coefficients,
-design model and WCPG) with those errors added.
+holds the quantisation of a float sample to the sample's format (half a unit of ``f_y``, ``f_r``), the command
+word's rounding (half a unit of ``f_u``) and the float the C returns (``(float)U``: exact in q15, within half a
+float32 unit of the largest command word in q31). Where the samples are float32 roundings of finer values (PIL:
+the plant is simulated in float64 and its samples travel as float32, while the float64 twin samples its plant
+exactly), each sample and reference carries one more error, at most half a float32 ulp of the largest magnitude
+in its declared range; in q31 that is far more than half a unit of the formats (a float32 has 24 significant
+bits). The commands need nothing more: the float the C returns is what drives the plant.
+:func:`bound_float32_link` is the certificate's closed-loop bound (:func:`~.fixed_error.closed_loop_bound`: the
+same quantised coefficients, design model and WCPG) with those errors added.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
 from ..proof.fixed_law import gains_from_artifact
 from ..shipping.artifact import Artifact
+from .fixed_error import closed_loop_bound
 from .fixed_formats import rounding
-from .fixed_loops import closed_loop
-from .wcpg import wcpg
 
 
 def float32_half_ulp(lo, hi) -> np.ndarray:
@@ -39,16 +40,9 @@ def bound_float32_link(a: Artifact) -> np.ndarray:
     ranges = a.checks["fixed_point"]["ranges"]
     g = gains_from_artifact(a)
     h = rounding(g)
-    weights = {
-        "ny": h.y + float32_half_ulp(ranges["y_min"], ranges["y_max"]),
-        "nr": h.r + (float32_half_ulp(ranges["r_min"], ranges["r_max"]) if a.q else 0.0),
-        "rv": h.v,
-        "ru": h.u,
-        "rz": h.z,
-        "rx": h.x,
-        "d": float32_half_ulp(a.u_min, a.u_max),
-    }
-    system = closed_loop(g.ideal, (a.Ad, a.Bd, a.Cd, a.Dd))
-    B, D = system.columns(weights)
-    what = "the closed loop with the quantised coefficients and a float32 link"
-    return wcpg(system.A, B, system.C, D, what=what).upper.sum(axis=1)
+    link = replace(
+        h,
+        y=h.y + float32_half_ulp(ranges["y_min"], ranges["y_max"]),
+        r=h.r + (float32_half_ulp(ranges["r_min"], ranges["r_max"]) if a.q else 0.0),
+    )
+    return closed_loop_bound(g.ideal, (a.Ad, a.Bd, a.Cd, a.Dd), link)

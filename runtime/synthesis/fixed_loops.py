@@ -13,15 +13,19 @@ is clipped), in deviations from the operating point, with exogenous inputs named
 
 The closed loop's plant is the design model ``x+ = Ad x + Bd du``, ``y = Cd x + Dd du_prev`` (the feed-through
 acts on the previous command, as :class:`~gainlink.proof.sampled_plant.SampledPlant`). Each system is returned as
-``(A, B, C, D)`` with ``B`` and ``D`` split into named column blocks.
+``(A, B, C, D)`` with ``B`` and ``D`` split into named column blocks, formed in balls
+(:mod:`gainlink.proof.ball`: each entry contains the exact value of the products and sums of the law's and the
+plant's numbers), so that a peak gain taken of it (:func:`~.wcpg.wcpg_ball`) covers the float64 rounding of
+forming it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..proof.ball import balls, precise
 from ..proof.derived_law import DerivedLaw
 
 INPUTS = ("r", "ny", "nop", "nr", "rv", "ru", "rz", "rx", "d")
@@ -37,11 +41,18 @@ class LinearSystem:
     D: dict[str, np.ndarray]
 
     def columns(self, weights: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """``(B, D)`` of the named inputs, each column scaled by its weight (the input's bound)."""
+        """``(B, D)`` of the named inputs, each column scaled by its weight (the input's bound, a float or a
+        ball)."""
         names = [k for k in weights if weights[k].size]
         B = np.hstack([self.B[k] * weights[k][None, :] for k in names]) if names else np.zeros((self.A.shape[0], 0))
         D = np.hstack([self.D[k] * weights[k][None, :] for k in names]) if names else np.zeros((self.C.shape[0], 0))
         return B, D
+
+
+def _law_balls(law: DerivedLaw) -> DerivedLaw:
+    """``law`` with the coefficients the loops use as balls (exact), so that products formed from them are too."""
+    names = ("F", "G", "Ly", "Kx", "Ky", "Kz", "Tr", "Ty")
+    return replace(law, **{k: balls(getattr(law, k)) for k in names})
 
 
 class _Affine:
@@ -68,11 +79,13 @@ class _Affine:
         return A, blocks
 
 
+@precise
 def closed_loop(law: DerivedLaw, plant: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> LinearSystem:
     """The unsaturated law around the design model; output: the plant's command deviation ``du + d``."""
-    Ad, Bd, Cd, Dd = plant
+    feed = bool(np.any(np.asarray(plant[3]) != 0))
+    Ad, Bd, Cd, Dd = (balls(M) for M in plant)
+    law = _law_balls(law)
     n, m, p, q = law.n, law.m, law.p, law.q
-    feed = bool(np.any(Dd != 0.0))
     state = ("x", "xh", "z") + (("dup",) if feed else ())
     sizes = {"x": Ad.shape[0], "xh": n, "z": q, "dup": m if feed else 0}
     sizes |= {"r": q, "ny": p, "nop": p, "nr": q, "rv": m, "ru": m, "rz": q, "rx": n, "d": m}
@@ -93,11 +106,13 @@ def closed_loop(law: DerivedLaw, plant: tuple[np.ndarray, np.ndarray, np.ndarray
     return LinearSystem(A=A, B=B, C=C, D=D)
 
 
+@precise
 def open_loop(law: DerivedLaw) -> LinearSystem:
     """The unsaturated law on its own (no integrators, ``q = 0``), from what it reads to its command deviation.
 
     Input ``ny`` is whatever is added to the sample deviation ``dy``: its quantisation error for a rounding
     analysis, the sample itself for the coefficient term (both enter alike)."""
+    law = _law_balls(law)
     n, m, p = law.n, law.m, law.p
     sizes = {"xh": n, "ny": p, "nop": p, "rv": m, "ru": m, "rx": n, "d": m}
     s = _Affine(sizes)

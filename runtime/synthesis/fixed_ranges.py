@@ -27,8 +27,9 @@ from fractions import Fraction
 import numpy as np
 
 from ..errors import DesignError
+from ..proof.ball import balls, mid, precise
 from ..proof.derived_law import DerivedLaw
-from .wcpg import PeakGain, wcpg
+from .wcpg import PeakGain, wcpg_ball
 
 
 @dataclass(frozen=True)
@@ -44,7 +45,9 @@ class InputRanges:
 @dataclass(frozen=True)
 class Rounding:
     """Half a unit in the last place of each rounding point (0 where there is no rounding): the samples ``y``
-    (p) and references ``r`` (q), the unsaturated command ``v`` and the command ``u`` (m), ``z`` (q), ``xh`` (n)."""
+    (p) and references ``r`` (q), the unsaturated command ``v`` and the command ``u`` (m), ``z`` (q), ``xh`` (n);
+    and ``c`` (m), how far the float the C returns can be from the command word's value (``(float)U``: 0 when
+    every word of the command's range is a float32)."""
 
     y: np.ndarray
     r: np.ndarray
@@ -52,6 +55,7 @@ class Rounding:
     u: np.ndarray
     z: np.ndarray
     x: np.ndarray
+    c: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -69,23 +73,46 @@ class RangeBounds:
     feedthrough: np.ndarray
 
 
-def _centre_half(interval: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    lo, hi = (np.asarray(x, dtype=float) for x in interval)
-    return 0.5 * (lo + hi), 0.5 * (hi - lo)
+def centre_half(interval: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """The centre and half-width of the interval ``(lo, hi)`` (floats or balls), as balls."""
+    lo, hi = (balls(x) for x in interval)
+    return (lo + hi) * 0.5, (hi - lo) * 0.5
+
+
+@precise
+def estimate_columns(law: DerivedLaw, ranges: InputRanges, h: Rounding) -> np.ndarray:
+    """The input columns of the estimate recursion ``xh+ = F xh + G du + Ly dy + rho_x`` with unit-bounded inputs
+    (balls, n x (1 + m + p + n + 1)): ``[centre, du, dy, rounding, xh0]``, each deviation scaled by its
+    half-width."""
+    cu, hu = centre_half(ranges.du)
+    cy, hy = centre_half(ranges.dy)
+    G, Ly = balls(law.G), balls(law.Ly)
+    return np.hstack([(G @ cu + Ly @ cy)[:, None], G * hu[None, :], Ly * hy[None, :], np.diag(h.x), law.xh0[:, None]])
+
+
+@precise
+def estimate_outputs(
+    law: DerivedLaw, ranges: InputRanges, X: np.ndarray, U: np.ndarray, Y: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(C, D)`` of the signal ``X xh + U du + Y dy`` (each row one output) over :func:`estimate_columns`."""
+    cu, hu = centre_half(ranges.du)
+    cy, hy = centre_half(ranges.dy)
+    U, Y = balls(U), balls(Y)
+    m, p = law.m, law.p
+    D = np.zeros((X.shape[0], 1 + m + p + law.n + 1), dtype=object)
+    D[:, 0] = U @ cu + Y @ cy
+    D[:, 1 : 1 + m] = U * hu[None, :]
+    D[:, 1 + m : 1 + m + p] = Y * hy[None, :]
+    return X, D
 
 
 def estimate_system(law: DerivedLaw, ranges: InputRanges, h: Rounding) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(B, C, D)`` of the estimate recursion with unit-bounded inputs: columns ``[centre, du, dy, rounding,
-    xh0]`` (each scaled by its half-width); outputs ``[xh; c]``."""
-    cu, hu = _centre_half(ranges.du)
-    cy, hy = _centre_half(ranges.dy)
-    n, m = law.n, law.m
-    B = np.hstack([(law.G @ cu + law.Ly @ cy)[:, None], law.G * hu, law.Ly * hy, np.diag(h.x), law.xh0[:, None]])
-    C = np.vstack([np.eye(n), law.Kx])
-    D = np.zeros((n + m, B.shape[1]))
-    D[n:, 0] = law.Ky @ cy
-    D[n:, 1 + m : 1 + m + law.p] = law.Ky * hy
-    return B, C, D
+    """``(B, C, D)`` of the estimate recursion (:func:`estimate_columns`) with outputs ``[xh; c]``,
+    ``c = Kx xh + Ky dy`` the command's feedback part."""
+    n, m, p = law.n, law.m, law.p
+    X = np.vstack([np.eye(n), law.Kx])
+    C, D = estimate_outputs(law, ranges, X, np.zeros((n + m, m)), np.vstack([np.zeros((n, p)), law.Ky]))
+    return estimate_columns(law, ranges, h), C, D
 
 
 def range_bounds(law: DerivedLaw, ranges: InputRanges, h: Rounding) -> RangeBounds:
@@ -97,15 +124,15 @@ def range_bounds(law: DerivedLaw, ranges: InputRanges, h: Rounding) -> RangeBoun
         ``F`` is unstable (the estimate is unbounded) or the integrator cannot be bounded.
     """
     B, C, D = estimate_system(law, ranges, h)
-    gain = wcpg(law.F, B, C, D, what="the estimate (the observer's error dynamics F)")
-    total = gain.upper.sum(axis=1)
+    peak = wcpg_ball(law.F, B, C, D, what="the estimate (the observer's error dynamics F)")
+    total = peak.total
     xh, c = total[: law.n], total[law.n :]
     room = np.maximum(law.hi - law.u_op, law.u_op - law.lo)
     z = _integrator_bound(law, ranges, h, room + c + h.v)
     kz_z = np.abs(law.Kz) @ z
     v = (np.abs(law.u_op) + c + kz_z + h.v) * (1 + 1e-12)
     w = (room + c + kz_z + h.v) * (1 + 1e-12)
-    return RangeBounds(xh=xh, c=c, z=z, v=v, w=w, gain=gain, columns=B, feedthrough=D)
+    return RangeBounds(xh=xh, c=c, z=z, v=v, w=w, gain=peak.gain, columns=mid(B), feedthrough=mid(D))
 
 
 def _increment_bound(law: DerivedLaw, ranges: InputRanges) -> np.ndarray:

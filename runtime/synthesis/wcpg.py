@@ -24,6 +24,7 @@ The result is an upper bound (and a lower bound: the head minus its error) of ev
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -187,19 +188,13 @@ class _EigenCertificate:
     def verify(cls, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> _EigenCertificate:
         from flint import acb_mat, ctx
 
+        V, W, rho, absW, condition = _eigen_basis(A.shape, A.tobytes())
         old, ctx.prec = ctx.prec, PREC
         try:
-            E, V = acb_mat(A.tolist()).eig(right=True, algorithm="rump")
-            W = V.inv()
-            rho = np.array([_up(e) for e in E])
-            if not np.all(rho < 1.0):
-                raise ValueError("an eigenvalue enclosure reaches the unit circle")
-            absV, absW = _up_matrix(V), _up_matrix(W)
             absCV = _up_matrix(acb_mat(C.tolist()) * V)
             absWB = _up_matrix(W * acb_mat(B.tolist()))
         finally:
             ctx.prec = old
-        condition = float(np.linalg.norm(absV, 2) * np.linalg.norm(absW, 2))
         return cls(rho=rho, absCV=absCV, absWB=absWB, absW=absW, condition=condition)
 
     def tail(self, N: int) -> np.ndarray:
@@ -231,25 +226,13 @@ class _LyapunovCertificate:
 
     @classmethod
     def verify(cls, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> _LyapunovCertificate | None:
-        from flint import arb_mat, ctx
-
-        rho = spectral_radius(A)
-        for gamma in (rho + 0.25 * (1.0 - rho), rho + 0.5 * (1.0 - rho), rho + 0.75 * (1.0 - rho)):
-            P = scipy.linalg.solve_discrete_lyapunov((A / gamma).T, np.eye(A.shape[0]))
-            P = 0.5 * (P + P.T)
-            old, ctx.prec = ctx.prec, PREC
-            try:
-                Pa, Aa = arb_mat(P.tolist()), arb_mat(A.tolist())
-                lmin = _verified_lambda_min(Pa)
-                dissipation = _verified_lambda_min(Pa * (gamma * gamma) - Aa.transpose() * Pa * Aa)
-                lmax = float(np.linalg.norm(P, "fro")) * INFLATE  # P is exact: its Frobenius norm bounds lambda_max
-            finally:
-                ctx.prec = old
-            if lmin > 0.0 and dissipation >= 0.0:
-                normC = np.linalg.norm(C, axis=1) * INFLATE
-                normB = np.linalg.norm(B, axis=0) * INFLATE
-                return cls(gamma=gamma, lmin=lmin, lmax=lmax, normC=normC, normB=normB)
-        return None
+        found = _lyapunov_matrix(A.shape, A.tobytes())
+        if found is None:
+            return None
+        gamma, lmin, lmax = found
+        normC = np.linalg.norm(C, axis=1) * INFLATE
+        normB = np.linalg.norm(B, axis=0) * INFLATE
+        return cls(gamma=gamma, lmin=lmin, lmax=lmax, normC=normC, normB=normB)
 
     @property
     def kappa(self) -> float:
@@ -268,6 +251,51 @@ class _LyapunovCertificate:
 
     def output_error(self, e: np.ndarray) -> np.ndarray:
         return np.outer(self.normC, e) / math.sqrt(self.lmin) * INFLATE
+
+
+@functools.lru_cache(maxsize=16)
+def _eigen_basis(shape: tuple[int, ...], data: bytes) -> tuple:
+    """``(V, W, rho, |W|, condition)`` of the eigendecomposition of the float64 matrix ``A`` (given by its shape and
+    bytes: the same matrix is decomposed once, however many input and output columns its peak gains are taken for)
+    enclosed in balls (Rump's method); ValueError when an eigenvalue's enclosure reaches the unit circle."""
+    from flint import acb_mat, ctx
+
+    A = np.frombuffer(data, dtype=np.float64).reshape(shape)
+    old, ctx.prec = ctx.prec, PREC
+    try:
+        E, V = acb_mat(A.tolist()).eig(right=True, algorithm="rump")
+        W = V.inv()
+        rho = np.array([_up(e) for e in E])
+        if not np.all(rho < 1.0):
+            raise ValueError("an eigenvalue enclosure reaches the unit circle")
+        absV, absW = _up_matrix(V), _up_matrix(W)
+    finally:
+        ctx.prec = old
+    return V, W, rho, absW, float(np.linalg.norm(absV, 2) * np.linalg.norm(absW, 2))
+
+
+@functools.lru_cache(maxsize=16)
+def _lyapunov_matrix(shape: tuple[int, ...], data: bytes) -> tuple[float, float, float] | None:
+    """``(gamma, lambda_min lower bound, lambda_max upper bound)`` of a verified ``P`` with ``A' P A <= gamma^2 P``
+    for the float64 matrix ``A`` (its shape and bytes), or None."""
+    from flint import arb_mat, ctx
+
+    A = np.frombuffer(data, dtype=np.float64).reshape(shape)
+    rho = spectral_radius(A)
+    for gamma in (rho + 0.25 * (1.0 - rho), rho + 0.5 * (1.0 - rho), rho + 0.75 * (1.0 - rho)):
+        P = scipy.linalg.solve_discrete_lyapunov((A / gamma).T, np.eye(A.shape[0]))
+        P = 0.5 * (P + P.T)
+        old, ctx.prec = ctx.prec, PREC
+        try:
+            Pa, Aa = arb_mat(P.tolist()), arb_mat(A.tolist())
+            lmin = _verified_lambda_min(Pa)
+            dissipation = _verified_lambda_min(Pa * (gamma * gamma) - Aa.transpose() * Pa * Aa)
+            lmax = float(np.linalg.norm(P, "fro")) * INFLATE  # P is exact: its Frobenius norm bounds lambda_max
+        finally:
+            ctx.prec = old
+        if lmin > 0.0 and dissipation >= 0.0:
+            return gamma, lmin, lmax
+    return None
 
 
 def _verified_lambda_min(M) -> float:
@@ -294,3 +322,69 @@ def _verified_lambda_min(M) -> float:
     E = M - La * La.transpose() - arb_mat(np.eye(n).tolist()) * delta
     frob = math.sqrt(sum(_up(E[i, j]) ** 2 for i in range(n) for j in range(n))) * INFLATE
     return delta - frob if frob < delta else -math.inf
+
+
+@dataclass(frozen=True)
+class BallPeak:
+    """The peak bound of a system formed in balls (:func:`wcpg_ball`): ``upper`` (p x m) the peak gain of the
+    float64 system nearest the balls, per input column; ``formed`` (p) what the entries' rounding can add for
+    inputs ``|w_j| <= 1`` on every column; ``gain`` the float64 system's :class:`PeakGain` (its ``method`` and
+    ``terms``)."""
+
+    upper: np.ndarray
+    formed: np.ndarray
+    gain: PeakGain
+
+    @property
+    def total(self) -> np.ndarray:
+        """Every output's bound for inputs ``|w_j| <= 1``."""
+        return (self.upper.sum(axis=1) + self.formed) * INFLATE
+
+
+def wcpg_ball(A, B, C, D=None, *, what: str = "the system") -> BallPeak:
+    """The peak gain of ``(A, B, C, D)`` given as balls (numpy object arrays of python-flint ``arb``,
+    :mod:`gainlink.proof.ball`; float arrays are taken as exact), with what their rounding to float64 can add.
+
+    The peak gain is taken of the float64 matrices ``Â, B̂, Ĉ, D̂`` nearest the balls; the rest (at most
+    ``Ā, B̄, C̄, D̄`` entrywise) is an injection ``ε = (A - Â) x + (B - B̂) w`` into the state and a term
+    ``(C - Ĉ) x + (D - D̂) w`` on the output. With ``G`` the peak gain of ``(Â, [B̂ I], [Ĉ; I])`` (taken apart
+    from the main one, ``G_ow``), the state's peak ``s`` obeys ``s <= G_xw 1 + G_xI (B̄ 1 + Ā s)``; when
+    ``μ = max row sum of G_xI Ā < 1`` that gives ``|s|_inf <= |v|_inf / (1 - μ)``, ``v = G_xw 1 + G_xI B̄ 1``,
+    hence ``s``, and every output is at most ``G_ow 1 + G_oI (B̄ 1 + Ā s) + C̄ s + D̄ 1`` (a small-gain argument,
+    valid over every finite horizon).
+
+    Raises
+    ------
+    DesignError
+        ``Â`` is not stable, or the entries' rounding is not small against the loop's peak gain (``μ >= 1``).
+    """
+    from ..proof.ball import split
+
+    Ah, Ab = split(A)
+    Bh, Bb = split(B)
+    Ch, Cb = split(C)
+    n, mw, p = Ah.shape[0], Bh.shape[1], Ch.shape[0]
+    Dh, Db = (np.zeros((p, mw)), np.zeros((p, mw))) if D is None else split(D)
+    g = wcpg(Ah, Bh, Ch, Dh, what=what)
+    if not (Ab.any() or Cb.any() or Bb.any()):  # float64 exactly
+        return BallPeak(upper=g.upper, formed=Db.sum(axis=1) * INFLATE, gain=g)
+    # the gains from an injection into the state, and the state's own: only for the entries' rounding (a separate
+    # peak gain, so that its identity columns leave the main one's convergence as it was; the decomposition of A is
+    # verified once for both)
+    if not (Ab.any() or Cb.any()):  # the state's own peak is not needed
+        G_oI = wcpg(Ah, np.eye(n), Ch, what=what).upper
+        return BallPeak(upper=g.upper, formed=(G_oI @ Bb.sum(axis=1) + Db.sum(axis=1)) * INFLATE, gain=g)
+    aux = wcpg(Ah, np.hstack([Bh, np.eye(n)]), np.vstack([Ch, np.eye(n)]), what=what).upper
+    G_oI, G_xw, G_xI = aux[:p, mw:], aux[p:, :mw], aux[p:, mw:]
+    M = (G_xI @ Ab) * INFLATE
+    mu = float(M.sum(axis=1).max(initial=0.0)) * INFLATE
+    if not mu < 1.0:
+        raise DesignError(
+            f"the rounding of the matrices of {what} is not small against its peak gain (small-gain factor "
+            f"{mu:.3g} >= 1): its bound cannot be certified"
+        )
+    v = (G_xw.sum(axis=1) + G_xI @ Bb.sum(axis=1)) * INFLATE
+    s = (v + M.sum(axis=1) * (float(v.max(initial=0.0)) / (1.0 - mu))) * INFLATE
+    injection = (Bb.sum(axis=1) + Ab @ s) * INFLATE
+    formed = (G_oI @ injection + Cb @ s + Db.sum(axis=1)) * INFLATE
+    return BallPeak(upper=g.upper, formed=formed, gain=g)

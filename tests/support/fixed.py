@@ -23,7 +23,7 @@ def example(name: str, numeric: str) -> Artifact:
     if key not in _CACHE:
         data, _ = read_toml(EXAMPLES / f"{name}.toml", what="spec", error=ValueError)
         data = copy.deepcopy(data)
-        data["implementation"] = {"numeric": numeric}
+        data["implementation"] = data.get("implementation", {}) | {"numeric": numeric}
         _CACHE[key] = from_dict(designed(data))
     return _CACHE[key]
 
@@ -93,3 +93,40 @@ def pendulum_design(numeric: str, q_diag=None, r_diag=None) -> Artifact:
         data["controller"]["R_diag"] = r_diag or data["controller"]["R_diag"]
         _PENDULUM_DESIGNS[key] = from_dict(designed(data))
     return _PENDULUM_DESIGNS[key]
+
+
+class DesignLaw:
+    """The design's float64 law written from the contract (docs/design.md, "The control law"), independently of
+    gainlink's own law code: predictor or current observer, integrators with their anti-windup rule, the limits;
+    state ``xh``, ``z`` (real values, settable)."""
+
+    def __init__(self, a: Artifact) -> None:
+        self.a = a
+        self.xh, self.z = a.xh0.astype(float).copy(), a.z0.astype(float).copy()
+
+    def step(self, y, r) -> tuple[np.ndarray, bool]:
+        """One step on the absolute sample ``y`` and reference ``r``: the command and whether it saturated."""
+        a = self.a
+        y, r = np.asarray(y, dtype=float), np.asarray(r, dtype=float).reshape(a.q)
+        dy = y - a.y_op
+        xc = self.xh + a.M @ (dy - a.Cd @ self.xh) if a.observer_form == "current" else self.xh
+        v = a.u_op - a.K @ xc - a.Ki @ self.z
+        u = np.minimum(np.maximum(v, a.u_min), a.u_max)
+        saturated = bool(np.any(u != v))
+        if a.q:
+            e = r - a.Ci @ y
+            if a.anti_windup == "backcalc":
+                self.z = self.z + a.Ts * e + a.Kaw @ (u - v)
+            elif not (a.anti_windup == "clamp" and saturated):
+                self.z = self.z + a.Ts * e
+        du = u - a.u_op
+        if a.observer_form == "current":
+            self.xh = a.Ad @ xc + a.Bd @ du
+        else:
+            self.xh = a.Ad @ self.xh + a.Bd @ du + a.L @ (dy - a.Cd @ self.xh - a.Dd @ du)
+        return u, saturated
+
+
+def c_float(u: np.ndarray) -> np.ndarray:
+    """The float the fixed-point C returns for commands ``u = U 2^-f_u``: ``(float)U`` times the power of two."""
+    return np.asarray(u, dtype=np.float64).astype(np.float32).astype(np.float64)
