@@ -59,3 +59,7 @@ class VerificationError(GainlinkError, RuntimeError):
 
 class ParameterError(GainlinkError, RuntimeError):
     """A parameter upload failed (refused, not verified, or rolled back)."""
+
+
+class LawError(GainlinkError, ValueError):
+    """A law cannot do what was asked of it (its declaration says why), or no law runs such an artifact."""

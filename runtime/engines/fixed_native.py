@@ -45,6 +45,11 @@ class FixedNativeLoop:
         self._r = np.zeros(max(artifact.q, 1), dtype=np.float32)
 
     @property
+    def last_record(self) -> np.void:
+        """The C's output record of the last step (``gainlink.firmware.fixed.record_dtype``: flags, words, ...)."""
+        return self._rec[0]
+
+    @property
     def law(self) -> str:
         """``q31`` or ``q15``."""
         return str(self.a.checks["fixed_point"]["numeric"])

@@ -44,6 +44,7 @@ class NativeScheduledLoop:
         self.artifact = artifact
         self.e = len(artifact.schedule.external)
         path = Path(library or build(artifact, target="host", only="gainlink_host").files["shared"])
+        self.library = path
         lib = ctypes.PyDLL(str(path))  # short calls keep the GIL (see gainlink.engines.native)
         self._lib = lib
         lib.gl_host_artifact_sha256.restype = ctypes.c_char_p

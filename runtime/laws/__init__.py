@@ -1,0 +1,59 @@
+"""gainlink.laws: every kind of control law behind one interface (docs/design.md, "Adding a law").
+
+A law is a pair, structure x numeric format; :func:`law_of` is the one place that decides which law an artifact
+runs, from the artifact's own content (a ``schedule`` block: the scheduled structure; ``checks.fixed_point``: an
+integer format). Everything else asks the returned :class:`Law`: for a :class:`Controller` to step
+(``reference``, ``model``, ``native``), for its refusals (:meth:`Law.refuse`), its safe command and trim.
+
+Pairs today: ``lq/float32``, ``lq/q31``, ``lq/q15``, ``scheduled/float32``. A scheduled law on integers is not a
+pair: a time-varying law has no worst-case peak gain to certify its formats with.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ..errors import LawError
+from .base import CELLS, Capabilities, Controller, Law, Step
+from .fixed import FixedLaw
+from .lq import LqLaw
+from .scheduled import ScheduledLaw
+
+__all__ = ["CELLS", "Capabilities", "Controller", "Law", "Step", "law_for", "law_of", "pairs"]
+
+#: Each structure's law class (its numeric formats are the class's).
+STRUCTURES: dict[str, tuple[type[Law], ...]] = {"lq": (LqLaw, FixedLaw), "scheduled": (ScheduledLaw,)}
+
+#: Why a structure has no form in a numeric format that another structure has.
+NOT_PAIRS = {
+    ("scheduled", "q31"): "a scheduled law on integers is time-varying, and the worst-case peak gain that certifies "
+    "a fixed-point law's formats does not apply to it",
+}
+NOT_PAIRS[("scheduled", "q15")] = NOT_PAIRS[("scheduled", "q31")]
+
+
+def pairs() -> list[str]:
+    """Every law pair, ``structure/numeric``."""
+    return [f"{s}/{n}" for s, classes in STRUCTURES.items() for cls in classes for n in cls.numerics]
+
+
+def law_for(structure: str, numeric: str = "float32") -> Law:
+    """The law of ``structure`` in ``numeric``; :class:`LawError` (one line) for anything that is not a pair."""
+    if structure not in STRUCTURES:
+        raise LawError(f"unknown law structure {structure!r} (structures: {', '.join(STRUCTURES)})")
+    for cls in STRUCTURES[structure]:
+        if numeric in cls.numerics:
+            return cls(numeric)
+    reason = NOT_PAIRS.get((structure, numeric))
+    if reason is not None:
+        raise LawError(f"no {structure} law in {numeric}: {reason}")
+    formats = [n for cls in STRUCTURES[structure] for n in cls.numerics]
+    raise LawError(f"no {structure} law in {numeric} (formats: {', '.join(formats)})")
+
+
+def law_of(artifact: Any) -> Law:
+    """The law ``artifact`` runs: the one place that reads which (module docstring)."""
+    data = artifact.data
+    structure = "scheduled" if data.get("schedule") is not None else "lq"
+    fixed = data.get("checks", {}).get("fixed_point")
+    return law_for(structure, "float32" if fixed is None else str(fixed["numeric"]))
