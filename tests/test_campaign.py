@@ -34,6 +34,7 @@ from gainlink.shipping.artifact import load
 from scipy import stats
 from support.cli import run_cli
 from support.paths import EXAMPLES, ROOT
+from support.procs import children, children_running, group_alive
 
 VENV_BIN = Path(sys.executable).parent
 # What must be equal between two executions of the same run (timing is not: wall time, C step latency).
@@ -598,14 +599,6 @@ def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster
     assert json.loads((out / "campaign.json").read_text())["counts"]["runs"] == 8
 
 
-def _group_alive(pgid: int) -> bool:
-    try:
-        os.killpg(pgid, 0)
-    except ProcessLookupError:
-        return False
-    return True
-
-
 @pytest.mark.slow
 def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_command_that_resumes(pend, tmp_path):
     data = slow_campaign(pend)
@@ -633,9 +626,9 @@ def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_comman
         os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the client and the LocalCluster's processes
         _, err = proc.communicate(timeout=120)
         deadline = time.monotonic() + 30
-        while _group_alive(proc.pid) and time.monotonic() < deadline:
+        while group_alive(proc.pid) and time.monotonic() < deadline:
             time.sleep(0.1)
-        assert not _group_alive(proc.pid), "a process of the campaign outlived it"
+        assert not group_alive(proc.pid), "a process of the campaign outlived it"
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
@@ -655,6 +648,64 @@ def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_comman
     after = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
     assert len(after) == 8 and all(after[k] == v for k, v in before.items())
     assert json.loads((out / "campaign.json").read_text())["counts"]["runs"] == 8
+
+
+def _fork_servers(pid: int) -> set[int]:
+    return children_running(pid, b"multiprocessing.forkserver")
+
+
+def _fork_server_started(pid: int) -> bool:
+    return bool(_fork_servers(pid))
+
+
+def _first_worker_forked(pid: int) -> bool:
+    return any(children(server) for server in _fork_servers(pid))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "moment",
+    [
+        pytest.param(_fork_server_started, id="fork-server-importing"),
+        pytest.param(_first_worker_forked, id="workers-starting"),
+    ],
+)
+def test_ctrl_c_while_the_cluster_starts_exits_130_with_one_line_and_leaves_no_process(pend, tmp_path, moment):
+    # The fork server imports Dask and numpy for a second or more before it ignores SIGINT, and a worker starts
+    # for as long: a Ctrl-C there printed the server's traceback, failed the workers' start ("Nanny failed to
+    # start") and then Dask's atexit closing of a cluster nobody held (AssertionError: Status.init).
+    path, out = tmp_path / "c.toml", tmp_path / "out"
+    path.write_text(toml_write.dumps(small_campaign(pend)))
+    argv = ["campaign", "run", str(path), "--out", str(out), "--workers", "1", "--no-progress", "--no-plots"]
+    proc = subprocess.Popen(
+        [str(VENV_BIN / "gainlink"), *argv],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while not moment(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert moment(proc.pid), "the moment never came"
+        os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C
+        _, err = proc.communicate(timeout=120)
+        deadline = time.monotonic() + 30
+        while group_alive(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not group_alive(proc.pid), "a process of the campaign outlived it"
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    assert proc.returncode == 130, err
+    assert err.splitlines() == [
+        f"gainlink: interrupted: 0 of 6 runs have a result in {out} (kept); resume with: gainlink campaign run "
+        f"{path} --out {out} --workers 1 --no-plots"
+    ]
 
 
 # A run stuck in C code that holds the GIL (here a libc sleep of 8 s) when Ctrl-C comes: its worker cannot stop, and
