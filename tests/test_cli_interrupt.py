@@ -139,3 +139,29 @@ def test_ctrl_c_on_a_hil_run_exits_130_with_one_line_and_stops_the_firmware(
         proc.wait(timeout=30)
     assert (proc.returncode, err) == (130, "gainlink: interrupted\n")
     assert not (tmp_path / "report").exists()
+
+
+def test_ctrl_c_on_firmware_run_stops_the_loop_and_exits_130(pend):
+    # the host loop on stdin/stdout (a SIGTERM to the command alone exits 0: tests/test_firmware_host.py)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "import sys; from gainlink.cli import main; sys.exit(main())"]
+        + ["firmware", "run", str(pend)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    try:
+        assert proc.stdout.readline().startswith(b"gainlink-loop pendulum ")  # the loop is up, reading stdin
+        os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the command and the loop
+        _, err = proc.communicate(timeout=30)
+        deadline = time.monotonic() + 30
+        while group_alive(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not group_alive(proc.pid), "the loop outlived the command"
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    assert (proc.returncode, err) == (130, b"gainlink: interrupted\n")

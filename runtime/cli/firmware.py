@@ -451,15 +451,35 @@ def _add_flash_parser(sub) -> None:
     p.set_defaults(func=_flash)
 
 
+RUN_DESCRIPTION = """\
+Build (cached) and start the host firmware's loop executable (a fixed-point artifact: its integer loop, the law it
+certifies).
+
+Without --input the loop reads stdin and answers each line with one line on stdout, flushed at once:
+  (first)       gainlink-loop NAME sha256:HEX n m p q        fixed point: gainlink-fixed NAME sha256:HEX
+  y0.. r0..     the samples, then the references (numbers separated by spaces, tabs or commas; nan, inf allowed)
+                -> step STATUS u.. SATMASK xh.. z..          fixed point: step FLAGS SAT CLIP OVERFLOW U.. V.. XH.. Z..
+                                                             (integer words)
+  reset         -> reset STATUS                              the loop restarts from its initial state
+  idle          -> idle STATUS u..                           float32 only: a period without a sample (watchdog)
+  stage, crc    -> stage STATUS, crc 0xHEX                   float32 only: re-stage the gain set, its checksum
+  other lines   -> error ...                                 nothing changes and the loop goes on; the exit
+                                                             status is 2 at the end of stdin, else 0
+Ctrl-C stops the loop (exit status 130); a SIGTERM to the command stops it too (exit status 0).
+
+With --input, replay a CSV (columns y0.., r0.., optionally t) through the loop and write the replay CSV (fixed
+point: after a '# numeric=q31|q15' line, as `gainlink replay` writes it).
+
+With a Cortex-M --target (or --board), run the image in QEMU as a bus node on its UART, served as a TCP socket:
+--mavlink tcp:HOST:PORT, or --can with an slcan configuration (channel socket://HOST:PORT)."""
+
+
 def _add_run_parser(sub) -> None:
     p = sub.add_parser(
         "run",
         help="run the firmware for an artifact (host build, or a Cortex-M image in QEMU)",
-        description="Build (cached) and start the host firmware. With --input, replay a CSV "
-        "(columns y0.., r0..) through the loop executable and write the replay CSV (a fixed-point artifact: "
-        "the integer loop, its CSV after a '# numeric=q31|q15' line, as replay writes it). With a Cortex-M "
-        "--target (or --board), run the image in QEMU as a bus node on its UART, served as a TCP socket: "
-        "--mavlink tcp:HOST:PORT, or --can with an slcan configuration (channel socket://HOST:PORT).",
+        description=RUN_DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("artifact", help="gains.json")
     p.add_argument(
