@@ -87,15 +87,40 @@ def _build(args: argparse.Namespace) -> int:
         if is_fixed(artifact):
             (out / "gainlink_fixed_loop_host").chmod(0o755)
     else:
-        print(
-            f"flash {report['flash_bytes']} B, RAM {report['ram_bytes_without_stack']} B + stack "
-            f"({report['ram_bytes']} B total) on {res.board}"
-        )
+        for name, what in _image_roles(artifact, platform.board, stem=stem):
+            print(_size_line(name, json.loads(files[name.removesuffix(".elf") + ".size.json"]), what))
     print(
         f"built {artifact.name} for {args.target}{' / ' + res.board if res.board else ''}: "
         + ", ".join(p.name for p in written if p.parent == out)
     )
     return 0
+
+
+def _image_roles(artifact, board, *, stem: str) -> list[tuple[str, str]]:
+    """Each Cortex-M image a build writes, by file name, with the law it runs and where (what the C compiled in:
+    cortex-m.cmake, gl_fixed.cmake, sched-image.cmake)."""
+    if artifact.schedule is not None:
+        law = "scheduled-float32"
+    else:
+        law = artifact.checks["fixed_point"]["numeric"] if is_fixed(artifact) else "float32"
+    if board.serves:
+        nodes = "its UART's MAVLink and slcan nodes"
+    elif is_fixed(artifact) and board.serves_fixed_slcan:
+        nodes = "its UART's slcan node"
+    else:
+        nodes = None
+    replay = "replay and PIL over semihosting"
+    if not is_fixed(artifact):
+        return [(f"{stem}.elf", f"the {law} law: " + (f"{nodes}, {replay}" if nodes else replay))]
+    main = f"the {law} law on {nodes}, the float32 loop for {replay}" if nodes else f"the float32 loop: {replay}"
+    return [(f"{stem}.elf", main), (f"{stem}_fixed.elf", f"the {law} law alone: {replay}")]
+
+
+def _size_line(name: str, report: dict, what: str) -> str:
+    return (
+        f"{name} on {report['board']}: flash {report['flash_bytes']} B, RAM {report['ram_bytes_without_stack']} B "
+        f"+ stack ({report['ram_bytes']} B total); {what}"
+    )
 
 
 def _add_fixed(files: dict, manifest: dict, res, *, stem: str) -> None:
