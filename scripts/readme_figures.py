@@ -280,8 +280,9 @@ def fixed_point_cost_block() -> str:
 
 def _step(row: Doc, name: str) -> str:
     st = row[f"step_{name}"]
-    tail = "" if st["settled"] else ", not settled (a limit cycle)"
-    return f"{st['overshoot_pct']:.1f} % / {st['settling_time_s']:.2f} s{tail}"
+    if not st["settled"]:
+        return f"{st['overshoot_pct']:.1f} % / not settled (a limit cycle)"
+    return f"{st['overshoot_pct']:.1f} % / {st['settling_time_s']:.2f} s"
 
 
 def sched_showcase_block() -> str:
