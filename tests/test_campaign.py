@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from gainlink.fileio import read_toml
 from gainlink.hil.campaign import CampaignError, parse_campaign, run
 from gainlink.hil.campaign.criteria import growth
 from gainlink.hil.campaign.plan import draw_values, plan_campaign
@@ -1039,3 +1040,25 @@ def test_local_cluster_workers_are_forked_from_a_server_that_imported_the_runner
     parents = {ppid for ppid, _ in views}
     assert len(parents) == 1 and os.getpid() not in parents, views
     assert all(imported for _, imported in views), views
+
+
+def test_the_pendulum_example_passes_the_plants_that_stay_up_under_back_calculation(tmp_path):
+    """examples/campaigns/pendulum_mass_uncertainty.toml judges what its text asks, whether the pendulum stays up
+    (stable, within 40 degrees, the cart on its track), not how fast the cart comes back: its back-calculation
+    runs, which bring the cart back with little or no overshoot in 8 s or more, failed a settled_within = 8 every time (0
+    of 7 on a small draw, while the README counted 97.6 % up). Nor does it run the model twin, which flagged every run:
+    the draws are not the design's model on purpose. Four draws of the back-calculation point, run in process."""
+    from gainlink.hil.campaign.criteria import evaluate
+    from gainlink.hil.campaign.worker import execute
+
+    data, _ = read_toml(EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml", what="campaign", error=ValueError)
+    assert data["scenario"]["model_twin"] is False and "settled_within" not in data["criteria"]
+    data["spec"] = str(EXAMPLES / "pendulum.toml")
+    data["runs"], data["grid"][0]["values"] = 4, ["backcalc"]
+    plan = plan_campaign(parse_campaign(data))
+    for point in plan.runs:
+        record = execute("sil", plan.artifacts[point.artifact_sha256], point.scenario, point.seed)
+        assert record["status"] == "done" and "model_twin" not in record["metrics"]
+        assert evaluate(plan.campaign.criteria, record) == [], point.values
+        settle = record["metrics"]["tracked"]["r_x"]["settling_time_s"]
+        assert settle is None or settle > 8.0  # what settled_within = 8 failed (None: not within the 10 s run)
