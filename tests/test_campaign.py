@@ -156,7 +156,10 @@ def local_run(pend, tmp_path_factory):
         ({"grid": [{"targets": ["initial_state.x", "initial_state.theta"], "values": [1.0]}]}, "needs a name"),
         ({"grid": [{"target": "spec.Ts", "values": [0.01]}]}, "spec.* axes need a spec"),
         ({"fault_matrix": {"drop": [0.1]}}, "fault_matrix acts on a link"),
-        ({"criteria": {"overshot_below": 5}}, "unknown key(s) overshot_below in criteria"),
+        (
+            {"criteria": {"overshot_below": 5}},
+            "unknown key(s) overshot_below (did you mean 'overshoot_below'?) in criteria",
+        ),
     ],
 )
 def test_campaign_file_mistakes_are_one_line(pend, change, words):
@@ -175,8 +178,19 @@ def test_a_run_that_cannot_be_built_is_named_before_anything_runs(pend, tmp_path
         pend,
         draw=[{"target": "plant.parameters.l", "distribution": "uniform", "low": 0.9, "high": 1.1, "apply": "scale"}],
     )
-    with pytest.raises(CampaignError, match=r"needs a number at plant\.parameters\.l in the base"):
+    # the base sets no l to scale (the plant's default is not a number the campaign holds): said so, with what it has
+    with pytest.raises(CampaignError) as err:
         plan_campaign(parse_campaign(scale))
+    assert str(err.value).endswith(
+        "plant.parameters.l: the base has no 'l' to scale; give it a value in the campaign's scenario "
+        "(the base's plant.parameters: M, m)"
+    ), str(err.value)
+    misspelt = small_campaign(
+        pend,
+        draw=[{"target": "plant.parameters.MM", "distribution": "uniform", "low": 0.9, "high": 1.1, "apply": "scale"}],
+    )
+    with pytest.raises(CampaignError, match=r"the base has no 'MM' to scale \(did you mean 'M'\?\)"):
+        plan_campaign(parse_campaign(misspelt))
     path = tmp_path / "c.toml"
     path.write_text(toml_write.dumps(small_campaign(pend, kind="hil")))
     res = run_cli("campaign", "run", path, "--out", tmp_path / "out")
@@ -202,7 +216,10 @@ def test_a_refused_worker_count_writes_nothing(pend, tmp_path):
     [
         (
             {"target": "spec.controlr.R", "values": [1.0, 2.0]},
-            ("run 0 (spec.controlr.R=1, M_factor=", "): unknown key 'controlr' in spec (allowed: Ts, controller,"),
+            (
+                "run 0 (spec.controlr.R=1, M_factor=",
+                "): unknown key 'controlr' (did you mean 'controller'?) in spec (allowed: Ts, controller,",
+            ),
         ),
         (
             {"target": "plant.parameters.M", "values": [1.0, "heavy"]},
@@ -213,8 +230,14 @@ def test_a_refused_worker_count_writes_nothing(pend, tmp_path):
             {"name": "outs", "targets": ["plant.outputs"], "values": [["x", "theta"], "theta"]},
             'axis outs: plant.outputs is a list in the scenario (["x", "theta"]), so the axis cannot set it to "theta"',
         ),
-        ({"target": "plant.parameters.Mass", "values": [1.0]}, "plant cart_pendulum has no parameter 'Mass'"),
-        ({"target": "plant.parametrs.M", "values": [1.0]}, "plant cart_pendulum: unknown key(s) parametrs"),
+        (
+            {"target": "plant.parameters.Mass", "values": [1.0]},
+            "plant cart_pendulum has no parameter 'Mass' (has: M, m, l, g)",  # too far from M to suggest it
+        ),
+        (
+            {"target": "plant.parametrs.M", "values": [1.0]},
+            "plant cart_pendulum: unknown key(s) parametrs (did you mean 'parameters'?)",
+        ),
         ({"target": "initial_state.thta", "values": [0.1, 0.2]}, "plant cart_pendulum has no state 'thta'"),
         ({"target": "noise.thta", "values": [0.001]}, "noise on 'thta', which is not a plant output"),
         # not in the base scenario (the plant's default): the plant's own complaint, for the run that first has it
@@ -1045,9 +1068,10 @@ def test_local_cluster_workers_are_forked_from_a_server_that_imported_the_runner
 def test_the_pendulum_example_passes_the_plants_that_stay_up_under_back_calculation(tmp_path):
     """examples/campaigns/pendulum_mass_uncertainty.toml judges what its text asks, whether the pendulum stays up
     (stable, within 40 degrees, the cart on its track), not how fast the cart comes back: its back-calculation
-    runs, which bring the cart back with little or no overshoot in 8 s or more, failed a settled_within = 8 every time (0
-    of 7 on a small draw, while the README counted 97.6 % up). Nor does it run the model twin, which flagged every run:
-    the draws are not the design's model on purpose. Four draws of the back-calculation point, run in process."""
+    runs, which bring the cart back with little or no overshoot in 8 s or more, failed a settled_within = 8 every
+    time (0 of 7 on a small draw, while the README counted 97.6 % up). Nor does it run the model twin, which flagged
+    every run: the draws are not the design's model on purpose. Four draws of the back-calculation point, run in
+    process."""
     from gainlink.hil.campaign.criteria import evaluate
     from gainlink.hil.campaign.worker import execute
 

@@ -193,6 +193,11 @@ def test_flashing_an_fpga_board_image_names_its_loader_in_one_line(pend, tmp_pat
         (["pil", "run", "{art}", "--steps", "5", "--target", "host", "--out", "{out}"], "host"),
         (["pil", "run", "{art}", "--steps", "5", "--board", "mps9", "--out", "{out}"], "mps9"),
         (["replay", "{art}", "--input", "{csv}", "--output", "{out}", "--engine", "qemu", "--target", "m4"], "m4"),
+        # an image's targets only: the host is not among them
+        (
+            ["replay", "{art}", "--input", "{csv}", "--output", "{out}", "--engine", "qemu", "--target", "cortex-m9"],
+            "unknown target 'cortex-m9' (did you mean 'cortex-m7'?) (choose from cortex-m0, cortex-m3,",
+        ),
         (["replay", "{art}", "--input", "{csv}", "--output", "{out}", "--engine", "qemu", "--board", "x"], "x"),
         (["replay", "{art}", "--input", "{csv}", "--output", "{out}", "--target", "cortex-m0"], "--engine qemu"),
         (

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gainlink.errors import ScenarioError
+from gainlink.errors import ScenarioError, did_you_mean
 from gainlink.fileio import parse_toml, publish_files, read_toml
 from gainlink.shipping.artifact import Artifact, from_dict, render
 
@@ -68,7 +68,7 @@ def default_showcase(name: str = "tank_showcase") -> dict:
     """A built-in showcase description (``scenarios/<name>.toml`` of the package)."""
     path = resources.files("gainlink.hil").joinpath(f"scenarios/{name}.toml")
     if not path.is_file():
-        raise ScenarioError(f"no built-in showcase {name!r} (tank_showcase)")
+        raise ScenarioError(f"no built-in showcase {name!r}{did_you_mean(name, ['tank_showcase'])} (tank_showcase)")
     return parse_toml(path.read_text("utf-8"), what=f"built-in showcase {name}", error=ScenarioError)
 
 

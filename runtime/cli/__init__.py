@@ -13,6 +13,7 @@ import importlib
 import logging
 import os
 import pkgutil
+import re
 import sys
 
 # gainlink's matrices are small (tens of states): a BLAS thread pool does not speed them up, and its threads spin
@@ -20,7 +21,7 @@ import sys
 # time on 2 cores). One thread, as Dask gives its workers, unless the user set it. Before numpy is imported.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from ..errors import GainlinkError
+from ..errors import GainlinkError, did_you_mean
 from ..version import __version__
 
 log = logging.getLogger("gainlink")
@@ -41,7 +42,20 @@ class _OneLineParser(argparse.ArgumentParser):
 
     def error(self, message: str) -> None:
         where = self.prog.removeprefix("gainlink").strip()
-        self.exit(EXIT_USAGE, f"gainlink: error: {where + ': ' if where else ''}{message}\n")
+        self.exit(EXIT_USAGE, f"gainlink: error: {where + ': ' if where else ''}{_suggested(message)}\n")
+
+
+_INVALID_CHOICE = re.compile(r"invalid choice: '(?P<name>[^']*)' \(choose from (?P<choices>.*)\)$")
+
+
+def _suggested(message: str) -> str:
+    """argparse's "invalid choice" message with the closest choice suggested (Python 3.11's argparse has none)."""
+    m = _INVALID_CHOICE.search(message)
+    if m is None:
+        return message
+    choices = [c.strip().strip("'") for c in m.group("choices").split(",")]
+    hint = did_you_mean(m.group("name"), choices)
+    return message[: m.end("name") + 1] + hint + message[m.end("name") + 1 :] if hint else message
 
 
 @functools.cache

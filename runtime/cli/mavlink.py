@@ -74,6 +74,7 @@ def _upload(args: argparse.Namespace) -> int:
     from gainlink.mavlink.params import Encoding
     from gainlink.mavlink.signing import read_key
     from gainlink.mavlink.upload import UploadFailed, format_changes, upload
+    from gainlink.mavlink.upload_text import upload_summary
     from gainlink.shipping.artifact import load
 
     if args.window < 1 or args.retries < 0 or args.timeout <= 0:
@@ -106,21 +107,7 @@ def _upload(args: argparse.Namespace) -> int:
             print(f"gainlink: {line}", file=sys.stderr)
         print(f"gainlink: error: {exc}", file=sys.stderr)
         return EXIT_ROLLED_BACK if exc.rolled_back else EXIT_ROLLBACK_INCOMPLETE
-    if res.dry_run:
-        print(
-            f"dry run: {len(res.changes)} parameter(s) would change, {res.unchanged} already match "
-            f"(vehicle {res.target[0]}/{res.target[1]}, {res.encoding.value} integers)"
-        )
-        return 0
-    what = [f"{res.verified} set(s) verified", f"{res.unchanged} unchanged"]
-    if res.committed:
-        what.append("gain set committed")
-    if res.persisted:
-        what.append("persisted")
-    print(
-        f"uploaded {artifact.name} sha256:{artifact.sha256[:12]} to vehicle {res.target[0]}/{res.target[1]}: "
-        f"{', '.join(what)} ({res.sent} sent, {res.retries} retries, {res.seconds:.3f} s)"
-    )
+    print(upload_summary(artifact, res))
     return 0
 
 
