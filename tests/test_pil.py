@@ -68,6 +68,7 @@ def test_pil_cli_summary_and_files(example_artifacts, tmp_path):
             "0.2",
             "--out",
             str(out),
+            "--json",
         ],
         capture_output=True,
         text=True,

@@ -79,12 +79,12 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
     lines.append(_saturation_line(m))
     if "peak_integrator" in m:
         lines.append("  peak integrator: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["peak_integrator"].items()))
-    lines += _twin_lines(m.get("twin"))
+    lines += twin_lines(m.get("twin"))
     if m.get("fixed_point"):
         from .can_fixed import summary_lines as fixed_summary_lines
 
         lines += fixed_summary_lines(m["fixed_point"])
-    lines += _model_lines(m.get("model_twin"))
+    lines += model_lines(m.get("model_twin"))
     lines += schedule_lines(m.get("schedule"))
     for name, tr in m["tracked"].items():
         lines.append(
@@ -135,7 +135,7 @@ def _plant_lines(info: dict, *, mode: str) -> list[str]:
     return out
 
 
-def _twin_lines(tw: dict | None) -> list[str]:
+def twin_lines(tw: dict | None) -> list[str]:
     """The twin comparison in a few lines: what the implementation cost against the ideal loop."""
     if not tw:
         return []
@@ -161,7 +161,7 @@ def _twin_lines(tw: dict | None) -> list[str]:
     return out
 
 
-def _model_lines(mt: dict | None) -> list[str]:
+def model_lines(mt: dict | None) -> list[str]:
     """The model twin in a few lines: how far the plant departs from the design's own linear model."""
     if not mt:
         return []

@@ -385,8 +385,9 @@ def _pil(args: argparse.Namespace) -> int:
                 "twin.png": png_bytes(twin_figure(result, artifact, title=title)),
             },
         )
-    sys.stdout.write(text)
-    return 0
+    from ._pil_output import print_pil_summary
+
+    return print_pil_summary(args, summary, artifact=artifact, json_text=text)
 
 
 def _pil_model_twin(artifact, plant):
@@ -559,7 +560,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "run",
         help="close the loop with a Cortex-M image in QEMU",
         description="Run a Cortex-M image in QEMU against a plant simulated in Python, one "
-        "sample per semihosting FIFO round trip; prints a JSON summary. A fixed-point artifact runs its integer "
+        "sample per semihosting FIFO round trip; prints a summary (--json: the JSON pil.json holds). A fixed-point "
+        "artifact runs its integer "
         "image; the summary's fixed_point block says whether it equals the bit-exact model on the samples it "
         "received and its deviation from the float64 law with the quantised coefficients beside the certified "
         "bound. A scheduled artifact runs its scheduled image (gl_sched_step, sigma from its output or "
@@ -593,4 +595,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="a scheduled artifact's external scheduling signal: constant, or a linear ramp over the run",
     )
     p.add_argument("--out", help="folder for pil.csv, pil.json and twin.png (the run minus its float64 twin)")
+    p.add_argument("--json", action="store_true", help="print the JSON summary (what pil.json holds) instead")
     p.set_defaults(func=_pil)
