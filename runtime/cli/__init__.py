@@ -8,6 +8,7 @@ become one line on stderr and exit status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import functools
 import importlib
 import logging
@@ -27,6 +28,7 @@ from ..version import __version__
 log = logging.getLogger("gainlink")
 
 EXIT_USAGE = 2
+EXIT_BROKEN_PIPE = 141
 
 EXIT_STATUS_HELP = """\
 exit status:
@@ -103,6 +105,12 @@ def main(argv: list[str] | None = None) -> int:
     with InterruptWatch(process=argv is None) as watch:
         try:
             status = int(args.func(args) or 0)
+        except BrokenPipeError:  # stdout's reader left (| head): the shell's quiet end, 128 + SIGPIPE
+            with contextlib.suppress(OSError, ValueError):  # not a file descriptor: a caller's own stream
+                null = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(null, sys.stdout.fileno())  # Python's final flush of stdout would fail again: a traceback
+                os.close(null)
+            return EXIT_BROKEN_PIPE
         except Exception as exc:
             if not watch.seen:
                 code = _user_error(exc)

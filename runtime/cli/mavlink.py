@@ -29,7 +29,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     up = sub.add_parser("upload", help="upload an artifact's gains (verified, rolled back on failure)")
     up.add_argument("artifact", help="gains.json")
-    up.add_argument("--connect", required=True, help="pymavlink URL: udpout:HOST:PORT, udpin:HOST:PORT, /dev/ttyACM0")
+    up.add_argument("--connect", help="pymavlink URL: udpout:HOST:PORT, udpin:HOST:PORT, /dev/ttyACM0")
+    up.add_argument(
+        "--against",
+        metavar="FILE.params",
+        help="with --dry-run, instead of --connect: diff against a vehicle's saved parameters (QGroundControl .params)",
+    )
     up.add_argument("--mapping", help="TOML mapping of gains to the vehicle's own parameter names and types")
     up.add_argument("--persist", action="store_true", help="send MAV_CMD_PREFLIGHT_STORAGE and check the ack")
     up.add_argument("--dry-run", action="store_true", help="read and print the diff only")
@@ -46,8 +51,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     up.add_argument("--signing-key", metavar="FILE", help=SIGNING_HELP)
     up.set_defaults(func=_upload)
 
-    ls = sub.add_parser("params", help="list a vehicle's parameters (PARAM_REQUEST_LIST)")
-    ls.add_argument("--connect", required=True, help="pymavlink URL")
+    ls = sub.add_parser(
+        "params",
+        help="list a vehicle's, an artifact's or a .params file's parameters, or write them as a QGroundControl "
+        ".params file",
+    )
+    ls.add_argument("source", nargs="?", help="gains.json (the parameters it gives the firmware) or a .params file")
+    ls.add_argument("--connect", help="pymavlink URL of the vehicle (PARAM_REQUEST_LIST)")
+    ls.add_argument("--out", metavar="FILE.params", help="write them as QGroundControl's .params file")
+    ls.add_argument("--mapping", help="with gains.json: the vehicle parameters a mapping TOML names instead")
+    ls.add_argument("--system", type=int, default=1, help="with gains.json: the vehicle id written (default 1)")
+    ls.add_argument("--component", type=int, default=1, help="with gains.json: the component id written (default 1)")
     ls.add_argument("--heartbeat-timeout", type=float, default=5.0, help="seconds to wait for a heartbeat (default 5)")
     ls.add_argument("--signing-key", metavar="FILE", help=SIGNING_HELP)
     ls.set_defaults(func=_params)
@@ -77,6 +91,12 @@ def _upload(args: argparse.Namespace) -> int:
     from gainlink.mavlink.upload_text import upload_summary
     from gainlink.shipping.artifact import load
 
+    if args.against:
+        from ._mavlink_params import upload_against
+
+        return upload_against(args)
+    if not args.connect:
+        raise ParameterError("mavlink upload: give --connect URL (or, with --dry-run, --against FILE.params)")
     if args.window < 1 or args.retries < 0 or args.timeout <= 0:
         raise ParameterError("--window must be >= 1, --retries >= 0 and --timeout > 0")
     artifact = load(args.artifact)
@@ -112,23 +132,9 @@ def _upload(args: argparse.Namespace) -> int:
 
 
 def _params(args: argparse.Namespace) -> int:
-    from gainlink.mavlink.link import MavLink
-    from gainlink.mavlink.params import REAL32, Encoding
-    from gainlink.mavlink.session import ParamSession
-    from gainlink.mavlink.signing import read_key
-    from gainlink.mavlink.upload import detect_encoding
+    from ._mavlink_params import params
 
-    key = read_key(args.signing_key) if args.signing_key else None
-    with MavLink(args.connect, signing_key=key) as link:
-        hb = link.wait_heartbeat(timeout=args.heartbeat_timeout)
-        session = ParamSession(
-            link, target_system=hb.get_srcSystem(), target_component=hb.get_srcComponent(), encoding=Encoding.C_CAST
-        )
-        session.encoding = detect_encoding(session, autopilot=hb.autopilot)
-        for pv in session.read_all().values():
-            value = f"{pv.value:.9g}" if pv.ptype == REAL32 else str(int(pv.value))
-            print(f"{pv.name:<16} {value}")
-    return 0
+    return params(args)
 
 
 def _setup_signing(args: argparse.Namespace) -> int:
