@@ -280,9 +280,10 @@ def fixed_point_cost_block() -> str:
 
 def _step(row: Doc, name: str) -> str:
     st = row[f"step_{name}"]
-    if not st["settled"]:
+    if st["settling_time_s"] is None:  # a result recorded since the showcase stopped giving a run's end as a time
         return f"{st['overshoot_pct']:.1f} % / not settled (a limit cycle)"
-    return f"{st['overshoot_pct']:.1f} % / {st['settling_time_s']:.2f} s"
+    tail = "" if st["settled"] else ", not settled (a limit cycle)"
+    return f"{st['overshoot_pct']:.1f} % / {st['settling_time_s']:.2f} s{tail}"
 
 
 def sched_showcase_block() -> str:

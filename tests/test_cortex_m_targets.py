@@ -299,9 +299,9 @@ def test_pil_cli_with_a_board_alone_runs_that_boards_core(pend, tmp_path):
     assert lines[0] == "PIL run pendulum on mps2-an500 (cortex-m7, QEMU), plant artifact: 50 steps"
     assert f"p50 {summary['round_trip_us_p50']:.4g} us" in lines[2] and "saturated 0 of 50 steps" in lines[3]
     tw = summary["twin"]["inputs"]["F"]
-    assert f"max |u - u_twin|: F {tw['max_du']:.4g} ({tw['max_du_rel']:.3g} of span)" in res.out
+    assert f"max |u - u_twin|: F {tw['max_du']:.4g} N ({tw['max_du_rel']:.3g} of span)" in res.out
     x, theta = summary["final_output"]
-    assert f"final outputs: x {x:.4g}, theta {theta:.4g}" in res.out and len(lines) < 20
+    assert f"final outputs: x {x:.4g} m, theta {theta:.4g} rad" in res.out and len(lines) < 20
 
 
 # --- the image as a bus node on another core's board --------------------------------------------------------

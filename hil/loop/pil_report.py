@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from .report import model_lines, twin_lines
+from .report import model_lines, twin_lines, unit_of
 from .sched_report import schedule_lines
 
 
@@ -23,15 +23,16 @@ def pil_summary_text(summary: dict, *, artifact: Any, out_dir: Path | None = Non
         f"  artifact {s['artifact']} sha256:{s['sha256'][:16]}  law {_law(s)}",
         f"  emulated loop: {_g(s['steps_per_second'], 5)} steps/s; round trip (sample out, command back) "
         f"p50 {_g(s['round_trip_us_p50'])} us, p99 {_g(s['round_trip_us_p99'])} us",
-        f"  saturated {s['saturated_steps']} of {s['steps']} steps (any input); refused samples (faults) "
-        f"{s['faults']}",
+        f"  saturated {s['saturated_steps']} of {s['steps']} steps (any input); refused samples (faults) {s['faults']}",
     ]
     lines += _fixed_lines(s.get("fixed_point"))
     lines += _scheduled_lines(s.get("scheduled"))
-    lines += twin_lines(s.get("twin"))
-    lines += model_lines(s.get("model_twin"))
+    units = sig.get("units")
+    lines += twin_lines(s.get("twin"), units=units)
+    lines += model_lines(s.get("model_twin"), units=units)
     lines.append(
-        "  final outputs: " + ", ".join(f"{name} {_g(v)}" for name, v in zip(sig["outputs"], s["final_output"]))
+        "  final outputs: "
+        + ", ".join(f"{name} {_g(v)}{unit_of(units, name)}" for name, v in zip(sig["outputs"], s["final_output"]))
     )
     if out_dir is not None:
         lines.append(f"  report: {out_dir / 'pil.json'}, pil.csv, twin.png")

@@ -101,6 +101,7 @@ def _bode_figure(artifact: Any, i: int) -> Any:
     import matplotlib.pyplot as plt
 
     a = artifact
+    per = f"rad/{a.unit('time')}"
     loop = broken_loop(a, i)
     m = loop_margins(a, i, loop)
     nyquist = np.pi / a.Ts
@@ -120,7 +121,7 @@ def _bode_figure(artifact: Any, i: int) -> Any:
             continue
         gm_db = 20 * np.log10(gain)
         ax_m.vlines(wpc, -gm_db, 0.0, colors="C3", lw=1.5)
-        ax_m.annotate(f"GM {gm_db:+.1f} dB\nat {wpc:.3g} rad/s", (wpc, -gm_db / 2), fontsize=8, color="C3",
+        ax_m.annotate(f"GM {gm_db:+.1f} dB\nat {wpc:.3g} {per}", (wpc, -gm_db / 2), fontsize=8, color="C3",
                       xytext=(4, 0), textcoords="offset points")  # fmt: skip
         ax_p.axvline(wpc, color="C3", lw=0.8, ls="--")
     if m.phase_margin_deg is not None:
@@ -128,7 +129,7 @@ def _bode_figure(artifact: Any, i: int) -> Any:
         at = float(np.interp(np.log(wgc), np.log(w), phase))
         edge = 180.0 * np.sign(at) if at != 0 else -180.0
         ax_p.vlines(wgc, at, edge, colors="C2", lw=1.5)
-        ax_p.annotate(f"PM {m.phase_margin_deg:.1f} deg\nat {wgc:.3g} rad/s", (wgc, (at + edge) / 2), fontsize=8,
+        ax_p.annotate(f"PM {m.phase_margin_deg:.1f} deg\nat {wgc:.3g} {per}", (wgc, (at + edge) / 2), fontsize=8,
                       color="C2", xytext=(4, 0), textcoords="offset points")  # fmt: skip
         ax_m.axvline(wgc, color="C2", lw=0.8, ls="--")
     # a discrete loop's magnitude dives towards a zero at Nyquist (z = -1): keep the axis on the rest
@@ -138,7 +139,7 @@ def _bode_figure(artifact: Any, i: int) -> Any:
         ax.grid(True, which="both", alpha=0.3)
     ax_m.set_ylabel("|L| [dB]")
     ax_p.set_ylabel("phase of L [deg]")
-    ax_p.set_xlabel(f"frequency [rad/s] (Nyquist {nyquist:.4g} rad/s)")
+    ax_p.set_xlabel(f"frequency [{per}] (Nyquist {nyquist:.4g} {per})")
     fig.suptitle(f"{a.name}: the loop broken at input {m.input} (the others closed), L = -u/v\n"
                  f"{_design_margins(a, m.input)}", fontsize=10)  # fmt: skip
     return fig
@@ -153,9 +154,9 @@ def _design_margins(a: Any, name: str) -> str:
     def db(v: float | None) -> str:
         return "beyond 60 dB" if v is None else f"{v:+.1f} dB"
 
-    pm = row["phase_margin_deg"]
+    pm, per = row["phase_margin_deg"], f"rad/{a.unit('time')}"
     return f"design: gain margin {db(row['gain_margin_up_db'])} / {db(row['gain_margin_down_db'])}, " + (
-        "no gain crossover" if pm is None else f"phase {pm:.1f} deg at {row['gain_crossover_rad_s']:.3g} rad/s"
+        "no gain crossover" if pm is None else f"phase {pm:.1f} deg at {row['gain_crossover_rad_s']:.3g} {per}"
     )
 
 
@@ -180,10 +181,10 @@ def _step_figure(artifact: Any) -> Any:
             ax.step(resp.time, resp.outputs[k, 0], where="post", lw=1.2, label=f"step of {name}")
     for k, ax in enumerate(axes[:, 0]):
         kind = "command" if k >= a.p else "output"
-        ax.set_ylabel(f"{outputs[k]} ({kind})")
+        ax.set_ylabel(f"{a.label(outputs[k])} ({kind})")
         ax.grid(True, alpha=0.3)
     axes[0, 0].legend(fontsize=8, loc="best")
-    axes[-1, 0].set_xlabel("t [s]")
+    axes[-1, 0].set_xlabel(f"t [{a.unit('time')}]")
     what = "reference" if a.signals["references"] else "input disturbance"
     fig.suptitle(f"{a.name}: the closed loop after a unit {what} step\n(design plant, linear law: no limits; "
                  "deviations from the operating point)", fontsize=10)  # fmt: skip
