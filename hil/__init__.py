@@ -70,11 +70,18 @@ def run(
     import dataclasses
     import tempfile
 
+    from gainlink.errors import ScenarioError
     from gainlink.shipping.artifact import Artifact, load
 
     from .loop.report import write_report
+    from .loop.scenario import is_builtin_scenario
 
     sc = _as_scenario(scenario)
+    if artifact is None and is_builtin_scenario(sc.path):
+        raise ScenarioError(
+            f"the built-in scenario {sc.path.stem} runs an artifact of yours: give it (--artifact gains.json, "
+            "as `gainlink design SPEC --out DIR` writes)"
+        )
     with tempfile.TemporaryDirectory(prefix="gainlink-run-") as tmp:
         if isinstance(artifact, Artifact):
             path = Path(tmp) / "gains.json"

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any, Generic, TypeVar
 
-from gainlink.errors import GainlinkError
+from gainlink.errors import GainlinkError, did_you_mean
 
 T = TypeVar("T")
 
@@ -49,7 +49,10 @@ class Registry(Generic[T]):
         try:
             factory = self._factories[name]
         except KeyError:
-            raise self.error(f"unknown {self.what} kind {name!r} (known: {', '.join(self.names())})") from None
+            known = self.names()
+            raise self.error(
+                f"unknown {self.what} kind {name!r}{did_you_mean(name, known)} (known: {', '.join(known)})"
+            ) from None
         return factory(config, **context)
 
 
@@ -57,5 +60,8 @@ def take_keys(config: Mapping[str, Any], *, allowed: set[str], where: str, error
     """Return ``config`` as a dict after checking it only uses ``allowed`` keys."""
     unknown = sorted(set(config) - allowed)
     if unknown:
-        raise error(f"{where}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(allowed))})")
+        raise error(
+            f"{where}: unknown key(s) {', '.join(unknown)}{did_you_mean(unknown[0], allowed)} "
+            f"(allowed: {', '.join(sorted(allowed))})"
+        )
     return dict(config)

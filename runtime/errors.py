@@ -4,6 +4,10 @@ Every error a user can cause derives from :class:`GainlinkError` and from the ma
 so callers may catch either. The CLI turns any of them into one line and exit status 2.
 """
 
+from __future__ import annotations
+
+from collections.abc import Iterable
+
 
 class GainlinkError(Exception):
     """Root of every gainlink error."""
@@ -63,3 +67,12 @@ class ParameterError(GainlinkError, RuntimeError):
 
 class LawError(GainlinkError, ValueError):
     """A law cannot do what was asked of it (its declaration says why), or no law runs such an artifact."""
+
+
+def did_you_mean(name: str, known: Iterable[str]) -> str:
+    """``" (did you mean 'x'?)"`` for the known name closest to a misspelt ``name`` (:func:`difflib.get_close_matches`,
+    its default cut-off 0.6), or ``""`` when none is close: the tail of the one line that refuses ``name``."""
+    import difflib
+
+    close = difflib.get_close_matches(str(name), [str(k) for k in known], n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""

@@ -478,6 +478,8 @@ def cortex_m_targets_block() -> str:
 
 def _step(row: Doc, name: str) -> str:
     st = row[f"step_{name}"]
+    if st["settling_time_s"] is None:  # a result recorded since the showcase stopped giving a run's end as a time
+        return f"{st['overshoot_pct']:.1f} % / not settled (a limit cycle)"
     tail = "" if st["settled"] else ", not settled (a limit cycle)"
     return f"{st['overshoot_pct']:.1f} % / {st['settling_time_s']:.2f} s{tail}"
 

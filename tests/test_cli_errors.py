@@ -18,7 +18,11 @@ def spec_with(old: str, new: str) -> str:
 # (id, spec text, expected words in the message)
 BAD_SPECS = [
     ("malformed-toml", GOOD_SPEC.replace("Ts = 0.01", "Ts = = 0.01"), "not valid TOML"),
-    ("missing-plant", GOOD_SPEC.replace('[plant]\nkind = "continuous"\n', "[plant_]\n"), "unknown key 'plant_'"),
+    (
+        "missing-plant",
+        GOOD_SPEC.replace('[plant]\nkind = "continuous"\n', "[plant_]\n"),
+        "unknown key 'plant_' (did you mean 'plant'?)",
+    ),
     (
         "A-not-square",
         spec_with("A = [[0.0, 1.0], [0.0, -2.0]]", "A = [[0.0, 1.0, 0.0], [0.0, -2.0, 0.0]]"),
@@ -63,7 +67,7 @@ BAD_SPECS = [
     (
         "unknown-controller-key",
         spec_with("R_diag = [1.0]", "R_diag = [1.0]\nQdiag = [1.0, 1.0]"),
-        "unknown key 'Qdiag'",
+        "unknown key 'Qdiag' (did you mean 'Q_diag'?)",
     ),
     ("u-min-above-max", spec_with("u_min = [-5.0]", "u_min = [6.0]"), "u_min must be below"),
     ("u-max-wrong-length", spec_with("u_max = [5.0]", "u_max = [5.0, 5.0]"), "has 2 entries, expected 1"),
@@ -104,7 +108,11 @@ BAD_SPECS = [
         GOOD_SPEC.replace('name = "servo"', 'name = "servo"\noperating_point = 3.0'),
         "'operating_point' must be a table",
     ),
-    ("op-unknown-key", GOOD_SPEC + "[operating_point]\nu_opp = [1.0]\n", "unknown key 'u_opp' in operating_point"),
+    (
+        "op-unknown-key",
+        GOOD_SPEC + "[operating_point]\nu_opp = [1.0]\n",
+        "unknown key 'u_opp' (did you mean 'u_op'?) in operating_point",
+    ),
     (
         "op-u-wrong-length",
         GOOD_SPEC + "[operating_point]\nu_op = [1.0, 2.0]\n",
@@ -234,6 +242,34 @@ def test_usage_errors_are_one_line_too(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # where a command would write by default
     assert_refused(("design",), "required", tmp_path)
     assert_refused(("frobnicate",), "invalid choice", tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["desing"], "invalid choice: 'desing' (did you mean 'design'?)"),
+        (["firmware", "build", "g.json", "--target", "cortex-m44"], "'cortex-m44' (did you mean 'cortex-m4'?)"),
+        (["hil", "run", "pendulum_fmx"], "nor a built-in scenario (did you mean 'pendulum_fmu'?)"),
+        (["hil", "study", "--study", "saturation_kik"], "study 'saturation_kik' (did you mean 'saturation_kick'?)"),
+    ],
+)
+def test_a_misspelt_name_gets_the_closest_one_suggested(argv, words, tmp_path):
+    assert_refused((*argv, "--report" if argv[0] == "hil" else "--out", tmp_path / "out"), words, tmp_path)
+
+
+def test_a_built_in_scenario_without_an_artifact_asks_for_one(tmp_path):
+    # its artifact = "gains.json" is a placeholder: it was read beside the package's scenario file
+    argv = ("hil", "run", "pendulum_fmu", "--report", tmp_path / "out")
+    phrase = "the built-in scenario pendulum_fmu runs an artifact of yours: give it (--artifact"
+    res = assert_refused(argv, phrase, tmp_path)
+    assert "scenarios/gains.json" not in res.err
+
+
+def test_the_help_says_hil_runs_over_can_and_mavlink():
+    res = run_cli("--help")
+    assert res.code == 0
+    assert "hardware-in-the-loop bridge over CAN or MAVLink" in " ".join(res.out.split())
+    assert "130  interrupted (Ctrl-C" in res.out
 
 
 def test_real_console_script_exit_status(tmp_path):

@@ -193,6 +193,11 @@ def test_flashing_an_fpga_board_image_names_its_loader_in_one_line(pend, tmp_pat
         (["pil", "run", "{art}", "--steps", "5", "--target", "host", "--out", "{out}"], "host"),
         (["pil", "run", "{art}", "--steps", "5", "--board", "mps9", "--out", "{out}"], "mps9"),
         (["replay", "{art}", "--input", "{csv}", "--output", "{out}", "--engine", "qemu", "--target", "m4"], "m4"),
+        # an image's targets only: the host is not among them
+        (
+            ["replay", "{art}", "--input", "{csv}", "--output", "{out}", "--engine", "qemu", "--target", "cortex-m9"],
+            "unknown target 'cortex-m9' (did you mean 'cortex-m7'?) (choose from cortex-m0, cortex-m3,",
+        ),
         (["replay", "{art}", "--input", "{csv}", "--output", "{out}", "--engine", "qemu", "--board", "x"], "x"),
         (["replay", "{art}", "--input", "{csv}", "--output", "{out}", "--target", "cortex-m0"], "--engine qemu"),
         (
@@ -284,9 +289,16 @@ def test_pil_closes_the_loop_on_other_cores(pend, target):
 def test_pil_cli_with_a_board_alone_runs_that_boards_core(pend, tmp_path):
     res = run_cli("pil", "run", pend, "--board", "mps2-an500", "--steps", "50", "--out", tmp_path / "pil")
     assert res.code == 0, res.err
-    summary = json.loads(res.out)
+    summary = json.loads((tmp_path / "pil" / "pil.json").read_text())
     assert (summary["target"], summary["board"], summary["steps"]) == ("cortex-m7", "mps2-an500", 50)
-    assert json.loads((tmp_path / "pil" / "pil.json").read_text()) == summary
+    # a one-screen summary, as hil run prints one (the JSON with --json), from the numbers pil.json holds
+    lines = res.out.splitlines()
+    assert lines[0] == "PIL run pendulum on mps2-an500 (cortex-m7, QEMU), plant artifact: 50 steps"
+    assert f"p50 {summary['round_trip_us_p50']:.4g} us" in lines[2] and "saturated 0 of 50 steps" in lines[3]
+    tw = summary["twin"]["inputs"]["F"]
+    assert f"max |u - u_twin|: F {tw['max_du']:.4g} N ({tw['max_du_rel']:.3g} of span)" in res.out
+    x, theta = summary["final_output"]
+    assert f"final outputs: x {x:.4g} m, theta {theta:.4g} rad" in res.out and len(lines) < 20
 
 
 # --- the image as a bus node on another core's board --------------------------------------------------------

@@ -289,7 +289,7 @@ def test_host_executable_under_asan_ubsan_matches_ctypes(pendulum, random_design
         lines = [" ".join(repr(float(v)) for v in np.concatenate([Y[k], R[k]])) for k in range(N)]
         script = lines[:60] + ["idle", "stage", "crc"] + lines[60:] + ["reset", "bogus line"]
         proc = subprocess.run([str(exe)], input="\n".join(script) + "\n", capture_output=True, text=True, timeout=120)
-        assert proc.returncode == 0, proc.stderr
+        assert proc.returncode == 2, proc.stderr  # the malformed last line
         assert "runtime error" not in proc.stderr and "AddressSanitizer" not in proc.stderr, proc.stderr
         out = proc.stdout.splitlines()
         assert out[0].startswith(f"gainlink-loop {a.name} sha256:{a.sha256}")
@@ -355,6 +355,35 @@ def test_a_sigterm_to_firmware_run_stops_the_loop_it_started_and_leaves_nothing_
         proc.wait()
         for f in (proc.stdin, proc.stdout, proc.stderr):
             f.close()
+
+
+def test_firmware_run_answers_each_stdin_line_and_exits_2_after_an_unreadable_one(pend):
+    """The stdin protocol of `gainlink firmware run` (its help): numbers separated by spaces, tabs or commas, each
+    line answered by one; a line it cannot read is answered `error ...` and the loop goes on, but the exit status
+    is then 2, with one line on stderr."""
+    import sys
+
+    from gainlink.proof.float32_law import Float32Loop
+    from gainlink.shipping.artifact import load
+
+    a = load(pend)
+    rng = np.random.default_rng(3)
+    Y, R = rng.normal(0.0, 0.05, (3, a.p)), np.full((3, a.q), 0.2)
+    rows = [np.concatenate([Y[k], R[k]]).astype(np.float32) for k in range(3)]
+    script = [",".join(repr(float(v)) for v in rows[0]), "y0,y1,r0", "\t".join(repr(float(v)) for v in rows[1])]
+    script.append(" , ".join(repr(float(v)) for v in rows[2]))
+    exe = str(Path(sys.executable).with_name("gainlink"))
+    proc = subprocess.run(
+        [exe, "firmware", "run", str(pend)], input="\n".join(script) + "\n", capture_output=True, text=True
+    )
+    answers = proc.stdout.splitlines()[1:]
+    assert len(answers) == len(script)
+    assert answers[1] == f"error expected {a.p + a.q} numbers, idle, reset, stage or crc"
+    want = Float32Loop(a).run(np.array(rows)[:, : a.p].astype(float), np.array(rows)[:, a.p :].astype(float)).u
+    got = np.array([[float(v) for v in answers[k].split()[2 : 2 + a.m]] for k in (0, 2, 3)], dtype=np.float32)
+    assert np.array_equal(got, want.astype(np.float32))  # the refused line changed nothing
+    assert proc.returncode == 2
+    assert proc.stderr.splitlines() == ["gainlink_loop_host: 1 of 4 input lines unreadable (the first: line 2)"]
 
 
 def test_firmware_run_replays_a_csv_through_the_host_executable(tmp_path, pendulum):

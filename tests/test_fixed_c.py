@@ -219,7 +219,8 @@ def test_host_executable_under_asan_ubsan_matches_the_library():
         lines = [" ".join(repr(float(v)) for v in np.concatenate([Y[k], R[k]])) for k in range(len(Y))]
         script = lines + ["reset", "bogus"] + lines[:10]
         proc = subprocess.run([str(exe)], input="\n".join(script) + "\n", capture_output=True, text=True, timeout=120)
-        assert proc.returncode == 0 and "runtime error" not in proc.stderr and "Sanitizer" not in proc.stderr
+        assert proc.returncode == 2  # the line "bogus"
+        assert "runtime error" not in proc.stderr and "Sanitizer" not in proc.stderr, proc.stderr
         steps = [[int(v) for v in line.split()[1:]] for line in proc.stdout.splitlines() if line.startswith("step ")]
         run = run_host(a, Y, R)
         for k in range(len(Y)):
@@ -227,4 +228,4 @@ def test_host_executable_under_asan_ubsan_matches_the_library():
             assert [flags, sat, clip, ovf] == [run.flags[k], run.sat[k], run.clip[k], run.overflow[k]]
             assert rest == [*run.U[k], *run.V[k], *run.XH[k], *run.Z[k]], k
         assert steps[len(Y) :] == steps[:10]  # reset: the same steps again
-        assert "error unreadable line" in proc.stdout
+        assert f"error expected {a.p + a.q} numbers or reset" in proc.stdout

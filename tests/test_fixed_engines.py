@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import json
+import subprocess
 
 import numpy as np
 import pytest
@@ -69,6 +70,24 @@ def test_firmware_build_ships_the_fixed_point_image(pendulum_q31, tmp_path):
     _, gains, _ = pendulum_q31
     res = run_cli("firmware", "build", gains, "--target", "cortex-m0", "--out", tmp_path / "fw")
     assert res.code == 0, res.err
+    # Every image built is printed with its size and the law it runs, the integer image included (the float32
+    # one alone was): flash as objcopy's .bin, RAM as binutils' size counts the sections at 0x20000000 and up.
+    sizes = {line.split()[0]: line for line in res.out.splitlines() if line.startswith("gainlink_pendulum")}
+    assert set(sizes) == {"gainlink_pendulum.elf", "gainlink_pendulum_fixed.elf"}, res.out
+    for name, law in (
+        ("gainlink_pendulum.elf", "the q31 law on its UART's slcan node"),
+        ("gainlink_pendulum_fixed.elf", "the q31 law alone"),
+    ):
+        elf = tmp_path / "fw" / name
+        table = subprocess.run(["arm-none-eabi-size", "-A", str(elf)], capture_output=True, text=True, check=True)
+        ram = sum(
+            int(f[1])
+            for f in (ln.split() for ln in table.stdout.splitlines()[2:])
+            if len(f) == 3 and f[2].isdigit() and int(f[2]) >= 0x20000000
+        )
+        flash = elf.with_suffix(".bin").stat().st_size
+        assert f"{name} on microbit: flash {flash} B," in sizes[name] and f"({ram} B total)" in sizes[name], sizes[name]
+        assert law in sizes[name], sizes[name]
     manifest = json.loads((tmp_path / "fw" / "firmware.json").read_text())
     assert manifest["fixed_point"]["elf"] == "gainlink_pendulum_fixed.elf"
     assert (tmp_path / "fw" / "src" / "gl_fixed_gains.c").is_file()

@@ -106,6 +106,37 @@ def test_firmware_run_without_input_is_the_integer_loop_on_stdin(saved):
     assert len(steps) == 40 and np.any(real(model.U, fu) != Float32Loop(a).run(Y[:40], R[:40]).u)
 
 
+def test_firmware_run_without_input_reads_the_float_loops_lines_and_exits_2_on_an_unreadable_one(saved):
+    """The float loop's stdin lines (commas or tabs between the numbers, `reset`) are the integer loop's too: each
+    answered with the model's words; a line it cannot read (a CSV header) or a command only the float loop has is
+    answered `error ...`, changes nothing, and the exit status is 2 with one line on stderr."""
+    a, path, Y, R = saved
+    rows = [np.concatenate([Y[k], R[k]]) for k in range(6)]
+    lines = [",".join(repr(float(v)) for v in rows[0]), "\t".join(repr(float(v)) for v in rows[1])]
+    lines += [", ".join(repr(float(v)) for v in row) for row in rows[2:4]]
+    header = ",".join([f"y{i}" for i in range(a.p)] + [f"r{i}" for i in range(a.q)])
+    script = [header, *lines, "idle", "reset", *lines[:2]]
+    proc = subprocess.run(
+        [GAINLINK, "firmware", "run", str(path)], input="\n".join(script) + "\n", capture_output=True, text=True
+    )
+    out = proc.stdout.splitlines()
+    assert out[0] == f"gainlink-fixed {a.name} sha256:{a.sha256}"
+    answers = out[1:]
+    assert len(answers) == len(script)  # one answer per line, whatever the line
+    assert answers[0] == f"error expected {a.p + a.q} numbers or reset"
+    assert answers[5].startswith("error idle: ") and answers[6] == "reset 0"
+    model = model_run(a, Y[:4], R[:4])
+    steps = [[int(v) for v in ln.split()[1:]] for ln in answers[1:5] + answers[7:]]
+    for k, (flags, sat, clip, _ovf, *words) in enumerate(steps):
+        j = k if k < 4 else k - 4  # after the reset: the first steps again
+        assert [sat, clip, bool(flags & 1)] == [model.sat[j], model.clip[j], model.fault[j]], k
+        assert words == [*model.U[j], *model.V[j], *model.XH[j], *model.Z[j]], k
+    assert proc.returncode == 2
+    assert proc.stderr.splitlines() == [
+        f"gainlink_fixed_loop_host: 2 of {len(script)} input lines unreadable (the first: line 1)"
+    ]
+
+
 def _answer(proc: subprocess.Popen, timeout: float) -> str:
     """The next line the process writes, within ``timeout`` seconds (unbuffered pipe: nothing is read ahead)."""
     ready, _, _ = select.select([proc.stdout], [], [], timeout)

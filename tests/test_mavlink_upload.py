@@ -107,6 +107,17 @@ def test_upload_persists_survives_restart_and_the_loop_runs_the_new_gains(mavlin
         assert params["GL_K_0_2"].value == float(np.float32(new.K[0, 2]))
         res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--dry-run")
         assert res.code == 0 and "dry run: 0 parameter(s) would change" in res.out
+        # The same set again, with --persist: nothing is set or committed, and the vehicle's flash is not written
+        # (it holds this set): the command says so, not "persisted"
+        stored = storage.stat().st_mtime_ns, storage.read_bytes()
+        res = run_cli("mavlink", "upload", retuned, "--connect", f"udpout:127.0.0.1:{port}", "--persist")
+        assert res.code == 0, res.err
+        assert res.out.startswith(
+            f"nothing to upload: vehicle 1/1 (MAV_AUTOPILOT_GENERIC, a gainlink node) already holds {new.name} "
+            f"sha256:{new.sha256[:12]}"
+        )
+        assert "persisted" not in res.out and "committed" not in res.out
+        assert (storage.stat().st_mtime_ns, storage.read_bytes()) == stored
         Y, R, U = closed_loop(port, new)
         np.testing.assert_allclose(U, reference_u(new, Y, R), atol=1e-4)
     finally:

@@ -337,6 +337,7 @@ def test_pil_reports_the_model_twin_against_a_nonlinear_plant(example_artifacts,
         "0.2",
         "--out",
         tmp_path,
+        "--json",
     )
     assert res.code == 0, res.err
     mt = json.loads(res.out)["model_twin"]

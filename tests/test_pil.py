@@ -68,6 +68,7 @@ def test_pil_cli_summary_and_files(example_artifacts, tmp_path):
             "0.2",
             "--out",
             str(out),
+            "--json",
         ],
         capture_output=True,
         text=True,
@@ -103,7 +104,13 @@ def test_pil_twin_plot_shows_the_run_minus_its_twin(example_artifacts):
     fig = twin_figure(res, a)
     try:
         panels = list(fig.axes)
-        assert [ax.get_ylabel() for ax in panels] == ["x_D - twin", "x_B - twin", "reflux - twin", "steam - twin"]
+        assert [ax.get_ylabel() for ax in panels] == [
+            "x_D - twin [mol %]",
+            "x_B - twin [mol %]",
+            "reflux - twin [lb/min]",
+            "steam - twin [lb/min]",
+        ]
+        assert panels[-1].get_xlabel() == "t [min]"  # the example's time unit
         expected = [res.y[:, 0] - res.twin.y[:, 0], res.y[:, 1] - res.twin.y[:, 1]]
         expected += [res.u[:, 0] - res.twin.u[:, 0], res.u[:, 1] - res.twin.u[:, 1]]
         for ax, diff in zip(panels, expected):

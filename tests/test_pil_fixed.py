@@ -77,7 +77,9 @@ def test_pil_cli_on_a_fixed_point_artifact_reports_the_oracle(tmp_path):
     gains = tmp_path / "gains.json"
     a.save(gains)
     out = tmp_path / "pil"
-    res = run_cli("pil", "run", gains, "--board", "microbit", "--steps", "200", "--reference", "0.2", "--out", out)
+    res = run_cli(
+        "pil", "run", gains, "--board", "microbit", "--steps", "200", "--reference", "0.2", "--out", out, "--json"
+    )
     assert res.code == 0, res.err
     summary = json.loads(res.out)
     assert summary["target"] == "cortex-m0" and summary["steps"] == 200 and summary["faults"] == 0

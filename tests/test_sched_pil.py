@@ -141,7 +141,7 @@ def test_pil_cli_on_a_scheduled_artifact(level_data, level, tmp_path):
     artifact_mod.write(path, level_data)
     out = tmp_path / "pil"
     res = run_cli("pil", "run", path, "--plant", "tank", "--steps", 200, "--reference", 1.2, "--x0", 0.0, 0.0,
-                  "--out", out)  # fmt: skip
+                  "--out", out, "--json")  # fmt: skip
     assert res.code == 0, res.err
     summary = json.loads((out / "pil.json").read_text())
     assert summary == json.loads(res.out)

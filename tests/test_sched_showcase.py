@@ -3,12 +3,14 @@ scheduled on its level and as one unscheduled design at its middle point, both r
 the project's tank FMU across the whole envelope, as hardware in the loop: the firmware's CAN node on each law,
 in lockstep over a udp_multicast bus.
 
-Measured (the built-in description, firmware): low-end step overshoot 17.3 % and a limit cycle (settling 15 s,
-never within 5 %) for the single point against 0 % and 1.5 s scheduled; high-end step 7.9 % / 3.35 s against
-0 % / 2.1 s; max |e| held at the low end after the sweep 0.021 m against 0.0008 m; max |e| over the sweep 0.100
-against 0.088 m; the sweep's IAE nearly equal (2.09 against 2.05: the ramp's lag of both integrating loops
+Measured (the built-in description, firmware): low-end step overshoot 17.3 % and a limit cycle (not settled:
+out of the 5 % band to the run's end) for the single point against 0 % and 1.5 s scheduled; high-end step 7.9 % /
+3.35 s against 0 % / 2.1 s; max |e| held at the low end after the sweep 0.021 m against 0.0008 m; max |e| over the
+sweep 0.100 against 0.088 m; the sweep's IAE nearly equal (2.09 against 2.05: the ramp's lag of both integrating loops
 dominates it). The model twin flags the single-point design (0.119 of the level's range, its one model is wrong
-away from its point) and not the scheduled one (0.0037). Asserted with margin below.
+away from its point) and not the scheduled one (0.0037). Before the references move (the first 10 s), the
+single-point law's start from its own point's trim command takes the level 0.645 m off (its high-end run), the
+scheduled law's 0.0057 m. Asserted with margin below.
 """
 
 from __future__ import annotations
@@ -48,7 +50,8 @@ def test_the_scheduled_design_holds_damping_and_tracking_where_the_single_point_
     assert single["complete"] and sched["complete"]
     low, high = single["step_low"], sched["step_low"]
     assert low["overshoot_pct"] > 10.0 and high["overshoot_pct"] < 1.0  # the fast end: rings, then limit-cycles
-    assert not low["settled"] and high["settled"] and high["settling_time_s"] < 0.3 * low["settling_time_s"]
+    assert not low["settled"] and low["settling_time_s"] is None  # a limit cycle: not settled, no time printed
+    assert high["settled"] and high["settling_time_s"] < 4.5  # 0.3 of the 15 s after the step
     assert single["step_high"]["overshoot_pct"] > 5.0 and sched["step_high"]["overshoot_pct"] < 1.0
     assert sched["step_high"]["settling_time_s"] < 0.8 * single["step_high"]["settling_time_s"]
     assert sched["sweep_hold_max_abs_e"] < 0.1 * single["sweep_hold_max_abs_e"]
@@ -87,6 +90,12 @@ def test_report_json_holds_the_numbers_summary_txt_prints(showcase):
         line = next(ln for ln in summary.splitlines() if ln.strip().startswith(name + " "))
         for v in (row["sweep_iae"], row["model_twin_worst"], row["step_low"]["overshoot_pct"]):
             assert f"{v:.3g}" in line, (name, v)
+        assert f"{row['start_max_abs_e']:.3g} m" in line, name
+    assert "not settled" in next(ln for ln in summary.splitlines() if ln.strip().startswith("single "))
+    # the start the other columns leave out (comparison.png shades it): the single-point law starts from its own
+    # point's trim command, far from the ends, and the level travels; the scheduled law starts at the trim it measures
+    single, sched = doc["designs"]["single"], doc["designs"]["scheduled"]
+    assert single["start_max_abs_e"] > 0.3 and sched["start_max_abs_e"] < 0.05 * single["start_max_abs_e"]
 
 
 def test_the_cli_refuses_a_spec_without_a_schedule_in_one_line(tmp_path):

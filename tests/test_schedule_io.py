@@ -48,7 +48,10 @@ BAD = {
     "no integral action": (lambda d: d.pop("integral"), "integral action on every input"),
     "other anti-windup": (lambda d: d["limits"].update(anti_windup="backcalc"), "must be 'velocity'"),
     "operating_point table": (lambda d: d.update(operating_point={"u_op": [0.1]}), "drop \\[operating_point\\]"),
-    "unknown key": (lambda d: d["schedule"].update(rate=1.0), "unknown key 'rate' in schedule"),
+    "unknown key": (
+        lambda d: d["schedule"].update(rate=1.0),
+        "unknown key 'rate' \\(did you mean 'rate_max'\\?\\) in schedule",
+    ),
 }
 
 

@@ -16,9 +16,13 @@ import ast
 import contextlib
 import logging
 import os
+import signal
 import sys
+import threading
 from collections.abc import Iterator
 from pathlib import Path
+from types import FrameType
+from typing import Any
 
 from gainlink.errors import GainlinkError
 
@@ -189,8 +193,9 @@ def dask_client(
     n = cpus if workers is None else workers
     if n < 1:
         raise ClusterError(f"--workers must be at least 1, not {n}")
-    with dask.config.set(LOCAL_CONFIG):
-        _preload_worker_modules()
+    held = _HeldInterrupt()
+    with dask.config.set(LOCAL_CONFIG), held:
+        _start_fork_server()
         cluster = LocalCluster(
             n_workers=n,
             threads_per_worker=1,
@@ -200,12 +205,69 @@ def dask_client(
             scheduler_kwargs={"dashboard_address": SCHEDULER_HTTP},
             preload=[WORKER_SETUP],  # each worker process ignores SIGINT: the client stops them
         )
-    with contextlib.closing(cluster), contextlib.closing(Client(cluster)) as client:
-        try:
+    interrupted = False
+    try:
+        with contextlib.closing(Client(cluster)) as client:
+            held.release()  # a Ctrl-C while the cluster started: now, with the cluster in hand
             yield client
-        except KeyboardInterrupt:
-            # the nannies then stop workers in the middle of a run, warn that they kill the ones still busy after
-            # 4 s, and the closing comms may log errors: the stop the user asked for, not news (the campaign says
-            # what it kept); shown with -v
-            quiet_dask_logs(_dask_log_level())
-            raise
+    except KeyboardInterrupt:
+        # the nannies then stop workers in the middle of a run, warn that they kill the ones still busy after
+        # 4 s, and the closing comms may log errors: the stop the user asked for, not news (the campaign says
+        # what it kept); shown with -v
+        interrupted = True
+        quiet_dask_logs(_dask_log_level())
+        with contextlib.suppress(Exception):  # the interrupt is the news, not what stopping in its middle raised
+            cluster.close()
+        raise
+    finally:
+        if not interrupted:
+            cluster.close()
+
+
+class _HeldInterrupt:
+    """Holds a Ctrl-C that comes while the block runs (in the main thread, where Python's handler or the CLI's is
+    in place), for :meth:`release` to raise once the cluster is in hand.
+
+    Interrupted in its start (its workers still ``Status.init``), a LocalCluster can be closed by nobody: the
+    constructor never returned it, and Dask's own ``atexit`` closing then failed on an assertion with a traceback.
+    A start takes a few seconds; the interrupt waits for it.
+    """
+
+    def __init__(self) -> None:
+        self._previous: Any = None
+        self._frames: list[FrameType | None] = []
+
+    def __enter__(self) -> _HeldInterrupt:
+        if threading.current_thread() is threading.main_thread() and callable(signal.getsignal(signal.SIGINT)):
+            self._previous = signal.signal(signal.SIGINT, lambda signum, frame: self._frames.append(frame))
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+    def release(self) -> None:
+        """Raise the held interrupt, through the handler that was in place (Python's raises KeyboardInterrupt)."""
+        if self._frames:
+            frame, self._frames = self._frames[-1], []
+            self._previous(signal.SIGINT, frame)
+
+
+def _start_fork_server() -> None:
+    """Start the fork server the LocalCluster's workers come from, from this thread, with SIGINT blocked.
+
+    It ignores SIGINT only once it has imported :data:`WORKER_MODULES`; a Ctrl-C during those imports (a second or
+    more on a busy machine) printed their traceback from the server and stopped the workers' start. A blocked signal
+    stays blocked across its exec (as ``multiprocessing.resource_tracker`` starts its own server); the workers
+    forked from it unblock it once they ignore it (:mod:`.local_worker`).
+    """
+    from multiprocessing import forkserver, resource_tracker
+
+    _preload_worker_modules()
+    # the server starts the resource tracker first, which blocks SIGINT around its own start and then unblocks it
+    resource_tracker.ensure_running()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        forkserver.ensure_running()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)

@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from gainlink.errors import ScenarioError
+from gainlink.errors import ScenarioError, did_you_mean
 from gainlink.fileio import read_toml
 
 KINDS = ("sil", "hil")
@@ -185,7 +185,10 @@ def _keys(d: Any, allowed: set[str], where: str) -> dict:
         raise _fail(f"{where} must be a table")
     unknown = sorted(set(d) - allowed)
     if unknown:
-        raise _fail(f"unknown key(s) {', '.join(unknown)} in {where} (allowed: {', '.join(sorted(allowed))})")
+        raise _fail(
+            f"unknown key(s) {', '.join(unknown)}{did_you_mean(unknown[0], allowed)} in {where} "
+            f"(allowed: {', '.join(sorted(allowed))})"
+        )
     return dict(d)
 
 

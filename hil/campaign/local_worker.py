@@ -18,3 +18,6 @@ def dask_setup(worker: Any) -> None:
     """Called by Dask in each worker process as it starts: SIGINT is ignored there from now on."""
     if threading.current_thread() is threading.main_thread():  # only the main thread may set a handler
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # forked from a fork server started with SIGINT blocked (:func:`.cluster._start_fork_server`): ignored now, so
+    # the processes a run starts (firmware, QEMU) get the usual mask, SIGINT ignored as before
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gainlink.errors import GainlinkError, SpecError
+from gainlink.errors import GainlinkError, SpecError, did_you_mean
 from gainlink.shipping.artifact import canonical_json, render
 from gainlink.version import __version__
 
@@ -83,7 +83,14 @@ def set_path(tree: dict, path: str, value: Any, *, apply: str = "set", where: st
     if not container_ok:
         raise CampaignError(f"campaign: {where}: {path}: cannot set it in the base")
     if apply != "set":
-        base = node[last] if (isinstance(node, list) or last in node) else None
+        if isinstance(node, dict) and last not in node:  # nothing to scale or add to: name what is there
+            parent = path.rsplit(".", 1)[0] if "." in path else "the top level"
+            has = ", ".join(map(str, node)) or "none"
+            raise CampaignError(
+                f"campaign: {where}: {path}: the base has no {last!r} to {apply}{did_you_mean(str(last), node)}; "
+                f"give it a value in the campaign's scenario (the base's {parent}: {has})"
+            )
+        base = node[last]
         if isinstance(base, bool) or not isinstance(base, (int, float)):
             raise CampaignError(
                 f'campaign: {where}: apply = "{apply}" needs a number at {path} in the base (found {base!r})'

@@ -208,11 +208,16 @@ def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, ou
         f"{counts['fail']} failed, {counts['error']} errors"
         + (f", {counts['missing']} missing" if counts["missing"] else "")
     ]
+    unit = _iae_unit(_signals(plan)).replace("[", "").replace("]", "")  # " m s" or ""
     if len(points) > 1:
         lines.append("  per grid point:")
         for p in points[:MAX_POINT_LINES]:
             vals = ", ".join(f"{k}={_short(v)}" for k, v in p["values"].items())
-            iae = "" if p["iae_median"] is None else f"  IAE median {p['iae_median']:.4g} p95 {p['iae_p95']:.4g}"
+            iae = (
+                ""
+                if p["iae_median"] is None
+                else f"  IAE median {p['iae_median']:.4g}{unit} p95 {p['iae_p95']:.4g}{unit}"
+            )
             lines.append(f"    {vals}: {p['pass']}/{p['runs']} passed ({100 * p['pass_fraction']:.1f}%){iae}")
         if len(points) > MAX_POINT_LINES:
             lines.append(f"    ... {len(points) - MAX_POINT_LINES} more grid points in campaign.json (points)")
@@ -224,7 +229,7 @@ def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, ou
     if worst:
         lines.append(
             "  worst IAE: "
-            + ", ".join(f"run {r['index']} {r['id']} ({_tracked_iae(r):.4g}, {r['status']})" for r in worst)
+            + ", ".join(f"run {r['index']} {r['id']} ({_tracked_iae(r):.4g}{unit}, {r['status']})" for r in worst)
         )
         lines.append(f"  replay one: gainlink campaign show {out} --run {worst[0]['id']} --report REPORT_DIR")
     pngs = " envelopes.png, scatter.png," if plots else ""
@@ -291,12 +296,23 @@ def envelopespng_bytes(plan: CampaignPlan, rows: list[dict], store: Any) -> byte
                 label=f"median of {len(failed)} failed",
             )
         names = sig["outputs"] if key == "y" else sig["inputs"]
-        ax.set_ylabel(names[j] if j < len(names) else f"{key}{j}")
+        name = names[j] if j < len(names) else f"{key}{j}"
+        unit = sig.get("units", {}).get(name)
+        ax.set_ylabel(f"{name} [{unit}]" if unit else name)
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=7)
-    axes[-1, 0].set_xlabel("t (the plant's time unit)")
+    axes[-1, 0].set_xlabel(f"t [{sig.get('units', {}).get('time', 's')}]")
     fig.suptitle(f"{plan.campaign.name}: outputs and commands over {len(keep)} runs")
     return png_bytes(fig)
+
+
+def _iae_unit(sig: dict) -> str:
+    """`` [unit time]`` of an IAE when every tracked output has the same unit, else nothing."""
+    units = sig.get("units", {})
+    tracked = {units.get(r[2:]) for r in sig.get("references", [])}
+    if len(tracked) != 1 or None in tracked:
+        return ""
+    return f" [{tracked.pop()} {units.get('time', 's')}]"
 
 
 def _signals(plan: CampaignPlan) -> dict:
@@ -342,7 +358,7 @@ def scatterpng_bytes(plan: CampaignPlan, rows: list[dict]) -> bytes:
         if min(iae) > 0 and max(iae) > 20 * min(iae):
             ax.set_yscale("log")
         ax.set_xlabel(name)
-        ax.set_ylabel("IAE (sum over tracked outputs)")
+        ax.set_ylabel("IAE (sum over tracked outputs)" + _iae_unit(_signals(plan)))
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
     for k in range(len(axes_ or [None]), grid.size):

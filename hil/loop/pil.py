@@ -187,6 +187,8 @@ def twin_figure(result: PilResult, artifact: Artifact, *, title: str | None = No
         title=title or f"PIL {artifact.name}",
         marked=result.status == FAULT_STATUS,
         marked_label="sample refused (non-finite)",
+        units=sig.get("units"),
+        time_unit=artifact.unit("time"),
     )
 
 

@@ -121,6 +121,8 @@ def describe_artifact(artifact: Artifact, path) -> dict:
     model = {k: artifact.provenance[k] for k in ("plant_interface", "plant_fit") if k in artifact.provenance}
     if model:
         out["model"] = model
+    if artifact.signals.get("units"):  # for the summary's figures (what the spec said each signal is measured in)
+        out["units"] = dict(artifact.signals["units"])
     return out
 
 

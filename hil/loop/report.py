@@ -30,6 +30,19 @@ def report_json(result: RunResult) -> str:
     return json.dumps(body, sort_keys=True, indent=2, allow_nan=False) + "\n"
 
 
+def unit_of(units: dict | None, name: str) -> str:
+    """`` unit`` of signal ``name`` (a reference ``r_<output>``: its output's), ``""`` without one."""
+    units = units or {}
+    unit = units.get(name) or (units.get(name[2:]) if name.startswith("r_") else None)
+    return f" {unit}" if unit else ""
+
+
+def _integral_unit(units: dict | None, name: str) -> str:
+    """`` unit time`` of an integral of signal ``name`` (an integrator, an IAE), ``""`` without a unit."""
+    unit = unit_of(units, name)
+    return f"{unit} {(units or {}).get('time', 's')}" if unit else ""
+
+
 def _fmt(v: Any, unit: str = "", digits: int = 4) -> str:
     if v is None:
         return "n/a"
@@ -76,22 +89,29 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
     )
     if "uart" in m:
         lines += _uart_lines(m["uart"], board=info["controller"].get("board"))
+    units = info["artifact"].get("units")
+    time_unit = f" {(units or {}).get('time', 's')}"
     lines.append(_saturation_line(m))
     if "peak_integrator" in m:
-        lines.append("  peak integrator: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["peak_integrator"].items()))
-    lines += _twin_lines(m.get("twin"))
+        lines.append(
+            "  peak integrator: "
+            + ", ".join(f"{k} {_fmt(v, _integral_unit(units, k))}" for k, v in m["peak_integrator"].items())
+        )
+    lines += twin_lines(m.get("twin"), units=units)
     if m.get("fixed_point"):
         from .can_fixed import summary_lines as fixed_summary_lines
 
         lines += fixed_summary_lines(m["fixed_point"])
-    lines += _model_lines(m.get("model_twin"))
+    lines += model_lines(m.get("model_twin"), units=units)
     lines += schedule_lines(m.get("schedule"))
     for name, tr in m["tracked"].items():
         lines.append(
-            f"  {name}: overshoot {_fmt(tr['overshoot_pct'], '%')}, settling {_fmt(tr['settling_time_s'], ' s')}"
-            f", IAE {_fmt(tr['iae'])}"
+            f"  {name}: overshoot {_fmt(tr['overshoot_pct'], '%')}, settling {_fmt(tr['settling_time_s'], time_unit)}"
+            f", IAE {_fmt(tr['iae'], _integral_unit(units, name))}"
         )
-    lines.append("  final outputs: " + ", ".join(f"{k} {_fmt(v)}" for k, v in m["outputs_final"].items()))
+    lines.append(
+        "  final outputs: " + ", ".join(f"{k} {_fmt(v, unit_of(units, k))}" for k, v in m["outputs_final"].items())
+    )
     if report_dir is not None:
         lines.append(f"  report: {report_dir / 'report.json'}")
     return "\n".join(lines) + "\n"
@@ -135,25 +155,29 @@ def _plant_lines(info: dict, *, mode: str) -> list[str]:
     return out
 
 
-def _twin_lines(tw: dict | None) -> list[str]:
-    """The twin comparison in a few lines: what the implementation cost against the ideal loop."""
+def twin_lines(tw: dict | None, *, units: dict | None = None) -> list[str]:
+    """The twin comparison in a few lines: what the implementation cost against the ideal loop (each figure with
+    its signal's unit, from ``units``: the artifact's ``signals.units``)."""
     if not tw:
         return []
     out = [
         "  against the float64 twin (same plant, noise, references, disturbances; ideal law, no link):",
         "    max |u - u_twin|: "
         + ", ".join(
-            f"{k} {_fmt(v['max_du'])} ({_fmt(v['max_du_rel'], digits=3)} of span)" for k, v in tw["inputs"].items()
+            f"{k} {_fmt(v['max_du'], unit_of(units, k))} ({_fmt(v['max_du_rel'], digits=3)} of span)"
+            for k, v in tw["inputs"].items()
         ),
         "    max |y - y_twin|: "
         + ", ".join(
-            f"{k} {_fmt(v['max_dy'])} ({_fmt(v['max_dy_rel'], digits=3)} of range)" for k, v in tw["outputs"].items()
+            f"{k} {_fmt(v['max_dy'], unit_of(units, k))} ({_fmt(v['max_dy_rel'], digits=3)} of range)"
+            for k, v in tw["outputs"].items()
         ),
     ]
     out.append(
         "    IAE real vs twin: "
         + ", ".join(
-            f"{k} {_fmt(v['real'])} vs {_fmt(v['twin'])} ({'+' if (v['difference_rel'] or 0) >= 0 else ''}"
+            f"{k} {_fmt(v['real'], _integral_unit(units, k))} vs {_fmt(v['twin'])} "
+            f"({'+' if (v['difference_rel'] or 0) >= 0 else ''}"
             f"{_fmt(None if v['difference_rel'] is None else 100 * v['difference_rel'], '%', 3)})"
             for k, v in tw["iae"].items()
         )
@@ -161,7 +185,7 @@ def _twin_lines(tw: dict | None) -> list[str]:
     return out
 
 
-def _model_lines(mt: dict | None) -> list[str]:
+def model_lines(mt: dict | None, *, units: dict | None = None) -> list[str]:
     """The model twin in a few lines: how far the plant departs from the design's own linear model."""
     if not mt:
         return []
@@ -170,7 +194,8 @@ def _model_lines(mt: dict | None) -> list[str]:
         f"  against the model twin (the same law around the design's linear model, from {mt['start']}):",
         "    max |y - y_model|: "
         + ", ".join(
-            f"{k} {_fmt(v['max_dy'])} ({_fmt(v['max_dy_rel'], digits=3)} of range)" for k, v in mt["outputs"].items()
+            f"{k} {_fmt(v['max_dy'], unit_of(units, k))} ({_fmt(v['max_dy_rel'], digits=3)} of range)"
+            for k, v in mt["outputs"].items()
         ),
         "    IAE plant / model: "
         + ", ".join(
@@ -206,10 +231,10 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
             for j, rname in enumerate(artifact.signals["references"]):
                 if artifact.Ci[j, i] != 0:
                     ax.plot(tr.t, tr.r[:, j], "--", label=f"reference {rname}")
-        ax.set_ylabel(name)
+        ax.set_ylabel(_label(artifact, name))
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=8)
-    axes[-1, 0].set_xlabel("t [s]")
+    axes[-1, 0].set_xlabel(_time_label(artifact))
     fig.suptitle(f"{result.scenario.name}: outputs")
     files["outputs.png"] = png_bytes(fig)
     fig, axes = plt.subplots(len(ins), 1, figsize=(8, 2.2 * len(ins)), sharex=True, squeeze=False)
@@ -221,10 +246,10 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
         if artifact is not None:
             ax.axhline(artifact.u_min[i], color="r", lw=0.8, ls="--", label="limits")
             ax.axhline(artifact.u_max[i], color="r", lw=0.8, ls="--")
-        ax.set_ylabel(name)
+        ax.set_ylabel(_label(artifact, name))
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=8)
-    axes[-1, 0].set_xlabel("t [s]")
+    axes[-1, 0].set_xlabel(_time_label(artifact))
     fig.suptitle(f"{result.scenario.name}: inputs")
     files["inputs.png"] = png_bytes(fig)
     fig, ax = plt.subplots(figsize=(8, 3))
@@ -237,7 +262,7 @@ def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
     ax.set_title(f"{result.scenario.name}: latency ({lat.size} commands)")
     files["latency.png"] = png_bytes(fig)
     if tr.has_twin:
-        files["twin.png"] = _twin_plot(result, outs=outs, ins=ins)
+        files["twin.png"] = _twin_plot(result, outs=outs, ins=ins, artifact=artifact)
     if tr.has_model_twin:
         files["model_twin.png"] = _model_twin_plot(result, outs=outs, artifact=artifact)
     return files
@@ -259,10 +284,10 @@ def _model_twin_plot(result: RunResult, *, outs: list[str], artifact: Any) -> by
             for j, rname in enumerate(artifact.signals["references"]):
                 if artifact.Ci[j, i] != 0:
                     ax.plot(tr.t, tr.r[:, j], color="0.5", lw=0.8, label=f"reference {rname}")
-        ax.set_ylabel(name)
+        ax.set_ylabel(_label(artifact, name))
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=7)
-    axes[-1, 0].set_xlabel("t [s]")
+    axes[-1, 0].set_xlabel(_time_label(artifact))
     mt = result.metrics.get("model_twin") or {}
     worst = mt.get("worst")
     fig.suptitle(
@@ -272,7 +297,16 @@ def _model_twin_plot(result: RunResult, *, outs: list[str], artifact: Any) -> by
     return png_bytes(fig)
 
 
-def _twin_plot(result: RunResult, *, outs: list[str], ins: list[str]) -> bytes:
+def _label(artifact: Any, name: str) -> str:
+    """``name [unit]`` when the artifact gives the signal a unit (and is at hand), else ``name``."""
+    return name if artifact is None else artifact.label(name)
+
+
+def _time_label(artifact: Any) -> str:
+    return f"t [{'s' if artifact is None else artifact.unit('time')}]"
+
+
+def _twin_plot(result: RunResult, *, outs: list[str], ins: list[str], artifact: Any = None) -> bytes:
     """The run minus its twin, per output and input: what the implementation cost, over time."""
     tr = result.trace
     fig = twin_difference_figure(
@@ -286,6 +320,8 @@ def _twin_plot(result: RunResult, *, outs: list[str], ins: list[str]) -> bytes:
         title=result.scenario.name,
         marked=~tr.got,
         marked_label="no command in time",
+        units=None if artifact is None else artifact.signals.get("units"),
+        time_unit="s" if artifact is None else artifact.unit("time"),
     )
     return png_bytes(fig)
 

@@ -89,7 +89,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gainlink.errors import ScenarioError
+from gainlink.errors import ScenarioError, did_you_mean
 from gainlink.fileio import read_toml
 from gainlink.firmware.targets import BOARDS as _FIRMWARE_BOARDS
 
@@ -232,7 +232,8 @@ def _check_keys(d: Mapping, allowed: set[str], where: str) -> None:
     unknown = sorted(set(d) - allowed)
     if unknown:
         raise ScenarioError(
-            f"scenario: unknown key(s) {', '.join(unknown)} in {where} (allowed: {', '.join(sorted(allowed))})"
+            f"scenario: unknown key(s) {', '.join(unknown)}{did_you_mean(unknown[0], allowed)} in {where} "
+            f"(allowed: {', '.join(sorted(allowed))})"
         )
 
 
@@ -369,15 +370,42 @@ def _disturbances(data: Mapping[str, Any]) -> tuple[Disturbance, ...]:
     return tuple(dists)
 
 
+def builtin_scenarios() -> dict[str, Path]:
+    """The built-in scenarios (``gainlink.hil`` package ``scenarios/<name>.toml``) by name: those that run an
+    artifact (its ``artifact`` a placeholder the caller replaces), not the study and showcase descriptions there."""
+    from importlib import resources
+
+    folder = Path(str(resources.files("gainlink.hil").joinpath("scenarios")))
+    found = {}
+    for path in sorted(folder.glob("*.toml")):
+        if any(line.startswith("artifact =") for line in path.read_text("utf-8").splitlines()):
+            found[path.stem] = path
+    return found
+
+
 def resolve_scenario_path(name: str) -> Path:
-    """A scenario file, or the name of a built-in one (``gainlink.hil`` package ``scenarios/<name>.toml``)."""
+    """A scenario file, or the name of a built-in one (:func:`builtin_scenarios`).
+
+    Raises
+    ------
+    ScenarioError
+        ``name`` is a bare name (no folder, no suffix) of neither a file nor a built-in scenario.
+    """
     path = Path(name)
     if path.exists() or path.suffix or "/" in name:
         return path
-    from importlib import resources
+    builtin = builtin_scenarios()
+    if name in builtin:
+        return builtin[name]
+    raise ScenarioError(
+        f"scenario {name} not found: no such file, nor a built-in scenario{did_you_mean(name, builtin)} "
+        f"(built-in: {', '.join(builtin)})"
+    )
 
-    builtin = Path(str(resources.files("gainlink.hil").joinpath(f"scenarios/{name}.toml")))
-    return builtin if builtin.is_file() else path
+
+def is_builtin_scenario(path: Path | None) -> bool:
+    """Whether ``path`` is one of :func:`builtin_scenarios` (its artifact a placeholder)."""
+    return path is not None and Path(path).resolve() in {p.resolve() for p in builtin_scenarios().values()}
 
 
 def load_scenario(path: str | Path) -> Scenario:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gainlink.errors import GainlinkError, ScenarioError
+from gainlink.errors import GainlinkError, ScenarioError, did_you_mean
 from gainlink.shipping.artifact import Artifact
 
 from ..plants.base import Plant, check_dimensions
@@ -22,18 +22,21 @@ def build_plant(scenario: Scenario, *, artifact: Artifact) -> Plant:
         for name in scenario.reference:
             if name not in artifact.signals["references"]:
                 raise ScenarioError(
-                    f"scenario: reference {name!r} is not a reference of the artifact "
+                    f"scenario: reference {name!r} is not a reference of the artifact"
+                    f"{did_you_mean(name, artifact.signals['references'])} "
                     f"(references: {', '.join(artifact.signals['references']) or 'none'})"
                 )
         for name in scenario.noise:
             if name not in plant.output_names:
                 raise ScenarioError(
-                    f"scenario: noise on {name!r}, which is not a plant output ({', '.join(plant.output_names)})"
+                    f"scenario: noise on {name!r}, which is not a plant output{did_you_mean(name, plant.output_names)}"
+                    f" ({', '.join(plant.output_names)})"
                 )
         for d in scenario.disturbances:
             if d.input not in plant.input_names:
                 raise ScenarioError(
-                    f"scenario: disturbance on {d.input!r}, which is not a plant input ({', '.join(plant.input_names)})"
+                    f"scenario: disturbance on {d.input!r}, which is not a plant input"
+                    f"{did_you_mean(d.input, plant.input_names)} ({', '.join(plant.input_names)})"
                 )
     except GainlinkError:
         plant.close()

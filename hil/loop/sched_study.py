@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gainlink.errors import ScenarioError
+from gainlink.errors import ScenarioError, did_you_mean
 from gainlink.fileio import parse_toml, publish_files, read_toml
 from gainlink.shipping.artifact import Artifact, from_dict, render
 
@@ -50,6 +50,9 @@ SHOWCASE_KEYS = {
 }
 DESIGNS = ("single", "scheduled")
 SETTLE_BAND = 0.05  # settling: within 5 % of the step's size for good
+# ... and "for good" must be seen: inside the band over at least the last quarter of the time after the step. A
+# limit cycle wider than the band that happens to be inside it at the run's last sample has not settled.
+SETTLE_HOLD = 0.25
 
 
 @dataclass(frozen=True)
@@ -65,7 +68,7 @@ def default_showcase(name: str = "tank_showcase") -> dict:
     """A built-in showcase description (``scenarios/<name>.toml`` of the package)."""
     path = resources.files("gainlink.hil").joinpath(f"scenarios/{name}.toml")
     if not path.is_file():
-        raise ScenarioError(f"no built-in showcase {name!r} (tank_showcase)")
+        raise ScenarioError(f"no built-in showcase {name!r}{did_you_mean(name, ['tank_showcase'])} (tank_showcase)")
     return parse_toml(path.read_text("utf-8"), what=f"built-in showcase {name}", error=ScenarioError)
 
 
@@ -210,7 +213,8 @@ def _design_files(runs: dict[str, RunResult], *, design: str, artifact: Artifact
 
 def showcase_row(runs: dict[str, RunResult], desc: dict) -> dict[str, Any]:
     """One design's line of the comparison: tracking over the sweep (IAE and max |e| from its start, max |e| over
-    the hold at its end from 2 s after the return), damping of each step, both twins."""
+    the hold at its end from 2 s after the return), damping of each step, both twins, and the start (max |e| of
+    each run before its reference moves, while the law starts from rest at the plant's trim)."""
     sw, d = runs["sweep"], desc["sweep"]
     moving = sw.trace.t >= d["start"]
     e = sw.trace.r[moving, 0] - sw.trace.y[moving, 0]
@@ -228,14 +232,25 @@ def showcase_row(runs: dict[str, RunResult], desc: dict) -> dict[str, Any]:
         "sigma_coverage": (sw.metrics.get("schedule") or {}).get("coverage"),
     }
     row["sweep_iae"] = float(np.sum(np.abs(e)) * float(np.median(np.diff(sw.trace.t))))
+    starts = {"sweep": start_max_abs_e(sw, d["start"])}
     for name, st in desc["steps"].items():
         row[f"step_{name}"] = step_metrics(runs[f"step_{name}"], st)
+        starts[f"step_{name}"] = row[f"step_{name}"]["start_max_abs_e"]
+    row["start_max_abs_e"] = max(starts.values())
+    row["start_worst_run"] = max(starts, key=lambda k: starts[k])
     return row
 
 
-def step_metrics(res: RunResult, step: dict) -> dict[str, float | None]:
-    """Overshoot (% of the step, past its target), settling time (last exit from the 5 % band, from the step)
-    and IAE of the level after a reference step ``from -> to`` at ``at``."""
+def start_max_abs_e(res: RunResult, until: float) -> float:
+    """The largest ``|r - y|`` of the tracked level before ``until`` (the reference still at its start value)."""
+    before = res.trace.t < until
+    return float(np.max(np.abs(res.trace.r[before, 0] - res.trace.y[before, 0]), initial=0.0))
+
+
+def step_metrics(res: RunResult, step: dict) -> dict[str, float | bool | None]:
+    """Overshoot (% of the step, past its target), settling time (last exit from the 5 % band, from the step; None
+    when the level is not inside the band over the last :data:`SETTLE_HOLD` of the time after the step: not
+    settled), IAE of the level after a reference step ``from -> to`` at ``at``, and max ``|e|`` before the step."""
     t, y = res.trace.t, res.trace.y[:, 0]
     after = t >= step["at"]
     size = float(step["to"]) - float(step["from"])
@@ -243,9 +258,11 @@ def step_metrics(res: RunResult, step: dict) -> dict[str, float | None]:
     e = np.abs(step["to"] - y[after])
     out = np.nonzero(e > SETTLE_BAND * abs(size))[0]
     Ts = float(np.median(np.diff(t)))
+    settled = bool(out.size == 0 or out[-1] + 1 <= (1.0 - SETTLE_HOLD) * e.size)
     return {
         "overshoot_pct": float(max(0.0, np.max(past)) / abs(size) * 100.0),
-        "settling_time_s": float((out[-1] + 1) * Ts) if out.size else 0.0,
-        "settled": bool(out.size == 0 or out[-1] + 1 < e.size),
+        "settling_time_s": (float((out[-1] + 1) * Ts) if out.size else 0.0) if settled else None,
+        "settled": settled,
         "iae": float(np.sum(e) * Ts),
+        "start_max_abs_e": start_max_abs_e(res, step["at"]),
     }

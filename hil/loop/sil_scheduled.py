@@ -73,6 +73,8 @@ def describe_scheduled(artifact: Artifact, path) -> dict:
     removed = artifact.data.get("provenance", {}).get("rate_limit_removed")
     if removed:  # sigma_rate_limit = false: the law runs without the designed rate_max
         out["rate_limit_removed"] = removed
+    if artifact.signals.get("units"):
+        out["units"] = dict(artifact.signals["units"])
     return out
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gainlink.errors import ScenarioError
+from gainlink.errors import ScenarioError, did_you_mean
 from gainlink.fileio import parse_toml, publish_files, read_toml
 from gainlink.shipping.artifact import from_dict, write
 
@@ -57,7 +57,8 @@ def default_study(name: str = "saturation_study") -> dict:
     """A built-in study description (``scenarios/<name>.toml`` of the package)."""
     path = resources.files("gainlink.hil").joinpath(f"scenarios/{name}.toml")
     if not path.is_file():
-        raise ScenarioError(f"no built-in study {name!r} (saturation_study, saturation_kick)")
+        known = ("saturation_study", "saturation_kick")
+        raise ScenarioError(f"no built-in study {name!r}{did_you_mean(name, known)} ({', '.join(known)})")
     return parse_toml(path.read_text("utf-8"), what=f"built-in study {name}", error=ScenarioError)
 
 

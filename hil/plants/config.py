@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from gainlink.errors import PlantError
+from gainlink.errors import PlantError, did_you_mean
 
 from . import fmu_interface, linear, models, python, scheduled_model, tank  # noqa: F401 - each registers its kinds
 from .base import PLANTS, Plant
@@ -33,7 +33,7 @@ def plant_from_config(config: Mapping[str, Any], *, artifact: Any = None, base_d
         plant = python.plugin_plant(kind, config)
         if plant is not None:
             return plant
-        raise PlantError(f"unknown plant kind {kind!r} (known: {', '.join(_known())})")
+        raise PlantError(f"unknown plant kind {kind!r}{did_you_mean(kind, _known())} (known: {', '.join(_known())})")
     return PLANTS.create(kind, config, artifact=artifact, base_dir=base_dir)
 
 

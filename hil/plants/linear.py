@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gainlink.errors import GainlinkError, PlantError
+from gainlink.errors import GainlinkError, PlantError, did_you_mean
 from gainlink.lti import StateSpaceModel
 from gainlink.proof.sampled_plant import SampledPlant
 
@@ -194,7 +194,10 @@ class LinearPlant(Plant):
         x0 = np.zeros(self.A.shape[0])
         for key, value in initial.items():
             if key not in self.state_names:
-                raise PlantError(f"plant {self.name} has no state {key!r} (has: {', '.join(self.state_names)})")
+                raise PlantError(
+                    f"plant {self.name} has no state {key!r}{did_you_mean(key, self.state_names)} "
+                    f"(has: {', '.join(self.state_names)})"
+                )
             x0[self.state_names.index(key)] = float(value)
         self._sampled.reset(x0)
 

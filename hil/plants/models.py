@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
-from gainlink.errors import PlantError
+from gainlink.errors import PlantError, did_you_mean
 
 from ..registry import take_keys
 from .base import PLANTS, Plant, select
@@ -40,7 +40,9 @@ class OdePlant(Plant):
         params = dict(self.defaults)
         for key, value in (parameters or {}).items():
             if key not in params:
-                raise PlantError(f"plant {self.name} has no parameter {key!r} (has: {', '.join(params)})")
+                raise PlantError(
+                    f"plant {self.name} has no parameter {key!r}{did_you_mean(key, params)} (has: {', '.join(params)})"
+                )
             params[key] = float(value)
         self.params = params
         self._in_idx = select(self.all_inputs, inputs, what="inputs", plant=self.name)
@@ -65,7 +67,10 @@ class OdePlant(Plant):
         self.x = np.zeros(len(self.state_names))
         for key, value in initial.items():
             if key not in self.state_names:
-                raise PlantError(f"plant {self.name} has no state {key!r} (has: {', '.join(self.state_names)})")
+                raise PlantError(
+                    f"plant {self.name} has no state {key!r}{did_you_mean(key, self.state_names)} "
+                    f"(has: {', '.join(self.state_names)})"
+                )
             self.x[self.state_names.index(key)] = float(value)
 
     def outputs(self) -> np.ndarray:
@@ -194,7 +199,10 @@ class WoodBerry(Plant):
         self.k = 0
         for key, value in initial.items():
             if key not in self.state_names:
-                raise PlantError(f"plant wood_berry has no state {key!r} (has: {', '.join(self.state_names)})")
+                raise PlantError(
+                    f"plant wood_berry has no state {key!r}{did_you_mean(key, self.state_names)} "
+                    f"(has: {', '.join(self.state_names)})"
+                )
             i = self.state_names.index(key)
             self.y[i // 2, i % 2] = float(value)
 

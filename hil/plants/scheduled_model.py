@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from gainlink.errors import PlantError
+from gainlink.errors import PlantError, did_you_mean
 from gainlink.shipping.scheduled import interval, lerp
 
 from .base import PLANTS, Plant
@@ -87,7 +87,10 @@ class ScheduledModelPlant(Plant):
         x = self.X_op[0].copy()
         for key, value in initial.items():
             if key not in self.state_names:
-                raise PlantError(f"plant {self.name} has no state {key!r} (has: {', '.join(self.state_names)})")
+                raise PlantError(
+                    f"plant {self.name} has no state {key!r}{did_you_mean(key, self.state_names)} "
+                    f"(has: {', '.join(self.state_names)})"
+                )
             x[self.state_names.index(key)] = float(value)
         self.model = ScheduledModel(self.a, x_op=self.X_op, x0=x, sigma=float(S.points[0]))
         if S.source == "output":

@@ -124,15 +124,23 @@ def _residual(lin: Linearization, names: list[str], sigma: str, value: float) ->
     return np.concatenate(g), np.vstack(J)
 
 
+# Where linearize says a point is not an equilibrium: the operating point (linearize) and the FMU's start point,
+# moved to the equilibrium with the inputs held (jacobian). Every probe and Newton guess of a trim is such a point,
+# and the FMU's start point is the same for each value of a schedule: not news, once per point.
+_EQUILIBRIUM_LOGGERS = ("gainlink.hil.plants.linearize", "gainlink.hil.plants.jacobian")
+
+
 def _quiet(fn):
-    """Run ``fn`` without linearize's "not an equilibrium" warning (every Newton guess is one)."""
-    logger = logging.getLogger("gainlink.hil.plants.linearize")
-    level = logger.level
-    logger.setLevel(logging.ERROR)
+    """Run ``fn`` without linearize's "not an equilibrium" messages (every Newton guess is one)."""
+    loggers = [logging.getLogger(name) for name in _EQUILIBRIUM_LOGGERS]
+    levels = [logger.level for logger in loggers]
+    for logger in loggers:
+        logger.setLevel(logging.ERROR)
     try:
         return fn()
     finally:
-        logger.setLevel(level)
+        for logger, level in zip(loggers, levels):
+            logger.setLevel(level)
 
 
 def trim_schedule(fmu, *, sigma: str, values: Sequence[float], at: Mapping[str, float] | None = None,

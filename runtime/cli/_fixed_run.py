@@ -2,15 +2,16 @@
 executable ``gainlink_fixed_loop_host`` (firmware/ports/host/fixed_main.c), the law the artifact certifies, rather
 than the float32 loop executable of the same export.
 
-Without ``--input`` stdin and stdout are the executable's (one line of samples and references in, one
-``step FLAGS SAT CLIP OVERFLOW U.. V.. XH.. Z..`` line of integers out). With ``--input`` the samples are replayed
-through it and written as the replay CSV ``gainlink replay`` writes for the artifact: after a ``# numeric=q31|q15``
-line, the command words, estimate and integrators in real units (exact in double), the saturation and fault flags.
+Without ``--input`` stdin and stdout are the executable's: the float loop's input lines (samples then references,
+separated by spaces, tabs or commas; ``reset``), each answered by one line (``step FLAGS SAT CLIP OVERFLOW U.. V..
+XH.. Z..``, integers; ``reset 0``; ``error ...`` for a line it cannot read, and exit status 2 at the end). With
+``--input`` the samples are replayed through it and written as the replay CSV ``gainlink replay`` writes for the
+artifact: after a ``# numeric=q31|q15`` line, the command words, estimate and integrators in real units (exact in
+double), the saturation and fault flags.
 """
 
 from __future__ import annotations
 
-import subprocess
 import sys
 from pathlib import Path
 
@@ -33,7 +34,9 @@ def run_fixed_host(artifact: Artifact, build_dir: Path, *, input_path: Path | No
     ``input_path`` into ``output_path`` (stdout when ``None``). Returns the exit status."""
     exe = Path(build_dir) / EXECUTABLE
     if input_path is None:
-        return subprocess.run([str(exe)]).returncode
+        from ..firmware.foreground import run_in_foreground
+
+        return run_in_foreground([str(exe)])
     return _replay(artifact, exe, input_path, output_path)
 
 

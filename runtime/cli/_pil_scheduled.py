@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 
 from ..errors import GainlinkError
 
@@ -54,8 +53,9 @@ def run(args: argparse.Namespace, artifact, platform) -> int:
         files = {"pil.csv": pil_csv(artifact, result), "pil.json": text,
                  "twin.png": png_bytes(twin_figure(result, artifact, title=title))}  # fmt: skip
         publish_files(args.out, files)
-    sys.stdout.write(text)
-    return 0
+    from ._pil_output import print_pil_summary
+
+    return print_pil_summary(args, summary, artifact=artifact, json_text=text)
 
 
 def pil_csv(artifact, result) -> str:

@@ -14,12 +14,12 @@ import shlex
 import sys
 from pathlib import Path
 
+from ._interrupt import EXIT_INTERRUPTED
 from .hil import _progress_bar
 
 log = logging.getLogger("gainlink")
 
 EXIT_RUNS_ERRORED = 3
-EXIT_INTERRUPTED = 130
 
 
 def _resume_command(args: argparse.Namespace) -> str:

@@ -36,6 +36,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         choices=("float32", "q31", "q15"),
         help="the law's arithmetic, overriding [implementation] numeric (q31/q15: fixed point, needs declared ranges)",
     )
+    p.add_argument(
+        "--plots",
+        metavar="DIR",
+        help="also draw the loop broken at each actuator (loop_INPUT.png: Bode, gain and phase margins marked) and "
+        "the closed loop's step response (step.png) into DIR (python-control, matplotlib)",
+    )
     p.set_defaults(func=cmd_design)
 
     p = sub.add_parser("validate", help="check a gain artifact against its schema, hash and invariants")
@@ -151,11 +157,19 @@ def cmd_design(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise GainlinkError(f"output path {out} exists and is not a directory")
+    plots_dir = Path(args.plots) if args.plots else None
+    if plots_dir is not None and plots_dir.exists() and not plots_dir.is_dir():
+        raise GainlinkError(f"--plots {plots_dir} exists and is not a directory")
     numeric = None if args.numeric is None else {"numeric": args.numeric}
     result = api.design_report(args.spec, implementation=numeric)
-    artifact_mod.from_dict(result.artifact)  # the written file must load: check before publishing
+    loaded = artifact_mod.from_dict(result.artifact)  # the written file must load: check before publishing
+    plots = _design_plots(loaded) if plots_dir is not None else {}
     publish_files(out, {"gains.json": artifact_mod.render(result.artifact)})
+    if plots:
+        publish_files(plots_dir, plots)
     if result.schedule is not None:
+        if plots_dir is not None:
+            print(f"  --plots: not drawn for a scheduled law (its loop changes along {loaded.schedule.sigma})")
         return _print_scheduled(result, out, as_json=args.json)
     if args.json:
         print(json.dumps(_design_json(result, out / "gains.json"), indent=2))
@@ -165,7 +179,18 @@ def cmd_design(args: argparse.Namespace) -> int:
     if result.fixed_point is not None:
         _print_fixed_point(result.fixed_point, result.artifact["checks"]["fixed_point"]["measured"])
     print(f"  wrote {out / 'gains.json'} (sha256 {result.artifact['sha256'][:16]})")
+    if plots:
+        print(f"  plots in {plots_dir}: {', '.join(sorted(plots))}")
     return 0
+
+
+def _design_plots(artifact) -> dict[str, bytes]:
+    """``design --plots``: the broken loops and the step response (nothing for a scheduled law)."""
+    if artifact.schedule is not None:
+        return {}
+    from ..synthesis.loop_plots import design_plots
+
+    return design_plots(artifact)
 
 
 def _design_json(result, path: Path) -> dict:

@@ -87,15 +87,40 @@ def _build(args: argparse.Namespace) -> int:
         if is_fixed(artifact):
             (out / "gainlink_fixed_loop_host").chmod(0o755)
     else:
-        print(
-            f"flash {report['flash_bytes']} B, RAM {report['ram_bytes_without_stack']} B + stack "
-            f"({report['ram_bytes']} B total) on {res.board}"
-        )
+        for name, what in _image_roles(artifact, platform.board, stem=stem):
+            print(_size_line(name, json.loads(files[name.removesuffix(".elf") + ".size.json"]), what))
     print(
         f"built {artifact.name} for {args.target}{' / ' + res.board if res.board else ''}: "
         + ", ".join(p.name for p in written if p.parent == out)
     )
     return 0
+
+
+def _image_roles(artifact, board, *, stem: str) -> list[tuple[str, str]]:
+    """Each Cortex-M image a build writes, by file name, with the law it runs and where (what the C compiled in:
+    cortex-m.cmake, gl_fixed.cmake, sched-image.cmake)."""
+    if artifact.schedule is not None:
+        law = "scheduled-float32"
+    else:
+        law = artifact.checks["fixed_point"]["numeric"] if is_fixed(artifact) else "float32"
+    if board.serves:
+        nodes = "its UART's MAVLink and slcan nodes"
+    elif is_fixed(artifact) and board.serves_fixed_slcan:
+        nodes = "its UART's slcan node"
+    else:
+        nodes = None
+    replay = "replay and PIL over semihosting"
+    if not is_fixed(artifact):
+        return [(f"{stem}.elf", f"the {law} law: " + (f"{nodes}, {replay}" if nodes else replay))]
+    main = f"the {law} law on {nodes}, the float32 loop for {replay}" if nodes else f"the float32 loop: {replay}"
+    return [(f"{stem}.elf", main), (f"{stem}_fixed.elf", f"the {law} law alone: {replay}")]
+
+
+def _size_line(name: str, report: dict, what: str) -> str:
+    return (
+        f"{name} on {report['board']}: flash {report['flash_bytes']} B, RAM {report['ram_bytes_without_stack']} B "
+        f"+ stack ({report['ram_bytes']} B total); {what}"
+    )
 
 
 def _add_fixed(files: dict, manifest: dict, res, *, stem: str) -> None:
@@ -370,8 +395,9 @@ def _pil(args: argparse.Namespace) -> int:
                 "twin.png": png_bytes(twin_figure(result, artifact, title=title)),
             },
         )
-    sys.stdout.write(text)
-    return 0
+    from ._pil_output import print_pil_summary
+
+    return print_pil_summary(args, summary, artifact=artifact, json_text=text)
 
 
 def _pil_model_twin(artifact, plant):
@@ -461,15 +487,35 @@ def _add_flash_parser(sub) -> None:
     p.set_defaults(func=_flash)
 
 
+RUN_DESCRIPTION = """\
+Build (cached) and start the host firmware's loop executable (a fixed-point artifact: its integer loop, the law it
+certifies).
+
+Without --input the loop reads stdin and answers each line with one line on stdout, flushed at once:
+  (first)       gainlink-loop NAME sha256:HEX n m p q        fixed point: gainlink-fixed NAME sha256:HEX
+  y0.. r0..     the samples, then the references (numbers separated by spaces, tabs or commas; nan, inf allowed)
+                -> step STATUS u.. SATMASK xh.. z..          fixed point: step FLAGS SAT CLIP OVERFLOW U.. V.. XH.. Z..
+                                                             (integer words)
+  reset         -> reset STATUS                              the loop restarts from its initial state
+  idle          -> idle STATUS u..                           float32 only: a period without a sample (watchdog)
+  stage, crc    -> stage STATUS, crc 0xHEX                   float32 only: re-stage the gain set, its checksum
+  other lines   -> error ...                                 nothing changes and the loop goes on; the exit
+                                                             status is 2 at the end of stdin, else 0
+Ctrl-C stops the loop (exit status 130); a SIGTERM to the command stops it too (exit status 0).
+
+With --input, replay a CSV (columns y0.., r0.., optionally t) through the loop and write the replay CSV (fixed
+point: after a '# numeric=q31|q15' line, as `gainlink replay` writes it).
+
+With a Cortex-M --target (or --board), run the image in QEMU as a bus node on its UART, served as a TCP socket:
+--mavlink tcp:HOST:PORT, or --can with an slcan configuration (channel socket://HOST:PORT)."""
+
+
 def _add_run_parser(sub) -> None:
     p = sub.add_parser(
         "run",
         help="run the firmware for an artifact (host build, or a Cortex-M image in QEMU)",
-        description="Build (cached) and start the host firmware. With --input, replay a CSV "
-        "(columns y0.., r0..) through the loop executable and write the replay CSV (a fixed-point artifact: "
-        "the integer loop, its CSV after a '# numeric=q31|q15' line, as replay writes it). With a Cortex-M "
-        "--target (or --board), run the image in QEMU as a bus node on its UART, served as a TCP socket: "
-        "--mavlink tcp:HOST:PORT, or --can with an slcan configuration (channel socket://HOST:PORT).",
+        description=RUN_DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("artifact", help="gains.json")
     p.add_argument(
@@ -531,7 +577,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "run",
         help="close the loop with a Cortex-M image in QEMU",
         description="Run a Cortex-M image in QEMU against a plant simulated in Python, one "
-        "sample per semihosting FIFO round trip; prints a JSON summary. A fixed-point artifact runs its integer "
+        "sample per semihosting FIFO round trip; prints a summary (--json: the JSON pil.json holds). A fixed-point "
+        "artifact runs its integer "
         "image; the summary's fixed_point block says whether it equals the bit-exact model on the samples it "
         "received and its deviation from the float64 law with the quantised coefficients beside the certified "
         "bound. A scheduled artifact runs its scheduled image (gl_sched_step, sigma from its output or "
@@ -565,4 +612,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="a scheduled artifact's external scheduling signal: constant, or a linear ramp over the run",
     )
     p.add_argument("--out", help="folder for pil.csv, pil.json and twin.png (the run minus its float64 twin)")
+    p.add_argument("--json", action="store_true", help="print the JSON summary (what pil.json holds) instead")
     p.set_defaults(func=_pil)

@@ -308,7 +308,7 @@ def _add_linearize_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``hil`` and ``linearize`` to the gainlink CLI."""
-    hil = subparsers.add_parser("hil", help="hardware-in-the-loop bridge over CAN (FMU or built-in plants)")
+    hil = subparsers.add_parser("hil", help="hardware-in-the-loop bridge over CAN or MAVLink (FMU or built-in plants)")
     sub = hil.add_subparsers(dest="hil_command", metavar="HIL_COMMAND")
     sub.required = True
     _add_run_parser(sub)

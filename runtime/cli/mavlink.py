@@ -31,7 +31,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     up = sub.add_parser("upload", help="upload an artifact's gains (verified, rolled back on failure)")
     up.add_argument("artifact", help="gains.json")
-    up.add_argument("--connect", required=True, help="pymavlink URL: udpout:HOST:PORT, udpin:HOST:PORT, /dev/ttyACM0")
+    up.add_argument("--connect", help="pymavlink URL: udpout:HOST:PORT, udpin:HOST:PORT, /dev/ttyACM0")
+    up.add_argument(
+        "--against",
+        metavar="FILE.params",
+        help="with --dry-run, instead of --connect: diff against a vehicle's saved parameters (QGroundControl .params)",
+    )
     up.add_argument("--mapping", help="TOML mapping of gains to the vehicle's own parameter names and types")
     up.add_argument("--persist", action="store_true", help="send MAV_CMD_PREFLIGHT_STORAGE and check the ack")
     up.add_argument("--dry-run", action="store_true", help="read and print the diff only")
@@ -55,8 +60,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     up.add_argument("--target-component", type=int, metavar="N", help="and this component id (default: any)")
     up.set_defaults(func=_upload)
 
-    ls = sub.add_parser("params", help="list a vehicle's parameters (PARAM_REQUEST_LIST)")
-    ls.add_argument("--connect", required=True, help="pymavlink URL")
+    ls = sub.add_parser(
+        "params",
+        help="list a vehicle's, an artifact's or a .params file's parameters, or write them as a QGroundControl "
+        ".params file",
+    )
+    ls.add_argument("source", nargs="?", help="gains.json (the parameters it gives the firmware) or a .params file")
+    ls.add_argument("--connect", help="pymavlink URL of the vehicle (PARAM_REQUEST_LIST)")
+    ls.add_argument("--out", metavar="FILE.params", help="write them as QGroundControl's .params file")
+    ls.add_argument("--mapping", help="with gains.json: the vehicle parameters a mapping TOML names instead")
+    ls.add_argument("--system", type=int, default=1, help="with gains.json: the vehicle id written (default 1)")
+    ls.add_argument("--component", type=int, default=1, help="with gains.json: the component id written (default 1)")
     ls.add_argument("--heartbeat-timeout", type=float, default=5.0, help="seconds to wait for a heartbeat (default 5)")
     ls.add_argument("--signing-key", metavar="FILE", help=SIGNING_HELP)
     ls.set_defaults(func=_params)
@@ -83,8 +97,15 @@ def _upload(args: argparse.Namespace) -> int:
     from gainlink.mavlink.params import Encoding
     from gainlink.mavlink.signing import read_key
     from gainlink.mavlink.upload import UploadFailed, format_changes, upload
+    from gainlink.mavlink.upload_text import upload_summary
     from gainlink.shipping.artifact import load
 
+    if args.against:
+        from ._mavlink_params import upload_against
+
+        return upload_against(args)
+    if not args.connect:
+        raise ParameterError("mavlink upload: give --connect URL (or, with --dry-run, --against FILE.params)")
     if args.window < 1 or args.retries < 0 or args.timeout <= 0:
         raise ParameterError("--window must be >= 1, --retries >= 0 and --timeout > 0")
     for name, value, low in (
@@ -123,53 +144,14 @@ def _upload(args: argparse.Namespace) -> int:
             print(f"gainlink: {line}", file=sys.stderr)
         print(f"gainlink: error: {exc}", file=sys.stderr)
         return EXIT_ROLLED_BACK if exc.rolled_back else EXIT_ROLLBACK_INCOMPLETE
-    vehicle = res.vehicle.describe()
-    if res.dry_run:
-        print(
-            f"dry run: {len(res.changes)} parameter(s) would change, {res.unchanged} already match "
-            f"(vehicle {vehicle}, {res.encoding.value} integers)"
-        )
-        return 0
-    what = [f"{res.verified} set(s) verified", f"{res.unchanged} unchanged", *_commit_words(res)]
-    if res.persisted:
-        what.append("persisted")
-    print(
-        f"uploaded {artifact.name} sha256:{artifact.sha256[:12]} to vehicle {vehicle}: "
-        f"{', '.join(what)} ({res.sent} sent, {res.retries} retries, {res.seconds:.3f} s)"
-    )
+    print(upload_summary(artifact, res))
     return 0
-
-
-def _commit_words(res) -> list[str]:
-    """What the summary may say of the commit: confirmed by a gainlink node, or only echoed by another vehicle."""
-    if res.committed:
-        return ["gain set committed (the node's AUTOPILOT_VERSION uid is its CRC-32)"]
-    if res.hash_set:
-        return [
-            "GL_HASH echoed, commit NOT confirmed (the vehicle does not identify as a gainlink node: it holds the "
-            "values, nothing shows that its loop runs them)"
-        ]
-    return []
 
 
 def _params(args: argparse.Namespace) -> int:
-    from gainlink.mavlink.link import MavLink
-    from gainlink.mavlink.params import REAL32, Encoding
-    from gainlink.mavlink.session import ParamSession
-    from gainlink.mavlink.signing import read_key
-    from gainlink.mavlink.upload import detect_encoding
+    from ._mavlink_params import params
 
-    key = read_key(args.signing_key) if args.signing_key else None
-    with MavLink(args.connect, signing_key=key) as link:
-        hb = link.wait_heartbeat(timeout=args.heartbeat_timeout)
-        session = ParamSession(
-            link, target_system=hb.get_srcSystem(), target_component=hb.get_srcComponent(), encoding=Encoding.C_CAST
-        )
-        session.encoding = detect_encoding(session, autopilot=hb.autopilot)
-        for pv in session.read_all().values():
-            value = f"{pv.value:.9g}" if pv.ptype == REAL32 else str(int(pv.value))
-            print(f"{pv.name:<16} {value}")
-    return 0
+    return params(args)
 
 
 def _setup_signing(args: argparse.Namespace) -> int:

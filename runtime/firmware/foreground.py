@@ -28,7 +28,7 @@ def run_in_foreground(argv: Sequence[str], **popen: Any) -> int:
     -------
     int
         The process's exit status; 0 when it stopped because of a SIGTERM passed on to it or of Ctrl-C (it was
-        asked to stop, and did).
+        asked to stop, and did; the command line then exits 130 for the Ctrl-C, the shell's convention).
     """
     started: list[subprocess.Popen] = []
     termed: list[int] = []

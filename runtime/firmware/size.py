@@ -37,7 +37,8 @@ def size_report(elf: Path, *, board: str) -> dict:
 
     A section counts towards flash when its contents are loaded into the image (code, constants,
     the initial values of ``.data``), towards RAM when it lives at or above 0x20000000 (``.data``,
-    ``.bss``, the stack).
+    ``.bss``, the stack). ``flash_bytes`` is the span those sections take in flash, from the first's start to the
+    last's end, with the alignment gaps between them (what the ``.bin`` holds and a probe writes).
     """
     out = subprocess.run([tool("arm-none-eabi-objdump"), "-h", str(elf)], capture_output=True, text=True, check=True)
     lines = out.stdout.splitlines()
@@ -58,8 +59,13 @@ def size_report(elf: Path, *, board: str) -> dict:
         "board": board,
         "elf": elf.name,
         "sections": sections,
-        "flash_bytes": sum(s["size"] for s in sections if s["flash"]),
+        "flash_bytes": _flash_span(sections),
         "ram_bytes": sum(s["size"] for s in sections if s["ram"]),
         "ram_bytes_without_stack": sum(s["size"] for s in sections if s["ram"] and s["name"] != ".stack"),
         "symbols": symbols,
     }
+
+
+def _flash_span(sections: list[dict]) -> int:
+    loaded = [(s["lma"], s["lma"] + s["size"]) for s in sections if s["flash"] and s["size"] > 0]
+    return max(end for _, end in loaded) - min(start for start, _ in loaded) if loaded else 0

@@ -23,9 +23,10 @@ Every target's float32 law equals the host build bit for bit: each multiply-add 
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
-from ..errors import ToolchainError
+from ..errors import ToolchainError, did_you_mean
 
 HOST = "host"
 
@@ -130,10 +131,7 @@ def resolve(target: str | None = None, board: str | None = None, *, default_targ
     ToolchainError
         An unknown target or board, a board that does not carry the target's core, or a board for the host.
     """
-    if target is not None and target not in TARGETS:
-        raise ToolchainError(f"unknown target {target!r} (choose from {', '.join(TARGETS)})")
-    if board is not None and board not in BOARDS:
-        raise ToolchainError(f"unknown board {board!r} (choose from {', '.join(BOARDS)})")
+    _known_names(target=target, board=board, targets=TARGETS)
     if target is None:
         target = BOARDS[board].core if board is not None else default_target
     t = TARGETS[target]
@@ -151,9 +149,23 @@ def resolve(target: str | None = None, board: str | None = None, *, default_targ
 
 def resolve_cortex_m(target: str | None = None, board: str | None = None) -> Platform:
     """:func:`resolve` for what only runs on a Cortex-M image (QEMU replay, PIL): the host is refused."""
+    _known_names(target=target, board=board, targets=CORTEX_M_TARGETS)
     platform = resolve(target, board)
     if platform.board is None:
         raise ToolchainError(
             f"{platform.target.name} is not a Cortex-M target (choose from {', '.join(CORTEX_M_TARGETS)})"
         )
     return platform
+
+
+def _known_names(*, target: str | None, board: str | None, targets: Iterable[str]) -> None:
+    """Refuse a target not among ``targets`` or an unknown board, in one line naming the choices."""
+    choices = list(targets)
+    if target is not None and target not in choices:
+        if target in TARGETS:  # a known target that is not a choice here (the host, for an image)
+            raise ToolchainError(f"{target} is not a Cortex-M target (choose from {', '.join(choices)})")
+        raise ToolchainError(
+            f"unknown target {target!r}{did_you_mean(target, choices)} (choose from {', '.join(choices)})"
+        )
+    if board is not None and board not in BOARDS:
+        raise ToolchainError(f"unknown board {board!r}{did_you_mean(board, BOARDS)} (choose from {', '.join(BOARDS)})")

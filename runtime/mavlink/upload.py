@@ -705,3 +705,22 @@ def _rollback(
             ok = False
             events.append(f"could NOT re-commit the previous gain set {HASH_ID}={old_hash}")
     return ok
+
+
+def dry_run_against(
+    artifact: Artifact,
+    session: ParamSession,
+    *,
+    target: tuple[int, int],
+    mapping: Mapping | str | Path | None = None,
+    on_diff: Callable[[tuple[ParamChange, ...]], None] | None = None,
+) -> UploadResult:
+    """:func:`upload`'s dry run against a session that is no link (:class:`.params_file.ValuesSession`: a vehicle's
+    saved ``.params`` file): the same plan, checks, refusals and diff; nothing is sent anywhere."""
+    if mapping is not None and not isinstance(mapping, Mapping):
+        mapping = load_mapping(mapping)
+    plan = _plan(artifact, mapping)
+    vehicle = Vehicle(system=target[0], component=target[1], autopilot=0, gainlink=plan.commit, advertised=None,
+                      versioned=False)  # a file says no more of the vehicle than its ids  # fmt: skip
+    return _upload(session, plan=plan, persist=False, dry_run=True, t0=time.perf_counter(), vehicle=vehicle,
+                   encoding=None, on_diff=on_diff, needs_key=False)  # fmt: skip

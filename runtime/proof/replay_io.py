@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataError, GainlinkError
+from ..errors import DataError, GainlinkError, did_you_mean
 from ..fileio import atomic_write_text, read_user_file
 from ..shipping.artifact import Artifact
 from . import scheduled_replay
@@ -129,8 +129,10 @@ def read_samples(path: str | Path, artifact: Artifact) -> Samples:
         )
     unknown = [c for c in header if c not in set(want_y + want_r + want_s + ["t"])]
     if unknown:
+        known = [*want_y, *want_r, *want_s]
         raise DataError(
-            f"input {path} has unknown column {unknown[0]!r} (expected t, {', '.join(want_y + want_r + want_s)})"
+            f"input {path} has unknown column {unknown[0]!r}{did_you_mean(unknown[0], [*known, 't'])}"
+            f" (expected t, {', '.join(known)})"
         )
     if len(set(header)) != len(header):
         raise DataError(f"input {path} repeats a column name")

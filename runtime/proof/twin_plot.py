@@ -8,6 +8,7 @@ step. Steps worth pointing at (a command that did not arrive in time, a refused 
 from __future__ import annotations
 
 import io
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,8 @@ def twin_difference_figure(
     title: str,
     marked: np.ndarray | None = None,
     marked_label: str = "",
+    units: Mapping[str, str] | None = None,
+    time_unit: str = "s",
 ) -> Any:
     """The run minus its twin, one panel per output and input (a matplotlib Figure, Agg backend).
 
@@ -42,6 +45,10 @@ def twin_difference_figure(
         What ran; the figure's title reads ``"{title}: run minus its float64 twin"``.
     marked : ndarray of bool, optional
         (N,) steps to mark in red, named ``marked_label`` in the legend.
+    units : mapping, optional
+        Signal name -> unit (the artifact's ``signals.units``), on the panels' labels.
+    time_unit : str
+        The unit of ``t`` (the artifact's ``unit("time")``).
     """
     import matplotlib
 
@@ -56,9 +63,10 @@ def twin_difference_figure(
         if marked is not None and marked.any():
             ax.plot(t[marked], diff[marked], "r.", ms=3, label=marked_label)
             ax.legend(loc="best", fontsize=8)
-        ax.set_ylabel(f"{name} - twin")
+        unit = (units or {}).get(name)
+        ax.set_ylabel(f"{name} - twin" + (f" [{unit}]" if unit else ""))
         ax.grid(True, alpha=0.3)
-    axes[-1, 0].set_xlabel("t [s]")
+    axes[-1, 0].set_xlabel(f"t [{time_unit}]")
     fig.suptitle(f"{title}: run minus its float64 twin")
     return fig
 

@@ -128,8 +128,24 @@ class Artifact:
 
     @property
     def signals(self) -> dict:
-        """Names of states, inputs, outputs and references."""
+        """Names of states, inputs, outputs and references (and ``units``, when the spec gave them)."""
         return self.data["signals"]
+
+    def unit(self, name: str) -> str:
+        """What signal ``name`` is measured in (``""``: the spec gave no unit): a state, input or output its entry of
+        the spec's ``[units]``, a reference ``r_<output>`` its output's, ``"time"`` the unit of ``Ts`` (``s`` unless
+        the spec says otherwise)."""
+        units = self.signals.get("units", {})
+        if name == "time":
+            return units.get("time", "s")
+        if name not in units and name.startswith("r_") and name in self.signals["references"]:
+            return units.get(name[2:], "")
+        return units.get(name, "")
+
+    def label(self, name: str) -> str:
+        """``name [unit]`` for a plot's axis or a summary's figure, or ``name`` alone without a unit."""
+        unit = self.unit(name)
+        return f"{name} [{unit}]" if unit else name
 
     @property
     def safe_command(self) -> np.ndarray:
@@ -328,6 +344,10 @@ def _check_signals(sig: dict, *, n: int, m: int, p: int, q: int) -> None:
     for key, size in (("states", n), ("inputs", m), ("outputs", p), ("references", q)):
         if len(sig[key]) != size:
             raise ArtifactError(f"signals.{key} names {len(sig[key])} signals, expected {size}")
+    known = {*sig["states"], *sig["inputs"], *sig["outputs"], "time"}
+    stray = sorted(set(sig.get("units", {})) - known)
+    if stray:
+        raise ArtifactError(f"signals.units names {stray[0]!r}, which is not a signal of the artifact")
 
 
 #: sha256 of the canonical JSON of artifacts that passed the schema in this process (a design validates its

@@ -7,7 +7,7 @@ reads the user's raw tables again.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -198,6 +198,7 @@ class PlantSpec:
     description: str = ""
     linearization: dict | None = None  # the record `gainlink linearize` wrote, as written (for the provenance)
     schedule: ScheduleSpec | None = None
+    units: dict[str, str] = field(default_factory=dict)  # [units]: signal name (or "time") -> unit
 
     def at_point(self, i: int) -> PlantSpec:
         """The unscheduled spec of schedule point ``i``: its plant, operating point and controller weights."""

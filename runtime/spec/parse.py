@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SpecError
+from ..errors import SpecError, did_you_mean
 from ..fileio import read_toml
 from .model import ImplementationSpec, PlantSpec
 from .plant import parse_plant
@@ -41,8 +41,10 @@ NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 
 TOP_KEYS = {
     "name", "Ts", "discretization", "description", "plant", "controller", "integral", "observer", "limits",
-    "operating_point", "implementation", "linearization", "schedule",
+    "operating_point", "implementation", "linearization", "schedule", "units",
 }  # fmt: skip
+TIME_UNIT_KEY = "time"  # in [units]: the unit of Ts and of every time (default s)
+UNIT_MAX_LEN = 16
 
 
 def load_spec(path: str | Path) -> PlantSpec:
@@ -110,7 +112,28 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
         description=str(data.get("description", "")),
         linearization=checked_table(data, "linearization", LINEARIZATION_KEYS, required=False),
         schedule=schedule,
+        units=parse_units(table(data, "units", required=False), plant),
     )
+
+
+def parse_units(units: dict | None, plant) -> dict[str, str]:
+    """``[units]``: what each named signal is measured in (``x = "m"``, ``F = "N"``), and ``time`` the unit of ``Ts``
+    and every time (default ``s``); for plots and summaries only, the law does not change. Names are the plant's
+    states, inputs and outputs (a reference takes its tracked output's)."""
+    if units is None:
+        return {}
+    known = {*plant.states, *plant.inputs, *plant.outputs, TIME_UNIT_KEY}
+    out = {}
+    for name, unit in units.items():
+        if name not in known:
+            raise SpecError(
+                f"units names {name!r}, which is not a plant signal{did_you_mean(name, known)} "
+                f"(states, inputs, outputs, or time)"
+            )
+        if not isinstance(unit, str) or not unit.strip() or len(unit) > UNIT_MAX_LEN or "\n" in unit:
+            raise SpecError(f"units.{name} must be a unit of 1 to {UNIT_MAX_LEN} characters on one line, got {unit!r}")
+        out[str(name)] = unit.strip()
+    return dict(sorted(out.items()))
 
 
 def _plants(plant: dict, sched: dict | None, *, Ts: float) -> tuple:

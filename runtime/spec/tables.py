@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import SpecError
+from ..errors import SpecError, did_you_mean
 from .model import (
     ControllerSpec,
     ImplementationSpec,
@@ -66,7 +66,10 @@ def parse_integral(tbl: dict | None, plant: PlantModel, *, lqr: bool) -> Integra
 def _output_index(o, plant: PlantModel) -> int:
     if isinstance(o, str):
         if o not in plant.outputs:
-            raise SpecError(f"integral.outputs names {o!r}, which is not an output ({', '.join(plant.outputs)})")
+            raise SpecError(
+                f"integral.outputs names {o!r}, which is not an output{did_you_mean(o, plant.outputs)} "
+                f"({', '.join(plant.outputs)})"
+            )
         return plant.outputs.index(o)
     if isinstance(o, int) and not isinstance(o, bool) and 0 <= o < plant.p:
         return o
@@ -222,7 +225,10 @@ def _signal_values(tbl: dict, key: str, names: tuple[str, ...], kind: str) -> np
     out = np.zeros(len(names))
     for name, v in value.items():
         if name not in names:
-            raise SpecError(f"{what} names {name!r}, which is not a plant {kind} (the {kind}s are: {', '.join(names)})")
+            raise SpecError(
+                f"{what} names {name!r}, which is not a plant {kind}{did_you_mean(name, names)} "
+                f"(the {kind}s are: {', '.join(names)})"
+            )
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
             raise SpecError(f"{what}.{name} must be a finite number, got {v!r}")
         out[names.index(name)] = float(v)

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import SpecError
+from ..errors import SpecError, did_you_mean
 
 SIGNAL_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -66,7 +66,10 @@ def no_unknown(table: dict, allowed: set[str], where: str) -> None:
     """Refuse a key that is not in ``allowed`` (a misspelt weight silently ignored designs the wrong controller)."""
     unknown = sorted(set(table) - allowed)
     if unknown:
-        raise SpecError(f"unknown key {unknown[0]!r} in {where} (allowed: {', '.join(sorted(allowed))})")
+        raise SpecError(
+            f"unknown key {unknown[0]!r}{did_you_mean(unknown[0], allowed)} in {where} "
+            f"(allowed: {', '.join(sorted(allowed))})"
+        )
 
 
 def table(data: dict, key: str, *, required: bool) -> dict | None:

@@ -75,12 +75,15 @@ def artifact_data(spec: PlantSpec, d: Discretised, gains: Gains, *, design_recor
 
 def _signals(spec: PlantSpec) -> dict:
     plant = spec.plant
-    return {
+    out = {
         "states": list(plant.states),
         "inputs": list(plant.inputs),
         "outputs": list(plant.outputs),
         "references": [f"r_{plant.outputs[int(np.argmax(row))]}" for row in spec.Ci],
     }
+    if spec.units:  # written only when the spec gives them: every artifact before keeps its sha256
+        out["units"] = dict(spec.units)
+    return out
 
 
 def _plant_as_specified(spec: PlantSpec) -> dict:

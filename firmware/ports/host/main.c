@@ -8,7 +8,9 @@
  * - `reset` -> `reset STATUS`
  * - `stage` -> `stage STATUS` (re-stages the built-in gain set through the double buffer)
  * - `crc`   -> `crc 0xHEX` (checksum of the running gain set)
- * Floats are printed round-trip (%.9g). A malformed line answers `error ...` and the loop goes on.
+ * Numbers are separated by spaces, tabs or commas. Floats are printed round-trip (%.9g). Each answer is flushed at
+ * once. A malformed line answers `error ...`, changes nothing, and the loop goes on; at the end of stdin the
+ * executable exits with status 2 if any line was, after one line on stderr saying how many and which came first.
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -54,7 +56,9 @@ int main(void)
     char line[4096];
     float sample[GL_P + GL_QA];
     float u[GL_M];
+    unsigned long lines = 0, refused = 0, first_refused = 0;
     while (fgets(line, sizeof line, stdin) != NULL) {
+        ++lines;
         if (strncmp(line, "idle", 4) == 0) {
             st = gl_loop_idle(&loop, u);
             printf("idle %d", (int)st);
@@ -74,9 +78,17 @@ int main(void)
             print_floats(loop.z, GL_Q);
         } else {
             printf("error expected %d numbers, idle, reset, stage or crc", GL_P + GL_Q);
+            if (++refused == 1) {
+                first_refused = lines;
+            }
         }
         printf("\n");
         fflush(stdout);
+    }
+    if (refused > 0) {
+        fprintf(stderr, "gainlink_loop_host: %lu of %lu input lines unreadable (the first: line %lu)\n", refused, lines,
+                first_refused);
+        return 2;
     }
     return 0;
 }
