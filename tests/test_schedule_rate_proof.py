@@ -65,7 +65,9 @@ def test_the_spring_ships_a_certified_rate_that_no_path_within_it_breaks(spring6
     art = from_dict(spring65)
     S, v = art.schedule, art.checks["schedule"]["variation"]
     assert S.rate_certified and 0.0 < S.rate_max < 10.0 and v["certified_rate"] == S.rate_max
-    assert v["rate_source"].startswith("certified rate") and "the spec's 10/s is above it" in v["rate_source"]
+    assert v["rate_source"] == (
+        "the fastest rate a sigma-dependent Lyapunov function proves, rounded down; the spec's 10/s is above it"
+    )
     assert not v["common_lyapunov"]
     model = LoopModel(spring65)
     growth, _path = adversarial(model, S.rate_max * art.Ts)
@@ -178,7 +180,7 @@ def test_a_declared_uncertified_rate_ships_and_says_so_wherever_it_appears(tmp_p
     v = art.checks["schedule"]["variation"]
     assert v["rate_max"] == 0.5 and not v["rate_certified"] and v["certified_rate"] is None
     lines = describe_schedule(art.checks["schedule"])  # what `gainlink design` prints
-    assert "rate_max the law enforces on k: 0.5/s, not certified (spec, declared not certified" in lines[-1]
+    assert "rate_max the law enforces on k: 0.5/s, not certified (the spec's, declared not certified" in lines[-1]
     assert any(line.startswith("moving k: no rate certified") for line in lines)
     analyze = run_cli("analyze", spec)
     assert analyze.code == 0 and "0.5/s, not certified" in analyze.out

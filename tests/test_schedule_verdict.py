@@ -256,4 +256,4 @@ def test_spec_rate_max_is_kept_and_recorded():
     """A spec's rate_max is what the law enforces when the verdict allows any rate, and it is certified."""
     art = from_dict(designed(external_tank(rate_max=0.3)))
     assert art.schedule.rate_max == 0.3 and art.schedule.rate_certified
-    assert art.checks["schedule"]["variation"]["rate_source"].startswith("spec")
+    assert art.checks["schedule"]["variation"]["rate_source"].startswith("the spec's; any rate is certified")

@@ -162,7 +162,7 @@ def _rate_warnings(spec: PlantSpec, v: VariationCheck, tau: float) -> list[str]:
     name, proved = s.sigma, v.certified_rate
     if s.rate_max is not None and s.rate_certified and proved is not None and s.rate_max > proved:
         out.append(f"the spec's rate_max of {name}, {s.rate_max:g}/s, is above the certified rate: the law ships "
-                   f"{proved:.4g}/s, certified")  # fmt: skip
+                   f"{rate_text(v.rate_max, True)}")  # fmt: skip
     if not v.rate_certified:
         out.append(f"rate_max of {name}: {rate_text(v.rate_max, False)}: the spec declared it (rate_certified = "
                    "false); no Lyapunov certificate covers it")  # fmt: skip

@@ -185,18 +185,18 @@ def _decide(any_rate: Certificate | None, search: RateSearch | None, spec: RateS
     """``(rate_max, certified, why)`` from the certificates and the spec (module docstring)."""
     if any_rate is not None:
         if spec.rate_max is None:
-            return None, True, "common Lyapunov function: any rate certified"
-        return spec.rate_max, True, "spec (any rate certified: common Lyapunov function)"
+            return None, True, "any rate: a common Lyapunov function"
+        return spec.rate_max, True, "the spec's; any rate is certified (a common Lyapunov function)"
     proved = _shipped(search.certificate.rate) if search and search.certificate else None
     if proved is not None and (spec.rate_max is None or spec.rate_max > proved):
         if spec.rate_max is not None and not spec.certified:
-            return spec.rate_max, False, f"spec, declared not certified (certified up to {proved:.4g}/s)"
+            return spec.rate_max, False, f"the spec's, declared not certified (certified up to {proved:.4g}/s)"
         above = "" if spec.rate_max is None else f"; the spec's {spec.rate_max:g}/s is above it"
-        return proved, True, f"certified rate (sigma-dependent Lyapunov function{above})"
+        return proved, True, f"the fastest rate a sigma-dependent Lyapunov function proves, rounded down{above}"
     if proved is not None:
-        return spec.rate_max, True, f"spec (within the certified {proved:.4g}/s)"
+        return spec.rate_max, True, f"the spec's, within the certified {proved:.4g}/s"
     if spec.rate_max is not None and not spec.certified:
-        return spec.rate_max, False, "spec, declared not certified (no rate certified)"
+        return spec.rate_max, False, "the spec's, declared not certified (no rate certified)"
     where = search.binding.describe(sigma) if search and search.binding else f"the envelope of {sigma}"
     stop = " within the budget" if search and search.budget_spent else ""
     raise DesignError(
