@@ -86,9 +86,11 @@ def design(
         How a continuous plant is sampled (default ``zoh``).
     schedule : dict, optional
         The ``[schedule]`` table (docs/guide/scheduled.md): ``sigma``, ``points``, optional ``external``,
-        ``rate_max``, ``filter_tau``, and ``plant``: one entry per point, each a ``control.StateSpace`` (about
-        the origin) or a dict of ``A B C D u_op y_op x_op``. ``plant`` then gives only the shared kind and
-        names (a python-control system's own matrices are dropped). The artifact is scheduled (schema 2).
+        ``rate_max`` (with ``rate_certified = False`` to ship it where no certificate covers it),
+        ``certify_budget`` (CPU seconds of the certificate searches), ``filter_tau``, and ``plant``: one entry per
+        point, each a ``control.StateSpace`` (about the origin) or a dict of ``A B C D u_op y_op x_op``. ``plant``
+        then gives only the shared kind and names (a python-control system's own matrices are dropped). The
+        artifact is scheduled (schema 2).
     implementation : dict, optional
         The ``[implementation]`` table, e.g. ``{"numeric": "q31"}`` for the fixed-point law
         (docs/guide/fixed_point.md; needs the ranges ``y_min y_max r_min r_max`` in ``limits``); given keys

@@ -1,19 +1,19 @@
 """A campaign over a scheduled artifact's sigma rate and range (SIL with the scheduled C, a LocalCluster of one
 worker).
 
-The plant is the spring of schedule_cases (stiffness scheduled 1 -> 400 on an external sigma; no common Lyapunov
-function: the design's verdict is a simulated ``rate_max``) run as ``kind = "scheduled_model"``, whose dynamics
-follow the external signal; the law is the same design with ``rate_max`` removed, so the signal's own rate is the
-rate sigma moves at. Oracles: the design's verdict (stable up to ``rate_max`` for periodic sweeps over every
-sub-range on its grid) and the direct SIL run of each campaign run.
+The plant is the spring of schedule_cases (stiffness scheduled 1 -> 400 on an external sigma; no rate certified
+within the default refinements, so its spec declares a rate uncertified: 0.5/s, the rate the old simulated verdict
+gave) run as ``kind = "scheduled_model"``, whose dynamics follow the external signal; the law is the same design
+with ``rate_max`` removed, so the signal's own rate is the rate sigma moves at. Oracles: the falsifier's sweeps
+(stable at 0.5/s over every sub-range on its grid) and the direct SIL run of each campaign run.
 
 What the campaign finds (measured, and checked with the verdict's own loop outside SIL: the scheduled law around
-``Schedule.plant_at`` on a triangle over [0, 0.5] at 1.58/s grows from 7e-3 to 34 in 60 periods): the rate the
+``Schedule.plant_at`` on a triangle over [0, 0.5] at 1.58/s grows from 7e-3 to 34 in 60 periods): the rate a
 verdict gave when it simulated sweeps over the whole envelope and each interval only, 1.58/s, holds across the
 whole envelope, but a sweep over half of it at that rate drives the loop into a saturated limit cycle (|x| ~ 27
 from 0.01). Periodic sigma is a parametric excitation: a rate bound from full-envelope trajectories alone is not a
-bound for every trajectory. The verdict now sweeps every sub-range on a grid of the envelope
-(``gainlink.synthesis.schedule_sweeps``): its ``rate_max`` (0.5/s) holds on both ranges.
+bound for every trajectory, which is why the falsifier sweeps every sub-range on a grid (and why a shipped rate is
+a certified one, or said not to be): 0.5/s holds on both ranges.
 """
 
 from __future__ import annotations
@@ -26,9 +26,8 @@ from gainlink.hil.campaign import run
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil import run_sil
 from gainlink.shipping.artifact import from_dict, seal
-from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from schedule_cases import spring
+from support.designs import designed
 
 OLD_RATE = 50.0 * 10**-1.5  # the rate_max of the verdict that swept only the whole envelope and each interval
 pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
@@ -36,9 +35,12 @@ pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
 @pytest.fixture(scope="module")
 def spring_free(tmp_path_factory):
-    """The spring's artifact without its rate limit, saved; and the verdict's ``rate_max``."""
-    data = synthesize(parse_spec(spring())).artifact
+    """The spring's artifact without its rate limit, saved; and its declared (uncertified) ``rate_max``."""
+    spec = spring(400.0)
+    spec["schedule"].update(rate_max=0.5, rate_certified=False)
+    data = designed(spec)
     rate_max = data["schedule"]["rate_max"]
+    assert not data["schedule"]["rate_certified"]
     free = from_dict(seal(dict(data, schedule=dict(data["schedule"], rate_max=None))))
     path = tmp_path_factory.mktemp("spring") / "gains.json"
     free.save(path)
@@ -75,7 +77,7 @@ def test_a_campaign_over_sigma_rate_and_range_finds_where_stability_stops(spring
     assert result.total == 4 and result.errors == 0
     doc = json.loads((tmp_path / "out" / "campaign.json").read_text())
     verdict = {(row["values"]["sigma_rate"], row["values"]["sigma_high"]): row["status"] for row in doc["runs"]}
-    # at the verdict's rate_max the loop holds on both ranges; at the old verdict's rate it holds across the whole
+    # at the declared rate_max the loop holds on both ranges; at the old verdict's rate it holds across the whole
     # envelope and not over its lower half (the module docstring)
     assert rate_max < OLD_RATE
     assert verdict == {

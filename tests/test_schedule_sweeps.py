@@ -1,10 +1,12 @@
-"""The simulated rate covers periodic sweeps over sub-ranges of the envelope (issue 18, item 3).
+"""The falsifier's periodic sigma paths (issue 18 item 3; issue 29): triangles over every sub-range of the envelope
+on a grid and holds/jumps/ramps between levels, judged by their monodromy matrices, never a certificate.
 
-On the spring of ``schedule_cases`` (no Lyapunov certificate, so the simulated rate is ``rate_max``), the rate the
-verdict gave when it swept only the whole envelope and each interval, 50 * 10^(-1.5) = 1.58/s, does not hold for a
-sweep over half the envelope. The oracles are the test's own: the float64 scheduled law
-(``gainlink.proof.scheduled_reference``) around the interpolated plant, and a transition matrix over one period built
-here from the law's step equations (docs/design.md), both stepped sample by sample on triangles made here.
+On the spring of ``schedule_cases`` scheduled 1 -> 400 (no rate certified within the default refinements; its spec
+here declares the old simulated rate, 0.5/s, uncertified), sweeping only the whole envelope and each interval gave
+50 * 10^(-1.5) = 1.58/s, at which a sweep over half the envelope grows. The oracles are the test's own: the float64
+scheduled law (``gainlink.proof.scheduled_reference``) around the interpolated plant, and a transition matrix over
+one period built here from the law's step equations (docs/design.md), both stepped sample by sample on paths made
+here.
 """
 
 from __future__ import annotations
@@ -14,23 +16,37 @@ import itertools
 import numpy as np
 import pytest
 from gainlink.shipping.artifact import from_dict, seal
-from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
-from gainlink.synthesis.schedule_rate import RATE_GRID, monodromy_radius, scan_rates, trajectories
+from gainlink.synthesis.schedule_rate import (
+    RATE_GRID,
+    Path,
+    dwell_grid,
+    monodromy_radius,
+    scan_rates,
+    triangle,
+    worst_path,
+)
 from gainlink.synthesis.schedule_sweeps import sweep_nodes, sweep_radii
 from gainlink.synthesis.schedule_variation import loops_at
 from schedule_cases import spring
+from support.designs import designed
 
 OLD_RATE = 50.0 * 10**-1.5  # the old verdict: the scan's grid rate before the first full-envelope instability
 GRID_RATIO = 10 ** (4 / (RATE_GRID - 1))
 
 
+def _uncertified() -> dict:
+    data = spring(400.0)
+    data["schedule"].update(rate_max=0.5, rate_certified=False)
+    return data
+
+
 @pytest.fixture(scope="module")
 def spring_art():
-    """The spring's artifact and the same law without its rate limit (sigma then moves as the test moves it)."""
-    result = synthesize(parse_spec(spring()))
-    free = dict(result.artifact, schedule=dict(result.artifact["schedule"], rate_max=None))
-    return from_dict(result.artifact), from_dict(seal(free))
+    """The spring's artifact (its rate declared uncertified) and the same law without its rate limit (sigma then
+    moves as the test moves it)."""
+    data = designed(_uncertified())
+    free = dict(data, schedule=dict(data["schedule"], rate_max=None))
+    return from_dict(data), from_dict(seal(free))
 
 
 def _triangle(a: float, b: float, rate: float, Ts: float) -> np.ndarray:
@@ -77,9 +93,9 @@ def _period_radius(art, sigma: np.ndarray) -> float:
     return float(np.exp(np.log(np.max(np.abs(np.linalg.eigvals(Z)))) + log_norm))
 
 
-def test_old_rate_fails_over_half_the_envelope_and_the_new_one_holds(spring_art):
+def test_old_rate_fails_over_half_the_envelope_and_the_declared_one_holds(spring_art):
     """At the old rate the whole-envelope sweep is stable but the sweep over [0, 0.5] grows (the law itself: by
-    more than 100x in 60 periods); the verdict's rate_max is now below it, and there the same sweep decays."""
+    more than 100x in 60 periods); at the declared 0.5/s the same sweep decays."""
     art, free = spring_art
     Ts, rate_max = art.Ts, art.schedule.rate_max
     assert _period_radius(art, _triangle(0.0, 1.0, OLD_RATE, Ts)) < 1.0
@@ -92,49 +108,59 @@ def test_old_rate_fails_over_half_the_envelope_and_the_new_one_holds(spring_art)
     assert last < 1e-3 * first
 
 
-def test_new_rate_holds_for_every_sub_range(spring_art):
-    """rate_max is the scan's grid rate 50 * 10^-2 (the first instability is one grid step up), and at it every
-    triangle between two points of a grid of tenths (most of them not the verdict's nodes) is stable."""
+def test_below_the_first_growing_rate_every_sub_range_holds(spring_art):
+    """The falsifier's first growing rate is the scan's grid rate 50 * 10^-1.75 (0.89/s); at the grid rate below
+    it every triangle between two points of a grid of tenths (most of them not the falsifier's nodes) is stable,
+    and one grid step up some sweep of its own set grows (by the oracle here)."""
     art, _ = spring_art
-    v = art.checks["schedule"]["variation"]
-    assert v["rate_max_source"].startswith("simulation")
-    assert art.schedule.rate_max == v["simulated_stable_rate"] == pytest.approx(50.0 * 10**-2)
+    f = art.checks["schedule"]["variation"]["falsifier"]
+    assert f["first_growing_rate"] == pytest.approx(50.0 * 10**-1.75)
+    below = f["first_growing_rate"] / GRID_RATIO
     pairs = itertools.combinations(np.linspace(0.0, 1.0, 11), 2)
-    radii = [_period_radius(art, _triangle(a, b, art.schedule.rate_max, art.Ts)) for a, b in pairs]
-    assert max(radii) < 1.0
+    assert max(_period_radius(art, _triangle(a, b, below, art.Ts)) for a, b in pairs) < 1.0
+    w = f["worst"]
+    path = Path(w["low"], w["high"], w["dwell_low"], w["dwell_high"], w["rate"], w["period"], 0.0)
+    assert _period_radius(art, path.samples(art.Ts)) ** (1 / w["period"]) == pytest.approx(w["growth_per_step"])
+    assert w["growth_per_step"] > 1.0
 
 
-def test_rate_max_is_not_vacuous(spring_art):
-    """One grid step above rate_max some sweep of the verdict's own set is unstable (by the oracle here); at
-    rate_max none is."""
+def test_the_worst_dwell_path_is_the_oracles(spring_art):
+    """worst_path's dwell search (bounded screening, then eigenvalues) at a fast rate: its path, rebuilt from the
+    record and multiplied out here, has the growth it reports, and no hold pair of its grid between the same levels
+    grows faster by the oracle."""
     art, _ = spring_art
-    pairs = list(itertools.combinations(sweep_nodes(art.schedule.points), 2))
-    worst = max(_period_radius(art, _triangle(a, b, art.schedule.rate_max * GRID_RATIO, art.Ts)) for a, b in pairs)
-    assert worst > 1.0
-    assert max(_period_radius(art, _triangle(a, b, art.schedule.rate_max, art.Ts)) for a, b in pairs) < 1.0
+    L, S = loops_at(art.schedule, art.Ci), art.schedule
+    dwells = dwell_grid(20.0)
+    p = worst_path(L, S.points, art.Ts, 10.0, dwells)
+    got = _period_radius(art, p.samples(art.Ts)) ** (1 / p.period)
+    assert got == pytest.approx(p.growth, rel=1e-9)
+    if p.dwell_low:
+        for d1, d2 in itertools.product(dwells[::3], repeat=2):
+            alt = Path(p.low, p.high, d1, d2, p.rate, 0, 0.0).samples(art.Ts)
+            assert _period_radius(art, alt) ** (1 / alt.size) <= p.growth * (1 + 1e-9)
 
 
 def test_shared_sweeps_equal_each_triangle_multiplied_out(spring_art):
-    """The sweeps from one node share their factors; the radii equal each triangle's product taken alone, and
-    the trajectory list holds one triangle per pair of nodes (whole envelope first) and the two dwelling steps."""
+    """The sweeps from one node share their factors; the radii equal each triangle's product taken alone."""
     art, _ = spring_art
     L, nodes = loops_at(art.schedule, art.Ci), sweep_nodes(art.schedule.points)
     assert np.allclose(nodes, np.linspace(0.0, 1.0, 9))
     for rate in (0.05, 0.9, 3.0, 45.0):
-        trajs = trajectories(art.schedule.points, rate * art.Ts)
-        assert len(trajs) == 36 + 2 and np.allclose(trajs[0], _triangle(0.0, 1.0, rate, art.Ts))
+        assert np.allclose(triangle(0.0, 1.0, rate * art.Ts), _triangle(0.0, 1.0, rate, art.Ts))
         direct = [monodromy_radius(L, _triangle(a, b, rate, art.Ts)) for a, b in itertools.combinations(nodes, 2)]
         assert np.allclose(sweep_radii(L, nodes, rate * art.Ts), direct, rtol=1e-9, atol=1e-300)
 
 
 def test_scan_stops_at_the_first_unstable_rate(monkeypatch):
-    """Stability need not be monotone in the rate: a family unstable at the sixth rate only gives the fifth rate,
-    and the rates above are not tried."""
+    """Stability need not be monotone in the rate: a family growing at the sixth rate only is reported there, and
+    the rates above are not tried."""
     import gainlink.synthesis.schedule_rate as R
 
     rates = 10.0 * np.logspace(-4, 0, RATE_GRID)
-    bad = rates[5] * 0.1  # the step at the sixth rate (Ts = 0.1)
-    monkeypatch.setattr(R, "sweep_radii", lambda _l, nodes, step: np.array([2.0 if np.isclose(step, bad) else 0.5]))
-    monkeypatch.setattr(R, "monodromy_radius", lambda _l, _s: 0.5)
-    scan = scan_rates(None, np.array([0.0, 1.0]), 0.1)
-    assert scan.stable_rate == pytest.approx(rates[4]) and scan.rates.size == 6
+
+    def worst(_l, points, Ts, rate, dwells, at_least=0.0):
+        return Path(0.0, 1.0, 0, 0, rate, 4, 1.5 if np.isclose(rate, rates[5]) else 0.5)
+
+    monkeypatch.setattr(R, "worst_path", worst)
+    scan = scan_rates(None, np.array([0.0, 1.0]), 0.1, (1, 2))
+    assert scan.unstable_rate == pytest.approx(rates[5]) and scan.rates.size == 6

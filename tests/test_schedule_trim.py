@@ -89,9 +89,10 @@ def test_schedule_on_a_parameter_trims_hover_throttle(multirotor, tmp_path):
 
 def test_the_default_spec_of_a_slow_loop_designs_its_certificate_proved_in_float64(multirotor, tmp_path):
     """The spec `linearize --schedule` writes without a template (the multirotor on its mass) needs a Lyapunov
-    matrix with a condition number near 1e7: Clarabel stops short of its tolerances (InsufficientProgress) and the
-    design was refused ("the LMI solver failed"). The candidate is now kept when the float64 re-check proves it;
-    proved again here, independently, on a dense grid of masses (not only the hull's vertices)."""
+    matrix with a condition number near 1e7: Clarabel stopped short of its tolerances (InsufficientProgress) and the
+    design was refused ("the LMI solver failed"). The LMIs are solved in a whitened basis and their candidate is
+    proved in ball arithmetic; the common P is proved again here, independently, on a dense grid of masses (not only
+    the hull's vertices)."""
     from gainlink.shipping.artifact import load
     from gainlink.synthesis.lpv import velocity_loop
 
@@ -102,11 +103,13 @@ def test_the_default_spec_of_a_slow_loop_designs_its_certificate_proved_in_float
     assert res.code == 0, res.err
     art = load(out / "gains.json")
     var = art.checks["schedule"]["variation"]
-    assert var["common_lyapunov"] and var["rate_max"] is None
-    P = np.array(var["certificate"]["P"][0])
+    assert var["common_lyapunov"] and var["rate_max"] is None and var["rate_certified"]
+    P = np.array(var["certificate"]["P"][0])  # on [x; delta; u_prev; y_prev], e_prev = -Ci y_prev (r = 0)
     S = art.schedule
+    r = P.shape[0]
+    E = np.vstack([np.eye(r), np.hstack([np.zeros((art.q, r - art.p)), -art.Ci])])
     for mass in np.linspace(S.points[0], S.points[-1], 201):
-        A = velocity_loop(S.plant_at(mass), S.coefficients_at(mass), Ci=art.Ci)
+        A = velocity_loop(S.plant_at(mass), S.coefficients_at(mass), Ci=art.Ci)[:r] @ E
         assert np.linalg.eigvalsh(P - A.T @ P @ A)[0] > 0, mass
 
 

@@ -14,8 +14,8 @@ def schedule_metrics(trace: Any, *, artifact: Any) -> dict:
 
     ``sigma_min``/``sigma_max`` the range sigma covered, ``coverage`` that range over the envelope's (1: all of
     it), ``max_rate`` the fastest ``|d sigma / dt|`` between steps (per second), ``held_steps``, ``clipped_steps``,
-    ``rate_limited_steps`` the steps with each flag, and the schedule's ``sigma``, ``source``, ``points`` and
-    ``rate_max`` for the record.
+    ``rate_limited_steps`` the steps with each flag, and the schedule's ``sigma``, ``source``, ``points``,
+    ``rate_max`` and ``rate_certified`` (whether a Lyapunov certificate covers that rate) for the record.
     """
     S = artifact.schedule
     sigma = np.asarray(trace.sigma, dtype=float)
@@ -28,6 +28,7 @@ def schedule_metrics(trace: Any, *, artifact: Any) -> dict:
         "source": S.source,
         "points": [float(v) for v in S.points],
         "rate_max": S.rate_max,
+        "rate_certified": S.rate_certified,
         "sigma_min": lo,
         "sigma_max": hi,
         "coverage": (hi - lo) / span if sigma.size else 0.0,

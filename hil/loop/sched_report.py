@@ -48,6 +48,12 @@ def schedule_lines(sch: dict | None) -> list[str]:
     return [
         f"  sigma {sch['sigma']} ({sch['source']}): covered [{sch['sigma_min']:.4g}, {sch['sigma_max']:.4g}] of "
         f"[{lo:.4g}, {hi:.4g}] ({100 * sch['coverage']:.0f}%), fastest {sch['max_rate']:.4g}/s"
-        f" (rate_max {sch['rate_max'] if sch['rate_max'] is not None else 'none'}); steps held {sch['held_steps']},"
+        f" (rate_max {_rate(sch)}); steps held {sch['held_steps']},"
         f" clipped {sch['clipped_steps']}, rate-limited {sch['rate_limited_steps']}"
     ]
+
+
+def _rate(sch: dict) -> str:
+    """The law's rate_max with what covers it (a run recorded before ``rate_certified``: not certified)."""
+    value = "none" if sch["rate_max"] is None else f"{sch['rate_max']:g}/s"
+    return f"{value}, {'certified' if sch.get('rate_certified') else 'not certified'}"

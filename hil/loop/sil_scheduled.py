@@ -67,6 +67,7 @@ def describe_scheduled(artifact: Artifact, path) -> dict:
             "source": S.source,
             "points": [float(v) for v in S.points],
             "rate_max": S.rate_max,
+            "rate_certified": S.rate_certified,
             "filter_tau": S.filter_tau,
         },
     }
@@ -81,10 +82,12 @@ def describe_scheduled(artifact: Artifact, path) -> dict:
 def without_rate_limit(artifact: Artifact) -> Artifact:
     """A copy of a scheduled artifact whose law does not limit sigma's rate (``rate_max`` removed, re-sealed; its
     provenance's ``rate_limit_removed`` says which ``rate_max`` of which artifact): the scenario's
-    ``sigma_rate_limit = false``."""
+    ``sigma_rate_limit = false``. No certificate covers an unlimited rate unless one covered any rate already."""
     from gainlink.shipping.artifact import from_dict, seal
 
-    data = dict(artifact.data, schedule=dict(artifact.data["schedule"], rate_max=None))
+    S = artifact.schedule
+    certified = S.rate_certified and S.rate_max is None
+    data = dict(artifact.data, schedule=dict(artifact.data["schedule"], rate_max=None, rate_certified=certified))
     removed = f"rate_max {artifact.schedule.rate_max!r} of sha256:{artifact.sha256}"
     data["provenance"] = dict(data.get("provenance", {}), rate_limit_removed=removed)
     return from_dict(seal(data))

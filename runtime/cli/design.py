@@ -307,7 +307,8 @@ def _print_scheduled(result, out: Path, *, as_json: bool) -> int:
     sch = a["checks"]["schedule"]
     if as_json:
         print(json.dumps({"artifact": str(out / "gains.json"), "sha256": a["sha256"], "schedule": sch,
-                          "rate_max": a["schedule"]["rate_max"], "warnings": result.warnings}, indent=2))  # fmt: skip
+                          "rate_max": a["schedule"]["rate_max"], "rate_certified": a["schedule"]["rate_certified"],
+                          "warnings": result.warnings}, indent=2))  # fmt: skip
         return 0
     s = a["schedule"]
     print(

@@ -73,10 +73,16 @@ def render_header(artifact: Artifact) -> str:
         f"#define GL_SIGMA_EXTERNAL {int(external)} /* sigma = {S.sigma} ({S.source}) */\n"
         f"#define GL_SIGMA_INDEX {S.index}\n"
         f"#define GL_SIGMA_FILTERED {int(S.filter_alpha != 1.0)}\n"
-        f"#define GL_SIGMA_RATE_LIMITED {int(S.rate_max is not None)}\n"
+        f"#define GL_SIGMA_RATE_LIMITED {int(S.rate_max is not None)} /* {_rate_comment(S)} */\n"
         + "".join(f"#define GL_SCHED_FIXED_{k.upper()} {v:#010x}u\n" for k, v in fixed_masks(a).items())
         + "\n#endif /* GL_GAINS_H */\n"
     )
+
+
+def _rate_comment(S) -> str:
+    """What the rate limit is and whether a Lyapunov certificate covers it (docs/design.md, verdicts)."""
+    value = "rate_max none" if S.rate_max is None else f"rate_max {S.rate_max:g}/s"
+    return f"{value}, {'certified' if S.rate_certified else 'NOT certified'}"
 
 
 def render_source(artifact: Artifact) -> str:

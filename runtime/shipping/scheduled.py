@@ -59,7 +59,8 @@ def lerp(stack: np.ndarray, i: int, lam: float) -> np.ndarray:
 @dataclass(frozen=True)
 class Schedule:
     """A loaded schedule: ``points`` (N), sigma's ``source``/``index``/``name``, ``external`` names, the shaping
-    (``rate_max`` or None, ``filter_tau``, ``filter_alpha``), and per point stacked arrays: ``coef[name]`` of shape
+    (``rate_max`` or None, ``rate_certified``: whether a Lyapunov certificate covers that rate, None included,
+    ``filter_tau``, ``filter_alpha``), and per point stacked arrays: ``coef[name]`` of shape
     ``(N, rows, cols)`` for each of :data:`COEFFICIENTS`, ``design[name]`` for each of :data:`DESIGN_MATRICES`
     (``M`` too in the current form), ``u_op`` (N, m) and ``y_op`` (N, p)."""
 
@@ -69,6 +70,7 @@ class Schedule:
     index: int
     external: tuple[str, ...]
     rate_max: float | None
+    rate_certified: bool
     filter_tau: float
     filter_alpha: float
     coef: dict
@@ -126,6 +128,8 @@ def load_schedule(data: dict, *, n: int, m: int, p: int, q: int, form: str) -> S
         index=int(sig["index"]),
         external=tuple(s["external"]),
         rate_max=None if s.get("rate_max") is None else float(s["rate_max"]),
+        # an artifact from before rate_certified proved nothing its rate_max can be trusted for: not certified
+        rate_certified=bool(s.get("rate_certified", False)),
         filter_tau=tau,
         filter_alpha=float(s["filter_alpha"]),
         coef={k: stacked[k] for k in COEFFICIENTS},

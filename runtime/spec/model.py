@@ -154,6 +154,9 @@ class ScheduleSpec:
     ``operating_points[i]`` and ``controllers[i]`` (the controller table parsed against that point's plant: shared
     weights, or Bryson's output maxima giving each point its own ``Q``). ``rate_max`` (sigma units per second,
     None: not limited by the spec) and ``filter_tau`` (seconds, 0: no filter) shape sigma before the law uses it.
+    ``rate_certified`` False declares the spec's ``rate_max`` shipped even where no certificate covers it (the
+    artifact then says it is not certified); ``certify_budget`` is the CPU seconds the design's certificate
+    searches may take (None: the design's default).
     """
 
     sigma: str
@@ -166,6 +169,8 @@ class ScheduleSpec:
     controllers: tuple[ControllerSpec, ...]
     rate_max: float | None = None
     filter_tau: float = 0.0
+    rate_certified: bool = True
+    certify_budget: float | None = None
 
     @property
     def size(self) -> int:

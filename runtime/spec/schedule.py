@@ -4,7 +4,8 @@
 matrices and the operating point at one point, in the order of ``schedule.points``. Everything that would make
 the points mean different things is refused here in one line: points not increasing or fewer than two, different
 names or dimensions, a sigma that is neither an output nor a declared external signal, a trim outside the limits,
-``rate_max <= 0``, a transfer-function plant, matrices in ``[plant]`` besides the points'.
+``rate_max <= 0``, ``rate_certified = false`` without a ``rate_max``, a ``certify_budget`` that is not a positive
+number of seconds, a transfer-function plant, matrices in ``[plant]`` besides the points'.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from .plant import parse_plant
 from .tables import parse_operating_point
 from .values import SIGNAL_RE, as_vector, no_unknown, positive_number
 
-SCHEDULE_KEYS = {"sigma", "external", "points", "rate_max", "filter_tau", "plant"}
+SCHEDULE_KEYS = {"sigma", "external", "points", "rate_max", "rate_certified", "certify_budget", "filter_tau", "plant"}
 # the fit keys: each point's fit to its FMU, written by ``linearize --schedule`` (kept as written, not used)
 POINT_KEYS = {"A", "B", "C", "D", "states", "inputs", "outputs", "u_op", "y_op", "x_op"} | {
     "fit_steps", "fit_amplitude", "fit", "fit_warning",
@@ -104,9 +105,16 @@ def sigma_source(tbl: dict, plant: PlantModel) -> tuple[str, int, tuple[str, ...
 def parse_schedule(
     tbl: dict, plants: tuple[PlantModel, ...], points: np.ndarray, *, limits: LimitsSpec, controllers: tuple
 ) -> ScheduleSpec:
-    """The :class:`ScheduleSpec`: sigma's source, each point's operating point, ``rate_max`` and ``filter_tau``."""
+    """The :class:`ScheduleSpec`: sigma's source, each point's operating point, ``rate_max`` (and whether it must
+    be certified), ``filter_tau`` and the certificate searches' budget."""
     source, index, external = sigma_source(tbl, plants[0])
     rate_max = positive_number(tbl["rate_max"], "schedule.rate_max") if "rate_max" in tbl else None
+    certified = tbl.get("rate_certified", True)
+    if not isinstance(certified, bool):
+        raise SpecError(f"schedule.rate_certified must be true or false, got {certified!r}")
+    if not certified and rate_max is None:
+        raise SpecError("schedule.rate_certified = false declares the spec's rate_max not certified: give rate_max")
+    budget = positive_number(tbl["certify_budget"], "schedule.certify_budget") if "certify_budget" in tbl else None
     tau = tbl.get("filter_tau", 0.0)
     if isinstance(tau, bool) or not isinstance(tau, (int, float)) or not np.isfinite(tau) or tau < 0:
         raise SpecError(f"schedule.filter_tau must be a time constant >= 0 in seconds (0: no filter), got {tau!r}")
@@ -128,4 +136,6 @@ def parse_schedule(
         controllers=tuple(controllers),
         rate_max=rate_max,
         filter_tau=float(tau),
+        rate_certified=certified,
+        certify_budget=budget,
     )

@@ -16,7 +16,7 @@ from ..shipping.scheduled import COEFFICIENTS, filter_alpha, law_coefficients, l
 from ..spec import PlantSpec
 from .record import provenance
 from .schedule_grid import GridCheck, grid_check
-from .schedule_variation import VariationCheck, variation_check
+from .schedule_variation import DEFAULT_BUDGET, RateSpec, VariationCheck, crossing_warning, rate_text, variation_check
 
 log = logging.getLogger(__name__)
 
@@ -46,11 +46,13 @@ def synthesize_scheduled(spec: PlantSpec, design_point: Callable) -> tuple[dict,
     data = _artifact_data(spec, points_data, results)
     sched = load_schedule(data, n=spec.plant.n, m=spec.plant.m, p=spec.plant.p, q=spec.q, form=spec.observer.form)
     grid = grid_check(sched, Ci=spec.Ci, Ts=spec.Ts, inputs=spec.plant.inputs)
-    variation = variation_check(sched, Ci=spec.Ci, Ts=spec.Ts, spec_rate_max=s.rate_max)
+    tau = -1.0 / np.log(float(grid.radius.max()))  # the slowest closed-loop time constant, in samples
+    rate_spec = RateSpec(rate_max=s.rate_max, certified=s.rate_certified, budget=s.certify_budget or DEFAULT_BUDGET)
+    variation = variation_check(sched, Ci=spec.Ci, Ts=spec.Ts, tau_samples=tau, spec=rate_spec, sigma=s.sigma)
     data["schedule"]["rate_max"] = variation.rate_max
+    data["schedule"]["rate_certified"] = variation.rate_certified
     data["checks"] = _checks(s.sigma, s.points, results, grid, variation)
-    if variation.common is None:
-        warnings.append(_rate_warning(spec, variation))
+    warnings += _rate_warnings(spec, variation, tau)
     for w in warnings:
         log.warning(w)
     sealed = seal(data)
@@ -153,13 +155,26 @@ def _checks(sigma: str, points: np.ndarray, results: list, grid: GridCheck, vari
     }
 
 
-def _rate_warning(spec: PlantSpec, v: VariationCheck) -> str:
-    rate = "not limited" if v.rate_max is None else f"limited to {v.rate_max:.4g} {spec.schedule.sigma}/s"
-    return (
-        f"no common Lyapunov function: stability is proved only for a slowly moving {spec.schedule.sigma}; the law "
-        f"limits the {spec.schedule.sigma} it uses ({rate}, from the {v.rate_max_source}), but only a "
-        "rate-limited reference or a slow external signal keeps the plant within that rate"
-    )
+def _rate_warnings(spec: PlantSpec, v: VariationCheck, tau: float) -> list[str]:
+    """What the design says of sigma's rate beside the record: a spec's rate above the certified one, a rate not
+    certified, a certified rate too slow to cross the envelope in reasonable time, and what the limit covers."""
+    s, out = spec.schedule, []
+    name, proved = s.sigma, v.certified_rate
+    if s.rate_max is not None and s.rate_certified and proved is not None and s.rate_max > proved:
+        out.append(f"the spec's rate_max of {name}, {s.rate_max:g}/s, is above the certified rate: the law ships "
+                   f"{rate_text(v.rate_max, True)}")  # fmt: skip
+    if not v.rate_certified:
+        out.append(f"rate_max of {name}: {rate_text(v.rate_max, False)}: the spec declared it (rate_certified = "
+                   "false); no Lyapunov certificate covers it")  # fmt: skip
+    slow = crossing_warning(v, span=float(s.points[-1] - s.points[0]), Ts=spec.Ts, tau_samples=tau, sigma=name)
+    if slow:
+        out.append(slow)
+    if v.rate_max is not None:
+        out.append(
+            f"the law limits the {name} it uses to {rate_text(v.rate_max, v.rate_certified)}, but only a "
+            f"rate-limited reference or a slow external signal keeps the plant's own {name} within that rate"
+        )
+    return out
 
 
 def describe_schedule(checks: dict) -> list[str]:
@@ -171,30 +186,52 @@ def describe_schedule(checks: dict) -> list[str]:
         lines.append(f"at {sigma} = {pt['sigma']:g}: closed-loop spectral radius {pt['spectral_radius']:.5f}, {mg}")
     g = checks["grid"]
     lines.append(
-        f"between points ({g['per_interval']} steps per interval, {g['sigma_count']} values of {sigma}, the law the "
-        f"C runs): spectral radius at most {g['max_spectral_radius']:.5f} (at {sigma} = {g['worst_sigma']:.4g}), "
+        f"between points, at {g['sigma_count']} values of {sigma} ({g['per_interval']} steps per interval; the law "
+        f"the C runs): spectral radius at most {g['max_spectral_radius']:.5f} (at {sigma} = {g['worst_sigma']:.4g}), "
         f"gain margin at least +{_db(g['min_gain_margin_up_db'])} dB, phase margin at least "
         f"{_deg(g['min_phase_margin_deg'])}"
     )
-    v = checks["variation"]
-    if v["common_lyapunov"]:
-        proof = (
-            f"a common quadratic Lyapunov function proves stability for any rate of {sigma} "
-            f"(margin {v['certificate_margin']:.3g}, {v['solver']})"
-        )
-    elif v["certified_rate"] is not None:
-        proof = (
-            f"no common Lyapunov function; a {sigma}-dependent one certifies |d{sigma}/dt| <= "
-            f"{v['certified_rate']:.4g}/s"
-        )
-    else:
-        proof = "no Lyapunov certificate found"
-    sim = v["simulated_stable_rate"]
-    sim_text = "stable at every rate tried" if sim is None else f"stable up to {sim:.4g}/s"
-    rate = "not limited" if v["rate_max"] is None else f"{v['rate_max']:.4g}/s"
-    lines.append(f"moving {sigma}: {proof}; simulation (ramps and steps across the envelope): {sim_text}")
-    lines.append(f"rate_max the law enforces on {sigma}: {rate} ({v['rate_max_source']})")
+    lines += _variation_lines(sigma, checks["variation"])
     return lines
+
+
+def _variation_lines(sigma: str, v: dict) -> list[str]:
+    """The verdict on a moving sigma, each figure with what covers it (docs/design.md, verdicts)."""
+    if "frozen" not in v:  # an artifact from before the certified rate
+        return [f"moving {sigma}: rate_max {rate_text(v.get('rate_max'), False)} (recorded before certificates of "
+                "the rate: not proved)"]  # fmt: skip
+    lines = [f"frozen at any {sigma} between the points: stable, certified ({v['frozen']['pieces']} pieces, one "
+             "Lyapunov function each, proved in ball arithmetic)"]  # fmt: skip
+    cert = v["certificate"]
+    if v["common_lyapunov"]:
+        proof = f"certified for any rate of {sigma} (one Lyapunov function, margin {cert['margin']:.3g})"
+    elif v["certified_rate"] is not None:
+        proof = (f"certified for |d{sigma}/dt| <= {v['certified_rate']:.4g}/s (a {sigma}-dependent Lyapunov "
+                 f"function, {cert['hull_pieces']} pieces, margin {cert['margin']:.3g})")  # fmt: skip
+    else:
+        proof = "no rate certified"
+    lines.append(f"moving {sigma}: {proof}")
+    f = v["falsifier"]
+    worst = _path_text(sigma, f["worst"])
+    if f["first_growing_rate"] is None:
+        found = f"no growing path at {f['rates_tried']} rates up to a one-step crossing (worst: {worst})"
+    else:
+        found = f"grows at {f['first_growing_rate']:.4g}/s: {worst}"
+    lines.append(f"falsifier (periodic {sigma} paths, simulated: not certified): {found}")
+    if f["at_rate_max"] is not None:
+        lines.append(f"  worst path found at rate_max: {_path_text(sigma, f['at_rate_max'])}")
+    lines.append(f"rate_max the law enforces on {sigma}: {rate_text(v['rate_max'], v['rate_certified'])} "
+                 f"({v['rate_source']})")  # fmt: skip
+    return lines
+
+
+def _path_text(sigma: str, p: dict) -> str:
+    if p["shape"] == "dwell":
+        where = (f"held {p['dwell_low']} samples at {p['low']:.4g} and {p['dwell_high']} at {p['high']:.4g}, moving "
+                 f"between them at {p['rate']:.4g}/s")  # fmt: skip
+    else:
+        where = f"swept between {p['low']:.4g} and {p['high']:.4g} at {p['rate']:.4g}/s"
+    return f"{sigma} {where}, x{p['growth_per_step']:.5f} per step"
 
 
 def _margin_text(m: dict) -> str:

@@ -1,132 +1,237 @@
-"""The verdict on a moving sigma: a common quadratic Lyapunov function (any rate), else the rate a sigma-dependent
-one certifies, and the fastest rate that stays stable in simulation; and from them the ``rate_max`` the law
-enforces (docs/design.md, scheduled law)."""
+"""The verdict on a moving sigma (docs/design.md, scheduled law): what is proved about the loop while sigma moves,
+what the falsifier found, and from them the ``rate_max`` the law enforces and whether it is certified.
+
+In order: the loop frozen anywhere in the envelope is proved stable piece by piece (else the design is refused,
+naming where); the falsifier scans periodic sigma paths (:mod:`.schedule_rate`) for the first rate at which one
+grows; a common ``P`` proves any rate; else the fastest rate a ``P(sigma)`` proves, below the falsifier's rate, is
+searched within the budget (:mod:`.schedule_certify`). The shipped ``rate_max`` is a certified rate (rounded down
+to three digits), the spec's when slower; or, when the spec declares its own rate uncertified
+(``rate_certified = false``), the spec's, said to be not certified. A path the falsifier finds growing at or below a
+certified rate contradicts the certificate: :class:`CertificateContradiction`, never an artifact.
+"""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..shipping.artifact import matrix_to_json
+from ..errors import DesignError, VerificationError
 from ..shipping.scheduled import Schedule
-from .lpv import bernstein_vertices, lambda_polynomial, velocity_loop
-from .lyapunov import Certificate, common_lyapunov, rate_certificate
-from .schedule_rate import RateScan, scan_rates
-from .schedule_sweeps import SWEEP_PIECES
+from .lpv import loop_polynomial
+from .lyapunov import PREC, Certificate
+from .schedule_certify import (
+    MAX_PIECES,
+    REFINEMENTS,
+    Budget,
+    RateSearch,
+    certify_rate,
+    common,
+    prove_frozen,
+    start_pieces,
+)
+from .schedule_hull import LoopHull
+from .schedule_rate import Path, RateScan, dwell_grid, scan_rates, worst_path
 
-#: Each interval is split in this many parts for the Bernstein hull (a tighter hull, more vertices).
-HULL_PIECES = 2
+#: CPU seconds the certificate searches may take by default (``[schedule] certify_budget``).
+DEFAULT_BUDGET = 60.0
+#: A certified rate at which sigma needs longer than this many slowest closed-loop time constants to cross the
+#: envelope is shipped with a warning saying that time.
+CROSSING_TIME_CONSTANTS = 100.0
+
+COVERS = (
+    "the unsaturated velocity-form loop on the interpolated linear plant, the law's coefficients interpolated "
+    "exactly from the artifact's float64 points, references zero; any sigma path whose steps are at most "
+    "Ts * rate_max (sigma clipped to the envelope); not saturation, the float32 C or the plant's nonlinearity"
+)
+
+
+class CertificateContradiction(VerificationError):
+    """The falsifier found a path growing at or below a certified rate: the certificate is wrong (a bug in
+    gainlink, reported in one line like every refusal; no artifact is written)."""
 
 
 @dataclass(frozen=True)
 class VariationCheck:
-    """``common``: a common P (stable at any rate) or None; ``certified``: the rate a P(sigma) certifies (when no
-    common P); ``scan``: the simulation; ``rate_max``: what the law enforces and ``rate_max_source`` why."""
+    """The verdict: the frozen proof, a common ``P`` (any rate) or the rate search, the falsifier's scan and its
+    worst path at the shipped rate, and the ``rate_max`` shipped, whether it is certified and why."""
 
+    frozen: list[Certificate]
     common: Certificate | None
-    certified: Certificate | None
+    search: RateSearch | None
     scan: RateScan
+    at_rate_max: Path | None
     rate_max: float | None
-    rate_max_source: str
+    rate_certified: bool
+    rate_source: str
+    budget: float
+
+    @property
+    def certified_rate(self) -> float | None:
+        """The fastest rate proved (None: none, or any rate with a common ``P``)."""
+        cert = None if self.search is None else self.search.certificate
+        return None if cert is None else cert.rate
 
     def to_dict(self) -> dict:
         """The record in ``checks.schedule.variation``."""
-        cert = self.common or self.certified
+        cert = self.common or (None if self.search is None else self.search.certificate)
         return {
-            "method": "quadratic Lyapunov function over the Bernstein hull of the velocity loop on each interval "
-            f"({HULL_PIECES} pieces per interval), re-checked by eigenvalues; periodic sigma trajectories (triangles "
-            f"between every pair of {SWEEP_PIECES + 1} envelope nodes, the points and the intervals' middles; "
-            "rate-limited steps across the envelope) judged by their monodromy matrix on a log grid of rates",
+            "method": _method_text(),
+            "covers": COVERS,
+            "frozen": {
+                "certified": True,
+                "pieces": len(self.frozen),
+                "certificates": [c.to_dict() for c in self.frozen],
+            },
             "common_lyapunov": self.common is not None,
-            "certified_rate": None if self.certified is None else self.certified.rate,
-            "certificate_margin": None if cert is None else cert.margin,
-            "solver": None if cert is None else cert.solver,
-            "simulated_stable_rate": self.scan.stable_rate,
-            "simulated_rates": int(self.scan.rates.size),
-            "simulated_max_radius_at_stable_rate": _radius_at(self.scan),
+            "certified_rate": _shipped(self.certified_rate),
             "rate_max": self.rate_max,
-            "rate_max_source": self.rate_max_source,
-            "confirmed_by_simulation": _confirmed(self),
-            "certificate": None if cert is None else _certificate_record(cert),
+            "rate_certified": self.rate_certified,
+            "rate_source": self.rate_source,
+            "certificate": None if cert is None else cert.to_dict(),
+            "search": None if self.search is None else _search_record(self.search, self.budget),
+            "falsifier": _falsifier_record(self.scan, self.at_rate_max),
         }
 
 
-def _certificate_record(cert: Certificate) -> dict:
-    """The Lyapunov matrices themselves, so that anyone can re-check them: P at each node (one: a common P)."""
-    return {"nodes": [float(v) for v in cert.nodes], "P": [matrix_to_json(P) for P in cert.P]}
+def _method_text() -> str:
+    return (
+        "Lyapunov functions x' P x on the loop's states [x; delta; u_prev; y_prev] (e_prev = -Ci y_prev after the "
+        "first step): the loop's exact polynomial in lambda on each interval hulled by its Bernstein coefficients on "
+        "dyadic pieces; frozen: one P per piece; any rate: one P; a rate: P(sigma) piecewise linear between nodes, "
+        "P(s) - V' P(s') V > 0 at every corner of every piece against every node interval within Ts * rate; found by "
+        f"Clarabel, proved in ball arithmetic (python-flint arb, {PREC} bits, Rump's test) on the exact vertices, at "
+        "exact rational corners. Falsifier (never a proof): periodic sigma paths (triangles and dwells between "
+        "levels) judged by their monodromy matrices"
+    )
 
 
-def _radius_at(scan: RateScan) -> float | None:
-    ok = scan.radius[scan.radius < 1.0]
-    return float(ok[-1]) if ok.size else None
+def _search_record(search: RateSearch, budget: float) -> dict:
+    return {
+        "budget_s": budget,
+        "budget_spent": search.budget_spent,
+        "lmis_solved": search.solves,
+        "hull_pieces": len(search.pieces),
+        "max_pieces": MAX_PIECES,
+        "refinements_max": REFINEMENTS,
+        "slowest_rate_not_proved": search.unproved,
+    }
 
 
-def _confirmed(v: VariationCheck) -> bool:
-    """The simulation found nothing unstable at or below the rate the verdict allows."""
-    if v.scan.stable_rate is None:
-        return True
-    return v.rate_max is not None and v.rate_max <= v.scan.stable_rate
+def _falsifier_record(scan: RateScan, at_rate_max: Path | None) -> dict:
+    return {
+        "rates_tried": int(scan.rates.size),
+        "first_growing_rate": scan.unstable_rate,
+        "worst": scan.worst.to_dict(),
+        "at_rate_max": None if at_rate_max is None else at_rate_max.to_dict(),
+        "dwells": list(scan.dwells),
+    }
 
 
 def loops_at(s: Schedule, Ci: np.ndarray):
-    """``sigmas (K,) -> velocity loop matrices (K, N, N)`` through the loop's polynomial in lambda on each
-    interval (the same matrices as :func:`~.lpv.velocity_loop` at each sigma, fast to evaluate in bulk)."""
-    polys = np.array([lambda_polynomial(_interval_fn(s, Ci, i)) for i in range(len(s.points) - 1)])
-    degree = polys.shape[1] - 1
+    """``sigmas (K,) -> velocity loop matrices (K, N, N)`` from the loop's exact polynomial in lambda on each
+    interval (the matrices of :func:`~.lpv.velocity_loop` at each sigma, fast to evaluate in bulk)."""
+    polys = [loop_polynomial(s, Ci, i) for i in range(len(s.points) - 1)]
+    degree = max(len(p) for p in polys) - 1
+    stack = np.array([np.concatenate([p, np.zeros((degree + 1 - len(p),) + p.shape[1:])]) for p in polys])
 
     def at(sigmas: np.ndarray) -> np.ndarray:
         clipped = np.clip(sigmas, s.points[0], s.points[-1])
         i = np.clip(np.searchsorted(s.points, clipped, side="right") - 1, 0, len(s.points) - 2)
         lam = (clipped - s.points[i]) / (s.points[i + 1] - s.points[i])
-        return np.einsum("kj,kjab->kab", lam[:, None] ** np.arange(degree + 1), polys[i])
+        return np.einsum("kj,kjab->kab", lam[:, None] ** np.arange(degree + 1), stack[i])
 
     return at
 
 
-def _interval_fn(s: Schedule, Ci: np.ndarray, i: int, a: float = 0.0, b: float = 1.0):
-    lo, hi = s.points[i], s.points[i + 1]
+@dataclass(frozen=True)
+class RateSpec:
+    """What the spec says of sigma's rate: ``rate_max`` (None: none), whether it must be certified, the budget."""
 
-    def fn(t: float) -> np.ndarray:
-        sigma = lo + (a + (b - a) * t) * (hi - lo)
-        return velocity_loop(s.plant_at(sigma), s.coefficients_at(sigma), Ci=Ci)
-
-    return fn
-
-
-def hull(s: Schedule, Ci: np.ndarray) -> tuple[np.ndarray, list[list[np.ndarray]]]:
-    """Nodes (points and piece boundaries) and, per piece, the Bernstein vertices of the velocity loop."""
-    nodes, pieces = [], []
-    for i in range(len(s.points) - 1):
-        for j in range(HULL_PIECES):
-            a, b = j / HULL_PIECES, (j + 1) / HULL_PIECES
-            nodes.append(s.points[i] + a * (s.points[i + 1] - s.points[i]))
-            pieces.append(bernstein_vertices(_interval_fn(s, Ci, i, a, b)))
-    return np.array(nodes + [s.points[-1]]), pieces
+    rate_max: float | None = None
+    certified: bool = True
+    budget: float = DEFAULT_BUDGET
 
 
-def variation_check(s: Schedule, *, Ci: np.ndarray, Ts: float, spec_rate_max: float | None) -> VariationCheck:
-    """Common P, else certified rate; the simulated scan; ``rate_max`` = the spec's, tightened to the certified
-    rate (or, with no certificate at all, to the simulated stable rate)."""
-    nodes, pieces = hull(s, Ci)
-    common = common_lyapunov([V for piece in pieces for V in piece])
-    scan = scan_rates(loops_at(s, Ci), s.points, Ts)
-    certified = None
-    if common is None:
-        unstable = scan.rates[-1] if scan.stable_rate is not None else float(s.points[-1] - s.points[0]) / Ts
-        certified = rate_certificate(nodes, pieces, Ts=Ts, rate_hi=float(unstable))
-    if common is not None:
-        bound, source = None, "common Lyapunov function: any rate"
-    elif certified is not None:
-        bound, source = certified.rate, "certified rate (sigma-dependent Lyapunov function)"
-    else:
-        bound, source = scan.stable_rate, "simulation (no Lyapunov certificate found)"
-    rate_max = _tighter(spec_rate_max, bound)
-    if spec_rate_max is not None and rate_max == spec_rate_max:
-        source = "spec" + ("" if bound is None else f" (within the {source.split(' (')[0]})")
-    return VariationCheck(common=common, certified=certified, scan=scan, rate_max=rate_max, rate_max_source=source)
+def variation_check(s: Schedule, *, Ci: np.ndarray, Ts: float, tau_samples: float, spec: RateSpec,
+                    sigma: str) -> VariationCheck:  # fmt: skip
+    """The verdict (module docstring); DesignError when nothing certifies and the spec did not declare its rate
+    uncertified."""
+    budget = Budget(spec.budget)
+    hull = LoopHull.of(s, Ci)
+    frozen_pieces, frozen = prove_frozen(hull, budget, sigma=sigma)
+    L = loops_at(s, Ci)
+    scan = scan_rates(L, s.points, Ts, dwell_grid(tau_samples))
+    any_rate = common(hull, frozen_pieces)
+    if any_rate is not None and scan.unstable_rate is not None:
+        raise CertificateContradiction(f"a common Lyapunov function was proved but {scan.worst.describe(sigma)}")
+    search = None
+    if any_rate is None:
+        ceiling = scan.unstable_rate or float(s.points[-1] - s.points[0]) / Ts
+        search = certify_rate(hull, start_pieces(hull, frozen_pieces), Ts=Ts, hi=ceiling, budget=budget)
+    rate_max, certified, source = _decide(any_rate, search, spec, sigma=sigma)
+    at_rate_max = None
+    if certified and rate_max is not None:
+        at_rate_max = worst_path(L, s.points, Ts, rate_max, scan.dwells)
+        if at_rate_max.growth >= 1.0:
+            raise CertificateContradiction(
+                f"the rate {rate_max:.4g}/s of {sigma} is certified but {at_rate_max.describe(sigma)}"
+            )
+    return VariationCheck(frozen, any_rate, search, scan, at_rate_max, rate_max, certified, source, spec.budget)
 
 
-def _tighter(a: float | None, b: float | None) -> float | None:
-    values = [v for v in (a, b) if v is not None]
-    return min(values) if values else None
+def _decide(any_rate: Certificate | None, search: RateSearch | None, spec: RateSpec,
+            *, sigma: str) -> tuple[float | None, bool, str]:  # fmt: skip
+    """``(rate_max, certified, why)`` from the certificates and the spec (module docstring)."""
+    if any_rate is not None:
+        if spec.rate_max is None:
+            return None, True, "any rate: a common Lyapunov function"
+        return spec.rate_max, True, "the spec's; any rate is certified (a common Lyapunov function)"
+    proved = _shipped(search.certificate.rate) if search and search.certificate else None
+    if proved is not None and (spec.rate_max is None or spec.rate_max > proved):
+        if spec.rate_max is not None and not spec.certified:
+            return spec.rate_max, False, f"the spec's, declared not certified (certified up to {proved:.4g}/s)"
+        above = "" if spec.rate_max is None else f"; the spec's {spec.rate_max:g}/s is above it"
+        return proved, True, f"the fastest rate a sigma-dependent Lyapunov function proves, rounded down{above}"
+    if proved is not None:
+        return spec.rate_max, True, f"the spec's, within the certified {proved:.4g}/s"
+    if spec.rate_max is not None and not spec.certified:
+        return spec.rate_max, False, "the spec's, declared not certified (no rate certified)"
+    where = search.binding.describe(sigma) if search and search.binding else f"the envelope of {sigma}"
+    stop = " within the budget" if search and search.budget_spent else ""
+    raise DesignError(
+        f"no Lyapunov function certifies any rate of {sigma}{stop} (the search is stuck at {where}): declare a "
+        "rate with [schedule] rate_max and rate_certified = false to ship it uncertified, or add points there"
+    )
+
+
+def _shipped(rate: float | None) -> float | None:
+    """A proved rate rounded down to three significant digits (every slower rate is proved too)."""
+    if rate is None or rate <= 0:
+        return None
+    scale = 10.0 ** (math.floor(math.log10(rate)) - 2)
+    out = float(f"{math.floor(rate / scale) * scale:.3g}")
+    while out > rate:  # the decimal's nearest double may lie an ulp above a rate that is exactly three digits
+        out = float(f"{out - scale:.3g}")
+    return out
+
+
+def crossing_warning(v: VariationCheck, *, span: float, Ts: float, tau_samples: float, sigma: str) -> str | None:
+    """The warning for a certified rate so slow that crossing the envelope takes longer than
+    :data:`CROSSING_TIME_CONSTANTS` closed-loop time constants (None otherwise)."""
+    if not v.rate_certified or v.rate_max is None:
+        return None
+    crossing, limit = span / v.rate_max, CROSSING_TIME_CONSTANTS * tau_samples * Ts
+    if crossing <= limit:
+        return None
+    return (
+        f"the certified rate of {sigma}, {v.rate_max:.4g}/s, needs {crossing:.4g} s to cross the envelope (more than "
+        f"{CROSSING_TIME_CONSTANTS:g} closed-loop time constants, {limit:.3g} s)"
+    )
+
+
+def rate_text(rate_max: float | None, certified: bool) -> str:
+    """``rate_max`` as every report prints it, with what covers it."""
+    value = "not limited" if rate_max is None else f"{rate_max:.4g}/s"
+    return f"{value}, {'certified' if certified else 'not certified'}"

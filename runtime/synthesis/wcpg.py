@@ -32,9 +32,11 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import DesignError
+from .balls import INFLATE
+from .balls import upper as _up
+from .balls import verified_lambda_min as _verified_lambda_min
 
 UNIT = 2.0**-53
-INFLATE = 1.0 + 1e-9  # covers the float64 rounding of the error bounds' own arithmetic
 EIGEN_MAX_COND = 1e8  # above this basis condition number the Lyapunov certificate is used
 PREC = 128  # bits of the ball arithmetic
 BLOCK = 64  # steps between tail checks
@@ -156,17 +158,6 @@ def decay_certificate(A: np.ndarray, B: np.ndarray, C: np.ndarray, *, what: str 
     if cert is None:
         raise DesignError(f"could not verify that {what} is stable (no certificate of its peak gain)")
     return cert
-
-
-def _up(x) -> float:
-    """A float64 at or above the upper end of the absolute value of a flint ball (arb or acb)."""
-    from flint import acb
-
-    u = (abs(x) if isinstance(x, acb) else x).abs_upper()
-    man, exp = u.man_exp()
-    man = int(man)
-    value = math.ldexp(float(man), int(exp))
-    return float(np.nextafter(value, np.inf)) if man.bit_length() > 53 else value
 
 
 def _up_matrix(M) -> np.ndarray:
@@ -296,32 +287,6 @@ def _lyapunov_matrix(shape: tuple[int, ...], data: bytes) -> tuple[float, float,
         if lmin > 0.0 and dissipation >= 0.0:
             return gamma, lmin, lmax
     return None
-
-
-def _verified_lambda_min(M) -> float:
-    """A lower bound of the smallest eigenvalue of the symmetric ball matrix ``M`` (-inf when not positive).
-
-    Rump's test: with ``delta`` half the approximate smallest eigenvalue and ``L`` the float Cholesky factor of
-    ``mid(M) - delta I``, every matrix in ``M`` is ``L L' + delta I + E`` with ``|E|_2 <= |E|_F``; if that is below
-    ``delta``, the smallest eigenvalue is at least ``delta - |E|_F``.
-    """
-    from flint import arb_mat
-
-    n = M.nrows()
-    mid = np.array([[float(M[i, j].mid()) for j in range(n)] for i in range(n)])
-    mid = 0.5 * (mid + mid.T)
-    approx = float(np.linalg.eigvalsh(mid).min())
-    if not approx > 0.0:
-        return -math.inf
-    delta = 0.5 * approx
-    try:
-        L = np.linalg.cholesky(mid - delta * np.eye(n))
-    except np.linalg.LinAlgError:
-        return -math.inf
-    La = arb_mat(L.tolist())
-    E = M - La * La.transpose() - arb_mat(np.eye(n).tolist()) * delta
-    frob = math.sqrt(sum(_up(E[i, j]) ** 2 for i in range(n) for j in range(n))) * INFLATE
-    return delta - frob if frob < delta else -math.inf
 
 
 @dataclass(frozen=True)
