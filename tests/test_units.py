@@ -13,7 +13,7 @@ from gainlink.errors import ArtifactError
 from gainlink.hil.loop.pil_report import pil_summary_text
 from gainlink.shipping.artifact import from_dict, load, seal
 from gainlink.synthesis.loop_plots import _bode_figure, _step_figure
-from support.cli import GOOD_SPEC, assert_one_clear_line, run_cli
+from support.cli import GOOD_SPEC, assert_refused, run_cli
 
 
 def test_the_examples_units_reach_the_artifact_and_its_labels(example_artifacts):
@@ -69,8 +69,7 @@ def test_a_spec_without_units_writes_no_units_key(tmp_path):
 def test_a_bad_units_table_is_one_line(tmp_path, table, words):
     spec = tmp_path / "s.toml"
     spec.write_text(GOOD_SPEC + table)
-    assert_one_clear_line(run_cli("design", spec, "--out", tmp_path / "out"), words)
-    assert not (tmp_path / "out").exists()
+    assert_refused(("design", spec, "--out", tmp_path / "out"), words, tmp_path)
 
 
 def test_an_artifact_whose_units_name_no_signal_is_refused(example_artifacts):

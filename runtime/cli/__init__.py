@@ -31,7 +31,8 @@ EXIT_USAGE = 2
 EXIT_BROKEN_PIPE = 141
 
 EXIT_STATUS_HELP = """\
-exit status:
+exit status::
+
   0    done
   2    bad input: one line on stderr names the problem, nothing is written
   130  interrupted (Ctrl-C: the shell's 128 + SIGINT): one line on stderr, no traceback;

@@ -491,7 +491,8 @@ RUN_DESCRIPTION = """\
 Build (cached) and start the host firmware's loop executable (a fixed-point artifact: its integer loop, the law it
 certifies).
 
-Without --input the loop reads stdin and answers each line with one line on stdout, flushed at once:
+Without --input the loop reads stdin and answers each line with one line on stdout, flushed at once::
+
   (first)       gainlink-loop NAME sha256:HEX n m p q        fixed point: gainlink-fixed NAME sha256:HEX
   y0.. r0..     the samples, then the references (numbers separated by spaces, tabs or commas; nan, inf allowed)
                 -> step STATUS u.. SATMASK xh.. z..          fixed point: step FLAGS SAT CLIP OVERFLOW U.. V.. XH.. Z..
@@ -501,6 +502,7 @@ Without --input the loop reads stdin and answers each line with one line on stdo
   stage, crc    -> stage STATUS, crc 0xHEX                   float32 only: re-stage the gain set, its checksum
   other lines   -> error ...                                 nothing changes and the loop goes on; the exit
                                                              status is 2 at the end of stdin, else 0
+
 Ctrl-C stops the loop (exit status 130); a SIGTERM to the command stops it too (exit status 0).
 
 With --input, replay a CSV (columns y0.., r0.., optionally t) through the loop and write the replay CSV (fixed
