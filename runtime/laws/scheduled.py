@@ -4,6 +4,7 @@ host C through ctypes; its replay engines, one-step checks, trace files and C ex
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -18,11 +19,30 @@ if TYPE_CHECKING:
     from ..spec import PlantSpec
     from ..synthesis.pipeline import DesignResult
 
+log = logging.getLogger(__name__)
+
 #: What a trace of the C is checked against, bit for bit (gainlink.proof.scheduled_float32).
 AGAINST_FLOAT32_MODEL = "the C's float32 arithmetic, bit for bit, from its own state at each step"
 
 #: The scheduled law's own sigma flags (proof.scheduled_reference) as the status flags.
 _SIGMA_FLAGS = ((1, flags.SIGMA_HELD), (2, flags.SIGMA_CLIPPED), (4, flags.SIGMA_RATE))
+
+
+def _float32_check(artifact: dict, spec: PlantSpec, warnings: list[str]) -> tuple[dict, Any]:
+    """The sealed scheduled ``artifact`` with its float32 fidelity at a sigma sweep in ``checks.float32`` (and a
+    warning naming where and the remedies when it is above the threshold); unchanged, with None, when the spec
+    switched the float32 check off."""
+    from ..shipping.artifact import from_dict, seal
+    from .scheduled_fidelity import scheduled_fidelity
+
+    if not spec.implementation.float32_check:
+        return artifact, None
+    fidelity = scheduled_fidelity(from_dict(artifact))
+    data = dict(artifact, checks=dict(artifact["checks"], float32=fidelity.to_dict()))
+    if not fidelity.ok:
+        warnings.append(fidelity.warning(spec.schedule.sigma))
+        log.warning(warnings[-1])
+    return seal(data), fidelity
 
 
 def status_flags(sigma_flags: int, *, fault: bool) -> int:
@@ -108,16 +128,19 @@ class ScheduledLaw(Law):
     # -- the design side ----------------------------------------------------------------------------------------
 
     def design(self, spec: PlantSpec) -> DesignResult:
-        """Every point through the observer-based law's design (float32), then the scheduled checks."""
+        """Every point through the observer-based law's design (float32), then the scheduled checks, then the
+        float32 fidelity at a sigma sweep (:mod:`.scheduled_fidelity`; off when the spec switches the float32 check
+        off)."""
         from ..synthesis.pipeline import DesignResult
         from ..synthesis.schedule import synthesize_scheduled
 
         artifact, design, warnings = synthesize_scheduled(spec, LqLaw().design)
+        artifact, float32 = _float32_check(artifact, spec, warnings)
         first = design.results[0]
         return DesignResult(artifact=artifact, controller_poles=first.controller_poles,
                             observer_poles=first.observer_poles, closed_loop_poles=first.closed_loop_poles,
                             margins=first.margins, warnings=warnings, compensator=first.compensator,
-                            schedule=design)  # fmt: skip
+                            float32=float32, schedule=design)  # fmt: skip
 
     def plant(self, artifact: Any, *, sigma: float | None = None) -> SampledPlant:
         """The design model frozen at ``sigma`` (the first point by default): the points' sampled plants and trims
@@ -201,6 +224,7 @@ class ScheduledLaw(Law):
             "point, velocity form",
             *(f"  {line}" for line in describe_schedule(sch)),
             f"  coefficients that vary between points (interpolated by the C): {', '.join(s['varying']) or 'none'}",
+            *([f"  {result.float32.describe(sch['sigma'])}"] if result.float32 is not None else []),
             f"  wrote {path} (schema 2, sha256 {a['sha256'][:16]})",
         ]
 
@@ -209,7 +233,7 @@ class ScheduledLaw(Law):
         a = result.artifact
         return {"artifact": str(path), "sha256": a["sha256"], "schedule": a["checks"]["schedule"],
                 "rate_max": a["schedule"]["rate_max"], "rate_certified": a["schedule"]["rate_certified"],
-                "warnings": result.warnings}  # fmt: skip
+                "float32": a["checks"].get("float32"), "warnings": result.warnings}  # fmt: skip
 
     def design_plots(self, artifact: Any) -> tuple[dict[str, bytes], str | None]:
         """Nothing: the loop a plot would show changes along sigma."""

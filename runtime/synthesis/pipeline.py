@@ -48,7 +48,7 @@ class DesignResult:
     margins: list[ChannelMargin]
     warnings: list[str] = field(default_factory=list)
     compensator: CompensatorStability | None = None
-    float32: Float32Fidelity | None = None  # None when the check was switched off
+    float32: Float32Fidelity | Any = None  # None when the check was switched off; a scheduled law's: its sweep
     dead_time: DeadTimeCheck | None = None  # None unless the plant has sampled dead times
     fixed_point: FixedPointCertificate | None = None  # None unless [implementation] numeric is q31 or q15
     schedule: ScheduleDesign | None = None  # a scheduled spec: every point's result and the verdicts; the fields
