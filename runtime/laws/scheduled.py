@@ -21,7 +21,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: What a trace of the C is checked against, bit for bit (gainlink.proof.scheduled_float32).
+#: What a trace of the C is checked against: the float64 law within the float32 bound (.scheduled_onestep), and its
+#: float32 model bit for bit (gainlink.proof.scheduled_float32).
+AGAINST_FLOAT32_BOUND = "float64 law from its own state at each step, within the float32 bound"
 AGAINST_FLOAT32_MODEL = "the C's float32 arithmetic, bit for bit, from its own state at each step"
 
 #: The scheduled law's own sigma flags (proof.scheduled_reference) as the status flags.
@@ -174,12 +176,18 @@ class ScheduledLaw(Law):
         self, artifact: Any, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, trace: Any, *, engine: str | None
     ) -> tuple[OneStepVerdict, ...]:
         """The float64 law's trace (``reference``, or a file that names ``float64`` or no format) against the float64
-        law within float64's bound; a trace of the C (``native``, ``qemu``) bit for bit against its float32 model."""
+        law within float64's bound; a trace of the C (``native``, ``qemu``, its ``model``, or a file that names
+        ``float32``) against the float64 law within the float32 bound (:mod:`.scheduled_onestep`) and bit for bit
+        against the C's float32 model."""
         from ..proof.scheduled_replay import one_step_check
+        from .scheduled_onestep import float32_bound_check
 
         c_trace = engine in ("model", "native", "qemu") or (engine is None and trace.numeric == "float32")
         if c_trace:
-            return (OneStepVerdict(AGAINST_FLOAT32_MODEL, one_step_check(artifact, Y, R, S, trace, float32=True)),)
+            return (
+                OneStepVerdict(AGAINST_FLOAT32_BOUND, float32_bound_check(artifact, Y, R, S, trace)),
+                OneStepVerdict(AGAINST_FLOAT32_MODEL, one_step_check(artifact, Y, R, S, trace, float32=True)),
+            )
         return (OneStepVerdict(AGAINST_FLOAT64, one_step_check(artifact, Y, R, S, trace)),)
 
     def trace_numeric(self, engine: str | None) -> str:

@@ -12,8 +12,8 @@ The one-step check resynchronises a law on an engine's state before each step, a
 (:mod:`gainlink.proof.onestep`). A float64 trace (the reference engine) is checked against the float64 law within
 float64's bound: ``REL`` times each quantity's magnitude in that step. A trace of the C (engines ``native`` and
 ``qemu``, ``firmware/src/gl_sched.c``) is checked against the C's float32 arithmetic,
-:class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`, bit for bit (``float32=True``); that model is
-itself tested close to the float64 law (tests/test_sched_firmware.py).
+:class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`, bit for bit (``float32=True``), and against the
+float64 law within a float32 bound, as the unscheduled check does (:mod:`gainlink.laws.scheduled_onestep`).
 """
 
 from __future__ import annotations
