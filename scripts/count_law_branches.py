@@ -51,7 +51,7 @@ PY_TESTS: tuple[tuple[str, re.Pattern[str]], ...] = tuple(
             "fixed_point is None",
             [r"\bfixed_point\s+is\s+(?:not\s+)?None\b", r"\bif\s+(?:not\s+)?[\w.]*\bfixed_point\s*:"],
         ),
-        ("trace_numeric", [r"\btrace_numeric\s*\("]),
+        ("trace_numeric", [r"(?<![.\w])trace_numeric\s*\("]),
         ("flags in names", [r"""["']flags["']\s+(?:not\s+)?in\s+[\w.]*\.names\b"""]),
         (
             "numeric compared",

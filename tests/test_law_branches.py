@@ -26,6 +26,7 @@ TREE = {
         "    # if a.schedule is None: (a comment)\n"
         "    if a.schedule is not None and is_fixed(a):\n"  # 2
         "        return law_of(a)\n"  # gainlink.laws's: 0
+        "    law_of(a).trace_numeric(None)\n"  # asking the law: 0
         "    a.require_unscheduled('f')\n"  # 1
         '    return a.checks.get("fixed_point") or numeric == "q15"\n',  # 2
         5,
