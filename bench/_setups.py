@@ -8,9 +8,9 @@ import socket
 import tomllib
 from pathlib import Path
 
+from gainlink.laws import design as design_spec
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -40,5 +40,5 @@ def pendulum_1khz(folder: Path) -> Path:
     spec = tomllib.loads((ROOT / "examples" / "pendulum.toml").read_text())
     spec["Ts"], spec["name"] = 0.001, "pendulum_1khz"
     path = Path(folder) / "gains.json"
-    artifact_mod.write(path, synthesize(parse_spec(spec)).artifact)
+    artifact_mod.write(path, design_spec(parse_spec(spec)).artifact)
     return path

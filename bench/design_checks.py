@@ -26,11 +26,11 @@ from pathlib import Path
 os.environ["OPENBLAS_NUM_THREADS"] = "1"
 
 import numpy as np
+from gainlink.laws import design as design_spec
 from gainlink.proof.float32_law import Float32Loop
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import PlantSpec, load_spec, parse_spec
-from gainlink.synthesis import synthesize
 from gainlink.synthesis.random_plants import random_spec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,9 +48,9 @@ def _median_time(fn) -> float:
 
 def measure(label: str, spec: PlantSpec) -> dict:
     without = replace(spec, implementation=replace(spec.implementation, float32_check=False))
-    t_on = _median_time(lambda: synthesize(spec))
-    t_off = _median_time(lambda: synthesize(without))
-    result = synthesize(spec)
+    t_on = _median_time(lambda: design_spec(spec))
+    t_off = _median_time(lambda: design_spec(without))
+    result = design_spec(spec)
     a = from_dict(result.artifact)
     rng = np.random.default_rng(0)
     Y = a.y_op + rng.standard_normal((500, a.p))

@@ -31,9 +31,9 @@ from gainlink.firmware.cost import count_step_instructions
 from gainlink.firmware.golden import example_cases
 from gainlink.firmware.size import size_report, symbol_sizes
 from gainlink.firmware.targets import TARGETS
+from gainlink.laws import design as design_spec
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 STEPS = 2000
@@ -44,7 +44,7 @@ def pendulum_q31():
     data, _ = read_toml(ROOT / "examples" / "pendulum.toml", what="spec", error=ValueError)
     data = copy.deepcopy(data)
     data["implementation"] = {"numeric": "q31"}
-    return from_dict(synthesize(parse_spec(data)).artifact)
+    return from_dict(design_spec(parse_spec(data)).artifact)
 
 
 def _size(elf: Path, board: str, symbols: tuple[str, ...]) -> dict:

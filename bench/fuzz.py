@@ -19,9 +19,9 @@ import sys
 from pathlib import Path
 
 from gainlink.firmware import fuzz
+from gainlink.laws import design as design_spec
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import load_spec
-from gainlink.synthesis import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET_EXECUTIONS = 10_000_000
@@ -30,7 +30,7 @@ TARGET_EXECUTIONS = 10_000_000
 def load_artifact(path: str | None):
     if path:
         return artifact_mod.load(path)
-    result = synthesize(load_spec(ROOT / "examples" / "pendulum.toml"))
+    result = design_spec(load_spec(ROOT / "examples" / "pendulum.toml"))
     return artifact_mod.from_dict(result.artifact)
 
 

@@ -32,10 +32,10 @@ from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.fmu import FmuPlant
+from gainlink.laws import design as design_spec
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import load_spec
-from gainlink.synthesis import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING)
     with tempfile.TemporaryDirectory() as tmp:
         gains = Path(tmp) / "gains.json"
-        artifact_mod.write(gains, synthesize(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
+        artifact_mod.write(gains, design_spec(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
         art = artifact_mod.load(gains)
         exe = firmware_can_executable(art)
         fmu = build_fmu("cart_pendulum")

@@ -153,13 +153,13 @@ def main() -> int:
     args = parser.parse_args()
 
     from gainlink.firmware.mavlink_app import mavlink_executable
+    from gainlink.laws import design as design_spec
     from gainlink.shipping import artifact as artifact_mod
     from gainlink.spec import load_spec
-    from gainlink.synthesis import synthesize
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "gains.json"
-        artifact_mod.write(path, synthesize(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
+        artifact_mod.write(path, design_spec(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
         art = artifact_mod.load(path)
         rates, agree, busy_equals_default = _measure(art, mavlink_executable(art), args)
         bridge = _bridge_runs(path, args.busy_poll_us)

@@ -29,12 +29,12 @@ TARGET = 5000.0
 def wood_berry(spec: dict, params: int):
     """The Wood-Berry design, its firmware app and the first ``params`` REAL32 gains of its parameter table."""
     from gainlink.firmware.mavlink_app import mavlink_executable
+    from gainlink.laws import design as design_spec
     from gainlink.mavlink.params import REAL32, firmware_params
     from gainlink.shipping.artifact import from_dict
     from gainlink.spec import parse_spec
-    from gainlink.synthesis import synthesize
 
-    art = from_dict(synthesize(parse_spec(spec)).artifact)
+    art = from_dict(design_spec(parse_spec(spec)).artifact)
     gains = [s for s in firmware_params(art) if s.ptype == REAL32][:params]
     if len(gains) < params:
         raise SystemExit(f"the Wood-Berry firmware has only {len(gains)} REAL32 parameters")
@@ -67,16 +67,16 @@ def set_rates(link, gains: list, rounds: int) -> dict[str, list[float]]:
 def retuned_upload(spec: dict, port: int):
     """``upload()`` of the Wood-Berry design retuned (bryson_u_max / 1.7) to the app on ``port``: read, diff, set,
     commit."""
+    from gainlink.laws import design as design_spec
     from gainlink.mavlink.upload import upload
     from gainlink.shipping import artifact as artifact_mod
     from gainlink.spec import parse_spec
-    from gainlink.synthesis import synthesize
 
     spec = dict(spec, controller=dict(spec["controller"]))
     spec["controller"]["bryson_u_max"] = [v / 1.7 for v in spec["controller"]["bryson_u_max"]]
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "gains.json"
-        artifact_mod.write(path, synthesize(parse_spec(spec)).artifact)
+        artifact_mod.write(path, design_spec(parse_spec(spec)).artifact)
         retuned = artifact_mod.load(path)
     return upload(retuned, connect=f"udpout:127.0.0.1:{port}")
 

@@ -18,8 +18,8 @@ from pathlib import Path
 
 os.environ["OPENBLAS_NUM_THREADS"] = "1"  # before numpy: idle BLAS threads would take CPU time from the design
 
+from gainlink.laws import design as design_spec
 from gainlink.spec import load_spec, parse_spec
-from gainlink.synthesis import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
@@ -29,7 +29,7 @@ from schedule_cases import spring  # noqa: E402
 def measure(label: str, spec) -> dict:
     """One design: its CPU seconds and what its verdict on a moving sigma says."""
     t0 = time.process_time()
-    art = synthesize(spec).artifact
+    art = design_spec(spec).artifact
     seconds = time.process_time() - t0
     v = art["checks"]["schedule"]["variation"]
     search = v["search"] or {}

@@ -29,9 +29,9 @@ from gainlink.firmware.build import build
 from gainlink.firmware.cost import count_step_instructions
 from gainlink.firmware.sched_cost import count_sched_step_instructions
 from gainlink.firmware.size import size_report, symbol_sizes
+from gainlink.laws import design as design_spec
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 STEPS = 2000
@@ -83,10 +83,10 @@ def host_ns_per_step(runs: dict, N: int, rounds: int = 5) -> dict:
 def main() -> int:
     logging.disable(logging.WARNING)
     spec = parse_spec(tank_spec())
-    sched = from_dict(synthesize(spec).artifact)
-    ext = from_dict(synthesize(parse_spec(tank_spec(external=True))).artifact)
+    sched = from_dict(design_spec(spec).artifact)
+    ext = from_dict(design_spec(parse_spec(tank_spec(external=True))).artifact)
     mid = spec.at_point(len(LEVELS) // 2)
-    plain = from_dict(synthesize(replace(mid, limits=replace(mid.limits, anti_windup="clamp"))).artifact)
+    plain = from_dict(design_spec(replace(mid, limits=replace(mid.limits, anti_windup="clamp"))).artifact)
     same = ("n", "m", "p", "q", "observer_form")
     assert all(getattr(plain, k) == getattr(sched, k) for k in same), "the baseline is not the same design's"
     Y, R, H = samples(STEPS)

@@ -191,14 +191,14 @@ def main() -> int:
 
     import logging
 
+    from gainlink.laws import design as design_spec
     from gainlink.shipping import artifact as artifact_mod
     from gainlink.spec import load_spec
-    from gainlink.synthesis import synthesize
 
     logging.disable(logging.WARNING)
     with tempfile.TemporaryDirectory() as tmp:
         art_path = Path(tmp) / "gains.json"
-        art = synthesize(load_spec(ROOT / "examples" / "pendulum.toml")).artifact
+        art = design_spec(load_spec(ROOT / "examples" / "pendulum.toml")).artifact
         artifact_mod.write(art_path, art)
         art = artifact_mod.load(art_path)
         rt = measure_round_trips(art, boards=args.boards, steps=args.steps)

@@ -11,21 +11,21 @@ import hashlib
 import json
 import re
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .engines import engine_with_image
-from .engines.scheduled import scheduled_engine
-from .errors import DataError, SpecError
+from .errors import SpecError
 from .fileio import read_toml
+from .laws import design as design_spec
+from .laws import law_for_spec, law_of
 from .proof.reference import Trace
-from .proof.replay_io import run_reference
 from .proof.simulation import Simulation, simulate_linear
 from .shipping.artifact import Artifact, from_dict
 from .spec import PlantSpec, load_spec, parse_spec
-from .synthesis import DesignResult, synthesize
+from .synthesis import DesignResult
 from .synthesis.plant_report import AnalysisReport
 from .synthesis.plant_report import analyze as analyze_spec
 
@@ -196,12 +196,12 @@ def design_report(
     shortcuts = {"Q": Q, "R": R, "W": W, "V": V, "u_min": u_min, "u_max": u_max}
     given = [v for v in (Ts, name, discretization, *tables.values(), *shortcuts.values()) if v is not None]
     if isinstance(plant, (str, Path)) and not given:
-        return synthesize(load_spec(plant))
+        return design_spec(load_spec(plant))
     data = _merge_tables(_spec_dict(plant, Ts=Ts, name=name, discretization=discretization), tables, shortcuts)
     if schedule is not None:  # the points hold the matrices; [plant] keeps the shared kind and names
         data["plant"] = {k: v for k, v in data["plant"].items() if k in ("kind", "states", "inputs", "outputs")}
         data.pop("operating_point", None)
-    return synthesize(_parse(data, source=_source_name(plant)))
+    return design_spec(_parse(data, source=_source_name(plant)))
 
 
 def analyze(spec: str | Path | Mapping[str, Any]) -> AnalysisReport:
@@ -215,9 +215,10 @@ def analyze(spec: str | Path | Mapping[str, Any]) -> AnalysisReport:
     >>> rep.n, rep.stabilizable, rep.detectable
     (4, True, True)
     """
-    if isinstance(spec, (str, Path)):
-        return analyze_spec(load_spec(spec))
-    return analyze_spec(_parse(json.loads(json.dumps(spec)), source="<dict>"))
+    parsed = load_spec(spec) if isinstance(spec, (str, Path)) else _parse(json.loads(json.dumps(spec)), source="<dict>")
+    law = law_for_spec(parsed)
+    report = analyze_spec(parsed, design=law.design)
+    return replace(report, law_lines=law.analysis_lines(report))
 
 
 def from_gains(
@@ -306,7 +307,7 @@ def from_gains(
     for key in ("controller", "observer", "integral"):
         data.pop(key, None)
     data.update(tables)
-    return from_dict(synthesize(_parse(data, source=_source_name(plant))).artifact)
+    return from_dict(design_spec(_parse(data, source=_source_name(plant))).artifact)
 
 
 def replay(
@@ -331,9 +332,9 @@ def replay(
         References (absolute), zeros by default.
     s : array_like (N, e), optional
         A scheduled artifact's external scheduling signals (``schedule.external``, in order).
-    engine : {"reference", "native", "qemu"}
-        The float64 law, the host C library (built on first use), or a Cortex-M image in QEMU (a scheduled
-        artifact: its scheduled loop, ``gl_sched.c``).
+    engine : {"reference", "model", "native", "qemu"}
+        The law's float64 reference, the bit-exact model of its C (float32 with explicit fused multiply-adds, or a
+        fixed-point law's integers), the host C library (built on first use), or a Cortex-M image in QEMU.
     target : str, optional
         With ``engine="qemu"``: the core whose image runs, ``cortex-m0``, ``cortex-m3``, ``cortex-m4``
         (default), ``cortex-m7``, ``cortex-m33`` or ``cortex-m55``.
@@ -357,16 +358,8 @@ def replay(
     """
     Y = np.asarray(y, dtype=float).reshape(-1, artifact.p)
     R = np.zeros((Y.shape[0], artifact.q)) if r is None else np.asarray(r, dtype=float).reshape(Y.shape[0], artifact.q)
-    if artifact.schedule is None:
-        trace: Trace = engine_with_image(engine, target=target, board=board)(artifact, Y, R)
-        return trace
-    run = run_reference if engine == "reference" else scheduled_engine(engine, target=target, board=board)
-    e = len(artifact.schedule.external)
-    S = None if s is None else np.asarray(s, dtype=float).reshape(Y.shape[0], e)
-    if e and S is None:
-        raise DataError(f"artifact {artifact.name} is scheduled on {artifact.schedule.sigma}: give s (N, {e})")
-    scheduled: Trace = run(artifact, Y, R, S)
-    return scheduled
+    trace: Trace = law_of(artifact).replay(artifact, engine, Y, R, s, target=target, board=board)
+    return trace
 
 
 def simulate(

@@ -224,15 +224,15 @@ def image_sizes() -> dict[tuple[str, str], Doc]:
     from gainlink.firmware.build import build
     from gainlink.firmware.size import size_report
     from gainlink.firmware.targets import CORTEX_M_TARGETS, TARGETS
+    from gainlink.laws import design as design_spec
     from gainlink.shipping.artifact import from_dict
     from gainlink.spec import load_spec
-    from gainlink.synthesis import synthesize
 
     sys.path.insert(0, str(ROOT / "bench"))
     from fixed_point_cost import CORES, pendulum_q31
 
     logging.disable(logging.WARNING)
-    pendulum = from_dict(synthesize(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
+    pendulum = from_dict(design_spec(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
     sizes: dict[tuple[str, str], Doc] = {}
     for target in CORTEX_M_TARGETS:
         board = TARGETS[target].default_board

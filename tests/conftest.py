@@ -19,10 +19,10 @@ from pathlib import Path
 import pytest
 from gainlink.fileio import exclusive_lock
 from gainlink.firmware.golden import GoldenCase, closed_loop_cases, random_cases
+from gainlink.laws import design as design_spec
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import load
 from gainlink.spec import load_spec
-from gainlink.synthesis import synthesize
 from support.mavlink import retuned_pendulum
 from support.paths import EXAMPLE_NAMES, EXAMPLES
 from support.shared import once_per_run, register_run
@@ -74,7 +74,7 @@ def example_artifacts(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Pat
         base = tmp_path_factory.mktemp("examples")
         paths = {}
         for name in EXAMPLE_NAMES:
-            result = synthesize(load_spec(EXAMPLES / f"{name}.toml"))
+            result = design_spec(load_spec(EXAMPLES / f"{name}.toml"))
             path = base / name / "gains.json"
             path.parent.mkdir()
             artifact_mod.write(path, result.artifact)

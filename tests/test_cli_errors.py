@@ -300,7 +300,8 @@ def test_replay_compare_with_a_different_number_of_rows_is_one_line(rows, pendul
     assert "50" in res.err
     # the library call refuses it the same way
     from gainlink.errors import DataError
-    from gainlink.proof.replay_io import one_step_check, read_samples, read_trace
+    from gainlink.proof.onestep import one_step_check
+    from gainlink.proof.replay_io import read_samples, read_trace
     from gainlink.shipping.artifact import load
 
     a = load(pendulum_artifact)

@@ -6,10 +6,10 @@ import tomllib
 
 import numpy as np
 import pytest
+from gainlink.laws import design as design_spec
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from gainlink.synthesis.deadtime import element_model
 from support.cli import run_cli
 from support.paths import EXAMPLES
@@ -87,7 +87,7 @@ def test_the_dead_time_check_agrees_with_the_column_simulated_by_hand(pade_order
     """Designed with first-order Padé the Wood-Berry LQI is unstable on the column with its true dead times
     (the check says so and design warns); with second order it is stable. The oracle is the hand-sampled
     column in closed loop with the float64 law: its error dies out or grows over 1500 min."""
-    result = synthesize(parse_spec(_wood_berry(pade_order)))
+    result = design_spec(parse_spec(_wood_berry(pade_order)))
     check = result.artifact["checks"]["dead_time"]
     assert check["stable"] is stable and check["pade_order"] == pade_order
     assert any("true dead times" in w for w in result.warnings) is not stable
@@ -109,4 +109,4 @@ def test_the_example_is_stable_on_its_true_dead_times_and_analyze_reports_it():
 def test_specs_without_dead_time_carry_no_dead_time_check():
     data = _wood_berry(2)
     data["plant"]["delay"] = [[0.0, 0.0], [0.0, 0.0]]
-    assert "dead_time" not in synthesize(parse_spec(data)).artifact["checks"]
+    assert "dead_time" not in design_spec(parse_spec(data)).artifact["checks"]

@@ -10,9 +10,9 @@ import pytest
 import scipy.linalg
 import scipy.signal
 from gainlink.errors import DesignError
+from gainlink.laws import design as design_spec
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import load_spec, parse_spec
-from gainlink.synthesis import synthesize
 from gainlink.synthesis.loop import poles_match
 from support.cli import run_cli
 from support.paths import EXAMPLES
@@ -147,7 +147,7 @@ def test_pole_placement_and_luenberger_put_poles_where_asked():
             observer={"method": "luenberger", "poles": [[-30.0, 5.0], [-30.0, -5.0]], "form": "current"},
         )
     )
-    r = synthesize(spec)
+    r = design_spec(spec)
     a = artifact_mod.from_dict(r.artifact)
     want_c = np.exp(np.array([-8.0, -9.0]) * 0.01)
     want_o = np.exp(np.array([-30 + 5j, -30 - 5j]) * 0.01)
@@ -190,7 +190,7 @@ def test_an_artifact_breaking_an_invariant_of_the_law_is_refused(form, change, w
     if form == "integral":
         spec["plant"]["outputs"] = ["pos"]
         spec["integral"] = {"outputs": ["pos"], "Q_diag": [5.0]}
-    data = synthesize(parse_spec(spec)).artifact
+    data = design_spec(parse_spec(spec)).artifact
     artifact_mod.from_dict(data)  # the untouched one is valid
     with pytest.raises(artifact_mod.ArtifactError, match=re.escape(words)):
         artifact_mod.from_dict(_tampered(data, change))
@@ -199,7 +199,7 @@ def test_an_artifact_breaking_an_invariant_of_the_law_is_refused(form, change, w
 def test_a_schema_violation_is_refused_after_the_same_artifact_passed_and_before_it_passes_again():
     """The schema's verdict is remembered by content (a design validates its artifact three times): an artifact
     edited after passing, even the same dict in place, is checked again, and the untouched one still passes."""
-    data = synthesize(parse_spec(_small_spec())).artifact
+    data = design_spec(parse_spec(_small_spec())).artifact
     artifact_mod.from_dict(data)
     bad = json.loads(json.dumps(data))
     bad["anti_windup"] = "sometimes"
@@ -214,14 +214,14 @@ def test_a_schema_violation_is_refused_after_the_same_artifact_passed_and_before
 
 
 def test_ackermann_matches_place_for_single_input():
-    r1 = synthesize(parse_spec(_small_spec(controller={"method": "place", "poles": [-8.0, -9.0]})))
-    r2 = synthesize(parse_spec(_small_spec(controller={"method": "ackermann", "poles": [-8.0, -9.0]})))
+    r1 = design_spec(parse_spec(_small_spec(controller={"method": "place", "poles": [-8.0, -9.0]})))
+    r2 = design_spec(parse_spec(_small_spec(controller={"method": "ackermann", "poles": [-8.0, -9.0]})))
     np.testing.assert_allclose(r1.artifact["K"], r2.artifact["K"], rtol=1e-8)
     assert any("Ackermann" in w for w in r2.warnings)
 
 
 def test_tustin_gives_the_bilinear_plant():
-    r = synthesize(parse_spec(_small_spec(discretization="tustin")))
+    r = design_spec(parse_spec(_small_spec(discretization="tustin")))
     a = artifact_mod.from_dict(r.artifact)
     A, B, C, D = np.array([[0.0, 1.0], [0.0, -2.0]]), np.array([[0.0], [4.0]]), np.array([[1.0, 0.0]]), np.zeros((1, 1))
     Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), 0.01, method="bilinear")
@@ -265,7 +265,7 @@ def _stiff_spec(integral_weight: float) -> dict:
 def test_badly_scaled_lqr_weights_are_solved_by_scaling_the_problem():
     """An integrator weighted 1e11 beside states weighted 1e-6 made SLICOT's DARE fail ('is (Q, A) detectable?');
     the scaled problem gives the gain SciPy's DARE computes for the unscaled one."""
-    r = synthesize(parse_spec(_stiff_spec(1e11)))
+    r = design_spec(parse_spec(_stiff_spec(1e11)))
     a = r.artifact
     Ad, Bd, Cd = (np.array(a[k]) for k in ("Ad", "Bd", "Cd"))
     Aa = np.block([[Ad, np.zeros((4, 1))], [-0.001 * Cd, np.eye(1)]])
@@ -278,7 +278,7 @@ def test_badly_scaled_lqr_weights_are_solved_by_scaling_the_problem():
 
 def test_a_marginal_mode_the_weights_cannot_see_is_named():
     with pytest.raises(DesignError, match=r"mode at z = 1 \(mostly integral of y0\).*give it a weight in Q"):
-        synthesize(parse_spec(_stiff_spec(0.0)))
+        design_spec(parse_spec(_stiff_spec(0.0)))
 
 
 @pytest.mark.parametrize(
@@ -305,7 +305,7 @@ def test_given_gains_that_leave_the_loop_unstable_name_the_part_and_its_eigenval
     }  # fmt: skip
     unstable = np.exp(np.sqrt(21.582) * 0.01)
     with pytest.raises(DesignError) as err:
-        synthesize(parse_spec(data))
+        design_spec(parse_spec(data))
     msg = str(err.value)
     assert part in msg
     assert f"|z| = {unstable:.6g}" in msg

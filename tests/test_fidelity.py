@@ -10,13 +10,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from gainlink.engines.native import NativeLoop
+from gainlink.laws import design as design_spec
 from gainlink.proof.fidelity import THRESHOLD, float32_fidelity
+from gainlink.proof.onestep import one_step_check
 from gainlink.proof.reference import ReferenceLoop, StepResult
-from gainlink.proof.replay_io import one_step_check
 from gainlink.proof.simulation import simulate_linear
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from support.cli import assert_refused, run_cli
 from support.oracles import jacobian_poles
 from support.paths import EXAMPLES
@@ -67,7 +67,7 @@ def flexible():
     """name -> (DesignResult, Artifact) for the three realisations."""
     out = {}
     for kind in ("as_designed", "balanced", "schur"):
-        result = synthesize(parse_spec(flexible_spec(kind)))
+        result = design_spec(parse_spec(flexible_spec(kind)))
         out[kind] = (result, artifact_mod.from_dict(result.artifact))
     return out
 
@@ -99,7 +99,7 @@ def test_unstable_compensator_is_reported_in_design_analyze_and_checks(tmp_path)
     from gainlink.synthesis.random_plants import random_spec
 
     spec = random_spec(0, n=7, m=2, p=3, q=2, anti_windup="backcalc", u_limit=100.0)
-    result = synthesize(parse_spec(spec))
+    result = design_spec(parse_spec(spec))
     comp = result.artifact["checks"]["compensator"]
     assert not comp["stable"] and max(abs(complex(*z)) for z in comp["unstable_poles"]) > 1.5
     warning = next(w for w in result.warnings if "compensator" in w)

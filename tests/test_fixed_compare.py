@@ -10,8 +10,9 @@ import io
 import re
 
 import pytest
+from gainlink.laws import law_of
 from gainlink.proof.fixed_onestep import fixed_one_step_check, trace_words
-from gainlink.proof.replay_io import read_samples, read_trace
+from gainlink.proof.replay_io import read_samples
 from gainlink.shipping.artifact import load
 from support.cli import assert_refused, run_cli
 from support.fixed import pendulum_design
@@ -57,13 +58,13 @@ def _rewrite(src, dst, edit) -> None:
 def test_host_c_trace_passes_bit_for_bit(pendulum):
     d, gains = pendulum
     res = run_cli(
-        "replay", gains["q31"], "--input", d / "in.csv", "--output", d / "fixed.csv", "--engine", "fixed",
+        "replay", gains["q31"], "--input", d / "in.csv", "--output", d / "model.csv", "--engine", "model",
         "--compare", d / "native.csv",
     )  # fmt: skip
     assert res.code == 0, res.err
     line = next(ln for ln in res.out.splitlines() if ln.startswith(f"one-step check of {d / 'native.csv'}"))
     assert "pass, 300 steps bit for bit against the q31 integer law from the trace's own XH, Z words" in line
-    assert "one-step check of fixed: pass" in res.out
+    assert "one-step check of model: pass" in res.out
 
 
 def test_one_lsb_on_one_command_is_caught_at_its_step(pendulum, tmp_path):
@@ -99,7 +100,7 @@ def test_a_state_without_its_words_is_quantised_and_said(pendulum, tmp_path):
     short = tmp_path / "short.csv"
     _rewrite(d / "native.csv", short, round12)
     samples = read_samples(d / "in.csv", a)
-    check = fixed_one_step_check(a, samples.Y, samples.R, trace_words(a, read_trace(short, a), "short"))
+    check = fixed_one_step_check(a, samples.Y, samples.R, trace_words(a, law_of(a).read_trace(short, a), "short"))
     assert check.passed and not check.state_words
     assert "quantised to the state formats" in check.summary()
 
@@ -129,7 +130,7 @@ def test_a_recorded_trace_names_its_format_and_one_of_another_format_is_refused_
     d, gains = pendulum
     assert (d / "native.csv").read_text().startswith("# numeric=q31\nt,u0,")
     q15 = tmp_path / "q15.csv"
-    res = run_cli("replay", gains["q15"], "--input", d / "in.csv", "--output", q15, "--engine", "fixed")
+    res = run_cli("replay", gains["q15"], "--input", d / "in.csv", "--output", q15, "--engine", "model")
     assert res.code == 0, res.err
     assert q15.read_text().startswith("# numeric=q15\n")
     argv = ("replay", gains["q31"], "--input", d / "in.csv", "--output", tmp_path / "out.csv", "--compare", q15)

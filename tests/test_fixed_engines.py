@@ -53,12 +53,12 @@ def test_fixed_point_without_ranges_is_one_line(tmp_path):
 def test_replay_engines_of_a_fixed_point_artifact_agree_byte_for_byte(pendulum_q31):
     d, gains, _ = pendulum_q31
     outs = {}
-    for engine, extra in (("fixed", ()), ("native", ()), ("qemu", ("--target", "cortex-m3"))):
+    for engine, extra in (("model", ()), ("native", ()), ("qemu", ("--target", "cortex-m3"))):
         out = d / f"{engine}.csv"
         res = run_cli("replay", gains, "--input", d / "in.csv", "--output", out, "--engine", engine, *extra)
         assert res.code == 0, res.err
         outs[engine] = out.read_text()
-    assert outs["fixed"] == outs["native"] == outs["qemu"]
+    assert outs["model"] == outs["native"] == outs["qemu"]
     ref = d / "reference.csv"
     assert run_cli("replay", gains, "--input", d / "in.csv", "--output", ref).code == 0
     assert ref.read_text() != outs["native"]  # the float64 law is not what the fixed-point artifact runs

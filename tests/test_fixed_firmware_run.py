@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from gainlink.laws import law_of
 from gainlink.proof.fixed_format import real
 from gainlink.proof.fixed_law import FixedPointLoop
 from gainlink.proof.float32_law import Float32Loop
-from gainlink.proof.replay_io import format_trace, read_trace, run_fixed
 from support.fixed import example, model_run
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))
@@ -71,7 +71,7 @@ def test_firmware_run_replays_a_fixed_point_artifact_through_the_integer_loop(sa
     assert proc.returncode == 0, proc.stderr
     # The oracle's words, in real units: the commands, estimate and integrators bit for bit, and every flag.
     model, f = model_run(a, Y, R), FixedPointLoop(a).f
-    got = read_trace(out, a)  # (a trace without the format line is read as before)
+    got = law_of(a).read_trace(out, a)
     assert np.array_equal(got.u * 2.0 ** f["u"], model.U)
     assert np.array_equal(got.xh * 2.0 ** f["xh"], model.XH)
     assert np.array_equal(got.z * 2.0 ** f["z"], model.Z)
@@ -81,10 +81,11 @@ def test_firmware_run_replays_a_fixed_point_artifact_through_the_integer_loop(sa
     # Not the float32 loop of the same export.
     f32 = Float32Loop(a).run(Y, R)
     assert np.any(got.u.astype(np.float32) != f32.u.astype(np.float32))
-    # The file is what `gainlink replay --engine fixed` writes for these samples, byte for byte.
+    # The file is what `gainlink replay --engine model` writes for these samples, byte for byte.
     text = out.read_text()
     assert text.splitlines()[0] == f"# numeric={numeric}"
-    assert text == format_trace(run_fixed(a, Y, R), t, numeric=numeric)
+    law = law_of(a)
+    assert text == law.trace_text(a, law.replay(a, "model", Y, R), t, engine="model")
     assert "gainlink_fixed_loop_host" in proc.stdout and f"{numeric} integer law" in proc.stdout, proc.stdout
 
 

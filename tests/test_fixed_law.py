@@ -10,6 +10,7 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
+from gainlink.laws import design as design_spec
 from gainlink.proof.derived_law import DerivedLoop, derive
 from gainlink.proof.fixed_format import quantise, rshift_round
 from gainlink.proof.fixed_law import FixedPointLoop
@@ -17,7 +18,6 @@ from gainlink.proof.reference import ReferenceLoop
 from gainlink.proof.sampled_plant import SampledPlant
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from gainlink.synthesis.fixed_point import certify
 from gainlink.synthesis.random_plants import random_spec
 
@@ -59,7 +59,7 @@ def _design(case):
     key = repr(case)
     if key not in _CACHE:
         seed, kw, numeric = case
-        a = from_dict(synthesize(parse_spec(_no_float32(random_spec(seed, **kw)))).artifact)
+        a = from_dict(design_spec(parse_spec(_no_float32(random_spec(seed, **kw)))).artifact)
         _CACHE[key] = (a, certify(a, _ranges(a), numeric=numeric, max_error=1.0))
     return _CACHE[key]
 
@@ -105,7 +105,7 @@ def test_rshift_round_is_round_half_up():
 def test_derived_law_is_the_reference_law(form, aw):
     """The C's form of the law (one sum of products per output) is the float64 law of docs/design.md."""
     spec = _no_float32(random_spec(3, n=4, m=2, p=2, q=1, form=form, anti_windup=aw))
-    a = from_dict(synthesize(parse_spec(spec)).artifact)
+    a = from_dict(design_spec(parse_spec(spec)).artifact)
     rng = np.random.default_rng(1)
     Y, R = rng.uniform(-1.0, 1.0, (300, 2)), rng.uniform(-1.0, 1.0, (300, 1))
     ours, ref = DerivedLoop(derive(a)).run(Y, R), ReferenceLoop(a).run(Y, R)

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from gainlink.errors import DesignError
 from gainlink.fileio import read_toml
+from gainlink.laws import design as design_spec
 from gainlink.proof.fixed_format import quantise
 from gainlink.proof.fixed_law import FixedPointLoop, gains_from_artifact
 from gainlink.shipping.artifact import from_dict, seal
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from gainlink.synthesis.fixed_point import certify
 from support.designs import designed
 from support.paths import EXAMPLES
@@ -30,7 +30,7 @@ def _example(name: str, numeric: str, **implementation) -> dict:
 
 @pytest.fixture(scope="module")
 def pendulum_q31():
-    return synthesize(parse_spec(_example("pendulum", "q31")))
+    return design_spec(parse_spec(_example("pendulum", "q31")))
 
 
 def test_pendulum_certifies_in_q31_with_its_integrator(pendulum_q31):
@@ -61,7 +61,7 @@ def test_artifact_rebuilds_the_certified_integers(pendulum_q31):
 @pytest.mark.parametrize("name", ["pendulum", "quadrotor_lateral", "wood_berry"])
 def test_examples_certify_in_q31_within_the_default_error(name):
     spec = parse_spec(_example(name, "q31"))
-    cert = synthesize(spec).fixed_point
+    cert = design_spec(spec).fixed_point
     assert np.all(cert.fraction <= 1.0 / 4096)
 
 
@@ -105,7 +105,7 @@ def test_estimate_bound_is_reached_off_centre():
 
     spec = random_spec(5, n=3, m=1, p=1, q=1, form="current", anti_windup="clamp")
     spec["operating_point"] = {"u_op": [0.3], "y_op": [0.5]}
-    a = from_dict(synthesize(parse_spec(spec)).artifact)
+    a = from_dict(design_spec(parse_spec(spec)).artifact)
     cert = certify(a, {"y_min": [-1.0], "y_max": [3.0], "r_min": [-1.0], "r_max": [2.0]}, numeric="q15",
                    max_error=1.0)  # fmt: skip
     bound = cert.quantised.bounds.xh
@@ -125,7 +125,7 @@ def test_unstable_estimator_is_refused_in_one_line(pendulum_q31):
 
 
 def test_q15_keeps_states_32_bit_and_samples_16():
-    cert = synthesize(parse_spec(_example("wood_berry", "q15"))).fixed_point
+    cert = design_spec(parse_spec(_example("wood_berry", "q15"))).fixed_point
     fm = cert.quantised.gains.formats
     assert {f.word for f in fm.y + fm.r + fm.u} == {16} and {f.word for f in fm.xh + fm.z + fm.v} == {32}
     for name in ("KX", "F", "G", "LY", "KAW"):
@@ -152,7 +152,7 @@ def test_q15_examples_are_refused_naming_the_remedy(name):
     """The headline in operation of the pendulum and the quadrotor in q15 is above the default 1/4096 of the span
     (1.8e-3 and 7.4e-3): refused in one line that names the figure, its parts and the remedies."""
     with pytest.raises(DesignError) as exc:
-        synthesize(parse_spec(_example(name, "q15")))
+        design_spec(parse_spec(_example(name, "q15")))
     text = str(exc.value)
     assert "\n" not in text and "certified deviation in operation" in text and "from rest" in text
     for remedy in ('use numeric = "q31"', "narrow the declared ranges", "raise fixed_point_max_error"):

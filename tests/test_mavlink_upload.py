@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from gainlink.firmware.mavlink_app import MavlinkFirmware, mavlink_executable
+from gainlink.laws import design as design_spec
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import Artifact, load
 from gainlink.shipping.codegen import gain_set
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from support.cli import GAINLINK, assert_refused, gainlink_process, run_cli
 from support.mavlink import closed_loop, read_params, reference_u, start_firmware
 from support.net import udp_port
@@ -291,7 +291,7 @@ def test_firmware_and_python_naming_schemes_agree_for_every_structure(shape, tmp
     from gainlink.shipping.artifact import from_dict
     from gainlink.synthesis.random_plants import random_spec
 
-    art = from_dict(synthesize(parse_spec(random_spec(11, **shape))).artifact)
+    art = from_dict(design_spec(parse_spec(random_spec(11, **shape))).artifact)
     fw, port = start_firmware(mavlink_executable(art), None)
     try:
         got = read_params(port)

@@ -24,11 +24,11 @@ from gainlink.engines.native import NativeLoop
 from gainlink.errors import ArtifactError
 from gainlink.firmware.golden import random_case
 from gainlink.hil.loop.pil import make_plant, run_pil
+from gainlink.laws import design as design_spec
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import from_dict, seal
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from support.cli import run_cli
 from support.shared import once
 
@@ -67,7 +67,7 @@ def motor(**op) -> dict:
 
 
 def designed(spec: dict) -> dict:
-    return synthesize(parse_spec(spec)).artifact
+    return design_spec(parse_spec(spec)).artifact
 
 
 # --- spec and artifact ---------------------------------------------------------------------------------

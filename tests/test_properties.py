@@ -6,10 +6,10 @@ import functools
 
 import numpy as np
 from gainlink.errors import DesignError
+from gainlink.laws import design as design_spec
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from gainlink.synthesis.discretize import Discretised
 from gainlink.synthesis.loop import check_separation, closed_loop_matrix, poles_match
 from gainlink.synthesis.random_plants import random_spec
@@ -30,7 +30,7 @@ def _artifacts():
         random_spec(13, n=5, m=2, p=3, q=1, anti_windup="backcalc", feedthrough=True),
         random_spec(14, n=4, m=3, p=2, q=0),
     ]
-    return [artifact_mod.from_dict(synthesize(parse_spec(s)).artifact) for s in specs]
+    return [artifact_mod.from_dict(design_spec(parse_spec(s)).artifact) for s in specs]
 
 
 @PROPERTY_SETTINGS
@@ -79,7 +79,7 @@ def test_predictor_and_current_forms_give_the_same_closed_loop(seed, n, m, p, q,
         spec = random_spec(seed, n=n, m=m, p=p, q=q, form=form, anti_windup=aw)
         spec["implementation"] = {"float32_check": False}  # gains and poles only: skip the closed-loop runs
         try:
-            results[form] = synthesize(parse_spec(spec))
+            results[form] = design_spec(parse_spec(spec))
         except DesignError:
             reject()  # an infeasible draw (e.g. two integrators on a one-state plant), whichever the form
     pred, cur = (artifact_mod.from_dict(results[f].artifact) for f in ("predictor", "current"))

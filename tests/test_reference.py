@@ -7,11 +7,11 @@ import math
 
 import numpy as np
 import pytest
+from gainlink.laws import design as design_spec
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.proof.replay_io import read_samples
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from gainlink.synthesis.random_plants import random_spec
 from support.cli import assert_refused, run_cli
 
@@ -72,7 +72,7 @@ CASES = [
     "case", CASES, ids=lambda c: f"n{c['n']}m{c['m']}p{c['p']}q{c['q']}-{c['form']}-{c['anti_windup']}"
 )
 def test_reference_matches_independent_law_on_random_inputs(case):
-    a = artifact_mod.from_dict(synthesize(parse_spec(random_spec(7, **case))).artifact)
+    a = artifact_mod.from_dict(design_spec(parse_spec(random_spec(7, **case))).artifact)
     rng = np.random.default_rng(1)
     N = 200
     Y = 3.0 * rng.standard_normal((N, a.p))  # large enough to saturate the +-1 limits
@@ -94,7 +94,7 @@ def test_non_finite_sample_leaves_state_untouched_and_returns_safe_command():
     spec = random_spec(3, n=3, m=2, p=2, q=1, anti_windup="clamp")
     spec["limits"]["u_min"] = [0.5, -2.0]  # zero is outside input 0's range: the safe command clamps it
     spec["limits"]["u_max"] = [2.0, 1.0]
-    a = artifact_mod.from_dict(synthesize(parse_spec(spec)).artifact)
+    a = artifact_mod.from_dict(design_spec(parse_spec(spec)).artifact)
     loop = ReferenceLoop(a)
     loop.step([1.0, -1.0], [0.2])
     xh, z = loop.xh.copy(), loop.z.copy()
@@ -108,7 +108,8 @@ def test_non_finite_sample_leaves_state_untouched_and_returns_safe_command():
 
 
 def test_clamp_freezes_the_integrator_only_on_saturated_steps():
-    a = artifact_mod.from_dict(synthesize(parse_spec(random_spec(5, n=2, m=1, p=1, q=1, anti_windup="clamp"))).artifact)
+    spec = parse_spec(random_spec(5, n=2, m=1, p=1, q=1, anti_windup="clamp"))
+    a = artifact_mod.from_dict(design_spec(spec).artifact)
     loop = ReferenceLoop(a)
     res = loop.step([50.0], [0.0])  # first step: xh = 0 so v = 0, not saturated: integrates
     assert not res.saturated.any() and loop.z[0] == pytest.approx(-a.Ts * 50.0 * a.Ci[0, 0])
@@ -206,7 +207,7 @@ def test_the_compiled_step_is_shared_by_equal_laws_and_never_by_laws_that_differ
     one gain changed in its twelfth digit gets its own."""
     from gainlink.proof.reference_step import compile_reference_step
 
-    a = artifact_mod.from_dict(synthesize(parse_spec(random_spec(7, **CASES[2]))).artifact)
+    a = artifact_mod.from_dict(design_spec(parse_spec(random_spec(7, **CASES[2]))).artifact)
     same = artifact_mod.from_dict(dict(a.data))
     data = dict(a.data)
     data["K"] = [list(row) for row in data["K"]]

@@ -20,9 +20,9 @@ from gainlink.hil.campaign import run
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.loop.sil import run_sil
 from gainlink.hil.loop.sil_scheduled import without_rate_limit
+from gainlink.laws import design as design_spec
 from gainlink.shipping.artifact import from_dict, load
 from gainlink.spec import load_spec
-from gainlink.synthesis import synthesize
 from support.paths import EXAMPLES
 from support.shared import once_per_run
 
@@ -34,7 +34,7 @@ pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 def artifact(tmp_path_factory):
     """examples/tank_showcase_load.toml designed once per test run, saved."""
     made = once_per_run(tmp_path_factory, "tank_showcase_load",
-                        lambda: synthesize(load_spec(EXAMPLES / "tank_showcase_load.toml")).artifact)  # fmt: skip
+                        lambda: design_spec(load_spec(EXAMPLES / "tank_showcase_load.toml")).artifact)  # fmt: skip
     path = tmp_path_factory.mktemp("tank_load") / "gains.json"
     from_dict(made).save(path)
     return path

@@ -11,13 +11,13 @@ import tomllib
 import numpy as np
 import pytest
 from gainlink.engines.sched_native import NativeScheduledLoop
+from gainlink.laws import design as design_spec
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop
 from gainlink.shipping import codegen
 from gainlink.shipping.artifact import from_dict
 from gainlink.shipping.codegen_scheduled import render_export, tables
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, tank_dict
 from support.cli import GOOD_SPEC, assert_refused, run_cli
 from support.designs import designed
@@ -104,7 +104,7 @@ def test_scheduled_export_holds_the_tables_and_an_unscheduled_one_is_unchanged(l
         assert np.array_equal(got, want) and np.array_equal(t[name].reshape(-1), want), name
     assert float(t["rate_step"]) == np.float32(external.Ts * 4.0)
     assert float(t["alpha"]) == np.float32(-np.expm1(-external.Ts / 0.1))
-    plain = from_dict(synthesize(parse_spec(tomllib.loads(GOOD_SPEC))).artifact)
+    plain = from_dict(design_spec(parse_spec(tomllib.loads(GOOD_SPEC))).artifact)
     assert render_export(plain) == codegen.render_c(plain)
 
 
@@ -208,7 +208,8 @@ def test_cortex_m4f_in_qemu_is_the_host_bit_for_bit(external):
 
 def test_replay_cli_runs_the_scheduled_c_on_host_and_qemu(external_data, external, tmp_path):
     """``gainlink replay --engine native|qemu`` on a scheduled artifact with s0: both write the output of the
-    float32 model, byte for byte (the same CSV text); an engine flag that does not apply is one line, exit 2."""
+    float32 model, byte for byte (the same CSV text, which names its arithmetic, float32); an engine flag that does
+    not apply is one line, exit 2."""
     from gainlink.proof.scheduled_replay import format_trace
     from gainlink.shipping import artifact as artifact_mod
 
@@ -217,7 +218,7 @@ def test_replay_cli_runs_the_scheduled_c_on_host_and_qemu(external_data, externa
     Y, R, S = _samples(external, N=300)
     rows = ["y0,r0,s0"] + [",".join(repr(float(v)) for v in (Y[k, 0], R[k, 0], S[k, 0])) for k in range(len(Y))]
     inp.write_text("\n".join(rows) + "\n")
-    want = format_trace(external, ScheduledFloat32Loop(external).run(Y, R, S))
+    want = format_trace(external, ScheduledFloat32Loop(external).run(Y, R, S), numeric="float32")
     for engine in ("native", "qemu"):
         out = tmp_path / f"{engine}.csv"
         res = run_cli("replay", path, "--input", inp, "--output", out, "--engine", engine)

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from gainlink.errors import ArtifactError, DataError
 from gainlink.fileio import atomic_write_text
+from gainlink.laws import design as design_spec
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from schedule_cases import TANK, external_tank, tank_dict
 from support.cli import assert_refused, run_cli
 from support.designs import designed
@@ -160,9 +160,11 @@ def test_replay_with_external_sigma_and_one_step_check(external, tmp_path):
     _sim_csv(art, inp)
     res = run_cli("replay", path, "--input", inp, "--output", out)
     assert res.code == 0, res.err
-    header = out.read_text().splitlines()[0].split(",")
+    first, *lines = out.read_text().splitlines()
+    assert first == "# numeric=float64"  # the float64 law's trace: checked as such when compared
+    header = lines[0].split(",")
     assert header[:7] == ["t", "u0", "sat0", "fault", "sigma", "sflags", "d0"] and header[-1] == "started"
-    body = [line.split(",") for line in out.read_text().splitlines()[1:]]
+    body = [line.split(",") for line in lines[1:]]
     assert body[120][3] == "1" and int(body[121][5]) & 1 and int(body[0][5]) & 2  # fault, held, clipped
     assert run_cli("replay", path, "--input", inp, "--output", tmp_path / "o2.csv", "--compare", out).code == 0
     body[200][1] = repr(float(body[200][1]) + 1e-6)
@@ -207,6 +209,6 @@ def test_gl_design_with_a_schedule_of_statespaces():
         systems[0], Ts=data["Ts"], name=data["name"], controller=data["controller"], integral=data["integral"],
         observer=data["observer"], limits=data["limits"], schedule=sched,
     )  # fmt: skip
-    want = artifact_mod.from_dict(synthesize(parse_spec(data)).artifact)
+    want = artifact_mod.from_dict(design_spec(parse_spec(data)).artifact)
     for k in ("Kx", "Kz", "F", "G", "Ly"):
         assert np.allclose(art.schedule.coef[k], want.schedule.coef[k], rtol=1e-12, atol=1e-15)

@@ -6,11 +6,11 @@ from __future__ import annotations
 import control as ct
 import numpy as np
 import pytest
+from gainlink.laws import design as design_spec
 from gainlink.proof.sampled_plant import SampledPlant
 from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from gainlink.synthesis.lpv import velocity_loop
 from schedule_cases import external_tank
 from support.designs import designed
@@ -23,7 +23,7 @@ pytestmark = pytest.mark.xdist_group("test_schedule_law")
 def scheduled(request):
     """(spec, artifact) of the external-sigma tank in each observer form."""
     spec = parse_spec(external_tank(form=request.param))
-    return spec, from_dict(synthesize(spec).artifact)
+    return spec, from_dict(design_spec(spec).artifact)
 
 
 def _hand_coefficients(art_i, Ts: float) -> dict:
@@ -57,7 +57,7 @@ def _design_points(spec):
         p = spec.at_point(i)
         p = replace(p, limits=replace(p.limits, anti_windup="clamp"),
                     implementation=replace(p.implementation, float32_check=False))  # fmt: skip
-        out.append(from_dict(synthesize(p).artifact))
+        out.append(from_dict(design_spec(p).artifact))
     return out
 
 

@@ -17,9 +17,9 @@ import json
 
 import numpy as np
 import pytest
+from gainlink.laws import design as design_spec
 from gainlink.shipping.artifact import from_dict, seal
 from gainlink.spec import load_spec, parse_spec
-from gainlink.synthesis import synthesize
 from schedule_cases import external_tank, spring
 from support.cli import run_cli
 from support.designs import designed
@@ -127,7 +127,7 @@ def test_the_reference_law_with_its_rate_limit_holds_under_jumping_sigma(spring6
 def showcase(tmp_path_factory):
     """examples/tank_showcase_load.toml (the showcase's law, sigma external) designed once per test run."""
     return once_per_run(tmp_path_factory, "tank_showcase_load",
-                        lambda: synthesize(load_spec(EXAMPLES / "tank_showcase_load.toml")).artifact)  # fmt: skip
+                        lambda: design_spec(load_spec(EXAMPLES / "tank_showcase_load.toml")).artifact)  # fmt: skip
 
 
 def test_the_showcase_ships_certified(showcase):
@@ -215,7 +215,7 @@ def test_a_path_growing_within_a_certified_rate_stops_the_design(monkeypatch):
 
     monkeypatch.setattr(V, "scan_rates", growing)
     with pytest.raises(V.CertificateContradiction, match="common Lyapunov function was proved"):
-        synthesize(parse_spec(external_tank()))
+        design_spec(parse_spec(external_tank()))
 
 
 def test_a_certified_rate_too_slow_to_cross_the_envelope_warns_with_the_time():

@@ -10,9 +10,9 @@ from fractions import Fraction
 import numpy as np
 import pytest
 from gainlink.errors import DesignError
+from gainlink.laws import design as design_spec
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 from gainlink.synthesis.lpv import bernstein_vertices, loop_polynomial, velocity_loop
 from gainlink.synthesis.schedule_certify import Budget, certify_rate, common, prove_frozen, start_pieces
 from gainlink.synthesis.schedule_hull import LoopHull
@@ -249,7 +249,7 @@ def test_unstable_between_points_is_refused():
     entries[1]["B"] = [[-10.0], [0.0]]
     data["schedule"]["plant"] = [entries[0], entries[1]]
     with pytest.raises(DesignError, match="unstable frozen at sigma"):
-        synthesize(parse_spec(data))
+        design_spec(parse_spec(data))
 
 
 def test_spec_rate_max_is_kept_and_recorded():

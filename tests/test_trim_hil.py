@@ -281,13 +281,13 @@ def test_with_integral_action_both_settle_and_the_operating_point_buys_the_start
     throttle itself. The operating point then decides the start: with it the vehicle, at rest at the trim,
     gets exactly u_hover and does not move; blind, it gets zero throttle and drops (0.19 m here) before the
     integrator has wound up the hover throttle."""
+    from gainlink.laws import design as design_spec
     from gainlink.spec import parse_spec
-    from gainlink.synthesis import synthesize
 
     spec = tomllib.loads(hover["spec"].read_text())
     spec["integral"] = {"outputs": ["z"], "Q_diag": [4.0]}
     spec["limits"]["anti_windup"] = "backcalc"
-    data = synthesize(parse_spec(spec)).artifact
+    data = design_spec(parse_spec(spec)).artifact
     blind = seal({k: v for k, v in data.items() if k not in ("u_op", "y_op", "x_op")})
     steps, step_at = 1500, 5.0
     Z, U = fmu_closed_loop(data, hover["fmu"], steps=steps, step_at=step_at, step_to=Z_SET + 0.5)
@@ -309,14 +309,14 @@ def test_hil_with_integral_action_tracks_a_reference_off_the_trim_with_a_heavier
     2.5 m within 1 mm and its throttle on the heavier vehicle's hover throttle; the float64 twin (the law on a
     second, equally heavy FMU) agrees to float32 accuracy. A regulator about the same point cannot: at rest
     its command is u_op - K xh, a trim error it can only hold with an altitude error (law_equilibrium)."""
+    from gainlink.laws import design as design_spec
     from gainlink.spec import parse_spec
-    from gainlink.synthesis import synthesize
 
     spec = tomllib.loads(hover["spec"].read_text())
     spec["integral"] = {"outputs": ["z"], "Q_diag": [4.0]}
     spec["limits"]["anti_windup"] = "backcalc"
     art = tmp_path / "lqi.json"
-    art.write_text(render(seal(synthesize(parse_spec(spec)).artifact)))
+    art.write_text(render(seal(design_spec(parse_spec(spec)).artifact)))
     a = load(art)
     assert a.q == 1 and a.u_op.tolist() == [hover["u_hover"]] and a.y_op.tolist() == [Z_SET]
 

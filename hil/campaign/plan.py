@@ -150,10 +150,10 @@ def run_id(*, kind: str, artifact_sha256: str | None, scenario: dict, seed: int)
 
 
 def _design(spec: dict, *, source: str) -> bytes:
+    from gainlink.laws import design
     from gainlink.spec import parse_spec
-    from gainlink.synthesis import synthesize
 
-    sealed = synthesize(parse_spec(spec, source=source)).artifact
+    sealed = design(parse_spec(spec, source=source)).artifact
     return render(sealed).encode("utf-8")
 
 

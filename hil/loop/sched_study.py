@@ -142,10 +142,10 @@ def _checked(showcase: dict | None) -> dict:
 
 
 def _design(spec: dict, *, source: str) -> Artifact:
+    from gainlink.laws import design
     from gainlink.spec import parse_spec
-    from gainlink.synthesis import synthesize
 
-    return from_dict(synthesize(parse_spec(spec, source=source)).artifact)
+    return from_dict(design(parse_spec(spec, source=source)).artifact)
 
 
 def _run_design(art: Artifact, desc: dict, *, controller: str) -> dict[str, RunResult]:

@@ -139,13 +139,13 @@ def _checked_modes(desc: dict) -> list[str]:
 
 def _design_mode(spec: dict, *, mode: str, spec_path: Path, folder: Path) -> Path:
     """Design ``spec`` with anti-windup ``mode`` and write the sealed artifact to ``folder/gains.json``."""
+    from gainlink.laws import design
     from gainlink.spec import parse_spec
-    from gainlink.synthesis import synthesize
 
     data = json.loads(json.dumps(spec))
     data.setdefault("limits", {})["anti_windup"] = mode
     data["name"] = f"{spec.get('name', 'plant')}_{mode}"[:32]
-    sealed = synthesize(parse_spec(data, source=f"{spec_path} (anti_windup={mode})")).artifact
+    sealed = design(parse_spec(data, source=f"{spec_path} (anti_windup={mode})")).artifact
     gains = folder / "gains.json"
     gains.parent.mkdir()
     write(gains, sealed)

@@ -21,8 +21,9 @@ from ..engines.fixed import trace_from_run
 from ..errors import DataError, FirmwareError
 from ..fileio import atomic_write_text
 from ..firmware.fixed import CLIPPED, FAULT, OVERFLOW, FixedRun
+from ..laws import law_of
 from ..proof.fixed_format import real
-from ..proof.replay_io import format_trace, read_samples, trace_numeric
+from ..proof.replay_io import read_samples
 from ..shipping.artifact import Artifact
 from ._host_exec import answer_samples
 
@@ -44,7 +45,7 @@ def _replay(a: Artifact, exe: Path, input_path: Path, output_path: Path | None) 
     samples = read_samples(input_path, a)
     stdout, count = answer_samples(exe, samples.Y, samples.R)
     run = parse_steps(a, stdout, count=count)
-    text = format_trace(trace_from_run(a, run), samples.t, numeric=trace_numeric(a))
+    text = law_of(a).trace_text(a, trace_from_run(a, run), samples.t, engine="native")
     if output_path is None:
         sys.stdout.write(text)
         return 0
@@ -52,7 +53,7 @@ def _replay(a: Artifact, exe: Path, input_path: Path, output_path: Path | None) 
         raise DataError(f"output {output_path} is a directory")
     atomic_write_text(output_path, text)
     print(
-        f"ran {count} samples through {exe.name} ({trace_numeric(a)} integer law): "
+        f"ran {count} samples through {exe.name} ({law_of(a).label} integer law): "
         f"{int((run.sat != 0).sum())} saturated, {int(((run.flags & FAULT) != 0).sum())} refused, "
         f"{int(((run.flags & CLIPPED) != 0).sum())} clipped, {int(((run.flags & OVERFLOW) != 0).sum())} overflowed"
     )

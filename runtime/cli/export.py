@@ -7,11 +7,11 @@ import argparse
 
 def _export(args: argparse.Namespace) -> int:
     from gainlink.fileio import publish_files
+    from gainlink.laws import law_of
     from gainlink.shipping.artifact import load
-    from gainlink.shipping.codegen_scheduled import render_export
 
     artifact = load(args.artifact)
-    files = render_export(artifact)  # everything computed before anything is written
+    files = law_of(artifact).export(artifact)  # everything computed before anything is written
     written = publish_files(args.out, files)
     print(f"exported {artifact.name} sha256:{artifact.sha256[:12]}... -> " + ", ".join(str(p) for p in written))
     return 0

@@ -41,53 +41,27 @@ FLASH_COMMANDS = {
 def _build(args: argparse.Namespace) -> int:
     from gainlink.fileio import publish_files
     from gainlink.firmware.build import build
-    from gainlink.firmware.size import size_report
+    from gainlink.laws import law_of
     from gainlink.shipping.artifact import load
 
     platform = resolve(args.target, args.board)  # a wrong target or board is refused before any work
     artifact = load(args.artifact)
+    law = law_of(artifact)
     res = build(artifact, target=platform.target.name, board=platform.board.name if platform.board else None)
     stem = f"gainlink_{artifact.name}"
-    files: dict[str, bytes | str] = {}
-    manifest = {
-        "artifact": artifact.name,
-        "sha256": artifact.sha256,
-        "target": args.target,
-        "board": res.board,
-        "files": {},
-    }
-    if platform.board is not None:
-        for ext in ("elf", "bin", "hex", "map"):
-            files[f"{stem}.{ext}"] = res.files[ext].read_bytes()
-            manifest["files"][ext] = f"{stem}.{ext}"
-        report = size_report(res.files["elf"], board=res.board)
-        report["elf"] = f"{stem}.elf"
-        files[f"{stem}.size.json"] = json.dumps(report, indent=2) + "\n"
-        manifest["files"]["size"] = f"{stem}.size.json"
-    else:
-        for role, name in (
-            ("shared", "libgainlink_host.so"),
-            ("static", "libgainlink_loop.a"),
-            ("exe", "gainlink_loop_host"),
-        ):
-            if role == "exe" and artifact.schedule is not None:
-                continue  # the scheduled loop has no stdin/stdout executable
-            files[name] = res.files[role].read_bytes()
-            manifest["files"][role] = name
-    if is_fixed(artifact):
-        _add_fixed(files, manifest, res, stem=stem)
+    shipped = law.firmware_files(artifact, res, stem=stem)
+    files: dict[str, bytes | str] = dict(shipped.files)
+    manifest = {"artifact": artifact.name, "sha256": artifact.sha256, "target": args.target, "board": res.board,
+                "files": {}} | shipped.manifest  # fmt: skip
     for name, text in sorted((p.name, p.read_text("utf-8")) for p in res.gains_dir.iterdir()):
         files[f"src/{name}"] = text
     files["firmware.json"] = json.dumps(manifest, indent=2) + "\n"
     written = publish_files(args.out, files)
     out = Path(args.out)
-    if args.target == "host":
-        if artifact.schedule is None:
-            (out / "gainlink_loop_host").chmod(0o755)
-        if is_fixed(artifact):
-            (out / "gainlink_fixed_loop_host").chmod(0o755)
-    else:
-        for name, what in _image_roles(artifact, platform.board, stem=stem):
+    for name in shipped.executables:
+        (out / name).chmod(0o755)
+    if platform.board is not None:
+        for name, what in law.image_roles(artifact, platform.board, stem=stem):
             print(_size_line(name, json.loads(files[name.removesuffix(".elf") + ".size.json"]), what))
     print(
         f"built {artifact.name} for {args.target}{' / ' + res.board if res.board else ''}: "
@@ -96,53 +70,11 @@ def _build(args: argparse.Namespace) -> int:
     return 0
 
 
-def _image_roles(artifact, board, *, stem: str) -> list[tuple[str, str]]:
-    """Each Cortex-M image a build writes, by file name, with the law it runs and where (what the C compiled in:
-    cortex-m.cmake, gl_fixed.cmake, sched-image.cmake)."""
-    if artifact.schedule is not None:
-        law = "scheduled-float32"
-    else:
-        law = artifact.checks["fixed_point"]["numeric"] if is_fixed(artifact) else "float32"
-    if board.serves:
-        nodes = "its UART's MAVLink and slcan nodes"
-    elif is_fixed(artifact) and board.serves_fixed_slcan:
-        nodes = "its UART's slcan node"
-    else:
-        nodes = None
-    replay = "replay and PIL over semihosting"
-    if not is_fixed(artifact):
-        return [(f"{stem}.elf", f"the {law} law: " + (f"{nodes}, {replay}" if nodes else replay))]
-    main = f"the {law} law on {nodes}, the float32 loop for {replay}" if nodes else f"the float32 loop: {replay}"
-    return [(f"{stem}.elf", main), (f"{stem}_fixed.elf", f"the {law} law alone: {replay}")]
-
-
 def _size_line(name: str, report: dict, what: str) -> str:
     return (
         f"{name} on {report['board']}: flash {report['flash_bytes']} B, RAM {report['ram_bytes_without_stack']} B "
         f"+ stack ({report['ram_bytes']} B total); {what}"
     )
-
-
-def _add_fixed(files: dict, manifest: dict, res, *, stem: str) -> None:
-    """A fixed-point artifact's integer loop beside the float32 one: the image ``{stem}_fixed.*`` (replay over
-    semihosting, firmware/ports/cortex-m/main_fixed.c) or the host library and executable."""
-    from gainlink.firmware.size import size_report
-
-    cm = res.build_dir
-    fixed: dict[str, str] = {}
-    if res.board is not None:
-        for ext in ("elf", "bin", "hex", "map"):
-            files[f"{stem}_fixed.{ext}"] = (cm / f"gainlink_fixed_image.{ext}").read_bytes()
-            fixed[ext] = f"{stem}_fixed.{ext}"
-        report = size_report(cm / "gainlink_fixed_image.elf", board=res.board)
-        report["elf"] = f"{stem}_fixed.elf"
-        files[f"{stem}_fixed.size.json"] = json.dumps(report, indent=2) + "\n"
-        fixed["size"] = f"{stem}_fixed.size.json"
-    else:
-        for role, name in (("shared", "libgainlink_fixed_host.so"), ("exe", "gainlink_fixed_loop_host")):
-            files[name] = (cm / name).read_bytes()
-            fixed[role] = name
-    manifest["fixed_point"] = fixed
 
 
 # --- firmware flash ---------------------------------------------------------------------------------

@@ -20,7 +20,8 @@ from ..errors import DesignError, SpecError
 from ..proof.reference import ReferenceLoop, Trace
 from ..shipping.artifact import Artifact, from_dict, render
 from ..spec import load_spec, parse_spec
-from ..synthesis import synthesize
+from ..synthesis.implementation import float32_check
+from ..synthesis.pipeline import synthesize_lq
 
 EXAMPLES = ("pendulum", "quadrotor_lateral", "wood_berry")
 FORMS = ("predictor", "current")
@@ -93,7 +94,7 @@ def random_spec(
 
 
 def _design(spec: dict) -> Artifact:
-    return from_dict(synthesize(parse_spec(spec)).artifact)
+    return from_dict(synthesize_lq(parse_spec(spec), float32_check).artifact)
 
 
 def random_operating_point(seed: int, *, m: int, p: int) -> dict:
@@ -295,7 +296,7 @@ def example_cases(examples_dir: Path, *, N: int = 600, seed: int = 7) -> tuple[G
 def _example_cases(examples_dir: Path, N: int, seed: int) -> tuple[GoldenCase, ...]:
     cases = []
     for name in EXAMPLES:
-        art = from_dict(synthesize(load_spec(examples_dir / f"{name}.toml")).artifact)
+        art = from_dict(synthesize_lq(load_spec(examples_dir / f"{name}.toml"), float32_check).artifact)
         rng = np.random.default_rng(seed)
         Y0 = _signals(rng, N=N, width=art.p, scale=1.0)
         R0 = _signals(rng, N=N, width=art.q, scale=1.0) if art.q else np.zeros((N, 0))

@@ -11,15 +11,34 @@ pair: a time-varying law has no worst-case peak gain to certify its formats with
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..errors import LawError
-from .base import CELLS, Capabilities, Controller, Law, Step
+from .base import CELLS, ENGINE_ALIASES, ENGINES, Capabilities, Controller, FirmwareFiles, Law, OneStepVerdict, Step
 from .fixed import FixedLaw
 from .lq import LqLaw
 from .scheduled import ScheduledLaw
 
-__all__ = ["CELLS", "Capabilities", "Controller", "Law", "Step", "law_for", "law_of", "pairs"]
+if TYPE_CHECKING:
+    from ..spec import PlantSpec
+    from ..synthesis.pipeline import DesignResult
+
+__all__ = [
+    "CELLS",
+    "ENGINES",
+    "ENGINE_ALIASES",
+    "Capabilities",
+    "Controller",
+    "FirmwareFiles",
+    "Law",
+    "OneStepVerdict",
+    "Step",
+    "design",
+    "law_for",
+    "law_for_spec",
+    "law_of",
+    "pairs",
+]
 
 #: Each structure's law class (its numeric formats are the class's).
 STRUCTURES: dict[str, tuple[type[Law], ...]] = {"lq": (LqLaw, FixedLaw), "scheduled": (ScheduledLaw,)}
@@ -57,3 +76,15 @@ def law_of(artifact: Any) -> Law:
     structure = "scheduled" if data.get("schedule") is not None else "lq"
     fixed = data.get("checks", {}).get("fixed_point")
     return law_for(structure, "float32" if fixed is None else str(fixed["numeric"]))
+
+
+def law_for_spec(spec: PlantSpec) -> Law:
+    """The law a spec asks for: a ``[schedule]`` the scheduled structure, ``[implementation] numeric`` its format;
+    the one place that reads which for a spec, as :func:`law_of` for an artifact."""
+    return law_for("scheduled" if spec.schedule is not None else "lq", spec.implementation.numeric)
+
+
+def design(spec: PlantSpec) -> DesignResult:
+    """Design the law ``spec`` asks for (:func:`law_for_spec`): the sealed artifact and the numbers behind its
+    checks (what ``gl.design_report`` returns)."""
+    return law_for_spec(spec).design(spec)

@@ -14,11 +14,17 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Protocol
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 import numpy as np
 
-from ..errors import LawError
+from ..errors import DataError, GainlinkError, LawError, did_you_mean
+
+if TYPE_CHECKING:
+    from ..proof.sampled_plant import SampledPlant
+    from ..spec import PlantSpec
+    from ..synthesis.pipeline import DesignResult
 
 #: Everything a consumer may ask of a law (issue 30's cells). A pair declares which it can do; the others carry a
 #: reason, and asking for them is one line (:meth:`Law.refuse`).
@@ -54,6 +60,14 @@ CELLS: tuple[str, ...] = (
     "campaign.hil",
     "cost",
 )
+
+
+#: The replay engines of every law: its float64 law, the bit-exact model of its C, the host build of the C through
+#: ctypes, and a Cortex-M image under QEMU (``target`` and ``board`` choose which).
+ENGINES: tuple[str, ...] = ("reference", "model", "native", "qemu")
+#: Earlier names of an engine, still accepted: ``fixed`` was a fixed-point law's ``model`` (the fixed-point page's
+#: commands say ``--engine fixed``; remove the alias when they say ``model``).
+ENGINE_ALIASES: dict[str, str] = {"fixed": "model"}
 
 
 @dataclass(frozen=True)
@@ -102,6 +116,33 @@ class Controller(Protocol):
     def reset(self) -> None:
         """Back to the law's start state."""
         ...
+
+
+@dataclass(frozen=True)
+class OneStepVerdict:
+    """A one-step (resynchronised) check of a trace, and what the trace was checked against.
+
+    ``check`` has ``passed``, ``summary()`` and ``first_failure.describe(name)``
+    (:class:`~gainlink.proof.onestep.OneStepCheck` or :class:`~gainlink.proof.fixed_onestep.FixedOneStepCheck`).
+    """
+
+    against: str
+    check: Any
+
+    @property
+    def passed(self) -> bool:
+        """Whether every step held."""
+        return bool(self.check.passed)
+
+
+@dataclass(frozen=True)
+class FirmwareFiles:
+    """What ``gainlink firmware build`` ships of a build, beyond the generated sources: the files by name, the
+    manifest's entries naming them, and which files are executables."""
+
+    files: Mapping[str, bytes | str]
+    manifest: Mapping[str, Any]
+    executables: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -184,6 +225,114 @@ class Law(ABC):
     def externals(self, artifact: Any) -> tuple[str, ...]:
         """The names of the external scheduling signals a sample carries after its references (none by default)."""
         return ()
+
+    # -- the design side: design, replay, the one-step check, the trace files, the C rendering ------------------
+
+    @abstractmethod
+    def design(self, spec: PlantSpec) -> DesignResult:
+        """Design the law ``spec`` asks for: the sealed artifact and the numbers behind its checks."""
+
+    @abstractmethod
+    def plant(self, artifact: Any, *, sigma: float | None = None) -> SampledPlant:
+        """The design's own sampled plant about its trim (a scheduled law's: frozen at ``sigma``)."""
+
+    def replay(
+        self,
+        artifact: Any,
+        engine: str,
+        Y: np.ndarray,
+        R: np.ndarray,
+        S: np.ndarray | None = None,
+        *,
+        target: str | None = None,
+        board: str | None = None,
+    ) -> Any:
+        """``Y`` (N, p), ``R`` (N, q) and the external signals ``S`` (N, e) through ``engine`` (:data:`ENGINES`)
+        from the law's start; ``target`` and ``board`` choose the Cortex-M image of ``qemu``.
+
+        Raises
+        ------
+        GainlinkError
+            An unknown engine, a target or board for another engine than ``qemu``, an unknown target or board.
+        DataError
+            The law is scheduled on external signals and ``S`` is missing.
+        """
+        engine = ENGINE_ALIASES.get(engine, engine)
+        if engine not in ENGINES:
+            known = ", ".join(ENGINES)
+            raise GainlinkError(f"unknown engine {engine!r}{did_you_mean(engine, ENGINES)} (engines: {known})")
+        externals = self.externals(artifact)
+        if externals and S is None:
+            raise DataError(
+                f"the {self.label} law of artifact {artifact.name} reads {len(externals)} external signal(s) "
+                f"({', '.join(externals)}) beside its samples: give s (N, {len(externals)})"
+            )
+        S = np.asarray(S, dtype=float).reshape(len(Y), len(externals)) if externals else None
+        platform = None
+        if engine == "qemu":
+            from ..firmware.targets import resolve_cortex_m
+
+            platform = resolve_cortex_m(target, board)
+        elif target is not None or board is not None:
+            raise GainlinkError(f"--target and --board choose the image of --engine qemu, not of {engine}")
+        return self._replay(artifact, engine, Y, R, S, platform=platform)
+
+    @abstractmethod
+    def _replay(self, artifact: Any, engine: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, *,
+                platform: Any) -> Any:  # fmt: skip
+        """:meth:`replay` once the engine and image are checked (``platform``: the resolved Cortex-M image)."""
+
+    @abstractmethod
+    def one_step(
+        self, artifact: Any, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, trace: Any, *, engine: str | None
+    ) -> tuple[OneStepVerdict, ...]:
+        """Check every step of ``trace`` (what ``engine`` returned for these samples; ``None``: a trace file of this
+        law's format from any engine) from the trace's own state, each against what proves it."""
+
+    @abstractmethod
+    def trace_text(self, artifact: Any, trace: Any, t: np.ndarray | None = None, *, engine: str | None = None) -> str:
+        """The replay output CSV of ``trace`` (what ``engine`` returned), as ``gainlink replay`` writes it."""
+
+    @abstractmethod
+    def read_trace(self, path: str | Path, artifact: Any) -> Any:
+        """A replay output CSV of this law back into a trace (:class:`~gainlink.errors.DataError` when it is not
+        one of this artifact, or names another numeric format)."""
+
+    @abstractmethod
+    def export(self, artifact: Any) -> dict[str, str]:
+        """The C files of the law's export (``gainlink export``), by name; the same artifact, the same bytes."""
+
+    @abstractmethod
+    def firmware_files(self, artifact: Any, build: Any, *, stem: str) -> FirmwareFiles:
+        """The files ``gainlink firmware build`` ships from ``build`` (a :class:`~gainlink.firmware.build.Build` of
+        ``artifact``): a Cortex-M image's ``{stem}.elf/.bin/.hex/.map`` and size report, or the host libraries
+        (and the loop executable where the law has one)."""
+
+    @abstractmethod
+    def image_roles(self, artifact: Any, board: Any, *, stem: str) -> list[tuple[str, str]]:
+        """Each Cortex-M image a build for ``board`` writes, by file name, with the law it runs and where."""
+
+    # -- what the commands print about a law --------------------------------------------------------------------
+
+    @abstractmethod
+    def design_lines(self, result: DesignResult, path: Path) -> list[str]:
+        """What ``gainlink design`` prints of ``result``, written to ``path``."""
+
+    @abstractmethod
+    def design_json(self, result: DesignResult, path: Path) -> dict:
+        """``gainlink design --json``."""
+
+    @abstractmethod
+    def design_plots(self, artifact: Any) -> tuple[dict[str, bytes], str | None]:
+        """``design --plots``: PNG files by name, and why nothing was drawn (None: drawn)."""
+
+    @abstractmethod
+    def open_loop_note(self, artifact: Any) -> str:
+        """What ``replay --compare`` says of two replays compared open loop (the compensator's stability)."""
+
+    def analysis_lines(self, report: Any) -> list[str]:
+        """What ``gainlink analyze`` adds for this law after the checks of the spec's design (nothing by default)."""
+        return []
 
     def __repr__(self) -> str:
         return f"<law {self.name}>"

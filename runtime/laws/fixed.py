@@ -1,15 +1,22 @@
-"""The observer-based LQ law on integers (``numeric = "q31" | "q15"``, docs/design.md "Fixed point"): the float64
-design law it is certified against, the bit-exact integer model of its C, and the host C through ctypes."""
+"""The observer-based LQ law on integers (``numeric = "q31" | "q15"``, docs/design.md "Fixed point"): its design (the
+observer-based pipeline and the fixed-point certificate), the float64 design law it is certified against, the
+bit-exact integer model of its C, and the host C through ctypes; its replay engines (the integer C), its one-step
+check (bit for bit against the integer law) and its trace files (which name their numeric format)."""
 
 from __future__ import annotations
 
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import flags
-from .base import Controller, Step
-from .lq import LqLaw, PythonLoop, sat_bits
+from .base import Controller, FirmwareFiles, OneStepVerdict, Step
+from .lq import AGAINST_FLOAT64, IMAGE_FILES, REPLAY_OVER_SEMIHOSTING, LqLaw, PythonLoop, _image_files, sat_bits
+
+if TYPE_CHECKING:
+    from ..spec import PlantSpec
+    from ..synthesis.pipeline import DesignResult
 
 #: gl_fixed.h's GL_FX_FAULT, GL_FX_CLIPPED, GL_FX_OVERFLOW as the status flags.
 _FX_FLAGS = ((1, flags.FAULT), (2, flags.CLIPPED), (4, flags.OVERFLOW))
@@ -95,3 +102,104 @@ class FixedLaw(LqLaw):
 
     def native(self, artifact: Any, *, library: Any = None) -> Controller:
         return FixedNative(artifact, library=library)
+
+    # -- the design side ----------------------------------------------------------------------------------------
+
+    def design(self, spec: PlantSpec) -> DesignResult:
+        from ..synthesis.implementation import fixed_point_check
+        from ..synthesis.pipeline import synthesize_lq
+
+        return synthesize_lq(spec, fixed_point_check)
+
+    def _replay(self, artifact: Any, engine: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, *,
+                platform: Any) -> Any:  # fmt: skip
+        if engine == "reference":
+            from ..proof.reference import ReferenceLoop
+
+            return ReferenceLoop(artifact).run(Y, R)
+        if engine == "model":  # on the float32 samples the C takes: the trace native and qemu give, bit for bit
+            from ..proof.fixed_law import FixedPointLoop
+
+            return FixedPointLoop(artifact).run(_as_float32(Y), _as_float32(R))
+        from ..engines import fixed as fixed_engine
+
+        if engine == "native":
+            return fixed_engine.run_native(artifact, Y, R)
+        return fixed_engine.run_qemu(artifact, Y, R, target=platform.target.name, board=platform.board.name)
+
+    def one_step(
+        self, artifact: Any, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, trace: Any, *, engine: str | None
+    ) -> tuple[OneStepVerdict, ...]:
+        """The ``reference`` engine's trace against the float64 law within the float32 bound; any other (a trace of
+        the integer law, or a trace file of this law's format) bit for bit against the integer law."""
+        from ..proof.fixed_onestep import fixed_one_step_check, trace_words
+        from ..proof.onestep import one_step_check
+
+        if engine == "reference":
+            return (OneStepVerdict(AGAINST_FLOAT64, one_step_check(artifact, Y, R, trace)),)
+        words = trace_words(artifact, trace, f"the trace of engine {engine}" if engine else "the trace")
+        return (OneStepVerdict("", fixed_one_step_check(artifact, Y, R, words)),)
+
+    def trace_numeric(self, engine: str | None) -> str | None:
+        """``float64`` for the ``reference`` engine's trace, else the law's own format (``q31``, ``q15``)."""
+        return "float64" if engine == "reference" else self.numeric
+
+    def firmware_files(self, artifact: Any, build: Any, *, stem: str) -> FirmwareFiles:
+        """The float32 law's files, and beside them the integer law's: the image ``{stem}_fixed.*`` (replay over
+        semihosting, firmware/ports/cortex-m/main_fixed.c) or the host library and executable."""
+        shipped = super().firmware_files(artifact, build, stem=stem)
+        files, fixed, cm = dict(shipped.files), {}, build.build_dir
+        if build.board is not None:
+            paths = {ext: cm / f"gainlink_fixed_image.{ext}" for ext in IMAGE_FILES}
+            _image_files(files, fixed, build, paths, image=f"{stem}_fixed")
+            executables = shipped.executables
+        else:
+            for role, name in (("shared", "libgainlink_fixed_host.so"), ("exe", "gainlink_fixed_loop_host")):
+                files[name] = (cm / name).read_bytes()
+                fixed[role] = name
+            executables = (*shipped.executables, "gainlink_fixed_loop_host")
+        return FirmwareFiles(files, {**shipped.manifest, "fixed_point": fixed}, executables)
+
+    def image_roles(self, artifact: Any, board: Any, *, stem: str) -> list[tuple[str, str]]:
+        """The image of the export (the integer law on its nodes, the float32 loop for replay) and the integer law's
+        own image."""
+        replay = REPLAY_OVER_SEMIHOSTING
+        if board.serves:
+            nodes = "its UART's MAVLink and slcan nodes"
+        elif board.serves_fixed_slcan:
+            nodes = "its UART's slcan node"
+        else:
+            nodes = None
+        main = f"the {self.label} law on {nodes}, the float32 loop for {replay}" if nodes else None
+        return [(f"{stem}.elf", main or f"the float32 loop: {replay}"),
+                (f"{stem}_fixed.elf", f"the {self.label} law alone: {replay}")]  # fmt: skip
+
+    def _arithmetic_lines(self, result: DesignResult) -> list[str]:
+        """The certificate's lines, and the deviation measured in closed loop beside the certified bound."""
+        from ..synthesis.fixed_point import describe as describe_fixed_point
+
+        cert, measured = result.fixed_point, result.artifact["checks"]["fixed_point"]["measured"]
+        got, bound = measured["max_abs_u_unsaturated"], measured["bound_closed_loop"]
+        worst = ", ".join(f"{name} {g:.3g} (bound {b:.3g})" for name, g, b in zip(cert.names["u"], got, bound))
+        return [f"  {line}" for line in describe_fixed_point(cert)] + [
+            f"    measured in closed loop ({measured['steps']} steps, noise, reference step, saturating disturbance): "
+            f"unsaturated, against the float64 law with the quantised coefficients (the rounding alone, closed loop) "
+            f"{worst} over {measured['unsaturated_steps']} steps; whole run "
+            f"{measured['max_rel_u_quantised']:.3g} of the span against the float64 law with the same coefficients "
+            f"and clip, {measured['max_rel_u']:.3g} against the design's"
+            + (f" ({measured['clipped_steps']} steps clipped to the ranges)" if measured["clipped_steps"] else "")
+            + ("" if not measured["overflow"] else f"; SECOND-LINE SATURATION on {', '.join(measured['overflow'])}")
+        ]
+
+    def design_json(self, result: DesignResult, path: Path) -> dict:
+        """``gainlink design --json``: the float32 law's, with the certificate."""
+        return super().design_json(result, path) | {"fixed_point": result.artifact["checks"]["fixed_point"]}
+
+    def read_trace(self, path: str | Path, artifact: Any) -> Any:
+        """A trace of this law's format, refused in one line unless its commands are words of the artifact's
+        command format (read before anything is replayed, so a wrong file writes nothing)."""
+        from ..proof.fixed_onestep import trace_words
+
+        trace = super().read_trace(path, artifact)
+        trace_words(artifact, trace, f"comparison file {path}")
+        return trace

@@ -1,14 +1,28 @@
-"""The observer-based LQ law in float32 (docs/design.md §2): its float64 reference, the bit-exact float32 model of
-its C, and the host C through ctypes, each behind :class:`~gainlink.laws.base.Controller`."""
+"""The observer-based LQ law in float32 (docs/design.md §2): its design (the observer-based pipeline and the float32
+fidelity check), its float64 reference, the bit-exact float32 model of its C, and the host C through ctypes, each
+behind :class:`~gainlink.laws.base.Controller`; its replay engines, one-step check, trace files and C export."""
 
 from __future__ import annotations
 
-from typing import Any
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import flags
-from .base import Controller, Law, Step
+from .base import Controller, FirmwareFiles, Law, OneStepVerdict, Step
+
+if TYPE_CHECKING:
+    from ..proof.sampled_plant import SampledPlant
+    from ..spec import PlantSpec
+    from ..synthesis.pipeline import DesignResult
+
+#: The files of a Cortex-M image, by extension.
+IMAGE_FILES = ("elf", "bin", "hex", "map")
+
+#: What the one-step check of this law checks a trace against (gainlink.proof.onestep).
+AGAINST_FLOAT64 = "float64 law from its own state at each step"
 
 
 def sat_bits(saturated: np.ndarray) -> int:
@@ -82,3 +96,211 @@ class LqLaw(Law):
 
     def r_op(self, artifact: Any, *, sigma: float | None = None) -> np.ndarray:
         return artifact.Ci @ artifact.y_op
+
+    # -- the design side ----------------------------------------------------------------------------------------
+
+    def design(self, spec: PlantSpec) -> DesignResult:
+        from ..synthesis.implementation import float32_check
+        from ..synthesis.pipeline import synthesize_lq
+
+        return synthesize_lq(spec, float32_check)
+
+    def plant(self, artifact: Any, *, sigma: float | None = None) -> SampledPlant:
+        from ..proof.sampled_plant import SampledPlant
+
+        return SampledPlant(*artifact.design_plant(), u_op=artifact.u_op, y_op=artifact.y_op)
+
+    def _replay(self, artifact: Any, engine: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, *,
+                platform: Any) -> Any:  # fmt: skip
+        if engine == "reference":
+            from ..proof.reference import ReferenceLoop
+
+            return ReferenceLoop(artifact).run(Y, R)
+        if engine == "model":
+            from ..proof.float32_law import Float32Loop
+
+            return Float32Loop(artifact).run(Y, R)
+        if engine == "native":
+            from ..engines.native import NativeLoop
+
+            return NativeLoop(artifact).run(Y, R)
+        from ..engines.qemu import run_raw, trace_from_raw
+
+        raw = run_raw(artifact, Y, R, target=platform.target.name, board=platform.board.name)
+        return trace_from_raw(raw, m=artifact.m)
+
+    def one_step(
+        self, artifact: Any, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, trace: Any, *, engine: str | None
+    ) -> tuple[OneStepVerdict, ...]:
+        from ..proof.onestep import one_step_check
+
+        return (OneStepVerdict(AGAINST_FLOAT64, one_step_check(artifact, Y, R, trace)),)
+
+    def trace_numeric(self, engine: str | None) -> str | None:
+        """The numeric format a replay output of ``engine`` names in its first line (none for the float32 law)."""
+        return None
+
+    def trace_text(self, artifact: Any, trace: Any, t: np.ndarray | None = None, *, engine: str | None = None) -> str:
+        from ..proof.replay_io import format_trace
+
+        return format_trace(trace, t, numeric=self.trace_numeric(engine))
+
+    def read_trace(self, path: str | Path, artifact: Any) -> Any:
+        from ..proof.replay_io import read_trace
+
+        return read_trace(path, artifact, numeric=self.trace_numeric(None) or "float32")
+
+    def export(self, artifact: Any) -> dict[str, str]:
+        from ..shipping.codegen import render_c
+
+        return render_c(artifact)
+
+    def firmware_files(self, artifact: Any, build: Any, *, stem: str) -> FirmwareFiles:
+        return shipped_files(build, stem=stem, host=HOST_FILES)
+
+    def image_roles(self, artifact: Any, board: Any, *, stem: str) -> list[tuple[str, str]]:
+        return image_role(self.label, board, stem=stem)
+
+    # -- what the design and replay commands print --------------------------------------------------------------
+
+    def design_lines(self, result: DesignResult, path: Path) -> list[str]:
+        """What ``gainlink design`` prints of ``result``, written to ``path``: gains, poles, margins, the operating
+        point, the checks of the loop and of the law's arithmetic."""
+        return [*_gains_lines(result), *_checks_lines(result), *self._arithmetic_lines(result),
+                f"  wrote {path} (sha256 {result.artifact['sha256'][:16]})"]  # fmt: skip
+
+    def _arithmetic_lines(self, result: DesignResult) -> list[str]:
+        """The check of the law's arithmetic: the float32 fidelity (none when the spec switched it off)."""
+        f = result.float32
+        if f is None:
+            return []
+        realization = result.artifact.get("realization", {}).get("kind", "as_designed")
+        return [
+            f"  float32 in closed loop ({realization} realisation, {f.steps} steps, noise, reference step, "
+            f"saturating disturbance): max |u32 - u64| {f.max_rel_u:.3g} of the limit span, max |y32 - y64| "
+            f"{f.max_rel_y:.3g} of the output excursion ({'within' if f.ok else 'ABOVE'} {f.threshold:g})"
+        ]
+
+    def design_json(self, result: DesignResult, path: Path) -> dict:
+        """``gainlink design --json``."""
+        from ..synthesis.analysis import complex_pairs
+
+        a = result.artifact
+        return {
+            "artifact": str(path),
+            "sha256": a["sha256"],
+            "K": a["K"],
+            "L": a["L"],
+            "Ki": a.get("Ki"),
+            "controller_poles": complex_pairs(result.controller_poles),
+            "observer_poles": complex_pairs(result.observer_poles),
+            "margins": a["checks"]["margins"],
+            "u_op": a.get("u_op"),
+            "y_op": a.get("y_op"),
+            "compensator": a["checks"]["compensator"],
+            "float32": a["checks"].get("float32"),
+            "fixed_point": None,
+            "realization": a.get("realization", {}).get("kind", "as_designed"),
+            "warnings": result.warnings,
+        }
+
+    def design_plots(self, artifact: Any) -> tuple[dict[str, bytes], str | None]:
+        """``design --plots``: the loop broken at each actuator and the closed-loop step (PNG files by name), and
+        why nothing was drawn (None: drawn)."""
+        from ..synthesis.loop_plots import design_plots
+
+        return design_plots(artifact), None
+
+    def open_loop_note(self, artifact: Any) -> str:
+        """What the compensator's stability says about two replays compared open loop."""
+        from ..synthesis.compensator import compensator_stability
+
+        comp = compensator_stability(artifact)
+        if comp.stable:
+            return comp.describe()
+        return (
+            f"{comp.describe()}; replayed open loop, rounding grows like {comp.radius_without_integrators:.3g}^k"
+            ": the one-step check is the verdict"
+        )
+
+
+#: The host build's files: (role in the build, name); the role ``exe`` is the loop executable.
+HOST_FILES = (("shared", "libgainlink_host.so"), ("static", "libgainlink_loop.a"), ("exe", "gainlink_loop_host"))
+REPLAY_OVER_SEMIHOSTING = "replay and PIL over semihosting"
+
+
+def shipped_files(build: Any, *, stem: str, host: tuple[tuple[str, str], ...]) -> FirmwareFiles:
+    """What ``firmware build`` ships of ``build``: a Cortex-M image as ``{stem}.*`` with its size report, or the
+    host build's files ``host`` (role, name)."""
+    files: dict[str, bytes | str] = {}
+    named: dict[str, str] = {}
+    if build.board is not None:
+        _image_files(files, named, build, {ext: build.files[ext] for ext in IMAGE_FILES}, image=stem)
+        return FirmwareFiles(files, {"files": named})
+    for role, name in host:
+        files[name] = build.files[role].read_bytes()
+        named[role] = name
+    return FirmwareFiles(files, {"files": named}, tuple(name for role, name in host if role == "exe"))
+
+
+def image_role(label: str, board: Any, *, stem: str) -> list[tuple[str, str]]:
+    """The one image of a law, the nodes its UART serves on ``board`` and its replay."""
+    nodes = "its UART's MAVLink and slcan nodes" if board.serves else None
+    how = f"{nodes}, {REPLAY_OVER_SEMIHOSTING}" if nodes else REPLAY_OVER_SEMIHOSTING
+    return [(f"{stem}.elf", f"the {label} law: {how}")]
+
+
+def _image_files(files: dict, named: dict, build: Any, paths: dict[str, Path], *, image: str) -> None:
+    """A Cortex-M image (``paths``: its files by extension) shipped as ``{image}.elf/.bin/.hex/.map`` with its size
+    report (``named``: the manifest's entries, by extension)."""
+    from ..firmware.size import size_report
+
+    for ext in IMAGE_FILES:
+        files[f"{image}.{ext}"] = Path(paths[ext]).read_bytes()
+        named[ext] = f"{image}.{ext}"
+    report = size_report(paths["elf"], board=build.board)
+    report["elf"] = f"{image}.elf"
+    files[f"{image}.size.json"] = json.dumps(report, indent=2) + "\n"
+    named["size"] = f"{image}.size.json"
+
+
+def _gains_lines(result: DesignResult) -> list[str]:
+    """The design's summary line, gains, poles and margins."""
+    a = result.artifact
+    lines = [
+        f"{a['name']}: n={a['n']} m={a['m']} p={a['p']} q={a['q']}, Ts={a['Ts']:g} s, "
+        f"{a['design']['controller']['method']} + {a['design']['observer']['method']} "
+        f"({a['observer_form']}), anti-windup {a['anti_windup']}"
+    ]
+    with np.printoptions(precision=5, suppress=True, linewidth=110):
+        lines.append(f"  K  = {np.array(a['K'])}".replace("\n", "\n       "))
+        if a["q"]:
+            lines.append(f"  Ki = {np.array(a['Ki'])}".replace("\n", "\n       "))
+    lines.append(
+        f"  controller poles |z| max {np.max(np.abs(result.controller_poles)):.5f}, "
+        f"observer poles |z| max {np.max(np.abs(result.observer_poles)):.5f}, "
+        f"closed loop spectral radius {a['checks']['spectral_radius']:.5f}"
+    )
+    for mg in result.margins:
+        up = "inf" if mg.gain_margin_up_db is None else f"+{mg.gain_margin_up_db:.1f}"
+        down = "-inf" if mg.gain_margin_down_db is None else f"{mg.gain_margin_down_db:.1f}"
+        pm = "n/a" if mg.phase_margin_deg is None else f"{mg.phase_margin_deg:.1f} deg"
+        lines.append(f"  margins at input {mg.input}: gain {up} / {down} dB, phase {pm}")
+    return lines
+
+
+def _checks_lines(result: DesignResult) -> list[str]:
+    """The operating point and the checks of the loop: compensator, dead times."""
+    a = result.artifact
+    lines = []
+    if "u_op" in a or "y_op" in a:
+        op = [
+            f"{name}={v:.6g}"
+            for key, names in (("u_op", a["signals"]["inputs"]), ("y_op", a["signals"]["outputs"]))
+            for name, v in zip(names, a.get(key, [0.0] * len(names)))
+        ]
+        lines.append(f"  operating point: {', '.join(op)} (samples, references and commands are absolute)")
+    lines.append(f"  {result.compensator.describe()}")
+    if result.dead_time is not None:
+        lines.append(f"  {result.dead_time.describe()}")
+    return lines

@@ -1,18 +1,50 @@
-"""The scheduled law (velocity form, docs/design.md "Scheduled law"): its float64 reference, the bit-exact float32
-model of its C, and the host C through ctypes."""
+"""The scheduled law (velocity form, docs/design.md "Scheduled law"): its design (every point through the observer-
+based law's design, then the scheduled checks), its float64 reference, the bit-exact float32 model of its C, and the
+host C through ctypes; its replay engines, one-step checks, trace files and C export."""
 
 from __future__ import annotations
 
-from typing import Any
+import logging
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import flags
-from .base import Controller, Law, Step
-from .lq import sat_bits
+from .base import Controller, FirmwareFiles, Law, OneStepVerdict, Step
+from .lq import AGAINST_FLOAT64, HOST_FILES, LqLaw, image_role, sat_bits, shipped_files
+
+if TYPE_CHECKING:
+    from ..proof.sampled_plant import SampledPlant
+    from ..spec import PlantSpec
+    from ..synthesis.pipeline import DesignResult
+
+log = logging.getLogger(__name__)
+
+#: What a trace of the C is checked against: the float64 law within the float32 bound (.scheduled_onestep), and its
+#: float32 model bit for bit (gainlink.proof.scheduled_float32).
+AGAINST_FLOAT32_BOUND = "float64 law from its own state at each step, within the float32 bound"
+AGAINST_FLOAT32_MODEL = "the C's float32 arithmetic, bit for bit, from its own state at each step"
 
 #: The scheduled law's own sigma flags (proof.scheduled_reference) as the status flags.
 _SIGMA_FLAGS = ((1, flags.SIGMA_HELD), (2, flags.SIGMA_CLIPPED), (4, flags.SIGMA_RATE))
+
+
+def _float32_check(artifact: dict, spec: PlantSpec, warnings: list[str]) -> tuple[dict, Any]:
+    """The sealed scheduled ``artifact`` with its float32 fidelity at a sigma sweep in ``checks.float32`` (and a
+    warning naming where and the remedies when it is above the threshold); unchanged, with None, when the spec
+    switched the float32 check off."""
+    from ..shipping.artifact import from_dict, seal
+    from .scheduled_fidelity import scheduled_fidelity
+
+    if not spec.implementation.float32_check:
+        return artifact, None
+    fidelity = scheduled_fidelity(from_dict(artifact))
+    data = dict(artifact, checks=dict(artifact["checks"], float32=fidelity.to_dict()))
+    if not fidelity.ok:
+        warnings.append(fidelity.warning(spec.schedule.sigma))
+        log.warning(warnings[-1])
+    return seal(data), fidelity
 
 
 def status_flags(sigma_flags: int, *, fault: bool) -> int:
@@ -94,3 +126,136 @@ class ScheduledLaw(Law):
 
     def externals(self, artifact: Any) -> tuple[str, ...]:
         return tuple(artifact.schedule.external)
+
+    # -- the design side ----------------------------------------------------------------------------------------
+
+    def design(self, spec: PlantSpec) -> DesignResult:
+        """Every point through the observer-based law's design (float32), then the scheduled checks, then the
+        float32 fidelity at a sigma sweep (:mod:`.scheduled_fidelity`; off when the spec switches the float32 check
+        off)."""
+        from ..synthesis.pipeline import DesignResult
+        from ..synthesis.schedule import synthesize_scheduled
+
+        artifact, design, warnings = synthesize_scheduled(spec, LqLaw().design)
+        artifact, float32 = _float32_check(artifact, spec, warnings)
+        first = design.results[0]
+        return DesignResult(artifact=artifact, controller_poles=first.controller_poles,
+                            observer_poles=first.observer_poles, closed_loop_poles=first.closed_loop_poles,
+                            margins=first.margins, warnings=warnings, compensator=first.compensator,
+                            float32=float32, schedule=design)  # fmt: skip
+
+    def plant(self, artifact: Any, *, sigma: float | None = None) -> SampledPlant:
+        """The design model frozen at ``sigma`` (the first point by default): the points' sampled plants and trims
+        interpolated there."""
+        from ..proof.sampled_plant import SampledPlant
+
+        S = artifact.schedule
+        at = S.clip(S.points[0] if sigma is None else sigma)
+        u_op, y_op = S.trim_at(at)
+        return SampledPlant(*S.plant_at(at), u_op=u_op, y_op=y_op)
+
+    def _replay(self, artifact: Any, engine: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, *,
+                platform: Any) -> Any:  # fmt: skip
+        if engine == "reference":
+            from ..proof.scheduled_reference import ScheduledLoop
+
+            return ScheduledLoop(artifact).run(Y, R, S)
+        if engine == "model":
+            from ..proof.scheduled_float32 import ScheduledFloat32Loop
+
+            return ScheduledFloat32Loop(artifact).run(Y, R, S)
+        if engine == "native":
+            from ..engines.sched_native import run
+
+            return run(artifact, Y, R, S)
+        from ..engines.sched_qemu import run as run_qemu
+
+        return run_qemu(artifact, Y, R, S, target=platform.target.name, board=platform.board.name)
+
+    def one_step(
+        self, artifact: Any, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, trace: Any, *, engine: str | None
+    ) -> tuple[OneStepVerdict, ...]:
+        """The float64 law's trace (``reference``, or a file that names ``float64`` or no format) against the float64
+        law within float64's bound; a trace of the C (``native``, ``qemu``, its ``model``, or a file that names
+        ``float32``) against the float64 law within the float32 bound (:mod:`.scheduled_onestep`) and bit for bit
+        against the C's float32 model."""
+        from ..proof.scheduled_replay import one_step_check
+        from .scheduled_onestep import float32_bound_check
+
+        c_trace = engine in ("model", "native", "qemu") or (engine is None and trace.numeric == "float32")
+        if c_trace:
+            return (
+                OneStepVerdict(AGAINST_FLOAT32_BOUND, float32_bound_check(artifact, Y, R, S, trace)),
+                OneStepVerdict(AGAINST_FLOAT32_MODEL, one_step_check(artifact, Y, R, S, trace, float32=True)),
+            )
+        return (OneStepVerdict(AGAINST_FLOAT64, one_step_check(artifact, Y, R, S, trace)),)
+
+    def trace_numeric(self, engine: str | None) -> str:
+        """``float64`` for the ``reference`` engine's trace, ``float32`` for the C's and its model's."""
+        return "float64" if engine == "reference" else "float32"
+
+    def trace_text(self, artifact: Any, trace: Any, t: np.ndarray | None = None, *, engine: str | None = None) -> str:
+        from ..proof.scheduled_replay import format_trace
+
+        return format_trace(artifact, trace, t, numeric=self.trace_numeric(engine))
+
+    def read_trace(self, path: str | Path, artifact: Any) -> Any:
+        from ..proof.scheduled_replay import read_trace
+
+        return read_trace(path, artifact)
+
+    def export(self, artifact: Any) -> dict[str, str]:
+        from ..shipping.codegen_scheduled import render_scheduled
+
+        return render_scheduled(artifact)
+
+    def firmware_files(self, artifact: Any, build: Any, *, stem: str) -> FirmwareFiles:
+        """The observer-based law's, but no stdin/stdout executable on the host (the scheduled loop has none)."""
+        return shipped_files(build, stem=stem, host=tuple(f for f in HOST_FILES if f[0] != "exe"))
+
+    def image_roles(self, artifact: Any, board: Any, *, stem: str) -> list[tuple[str, str]]:
+        return image_role(self.label, board, stem=stem)
+
+    # -- what the design and replay commands print --------------------------------------------------------------
+
+    def design_lines(self, result: DesignResult, path: Path) -> list[str]:
+        """What ``gainlink design`` prints of a scheduled design: every point, the grid, the verdict on a moving
+        sigma."""
+        from ..synthesis.schedule import describe_schedule
+
+        a = result.artifact
+        sch, s = a["checks"]["schedule"], a["schedule"]
+        return [
+            f"{a['name']}: n={a['n']} m={a['m']} p={a['p']} q={a['q']}, Ts={a['Ts']:g} s, scheduled on {sch['sigma']}"
+            f" ({s['sigma']['source']}) at {', '.join(f'{v:g}' for v in s['points'])}: "
+            f"{a['design']['controller']['method']} + {a['design']['observer']['method']} ({a['observer_form']}) per "
+            "point, velocity form",
+            *(f"  {line}" for line in describe_schedule(sch)),
+            f"  coefficients that vary between points (interpolated by the C): {', '.join(s['varying']) or 'none'}",
+            *([f"  {result.float32.describe(sch['sigma'])}"] if result.float32 is not None else []),
+            f"  wrote {path} (schema 2, sha256 {a['sha256'][:16]})",
+        ]
+
+    def design_json(self, result: DesignResult, path: Path) -> dict:
+        """``gainlink design --json`` of a scheduled design."""
+        a = result.artifact
+        return {"artifact": str(path), "sha256": a["sha256"], "schedule": a["checks"]["schedule"],
+                "rate_max": a["schedule"]["rate_max"], "rate_certified": a["schedule"]["rate_certified"],
+                "float32": a["checks"].get("float32"), "warnings": result.warnings}  # fmt: skip
+
+    def design_plots(self, artifact: Any) -> tuple[dict[str, bytes], str | None]:
+        """Nothing: the loop a plot would show changes along sigma."""
+        return {}, f"not drawn for a scheduled law (its loop changes along {artifact.schedule.sigma})"
+
+    def analysis_lines(self, report: Any) -> list[str]:
+        """The points and their verdicts, when the spec designs (``report.schedule``: its ``checks.schedule``)."""
+        from ..synthesis.schedule import describe_schedule
+
+        if not report.schedule:
+            return []
+        return [f"  scheduled on {report.schedule['sigma']} (the plant above is the first point's):",
+                *(f"    {line}" for line in describe_schedule(report.schedule))]  # fmt: skip
+
+    def open_loop_note(self, artifact: Any) -> str:
+        """Where each point's compensator stability is recorded."""
+        return "the scheduled law's compensator at each point is in checks.schedule.points"

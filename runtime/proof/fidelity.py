@@ -15,7 +15,10 @@ scenario:
   it does; without any such pulse the run has no disturbance and says so).
 
 The result is the worst command deviation ``max |u32 - u64|`` relative to each input's limit span, and
-the worst output deviation relative to each output's excursion over the run. Above
+the worst output deviation relative to each output's excursion over the run. The run is written for any law about
+one operating point (:class:`LoopPoint`: the design plant there, the unsaturated controller that sizes the scenario,
+and the two laws to close the loop with): :func:`float32_fidelity` is the observer-based law's, and a scheduled law
+runs it at each sigma of a sweep (:mod:`gainlink.laws.scheduled_fidelity`). Above
 :data:`THRESHOLD` (1/4096 of the span: one step of a 12-bit actuator command, the usual PWM or DAC
 resolution of a microcontroller; below it float32 is invisible at the actuator) ``design`` warns and
 names the remedy, the balanced realisation (``[implementation] realization = "balanced"``), with the
@@ -25,7 +28,10 @@ wood_berry 8.9e-7 of the span (tests/test_fidelity.py checks these figures again
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+import copy
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -85,6 +91,77 @@ class Float32Fidelity:
 
 
 @dataclass(frozen=True)
+class LoopPoint:
+    """A design about one operating point, as the fidelity run needs it: the sampled plant (deviations about the
+    trim ``u_op``, ``y_op``), the references that hold it there (``r_op``), the limits, the unsaturated controller
+    ``(A, B, C, D)`` from ``[dy; dr]`` to ``du`` (:func:`~gainlink.shipping.systems.controller_matrices`) that sizes
+    the scenario, the measurement noise's standard deviations of a Kalman design (None: 1e-3 of the excursion), the
+    closed loop's spectral radius (the run's length; None: that of the plant with the unsaturated controller) and
+    the inputs' names.
+
+    ``model`` and ``reference`` make the two laws that close the loop (anything with ``step(y, r)`` returning
+    ``u`` and ``saturated``): the C's arithmetic and the float64 law. ``shared`` are objects a copy of a running law
+    keeps sharing (the artifact), not copied with it.
+    """
+
+    Ad: np.ndarray
+    Bd: np.ndarray
+    Cd: np.ndarray
+    Dd: np.ndarray
+    u_op: np.ndarray
+    y_op: np.ndarray
+    r_op: np.ndarray
+    u_min: np.ndarray
+    u_max: np.ndarray
+    controller: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    noise_sd: np.ndarray | None
+    radius: float | None
+    inputs: tuple[str, ...]
+    model: Callable[[], Any]
+    reference: Callable[[], Any]
+    shared: tuple = field(default=())
+
+    @property
+    def n(self) -> int:
+        """States of the plant."""
+        return self.Ad.shape[0]
+
+    @property
+    def m(self) -> int:
+        """Inputs."""
+        return self.Bd.shape[1]
+
+    @property
+    def p(self) -> int:
+        """Outputs."""
+        return self.Cd.shape[0]
+
+    @property
+    def q(self) -> int:
+        """Tracked outputs (references)."""
+        return self.r_op.shape[0]
+
+
+def artifact_point(artifact: Artifact, *, implementation: Callable[[Artifact], Any] = Float32Loop) -> LoopPoint:
+    """The observer-based law of ``artifact`` about its operating point (``implementation``: the law under test)."""
+    from ..shipping.systems import controller_matrices
+
+    a = artifact
+    V = a.data.get("design", {}).get("observer", {}).get("V")
+    return LoopPoint(
+        Ad=a.Ad, Bd=a.Bd, Cd=a.Cd, Dd=a.Dd, u_op=a.u_op, y_op=a.y_op, r_op=a.r_op, u_min=a.u_min, u_max=a.u_max,
+        controller=controller_matrices(a), noise_sd=None if V is None else noise_sd(V),
+        radius=float(a.data.get("checks", {}).get("spectral_radius", 0.99)), inputs=tuple(a.signals["inputs"]),
+        model=lambda: implementation(a), reference=lambda: ReferenceLoop(a), shared=(a,),
+    )  # fmt: skip
+
+
+def noise_sd(V: Any) -> np.ndarray:
+    """Standard deviations of a measurement noise covariance's diagonal (negative entries read as 0)."""
+    return np.sqrt(np.maximum(np.diag(np.asarray(V, dtype=float)), 0.0))
+
+
+@dataclass(frozen=True)
 class _Scenario:
     steps: int
     x0: np.ndarray
@@ -130,9 +207,13 @@ def float32_fidelity(artifact: Artifact, *, seed: int = 0, implementation=Float3
     >>> fid.ok, 0.0 < fid.max_rel_u < 1e-5
     (True, True)
     """
-    a = artifact
+    return fidelity_at(artifact_point(artifact, implementation=implementation), seed=seed)
+
+
+def fidelity_at(a: LoopPoint, *, seed: int = 0) -> Float32Fidelity:
+    """Close the loop around ``a``'s plant with its model and its float64 law (module docstring) and compare."""
     sc, ref = _scenario_and_reference_run(a, seed=seed)
-    f32, _ = _simulate(a, implementation(a), sc)
+    f32, _ = _simulate(a, a.model(), sc)
     span = a.u_max - a.u_min
     du = np.abs(f32.u - ref.u) / span
     excursion = np.ptp(ref.y, axis=0)
@@ -146,11 +227,11 @@ def float32_fidelity(artifact: Artifact, *, seed: int = 0, implementation=Float3
         threshold=THRESHOLD,
         saturated_fraction=float(ref.saturated.any(axis=1).mean()),
         disturbance_steps=sc.pulse_steps,
-        worst_input=a.signals["inputs"][worst],
+        worst_input=a.inputs[worst],
     )
 
 
-def _simulate(a: Artifact, law, sc: _Scenario, *, start: tuple | None = None, stop: int | None = None):
+def _simulate(a: LoopPoint, law, sc: _Scenario, *, start: tuple | None = None, stop: int | None = None):
     """Close ``law`` around ``x+ = Ad x + Bd (u - u_op + d)``, ``y = y_op + Cd x + Dd (u_prev - u_op) + noise``.
 
     Runs steps ``start[0]`` (0 by default) to ``stop`` (the end) from the plant state of ``start``
@@ -184,11 +265,9 @@ class _LinearLoop:
     :func:`_simulate`), input ``[r; noise; d]``.
     """
 
-    def __init__(self, a: Artifact) -> None:
-        from ..shipping.systems import controller_matrices
-
+    def __init__(self, a: LoopPoint) -> None:
         self.a = a
-        Ac, Bc, Cc, Dc = controller_matrices(a)
+        Ac, Bc, Cc, Dc = a.controller
         n, m, p, q = a.n, a.m, a.p, a.q
         nc = n + q
         By, Br, Dy, Dr = Bc[:, :p], Bc[:, p:], Dc[:, :p], Dc[:, p:]
@@ -234,7 +313,7 @@ class _LinearLoop:
             return S[:, : a.n], S @ self.Ys.T + W @ self.Yw.T, S @ self.Vs.T + W @ self.Vw.T
 
 
-def _scenario_and_reference_run(a: Artifact, *, seed: int) -> tuple[_Scenario, _Run]:
+def _scenario_and_reference_run(a: LoopPoint, *, seed: int) -> tuple[_Scenario, _Run]:
     """Size the run, the reference step, the noise and the pulse; return them with the float64 run."""
     u_op = a.u_op
     room = np.minimum(a.u_max - u_op, u_op - a.u_min)
@@ -262,12 +341,11 @@ def _scenario_and_reference_run(a: Artifact, *, seed: int) -> tuple[_Scenario, _
     nominal, _, _ = lin.run(steps=steps, x0=sc.x0, r=sc.r, r_step_at=sc.r_step_at, noise=noise)
     excursion = max(float(np.max(np.abs(nominal))), 1e-300)
     tail = slice(-max(1, steps // 20), None)
-    law = ReferenceLoop(a)
+    law = a.reference()
     first, resume = _simulate(a, law, sc, stop=half)
     for length, amplitude in _pulse_trials(sc.pulse_steps):
         sc = _Scenario(**{**sc.__dict__, "pulse_steps": length, "pulse": amplitude * PULSE_FACTOR * room})
-        again = ReferenceLoop(a)
-        again.xh, again.z = law.xh.copy(), law.z.copy()
+        again = copy.deepcopy(law, {id(x): x for x in a.shared})  # the law as the first half left it
         second, _ = _simulate(a, again, sc, start=resume)
         gap = float(np.max(np.abs(second.x[tail] - nominal[tail]))) if np.all(np.isfinite(second.x)) else np.inf
         if length == 0 or gap <= 2.0 * _linear_pulse_tail(a, lin, sc, tail) + RECOVERY_TOL * excursion:
@@ -276,7 +354,7 @@ def _scenario_and_reference_run(a: Artifact, *, seed: int) -> tuple[_Scenario, _
     return sc, run
 
 
-def _linear_pulse_tail(a: Artifact, lin: _LinearLoop, sc: _Scenario, tail: slice) -> float:
+def _linear_pulse_tail(a: LoopPoint, lin: _LinearLoop, sc: _Scenario, tail: slice) -> float:
     """How far the unsaturated loop itself still is from its undisturbed run at the end, after this pulse."""
     window = sc.steps - sc.pulse_at
     d = np.zeros((window, a.m))
@@ -298,12 +376,11 @@ def _pulse_trials(longest: int):
 
 
 def _noise(
-    a: Artifact, lin: _LinearLoop, *, steps: int, room: np.ndarray, y_excursion: np.ndarray, seed: int
+    a: LoopPoint, lin: _LinearLoop, *, steps: int, room: np.ndarray, y_excursion: np.ndarray, seed: int
 ) -> np.ndarray:
     """White measurement noise: ``sqrt(diag V)`` (or 1e-3 of the excursion), scaled down if it alone would
     move the command by more than a quarter of the room (3 standard deviations)."""
-    V = a.data.get("design", {}).get("observer", {}).get("V")
-    sd = np.sqrt(np.maximum(np.diag(np.asarray(V, dtype=float)), 0.0)) if V is not None else 1e-3 * y_excursion
+    sd = a.noise_sd if a.noise_sd is not None else 1e-3 * y_excursion
     white = np.random.default_rng(seed).standard_normal((steps, a.p))
     _, _, Vn = lin.run(steps=steps, x0=np.zeros(a.n), r=np.zeros(a.q), noise=white * sd)
     with np.errstate(all="ignore"):
@@ -313,14 +390,14 @@ def _noise(
     return white * sd * factor
 
 
-def _half_run_steps(a: Artifact) -> int:
+def _half_run_steps(a: LoopPoint) -> int:
     """Half the run: enough closed-loop time constants to settle (from the slowest closed-loop pole)."""
-    radius = float(a.data.get("checks", {}).get("spectral_radius", 0.99))
+    radius = a.radius if a.radius is not None else float(np.max(np.abs(np.linalg.eigvals(_LinearLoop(a).A))))
     tau = 1.0 / max(-np.log(min(radius, 1.0 - 1e-9)), 1e-9)
     return int(np.clip(SETTLE_TIME_CONSTANTS * tau, MIN_STEPS // 2, MAX_STEPS // 2))
 
 
-def _saturating_pulse_length(a: Artifact, lin: _LinearLoop, steps: int, pulse_at: int, room: np.ndarray) -> int:
+def _saturating_pulse_length(a: LoopPoint, lin: _LinearLoop, steps: int, pulse_at: int, room: np.ndarray) -> int:
     """The shortest pulse whose linear command response reaches twice the room (capped at 2 % of the run)."""
     window = steps - pulse_at
     d = np.zeros((window, a.m))

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..shipping.artifact import Artifact
 from .derived_law import DerivedLoop
-from .fidelity import _scenario_and_reference_run, _simulate  # the float32 check's scenario, shared
+from .fidelity import _scenario_and_reference_run, _simulate, artifact_point  # the float32 check's scenario, shared
 from .fixed_law import FixedPointLoop
 from .reference import ReferenceLoop, StepResult
 
@@ -75,14 +75,15 @@ def fixed_point_fidelity(artifact: Artifact, *, seed: int = 0) -> FixedPointFide
     ``artifact`` must hold ``checks.fixed_point`` (a fixed-point design).
     """
     a = artifact
-    sc, ref = _scenario_and_reference_run(a, seed=seed)
+    point = artifact_point(a)  # the design plant about the operating point, as the float32 check runs it
+    sc, ref = _scenario_and_reference_run(point, seed=seed)
     scale = _range_scale(a, sc, ref)
     if scale < 1.0:
         sc = replace(sc, r=sc.r * scale, x0=sc.x0 * scale)
-        ref, _ = _simulate(a, ReferenceLoop(a), sc)
+        ref, _ = _simulate(point, ReferenceLoop(a), sc)
     integer = _Recorded(a)
-    run, _ = _simulate(a, integer, sc)
-    ideal, _ = _simulate(a, DerivedLoop(integer.g.ideal), sc)
+    run, _ = _simulate(point, integer, sc)
+    ideal, _ = _simulate(point, DerivedLoop(integer.g.ideal), sc)
     span = a.u_max - a.u_min
     events = run.saturated.any(axis=1) | ideal.saturated.any(axis=1) | np.array(integer.clipped)
     first = int(np.argmax(events)) if events.any() else sc.steps

@@ -1,97 +1,34 @@
-"""Replay recorded measurements through an engine that runs the control law.
+"""Replay files: the samples a replay reads, the observer-based law's trace it writes, and the open-loop comparison of
+two traces.
 
-Engines share one signature, ``run(artifact, Y, R) -> Trace``: ``reference`` is the float64
-Python law; ``fixed`` the bit-exact integer model of a fixed-point artifact; ``native`` (host C library) and
-``qemu`` (a Cortex-M image under QEMU; ``target`` and ``board`` choose which, cortex-m4 on mps2-an386 by
-default; for a fixed-point artifact both run the integer C) are provided by :mod:`gainlink.engines`
-and loaded on first use, so replay never imports a toolchain it does not need.
+Which engine runs the samples, which trace format it writes and which one-step check proves it are the law's
+(:meth:`gainlink.laws.Law.replay`, :meth:`~gainlink.laws.Law.trace_text`, :meth:`~gainlink.laws.Law.one_step`);
+this module holds the file formats they share.
 
-Input CSV: a header with ``y0..y{p-1}`` and ``r0..r{q-1}`` (a ``t`` column is allowed and copied
-through), and ``s0..`` for the external scheduling signals of a scheduled artifact. Output CSV: ``t`` if
-given, ``u0..``, ``sat0..`` (1 where that input saturated), ``fault`` (1 where the sample was refused as
-non-finite), ``xh0..`` and ``z0..`` (state after the step); a scheduled artifact's: :mod:`.scheduled_replay`.
-A fixed-point artifact's output starts with the line ``# numeric=q31`` (or ``q15``; ``float64`` from the
-``reference`` engine): ``--compare`` refuses a trace of another format in one line (a file without the line is read
-as before); a float32 artifact's output has no such line.
+Input CSV: a header with ``y0..y{p-1}`` and ``r0..r{q-1}`` (a ``t`` column is allowed and copied through), and
+``s0..`` for the law's external scheduling signals (a scheduled law's ``schedule.external``). Output CSV of the
+observer-based law: ``t`` if given, ``u0..``, ``sat0..`` (1 where that input saturated), ``fault`` (1 where the
+sample was refused as non-finite), ``xh0..`` and ``z0..`` (state after the step); a scheduled law's:
+:mod:`.scheduled_replay`. A fixed-point law's output starts with the line ``# numeric=q31`` (or ``q15``; ``float64``
+from the ``reference`` engine): ``--compare`` refuses a trace of another format in one line (a file without the line
+is read as before); a float32 law's output has no such line.
 """
 
 from __future__ import annotations
 
 import csv
-import importlib
 import io
 import math
-from collections.abc import Callable
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataError, GainlinkError, did_you_mean
+from ..errors import DataError, did_you_mean
 from ..fileio import atomic_write_text, read_user_file
 from ..shipping.artifact import Artifact
-from . import scheduled_replay
-from .fixed_law import FixedPointLoop
-from .onestep import OneStepCheck
-from .onestep import one_step_check as _unscheduled_one_step_check
-from .reference import ReferenceLoop, Trace
-from .scheduled_reference import ScheduledLoop, ScheduledTrace
-
-Engine = Callable[[Artifact, np.ndarray, np.ndarray], Trace]
-
-_ENGINES: dict[str, Engine] = {}
-_LAZY_ENGINES = {"native": "gainlink.engines.native", "qemu": "gainlink.engines.qemu"}
-
-
-def register_engine(name: str, fn: Engine) -> None:
-    """Make ``fn`` available as ``--engine name``."""
-    _ENGINES[name] = fn
-
-
-def engine_names() -> list[str]:
-    """Every engine name replay accepts."""
-    return sorted(set(_ENGINES) | set(_LAZY_ENGINES))
-
-
-def get_engine(name: str) -> Engine:
-    """The engine called ``name``, importing its module on first use."""
-    if name not in _ENGINES and name in _LAZY_ENGINES:
-        module = importlib.import_module(_LAZY_ENGINES[name])
-        _ENGINES[name] = module.run
-    if name not in _ENGINES:
-        raise GainlinkError(f"unknown engine {name!r} (available: {', '.join(engine_names())})")
-    return _ENGINES[name]
-
-
-def run_reference(artifact: Artifact, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None = None) -> Trace:
-    """The float64 reference engine (a scheduled artifact: the scheduled law, with the external signals ``S``)."""
-    if artifact.schedule is not None:
-        return ScheduledLoop(artifact).run(Y, R, S)
-    return ReferenceLoop(artifact).run(Y, R)
-
-
-def one_step_check(
-    artifact: Artifact, Y: np.ndarray, R: np.ndarray, trace, *, S: np.ndarray | None = None, c_engine: bool = False
-) -> OneStepCheck:
-    """:func:`gainlink.proof.onestep.one_step_check`, or for a scheduled artifact
-    :func:`gainlink.proof.scheduled_replay.one_step_check` (with the external signals ``S``; a trace of the C,
-    ``c_engine``, against the C's float32 arithmetic bit for bit)."""
-    if artifact.schedule is not None:
-        return scheduled_replay.one_step_check(artifact, Y, R, S, trace, float32=c_engine)
-    return _unscheduled_one_step_check(artifact, Y, R, trace)
-
-
-def run_fixed(artifact: Artifact, Y: np.ndarray, R: np.ndarray) -> Trace:
-    """The bit-exact integer model of a fixed-point artifact (:mod:`.fixed_law`) on float32 samples, as the C
-    takes them: the trace ``native`` and ``qemu`` give for it, bit for bit."""
-    loop = FixedPointLoop(artifact)
-    Y32 = np.asarray(Y, dtype=np.float32).astype(np.float64)
-    R32 = np.asarray(R, dtype=np.float32).astype(np.float64)
-    return loop.run(Y32, R32)
-
-
-register_engine("reference", run_reference)
-register_engine("fixed", run_fixed)
+from .reference import Trace
 
 
 @dataclass(frozen=True)
@@ -101,11 +38,12 @@ class Samples:
     Y: np.ndarray  # (N, p)
     R: np.ndarray  # (N, q)
     t: np.ndarray | None
-    S: np.ndarray | None = None  # (N, e): a scheduled artifact's external scheduling signals
+    S: np.ndarray | None = None  # (N, e): the law's external scheduling signals (None when it has none)
 
 
-def read_samples(path: str | Path, artifact: Artifact) -> Samples:
-    """Read a replay input CSV for ``artifact``; non-finite values are kept (the law handles them).
+def read_samples(path: str | Path, artifact: Artifact, externals: Sequence[str] = ()) -> Samples:
+    """Read a replay input CSV for ``artifact`` whose law takes the external signals ``externals``
+    (:meth:`gainlink.laws.Law.externals`; columns ``s0..``); non-finite values are kept (the law handles them).
 
     Raises
     ------
@@ -120,7 +58,7 @@ def read_samples(path: str | Path, artifact: Artifact) -> Samples:
     header = [h.strip() for h in rows[0]]
     want_y = [f"y{i}" for i in range(artifact.p)]
     want_r = [f"r{i}" for i in range(artifact.q)]
-    want_s = [f"s{i}" for i in range(len(artifact.schedule.external))] if artifact.schedule is not None else []
+    want_s = [f"s{i}" for i in range(len(externals))]
     missing = [c for c in want_y + want_r + want_s if c not in header]
     if missing:
         raise DataError(
@@ -156,15 +94,6 @@ def read_samples(path: str | Path, artifact: Artifact) -> Samples:
     return Samples(Y=Y, R=R, t=t, S=S)
 
 
-def trace_numeric(artifact: Artifact, engine: str | None = None) -> str | None:
-    """The numeric format of ``artifact``'s law through ``engine`` that its replay output names: a fixed-point
-    artifact's (``q31``, ``q15``), ``float64`` through its ``reference`` engine; ``None`` for a float32 artifact."""
-    fp = artifact.checks.get("fixed_point")
-    if not fp:
-        return None
-    return "float64" if engine == "reference" else str(fp["numeric"])
-
-
 def format_trace(trace: Trace, t: np.ndarray | None = None, *, numeric: str | None = None) -> str:
     """The output CSV text for a trace (round-trip float formatting), after a ``# numeric=...`` line when
     ``numeric`` is given."""
@@ -189,31 +118,19 @@ def _num(v: float) -> str:
     return repr(v) if math.isfinite(v) else ("nan" if math.isnan(v) else ("inf" if v > 0 else "-inf"))
 
 
-def write_trace(
-    path: str | Path,
-    trace: Trace,
-    t: np.ndarray | None = None,
-    *,
-    artifact: Artifact | None = None,
-    engine: str | None = None,
-) -> None:
-    """Write a replay's output CSV (``u``, ``sat``, ``fault``, ``xh``, ``z`` per step; a scheduled trace: the
-    columns of :mod:`.scheduled_replay`, which needs its ``artifact``; a fixed-point ``artifact``'s trace through
-    ``engine`` names its format first, see :func:`trace_numeric`) atomically."""
+def write_output(path: str | Path, text: str) -> None:
+    """Write a replay's output CSV ``text`` atomically (a folder or a missing parent folder is one line)."""
     out = Path(path)
     if out.is_dir():
         raise DataError(f"output {out} is a directory")
     if not out.parent.exists():
         raise DataError(f"output folder {out.parent} does not exist")
-    if isinstance(trace, ScheduledTrace):
-        atomic_write_text(out, scheduled_replay.format_trace(artifact, trace, t))
-    else:
-        atomic_write_text(out, format_trace(trace, t, numeric=trace_numeric(artifact, engine) if artifact else None))
+    atomic_write_text(out, text)
 
 
 @dataclass(frozen=True)
 class Comparison:
-    """How far one replay output is from another, open loop (information, see :func:`one_step_check`)."""
+    """How far one replay output is from another, open loop (information; the law's one-step check is the verdict)."""
 
     steps: int
     max_abs_u: float
@@ -223,18 +140,17 @@ class Comparison:
     sat_mismatches_per_input: tuple[int, ...] = ()  # steps in which input i's flag differs
 
 
-def read_trace(path: str | Path, artifact: Artifact) -> Trace:
-    """Read a replay output CSV (``u``, ``sat``, ``fault``, ``xh``, ``z`` columns) back into a :class:`Trace`.
+def read_trace(path: str | Path, artifact: Artifact, *, numeric: str = "float32") -> Trace:
+    """Read a replay output CSV of the observer-based law (``u``, ``sat``, ``fault``, ``xh``, ``z`` columns) of
+    ``artifact``, whose law's traces are ``numeric``, back into a :class:`Trace`.
 
     Raises
     ------
     DataError
         The file is not a replay output for this artifact's dimensions, or it names another numeric format.
     """
-    if artifact.schedule is not None:
-        return scheduled_replay.read_trace(path, artifact)
     path = Path(path)
-    text = _same_numeric(path, read_user_file(path, what="comparison file", error=DataError), artifact)
+    text = _same_numeric(path, read_user_file(path, what="comparison file", error=DataError), artifact, numeric)
     rows = list(csv.DictReader(io.StringIO(text)))
     a = artifact
     try:
@@ -255,15 +171,15 @@ def read_trace(path: str | Path, artifact: Artifact) -> Trace:
         ) from None
 
 
-def _same_numeric(path: Path, text: str, artifact: Artifact) -> str:
-    """``text`` without its ``# key=value`` lines, refused when their ``numeric`` is not the artifact's format (a
-    trace without the line is taken as before: the one-step check is its verdict)."""
+def _same_numeric(path: Path, text: str, artifact: Artifact, own: str) -> str:
+    """``text`` without its ``# key=value`` lines, refused when their ``numeric`` is not ``own``, the artifact's
+    format (a trace without the line is taken as before: the one-step check is its verdict)."""
     lines = text.splitlines(keepends=True)
     head = 0
     while head < len(lines) and lines[head].startswith("#"):
         head += 1
     meta = dict(ln[1:].strip().partition("=")[::2] for ln in lines[:head])
-    recorded, own = meta.get("numeric"), trace_numeric(artifact) or "float32"
+    recorded = meta.get("numeric")
     if recorded is not None and recorded.strip() != own:
         raise DataError(
             f"comparison file {path} is a trace of a {recorded.strip()} law and artifact {artifact.name} is a "
@@ -276,7 +192,8 @@ def compare_traces(artifact: Artifact, trace: Trace, other: Trace) -> Comparison
     """Open-loop difference of two replays of the same input (commands relative to the limit span).
 
     Information only: for an unstable compensator two correct implementations drift apart like
-    ``|z|^k`` (see :mod:`gainlink.synthesis.compensator`); :func:`one_step_check` is the verdict.
+    ``|z|^k`` (see :mod:`gainlink.synthesis.compensator`); the law's one-step check
+    (:meth:`gainlink.laws.Law.one_step`) is the verdict.
     """
     N = trace.u.shape[0]
     if other.u.shape[0] != N:

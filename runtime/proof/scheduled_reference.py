@@ -86,7 +86,8 @@ class ScheduledState:
 @dataclass(frozen=True)
 class ScheduledTrace:
     """A block of steps: commands, flags, the sigma used, and the state after each step (rows of
-    :meth:`ScheduledState.vector`)."""
+    :meth:`ScheduledState.vector`). ``numeric`` is the arithmetic a trace read from a file names (``float64``: the
+    float64 law's, ``float32``: the C's; None: a file that names none, or a trace not read from a file)."""
 
     u: np.ndarray
     saturated: np.ndarray
@@ -94,6 +95,7 @@ class ScheduledTrace:
     sigma: np.ndarray
     sigma_flags: np.ndarray
     state: np.ndarray
+    numeric: str | None = None
 
 
 class ScheduledLoop:

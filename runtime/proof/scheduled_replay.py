@@ -1,18 +1,19 @@
 """Replay files and the one-step check of the scheduled law (schema-2 artifacts).
 
 Input CSV: as for the unscheduled law (``t``, ``y0..``, ``r0..``), plus ``s0..s{e-1}`` when the artifact is
-scheduled on external signals (``schedule.external``, in order). Output CSV: ``t`` if given, ``u0..``, ``sat0..``,
-``fault``, ``sigma`` (the sigma the step used), ``sflags`` (1 held, 2 clipped, 4 rate-limited), then the state
-after the step: ``d0..`` (the estimate's increment), ``up0..`` (the previous command), ``yp0..``, ``ep0..``,
-``sh`` (the held sigma), ``sf`` (the filter's state), ``started``.
+scheduled on external signals (``schedule.external``, in order). Output CSV: a first line ``# numeric=float64`` (the
+reference engine's trace) or ``# numeric=float32`` (the C's, or its model's), then ``t`` if given, ``u0..``,
+``sat0..``, ``fault``, ``sigma`` (the sigma the step used), ``sflags`` (1 held, 2 clipped, 4 rate-limited), then the
+state after the step: ``d0..`` (the estimate's increment), ``up0..`` (the previous command), ``yp0..``, ``ep0..``,
+``sh`` (the held sigma), ``sf`` (the filter's state), ``started``. A file without the first line (written before it
+existed) is read as a float64 trace.
 
 The one-step check resynchronises a law on an engine's state before each step, as for the unscheduled law
 (:mod:`gainlink.proof.onestep`). A float64 trace (the reference engine) is checked against the float64 law within
 float64's bound: ``REL`` times each quantity's magnitude in that step. A trace of the C (engines ``native`` and
 ``qemu``, ``firmware/src/gl_sched.c``) is checked against the C's float32 arithmetic,
-:class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`, bit for bit (``float32=True``); that model is
-itself tested close to the float64 law (tests/test_sched_firmware.py). A float32 bound against the float64 law, as
-the unscheduled check has, is not derived for the scheduled law yet.
+:class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`, bit for bit (``float32=True``), and against the
+float64 law within a float32 bound, as the unscheduled check does (:mod:`gainlink.laws.scheduled_onestep`).
 """
 
 from __future__ import annotations
@@ -38,12 +39,19 @@ def state_columns(a: Artifact) -> list[str]:
     return [f"{p}{i}" for p, k in parts for i in range(k)] + ["sh", "sf", "started"]
 
 
-def format_trace(a: Artifact, trace: ScheduledTrace, t: np.ndarray | None = None) -> str:
-    """The output CSV text of a scheduled replay (round-trip floats)."""
+#: The arithmetic a scheduled trace can name in its first line.
+NUMERICS = ("float64", "float32")
+
+
+def format_trace(a: Artifact, trace: ScheduledTrace, t: np.ndarray | None = None, *, numeric: str | None = None) -> str:
+    """The output CSV text of a scheduled replay (round-trip floats), after a ``# numeric=...`` line when
+    ``numeric`` (:data:`NUMERICS`) is given."""
     m = a.m
     header = (["t"] if t is not None else []) + [f"u{i}" for i in range(m)] + [f"sat{i}" for i in range(m)]
     header += ["fault", "sigma", "sflags"] + state_columns(a)
     out = io.StringIO()
+    if numeric is not None:
+        out.write(f"# numeric={numeric}\n")
     out.write(",".join(header) + "\n")
     for k in range(trace.u.shape[0]):
         cells = ([repr(float(t[k]))] if t is not None else []) + [repr(float(v)) for v in trace.u[k]]
@@ -55,9 +63,21 @@ def format_trace(a: Artifact, trace: ScheduledTrace, t: np.ndarray | None = None
 
 
 def read_trace(path: str | Path, a: Artifact) -> ScheduledTrace:
-    """A scheduled replay output CSV back into a :class:`ScheduledTrace` (DataError when it is not one)."""
+    """A scheduled replay output CSV back into a :class:`ScheduledTrace`, with the arithmetic its first line names
+    (DataError when it is not one, or names another)."""
     path = Path(path)
-    rows = list(csv.DictReader(io.StringIO(read_user_file(path, what="comparison file", error=DataError))))
+    lines = read_user_file(path, what="comparison file", error=DataError).splitlines(keepends=True)
+    head = 0
+    while head < len(lines) and lines[head].startswith("#"):
+        head += 1
+    meta = dict(ln[1:].strip().partition("=")[::2] for ln in lines[:head])
+    numeric = meta.get("numeric", "float64").strip()
+    if numeric not in NUMERICS:
+        raise DataError(
+            f"comparison file {path} is a trace of a {numeric} law and artifact {a.name} is a scheduled float32 design:"
+            " compare traces of its float64 law or of its C"
+        )
+    rows = list(csv.DictReader(io.StringIO("".join(lines[head:]))))
     try:
         col = lambda names, kind=float: np.array([[kind(r[c]) for c in names] for r in rows]).reshape(len(rows), -1)  # noqa: E731
         return ScheduledTrace(
@@ -67,6 +87,7 @@ def read_trace(path: str | Path, a: Artifact) -> ScheduledTrace:
             sigma=col(["sigma"]).ravel(),
             sigma_flags=col(["sflags"], int).ravel(),
             state=col(state_columns(a)),
+            numeric=numeric,
         )
     except (KeyError, TypeError, ValueError) as exc:
         raise DataError(

@@ -1,7 +1,8 @@
 """Making a design: a typed spec in, a checked, sealed gain artifact out.
 
-:func:`synthesize` runs the pipeline (discretise, augment with integrators, controller gain, observer gain,
-anti-windup, the loop's checks, the implementation choices); :mod:`.analysis` answers structural questions
+:func:`synthesize_lq` runs the observer-based law's pipeline (discretise, augment with integrators, controller gain,
+observer gain, anti-windup, the loop's checks, the implementation choices; a law asks for it with its own check of
+its arithmetic, :func:`gainlink.laws.design` designs any spec); :mod:`.analysis` answers structural questions
 about a plant; :mod:`.compensator`, :mod:`.deadtime` and :mod:`.realization` are the checks and coordinate
 choices the pipeline records.
 """
@@ -10,9 +11,9 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from .pipeline import DesignResult as DesignResult
-    from .pipeline import synthesize as synthesize
+    from .pipeline import synthesize_lq as synthesize_lq
 
-__all__ = ["DesignResult", "synthesize"]
+__all__ = ["DesignResult", "synthesize_lq"]
 
 
 def __getattr__(name: str) -> Any:

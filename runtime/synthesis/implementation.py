@@ -1,57 +1,60 @@
-"""The spec's ``[implementation]`` choices applied to a designed artifact: the realisation of the estimate, then
-the compensator's stability and the float32 closed-loop fidelity (or, for a fixed-point law, its certificate and
-measured fidelity) recorded in ``checks`` with their warnings."""
+"""The spec's ``[implementation]`` choices applied to a designed artifact: the realisation of the estimate and the
+compensator's stability (:func:`realise`, every observer-based law), then the law's own check of its arithmetic,
+recorded in ``checks`` with its warnings: the float32 closed-loop fidelity (:func:`float32_check`) or a fixed-point
+law's certificate and measured fidelity (:func:`fixed_point_check`)."""
 
 from __future__ import annotations
 
 from ..proof.fidelity import Float32Fidelity, float32_fidelity
 from ..proof.fixed_fidelity import fixed_point_fidelity
 from ..shipping.artifact import Artifact, from_dict, seal
-from ..spec import ImplementationSpec
+from ..spec import ImplementationSpec, PlantSpec
 from .compensator import CompensatorStability, compensator_stability
 from .fixed_point import FixedPointCertificate, certificate_dict, certify
 from .realization import apply, transformation
 
 
-def implement(
-    data: dict, implementation: ImplementationSpec, warnings: list[str], *, ranges: dict | None = None
-) -> tuple[dict, CompensatorStability, Float32Fidelity | None, FixedPointCertificate | None]:
-    """Apply the implementation choices to a designed artifact dict and record their checks.
-
-    Returns ``(data, compensator stability, float32 fidelity or None when the check is off or the law is fixed
-    point, fixed-point certificate or None)``; ``data`` is not sealed. ``ranges`` (y_min, y_max, r_min, r_max)
-    are the declared ranges a fixed-point law is certified for.
-    """
+def realise(data: dict, implementation: ImplementationSpec, warnings: list[str]) -> tuple[dict, CompensatorStability]:
+    """The estimate in the spec's realisation, and the compensator's stability recorded in ``checks.compensator``
+    (with its warning). Returns ``(data, compensator stability)``; ``data`` is not sealed."""
     kind = implementation.realization
     if kind != "as_designed":
         data = _realised(data, kind)
     data = dict(data, checks=dict(data["checks"]))
-    a = from_dict(seal(data))
-    compensator = compensator_stability(a)
+    compensator = compensator_stability(from_dict(seal(data)))
     data["checks"]["compensator"] = compensator.to_dict()
     if not compensator.stable:
         warnings.append(compensator.warning())
-    if implementation.fixed_point:
-        return (data, compensator, None, _fixed_point(data, a, implementation, ranges or {}))
-    fidelity = None
-    if implementation.float32_check:
-        fidelity = float32_fidelity(a)
-        data["checks"]["float32"] = fidelity.to_dict()
-        if not fidelity.ok:
-            better = None
-            if kind == "as_designed":
-                better = float32_fidelity(from_dict(seal(_realised(data, "balanced")))).max_rel_u
-            warnings.append(fidelity.warning(kind, balanced=better))
-    return data, compensator, fidelity, None
+    return data, compensator
 
 
-def _fixed_point(data: dict, a: Artifact, implementation: ImplementationSpec, ranges: dict) -> FixedPointCertificate:
-    """Certify the fixed-point law, record it in ``checks.fixed_point`` with the measured closed-loop deviation."""
-    cert = certify(a, ranges, numeric=implementation.numeric, max_error=implementation.fixed_point_max_error)
+def float32_check(data: dict, spec: PlantSpec, warnings: list[str]) -> dict[str, Float32Fidelity | None]:
+    """The float32 law's closed-loop fidelity (:func:`~gainlink.proof.fidelity.float32_fidelity`) recorded in
+    ``checks.float32``, with a warning naming the remedy when it is above its threshold (``float32`` of the design
+    result; None when the spec switched the check off)."""
+    if not spec.implementation.float32_check:
+        return {"float32": None}
+    kind = spec.implementation.realization
+    fidelity = float32_fidelity(from_dict(seal(data)))
+    data["checks"]["float32"] = fidelity.to_dict()
+    if not fidelity.ok:
+        better = None
+        if kind == "as_designed":
+            better = float32_fidelity(from_dict(seal(_realised(data, "balanced")))).max_rel_u
+        warnings.append(fidelity.warning(kind, balanced=better))
+    return {"float32": fidelity}
+
+
+def fixed_point_check(data: dict, spec: PlantSpec, warnings: list[str]) -> dict[str, FixedPointCertificate]:
+    """Certify the fixed-point law for the spec's declared ranges, record it in ``checks.fixed_point`` with the
+    measured closed-loop deviation (``fixed_point`` of the design result)."""
+    impl, lim = spec.implementation, spec.limits
+    ranges = {"y_min": lim.y_min, "y_max": lim.y_max, "r_min": lim.r_min, "r_max": lim.r_max}
+    cert = certify(from_dict(seal(data)), ranges, numeric=impl.numeric, max_error=impl.fixed_point_max_error)
     data["checks"]["fixed_point"] = certificate_dict(cert)
     measured = fixed_point_fidelity(from_dict(seal(data)))
     data["checks"]["fixed_point"]["measured"] = measured.to_dict()
-    return cert
+    return {"fixed_point": cert}
 
 
 def _realised(data: dict, kind: str) -> dict:

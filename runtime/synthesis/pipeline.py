@@ -1,13 +1,19 @@
-"""The design pipeline: discretise -> augment with integrators of the tracked outputs -> controller gain (DLQR,
-placement or given) -> observer gain (Kalman, Luenberger or given; predictor or current form) -> anti-windup gain
--> checks of the combined loop (stability, separation, margins, bandwidth) -> the artifact, with the
-implementation choices and their checks, sealed. Every Riccati solution comes from python-control (SLICOT through
-slycot)."""
+"""The observer-based law's design pipeline: discretise -> augment with integrators of the tracked outputs ->
+controller gain (DLQR, placement or given) -> observer gain (Kalman, Luenberger or given; predictor or current form)
+-> anti-windup gain -> checks of the combined loop (stability, separation, margins, bandwidth) -> the artifact, with
+the realisation of the estimate and the compensator's stability, then the law's own implementation check (the float32
+fidelity, or a fixed-point law's certificate), sealed. Every Riccati solution comes from python-control (SLICOT
+through slycot).
+
+Which law a spec asks for, and so which implementation check runs, is the law's to say: design a spec with
+:func:`gainlink.laws.design` (``gl.design``), which asks the spec's law (:func:`gainlink.laws.law_for_spec`)."""
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -21,12 +27,12 @@ from .controller import controller_gain
 from .deadtime import DeadTimeCheck, dead_time_check
 from .discretize import Discretised, augment, discretise
 from .fixed_point import FixedPointCertificate
-from .implementation import implement
+from .implementation import realise
 from .loop import closed_loop_poles
 from .margins import ChannelMargin, input_margins, loop_bandwidth
 from .observer import observer_gain
 from .record import Gains, artifact_data
-from .schedule import ScheduleDesign, synthesize_scheduled
+from .schedule import ScheduleDesign
 
 log = logging.getLogger(__name__)
 
@@ -42,15 +48,23 @@ class DesignResult:
     margins: list[ChannelMargin]
     warnings: list[str] = field(default_factory=list)
     compensator: CompensatorStability | None = None
-    float32: Float32Fidelity | None = None  # None when the check was switched off
+    float32: Float32Fidelity | Any = None  # None when the check was switched off; a scheduled law's: its sweep
     dead_time: DeadTimeCheck | None = None  # None unless the plant has sampled dead times
     fixed_point: FixedPointCertificate | None = None  # None unless [implementation] numeric is q31 or q15
     schedule: ScheduleDesign | None = None  # a scheduled spec: every point's result and the verdicts; the fields
     # above are then those of the first point
 
 
-def synthesize(spec: PlantSpec) -> DesignResult:
-    """Design the controller and observer a spec asks for and return the sealed artifact.
+#: The law's own implementation check (:func:`synthesize_lq`): it records its check in ``data["checks"]``, appends
+#: its warnings, and returns the :class:`DesignResult` fields it fills (``float32``, ``fixed_point``).
+ImplementationCheck = Callable[[dict, PlantSpec, list[str]], dict[str, Any]]
+
+
+def synthesize_lq(spec: PlantSpec, implementation_check: ImplementationCheck) -> DesignResult:
+    """Design the observer-based law of an unscheduled ``spec`` and return the sealed artifact.
+
+    ``implementation_check`` is the law's check of its arithmetic (:data:`ImplementationCheck`): the float32
+    fidelity of the float32 law, the certificate of a fixed-point one.
 
     Raises
     ------
@@ -58,11 +72,8 @@ def synthesize(spec: PlantSpec) -> DesignResult:
         A design setting is inconsistent with the discretised plant (e.g. the current form with feedthrough).
     DesignError
         The plant is not stabilizable/detectable, weights are not (semi)definite, or the resulting closed loop
-        is not stable (naming the part that is not); with a schedule, also a point, the grid between points, or
-        the LMI solver.
+        is not stable (naming the part that is not).
     """
-    if spec.schedule is not None:
-        return _scheduled(spec)
     warnings: list[str] = []
     d = discretise(spec)
     Aa, Ba = augment(d, spec.Ci, spec.Ts)
@@ -83,7 +94,8 @@ def synthesize(spec: PlantSpec) -> DesignResult:
     }
     record = {"discretization": d.method, "controller": controller_record, "observer": observer_record}
     data = artifact_data(spec, d, gains, design_record=record, checks=checks)
-    data, compensator, fidelity, fixed = implement(data, spec.implementation, warnings, ranges=_ranges(spec))
+    data, compensator = realise(data, spec.implementation, warnings)
+    checked = implementation_check(data, spec, warnings)
     dead_time = _dead_time(spec, data, warnings)
     for w in warnings:
         log.warning(w)
@@ -95,31 +107,8 @@ def synthesize(spec: PlantSpec) -> DesignResult:
         margins=margins,
         warnings=warnings,
         compensator=compensator,
-        float32=fidelity,
         dead_time=dead_time,
-        fixed_point=fixed,
-    )
-
-
-def _ranges(spec: PlantSpec) -> dict:
-    """The declared ranges of samples and references (None where not declared)."""
-    lim = spec.limits
-    return {"y_min": lim.y_min, "y_max": lim.y_max, "r_min": lim.r_min, "r_max": lim.r_max}
-
-
-def _scheduled(spec: PlantSpec) -> DesignResult:
-    """Every point through :func:`synthesize`, then the scheduled checks (:mod:`.schedule`)."""
-    artifact, design, warnings = synthesize_scheduled(spec, synthesize)
-    first = design.results[0]
-    return DesignResult(
-        artifact=artifact,
-        controller_poles=first.controller_poles,
-        observer_poles=first.observer_poles,
-        closed_loop_poles=first.closed_loop_poles,
-        margins=first.margins,
-        warnings=warnings,
-        compensator=first.compensator,
-        schedule=design,
+        **checked,
     )
 
 

@@ -3,7 +3,9 @@ float32 and dead-time checks of the spec's own design when it designs."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -21,7 +23,6 @@ from .analysis import (
     transmission_zeros,
 )
 from .margins import loop_bandwidth
-from .pipeline import synthesize
 
 SAMPLE_RATE_FACTOR = 10.0
 
@@ -56,6 +57,7 @@ class AnalysisReport:
     float32: dict | None = None  # float32 closed-loop fidelity of that design (gainlink.proof.fidelity)
     dead_time: dict | None = None  # that design against the exact sampled dead times (gainlink.synthesis.deadtime)
     schedule: dict | None = None  # a scheduled spec: checks.schedule of its design (the plant above: first point)
+    law_lines: list[str] = field(default_factory=list)  # what the spec's law adds (gainlink.laws.Law.analysis_lines)
 
     def to_dict(self) -> dict:
         """JSON-friendly dict; complex numbers become [re, im] pairs."""
@@ -67,8 +69,9 @@ class AnalysisReport:
         return d
 
 
-def analyze(spec: PlantSpec) -> AnalysisReport:
-    """Analyse a spec's plant; include the closed-loop bandwidth when the spec designs."""
+def analyze(spec: PlantSpec, *, design: Callable[[PlantSpec], Any]) -> AnalysisReport:
+    """Analyse a spec's plant; include the closed-loop bandwidth when the spec designs (with ``design``, the spec's
+    law's design step: :func:`gainlink.laws.design`)."""
     import control
 
     plant = spec.plant
@@ -86,7 +89,7 @@ def analyze(spec: PlantSpec) -> AnalysisReport:
         warnings.append(
             f"non-minimum-phase zeros {', '.join(format_eigenvalue(z) for z in nmp)}{origin} limit bandwidth"
         )
-    bandwidth, source, checks = _bandwidth(spec, warnings)
+    bandwidth, source, checks = _bandwidth(spec, warnings, design)
     ratio = (2 * np.pi / spec.Ts) / bandwidth if bandwidth > 0 else float("inf")
     if ratio < SAMPLE_RATE_FACTOR:
         warnings.append(
@@ -143,11 +146,11 @@ def _mode_warnings(mode_list: list, *, c_rank: int, c_cond: float, n: int) -> li
     return warnings
 
 
-def _bandwidth(spec: PlantSpec, warnings: list[str]) -> tuple[float, str, dict]:
+def _bandwidth(spec: PlantSpec, warnings: list[str], design: Callable[[PlantSpec], Any]) -> tuple[float, str, dict]:
     """The closed-loop bandwidth of the spec's own design (and its checks), or the fastest open-loop pole
     when the spec does not design (saying why)."""
     try:
-        result = synthesize(spec)
+        result = design(spec)
     except GainlinkError as exc:
         warnings.append(f"design of this spec fails: {exc}")
         fastest = max(

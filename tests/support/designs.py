@@ -2,7 +2,7 @@
 every pytest-xdist worker that asks for the same spec.
 
 The scheduled tank and its variants are designed by a dozen modules, at seconds of CPU each (the envelope's rate
-scan and its Lyapunov certificates). Tests of the design itself call :func:`gainlink.synthesis.synthesize`; tests
+scan and its Lyapunov certificates). Tests of the design itself call :func:`gainlink.laws.design`; tests
 that only need its artifact call :func:`designed`.
 """
 
@@ -13,8 +13,8 @@ import hashlib
 import json
 from typing import Any
 
+from gainlink.laws import design as design_spec
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 
 from .shared import once
 
@@ -27,5 +27,5 @@ def designed(spec: dict) -> dict[str, Any]:
     text = json.dumps(data, sort_keys=True, default=str)
     key = "design-" + hashlib.sha256(text.encode()).hexdigest()[:16]
     if key not in _LOCAL:
-        _LOCAL[key] = once(key, lambda: synthesize(parse_spec(data)).artifact)
+        _LOCAL[key] = once(key, lambda: design_spec(parse_spec(data)).artifact)
     return copy.deepcopy(_LOCAL[key])

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 from gainlink.firmware.mavlink_app import MavlinkFirmware
 from gainlink.hil.links.mavlink import MavlinkTransport
+from gainlink.laws import design as design_spec
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import Encoding
 from gainlink.mavlink.session import ParamSession, ParamValue
@@ -16,7 +17,6 @@ from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import Artifact
 from gainlink.spec import parse_spec
-from gainlink.synthesis import synthesize
 
 from .net import udp_port
 from .paths import EXAMPLES
@@ -28,7 +28,7 @@ def retuned_pendulum(path: Path) -> Path:
     spec["controller"]["Q_diag"] = [40.0, 1.0, 300.0, 2.0]
     spec["controller"]["R_diag"] = [3.0]
     spec["integral"]["Q_diag"] = [12.0]
-    artifact_mod.write(path, synthesize(parse_spec(spec)).artifact)
+    artifact_mod.write(path, design_spec(parse_spec(spec)).artifact)
     return path
 
 
