@@ -1,4 +1,4 @@
-"""`design --numeric` and the replay engines of a fixed-point artifact: `fixed` (the bit-exact model), `native`
+"""`design --numeric` and the replay engines of a fixed-point artifact: `model` (the bit-exact model), `native`
 (the host C) and `qemu` (the Cortex-M image) write the same trace, byte for byte; the flag overrides the spec's
 `[implementation] numeric`, and a fixed-point design without declared ranges is one line, exit 2, nothing written."""
 

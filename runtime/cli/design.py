@@ -10,7 +10,7 @@ import numpy as np
 
 from ..errors import DataError, GainlinkError, VerificationError
 from ..fileio import atomic_write_text, publish_files
-from ..laws import ENGINE_ALIASES, ENGINES, law_of
+from ..laws import ENGINES, law_of
 from ..proof.replay_io import compare_traces, read_samples, write_output
 from ..proof.simulation import samples_csv
 from ..shipping import artifact as artifact_mod
@@ -222,7 +222,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
     a = api.load(args.artifact)
     law = law_of(a)
-    engine = ENGINE_ALIASES.get(args.engine, args.engine)
+    engine = args.engine
     samples = read_samples(args.input, a, law.externals(a))
     other = None
     if args.compare:  # read and checked before the replay writes anything

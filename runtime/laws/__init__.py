@@ -14,7 +14,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from ..errors import LawError
-from .base import CELLS, ENGINE_ALIASES, ENGINES, Capabilities, Controller, FirmwareFiles, Law, OneStepVerdict, Step
+from .base import CELLS, ENGINES, Capabilities, Controller, FirmwareFiles, Law, OneStepVerdict, Step
 from .fixed import FixedLaw
 from .lq import LqLaw
 from .scheduled import ScheduledLaw
@@ -26,7 +26,6 @@ if TYPE_CHECKING:
 __all__ = [
     "CELLS",
     "ENGINES",
-    "ENGINE_ALIASES",
     "Capabilities",
     "Controller",
     "FirmwareFiles",

@@ -65,9 +65,6 @@ CELLS: tuple[str, ...] = (
 #: The replay engines of every law: its float64 law, the bit-exact model of its C, the host build of the C through
 #: ctypes, and a Cortex-M image under QEMU (``target`` and ``board`` choose which).
 ENGINES: tuple[str, ...] = ("reference", "model", "native", "qemu")
-#: Earlier names of an engine, still accepted: ``fixed`` was a fixed-point law's ``model`` (the fixed-point page's
-#: commands say ``--engine fixed``; remove the alias when they say ``model``).
-ENGINE_ALIASES: dict[str, str] = {"fixed": "model"}
 
 
 @dataclass(frozen=True)
@@ -257,7 +254,6 @@ class Law(ABC):
         DataError
             The law is scheduled on external signals and ``S`` is missing.
         """
-        engine = ENGINE_ALIASES.get(engine, engine)
         if engine not in ENGINES:
             known = ", ".join(ENGINES)
             raise GainlinkError(f"unknown engine {engine!r}{did_you_mean(engine, ENGINES)} (engines: {known})")
