@@ -1,5 +1,6 @@
 """`gainlink firmware run` of a fixed-point artifact runs its integer law: the host build's integer loop executable
-(gainlink_fixed_loop_host, firmware/ports/host/fixed_main.c), not the float32 loop of the same export.
+(gainlink_loop_host, firmware/ports/host/main.c: the one host main, running the integer law), not the float32 loop of
+the same export.
 
 With --input the replay CSV starts with the `# numeric=q31|q15` line `gainlink replay` writes for the artifact, and
 its commands, estimate and integrators are the integer words of the bit-exact numpy model
@@ -85,7 +86,7 @@ def test_firmware_run_replays_a_fixed_point_artifact_through_the_integer_loop(sa
     text = out.read_text()
     assert text.splitlines()[0] == f"# numeric={numeric}"
     assert text == format_trace(run_fixed(a, Y, R), t, numeric=numeric)
-    assert "gainlink_fixed_loop_host" in proc.stdout and f"{numeric} integer law" in proc.stdout, proc.stdout
+    assert "gainlink_loop_host" in proc.stdout and f"{numeric} integer law" in proc.stdout, proc.stdout
 
 
 def test_firmware_run_without_input_is_the_integer_loop_on_stdin(saved):
@@ -96,13 +97,21 @@ def test_firmware_run_without_input_is_the_integer_loop_on_stdin(saved):
     )
     assert proc.returncode == 0, proc.stderr
     out = proc.stdout.splitlines()
-    assert out[0] == f"gainlink-fixed {a.name} sha256:{a.sha256}"
-    steps = [[int(v) for v in line.split()[1:]] for line in out[1:]]
+    numeric = a.checks["fixed_point"]["numeric"]
+    assert (
+        out[0]
+        == f"gainlink-loop {a.name} sha256:{a.sha256} {a.n} {a.m} {a.p} {a.q} law={numeric} variant=unrolled wire=2"
+    )
+    # each step: status flags sat u (m floats), then the words U V (m), XH (n), Z (q), clip, overflow
+    steps = [line.split()[1:] for line in out[1:]]
     model = model_run(a, Y[:40], R[:40])
     fu = np.array(FixedPointLoop(a).f["u"])
-    for k, (flags, sat, clip, _ovf, *words) in enumerate(steps):
+    m = a.m
+    for k, words in enumerate(steps):
+        _status, flags, sat = (int(v) for v in words[:3])
+        *state, clip, _ovf = (int(v) for v in words[3 + m :])
         assert [sat, clip, bool(flags & 1)] == [model.sat[k], model.clip[k], model.fault[k]], k
-        assert words == [*model.U[k], *model.V[k], *model.XH[k], *model.Z[k]], k
+        assert state == [*model.U[k], *model.V[k], *model.XH[k], *model.Z[k]], k
     assert len(steps) == 40 and np.any(real(model.U, fu) != Float32Loop(a).run(Y[:40], R[:40]).u)
 
 
@@ -121,10 +130,10 @@ def test_the_integer_loop_answers_each_line_before_the_next_is_sent(saved):
     proc = subprocess.Popen([GAINLINK, "firmware", "run", str(path)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             bufsize=0)  # fmt: skip
     try:
-        assert _answer(proc, 300).startswith(f"gainlink-fixed {a.name} ")  # after the (cached) build
+        assert _answer(proc, 300).startswith(f"gainlink-loop {a.name} ")  # after the (cached) build
         for k in range(3):
             proc.stdin.write((" ".join(repr(float(v)) for v in np.concatenate([Y[k], R[k]])) + "\n").encode())
-            words = [int(v) for v in _answer(proc, 30).split()[5 : 5 + a.m]]
+            words = [int(v) for v in _answer(proc, 30).split()[4 + a.m : 4 + 2 * a.m]]  # step status flags sat u U
             assert words == list(model.U[k]), k
     finally:
         proc.stdin.close()

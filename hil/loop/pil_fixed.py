@@ -118,6 +118,7 @@ def model_records(a: Artifact, Y: np.ndarray, R: np.ndarray) -> np.ndarray:
         bits = [int(b) for b in (*s.clipped_y, *s.clipped_r)]
         overflow = sum(bit for name, bit in fwfixed.OVERFLOW_BITS.items() if name in s.overflow)
         rec["sat"] = sum(int(b) << i for i, b in enumerate(s.saturated))
+        rec["status"] = -2 if s.fault else (1 if rec["sat"] else 0)  # GL_ERR_NANINF, GL_SATURATED, GL_OK
         rec["clip"] = sum(b << i for i, b in enumerate(bits))
         rec["overflow"] = overflow
         flags = (fwfixed.FAULT if s.fault else 0) | (fwfixed.CLIPPED if any(bits) else 0)

@@ -8,7 +8,7 @@ import argparse
 def _export(args: argparse.Namespace) -> int:
     from gainlink.fileio import publish_files
     from gainlink.shipping.artifact import load
-    from gainlink.shipping.codegen_scheduled import render_export
+    from gainlink.shipping.export_c import render_export
 
     artifact = load(args.artifact)
     files = render_export(artifact)  # everything computed before anything is written

@@ -13,6 +13,7 @@ from pathlib import Path
 from ..errors import DataError, FirmwareError, GainlinkError, ToolchainError
 from ..firmware.targets import BOARDS, CORTEX_M_TARGETS, TARGETS, resolve, resolve_cortex_m
 from ..shipping.codegen_fixed import is_fixed
+from ..shipping.law_c import law_label
 
 _BOARD_HELP = "QEMU board of the Cortex-M image (default: the target's first): " + ", ".join(
     f"{b.name} ({b.core})" for b in BOARDS.values()
@@ -54,6 +55,7 @@ def _build(args: argparse.Namespace) -> int:
         "sha256": artifact.sha256,
         "target": args.target,
         "board": res.board,
+        "law": law_label(artifact),
         "files": {},
     }
     if platform.board is not None:
@@ -70,22 +72,15 @@ def _build(args: argparse.Namespace) -> int:
             ("static", "libgainlink_loop.a"),
             ("exe", "gainlink_loop_host"),
         ):
-            if role == "exe" and artifact.schedule is not None:
-                continue  # the scheduled loop has no stdin/stdout executable
             files[name] = res.files[role].read_bytes()
             manifest["files"][role] = name
-    if is_fixed(artifact):
-        _add_fixed(files, manifest, res, stem=stem)
     for name, text in sorted((p.name, p.read_text("utf-8")) for p in res.gains_dir.iterdir()):
         files[f"src/{name}"] = text
     files["firmware.json"] = json.dumps(manifest, indent=2) + "\n"
     written = publish_files(args.out, files)
     out = Path(args.out)
     if args.target == "host":
-        if artifact.schedule is None:
-            (out / "gainlink_loop_host").chmod(0o755)
-        if is_fixed(artifact):
-            (out / "gainlink_fixed_loop_host").chmod(0o755)
+        (out / "gainlink_loop_host").chmod(0o755)
     else:
         print(
             f"flash {report['flash_bytes']} B, RAM {report['ram_bytes_without_stack']} B + stack "
@@ -96,28 +91,6 @@ def _build(args: argparse.Namespace) -> int:
         + ", ".join(p.name for p in written if p.parent == out)
     )
     return 0
-
-
-def _add_fixed(files: dict, manifest: dict, res, *, stem: str) -> None:
-    """A fixed-point artifact's integer loop beside the float32 one: the image ``{stem}_fixed.*`` (replay over
-    semihosting, firmware/ports/cortex-m/main_fixed.c) or the host library and executable."""
-    from gainlink.firmware.size import size_report
-
-    cm = res.build_dir
-    fixed: dict[str, str] = {}
-    if res.board is not None:
-        for ext in ("elf", "bin", "hex", "map"):
-            files[f"{stem}_fixed.{ext}"] = (cm / f"gainlink_fixed_image.{ext}").read_bytes()
-            fixed[ext] = f"{stem}_fixed.{ext}"
-        report = size_report(cm / "gainlink_fixed_image.elf", board=res.board)
-        report["elf"] = f"{stem}_fixed.elf"
-        files[f"{stem}_fixed.size.json"] = json.dumps(report, indent=2) + "\n"
-        fixed["size"] = f"{stem}_fixed.size.json"
-    else:
-        for role, name in (("shared", "libgainlink_fixed_host.so"), ("exe", "gainlink_fixed_loop_host")):
-            files[name] = (cm / name).read_bytes()
-            fixed[role] = name
-    manifest["fixed_point"] = fixed
 
 
 # --- firmware flash ---------------------------------------------------------------------------------
@@ -174,9 +147,7 @@ def _run_host(args: argparse.Namespace) -> int:
     from gainlink.shipping.artifact import load
 
     artifact = load(args.artifact)
-    res = build(
-        artifact, target="host", only="gainlink_fixed_loop_host" if is_fixed(artifact) else "gainlink_loop_host"
-    )
+    res = build(artifact, target="host", only="gainlink_loop_host")
     if is_fixed(artifact):  # the integer law the artifact certifies, not the float32 loop of the same export
         from ._fixed_run import run_fixed_host
 
@@ -200,30 +171,16 @@ def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: 
     from gainlink.proof.reference import Trace
     from gainlink.proof.replay_io import format_trace, read_samples
 
-    from ._host_exec import answer_samples
+    from ._host_exec import answer_samples, parse_records
 
     a = artifact
     samples = read_samples(input_path, a)
     stdout, N = answer_samples(exe, samples.Y, samples.R)
-    out = stdout.splitlines()[1:]  # skip the banner
-    U, S, XH, Z, F = (
-        np.zeros((N, a.m)),
-        np.zeros((N, a.m), bool),
-        np.zeros((N, a.n)),
-        np.zeros((N, a.q)),
-        np.zeros(N, bool),
-    )
-    for k, line in enumerate(out[:N]):
-        parts = line.split()
-        status = int(parts[1])
-        vals = [float(v) for v in parts[2:]]
-        U[k] = vals[: a.m]
-        mask = int(vals[a.m])
-        S[k] = [(mask >> i) & 1 for i in range(a.m)]
-        XH[k] = vals[a.m + 1 : a.m + 1 + a.n]
-        Z[k] = vals[a.m + 1 + a.n :]
-        F[k] = status == -2
-    trace = Trace(u=U, saturated=S, xh=XH, z=Z, fault=F)
+    rec = parse_records(a, stdout, count=N, executable=exe.name)
+    S = ((rec["sat"][:, None] >> np.arange(a.m)) & 1).astype(bool)
+    F = rec["status"] == -2
+    trace = Trace(u=rec["u"].astype(float), saturated=S, xh=rec["xh"].astype(float), z=rec["z"][:, : a.q].astype(float),
+                  fault=F)  # fmt: skip
     text = format_trace(trace, samples.t)
     if output_path is None:
         sys.stdout.write(text)

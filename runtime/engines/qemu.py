@@ -22,7 +22,7 @@ def run_raw(
     a = artifact
     platform = resolve_cortex_m(target, board)
     elf = replay_image(a, target=platform.target.name, board=platform.board.name)
-    rec = fwqemu.replay(elf, board=platform.board.name, n=a.n, m=a.m, p=a.p, q=a.q, Y=Y, R=R)
+    rec = fwqemu.replay(elf, a, board=platform.board.name, Y=Y, R=R if a.q else None)
     return {
         "u": np.array(rec["u"]),
         "sat": np.array(rec["sat"]),

@@ -23,7 +23,7 @@ from pathlib import Path
 from ..errors import ToolchainError
 from ..fileio import exclusive_lock
 from ..shipping.artifact import Artifact
-from ..shipping.codegen_scheduled import render_export
+from ..shipping.export_c import render_export
 from . import targets as _targets
 
 log = logging.getLogger(__name__)

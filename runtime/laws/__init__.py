@@ -14,6 +14,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..errors import LawError
+from ..shipping.law_c import law_pair
 from .base import CELLS, Capabilities, Controller, Law, Step
 from .fixed import FixedLaw
 from .lq import LqLaw
@@ -52,8 +53,6 @@ def law_for(structure: str, numeric: str = "float32") -> Law:
 
 
 def law_of(artifact: Any) -> Law:
-    """The law ``artifact`` runs: the one place that reads which (module docstring)."""
-    data = artifact.data
-    structure = "scheduled" if data.get("schedule") is not None else "lq"
-    fixed = data.get("checks", {}).get("fixed_point")
-    return law_for(structure, "float32" if fixed is None else str(fixed["numeric"]))
+    """The law ``artifact`` runs. Which it is, is read in one place, :func:`gainlink.shipping.law_c.law_pair`, below
+    this layer because the C export names the law too (module docstring)."""
+    return law_for(*law_pair(artifact))

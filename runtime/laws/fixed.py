@@ -11,14 +11,6 @@ from . import flags
 from .base import Controller, Step
 from .lq import LqLaw, PythonLoop, sat_bits
 
-#: gl_fixed.h's GL_FX_FAULT, GL_FX_CLIPPED, GL_FX_OVERFLOW as the status flags.
-_FX_FLAGS = ((1, flags.FAULT), (2, flags.CLIPPED), (4, flags.OVERFLOW))
-
-
-def status_flags(fx: int) -> int:
-    """The status flags of the fixed-point C's own flag word."""
-    return sum(bit for fx_bit, bit in _FX_FLAGS if fx & fx_bit)
-
 
 def _as_float32(x: np.ndarray) -> np.ndarray:
     return np.asarray(x, dtype=np.float32).astype(np.float64)
@@ -67,9 +59,9 @@ class FixedNative:
     def step(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> Step:
         """One sample through ``gl_fixed_step``."""
         out = self.loop.step(y, r)
-        rec = self.loop.last_record
-        return Step(u=np.asarray(out.u, dtype=float), flags=status_flags(int(rec["flags"])),
-                    sat=int(out.sat_mask), word=np.array(rec["U"], dtype=np.int64))  # fmt: skip
+        rec = self.loop.last_record  # its flags are the status flags (the one table)
+        return Step(u=np.asarray(out.u, dtype=float), flags=int(rec["flags"]), sat=int(out.sat_mask),
+                    word=np.array(rec["U"], dtype=np.int64))  # fmt: skip
 
     def reset(self) -> None:
         """``gl_fixed_reset``."""

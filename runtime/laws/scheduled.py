@@ -45,15 +45,13 @@ class ScheduledNative:
         from ..engines.sched_native import NativeScheduledLoop
 
         self.loop = NativeScheduledLoop(artifact, library=library)
-        self.sigma_at = artifact.n + artifact.m + artifact.p + artifact.q  # sigma in the state vector
         self.describe = {"kind": "firmware (host scheduled C loop, ctypes)", "library": str(self.loop.library)}
 
     def step(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> Step:
-        """One sample through ``gl_sched_step``."""
-        raw = self.loop.run_raw(y[None, :], r[None, :], s[None, :] if s.size else None)
-        fault = int(raw["status"][0]) == -2  # GL_SCHED_ERR_NANINF
-        return Step(u=raw["u"][0].astype(float), flags=status_flags(int(raw["sflags"][0]), fault=fault),
-                    sat=int(raw["sat"][0]), sigma=float(raw["state"][0, self.sigma_at]))  # fmt: skip
+        """One sample through ``gl_sched_step``: its record's flags are the status flags (the one table)."""
+        rec = self.loop.host.step(y, r, s if s.size else None)
+        return Step(u=rec["u"].astype(float), flags=int(rec["flags"]), sat=int(rec["sat"]),
+                    sigma=float(rec["sigma"]))  # fmt: skip
 
     def reset(self) -> None:
         """``gl_sched_reset``."""

@@ -2,13 +2,13 @@
  * @file gl_mav_node.h
  * @brief The MAVLink node of the control loop, independent of its transport: bytes in, bytes out.
  *
- * One node holds the loop (::gl_loop_t), its parameter table and the MAVLink parse state of one
+ * One node holds the build's law (::gl_law_t of gl_law.h), its parameter table and the MAVLink parse state of one
  * channel. Whatever carries the bytes (UDP on the host, a UART on the Cortex-M image, a fuzz harness)
  * feeds them to gl_mav_node_input() and gets the answers through ::gl_mav_port_t::send. It speaks:
  *
  * - HEARTBEAT at 1 Hz (gl_mav_node_poll()) and on demand (gl_mav_node_heartbeat(), e.g. to a new peer):
- *   MAV_TYPE_GENERIC, MAV_AUTOPILOT_GENERIC, custom_mode = the law it runs (GL_MAV_LAW_ID: 0 float32, 31 q31,
- *   15 q15; gl_mav_law.h).
+ *   MAV_TYPE_GENERIC, MAV_AUTOPILOT_GENERIC, custom_mode = the law it runs (GL_LAW_ID of gl_law.h: 0 float32, 31 q31,
+ *   15 q15, 256 scheduled-float32).
  * - AUTOPILOT_VERSION on MAV_CMD_REQUEST_MESSAGE(148) or MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
  *   capabilities MAVLINK2 | PARAM_ENCODE_BYTEWISE, flight_custom_version = first 8 hex digits of the
  *   artifact's sha256, middleware_custom_version = "gainlink" (how an uploader tells a gainlink node, whose uid
@@ -57,10 +57,7 @@
 #include <stdint.h>
 
 #include "common/mavlink.h"
-#include "gl_mav_law.h"
-#if !(defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED)
-#include "gainlink/gl_loop.h"
-#endif
+#include "gainlink/gl_law.h"
 #include "gl_mav_params.h"
 #include "gl_mav_platform.h" /* gl_mav_storage_t, GL_MAV_KEY_LEN */
 #include "gl_mav_store.h"
@@ -156,14 +153,7 @@ typedef struct gl_mav_node_config {
 typedef struct gl_mav_node {
     gl_mav_node_config_t cfg;          /**< Configuration. */
     gl_mav_params_t table;             /**< Parameters over the staged and committed sets. */
-#if defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
-    gl_mav_sched_t sched;              /**< The scheduled law the node runs (gl_mav_law.h). */
-#else
-    gl_loop_t loop;                    /**< The control loop (float32; with a fixed-point law, the float gains'). */
-#endif
-#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
-    gl_mav_fixed_t fixed;              /**< The integer law the node runs (gl_mav_law.h). */
-#endif
+    gl_law_t law;                      /**< The law the node runs (gl_law.h), on the table's committed set. */
     gl_mav_node_stats_t stats;         /**< Counters. */
     int dirty;                         /**< A committed set waits to be staged into the loop. */
     uint64_t next_beat_us;             /**< When the next HEARTBEAT is due. */
@@ -193,7 +183,7 @@ gl_status_t gl_mav_node_init(gl_mav_node_t *node, const gl_mav_node_config_t *cf
 /**
  * @brief Make `dst` a copy of `src` (a snapshot to restore, e.g. a fuzz harness's freshly initialised node).
  *
- * Parameters, loop (running on its own coefficient bank, see gl_loop_copy()), counters, key and replay state
+ * Parameters, law (running on its own state and its own table's set, see gl_law_copy()), counters, key and replay state
  * are copied; the MAVLink channel starts afresh as after gl_mav_node_init() (no frame in progress) and, with a
  * key, checks signatures against `dst`. `src` must not be in use on the same channel afterwards.
  * @param[out] dst Copy.
