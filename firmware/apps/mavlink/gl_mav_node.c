@@ -11,15 +11,6 @@
 #define HIL_ARRAY_SAMPLE 1
 #define HIL_ARRAY_RESET 2
 #define HIL_ARRAY_IDLE 3
-#define HIL_FLAG_FAULT 0x1u
-#define HIL_FLAG_WATCHDOG 0x2u
-#define HIL_FLAG_RESET 0x4u
-#define HIL_FLAG_CLIPPED 0x8u
-#define HIL_FLAG_OVERFLOW 0x10u
-#define HIL_FLAG_SIGMA_HELD 0x20u
-#define HIL_FLAG_SIGMA_CLIPPED 0x40u
-#define HIL_FLAG_SIGMA_RATE 0x80u
-#define HIL_SAT_SHIFT 8
 #define HEARTBEAT_PERIOD_US 1000000u
 /** Room kept free while streaming a parameter list, so a HIL answer always fits beside it. */
 #define LIST_HEADROOM (2u * MAVLINK_MAX_PACKET_LEN)
@@ -111,8 +102,8 @@ static void send_version(gl_mav_node_t *node)
     mavlink_message_t msg;
     mavlink_msg_autopilot_version_pack_chan(
         node->cfg.sysid, node->cfg.compid, node->cfg.chan, &msg,
-        MAV_PROTOCOL_CAPABILITY_MAVLINK2 | MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE, 0x00010000u, 0, 0, 0, custom,
-        mark, none, 0, 0, node->table.committed.crc32, uid2);
+        MAV_PROTOCOL_CAPABILITY_MAVLINK2 | MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE, 0x00010000u, GL_WIRE_VERSION, 0,
+        0, custom, mark, none, 0, 0, node->table.committed.crc32, uid2);
     emit(node, GL_MAV_TO_SENDER, &msg);
 }
 
@@ -358,20 +349,11 @@ static void reset_law(gl_mav_node_t *node, gl_law_out_t *out)
     (void)gl_law_reset(&node->law, out);
 }
 
-/** The HIL_ACTUATOR_CONTROLS flags of an answer: the law's status flags and its saturation mask. */
+/** The HIL_ACTUATOR_CONTROLS flags of an answer (wire format 2): MAVLink's own bits 0-15 left alone (bit 0 is its
+ *  LOCKSTEP flag), the law's status flags (the one table, gl_flags.h) at bits 16-23, the saturation mask at 32-47. */
 static uint64_t hil_flags(const gl_law_out_t *out)
 {
-    static const uint32_t bits[][2] = {
-        {GL_FLAG_FAULT, HIL_FLAG_FAULT},           {GL_FLAG_WATCHDOG, HIL_FLAG_WATCHDOG},
-        {GL_FLAG_RESET, HIL_FLAG_RESET},           {GL_FLAG_CLIPPED, HIL_FLAG_CLIPPED},
-        {GL_FLAG_OVERFLOW, HIL_FLAG_OVERFLOW},     {GL_FLAG_SIGMA_HELD, HIL_FLAG_SIGMA_HELD},
-        {GL_FLAG_SIGMA_CLIPPED, HIL_FLAG_SIGMA_CLIPPED}, {GL_FLAG_SIGMA_RATE, HIL_FLAG_SIGMA_RATE},
-    };
-    uint64_t flags = (uint64_t)out->sat << HIL_SAT_SHIFT;
-    for (size_t k = 0; k < sizeof bits / sizeof bits[0]; ++k) {
-        flags |= (out->flags & bits[k][0]) != 0u ? bits[k][1] : 0u;
-    }
-    return flags;
+    return ((uint64_t)(out->flags & 0xFFu) << GL_FLAGS_MAVLINK_SHIFT) | ((uint64_t)out->sat << GL_SAT_MAVLINK_SHIFT);
 }
 
 static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)

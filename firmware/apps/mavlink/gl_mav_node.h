@@ -12,20 +12,20 @@
  * - AUTOPILOT_VERSION on MAV_CMD_REQUEST_MESSAGE(148) or MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
  *   capabilities MAVLINK2 | PARAM_ENCODE_BYTEWISE, flight_custom_version = first 8 hex digits of the
  *   artifact's sha256, middleware_custom_version = "gainlink" (how an uploader tells a gainlink node, whose uid
- *   it may read as a gain set, from other autopilots, whose uid is a hardware id), uid = CRC-32 of the committed
- *   gain set.
+ *   it may read as a gain set, from other autopilots, whose uid is a hardware id) and middleware_sw_version = the
+ *   sample/command wire format (GL_WIRE_VERSION: 2), uid = CRC-32 of the committed gain set.
  * - SYS_STATUS on MAV_CMD_REQUEST_MESSAGE(1): the link's error counters (see gl_mav_node_stats_t).
  * - The parameter protocol over the gain set (naming in gl_mav_params.h): PARAM_REQUEST_LIST (streamed as
  *   the transport has room), PARAM_REQUEST_READ by id or index (PARAM_ERROR when unknown), PARAM_SET
  *   always answered with PARAM_VALUE (the value now held), then PARAM_ERROR when refused.
  * - MAV_CMD_PREFLIGHT_STORAGE param1 = 0 reload from storage, 1 write the committed set to it, 2 reset to
  *   the compiled set; COMMAND_ACK each.
- * - HIL: DEBUG_FLOAT_ARRAY array_id 1 (`GL_SAMPLE`, data = y then r) answered by HIL_ACTUATOR_CONTROLS
- *   with the same time_usec, controls = u, flags bit 0 fault, bit 1 watchdog, bit 2 reset done, bits 8+k
- *   saturation of input k (a fixed-point law also bit 3 a sample clipped to its range, bit 4 its second-line
- *   saturation; a scheduled law data = y, r, then its GL_E external scheduling signals, and bits 5, 6, 7 its
- *   sigma held, clipped, rate-limited); array_id 2 resets the loop state, 3 is a period without a measurement.
- *   A committed gain set is staged into the loop right before the next step.
+ * - HIL: DEBUG_FLOAT_ARRAY array_id 1 (`GL_SAMPLE`, data = y then r, then a scheduled law's GL_LAW_E external
+ *   scheduling signals) answered by HIL_ACTUATOR_CONTROLS with the same time_usec, controls = u and flags in wire
+ *   format 2: bits 0-15 MAVLink's own (bit 0 its LOCKSTEP flag; none set), bits 16-23 the step's status flags
+ *   (GL_FLAG_* of gl_flags.h, the one table: fault, watchdog, clipped, overflow, sigma held, clipped,
+ *   rate-limited, reset), bits 32+k input k saturated; array_id 2 resets the law's state (answered with RESET), 3
+ *   is a period without a measurement. A committed gain set is staged into the law right before the next step.
  *
  * Events (storage loaded, commit, refusal, ...) go to one hook, ::gl_mav_port_t::event, never to a
  * stream: the caller decides whether and how to log them.
