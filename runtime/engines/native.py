@@ -21,6 +21,7 @@ from ..shipping import gains_layout
 from ..shipping.artifact import Artifact
 from ..shipping.codegen import shape_of
 from ..shipping.codegen_fixed import is_fixed
+from ..shipping.records import column
 from . import fixed as fixed_engine
 
 
@@ -112,8 +113,9 @@ class NativeLoop:
         """Run a block in one C call; return the float32 outputs as arrays (``u sat xh z fault``)."""
         a = self.artifact
         rec = self.host.run(Y, R if a.q else None)
-        return {"u": np.array(rec["u"]), "sat": np.array(rec["sat"]), "xh": np.array(rec["xh"]),
-                "z": np.array(rec["z"][:, : a.q]), "fault": (rec["status"] == -2).astype(np.uint8)}  # fmt: skip
+        z = np.ascontiguousarray(column(rec, "z")[:, : a.q])
+        return {"u": column(rec, "u"), "sat": column(rec, "sat"), "xh": column(rec, "xh"), "z": z,
+                "fault": (rec["status"] == -2).astype(np.uint8)}  # fmt: skip
 
     def run(self, Y: np.ndarray, R: np.ndarray | None = None) -> Trace:
         """Run a block of samples from the current state; see :func:`run`."""

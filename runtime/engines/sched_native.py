@@ -17,10 +17,15 @@ from ..firmware.host import HostLaw
 from ..proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledTrace
 from ..shipping import flags
 from ..shipping.artifact import Artifact
+from ..shipping.records import column
 
 _FP = ctypes.POINTER(ctypes.c_float)
 #: The status flags of the record and the scheduled law's own sigma flags (proof.scheduled_reference).
 _SIGMA = ((flags.SIGMA_HELD, SIGMA_HELD), (flags.SIGMA_CLIPPED, SIGMA_CLIPPED), (flags.SIGMA_RATE, SIGMA_RATE))
+_SIGMA_LOW = min(bit for bit, _ in _SIGMA).bit_length() - 1
+_SIGMA_SPAN = max(bit for bit, _ in _SIGMA).bit_length() - _SIGMA_LOW
+#: The own flags of each value of the record's flag bits _SIGMA_LOW .. + _SIGMA_SPAN (one lookup per record).
+_SIGMA_OWN = np.array([sum(own for bit, own in _SIGMA if (k << _SIGMA_LOW) & bit) for k in range(1 << _SIGMA_SPAN)])
 
 
 def state_length(a: Artifact) -> int:
@@ -31,13 +36,13 @@ def state_length(a: Artifact) -> int:
 def sigma_flags(status_flags: np.ndarray) -> np.ndarray:
     """The scheduled law's own sigma flags of records' status flags."""
     status_flags = np.asarray(status_flags, dtype=np.int64)
-    return sum(np.where(status_flags & bit, own, 0) for bit, own in _SIGMA).astype(int)
+    return _SIGMA_OWN[(status_flags >> _SIGMA_LOW) & ((1 << _SIGMA_SPAN) - 1)]
 
 
 def raw_of_records(rec: np.ndarray) -> dict[str, np.ndarray]:
     """The records of a scheduled law as the arrays :func:`scheduled_trace_from_raw` takes."""
-    return {"u": np.array(rec["u"]), "sat": np.array(rec["sat"]), "sflags": sigma_flags(rec["flags"]),
-            "state": np.array(rec["state"]), "status": np.array(rec["status"])}  # fmt: skip
+    return {"u": column(rec, "u"), "sat": column(rec, "sat"), "sflags": sigma_flags(rec["flags"]),
+            "state": column(rec, "state"), "status": column(rec, "status")}  # fmt: skip
 
 
 class NativeScheduledLoop:

@@ -87,7 +87,9 @@ int32_t gl_host_law_init(gl_law_t *law, uint32_t watchdog_periods)
     return (int32_t)gl_law_init(law, watchdog_periods);
 }
 
-int32_t gl_host_law_step(gl_law_t *law, const float *y, const float *r, const float *s, gl_law_record_t *rec)
+/* The exported entry points and gl_host_law_run() share these (a call between exported functions of a shared
+ * library goes through its PLT). */
+static inline int32_t host_step(gl_law_t *law, const float *y, const float *r, const float *s, gl_law_record_t *rec)
 {
     gl_law_out_t out;
     const gl_status_t st = gl_law_step(law, y, GL_Q > 0 ? r : NULL, GL_LAW_E > 0 ? s : NULL, &out);
@@ -95,7 +97,7 @@ int32_t gl_host_law_step(gl_law_t *law, const float *y, const float *r, const fl
     return (int32_t)st;
 }
 
-int32_t gl_host_law_idle(gl_law_t *law, gl_law_record_t *rec)
+static inline int32_t host_idle(gl_law_t *law, gl_law_record_t *rec)
 {
     gl_law_out_t out;
     const gl_status_t st = gl_law_idle(law, &out);
@@ -103,12 +105,27 @@ int32_t gl_host_law_idle(gl_law_t *law, gl_law_record_t *rec)
     return (int32_t)st;
 }
 
-int32_t gl_host_law_reset(gl_law_t *law, gl_law_record_t *rec)
+static inline int32_t host_reset(gl_law_t *law, gl_law_record_t *rec)
 {
     gl_law_out_t out;
     const gl_status_t st = gl_law_reset(law, &out);
     gl_law_record(law, &out, rec);
     return (int32_t)st;
+}
+
+int32_t gl_host_law_step(gl_law_t *law, const float *y, const float *r, const float *s, gl_law_record_t *rec)
+{
+    return host_step(law, y, r, s, rec);
+}
+
+int32_t gl_host_law_idle(gl_law_t *law, gl_law_record_t *rec)
+{
+    return host_idle(law, rec);
+}
+
+int32_t gl_host_law_reset(gl_law_t *law, gl_law_record_t *rec)
+{
+    return host_reset(law, rec);
 }
 
 int32_t gl_host_law_stage(gl_law_t *law, const gl_law_gains_t *gains)
@@ -125,12 +142,12 @@ void gl_host_law_run(gl_law_t *law, uint32_t count, const gl_law_sample_t *in, g
 {
     for (uint32_t k = 0; k < count; ++k) {
         const gl_law_sample_t *x = &in[k];
-        if (x->tag == GL_LAW_TAG_IDLE) {
-            (void)gl_host_law_idle(law, &out[k]);
+        if (x->tag == GL_LAW_TAG_STEP) {
+            (void)host_step(law, x->y, x->r, x->s, &out[k]);
+        } else if (x->tag == GL_LAW_TAG_IDLE) {
+            (void)host_idle(law, &out[k]);
         } else if (x->tag == GL_LAW_TAG_RESET) {
-            (void)gl_host_law_reset(law, &out[k]);
-        } else if (x->tag == GL_LAW_TAG_STEP) {
-            (void)gl_host_law_step(law, x->y, x->r, x->s, &out[k]);
+            (void)host_reset(law, &out[k]);
         } else {
             gl_law_out_t none;
             memset(&none, 0, sizeof none);
