@@ -1,6 +1,6 @@
 """PIL of a fixed-point artifact: the integer image's oracle (docs/design.md, fixed point: PIL).
 
-Two checks of the run the image (``firmware/ports/cortex-m/main_fixed.c``) made in closed loop:
+Two checks of the run the image (``firmware/ports/cortex-m/main.c`` on the integer law) made in closed loop:
 
 - **bit for bit**: the bit-exact model (:class:`~gainlink.proof.fixed_law.FixedPointLoop`) fed the very float32
   samples and references the image received, from the initial state, must write the image's records step for

@@ -271,7 +271,7 @@ def render_step(artifact: Artifact) -> str:
     return (
         _banner(artifact) + "/**\n * @file gl_fixed_step.h\n"
         " * @brief The sums of the fixed-point law written out row by row (included by gl_fixed.c when\n"
-        " *        GL_FX_UNROLLED): the terms of gl_fixed_gains_default, same order, so bit for bit the generic loop.\n"
+        " *        GL_FX_UNROLLED): the terms of gl_fixed_default, same order, so bit for bit the generic loop.\n"
         " */\n#ifndef GL_FIXED_STEP_H\n#define GL_FIXED_STEP_H\n\n"
         f"_Static_assert(GL_FX_TERMS == {len(rows)} && GL_FX_ROWS == {len(ends)},\n"
         '               "gl_fixed_step.h does not match");\n\n'
