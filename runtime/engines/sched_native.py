@@ -17,7 +17,6 @@ from ..firmware.host import HostLaw
 from ..proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledTrace
 from ..shipping import flags
 from ..shipping.artifact import Artifact
-from ..shipping.records import column
 
 _FP = ctypes.POINTER(ctypes.c_float)
 #: The status flags of the record and the scheduled law's own sigma flags (proof.scheduled_reference).
@@ -40,9 +39,10 @@ def sigma_flags(status_flags: np.ndarray) -> np.ndarray:
 
 
 def raw_of_records(rec: np.ndarray) -> dict[str, np.ndarray]:
-    """The records of a scheduled law as the arrays :func:`scheduled_trace_from_raw` takes."""
-    return {"u": column(rec, "u"), "sat": column(rec, "sat"), "sflags": sigma_flags(rec["flags"]),
-            "state": column(rec, "state"), "status": column(rec, "status")}  # fmt: skip
+    """The records of a scheduled law as the arrays :func:`scheduled_trace_from_raw` takes: views of the records (a
+    copy of the state column alone would cost as much as the step)."""
+    return {"u": rec["u"], "sat": rec["sat"], "sflags": sigma_flags(rec["flags"]), "state": rec["state"],
+            "status": rec["status"]}  # fmt: skip
 
 
 class NativeScheduledLoop:
@@ -80,7 +80,7 @@ class NativeScheduledLoop:
         return out
 
     def run_raw(self, Y, R=None, S=None) -> dict[str, np.ndarray]:
-        """Run a block in one C call; float32 outputs ``u sat sflags state status``."""
+        """Run a block in one C call; float32 outputs ``u sat sflags state status`` (views of one record array)."""
         return raw_of_records(self.host.run(Y, R, S if self.e else None))
 
     def run(self, Y, R=None, S=None) -> ScheduledTrace:
