@@ -1,9 +1,10 @@
 """The fixed-point law against float32 on the Cortex-M cores: instructions per step in QEMU, flash and RAM.
 
 Prints JSON. The pendulum example (Kalman, integral action, back-calculation) designed with ``[implementation]
-numeric = "q31"`` (its certificate in the artifact); one artifact gives both images, the float32 loop
-(``gainlink_image``, ``gl_loop_step``) and the integer one (``gainlink_fixed_image``, ``gl_fixed_step``), run on
-the same 2000 samples (those of ``bench/firmware_cost.py``; the q31 law clips them to the declared ranges).
+numeric = "q31"`` (its certificate in the artifact). Its image runs the integer law (``gl_fixed_step``, the unrolled
+variant: the replay-only image, ``GL_IMAGE_SERVE=OFF``); the float32 baseline is the same export built with
+``GL_LAW=lq_float32`` (``gl_loop_step``: the export holds the float gains too), both run on the same 2000 samples
+(those of ``bench/firmware_cost.py``; the q31 law clips them to the declared ranges).
 Instructions are counted from each call of the step to its return, callees included (gainlink.firmware.cost), so
 the soft-float routines of the M0 and M3 and the float conversions of the fixed step are in the count.
 
@@ -58,13 +59,17 @@ def _size(elf: Path, board: str, symbols: tuple[str, ...]) -> dict:
     }
 
 
+#: The float32 baseline of the q31 artifact: its export's float gains, the law alone (cmake/law.cmake).
+BASELINE = {"GL_LAW": "lq_float32", "GL_IMAGE_SERVE": "OFF"}
+
+
 def measure(target: str, artifact, Y, R) -> dict:
     board = TARGETS[target].default_board
     fpu = TARGETS[target].hardware_fma
-    elf_q, _ = fixed.image(artifact, target=target)
-    q = fixed.count_step_instructions(elf_q, artifact, Y, R, board=board)
-    elf_f = build(artifact, target=target).files["elf"]
-    f = count_step_instructions(elf_f, artifact, Y=Y, R=R, board=board)
+    elf_q, _ = fixed.image(artifact, target=target, options=fixed.REPLAY_OPTIONS)
+    q = count_step_instructions(elf_q, artifact, Y=Y, R=R, board=board)
+    elf_f = build(artifact, target=target, options=BASELINE).files["elf"]
+    f = count_step_instructions(elf_f, artifact, Y=Y, R=R, board=board, law="lq/float32")
     row = {
         "target": target,
         "board": board,
@@ -74,12 +79,12 @@ def measure(target: str, artifact, Y, R) -> dict:
         "q31_own_instructions_per_step": round(q.own_per_step, 1),
         "float32_instructions_per_step": round(f.per_step, 1),
         "ratio_float32_to_q31": round(f.per_step / q.per_step, 2),
-        "q31_image": _size(elf_q, board, ("gl_fixed_step", "gl_fixed_gains_default")),
+        "q31_image": _size(elf_q, board, ("gl_fixed_step", "gl_fixed_default")),
         "float32_image": _size(elf_f, board, ("gl_loop_step", "gl_gains_default")),
     }
     if not fpu:
-        plain = build(artifact, target=target, options={"GL_SOFT_FMA": "plain"}).files["elf"]
-        p = count_step_instructions(plain, artifact, Y=Y, R=R, board=board)
+        plain = build(artifact, target=target, options=BASELINE | {"GL_SOFT_FMA": "plain"}).files["elf"]
+        p = count_step_instructions(plain, artifact, Y=Y, R=R, board=board, law="lq/float32")
         row["float32_plain_fma_instructions_per_step"] = round(p.per_step, 1)
         row["ratio_float32_plain_to_q31"] = round(p.per_step / q.per_step, 2)
     return row

@@ -27,7 +27,6 @@ from gainlink.engines.sched_native import NativeScheduledLoop
 from gainlink.fileio import read_toml
 from gainlink.firmware.build import build
 from gainlink.firmware.cost import count_step_instructions
-from gainlink.firmware.sched_cost import count_sched_step_instructions
 from gainlink.firmware.size import size_report, symbol_sizes
 from gainlink.laws import design as design_spec
 from gainlink.shipping.artifact import from_dict
@@ -95,9 +94,9 @@ def main() -> int:
     elf_e = build(ext, target="cortex-m4").files["elf"]
     elf_p = build(plain, target="cortex-m4").files["elf"]
     base = count_step_instructions(elf_p, plain, Y=Y, R=R)
-    moving = count_sched_step_instructions(elf_s, sched, Y=Y, R=R, S=None)
-    standing = count_sched_step_instructions(elf_s, sched, Y=Ys, R=R, S=None)
-    external = count_sched_step_instructions(elf_e, ext, Y=Y, R=R, S=H)
+    moving = count_step_instructions(elf_s, sched, Y=Y, R=R)
+    standing = count_step_instructions(elf_s, sched, Y=Ys, R=R)
+    external = count_step_instructions(elf_e, ext, Y=Y, R=R, S=H)
     Yh, Rh, _ = samples(HOST_STEPS)
     nat_p, nat_s = NativeLoop(plain), NativeScheduledLoop(sched)
     Yhs, _, _ = samples(HOST_STEPS, standing=True)

@@ -55,6 +55,11 @@ _FIRMWARE_C = (
     "runtime/shipping/codegen_fixed.py",
     "runtime/shipping/codegen_scheduled.py",
     "runtime/shipping/gains_layout.py",
+    "runtime/shipping/export_c.py",
+    "runtime/shipping/flags.py",
+    "runtime/shipping/law_c.py",
+    "runtime/shipping/params.py",
+    "runtime/shipping/records.py",
 )
 _HOST_LINKS = ("hil/loop", "hil/links", "firmware/apps", "firmware/ports/host")
 SOURCES: dict[str, tuple[str, ...]] = {
@@ -216,8 +221,9 @@ def missing(what: str, target: str) -> str:
 @functools.cache
 def image_sizes() -> dict[tuple[str, str], Doc]:
     """Flash and RAM of the pendulum's images, built now (cached builds, as the test suite's): the float32 image on
-    every core (``("float32", target)``) and, for the cores of ``bench/fixed_point_cost.py``, both images of its q31
-    design (``("q31", target)``, ``("q31-float32", target)``)."""
+    every core (``("float32", target)``) and, for the cores of ``bench/fixed_point_cost.py``, the two images it counts
+    of its q31 design (``("q31", target)``: the integer law's replay image; ``("q31-float32", target)``: the float32
+    baseline of the same export, ``GL_LAW=lq_float32``)."""
     import logging
 
     from gainlink.firmware import fixed
@@ -229,7 +235,7 @@ def image_sizes() -> dict[tuple[str, str], Doc]:
     from gainlink.spec import load_spec
 
     sys.path.insert(0, str(ROOT / "bench"))
-    from fixed_point_cost import CORES, pendulum_q31
+    from fixed_point_cost import BASELINE, CORES, pendulum_q31
 
     logging.disable(logging.WARNING)
     pendulum = from_dict(design_spec(load_spec(ROOT / "examples" / "pendulum.toml")).artifact)
@@ -240,9 +246,11 @@ def image_sizes() -> dict[tuple[str, str], Doc]:
     q31 = pendulum_q31()
     for target in CORES:
         board = TARGETS[target].default_board
-        elf_q, _ = fixed.image(q31, target=target)
+        elf_q, _ = fixed.image(q31, target=target, options=fixed.REPLAY_OPTIONS)
         sizes["q31", target] = size_report(elf_q, board=board)
-        sizes["q31-float32", target] = size_report(build(q31, target=target).files["elf"], board=board)
+        sizes["q31-float32", target] = size_report(
+            build(q31, target=target, options=BASELINE).files["elf"], board=board
+        )
     return sizes
 
 

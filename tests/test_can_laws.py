@@ -83,16 +83,25 @@ def test_q31_hil_report_states_the_law_and_its_deviation_beside_the_certified_bo
     assert "certified <= " in summary
 
 
-def test_a_float32_artifact_names_no_law_and_gets_no_fixed_point_block(pend, can_firmware, cart_fmu):
+def test_a_float32_artifact_names_its_law_and_gets_no_fixed_point_block(pend, can_firmware, cart_fmu):
     res = hil_run(pendulum_scenario(gains=pend, fmu=cart_fmu, transport=udp_transport(fd=True), duration=0.3))
-    assert res.complete and "law=" not in res.info["controller"]["ready"]
+    assert res.complete and "law=float32 wire=2" in res.info["controller"]["ready"]
     assert "fixed_point" not in res.metrics
 
 
 def test_the_dbc_names_the_status_bits_of_the_law_the_node_runs(pend_q31, pend):
-    fixed = layout_for(pend_q31[0]).dbc()
-    assert "bit2 a sample clipped to its range, bit3 second-line saturation (fixed point)" in fixed
-    assert "bit2" not in layout_for(load(pend)).dbc()  # a float32 artifact's DBC is as it was
+    """The command frames' status signal carries a value table of the bits the law can set, at docs/design.md's
+    positions (written out here): the integer law's clipped and overflow bits, none of them for the float32 law."""
+    import cantools
+
+    def table(a) -> dict[int, str]:
+        db = cantools.database.load_string(layout_for(a).dbc(), database_format="dbc")
+        command = next(m for m in db.messages if m.senders == ["controller"])
+        return {int(k): str(v) for k, v in command.get_signal_by_name("status").choices.items()}
+
+    fixed, plain = table(pend_q31[0]), table(load(pend))
+    assert {0x01: "FAULT", 0x04: "CLIPPED", 0x08: "OVERFLOW"}.items() <= fixed.items()
+    assert 0x04 not in plain and 0x08 not in plain and plain[0x01] == "FAULT" and plain[0x80] == "RESET"
 
 
 def test_q15_on_the_design_model_is_bit_exact_and_within_the_certified_bounds(tmp_path):

@@ -35,7 +35,8 @@ def test_export_is_reproducible_and_names_the_artifact(example_artifacts, tmp_pa
     assert export(art, tmp_path / "a").code == 0
     assert export_in_a_new_process(art, tmp_path / "b").returncode == 0
     files = sorted(p.name for p in (tmp_path / "a").iterdir())
-    assert files == ["gl_gains.c", "gl_gains.h", "gl_gains_layout.h", "gl_step.h"]
+    assert files == ["gl_flags.h", "gl_gains.c", "gl_gains.h", "gl_gains_layout.h", "gl_law_params.h",
+                     "gl_record_lq_float32.h", "gl_step.h"]  # fmt: skip
     for f in files:
         text = (tmp_path / "a" / f).read_text("utf-8")
         assert text == (tmp_path / "b" / f).read_text("utf-8"), f"{f} differs between two exports"
@@ -144,7 +145,14 @@ def test_headers_are_the_same_for_every_artifact_of_a_structure(example_artifact
     assert export(example_artifacts["pendulum"], tmp_path / "a").code == 0
     res = export(path, tmp_path / "b")
     assert res.code == 0, res.err
-    for name in ("gl_gains.h", "gl_gains_layout.h", "gl_step.h"):
+    for name in (
+        "gl_gains.h",
+        "gl_gains_layout.h",
+        "gl_step.h",
+        "gl_flags.h",
+        "gl_law_params.h",
+        "gl_record_lq_float32.h",
+    ):
         assert (tmp_path / "a" / name).read_text() == (tmp_path / "b" / name).read_text(), name
     assert (tmp_path / "a" / "gl_gains.c").read_text() != (tmp_path / "b" / "gl_gains.c").read_text()
 

@@ -118,7 +118,7 @@ def test_uart_banner_and_one_step_on_every_board(pendulum, board):
         res = fwqemu.run_image(elf, board=board, cwd=Path(tmp), timeout_s=10)
     assert res.returncode == 0, res.meaning
     lines = res.uart.splitlines()
-    assert lines[0] == f"gainlink {a.name} {board} sha256:{a.sha256}"
+    assert lines[0] == f"gainlink {a.name} {board} sha256:{a.sha256} law=float32 variant=unrolled wire=2"
     host = NativeLoop(a).step(np.full(a.p, 0.5), np.zeros(a.q))
     bits = " ".join(f"u=0x{int(v):08X}" for v in host.u.view(np.uint32))
     assert lines[1] == f"step 0x{host.status & 0xFFFFFFFF:08X} {bits}"
@@ -161,9 +161,7 @@ def test_firmware_build_for_a_soft_float_target_writes_its_image(pend, tmp_path)
     assert report["ram_bytes"] <= 16 * 1024, "fits the micro:bit's 16 KiB"
     assert (out / "gainlink_pendulum.bin").stat().st_size == report["flash_bytes"]
     a = load(pend)
-    rec = fwqemu.replay(
-        out / "gainlink_pendulum.elf", board="microbit", n=a.n, m=a.m, p=a.p, q=a.q, Y=[[0.1, 0.0]], R=[[0.2]]
-    )
+    rec = fwqemu.replay(out / "gainlink_pendulum.elf", a, board="microbit", Y=[[0.1, 0.0]], R=[[0.2]])
     assert rec["status"][0] >= 0
     dry = run_cli("firmware", "flash", out, "--probe", "pyocd", "--dry-run")
     assert dry.code == 0 and dry.out.startswith("pyocd flash --target nrf51 --format hex "), dry.out

@@ -293,14 +293,15 @@ def test_host_executable_under_asan_ubsan_matches_ctypes(pendulum, random_design
         assert "runtime error" not in proc.stderr and "AddressSanitizer" not in proc.stderr, proc.stderr
         out = proc.stdout.splitlines()
         assert out[0].startswith(f"gainlink-loop {a.name} sha256:{a.sha256}")
+        # each step: status flags sat u (m), xh (n), z (q)
         steps = [line.split() for line in out[1:] if line.startswith("step ")]
         assert len(steps) == N
         raw = NativeLoop(a).run_raw(Y, R)
-        u = np.array([[float(v) for v in s[2 : 2 + a.m]] for s in steps], dtype=np.float32)
-        xh = np.array([[float(v) for v in s[3 + a.m : 3 + a.m + a.n]] for s in steps], dtype=np.float32)
-        z = np.array([[float(v) for v in s[3 + a.m + a.n :]] for s in steps], dtype=np.float32).reshape(N, a.q)
+        u = np.array([[float(v) for v in s[4 : 4 + a.m]] for s in steps], dtype=np.float32)
+        xh = np.array([[float(v) for v in s[4 + a.m : 4 + a.m + a.n]] for s in steps], dtype=np.float32)
+        z = np.array([[float(v) for v in s[4 + a.m + a.n :]] for s in steps], dtype=np.float32).reshape(N, a.q)
         assert np.array_equal(u, raw["u"]) and np.array_equal(xh, raw["xh"]) and np.array_equal(z, raw["z"]), case.label
-        assert int(steps[50][1]) == GL_ERR_NANINF
+        assert int(steps[50][1]) == GL_ERR_NANINF and int(steps[50][2]) == 1  # the status and the fault flag
         assert any(line.startswith("error ") for line in out), "a malformed line is answered, not fatal"
 
 

@@ -86,11 +86,8 @@ def test_watchdog_in_the_image(pendulum):
     tags[10:16] = fwqemu.TAG_IDLE  # six periods without a measurement, watchdog at 4
     rec = fwqemu.replay(
         elf,
+        a,
         board="mps2-an386",
-        n=a.n,
-        m=a.m,
-        p=a.p,
-        q=a.q,
         Y=pendulum.Y[:30],
         R=pendulum.R[:30],
         tags=tags,
@@ -107,9 +104,7 @@ def test_fpu_left_disabled_is_caught_by_the_startup_self_test(pendulum):
     a = pendulum.artifact
     elf = build(a, target="cortex-m4", options={"GL_SKIP_FPU_ENABLE": "ON", "GL_IMAGE_SERVE": "OFF"}).files["elf"]
     with tempfile.TemporaryDirectory() as tmp:
-        (Path(tmp) / "gl_in.bin").write_bytes(
-            fwqemu.encode_input(pendulum.Y[:5], pendulum.R[:5], n=a.n, m=a.m, p=a.p, q=a.q)
-        )
+        (Path(tmp) / "gl_in.bin").write_bytes(fwqemu.encode_input(a, pendulum.Y[:5], pendulum.R[:5]))
         res = fwqemu.run_image(elf, board="mps2-an386", cwd=Path(tmp), timeout_s=10)
     assert res.returncode == fwqemu.EXIT_FPU, f"expected the FPU self-test exit, got {res.meaning}"
     good = replay_image(a, target="cortex-m4", board="mps2-an386")
@@ -126,7 +121,7 @@ def test_uart_smoke(pendulum, board):
         res = fwqemu.run_image(elf, board=board, cwd=Path(tmp), timeout_s=10)
     assert res.returncode == 0, res.meaning
     lines = res.uart.splitlines()
-    assert lines[0] == f"gainlink {a.name} {board} sha256:{a.sha256}"
+    assert lines[0] == f"gainlink {a.name} {board} sha256:{a.sha256} law=float32 variant=unrolled wire=2"
     host = NativeLoop(a).step(np.full(a.p, 0.5), np.zeros(a.q))
     bits = " ".join(f"u=0x{int(v):08X}" for v in host.u.view(np.uint32))
     assert lines[1] == f"step 0x{host.status & 0xFFFFFFFF:08X} {bits}"
@@ -168,9 +163,7 @@ def test_cli_firmware_build_writes_images_and_size_report(tmp_path, pendulum):
         assert bin_size == report["flash_bytes"], "the .bin holds exactly the flash sections"
         # the ELF the command wrote boots on its board and replays the golden samples bit for bit like the host
         a = pendulum.artifact
-        rec = fwqemu.replay(
-            d / "gainlink_pendulum.elf", board=board, n=a.n, m=a.m, p=a.p, q=a.q, Y=pendulum.Y, R=pendulum.R
-        )
+        rec = fwqemu.replay(d / "gainlink_pendulum.elf", a, board=board, Y=pendulum.Y, R=pendulum.R)
         host = NativeLoop(a).run_raw(pendulum.Y, pendulum.R)
         assert np.array_equal(rec["u"].view(np.uint32), host["u"].view(np.uint32))
         assert np.array_equal(rec["xh"].view(np.uint32), host["xh"].view(np.uint32))
@@ -234,11 +227,8 @@ def test_gain_update_on_target_matches_host(pendulum):
     tags[[60, 120]] = fwqemu.TAG_STAGE
     rec = fwqemu.replay(
         replay_image(a, target="cortex-m4", board="mps2-an386"),
+        a,
         board="mps2-an386",
-        n=a.n,
-        m=a.m,
-        p=a.p,
-        q=a.q,
         Y=pendulum.Y[:N],
         R=pendulum.R[:N],
         tags=tags,

@@ -65,8 +65,8 @@ def test_replay_engines_of_a_fixed_point_artifact_agree_byte_for_byte(pendulum_q
 
 
 def test_firmware_build_ships_the_fixed_point_image(pendulum_q31, tmp_path):
-    """`firmware build` of a fixed-point artifact writes the integer image beside the float32 one, and the written
-    ELF is the one that runs (replayed from the output folder, equal to the host build)."""
+    """`firmware build` of a fixed-point artifact writes one image, the integer law's (its manifest says so), and the
+    written ELF is the one that runs (replayed from the output folder, equal to the host build)."""
     _, gains, _ = pendulum_q31
     res = run_cli("firmware", "build", gains, "--target", "cortex-m0", "--out", tmp_path / "fw")
     assert res.code == 0, res.err
@@ -89,10 +89,10 @@ def test_firmware_build_ships_the_fixed_point_image(pendulum_q31, tmp_path):
         assert f"{name} on microbit: flash {flash} B," in sizes[name] and f"({ram} B total)" in sizes[name], sizes[name]
         assert law in sizes[name], sizes[name]
     manifest = json.loads((tmp_path / "fw" / "firmware.json").read_text())
-    assert manifest["fixed_point"]["elf"] == "gainlink_pendulum_fixed.elf"
+    assert manifest["law"] == "q31" and manifest["files"]["elf"] == "gainlink_pendulum.elf"
     assert (tmp_path / "fw" / "src" / "gl_fixed_gains.c").is_file()
     a = load(gains)
     Y = np.tile(np.array([[0.1, -0.02]], dtype=np.float32), (50, 1))
     R = np.full((50, 1), 0.3, dtype=np.float32)
-    image = replay_image(tmp_path / "fw" / "gainlink_pendulum_fixed.elf", a, Y, R, board="microbit")
+    image = replay_image(tmp_path / "fw" / "gainlink_pendulum.elf", a, Y, R, board="microbit")
     assert np.array_equal(image.U, run_host(a, Y, R).U) and np.array_equal(image.XH, run_host(a, Y, R).XH)

@@ -1,5 +1,6 @@
 """`gainlink firmware run` of a fixed-point artifact runs its integer law: the host build's integer loop executable
-(gainlink_fixed_loop_host, firmware/ports/host/fixed_main.c), not the float32 loop of the same export.
+(gainlink_loop_host, firmware/ports/host/main.c: the one host main, running the integer law), not the float32 loop of
+the same export.
 
 With --input the replay CSV starts with the `# numeric=q31|q15` line `gainlink replay` writes for the artifact, and
 its commands, estimate and integrators are the integer words of the bit-exact numpy model
@@ -86,7 +87,7 @@ def test_firmware_run_replays_a_fixed_point_artifact_through_the_integer_loop(sa
     assert text.splitlines()[0] == f"# numeric={numeric}"
     law = law_of(a)
     assert text == law.trace_text(a, law.replay(a, "model", Y, R), t, engine="model")
-    assert "gainlink_fixed_loop_host" in proc.stdout and f"{numeric} integer law" in proc.stdout, proc.stdout
+    assert "gainlink_loop_host" in proc.stdout and f"{numeric} integer law" in proc.stdout, proc.stdout
 
 
 def test_firmware_run_without_input_is_the_integer_loop_on_stdin(saved):
@@ -97,44 +98,57 @@ def test_firmware_run_without_input_is_the_integer_loop_on_stdin(saved):
     )
     assert proc.returncode == 0, proc.stderr
     out = proc.stdout.splitlines()
-    assert out[0] == f"gainlink-fixed {a.name} sha256:{a.sha256}"
-    steps = [[int(v) for v in line.split()[1:]] for line in out[1:]]
+    numeric = a.checks["fixed_point"]["numeric"]
+    assert (
+        out[0]
+        == f"gainlink-loop {a.name} sha256:{a.sha256} {a.n} {a.m} {a.p} {a.q} law={numeric} variant=unrolled wire=2"
+    )
+    # each step: status flags sat u (m floats), then the words U V (m), XH (n), Z (q), clip, overflow
+    steps = [line.split()[1:] for line in out[1:]]
     model = model_run(a, Y[:40], R[:40])
     fu = np.array(FixedPointLoop(a).f["u"])
-    for k, (flags, sat, clip, _ovf, *words) in enumerate(steps):
+    m = a.m
+    for k, words in enumerate(steps):
+        _status, flags, sat = (int(v) for v in words[:3])
+        *state, clip, _ovf = (int(v) for v in words[3 + m :])
         assert [sat, clip, bool(flags & 1)] == [model.sat[k], model.clip[k], model.fault[k]], k
-        assert words == [*model.U[k], *model.V[k], *model.XH[k], *model.Z[k]], k
+        assert state == [*model.U[k], *model.V[k], *model.XH[k], *model.Z[k]], k
     assert len(steps) == 40 and np.any(real(model.U, fu) != Float32Loop(a).run(Y[:40], R[:40]).u)
 
 
 def test_firmware_run_without_input_reads_the_float_loops_lines_and_exits_2_on_an_unreadable_one(saved):
-    """The float loop's stdin lines (commas or tabs between the numbers, `reset`) are the integer loop's too: each
-    answered with the model's words; a line it cannot read (a CSV header) or a command only the float loop has is
-    answered `error ...`, changes nothing, and the exit status is 2 with one line on stderr."""
+    """The one host loop's stdin lines (commas or tabs between the numbers, `idle`, `reset`) drive the integer law as
+    they drive the float one: each answered with its record, the model's words; a line it cannot read (a CSV header)
+    is answered `error ...`, changes nothing, and the exit status is 2 with one line on stderr."""
     a, path, Y, R = saved
     rows = [np.concatenate([Y[k], R[k]]) for k in range(6)]
     lines = [",".join(repr(float(v)) for v in rows[0]), "\t".join(repr(float(v)) for v in rows[1])]
     lines += [", ".join(repr(float(v)) for v in row) for row in rows[2:4]]
     header = ",".join([f"y{i}" for i in range(a.p)] + [f"r{i}" for i in range(a.q)])
-    script = [header, *lines, "idle", "reset", *lines[:2]]
+    script = [header, *lines, "reset", *lines[:2]]
     proc = subprocess.run(
         [GAINLINK, "firmware", "run", str(path)], input="\n".join(script) + "\n", capture_output=True, text=True
     )
     out = proc.stdout.splitlines()
-    assert out[0] == f"gainlink-fixed {a.name} sha256:{a.sha256}"
+    numeric = a.checks["fixed_point"]["numeric"]
+    assert out[0].startswith(f"gainlink-loop {a.name} sha256:{a.sha256} {a.n} {a.m} {a.p} {a.q} law={numeric} ")
     answers = out[1:]
     assert len(answers) == len(script)  # one answer per line, whatever the line
-    assert answers[0] == f"error expected {a.p + a.q} numbers or reset"
-    assert answers[5].startswith("error idle: ") and answers[6] == "reset 0"
+    assert answers[0] == f"error expected {a.p + a.q} numbers, idle, reset, stage or crc"
+    assert answers[5].startswith("reset ")
     model = model_run(a, Y[:4], R[:4])
-    steps = [[int(v) for v in ln.split()[1:]] for ln in answers[1:5] + answers[7:]]
-    for k, (flags, sat, clip, _ovf, *words) in enumerate(steps):
+    m = a.m
+    for k, line in enumerate(answers[1:5] + answers[6:]):
+        assert line.startswith("step "), line
+        words = line.split()[1:]
+        _status, flags, sat = (int(v) for v in words[:3])
+        *state, clip, _ovf = (int(v) for v in words[3 + m :])
         j = k if k < 4 else k - 4  # after the reset: the first steps again
         assert [sat, clip, bool(flags & 1)] == [model.sat[j], model.clip[j], model.fault[j]], k
-        assert words == [*model.U[j], *model.V[j], *model.XH[j], *model.Z[j]], k
+        assert state == [*model.U[j], *model.V[j], *model.XH[j], *model.Z[j]], k
     assert proc.returncode == 2
     assert proc.stderr.splitlines() == [
-        f"gainlink_fixed_loop_host: 2 of {len(script)} input lines unreadable (the first: line 1)"
+        f"gainlink_loop_host: 1 of {len(script)} input lines unreadable (the first: line 1)"
     ]
 
 
@@ -153,10 +167,10 @@ def test_the_integer_loop_answers_each_line_before_the_next_is_sent(saved):
     proc = subprocess.Popen([GAINLINK, "firmware", "run", str(path)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             bufsize=0)  # fmt: skip
     try:
-        assert _answer(proc, 300).startswith(f"gainlink-fixed {a.name} ")  # after the (cached) build
+        assert _answer(proc, 300).startswith(f"gainlink-loop {a.name} ")  # after the (cached) build
         for k in range(3):
             proc.stdin.write((" ".join(repr(float(v)) for v in np.concatenate([Y[k], R[k]])) + "\n").encode())
-            words = [int(v) for v in _answer(proc, 30).split()[5 : 5 + a.m]]
+            words = [int(v) for v in _answer(proc, 30).split()[4 + a.m : 4 + 2 * a.m]]  # step status flags sat u U
             assert words == list(model.U[k]), k
     finally:
         proc.stdin.close()

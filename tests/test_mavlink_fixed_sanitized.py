@@ -18,7 +18,7 @@ from gainlink.mavlink.fixed_params import fixed_firmware_params
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import INT32, REAL32, Encoding
 from gainlink.mavlink.session import ParamSession
-from gainlink.shipping.codegen import render_c
+from gainlink.shipping.export_c import render_export
 from pymavlink.dialects.v20 import common as mavlink2
 from support.cli import run_cli
 from support.fixed import example, pendulum_design
@@ -32,7 +32,7 @@ def q31_asan():
     bdir = cache_root().parent / "mavlink-asan" / art.sha256[:16]
     gen = bdir / "gen"
     gen.mkdir(parents=True, exist_ok=True)
-    for name, text in render_c(art).items():
+    for name, text in render_export(art).items():
         if not (gen / name).is_file() or (gen / name).read_text() != text:
             (gen / name).write_text(text)
     cm = bdir / "cmake"

@@ -17,7 +17,8 @@ from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import REAL32, Encoding
 from gainlink.mavlink.session import ParamSession
 from gainlink.shipping.artifact import load
-from gainlink.shipping.codegen import gain_set, render_c
+from gainlink.shipping.codegen import gain_set
+from gainlink.shipping.export_c import render_export
 from pymavlink.dialects.v20 import common as mavlink2
 from support.cli import run_cli
 from support.mavlink import retuned_pendulum
@@ -31,7 +32,7 @@ def sanitized_exe(pend):
     bdir = cache_root().parent / "mavlink-asan" / art.sha256[:16]
     gen = bdir / "gen"
     gen.mkdir(parents=True, exist_ok=True)
-    for name, text in render_c(art).items():
+    for name, text in render_export(art).items():
         if not (gen / name).is_file() or (gen / name).read_text() != text:
             (gen / name).write_text(text)
     cm = bdir / "cmake"

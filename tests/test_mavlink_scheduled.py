@@ -1,5 +1,5 @@
 """The firmware's MAVLink node runs a scheduled artifact's law over its link (gainlink.hil.loop.can_scheduled with a
-MAVLink transport; firmware/apps/mavlink/gl_mav_law.h): the tank of examples/tank_scheduled.toml, scheduled on its
+MAVLink transport; firmware/apps/mavlink on gl_law.h): the tank of examples/tank_scheduled.toml, scheduled on its
 measured level (and on an external signal carried after the references), swept across its envelope through the real
 gainlink_mavlink process over UDP. Oracle: the scheduled float32 model (gainlink.proof.scheduled_float32, bit for
 bit the C) on the float32 samples the run recorded: the same commands, saturation and sigma flags. Its parameter table

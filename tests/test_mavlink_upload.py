@@ -236,7 +236,9 @@ def test_firmware_run_mavlink_command_persists_beside_the_artifact(mavlink_exe, 
         try:
             banner = proc.stdout.readline()
             assert banner.startswith("gainlink-mavlink pendulum sha256:"), banner + proc.stderr.read()
-            assert banner.rstrip().endswith(f" gains={which} crc32={runs.crc32} format=float32"), banner
+            assert banner.rstrip().endswith(f" gains={which} crc32={runs.crc32} format=float32 law=float32 wire=2"), (
+                banner
+            )
             if round_ == 0:
                 res = run_cli("mavlink", "upload", retuned, "--connect", url.format(port=port), "--persist")
                 assert res.code == 0 and "persisted" in res.out, res.err

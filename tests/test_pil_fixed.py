@@ -1,4 +1,4 @@
-"""Processor-in-the-loop of a fixed-point artifact: the integer image (firmware/ports/cortex-m/main_fixed.c) on the
+"""Processor-in-the-loop of a fixed-point artifact: the integer image (firmware/ports/cortex-m/main.c) on the
 Cortex-M0 (micro:bit) and M3 (MPS2-AN385) closes the loop with the pendulum's model through the float image's
 stream. The oracles, recomputed here: the bit-exact integer model (gainlink.proof.fixed_law, through
 tests/support/fixed.py) fed the very float32 samples the image received writes the image's words step for step;

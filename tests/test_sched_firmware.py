@@ -15,8 +15,9 @@ from gainlink.laws import design as design_spec
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop
 from gainlink.shipping import codegen
-from gainlink.shipping.artifact import from_dict
-from gainlink.shipping.codegen_scheduled import render_export, tables
+from gainlink.shipping.artifact import from_dict, load
+from gainlink.shipping.codegen_scheduled import tables
+from gainlink.shipping.export_c import render_export
 from gainlink.spec import parse_spec
 from schedule_cases import external_tank, tank_dict
 from support.cli import GOOD_SPEC, assert_refused, run_cli
@@ -84,10 +85,12 @@ def _bits(x: np.ndarray) -> np.ndarray:
 
 def test_scheduled_export_holds_the_tables_and_an_unscheduled_one_is_unchanged(level, external):
     """The export of a schema-2 artifact: gl_gains.h with the macros of the scheduled loop, gl_sched_gains.c with
-    every per-point coefficient as its float32 value; same artifact, same bytes. An unscheduled artifact's export
-    is codegen.render_c's, byte for byte."""
+    every per-point coefficient as its float32 value, and the files gl_law.h reads for every law (flags, record,
+    parameter table); same artifact, same bytes. An unscheduled artifact's export holds codegen.render_c's files,
+    byte for byte."""
     files = render_export(external)
-    assert sorted(files) == ["gl_gains.h", "gl_sched_gains.c"] and files == render_export(external)
+    law_files = ["gl_flags.h", "gl_law_params.h", "gl_record_scheduled_float32.h"]
+    assert sorted(files) == sorted(["gl_gains.h", "gl_sched_gains.c", *law_files]) and files == render_export(external)
     h = files["gl_gains.h"]
     for macro in ("GL_SCHEDULED 1", "GL_NPTS 3", "GL_E 1", "GL_SIGMA_EXTERNAL 1", "GL_SIGMA_INDEX 0",
                   "GL_SIGMA_FILTERED 1", "GL_SIGMA_RATE_LIMITED 1", "GL_OBSERVER_FORM 1"):  # fmt: skip
@@ -98,14 +101,14 @@ def test_scheduled_export_holds_the_tables_and_an_unscheduled_one_is_unchanged(l
     t = tables(external)
     S = external.schedule
     for name in ("Kx", "Ky", "Kz", "F", "G", "Ly"):
-        block = re.search(rf"\.{name} = \{{(.*?)\n    \}},", src, re.S).group(1)
+        block = re.search(rf"\.{name} = \{{(.*?)\n +\}},", src, re.S).group(1)
         got = np.array([float(v[:-1]) for v in re.findall(FLOAT, block)], dtype=np.float32)
         want = S.coef[name].reshape(-1).astype(np.float32)
         assert np.array_equal(got, want) and np.array_equal(t[name].reshape(-1), want), name
     assert float(t["rate_step"]) == np.float32(external.Ts * 4.0)
     assert float(t["alpha"]) == np.float32(-np.expm1(-external.Ts / 0.1))
     plain = from_dict(design_spec(parse_spec(tomllib.loads(GOOD_SPEC))).artifact)
-    assert render_export(plain) == codegen.render_c(plain)
+    assert {k: v for k, v in render_export(plain).items() if k in codegen.render_c(plain)} == codegen.render_c(plain)
 
 
 def test_export_cli_writes_the_scheduled_tables(level_data, tmp_path):
@@ -115,7 +118,7 @@ def test_export_cli_writes_the_scheduled_tables(level_data, tmp_path):
     artifact_mod.write(path, level_data)
     res = run_cli("export", path, "--out", tmp_path / "out")
     assert res.code == 0, res.err
-    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["gl_gains.h", "gl_sched_gains.c"]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == sorted(render_export(load(path)))
 
 
 @pytest.mark.parametrize("case", ["level", "external"])

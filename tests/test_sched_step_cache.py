@@ -13,7 +13,8 @@ import pytest
 from gainlink.engines.sched_native import NativeScheduledLoop
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
-from gainlink.shipping.codegen_scheduled import fixed_masks, render_export, tables
+from gainlink.shipping.codegen_scheduled import fixed_masks, tables
+from gainlink.shipping.export_c import render_export
 from schedule_cases import external_tank
 from support.designs import designed
 

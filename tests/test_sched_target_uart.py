@@ -1,5 +1,5 @@
 """The Cortex-M4F image of a scheduled export serves its scheduled law on its UART: the slcan and MAVLink nodes
-(firmware/ports/cortex-m/sched-image.cmake, main_sched.c `serve ...`) run gl_sched_step, as the host apps do.
+(firmware/ports/cortex-m/cortex-m.cmake, main.c `serve ...`) run gl_sched_step, as the host apps do.
 
 The tank of examples/tank_scheduled.toml in closed loop in QEMU on mps2-an386 (HIL, controller = "qemu"), its level
 swept across the envelope; over MAVLink also the tank scheduled on an external signal, which the HIL sample carries
@@ -97,8 +97,8 @@ def test_the_images_slcan_node_runs_the_scheduled_law_bit_for_bit(level):
     slcan = {"interface": "slcan", "channel": f"socket://127.0.0.1:{tcp_port()}"}
     image = hil_run(_sweep(path, slcan, controller="qemu"))
     ready = image.info["controller"]["ready"]
-    assert ready.startswith(f"gainlink tank_scheduled {BOARD} sha256:{a.sha256} scheduled")
-    assert ready.endswith("ready slcan encoding=float32 law=scheduled-float32")
+    assert ready.startswith(f"gainlink tank_scheduled {BOARD} sha256:{a.sha256} law=scheduled-float32 variant=unrolled")
+    assert ready.endswith("ready slcan encoding=float32 law=scheduled-float32 wire=2")
     _assert_model(a, image)
     assert image.trace.sigma.min() < 0.05 and image.trace.sigma.max() > 0.8  # across the middle point
     host = hil_run(_sweep(path, udp_transport(fd=False), controller="firmware"))
@@ -224,7 +224,8 @@ def test_a_retuned_schedule_uploaded_to_the_images_mavlink_node_commits_runs_bit
     assert _expected(new) != _expected(old)
     flash = tmp_path / "flash"
     with _mav_image(old, flash) as image:
-        assert image.ready_line.endswith(f"crc32={table_hash(old) & 0xFFFFFFFF} signing=off law=scheduled-float32")
+        want = f"crc32={table_hash(old) & 0xFFFFFFFF} signing=off law=scheduled-float32 wire=2"
+        assert image.ready_line.endswith(want), image.ready_line
         assert _table(image.url) == _expected(old)
         with monkeypatch.context() as m:  # a commit the image refuses: every staged value is undone, none kept
             m.setattr(upload_mod, "scheduled_firmware_params", _wrong_hash)

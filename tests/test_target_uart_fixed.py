@@ -31,9 +31,10 @@ from support.net import tcp_port, udp_port
 from support.uart import assert_same_closed_loop, scenario
 
 CORES = {"mps2-an385": "cortex-m3", "microbit": "cortex-m0"}
-# The one fixed-point library each serving image links (ports/cortex-m/cortex-m.cmake names it): the MAVLink node's
-# generic loop where the image carries that node (the slcan node runs it too), the unrolled one on the micro:bit.
-FIXED_LIBRARY = {"mps2-an385": "libgainlink_fixed_generic.a", "microbit": "libgainlink_fixed.a"}
+# The one variant of the law each serving image links (ports/cortex-m/cortex-m.cmake names it): the MAVLink node's
+# generic one where the image carries that node (the slcan node runs it too), the unrolled one on the micro:bit.
+FIXED_LIBRARY = {"mps2-an385": "libgainlink_loop_generic.a", "microbit": "libgainlink_loop.a"}
+VARIANT = {"mps2-an385": "generic", "microbit": "unrolled"}
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +63,10 @@ def test_the_images_slcan_node_runs_the_integer_law_bit_for_bit(q31, board):
     image = run_scenario(scenario(path, slcan, controller="qemu", board=board, duration=1.0))
     assert_same_closed_loop(image, host)  # the host CAN app, which runs the integer law (tests/test_can_laws.py)
     assert image.info["controller"]["ready"].startswith(f"gainlink pendulum {board} sha256:{a.sha256}")
-    assert "law=q31" in image.info["controller"]["ready"]
+    assert (
+        "law=q31" in image.info["controller"]["ready"]
+        and f"variant={VARIANT[board]}" in image.info["controller"]["ready"]
+    )
     Y, R = image.trace.y.astype(np.float32), image.trace.r.astype(np.float32)
     model = model_run(a, Y, R)
     u_model = real(model.U, FixedPointLoop(a).f["u"]).astype(np.float32)

@@ -158,7 +158,7 @@ static void check_step_runs_committed(void)
     uint16_t n = mavlink_msg_to_send_buffer(buf, &msg);
     gl_mav_node_resync(&node); /* a frame the input left half-parsed must not swallow the sample */
     gl_mav_node_input(&node, buf, n);
-    if (gl_loop_active_crc32(&node.loop) != node.table.committed.crc32) {
+    if (gl_law_active_crc32(&node.law) != node.table.committed.crc32) {
         abort();
     }
 }
@@ -184,7 +184,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (s->tx_dropped != refused_sends) {
         abort(); /* every answer the link refused is counted, nothing else */
     }
-    if (gl_gains_check(&node.table.committed) != GL_OK) {
+    if (gl_law_gains_check(&node.table.committed) != GL_OK) {
         abort(); /* whatever arrived, the committed set is a valid one */
     }
     if (node.table.committed.crc32 != crc_before && changes == 0u) {

@@ -300,3 +300,87 @@ uint32_t gl_fixed_step(gl_fixed_loop_t *loop, const float *y, const float *r, fl
     to_float(loop, u);
     return loop->flags;
 }
+
+void gl_fixed_command(const gl_fixed_loop_t *loop, float *u)
+{
+    for (unsigned i = 0; i < GL_FX_M; ++i) {
+        u[i] = (float)loop->u[i] * loop->g->u_lsb[i];
+    }
+}
+
+/* Whether `count` entries of two tables are equal (the structure a set must share with the compiled one). */
+#define SAME(a, b, count) (memcmp((a), (b), sizeof((a)[0]) * (size_t)(count)) == 0)
+
+int gl_fixed_check(const gl_fixed_gains_t *g)
+{
+    const gl_fixed_gains_t *c = &gl_fixed_default.g;
+    const int same = SAME(g->signal, c->signal, GL_FX_TERMS) && SAME(g->row_end, c->row_end, GL_FX_ROWS) &&
+                     SAME(g->row_shift, c->row_shift, GL_FX_ROWS) && SAME(g->shift_u, c->shift_u, GL_FX_M) &&
+                     SAME(g->frac_y, c->frac_y, GL_FX_P) && SAME(g->frac_r, c->frac_r, GL_FX_QA) &&
+                     SAME(g->frac_u, c->frac_u, GL_FX_M) && SAME(g->key_y_lo, c->key_y_lo, GL_FX_P) &&
+                     SAME(g->key_y_hi, c->key_y_hi, GL_FX_P) && SAME(g->key_r_lo, c->key_r_lo, GL_FX_QA) &&
+                     SAME(g->key_r_hi, c->key_r_hi, GL_FX_QA) && SAME(g->y_lo, c->y_lo, GL_FX_P) &&
+                     SAME(g->y_hi, c->y_hi, GL_FX_P) && SAME(g->r_lo, c->r_lo, GL_FX_QA) &&
+                     SAME(g->r_hi, c->r_hi, GL_FX_QA) && SAME(g->u_lsb, c->u_lsb, GL_FX_M) && g->clamp == c->clamp;
+    if (!same) {
+        return -1;
+    }
+    for (unsigned k = 0; k < GL_FX_TERMS; ++k) {
+        if (g->shift[k] > 62u) {
+            return -2;
+        }
+    }
+    for (unsigned i = 0; i < GL_FX_M; ++i) {
+        if (g->lo_v[i] > g->hi_v[i]) {
+            return -2;
+        }
+    }
+    return 0;
+}
+
+/* CRC-32 (zlib's) of one int32 as its four little-endian bytes, continuing `c` (the register, not inverted). */
+static uint32_t crc_word(uint32_t c, int32_t w)
+{
+    for (unsigned b = 0; b < 4u; ++b) {
+        c ^= ((uint32_t)w >> (8u * b)) & 0xFFu;
+        for (unsigned i = 0; i < 8u; ++i) {
+            c = (c >> 1) ^ (0xEDB88320u & (0u - (c & 1u)));
+        }
+    }
+    return c;
+}
+
+/* The same for `count` int32 words (count may be 0: GL_FX_Q). */
+static uint32_t crc_words(uint32_t c, const int32_t *w, unsigned count)
+{
+    for (unsigned k = 0; k < count; ++k) {
+        c = crc_word(c, w[k]);
+    }
+    return c;
+}
+
+/* The CRC of `count` (>= 1) entries of any integer table as int32 words. */
+#define CRC_TABLE(c, table, count)                                                                                   \
+    do {                                                                                                             \
+        for (size_t k_ = 0; k_ < (size_t)(count); ++k_) {                                                            \
+            (c) = crc_word((c), (int32_t)(table)[k_]);                                                               \
+        }                                                                                                            \
+    } while (0)
+
+uint32_t gl_fixed_set_crc32(const gl_fixed_gains_t *g)
+{
+    uint32_t c = 0xFFFFFFFFu;
+    for (unsigned k = 0; k < GL_FX_TERMS; ++k) {
+        c = crc_word(c, g->coef[k]);
+        c = crc_word(c, g->shift[k]);
+    }
+    CRC_TABLE(c, g->uop_v, GL_FX_M);
+    CRC_TABLE(c, g->lo_v, GL_FX_M);
+    CRC_TABLE(c, g->hi_v, GL_FX_M);
+    CRC_TABLE(c, g->uop_u, GL_FX_M);
+    CRC_TABLE(c, g->u_safe, GL_FX_M);
+    CRC_TABLE(c, g->yop, GL_FX_P);
+    CRC_TABLE(c, g->xh0, GL_FX_N);
+    c = crc_words(c, g->z0, GL_FX_Q);
+    return ~c;
+}

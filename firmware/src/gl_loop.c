@@ -293,32 +293,3 @@ gl_status_t gl_loop_idle(gl_loop_t *loop, float *u)
     memcpy(u, loop->u, sizeof loop->u);
     return GL_OK;
 }
-
-gl_status_t gl_loop_run_block(gl_loop_t *loop, uint32_t count, const float *Y, const float *R, float *U,
-                              uint32_t *SAT, float *XH, float *Z, uint8_t *FAULT)
-{
-    if (loop == NULL || (count > 0u && Y == NULL) || (GL_Q > 0 && count > 0u && R == NULL)) {
-        return GL_ERR_NULL;
-    }
-    float u[GL_M];
-    for (uint32_t k = 0; k < count; ++k) {
-        const float *r = (GL_Q > 0) ? &R[(size_t)k * GL_QA] : NULL;
-        gl_status_t st = gl_loop_step(loop, &Y[(size_t)k * GL_P], r, u);
-        if (U != NULL) {
-            memcpy(&U[(size_t)k * GL_M], u, sizeof u);
-        }
-        if (SAT != NULL) {
-            SAT[k] = loop->sat_mask;
-        }
-        if (XH != NULL) {
-            memcpy(&XH[(size_t)k * GL_N], loop->xh, sizeof loop->xh);
-        }
-        if (Z != NULL) {
-            memcpy(&Z[(size_t)k * GL_QA], loop->z, sizeof loop->z);
-        }
-        if (FAULT != NULL) {
-            FAULT[k] = (uint8_t)(st == GL_ERR_NANINF);
-        }
-    }
-    return GL_OK;
-}

@@ -589,35 +589,34 @@ void gl_sched_state(const gl_sched_t *loop, float *out)
     out[2] = (loop->started != 0u) ? 1.0f : 0.0f;
 }
 
-gl_sched_status_t gl_sched_run_block(gl_sched_t *loop, uint32_t count, const float *Y, const float *R,
-                                     const float *S, float *U, uint32_t *SAT, uint32_t *SFLAGS, float *STATE,
-                                     int32_t *STATUS)
+gl_sched_status_t gl_sched_check(const gl_sched_tables_t *tables)
 {
-    if (loop == NULL || Y == NULL || R == NULL || (GL_E > 0 && S == NULL)) {
+    if (tables == NULL) {
         return GL_SCHED_ERR_NULL;
     }
-    float u[GL_M];
-    for (uint32_t k = 0; k < count; ++k) {
-        const float *s = (GL_E > 0) ? &S[k * GL_EA] : NULL;
-        const gl_sched_status_t st = gl_sched_step(loop, &Y[k * GL_P], &R[k * GL_Q], s, u);
-        if (st == GL_SCHED_ERR_NULL) {
-            return st;
-        }
-        if (U != NULL) {
-            memcpy(&U[k * GL_M], u, sizeof u);
-        }
-        if (SAT != NULL) {
-            SAT[k] = loop->sat_mask;
-        }
-        if (SFLAGS != NULL) {
-            SFLAGS[k] = loop->sigma_flags;
-        }
-        if (STATE != NULL) {
-            gl_sched_state(loop, &STATE[k * GL_SCHED_STATE_LEN]);
-        }
-        if (STATUS != NULL) {
-            STATUS[k] = (int32_t)st;
+    const gl_sched_status_t st = check_tables(tables);
+    if (st != GL_SCHED_OK) {
+        return st;
+    }
+    return fixed_hold(tables) ? GL_SCHED_OK : GL_SCHED_ERR_DIMS;
+}
+
+uint32_t gl_sched_tables_crc32(const gl_sched_tables_t *tables)
+{
+    const uint8_t *b = (const uint8_t *)tables;
+    uint32_t c = 0xFFFFFFFFu;
+    for (size_t k = 0; k < sizeof *tables; ++k) {
+        c ^= b[k];
+        for (unsigned i = 0; i < 8u; ++i) {
+            c = (c >> 1) ^ (0xEDB88320u & (0u - (c & 1u)));
         }
     }
-    return GL_SCHED_OK;
+    return ~c;
+}
+
+void gl_sched_safe(const gl_sched_t *loop, float *u)
+{
+    float lam;
+    const uint32_t i = interval(loop->t->S, loop->sigma, &lam);
+    trim(loop->t, i, lam, u);
 }

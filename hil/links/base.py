@@ -20,19 +20,22 @@ from typing import Any
 
 import numpy as np
 from gainlink.errors import TransportError
+from gainlink.laws import flags
 
 from ..registry import Registry
 
 TRANSPORTS: Registry[Transport] = Registry(what="transport", error=TransportError)
 
-#: Command status bits (shared by every transport and the firmware apps).
-STATUS_FAULT = 0x01  #: the controller refused a non-finite sample and returned the safe command
-STATUS_WATCHDOG = 0x02  #: the controller's watchdog expired (no measurement) and it holds the safe command
-STATUS_CLIPPED = 0x04  #: the fixed-point law clipped a sample or reference to its declared range
-STATUS_OVERFLOW = 0x08  #: the fixed-point law's second-line saturation fired
-STATUS_SIGMA_HELD = 0x10  #: the scheduled law held its last sigma (the new one was not finite)
-STATUS_SIGMA_CLIPPED = 0x20  #: the scheduled law clipped sigma to its points
-STATUS_SIGMA_RATE = 0x40  #: the scheduled law limited sigma's change
+#: Command status bits: the one table of a step's status flags (:mod:`gainlink.laws.flags`), the same bits on every
+#: link and in the firmware (gl_flags.h).
+STATUS_FAULT = flags.FAULT  #: the controller refused a non-finite sample and returned the safe command
+STATUS_WATCHDOG = flags.WATCHDOG  #: the controller's watchdog expired (no measurement) and it holds the safe command
+STATUS_CLIPPED = flags.CLIPPED  #: the fixed-point law clipped a sample or reference to its declared range
+STATUS_OVERFLOW = flags.OVERFLOW  #: the fixed-point law's second-line saturation fired
+STATUS_SIGMA_HELD = flags.SIGMA_HELD  #: the scheduled law held its last sigma (the new one was not finite)
+STATUS_SIGMA_CLIPPED = flags.SIGMA_CLIPPED  #: the scheduled law clipped sigma to its points
+STATUS_SIGMA_RATE = flags.SIGMA_RATE  #: the scheduled law limited sigma's change
+STATUS_RESET = flags.RESET  #: the controller was reset: the command is its start command
 
 
 @dataclass(frozen=True)
@@ -51,6 +54,9 @@ class Command:
         Bit set of ``STATUS_*``.
     t_ns : int
         ``time.perf_counter_ns()`` when the command was complete.
+    wire : int
+        The link's own flag word as it arrived (MAVLink: ``HIL_ACTUATOR_CONTROLS.flags``; CAN: the status byte), for
+        whoever checks where the link puts the bits.
     """
 
     seq: int
@@ -58,6 +64,7 @@ class Command:
     saturated: np.ndarray
     status: int
     t_ns: int
+    wire: int = 0
 
 
 class Transport(ABC):

@@ -15,6 +15,7 @@ import sys
 from typing import Any
 
 import numpy as np
+from gainlink.laws.flags import WIRE_VERSION
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping.artifact import load
 
@@ -34,7 +35,10 @@ def serve(artifact: Any, config: dict, *, out: Any = sys.stdout) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
     bus = open_bus(config)
-    print(f"gainlink_can ready {artifact.name} sha256:{artifact.sha256} (python reference)", file=out, flush=True)
+    wire = f"law=float64 wire={WIRE_VERSION}"
+    print(
+        f"gainlink_can ready {artifact.name} sha256:{artifact.sha256} (python reference) {wire}", file=out, flush=True
+    )
     last = None
     try:
         while not stop:

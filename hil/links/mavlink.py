@@ -3,10 +3,11 @@
 Plant → controller: ``DEBUG_FLOAT_ARRAY`` (name ``GL_SAMPLE``, ``array_id`` 1) with
 ``data = y[0..p-1], r[0..q-1]`` and ``time_usec = seq * round(Ts * 1e6)``.
 Controller → plant: ``HIL_ACTUATOR_CONTROLS`` with the same ``time_usec`` (lockstep: the answer
-names its sample), ``controls[0..m-1] = u`` and ``flags`` bit 0 fault, bit 1 watchdog, bit 2 reset
-done, bit 3 a sample clipped and bit 4 the second-line saturation (a fixed-point law), bits 5, 6, 7 sigma held,
-clipped and rate-limited (a scheduled law, whose sample carries its external scheduling signals after ``r``), bits
-8+k saturation of input k (see ``firmware/apps/mavlink/gl_mav_law.h``).
+names its sample), ``controls[0..m-1] = u`` and ``flags``: bits 0-15 are MAVLink's own (bit 0 its LOCKSTEP flag;
+gainlink sets none of them), bits 16-23 the step's status flags (the one table, :mod:`gainlink.laws.flags`: the
+same bits as the CAN status byte; RESET on the answer to a reset), bits 32-47 the saturation mask (bit 32+k: input k
+clamped). That is wire format 2 (``wire=2`` on the node's ready line, AUTOPILOT_VERSION's
+``middleware_sw_version``); a scheduled law's sample carries its external scheduling signals after ``r``.
 
 Scenario table::
 
@@ -38,33 +39,15 @@ from typing import Any
 import numpy as np
 from gainlink.errors import TransportError
 from gainlink.firmware.uart import tcp_endpoint
+from gainlink.laws.flags import MAVLINK_FLAGS_SHIFT, MAVLINK_SAT_SHIFT
 from pymavlink.dialects.v20 import common as mavlink2
 
 from ..registry import take_keys
-from .base import (
-    STATUS_CLIPPED,
-    STATUS_FAULT,
-    STATUS_OVERFLOW,
-    STATUS_SIGMA_CLIPPED,
-    STATUS_SIGMA_HELD,
-    STATUS_SIGMA_RATE,
-    STATUS_WATCHDOG,
-    TRANSPORTS,
-    Command,
-    Transport,
-)
+from .base import TRANSPORTS, Command, Transport
 
 ARRAY_SAMPLE = 1
 ARRAY_RESET = 2
 ARRAY_IDLE = 3
-FLAG_FAULT = 0x1
-FLAG_WATCHDOG = 0x2
-FLAG_RESET = 0x4
-FLAG_CLIPPED = 0x8
-FLAG_OVERFLOW = 0x10
-#: A scheduled law's sigma flags and the status bits they become.
-SIGMA_FLAGS = ((0x20, STATUS_SIGMA_HELD), (0x40, STATUS_SIGMA_CLIPPED), (0x80, STATUS_SIGMA_RATE))
-SAT_SHIFT = 8
 DEFAULT_PORT = 14560
 MAX_BUSY_POLL_US = 1_000_000
 
@@ -209,7 +192,7 @@ class MavlinkTransport(Transport):
         return [self._frame(array_id=ARRAY_SAMPLE, name=b"GL_SAMPLE", seq=seq % self.seq_modulo, values=values)]
 
     def encode_reset(self, *, seq: int) -> list[Any]:
-        """The frame that resets the controller's state (answered with the reset flag)."""
+        """The frame that resets the controller's state (answered with the RESET status flag)."""
         return [self._frame(array_id=ARRAY_RESET, name=b"GL_RESET", seq=seq % self.seq_modulo)]
 
     def encode_idle(self, *, seq: int) -> list[Any]:
@@ -286,13 +269,10 @@ class MavlinkTransport(Transport):
             self.stats["received"] += 1
             flags = int(msg.flags)
             u = np.asarray(msg.controls[: self.m], dtype=float)
-            sat = np.array([(flags >> (SAT_SHIFT + k)) & 1 for k in range(self.m)], dtype=bool)
-            status = (STATUS_FAULT if flags & FLAG_FAULT else 0) | (STATUS_WATCHDOG if flags & FLAG_WATCHDOG else 0)
-            status |= STATUS_CLIPPED if flags & FLAG_CLIPPED else 0
-            status |= STATUS_OVERFLOW if flags & FLAG_OVERFLOW else 0
-            status |= sum(bit for flag, bit in SIGMA_FLAGS if flags & flag)
+            sat = np.array([(flags >> (MAVLINK_SAT_SHIFT + k)) & 1 for k in range(self.m)], dtype=bool)
+            status = (flags >> MAVLINK_FLAGS_SHIFT) & 0xFF  # the status flags, as the table numbers them
             seq = (int(msg.time_usec) // self.ts_us) % self.seq_modulo
-            out.append(Command(seq=seq, u=u, saturated=sat, status=status, t_ns=time.perf_counter_ns()))
+            out.append(Command(seq=seq, u=u, saturated=sat, status=status, t_ns=time.perf_counter_ns(), wire=flags))
         return out
 
     def _not_uart(self, what: str) -> None:

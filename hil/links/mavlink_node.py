@@ -17,11 +17,12 @@ import sys
 from typing import Any
 
 import numpy as np
+from gainlink.laws import flags as status_flags
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping.artifact import load
 from pymavlink.dialects.v20 import common as mavlink2
 
-from .mavlink import ARRAY_IDLE, ARRAY_RESET, ARRAY_SAMPLE, FLAG_FAULT, FLAG_RESET, FLAG_WATCHDOG, SAT_SHIFT
+from .mavlink import ARRAY_IDLE, ARRAY_RESET, ARRAY_SAMPLE
 
 WATCHDOG_PERIODS = 10  # as the firmware's default (GL_WATCHDOG_PERIODS_DEFAULT)
 
@@ -43,7 +44,12 @@ def serve(artifact: Any, *, url: str, out: Any = sys.stdout) -> int:
     stop: list[int] = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
-    print(f"gainlink-mavlink {artifact.name} sha256:{artifact.sha256} (python reference) {url}", file=out, flush=True)
+    wire = f"law=float64 wire={status_flags.WIRE_VERSION}"
+    print(
+        f"gainlink-mavlink {artifact.name} sha256:{artifact.sha256} (python reference) {url} {wire}",
+        file=out,
+        flush=True,
+    )
     try:
         while not stop:
             try:
@@ -57,25 +63,25 @@ def serve(artifact: Any, *, url: str, out: Any = sys.stdout) -> int:
             for msg in msgs:
                 if msg.get_msgId() != mavlink2.MAVLINK_MSG_ID_DEBUG_FLOAT_ARRAY:
                     continue
-                flags = 0
+                bits, sat = 0, 0
                 values = np.asarray(msg.data, dtype=np.float32).astype(np.float64)
                 if msg.array_id == ARRAY_SAMPLE:
                     res = law.step(values[:p], values[p : p + artifact.q])
                     u, idle = np.asarray(res.u, dtype=float), 0
-                    flags |= FLAG_FAULT if res.fault else 0
-                    for k, sat in enumerate(np.atleast_1d(res.saturated)):
-                        flags |= int(bool(sat)) << (SAT_SHIFT + k)
+                    bits = status_flags.FAULT if res.fault else 0
+                    sat = sum(int(bool(s)) << k for k, s in enumerate(np.atleast_1d(res.saturated)))
                 elif msg.array_id == ARRAY_RESET:
                     law.reset()
-                    u, idle, flags = safe.copy(), 0, FLAG_RESET
+                    u, idle, bits = safe.copy(), 0, status_flags.RESET
                 elif msg.array_id == ARRAY_IDLE:
                     idle += 1
                     if idle >= WATCHDOG_PERIODS:
-                        u, flags = safe.copy(), FLAG_WATCHDOG
+                        u, bits = safe.copy(), status_flags.WATCHDOG
                 else:
                     continue
                 controls = np.zeros(16, dtype=np.float32)
                 controls[:m] = u
+                flags = (bits << status_flags.MAVLINK_FLAGS_SHIFT) | (sat << status_flags.MAVLINK_SAT_SHIFT)
                 reply = mavlink2.MAVLink_hil_actuator_controls_message(msg.time_usec, controls.tolist(), 0, flags)
                 sock.sendto(reply.pack(mav), addr)
     finally:

@@ -1,6 +1,6 @@
 """HIL over CAN of a fixed-point artifact: which law the node ran, and that law checked against its oracles.
 
-The host CAN node of a fixed-point export runs the integer law (``firmware/apps/can/gl_can_law.h``) and names it in
+The host CAN node of a fixed-point export runs the integer law (``gl_law.h``, chosen at compile time) and names it in
 its ready line (``law=q31`` or ``law=q15``; a float node names none). After the run, with every sample answered:
 
 - **bit for bit**: the bit-exact model (:class:`~gainlink.proof.fixed_law.FixedPointLoop`) fed the float32 samples

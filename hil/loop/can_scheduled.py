@@ -1,5 +1,5 @@
 """HIL over CAN for a scheduled artifact: the firmware's CAN node (``gainlink_can`` built on the scheduled loop,
-``firmware/apps/can/gl_can_law.h``) answers each sample over the scenario's bus, as it does for an unscheduled one.
+``gl_law.h``) answers each sample over the scenario's bus, as it does for an unscheduled one.
 
 The run is the scheduled SIL's loop (:mod:`.sil_scheduled`: plant, sigma trace, closed-loop and model twins, the
 report's ``schedule`` block) with the law behind the link: per step the sample (y then r) goes out in the CAN
@@ -20,8 +20,8 @@ With ``controller = "qemu"`` the node is the Cortex-M image's on its UART (slcan
 ``ports/cortex-m/sched-image.cmake``), the same node libraries on the same scheduled loop.
 
 A MAVLink transport runs the same loop through the firmware's MAVLink node (``gainlink_mavlink`` on the scheduled
-loop, ``firmware/apps/mavlink/gl_mav_law.h``): the HIL sample carries y, r and then the external scheduling signals;
-the sigma flags come back in HIL_ACTUATOR_CONTROLS' flags (bits 5, 6, 7), decoded to the same status bits.
+loop, ``gl_law.h``): the HIL sample carries y, r and then the external scheduling signals; the sigma flags come back
+in HIL_ACTUATOR_CONTROLS' flags (the status flags 0x10, 0x20, 0x40, at bits 16-23), decoded to the same status bits.
 """
 
 from __future__ import annotations

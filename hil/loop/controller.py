@@ -116,9 +116,10 @@ class ControllerProcess:
         self.paused = False
 
     def check_artifact(self, sha256: str) -> None:
-        """Fail unless the ready line names the artifact ``sha256`` (a firmware built for other gains) and, for a
-        MAVLink node, says that it runs that artifact's set (``gains=artifact``, not a persisted one)."""
-        from gainlink.firmware.uart import refuse_persisted
+        """Fail unless the ready line names the artifact ``sha256`` (a firmware built for other gains), speaks this
+        gainlink's wire format (``wire=2``) and, for a MAVLink node, says that it runs that artifact's set
+        (``gains=artifact``, not a persisted one)."""
+        from gainlink.firmware.uart import refuse_other_wire, refuse_persisted
 
         m = re.search(r"sha256:([0-9a-f]{64})", self.ready_line)
         if m is None or m.group(1) != sha256:
@@ -128,7 +129,9 @@ class ControllerProcess:
                 f"controller {Path(self.argv[0]).name} runs artifact sha256:{found}..., "
                 f"not the scenario's sha256:{sha256[:16]}..."
             )
-        refuse_persisted(self.ready_line, what=f"controller {Path(self.argv[0]).name}", stop=self.stop)
+        what = f"controller {Path(self.argv[0]).name}"
+        refuse_other_wire(self.ready_line, what=what, stop=self.stop)
+        refuse_persisted(self.ready_line, what=what, stop=self.stop)
 
     def start(self) -> None:
         """Start the process and wait for its ready line; :class:`FirmwareError` if it dies or stays silent."""

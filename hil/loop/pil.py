@@ -1,11 +1,10 @@
 """Processor-in-the-loop: a Cortex-M image in QEMU closes the loop with a plant simulated in Python.
 
 Samples travel through two FIFOs that the image opens with semihosting (``gl_in.bin``, ``gl_out.bin``),
-one record per step (see ``firmware/ports/cortex-m/main.c``). Python opens its ends read-write, so no
-open blocks, and every read waits with a deadline while checking that QEMU is still alive. A fixed-point
-artifact runs its integer image (``main_fixed.c``, the same stream; its records are
-``gainlink.firmware.fixed``'s) and is checked by :mod:`.pil_fixed`; a scheduled artifact runs its scheduled image
-(``main_sched.c``) through :mod:`.pil_scheduled`.
+one record per step (see ``firmware/ports/cortex-m/main.c``, one main for every law, and the law's record,
+:mod:`gainlink.shipping.records`). Python opens its ends read-write, so no open blocks, and every read waits with a
+deadline while checking that QEMU is still alive. A fixed-point artifact's image runs its integer law and is checked
+by :mod:`.pil_fixed`; a scheduled artifact's runs through :mod:`.pil_scheduled` (sigma and its external signals).
 """
 
 from __future__ import annotations
@@ -28,11 +27,11 @@ from gainlink.errors import FirmwareError, PeerTimeoutError, PlantError
 from gainlink.firmware import fixed as fwfixed
 from gainlink.firmware import qemu as fwqemu
 from gainlink.firmware.build import replay_image
-from gainlink.firmware.fixed import step_status
 from gainlink.firmware.targets import resolve_cortex_m
 from gainlink.proof.sampled_plant import SampledPlant
 from gainlink.proof.twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
 from gainlink.proof.twin_plot import twin_difference_figure
+from gainlink.shipping import records
 from gainlink.shipping.artifact import Artifact
 from gainlink.shipping.codegen_fixed import is_fixed
 
@@ -263,14 +262,12 @@ def run_pil(
     board = platform.board.name
     R = np.broadcast_to(a.r_op if reference is None else np.asarray(reference, float), (steps, a.q))
     fixed = is_fixed(a)
-    elf, magic = _image(a, target=platform.target.name, board=board)
+    elf = _image(a, target=platform.target.name, board=board)
     qt = None if quantised_twin is None else QuantisedTwin(a, plant=quantised_twin, steps=steps)
     tw, mt = _twin_loop(a, twin, steps), _twin_loop(a, model_twin, steps)
-    rec = _PilRecord.empty(a, steps, x0=plant.state, fixed=fixed)
+    rec = _PilRecord.empty(a, steps, x0=plant.state)
     with _qemu_fifos(elf, board=board, steps=steps) as (proc, fin, fout):
-        _open_stream(
-            proc, fin, fout, steps=steps, watchdog_periods=watchdog_periods, deadline_s=deadline_s, magic=magic
-        )
+        _open_stream(proc, fin, fout, a, steps=steps, watchdog_periods=watchdog_periods, deadline_s=deadline_s)
         t_start = time.perf_counter()
         _exchange(a, plant, R, rec, link=(proc, fin, fout), deadline_s=deadline_s, twins=(tw, mt, qt))
         elapsed = time.perf_counter() - t_start
@@ -287,7 +284,7 @@ def run_pil(
 def _check_request(a: Artifact, *, steps: int, quantised_twin: DiscretePlant | None) -> None:
     """What :func:`run_pil` refuses before anything is built: a scheduled artifact (its PIL is
     :func:`~.pil_scheduled.run_scheduled_pil`), no steps, a quantised twin for a float32 artifact."""
-    if a.schedule is not None:  # its image speaks the scheduled stream (main_sched.c)
+    if a.schedule is not None:  # its PIL checks sigma (pil_scheduled)
         raise PlantError(f"artifact {a.name} is scheduled on {a.schedule.sigma}: its PIL is "
                          "gainlink.hil.loop.pil_scheduled.run_scheduled_pil (gainlink pil run runs it)")  # fmt: skip
     if steps < 1:
@@ -326,13 +323,10 @@ def _result(a: Artifact, rec, *, R, elapsed: float, twin: tuple, model_twin, che
     )
 
 
-def _image(a: Artifact, *, target: str, board: str) -> tuple[Path, int]:
-    """The image PIL runs (built and cached) and the first word of its answer: a fixed-point artifact's integer
-    image (``main_fixed.c``), else the float image (``main.c``); both speak the stream of ``gl_stream.h``."""
-    if is_fixed(a):
-        elf, _ = fwfixed.image(a, target=target, board=board, options=fwfixed.REPLAY_OPTIONS)
-        return elf, fwfixed.OUT_MAGIC
-    return replay_image(a, target=target, board=board), fwqemu.OUT_MAGIC
+def _image(a: Artifact, *, target: str, board: str) -> Path:
+    """The image PIL runs (built and cached): the artifact's law without the bus nodes (``main.c``, one main for
+    every law: a fixed-point artifact's runs its integer law); it speaks the stream of ``gl_stream.h``."""
+    return replay_image(a, target=target, board=board)
 
 
 def _compare_with_twin(
@@ -365,8 +359,8 @@ class _PilRecord:
     raw: np.ndarray  # the image's output records as they came
 
     @classmethod
-    def empty(cls, a: Artifact, steps: int, *, x0: np.ndarray, fixed: bool = False) -> _PilRecord:
-        dout = fwfixed.record_dtype(a) if fixed else fwqemu.record_dtypes(n=a.n, m=a.m, p=a.p, q=a.q)[1]
+    def empty(cls, a: Artifact, steps: int, *, x0: np.ndarray) -> _PilRecord:
+        dout = records.layout(a).dtype
         return cls(
             Y=np.zeros((steps, a.p)),
             U=np.zeros((steps, a.m), dtype=np.float32),
@@ -404,14 +398,14 @@ def _qemu_fifos(elf: Path, *, board: str, steps: int):
 
 
 def _open_stream(
-    proc: subprocess.Popen, fin: int, fout: int, *, steps: int, watchdog_periods: int, deadline_s: float, magic: int
+    proc: subprocess.Popen, fin: int, fout: int, a: Artifact, *, steps: int, watchdog_periods: int, deadline_s: float
 ) -> None:
-    """Send the stream header (steps, one sample per record, watchdog) and check the firmware's answer (its
-    header's first word ``magic``: the float or the fixed-point image's)."""
+    """Send the stream header (steps, one sample per record, watchdog) and check the firmware's answer (its header:
+    the magic, the count, the law it runs and its dimensions: :func:`gainlink.firmware.qemu.output_header`)."""
     os.write(fin, struct.pack("<4I", fwqemu.IN_MAGIC, steps, 1, watchdog_periods))
     header = _read_exact(fout, 32, proc=proc, deadline_s=deadline_s)
-    got, count, *_ = struct.unpack("<8I", header)
-    if got != magic or count != steps:
+    got, count, *shape = struct.unpack("<8I", header)
+    if got != fwqemu.OUT_MAGIC or count != steps or tuple(shape) != fwqemu.output_header(a):
         raise FirmwareError("firmware answered with a bad stream header")
 
 
@@ -427,10 +421,8 @@ def _exchange(
 ) -> None:
     """One FIFO round trip per sample: the plant's outputs in, the command out, the plant advanced."""
     proc, fin, fout = link
-    din, _ = fwqemu.record_dtypes(n=a.n, m=a.m, p=a.p, q=a.q)
     dout = rec.raw.dtype
-    fixed = "flags" in dout.names
-    sample = np.zeros(1, dtype=din)
+    sample = records.samples(a, np.zeros((1, a.p)))
     for k in range(len(rec.Y)):
         y = plant.outputs()
         rec.Y[k] = y
@@ -443,7 +435,7 @@ def _exchange(
         rec.RT[k] = (time.perf_counter() - t0) * 1e6
         rec.raw[k] = out
         rec.U[k] = out["u"]
-        rec.S[k] = step_status(int(out["flags"]), int(out["sat"])) if fixed else out["status"]
+        rec.S[k] = out["status"]
         rec.SAT[k] = (int(out["sat"]) >> np.arange(a.m)) & 1
         plant.advance(u=rec.U[k].astype(float))
         rec.X.append(plant.state)

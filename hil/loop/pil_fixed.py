@@ -1,6 +1,6 @@
 """PIL of a fixed-point artifact: the integer image's oracle (docs/design.md, fixed point: PIL).
 
-Two checks of the run the image (``firmware/ports/cortex-m/main_fixed.c``) made in closed loop:
+Two checks of the run the image (``firmware/ports/cortex-m/main.c`` on the integer law) made in closed loop:
 
 - **bit for bit**: the bit-exact model (:class:`~gainlink.proof.fixed_law.FixedPointLoop`) fed the very float32
   samples and references the image received, from the initial state, must write the image's records step for
@@ -118,6 +118,7 @@ def model_records(a: Artifact, Y: np.ndarray, R: np.ndarray) -> np.ndarray:
         bits = [int(b) for b in (*s.clipped_y, *s.clipped_r)]
         overflow = sum(bit for name, bit in fwfixed.OVERFLOW_BITS.items() if name in s.overflow)
         rec["sat"] = sum(int(b) << i for i, b in enumerate(s.saturated))
+        rec["status"] = -2 if s.fault else (1 if rec["sat"] else 0)  # GL_ERR_NANINF, GL_SATURATED, GL_OK
         rec["clip"] = sum(b << i for i, b in enumerate(bits))
         rec["overflow"] = overflow
         flags = (fwfixed.FAULT if s.fault else 0) | (fwfixed.CLIPPED if any(bits) else 0)

@@ -1,16 +1,17 @@
 """PIL of a scheduled artifact (schema 2): its Cortex-M image runs ``gl_sched_step`` in closed loop with a plant
 in Python, and is checked bit for bit.
 
-The image is the scheduled one (``firmware/ports/cortex-m/main_sched.c``, replay only), driven through the FIFOs of
-:mod:`.pil` one record per step (block 1): in ``{y, r, s}`` (``s`` the external scheduling signals, the schedule's
-``external`` names in order), out ``{status, sat, sflags, u, state}`` (:mod:`gainlink.firmware.qemu_sched`). Sigma
+The image is the artifact's (``firmware/ports/cortex-m/main.c``, replay only), driven through the FIFOs of :mod:`.pil`
+one record per step (block 1): in ``{tag, y, r, s}`` (``s`` the external scheduling signals, the schedule's
+``external`` names in order), out the scheduled law's record ``{status, flags, sat, u, sigma, state}``
+(:mod:`gainlink.shipping.records`; its flags the one flag table, the sigma flags among them). Sigma
 is the measured output the schedule names, or the external signal given per step; a plant with a ``schedule(s)``
 method (``scheduled_model``) hears the external signals before each sample, as in SIL.
 
 Two oracles, each fed the very float32 samples, references and signals the image received, from reset: the
 scheduled float32 model (:class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`) and the host build of the
 same C (:class:`~gainlink.engines.sched_native.NativeScheduledLoop`). Every record must equal theirs in its bits:
-status, saturation mask, sigma flags, command and the whole state (sigma among it). Beside the run, the float64
+status, flags, saturation mask, command, sigma and the whole state. Beside the run, the float64
 scheduled law closes the loop on a second plant (the closed-loop twin) and around the design's own model at the
 sigma it runs at (the model twin, :func:`~.sched_law.start_scheduled_model_twin`).
 """
@@ -23,12 +24,14 @@ import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from gainlink.engines.sched_native import NativeScheduledLoop
+from gainlink.engines.sched_native import NativeScheduledLoop, sigma_flags
 from gainlink.errors import FirmwareError, PlantError
-from gainlink.firmware import qemu_sched
+from gainlink.firmware import qemu as fwqemu
 from gainlink.firmware.build import replay_image
 from gainlink.firmware.targets import resolve_cortex_m
+from gainlink.laws.scheduled import status_flags
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
+from gainlink.shipping import records
 from gainlink.shipping.artifact import Artifact
 
 from ..plants import tank  # noqa: F401 - registers the tank of the scheduled examples
@@ -86,18 +89,15 @@ def external_ramps(a: Artifact, spec: dict[str, tuple[float, float]], steps: int
 def image_records(a: Artifact, *, Y: np.ndarray, R: np.ndarray, S: np.ndarray, host: bool) -> np.ndarray:
     """The records the image writes for these float32 samples from reset, computed by the float32 model (or, with
     ``host``, by the host build of the C)."""
-    _, dout = qemu_sched.record_dtypes(n=a.n, m=a.m, p=a.p, q=a.q, e=len(a.schedule.external))
-    out = np.zeros(Y.shape[0], dtype=dout)
     Sx = S if S.shape[1] else None
     if host:
-        raw = NativeScheduledLoop(a).run_raw(Y, R, Sx)
-        for name in ("status", "sat", "sflags", "u", "state"):
-            out[name] = raw[name]
-        return out
+        return NativeScheduledLoop(a).host.run(Y, R, Sx)
+    out = np.zeros(Y.shape[0], dtype=records.layout(a).dtype)
     tr = ScheduledFloat32Loop(a).run(Y.astype(np.float64), R.astype(np.float64), Sx)
-    out["u"], out["state"], out["sflags"] = tr.u, tr.state, tr.sigma_flags
+    out["u"], out["state"], out["sigma"] = tr.u, tr.state, tr.sigma
     out["sat"] = (tr.saturated.astype(np.uint32) << np.arange(a.m, dtype=np.uint32)).sum(axis=1)
     out["status"] = np.where(tr.fault, -2, np.where(tr.saturated.any(axis=1), 1, 0))
+    out["flags"] = [status_flags(int(f), fault=bool(x)) for f, x in zip(tr.sigma_flags, tr.fault, strict=True)]
     return out
 
 
@@ -166,7 +166,7 @@ def run_scheduled_pil(
     mt, note = scheduled_model_twin(a, plant, steps=steps, S=S) if model_twin else (None, "off")
     rec = _Record.empty(a, steps, x0=plant.state)
     with _qemu_fifos(elf, board=platform.board.name, steps=steps) as link:
-        _open(link, steps=steps, deadline_s=deadline_s)
+        _open(a, link, steps=steps, deadline_s=deadline_s)
         t0 = time.perf_counter()
         _exchange(a, plant, R, S, rec, link=link, deadline_s=deadline_s, twins=(tw, mt))
         elapsed = time.perf_counter() - t0
@@ -204,17 +204,18 @@ class _Record:
 
     @classmethod
     def empty(cls, a: Artifact, steps: int, *, x0: np.ndarray) -> _Record:
-        din, dout = qemu_sched.record_dtypes(n=a.n, m=a.m, p=a.p, q=a.q, e=len(a.schedule.external))
-        return cls(Y=np.zeros((steps, a.p)), X=[x0], RT=np.zeros(steps), sent=np.zeros(steps, dtype=din),
-                   raw=np.zeros(steps, dtype=dout))  # fmt: skip
+        sent = records.samples(a, np.zeros((steps, a.p)))
+        raw = np.zeros(steps, dtype=records.layout(a).dtype)
+        return cls(Y=np.zeros((steps, a.p)), X=[x0], RT=np.zeros(steps), sent=sent, raw=raw)
 
 
-def _open(link: tuple, *, steps: int, deadline_s: float) -> None:
-    """The scheduled stream's header (one record per block) and the image's answer."""
+def _open(a: Artifact, link: tuple, *, steps: int, deadline_s: float) -> None:
+    """The stream's header (one record per block; the watchdog's periods, unused: every record is a step) and the
+    image's answer (the law it runs and its dimensions: :func:`gainlink.firmware.qemu.output_header`)."""
     proc, fin, fout = link
-    os.write(fin, struct.pack("<4I", qemu_sched.IN_MAGIC, steps, 1, 0))
-    magic, count, *_ = struct.unpack("<8I", _read_exact(fout, 32, proc=proc, deadline_s=deadline_s))
-    if magic != qemu_sched.OUT_MAGIC or count != steps:
+    os.write(fin, struct.pack("<4I", fwqemu.IN_MAGIC, steps, 1, 10))
+    magic, count, *shape = struct.unpack("<8I", _read_exact(fout, 32, proc=proc, deadline_s=deadline_s))
+    if magic != fwqemu.OUT_MAGIC or count != steps or tuple(shape) != fwqemu.output_header(a):
         raise FirmwareError("scheduled firmware answered with a bad stream header (image built for another artifact?)")
 
 
@@ -231,7 +232,7 @@ def _exchange(a: Artifact, plant, R, S, rec: _Record, *, link: tuple, deadline_s
         sample["y"] = y.astype(np.float32)
         sample["r"] = R[k].astype(np.float32)
         if e:
-            sample["s"] = S[k].astype(np.float32)
+            sample["s"][0, :e] = S[k].astype(np.float32)
         t0 = time.perf_counter()
         os.write(fin, sample.tobytes())
         out = np.frombuffer(_read_exact(fout, dout.itemsize, proc=proc, deadline_s=deadline_s), dtype=dout)[0]
@@ -250,8 +251,8 @@ def _result(a: Artifact, rec: _Record, *, R, S, elapsed: float, twin, model_twin
     e = S.shape[1]
     Y32, R32 = rec.sent["y"].reshape(steps, a.p), rec.sent["r"].reshape(steps, a.q)
     S32 = rec.sent["s"].reshape(steps, -1)[:, :e]
-    sigma = raw["state"][:, a.n + a.m + a.p + a.q].astype(np.float64)
-    flags = raw["sflags"].astype(np.int64)
+    sigma = raw["sigma"].astype(np.float64)
+    flags = sigma_flags(raw["flags"])
     model = first_difference(raw, image_records(a, Y=Y32, R=R32, S=S32, host=False))
     host = first_difference(raw, image_records(a, Y=Y32, R=R32, S=S32, host=True))
     check = ScheduledPilCheck(

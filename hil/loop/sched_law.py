@@ -55,7 +55,7 @@ class ReferenceScheduled:
 
 
 class NativeScheduled:
-    """The scheduled C loop of the host library (``gl_sched_step`` through ``gl_sched_run_block``, one sample a
+    """The scheduled C loop of the host library (``gl_sched_step`` through the law's one host binding, one sample a
     call)."""
 
     def __init__(self, artifact: Artifact, *, library=None) -> None:

@@ -41,6 +41,7 @@ FLASH_COMMANDS = {
 def _build(args: argparse.Namespace) -> int:
     from gainlink.fileio import publish_files
     from gainlink.firmware.build import build
+    from gainlink.firmware.size import size_report
     from gainlink.laws import law_of
     from gainlink.shipping.artifact import load
 
@@ -49,20 +50,40 @@ def _build(args: argparse.Namespace) -> int:
     law = law_of(artifact)
     res = build(artifact, target=platform.target.name, board=platform.board.name if platform.board else None)
     stem = f"gainlink_{artifact.name}"
-    shipped = law.firmware_files(artifact, res, stem=stem)
-    files: dict[str, bytes | str] = dict(shipped.files)
-    manifest = {"artifact": artifact.name, "sha256": artifact.sha256, "target": args.target, "board": res.board,
-                "files": {}} | shipped.manifest  # fmt: skip
+    files: dict[str, bytes | str] = {}
+    manifest = {
+        "artifact": artifact.name,
+        "sha256": artifact.sha256,
+        "target": args.target,
+        "board": res.board,
+        "law": law.label,
+        "files": {},
+    }
+    if platform.board is not None:
+        for ext in ("elf", "bin", "hex", "map"):
+            files[f"{stem}.{ext}"] = res.files[ext].read_bytes()
+            manifest["files"][ext] = f"{stem}.{ext}"
+        report = size_report(res.files["elf"], board=res.board)
+        report["elf"] = f"{stem}.elf"
+        files[f"{stem}.size.json"] = json.dumps(report, indent=2) + "\n"
+        manifest["files"]["size"] = f"{stem}.size.json"
+    else:
+        for role, name in (
+            ("shared", "libgainlink_host.so"),
+            ("static", "libgainlink_loop.a"),
+            ("exe", "gainlink_loop_host"),
+        ):
+            files[name] = res.files[role].read_bytes()
+            manifest["files"][role] = name
     for name, text in sorted((p.name, p.read_text("utf-8")) for p in res.gains_dir.iterdir()):
         files[f"src/{name}"] = text
     files["firmware.json"] = json.dumps(manifest, indent=2) + "\n"
     written = publish_files(args.out, files)
     out = Path(args.out)
-    for name in shipped.executables:
-        (out / name).chmod(0o755)
-    if platform.board is not None:
-        for name, what in law.image_roles(artifact, platform.board, stem=stem):
-            print(_size_line(name, json.loads(files[name.removesuffix(".elf") + ".size.json"]), what))
+    if args.target == "host":
+        (out / "gainlink_loop_host").chmod(0o755)
+    else:
+        print(_size_line(f"{stem}.elf", report, _image_role(law.label, platform.board)))
     print(
         f"built {artifact.name} for {args.target}{' / ' + res.board if res.board else ''}: "
         + ", ".join(p.name for p in written if p.parent == out)
@@ -75,6 +96,16 @@ def _size_line(name: str, report: dict, what: str) -> str:
         f"{name} on {report['board']}: flash {report['flash_bytes']} B, RAM {report['ram_bytes_without_stack']} B "
         f"+ stack ({report['ram_bytes']} B total); {what}"
     )
+
+
+def _image_role(label: str, board) -> str:
+    """What an image runs: the law, the nodes its UART serves on ``board``, and its replay."""
+    if board.serves:
+        nodes = "its UART's MAVLink and slcan nodes"
+    else:
+        nodes = "its UART's slcan node" if board.serves_fixed_slcan else None
+    replay = "replay and PIL over semihosting"
+    return f"the {label} law: {nodes}, {replay}" if nodes else f"the {label} law: {replay}"
 
 
 # --- firmware flash ---------------------------------------------------------------------------------
@@ -131,9 +162,7 @@ def _run_host(args: argparse.Namespace) -> int:
     from gainlink.shipping.artifact import load
 
     artifact = load(args.artifact)
-    res = build(
-        artifact, target="host", only="gainlink_fixed_loop_host" if is_fixed(artifact) else "gainlink_loop_host"
-    )
+    res = build(artifact, target="host", only="gainlink_loop_host")
     if is_fixed(artifact):  # the integer law the artifact certifies, not the float32 loop of the same export
         from ._fixed_run import run_fixed_host
 
@@ -157,30 +186,16 @@ def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: 
     from gainlink.proof.reference import Trace
     from gainlink.proof.replay_io import format_trace, read_samples
 
-    from ._host_exec import answer_samples
+    from ._host_exec import answer_samples, parse_records
 
     a = artifact
     samples = read_samples(input_path, a)
     stdout, N = answer_samples(exe, samples.Y, samples.R)
-    out = stdout.splitlines()[1:]  # skip the banner
-    U, S, XH, Z, F = (
-        np.zeros((N, a.m)),
-        np.zeros((N, a.m), bool),
-        np.zeros((N, a.n)),
-        np.zeros((N, a.q)),
-        np.zeros(N, bool),
-    )
-    for k, line in enumerate(out[:N]):
-        parts = line.split()
-        status = int(parts[1])
-        vals = [float(v) for v in parts[2:]]
-        U[k] = vals[: a.m]
-        mask = int(vals[a.m])
-        S[k] = [(mask >> i) & 1 for i in range(a.m)]
-        XH[k] = vals[a.m + 1 : a.m + 1 + a.n]
-        Z[k] = vals[a.m + 1 + a.n :]
-        F[k] = status == -2
-    trace = Trace(u=U, saturated=S, xh=XH, z=Z, fault=F)
+    rec = parse_records(a, stdout, count=N, executable=exe.name)
+    S = ((rec["sat"][:, None] >> np.arange(a.m)) & 1).astype(bool)
+    F = rec["status"] == -2
+    trace = Trace(u=rec["u"].astype(float), saturated=S, xh=rec["xh"].astype(float), z=rec["z"][:, : a.q].astype(float),
+                  fault=F)  # fmt: skip
     text = format_trace(trace, samples.t)
     if output_path is None:
         sys.stdout.write(text)
@@ -425,15 +440,16 @@ certifies).
 
 Without --input the loop reads stdin and answers each line with one line on stdout, flushed at once::
 
-  (first)       gainlink-loop NAME sha256:HEX n m p q        fixed point: gainlink-fixed NAME sha256:HEX
-  y0.. r0..     the samples, then the references (numbers separated by spaces, tabs or commas; nan, inf allowed)
-                -> step STATUS u.. SATMASK xh.. z..          fixed point: step FLAGS SAT CLIP OVERFLOW U.. V.. XH.. Z..
-                                                             (integer words)
-  reset         -> reset STATUS                              the loop restarts from its initial state
-  idle          -> idle STATUS u..                           float32 only: a period without a sample (watchdog)
-  stage, crc    -> stage STATUS, crc 0xHEX                   float32 only: re-stage the gain set, its checksum
-  other lines   -> error ...                                 nothing changes and the loop goes on; the exit
-                                                             status is 2 at the end of stdin, else 0
+  (first)       gainlink-loop NAME sha256:HEX n m p q law=LAW variant=VARIANT wire=2
+  y0.. r0.. [s0..]  the samples, the references (and a scheduled law's external signals; numbers separated by
+                spaces, tabs or commas; nan, inf allowed) -> step and the step's record: the law's fields in
+                order (status, flags, saturation, commands, a fixed-point law's words, the state), integers in
+                decimal, floats round-trip
+  idle          -> idle and the record             a period without a sample (the watchdog)
+  reset         -> reset and the record            the law restarts from its initial state
+  stage, crc    -> stage STATUS, crc 0xHEX         re-stage the built-in gain set through the law's checks; its CRC
+  other lines   -> error ...                       nothing changes and the loop goes on; the exit status is 2 at
+                                                   the end of stdin, else 0
 
 Ctrl-C stops the loop (exit status 130); a SIGTERM to the command stops it too (exit status 0).
 

@@ -10,6 +10,7 @@ from ..firmware.targets import resolve_cortex_m
 from ..proof.reference import Trace
 from ..shipping.artifact import Artifact
 from ..shipping.codegen_fixed import is_fixed
+from ..shipping.records import column
 from . import fixed as fixed_engine
 from .native import trace_from_raw
 
@@ -22,14 +23,14 @@ def run_raw(
     a = artifact
     platform = resolve_cortex_m(target, board)
     elf = replay_image(a, target=platform.target.name, board=platform.board.name)
-    rec = fwqemu.replay(elf, board=platform.board.name, n=a.n, m=a.m, p=a.p, q=a.q, Y=Y, R=R)
+    rec = fwqemu.replay(elf, a, board=platform.board.name, Y=Y, R=R if a.q else None)
     return {
-        "u": np.array(rec["u"]),
-        "sat": np.array(rec["sat"]),
-        "xh": np.array(rec["xh"]),
-        "z": np.array(rec["z"][:, : a.q]),
+        "u": column(rec, "u"),
+        "sat": column(rec, "sat"),
+        "xh": column(rec, "xh"),
+        "z": np.ascontiguousarray(column(rec, "z")[:, : a.q]),
         "fault": (rec["status"] == -2).astype(np.uint8),
-        "status": np.array(rec["status"]),
+        "status": column(rec, "status"),
     }
 
 

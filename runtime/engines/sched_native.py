@@ -1,8 +1,8 @@
 """The host build of the scheduled C loop (``firmware/src/gl_sched.c``), driven through ctypes.
 
-:class:`NativeScheduledLoop` owns one ``gl_sched_t`` in a ctypes buffer; :meth:`NativeScheduledLoop.run` hands a
-block of samples to ``gl_sched_run_block`` in one call and returns a
-:class:`~gainlink.proof.scheduled_reference.ScheduledTrace` (float32 values as float64 arrays).
+:class:`NativeScheduledLoop` owns the scheduled law's instance (:class:`gainlink.firmware.host.HostLaw`, whose first
+member is a ``gl_sched_t``); :meth:`NativeScheduledLoop.run` hands a block of samples to the library in one call and
+returns a :class:`~gainlink.proof.scheduled_reference.ScheduledTrace` (float32 values as float64 arrays).
 """
 
 from __future__ import annotations
@@ -13,13 +13,18 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FirmwareError
-from ..firmware.build import build
-from ..proof.scheduled_reference import ScheduledTrace
+from ..firmware.host import HostLaw
+from ..proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledTrace
+from ..shipping import flags
 from ..shipping.artifact import Artifact
-from .native import STATUS
 
 _FP = ctypes.POINTER(ctypes.c_float)
-_U32P = ctypes.POINTER(ctypes.c_uint32)
+#: The status flags of the record and the scheduled law's own sigma flags (proof.scheduled_reference).
+_SIGMA = ((flags.SIGMA_HELD, SIGMA_HELD), (flags.SIGMA_CLIPPED, SIGMA_CLIPPED), (flags.SIGMA_RATE, SIGMA_RATE))
+_SIGMA_LOW = min(bit for bit, _ in _SIGMA).bit_length() - 1
+_SIGMA_SPAN = max(bit for bit, _ in _SIGMA).bit_length() - _SIGMA_LOW
+#: The own flags of each value of the record's flag bits _SIGMA_LOW .. + _SIGMA_SPAN (one lookup per record).
+_SIGMA_OWN = np.array([sum(own for bit, own in _SIGMA if (k << _SIGMA_LOW) & bit) for k in range(1 << _SIGMA_SPAN)])
 
 
 def state_length(a: Artifact) -> int:
@@ -27,8 +32,21 @@ def state_length(a: Artifact) -> int:
     return a.n + a.m + a.p + a.q + 3
 
 
+def sigma_flags(status_flags: np.ndarray) -> np.ndarray:
+    """The scheduled law's own sigma flags of records' status flags."""
+    status_flags = np.asarray(status_flags, dtype=np.int64)
+    return _SIGMA_OWN[(status_flags >> _SIGMA_LOW) & ((1 << _SIGMA_SPAN) - 1)]
+
+
+def raw_of_records(rec: np.ndarray) -> dict[str, np.ndarray]:
+    """The records of a scheduled law as the arrays :func:`scheduled_trace_from_raw` takes: views of the records (a
+    copy of the state column alone would cost as much as the step)."""
+    return {"u": rec["u"], "sat": rec["sat"], "sflags": sigma_flags(rec["flags"]), "state": rec["state"],
+            "status": rec["status"]}  # fmt: skip
+
+
 class NativeScheduledLoop:
-    """One ``gl_sched_t`` of the host library built for the scheduled ``artifact``.
+    """One instance of the scheduled law in the host library built for the scheduled ``artifact``.
 
     Parameters
     ----------
@@ -43,31 +61,17 @@ class NativeScheduledLoop:
             raise FirmwareError(f"artifact {artifact.name} is not scheduled: use gainlink.engines.native")
         self.artifact = artifact
         self.e = len(artifact.schedule.external)
-        path = Path(library or build(artifact, target="host", only="gainlink_host").files["shared"])
-        self.library = path
-        lib = ctypes.PyDLL(str(path))  # short calls keep the GIL (see gainlink.engines.native)
-        self._lib = lib
-        lib.gl_host_artifact_sha256.restype = ctypes.c_char_p
-        sha = lib.gl_host_artifact_sha256().decode()
-        if sha != artifact.sha256:
-            raise FirmwareError(f"library {path} was built for artifact {sha[:12]}..., not {artifact.sha256[:12]}...")
-        lib.gl_host_sched_size.restype = ctypes.c_size_t
-        lib.gl_host_sched_default.restype = ctypes.c_void_p
-        self._loop = (ctypes.c_uint64 * ((lib.gl_host_sched_size() + 7) // 8))()
+        self.host = HostLaw(artifact, library=library)
+        self.library = self.host.library
+        lib = self._lib = ctypes.PyDLL(str(self.library))  # short calls keep the GIL (see gainlink.engines.native)
+        self._loop = self.host.address  # a gl_sched_t first: the law's own functions take it
         lib.gl_sched_init.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
         lib.gl_sched_reset.argtypes = [ctypes.c_void_p]
-        lib.gl_sched_step.argtypes = [ctypes.c_void_p, _FP, _FP, _FP, _FP]
         lib.gl_sched_state.argtypes = [ctypes.c_void_p, _FP]
-        self._run_block = ctypes.CDLL(str(path)).gl_sched_run_block
-        self._run_block.argtypes = [ctypes.c_void_p, ctypes.c_uint32, _FP, _FP, _FP, _FP, _U32P, _U32P, _FP,
-                                    ctypes.POINTER(ctypes.c_int32)]  # fmt: skip
-        status = lib.gl_sched_init(self._loop, lib.gl_host_sched_default())
-        if status != 0:
-            raise FirmwareError(f"gl_sched_init rejected the artifact's tables: {STATUS.get(status, status)}")
 
     def reset(self) -> int:
-        """``gl_sched_reset``."""
-        return int(self._lib.gl_sched_reset(self._loop))
+        """Back to the start state (``gl_law_reset``)."""
+        return int(self.host.reset()["status"])
 
     def state(self) -> np.ndarray:
         """``gl_sched_state``: the loop's state vector (float32)."""
@@ -76,23 +80,8 @@ class NativeScheduledLoop:
         return out
 
     def run_raw(self, Y, R=None, S=None) -> dict[str, np.ndarray]:
-        """Run a block in one C call; float32 outputs ``u sat sflags state status``."""
-        a = self.artifact
-        with np.errstate(over="ignore"):
-            Y = np.ascontiguousarray(np.asarray(Y, dtype=np.float32).reshape(-1, a.p))
-            N = Y.shape[0]
-            R = np.ascontiguousarray(np.zeros((N, a.q)) if R is None else np.asarray(R).reshape(N, a.q), np.float32)
-            Sx = np.zeros((N, max(self.e, 1))) if S is None or self.e == 0 else np.asarray(S).reshape(N, self.e)
-            Sx = np.ascontiguousarray(Sx, dtype=np.float32)
-        out = {"u": np.zeros((N, a.m), np.float32), "sat": np.zeros(N, np.uint32), "sflags": np.zeros(N, np.uint32),
-               "state": np.zeros((N, state_length(a)), np.float32), "status": np.zeros(N, np.int32)}  # fmt: skip
-        st = self._run_block(self._loop, N, Y.ctypes.data_as(_FP), R.ctypes.data_as(_FP), Sx.ctypes.data_as(_FP),
-                             out["u"].ctypes.data_as(_FP), out["sat"].ctypes.data_as(_U32P),
-                             out["sflags"].ctypes.data_as(_U32P), out["state"].ctypes.data_as(_FP),
-                             out["status"].ctypes.data_as(ctypes.POINTER(ctypes.c_int32)))  # fmt: skip
-        if st != 0:
-            raise FirmwareError(f"gl_sched_run_block failed: {STATUS.get(st, st)}")
-        return out
+        """Run a block in one C call; float32 outputs ``u sat sflags state status`` (views of one record array)."""
+        return raw_of_records(self.host.run(Y, R, S if self.e else None))
 
     def run(self, Y, R=None, S=None) -> ScheduledTrace:
         """Run a block of samples from the current state; the C's trace."""

@@ -23,7 +23,7 @@ from pathlib import Path
 from ..errors import ToolchainError
 from ..fileio import exclusive_lock
 from ..shipping.artifact import Artifact
-from ..shipping.codegen_scheduled import render_export
+from ..shipping.export_c import render_export
 from . import targets as _targets
 
 log = logging.getLogger(__name__)
@@ -347,7 +347,7 @@ def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path 
     ToolchainError
         When the build fails or does not produce the executable.
     """
-    # The CAN and MAVLink nodes also run a scheduled law (apps/can/gl_can_law.h, apps/mavlink/gl_mav_law.h).
+    # The CAN and MAVLink nodes run any law, a scheduled one too (gl_law.h).
     if target not in ("gainlink_can", "gainlink_mavlink"):
         artifact.require_unscheduled(f"the host app {target}")
     result = build(artifact, target="host", options={"GL_APPS": "ON"}, build_root=build_root, only=target)

@@ -1,7 +1,9 @@
 """Instructions per control step, counted by this project's QEMU TCG plugin (``firmware/tools/gl_insn_count.c``).
 
 DWT's cycle counter is not emulated, so the cost is measured as guest instructions executed from the
-entry of ``gl_loop_step`` to its return, callees included: on the soft-float cores (M0, M3) most of the
+entry of the law's own step function (``gl_loop_step``, ``gl_fixed_step`` or ``gl_sched_step``:
+:func:`gainlink.shipping.law_c.step_symbol`; gl_law.h's inline wrapper around it, which copies words and sets
+flag bits, is not counted) to its return, callees included: on the soft-float cores (M0, M3) most of the
 work is in libgcc's float routines and gl_fmaf, outside the step's own symbol, and counting inside the
 symbol only would flatter them. The instructions inside the symbol are reported beside it (``own``).
 The image masks interrupts around each step it replays, so no handler is counted. The count is exact
@@ -22,11 +24,11 @@ import numpy as np
 from ..errors import FirmwareError, ToolchainError
 from ..fileio import exclusive_lock
 from ..shipping.artifact import Artifact
+from ..shipping.law_c import step_symbol
 from . import qemu as fwqemu
 from .build import DEFAULT_BOARD, cache_root, firmware_dir
 from .size import symbol_sizes, tool
 
-STEP_SYMBOL = "gl_loop_step"
 _CALL = re.compile(r"^\s*([0-9a-f]+):\s+(?:[0-9a-f]{4}\s+){2}bl\s+[0-9a-f]+ <(\S+)>$")
 
 
@@ -94,16 +96,34 @@ def return_addresses(elf: Path, symbol: str) -> list[int]:
 
 
 def count_step_instructions(
-    elf: Path, artifact: Artifact, *, Y: np.ndarray, R: np.ndarray, board: str = DEFAULT_BOARD
+    elf: Path,
+    artifact: Artifact,
+    *,
+    Y: np.ndarray,
+    R: np.ndarray | None,
+    S: np.ndarray | None = None,
+    board: str = DEFAULT_BOARD,
+    law: str | None = None,
 ) -> StepCost:
-    """Replay ``Y``, ``R`` through ``elf`` on ``board`` in QEMU, counting every call of ``gl_loop_step``."""
-    return count_calls(elf, artifact, symbol=STEP_SYMBOL, Y=Y, R=R, board=board)
+    """Replay ``Y``, ``R`` (and a scheduled law's external signals ``S``) through ``elf`` on ``board`` in QEMU,
+    counting every call of the law's step function (``law``: the law the image runs when it is not the artifact's
+    own, a ``GL_LAW`` baseline)."""
+    symbol = step_symbol(artifact, law=law)
+    return count_calls(elf, artifact, symbol=symbol, Y=Y, R=R, S=S, board=board, law=law)
 
 
 def count_calls(
-    elf: Path, artifact: Artifact, *, symbol: str, Y: np.ndarray, R: np.ndarray, board: str = DEFAULT_BOARD
+    elf: Path,
+    artifact: Artifact,
+    *,
+    symbol: str,
+    Y: np.ndarray,
+    R: np.ndarray | None,
+    S: np.ndarray | None = None,
+    board: str = DEFAULT_BOARD,
+    law: str | None = None,
 ) -> StepCost:
-    """Replay ``Y``, ``R`` through ``elf`` on ``board``, counting every direct call of the function ``symbol``
+    """Replay ``Y``, ``R``, ``S`` through ``elf`` on ``board``, counting every direct call of the function ``symbol``
     (e.g. ``gl_fmaf`` on a soft-float core) from its entry to its return, callees included."""
     sym = symbol_sizes(elf, (symbol,)).get(symbol)
     if sym is None:
@@ -117,8 +137,7 @@ def count_calls(
         result = Path(tmp) / "count.txt"
         spec = [f"{plugin}", f"lo={lo:#x}", f"hi={hi:#x}", f"entry={lo:#x}", f"out={result}"]
         spec += [f"ret={r:#x}" for r in returns]
-        a = artifact
-        fwqemu.replay(elf, board=board, n=a.n, m=a.m, p=a.p, q=a.q, Y=Y, R=R, plugin=["-plugin", ",".join(spec)])
+        fwqemu.replay(elf, artifact, board=board, Y=Y, R=R, S=S, plugin=["-plugin", ",".join(spec)], law=law)
         fields = {k: int(v) for k, v in (item.split("=") for item in result.read_text().split())}
     return StepCost(
         instructions=fields["insns"],

@@ -1,8 +1,9 @@
-"""Running the Cortex-M4F image under ``qemu-system-arm``: replay through semihosting files.
+"""Running a Cortex-M image under ``qemu-system-arm``: replay through semihosting files.
 
-The image (see ``firmware/ports/cortex-m/main.c``) reads ``gl_in.bin`` and writes ``gl_out.bin`` in
-QEMU's working directory. Every QEMU is started with stdin from /dev/null, wrapped in ``timeout``
-and killed in ``finally``; its exit status is the image's semihosting exit code.
+The image (``firmware/ports/cortex-m/main.c``, one main for every law) reads ``gl_in.bin`` and writes ``gl_out.bin``
+in QEMU's working directory: a header, then one sample in per record and one record out (the law's record,
+:mod:`gainlink.shipping.records`: the same dtype the host bindings read). Every QEMU is started with stdin from
+/dev/null, wrapped in ``timeout`` and killed in ``finally``; its exit status is the image's semihosting exit code.
 """
 
 from __future__ import annotations
@@ -14,23 +15,26 @@ import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..errors import FirmwareError, ToolchainError
+from ..shipping import records
+from ..shipping.law_c import law_ids
 
 log = logging.getLogger(__name__)
 
-IN_MAGIC = 0x31494C47  # "GLI1"
-OUT_MAGIC = 0x314F4C47  # "GLO1"
+IN_MAGIC = 0x32494C47  # "GLI2"
+OUT_MAGIC = 0x324F4C47  # "GLO2"
 MAX_BLOCK = 64
-TAG_STEP, TAG_IDLE, TAG_STAGE = 0, 1, 2
+TAG_STEP, TAG_IDLE, TAG_STAGE, TAG_RESET = records.TAG_STEP, records.TAG_IDLE, records.TAG_STAGE, records.TAG_RESET
 
 EXIT_CODES = {
     0: "ok",
     1: "malformed input stream header",
     2: "semihosting I/O error or short read",
-    4: "built-in gain set rejected by gl_loop_init",
+    4: "built-in gain set rejected by gl_law_init",
     8: "startup self-test: FPU not enabled",
     9: "CPU fault (HardFault/UsageFault)",
     124: "timed out",
@@ -117,74 +121,65 @@ def run_image(elf: Path, *, board: str, cwd: Path, timeout_s: float = 20.0, plug
     return QemuRun(returncode=proc.returncode, uart=text)
 
 
-def record_dtypes(*, n: int, m: int, p: int, q: int) -> tuple[np.dtype, np.dtype]:
-    """numpy dtypes of one input and one output record of the image's stream."""
-    qa = max(q, 1)
-    din = np.dtype([("tag", "<u4"), ("y", "<f4", (p,)), ("r", "<f4", (qa,))])
-    dout = np.dtype([("status", "<i4"), ("sat", "<u4"), ("u", "<f4", (m,)), ("xh", "<f4", (n,)), ("z", "<f4", (qa,))])
-    return din, dout
-
-
 def encode_input(
+    artifact: Any,
     Y: np.ndarray,
-    R: np.ndarray | None,
+    R: np.ndarray | None = None,
+    S: np.ndarray | None = None,
     *,
-    n: int,
-    m: int,
-    p: int,
-    q: int,
     block: int = MAX_BLOCK,
     watchdog_periods: int = 10,
     tags: np.ndarray | None = None,
 ) -> bytes:
-    """The ``gl_in.bin`` stream for samples ``Y`` (N, p), ``R`` (N, q)."""
-    din, _ = record_dtypes(n=n, m=m, p=p, q=q)
-    Y = np.asarray(Y, dtype=np.float64).reshape(-1, p)
-    N = Y.shape[0]
-    rec = np.zeros(N, dtype=din)
-    rec["y"] = Y.astype(np.float32)
-    if q > 0:
-        rec["r"] = np.asarray(R, dtype=np.float64).reshape(N, q).astype(np.float32)
-    if tags is not None:
-        rec["tag"] = tags
+    """The ``gl_in.bin`` stream for samples ``Y`` (N, p), references ``R`` (N, q) and external scheduling signals
+    ``S`` (N, e) of ``artifact``'s law (cast to float32; missing ones zero), each record a step unless ``tags`` says
+    otherwise (:data:`TAG_IDLE`, :data:`TAG_STAGE`, :data:`TAG_RESET`)."""
+    rec = records.samples(artifact, Y, R, S, tags=tags)
+    N = rec.size
     return struct.pack("<4I", IN_MAGIC, N, block, watchdog_periods) + rec.tobytes()
 
 
-def decode_output(blob: bytes, *, n: int, m: int, p: int, q: int) -> tuple[np.ndarray, int]:
-    """Parse ``gl_out.bin``: the records and the checksum of the gain set that ran."""
+def output_header(artifact: Any, *, law: str | None = None) -> tuple[int, ...]:
+    """The words 2..7 of the image's output header for ``artifact`` (running ``law``, default its own): the law's
+    HEARTBEAT id and the dimensions n, m, p, q, e."""
+    return (law_ids(artifact, law=law), *records.dims(artifact))
+
+
+def decode_output(blob: bytes, artifact: Any, *, law: str | None = None) -> np.ndarray:
+    """Parse ``gl_out.bin`` of an image of ``artifact`` (running ``law``, default its own): its records."""
     if len(blob) < 32:
         raise FirmwareError("firmware output stream is truncated (no header)")
-    magic, count, nn, mm, pp, qq, crc, _ = struct.unpack("<8I", blob[:32])
-    if magic != OUT_MAGIC or (nn, mm, pp, qq) != (n, m, p, q):
-        raise FirmwareError("firmware output stream has a bad header (image built for another artifact?)")
-    _, dout = record_dtypes(n=n, m=m, p=p, q=q)
-    rec = np.frombuffer(blob[32:], dtype=dout)
+    magic, count, *shape = struct.unpack("<8I", blob[:32])
+    if magic != OUT_MAGIC or tuple(shape) != output_header(artifact, law=law):
+        raise FirmwareError("firmware output stream has a bad header (image built for another artifact or law?)")
+    rec = np.frombuffer(blob[32:], dtype=records.layout(artifact, law=law).dtype)
     if rec.shape[0] != count:
         raise FirmwareError(f"firmware wrote {rec.shape[0]} of {count} records")
-    return rec, crc
+    return rec
 
 
 def replay(
     elf: Path,
+    artifact: Any,
     *,
     board: str,
-    n: int,
-    m: int,
-    p: int,
-    q: int,
     Y: np.ndarray,
-    R: np.ndarray | None,
+    R: np.ndarray | None = None,
+    S: np.ndarray | None = None,
     tags: np.ndarray | None = None,
     watchdog_periods: int = 10,
     plugin: list[str] | None = None,
     stage_sets: list[bytes] | None = None,
+    law: str | None = None,
 ) -> np.ndarray:
-    """Run samples through the image in QEMU (semihosting file I/O); return the output records.
+    """Run samples through the image ``elf`` of ``artifact`` in QEMU (semihosting file I/O); return its records
+    (:func:`gainlink.shipping.records.layout`; ``law``: the law the image runs when it is not the artifact's own, a
+    baseline built with ``GL_LAW``).
 
-    ``stage_sets[K]`` is the raw ``gl_gains_t`` the K-th record tagged :data:`TAG_STAGE` stages.
+    ``stage_sets[K]`` is the raw ``gl_law_gains_t`` the K-th record tagged :data:`TAG_STAGE` stages.
     """
-    blob = encode_input(Y, R, n=n, m=m, p=p, q=q, watchdog_periods=watchdog_periods, tags=tags)
-    N = int(np.asarray(Y).reshape(-1, p).shape[0])
+    blob = encode_input(artifact, Y, R, S, watchdog_periods=watchdog_periods, tags=tags)
+    N = int(np.asarray(Y).reshape(-1, artifact.p).shape[0])
     with tempfile.TemporaryDirectory(prefix="gainlink-qemu-") as tmp:
         work = Path(tmp)
         (work / "gl_in.bin").write_bytes(blob)
@@ -194,5 +189,4 @@ def replay(
         if res.returncode != 0:
             raise FirmwareError(f"firmware image in QEMU ({board}) failed: {res.meaning}")
         out = (work / "gl_out.bin").read_bytes()
-    rec, _crc = decode_output(out, n=n, m=m, p=p, q=q)
-    return rec
+    return decode_output(out, artifact, law=law)

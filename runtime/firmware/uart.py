@@ -34,6 +34,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ..errors import FirmwareError, TransportError
+from ..shipping.flags import WIRE_VERSION
 from .qemu import EXIT_CODES, qemu_command
 
 log = logging.getLogger(__name__)
@@ -271,6 +272,7 @@ class QemuUart:
             found = m.group(1)[:16] if m else "unknown"
             self.stop()
             raise FirmwareError(f"the image runs artifact sha256:{found}..., not sha256:{sha256[:16]}...")
+        refuse_other_wire(self.ready_line, what="the image", stop=self.stop)
         refuse_persisted(self.ready_line, what="the image", stop=self.stop)
 
     def exit_status(self) -> int | None:
@@ -354,6 +356,19 @@ def gains_of(ready_line: str) -> dict | None:
         return None
     fmt = re.search(r"\bformat=(\S+)", ready_line)
     return {"set": m.group(1), "crc32": int(m.group(2)), "format": fmt.group(1) if fmt else None}
+
+
+def refuse_other_wire(ready_line: str, *, what: str, stop) -> None:
+    """Stop the node (``stop()``) and raise :class:`FirmwareError`, in one line, when its start-up line speaks another
+    sample/command wire format than this gainlink (``wire=N``, :data:`gainlink.shipping.flags.WIRE_VERSION`; a line
+    without one is a firmware from before the format was versioned): its status bits would be read at other places."""
+    m = re.search(r"\bwire=(\d+)", ready_line)
+    if m is None or int(m.group(1)) != WIRE_VERSION:
+        stop()
+        theirs = f"wire format {m.group(1)}" if m else "a wire format from before it was versioned"
+        raise FirmwareError(
+            f"{what} speaks {theirs}, this gainlink wire format {WIRE_VERSION}: rebuild its firmware with this gainlink"
+        )
 
 
 def refuse_persisted(ready_line: str, *, what: str, stop) -> None:

@@ -14,7 +14,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from ..errors import LawError
-from .base import CELLS, ENGINES, Capabilities, Controller, FirmwareFiles, Law, OneStepVerdict, Step
+from ..shipping.law_c import law_pair
+from .base import CELLS, ENGINES, Capabilities, Controller, Law, OneStepVerdict, Step
 from .fixed import FixedLaw
 from .lq import LqLaw
 from .scheduled import ScheduledLaw
@@ -28,7 +29,6 @@ __all__ = [
     "ENGINES",
     "Capabilities",
     "Controller",
-    "FirmwareFiles",
     "Law",
     "OneStepVerdict",
     "Step",
@@ -70,11 +70,9 @@ def law_for(structure: str, numeric: str = "float32") -> Law:
 
 
 def law_of(artifact: Any) -> Law:
-    """The law ``artifact`` runs: the one place that reads which (module docstring)."""
-    data = artifact.data
-    structure = "scheduled" if data.get("schedule") is not None else "lq"
-    fixed = data.get("checks", {}).get("fixed_point")
-    return law_for(structure, "float32" if fixed is None else str(fixed["numeric"]))
+    """The law ``artifact`` runs. Which it is, is read in one place, :func:`gainlink.shipping.law_c.law_pair`, below
+    this layer because the C export names the law too (module docstring)."""
+    return law_for(*law_pair(artifact))
 
 
 def law_for_spec(spec: PlantSpec) -> Law:

@@ -133,16 +133,6 @@ class OneStepVerdict:
 
 
 @dataclass(frozen=True)
-class FirmwareFiles:
-    """What ``gainlink firmware build`` ships of a build, beyond the generated sources: the files by name, the
-    manifest's entries naming them, and which files are executables."""
-
-    files: Mapping[str, bytes | str]
-    manifest: Mapping[str, Any]
-    executables: tuple[str, ...] = ()
-
-
-@dataclass(frozen=True)
 class Capabilities:
     """What a pair can do: every cell of :data:`CELLS` either in ``can`` or refused with its reason in ``cannot``."""
 
@@ -294,19 +284,13 @@ class Law(ABC):
         """A replay output CSV of this law back into a trace (:class:`~gainlink.errors.DataError` when it is not
         one of this artifact, or names another numeric format)."""
 
-    @abstractmethod
     def export(self, artifact: Any) -> dict[str, str]:
-        """The C files of the law's export (``gainlink export``), by name; the same artifact, the same bytes."""
+        """The C files of the law's export (``gainlink export``), by name; the same artifact, the same bytes: its
+        gains, its record and parameter table, the flags, rendered from the law's descriptions
+        (:func:`gainlink.shipping.export_c.render_export`; the C chooses the law from the header at compile time)."""
+        from ..shipping.export_c import render_export
 
-    @abstractmethod
-    def firmware_files(self, artifact: Any, build: Any, *, stem: str) -> FirmwareFiles:
-        """The files ``gainlink firmware build`` ships from ``build`` (a :class:`~gainlink.firmware.build.Build` of
-        ``artifact``): a Cortex-M image's ``{stem}.elf/.bin/.hex/.map`` and size report, or the host libraries
-        (and the loop executable where the law has one)."""
-
-    @abstractmethod
-    def image_roles(self, artifact: Any, board: Any, *, stem: str) -> list[tuple[str, str]]:
-        """Each Cortex-M image a build for ``board`` writes, by file name, with the law it runs and where."""
+        return render_export(artifact)
 
     # -- what the commands print about a law --------------------------------------------------------------------
 

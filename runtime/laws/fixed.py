@@ -11,20 +11,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from . import flags
-from .base import Controller, FirmwareFiles, OneStepVerdict, Step
-from .lq import AGAINST_FLOAT64, IMAGE_FILES, REPLAY_OVER_SEMIHOSTING, LqLaw, PythonLoop, _image_files, sat_bits
+from .base import Controller, OneStepVerdict, Step
+from .lq import AGAINST_FLOAT64, LqLaw, PythonLoop, sat_bits
 
 if TYPE_CHECKING:
     from ..spec import PlantSpec
     from ..synthesis.pipeline import DesignResult
-
-#: gl_fixed.h's GL_FX_FAULT, GL_FX_CLIPPED, GL_FX_OVERFLOW as the status flags.
-_FX_FLAGS = ((1, flags.FAULT), (2, flags.CLIPPED), (4, flags.OVERFLOW))
-
-
-def status_flags(fx: int) -> int:
-    """The status flags of the fixed-point C's own flag word."""
-    return sum(bit for fx_bit, bit in _FX_FLAGS if fx & fx_bit)
 
 
 def _as_float32(x: np.ndarray) -> np.ndarray:
@@ -74,9 +66,9 @@ class FixedNative:
     def step(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> Step:
         """One sample through ``gl_fixed_step``."""
         out = self.loop.step(y, r)
-        rec = self.loop.last_record
-        return Step(u=np.asarray(out.u, dtype=float), flags=status_flags(int(rec["flags"])),
-                    sat=int(out.sat_mask), word=np.array(rec["U"], dtype=np.int64))  # fmt: skip
+        rec = self.loop.last_record  # its flags are the status flags (the one table)
+        return Step(u=np.asarray(out.u, dtype=float), flags=int(rec["flags"]), sat=int(out.sat_mask),
+                    word=np.array(rec["U"], dtype=np.int64))  # fmt: skip
 
     def reset(self) -> None:
         """``gl_fixed_reset``."""
@@ -143,36 +135,6 @@ class FixedLaw(LqLaw):
     def trace_numeric(self, engine: str | None) -> str | None:
         """``float64`` for the ``reference`` engine's trace, else the law's own format (``q31``, ``q15``)."""
         return "float64" if engine == "reference" else self.numeric
-
-    def firmware_files(self, artifact: Any, build: Any, *, stem: str) -> FirmwareFiles:
-        """The float32 law's files, and beside them the integer law's: the image ``{stem}_fixed.*`` (replay over
-        semihosting, firmware/ports/cortex-m/main_fixed.c) or the host library and executable."""
-        shipped = super().firmware_files(artifact, build, stem=stem)
-        files, fixed, cm = dict(shipped.files), {}, build.build_dir
-        if build.board is not None:
-            paths = {ext: cm / f"gainlink_fixed_image.{ext}" for ext in IMAGE_FILES}
-            _image_files(files, fixed, build, paths, image=f"{stem}_fixed")
-            executables = shipped.executables
-        else:
-            for role, name in (("shared", "libgainlink_fixed_host.so"), ("exe", "gainlink_fixed_loop_host")):
-                files[name] = (cm / name).read_bytes()
-                fixed[role] = name
-            executables = (*shipped.executables, "gainlink_fixed_loop_host")
-        return FirmwareFiles(files, {**shipped.manifest, "fixed_point": fixed}, executables)
-
-    def image_roles(self, artifact: Any, board: Any, *, stem: str) -> list[tuple[str, str]]:
-        """The image of the export (the integer law on its nodes, the float32 loop for replay) and the integer law's
-        own image."""
-        replay = REPLAY_OVER_SEMIHOSTING
-        if board.serves:
-            nodes = "its UART's MAVLink and slcan nodes"
-        elif board.serves_fixed_slcan:
-            nodes = "its UART's slcan node"
-        else:
-            nodes = None
-        main = f"the {self.label} law on {nodes}, the float32 loop for {replay}" if nodes else None
-        return [(f"{stem}.elf", main or f"the float32 loop: {replay}"),
-                (f"{stem}_fixed.elf", f"the {self.label} law alone: {replay}")]  # fmt: skip
 
     def _arithmetic_lines(self, result: DesignResult) -> list[str]:
         """The certificate's lines, and the deviation measured in closed loop beside the certified bound."""

@@ -4,14 +4,13 @@ behind :class:`~gainlink.laws.base.Controller`; its replay engines, one-step che
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import flags
-from .base import Controller, FirmwareFiles, Law, OneStepVerdict, Step
+from .base import Controller, Law, OneStepVerdict, Step
 
 if TYPE_CHECKING:
     from ..proof.sampled_plant import SampledPlant
@@ -19,7 +18,6 @@ if TYPE_CHECKING:
     from ..synthesis.pipeline import DesignResult
 
 #: The files of a Cortex-M image, by extension.
-IMAGE_FILES = ("elf", "bin", "hex", "map")
 
 #: What the one-step check of this law checks a trace against (gainlink.proof.onestep).
 AGAINST_FLOAT64 = "float64 law from its own state at each step"
@@ -150,17 +148,6 @@ class LqLaw(Law):
 
         return read_trace(path, artifact, numeric=self.trace_numeric(None) or "float32")
 
-    def export(self, artifact: Any) -> dict[str, str]:
-        from ..shipping.codegen import render_c
-
-        return render_c(artifact)
-
-    def firmware_files(self, artifact: Any, build: Any, *, stem: str) -> FirmwareFiles:
-        return shipped_files(build, stem=stem, host=HOST_FILES)
-
-    def image_roles(self, artifact: Any, board: Any, *, stem: str) -> list[tuple[str, str]]:
-        return image_role(self.label, board, stem=stem)
-
     # -- what the design and replay commands print --------------------------------------------------------------
 
     def design_lines(self, result: DesignResult, path: Path) -> list[str]:
@@ -222,46 +209,6 @@ class LqLaw(Law):
             f"{comp.describe()}; replayed open loop, rounding grows like {comp.radius_without_integrators:.3g}^k"
             ": the one-step check is the verdict"
         )
-
-
-#: The host build's files: (role in the build, name); the role ``exe`` is the loop executable.
-HOST_FILES = (("shared", "libgainlink_host.so"), ("static", "libgainlink_loop.a"), ("exe", "gainlink_loop_host"))
-REPLAY_OVER_SEMIHOSTING = "replay and PIL over semihosting"
-
-
-def shipped_files(build: Any, *, stem: str, host: tuple[tuple[str, str], ...]) -> FirmwareFiles:
-    """What ``firmware build`` ships of ``build``: a Cortex-M image as ``{stem}.*`` with its size report, or the
-    host build's files ``host`` (role, name)."""
-    files: dict[str, bytes | str] = {}
-    named: dict[str, str] = {}
-    if build.board is not None:
-        _image_files(files, named, build, {ext: build.files[ext] for ext in IMAGE_FILES}, image=stem)
-        return FirmwareFiles(files, {"files": named})
-    for role, name in host:
-        files[name] = build.files[role].read_bytes()
-        named[role] = name
-    return FirmwareFiles(files, {"files": named}, tuple(name for role, name in host if role == "exe"))
-
-
-def image_role(label: str, board: Any, *, stem: str) -> list[tuple[str, str]]:
-    """The one image of a law, the nodes its UART serves on ``board`` and its replay."""
-    nodes = "its UART's MAVLink and slcan nodes" if board.serves else None
-    how = f"{nodes}, {REPLAY_OVER_SEMIHOSTING}" if nodes else REPLAY_OVER_SEMIHOSTING
-    return [(f"{stem}.elf", f"the {label} law: {how}")]
-
-
-def _image_files(files: dict, named: dict, build: Any, paths: dict[str, Path], *, image: str) -> None:
-    """A Cortex-M image (``paths``: its files by extension) shipped as ``{image}.elf/.bin/.hex/.map`` with its size
-    report (``named``: the manifest's entries, by extension)."""
-    from ..firmware.size import size_report
-
-    for ext in IMAGE_FILES:
-        files[f"{image}.{ext}"] = Path(paths[ext]).read_bytes()
-        named[ext] = f"{image}.{ext}"
-    report = size_report(paths["elf"], board=build.board)
-    report["elf"] = f"{image}.elf"
-    files[f"{image}.size.json"] = json.dumps(report, indent=2) + "\n"
-    named["size"] = f"{image}.size.json"
 
 
 def _gains_lines(result: DesignResult) -> list[str]:

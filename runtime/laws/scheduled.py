@@ -11,8 +11,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from . import flags
-from .base import Controller, FirmwareFiles, Law, OneStepVerdict, Step
-from .lq import AGAINST_FLOAT64, HOST_FILES, LqLaw, image_role, sat_bits, shipped_files
+from .base import Controller, Law, OneStepVerdict, Step
+from .lq import AGAINST_FLOAT64, LqLaw, sat_bits
 
 if TYPE_CHECKING:
     from ..proof.sampled_plant import SampledPlant
@@ -77,15 +77,13 @@ class ScheduledNative:
         from ..engines.sched_native import NativeScheduledLoop
 
         self.loop = NativeScheduledLoop(artifact, library=library)
-        self.sigma_at = artifact.n + artifact.m + artifact.p + artifact.q  # sigma in the state vector
         self.describe = {"kind": "firmware (host scheduled C loop, ctypes)", "library": str(self.loop.library)}
 
     def step(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> Step:
-        """One sample through ``gl_sched_step``."""
-        raw = self.loop.run_raw(y[None, :], r[None, :], s[None, :] if s.size else None)
-        fault = int(raw["status"][0]) == -2  # GL_SCHED_ERR_NANINF
-        return Step(u=raw["u"][0].astype(float), flags=status_flags(int(raw["sflags"][0]), fault=fault),
-                    sat=int(raw["sat"][0]), sigma=float(raw["state"][0, self.sigma_at]))  # fmt: skip
+        """One sample through ``gl_sched_step``: its record's flags are the status flags (the one table)."""
+        rec = self.loop.host.step(y, r, s if s.size else None)
+        return Step(u=rec["u"].astype(float), flags=int(rec["flags"]), sat=int(rec["sat"]),
+                    sigma=float(rec["sigma"]))  # fmt: skip
 
     def reset(self) -> None:
         """``gl_sched_reset``."""
@@ -203,18 +201,6 @@ class ScheduledLaw(Law):
         from ..proof.scheduled_replay import read_trace
 
         return read_trace(path, artifact)
-
-    def export(self, artifact: Any) -> dict[str, str]:
-        from ..shipping.codegen_scheduled import render_scheduled
-
-        return render_scheduled(artifact)
-
-    def firmware_files(self, artifact: Any, build: Any, *, stem: str) -> FirmwareFiles:
-        """The observer-based law's, but no stdin/stdout executable on the host (the scheduled loop has none)."""
-        return shipped_files(build, stem=stem, host=tuple(f for f in HOST_FILES if f[0] != "exe"))
-
-    def image_roles(self, artifact: Any, board: Any, *, stem: str) -> list[tuple[str, str]]:
-        return image_role(self.label, board, stem=stem)
 
     # -- what the design and replay commands print --------------------------------------------------------------
 

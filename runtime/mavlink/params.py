@@ -56,8 +56,10 @@ import numpy as np
 from ..errors import ParameterError
 from ..fileio import read_toml
 from ..shipping import gains_layout as layout
+from ..shipping import params as law_params
 from ..shipping.artifact import Artifact
-from ..shipping.codegen import gain_set, shape_of
+from ..shipping.codegen import gain_set
+from ..shipping.params import as_int32
 
 #: MAV_PARAM_TYPE values (MAVLink common.xml).
 PARAM_TYPES: dict[str, int] = {
@@ -89,7 +91,7 @@ PARAM_ID_LEN = 16
 #: (:mod:`gainlink.shipping.gains_layout`).
 MATRICES: tuple[str, ...] = tuple(f.name for f in layout.NUMBERS if len(f.dims) == 2)
 DIMENSION_IDS: tuple[str, ...] = tuple(f.param for f in layout.STRUCTURE)
-HASH_ID = "GL_HASH"
+HASH_ID = law_params.HASH_ID
 
 
 class Encoding(enum.Enum):
@@ -166,49 +168,19 @@ def same_value(*, a: float | int, b: float | int, ptype: int) -> bool:
     return int(a) == int(b)
 
 
-def as_int32(value: int) -> int:
-    """A uint32 (a CRC) as the int32 an INT32 parameter holds."""
-    value &= 0xFFFFFFFF
-    return value - (1 << 32) if value >= 1 << 31 else value
-
-
-def _block_params(field: layout.Field, values: np.ndarray, shape: layout.Shape) -> list[ParamSpec]:
-    if not field.dims:
-        return [ParamSpec(name=f"GL_{field.param}", ptype=REAL32, value=float(values), source=field.name)]
-    exposed = field.exposed_shape(shape)  # integrator arrays are stored with max(q, 1) rows or columns
-    if len(field.dims) == 1:
-        return [
-            ParamSpec(name=f"GL_{field.param}_{i}", ptype=REAL32, value=float(values[i]), source=f"{field.name}[{i}]")
-            for i in range(exposed[0])
-        ]
-    rows, cols = exposed
-    return [
-        ParamSpec(
-            name=f"GL_{field.param}_{i}_{j}", ptype=REAL32, value=float(values[i, j]), source=f"{field.name}[{i},{j}]"
-        )
-        for i in range(rows)
-        for j in range(cols)
-    ]
-
-
 def firmware_params(artifact: Artifact) -> tuple[ParamSpec, ...]:
-    """Every parameter of the gainlink firmware built for ``artifact``, in index order (see module doc).
+    """Every parameter of the gainlink firmware built for ``artifact``, in index order: the table of the law it runs
+    (:func:`gainlink.shipping.params.table`, the one description the firmware's table is generated from; for the
+    float32 law the module docstring's).
 
     REAL32 values are the float32 numbers the C ``gl_gains_t`` holds; ``GL_HASH`` is its CRC-32.
     """
-    gs = gain_set(artifact)
-    shape = shape_of(artifact)
-    out = [
-        ParamSpec(name=f.param, ptype=INT32, value=int(v), source=f.name)
-        for f, v in zip(layout.STRUCTURE, gs.header, strict=True)
-    ]
-    out.append(ParamSpec(name=HASH_ID, ptype=INT32, value=as_int32(gs.crc32), source="crc32"))
-    for field in layout.NUMBERS:
-        if field.param:
-            out.extend(_block_params(field, np.asarray(gs.fields[field.name]), shape))
+    out = tuple(
+        ParamSpec(name=p.name, ptype=p.ptype, value=p.value, source=p.source) for p in law_params.table(artifact)
+    )
     for spec in out:
         check_param_id(spec.name)
-    return tuple(out)
+    return out
 
 
 def gain_set_hash(artifact: Artifact) -> int:

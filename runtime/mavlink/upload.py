@@ -203,7 +203,7 @@ def _plan(artifact: Artifact, mapping: Mapping | None) -> _Plan:
 
 
 def _scheduled_plan(artifact: Artifact, mapping: Mapping | None) -> _Plan:
-    """Every point's gains as one set, committed through GL_HASH (all or none: gl_mav_schedparams.c)."""
+    """Every point's gains as one set, committed through GL_HASH (all or none: the node commits its table whole)."""
     if mapping is not None:
         raise ParameterError(
             f"{artifact.name} is a scheduled artifact: a --mapping names one gain set, not its points; "

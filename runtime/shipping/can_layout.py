@@ -1,8 +1,9 @@
 """The CAN message layout of one artifact, as a DBC (cantools) and as a fast struct codec.
 
 Every frame starts with a 4-byte header: ``seq`` (uint16, little-endian sample counter), ``status``
-(uint8, ``STATUS_*`` bits in commands, 0 in measurements) and ``sat`` (uint8, bit i set when the
-i-th value of this command frame was clamped). Values follow, little-endian, in one of two encodings:
+(uint8: in commands the step's status flags, the one table of :mod:`gainlink.shipping.flags`, which the DBC carries as
+the signal's value table; 0 in measurements) and ``sat`` (uint8, bit i set when the i-th value of this command frame
+was clamped). Values follow, little-endian, in one of two encodings:
 
 ``float32`` (default)
     IEEE float32, 1 per classic CAN frame (8 bytes), up to 8 per CAN FD frame.
@@ -35,6 +36,9 @@ from typing import Any
 import numpy as np
 from gainlink.errors import TransportError
 
+from .flags import FLAGS, Flag
+from .law_c import law_pair
+
 HEADER_BYTES = 4
 COMMAND_OFFSET = 0x00
 MEASUREMENT_OFFSET = 0x10
@@ -43,10 +47,9 @@ MAX_MEASUREMENT_FRAMES = 0x20  # ids base+0x10 .. base+0x2f (the firmware tracks
 FD_MAX_VALUES = 8
 FD_LENGTHS = (8, 12, 16, 20, 24, 32, 48, 64)
 ENCODINGS = ("float32", "int16")
-#: The status bits every law sets, and those of the fixed-point and the scheduled law (firmware/apps/can/gl_can_law.h).
-STATUS_BITS = "bit0 fault (non-finite sample), bit1 watchdog"
-STATUS_BITS_FIXED = STATUS_BITS + ", bit2 a sample clipped to its range, bit3 second-line saturation (fixed point)"
-STATUS_BITS_SCHEDULED = STATUS_BITS + ", bit4 sigma held, bit5 sigma clipped, bit6 sigma rate-limited"
+#: Which flags of the one table (:data:`gainlink.shipping.flags.FLAGS`, its ``set_by``) each structure's CAN node can
+#: set: the DBC's value table and comment of ``status`` name them.
+_SET_BY = {"lq": ("every law",), "fixed": ("every law", "fixed point"), "scheduled": ("every law", "scheduled")}
 VALUE_BYTES = {"float32": 4, "int16": 2}
 CLASSIC_VALUES = {"float32": 1, "int16": 2}
 INT16_MAX = 32767  #: largest raw value; -INT16_MAX is the smallest
@@ -180,8 +183,8 @@ class CanLayout:
         Plant -> controller frames (``y`` then ``r``), controller -> plant frames (``u``).
     encoding : {"float32", "int16"}
         How values are carried.
-    status_bits : str
-        What the command frames' status bits mean for the artifact's law (the DBC's comment on ``status``).
+    status_flags : tuple of Flag
+        The status flags the artifact's law can set (the DBC's value table and comment of ``status``).
     """
 
     fd: bool
@@ -190,14 +193,14 @@ class CanLayout:
     measurement: tuple[FrameSpec, ...]
     command: tuple[FrameSpec, ...]
     encoding: str = "float32"
-    status_bits: str = STATUS_BITS
+    status_flags: tuple[Flag, ...] = ()
 
     def database(self) -> Any:
         """The layout as a ``cantools.database.Database``."""
         from cantools.database import Database, Node
 
         messages = [
-            _message(spec, sender=role, receiver=peer, fd=self.fd, status_bits=self.status_bits)
+            _message(spec, sender=role, receiver=peer, fd=self.fd, status_flags=self._flags_of(role))
             for role, peer, specs in (("controller", "plant", self.command), ("plant", "controller", self.measurement))
             for spec in specs
         ]
@@ -207,6 +210,10 @@ class CanLayout:
         ]
         dbc = _fd_bus_type() if self.fd else None
         return Database(messages=messages, nodes=nodes, version="gainlink-1", dbc_specifics=dbc)
+
+    def _flags_of(self, sender: str) -> tuple[Flag, ...]:
+        """The status flags a sender's frames carry: the controller's commands, none in the plant's samples."""
+        return self.status_flags if sender == "controller" else ()
 
     def dbc(self) -> str:
         """The DBC text of :meth:`database`."""
@@ -220,7 +227,7 @@ class CanLayout:
         }
 
 
-def _message(spec: FrameSpec, *, sender: str, receiver: str, fd: bool, status_bits: str = "") -> Any:
+def _message(spec: FrameSpec, *, sender: str, receiver: str, fd: bool, status_flags: tuple[Flag, ...] = ()) -> Any:
     """The cantools message of one frame."""
     from cantools.database import Message
 
@@ -228,16 +235,21 @@ def _message(spec: FrameSpec, *, sender: str, receiver: str, fd: bool, status_bi
         frame_id=spec.arbitration_id,
         name=spec.name,
         length=spec.length,
-        signals=_header_signals([receiver], status_bits=status_bits or STATUS_BITS) + _value_signals(spec, [receiver]),
+        signals=_header_signals([receiver], status_flags=status_flags) + _value_signals(spec, [receiver]),
         senders=[sender],
         is_fd=fd,
         comment=f"sent by the {sender}",
     )
 
 
-def _header_signals(rx: list[str], *, status_bits: str = "") -> list:
-    """The header every frame starts with: ``seq``, ``status``, ``sat``."""
+def _header_signals(rx: list[str], *, status_flags: tuple[Flag, ...] = ()) -> list:
+    """The header every frame starts with: ``seq``, ``status`` (its value table: the flags the law can set, each one
+    bit of the one flag table), ``sat``."""
     from cantools.database import Signal
+    from cantools.database.conversion import BaseConversion
+
+    choices = {f.bit: f.name for f in status_flags}
+    meaning = "; ".join(f"bit{f.bit.bit_length() - 1} {f.name}: {f.meaning}" for f in status_flags)
 
     return [
         Signal(
@@ -255,8 +267,9 @@ def _header_signals(rx: list[str], *, status_bits: str = "") -> list:
             length=8,
             byte_order="little_endian",
             is_signed=False,
+            conversion=BaseConversion.factory(scale=1, offset=0, choices=choices or None, is_float=False),
             receivers=rx,
-            comment=status_bits or STATUS_BITS,
+            comment=f"status flags of the step (commands; 0 in samples, gainlink.shipping.flags): {meaning}",
         ),
         Signal(
             "sat",
@@ -484,16 +497,15 @@ def layout_for(
         command=_frames(
             us, sc["inputs"], prefix="Command", base=base_id + COMMAND_OFFSET, max_frames=MAX_COMMAND_FRAMES, **common
         ),
-        status_bits=_status_bits(artifact),
+        status_flags=status_flags(artifact),
     )
 
 
-def _status_bits(artifact: Any) -> str:
-    """What the status bits mean for the law the artifact's CAN node runs."""
-    if getattr(artifact, "schedule", None) is not None:
-        return STATUS_BITS_SCHEDULED
-    checks = getattr(artifact, "checks", None) or {}
-    return STATUS_BITS_FIXED if checks.get("fixed_point") is not None else STATUS_BITS
+def status_flags(artifact: Any) -> tuple[Flag, ...]:
+    """The status flags the artifact's law can set (its CAN node's command frames; the one table's ``set_by``)."""
+    structure, numeric = law_pair(artifact)
+    family = "fixed" if numeric in ("q31", "q15") else structure
+    return tuple(f for f in FLAGS if f.set_by in _SET_BY[family])
 
 
 def _external_signals(artifact: Any) -> tuple[list[str], list[str]]:

@@ -20,7 +20,9 @@ import numpy as np
 from ..fileio import publish_files
 from . import gains_layout as layout
 from .artifact import Artifact
+from .codegen_fixed import described as fixed_described
 from .codegen_fixed import is_fixed, render_fixed
+from .law_c import macros as law_macros
 
 FORM_CODES = {"predictor": 0, "current": 1}
 ANTI_WINDUP_CODES = {"none": 0, "clamp": 1, "backcalc": 2}
@@ -139,9 +141,18 @@ def render_header(artifact: Artifact) -> str:
         f"#define GL_N {a.n}\n#define GL_M {a.m}\n#define GL_P {a.p}\n#define GL_Q {a.q}\n"
         f"#define GL_OBSERVER_FORM {FORM_CODES[a.observer_form]} /* {a.observer_form} */\n"
         f"#define GL_ANTI_WINDUP {ANTI_WINDUP_CODES[a.anti_windup]} /* {a.anti_windup} */\n"
-        f"#define GL_WATCHDOG_PERIODS_DEFAULT {DEFAULT_WATCHDOG_PERIODS}u\n\n"
-        "#endif /* GL_GAINS_H */\n"
+        f"#define GL_WATCHDOG_PERIODS_DEFAULT {DEFAULT_WATCHDOG_PERIODS}u\n"
+        + law_macros(a, described=described(a))
+        + "\n#endif /* GL_GAINS_H */\n"
     )
+
+
+def described(artifact: Artifact) -> str:
+    """What the compiled lq step depends on besides the law's pair (its compatibility signature's text): the
+    dimensions, observer form and anti-windup mode, and a fixed-point law's formats and term structure."""
+    a = artifact
+    text = f"n={a.n};m={a.m};p={a.p};q={a.q};form={a.observer_form};aw={a.anti_windup}"
+    return text + (f";{fixed_described(a)}" if is_fixed(a) else "")
 
 
 def render_source(artifact: Artifact, gains: GainSet) -> str:

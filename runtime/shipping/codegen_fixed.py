@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import struct
+import zlib
 
 import numpy as np
 
@@ -116,6 +117,55 @@ def _ranges(artifact: Artifact, fp: dict) -> dict[str, list]:
     return out
 
 
+#: The integer vectors of a set after its terms, in the order of the MAVLink table and of gl_fixed_set_crc32():
+#: (parameter stem, key of ``checks.fixed_point.integers``).
+VECTORS = (
+    ("UOPV", "UOP_V"),
+    ("LOV", "LO_V"),
+    ("HIV", "HI_V"),
+    ("UOPU", "UOP_U"),
+    ("USAFE", "U_SAFE"),
+    ("YOP", "YOP"),
+    ("XH0", "XH0"),
+    ("Z0", "Z0"),
+)
+
+
+def _crc_words(words: list[int]) -> int:
+    return zlib.crc32(b"".join(struct.pack("<i", int(w)) for w in words))
+
+
+def gain_values(artifact: Artifact) -> list[int]:
+    """The set's gain values in table order: each term's mantissa and shift (:func:`terms`), then :data:`VECTORS`."""
+    rows, _ = terms(artifact)
+    table = artifact.checks["fixed_point"]["integers"]
+    return [v for c, e, _ in rows for v in (c, e)] + [int(v) for _, key in VECTORS for v in table[key]]
+
+
+def set_crc32(artifact: Artifact) -> int:
+    """CRC-32 of :func:`gain_values` as little-endian int32 words (gl_fixed_set_crc32(), the MAVLink ``GL_HASH``)."""
+    return _crc_words(gain_values(artifact))
+
+
+def structure_crc(artifact: Artifact) -> int:
+    """CRC-32 of what a set shares with the build besides its formats (the MAVLink ``GL_FX_STRUCT``): each term's
+    signal, each row's end, and the declared ranges' clip keys and quantised bounds, as little-endian int32 words."""
+    fp = artifact.checks["fixed_point"]
+    rows, ends = terms(artifact)
+    r = _ranges(artifact, fp)
+    words = [s for _, _, s in rows] + list(ends)
+    words += (
+        r["key_y_lo"] + r["key_y_hi"] + r["key_r_lo"] + r["key_r_hi"] + r["y_lo"] + r["y_hi"] + r["r_lo"] + r["r_hi"]
+    )
+    return _crc_words(words)
+
+
+def described(artifact: Artifact) -> str:
+    """What a fixed-point law's step depends on beyond its dimensions (part of its compatibility signature): its
+    formats' signature and :func:`structure_crc`."""
+    return f"formats={artifact.checks['fixed_point']['signature']};structure={structure_crc(artifact):08x}"
+
+
 def _c_floats(values: list[float]) -> str:
     return "{" + ", ".join(f"{float(np.float32(v)):.9g}f" for v in values) + "}"
 
@@ -138,9 +188,7 @@ def render_header(artifact: Artifact) -> str:
         " * @brief Number format and dimensions of the fixed-point law the firmware is built for (gl_fixed.h).\n */\n"
         "#ifndef GL_FIXED_GAINS_H\n#define GL_FIXED_GAINS_H\n\n"
         f"#define GL_NUMERIC_{numeric.upper()} 1\n"
-        f'#define GL_FX_NAME "{a.name}"\n'
-        f'#define GL_FX_ARTIFACT_SHA256 "{a.sha256}"\n'
-        f'#define GL_FX_SIGNATURE "{fp["signature"]}"\n'
+        f'#define GL_FX_SIGNATURE "{fp["signature"]}" /* the formats (checks.fixed_point.signature) */\n'
         f"#define GL_FX_N {a.n}\n#define GL_FX_M {a.m}\n#define GL_FX_P {a.p}\n#define GL_FX_Q {a.q}\n"
         f"#define GL_FX_QA {max(a.q, 1)}\n"
         f"#define GL_FX_TERMS {len(rows)}\n#define GL_FX_TERMS_A {max(len(rows), 1)}\n"
@@ -150,7 +198,8 @@ def render_header(artifact: Artifact) -> str:
 
 
 def render_source(artifact: Artifact) -> str:
-    """Text of ``gl_fixed_gains.c``: the certified integers as one const ``gl_fixed_gains_t``."""
+    """Text of ``gl_fixed_gains.c``: the certified integers as one const ``gl_fixed_set_t`` (with the CRC of its gain
+    values and the law's signature)."""
     a, fp = artifact, artifact.checks["fixed_point"]
     table, frac = fp["integers"], fp["formats"]
     rows, ends = terms(a)
@@ -181,15 +230,24 @@ def render_source(artifact: Artifact) -> str:
     lines = [
         _banner(a),
         '#include "gainlink/gl_fixed.h"\n',
+        '#include "gainlink/gl_artifact.h"',
+        '#include "gl_gains.h" /* GL_LAW_SIGNATURE */\n',
         f"_Static_assert(GL_FX_N == {a.n} && GL_FX_M == {a.m} && GL_FX_P == {a.p} && GL_FX_Q == {a.q}, "
         '"gl_fixed_gains.h does not match");',
         f'_Static_assert(GL_FX_TERMS == {len(rows)}, "gl_fixed_gains.h does not match");',
         "",
-        "const gl_fixed_gains_t gl_fixed_gains_default = {",
+        f'const char gl_artifact_name[] = "{a.name}";',
+        f'const char gl_artifact_sha256[] = "{a.sha256}";',
+        "",
+        "const gl_fixed_set_t gl_fixed_default = {",
+        "    .g = {",
     ]
-    lines += [f"    .{name} = {_c_ints(values)}," for name, values in fields.items()]
-    lines.append(f"    .u_lsb = {_c_floats([math.ldexp(1.0, -int(f)) for f in frac['u']])},")
-    lines.append(f"    .clamp = {1 if a.anti_windup == 'clamp' else 0}u,")
+    lines += [f"        .{name} = {_c_ints(values)}," for name, values in fields.items()]
+    lines.append(f"        .u_lsb = {_c_floats([math.ldexp(1.0, -int(f)) for f in frac['u']])},")
+    lines.append(f"        .clamp = {1 if a.anti_windup == 'clamp' else 0}u,")
+    lines.append("    },")
+    lines.append(f"    .crc32 = 0x{set_crc32(a):08X}u,")
+    lines.append("    .signature = GL_LAW_SIGNATURE,")
     lines.append("};")
     return "\n".join(lines) + "\n"
 
@@ -213,7 +271,7 @@ def render_step(artifact: Artifact) -> str:
     return (
         _banner(artifact) + "/**\n * @file gl_fixed_step.h\n"
         " * @brief The sums of the fixed-point law written out row by row (included by gl_fixed.c when\n"
-        " *        GL_FX_UNROLLED): the terms of gl_fixed_gains_default, same order, so bit for bit the generic loop.\n"
+        " *        GL_FX_UNROLLED): the terms of gl_fixed_default, same order, so bit for bit the generic loop.\n"
         " */\n#ifndef GL_FIXED_STEP_H\n#define GL_FIXED_STEP_H\n\n"
         f"_Static_assert(GL_FX_TERMS == {len(rows)} && GL_FX_ROWS == {len(ends)},\n"
         '               "gl_fixed_step.h does not match");\n\n'

@@ -3,17 +3,20 @@
 ``render_scheduled(artifact)`` returns ``{"gl_gains.h": ..., "gl_sched_gains.c": ...}``: the dimensions and the
 shape of sigma as macros (``GL_SCHEDULED 1``, ``GL_NPTS``, ``GL_E``, ``GL_SIGMA_*``) and the tables as one
 ``const gl_sched_tables_t gl_sched_default`` (``firmware/include/gainlink/gl_sched.h``), every float printed
-round-trip. The firmware's CMake builds the scheduled loop (``firmware/src/gl_sched.c``) when the export folder
-holds ``gl_sched_gains.c``. :func:`render_export` is what ``gainlink export`` and the firmware build call: an
-unscheduled artifact gets :func:`gainlink.shipping.codegen.render_c`, unchanged.
+round-trip. The firmware builds the scheduled law (``firmware/src/gl_sched.c``) when ``gl_gains.h`` names it
+(``GL_LAW_STRUCTURE scheduled``); :func:`gainlink.shipping.export_c.render_export` is what ``gainlink export`` and
+the firmware build call.
 """
 
 from __future__ import annotations
+
+import zlib
 
 import numpy as np
 
 from . import codegen
 from .artifact import Artifact
+from .law_c import macros as law_macros
 from .scheduled import COEFFICIENTS
 
 SOURCE_NAME = "gl_sched_gains.c"
@@ -75,6 +78,8 @@ def render_header(artifact: Artifact) -> str:
         f"#define GL_SIGMA_FILTERED {int(S.filter_alpha != 1.0)}\n"
         f"#define GL_SIGMA_RATE_LIMITED {int(S.rate_max is not None)} /* {_rate_comment(S)} */\n"
         + "".join(f"#define GL_SCHED_FIXED_{k.upper()} {v:#010x}u\n" for k, v in fixed_masks(a).items())
+        + f"#define GL_WATCHDOG_PERIODS_DEFAULT {codegen.DEFAULT_WATCHDOG_PERIODS}u\n"
+        + law_macros(a, described=described(a))
         + "\n#endif /* GL_GAINS_H */\n"
     )
 
@@ -85,8 +90,27 @@ def _rate_comment(S) -> str:
     return f"{value}, {'certified' if S.rate_certified else 'NOT certified'}"
 
 
+def described(artifact: Artifact) -> str:
+    """What the compiled scheduled step depends on besides the law's pair (its compatibility signature's text):
+    dimensions, points, external signals, the shape of sigma and the coefficients it does not interpolate."""
+    a, S = artifact, artifact.schedule
+    masks = ",".join(f"{k}={v:08x}" for k, v in fixed_masks(a).items())
+    return (
+        f"n={a.n};m={a.m};p={a.p};q={a.q};npts={S.points.size};e={len(S.external)};form={a.observer_form};"
+        f"sigma={S.source}:{S.index};filtered={int(S.filter_alpha != 1.0)};rate={int(S.rate_max is not None)};"
+        f"fixed={masks}"
+    )
+
+
+def tables_crc32(artifact: Artifact) -> int:
+    """CRC-32 of the tables' bytes as ``gl_sched_default`` holds them (gl_sched_tables_crc32(), the MAVLink
+    ``GL_HASH``)."""
+    return zlib.crc32(b"".join(np.asarray(v, dtype="<f4").tobytes() for v in tables(artifact).values()))
+
+
 def render_source(artifact: Artifact) -> str:
-    """Text of ``gl_sched_gains.c``: the tables as one const ``gl_sched_tables_t``."""
+    """Text of ``gl_sched_gains.c``: the tables as one const ``gl_sched_set_t`` (with their CRC and the law's
+    signature)."""
     a = artifact
     S = a.schedule
     lines = [
@@ -97,11 +121,15 @@ def render_source(artifact: Artifact) -> str:
         "",
         *codegen.identity_lines(a),
         "",
-        "const gl_sched_tables_t gl_sched_default = {",
+        "const gl_sched_set_t gl_sched_default = {",
+        "    .t = {",
     ]
     for name, value in tables(a).items():
-        text = codegen.c_float(value) if value.ndim == 0 else codegen._c_array(value, "    ")
-        lines.append(f"    .{name} = {text},")
+        text = codegen.c_float(value) if value.ndim == 0 else codegen._c_array(value, "        ")
+        lines.append(f"        .{name} = {text},")
+    lines.append("    },")
+    lines.append(f"    .crc32 = 0x{tables_crc32(a):08X}u,")
+    lines.append("    .signature = GL_LAW_SIGNATURE,")
     lines.append("};")
     return "\n".join(lines) + "\n"
 
@@ -112,9 +140,3 @@ def render_scheduled(artifact: Artifact) -> dict[str, str]:
     if artifact.schedule is None:
         raise ValueError(f"artifact {artifact.name} is not scheduled: use gainlink.shipping.codegen.render_c")
     return {codegen.HEADER_NAME: render_header(artifact), SOURCE_NAME: render_source(artifact)}
-
-
-def render_export(artifact: Artifact) -> dict[str, str]:
-    """The C files of ``artifact``'s export: :func:`render_scheduled` for a scheduled artifact, else today's
-    :func:`gainlink.shipping.codegen.render_c` (byte for byte)."""
-    return codegen.render_c(artifact) if artifact.schedule is None else render_scheduled(artifact)

@@ -2,8 +2,9 @@
 command's bits, and the exchange of samples, resets and idle periods with a real node.
 
 The expected bits are written out here from the documentation and never imported from the tables the links use
-(``hil/links/base.py``, the C headers ``gl_can_layout.h`` and ``gl_mav_law.h``, the DBC generator): a bit moved in
-any one of them then shows as a difference, where a test comparing a link with its own table would pass.
+(``gainlink.shipping.flags`` and what it generates: ``gl_flags.h``, ``hil/links/base.py``'s ``STATUS_*``, the DBC):
+a bit moved in any one of them then shows as a difference, where a test comparing a link with its own table would
+pass. Over MAVLink the answer's raw flag word is checked too, at the positions the documentation gives.
 """
 
 from __future__ import annotations
@@ -25,10 +26,13 @@ from .hil import udp_transport
 
 #: A command's status as the Python side decodes it (``Command.status``), the numbering docs/design.md gives the CAN
 #: command frames' status byte (the DBC's ``status``: bit0 fault, bit1 watchdog, bit2 a sample clipped, bit3 the
-#: second-line saturation, then sigma held 0x10, clipped 0x20, rate-limited 0x40); the MAVLink transport decodes its
-#: HIL flags (bits 0 fault, 1 watchdog, 3 clipped, 4 overflow, 5-7 sigma) into the same numbering.
-FAULT, WATCHDOG, CLIPPED, OVERFLOW = 0x01, 0x02, 0x04, 0x08
+#: second-line saturation, then sigma held 0x10, clipped 0x20, rate-limited 0x40, reset 0x80).
+FAULT, WATCHDOG, CLIPPED, OVERFLOW, RESET = 0x01, 0x02, 0x04, 0x08, 0x80
 SIGMA_BITS = {SIGMA_HELD: 0x10, SIGMA_CLIPPED: 0x20, SIGMA_RATE: 0x40}  # the scheduled model's flag -> the link's bit
+#: Where MAVLink carries them (docs/design.md, "Links"; wire format 2): HIL_ACTUATOR_CONTROLS.flags bits 0-15 are
+#: MAVLink's own (bit 0 its LOCKSTEP flag) and stay clear, the status byte sits at bits 16-23, the saturation mask
+#: (bit k: input k) at bits 32-47.
+MAVLINK_STATUS_AT, MAVLINK_SAT_AT, MAVLINK_OWN = 16, 32, 0xFFFF
 
 #: The hang guard of one answer: a node answers in milliseconds; past this it hung or the link lost the frames.
 ANSWER_GUARD_S = 10.0
@@ -139,9 +143,10 @@ def assert_answers(a: Artifact, transport, samples, *, mavlink: bool) -> int:
     if mavlink:
         model.reset()
         c = answer(transport, transport.encode_reset(seq=seq), seq)
-        assert c.status == 0, f"the reset's answer has status {c.status:#04x}"
+        assert c.status == RESET, f"the reset's answer has status {c.status:#04x}"
+        assert c.wire == RESET << MAVLINK_STATUS_AT, f"the reset's flags {c.wire:#x}"
         seq += 1
-    seen, last = _samples(a, transport, model, samples, seq)
+    seen, last = _samples(a, transport, model, samples, seq, mavlink=mavlink)
     if mavlink:
         seen |= _watchdog(a, transport, model, seq + len(samples), last=last, again=samples[-1])
     return seen
@@ -152,7 +157,7 @@ def _as_sent(sample) -> tuple[np.ndarray, ...]:
     return tuple(np.float32(np.atleast_1d(v)).astype(np.float64) for v in sample)
 
 
-def _samples(a: Artifact, transport, model, samples, seq: int) -> tuple[int, np.ndarray]:
+def _samples(a: Artifact, transport, model, samples, seq: int, *, mavlink: bool) -> tuple[int, np.ndarray]:
     """Each sample through the link against the model; the status bits seen and the last command."""
     seen, u = 0, np.zeros(a.m, np.float32)
     for k, sample in enumerate(samples):
@@ -161,6 +166,10 @@ def _samples(a: Artifact, transport, model, samples, seq: int) -> tuple[int, np.
         c = answer(transport, sample_frames(transport, a, seq + k, y, r, s), seq + k)
         assert c.status == want.status, f"sample {k} {sample}: status {c.status:#04x}, the model's {want.status:#04x}"
         assert np.array_equal(c.saturated, want.saturated), (k, c.saturated, want.saturated)
+        if mavlink:  # the bits where docs/design.md puts them, read from the message itself
+            sat = sum(int(b) << j for j, b in enumerate(want.saturated))
+            assert c.wire == (want.status << MAVLINK_STATUS_AT) | (sat << MAVLINK_SAT_AT), (k, hex(c.wire))
+            assert c.wire & MAVLINK_OWN == 0, f"sample {k}: MAVLink's own bits set ({c.wire:#x})"
         u = np.float32(c.u)
         assert np.array_equal(u.view(np.uint32), want.u.view(np.uint32)), (k, c.u, want.u)
         seen |= c.status
@@ -179,6 +188,7 @@ def _watchdog(a: Artifact, transport, model, seq: int, *, last: np.ndarray, agai
             assert c.status == 0 and np.array_equal(np.float32(c.u), last), (k, c.status, c.u, last)
         else:
             assert c.status == WATCHDOG, f"idle period {k}: status {c.status:#04x}, not the watchdog's"
+            assert c.wire == WATCHDOG << MAVLINK_STATUS_AT, f"idle period {k}: flags {c.wire:#x}"
             assert np.array_equal(np.float32(c.u), model.safe()), (k, c.u, model.safe())
     y, r, s = _as_sent(again)
     want = model.sample(y, r, s)

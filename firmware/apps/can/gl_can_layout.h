@@ -2,7 +2,8 @@
  * @file gl_can_layout.h
  * @brief The CAN layout of the artifact's samples and commands (the rule of gainlink.hil.links.can_layout).
  *
- * Every frame: bytes 0-1 `seq` (uint16 LE), byte 2 `status`, byte 3 `sat` (bit i: i-th value of this
+ * Every frame: bytes 0-1 `seq` (uint16 LE), byte 2 `status` (a command's: the step's GL_FLAG_* of gl_flags.h, the
+ * one flag table; the DBC's value table of `status` is the same table), byte 3 `sat` (bit i: i-th value of this
  * frame saturated), then the values, little-endian, in one of two encodings:
  * - GL_CAN_FLOAT32: IEEE float32, 1 per classic frame (8 bytes), up to 8 per FD frame;
  * - GL_CAN_INT16: scaled integers, `physical = raw * factor + offset` with a factor and offset per value
@@ -24,13 +25,6 @@
 #define GL_CAN_FD_VALUES 8u             /**< Values per FD frame (the `sat` byte has 8 bits). */
 #define GL_CAN_CMD_OFFSET 0x00u         /**< Command ids: base + this + frame index. */
 #define GL_CAN_MEAS_OFFSET 0x10u        /**< Measurement ids: base + this + frame index. */
-#define GL_CAN_STATUS_FAULT 0x01u       /**< Command status: non-finite sample refused. */
-#define GL_CAN_STATUS_WATCHDOG 0x02u    /**< Command status: watchdog expired. */
-#define GL_CAN_STATUS_CLIPPED 0x04u     /**< Command status (fixed-point law): a sample clipped to its range. */
-#define GL_CAN_STATUS_OVERFLOW 0x08u    /**< Command status (fixed-point law): its second-line saturation fired. */
-#define GL_CAN_STATUS_SIGMA_HELD 0x10u  /**< Command status (scheduled law): sigma not finite, the last one held. */
-#define GL_CAN_STATUS_SIGMA_CLIPPED 0x20u /**< Command status (scheduled law): sigma clipped to the points. */
-#define GL_CAN_STATUS_SIGMA_RATE 0x40u  /**< Command status (scheduled law): sigma's change rate-limited. */
 #define GL_CAN_INT16_MAX 32767          /**< Largest raw int16 value (-GL_CAN_INT16_MAX is the smallest). */
 #define GL_CAN_INT16_NAN (-32768)       /**< Reserved raw int16 value: not a number. */
 

@@ -26,7 +26,7 @@ gl_status_t gl_can_node_init(gl_can_node_t *node, const gl_can_node_config_t *cf
     node->meas_frames = gl_can_layout_frames(&node->layout, GL_CAN_NODE_SAMPLE);
     node->cmd_frames = gl_can_layout_frames(&node->layout, GL_M);
     node->meas_base = cfg->base_id + GL_CAN_MEAS_OFFSET;
-    return gl_can_law_init(&node->loop, cfg->watchdog_periods);
+    return gl_law_init(&node->loop, cfg->watchdog_periods);
 }
 
 void gl_can_node_rx_range(const gl_can_node_t *node, uint32_t *lo, uint32_t *hi)
@@ -38,19 +38,19 @@ void gl_can_node_rx_range(const gl_can_node_t *node, uint32_t *lo, uint32_t *hi)
 /** Step the assembled sample and send the command frames. */
 static void answer(gl_can_node_t *node, uint16_t seq)
 {
-    float u[GL_M];
-    uint8_t status = 0u;
     const float *r = GL_Q > 0 ? &node->sample[GL_P] : NULL;
-    const float *s = GL_CAN_EXTRA > 0 ? &node->sample[GL_P + GL_Q] : NULL;
-    uint32_t sat = gl_can_law_step(&node->loop, node->sample, r, s, u, &status);
+    const float *s = GL_LAW_E > 0 ? &node->sample[GL_P + GL_Q] : NULL;
+    gl_law_out_t out;
+    (void)gl_law_step(&node->loop, node->sample, r, s, &out);
+    const uint8_t status = (uint8_t)out.flags; /* the status byte is the flag table's low byte */
     uint32_t cmd_base = node->cfg.base_id + GL_CAN_CMD_OFFSET;
     for (uint32_t j = 0; j < node->cmd_frames; ++j) {
-        gl_can_frame_t out;
-        inc(&node->stats.clipped, gl_can_layout_encode(&node->layout, cmd_base + j, j, seq, status, sat, u,
-                                                       node->cfg.cmd_scale, GL_M, &out));
-        if (node->cfg.send(node->cfg.ctx, &out) != 0) {
+        gl_can_frame_t frame;
+        inc(&node->stats.clipped, gl_can_layout_encode(&node->layout, cmd_base + j, j, seq, status, out.sat, out.u,
+                                                       node->cfg.cmd_scale, GL_M, &frame));
+        if (node->cfg.send(node->cfg.ctx, &frame) != 0) {
             inc(&node->stats.send_errors, 1u);
-            event(node, GL_CAN_EV_SEND_FAILED, &out);
+            event(node, GL_CAN_EV_SEND_FAILED, &frame);
         }
     }
     node->last_done = seq;

@@ -2,10 +2,11 @@
  * @file gl_can_node.h
  * @brief The CAN node of the loop, independent of its link: frames in, frames out.
  *
- * Assembles each sample (y then r) from its measurement frames by sequence number, steps the artifact's law
- * (gl_can_law.h: the float32 loop, or the fixed-point loop of a fixed-point export) once per complete, newer sample (duplicates and stale samples are ignored and counted), and answers
- * with the command frames carrying the same sequence number, the status bits and the saturation mask
- * (layout in gl_can_layout.h). The host app `gainlink_can` feeds it from SocketCAN or udp_multicast,
+ * Assembles each sample (y, r, then a scheduled law's external scheduling signals) from its measurement frames by
+ * sequence number, steps the build's law (gl_law.h) once per complete, newer sample (duplicates and stale samples
+ * are ignored and counted), and answers with the command frames carrying the same sequence number, the step's
+ * status flags (GL_FLAG_* of the one flag table: the status byte) and the saturation mask (layout in
+ * gl_can_layout.h). It steps only on a sample: it has no idle period, so it never sends the watchdog bit. The host app `gainlink_can` feeds it from SocketCAN or udp_multicast,
  * the Cortex-M4F image from slcan on its UART (gl_slcan.h).
  */
 #ifndef GAINLINK_GL_CAN_NODE_H
@@ -13,14 +14,14 @@
 
 #include <stdint.h>
 
-#include "gl_can_law.h" /* the law, and gl_loop.h (or its stand-ins for a scheduled law) */
+#include "gainlink/gl_law.h"
 #include "gl_can_layout.h"
 #include "gl_can_link.h"
 
 /** Values of one sample: the outputs, then the references (then a scheduled law's external signals). */
-#define GL_CAN_NODE_SAMPLE ((uint32_t)(GL_P + GL_Q + GL_CAN_EXTRA))
+#define GL_CAN_NODE_SAMPLE ((uint32_t)(GL_P + GL_Q + GL_LAW_E))
 /** Array length of a sample (GL_QA: no zero-length arrays). */
-#define GL_CAN_NODE_SAMPLE_A (GL_P + GL_QA + GL_CAN_EXTRA)
+#define GL_CAN_NODE_SAMPLE_A (GL_P + GL_QA + GL_LAW_E)
 
 /** What the node reports through gl_can_node_config_t::event. */
 typedef enum gl_can_node_event {
@@ -35,7 +36,7 @@ typedef struct gl_can_node_config {
     gl_can_encoding_t encoding;              /**< Value encoding. */
     gl_can_scale_t meas_scale[GL_CAN_NODE_SAMPLE_A]; /**< int16: factor and offset of each sample value. */
     gl_can_scale_t cmd_scale[GL_M];          /**< int16: factor and offset of each command value. */
-    uint32_t watchdog_periods;               /**< Idle periods before the loop's safe command. */
+    uint32_t watchdog_periods;               /**< Idle periods before the law's safe command. */
     void *ctx;                               /**< Passed back to send(). */
     /** Send one command frame; 0 when sent or queued, -1 when it could not be. */
     int (*send)(void *ctx, const gl_can_frame_t *frame);
@@ -59,7 +60,7 @@ typedef struct gl_can_node_stats {
 typedef struct gl_can_node {
     gl_can_node_config_t cfg;          /**< Configuration. */
     gl_can_layout_t layout;            /**< Frame layout. */
-    gl_can_law_t loop;                 /**< The control law (gl_can_law.h). */
+    gl_law_t loop;                     /**< The control law (gl_law.h). */
     gl_can_node_stats_t stats;         /**< Counters. */
     uint32_t meas_base;                /**< First measurement identifier. */
     uint32_t meas_frames;              /**< Frames per sample. */

@@ -37,20 +37,12 @@
 #include <string.h>
 #include <time.h>
 
-#include "gl_can_law.h"
 #include "gl_can_layout.h"
 #include "gl_can_link.h"
 #include "gl_can_node.h"
 #include "gl_log.h"
 
 #define N_SAMPLE GL_CAN_NODE_SAMPLE
-
-/* The ready line names a law other than float32 (the float32 node's line is as it always was). */
-#if (defined(GL_CAN_LAW_FIXED) && GL_CAN_LAW_FIXED) || (defined(GL_SCHEDULED) && GL_SCHEDULED)
-#define LAW_FIELD " law=" GL_CAN_LAW_NAME
-#else
-#define LAW_FIELD ""
-#endif
 
 static volatile sig_atomic_t stop_requested;
 static gl_can_node_t node;
@@ -355,9 +347,9 @@ int main(int argc, char **argv)
     if (gl_can_link_open(&can_link, &o.link) != 0) {
         return 4;
     }
-    printf("gainlink_can ready %s sha256:%s n=%d m=%d p=%d q=%d fd=%d base_id=%lu encoding=%s%s\n", gl_artifact_name,
-           gl_artifact_sha256, GL_N, GL_M, GL_P, GL_Q, o.link.fd, o.base_id,
-           o.encoding == GL_CAN_INT16 ? "int16" : "float32", LAW_FIELD);
+    printf("gainlink_can ready %s sha256:%s n=%d m=%d p=%d q=%d fd=%d base_id=%lu encoding=%s law=%s wire=%d\n",
+           gl_artifact_name, gl_artifact_sha256, GL_N, GL_M, GL_P, GL_Q, o.link.fd, o.base_id,
+           o.encoding == GL_CAN_INT16 ? "int16" : "float32", GL_LAW_NAME, GL_WIRE_VERSION);
     fflush(stdout);
     rc = serve(o.spin_us);
     gl_can_link_close(&can_link);

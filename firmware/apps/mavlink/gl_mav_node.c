@@ -11,19 +11,12 @@
 #define HIL_ARRAY_SAMPLE 1
 #define HIL_ARRAY_RESET 2
 #define HIL_ARRAY_IDLE 3
-#define HIL_FLAG_FAULT 0x1u
-#define HIL_FLAG_WATCHDOG 0x2u
-#define HIL_FLAG_RESET 0x4u
-#define HIL_SAT_SHIFT 8
 #define HEARTBEAT_PERIOD_US 1000000u
 /** Room kept free while streaming a parameter list, so a HIL answer always fits beside it. */
 #define LIST_HEADROOM (2u * MAVLINK_MAX_PACKET_LEN)
 
-_Static_assert(GL_P + GL_Q + GL_MAV_EXTRA <= 58, "DEBUG_FLOAT_ARRAY carries at most 58 values (y, r and s)");
+_Static_assert(GL_P + GL_Q + GL_LAW_E <= 58, "DEBUG_FLOAT_ARRAY carries at most 58 values (y, r and s)");
 _Static_assert(GL_M <= 16, "HIL_ACTUATOR_CONTROLS carries at most 16 commands");
-_Static_assert(HIL_FLAG_FAULT == GL_MAV_FLAG_FAULT && HIL_FLAG_WATCHDOG == GL_MAV_FLAG_WATCHDOG &&
-                   HIL_FLAG_RESET == GL_MAV_FLAG_RESET && HIL_SAT_SHIFT == GL_MAV_SAT_SHIFT,
-               "the laws' HIL flags (gl_mav_law.h) are the node's");
 
 static void inc(uint32_t *counter, uint32_t by)
 {
@@ -66,7 +59,7 @@ void gl_mav_node_heartbeat(gl_mav_node_t *node)
 {
     mavlink_message_t msg;
     mavlink_msg_heartbeat_pack_chan(node->cfg.sysid, node->cfg.compid, node->cfg.chan, &msg, MAV_TYPE_GENERIC,
-                                    MAV_AUTOPILOT_GENERIC, 0, GL_MAV_LAW_ID, MAV_STATE_ACTIVE);
+                                    MAV_AUTOPILOT_GENERIC, 0, GL_LAW_ID, MAV_STATE_ACTIVE);
     emit(node, GL_MAV_TO_ALL, &msg);
 }
 
@@ -109,8 +102,8 @@ static void send_version(gl_mav_node_t *node)
     mavlink_message_t msg;
     mavlink_msg_autopilot_version_pack_chan(
         node->cfg.sysid, node->cfg.compid, node->cfg.chan, &msg,
-        MAV_PROTOCOL_CAPABILITY_MAVLINK2 | MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE, 0x00010000u, 0, 0, 0, custom,
-        mark, none, 0, 0, node->table.committed.crc32, uid2);
+        MAV_PROTOCOL_CAPABILITY_MAVLINK2 | MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE, 0x00010000u, GL_WIRE_VERSION, 0,
+        0, custom, mark, none, 0, 0, node->table.committed.crc32, uid2);
     emit(node, GL_MAV_TO_SENDER, &msg);
 }
 
@@ -149,7 +142,7 @@ static void handle_param_set(gl_mav_node_t *node, const mavlink_message_t *msg)
         return;
     }
     gl_mav_set_result_t r = gl_mav_params_set(&node->table, (uint16_t)k, set.param_value, set.param_type);
-    int is_header = node->table.param[k].header >= 0;
+    int is_header = node->table.param[k].kind == GL_MAV_PARAM_HASH; /* the one header a set may change */
     if (r == GL_MAV_SET_OK && is_header) {
         node->dirty = 1;
         inc(&node->stats.commits, 1u);
@@ -332,129 +325,61 @@ static void handle_command(gl_mav_node_t *node, const mavlink_message_t *msg)
     }
 }
 
+/** A committed set not yet in the law: staged now (the law's checks; in force from the next step). */
 static void stage_if_dirty(gl_mav_node_t *node)
 {
-#if defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
-    if (node->dirty) { /* the law runs on the committed tables in place: a commit is in force from this step */
-        gl_mav_sched_retable(&node->sched);
-        node->dirty = 0;
-    }
-#elif defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
-    node->dirty = 0; /* the integer law reads the committed set itself: a commit is in force from the next step */
-#else
     if (node->dirty) {
-        gl_status_t st = gl_loop_stage(&node->loop, &node->table.committed);
+        gl_status_t st = gl_law_stage(&node->law, &node->table.committed);
         if (st != GL_OK) {
             event(node, GL_MAV_EV_STAGE_FAILED, (int32_t)st, 0);
             return; /* stays dirty: tried again before the next step */
         }
         node->dirty = 0;
     }
-#endif
 }
 
 /**
- * Reset the loop state. With a committed set not yet running, the loop restarts on it (its xh0, z0): staging
- * it and resetting would leave it pending behind the reset, and a second commit before the next step would
- * then be refused as busy while the parameters already reported it (a reset between two commits).
+ * Reset the law's state. A committed set not yet running is staged first and the reset puts it in force with its
+ * own initial state (gl_law_reset()): staging it after the reset would leave it pending behind it, and a second
+ * commit before the next step would then be refused as busy while the parameters already reported it.
  */
-static void reset_loop(gl_mav_node_t *node)
+static void reset_law(gl_mav_node_t *node, gl_law_out_t *out)
 {
-#if (defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED) || (defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED)
-    node->dirty = 0; /* the integer law resets itself (fixed_sample) */
-#else
-    if (node->dirty) {
-        gl_status_t st = gl_loop_init(&node->loop, &node->table.committed, node->cfg.watchdog_periods);
-        if (st == GL_OK) {
-            node->dirty = 0;
-            return;
-        }
-        event(node, GL_MAV_EV_STAGE_FAILED, (int32_t)st, 0);
-    }
-    (void)gl_loop_reset(&node->loop);
-#endif
+    stage_if_dirty(node);
+    (void)gl_law_reset(&node->law, out);
 }
 
-#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
-/** A HIL message for the integer law: its command and flags; 0 when it is not one. */
-static int fixed_sample(gl_mav_node_t *node, const mavlink_debug_float_array_t *in, float *u, uint64_t *flags)
+/** The HIL_ACTUATOR_CONTROLS flags of an answer (wire format 2): MAVLink's own bits 0-15 left alone (bit 0 is its
+ *  LOCKSTEP flag), the law's status flags (the one table, gl_flags.h) at bits 16-23, the saturation mask at 32-47. */
+static uint64_t hil_flags(const gl_law_out_t *out)
 {
-    if (in->array_id == HIL_ARRAY_SAMPLE) {
-        stage_if_dirty(node);
-        *flags = gl_mav_fixed_step(&node->fixed, &in->data[0], GL_Q > 0 ? &in->data[GL_P] : NULL, u);
-        inc(&node->stats.samples, 1u);
-    } else if (in->array_id == HIL_ARRAY_RESET) {
-        reset_loop(node);
-        *flags = gl_mav_fixed_reset(&node->fixed, u);
-    } else if (in->array_id == HIL_ARRAY_IDLE) {
-        *flags = gl_mav_fixed_idle(&node->fixed, u);
-    } else {
-        return 0;
-    }
-    return 1;
+    return ((uint64_t)(out->flags & 0xFFu) << GL_FLAGS_MAVLINK_SHIFT) | ((uint64_t)out->sat << GL_SAT_MAVLINK_SHIFT);
 }
-#elif defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
-/** A HIL message for the scheduled law (data = y, r, s): its command and flags; 0 when it is not one. */
-static int sched_sample(gl_mav_node_t *node, const mavlink_debug_float_array_t *in, float *u, uint64_t *flags)
-{
-    if (in->array_id == HIL_ARRAY_SAMPLE) {
-        stage_if_dirty(node);
-        const float *s = GL_MAV_EXTRA > 0 ? &in->data[GL_P + GL_Q] : NULL;
-        *flags = gl_mav_sched_step(&node->sched, &in->data[0], &in->data[GL_P], s, u);
-        inc(&node->stats.samples, 1u);
-    } else if (in->array_id == HIL_ARRAY_RESET) {
-        reset_loop(node);
-        *flags = gl_mav_sched_reset(&node->sched, u);
-    } else if (in->array_id == HIL_ARRAY_IDLE) {
-        *flags = gl_mav_sched_idle(&node->sched, u);
-    } else {
-        return 0;
-    }
-    return 1;
-}
-#endif
 
 static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)
 {
     mavlink_debug_float_array_t in;
     mavlink_msg_debug_float_array_decode(msg, &in);
-    float u[GL_M];
-    uint64_t flags = 0;
-#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
-    if (!fixed_sample(node, &in, u, &flags)) {
-        return;
-    }
-#elif defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
-    if (!sched_sample(node, &in, u, &flags)) {
-        return;
-    }
-#else
-    if (in.array_id == HIL_ARRAY_SAMPLE) {
+    gl_law_out_t out;
+    if (in.array_id == HIL_ARRAY_SAMPLE) { /* data = y, r, then a scheduled law's external signals */
         stage_if_dirty(node);
-        gl_status_t st = gl_loop_step(&node->loop, &in.data[0], GL_Q > 0 ? &in.data[GL_P] : NULL, u);
-        if (st < 0) {
-            flags |= HIL_FLAG_FAULT;
-        }
-        flags |= (uint64_t)node->loop.sat_mask << HIL_SAT_SHIFT;
+        const float *r = GL_Q > 0 ? &in.data[GL_P] : NULL;
+        const float *s = GL_LAW_E > 0 ? &in.data[GL_P + GL_Q] : NULL;
+        (void)gl_law_step(&node->law, &in.data[0], r, s, &out);
         inc(&node->stats.samples, 1u);
     } else if (in.array_id == HIL_ARRAY_RESET) {
-        reset_loop(node);
-        memcpy(u, node->loop.u, sizeof u); /* after a reset: the safe command, u_op clamped */
-        flags |= HIL_FLAG_RESET;
+        reset_law(node, &out); /* the answer: the start command */
     } else if (in.array_id == HIL_ARRAY_IDLE) {
-        if (gl_loop_idle(&node->loop, u) == GL_ERR_WATCHDOG) {
-            flags |= HIL_FLAG_WATCHDOG;
-        }
+        (void)gl_law_idle(&node->law, &out);
     } else {
         return;
     }
-#endif
     float controls[16] = {0};
-    memcpy(controls, u, sizeof u);
-    mavlink_message_t out;
-    mavlink_msg_hil_actuator_controls_pack_chan(node->cfg.sysid, node->cfg.compid, node->cfg.chan, &out, in.time_usec,
-                                                controls, 0, flags);
-    emit(node, GL_MAV_TO_SENDER, &out);
+    memcpy(controls, out.u, sizeof out.u);
+    mavlink_message_t reply;
+    mavlink_msg_hil_actuator_controls_pack_chan(node->cfg.sysid, node->cfg.compid, node->cfg.chan, &reply,
+                                                in.time_usec, controls, 0, hil_flags(&out));
+    emit(node, GL_MAV_TO_SENDER, &reply);
 }
 
 void gl_mav_node_set_key(gl_mav_node_t *node, const uint8_t *key, uint64_t timestamp)
@@ -596,17 +521,17 @@ gl_status_t gl_mav_node_init(gl_mav_node_t *node, const gl_mav_node_config_t *cf
     memset(mavlink_get_channel_status(cfg->chan), 0, sizeof(mavlink_status_t));
     gl_mav_params_init(&node->table, GL_MAV_DEFAULT_SET);
     node->started_stored = cfg->ignore_stored ? 0 : load_stored(node) == 1;
-#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
-    /* the integer law runs on the table's committed set; the float loop of the same export only idles beside it */
-    if (gl_mav_fixed_init(&node->fixed, &node->table.committed.g, cfg->watchdog_periods) != 0) {
-        return GL_ERR_NULL;
+    /* the law starts on the compiled set, then runs the table's committed set (the compiled one or the stored one)
+     * from its own initial state */
+    gl_status_t st = gl_law_init(&node->law, cfg->watchdog_periods);
+    if (st == GL_OK) {
+        st = gl_law_stage(&node->law, &node->table.committed);
     }
-    return gl_loop_init(&node->loop, &gl_gains_default, cfg->watchdog_periods);
-#elif defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
-    return gl_mav_sched_init(&node->sched, &node->table.committed.t, cfg->watchdog_periods);
-#else
-    return gl_loop_init(&node->loop, &node->table.committed, cfg->watchdog_periods);
-#endif
+    if (st == GL_OK) {
+        gl_law_out_t out;
+        st = gl_law_reset(&node->law, &out);
+    }
+    return st;
 }
 
 gl_status_t gl_mav_node_copy(gl_mav_node_t *dst, const gl_mav_node_t *src)
@@ -615,17 +540,10 @@ gl_status_t gl_mav_node_copy(gl_mav_node_t *dst, const gl_mav_node_t *src)
         return GL_ERR_NULL;
     }
     memcpy(dst, src, sizeof *dst);
-#if !(defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED) /* the scheduled loop's one pointer is repointed below */
-    gl_status_t st = gl_loop_copy(&dst->loop, &src->loop);
+    gl_status_t st = gl_law_copy(&dst->law, &src->law, &src->table.committed, &dst->table.committed);
     if (st != GL_OK) {
         return st;
     }
-#endif
-#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
-    dst->fixed.loop.g = &dst->table.committed.g; /* the copy runs on its own table */
-#elif defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
-    dst->sched.loop.t = &dst->table.committed.t; /* the copy runs on its own table */
-#endif
     /* The channel state lives in mavgen's per-file statics: only this file's are the node's. */
     mavlink_status_t *chan = mavlink_get_channel_status(dst->cfg.chan);
     memset(chan, 0, sizeof *chan);

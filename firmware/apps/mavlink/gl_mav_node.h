@@ -2,30 +2,30 @@
  * @file gl_mav_node.h
  * @brief The MAVLink node of the control loop, independent of its transport: bytes in, bytes out.
  *
- * One node holds the loop (::gl_loop_t), its parameter table and the MAVLink parse state of one
+ * One node holds the build's law (::gl_law_t of gl_law.h), its parameter table and the MAVLink parse state of one
  * channel. Whatever carries the bytes (UDP on the host, a UART on the Cortex-M image, a fuzz harness)
  * feeds them to gl_mav_node_input() and gets the answers through ::gl_mav_port_t::send. It speaks:
  *
  * - HEARTBEAT at 1 Hz (gl_mav_node_poll()) and on demand (gl_mav_node_heartbeat(), e.g. to a new peer):
- *   MAV_TYPE_GENERIC, MAV_AUTOPILOT_GENERIC, custom_mode = the law it runs (GL_MAV_LAW_ID: 0 float32, 31 q31,
- *   15 q15; gl_mav_law.h).
+ *   MAV_TYPE_GENERIC, MAV_AUTOPILOT_GENERIC, custom_mode = the law it runs (GL_LAW_ID of gl_law.h: 0 float32, 31 q31,
+ *   15 q15, 256 scheduled-float32).
  * - AUTOPILOT_VERSION on MAV_CMD_REQUEST_MESSAGE(148) or MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
  *   capabilities MAVLINK2 | PARAM_ENCODE_BYTEWISE, flight_custom_version = first 8 hex digits of the
  *   artifact's sha256, middleware_custom_version = "gainlink" (how an uploader tells a gainlink node, whose uid
- *   it may read as a gain set, from other autopilots, whose uid is a hardware id), uid = CRC-32 of the committed
- *   gain set.
+ *   it may read as a gain set, from other autopilots, whose uid is a hardware id) and middleware_sw_version = the
+ *   sample/command wire format (GL_WIRE_VERSION: 2), uid = CRC-32 of the committed gain set.
  * - SYS_STATUS on MAV_CMD_REQUEST_MESSAGE(1): the link's error counters (see gl_mav_node_stats_t).
  * - The parameter protocol over the gain set (naming in gl_mav_params.h): PARAM_REQUEST_LIST (streamed as
  *   the transport has room), PARAM_REQUEST_READ by id or index (PARAM_ERROR when unknown), PARAM_SET
  *   always answered with PARAM_VALUE (the value now held), then PARAM_ERROR when refused.
  * - MAV_CMD_PREFLIGHT_STORAGE param1 = 0 reload from storage, 1 write the committed set to it, 2 reset to
  *   the compiled set; COMMAND_ACK each.
- * - HIL: DEBUG_FLOAT_ARRAY array_id 1 (`GL_SAMPLE`, data = y then r) answered by HIL_ACTUATOR_CONTROLS
- *   with the same time_usec, controls = u, flags bit 0 fault, bit 1 watchdog, bit 2 reset done, bits 8+k
- *   saturation of input k (a fixed-point law also bit 3 a sample clipped to its range, bit 4 its second-line
- *   saturation; a scheduled law data = y, r, then its GL_E external scheduling signals, and bits 5, 6, 7 its
- *   sigma held, clipped, rate-limited); array_id 2 resets the loop state, 3 is a period without a measurement.
- *   A committed gain set is staged into the loop right before the next step.
+ * - HIL: DEBUG_FLOAT_ARRAY array_id 1 (`GL_SAMPLE`, data = y then r, then a scheduled law's GL_LAW_E external
+ *   scheduling signals) answered by HIL_ACTUATOR_CONTROLS with the same time_usec, controls = u and flags in wire
+ *   format 2: bits 0-15 MAVLink's own (bit 0 its LOCKSTEP flag; none set), bits 16-23 the step's status flags
+ *   (GL_FLAG_* of gl_flags.h, the one table: fault, watchdog, clipped, overflow, sigma held, clipped,
+ *   rate-limited, reset), bits 32+k input k saturated; array_id 2 resets the law's state (answered with RESET), 3
+ *   is a period without a measurement. A committed gain set is staged into the law right before the next step.
  *
  * Events (storage loaded, commit, refusal, ...) go to one hook, ::gl_mav_port_t::event, never to a
  * stream: the caller decides whether and how to log them.
@@ -57,10 +57,7 @@
 #include <stdint.h>
 
 #include "common/mavlink.h"
-#include "gl_mav_law.h"
-#if !(defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED)
-#include "gainlink/gl_loop.h"
-#endif
+#include "gainlink/gl_law.h"
 #include "gl_mav_params.h"
 #include "gl_mav_platform.h" /* gl_mav_storage_t, GL_MAV_KEY_LEN */
 #include "gl_mav_store.h"
@@ -156,14 +153,7 @@ typedef struct gl_mav_node_config {
 typedef struct gl_mav_node {
     gl_mav_node_config_t cfg;          /**< Configuration. */
     gl_mav_params_t table;             /**< Parameters over the staged and committed sets. */
-#if defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED
-    gl_mav_sched_t sched;              /**< The scheduled law the node runs (gl_mav_law.h). */
-#else
-    gl_loop_t loop;                    /**< The control loop (float32; with a fixed-point law, the float gains'). */
-#endif
-#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
-    gl_mav_fixed_t fixed;              /**< The integer law the node runs (gl_mav_law.h). */
-#endif
+    gl_law_t law;                      /**< The law the node runs (gl_law.h), on the table's committed set. */
     gl_mav_node_stats_t stats;         /**< Counters. */
     int dirty;                         /**< A committed set waits to be staged into the loop. */
     uint64_t next_beat_us;             /**< When the next HEARTBEAT is due. */
@@ -193,7 +183,7 @@ gl_status_t gl_mav_node_init(gl_mav_node_t *node, const gl_mav_node_config_t *cf
 /**
  * @brief Make `dst` a copy of `src` (a snapshot to restore, e.g. a fuzz harness's freshly initialised node).
  *
- * Parameters, loop (running on its own coefficient bank, see gl_loop_copy()), counters, key and replay state
+ * Parameters, law (running on its own state and its own table's set, see gl_law_copy()), counters, key and replay state
  * are copied; the MAVLink channel starts afresh as after gl_mav_node_init() (no frame in progress) and, with a
  * key, checks signatures against `dst`. `src` must not be in use on the same channel afterwards.
  * @param[out] dst Copy.

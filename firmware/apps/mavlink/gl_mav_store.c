@@ -11,11 +11,8 @@
 
 #include <string.h>
 
-#if defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED
-static const char header[] = "# gainlink MAVLink parameters: committed gain set, int32 bits in hex\n";
-#else
-static const char header[] = "# gainlink MAVLink parameters: committed gain set, float32 bits in hex\n";
-#endif
+static const char header[] = "# gainlink MAVLink parameters: committed gain set of the " GL_LAW_NAME
+                             " law, each value's 32 bits in hex\n";
 static const char hex_digits[] = "0123456789abcdef";
 
 static size_t put_line(uint8_t *out, size_t at, size_t cap, const char *id, uint32_t bits)
@@ -46,10 +43,10 @@ size_t gl_mav_store_encode(const gl_mav_params_t *table, uint8_t *buf, size_t ca
     memcpy(buf, header, at);
     for (uint16_t k = 0; k < table->count; ++k) {
         const gl_mav_param_t *p = &table->param[k];
-        if (p->header >= 0) {
+        if (p->kind != GL_MAV_PARAM_GAIN) {
             continue;
         }
-        at = put_line(buf, at, cap, p->id, gl_mav_params_bits(&table->committed, p->offset));
+        at = put_line(buf, at, cap, p->id, gl_mav_params_bits(&table->committed, p));
         if (at == 0u) {
             return 0;
         }
@@ -101,11 +98,10 @@ static gl_mav_store_error_t apply_line(const gl_mav_params_t *table, const uint8
         return GL_MAV_STORE_OK;
     }
     int32_t k = find_param(table, id, next);
-    if (k < 0 || table->param[k].header >= 0) {
+    if (k < 0 || table->param[k].kind != GL_MAV_PARAM_GAIN) {
         return GL_MAV_STORE_E_UNKNOWN;
     }
-    gl_mav_params_put_bits(candidate, table->param[k].offset, bits);
-    return GL_MAV_STORE_OK;
+    return gl_mav_params_put_bits(candidate, &table->param[k], bits) == 0 ? GL_MAV_STORE_OK : GL_MAV_STORE_E_RANGE;
 }
 
 gl_mav_store_result_t gl_mav_store_decode(gl_mav_params_t *table, const uint8_t *buf, size_t len)
@@ -153,6 +149,7 @@ const char *gl_mav_store_strerror(gl_mav_store_error_t error)
     case GL_MAV_STORE_E_NUMBER: return "value is not 8 hex digits";
     case GL_MAV_STORE_E_NO_HASH: return "no GL_HASH line";
     case GL_MAV_STORE_E_REFUSED: return "stored set refused by the loop's checks";
+    case GL_MAV_STORE_E_RANGE: return "an integer beyond its parameter's word";
     default: return "unknown error";
     }
 }

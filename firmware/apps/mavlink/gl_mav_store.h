@@ -4,10 +4,10 @@
  *
  * Format (ASCII text, one line per item, LF endings): an optional `#` comment line, then one
  * `ID BITS` line per gain parameter of the committed set, where BITS is the float's IEEE-754
- * binary32 pattern (a fixed-point law's table: the int32's bits) as exactly 8 lowercase hex digits (exact, and needs no printf/strtof on a
- * microcontroller), and a last line `GL_HASH BITS` with the set's CRC-32. Loading rebuilds a whole
- * gain set from the bytes and accepts it only if it passes the library's checks (dimensions, CRC,
- * finiteness, limits, derivation); on any error nothing changes.
+ * binary32 pattern (an integer law's table: the int32's bits) as exactly 8 lowercase hex digits (exact, and needs no
+ * printf/strtof on a microcontroller), and a last line `GL_HASH BITS` with the set's CRC-32. Loading rebuilds a whole
+ * gain set from the bytes and accepts it only if it passes the law's checks (gl_law_stage(): signature or
+ * dimensions, CRC, finiteness, limits, derivation); on any error nothing changes.
  *
  * Where the bytes live is the caller's business (gl_mav_storage_t in gl_mav_node.h): a file on the
  * host, a semihosting file standing for flash under QEMU, a flash sector on a board.
@@ -33,7 +33,8 @@ typedef enum gl_mav_store_error {
     GL_MAV_STORE_E_UNKNOWN = 2, /**< An id that is not a gain parameter of this build. */
     GL_MAV_STORE_E_NUMBER = 3,  /**< BITS is not 8 hex digits. */
     GL_MAV_STORE_E_NO_HASH = 4, /**< No `GL_HASH` line. */
-    GL_MAV_STORE_E_REFUSED = 5, /**< The set failed the loop's checks (see the status). */
+    GL_MAV_STORE_E_REFUSED = 5, /**< The set failed the law's checks (see the status). */
+    GL_MAV_STORE_E_RANGE = 6,   /**< An integer beyond its parameter's word (see the line number). */
 } gl_mav_store_error_t;
 
 /** Outcome of a decode: the error, the 1-based line it is on, and the loop's status for a refusal. */

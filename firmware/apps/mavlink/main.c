@@ -17,10 +17,9 @@
  * - `--from-artifact`: start on the compiled set (the artifact's) even when FILE holds a persisted one; FILE is
  *   kept as it is until the next persist.
  *
- * Prints `gainlink-mavlink NAME sha256:HEX n m p q URL` on stdout when ready (followed by ` law=q31` or ` law=q15`
- * when it runs a fixed-point law, gl_mav_law.h), then the set in force: ` gains=artifact` (the compiled set of
- * artifact sha256:HEX) or ` gains=persisted` (the set FILE held), ` crc32=DECIMAL format=float32|q31|q15|
- * scheduled-float32`. Events go to stderr through
+ * Prints `gainlink-mavlink NAME sha256:HEX n m p q URL` on stdout when ready, then the set in force: ` gains=artifact`
+ * (the compiled set of artifact sha256:HEX) or ` gains=persisted` (the set FILE held), ` crc32=DECIMAL
+ * format=float32|q31|q15|scheduled-float32`, then the law it runs and the wire format (` law=LAW wire=N`, gl_law.h). Events go to stderr through
  * gl_log.h (rate-limited, never blocking the loop); at exit one summary line accounts for every datagram and
  * frame: `datagrams= dropped= frames= bad_frames= garbage_bytes= unsigned= bad_signature= replayed= ...`.
  */
@@ -47,13 +46,6 @@ typedef struct udp_port {
     const char *key_path;
     int from_artifact;
 } udp_port_t;
-
-/* The ready line names a law other than float32 (the float32 app's line is as it always was). */
-#if (defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED) || (defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED)
-#define LAW_FIELD " law=" GL_MAV_LAW_NAME
-#else
-#define LAW_FIELD ""
-#endif
 
 static gl_mav_node_t node;
 static udp_port_t udp;
@@ -346,9 +338,10 @@ int main(int argc, char **argv)
         return rc;
     }
     catch_stop_signals();
-    printf("gainlink-mavlink %s sha256:%s %d %d %d %d %s%s gains=%s crc32=%lu format=%s\n", gl_artifact_name,
-           gl_artifact_sha256, GL_N, GL_M, GL_P, GL_Q, opt.url, LAW_FIELD, node.started_stored ? "persisted" : "artifact",
-           (unsigned long)node.table.committed.crc32, GL_MAV_LAW_NAME);
+    printf("gainlink-mavlink %s sha256:%s %d %d %d %d %s gains=%s crc32=%lu format=%s law=%s wire=%d\n",
+           gl_artifact_name, gl_artifact_sha256, GL_N, GL_M, GL_P, GL_Q, opt.url,
+           node.started_stored ? "persisted" : "artifact", (unsigned long)node.table.committed.crc32, GL_LAW_NAME,
+           GL_LAW_NAME, GL_WIRE_VERSION);
     fflush(stdout);
     rc = serve(opt.spin_us);
     log_summary();

@@ -5,7 +5,7 @@
  * For cores without an FPU. The integers (coefficient mantissas and shifts, rounding shifts, operating point,
  * limits, safe command, initial state, formats and ranges) are those the design certified, stored in the
  * artifact (`checks.fixed_point.integers`) and rendered by `gainlink export` into `gl_fixed_gains.h` /
- * `gl_fixed_gains.c` as the const ::gl_fixed_gains_t `gl_fixed_gains_default`: never recomputed here. A signal in
+ * `gl_fixed_gains.c` as the const ::gl_fixed_set_t `gl_fixed_default`: never recomputed here. A signal in
  * format f is an integer X meaning X 2^-f. The step, in this order (bit for bit the reference model
  * gainlink.proof.fixed_law, whose module docstring is the same list):
  * @code
@@ -29,11 +29,10 @@
  * Words (q31 / q15): coefficients, samples and commands 32 / 16 bits (::gl_fx_coef_t, ::gl_fx_word_t); estimate,
  * integrators and the unsaturated command 32 bits; accumulators 64 bits.
  *
- * @par CMake targets (firmware/cmake/gl_fixed.cmake; present when the export holds gl_fixed_gains.c)
- * - `gainlink_fixed`: this API and the generated gains (GL_FIXED_UNROLLED, on by default: the row sums of the
- *   generated gl_fixed_step.h; off: the generic table-driven loop, bit for bit the same).
- * - host: `gainlink_fixed_host` (shared, Python ctypes), `gainlink_fixed_loop_host` (text in and out).
- * - cortex-m*: `gainlink_fixed_image` (replay over semihosting, ports/cortex-m/main_fixed.c).
+ * @par Building
+ * These are the `lq_q31` and `lq_q15` laws of gl_law.h, which every main, node and binding calls (cmake/law.cmake
+ * builds them when the export names one: `gainlink_loop`, with the generated row sums of gl_fixed_step.h,
+ * GL_FX_UNROLLED; and `gainlink_loop_generic`, the table-driven loop the MAVLink node runs, bit for bit the same).
  */
 #ifndef GAINLINK_GL_FIXED_H
 #define GAINLINK_GL_FIXED_H
@@ -117,8 +116,19 @@ typedef struct {
     uint8_t clamp;                     /**< anti-windup clamp: hold Z on a saturated step */
 } gl_fixed_gains_t;
 
-/** @brief The artifact's certified integers (generated gl_fixed_gains.c). */
-extern const gl_fixed_gains_t gl_fixed_gains_default;
+/**
+ * @brief A gain set of the integer law as an upload changes it: the integers, the CRC-32 of its gain values (the
+ *        MAVLink table's `GL_HASH`, gl_fixed_set_crc32()) and the compatibility signature of the law it was made for
+ *        (GL_LAW_SIGNATURE of gl_law.h: dimensions, number formats, the terms' signals and the declared ranges).
+ */
+typedef struct {
+    gl_fixed_gains_t g;  /**< The integers (first: a pointer to the set is one to them). */
+    uint32_t crc32;      /**< gl_fixed_set_crc32() of the set. */
+    uint32_t signature;  /**< The law's compatibility signature. */
+} gl_fixed_set_t;
+
+/** @brief The artifact's certified integers as a set (generated gl_fixed_gains.c). */
+extern const gl_fixed_set_t gl_fixed_default;
 
 /** @brief Loop state and the last step's outputs (caller-owned; no dynamic memory). */
 typedef struct {
@@ -133,7 +143,7 @@ typedef struct {
 } gl_fixed_loop_t;
 
 /**
- * @brief Start a loop on gain set `g` (normally &gl_fixed_gains_default): XH = XH0, Z = Z0, U = U_SAFE.
+ * @brief Start a loop on gain set `g` (normally &gl_fixed_default.g): XH = XH0, Z = Z0, U = U_SAFE.
  * @param[out] loop The loop.
  * @param[in] g The integers.
  * @return 0, or -1 when an argument is NULL.
@@ -152,6 +162,30 @@ void gl_fixed_reset(gl_fixed_loop_t *loop);
  * @return The step's flags (GL_FX_FAULT, GL_FX_CLIPPED, GL_FX_OVERFLOW; 0 for a clean step).
  */
 uint32_t gl_fixed_step(gl_fixed_loop_t *loop, const float *y, const float *r, float *u);
+
+/**
+ * @brief The command words of the last step (or the safe command after gl_fixed_reset()) as floats, U 2^-f_u: the
+ *        conversion gl_fixed_step() ends with, for a caller that changed the words (a watchdog's safe command).
+ * @param[in] loop The loop. @param[out] u GL_FX_M commands.
+ */
+void gl_fixed_command(const gl_fixed_loop_t *loop, float *u);
+
+/**
+ * @brief Whether a set's integers can run on this build: its structure (each term's signal, the rows' ends and
+ *        rounding shifts, formats, declared ranges, anti-windup) is the compiled one's, and its values are in range
+ *        (left shifts 0..62, LO_V <= HI_V).
+ * @param[in] g The integers.
+ * @return 0; -1 when the structure differs from the compiled set's; -2 when a value is out of range.
+ */
+int gl_fixed_check(const gl_fixed_gains_t *g);
+
+/**
+ * @brief CRC-32 (zlib's) of a set's gain values as little-endian int32 words, in the order of the MAVLink table
+ *        (gainlink.shipping.params): each term's mantissa and shift, then UOP_V, LO_V, HI_V, UOP_U, U_SAFE, YOP,
+ *        XH0, Z0.
+ * @param[in] g The integers. @return The checksum.
+ */
+uint32_t gl_fixed_set_crc32(const gl_fixed_gains_t *g);
 
 /**
  * @brief A float's order key: an int32 that orders as the float does (non-NaN), used to clip without float

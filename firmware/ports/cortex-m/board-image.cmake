@@ -1,9 +1,8 @@
-# The QEMU board of a Cortex-M image and how an image is linked for it (included from cortex-m.cmake,
-# sched-image.cmake and cmake/gl_fixed.cmake: the float, scheduled and fixed-point images share it).
+# The QEMU board of a Cortex-M image and how an image is linked for it (included from cortex-m.cmake).
 #
 # Boards, one QEMU machine each (board file, linker script <board>.ld, the core it carries):
-#   microbit       board_microbit.c     cortex-m0   nRF51822, 16 KiB RAM: on the UART the slcan node of a fixed-point
-#                                                export only
+#   microbit       board_microbit.c     cortex-m0   nRF51822, 16 KiB RAM: on the UART the slcan node of an integer
+#                                                law only
 #   mps2-an385     board_mps2_an385.c   cortex-m3
 #   mps2-an386     board_mps2_an386.c   cortex-m4   (default for cortex-m4)
 #   netduinoplus2  board_netduinoplus2.c cortex-m4  STM32F405

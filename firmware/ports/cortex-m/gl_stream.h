@@ -1,15 +1,14 @@
 /**
  * @file gl_stream.h
- * @brief The replay and PIL stream of the Cortex-M images over semihosting files, shared by the float image
- *        (main.c) and the fixed-point image (main_fixed.c).
+ * @brief The replay and PIL stream of the Cortex-M image over semihosting files (main.c).
  *
  * in:  header {uint32 in_magic, count, block, watchdog_periods}, then `count` records of `in_size` bytes
  * out: header {uint32 out_magic, count, six words from the image's begin()}, then one record of `out_size`
  *      bytes per input record, written after each block
  *
  * Records are read up to `block` at a time (block 1 for a closed loop through FIFOs: gainlink.hil.loop.pil), never
- * more than the image's buffers hold (`max_block`). The record layouts are the image's (see main.c,
- * main_fixed.c); all little-endian.
+ * more than the image's buffers hold (`max_block`). The record layouts are the law's (GL_LAW_RECORD_HEADER of gl_law.h, see main.c);
+ * all little-endian.
  */
 #ifndef GAINLINK_GL_STREAM_H
 #define GAINLINK_GL_STREAM_H

@@ -1,40 +1,39 @@
 /**
  * @file main.c
- * @brief Cortex-M image: a bus node on its UART (MAVLink or slcan), or the loop fed through semihosting
- *        files (replay and PIL), or a UART smoke test.
+ * @brief Cortex-M image: the build's law (gl_law.h) as a bus node on its UART (MAVLink or slcan), or fed through
+ *        semihosting files (replay and PIL), or a UART smoke test. One main for every law.
  *
  * Starts the millisecond clock and the interrupt-driven UART (gl_uart.h) and prints
- * `gainlink NAME BOARD sha256:HEX` on it. Then, by the simulator's command line (semihosting
- * SYS_GET_CMDLINE; QEMU: `-semihosting-config enable=on,target=native,arg=gainlink,arg=serve,arg=mavlink`):
+ * `gainlink NAME BOARD sha256:HEX law=LAW variant=VARIANT wire=N` on it. Then, by the simulator's command line
+ * (semihosting SYS_GET_CMDLINE; QEMU: `-semihosting-config enable=on,target=native,arg=gainlink,arg=serve,arg=mavlink`):
  * - `serve mavlink [sysid=N] [compid=N] [gains=artifact]`: the MAVLink node on the UART (serve.h), parameters persisted
  *   in the semihosting file gl_flash.txt (flash_semihost.h); runs until the simulator is stopped;
  * - `serve slcan [base=ID] [encoding=float32|int16 meas=... cmd=...]`: the CAN node behind slcan (serve.h);
  *   (images built with GL_IMAGE_SERVE only; the others answer `serve` with exit status GL_EXIT_BAD_INPUT;
- *   the micro:bit's image of a fixed-point export carries the slcan node only, GL_IMAGE_SERVE_MAVLINK off);
+ *   an image without the MAVLink node, GL_IMAGE_SERVE_MAVLINK off, refuses `serve mavlink`: the micro:bit's);
  * - anything else: opens `gl_in.bin` (a file or a FIFO) in the simulator's working directory. Without it,
- *   the UART smoke test runs: one step with y = 0.5, r = 0, printed as `u0=0xBITS ...`, exit 0. With it,
- *   `gl_out.bin` is opened for writing and the stream is:
+ *   the UART smoke test runs: one step with y = 0.5, r = 0, s = 0, printed as `step STATUS u=0xBITS ...`, exit 0.
+ *   With it, `gl_out.bin` is opened for writing and the stream is (gl_stream.h; records generated from the law's
+ *   one description, GL_LAW_RECORD_HEADER of gl_law.h and gainlink.shipping.records):
  *
- * in:  header {uint32 magic 'GLI1', count, block, watchdog_periods}, then `count` records
- *      {uint32 tag (0 step, 1 idle, 2 stage), float y[GL_P], float r[GL_QA]}
- *      A stage record reads a whole gl_gains_t from `gl_stageK.bin` (K = 0, 1, ... per stage record) and
- *      hands it to gl_loop_stage(); its output record carries that status and the held command.
- * out: header {uint32 magic 'GLO1', count, n, m, p, q, crc32 of the running gains, 0}, then one record per
- *      input {int32 status, uint32 sat_mask, float u[GL_M], float xh[GL_N], float z[GL_QA]}
+ * in:  header {uint32 magic 'GLI2', count, block, watchdog_periods}, then `count` gl_law_sample_t
+ *      {uint32 tag (0 step, 1 idle, 2 stage, 3 reset), float y[GL_P], float r[GL_QA], float s[GL_LAW_EA]}
+ *      A stage record reads a whole gl_law_gains_t from `gl_stageK.bin` (K = 0, 1, ... per stage record) and
+ *      hands it to gl_law_stage(); its output record carries that status and the held command.
+ * out: header {uint32 magic 'GLO2', count, GL_LAW_ID, n, m, p, q, e}, then one gl_law_record_t per input.
  *
  * Records are read up to `block` at a time (use block 1 for a closed loop through FIFOs); the image reads
- * fewer when its buffers are smaller (GL_IMAGE_MAX_BLOCK). All little-endian. The stream's reading and writing
- * is gl_stream.c, shared with the fixed-point image (main_fixed.c).
+ * fewer when its buffers are smaller (GL_IMAGE_MAX_BLOCK). All little-endian.
  *
- * Each gl_loop_step() of the replay runs with interrupts masked: the step's instruction count
- * (gainlink.firmware.cost, from the call to its return) then holds the step alone, never the SysTick or
- * UART handler that happened to interrupt it. The pending interrupt runs right after.
+ * Each step of the replay runs with interrupts masked: the step's instruction count (gainlink.firmware.cost, from
+ * the call of the law's own step function, GL_LAW_STEP_SYMBOL, to its return) then holds the step alone, never
+ * the SysTick or UART handler that happened to interrupt it. The pending interrupt runs right after.
  */
 #include <stdint.h>
 #include <string.h>
 
 #include "board.h"
-#include "gainlink/gl_loop.h"
+#include "gainlink/gl_law.h"
 #include "gl_clock.h"
 #include "gl_nvic.h"
 #include "gl_stream.h"
@@ -44,42 +43,26 @@
 #include "serve.h"
 #endif
 
-#define GL_IN_MAGIC 0x31494C47u  /* "GLI1" */
-#define GL_OUT_MAGIC 0x314F4C47u /* "GLO1" */
+#define GL_IN_MAGIC 0x32494C47u  /* "GLI2" */
+#define GL_OUT_MAGIC 0x324F4C47u /* "GLO2" */
 #ifndef GL_IMAGE_MAX_BLOCK
 #define GL_IMAGE_MAX_BLOCK 64
 #endif
 #define GL_MAX_BLOCK ((uint32_t)GL_IMAGE_MAX_BLOCK)
-#define GL_TAG_STEP 0u
-#define GL_TAG_IDLE 1u
-#define GL_TAG_STAGE 2u
 #define GL_MAX_ARGS 16
 
-typedef struct {
-    uint32_t tag;
-    float y[GL_P];
-    float r[GL_QA];
-} in_record_t;
+static gl_law_t law;
+static gl_law_sample_t in_buf[GL_MAX_BLOCK];
+static gl_law_record_t out_buf[GL_MAX_BLOCK];
+static gl_law_out_t last; /* the answer of the last step, idle period or reset (a stage record holds it) */
 
-typedef struct {
-    int32_t status;
-    uint32_t sat_mask;
-    float u[GL_M];
-    float xh[GL_N];
-    float z[GL_QA];
-} out_record_t;
-
-_Static_assert(sizeof(in_record_t) == 4u * (1u + GL_P + GL_QA), "in_record_t must be packed");
-_Static_assert(sizeof(out_record_t) == 4u * (2u + GL_M + GL_N + GL_QA), "out_record_t must be packed");
-
-static gl_loop_t loop;
-static in_record_t in_buf[GL_MAX_BLOCK];
-static out_record_t out_buf[GL_MAX_BLOCK];
-
-static gl_gains_t staged;
+/* Staged sets, read alternately: a law that runs a set by address keeps running the one it accepted last while
+ * the next is read and checked. */
+static gl_law_gains_t staged[2];
 static uint32_t stage_count;
+static int running = -1; /* which of `staged` the law runs (-1: the compiled set) */
 
-/** Read gl_stageK.bin (K = number of earlier stage records) into `staged` and stage it. */
+/** Read gl_stageK.bin (K = number of earlier stage records) into the set the law does not run and stage it. */
 static gl_status_t stage_from_file(void)
 {
     char name[24] = "gl_stage";
@@ -99,11 +82,15 @@ static gl_status_t stage_from_file(void)
     if (fd < 0) {
         return GL_ERR_NULL;
     }
+    const int into = running == 0 ? 1 : 0;
     gl_status_t st = GL_ERR_NULL;
-    if (gl_sh_read_all(fd, &staged, sizeof staged) == 0) {
-        st = gl_loop_stage(&loop, &staged);
+    if (gl_sh_read_all(fd, &staged[into], sizeof staged[into]) == 0) {
+        st = gl_law_stage(&law, &staged[into]);
     }
     gl_sh_close(fd);
+    if (st == GL_OK) {
+        running = into;
+    }
     return st;
 }
 
@@ -127,17 +114,19 @@ static int uart_smoke(void)
 {
     float y[GL_P];
     float r[GL_QA];
-    float u[GL_M];
+    float s[GL_LAW_EA];
     for (unsigned i = 0; i < GL_P; ++i) {
         y[i] = 0.5f;
     }
     memset(r, 0, sizeof r);
-    gl_status_t st = gl_loop_step(&loop, y, r, u);
+    memset(s, 0, sizeof s);
+    gl_law_out_t out;
+    gl_status_t st = gl_law_step(&law, y, r, s, &out);
     uart_puts("step ");
     uart_hex((uint32_t)st);
     for (unsigned i = 0; i < GL_M; ++i) {
         uint32_t bits;
-        memcpy(&bits, &u[i], sizeof bits);
+        memcpy(&bits, &out.u[i], sizeof bits);
         uart_puts(" u=");
         uart_hex(bits);
     }
@@ -172,26 +161,24 @@ static int serve_if_asked(void)
 #endif
 }
 
-/** One input record through the loop into its output record (a step, an idle period or a staged gain set). */
+/** One input record through the law into its output record (a step, an idle period, a staged set or a reset). */
 static void replay_record(const void *in_record, void *out_record)
 {
-    const in_record_t *in = (const in_record_t *)in_record;
-    out_record_t *o = (out_record_t *)out_record;
-    gl_status_t st;
-    if (in->tag == GL_TAG_IDLE) {
-        st = gl_loop_idle(&loop, o->u);
-    } else if (in->tag == GL_TAG_STAGE) {
-        st = stage_from_file();
-        memcpy(o->u, loop.u, sizeof o->u);
+    const gl_law_sample_t *in = (const gl_law_sample_t *)in_record;
+    if (in->tag == GL_LAW_TAG_IDLE) {
+        (void)gl_law_idle(&law, &last);
+    } else if (in->tag == GL_LAW_TAG_RESET) {
+        (void)gl_law_reset(&law, &last);
+    } else if (in->tag == GL_LAW_TAG_STAGE) {
+        last.status = (int32_t)stage_from_file(); /* the command held, as before the record */
+        last.flags = 0u;
+        last.sat = 0u;
     } else {
         const uint32_t primask = gl_irq_save();
-        st = gl_loop_step(&loop, in->y, in->r, o->u);
+        (void)gl_law_step(&law, in->y, GL_Q > 0 ? in->r : NULL, GL_LAW_E > 0 ? in->s : NULL, &last);
         gl_irq_restore(primask);
     }
-    o->status = (int32_t)st;
-    o->sat_mask = loop.sat_mask;
-    memcpy(o->xh, loop.xh, sizeof o->xh);
-    memcpy(o->z, loop.z, sizeof o->z);
+    gl_law_record(&law, &last, (gl_law_record_t *)out_record);
 }
 
 /** The stream's start: a watchdog of at least one period, the built-in gains; the output header's words. */
@@ -200,10 +187,11 @@ static int replay_begin(const uint32_t in_hdr[4], uint32_t out_hdr[8])
     if (in_hdr[3] == 0u) {
         return GL_EXIT_BAD_INPUT;
     }
-    if (gl_loop_init(&loop, &gl_gains_default, in_hdr[3]) != GL_OK) {
+    if (gl_law_init(&law, in_hdr[3]) != GL_OK) {
         return GL_EXIT_GAINS;
     }
-    const uint32_t words[6] = {GL_N, GL_M, GL_P, GL_Q, gl_loop_active_crc32(&loop), 0u};
+    memset(&last, 0, sizeof last);
+    const uint32_t words[6] = {GL_LAW_ID, GL_N, GL_M, GL_P, GL_Q, GL_LAW_E};
     memcpy(&out_hdr[2], words, sizeof words);
     return GL_EXIT_OK;
 }
@@ -211,8 +199,8 @@ static int replay_begin(const uint32_t in_hdr[4], uint32_t out_hdr[8])
 static const gl_stream_t replay_stream = {
     .in_magic = GL_IN_MAGIC,
     .out_magic = GL_OUT_MAGIC,
-    .in_size = sizeof(in_record_t),
-    .out_size = sizeof(out_record_t),
+    .in_size = sizeof(gl_law_sample_t),
+    .out_size = sizeof(gl_law_record_t),
     .max_block = GL_MAX_BLOCK,
     .in_buf = in_buf,
     .out_buf = out_buf,
@@ -230,14 +218,14 @@ static int run(void)
     uart_puts(gl_board_name);
     uart_puts(" sha256:");
     uart_puts(gl_artifact_sha256);
-    uart_puts("\n");
+    uart_puts(" law=" GL_LAW_NAME " variant=" GL_LAW_VARIANT " wire=" GL_WIRE_VERSION_TEXT "\n");
     int served = serve_if_asked();
     if (served >= 0) {
         return served;
     }
     int32_t fin = gl_sh_open("gl_in.bin", GL_SH_MODE_RB);
     if (fin < 0) {
-        if (gl_loop_init(&loop, &gl_gains_default, GL_WATCHDOG_PERIODS_DEFAULT) != GL_OK) {
+        if (gl_law_init(&law, GL_WATCHDOG_PERIODS_DEFAULT) != GL_OK) {
             return GL_EXIT_GAINS;
         }
         return uart_smoke();

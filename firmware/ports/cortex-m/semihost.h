@@ -13,7 +13,7 @@ enum gl_exit {
     GL_EXIT_OK = 0,          /**< Done. */
     GL_EXIT_BAD_INPUT = 1,   /**< The input stream's header is malformed. */
     GL_EXIT_IO = 2,          /**< A semihosting read/write failed or came up short. */
-    GL_EXIT_GAINS = 4,       /**< The built-in gain set was rejected by gl_loop_init(). */
+    GL_EXIT_GAINS = 4,       /**< The built-in gain set was rejected by gl_law_init(). */
     GL_EXIT_FPU = 8,         /**< Startup self-test: FPU not enabled (GL_ERR_FPU). */
     GL_EXIT_FAULT = 9        /**< A HardFault / UsageFault / other fault occurred. */
 };

@@ -1,13 +1,11 @@
 /**
  * @file serve_mavlink.c
  * @brief The MAVLink node (apps/mavlink/gl_mav_node.h) on the console UART: the same protocol code as the
- *        host app, carried by the interrupt-driven rings of gl_uart.h. It runs the law the host app runs
- *        (gl_mav_law.h): a fixed-point export's integer law, with its integers in the parameter table, or a
- *        scheduled export's scheduled law (sigma external: after the references in the HIL sample), which the
- *        ready line names (` law=q31`, ` law=scheduled-float32`; a float32 image's line names none), after the set in
- *        force: ` format=float32|q31|q15|scheduled-float32`, ` gains=persisted` (the one its flash held) or
+ *        host app, carried by the interrupt-driven rings of gl_uart.h. It runs the build's law (gl_law.h; a
+ *        scheduled law's external sigma travels after the references in the HIL sample). Its ready line names the
+ *        set in force: ` format=float32|q31|q15|scheduled-float32`, ` gains=persisted` (the one its flash held) or
  *        ` gains=artifact` (the compiled one; option `gains=artifact` starts on it whatever the flash holds) and its
- *        ` crc32=`.
+ *        ` crc32=`, then ` signing=on|off`, the law and the wire format (` law=q31 wire=2`).
  *
  * A serial link has one peer, so every answer goes to the UART whatever its destination. The node's
  * events are not printed (the UART carries MAVLink); SYS_STATUS reports the counters. The UART is a
@@ -129,16 +127,15 @@ int gl_serve_mavlink(int argc, char *const argv[])
     static const char ready[] = "ready mavlink sysid=";
     (void)gl_uart_write((const uint8_t *)ready, sizeof ready - 1u);
     put_number(sysid);
-    static const char format[] = " format=" GL_MAV_LAW_NAME;
+    static const char format[] = " format=" GL_LAW_NAME;
     (void)gl_uart_write((const uint8_t *)format, sizeof format - 1u);
     static const char *const gains[2] = {" gains=artifact", " gains=persisted"};
     (void)gl_uart_write((const uint8_t *)gains[node.started_stored], strlen(gains[node.started_stored]));
     (void)gl_uart_write((const uint8_t *)" crc32=", 7);
     put_number(node.table.committed.crc32);
     (void)gl_uart_write((const uint8_t *)(keyed ? " signing=on" : " signing=off"), keyed ? 11u : 12u);
-#if (defined(GL_MAV_LAW_FIXED) && GL_MAV_LAW_FIXED) || (defined(GL_MAV_LAW_SCHED) && GL_MAV_LAW_SCHED)
-    (void)gl_uart_write((const uint8_t *)" law=" GL_MAV_LAW_NAME, sizeof " law=" GL_MAV_LAW_NAME - 1u);
-#endif
+    static const char law[] = " law=" GL_LAW_NAME " wire=" GL_WIRE_VERSION_TEXT;
+    (void)gl_uart_write((const uint8_t *)law, sizeof law - 1u);
     (void)gl_uart_write((const uint8_t *)"\n", 1);
     for (;;) {
         uint8_t buf[64];

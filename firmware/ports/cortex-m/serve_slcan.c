@@ -2,9 +2,9 @@
  * @file serve_slcan.c
  * @brief The CAN node (apps/can/gl_can_node.h) behind an slcan adapter (apps/can/gl_slcan.h) on the
  *        console UART: `can.Bus(interface="slcan", channel="socket://HOST:PORT")` exchanges the same DBC
- *        frames with it as with the host CAN app (classic frames: slcan has no CAN FD). It runs the law the host
- *        app runs (gl_can_law.h): a fixed-point export's integer law or a scheduled export's scheduled law, which
- *        its ready line names (`law=q31`, `law=scheduled-float32`; sigma external: after the references).
+ *        frames with it as with the host CAN app (classic frames: slcan has no CAN FD). It runs the build's law
+ *        (gl_law.h), which its ready line names with the wire format (`law=q31 wire=2`; a scheduled law's external
+ *        sigma travels after the references).
  */
 #include <math.h>
 #include <string.h>
@@ -17,12 +17,8 @@
 #include "semihost.h"
 #include "serve.h"
 
-/* The ready line names a law other than float32, as the host app's does (a float32 image's line is as it was). */
-#if (defined(GL_CAN_LAW_FIXED) && GL_CAN_LAW_FIXED) || (defined(GL_SCHEDULED) && GL_SCHEDULED)
-#define LAW_FIELD " law=" GL_CAN_LAW_NAME
-#else
-#define LAW_FIELD ""
-#endif
+/* The ready line names the law and the wire format, as the host app's does. */
+#define LAW_FIELD " law=" GL_LAW_NAME " wire=" GL_WIRE_VERSION_TEXT
 
 static gl_can_node_t node;
 static gl_slcan_t slcan;

@@ -1,0 +1,215 @@
+"""The MAVLink parameter table of each law: one description, from which the export renders the firmware's table
+(``gl_law_params.h``, read by ``firmware/apps/mavlink/gl_mav_params.c``) and :mod:`gainlink.mavlink` plans uploads.
+
+Each law's table, in index order: read-only structure parameters (INT32, their compiled values), ``GL_HASH`` (the
+CRC-32 of the set the node runs: setting it to the staged set's CRC commits that set), then the gain values, each
+with its value in the artifact and, for the C, where it lives in the law's gain set (``gl_law_gains_t`` of gl_law.h:
+a C member designator). What the parameters are named and what ``GL_HASH`` covers, per law:
+
+- ``lq/float32``: every number of the C ``gl_gains_t`` that is a parameter (:mod:`.gains_layout`), REAL32;
+  ``GL_HASH`` is ``gl_gains_crc32`` (the structure words and every float).
+- ``lq/q31``, ``lq/q15``: the certified integers (INT32, bytewise): each non-zero term's mantissa and left shift,
+  then the operating point, limits, safe command and initial state (:data:`.codegen_fixed.VECTORS`); headers
+  ``GL_FX_SIG`` (the formats' signature) and ``GL_FX_STRUCT`` (:func:`.codegen_fixed.structure_crc`); ``GL_HASH``
+  is the CRC of the gain values as int32 words (:func:`.codegen_fixed.set_crc32`).
+- ``scheduled/float32``: every float of the tables, REAL32; ``GL_HASH`` the CRC of their bytes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import gains_layout as layout
+from .artifact import Artifact
+from .codegen import gain_set, shape_of
+from .codegen_fixed import ROWS, VECTORS, set_crc32, structure_crc
+from .codegen_scheduled import tables, tables_crc32
+from .law_c import law_name
+
+#: MAV_PARAM_TYPE of the table's parameters (MAVLink common.xml).
+INT32 = 6
+REAL32 = 9
+HASH_ID = "GL_HASH"
+SIGNATURE_ID = "GL_FX_SIG"
+STRUCTURE_ID = "GL_FX_STRUCT"
+#: The scheduled table's read-only structure parameters.
+SCHEDULED_DIMENSION_IDS = ("GL_DIM_N", "GL_DIM_M", "GL_DIM_P", "GL_DIM_Q", "GL_NPTS", "GL_DIM_E")
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter of a law's table.
+
+    ``value`` is the artifact's (an INT32 as the signed 32-bit integer it carries); ``source`` says where it comes
+    from (``K[0,1]``); ``slot`` is the C designator of a gain value in ``gl_law_gains_t`` (empty for a header); a
+    header is read-only but for ``GL_HASH`` (``is_hash``).
+    """
+
+    name: str
+    ptype: int
+    value: float | int
+    source: str
+    slot: str = ""
+    is_hash: bool = False
+
+
+def as_int32(value: int) -> int:
+    """A uint32 (a CRC) as the int32 an INT32 parameter holds."""
+    value &= 0xFFFFFFFF
+    return value - (1 << 32) if value >= 1 << 31 else value
+
+
+def table(artifact: Artifact) -> tuple[Param, ...]:
+    """Every parameter of the MAVLink node built from ``artifact``, in index order (module docstring)."""
+    law = law_name(artifact)
+    if law == "lq/float32":
+        return _lq(artifact)
+    if law in ("lq/q31", "lq/q15"):
+        return _fixed(artifact)
+    return _scheduled(artifact)
+
+
+def _structure(artifact: Artifact) -> list[Param]:
+    """The lq structure's read-only parameters (dimensions, observer form, anti-windup)."""
+    header = gain_set(artifact).header
+    return [Param(f.param, INT32, int(v), f.name) for f, v in zip(layout.STRUCTURE, header, strict=True)]
+
+
+def _block(field: layout.Field, values: np.ndarray, shape: layout.Shape) -> list[Param]:
+    if not field.dims:
+        return [Param(f"GL_{field.param}", REAL32, float(values), field.name, slot=field.name)]
+    exposed = field.exposed_shape(shape)  # integrator arrays are stored with max(q, 1) rows or columns
+    if len(field.dims) == 1:
+        return [
+            Param(f"GL_{field.param}_{i}", REAL32, float(values[i]), f"{field.name}[{i}]", slot=f"{field.name}[{i}]")
+            for i in range(exposed[0])
+        ]
+    return [
+        Param(
+            f"GL_{field.param}_{i}_{j}",
+            REAL32,
+            float(values[i, j]),
+            f"{field.name}[{i},{j}]",
+            slot=f"{field.name}[{i}][{j}]",
+        )
+        for i in range(exposed[0])
+        for j in range(exposed[1])
+    ]
+
+
+def _lq(artifact: Artifact) -> tuple[Param, ...]:
+    gs, shape = gain_set(artifact), shape_of(artifact)
+    out = _structure(artifact) + [Param(HASH_ID, INT32, as_int32(gs.crc32), "crc32", is_hash=True)]
+    for field in layout.NUMBERS:
+        if field.param:
+            out += _block(field, np.asarray(gs.fields[field.name]), shape)
+    return tuple(out)
+
+
+def _fixed(artifact: Artifact) -> tuple[Param, ...]:
+    fp = artifact.checks["fixed_point"]
+    table_, k = fp["integers"], 0
+    gains: list[Param] = []
+    for kind, count in (("v", artifact.m), ("z", artifact.q), ("x", artifact.n)):
+        for i in range(count):
+            for block, _ in ROWS[kind]:
+                for j, (c, e) in enumerate(zip(table_[block][i], table_[f"{block}_shift"][i], strict=True)):
+                    if c != 0:  # the order of codegen_fixed.terms: term k
+                        gains.append(
+                            Param(f"GL_{block}_{i}_{j}", INT32, int(c), f"{block}[{i},{j}]", slot=f"g.coef[{k}]")
+                        )
+                        gains.append(Param(f"GL_{block}E_{i}_{j}", INT32, int(e), f"{block}_shift[{i},{j}]",
+                                           slot=f"g.shift[{k}]"))  # fmt: skip
+                        k += 1
+    for stem, key in VECTORS:
+        field = key.lower()  # gl_fixed_gains_t's field: uop_v, lo_v, ..., z0
+        gains += [Param(f"GL_{stem}_{i}", INT32, int(v), f"{key}[{i}]", slot=f"g.{field}[{i}]")
+                  for i, v in enumerate(table_[key])]  # fmt: skip
+    header = _structure(artifact) + [
+        Param(SIGNATURE_ID, INT32, as_int32(int(fp["signature"], 16)), "checks.fixed_point.signature"),
+        Param(STRUCTURE_ID, INT32, as_int32(structure_crc(artifact)), "structure"),
+        Param(HASH_ID, INT32, as_int32(set_crc32(artifact)), "crc32", is_hash=True),
+    ]
+    return tuple(header + gains)
+
+
+#: Each field of gl_sched_tables_t: its id stem and whether it holds one block per point.
+_SCHEDULED_STEMS = {
+    "S": ("S", False), "Kx": ("KX", True), "Ky": ("KY", True), "Kz": ("KZ", True), "F": ("F", True),
+    "G": ("G", True), "Ly": ("LY", True), "u_op": ("UOP", True), "u_min": ("UMIN", False),
+    "u_max": ("UMAX", False), "Ci": ("CI", False), "alpha": ("ALPHA", False), "rate_step": ("RATE", False),
+}  # fmt: skip
+
+
+def _scheduled_shapes(a: Artifact) -> dict[str, tuple[int, ...]]:
+    """Each field's shape per point (empty: a scalar; one number: a vector)."""
+    n, m, p, q = a.n, a.m, a.p, a.q
+    mats = {"Kx": (m, n), "Ky": (m, p), "Kz": (m, q), "F": (n, n), "G": (n, m), "Ly": (n, p), "Ci": (q, p)}
+    return {**mats, "S": (a.schedule.points.size,), "u_op": (m,), "u_min": (m,), "u_max": (m,), "alpha": (),
+            "rate_step": ()}  # fmt: skip
+
+
+def _scheduled_names(field: str, point: int | None, shape: tuple[int, ...]) -> list[tuple[str, str]]:
+    """Each element's parameter id and C designator in ``gl_sched_set_t`` (``t.Kx[k][i * n + j]``)."""
+    stem = _SCHEDULED_STEMS[field][0]
+    base, slot = (
+        f"GL_{stem}" + ("" if point is None else f"_{point}"),
+        f"t.{field}" + ("" if point is None else f"[{point}]"),
+    )
+    if not shape:
+        return [(base, slot)]
+    if len(shape) == 1:
+        return [(f"{base}_{i}", f"{slot}[{i}]") for i in range(shape[0])]
+    return [(f"{base}_{i}_{j}", f"{slot}[{i * shape[1] + j}]") for i in range(shape[0]) for j in range(shape[1])]
+
+
+def _scheduled(artifact: Artifact) -> tuple[Param, ...]:
+    a = artifact
+    dims = (a.n, a.m, a.p, a.q, a.schedule.points.size, len(a.schedule.external))
+    out = [Param(k, INT32, int(v), "structure") for k, v in zip(SCHEDULED_DIMENSION_IDS, dims, strict=True)]
+    out.append(Param(HASH_ID, INT32, as_int32(tables_crc32(a)), "CRC-32 of the tables", is_hash=True))
+    shapes = _scheduled_shapes(a)
+    for field, values in tables(a).items():
+        flat = np.asarray(values, dtype=np.float32).reshape(-1)
+        points = range(a.schedule.points.size) if _SCHEDULED_STEMS[field][1] else [None]
+        named = [pair for k in points for pair in _scheduled_names(field, k, shapes[field])]
+        out += [Param(name, REAL32, float(v), field, slot=slot) for (name, slot), v in zip(named, flat, strict=True)]
+    return tuple(out)
+
+
+def c_header(artifact: Artifact, *, banner: str) -> str:
+    """Text of ``gl_law_params.h``: the table as ``GL_LAW_PARAMS(HEADER, HASH, GAIN)``, one entry per parameter in
+    index order (``HEADER(id, type, bits)`` a read-only constant, ``HASH(id)``, ``GAIN(id, type, designator)``)."""
+    params = table(artifact)
+    entries = []
+    for p in params:
+        if p.is_hash:
+            entries.append(f'    HASH("{p.name}")')
+        elif not p.slot:
+            entries.append(f'    HEADER("{p.name}", {p.ptype}, 0x{int(p.value) & 0xFFFFFFFF:08x}u)')
+        else:
+            entries.append(f'    GAIN("{p.name}", {p.ptype}, {p.slot})')
+    return "\n".join(
+        [
+            banner.rstrip("\n"),
+            "/**",
+            " * @file gl_law_params.h",
+            f" * @brief The MAVLink parameter table of the {law_name(artifact)} law for this build, in index order",
+            " *        (gainlink.shipping.params: the one description the uploader reads too).",
+            " */",
+            "#ifndef GL_LAW_PARAMS_H",
+            "#define GL_LAW_PARAMS_H",
+            "",
+            f"#define GL_LAW_PARAM_COUNT {len(params)}",
+            f"#define GL_LAW_HEADER_COUNT {sum(1 for p in params if not p.slot)}",
+            "/** Every parameter: HEADER(id, MAV_PARAM_TYPE, value bits), HASH(id) or GAIN(id, MAV_PARAM_TYPE, member",
+            " *  of gl_law_gains_t). */",
+            "#define GL_LAW_PARAMS(HEADER, HASH, GAIN) \\",
+            " \\\n".join(entries),
+            "",
+            "#endif /* GL_LAW_PARAMS_H */",
+            "",
+        ]
+    )
