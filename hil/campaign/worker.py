@@ -178,8 +178,8 @@ def _scenario(scenario: dict, *, artifact_path: Path, seed: int, blobs: dict, ki
     plant = data.get("plant", {})
     if plant.get("kind") == "fmu" and str(plant.get("path", "")).startswith("sha256:"):
         plant["path"] = str(_fmu_path(plant["path"], blobs))
-    if kind == "sil":
-        data.setdefault("transport", {})
+    if kind == "sil":  # in process: no link, whatever the scenario's table says
+        data["transport"] = {}
     return parse_scenario(data)
 
 
@@ -192,18 +192,19 @@ def downsampled_trace(trace: Any) -> bytes:
 
 
 def run_point(kind: str, artifact: Artifact, scenario: Any) -> Any:
-    """Run one parsed scenario as SIL (in-process C loop) or HIL (the bridge, in its own bus slot)."""
-    if kind == "sil":
-        from ..loop.sil import run_sil
-
-        return run_sil(artifact, scenario, library=_library(artifact) if scenario.controller == "firmware" else None)
+    """Run one parsed scenario through the one dispatcher (:func:`~gainlink.hil.loop.bridge.run_scenario`): SIL in
+    process (its transport table is empty), HIL over its link in its own bus slot."""
     from ..loop.bridge import run_scenario
 
+    if kind == "sil":
+        library = _library(artifact) if scenario.controller == "firmware" else None
+        return run_scenario(scenario, artifact=artifact, library=library)
     with bus_slot() as slot, _one_cpu(slot):
         held = time.time()
         transport = isolate_transport(scenario.transport, slot)
         firmware = _executable(artifact, transport) if scenario.controller == "firmware" else None
-        result = run_scenario(dataclasses.replace(scenario, transport=transport, firmware=firmware))
+        scenario = dataclasses.replace(scenario, transport=transport, firmware=firmware)
+        result = run_scenario(scenario, artifact=artifact)
         # when this run held its slot (its bus): runs whose holds overlap never share a bus
         result.info["transport"]["bus_slot"] = {"slot": slot, "start": held, "stop": time.time()}
         return result

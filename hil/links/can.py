@@ -268,6 +268,7 @@ class CanTransport(Transport):
         self._can_error = CanOperationError
         self.frames_sent = 0
         self.frames_refused = 0  # datagrams python-can could not unpack (hostile or corrupt traffic on the bus)
+        self._last_done: int | None = None  # the last sample the node steps on (steps_on)
 
     def open(self) -> None:
         if self.bus is None:
@@ -291,6 +292,16 @@ class CanTransport(Transport):
 
     def encode_sample(self, *, seq: int, y: np.ndarray, r: np.ndarray) -> list[Any]:
         return self.tx.encode(seq=seq, values=np.concatenate([y, r]))
+
+    def steps_on(self, seq: int) -> bool:
+        """The CAN node answers a sample once: a duplicate or a stale one (its 16-bit ``seq`` not ahead of the last
+        answered) is skipped."""
+        if self._last_done is not None:
+            ahead = (seq - self._last_done) & 0xFFFF
+            if ahead == 0 or ahead >= 0x8000:
+                return False
+        self._last_done = seq
+        return True
 
     def received_sample(self, *, y: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """What the firmware decodes from this sample (float32, after int16 quantisation), as float64.

@@ -64,7 +64,28 @@ FLAG_CLIPPED = 0x8
 FLAG_OVERFLOW = 0x10
 #: A scheduled law's sigma flags and the status bits they become.
 SIGMA_FLAGS = ((0x20, STATUS_SIGMA_HELD), (0x40, STATUS_SIGMA_CLIPPED), (0x80, STATUS_SIGMA_RATE))
+#: Every HIL_ACTUATOR_CONTROLS flag that carries a status bit (:attr:`Command.status`), and that bit.
+STATUS_FLAGS = (
+    (FLAG_FAULT, STATUS_FAULT),
+    (FLAG_WATCHDOG, STATUS_WATCHDOG),
+    (FLAG_CLIPPED, STATUS_CLIPPED),
+    (FLAG_OVERFLOW, STATUS_OVERFLOW),
+    *SIGMA_FLAGS,
+)
 SAT_SHIFT = 8
+
+
+def status_of(flags: int) -> int:
+    """The status bits of a command's HIL_ACTUATOR_CONTROLS ``flags``."""
+    return sum(bit for flag, bit in STATUS_FLAGS if flags & flag)
+
+
+def flags_of(status: int, sat: int) -> int:
+    """The HIL_ACTUATOR_CONTROLS ``flags`` of a command's status bits and saturation mask (a node's side of
+    :func:`status_of`)."""
+    return sum(flag for flag, bit in STATUS_FLAGS if status & bit) | (int(sat) << SAT_SHIFT)
+
+
 DEFAULT_PORT = 14560
 MAX_BUSY_POLL_US = 1_000_000
 
@@ -287,10 +308,7 @@ class MavlinkTransport(Transport):
             flags = int(msg.flags)
             u = np.asarray(msg.controls[: self.m], dtype=float)
             sat = np.array([(flags >> (SAT_SHIFT + k)) & 1 for k in range(self.m)], dtype=bool)
-            status = (STATUS_FAULT if flags & FLAG_FAULT else 0) | (STATUS_WATCHDOG if flags & FLAG_WATCHDOG else 0)
-            status |= STATUS_CLIPPED if flags & FLAG_CLIPPED else 0
-            status |= STATUS_OVERFLOW if flags & FLAG_OVERFLOW else 0
-            status |= sum(bit for flag, bit in SIGMA_FLAGS if flags & flag)
+            status = status_of(flags)
             seq = (int(msg.time_usec) // self.ts_us) % self.seq_modulo
             out.append(Command(seq=seq, u=u, saturated=sat, status=status, t_ns=time.perf_counter_ns()))
         return out

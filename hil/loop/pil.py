@@ -30,8 +30,9 @@ from gainlink.firmware import qemu as fwqemu
 from gainlink.firmware.build import replay_image
 from gainlink.firmware.fixed import step_status
 from gainlink.firmware.targets import resolve_cortex_m
+from gainlink.laws import law_of
 from gainlink.proof.sampled_plant import SampledPlant
-from gainlink.proof.twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
+from gainlink.proof.twin import TwinComparison, TwinTrace, run_twin, twin_comparison
 from gainlink.proof.twin_plot import twin_difference_figure
 from gainlink.shipping.artifact import Artifact
 from gainlink.shipping.codegen_fixed import is_fixed
@@ -265,16 +266,18 @@ def run_pil(
     fixed = is_fixed(a)
     elf, magic = _image(a, target=platform.target.name, board=board)
     qt = None if quantised_twin is None else QuantisedTwin(a, plant=quantised_twin, steps=steps)
-    tw, mt = _twin_loop(a, twin, steps), _twin_loop(a, model_twin, steps)
     rec = _PilRecord.empty(a, steps, x0=plant.state, fixed=fixed)
     with _qemu_fifos(elf, board=board, steps=steps) as (proc, fin, fout):
         _open_stream(
             proc, fin, fout, steps=steps, watchdog_periods=watchdog_periods, deadline_s=deadline_s, magic=magic
         )
         t_start = time.perf_counter()
-        _exchange(a, plant, R, rec, link=(proc, fin, fout), deadline_s=deadline_s, twins=(tw, mt, qt))
+        _exchange(a, plant, R, rec, link=(proc, fin, fout), deadline_s=deadline_s)
         elapsed = time.perf_counter() - t_start
         _await_exit(proc, deadline_s=deadline_s)
+    tw, mt = _twin_after(a, twin, R, steps), _twin_after(a, model_twin, R, steps)  # off the per-sample path
+    for k in range(steps if qt is not None else 0):
+        qt.step(k, noise=np.zeros(a.p), r=R[k], d=np.zeros(a.m))
     twin_trace, comparison = (None, None) if tw is None else _compare_with_twin(a, tw, rec, R=R, steps=steps)
     check = None
     if fixed:
@@ -296,11 +299,14 @@ def _check_request(a: Artifact, *, steps: int, quantised_twin: DiscretePlant | N
         raise PlantError(f"artifact {a.name} is float32: no quantised twin (a fixed-point artifact has one)")
 
 
-def _twin_loop(a: Artifact, plant: DiscretePlant | None, steps: int) -> TwinLoop | None:
-    """The float64 law closing the loop on ``plant`` beside the run (None without a plant)."""
+def _twin_after(a: Artifact, plant: DiscretePlant | None, R: np.ndarray, steps: int) -> TwinTrace | None:
+    """The float64 law closing the loop on ``plant`` (in the run's initial state) for the run's samples, computed
+    after the run (None without a plant)."""
     if plant is None:
         return None
-    return TwinLoop(a, outputs=plant.outputs, advance=lambda u: plant.advance(u=u), steps=steps)
+    return run_twin(law_of(a).reference(a), outputs=plant.outputs, advance=lambda u: plant.advance(u=u),
+                    noise=np.zeros((steps, a.p)), R=np.asarray(R, dtype=float), D=np.zeros((steps, a.m)),
+                    S=np.zeros((steps, 0)), steps=steps)  # fmt: skip
 
 
 def _result(a: Artifact, rec, *, R, elapsed: float, twin: tuple, model_twin, check) -> PilResult:
@@ -319,7 +325,7 @@ def _result(a: Artifact, rec, *, R, elapsed: float, twin: tuple, model_twin, che
         steps_per_second=steps / elapsed if elapsed > 0 else float("inf"),
         twin=twin_trace,
         comparison=comparison,
-        model_twin=None if model_twin is None else model_twin.trace(steps),
+        model_twin=model_twin,
         reference=np.array(R, dtype=float),
         fixed_point=check,
         fixed_run=fwfixed.FixedRun.from_records(rec.raw, a.q) if fixed else None,
@@ -336,10 +342,9 @@ def _image(a: Artifact, *, target: str, board: str) -> tuple[Path, int]:
 
 
 def _compare_with_twin(
-    a: Artifact, tw: TwinLoop, rec: _PilRecord, *, R: np.ndarray, steps: int
+    a: Artifact, twin_trace: TwinTrace, rec: _PilRecord, *, R: np.ndarray, steps: int
 ) -> tuple[TwinTrace, TwinComparison]:
     """The twin's trace and its comparison with what the firmware did."""
-    twin_trace = tw.trace(steps)
     comparison = twin_comparison(
         t=np.arange(steps) * a.Ts,
         y=rec.Y,
@@ -423,7 +428,6 @@ def _exchange(
     *,
     link: tuple,
     deadline_s: float,
-    twins: tuple[TwinLoop | None, ...],
 ) -> None:
     """One FIFO round trip per sample: the plant's outputs in, the command out, the plant advanced."""
     proc, fin, fout = link
@@ -447,9 +451,6 @@ def _exchange(
         rec.SAT[k] = (int(out["sat"]) >> np.arange(a.m)) & 1
         plant.advance(u=rec.U[k].astype(float))
         rec.X.append(plant.state)
-        for twin in twins:  # outside the timed round trip
-            if twin is not None:
-                twin.step(k, noise=np.zeros(a.p), r=R[k], d=np.zeros(a.m))
 
 
 def _await_exit(proc: subprocess.Popen, *, deadline_s: float) -> None:

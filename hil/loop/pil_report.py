@@ -7,8 +7,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from gainlink.laws.scheduled_run import schedule_lines
+
 from .report import model_lines, twin_lines, unit_of
-from .sched_report import schedule_lines
 
 
 def _g(v: Any, digits: int = 4) -> str:

@@ -12,7 +12,7 @@ scheduled float32 model (:class:`~gainlink.proof.scheduled_float32.ScheduledFloa
 same C (:class:`~gainlink.engines.sched_native.NativeScheduledLoop`). Every record must equal theirs in its bits:
 status, saturation mask, sigma flags, command and the whole state (sigma among it). Beside the run, the float64
 scheduled law closes the loop on a second plant (the closed-loop twin) and around the design's own model at the
-sigma it runs at (the model twin, :func:`~.sched_law.start_scheduled_model_twin`).
+sigma it runs at (the model twin, ``Law.design_model``); both are computed after the run.
 """
 
 from __future__ import annotations
@@ -28,14 +28,17 @@ from gainlink.errors import FirmwareError, PlantError
 from gainlink.firmware import qemu_sched
 from gainlink.firmware.build import replay_image
 from gainlink.firmware.targets import resolve_cortex_m
+from gainlink.laws import law_of
+from gainlink.laws.scheduled import status_flags
+from gainlink.laws.scheduled_run import schedule_metrics
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
+from gainlink.proof.twin import run_twin
 from gainlink.shipping.artifact import Artifact
 
 from ..plants import tank  # noqa: F401 - registers the tank of the scheduled examples
+from ..plants.fmi import signal_name
 from .pil import DiscretePlant, PilResult, _await_exit, _compare_with_twin, _qemu_fifos, _read_exact
 from .pil_fixed import first_difference
-from .sched_law import ScheduledTwin, start_scheduled_model_twin
-from .sched_metrics import schedule_metrics
 
 LAW = "scheduled-float32"  # what the image runs (the host apps' ready line says the same)
 
@@ -62,10 +65,10 @@ class ScheduledPilCheck:
 
 @dataclass(frozen=True)
 class _SigmaTrace:
-    """Sigma per step and its flags, as :func:`~.sched_metrics.schedule_metrics` reads a trace."""
+    """Sigma per step and its status flags, as the law's ``schedule_metrics`` reads a trace."""
 
     sigma: np.ndarray
-    sigma_flags: np.ndarray
+    flags: np.ndarray
 
 
 def external_ramps(a: Artifact, spec: dict[str, tuple[float, float]], steps: int) -> np.ndarray:
@@ -101,15 +104,16 @@ def image_records(a: Artifact, *, Y: np.ndarray, R: np.ndarray, S: np.ndarray, h
     return out
 
 
-def scheduled_model_twin(a: Artifact, plant: DiscretePlant, *, steps: int, S: np.ndarray):
-    """The model twin (the float64 law around the design's model at its sigma) started where ``plant`` starts, and
-    a note on where; ``(None, why)`` when the plant is not a ``gainlink.hil`` plant or the points give no x_op."""
+def scheduled_model_twin(a: Artifact, plant: DiscretePlant, *, S: np.ndarray):
+    """The model (the design's model at its law's sigma) started where ``plant`` starts (taken now, before the run),
+    and a note on where; ``(None, why)`` when the plant is not a ``gainlink.hil`` plant or the points give no x_op."""
     inner = getattr(plant, "plant", None)
     if inner is None:
         return None, "off: the plant is not a gainlink.hil plant (its state does not map onto the model's)"
-    sch = a.schedule
-    raw = plant.outputs()[sch.index] if sch.source == "output" else (S[0, sch.index] if len(S) else sch.points[0])
-    return start_scheduled_model_twin(a, plant=inner, steps=steps, sigma0=sch.clip(float(raw)))
+    law = law_of(a)
+    sigma0 = law.sigma_of(a, plant.outputs(), S[0] if len(S) else np.zeros(S.shape[1]))
+    state = dict(zip((signal_name(s) for s in inner.state_names), np.asarray(inner.state(), float)))
+    return law.design_model(a, state=state, deviation=False, sigma=sigma0)
 
 
 def run_scheduled_pil(
@@ -162,15 +166,16 @@ def run_scheduled_pil(
         follow(S[0])
     R = np.broadcast_to(_start_reference(a, plant, S) if reference is None else np.asarray(reference, float),
                         (steps, a.q))  # fmt: skip
-    tw = None if twin is None else _twin(a, twin, steps)
-    mt, note = scheduled_model_twin(a, plant, steps=steps, S=S) if model_twin else (None, "off")
+    model, note = scheduled_model_twin(a, plant, S=S) if model_twin else (None, "off")
     rec = _Record.empty(a, steps, x0=plant.state)
     with _qemu_fifos(elf, board=platform.board.name, steps=steps) as link:
         _open(link, steps=steps, deadline_s=deadline_s)
         t0 = time.perf_counter()
-        _exchange(a, plant, R, S, rec, link=link, deadline_s=deadline_s, twins=(tw, mt))
+        _exchange(a, plant, R, S, rec, link=link, deadline_s=deadline_s)
         elapsed = time.perf_counter() - t0
         _await_exit(link[0], deadline_s=deadline_s)
+    tw = None if twin is None else _twin(a, twin, R, S, follow=_follower(twin))  # off the per-sample path
+    mt = None if model is None else _twin(a, model, R, S, follow=None, on_sigma=model.follow, bare=True)
     return _result(a, rec, R=R, S=S, elapsed=elapsed, twin=tw, model_twin=mt, note=note)
 
 
@@ -186,10 +191,14 @@ def _start_reference(a: Artifact, plant: DiscretePlant, S: np.ndarray) -> np.nda
     return a.Ci @ sch.trim_at(sch.clip(float(raw)))[1]
 
 
-def _twin(a: Artifact, plant: DiscretePlant, steps: int) -> ScheduledTwin:
-    """The float64 scheduled law on a second instance of the plant."""
-    return ScheduledTwin(a, outputs=plant.outputs, advance=lambda u: plant.advance(u=u), steps=steps,
-                         on_signals=_follower(plant))  # fmt: skip
+def _twin(a: Artifact, plant, R, S, *, follow, on_sigma=None, bare: bool = False):
+    """The float64 scheduled law closing the loop on ``plant`` (in the run's initial state) for the run's samples
+    (``bare``: a model advanced as ``advance(u)``)."""
+    steps = S.shape[0]
+    advance = plant.advance if bare else (lambda u: plant.advance(u=u))
+    return run_twin(law_of(a).reference(a), outputs=plant.outputs, advance=advance, noise=np.zeros((steps, a.p)),
+                    R=np.asarray(R, dtype=float), D=np.zeros((steps, a.m)), S=S, steps=steps, on_signals=follow,
+                    on_sigma=on_sigma)  # fmt: skip
 
 
 @dataclass
@@ -218,7 +227,7 @@ def _open(link: tuple, *, steps: int, deadline_s: float) -> None:
         raise FirmwareError("scheduled firmware answered with a bad stream header (image built for another artifact?)")
 
 
-def _exchange(a: Artifact, plant, R, S, rec: _Record, *, link: tuple, deadline_s: float, twins: tuple) -> None:
+def _exchange(a: Artifact, plant, R, S, rec: _Record, *, link: tuple, deadline_s: float) -> None:
     """One FIFO round trip per sample: outputs, reference and signals in, the record out, the plant advanced."""
     proc, fin, fout = link
     dout, follow, e = rec.raw.dtype, _follower(plant), S.shape[1]
@@ -239,9 +248,6 @@ def _exchange(a: Artifact, plant, R, S, rec: _Record, *, link: tuple, deadline_s
         rec.raw[k] = out
         plant.advance(u=out["u"].astype(float))
         rec.X.append(plant.state)
-        for twin in twins:  # outside the timed round trip
-            if twin is not None:
-                twin.step(k, noise=np.zeros(a.p), r=R[k], d=np.zeros(a.m), s=S[k])
 
 
 def _result(a: Artifact, rec: _Record, *, R, S, elapsed: float, twin, model_twin, note: str) -> PilResult:
@@ -257,7 +263,7 @@ def _result(a: Artifact, rec: _Record, *, R, S, elapsed: float, twin, model_twin
     check = ScheduledPilCheck(
         law=LAW, steps=steps, bit_exact_model=model is None, first_difference_model=model,
         bit_exact_host=host is None, first_difference_host=host,
-        schedule=schedule_metrics(_SigmaTrace(sigma, flags), artifact=a), model_twin_start=note,
+        schedule=schedule_metrics(a, _SigmaTrace(sigma, _status(raw))), model_twin_start=note,
     )  # fmt: skip
     U = raw["u"].reshape(steps, a.m).copy()
     twin_trace, comparison = (None, None) if twin is None else _compare_with_twin(a, twin, _Cmds(rec.Y, U), R=R,
@@ -272,12 +278,18 @@ def _result(a: Artifact, rec: _Record, *, R, S, elapsed: float, twin, model_twin
         steps_per_second=steps / elapsed if elapsed > 0 else float("inf"),
         twin=twin_trace,
         comparison=comparison,
-        model_twin=None if model_twin is None else model_twin.trace(steps),
+        model_twin=model_twin,
         reference=np.array(R, dtype=float),
         scheduled=check,
         sigma=sigma,
         sigma_flags=flags,
     )
+
+
+def _status(raw: np.ndarray) -> np.ndarray:
+    """The status flags of the image's records (its sigma flags and fault)."""
+    return np.array([status_flags(int(f), fault=int(st) == -2) for f, st in zip(raw["sflags"], raw["status"])],
+                    dtype=np.int64)  # fmt: skip
 
 
 @dataclass(frozen=True)

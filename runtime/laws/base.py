@@ -103,6 +103,10 @@ class Controller(Protocol):
         """Back to the law's start state."""
         ...
 
+    def state(self) -> np.ndarray:
+        """The law's state now, as one vector (its layout is the law's: :meth:`Law.integrators` reads it)."""
+        ...
+
 
 @dataclass(frozen=True)
 class Capabilities:
@@ -184,6 +188,51 @@ class Law(ABC):
     def externals(self, artifact: Any) -> tuple[str, ...]:
         """The names of the external scheduling signals a sample carries after its references (none by default)."""
         return ()
+
+    # -- what a closed loop asks (gainlink.hil.loop); defaults for a law without a scheduling variable -------------
+
+    def sigma_of(self, artifact: Any, y: np.ndarray, s: np.ndarray) -> float:
+        """The scheduling variable the sample ``y``, ``s`` gives, clipped into the law's envelope (where a run
+        starts); NaN for a law without one."""
+        return math.nan
+
+    def integrators(self, artifact: Any, states: np.ndarray) -> np.ndarray | None:
+        """The integrators (N, q) in rows of :meth:`Controller.state` of this law's float64 reference (N, ...);
+        None for a law that keeps none."""
+        return None
+
+    def design_model(self, artifact: Any, *, state: Mapping[str, float] | None, deviation: bool,
+                     sigma: float) -> tuple[Any, str]:  # fmt: skip
+        """The design's own model of the plant, started at the plant's ``state`` by name (absolute, or a deviation
+        from the operating point when ``deviation``; None: unknown) and ``sigma``, as a plant: ``outputs()``,
+        ``advance(u)`` and, when it follows its law's sigma, ``follow(sigma)``. Returns ``(model, note)``, the note
+        saying where it started; ``(None, why)`` when the artifact gives no such model."""
+        return None, "off: this law has no design model"
+
+    def shadow(self, artifact: Any, *, like: str) -> Controller | None:
+        """What a loop steps beside a link whose commands do not carry everything this law's step reports (a
+        scheduled law's sigma): the peer's law in this process, fed what the peer received (``like`` the peer:
+        ``reference``, the float64 law; else the bit-exact model of the C). None when the commands carry it all."""
+        return None
+
+    def describe(self, artifact: Any) -> dict:
+        """What a run's report says about the artifact beyond its identity (the compensator, a schedule, units)."""
+        return {"units": dict(artifact.signals["units"])} if artifact.signals.get("units") else {}
+
+    def without_rate_limit(self, artifact: Any) -> Any:
+        """A copy of ``artifact`` whose law does not limit its scheduling variable's rate (a probe, never a way to
+        fly); :class:`LawError` for a law without one."""
+        raise LawError(f"sigma_rate_limit = false is for a scheduled law; the {self.label} law has no sigma")
+
+    def run_report(self, artifact: Any, trace: Any, *, ran: str | None, design_model: bool) -> dict:
+        """The law's own blocks of a closed-loop run's metrics, from its trace (``gainlink.hil.loop.metrics
+        .RunTrace``, twins included): ``ran`` is the label of the law the controller says it ran (None: the float64
+        reference ran), ``design_model`` whether the plant is the design's own model."""
+        return {}
+
+    def report_lines(self, metrics: Mapping[str, Any]) -> list[str]:
+        """The run summary's lines on this law's own blocks of ``metrics`` (:meth:`run_report`)."""
+        return []
 
     def __repr__(self) -> str:
         return f"<law {self.name}>"

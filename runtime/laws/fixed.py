@@ -3,6 +3,7 @@ design law it is certified against, the bit-exact integer model of its C, and th
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -52,6 +53,10 @@ class FixedModel:
         """Back to the start state."""
         self.loop.reset()
 
+    def state(self) -> np.ndarray:
+        """``[xh, z]`` (the integer words in real units)."""
+        return np.concatenate([self.loop.xh, self.loop.z])
+
 
 class FixedNative:
     """The host C's integer loop (:class:`~gainlink.engines.fixed_native.FixedNativeLoop`) as a
@@ -61,6 +66,7 @@ class FixedNative:
         from ..engines.fixed_native import FixedNativeLoop
 
         self.loop = FixedNativeLoop(artifact, library=library)
+        self.f, self.q = artifact.checks["fixed_point"]["formats"], artifact.q
         self.describe = {"kind": f"firmware (host C {self.loop.law} fixed-point loop, ctypes)",
                          "library": str(self.loop.library)}  # fmt: skip
 
@@ -74,6 +80,14 @@ class FixedNative:
     def reset(self) -> None:
         """``gl_fixed_reset``."""
         self.loop.reset()
+
+    def state(self) -> np.ndarray:
+        """``[xh, z]`` of the last step's record (the integer words in real units)."""
+        from ..proof.fixed_format import real
+
+        rec, f = self.loop.last_record, self.f
+        return np.concatenate([real(np.asarray(rec["XH"], dtype=np.int64), f["xh"]),
+                               real(np.asarray(rec["Z"], dtype=np.int64)[: self.q], f["z"])])  # fmt: skip
 
 
 class FixedLaw(LqLaw):
@@ -95,3 +109,16 @@ class FixedLaw(LqLaw):
 
     def native(self, artifact: Any, *, library: Any = None) -> Controller:
         return FixedNative(artifact, library=library)
+
+    def run_report(self, artifact: Any, trace: Any, *, ran: str | None, design_model: bool) -> dict:
+        if ran is None:  # the float64 design law ran: nothing of the integer law to check
+            return {}
+        from .fixed_run import run_check
+
+        check = run_check(artifact, trace, model=self.model(artifact), ran=ran, design_model=design_model)
+        return {"fixed_point": check}
+
+    def report_lines(self, metrics: Mapping[str, Any]) -> list[str]:
+        from .fixed_run import summary_lines
+
+        return summary_lines(metrics.get("fixed_point"))

@@ -3,6 +3,7 @@ its C, and the host C through ctypes, each behind :class:`~gainlink.laws.base.Co
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -32,6 +33,10 @@ class PythonLoop:
         """Back to the start state."""
         self.loop.reset()
 
+    def state(self) -> np.ndarray:
+        """``[xh, z]`` (the estimate and the integrators, in real units)."""
+        return np.concatenate([np.asarray(self.loop.xh, dtype=float), np.asarray(self.loop.z, dtype=float)])
+
 
 class NativeLqLoop:
     """The host C's ``gl_loop_t`` (:class:`~gainlink.engines.native.NativeLoop`) as a :class:`Controller`."""
@@ -52,6 +57,10 @@ class NativeLqLoop:
     def reset(self) -> None:
         """``gl_loop_reset``."""
         self.loop.reset()
+
+    def state(self) -> np.ndarray:
+        """Not read one step at a time: the C loop's estimate comes with a block run (``NativeLoop.run_raw``)."""
+        raise NotImplementedError("the host C loop's state is read with NativeLoop.run_raw")
 
 
 class LqLaw(Law):
@@ -82,3 +91,17 @@ class LqLaw(Law):
 
     def r_op(self, artifact: Any, *, sigma: float | None = None) -> np.ndarray:
         return artifact.Ci @ artifact.y_op
+
+    def integrators(self, artifact: Any, states: np.ndarray) -> np.ndarray | None:
+        return np.asarray(states)[:, artifact.n : artifact.n + artifact.q]
+
+    def design_model(self, artifact: Any, *, state: Mapping[str, float] | None, deviation: bool,
+                     sigma: float) -> tuple[Any, str]:  # fmt: skip
+        from .lq_run import design_model
+
+        return design_model(artifact, state=state, deviation=deviation)
+
+    def describe(self, artifact: Any) -> dict:
+        from .lq_run import describe
+
+        return describe(artifact) | super().describe(artifact)

@@ -3,6 +3,7 @@ model of its C, and the host C through ctypes."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -36,6 +37,11 @@ class ScheduledPython:
         """Back to the start state."""
         self.loop.reset()
 
+    def state(self) -> np.ndarray:
+        """The law's state vector (``ScheduledState.vector``: increments, previous command, sample and error,
+        sigma, its filter, started)."""
+        return self.loop.state.vector()
+
 
 class ScheduledNative:
     """The host C's ``gl_sched_t`` (:class:`~gainlink.engines.sched_native.NativeScheduledLoop`) as a
@@ -58,6 +64,10 @@ class ScheduledNative:
     def reset(self) -> None:
         """``gl_sched_reset``."""
         self.loop.reset()
+
+    def state(self) -> np.ndarray:
+        """``gl_sched_state``: the C loop's state vector."""
+        return self.loop.state().astype(float)
 
 
 class ScheduledLaw(Law):
@@ -94,3 +104,37 @@ class ScheduledLaw(Law):
 
     def externals(self, artifact: Any) -> tuple[str, ...]:
         return tuple(artifact.schedule.external)
+
+    def sigma_of(self, artifact: Any, y: np.ndarray, s: np.ndarray) -> float:
+        sch = artifact.schedule
+        raw = y[sch.index] if sch.source == "output" else (s[sch.index] if len(s) else sch.points[0])
+        return sch.clip(float(raw))
+
+    def design_model(self, artifact: Any, *, state: Mapping[str, float] | None, deviation: bool,
+                     sigma: float) -> tuple[Any, str]:  # fmt: skip
+        from .scheduled_run import design_model
+
+        return design_model(artifact, state=state, sigma=sigma)
+
+    def shadow(self, artifact: Any, *, like: str) -> Controller | None:
+        return self.reference(artifact) if like == "reference" else self.model(artifact)
+
+    def describe(self, artifact: Any) -> dict:
+        from .scheduled_run import describe
+
+        return describe(artifact) | super().describe(artifact)
+
+    def without_rate_limit(self, artifact: Any) -> Any:
+        from .scheduled_run import without_rate_limit
+
+        return without_rate_limit(artifact)
+
+    def run_report(self, artifact: Any, trace: Any, *, ran: str | None, design_model: bool) -> dict:
+        from .scheduled_run import schedule_metrics
+
+        return {"schedule": schedule_metrics(artifact, trace)}
+
+    def report_lines(self, metrics: Mapping[str, Any]) -> list[str]:
+        from .scheduled_run import schedule_lines
+
+        return schedule_lines(metrics.get("schedule"))
