@@ -56,6 +56,7 @@ class ClosedLoop:
         self.record_state = record_state  # the plant's state per step: an FMU call per step, only with the twin
         self.skip = skip_overruns
         self.follow = getattr(plant, "schedule", None)  # a plant whose dynamics follow the external signals
+        self.corrupts = bool(injector.sample_faults)  # a nan fault may replace a sample
         self.u = endpoint.safe_command()  # until the first command
         self.sigma = plan.sigma0
         self.overruns = 0
@@ -127,16 +128,18 @@ class ClosedLoop:
         rec.Y[k] = y
         if self.record_state:
             rec.X[k] = self.plant.state()
-        sent_y = self.injector.corrupt(k, y)
-        rec.NAN[k] = sent_y is not y
+        if self.corrupts:
+            sent_y = self.injector.corrupt(k, y)
+            rec.NAN[k] = sent_y is not y
+            y = sent_y
         rec.U[k], rec.SIGMA[k] = self.u, self.sigma  # what holds if the endpoint ends the run here
-        sent = self.endpoint.send(k, sent_y, plan.R[k], plan.S[k])
+        sent = self.endpoint.send(k, y, plan.R[k], plan.S[k])
         if wait_until is None:
             rec.TICK[k] = sent - self.t_start
         step = self.endpoint.receive(k, deadline=wait_until)
         if step is not None:
             self.u, self.sigma = step.u, step.sigma
-            rec.GOT[k], rec.SAT[k], rec.FLAGS[k] = True, step.saturated, step.flags
+            rec.GOT[k], rec.SATBITS[k], rec.FLAGS[k] = True, step.sat, step.flags
             rec.U[k], rec.SIGMA[k] = self.u, self.sigma
         else:
             self.endpoint.no_answer(k)

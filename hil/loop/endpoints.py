@@ -88,6 +88,7 @@ class OverLink:
         self.shadow, self.sigma = shadow, {}
         self.q = plan.R.shape[1]
         self.modulo = transport.seq_modulo
+        self._weights = 1 << np.arange(len(safe_command))  # saturation flags -> bits
         self.late = 0
         self.silent_since_ns: int | None = None
         self.silent_since_step = 0  # the first sample of the current silence (lockstep runs faster than Ts)
@@ -162,7 +163,7 @@ class OverLink:
             if c.seq == seq:
                 rec.LAT[k], rec.BACK[k] = c.t_ns - sent, c.t_ns - self.t_start
                 self.silent_since_ns = None
-                sat = int(np.dot(c.saturated, 1 << np.arange(c.saturated.size)))
+                sat = int(self._weights @ c.saturated)
                 return Step(u=c.u, flags=int(c.status), sat=sat, sigma=self.sigma.pop(k, np.nan))
             self.late += 1
             j = k - (seq - c.seq) % self.modulo  # the latest earlier sample with that seq

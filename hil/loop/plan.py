@@ -93,7 +93,7 @@ class Recorder:
         self.plan = plan
         self.Y = np.zeros((N, a.p))
         self.U = np.zeros((N, a.m))
-        self.SAT = np.zeros((N, a.m), dtype=bool)
+        self.SATBITS = np.zeros(N, dtype=np.int64)  # bit j: input j saturated
         self.GOT = np.zeros(N, dtype=bool)
         self.LAT = np.full(N, np.nan)
         self.SENT = np.full(N, np.nan)  # when sample k was sent, ns from the run start (NaN: never sent)
@@ -121,7 +121,7 @@ class Recorder:
             r=p.R[:steps],
             s=p.S[:steps],
             u=self.U[:steps],
-            sat=self.SAT[:steps],
+            sat=((self.SATBITS[:steps, None] >> np.arange(self.U.shape[1])) & 1).astype(bool),
             got=self.GOT[:steps],
             latency_ns=self.LAT[:steps],
             tick_ns=self.TICK[:steps],

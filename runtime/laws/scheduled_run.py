@@ -9,15 +9,15 @@ from typing import Any
 
 import numpy as np
 
-from ..proof.scheduled_model import ScheduledModel, operating_states
 from ..shipping.scheduled import interval, lerp
 from . import flags
+from .scheduled_model import ScheduledModel, operating_states
 
 
 def design_model(
     artifact: Any, *, state: Mapping[str, float] | None, sigma: float
 ) -> tuple[ScheduledModel | None, str]:
-    """The points' models interpolated at a moving sigma (:class:`~gainlink.proof.scheduled_model.ScheduledModel`,
+    """The points' models interpolated at a moving sigma (:class:`~gainlink.laws.scheduled_model.ScheduledModel`,
     which follows its law's sigma), started at the plant's ``state`` by name (absolute; else ``x_op`` at ``sigma``),
     and a note; ``(None, why)`` when the points give no ``x_op``."""
     X_op = operating_states(artifact)

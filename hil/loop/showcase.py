@@ -30,7 +30,7 @@ from ..paths import project_root
 from .bridge import RunResult, run_scenario
 from .report import has_sigma, plots, report_json, sigma_csv, sigma_plot, summary_text
 from .scenario import parse_scenario
-from .sched_study_report import comparison_png, showcase_summary
+from .showcase_report import comparison_png, showcase_summary
 
 SHOWCASE_KEYS = {
     "spec",
