@@ -53,10 +53,10 @@ def run(
     RunResult
         ``metrics`` (as in report.json), ``trace`` (numpy arrays per step), ``complete`` and ``reason``.
 
-    Every law runs every way (:func:`gainlink.laws.law_of` says which law the artifact runs): ``controller =
-    "reference"`` the law's float64 reference, ``"firmware"`` its C (the host library in process, or the firmware's
-    host app for the link), ``"qemu"`` the Cortex-M image's node on its UART; a scheduled law takes sigma from its
-    measured output or ``[schedule_signal]``, its external signals travel after the references
+    Every law runs every way (:func:`gainlink.laws.law_of` says which law the artifact runs): the controller
+    ``reference`` is the law's float64 reference, ``firmware`` its C (the host library in process, or the
+    firmware's host app for the link), ``qemu`` the Cortex-M image's node on its UART; a scheduled law takes sigma
+    from its measured output or ``[schedule_signal]``, its external signals travel after the references
     (:mod:`gainlink.hil.loop.bridge`).
 
     Examples

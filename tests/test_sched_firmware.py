@@ -257,5 +257,6 @@ def test_firmware_commands_on_a_scheduled_artifact(external_data, tmp_path):
     assert res.code == 0, res.err
     shipped = {p.name for p in (tmp_path / "fw").iterdir()}
     assert {"libgainlink_host.so", "libgainlink_loop.a", "firmware.json"} <= shipped
-    for argv in (("firmware", "run", path), ("pil", "run", path, "--steps", "5")):
-        assert_refused(argv, "scheduled on load", tmp_path)
+    said = "gainlink firmware run is not available for the scheduled-float32 law: the host build has no stdin/stdout"
+    assert_refused(("firmware", "run", path), said, tmp_path)
+    assert_refused(("pil", "run", path, "--steps", "5"), "scheduled on load", tmp_path)

@@ -2,6 +2,8 @@
 
 - :class:`InProcess`: a :class:`~gainlink.laws.Controller` in this process (SIL: the law's float64 reference, or
   the host C through ctypes). No link, no peer, no pacing: ``latency_us`` is the time of the step call itself.
+- :class:`OverFifos`: the law's replay-only Cortex-M image in QEMU over its semihosting FIFOs (PIL), one record
+  each way per step (``Law.image_stream``); its records are kept for the law's own check.
 - :class:`OverLink`: a peer behind a transport (HIL): the firmware's host app (CAN or MAVLink), the Python
   reference node, or the Cortex-M image in QEMU on its UART. The frame faults (drop, delay, duplicate, reorder)
   act on the frames sent, the process faults (silent, crash) on the peer; a command that does not come by the
@@ -62,6 +64,52 @@ class InProcess:
 
     def no_answer(self, k: int) -> None:
         """Never: an in-process controller always answers."""
+
+
+class OverFifos:
+    """The law's image in QEMU over its FIFOs (module docstring): ``link`` is ``(process, in fd, out fd)`` with the
+    stream's header exchanged; ``read(fd, size, proc=, deadline_s=)`` reads a whole record or raises."""
+
+    def __init__(self, stream: Any, *, link: tuple, recorder: Recorder, deadline_s: float, steps: int,
+                 safe_command: np.ndarray, read: Any) -> None:  # fmt: skip
+        self.stream, self.recorder, self._safe, self._read = stream, recorder, safe_command, read
+        self.proc, self.fin, self.fout = link
+        self.deadline_s = deadline_s
+        self.records = np.zeros(steps, dtype=stream.dout)
+        self.describe = {"kind": "qemu (the image over semihosting FIFOs)", "elf": str(stream.elf)}
+        self._sent = 0
+
+    def safe_command(self) -> np.ndarray:
+        """The command before the first answer."""
+        return self._safe
+
+    def begin(self, t_start: int) -> None:
+        """The run starts (``perf_counter_ns``)."""
+        self.t_start = t_start
+
+    def peer_faults(self, k: int) -> None:
+        """No process faults on the image."""
+
+    def send(self, k: int, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> int:
+        """Write sample ``k``'s record; returns when (``perf_counter_ns``)."""
+        import os
+
+        self._sent = time.perf_counter_ns()
+        os.write(self.fin, self.stream.sample(y, r, s))
+        self.recorder.SENT[k] = self._sent - self.t_start
+        return self._sent
+
+    def receive(self, k: int, *, deadline: int | None) -> Step:
+        """The image's record for sample ``k`` (it answers every record, or the read fails in one line)."""
+        raw = self._read(self.fout, self.stream.dout.itemsize, proc=self.proc, deadline_s=self.deadline_s)
+        back = time.perf_counter_ns()
+        rec = self.recorder
+        rec.LAT[k], rec.BACK[k] = back - self._sent, back - self.t_start
+        self.records[k] = np.frombuffer(raw, dtype=self.stream.dout)[0]
+        return self.stream.decode(self.records[k])
+
+    def no_answer(self, k: int) -> None:
+        """Never: the image answers every record."""
 
 
 class OverLink:

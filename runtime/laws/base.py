@@ -230,9 +230,41 @@ class Law(ABC):
         reference ran), ``design_model`` whether the plant is the design's own model."""
         return {}
 
+    def simulate(self, artifact: Any, *, steps: int, x0: Any = None, reference: Any = None, noise_std: float = 0.0,
+                 seed: int = 0, signals: Any = None) -> Any:  # fmt: skip
+        """A closed-loop run of the law's float64 reference around the artifact's own discrete plant
+        (:class:`gainlink.proof.simulation.Simulation`); ``x0`` is a deviation from the operating point, ``signals``
+        the external scheduling signals ((e,) or (steps, e)) of a law that has them."""
+        self.refuse("simulate")
+        raise LawError(f"simulate is not available for the {self.label} law")
+
     def report_lines(self, metrics: Mapping[str, Any]) -> list[str]:
         """The run summary's lines on this law's own blocks of ``metrics`` (:meth:`run_report`)."""
         return []
+
+    def image_stream(self, artifact: Any, *, target: str, board: str) -> Any:
+        """The law's replay-only Cortex-M image for ``target`` on ``board`` (built and cached) and how a loop talks
+        to it over its semihosting FIFOs (:class:`~gainlink.laws.image.ImageStream`: processor in the loop)."""
+        self.refuse("pil")
+        raise LawError(f"pil is not available for the {self.label} law")
+
+    def pil_check(self, artifact: Any, records: np.ndarray, *, Y: np.ndarray, R: np.ndarray, S: np.ndarray,
+                  trace: Any, twin_u: np.ndarray | None, design_model: bool, check_plant: Any) -> dict:  # fmt: skip
+        """The law's own blocks of a PIL run: the image's output ``records`` checked against the law's oracles on
+        the samples it was sent (``Y``, ``R``, ``S`` in float64: the image got them in float32); ``trace`` holds the
+        run's flags and sigma, ``twin_u`` the float64 twin's commands, ``check_plant`` a further instance of the
+        plant in the run's initial state for a check that closes a loop of its own (None: none)."""
+        return {}
+
+    def pil_lines(self, summary: Mapping[str, Any]) -> list[str]:
+        """The PIL summary's lines on this law's own blocks of ``summary`` (:meth:`pil_check`, as JSON)."""
+        return []
+
+    def cost(self, artifact: Any, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
+        """Instructions per step of the law's C on ``target``'s image, callees included, replaying the samples
+        (``gainlink.firmware.cost.StepCost``: mean, cheapest, dearest)."""
+        self.refuse("cost")
+        raise LawError(f"cost is not available for the {self.label} law")
 
     def __repr__(self) -> str:
         return f"<law {self.name}>"

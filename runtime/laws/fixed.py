@@ -122,3 +122,25 @@ class FixedLaw(LqLaw):
         from .fixed_run import summary_lines
 
         return summary_lines(metrics.get("fixed_point"))
+
+    def image_stream(self, artifact: Any, *, target: str, board: str) -> Any:
+        from .fixed_pil import image_stream
+
+        return image_stream(artifact, target=target, board=board, status_flags=status_flags)
+
+    def pil_check(self, artifact: Any, records: np.ndarray, *, Y: np.ndarray, R: np.ndarray, S: np.ndarray,
+                  trace: Any, twin_u: np.ndarray | None, design_model: bool, check_plant: Any) -> dict:  # fmt: skip
+        from .fixed_pil import pil_check
+
+        return pil_check(artifact, records, Y=Y, R=R, design_u=twin_u, design_model=design_model,
+                         check_plant=check_plant)  # fmt: skip
+
+    def pil_lines(self, summary: Mapping[str, Any]) -> list[str]:
+        from .fixed_pil import pil_lines
+
+        return pil_lines(summary.get("fixed_point"))
+
+    def cost(self, artifact: Any, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
+        from .fixed_pil import cost
+
+        return cost(artifact, target=target, board=board, Y=Y, R=R, S=S)

@@ -101,6 +101,25 @@ class LqLaw(Law):
 
         return design_model(artifact, state=state, deviation=deviation)
 
+    def simulate(self, artifact: Any, *, steps: int, x0: Any = None, reference: Any = None, noise_std: float = 0.0,
+                 seed: int = 0, signals: Any = None) -> Any:  # fmt: skip
+        from ..errors import DataError
+        from ..proof.simulation import simulate_linear
+
+        if signals is not None and np.size(signals):
+            raise DataError(f"artifact {artifact.name} is not scheduled: it takes no external scheduling signals")
+        return simulate_linear(artifact, steps=steps, x0=x0, reference=reference, noise_std=noise_std, seed=seed)
+
+    def image_stream(self, artifact: Any, *, target: str, board: str) -> Any:
+        from .lq_run import image_stream
+
+        return image_stream(artifact, target=target, board=board)
+
+    def cost(self, artifact: Any, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
+        from .lq_run import cost
+
+        return cost(artifact, target=target, board=board, Y=Y, R=R, S=S)
+
     def describe(self, artifact: Any) -> dict:
         from .lq_run import describe
 

@@ -52,3 +52,32 @@ def describe(artifact: Any) -> dict:
     if model:
         out["model"] = model
     return out
+
+
+def image_stream(artifact: Any, *, target: str, board: str) -> Any:
+    """The float32 law's replay-only image (``main.c``) and its stream (``gainlink.firmware.qemu``)."""
+    from ..firmware import qemu as fwqemu
+    from ..firmware.build import replay_image
+    from . import flags
+    from .base import Step
+    from .image import ImageStream
+
+    a = artifact
+    din, dout = fwqemu.record_dtypes(n=a.n, m=a.m, p=a.p, q=a.q)
+
+    def decode(rec: Any) -> Step:
+        fault = int(rec["status"]) == -2  # GL_ERR_NANINF
+        return Step(u=rec["u"].astype(float), flags=flags.FAULT if fault else 0, sat=int(rec["sat"]))
+
+    elf = replay_image(a, target=target, board=board)
+    return ImageStream(elf=elf, in_magic=fwqemu.IN_MAGIC, out_magic=fwqemu.OUT_MAGIC, din=din, dout=dout,
+                       decode=decode)  # fmt: skip
+
+
+def cost(artifact: Any, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
+    """Instructions per call of ``gl_loop_step`` (callees included) replaying the samples on the image."""
+    from ..firmware.build import replay_image
+    from ..firmware.cost import count_step_instructions
+
+    elf = replay_image(artifact, target=target, board=board)
+    return count_step_instructions(elf, artifact, Y=Y, R=R, board=board)

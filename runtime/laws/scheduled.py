@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from . import flags
-from .base import Controller, Law, Step
+from .base import Capabilities, Controller, Law, Step
 from .lq import sat_bits
 
 #: The scheduled law's own sigma flags (proof.scheduled_reference) as the status flags.
@@ -70,6 +70,18 @@ class ScheduledNative:
         return self.loop.state().astype(float)
 
 
+#: What the scheduled law cannot do yet, and why (each one generated line: ``Law.refuse``).
+CANNOT = {
+    "firmware_run": "the host build has no stdin/stdout loop executable for it yet (its CAN and MAVLink nodes run it: "
+    "gainlink firmware run --can|--mavlink)",
+    "fidelity": "the design-time float32 fidelity check is not written for the velocity form yet (its one-step check "
+    "and the closed-loop twin are)",
+    "fuzz": "no fuzz harness builds on its tables yet",
+    "one_step": "its one-step check against the float64 law has no float32 bound yet (the C is checked bit for bit "
+    "against its float32 model: gainlink replay --engine native --compare)",
+}
+
+
 class ScheduledLaw(Law):
     """The velocity-form law scheduled on sigma, interpolating the per-point coefficients."""
 
@@ -79,6 +91,10 @@ class ScheduledLaw(Law):
     @property
     def label(self) -> str:
         return "scheduled-float32"
+
+    @property
+    def capabilities(self) -> Capabilities:
+        return Capabilities(cannot=CANNOT)
 
     def reference(self, artifact: Any) -> Controller:
         from ..proof.scheduled_reference import ScheduledLoop
@@ -116,6 +132,13 @@ class ScheduledLaw(Law):
 
         return design_model(artifact, state=state, sigma=sigma)
 
+    def simulate(self, artifact: Any, *, steps: int, x0: Any = None, reference: Any = None, noise_std: float = 0.0,
+                 seed: int = 0, signals: Any = None) -> Any:  # fmt: skip
+        from .scheduled_run import simulate
+
+        return simulate(self, artifact, steps=steps, x0=x0, reference=reference, noise_std=noise_std, seed=seed,
+                        signals=signals)  # fmt: skip
+
     def shadow(self, artifact: Any, *, like: str) -> Controller | None:
         return self.reference(artifact) if like == "reference" else self.model(artifact)
 
@@ -138,3 +161,24 @@ class ScheduledLaw(Law):
         from .scheduled_run import schedule_lines
 
         return schedule_lines(metrics.get("schedule"))
+
+    def image_stream(self, artifact: Any, *, target: str, board: str) -> Any:
+        from .scheduled_pil import image_stream
+
+        return image_stream(artifact, target=target, board=board, status_flags=status_flags)
+
+    def pil_check(self, artifact: Any, records: np.ndarray, *, Y: np.ndarray, R: np.ndarray, S: np.ndarray,
+                  trace: Any, twin_u: np.ndarray | None, design_model: bool, check_plant: Any) -> dict:  # fmt: skip
+        from .scheduled_pil import pil_check
+
+        return pil_check(artifact, records, Y=Y, R=R, S=S, trace=trace)
+
+    def pil_lines(self, summary: Mapping[str, Any]) -> list[str]:
+        from .scheduled_pil import pil_lines
+
+        return pil_lines(summary.get("scheduled"))
+
+    def cost(self, artifact: Any, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
+        from .scheduled_pil import cost
+
+        return cost(artifact, target=target, board=board, Y=Y, R=R, S=S)

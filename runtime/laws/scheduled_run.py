@@ -111,3 +111,42 @@ def _rate(sch: Mapping[str, Any]) -> str:
     """The law's rate_max with what covers it (a run recorded before ``rate_certified``: not certified)."""
     value = "none" if sch["rate_max"] is None else f"{sch['rate_max']:g}/s"
     return f"{value}, {'certified' if sch.get('rate_certified') else 'not certified'}"
+
+
+def simulate(law: Any, artifact: Any, *, steps: int, x0: Any, reference: Any, noise_std: float, seed: int,
+             signals: Any) -> Any:  # fmt: skip
+    """The float64 scheduled law around the points' model (:class:`ScheduledModel`), which follows its own scheduled
+    output or the external signals (as the scenario plant ``scheduled_model``): started at ``x_op`` at the start
+    sigma (the first point, or the first external signal) plus ``x0``; the reference holds the trim there unless
+    given; the signals constant ((e,)) or per step ((steps, e))."""
+    from ..errors import ArtifactError, DataError
+    from ..proof.simulation import closed_loop
+
+    a, sch = artifact, artifact.schedule
+    if steps < 1:
+        raise DataError("steps must be at least 1")
+    e = len(sch.external)
+    if e and signals is None:
+        raise DataError(f"artifact {a.name} is scheduled on {sch.sigma}: give its external signal(s) ({e} value(s))")
+    S = np.zeros((steps, e)) if signals is None else np.broadcast_to(np.asarray(signals, float), (steps, e))
+    X_op = operating_states(a)
+    if X_op is None:
+        raise ArtifactError(f"artifact {a.name}: the schedule's points give no x_op, so its model's state is unknown")
+    sigma0 = sch.clip(float(S[0, sch.index])) if sch.source == "external" else float(sch.points[0])
+    i, lam = interval(sch.points, sigma0)
+    start = lerp(X_op, i, lam) + (0.0 if x0 is None else np.asarray(x0, dtype=float).reshape(a.n))
+    model = ScheduledModel(a, x_op=X_op, x0=start, sigma=sigma0)
+    r = law.r_op(a, sigma=sigma0) if reference is None else np.asarray(reference, float).reshape(a.q)
+    noise = noise_std * np.random.default_rng(seed).standard_normal((steps, a.p))
+
+    def before(s: np.ndarray) -> None:  # an external sigma: the model's dynamics follow the signal
+        if sch.source == "external":
+            model.follow(sch.clip(float(s[sch.index])))
+
+    def after() -> None:  # a measured sigma: the model's own output
+        if sch.source == "output":
+            model.follow(sch.clip(float(model.outputs()[sch.index])))
+
+    after()
+    return closed_loop(law.reference(a), model, Ts=a.Ts, m=a.m, R=np.tile(r, (steps, 1)), noise=noise, S=np.array(S),
+                       before=before, after=after)  # fmt: skip
