@@ -86,16 +86,12 @@ def _fmu_path(ref: str, blobs: dict[str, bytes]) -> Path:
 
 
 def _library(artifact: Artifact) -> Path:
-    """The host library SIL runs: the integer loop's for a fixed-point artifact, else the float loop's."""
+    """The host library the law's SIL runs step (``Law.native``: built and cached by sha256 on first use), kept for
+    the worker's life so the next run of the artifact pays nothing for it."""
     if artifact.sha256 not in _LIBRARIES:
-        from gainlink.firmware.build import build
-        from gainlink.firmware.fixed import host_library
-        from gainlink.shipping.codegen_fixed import is_fixed
+        from gainlink.laws import law_of
 
-        if is_fixed(artifact):
-            _LIBRARIES[artifact.sha256] = host_library(artifact)
-        else:
-            _LIBRARIES[artifact.sha256] = build(artifact, target="host", only="gainlink_host").files["shared"]
+        _LIBRARIES[artifact.sha256] = Path(law_of(artifact).native(artifact).describe["library"])
     return _LIBRARIES[artifact.sha256]
 
 

@@ -167,7 +167,10 @@ class FrameCodec:
     def encode(self, *, seq: int, values: np.ndarray, status: int = 0, sat: np.ndarray | None = None) -> list[Any]:
         frames = []
         seq &= 0xFFFF
-        vals = self.quantise(values).tolist() if self.int16 else [float(v) for v in values]
+        if self.int16:
+            vals = self.quantise(np.asarray(values, dtype=float)).tolist()
+        else:  # Python floats (a float32 field packs them as the C reads them)
+            vals = values.tolist() if isinstance(values, np.ndarray) else [float(v) for v in values]
         for s in self.specs:
             k = len(s.signals)
             bits = 0
@@ -291,7 +294,7 @@ class CanTransport(Transport):
                 self.bus = None
 
     def encode_sample(self, *, seq: int, y: np.ndarray, r: np.ndarray) -> list[Any]:
-        return self.tx.encode(seq=seq, values=np.concatenate([y, r]))
+        return self.tx.encode(seq=seq, values=[*np.asarray(y).tolist(), *np.asarray(r).tolist()])
 
     def steps_on(self, seq: int) -> bool:
         """The CAN node answers a sample once: a duplicate or a stale one (its 16-bit ``seq`` not ahead of the last

@@ -82,8 +82,9 @@ class ClosedLoop:
                 k += 1
                 if progress is not None and k % every == 0:
                     progress(k, N)
-        except Stop as stop:
+        except Stop as stop:  # in step k: the command held there
             k, reason = stop.steps, stop.reason
+            self.rec.U[k - 1], self.rec.SIGMA[k - 1] = self.u, self.sigma
         except PlantError as exc:  # in an overrun's held steps
             reason = f"plant failed at step {k}: {exc}"
         wall = (time.perf_counter_ns() - self.t_start) / 1e9
@@ -132,7 +133,6 @@ class ClosedLoop:
             sent_y = self.injector.corrupt(k, y)
             rec.NAN[k] = sent_y is not y
             y = sent_y
-        rec.U[k], rec.SIGMA[k] = self.u, self.sigma  # what holds if the endpoint ends the run here
         sent = self.endpoint.send(k, y, plan.R[k], plan.S[k])
         if wait_until is None:
             rec.TICK[k] = sent - self.t_start
@@ -140,9 +140,9 @@ class ClosedLoop:
         if step is not None:
             self.u, self.sigma = step.u, step.sigma
             rec.GOT[k], rec.SATBITS[k], rec.FLAGS[k] = True, step.sat, step.flags
-            rec.U[k], rec.SIGMA[k] = self.u, self.sigma
         else:
             self.endpoint.no_answer(k)
+        rec.U[k], rec.SIGMA[k] = self.u, self.sigma
         try:
             self.plant.advance(u=self.u + plan.D[k], dt=self.Ts)
         except PlantError as exc:

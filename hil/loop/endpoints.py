@@ -136,7 +136,8 @@ class OverLink:
         self.shadow, self.sigma = shadow, {}
         self.q = plan.R.shape[1]
         self.modulo = transport.seq_modulo
-        self._weights = 1 << np.arange(len(safe_command))  # saturation flags -> bits
+        self._sat: dict[bytes, int] = {}  # a command's saturation flags -> their bits
+        self._direct = not injector.faults and shadow is None
         self.late = 0
         self.silent_since_ns: int | None = None
         self.silent_since_step = 0  # the first sample of the current silence (lockstep runs faster than Ts)
@@ -166,7 +167,14 @@ class OverLink:
         what goes out now; returns when (``perf_counter_ns``)."""
         tr = self.transport
         rs = np.concatenate([r, s]) if s.size else r
-        units = self.injector.apply(k, (y, rs, tr.encode_sample(seq=k % self.modulo, y=y, r=rs)))
+        frames = tr.encode_sample(seq=k % self.modulo, y=y, r=rs)
+        if self._direct:  # no frame fault, no shadow: the sample's frames, now
+            sent = self._sent_ns = time.perf_counter_ns()
+            self._send(k, frames)
+            self._pending = True
+            self.recorder.SENT[k] = sent - self.t_start
+            return sent
+        units = self.injector.apply(k, (y, rs, frames))
         sent = time.perf_counter_ns()
         self._pending = False
         for j, (yj, rsj, frames) in units:
@@ -211,8 +219,11 @@ class OverLink:
             if c.seq == seq:
                 rec.LAT[k], rec.BACK[k] = c.t_ns - sent, c.t_ns - self.t_start
                 self.silent_since_ns = None
-                sat = int(self._weights @ c.saturated)
-                return Step(u=c.u, flags=int(c.status), sat=sat, sigma=self.sigma.pop(k, np.nan))
+                key = c.saturated.tobytes()
+                sat = self._sat.get(key)
+                if sat is None:
+                    sat = self._sat[key] = sum(1 << j for j, b in enumerate(c.saturated) if b)
+                return Step(u=c.u, flags=c.status, sat=sat, sigma=self.sigma.pop(k, np.nan) if self.sigma else np.nan)
             self.late += 1
             j = k - (seq - c.seq) % self.modulo  # the latest earlier sample with that seq
             if 0 <= j < k and np.isnan(rec.BACK[j]):
