@@ -57,6 +57,7 @@ class ClosedLoop:
         self.skip = skip_overruns
         self.follow = getattr(plant, "schedule", None)  # a plant whose dynamics follow the external signals
         self.corrupts = bool(injector.sample_faults)  # a nan fault may replace a sample
+        self.disturbed = bool(plan.D.any())  # else the command goes to the plant as it is
         self.u = endpoint.safe_command()  # until the first command
         self.sigma = plan.sigma0
         self.overruns = 0
@@ -144,6 +145,6 @@ class ClosedLoop:
             self.endpoint.no_answer(k)
         rec.U[k], rec.SIGMA[k] = self.u, self.sigma
         try:
-            self.plant.advance(u=self.u + plan.D[k], dt=self.Ts)
+            self.plant.advance(u=self.u + plan.D[k] if self.disturbed else self.u, dt=self.Ts)
         except PlantError as exc:
             raise Stop(f"plant failed at step {k}: {exc}", k + 1) from None
