@@ -23,24 +23,7 @@ from typing import Any
 import numpy as np
 from gainlink.shipping.artifact import Artifact
 
-from ..plants.base import Plant
-from ..plants.fmi import signal_name
-from ..plants.linear import LinearPlant
-
 MISMATCH_WARN = 0.05
-
-
-def initial_deviation(artifact: Artifact, plant: Plant) -> tuple[dict, str]:
-    """The model's start: the plant's state now, by name, as a deviation from the artifact's ``x_op``, and a
-    note. A linear plant's state already is a deviation. When a model state has no counterpart in the plant
-    (an identified model, a transfer function), the model starts at the operating point and the note says so."""
-    names = list(artifact.signals["states"])
-    state = dict(zip((signal_name(s) for s in plant.state_names), np.asarray(plant.state(), float)))
-    missing = [s for s in names if s not in state]
-    if missing or len(names) != artifact.n:
-        return {}, "the operating point (the plant's states do not map onto the model's)"
-    x_op = np.zeros(artifact.n) if artifact.x_op is None or isinstance(plant, LinearPlant) else artifact.x_op
-    return {s: float(state[s] - x_op[i]) for i, s in enumerate(names)}, "the plant's initial state"
 
 
 @dataclass(frozen=True)
