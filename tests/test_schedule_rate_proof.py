@@ -164,7 +164,7 @@ def test_a_declared_uncertified_rate_ships_and_says_so_wherever_it_appears(tmp_p
     rate (the old design warned "stability is proved only for a slowly moving k" with nothing proved)."""
     from gainlink.laws.scheduled_run import schedule_lines
     from gainlink.shipping.artifact import load
-    from gainlink.shipping.codegen_scheduled import render_export
+    from gainlink.shipping.export_c import render_export
     from gainlink.synthesis.schedule import describe_schedule
 
     spec = tmp_path / "spec.toml"
