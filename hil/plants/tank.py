@@ -11,7 +11,6 @@ zero after each sample.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import ClassVar
 
@@ -31,15 +30,17 @@ class Tank(OdePlant):
     default_outputs = ("h",)
     defaults: ClassVar[Mapping[str, float]] = {"c": 0.4, "tau_p": 0.1, "area": 1.0, "flare": 0.0}
 
-    def derivatives(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        c, tau = self.params["c"], self.params["tau_p"]
-        h = max(float(x[1]), 0.0)
-        section = self.params["area"] + self.params["flare"] * h
-        return np.array([(u[0] - x[0]) / tau, (x[0] - c * math.sqrt(h)) / section])
+    def rates(self, X: np.ndarray, U: np.ndarray, P: Mapping[str, np.ndarray]) -> np.ndarray:
+        h = np.maximum(X[:, 1], 0.0)
+        section = P["area"] + P["flare"] * h
+        out = np.empty_like(X)
+        out[:, 0], out[:, 1] = (U[:, 0] - X[:, 0]) / P["tau_p"], (X[:, 0] - P["c"] * np.sqrt(h)) / section
+        return out
 
-    def advance(self, *, u: np.ndarray, dt: float) -> None:
-        super().advance(u=u, dt=dt)
-        self.x[1] = max(self.x[1], 0.0)
+    def clamp(self, X: np.ndarray) -> np.ndarray:
+        """A drained tank stays empty: a negative level is clamped to zero after each sample."""
+        X[:, 1] = np.maximum(X[:, 1], 0.0)
+        return X
 
 
 PLANTS.register("tank")(_ode_factory(Tank))
