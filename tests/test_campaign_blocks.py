@@ -89,3 +89,32 @@ def test_a_row_that_blows_up_fails_alone_and_keeps_its_last_state():
 def test_plants_of_other_kinds_or_steps_are_not_one_batch():
     assert not batchable([CartPendulum(step=0.005), CartPendulum(step=0.001)])
     assert not batchable([CartPendulum(), QuadrotorLateral()])
+
+
+@pytest.mark.parametrize("numeric", ["float32", "q31"])
+def test_one_c_call_steps_each_instance_as_its_own_native_step(numeric):
+    """Row i of the block's answer equals instance i's own host C step (the per-run path's controller), bit for bit,
+    through saturation and NaN samples (a FAULT)."""
+    from gainlink.laws import law_of
+    from support.fixed import example
+
+    a = example("pendulum", numeric)
+    law = law_of(a)
+    count, steps = 7, 40
+    rng = np.random.default_rng(3)
+    Y = rng.normal(0.0, 0.6, (steps, count, a.p))
+    Y[10, 2, 0] = np.nan
+    Y[20:23, 5] = 40.0  # far out: saturates
+    R = rng.normal(0.0, 0.2, (steps, count, a.q))
+    S = np.zeros((steps, count, 0))
+    block = law.native_block(a, count)
+    alone = [law.native(a, library=block.host.library) for _ in range(count)]
+    seen = set()
+    for k in range(steps):
+        got = block.step(Y[k], R[k], S[k])
+        for i, c in enumerate(alone):
+            want = c.step(Y[k, i], R[k, i], S[k, i])
+            assert np.array_equal(got.u[i], want.u)
+            assert (got.flags[i], got.sat[i]) == (want.flags, want.sat)
+            seen |= {("fault", bool(want.flags & 1)), ("sat", bool(want.sat))}
+    assert seen == {("fault", True), ("fault", False), ("sat", True), ("sat", False)}

@@ -133,3 +133,40 @@ class HostLaw:
         out = np.zeros(samples.size, dtype=self.dtype)
         self._run(self._law, samples.size, samples.ctypes.data, out.ctypes.data)
         return out
+
+
+class HostLawBlock:
+    """``count`` instances of the law ``artifact`` runs, contiguous in one buffer of the host library built for it:
+    a campaign block's laws, stepped together in one C call (``gl_host_law_step_block``: instance i takes row i).
+
+    Each instance starts on the artifact's gains (``gl_law_init``) and keeps its own state; the operations per
+    instance are those of :meth:`HostLaw.step`, so each row's record equals the one its own instance would give.
+    """
+
+    def __init__(self, artifact: Any, count: int, *, library: Path | None = None, watchdog_periods: int = 10) -> None:
+        one = HostLaw(artifact, library=library, watchdog_periods=watchdog_periods)  # checks the library's layout
+        self.artifact, self.library, self.dtype, self.count = artifact, one.library, one.dtype, int(count)
+        lib = ctypes.PyDLL(str(self.library))
+        size = lib.gl_host_law_bytes()
+        if size % 8:  # rows of uint64 words: the instances' alignment is the buffer's
+            raise FirmwareError(f"gl_law_t of {self.library} is {size} bytes, not a whole number of 8-byte words")
+        self._laws = np.zeros((self.count, size // 8), dtype=np.uint64)
+        self._size = size
+        for i in range(self.count):
+            status = lib.gl_host_law_init(ctypes.c_void_p(self.address(i)), watchdog_periods)
+            if status != 0:
+                raise FirmwareError(f"gl_law_init rejected the artifact's gains: {STATUS.get(status, status)}")
+        self._block = ctypes.CDLL(str(self.library)).gl_host_law_step_block  # long: releases the GIL
+        self._block.argtypes = [_VP, ctypes.c_uint32, _VP, _VP]
+        self._out = np.zeros(self.count, dtype=self.dtype)
+
+    def address(self, i: int) -> int:
+        """The address of instance ``i``."""
+        return self._laws.ctypes.data + i * self._size
+
+    def step(self, Y: np.ndarray, R: np.ndarray | None = None, S: np.ndarray | None = None) -> np.ndarray:
+        """One sample per instance (row i of ``Y`` (count, p), ``R``, ``S`` to instance i): their records (a view
+        overwritten by the next call)."""
+        samples = records.samples(self.artifact, Y, R, S)
+        self._block(self._laws.ctypes.data, self.count, samples.ctypes.data, self._out.ctypes.data)
+        return self._out

@@ -48,6 +48,13 @@ class LoopHooks:
         ``reference``, the float64 law; else the bit-exact model of the C). None when the commands carry it all."""
         return None
 
+    def native_block(self, artifact: Any, count: int, *, library: Any = None) -> Any:
+        """``count`` instances of the law's host C stepped by one call per step (a campaign block:
+        :class:`gainlink.laws.block.NativeBlock`); row i answers as instance i's own ``native`` step would."""
+        from .block import NativeBlock
+
+        return NativeBlock(artifact, count, library=library)
+
     def describe(self, artifact: Any) -> dict:
         """What a run's report says about the artifact beyond its identity (the compensator, a schedule, units)."""
         return {"units": dict(artifact.signals["units"])} if artifact.signals.get("units") else {}

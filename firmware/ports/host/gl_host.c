@@ -46,6 +46,14 @@ uint32_t gl_host_law_active_crc32(const gl_law_t *law);
  * @param[in,out] law Instance. @param[in] count Samples. @param[in] in count samples. @param[out] out count records.
  */
 void gl_host_law_run(gl_law_t *law, uint32_t count, const gl_law_sample_t *in, gl_law_record_t *out);
+/**
+ * @brief One sample for each of many instances (a campaign block), one call: instance i takes in[i] (a step, an
+ *        idle period or a reset by its tag, as gl_host_law_run()) and answers out[i]. Each instance keeps its own
+ *        state and gain set (gl_host_law_stage()); the operations per instance are those of gl_host_law_step().
+ * @param[in,out] laws count instances, contiguous (gl_host_law_bytes() each). @param[in] count Instances.
+ * @param[in] in count samples. @param[out] out count records.
+ */
+void gl_host_law_step_block(gl_law_t *laws, uint32_t count, const gl_law_sample_t *in, gl_law_record_t *out);
 
 size_t gl_host_law_bytes(void)
 {
@@ -138,21 +146,33 @@ uint32_t gl_host_law_active_crc32(const gl_law_t *law)
     return gl_law_active_crc32(law);
 }
 
+/* One sample by its tag (a stage record is answered with status GL_ERR_NULL). */
+static inline void host_sample(gl_law_t *law, const gl_law_sample_t *x, gl_law_record_t *out)
+{
+    if (x->tag == GL_LAW_TAG_STEP) {
+        (void)host_step(law, x->y, x->r, x->s, out);
+    } else if (x->tag == GL_LAW_TAG_IDLE) {
+        (void)host_idle(law, out);
+    } else if (x->tag == GL_LAW_TAG_RESET) {
+        (void)host_reset(law, out);
+    } else {
+        gl_law_out_t none;
+        memset(&none, 0, sizeof none);
+        none.status = GL_ERR_NULL;
+        gl_law_record(law, &none, out);
+    }
+}
+
 void gl_host_law_run(gl_law_t *law, uint32_t count, const gl_law_sample_t *in, gl_law_record_t *out)
 {
     for (uint32_t k = 0; k < count; ++k) {
-        const gl_law_sample_t *x = &in[k];
-        if (x->tag == GL_LAW_TAG_STEP) {
-            (void)host_step(law, x->y, x->r, x->s, &out[k]);
-        } else if (x->tag == GL_LAW_TAG_IDLE) {
-            (void)host_idle(law, &out[k]);
-        } else if (x->tag == GL_LAW_TAG_RESET) {
-            (void)host_reset(law, &out[k]);
-        } else {
-            gl_law_out_t none;
-            memset(&none, 0, sizeof none);
-            none.status = GL_ERR_NULL;
-            gl_law_record(law, &none, &out[k]);
-        }
+        host_sample(law, &in[k], &out[k]);
+    }
+}
+
+void gl_host_law_step_block(gl_law_t *laws, uint32_t count, const gl_law_sample_t *in, gl_law_record_t *out)
+{
+    for (uint32_t i = 0; i < count; ++i) {
+        host_sample(&laws[i], &in[i], &out[i]);
     }
 }
