@@ -6,6 +6,8 @@ scipy's ``solve_ivp`` (a tight adaptive integrator) for the kernel's accuracy.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from gainlink.hil.plants.models import CartPendulum, OdeBatch, QuadrotorLateral, batchable
@@ -118,3 +120,97 @@ def test_one_c_call_steps_each_instance_as_its_own_native_step(numeric):
             assert (got.flags[i], got.sat[i]) == (want.flags, want.sat)
             seen |= {("fault", bool(want.flags & 1)), ("sat", bool(want.sat))}
     assert seen == {("fault", True), ("fault", False), ("sat", True), ("sat", False)}
+
+
+def test_the_float64_law_over_a_block_is_each_runs_own_reference_bit_for_bit(random_designs):
+    """Every form and anti-windup mode of the golden designs: each column of the block's float64 law equals that
+    run's own reference (the per-run twin's controller), through saturation and refused (NaN) samples."""
+    from gainlink.laws import law_of
+
+    seen = set()
+    for case in random_designs:
+        a, law = case.artifact, law_of(case.artifact)
+        count = 5
+        block, alone = law.reference_block(a, count), [law.reference(a) for _ in range(count)]
+        rng = np.random.default_rng(11)
+        N = min(len(case.Y), 60)
+        scale = rng.uniform(0.5, 8.0, count)  # the larger ones saturate
+        for k in range(N):
+            Y = case.Y[k] * scale[:, None] + rng.normal(0, 0.01, (count, a.p))
+            R = np.tile(case.R[k], (count, 1))
+            if k == 17:
+                Y[3, 0] = np.nan
+            got = block.step(Y, R, np.zeros((count, 0)))
+            states = block.states()
+            for i, c in enumerate(alone):
+                want = c.step(Y[i], R[i], np.zeros(0))
+                assert np.array_equal(got.u[i], want.u), case.label
+                assert (got.flags[i], got.sat[i]) == (want.flags, want.sat), case.label
+                assert np.array_equal(states[i], c.state()), case.label
+                seen |= {("sat", bool(want.sat)), ("fault", bool(want.flags)), (a.observer_form, a.anti_windup)}
+    assert {("sat", True), ("fault", True), ("current", "clamp"), ("predictor", "backcalc")} <= seen
+
+
+# What a run alone and its run in a block must agree on: every control metric and verdict (timing is the call's).
+CONTROL_KEYS = (
+    "tracked", "outputs_final", "outputs_peak_abs", "inputs_peak_abs", "saturation_fraction", "saturated_steps",
+    "peak_integrator", "twin", "steps", "complete", "refused_steps", "reason",
+)  # fmt: skip
+TRACE_FIELDS = ("t", "y", "r", "u", "sat", "flags", "sigma", "got", "x", "twin_y", "twin_u", "twin_z")
+
+
+def _pendulum_campaign_points(draws: int, duration: float) -> tuple:
+    """The shipped pendulum campaign (its three anti-windup modes) at ``draws`` draws of ``duration`` seconds: its
+    artifacts and each run's parsed scenario."""
+    from gainlink.fileio import read_toml
+    from gainlink.hil.campaign import parse_campaign, worker
+    from gainlink.hil.campaign.plan import plan_campaign
+    from support.paths import EXAMPLES
+
+    path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
+    data, _ = read_toml(path, what="campaign", error=ValueError)
+    data |= {"runs": draws, "spec": str((path.parent / data["spec"]).resolve())}
+    data["scenario"]["duration"] = duration
+    plan = plan_campaign(parse_campaign(data))
+    groups: dict = {}
+    for p in plan.runs:
+        art, where = worker.artifact_from_bytes(plan.artifacts[p.artifact_sha256])
+        sc = worker._scenario(p.scenario, artifact_path=where, seed=p.seed, blobs={}, kind="sil")
+        groups.setdefault(art.sha256, (art, []))[1].append(sc)
+    return list(groups.values())
+
+
+def _same_runs(draws: int, duration: float) -> int:
+    from gainlink.hil.campaign.worker import _library
+    from gainlink.hil.loop.block import run_block
+    from gainlink.hil.loop.bridge import run_scenario
+
+    compared = 0
+    for art, scenarios in _pendulum_campaign_points(draws, duration):
+        library = _library(art)
+        for controller in ("firmware", "reference"):
+            scs = [dataclasses.replace(sc, controller=controller) for sc in scenarios]
+            block = run_block(scs, artifact=art, library=library)
+            assert block is not None
+            for sc, got in zip(scs, block):
+                want = run_scenario(sc, artifact=art, library=library)
+                for name in TRACE_FIELDS:
+                    assert np.array_equal(getattr(got.trace, name), getattr(want.trace, name), equal_nan=True), name
+                for key in CONTROL_KEYS:
+                    assert got.metrics.get(key) == want.metrics.get(key), key
+                assert got.complete == want.complete and got.reason == want.reason
+                assert got.info["transport"] == want.info["transport"]
+                compared += 1
+    return compared
+
+
+def test_the_pendulum_campaign_gives_each_run_through_a_block_what_it_gives_alone():
+    """A few draws of the shipped campaign, its three anti-windup builds, the host C and the float64 law: every
+    trace bit for bit, every control metric and verdict equal."""
+    assert _same_runs(draws=6, duration=1.5) == 3 * 2 * 6
+
+
+@pytest.mark.matrix
+def test_the_pendulum_campaign_through_blocks_run_for_run_at_full_length():
+    """300 runs of the shipped campaign (100 draws x 3 modes, 10 s each) with the host C and with the float64 law."""
+    assert _same_runs(draws=100, duration=10.0) == 3 * 2 * 100

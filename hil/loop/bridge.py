@@ -52,7 +52,7 @@ from .twins import TwinStart, run_twins, twin_start
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RunResult", "build_plant", "is_design_model", "run_scenario"]
+__all__ = ["Run", "RunResult", "build_plant", "is_design_model", "prepare_run", "run_scenario"]
 
 
 @dataclass(frozen=True)
@@ -113,10 +113,8 @@ def run_scenario(
     plant = build_plant(scenario, artifact=a)
     with ExitStack() as stack:
         stack.callback(plant.close)
-        plant.reset(initial=scenario.initial_state)
-        plan = plan_run(scenario, law=law, artifact=a, plant=plant)  # before anything is built or started
-        start = twin_start(plant, sigma=plan.sigma0) if scenario.model_twin else TwinStart({}, False, plan.sigma0)
-        run = _Run(scenario, law=law, artifact=a, plant=plant, plan=plan, source=source)
+        run = prepare_run(scenario, law=law, artifact=a, plant=plant, source=source)
+        start, plan = run.start, run.plan
         if in_process(scenario):
             outcome = run.in_process(library=library, progress=progress)
         else:
@@ -153,12 +151,22 @@ def _check(scenario: Scenario) -> None:
         raise ScenarioError(f'scenario {scenario.name}: a nan fault needs encoding = "float32" (not "{encoding}")')
 
 
-class _Run:
+def prepare_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant, source: str) -> Run:
+    """A run of ``scenario`` ready to step: ``plant`` reset to its initial state, the plan made (before anything is
+    built or started) and where the model twin starts (a campaign block prepares each of its runs so)."""
+    plant.reset(initial=scenario.initial_state)
+    plan = plan_run(scenario, law=law, artifact=artifact, plant=plant)
+    start = twin_start(plant, sigma=plan.sigma0) if scenario.model_twin else TwinStart({}, False, plan.sigma0)
+    return Run(scenario, law=law, artifact=artifact, plant=plant, plan=plan, source=source, start=start)
+
+
+class Run:
     """One run being made: the loop and its endpoint, then the result."""
 
-    def __init__(self, scenario: Scenario, *, law, artifact: Artifact, plant: Plant, plan: Plan, source: str) -> None:
+    def __init__(self, scenario: Scenario, *, law, artifact: Artifact, plant: Plant, plan: Plan, source: str,
+                 start: TwinStart) -> None:  # fmt: skip
         self.scenario, self.law, self.a, self.plant, self.plan = scenario, law, artifact, plant, plan
-        self.source = source
+        self.source, self.start = source, start
         self.rec = Recorder(plan, artifact=artifact, plant=plant)
         self.injector = FaultInjector(scenario.faults, Ts=artifact.Ts, seed=scenario.seed)
         self.safe = law.safe_command(artifact)

@@ -79,16 +79,27 @@ def model_twin(law: Any, artifact: Any, *, start: TwinStart, plan: Any, steps: i
 def run_twins(law: Any, artifact: Any, *, scenario: Any, plan: Any, start: TwinStart, steps: int, build) -> Twins:
     """The twins ``scenario`` asks for (``twin``, ``model_twin``) over the run's first ``steps`` samples;
     ``build()`` makes the second plant. A twin whose plant fails is off, and ``notes`` says why."""
-    twin, model, note, notes = None, None, "", {}
+    twin, failed = None, None
     if scenario.twin:
         plant = build()
         try:
             plant.reset(initial=scenario.initial_state)
             twin = closed_loop_twin(law, artifact, plant=plant, plan=plan, steps=steps)
         except PlantError as exc:
-            notes["twin_off"] = f"the twin's plant failed: {exc}"
+            failed = str(exc)
         finally:
             plant.close()
+    return with_model_twin(law, artifact, scenario=scenario, plan=plan, start=start, steps=steps, twin=twin,
+                           twin_failed=failed)  # fmt: skip
+
+
+def with_model_twin(law: Any, artifact: Any, *, scenario: Any, plan: Any, start: TwinStart, steps: int,
+                    twin: TwinTrace | None, twin_failed: str | None) -> Twins:  # fmt: skip
+    """A run's :class:`Twins` from its closed-loop twin (computed by :func:`run_twins` or a campaign block;
+    ``twin_failed``: why its plant failed) and the model twin ``scenario`` asks for."""
+    model, note, notes = None, "", {}
+    if twin_failed is not None:
+        notes["twin_off"] = f"the twin's plant failed: {twin_failed}"
     if scenario.model_twin:
         try:
             model, note = model_twin(law, artifact, start=start, plan=plan, steps=steps)

@@ -124,7 +124,7 @@ class OdePlant(Plant):
         full[0, self._in_idx] = u
         X = self.clamp(rk4(self.rates, self.x[None, :], full, self._P, dt=dt, h=self.h))
         if not np.all(np.isfinite(X)):
-            raise PlantError(f"plant {self.name}: state became non-finite")
+            raise PlantError(non_finite(self.name))
         self.x = X[0]
 
     def save_state(self) -> Any:
@@ -132,6 +132,11 @@ class OdePlant(Plant):
 
     def restore_state(self, snapshot: Any) -> None:
         self.x = np.array(snapshot, dtype=float)
+
+
+def non_finite(name: str) -> str:
+    """Why a plant's run ends when its state overflows (alone, or its row in a block)."""
+    return f"plant {name}: state became non-finite"
 
 
 class OdeBatch:

@@ -55,6 +55,13 @@ class LoopHooks:
 
         return NativeBlock(artifact, count, library=library)
 
+    def reference_block(self, artifact: Any, count: int) -> Any:
+        """``count`` instances of the law's float64 reference stepped together (the twins of a campaign block); by
+        default one after the other (:class:`gainlink.laws.block.OneByOne`)."""
+        from .block import OneByOne
+
+        return OneByOne([self.reference(artifact) for _ in range(count)])
+
     def describe(self, artifact: Any) -> dict:
         """What a run's report says about the artifact beyond its identity (the compensator, a schedule, units)."""
         return {"units": dict(artifact.signals["units"])} if artifact.signals.get("units") else {}

@@ -96,6 +96,11 @@ class LqLaw(Law):
     def native(self, artifact: Any, *, library: Any = None) -> Controller:
         return NativeLqLoop(artifact, library=library)
 
+    def reference_block(self, artifact: Any, count: int) -> Any:
+        from .block import ReferenceBlock
+
+        return ReferenceBlock(artifact, count)
+
     def safe_command(self, artifact: Any) -> np.ndarray:
         return np.minimum(np.maximum(artifact.u_op, artifact.u_min), artifact.u_max)
 

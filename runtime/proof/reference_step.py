@@ -24,8 +24,20 @@ def _lit(value: float) -> str:
 
 
 class _Writer:
-    def __init__(self) -> None:
+    """Lines of the step; ``columns``: each name holds a column of a block's runs (numpy float64 arrays), so the two
+    choices of the law are written with ``where`` and ``|``, every arithmetic operation unchanged."""
+
+    def __init__(self, *, columns: bool = False) -> None:
         self.lines: list[str] = []
+        self.columns = columns
+
+    def choose(self, cond: str, then: str, other: str) -> str:
+        """``then if cond else other``."""
+        return f"where({cond}, {then}, {other})" if self.columns else f"{then} if {cond} else {other}"
+
+    def any_of(self, names: list[str]) -> str:
+        """True where any of ``names`` is."""
+        return (" | ".join(names) if self.columns else " or ".join(names)) or "False"
 
     def let(self, name: str, expr: str) -> str:
         self.lines.append(f"{name} = {expr}")
@@ -49,18 +61,31 @@ def _matvec(mat: np.ndarray, names: list[str]) -> list[str]:
 _TERMS = ("y_op", "u_op", "u_min", "u_max", "K", "Ki", "M", "Cd", "Ci", "Kaw", "Ad", "Bd", "Dd", "L")
 
 
+def compile_reference_block(artifact: Artifact) -> Callable:
+    """The step of :func:`compile_reference_step` over a block of runs: the same source, operation for operation,
+    with each name a column of the runs (``xh`` (n, B), ``z`` (q, B), ``y`` (p, B), ``r`` (q, B) in, lists of (B,)
+    columns out) and the law's two choices (a clamp, the held integrator) written with ``numpy.where``. Every
+    operation is elementwise IEEE float64, as Python's float arithmetic is, so each run's column equals its own step
+    bit for bit (for finite samples; the caller refuses the others)."""
+    return _cached(artifact, columns=True)
+
+
 def compile_reference_step(artifact: Artifact) -> Callable:
     """``step(xh, z, y, r) -> (u, v, saturated, xh_next, z_next)`` on lists of Python floats, for a finite sample
     (the caller refuses the others), as :meth:`ReferenceLoop.step` defines it; compiled once per law in a process,
     keyed by everything the step is written from (the forms, Ts and the bytes of the matrices), so two artifacts share
     a step only when they compute the same law."""
-    a = artifact
-    key = (a.observer_form, a.anti_windup, a.Ts, *((np.shape(getattr(a, t)), _bytes(getattr(a, t))) for t in _TERMS))
+    return _cached(artifact, columns=False)
+
+
+def _cached(a: Artifact, *, columns: bool) -> Callable:
+    key = (columns, a.observer_form, a.anti_windup, a.Ts,
+           *((np.shape(getattr(a, t)), _bytes(getattr(a, t))) for t in _TERMS))  # fmt: skip
     step = _CACHE.get(key)
     if step is None:
         if len(_CACHE) >= _CACHE_MAX:
             _CACHE.pop(next(iter(_CACHE)))
-        step = _CACHE[key] = _compile(a)
+        step = _CACHE[key] = _compile(a, columns=columns)
     return step
 
 
@@ -72,8 +97,8 @@ def _bytes(value) -> bytes:
     return np.ascontiguousarray(value, dtype=float).tobytes()
 
 
-def _compile(a: Artifact) -> Callable:
-    wr = _Writer()
+def _compile(a: Artifact, *, columns: bool) -> Callable:
+    wr = _Writer(columns=columns)
     xh, z = [f"xh[{i}]" for i in range(a.n)], [f"z[{j}]" for j in range(a.q)]
     y, r = [f"y[{k}]" for k in range(a.p)], [f"r[{j}]" for j in range(a.q)]
     dy = wr.vector("dy", [f"{yk} - {_lit(o)}" for yk, o in zip(y, a.y_op, strict=True)])
@@ -86,8 +111,8 @@ def _compile(a: Artifact) -> Callable:
     v = wr.vector("v", [f"{_lit(o)} - {k1} - {k2}" for o, k1, k2 in zip(a.u_op, kx, kz, strict=True)])
     u = []
     for i, vi in enumerate(v):
-        wr.let(f"u{i}", f"{_lit(a.u_min[i])} if {vi} < {_lit(a.u_min[i])} else {vi}")  # NaN stays NaN, as np.maximum
-        u.append(wr.let(f"u{i}", f"{_lit(a.u_max[i])} if u{i} > {_lit(a.u_max[i])} else u{i}"))
+        wr.let(f"u{i}", wr.choose(f"{vi} < {_lit(a.u_min[i])}", _lit(a.u_min[i]), vi))  # NaN stays NaN, as np.maximum
+        u.append(wr.let(f"u{i}", wr.choose(f"u{i} > {_lit(a.u_max[i])}", _lit(a.u_max[i]), f"u{i}")))
     sat = wr.vector("s", [f"{ui} != {vi}" for ui, vi in zip(u, v, strict=True)])
     _integrators(wr, a, z=z, y=y, r=r, u=u, v=v, sat=sat)
     du = wr.vector("du", [f"{ui} - {_lit(o)}" for ui, o in zip(u, a.u_op, strict=True)])
@@ -96,7 +121,7 @@ def _compile(a: Artifact) -> Callable:
     zn = [f"zn{j}" for j in range(a.q)]
     wr.lines.append(f"return {lst(u)}, {lst(v)}, {lst(sat)}, {lst([f'xn{i}' for i in range(a.n)])}, {lst(zn)}")
     source = "def step(xh, z, y, r):\n" + "".join(f"    {line}\n" for line in wr.lines)
-    scope: dict = {}
+    scope: dict = {"where": np.where}
     exec(compile(source, f"<gainlink float64 step {a.name}>", "exec"), scope)
     return scope["step"]
 
@@ -106,8 +131,8 @@ def _integrators(wr: _Writer, a: Artifact, *, z, y, r, u, v, sat) -> None:
     e = wr.vector("e", [f"{rj} - {c}" for rj, c in zip(r, _matvec(a.Ci, y), strict=True)])
     grown = [f"{zj} + {_lit(a.Ts)} * {ej}" for zj, ej in zip(z, e, strict=True)]
     if a.anti_windup == "clamp":
-        held = " or ".join(sat) or "False"
-        grown = [f"{zj} if ({held}) else {g}" for zj, g in zip(z, grown, strict=True)]
+        held = wr.any_of(sat)
+        grown = [wr.choose(f"({held})", zj, g) for zj, g in zip(z, grown, strict=True)]
     elif a.anti_windup == "backcalc":
         diff = [f"({ui} - {vi})" for ui, vi in zip(u, v, strict=True)]
         grown = [f"{g} + {c}" for g, c in zip(grown, _matvec(a.Kaw, diff), strict=True)]
