@@ -1,9 +1,9 @@
 """Run a campaign: plan it, submit the runs without a result to Dask, store each as it completes, merge.
 
 FMUs go to the cluster once each (as tasks returning them, keyed by sha256); a task is
-``execute_batch(kind, artifacts, runs, fmus)``: a short list of runs with the artifacts they use, inline
-(SIL: up to :data:`MAX_BATCH` runs, so Dask's cost per task is shared, smaller towards the end; HIL: one
-run, keyed by its run id).
+``execute_batch(kind, artifacts, runs, fmus)``: a list of runs with the artifacts they use, inline (SIL: a block of
+up to :data:`MAX_BLOCK` runs of one artifact stepped together on the worker, :func:`batch_sizes`; HIL: one run, keyed
+by its run id).
 Results come back through ``as_completed`` and are written one run at a time, so whatever finished before
 an interruption is kept. A task that raised is retried once by Dask (``retries=1``); a batch still failing,
 or whose workers died under it (``KilledWorker``), is submitted again one run per task, and a single run
@@ -28,8 +28,8 @@ from .worker import execute_batch, unpack_results
 log = logging.getLogger(__name__)
 
 Progress = Callable[[int, int, dict], None]
-MAX_BATCH = 16
-BATCHES_PER_THREAD = 4
+MAX_BLOCK = 500
+BLOCKS_PER_THREAD = 2
 
 
 @dataclass(frozen=True)
@@ -226,19 +226,18 @@ def _data(value: bytes) -> bytes:
 def batch_sizes(kind: str, runs: int, threads: int, *, batch: int | None = None) -> list[int]:
     """Runs per Dask task, in the order of submission.
 
-    HIL: 1 (a run lasts seconds). SIL: each task takes the runs left over ``threads`` x
-    :data:`BATCHES_PER_THREAD`, at least 1 and at most :data:`MAX_BATCH`: batches big enough to make Dask's
-    share of a run small, getting smaller towards the end so no worker idles long while another finishes
-    a batch. ``batch`` fixes the size instead.
+    HIL: 1 (a run lasts seconds). SIL: blocks stepped together on the worker (:mod:`gainlink.hil.loop.block`), as
+    few as keep every thread busy (:data:`BLOCKS_PER_THREAD` each) and no larger than :data:`MAX_BLOCK` runs (a
+    block's records live in the worker's memory until it ends), the runs shared evenly. ``batch`` fixes the size
+    instead.
     """
     if batch is not None or kind == "hil":
         size = batch or 1
         return [size] * (runs // size) + ([runs % size] if runs % size else [])
-    sizes, left = [], runs
-    while left:
-        sizes.append(max(1, min(MAX_BATCH, left // (max(threads, 1) * BATCHES_PER_THREAD))))
-        left -= sizes[-1]
-    return sizes
+    if not runs:
+        return []
+    count = min(runs, max(-(-runs // MAX_BLOCK), max(threads, 1) * BLOCKS_PER_THREAD))
+    return [runs // count + (1 if i < runs % count else 0) for i in range(count)]
 
 
 class _Submitter:
@@ -286,7 +285,8 @@ def _submit_and_store(
     from distributed import as_completed
 
     kind = plan.campaign.kind
-    points = list(todo.values())
+    # a block steps the runs of one artifact together: the runs of an artifact are submitted side by side
+    points = sorted(todo.values(), key=lambda p: (p.artifact_sha256 or "", p.index))
     submitter = _Submitter(client, plan)
     futures, i = {}, 0
     for size in batch_sizes(kind, len(points), sum(client.nthreads().values()), batch=batch):
