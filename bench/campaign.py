@@ -27,7 +27,19 @@ Prints JSON. Everything is measured in the same run, against a baseline of the s
 - ``hil``: 40 lockstep HIL runs (firmware CAN process over udp_multicast, each in its own bus slot) on 1
   and on 2 workers (once each);
 - ``memory``: the first 1-worker cluster's worker, its resident memory after 40 runs and after 40 + 400
-  (target: flat).
+  (target: flat);
+- ``blocks``: the shipped pendulum campaign (examples/campaigns/pendulum_mass_uncertainty.toml: 10 s, 1,000 steps of
+  the RK4 pendulum, the host C law, the closed-loop twin, its three anti-windup builds) through campaign blocks
+  (:mod:`gainlink.hil.loop.block`). On clusters of 1, 2, 2 and 1 workers (new each time; cluster start and the
+  cold builds of the three laws timed apart, ``cluster_start_s`` and ``builds_and_first_runs_s``) the same
+  :data:`BLOCK_SPEEDUP_DRAWS` draws (seeds 1 and 2 on each side): ``speedup_2_vs_1`` (target >= 1.8); on the first
+  2-worker cluster :data:`BLOCK_DRAWS` draws (target <= 20 s wall, report included), with the runs' own CPU per
+  run-step (target <= 1 us), the machinery's share (target <= 0.10), the client's peak resident memory over its
+  start (sampled every 50 ms), the worker's, and the number of result files; ``per_run_path`` is a sample of the
+  same runs each through the per-run path (``execute``) in this process, measured in the same run, and
+  ``block_vs_per_run_path`` the ratio of CPU per run-step (target >= 50). With ``BENCH_LARGE=1``
+  :data:`LARGE_DRAWS` draws once more (``hundred_thousand``; target: client peak RSS growth <= 100 MB).
+  ``python bench/campaign.py --blocks`` runs this part alone.
 
 Clusters are started before the timing (and warmed by a few runs that build the firmware), so the
 times are those of the runs, the scheduling, the result files and the report. The campaign folders are
@@ -342,11 +354,147 @@ def overhead(one: list[dict], plain: dict) -> dict:
     }
 
 
+BLOCK_DRAWS = 10_000  # the shipped pendulum campaign's draws in the block benchmark (its three modes share them)
+BLOCK_SPEEDUP_DRAWS = 1_000
+BLOCK_PER_RUN_SAMPLE = 12  # runs through the per-run path, for the ratio
+LARGE_DRAWS = 100_000  # with BENCH_LARGE=1 (once: minutes of both cores)
+
+
+def shipped_pendulum(draws: int, seed: int = 2026) -> dict:
+    """examples/campaigns/pendulum_mass_uncertainty.toml (10 s runs: 1,000 steps of the RK4 pendulum, the host C
+    law, the closed-loop twin) with ``draws`` runs over its three anti-windup modes (``ceil(draws / 3)`` each)."""
+    from gainlink.fileio import read_toml
+
+    path = ROOT / "examples/campaigns/pendulum_mass_uncertainty.toml"
+    data, _ = read_toml(path, what="campaign", error=ValueError)
+    data.update(runs=-(-draws // 3), seed=seed, spec=str((path.parent / data["spec"]).resolve()))
+    return data
+
+
+def _peak_rss_sampler() -> tuple[Callable[[], float], Callable[[], None]]:
+    """(peak MB since start, stop): this process's resident memory sampled every 50 ms in a thread."""
+    import threading
+
+    import psutil
+
+    proc, peak, stop = psutil.Process(), [0], threading.Event()
+
+    def sample() -> None:
+        while not stop.is_set():
+            peak[0] = max(peak[0], proc.memory_info().rss)
+            stop.wait(0.05)
+
+    thread = threading.Thread(target=sample, daemon=True)
+    thread.start()
+
+    def done() -> None:
+        stop.set()
+        thread.join()
+
+    return (lambda: peak[0] / 2**20), done
+
+
+def block_campaign(client, data: dict, out: Path) -> dict:
+    """One campaign through blocks, timed (report included), with CPU per run-step, the machinery's share and the
+    client's peak resident memory over its resident memory at the start."""
+    import psutil
+
+    steps = round(data["scenario"]["duration"] / 0.01)
+    rss0 = psutil.Process().memory_info().rss / 2**20
+    peak, stop = _peak_rss_sampler()
+    try:
+        res = timed_campaign(data, client, out)
+    finally:
+        stop()
+    files = sum(1 for _ in (out / "runs").iterdir()) if (out / "runs").is_dir() else 0
+    return res | {
+        "steps_per_run": steps,
+        "runs_own_cpu_per_run_step_us": round(1e3 * res["runs_own_cpu_per_run_ms"] / steps, 3),
+        "campaign_cpu_per_run_step_us": round(1e3 * res["cpu_per_run_ms"] / steps, 3),
+        "client_rss_start_mb": round(rss0, 1),
+        "client_peak_rss_growth_mb": round(peak() - rss0, 1),
+        "worker_rss_mb": worker_rss_mb(client),
+        "result_files": files,
+    }
+
+
+def per_run_path(data: dict, count: int) -> dict:
+    """The same campaign's first ``count`` runs each through the per-run path (``execute``: one run alone, no
+    block), in this process: CPU per run-step."""
+    from gainlink.hil.campaign import parse_campaign
+    from gainlink.hil.campaign.plan import plan_campaign
+    from gainlink.hil.campaign.worker import execute
+
+    plan = plan_campaign(parse_campaign(data | {"runs": max(1, count // 3)}))
+    runs = [(plan.artifacts[p.artifact_sha256], p.scenario, p.seed) for p in plan.runs]
+    execute("sil", *runs[0])  # warm: the library of the first build
+    c0 = time.thread_time()
+    for run in runs:
+        execute("sil", *run)
+    cpu = time.thread_time() - c0
+    steps = round(data["scenario"]["duration"] / 0.01)
+    return {"runs": len(runs), "cpu_per_run_step_us": round(1e6 * cpu / len(runs) / steps, 3)}
+
+
+def measure_blocks(tmp: Path) -> dict:
+    """The block benchmark: cluster start and cold builds apart; 10,000 draws of the shipped pendulum campaign on
+    2 workers (warm); the per-run path on a sample in the same run; 2 workers over 1 on the same 1,000 draws in the
+    order 1, 2, 2, 1; with BENCH_LARGE=1, 100,000 draws once."""
+    from gainlink.hil.campaign.cluster import dask_client
+
+    out: dict = {}
+    walls: dict[int, list[float]] = {1: [], 2: []}
+    for k, n in enumerate((1, 2, 2, 1)):
+        t0 = time.perf_counter()
+        with dask_client(workers=n) as client:
+            start = time.perf_counter() - t0
+            t1 = time.perf_counter()
+            timed_campaign(shipped_pendulum(3, seed=99), client, tmp / f"blocks_warm_{k}")  # builds the 3 laws
+            warm = time.perf_counter() - t1
+            res = block_campaign(client, shipped_pendulum(BLOCK_SPEEDUP_DRAWS, seed=1 + k % 2), tmp / f"blocks_{k}")
+            walls[n].append(res["wall_s"])
+            out.setdefault("speedup_runs", []).append({"workers": n, "cluster_start_s": round(start, 2),
+                                                       "builds_and_first_runs_s": round(warm, 2)} | res)  # fmt: skip
+            if k == 1:
+                out["ten_thousand"] = block_campaign(client, shipped_pendulum(BLOCK_DRAWS), tmp / "blocks_10k") | {
+                    "cluster_start_s": round(start, 2)
+                }
+                out["per_run_path"] = per_run_path(shipped_pendulum(BLOCK_DRAWS), BLOCK_PER_RUN_SAMPLE)
+                if os.environ.get("BENCH_LARGE") == "1":
+                    out["hundred_thousand"] = block_campaign(client, shipped_pendulum(LARGE_DRAWS), tmp / "blocks_100k")
+    speed = sum(walls[1]) / sum(walls[2])
+    ten = out["ten_thousand"]
+    block_us = ten["runs_own_cpu_per_run_step_us"]
+    out.update(
+        {
+            "speedup_2_vs_1": round(speed, 3),
+            "target_speedup": 1.8,
+            "meets_speedup": speed >= 1.8,
+            "block_vs_per_run_path": round(out["per_run_path"]["cpu_per_run_step_us"] / block_us, 1),
+            "target_block_vs_per_run_path": 50,
+            "target_cpu_per_run_step_us": 1.0,
+            "meets_cpu_per_run_step": block_us <= 1.0,
+            "target_ten_thousand_wall_s": 20,
+            "meets_ten_thousand_wall": ten["wall_s"] <= 20,
+            "target_machinery_ratio": 0.10,
+            "meets_machinery_ratio": ten["machinery_ratio"] <= 0.10,
+        }
+    )
+    return out
+
+
 def main() -> int:
     logging.disable(logging.WARNING)
     out = {"machine_cpus": len(os.sched_getaffinity(0)), "load_average_before": [round(v, 2) for v in os.getloadavg()]}
     (ROOT / "out" / "bench").mkdir(parents=True, exist_ok=True)
+    if "--blocks" in sys.argv[1:]:  # the block benchmark alone
+        with tempfile.TemporaryDirectory(prefix="campaign-", dir=ROOT / "out" / "bench") as tmp:
+            out["blocks"] = measure_blocks(Path(tmp))
+        json.dump(out | {"load_average_after": [round(v, 2) for v in os.getloadavg()]}, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
     with tempfile.TemporaryDirectory(prefix="campaign-", dir=ROOT / "out" / "bench") as tmp:
+        blocks = measure_blocks(Path(tmp))
         # In the order 1, 2, 2, 1 worker(s) (each cluster new), so that a drift of the machine's speed hits
         # both sides alike; each side runs seeds 1 and 2.
         first = measure_cluster(1, Path(tmp), seeds=(1,), memory=True)
@@ -358,6 +506,7 @@ def main() -> int:
     memory_ratio = first["rss_after_440_mb"] / first["rss_after_40_mb"]
     out.update(
         {
+            "blocks": blocks,
             "sil": {
                 "runs": SIL_RUNS,
                 "one_worker": one,
