@@ -214,3 +214,38 @@ def test_the_pendulum_campaign_gives_each_run_through_a_block_what_it_gives_alon
 def test_the_pendulum_campaign_through_blocks_run_for_run_at_full_length():
     """300 runs of the shipped campaign (100 draws x 3 modes, 10 s each) with the host C and with the float64 law."""
     assert _same_runs(draws=100, duration=10.0) == 3 * 2 * 100
+
+
+def test_a_task_steps_what_it_can_in_a_block_and_the_rest_alone_with_the_same_records(caplog):
+    """A task of the campaign's runs: four that step as one block, one with a nan fault and two on linear plants
+    (not vectorised) that run alone; every record equals the run's own ``execute`` (control metrics, verdict inputs),
+    and the linear pair's fallback is said once."""
+    import logging
+
+    import msgpack
+    from gainlink.fileio import read_toml
+    from gainlink.hil.campaign import parse_campaign, worker
+    from gainlink.hil.campaign.plan import plan_campaign
+    from support.paths import EXAMPLES
+
+    path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
+    data, _ = read_toml(path, what="campaign", error=ValueError)
+    data |= {"runs": 7, "spec": str((path.parent / data["spec"]).resolve())}
+    data["grid"][0]["values"] = ["clamp"]
+    data["scenario"]["duration"] = 1.0
+    plan = plan_campaign(parse_campaign(data))
+    runs = [(p.artifact_sha256, dict(p.scenario), p.seed) for p in plan.runs]
+    runs[4][1]["faults"] = [{"kind": "nan", "start": 0.2, "stop": 0.3}]
+    for i in (5, 6):
+        runs[i][1]["plant"] = {"kind": "linear"}
+    with caplog.at_level(logging.INFO, logger="gainlink.hil.campaign.worker"):
+        records = worker.unpack_results(worker.execute_batch("sil", plan.artifacts, runs))
+    assert [r["status"] for r in records] == ["done"] * 7
+    assert [r["worker"].get("block") for r in records] == [4, 4, 4, 4, None, None, None]
+    for (sha, scenario, seed), got in zip(runs, records):
+        want = msgpack.unpackb(msgpack.packb(worker.execute("sil", plan.artifacts[sha], scenario, seed)), raw=False)
+        assert {k: got["metrics"].get(k) for k in CONTROL_KEYS} == {k: want["metrics"].get(k) for k in CONTROL_KEYS}
+        assert (got["measures"], got["trace"], got["link"]) == (want["measures"], want["trace"], want["link"])
+    lines = [r.getMessage() for r in caplog.records]
+    assert sum("one by one" in line for line in lines) == 1
+    assert sum("injects faults" in line for line in lines) == 1

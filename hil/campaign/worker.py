@@ -294,8 +294,9 @@ def execute_batch(
 
 
 def _blocks(artifacts: dict[str, bytes], runs: list, blobs: dict) -> dict[tuple, list]:
-    """The SIL runs that can step together, by (artifact, controller, steps): ``(index, artifact, scenario)``; a run
-    whose inputs are wrong is left out (it runs alone and records its error)."""
+    """The SIL runs that can step together, by (artifact, controller, steps, the plant but its drawn numbers):
+    ``(index, artifact, scenario)``; a run whose inputs are wrong is left out (it runs alone and records its
+    error)."""
     from ..loop.block import refusal
 
     groups: dict[tuple, list] = {}
@@ -309,8 +310,12 @@ def _blocks(artifacts: dict[str, bytes], runs: list, blobs: dict) -> dict[tuple,
         if why is not None:
             log.info("campaign run %d of this task runs alone: %s", i, why)
             continue
-        groups.setdefault((sha, sc.controller, round(sc.duration / artifact.Ts)), []).append((i, artifact, sc))
+        shape = json.dumps({k: v for k, v in sc.plant.items() if k not in _DRAWN}, sort_keys=True, default=str)
+        groups.setdefault((sha, sc.controller, round(sc.duration / artifact.Ts), shape), []).append((i, artifact, sc))
     return groups
+
+
+_DRAWN = ("parameters", "perturb", "scale")  # what a run's plant may differ in from its block's others
 
 
 def _run_block(members: list, records: list, runs: list, blobs: dict) -> None:
