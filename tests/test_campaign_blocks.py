@@ -217,9 +217,10 @@ def test_the_pendulum_campaign_through_blocks_run_for_run_at_full_length():
 
 
 def test_a_task_steps_what_it_can_in_a_block_and_the_rest_alone_with_the_same_records(caplog):
-    """A task of the campaign's runs: four that step as one block, one with a nan fault and two on linear plants
-    (not vectorised) that run alone; every record equals the run's own ``execute`` (control metrics, verdict inputs),
-    and the linear pair's fallback is said once."""
+    """A task of the campaign's runs: four pendulums that step as one block, two on linear plants (a block of their
+    own), one with a nan fault and two on a user's pendulum that overrides ``advance`` without declaring itself
+    vectorised (those three run alone); every record equals the run's own ``execute`` (control metrics, measures,
+    traces), and each fallback is said once."""
     import logging
 
     import msgpack
@@ -230,7 +231,7 @@ def test_a_task_steps_what_it_can_in_a_block_and_the_rest_alone_with_the_same_re
 
     path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
     data, _ = read_toml(path, what="campaign", error=ValueError)
-    data |= {"runs": 7, "spec": str((path.parent / data["spec"]).resolve())}
+    data |= {"runs": 9, "spec": str((path.parent / data["spec"]).resolve())}
     data["grid"][0]["values"] = ["clamp"]
     data["scenario"]["duration"] = 1.0
     plan = plan_campaign(parse_campaign(data))
@@ -238,10 +239,13 @@ def test_a_task_steps_what_it_can_in_a_block_and_the_rest_alone_with_the_same_re
     runs[4][1]["faults"] = [{"kind": "nan", "start": 0.2, "stop": 0.3}]
     for i in (5, 6):
         runs[i][1]["plant"] = {"kind": "linear"}
+    for i in (7, 8):
+        slow = {"kind": "python", "class": "support.campaign_plants:SlowPendulum", "pause": 0.0}
+        runs[i][1]["plant"] = runs[i][1]["plant"] | slow
     with caplog.at_level(logging.INFO, logger="gainlink.hil.campaign.worker"):
         records = worker.unpack_results(worker.execute_batch("sil", plan.artifacts, runs))
-    assert [r["status"] for r in records] == ["done"] * 7
-    assert [r["worker"].get("block") for r in records] == [4, 4, 4, 4, None, None, None]
+    assert [r["status"] for r in records] == ["done"] * 9
+    assert [r["worker"].get("block") for r in records] == [4, 4, 4, 4, None, 2, 2, None, None]
     for (sha, scenario, seed), got in zip(runs, records):
         want = msgpack.unpackb(msgpack.packb(worker.execute("sil", plan.artifacts[sha], scenario, seed)), raw=False)
         assert {k: got["metrics"].get(k) for k in CONTROL_KEYS} == {k: want["metrics"].get(k) for k in CONTROL_KEYS}
@@ -249,3 +253,48 @@ def test_a_task_steps_what_it_can_in_a_block_and_the_rest_alone_with_the_same_re
     lines = [r.getMessage() for r in caplog.records]
     assert sum("one by one" in line for line in lines) == 1
     assert sum("injects faults" in line for line in lines) == 1
+
+
+@pytest.mark.parametrize("Ts", [None, 0.02])
+def test_linear_plants_step_in_a_block_as_alone_and_as_the_exact_discretisation(Ts):
+    """Perturbed linear plants (continuous: sampled by the matrix exponential; discrete) in a block of 200 against
+    each alone, bit for bit; and one of them against python-control's own discretisation and simulation."""
+    import control
+    from gainlink.hil.plants.linear import LinearBatch, LinearModel, LinearPlant, linear_batchable, perturb_model
+
+    A = np.array([[0.0, 1.0, 0.0], [-2.0, -0.4, 1.0], [0.0, 0.0, -3.0]])
+    B, C, D = (
+        np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 2.0]]),
+        np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+        np.zeros((2, 2)),
+    )
+    D[1, 0] = 0.3
+    nominal = LinearModel(name="m", A=A, B=B, C=C, D=D, Ts=Ts, states=("a", "b", "c"), inputs=("u1", "u2"),
+                          outputs=("y1", "y2"), u_op=np.array([0.5, -0.2]), y_op=np.array([1.0, 2.0]))  # fmt: skip
+    rng = np.random.default_rng(5)
+    plants = [LinearPlant(model=perturb_model(nominal, perturb={"A[1][0]": rng.uniform(-0.3, 0.3)},
+                                               scale={"B": rng.uniform(0.8, 1.2)})) for _ in range(200)]  # fmt: skip
+    for p in plants:
+        p.reset(initial={"a": 0.4})
+    alone = [LinearPlant(model=plants[i].model) for i in (0, 77, 199)]
+    for q in alone:
+        q.reset(initial={"a": 0.4})
+    assert linear_batchable(plants)
+    batch = LinearBatch(plants)
+    U = rng.normal(0.0, 1.0, (80, len(plants), 2))
+    Y0 = []
+    for k in range(80):
+        Y = batch.outputs()
+        Y0.append(alone[0].outputs())
+        for j, q in zip((0, 77, 199), alone):
+            assert np.array_equal(Y[j], q.outputs())
+            q.advance(u=U[k, j], dt=0.02)
+        batch.advance(U[k], dt=0.02)
+    sys = control.ss(plants[0].A, plants[0].B, C, D, Ts if Ts else 0)
+    sysd = sys if Ts else control.c2d(sys, 0.02)
+    x0 = np.array([0.4, 0.0, 0.0])
+    du = U[:, 0] - nominal.u_op
+    # y_k = y_op + C x_k + D du_{k-1}: the feed-through acts on the command held over the last sample
+    resp = control.forced_response(control.ss(sysd.A, sysd.B, C, np.zeros((2, 2)), 0.02), U=du.T, X0=x0)
+    want = nominal.y_op + resp.outputs.T + np.vstack([np.zeros(2), du[:-1] @ D.T])
+    np.testing.assert_allclose(np.array(Y0), want, rtol=1e-10, atol=1e-12)

@@ -1,12 +1,13 @@
 """A campaign block: SIL runs of one artifact stepped together, in lockstep, each answering what it answers alone.
 
-Per step ``k`` every run of the block is sampled (its plant's outputs plus its own noise, one stacked array), the
-law answers the whole block in one call (:meth:`gainlink.laws.Law.native_block`: one C call for the host C, the
-controllers one by one for the float64 reference) and the plants advance together (:class:`~..plants.models.OdeBatch`,
-the RK4 kernel a plant alone steps with a batch of one). The closed-loop twin is stepped the same way afterwards
-(the float64 reference of each run around a second block of plants). Each run is prepared (plan, noise, references)
-and reported (metrics, the law's report) by the very functions a run alone uses (:mod:`.bridge`), so a run's trace
-and verdict are the same bit for bit whichever path ran it (timing columns aside: a block times its calls, not a run).
+Per step ``k`` every run of the block is sampled (its plant's outputs plus its own noise, one stacked array), the law
+answers the whole block in one call (:meth:`gainlink.laws.Law.native_block`: one C call for the host C;
+:meth:`gainlink.laws.Law.reference_block`: the float64 law, as columns for the lq law) and the plants advance together
+(:class:`~..plants.models.OdeBatch`, the RK4 kernel a plant alone steps with a batch of one;
+:class:`~..plants.linear.LinearBatch`, each run's own matrices). The closed-loop twin is stepped the same way afterwards
+(the float64 reference of each run around a second block of plants). Each run is prepared (plan, noise, references) and
+reported (metrics, the law's report) by the very functions a run alone uses (:mod:`.bridge`), so a run's trace and
+verdict are the same bit for bit whichever path ran it (timing columns aside: a block times its calls, not a run).
 
 What cannot step so (:func:`refusal`: a link, faults, a plant that is not vectorised, a plant that follows external
 signals) is left to the caller, which runs it alone.
@@ -22,6 +23,7 @@ import numpy as np
 from gainlink.laws import law_of
 from gainlink.shipping.artifact import Artifact
 
+from ..plants.linear import LinearBatch, linear_batchable
 from ..plants.models import OdeBatch, batchable, non_finite
 from .bridge import Run, RunResult, build_plant, in_process, prepare_run
 from .closed_loop import Outcome
@@ -43,6 +45,16 @@ def refusal(scenario: Scenario) -> str | None:
         return "it runs without the sigma rate limit"
     if scenario.mode == "realtime":
         return "it runs in real time"
+    return None
+
+
+def batch_of(plants: list) -> OdeBatch | LinearBatch | None:
+    """The plants (reset) as one batch (built-in continuous models of one kind, or linear plants of one shape), or
+    None when they are not one vectorised kind."""
+    if batchable(plants):
+        return OdeBatch(plants)
+    if linear_batchable(plants):
+        return LinearBatch(plants)
     return None
 
 
@@ -68,7 +80,7 @@ def _stack(runs: list[Run], name: str) -> np.ndarray:
     return np.stack([getattr(r.plan, name) for r in runs], axis=1)
 
 
-def _lockstep(runs: list[Run], batch: OdeBatch, controller, *, Ts: float, steps: int,
+def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts: float, steps: int,
               always_disturbed: bool, plant_state: bool, law_state: bool) -> _Steps:  # fmt: skip
     """Step ``controller`` (a block law) around ``batch`` for ``steps`` samples of each run's plan; a run whose
     plant fails stops there (its row steps on, unrecorded). ``always_disturbed``: the command plus the plan's
@@ -117,13 +129,13 @@ def run_block(scenarios: list[Scenario], *, artifact: Artifact, library: Path | 
     a, law, Ts = artifact, law_of(artifact), artifact.Ts
     plants = [build_plant(sc, artifact=a) for sc in scenarios]
     try:
-        if not batchable(plants):
+        if not (batchable(plants) or linear_batchable(plants)):
             return None
         runs = [prepare_run(sc, law=law, artifact=a, plant=pl, source="(given as an object)")
                 for sc, pl in zip(scenarios, plants)]  # fmt: skip
         if len({r.plan.N for r in runs}) != 1:
             return None
-        batch = OdeBatch(plants)
+        batch = batch_of(plants)
         firmware = scenarios[0].controller == "firmware"
         block = len(runs)
         controller = law.native_block(a, block, library=library) if firmware else law.reference_block(a, block)
@@ -174,7 +186,7 @@ def _twins(runs: list[Run], *, law, artifact: Artifact, steps: np.ndarray) -> li
         try:
             for r, pl in zip(sub, plants):
                 pl.reset(initial=r.scenario.initial_state)
-            batch = OdeBatch(plants)
+            batch = batch_of(plants)
             longest = int(max(steps[want]))
             tw = _lockstep(sub, batch, law.reference_block(artifact, len(sub)), Ts=artifact.Ts,
                            steps=longest, always_disturbed=True, plant_state=False,

@@ -25,7 +25,6 @@ from typing import Any
 import numpy as np
 from gainlink.errors import GainlinkError, PlantError, did_you_mean
 from gainlink.lti import StateSpaceModel
-from gainlink.proof.sampled_plant import SampledPlant
 
 from ..registry import take_keys
 from .base import PLANTS, Plant
@@ -154,8 +153,25 @@ def perturb_model(
     return replace(model, **mats)
 
 
+def rowsum(M: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``M @ v`` for each row of a batch (``M`` (B, r, c) or (1, r, c), ``v`` (B, c)) as a fixed chain of elementwise
+    multiply-adds, summed left to right over the columns: a run's sums are the same at any batch size (a BLAS
+    product picks its own order, per machine and size)."""
+    B, rows = v.shape[0], M.shape[1]
+    if M.shape[2] == 0:
+        return np.zeros((B, rows))
+    acc = M[:, :, 0] * v[:, None, 0]
+    for j in range(1, M.shape[2]):
+        acc = acc + M[:, :, j] * v[:, None, j]
+    return acc
+
+
 class LinearPlant(Plant):
     """A :class:`LinearModel` simulated exactly under a held input.
+
+    ``x+ = Ad x + Bd (u - u_op)``, ``y = y_op + C x + D (u_prev - u_op)`` (the feed-through acts on the command
+    held over the last sample), stepped by :func:`rowsum`, the kernel a campaign block steps its linear plants with
+    (:class:`LinearBatch`): a plant alone is a batch of one.
 
     Parameters
     ----------
@@ -166,13 +182,16 @@ class LinearPlant(Plant):
     def __init__(self, *, model: LinearModel) -> None:
         self.model = model
         self.name = f"linear({model.name})"
-        self.A, self.B, self.C, self.D = model.A, model.B, model.C, model.D
+        self.A, self.B, self.C, self.D = (np.asarray(getattr(model, k), float) for k in MATRICES)
         self.state_names, self.input_names, self.output_names = model.states, model.inputs, model.outputs
         self._disc: dict[float, tuple[np.ndarray, np.ndarray]] = {}
-        # Stepped with the transition of each step's length (a continuous model is sampled per dt).
-        self._sampled = SampledPlant(self.A, self.B, self.C, self.D, u_op=model.u_op, y_op=model.y_op)
+        n, m = self.B.shape
+        self.u_op = np.zeros(m) if model.u_op is None else np.asarray(model.u_op, float)
+        self.y_op = np.zeros(self.C.shape[0]) if model.y_op is None else np.asarray(model.y_op, float)
+        self.X, self.dU = np.zeros((1, n)), np.zeros((1, m))
 
-    def _discrete(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    def discrete(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(Ad, Bd)`` of one step of ``dt`` (the model's own for a discrete one, which advances only by ``Ts``)."""
         if dt not in self._disc:
             Ts = self.model.Ts
             if Ts is not None:
@@ -199,22 +218,65 @@ class LinearPlant(Plant):
                     f"(has: {', '.join(self.state_names)})"
                 )
             x0[self.state_names.index(key)] = float(value)
-        self._sampled.reset(x0)
+        self.X, self.dU = x0[None, :], np.zeros_like(self.dU)
 
     def outputs(self) -> np.ndarray:
-        return self._sampled.outputs()
+        return (self.y_op + rowsum(self.C[None], self.X) + rowsum(self.D[None], self.dU))[0]
 
     def state(self) -> np.ndarray:
-        return self._sampled.state
+        return self.X[0].copy()
 
     def advance(self, *, u: np.ndarray, dt: float) -> None:
-        self._sampled.advance(u, transition=self._discrete(dt))
+        Ad, Bd = self.discrete(dt)
+        self.dU = (np.asarray(u, dtype=float) - self.u_op).reshape(1, -1)
+        self.X = rowsum(Ad[None], self.X) + rowsum(Bd[None], self.dU)
 
     def save_state(self) -> Any:
-        return self._sampled.save()
+        return self.X.copy(), self.dU.copy()
 
     def restore_state(self, snapshot: Any) -> None:
-        self._sampled.restore(snapshot)
+        self.X, self.dU = snapshot[0].copy(), snapshot[1].copy()
+
+
+class LinearBatch:
+    """Linear plants of one shape stepped together (a campaign block): each its own (perturbed) matrices, stacked
+    (B, ., .), the :func:`rowsum` kernel a plant alone steps. ``plants`` are reset already."""
+
+    def __init__(self, plants: list[LinearPlant]) -> None:
+        self.name = plants[0].name
+        self._plants = plants
+        self.X = np.concatenate([p.X for p in plants])
+        self.dU = np.concatenate([p.dU for p in plants])
+        self.C, self.D = np.stack([p.C for p in plants]), np.stack([p.D for p in plants])
+        self.y_op, self.u_op = np.stack([p.y_op for p in plants]), np.stack([p.u_op for p in plants])
+        self._disc: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+
+    def outputs(self) -> np.ndarray:
+        """Every row's outputs (B, p)."""
+        return self.y_op + rowsum(self.C, self.X) + rowsum(self.D, self.dU)
+
+    def advance(self, U: np.ndarray, *, dt: float) -> np.ndarray:
+        """Hold each row's command ``U`` (B, m) for ``dt``; returns the rows that failed (none: a linear plant
+        does not fail, as a plant alone does not)."""
+        if dt not in self._disc:
+            pairs = [p.discrete(dt) for p in self._plants]
+            self._disc[dt] = (np.stack([a for a, _ in pairs]), np.stack([b for _, b in pairs]))
+        Ad, Bd = self._disc[dt]
+        self.dU = np.asarray(U, dtype=float) - self.u_op
+        self.X = rowsum(Ad, self.X) + rowsum(Bd, self.dU)
+        return np.zeros(self.X.shape[0], dtype=bool)
+
+
+def linear_batchable(plants: list) -> bool:
+    """Whether ``plants`` can step as one :class:`LinearBatch`: linear plants of one shape and kind of time."""
+    first = plants[0]
+    if not isinstance(first, LinearPlant):
+        return False
+    return all(
+        isinstance(p, LinearPlant) and p.A.shape == first.A.shape and p.B.shape == first.B.shape
+        and p.C.shape == first.C.shape and p.model.Ts == first.model.Ts
+        for p in plants
+    )  # fmt: skip
 
 
 def _source_path(value: Any, *, base_dir: Path | None, what: str) -> Path:

@@ -57,7 +57,10 @@ class OdePlant(Plant):
 
     all_inputs: tuple[str, ...]
     defaults: ClassVar[Mapping[str, float]]
-    vectorised: ClassVar[bool] = True  # steps in a campaign block (OdeBatch)
+    #: Steps in a campaign block (:class:`OdeBatch`): declared by each class in its own body, not inherited, because a
+    #: block steps only :meth:`rates` and :meth:`clamp` (a subclass that overrides ``advance`` or ``outputs`` runs
+    #: alone unless it declares itself vectorised again).
+    vectorised: ClassVar[bool] = False
 
     def __init__(
         self,
@@ -174,10 +177,10 @@ class OdeBatch:
 
 
 def batchable(plants: list[Plant]) -> bool:
-    """Whether ``plants`` can step as one :class:`OdeBatch`: vectorised built-in models of one class, the same
-    inputs, outputs and sub-step."""
+    """Whether ``plants`` can step as one :class:`OdeBatch`: models of one class that declares itself vectorised
+    (``vectorised = True`` in its own body: the built-in ones, or a user's), the same inputs, outputs and sub-step."""
     first = plants[0]
-    if not isinstance(first, OdePlant) or not first.vectorised:
+    if not isinstance(first, OdePlant) or vars(type(first)).get("vectorised") is not True:
         return False
     return all(
         type(p) is type(first) and p._in_idx == first._in_idx and p._out_idx == first._out_idx and p.h == first.h
@@ -197,6 +200,7 @@ class CartPendulum(OdePlant):
     """
 
     name = "cart_pendulum"
+    vectorised = True
     all_inputs = ("F",)
     state_names = ("x", "x_dot", "theta", "theta_dot")
     default_outputs = ("x", "theta")
@@ -229,6 +233,7 @@ class QuadrotorLateral(OdePlant):
     """
 
     name = "quadrotor_lateral"
+    vectorised = True
     all_inputs = ("tau",)
     state_names = ("phi", "p", "v", "y")
     default_outputs = ("phi", "y")

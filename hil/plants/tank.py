@@ -25,6 +25,7 @@ class Tank(OdePlant):
     ``flare`` (m^2 per m of level)."""
 
     name = "tank"
+    vectorised = True
     all_inputs = ("u",)
     state_names = ("q", "h")
     default_outputs = ("h",)
