@@ -298,3 +298,36 @@ def test_linear_plants_step_in_a_block_as_alone_and_as_the_exact_discretisation(
     resp = control.forced_response(control.ss(sysd.A, sysd.B, C, np.zeros((2, 2)), 0.02), U=du.T, X0=x0)
     want = nominal.y_op + resp.outputs.T + np.vstack([np.zeros(2), du[:-1] @ D.T])
     np.testing.assert_allclose(np.array(Y0), want, rtol=1e-10, atol=1e-12)
+
+
+def _small_campaign_file(tmp_path, name: str):
+    from support.paths import EXAMPLES
+
+    path = tmp_path / f"{name}.toml"
+    path.write_text(
+        f'name = "{name}"\nkind = "sil"\nseed = 1\nruns = 2\nspec = "{EXAMPLES / "pendulum.toml"}"\n'
+        '[scenario]\nduration = 0.5\n[scenario.plant]\nkind = "cart_pendulum"\n'
+        '[[draw]]\ntarget = "plant.parameters.M"\ndistribution = "uniform"\nlow = 0.7\nhigh = 1.3\n'
+    )
+    return path
+
+
+@pytest.mark.parametrize(
+    "plan, phrase",
+    [
+        ({"campaign": {"name": "other", "gainlink": "0.1.0"}, "runs": []}, "holds campaign 'other', not 'mine'"),
+        ({"campaign": {"name": "mine"}, "runs": []}, "was written by gainlink older than 0.1.0"),
+        ({"campaign": {"name": "mine", "gainlink": "9.9"}, "runs": []}, "was written by gainlink 9.9"),
+        ("not json", "is not a campaign plan"),
+    ],
+)
+def test_resuming_into_another_campaigns_or_versions_folder_is_refused_in_one_line(tmp_path, plan, phrase):
+    import json
+
+    from support.cli import assert_refused
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "plan.json").write_text(plan if isinstance(plan, str) else json.dumps(plan))
+    campaign = _small_campaign_file(tmp_path, "mine")
+    assert_refused(["campaign", "run", campaign, "--out", out, "--workers", "1"], phrase, out)

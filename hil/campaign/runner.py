@@ -18,11 +18,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from gainlink.version import __version__
+
 from .cluster import check_main_guard, dask_client
 from .config import Campaign, CampaignError, load_campaign, parse_campaign
 from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign
 from .report import merge
-from .store import Store
+from .store import Store, refuse_foreign
 from .worker import execute_batch, unpack_results
 
 log = logging.getLogger(__name__)
@@ -90,6 +92,7 @@ def plan_doc(plan: CampaignPlan) -> dict:
             "artifact": str(c.artifact_path) if c.artifact_path else None,
             "axes": describe_axes(c),
             "description": c.description,
+            "gainlink": __version__,
         },
         "runs": [
             {
@@ -164,8 +167,10 @@ def run(
     _check_counts(batch=batch, workers=workers)  # before anything is planned or written
     campaign = as_campaign(campaign)
     plan = plan_campaign(campaign)
+    doc = plan_doc(plan)
+    refuse_foreign(out, doc)  # before anything is written
     store = Store(out)
-    store.prepare(plan, plan_doc=plan_doc(plan))
+    store.prepare(plan, plan_doc=doc)
     unique = {p.id: p for p in reversed(plan.runs)}  # a run planned twice (same inputs) runs once: its first point
     reused = {i for i in unique if store.finished(i)}  # before anything is stored, so the count is this call's
     todo = _runs_to_do(unique, reused=reused, store=store, kind=campaign.kind)

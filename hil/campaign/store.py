@@ -23,7 +23,9 @@ from typing import Any
 
 import numpy as np
 from gainlink.fileio import atomic_write_bytes, atomic_write_text, prepare_output_dir
+from gainlink.version import __version__
 
+from .config import CampaignError
 from .plan import CampaignPlan, RunPoint
 
 TRACE_FIELDS = ("t", "y", "u", "r")
@@ -59,6 +61,29 @@ def _json(obj: Any) -> str:
 def _compact_json(obj: Any) -> str:
     # No indent: json's C encoder (indent falls back to the Python one, 10x slower: one file per run).
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False) + "\n"
+
+
+def refuse_foreign(out: str | Path, plan_doc: dict) -> None:
+    """Refuse, in one line and before anything is written, to resume into ``out`` when its ``plan.json`` is another
+    campaign's (another name) or another gainlink version's (its runs would be ignored, not resumed)."""
+    path = Path(out) / "plan.json"
+    if not path.is_file():
+        return
+    try:
+        old = json.loads(path.read_text("utf-8"))["campaign"]
+        name, version = old["name"], old.get("gainlink")
+    except (OSError, ValueError, KeyError, TypeError):
+        raise CampaignError(
+            f"campaign: {path} is not a campaign plan this gainlink can read; give another --out"
+        ) from None
+    new = plan_doc["campaign"]["name"]
+    if name != new:
+        raise CampaignError(f"campaign: {out} holds campaign {name!r}, not {new!r}: give another --out")
+    if version != __version__:
+        raise CampaignError(
+            f"campaign: {out} was written by gainlink {version or 'older than 0.1.0'}, this is {__version__}: "
+            "its runs would not be reused; give another --out"
+        )
 
 
 class Store:

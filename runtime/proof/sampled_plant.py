@@ -3,8 +3,9 @@
 ``x+ = Ad x + Bd (u - u_op + d)``, ``y = y_op + Cd x + Dd (u_prev - u_op)``: the state is a deviation from the
 operating point, the command ``u`` and the output ``y`` are absolute, ``d`` is a disturbance at the plant's input.
 The feed-through acts on the previous command: the controller computes ``u`` from ``y``, so ``y`` cannot depend on
-the same sample's ``u`` without an algebraic loop. The closed-loop simulation, the float32 fidelity check, PIL's
-artifact plant and the bridge's linear plant all step this class.
+the same sample's ``u`` without an algebraic loop. The closed-loop simulation, the float32 fidelity check and PIL's
+artifact plant step this class; the bridge's linear plant steps the same model through fixed-order products of its
+own (``gainlink.hil.plants.linear.rowsum``), so that a campaign block gives each run the same bits as the run alone.
 """
 
 from __future__ import annotations
