@@ -329,12 +329,10 @@ def _run_block(members: list, records: list, runs: list, blobs: dict) -> None:
     try:
         results = run_block([sc for _, _, sc in members], artifact=artifact, library=_library(artifact))
     except GainlinkError as exc:
-        log.warning("a campaign block of %d runs failed (%s); running each alone", len(members), exc)
+        log.info("a campaign block of %d runs failed (%s); running each alone", len(members), exc)
         return
     if results is None:
-        log.warning(
-            "a campaign block of %d runs steps one by one: its plants are not one vectorised kind", len(members)
-        )
+        log.info("a campaign block of %d runs steps one by one: its plants are not one vectorised kind", len(members))
         return
     share = _stopped(where, cpu0)
     share["cpu_s"] /= len(members)
