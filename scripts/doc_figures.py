@@ -63,7 +63,18 @@ _FIRMWARE_C = (
 )
 _HOST_LINKS = ("hil/loop", "hil/links", "firmware/apps", "firmware/ports/host")
 SOURCES: dict[str, tuple[str, ...]] = {
-    "campaign": ("hil/campaign", "hil/loop/closed_loop.py", "hil/loop/endpoints.py", "bench/campaign.py"),
+    "campaign": (
+        "hil/campaign",
+        "hil/loop/closed_loop.py",
+        "hil/loop/endpoints.py",
+        "hil/loop/block.py",
+        "hil/plants/models.py",
+        "hil/plants/linear.py",
+        "runtime/laws/block.py",
+        "runtime/proof/reference_step.py",
+        "firmware/ports/host/gl_host.c",
+        "bench/campaign.py",
+    ),
     "firmware_cost": (*_FIRMWARE_C, "runtime/firmware/cost.py", "bench/firmware_cost.py"),
     "fixed_point_cost": (*_FIRMWARE_C, "runtime/synthesis/fixed_point.py", "bench/fixed_point_cost.py"),
     "fuzz": ("firmware/fuzz", "firmware/apps", "firmware/src", "bench/fuzz.py"),
@@ -345,7 +356,35 @@ def campaign_block() -> str:
         f"{', '.join(map(str, doc['load_average_after']))}, on {doc['machine_cpus']} CPUs: other work on the machine "
         "takes from the 2-worker side first",
     ]
+    lines += _block_lines(doc.get("blocks"))
     return "\n".join(prose(line, "  ") for line in lines) + "\n\n" + provenance(doc) + "\n"
+
+
+def _block_lines(blocks: dict | None) -> list[str]:
+    """The block benchmark's lines (campaign blocks), when the recording has them."""
+    if not blocks:
+        return ["- campaign blocks: not in this recording (`scripts/bench.sh campaign` records them)"]
+    ten, per_run = blocks["ten_thousand"], blocks["per_run_path"]
+    lines = [
+        f"- blocks, the shipped pendulum campaign at {ten['runs']} runs of {ten['steps_per_run']} steps on 2 workers: "
+        f"**{ten['wall_s']:.1f} s** wall, report included (target {blocks['target_ten_thousand_wall_s']} s; cluster "
+        f"start {ten['cluster_start_s']:.1f} s apart); the runs' own CPU "
+        f"**{ten['runs_own_cpu_per_run_step_us']:.2f} us** per run-step (target "
+        f"{blocks['target_cpu_per_run_step_us']}), {blocks['block_vs_per_run_path']:.0f}x less than the per-run path "
+        f"in the same run ({per_run['cpu_per_run_step_us']:.0f} us; target "
+        f"{blocks['target_block_vs_per_run_path']}x); machinery **{ten['machinery_ratio']:+.0%}** of the runs' own "
+        f"(target {blocks['target_machinery_ratio']:.0%}); client peak RSS +{ten['client_peak_rss_growth_mb']:.0f} MB, "
+        f"worker {ten['worker_rss_mb']:.0f} MB, {ten['result_files']} result files",
+        f"- blocks, 2 workers over 1 (1-2-2-1, {blocks['speedup_runs'][0]['runs']} runs each): "
+        f"**{blocks['speedup_2_vs_1']:.2f}x** (target {blocks['target_speedup']})",
+    ]
+    large = blocks.get("hundred_thousand")
+    if large:
+        lines.append(
+            f"- blocks at {large['runs']} runs: {large['wall_s']:.0f} s wall, client peak RSS "
+            f"+{large['client_peak_rss_growth_mb']:.0f} MB, {large['result_files']} result files"
+        )
+    return lines
 
 
 def loop_rates_block() -> str:
