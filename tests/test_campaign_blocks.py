@@ -331,3 +331,25 @@ def test_resuming_into_another_campaigns_or_versions_folder_is_refused_in_one_li
     (out / "plan.json").write_text(plan if isinstance(plan, str) else json.dumps(plan))
     campaign = _small_campaign_file(tmp_path, "mine")
     assert_refused(["campaign", "run", campaign, "--out", out, "--workers", "1"], phrase, out)
+
+
+def test_a_run_whose_plant_blows_up_ends_in_a_block_as_it_ends_alone():
+    """One run of a block starts spinning at 1e200 rad/s: its plant (and its twin's) overflows in the first sample.
+    It ends there with the reason a run alone gives, its twin off with the same note; the others run on."""
+    from gainlink.hil.campaign.worker import _library
+    from gainlink.hil.loop.block import run_block
+    from gainlink.hil.loop.bridge import run_scenario
+
+    art, scenarios = _pendulum_campaign_points(draws=3, duration=0.5)[0]
+    scs = list(scenarios)
+    scs[1] = dataclasses.replace(scs[1], initial_state={"theta_dot": 1e200})
+    library = _library(art)
+    block = run_block(scs, artifact=art, library=library)
+    alone = [run_scenario(sc, artifact=art, library=library) for sc in scs]
+    assert [r.complete for r in block] == [True, False, True]
+    assert block[1].reason == alone[1].reason and "plant failed at step 0" in block[1].reason
+    assert block[1].metrics.get("twin_off") == alone[1].metrics.get("twin_off") is not None
+    for got, want in zip(block, alone):
+        for name in TRACE_FIELDS:
+            assert np.array_equal(getattr(got.trace, name), getattr(want.trace, name), equal_nan=True), name
+        assert {k: got.metrics.get(k) for k in CONTROL_KEYS} == {k: want.metrics.get(k) for k in CONTROL_KEYS}
