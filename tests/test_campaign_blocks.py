@@ -7,6 +7,7 @@ scipy's ``solve_ivp`` (a tight adaptive integrator) for the kernel's accuracy.
 from __future__ import annotations
 
 import dataclasses
+import logging
 
 import numpy as np
 import pytest
@@ -221,8 +222,6 @@ def test_a_task_steps_what_it_can_in_a_block_and_the_rest_alone_with_the_same_re
     own), one with a nan fault and two on a user's pendulum that overrides ``advance`` without declaring itself
     vectorised (those three run alone); every record equals the run's own ``execute`` (control metrics, measures,
     traces), and each fallback is said once."""
-    import logging
-
     import msgpack
     from gainlink.fileio import read_toml
     from gainlink.hil.campaign import parse_campaign, worker
@@ -353,3 +352,31 @@ def test_a_run_whose_plant_blows_up_ends_in_a_block_as_it_ends_alone():
         for name in TRACE_FIELDS:
             assert np.array_equal(getattr(got.trace, name), getattr(want.trace, name), equal_nan=True), name
         assert {k: got.metrics.get(k) for k in CONTROL_KEYS} == {k: want.metrics.get(k) for k in CONTROL_KEYS}
+
+
+def test_a_bad_run_in_a_block_costs_no_other_its_result(caplog):
+    """One run of a task names a parameter its plant does not have: the block fails, each run runs alone, the bad
+    one records its one-line error and the others the records they get alone."""
+    from gainlink.fileio import read_toml
+    from gainlink.hil.campaign import parse_campaign, worker
+    from gainlink.hil.campaign.plan import plan_campaign
+    from support.paths import EXAMPLES
+
+    path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
+    data, _ = read_toml(path, what="campaign", error=ValueError)
+    data |= {"runs": 3, "spec": str((path.parent / data["spec"]).resolve())}
+    data["grid"][0]["values"] = ["none"]
+    data["scenario"]["duration"] = 0.5
+    plan = plan_campaign(parse_campaign(data))
+    runs = [(p.artifact_sha256, dict(p.scenario), p.seed) for p in plan.runs]
+    plant = dict(runs[1][1]["plant"])
+    plant["parameters"] = dict(plant["parameters"], mass=2.0)
+    runs[1][1]["plant"] = plant
+    with caplog.at_level(logging.INFO, logger="gainlink.hil.campaign.worker"):
+        records = worker.unpack_results(worker.execute_batch("sil", plan.artifacts, runs))
+    assert [r["status"] for r in records] == ["done", "error", "done"]
+    assert ["block of 3 runs failed" in r.getMessage() for r in caplog.records] == [True]
+    assert "no parameter 'mass'" in records[1]["reason"] and "\n" not in records[1]["reason"]
+    for i in (0, 2):
+        want = worker.execute("sil", plan.artifacts[runs[i][0]], runs[i][1], runs[i][2])
+        assert records[i]["trace"] == want["trace"] and records[i]["measures"] == want["measures"]
