@@ -380,3 +380,31 @@ def test_a_bad_run_in_a_block_costs_no_other_its_result(caplog):
     for i in (0, 2):
         want = worker.execute("sil", plan.artifacts[runs[i][0]], runs[i][1], runs[i][2])
         assert records[i]["trace"] == want["trace"] and records[i]["measures"] == want["measures"]
+
+
+def test_each_instance_of_a_block_runs_its_own_gain_set():
+    """Instances 1 and 2 of a block stage gain sets of their own (K and Ki retuned two ways): each row answers as a
+    host C loop alone with that set staged, bit for bit, and the instance left on the built-in set as one on it."""
+    from gainlink.engines.native import NativeLoop
+    from gainlink.firmware.host import HostLawBlock
+    from support.fixed import example
+
+    a = example("pendulum", "float32")
+    block = HostLawBlock(a, 3)
+    alone = [NativeLoop(a, library=block.library) for _ in range(3)]
+    for i, (k, ki) in enumerate(((1.1, 0.9), (0.8, 1.2)), start=1):
+        gains = alone[i].default_gains()
+        gains.K[0][2] *= k
+        gains.Ki[0][0] *= ki
+        gains.crc32 = alone[i].crc32(gains)
+        assert alone[i].stage(gains) == 0 and block.stage(i, gains) == 0
+    rng = np.random.default_rng(2)
+    differ = 0
+    for _ in range(50):  # the same samples to every instance: only their gains tell them apart
+        Y, R = np.tile(rng.normal(0, 0.05, a.p), (3, 1)), np.tile(rng.normal(0, 0.02, a.q), (3, 1))
+        rec = block.step(Y, R)
+        for i, c in enumerate(alone):
+            want = c.step(Y[i], R[i])
+            assert np.array_equal(rec["u"][i], want.u.astype(np.float32))
+        differ += len(set(rec["u"][:, 0].tolist())) == 3
+    assert differ >= 45  # the three sets answer differently

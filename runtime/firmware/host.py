@@ -159,10 +159,20 @@ class HostLawBlock:
         self._block = ctypes.CDLL(str(self.library)).gl_host_law_step_block  # long: releases the GIL
         self._block.argtypes = [_VP, ctypes.c_uint32, _VP, _VP]
         self._out = np.zeros(self.count, dtype=self.dtype)
+        self._staged: dict[int, Any] = {}
 
     def address(self, i: int) -> int:
         """The address of instance ``i``."""
         return self._laws.ctypes.data + i * self._size
+
+    def stage(self, i: int, gains: Any) -> int:
+        """``gl_law_stage`` on instance ``i``: its own gain set (a ctypes ``gl_law_gains_t``, kept referenced here:
+        the law keeps it by address), in force from its next step. Returns the C status (0: staged)."""
+        lib = ctypes.PyDLL(str(self.library))
+        lib.gl_host_law_stage.restype = ctypes.c_int32
+        lib.gl_host_law_stage.argtypes = [_VP, _VP]
+        self._staged[i] = gains
+        return int(lib.gl_host_law_stage(self.address(i), ctypes.addressof(gains)))
 
     def step(self, Y: np.ndarray, R: np.ndarray | None = None, S: np.ndarray | None = None) -> np.ndarray:
         """One sample per instance (row i of ``Y`` (count, p), ``R``, ``S`` to instance i): their records (a view
