@@ -4,7 +4,10 @@ The pendulum example's artifact drives the nonlinear cart-pendulum FMU (built fr
 sources) through the firmware's ``gainlink_can`` node, one sample in flight (lockstep), CAN FD (one
 frame each way) and classic CAN (three measurement frames + one command frame per step), with the
 bridge's default placement (bridge and firmware share one CPU); ``can_fd_unpinned`` is the same run
-left to the kernel's placement (``affinity = "none"``). The baseline,
+left to the kernel's placement (``affinity = "none"``). The runs send the samples on one port of the group and the
+commands come back on the next (``reply_port``: neither end reads back its own frames);
+``can_fd_one_port`` is the CAN FD run with both directions on one port, as python-can's bus is by default (each end
+unpacks the other's frames and its own). The baseline,
 measured in the same run, is the same FMU stepped in-process with the float64 reference law (no bus,
 no process boundary): ``ratio`` = lockstep steps/s / baseline steps/s is what the link costs. A third
 run sets ``busy_poll_us`` (both ends poll without sleeping between samples: two busy cores, fewer
@@ -85,9 +88,17 @@ def _children_cpu() -> float:
 
 
 def lockstep(
-    gains: Path, exe: Path, fmu: Path, steps: int, *, fd: bool, busy_poll_us: int = 0, affinity: str = "auto"
+    gains: Path,
+    exe: Path,
+    fmu: Path,
+    steps: int,
+    *,
+    fd: bool,
+    busy_poll_us: int = 0,
+    affinity: str = "auto",
+    reply: bool = True,
 ) -> dict:
-    transport = multicast_transport(fd=fd, salt=busy_poll_us + fd)
+    transport = multicast_transport(fd=fd, salt=busy_poll_us + fd, reply=reply)
     if busy_poll_us:
         transport["busy_poll_us"] = busy_poll_us
     art = artifact_mod.load(gains)
@@ -142,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         fmu = build_fmu("cart_pendulum")
         base, base_cpu = baseline(art, fmu, args.steps)
         fd = lockstep(gains, exe, fmu, args.steps, fd=True)
+        one_port = lockstep(gains, exe, fmu, args.steps, fd=True, reply=False)
         unpinned = lockstep(gains, exe, fmu, args.steps, fd=True, affinity="none")
         classic = lockstep(gains, exe, fmu, max(1, args.steps // 2), fd=False)
         busy = lockstep(gains, exe, fmu, args.steps, fd=True, busy_poll_us=args.busy_poll_us)
@@ -155,11 +167,14 @@ def main(argv: list[str] | None = None) -> int:
             "cpu_us_per_step": base_cpu,
         },
         "can_fd": fd,
+        "can_fd_one_port": one_port,
         "can_fd_unpinned": unpinned,
         "classic_can": classic,
         "can_fd_busy_poll": {"busy_poll_us": args.busy_poll_us, **busy},
         "ratio": fd["steps_per_s"] / base,
         "cpu": _cpu_figures(fd, base_cpu),
+        "ratio_one_port": one_port["steps_per_s"] / base,
+        "cpu_one_port": _cpu_figures(one_port, base_cpu),
         "ratio_unpinned": unpinned["steps_per_s"] / base,
         "ratio_classic": classic["steps_per_s"] / base,
         "ratio_busy_poll": busy["steps_per_s"] / base,
