@@ -33,13 +33,17 @@ import resource
 import sys
 import tempfile
 import time
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 from _setups import multicast_transport
 from gainlink.hil.links.can_firmware import firmware_can_executable
+from gainlink.hil.links.config import transport_from_config
 from gainlink.hil.loop.bridge import run_scenario
+from gainlink.hil.loop.controller import ControllerProcess
 from gainlink.hil.loop.scenario import parse_scenario
+from gainlink.hil.loop.scheduler import Placement
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.fmu import FmuPlant
 from gainlink.laws import design as design_spec
@@ -134,6 +138,32 @@ def lockstep(
     }
 
 
+def link_floor(gains: Path, exe: Path, steps: int, *, reply: bool = True) -> dict:
+    """The link alone: one CAN FD sample out through the bridge's transport and the firmware's command back,
+    lockstep, both on one CPU as the lockstep runs place them; no plant, no loop, no recording. What a step over
+    python-can costs before the plant and the loop add theirs (CPU per step, this thread's and the firmware's)."""
+    art = artifact_mod.load(gains)
+    transport = transport_from_config(multicast_transport(fd=True, salt=99, reply=reply), artifact=art)
+    y, r = np.zeros(art.p), np.zeros(art.q)
+    with ExitStack() as stack:
+        transport.open()
+        stack.callback(transport.close)
+        peer = ControllerProcess([str(exe), *transport.controller_argv()])
+        stack.callback(peer.close)
+        peer.start()
+        stack.enter_context(Placement("shared", peer_pid=peer.proc.pid))
+        c0, k0, t0 = time.thread_time(), _children_cpu(), time.perf_counter()
+        for k in range(steps):
+            transport.send_frames(transport.encode_sample(seq=k % transport.seq_modulo, y=y, r=r))
+            if transport.receive_command(timeout=0.5) is None:
+                raise SystemExit(f"link floor: no command for sample {k}")
+        wall, loop_cpu = time.perf_counter() - t0, time.thread_time() - c0
+        peer.stop()
+        firmware_cpu = _children_cpu() - k0
+    return {"steps_per_s": steps / wall, "cpu_us_per_step": {"bridge": loop_cpu / steps * 1e6,
+            "firmware": firmware_cpu / steps * 1e6}}  # fmt: skip
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20000)
@@ -152,6 +182,7 @@ def main(argv: list[str] | None = None) -> int:
         exe = firmware_can_executable(art)
         fmu = build_fmu("cart_pendulum")
         base, base_cpu = baseline(art, fmu, args.steps)
+        floor = link_floor(gains, exe, args.steps)
         fd = lockstep(gains, exe, fmu, args.steps, fd=True)
         one_port = lockstep(gains, exe, fmu, args.steps, fd=True, reply=False)
         unpinned = lockstep(gains, exe, fmu, args.steps, fd=True, affinity="none")
@@ -165,6 +196,11 @@ def main(argv: list[str] | None = None) -> int:
             "what": "in-process float64 reference law + same FMU, no bus",
             "steps_per_s": base,
             "cpu_us_per_step": base_cpu,
+        },
+        "link_floor": {
+            "what": "CAN FD sample out, command back through the bridge's transport and the firmware, "
+            "lockstep on one CPU; no plant, no loop",
+            **floor,
         },
         "can_fd": fd,
         "can_fd_one_port": one_port,

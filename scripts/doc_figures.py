@@ -354,11 +354,15 @@ def loop_rates_block() -> str:
     if lock is not None:
         base = lock["baseline"]["steps_per_s"]
         for key, label in (
-            ("can_fd", "CAN FD, bridge and firmware sharing a CPU (default)"),
+            ("can_fd", "CAN FD, commands on a reply_port, bridge and firmware sharing a CPU (the default placement)"),
+            ("can_fd_one_port", "CAN FD, both directions on one port"),
             ("can_fd_unpinned", "CAN FD, placement left to the kernel"),
             ("classic_can", "classic CAN (3 + 1 frames a step)"),
             ("can_fd_busy_poll", "CAN FD, busy polling"),
+            ("link_floor", "the link alone (CAN FD sample out, command back; no plant, no loop)"),
         ):
+            if key not in lock:  # a recording from before the run existed
+                continue
             rate = lock[key]["steps_per_s"]
             rows.append([f"lockstep, udp_multicast: {label}", num(rate), f"{rate / base:.2f} of in-process"])
     mav = result("mavlink_hil")
