@@ -519,3 +519,28 @@ def test_a_bad_reply_port_is_refused_in_one_line(pend, change, says):
     with pytest.raises(TransportError, match=says) as err:
         transport_from_config(config, artifact=load(pend))
     assert "\n" not in str(err.value)
+
+
+def test_with_a_reply_port_each_end_hears_the_other_only():
+    import select
+
+    import can
+    from gainlink.hil.links.can import open_link_buses
+
+    config = {**udp_transport(), "reply_port": udp_port()}
+    plant_rx, plant_tx = open_link_buses(config)
+    node_rx, node_tx = open_link_buses(config, controller=True)
+    try:
+        plant_tx.send(can.Message(arbitration_id=0x110, data=b"sample", is_extended_id=False))
+        got = node_rx.recv(2.0)
+        assert got is not None and bytes(got.data) == b"sample"
+        node_tx.send(can.Message(arbitration_id=0x100, data=b"command", is_extended_id=False))
+        got = plant_rx.recv(2.0)
+        assert got is not None and bytes(got.data) == b"command"
+        # nobody got its own frame back, nor the other direction's: the send-only sockets queue nothing at all
+        assert plant_rx.recv(0.2) is None and node_rx.recv(0.2) is None
+        for bus in (plant_tx, node_tx):
+            assert select.select([bus.fileno()], [], [], 0.2)[0] == []
+    finally:
+        for bus in (plant_rx, plant_tx, node_rx, node_tx):
+            bus.shutdown()

@@ -94,7 +94,7 @@ def reply_port(config: Mapping[str, Any]) -> int | None:
             f'CAN transport: reply_port is for interface = "udp_multicast" (not {config.get("interface")}): '
             "other interfaces do not echo a member's own frames"
         )
-    port = int(config.get("port", 43113))
+    port = config.get("port", 43113)
     if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 65535 or value == port:
         raise TransportError(f"CAN transport: reply_port must be a UDP port 1..65535 other than port {port}")
     return value
