@@ -3,7 +3,7 @@ q15, where its certificate allows) on every Cortex-M board, the image under QEMU
 bit (command words, unsaturated commands, estimate, integrators, flags, float commands), and run
 processor-in-the-loop around the example's model: the image's records equal to the bit-exact model fed the very
 samples it received, step for step, and its commands within the certified closed-loop bound (widened by the
-link's float32 roundings) of the float64 law with the quantised coefficients (gainlink.laws.fixed_pil)."""
+link's float32 roundings) of the float64 law with the quantised coefficients (gainlink.laws.fixed.pil)."""
 
 from __future__ import annotations
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from gainlink.firmware.fixed import FAULT, FixedRun, run_host
 from gainlink.hil.loop.pil import make_plant, run_pil
-from gainlink.laws.fixed_pil import model_records
+from gainlink.laws.fixed.pil import model_records
 from gainlink.laws.image import first_difference
 from gainlink.proof.derived_law import DerivedLoop
 from gainlink.proof.fixed_law import gains_from_artifact

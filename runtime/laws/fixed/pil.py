@@ -1,5 +1,5 @@
 """PIL of a fixed-point law: its integer image's oracle (docs/design.md, fixed point: PIL), the law's block of a PIL
-run (:meth:`gainlink.laws.fixed.FixedLaw.pil_check`).
+run (:meth:`gainlink.laws.fixed.law.FixedLaw.pil_check`).
 
 Two checks of the run the image (``firmware/ports/cortex-m/main.c`` on the integer law) made in closed loop:
 
@@ -23,12 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from ..firmware import fixed as fwfixed
-from ..proof.derived_law import DerivedLoop
-from ..proof.fixed_format import real
-from ..proof.fixed_law import FixedPointLoop
-from ..shipping.artifact import Artifact
-from .image import first_difference
+from ...firmware import fixed as fwfixed
+from ...proof.derived_law import DerivedLoop
+from ...proof.fixed_format import real
+from ...proof.fixed_law import FixedPointLoop
+from ...shipping.artifact import Artifact
+from ..image import first_difference
 
 
 class QuantisedTwin:
@@ -208,8 +208,8 @@ def image_stream(artifact: Artifact, *, target: str, board: str) -> Any:
     """The integer law's replay-only image (``main.c`` on the integer law) and its stream
     (:func:`.image.law_image_stream`): the integer law's records (:func:`gainlink.firmware.fixed.record_dtype`),
     their flags the status flags (the one table), their words ``U`` the step's."""
-    from .base import Step
-    from .image import law_image_stream
+    from ..base import Step
+    from ..image import law_image_stream
 
     def decode(rec: Any) -> Step:
         return Step(u=rec["u"].astype(float), flags=int(rec["flags"]), sat=int(rec["sat"]),

@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from ..proof.derived_law import DerivedLoop
-from ..proof.fixed_format import real
-from ..proof.fixed_law import FixedPointLoop
-from . import flags
+from ...proof.derived_law import DerivedLoop
+from ...proof.fixed_format import real
+from ...proof.fixed_law import FixedPointLoop
+from .. import flags
 
 
 def _model_steps(a: Any, model: Any, Y: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -11,13 +11,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import flags
-from .base import Capabilities, Controller, OneStepVerdict, Step
-from .lq import AGAINST_FLOAT64, LqLaw, PythonLoop, sat_bits
+from .. import flags
+from ..base import Capabilities, Controller, OneStepVerdict, Step
+from ..lq import AGAINST_FLOAT64, LqLaw, PythonLoop, sat_bits
 
 if TYPE_CHECKING:
-    from ..spec import PlantSpec
-    from ..synthesis.pipeline import DesignResult
+    from ...spec import PlantSpec
+    from ...synthesis.pipeline import DesignResult
 
 
 def _as_float32(x: np.ndarray) -> np.ndarray:
@@ -28,7 +28,7 @@ class FixedModel:
     """The integer model (:class:`~gainlink.proof.fixed_law.FixedPointLoop`) as a :class:`Controller`."""
 
     def __init__(self, artifact: Any) -> None:
-        from ..proof.fixed_law import FixedPointLoop
+        from ...proof.fixed_law import FixedPointLoop
 
         self.loop = FixedPointLoop(artifact)
         self.f_u = np.array(artifact.checks["fixed_point"]["formats"]["u"])
@@ -62,7 +62,7 @@ class FixedNative:
     :class:`Controller`."""
 
     def __init__(self, artifact: Any, *, library: Any = None) -> None:
-        from ..engines.fixed_native import FixedNativeLoop
+        from ...engines.fixed_native import FixedNativeLoop
 
         self.loop = FixedNativeLoop(artifact, library=library)
         self.f, self.q = artifact.checks["fixed_point"]["formats"], artifact.q
@@ -82,7 +82,7 @@ class FixedNative:
 
     def state(self) -> np.ndarray:
         """``[xh, z]`` of the last step's record (the integer words in real units)."""
-        from ..proof.fixed_format import real
+        from ...proof.fixed_format import real
 
         rec, f = self.loop.last_record, self.f
         return np.concatenate([real(np.asarray(rec["XH"], dtype=np.int64), f["xh"]),
@@ -110,7 +110,7 @@ class FixedLaw(LqLaw):
         return Capabilities(cannot=CANNOT)
 
     def reference(self, artifact: Any) -> Controller:
-        from ..proof.reference import ReferenceLoop
+        from ...proof.reference import ReferenceLoop
 
         return PythonLoop(ReferenceLoop(artifact), {"kind": "reference (float64 design law)"})
 
@@ -123,22 +123,22 @@ class FixedLaw(LqLaw):
     # -- the design side ----------------------------------------------------------------------------------------
 
     def design(self, spec: PlantSpec) -> DesignResult:
-        from ..synthesis.implementation import fixed_point_check
-        from ..synthesis.pipeline import synthesize_lq
+        from ...synthesis.implementation import fixed_point_check
+        from ...synthesis.pipeline import synthesize_lq
 
         return synthesize_lq(spec, fixed_point_check)
 
     def _replay(self, artifact: Any, engine: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, *,
                 platform: Any) -> Any:  # fmt: skip
         if engine == "reference":
-            from ..proof.reference import ReferenceLoop
+            from ...proof.reference import ReferenceLoop
 
             return ReferenceLoop(artifact).run(Y, R)
         if engine == "model":  # on the float32 samples the C takes: the trace native and qemu give, bit for bit
-            from ..proof.fixed_law import FixedPointLoop
+            from ...proof.fixed_law import FixedPointLoop
 
             return FixedPointLoop(artifact).run(_as_float32(Y), _as_float32(R))
-        from ..engines import fixed as fixed_engine
+        from ...engines import fixed as fixed_engine
 
         if engine == "native":
             return fixed_engine.run_native(artifact, Y, R)
@@ -149,8 +149,8 @@ class FixedLaw(LqLaw):
     ) -> tuple[OneStepVerdict, ...]:
         """The ``reference`` engine's trace against the float64 law within the float32 bound; any other (a trace of
         the integer law, or a trace file of this law's format) bit for bit against the integer law."""
-        from ..proof.fixed_onestep import fixed_one_step_check, trace_words
-        from ..proof.onestep import one_step_check
+        from ...proof.fixed_onestep import fixed_one_step_check, trace_words
+        from ...proof.onestep import one_step_check
 
         if engine == "reference":
             return (OneStepVerdict(AGAINST_FLOAT64, one_step_check(artifact, Y, R, trace)),)
@@ -163,14 +163,14 @@ class FixedLaw(LqLaw):
 
     def records_trace(self, artifact: Any, records: np.ndarray) -> Any:
         """The integer law's records as the real values its words mean (``replay --engine native``'s trace)."""
-        from ..engines.fixed import trace_from_run
-        from ..firmware.fixed import FixedRun
+        from ...engines.fixed import trace_from_run
+        from ...firmware.fixed import FixedRun
 
         return trace_from_run(artifact, FixedRun.from_records(records, artifact.q))
 
     def _arithmetic_lines(self, result: DesignResult) -> list[str]:
         """The certificate's lines, and the deviation measured in closed loop beside the certified bound."""
-        from ..synthesis.fixed_point import describe as describe_fixed_point
+        from ...synthesis.fixed_point import describe as describe_fixed_point
 
         cert, measured = result.fixed_point, result.artifact["checks"]["fixed_point"]["measured"]
         got, bound = measured["max_abs_u_unsaturated"], measured["bound_closed_loop"]
@@ -192,7 +192,7 @@ class FixedLaw(LqLaw):
     def read_trace(self, path: str | Path, artifact: Any) -> Any:
         """A trace of this law's format, refused in one line unless its commands are words of the artifact's
         command format (read before anything is replayed, so a wrong file writes nothing)."""
-        from ..proof.fixed_onestep import trace_words
+        from ...proof.fixed_onestep import trace_words
 
         trace = super().read_trace(path, artifact)
         trace_words(artifact, trace, f"comparison file {path}")
@@ -203,34 +203,34 @@ class FixedLaw(LqLaw):
     def run_report(self, artifact: Any, trace: Any, *, ran: str | None, design_model: bool) -> dict:
         if ran is None:  # the float64 design law ran: nothing of the integer law to check
             return {}
-        from .fixed_run import run_check
+        from .run import run_check
 
         check = run_check(artifact, trace, model=self.model(artifact), ran=ran, design_model=design_model)
         return {"fixed_point": check}
 
     def report_lines(self, metrics: Mapping[str, Any]) -> list[str]:
-        from .fixed_run import summary_lines
+        from .run import summary_lines
 
         return summary_lines(metrics.get("fixed_point"))
 
     def image_stream(self, artifact: Any, *, target: str, board: str) -> Any:
-        from .fixed_pil import image_stream
+        from .pil import image_stream
 
         return image_stream(artifact, target=target, board=board)
 
     def pil_check(self, artifact: Any, records: np.ndarray, *, Y: np.ndarray, R: np.ndarray, S: np.ndarray,
                   trace: Any, twin_u: np.ndarray | None, design_model: bool, check_plant: Any) -> dict:  # fmt: skip
-        from .fixed_pil import pil_check
+        from .pil import pil_check
 
         return pil_check(artifact, records, Y=Y, R=R, design_u=twin_u, design_model=design_model,
                          check_plant=check_plant)  # fmt: skip
 
     def pil_lines(self, summary: Mapping[str, Any]) -> list[str]:
-        from .fixed_pil import pil_lines
+        from .pil import pil_lines
 
         return pil_lines(summary.get("fixed_point"))
 
     def cost(self, artifact: Any, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
-        from .fixed_pil import cost
+        from .pil import cost
 
         return cost(artifact, target=target, board=board, Y=Y, R=R, S=S)
