@@ -20,9 +20,7 @@ from ..proof.reference import Trace
 from ..shipping import gains_layout
 from ..shipping.artifact import Artifact
 from ..shipping.codegen import shape_of
-from ..shipping.codegen_fixed import is_fixed
 from ..shipping.records import column
-from . import fixed as fixed_engine
 
 
 @dataclass(frozen=True)
@@ -132,24 +130,3 @@ def trace_from_raw(raw: dict[str, np.ndarray], *, m: int) -> Trace:
         z=raw["z"].astype(np.float64),
         fault=raw["fault"].astype(bool),
     )
-
-
-def run(artifact: Artifact, Y: np.ndarray, R: np.ndarray) -> Trace:
-    """Replay ``Y`` (N, p) and ``R`` (N, q) through the host C library from the artifact's initial state.
-
-    Parameters
-    ----------
-    artifact : Artifact
-        The artifact (its host library is built and cached on first use).
-    Y, R : ndarray
-        Measurements and references, one row per step (cast to float32).
-
-    Returns
-    -------
-    Trace
-        The C loop's outputs (float32 values as float64 arrays); for a fixed-point artifact, the integer
-        loop's (:mod:`gainlink.engines.fixed`).
-    """
-    if is_fixed(artifact):
-        return fixed_engine.run_native(artifact, Y, R)
-    return NativeLoop(artifact).run(Y, R)

@@ -129,7 +129,8 @@ class LqLaw(Law):
             from ..engines.native import NativeLoop
 
             return NativeLoop(artifact).run(Y, R)
-        from ..engines.qemu import run_raw, trace_from_raw
+        from ..engines.native import trace_from_raw
+        from ..engines.qemu import run_raw
 
         raw = run_raw(artifact, Y, R, target=platform.target.name, board=platform.board.name)
         return trace_from_raw(raw, m=artifact.m)

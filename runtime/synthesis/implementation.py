@@ -1,16 +1,14 @@
 """The spec's ``[implementation]`` choices applied to a designed artifact: the realisation of the estimate and the
 compensator's stability (:func:`realise`, every observer-based law), then the law's own check of its arithmetic,
-recorded in ``checks`` with its warnings: the float32 closed-loop fidelity (:func:`float32_check`) or a fixed-point
-law's certificate and measured fidelity (:func:`fixed_point_check`)."""
+recorded in ``checks`` with its warnings: the float32 closed-loop fidelity (:func:`float32_check`); a fixed-point law's
+certificate is its family's (:func:`gainlink.laws.fixed.design.fixed_point_check`)."""
 
 from __future__ import annotations
 
 from ..proof.fidelity import Float32Fidelity, float32_fidelity
-from ..proof.fixed_fidelity import fixed_point_fidelity
 from ..shipping.artifact import Artifact, from_dict, seal
 from ..spec import ImplementationSpec, PlantSpec
 from .compensator import CompensatorStability, compensator_stability
-from .fixed_point import FixedPointCertificate, certificate_dict, certify
 from .realization import apply, transformation
 
 
@@ -43,18 +41,6 @@ def float32_check(data: dict, spec: PlantSpec, warnings: list[str]) -> dict[str,
             better = float32_fidelity(from_dict(seal(_realised(data, "balanced")))).max_rel_u
         warnings.append(fidelity.warning(kind, balanced=better))
     return {"float32": fidelity}
-
-
-def fixed_point_check(data: dict, spec: PlantSpec, warnings: list[str]) -> dict[str, FixedPointCertificate]:
-    """Certify the fixed-point law for the spec's declared ranges, record it in ``checks.fixed_point`` with the
-    measured closed-loop deviation (``fixed_point`` of the design result)."""
-    impl, lim = spec.implementation, spec.limits
-    ranges = {"y_min": lim.y_min, "y_max": lim.y_max, "r_min": lim.r_min, "r_max": lim.r_max}
-    cert = certify(from_dict(seal(data)), ranges, numeric=impl.numeric, max_error=impl.fixed_point_max_error)
-    data["checks"]["fixed_point"] = certificate_dict(cert)
-    measured = fixed_point_fidelity(from_dict(seal(data)))
-    data["checks"]["fixed_point"]["measured"] = measured.to_dict()
-    return {"fixed_point": cert}
 
 
 def _realised(data: dict, kind: str) -> dict:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,13 +26,15 @@ from .compensator import CompensatorStability
 from .controller import controller_gain
 from .deadtime import DeadTimeCheck, dead_time_check
 from .discretize import Discretised, augment, discretise
-from .fixed_point import FixedPointCertificate
 from .implementation import realise
 from .loop import closed_loop_poles
 from .margins import ChannelMargin, input_margins, loop_bandwidth
 from .observer import observer_gain
 from .record import Gains, artifact_data
-from .schedule import ScheduleDesign
+
+if TYPE_CHECKING:  # the laws' own results (gainlink.laws.fixed, gainlink.laws.scheduled fill them)
+    from .fixed_point import FixedPointCertificate
+    from .schedule import ScheduleDesign
 
 log = logging.getLogger(__name__)
 

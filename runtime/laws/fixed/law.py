@@ -123,8 +123,8 @@ class FixedLaw(LqLaw):
     # -- the design side ----------------------------------------------------------------------------------------
 
     def design(self, spec: PlantSpec) -> DesignResult:
-        from ...synthesis.implementation import fixed_point_check
         from ...synthesis.pipeline import synthesize_lq
+        from .design import fixed_point_check
 
         return synthesize_lq(spec, fixed_point_check)
 
