@@ -1,4 +1,4 @@
-"""The fixed-point C (firmware/src/gl_fixed.c) against the bit-exact integer model gainlink.proof.fixed_law: the
+"""The fixed-point C (firmware/src/gl_fixed.c) against the bit-exact integer model gainlink.laws.fixed.model: the
 host build step for step (command words, unsaturated commands, estimate, integrators, every flag) on the three
 examples (q31; q15 where the certificate allows it: wood_berry) and on seeded random designs (both observer forms,
 clamp and back-calculation, q31 and q15); samples outside their ranges clipped and flagged, a NaN refused with the
@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from gainlink.fileio import read_toml
 from gainlink.firmware.build import build
-from gainlink.firmware.fixed import CLIPPED, FAULT, OVERFLOW, OVERFLOW_BITS, run_host, run_qemu
-from gainlink.proof.fixed_format import WORDS, real
-from gainlink.proof.fixed_law import gains_from_artifact
+from gainlink.laws.fixed.firmware import CLIPPED, FAULT, OVERFLOW, OVERFLOW_BITS, run_host, run_qemu
+from gainlink.laws.fixed.model import gains_from_artifact
+from gainlink.laws.fixed.qformat import WORDS, real
 from gainlink.shipping.artifact import from_dict, seal
 from gainlink.shipping.codegen import render_c
 from support.designs import designed

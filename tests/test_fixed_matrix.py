@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from gainlink.firmware.fixed import run_host, run_qemu
 from gainlink.firmware.targets import BOARDS
 from gainlink.hil.loop.pil import make_plant, run_pil
+from gainlink.laws.fixed.firmware import run_host, run_qemu
 from support.fixed import example
 
 pytestmark = pytest.mark.matrix

@@ -4,7 +4,7 @@ its MAVLink node too, and takes a re-designed set of integers over the UART as t
 On the cores without an FPU, where fixed point matters (M3: mps2-an385; M0: the micro:bit, whose 16 KiB of RAM
 hold the slcan node of a fixed-point export but not the MAVLink node), the q31 pendulum is served by the image over
 slcan in QEMU, in closed loop with the cart-pendulum FMU. Oracles: the host CAN app on the same scenario (the same C,
-so the same closed loop bit for bit), and the bit-exact integer model (``gainlink.proof.fixed_law``) on the samples
+so the same closed loop bit for bit), and the bit-exact integer model (``gainlink.laws.fixed.model``) on the samples
 the image received.
 """
 
@@ -19,9 +19,9 @@ from gainlink.errors import FirmwareError
 from gainlink.firmware.build import build
 from gainlink.firmware.uart import QemuUart
 from gainlink.hil.loop.bridge import run_scenario
+from gainlink.laws.fixed.model import FixedPointLoop
+from gainlink.laws.fixed.qformat import real
 from gainlink.mavlink.fixed_params import fixed_firmware_params
-from gainlink.proof.fixed_format import real
-from gainlink.proof.fixed_law import FixedPointLoop
 from gainlink.proof.float32_law import Float32Loop
 from support.cli import assert_refused, run_cli
 from support.fixed import example, model_run, pendulum_design

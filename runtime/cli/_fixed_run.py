@@ -13,11 +13,11 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ..engines.fixed import trace_from_run
 from ..errors import DataError
 from ..fileio import atomic_write_text
-from ..firmware.fixed import CLIPPED, FAULT, OVERFLOW, FixedRun
 from ..laws import law_of
+from ..laws.fixed.engines import trace_from_run
+from ..laws.fixed.firmware import CLIPPED, FAULT, OVERFLOW, FixedRun
 from ..proof.replay_io import read_samples
 from ..shipping.artifact import Artifact
 from ._host_exec import answer_samples, parse_records

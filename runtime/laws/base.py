@@ -125,7 +125,7 @@ class OneStepVerdict:
     """A one-step (resynchronised) check of a trace, and what the trace was checked against.
 
     ``check`` has ``passed``, ``summary()`` and ``first_failure.describe(name)``
-    (:class:`~gainlink.proof.onestep.OneStepCheck` or :class:`~gainlink.proof.fixed_onestep.FixedOneStepCheck`).
+    (:class:`~gainlink.proof.onestep.OneStepCheck` or :class:`~gainlink.laws.fixed.onestep.FixedOneStepCheck`).
     """
 
     against: str

@@ -28,7 +28,7 @@ STEP_NAME = "gl_fixed_step.h"
 COEFFICIENT_BITS = {"q31": 32, "q15": 16}
 ANTI_WINDUP_CODES = {"none": 0, "clamp": 1, "backcalc": 2}
 
-# each row's blocks in the order of fixed_law: (block, signal group); signal groups as in gl_fixed.h
+# each row's blocks in the order of laws.fixed.model: (block, signal group); signal groups as in gl_fixed.h
 ROWS = {
     "v": (("KX", "XH"), ("KY", "DY"), ("KZ", "Z")),
     "z": (("TR", "R"), ("TY", "Y"), ("KAW", "W")),
@@ -86,7 +86,7 @@ def range_keys(lo: float, hi: float) -> tuple[int, int]:
 
 
 def quantise(x: float, frac: int) -> int:
-    """``floor(x 2**frac + 1/2)``, exactly (as gainlink.proof.fixed_format.quantise)."""
+    """``floor(x 2**frac + 1/2)``, exactly (as gainlink.laws.fixed.qformat.quantise)."""
     s = math.ldexp(float(x), int(frac))
     q = math.floor(s)
     return q + (1 if s - q >= 0.5 else 0)

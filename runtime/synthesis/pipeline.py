@@ -33,7 +33,7 @@ from .observer import observer_gain
 from .record import Gains, artifact_data
 
 if TYPE_CHECKING:  # the laws' own results (gainlink.laws.fixed, gainlink.laws.scheduled fill them)
-    from .fixed_point import FixedPointCertificate
+    from ..laws.fixed.certificate import FixedPointCertificate
     from .schedule import ScheduleDesign
 
 log = logging.getLogger(__name__)

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from gainlink.proof.fixed_format import real
-from gainlink.proof.fixed_law import FixedPointLoop
+from gainlink.laws.fixed.model import FixedPointLoop
+from gainlink.laws.fixed.qformat import real
 from gainlink.proof.float32_law import Float32Loop
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE
@@ -76,7 +76,7 @@ class Float32Oracle:
 
 
 class FixedOracle:
-    """The integer law's bit-exact model (gainlink.proof.fixed_law): fault, a sample or reference clipped to its
+    """The integer law's bit-exact model (gainlink.laws.fixed.model): fault, a sample or reference clipped to its
     declared range, the second-line saturation (any variable it clipped), saturation."""
 
     def __init__(self, a: Artifact) -> None:

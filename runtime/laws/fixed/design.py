@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from ...proof.fixed_fidelity import fixed_point_fidelity
 from ...shipping.artifact import from_dict, seal
-from ...synthesis.fixed_point import FixedPointCertificate, certificate_dict, certify
+from .certificate import FixedPointCertificate, certificate_dict, certify
+from .fidelity import fixed_point_fidelity
 
 if TYPE_CHECKING:
     from ...spec import PlantSpec

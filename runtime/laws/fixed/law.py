@@ -25,10 +25,10 @@ def _as_float32(x: np.ndarray) -> np.ndarray:
 
 
 class FixedModel:
-    """The integer model (:class:`~gainlink.proof.fixed_law.FixedPointLoop`) as a :class:`Controller`."""
+    """The integer model (:class:`~gainlink.laws.fixed.model.FixedPointLoop`) as a :class:`Controller`."""
 
     def __init__(self, artifact: Any) -> None:
-        from ...proof.fixed_law import FixedPointLoop
+        from .model import FixedPointLoop
 
         self.loop = FixedPointLoop(artifact)
         self.f_u = np.array(artifact.checks["fixed_point"]["formats"]["u"])
@@ -58,11 +58,11 @@ class FixedModel:
 
 
 class FixedNative:
-    """The host C's integer loop (:class:`~gainlink.engines.fixed_native.FixedNativeLoop`) as a
+    """The host C's integer loop (:class:`~gainlink.laws.fixed.native.FixedNativeLoop`) as a
     :class:`Controller`."""
 
     def __init__(self, artifact: Any, *, library: Any = None) -> None:
-        from ...engines.fixed_native import FixedNativeLoop
+        from .native import FixedNativeLoop
 
         self.loop = FixedNativeLoop(artifact, library=library)
         self.f, self.q = artifact.checks["fixed_point"]["formats"], artifact.q
@@ -82,7 +82,7 @@ class FixedNative:
 
     def state(self) -> np.ndarray:
         """``[xh, z]`` of the last step's record (the integer words in real units)."""
-        from ...proof.fixed_format import real
+        from .qformat import real
 
         rec, f = self.loop.last_record, self.f
         return np.concatenate([real(np.asarray(rec["XH"], dtype=np.int64), f["xh"]),
@@ -135,10 +135,10 @@ class FixedLaw(LqLaw):
 
             return ReferenceLoop(artifact).run(Y, R)
         if engine == "model":  # on the float32 samples the C takes: the trace native and qemu give, bit for bit
-            from ...proof.fixed_law import FixedPointLoop
+            from .model import FixedPointLoop
 
             return FixedPointLoop(artifact).run(_as_float32(Y), _as_float32(R))
-        from ...engines import fixed as fixed_engine
+        from . import engines as fixed_engine
 
         if engine == "native":
             return fixed_engine.run_native(artifact, Y, R)
@@ -149,8 +149,8 @@ class FixedLaw(LqLaw):
     ) -> tuple[OneStepVerdict, ...]:
         """The ``reference`` engine's trace against the float64 law within the float32 bound; any other (a trace of
         the integer law, or a trace file of this law's format) bit for bit against the integer law."""
-        from ...proof.fixed_onestep import fixed_one_step_check, trace_words
         from ...proof.onestep import one_step_check
+        from .onestep import fixed_one_step_check, trace_words
 
         if engine == "reference":
             return (OneStepVerdict(AGAINST_FLOAT64, one_step_check(artifact, Y, R, trace)),)
@@ -163,14 +163,14 @@ class FixedLaw(LqLaw):
 
     def records_trace(self, artifact: Any, records: np.ndarray) -> Any:
         """The integer law's records as the real values its words mean (``replay --engine native``'s trace)."""
-        from ...engines.fixed import trace_from_run
-        from ...firmware.fixed import FixedRun
+        from .engines import trace_from_run
+        from .firmware import FixedRun
 
         return trace_from_run(artifact, FixedRun.from_records(records, artifact.q))
 
     def _arithmetic_lines(self, result: DesignResult) -> list[str]:
         """The certificate's lines, and the deviation measured in closed loop beside the certified bound."""
-        from ...synthesis.fixed_point import describe as describe_fixed_point
+        from .certificate import describe as describe_fixed_point
 
         cert, measured = result.fixed_point, result.artifact["checks"]["fixed_point"]["measured"]
         got, bound = measured["max_abs_u_unsaturated"], measured["bound_closed_loop"]
@@ -192,7 +192,7 @@ class FixedLaw(LqLaw):
     def read_trace(self, path: str | Path, artifact: Any) -> Any:
         """A trace of this law's format, refused in one line unless its commands are words of the artifact's
         command format (read before anything is replayed, so a wrong file writes nothing)."""
-        from ...proof.fixed_onestep import trace_words
+        from .onestep import trace_words
 
         trace = super().read_trace(path, artifact)
         trace_words(artifact, trace, f"comparison file {path}")

@@ -3,7 +3,7 @@ run (:meth:`gainlink.laws.fixed.law.FixedLaw.pil_check`).
 
 Two checks of the run the image (``firmware/ports/cortex-m/main.c`` on the integer law) made in closed loop:
 
-- **bit for bit**: the bit-exact model (:class:`~gainlink.proof.fixed_law.FixedPointLoop`) fed the very float32
+- **bit for bit**: the bit-exact model (:class:`~gainlink.laws.fixed.model.FixedPointLoop`) fed the very float32
   samples and references the image received, from the initial state, must write the image's records step for
   step: command words, unsaturated commands, estimate, integrators, saturation, clip and overflow masks, fault
   flag and the float command;
@@ -13,7 +13,7 @@ Two checks of the run the image (``firmware/ports/cortex-m/main.c`` on the integ
   loop) and no sample is clipped, ``|u - u_q|`` is what ``checks.fixed_point.error.closed_loop`` bounds, around the
   design model. PIL carries samples and commands as float32, roundings the certificate's budget does not hold (it is
   about the law between the floats the C receives and returns), so the oracle is the same bound with them added
-  (:func:`gainlink.synthesis.fixed_link.bound_float32_link`); both are reported.
+  (:func:`gainlink.laws.fixed.link.bound_float32_link`); both are reported.
 """
 
 from __future__ import annotations
@@ -23,12 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from ...firmware import fixed as fwfixed
 from ...proof.derived_law import DerivedLoop
-from ...proof.fixed_format import real
-from ...proof.fixed_law import FixedPointLoop
 from ...shipping.artifact import Artifact
 from ..image import first_difference
+from . import firmware as fwfixed
+from .model import FixedPointLoop
+from .qformat import real
 
 
 class QuantisedTwin:
@@ -111,7 +111,7 @@ class FixedPilCheck:
 
 
 def model_records(a: Artifact, Y: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """The records the C writes (:func:`gainlink.firmware.fixed.record_dtype`), from the bit-exact model fed
+    """The records the C writes (:func:`gainlink.laws.fixed.firmware.record_dtype`), from the bit-exact model fed
     float32 samples ``Y`` (N, p) and references ``R`` (N, q) from the initial state."""
     loop = FixedPointLoop(a)
     out = np.zeros(Y.shape[0], dtype=fwfixed.record_dtype(a))
@@ -150,7 +150,7 @@ def fixed_pil_check(
     a : Artifact
         The fixed-point artifact.
     records : ndarray
-        The image's output records, one per step (:func:`gainlink.firmware.fixed.record_dtype`).
+        The image's output records, one per step (:func:`gainlink.laws.fixed.firmware.record_dtype`).
     Y, R : ndarray
         The samples (N, p) and references (N, q) sent to the image (cast to float32 on the way).
     quantised : QuantisedTwin, optional
@@ -160,7 +160,7 @@ def fixed_pil_check(
     model_plant : bool
         Whether the plant is the design model (the certificate's premise).
     """
-    from gainlink.synthesis.fixed_link import bound_float32_link  # SciPy: not imported by a float32 run
+    from gainlink.laws.fixed.link import bound_float32_link  # SciPy: not imported by a float32 run
 
     fp = a.checks["fixed_point"]
     err = fp["error"]
@@ -206,7 +206,7 @@ def _floats(x) -> list[float] | None:
 
 def image_stream(artifact: Artifact, *, target: str, board: str) -> Any:
     """The integer law's replay-only image (``main.c`` on the integer law) and its stream
-    (:func:`.image.law_image_stream`): the integer law's records (:func:`gainlink.firmware.fixed.record_dtype`),
+    (:func:`.image.law_image_stream`): the integer law's records (:func:`gainlink.laws.fixed.firmware.record_dtype`),
     their flags the status flags (the one table), their words ``U`` the step's."""
     from ..base import Step
     from ..image import law_image_stream

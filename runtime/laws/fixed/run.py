@@ -4,7 +4,7 @@
 The controller names the law it ran (``ran``: a node's ready line says ``law=q31`` or ``law=q15``; a float node
 names none). After the run, with every sample answered:
 
-- **bit for bit**: the bit-exact model (:class:`~gainlink.proof.fixed_law.FixedPointLoop`, as the law's ``model``)
+- **bit for bit**: the bit-exact model (:class:`~gainlink.laws.fixed.model.FixedPointLoop`, as the law's ``model``)
   fed the float32 samples and references the controller received (NaN where a ``nan`` fault replaced the sample),
   from the initial state, must give the float32 command, the saturation bits and the status flags (fault, clipped,
   overflow) the controller returned, step for step;
@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 
 from ...proof.derived_law import DerivedLoop
-from ...proof.fixed_format import real
-from ...proof.fixed_law import FixedPointLoop
 from .. import flags
+from .model import FixedPointLoop
+from .qformat import real
 
 
 def _model_steps(a: Any, model: Any, Y: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

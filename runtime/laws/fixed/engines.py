@@ -1,8 +1,8 @@
 """The fixed-point C as replay engines: ``native`` and ``qemu`` run it for a fixed-point artifact.
 
 A fixed-point artifact's implementation is the integer law, so ``replay --engine native`` runs the host build of
-``firmware/src/gl_fixed.c`` and ``--engine qemu`` its Cortex-M image (:mod:`gainlink.firmware.fixed`); ``fixed``
-runs the bit-exact model (:mod:`gainlink.proof.fixed_law`). All three give the same trace, bit for bit: the
+``firmware/src/gl_fixed.c`` and ``--engine qemu`` its Cortex-M image (:mod:`gainlink.laws.fixed.firmware`); ``fixed``
+runs the bit-exact model (:mod:`gainlink.laws.fixed.model`). All three give the same trace, bit for bit: the
 command words, estimate and integrators in real units (``X 2**-f``, exact in double), the saturation and fault
 flags.
 """
@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..firmware import fixed as fwfixed
-from ..firmware.targets import resolve_cortex_m
-from ..proof.fixed_format import real
-from ..proof.reference import Trace
-from ..shipping.artifact import Artifact
+from ...firmware.targets import resolve_cortex_m
+from ...proof.reference import Trace
+from ...shipping.artifact import Artifact
+from . import firmware as fwfixed
+from .qformat import real
 
 
 def trace_from_run(a: Artifact, run: fwfixed.FixedRun) -> Trace:

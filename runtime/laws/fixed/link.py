@@ -10,7 +10,7 @@ the plant is simulated in float64 and its samples travel as float32, while the f
 exactly), each sample and reference carries one more error, at most half a float32 ulp of the largest magnitude
 in its declared range; in q31 that is far more than half a unit of the formats (a float32 has 24 significant
 bits). The commands need nothing more: the float the C returns is what drives the plant.
-:func:`bound_float32_link` is the certificate's closed-loop bound (:func:`~.fixed_error.closed_loop_bound`: the
+:func:`bound_float32_link` is the certificate's closed-loop bound (:func:`~.error.closed_loop_bound`: the
 same quantised coefficients, design model and WCPG) with those errors added.
 """
 
@@ -20,10 +20,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..proof.fixed_law import gains_from_artifact
-from ..shipping.artifact import Artifact
-from .fixed_error import closed_loop_bound
-from .fixed_formats import rounding
+from ...shipping.artifact import Artifact
+from .error import closed_loop_bound
+from .formats import rounding
+from .model import gains_from_artifact
 
 
 def float32_half_ulp(lo, hi) -> np.ndarray:

@@ -10,10 +10,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import DesignError
-from ..proof.derived_law import DerivedLaw
-from ..proof.fixed_format import WORDS, Format, format_for, quantise, real
-from ..proof.fixed_gains import (
+from ...errors import DesignError
+from ...proof.derived_law import DerivedLaw
+from ...synthesis.wcpg import spectral_radius
+from .gains import (
     FixedGains,
     SignalFormats,
     command_integers,
@@ -21,8 +21,8 @@ from ..proof.fixed_gains import (
     finest_accumulator_fracs,
     quantise_law,
 )
-from .fixed_ranges import InputRanges, RangeBounds, Rounding, range_bounds
-from .wcpg import spectral_radius
+from .qformat import WORDS, Format, format_for, quantise, real
+from .ranges import InputRanges, RangeBounds, Rounding, range_bounds
 
 ACC_LIMIT = 2.0**62  # the integer model's guard: partial sums stay below it
 MAX_ROUNDS = 8

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..firmware import fixed as fwfixed
-from ..firmware.host import HostLaw
-from ..shipping.artifact import Artifact
-from .native import StepOutput
+from ...engines.native import StepOutput
+from ...firmware.host import HostLaw
+from ...shipping.artifact import Artifact
+from . import firmware as fwfixed
 
 
 class FixedNativeLoop:

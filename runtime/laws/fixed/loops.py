@@ -25,8 +25,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..proof.ball import balls, precise
-from ..proof.derived_law import DerivedLaw
+from ...proof.ball import balls, precise
+from ...proof.derived_law import DerivedLaw
 
 INPUTS = ("r", "ny", "nop", "nr", "rv", "ru", "rz", "rx", "d")
 

@@ -6,7 +6,7 @@ saturating input disturbance), with the reference step (or initial offset) scale
 undisturbed run keeps the samples and references within half their declared ranges' room around the operating
 point (the certificate's premise; beyond the ranges samples are clipped, and that is measured as clipping), is
 run three times around the design plant: the integer law
-(:class:`~gainlink.proof.fixed_law.FixedPointLoop`), the float64 law with the same quantised coefficients and
+(:class:`~gainlink.laws.fixed.model.FixedPointLoop`), the float64 law with the same quantised coefficients and
 sample clip (:class:`~gainlink.proof.derived_law.DerivedLoop` on ``FixedGains.ideal``: what the rounding bound is
 about) and the design's float64 law (:class:`~gainlink.proof.reference.ReferenceLoop`). Reported, per input:
 
@@ -23,11 +23,15 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from ..shipping.artifact import Artifact
-from .derived_law import DerivedLoop
-from .fidelity import _scenario_and_reference_run, _simulate, artifact_point  # the float32 check's scenario, shared
-from .fixed_law import FixedPointLoop
-from .reference import ReferenceLoop, StepResult
+from ...proof.derived_law import DerivedLoop
+from ...proof.fidelity import (  # the float32 check's scenario, shared
+    _scenario_and_reference_run,
+    _simulate,
+    artifact_point,
+)
+from ...proof.reference import ReferenceLoop, StepResult
+from ...shipping.artifact import Artifact
+from .model import FixedPointLoop
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ host executable and the image are the same ones every law has, and write the law
 (:func:`gainlink.shipping.records.layout`): status, flags (the one flag table), saturation, the float commands, the
 command words ``U``, the unsaturated commands ``V``, the estimate ``XH``, the integrators ``Z`` and the clip and
 overflow masks. :class:`FixedRun` holds them as arrays; the reference is
-:class:`gainlink.proof.fixed_law.FixedPointLoop`, bit for bit.
+:class:`gainlink.laws.fixed.model.FixedPointLoop`, bit for bit.
 """
 
 from __future__ import annotations
@@ -16,16 +16,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FirmwareError
-from ..shipping import flags as status_flags
-from ..shipping import records
-from ..shipping.artifact import Artifact
-from ..shipping.codegen_fixed import is_fixed
-from . import qemu as fwqemu
-from . import targets as _targets
-from .build import BuildResult, build
-from .cost import StepCost, count_step_instructions
-from .host import HostLaw
+from ...errors import FirmwareError
+from ...firmware import qemu as fwqemu
+from ...firmware import targets as _targets
+from ...firmware.build import BuildResult, build
+from ...firmware.cost import StepCost, count_step_instructions
+from ...firmware.host import HostLaw
+from ...shipping import flags as status_flags
+from ...shipping import records
+from ...shipping.artifact import Artifact
+from ...shipping.codegen_fixed import is_fixed
 
 FAULT, CLIPPED, OVERFLOW = status_flags.FAULT, status_flags.CLIPPED, status_flags.OVERFLOW
 OVERFLOW_BITS = {"dY": 1, "V": 2, "dU": 4, "Uv-V": 8, "Z": 16, "XH": 32}  # GL_FX_OVF_* of gl_fixed.h

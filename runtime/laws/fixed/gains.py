@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .derived_law import DerivedLaw
-from .fixed_format import WORDS, Format, format_for, quantise, quantise_inward, real
+from ...proof.derived_law import DerivedLaw
+from .qformat import WORDS, Format, format_for, quantise, quantise_inward, real
 
 
 @dataclass(frozen=True)

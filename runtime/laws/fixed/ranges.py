@@ -26,10 +26,10 @@ from fractions import Fraction
 
 import numpy as np
 
-from ..errors import DesignError
-from ..proof.ball import balls, mid, precise
-from ..proof.derived_law import DerivedLaw
-from .wcpg import PeakGain, wcpg_ball
+from ...errors import DesignError
+from ...proof.ball import balls, mid, precise
+from ...proof.derived_law import DerivedLaw
+from ...synthesis.wcpg import PeakGain, wcpg_ball
 
 
 @dataclass(frozen=True)

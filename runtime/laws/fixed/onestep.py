@@ -1,6 +1,6 @@
 """The one-step check of a fixed-point artifact: every step of a trace against the bit-exact integer law.
 
-A fixed-point artifact's implementation is the integer law (:mod:`.fixed_law`), so there is no rounding to bound:
+A fixed-point artifact's implementation is the integer law (:mod:`.model`), so there is no rounding to bound:
 before each step ``k`` the law is put into the trace's own state after step ``k - 1`` (the artifact's initial
 ``XH0``, ``Z0`` for step 0), runs step ``k`` on the same samples (cast to float32, as the C takes them), and the
 trace's fault flag, command words ``U``, saturation flags and next state ``XH``, ``Z`` must equal the law's bit
@@ -20,11 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import DataError
-from ..shipping.artifact import Artifact
-from .fixed_format import WORDS, quantise
-from .fixed_law import FixedPointLoop
-from .reference import Trace
+from ...errors import DataError
+from ...proof.reference import Trace
+from ...shipping.artifact import Artifact
+from .model import FixedPointLoop
+from .qformat import WORDS, quantise
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """The fixed-point law on integers, bit for bit what the C does (as :mod:`gainlink.proof.float32_law` is for the
 float C): the reference a fixed-point C build is tested against.
 
-Formats, integers and their names are those of :class:`~gainlink.proof.fixed_gains.FixedGains`: a signal in
+Formats, integers and their names are those of :class:`~gainlink.laws.fixed.gains.FixedGains`: a signal in
 format ``f`` is an integer ``X`` meaning ``X * 2**-f``. Words: q31 = 32-bit coefficients, samples (``Y``,
 ``R``, ``dY``) and commands (``U``, ``dU``); q15 = 16-bit ones; both keep ``XH``, ``Z``, ``V`` and ``Uv - V`` in
 32 bits and every accumulator in 64. A coefficient is a mantissa ``C`` and a left shift ``E``; each product
@@ -44,11 +44,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ArtifactError
-from ..shipping.artifact import Artifact
-from .fixed_format import WORDS, quantise, real
-from .fixed_gains import Block, FixedGains, SignalFormats, from_integers
-from .reference import StepResult, Trace
+from ...errors import ArtifactError
+from ...proof.reference import StepResult, Trace
+from ...shipping.artifact import Artifact
+from .gains import Block, FixedGains, SignalFormats, from_integers
+from .qformat import WORDS, quantise, real
 
 _INT64 = 1 << 63
 

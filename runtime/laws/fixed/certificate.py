@@ -1,6 +1,6 @@
 """The fixed-point certificate of a design: formats, no overflow, and how far the command can be from the float64
-law (docs/design.md, fixed point; the parts: :mod:`.wcpg`, :mod:`.fixed_ranges`, :mod:`.fixed_formats`,
-:mod:`.fixed_error`).
+law (docs/design.md, fixed point; the parts: :mod:`gainlink.synthesis.wcpg`, :mod:`.ranges`, :mod:`.formats`,
+:mod:`.error`).
 
 What it covers, recorded in ``checks.fixed_point.covers`` (:data:`COVERS`, the words ``design`` prints and the
 docs use):
@@ -27,11 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import DesignError
-from ..proof.ball import precision
-from ..proof.derived_law import derive
-from ..shipping.artifact import Artifact
-from .fixed_error import (
+from ...errors import DesignError
+from ...proof.ball import precision
+from ...proof.derived_law import derive
+from ...shipping.artifact import Artifact
+from .error import (
     Injections,
     InOperation,
     PerStep,
@@ -45,7 +45,7 @@ from .fixed_error import (
     per_step,
     per_step_design,
 )
-from .fixed_formats import Quantised, choose
+from .formats import Quantised, choose
 
 SCOPE = "while no input saturates and no sample is clipped; under saturation measured, not certified"
 COVERS = {

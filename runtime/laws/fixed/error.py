@@ -14,7 +14,7 @@ times a power of two (exact in q15; within half a float32 unit of the largest co
   design model sharing the initial plant state, disturbances, references and noise. Written with the design's
   coefficients, the integer law is the design's law plus injections: the roundings ``h``, and
   ``zeta = dK (xh, z, dy, du, r)`` with ``dK`` the quantised coefficients minus the design's, each factor one of
-  the integer law's own signals, whose range the certificate proves for any history (:mod:`.fixed_ranges`). The
+  the integer law's own signals, whose range the certificate proves for any history (:mod:`.ranges`). The
   state difference obeys ``e+ = A_cl e + B_h h + B_zeta zeta`` (the design's closed loop): the initial plant
   state, disturbances and noise cancel; the quantised initial estimate and integrator enter as one injection
   before the first step; the rounded operating point as constant offsets. The WCPG of that system bounds the
@@ -46,13 +46,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import DesignError
-from ..proof.ball import abs_upper, balls, mid, precise
-from ..proof.derived_law import DerivedLaw
-from .fixed_formats import Quantised
-from .fixed_loops import LinearSystem, closed_loop, difference, open_loop
-from .fixed_ranges import Rounding, centre_half, estimate_columns, estimate_outputs
-from .wcpg import spectral_radius, wcpg_ball
+from ...errors import DesignError
+from ...proof.ball import abs_upper, balls, mid, precise
+from ...proof.derived_law import DerivedLaw
+from ...synthesis.wcpg import spectral_radius, wcpg_ball
+from .formats import Quantised
+from .loops import LinearSystem, closed_loop, difference, open_loop
+from .ranges import Rounding, centre_half, estimate_columns, estimate_outputs
 
 UP = 1 + 1e-12  # covers the float64 rounding of adding a few non-negative bounds
 COEFFICIENTS = ("F", "G", "Ly", "Kx", "Ky", "Kz", "Tr", "Ty")
@@ -115,7 +115,7 @@ def _errors(design: DerivedLaw, ideal: DerivedLaw) -> dict[str, np.ndarray]:
 
 
 def _carried(qz: Quantised, d: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """``(C, D)`` over the integer law's estimate recursion (:func:`~.fixed_ranges.estimate_columns`) of what the
+    """``(C, D)`` over the integer law's estimate recursion (:func:`~.ranges.estimate_columns`) of what the
     coefficient errors carry into the estimate's sum (``dF xh + dG du + dLy dy``, n rows) and the command's
     (``dKx xh + dKy dy``, m rows)."""
     ideal = qz.gains.ideal
