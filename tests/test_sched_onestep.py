@@ -1,4 +1,4 @@
-"""The scheduled law's one-step check with a float32 bound (gainlink.laws.scheduled_onestep): every step of a trace
+"""The scheduled law's one-step check with a float32 bound (gainlink.laws.scheduled.onestep): every step of a trace
 of the C against the float64 law from the trace's own state, within what float32 can change in that step.
 
 Oracles: the float64 law (gainlink.proof.scheduled_reference) and the real host C (``gl_sched.c`` through ctypes);
@@ -14,7 +14,7 @@ import functools
 import numpy as np
 import pytest
 from gainlink.laws import law_of
-from gainlink.laws.scheduled_onestep import float32_bound_check
+from gainlink.laws.scheduled.onestep import float32_bound_check
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop
 from gainlink.shipping import artifact as artifact_mod

@@ -15,8 +15,8 @@ from gainlink.engines.sched_native import NativeScheduledLoop
 from gainlink.firmware.build import replay_image
 from gainlink.hil.loop.pil import make_plant, run_pil
 from gainlink.laws.image import first_difference
-from gainlink.laws.scheduled import status_flags
-from gainlink.laws.scheduled_pil import image_records
+from gainlink.laws.scheduled.law import status_flags
+from gainlink.laws.scheduled.pil import image_records
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE
 from gainlink.shipping import artifact as artifact_mod

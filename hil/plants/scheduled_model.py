@@ -1,4 +1,4 @@
-"""The design's own model of a scheduled artifact (:class:`gainlink.laws.scheduled_model.ScheduledModel`: the
+"""The design's own model of a scheduled artifact (:class:`gainlink.laws.scheduled.plant.ScheduledModel`: the
 points' sampled plants and trims interpolated at a moving sigma) as the scenario plant ``kind = "scheduled_model"``:
 a plant whose dynamics follow an external scheduling signal (the run hands it the signals each step through
 :meth:`ScheduledModelPlant.schedule`) or its own scheduled output. It advances by the artifact's ``Ts`` only.
@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 from gainlink.errors import PlantError, did_you_mean
-from gainlink.laws.scheduled_model import ScheduledModel, operating_states
+from gainlink.laws.scheduled.plant import ScheduledModel, operating_states
 
 from .base import PLANTS, Plant
 

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 from ..errors import LawError
 from ..shipping.law_c import law_pair
 from .base import CELLS, ENGINES, Capabilities, Controller, Law, OneStepVerdict, Step
-from .fixed.law import FixedLaw
+from .fixed import FixedLaw
 from .lq import LqLaw
 from .scheduled import ScheduledLaw
 

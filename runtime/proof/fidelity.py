@@ -18,7 +18,7 @@ The result is the worst command deviation ``max |u32 - u64|`` relative to each i
 the worst output deviation relative to each output's excursion over the run. The run is written for any law about
 one operating point (:class:`LoopPoint`: the design plant there, the unsaturated controller that sizes the scenario,
 and the two laws to close the loop with): :func:`float32_fidelity` is the observer-based law's, and a scheduled law
-runs it at each sigma of a sweep (:mod:`gainlink.laws.scheduled_fidelity`). Above
+runs it at each sigma of a sweep (:mod:`gainlink.laws.scheduled.fidelity`). Above
 :data:`THRESHOLD` (1/4096 of the span: one step of a 12-bit actuator command, the usual PWM or DAC
 resolution of a microcontroller; below it float32 is invisible at the actuator) ``design`` warns and
 names the remedy, the balanced realisation (``[implementation] realization = "balanced"``), with the

@@ -13,7 +13,7 @@ The one-step check resynchronises a law on an engine's state before each step, a
 float64's bound: ``REL`` times each quantity's magnitude in that step. A trace of the C (engines ``native`` and
 ``qemu``, ``firmware/src/gl_sched.c``) is checked against the C's float32 arithmetic,
 :class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`, bit for bit (``float32=True``), and against the
-float64 law within a float32 bound, as the unscheduled check does (:mod:`gainlink.laws.scheduled_onestep`).
+float64 law within a float32 bound, as the unscheduled check does (:mod:`gainlink.laws.scheduled.onestep`).
 """
 
 from __future__ import annotations

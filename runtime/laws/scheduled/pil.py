@@ -1,5 +1,5 @@
 """PIL of a scheduled law: its image's records checked bit for bit, the law's block of a PIL run
-(:meth:`gainlink.laws.scheduled.ScheduledLaw.pil_check`).
+(:meth:`gainlink.laws.scheduled.law.ScheduledLaw.pil_check`).
 
 The image is the artifact's (``firmware/ports/cortex-m/main.c``, one main for every law, replay only): in
 ``{tag, y, r, s}`` (``s`` the external scheduling signals, the schedule's ``external`` names in order), out the
@@ -18,9 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from ..shipping import records as law_records
-from ..shipping.artifact import Artifact
-from .image import first_difference
+from ...shipping import records as law_records
+from ...shipping.artifact import Artifact
+from ..image import first_difference
 
 LAW = "scheduled-float32"  # what the image runs (the host apps' ready line says the same)
 
@@ -49,8 +49,8 @@ def image_records(a: Artifact, *, Y: np.ndarray, R: np.ndarray, S: np.ndarray, h
     """The records the image writes for these float32 samples from reset, computed by the float32 model (its sigma
     flags read by ``status_flags``) or, with ``host``, by the host build of the C (the same record,
     :func:`gainlink.shipping.records.layout`)."""
-    from ..engines.sched_native import NativeScheduledLoop
-    from ..proof.scheduled_float32 import ScheduledFloat32Loop
+    from ...engines.sched_native import NativeScheduledLoop
+    from ...proof.scheduled_float32 import ScheduledFloat32Loop
 
     Sx = S if S.shape[1] else None
     if host:
@@ -68,8 +68,8 @@ def image_stream(artifact: Artifact, *, target: str, board: str) -> Any:
     """The scheduled law's replay-only image (``main.c`` on the scheduled law) and its stream
     (:func:`.image.law_image_stream`): its records' flags are the status flags (the sigma flags among them), its
     ``sigma`` the sigma the step used."""
-    from .base import Step
-    from .image import law_image_stream
+    from ..base import Step
+    from ..image import law_image_stream
 
     def decode(rec: Any) -> Step:
         return Step(u=rec["u"].astype(float), flags=int(rec["flags"]), sat=int(rec["sat"]),
@@ -82,7 +82,7 @@ def pil_check(a: Artifact, records: np.ndarray, *, Y: np.ndarray, R: np.ndarray,
               status_flags: Any) -> dict:  # fmt: skip
     """The ``scheduled`` block of a PIL run (module docstring); ``trace`` holds sigma and the status flags per step
     (for the schedule block), ``status_flags`` reads the float32 model's sigma flags."""
-    from .scheduled_run import schedule_metrics
+    from .run import schedule_metrics
 
     Y32, R32, S32 = (np.asarray(X, dtype=np.float32) for X in (Y, R, S))
     model = first_difference(records, image_records(a, Y=Y32, R=R32, S=S32, host=False, status_flags=status_flags))
@@ -95,7 +95,7 @@ def pil_check(a: Artifact, records: np.ndarray, *, Y: np.ndarray, R: np.ndarray,
 
 def pil_lines(block: Any) -> list[str]:
     """The PIL summary's lines on the scheduled image: against the float32 model and the host C, and sigma."""
-    from .scheduled_run import schedule_lines
+    from .run import schedule_lines
 
     if not block:
         return []
@@ -108,8 +108,8 @@ def pil_lines(block: Any) -> list[str]:
 def cost(artifact: Artifact, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
     """Instructions per call of ``gl_sched_step`` (callees included) replaying the samples on the image
     (:func:`gainlink.firmware.cost.count_step_instructions`, the one count for every law)."""
-    from ..firmware.build import replay_image
-    from ..firmware.cost import count_step_instructions
+    from ...firmware.build import replay_image
+    from ...firmware.cost import count_step_instructions
 
     elf = replay_image(artifact, target=target, board=board)
     return count_step_instructions(elf, artifact, Y=Y, R=R if artifact.q else None, S=S if S.shape[1] else None,

@@ -9,15 +9,15 @@ from typing import Any
 
 import numpy as np
 
-from ..shipping.scheduled import interval, lerp
-from . import flags
-from .scheduled_model import ScheduledModel, operating_states
+from ...shipping.scheduled import interval, lerp
+from .. import flags
+from .plant import ScheduledModel, operating_states
 
 
 def design_model(
     artifact: Any, *, state: Mapping[str, float] | None, sigma: float
 ) -> tuple[ScheduledModel | None, str]:
-    """The points' models interpolated at a moving sigma (:class:`~gainlink.laws.scheduled_model.ScheduledModel`,
+    """The points' models interpolated at a moving sigma (:class:`~gainlink.laws.scheduled.plant.ScheduledModel`,
     which follows its law's sigma), started at the plant's ``state`` by name (absolute; else ``x_op`` at ``sigma``),
     and a note; ``(None, why)`` when the points give no ``x_op``."""
     X_op = operating_states(artifact)
@@ -56,7 +56,7 @@ def without_rate_limit(artifact: Any) -> Any:
     """A copy of a scheduled artifact whose law does not limit sigma's rate (``rate_max`` removed, re-sealed; its
     provenance's ``rate_limit_removed`` says which ``rate_max`` of which artifact): the scenario's
     ``sigma_rate_limit = false``. No certificate covers an unlimited rate unless one covered any rate already."""
-    from ..shipping.artifact import from_dict, seal
+    from ...shipping.artifact import from_dict, seal
 
     S = artifact.schedule
     certified = S.rate_certified and S.rate_max is None
@@ -119,8 +119,8 @@ def simulate(law: Any, artifact: Any, *, steps: int, x0: Any, reference: Any, no
     output or the external signals (as the scenario plant ``scheduled_model``): started at ``x_op`` at the start
     sigma (the first point, or the first external signal) plus ``x0``; the reference holds the trim there unless
     given; the signals constant ((e,)) or per step ((steps, e))."""
-    from ..errors import ArtifactError, DataError
-    from ..proof.simulation import closed_loop
+    from ...errors import ArtifactError, DataError
+    from ...proof.simulation import closed_loop
 
     a, sch = artifact, artifact.schedule
     if steps < 1:

@@ -36,11 +36,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import DataError
-from ..proof.onestep import OneStepCheck, StepMismatch
-from ..proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop, ScheduledState
-from ..shipping.artifact import Artifact
-from ..shipping.scheduled import interval
+from ...errors import DataError
+from ...proof.onestep import OneStepCheck, StepMismatch
+from ...proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop, ScheduledState
+from ...shipping.artifact import Artifact
+from ...shipping.scheduled import interval
 
 EPS = 2.0**-24
 SLACK = 2.0  # times the first-order worst case

@@ -14,7 +14,7 @@ does not simulate the envelope).
 
 The verdict is the worst command deviation ``max |u32 - u64|`` over the sweep, relative to each input's limit span,
 against the same threshold (:data:`~gainlink.proof.fidelity.THRESHOLD`): simulated, not certified. ``design``
-records it in ``checks.float32`` (:meth:`gainlink.laws.scheduled.ScheduledLaw.design`) unless the spec switches the
+records it in ``checks.float32`` (:meth:`gainlink.laws.scheduled.law.ScheduledLaw.design`) unless the spec switches the
 float32 check off.
 """
 
@@ -26,12 +26,12 @@ from typing import Any
 
 import numpy as np
 
-from ..proof.fidelity import Float32Fidelity, LoopPoint, fidelity_at, noise_sd
-from ..proof.scheduled_float32 import ScheduledFloat32Loop
-from ..proof.scheduled_reference import ScheduledLoop
-from ..shipping.artifact import Artifact
-from ..shipping.scheduled import interval
-from ..shipping.systems import controller_matrices
+from ...proof.fidelity import Float32Fidelity, LoopPoint, fidelity_at, noise_sd
+from ...proof.scheduled_float32 import ScheduledFloat32Loop
+from ...proof.scheduled_reference import ScheduledLoop
+from ...shipping.artifact import Artifact
+from ...shipping.scheduled import interval
+from ...shipping.systems import controller_matrices
 
 
 def sweep(points: np.ndarray) -> np.ndarray:

@@ -11,14 +11,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import flags
-from .base import Capabilities, Controller, Law, OneStepVerdict, Step
-from .lq import AGAINST_FLOAT64, LqLaw, sat_bits
+from .. import flags
+from ..base import Capabilities, Controller, Law, OneStepVerdict, Step
+from ..lq import AGAINST_FLOAT64, LqLaw, sat_bits
 
 if TYPE_CHECKING:
-    from ..proof.sampled_plant import SampledPlant
-    from ..spec import PlantSpec
-    from ..synthesis.pipeline import DesignResult
+    from ...proof.sampled_plant import SampledPlant
+    from ...spec import PlantSpec
+    from ...synthesis.pipeline import DesignResult
 
 log = logging.getLogger(__name__)
 
@@ -35,8 +35,8 @@ def _float32_check(artifact: dict, spec: PlantSpec, warnings: list[str]) -> tupl
     """The sealed scheduled ``artifact`` with its float32 fidelity at a sigma sweep in ``checks.float32`` (and a
     warning naming where and the remedies when it is above the threshold); unchanged, with None, when the spec
     switched the float32 check off."""
-    from ..shipping.artifact import from_dict, seal
-    from .scheduled_fidelity import scheduled_fidelity
+    from ...shipping.artifact import from_dict, seal
+    from .fidelity import scheduled_fidelity
 
     if not spec.implementation.float32_check:
         return artifact, None
@@ -80,7 +80,7 @@ class ScheduledNative:
     :class:`Controller`."""
 
     def __init__(self, artifact: Any, *, library: Any = None) -> None:
-        from ..engines.sched_native import NativeScheduledLoop
+        from ...engines.sched_native import NativeScheduledLoop
 
         self.loop = NativeScheduledLoop(artifact, library=library)
         self.describe = {"kind": "firmware (host scheduled C loop, ctypes)", "library": str(self.loop.library)}
@@ -124,12 +124,12 @@ class ScheduledLaw(Law):
         return Capabilities(cannot=CANNOT)
 
     def reference(self, artifact: Any) -> Controller:
-        from ..proof.scheduled_reference import ScheduledLoop
+        from ...proof.scheduled_reference import ScheduledLoop
 
         return ScheduledPython(ScheduledLoop(artifact), {"kind": "reference (float64 scheduled law)"})
 
     def model(self, artifact: Any) -> Controller:
-        from ..proof.scheduled_float32 import ScheduledFloat32Loop
+        from ...proof.scheduled_float32 import ScheduledFloat32Loop
 
         return ScheduledPython(ScheduledFloat32Loop(artifact), {"kind": "model (the scheduled C's float32 arithmetic)"})
 
@@ -154,8 +154,8 @@ class ScheduledLaw(Law):
         """Every point through the observer-based law's design (float32), then the scheduled checks, then the
         float32 fidelity at a sigma sweep (:mod:`.scheduled_fidelity`; off when the spec switches the float32 check
         off)."""
-        from ..synthesis.pipeline import DesignResult
-        from ..synthesis.schedule import synthesize_scheduled
+        from ...synthesis.pipeline import DesignResult
+        from ...synthesis.schedule import synthesize_scheduled
 
         artifact, design, warnings = synthesize_scheduled(spec, LqLaw().design)
         artifact, float32 = _float32_check(artifact, spec, warnings)
@@ -168,7 +168,7 @@ class ScheduledLaw(Law):
     def plant(self, artifact: Any, *, sigma: float | None = None) -> SampledPlant:
         """The design model frozen at ``sigma`` (the first point by default): the points' sampled plants and trims
         interpolated there."""
-        from ..proof.sampled_plant import SampledPlant
+        from ...proof.sampled_plant import SampledPlant
 
         S = artifact.schedule
         at = S.clip(S.points[0] if sigma is None else sigma)
@@ -178,18 +178,18 @@ class ScheduledLaw(Law):
     def _replay(self, artifact: Any, engine: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, *,
                 platform: Any) -> Any:  # fmt: skip
         if engine == "reference":
-            from ..proof.scheduled_reference import ScheduledLoop
+            from ...proof.scheduled_reference import ScheduledLoop
 
             return ScheduledLoop(artifact).run(Y, R, S)
         if engine == "model":
-            from ..proof.scheduled_float32 import ScheduledFloat32Loop
+            from ...proof.scheduled_float32 import ScheduledFloat32Loop
 
             return ScheduledFloat32Loop(artifact).run(Y, R, S)
         if engine == "native":
-            from ..engines.sched_native import run
+            from ...engines.sched_native import run
 
             return run(artifact, Y, R, S)
-        from ..engines.sched_qemu import run as run_qemu
+        from ...engines.sched_qemu import run as run_qemu
 
         return run_qemu(artifact, Y, R, S, target=platform.target.name, board=platform.board.name)
 
@@ -200,8 +200,8 @@ class ScheduledLaw(Law):
         law within float64's bound; a trace of the C (``native``, ``qemu``, its ``model``, or a file that names
         ``float32``) against the float64 law within the float32 bound (:mod:`.scheduled_onestep`) and bit for bit
         against the C's float32 model."""
-        from ..proof.scheduled_replay import one_step_check
-        from .scheduled_onestep import float32_bound_check
+        from ...proof.scheduled_replay import one_step_check
+        from .onestep import float32_bound_check
 
         c_trace = engine in ("model", "native", "qemu") or (engine is None and trace.numeric == "float32")
         if c_trace:
@@ -216,17 +216,17 @@ class ScheduledLaw(Law):
         return "float64" if engine == "reference" else "float32"
 
     def trace_text(self, artifact: Any, trace: Any, t: np.ndarray | None = None, *, engine: str | None = None) -> str:
-        from ..proof.scheduled_replay import format_trace
+        from ...proof.scheduled_replay import format_trace
 
         return format_trace(artifact, trace, t, numeric=self.trace_numeric(engine))
 
     def read_trace(self, path: str | Path, artifact: Any) -> Any:
-        from ..proof.scheduled_replay import read_trace
+        from ...proof.scheduled_replay import read_trace
 
         return read_trace(path, artifact)
 
     def records_trace(self, artifact: Any, records: np.ndarray) -> Any:
-        from ..engines.sched_native import raw_of_records, scheduled_trace_from_raw
+        from ...engines.sched_native import raw_of_records, scheduled_trace_from_raw
 
         return scheduled_trace_from_raw(raw_of_records(records), a=artifact)
 
@@ -235,7 +235,7 @@ class ScheduledLaw(Law):
     def design_lines(self, result: DesignResult, path: Path) -> list[str]:
         """What ``gainlink design`` prints of a scheduled design: every point, the grid, the verdict on a moving
         sigma."""
-        from ..synthesis.schedule import describe_schedule
+        from ...synthesis.schedule import describe_schedule
 
         a = result.artifact
         sch, s = a["checks"]["schedule"], a["schedule"]
@@ -263,7 +263,7 @@ class ScheduledLaw(Law):
 
     def analysis_lines(self, report: Any) -> list[str]:
         """The points and their verdicts, when the spec designs (``report.schedule``: its ``checks.schedule``)."""
-        from ..synthesis.schedule import describe_schedule
+        from ...synthesis.schedule import describe_schedule
 
         if not report.schedule:
             return []
@@ -283,13 +283,13 @@ class ScheduledLaw(Law):
 
     def design_model(self, artifact: Any, *, state: Mapping[str, float] | None, deviation: bool,
                      sigma: float) -> tuple[Any, str]:  # fmt: skip
-        from .scheduled_run import design_model
+        from .run import design_model
 
         return design_model(artifact, state=state, sigma=sigma)
 
     def simulate(self, artifact: Any, *, steps: int, x0: Any = None, reference: Any = None, noise_std: float = 0.0,
                  seed: int = 0, signals: Any = None) -> Any:  # fmt: skip
-        from .scheduled_run import simulate
+        from .run import simulate
 
         return simulate(self, artifact, steps=steps, x0=x0, reference=reference, noise_std=noise_std, seed=seed,
                         signals=signals)  # fmt: skip
@@ -298,42 +298,42 @@ class ScheduledLaw(Law):
         return self.reference(artifact) if like == "reference" else self.model(artifact)
 
     def describe(self, artifact: Any) -> dict:
-        from .scheduled_run import describe
+        from .run import describe
 
         return describe(artifact) | super().describe(artifact)
 
     def without_rate_limit(self, artifact: Any) -> Any:
-        from .scheduled_run import without_rate_limit
+        from .run import without_rate_limit
 
         return without_rate_limit(artifact)
 
     def run_report(self, artifact: Any, trace: Any, *, ran: str | None, design_model: bool) -> dict:
-        from .scheduled_run import schedule_metrics
+        from .run import schedule_metrics
 
         return {"schedule": schedule_metrics(artifact, trace)}
 
     def report_lines(self, metrics: Mapping[str, Any]) -> list[str]:
-        from .scheduled_run import schedule_lines
+        from .run import schedule_lines
 
         return schedule_lines(metrics.get("schedule"))
 
     def image_stream(self, artifact: Any, *, target: str, board: str) -> Any:
-        from .scheduled_pil import image_stream
+        from .pil import image_stream
 
         return image_stream(artifact, target=target, board=board)
 
     def pil_check(self, artifact: Any, records: np.ndarray, *, Y: np.ndarray, R: np.ndarray, S: np.ndarray,
                   trace: Any, twin_u: np.ndarray | None, design_model: bool, check_plant: Any) -> dict:  # fmt: skip
-        from .scheduled_pil import pil_check
+        from .pil import pil_check
 
         return pil_check(artifact, records, Y=Y, R=R, S=S, trace=trace, status_flags=status_flags)
 
     def pil_lines(self, summary: Mapping[str, Any]) -> list[str]:
-        from .scheduled_pil import pil_lines
+        from .pil import pil_lines
 
         return pil_lines(summary.get("scheduled"))
 
     def cost(self, artifact: Any, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
-        from .scheduled_pil import cost
+        from .pil import cost
 
         return cost(artifact, target=target, board=board, Y=Y, R=R, S=S)
