@@ -345,7 +345,7 @@ def replay(
     -------
     Trace
         Commands, saturation flags, faults and the state after each step (a scheduled artifact:
-        :class:`~gainlink.proof.scheduled_reference.ScheduledTrace`, with the sigma each step used).
+        :class:`~gainlink.laws.scheduled.reference.ScheduledTrace`, with the sigma each step used).
 
     Examples
     --------

@@ -1,7 +1,7 @@
 """The firmware's MAVLink node runs a scheduled artifact's law over its link (gainlink.hil.loop.bridge with a
 MAVLink transport; firmware/apps/mavlink on gl_law.h): the tank of examples/tank_scheduled.toml, scheduled on its
 measured level (and on an external signal carried after the references), swept across its envelope through the real
-gainlink_mavlink process over UDP. Oracle: the scheduled float32 model (gainlink.proof.scheduled_float32, bit for
+gainlink_mavlink process over UDP. Oracle: the scheduled float32 model (gainlink.laws.scheduled.model, bit for
 bit the C) on the float32 samples the run recorded: the same commands, saturation and sigma flags. Its parameter table
 holds every point's gains, and `gainlink mavlink upload` commits them all as one set (gainlink.mavlink.sched_params)."""
 
@@ -17,11 +17,11 @@ import pytest
 from gainlink.firmware.mavlink_app import mavlink_executable
 from gainlink.hil import run as hil_run
 from gainlink.hil.links.mavlink import MavlinkTransport
+from gainlink.laws.scheduled.model import ScheduledFloat32Loop
 from gainlink.mavlink import upload as upload_mod
 from gainlink.mavlink.params import INT32
 from gainlink.mavlink.sched_params import scheduled_firmware_params
 from gainlink.mavlink.upload import UploadFailed, upload
-from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import external_tank, tank_dict, tank_hil_scenario
 from support.cli import assert_refused

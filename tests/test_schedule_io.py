@@ -135,8 +135,8 @@ def test_unscheduled_tools_refuse_a_scheduled_artifact(external):
 def _sim_csv(art, path, N=300):
     """A closed loop of the scheduled law around the interpolated plant, sigma ramping across the envelope (with a
     non-finite sample and a non-finite sigma in it), written as a replay input with s0."""
+    from gainlink.laws.scheduled.reference import ScheduledLoop
     from gainlink.proof.sampled_plant import SampledPlant
-    from gainlink.proof.scheduled_reference import ScheduledLoop
 
     S = art.schedule
     sig = np.clip(np.linspace(-0.1, 1.2, N), None, None)

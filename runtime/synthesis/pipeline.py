@@ -34,7 +34,7 @@ from .record import Gains, artifact_data
 
 if TYPE_CHECKING:  # the laws' own results (gainlink.laws.fixed, gainlink.laws.scheduled fill them)
     from ..laws.fixed.certificate import FixedPointCertificate
-    from .schedule import ScheduleDesign
+    from ..laws.scheduled.design import ScheduleDesign
 
 log = logging.getLogger(__name__)
 

@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 from gainlink.laws.fixed.model import FixedPointLoop
 from gainlink.laws.fixed.qformat import real
+from gainlink.laws.scheduled.model import ScheduledFloat32Loop
+from gainlink.laws.scheduled.reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE
 from gainlink.proof.float32_law import Float32Loop
-from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
-from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE
 from gainlink.shipping.artifact import Artifact
 
 from .hil import udp_transport
@@ -101,7 +101,7 @@ class FixedOracle:
 
 
 class ScheduledOracle:
-    """The scheduled law's float32 model (gainlink.proof.scheduled_float32): fault, and sigma held, clipped and
+    """The scheduled law's float32 model (gainlink.laws.scheduled.model): fault, and sigma held, clipped and
     rate-limited, saturation."""
 
     def __init__(self, a: Artifact) -> None:

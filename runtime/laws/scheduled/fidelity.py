@@ -4,8 +4,8 @@ its own loop around the design model, at each sigma of a sweep.
 At each sigma of :func:`sweep` (the points and the middle of each interval between them) the plant is the design
 model frozen there (the points' sampled plants and trims interpolated at sigma,
 :meth:`~gainlink.shipping.scheduled.Schedule.plant_at`), and the two laws are the C's arithmetic
-(:class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`, bit for bit the host and Cortex-M builds) and the
-float64 law (:class:`~gainlink.proof.scheduled_reference.ScheduledLoop`). They run the observer-based law's
+(:class:`~gainlink.laws.scheduled.model.ScheduledFloat32Loop`, bit for bit the host and Cortex-M builds) and the
+float64 law (:class:`~gainlink.laws.scheduled.reference.ScheduledLoop`). They run the observer-based law's
 scenario (:mod:`gainlink.proof.fidelity`: measurement noise, a reference step sized to half the room to the nearer
 limit, a saturating input disturbance), sized with the frozen unsaturated law there. An external sigma is held at
 the sweep's value; a sigma the law reads from an output moves with that output, as it does in the C (the plant
@@ -27,11 +27,11 @@ from typing import Any
 import numpy as np
 
 from ...proof.fidelity import Float32Fidelity, LoopPoint, fidelity_at, noise_sd
-from ...proof.scheduled_float32 import ScheduledFloat32Loop
-from ...proof.scheduled_reference import ScheduledLoop
 from ...shipping.artifact import Artifact
 from ...shipping.scheduled import interval
 from ...shipping.systems import controller_matrices
+from .model import ScheduledFloat32Loop
+from .reference import ScheduledLoop
 
 
 def sweep(points: np.ndarray) -> np.ndarray:

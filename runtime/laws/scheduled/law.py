@@ -23,11 +23,11 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 #: What a trace of the C is checked against: the float64 law within the float32 bound (.scheduled_onestep), and its
-#: float32 model bit for bit (gainlink.proof.scheduled_float32).
+#: float32 model bit for bit (gainlink.laws.scheduled.model).
 AGAINST_FLOAT32_BOUND = "float64 law from its own state at each step, within the float32 bound"
 AGAINST_FLOAT32_MODEL = "the C's float32 arithmetic, bit for bit, from its own state at each step"
 
-#: The scheduled law's own sigma flags (proof.scheduled_reference) as the status flags.
+#: The scheduled law's own sigma flags (laws.scheduled.reference) as the status flags.
 _SIGMA_FLAGS = ((1, flags.SIGMA_HELD), (2, flags.SIGMA_CLIPPED), (4, flags.SIGMA_RATE))
 
 
@@ -76,11 +76,11 @@ class ScheduledPython:
 
 
 class ScheduledNative:
-    """The host C's ``gl_sched_t`` (:class:`~gainlink.engines.sched_native.NativeScheduledLoop`) as a
+    """The host C's ``gl_sched_t`` (:class:`~gainlink.laws.scheduled.native.NativeScheduledLoop`) as a
     :class:`Controller`."""
 
     def __init__(self, artifact: Any, *, library: Any = None) -> None:
-        from ...engines.sched_native import NativeScheduledLoop
+        from .native import NativeScheduledLoop
 
         self.loop = NativeScheduledLoop(artifact, library=library)
         self.describe = {"kind": "firmware (host scheduled C loop, ctypes)", "library": str(self.loop.library)}
@@ -124,12 +124,12 @@ class ScheduledLaw(Law):
         return Capabilities(cannot=CANNOT)
 
     def reference(self, artifact: Any) -> Controller:
-        from ...proof.scheduled_reference import ScheduledLoop
+        from .reference import ScheduledLoop
 
         return ScheduledPython(ScheduledLoop(artifact), {"kind": "reference (float64 scheduled law)"})
 
     def model(self, artifact: Any) -> Controller:
-        from ...proof.scheduled_float32 import ScheduledFloat32Loop
+        from .model import ScheduledFloat32Loop
 
         return ScheduledPython(ScheduledFloat32Loop(artifact), {"kind": "model (the scheduled C's float32 arithmetic)"})
 
@@ -155,7 +155,7 @@ class ScheduledLaw(Law):
         float32 fidelity at a sigma sweep (:mod:`.scheduled_fidelity`; off when the spec switches the float32 check
         off)."""
         from ...synthesis.pipeline import DesignResult
-        from ...synthesis.schedule import synthesize_scheduled
+        from .design import synthesize_scheduled
 
         artifact, design, warnings = synthesize_scheduled(spec, LqLaw().design)
         artifact, float32 = _float32_check(artifact, spec, warnings)
@@ -178,18 +178,18 @@ class ScheduledLaw(Law):
     def _replay(self, artifact: Any, engine: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, *,
                 platform: Any) -> Any:  # fmt: skip
         if engine == "reference":
-            from ...proof.scheduled_reference import ScheduledLoop
+            from .reference import ScheduledLoop
 
             return ScheduledLoop(artifact).run(Y, R, S)
         if engine == "model":
-            from ...proof.scheduled_float32 import ScheduledFloat32Loop
+            from .model import ScheduledFloat32Loop
 
             return ScheduledFloat32Loop(artifact).run(Y, R, S)
         if engine == "native":
-            from ...engines.sched_native import run
+            from .native import run
 
             return run(artifact, Y, R, S)
-        from ...engines.sched_qemu import run as run_qemu
+        from .qemu import run as run_qemu
 
         return run_qemu(artifact, Y, R, S, target=platform.target.name, board=platform.board.name)
 
@@ -200,8 +200,8 @@ class ScheduledLaw(Law):
         law within float64's bound; a trace of the C (``native``, ``qemu``, its ``model``, or a file that names
         ``float32``) against the float64 law within the float32 bound (:mod:`.scheduled_onestep`) and bit for bit
         against the C's float32 model."""
-        from ...proof.scheduled_replay import one_step_check
         from .onestep import float32_bound_check
+        from .replay import one_step_check
 
         c_trace = engine in ("model", "native", "qemu") or (engine is None and trace.numeric == "float32")
         if c_trace:
@@ -216,17 +216,17 @@ class ScheduledLaw(Law):
         return "float64" if engine == "reference" else "float32"
 
     def trace_text(self, artifact: Any, trace: Any, t: np.ndarray | None = None, *, engine: str | None = None) -> str:
-        from ...proof.scheduled_replay import format_trace
+        from .replay import format_trace
 
         return format_trace(artifact, trace, t, numeric=self.trace_numeric(engine))
 
     def read_trace(self, path: str | Path, artifact: Any) -> Any:
-        from ...proof.scheduled_replay import read_trace
+        from .replay import read_trace
 
         return read_trace(path, artifact)
 
     def records_trace(self, artifact: Any, records: np.ndarray) -> Any:
-        from ...engines.sched_native import raw_of_records, scheduled_trace_from_raw
+        from .native import raw_of_records, scheduled_trace_from_raw
 
         return scheduled_trace_from_raw(raw_of_records(records), a=artifact)
 
@@ -235,7 +235,7 @@ class ScheduledLaw(Law):
     def design_lines(self, result: DesignResult, path: Path) -> list[str]:
         """What ``gainlink design`` prints of a scheduled design: every point, the grid, the verdict on a moving
         sigma."""
-        from ...synthesis.schedule import describe_schedule
+        from .design import describe_schedule
 
         a = result.artifact
         sch, s = a["checks"]["schedule"], a["schedule"]
@@ -263,7 +263,7 @@ class ScheduledLaw(Law):
 
     def analysis_lines(self, report: Any) -> list[str]:
         """The points and their verdicts, when the spec designs (``report.schedule``: its ``checks.schedule``)."""
-        from ...synthesis.schedule import describe_schedule
+        from .design import describe_schedule
 
         if not report.schedule:
             return []

@@ -1,7 +1,7 @@
 """The scheduled law's one-step check with a float32 bound: each step of a trace of the C against the float64 law
 started from the trace's own state, within a bound on what float32 arithmetic can change in that step.
 
-Before step ``k`` the float64 law (:class:`~gainlink.proof.scheduled_reference.ScheduledLoop`) is put into the
+Before step ``k`` the float64 law (:class:`~gainlink.laws.scheduled.reference.ScheduledLoop`) is put into the
 trace's state after step ``k - 1`` (its reset state for step 0), runs step ``k`` on the same ``y``, ``r``, ``s``, and
 the trace's command, sigma and next state must be within the bound of the float64 law's; its fault flag must be the
 same, and its saturation and sigma flags the same except where the float64 law is within the bound of the
@@ -9,7 +9,7 @@ threshold that sets them. This is valid whatever the law does between steps (the
 :mod:`gainlink.proof.onestep`), and it holds for the C itself, not only for its model.
 
 The bound (``EPS = 2**-24``), first order in ``EPS``, from the C's operations (``gl_sched.c``, in the order
-:mod:`gainlink.proof.scheduled_float32` reproduces them), then doubled (``SLACK``) for higher-order terms:
+:mod:`gainlink.laws.scheduled.model` reproduces them), then doubled (``SLACK``) for higher-order terms:
 
 - sigma. The raw value (``y`` or ``s``) is rounded to float32 (``EPS |raw|``); clipping to the float32 points moves
   it by at most ``EPS max(|raw|, |S1|, |SN|)``; the filter ``fmaf(alpha, c - sf, sf)`` passes ``alpha`` times the
@@ -38,9 +38,9 @@ import numpy as np
 
 from ...errors import DataError
 from ...proof.onestep import OneStepCheck, StepMismatch
-from ...proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop, ScheduledState
 from ...shipping.artifact import Artifact
 from ...shipping.scheduled import interval
+from .reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop, ScheduledState
 
 EPS = 2.0**-24
 SLACK = 2.0  # times the first-order worst case

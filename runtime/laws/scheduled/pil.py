@@ -6,8 +6,8 @@ The image is the artifact's (``firmware/ports/cortex-m/main.c``, one main for ev
 scheduled law's record ``{status, flags, sat, u, sigma, state}`` (:mod:`gainlink.shipping.records`; its flags the one
 flag table, the sigma flags among them). Two oracles, each fed the very float32 samples, references and signals the
 image received, from reset: the scheduled float32 model
-(:class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`) and the host build of the same C
-(:class:`~gainlink.engines.sched_native.NativeScheduledLoop`). Every record must equal theirs in its bits: status,
+(:class:`~gainlink.laws.scheduled.model.ScheduledFloat32Loop`) and the host build of the same C
+(:class:`~gainlink.laws.scheduled.native.NativeScheduledLoop`). Every record must equal theirs in its bits: status,
 flags, saturation mask, command, sigma and the whole state.
 """
 
@@ -49,8 +49,8 @@ def image_records(a: Artifact, *, Y: np.ndarray, R: np.ndarray, S: np.ndarray, h
     """The records the image writes for these float32 samples from reset, computed by the float32 model (its sigma
     flags read by ``status_flags``) or, with ``host``, by the host build of the C (the same record,
     :func:`gainlink.shipping.records.layout`)."""
-    from ...engines.sched_native import NativeScheduledLoop
-    from ...proof.scheduled_float32 import ScheduledFloat32Loop
+    from .model import ScheduledFloat32Loop
+    from .native import NativeScheduledLoop
 
     Sx = S if S.shape[1] else None
     if host:

@@ -26,9 +26,9 @@ from fractions import Fraction
 
 import numpy as np
 
-from ..errors import DesignError
+from ...errors import DesignError
+from .hull import LoopHull, Piece
 from .lyapunov import Attempt, Certificate, common_certificate, frozen_piece, rate_attempt
-from .schedule_hull import LoopHull, Piece
 
 FROZEN_DEPTH = 10  # halvings of an interval before the frozen proof gives up on a piece (1/1024 of it)
 RATE_TOLERANCE = 1.1  # the bisection stops when the slowest rate not proved is within 10 % of the fastest proved

@@ -10,10 +10,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import DesignError
-from ..shipping.scheduled import Schedule
+from ...errors import DesignError
+from ...shipping.scheduled import Schedule
+from ...synthesis.margins import ChannelMargin, broken_loop_margin
 from .lpv import frozen_loop
-from .margins import ChannelMargin, broken_loop_margin
 
 GRID_PER_INTERVAL = 10
 

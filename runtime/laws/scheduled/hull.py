@@ -23,7 +23,7 @@ from fractions import Fraction
 import numpy as np
 import scipy.linalg
 
-from .lmi import congruence
+from ...synthesis.lmi import congruence
 from .lpv import bernstein_vertices, loop_polynomial, to_balls
 
 _VERSIONS = itertools.count()  # a basis's identity, for the congruences kept per basis

@@ -1,6 +1,6 @@
 """The scheduled C loop's float32 arithmetic (``firmware/src/gl_sched.c``), reproduced in numpy bit for bit.
 
-The C runs the law of :mod:`gainlink.proof.scheduled_reference` on the float32 tables of
+The C runs the law of :mod:`gainlink.laws.scheduled.reference` on the float32 tables of
 :func:`gainlink.shipping.codegen_scheduled.tables` (no derivation on the target: the per-point coefficients are
 the artifact's, rounded once). Each operation here is the C's, in the C's order (``gl_sched.h`` states it):
 float32 ``+ - /`` correctly rounded (numpy float32 scalars), every multiply-add one correctly rounded ``fmaf``
@@ -8,7 +8,7 @@ float32 ``+ - /`` correctly rounded (numpy float32 scalars), every multiply-add 
 and each sum a product of its first terms followed by one ``fmaf`` per further term. In the predictor form the C
 skips ``Ky`` (zero there); so does this model.
 
-:class:`ScheduledFloat32Loop` has the interface of :class:`~gainlink.proof.scheduled_reference.ScheduledLoop`
+:class:`ScheduledFloat32Loop` has the interface of :class:`~gainlink.laws.scheduled.reference.ScheduledLoop`
 (``step``, ``run``, ``reset``, ``state``), so either can close a loop or be compared step by step.
 """
 
@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..shipping.artifact import Artifact
-from ..shipping.codegen_scheduled import tables
-from .float32_law import fma32_exact
-from .scheduled_reference import (
+from ...proof.float32_law import fma32_exact
+from ...shipping.artifact import Artifact
+from ...shipping.codegen_scheduled import tables
+from .reference import (
     SIGMA_CLIPPED,
     SIGMA_HELD,
     SIGMA_RATE,

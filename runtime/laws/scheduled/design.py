@@ -10,13 +10,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import DesignError
-from ..shipping.artifact import SCHEDULED_SCHEMA_VERSION, from_dict, matrix_to_json, seal, vector_to_json
-from ..shipping.scheduled import COEFFICIENTS, filter_alpha, law_coefficients, load_schedule
-from ..spec import PlantSpec
-from .record import provenance
-from .schedule_grid import GridCheck, grid_check
-from .schedule_variation import DEFAULT_BUDGET, RateSpec, VariationCheck, crossing_warning, rate_text, variation_check
+from ...errors import DesignError
+from ...shipping.artifact import SCHEDULED_SCHEMA_VERSION, from_dict, matrix_to_json, seal, vector_to_json
+from ...shipping.scheduled import COEFFICIENTS, filter_alpha, law_coefficients, load_schedule
+from ...spec import PlantSpec
+from ...synthesis.record import provenance
+from .grid import GridCheck, grid_check
+from .variation import DEFAULT_BUDGET, RateSpec, VariationCheck, crossing_warning, rate_text, variation_check
 
 log = logging.getLogger(__name__)
 

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..firmware import qemu as fwqemu
-from ..firmware.build import replay_image
-from ..firmware.targets import resolve_cortex_m
-from ..proof.scheduled_reference import ScheduledTrace
-from ..shipping.artifact import Artifact
-from .sched_native import raw_of_records, scheduled_trace_from_raw
+from ...firmware import qemu as fwqemu
+from ...firmware.build import replay_image
+from ...firmware.targets import resolve_cortex_m
+from ...shipping.artifact import Artifact
+from .native import raw_of_records, scheduled_trace_from_raw
+from .reference import ScheduledTrace
 
 
 def run(

@@ -1,5 +1,5 @@
 """Stability of the scheduled loop while sigma moves: quadratic Lyapunov functions found as LMIs (:mod:`.lmi`) on the
-pieces of :mod:`.schedule_hull`, and proved in ball arithmetic.
+pieces of :mod:`.hull`, and proved in ball arithmetic.
 
 The loop's matrix on a piece lies in the convex hull of the piece's Bernstein vertices ``V``. ``A' P A`` is convex
 in ``A`` for ``P >= 0``, so ``P(s) - V' P(s') V > 0`` at every vertex gives ``P(s) - A(s)' P(s') A(s) > 0`` for the
@@ -29,12 +29,12 @@ from math import comb
 import numpy as np
 import scipy.linalg
 
-from .balls import verified_lambda_min
-from .lmi import LmiFamily, LmiSolution
-from .schedule_hull import Basis, LoopHull, Piece
+from ...synthesis.balls import verified_lambda_min
+from ...synthesis.lmi import LmiFamily, LmiSolution
+from .hull import Basis, LoopHull, Piece
 
 PREC = 128  # bits of the re-check's ball arithmetic
-REWHITEN = 2  # re-solves of an LMI in the basis its own solution whitens (module docstring of .schedule_hull)
+REWHITEN = 2  # re-solves of an LMI in the basis its own solution whitens (module docstring of .hull)
 
 
 @dataclass(frozen=True)

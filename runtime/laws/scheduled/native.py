@@ -2,7 +2,7 @@
 
 :class:`NativeScheduledLoop` owns the scheduled law's instance (:class:`gainlink.firmware.host.HostLaw`, whose first
 member is a ``gl_sched_t``); :meth:`NativeScheduledLoop.run` hands a block of samples to the library in one call and
-returns a :class:`~gainlink.proof.scheduled_reference.ScheduledTrace` (float32 values as float64 arrays).
+returns a :class:`~gainlink.laws.scheduled.reference.ScheduledTrace` (float32 values as float64 arrays).
 """
 
 from __future__ import annotations
@@ -12,14 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FirmwareError
-from ..firmware.host import HostLaw
-from ..proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledTrace
-from ..shipping import flags
-from ..shipping.artifact import Artifact
+from ...errors import FirmwareError
+from ...firmware.host import HostLaw
+from ...shipping import flags
+from ...shipping.artifact import Artifact
+from .reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledTrace
 
 _FP = ctypes.POINTER(ctypes.c_float)
-#: The status flags of the record and the scheduled law's own sigma flags (proof.scheduled_reference).
+#: The status flags of the record and the scheduled law's own sigma flags (laws.scheduled.reference).
 _SIGMA = ((flags.SIGMA_HELD, SIGMA_HELD), (flags.SIGMA_CLIPPED, SIGMA_CLIPPED), (flags.SIGMA_RATE, SIGMA_RATE))
 _SIGMA_LOW = min(bit for bit, _ in _SIGMA).bit_length() - 1
 _SIGMA_SPAN = max(bit for bit, _ in _SIGMA).bit_length() - _SIGMA_LOW

@@ -2,9 +2,9 @@
 what the falsifier found, and from them the ``rate_max`` the law enforces and whether it is certified.
 
 In order: the loop frozen anywhere in the envelope is proved stable piece by piece (else the design is refused,
-naming where); the falsifier scans periodic sigma paths (:mod:`.schedule_rate`) for the first rate at which one
+naming where); the falsifier scans periodic sigma paths (:mod:`.rate`) for the first rate at which one
 grows; a common ``P`` proves any rate; else the fastest rate a ``P(sigma)`` proves, below the falsifier's rate, is
-searched within the budget (:mod:`.schedule_certify`). The shipped ``rate_max`` is a certified rate (rounded down
+searched within the budget (:mod:`.certify`). The shipped ``rate_max`` is a certified rate (rounded down
 to three digits), the spec's when slower; or, when the spec declares its own rate uncertified
 (``rate_certified = false``), the spec's, said to be not certified. A path the falsifier finds growing at or below a
 certified rate contradicts the certificate: :class:`CertificateContradiction`, never an artifact.
@@ -17,11 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import DesignError, VerificationError
-from ..shipping.scheduled import Schedule
-from .lpv import loop_polynomial
-from .lyapunov import PREC, Certificate
-from .schedule_certify import (
+from ...errors import DesignError, VerificationError
+from ...shipping.scheduled import Schedule
+from .certify import (
     MAX_PIECES,
     REFINEMENTS,
     Budget,
@@ -31,8 +29,10 @@ from .schedule_certify import (
     prove_frozen,
     start_pieces,
 )
-from .schedule_hull import LoopHull
-from .schedule_rate import Path, RateScan, dwell_grid, scan_rates, worst_path
+from .hull import LoopHull
+from .lpv import loop_polynomial
+from .lyapunov import PREC, Certificate
+from .rate import Path, RateScan, dwell_grid, scan_rates, worst_path
 
 #: CPU seconds the certificate searches may take by default (``[schedule] certify_budget``).
 DEFAULT_BUDGET = 60.0

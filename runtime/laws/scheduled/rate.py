@@ -5,7 +5,7 @@ loop's transition over one period: a periodic path grows exactly when its spectr
 The paths at a rate:
 
 - **triangles**: from one level to another and back at the rate, between every pair of
-  :func:`~.schedule_sweeps.sweep_nodes` (the points, the envelope cut in eight, the middle of each interval);
+  :func:`~.sweeps.sweep_nodes` (the points, the envelope cut in eight, the middle of each interval);
 - **dwells**: hold the lower level ``d1`` samples, ramp to the upper at the rate, hold it ``d2`` samples, ramp back
   (a jump between the levels and back when the rate crosses them in one step), between every pair of
   :func:`dwell_levels` (the points and the envelope's quarters), for ``d1``, ``d2`` on a grid from one sample to
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .schedule_sweeps import product, radius, sweep_nodes, sweep_radii
+from .sweeps import product, radius, sweep_nodes, sweep_radii
 
 RATE_GRID = 17  # rates over four decades below a one-step crossing of the envelope
 DWELL_TIME_CONSTANTS = 5.0  # the longest dwell, in closed-loop time constants
@@ -132,7 +132,7 @@ def dwell_levels(points: np.ndarray) -> np.ndarray:
 def worst_path(loops_at, points: np.ndarray, Ts: float, rate: float, dwells: tuple[int, ...], *,
                at_least: float = 0.0) -> Path:  # fmt: skip
     """The path of largest growth per step at ``rate``: triangles between every pair of
-    :func:`~.schedule_sweeps.sweep_nodes`, dwells between every pair of :func:`dwell_levels`. Dwell paths that
+    :func:`~.sweeps.sweep_nodes`, dwells between every pair of :func:`dwell_levels`. Dwell paths that
     cannot grow by ``at_least`` per step are not examined: the answer is exact when the worst grows at least that
     much (the scan asks for 1: is there a growing path?)."""
     nodes = sweep_nodes(points)

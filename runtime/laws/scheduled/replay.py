@@ -12,7 +12,7 @@ The one-step check resynchronises a law on an engine's state before each step, a
 (:mod:`gainlink.proof.onestep`). A float64 trace (the reference engine) is checked against the float64 law within
 float64's bound: ``REL`` times each quantity's magnitude in that step. A trace of the C (engines ``native`` and
 ``qemu``, ``firmware/src/gl_sched.c``) is checked against the C's float32 arithmetic,
-:class:`~gainlink.proof.scheduled_float32.ScheduledFloat32Loop`, bit for bit (``float32=True``), and against the
+:class:`~gainlink.laws.scheduled.model.ScheduledFloat32Loop`, bit for bit (``float32=True``), and against the
 float64 law within a float32 bound, as the unscheduled check does (:mod:`gainlink.laws.scheduled.onestep`).
 """
 
@@ -24,11 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataError
-from ..fileio import read_user_file
-from ..shipping.artifact import Artifact
-from .onestep import OneStepCheck, StepMismatch
-from .scheduled_reference import ScheduledLoop, ScheduledState, ScheduledTrace
+from ...errors import DataError
+from ...fileio import read_user_file
+from ...proof.onestep import OneStepCheck, StepMismatch
+from ...shipping.artifact import Artifact
+from .reference import ScheduledLoop, ScheduledState, ScheduledTrace
 
 REL = 1e-12  # float64 against float64: a few roundings on each quantity's magnitude
 
@@ -107,7 +107,7 @@ def one_step_check(
 ) -> OneStepCheck:
     """Every step of ``trace`` against the scheduled law started from the trace's own previous state: the float64
     law within ``REL``, or with ``float32`` the C's float32 arithmetic, bit for bit."""
-    from .scheduled_float32 import ScheduledFloat32Loop
+    from .model import ScheduledFloat32Loop
 
     Y = np.asarray(Y, dtype=float).reshape(-1, a.p)
     N = Y.shape[0]
