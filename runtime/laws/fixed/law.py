@@ -13,7 +13,7 @@ import numpy as np
 
 from .. import flags
 from ..base import Capabilities, Controller, OneStepVerdict, Step
-from ..lq import AGAINST_FLOAT64, LqLaw, PythonLoop, sat_bits
+from ..lq.law import AGAINST_FLOAT64, LqLaw, PythonLoop, sat_bits
 
 if TYPE_CHECKING:
     from ...spec import PlantSpec

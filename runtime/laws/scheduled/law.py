@@ -13,7 +13,7 @@ import numpy as np
 
 from .. import flags
 from ..base import Capabilities, Controller, Law, OneStepVerdict, Step
-from ..lq import AGAINST_FLOAT64, LqLaw, sat_bits
+from ..lq.law import AGAINST_FLOAT64, LqLaw, sat_bits
 
 if TYPE_CHECKING:
     from ...proof.sampled_plant import SampledPlant

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..proof.sampled_plant import SampledPlant
+from ...proof.sampled_plant import SampledPlant
 
 
 class DesignModel:
@@ -44,7 +44,7 @@ def design_model(artifact: Any, *, state: Mapping[str, float] | None, deviation:
 def describe(artifact: Any) -> dict:
     """The compensator's stability and, for a model ``linearize`` wrote, the interface it was checked through and
     its fit (from the provenance)."""
-    from ..synthesis.compensator import compensator_stability
+    from ...synthesis.compensator import compensator_stability
 
     comp = compensator_stability(artifact)
     out: dict = {"compensator": {**comp.to_dict(), "summary": comp.describe()}}
@@ -57,8 +57,8 @@ def describe(artifact: Any) -> dict:
 def image_stream(artifact: Any, *, target: str, board: str) -> Any:
     """The float32 law's replay-only image (``main.c``) and its stream (:func:`.image.law_image_stream`): its
     records' flags are the status flags (the one table)."""
-    from .base import Step
-    from .image import law_image_stream
+    from ..base import Step
+    from ..image import law_image_stream
 
     def decode(rec: Any) -> Step:
         return Step(u=rec["u"].astype(float), flags=int(rec["flags"]), sat=int(rec["sat"]))
@@ -69,8 +69,8 @@ def image_stream(artifact: Any, *, target: str, board: str) -> Any:
 def cost(artifact: Any, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
     """Instructions per call of the law's step (``gl_loop_step``, callees included) replaying the samples on the
     image (:func:`gainlink.firmware.cost.count_step_instructions`, the one count for every law)."""
-    from ..firmware.build import replay_image
-    from ..firmware.cost import count_step_instructions
+    from ...firmware.build import replay_image
+    from ...firmware.cost import count_step_instructions
 
     elf = replay_image(artifact, target=target, board=board)
     return count_step_instructions(elf, artifact, Y=Y, R=R if artifact.q else None, S=S if S.shape[1] else None,

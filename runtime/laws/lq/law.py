@@ -10,13 +10,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import flags
-from .base import Controller, Law, OneStepVerdict, Step
+from .. import flags
+from ..base import Controller, Law, OneStepVerdict, Step
 
 if TYPE_CHECKING:
-    from ..proof.sampled_plant import SampledPlant
-    from ..spec import PlantSpec
-    from ..synthesis.pipeline import DesignResult
+    from ...proof.sampled_plant import SampledPlant
+    from ...spec import PlantSpec
+    from ...synthesis.pipeline import DesignResult
 
 #: What the one-step check of this law checks a trace against (gainlink.proof.onestep).
 AGAINST_FLOAT64 = "float64 law from its own state at each step"
@@ -52,7 +52,7 @@ class NativeLqLoop:
     """The host C's ``gl_loop_t`` (:class:`~gainlink.engines.native.NativeLoop`) as a :class:`Controller`."""
 
     def __init__(self, artifact: Any, *, library: Any = None) -> None:
-        from ..engines.native import NativeLoop
+        from ...engines.native import NativeLoop
 
         self.loop = NativeLoop(artifact, library=library)
         self.describe = {"kind": "firmware (host C loop, ctypes)", "library": str(self.loop.library)}
@@ -84,12 +84,12 @@ class LqLaw(Law):
         return "float32"
 
     def reference(self, artifact: Any) -> Controller:
-        from ..proof.reference import ReferenceLoop
+        from ...proof.reference import ReferenceLoop
 
         return PythonLoop(ReferenceLoop(artifact), {"kind": "reference (float64 law)"})
 
     def model(self, artifact: Any) -> Controller:
-        from ..proof.float32_law import Float32Loop
+        from ...proof.float32_law import Float32Loop
 
         return PythonLoop(Float32Loop(artifact), {"kind": "model (the C's float32 arithmetic, bit for bit)"})
 
@@ -105,32 +105,32 @@ class LqLaw(Law):
     # -- the design side ----------------------------------------------------------------------------------------
 
     def design(self, spec: PlantSpec) -> DesignResult:
-        from ..synthesis.implementation import float32_check
-        from ..synthesis.pipeline import synthesize_lq
+        from ...synthesis.implementation import float32_check
+        from ...synthesis.pipeline import synthesize_lq
 
         return synthesize_lq(spec, float32_check)
 
     def plant(self, artifact: Any, *, sigma: float | None = None) -> SampledPlant:
-        from ..proof.sampled_plant import SampledPlant
+        from ...proof.sampled_plant import SampledPlant
 
         return SampledPlant(*artifact.design_plant(), u_op=artifact.u_op, y_op=artifact.y_op)
 
     def _replay(self, artifact: Any, engine: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, *,
                 platform: Any) -> Any:  # fmt: skip
         if engine == "reference":
-            from ..proof.reference import ReferenceLoop
+            from ...proof.reference import ReferenceLoop
 
             return ReferenceLoop(artifact).run(Y, R)
         if engine == "model":
-            from ..proof.float32_law import Float32Loop
+            from ...proof.float32_law import Float32Loop
 
             return Float32Loop(artifact).run(Y, R)
         if engine == "native":
-            from ..engines.native import NativeLoop
+            from ...engines.native import NativeLoop
 
             return NativeLoop(artifact).run(Y, R)
-        from ..engines.native import trace_from_raw
-        from ..engines.qemu import run_raw
+        from ...engines.native import trace_from_raw
+        from ...engines.qemu import run_raw
 
         raw = run_raw(artifact, Y, R, target=platform.target.name, board=platform.board.name)
         return trace_from_raw(raw, m=artifact.m)
@@ -138,7 +138,7 @@ class LqLaw(Law):
     def one_step(
         self, artifact: Any, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None, trace: Any, *, engine: str | None
     ) -> tuple[OneStepVerdict, ...]:
-        from ..proof.onestep import one_step_check
+        from ...proof.onestep import one_step_check
 
         return (OneStepVerdict(AGAINST_FLOAT64, one_step_check(artifact, Y, R, trace)),)
 
@@ -147,17 +147,17 @@ class LqLaw(Law):
         return None
 
     def trace_text(self, artifact: Any, trace: Any, t: np.ndarray | None = None, *, engine: str | None = None) -> str:
-        from ..proof.replay_io import format_trace
+        from ...proof.replay_io import format_trace
 
         return format_trace(trace, t, numeric=self.trace_numeric(engine))
 
     def read_trace(self, path: str | Path, artifact: Any) -> Any:
-        from ..proof.replay_io import read_trace
+        from ...proof.replay_io import read_trace
 
         return read_trace(path, artifact, numeric=self.trace_numeric(None) or "float32")
 
     def records_trace(self, artifact: Any, records: np.ndarray) -> Any:
-        from ..proof.reference import Trace
+        from ...proof.reference import Trace
 
         a = artifact
         sat = ((records["sat"][:, None] >> np.arange(a.m)) & 1).astype(bool)
@@ -186,7 +186,7 @@ class LqLaw(Law):
 
     def design_json(self, result: DesignResult, path: Path) -> dict:
         """``gainlink design --json``."""
-        from ..synthesis.analysis import complex_pairs
+        from ...synthesis.analysis import complex_pairs
 
         a = result.artifact
         return {
@@ -210,13 +210,13 @@ class LqLaw(Law):
     def design_plots(self, artifact: Any) -> tuple[dict[str, bytes], str | None]:
         """``design --plots``: the loop broken at each actuator and the closed-loop step (PNG files by name), and
         why nothing was drawn (None: drawn)."""
-        from ..synthesis.loop_plots import design_plots
+        from ...synthesis.loop_plots import design_plots
 
         return design_plots(artifact), None
 
     def open_loop_note(self, artifact: Any) -> str:
         """What the compensator's stability says about two replays compared open loop."""
-        from ..synthesis.compensator import compensator_stability
+        from ...synthesis.compensator import compensator_stability
 
         comp = compensator_stability(artifact)
         if comp.stable:
@@ -233,31 +233,31 @@ class LqLaw(Law):
 
     def design_model(self, artifact: Any, *, state: Mapping[str, float] | None, deviation: bool,
                      sigma: float) -> tuple[Any, str]:  # fmt: skip
-        from .lq_run import design_model
+        from .run import design_model
 
         return design_model(artifact, state=state, deviation=deviation)
 
     def simulate(self, artifact: Any, *, steps: int, x0: Any = None, reference: Any = None, noise_std: float = 0.0,
                  seed: int = 0, signals: Any = None) -> Any:  # fmt: skip
-        from ..errors import DataError
-        from ..proof.simulation import simulate_linear
+        from ...errors import DataError
+        from ...proof.simulation import simulate_linear
 
         if signals is not None and np.size(signals):
             raise DataError(f"artifact {artifact.name} is not scheduled: it takes no external scheduling signals")
         return simulate_linear(artifact, steps=steps, x0=x0, reference=reference, noise_std=noise_std, seed=seed)
 
     def image_stream(self, artifact: Any, *, target: str, board: str) -> Any:
-        from .lq_run import image_stream
+        from .run import image_stream
 
         return image_stream(artifact, target=target, board=board)
 
     def cost(self, artifact: Any, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
-        from .lq_run import cost
+        from .run import cost
 
         return cost(artifact, target=target, board=board, Y=Y, R=R, S=S)
 
     def describe(self, artifact: Any) -> dict:
-        from .lq_run import describe
+        from .run import describe
 
         return describe(artifact) | super().describe(artifact)
 
