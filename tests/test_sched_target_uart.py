@@ -29,8 +29,8 @@ from gainlink.hil.links.can import CanTransport
 from gainlink.hil.links.mavlink import MavlinkTransport
 from gainlink.laws.scheduled.model import ScheduledFloat32Loop
 from gainlink.mavlink import upload as upload_mod
-from gainlink.mavlink.params import INT32
-from gainlink.mavlink.sched_params import scheduled_firmware_params, table_hash
+from gainlink.mavlink.params import INT32, table_hash
+from gainlink.mavlink.params import firmware_params as scheduled_firmware_params
 from gainlink.mavlink.upload import UploadFailed, upload
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import external_tank, tank_dict, tank_hil_scenario
@@ -226,7 +226,7 @@ def test_a_retuned_schedule_uploaded_to_the_images_mavlink_node_commits_runs_bit
         assert image.ready_line.endswith(want), image.ready_line
         assert _table(image.url) == _expected(old)
         with monkeypatch.context() as m:  # a commit the image refuses: every staged value is undone, none kept
-            m.setattr(upload_mod, "scheduled_firmware_params", _wrong_hash)
+            m.setattr(upload_mod, "firmware_params", _wrong_hash)
             with pytest.raises(UploadFailed) as failed:
                 upload(new, connect=image.url, persist=True, timeout=UPLOAD_TIMEOUT)
         assert failed.value.rolled_back and _table(image.url) == _expected(old)

@@ -42,6 +42,22 @@ STEP_SYMBOLS = {"lq/float32": "gl_loop_step", "lq/q31": "gl_fixed_step", "lq/q15
                 "scheduled/float32": "gl_sched_step"}  # fmt: skip
 
 
+#: Why a pair's gain set cannot be written through a ``--mapping`` onto another autopilot's parameters (a mapping
+#: names one gain set); the pairs not here can.
+NO_MAPPING = {"scheduled/float32": "a --mapping names one gain set, not its points"}
+
+
+def mapping_refusal(artifact: Any) -> str | None:
+    """Why ``artifact``'s gains cannot go through a ``--mapping`` (None: they can; :data:`NO_MAPPING`)."""
+    return NO_MAPPING.get(law_name(artifact))
+
+
+def label_of_id(law_id: int) -> str:
+    """The label of the law whose GL_LAW_ID is ``law_id`` (a HEARTBEAT's custom_mode; ``"law 7"`` when it is none
+    of :data:`IDS`)."""
+    return next((LABELS[law] for law, i in IDS.items() if i == law_id), f"law {law_id}")
+
+
 def law_label(artifact: Any) -> str:
     """What ready lines, banners and manifests name the law ``artifact`` runs by (GL_LAW_NAME of gl_law.h)."""
     return LABELS[law_name(artifact)]
