@@ -20,6 +20,7 @@ from ..proof.reference import Trace
 from ..shipping import gains_layout
 from ..shipping.artifact import Artifact
 from ..shipping.codegen import shape_of
+from ..shipping.law_c import require_structure
 from ..shipping.records import column
 
 
@@ -46,7 +47,7 @@ class NativeLoop:
     """
 
     def __init__(self, artifact: Artifact, *, watchdog_periods: int = 10, library: Path | None = None) -> None:
-        artifact.require_unscheduled("the native engine")
+        require_structure(artifact, "lq", "the native engine")
         self.artifact = artifact
         path = library or build(artifact, target="host", only="gainlink_host").files["shared"]
         self.host = HostLaw(artifact, library=Path(path), watchdog_periods=watchdog_periods)

@@ -20,48 +20,13 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 import numpy as np
 
 from ..errors import DataError, GainlinkError, LawError, did_you_mean
+from ..shipping.law_c import CANNOT, CELLS, refusal
 from .hooks import LoopHooks
 
 if TYPE_CHECKING:
     from ..proof.sampled_plant import SampledPlant
     from ..spec import PlantSpec
     from ..synthesis.pipeline import DesignResult
-
-#: Everything a consumer may ask of a law (issue 30's cells). A pair declares which it can do; the others carry a
-#: reason, and asking for them is one line (:meth:`Law.refuse`).
-CELLS: tuple[str, ...] = (
-    "design",
-    "codegen",
-    "engine.native",
-    "engine.qemu",
-    "one_step",
-    "replay",
-    "twins",
-    "simulate",
-    "fidelity",
-    "sil",
-    "pil",
-    "hil.can",
-    "hil.mavlink",
-    "fault.drop",
-    "fault.delay",
-    "fault.duplicate",
-    "fault.reorder",
-    "fault.nan",
-    "fault.silent",
-    "fault.crash",
-    "realtime.host",
-    "realtime.qemu",
-    "upload.host",
-    "upload.image",
-    "slcan",
-    "firmware_run",
-    "fuzz",
-    "campaign.sil",
-    "campaign.hil",
-    "cost",
-)
-
 
 #: The replay engines of every law: its float64 law, the bit-exact model of its C, the host build of the C through
 #: ctypes, and a Cortex-M image under QEMU (``target`` and ``board`` choose which).
@@ -181,8 +146,8 @@ class Law(LoopHooks, ABC):
 
     @property
     def capabilities(self) -> Capabilities:
-        """What this pair can do (default: every cell)."""
-        return Capabilities()
+        """What this pair can do: its declaration (:data:`gainlink.shipping.law_c.CANNOT`)."""
+        return Capabilities(cannot=CANNOT[self.name])
 
     def refuse(self, cell: str, *, what: str | None = None) -> None:
         """Raise :class:`LawError` (one line) unless the pair can do ``cell``; ``what`` names the request."""
@@ -190,7 +155,7 @@ class Law(LoopHooks, ABC):
             raise ValueError(f"unknown cell {cell!r}")
         reason = self.capabilities.cannot.get(cell)
         if reason is not None:
-            raise LawError(f"{what or cell} is not available for the {self.label} law: {reason}")
+            raise LawError(refusal(self.label, cell, reason, what=what))
 
     # -- required: every consumer needs these -------------------------------------------------------------------
 

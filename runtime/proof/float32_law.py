@@ -29,6 +29,7 @@ from array import array
 import numpy as np
 
 from ..shipping.artifact import Artifact
+from ..shipping.law_c import require_structure
 from .float32_step import MID_HALF, MID_MASK, compile_step
 from .reference import StepResult, Trace
 
@@ -92,7 +93,7 @@ class Float32Loop:
     """
 
     def __init__(self, artifact: Artifact) -> None:
-        artifact.require_unscheduled("the float32 law")
+        require_structure(artifact, "lq", "the float32 law")
         self.a = artifact
         self._derive()
         self.reset()

@@ -23,6 +23,7 @@ from .artifact import Artifact
 from .codegen_fixed import described as fixed_described
 from .codegen_fixed import is_fixed, render_fixed
 from .law_c import macros as law_macros
+from .law_c import require_structure
 
 FORM_CODES = {"predictor": 0, "current": 1}
 ANTI_WINDUP_CODES = {"none": 0, "clamp": 1, "backcalc": 2}
@@ -75,7 +76,7 @@ def gain_set(artifact: Artifact) -> GainSet:
     GainSet
         Float32 fields in C declaration order and the checksum ``gl_gains_crc32`` will compute.
     """
-    artifact.require_unscheduled("the C gain set")
+    require_structure(artifact, "lq", "the C gain set")
     shape = shape_of(artifact)
     fields = {}
     for f in layout.NUMBERS:
@@ -310,7 +311,7 @@ def render_c(artifact: Artifact) -> dict[str, str]:
         fixed-point artifact ``gl_fixed_gains.h`` and ``gl_fixed_gains.c`` (:mod:`.codegen_fixed`); identical for
         the same artifact.
     """
-    artifact.require_unscheduled("codegen")
+    require_structure(artifact, "lq", "codegen")
     gains = gain_set(artifact)
     files = {
         HEADER_NAME: render_header(artifact),

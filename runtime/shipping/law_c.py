@@ -11,7 +11,98 @@ for ``gl_law_stage`` to accept it.
 from __future__ import annotations
 
 import zlib
+from collections.abc import Callable
 from typing import Any
+
+from ..errors import ArtifactError, LawError
+
+#: Everything a consumer may ask of a law (issue 30's cells). A pair declares which it cannot do (:data:`CANNOT`);
+#: asking for one of those is one line (:func:`refusal`). ``gainlink.laws`` reads the same table.
+CELLS: tuple[str, ...] = (
+    "design",
+    "codegen",
+    "engine.native",
+    "engine.qemu",
+    "one_step",
+    "replay",
+    "twins",
+    "simulate",
+    "fidelity",
+    "sil",
+    "pil",
+    "hil.can",
+    "hil.mavlink",
+    "fault.drop",
+    "fault.delay",
+    "fault.duplicate",
+    "fault.reorder",
+    "fault.nan",
+    "fault.silent",
+    "fault.crash",
+    "realtime.host",
+    "realtime.qemu",
+    "upload.host",
+    "upload.image",
+    "slcan",
+    "firmware_run",
+    "fuzz",
+    "campaign.sil",
+    "campaign.hil",
+    "cost",
+)
+
+#: Each pair's declaration of the cells it cannot do yet, with the reason (the one declaration: the laws'
+#: ``Capabilities`` are these, and the layers below the laws refuse from them with :func:`refuse`).
+CANNOT: dict[str, dict[str, str]] = {
+    "lq/float32": {},
+    "lq/q31": {
+        "fuzz": "the fuzz harnesses are built on the float32 lq law's gain set (firmware/fuzz/fuzz_gains_stage.c "
+        "stages a gl_gains_t through gl_loop_stage, which a fixed-point export does not link)",
+    },
+    "scheduled/float32": {
+        "fuzz": "the fuzz harnesses are built on the float32 lq law's gain set (firmware/fuzz/fuzz_gains_stage.c "
+        "stages a gl_gains_t, and the seeds are its field table)",
+    },
+}
+CANNOT["lq/q15"] = CANNOT["lq/q31"]
+
+#: Each structure in a few words, from its artifact (what a refusal of another structure's part says of it).
+STRUCTURES: dict[str, Callable[[Any], str]] = {
+    "lq": lambda a: "one positional law about one operating point",
+    "scheduled": lambda a: f"the velocity-form law scheduled on {a.schedule.sigma}",
+}
+
+
+def refusal(label: str, cell: str, reason: str, *, what: str | None = None) -> str:
+    """The one line that refuses ``cell`` (asked as ``what``) of the ``label`` law, for its declared ``reason``."""
+    if cell not in CELLS:
+        raise ValueError(f"unknown cell {cell!r}")
+    return f"{what or cell} is not available for the {label} law: {reason}"
+
+
+def refuse(artifact: Any, cell: str, *, what: str | None = None) -> None:
+    """Raise :class:`LawError` (one line, :func:`refusal`) when the law ``artifact`` runs declares it cannot do
+    ``cell`` (:data:`CANNOT`)."""
+    reason = CANNOT[law_name(artifact)].get(cell)
+    if reason is not None:
+        raise LawError(refusal(law_label(artifact), cell, reason, what=what))
+
+
+def require_structure(artifact: Any, structure: str, what: str) -> None:
+    """Raise :class:`ArtifactError` (one line) when ``what``, a part of the ``structure`` law (its float64 law, its
+    C gain set, its one operating point...), is asked of an artifact whose law has another structure: that law has
+    its own (``gainlink.laws.law_of``)."""
+    own = law_pair(artifact)[0]
+    if own != structure:
+        raise ArtifactError(
+            f"{what} is the {structure} law's ({STRUCTURES[structure](artifact)}); {artifact.name} runs the "
+            f"{law_label(artifact)} law ({STRUCTURES[own](artifact)}), which has its own (gainlink.laws.law_of)"
+        )
+
+
+def sigma_name(artifact: Any) -> str | None:
+    """The scheduling variable of the law ``artifact`` runs (None: a law without one)."""
+    return artifact.schedule.sigma if law_pair(artifact)[0] == "scheduled" else None
 
 
 def law_pair(artifact: Any) -> tuple[str, str]:

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import flags
-from ..base import Capabilities, Controller, OneStepVerdict, Step
+from ..base import Controller, OneStepVerdict, Step
 from ..lq.law import AGAINST_FLOAT64, LqLaw, PythonLoop, sat_bits
 
 if TYPE_CHECKING:
@@ -89,13 +89,6 @@ class FixedNative:
                                real(np.asarray(rec["Z"], dtype=np.int64)[: self.q], f["z"])])  # fmt: skip
 
 
-#: What a fixed-point law cannot do yet, and why (each one generated line: ``Law.refuse``).
-CANNOT = {
-    "fuzz": "the fuzz harnesses are built on the float32 lq law's gain set (firmware/fuzz/fuzz_gains_stage.c stages "
-    "a gl_gains_t through gl_loop_stage, which a fixed-point export does not link)",
-}
-
-
 class FixedLaw(LqLaw):
     """The lq structure with integer arithmetic (a pair of its own: its model and its C differ)."""
 
@@ -104,10 +97,6 @@ class FixedLaw(LqLaw):
     @property
     def label(self) -> str:
         return self.numeric
-
-    @property
-    def capabilities(self) -> Capabilities:
-        return Capabilities(cannot=CANNOT)
 
     def reference(self, artifact: Any) -> Controller:
         from ...proof.reference import ReferenceLoop

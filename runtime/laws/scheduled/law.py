@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import flags
-from ..base import Capabilities, Controller, Law, OneStepVerdict, Step
+from ..base import Controller, Law, OneStepVerdict, Step
 from ..lq.law import AGAINST_FLOAT64, LqLaw, sat_bits
 
 if TYPE_CHECKING:
@@ -100,15 +100,6 @@ class ScheduledNative:
         return self.loop.state().astype(float)
 
 
-#: What the scheduled law cannot do yet, and why (each one generated line: ``Law.refuse``). Its host executable
-#: (``firmware run``), design-time float32 fidelity (:mod:`.scheduled_fidelity`) and one-step float32 bound
-#: (:mod:`.scheduled_onestep`) have landed; the fuzz harnesses have not.
-CANNOT = {
-    "fuzz": "the fuzz harnesses are built on the float32 lq law's gain set (firmware/fuzz/fuzz_gains_stage.c stages "
-    "a gl_gains_t, and the seeds are its field table): gainlink.firmware.fuzz refuses a scheduled artifact",
-}
-
-
 class ScheduledLaw(Law):
     """The velocity-form law scheduled on sigma, interpolating the per-point coefficients."""
 
@@ -118,10 +109,6 @@ class ScheduledLaw(Law):
     @property
     def label(self) -> str:
         return "scheduled-float32"
-
-    @property
-    def capabilities(self) -> Capabilities:
-        return Capabilities(cannot=CANNOT)
 
     def reference(self, artifact: Any) -> Controller:
         from .reference import ScheduledLoop
