@@ -19,6 +19,7 @@ from gainlink.laws.fixed.model import gains_from_artifact
 from gainlink.laws.fixed.qformat import WORDS, real
 from gainlink.shipping.artifact import from_dict, seal
 from gainlink.shipping.codegen import render_c
+from gainlink.shipping.export_c import render_export
 from support.designs import designed
 from support.fixed import DesignLaw, example, model_run, random_design
 from support.paths import EXAMPLES as SPECS
@@ -79,13 +80,13 @@ def _float_pendulum() -> dict:
 
 def test_fixed_export_holds_the_stored_integers():
     a = example("pendulum", "q31")
-    files = render_c(a)
+    files = render_export(a)
     assert {"gl_fixed_gains.h", "gl_fixed_gains.c", "gl_fixed_step.h"} <= set(files)
     assert "#define GL_NUMERIC_Q31 1" in files["gl_fixed_gains.h"]
     table = a.checks["fixed_point"]["integers"]
     first = next(c for c in table["KX"][0] if c != 0)
     assert f".coef = {{{first}," in files["gl_fixed_gains.c"]
-    assert render_c(a) == files  # deterministic
+    assert render_export(a) == files  # deterministic
 
 
 @pytest.mark.parametrize("name,numeric", EXAMPLES, ids=[f"{n}-{q}" for n, q in EXAMPLES])

@@ -113,11 +113,11 @@ def test_the_microbit_serves_only_a_fixed_point_artifact_over_slcan_and_says_so(
     mav = scenario(q31_saved[1], {"kind": "mavlink", "url": "tcp:127.0.0.1:1"}, controller="qemu", board="microbit")
     slcan = {"interface": "slcan", "channel": "socket://127.0.0.1:1"}
     for sc in (mav, scenario(pend, slcan, controller="qemu", board="microbit")):  # MAVLink; a float32 artifact
-        with pytest.raises(FirmwareError, match=r"no bus node for this artifact and link .* fixed-point"):
+        with pytest.raises(FirmwareError, match=r"no bus node for this artifact and link .* for the q31 and q15 laws"):
             run_scenario(sc)
     can = '{"interface": "slcan", "channel": "socket://127.0.0.1:1"}'
     argv = ("firmware", "run", pendulum_artifact, "--target", "cortex-m0", "--can", can)
-    assert_refused(argv, "the slcan node of a fixed-point artifact", tmp_path)
+    assert_refused(argv, "holds only the slcan node, for the q31 and q15 laws", tmp_path)
 
 
 # -- a re-designed set of integers uploaded to the M3 image's MAVLink node ------------------------------------------

@@ -260,6 +260,12 @@ class Law(LoopHooks, ABC):
         ``gainlink_loop_host`` and the image write), the trace ``replay --engine native`` gives for the same
         samples."""
 
+    def host_run_note(self, artifact: Any, records: np.ndarray, trace: Any) -> str:
+        """What ``firmware run --input`` prints after the executable's name, of a replay through it: its ``records``
+        (:meth:`records_trace`'s input) and ``trace`` counted (saturated and refused steps)."""
+        saturated, refused = int(trace.saturated.any(axis=1).sum()), int(trace.fault.sum())
+        return f": {saturated} saturated, {refused} refused"
+
     def export(self, artifact: Any) -> dict[str, str]:
         """The C files of the law's export (``gainlink export``), by name; the same artifact, the same bytes: its
         gains, its record and parameter table, the flags, rendered from the law's descriptions

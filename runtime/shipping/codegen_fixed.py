@@ -21,7 +21,10 @@ import numpy as np
 
 from ..errors import ArtifactError
 from .artifact import Artifact
+from .law_c import require_law
 
+#: The laws whose export this module renders (the lq structure on integers).
+INTEGER_LAWS = ("lq/q31", "lq/q15")
 HEADER_NAME = "gl_fixed_gains.h"
 SOURCE_NAME = "gl_fixed_gains.c"
 STEP_NAME = "gl_fixed_step.h"
@@ -34,11 +37,6 @@ ROWS = {
     "z": (("TR", "R"), ("TY", "Y"), ("KAW", "W")),
     "x": (("F", "XH"), ("G", "DU"), ("LY", "DY")),
 }
-
-
-def is_fixed(artifact: Artifact) -> bool:
-    """Whether ``artifact`` is a fixed-point design (it carries ``checks.fixed_point``)."""
-    return artifact.checks.get("fixed_point") is not None
 
 
 def _offsets(n: int, m: int, p: int, q: int) -> dict[str, int]:
@@ -287,8 +285,7 @@ def render_step(artifact: Artifact) -> str:
 def render_fixed(artifact: Artifact) -> dict[str, str]:
     """``{"gl_fixed_gains.h": ..., "gl_fixed_gains.c": ..., "gl_fixed_step.h": ...}`` for a fixed-point
     artifact; identical for the same artifact."""
-    if not is_fixed(artifact):
-        raise ArtifactError(f"artifact {artifact.name} is not a fixed-point design (no checks.fixed_point)")
+    require_law(artifact, INTEGER_LAWS, "the fixed-point C")
     return {
         HEADER_NAME: render_header(artifact),
         SOURCE_NAME: render_source(artifact),

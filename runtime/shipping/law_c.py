@@ -100,6 +100,15 @@ def require_structure(artifact: Any, structure: str, what: str) -> None:
         )
 
 
+def require_law(artifact: Any, laws: tuple[str, ...], what: str) -> None:
+    """Raise :class:`ArtifactError` (one line) when ``what``, a part of the laws ``laws`` only (``structure/numeric``:
+    a fixed-point law's integers, the scheduled law's tables), is asked of an artifact whose law is another."""
+    own = law_name(artifact)
+    if own not in laws:
+        names = ", ".join(LABELS[law] for law in laws)
+        raise ArtifactError(f"{what} is the {names} law's; {artifact.name} runs the {LABELS[own]} law")
+
+
 def sigma_name(artifact: Any) -> str | None:
     """The scheduling variable of the law ``artifact`` runs (None: a law without one)."""
     return artifact.schedule.sigma if law_pair(artifact)[0] == "scheduled" else None

@@ -104,12 +104,7 @@ def as_int32(value: int) -> int:
 
 def table(artifact: Artifact) -> tuple[Param, ...]:
     """Every parameter of the MAVLink node built from ``artifact``, in index order (module docstring)."""
-    law = law_name(artifact)
-    if law == "lq/float32":
-        return _lq(artifact)
-    if law in ("lq/q31", "lq/q15"):
-        return _fixed(artifact)
-    return _scheduled(artifact)
+    return TABLES[law_name(artifact)](artifact)
 
 
 def _structure(artifact: Artifact) -> list[Param]:
@@ -218,6 +213,10 @@ def _scheduled(artifact: Artifact) -> tuple[Param, ...]:
         named = [pair for k in points for pair in _scheduled_names(field, k, shapes[field])]
         out += [Param(name, REAL32, float(v), field, slot=slot) for (name, slot), v in zip(named, flat, strict=True)]
     return tuple(out)
+
+
+#: Each law's table (module docstring): the registry the export and the upload ask.
+TABLES = {"lq/float32": _lq, "lq/q31": _fixed, "lq/q15": _fixed, "scheduled/float32": _scheduled}
 
 
 def c_header(artifact: Artifact, *, banner: str) -> str:

@@ -25,7 +25,8 @@ from ...firmware.host import HostLaw
 from ...shipping import flags as status_flags
 from ...shipping import records
 from ...shipping.artifact import Artifact
-from ...shipping.codegen_fixed import is_fixed
+from ...shipping.codegen_fixed import INTEGER_LAWS
+from ...shipping.law_c import law_name
 
 FAULT, CLIPPED, OVERFLOW = status_flags.FAULT, status_flags.CLIPPED, status_flags.OVERFLOW
 OVERFLOW_BITS = {"dY": 1, "V": 2, "dU": 4, "Uv-V": 8, "Z": 16, "XH": 32}  # GL_FX_OVF_* of gl_fixed.h
@@ -75,7 +76,7 @@ class FixedRun:
 
 def require_fixed(a: Artifact) -> None:
     """Refuse, in one line, an artifact that is not a fixed-point design."""
-    if not is_fixed(a):
+    if law_name(a) not in INTEGER_LAWS:
         raise FirmwareError(f"artifact {a.name} is not a fixed-point design (numeric float32): no fixed-point C")
 
 

@@ -157,6 +157,17 @@ class FixedLaw(LqLaw):
 
         return trace_from_run(artifact, FixedRun.from_records(records, artifact.q))
 
+    def host_run_note(self, artifact: Any, records: np.ndarray, trace: Any) -> str:
+        """The integer law's counts: saturated and refused steps, and those its ranges clipped or that overflowed."""
+        from .firmware import CLIPPED, OVERFLOW
+
+        flags = np.asarray(records["flags"])
+        saturated, refused = int(trace.saturated.any(axis=1).sum()), int(trace.fault.sum())
+        return (
+            f" ({self.label} integer law): {saturated} saturated, {refused} refused, "
+            f"{int(((flags & CLIPPED) != 0).sum())} clipped, {int(((flags & OVERFLOW) != 0).sum())} overflowed"
+        )
+
     def _arithmetic_lines(self, result: DesignResult) -> list[str]:
         """The certificate's lines, and the deviation measured in closed loop beside the certified bound."""
         from .certificate import describe as describe_fixed_point
