@@ -109,6 +109,12 @@ def require_law(artifact: Any, laws: tuple[str, ...], what: str) -> None:
         raise ArtifactError(f"{what} is the {names} law's; {artifact.name} runs the {LABELS[own]} law")
 
 
+def externals(artifact: Any) -> tuple[str, ...]:
+    """The external scheduling signals a sample of ``artifact``'s law carries after its references, in order (none
+    for a law without them, or one whose sigma is read from an output)."""
+    return tuple(artifact.schedule.external) if law_pair(artifact)[0] == "scheduled" else ()
+
+
 def sigma_name(artifact: Any) -> str | None:
     """The scheduling variable of the law ``artifact`` runs (None: a law without one)."""
     return artifact.schedule.sigma if law_pair(artifact)[0] == "scheduled" else None
