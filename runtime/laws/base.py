@@ -179,6 +179,11 @@ class Law(LoopHooks, ABC):
     def r_op(self, artifact: Any, *, sigma: float | None = None) -> np.ndarray:
         """The references that hold the plant at its operating point (a scheduled law: at ``sigma``)."""
 
+    @abstractmethod
+    def u_op(self, artifact: Any, *, sigma: float | None = None) -> np.ndarray:
+        """The command that holds the plant at its operating point, unclamped (a scheduled law: at ``sigma``, by
+        default its first point)."""
+
     def externals(self, artifact: Any) -> tuple[str, ...]:
         """The names of the external scheduling signals a sample carries after its references (none by default)."""
         return ()

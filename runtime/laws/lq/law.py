@@ -102,6 +102,9 @@ class LqLaw(Law):
     def r_op(self, artifact: Any, *, sigma: float | None = None) -> np.ndarray:
         return artifact.Ci @ artifact.y_op
 
+    def u_op(self, artifact: Any, *, sigma: float | None = None) -> np.ndarray:
+        return np.asarray(artifact.u_op, dtype=float)
+
     # -- the design side ----------------------------------------------------------------------------------------
 
     def design(self, spec: PlantSpec) -> DesignResult:

@@ -132,8 +132,15 @@ class ScheduledLaw(Law):
         s = artifact.schedule
         return artifact.Ci @ s.trim_at(s.clip(s.points[0] if sigma is None else sigma))[1]
 
+    def u_op(self, artifact: Any, *, sigma: float | None = None) -> np.ndarray:
+        s = artifact.schedule
+        return np.asarray(s.u_op[0] if sigma is None else s.trim_at(s.clip(sigma))[0], dtype=float)
+
     def externals(self, artifact: Any) -> tuple[str, ...]:
         return tuple(artifact.schedule.external)
+
+    #: The scenario plant that is this law's own model (``plant = "artifact"`` asks for it).
+    own_plant = "scheduled_model"
 
     # -- the design side ----------------------------------------------------------------------------------------
 
