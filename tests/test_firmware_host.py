@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware.build import build
-from gainlink.firmware.golden import example_cases, random_cases
+from gainlink.laws.lq.golden import example_cases, random_cases
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping.artifact import from_dict, seal
 from hypothesis import HealthCheck, given, settings

@@ -11,7 +11,7 @@ import ctypes.util
 import numpy as np
 import pytest
 from gainlink.engines.native import NativeLoop
-from gainlink.firmware.golden import example_cases
+from gainlink.laws.lq.golden import example_cases
 from gainlink.proof.float32_law import Float32Loop, fma32_exact
 from support.paths import EXAMPLES
 

@@ -16,12 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DesignError, SpecError
-from ..proof.reference import ReferenceLoop, Trace
-from ..shipping.artifact import Artifact, from_dict, render
-from ..spec import load_spec, parse_spec
-from ..synthesis.implementation import float32_check
-from ..synthesis.pipeline import synthesize_lq
+from ...errors import DesignError, SpecError
+from ...proof.reference import ReferenceLoop, Trace
+from ...shipping.artifact import Artifact, from_dict, render
+from ...spec import load_spec, parse_spec
+from ...synthesis.implementation import float32_check
+from ...synthesis.pipeline import synthesize_lq
 
 EXAMPLES = ("pendulum", "quadrotor_lateral", "wood_berry")
 FORMS = ("predictor", "current")
@@ -203,8 +203,8 @@ def closed_loop_case(
     record saturates during the initial transient and still stays bounded. With ``operating_point`` the
     plant is about a random non-zero point, the limits are centred on ``u_op`` and the record is absolute.
     """
-    from ..proof.simulation import simulate_linear
-    from ..synthesis.random_plants import random_spec as continuous_spec
+    from ...proof.simulation import simulate_linear
+    from ...synthesis.random_plants import random_spec as continuous_spec
 
     op = random_operating_point(seed, m=m, p=p) if operating_point else None
 
