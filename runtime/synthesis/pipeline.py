@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import DesignError
-from ..proof.fidelity import Float32Fidelity
 from ..shipping.artifact import from_dict, seal
 from ..spec import PlantSpec
 from .analysis import complex_pairs, uncontrollable_unstable, unobservable_unstable
@@ -35,6 +34,7 @@ from .record import Gains, artifact_data
 if TYPE_CHECKING:  # the laws' own results (gainlink.laws.fixed, gainlink.laws.scheduled fill them)
     from ..laws.fixed.certificate import FixedPointCertificate
     from ..laws.scheduled.design import ScheduleDesign
+    from ..proof.fidelity import Float32Fidelity
 
 log = logging.getLogger(__name__)
 

@@ -20,8 +20,8 @@ from ...errors import DesignError, SpecError
 from ...proof.reference import ReferenceLoop, Trace
 from ...shipping.artifact import Artifact, from_dict, render
 from ...spec import load_spec, parse_spec
-from ...synthesis.implementation import float32_check
 from ...synthesis.pipeline import synthesize_lq
+from .design import float32_check
 
 EXAMPLES = ("pendulum", "quadrotor_lateral", "wood_berry")
 FORMS = ("predictor", "current")

@@ -108,8 +108,8 @@ class LqLaw(Law):
     # -- the design side ----------------------------------------------------------------------------------------
 
     def design(self, spec: PlantSpec) -> DesignResult:
-        from ...synthesis.implementation import float32_check
         from ...synthesis.pipeline import synthesize_lq
+        from .design import float32_check
 
         return synthesize_lq(spec, float32_check)
 
