@@ -12,7 +12,7 @@ import pytest
 from gainlink.hil import run as hil_run
 from gainlink.laws.fixed.model import FixedPointLoop
 from gainlink.laws.fixed.qformat import real
-from gainlink.proof.float32_law import Float32Loop
+from gainlink.laws.lq.model import Float32Loop
 from gainlink.shipping.artifact import load
 from gainlink.shipping.can_layout import layout_for
 from support.fixed import example, model_run

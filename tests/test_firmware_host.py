@@ -364,7 +364,7 @@ def test_firmware_run_answers_each_stdin_line_and_exits_2_after_an_unreadable_on
     is then 2, with one line on stderr."""
     import sys
 
-    from gainlink.proof.float32_law import Float32Loop
+    from gainlink.laws.lq.model import Float32Loop
     from gainlink.shipping import records
     from gainlink.shipping.artifact import load
 

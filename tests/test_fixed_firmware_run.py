@@ -21,7 +21,7 @@ import pytest
 from gainlink.laws import law_of
 from gainlink.laws.fixed.model import FixedPointLoop
 from gainlink.laws.fixed.qformat import real
-from gainlink.proof.float32_law import Float32Loop
+from gainlink.laws.lq.model import Float32Loop
 from support.fixed import example, model_run
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))

@@ -14,7 +14,7 @@ from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.laws.fixed.model import FixedPointLoop
 from gainlink.laws.fixed.native import FixedNativeLoop
 from gainlink.laws.fixed.qformat import real
-from gainlink.proof.float32_law import Float32Loop
+from gainlink.laws.lq.model import Float32Loop
 from support.fixed import example, model_run
 
 pytestmark = pytest.mark.xdist_group("test_fixed_sil")  # one worker builds the q31 library once

@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from gainlink.laws import law_of
+from gainlink.laws.lq.fidelity import THRESHOLD
 from gainlink.laws.scheduled.fidelity import scheduled_fidelity
 from gainlink.laws.scheduled.model import ScheduledFloat32Loop
-from gainlink.proof.fidelity import THRESHOLD
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import external_tank, tank_dict
 from support.designs import designed

@@ -126,7 +126,7 @@ def test_unscheduled_tools_refuse_a_scheduled_artifact(external):
     plant) refuses the scheduled law's artifact in one line naming the part, the law it runs and its sigma."""
     _path, art = external
     from gainlink.engines.native import NativeLoop
-    from gainlink.proof.float32_law import Float32Loop
+    from gainlink.laws.lq.model import Float32Loop
     from gainlink.proof.reference import ReferenceLoop
     from gainlink.proof.sampled_plant import SampledPlant
     from gainlink.shipping.codegen import render_c

@@ -21,8 +21,8 @@ from gainlink.firmware.uart import QemuUart
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.laws.fixed.model import FixedPointLoop
 from gainlink.laws.fixed.qformat import real
+from gainlink.laws.lq.model import Float32Loop
 from gainlink.mavlink.params import firmware_params as fixed_firmware_params
-from gainlink.proof.float32_law import Float32Loop
 from support.cli import assert_refused, run_cli
 from support.fixed import example, model_run, pendulum_design
 from support.hil import udp_transport

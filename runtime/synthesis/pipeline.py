@@ -33,8 +33,8 @@ from .record import Gains, artifact_data
 
 if TYPE_CHECKING:  # the laws' own results (gainlink.laws.fixed, gainlink.laws.scheduled fill them)
     from ..laws.fixed.certificate import FixedPointCertificate
+    from ..laws.lq.fidelity import Float32Fidelity
     from ..laws.scheduled.design import ScheduleDesign
-    from ..proof.fidelity import Float32Fidelity
 
 log = logging.getLogger(__name__)
 

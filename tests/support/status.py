@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 from gainlink.laws.fixed.model import FixedPointLoop
 from gainlink.laws.fixed.qformat import real
+from gainlink.laws.lq.model import Float32Loop
 from gainlink.laws.scheduled.model import ScheduledFloat32Loop
 from gainlink.laws.scheduled.reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE
-from gainlink.proof.float32_law import Float32Loop
 from gainlink.shipping.artifact import Artifact
 
 from .hil import udp_transport
@@ -58,7 +58,7 @@ class Expected:
 
 
 class Float32Oracle:
-    """The float32 law's bit-exact model (gainlink.proof.float32_law): fault on a refused sample, saturation."""
+    """The float32 law's bit-exact model (gainlink.laws.lq.model): fault on a refused sample, saturation."""
 
     def __init__(self, a: Artifact) -> None:
         self.a, self.loop = a, Float32Loop(a)

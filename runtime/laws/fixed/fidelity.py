@@ -1,7 +1,7 @@
 """Fixed-point fidelity at design time: the integer law in closed loop, its measured deviation beside the
 certified bound.
 
-The float32 check's scenario (:mod:`gainlink.proof.fidelity`: measurement noise, a reference step, then a
+The float32 check's scenario (:mod:`gainlink.laws.lq.fidelity`: measurement noise, a reference step, then a
 saturating input disturbance), with the reference step (or initial offset) scaled down where needed so that the
 undisturbed run keeps the samples and references within half their declared ranges' room around the operating
 point (the certificate's premise; beyond the ranges samples are clipped, and that is measured as clipping), is
@@ -24,13 +24,13 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from ...proof.derived_law import DerivedLoop
-from ...proof.fidelity import (  # the float32 check's scenario, shared
+from ...proof.reference import ReferenceLoop, StepResult
+from ...shipping.artifact import Artifact
+from ..lq.fidelity import (  # the float32 check's scenario, shared
     _scenario_and_reference_run,
     _simulate,
     artifact_point,
 )
-from ...proof.reference import ReferenceLoop, StepResult
-from ...shipping.artifact import Artifact
 from .model import FixedPointLoop
 
 

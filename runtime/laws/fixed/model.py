@@ -1,4 +1,4 @@
-"""The fixed-point law on integers, bit for bit what the C does (as :mod:`gainlink.proof.float32_law` is for the
+"""The fixed-point law on integers, bit for bit what the C does (as :mod:`gainlink.laws.lq.model` is for the
 float C): the reference a fixed-point C build is tested against.
 
 Formats, integers and their names are those of :class:`~gainlink.laws.fixed.gains.FixedGains`: a signal in

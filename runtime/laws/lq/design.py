@@ -6,16 +6,16 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from ...proof.fidelity import Float32Fidelity, float32_fidelity
 from ...shipping.artifact import from_dict, seal
 from ...synthesis.implementation import realised
+from .fidelity import Float32Fidelity, float32_fidelity
 
 if TYPE_CHECKING:
     from ...spec import PlantSpec
 
 
 def float32_check(data: dict, spec: PlantSpec, warnings: list[str]) -> dict[str, Float32Fidelity | None]:
-    """The float32 law's closed-loop fidelity (:func:`~gainlink.proof.fidelity.float32_fidelity`) recorded in
+    """The float32 law's closed-loop fidelity (:func:`~gainlink.laws.lq.fidelity.float32_fidelity`) recorded in
     ``checks.float32``, with a warning naming the remedy when it is above its threshold (``float32`` of the design
     result; None when the spec switched the check off)."""
     if not spec.implementation.float32_check:

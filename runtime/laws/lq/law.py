@@ -89,7 +89,7 @@ class LqLaw(Law):
         return PythonLoop(ReferenceLoop(artifact), {"kind": "reference (float64 law)"})
 
     def model(self, artifact: Any) -> Controller:
-        from ...proof.float32_law import Float32Loop
+        from .model import Float32Loop
 
         return PythonLoop(Float32Loop(artifact), {"kind": "model (the C's float32 arithmetic, bit for bit)"})
 
@@ -125,7 +125,7 @@ class LqLaw(Law):
 
             return ReferenceLoop(artifact).run(Y, R)
         if engine == "model":
-            from ...proof.float32_law import Float32Loop
+            from .model import Float32Loop
 
             return Float32Loop(artifact).run(Y, R)
         if engine == "native":

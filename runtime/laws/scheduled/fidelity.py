@@ -6,14 +6,14 @@ model frozen there (the points' sampled plants and trims interpolated at sigma,
 :meth:`~gainlink.shipping.scheduled.Schedule.plant_at`), and the two laws are the C's arithmetic
 (:class:`~gainlink.laws.scheduled.model.ScheduledFloat32Loop`, bit for bit the host and Cortex-M builds) and the
 float64 law (:class:`~gainlink.laws.scheduled.reference.ScheduledLoop`). They run the observer-based law's
-scenario (:mod:`gainlink.proof.fidelity`: measurement noise, a reference step sized to half the room to the nearer
+scenario (:mod:`gainlink.laws.lq.fidelity`: measurement noise, a reference step sized to half the room to the nearer
 limit, a saturating input disturbance), sized with the frozen unsaturated law there. An external sigma is held at
 the sweep's value; a sigma the law reads from an output moves with that output, as it does in the C (the plant
 stays the model frozen at the sweep's value, so the run compares two arithmetics of one law in one scenario; it
 does not simulate the envelope).
 
 The verdict is the worst command deviation ``max |u32 - u64|`` over the sweep, relative to each input's limit span,
-against the same threshold (:data:`~gainlink.proof.fidelity.THRESHOLD`): simulated, not certified. ``design``
+against the same threshold (:data:`~gainlink.laws.lq.fidelity.THRESHOLD`): simulated, not certified. ``design``
 records it in ``checks.float32`` (:meth:`gainlink.laws.scheduled.law.ScheduledLaw.design`) unless the spec switches the
 float32 check off.
 """
@@ -26,10 +26,10 @@ from typing import Any
 
 import numpy as np
 
-from ...proof.fidelity import Float32Fidelity, LoopPoint, fidelity_at, noise_sd
 from ...shipping.artifact import Artifact
 from ...shipping.scheduled import interval
 from ...shipping.systems import controller_matrices
+from ..lq.fidelity import Float32Fidelity, LoopPoint, fidelity_at, noise_sd
 from .model import ScheduledFloat32Loop
 from .reference import ScheduledLoop
 
@@ -58,7 +58,7 @@ class ScheduledFidelity:
 
     @property
     def threshold(self) -> float:
-        """The deviation above which ``design`` warns (:data:`~gainlink.proof.fidelity.THRESHOLD`)."""
+        """The deviation above which ``design`` warns (:data:`~gainlink.laws.lq.fidelity.THRESHOLD`)."""
         return self.worst[1].threshold
 
     @property

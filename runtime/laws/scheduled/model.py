@@ -4,7 +4,7 @@ The C runs the law of :mod:`gainlink.laws.scheduled.reference` on the float32 ta
 :func:`gainlink.shipping.codegen_scheduled.tables` (no derivation on the target: the per-point coefficients are
 the artifact's, rounded once). Each operation here is the C's, in the C's order (``gl_sched.h`` states it):
 float32 ``+ - /`` correctly rounded (numpy float32 scalars), every multiply-add one correctly rounded ``fmaf``
-(:func:`gainlink.proof.float32_law.fma32_exact`), each interpolated coefficient ``fmaf(lam, X[i+1] - X[i], X[i])``
+(:func:`gainlink.laws.lq.model.fma32_exact`), each interpolated coefficient ``fmaf(lam, X[i+1] - X[i], X[i])``
 and each sum a product of its first terms followed by one ``fmaf`` per further term. In the predictor form the C
 skips ``Ky`` (zero there); so does this model.
 
@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...proof.float32_law import fma32_exact
 from ...shipping.artifact import Artifact
 from ...shipping.codegen_scheduled import tables
+from ..lq.model import fma32_exact
 from .reference import (
     SIGMA_CLIPPED,
     SIGMA_HELD,
@@ -63,7 +63,7 @@ class ScheduledFloat32Loop:
 
     def __init__(self, artifact: Artifact) -> None:
         if artifact.schedule is None:
-            raise ValueError(f"artifact {artifact.name} is not scheduled: use gainlink.proof.float32_law")
+            raise ValueError(f"artifact {artifact.name} is not scheduled: use gainlink.laws.lq.model")
         self.a = artifact
         S = artifact.schedule
         t = {k: np.asarray(v, dtype=np.float64) for k, v in tables(artifact).items()}

@@ -14,7 +14,7 @@ same chain:
   correctly rounded operations (:func:`fma32_exact`), so results are those of the C bit for bit for normal
   numbers (tested against the host build). float32 subnormal results (below 1.2e-38) are not treated specially.
 
-Each step runs as straight-line Python written for the artifact's dimensions (:mod:`.float32_step`, as the export's
+Each step runs as straight-line Python written for the artifact's dimensions (:mod:`.step`, as the export's
 ``gl_step.h``); the term-by-term interpreter (:meth:`Float32Loop._core`) is the exact path.
 
 It exists so that ``gainlink design`` can measure what float32 costs a design in closed loop without a
@@ -28,10 +28,10 @@ from array import array
 
 import numpy as np
 
-from ..shipping.artifact import Artifact
-from ..shipping.law_c import require_structure
-from .float32_step import MID_HALF, MID_MASK, compile_step
-from .reference import StepResult, Trace
+from ...proof.reference import StepResult, Trace
+from ...shipping.artifact import Artifact
+from ...shipping.law_c import require_structure
+from .step import MID_HALF, MID_MASK, compile_step
 
 _F32 = np.float32
 
@@ -158,7 +158,7 @@ class Float32Loop:
                 u=self.safe_u.copy(), saturated=np.zeros(a.m, dtype=bool), fault=True, v=self.safe_u.copy()
             )
         args = (self.xh.tolist(), self.z.tolist(), ys, rs)
-        u, v, sat, xh, z, inexact = self._fast(*args)  # gl_step_core unrolled (float32_step)
+        u, v, sat, xh, z, inexact = self._fast(*args)  # gl_step_core unrolled (laws.lq.step)
         if inexact:  # an fmaf sum on a float32 midpoint: double rounding may differ from fmaf's one rounding
             u, v, sat, xh, z = self._core(*args, _ExactRounding())
         self.xh, self.z = np.array(xh), np.array(z)
@@ -166,7 +166,7 @@ class Float32Loop:
 
     def _core(self, xh: list, z: list, ys: list, rs: list, rounding) -> tuple[list, list, list, list, list]:
         """gl_step_core: the same operations in the same order over the coefficient stream, interpreted term by
-        term (with :class:`_ExactRounding`: the step that :mod:`.float32_step`'s fast path falls back to)."""
+        term (with :class:`_ExactRounding`: the step that :mod:`.step`'s fast path falls back to)."""
         a = self.a
         n, m, p, q = a.n, a.m, a.p, a.q
         mul, fma = rounding.mul, rounding.fma

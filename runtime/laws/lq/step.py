@@ -1,5 +1,5 @@
 """The C step (``gl_step_core``) as straight-line Python for one artifact: the fast path of
-:class:`gainlink.proof.float32_law.Float32Loop`.
+:class:`gainlink.laws.lq.model.Float32Loop`.
 
 As the firmware's export unrolls the step for fixed dimensions (``gl_step.h``), :func:`compile_step` writes the same
 operations in the same order as Python source with the coefficients as literals, and compiles it once per loop.

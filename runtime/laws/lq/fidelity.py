@@ -1,7 +1,7 @@
 """float32 fidelity at design time: the C's arithmetic and the float64 law, each closing its own loop.
 
 ``gainlink design`` runs the law twice against the design plant (the artifact's discrete model, one copy
-per loop): once as the C computes it (:class:`~gainlink.proof.float32_law.Float32Loop`: coefficients derived in
+per loop): once as the C computes it (:class:`~gainlink.laws.lq.model.Float32Loop`: coefficients derived in
 double from the float32 gain set, a float32 fused multiply-add chain per step, bit for bit the host and
 Cortex-M4F builds) and once in float64 (:class:`~gainlink.proof.reference.ReferenceLoop`). Both see the same
 scenario:
@@ -35,10 +35,10 @@ from typing import Any
 
 import numpy as np
 
-from ..shipping.artifact import Artifact
-from .float32_law import Float32Loop
-from .reference import ReferenceLoop
-from .sampled_plant import SampledPlant
+from ...proof.reference import ReferenceLoop
+from ...proof.sampled_plant import SampledPlant
+from ...shipping.artifact import Artifact
+from .model import Float32Loop
 
 THRESHOLD = 1.0 / 4096
 MIN_STEPS, MAX_STEPS = 400, 800
@@ -144,7 +144,7 @@ class LoopPoint:
 
 def artifact_point(artifact: Artifact, *, implementation: Callable[[Artifact], Any] = Float32Loop) -> LoopPoint:
     """The observer-based law of ``artifact`` about its operating point (``implementation``: the law under test)."""
-    from ..shipping.systems import controller_matrices
+    from ...shipping.systems import controller_matrices
 
     a = artifact
     V = a.data.get("design", {}).get("observer", {}).get("V")
