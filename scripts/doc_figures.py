@@ -226,11 +226,11 @@ def image_sizes() -> dict[tuple[str, str], Doc]:
     baseline of the same export, ``GL_LAW=lq_float32``)."""
     import logging
 
-    from gainlink.firmware import fixed
     from gainlink.firmware.build import build
     from gainlink.firmware.size import size_report
     from gainlink.firmware.targets import CORTEX_M_TARGETS, TARGETS
     from gainlink.laws import design as design_spec
+    from gainlink.laws.fixed import firmware as fixed
     from gainlink.shipping.artifact import from_dict
     from gainlink.spec import load_spec
 
