@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from ..shipping.flags import (
     BITS,
+    CAPPED,
     CLIPPED,
     FAULT,
     FLAGS,
@@ -25,6 +26,7 @@ from ..shipping.flags import (
 
 __all__ = [
     "BITS",
+    "CAPPED",
     "CLIPPED",
     "FAULT",
     "FLAGS",

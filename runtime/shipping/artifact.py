@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import ArtifactError, IntegrityError
 from ..fileio import atomic_write_text, read_user_file
+from .mpc import Mpc, load_mpc
 from .scheduled import Schedule, load_schedule
 
 SCHEMA_VERSION = 1
@@ -115,6 +116,7 @@ class Artifact:
     observer_form: str
     sha256: str
     schedule: Schedule | None = None
+    mpc: Mpc | None = None
 
     def require_unscheduled(self, what: str) -> None:
         """Raise :class:`ArtifactError` naming ``what`` when this artifact is scheduled (it does not run one
@@ -293,6 +295,12 @@ def _positional(data: dict) -> Artifact:
     if np.any(u_min > u_max):
         raise ArtifactError("artifact has u_min > u_max for some input")
     _check_signals(data["signals"], n=n, m=m, p=p, q=q)
+    u_op, y_op = _vector(data, "u_op", m, 0.0), _vector(data, "y_op", p, 0.0)
+    x_op = _vector(data, "x_op", n) if "x_op" in data else None
+    mpc = None
+    if "mpc" in data:  # the MPC law: its block checked against the matrices above (gainlink.shipping.mpc)
+        mpc = load_mpc(data, Ad=Ad, Bd=Bd, Cd=Cd, Dd=Dd, Ci=Ci, Ts=float(data["Ts"]), u_min=u_min, u_max=u_max,
+                       u_op=u_op, x_op=x_op, y_op=y_op)  # fmt: skip
     return Artifact(
         data=data,
         name=data["name"],
@@ -315,12 +323,13 @@ def _positional(data: dict) -> Artifact:
         u_max=u_max,
         xh0=_vector(data, "xh0", n, 0.0),
         z0=_vector(data, "z0", q, 0.0),
-        u_op=_vector(data, "u_op", m, 0.0),
-        y_op=_vector(data, "y_op", p, 0.0),
-        x_op=_vector(data, "x_op", n) if "x_op" in data else None,
+        u_op=u_op,
+        y_op=y_op,
+        x_op=x_op,
         anti_windup=data["anti_windup"],
         observer_form=form,
         sha256=data["sha256"],
+        mpc=mpc,
     )
 
 

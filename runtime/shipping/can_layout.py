@@ -49,7 +49,8 @@ FD_LENGTHS = (8, 12, 16, 20, 24, 32, 48, 64)
 ENCODINGS = ("float32", "int16")
 #: Which flags of the one table (:data:`gainlink.shipping.flags.FLAGS`, its ``set_by``) each structure's CAN node can
 #: set: the DBC's value table and comment of ``status`` name them.
-_SET_BY = {"lq": ("every law",), "fixed": ("every law", "fixed point"), "scheduled": ("every law", "scheduled")}
+_SET_BY = {"lq": ("every law",), "fixed": ("every law", "fixed point"), "scheduled": ("every law", "scheduled"),
+           "mpc": ("every law", "mpc")}  # fmt: skip
 VALUE_BYTES = {"float32": 4, "int16": 2}
 CLASSIC_VALUES = {"float32": 1, "int16": 2}
 INT16_MAX = 32767  #: largest raw value; -INT16_MAX is the smallest

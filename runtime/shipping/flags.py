@@ -31,6 +31,7 @@ FLAGS: tuple[Flag, ...] = (
     Flag("SIGMA_CLIPPED", 0x20, "sigma was outside the envelope and was clipped to it", "scheduled"),
     Flag("SIGMA_RATE", 0x40, "sigma's change was limited to Ts * rate_max", "scheduled"),
     Flag("RESET", 0x80, "the law was reset: the command is its start command", "every law"),
+    Flag("CAPPED", 0x100, "the solver's iteration cap stopped it: the projected first move was applied", "mpc"),
 )
 
 #: Each flag's bit by name.
@@ -44,6 +45,7 @@ SIGMA_HELD = BITS["SIGMA_HELD"]
 SIGMA_CLIPPED = BITS["SIGMA_CLIPPED"]
 SIGMA_RATE = BITS["SIGMA_RATE"]
 RESET = BITS["RESET"]
+CAPPED = BITS["CAPPED"]
 
 #: MAVLink keeps bits 0-15 of ``HIL_ACTUATOR_CONTROLS.flags`` (bit 0 is its LOCKSTEP flag): gainlink's flags sit at
 #: bits 16-23, the saturation mask at bits 32-47.

@@ -1,7 +1,8 @@
 """Which law an artifact runs, as its C export names it: the one place that reads it from the artifact's content.
 
 A law is a pair structure x numeric format (docs/design.md, "Adding a law"): a ``schedule`` block makes the
-``scheduled`` structure, else ``lq``; ``checks.fixed_point.numeric`` makes an integer format, else ``float32``.
+``scheduled`` structure, an ``mpc`` block the ``mpc`` structure, else ``lq``; ``checks.fixed_point.numeric``
+makes an integer format, else ``float32``.
 :func:`law_name` decides it (``gainlink.laws.law_of`` asks it too); the export writes the pair into ``gl_gains.h``
 (``GL_LAW_STRUCTURE``, ``GL_LAW_NUMERIC``), where ``firmware/include/gainlink/gl_law.h`` and the firmware's CMake
 read which law to build, with the law's compatibility signature (``GL_LAW_SIGNATURE``), which a gain set must carry
@@ -17,7 +18,7 @@ from typing import Any
 def law_pair(artifact: Any) -> tuple[str, str]:
     """``(structure, numeric)`` of the law ``artifact`` runs."""
     data = artifact.data
-    structure = "scheduled" if data.get("schedule") is not None else "lq"
+    structure = "scheduled" if data.get("schedule") is not None else "mpc" if data.get("mpc") is not None else "lq"
     fixed = data.get("checks", {}).get("fixed_point")
     return structure, "float32" if fixed is None else str(fixed["numeric"])
 
@@ -36,10 +37,11 @@ def buildable(artifact: Any) -> tuple[str, ...]:
 
 #: Each law's id (the HEARTBEAT's custom_mode and the image's output header: GL_LAW_ID of gl_law.h), the name ready
 #: lines give it (GL_LAW_NAME) and its own step function (GL_LAW_STEP_SYMBOL: what an instruction count covers).
-IDS = {"lq/float32": 0, "lq/q31": 31, "lq/q15": 15, "scheduled/float32": 256}
-LABELS = {"lq/float32": "float32", "lq/q31": "q31", "lq/q15": "q15", "scheduled/float32": "scheduled-float32"}
+IDS = {"lq/float32": 0, "lq/q31": 31, "lq/q15": 15, "scheduled/float32": 256, "mpc/float32": 512}
+LABELS = {"lq/float32": "float32", "lq/q31": "q31", "lq/q15": "q15", "scheduled/float32": "scheduled-float32",
+          "mpc/float32": "mpc-float32"}  # fmt: skip
 STEP_SYMBOLS = {"lq/float32": "gl_loop_step", "lq/q31": "gl_fixed_step", "lq/q15": "gl_fixed_step",
-                "scheduled/float32": "gl_sched_step"}  # fmt: skip
+                "scheduled/float32": "gl_sched_step", "mpc/float32": "gl_mpc_step"}  # fmt: skip
 
 
 def law_label(artifact: Any) -> str:

@@ -18,6 +18,7 @@ import numpy as np
 from ..errors import SpecError, did_you_mean
 from ..fileio import read_toml
 from .model import ImplementationSpec, PlantSpec
+from .mpc import check_mpc_spec, parse_mpc
 from .plant import parse_plant
 from .ranges import check_ranges
 from .schedule import check_schedule_table, parse_schedule, point_plants
@@ -41,7 +42,7 @@ NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 
 TOP_KEYS = {
     "name", "Ts", "discretization", "description", "plant", "controller", "integral", "observer", "limits",
-    "operating_point", "implementation", "linearization", "schedule", "units",
+    "operating_point", "implementation", "linearization", "schedule", "units", "mpc",
 }  # fmt: skip
 TIME_UNIT_KEY = "time"  # in [units]: the unit of Ts and of every time (default s)
 UNIT_MAX_LEN = 16
@@ -78,13 +79,15 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     integral = parse_integral(
         checked_table(data, "integral", INTEGRAL_KEYS, required=False),
         plant,
-        lqr=ctl.get("method", "lqr") == "lqr",
+        lqr=ctl.get("method", "lqr") in ("lqr", "mpc"),
     )
     q = 0 if integral is None else integral.q
     limits_table = checked_table(data, "limits", LIMITS_KEYS, required=True)
     limits = parse_limits(limits_table, plant, q=q, scheduled=sched is not None)
     controllers = tuple(parse_controller(ctl, p, q=q, Ts=Ts) for p in plants)
     implementation = parse_implementation(checked_table(data, "implementation", IMPLEMENTATION_KEYS, required=False))
+    if ctl.get("method") == "mpc":
+        check_mpc_spec(data, numeric=implementation.numeric, realization=implementation.realization)
     schedule = None
     if sched is not None:
         _check_schedulable(data, q=q, m=plant.m, implementation=implementation)
@@ -113,6 +116,9 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
         linearization=checked_table(data, "linearization", LINEARIZATION_KEYS, required=False),
         schedule=schedule,
         units=parse_units(table(data, "units", required=False), plant),
+        mpc=parse_mpc(
+            table(data, "mpc", required=False), method=str(ctl.get("method", "lqr")), plant=plant, op=operating_point
+        ),
     )
 
 

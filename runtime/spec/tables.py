@@ -79,15 +79,15 @@ def _output_index(o, plant: PlantModel) -> int:
 def parse_controller(tbl: dict, plant: PlantModel, *, q: int, Ts: float) -> ControllerSpec:
     """``[controller]``: LQR weights, closed-loop poles (n + q, z-plane) or the user's own gains."""
     method = tbl.get("method", "lqr")
-    if method == "lqr":
-        return ControllerSpec(method="lqr", Q=_state_weight(tbl, plant), R=_input_weight(tbl, plant.m))
+    if method in ("lqr", "mpc"):  # MPC: the same weights, its terminal cost their DARE solution ([mpc])
+        return ControllerSpec(method=method, Q=_state_weight(tbl, plant), R=_input_weight(tbl, plant.m))
     if method in ("place", "ackermann"):
         if method == "ackermann" and plant.m != 1:
             raise SpecError("controller.method 'ackermann' is single-input only; use 'place'")
         return ControllerSpec(method=method, poles_z=poles_z(tbl, plant.n + q, Ts, "controller"))
     if method == "given":
         return _given_controller(tbl, plant, q=q)
-    raise SpecError(f"controller.method must be lqr, place, ackermann or given, not {method!r}")
+    raise SpecError(f"controller.method must be lqr, mpc, place, ackermann or given, not {method!r}")
 
 
 def _state_weight(tbl: dict, plant: PlantModel) -> np.ndarray:
