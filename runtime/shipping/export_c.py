@@ -11,7 +11,7 @@ gives the same bytes.
 
 from __future__ import annotations
 
-from . import codegen, codegen_scheduled, params, records
+from . import codegen, codegen_mpc, codegen_scheduled, params, records
 from .artifact import Artifact
 from .flags import c_header as flags_header
 from .law_c import buildable, law_pair
@@ -19,10 +19,14 @@ from .law_c import buildable, law_pair
 
 def render_export(artifact: Artifact) -> dict[str, str]:
     """The C files of ``artifact``'s export, by name (module docstring)."""
-    scheduled = law_pair(artifact)[0] == "scheduled"
-    files = codegen_scheduled.render_scheduled(artifact) if scheduled else codegen.render_c(artifact)
+    structure = law_pair(artifact)[0]
+    render, source = {
+        "scheduled": (codegen_scheduled.render_scheduled, codegen_scheduled.SOURCE_NAME),
+        "mpc": (codegen_mpc.render_mpc, codegen_mpc.SOURCE_NAME),
+    }.get(structure, (codegen.render_c, codegen.SOURCE_NAME))
+    files = render(artifact)
     # the headers hold the artifact's structure only and name the source that holds the rest
-    banner = codegen.structure_banner(codegen_scheduled.SOURCE_NAME if scheduled else codegen.SOURCE_NAME)
+    banner = codegen.structure_banner(source)
     files["gl_flags.h"] = flags_header()
     for law in buildable(artifact):
         files[records.header_name(law)] = records.c_header(artifact, law=law, banner=banner)
