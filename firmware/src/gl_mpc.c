@@ -15,6 +15,9 @@
 /* Fixed dimensions: the inner loops unroll completely (the stage loops stay loops). */
 #define GL_UNROLL _Pragma("GCC unroll 64")
 #define GL_COLD __attribute__((noinline))
+/* The three parts of an iteration stay functions of their own: the instruction counter counts each per call
+ * (bench/mpc_cost.py: the cost of an iteration, and so of a step at the cap). */
+#define GL_PASS __attribute__((noinline))
 
 _Static_assert(sizeof(gl_mpc_tables_t) % sizeof(float) == 0, "gl_mpc_tables_t must hold floats only");
 
@@ -124,105 +127,138 @@ static inline void box_term(const gl_mpc_t *loop, uint32_t j, float *p)
 #endif
 }
 
-/** The backward pass: d[k] for every stage. */
-static void backward(gl_mpc_t *loop)
+/* One stage of each pass is a function of its own: inside it every coefficient is a short offset from the base
+ * register of its table (a vldr with an immediate); with the stage loop around an inlined body, GCC hoisted every
+ * coefficient's address out of the loop and kept them on the stack (a load more per multiply-add). Its vectors
+ * are restrict (no output aliases an input): the vector a pass multiplies stays in registers. */
+#if GL_NX * (GL_NX + GL_M) > 96
+#define GL_STAGE_FN static __attribute__((noinline))
+#else /* a small stage costs less than a call: inlined (the pendulum's 5 x 6 stage: 43.4k instructions a step at
+       * worst on the M4F against 56.1k as a function) */
+#define GL_STAGE_FN static inline __attribute__((always_inline))
+#endif
+
+/** Stage k of the backward pass: g = r + B'p, d = C1 g, and (k > 0) pn = q + A'p - K'g. */
+GL_STAGE_FN void backward_stage(const float *restrict A, const float *restrict B, const float *restrict K,
+                                    const float *restrict C1, float rho, const float *restrict yu,
+                                    const float *restrict zu, const float *restrict p, const float *restrict q,
+                                    float *restrict d, float *restrict pn)
 {
-    const gl_mpc_tables_t *t = loop->t;
-    float p[GL_NX];
-    float pn[GL_NX];
-    box_term(loop, GL_H - 1u, p);
-    for (uint32_t kk = GL_H; kk-- > 0u;) {
-        float g[GL_M];
-        GL_UNROLL
-        for (uint32_t i = 0; i < GL_M; ++i) {
-            float acc = t->rho * (loop->yu[kk][i] - loop->zu[kk][i]);
-            GL_UNROLL
-            for (uint32_t j = 0; j < GL_NX; ++j) {
-                acc = GL_FMA(t->B[j * GL_M + i], p[j], acc);
-            }
-            g[i] = acc;
-        }
-        const float *C1 = t->C1[kk];
-        GL_UNROLL
-        for (uint32_t i = 0; i < GL_M; ++i) {
-            float acc = 0.0f;
-            GL_UNROLL
-            for (uint32_t l = 0; l < GL_M; ++l) {
-                acc = GL_FMA(C1[i * GL_M + l], g[l], acc);
-            }
-            loop->d[kk][i] = acc;
-        }
-        if (kk == 0u) {
-            break;
-        }
-        const float *K = t->K[kk];
-        box_term(loop, kk - 1u, pn);
+    float g[GL_M];
+    GL_UNROLL
+    for (uint32_t i = 0; i < GL_M; ++i) {
+        float acc = rho * (yu[i] - zu[i]);
         GL_UNROLL
         for (uint32_t j = 0; j < GL_NX; ++j) {
-            float acc = pn[j];
-            GL_UNROLL
-            for (uint32_t i = 0; i < GL_NX; ++i) {
-                acc = GL_FMA(t->A[i * GL_NX + j], p[i], acc);
-            }
-            GL_UNROLL
-            for (uint32_t i = 0; i < GL_M; ++i) {
-                acc = GL_FMA(-K[i * GL_NX + j], g[i], acc);
-            }
-            pn[j] = acc;
+            acc = GL_FMA(B[j * GL_M + i], p[j], acc);
         }
-        memcpy(p, pn, sizeof p);
+        g[i] = acc;
+    }
+    GL_UNROLL
+    for (uint32_t i = 0; i < GL_M; ++i) {
+        float acc = 0.0f;
+        GL_UNROLL
+        for (uint32_t l = 0; l < GL_M; ++l) {
+            acc = GL_FMA(C1[i * GL_M + l], g[l], acc);
+        }
+        d[i] = acc;
+    }
+    if (pn == NULL) {
+        return;
+    }
+    GL_UNROLL
+    for (uint32_t j = 0; j < GL_NX; ++j) {
+        float acc = q[j];
+        GL_UNROLL
+        for (uint32_t i = 0; i < GL_NX; ++i) {
+            acc = GL_FMA(A[i * GL_NX + j], p[i], acc);
+        }
+        GL_UNROLL
+        for (uint32_t i = 0; i < GL_M; ++i) {
+            acc = GL_FMA(-K[i * GL_NX + j], g[i], acc);
+        }
+        pn[j] = acc;
     }
 }
 
-/** The forward pass from x0: the moves u[k] and the box rows c[k] of x_{k+1}. */
-static void forward(gl_mpc_t *loop, const float *x0)
+/** The backward pass: d[k] for every stage. */
+static GL_PASS void backward(gl_mpc_t *loop)
 {
     const gl_mpc_tables_t *t = loop->t;
-    float x[GL_NX];
-    float xn[GL_NX];
-    memcpy(x, x0, sizeof x);
-    for (uint32_t k = 0; k < GL_H; ++k) {
-        const float *K = t->K[k];
-        float *u = loop->u[k];
+    float p[2][GL_NX];
+    float q[GL_NX];
+    uint32_t at = 0u;
+    box_term(loop, GL_H - 1u, p[0]);
+    for (uint32_t kk = GL_H; kk-- > 0u;) {
+        float *pn = NULL;
+        if (kk > 0u) {
+            box_term(loop, kk - 1u, q);
+            pn = p[at ^ 1u];
+        }
+        backward_stage(t->A, t->B, t->K[kk], t->C1[kk], t->rho, loop->yu[kk], loop->zu[kk], p[at], q, loop->d[kk],
+                       pn);
+        at ^= 1u;
+    }
+}
+
+/** Stage k of the forward pass: u = -d - K x, xn = A x + B u, c = Hx xn. */
+GL_STAGE_FN void forward_stage(const float *restrict A, const float *restrict B, const float *restrict K,
+                                   const float *restrict Hx, const float *restrict d, const float *restrict x,
+                                   float *restrict u, float *restrict xn, float *restrict c)
+{
+    GL_UNROLL
+    for (uint32_t i = 0; i < GL_M; ++i) {
+        float acc = -d[i];
         GL_UNROLL
-        for (uint32_t i = 0; i < GL_M; ++i) {
-            float acc = -loop->d[k][i];
-            GL_UNROLL
-            for (uint32_t j = 0; j < GL_NX; ++j) {
-                acc = GL_FMA(-K[i * GL_NX + j], x[j], acc);
-            }
-            u[i] = acc;
+        for (uint32_t j = 0; j < GL_NX; ++j) {
+            acc = GL_FMA(-K[i * GL_NX + j], x[j], acc);
+        }
+        u[i] = acc;
+    }
+    GL_UNROLL
+    for (uint32_t i = 0; i < GL_NX; ++i) {
+        float acc = 0.0f;
+        GL_UNROLL
+        for (uint32_t j = 0; j < GL_NX; ++j) {
+            acc = GL_FMA(A[i * GL_NX + j], x[j], acc);
         }
         GL_UNROLL
-        for (uint32_t i = 0; i < GL_NX; ++i) {
-            float acc = 0.0f;
-            GL_UNROLL
-            for (uint32_t j = 0; j < GL_NX; ++j) {
-                acc = GL_FMA(t->A[i * GL_NX + j], x[j], acc);
-            }
-            GL_UNROLL
-            for (uint32_t l = 0; l < GL_M; ++l) {
-                acc = GL_FMA(t->B[i * GL_M + l], u[l], acc);
-            }
-            xn[i] = acc;
+        for (uint32_t l = 0; l < GL_M; ++l) {
+            acc = GL_FMA(B[i * GL_M + l], u[l], acc);
         }
+        xn[i] = acc;
+    }
 #if GL_NC > 0
+    GL_UNROLL
+    for (uint32_t r = 0; r < GL_NC; ++r) {
+        float acc = 0.0f;
         GL_UNROLL
-        for (uint32_t r = 0; r < GL_NC; ++r) {
-            float acc = 0.0f;
-            GL_UNROLL
-            for (uint32_t j = 0; j < GL_NX; ++j) {
-                acc = GL_FMA(t->Hx[r * GL_NX + j], xn[j], acc);
-            }
-            loop->c[k][r] = acc;
+        for (uint32_t j = 0; j < GL_NX; ++j) {
+            acc = GL_FMA(Hx[r * GL_NX + j], xn[j], acc);
         }
+        c[r] = acc;
+    }
+#else
+    (void)Hx;
+    (void)c;
 #endif
-        memcpy(x, xn, sizeof x);
+}
+
+/** The forward pass from x0: the moves u[k] and the box rows c[k] of x_{k+1}. */
+static GL_PASS void forward(gl_mpc_t *loop, const float *x0)
+{
+    const gl_mpc_tables_t *t = loop->t;
+    float x[2][GL_NX];
+    uint32_t at = 0u;
+    memcpy(x[0], x0, sizeof x[0]);
+    for (uint32_t k = 0; k < GL_H; ++k) {
+        forward_stage(t->A, t->B, t->K[k], t->Hx, loop->d[k], x[at], loop->u[k], x[at ^ 1u], loop->c[k]);
+        at ^= 1u;
     }
 }
 
 /** Slack, dual and both residual tests of every stage; 1 when every residual is within its threshold. */
-static int slacks(gl_mpc_t *loop)
+static GL_PASS int slacks(gl_mpc_t *loop)
 {
     const gl_mpc_tables_t *t = loop->t;
     int done = 1;

@@ -25,11 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import codegen_mpc
 from . import gains_layout as layout
 from .artifact import Artifact
 from .codegen import gain_set, shape_of
 from .codegen_fixed import ROWS, VECTORS, set_crc32, structure_crc
-from . import codegen_mpc
 from .codegen_scheduled import tables, tables_crc32
 from .law_c import law_name
 

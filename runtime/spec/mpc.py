@@ -99,10 +99,9 @@ def _box(name: str, bounds: Any, plant: PlantModel, op: OperatingPoint | None) -
     return MpcBox(name=name, kind=kind, index=index, lo=lo, hi=hi)
 
 
-def check_mpc_spec(data: dict, *, numeric: str, realization: str) -> None:
-    """What the MPC law cannot be combined with in this version, refused in one line each."""
-    if "schedule" in data:
-        raise SpecError('an MPC law cannot be scheduled in this version: drop [schedule] or use method = "lqr"')
+def check_mpc_spec(*, numeric: str, realization: str) -> None:
+    """What the MPC law cannot be combined with in this version, refused in one line each (a ``[schedule]``: at the
+    top of :func:`gainlink.spec.parse.parse_spec`, before the points are read)."""
     if numeric != "float32":
         raise SpecError(
             f"implementation.numeric {numeric!r} is not available for the MPC law in this version (float32 only)"

@@ -73,6 +73,8 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     if disc not in ("zoh", "tustin"):
         raise SpecError(f"discretization must be 'zoh' or 'tustin', not {disc!r}")
     sched = table(data, "schedule", required=False)
+    if sched is not None and isinstance(data.get("controller"), dict) and data["controller"].get("method") == "mpc":
+        raise SpecError('an MPC law cannot be scheduled in this version: drop [schedule] or use method = "lqr"')
     plants = _plants(table(data, "plant", required=True), sched, Ts=Ts)
     plant = plants[0]
     ctl = checked_table(data, "controller", CONTROLLER_KEYS, required=True)
@@ -87,7 +89,7 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     controllers = tuple(parse_controller(ctl, p, q=q, Ts=Ts) for p in plants)
     implementation = parse_implementation(checked_table(data, "implementation", IMPLEMENTATION_KEYS, required=False))
     if ctl.get("method") == "mpc":
-        check_mpc_spec(data, numeric=implementation.numeric, realization=implementation.realization)
+        check_mpc_spec(numeric=implementation.numeric, realization=implementation.realization)
     schedule = None
     if sched is not None:
         _check_schedulable(data, q=q, m=plant.m, implementation=implementation)

@@ -38,8 +38,7 @@ class Tables:
 
     A: np.ndarray
     B: np.ndarray
-    K: np.ndarray  # (N, m, nx)
-    negK: np.ndarray
+    negK: np.ndarray  # (N, m, nx): -K_k, as the C multiplies it
     C1: np.ndarray
     Hx: np.ndarray
     lo_u: np.ndarray
@@ -61,7 +60,7 @@ class Tables:
         v = ar.value
         eps = mpc.eps
         big = np.finfo(np.float32).max  # an infinite side of a box: never binds, finite in every arithmetic
-        return cls(A=v(mpc.A), B=v(mpc.B), K=v(mpc.K), negK=-v(mpc.K), C1=v(mpc.C1), Hx=v(mpc.Hx),
+        return cls(A=v(mpc.A), B=v(mpc.B), negK=-v(mpc.K), C1=v(mpc.C1), Hx=v(mpc.Hx),
                    lo_u=v(mpc.lo_u), hi_u=v(mpc.hi_u), lo_x=v(np.maximum(mpc.lo_x, -big)),
                    hi_x=v(np.minimum(mpc.hi_x, big)), rho=float(v(mpc.rho)), rho_x=float(v(mpc.rho_state)),
                    kappa=float(v(mpc.kappa)), eps_pu=v(eps["pu"]), eps_du=v(eps["du"]), eps_px=v(eps["px"]),

@@ -1,0 +1,196 @@
+"""The MPC law (issue 32; docs/design.md, "MPC (the fourth law)"): its references, each its own claim, and its C.
+
+Oracles: python-control's DLQR gain of the same weights (the LQ law the unconstrained optimum's first move must be),
+Clarabel's interior-point solution of the QP written out independently of the solver (gainlink.laws.mpc.qp builds it
+from the artifact's matrices, not from the ADMM's cached gains), the float32 model of the C (gainlink.laws.mpc with
+the C's arithmetic) against the host build and the Cortex-M images, run from the same samples.
+"""
+
+from __future__ import annotations
+
+import tomllib
+
+import control
+import numpy as np
+import pytest
+from gainlink.laws import flags as law_flags
+from gainlink.laws import law_for_spec, law_of
+from gainlink.laws.mpc import qp
+from gainlink.laws.mpc.arith import Arith, Float32
+from gainlink.laws.mpc.solver import Tables, Workspace, solve
+from gainlink.laws.mpc.step import MpcLoop
+from gainlink.shipping.artifact import from_dict
+from gainlink.spec import parse_spec
+from support.cli import assert_refused
+from support.designs import designed
+from support.paths import EXAMPLES
+
+
+def pendulum(horizon: int = 20, *, box: float | None = None, soft: dict | None = None, cap: int = 10) -> dict:
+    """examples/pendulum_mpc.toml, with another horizon, cap, input box or soft boxes."""
+    data = tomllib.loads((EXAMPLES / "pendulum_mpc.toml").read_text())
+    data["mpc"].update(horizon=horizon, max_iter=cap)
+    if box is not None:
+        data["limits"].update(u_min=[-box], u_max=[box])
+    if soft:
+        data["mpc"]["boxes"] = soft
+    return data
+
+
+def artifact(**kw):
+    return from_dict(designed(pendulum(**kw)))
+
+
+def admm(a, x0: np.ndarray, *, cap: int = 5000):
+    """The float64 algorithm from a cold start, run to its tolerances (a cap far away)."""
+    t = Tables.of(a.mpc, Arith())
+    t.max_iter = cap
+    return solve(t, Arith(), Workspace.zeros(a.mpc.horizon, a.m, a.mpc.nc), x0)
+
+
+def test_the_unconstrained_optimum_first_move_is_the_lq_law_within_float64_rounding():
+    a = artifact()
+    m = a.mpc
+    Kd, _, _ = control.dlqr(m.A, m.B, m.Q, m.R)  # python-control's own DLQR of the design's weights
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        x0 = rng.normal(0.0, 0.02, m.nx)  # small: the first moves stay far inside the 20 N box
+        want = -np.asarray(Kd) @ x0
+        kkt = qp.unconstrained(m, x0)
+        clarabel = qp.solve_qp(m, x0)
+        assert np.all(np.abs(clarabel.u) < 0.5 * (a.u_max - a.u_min)), "a constraint is active: not this claim"
+        assert np.allclose(kkt.u[0], want, rtol=1e-9, atol=1e-12), (kkt.u[0], want)
+        assert np.allclose(clarabel.u[0], want, rtol=1e-7, atol=1e-9), (clarabel.u[0], want)
+
+
+@pytest.mark.parametrize(
+    "case",
+    [
+        {"box": None, "soft": None, "x0": [1.0, 0.0, 0.0, 0.0, 0.0]},  # unconstrained: a proximal iteration
+        {"box": 2.5, "soft": None, "x0": [1.0, 0.0, 0.0, 0.0, 0.0]},  # the input box binds for the whole horizon
+        {"box": 2.5, "soft": {"x_dot": [-0.3, 0.3]}, "x0": [0.3, 0.2, 0.05, 0.0, 0.1]},  # and a soft velocity box
+    ],
+)
+def test_the_float64_algorithm_stops_within_its_tolerance_of_clarabels_optimum(case):
+    a = artifact(box=case["box"], soft=case["soft"])
+    x0 = np.array(case["x0"])
+    opt = qp.solve_qp(a.mpc, x0)
+    run = admm(a, x0)
+    assert run.converged
+    gap = np.abs(run.u[0] - opt.u[0])
+    assert np.all(gap <= a.mpc.eps["pu"]), (gap, a.mpc.eps["pu"], run.iterations)
+
+
+def test_at_the_cap_the_first_move_is_projected_and_flagged_and_the_count_is_the_caps():
+    a = artifact(horizon=4, box=2.5, cap=2)
+    model = law_of(a).model(a)
+    step = model.step(np.array([1.0, 0.0]), np.zeros(1), np.zeros(0))
+    step = model.step(np.array([1.0, 0.0]), np.zeros(1), np.zeros(0))  # the estimate has moved: the box binds
+    assert step.flags & law_flags.CAPPED
+    assert model.last.iterations == 2
+    assert a.u_min[0] <= step.u[0] <= a.u_max[0] and step.sat == 1
+
+
+def _samples(a, k: int, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    Y = a.y_op + np.array([1.0, 0.0]) + rng.normal(0.0, 0.01, (k, a.p))
+    Y[k // 2, 1] = np.nan  # refused: FAULT, nothing changes
+    return Y, np.zeros((k, a.q))
+
+
+@pytest.mark.parametrize("soft", [None, {"x_dot": [-0.3, 0.3], "theta": [-0.2, 0.2]}])
+def test_the_host_c_is_its_float32_model_bit_for_bit_and_near_the_float64_algorithm(soft):
+    a = artifact(horizon=5, box=2.5, soft=soft, cap=4)
+    law = law_of(a)
+    Y, R = _samples(a, 24)
+    native, model = law.replay(a, "native", Y, R), law.replay(a, "model", Y, R)
+    for field in ("u", "sat", "flags", "iterations", "state"):
+        assert np.array_equal(getattr(native, field), getattr(model, field)), field
+    assert native.flags[12] == law_flags.FAULT and native.iterations[12] == 0
+    assert np.array_equal(native.state[12], native.state[11])  # a refused sample changes nothing
+    assert (native.flags & law_flags.CAPPED).any() and (native.iterations < a.mpc.max_iter).any()
+    verdicts = law.one_step(a, Y, R, None, native, engine="native")
+    assert [v.passed for v in verdicts] == [True, True], [v.check.summary() for v in verdicts]
+
+
+def test_a_bent_gain_is_caught_by_the_one_step_check():
+    a = artifact(horizon=5, box=2.5)
+    law = law_of(a)
+    Y, R = _samples(a, 10)
+    bent = MpcLoop(a, Float32())
+    bent.law.t.negK[2, 0, 1] = np.float32(bent.law.t.negK[2, 0, 1] * (1 + 1e-4))  # one cached gain of stage 2
+    trace = bent.run(Y, R)
+    assert law.one_step(a, Y, R, None, law.replay(a, "model", Y, R), engine="model")[0].passed
+    verdicts = law.one_step(a, Y, R, None, trace, engine="model")
+    assert not verdicts[0].passed and verdicts[0].check.first_failure.k == 1  # step 0 starts cold: u0 = 0
+
+
+@pytest.mark.parametrize("target,steps", [("cortex-m4", 12), ("cortex-m0", 3)])
+def test_the_cortex_m_image_is_the_host_c_bit_for_bit(target, steps):
+    a = artifact(horizon=4, box=2.5, soft={"x_dot": [-0.3, 0.3]})
+    law = law_of(a)
+    Y, R = _samples(a, steps, seed=2)
+    Y[1, 0] = np.nan
+    host, image = law.replay(a, "native", Y, R), law.replay(a, "qemu", Y, R, target=target)
+    for field in ("u", "sat", "flags", "iterations", "state"):
+        assert np.array_equal(getattr(host, field), getattr(image, field)), field
+
+
+BAD = [
+    ({"mpc": {"horizon": 0}}, "mpc.horizon must be an integer from 1"),
+    ({"mpc": {"horizon": 5, "max_iter": 0}}, "mpc.max_iter must be an integer from 1"),
+    ({"mpc": {"horizon": 5, "rho": 0.0}}, "mpc.rho must be a finite number > 0"),
+    ({"mpc": {"horizon": 5, "rho_state": -1.0}}, "mpc.rho_state must be a finite number > 0"),
+    ({"mpc": {"horizon": 5, "boxes": {"x_dot": [0.5, 1.0]}}}, "excludes the operating point"),
+    ({"implementation": {"numeric": "q31"}}, "not available for the MPC law"),
+    ({"mpc": None}, 'method = "mpc" needs an [mpc] table'),
+]
+
+
+def _toml(data: dict) -> str:
+    lines = []
+    for key in ("name", "Ts", "discretization"):
+        lines.append(f"{key} = {data[key]!r}".replace("'", '"'))
+    for table, body in data.items():
+        if not isinstance(body, dict):
+            continue
+        lines.append(f"[{table}]")
+        for k, v in body.items():
+            if isinstance(v, dict):
+                v = "{ " + ", ".join(f"{kk} = {vv}" for kk, vv in v.items()) + " }"
+            elif isinstance(v, str):
+                v = f'"{v}"'
+            lines.append(f"{k} = {v}")
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("change,phrase", BAD, ids=[p for _, p in BAD])
+def test_bad_mpc_input_is_one_line_exit_2_and_nothing_written(tmp_path, change, phrase):
+    data = pendulum()
+    for table, body in change.items():
+        if body is None:
+            data.pop(table)
+        else:
+            data.setdefault(table, {}).update(body)
+    spec = tmp_path / "spec.toml"
+    spec.write_text(_toml(data))
+    assert_refused(["design", spec, "--out", tmp_path / "out.json"], phrase, tmp_path)
+
+
+def test_a_terminal_cost_that_is_not_positive_definite_is_refused(tmp_path):
+    data = pendulum()
+    data["plant"].update(A=[[-1.0, 0.0, 0.0, 0.0], [0.0, -2.0, 0.0, 0.0], [0.0, 0.0, -3.0, 0.0],
+                            [0.0, 0.0, 0.0, -4.0]])  # fmt: skip
+    data["controller"]["Q_diag"] = [1.0, 0.0, 1.0, 1.0]  # a stable mode the cost does not see: P singular
+    data.pop("integral")
+    data["limits"]["anti_windup"] = "none"
+    spec = tmp_path / "spec.toml"
+    spec.write_text(_toml(data))
+    assert_refused(["design", spec, "--out", tmp_path / "out.json"], "terminal cost", tmp_path)
+
+
+def test_an_mpc_law_with_a_schedule_is_refused_in_one_line():
+    data = pendulum()
+    data["schedule"] = {"sigma": "x", "points": [0.0, 1.0]}
+    with pytest.raises(ValueError, match="cannot be scheduled"):
+        law_for_spec(parse_spec(data))
