@@ -4,7 +4,7 @@ Plant → controller: ``DEBUG_FLOAT_ARRAY`` (name ``GL_SAMPLE``, ``array_id`` 1)
 ``data = y[0..p-1], r[0..q-1]`` and ``time_usec = seq * round(Ts * 1e6)``.
 Controller → plant: ``HIL_ACTUATOR_CONTROLS`` with the same ``time_usec`` (lockstep: the answer
 names its sample), ``controls[0..m-1] = u`` and ``flags``: bits 0-15 are MAVLink's own (bit 0 its LOCKSTEP flag;
-gainlink sets none of them), bits 16-23 the step's status flags (the one table, :mod:`gainlink.laws.flags`: the
+gainlink sets none of them), bits 16-31 the step's status flags (the one table, :mod:`gainlink.laws.flags`: the
 same bits as the CAN status byte; RESET on the answer to a reset), bits 32-47 the saturation mask (bit 32+k: input k
 clamped). That is wire format 2 (``wire=2`` on the node's ready line, AUTOPILOT_VERSION's
 ``middleware_sw_version``); a scheduled law's sample carries its external scheduling signals after ``r``.
@@ -270,7 +270,7 @@ class MavlinkTransport(Transport):
             flags = int(msg.flags)
             u = np.asarray(msg.controls[: self.m], dtype=float)
             sat = np.array([(flags >> (MAVLINK_SAT_SHIFT + k)) & 1 for k in range(self.m)], dtype=bool)
-            status = (flags >> MAVLINK_FLAGS_SHIFT) & 0xFF  # the status flags, as the table numbers them
+            status = (flags >> MAVLINK_FLAGS_SHIFT) & 0xFFFF  # the status flags, as the table numbers them
             seq = (int(msg.time_usec) // self.ts_us) % self.seq_modulo
             out.append(Command(seq=seq, u=u, saturated=sat, status=status, t_ns=time.perf_counter_ns(), wire=flags))
         return out

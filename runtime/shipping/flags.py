@@ -48,7 +48,8 @@ RESET = BITS["RESET"]
 CAPPED = BITS["CAPPED"]
 
 #: MAVLink keeps bits 0-15 of ``HIL_ACTUATOR_CONTROLS.flags`` (bit 0 is its LOCKSTEP flag): gainlink's flags sit at
-#: bits 16-23, the saturation mask at bits 32-47.
+#: bits 16-31 (the table's bits 0-15: CAPPED, 0x100, at bit 24), the saturation mask at bits 32-47. The CAN command
+#: frames' status byte carries the table's bits 0-7 only: an MPC node's CAPPED is not on CAN.
 MAVLINK_FLAGS_SHIFT = 16
 MAVLINK_SAT_SHIFT = 32
 

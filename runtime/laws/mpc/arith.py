@@ -4,7 +4,8 @@
 The law's step (:mod:`.solver`, :mod:`.step`) is written against :class:`Arith`, so the float64 model and the bit-exact
 model of the C are the same sequence of operations in the same order, and only the rounding differs. Sums are chains:
 ``acc = start; acc = fma(a_j, b_j, acc)`` for each term in order (the order ``firmware/src/gl_mpc.c`` keeps); a chain
-over the columns of a matrix runs every row's chain at once (each element's chain is its own).
+over the columns of a matrix runs every row's chain at once (each element's chain is its own). The float64 model
+sums a matrix product in numpy's order: it models the algorithm, not an arithmetic.
 """
 
 from __future__ import annotations
@@ -38,10 +39,8 @@ class Arith:
         return a * b
 
     def matvec(self, M: np.ndarray, x: np.ndarray, acc: np.ndarray) -> np.ndarray:
-        """``acc + M x``, each row's chain over the columns in order."""
-        for j in range(M.shape[1]):
-            acc = self.fma(M[:, j], x[j], acc)
-        return acc
+        """``acc + M x`` (float64: numpy's product, in its own order; the algorithm's model, not an arithmetic's)."""
+        return acc + M @ x
 
 
 class Float32(Arith):
@@ -55,6 +54,12 @@ class Float32(Arith):
 
     def value(self, x) -> np.ndarray:
         return self._round(x)
+
+    def matvec(self, M: np.ndarray, x: np.ndarray, acc: np.ndarray) -> np.ndarray:
+        """``acc + M x``, each row's chain of ``fmaf`` over the columns in order (the C's)."""
+        for j in range(M.shape[1]):
+            acc = self.fma(M[:, j], x[j], acc)
+        return acc
 
     def fma(self, a, b, c) -> np.ndarray:
         """Correctly rounded ``fmaf``: the product of two float32 values is exact in float64, so the float64 sum
