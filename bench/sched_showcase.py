@@ -16,7 +16,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from gainlink.hil.loop.sched_study import run_showcase
+from gainlink.hil.loop.showcase import run_showcase
 
 
 def main() -> int:

@@ -6,8 +6,8 @@ Sub-packages, by part:
   project's FMUs built from source, linearisation of an FMU to a spec;
 - :mod:`.links`: the transport base class and registry, CAN (python-can, DBC layout, firmware CAN
   node), MAVLink (pymavlink), reference controller nodes, a Linux VM with a real SocketCAN vcan0;
-- :mod:`.loop`: scenario, faults, scheduling, the controller peer process, the bridge loop, metrics,
-  report and the anti-windup study; SIL (:mod:`.loop.sil`, the host C loop in-process, no bus);
+- :mod:`.loop`: scenario, plan, faults, scheduling, the controller peer process, the one closed loop and its
+  endpoints (in process: SIL; over a link: HIL), the twins, metrics, report and the studies;
 - :mod:`.campaign`: many SIL/HIL runs over plant uncertainty, design grids and fault matrices on Dask
   (``gainlink campaign run|show``).
 
@@ -30,7 +30,8 @@ def run(
     plots: bool = True,
     progress: Callable[[int, int], None] | None = None,
 ) -> Any:
-    """Run one HIL scenario: plant on this side, the controller (firmware) on the other, and return the result.
+    """Run one scenario: the plant on this side, the law on the other (in process without a ``[transport]``, over
+    the link with one), and return the result.
 
     Parameters
     ----------
@@ -38,8 +39,8 @@ def run(
         A scenario file, the name of a built-in scenario (``pendulum_fmu``), a scenario as a dict
         (the parsed TOML; relative paths are taken from the working directory) or a parsed Scenario.
     artifact : str, Path or Artifact, optional
-        Replaces the scenario's artifact (an Artifact object is written to a temporary file for
-        the controller process).
+        Replaces the scenario's artifact (an Artifact object runs as it is; a peer process that reads a file gets
+        one written once).
     report : str or Path, optional
         Also write the report folder there (report.json, plots, summary).
     plots : bool
@@ -52,13 +53,11 @@ def run(
     RunResult
         ``metrics`` (as in report.json), ``trace`` (numpy arrays per step), ``complete`` and ``reason``.
 
-    A scheduled artifact (schema 2) with ``controller = "firmware"`` (or ``"qemu"``: the Cortex-M image's node) and a
-    CAN or MAVLink transport runs the firmware's node on the scheduled law over the link
-    (:mod:`gainlink.hil.loop.can_scheduled`, in lockstep or real time; external scheduling signals travel after the
-    references);
-    otherwise (``controller = "reference"``, another transport) it runs as
-    software in the loop in this process (:mod:`gainlink.hil.loop.sil_scheduled`: the transport is not used), sigma
-    from its measured output or ``[schedule_signal]``.
+    Every law runs every way (:func:`gainlink.laws.law_of` says which law the artifact runs): the controller
+    ``reference`` is the law's float64 reference, ``firmware`` its C (the host library in process, or the
+    firmware's host app for the link), ``qemu`` the Cortex-M image's node on its UART; a scheduled law takes sigma
+    from its measured output or ``[schedule_signal]``, its external signals travel after the references
+    (:mod:`gainlink.hil.loop.bridge`).
 
     Examples
     --------
@@ -67,12 +66,9 @@ def run(
     >>> res.complete, res.trace.y.shape  # doctest: +SKIP
     (True, (1000, 2))
     """
-    import dataclasses
-    import tempfile
-
     from gainlink.errors import ScenarioError
-    from gainlink.shipping.artifact import Artifact, load
 
+    from .loop.bridge import run_scenario
     from .loop.report import write_report
     from .loop.scenario import is_builtin_scenario
 
@@ -82,17 +78,9 @@ def run(
             f"the built-in scenario {sc.path.stem} runs an artifact of yours: give it (--artifact gains.json, "
             "as `gainlink design SPEC --out DIR` writes)"
         )
-    with tempfile.TemporaryDirectory(prefix="gainlink-run-") as tmp:
-        if isinstance(artifact, Artifact):
-            path = Path(tmp) / "gains.json"
-            artifact.save(path)
-            sc = dataclasses.replace(sc, artifact_path=path)
-        elif artifact is not None:
-            sc = dataclasses.replace(sc, artifact_path=Path(artifact))
-        loaded = load(sc.artifact_path)
-        result = _run_loaded(loaded, sc, progress=progress)
-        if report is not None:
-            write_report(result, Path(report), artifact=loaded, with_plots=plots)
+    result = run_scenario(sc, artifact=artifact, progress=progress)
+    if report is not None:
+        write_report(result, Path(report), with_plots=plots)
     return result
 
 
@@ -105,18 +93,3 @@ def _as_scenario(scenario: Any) -> Any:
     if isinstance(scenario, dict):
         return parse_scenario(scenario)
     return load_scenario(resolve_scenario_path(str(scenario)))
-
-
-def _run_loaded(artifact: Any, sc: Any, *, progress: Callable[[int, int], None] | None) -> Any:
-    """The run of ``sc`` with its artifact loaded: a scheduled law over its link (or in process without one), else
-    the bridge."""
-    if artifact.schedule is None:
-        from .loop.bridge import run_scenario
-
-        return run_scenario(sc, progress=progress)
-    from .loop.can_scheduled import over_link, run_scheduled_can
-    from .loop.sil import run_sil
-
-    if over_link(sc):  # the firmware's CAN or MAVLink node on the scheduled law, over the link
-        return run_scheduled_can(artifact, sc, progress=progress)
-    return run_sil(artifact, sc, progress=progress)

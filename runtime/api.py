@@ -22,7 +22,7 @@ from .fileio import read_toml
 from .laws import design as design_spec
 from .laws import law_for_spec, law_of
 from .proof.reference import Trace
-from .proof.simulation import Simulation, simulate_linear
+from .proof.simulation import Simulation
 from .shipping.artifact import Artifact, from_dict
 from .spec import PlantSpec, load_spec, parse_spec
 from .synthesis import DesignResult
@@ -363,9 +363,17 @@ def replay(
 
 
 def simulate(
-    artifact: Artifact, *, steps: int, x0: Any = None, reference: Any = None, noise_std: float = 0.0, seed: int = 0
+    artifact: Artifact,
+    *,
+    steps: int,
+    x0: Any = None,
+    reference: Any = None,
+    noise_std: float = 0.0,
+    seed: int = 0,
+    signals: Any = None,
 ) -> Simulation:
-    """Closed-loop run of the float64 law against the artifact's own discrete plant.
+    """Closed-loop run of the law's float64 reference against the artifact's own discrete plant (a scheduled law:
+    its points' model, following its scheduled output or the external signals).
 
     Parameters
     ----------
@@ -381,11 +389,13 @@ def simulate(
         Standard deviation of white measurement noise.
     seed : int
         Seed of the noise.
+    signals : array_like (e,) or (steps, e), optional
+        A scheduled law's external scheduling signals (``schedule.external``, in order).
 
     Returns
     -------
     Simulation
-        ``t, x, y, r, u`` arrays; ``y`` and ``r`` replay to the same ``u`` through any engine.
+        ``t, x, y, r, u`` (and ``s``) arrays; ``y``, ``r`` and ``s`` replay to the same ``u`` through any engine.
 
     Examples
     --------
@@ -396,7 +406,9 @@ def simulate(
     >>> bool(abs(sim.y[-1, 0]) < 1e-3), bool(np.array_equal(gl.replay(art, sim.y).u, sim.u))
     (True, True)
     """
-    return simulate_linear(artifact, steps=steps, x0=x0, reference=reference, noise_std=noise_std, seed=seed)
+    sim: Simulation = law_of(artifact).simulate(artifact, steps=steps, x0=x0, reference=reference,
+                                                 noise_std=noise_std, seed=seed, signals=signals)  # fmt: skip
+    return sim
 
 
 def load(path: str | Path) -> Artifact:

@@ -63,7 +63,7 @@ _FIRMWARE_C = (
 )
 _HOST_LINKS = ("hil/loop", "hil/links", "firmware/apps", "firmware/ports/host")
 SOURCES: dict[str, tuple[str, ...]] = {
-    "campaign": ("hil/campaign", "hil/loop/sil.py", "bench/campaign.py"),
+    "campaign": ("hil/campaign", "hil/loop/closed_loop.py", "hil/loop/endpoints.py", "bench/campaign.py"),
     "firmware_cost": (*_FIRMWARE_C, "runtime/firmware/cost.py", "bench/firmware_cost.py"),
     "fixed_point_cost": (*_FIRMWARE_C, "runtime/synthesis/fixed_point.py", "bench/fixed_point_cost.py"),
     "fuzz": ("firmware/fuzz", "firmware/apps", "firmware/src", "bench/fuzz.py"),

@@ -9,6 +9,7 @@ run for run; draws follow their distributions (scipy's KS test); stability on ha
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import shlex
@@ -28,8 +29,8 @@ from gainlink.fileio import read_toml
 from gainlink.hil.campaign import CampaignError, parse_campaign, run
 from gainlink.hil.campaign.criteria import growth
 from gainlink.hil.campaign.plan import draw_values, plan_campaign
+from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
-from gainlink.hil.loop.sil import run_sil
 from gainlink.hil.plants import toml_write
 from gainlink.shipping.artifact import load
 from scipy import stats
@@ -473,7 +474,7 @@ def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pen
     for row in doc["runs"]:
         rec = json.loads((out / "runs" / f"{row['id']}.json").read_text())
         sc = dict(rec["inputs"]["scenario"], artifact=str(pend), transport={})
-        direct = run_sil(a, parse_scenario(sc), seed=row["seed"])
+        direct = run_scenario(dataclasses.replace(parse_scenario(sc), seed=row["seed"]), artifact=a)
         assert _control(rec) == {k: direct.metrics.get(k) for k in CONTROL_KEYS}
         assert row["status"] == ("fail" if row["reasons"] else "pass")
         assert rec["worker"]["pid"] != os.getpid()  # it ran in a worker process
@@ -575,9 +576,11 @@ def test_a_long_run_is_stored_as_evenly_spaced_true_samples_with_both_ends():
         y=y,
         r=np.zeros((N, 0)),
         u=np.tanh(t)[:, None],
+        s=np.zeros((N, 0)),
         **{
             k: np.zeros(N)
-            for k in ("sat", "got", "latency_ns", "tick_ns", "deadline_ns", "x", "status", "twin_y", "twin_u", "twin_z")
+            for k in ("sat", "got", "latency_ns", "tick_ns", "deadline_ns", "x", "flags", "sigma", "nan_sent")
+            + ("twin_y", "twin_u", "twin_z")
         },
     )
     got = decode_trace(downsampled_trace(trace))
@@ -1079,7 +1082,7 @@ def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, da
         assert rec["status"] == "done"
         sc = dict(rec["inputs"]["scenario"], artifact=str(pend), transport={})
         sc["plant"] = {k: v for k, v in sc["plant"].items() if k not in ("class", "bug")} | {"kind": "cart_pendulum"}
-        direct = run_sil(a, parse_scenario(sc), seed=rows[i]["seed"])
+        direct = run_scenario(dataclasses.replace(parse_scenario(sc), seed=rows[i]["seed"]), artifact=a)
         assert _control(rec) == {k: direct.metrics.get(k) for k in CONTROL_KEYS}
     assert result.errors == 2 and result.total == 4
 

@@ -60,7 +60,7 @@ def test_q31_over_can_is_the_integer_law_bit_for_bit_on_the_recorded_samples(pen
     np.testing.assert_array_equal(tr.u.astype(np.float32).view(np.uint32), u_model.view(np.uint32))
     sat = np.sum(tr.sat.astype(np.int64) << np.arange(a.m), axis=1)
     np.testing.assert_array_equal(sat, model.sat)
-    assert not model.fault.any() and not tr.status.any()
+    assert not model.fault.any() and not tr.flags.any()
     # ... and not the float32 law of the same export (what the node ran before it chose the law).
     f32 = Float32Loop(a).run(Y.astype(np.float64), R.astype(np.float64))
     assert np.any(f32.u.astype(np.float32) != tr.u.astype(np.float32))

@@ -1,4 +1,4 @@
-"""The firmware's CAN node runs a scheduled artifact's law over the bus (gainlink.hil.loop.can_scheduled): the
+"""The firmware's CAN node runs a scheduled artifact's law over the bus (gainlink.hil.loop.bridge): the
 tank of examples/tank_scheduled.toml, scheduled on its measured level, swept across its envelope through the real
 gainlink_can process on python-can udp_multicast. Oracle: the scheduled float32 model (gainlink.proof.scheduled_float32,
 bit for bit the C) on the float32 samples the run recorded: the same commands, saturation and sigma flags."""
@@ -14,14 +14,13 @@ import numpy as np
 import pytest
 from gainlink.hil import run as hil_run
 from gainlink.hil.links.can import CanTransport
-from gainlink.hil.loop.scenario import parse_scenario
-from gainlink.hil.loop.sil_scheduled import external_signals
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from gainlink.shipping.can_layout import layout_for
 from schedule_cases import external_tank, tank_dict, tank_hil_scenario
 from support.designs import designed
 from support.hil import udp_transport
+from support.status import scheduled_status
 
 pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
@@ -55,7 +54,8 @@ def test_the_can_node_runs_the_scheduled_law_bit_for_bit_as_sigma_crosses_the_po
     model = ScheduledFloat32Loop(a).run(Y, R)
     np.testing.assert_array_equal(tr.u.astype(np.float32).view(np.uint32), model.u.astype(np.float32).view(np.uint32))
     np.testing.assert_array_equal(tr.sat, model.saturated)
-    np.testing.assert_array_equal(tr.sigma_flags, model.sigma_flags)  # from the node's status byte
+    status = scheduled_status(model.sigma_flags, model.fault)
+    np.testing.assert_array_equal(tr.flags, status)  # from the node's status byte
     assert tr.sigma.min() < 0.05 and tr.sigma.max() > 0.8  # sigma moved across the middle point (0.25)
     assert m["schedule"]["sigma"] == "h"
     summary = (tmp_path / "report" / "summary.txt").read_text()
@@ -71,11 +71,12 @@ def test_an_external_sigma_travels_after_the_references_and_the_node_runs_on_it(
     res = hil_run(data)
     tr = res.trace
     assert res.complete and res.metrics["lost"] == 0 and res.metrics["schedule"]["source"] == "external"
-    S = external_signals(parse_scenario(data), artifact=a, t=tr.t).astype(np.float32).astype(np.float64)
+    S = tr.s.astype(np.float32).astype(np.float64)  # the signals the run sent
     Y, R = tr.y.astype(np.float32).astype(np.float64), tr.r.astype(np.float32).astype(np.float64)
     model = ScheduledFloat32Loop(a).run(Y, R, S)
     np.testing.assert_array_equal(tr.u.astype(np.float32).view(np.uint32), model.u.astype(np.float32).view(np.uint32))
-    np.testing.assert_array_equal(tr.sigma_flags, model.sigma_flags)  # clipped at 0 and above 1: from the node
+    status = scheduled_status(model.sigma_flags, model.fault)
+    np.testing.assert_array_equal(tr.flags, status)  # clipped at 0 and above 1: from the node
     assert np.any(model.sigma_flags & 2) and tr.sigma.min() < 0.05 and tr.sigma.max() > 0.9
 
 

@@ -246,7 +246,7 @@ def test_a_recorded_figure_is_flagged_once_the_files_it_measures_change_and_only
     that a later change does not alter (a figure flagged once stays flagged without another edit)."""
     figures = _doc_figures()
     monkeypatch.setattr(figures, "ROOT", tmp_path)
-    for rel in ("hil/campaign/runner.py", "hil/loop/sil.py", "bench/campaign.py", "runtime/api.py"):
+    for rel in ("hil/campaign/runner.py", "hil/loop/closed_loop.py", "bench/campaign.py", "runtime/api.py"):
         (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / rel).write_text(f"# {rel}\n")
     stamp = {"from": "bench/campaign.py", "date": "2026-11-29", "cpus": 2, "load_average_at_record": 1.0}
@@ -258,7 +258,7 @@ def test_a_recorded_figure_is_flagged_once_the_files_it_measures_change_and_only
     assert figures.staleness("campaign", doc) is not None
     flagged = " ".join(figures.provenance(doc).split())
     assert "**Older than the code it describes**" in flagged and "`scripts/bench.sh campaign`" in flagged
-    (tmp_path / "hil/loop/sil.py").write_text("# changed too\n")
+    (tmp_path / "hil/loop/closed_loop.py").write_text("# changed too\n")
     assert " ".join(figures.provenance(doc).split()) == flagged
     undated = {"recorded": stamp}
     assert figures.staleness("campaign", undated) is None

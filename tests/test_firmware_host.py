@@ -365,6 +365,7 @@ def test_firmware_run_answers_each_stdin_line_and_exits_2_after_an_unreadable_on
     import sys
 
     from gainlink.proof.float32_law import Float32Loop
+    from gainlink.shipping import records
     from gainlink.shipping.artifact import load
 
     a = load(pend)
@@ -381,7 +382,8 @@ def test_firmware_run_answers_each_stdin_line_and_exits_2_after_an_unreadable_on
     assert len(answers) == len(script)
     assert answers[1] == f"error expected {a.p + a.q} numbers, idle, reset, stage or crc"
     want = Float32Loop(a).run(np.array(rows)[:, : a.p].astype(float), np.array(rows)[:, a.p :].astype(float)).u
-    got = np.array([[float(v) for v in answers[k].split()[2 : 2 + a.m]] for k in (0, 2, 3)], dtype=np.float32)
+    recs = records.layout(a).from_text([answers[k].split()[1:] for k in (0, 2, 3)])  # the step lines' records
+    got = records.column(recs, "u").reshape(3, a.m)
     assert np.array_equal(got, want.astype(np.float32))  # the refused line changed nothing
     assert proc.returncode == 2
     assert proc.stderr.splitlines() == ["gainlink_loop_host: 1 of 4 input lines unreadable (the first: line 2)"]

@@ -70,14 +70,11 @@ def test_firmware_build_ships_the_fixed_point_image(pendulum_q31, tmp_path):
     _, gains, _ = pendulum_q31
     res = run_cli("firmware", "build", gains, "--target", "cortex-m0", "--out", tmp_path / "fw")
     assert res.code == 0, res.err
-    # Every image built is printed with its size and the law it runs, the integer image included (the float32
-    # one alone was): flash as objcopy's .bin, RAM as binutils' size counts the sections at 0x20000000 and up.
+    # The image built is printed with its size and the law it runs (the integer law: a float32 image was printed
+    # before): flash as objcopy's .bin, RAM as binutils' size counts the sections at 0x20000000 and up.
     sizes = {line.split()[0]: line for line in res.out.splitlines() if line.startswith("gainlink_pendulum")}
-    assert set(sizes) == {"gainlink_pendulum.elf", "gainlink_pendulum_fixed.elf"}, res.out
-    for name, law in (
-        ("gainlink_pendulum.elf", "the q31 law on its UART's slcan node"),
-        ("gainlink_pendulum_fixed.elf", "the q31 law alone"),
-    ):
+    assert set(sizes) == {"gainlink_pendulum.elf"}, res.out
+    for name, law in (("gainlink_pendulum.elf", "the q31 law: its UART's slcan node, replay and PIL"),):
         elf = tmp_path / "fw" / name
         table = subprocess.run(["arm-none-eabi-size", "-A", str(elf)], capture_output=True, text=True, check=True)
         ram = sum(

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from gainlink.engines.fixed_native import FixedNativeLoop
 from gainlink.hil.campaign.runner import run as run_campaign
+from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
-from gainlink.hil.loop.sil import run_sil
 from gainlink.proof.fixed_format import real
 from gainlink.proof.fixed_law import FixedPointLoop
 from gainlink.proof.float32_law import Float32Loop
@@ -46,7 +46,7 @@ def _scenario(path, **extra) -> dict:
 
 def test_sil_of_a_q31_artifact_is_the_integer_law_bit_for_bit(pend_q31):
     a, path = pend_q31
-    res = run_sil(a, parse_scenario(_scenario(path)))
+    res = run_scenario(parse_scenario(_scenario(path)), artifact=a)
     tr = res.trace
     assert res.complete and tr.t.size == 200
     assert "q31 fixed-point" in res.info["controller"]["kind"]

@@ -133,8 +133,8 @@ anti_windup = "clamp"
 def test_a_sil_run_tracks_through_it_and_agrees_with_its_model(msd3, tmp_path):
     """linearize -> design -> SIL with the C loop: the only interface runs, the loop tracks, and the plant (a linear
     one integrated by CVode) is its model to within the solver's tolerance."""
+    from gainlink.hil.loop.bridge import run_scenario
     from gainlink.hil.loop.scenario import parse_scenario
-    from gainlink.hil.loop.sil import run_sil
     from gainlink.shipping.artifact import load
 
     (tmp_path / "t.toml").write_text(MSD_TEMPLATE, "utf-8")
@@ -151,7 +151,7 @@ def test_a_sil_run_tracks_through_it_and_agrees_with_its_model(msd3, tmp_path):
         "transport": {},
         "reference": {"r_s": {"kind": "step", "at": 0.5, "value": 0.6}},
     }
-    r = run_sil(art, parse_scenario(sc))
+    r = run_scenario(parse_scenario(sc), artifact=art)
     assert r.complete and r.info["plant"]["interface"] == "me"
     assert r.metrics["outputs_final"]["s"] == pytest.approx(0.6, abs=1e-3)
     assert r.metrics["model_twin"]["worst"] < 1e-4 and not r.metrics["model_twin"]["warning"]

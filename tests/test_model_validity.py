@@ -23,7 +23,6 @@ from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.model_twin import MISMATCH_WARN, model_mismatch
 from gainlink.hil.loop.report import summary_text, write_report
 from gainlink.hil.loop.scenario import parse_scenario
-from gainlink.hil.loop.sil import run_sil
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.config import plant_from_config
 from gainlink.hil.plants.fmi import read_description
@@ -255,7 +254,7 @@ def test_done_when_the_default_path_tracks_in_hil_and_agrees_with_its_model(desi
     assert plant["interface"] == "me" and plant["interface_check"]["cached"]  # linearize's verdict, reused
     assert m["model_twin"]["worst"] < 1e-3 and not m["model_twin"]["warning"]
     assert m["model_twin"]["start"] == "the plant's initial state"
-    write_report(r, tmp_path / "report", artifact=load(designed))
+    write_report(r, tmp_path / "report")
     text = (tmp_path / "report" / "summary.txt").read_text()
     assert "plant interface me: Co-Simulation does not reproduce" in text and "WARNING" not in text
     assert (tmp_path / "report" / "model_twin.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -263,7 +262,9 @@ def test_done_when_the_default_path_tracks_in_hil_and_agrees_with_its_model(desi
 
 def test_done_when_forcing_cosimulation_is_caught_by_the_model_twin(designed, mass_damper, tmp_path):
     art = load(designed)
-    r = run_sil(art, parse_scenario({**_scenario(designed, mass_damper, interface="cs"), "transport": {}}))
+    r = run_scenario(
+        parse_scenario({**_scenario(designed, mass_damper, interface="cs"), "transport": {}}), artifact=art
+    )
     mt = r.metrics["model_twin"]
     assert mt["warning"] and mt["worst"] > MISMATCH_WARN
     assert mt["iae"]["r_y"]["ratio"] > 1.5  # the undamped plant needs more than twice the model's IAE
@@ -278,7 +279,9 @@ def test_the_model_twin_is_the_designed_closed_loop(designed, mass_damper):
     import control as ct
 
     art = load(designed)
-    r = run_sil(art, parse_scenario({**_scenario(designed, mass_damper), "controller": "reference", "transport": {}}))
+    r = run_scenario(
+        parse_scenario({**_scenario(designed, mass_damper), "controller": "reference", "transport": {}}), artifact=art
+    )
     assert r.metrics["saturation_fraction"]["f"] == 0.0
     cl = art.closed_loop()
     tr = r.trace

@@ -8,8 +8,6 @@ the C's arithmetic) against the host build and the Cortex-M images, run from the
 
 from __future__ import annotations
 
-import tomllib
-
 import control
 import numpy as np
 import pytest
@@ -23,18 +21,7 @@ from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
 from support.cli import assert_refused
 from support.designs import designed
-from support.paths import EXAMPLES
-
-
-def pendulum(horizon: int = 20, *, box: float | None = None, soft: dict | None = None, cap: int = 10) -> dict:
-    """examples/pendulum_mpc.toml, with another horizon, cap, input box or soft boxes."""
-    data = tomllib.loads((EXAMPLES / "pendulum_mpc.toml").read_text())
-    data["mpc"].update(horizon=horizon, max_iter=cap)
-    if box is not None:
-        data["limits"].update(u_min=[-box], u_max=[box])
-    if soft:
-        data["mpc"]["boxes"] = soft
-    return data
+from support.mpc import mpc_pendulum as pendulum
 
 
 def artifact(**kw):

@@ -12,10 +12,10 @@ import json
 
 import numpy as np
 import pytest
-from gainlink.errors import PlantError
 from gainlink.firmware.fixed import FAULT, FixedRun, run_host
 from gainlink.hil.loop.pil import make_plant, run_pil
-from gainlink.hil.loop.pil_fixed import first_difference, model_records
+from gainlink.laws.fixed_pil import model_records
+from gainlink.laws.image import first_difference
 from gainlink.proof.derived_law import DerivedLoop
 from gainlink.proof.fixed_law import gains_from_artifact
 from gainlink.shipping.artifact import from_dict, seal
@@ -47,12 +47,12 @@ def test_pendulum_q31_pil_equals_the_model_and_stays_within_the_bound(target):
     x0 = np.full(a.n, 0.05)
     plants = [make_plant("artifact", artifact=a, x0=x0) for _ in range(3)]
     res = run_pil(
-        a, plant=plants[0], steps=STEPS, reference=REFERENCE, target=target, twin=plants[1], quantised_twin=plants[2]
+        a, plant=plants[0], steps=STEPS, reference=REFERENCE, target=target, twin=plants[1], check_plant=plants[2]
     )
-    assert np.all(res.status >= 0)
+    assert not np.any(res.flags & 0x01)  # no sample refused (the fault flag)
     # bit for bit: the model fed the samples the image received (float32), from the initial state
     model = model_run(a, res.y.astype(np.float32), np.broadcast_to(np.float32(REFERENCE), (STEPS, a.q)))
-    run = res.fixed_run
+    run = FixedRun.from_records(res.records, a.q)
     for field in ("U", "V", "XH", "Z", "sat", "clip"):
         assert np.array_equal(getattr(run, field), getattr(model, field)), field
     assert not np.any(run.flags) and not np.any(run.overflow)
@@ -65,7 +65,7 @@ def test_pendulum_q31_pil_equals_the_model_and_stays_within_the_bound(target):
     bound = bound_float32_link(a)
     assert np.all(measured <= bound), (measured, bound)
     assert np.all(measured > 0), "the integer law is not the float64 one: something to measure"
-    check = res.fixed_point
+    check = res.checks["fixed_point"]
     assert check.bit_exact and check.first_difference is None and check.within_bound
     assert check.unsaturated_steps == STEPS and np.array_equal(check.measured_du_rounding, measured)
     assert check.certified_du_rounding == a.checks["fixed_point"]["error"]["closed_loop"]
@@ -90,12 +90,13 @@ def test_pil_cli_on_a_fixed_point_artifact_reports_the_oracle(tmp_path):
     assert json.loads((out / "pil.json").read_text()) == summary
 
 
-def test_a_quantised_twin_needs_a_fixed_point_artifact():
+def test_the_check_plant_closes_a_loop_only_for_a_law_whose_check_needs_one():
+    """The same design in float32 (its fixed-point check removed): no quantised twin, no integer check."""
     data = copy.deepcopy(example("pendulum", "q31").data)
     del data["checks"]["fixed_point"]
-    a = from_dict(seal(data))  # the same design, float32
-    with pytest.raises(PlantError, match="quantised twin"):
-        run_pil(a, plant=make_plant("artifact", artifact=a), steps=5, quantised_twin=make_plant("artifact", artifact=a))
+    a = from_dict(seal(data))
+    res = run_pil(a, plant=make_plant("artifact", artifact=a), steps=5, check_plant=make_plant("artifact", artifact=a))
+    assert res.law == "float32" and res.checks == {} and "fixed_point" not in res.summary()
 
 
 @pytest.mark.parametrize("name,numeric", [("pendulum", "q31"), ("wood_berry", "q15")])

@@ -23,8 +23,8 @@ import json
 import numpy as np
 import pytest
 from gainlink.hil.campaign import run
+from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
-from gainlink.hil.loop.sil import run_sil
 from gainlink.shipping.artifact import from_dict, seal
 from schedule_cases import spring
 from support.designs import designed
@@ -93,8 +93,7 @@ def test_a_campaign_over_sigma_rate_and_range_finds_where_stability_stops(spring
         step = row["values"]["sigma_rate"] * 0.02  # sigma per sample (Ts = 0.02 s): the turn falls between samples
         assert row["values"]["sigma_high"] - step <= sch["sigma_max"] <= row["values"]["sigma_high"]
         assert sch["max_rate"] == pytest.approx(row["values"]["sigma_rate"], rel=1e-5)  # sigma in float32
-        direct = run_sil(from_dict(json.loads(path.read_text())),
-                         parse_scenario(dict(rec["inputs"]["scenario"], artifact=str(path), transport={})),
-                         seed=row["seed"])  # fmt: skip
+        sc = parse_scenario(dict(rec["inputs"]["scenario"], artifact=str(path), transport={}, seed=row["seed"]))
+        direct = run_scenario(sc, artifact=from_dict(json.loads(path.read_text())))
         assert direct.metrics["outputs_final"] == rec["metrics"]["outputs_final"]
         assert np.isfinite(direct.trace.y).all()

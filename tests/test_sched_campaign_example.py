@@ -14,13 +14,13 @@ import json
 
 import numpy as np
 import pytest
-from gainlink.errors import ScenarioError
+from gainlink.errors import LawError
 from gainlink.fileio import read_toml
 from gainlink.hil.campaign import run
+from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
-from gainlink.hil.loop.sil import run_sil
-from gainlink.hil.loop.sil_scheduled import without_rate_limit
 from gainlink.laws import design as design_spec
+from gainlink.laws import law_of
 from gainlink.shipping.artifact import from_dict, load
 from gainlink.spec import load_spec
 from support.paths import EXAMPLES
@@ -77,12 +77,12 @@ def test_sigma_rate_limit_false_runs_the_law_without_its_rate_max(artifact, exam
     """The copy differs only in rate_max (and provenance); the scenario's key is refused for an unscheduled
     artifact in one line."""
     art = load(artifact)
-    free = without_rate_limit(art)
+    free = law_of(art).without_rate_limit(art)
     assert free.schedule.rate_max is None and free.sha256 != art.sha256
     assert free.data["provenance"]["rate_limit_removed"] == f"rate_max {art.schedule.rate_max!r} of sha256:{art.sha256}"
     assert np.array_equal(free.schedule.coef["F"], art.schedule.coef["F"]) and free.Ts == art.Ts
     sc = {"artifact": "x", "transport": {}, "duration": 1.0, "plant": {"kind": "cart_pendulum"},
           "sigma_rate_limit": False}  # fmt: skip
-    with pytest.raises(ScenarioError) as exc:
-        run_sil(load(example_artifacts["pendulum"]), parse_scenario(sc))
-    assert "sigma_rate_limit is for a scheduled artifact" in str(exc.value) and "\n" not in str(exc.value)
+    with pytest.raises(LawError) as exc:
+        run_scenario(parse_scenario(sc), artifact=load(example_artifacts["pendulum"]))
+    assert str(exc.value) == "sigma_rate_limit = false is for a scheduled law; the float32 law has no sigma"

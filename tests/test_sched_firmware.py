@@ -248,11 +248,11 @@ def test_replay_cli_runs_the_scheduled_c_on_host_and_qemu(external_data, externa
     assert_refused(argv, "--target", tmp_path)
 
 
-def test_firmware_commands_on_a_scheduled_artifact(external_data, tmp_path):
-    """``firmware build --target host`` ships the scheduled loop's libraries (no stdin/stdout executable);
-    ``firmware run`` (its stdin/stdout loop; the host CAN and MAVLink nodes do run it: test_can_scheduled,
-    test_mavlink_scheduled), which speaks the unscheduled loop's protocol, refuses it in one line, exit 2; so does
-    ``pil run`` without the external sigma's signal (it runs the scheduled image: test_sched_pil)."""
+def test_firmware_commands_on_a_scheduled_artifact(external_data, external, tmp_path):
+    """``firmware build --target host`` ships the scheduled loop's libraries; ``firmware run --input`` replays a CSV
+    (outputs, references, the external signals) through the one host executable (``gainlink_loop_host`` on the
+    scheduled law) and writes what ``replay --engine native`` writes, bit for bit; ``pil run`` without the external
+    sigma's signal is refused in one line, exit 2 (it runs the scheduled image: test_sched_pil)."""
     from gainlink.shipping import artifact as artifact_mod
 
     path = tmp_path / "gains.json"
@@ -261,5 +261,14 @@ def test_firmware_commands_on_a_scheduled_artifact(external_data, tmp_path):
     assert res.code == 0, res.err
     shipped = {p.name for p in (tmp_path / "fw").iterdir()}
     assert {"libgainlink_host.so", "libgainlink_loop.a", "firmware.json"} <= shipped
-    for argv in (("firmware", "run", path), ("pil", "run", path, "--steps", "5")):
-        assert_refused(argv, "scheduled on load", tmp_path)
+    Y, R, S = _samples(external, 260)  # a refused sample (150), a non-finite sigma (200-202)
+    lines = ["t,y0,r0,s0"] + [",".join(repr(float(v)) for v in (k * external.Ts, Y[k, 0], R[k, 0], S[k, 0]))
+                              for k in range(Y.shape[0])]  # fmt: skip
+    (tmp_path / "in.csv").write_text("\n".join(lines) + "\n")
+    res = run_cli("firmware", "run", path, "--input", tmp_path / "in.csv", "--output", tmp_path / "fw.csv")
+    assert res.code == 0, res.err
+    res = run_cli("replay", path, "--input", tmp_path / "in.csv", "--engine", "native", "--output",
+                  tmp_path / "native.csv")  # fmt: skip
+    assert res.code == 0, res.err
+    assert (tmp_path / "fw.csv").read_text() == (tmp_path / "native.csv").read_text()
+    assert_refused(("pil", "run", path, "--steps", "5"), "scheduled on load", tmp_path)

@@ -1,4 +1,4 @@
-"""Injected faults in the HIL of a scheduled artifact over its link (gainlink.hil.loop.can_scheduled): the tank of
+"""Injected faults in the HIL of a scheduled artifact over its link (gainlink.hil.loop.bridge): the tank of
 examples/tank_scheduled.toml, scheduled on its measured level, through the real gainlink_can process on python-can
 udp_multicast, with a window of NaN samples and a window of dropped samples. Oracle: the scheduled float32 model
 (gainlink.proof.scheduled_float32, bit for bit the C) fed the samples the node received, rebuilt here from the
@@ -10,13 +10,12 @@ import numpy as np
 import pytest
 from gainlink.errors import ScenarioError
 from gainlink.hil import run as hil_run
-from gainlink.hil.loop.sched_law import GL_ERR_NANINF
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
-from gainlink.proof.scheduled_reference import SIGMA_HELD
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import tank_dict, tank_hil_scenario
 from support.designs import designed
 from support.hil import udp_transport
+from support.status import FAULT, SIGMA_BITS, scheduled_status
 
 pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
@@ -57,31 +56,18 @@ def test_nan_and_dropped_samples_reach_the_node_as_the_model_is_fed_and_the_repo
     model = ScheduledFloat32Loop(a).run(Y[keep], R[keep])
     u = tr.u.astype(np.float32).view(np.uint32)
     np.testing.assert_array_equal(u[keep], model.u.astype(np.float32).view(np.uint32))
-    np.testing.assert_array_equal(tr.sigma_flags[keep], model.sigma_flags)  # from the node's status byte
+    np.testing.assert_array_equal(tr.flags[keep], scheduled_status(model.sigma_flags, model.fault))  # the node's
     first = int(np.flatnonzero(drop)[0])
     assert np.all(u[drop] == u[first - 1])  # a lost command holds the last one
 
     # sigma = h is a measured output: a NaN sample is refused whole (DESIGN.md, "Scheduled law"): the node answers
     # with its fault bit and u_op at the held sigma; sigma keeps its last valid value and no sigma flag is raised
-    assert np.all(tr.status[nan] == GL_ERR_NANINF) and not np.any(tr.status[keep & ~nan] == GL_ERR_NANINF)
+    assert np.all(tr.flags[nan] & FAULT) and not np.any(tr.flags[keep & ~nan] & FAULT)
     assert m["refused_steps"] == 6
     assert np.all(tr.sigma[nan] == tr.sigma[int(np.flatnonzero(nan)[0]) - 1])
-    assert not np.any(tr.sigma_flags[nan] & SIGMA_HELD) and m["schedule"]["held_steps"] == 0
+    assert not np.any(tr.flags[nan] & sum(SIGMA_BITS.values())) and m["schedule"]["held_steps"] == 0
     summary = (tmp_path / "report" / "summary.txt").read_text()
     assert "nan 6" in summary and "drop 3" in summary
-
-
-@pytest.mark.parametrize(
-    ("extra", "match"),
-    [
-        ({"faults": [{"kind": "delay", "start": 1.0, "stop": 1.2}]}, "faults delay"),
-        ({"mode": "realtime", "controller": "qemu"}, 'not yet with "qemu"'),
-    ],
-)
-def test_what_a_scheduled_run_does_not_do_yet_is_refused_in_one_line(tank, extra, match):
-    _, path = tank
-    with pytest.raises(ScenarioError, match=match):
-        hil_run(_scenario(path, **extra))
 
 
 def test_a_nan_fault_needs_float32_values_on_the_link(tank):
@@ -89,15 +75,6 @@ def test_a_nan_fault_needs_float32_values_on_the_link(tank):
     transport = dict(udp_transport(fd=False), encoding="int16")
     with pytest.raises(ScenarioError, match='encoding = "float32"'):
         hil_run(_scenario(path, transport=transport))
-
-
-def test_the_unscheduled_bridge_refuses_a_nan_fault_in_one_line(tank):
-    from gainlink.hil.loop.bridge import run_scenario
-    from gainlink.hil.loop.scenario import parse_scenario
-
-    _, path = tank
-    with pytest.raises(ScenarioError, match="nan faults run with a scheduled artifact over its link only"):
-        run_scenario(parse_scenario(_scenario(path)))
 
 
 def test_a_realtime_run_is_paced_reports_its_timing_and_the_node_runs_the_law_on_the_samples_sent(
@@ -119,6 +96,6 @@ def test_a_realtime_run_is_paced_reports_its_timing_and_the_node_runs_the_law_on
     got = tr.got[sent]
     u = tr.u[sent].astype(np.float32).view(np.uint32)
     np.testing.assert_array_equal(u[got], model.u.astype(np.float32).view(np.uint32)[got])
-    np.testing.assert_array_equal(tr.sigma_flags[sent][got], model.sigma_flags[got])
+    np.testing.assert_array_equal(tr.flags[sent][got], scheduled_status(model.sigma_flags, model.fault)[got])
     summary = (tmp_path / "report" / "summary.txt").read_text()
     assert "period jitter us" in summary and "overruns" in summary

@@ -12,11 +12,11 @@ import json
 import numpy as np
 import pytest
 from gainlink.engines.sched_native import NativeScheduledLoop
-from gainlink.errors import PlantError
 from gainlink.firmware.build import replay_image
 from gainlink.hil.loop.pil import make_plant, run_pil
-from gainlink.hil.loop.pil_fixed import first_difference
-from gainlink.hil.loop.pil_scheduled import image_records, run_scheduled_pil
+from gainlink.laws.image import first_difference
+from gainlink.laws.scheduled import status_flags
+from gainlink.laws.scheduled_pil import image_records
 from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE
 from gainlink.shipping import artifact as artifact_mod
@@ -24,6 +24,7 @@ from gainlink.shipping.artifact import from_dict
 from schedule_cases import external_tank, tank_dict
 from support.cli import assert_refused, run_cli
 from support.designs import designed
+from support.status import SIGMA_BITS, scheduled_status
 
 pytestmark = pytest.mark.xdist_group("test_sched_pil")  # one worker: the images are built once
 
@@ -68,20 +69,20 @@ def test_scheduled_pil_runs_gl_sched_step_bit_for_bit_with_sigma_measured(level)
     """sigma is the tank's level: it sweeps the whole envelope and is clipped below and above it."""
     plant, twin = (make_plant("tank", artifact=level, x0=np.array([0.08, 0.04])) for _ in range(2))
     R = _triangle(STEPS)
-    res = run_scheduled_pil(level, plant=plant, steps=STEPS, reference=R, target="cortex-m4", twin=twin)
-    chk = res.scheduled
+    res = run_pil(level, plant=plant, steps=STEPS, reference=R, target="cortex-m4", twin=twin)
+    chk = res.checks["scheduled"]
     assert chk.law == "scheduled-float32" and chk.bit_exact_model and chk.bit_exact_host, chk
     # independent of the run's own check: the float32 model on the samples the image got, step by step
     model = ScheduledFloat32Loop(level).run(res.y.astype(np.float32).astype(float), R.astype(np.float32))
     assert np.array_equal(_f32_bits(res.u), _f32_bits(model.u))
     assert np.array_equal(_f32_bits(res.sigma), _f32_bits(model.sigma))
-    assert np.array_equal(res.sigma_flags, model.sigma_flags)
+    assert np.array_equal(res.flags, scheduled_status(model.sigma_flags, model.fault))
     assert np.array_equal(res.saturated, model.saturated)
     sch = chk.schedule
     assert sch["source"] == "output" and sch["sigma_min"] == np.float32(0.04) and sch["sigma_max"] == 1.0
     assert sch["clipped_steps"] > 0 and sch["held_steps"] == 0 and res.saturated.any()
     h = res.y[:, 0].astype(np.float32)  # the image clips the float32 level to the float32 envelope
-    assert np.array_equal((res.sigma_flags & SIGMA_CLIPPED) != 0, (h < np.float32(0.04)) | (h > np.float32(1.0)))
+    assert np.array_equal((res.flags & SIGMA_BITS[SIGMA_CLIPPED]) != 0, (h < np.float32(0.04)) | (h > np.float32(1.0)))
     assert res.comparison.worst_du_rel < 1e-4  # the float64 law on a second tank: float32 rounding apart
     assert res.model_twin is not None and np.all(np.isfinite(res.model_twin.y))
     s = res.summary()
@@ -96,12 +97,12 @@ def test_scheduled_pil_with_an_external_sigma_held_clipped_and_rate_limited(exte
     S[100:140] += 0.5
     S[200:203, 0] = (np.nan, np.inf, -np.inf)
     plant, twin = (make_plant("tank", artifact=external, x0=np.array([0.2, 0.25])) for _ in range(2))
-    res = run_scheduled_pil(external, plant=plant, steps=N, reference=[0.5], signals=S, twin=twin)
-    chk = res.scheduled
+    res = run_pil(external, plant=plant, steps=N, reference=[0.5], signals=S, twin=twin)
+    chk = res.checks["scheduled"]
     assert chk.bit_exact_model and chk.bit_exact_host, chk
-    f = res.sigma_flags
-    assert np.array_equal(np.flatnonzero(f & SIGMA_HELD), [200, 201, 202])
-    assert (f & SIGMA_RATE).any() and (f & SIGMA_CLIPPED).any()
+    f = res.flags
+    assert np.array_equal(np.flatnonzero(f & SIGMA_BITS[SIGMA_HELD]), [200, 201, 202])
+    assert (f & SIGMA_BITS[SIGMA_RATE]).any() and (f & SIGMA_BITS[SIGMA_CLIPPED]).any()
     sch = chk.schedule
     assert sch["held_steps"] == 3 and sch["rate_limited_steps"] > 0 and sch["source"] == "external"
     assert sch["max_rate"] <= 4.0 * (1 + 1e-6)  # the rate limit in the image
@@ -113,9 +114,10 @@ def test_scheduled_pil_on_the_m0_without_an_fpu_is_bit_for_bit_too(level):
     """The micro:bit's Cortex-M0 computes every fmaf in software (gl_fmaf, rounded once): the same records."""
     N = 200
     plant = make_plant("tank", artifact=level, x0=np.array([0.08, 0.04]))
-    res = run_scheduled_pil(level, plant=plant, steps=N, reference=_triangle(N), board="microbit")
-    assert res.scheduled.bit_exact_model and res.scheduled.bit_exact_host, res.scheduled
-    assert res.scheduled.schedule["coverage"] > 0.99
+    res = run_pil(level, plant=plant, steps=N, reference=_triangle(N), board="microbit")
+    chk = res.checks["scheduled"]
+    assert chk.bit_exact_model and chk.bit_exact_host, chk
+    assert chk.schedule["coverage"] > 0.99
 
 
 def test_the_check_finds_a_record_that_differs(level):
@@ -124,8 +126,8 @@ def test_the_check_finds_a_record_that_differs(level):
     Y = np.linspace(0.0, 1.2, N, dtype=np.float32).reshape(N, 1)
     R = np.full((N, 1), 0.5, dtype=np.float32)
     S = np.zeros((N, 0), dtype=np.float32)
-    model = image_records(level, Y=Y, R=R, S=S, host=False)
-    assert first_difference(image_records(level, Y=Y, R=R, S=S, host=True), model) is None
+    model = image_records(level, Y=Y, R=R, S=S, host=False, status_flags=status_flags)
+    assert first_difference(image_records(level, Y=Y, R=R, S=S, host=True, status_flags=status_flags), model) is None
     bad = model.copy()
     bad["u"][17] = np.float32(bad["u"][17]) + np.float32(1e-7) * abs(bad["u"][17])
     assert first_difference(bad, model) == {"step": 17, "field": "u"}
@@ -136,7 +138,7 @@ def test_the_check_finds_a_record_that_differs(level):
 
 def test_pil_cli_on_a_scheduled_artifact(level_data, level, tmp_path):
     """``gainlink pil run`` of a scheduled artifact runs its scheduled image; pil.json names the law and carries
-    sigma's flags, pil.csv sigma per step; the unscheduled run_pil refuses it in one line."""
+    sigma's flags, pil.csv sigma per step."""
     path = tmp_path / "gains.json"
     artifact_mod.write(path, level_data)
     out = tmp_path / "pil"
@@ -149,10 +151,8 @@ def test_pil_cli_on_a_scheduled_artifact(level_data, level, tmp_path):
     assert summary["scheduled"]["bit_exact_host"] and summary["scheduled"]["schedule"]["clipped_steps"] > 0
     assert summary["model_twin"]["warning"] is False
     header, *rows = (out / "pil.csv").read_text().splitlines()
-    assert header.split(",")[3:8] == ["status", "sigma", "held", "clipped", "rate"] and len(rows) == 200
+    assert header.split(",")[3:5] == ["flags", "sigma"] and len(rows) == 200
     assert (out / "twin.png").stat().st_size > 0
-    with pytest.raises(PlantError, match="run_scheduled_pil"):
-        run_pil(level, plant=make_plant("tank", artifact=level), steps=5)
 
 
 def test_pil_cli_bad_schedule_signals(level_data, pend, tmp_path):
@@ -168,7 +168,7 @@ def test_pil_cli_bad_schedule_signals(level_data, pend, tmp_path):
         ((ext, "--schedule-signal", "speed=1"), "not an external scheduling signal"),
         ((ext, "--schedule-signal", "load=a,b"), "NAME=START"),
         ((lvl, "--schedule-signal", "load=0.5"), "not an external scheduling signal"),
-        ((pend, "--schedule-signal", "load=0.5"), "is not scheduled"),
+        ((pend, "--schedule-signal", "load=0.5"), "not an external scheduling signal of pendulum (external: none)"),
     ):
         plant = "artifact" if argv[0] == pend else "tank"
         assert_refused(("pil", "run", *argv, "--plant", plant, "--steps", 5, "--out", out), said, tmp_path)

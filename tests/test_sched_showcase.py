@@ -21,7 +21,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
-from gainlink.hil.loop.sched_study import default_showcase, run_showcase
+from gainlink.hil.loop.showcase import default_showcase, run_showcase
 from support.cli import assert_refused
 from support.hil import udp_transport
 from support.shared import once_per_run

@@ -1,4 +1,4 @@
-"""The scheduled law in the software-in-the-loop path (gainlink.hil.loop.sil_scheduled) on the nonlinear tank of
+"""The scheduled law in the software-in-the-loop path (in process, gainlink.hil.loop.bridge) on the nonlinear tank of
 examples/tank_scheduled.toml (kind = "tank": its level's time constant grows 5x across the envelope).
 
 Oracles: the float64 scheduled law as the closed-loop twin of the C; sigma recomputed here from the measured level
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from gainlink.errors import ScenarioError
 from gainlink.fileio import read_toml
+from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario, resolve_scenario_path
-from gainlink.hil.loop.sil import run_sil
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import external_tank, tank_dict
 from support.cli import assert_refused, run_cli
@@ -74,7 +74,7 @@ def _sweep(rate: float, start: float = 2.0) -> dict:
 
 
 def test_a_reference_sweep_across_the_envelope_tracks_and_sigma_covers_it(tank):
-    res = run_sil(tank, _scenario(45.0, 0.04, _sweep(0.05)))
+    res = run_scenario(_scenario(45.0, 0.04, _sweep(0.05)), artifact=tank)
     m, tr = res.metrics, res.trace
     assert res.complete
     sch = m["schedule"]
@@ -91,7 +91,7 @@ def test_a_reference_sweep_across_the_envelope_tracks_and_sigma_covers_it(tank):
 
 
 def test_the_scheduled_c_closes_the_loop_as_its_float64_twin(tank):
-    res = run_sil(tank, _scenario(14.0, 0.04, _sweep(0.2, start=1.0), controller="firmware"))
+    res = run_scenario(_scenario(14.0, 0.04, _sweep(0.2, start=1.0), controller="firmware"), artifact=tank)
     m = res.metrics
     assert res.complete and res.info["controller"]["kind"].startswith("firmware (host scheduled C")
     assert m["twin"]["worst_du_rel"] < 1e-5 and m["twin"]["worst_dy_rel"] < 1e-5
@@ -102,7 +102,7 @@ def test_the_scheduled_c_closes_the_loop_as_its_float64_twin(tank):
 def _step_iae(art, h0: float, h1: float) -> float:
     """IAE of the level after a reference step h0 -> h1 at t = 20 s, from equilibrium at h0."""
     sc = _scenario(40.0, h0, {"kind": "step", "initial": h0, "value": h1, "at": 20.0}, twin=False, model_twin=False)
-    res = run_sil(art, sc)
+    res = run_scenario(sc, artifact=art)
     after = res.trace.t >= 20.0
     return float(np.sum(np.abs(h1 - res.trace.y[after, 0])) * art.Ts)
 
@@ -145,15 +145,19 @@ def test_an_external_sigma_follows_its_profile_clipped_and_rate_limited(external
     [
         ("external", {}, "the artifact is scheduled on load: give [schedule_signal.NAME]"),
         ("output", {"schedule_signal": {"load": 0.5}}, "schedule_signal.load is not an external scheduling signal"),
-        ("output", {"controller": "qemu"}, 'runs as SIL with controller = "firmware"'),
-        ("single", {"schedule_signal": {"load": 0.5}}, "schedule_signal is for a scheduled artifact"),
+        ("output", {"controller": "qemu"}, 'controller = "qemu" serves the image\'s UART: give it a [transport]'),
+        (
+            "single",
+            {"schedule_signal": {"load": 0.5}},
+            "schedule_signal.load is not an external scheduling signal of the artifact (external: none)",
+        ),
         ("external", {"schedule_signal": {"load": {"kind": "sweep", "low": 0.0}}}, "a sweep needs low, high and"),
     ],
 )
 def test_a_wrong_scheduling_signal_is_one_line(tank, singles, external, which, change, words):
     art = {"external": external[None], "output": tank, "single": singles[0]}[which]
     with pytest.raises(ScenarioError, match=None) as exc:
-        run_sil(art, _scenario(1.0, 0.04, 0.04, **change))
+        run_scenario(_scenario(1.0, 0.04, 0.04, **change), artifact=art)
     assert words in str(exc.value) and "\n" not in str(exc.value)
 
 

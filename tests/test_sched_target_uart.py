@@ -27,8 +27,6 @@ from gainlink.firmware.uart import QemuUart
 from gainlink.hil import run as hil_run
 from gainlink.hil.links.can import CanTransport
 from gainlink.hil.links.mavlink import MavlinkTransport
-from gainlink.hil.loop.scenario import parse_scenario
-from gainlink.hil.loop.sil_scheduled import external_signals
 from gainlink.mavlink import upload as upload_mod
 from gainlink.mavlink.params import INT32
 from gainlink.mavlink.sched_params import scheduled_firmware_params, table_hash
@@ -41,6 +39,7 @@ from support.designs import designed
 from support.hil import udp_transport
 from support.mavlink import read_params
 from support.net import tcp_port, udp_port
+from support.status import scheduled_status
 
 pytestmark = [pytest.mark.usefixtures("quiet_design_warnings"), pytest.mark.xdist_group("test_sched_target_uart")]
 
@@ -83,13 +82,13 @@ def _assert_model(a, res, S=None) -> None:
     model = ScheduledFloat32Loop(a).run(Y, R, S)
     np.testing.assert_array_equal(tr.u.astype(np.float32).view(np.uint32), model.u.astype(np.float32).view(np.uint32))
     np.testing.assert_array_equal(tr.sat, model.saturated)
-    np.testing.assert_array_equal(tr.sigma_flags, model.sigma_flags)
+    np.testing.assert_array_equal(tr.flags, scheduled_status(model.sigma_flags, model.fault))
 
 
 def _assert_same(image, host) -> None:
     np.testing.assert_array_equal(image.trace.u, host.trace.u)
     np.testing.assert_array_equal(image.trace.y, host.trace.y)
-    np.testing.assert_array_equal(image.trace.sigma_flags, host.trace.sigma_flags)
+    np.testing.assert_array_equal(image.trace.flags, host.trace.flags)
 
 
 def test_the_images_slcan_node_runs_the_scheduled_law_bit_for_bit(level):
@@ -111,10 +110,9 @@ def test_the_images_mavlink_node_runs_the_scheduled_law_on_an_external_sigma(ext
     mav = {"kind": "mavlink", "url": f"tcp:127.0.0.1:{tcp_port()}"}
     image = hil_run(_sweep(path, mav, controller="qemu", schedule_signal={"load": signal}))
     assert "law=scheduled-float32" in image.info["controller"]["ready"]
-    S = external_signals(parse_scenario(_sweep(path, mav, controller="qemu", schedule_signal={"load": signal})),
-                         artifact=a, t=image.trace.t).astype(np.float32).astype(np.float64)  # fmt: skip
+    S = image.trace.s.astype(np.float32).astype(np.float64)  # the signals the run sent
     _assert_model(a, image, S)
-    assert np.any(image.trace.sigma_flags & 2)  # clipped at 0 and above 1.0: from the node
+    assert np.any(image.trace.flags & 0x20)  # clipped at 0 and above 1.0: from the node
     host = hil_run(_sweep(path, {"kind": "mavlink", "port": udp_port()}, controller="firmware",
                           schedule_signal={"load": signal}))  # fmt: skip
     _assert_same(image, host)

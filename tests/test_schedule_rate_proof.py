@@ -162,9 +162,9 @@ def test_a_declared_uncertified_rate_ships_and_says_so_wherever_it_appears(tmp_p
     """rate_max 0.5 with rate_certified = false: the artifact, the design's (JSON and lines) and analyze's output,
     the warnings, the exported header and a run's report all say "not certified"; nothing claims a proof of the
     rate (the old design warned "stability is proved only for a slowly moving k" with nothing proved)."""
-    from gainlink.hil.loop.sched_report import schedule_lines
+    from gainlink.laws.scheduled_run import schedule_lines
     from gainlink.shipping.artifact import load
-    from gainlink.shipping.codegen_scheduled import render_export
+    from gainlink.shipping.export_c import render_export
     from gainlink.synthesis.schedule import describe_schedule
 
     spec = tmp_path / "spec.toml"

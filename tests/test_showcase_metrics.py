@@ -9,8 +9,8 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
-from gainlink.hil.loop.sched_study import step_metrics
-from gainlink.hil.loop.sched_study_report import showcase_summary
+from gainlink.hil.loop.showcase import step_metrics
+from gainlink.hil.loop.showcase_report import showcase_summary
 
 TS, AT, END = 0.05, 10.0, 25.0
 STEP = {"from": 0.1, "to": 0.04, "at": AT, "duration": END}

@@ -8,13 +8,14 @@ bit for bit (both C loops see the same float32 samples).
 
 from __future__ import annotations
 
+import dataclasses
+
 import control
 import numpy as np
 import pytest
 from gainlink.errors import ScenarioError
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
-from gainlink.hil.loop.sil import run_sil
 from gainlink.shipping.artifact import load
 from support.hil import udp_transport
 
@@ -69,7 +70,7 @@ def test_sil_on_the_linear_plant_follows_the_closed_loop_of_the_law(pend):
             reference={"r_x": 0.05},
         )
     )
-    res = run_sil(a, sc)
+    res = run_scenario(sc, artifact=a)
     assert res.complete and res.metrics["mode"] == "sil" and not res.trace.sat.any()
     N = res.trace.t.size
     assert N == 400 and res.metrics["steps"] == 400 and res.metrics["lost"] == 0
@@ -94,7 +95,7 @@ def test_sil_equals_the_lockstep_hil_run_bit_for_bit(pend, can_firmware):
         reference={"r_x": {"kind": "step", "at": 0.5, "value": 0.3}},
         disturbances=[{"input": "F", "start": 1.0, "stop": 1.05, "value": 3.0}],
     )
-    sil = run_sil(a, parse_scenario(_scenario(pend, **common)))
+    sil = run_scenario(parse_scenario(_scenario(pend, **common)), artifact=a)
     hil = run_scenario(
         parse_scenario(
             _scenario(
@@ -119,7 +120,11 @@ def test_sil_equals_the_lockstep_hil_run_bit_for_bit(pend, can_firmware):
 def test_sil_seed_sets_the_noise_and_a_failing_plant_ends_the_run(pend):
     a = load(pend)
     sc = parse_scenario(_scenario(pend, noise={"theta": 1e-3}, duration=1.0))
-    r1, r2, r3 = run_sil(a, sc, seed=1), run_sil(a, sc, seed=1), run_sil(a, sc, seed=2)
+    r1, r2, r3 = (
+        run_scenario(dataclasses.replace(sc, seed=1), artifact=a),
+        run_scenario(dataclasses.replace(sc, seed=1), artifact=a),
+        run_scenario(dataclasses.replace(sc, seed=2), artifact=a),
+    )
     assert np.array_equal(r1.trace.y, r2.trace.y) and not np.array_equal(r1.trace.y, r3.trace.y)
     # A stiff plant for its integrator step (g = 1e6: |lambda| h ~ 14, RK4 grows ~1e3 per sub-step):
     # the state overflows, the plant refuses the step, and the run ends there.
@@ -131,7 +136,7 @@ def test_sil_seed_sets_the_noise_and_a_failing_plant_ends_the_run(pend):
             plant={"kind": "cart_pendulum", "outputs": ["x", "theta"], "step": 0.01, "parameters": {"g": 1e6}},
         )
     )
-    res = run_sil(a, bad)
+    res = run_scenario(bad, artifact=a)
     assert not res.complete and "non-finite" in res.reason
     assert res.metrics["complete"] is False and res.metrics["steps"] < 2000
 
@@ -145,7 +150,7 @@ def test_sil_seed_sets_the_noise_and_a_failing_plant_ends_the_run(pend):
 )
 def test_sil_refuses_what_needs_a_link(pend, extra, words):
     with pytest.raises(ScenarioError, match=words):
-        run_sil(load(pend), parse_scenario(_scenario(pend, **extra)))
+        run_scenario(parse_scenario(_scenario(pend, **extra)), artifact=load(pend))
 
 
 def test_saturation_counts_steps_with_any_input_saturated_and_each_input(example_artifacts):
@@ -166,7 +171,7 @@ def test_saturation_counts_steps_with_any_input_saturated_and_each_input(example
             "disturbances": [{"input": "steam", "start": 20.0, "stop": 60.0, "value": 2.0}],
         }
     )
-    res = run_sil(a, sc)
+    res = run_scenario(sc, artifact=a)
     sat, N = res.trace.sat, res.trace.t.size
     per_input = [int(np.count_nonzero(sat[:, i])) for i in range(a.m)]
     any_input = int(np.count_nonzero(sat[:, 0] | sat[:, 1]))
@@ -181,3 +186,44 @@ def test_saturation_counts_steps_with_any_input_saturated_and_each_input(example
         f"saturated {any_input} of {N} steps (any input); per input: reflux {per_input[0]} "
         f"({100 * per_input[0] / N:.1f}%), steam {per_input[1]} ({100 * per_input[1] / N:.1f}%)"
     )
+
+
+def test_the_twins_computed_after_the_run_are_the_float64_law_stepped_beside_it(pend):
+    """The closed-loop twin and the model twin leave the run's per-sample path (they do not depend on it): the
+    figures computed after the run must be those of the float64 law stepped sample by sample beside it, written out
+    here (DESIGN.md, "How the C equals the design": a second instance of the plant, the same noise, references and
+    disturbances; the model twin on the design's own Ad, Bd, Cd from the plant's initial state)."""
+    from gainlink.hil.plants.config import plant_from_config
+    from gainlink.proof.reference import ReferenceLoop
+
+    a = load(pend)
+    seed, sd = 5, 2e-3
+    plant = {"kind": "cart_pendulum", "outputs": ["x", "theta"], "step": 0.001}
+    sc = parse_scenario(_scenario(pend, plant=plant, duration=1.5, noise={"theta": sd}, seed=seed,
+                                  reference={"r_x": {"kind": "step", "at": 0.3, "value": 0.2}},
+                                  disturbances=[{"input": "F", "start": 0.8, "stop": 0.85, "value": 4.0}]))  # fmt: skip
+    res = run_scenario(sc, artifact=a)
+    N = res.trace.t.size
+    t = np.arange(N) * a.Ts
+    noise = np.random.default_rng(seed).standard_normal((N, 2)) * np.array([0.0, sd])
+    R = np.where(t >= 0.3, 0.2, 0.0)[:, None]
+    D = np.where((t >= 0.8) & (t < 0.85), 4.0, 0.0)[:, None]
+    second = plant_from_config(plant, artifact=a)
+    second.reset(initial={"theta": 0.05})
+    Ad, Bd, Cd, Dd = a.design_plant()
+    x = np.array([0.0, 0.0, 0.05, 0.0])  # the plant's initial state by name, about the origin (x_op none)
+    twin, model = ReferenceLoop(a), ReferenceLoop(a)
+    Ty, Tu, My, Mu = np.zeros((N, 2)), np.zeros((N, 1)), np.zeros((N, 2)), np.zeros((N, 1))
+    du_prev = np.zeros(1)
+    for k in range(N):
+        Ty[k] = second.outputs() + noise[k]
+        Tu[k] = twin.step(Ty[k], R[k]).u
+        second.advance(u=Tu[k] + D[k], dt=a.Ts)
+        My[k] = Cd @ x + Dd @ du_prev + noise[k]
+        Mu[k] = model.step(My[k], R[k]).u
+        du_prev = Mu[k]
+        x = Ad @ x + Bd @ (Mu[k] + D[k])
+    tr = res.trace
+    assert np.array_equal(tr.twin_y, Ty) and np.array_equal(tr.twin_u, Tu)
+    assert np.array_equal(tr.model_y, My) and np.array_equal(tr.model_u, Mu)
+    assert res.metrics["model_twin"]["start"] == "the plant's initial state"

@@ -67,7 +67,7 @@ def test_example_runs_pil_on_every_board(example, board):
         board=board,
         twin=make_plant("artifact", artifact=a, x0=x0),
     )
-    assert np.all(res.status >= 0), f"{example}/{board}: a step was refused"
+    assert not np.any(res.flags & 0x01), f"{example}/{board}: a step was refused"
     # the image's commands are the host library's for the same samples (as float32), bit for bit
     host = NativeLoop(a).run_raw(res.y.astype(np.float32).astype(float), np.broadcast_to(a.r_op, (PIL_STEPS, a.q)))
     assert np.array_equal(res.u.view(np.uint32), host["u"].view(np.uint32)), f"{example}/{board}"

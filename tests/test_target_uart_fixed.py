@@ -71,10 +71,10 @@ def test_the_images_slcan_node_runs_the_integer_law_bit_for_bit(q31, board):
     model = model_run(a, Y, R)
     u_model = real(model.U, FixedPointLoop(a).f["u"]).astype(np.float32)
     np.testing.assert_array_equal(image.trace.u.astype(np.float32).view(np.uint32), u_model.view(np.uint32))
-    assert not model.fault.any() and not image.trace.status.any()
+    assert not model.fault.any() and not image.trace.flags.any()
     f32 = Float32Loop(a).run(Y.astype(np.float64), R.astype(np.float64))  # not the export's float law
     assert np.any(f32.u.astype(np.float32) != image.trace.u.astype(np.float32))
-    # The HIL report names the law that ran and checks it (hil/loop/can_fixed.py).
+    # The HIL report names the law that ran and checks it (gainlink.laws.fixed_run).
     fx = image.metrics["fixed_point"]
     assert fx["law"] == "q31" and fx["bit_exact"] is True and fx["overflow_steps"] == 0
     assert fx["within_per_step"] and fx["unsaturated_steps"] > 50

@@ -41,13 +41,15 @@ def test_the_pil_summary_gives_every_figure_its_unit(example_artifacts):
         "outputs": {"x": {"max_dy": 3e-7, "max_dy_rel": 1e-6}, "theta": {"max_dy": 1e-7, "max_dy_rel": 6e-7}},
         "iae": {"r_x": {"real": 0.25, "twin": 0.25, "difference": 0.0, "difference_rel": 0.0}},
     }
-    summary = {"artifact": "pendulum", "sha256": a.sha256, "target": "cortex-m4", "board": "mps2-an386",
+    summary = {"artifact": "pendulum", "sha256": a.sha256, "law": "float32", "target": "cortex-m4", "board": "mps2-an386",
                "plant": "artifact", "steps": 10, "saturated_steps": 0, "faults": 0, "steps_per_second": 5000.0,
                "round_trip_us_p50": 40.0, "round_trip_us_p99": 90.0, "final_output": [0.1, -0.02],
                "twin": twin}  # fmt: skip
     text = pil_summary_text(summary, artifact=a)
     assert "F 2e-06 N (5e-08 of span)" in text and "x 3e-07 m" in text and "theta 1e-07 rad" in text
-    assert "r_x 0.25 m s vs 0.25" in text and "final outputs: x 0.1 m, theta -0.02 rad" in text
+    assert (
+        "law float32" in text and "r_x 0.25 m s vs 0.25" in text and "final outputs: x 0.1 m, theta -0.02 rad" in text
+    )
 
 
 def test_a_spec_without_units_writes_no_units_key(tmp_path):

@@ -24,8 +24,8 @@ from gainlink.errors import GainlinkError, SpecError, did_you_mean
 from gainlink.shipping.artifact import canonical_json, render
 from gainlink.version import __version__
 
+from ..loop.endpoints import refuse_link_faults
 from ..loop.scenario import Scenario, parse_scenario
-from ..loop.sil import check_sil
 from .config import Axis, Campaign, CampaignError, path_steps
 from .preflight import DryBuild, check_axis_values
 
@@ -179,12 +179,12 @@ def _check_scenario(campaign: Campaign, scenario: dict, where: str) -> Scenario:
     if "firmware" in scenario:
         raise CampaignError("campaign: scenario.firmware: a campaign builds the firmware on each worker")
     data = dict(scenario, artifact="gains.json")
-    if campaign.kind == "sil":
-        data.setdefault("transport", {})
+    if campaign.kind == "sil":  # in process: no link, whatever the scenario's table says
+        data["transport"] = {}
     try:
         parsed = parse_scenario(data)
         if campaign.kind == "sil":
-            check_sil(parsed)
+            refuse_link_faults(parsed)
     except GainlinkError as exc:
         raise CampaignError(f"campaign: {where}: {exc}") from None
     return parsed

@@ -4,9 +4,11 @@ line naming the key (exit status 2, nothing written), not an error in every run.
 - :func:`check_axis_values`: every value an axis can set at a path of the base scenario is of the kind the base
   holds there (a number where it holds a number, a string where a string, ...);
 - :class:`DryBuild`: the plant of one run of each *shape* (the scenario with its numbers blanked, and the signal
-  names of the artifact) is built and reset to the run's initial state, as the worker would, so a misspelt plant
-  option, parameter or state name is refused here. Plants of ``kind = "python"`` and of entry-point plugins are
-  left to the workers: their code may be installed there alone.
+  names of the artifact) is built and reset to the run's initial state, and the run planned on it
+  (:func:`~gainlink.hil.loop.plan.plan_run`: references, external scheduling signals, the law's trim; a HIL run's
+  link layout too), as the worker would before it builds any firmware or starts any peer, so a misspelt plant
+  option, parameter or state name, or a scheduled law's missing ``[schedule_signal]``, is refused here. Plants of
+  ``kind = "python"`` and of entry-point plugins are left to the workers: their code may be installed there alone.
 
 The spec's own mistakes are the spec parser's (a ``SpecError`` while planning, see :mod:`.plan`).
 """
@@ -19,10 +21,13 @@ from pathlib import Path
 from typing import Any
 
 from gainlink.errors import GainlinkError
+from gainlink.laws import law_of
 from gainlink.shipping.artifact import Artifact, from_dict
 
-from ..loop.bridge import build_plant
+from ..links.config import transport_from_config
+from ..loop.plan import plan_run
 from ..loop.scenario import Scenario
+from ..loop.scenario_plant import build_plant
 from ..plants.base import PLANTS
 from .config import Axis, Campaign, CampaignError, path_steps
 
@@ -116,10 +121,23 @@ class DryBuild:
         self.seen.add(shape)
         path = self.campaign.path or Path.cwd() / "campaign.toml"  # relative plant files: from the campaign's folder
         try:
-            plant = build_plant(dataclasses.replace(scenario, path=path), artifact=artifact)
-            try:
-                plant.reset(initial=scenario.initial_state)
-            finally:
-                plant.close()
+            _dry_run(dataclasses.replace(scenario, path=path), artifact=artifact, kind=self.campaign.kind)
         except (GainlinkError, ValueError, TypeError) as exc:  # a built-in plant's complaint about its table
             raise CampaignError(f"campaign: {where}: {exc}") from None
+
+
+def _dry_run(scenario: Scenario, *, artifact: Artifact, kind: str) -> None:
+    """Build and reset the run's plant and plan the run on it, as the worker does before anything is built; for a
+    HIL run the link's layout too."""
+    law = law_of(artifact)
+    law.refuse(f"campaign.{kind}", what=f"a {kind.upper()} campaign")
+    if not scenario.sigma_rate_limit:
+        artifact = law.without_rate_limit(artifact)
+    plant = build_plant(scenario, artifact=artifact)
+    try:
+        plant.reset(initial=scenario.initial_state)
+        plan_run(scenario, law=law, artifact=artifact, plant=plant)
+    finally:
+        plant.close()
+    if kind == "hil":
+        transport_from_config(scenario.transport, artifact=artifact)

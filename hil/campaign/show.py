@@ -95,5 +95,5 @@ def show_run(
     except GainlinkError as exc:
         raise CampaignError(f"run {point['id']} failed again: {exc}") from None
     folder = Path(report) if report is not None else out / "replay" / point["id"]
-    write_report(result, folder, artifact=artifact, with_plots=plots)
+    write_report(result, folder, with_plots=plots)
     return result, folder

@@ -86,16 +86,12 @@ def _fmu_path(ref: str, blobs: dict[str, bytes]) -> Path:
 
 
 def _library(artifact: Artifact) -> Path:
-    """The host library SIL runs: the integer loop's for a fixed-point artifact, else the float loop's."""
+    """The host library the law's SIL runs step (``Law.native``: built and cached by sha256 on first use), kept for
+    the worker's life so the next run of the artifact pays nothing for it."""
     if artifact.sha256 not in _LIBRARIES:
-        from gainlink.firmware.build import build
-        from gainlink.firmware.fixed import host_library
-        from gainlink.shipping.codegen_fixed import is_fixed
+        from gainlink.laws import law_of
 
-        if is_fixed(artifact):
-            _LIBRARIES[artifact.sha256] = host_library(artifact)
-        else:
-            _LIBRARIES[artifact.sha256] = build(artifact, target="host", only="gainlink_host").files["shared"]
+        _LIBRARIES[artifact.sha256] = Path(law_of(artifact).native(artifact).describe["library"])
     return _LIBRARIES[artifact.sha256]
 
 
@@ -178,8 +174,8 @@ def _scenario(scenario: dict, *, artifact_path: Path, seed: int, blobs: dict, ki
     plant = data.get("plant", {})
     if plant.get("kind") == "fmu" and str(plant.get("path", "")).startswith("sha256:"):
         plant["path"] = str(_fmu_path(plant["path"], blobs))
-    if kind == "sil":
-        data.setdefault("transport", {})
+    if kind == "sil":  # in process: no link, whatever the scenario's table says
+        data["transport"] = {}
     return parse_scenario(data)
 
 
@@ -192,18 +188,19 @@ def downsampled_trace(trace: Any) -> bytes:
 
 
 def run_point(kind: str, artifact: Artifact, scenario: Any) -> Any:
-    """Run one parsed scenario as SIL (in-process C loop) or HIL (the bridge, in its own bus slot)."""
-    if kind == "sil":
-        from ..loop.sil import run_sil
-
-        return run_sil(artifact, scenario, library=_library(artifact) if scenario.controller == "firmware" else None)
+    """Run one parsed scenario through the one dispatcher (:func:`~gainlink.hil.loop.bridge.run_scenario`): SIL in
+    process (its transport table is empty), HIL over its link in its own bus slot."""
     from ..loop.bridge import run_scenario
 
+    if kind == "sil":
+        library = _library(artifact) if scenario.controller == "firmware" else None
+        return run_scenario(scenario, artifact=artifact, library=library)
     with bus_slot() as slot, _one_cpu(slot):
         held = time.time()
         transport = isolate_transport(scenario.transport, slot)
         firmware = _executable(artifact, transport) if scenario.controller == "firmware" else None
-        result = run_scenario(dataclasses.replace(scenario, transport=transport, firmware=firmware))
+        scenario = dataclasses.replace(scenario, transport=transport, firmware=firmware)
+        result = run_scenario(scenario, artifact=artifact)
         # when this run held its slot (its bus): runs whose holds overlap never share a bus
         result.info["transport"]["bus_slot"] = {"slot": slot, "start": held, "stop": time.time()}
         return result

@@ -103,6 +103,11 @@ class Transport(ABC):
         exactly the controller's inputs. Default: values travel as float32."""
         return y.astype(np.float32).astype(np.float64), r.astype(np.float32).astype(np.float64)
 
+    def steps_on(self, seq: int) -> bool:
+        """Whether the controller steps its law on the sample ``seq`` arriving next (a node may skip a duplicate or
+        a stale sample): the order a shadow of its law must follow. Default: every sample it gets."""
+        return True
+
     @abstractmethod
     def controller_argv(self) -> list[str]:
         """Command-line arguments that make the firmware host executable speak this link."""

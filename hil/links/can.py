@@ -167,7 +167,10 @@ class FrameCodec:
     def encode(self, *, seq: int, values: np.ndarray, status: int = 0, sat: np.ndarray | None = None) -> list[Any]:
         frames = []
         seq &= 0xFFFF
-        vals = self.quantise(values).tolist() if self.int16 else [float(v) for v in values]
+        if self.int16:
+            vals = self.quantise(np.asarray(values, dtype=float)).tolist()
+        else:  # Python floats (a float32 field packs them as the C reads them)
+            vals = values.tolist() if isinstance(values, np.ndarray) else [float(v) for v in values]
         for s in self.specs:
             k = len(s.signals)
             bits = 0
@@ -268,6 +271,7 @@ class CanTransport(Transport):
         self._can_error = CanOperationError
         self.frames_sent = 0
         self.frames_refused = 0  # datagrams python-can could not unpack (hostile or corrupt traffic on the bus)
+        self._last_done: int | None = None  # the last sample the node steps on (steps_on)
 
     def open(self) -> None:
         if self.bus is None:
@@ -290,7 +294,17 @@ class CanTransport(Transport):
                 self.bus = None
 
     def encode_sample(self, *, seq: int, y: np.ndarray, r: np.ndarray) -> list[Any]:
-        return self.tx.encode(seq=seq, values=np.concatenate([y, r]))
+        return self.tx.encode(seq=seq, values=[*np.asarray(y).tolist(), *np.asarray(r).tolist()])
+
+    def steps_on(self, seq: int) -> bool:
+        """The CAN node answers a sample once: a duplicate or a stale one (its 16-bit ``seq`` not ahead of the last
+        answered) is skipped."""
+        if self._last_done is not None:
+            ahead = (seq - self._last_done) & 0xFFFF
+            if ahead == 0 or ahead >= 0x8000:
+                return False
+        self._last_done = seq
+        return True
 
     def received_sample(self, *, y: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """What the firmware decodes from this sample (float32, after int16 quantisation), as float64.

@@ -1,9 +1,10 @@
-"""A controller node in Python speaking the gainlink CAN layout: the float64 reference law on the bus.
+"""A controller node in Python speaking the gainlink CAN layout: the float64 reference of any law on the bus.
 
 ``python -m gainlink.hil.links.can_node ARTIFACT --config JSON`` behaves like the firmware's
-``gainlink_can`` (same layout and encoding, same duplicate/stale handling, same ready line), with
-:class:`gainlink.proof.reference.ReferenceLoop` as the law. The bridge uses it as ``controller =
-"reference"``: a real peer process on a real bus, without a C toolchain.
+``gainlink_can`` (same layout and encoding, the sample ``y, r`` then the law's external scheduling signals, the
+step's flags in the status byte, same duplicate/stale handling, same ready line), with the artifact's law's float64
+reference (:func:`gainlink.laws.law_of`) as the law. The bridge uses it as ``controller = "reference"``: a real
+peer process on a real bus, without a C toolchain.
 """
 
 from __future__ import annotations
@@ -15,11 +16,10 @@ import sys
 from typing import Any
 
 import numpy as np
+from gainlink.laws import law_of
 from gainlink.laws.flags import WIRE_VERSION
-from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping.artifact import load
 
-from .base import STATUS_FAULT
 from .can import Assembler, FrameCodec, layout_from_config, open_bus
 
 
@@ -29,8 +29,8 @@ def serve(artifact: Any, config: dict, *, out: Any = sys.stdout) -> int:
     layout = layout_from_config(config, artifact=artifact)
     rx = Assembler(FrameCodec(layout.measurement, fd=fd))
     tx = FrameCodec(layout.command, fd=fd)
-    law = ReferenceLoop(artifact)
-    p = artifact.p
+    ctl = law_of(artifact).reference(artifact)
+    p, q = artifact.p, artifact.q
     stop = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
@@ -51,8 +51,9 @@ def serve(artifact: Any, config: dict, *, out: Any = sys.stdout) -> int:
             seq, vals, _status, _sat = done
             if last is not None and ((seq - last) & 0xFFFF == 0 or (seq - last) & 0xFFFF >= 0x8000):
                 continue  # duplicate or stale sample, as the firmware app does
-            res = law.step(vals[:p].astype(np.float64), vals[p:].astype(np.float64))
-            for frame in tx.encode(seq=seq, values=res.u, status=STATUS_FAULT if res.fault else 0, sat=res.saturated):
+            v = vals.astype(np.float64)
+            step = ctl.step(v[:p], v[p : p + q], v[p + q :])
+            for frame in tx.encode(seq=seq, values=step.u, status=step.flags, sat=step.saturated):
                 bus.send(frame)
             last = seq
     finally:

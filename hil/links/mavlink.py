@@ -48,6 +48,19 @@ from .base import TRANSPORTS, Command, Transport
 ARRAY_SAMPLE = 1
 ARRAY_RESET = 2
 ARRAY_IDLE = 3
+
+
+def status_of(flags: int) -> int:
+    """The status bits of a command's HIL_ACTUATOR_CONTROLS ``flags`` (bits 16-31: the one table's bits 0-15)."""
+    return (flags >> MAVLINK_FLAGS_SHIFT) & 0xFFFF
+
+
+def flags_of(status: int, sat: int) -> int:
+    """The HIL_ACTUATOR_CONTROLS ``flags`` of a command's status bits and saturation mask (a node's side of
+    :func:`status_of`): the status at bits 16-31, the saturation mask at bits 32-47, MAVLink's bits 0-15 clear."""
+    return ((int(status) & 0xFFFF) << MAVLINK_FLAGS_SHIFT) | ((int(sat) & 0xFFFF) << MAVLINK_SAT_SHIFT)
+
+
 DEFAULT_PORT = 14560
 MAX_BUSY_POLL_US = 1_000_000
 
@@ -270,7 +283,7 @@ class MavlinkTransport(Transport):
             flags = int(msg.flags)
             u = np.asarray(msg.controls[: self.m], dtype=float)
             sat = np.array([(flags >> (MAVLINK_SAT_SHIFT + k)) & 1 for k in range(self.m)], dtype=bool)
-            status = (flags >> MAVLINK_FLAGS_SHIFT) & 0xFFFF  # the status flags, as the table numbers them
+            status = status_of(flags)  # the status flags, as the table numbers them
             seq = (int(msg.time_usec) // self.ts_us) % self.seq_modulo
             out.append(Command(seq=seq, u=u, saturated=sat, status=status, t_ns=time.perf_counter_ns(), wire=flags))
         return out

@@ -1,11 +1,11 @@
-"""A controller node in Python speaking the gainlink MAVLink HIL link: the float64 reference law on UDP.
+"""A controller node in Python speaking the gainlink MAVLink HIL link: the float64 reference of any law on UDP.
 
 ``python -m gainlink.hil.links.mavlink_node ARTIFACT --url udpin:127.0.0.1:14560`` answers like the
 firmware's ``gainlink_mavlink`` does on its HIL link (DEBUG_FLOAT_ARRAY ``GL_SAMPLE``/``GL_RESET``/
-``GL_IDLE`` in, HIL_ACTUATOR_CONTROLS out with the sample's ``time_usec``), with
-:class:`gainlink.proof.reference.ReferenceLoop` as the law. The bridge uses it as ``controller =
-"reference"`` with the ``mavlink`` transport: a real peer process on a real link, without a C
-toolchain. It serves no parameters.
+``GL_IDLE`` in, the sample ``y, r`` then the law's external scheduling signals; HIL_ACTUATOR_CONTROLS out with the
+sample's ``time_usec`` and the step's flags), with the artifact's law's float64 reference
+(:func:`gainlink.laws.law_of`) as the law. The bridge uses it as ``controller = "reference"`` with the
+``mavlink`` transport: a real peer process on a real link, without a C toolchain. It serves no parameters.
 """
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 from gainlink.laws import flags as status_flags
-from gainlink.proof.reference import ReferenceLoop
+from gainlink.laws import law_of
 from gainlink.shipping.artifact import load
 from pymavlink.dialects.v20 import common as mavlink2
 
-from .mavlink import ARRAY_IDLE, ARRAY_RESET, ARRAY_SAMPLE
+from .mavlink import ARRAY_IDLE, ARRAY_RESET, ARRAY_SAMPLE, flags_of
 
 WATCHDOG_PERIODS = 10  # as the firmware's default (GL_WATCHDOG_PERIODS_DEFAULT)
 
@@ -37,9 +37,10 @@ def serve(artifact: Any, *, url: str, out: Any = sys.stdout) -> int:
     sock.bind((parts[1], int(parts[2])))
     sock.settimeout(0.2)
     mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=mavlink2.MAV_COMP_ID_AUTOPILOT1)
-    law = ReferenceLoop(artifact)
-    m, p = artifact.m, artifact.p
-    safe = artifact.safe_command
+    law = law_of(artifact)
+    ctl = law.reference(artifact)
+    m, p, q, e = artifact.m, artifact.p, artifact.q, len(law.externals(artifact))
+    safe = law.safe_command(artifact)
     u, idle = safe.copy(), 0
     stop: list[int] = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
@@ -66,12 +67,11 @@ def serve(artifact: Any, *, url: str, out: Any = sys.stdout) -> int:
                 bits, sat = 0, 0
                 values = np.asarray(msg.data, dtype=np.float32).astype(np.float64)
                 if msg.array_id == ARRAY_SAMPLE:
-                    res = law.step(values[:p], values[p : p + artifact.q])
-                    u, idle = np.asarray(res.u, dtype=float), 0
-                    bits = status_flags.FAULT if res.fault else 0
-                    sat = sum(int(bool(s)) << k for k, s in enumerate(np.atleast_1d(res.saturated)))
+                    step = ctl.step(values[:p], values[p : p + q], values[p + q : p + q + e])
+                    u, idle = np.asarray(step.u, dtype=float), 0
+                    bits, sat = step.flags, step.sat
                 elif msg.array_id == ARRAY_RESET:
-                    law.reset()
+                    ctl.reset()
                     u, idle, bits = safe.copy(), 0, status_flags.RESET
                 elif msg.array_id == ARRAY_IDLE:
                     idle += 1
@@ -81,7 +81,7 @@ def serve(artifact: Any, *, url: str, out: Any = sys.stdout) -> int:
                     continue
                 controls = np.zeros(16, dtype=np.float32)
                 controls[:m] = u
-                flags = (bits << status_flags.MAVLINK_FLAGS_SHIFT) | (sat << status_flags.MAVLINK_SAT_SHIFT)
+                flags = flags_of(bits, sat)  # status at bits 16-31, saturation at 32-47
                 reply = mavlink2.MAVLink_hil_actuator_controls_message(msg.time_usec, controls.tolist(), 0, flags)
                 sock.sendto(reply.pack(mav), addr)
     finally:

@@ -49,7 +49,7 @@ def qemu_peer(*, artifact: Any, transport: Any, board: str, elf: Path | None, du
     refusal = BOARDS[board].serving_refusal(protocol, fixed=is_fixed(artifact))
     if refusal is not None:
         raise FirmwareError(refusal)
-    if elf is None:  # a scheduled artifact's image serves its scheduled law (ports/cortex-m/sched-image.cmake)
+    if elf is None:  # the artifact's image serves its law (ports/cortex-m/main.c, one main for every law)
         elf = build(artifact, target=BOARDS[board].core, board=board).files["elf"]
     elif not Path(elf).is_file():
         raise FirmwareError(f"firmware image {elf} not found")

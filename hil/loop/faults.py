@@ -1,5 +1,5 @@
-"""Fault injection between the bridge and the transport: on the frames (drop, delay, duplicate, reorder) and on the
-sample's values (nan: every measured output of the sample sent as NaN)."""
+"""Fault injection between the loop and its endpoint: on the sample's values (nan: every measured output of the
+sample sent as NaN; in process too) and on a link's frames (drop, delay, duplicate, reorder)."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ class FaultInjector:
         self.Ts = Ts
         # A stream of its own (not the noise's): adding a fault leaves the run's noise unchanged.
         self.rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0xFA17])
-        self.held: list[tuple[int, list[Any]]] = []  # (release at sample k, frames)
+        self.held: list[tuple[int, int, Any]] = []  # (release at sample, sample, unit)
         self.counts = {"drop": 0, "delay": 0, "duplicate": 0, "reorder": 0}
         if self.sample_faults:  # only then: a report without them reads as before
             self.counts["nan"] = 0
@@ -57,26 +57,25 @@ class FaultInjector:
         self.counts["nan"] += 1
         return np.full_like(np.asarray(y, dtype=float), np.nan)
 
-    def apply(self, k: int, frames: list[Any]) -> list[Any]:
-        """The frames to send at sample ``k`` (held frames due now come after this sample's own)."""
+    def apply(self, k: int, unit: Any) -> list[tuple[int, Any]]:
+        """What goes out at sample ``k``: ``(sample, unit)`` pairs in sending order, ``unit`` being sample ``k``'s
+        (its frames, or anything that stands for them); held units due now come after this sample's own."""
         fault = self._active(k) if self.faults else None
-        out: list[Any] = []
+        out: list[tuple[int, Any]] = []
         if fault is None:
-            out = list(frames)
+            out = [(k, unit)]
         elif fault.kind == "drop":
             self.counts["drop"] += 1
         elif fault.kind == "duplicate":
             self.counts["duplicate"] += 1
-            out = list(frames) + list(frames)
+            out = [(k, unit), (k, unit)]
         elif fault.kind == "delay":
             self.counts["delay"] += 1
-            self.held.append((k + fault.delay_steps, list(frames)))
+            self.held.append((k + fault.delay_steps, k, unit))
         elif fault.kind == "reorder":
             self.counts["reorder"] += 1
-            self.held.append((k + 1, list(frames)))
+            self.held.append((k + 1, k, unit))
         if self.held:
-            due = [f for at, f in self.held if at <= k]
-            self.held = [(at, f) for at, f in self.held if at > k]
-            for fr in due:
-                out.extend(fr)
+            out += [(j, u) for at, j, u in self.held if at <= k]
+            self.held = [h for h in self.held if h[0] > k]
         return out

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from gainlink.laws import flags
 from gainlink.proof.twin import twin_comparison
 
 from .model_twin import model_mismatch
@@ -14,23 +15,25 @@ from .model_twin import model_mismatch
 
 @dataclass(frozen=True)
 class RunTrace:
-    """Everything recorded per step of a run (row k = sample k).
+    """Everything recorded per step of a run (row k = sample k), the same for every law and endpoint.
 
-    ``t`` plant time; ``y`` sampled outputs (with noise) (N, p); ``r`` references (N, q); ``u`` the
-    command applied after the sample (N, m); ``sat`` the controller's saturation flags (N, m);
-    ``got`` whether the command for this sample arrived in time; ``latency_ns`` send -> command
-    (NaN when not got); ``tick_ns`` when the step started (realtime: the pacer's wake-up; lockstep: the
-    send), relative to the run start;
-    ``deadline_ns`` when it was due (realtime; NaN in lockstep); ``x`` the plant states (N, n_plant);
-    ``twin_y``, ``twin_u``, ``twin_z`` the float64 twin's sampled outputs, commands and integrator
-    (:mod:`gainlink.proof.twin`) (``x`` and the twin's are NaN when the twin is off); ``model_y``, ``model_u`` the
-    model twin's (:mod:`.model_twin`; None when it is off); ``sigma``, ``sigma_flags`` the scheduled law's sigma
-    and its flags per step (:mod:`.sil_scheduled`; None for an unscheduled artifact).
+    ``t`` plant time; ``y`` sampled outputs (with noise) (N, p); ``r`` references (N, q); ``s`` external scheduling
+    signals (N, e); ``u`` the command applied after the sample (N, m); ``sat`` the controller's saturation flags
+    (N, m); ``got`` whether the command for this sample arrived in time; ``latency_ns`` send -> command (NaN when
+    not got); ``tick_ns`` when the step started (realtime: the pacer's wake-up; lockstep: the send), relative to the
+    run start; ``deadline_ns`` when it was due (realtime; NaN in lockstep); ``x`` the plant states (N, n_plant);
+    ``flags`` the command's status flags (:mod:`gainlink.laws.flags`; 0 without a command); ``sigma`` the sigma the
+    law used (NaN for a law without one; held from the step before without a command); ``nan_sent`` whether the
+    sample went out as NaN (a ``nan`` fault: ``y`` is the plant's own sample); ``twin_y``, ``twin_u``, ``twin_z``
+    the float64 twin's sampled outputs, commands and integrators (:mod:`gainlink.proof.twin`) (``x`` and the twin's
+    are NaN when the twin is off; ``twin_z`` also for a law without integrators); ``model_y``, ``model_u`` the
+    model twin's (:mod:`.model_twin`; None when it is off).
     """
 
     t: np.ndarray
     y: np.ndarray
     r: np.ndarray
+    s: np.ndarray
     u: np.ndarray
     sat: np.ndarray
     got: np.ndarray
@@ -38,14 +41,14 @@ class RunTrace:
     tick_ns: np.ndarray
     deadline_ns: np.ndarray
     x: np.ndarray
-    status: np.ndarray
+    flags: np.ndarray
+    sigma: np.ndarray
+    nan_sent: np.ndarray
     twin_y: np.ndarray
     twin_u: np.ndarray
     twin_z: np.ndarray
     model_y: np.ndarray | None = None
     model_u: np.ndarray | None = None
-    sigma: np.ndarray | None = None
-    sigma_flags: np.ndarray | None = None
 
     @property
     def has_twin(self) -> bool:
@@ -102,7 +105,7 @@ def compute_metrics(
     trace: RunTrace, *, artifact: Any, mode: str, late: int, period_s: float, model_start: str = ""
 ) -> dict:
     """The report's metrics from a trace (JSON-able dict; NaN becomes ``None``); ``model_start`` says where the
-    model twin started."""
+    model twin started. The law's own blocks (:meth:`gainlink.laws.Law.run_report`) are the caller's."""
     a = artifact
     N = trace.t.size
     lost = int(np.count_nonzero(~trace.got))
@@ -133,9 +136,10 @@ def compute_metrics(
         "outputs_peak_abs": {name: float(v) for name, v in zip(sig["outputs"], np.abs(trace.y).max(axis=0))}
         if N
         else {},
+        "refused_steps": int(np.count_nonzero(trace.flags & flags.FAULT)),  # answered with the fault flag
     }
     if trace.has_twin:
-        if a.q and a.schedule is None:  # the controller's state is not on the link: the twin's integrator
+        if a.q and np.all(np.isfinite(trace.twin_z)):  # the controller's state is not on the link: the twin's
             out["peak_integrator"] = {
                 name: float(v) for name, v in zip(sig["references"], np.abs(trace.twin_z).max(axis=0))
             }
@@ -158,10 +162,6 @@ def compute_metrics(
             for i, name in enumerate(sig["outputs"]):
                 tracked[name] = tracking(trace.t, trace.y[:, i], np.full(N, a.y_op[i]))
     out["tracked"] = tracked
-    if trace.sigma is not None:
-        from .sched_metrics import schedule_metrics
-
-        out["schedule"] = schedule_metrics(trace, artifact=a)
     return _clean(out)
 
 

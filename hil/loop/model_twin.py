@@ -1,4 +1,4 @@
-"""The model twin: the float64 law closed around the design's own linear model, beside every run.
+"""The model twin: the float64 law closed around the design's own model (:mod:`.twins`), and what it tells.
 
 The closed-loop twin (:mod:`gainlink.proof.twin`) runs the ideal law on a second instance of the *same* plant, so it
 agrees with the run whatever the plant does: it prices the implementation, not the model. The model twin runs
@@ -21,58 +21,9 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
-from gainlink.proof.twin import TwinLoop
 from gainlink.shipping.artifact import Artifact
 
-from ..plants.base import Plant
-from ..plants.fmi import signal_name
-from ..plants.linear import LinearModel, LinearPlant
-
 MISMATCH_WARN = 0.05
-
-
-def model_plant(artifact: Artifact) -> LinearPlant:
-    """The artifact's discrete model (design coordinates) as a plant: absolute inputs and outputs, deviation
-    state, advancing only by ``Ts``."""
-    Ad, Bd, Cd, Dd = artifact.design_plant()
-    n = Ad.shape[0]
-    names = artifact.signals["states"]
-    model = LinearModel(
-        name=f"{artifact.name} model",
-        A=Ad,
-        B=Bd,
-        C=Cd,
-        D=Dd,
-        Ts=artifact.Ts,
-        states=tuple(names) if len(names) == n else tuple(f"x{i}" for i in range(n)),
-        inputs=tuple(artifact.signals["inputs"]),
-        outputs=tuple(artifact.signals["outputs"]),
-        u_op=artifact.u_op,
-        y_op=artifact.y_op,
-    )
-    return LinearPlant(model=model)
-
-
-def initial_deviation(artifact: Artifact, plant: Plant) -> tuple[dict, str]:
-    """The model's start: the plant's state now, by name, as a deviation from the artifact's ``x_op``, and a
-    note. A linear plant's state already is a deviation. When a model state has no counterpart in the plant
-    (an identified model, a transfer function), the model starts at the operating point and the note says so."""
-    names = list(artifact.signals["states"])
-    state = dict(zip((signal_name(s) for s in plant.state_names), np.asarray(plant.state(), float)))
-    missing = [s for s in names if s not in state]
-    if missing or len(names) != artifact.n:
-        return {}, "the operating point (the plant's states do not map onto the model's)"
-    x_op = np.zeros(artifact.n) if artifact.x_op is None or isinstance(plant, LinearPlant) else artifact.x_op
-    return {s: float(state[s] - x_op[i]) for i, s in enumerate(names)}, "the plant's initial state"
-
-
-def start_model_twin(artifact: Artifact, *, plant: Plant, steps: int) -> tuple[TwinLoop, str]:
-    """The model twin for a run whose ``plant`` was just reset, and where it starts (a note for the report)."""
-    model = model_plant(artifact)
-    initial, note = initial_deviation(artifact, plant)
-    model.reset(initial=initial)
-    twin = TwinLoop(artifact, outputs=model.outputs, advance=lambda u: model.advance(u=u, dt=artifact.Ts), steps=steps)
-    return twin, note
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,13 @@
-"""Processor-in-the-loop: a Cortex-M image in QEMU closes the loop with a plant simulated in Python.
+"""Processor-in-the-loop: a Cortex-M image in QEMU closes the loop with a plant simulated in Python, through the one
+closed loop (:mod:`.closed_loop`) with the image as its endpoint (:class:`~.endpoints.OverFifos`).
 
-Samples travel through two FIFOs that the image opens with semihosting (``gl_in.bin``, ``gl_out.bin``),
-one record per step (see ``firmware/ports/cortex-m/main.c``, one main for every law, and the law's record,
-:mod:`gainlink.shipping.records`). Python opens its ends read-write, so no open blocks, and every read waits with a
-deadline while checking that QEMU is still alive. A fixed-point artifact's image runs its integer law and is checked
-by :mod:`.pil_fixed`; a scheduled artifact's runs through :mod:`.pil_scheduled` (sigma and its external signals).
+Samples travel through two FIFOs that the image opens with semihosting (``gl_in.bin``, ``gl_out.bin``), one record
+per step: one image for every law (``firmware/ports/cortex-m/main.c``, the stream ``GLI2``/``GLO2``: in ``{tag, y,
+r, s}``, out the law's record, :mod:`gainlink.shipping.records`), which the law reads (``Law.image_stream``: its
+step's flags, words and sigma). Python opens its ends read-write, so no open blocks, and every read waits with a
+deadline while checking that QEMU is still alive. The twins are computed after the run; the law checks its image's
+records (``Law.pil_check``: a fixed-point law's integer model and certified bounds, a scheduled law's float32 model
+and host C, bit for bit).
 """
 
 from __future__ import annotations
@@ -15,7 +18,6 @@ import select
 import struct
 import subprocess
 import tempfile
-import time
 from abc import ABC, abstractmethod
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -24,22 +26,22 @@ from typing import Any
 
 import numpy as np
 from gainlink.errors import FirmwareError, PeerTimeoutError, PlantError
-from gainlink.firmware import fixed as fwfixed
 from gainlink.firmware import qemu as fwqemu
-from gainlink.firmware.build import replay_image
 from gainlink.firmware.targets import resolve_cortex_m
+from gainlink.laws import flags, law_of
 from gainlink.proof.sampled_plant import SampledPlant
-from gainlink.proof.twin import TwinComparison, TwinLoop, TwinTrace, twin_comparison
+from gainlink.proof.twin import TwinComparison, TwinTrace, run_twin, twin_comparison
 from gainlink.proof.twin_plot import twin_difference_figure
-from gainlink.shipping import records
 from gainlink.shipping.artifact import Artifact
-from gainlink.shipping.codegen_fixed import is_fixed
 
-from .pil_fixed import FixedPilCheck, QuantisedTwin, fixed_pil_check
+from .closed_loop import ClosedLoop
+from .endpoints import OverFifos
+from .faults import FaultInjector
+from .plan import Plan, Recorder
+from .twins import Twins, TwinStart, twin_start
+from .twins import model_twin as model_twin_after
 
 log = logging.getLogger(__name__)
-
-FAULT_STATUS = -2  # GL_ERR_NANINF: the firmware refused a non-finite sample
 
 
 class DiscretePlant(ABC):
@@ -69,6 +71,8 @@ class ArtifactPlant(DiscretePlant):
 
     def __init__(self, artifact: Artifact, *, x0: np.ndarray) -> None:
         self.model = SampledPlant.from_artifact(artifact, x0=x0)  # x0 is in the design's coordinates
+        names = tuple(artifact.signals["states"])
+        self.names = names if len(names) == artifact.n else ()  # its states by the artifact's names
 
     def outputs(self) -> np.ndarray:
         return self.model.outputs()
@@ -85,10 +89,10 @@ class HilPlant(DiscretePlant):
     """A plant from ``gainlink.hil``'s registry (e.g. ``cart_pendulum``), advanced by ``Ts`` per sample."""
 
     def __init__(self, name: str, *, artifact: Artifact, x0: np.ndarray | None = None) -> None:
-        from ..plants import models  # noqa: F401 - registers the built-in models
-        from ..plants.base import PLANTS, check_dimensions
+        from ..plants.base import check_dimensions
+        from ..plants.config import plant_from_config
 
-        self.plant = PLANTS.create(name, {}, artifact=artifact)
+        self.plant = plant_from_config({"kind": name}, artifact=artifact)
         check_dimensions(self.plant, m=artifact.m, p=artifact.p, artifact=artifact.name)
         names = tuple(self.plant.state_names)
         if x0 is not None and len(x0) != len(names):
@@ -123,31 +127,34 @@ def make_plant(name: str, *, artifact: Artifact, x0: np.ndarray | None = None) -
 
 @dataclass(frozen=True)
 class PilResult:
-    """A closed-loop PIL run: per step the measurement, the firmware's command and status, and timing."""
+    """A closed-loop PIL run: per step the measurement, the image's command, flags and sigma, and timing; the
+    twins; the law's own checks of the image's records."""
 
+    law: str  # the law that ran (its label)
     y: np.ndarray  # (N, p)
     u: np.ndarray  # (N, m) float32 commands from the firmware
-    status: np.ndarray  # (N,)
+    flags: np.ndarray  # (N,) status flags (gainlink.laws.flags)
     saturated: np.ndarray  # (N, m) bool
+    sigma: np.ndarray  # (N,) the sigma the law used (NaN for a law without one)
     plant_state: np.ndarray  # (N + 1, plant states)
     round_trip_us: np.ndarray  # (N,)
     steps_per_second: float
+    records: np.ndarray  # (N,) the image's output records as they came (Law.image_stream's dout)
+    checks: dict  # the law's own blocks (Law.pil_check): e.g. "fixed_point", "scheduled"
     twin: TwinTrace | None = None  # the float64 twin's run (gainlink.proof.twin), when one ran
     comparison: TwinComparison | None = None  # the run against its twin
-    model_twin: TwinTrace | None = None  # the law around the artifact's own model (model_twin), when one ran
+    model_twin: TwinTrace | None = None  # the law around the design's own model, when one ran
+    model_twin_start: str = ""  # where the model twin started
     reference: np.ndarray | None = None  # (N, q) the references the run tracked
-    fixed_point: FixedPilCheck | None = None  # a fixed-point artifact's oracle (gainlink.hil.loop.pil_fixed)
-    fixed_run: fwfixed.FixedRun | None = None  # a fixed-point image's records (words, estimate, flags) per step
-    scheduled: Any = None  # a scheduled artifact's check (gainlink.hil.loop.pil_scheduled.ScheduledPilCheck)
-    sigma: np.ndarray | None = None  # (N,) a scheduled image's sigma per step
-    sigma_flags: np.ndarray | None = None  # (N,) its flags (held 1, clipped 2, rate-limited 4)
+    signals: np.ndarray | None = None  # (N, e) the external scheduling signals
 
     def summary(self) -> dict:
-        """Counts, timing and the comparison with the twin, JSON-ready."""
+        """Counts, timing, the comparison with the twin and the law's checks, JSON-ready."""
         out = {
+            "law": self.law,
             "steps": int(self.u.shape[0]),
             "saturated_steps": int(self.saturated.any(axis=1).sum()),
-            "faults": int((self.status == FAULT_STATUS).sum()),
+            "faults": int(np.count_nonzero(self.flags & flags.FAULT)),
             "steps_per_second": round(self.steps_per_second, 1),
             "round_trip_us_p50": round(float(np.median(self.round_trip_us)), 1),
             "round_trip_us_p99": round(float(np.percentile(self.round_trip_us, 99)), 1),
@@ -155,11 +162,8 @@ class PilResult:
         }
         if self.comparison is not None:
             out["twin"] = self.comparison.to_dict()
-        if self.fixed_point is not None:
-            out["fixed_point"] = self.fixed_point.to_dict()
-        if self.scheduled is not None:
-            out["law"] = self.scheduled.law
-            out["scheduled"] = self.scheduled.to_dict()
+        for name, block in self.checks.items():
+            out[name] = block.to_dict()
         return out
 
 
@@ -184,7 +188,7 @@ def twin_figure(result: PilResult, artifact: Artifact, *, title: str | None = No
         outputs=list(sig["outputs"]),
         inputs=list(sig["inputs"]),
         title=title or f"PIL {artifact.name}",
-        marked=result.status == FAULT_STATUS,
+        marked=(result.flags & flags.FAULT) != 0,
         marked_label="sample refused (non-finite)",
         units=sig.get("units"),
         time_unit=artifact.unit("time"),
@@ -211,27 +215,31 @@ def run_pil(
     plant: DiscretePlant,
     steps: int,
     reference: np.ndarray | None = None,
+    signals: np.ndarray | None = None,
     target: str | None = None,
     board: str | None = None,
     watchdog_periods: int = 10,
     deadline_s: float = 10.0,
     twin: DiscretePlant | None = None,
-    model_twin: DiscretePlant | None = None,
-    quantised_twin: DiscretePlant | None = None,
+    model_twin: bool = True,
+    check_plant: DiscretePlant | None = None,
 ) -> PilResult:
-    """Close the loop: firmware in QEMU, ``plant`` in Python, one FIFO round trip per sample.
+    """Close the loop: the law's image in QEMU, ``plant`` in Python, one FIFO round trip per sample.
 
     Parameters
     ----------
     artifact : Artifact
-        Artifact whose image runs (built and cached by sha256).
+        Artifact whose image runs (built and cached by sha256; its law's: ``Law.image_stream``).
     plant : DiscretePlant
-        The plant; its outputs are sampled each period.
+        The plant; its outputs are sampled each period (a plant with a ``schedule(s)`` method hears the external
+        scheduling signals before each sample).
     steps : int
         Number of samples.
     reference : ndarray, optional
-        (q,) constant absolute reference or (steps, q) sequence; by default the tracked outputs at the
-        operating point (``Artifact.r_op``, zero without one).
+        (q,) constant absolute reference or (steps, q) sequence; by default the law's trim where the run starts
+        (``Law.r_op``: the tracked outputs at the operating point).
+    signals : ndarray, optional
+        (steps, e) external scheduling signals; required when the law has any (``Law.externals``).
     target : str, optional
         The core whose image runs: ``cortex-m0``, ``cortex-m3``, ``cortex-m4`` (default), ``cortex-m7``,
         ``cortex-m33`` or ``cortex-m55`` (see :mod:`gainlink.firmware.targets`).
@@ -241,135 +249,137 @@ def run_pil(
         How long to wait for one answer before declaring the firmware silent.
     twin : DiscretePlant, optional
         A second instance of the plant, in the same initial state: the float64 twin of the loop
-        (:mod:`gainlink.proof.twin`) runs on it in step with the firmware, and the result compares the two.
-    model_twin : DiscretePlant, optional
-        The artifact's own model (:class:`ArtifactPlant`) started where the plant starts: the float64 law runs
-        around it too, and the result holds its trace (the model twin of ``gainlink.hil.loop.model_twin``).
-    quantised_twin : DiscretePlant, optional
-        A fixed-point artifact only: a third instance of the plant, in the same initial state, on which the
-        float64 law with the artifact's quantised coefficients closes the loop (the law the certified rounding
-        bound compares with; :mod:`gainlink.hil.loop.pil_fixed`).
+        (:mod:`gainlink.proof.twin`) runs on it, after the run, and the result compares the two.
+    model_twin : bool
+        Run the law around the design's own model (``Law.design_model``) started where the plant starts.
+    check_plant : DiscretePlant, optional
+        A further instance of the plant in the same initial state, for a law whose check closes a loop of its own
+        (a fixed-point law: the float64 law with its quantised coefficients, which its certified rounding bound
+        compares with).
 
     Returns
     -------
     PilResult
-        For a fixed-point artifact, ``fixed_point`` holds the oracle: the image bit for bit the model on the
-        samples it received, and the deviation from the quantised twin beside the certified bound.
+        ``checks`` holds the law's own checks of its image: for a fixed-point artifact ``fixed_point`` (the image
+        bit for bit the model on the samples it received, the deviation from the quantised twin beside the
+        certified bound), for a scheduled one ``scheduled`` (every record the float32 model's and the host C's).
     """
-    a = artifact
-    _check_request(a, steps=steps, quantised_twin=quantised_twin)
-    platform = resolve_cortex_m(target, board)
-    board = platform.board.name
-    R = np.broadcast_to(a.r_op if reference is None else np.asarray(reference, float), (steps, a.q))
-    fixed = is_fixed(a)
-    elf = _image(a, target=platform.target.name, board=board)
-    qt = None if quantised_twin is None else QuantisedTwin(a, plant=quantised_twin, steps=steps)
-    tw, mt = _twin_loop(a, twin, steps), _twin_loop(a, model_twin, steps)
-    rec = _PilRecord.empty(a, steps, x0=plant.state)
-    with _qemu_fifos(elf, board=board, steps=steps) as (proc, fin, fout):
-        _open_stream(proc, fin, fout, a, steps=steps, watchdog_periods=watchdog_periods, deadline_s=deadline_s)
-        t_start = time.perf_counter()
-        _exchange(a, plant, R, rec, link=(proc, fin, fout), deadline_s=deadline_s, twins=(tw, mt, qt))
-        elapsed = time.perf_counter() - t_start
-        _await_exit(proc, deadline_s=deadline_s)
-    twin_trace, comparison = (None, None) if tw is None else _compare_with_twin(a, tw, rec, R=R, steps=steps)
-    check = None
-    if fixed:
-        model_plant = isinstance(plant, ArtifactPlant)  # the design model: the loop the certificate is about
-        design_u = None if twin_trace is None else twin_trace.u
-        check = fixed_pil_check(a, rec.raw, Y=rec.Y, R=R, quantised=qt, design_u=design_u, model_plant=model_plant)
-    return _result(a, rec, R=R, elapsed=elapsed, twin=(twin_trace, comparison), model_twin=mt, check=check)
-
-
-def _check_request(a: Artifact, *, steps: int, quantised_twin: DiscretePlant | None) -> None:
-    """What :func:`run_pil` refuses before anything is built: a scheduled artifact (its PIL is
-    :func:`~.pil_scheduled.run_scheduled_pil`), no steps, a quantised twin for a float32 artifact."""
-    if a.schedule is not None:  # its PIL checks sigma (pil_scheduled)
-        raise PlantError(f"artifact {a.name} is scheduled on {a.schedule.sigma}: its PIL is "
-                         "gainlink.hil.loop.pil_scheduled.run_scheduled_pil (gainlink pil run runs it)")  # fmt: skip
+    a, law = artifact, law_of(artifact)
     if steps < 1:
         raise PlantError("--steps must be at least 1")
-    if quantised_twin is not None and not is_fixed(a):
-        raise PlantError(f"artifact {a.name} is float32: no quantised twin (a fixed-point artifact has one)")
+    S = _signals(a, law, signals, steps)
+    platform = resolve_cortex_m(target, board)
+    stream = law.image_stream(a, target=platform.target.name, board=platform.board.name)
+    sampled = _Sampled(plant, Ts=a.Ts)
+    plan = _plan(a, law, sampled, steps=steps, reference=reference, S=S)
+    start = _twin_start(plant, sigma=plan.sigma0) if model_twin else None
+    rec = Recorder(plan, artifact=a, plant=sampled)
+    with _qemu_fifos(stream.elf, board=platform.board.name, steps=steps) as (proc, fin, fout):
+        _open_stream(proc, fin, fout, stream, steps=steps, watchdog_periods=watchdog_periods, deadline_s=deadline_s)
+        endpoint = OverFifos(stream, link=(proc, fin, fout), recorder=rec, deadline_s=deadline_s, steps=steps,
+                             safe_command=law.safe_command(a), read=_read_exact)  # fmt: skip
+        loop = ClosedLoop(plan=plan, plant=sampled, endpoint=endpoint, injector=FaultInjector((), Ts=a.Ts), Ts=a.Ts,
+                          record_state=True)  # fmt: skip
+        outcome = loop.run(None)
+        _await_exit(proc, deadline_s=deadline_s)
+    tw = None if twin is None else _twin_after(a, law, twin, plan, steps)  # off the per-sample path
+    mt, note = (None, "off") if start is None else model_twin_after(law, a, start=start, plan=plan, steps=steps)
+    return _result(a, law, rec, endpoint, plan=plan, wall_s=outcome.wall_s, twins=(tw, mt, note),
+                   design_model=isinstance(plant, ArtifactPlant), check_plant=check_plant,
+                   final_state=sampled.state())  # fmt: skip
 
 
-def _twin_loop(a: Artifact, plant: DiscretePlant | None, steps: int) -> TwinLoop | None:
-    """The float64 law closing the loop on ``plant`` beside the run (None without a plant)."""
-    if plant is None:
-        return None
-    return TwinLoop(a, outputs=plant.outputs, advance=lambda u: plant.advance(u=u), steps=steps)
+class _Sampled:
+    """A :class:`DiscretePlant` as the closed loop steps a plant (``advance(u, dt)``, ``state()``, the names its
+    record needs, and its ``schedule(s)`` when it follows external signals)."""
+
+    def __init__(self, plant: DiscretePlant, *, Ts: float) -> None:
+        self.plant, self.Ts = plant, Ts
+        self.state_names = tuple(f"x{i}" for i in range(np.size(plant.state)))
+        follow = getattr(getattr(plant, "plant", plant), "schedule", None)
+        if follow is not None:
+            self.schedule = follow
+
+    def outputs(self) -> np.ndarray:
+        return self.plant.outputs()
+
+    def advance(self, *, u: np.ndarray, dt: float) -> None:
+        self.plant.advance(u=u)
+
+    def state(self) -> np.ndarray:
+        return np.asarray(self.plant.state, dtype=float)
 
 
-def _result(a: Artifact, rec, *, R, elapsed: float, twin: tuple, model_twin, check) -> PilResult:
-    """The PIL result from the run's record, its twins (the twin's trace and comparison; the model twin) and the
-    fixed-point check."""
-    twin_trace, comparison = twin
-    steps = rec.Y.shape[0]
-    fixed = check is not None
+def _signals(a: Artifact, law, signals: np.ndarray | None, steps: int) -> np.ndarray:
+    """The external scheduling signals per step (steps, e), checked against the law's."""
+    e = len(law.externals(a))
+    S = np.zeros((steps, e)) if signals is None else np.asarray(signals, dtype=float).reshape(steps, -1)
+    if S.shape[1] != e:
+        raise PlantError(f"artifact {a.name} needs {e} external scheduling signal(s) per step, got {S.shape[1]}")
+    return S
+
+
+def _plan(a: Artifact, law, plant: _Sampled, *, steps: int, reference, S: np.ndarray) -> Plan:
+    """The run's plan: no noise, no disturbance, no fault; the reference given or the law's trim where it starts."""
+    follow = getattr(plant, "schedule", None)
+    if follow is not None:
+        follow(S[0])
+    sigma0 = law.sigma_of(a, plant.outputs(), S[0])
+    r = law.r_op(a, sigma=sigma0) if reference is None else np.asarray(reference, dtype=float)
+    R = np.array(np.broadcast_to(r, (steps, a.q)), dtype=float)
+    return Plan(N=steps, t=np.arange(steps) * a.Ts, R=R, noise=np.zeros((steps, a.p)), D=np.zeros((steps, a.m)),
+                S=S, sigma0=sigma0, silent_at=None, crash_at=None, period_s=a.Ts, realtime=False)  # fmt: skip
+
+
+def _twin_start(plant: DiscretePlant, *, sigma: float) -> TwinStart:
+    """Where the plant starts, for the model twin: a ``gainlink.hil`` plant's state by name, or the artifact's own
+    model's state (a deviation, in the design's coordinates)."""
+    inner = getattr(plant, "plant", None)
+    if inner is not None:
+        return twin_start(inner, sigma=sigma)
+    names = plant.names if isinstance(plant, ArtifactPlant) else ()
+    return TwinStart(dict(zip(names, np.asarray(plant.state, dtype=float))), True, float(sigma))
+
+
+def _twin_after(a: Artifact, law, plant: DiscretePlant, plan: Plan, steps: int) -> TwinTrace:
+    """The float64 law closing the loop on ``plant`` (in the run's initial state) for the run's samples."""
+    follow = getattr(getattr(plant, "plant", plant), "schedule", None)
+    return run_twin(law.reference(a), outputs=plant.outputs, advance=lambda u: plant.advance(u=u), noise=plan.noise,
+                    R=plan.R, D=plan.D, S=plan.S, steps=steps, on_signals=follow)  # fmt: skip
+
+
+def _result(a: Artifact, law, rec: Recorder, endpoint, *, plan: Plan, wall_s: float, twins: tuple,
+            design_model: bool, check_plant, final_state: np.ndarray) -> PilResult:  # fmt: skip
+    """The PIL result from the run's record, its twins and the law's checks of the image's records."""
+    twin_trace, model, note = twins
+    steps = plan.N
+    trace = rec.trace(steps, law=law, artifact=a, twins=Twins(twin_trace, model, note, {}))
+    comparison = None
+    if twin_trace is not None:
+        comparison = twin_comparison(t=plan.t, y=trace.y, u=trace.u, r=plan.R, twin_y=twin_trace.y,
+                                     twin_u=twin_trace.u, artifact=a)  # fmt: skip
+    checks = law.pil_check(a, endpoint.records, Y=trace.y, R=plan.R, S=plan.S, trace=trace,
+                           twin_u=None if twin_trace is None else twin_trace.u, design_model=design_model,
+                           check_plant=check_plant)  # fmt: skip
     return PilResult(
-        y=rec.Y,
-        u=rec.U,
-        status=rec.S,
-        saturated=rec.SAT,
-        plant_state=np.array(rec.X),
-        round_trip_us=rec.RT,
-        steps_per_second=steps / elapsed if elapsed > 0 else float("inf"),
+        law=law.label,
+        y=trace.y,
+        u=trace.u.astype(np.float32),
+        flags=trace.flags,
+        saturated=trace.sat,
+        sigma=trace.sigma,
+        plant_state=np.vstack([rec.X[:steps], final_state]),
+        round_trip_us=trace.latency_ns / 1e3,
+        steps_per_second=steps / wall_s if wall_s > 0 else float("inf"),
+        records=endpoint.records,
+        checks=checks,
         twin=twin_trace,
         comparison=comparison,
-        model_twin=None if model_twin is None else model_twin.trace(steps),
-        reference=np.array(R, dtype=float),
-        fixed_point=check,
-        fixed_run=fwfixed.FixedRun.from_records(rec.raw, a.q) if fixed else None,
+        model_twin=model,
+        model_twin_start=note,
+        reference=plan.R,
+        signals=plan.S,
     )
-
-
-def _image(a: Artifact, *, target: str, board: str) -> Path:
-    """The image PIL runs (built and cached): the artifact's law without the bus nodes (``main.c``, one main for
-    every law: a fixed-point artifact's runs its integer law); it speaks the stream of ``gl_stream.h``."""
-    return replay_image(a, target=target, board=board)
-
-
-def _compare_with_twin(
-    a: Artifact, tw: TwinLoop, rec: _PilRecord, *, R: np.ndarray, steps: int
-) -> tuple[TwinTrace, TwinComparison]:
-    """The twin's trace and its comparison with what the firmware did."""
-    twin_trace = tw.trace(steps)
-    comparison = twin_comparison(
-        t=np.arange(steps) * a.Ts,
-        y=rec.Y,
-        u=rec.U.astype(float),
-        r=np.asarray(R, dtype=float),
-        twin_y=twin_trace.y,
-        twin_u=twin_trace.u,
-        artifact=a,
-    )
-    return twin_trace, comparison
-
-
-@dataclass
-class _PilRecord:
-    """What a PIL run records per sample."""
-
-    Y: np.ndarray
-    U: np.ndarray
-    S: np.ndarray
-    SAT: np.ndarray
-    X: list
-    RT: np.ndarray
-    raw: np.ndarray  # the image's output records as they came
-
-    @classmethod
-    def empty(cls, a: Artifact, steps: int, *, x0: np.ndarray) -> _PilRecord:
-        dout = records.layout(a).dtype
-        return cls(
-            Y=np.zeros((steps, a.p)),
-            U=np.zeros((steps, a.m), dtype=np.float32),
-            S=np.zeros(steps, dtype=np.int32),
-            SAT=np.zeros((steps, a.m), dtype=bool),
-            X=[x0],
-            RT=np.zeros(steps),
-            raw=np.zeros(steps, dtype=dout),
-        )
 
 
 @contextmanager
@@ -397,51 +407,16 @@ def _qemu_fifos(elf: Path, *, board: str, steps: int):
             os.close(fout)
 
 
-def _open_stream(
-    proc: subprocess.Popen, fin: int, fout: int, a: Artifact, *, steps: int, watchdog_periods: int, deadline_s: float
-) -> None:
-    """Send the stream header (steps, one sample per record, watchdog) and check the firmware's answer (its header:
-    the magic, the count, the law it runs and its dimensions: :func:`gainlink.firmware.qemu.output_header`)."""
-    os.write(fin, struct.pack("<4I", fwqemu.IN_MAGIC, steps, 1, watchdog_periods))
+def _open_stream(proc: subprocess.Popen, fin: int, fout: int, stream, *, steps: int, watchdog_periods: int,
+                 deadline_s: float) -> None:  # fmt: skip
+    """Send the stream header (steps, one sample per record, the watchdog's periods) and check the image's answer:
+    the magic (``GLO2``), the count, the law it runs and its dimensions (``stream.header``:
+    :func:`gainlink.firmware.qemu.output_header`)."""
+    os.write(fin, struct.pack("<4I", stream.in_magic, steps, 1, watchdog_periods if stream.watchdog else 0))
     header = _read_exact(fout, 32, proc=proc, deadline_s=deadline_s)
     got, count, *shape = struct.unpack("<8I", header)
-    if got != fwqemu.OUT_MAGIC or count != steps or tuple(shape) != fwqemu.output_header(a):
-        raise FirmwareError("firmware answered with a bad stream header")
-
-
-def _exchange(
-    a: Artifact,
-    plant: DiscretePlant,
-    R: np.ndarray,
-    rec: _PilRecord,
-    *,
-    link: tuple,
-    deadline_s: float,
-    twins: tuple[TwinLoop | None, ...],
-) -> None:
-    """One FIFO round trip per sample: the plant's outputs in, the command out, the plant advanced."""
-    proc, fin, fout = link
-    dout = rec.raw.dtype
-    sample = records.samples(a, np.zeros((1, a.p)))
-    for k in range(len(rec.Y)):
-        y = plant.outputs()
-        rec.Y[k] = y
-        sample["y"] = y.astype(np.float32)
-        if a.q:
-            sample["r"][0, : a.q] = R[k].astype(np.float32)
-        t0 = time.perf_counter()
-        os.write(fin, sample.tobytes())
-        out = np.frombuffer(_read_exact(fout, dout.itemsize, proc=proc, deadline_s=deadline_s), dtype=dout)[0]
-        rec.RT[k] = (time.perf_counter() - t0) * 1e6
-        rec.raw[k] = out
-        rec.U[k] = out["u"]
-        rec.S[k] = out["status"]
-        rec.SAT[k] = (int(out["sat"]) >> np.arange(a.m)) & 1
-        plant.advance(u=rec.U[k].astype(float))
-        rec.X.append(plant.state)
-        for twin in twins:  # outside the timed round trip
-            if twin is not None:
-                twin.step(k, noise=np.zeros(a.p), r=R[k], d=np.zeros(a.m))
+    if got != stream.out_magic or count != steps or tuple(shape) != tuple(stream.header):
+        raise FirmwareError("firmware answered with a bad stream header (image built for another artifact or law?)")
 
 
 def _await_exit(proc: subprocess.Popen, *, deadline_s: float) -> None:

@@ -8,10 +8,10 @@ from typing import Any
 
 import numpy as np
 from gainlink.fileio import publish_files
+from gainlink.laws import flags, law_of
 from gainlink.proof.twin_plot import png_bytes, twin_difference_figure
 
 from .bridge import RunResult
-from .sched_report import schedule_lines, sigma_csv, sigma_plot
 
 
 def report_json(result: RunResult) -> str:
@@ -98,12 +98,8 @@ def summary_text(result: RunResult, *, report_dir: Path | None = None) -> str:
             + ", ".join(f"{k} {_fmt(v, _integral_unit(units, k))}" for k, v in m["peak_integrator"].items())
         )
     lines += twin_lines(m.get("twin"), units=units)
-    if m.get("fixed_point"):
-        from .can_fixed import summary_lines as fixed_summary_lines
-
-        lines += fixed_summary_lines(m["fixed_point"])
     lines += model_lines(m.get("model_twin"), units=units)
-    lines += schedule_lines(m.get("schedule"))
+    lines += law_of(result.artifact).report_lines(m)
     for name, tr in m["tracked"].items():
         lines.append(
             f"  {name}: overshoot {_fmt(tr['overshoot_pct'], '%')}, settling {_fmt(tr['settling_time_s'], time_unit)}"
@@ -210,14 +206,48 @@ def model_lines(mt: dict | None, *, units: dict | None = None) -> list[str]:
     return out
 
 
-def plots(result: RunResult, *, artifact: Any = None) -> dict[str, bytes]:
+def has_sigma(result: RunResult) -> bool:
+    """Whether the run's law reported a sigma (its trace then has ``sigma.csv`` and ``sigma.png``)."""
+    return bool(np.isfinite(result.trace.sigma).any())
+
+
+def sigma_csv(trace: Any) -> str:
+    """``t,sigma,held,clipped,rate`` per step: the sigma the law used and its flags (0/1)."""
+    bits = np.asarray(trace.flags, dtype=np.int64)
+    rows = ["t,sigma,held,clipped,rate"]
+    for t, s, f in zip(trace.t, trace.sigma, bits):
+        rows.append(f"{t:.9g},{s:.9g},{int(bool(f & flags.SIGMA_HELD))},{int(bool(f & flags.SIGMA_CLIPPED))},"
+                    f"{int(bool(f & flags.SIGMA_RATE))}")  # fmt: skip
+    return "\n".join(rows) + "\n"
+
+
+def sigma_plot(result: RunResult) -> bytes:
+    """``sigma.png``: sigma against time, the law's points (its ``schedule`` block) as lines, flagged steps marked."""
+    import matplotlib.pyplot as plt
+
+    tr, sch = result.trace, result.metrics.get("schedule") or {}
+    fig, ax = plt.subplots(figsize=(8, 2.6))
+    ax.plot(tr.t, tr.sigma, label=f"sigma ({sch.get('sigma', '')})")
+    for v in sch.get("points", []):
+        ax.axhline(v, color="0.6", lw=0.7, ls=":")
+    flagged = (np.asarray(tr.flags) & (flags.SIGMA_HELD | flags.SIGMA_CLIPPED | flags.SIGMA_RATE)) != 0
+    if flagged.any():
+        ax.plot(tr.t[flagged], tr.sigma[flagged], "r.", ms=3, label="held / clipped / rate-limited")
+    ax.set_xlabel("t [s]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    fig.suptitle(f"{result.scenario.name}: scheduling variable")
+    return png_bytes(fig)
+
+
+def plots(result: RunResult) -> dict[str, bytes]:
     """PNG plots: outputs with references, inputs with limits, latency histogram."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    tr = result.trace
+    tr, artifact = result.trace, result.artifact
     outs = result.info["plant"]["outputs"]
     ins = result.info["plant"]["inputs"]
     files = {}
@@ -326,13 +356,13 @@ def _twin_plot(result: RunResult, *, outs: list[str], ins: list[str], artifact: 
     return png_bytes(fig)
 
 
-def write_report(result: RunResult, report_dir: str | Path, *, artifact: Any = None, with_plots: bool = True) -> Path:
+def write_report(result: RunResult, report_dir: str | Path, *, with_plots: bool = True) -> Path:
     """Compute every report file, then publish them atomically into ``report_dir``."""
     report_dir = Path(report_dir)
     files: dict[str, bytes | str] = {"report.json": report_json(result)}
     if with_plots:
-        files.update(plots(result, artifact=artifact))
-    if result.trace.sigma is not None:  # a scheduled run: sigma per step
+        files.update(plots(result))
+    if has_sigma(result):  # a law with a scheduling variable: sigma per step
         files["sigma.csv"] = sigma_csv(result.trace)
         if with_plots:
             files["sigma.png"] = sigma_plot(result)

@@ -23,6 +23,7 @@ Example::
     [plant]        kind = "fmu", fmu = "cart_pendulum", outputs = ["x", "theta"]
     [transport]    interface = "udp_multicast", channel = "239.74.163.2", hop_limit = 0, fd = true
                    # optional: encoding = "int16", ranges = { x = [-5.0, 5.0], theta = [-1.0, 1.0], r_x = [-5.0, 5.0] }
+                   # an empty table: no link, the law runs in process (SIL)
     [initial_state] theta = 0.1
     [reference.x]  kind = "step", at = 1.0, value = 0.5     # constant | step | square | sine | ramp | sweep
                    # absolute; without a profile, or without initial/offset, a reference holds the
@@ -31,7 +32,7 @@ Example::
     [[disturbances]] input = "F", start = 2.0, stop = 2.1, value = 5.0
     [[faults]]     kind = "drop", start = 3.0, stop = 3.1, every = 1
                    # kind: drop | delay | duplicate | reorder | silent | crash | nan
-                   # nan: the sample's measured outputs sent as NaN (a scheduled artifact over its link only)
+                   # nan: the sample's measured outputs sent as NaN (every law, in process too)
                    # probability = 0.05: each sample the window and ``every`` select is hit with this probability
                    # (drawn from the run's seed): a random loss rate instead of a pattern
 
@@ -66,9 +67,9 @@ difference): what float32, the encoding, the link, timing and faults cost the cl
 ``model_twin`` runs the same law around the design's own linear model (:mod:`.model_twin`), started where
 the plant starts: the report gives how far the plant departs from the model the controller believes in.
 
-A scheduled artifact (SIL, :mod:`.sil_scheduled`; with ``controller = "firmware"`` and a CAN transport the firmware's
-CAN node over the bus, :mod:`.can_scheduled`) takes its sigma from the measured output the schedule
-names or, when sigma is an external signal, from a profile per external signal, written like a reference's::
+A scheduled artifact (in process or over its link, as every law: :mod:`.bridge`) takes its sigma from the measured
+output the schedule names or, when sigma is an external signal, from a profile per external signal, written like a
+reference's::
 
     [schedule_signal.load]  kind = "sweep", low = 0.04, high = 1.0, rate = 0.1, start = 2.0, cycles = 1
                    # sweep: low until start, to high at rate (units/s) and back at once (cycles times), then low

@@ -107,8 +107,8 @@ def run_saturation_study(
             gains = _design_mode(spec, mode=mode, spec_path=spec_path, folder=Path(tmp) / mode)
             artifacts[mode] = from_dict(json.loads(gains.read_text()))
             scenario = _mode_scenario(desc, mode=mode, gains=gains, controller=controller, transport=transport)
-            runs[mode] = run_scenario(scenario)
-            files.update(_mode_files(runs[mode], mode=mode, gains=gains, artifact=artifacts[mode], plots=plots))
+            runs[mode] = run_scenario(scenario, artifact=artifacts[mode])
+            files.update(_mode_files(runs[mode], mode=mode, gains=gains, plots=plots))
     table = {mode: _row(r) for mode, r in runs.items()}
     summary = _summary(table, report_dir=report_dir)
     files["study.json"] = _study_json(table, desc=desc, spec_path=spec_path)
@@ -171,7 +171,7 @@ def _mode_scenario(desc: dict, *, mode: str, gains: Path, controller: str | None
     )
 
 
-def _mode_files(result: RunResult, *, mode: str, gains: Path, artifact: Any, plots: bool) -> dict[str, bytes | str]:
+def _mode_files(result: RunResult, *, mode: str, gains: Path, plots: bool) -> dict[str, bytes | str]:
     """One mode's report files (artifact, report.json, summary, and with ``plots`` its PNGs) by their path in the
     report folder."""
     files: dict[str, bytes | str] = {
@@ -179,7 +179,7 @@ def _mode_files(result: RunResult, *, mode: str, gains: Path, artifact: Any, plo
         f"{mode}/report.json": report_json(result),
         f"{mode}/summary.txt": summary_text(result),
     }
-    for name, png in (run_plots(result, artifact=artifact) if plots else {}).items():
+    for name, png in (run_plots(result) if plots else {}).items():
         files[f"{mode}/{name}"] = png
     return files
 

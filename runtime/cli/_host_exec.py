@@ -13,15 +13,17 @@ from ..errors import FirmwareError
 from ..shipping import records
 
 
-def answer_samples(exe: Path, Y: np.ndarray, R: np.ndarray) -> tuple[str, int]:
-    """The executable's whole stdout for the steps ``Y[k], R[k]`` (one line each), and the number of steps.
+def answer_samples(exe: Path, Y: np.ndarray, R: np.ndarray, S: np.ndarray | None = None) -> tuple[str, int]:
+    """The executable's whole stdout for the steps ``Y[k], R[k]`` (and a scheduled law's external signals ``S[k]``
+    after them: the sample line of ``firmware/ports/host/main.c``; one line each), and the number of steps.
 
     Raises
     ------
     FirmwareError
         The executable exited with a non-zero status (its stderr's start in the message).
     """
-    lines = [" ".join(repr(float(v)) for v in np.concatenate([Y[k], R[k]])) for k in range(Y.shape[0])]
+    S = np.zeros((Y.shape[0], 0)) if S is None else np.asarray(S, dtype=float).reshape(Y.shape[0], -1)
+    lines = [" ".join(repr(float(v)) for v in np.concatenate([Y[k], R[k], S[k]])) for k in range(Y.shape[0])]
     proc = subprocess.run([str(exe)], input="\n".join(lines) + "\n", capture_output=True, text=True, timeout=600)
     if proc.returncode != 0:
         raise FirmwareError(f"host firmware exited with status {proc.returncode}: {proc.stderr.strip()[:200]}")

@@ -61,7 +61,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--noise", type=float, default=0.0, help="measurement noise standard deviation")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", required=True, help="output CSV (t, y0.., r0..)")
+    p.add_argument(
+        "--schedule-signal",
+        action="append",
+        metavar="NAME=START[,END]",
+        help="a scheduled artifact's external scheduling signal: constant, or a linear ramp over the run",
+    )
+    p.add_argument("--out", required=True, help="output CSV (t, y0.., r0.., and a scheduled law's s0..)")
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("replay", help="run recorded samples through an engine of the control law")
@@ -204,7 +210,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise DataError(f"--ref needs {a.q} values (one per tracked output), got {len(args.ref)}")
     if args.noise < 0 or not np.isfinite(args.noise):
         raise DataError("--noise must be a finite number >= 0")
-    sim = api.simulate(a, steps=args.steps, x0=args.x0, reference=args.ref, noise_std=args.noise, seed=args.seed)
+    from ._signals import signal_ramps
+
+    signals = signal_ramps(a, args.schedule_signal, args.steps)
+    sim = api.simulate(a, steps=args.steps, x0=args.x0, reference=args.ref, noise_std=args.noise, seed=args.seed,
+                       signals=signals if signals.shape[1] else None)  # fmt: skip
     out = Path(args.out)
     if not out.parent.is_dir():
         raise DataError(f"output folder {out.parent} does not exist")

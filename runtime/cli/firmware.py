@@ -181,29 +181,27 @@ def _run_host(args: argparse.Namespace) -> int:
 
 
 def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: Path | None) -> int:
-    import numpy as np
+    """Replay the CSV ``input_path`` through the host executable of the artifact's law (one line per sample: its
+    outputs, references and external signals) and write the trace ``gainlink replay --engine native`` writes."""
     from gainlink.fileio import atomic_write_text
-    from gainlink.proof.reference import Trace
-    from gainlink.proof.replay_io import format_trace, read_samples
+    from gainlink.laws import law_of
+    from gainlink.proof.replay_io import read_samples
 
     from ._host_exec import answer_samples, parse_records
 
-    a = artifact
-    samples = read_samples(input_path, a)
-    stdout, N = answer_samples(exe, samples.Y, samples.R)
-    rec = parse_records(a, stdout, count=N, executable=exe.name)
-    S = ((rec["sat"][:, None] >> np.arange(a.m)) & 1).astype(bool)
-    F = rec["status"] == -2
-    trace = Trace(u=rec["u"].astype(float), saturated=S, xh=rec["xh"].astype(float), z=rec["z"][:, : a.q].astype(float),
-                  fault=F)  # fmt: skip
-    text = format_trace(trace, samples.t)
+    a, law = artifact, law_of(artifact)
+    samples = read_samples(input_path, a, law.externals(a))
+    stdout, N = answer_samples(exe, samples.Y, samples.R, samples.S)
+    trace = law.records_trace(a, parse_records(a, stdout, count=N, executable=exe.name))
+    text = law.trace_text(a, trace, samples.t, engine="native")
     if output_path is None:
         sys.stdout.write(text)
     else:
         if output_path.is_dir():
             raise DataError(f"output {output_path} is a directory")
         atomic_write_text(output_path, text)
-        print(f"ran {N} samples through {exe.name}: {int(S.any(axis=1).sum())} saturated, {int(F.sum())} refused")
+        saturated, refused = int(trace.saturated.any(axis=1).sum()), int(trace.fault.sum())
+        print(f"ran {N} samples through {exe.name}: {saturated} saturated, {refused} refused")
     return 0
 
 
@@ -216,8 +214,11 @@ def _run(args: argparse.Namespace) -> int:
     bus_node = getattr(args, "can", None) or getattr(args, "mavlink", None)
     if args.from_artifact and not getattr(args, "mavlink", None):
         raise FirmwareError("--from-artifact is for the MAVLink node (--mavlink), the one that persists gain sets")
-    if not bus_node:  # the CAN and MAVLink nodes (host apps, and the image's on its UART) also run a scheduled law
-        load(args.artifact).require_unscheduled("gainlink firmware run")
+    if not bus_node:  # the CAN and MAVLink nodes (host apps, and the image's on its UART) run every law
+        from gainlink.laws import law_of
+
+        artifact = load(args.artifact)
+        law_of(artifact).refuse("firmware_run", what="gainlink firmware run")
     if not on_host:
         return _run_image(args)
     if getattr(args, "can", None):
@@ -289,119 +290,65 @@ def _run_image(args: argparse.Namespace) -> int:
 def _pil(args: argparse.Namespace) -> int:
     import numpy as np
     from gainlink.fileio import publish_files
+    from gainlink.hil.loop.model_twin import model_mismatch
     from gainlink.hil.loop.pil import make_plant, run_pil, twin_figure
     from gainlink.proof.twin_plot import png_bytes
     from gainlink.shipping.artifact import load
+
+    from ._signals import signal_ramps
 
     platform = resolve_cortex_m(args.target, args.board)
     artifact = load(args.artifact)
     ref = args.reference
     if ref is not None and len(ref) != artifact.q:
         raise GainlinkError(f"--reference needs {artifact.q} values for artifact {artifact.name}")
-    if artifact.schedule is not None:  # the scheduled image (gl_sched_step), sigma moving with the run
-        from ._pil_scheduled import run as run_scheduled
-
-        return run_scheduled(args, artifact, platform)
-    if args.schedule_signal:
-        raise GainlinkError(f"--schedule-signal is for a scheduled artifact; {artifact.name} is not scheduled")
-    x0 = args.x0
-    plant = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))
-    twin = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))  # the twin's plant
-    quantised = None  # a fixed-point artifact's quantised twin (gainlink.hil.loop.pil_fixed) closes a third loop
-    if is_fixed(artifact):
-        quantised = make_plant(args.plant, artifact=artifact, x0=None if x0 is None else np.array(x0))
-    model, start = _pil_model_twin(artifact, plant)
-    result = run_pil(
-        artifact,
-        plant=plant,
-        steps=args.steps,
-        reference=ref,
-        target=platform.target.name,
-        board=platform.board.name,
-        twin=twin,
-        model_twin=model,
-        quantised_twin=quantised,
-    )
-    summary = {
-        "artifact": artifact.name,
-        "sha256": artifact.sha256,
-        "target": platform.target.name,
-        "board": platform.board.name,
-        "plant": args.plant,
-        **result.summary(),
-        "model_twin": _pil_model_mismatch(artifact, result, start=start),
-    }
+    signals = signal_ramps(artifact, args.schedule_signal, args.steps)
+    x0 = None if args.x0 is None else np.array(args.x0)
+    plant, twin, check = (make_plant(args.plant, artifact=artifact, x0=x0) for _ in range(3))  # run, twin, check
+    result = run_pil(artifact, plant=plant, steps=args.steps, reference=ref, signals=signals,
+                     target=platform.target.name, board=platform.board.name, twin=twin,
+                     check_plant=check)  # fmt: skip
+    summary = {"artifact": artifact.name, "sha256": artifact.sha256, "target": platform.target.name,
+               "board": platform.board.name, "plant": args.plant, **result.summary()}  # fmt: skip
+    if result.model_twin is not None:
+        mismatch = model_mismatch(
+            t=np.arange(args.steps) * artifact.Ts,
+            y=result.y,
+            r=result.reference,
+            model_y=result.model_twin.y,
+            artifact=artifact,
+            start=result.model_twin_start,
+        )
+        summary["model_twin"] = mismatch.to_dict()  # fmt: skip
     text = json.dumps(summary, indent=2) + "\n"
     if args.out:
-        title = f"PIL {artifact.name} on {args.board}, plant {args.plant}"
-        publish_files(
-            args.out,
-            {
-                "pil.csv": _pil_csv(artifact, result, steps=args.steps),
-                "pil.json": text,
-                "twin.png": png_bytes(twin_figure(result, artifact, title=title)),
-            },
-        )
+        title = f"PIL {artifact.name} ({result.law}) on {platform.board.name}, plant {args.plant}"
+        files = {"pil.csv": _pil_csv(artifact, result), "pil.json": text,
+                 "twin.png": png_bytes(twin_figure(result, artifact, title=title))}  # fmt: skip
+        publish_files(args.out, files)
     from ._pil_output import print_pil_summary
 
     return print_pil_summary(args, summary, artifact=artifact, json_text=text)
 
 
-def _pil_model_twin(artifact, plant):
-    """The model twin's plant (the artifact's own model) started where ``plant`` starts, and a note on where."""
-    import numpy as np
-    from gainlink.hil.loop.model_twin import initial_deviation
-    from gainlink.hil.loop.pil import ArtifactPlant, HilPlant
-
-    if not isinstance(plant, HilPlant):  # the artifact's own model: the same coordinates
-        return ArtifactPlant(artifact, x0=plant.state), "the plant's initial state"
-    initial, note = initial_deviation(artifact, plant.plant)
-    x0 = np.array([initial.get(s, 0.0) for s in artifact.signals["states"]]) if initial else np.zeros(artifact.n)
-    return ArtifactPlant(artifact, x0=x0), note
-
-
-def _pil_model_mismatch(artifact, result, *, start: str) -> dict:
-    """The plant against the model twin (gainlink.hil.loop.model_twin.model_mismatch), JSON-ready."""
-    import numpy as np
-    from gainlink.hil.loop.model_twin import model_mismatch
-
-    steps = result.y.shape[0]
-    return model_mismatch(
-        t=np.arange(steps) * artifact.Ts,
-        y=result.y,
-        r=result.reference,
-        model_y=result.model_twin.y,
-        artifact=artifact,
-        start=start,
-    ).to_dict()
-
-
-def _pil_csv(artifact, result, *, steps: int) -> str:
-    """pil.csv: per step the samples, commands, flags, and the closed-loop and model twins'."""
-    import numpy as np
-
-    header = ",".join(
-        [f"y{i}" for i in range(artifact.p)]
-        + [f"u{i}" for i in range(artifact.m)]
-        + [f"sat{i}" for i in range(artifact.m)]
-        + ["status"]
-        + [f"twin_y{i}" for i in range(artifact.p)]
-        + [f"twin_u{i}" for i in range(artifact.m)]
-        + [f"model_y{i}" for i in range(artifact.p)]
-        + [f"model_u{i}" for i in range(artifact.m)]
-    )
-    tw, mt = result.twin, result.model_twin
-    rows = [
-        ",".join(
-            [repr(float(v)) for v in result.y[k]]
-            + [repr(float(v)) for v in result.u[k]]
-            + [str(int(s)) for s in result.saturated[k]]
-            + [str(int(result.status[k]))]
-            + [repr(float(v)) for v in np.concatenate([tw.y[k], tw.u[k], mt.y[k], mt.u[k]])]
-        )
-        for k in range(steps)
-    ]
-    return header + "\n" + "\n".join(rows) + "\n"
+def _pil_csv(artifact, result) -> str:
+    """pil.csv: per step the samples, commands, saturation, status flags and sigma, and the closed-loop and model
+    twins' samples and commands (when they ran)."""
+    a, tw, mt = artifact, result.twin, result.model_twin
+    cols = [f"y{i}" for i in range(a.p)] + [f"u{i}" for i in range(a.m)] + [f"sat{i}" for i in range(a.m)]
+    cols += ["flags", "sigma"]
+    for name, twin in (("twin", tw), ("model", mt)):
+        if twin is not None:
+            cols += [f"{name}_y{i}" for i in range(a.p)] + [f"{name}_u{i}" for i in range(a.m)]
+    rows = [",".join(cols)]
+    for k in range(result.y.shape[0]):
+        vals = [repr(float(v)) for v in (*result.y[k], *result.u[k])]
+        vals += [str(int(s)) for s in result.saturated[k]] + [str(int(result.flags[k])), repr(float(result.sigma[k]))]
+        for twin in (tw, mt):
+            if twin is not None:
+                vals += [repr(float(v)) for v in (*twin.y[k], *twin.u[k])]
+        rows.append(",".join(vals))
+    return "\n".join(rows) + "\n"
 
 
 # --- parsers -----------------------------------------------------------------------------------------

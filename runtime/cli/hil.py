@@ -97,7 +97,7 @@ def _study(args: argparse.Namespace) -> int:
 
 
 def _showcase(args: argparse.Namespace) -> int:
-    from gainlink.hil.loop.sched_study import run_showcase
+    from gainlink.hil.loop.showcase import run_showcase
 
     result = run_showcase(
         spec_path=Path(args.spec) if args.spec else None, report_dir=Path(args.report), controller=args.controller

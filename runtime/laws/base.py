@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 import numpy as np
 
 from ..errors import DataError, GainlinkError, LawError, did_you_mean
+from .hooks import LoopHooks
 
 if TYPE_CHECKING:
     from ..proof.sampled_plant import SampledPlant
@@ -114,6 +115,10 @@ class Controller(Protocol):
         """Back to the law's start state."""
         ...
 
+    def state(self) -> np.ndarray:
+        """The law's state now, as one vector (its layout is the law's: :meth:`Law.integrators` reads it)."""
+        ...
+
 
 @dataclass(frozen=True)
 class OneStepVerdict:
@@ -149,7 +154,7 @@ class Capabilities:
         return tuple(c for c in CELLS if c not in self.cannot)
 
 
-class Law(ABC):
+class Law(LoopHooks, ABC):
     """One pair, structure x numeric format (module docstring).
 
     Subclasses (one per structure, in the structure's own module family) set :attr:`structure`, the numeric
@@ -283,6 +288,12 @@ class Law(ABC):
     def read_trace(self, path: str | Path, artifact: Any) -> Any:
         """A replay output CSV of this law back into a trace (:class:`~gainlink.errors.DataError` when it is not
         one of this artifact, or names another numeric format)."""
+
+    @abstractmethod
+    def records_trace(self, artifact: Any, records: np.ndarray) -> Any:
+        """The trace of the law's C records (:func:`gainlink.shipping.records.layout`: what the host executable
+        ``gainlink_loop_host`` and the image write), the trace ``replay --engine native`` gives for the same
+        samples."""
 
     def export(self, artifact: Any) -> dict[str, str]:
         """The C files of the law's export (``gainlink export``), by name; the same artifact, the same bytes: its

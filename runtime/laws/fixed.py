@@ -5,13 +5,14 @@ check (bit for bit against the integer law) and its trace files (which name thei
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import flags
-from .base import Controller, OneStepVerdict, Step
+from .base import Capabilities, Controller, OneStepVerdict, Step
 from .lq import AGAINST_FLOAT64, LqLaw, PythonLoop, sat_bits
 
 if TYPE_CHECKING:
@@ -51,6 +52,10 @@ class FixedModel:
         """Back to the start state."""
         self.loop.reset()
 
+    def state(self) -> np.ndarray:
+        """``[xh, z]`` (the integer words in real units)."""
+        return np.concatenate([self.loop.xh, self.loop.z])
+
 
 class FixedNative:
     """The host C's integer loop (:class:`~gainlink.engines.fixed_native.FixedNativeLoop`) as a
@@ -60,6 +65,7 @@ class FixedNative:
         from ..engines.fixed_native import FixedNativeLoop
 
         self.loop = FixedNativeLoop(artifact, library=library)
+        self.f, self.q = artifact.checks["fixed_point"]["formats"], artifact.q
         self.describe = {"kind": f"firmware (host C {self.loop.law} fixed-point loop, ctypes)",
                          "library": str(self.loop.library)}  # fmt: skip
 
@@ -74,6 +80,21 @@ class FixedNative:
         """``gl_fixed_reset``."""
         self.loop.reset()
 
+    def state(self) -> np.ndarray:
+        """``[xh, z]`` of the last step's record (the integer words in real units)."""
+        from ..proof.fixed_format import real
+
+        rec, f = self.loop.last_record, self.f
+        return np.concatenate([real(np.asarray(rec["XH"], dtype=np.int64), f["xh"]),
+                               real(np.asarray(rec["Z"], dtype=np.int64)[: self.q], f["z"])])  # fmt: skip
+
+
+#: What a fixed-point law cannot do yet, and why (each one generated line: ``Law.refuse``).
+CANNOT = {
+    "fuzz": "the fuzz harnesses are built on the float32 lq law's gain set (firmware/fuzz/fuzz_gains_stage.c stages "
+    "a gl_gains_t through gl_loop_stage, which a fixed-point export does not link)",
+}
+
 
 class FixedLaw(LqLaw):
     """The lq structure with integer arithmetic (a pair of its own: its model and its C differ)."""
@@ -83,6 +104,10 @@ class FixedLaw(LqLaw):
     @property
     def label(self) -> str:
         return self.numeric
+
+    @property
+    def capabilities(self) -> Capabilities:
+        return Capabilities(cannot=CANNOT)
 
     def reference(self, artifact: Any) -> Controller:
         from ..proof.reference import ReferenceLoop
@@ -136,6 +161,13 @@ class FixedLaw(LqLaw):
         """``float64`` for the ``reference`` engine's trace, else the law's own format (``q31``, ``q15``)."""
         return "float64" if engine == "reference" else self.numeric
 
+    def records_trace(self, artifact: Any, records: np.ndarray) -> Any:
+        """The integer law's records as the real values its words mean (``replay --engine native``'s trace)."""
+        from ..engines.fixed import trace_from_run
+        from ..firmware.fixed import FixedRun
+
+        return trace_from_run(artifact, FixedRun.from_records(records, artifact.q))
+
     def _arithmetic_lines(self, result: DesignResult) -> list[str]:
         """The certificate's lines, and the deviation measured in closed loop beside the certified bound."""
         from ..synthesis.fixed_point import describe as describe_fixed_point
@@ -165,3 +197,40 @@ class FixedLaw(LqLaw):
         trace = super().read_trace(path, artifact)
         trace_words(artifact, trace, f"comparison file {path}")
         return trace
+
+    # -- the closed loop (gainlink.laws.hooks.LoopHooks) ------------------------------------------------------
+
+    def run_report(self, artifact: Any, trace: Any, *, ran: str | None, design_model: bool) -> dict:
+        if ran is None:  # the float64 design law ran: nothing of the integer law to check
+            return {}
+        from .fixed_run import run_check
+
+        check = run_check(artifact, trace, model=self.model(artifact), ran=ran, design_model=design_model)
+        return {"fixed_point": check}
+
+    def report_lines(self, metrics: Mapping[str, Any]) -> list[str]:
+        from .fixed_run import summary_lines
+
+        return summary_lines(metrics.get("fixed_point"))
+
+    def image_stream(self, artifact: Any, *, target: str, board: str) -> Any:
+        from .fixed_pil import image_stream
+
+        return image_stream(artifact, target=target, board=board)
+
+    def pil_check(self, artifact: Any, records: np.ndarray, *, Y: np.ndarray, R: np.ndarray, S: np.ndarray,
+                  trace: Any, twin_u: np.ndarray | None, design_model: bool, check_plant: Any) -> dict:  # fmt: skip
+        from .fixed_pil import pil_check
+
+        return pil_check(artifact, records, Y=Y, R=R, design_u=twin_u, design_model=design_model,
+                         check_plant=check_plant)  # fmt: skip
+
+    def pil_lines(self, summary: Mapping[str, Any]) -> list[str]:
+        from .fixed_pil import pil_lines
+
+        return pil_lines(summary.get("fixed_point"))
+
+    def cost(self, artifact: Any, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
+        from .fixed_pil import cost
+
+        return cost(artifact, target=target, board=board, Y=Y, R=R, S=S)

@@ -4,6 +4,7 @@ behind :class:`~gainlink.laws.base.Controller`; its replay engines, one-step che
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -16,8 +17,6 @@ if TYPE_CHECKING:
     from ..proof.sampled_plant import SampledPlant
     from ..spec import PlantSpec
     from ..synthesis.pipeline import DesignResult
-
-#: The files of a Cortex-M image, by extension.
 
 #: What the one-step check of this law checks a trace against (gainlink.proof.onestep).
 AGAINST_FLOAT64 = "float64 law from its own state at each step"
@@ -44,6 +43,10 @@ class PythonLoop:
         """Back to the start state."""
         self.loop.reset()
 
+    def state(self) -> np.ndarray:
+        """``[xh, z]`` (the estimate and the integrators, in real units)."""
+        return np.concatenate([np.asarray(self.loop.xh, dtype=float), np.asarray(self.loop.z, dtype=float)])
+
 
 class NativeLqLoop:
     """The host C's ``gl_loop_t`` (:class:`~gainlink.engines.native.NativeLoop`) as a :class:`Controller`."""
@@ -64,6 +67,10 @@ class NativeLqLoop:
     def reset(self) -> None:
         """``gl_loop_reset``."""
         self.loop.reset()
+
+    def state(self) -> np.ndarray:
+        """Not read one step at a time: the C loop's estimate comes with a block run (``NativeLoop.run_raw``)."""
+        raise NotImplementedError("the host C loop's state is read with NativeLoop.run_raw")
 
 
 class LqLaw(Law):
@@ -148,6 +155,14 @@ class LqLaw(Law):
 
         return read_trace(path, artifact, numeric=self.trace_numeric(None) or "float32")
 
+    def records_trace(self, artifact: Any, records: np.ndarray) -> Any:
+        from ..proof.reference import Trace
+
+        a = artifact
+        sat = ((records["sat"][:, None] >> np.arange(a.m)) & 1).astype(bool)
+        return Trace(u=records["u"].astype(float), saturated=sat, xh=records["xh"].astype(float),
+                     z=records["z"][:, : a.q].astype(float), fault=records["status"] == -2)  # fmt: skip
+
     # -- what the design and replay commands print --------------------------------------------------------------
 
     def design_lines(self, result: DesignResult, path: Path) -> list[str]:
@@ -209,6 +224,41 @@ class LqLaw(Law):
             f"{comp.describe()}; replayed open loop, rounding grows like {comp.radius_without_integrators:.3g}^k"
             ": the one-step check is the verdict"
         )
+
+    # -- the closed loop (gainlink.laws.hooks.LoopHooks) ------------------------------------------------------
+
+    def integrators(self, artifact: Any, states: np.ndarray) -> np.ndarray | None:
+        return np.asarray(states)[:, artifact.n : artifact.n + artifact.q]
+
+    def design_model(self, artifact: Any, *, state: Mapping[str, float] | None, deviation: bool,
+                     sigma: float) -> tuple[Any, str]:  # fmt: skip
+        from .lq_run import design_model
+
+        return design_model(artifact, state=state, deviation=deviation)
+
+    def simulate(self, artifact: Any, *, steps: int, x0: Any = None, reference: Any = None, noise_std: float = 0.0,
+                 seed: int = 0, signals: Any = None) -> Any:  # fmt: skip
+        from ..errors import DataError
+        from ..proof.simulation import simulate_linear
+
+        if signals is not None and np.size(signals):
+            raise DataError(f"artifact {artifact.name} is not scheduled: it takes no external scheduling signals")
+        return simulate_linear(artifact, steps=steps, x0=x0, reference=reference, noise_std=noise_std, seed=seed)
+
+    def image_stream(self, artifact: Any, *, target: str, board: str) -> Any:
+        from .lq_run import image_stream
+
+        return image_stream(artifact, target=target, board=board)
+
+    def cost(self, artifact: Any, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
+        from .lq_run import cost
+
+        return cost(artifact, target=target, board=board, Y=Y, R=R, S=S)
+
+    def describe(self, artifact: Any) -> dict:
+        from .lq_run import describe
+
+        return describe(artifact) | super().describe(artifact)
 
 
 def _gains_lines(result: DesignResult) -> list[str]:

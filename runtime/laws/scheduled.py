@@ -5,13 +5,14 @@ host C through ctypes; its replay engines, one-step checks, trace files and C ex
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import flags
-from .base import Controller, Law, OneStepVerdict, Step
+from .base import Capabilities, Controller, Law, OneStepVerdict, Step
 from .lq import AGAINST_FLOAT64, LqLaw, sat_bits
 
 if TYPE_CHECKING:
@@ -68,6 +69,11 @@ class ScheduledPython:
         """Back to the start state."""
         self.loop.reset()
 
+    def state(self) -> np.ndarray:
+        """The law's state vector (``ScheduledState.vector``: increments, previous command, sample and error,
+        sigma, its filter, started)."""
+        return self.loop.state.vector()
+
 
 class ScheduledNative:
     """The host C's ``gl_sched_t`` (:class:`~gainlink.engines.sched_native.NativeScheduledLoop`) as a
@@ -89,6 +95,19 @@ class ScheduledNative:
         """``gl_sched_reset``."""
         self.loop.reset()
 
+    def state(self) -> np.ndarray:
+        """``gl_sched_state``: the C loop's state vector."""
+        return self.loop.state().astype(float)
+
+
+#: What the scheduled law cannot do yet, and why (each one generated line: ``Law.refuse``). Its host executable
+#: (``firmware run``), design-time float32 fidelity (:mod:`.scheduled_fidelity`) and one-step float32 bound
+#: (:mod:`.scheduled_onestep`) have landed; the fuzz harnesses have not.
+CANNOT = {
+    "fuzz": "the fuzz harnesses are built on the float32 lq law's gain set (firmware/fuzz/fuzz_gains_stage.c stages "
+    "a gl_gains_t, and the seeds are its field table): gainlink.firmware.fuzz refuses a scheduled artifact",
+}
+
 
 class ScheduledLaw(Law):
     """The velocity-form law scheduled on sigma, interpolating the per-point coefficients."""
@@ -99,6 +118,10 @@ class ScheduledLaw(Law):
     @property
     def label(self) -> str:
         return "scheduled-float32"
+
+    @property
+    def capabilities(self) -> Capabilities:
+        return Capabilities(cannot=CANNOT)
 
     def reference(self, artifact: Any) -> Controller:
         from ..proof.scheduled_reference import ScheduledLoop
@@ -202,6 +225,11 @@ class ScheduledLaw(Law):
 
         return read_trace(path, artifact)
 
+    def records_trace(self, artifact: Any, records: np.ndarray) -> Any:
+        from ..engines.sched_native import raw_of_records, scheduled_trace_from_raw
+
+        return scheduled_trace_from_raw(raw_of_records(records), a=artifact)
+
     # -- what the design and replay commands print --------------------------------------------------------------
 
     def design_lines(self, result: DesignResult, path: Path) -> list[str]:
@@ -245,3 +273,67 @@ class ScheduledLaw(Law):
     def open_loop_note(self, artifact: Any) -> str:
         """Where each point's compensator stability is recorded."""
         return "the scheduled law's compensator at each point is in checks.schedule.points"
+
+    # -- the closed loop (gainlink.laws.hooks.LoopHooks) ------------------------------------------------------
+
+    def sigma_of(self, artifact: Any, y: np.ndarray, s: np.ndarray) -> float:
+        sch = artifact.schedule
+        raw = y[sch.index] if sch.source == "output" else (s[sch.index] if len(s) else sch.points[0])
+        return sch.clip(float(raw))
+
+    def design_model(self, artifact: Any, *, state: Mapping[str, float] | None, deviation: bool,
+                     sigma: float) -> tuple[Any, str]:  # fmt: skip
+        from .scheduled_run import design_model
+
+        return design_model(artifact, state=state, sigma=sigma)
+
+    def simulate(self, artifact: Any, *, steps: int, x0: Any = None, reference: Any = None, noise_std: float = 0.0,
+                 seed: int = 0, signals: Any = None) -> Any:  # fmt: skip
+        from .scheduled_run import simulate
+
+        return simulate(self, artifact, steps=steps, x0=x0, reference=reference, noise_std=noise_std, seed=seed,
+                        signals=signals)  # fmt: skip
+
+    def shadow(self, artifact: Any, *, like: str) -> Controller | None:
+        return self.reference(artifact) if like == "reference" else self.model(artifact)
+
+    def describe(self, artifact: Any) -> dict:
+        from .scheduled_run import describe
+
+        return describe(artifact) | super().describe(artifact)
+
+    def without_rate_limit(self, artifact: Any) -> Any:
+        from .scheduled_run import without_rate_limit
+
+        return without_rate_limit(artifact)
+
+    def run_report(self, artifact: Any, trace: Any, *, ran: str | None, design_model: bool) -> dict:
+        from .scheduled_run import schedule_metrics
+
+        return {"schedule": schedule_metrics(artifact, trace)}
+
+    def report_lines(self, metrics: Mapping[str, Any]) -> list[str]:
+        from .scheduled_run import schedule_lines
+
+        return schedule_lines(metrics.get("schedule"))
+
+    def image_stream(self, artifact: Any, *, target: str, board: str) -> Any:
+        from .scheduled_pil import image_stream
+
+        return image_stream(artifact, target=target, board=board)
+
+    def pil_check(self, artifact: Any, records: np.ndarray, *, Y: np.ndarray, R: np.ndarray, S: np.ndarray,
+                  trace: Any, twin_u: np.ndarray | None, design_model: bool, check_plant: Any) -> dict:  # fmt: skip
+        from .scheduled_pil import pil_check
+
+        return pil_check(artifact, records, Y=Y, R=R, S=S, trace=trace, status_flags=status_flags)
+
+    def pil_lines(self, summary: Mapping[str, Any]) -> list[str]:
+        from .scheduled_pil import pil_lines
+
+        return pil_lines(summary.get("scheduled"))
+
+    def cost(self, artifact: Any, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
+        from .scheduled_pil import cost
+
+        return cost(artifact, target=target, board=board, Y=Y, R=R, S=S)

@@ -39,11 +39,6 @@ SIGNATURE_ID = law_params.SIGNATURE_ID
 STRUCTURE_ID = law_params.STRUCTURE_ID
 
 
-def law_of(artifact: Artifact) -> str:
-    """``"q31"``, ``"q15"`` or ``"float32"``: the law the MAVLink app built from ``artifact`` runs."""
-    return artifact.checks["fixed_point"]["numeric"] if is_fixed(artifact) else "float32"
-
-
 def law_name(custom_mode: int) -> str:
     """The law a HEARTBEAT's custom_mode names (``"law 7"`` when it is none of :data:`LAW_IDS`)."""
     return next((k for k, v in LAW_IDS.items() if v == custom_mode), f"law {custom_mode}")

@@ -34,8 +34,8 @@ import numpy as np
 from ..errors import ParameterError
 from ..fileio import read_user_file
 from ..shipping.artifact import Artifact
-from ..shipping.codegen_fixed import is_fixed
-from .fixed_params import LAW_IDS, fixed_firmware_params, law_of
+from ..shipping.law_c import law_label
+from .fixed_params import LAW_IDS
 from .params import (
     PARAM_ID_LEN,
     PARAM_TYPES,
@@ -46,7 +46,6 @@ from .params import (
     firmware_params,
     mapped_params,
 )
-from .sched_params import LAW as SCHED_LAW
 from .sched_params import scheduled_firmware_params
 from .session import ParamValue
 
@@ -171,12 +170,12 @@ def artifact_parameters(artifact: Artifact, mapping: Mapping | None = None) -> t
         return mapped_params(artifact, mapping)
     if artifact.schedule is not None:
         return scheduled_firmware_params(artifact)
-    return fixed_firmware_params(artifact) if is_fixed(artifact) else firmware_params(artifact)
+    return firmware_params(artifact)  # the table of the law it runs (a fixed-point law's too)
 
 
 def artifact_law(artifact: Artifact) -> str:
     """The law the gainlink firmware built from ``artifact`` runs (its HEARTBEAT's custom_mode names it)."""
-    return SCHED_LAW if artifact.schedule is not None else law_of(artifact)
+    return law_label(artifact)
 
 
 class ValuesSession:

@@ -41,7 +41,9 @@ from pymavlink.dialects.v20 import common as mavlink2
 from ..errors import ParameterError, PeerTimeoutError
 from ..shipping.artifact import Artifact
 from ..shipping.codegen_fixed import is_fixed
-from .fixed_params import SIGNATURE_ID, STRUCTURE_ID, fixed_firmware_params, law_name, law_of
+from ..shipping.law_c import law_label
+from ..shipping.params import MPC_DIMENSION_IDS
+from .fixed_params import SIGNATURE_ID, STRUCTURE_ID, fixed_firmware_params, law_name
 from .link import MavLink, carries_signature
 from .params import (
     DIMENSION_IDS,
@@ -194,11 +196,11 @@ def _plan(artifact: Artifact, mapping: Mapping | None) -> _Plan:
     if mapping is None:
         every = fixed_firmware_params(artifact) if is_fixed(artifact) else firmware_params(artifact)
         formats = tuple(s for s in every if s.name in (SIGNATURE_ID, STRUCTURE_ID))
-        dims = tuple(s for s in every if s.name in DIMENSION_IDS)
+        dims = tuple(s for s in every if s.name in DIMENSION_IDS + MPC_DIMENSION_IDS)  # the MPC's: its horizon too
         header = {s.name for s in dims + formats} | {HASH_ID}
         gains = tuple(s for s in every if s.name not in header)  # REAL32 (float32) or INT32 (fixed point)
         (h,) = (int(s.value) for s in every if s.name == HASH_ID)
-        return _Plan(specs=gains, commit=True, checks=dims, new_hash=h, law=law_of(artifact), formats=formats)
+        return _Plan(specs=gains, commit=True, checks=dims, new_hash=h, law=law_label(artifact), formats=formats)
     return _Plan(specs=mapped_params(artifact, mapping), commit=False, checks=(), new_hash=None)
 
 

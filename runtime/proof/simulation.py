@@ -1,12 +1,17 @@
-"""Closed-loop simulation of the artifact's own discrete plant, to produce measurement records.
+"""Closed-loop simulation of a law against the artifact's own discrete plant, to produce measurement records.
 
-The recorded ``y`` and ``r`` are exactly what the loop saw, so replaying them through any engine
-must reproduce the recorded commands: a quick end-to-end check and the demo's input data.
+The recorded ``y``, ``r`` (and a scheduled law's external signals ``s``) are exactly what the loop saw, so
+replaying them through any engine must reproduce the recorded commands: a quick end-to-end check and the demo's
+input data. :func:`closed_loop` is the loop, written once against a law's step (``step(y, r, s)``: any law's
+float64 reference, :mod:`gainlink.laws`); :func:`simulate_linear` is the positional law around its one sampled
+plant (``gainlink.laws``' ``simulate`` for the scheduled law closes the same loop around its points' model).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -18,13 +23,59 @@ from .sampled_plant import SampledPlant
 
 @dataclass(frozen=True)
 class Simulation:
-    """Time, plant state, measurements, references and commands of a closed-loop run."""
+    """Time, plant state, measurements, references, external scheduling signals and commands of a closed-loop
+    run."""
 
     t: np.ndarray  # (N,)
-    x: np.ndarray  # (N, n) plant state at each sample (deviation from the operating point)
+    x: np.ndarray  # (N, n) plant state at each sample (the model's: a deviation from the operating point, or a
+    # scheduled law's points' model in absolute coordinates)
     y: np.ndarray  # (N, p)
     r: np.ndarray  # (N, q)
     u: np.ndarray  # (N, m)
+    s: np.ndarray | None = None  # (N, e) a scheduled law's external signals (None: the law has none)
+
+
+class _Positional:
+    """The positional law's ``step(y, r)`` as a law's ``step(y, r, s)`` (``s`` unused)."""
+
+    def __init__(self, loop: Any) -> None:
+        self.loop = loop
+
+    def step(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> Any:
+        return self.loop.step(y, r)
+
+
+def closed_loop(
+    controller: Any,
+    model: Any,
+    *,
+    Ts: float,
+    m: int,
+    R: np.ndarray,
+    noise: np.ndarray,
+    S: np.ndarray,
+    before: Callable[[np.ndarray], None] | None = None,
+    after: Callable[[], None] | None = None,
+) -> Simulation:
+    """Close ``controller`` (``step(y, r, s)`` with ``.u``, ``m`` commands) around ``model`` (``outputs()``,
+    ``advance(u)``, its state ``x``) for one sample per row of ``R`` (references), ``noise`` (added to the outputs)
+    and ``S`` (external scheduling signals); ``before(s)`` hears each sample's signals before the model is sampled,
+    ``after()`` runs after each advance (a model that follows its own scheduled output)."""
+    steps = R.shape[0]
+    T, Y, U = np.arange(steps) * Ts, np.empty((steps, noise.shape[1])), np.empty((steps, m))
+    X: list[np.ndarray] = []
+    for k in range(steps):
+        if before is not None:
+            before(S[k])
+        y = model.outputs() + noise[k]
+        u = np.asarray(controller.step(y, R[k], S[k]).u, dtype=float)
+        X.append(np.array(model.x, dtype=float))
+        Y[k], U[k] = y, u
+        model.advance(u)
+        if after is not None:
+            after()
+    return Simulation(t=T, x=np.array(X).reshape(steps, -1), y=Y, r=np.array(R, dtype=float), u=U,
+                      s=np.array(S, dtype=float) if S.shape[1] else None)  # fmt: skip
 
 
 def simulate_linear(
@@ -59,32 +110,21 @@ def simulate_linear(
         Seed of the noise generator.
     """
     a = artifact
-    a.require_unscheduled("the closed-loop simulation")
     if steps < 1:
         raise DataError("steps must be at least 1")
     r = a.r_op if reference is None else np.asarray(reference, float).reshape(a.q)
-    rng = np.random.default_rng(seed)
     plant = SampledPlant.from_artifact(a, x0=x0)  # x0 is a plant state in the design's coordinates
-    loop = ReferenceLoop(a)
-    T, X, Y, R, U = (
-        np.empty(steps),
-        np.empty((steps, a.n)),
-        np.empty((steps, a.p)),
-        np.empty((steps, a.q)),
-        np.empty((steps, a.m)),
-    )
-    for k in range(steps):
-        y = plant.outputs() + noise_std * rng.standard_normal(a.p)
-        u = loop.step(y, r).u
-        T[k], X[k], Y[k], R[k], U[k] = k * a.Ts, plant.x, y, r, u
-        plant.advance(u)
-    return Simulation(t=T, x=X, y=Y, r=R, u=U)
+    noise = noise_std * np.random.default_rng(seed).standard_normal((steps, a.p))
+    return closed_loop(_Positional(ReferenceLoop(a)), plant, Ts=a.Ts, m=a.m, R=np.tile(r, (steps, 1)), noise=noise,
+                       S=np.zeros((steps, 0)))  # fmt: skip
 
 
 def samples_csv(sim: Simulation) -> str:
-    """The measurements of a simulation as a replay input CSV (t, y0.., r0..)."""
+    """The measurements of a simulation as a replay input CSV (t, y0.., r0.., and a scheduled law's s0..)."""
     p, q = sim.y.shape[1], sim.r.shape[1]
-    lines = [",".join(["t"] + [f"y{i}" for i in range(p)] + [f"r{i}" for i in range(q)])]
+    S = np.zeros((sim.t.size, 0)) if sim.s is None else sim.s
+    head = ["t"] + [f"y{i}" for i in range(p)] + [f"r{i}" for i in range(q)] + [f"s{i}" for i in range(S.shape[1])]
+    lines = [",".join(head)]
     for k in range(sim.t.size):
-        lines.append(",".join(repr(float(v)) for v in [sim.t[k], *sim.y[k], *sim.r[k]]))
+        lines.append(",".join(repr(float(v)) for v in [sim.t[k], *sim.y[k], *sim.r[k], *S[k]]))
     return "\n".join(lines) + "\n"

@@ -1,11 +1,11 @@
 """The closed-loop twin: what the implementation costs against the ideal design.
 
-Beside a SIL, HIL or PIL run, a float64 twin of the whole loop runs in step: the reference law
-(:class:`~gainlink.proof.reference.ReferenceLoop`) closing the loop around a second instance of the same
-plant, fed the same measurement noise, references and input disturbances from the same initial
-state, with every sample arriving at once and no faults. Whatever separates the real run from the
-twin is what the implementation costs the closed loop: float32 arithmetic, the link's encoding
-(int16 quantisation), transport and timing (late or lost samples, a held command) and injected
+For a SIL, HIL or PIL run, a float64 twin of the whole loop (:func:`run_twin`): the law's float64 reference
+closing the loop around a second instance of the same plant, fed the same measurement noise, references, input
+disturbances and external scheduling signals from the same initial state, with every sample arriving at once and
+no faults. It does not depend on the run, so it is computed from the run's plan after the run. Whatever
+separates the real run from the twin is what the implementation costs the closed loop: float32 arithmetic, the
+link's encoding (int16 quantisation), transport and timing (late or lost samples, a held command) and injected
 faults. For a stable closed loop the difference stays bounded (unlike an open-loop replay through an
 unstable compensator).
 
@@ -16,60 +16,74 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
 from ..shipping.artifact import Artifact
-from .reference import ReferenceLoop
 
 
 @dataclass(frozen=True)
 class TwinTrace:
-    """The twin's run: sampled outputs (with the same noise), commands, integrator; row k = sample k."""
+    """A twin's run, row k = sample k: sampled outputs (with the run's noise), commands, the law's state after each
+    step (rows of the controller's ``state()``) and the sigma each step used (NaN for a law without one)."""
 
     y: np.ndarray  # (N, p)
     u: np.ndarray  # (N, m)
-    z: np.ndarray  # (N, q)
+    state: np.ndarray  # (N, state size)
+    sigma: np.ndarray  # (N,)
 
 
-class TwinLoop:
-    """The float64 twin of a loop, advanced one sample at a time beside the real run.
+def run_twin(
+    controller: Any,
+    *,
+    outputs: Callable[[], np.ndarray],
+    advance: Callable[[np.ndarray], None],
+    noise: np.ndarray,
+    R: np.ndarray,
+    D: np.ndarray,
+    S: np.ndarray,
+    steps: int,
+    on_signals: Callable[[np.ndarray], None] | None = None,
+    on_sigma: Callable[[float], None] | None = None,
+) -> TwinTrace:
+    """Close ``controller`` (a law's ``step(y, r, s)``, e.g. its float64 reference) around a plant for ``steps``
+    samples, with a run's measurement noise, references, input disturbances and external scheduling signals.
+
+    The twin of a run does not depend on the run (every sample arrives, no faults), so it is computed from the
+    run's plan after the run (or beside it), never on the run's per-sample path.
 
     Parameters
     ----------
-    artifact : Artifact
-        The design the real controller runs.
-    outputs : callable
-        ``outputs() -> y``: the twin plant's current outputs (absolute, noise-free).
-    advance : callable
-        ``advance(u)``: apply ``u`` (absolute, disturbance included) to the twin plant for one sample.
+    controller : Controller
+        ``step(y, r, s) -> Step`` (``u``, ``sigma``) and ``state()``, at its start state.
+    outputs, advance : callable
+        The twin plant: ``outputs() -> y`` (absolute, noise-free) and ``advance(u)`` for one sample (absolute,
+        disturbance included).
+    noise, R, D, S : ndarray
+        Per sample (rows): the noise added to the outputs, the references, the input disturbances and the external
+        scheduling signals.
     steps : int
-        Samples planned (the trace is cut to those taken).
+        Samples to run (the rows used).
+    on_signals : callable, optional
+        Hears each sample's external scheduling signals before the plant is sampled (a plant that follows them).
+    on_sigma : callable, optional
+        Hears the sigma of each step before the plant advances (a model that follows its law's sigma).
     """
-
-    def __init__(
-        self,
-        artifact: Artifact,
-        *,
-        outputs: Callable[[], np.ndarray],
-        advance: Callable[[np.ndarray], None],
-        steps: int,
-    ) -> None:
-        self.law = ReferenceLoop(artifact)
-        self._outputs, self._advance = outputs, advance
-        a = artifact
-        self.Y, self.U, self.Z = np.zeros((steps, a.p)), np.zeros((steps, a.m)), np.zeros((steps, a.q))
-
-    def step(self, k: int, *, noise: np.ndarray, r: np.ndarray, d: np.ndarray) -> None:
-        """Sample ``k``: sample the twin plant (plus ``noise``), run the law on it, apply ``u + d``."""
-        y = np.asarray(self._outputs(), dtype=float) + noise
-        u = self.law.step(y, r).u
-        self.Y[k], self.U[k], self.Z[k] = y, u, self.law.z
-        self._advance(u + d)
-
-    def trace(self, steps: int) -> TwinTrace:
-        """The twin's first ``steps`` samples."""
-        return TwinTrace(y=self.Y[:steps].copy(), u=self.U[:steps].copy(), z=self.Z[:steps].copy())
+    Y, U, SIG = np.zeros((steps, noise.shape[1])), np.zeros((steps, D.shape[1])), np.full(steps, np.nan)
+    states = []
+    for k in range(steps):
+        if on_signals is not None:
+            on_signals(S[k])
+        y = np.asarray(outputs(), dtype=float) + noise[k]
+        step = controller.step(y, R[k], S[k])
+        Y[k], U[k], SIG[k] = y, step.u, step.sigma
+        states.append(controller.state())
+        if on_sigma is not None:
+            on_sigma(step.sigma)
+        advance(step.u + D[k])
+    state = np.array(states) if states else np.zeros((0, 0))
+    return TwinTrace(y=Y, u=U, state=state, sigma=SIG)
 
 
 @dataclass(frozen=True)

@@ -52,6 +52,9 @@ CAPPED = BITS["CAPPED"]
 #: frames' status byte carries the table's bits 0-7 only: an MPC node's CAPPED is not on CAN.
 MAVLINK_FLAGS_SHIFT = 16
 MAVLINK_SAT_SHIFT = 32
+#: The table's bits a CAN command frame's status byte carries (the run's report counts an MPC's capped steps from
+#: its model on the samples the node received).
+CAN_STATUS_MASK = 0xFF
 
 #: The version of the sample/command wire format (ready lines say ``wire=N``; a peer of another version is refused).
 WIRE_VERSION = 2

@@ -30,9 +30,19 @@ from .hil import udp_transport
 FAULT, WATCHDOG, CLIPPED, OVERFLOW, RESET = 0x01, 0x02, 0x04, 0x08, 0x80
 SIGMA_BITS = {SIGMA_HELD: 0x10, SIGMA_CLIPPED: 0x20, SIGMA_RATE: 0x40}  # the scheduled model's flag -> the link's bit
 #: Where MAVLink carries them (docs/design.md, "Links"; wire format 2): HIL_ACTUATOR_CONTROLS.flags bits 0-15 are
-#: MAVLink's own (bit 0 its LOCKSTEP flag) and stay clear, the status byte sits at bits 16-23, the saturation mask
+#: MAVLink's own (bit 0 its LOCKSTEP flag) and stay clear, the status byte sits at bits 16-31, the saturation mask
 #: (bit k: input k) at bits 32-47.
 MAVLINK_STATUS_AT, MAVLINK_SAT_AT, MAVLINK_OWN = 16, 32, 0xFFFF
+
+
+def scheduled_status(sigma_flags: np.ndarray, fault: np.ndarray) -> np.ndarray:
+    """The status bits of a scheduled model's steps (its sigma flags and refusals), as docs/design.md numbers them:
+    what a run's trace records per step (``RunTrace.flags``)."""
+    bits = np.where(np.asarray(fault, dtype=bool), FAULT, 0).astype(np.int64)
+    for flag, bit in SIGMA_BITS.items():
+        bits |= np.where(np.asarray(sigma_flags, dtype=np.int64) & flag, bit, 0)
+    return bits
+
 
 #: The hang guard of one answer: a node answers in milliseconds; past this it hung or the link lost the frames.
 ANSWER_GUARD_S = 10.0

@@ -61,6 +61,11 @@ class MpcTrace:
     state: np.ndarray
 
     @property
+    def saturated(self) -> np.ndarray:
+        """(N, m): input j clamped at step k (from :attr:`sat`)."""
+        return ((self.sat[:, None] >> np.arange(self.u.shape[1])) & 1).astype(bool)
+
+    @property
     def fault(self) -> np.ndarray:
         """Refused steps."""
         return (self.flags & flags.FAULT) != 0

@@ -1,15 +1,17 @@
-"""HIL over CAN of a fixed-point artifact: which law the node ran, and that law checked against its oracles.
+"""A closed-loop run of a fixed-point law, checked against its oracles: the ``fixed_point`` block of the run's report
+(SIL with the host C, HIL over CAN or MAVLink, the image in QEMU).
 
-The host CAN node of a fixed-point export runs the integer law (``gl_law.h``, chosen at compile time) and names it in
-its ready line (``law=q31`` or ``law=q15``; a float node names none). After the run, with every sample answered:
+The controller names the law it ran (``ran``: a node's ready line says ``law=q31`` or ``law=q15``; a float node
+names none). After the run, with every sample answered:
 
-- **bit for bit**: the bit-exact model (:class:`~gainlink.proof.fixed_law.FixedPointLoop`) fed the float32 samples
-  and references the run recorded, from the initial state, must give the float32 command, the saturation bits and
-  the status bits (fault, clipped, overflow) the node sent, step for step;
+- **bit for bit**: the bit-exact model (:class:`~gainlink.proof.fixed_law.FixedPointLoop`, as the law's ``model``)
+  fed the float32 samples and references the controller received (NaN where a ``nan`` fault replaced the sample),
+  from the initial state, must give the float32 command, the saturation bits and the status flags (fault, clipped,
+  overflow) the controller returned, step for step;
 - **per step, resynchronised**: before each step the float64 law with the artifact's quantised coefficients
   (:class:`~gainlink.proof.derived_law.DerivedLoop` on ``FixedGains.ideal``) is put into the integer law's state
-  (the model's, which is the node's when the first check holds) and steps the same sample; ``|U 2^-f_u - u|`` is
-  what ``checks.fixed_point.error.per_step_rounding`` bounds for every compensator (``per_step`` in an artifact
+  (the model's, which is the controller's when the first check holds) and steps the same sample; ``|U 2^-f_u - u|``
+  is what ``checks.fixed_point.error.per_step_rounding`` bounds for every compensator (``per_step`` in an artifact
   from before that figure, the same one), on unsaturated, unclipped steps;
 - **in closed loop**: ``|u - u_twin|`` against the run's float64 twin of the design law (the report's ``twin``)
   while nothing saturates or clips, beside ``error.certified`` (the headline: any history in the declared ranges,
@@ -19,41 +21,33 @@ its ready line (``law=q31`` or ``law=q15``; a float node names none). After the 
 
 from __future__ import annotations
 
-import re
 from typing import Any
 
 import numpy as np
-from gainlink.firmware import fixed as fwfixed
-from gainlink.proof.derived_law import DerivedLoop
-from gainlink.proof.fixed_format import real
-from gainlink.proof.fixed_law import FixedPointLoop
-from gainlink.shipping.artifact import Artifact
 
-from ..links.base import STATUS_CLIPPED, STATUS_FAULT, STATUS_OVERFLOW
-from .pil_fixed import model_records
+from ..proof.derived_law import DerivedLoop
+from ..proof.fixed_format import real
+from ..proof.fixed_law import FixedPointLoop
+from . import flags
 
 
-def law_of(ready_line: str) -> str:
-    """The law a CAN node's ready line names (``law=``), ``float32`` when it names none."""
-    m = re.search(r"\blaw=(\w+)", ready_line)
-    return m.group(1) if m else "float32"
+def _model_steps(a: Any, model: Any, Y: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The integer ``model``'s float32 commands, saturation masks and status flags on these float32 samples, from
+    its initial state."""
+    e = np.zeros(0)
+    steps = [model.step(Y[k].astype(np.float64), R[k].astype(np.float64), e) for k in range(Y.shape[0])]
+    U = np.array([s.u for s in steps], dtype=np.float32).reshape(len(steps), a.m)
+    return U, np.array([s.sat for s in steps], dtype=np.int64), np.array([s.flags for s in steps], dtype=np.int64)
 
 
-def expected_status(records: np.ndarray) -> np.ndarray:
-    """The status byte the node sends for each of the model's records."""
-    flags = records["flags"].astype(np.int64)
-    status = np.where(flags & fwfixed.FAULT, STATUS_FAULT, 0)
-    status |= np.where(flags & fwfixed.CLIPPED, STATUS_CLIPPED, 0)
-    return status | np.where(flags & fwfixed.OVERFLOW, STATUS_OVERFLOW, 0)
-
-
-def _first_difference(trace: Any, records: np.ndarray, a: Artifact) -> dict | None:
-    """The first step whose command bits, saturation bits or status differ from the model's (None: none)."""
-    sat = np.sum(trace.sat.astype(np.int64) << np.arange(a.m), axis=1)
+def _first_difference(trace: Any, model: tuple[np.ndarray, np.ndarray, np.ndarray], a: Any) -> dict | None:
+    """The first step whose command bits, saturation bits or status flags differ from the model's (None: none)."""
+    U, sat, bits = model
+    trace_sat = np.sum(trace.sat.astype(np.int64) << np.arange(a.m), axis=1)
     checks = {
-        "u": np.any(trace.u.astype(np.float32).view(np.uint32) != records["u"].view(np.uint32), axis=1),
-        "sat": sat != records["sat"],
-        "status": trace.status.astype(np.int64) != expected_status(records),
+        "u": np.any(trace.u.astype(np.float32).view(np.uint32) != U.view(np.uint32), axis=1),
+        "sat": trace_sat != sat,
+        "status": np.asarray(trace.flags, dtype=np.int64) != bits,
     }
     first = None
     for field, bad in checks.items():
@@ -63,7 +57,7 @@ def _first_difference(trace: Any, records: np.ndarray, a: Artifact) -> dict | No
     return first
 
 
-def per_step_deviation(a: Artifact, Y: np.ndarray, R: np.ndarray, window: int) -> np.ndarray:
+def per_step_deviation(a: Any, Y: np.ndarray, R: np.ndarray, window: int) -> np.ndarray:
     """Max over the first ``window`` steps of ``|U 2^-f_u - u64|``: the float64 law with the quantised coefficients,
     put into the integer law's state before each step, on the same float32 samples."""
     integer = FixedPointLoop(a)
@@ -78,20 +72,21 @@ def per_step_deviation(a: Artifact, Y: np.ndarray, R: np.ndarray, window: int) -
     return worst
 
 
-def fixed_can_check(a: Artifact, trace: Any, *, ready_line: str, model_plant: bool) -> dict:
-    """The ``fixed_point`` block of a HIL report over CAN (module docstring)."""
+def run_check(a: Any, trace: Any, *, model: Any, ran: str, design_model: bool) -> dict:
+    """The ``fixed_point`` block of a run's report (module docstring); ``model`` is the law's bit-exact model."""
     fp = a.checks["fixed_point"]
     err = fp["error"]
-    out: dict[str, Any] = {"law": law_of(ready_line), "numeric": fp["numeric"], "steps": int(trace.t.size)}
-    Y, R = trace.y.astype(np.float32), trace.r.astype(np.float32)
-    records = model_records(a, Y, R)
-    events = (records["sat"] != 0) | (records["flags"] != 0)
-    window = int(np.argmax(events)) if events.any() else len(records)
+    out: dict[str, Any] = {"law": ran, "numeric": fp["numeric"], "steps": int(trace.t.size)}
+    Y = np.where(np.asarray(trace.nan_sent)[:, None], np.nan, trace.y).astype(np.float32)
+    R = trace.r.astype(np.float32)
+    model = _model_steps(a, model, Y, R)
+    events = (model[1] != 0) | (model[2] != 0)
+    window = int(np.argmax(events)) if events.any() else len(events)
     if not np.all(trace.got):
         out["bit_exact"] = None
-        out["note"] = "a sample went unanswered: the node's steps are not the recorded samples one for one"
+        out["note"] = "a sample went unanswered: the controller's steps are not the recorded samples one for one"
     else:
-        diff = _first_difference(trace, records, a)
+        diff = _first_difference(trace, model, a)
         out["bit_exact"], out["first_difference"] = diff is None, diff
     span = a.u_max - a.u_min
     out["unsaturated_steps"] = window
@@ -105,16 +100,16 @@ def fixed_can_check(a: Artifact, trace: Any, *, ready_line: str, model_plant: bo
     out["measured_du_design_fraction_of_span"] = None if design is None else _floats(design / span)
     out["certified_du_design_fraction_of_span"] = _floats(err["fraction_of_span"])
     out["certificate_case"] = fp.get("case")
-    out["certificate_applies"] = model_plant
-    out["clipped_steps"] = int(np.count_nonzero(records["flags"] & fwfixed.CLIPPED))
-    out["overflow_steps"] = int(np.count_nonzero(records["overflow"]))
+    out["certificate_applies"] = design_model
+    out["clipped_steps"] = int(np.count_nonzero(model[2] & flags.CLIPPED))
+    out["overflow_steps"] = int(np.count_nonzero(model[2] & flags.OVERFLOW))
     within = np.array(out["measured_du_per_step"]) <= np.array(out["certified_du_per_step"])
     out["within_per_step"] = bool(np.all(within))
     return out
 
 
 def summary_lines(fx: dict | None) -> list[str]:
-    """The summary's lines on the fixed-point law (nothing for a float32 artifact)."""
+    """The summary's lines on the fixed-point law (nothing without a ``fixed_point`` block)."""
     if not fx:
         return []
     exact = {

@@ -1,4 +1,5 @@
-"""PIL of a fixed-point artifact: the integer image's oracle (docs/design.md, fixed point: PIL).
+"""PIL of a fixed-point law: its integer image's oracle (docs/design.md, fixed point: PIL), the law's block of a PIL
+run (:meth:`gainlink.laws.fixed.FixedLaw.pil_check`).
 
 Two checks of the run the image (``firmware/ports/cortex-m/main.c`` on the integer law) made in closed loop:
 
@@ -8,23 +9,26 @@ Two checks of the run the image (``firmware/ports/cortex-m/main.c`` on the integ
   flag and the float command;
 - **within the certified bound**: beside the run, the float64 law with the artifact's quantised coefficients
   (:class:`~gainlink.proof.derived_law.DerivedLoop` on ``FixedGains.ideal``, the law the certificate's rounding
-  bound compares with) closes the loop on a twin plant. While no input saturates (in either loop) and no sample
-  is clipped, ``|u - u_q|`` is what ``checks.fixed_point.error.closed_loop`` bounds, around the design model. PIL
-  carries samples and commands as float32, roundings the certificate's budget does not hold (it is about the law
-  between the floats the C receives and returns), so the oracle is the same bound with them added
+  bound compares with) closes the loop on a further instance of the plant. While no input saturates (in either
+  loop) and no sample is clipped, ``|u - u_q|`` is what ``checks.fixed_point.error.closed_loop`` bounds, around the
+  design model. PIL carries samples and commands as float32, roundings the certificate's budget does not hold (it is
+  about the law between the floats the C receives and returns), so the oracle is the same bound with them added
   (:func:`gainlink.synthesis.fixed_link.bound_float32_link`); both are reported.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
-from gainlink.firmware import fixed as fwfixed
-from gainlink.proof.derived_law import DerivedLoop
-from gainlink.proof.fixed_format import real
-from gainlink.proof.fixed_law import FixedPointLoop
-from gainlink.shipping.artifact import Artifact
+
+from ..firmware import fixed as fwfixed
+from ..proof.derived_law import DerivedLoop
+from ..proof.fixed_format import real
+from ..proof.fixed_law import FixedPointLoop
+from ..shipping.artifact import Artifact
+from .image import first_difference
 
 
 class QuantisedTwin:
@@ -129,18 +133,6 @@ def model_records(a: Artifact, Y: np.ndarray, R: np.ndarray) -> np.ndarray:
     return out
 
 
-def first_difference(image: np.ndarray, model: np.ndarray) -> dict | None:
-    """The first step whose record differs in its bits, and the first field that does there (None: all equal)."""
-    first = None
-    for field in image.dtype.names:
-        got = image[field].reshape(len(image), -1).view(np.uint32)
-        want = model[field].reshape(len(model), -1).view(np.uint32)
-        bad = np.flatnonzero(np.any(got != want, axis=1))
-        if bad.size and (first is None or bad[0] < first["step"]):
-            first = {"step": int(bad[0]), "field": field}
-    return first
-
-
 def fixed_pil_check(
     a: Artifact,
     records: np.ndarray,
@@ -210,3 +202,65 @@ def _unsaturated_steps(records: np.ndarray, quantised: QuantisedTwin | None) -> 
 
 def _floats(x) -> list[float] | None:
     return None if x is None else [float(v) for v in np.asarray(x, dtype=float).ravel()]
+
+
+def image_stream(artifact: Artifact, *, target: str, board: str) -> Any:
+    """The integer law's replay-only image (``main.c`` on the integer law) and its stream
+    (:func:`.image.law_image_stream`): the integer law's records (:func:`gainlink.firmware.fixed.record_dtype`),
+    their flags the status flags (the one table), their words ``U`` the step's."""
+    from .base import Step
+    from .image import law_image_stream
+
+    def decode(rec: Any) -> Step:
+        return Step(u=rec["u"].astype(float), flags=int(rec["flags"]), sat=int(rec["sat"]),
+                    word=np.array(rec["U"], dtype=np.int64))  # fmt: skip
+
+    return law_image_stream(artifact, target=target, board=board, decode=decode)
+
+
+def pil_check(a: Artifact, records: np.ndarray, *, Y: np.ndarray, R: np.ndarray, design_u: np.ndarray | None,
+              design_model: bool, check_plant: Any) -> dict:  # fmt: skip
+    """The ``fixed_point`` block of a PIL run: the quantised twin closes its loop on ``check_plant`` (an instance of
+    the plant in the run's initial state; None: no quantised twin) over the run's references, then
+    :func:`fixed_pil_check`."""
+    quantised = None
+    if check_plant is not None:
+        steps = len(records)
+        quantised = QuantisedTwin(a, plant=check_plant, steps=steps)
+        for k in range(steps):
+            quantised.step(k, noise=np.zeros(a.p), r=R[k], d=np.zeros(a.m))
+    return {"fixed_point": fixed_pil_check(a, records, Y=Y, R=R, quantised=quantised, design_u=design_u,
+                                           model_plant=design_model)}  # fmt: skip
+
+
+def pil_lines(block: dict | None) -> list[str]:
+    """The PIL summary's lines on the integer image (its model, its certified bounds)."""
+    if not block:
+        return []
+    fx = block.to_dict() if hasattr(block, "to_dict") else block
+    first = fx["first_difference"]
+    exact = "bit for bit the integer model" if fx["bit_exact"] else f"DIFFERS from the integer model at {first}"
+    lines = [f"  integer law {fx['numeric']}: {exact} on the samples it received"]
+    if fx["measured_du_rounding"] is not None:
+        verdict = {True: "within", False: "OUTSIDE"}.get(fx["within_certified"], "not judged against")
+        applies = "" if fx["certificate_applies"] else " (about the design model; the plant is not it)"
+        lines.append(
+            f"    vs the quantised float64 twin over {fx['unsaturated_steps']} unsaturated steps: max |du| "
+            + ", ".join(_g(v) for v in fx["measured_du_rounding"])
+            + f", {verdict} the certified "
+            + ", ".join(_g(v) for v in fx["certified_du_rounding"])
+            + applies
+        )
+    if fx["clipped_steps"] or fx["overflow_steps"]:
+        lines.append(f"    clipped steps {fx['clipped_steps']}, second-line saturation steps {fx['overflow_steps']}")
+    return lines
+
+
+def cost(artifact: Artifact, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
+    """Instructions per call of ``gl_fixed_step`` (callees included) replaying the samples on the integer image."""
+    elf, board_name = fwfixed.image(artifact, target=target, board=board, options=fwfixed.REPLAY_OPTIONS)
+    return fwfixed.count_fixed_step_instructions(elf, artifact, Y, R, board=board_name)
+
+
+def _g(v: Any) -> str:
+    return "n/a" if v is None else f"{v:.3g}"

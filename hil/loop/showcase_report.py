@@ -1,4 +1,4 @@
-"""The showcase's summary and comparison plot (:mod:`.sched_study`): per design, tracking over the sweep,
+"""The showcase's summary and comparison plot (:mod:`.showcase`): per design, tracking over the sweep,
 damping of each step and both twins, from the same numbers ``report.json`` holds."""
 
 from __future__ import annotations

@@ -6,18 +6,16 @@ same nonlinear plant, with both twins; compared on tracking (IAE and max |e| ove
 The description is a TOML file (default: the built-in ``scenarios/tank_showcase.toml``): ``spec``,
 ``single_point``, ``controller``, ``[plant]``, ``[sweep]`` (``low``, ``high``, ``rate``, ``start``, ``duration``),
 ``[steps.NAME]`` (``from``, ``to``, ``at``, ``duration``), ``[transport]`` and ``step_timeout`` (s each lockstep
-step waits for the node's command, default 1). With a CAN ``[transport]`` and
-``controller = "firmware"`` every run is hardware in the loop: the firmware's CAN node over the bus, on the
-scheduled law (:func:`~.can_scheduled.run_scheduled_can`) or the single-point one (:func:`~.bridge.run_scenario`);
-without one, software in the loop in process (:func:`~.sil.run_sil`).
+step waits for the node's command, default 1). Every run goes through the one dispatcher
+(:func:`~.bridge.run_scenario`): with a ``[transport]`` hardware in the loop (``controller = "firmware"``: the
+firmware's node for the link, on each design's law; ``"reference"``: the Python reference node), without one
+software in the loop in process.
 """
 
 from __future__ import annotations
 
 import copy
-import dataclasses
 import json
-import tempfile
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -30,12 +28,9 @@ from gainlink.shipping.artifact import Artifact, from_dict, render
 
 from ..paths import project_root
 from .bridge import RunResult, run_scenario
-from .can_scheduled import over_can, run_scheduled_can
-from .report import plots, report_json, summary_text
-from .scenario import Scenario, parse_scenario
-from .sched_report import sigma_csv, sigma_plot
-from .sched_study_report import comparison_png, showcase_summary
-from .sil import run_sil
+from .report import has_sigma, plots, report_json, sigma_csv, sigma_plot, summary_text
+from .scenario import parse_scenario
+from .showcase_report import comparison_png, showcase_summary
 
 SHOWCASE_KEYS = {
     "spec",
@@ -117,7 +112,7 @@ def run_showcase(
         art = _design(specs[design], source=f"{spec_path} ({design})")
         runs[design] = _run_design(art, desc, controller=controller or desc.get("controller", "firmware"))
         files[f"{design}/gains.json"] = render(art.data)
-        files.update(_design_files(runs[design], design=design, artifact=art))
+        files.update(_design_files(runs[design], design=design))
     table = {design: showcase_row(runs[design], desc) for design in DESIGNS}
     doc = {"designs": table, "spec": str(spec_path), "single_point": desc["single_point"], "sweep": desc["sweep"],
            "steps": desc["steps"]}  # fmt: skip
@@ -152,25 +147,13 @@ def _run_design(art: Artifact, desc: dict, *, controller: str) -> dict[str, RunR
     """The sweep (with both twins) and each step (without) of one design."""
     sw = desc["sweep"]
     sweep = {"kind": "sweep", **{k: sw[k] for k in ("low", "high", "rate", "start")}}
-    out = {"sweep": _run(art, _scenario(desc, "sweep", sw["duration"], sw["low"], sweep, controller, twins=True))}
+    sweep_run = _scenario(desc, "sweep", sw["duration"], sw["low"], sweep, controller, twins=True)
+    out = {"sweep": run_scenario(sweep_run, artifact=art)}
     for name, st in desc["steps"].items():
         ref = {"kind": "step", "initial": st["from"], "value": st["to"], "at": st["at"]}
-        out[f"step_{name}"] = _run(art, _scenario(desc, f"step_{name}", st["duration"], st["from"], ref,
-                                                  controller, twins=False))  # fmt: skip
+        step = _scenario(desc, f"step_{name}", st["duration"], st["from"], ref, controller, twins=False)
+        out[f"step_{name}"] = run_scenario(step, artifact=art)
     return out
-
-
-def _run(art: Artifact, scenario: Scenario) -> RunResult:
-    """One run: over the CAN bus against the firmware's node when the scenario has a CAN transport and the
-    firmware controller, else in process."""
-    if not over_can(scenario):
-        return run_sil(art, scenario)
-    if art.schedule is not None:
-        return run_scheduled_can(art, scenario)
-    with tempfile.TemporaryDirectory(prefix="gainlink-showcase-") as tmp:
-        path = Path(tmp) / "gains.json"
-        art.save(path)
-        return run_scenario(dataclasses.replace(scenario, artifact_path=path))
 
 
 def _scenario(desc: dict, name: str, duration: float, h0: float, reference: dict, controller: str, *, twins: bool):
@@ -194,7 +177,7 @@ def _scenario(desc: dict, name: str, duration: float, h0: float, reference: dict
     )
 
 
-def _design_files(runs: dict[str, RunResult], *, design: str, artifact: Artifact) -> dict[str, bytes | str]:
+def _design_files(runs: dict[str, RunResult], *, design: str) -> dict[str, bytes | str]:
     """Each run's HIL report (report.json, summary.txt; the sweep's plots, twins included, and for the scheduled
     design its sigma.csv and sigma.png) under design/run/."""
     files: dict[str, bytes | str] = {}
@@ -203,9 +186,9 @@ def _design_files(runs: dict[str, RunResult], *, design: str, artifact: Artifact
         files[f"{design}/{name}/summary.txt"] = summary_text(res)
         if name != "sweep":
             continue
-        for png, data in plots(res, artifact=artifact).items():
+        for png, data in plots(res).items():
             files[f"{design}/{name}/{png}"] = data
-        if res.trace.sigma is not None:
+        if has_sigma(res):
             files[f"{design}/{name}/sigma.csv"] = sigma_csv(res.trace)
             files[f"{design}/{name}/sigma.png"] = sigma_plot(res)
     return files

@@ -1,0 +1,66 @@
+"""What a closed loop (:mod:`gainlink.hil.loop`) asks of the MPC law beyond its step: a closed-loop simulation of
+its float64 algorithm, the solver's iterations in a run's report (from the bit-exact model replayed on the samples
+the controller received: the C's own count when the run is bit for bit), and the summary's line on them."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from .. import flags
+from .arith import Arith, Float32
+from .step import MpcLoop
+
+
+def simulate(artifact: Any, *, steps: int, x0: Any, reference: Any, noise_std: float, seed: int) -> Any:
+    """The float64 algorithm around the artifact's own discrete plant (:func:`gainlink.proof.simulation
+    .simulate_linear`'s conventions: ``x0`` a deviation, ``reference`` absolute)."""
+    from ...errors import DataError
+    from ...proof.sampled_plant import SampledPlant
+    from ...proof.simulation import closed_loop
+    from .law import MpcController
+
+    a = artifact
+    if steps < 1:
+        raise DataError("steps must be at least 1")
+    r = a.r_op if reference is None else np.asarray(reference, float).reshape(a.q)
+    plant = SampledPlant.from_artifact(a, x0=x0)
+    noise = noise_std * np.random.default_rng(seed).standard_normal((steps, a.p))
+    ctl = MpcController(MpcLoop(a, Arith()), {"kind": "reference (the MPC algorithm in float64)"})
+    return closed_loop(ctl, plant, Ts=a.Ts, m=a.m, R=np.tile(r, (steps, 1)), noise=noise, S=np.zeros((steps, 0)))
+
+
+def iterations(artifact: Any, trace: Any, *, ran: str | None) -> dict:
+    """The ``mpc`` block of a run's report: the solver's iterations per solved step (mean, worst), the steps the
+    cap stopped (``capped_steps``: the projected first move was applied) and the cap, counted by the law that ran
+    (the float32 model of the C on the samples it received, in turn; the float64 algorithm for a reference run)."""
+    a = artifact
+    loop = MpcLoop(a, Arith() if ran is None else Float32())
+    Y = np.where(np.asarray(trace.nan_sent)[:, None], np.nan, trace.y)
+    if ran is not None:
+        Y = Y.astype(np.float32).astype(np.float64)
+    R = trace.r.astype(np.float32).astype(np.float64) if ran is not None else trace.r
+    counts, capped = [], 0
+    for k in range(trace.t.size):
+        res = loop.step(Y[k], R[k])
+        if not res.fault:
+            counts.append(res.iterations)
+            capped += bool(res.flags & flags.CAPPED)
+    c = np.array(counts, dtype=float)
+    by = "the float64 algorithm" if ran is None else "the C's float32 model, in turn"
+    return {"mpc": {"horizon": int(a.mpc.horizon), "cap": int(a.mpc.max_iter), "solved_steps": int(c.size),
+                    "iterations_mean": float(c.mean()) if c.size else None,
+                    "iterations_max": int(c.max()) if c.size else None, "capped_steps": capped,
+                    "counted_by": by}}  # fmt: skip
+
+
+def summary_lines(metrics: Mapping[str, Any]) -> list[str]:
+    """The run summary's line on the solver (nothing without an ``mpc`` block)."""
+    b = metrics.get("mpc")
+    if not b or not b["solved_steps"]:
+        return []
+    return [f"  MPC horizon {b['horizon']}: {b['iterations_mean']:.1f} iterations per step on average, "
+            f"{b['iterations_max']} at worst (cap {b['cap']}); {b['capped_steps']} of {b['solved_steps']} steps "
+            "stopped at the cap (the projected first move applied)"]  # fmt: skip
