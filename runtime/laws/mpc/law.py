@@ -36,34 +36,16 @@ CANNOT = {
 }
 
 
-class _Iterations:
-    """The solver's iterations of the steps a controller ran (refused samples: none), for a run's report."""
-
-    def __init__(self) -> None:
-        self.counts: list[int] = []
-
-    def metrics(self) -> dict:
-        """``iterations_mean``, ``iterations_max`` and ``capped_steps`` (the cap stopped the solver) of the run."""
-        c = np.array([k for k in self.counts if k > 0])
-        return {"iterations_mean": float(c.mean()) if c.size else None, "iterations_max": int(c.max(initial=0)),
-                "capped_steps": self.capped, "solved_steps": int(c.size)}  # fmt: skip
-
-    capped = 0
-
-
-class MpcController(_Iterations):
+class MpcController:
     """An :class:`~.step.MpcLoop` as a :class:`Controller`."""
 
     def __init__(self, loop: MpcLoop, describe: dict) -> None:
-        super().__init__()
         self.loop, self.describe = loop, describe
         self.last = None
 
     def step(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> Step:
         """One sample (``s`` unused: the MPC law is not scheduled)."""
         res = self.last = self.loop.step(y, r)
-        self.counts.append(res.iterations)
-        self.capped += bool(res.flags & flags.CAPPED)
         return Step(u=np.asarray(res.u, dtype=float), flags=res.flags, sat=res.sat)
 
     def reset(self) -> None:
@@ -75,21 +57,18 @@ class MpcController(_Iterations):
         return self.loop.state()
 
 
-class MpcNative(_Iterations):
+class MpcNative:
     """The host C's MPC law (:class:`~gainlink.firmware.host.HostLaw`) as a :class:`Controller`."""
 
     def __init__(self, artifact: Any, *, library: Any = None) -> None:
         from ...firmware.host import HostLaw
 
-        super().__init__()
         self.host = HostLaw(artifact, library=library)
         self.describe = {"kind": "firmware (host C MPC law, ctypes)", "library": str(self.host.library)}
 
     def step(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> Step:
         """One sample through ``gl_mpc_step``: its record's flags are the status flags."""
         rec = self.host.step(y, r)
-        self.counts.append(int(rec["iters"]))
-        self.capped += bool(int(rec["flags"]) & flags.CAPPED)
         return Step(u=rec["u"].astype(float), flags=int(rec["flags"]), sat=int(rec["sat"]))
 
     def reset(self) -> None:
