@@ -181,3 +181,45 @@ def test_an_mpc_law_with_a_schedule_is_refused_in_one_line():
     data["schedule"] = {"sigma": "x", "points": [0.0, 1.0]}
     with pytest.raises(ValueError, match="cannot be scheduled"):
         law_for_spec(parse_spec(data))
+
+
+@pytest.mark.parametrize("target,steps", [("cortex-m4", 40), ("cortex-m0", 4)])
+def test_pil_closes_the_loop_on_the_image_and_its_records_are_the_float32_model_step_by_step(target, steps):
+    """PIL on the M4F and a very short run on the M0 (~3M instructions a step through gl_fmaf): the image's records
+    (command, flags, iterations, its whole state) are checked from its own state against the float32 model, and its
+    commands are the model's fed the float32 samples the plant gave, in turn."""
+    from gainlink.hil.loop.pil import make_plant, run_pil
+
+    a = artifact(horizon=5, box=2.5)
+    plant = make_plant("artifact", artifact=a, x0=np.array([1.0, 0.0, 0.0, 0.0]))  # 1 m off: the box binds
+    res = run_pil(a, plant=plant, steps=steps, target=target, model_twin=False)
+    block = res.summary()["mpc"]
+    assert res.law == "mpc-float32" and block["bit_exact"] and block["solved_steps"] == steps
+    model = law_of(a).model(a)
+    want = [model.step(res.y[k].astype(np.float32).astype(float), np.zeros(1), np.zeros(0)) for k in range(steps)]
+    np.testing.assert_array_equal(res.u.view(np.uint32), np.array([w.u for w in want], np.float32).view(np.uint32))
+    np.testing.assert_array_equal(res.flags, [w.flags for w in want])
+    capped = sum(bool(w.flags & law_flags.CAPPED) for w in want)
+    assert block["capped_steps"] == capped and (capped > 0 or steps < 10)  # the longer run meets the cap
+
+
+def test_a_sil_run_reports_the_solvers_iterations_as_the_c_ran_them():
+    """The run report's mpc block (counted by the float32 model on the samples the controller received) against the
+    host C's own records: the CAPPED flags the trace carries and the iterations the C replays to on those samples."""
+    from gainlink.hil import run as hil_run
+
+    a = artifact(horizon=5, box=2.5)
+    steps = 40
+    scenario = {"name": "mpc_sil", "artifact": "unused.json", "duration": steps * a.Ts, "controller": "firmware",
+                "plant": {"kind": "linear"}, "initial_state": {"x": 1.0}, "transport": {}, "twin": False,
+                "model_twin": False}  # fmt: skip
+    res = hil_run(scenario, artifact=a)
+    assert res.complete
+    tr, block = res.trace, res.metrics["mpc"]
+    c = law_of(a).replay(a, "native", tr.y.astype(np.float32), tr.r.astype(np.float32))
+    capped = np.count_nonzero(tr.flags & law_flags.CAPPED)  # a step may also converge at its cap-th iteration
+    assert block["capped_steps"] == capped > 0 and capped <= np.count_nonzero(c.iterations == a.mpc.max_iter)
+    assert block["iterations_max"] == c.iterations.max() and block["iterations_mean"] == pytest.approx(
+        c.iterations.mean()
+    )
+    assert "stopped at the cap" in "\n".join(law_of(a).report_lines(res.metrics))

@@ -260,6 +260,17 @@ class MpcLaw(Law):
 
         return summary_lines(metrics)
 
+    def pil_check(self, artifact: Any, records: np.ndarray, *, Y: np.ndarray, R: np.ndarray, S: np.ndarray,
+                  trace: Any, twin_u: np.ndarray | None, design_model: bool, check_plant: Any) -> dict:  # fmt: skip
+        from .run import pil_check
+
+        return pil_check(artifact, records, Y=Y, R=R)
+
+    def pil_lines(self, summary: Mapping[str, Any]) -> list[str]:
+        from .run import pil_lines
+
+        return pil_lines(summary)
+
     def image_stream(self, artifact: Any, *, target: str, board: str) -> Any:
         from ..lq_run import image_stream
 

@@ -5,6 +5,7 @@ the controller received: the C's own count when the run is bit for bit), and the
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -64,3 +65,44 @@ def summary_lines(metrics: Mapping[str, Any]) -> list[str]:
     return [f"  MPC horizon {b['horizon']}: {b['iterations_mean']:.1f} iterations per step on average, "
             f"{b['iterations_max']} at worst (cap {b['cap']}); {b['capped_steps']} of {b['solved_steps']} steps "
             "stopped at the cap (the projected first move applied)"]  # fmt: skip
+
+
+@dataclass(frozen=True)
+class PilCheck:
+    """The ``mpc`` block of a PIL run (:func:`pil_check`)."""
+
+    block: dict
+
+    def to_dict(self) -> dict:
+        """JSON-ready."""
+        return dict(self.block)
+
+
+def pil_check(artifact: Any, records: np.ndarray, *, Y: np.ndarray, R: np.ndarray) -> dict:
+    """The ``mpc`` block of a PIL run: the image's records (command, flags, iterations and its whole state) checked
+    one step at a time from the image's own state against the float32 model with the image's iteration count, on the
+    float32 samples it was sent, and the solver's iterations (mean, worst, steps the cap stopped)."""
+    from .arith import Float32
+    from .law import one_step_check, trace_of_records
+
+    trace = trace_of_records(records)
+    Y32, R32 = (np.asarray(v, dtype=np.float32).astype(np.float64) for v in (Y, R))
+    check = one_step_check(artifact, Y32, R32, trace, Float32(), exact=True)
+    solved = trace.iterations[~trace.fault]
+    return {"mpc": PilCheck({"horizon": int(artifact.mpc.horizon), "cap": int(artifact.mpc.max_iter),
+                    "bit_exact": check.passed,
+                    "first_difference": None if check.passed else check.first_failure.describe("the image"),
+                    "solved_steps": int(solved.size),
+                    "iterations_mean": float(solved.mean()) if solved.size else None,
+                    "iterations_max": int(solved.max()) if solved.size else None,
+                    "capped_steps": int(np.count_nonzero(trace.flags & flags.CAPPED)),
+                    "counted_by": "the image's own records"})}  # fmt: skip
+
+
+def pil_lines(summary: Mapping[str, Any]) -> list[str]:
+    """The PIL summary's lines on the solver and the image's check."""
+    b = summary.get("mpc")
+    if not b:
+        return []
+    exact = "bit for bit its float32 model" if b["bit_exact"] else f"DIFFERS: {b['first_difference']}"
+    return [f"  MPC image: {exact}, step by step from its own state", *summary_lines(summary)]
