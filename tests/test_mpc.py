@@ -8,6 +8,8 @@ the C's arithmetic) against the host build and the Cortex-M images, run from the
 
 from __future__ import annotations
 
+import tomllib
+
 import control
 import numpy as np
 import pytest
@@ -223,3 +225,33 @@ def test_a_sil_run_reports_the_solvers_iterations_as_the_c_ran_them():
         c.iterations.mean()
     )
     assert "stopped at the cap" in "\n".join(law_of(a).report_lines(res.metrics))
+
+
+def test_the_mpc_campaign_and_its_lqi_counterpart_draw_the_same_plants_and_an_mpc_run_reports_its_solver():
+    """examples/campaigns/pendulum_mpc_mass_uncertainty.toml against the LQI law of pendulum.toml (bench/mpc_pays.py
+    pairs them on the draw): the same seed draws the same plant parameters for both laws, each campaign designs its
+    own law, and a run of the MPC campaign (the worker's function) reports the iterations of the C that ran."""
+    import json
+
+    from gainlink.hil.campaign.config import parse_campaign
+    from gainlink.hil.campaign.plan import plan_campaign
+    from gainlink.hil.campaign.worker import execute
+    from support.paths import EXAMPLES
+
+    path = EXAMPLES / "campaigns" / "pendulum_mpc_mass_uncertainty.toml"
+    plans = {}
+    for law, spec in (("mpc", "../pendulum_mpc.toml"), ("lq", "../pendulum.toml")):
+        data = tomllib.loads(path.read_text()) | {"spec": spec, "runs": 2}
+        data["scenario"] |= {"twin": False, "duration": 0.5}
+        plans[law] = plan_campaign(parse_campaign(data, path=path))
+    mpc, lq = plans["mpc"].runs, plans["lq"].runs
+    assert len(mpc) == len(lq) == 4  # two boxes x two draws
+    for a, b in zip(mpc, lq, strict=True):
+        assert a.values == b.values and a.scenario["plant"] == b.scenario["plant"] and a.seed == b.seed
+    names = {law: {law_of(from_dict(json.loads(art))).name for art in plans[law].artifacts.values()} for law in plans}
+    assert names == {"mpc": {"mpc/float32"}, "lq": {"lq/float32"}}
+    p = mpc[0]
+    rec = execute("sil", plans["mpc"].artifacts[p.artifact_sha256], p.scenario, p.seed, plans["mpc"].blobs)
+    block = rec["metrics"]["mpc"]
+    assert rec["status"] == "done" and block["solved_steps"] == rec["metrics"]["steps"] == 50
+    assert 1 <= block["iterations_mean"] <= block["iterations_max"] <= block["cap"] == 10

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from .. import flags
-from .arith import Arith, Float32
+from .arith import Arith
 from .step import MpcLoop
 
 
@@ -35,26 +35,25 @@ def simulate(artifact: Any, *, steps: int, x0: Any, reference: Any, noise_std: f
 
 def iterations(artifact: Any, trace: Any, *, ran: str | None) -> dict:
     """The ``mpc`` block of a run's report: the solver's iterations per solved step (mean, worst), the steps the
-    cap stopped (``capped_steps``: the projected first move was applied) and the cap, counted by the law that ran
-    (the float32 model of the C on the samples it received, in turn; the float64 algorithm for a reference run)."""
+    cap stopped (``capped_steps``: the projected first move was applied) and the cap, counted by the law that ran on
+    the samples it received, in turn: the host C's records (bit for bit the float32 model of every build of the C,
+    tests/test_mpc.py; one C call for the run), or the float64 algorithm for a reference run."""
+    from ...firmware.host import HostLaw
+    from .law import trace_of_records
+
     a = artifact
-    loop = MpcLoop(a, Arith() if ran is None else Float32())
     Y = np.where(np.asarray(trace.nan_sent)[:, None], np.nan, trace.y)
-    if ran is not None:
-        Y = Y.astype(np.float32).astype(np.float64)
-    R = trace.r.astype(np.float32).astype(np.float64) if ran is not None else trace.r
-    counts, capped = [], 0
-    for k in range(trace.t.size):
-        res = loop.step(Y[k], R[k])
-        if not res.fault:
-            counts.append(res.iterations)
-            capped += bool(res.flags & flags.CAPPED)
-    c = np.array(counts, dtype=float)
-    by = "the float64 algorithm" if ran is None else "the C's float32 model, in turn"
-    return {"mpc": {"horizon": int(a.mpc.horizon), "cap": int(a.mpc.max_iter), "solved_steps": int(c.size),
-                    "iterations_mean": float(c.mean()) if c.size else None,
-                    "iterations_max": int(c.max()) if c.size else None, "capped_steps": capped,
-                    "counted_by": by}}  # fmt: skip
+    R = trace.r
+    if ran is None:
+        run = MpcLoop(a, Arith()).run(Y, R)
+    else:
+        run = trace_of_records(HostLaw(a).run(Y.astype(np.float32), R.astype(np.float32)))
+    solved = run.iterations[~run.fault]
+    by = "the float64 algorithm" if ran is None else "the host C's records, on the samples the controller received"
+    return {"mpc": {"horizon": int(a.mpc.horizon), "cap": int(a.mpc.max_iter), "solved_steps": int(solved.size),
+                    "iterations_mean": float(solved.mean()) if solved.size else None,
+                    "iterations_max": int(solved.max()) if solved.size else None,
+                    "capped_steps": int(np.count_nonzero(run.flags & flags.CAPPED)), "counted_by": by}}  # fmt: skip
 
 
 def summary_lines(metrics: Mapping[str, Any]) -> list[str]:
