@@ -255,3 +255,24 @@ def test_the_mpc_campaign_and_its_lqi_counterpart_draw_the_same_plants_and_an_mp
     block = rec["metrics"]["mpc"]
     assert rec["status"] == "done" and block["solved_steps"] == rec["metrics"]["steps"] == 50
     assert 1 <= block["iterations_mean"] <= block["iterations_max"] <= block["cap"] == 10
+
+
+def test_a_non_finite_sample_gets_the_safe_command_and_leaves_the_c_solvers_state_untouched():
+    """The host C: a NaN sample between two steps answers u_op clamped into the box with the fault flag, and its
+    record's state (estimate, integrators, warm start) is the step before's, so the next step is the step it would
+    have been without the NaN."""
+    from gainlink.firmware.host import HostLaw
+
+    a = artifact(horizon=5, box=2.5)
+    y, r = np.array([0.3, 0.02]), np.zeros(1)
+    host = HostLaw(a)
+    host.step(y, r)
+    before = host.step(y, r)
+    bad = host.step(np.array([np.nan, 0.0]), r)
+    after = host.step(y, r)
+    assert int(bad["flags"]) & law_flags.FAULT and bad["u"][0] == np.float32(np.clip(a.u_op[0], -2.5, 2.5))
+    assert np.array_equal(bad["state"], before["state"])
+    clean = HostLaw(a)
+    for _ in range(3):
+        want = clean.step(y, r)
+    assert np.array_equal(after["u"], want["u"]) and np.array_equal(after["state"], want["state"])
