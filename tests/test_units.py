@@ -41,8 +41,9 @@ def test_the_pil_summary_gives_every_figure_its_unit(example_artifacts):
         "outputs": {"x": {"max_dy": 3e-7, "max_dy_rel": 1e-6}, "theta": {"max_dy": 1e-7, "max_dy_rel": 6e-7}},
         "iae": {"r_x": {"real": 0.25, "twin": 0.25, "difference": 0.0, "difference_rel": 0.0}},
     }
-    summary = {"artifact": "pendulum", "sha256": a.sha256, "law": "float32", "target": "cortex-m4", "board": "mps2-an386",
-               "plant": "artifact", "steps": 10, "saturated_steps": 0, "faults": 0, "steps_per_second": 5000.0,
+    summary = {"artifact": "pendulum", "sha256": a.sha256, "law": "float32", "target": "cortex-m4",
+               "board": "mps2-an386", "plant": "artifact", "steps": 10, "saturated_steps": 0, "faults": 0,
+               "steps_per_second": 5000.0,
                "round_trip_us_p50": 40.0, "round_trip_us_p99": 90.0, "final_output": [0.1, -0.02],
                "twin": twin}  # fmt: skip
     text = pil_summary_text(summary, artifact=a)

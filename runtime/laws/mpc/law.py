@@ -7,17 +7,17 @@ from __future__ import annotations
 import io
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ...errors import DataError
-from .. import flags
-from ..base import Capabilities, Controller, Law, OneStepVerdict, Step
+from ..base import Capabilities, Controller, Law, OneStepVerdict
 from ..lq import LqLaw
 from .arith import Arith, Float32
+from .controllers import MpcController, MpcNative, trace_of_records
+from .onestep import one_step_check
 from .step import MpcLoop, MpcTrace
 
 if TYPE_CHECKING:
@@ -34,116 +34,6 @@ CANNOT = {
     "over any history is not derived for the ADMM); each step of a trace is checked instead: bit "
     "for bit its float32 model, within the solver's tolerance of the float64 algorithm (one_step)"
 }
-
-
-class MpcController:
-    """An :class:`~.step.MpcLoop` as a :class:`Controller`."""
-
-    def __init__(self, loop: MpcLoop, describe: dict) -> None:
-        self.loop, self.describe = loop, describe
-        self.last = None
-
-    def step(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> Step:
-        """One sample (``s`` unused: the MPC law is not scheduled)."""
-        res = self.last = self.loop.step(y, r)
-        return Step(u=np.asarray(res.u, dtype=float), flags=res.flags, sat=res.sat)
-
-    def reset(self) -> None:
-        """Back to the start state."""
-        self.loop.reset()
-
-    def state(self) -> np.ndarray:
-        """``xh, z`` and the warm start (:meth:`.step.MpcLoop.state`)."""
-        return self.loop.state()
-
-
-class MpcNative:
-    """The host C's MPC law (:class:`~gainlink.firmware.host.HostLaw`) as a :class:`Controller`."""
-
-    def __init__(self, artifact: Any, *, library: Any = None) -> None:
-        from ...firmware.host import HostLaw
-
-        self.host = HostLaw(artifact, library=library)
-        self.describe = {"kind": "firmware (host C MPC law, ctypes)", "library": str(self.host.library)}
-
-    def step(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> Step:
-        """One sample through ``gl_mpc_step``: its record's flags are the status flags."""
-        rec = self.host.step(y, r)
-        return Step(u=rec["u"].astype(float), flags=int(rec["flags"]), sat=int(rec["sat"]))
-
-    def reset(self) -> None:
-        """``gl_law_reset``."""
-        self.host.reset()
-
-    def state(self) -> np.ndarray:
-        """The C's whole state as its last record carries it (``xh, z`` and the warm start)."""
-        return np.asarray(self.host.last_record["state"], dtype=float)
-
-
-def trace_of_records(rec: np.ndarray) -> MpcTrace:
-    """The C's records (:func:`gainlink.shipping.records.layout` of the MPC law) as a trace."""
-    return MpcTrace(u=rec["u"].astype(float), sat=rec["sat"].astype(np.int64), flags=rec["flags"].astype(np.int64),
-                    iterations=rec["iters"].astype(np.int64), state=rec["state"].astype(float))  # fmt: skip
-
-
-@dataclass(frozen=True)
-class StepMismatch:
-    """The first step where a trace left what it is checked against."""
-
-    k: int
-    what: str
-
-    def describe(self, name: str) -> str:
-        return f"step {self.k} of {name}: {self.what}"
-
-
-@dataclass(frozen=True)
-class MpcOneStep:
-    """A one-step check of an MPC trace: ``steps`` checked, the first mismatch (None: every step held) and the
-    largest deviation of the command relative to each input's limit span."""
-
-    steps: int
-    first_failure: StepMismatch | None
-    max_rel_u: float
-
-    @property
-    def passed(self) -> bool:
-        return self.first_failure is None
-
-    def summary(self) -> str:
-        verdict = "every step holds" if self.passed else "FAILED"
-        return f"{self.steps} steps, {verdict}; max |du| {self.max_rel_u:.3g} of the limit span"
-
-
-def one_step_check(artifact: Any, Y, R, trace: MpcTrace, ar: Arith, *, exact: bool) -> MpcOneStep:
-    """Each step of ``trace`` from the trace's own previous state through the law in ``ar``, with the trace's own
-    iteration count: ``exact`` asks for the same bits (commands, flags, saturation, iterations, state), else the
-    command within the solver's tolerance."""
-    a = artifact
-    loop = MpcLoop(a, ar)
-    span = a.u_max - a.u_min
-    worst, eps = 0.0, a.mpc.eps["pu"]
-    for k in range(len(Y)):
-        if k:
-            loop.set_state(trace.state[k - 1])
-        it = int(trace.iterations[k]) or None
-        res = loop.step(Y[k], R[k], iterations=None if exact else it)
-        if res.fault:
-            got = (trace.flags[k] & flags.FAULT) != 0 and np.array_equal(res.u, trace.u[k])
-            if not got:
-                return MpcOneStep(k + 1, StepMismatch(k, "a refused sample answered otherwise"), worst)
-            continue
-        worst = max(worst, float(np.max(np.abs(res.u - trace.u[k]) / span)))
-        if exact:
-            answer = (res.sat, res.flags, res.iterations)
-            same = answer == (trace.sat[k], trace.flags[k], trace.iterations[k])
-            if not (same and np.array_equal(res.u, trace.u[k]) and np.array_equal(loop.state(), trace.state[k])):
-                what = f"not bit for bit (u {res.u}, iterations {res.iterations}; the trace {trace.u[k]}, "
-                return MpcOneStep(k + 1, StepMismatch(k, what + f"{trace.iterations[k]})"), worst)
-        elif np.any(np.abs(res.u - trace.u[k]) > eps):
-            what = f"u {trace.u[k]} is {np.abs(res.u - trace.u[k])} from the float64 algorithm's {res.u}"
-            return MpcOneStep(k + 1, StepMismatch(k, what + f", beyond the tolerance {eps}"), worst)
-    return MpcOneStep(len(Y), None, worst)
 
 
 class MpcLaw(Law):

@@ -21,7 +21,7 @@ def simulate(artifact: Any, *, steps: int, x0: Any, reference: Any, noise_std: f
     from ...errors import DataError
     from ...proof.sampled_plant import SampledPlant
     from ...proof.simulation import closed_loop
-    from .law import MpcController
+    from .controllers import MpcController
 
     a = artifact
     if steps < 1:
@@ -39,7 +39,7 @@ def iterations(artifact: Any, trace: Any, *, ran: str | None) -> dict:
     the samples it received, in turn: the host C's records (bit for bit the float32 model of every build of the C,
     tests/test_mpc.py; one C call for the run), or the float64 algorithm for a reference run."""
     from ...firmware.host import HostLaw
-    from .law import trace_of_records
+    from .controllers import trace_of_records
 
     a = artifact
     Y = np.where(np.asarray(trace.nan_sent)[:, None], np.nan, trace.y)
@@ -82,7 +82,8 @@ def pil_check(artifact: Any, records: np.ndarray, *, Y: np.ndarray, R: np.ndarra
     one step at a time from the image's own state against the float32 model with the image's iteration count, on the
     float32 samples it was sent, and the solver's iterations (mean, worst, steps the cap stopped)."""
     from .arith import Float32
-    from .law import one_step_check, trace_of_records
+    from .controllers import trace_of_records
+    from .onestep import one_step_check
 
     trace = trace_of_records(records)
     Y32, R32 = (np.asarray(v, dtype=np.float32).astype(np.float64) for v in (Y, R))
