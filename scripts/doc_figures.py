@@ -627,25 +627,29 @@ def _pays_cell(s: Doc) -> list[str]:
 
 
 def mpc_pays_block() -> str:
-    """MPC against LQI + back-calculation on the same drawn pendulums, and the MPC over rho x cap
-    (bench/mpc_pays.py)."""
+    """MPC against LQI + back-calculation on the same drawn pendulums (and the MPC with a soft box on the angle), and
+    the MPC over rho x cap (bench/mpc_pays.py)."""
     doc = result("mpc_pays")
     if doc is None:
         return missing("MPC campaign comparison", "scripts/bench.sh mpc_pays")
+    laws = (("mpc", "MPC (N = 20, cap 10)"), ("mpc_theta_box", "MPC, soft box abs(theta) <= 0.4 rad"),
+            ("lqi_backcalc", "LQI + back-calculation"))  # fmt: skip
     rows = []
     for entry in doc["compare"].values():
-        for law, label in (("mpc", "MPC (N = 20, cap 10)"), ("lqi_backcalc", "LQI + back-calculation")):
+        for law, label in laws:
             s = entry[law]
             it = "—"
             if "iterations_mean" in s:
                 it = (f"{s['iterations_mean']:.1f} / {s['iterations_worst']}, "
                       f"{100 * s['capped_fraction_of_steps']:.0f} % of steps capped")  # fmt: skip
-            rows.append([f"±{entry['box_N']:g} N", label, *_pays_cell(s), it])
+            fell = ", ".join(f"{k} {v}" for k, v in sorted(s.get("failed_criteria", {}).items())) or "—"
+            rows.append([f"±{entry['box_N']:g} N", label, *_pays_cell(s), fell, it])
     head = ["box", "law", "stays up", "settling median (runs up)", "IAE median (runs up)"]
-    head += ["iterations mean / worst"]
+    head += ["runs failing each criterion", "iterations mean / worst"]
     pairs = "; ".join(
-        f"at ±{e['box_N']:g} N the MPC keeps {e['mpc_up_lqi_down']} plants up that LQI loses, and loses "
-        f"{e['lqi_up_mpc_down']} that LQI keeps"
+        f"at ±{e['box_N']:g} N the MPC keeps {e['mpc_up_lqi_down']} plants up that LQI loses and loses "
+        f"{e['lqi_up_mpc_down']} that LQI keeps, with the angle box {e['mpc_theta_box_up_lqi_down']} and "
+        f"{e['lqi_up_mpc_theta_box_down']}"
         for e in doc["compare"].values()
     )
     grid = []
@@ -656,7 +660,7 @@ def mpc_pays_block() -> str:
     ghead = ["rho", "cap", "stays up", "settling median", "IAE median", "iterations mean / worst", "steps capped"]
     ghead += ["runs that hit the cap"]
     text = table(head, rows) + "\n" + prose("Paired on the draw: " + pairs + ".") + "\n\n"
-    text += "Over rho and the cap (±20 N, the same draws):\n\n" + table(ghead, grid)
+    text += "Over rho and the cap (±20 N, no angle box, the same draws):\n\n" + table(ghead, grid)
     return text + "\n" + provenance(doc) + "\n"
 
 
