@@ -24,6 +24,7 @@ from gainlink.spec import parse_spec
 from support.cli import assert_refused
 from support.designs import designed
 from support.mpc import mpc_pendulum as pendulum
+from support.paths import EXAMPLES
 
 
 def artifact(**kw):
@@ -276,3 +277,16 @@ def test_a_non_finite_sample_gets_the_safe_command_and_leaves_the_c_solvers_stat
     for _ in range(3):
         want = clean.step(y, r)
     assert np.array_equal(after["u"], want["u"]) and np.array_equal(after["state"], want["state"])
+
+
+def test_an_image_whose_mpc_workspace_does_not_fit_the_boards_ram_is_refused_with_the_linkers_figure():
+    """The quadrotor's MPC (12 states, 4 inputs, N = 10) on the micro:bit's 16 KiB of RAM: the build fails in one
+    line that says by how much the RAM overflows (not the linker's exit status)."""
+    from gainlink.errors import ToolchainError
+    from gainlink.firmware.build import replay_image
+    from gainlink.laws import design
+    from gainlink.spec import load_spec
+
+    a = from_dict(design(load_spec(EXAMPLES / "quadrotor_hover_mpc.toml")).artifact)
+    with pytest.raises(ToolchainError, match=r"region .RAM. overflowed by \d+ bytes"):
+        replay_image(a, target="cortex-m0", board="microbit")
