@@ -15,17 +15,22 @@ from gainlink.spec import parse_spec
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def multicast_transport(*, fd: bool = True, salt: int = 0) -> dict:
+def multicast_transport(*, fd: bool = True, salt: int = 0, reply: bool = False) -> dict:
     """A udp_multicast transport on a group and port of this process's own (two benchmarks running at once, or a
-    test run beside one, do not hear each other), confined to the host (hop limit 0)."""
+    test run beside one, do not hear each other), confined to the host (hop limit 0); with ``reply``, the commands
+    come back on the next port (``reply_port``: neither end reads back its own frames)."""
     rnd = random.Random(os.getpid() + salt)
-    return {
+    port = rnd.randint(40000, 60000)
+    out = {
         "interface": "udp_multicast",
         "channel": f"239.74.{rnd.randint(1, 254)}.{rnd.randint(1, 254)}",
-        "port": rnd.randint(40000, 60000),
+        "port": port,
         "hop_limit": 0,
         "fd": fd,
     }
+    if reply:
+        out["reply_port"] = port + 1
+    return out
 
 
 def free_udp_port() -> int:

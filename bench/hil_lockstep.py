@@ -4,7 +4,10 @@ The pendulum example's artifact drives the nonlinear cart-pendulum FMU (built fr
 sources) through the firmware's ``gainlink_can`` node, one sample in flight (lockstep), CAN FD (one
 frame each way) and classic CAN (three measurement frames + one command frame per step), with the
 bridge's default placement (bridge and firmware share one CPU); ``can_fd_unpinned`` is the same run
-left to the kernel's placement (``affinity = "none"``). The baseline,
+left to the kernel's placement (``affinity = "none"``). The runs send the samples on one port of the group and the
+commands come back on the next (``reply_port``: neither end reads back its own frames);
+``can_fd_one_port`` is the CAN FD run with both directions on one port, as python-can's bus is by default (each end
+unpacks the other's frames and its own). The baseline,
 measured in the same run, is the same FMU stepped in-process with the float64 reference law (no bus,
 no process boundary): ``ratio`` = lockstep steps/s / baseline steps/s is what the link costs. A third
 run sets ``busy_poll_us`` (both ends poll without sleeping between samples: two busy cores, fewer
@@ -30,13 +33,17 @@ import resource
 import sys
 import tempfile
 import time
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 from _setups import multicast_transport
 from gainlink.hil.links.can_firmware import firmware_can_executable
+from gainlink.hil.links.config import transport_from_config
 from gainlink.hil.loop.bridge import run_scenario
+from gainlink.hil.loop.controller import ControllerProcess
 from gainlink.hil.loop.scenario import parse_scenario
+from gainlink.hil.loop.scheduler import Placement
 from gainlink.hil.plants.build import build_fmu
 from gainlink.hil.plants.fmu import FmuPlant
 from gainlink.laws import design as design_spec
@@ -85,9 +92,17 @@ def _children_cpu() -> float:
 
 
 def lockstep(
-    gains: Path, exe: Path, fmu: Path, steps: int, *, fd: bool, busy_poll_us: int = 0, affinity: str = "auto"
+    gains: Path,
+    exe: Path,
+    fmu: Path,
+    steps: int,
+    *,
+    fd: bool,
+    busy_poll_us: int = 0,
+    affinity: str = "auto",
+    reply: bool = True,
 ) -> dict:
-    transport = multicast_transport(fd=fd, salt=busy_poll_us + fd)
+    transport = multicast_transport(fd=fd, salt=busy_poll_us + fd, reply=reply)
     if busy_poll_us:
         transport["busy_poll_us"] = busy_poll_us
     art = artifact_mod.load(gains)
@@ -106,10 +121,10 @@ def lockstep(
             "affinity": affinity,
         }
     )
-    c0, k0 = time.thread_time(), _children_cpu()
+    k0 = _children_cpu()
     m = run_scenario(scenario, artifact=art).metrics
-    loop_cpu = (time.thread_time() - c0 - m["twins_wall_s"]) / steps * 1e6  # the twins' CPU is theirs, after
-    firmware_cpu = (_children_cpu() - k0) / steps * 1e6
+    loop_cpu = m["loop_cpu_s"] / steps * 1e6  # the loop's thread while it ran: not the setup, not the twins after
+    firmware_cpu = (_children_cpu() - k0) / steps * 1e6  # its whole life: start-up is a few ms against seconds
     return {
         "cpu_us_per_step": {"loop": loop_cpu, "firmware": firmware_cpu},
         "twins_wall_s": m["twins_wall_s"],
@@ -121,6 +136,32 @@ def lockstep(
         "latency_us": m["latency_us"],
         "theta_final": m["outputs_final"]["theta"],
     }
+
+
+def link_floor(gains: Path, exe: Path, steps: int, *, reply: bool = True) -> dict:
+    """The link alone: one CAN FD sample out through the bridge's transport and the firmware's command back,
+    lockstep, both on one CPU as the lockstep runs place them; no plant, no loop, no recording. What a step over
+    python-can costs before the plant and the loop add theirs (CPU per step, this thread's and the firmware's)."""
+    art = artifact_mod.load(gains)
+    transport = transport_from_config(multicast_transport(fd=True, salt=99, reply=reply), artifact=art)
+    y, r = np.zeros(art.p), np.zeros(art.q)
+    with ExitStack() as stack:
+        transport.open()
+        stack.callback(transport.close)
+        peer = ControllerProcess([str(exe), *transport.controller_argv()])
+        stack.callback(peer.close)
+        peer.start()
+        stack.enter_context(Placement("shared", peer_pid=peer.proc.pid))
+        c0, k0, t0 = time.thread_time(), _children_cpu(), time.perf_counter()
+        for k in range(steps):
+            transport.send_frames(transport.encode_sample(seq=k % transport.seq_modulo, y=y, r=r))
+            if transport.receive_command(timeout=0.5) is None:
+                raise SystemExit(f"link floor: no command for sample {k}")
+        wall, loop_cpu = time.perf_counter() - t0, time.thread_time() - c0
+        peer.stop()
+        firmware_cpu = _children_cpu() - k0
+    return {"steps_per_s": steps / wall, "cpu_us_per_step": {"bridge": loop_cpu / steps * 1e6,
+            "firmware": firmware_cpu / steps * 1e6}}  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -141,7 +182,9 @@ def main(argv: list[str] | None = None) -> int:
         exe = firmware_can_executable(art)
         fmu = build_fmu("cart_pendulum")
         base, base_cpu = baseline(art, fmu, args.steps)
+        floor = link_floor(gains, exe, args.steps)
         fd = lockstep(gains, exe, fmu, args.steps, fd=True)
+        one_port = lockstep(gains, exe, fmu, args.steps, fd=True, reply=False)
         unpinned = lockstep(gains, exe, fmu, args.steps, fd=True, affinity="none")
         classic = lockstep(gains, exe, fmu, max(1, args.steps // 2), fd=False)
         busy = lockstep(gains, exe, fmu, args.steps, fd=True, busy_poll_us=args.busy_poll_us)
@@ -154,12 +197,20 @@ def main(argv: list[str] | None = None) -> int:
             "steps_per_s": base,
             "cpu_us_per_step": base_cpu,
         },
+        "link_floor": {
+            "what": "CAN FD sample out, command back through the bridge's transport and the firmware, "
+            "lockstep on one CPU; no plant, no loop",
+            **floor,
+        },
         "can_fd": fd,
+        "can_fd_one_port": one_port,
         "can_fd_unpinned": unpinned,
         "classic_can": classic,
         "can_fd_busy_poll": {"busy_poll_us": args.busy_poll_us, **busy},
         "ratio": fd["steps_per_s"] / base,
         "cpu": _cpu_figures(fd, base_cpu),
+        "ratio_one_port": one_port["steps_per_s"] / base,
+        "cpu_one_port": _cpu_figures(one_port, base_cpu),
         "ratio_unpinned": unpinned["steps_per_s"] / base,
         "ratio_classic": classic["steps_per_s"] / base,
         "ratio_busy_poll": busy["steps_per_s"] / base,

@@ -377,11 +377,15 @@ def loop_rates_block() -> str:
     if lock is not None:
         base = lock["baseline"]["steps_per_s"]
         for key, label in (
-            ("can_fd", "CAN FD, bridge and firmware sharing a CPU (default)"),
+            ("can_fd", "CAN FD, commands on a reply_port, bridge and firmware sharing a CPU (the default placement)"),
+            ("can_fd_one_port", "CAN FD, both directions on one port"),
             ("can_fd_unpinned", "CAN FD, placement left to the kernel"),
             ("classic_can", "classic CAN (3 + 1 frames a step)"),
             ("can_fd_busy_poll", "CAN FD, busy polling"),
+            ("link_floor", "the link alone (CAN FD sample out, command back; no plant, no loop)"),
         ):
+            if key not in lock:  # a recording from before the run existed
+                continue
             rate = lock[key]["steps_per_s"]
             rows.append([f"lockstep, udp_multicast: {label}", num(rate), f"{rate / base:.2f} of in-process"])
     mav = result("mavlink_hil")
@@ -410,7 +414,32 @@ def loop_rates_block() -> str:
     if not rows:
         return missing("loop rate", "make bench")
     sources = [d for d in (lock, mav, rt) if d is not None]
-    return table(["loop", "steps/s", "against the baseline"], rows) + "\n" + "\n".join(map(provenance, sources)) + "\n"
+    cpu = "" if lock is None else lockstep_cpu_line(lock)
+    return (
+        table(["loop", "steps/s", "against the baseline"], rows)
+        + "\n"
+        + cpu
+        + "\n".join(map(provenance, sources))
+        + "\n"
+    )
+
+
+def lockstep_cpu_line(lock: dict) -> str:
+    """The CAN runs' CPU time per step (what a loaded machine's wall-clock rates hide), when recorded."""
+    parts = [
+        f"{label} {runs[key]['cpu_us_per_step'][a]:.1f} + {runs[key]['cpu_us_per_step'][b]:.1f} us"
+        for key, label, a, b, runs in (
+            ("can_fd", "CAN FD with a reply port", "loop", "firmware", lock),
+            ("can_fd_one_port", "on one port", "loop", "firmware", lock),
+            ("link_floor", "the link alone", "bridge", "firmware", lock),
+        )
+        if key in runs and isinstance(runs[key].get("cpu_us_per_step"), dict)
+    ]
+    if not parts:
+        return ""
+    base = lock["baseline"].get("cpu_us_per_step")
+    tail = f"; the in-process baseline {base:.1f} us" if base is not None else ""
+    return prose(f"CPU time a step, the bridge's loop + the firmware: {', '.join(parts)}{tail}.", "") + "\n"
 
 
 def target_uart_block() -> str:

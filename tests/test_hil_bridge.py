@@ -24,6 +24,7 @@ from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.shipping.artifact import load
 from support.cli import assert_refused, run_cli
 from support.hil import pendulum_scenario, udp_transport, write_scenario
+from support.net import udp_port
 
 
 def _run(data):
@@ -478,3 +479,68 @@ def test_random_drop_hits_a_seeded_fraction_of_the_window():
                 "faults": [{"kind": "drop", "probability": 1.5}],
             }
         )
+
+
+def test_reply_port_carries_the_commands_apart_and_changes_nothing_else(pend, can_firmware, cart_fmu):
+    common = dict(gains=pend, fmu=cart_fmu, duration=1.0)
+    one = udp_transport()
+    apart = {**udp_transport(), "reply_port": udp_port()}
+    shared = _run(pendulum_scenario(transport=one, **common))
+    split = _run(pendulum_scenario(transport=apart, **common))
+    node = _run(pendulum_scenario(transport={**udp_transport(), "reply_port": udp_port()}, controller="reference",
+                                  **common))  # fmt: skip
+    assert shared.complete and split.complete and node.complete
+    assert f"--reply-port {apart['reply_port']}" in " ".join(split.info["controller"]["argv"])
+    # Lockstep is deterministic: the same samples give the same commands, whichever port they come back on.
+    assert np.array_equal(shared.trace.u, split.trace.u) and np.array_equal(shared.trace.y, split.trace.y)
+    np.testing.assert_allclose(node.trace.u, split.trace.u, rtol=0, atol=1e-3)
+    # On one port the node reads back every command it sent (filtered as not a sample); apart, only samples.
+    steps = split.metrics["steps"]
+    assert shared.metrics["controller"]["counters"]["filtered"] >= steps
+    counters = split.metrics["controller"]["counters"]
+    assert counters["filtered"] == 0 and counters["read"] == counters["used"] == steps
+
+
+@pytest.mark.parametrize(
+    ("change", "says"),
+    [
+        ({"interface": "socketcan", "channel": "vcan0", "reply_port": 40001}, "reply_port is for interface"),
+        ({"reply_port": "PORT"}, "reply_port must be a UDP port"),
+        ({"reply_port": 70000}, "reply_port must be a UDP port"),
+    ],
+)
+def test_a_bad_reply_port_is_refused_in_one_line(pend, change, says):
+    from gainlink.errors import TransportError
+    from gainlink.hil.links.config import transport_from_config
+
+    config = {**udp_transport(), **change}
+    if config["reply_port"] == "PORT":
+        config["reply_port"] = config["port"]
+    with pytest.raises(TransportError, match=says) as err:
+        transport_from_config(config, artifact=load(pend))
+    assert "\n" not in str(err.value)
+
+
+def test_with_a_reply_port_each_end_hears_the_other_only():
+    import select
+
+    import can
+    from gainlink.hil.links.can import open_link_buses
+
+    config = {**udp_transport(), "reply_port": udp_port()}
+    plant_rx, plant_tx = open_link_buses(config)
+    node_rx, node_tx = open_link_buses(config, controller=True)
+    try:
+        plant_tx.send(can.Message(arbitration_id=0x110, data=b"sample", is_extended_id=False))
+        got = node_rx.recv(2.0)
+        assert got is not None and bytes(got.data) == b"sample"
+        node_tx.send(can.Message(arbitration_id=0x100, data=b"command", is_extended_id=False))
+        got = plant_rx.recv(2.0)
+        assert got is not None and bytes(got.data) == b"command"
+        # nobody got its own frame back, nor the other direction's: the send-only sockets queue nothing at all
+        assert plant_rx.recv(0.2) is None and node_rx.recv(0.2) is None
+        for bus in (plant_tx, node_tx):
+            assert select.select([bus.fileno()], [], [], 0.2)[0] == []
+    finally:
+        for bus in (plant_rx, plant_tx, node_rx, node_tx):
+            bus.shutdown()

@@ -3,7 +3,9 @@
 ``can.Bus(**config)`` takes the scenario's python-can table unchanged (``interface``, ``channel``,
 ``fd``, ``hop_limit``, ...) except gainlink's own keys: ``kind``, ``base_id`` (first CAN id),
 ``busy_poll_us`` (poll without sleeping for this long before blocking, on both ends: lower latency for
-100 % of a core while waiting; default 0), ``encoding`` (``"float32"``, the default, or ``"int16"``:
+100 % of a core while waiting; default 0), ``reply_port`` (udp_multicast only: the controller answers on this port
+of the group, the samples travel on ``port``, so neither end reads back its own frames; see
+:func:`open_link_buses`), ``encoding`` (``"float32"``, the default, or ``"int16"``:
 scaled integers, ``physical = raw * factor + offset``) and ``ranges`` (with int16, ``{ signal = [min,
 max], ... }`` for every output and reference, by the artifact's signal names; inputs default to the
 artifact's ``u_min``/``u_max``). With int16, values beyond their range saturate to its ends; the
@@ -35,7 +37,7 @@ from .base import TRANSPORTS, Command, Transport
 
 log = logging.getLogger(__name__)
 
-GAINLINK_KEYS = {"kind", "base_id", "busy_poll_us", "encoding", "ranges"}
+GAINLINK_KEYS = {"kind", "base_id", "busy_poll_us", "reply_port", "encoding", "ranges"}
 FIRMWARE_INTERFACES = {"udp_multicast", "socketcan"}
 
 
@@ -74,6 +76,77 @@ def open_bus(config: Mapping[str, Any]) -> Any:
     if kwargs["interface"] == "udp_multicast":
         _enlarge_receive_buffer(bus)
     return bus
+
+
+def reply_port(config: Mapping[str, Any]) -> int | None:
+    """The port the controller answers on (``reply_port``), or None when both directions share ``port``.
+
+    Raises
+    ------
+    TransportError
+        ``reply_port`` on another interface than udp_multicast, not a port, or ``port`` itself (one line).
+    """
+    value = config.get("reply_port")
+    if value is None:
+        return None
+    if config.get("interface") != "udp_multicast":
+        raise TransportError(
+            f'CAN transport: reply_port is for interface = "udp_multicast" (not {config.get("interface")}): '
+            "other interfaces do not echo a member's own frames"
+        )
+    port = config.get("port", 43113)
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 65535 or value == port:
+        raise TransportError(f"CAN transport: reply_port must be a UDP port 1..65535 other than port {port}")
+    return value
+
+
+def open_link_buses(config: Mapping[str, Any], *, controller: bool = False) -> tuple[Any, Any]:
+    """``(receive bus, send bus)`` of one end of the link: the plant's, or the ``controller``'s.
+
+    One bus for both, unless the configuration has a ``reply_port``: on udp_multicast every member of a group
+    receives every datagram sent to its port, its own included, and python-can unpacks each one (as much work again
+    as the frames the end wants). With a ``reply_port`` the samples travel on ``port`` and the commands on
+    ``reply_port``; each end receives on the port it listens to, and sends through a second bus on the other port
+    whose reception is switched off (:func:`_deaf`), so nobody reads back its own frames. A member listening on
+    ``port`` alone (a logger) then hears the samples only.
+    """
+    reply = reply_port(config)
+    if reply is None:
+        bus = open_bus(config)
+        return bus, bus
+    sample, command = dict(config), {**config, "port": reply}
+    listen, speak = (sample, command) if controller else (command, sample)
+    rx = open_bus(listen)
+    try:
+        tx = open_bus(speak)
+    except TransportError:
+        rx.shutdown()
+        raise
+    _deaf(tx, group=str(speak.get("channel", "")))
+    return rx, tx
+
+
+def _deaf(bus: Any, *, group: str) -> None:
+    """Switch off a send-only udp_multicast bus's reception (IPv4): it leaves the group and stops receiving the
+    groups other sockets joined (``IP_MULTICAST_ALL`` off), so the kernel queues none of the frames it sends. It
+    can still send to the group. Through the bus's public ``fileno()``; an IPv6 group keeps its reception (its
+    queue fills and the kernel drops the rest, unread)."""
+    import socket
+    import struct
+
+    try:
+        member = socket.inet_aton(group) + struct.pack("@I", socket.INADDR_ANY)
+    except OSError:
+        return  # not an IPv4 group
+    with socket.socket(fileno=os.dup(bus.fileno())) as sock:
+        try:
+            sock.setsockopt(socket.IPPROTO_IP, IP_MULTICAST_ALL, 0)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_DROP_MEMBERSHIP, member)
+        except OSError as exc:  # not Linux: the bus keeps hearing its own frames, unread
+            log.debug("udp_multicast: a send-only bus keeps its reception: %s", exc)
+
+
+IP_MULTICAST_ALL = 49  # linux/in.h; Python's socket module does not name it
 
 
 RECEIVE_BUFFER = 4 << 20
@@ -263,7 +336,9 @@ class CanTransport(Transport):
         self.layout: CanLayout = layout_from_config(self.config, artifact=artifact)
         self.tx = FrameCodec(self.layout.measurement, fd=self.fd)
         self.rx = Assembler(FrameCodec(self.layout.command, fd=self.fd))
-        self.bus: Any = None
+        reply_port(self.config)  # a bad reply_port is refused before anything opens
+        self.bus: Any = None  # the bus the commands come on
+        self._tx: Any = None  # the bus the samples go out on: the same one without a reply_port
         self.m = artifact.m
         self.busy_poll_ns = int(float(self.config.get("busy_poll_us", 0)) * 1000)
         from can import CanOperationError
@@ -275,9 +350,12 @@ class CanTransport(Transport):
 
     def open(self) -> None:
         if self.bus is None:
-            self.bus = open_bus(self.config)
+            self.bus, self._tx = open_link_buses(self.config)
 
     def close(self) -> None:
+        if self._tx is not None and self._tx is not self.bus:
+            self._tx.shutdown()
+        self._tx = None
         if self.bus is not None:
             try:
                 self.bus.shutdown()
@@ -319,7 +397,7 @@ class CanTransport(Transport):
         return v[: len(y)], v[len(y) :]
 
     def send_frames(self, frames: Sequence[Any]) -> None:
-        bus = self.bus
+        bus = self._tx
         try:
             for f in frames:
                 bus.send(f)
@@ -434,6 +512,9 @@ def firmware_can_argv(config: Mapping[str, Any], *, layout: CanLayout) -> list[s
             "--hop-limit",
             str(int(config.get("hop_limit", 1))),
         ]
+        reply = reply_port(config)
+        if reply is not None:
+            argv += ["--reply-port", str(reply)]
     return argv
 
 

@@ -20,7 +20,7 @@ from gainlink.laws import law_of
 from gainlink.laws.flags import WIRE_VERSION
 from gainlink.shipping.artifact import load
 
-from .can import Assembler, FrameCodec, layout_from_config, open_bus
+from .can import Assembler, FrameCodec, layout_from_config, open_link_buses
 
 
 def serve(artifact: Any, config: dict, *, out: Any = sys.stdout) -> int:
@@ -34,7 +34,7 @@ def serve(artifact: Any, config: dict, *, out: Any = sys.stdout) -> int:
     stop = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
     signal.signal(signal.SIGINT, lambda *_: stop.append(1))
-    bus = open_bus(config)
+    bus, out_bus = open_link_buses(config, controller=True)
     wire = f"law=float64 wire={WIRE_VERSION}"
     print(
         f"gainlink_can ready {artifact.name} sha256:{artifact.sha256} (python reference) {wire}", file=out, flush=True
@@ -54,9 +54,11 @@ def serve(artifact: Any, config: dict, *, out: Any = sys.stdout) -> int:
             v = vals.astype(np.float64)
             step = ctl.step(v[:p], v[p : p + q], v[p + q :])
             for frame in tx.encode(seq=seq, values=step.u, status=step.flags, sat=step.saturated):
-                bus.send(frame)
+                out_bus.send(frame)
             last = seq
     finally:
+        if out_bus is not bus:
+            out_bus.shutdown()
         bus.shutdown()
     return 0
 

@@ -224,7 +224,8 @@ class _Run:
         faults = dict(self.injector.counts) if link else {k: v for k, v in self.injector.counts.items() if k == "nan"}
         metrics.update({"complete": outcome.reason is None, "steps_planned": self.plan.N, "wall_s": outcome.wall_s,
                         "steps_per_s": steps / outcome.wall_s if outcome.wall_s > 0 else None, "sched_fifo": False,
-                        "faults_injected": faults, "mode": mode, "twins_wall_s": twins_s})  # fmt: skip
+                        "faults_injected": faults, "mode": mode, "twins_wall_s": twins_s,
+                        "loop_cpu_s": outcome.cpu_s})  # fmt: skip
         metrics.update(self.extra)
         metrics.update(twins.notes)
         if link and sc.mode == "realtime":

@@ -37,12 +37,13 @@ class Stop(Exception):
 @dataclass(frozen=True)
 class Outcome:
     """How the loop ended: the steps taken, the reason when it ended early, its wall time, the overruns of a real-time
-    run and the commands that came late."""
+    run, and the CPU time of the thread that ran it (the loop's own cost, whatever else the machine does)."""
 
     steps: int
     reason: str | None
     wall_s: float
     overruns: int
+    cpu_s: float = 0.0
 
 
 class ClosedLoop:
@@ -67,6 +68,7 @@ class ClosedLoop:
         """Run every planned step (or until the endpoint or the plant fails)."""
         N = self.plan.N
         every = max(1, N // 100)
+        cpu0 = time.thread_time()
         self.t_start = time.perf_counter_ns()
         self.endpoint.begin(self.t_start)
         self.pacer = Pacer(period_ns=self.period_ns) if self.plan.realtime else None
@@ -89,9 +91,10 @@ class ClosedLoop:
         except PlantError as exc:  # in an overrun's held steps
             reason = f"plant failed at step {k}: {exc}"
         wall = (time.perf_counter_ns() - self.t_start) / 1e9
+        cpu = time.thread_time() - cpu0
         if progress is not None:
             progress(k, N)
-        return Outcome(steps=k, reason=reason, wall_s=wall, overruns=self.overruns)
+        return Outcome(steps=k, reason=reason, wall_s=wall, overruns=self.overruns, cpu_s=cpu)
 
     def _next_tick(self, k: int) -> tuple[int, int]:
         """Wait for the pacer's next tick; returns the step to run and when its command is due (absolute ns).

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from gainlink.errors import FirmwareError, PeerTimeoutError, PlantError
 from gainlink.firmware import qemu as fwqemu
+from gainlink.firmware.cost import StepCost, counter_plugin, read_count
 from gainlink.firmware.targets import resolve_cortex_m
 from gainlink.laws import flags, law_of
 from gainlink.proof.sampled_plant import SampledPlant
@@ -147,6 +148,8 @@ class PilResult:
     model_twin_start: str = ""  # where the model twin started
     reference: np.ndarray | None = None  # (N, q) the references the run tracked
     signals: np.ndarray | None = None  # (N, e) the external scheduling signals
+    cost: StepCost | None = None  # the instructions of the law's step in this run (QEMU's counter)
+    cost_symbol: str = ""  # the step function the count covers
 
     def summary(self) -> dict:
         """Counts, timing, the comparison with the twin and the law's checks, JSON-ready."""
@@ -160,6 +163,8 @@ class PilResult:
             "round_trip_us_p99": round(float(np.percentile(self.round_trip_us, 99)), 1),
             "final_output": [float(v) for v in self.y[-1]],
         }
+        if self.cost is not None:
+            out["instructions_per_step"] = instructions_block(self.cost, symbol=self.cost_symbol)
         if self.comparison is not None:
             out["twin"] = self.comparison.to_dict()
         for name, block in self.checks.items():
@@ -193,6 +198,26 @@ def twin_figure(result: PilResult, artifact: Artifact, *, title: str | None = No
         units=sig.get("units"),
         time_unit=artifact.unit("time"),
     )
+
+
+INSTRUCTIONS_NOTE = (
+    "guest instructions QEMU executed (TCG plugin) from the entry of the law's step function to its return, callees "
+    "included, as the cost benchmarks count them; instructions, not cycles"
+)
+
+
+def instructions_block(cost: StepCost, *, symbol: str) -> dict:
+    """``pil.json``'s ``instructions_per_step``: the mean and the worst over the run's steps, the part inside the step's
+    own symbol, and what the figure covers."""
+    return {
+        "symbol": symbol,
+        "mean": round(cost.per_step, 1),
+        "worst": int(cost.dearest),
+        "fewest": int(cost.cheapest),
+        "own_mean": round(cost.own_per_step, 1),
+        "calls": int(cost.calls),
+        "covers": INSTRUCTIONS_NOTE,
+    }
 
 
 def _read_exact(fd: int, size: int, *, proc: subprocess.Popen, deadline_s: float) -> bytes:
@@ -274,7 +299,8 @@ def run_pil(
     plan = _plan(a, law, sampled, steps=steps, reference=reference, S=S)
     start = _twin_start(plant, sigma=plan.sigma0) if model_twin else None
     rec = Recorder(plan, artifact=a, plant=sampled)
-    with _qemu_fifos(stream.elf, board=platform.board.name, steps=steps) as (proc, fin, fout):
+    with _qemu_fifos(stream.elf, board=platform.board.name, steps=steps, symbol=stream.symbol) as qemu:
+        proc, fin, fout, count = qemu
         _open_stream(proc, fin, fout, stream, steps=steps, watchdog_periods=watchdog_periods, deadline_s=deadline_s)
         endpoint = OverFifos(stream, link=(proc, fin, fout), recorder=rec, deadline_s=deadline_s, steps=steps,
                              safe_command=law.safe_command(a), read=_read_exact)  # fmt: skip
@@ -282,11 +308,12 @@ def run_pil(
                           record_state=True)  # fmt: skip
         outcome = loop.run(None)
         _await_exit(proc, deadline_s=deadline_s)
+        cost = read_count(count)
     tw = None if twin is None else _twin_after(a, law, twin, plan, steps)  # off the per-sample path
     mt, note = (None, "off") if start is None else model_twin_after(law, a, start=start, plan=plan, steps=steps)
     return _result(a, law, rec, endpoint, plan=plan, wall_s=outcome.wall_s, twins=(tw, mt, note),
                    design_model=isinstance(plant, ArtifactPlant), check_plant=check_plant,
-                   final_state=sampled.state())  # fmt: skip
+                   final_state=sampled.state(), cost=(cost, stream.symbol))  # fmt: skip
 
 
 class _Sampled:
@@ -349,8 +376,9 @@ def _twin_after(a: Artifact, law, plant: DiscretePlant, plan: Plan, steps: int) 
 
 
 def _result(a: Artifact, law, rec: Recorder, endpoint, *, plan: Plan, wall_s: float, twins: tuple,
-            design_model: bool, check_plant, final_state: np.ndarray) -> PilResult:  # fmt: skip
-    """The PIL result from the run's record, its twins and the law's checks of the image's records."""
+            design_model: bool, check_plant, final_state: np.ndarray, cost: tuple) -> PilResult:  # fmt: skip
+    """The PIL result from the run's record, its twins, the law's checks of the image's records and the count of its
+    step's instructions (``cost``: the count and the symbol it covers)."""
     twin_trace, model, note = twins
     steps = plan.N
     trace = rec.trace(steps, law=law, artifact=a, twins=Twins(twin_trace, model, note, {}))
@@ -379,26 +407,32 @@ def _result(a: Artifact, law, rec: Recorder, endpoint, *, plan: Plan, wall_s: fl
         model_twin_start=note,
         reference=plan.R,
         signals=plan.S,
+        cost=cost[0],
+        cost_symbol=cost[1],
     )
 
 
 @contextmanager
-def _qemu_fifos(elf: Path, *, board: str, steps: int):
-    """QEMU running ``elf`` with its semihosting files gl_in.bin/gl_out.bin as FIFOs: (process, in fd, out fd)."""
+def _qemu_fifos(elf: Path, *, board: str, steps: int, symbol: str):
+    """QEMU running ``elf`` with its semihosting files gl_in.bin/gl_out.bin as FIFOs, counting the instructions of
+    every call of ``symbol`` (:func:`gainlink.firmware.cost.counter_plugin`): (process, in fd, out fd, the file the
+    count is in once QEMU exited)."""
     with tempfile.TemporaryDirectory(prefix="gainlink-pil-") as tmp:
         work = Path(tmp)
         os.mkfifo(work / "gl_in.bin")
         os.mkfifo(work / "gl_out.bin")
+        count = work / "count.txt"
+        plugin = counter_plugin(elf, symbol=symbol, out=count)
         fin = os.open(work / "gl_in.bin", os.O_RDWR)
         fout = os.open(work / "gl_out.bin", os.O_RDWR)
         cmd = ["timeout", "-k", "2", str(60 + steps / 1000)] + fwqemu.qemu_command(
-            elf, board=board, serial=f"file:{work / 'uart.log'}"
+            elf, board=board, serial=f"file:{work / 'uart.log'}", plugin=plugin
         )
         proc = subprocess.Popen(
             cmd, cwd=work, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
         )
         try:
-            yield proc, fin, fout
+            yield proc, fin, fout, count
         finally:
             if proc.poll() is None:
                 proc.kill()

@@ -26,6 +26,7 @@ def pil_summary_text(summary: dict, *, artifact: Any, out_dir: Path | None = Non
         f"p50 {_g(s['round_trip_us_p50'])} us, p99 {_g(s['round_trip_us_p99'])} us",
         f"  saturated {s['saturated_steps']} of {s['steps']} steps (any input); refused samples (faults) {s['faults']}",
     ]
+    lines += instruction_lines(s.get("instructions_per_step"))
     lines += law_of(artifact).pil_lines(s)
     units = sig.get("units")
     lines += twin_lines(s.get("twin"), units=units)
@@ -37,3 +38,14 @@ def pil_summary_text(summary: dict, *, artifact: Any, out_dir: Path | None = Non
     if out_dir is not None:
         lines.append(f"  report: {out_dir / 'pil.json'}, pil.csv, twin.png")
     return "\n".join(lines) + "\n"
+
+
+def instruction_lines(block: dict | None) -> list[str]:
+    """The summary's line on the instructions of the law's step in the run (``pil.json``'s
+    ``instructions_per_step``)."""
+    if not block:
+        return []
+    return [
+        f"  instructions per step in {block['symbol']} (callees included, counted by QEMU): mean {block['mean']:g}, "
+        f"worst {block['worst']} over {block['calls']} steps; instructions, not cycles"
+    ]

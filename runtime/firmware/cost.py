@@ -125,6 +125,16 @@ def count_calls(
 ) -> StepCost:
     """Replay ``Y``, ``R``, ``S`` through ``elf`` on ``board``, counting every direct call of the function ``symbol``
     (e.g. ``gl_fmaf`` on a soft-float core) from its entry to its return, callees included."""
+    with tempfile.TemporaryDirectory(prefix="gainlink-cost-") as tmp:
+        result = Path(tmp) / "count.txt"
+        plugin = counter_plugin(elf, symbol=symbol, out=result)
+        fwqemu.replay(elf, artifact, board=board, Y=Y, R=R, S=S, plugin=plugin, law=law)
+        return read_count(result)
+
+
+def counter_plugin(elf: Path, *, symbol: str, out: Path) -> list[str]:
+    """The QEMU arguments that count every direct call of ``symbol`` in ``elf`` from its entry to its return, callees
+    included (the plugin, built and cached), the totals written to ``out`` when QEMU exits (:func:`read_count`)."""
     sym = symbol_sizes(elf, (symbol,)).get(symbol)
     if sym is None:
         raise FirmwareError(f"{elf} has no {symbol} symbol")
@@ -132,13 +142,18 @@ def count_calls(
     if not returns:
         raise FirmwareError(f"{elf} never calls {symbol} directly: no return address to close a count")
     lo, hi = sym["address"], sym["address"] + sym["size"]
-    plugin = build_plugin()
-    with tempfile.TemporaryDirectory(prefix="gainlink-cost-") as tmp:
-        result = Path(tmp) / "count.txt"
-        spec = [f"{plugin}", f"lo={lo:#x}", f"hi={hi:#x}", f"entry={lo:#x}", f"out={result}"]
-        spec += [f"ret={r:#x}" for r in returns]
-        fwqemu.replay(elf, artifact, board=board, Y=Y, R=R, S=S, plugin=["-plugin", ",".join(spec)], law=law)
-        fields = {k: int(v) for k, v in (item.split("=") for item in result.read_text().split())}
+    spec = [f"{build_plugin()}", f"lo={lo:#x}", f"hi={hi:#x}", f"entry={lo:#x}", f"out={out}"]
+    spec += [f"ret={r:#x}" for r in returns]
+    return ["-plugin", ",".join(spec)]
+
+
+def read_count(out: Path) -> StepCost:
+    """The counts the plugin wrote to ``out`` (:func:`counter_plugin`) when QEMU exited."""
+    try:
+        text = out.read_text()
+    except OSError:
+        raise FirmwareError("QEMU exited without the instruction counter's totals (the plugin did not run)") from None
+    fields = {k: int(v) for k, v in (item.split("=") for item in text.split())}
     return StepCost(
         instructions=fields["insns"],
         calls=fields["calls"],

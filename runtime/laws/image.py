@@ -19,7 +19,8 @@ class ImageStream:
     :func:`gainlink.firmware.qemu.output_header`), one input record ``din`` (``tag``, ``y``, ``r``, ``s``:
     :func:`gainlink.shipping.records.sample_layout`) and one output record ``dout`` per step (the law's record,
     :func:`gainlink.shipping.records.layout`), which :attr:`decode` turns into the law's
-    :class:`~gainlink.laws.base.Step`."""
+    :class:`~gainlink.laws.base.Step`; ``symbol`` is the law's step function in the image, what an instruction count
+    covers (:func:`gainlink.shipping.law_c.step_symbol`)."""
 
     elf: Path
     in_magic: int
@@ -28,6 +29,7 @@ class ImageStream:
     din: np.dtype
     dout: np.dtype
     decode: Callable[[Any], Any]
+    symbol: str
     watchdog: bool = True  # the header's last word is the watchdog's periods (else 0)
 
     def sample(self, y: np.ndarray, r: np.ndarray, s: np.ndarray) -> bytes:
@@ -48,11 +50,13 @@ def law_image_stream(artifact: Any, *, target: str, board: str, decode: Callable
     from ..firmware import qemu as fwqemu
     from ..firmware.build import replay_image
     from ..shipping import records
+    from ..shipping.law_c import step_symbol
 
     elf = replay_image(artifact, target=target, board=board)
     return ImageStream(elf=elf, in_magic=fwqemu.IN_MAGIC, out_magic=fwqemu.OUT_MAGIC,
                        header=fwqemu.output_header(artifact), din=records.sample_layout(artifact).dtype,
-                       dout=records.layout(artifact).dtype, decode=decode)  # fmt: skip
+                       dout=records.layout(artifact).dtype, decode=decode,
+                       symbol=step_symbol(artifact))  # fmt: skip
 
 
 def first_difference(image: np.ndarray, model: np.ndarray) -> dict | None:

@@ -29,7 +29,8 @@ typedef enum gl_can_backend { GL_CAN_SOCKETCAN = 0, GL_CAN_UDP = 1 } gl_can_back
 typedef struct gl_can_config {
     gl_can_backend_t backend;  /**< Link kind. */
     const char *channel;       /**< SocketCAN interface name, or the IPv4 multicast group. */
-    uint16_t port;             /**< UDP port (udp_multicast). */
+    uint16_t port;             /**< UDP port (udp_multicast): where the node listens. */
+    uint16_t reply_port;       /**< UDP port it sends to (udp_multicast; 0: `port`, where it hears its own frames). */
     int hop_limit;             /**< IPv4 multicast TTL (udp_multicast); 0 keeps frames on the host. */
     int fd;                    /**< 1 to send/accept CAN FD frames. */
     uint32_t rx_lo;            /**< Lowest identifier to receive. */
@@ -45,6 +46,7 @@ typedef struct gl_can_config {
 typedef struct gl_can_link {
     gl_can_config_t cfg;       /**< Its configuration. */
     int sock;                  /**< Socket descriptor. */
+    uint32_t group;            /**< udp_multicast: the group's IPv4 address (network order), parsed once. */
     uint64_t rx_read;          /**< Datagrams / frames read from the socket. */
     uint64_t rx_filtered;      /**< Well-formed frames with identifiers outside [rx_lo, rx_hi] (our own echo too). */
     uint64_t rx_refused;       /**< Not a standard data frame: malformed or oversized datagram, extended, remote,

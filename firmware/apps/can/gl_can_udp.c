@@ -85,6 +85,7 @@ int gl_can_udp_open(gl_can_link_t *link)
         close(s);
         return -1;
     }
+    link->group = mreq.imr_multiaddr.s_addr;
     link->sock = s;
     return 0;
 }
@@ -135,10 +136,8 @@ int gl_can_udp_send(gl_can_link_t *link, const gl_can_frame_t *frame)
     struct sockaddr_in dest;
     memset(&dest, 0, sizeof dest);
     dest.sin_family = AF_INET;
-    dest.sin_port = htons(link->cfg.port);
-    if (inet_pton(AF_INET, link->cfg.channel, &dest.sin_addr) != 1) {
-        return -1;
-    }
+    dest.sin_port = htons(link->cfg.reply_port != 0u ? link->cfg.reply_port : link->cfg.port);
+    dest.sin_addr.s_addr = link->group;
     return sendto(link->sock, buf, len, 0, (struct sockaddr *)&dest, sizeof dest) == (ssize_t)len ? 0 : -1;
 }
 

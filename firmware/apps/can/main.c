@@ -4,10 +4,13 @@
  *
  * Usage:
  * @code
- *   gainlink_can --backend udp --channel 239.74.163.2 [--port 43113] [--hop-limit 0] [--fd] [--base-id 256]
+ *   gainlink_can --backend udp --channel 239.74.163.2 [--port 43113] [--reply-port N] [--hop-limit 0] [--fd]
+ *                [--base-id 256]
  *   gainlink_can --backend socketcan --channel vcan0 [--fd] [--base-id 256]
  *   gainlink_can ... --encoding int16 --scale-measurement 'F,O;F,O;F,O' --scale-command 'F,O'
  * @endcode
+ * `--reply-port N` (udp) sends the commands to port N of the group instead of `--port`, where the samples come:
+ * neither end then reads back its own frames (python-can's bus pays for every datagram it hears).
  * `--spin-us N` polls without sleeping for N us after each answered sample before blocking again
  * (lower latency in lockstep for the price of a busy core while waiting).
  * `--encoding float32|int16` (default float32): with int16 every value is a scaled signed 16-bit integer,
@@ -80,13 +83,14 @@ static int usage(const char *why)
 
 static int help(void)
 {
-    printf("usage: gainlink_can --backend udp|socketcan --channel GROUP|IFACE [--port N] [--hop-limit N] [--fd]\n"
-           "                    [--base-id N] [--spin-us N]\n"
+    printf("usage: gainlink_can --backend udp|socketcan --channel GROUP|IFACE [--port N] [--reply-port N]\n"
+           "                    [--hop-limit N] [--fd] [--base-id N] [--spin-us N]\n"
            "                    [--encoding float32|int16 --scale-measurement F,O;F,O;... --scale-command F,O;...]\n"
            "\n"
            "  --backend udp|socketcan  python-can udp_multicast wire format, or a SocketCAN interface\n"
            "  --channel GROUP|IFACE    IPv4 multicast group (udp) or interface name (socketcan)\n"
            "  --port N, --hop-limit N  udp_multicast port (default 43113) and TTL (default 1; 0 stays on the host)\n"
+           "  --reply-port N           udp_multicast: send the commands to this port (default: --port)\n"
            "  --fd                     CAN FD frames (up to 8 values per frame)\n"
            "  --base-id N              first 11-bit identifier (default 0x100; commands base+j, samples base+0x10+i)\n"
            "  --spin-us N              poll without sleeping for N us after each answer (default 0)\n"
@@ -188,6 +192,11 @@ static int parse_value_option(const char *a, const char *next, options_t *o)
             return usage("--port must be 0..65535");
         }
         o->link.port = (uint16_t)v;
+    } else if (strcmp(a, "--reply-port") == 0) {
+        if (parse_uint(next, 65535, &v) != 0 || v == 0u) {
+            return usage("--reply-port must be 1..65535");
+        }
+        o->link.reply_port = (uint16_t)v;
     } else if (strcmp(a, "--hop-limit") == 0) {
         if (parse_uint(next, 255, &v) != 0) {
             return usage("--hop-limit must be 0..255");
@@ -317,8 +326,8 @@ static void print_summary(void)
 
 int main(int argc, char **argv)
 {
-    options_t o = {.link = {.backend = GL_CAN_UDP, .channel = NULL, .port = 43113, .hop_limit = 1, .fd = 0,
-                            .rx_lo = 0, .rx_hi = 0},
+    options_t o = {.link = {.backend = GL_CAN_UDP, .channel = NULL, .port = 43113, .reply_port = 0, .hop_limit = 1,
+                            .fd = 0, .rx_lo = 0, .rx_hi = 0},
                    .base_id = 0x100, .spin_us = 0, .encoding = GL_CAN_FLOAT32, .scale_meas = NULL,
                    .scale_cmd = NULL};
     int rc = parse_options(argc, argv, &o);
