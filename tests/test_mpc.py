@@ -290,3 +290,26 @@ def test_an_image_whose_mpc_workspace_does_not_fit_the_boards_ram_is_refused_wit
     a = from_dict(design(load_spec(EXAMPLES / "quadrotor_hover_mpc.toml")).artifact)
     with pytest.raises(ToolchainError, match=r"region .RAM. overflowed by \d+ bytes"):
         replay_image(a, target="cortex-m0", board="microbit")
+
+
+def test_pil_counts_the_mpc_steps_instructions_within_the_cost_benchmarks_bound_at_the_cap():
+    """`pil run` on the M4F counts ``gl_mpc_step`` (callees included) on examples/pendulum_mpc.toml from 1 m off, where
+    the cap stops the solver: its worst step is within bench/mpc_cost.py's bound at the cap (the fixed part plus the
+    cap times the dearest iteration, recorded in bench/results/mpc_cost.json from replayed samples) and the issue's
+    target of 50,000, and its capped steps cost more than a step that stops early."""
+    import json
+
+    from gainlink.hil.loop.pil import make_plant, run_pil
+    from gainlink.laws import design
+    from gainlink.spec import load_spec
+    from support.paths import ROOT
+
+    a = from_dict(design(load_spec(EXAMPLES / "pendulum_mpc.toml")).artifact)
+    rec = json.loads((ROOT / "bench" / "results" / "mpc_cost.json").read_text())
+    (row,) = [d for d in rec["designs"] if d["design"] == "pendulum_mpc"]
+    (m4,) = [t for t in row["targets"] if t["target"] == "cortex-m4"]
+    plant = make_plant("artifact", artifact=a, x0=np.array([1.0, 0.0, 0.0, 0.0]))
+    res = run_pil(a, plant=plant, steps=30, target="cortex-m4", model_twin=False)
+    block, mpc = res.summary()["instructions_per_step"], res.summary()["mpc"]
+    assert block["symbol"] == "gl_mpc_step" and block["calls"] == 30 and mpc["capped_steps"] > 0
+    assert block["fewest"] < block["mean"] <= block["worst"] <= m4["bound_per_step_at_cap"] <= 50_000
