@@ -3,7 +3,7 @@
 Prints JSON. For the three examples and random designs with n = 4, 8, 12 (m = p = 2, one integrator):
 the median wall time of `design` with the float32 check and without it (the baseline, measured in the
 same run; `ratio` is their quotient), and the time per step of the numpy statement of the C's float32
-arithmetic (gainlink.proof.float32_law) against the float64 reference law on the same samples. Target: the
+arithmetic (gainlink.laws.lq.model) against the float64 reference law on the same samples. Target: the
 check adds at most a few tenths of a second to a design of n <= 12 (ratio reported, no absolute gate).
 
     .venv/bin/python bench/design_checks.py
@@ -27,7 +27,7 @@ os.environ["OPENBLAS_NUM_THREADS"] = "1"
 
 import numpy as np
 from gainlink.laws import design as design_spec
-from gainlink.proof.float32_law import Float32Loop
+from gainlink.laws.lq.model import Float32Loop
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import PlantSpec, load_spec, parse_spec

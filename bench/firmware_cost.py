@@ -28,9 +28,9 @@ from pathlib import Path
 
 from gainlink.firmware.build import build
 from gainlink.firmware.cost import count_calls, count_step_instructions, implemented_macs, law_macs
-from gainlink.firmware.golden import example_cases, random_case
 from gainlink.firmware.size import size_report
 from gainlink.firmware.targets import CORTEX_M_TARGETS, TARGETS
+from gainlink.laws.lq.golden import example_cases, random_case
 from gainlink.proof.reference import ReferenceLoop
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -26,13 +26,13 @@ import sys
 from pathlib import Path
 
 from gainlink.fileio import read_toml
-from gainlink.firmware import fixed
 from gainlink.firmware.build import build
 from gainlink.firmware.cost import count_step_instructions
-from gainlink.firmware.golden import example_cases
 from gainlink.firmware.size import size_report, symbol_sizes
 from gainlink.firmware.targets import TARGETS
 from gainlink.laws import design as design_spec
+from gainlink.laws.fixed import firmware as fixed
+from gainlink.laws.lq.golden import example_cases
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
 

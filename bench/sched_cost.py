@@ -23,12 +23,12 @@ from pathlib import Path
 
 import numpy as np
 from gainlink.engines.native import NativeLoop
-from gainlink.engines.sched_native import NativeScheduledLoop
 from gainlink.fileio import read_toml
 from gainlink.firmware.build import build
 from gainlink.firmware.cost import count_step_instructions
 from gainlink.firmware.size import size_report, symbol_sizes
 from gainlink.laws import design as design_spec
+from gainlink.laws.scheduled.native import NativeScheduledLoop
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
 

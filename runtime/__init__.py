@@ -34,7 +34,7 @@ if TYPE_CHECKING:  # the same names for type checkers, as explicit re-exports
     from .errors import ScenarioError as ScenarioError
     from .errors import SpecError as SpecError
     from .hil import campaign as campaign
-    from .proof.fidelity import float32_fidelity as float32_fidelity
+    from .laws.lq.fidelity import float32_fidelity as float32_fidelity
     from .proof.onestep import one_step_check as one_step_check
     from .proof.reference import ReferenceLoop as ReferenceLoop
     from .proof.reference import Trace as Trace
@@ -62,7 +62,7 @@ _WHERE = {
     "compensator_stability": (".synthesis.compensator", "compensator_stability"),
     "design": (".api", "design"),
     "design_report": (".api", "design_report"),
-    "float32_fidelity": (".proof.fidelity", "float32_fidelity"),
+    "float32_fidelity": (".laws.lq.fidelity", "float32_fidelity"),
     "from_gains": (".api", "from_gains"),
     "hil": (".hil", None),
     "load": (".api", "load"),

@@ -190,7 +190,7 @@ def design_report(
         "observer": observer,
         "limits": limits,
         "operating_point": operating_point,
-        "schedule": None if schedule is None else _schedule_table(schedule),
+        "schedule": schedule,
         "implementation": implementation,
     }
     shortcuts = {"Q": Q, "R": R, "W": W, "V": V, "u_min": u_min, "u_max": u_max}
@@ -198,9 +198,6 @@ def design_report(
     if isinstance(plant, (str, Path)) and not given:
         return design_spec(load_spec(plant))
     data = _merge_tables(_spec_dict(plant, Ts=Ts, name=name, discretization=discretization), tables, shortcuts)
-    if schedule is not None:  # the points hold the matrices; [plant] keeps the shared kind and names
-        data["plant"] = {k: v for k, v in data["plant"].items() if k in ("kind", "states", "inputs", "outputs")}
-        data.pop("operating_point", None)
     return design_spec(_parse(data, source=_source_name(plant)))
 
 
@@ -345,7 +342,7 @@ def replay(
     -------
     Trace
         Commands, saturation flags, faults and the state after each step (a scheduled artifact:
-        :class:`~gainlink.proof.scheduled_reference.ScheduledTrace`, with the sigma each step used).
+        :class:`~gainlink.laws.scheduled.reference.ScheduledTrace`, with the sigma each step used).
 
     Examples
     --------
@@ -507,6 +504,24 @@ def _schedule_table(schedule: Mapping[str, Any]) -> dict[str, Any]:
     return table
 
 
+def _points_hold_the_plant(data: dict[str, Any]) -> dict[str, Any]:
+    """A ``[schedule]`` given: its points hold the matrices and operating points; ``[plant]`` keeps the shared kind
+    and names."""
+    data["plant"] = {k: v for k, v in data["plant"].items() if k in ("kind", "states", "inputs", "outputs")}
+    data.pop("operating_point", None)
+    return data
+
+
+def _unchanged(data: dict[str, Any]) -> dict[str, Any]:
+    return data
+
+
+#: A table given as an argument, in its spec form (a ``[schedule]``'s points may be ``control.StateSpace``s).
+_TABLE_FORMS = {"schedule": _schedule_table}
+#: What giving a table as an argument does to the rest of the spec.
+_TABLE_EFFECTS = {"schedule": _points_hold_the_plant}
+
+
 def _identifiers(labels: list[str], prefix: str) -> list[str]:
     """python-control's labels when they are all distinct identifiers (``u[0]`` is not), else prefix + index."""
     if all(_IDENT.match(s) for s in labels) and len(set(labels)) == len(labels):
@@ -526,12 +541,14 @@ _REPLACES = {
 
 
 def _merge_tables(data: dict[str, Any], tables: Mapping[str, Any], shortcuts: Mapping[str, Any]) -> dict[str, Any]:
-    """``data`` with the given tables' keys replaced, then the keyword shortcuts put in their tables."""
+    """``data`` with the given tables' keys replaced (each in its spec form, :data:`_TABLE_FORMS`, and with what
+    giving it does to the rest, :data:`_TABLE_EFFECTS`), then the keyword shortcuts put in their tables."""
     for key, table in tables.items():
         if table is not None:
             merged = dict(data.get(key) or {})
-            merged.update({k: _jsonable(v) for k, v in table.items()})
+            merged.update({k: _jsonable(v) for k, v in _TABLE_FORMS.get(key, dict)(table).items()})
             data[key] = merged
+            data = _TABLE_EFFECTS.get(key, _unchanged)(data)
     for key, value in shortcuts.items():
         if value is None:
             continue

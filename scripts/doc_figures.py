@@ -65,7 +65,7 @@ _HOST_LINKS = ("hil/loop", "hil/links", "firmware/apps", "firmware/ports/host")
 SOURCES: dict[str, tuple[str, ...]] = {
     "campaign": ("hil/campaign", "hil/loop/closed_loop.py", "hil/loop/endpoints.py", "bench/campaign.py"),
     "firmware_cost": (*_FIRMWARE_C, "runtime/firmware/cost.py", "bench/firmware_cost.py"),
-    "fixed_point_cost": (*_FIRMWARE_C, "runtime/synthesis/fixed_point.py", "bench/fixed_point_cost.py"),
+    "fixed_point_cost": (*_FIRMWARE_C, "runtime/laws/fixed/certificate.py", "bench/fixed_point_cost.py"),
     "fuzz": ("firmware/fuzz", "firmware/apps", "firmware/src", "bench/fuzz.py"),
     "hil_lockstep": (*_HOST_LINKS, "bench/hil_lockstep.py"),
     "hil_realtime": (*_HOST_LINKS, "bench/hil_realtime.py"),
@@ -249,11 +249,11 @@ def image_sizes() -> dict[tuple[str, str], Doc]:
     baseline of the same export, ``GL_LAW=lq_float32``)."""
     import logging
 
-    from gainlink.firmware import fixed
     from gainlink.firmware.build import build
     from gainlink.firmware.size import size_report
     from gainlink.firmware.targets import CORTEX_M_TARGETS, TARGETS
     from gainlink.laws import design as design_spec
+    from gainlink.laws.fixed import firmware as fixed
     from gainlink.shipping.artifact import from_dict
     from gainlink.spec import load_spec
 

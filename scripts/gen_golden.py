@@ -15,7 +15,7 @@ import logging
 import sys
 from pathlib import Path
 
-from gainlink.firmware.golden import example_cases, random_cases, write_case, write_index
+from gainlink.laws.lq.golden import example_cases, random_cases, write_case, write_index
 
 ROOT = Path(__file__).resolve().parents[1]
 

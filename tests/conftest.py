@@ -18,8 +18,8 @@ from pathlib import Path
 
 import pytest
 from gainlink.fileio import exclusive_lock
-from gainlink.firmware.golden import GoldenCase, closed_loop_cases, random_cases
 from gainlink.laws import design as design_spec
+from gainlink.laws.lq.golden import GoldenCase, closed_loop_cases, random_cases
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import load
 from gainlink.spec import load_spec

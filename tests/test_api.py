@@ -67,7 +67,7 @@ def test_campaigns_are_in_the_namespace_without_import_gainlink_loading_dask():
         "gainlink.hil",
         "gainlink.proof.onestep",
         "gainlink.proof.twin",
-        "gainlink.proof.fidelity",
+        "gainlink.laws.lq.fidelity",
         "gainlink.synthesis.compensator",
     ],
 )

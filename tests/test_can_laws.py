@@ -10,9 +10,9 @@ import json
 import numpy as np
 import pytest
 from gainlink.hil import run as hil_run
-from gainlink.proof.fixed_format import real
-from gainlink.proof.fixed_law import FixedPointLoop
-from gainlink.proof.float32_law import Float32Loop
+from gainlink.laws.fixed.model import FixedPointLoop
+from gainlink.laws.fixed.qformat import real
+from gainlink.laws.lq.model import Float32Loop
 from gainlink.shipping.artifact import load
 from gainlink.shipping.can_layout import layout_for
 from support.fixed import example, model_run
@@ -53,7 +53,7 @@ def test_q31_over_can_is_the_integer_law_bit_for_bit_on_the_recorded_samples(pen
     tr = res.trace
     assert res.complete and res.metrics["lost"] == 0 and tr.t.size == 200
     assert "law=q31" in res.info["controller"]["ready"]
-    # The oracle: the integer model (gainlink.proof.fixed_law) on the float32 samples the run sent, from the start.
+    # The oracle: the integer model (gainlink.laws.fixed.model) on the float32 samples the run sent, from the start.
     Y, R = tr.y.astype(np.float32), tr.r.astype(np.float32)
     model = model_run(a, Y, R)
     u_model = real(model.U, FixedPointLoop(a).f["u"]).astype(np.float32)

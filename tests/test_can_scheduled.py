@@ -1,6 +1,6 @@
 """The firmware's CAN node runs a scheduled artifact's law over the bus (gainlink.hil.loop.bridge): the
 tank of examples/tank_scheduled.toml, scheduled on its measured level, swept across its envelope through the real
-gainlink_can process on python-can udp_multicast. Oracle: the scheduled float32 model (gainlink.proof.scheduled_float32,
+gainlink_can process on python-can udp_multicast. Oracle: the scheduled float32 model (gainlink.laws.scheduled.model,
 bit for bit the C) on the float32 samples the run recorded: the same commands, saturation and sigma flags."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from gainlink.hil import run as hil_run
 from gainlink.hil.links.can import CanTransport
-from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
+from gainlink.laws.scheduled.model import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from gainlink.shipping.can_layout import layout_for
 from schedule_cases import external_tank, tank_dict, tank_hil_scenario

@@ -24,9 +24,9 @@ from gainlink.engines.native import NativeLoop
 from gainlink.firmware import qemu as fwqemu
 from gainlink.firmware.build import firmware_dir, replay_image
 from gainlink.firmware.cost import count_step_instructions
-from gainlink.firmware.golden import example_cases
 from gainlink.firmware.targets import BOARDS, CORTEX_M_TARGETS, TARGETS
 from gainlink.hil.loop.pil import make_plant, run_pil
+from gainlink.laws.lq.golden import example_cases
 from gainlink.shipping.artifact import load
 from support.cli import assert_refused, run_cli
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from gainlink.engines.native import NativeLoop
 from gainlink.laws import design as design_spec
-from gainlink.proof.fidelity import THRESHOLD, float32_fidelity
+from gainlink.laws.lq.fidelity import THRESHOLD, float32_fidelity
 from gainlink.proof.onestep import one_step_check
 from gainlink.proof.reference import ReferenceLoop, StepResult
 from gainlink.proof.simulation import simulate_linear
@@ -222,7 +222,7 @@ def test_module_docstring_figures_are_what_the_examples_measure(example_artifact
     one the example's design records today, to the two digits printed (wood_berry said 6.2e-7 on main; 8.9e-7)."""
     import re
 
-    import gainlink.proof.fidelity as fidelity
+    import gainlink.laws.lq.fidelity as fidelity
 
     text = " ".join(fidelity.__doc__.split())
     quoted = dict(re.findall(r"(\w+) (\d\.\de-\d+)", text[text.index("Measured on the examples") :]))

@@ -7,7 +7,7 @@ import logging
 import pytest
 from gainlink.firmware.build import replay_image
 from gainlink.firmware.cost import count_step_instructions, law_macs
-from gainlink.firmware.golden import example_cases
+from gainlink.laws.lq.golden import example_cases
 from support.paths import EXAMPLES
 
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware.build import build
-from gainlink.firmware.golden import example_cases, random_cases
+from gainlink.laws.lq.golden import example_cases, random_cases
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping.artifact import from_dict, seal
 from hypothesis import HealthCheck, given, settings
@@ -364,7 +364,7 @@ def test_firmware_run_answers_each_stdin_line_and_exits_2_after_an_unreadable_on
     is then 2, with one line on stderr."""
     import sys
 
-    from gainlink.proof.float32_law import Float32Loop
+    from gainlink.laws.lq.model import Float32Loop
     from gainlink.shipping import records
     from gainlink.shipping.artifact import load
 

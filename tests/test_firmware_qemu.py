@@ -20,7 +20,7 @@ from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware import qemu as fwqemu
 from gainlink.firmware.build import build, replay_image
-from gainlink.firmware.golden import example_cases, random_cases
+from gainlink.laws.lq.golden import example_cases, random_cases
 from gainlink.shipping.artifact import render
 from support.cli import assert_refused
 from support.paths import EXAMPLES

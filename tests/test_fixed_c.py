@@ -1,4 +1,4 @@
-"""The fixed-point C (firmware/src/gl_fixed.c) against the bit-exact integer model gainlink.proof.fixed_law: the
+"""The fixed-point C (firmware/src/gl_fixed.c) against the bit-exact integer model gainlink.laws.fixed.model: the
 host build step for step (command words, unsaturated commands, estimate, integrators, every flag) on the three
 examples (q31; q15 where the certificate allows it: wood_berry) and on seeded random designs (both observer forms,
 clamp and back-calculation, q31 and q15); samples outside their ranges clipped and flagged, a NaN refused with the
@@ -14,11 +14,12 @@ import numpy as np
 import pytest
 from gainlink.fileio import read_toml
 from gainlink.firmware.build import build
-from gainlink.firmware.fixed import CLIPPED, FAULT, OVERFLOW, OVERFLOW_BITS, run_host, run_qemu
-from gainlink.proof.fixed_format import WORDS, real
-from gainlink.proof.fixed_law import gains_from_artifact
+from gainlink.laws.fixed.firmware import CLIPPED, FAULT, OVERFLOW, OVERFLOW_BITS, run_host, run_qemu
+from gainlink.laws.fixed.model import gains_from_artifact
+from gainlink.laws.fixed.qformat import WORDS, real
 from gainlink.shipping.artifact import from_dict, seal
 from gainlink.shipping.codegen import render_c
+from gainlink.shipping.export_c import render_export
 from support.designs import designed
 from support.fixed import DesignLaw, example, model_run, random_design
 from support.paths import EXAMPLES as SPECS
@@ -79,13 +80,13 @@ def _float_pendulum() -> dict:
 
 def test_fixed_export_holds_the_stored_integers():
     a = example("pendulum", "q31")
-    files = render_c(a)
+    files = render_export(a)
     assert {"gl_fixed_gains.h", "gl_fixed_gains.c", "gl_fixed_step.h"} <= set(files)
     assert "#define GL_NUMERIC_Q31 1" in files["gl_fixed_gains.h"]
     table = a.checks["fixed_point"]["integers"]
     first = next(c for c in table["KX"][0] if c != 0)
     assert f".coef = {{{first}," in files["gl_fixed_gains.c"]
-    assert render_c(a) == files  # deterministic
+    assert render_export(a) == files  # deterministic
 
 
 @pytest.mark.parametrize("name,numeric", EXAMPLES, ids=[f"{n}-{q}" for n, q in EXAMPLES])

@@ -1,5 +1,5 @@
 """`replay --compare` on a fixed-point artifact: the trace, step by step from its own XH, Z words, against the
-bit-exact integer law (the oracle: gainlink.proof.fixed_law), command words equal bit for bit. The host C's trace
+bit-exact integer law (the oracle: gainlink.laws.fixed.model), command words equal bit for bit. The host C's trace
 passes; one command moved by one LSB is caught at its step; a trace of another numeric format is refused (by the
 format line a recorded trace carries, and by its words when it has none)."""
 
@@ -11,7 +11,7 @@ import re
 
 import pytest
 from gainlink.laws import law_of
-from gainlink.proof.fixed_onestep import fixed_one_step_check, trace_words
+from gainlink.laws.fixed.onestep import fixed_one_step_check, trace_words
 from gainlink.proof.replay_io import read_samples
 from gainlink.shipping.artifact import load
 from support.cli import assert_refused, run_cli

@@ -9,7 +9,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from gainlink.firmware.fixed import replay_image, run_host
+from gainlink.laws.fixed.firmware import replay_image, run_host
 from gainlink.shipping.artifact import load
 from support.cli import GOOD_SPEC, assert_refused, run_cli
 from support.paths import EXAMPLES

@@ -4,7 +4,7 @@ the same export.
 
 With --input the replay CSV starts with the `# numeric=q31|q15` line `gainlink replay` writes for the artifact, and
 its commands, estimate and integrators are the integer words of the bit-exact numpy model
-(gainlink.proof.fixed_law, the oracle) in real units, bit for bit, and not the float32 law's; without --input the
+(gainlink.laws.fixed.model, the oracle) in real units, bit for bit, and not the float32 law's; without --input the
 executable answers stdin lines with the model's words, each as it comes (a program may drive it line by line). On
 the q31 pendulum and the q15 Wood-Berry column, samples about the middle of their declared ranges, one past its range
 (clipped and flagged) and one NaN (refused)."""
@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from gainlink.laws import law_of
-from gainlink.proof.fixed_format import real
-from gainlink.proof.fixed_law import FixedPointLoop
-from gainlink.proof.float32_law import Float32Loop
+from gainlink.laws.fixed.model import FixedPointLoop
+from gainlink.laws.fixed.qformat import real
+from gainlink.laws.lq.model import Float32Loop
 from support.fixed import example, model_run
 
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))

@@ -1,5 +1,5 @@
 """The fixed-point headline (``checks.fixed_point.error.certified``) covers the loop in operation: twin loops around
-the design model, the integer law (gainlink.proof.fixed_law, bit for bit the C; its command as the float the C
+the design model, the integer law (gainlink.laws.fixed.model, bit for bit the C; its command as the float the C
 returns) and the design's float64 law written here from the contract (support.fixed.DesignLaw), sharing a random
 initial plant state within the declared ranges, input disturbances, measurement noise and references within their
 ranges. While neither saturates and no sample is clipped, the commands never differ by more than the headline.
@@ -15,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from gainlink.errors import DesignError
-from gainlink.proof.fixed_format import real
-from gainlink.proof.fixed_law import FixedPointLoop
+from gainlink.laws.fixed.model import FixedPointLoop
+from gainlink.laws.fixed.qformat import real
 from gainlink.shipping.artifact import from_dict
 from gainlink.synthesis.random_plants import random_spec
 from support.designs import designed

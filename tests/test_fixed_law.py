@@ -11,14 +11,14 @@ from fractions import Fraction
 import numpy as np
 import pytest
 from gainlink.laws import design as design_spec
+from gainlink.laws.fixed.certificate import certify
+from gainlink.laws.fixed.model import FixedPointLoop
+from gainlink.laws.fixed.qformat import quantise, rshift_round
 from gainlink.proof.derived_law import DerivedLoop, derive
-from gainlink.proof.fixed_format import quantise, rshift_round
-from gainlink.proof.fixed_law import FixedPointLoop
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.proof.sampled_plant import SampledPlant
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
-from gainlink.synthesis.fixed_point import certify
 from gainlink.synthesis.random_plants import random_spec
 
 # (seed, random_spec options, numeric): chosen to cover stable plants (4, 7, 10) and unstable ones (0, 2, 9), both

@@ -3,15 +3,15 @@ q15, where its certificate allows) on every Cortex-M board, the image under QEMU
 bit (command words, unsaturated commands, estimate, integrators, flags, float commands), and run
 processor-in-the-loop around the example's model: the image's records equal to the bit-exact model fed the very
 samples it received, step for step, and its commands within the certified closed-loop bound (widened by the
-link's float32 roundings) of the float64 law with the quantised coefficients (gainlink.laws.fixed_pil)."""
+link's float32 roundings) of the float64 law with the quantised coefficients (gainlink.laws.fixed.pil)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from gainlink.firmware.fixed import run_host, run_qemu
 from gainlink.firmware.targets import BOARDS
 from gainlink.hil.loop.pil import make_plant, run_pil
+from gainlink.laws.fixed.firmware import run_host, run_qemu
 from support.fixed import example
 
 pytestmark = pytest.mark.matrix

@@ -12,11 +12,11 @@ import pytest
 from gainlink.errors import DesignError
 from gainlink.fileio import read_toml
 from gainlink.laws import design as design_spec
-from gainlink.proof.fixed_format import quantise
-from gainlink.proof.fixed_law import FixedPointLoop, gains_from_artifact
+from gainlink.laws.fixed.certificate import certify
+from gainlink.laws.fixed.model import FixedPointLoop, gains_from_artifact
+from gainlink.laws.fixed.qformat import quantise
 from gainlink.shipping.artifact import from_dict, seal
 from gainlink.spec import parse_spec
-from gainlink.synthesis.fixed_point import certify
 from support.designs import designed
 from support.paths import EXAMPLES
 

@@ -1,6 +1,6 @@
 """Software in the loop (and so campaigns, whose runs are SIL) of a fixed-point artifact runs the integer law it
 certifies, not the float32 law of the same export (it did: NativeLoop on the float library). The oracle is the
-bit-exact integer model (gainlink.proof.fixed_law) on the float32 samples the run recorded."""
+bit-exact integer model (gainlink.laws.fixed.model) on the float32 samples the run recorded."""
 
 from __future__ import annotations
 
@@ -8,13 +8,13 @@ import json
 
 import numpy as np
 import pytest
-from gainlink.engines.fixed_native import FixedNativeLoop
 from gainlink.hil.campaign.runner import run as run_campaign
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
-from gainlink.proof.fixed_format import real
-from gainlink.proof.fixed_law import FixedPointLoop
-from gainlink.proof.float32_law import Float32Loop
+from gainlink.laws.fixed.model import FixedPointLoop
+from gainlink.laws.fixed.native import FixedNativeLoop
+from gainlink.laws.fixed.qformat import real
+from gainlink.laws.lq.model import Float32Loop
 from support.fixed import example, model_run
 
 pytestmark = pytest.mark.xdist_group("test_fixed_sil")  # one worker builds the q31 library once

@@ -1,4 +1,4 @@
-"""The numpy statement of the C's float32 arithmetic (gainlink.proof.float32_law) against the real host build.
+"""The numpy statement of the C's float32 arithmetic (gainlink.laws.lq.model) against the real host build.
 
 Oracles: the C library through ctypes (bit for bit) and libm's own fmaf (for the rounding primitive).
 """
@@ -11,8 +11,8 @@ import ctypes.util
 import numpy as np
 import pytest
 from gainlink.engines.native import NativeLoop
-from gainlink.firmware.golden import example_cases
-from gainlink.proof.float32_law import Float32Loop, fma32_exact
+from gainlink.laws.lq.golden import example_cases
+from gainlink.laws.lq.model import Float32Loop, fma32_exact
 from support.paths import EXAMPLES
 
 pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
@@ -46,11 +46,11 @@ def test_fma32_is_correctly_rounded_like_libm_fmaf():
 
 
 def test_a_step_whose_fmaf_sum_sits_on_a_midpoint_is_redone_with_one_rounding(pend):
-    """The unrolled fast step (gainlink.proof.float32_step) rounds each fmaf twice (to double, then to float32); when
+    """The unrolled fast step (gainlink.laws.lq.step) rounds each fmaf twice (to double, then to float32); when
     a double sum sits on a float32 midpoint that the exact sum does not, the step is redone exactly. Here the first
     command's sum is 1 + a*b with a*b = 2^-24 + 2^-60 (the case of the test above): libm's fmaf gives 1 + 2^-23,
     the double rounding 1."""
-    from gainlink.proof.float32_step import compile_step
+    from gainlink.laws.lq.step import compile_step
     from gainlink.shipping.artifact import load
 
     a = load(pend)

@@ -587,6 +587,35 @@ def test_a_reference_controller_over_a_link_runs_the_laws_python_node(artifacts,
     cell_reference_over_a_link("scheduled/float32", artifacts["scheduled/float32"], tmp_path)
 
 
+def test_the_layers_below_the_laws_refuse_from_the_pairs_declaration(artifacts):
+    """One declaration per pair (shipping.law_c.CANNOT): the law's refusal and the firmware tooling's (below the
+    laws) are the same generated line; the fuzz harnesses refuse each law that declares it cannot fuzz, before
+    anything is built, and a float32 lq artifact passes."""
+    from gainlink.errors import LawError
+    from gainlink.firmware import fuzz
+    from gainlink.shipping import law_c
+
+    refused = []
+    for pair, a in artifacts.items():
+        law = law_of(a)
+        for cell in CELLS:
+            reason = law_c.CANNOT[pair].get(cell)
+            if reason is None:
+                law_c.refuse(a, cell)  # nothing to say
+                continue
+            line = f"{cell} is not available for the {law.label} law: {reason}"
+            with pytest.raises(LawError) as below:
+                law_c.refuse(a, cell)
+            with pytest.raises(LawError) as above:
+                law.refuse(cell)
+            assert str(below.value) == str(above.value) == line
+            refused.append((pair, cell))
+    assert sorted(refused) == [("lq/q15", "fuzz"), ("lq/q31", "fuzz"), ("scheduled/float32", "fuzz")]
+    for pair in ("scheduled/float32", "lq/q31"):
+        with pytest.raises(LawError, match=f"^fuzzing is not available for the {law_of(artifacts[pair]).label} law"):
+            fuzz.build_harnesses(artifacts[pair])
+
+
 def test_every_cell_is_in_the_table_and_only_scheduled_on_integers_is_not_a_pair():
     from gainlink.errors import LawError
     from gainlink.laws import law_for

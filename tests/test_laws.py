@@ -76,6 +76,20 @@ def test_a_declared_incapacity_is_one_generated_line():
     assert len(set(CELLS)) == len(CELLS)
 
 
+def test_each_law_gives_the_command_that_holds_its_operating_point(artifacts):
+    """``Law.u_op``: the artifact's stored ``u_op`` (the lq laws), each point's stored ``u_op`` at that point and by
+    default the first (the scheduled law), read here from the artifact's JSON, not from the law's code."""
+    for pair, a in artifacts.items():
+        law = law_of(a)
+        if "schedule" in a.data:
+            sched = a.data["schedule"]
+            assert np.array_equal(law.u_op(a), sched["point"][0]["u_op"])
+            for sigma, point in zip(sched["points"], sched["point"], strict=True):
+                np.testing.assert_allclose(law.u_op(a, sigma=sigma), point["u_op"], rtol=0, atol=1e-12)
+        else:
+            assert np.array_equal(law.u_op(a), a.data.get("u_op", np.zeros(a.m))), pair
+
+
 def test_the_flag_table_is_the_documented_one_and_its_c_header_defines_each_bit_once():
     assert {f.name: f.bit for f in law_flags.FLAGS} == DOC_FLAGS
     header = law_flags.c_header()

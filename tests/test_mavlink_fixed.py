@@ -1,5 +1,5 @@
 """The MAVLink host app runs a fixed-point artifact's own law: the integer law it certifies (not the float law of the
-same export), checked in lockstep HIL over MAVLink against the bit-exact integer model (gainlink.proof.fixed_law) on
+same export), checked in lockstep HIL over MAVLink against the bit-exact integer model (gainlink.laws.fixed.model) on
 the samples the run recorded; its parameter table holds the integers it runs, and `gainlink mavlink upload` of a
 re-designed set (same formats and structure; q31 and q15) writes, verifies, commits and persists them, refuses a set
 for another law or other formats in one line, and rolls back a set the target refuses."""
@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
-from gainlink.mavlink.fixed_params import fixed_firmware_params
+from gainlink.laws.fixed.model import FixedPointLoop
+from gainlink.laws.fixed.qformat import real
+from gainlink.laws.lq.model import Float32Loop
 from gainlink.mavlink.params import INT32
+from gainlink.mavlink.params import firmware_params as fixed_firmware_params
 from gainlink.mavlink.upload import UploadFailed, upload
-from gainlink.proof.fixed_format import real
-from gainlink.proof.fixed_law import FixedPointLoop
-from gainlink.proof.float32_law import Float32Loop
 from gainlink.shipping.artifact import Artifact
 from support.cli import assert_refused, run_cli
 from support.fixed import example, model_run, pendulum_design

@@ -14,9 +14,9 @@ from gainlink.firmware.build import cache_root, firmware_dir
 from gainlink.firmware.mavlink_app import EXECUTABLE, MavlinkFirmware
 from gainlink.hil.links.base import STATUS_CLIPPED, STATUS_FAULT, STATUS_WATCHDOG
 from gainlink.hil.links.mavlink import MavlinkTransport
-from gainlink.mavlink.fixed_params import fixed_firmware_params
 from gainlink.mavlink.link import MavLink
 from gainlink.mavlink.params import INT32, REAL32, Encoding
+from gainlink.mavlink.params import firmware_params as fixed_firmware_params
 from gainlink.mavlink.session import ParamSession
 from gainlink.shipping.export_c import render_export
 from pymavlink.dialects.v20 import common as mavlink2

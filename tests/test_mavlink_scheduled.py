@@ -1,9 +1,10 @@
 """The firmware's MAVLink node runs a scheduled artifact's law over its link (gainlink.hil.loop.bridge with a
 MAVLink transport; firmware/apps/mavlink on gl_law.h): the tank of examples/tank_scheduled.toml, scheduled on its
 measured level (and on an external signal carried after the references), swept across its envelope through the real
-gainlink_mavlink process over UDP. Oracle: the scheduled float32 model (gainlink.proof.scheduled_float32, bit for
+gainlink_mavlink process over UDP. Oracle: the scheduled float32 model (gainlink.laws.scheduled.model, bit for
 bit the C) on the float32 samples the run recorded: the same commands, saturation and sigma flags. Its parameter table
-holds every point's gains, and `gainlink mavlink upload` commits them all as one set (gainlink.mavlink.sched_params)."""
+holds every point's gains, and `gainlink mavlink upload` commits them all as one set
+(gainlink.shipping.params, gainlink.mavlink.upload)."""
 
 from __future__ import annotations
 
@@ -17,11 +18,11 @@ import pytest
 from gainlink.firmware.mavlink_app import mavlink_executable
 from gainlink.hil import run as hil_run
 from gainlink.hil.links.mavlink import MavlinkTransport
+from gainlink.laws.scheduled.model import ScheduledFloat32Loop
 from gainlink.mavlink import upload as upload_mod
 from gainlink.mavlink.params import INT32
-from gainlink.mavlink.sched_params import scheduled_firmware_params
+from gainlink.mavlink.params import firmware_params as scheduled_firmware_params
 from gainlink.mavlink.upload import UploadFailed, upload
-from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import external_tank, tank_dict, tank_hil_scenario
 from support.cli import assert_refused
@@ -145,7 +146,7 @@ def test_mavlink_upload_of_a_scheduled_artifact_through_a_mapping_is_refused_in_
         "--mapping",
         tmp_path / "map.toml",
     )
-    res = assert_refused(argv, "scheduled artifact", tmp_path, path.parent)
+    res = assert_refused(argv, "runs the scheduled-float32 law: a --mapping names one gain set", tmp_path, path.parent)
     assert res.out == "" and "nothing was changed" in res.err
 
 
@@ -162,7 +163,7 @@ def test_a_refused_scheduled_commit_is_rolled_back_and_a_committed_one_persists(
     try:
         url = f"udpout:127.0.0.1:{port}"
         with monkeypatch.context() as m:
-            m.setattr(upload_mod, "scheduled_firmware_params", wrong_hash)
+            m.setattr(upload_mod, "firmware_params", wrong_hash)
             with pytest.raises(UploadFailed) as failed:
                 upload(b, connect=url)
         assert failed.value.rolled_back and _table(port) == _expected(a)  # none of it

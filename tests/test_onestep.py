@@ -209,7 +209,7 @@ def test_what_the_one_step_check_catches_is_what_its_docstring_says(closed_loop_
     every gain matrix is caught on the pendulum and quadrotor_lateral records, of Ad and Cd on every record
     (the examples' golden records and twelve random closed-loop ones). It used to say any gain bent by 1e-4
     is caught: measured over 8 matrices x 15 records, 9 of 96 such bends pass (K on loop110, Kaw of Wood-Berry)."""
-    from gainlink.firmware.golden import example_cases
+    from gainlink.laws.lq.golden import example_cases
     from support.paths import EXAMPLES
 
     examples = list(example_cases(EXAMPLES))

@@ -22,9 +22,9 @@ import pytest
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.errors import ArtifactError
-from gainlink.firmware.golden import random_case
 from gainlink.hil.loop.pil import make_plant, run_pil
 from gainlink.laws import design as design_spec
+from gainlink.laws.lq.golden import random_case
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import from_dict, seal

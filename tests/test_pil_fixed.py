@@ -1,9 +1,9 @@
 """Processor-in-the-loop of a fixed-point artifact: the integer image (firmware/ports/cortex-m/main.c) on the
 Cortex-M0 (micro:bit) and M3 (MPS2-AN385) closes the loop with the pendulum's model through the float image's
-stream. The oracles, recomputed here: the bit-exact integer model (gainlink.proof.fixed_law, through
+stream. The oracles, recomputed here: the bit-exact integer model (gainlink.laws.fixed.model, through
 tests/support/fixed.py) fed the very float32 samples the image received writes the image's words step for step;
 the float64 law with the quantised coefficients, closing the loop on a fresh plant, stays within the certified
-closed-loop bound widened by the link's float32 roundings (gainlink.synthesis.fixed_link)."""
+closed-loop bound widened by the link's float32 roundings (gainlink.laws.fixed.link)."""
 
 from __future__ import annotations
 
@@ -12,14 +12,14 @@ import json
 
 import numpy as np
 import pytest
-from gainlink.firmware.fixed import FAULT, FixedRun, run_host
 from gainlink.hil.loop.pil import make_plant, run_pil
-from gainlink.laws.fixed_pil import model_records
+from gainlink.laws.fixed.firmware import FAULT, FixedRun, run_host
+from gainlink.laws.fixed.link import bound_float32_link
+from gainlink.laws.fixed.model import gains_from_artifact
+from gainlink.laws.fixed.pil import model_records
 from gainlink.laws.image import first_difference
 from gainlink.proof.derived_law import DerivedLoop
-from gainlink.proof.fixed_law import gains_from_artifact
 from gainlink.shipping.artifact import from_dict, seal
-from gainlink.synthesis.fixed_link import bound_float32_link
 from support.cli import run_cli
 from support.fixed import example, model_run
 

@@ -41,8 +41,8 @@ def artifact(tmp_path_factory):
 
 
 def _radius(art, rate: float) -> float:
-    from gainlink.synthesis.schedule_rate import monodromy_radius
-    from gainlink.synthesis.schedule_variation import loops_at
+    from gainlink.laws.scheduled.rate import monodromy_radius
+    from gainlink.laws.scheduled.variation import loops_at
 
     up = np.minimum(0.04 + rate * art.Ts * np.arange(1, 1 + int(np.ceil(1.4 / (rate * art.Ts) - 1e-9))), 1.44)
     return monodromy_radius(loops_at(art.schedule, art.Ci), np.concatenate([up, up[::-1][1:], [0.04]]))

@@ -1,4 +1,4 @@
-"""The scheduled law's float32 fidelity at design time (gainlink.laws.scheduled_fidelity): the C's float32
+"""The scheduled law's float32 fidelity at design time (gainlink.laws.scheduled.fidelity): the C's float32
 arithmetic and the float64 law, each in closed loop around the design model frozen at each sigma of a sweep.
 
 Oracles: the sweep's sigmas written out by hand (the points and the middle of each interval); the real host C
@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from gainlink.laws import law_of
-from gainlink.laws.scheduled_fidelity import scheduled_fidelity
-from gainlink.proof.fidelity import THRESHOLD
-from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
+from gainlink.laws.lq.fidelity import THRESHOLD
+from gainlink.laws.scheduled.fidelity import scheduled_fidelity
+from gainlink.laws.scheduled.model import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import external_tank, tank_dict
 from support.designs import designed

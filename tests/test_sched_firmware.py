@@ -10,10 +10,10 @@ import tomllib
 
 import numpy as np
 import pytest
-from gainlink.engines.sched_native import NativeScheduledLoop
 from gainlink.laws import design as design_spec
-from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
-from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop
+from gainlink.laws.scheduled.model import ScheduledFloat32Loop
+from gainlink.laws.scheduled.native import NativeScheduledLoop
+from gainlink.laws.scheduled.reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop
 from gainlink.shipping import codegen
 from gainlink.shipping.artifact import from_dict, load
 from gainlink.shipping.codegen_scheduled import tables
@@ -196,7 +196,7 @@ def test_start_and_safe_commands_are_u_op_interpolated_where_sigma_is_inside_an_
 def test_cortex_m4f_in_qemu_is_the_host_bit_for_bit(external):
     """One replay through the Cortex-M4F image (mps2-an386) in QEMU: every command, flag and state equals the host
     build's bit for bit, with the external sigma moving across the envelope, held, clipped and rate-limited."""
-    from gainlink.engines import sched_qemu
+    from gainlink.laws.scheduled import qemu as sched_qemu
 
     Y, R, S = _samples(external)
     host = NativeScheduledLoop(external).run(Y, R, S)
@@ -213,7 +213,7 @@ def test_replay_cli_runs_the_scheduled_c_on_host_and_qemu(external_data, externa
     """``gainlink replay --engine native|qemu`` on a scheduled artifact with s0: both write the output of the
     float32 model, byte for byte (the same CSV text, which names its arithmetic, float32); an engine flag that does
     not apply is one line, exit 2."""
-    from gainlink.proof.scheduled_replay import format_trace
+    from gainlink.laws.scheduled.replay import format_trace
     from gainlink.shipping import artifact as artifact_mod
 
     path, inp = tmp_path / "gains.json", tmp_path / "in.csv"

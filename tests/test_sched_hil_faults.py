@@ -1,7 +1,7 @@
 """Injected faults in the HIL of a scheduled artifact over its link (gainlink.hil.loop.bridge): the tank of
 examples/tank_scheduled.toml, scheduled on its measured level, through the real gainlink_can process on python-can
 udp_multicast, with a window of NaN samples and a window of dropped samples. Oracle: the scheduled float32 model
-(gainlink.proof.scheduled_float32, bit for bit the C) fed the samples the node received, rebuilt here from the
+(gainlink.laws.scheduled.model, bit for bit the C) fed the samples the node received, rebuilt here from the
 scenario's windows (NaN rows in, dropped rows out): the same commands, sigma flags and refusals."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from gainlink.errors import ScenarioError
 from gainlink.hil import run as hil_run
-from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
+from gainlink.laws.scheduled.model import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import tank_dict, tank_hil_scenario
 from support.designs import designed

@@ -1,7 +1,7 @@
-"""The scheduled law's one-step check with a float32 bound (gainlink.laws.scheduled_onestep): every step of a trace
+"""The scheduled law's one-step check with a float32 bound (gainlink.laws.scheduled.onestep): every step of a trace
 of the C against the float64 law from the trace's own state, within what float32 can change in that step.
 
-Oracles: the float64 law (gainlink.proof.scheduled_reference) and the real host C (``gl_sched.c`` through ctypes);
+Oracles: the float64 law (gainlink.laws.scheduled.reference) and the real host C (``gl_sched.c`` through ctypes);
 the bound is derived by hand in the module's docstring. A correct C passes on closed-loop records and on wild samples
 (sigma at and around the points, held, clipped, rate-limited; saturation; refused samples), with its largest error a
 measurable fraction of the bound; a C whose table has one coefficient bent by a relative 1e-4 fails.
@@ -14,9 +14,9 @@ import functools
 import numpy as np
 import pytest
 from gainlink.laws import law_of
-from gainlink.laws.scheduled_onestep import float32_bound_check
-from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
-from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop
+from gainlink.laws.scheduled.model import ScheduledFloat32Loop
+from gainlink.laws.scheduled.onestep import float32_bound_check
+from gainlink.laws.scheduled.reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import external_tank, tank_dict

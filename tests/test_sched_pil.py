@@ -1,7 +1,7 @@
 """Processor-in-the-loop of a scheduled artifact: the Cortex-M4F image (firmware/ports/cortex-m/main.c, on
 mps2-an386) runs gl_sched_step in closed loop with the nonlinear tank of examples/tank_scheduled.toml, sigma moving
 across the whole envelope (and beyond it: clipped). The oracles, recomputed here: the scheduled float32 model
-(gainlink.proof.scheduled_float32) and the host build of the same C, each fed the very float32 samples the image
+(gainlink.laws.scheduled.model) and the host build of the same C, each fed the very float32 samples the image
 received, write its commands, flags and state bit for bit; the float64 scheduled law on a second tank (the
 closed-loop twin) stays within float32 rounding of it."""
 
@@ -11,14 +11,14 @@ import json
 
 import numpy as np
 import pytest
-from gainlink.engines.sched_native import NativeScheduledLoop
 from gainlink.firmware.build import replay_image
 from gainlink.hil.loop.pil import make_plant, run_pil
 from gainlink.laws.image import first_difference
-from gainlink.laws.scheduled import status_flags
-from gainlink.laws.scheduled_pil import image_records
-from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
-from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE
+from gainlink.laws.scheduled.law import status_flags
+from gainlink.laws.scheduled.model import ScheduledFloat32Loop
+from gainlink.laws.scheduled.native import NativeScheduledLoop
+from gainlink.laws.scheduled.pil import image_records
+from gainlink.laws.scheduled.reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE
 from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import external_tank, tank_dict

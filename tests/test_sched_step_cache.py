@@ -10,8 +10,8 @@ import ctypes
 
 import numpy as np
 import pytest
-from gainlink.engines.sched_native import NativeScheduledLoop
-from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
+from gainlink.laws.scheduled.model import ScheduledFloat32Loop
+from gainlink.laws.scheduled.native import NativeScheduledLoop
 from gainlink.shipping.artifact import from_dict
 from gainlink.shipping.codegen_scheduled import fixed_masks, tables
 from gainlink.shipping.export_c import render_export
@@ -101,7 +101,7 @@ def test_tables_changed_in_place_are_run_as_changed_even_where_the_export_fixed_
 def test_the_cortex_m4f_runs_every_cache_path_as_the_host(ext):
     """The same sigma sequence through the Cortex-M4F image in QEMU (where the step takes its shortest path for a
     sigma that moves inside the cached interval): bit for bit the host build."""
-    from gainlink.engines import sched_qemu
+    from gainlink.laws.scheduled import qemu as sched_qemu
 
     sig = _sigmas(ext)
     N = sig.size

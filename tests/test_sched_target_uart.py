@@ -4,7 +4,7 @@
 The tank of examples/tank_scheduled.toml in closed loop in QEMU on mps2-an386 (HIL, controller = "qemu"), its level
 swept across the envelope; over MAVLink also the tank scheduled on an external signal, which the HIL sample carries
 after the references. Oracles: the host app of the same export on the same scenario (the same closed loop bit for
-bit), and the scheduled float32 model (gainlink.proof.scheduled_float32) on the samples the image received:
+bit), and the scheduled float32 model (gainlink.laws.scheduled.model) on the samples the image received:
 commands, saturation and sigma flags (from the node's status bits). A retuned schedule uploaded to the image's
 MAVLink node (every point's gains as one set, `gainlink mavlink upload --persist`) runs bit for bit the retuned model
 and comes back from the image's flash after a restart; a commit the image refuses is rolled back, point by point."""
@@ -27,11 +27,11 @@ from gainlink.firmware.uart import QemuUart
 from gainlink.hil import run as hil_run
 from gainlink.hil.links.can import CanTransport
 from gainlink.hil.links.mavlink import MavlinkTransport
+from gainlink.laws.scheduled.model import ScheduledFloat32Loop
 from gainlink.mavlink import upload as upload_mod
-from gainlink.mavlink.params import INT32
-from gainlink.mavlink.sched_params import scheduled_firmware_params, table_hash
+from gainlink.mavlink.params import INT32, table_hash
+from gainlink.mavlink.params import firmware_params as scheduled_firmware_params
 from gainlink.mavlink.upload import UploadFailed, upload
-from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
 from gainlink.shipping.artifact import from_dict
 from schedule_cases import external_tank, tank_dict, tank_hil_scenario
 from support.cli import run_cli
@@ -226,7 +226,7 @@ def test_a_retuned_schedule_uploaded_to_the_images_mavlink_node_commits_runs_bit
         assert image.ready_line.endswith(want), image.ready_line
         assert _table(image.url) == _expected(old)
         with monkeypatch.context() as m:  # a commit the image refuses: every staged value is undone, none kept
-            m.setattr(upload_mod, "scheduled_firmware_params", _wrong_hash)
+            m.setattr(upload_mod, "firmware_params", _wrong_hash)
             with pytest.raises(UploadFailed) as failed:
                 upload(new, connect=image.url, persist=True, timeout=UPLOAD_TIMEOUT)
         assert failed.value.rolled_back and _table(image.url) == _expected(old)

@@ -9,9 +9,9 @@ from __future__ import annotations
 import control as ct
 import numpy as np
 import pytest
-from gainlink.proof.scheduled_reference import ScheduledLoop
+from gainlink.laws.scheduled.lpv import velocity_loop
+from gainlink.laws.scheduled.reference import ScheduledLoop
 from gainlink.shipping.artifact import from_dict
-from gainlink.synthesis.lpv import velocity_loop
 from schedule_cases import external_tank, tank_dict
 from support.designs import designed
 

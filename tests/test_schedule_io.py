@@ -122,21 +122,38 @@ def test_scheduled_artifact_validates_and_is_sealed(external, tmp_path):
 
 
 def test_unscheduled_tools_refuse_a_scheduled_artifact(external):
+    """Each part of the lq law (its float64 law, its float32 model, its C and gain set, its one operating point and
+    plant) refuses the scheduled law's artifact in one line naming the part, the law it runs and its sigma."""
     _path, art = external
-    from gainlink.proof.float32_law import Float32Loop
+    from gainlink.engines.native import NativeLoop
+    from gainlink.laws.lq.model import Float32Loop
     from gainlink.proof.reference import ReferenceLoop
+    from gainlink.proof.sampled_plant import SampledPlant
     from gainlink.shipping.codegen import render_c
 
-    for make in (ReferenceLoop, Float32Loop, render_c):
-        with pytest.raises(ArtifactError, match="scheduled on load"):
+    parts = {
+        "ReferenceLoop": ReferenceLoop,
+        "the float32 law": Float32Loop,
+        "codegen": render_c,
+        "the native engine": NativeLoop,
+        "the artifact's own plant": SampledPlant.from_artifact,
+        "safe_command": lambda a: a.safe_command,
+        "r_op": lambda a: a.r_op,
+        "design_plant": lambda a: a.design_plant(),
+    }
+    for what, make in parts.items():
+        with pytest.raises(ArtifactError) as refused:
             make(art)
+        line = str(refused.value)
+        assert "\n" not in line and line.startswith(f"{what} is the lq law's"), line
+        assert "runs the scheduled-float32 law (the velocity-form law scheduled on load)" in line, line
 
 
 def _sim_csv(art, path, N=300):
     """A closed loop of the scheduled law around the interpolated plant, sigma ramping across the envelope (with a
     non-finite sample and a non-finite sigma in it), written as a replay input with s0."""
+    from gainlink.laws.scheduled.reference import ScheduledLoop
     from gainlink.proof.sampled_plant import SampledPlant
-    from gainlink.proof.scheduled_reference import ScheduledLoop
 
     S = art.schedule
     sig = np.clip(np.linspace(-0.1, 1.2, N), None, None)

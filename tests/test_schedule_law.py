@@ -7,11 +7,11 @@ import control as ct
 import numpy as np
 import pytest
 from gainlink.laws import design as design_spec
+from gainlink.laws.scheduled.lpv import velocity_loop
+from gainlink.laws.scheduled.reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop
 from gainlink.proof.sampled_plant import SampledPlant
-from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
-from gainlink.synthesis.lpv import velocity_loop
 from schedule_cases import external_tank
 from support.designs import designed
 

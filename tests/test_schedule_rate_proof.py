@@ -106,7 +106,7 @@ def test_the_reference_law_with_its_rate_limit_holds_under_jumping_sigma(spring6
     """The float64 law itself, sigma jumping 0 <-> 1 with dwells of 18 and 16 samples (the path that grows
     unlimited): its rate limit flags the jumps and the plant, interpolated at the sigma the law uses, decays from
     1e-3 (it grew to 1e8 in 100 periods with the old rate_max, none)."""
-    from gainlink.proof.scheduled_reference import SIGMA_RATE, ScheduledLoop
+    from gainlink.laws.scheduled.reference import SIGMA_RATE, ScheduledLoop
 
     art = from_dict(spring65)
     S = art.schedule
@@ -162,10 +162,10 @@ def test_a_declared_uncertified_rate_ships_and_says_so_wherever_it_appears(tmp_p
     """rate_max 0.5 with rate_certified = false: the artifact, the design's (JSON and lines) and analyze's output,
     the warnings, the exported header and a run's report all say "not certified"; nothing claims a proof of the
     rate (the old design warned "stability is proved only for a slowly moving k" with nothing proved)."""
-    from gainlink.laws.scheduled_run import schedule_lines
+    from gainlink.laws.scheduled.design import describe_schedule
+    from gainlink.laws.scheduled.run import schedule_lines
     from gainlink.shipping.artifact import load
     from gainlink.shipping.export_c import render_export
-    from gainlink.synthesis.schedule import describe_schedule
 
     spec = tmp_path / "spec.toml"
     spec.write_text(_toml(_uncertified()))
@@ -206,8 +206,8 @@ def test_a_path_growing_within_a_certified_rate_stops_the_design(monkeypatch):
     """The falsifier finding a path that grows at or below a certified rate contradicts the certificate: an
     internal error, never an artifact (made to happen here: the tank's common Lyapunov function against a scan
     that reports growth)."""
-    from gainlink.synthesis import schedule_variation as V
-    from gainlink.synthesis.schedule_rate import Path, RateScan
+    from gainlink.laws.scheduled import variation as V
+    from gainlink.laws.scheduled.rate import Path, RateScan
 
     def growing(_loops, points, Ts, dwells):
         path = Path(float(points[0]), float(points[-1]), 3, 3, 1.0, 10, 2.0)
@@ -223,7 +223,7 @@ def test_a_certified_rate_too_slow_to_cross_the_envelope_warns_with_the_time():
     certified rate is said, with the time; a faster one, an uncertified one or no limit is not."""
     from types import SimpleNamespace
 
-    from gainlink.synthesis.schedule_variation import crossing_warning
+    from gainlink.laws.scheduled.variation import crossing_warning
 
     slow = SimpleNamespace(rate_certified=True, rate_max=0.001)
     text = crossing_warning(slow, span=1.0, Ts=0.02, tau_samples=19.0, sigma="k")

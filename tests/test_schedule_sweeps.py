@@ -4,7 +4,7 @@ on a grid and holds/jumps/ramps between levels, judged by their monodromy matric
 On the spring of ``schedule_cases`` scheduled 1 -> 400 (no rate certified within the default refinements; its spec
 here declares the old simulated rate, 0.5/s, uncertified), sweeping only the whole envelope and each interval gave
 50 * 10^(-1.5) = 1.58/s, at which a sweep over half the envelope grows. The oracles are the test's own: the float64
-scheduled law (``gainlink.proof.scheduled_reference``) around the interpolated plant, and a transition matrix over
+scheduled law (``gainlink.laws.scheduled.reference``) around the interpolated plant, and a transition matrix over
 one period built here from the law's step equations (docs/design.md), both stepped sample by sample on paths made
 here.
 """
@@ -15,8 +15,7 @@ import itertools
 
 import numpy as np
 import pytest
-from gainlink.shipping.artifact import from_dict, seal
-from gainlink.synthesis.schedule_rate import (
+from gainlink.laws.scheduled.rate import (
     RATE_GRID,
     Path,
     dwell_grid,
@@ -25,8 +24,9 @@ from gainlink.synthesis.schedule_rate import (
     triangle,
     worst_path,
 )
-from gainlink.synthesis.schedule_sweeps import sweep_nodes, sweep_radii
-from gainlink.synthesis.schedule_variation import loops_at
+from gainlink.laws.scheduled.sweeps import sweep_nodes, sweep_radii
+from gainlink.laws.scheduled.variation import loops_at
+from gainlink.shipping.artifact import from_dict, seal
 from schedule_cases import spring
 from support.designs import designed
 
@@ -60,7 +60,7 @@ def _triangle(a: float, b: float, rate: float, Ts: float) -> np.ndarray:
 def _law_growth(art, sigma: np.ndarray, periods: int) -> tuple[float, float]:
     """The float64 scheduled law around the interpolated plant, sigma repeating ``sigma``: the plant state's norm
     after the first period and after the last."""
-    from gainlink.proof.scheduled_reference import ScheduledLoop
+    from gainlink.laws.scheduled.reference import ScheduledLoop
 
     S = art.schedule
     loop, x, norms = ScheduledLoop(art), np.array([1e-3, 0.0]), []
@@ -154,7 +154,7 @@ def test_shared_sweeps_equal_each_triangle_multiplied_out(spring_art):
 def test_scan_stops_at_the_first_unstable_rate(monkeypatch):
     """Stability need not be monotone in the rate: a family growing at the sixth rate only is reported there, and
     the rates above are not tried."""
-    import gainlink.synthesis.schedule_rate as R
+    import gainlink.laws.scheduled.rate as R
 
     rates = 10.0 * np.logspace(-4, 0, RATE_GRID)
 

@@ -93,8 +93,8 @@ def test_the_default_spec_of_a_slow_loop_designs_its_certificate_proved_in_float
     design was refused ("the LMI solver failed"). The LMIs are solved in a whitened basis and their candidate is
     proved in ball arithmetic; the common P is proved again here, independently, on a dense grid of masses (not only
     the hull's vertices)."""
+    from gainlink.laws.scheduled.lpv import velocity_loop
     from gainlink.shipping.artifact import load
-    from gainlink.synthesis.lpv import velocity_loop
 
     path, _ = multirotor
     spec, out = tmp_path / "spec.toml", tmp_path / "design"

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from gainlink.errors import DesignError
 from gainlink.laws import design as design_spec
+from gainlink.laws.scheduled.certify import Budget, certify_rate, common, prove_frozen, start_pieces
+from gainlink.laws.scheduled.hull import LoopHull
+from gainlink.laws.scheduled.lpv import bernstein_vertices, loop_polynomial, velocity_loop
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
-from gainlink.synthesis.lpv import bernstein_vertices, loop_polynomial, velocity_loop
-from gainlink.synthesis.schedule_certify import Budget, certify_rate, common, prove_frozen, start_pieces
-from gainlink.synthesis.schedule_hull import LoopHull
 from schedule_cases import external_tank, tank_dict
 from support.designs import designed
 

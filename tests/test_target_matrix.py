@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
-from gainlink.firmware.golden import EXAMPLES, example_cases, random_cases
 from gainlink.firmware.targets import BOARDS, CORTEX_M_TARGETS
 from gainlink.hil.loop.pil import make_plant, run_pil
+from gainlink.laws.lq.golden import EXAMPLES, example_cases, random_cases
 
 pytestmark = pytest.mark.matrix
 

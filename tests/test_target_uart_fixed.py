@@ -4,7 +4,7 @@ its MAVLink node too, and takes a re-designed set of integers over the UART as t
 On the cores without an FPU, where fixed point matters (M3: mps2-an385; M0: the micro:bit, whose 16 KiB of RAM
 hold the slcan node of a fixed-point export but not the MAVLink node), the q31 pendulum is served by the image over
 slcan in QEMU, in closed loop with the cart-pendulum FMU. Oracles: the host CAN app on the same scenario (the same C,
-so the same closed loop bit for bit), and the bit-exact integer model (``gainlink.proof.fixed_law``) on the samples
+so the same closed loop bit for bit), and the bit-exact integer model (``gainlink.laws.fixed.model``) on the samples
 the image received.
 """
 
@@ -19,10 +19,10 @@ from gainlink.errors import FirmwareError
 from gainlink.firmware.build import build
 from gainlink.firmware.uart import QemuUart
 from gainlink.hil.loop.bridge import run_scenario
-from gainlink.mavlink.fixed_params import fixed_firmware_params
-from gainlink.proof.fixed_format import real
-from gainlink.proof.fixed_law import FixedPointLoop
-from gainlink.proof.float32_law import Float32Loop
+from gainlink.laws.fixed.model import FixedPointLoop
+from gainlink.laws.fixed.qformat import real
+from gainlink.laws.lq.model import Float32Loop
+from gainlink.mavlink.params import firmware_params as fixed_firmware_params
 from support.cli import assert_refused, run_cli
 from support.fixed import example, model_run, pendulum_design
 from support.hil import udp_transport
@@ -74,7 +74,7 @@ def test_the_images_slcan_node_runs_the_integer_law_bit_for_bit(q31, board):
     assert not model.fault.any() and not image.trace.flags.any()
     f32 = Float32Loop(a).run(Y.astype(np.float64), R.astype(np.float64))  # not the export's float law
     assert np.any(f32.u.astype(np.float32) != image.trace.u.astype(np.float32))
-    # The HIL report names the law that ran and checks it (gainlink.laws.fixed_run).
+    # The HIL report names the law that ran and checks it (gainlink.laws.fixed.run).
     fx = image.metrics["fixed_point"]
     assert fx["law"] == "q31" and fx["bit_exact"] is True and fx["overflow_steps"] == 0
     assert fx["within_per_step"] and fx["unsaturated_steps"] > 50
@@ -113,11 +113,11 @@ def test_the_microbit_serves_only_a_fixed_point_artifact_over_slcan_and_says_so(
     mav = scenario(q31_saved[1], {"kind": "mavlink", "url": "tcp:127.0.0.1:1"}, controller="qemu", board="microbit")
     slcan = {"interface": "slcan", "channel": "socket://127.0.0.1:1"}
     for sc in (mav, scenario(pend, slcan, controller="qemu", board="microbit")):  # MAVLink; a float32 artifact
-        with pytest.raises(FirmwareError, match=r"no bus node for this artifact and link .* fixed-point"):
+        with pytest.raises(FirmwareError, match=r"no bus node for this artifact and link .* for the q31 and q15 laws"):
             run_scenario(sc)
     can = '{"interface": "slcan", "channel": "socket://127.0.0.1:1"}'
     argv = ("firmware", "run", pendulum_artifact, "--target", "cortex-m0", "--can", can)
-    assert_refused(argv, "the slcan node of a fixed-point artifact", tmp_path)
+    assert_refused(argv, "holds only the slcan node, for the q31 and q15 laws", tmp_path)
 
 
 # -- a re-designed set of integers uploaded to the M3 image's MAVLink node ------------------------------------------

@@ -94,9 +94,9 @@ def test_the_closed_loop_bound_covers_the_rounding_of_forming_its_matrices():
     from dataclasses import fields
     from fractions import Fraction
 
+    from gainlink.laws.fixed.error import closed_loop_bound
+    from gainlink.laws.fixed.ranges import Rounding
     from gainlink.proof.derived_law import DerivedLaw
-    from gainlink.synthesis.fixed_error import closed_loop_bound
-    from gainlink.synthesis.fixed_ranges import Rounding
 
     G, Kx = 1e4 + 3 * 2.0**-39, -(1e4 + 5 * 2.0**-39)
     F = 1e8 + 0.999

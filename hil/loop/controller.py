@@ -43,10 +43,10 @@ def qemu_peer(*, artifact: Any, transport: Any, board: str, elf: Path | None, du
     from gainlink.firmware.build import build
     from gainlink.firmware.targets import BOARDS
     from gainlink.firmware.uart import QemuUart
-    from gainlink.shipping.codegen_fixed import is_fixed
+    from gainlink.shipping.law_c import law_name
 
     protocol, host, port, options = transport.qemu_serve()
-    refusal = BOARDS[board].serving_refusal(protocol, fixed=is_fixed(artifact))
+    refusal = BOARDS[board].serving_refusal(protocol, law=law_name(artifact))
     if refusal is not None:
         raise FirmwareError(refusal)
     if elf is None:  # the artifact's image serves its law (ports/cortex-m/main.c, one main for every law)

@@ -116,8 +116,8 @@ def make_plant(name: str, *, artifact: Artifact, x0: np.ndarray | None = None) -
     """``artifact`` (alias ``linear``): the artifact's discrete model (a scheduled artifact's: its points' models
     interpolated at a moving sigma, the ``scheduled_model`` plant, ``x0`` absolute); any other name: a
     ``gainlink.hil`` plant."""
-    if name in ("artifact", "linear") and artifact.schedule is not None:
-        name = "scheduled_model"
+    if name in ("artifact", "linear"):
+        name = law_of(artifact).own_plant
     if name in ("artifact", "linear"):
         start = np.full(artifact.n, 0.1) if x0 is None else np.asarray(x0, dtype=float)
         if start.shape != (artifact.n,):

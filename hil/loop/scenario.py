@@ -128,7 +128,7 @@ TOP_KEYS = {
 CONTROLLERS = ("firmware", "reference", "qemu")
 BOARDS = tuple(
     sorted(
-        (b.name for b in _FIRMWARE_BOARDS.values() if b.serves or b.serves_fixed_slcan),
+        (b.name for b in _FIRMWARE_BOARDS.values() if b.serves or b.slcan_laws),
         key=lambda n: n != "mps2-an386",
     )
 )

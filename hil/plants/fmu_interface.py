@@ -94,7 +94,9 @@ def start_from_artifact(md: Any, artifact: Any, *, inputs: Any, outputs: Any) ->
         return {}
     mapping = map_variables(md, inputs=inputs, outputs=outputs)
     start = {}
-    u_op = artifact.u_op if artifact.schedule is None else artifact.schedule.u_op[0]
+    from gainlink.laws import law_of
+
+    u_op = law_of(artifact).u_op(artifact)
     if len(mapping.inputs) == artifact.m:
         start.update({name: float(v) for name, v in zip(mapping.inputs, u_op)})
     if artifact.x_op is not None:

@@ -1,4 +1,4 @@
-"""The design's own model of a scheduled artifact (:class:`gainlink.laws.scheduled_model.ScheduledModel`: the
+"""The design's own model of a scheduled artifact (:class:`gainlink.laws.scheduled.plant.ScheduledModel`: the
 points' sampled plants and trims interpolated at a moving sigma) as the scenario plant ``kind = "scheduled_model"``:
 a plant whose dynamics follow an external scheduling signal (the run hands it the signals each step through
 :meth:`ScheduledModelPlant.schedule`) or its own scheduled output. It advances by the artifact's ``Ts`` only.
@@ -11,7 +11,8 @@ from typing import Any
 
 import numpy as np
 from gainlink.errors import PlantError, did_you_mean
-from gainlink.laws.scheduled_model import ScheduledModel, operating_states
+from gainlink.laws.scheduled.plant import ScheduledModel, operating_states
+from gainlink.shipping.law_c import sigma_name
 
 from .base import PLANTS, Plant
 
@@ -20,7 +21,7 @@ class ScheduledModelPlant(Plant):
     """:class:`ScheduledModel` as a scenario plant; sigma from :meth:`schedule` (external) or its own output."""
 
     def __init__(self, artifact: Any) -> None:
-        if artifact is None or artifact.schedule is None:
+        if artifact is None or sigma_name(artifact) is None:
             raise PlantError("plant scheduled_model: the scenario's artifact must be scheduled (schema 2)")
         X_op = operating_states(artifact)
         if X_op is None:

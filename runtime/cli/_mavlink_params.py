@@ -41,13 +41,13 @@ def params(args: argparse.Namespace) -> int:
 
 def _vehicle_entries(args: argparse.Namespace):
     """Every parameter the vehicle lists (PARAM_REQUEST_LIST), the law its HEARTBEAT names, and its id."""
-    from gainlink.mavlink.fixed_params import law_name
     from gainlink.mavlink.link import MavLink
     from gainlink.mavlink.params import Encoding
     from gainlink.mavlink.params_file import ParamsEntry
     from gainlink.mavlink.session import ParamSession
     from gainlink.mavlink.signing import read_key
     from gainlink.mavlink.upload import detect_encoding
+    from gainlink.shipping.law_c import label_of_id
 
     key = read_key(args.signing_key) if args.signing_key else None
     with MavLink(args.connect, signing_key=key) as link:
@@ -56,7 +56,7 @@ def _vehicle_entries(args: argparse.Namespace):
         session = ParamSession(link, target_system=system, target_component=component, encoding=Encoding.C_CAST)
         session.encoding = detect_encoding(session, autopilot=hb.autopilot)
         values = sorted(session.read_all().values(), key=lambda pv: pv.index)
-    law = law_name(int(hb.custom_mode))
+    law = label_of_id(int(hb.custom_mode))
     entries = [ParamsEntry(system, component, pv.name, pv.value, pv.ptype) for pv in values]
     return entries, (law if not law.startswith("law ") else None), f"vehicle {system}/{component}"
 

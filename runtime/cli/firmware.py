@@ -12,7 +12,6 @@ from pathlib import Path
 
 from ..errors import DataError, FirmwareError, GainlinkError, ToolchainError
 from ..firmware.targets import BOARDS, CORTEX_M_TARGETS, TARGETS, resolve, resolve_cortex_m
-from ..shipping.codegen_fixed import is_fixed
 
 _BOARD_HELP = "QEMU board of the Cortex-M image (default: the target's first): " + ", ".join(
     f"{b.name} ({b.core})" for b in BOARDS.values()
@@ -83,7 +82,7 @@ def _build(args: argparse.Namespace) -> int:
     if args.target == "host":
         (out / "gainlink_loop_host").chmod(0o755)
     else:
-        print(_size_line(f"{stem}.elf", report, _image_role(law.label, platform.board)))
+        print(_size_line(f"{stem}.elf", report, _image_role(law, platform.board)))
     print(
         f"built {artifact.name} for {args.target}{' / ' + res.board if res.board else ''}: "
         + ", ".join(p.name for p in written if p.parent == out)
@@ -98,14 +97,14 @@ def _size_line(name: str, report: dict, what: str) -> str:
     )
 
 
-def _image_role(label: str, board) -> str:
+def _image_role(law, board) -> str:
     """What an image runs: the law, the nodes its UART serves on ``board``, and its replay."""
     if board.serves:
         nodes = "its UART's MAVLink and slcan nodes"
     else:
-        nodes = "its UART's slcan node" if board.serves_fixed_slcan else None
+        nodes = "its UART's slcan node" if law.name in board.slcan_laws else None
     replay = "replay and PIL over semihosting"
-    return f"the {label} law: {nodes}, {replay}" if nodes else f"the {label} law: {replay}"
+    return f"the {law.label} law: {nodes}, {replay}" if nodes else f"the {law.label} law: {replay}"
 
 
 # --- firmware flash ---------------------------------------------------------------------------------
@@ -156,22 +155,13 @@ def _flash(args: argparse.Namespace) -> int:
 
 
 def _run_host(args: argparse.Namespace) -> int:
-    """Start the host executable: replay a CSV through it, or pass stdin/stdout through (a fixed-point artifact's:
-    the integer loop, :mod:`._fixed_run`)."""
+    """Start the host executable of the artifact's law (``gainlink_loop_host``: a fixed-point artifact's runs its
+    integer law): replay a CSV through it, or pass stdin/stdout through."""
     from gainlink.firmware.build import build
     from gainlink.shipping.artifact import load
 
     artifact = load(args.artifact)
     res = build(artifact, target="host", only="gainlink_loop_host")
-    if is_fixed(artifact):  # the integer law the artifact certifies, not the float32 loop of the same export
-        from ._fixed_run import run_fixed_host
-
-        return run_fixed_host(
-            artifact,
-            res.build_dir,
-            input_path=None if args.input is None else Path(args.input),
-            output_path=Path(args.output) if args.output else None,
-        )
     exe = res.files["exe"]
     if args.input is None:
         from gainlink.firmware.foreground import run_in_foreground
@@ -192,7 +182,8 @@ def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: 
     a, law = artifact, law_of(artifact)
     samples = read_samples(input_path, a, law.externals(a))
     stdout, N = answer_samples(exe, samples.Y, samples.R, samples.S)
-    trace = law.records_trace(a, parse_records(a, stdout, count=N, executable=exe.name))
+    records = parse_records(a, stdout, count=N, executable=exe.name)
+    trace = law.records_trace(a, records)
     text = law.trace_text(a, trace, samples.t, engine="native")
     if output_path is None:
         sys.stdout.write(text)
@@ -200,8 +191,7 @@ def _replay_through_process(artifact, exe: Path, input_path: Path, output_path: 
         if output_path.is_dir():
             raise DataError(f"output {output_path} is a directory")
         atomic_write_text(output_path, text)
-        saturated, refused = int(trace.saturated.any(axis=1).sum()), int(trace.fault.sum())
-        print(f"ran {N} samples through {exe.name}: {saturated} saturated, {refused} refused")
+        print(f"ran {N} samples through {exe.name}{law.host_run_note(a, records, trace)}")
     return 0
 
 

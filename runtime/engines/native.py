@@ -20,9 +20,8 @@ from ..proof.reference import Trace
 from ..shipping import gains_layout
 from ..shipping.artifact import Artifact
 from ..shipping.codegen import shape_of
-from ..shipping.codegen_fixed import is_fixed
+from ..shipping.law_c import require_structure
 from ..shipping.records import column
-from . import fixed as fixed_engine
 
 
 @dataclass(frozen=True)
@@ -48,7 +47,7 @@ class NativeLoop:
     """
 
     def __init__(self, artifact: Artifact, *, watchdog_periods: int = 10, library: Path | None = None) -> None:
-        artifact.require_unscheduled("the native engine")
+        require_structure(artifact, "lq", "the native engine")
         self.artifact = artifact
         path = library or build(artifact, target="host", only="gainlink_host").files["shared"]
         self.host = HostLaw(artifact, library=Path(path), watchdog_periods=watchdog_periods)
@@ -132,24 +131,3 @@ def trace_from_raw(raw: dict[str, np.ndarray], *, m: int) -> Trace:
         z=raw["z"].astype(np.float64),
         fault=raw["fault"].astype(bool),
     )
-
-
-def run(artifact: Artifact, Y: np.ndarray, R: np.ndarray) -> Trace:
-    """Replay ``Y`` (N, p) and ``R`` (N, q) through the host C library from the artifact's initial state.
-
-    Parameters
-    ----------
-    artifact : Artifact
-        The artifact (its host library is built and cached on first use).
-    Y, R : ndarray
-        Measurements and references, one row per step (cast to float32).
-
-    Returns
-    -------
-    Trace
-        The C loop's outputs (float32 values as float64 arrays); for a fixed-point artifact, the integer
-        loop's (:mod:`gainlink.engines.fixed`).
-    """
-    if is_fixed(artifact):
-        return fixed_engine.run_native(artifact, Y, R)
-    return NativeLoop(artifact).run(Y, R)

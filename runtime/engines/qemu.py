@@ -7,12 +7,8 @@ import numpy as np
 from ..firmware import qemu as fwqemu
 from ..firmware.build import replay_image
 from ..firmware.targets import resolve_cortex_m
-from ..proof.reference import Trace
 from ..shipping.artifact import Artifact
-from ..shipping.codegen_fixed import is_fixed
 from ..shipping.records import column
-from . import fixed as fixed_engine
-from .native import trace_from_raw
 
 
 def run_raw(
@@ -32,30 +28,3 @@ def run_raw(
         "fault": (rec["status"] == -2).astype(np.uint8),
         "status": column(rec, "status"),
     }
-
-
-def run(
-    artifact: Artifact, Y: np.ndarray, R: np.ndarray, *, target: str | None = None, board: str | None = None
-) -> Trace:
-    """Replay ``Y`` (N, p) and ``R`` (N, q) through a Cortex-M image in QEMU.
-
-    Parameters
-    ----------
-    artifact : Artifact
-        The artifact (its image is built and cached on first use).
-    Y, R : ndarray
-        Measurements and references, one row per step (cast to float32).
-    target : str, optional
-        ``cortex-m0``, ``cortex-m3``, ``cortex-m4`` (default), ``cortex-m7``, ``cortex-m33`` or ``cortex-m55``.
-    board : str, optional
-        Its QEMU board (default: the target's, see :mod:`gainlink.firmware.targets`).
-
-    Returns
-    -------
-    Trace
-        The firmware's outputs (float32 values as float64 arrays).
-    """
-    artifact.require_unscheduled("the qemu engine")
-    if is_fixed(artifact):  # its implementation is the integer law: the fixed-point image
-        return fixed_engine.run_qemu(artifact, Y, R, target=target, board=board)
-    return trace_from_raw(run_raw(artifact, Y, R, target=target, board=board), m=artifact.m)

@@ -349,9 +349,6 @@ def host_app(artifact: Artifact, *, target: str, relpath: str, build_root: Path 
     ToolchainError
         When the build fails or does not produce the executable.
     """
-    # The CAN and MAVLink nodes run any law, a scheduled one too (gl_law.h).
-    if target not in ("gainlink_can", "gainlink_mavlink"):
-        artifact.require_unscheduled(f"the host app {target}")
     result = build(artifact, target="host", options={"GL_APPS": "ON"}, build_root=build_root, only=target)
     exe = result.build_dir / relpath
     with exclusive_lock(result.build_dir.parent / ".lock"):

@@ -23,6 +23,7 @@ import numpy as np
 from ..errors import ToolchainError
 from ..shipping import gains_layout
 from ..shipping.artifact import Artifact
+from ..shipping.law_c import refuse
 from .build import build
 
 HARNESSES = ("can_udp", "can_layout", "gains_stage", "mavlink_node") + (
@@ -98,7 +99,7 @@ def build_harnesses(artifact: Artifact) -> dict[str, Path]:
     ToolchainError
         clang is missing or the build failed.
     """
-    artifact.require_unscheduled("the fuzz harnesses")
+    refuse(artifact, "fuzz", what="fuzzing")
     result = build(artifact, target="host", options={"GL_FUZZ": "ON", "CMAKE_C_COMPILER": clang()})
     exes = {name: result.build_dir / "fuzz" / f"fuzz_{name}" for name in harnesses_of(artifact)}
     missing = [str(p) for p in exes.values() if not p.is_file()]

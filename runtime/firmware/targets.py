@@ -27,6 +27,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 from ..errors import ToolchainError, did_you_mean
+from ..shipping.law_c import LABELS
 
 HOST = "host"
 
@@ -36,23 +37,26 @@ class Board:
     """A QEMU machine (``-M name``) that runs a Cortex-M image.
 
     ``serves``: the image carries the MAVLink and slcan nodes on its UART (``firmware run --target``);
-    the micro:bit's 16 KiB of RAM holds the loop, replay and PIL but not both nodes. ``serves_fixed_slcan``: its
-    image of a fixed-point export carries the slcan node (the integer law's node is small), not the MAVLink node.
+    the micro:bit's 16 KiB of RAM holds the loop, replay and PIL but not both nodes. ``slcan_laws``: the laws
+    (``structure/numeric``) whose image on this board still carries the slcan node (the integer laws' node is
+    small), not the MAVLink node: the board's per-law capability, declared here.
     """
 
     name: str
     core: str
     serves: bool = True
-    serves_fixed_slcan: bool = False
+    slcan_laws: tuple[str, ...] = ()
 
-    def serving_refusal(self, protocol: str, *, fixed: bool) -> str | None:
-        """Why this board's image cannot serve ``protocol`` for an export (None: it can)."""
-        if self.serves or (fixed and protocol == "slcan" and self.serves_fixed_slcan):
+    def serving_refusal(self, protocol: str, *, law: str) -> str | None:
+        """Why this board's image of the law ``law`` (``structure/numeric``) cannot serve ``protocol`` (None: it
+        can)."""
+        if self.serves or (protocol == "slcan" and law in self.slcan_laws):
             return None
-        if self.serves_fixed_slcan:
+        if self.slcan_laws:
+            laws = " and ".join(LABELS[law] for law in self.slcan_laws)
             return (
-                f"the {self.name} image carries no bus node for this artifact and link (its 16 KiB of RAM hold only "
-                "the slcan node of a fixed-point artifact); choose another board"
+                f"the {self.name} image carries no bus node for this artifact and link (its RAM holds only the "
+                f"slcan node, for the {laws} laws); choose another board"
             )
         return f"the {self.name} image carries no bus node on its UART; choose another board"
 
@@ -79,7 +83,7 @@ class Target:
 BOARDS: dict[str, Board] = {
     b.name: b
     for b in (
-        Board("microbit", "cortex-m0", serves=False, serves_fixed_slcan=True),
+        Board("microbit", "cortex-m0", serves=False, slcan_laws=("lq/q31", "lq/q15")),
         Board("mps2-an385", "cortex-m3"),
         Board("mps2-an386", "cortex-m4"),
         Board("netduinoplus2", "cortex-m4"),

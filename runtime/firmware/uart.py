@@ -437,14 +437,14 @@ def run_foreground(
         0 after SIGINT/SIGTERM, else QEMU's exit status.
     """
     from ..shipping.artifact import load
-    from ..shipping.codegen_fixed import is_fixed
+    from ..shipping.law_c import law_name
     from .build import build
     from .targets import resolve_cortex_m
 
     platform = resolve_cortex_m(target, board)
     board = platform.board.name
     artifact = load(artifact_path)
-    refusal = platform.board.serving_refusal(protocol, fixed=is_fixed(artifact))
+    refusal = platform.board.serving_refusal(protocol, law=law_name(artifact))
     if refusal is not None:
         raise FirmwareError(refusal)
     host, port = tcp_endpoint(url, scheme="tcp" if protocol == "mavlink" else "socket")

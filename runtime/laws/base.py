@@ -20,48 +20,13 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 import numpy as np
 
 from ..errors import DataError, GainlinkError, LawError, did_you_mean
+from ..shipping.law_c import CANNOT, CELLS, refusal
 from .hooks import LoopHooks
 
 if TYPE_CHECKING:
     from ..proof.sampled_plant import SampledPlant
     from ..spec import PlantSpec
     from ..synthesis.pipeline import DesignResult
-
-#: Everything a consumer may ask of a law (issue 30's cells). A pair declares which it can do; the others carry a
-#: reason, and asking for them is one line (:meth:`Law.refuse`).
-CELLS: tuple[str, ...] = (
-    "design",
-    "codegen",
-    "engine.native",
-    "engine.qemu",
-    "one_step",
-    "replay",
-    "twins",
-    "simulate",
-    "fidelity",
-    "sil",
-    "pil",
-    "hil.can",
-    "hil.mavlink",
-    "fault.drop",
-    "fault.delay",
-    "fault.duplicate",
-    "fault.reorder",
-    "fault.nan",
-    "fault.silent",
-    "fault.crash",
-    "realtime.host",
-    "realtime.qemu",
-    "upload.host",
-    "upload.image",
-    "slcan",
-    "firmware_run",
-    "fuzz",
-    "campaign.sil",
-    "campaign.hil",
-    "cost",
-)
-
 
 #: The replay engines of every law: its float64 law, the bit-exact model of its C, the host build of the C through
 #: ctypes, and a Cortex-M image under QEMU (``target`` and ``board`` choose which).
@@ -125,7 +90,7 @@ class OneStepVerdict:
     """A one-step (resynchronised) check of a trace, and what the trace was checked against.
 
     ``check`` has ``passed``, ``summary()`` and ``first_failure.describe(name)``
-    (:class:`~gainlink.proof.onestep.OneStepCheck` or :class:`~gainlink.proof.fixed_onestep.FixedOneStepCheck`).
+    (:class:`~gainlink.proof.onestep.OneStepCheck` or :class:`~gainlink.laws.fixed.onestep.FixedOneStepCheck`).
     """
 
     against: str
@@ -181,8 +146,8 @@ class Law(LoopHooks, ABC):
 
     @property
     def capabilities(self) -> Capabilities:
-        """What this pair can do (default: every cell)."""
-        return Capabilities()
+        """What this pair can do: its declaration (:data:`gainlink.shipping.law_c.CANNOT`)."""
+        return Capabilities(cannot=CANNOT[self.name])
 
     def refuse(self, cell: str, *, what: str | None = None) -> None:
         """Raise :class:`LawError` (one line) unless the pair can do ``cell``; ``what`` names the request."""
@@ -190,7 +155,7 @@ class Law(LoopHooks, ABC):
             raise ValueError(f"unknown cell {cell!r}")
         reason = self.capabilities.cannot.get(cell)
         if reason is not None:
-            raise LawError(f"{what or cell} is not available for the {self.label} law: {reason}")
+            raise LawError(refusal(self.label, cell, reason, what=what))
 
     # -- required: every consumer needs these -------------------------------------------------------------------
 
@@ -213,6 +178,11 @@ class Law(LoopHooks, ABC):
     @abstractmethod
     def r_op(self, artifact: Any, *, sigma: float | None = None) -> np.ndarray:
         """The references that hold the plant at its operating point (a scheduled law: at ``sigma``)."""
+
+    @abstractmethod
+    def u_op(self, artifact: Any, *, sigma: float | None = None) -> np.ndarray:
+        """The command that holds the plant at its operating point, unclamped (a scheduled law: at ``sigma``, by
+        default its first point)."""
 
     def externals(self, artifact: Any) -> tuple[str, ...]:
         """The names of the external scheduling signals a sample carries after its references (none by default)."""
@@ -294,6 +264,12 @@ class Law(LoopHooks, ABC):
         """The trace of the law's C records (:func:`gainlink.shipping.records.layout`: what the host executable
         ``gainlink_loop_host`` and the image write), the trace ``replay --engine native`` gives for the same
         samples."""
+
+    def host_run_note(self, artifact: Any, records: np.ndarray, trace: Any) -> str:
+        """What ``firmware run --input`` prints after the executable's name, of a replay through it: its ``records``
+        (:meth:`records_trace`'s input) and ``trace`` counted (saturated and refused steps)."""
+        saturated, refused = int(trace.saturated.any(axis=1).sum()), int(trace.fault.sum())
+        return f": {saturated} saturated, {refused} refused"
 
     def export(self, artifact: Any) -> dict[str, str]:
         """The C files of the law's export (``gainlink export``), by name; the same artifact, the same bytes: its

@@ -19,6 +19,9 @@ class LoopHooks:
     """The loop-facing part of a law (module docstring); ``refuse`` and ``label`` are the law's."""
 
     label: str
+    #: The scenario plant that is the law's own model of the plant (``plant = "artifact"``, alias ``linear``: the
+    #: artifact's discrete plant about its one operating point).
+    own_plant: str = "artifact"
 
     def refuse(self, cell: str, *, what: str | None = None) -> None:
         """The law's (:meth:`gainlink.laws.base.Law.refuse`)."""

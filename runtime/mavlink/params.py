@@ -183,6 +183,12 @@ def firmware_params(artifact: Artifact) -> tuple[ParamSpec, ...]:
     return out
 
 
+def table_hash(artifact: Artifact) -> int:
+    """``GL_HASH`` (int32) of the gainlink firmware built for ``artifact``: the CRC its law's table commits with."""
+    (h,) = (int(s.value) for s in firmware_params(artifact) if s.name == HASH_ID)
+    return h
+
+
 def gain_set_hash(artifact: Artifact) -> int:
     """``GL_HASH`` (int32) of ``artifact``'s gain set."""
     return as_int32(gain_set(artifact).crc32)

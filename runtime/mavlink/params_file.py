@@ -34,8 +34,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..fileio import read_user_file
 from ..shipping.artifact import Artifact
-from ..shipping.law_c import law_label
-from .fixed_params import LAW_IDS
+from ..shipping.law_c import IDS, LABELS, law_label
 from .params import (
     PARAM_ID_LEN,
     PARAM_TYPES,
@@ -46,12 +45,13 @@ from .params import (
     firmware_params,
     mapped_params,
 )
-from .sched_params import scheduled_firmware_params
 from .session import ParamValue
 
 HEADER = "# Vehicle-Id Component-Id Name Value Type"
 _STACK = re.compile(r"^# Stack: gainlink firmware \(law (?P<law>[\w-]+)\)\s*$")
 _INT_TYPES = {t for name, t in PARAM_TYPES.items() if name.startswith(("UINT", "INT"))}
+#: What the HEARTBEAT's custom_mode says the gainlink firmware runs, by the law's label (GL_LAW_ID of gl_law.h).
+LAW_IDS = {LABELS[law]: IDS[law] for law in IDS}
 
 
 @dataclass(frozen=True)
@@ -168,9 +168,7 @@ def artifact_parameters(artifact: Artifact, mapping: Mapping | None = None) -> t
     gains), or with ``mapping`` the vehicle parameters the mapping names."""
     if mapping is not None:
         return mapped_params(artifact, mapping)
-    if artifact.schedule is not None:
-        return scheduled_firmware_params(artifact)
-    return firmware_params(artifact)  # the table of the law it runs (a fixed-point law's too)
+    return firmware_params(artifact)  # the table of the law it runs (gainlink.shipping.params.table)
 
 
 def artifact_law(artifact: Artifact) -> str:

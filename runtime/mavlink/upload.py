@@ -40,13 +40,10 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from ..errors import ParameterError, PeerTimeoutError
 from ..shipping.artifact import Artifact
-from ..shipping.codegen_fixed import is_fixed
-from ..shipping.law_c import law_label
-from ..shipping.params import MPC_DIMENSION_IDS
-from .fixed_params import SIGNATURE_ID, STRUCTURE_ID, fixed_firmware_params, law_name
+from ..shipping.law_c import label_of_id, law_label, mapping_refusal
+from ..shipping.params import SIGNATURE_ID, STRUCTURE_ID
 from .link import MavLink, carries_signature
 from .params import (
-    DIMENSION_IDS,
     HASH_ID,
     INT32,
     REAL32,
@@ -59,9 +56,6 @@ from .params import (
     same_value,
     type_name,
 )
-from .sched_params import DIMENSION_IDS as SCHED_DIMENSION_IDS
-from .sched_params import LAW as SCHED_LAW
-from .sched_params import scheduled_firmware_params
 from .session import ParamSession, ParamValue, SetOutcome
 
 log = logging.getLogger(__name__)
@@ -191,31 +185,22 @@ class _Plan:
 
 
 def _plan(artifact: Artifact, mapping: Mapping | None) -> _Plan:
-    if artifact.schedule is not None:
-        return _scheduled_plan(artifact, mapping)
-    if mapping is None:
-        every = fixed_firmware_params(artifact) if is_fixed(artifact) else firmware_params(artifact)
-        formats = tuple(s for s in every if s.name in (SIGNATURE_ID, STRUCTURE_ID))
-        dims = tuple(s for s in every if s.name in DIMENSION_IDS + MPC_DIMENSION_IDS)  # the MPC's: its horizon too
-        header = {s.name for s in dims + formats} | {HASH_ID}
-        gains = tuple(s for s in every if s.name not in header)  # REAL32 (float32) or INT32 (fixed point)
-        (h,) = (int(s.value) for s in every if s.name == HASH_ID)
-        return _Plan(specs=gains, commit=True, checks=dims, new_hash=h, law=law_label(artifact), formats=formats)
-    return _Plan(specs=mapped_params(artifact, mapping), commit=False, checks=(), new_hash=None)
-
-
-def _scheduled_plan(artifact: Artifact, mapping: Mapping | None) -> _Plan:
-    """Every point's gains as one set, committed through GL_HASH (all or none: the node commits its table whole)."""
+    """What an upload writes: with a ``mapping`` the vehicle parameters it names (no commit); else the table of the
+    law the gainlink firmware runs (gainlink.shipping.params.table), in its order: the read-only headers (checked
+    before anything is written: dimensions as ``checks``, a fixed-point law's number formats and structure as
+    ``formats``), ``GL_HASH``, then the gains, all committed at once through ``GL_HASH``."""
     if mapping is not None:
-        raise ParameterError(
-            f"{artifact.name} is a scheduled artifact: a --mapping names one gain set, not its points; "
-            "nothing was changed"
-        )
-    every = scheduled_firmware_params(artifact)
-    dims = tuple(s for s in every if s.name in SCHED_DIMENSION_IDS)
-    gains = tuple(s for s in every if s.name not in SCHED_DIMENSION_IDS and s.name != HASH_ID)
-    (h,) = (int(s.value) for s in every if s.name == HASH_ID)
-    return _Plan(specs=gains, commit=True, checks=dims, new_hash=h, law=SCHED_LAW)
+        why = mapping_refusal(artifact)
+        if why is not None:
+            raise ParameterError(f"{artifact.name} runs the {law_label(artifact)} law: {why}; nothing was changed")
+        return _Plan(specs=mapped_params(artifact, mapping), commit=False, checks=(), new_hash=None)
+    every = firmware_params(artifact)
+    at = next(k for k, s in enumerate(every) if s.name == HASH_ID)
+    header = every[:at]
+    formats = tuple(s for s in header if s.name in (SIGNATURE_ID, STRUCTURE_ID))
+    dims = tuple(s for s in header if s not in formats)
+    return _Plan(specs=every[at + 1 :], commit=True, checks=dims, new_hash=int(every[at].value),
+                 law=law_label(artifact), formats=formats)  # fmt: skip
 
 
 def _fmt(v: float | int, ptype: int) -> str:
@@ -414,7 +399,7 @@ def _use_encoding(session: ParamSession, vehicle: Vehicle, forced: Encoding | No
 def _check_law(session: ParamSession, plan: _Plan) -> None:
     """Refuse, before anything is written, a set the gainlink firmware's law cannot run: another law (its HEARTBEAT's
     custom_mode), or a fixed-point law with other number formats or structure (GL_FX_SIG, GL_FX_STRUCT)."""
-    runs = law_name(session.custom_mode)
+    runs = label_of_id(session.custom_mode)
     if plan.law is not None and runs != plan.law:
         raise ParameterError(
             f"the firmware runs the {runs} law and the artifact is a {plan.law} design: its gains cannot run there "

@@ -13,7 +13,7 @@
 :func:`derive` gives these coefficients from an artifact in float64 (with them, :class:`DerivedLoop` is
 :class:`~gainlink.proof.reference.ReferenceLoop`, tested), or exactly, in balls (what the fixed-point certificate
 measures the quantised coefficients against); the fixed-point law quantises the float64 ones
-(:mod:`gainlink.proof.fixed_gains`), and :class:`DerivedLoop` on the quantised values, with the samples clipped to
+(:mod:`gainlink.laws.fixed.gains`), and :class:`DerivedLoop` on the quantised values, with the samples clipped to
 the declared ranges, is the float64 law the fixed-point certificate bounds the integer law against.
 """
 

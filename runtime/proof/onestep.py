@@ -197,7 +197,7 @@ def one_step_check(artifact: Artifact, Y: np.ndarray, R: np.ndarray, trace: Trac
     >>> import control as ct, numpy as np, gainlink as gl
     >>> art = gl.design(ct.ss([[0.9]], [[0.1]], [[1.0]], [[0.0]], 0.01), Q=[[1.0]], R=[[1.0]],
     ...                 W=[[1e-3]], V=[[1e-4]], u_min=[-1.0], u_max=[1.0])
-    >>> from gainlink.proof.float32_law import Float32Loop
+    >>> from gainlink.laws.lq.model import Float32Loop
     >>> Y = np.linspace(0.0, 20.0, 50).reshape(-1, 1)
     >>> check = one_step_check(art, Y, None, Float32Loop(art).run(Y))  # the C's arithmetic
     >>> check.passed, check.worst["u"] < 0.5

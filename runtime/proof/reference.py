@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..shipping.artifact import Artifact
+from ..shipping.law_c import require_structure
 from .reference_step import compile_reference_step
 
 
@@ -51,7 +52,7 @@ class ReferenceLoop:
     """
 
     def __init__(self, artifact: Artifact) -> None:
-        artifact.require_unscheduled("ReferenceLoop")
+        require_structure(artifact, "lq", "ReferenceLoop")
         self.a = artifact
         self.safe_u = artifact.safe_command
         self._step = compile_reference_step(artifact)

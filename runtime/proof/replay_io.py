@@ -9,9 +9,9 @@ Input CSV: a header with ``y0..y{p-1}`` and ``r0..r{q-1}`` (a ``t`` column is al
 ``s0..`` for the law's external scheduling signals (a scheduled law's ``schedule.external``). Output CSV of the
 observer-based law: ``t`` if given, ``u0..``, ``sat0..`` (1 where that input saturated), ``fault`` (1 where the
 sample was refused as non-finite), ``xh0..`` and ``z0..`` (state after the step); a scheduled law's:
-:mod:`.scheduled_replay`. A fixed-point law's output starts with the line ``# numeric=q31`` (or ``q15``; ``float64``
-from the ``reference`` engine): ``--compare`` refuses a trace of another format in one line (a file without the line
-is read as before); a float32 law's output has no such line.
+:mod:`gainlink.laws.scheduled.replay`. A fixed-point law's output starts with the line ``# numeric=q31`` (or
+``q15``; ``float64`` from the ``reference`` engine): ``--compare`` refuses a trace of another format in one line (a
+file without the line is read as before); a float32 law's output has no such line.
 """
 
 from __future__ import annotations

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import ArtifactError, IntegrityError
 from ..fileio import atomic_write_text, read_user_file
+from .law_c import require_structure, sigma_name
 from .mpc import Mpc, load_mpc
 from .scheduled import Schedule, load_schedule
 
@@ -84,8 +85,8 @@ class Artifact:
 
     A scheduled artifact (schema 2, ``anti_windup == "velocity"``) has its per-point design in ``schedule``
     (:class:`~gainlink.shipping.scheduled.Schedule`) and no single ``Ad Bd Cd Dd K L M Ki Kaw xh0 z0 u_op y_op``:
-    those fields are ``None``, so that nothing runs one point's positional law by mistake
-    (:meth:`require_unscheduled`).
+    those fields are ``None``, so that nothing runs one point's positional law by mistake (each part of the lq law
+    refuses another law's artifact in one line: :func:`gainlink.shipping.law_c.require_structure`).
     """
 
     data: dict = field(repr=False)
@@ -118,16 +119,6 @@ class Artifact:
     schedule: Schedule | None = None
     mpc: Mpc | None = None
 
-    def require_unscheduled(self, what: str) -> None:
-        """Raise :class:`ArtifactError` naming ``what`` when this artifact is scheduled (it does not run one
-        positional law)."""
-        if self.schedule is not None:
-            raise ArtifactError(
-                f"{what} is for unscheduled artifacts; {self.name} is scheduled on {self.schedule.sigma} (schema 2, "
-                "velocity form): it runs in the design, the float64 reference, export and its own C loop (gainlink "
-                "replay --engine native|qemu) and SIL (gainlink hil run, SIL campaigns), not yet in the links or PIL"
-            )
-
     @property
     def signals(self) -> dict:
         """Names of states, inputs, outputs and references (and ``units``, when the spec gave them)."""
@@ -152,25 +143,25 @@ class Artifact:
     @property
     def safe_command(self) -> np.ndarray:
         """The command on a refused sample or an expired watchdog: ``u_op`` clamped into the limits."""
-        self.require_unscheduled("safe_command")
+        require_structure(self, "lq", "safe_command")
         return np.minimum(np.maximum(self.u_op, self.u_min), self.u_max)
 
     @property
     def r_op(self) -> np.ndarray:
         """The reference that holds the plant at its operating point: the tracked outputs there, ``Ci y_op``."""
-        self.require_unscheduled("r_op")
+        require_structure(self, "lq", "r_op")
         return self.Ci @ self.y_op
 
     @property
     def has_operating_point(self) -> bool:
         """True when ``u_op`` or ``y_op`` has a non-zero entry."""
-        self.require_unscheduled("has_operating_point")
+        require_structure(self, "lq", "has_operating_point")
         return bool(np.any(self.u_op != 0.0) or np.any(self.y_op != 0.0))
 
     def design_plant(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The discrete plant ``(Ad, Bd, Cd, Dd)`` in the design's coordinates (those of a plant state a user
         gives, e.g. ``simulate --x0``), whatever the realisation of the estimate (``realization.design``)."""
-        self.require_unscheduled("design_plant")
+        require_structure(self, "lq", "design_plant")
         rec = self.data.get("realization")
         if rec is None:
             return self.Ad, self.Bd, self.Cd, self.Dd
@@ -211,11 +202,10 @@ class Artifact:
         """
         from .systems import controller_system
 
-        if (sigma is None) != (self.schedule is None):
-            raise ArtifactError(
-                "controller(sigma=...) takes sigma exactly when the artifact is scheduled"
-                + (f" (on {self.schedule.sigma})" if self.schedule is not None else "")
-            )
+        on = sigma_name(self)
+        if (sigma is None) != (on is None):
+            on_what = f" (on {on})" if on else ""
+            raise ArtifactError(f"controller(sigma=...) takes sigma exactly when the artifact is scheduled{on_what}")
         return controller_system(self, sigma=sigma)
 
     def closed_loop(self) -> Any:
@@ -257,9 +247,7 @@ def from_dict(data: dict, *, check_hash: bool = True) -> Artifact:
     _check_schema(data)
     if check_hash:
         _check_hash(data)
-    if data["schema_version"] == SCHEDULED_SCHEMA_VERSION:
-        return _scheduled(data)
-    return _positional(data)
+    return _READERS[data["schema_version"]](data)
 
 
 def _check_hash(data: dict) -> None:
@@ -372,6 +360,11 @@ def _validator() -> Any:
     import jsonschema
 
     return jsonschema.Draft202012Validator(schema())
+
+
+#: The reader of each schema version (each checked against its JSON schema first): one positional law (1), the
+#: scheduled law's points (2).
+_READERS = {SCHEMA_VERSION: _positional, SCHEDULED_SCHEMA_VERSION: _scheduled}
 
 
 def _check_schema(data: Any) -> None:

@@ -37,7 +37,7 @@ import numpy as np
 from gainlink.errors import TransportError
 
 from .flags import FLAGS, Flag
-from .law_c import law_pair
+from .law_c import externals, law_name
 
 HEADER_BYTES = 4
 COMMAND_OFFSET = 0x00
@@ -49,8 +49,13 @@ FD_LENGTHS = (8, 12, 16, 20, 24, 32, 48, 64)
 ENCODINGS = ("float32", "int16")
 #: Which flags of the one table (:data:`gainlink.shipping.flags.FLAGS`, its ``set_by``) each structure's CAN node can
 #: set: the DBC's value table and comment of ``status`` name them.
-_SET_BY = {"lq": ("every law",), "fixed": ("every law", "fixed point"), "scheduled": ("every law", "scheduled"),
-           "mpc": ("every law", "mpc")}  # fmt: skip
+_SET_BY = {
+    "lq/float32": ("every law",),
+    "lq/q31": ("every law", "fixed point"),
+    "lq/q15": ("every law", "fixed point"),
+    "scheduled/float32": ("every law", "scheduled"),
+    "mpc/float32": ("every law", "mpc"),
+}
 VALUE_BYTES = {"float32": 4, "int16": 2}
 CLASSIC_VALUES = {"float32": 1, "int16": 2}
 INT16_MAX = 32767  #: largest raw value; -INT16_MAX is the smallest
@@ -504,16 +509,13 @@ def layout_for(
 
 def status_flags(artifact: Any) -> tuple[Flag, ...]:
     """The status flags the artifact's law can set (its CAN node's command frames; the one table's ``set_by``)."""
-    structure, numeric = law_pair(artifact)
-    family = "fixed" if numeric in ("q31", "q15") else structure
-    return tuple(f for f in FLAGS if f.set_by in _SET_BY[family])
+    return tuple(f for f in FLAGS if f.set_by in _SET_BY[law_name(artifact)])
 
 
 def _external_signals(artifact: Any) -> tuple[list[str], list[str]]:
     """A scheduled artifact's external scheduling signals (sent after the references, ``s_`` in the DBC): their
     names and DBC names; none for an unscheduled artifact or a sigma read from an output."""
-    S = getattr(artifact, "schedule", None)
-    names = list(S.external) if S is not None else []
+    names = list(externals(artifact))
     return names, [s if s.startswith("s_") else "s_" + s for s in map(_sanitize, names)]
 
 

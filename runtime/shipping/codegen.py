@@ -13,16 +13,13 @@ artifacts of one structure differ in that one translation unit.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from ..fileio import publish_files
 from . import gains_layout as layout
 from .artifact import Artifact
-from .codegen_fixed import described as fixed_described
-from .codegen_fixed import is_fixed, render_fixed
 from .law_c import macros as law_macros
+from .law_c import require_structure
 
 FORM_CODES = {"predictor": 0, "current": 1}
 ANTI_WINDUP_CODES = {"none": 0, "clamp": 1, "backcalc": 2}
@@ -75,7 +72,7 @@ def gain_set(artifact: Artifact) -> GainSet:
     GainSet
         Float32 fields in C declaration order and the checksum ``gl_gains_crc32`` will compute.
     """
-    artifact.require_unscheduled("the C gain set")
+    require_structure(artifact, "lq", "the C gain set")
     shape = shape_of(artifact)
     fields = {}
     for f in layout.NUMBERS:
@@ -129,7 +126,7 @@ def identity_lines(artifact: Artifact) -> list[str]:
     ]
 
 
-def render_header(artifact: Artifact) -> str:
+def render_header(artifact: Artifact, *, more: str = "") -> str:
     """Text of ``gl_gains.h``: the dimensions and structure of the artifact as macros (the same text for every
     artifact of that structure: its identity is in ``gl_gains.c``)."""
     a = artifact
@@ -142,17 +139,18 @@ def render_header(artifact: Artifact) -> str:
         f"#define GL_OBSERVER_FORM {FORM_CODES[a.observer_form]} /* {a.observer_form} */\n"
         f"#define GL_ANTI_WINDUP {ANTI_WINDUP_CODES[a.anti_windup]} /* {a.anti_windup} */\n"
         f"#define GL_WATCHDOG_PERIODS_DEFAULT {DEFAULT_WATCHDOG_PERIODS}u\n"
-        + law_macros(a, described=described(a))
+        + law_macros(a, described=described(a, more=more))
         + "\n#endif /* GL_GAINS_H */\n"
     )
 
 
-def described(artifact: Artifact) -> str:
+def described(artifact: Artifact, *, more: str = "") -> str:
     """What the compiled lq step depends on besides the law's pair (its compatibility signature's text): the
-    dimensions, observer form and anti-windup mode, and a fixed-point law's formats and term structure."""
+    dimensions, observer form and anti-windup mode, and ``more`` that the law's own files add (a fixed-point law's
+    formats and term structure: :func:`.codegen_fixed.described`)."""
     a = artifact
     text = f"n={a.n};m={a.m};p={a.p};q={a.q};form={a.observer_form};aw={a.anti_windup}"
-    return text + (f";{fixed_described(a)}" if is_fixed(a) else "")
+    return text + (f";{more}" if more else "")
 
 
 def render_source(artifact: Artifact, gains: GainSet) -> str:
@@ -300,29 +298,22 @@ def _step_file(a: Artifact, body: list[str], length: int) -> str:
     )
 
 
-def render_c(artifact: Artifact) -> dict[str, str]:
-    """Render the gains header and source for ``artifact``.
+def render_c(artifact: Artifact, *, more: str = "") -> dict[str, str]:
+    """Render the lq structure's gains header and source for ``artifact`` (``more``: what the law's own files add to
+    the compatibility signature, :func:`described`).
 
     Returns
     -------
     dict of str to str
-        ``{"gl_gains.h": ..., "gl_gains_layout.h": ..., "gl_gains.c": ..., "gl_step.h": ...}``, and for a
-        fixed-point artifact ``gl_fixed_gains.h`` and ``gl_fixed_gains.c`` (:mod:`.codegen_fixed`); identical for
-        the same artifact.
+        ``{"gl_gains.h": ..., "gl_gains_layout.h": ..., "gl_gains.c": ..., "gl_step.h": ...}``; identical for the
+        same artifact. A fixed-point law's export adds its integers (:mod:`.codegen_fixed`,
+        :func:`gainlink.shipping.export_c.render_export`).
     """
-    artifact.require_unscheduled("codegen")
+    require_structure(artifact, "lq", "codegen")
     gains = gain_set(artifact)
-    files = {
-        HEADER_NAME: render_header(artifact),
+    return {
+        HEADER_NAME: render_header(artifact, more=more),
         layout.HEADER_NAME: layout.GAINS.render_header(banner=structure_banner(SOURCE_NAME), shape=shape_of(artifact)),
         SOURCE_NAME: render_source(artifact, gains),
         STEP_NAME: render_step(artifact),
     }
-    if is_fixed(artifact):  # plus the certified integers (codegen_fixed); a float32 artifact's files are unchanged
-        files |= render_fixed(artifact)
-    return files
-
-
-def export(artifact: Artifact, *, out_dir: str | Path) -> list[Path]:
-    """Render the C files for ``artifact`` and publish them atomically into ``out_dir``."""
-    return publish_files(out_dir, render_c(artifact))

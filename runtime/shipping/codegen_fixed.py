@@ -21,24 +21,22 @@ import numpy as np
 
 from ..errors import ArtifactError
 from .artifact import Artifact
+from .law_c import require_law
 
+#: The laws whose export this module renders (the lq structure on integers).
+INTEGER_LAWS = ("lq/q31", "lq/q15")
 HEADER_NAME = "gl_fixed_gains.h"
 SOURCE_NAME = "gl_fixed_gains.c"
 STEP_NAME = "gl_fixed_step.h"
 COEFFICIENT_BITS = {"q31": 32, "q15": 16}
 ANTI_WINDUP_CODES = {"none": 0, "clamp": 1, "backcalc": 2}
 
-# each row's blocks in the order of fixed_law: (block, signal group); signal groups as in gl_fixed.h
+# each row's blocks in the order of laws.fixed.model: (block, signal group); signal groups as in gl_fixed.h
 ROWS = {
     "v": (("KX", "XH"), ("KY", "DY"), ("KZ", "Z")),
     "z": (("TR", "R"), ("TY", "Y"), ("KAW", "W")),
     "x": (("F", "XH"), ("G", "DU"), ("LY", "DY")),
 }
-
-
-def is_fixed(artifact: Artifact) -> bool:
-    """Whether ``artifact`` is a fixed-point design (it carries ``checks.fixed_point``)."""
-    return artifact.checks.get("fixed_point") is not None
 
 
 def _offsets(n: int, m: int, p: int, q: int) -> dict[str, int]:
@@ -86,7 +84,7 @@ def range_keys(lo: float, hi: float) -> tuple[int, int]:
 
 
 def quantise(x: float, frac: int) -> int:
-    """``floor(x 2**frac + 1/2)``, exactly (as gainlink.proof.fixed_format.quantise)."""
+    """``floor(x 2**frac + 1/2)``, exactly (as gainlink.laws.fixed.qformat.quantise)."""
     s = math.ldexp(float(x), int(frac))
     q = math.floor(s)
     return q + (1 if s - q >= 0.5 else 0)
@@ -287,8 +285,7 @@ def render_step(artifact: Artifact) -> str:
 def render_fixed(artifact: Artifact) -> dict[str, str]:
     """``{"gl_fixed_gains.h": ..., "gl_fixed_gains.c": ..., "gl_fixed_step.h": ...}`` for a fixed-point
     artifact; identical for the same artifact."""
-    if not is_fixed(artifact):
-        raise ArtifactError(f"artifact {artifact.name} is not a fixed-point design (no checks.fixed_point)")
+    require_law(artifact, INTEGER_LAWS, "the fixed-point C")
     return {
         HEADER_NAME: render_header(artifact),
         SOURCE_NAME: render_source(artifact),

@@ -17,6 +17,7 @@ import numpy as np
 from . import codegen
 from .artifact import Artifact
 from .law_c import macros as law_macros
+from .law_c import require_law
 from .scheduled import COEFFICIENTS
 
 SOURCE_NAME = "gl_sched_gains.c"
@@ -137,6 +138,5 @@ def render_source(artifact: Artifact) -> str:
 def render_scheduled(artifact: Artifact) -> dict[str, str]:
     """The export of a scheduled artifact: ``{"gl_gains.h": ..., "gl_sched_gains.c": ...}``; same artifact, same
     bytes."""
-    if artifact.schedule is None:
-        raise ValueError(f"artifact {artifact.name} is not scheduled: use gainlink.shipping.codegen.render_c")
+    require_law(artifact, ("scheduled/float32",), "the scheduled tables")
     return {codegen.HEADER_NAME: render_header(artifact), SOURCE_NAME: render_source(artifact)}

@@ -17,6 +17,47 @@ a C member designator). What the parameters are named and what ``GL_HASH`` cover
   (``gl_mpc_tables_t``: the observer-based law's numbers, the prediction model and the per-stage gains, the boxes and
   the solver's settings), REAL32; ``GL_HASH`` the CRC of their bytes. The horizon and cap are in the law's
   compatibility signature: a set for another horizon is refused.
+
+The fixed-point table (``lq/q31``, ``lq/q15``), all INT32, in index order:
+
+=============================================  ====================================================================
+id                                             meaning
+=============================================  ====================================================================
+``GL_DIM_N .. GL_AW``                          compiled structure, as the float table's (read-only)
+``GL_FX_SIG``                                  ``checks.fixed_point.signature`` (8 hex digits as a 32-bit word):
+                                               the number formats compiled into the law (read-only)
+``GL_FX_STRUCT``                               CRC-32 of the rest compiled in: each term's signal, each row's end,
+                                               the declared ranges' clip keys and quantised bounds (read-only)
+``GL_HASH``                                    CRC-32 of the values below as little-endian int32 words; setting it
+                                               commits the staged values (checked, swapped between two steps)
+``GL_<B>_i_j GL_<B>E_i_j``                     each non-zero term of the sums: mantissa and left shift of block
+                                               ``B`` (KX KY KZ, TR TY KAW, F G LY) row ``i``, column ``j``
+``GL_UOPV_i GL_LOV_i GL_HIV_i``                operating point and limits of the unsaturated command (v formats)
+``GL_UOPU_i GL_USAFE_i GL_YOP_i``              operating point and safe command (command formats), y_op
+``GL_XH0_i GL_Z0_i``                           initial estimate and integrators
+=============================================  ====================================================================
+
+The HEARTBEAT's ``custom_mode`` names the law the target runs (``GL_LAW_ID``, :data:`.law_c.IDS`), so a float
+upload to a fixed-point target, or a q15 set to a q31 one, is refused before anything is read; a set whose formats
+(``GL_FX_SIG``) or structure (``GL_FX_STRUCT``) differ from the image's is refused before anything is written.
+
+The scheduled table (``scheduled/float32``), in index order:
+
+=====================================================  ==============================================================
+id                                                     meaning
+=====================================================  ==============================================================
+``GL_DIM_N GL_DIM_M GL_DIM_P GL_DIM_Q GL_NPTS``        compiled structure: dimensions, points, external signals
+``GL_DIM_E`` (INT32, read-only)
+``GL_HASH`` (INT32)                                    CRC-32 of the tables' bytes (``gl_sched_tables_t``, float32);
+                                                       setting it commits every staged value at once (checked by the
+                                                       loop's own ``gl_sched_init``), or nothing
+``GL_S_k``                                             the points
+``GL_<B>_k_i_j``, B one of KX KY KZ F G LY             point k's coefficients (each block for every point in turn)
+``GL_UOP_k_i``                                         point k's trim (start and safe command)
+``GL_UMIN_i GL_UMAX_i GL_CI_i_j GL_ALPHA GL_RATE``     limits, tracked outputs, sigma's filter gain and step limit
+=====================================================  ==============================================================
+
+All REAL32 but the header. The HEARTBEAT's ``custom_mode`` of the scheduled app is 256 (``scheduled-float32``).
 """
 
 from __future__ import annotations
@@ -68,14 +109,7 @@ def as_int32(value: int) -> int:
 
 def table(artifact: Artifact) -> tuple[Param, ...]:
     """Every parameter of the MAVLink node built from ``artifact``, in index order (module docstring)."""
-    law = law_name(artifact)
-    if law == "lq/float32":
-        return _lq(artifact)
-    if law in ("lq/q31", "lq/q15"):
-        return _fixed(artifact)
-    if law == "mpc/float32":
-        return _mpc(artifact)
-    return _scheduled(artifact)
+    return TABLES[law_name(artifact)](artifact)
 
 
 def _structure(artifact: Artifact) -> list[Param]:
@@ -206,6 +240,10 @@ def _mpc(artifact: Artifact) -> tuple[Param, ...]:
             out += [Param(f"GL_{stem}{k}_{j}", REAL32, float(v), field, slot=f"t.{field}[{k}][{j}]")
                     for k, row in enumerate(values) for j, v in enumerate(row)]  # fmt: skip
     return tuple(out)
+
+
+#: Each law's table (module docstring): the registry the export and the upload ask.
+TABLES = {"lq/float32": _lq, "lq/q31": _fixed, "lq/q15": _fixed, "scheduled/float32": _scheduled, "mpc/float32": _mpc}
 
 
 def c_header(artifact: Artifact, *, banner: str) -> str:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .law_c import c_name, law_name
+from .law_c import c_name, externals, law_name
 
 #: Kinds of a record's words: C type, numpy type, the printer's format letter.
 KINDS = {"i32": ("int32_t", "<i4", "i"), "u32": ("uint32_t", "<u4", "u"), "f32": ("float", "<f4", "f")}
@@ -104,8 +104,7 @@ class Layout:
 def dims(artifact) -> tuple[int, int, int, int, int]:
     """``n, m, p, q, e`` of ``artifact``'s law (e: the external scheduling signals a sample carries)."""
     a = artifact
-    e = len(a.schedule.external) if a.schedule is not None else 0
-    return a.n, a.m, a.p, a.q, e
+    return a.n, a.m, a.p, a.q, len(externals(a))
 
 
 def sample_layout(artifact) -> Layout:

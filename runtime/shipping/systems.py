@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .law_c import law_pair
 from .scheduled import law_coefficients
 
 if TYPE_CHECKING:
@@ -28,13 +29,25 @@ def controller_matrices(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(A, B, C, D)`` of the unsaturated law from ``[dy; dr]`` to ``du`` on the state ``[xh; z]`` (a scheduled
     artifact: the frozen-point law at ``sigma``, its coefficients interpolated there)."""
-    if a.schedule is not None:
-        c = a.schedule.coefficients_at(sigma)
-        return coefficient_law(c["F"], c["G"], c["Ly"], c["Kx"], c["Ky"], c["Kz"] / a.Ts, Ci=a.Ci, Ts=a.Ts)
+    return _COEFFICIENTS[law_pair(a)[0]](a, sigma)
+
+
+def _lq_coefficients(a: Artifact, sigma: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The lq law's: its one positional law's coefficients."""
     c = law_coefficients(
         Ad=a.Ad, Bd=a.Bd, Cd=a.Cd, Dd=a.Dd, K=a.K, L=a.L, M=a.M, Ki=a.Ki, Ts=a.Ts, form=a.observer_form
     )
     return coefficient_law(c["F"], c["G"], c["Ly"], c["Kx"], c["Ky"], a.Ki, Ci=a.Ci, Ts=a.Ts)
+
+
+def _scheduled_coefficients(a: Artifact, sigma: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The scheduled law's: its points' coefficients interpolated at ``sigma``."""
+    c = a.schedule.coefficients_at(sigma)
+    return coefficient_law(c["F"], c["G"], c["Ly"], c["Kx"], c["Ky"], c["Kz"] / a.Ts, Ci=a.Ci, Ts=a.Ts)
+
+
+#: Each structure's frozen-point coefficients (the registry :func:`controller_matrices` asks).
+_COEFFICIENTS = {"lq": _lq_coefficients, "scheduled": _scheduled_coefficients}
 
 
 def coefficient_law(F, G, Ly, Kx, Ky, Ki, *, Ci, Ts: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

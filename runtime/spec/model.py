@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..lti import StateSpaceModel
+from .pairs import integer
 
 
 @dataclass(frozen=True)
@@ -141,7 +142,7 @@ class ImplementationSpec:
     @property
     def fixed_point(self) -> bool:
         """True for a fixed-point law (q31, q15)."""
-        return self.numeric != "float32"
+        return integer(self.numeric)
 
 
 @dataclass(frozen=True)

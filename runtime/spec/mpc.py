@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import SpecError, did_you_mean
 from .model import MpcBox, MpcSpec, OperatingPoint, PlantModel
+from .pairs import integer
 from .values import no_unknown, positive_number
 
 MPC_KEYS = {"horizon", "max_iter", "rho", "rho_state", "tol", "boxes", "box_weight"}
@@ -102,7 +103,7 @@ def _box(name: str, bounds: Any, plant: PlantModel, op: OperatingPoint | None) -
 def check_mpc_spec(*, numeric: str, realization: str) -> None:
     """What the MPC law cannot be combined with in this version, refused in one line each (a ``[schedule]``: at the
     top of :func:`gainlink.spec.parse.parse_spec`, before the points are read)."""
-    if numeric != "float32":
+    if integer(numeric):
         raise SpecError(
             f"implementation.numeric {numeric!r} is not available for the MPC law in this version (float32 only)"
         )

@@ -11,7 +11,9 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -19,6 +21,7 @@ from ..errors import SpecError, did_you_mean
 from ..fileio import read_toml
 from .model import ImplementationSpec, PlantSpec
 from .mpc import check_mpc_spec, parse_mpc
+from .pairs import integer, structure_of
 from .plant import parse_plant
 from .ranges import check_ranges
 from .schedule import check_schedule_table, parse_schedule, point_plants
@@ -72,10 +75,9 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     disc = data.get("discretization", "zoh")
     if disc not in ("zoh", "tustin"):
         raise SpecError(f"discretization must be 'zoh' or 'tustin', not {disc!r}")
+    structure = structure_of(data)
     sched = table(data, "schedule", required=False)
-    if sched is not None and isinstance(data.get("controller"), dict) and data["controller"].get("method") == "mpc":
-        raise SpecError('an MPC law cannot be scheduled in this version: drop [schedule] or use method = "lqr"')
-    plants = _plants(table(data, "plant", required=True), sched, Ts=Ts)
+    plants = _PLANTS[structure](table(data, "plant", required=True), sched, Ts=Ts)
     plant = plants[0]
     ctl = checked_table(data, "controller", CONTROLLER_KEYS, required=True)
     integral = parse_integral(
@@ -85,22 +87,13 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     )
     q = 0 if integral is None else integral.q
     limits_table = checked_table(data, "limits", LIMITS_KEYS, required=True)
-    limits = parse_limits(limits_table, plant, q=q, scheduled=sched is not None)
+    limits = parse_limits(limits_table, plant, q=q, structure=structure)
     controllers = tuple(parse_controller(ctl, p, q=q, Ts=Ts) for p in plants)
     implementation = parse_implementation(checked_table(data, "implementation", IMPLEMENTATION_KEYS, required=False))
-    if ctl.get("method") == "mpc":
-        check_mpc_spec(numeric=implementation.numeric, realization=implementation.realization)
-    schedule = None
-    if sched is not None:
-        _check_schedulable(data, q=q, m=plant.m, implementation=implementation)
-        points = check_schedule_table(sched)
-        schedule = parse_schedule(sched, plants, points, limits=limits, controllers=controllers)
-        operating_point = schedule.operating_points[0]
-    else:
-        operating_point = parse_operating_point(table(data, "operating_point", required=False), plant, limits)
-        check_ranges(
-            limits, operating_point, integral.Ci if integral else np.zeros((0, plant.p)), plant, implementation
-        )
+    _CHECKS.get(structure, _no_check)(implementation)
+    parts = _LawParts(data=data, sched=sched, plants=plants, integral=integral, limits=limits,
+                      controllers=controllers, implementation=implementation)  # fmt: skip
+    schedule, operating_point = _OPERATING[structure](parts)
     return PlantSpec(
         name=name,
         Ts=Ts,
@@ -144,12 +137,62 @@ def parse_units(units: dict | None, plant) -> dict[str, str]:
     return dict(sorted(out.items()))
 
 
-def _plants(plant: dict, sched: dict | None, *, Ts: float) -> tuple:
-    """The plant of an unscheduled spec (a 1-tuple), or one per point of a ``[schedule]``."""
-    if sched is None:
-        return (parse_plant(plant, Ts=Ts),)
+def _lq_plants(plant: dict, sched: dict | None, *, Ts: float) -> tuple:
+    """The lq law's plant (a 1-tuple)."""
+    return (parse_plant(plant, Ts=Ts),)
+
+
+def _scheduled_plants(plant: dict, sched: dict, *, Ts: float) -> tuple:
+    """The scheduled law's plants, one per point of its ``[schedule]``."""
     points = check_schedule_table(sched)
     return point_plants(plant, sched["plant"], points, Ts=Ts)
+
+
+@dataclass(frozen=True)
+class _LawParts:
+    """What the spec's structure-specific step reads (:data:`_OPERATING`)."""
+
+    data: dict
+    sched: dict | None
+    plants: tuple
+    integral: Any
+    limits: Any
+    controllers: tuple
+    implementation: ImplementationSpec
+
+
+def _lq_operating(parts: _LawParts) -> tuple[None, Any]:
+    """The lq law's ``[operating_point]``, with the declared ranges checked around it: ``(None, operating point)``."""
+    plant, limits, integral = parts.plants[0], parts.limits, parts.integral
+    operating_point = parse_operating_point(table(parts.data, "operating_point", required=False), plant, limits)
+    Ci = integral.Ci if integral else np.zeros((0, plant.p))
+    check_ranges(limits, operating_point, Ci, plant, parts.implementation)
+    return None, operating_point
+
+
+def _scheduled_operating(parts: _LawParts) -> tuple[Any, Any]:
+    """The scheduled law's ``[schedule]`` (each point its own operating point): ``(schedule, its first point's)``."""
+    q = 0 if parts.integral is None else parts.integral.q
+    _check_schedulable(parts.data, q=q, m=parts.plants[0].m, implementation=parts.implementation)
+    points = check_schedule_table(parts.sched)
+    schedule = parse_schedule(parts.sched, parts.plants, points, limits=parts.limits, controllers=parts.controllers)
+    return schedule, schedule.operating_points[0]
+
+
+#: Each structure's plants and operating point(s) (the registry :func:`parse_spec` asks; :mod:`.pairs` says which
+#: structure a spec asks for).
+def _mpc_check(implementation: ImplementationSpec) -> None:
+    check_mpc_spec(numeric=implementation.numeric, realization=implementation.realization)
+
+
+def _no_check(implementation: ImplementationSpec) -> None:
+    return None
+
+
+_PLANTS = {"lq": _lq_plants, "scheduled": _scheduled_plants, "mpc": _lq_plants}
+_OPERATING = {"lq": _lq_operating, "scheduled": _scheduled_operating, "mpc": _lq_operating}
+#: A structure's own check of ``[implementation]`` (the MPC law: float32, as designed).
+_CHECKS = {"mpc": _mpc_check}
 
 
 def _check_schedulable(data: dict, *, q: int, m: int, implementation: ImplementationSpec) -> None:
@@ -164,7 +207,7 @@ def _check_schedulable(data: dict, *, q: int, m: int, implementation: Implementa
     if realization != "as_designed":
         raise SpecError(f"implementation.realization {realization!r} cannot be scheduled: the points' estimates "
                         "must stay in the same coordinates (use as_designed)")  # fmt: skip
-    if implementation.numeric != "float32":
+    if integer(implementation.numeric):
         raise SpecError(
             f"implementation.numeric {implementation.numeric!r} cannot be scheduled: a scheduled law is time-varying, "
             "where the fixed-point certificate (worst-case peak gain) does not apply"

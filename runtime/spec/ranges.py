@@ -8,6 +8,7 @@ import numpy as np
 
 from ..errors import SpecError
 from .model import ImplementationSpec, LimitsSpec, OperatingPoint, PlantModel
+from .pairs import integer
 from .values import as_vector
 
 NUMERIC = ("float32", "q31", "q15")
@@ -48,7 +49,7 @@ def check_ranges(
     _contains("y", limits.y_min, limits.y_max, y_op, plant.outputs)
     references = [f"r_{plant.outputs[int(np.argmax(row))]}" for row in Ci]
     _contains("r", limits.r_min, limits.r_max, Ci @ y_op, references)
-    if not implementation.fixed_point:
+    if not integer(implementation.numeric):
         return
     numeric = f'numeric = "{implementation.numeric}"'
     if limits.y_min is None:

@@ -15,6 +15,7 @@ from .model import (
     OperatingPoint,
     PlantModel,
 )
+from .pairs import ANTI_WINDUP, STRUCTURE_TABLES, anti_windup_owner
 from .ranges import parse_numeric, parse_ranges
 from .values import as_matrix, as_vector, given_matrix, no_unknown, poles_z, weight
 
@@ -164,10 +165,11 @@ def _given_observer(tbl: dict, plant: PlantModel, *, form: str) -> ObserverSpec:
     return ObserverSpec(method="given", form=form, L=given_matrix(tbl, "L", shape, "observer"))
 
 
-def parse_limits(tbl: dict, plant: PlantModel, *, q: int, scheduled: bool = False) -> LimitsSpec:
-    """``[limits]``: absolute limits below one another, the anti-windup mode (none without integral action;
-    ``velocity``, the scheduled law's own, exactly when the spec has a ``[schedule]``) and the declared ranges of
-    samples and references."""
+def parse_limits(tbl: dict, plant: PlantModel, *, q: int, structure: str = "lq") -> LimitsSpec:
+    """``[limits]``: absolute limits below one another, the anti-windup mode of the law's ``structure``
+    (:data:`.pairs.ANTI_WINDUP`: the lq law's, none without integral action; ``velocity``, the scheduled law's own,
+    exactly when the spec has a ``[schedule]``) and, for the lq law, the declared ranges of samples and
+    references."""
     for key in ("u_min", "u_max"):
         if key not in tbl:
             raise SpecError(f"limits lacks {key}")
@@ -175,25 +177,48 @@ def parse_limits(tbl: dict, plant: PlantModel, *, q: int, scheduled: bool = Fals
     u_max = as_vector(tbl["u_max"], "limits.u_max", plant.m)
     if np.any(u_min >= u_max):
         raise SpecError("limits.u_min must be below limits.u_max for every input")
-    if scheduled:
-        return LimitsSpec(u_min=u_min, u_max=u_max, anti_windup=_scheduled_anti_windup(tbl))
-    aw = tbl.get("anti_windup", "backcalc" if q else "none")
-    if aw == "velocity":
-        raise SpecError("limits.anti_windup 'velocity' is the scheduled law's: it needs a [schedule]")
-    if aw not in ("none", "clamp", "backcalc"):
-        raise SpecError(f"limits.anti_windup must be none, clamp or backcalc, not {aw!r}")
+    return _LIMITS[structure](tbl, plant, q=q, u_min=u_min, u_max=u_max)
+
+
+def _lq_limits(tbl: dict, plant: PlantModel, *, q: int, u_min: np.ndarray, u_max: np.ndarray) -> LimitsSpec:
+    """The lq law's anti-windup (none without integral action) and declared ranges."""
+    aw = tbl.get("anti_windup", ANTI_WINDUP["lq"][0] if q else "none")
+    _check_anti_windup(aw, "lq")
     ranges = parse_ranges(tbl, plant, q=q)
     return LimitsSpec(u_min=u_min, u_max=u_max, anti_windup=aw if q else "none", **ranges)
 
 
-def _scheduled_anti_windup(tbl: dict) -> str:
-    aw = tbl.get("anti_windup", "velocity")
-    if aw != "velocity":
-        raise SpecError(
-            f"limits.anti_windup must be 'velocity' with a [schedule], not {aw!r}: the velocity form integrates its "
-            "own saturated command, which is its anti-windup"
-        )
-    return aw
+def _scheduled_limits(tbl: dict, plant: PlantModel, *, q: int, u_min: np.ndarray, u_max: np.ndarray) -> LimitsSpec:
+    """The scheduled law's own anti-windup: the velocity form integrates its own saturated command."""
+    aw = tbl.get("anti_windup", ANTI_WINDUP["scheduled"][0])
+    _check_anti_windup(aw, "scheduled")
+    return LimitsSpec(u_min=u_min, u_max=u_max, anti_windup=aw)
+
+
+def _check_anti_windup(aw: object, structure: str) -> None:
+    """Refuse an anti-windup mode the ``structure`` does not run: one line naming the structure whose mode it is
+    (:data:`.pairs.ANTI_WINDUP`), or what this structure's must be."""
+    if aw in ANTI_WINDUP[structure]:
+        return
+    owner = anti_windup_owner(aw) if isinstance(aw, str) else None
+    if owner in STRUCTURE_TABLES:
+        raise SpecError(f"limits.anti_windup {aw!r} is the {owner} law's: it needs a [{STRUCTURE_TABLES[owner]}]")
+    raise SpecError(f"limits.anti_windup {_ANTI_WINDUP_MUST[structure]}, not {aw!r}{_ANTI_WINDUP_WHY[structure]}")
+
+
+#: What each structure's anti-windup mode must be, and why, as its refusal says.
+_ANTI_WINDUP_MUST = {
+    "lq": "must be none, clamp or backcalc",
+    "scheduled": "must be 'velocity' with a [schedule]",
+    "mpc": "must be none, clamp or backcalc",
+}
+_ANTI_WINDUP_WHY = {
+    "lq": "",
+    "mpc": "",
+    "scheduled": ": the velocity form integrates its own saturated command, which is its anti-windup",
+}
+#: Each structure's ``[limits]`` (the registry :func:`parse_limits` asks).
+_LIMITS = {"lq": _lq_limits, "scheduled": _scheduled_limits, "mpc": _lq_limits}
 
 
 def parse_operating_point(tbl: dict | None, plant: PlantModel, limits: LimitsSpec) -> OperatingPoint | None:

@@ -1,7 +1,7 @@
 """Ball arithmetic (python-flint's ``arb``/``acb``) turned into float64 bounds that hold rigorously: the upper end
 of a ball's absolute value, and a lower bound of the smallest eigenvalue of a symmetric ball matrix (Rump's test).
-The worst-case peak gain (:mod:`.wcpg`) and the scheduled law's Lyapunov certificates (:mod:`.lyapunov`) prove
-their matrices positive definite with these."""
+The worst-case peak gain (:mod:`.wcpg`) and the scheduled law's Lyapunov certificates
+(:mod:`gainlink.laws.scheduled.lyapunov`) prove their matrices positive definite with these."""
 
 from __future__ import annotations
 

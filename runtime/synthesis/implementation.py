@@ -1,16 +1,14 @@
 """The spec's ``[implementation]`` choices applied to a designed artifact: the realisation of the estimate and the
 compensator's stability (:func:`realise`, every observer-based law), then the law's own check of its arithmetic,
-recorded in ``checks`` with its warnings: the float32 closed-loop fidelity (:func:`float32_check`) or a fixed-point
-law's certificate and measured fidelity (:func:`fixed_point_check`)."""
+recorded in ``checks`` with its warnings, is the law's own: the float32 closed-loop fidelity
+(:func:`gainlink.laws.lq.design.float32_check`), a fixed-point law's certificate
+(:func:`gainlink.laws.fixed.design.fixed_point_check`)."""
 
 from __future__ import annotations
 
-from ..proof.fidelity import Float32Fidelity, float32_fidelity
-from ..proof.fixed_fidelity import fixed_point_fidelity
 from ..shipping.artifact import Artifact, from_dict, seal
-from ..spec import ImplementationSpec, PlantSpec
+from ..spec import ImplementationSpec
 from .compensator import CompensatorStability, compensator_stability
-from .fixed_point import FixedPointCertificate, certificate_dict, certify
 from .realization import apply, transformation
 
 
@@ -19,7 +17,7 @@ def realise(data: dict, implementation: ImplementationSpec, warnings: list[str])
     (with its warning). Returns ``(data, compensator stability)``; ``data`` is not sealed."""
     kind = implementation.realization
     if kind != "as_designed":
-        data = _realised(data, kind)
+        data = realised(data, kind)
     data = dict(data, checks=dict(data["checks"]))
     compensator = compensator_stability(from_dict(seal(data)))
     data["checks"]["compensator"] = compensator.to_dict()
@@ -28,36 +26,7 @@ def realise(data: dict, implementation: ImplementationSpec, warnings: list[str])
     return data, compensator
 
 
-def float32_check(data: dict, spec: PlantSpec, warnings: list[str]) -> dict[str, Float32Fidelity | None]:
-    """The float32 law's closed-loop fidelity (:func:`~gainlink.proof.fidelity.float32_fidelity`) recorded in
-    ``checks.float32``, with a warning naming the remedy when it is above its threshold (``float32`` of the design
-    result; None when the spec switched the check off)."""
-    if not spec.implementation.float32_check:
-        return {"float32": None}
-    kind = spec.implementation.realization
-    fidelity = float32_fidelity(from_dict(seal(data)))
-    data["checks"]["float32"] = fidelity.to_dict()
-    if not fidelity.ok:
-        better = None
-        if kind == "as_designed":
-            better = float32_fidelity(from_dict(seal(_realised(data, "balanced")))).max_rel_u
-        warnings.append(fidelity.warning(kind, balanced=better))
-    return {"float32": fidelity}
-
-
-def fixed_point_check(data: dict, spec: PlantSpec, warnings: list[str]) -> dict[str, FixedPointCertificate]:
-    """Certify the fixed-point law for the spec's declared ranges, record it in ``checks.fixed_point`` with the
-    measured closed-loop deviation (``fixed_point`` of the design result)."""
-    impl, lim = spec.implementation, spec.limits
-    ranges = {"y_min": lim.y_min, "y_max": lim.y_max, "r_min": lim.r_min, "r_max": lim.r_max}
-    cert = certify(from_dict(seal(data)), ranges, numeric=impl.numeric, max_error=impl.fixed_point_max_error)
-    data["checks"]["fixed_point"] = certificate_dict(cert)
-    measured = fixed_point_fidelity(from_dict(seal(data)))
-    data["checks"]["fixed_point"]["measured"] = measured.to_dict()
-    return {"fixed_point": cert}
-
-
-def _realised(data: dict, kind: str) -> dict:
+def realised(data: dict, kind: str) -> dict:
     """``data`` with the estimate in the realisation ``kind`` (from the design's coordinates)."""
     a: Artifact = from_dict(seal(data))
     T = transformation(kind, Ad=a.Ad, Bd=a.Bd, Cd=a.Cd, Dd=a.Dd, K=a.K, L=a.L, M=a.M, form=a.observer_form)

@@ -13,12 +13,11 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import DesignError
-from ..proof.fidelity import Float32Fidelity
 from ..shipping.artifact import from_dict, seal
 from ..spec import PlantSpec
 from .analysis import complex_pairs, uncontrollable_unstable, unobservable_unstable
@@ -26,13 +25,16 @@ from .compensator import CompensatorStability
 from .controller import controller_gain
 from .deadtime import DeadTimeCheck, dead_time_check
 from .discretize import Discretised, augment, discretise
-from .fixed_point import FixedPointCertificate
 from .implementation import realise
 from .loop import closed_loop_poles
 from .margins import ChannelMargin, input_margins, loop_bandwidth
 from .observer import observer_gain
 from .record import Gains, artifact_data
-from .schedule import ScheduleDesign
+
+if TYPE_CHECKING:  # the laws' own results (gainlink.laws.fixed, gainlink.laws.scheduled fill them)
+    from ..laws.fixed.certificate import FixedPointCertificate
+    from ..laws.lq.fidelity import Float32Fidelity
+    from ..laws.scheduled.design import ScheduleDesign
 
 log = logging.getLogger(__name__)
 

@@ -54,7 +54,7 @@ class AnalysisReport:
     badly_scaled_states: list[str]
     warnings: list[str] = field(default_factory=list)
     compensator: dict | None = None  # the spec's designed compensator: poles, spectral radius, stability
-    float32: dict | None = None  # float32 closed-loop fidelity of that design (gainlink.proof.fidelity)
+    float32: dict | None = None  # float32 closed-loop fidelity of that design (gainlink.laws.lq.fidelity)
     dead_time: dict | None = None  # that design against the exact sampled dead times (gainlink.synthesis.deadtime)
     schedule: dict | None = None  # a scheduled spec: checks.schedule of its design (the plant above: first point)
     law_lines: list[str] = field(default_factory=list)  # what the spec's law adds (gainlink.laws.Law.analysis_lines)

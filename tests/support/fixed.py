@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from gainlink.fileio import read_toml
-from gainlink.proof.fixed_law import FixedPointLoop
+from gainlink.laws.fixed.model import FixedPointLoop
 from gainlink.shipping.artifact import Artifact, from_dict
 from gainlink.synthesis.random_plants import random_spec
 
@@ -45,7 +45,7 @@ def random_design(seed: int, numeric: str, y_range: float = 2.0, r_range: float 
 
 @dataclass(frozen=True)
 class ModelRun:
-    """The integer model's steps: as gainlink.firmware.fixed.FixedRun (masks as bit masks, overflow as names)."""
+    """The integer model's steps: as gainlink.laws.fixed.firmware.FixedRun (masks as bit masks, overflow as names)."""
 
     U: np.ndarray
     V: np.ndarray
@@ -58,7 +58,7 @@ class ModelRun:
 
 
 def model_run(a: Artifact, Y, R) -> ModelRun:
-    """Run float32 samples through gainlink.proof.fixed_law (widened exactly to double, as the C does)."""
+    """Run float32 samples through gainlink.laws.fixed.model (widened exactly to double, as the C does)."""
     loop = FixedPointLoop(a)
     Y = np.asarray(Y, dtype=np.float32).reshape(-1, a.p)
     R = np.asarray(R, dtype=np.float32).reshape(Y.shape[0], a.q)

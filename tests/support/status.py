@@ -15,11 +15,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from gainlink.proof.fixed_format import real
-from gainlink.proof.fixed_law import FixedPointLoop
-from gainlink.proof.float32_law import Float32Loop
-from gainlink.proof.scheduled_float32 import ScheduledFloat32Loop
-from gainlink.proof.scheduled_reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE
+from gainlink.laws.fixed.model import FixedPointLoop
+from gainlink.laws.fixed.qformat import real
+from gainlink.laws.lq.model import Float32Loop
+from gainlink.laws.scheduled.model import ScheduledFloat32Loop
+from gainlink.laws.scheduled.reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE
 from gainlink.shipping.artifact import Artifact
 
 from .hil import udp_transport
@@ -58,7 +58,7 @@ class Expected:
 
 
 class Float32Oracle:
-    """The float32 law's bit-exact model (gainlink.proof.float32_law): fault on a refused sample, saturation."""
+    """The float32 law's bit-exact model (gainlink.laws.lq.model): fault on a refused sample, saturation."""
 
     def __init__(self, a: Artifact) -> None:
         self.a, self.loop = a, Float32Loop(a)
@@ -76,7 +76,7 @@ class Float32Oracle:
 
 
 class FixedOracle:
-    """The integer law's bit-exact model (gainlink.proof.fixed_law): fault, a sample or reference clipped to its
+    """The integer law's bit-exact model (gainlink.laws.fixed.model): fault, a sample or reference clipped to its
     declared range, the second-line saturation (any variable it clipped), saturation."""
 
     def __init__(self, a: Artifact) -> None:
@@ -101,7 +101,7 @@ class FixedOracle:
 
 
 class ScheduledOracle:
-    """The scheduled law's float32 model (gainlink.proof.scheduled_float32): fault, and sigma held, clipped and
+    """The scheduled law's float32 model (gainlink.laws.scheduled.model): fault, and sigma held, clipped and
     rate-limited, saturation."""
 
     def __init__(self, a: Artifact) -> None:

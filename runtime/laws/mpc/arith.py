@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...proof.float32_law import fma32_exact
-from ...proof.float32_step import MID_HALF, MID_MASK
+from ..lq.model import fma32_exact
+from ..lq.step import MID_HALF, MID_MASK
 
 
 class Arith:

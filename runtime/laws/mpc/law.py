@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...errors import DataError
-from ..base import Capabilities, Controller, Law, OneStepVerdict
+from ..base import Controller, Law, OneStepVerdict
 from ..lq import LqLaw
 from .arith import Arith, Float32
 from .controllers import MpcController, MpcNative, trace_of_records
@@ -28,12 +28,6 @@ if TYPE_CHECKING:
 AGAINST_MODEL = "the C's float32 arithmetic, bit for bit, from its own state at each step (its iteration count too)"
 AGAINST_FLOAT64 = ("the float64 algorithm from the same state with the same iteration count, within the solver's own "
                    "tolerance (measured, not a proved float32 bound)")  # fmt: skip
-#: The cells the MPC law cannot do yet, each with its reason (refused in one generated line).
-CANNOT = {
-    "fidelity": "its design records no float32 fidelity figure (a bound on the C against the float64 algorithm "
-    "over any history is not derived for the ADMM); each step of a trace is checked instead: bit "
-    "for bit its float32 model, within the solver's tolerance of the float64 algorithm (one_step)"
-}
 
 
 class MpcLaw(Law):
@@ -46,10 +40,6 @@ class MpcLaw(Law):
     def label(self) -> str:
         return "mpc-float32"
 
-    @property
-    def capabilities(self) -> Capabilities:
-        return Capabilities(cannot=CANNOT)
-
     def reference(self, artifact: Any) -> Controller:
         return MpcController(MpcLoop(artifact, Arith()), {"kind": "reference (the MPC algorithm in float64)"})
 
@@ -58,6 +48,9 @@ class MpcLaw(Law):
 
     def native(self, artifact: Any, *, library: Any = None) -> Controller:
         return MpcNative(artifact, library=library)
+
+    def u_op(self, artifact: Any, *, sigma: float | None = None) -> np.ndarray:
+        return np.asarray(artifact.u_op, dtype=float)
 
     def safe_command(self, artifact: Any) -> np.ndarray:
         return np.minimum(np.maximum(artifact.u_op, artifact.u_min), artifact.u_max)

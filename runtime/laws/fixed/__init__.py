@@ -1,0 +1,18 @@
+"""The lq structure in q31/q15 (the fixed-point pairs ``lq/q31``, ``lq/q15``): everything that is this family's
+(docs/design.md, "Adding a law").
+
+- the law (:mod:`.law`) and its design step (:mod:`.design`: the certificate as the implementation check);
+- the certificate: formats (:mod:`.formats`), range bounds (:mod:`.ranges`), the command's error (:mod:`.error`,
+  over the linear systems of :mod:`.loops`), the verdict (:mod:`.certificate`), a float32 link's bound
+  (:mod:`.link`);
+- the integers: binary formats and operations (:mod:`.qformat`), the quantised gains (:mod:`.gains`), the
+  bit-exact model of the C (:mod:`.model`), its one-step check (:mod:`.onestep`), the closed-loop fidelity
+  (:mod:`.fidelity`);
+- the C: its host build and images (:mod:`.firmware`), as replay engines (:mod:`.engines`) and a ctypes
+  controller (:mod:`.native`);
+- the loops: the closed-loop run check (:mod:`.run`), processor in the loop and cost (:mod:`.pil`).
+"""
+
+from .law import FixedLaw
+
+__all__ = ["FixedLaw"]
