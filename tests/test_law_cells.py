@@ -610,7 +610,12 @@ def test_the_layers_below_the_laws_refuse_from_the_pairs_declaration(artifacts):
                 law.refuse(cell)
             assert str(below.value) == str(above.value) == line
             refused.append((pair, cell))
-    assert sorted(refused) == [("lq/q15", "fuzz"), ("lq/q31", "fuzz"), ("scheduled/float32", "fuzz")]
+    assert sorted(refused) == [
+        ("lq/q15", "fuzz"),
+        ("lq/q31", "fuzz"),
+        ("mpc/float32", "fidelity"),
+        ("scheduled/float32", "fuzz"),
+    ]
     for pair in ("scheduled/float32", "lq/q31"):
         with pytest.raises(LawError, match=f"^fuzzing is not available for the {law_of(artifacts[pair]).label} law"):
             fuzz.build_harnesses(artifacts[pair])

@@ -95,12 +95,19 @@ def refuse(artifact: Any, cell: str, *, what: str | None = None) -> None:
         raise LawError(refusal(law_label(artifact), cell, reason, what=what))
 
 
-def require_structure(artifact: Any, structure: str, what: str) -> None:
+#: The structures whose artifact holds one positional law about one operating point (its trim, safe command and
+#: design plant are the artifact's own; the scheduled law has one per point).
+ONE_OPERATING_POINT: tuple[str, ...] = ("lq", "mpc")
+
+
+def require_structure(artifact: Any, structure: str | tuple[str, ...], what: str) -> None:
     """Raise :class:`ArtifactError` (one line) when ``what``, a part of the ``structure`` law (its float64 law, its
     C gain set, its one operating point...), is asked of an artifact whose law has another structure: that law has
-    its own (``gainlink.laws.law_of``)."""
+    its own (``gainlink.laws.law_of``). A tuple names every structure that has it, the first named in the line."""
+    allowed = (structure,) if isinstance(structure, str) else structure
+    structure = allowed[0]
     own = law_pair(artifact)[0]
-    if own != structure:
+    if own not in allowed:
         raise ArtifactError(
             f"{what} is the {structure} law's ({STRUCTURES[structure](artifact)}); {artifact.name} runs the "
             f"{law_label(artifact)} law ({STRUCTURES[own](artifact)}), which has its own (gainlink.laws.law_of)"

@@ -115,12 +115,12 @@ class MpcLaw(Law):
 
     def design_model(self, artifact: Any, *, state: Mapping[str, float] | None, deviation: bool,
                      sigma: float) -> tuple[Any, str]:  # fmt: skip
-        from ..lq_run import design_model
+        from ..lq.run import design_model
 
         return design_model(artifact, state=state, deviation=deviation)
 
     def describe(self, artifact: Any) -> dict:
-        from ..lq_run import describe
+        from ..lq.run import describe
 
         return describe(artifact) | super().describe(artifact)
 
@@ -155,12 +155,12 @@ class MpcLaw(Law):
         return pil_lines(summary)
 
     def image_stream(self, artifact: Any, *, target: str, board: str) -> Any:
-        from ..lq_run import image_stream
+        from ..lq.run import image_stream
 
         return image_stream(artifact, target=target, board=board)
 
     def cost(self, artifact: Any, *, target: str, board: str, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> Any:
-        from ..lq_run import cost
+        from ..lq.run import cost
 
         return cost(artifact, target=target, board=board, Y=Y, R=R, S=S)
 
