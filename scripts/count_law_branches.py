@@ -75,22 +75,24 @@ C_LAW_OWN: tuple[str, ...] = (
     "firmware/src/gl_loop",
     "firmware/src/gl_fixed",
     "firmware/src/gl_sched",
+    "firmware/src/gl_mpc",
     "firmware/src/gl_law",
     "firmware/include/gainlink/gl_loop",
     "firmware/include/gainlink/gl_fixed",
     "firmware/include/gainlink/gl_sched",
+    "firmware/include/gainlink/gl_mpc",
     "firmware/include/gainlink/gl_law",
 )
 #: The macros that say which law an image compiles (a preprocessor test on one of them chooses by law).
 C_LAW_MACROS = re.compile(
-    r"\bGL_SCHEDULED\b|\bGL_\w*LAW_(?:FIXED|SCHED)\w*|\bGL_NUMERIC_\w+|\bGL_LAW(?:_STRUCTURE|_NUMERIC|_ID)?\b"
+    r"\bGL_SCHEDULED\b|\bGL_\w*LAW_(?:FIXED|SCHED|MPC)\w*|\bGL_NUMERIC_\w+|\bGL_LAW(?:_STRUCTURE|_NUMERIC|_ID)?\b"
 )
 C_CONDITIONAL = re.compile(r"^\s*#\s*(?:if|elif|ifdef|ifndef)\b(.*)")
 C_SUFFIXES = (".c", ".h")
 
 #: Words a module named after a law kind carries (``pil_fixed.py``, ``main_sched.c``, ``scheduled_float32.py``).
 KIND_WORDS = frozenset({"fixed", "fx", "fxparams", "fxset", "sched", "schedparams", "schedule", "scheduled",
-                        "float32", "q31", "q15", "lq"})  # fmt: skip
+                        "float32", "q31", "q15", "lq", "mpc"})  # fmt: skip
 KIND_NAME_SPLIT = re.compile(r"[_\-.]")
 
 

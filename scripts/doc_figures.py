@@ -81,6 +81,29 @@ SOURCES: dict[str, tuple[str, ...]] = {
     "hil_lockstep": (*_HOST_LINKS, "bench/hil_lockstep.py"),
     "hil_realtime": (*_HOST_LINKS, "bench/hil_realtime.py"),
     "mavlink_hil": (*_HOST_LINKS, "bench/mavlink_hil.py"),
+    "mpc_cost": (
+        *_FIRMWARE_C,
+        "runtime/shipping/codegen_mpc.py",
+        "runtime/shipping/mpc.py",
+        "runtime/laws/mpc/design.py",
+        "runtime/firmware/cost.py",
+        "examples/pendulum_mpc.toml",
+        "examples/quadrotor_hover_mpc.toml",
+        "bench/mpc_cost.py",
+    ),
+    "mpc_pays": (
+        "hil/campaign",
+        "hil/loop",
+        "hil/plants",
+        "runtime/laws/mpc",
+        "runtime/shipping/mpc.py",
+        "runtime/synthesis",
+        "firmware/src/gl_mpc.c",
+        "examples/pendulum.toml",
+        "examples/pendulum_mpc.toml",
+        "examples/campaigns/pendulum_mpc_mass_uncertainty.toml",
+        "bench/mpc_pays.py",
+    ),
     "sched_cost": (*_FIRMWARE_C, "firmware/ports/host", "bench/sched_cost.py"),
     "sched_showcase": (
         "runtime/synthesis",
@@ -608,7 +631,110 @@ def sched_cost_block() -> str:
     return target + table(head, rows) + "\n" + provenance(doc) + "\n"
 
 
+def mpc_cost_block() -> str:
+    """The MPC law's step on the M0, M4F and M7 (bench/mpc_cost.py): instructions per step, mean and worst, per
+    iteration, the bound at the cap, sizes; against the issue's targets and the LQ law of the same weights."""
+    doc = result("mpc_cost")
+    if doc is None:
+        return missing("MPC step cost", "scripts/bench.sh mpc_cost")
+    rows, notes = [], []
+    for d in doc["designs"]:
+        for r in d["targets"]:
+            core = r["target"].removeprefix("cortex-").upper() + ("F" if r["target"] == "cortex-m4" else "")
+            if not r.get("built", True):
+                rows.append([d["design"], core, "not built: the law's replay image does not fit the board's RAM"]
+                            + ["—"] * 6)  # fmt: skip
+                continue
+            rows.append([
+                d["design"], core,
+                f"{r['iterations_mean']:g} / {r['iterations_max']} ({r['capped_steps']}/{r['steps']} capped)",
+                f"{num(r['instructions_per_step_mean'])} / {num(r['instructions_per_step_worst'])}",
+                num(r["instructions_per_iteration_worst"]),
+                num(r["bound_per_step_at_cap"]),
+                f"{num(r['tables_bytes'])} B",
+                f"{num(r['law_state_and_workspace_bytes'])} B",
+                f"{num(r['law_ram_with_both_banks_bytes'])} B",
+            ])  # fmt: skip
+        m4 = next(r for r in d["targets"] if r["target"] == "cortex-m4")
+        target = d.get("target_m4f_instructions_per_step_worst")
+        words = (f"{d['design']} (N = {d['horizon']}, cap {d['cap']}, {d['macs_per_iteration']:,} multiply-adds per "
+                 f"iteration): M4F worst {num(m4['instructions_per_step_worst'])} instructions per step")  # fmt: skip
+        if target:
+            verdict = "within" if d["m4f_worst_within_target"] else "OVER"
+            words += f", {verdict} the target of {num(target)}"
+        base = d["baseline_m4f"]
+        words += (f"; the LQ law of the same weights takes {num(base['instructions_per_step_worst'])} "
+                  f"({d['ratio_to_baseline_worst']:g}x)")  # fmt: skip
+        if "m4f_law_ram_with_both_banks_within_16KiB" in d:
+            ok = "within" if d["m4f_law_ram_with_both_banks_within_16KiB"] else "OVER"
+            words += f"; state, workspace and both banks {num(m4['law_ram_with_both_banks_bytes'])} B, {ok} 16 KiB"
+        notes.append(words + ".")
+    head = ["design", "core", "iterations mean / worst", "instructions per step mean / worst", "per iteration (worst)"]
+    head += ["bound at the cap", "tables (one bank)", "state + workspace", "both banks + state"]
+    caveat = prose(
+        "Instructions, not cycles: a `vfma.f32` takes 3 cycles on the M4F and flash wait states add more, so no time "
+        "is given. The bound at the cap is the fixed part plus the cap times the dearest iteration measured on this "
+        "run, not proved for every input."
+    )
+    return (
+        table(head, rows)
+        + "\n"
+        + "\n".join(prose(n) for n in notes)
+        + "\n\n"
+        + caveat
+        + "\n\n"
+        + provenance(doc)
+        + "\n"
+    )
+
+
+def _pays_cell(s: Doc) -> list[str]:
+    settle = "—" if s["settling_s_median"] is None else f"{s['settling_s_median']:.2f} s ({s['settled_runs']} settle)"
+    iae = "—" if s["iae_median_of_runs_up"] is None else f"{s['iae_median_of_runs_up']:.2f}"
+    return [f"{100 * s['stays_up']:.0f} % of {s['runs']}", settle, iae]
+
+
+def mpc_pays_block() -> str:
+    """MPC against LQI + back-calculation on the same drawn pendulums (and the MPC with a soft box on the angle), and
+    the MPC over rho x cap (bench/mpc_pays.py)."""
+    doc = result("mpc_pays")
+    if doc is None:
+        return missing("MPC campaign comparison", "scripts/bench.sh mpc_pays")
+    laws = (("mpc", "MPC (N = 20, cap 10)"), ("mpc_theta_box", "MPC, soft box abs(theta) <= 0.4 rad"),
+            ("lqi_backcalc", "LQI + back-calculation"))  # fmt: skip
+    rows = []
+    for entry in doc["compare"].values():
+        for law, label in laws:
+            s = entry[law]
+            it = "—"
+            if "iterations_mean" in s:
+                it = (f"{s['iterations_mean']:.1f} / {s['iterations_worst']}, "
+                      f"{100 * s['capped_fraction_of_steps']:.0f} % of steps capped")  # fmt: skip
+            fell = ", ".join(f"{k} {v}" for k, v in sorted(s.get("failed_criteria", {}).items())) or "—"
+            rows.append([f"±{entry['box_N']:g} N", label, *_pays_cell(s), fell, it])
+    head = ["box", "law", "stays up", "settling median (runs up)", "IAE median (runs up)"]
+    head += ["runs failing each criterion", "iterations mean / worst"]
+    pairs = "; ".join(
+        f"at ±{e['box_N']:g} N the MPC keeps {e['mpc_up_lqi_down']} plants up that LQI loses and loses "
+        f"{e['lqi_up_mpc_down']} that LQI keeps, with the angle box {e['mpc_theta_box_up_lqi_down']} and "
+        f"{e['lqi_up_mpc_theta_box_down']}"
+        for e in doc["compare"].values()
+    )
+    grid = []
+    for r in doc["rho_cap"]:
+        grid.append([f"{r['rho']:g}", str(r["cap"]), *_pays_cell(r),
+                     f"{r['iterations_mean']:.1f} / {r['iterations_worst']}",
+                     f"{100 * r['capped_fraction_of_steps']:.0f} %", str(r["runs_needing_the_cap"])])  # fmt: skip
+    ghead = ["rho", "cap", "stays up", "settling median", "IAE median", "iterations mean / worst", "steps capped"]
+    ghead += ["runs that hit the cap"]
+    text = table(head, rows) + "\n" + prose("Paired on the draw: " + pairs + ".") + "\n\n"
+    text += "Over rho and the cap (±20 N, no angle box, the same draws):\n\n" + table(ghead, grid)
+    return text + "\n" + provenance(doc) + "\n"
+
+
 BLOCKS: dict[str, Callable[[], str]] = {
+    "mpc_cost": mpc_cost_block,
+    "mpc_pays": mpc_pays_block,
     "sched_cost": sched_cost_block,
     "sched_showcase": sched_showcase_block,
     "fixed_point_cost": fixed_point_cost_block,

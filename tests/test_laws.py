@@ -21,7 +21,7 @@ from support.paths import EXAMPLES
 
 #: docs/design.md's status flags, written out (the oracle).
 DOC_FLAGS = {"FAULT": 0x01, "WATCHDOG": 0x02, "CLIPPED": 0x04, "OVERFLOW": 0x08, "SIGMA_HELD": 0x10,
-             "SIGMA_CLIPPED": 0x20, "SIGMA_RATE": 0x40, "RESET": 0x80}  # fmt: skip
+             "SIGMA_CLIPPED": 0x20, "SIGMA_RATE": 0x40, "RESET": 0x80, "CAPPED": 0x100}  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +36,17 @@ def artifacts(tmp_path_factory):
         "lq/q31": example("pendulum", "q31"),
         "lq/q15": example("wood_berry", "q15"),
         "scheduled/float32": from_dict(designed(tank_dict())),
+        "mpc/float32": from_dict(designed(_short_mpc())),
     }
+
+
+def _short_mpc() -> dict:
+    """examples/pendulum_mpc.toml over 5 steps (its float32 model is Python: a short horizon keeps it cheap)."""
+    import tomllib
+
+    data = tomllib.loads((EXAMPLES / "pendulum_mpc.toml").read_text())
+    data["mpc"]["horizon"] = 5
+    return data
 
 
 def test_law_of_names_each_pair_from_the_artifacts_content(artifacts):
@@ -99,7 +109,7 @@ def _samples(a, rng, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return Y, R, np.zeros((k, e))
 
 
-@pytest.mark.parametrize("name", ["lq/float32", "lq/q31", "lq/q15", "scheduled/float32"])
+@pytest.mark.parametrize("name", ["lq/float32", "lq/q31", "lq/q15", "scheduled/float32", "mpc/float32"])
 def test_model_and_host_c_give_the_same_steps_bit_for_bit_and_the_reference_is_within_rounding(artifacts, name):
     a = artifacts[name]
     law = law_of(a)

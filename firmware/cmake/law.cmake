@@ -1,5 +1,5 @@
 # The law the build runs (firmware/include/gainlink/gl_law.h): the export's, named in its gl_gains.h
-# (`#define GL_LAW_STRUCTURE lq|scheduled`, `#define GL_LAW_NUMERIC float32|q31|q15`), unless GL_LAW names another
+# (`#define GL_LAW_STRUCTURE lq|scheduled|mpc`, `#define GL_LAW_NUMERIC float32|q31|q15`), unless GL_LAW names another
 # that the export also holds (a benchmark baseline: the float32 loop of a q31 artifact, GL_LAW=lq_float32).
 #
 # Sets GL_LAW_EXPORTED (the export's law) and GL_LAW_BUILT (the one built), and defines gl_add_law(NAME VARIANT
@@ -10,7 +10,7 @@
 # reads every shift and signal from its set (an uploaded set may carry other shifts: the MAVLink node's).
 include_guard(GLOBAL)
 
-set(GL_LAW "" CACHE STRING "Build this law instead of the export's (lq_float32, lq_q31, lq_q15, scheduled_float32)")
+set(GL_LAW "" CACHE STRING "Build this law instead of the export's (lq_float32, lq_q31, lq_q15, scheduled_float32, mpc_float32)")
 option(GL_STEP_UNROLLED "lq_float32: the generated, fully unrolled step (gl_step.h) instead of the generic loops" ON)
 option(GL_FIXED_UNROLLED "Integer laws: the generated row sums (gl_fixed_step.h) instead of the generic loop" ON)
 
@@ -47,11 +47,13 @@ set(GL_LAW_SOURCES_lq_q15 ${GL_LAW_SOURCES_lq_q31})
 set(GL_LAW_UNROLLED_lq_q15 GL_FX_UNROLLED)
 set(GL_LAW_SOURCES_scheduled_float32 src/gl_sched.c src/gl_fmaf.c @GAINS@/gl_sched_gains.c)
 set(GL_LAW_UNROLLED_scheduled_float32 "")
+set(GL_LAW_SOURCES_mpc_float32 src/gl_mpc.c src/gl_fmaf.c @GAINS@/gl_mpc_gains.c)
+set(GL_LAW_UNROLLED_mpc_float32 "")
 set(_gl_option_GL_STEP_UNROLLED ${GL_STEP_UNROLLED})
 set(_gl_option_GL_FX_UNROLLED ${GL_FIXED_UNROLLED})
 
 if(NOT DEFINED GL_LAW_SOURCES_${GL_LAW_BUILT})
-  message(FATAL_ERROR "GL_LAW must be lq_float32, lq_q31, lq_q15 or scheduled_float32 (got '${GL_LAW_BUILT}')")
+  message(FATAL_ERROR "GL_LAW must be lq_float32, lq_q31, lq_q15, scheduled_float32 or mpc_float32 (got '${GL_LAW_BUILT}')")
 endif()
 set(GL_LAW_SOURCES "")
 foreach(_gl_source IN LISTS GL_LAW_SOURCES_${GL_LAW_BUILT})

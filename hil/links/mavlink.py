@@ -4,7 +4,7 @@ Plant → controller: ``DEBUG_FLOAT_ARRAY`` (name ``GL_SAMPLE``, ``array_id`` 1)
 ``data = y[0..p-1], r[0..q-1]`` and ``time_usec = seq * round(Ts * 1e6)``.
 Controller → plant: ``HIL_ACTUATOR_CONTROLS`` with the same ``time_usec`` (lockstep: the answer
 names its sample), ``controls[0..m-1] = u`` and ``flags``: bits 0-15 are MAVLink's own (bit 0 its LOCKSTEP flag;
-gainlink sets none of them), bits 16-23 the step's status flags (the one table, :mod:`gainlink.laws.flags`: the
+gainlink sets none of them), bits 16-31 the step's status flags (the one table, :mod:`gainlink.laws.flags`: the
 same bits as the CAN status byte; RESET on the answer to a reset), bits 32-47 the saturation mask (bit 32+k: input k
 clamped). That is wire format 2 (``wire=2`` on the node's ready line, AUTOPILOT_VERSION's
 ``middleware_sw_version``); a scheduled law's sample carries its external scheduling signals after ``r``.
@@ -51,14 +51,14 @@ ARRAY_IDLE = 3
 
 
 def status_of(flags: int) -> int:
-    """The status bits of a command's HIL_ACTUATOR_CONTROLS ``flags`` (bits 16-23: the one table's bits)."""
-    return (flags >> MAVLINK_FLAGS_SHIFT) & 0xFF
+    """The status bits of a command's HIL_ACTUATOR_CONTROLS ``flags`` (bits 16-31: the one table's bits 0-15)."""
+    return (flags >> MAVLINK_FLAGS_SHIFT) & 0xFFFF
 
 
 def flags_of(status: int, sat: int) -> int:
     """The HIL_ACTUATOR_CONTROLS ``flags`` of a command's status bits and saturation mask (a node's side of
-    :func:`status_of`): the status at bits 16-23, the saturation mask at bits 32-47, MAVLink's bits 0-15 clear."""
-    return ((int(status) & 0xFF) << MAVLINK_FLAGS_SHIFT) | ((int(sat) & 0xFFFF) << MAVLINK_SAT_SHIFT)
+    :func:`status_of`): the status at bits 16-31, the saturation mask at bits 32-47, MAVLink's bits 0-15 clear."""
+    return ((int(status) & 0xFFFF) << MAVLINK_FLAGS_SHIFT) | ((int(sat) & 0xFFFF) << MAVLINK_SAT_SHIFT)
 
 
 DEFAULT_PORT = 14560

@@ -81,7 +81,7 @@ def serve(artifact: Any, *, url: str, out: Any = sys.stdout) -> int:
                     continue
                 controls = np.zeros(16, dtype=np.float32)
                 controls[:m] = u
-                flags = flags_of(bits, sat)  # status at bits 16-23, saturation at 32-47
+                flags = flags_of(bits, sat)  # status at bits 16-31, saturation at 32-47
                 reply = mavlink2.MAVLink_hil_actuator_controls_message(msg.time_usec, controls.tolist(), 0, flags)
                 sock.sendto(reply.pack(mav), addr)
     finally:

@@ -123,7 +123,9 @@ def _run(cmd: list[str], *, cwd: Path, what: str) -> None:
         lines = (proc.stdout + proc.stderr).strip().splitlines()
         for line in lines[-15:]:
             log.error("%s", line)
-        first = next((ln for ln in lines if "error" in ln.lower()), lines[-1] if lines else "")
+        # the linker's own words when the image does not fit its memory, else the first error
+        first = next((ln for ln in lines if "overflowed by" in ln), None)
+        first = first or next((ln for ln in lines if "error" in ln.lower()), lines[-1] if lines else "")
         raise ToolchainError(f"{what} failed (exit {proc.returncode}): {first.strip()[:300]}")
 
 

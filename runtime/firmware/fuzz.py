@@ -83,6 +83,14 @@ def clang() -> str:
     return path
 
 
+def harnesses_of(artifact: Artifact) -> tuple[str, ...]:
+    """The harnesses built for ``artifact``'s law: ``gains_stage`` stages the observer-based law's ``gl_gains_t``,
+    which an MPC image does not have (its tables, ``gl_mpc_set_t``, are staged by the MAVLink node's harness)."""
+    from ..shipping.law_c import law_name
+
+    return tuple(h for h in HARNESSES if not (h == "gains_stage" and law_name(artifact) == "mpc/float32"))
+
+
 def build_harnesses(artifact: Artifact) -> dict[str, Path]:
     """Build (cached) every harness for ``artifact``; returns name -> executable.
 
@@ -93,7 +101,7 @@ def build_harnesses(artifact: Artifact) -> dict[str, Path]:
     """
     refuse(artifact, "fuzz", what="fuzzing")
     result = build(artifact, target="host", options={"GL_FUZZ": "ON", "CMAKE_C_COMPILER": clang()})
-    exes = {name: result.build_dir / "fuzz" / f"fuzz_{name}" for name in HARNESSES}
+    exes = {name: result.build_dir / "fuzz" / f"fuzz_{name}" for name in harnesses_of(artifact)}
     missing = [str(p) for p in exes.values() if not p.is_file()]
     if missing:
         raise ToolchainError(f"fuzz build did not produce {', '.join(missing)}")

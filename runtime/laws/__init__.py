@@ -5,8 +5,8 @@ runs, from the artifact's own content (a ``schedule`` block: the scheduled struc
 integer format). Everything else asks the returned :class:`Law`: for a :class:`Controller` to step
 (``reference``, ``model``, ``native``), for its refusals (:meth:`Law.refuse`), its safe command and trim.
 
-Pairs today: ``lq/float32``, ``lq/q31``, ``lq/q15``, ``scheduled/float32``. A scheduled law on integers is not a
-pair: a time-varying law has no worst-case peak gain to certify its formats with.
+Pairs today: ``lq/float32``, ``lq/q31``, ``lq/q15``, ``scheduled/float32``, ``mpc/float32``. A scheduled law on
+integers is not a pair: a time-varying law has no worst-case peak gain to certify its formats with.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from ..shipping.law_c import law_pair
 from .base import CELLS, ENGINES, Capabilities, Controller, Law, OneStepVerdict, Step
 from .fixed import FixedLaw
 from .lq import LqLaw
+from .mpc import MpcLaw
 from .scheduled import ScheduledLaw
 
 if TYPE_CHECKING:
@@ -40,7 +41,8 @@ __all__ = [
 ]
 
 #: Each structure's law class (its numeric formats are the class's).
-STRUCTURES: dict[str, tuple[type[Law], ...]] = {"lq": (LqLaw, FixedLaw), "scheduled": (ScheduledLaw,)}
+STRUCTURES: dict[str, tuple[type[Law], ...]] = {"lq": (LqLaw, FixedLaw), "scheduled": (ScheduledLaw,),
+                                                "mpc": (MpcLaw,)}  # fmt: skip
 
 #: Why a structure has no form in a numeric format that another structure has.
 NOT_PAIRS = {
@@ -76,9 +78,11 @@ def law_of(artifact: Any) -> Law:
 
 
 def law_for_spec(spec: PlantSpec) -> Law:
-    """The law a spec asks for: a ``[schedule]`` the scheduled structure, ``[implementation] numeric`` its format;
-    the one place that reads which for a spec, as :func:`law_of` for an artifact."""
-    return law_for("scheduled" if spec.schedule is not None else "lq", spec.implementation.numeric)
+    """The law a spec asks for: a ``[schedule]`` the scheduled structure, ``[controller] method = "mpc"`` the MPC
+    structure, ``[implementation] numeric`` its format; the one place that reads which for a spec, as :func:`law_of`
+    for an artifact."""
+    structure = "scheduled" if spec.schedule is not None else "mpc" if spec.mpc is not None else "lq"
+    return law_for(structure, spec.implementation.numeric)
 
 
 def design(spec: PlantSpec) -> DesignResult:

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from ..shipping.flags import (
     BITS,
+    CAN_STATUS_MASK,
+    CAPPED,
     CLIPPED,
     FAULT,
     FLAGS,
@@ -25,6 +27,8 @@ from ..shipping.flags import (
 
 __all__ = [
     "BITS",
+    "CAN_STATUS_MASK",
+    "CAPPED",
     "CLIPPED",
     "FAULT",
     "FLAGS",

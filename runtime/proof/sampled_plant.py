@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..shipping.law_c import require_structure
+from ..shipping.law_c import ONE_OPERATING_POINT, require_structure
 
 
 class SampledPlant:
@@ -43,7 +43,7 @@ class SampledPlant:
     def from_artifact(cls, artifact: Any, *, x0: np.ndarray | None = None) -> SampledPlant:
         """The artifact's own plant in the design's coordinates (those of a state a user gives), about its
         operating point (a scheduled artifact has one per point: ArtifactError)."""
-        require_structure(artifact, "lq", "the artifact's own plant")
+        require_structure(artifact, ONE_OPERATING_POINT, "the artifact's own plant")
         return cls(*artifact.design_plant(), u_op=artifact.u_op, y_op=artifact.y_op, x0=x0)
 
     def reset(self, x0: np.ndarray | None = None) -> None:

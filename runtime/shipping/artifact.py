@@ -19,7 +19,8 @@ import numpy as np
 
 from ..errors import ArtifactError, IntegrityError
 from ..fileio import atomic_write_text, read_user_file
-from .law_c import require_structure, sigma_name
+from .law_c import ONE_OPERATING_POINT, require_structure, sigma_name
+from .mpc import Mpc, load_mpc
 from .scheduled import Schedule, load_schedule
 
 SCHEMA_VERSION = 1
@@ -116,6 +117,7 @@ class Artifact:
     observer_form: str
     sha256: str
     schedule: Schedule | None = None
+    mpc: Mpc | None = None
 
     @property
     def signals(self) -> dict:
@@ -141,25 +143,25 @@ class Artifact:
     @property
     def safe_command(self) -> np.ndarray:
         """The command on a refused sample or an expired watchdog: ``u_op`` clamped into the limits."""
-        require_structure(self, "lq", "safe_command")
+        require_structure(self, ONE_OPERATING_POINT, "safe_command")
         return np.minimum(np.maximum(self.u_op, self.u_min), self.u_max)
 
     @property
     def r_op(self) -> np.ndarray:
         """The reference that holds the plant at its operating point: the tracked outputs there, ``Ci y_op``."""
-        require_structure(self, "lq", "r_op")
+        require_structure(self, ONE_OPERATING_POINT, "r_op")
         return self.Ci @ self.y_op
 
     @property
     def has_operating_point(self) -> bool:
         """True when ``u_op`` or ``y_op`` has a non-zero entry."""
-        require_structure(self, "lq", "has_operating_point")
+        require_structure(self, ONE_OPERATING_POINT, "has_operating_point")
         return bool(np.any(self.u_op != 0.0) or np.any(self.y_op != 0.0))
 
     def design_plant(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The discrete plant ``(Ad, Bd, Cd, Dd)`` in the design's coordinates (those of a plant state a user
         gives, e.g. ``simulate --x0``), whatever the realisation of the estimate (``realization.design``)."""
-        require_structure(self, "lq", "design_plant")
+        require_structure(self, ONE_OPERATING_POINT, "design_plant")
         rec = self.data.get("realization")
         if rec is None:
             return self.Ad, self.Bd, self.Cd, self.Dd
@@ -281,6 +283,12 @@ def _positional(data: dict) -> Artifact:
     if np.any(u_min > u_max):
         raise ArtifactError("artifact has u_min > u_max for some input")
     _check_signals(data["signals"], n=n, m=m, p=p, q=q)
+    u_op, y_op = _vector(data, "u_op", m, 0.0), _vector(data, "y_op", p, 0.0)
+    x_op = _vector(data, "x_op", n) if "x_op" in data else None
+    mpc = None
+    if "mpc" in data:  # the MPC law: its block checked against the matrices above (gainlink.shipping.mpc)
+        mpc = load_mpc(data, Ad=Ad, Bd=Bd, Cd=Cd, Dd=Dd, Ci=Ci, Ts=float(data["Ts"]), u_min=u_min, u_max=u_max,
+                       u_op=u_op, x_op=x_op, y_op=y_op)  # fmt: skip
     return Artifact(
         data=data,
         name=data["name"],
@@ -303,12 +311,13 @@ def _positional(data: dict) -> Artifact:
         u_max=u_max,
         xh0=_vector(data, "xh0", n, 0.0),
         z0=_vector(data, "z0", q, 0.0),
-        u_op=_vector(data, "u_op", m, 0.0),
-        y_op=_vector(data, "y_op", p, 0.0),
-        x_op=_vector(data, "x_op", n) if "x_op" in data else None,
+        u_op=u_op,
+        y_op=y_op,
+        x_op=x_op,
         anti_windup=data["anti_windup"],
         observer_form=form,
         sha256=data["sha256"],
+        mpc=mpc,
     )
 
 

@@ -54,6 +54,7 @@ _SET_BY = {
     "lq/q31": ("every law", "fixed point"),
     "lq/q15": ("every law", "fixed point"),
     "scheduled/float32": ("every law", "scheduled"),
+    "mpc/float32": ("every law", "mpc"),
 }
 VALUE_BYTES = {"float32": 4, "int16": 2}
 CLASSIC_VALUES = {"float32": 1, "int16": 2}

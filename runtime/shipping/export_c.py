@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from . import codegen, codegen_fixed, codegen_scheduled, params, records
+from . import codegen, codegen_fixed, codegen_mpc, codegen_scheduled, params, records
 from .artifact import Artifact
 from .flags import c_header as flags_header
 from .law_c import buildable, law_name
@@ -32,6 +32,7 @@ RENDERINGS: dict[str, tuple[Callable[[Artifact], dict[str, str]], str]] = {
     "lq/q31": (_lq_integers, codegen.SOURCE_NAME),
     "lq/q15": (_lq_integers, codegen.SOURCE_NAME),
     "scheduled/float32": (codegen_scheduled.render_scheduled, codegen_scheduled.SOURCE_NAME),
+    "mpc/float32": (codegen_mpc.render_mpc, codegen_mpc.SOURCE_NAME),
 }
 
 

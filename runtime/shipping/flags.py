@@ -31,6 +31,7 @@ FLAGS: tuple[Flag, ...] = (
     Flag("SIGMA_CLIPPED", 0x20, "sigma was outside the envelope and was clipped to it", "scheduled"),
     Flag("SIGMA_RATE", 0x40, "sigma's change was limited to Ts * rate_max", "scheduled"),
     Flag("RESET", 0x80, "the law was reset: the command is its start command", "every law"),
+    Flag("CAPPED", 0x100, "the solver's iteration cap stopped it: the projected first move was applied", "mpc"),
 )
 
 #: Each flag's bit by name.
@@ -44,11 +45,16 @@ SIGMA_HELD = BITS["SIGMA_HELD"]
 SIGMA_CLIPPED = BITS["SIGMA_CLIPPED"]
 SIGMA_RATE = BITS["SIGMA_RATE"]
 RESET = BITS["RESET"]
+CAPPED = BITS["CAPPED"]
 
 #: MAVLink keeps bits 0-15 of ``HIL_ACTUATOR_CONTROLS.flags`` (bit 0 is its LOCKSTEP flag): gainlink's flags sit at
-#: bits 16-23, the saturation mask at bits 32-47.
+#: bits 16-31 (the table's bits 0-15: CAPPED, 0x100, at bit 24), the saturation mask at bits 32-47. The CAN command
+#: frames' status byte carries the table's bits 0-7 only: an MPC node's CAPPED is not on CAN.
 MAVLINK_FLAGS_SHIFT = 16
 MAVLINK_SAT_SHIFT = 32
+#: The table's bits a CAN command frame's status byte carries (the run's report counts an MPC's capped steps from
+#: its model on the samples the node received).
+CAN_STATUS_MASK = 0xFF
 
 #: The version of the sample/command wire format (ready lines say ``wire=N``; a peer of another version is refused).
 WIRE_VERSION = 2

@@ -1,7 +1,8 @@
 """Which law an artifact runs, as its C export names it: the one place that reads it from the artifact's content.
 
 A law is a pair structure x numeric format (docs/design.md, "Adding a law"): a ``schedule`` block makes the
-``scheduled`` structure, else ``lq``; ``checks.fixed_point.numeric`` makes an integer format, else ``float32``.
+``scheduled`` structure, an ``mpc`` block the ``mpc`` structure, else ``lq``; ``checks.fixed_point.numeric``
+makes an integer format, else ``float32``.
 :func:`law_name` decides it (``gainlink.laws.law_of`` asks it too); the export writes the pair into ``gl_gains.h``
 (``GL_LAW_STRUCTURE``, ``GL_LAW_NUMERIC``), where ``firmware/include/gainlink/gl_law.h`` and the firmware's CMake
 read which law to build, with the law's compatibility signature (``GL_LAW_SIGNATURE``), which a gain set must carry
@@ -63,6 +64,11 @@ CANNOT: dict[str, dict[str, str]] = {
         "fuzz": "the fuzz harnesses are built on the float32 lq law's gain set (firmware/fuzz/fuzz_gains_stage.c "
         "stages a gl_gains_t, and the seeds are its field table)",
     },
+    "mpc/float32": {
+        "fidelity": "its design records no float32 fidelity figure (a bound on the C against the float64 algorithm "
+        "over any history is not derived for the ADMM); each step of a trace is checked instead: bit "
+        "for bit its float32 model, within the solver's tolerance of the float64 algorithm (one_step)",
+    },
 }
 CANNOT["lq/q15"] = CANNOT["lq/q31"]
 
@@ -70,6 +76,7 @@ CANNOT["lq/q15"] = CANNOT["lq/q31"]
 STRUCTURES: dict[str, Callable[[Any], str]] = {
     "lq": lambda a: "one positional law about one operating point",
     "scheduled": lambda a: f"the velocity-form law scheduled on {a.schedule.sigma}",
+    "mpc": lambda a: f"the constrained MPC law over a horizon of {a.mpc.horizon} steps",
 }
 
 
@@ -88,12 +95,19 @@ def refuse(artifact: Any, cell: str, *, what: str | None = None) -> None:
         raise LawError(refusal(law_label(artifact), cell, reason, what=what))
 
 
-def require_structure(artifact: Any, structure: str, what: str) -> None:
+#: The structures whose artifact holds one positional law about one operating point (its trim, safe command and
+#: design plant are the artifact's own; the scheduled law has one per point).
+ONE_OPERATING_POINT: tuple[str, ...] = ("lq", "mpc")
+
+
+def require_structure(artifact: Any, structure: str | tuple[str, ...], what: str) -> None:
     """Raise :class:`ArtifactError` (one line) when ``what``, a part of the ``structure`` law (its float64 law, its
     C gain set, its one operating point...), is asked of an artifact whose law has another structure: that law has
-    its own (``gainlink.laws.law_of``)."""
+    its own (``gainlink.laws.law_of``). A tuple names every structure that has it, the first named in the line."""
+    allowed = (structure,) if isinstance(structure, str) else structure
+    structure = allowed[0]
     own = law_pair(artifact)[0]
-    if own != structure:
+    if own not in allowed:
         raise ArtifactError(
             f"{what} is the {structure} law's ({STRUCTURES[structure](artifact)}); {artifact.name} runs the "
             f"{law_label(artifact)} law ({STRUCTURES[own](artifact)}), which has its own (gainlink.laws.law_of)"
@@ -123,7 +137,7 @@ def sigma_name(artifact: Any) -> str | None:
 def law_pair(artifact: Any) -> tuple[str, str]:
     """``(structure, numeric)`` of the law ``artifact`` runs."""
     data = artifact.data
-    structure = "scheduled" if data.get("schedule") is not None else "lq"
+    structure = "scheduled" if data.get("schedule") is not None else "mpc" if data.get("mpc") is not None else "lq"
     fixed = data.get("checks", {}).get("fixed_point")
     return structure, "float32" if fixed is None else str(fixed["numeric"])
 
@@ -142,10 +156,11 @@ def buildable(artifact: Any) -> tuple[str, ...]:
 
 #: Each law's id (the HEARTBEAT's custom_mode and the image's output header: GL_LAW_ID of gl_law.h), the name ready
 #: lines give it (GL_LAW_NAME) and its own step function (GL_LAW_STEP_SYMBOL: what an instruction count covers).
-IDS = {"lq/float32": 0, "lq/q31": 31, "lq/q15": 15, "scheduled/float32": 256}
-LABELS = {"lq/float32": "float32", "lq/q31": "q31", "lq/q15": "q15", "scheduled/float32": "scheduled-float32"}
+IDS = {"lq/float32": 0, "lq/q31": 31, "lq/q15": 15, "scheduled/float32": 256, "mpc/float32": 512}
+LABELS = {"lq/float32": "float32", "lq/q31": "q31", "lq/q15": "q15", "scheduled/float32": "scheduled-float32",
+          "mpc/float32": "mpc-float32"}  # fmt: skip
 STEP_SYMBOLS = {"lq/float32": "gl_loop_step", "lq/q31": "gl_fixed_step", "lq/q15": "gl_fixed_step",
-                "scheduled/float32": "gl_sched_step"}  # fmt: skip
+                "scheduled/float32": "gl_sched_step", "mpc/float32": "gl_mpc_step"}  # fmt: skip
 
 
 #: Why a pair's gain set cannot be written through a ``--mapping`` onto another autopilot's parameters (a mapping

@@ -13,6 +13,10 @@ a C member designator). What the parameters are named and what ``GL_HASH`` cover
   ``GL_FX_SIG`` (the formats' signature) and ``GL_FX_STRUCT`` (:func:`.codegen_fixed.structure_crc`); ``GL_HASH``
   is the CRC of the gain values as int32 words (:func:`.codegen_fixed.set_crc32`).
 - ``scheduled/float32``: every float of the tables, REAL32; ``GL_HASH`` the CRC of their bytes.
+- ``mpc/float32``: the dimensions, horizon, box rows and cap (read-only), then every float of the tables
+  (``gl_mpc_tables_t``: the observer-based law's numbers, the prediction model and the per-stage gains, the boxes and
+  the solver's settings), REAL32; ``GL_HASH`` the CRC of their bytes. The horizon and cap are in the law's
+  compatibility signature: a set for another horizon is refused.
 
 The fixed-point table (``lq/q31``, ``lq/q15``), all INT32, in index order:
 
@@ -62,6 +66,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import codegen_mpc
 from . import gains_layout as layout
 from .artifact import Artifact
 from .codegen import gain_set, shape_of
@@ -215,8 +220,30 @@ def _scheduled(artifact: Artifact) -> tuple[Param, ...]:
     return tuple(out)
 
 
+#: The MPC table's read-only structure parameters.
+MPC_DIMENSION_IDS = ("GL_DIM_N", "GL_DIM_M", "GL_DIM_P", "GL_DIM_Q", "GL_HORIZON", "GL_DIM_NC", "GL_MAXIT")
+
+
+def _mpc(artifact: Artifact) -> tuple[Param, ...]:
+    a, b = artifact, artifact.mpc
+    dims = (a.n, a.m, a.p, a.q, b.horizon, b.nc, b.max_iter)
+    out = [Param(k, INT32, int(v), "structure") for k, v in zip(MPC_DIMENSION_IDS, dims, strict=True)]
+    out.append(Param(HASH_ID, INT32, as_int32(codegen_mpc.tables_crc32(a)), "CRC-32 of the tables", is_hash=True))
+    for field, values in codegen_mpc.tables(a).items():
+        stem = field.upper().replace("_", "")
+        if values.ndim == 0:
+            out.append(Param(f"GL_{stem}", REAL32, float(values), field, slot=f"t.{field}"))
+        elif values.ndim == 1:
+            out += [Param(f"GL_{stem}_{j}", REAL32, float(v), field, slot=f"t.{field}[{j}]")
+                    for j, v in enumerate(values)]  # fmt: skip
+        else:
+            out += [Param(f"GL_{stem}{k}_{j}", REAL32, float(v), field, slot=f"t.{field}[{k}][{j}]")
+                    for k, row in enumerate(values) for j, v in enumerate(row)]  # fmt: skip
+    return tuple(out)
+
+
 #: Each law's table (module docstring): the registry the export and the upload ask.
-TABLES = {"lq/float32": _lq, "lq/q31": _fixed, "lq/q15": _fixed, "scheduled/float32": _scheduled}
+TABLES = {"lq/float32": _lq, "lq/q31": _fixed, "lq/q15": _fixed, "scheduled/float32": _scheduled, "mpc/float32": _mpc}
 
 
 def c_header(artifact: Artifact, *, banner: str) -> str:

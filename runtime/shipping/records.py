@@ -186,6 +186,19 @@ def layout(artifact, *, law: str | None = None) -> Layout:
                 doc="gl_sched_state() after the step",
             ),
         )
+    elif law == "mpc/float32":
+        b = artifact.mpc
+        own = (
+            Field("iters", "u32", fill="law->loop.iterations", doc="ADMM iterations of the step (0: refused)"),
+            Field(
+                "state",
+                "f32",
+                n + q + 2 * b.horizon * (m + b.nc),
+                True,
+                fill="=gl_mpc_state(&law->loop, rec->state);",
+                doc="gl_mpc_state() after the step: xh, z, the warm start",
+            ),
+        )
     else:
         raise ValueError(f"no record for the {law} law")
     return Layout("gl_law_record", _common(m) + own)

@@ -47,7 +47,8 @@ def _scheduled_coefficients(a: Artifact, sigma: float | None) -> tuple[np.ndarra
 
 
 #: Each structure's frozen-point coefficients (the registry :func:`controller_matrices` asks).
-_COEFFICIENTS = {"lq": _lq_coefficients, "scheduled": _scheduled_coefficients}
+#: The MPC law's is its unconstrained one: with no box active its optimum is the lq law of the same weights.
+_COEFFICIENTS = {"lq": _lq_coefficients, "scheduled": _scheduled_coefficients, "mpc": _lq_coefficients}
 
 
 def coefficient_law(F, G, Ly, Kx, Ky, Ki, *, Ci, Ts: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

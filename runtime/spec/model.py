@@ -180,6 +180,37 @@ class ScheduleSpec:
 
 
 @dataclass(frozen=True)
+class MpcBox:
+    """A soft box of ``[mpc] boxes``: a state (``kind = "state"``) or an output (``"output"``) by index, its absolute
+    bounds (either may be infinite, not both)."""
+
+    name: str
+    kind: str
+    index: int
+    lo: float
+    hi: float
+
+
+@dataclass(frozen=True)
+class MpcSpec:
+    """``[mpc]`` with ``[controller] method = "mpc"``: the constrained law of docs/design.md, "MPC (the fourth law)".
+
+    ``horizon`` N moves (x0 the estimate, moves u0..u(N-1), states x1..xN, terminal cost on xN); ``max_iter`` the ADMM
+    iteration cap; ``rho`` the input slacks' penalty and ``rho_state`` the state boxes' (None: the default rules,
+    3 mean(diag R) and 1000 rho); ``tol`` the stopping tolerance relative to each constrained signal's scale;
+    ``boxes`` the soft state or output boxes, each penalised by ``box_weight`` times its squared violation (None: the
+    default rule, 1e4 max(diag Q))."""
+
+    horizon: int
+    max_iter: int = 10
+    rho: float | None = None
+    rho_state: float | None = None
+    tol: float = 1e-3
+    boxes: tuple[MpcBox, ...] = ()
+    box_weight: float | None = None
+
+
+@dataclass(frozen=True)
 class PlantSpec:
     """A validated plant spec: the plant and every design choice, typed.
 
@@ -205,6 +236,7 @@ class PlantSpec:
     linearization: dict | None = None  # the record `gainlink linearize` wrote, as written (for the provenance)
     schedule: ScheduleSpec | None = None
     units: dict[str, str] = field(default_factory=dict)  # [units]: signal name (or "time") -> unit
+    mpc: MpcSpec | None = None  # [controller] method = "mpc": the horizon, the solver's settings, the soft boxes
 
     def at_point(self, i: int) -> PlantSpec:
         """The unscheduled spec of schedule point ``i``: its plant, operating point and controller weights."""

@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import SpecError, did_you_mean
 from ..fileio import read_toml
 from .model import ImplementationSpec, PlantSpec
+from .mpc import check_mpc_spec, parse_mpc
 from .pairs import integer, structure_of
 from .plant import parse_plant
 from .ranges import check_ranges
@@ -44,7 +45,7 @@ NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,31}$")
 
 TOP_KEYS = {
     "name", "Ts", "discretization", "description", "plant", "controller", "integral", "observer", "limits",
-    "operating_point", "implementation", "linearization", "schedule", "units",
+    "operating_point", "implementation", "linearization", "schedule", "units", "mpc",
 }  # fmt: skip
 TIME_UNIT_KEY = "time"  # in [units]: the unit of Ts and of every time (default s)
 UNIT_MAX_LEN = 16
@@ -82,13 +83,14 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     integral = parse_integral(
         checked_table(data, "integral", INTEGRAL_KEYS, required=False),
         plant,
-        lqr=ctl.get("method", "lqr") == "lqr",
+        lqr=ctl.get("method", "lqr") in ("lqr", "mpc"),
     )
     q = 0 if integral is None else integral.q
     limits_table = checked_table(data, "limits", LIMITS_KEYS, required=True)
     limits = parse_limits(limits_table, plant, q=q, structure=structure)
     controllers = tuple(parse_controller(ctl, p, q=q, Ts=Ts) for p in plants)
     implementation = parse_implementation(checked_table(data, "implementation", IMPLEMENTATION_KEYS, required=False))
+    _CHECKS.get(structure, _no_check)(implementation)
     parts = _LawParts(data=data, sched=sched, plants=plants, integral=integral, limits=limits,
                       controllers=controllers, implementation=implementation)  # fmt: skip
     schedule, operating_point = _OPERATING[structure](parts)
@@ -109,6 +111,9 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
         linearization=checked_table(data, "linearization", LINEARIZATION_KEYS, required=False),
         schedule=schedule,
         units=parse_units(table(data, "units", required=False), plant),
+        mpc=parse_mpc(
+            table(data, "mpc", required=False), method=str(ctl.get("method", "lqr")), plant=plant, op=operating_point
+        ),
     )
 
 
@@ -176,8 +181,18 @@ def _scheduled_operating(parts: _LawParts) -> tuple[Any, Any]:
 
 #: Each structure's plants and operating point(s) (the registry :func:`parse_spec` asks; :mod:`.pairs` says which
 #: structure a spec asks for).
-_PLANTS = {"lq": _lq_plants, "scheduled": _scheduled_plants}
-_OPERATING = {"lq": _lq_operating, "scheduled": _scheduled_operating}
+def _mpc_check(implementation: ImplementationSpec) -> None:
+    check_mpc_spec(numeric=implementation.numeric, realization=implementation.realization)
+
+
+def _no_check(implementation: ImplementationSpec) -> None:
+    return None
+
+
+_PLANTS = {"lq": _lq_plants, "scheduled": _scheduled_plants, "mpc": _lq_plants}
+_OPERATING = {"lq": _lq_operating, "scheduled": _scheduled_operating, "mpc": _lq_operating}
+#: A structure's own check of ``[implementation]`` (the MPC law: float32, as designed).
+_CHECKS = {"mpc": _mpc_check}
 
 
 def _check_schedulable(data: dict, *, q: int, m: int, implementation: ImplementationSpec) -> None:

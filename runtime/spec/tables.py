@@ -80,15 +80,15 @@ def _output_index(o, plant: PlantModel) -> int:
 def parse_controller(tbl: dict, plant: PlantModel, *, q: int, Ts: float) -> ControllerSpec:
     """``[controller]``: LQR weights, closed-loop poles (n + q, z-plane) or the user's own gains."""
     method = tbl.get("method", "lqr")
-    if method == "lqr":
-        return ControllerSpec(method="lqr", Q=_state_weight(tbl, plant), R=_input_weight(tbl, plant.m))
+    if method in ("lqr", "mpc"):  # MPC: the same weights, its terminal cost their DARE solution ([mpc])
+        return ControllerSpec(method=method, Q=_state_weight(tbl, plant), R=_input_weight(tbl, plant.m))
     if method in ("place", "ackermann"):
         if method == "ackermann" and plant.m != 1:
             raise SpecError("controller.method 'ackermann' is single-input only; use 'place'")
         return ControllerSpec(method=method, poles_z=poles_z(tbl, plant.n + q, Ts, "controller"))
     if method == "given":
         return _given_controller(tbl, plant, q=q)
-    raise SpecError(f"controller.method must be lqr, place, ackermann or given, not {method!r}")
+    raise SpecError(f"controller.method must be lqr, mpc, place, ackermann or given, not {method!r}")
 
 
 def _state_weight(tbl: dict, plant: PlantModel) -> np.ndarray:
@@ -207,13 +207,18 @@ def _check_anti_windup(aw: object, structure: str) -> None:
 
 
 #: What each structure's anti-windup mode must be, and why, as its refusal says.
-_ANTI_WINDUP_MUST = {"lq": "must be none, clamp or backcalc", "scheduled": "must be 'velocity' with a [schedule]"}
+_ANTI_WINDUP_MUST = {
+    "lq": "must be none, clamp or backcalc",
+    "scheduled": "must be 'velocity' with a [schedule]",
+    "mpc": "must be none, clamp or backcalc",
+}
 _ANTI_WINDUP_WHY = {
     "lq": "",
+    "mpc": "",
     "scheduled": ": the velocity form integrates its own saturated command, which is its anti-windup",
 }
 #: Each structure's ``[limits]`` (the registry :func:`parse_limits` asks).
-_LIMITS = {"lq": _lq_limits, "scheduled": _scheduled_limits}
+_LIMITS = {"lq": _lq_limits, "scheduled": _scheduled_limits, "mpc": _lq_limits}
 
 
 def parse_operating_point(tbl: dict | None, plant: PlantModel, limits: LimitsSpec) -> OperatingPoint | None:

@@ -28,7 +28,7 @@ def controller_gain(spec: PlantSpec, Aa: np.ndarray, Ba: np.ndarray, warnings: l
     """``Ka = [K Ki]`` for the augmented plant ``(Aa, Ba)`` and the design record of the artifact."""
     ctl = spec.controller
     q = spec.q
-    if ctl.method == "lqr":
+    if ctl.method in ("lqr", "mpc"):  # MPC: the LQ gain it reduces to with no constraint active
         return _lqr(spec, Aa, Ba, warnings)
     if ctl.method in ("place", "ackermann"):
         return _placed(spec, Aa, Ba, warnings)
@@ -44,7 +44,7 @@ def _lqr(spec: PlantSpec, Aa: np.ndarray, Ba: np.ndarray, warnings: list[str]) -
     check_psd(Q, "controller Q", definite=False)
     check_psd(R, "controller R", definite=True)
     K = solve_dlqr(Aa, Ba, Q, R, states=_augmented_names(spec), warnings=warnings)
-    return K, {"method": "lqr", "Q": matrix_to_json(Q), "R": matrix_to_json(R), "augmented": bool(q)}
+    return K, {"method": spec.controller.method, "Q": matrix_to_json(Q), "R": matrix_to_json(R), "augmented": bool(q)}
 
 
 def _augmented_names(spec: PlantSpec) -> list[str]:

@@ -30,7 +30,7 @@ from .hil import udp_transport
 FAULT, WATCHDOG, CLIPPED, OVERFLOW, RESET = 0x01, 0x02, 0x04, 0x08, 0x80
 SIGMA_BITS = {SIGMA_HELD: 0x10, SIGMA_CLIPPED: 0x20, SIGMA_RATE: 0x40}  # the scheduled model's flag -> the link's bit
 #: Where MAVLink carries them (docs/design.md, "Links"; wire format 2): HIL_ACTUATOR_CONTROLS.flags bits 0-15 are
-#: MAVLink's own (bit 0 its LOCKSTEP flag) and stay clear, the status byte sits at bits 16-23, the saturation mask
+#: MAVLink's own (bit 0 its LOCKSTEP flag) and stay clear, the status byte sits at bits 16-31, the saturation mask
 #: (bit k: input k) at bits 32-47.
 MAVLINK_STATUS_AT, MAVLINK_SAT_AT, MAVLINK_OWN = 16, 32, 0xFFFF
 

@@ -350,10 +350,10 @@ static void reset_law(gl_mav_node_t *node, gl_law_out_t *out)
 }
 
 /** The HIL_ACTUATOR_CONTROLS flags of an answer (wire format 2): MAVLink's own bits 0-15 left alone (bit 0 is its
- *  LOCKSTEP flag), the law's status flags (the one table, gl_flags.h) at bits 16-23, the saturation mask at 32-47. */
+ *  LOCKSTEP flag), the law's status flags (the one table, gl_flags.h) at bits 16-31, the saturation mask at 32-47. */
 static uint64_t hil_flags(const gl_law_out_t *out)
 {
-    return ((uint64_t)(out->flags & 0xFFu) << GL_FLAGS_MAVLINK_SHIFT) | ((uint64_t)out->sat << GL_SAT_MAVLINK_SHIFT);
+    return ((uint64_t)(out->flags & 0xFFFFu) << GL_FLAGS_MAVLINK_SHIFT) | ((uint64_t)out->sat << GL_SAT_MAVLINK_SHIFT);
 }
 
 static void handle_sample(gl_mav_node_t *node, const mavlink_message_t *msg)

@@ -22,7 +22,7 @@
  *   the compiled set; COMMAND_ACK each.
  * - HIL: DEBUG_FLOAT_ARRAY array_id 1 (`GL_SAMPLE`, data = y then r, then a scheduled law's GL_LAW_E external
  *   scheduling signals) answered by HIL_ACTUATOR_CONTROLS with the same time_usec, controls = u and flags in wire
- *   format 2: bits 0-15 MAVLink's own (bit 0 its LOCKSTEP flag; none set), bits 16-23 the step's status flags
+ *   format 2: bits 0-15 MAVLink's own (bit 0 its LOCKSTEP flag; none set), bits 16-31 the step's status flags
  *   (GL_FLAG_* of gl_flags.h, the one table: fault, watchdog, clipped, overflow, sigma held, clipped,
  *   rate-limited, reset), bits 32+k input k saturated; array_id 2 resets the law's state (answered with RESET), 3
  *   is a period without a measurement. A committed gain set is staged into the law right before the next step.

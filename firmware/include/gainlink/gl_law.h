@@ -3,7 +3,7 @@
  * @brief The one law interface: what every main, node and binding calls, whichever law the build runs.
  *
  * A law is a pair structure x numeric format (docs/design.md, "Adding a law"): `lq_float32` (gl_loop.h), `lq_q31`
- * and `lq_q15` (gl_fixed.h), `scheduled_float32` (gl_sched.h). The build runs one of them, chosen at compile time:
+ * and `lq_q15` (gl_fixed.h), `scheduled_float32` (gl_sched.h), `mpc_float32` (gl_mpc.h). The build runs one of them, chosen at compile time:
  * the export's generated `gl_gains.h` names the artifact's (`GL_LAW_STRUCTURE`, `GL_LAW_NUMERIC`), and
  * `-DGL_LAW=lq_float32` (CMake `GL_LAW`) overrides it for a benchmark baseline (the float32 loop of a q31 artifact,
  * whose export holds both). Each `gl_law_*` call is a `static inline` wrapper onto the law's own functions, so a
@@ -48,6 +48,7 @@
 #define GL_LAW_KIND_lq_q31 2
 #define GL_LAW_KIND_lq_q15 3
 #define GL_LAW_KIND_scheduled_float32 4
+#define GL_LAW_KIND_mpc_float32 5
 
 #define GL_LAW_JOIN_(structure, numeric) structure##_##numeric
 #define GL_LAW_JOIN(structure, numeric) GL_LAW_JOIN_(structure, numeric)
@@ -143,8 +144,29 @@ typedef float gl_law_word_t;
 #define GL_LAW_DEFAULT_GAINS (&gl_sched_default)
 #define GL_LAW_RECORD_HEADER "gl_record_scheduled_float32.h"
 
+#elif GL_LAW_KIND == GL_LAW_KIND_mpc_float32
+/* ---- mpc/float32: linear MPC by ADMM on cached per-stage Riccati gains (gl_mpc.h) ------------------------------ */
+#include "gl_mpc.h"
+
+#define GL_LAW_NAME "mpc-float32"
+#define GL_LAW_ID 512u
+#define GL_LAW_E 0
+#define GL_LAW_STEP_SYMBOL "gl_mpc_step"
+#define GL_LAW_VARIANT "unrolled"
+/** The law's state: the MPC loop, the set it runs and its watchdog. */
+typedef struct gl_law {
+    gl_mpc_t loop;               /**< The MPC loop (first). */
+    const gl_mpc_set_t *set;     /**< The set it runs (by address). */
+    uint32_t missed;             /**< Consecutive idle periods since the last sample. */
+    uint32_t watchdog_periods;   /**< Idle periods before the safe command. */
+} gl_law_t;
+typedef gl_mpc_set_t gl_law_gains_t;
+typedef float gl_law_word_t;
+#define GL_LAW_DEFAULT_GAINS (&gl_mpc_default)
+#define GL_LAW_RECORD_HEADER "gl_record_mpc_float32.h"
+
 #else
-#error "unknown law: GL_LAW must be lq_float32, lq_q31, lq_q15 or scheduled_float32"
+#error "unknown law: GL_LAW must be lq_float32, lq_q31, lq_q15, scheduled_float32 or mpc_float32"
 #endif
 
 #ifndef GL_QA
@@ -495,6 +517,123 @@ GL_LAW_INLINE gl_status_t gl_law_stage(gl_law_t *law, const gl_law_gains_t *gain
 GL_LAW_INLINE void gl_law_retable(gl_law_t *law)
 {
     gl_sched_retable(&law->loop);
+}
+
+GL_LAW_INLINE uint32_t gl_law_active_crc32(const gl_law_t *law)
+{
+    return law->set->crc32;
+}
+
+GL_LAW_INLINE gl_status_t gl_law_copy(gl_law_t *dst, const gl_law_t *src, const gl_law_gains_t *from,
+                                      const gl_law_gains_t *to)
+{
+    if (dst == NULL || src == NULL || dst == src) {
+        return GL_ERR_NULL;
+    }
+    *dst = *src;
+    if (src->set == from) {
+        dst->set = to;
+        dst->loop.t = &to->t;
+    }
+    return GL_OK;
+}
+
+#elif GL_LAW_KIND == GL_LAW_KIND_mpc_float32
+
+GL_LAW_INLINE void gl_law_words(gl_law_out_t *out)
+{
+    for (unsigned i = 0; i < GL_M; ++i) {
+        out->word[i] = out->u[i];
+    }
+}
+
+GL_LAW_INLINE gl_status_t gl_law_init(gl_law_t *law, uint32_t watchdog_periods)
+{
+    if (law == NULL) {
+        return GL_ERR_NULL;
+    }
+    if (watchdog_periods == 0u) {
+        return GL_ERR_RANGE;
+    }
+    law->set = &gl_mpc_default;
+    law->missed = 0u;
+    law->watchdog_periods = watchdog_periods;
+    return (gl_status_t)gl_mpc_init(&law->loop, &gl_mpc_default.t);
+}
+
+/** @brief One sample: the status flags are FAULT (refused) or CAPPED (the solver's cap stopped it). */
+GL_LAW_INLINE gl_status_t gl_law_step(gl_law_t *law, const float *y, const float *r, const float *s,
+                                      gl_law_out_t *out)
+{
+    (void)s;
+    const gl_status_t st = (gl_status_t)gl_mpc_step(&law->loop, y, r, out->u);
+    law->missed = 0u;
+    const uint32_t flags = st == GL_ERR_NANINF ? GL_FLAG_FAULT : (law->loop.capped != 0u ? GL_FLAG_CAPPED : 0u);
+    gl_law_answer(out, st, flags, st == GL_ERR_NANINF ? 0u : law->loop.sat_mask, __builtin_nanf(""));
+    gl_law_words(out);
+    return st;
+}
+
+GL_LAW_INLINE gl_status_t gl_law_idle(gl_law_t *law, gl_law_out_t *out)
+{
+    if (law->missed < law->watchdog_periods) {
+        law->missed++;
+    }
+    gl_status_t st = GL_OK;
+    if (law->missed >= law->watchdog_periods) { /* the safe command until the next sample */
+        gl_mpc_safe(&law->loop, law->loop.out);
+        law->loop.sat_mask = 0u;
+        st = GL_ERR_WATCHDOG;
+    }
+    memcpy(out->u, law->loop.out, sizeof out->u);
+    gl_law_answer(out, st, st == GL_ERR_WATCHDOG ? GL_FLAG_WATCHDOG : 0u, 0u, __builtin_nanf(""));
+    gl_law_words(out);
+    return st;
+}
+
+GL_LAW_INLINE gl_status_t gl_law_reset(gl_law_t *law, gl_law_out_t *out)
+{
+    const gl_status_t st = (gl_status_t)gl_mpc_reset(&law->loop);
+    law->missed = 0u;
+    memcpy(out->u, law->loop.out, sizeof out->u);
+    gl_law_answer(out, st, GL_FLAG_RESET, 0u, __builtin_nanf(""));
+    gl_law_words(out);
+    return st;
+}
+
+GL_LAW_INLINE uint32_t gl_law_gains_crc32(const gl_law_gains_t *gains)
+{
+    return gl_mpc_tables_crc32(&gains->t);
+}
+
+GL_LAW_INLINE gl_status_t gl_law_gains_check(const gl_law_gains_t *gains)
+{
+    if (gains == NULL) {
+        return GL_ERR_NULL;
+    }
+    if (gains->signature != GL_LAW_SIGNATURE) {
+        return GL_ERR_DIMS;
+    }
+    if (gl_mpc_tables_crc32(&gains->t) != gains->crc32) {
+        return GL_ERR_CRC;
+    }
+    return (gl_status_t)gl_mpc_check(&gains->t);
+}
+
+/** @brief Check a set and run it, by address, from the next step (the state and warm start kept). */
+GL_LAW_INLINE gl_status_t gl_law_stage(gl_law_t *law, const gl_law_gains_t *gains)
+{
+    const gl_status_t st = gl_law_gains_check(gains);
+    if (st == GL_OK) {
+        law->set = gains;
+        law->loop.t = &gains->t;
+    }
+    return st;
+}
+
+GL_LAW_INLINE void gl_law_retable(gl_law_t *law)
+{
+    (void)law; /* the loop reads its tables at every step */
 }
 
 GL_LAW_INLINE uint32_t gl_law_active_crc32(const gl_law_t *law)
