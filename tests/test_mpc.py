@@ -115,8 +115,14 @@ def test_a_bent_gain_is_caught_by_the_one_step_check():
     assert not verdicts[0].passed and verdicts[0].check.first_failure.k == 1  # step 0 starts cold: u0 = 0
 
 
-@pytest.mark.parametrize("target,steps", [("cortex-m4", 12), ("cortex-m0", 3)])
+@pytest.mark.parametrize(
+    "target,steps",
+    [("cortex-m4", 12), ("cortex-m0", 3)]
+    + [pytest.param(t, 12, marks=pytest.mark.matrix) for t in ("cortex-m3", "cortex-m7", "cortex-m33", "cortex-m55")],
+)
 def test_the_cortex_m_image_is_the_host_c_bit_for_bit(target, steps):
+    """Host C and the image in QEMU, bit for bit, on every core (the M4F and the M0 in ``make test``, the other four
+    under ``-m matrix``): commands, saturation, flags, iteration counts and the solver's whole state."""
     a = artifact(horizon=4, box=2.5, soft={"x_dot": [-0.3, 0.3]})
     law = law_of(a)
     Y, R = _samples(a, steps, seed=2)
