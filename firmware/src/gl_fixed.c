@@ -8,6 +8,7 @@
  * the q integrators count with an int (GL_FX_Q may be 0: an unsigned `j < 0` would not compile under -Wextra).
  */
 #include "gainlink/gl_fixed.h"
+#include "gainlink/gl_crc32.h"
 
 #include <stddef.h>
 #include <string.h>
@@ -341,13 +342,7 @@ int gl_fixed_check(const gl_fixed_gains_t *g)
 /* CRC-32 (zlib's) of one int32 as its four little-endian bytes, continuing `c` (the register, not inverted). */
 static uint32_t crc_word(uint32_t c, int32_t w)
 {
-    for (unsigned b = 0; b < 4u; ++b) {
-        c ^= ((uint32_t)w >> (8u * b)) & 0xFFu;
-        for (unsigned i = 0; i < 8u; ++i) {
-            c = (c >> 1) ^ (0xEDB88320u & (0u - (c & 1u)));
-        }
-    }
-    return c;
+    return gl_crc32_word(c, (uint32_t)w);
 }
 
 /* The same for `count` int32 words (count may be 0: GL_FX_Q). */

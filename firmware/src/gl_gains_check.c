@@ -7,22 +7,12 @@
 #include <string.h>
 
 #include "gl_internal.h"
+#include "gainlink/gl_crc32.h"
 
 /* The field lists below (GL_GAINS_STRUCTURE, GL_GAINS_FLOATS from Ts on) come from gl_gains_layout.h, generated
  * from the field table gainlink.shipping.gains_layout. */
 #define GL_STRUCTURE_WORD(field, compiled, param) gains->field,
 #define GL_STRUCTURE_DIFFERS(field, compiled, param) || gains->field != (uint32_t)(compiled)
-
-static uint32_t crc32_update(uint32_t crc, uint32_t word)
-{
-    for (unsigned byte = 0; byte < 4u; ++byte) {
-        crc ^= (word >> (8u * byte)) & 0xFFu; /* little-endian byte order, independent of the host */
-        for (unsigned bit = 0; bit < 8u; ++bit) {
-            crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
-        }
-    }
-    return crc;
-}
 
 uint32_t gl_gains_crc32(const gl_gains_t *gains)
 {
@@ -32,13 +22,13 @@ uint32_t gl_gains_crc32(const gl_gains_t *gains)
     uint32_t crc = 0xFFFFFFFFu;
     const uint32_t header[GL_GAINS_STRUCTURE_FIELDS] = {GL_GAINS_STRUCTURE(GL_STRUCTURE_WORD)};
     for (size_t i = 0; i < GL_GAINS_STRUCTURE_FIELDS; ++i) {
-        crc = crc32_update(crc, header[i]);
+        crc = gl_crc32_word(crc, header[i]);
     }
     const float *payload = &gains->Ts;
     for (size_t i = 0; i < (size_t)(GL_GAINS_FLOATS); ++i) {
         uint32_t bits;
         memcpy(&bits, &payload[i], sizeof bits);
-        crc = crc32_update(crc, bits);
+        crc = gl_crc32_word(crc, bits); /* little-endian bytes, whatever the host */
     }
     return crc ^ 0xFFFFFFFFu;
 }

@@ -5,6 +5,7 @@
  *        gl_mpc.h (gainlink.laws.mpc.solver and .step run the same operations).
  */
 #include "gainlink/gl_mpc.h"
+#include "gainlink/gl_crc32.h"
 
 #include <math.h>
 #include <stddef.h>
@@ -479,15 +480,7 @@ gl_mpc_status_t gl_mpc_step(gl_mpc_t *loop, const float *y, const float *r, floa
 
 uint32_t gl_mpc_tables_crc32(const gl_mpc_tables_t *tables)
 {
-    const uint8_t *b = (const uint8_t *)tables;
-    uint32_t c = 0xFFFFFFFFu;
-    for (size_t k = 0; k < sizeof *tables; ++k) {
-        c ^= b[k];
-        for (unsigned i = 0; i < 8u; ++i) {
-            c = (c >> 1) ^ (0xEDB88320u & (0u - (c & 1u)));
-        }
-    }
-    return ~c;
+    return gl_crc32_bytes(tables, sizeof *tables);
 }
 
 void gl_mpc_state(const gl_mpc_t *loop, float *out)

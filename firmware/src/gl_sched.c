@@ -3,6 +3,7 @@
  * @brief The scheduled law's step (gl_sched.h; docs/design.md, "Scheduled law"): sigma, interpolation, velocity form.
  */
 #include "gainlink/gl_sched.h"
+#include "gainlink/gl_crc32.h"
 
 #include <math.h>
 #include <stddef.h>
@@ -603,15 +604,7 @@ gl_sched_status_t gl_sched_check(const gl_sched_tables_t *tables)
 
 uint32_t gl_sched_tables_crc32(const gl_sched_tables_t *tables)
 {
-    const uint8_t *b = (const uint8_t *)tables;
-    uint32_t c = 0xFFFFFFFFu;
-    for (size_t k = 0; k < sizeof *tables; ++k) {
-        c ^= b[k];
-        for (unsigned i = 0; i < 8u; ++i) {
-            c = (c >> 1) ^ (0xEDB88320u & (0u - (c & 1u)));
-        }
-    }
-    return ~c;
+    return gl_crc32_bytes(tables, sizeof *tables);
 }
 
 void gl_sched_safe(const gl_sched_t *loop, float *u)
