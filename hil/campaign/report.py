@@ -69,11 +69,9 @@ def _row(point: Any, record: dict, criteria: Any) -> dict:
 
 def rows_of(plan: CampaignPlan, store: Any) -> list[dict]:
     """One row per planned run, with its verdict under the campaign's criteria."""
-    records: dict[str, dict | None] = {}
-    for p in plan.runs:
-        if p.id not in records:
-            records[p.id] = store.record(p.id) if store.has(p.id) else None
-    return [_row(p, records[p.id], plan.campaign.criteria) for p in plan.runs]
+    planned = {p.id for p in plan.runs}
+    records = {run_id: record for run_id, record in store.records() if run_id in planned}
+    return [_row(p, records.get(p.id), plan.campaign.criteria) for p in plan.runs]
 
 
 def _tracked_iae(row: dict) -> float | None:
@@ -259,12 +257,8 @@ def envelopespng_bytes(plan: CampaignPlan, rows: list[dict], store: Any) -> byte
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    traces = {}
-    for r in rows:
-        if r["status"] in ("pass", "fail") and r["id"] not in traces:
-            tr = store.trace(r["id"])
-            if tr is not None:
-                traces[r["id"]] = (tr, r["status"])
+    status = {r["id"]: r["status"] for r in rows if r["status"] in ("pass", "fail")}
+    traces = {run_id: (tr, status[run_id]) for run_id, tr in store.traces(set(status))}
     lengths = Counter(tr["t"].size for tr, _ in traces.values())
     size = lengths.most_common(1)[0][0] if lengths else 0
     keep = [(tr, s) for tr, s in traces.values() if tr["t"].size == size]
