@@ -629,6 +629,48 @@ def test_a_block_file_holds_each_runs_record_and_traces_and_a_foreign_worker_ans
         _block_bytes([{"status": "done"}])
 
 
+def test_the_envelopes_read_block_by_block_are_numpys_percentiles_within_half_a_bin(tmp_path):
+    """300 runs in three block files (NaN and an infinite sample among them, 20 runs of another length left out):
+    each percentile of every output and command at each sample, and the failed runs' median, against
+    ``np.nanpercentile`` of all the runs stacked, within the half bin the function states."""
+    from gainlink.hil.campaign.report import PERCENTILES, envelope_bands
+    from gainlink.hil.campaign.store import encode_block, encode_trace
+
+    rng = np.random.default_rng(11)
+    N, store, status, stacks = 40, Store(tmp_path, campaign="c"), {}, []
+    for b in range(3):
+        ids, records = [], []
+        for k in range(110 if b < 2 else 100):
+            run_id, n = f"run-{b}-{k}", N if k < 100 else N + 5  # 20 runs of another length
+            y = rng.normal(np.sin(np.arange(n) * 0.1)[:, None] * (1 + b), 0.3, (n, 2)).astype(np.float32)
+            u = rng.standard_cauchy((n, 1)).astype(np.float32)  # heavy tails: wide bins
+            if k == 3:
+                y[5:9, 0] = np.nan
+            if k == 4 and b == 1:
+                u[7, 0] = np.inf
+            ids.append(run_id)
+            ok = k % 7 != 0
+            records.append({"status": "done", "trace": encode_trace(np.arange(n) * 0.1, y, u, np.zeros((n, 0)))})
+            status[run_id] = "pass" if ok else "fail"
+            if n == N:
+                stacks.append((ok, np.concatenate([y, u], axis=1).astype(float)))
+        store.put_block(encode_block(ids, records, campaign="c"))
+    status["never-stored"] = "pass"
+    bands = envelope_bands(Store(tmp_path), status, bins=256)
+    every = np.stack([s for _, s in stacks])
+    failed = np.stack([s for ok, s in stacks if not ok])
+    assert bands["runs"] == 300 and bands["failed"] == len(failed) and (bands["outputs"], bands["inputs"]) == (2, 1)
+    assert np.array_equal(bands["t"], (np.arange(N) * 0.1).astype(np.float32).astype(float))
+    finite = np.where(np.isfinite(every), every, np.nan)
+    half = (np.nanmax(finite, axis=0) - np.nanmin(finite, axis=0)) / 256 / 2
+    np.testing.assert_array_equal(bands["half_bin"], half)
+    for i, q in enumerate(PERCENTILES):
+        want = np.nanpercentile(every, q, axis=0)
+        assert np.all(np.abs(bands["percentiles"][i] - want) <= half * (1 + 1e-9)), q
+    assert np.all(np.abs(bands["failed_median"] - np.nanmedian(failed, axis=0)) <= half * (1 + 1e-9))
+    assert envelope_bands(Store(tmp_path), {"never-stored": "pass"}) is None
+
+
 # --- a campaign killed halfway resumes ---------------------------------------------------------------
 
 

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 from gainlink.fileio import atomic_write_bytes, atomic_write_text, prepare_output_dir
 from gainlink.version import __version__
@@ -215,12 +216,14 @@ class Store:
         return self.index().get(run_id, ("error",))[0] != "error"
 
     def put_block(self, data: bytes) -> list[dict]:
-        """Store a block file made by :func:`encode_block`; returns each run's ``id``, ``status`` and ``reason``."""
+        """Store a block file made by :func:`encode_block`; returns each run's ``id``, ``status`` and ``reason`` (an
+        error's)."""
         table = pq.read_table(pa.BufferReader(data), columns=["id", "status", "record"])
         ids, statuses = table.column("id").to_pylist(), table.column("status").to_pylist()
         atomic_write_bytes(self.blocks / f"{block_address(ids)}.parquet", data)
         self._note(ids, statuses, f"{block_address(ids)}.parquet")
-        reasons = [json.loads(r).get("reason") for r in table.column("record").to_pylist()]
+        records = table.column("record").to_pylist()
+        reasons = [json.loads(r).get("reason") if s == "error" else None for r, s in zip(records, statuses)]
         return [{"id": i, "status": s, "reason": r} for i, s, r in zip(ids, statuses, reasons)]
 
     def put(self, points: list[RunPoint], *, kind: str, results: list[dict]) -> list[dict]:
@@ -248,6 +251,27 @@ class Store:
                     trace = _trace_of(table, row)
                     if trace is not None:
                         yield run_id, trace
+
+    def trace_stacks(self, ids: set[str]) -> Iterator[tuple[list[str], dict[str, np.ndarray]]]:
+        """The stored traces of the runs ``ids`` that have a result, one block file at a time, stacked: for each
+        block, the runs of one trace length ``N`` as ``(ids, {"t": (k, N), "y": (k, N, p), "u": ..., "r": ...})``."""
+        index = self.index()
+        for path in self.files():
+            table = pq.read_table(path, columns=["id", "t", *WIDE, *(f"{k}_width" for k in WIDE)])
+            names = table.column("id").to_pylist()
+            lengths = pc.list_value_length(table.column("t")).to_pylist()
+            widths = list(zip(*(table.column(f"{k}_width").to_pylist() for k in WIDE)))
+            groups: dict[tuple, list[int]] = {}
+            for i, run_id in enumerate(names):
+                if run_id in ids and index[run_id] == ("done", path.name) and lengths[i] is not None:
+                    groups.setdefault((lengths[i], *widths[i]), []).append(i)
+            for (n, *shape), rows in groups.items():
+                part = table.take(pa.array(rows))
+                stack = {"t": pc.list_flatten(part.column("t")).to_numpy(zero_copy_only=False).reshape(len(rows), n)}
+                for k, width in zip(WIDE, shape):
+                    flat = pc.list_flatten(part.column(k)).to_numpy(zero_copy_only=False)
+                    stack[k] = flat.reshape(len(rows), n, width)
+                yield [names[i] for i in rows], stack
 
     def _row(self, run_id: str, columns: list[str]) -> tuple[pa.Table, int] | None:
         hit = self.index().get(run_id)
