@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import hashlib
 import json
 import os
 import shlex
@@ -546,6 +547,10 @@ def test_show_takes_a_run_by_index_or_by_id_never_guessing_which(local_run, tmp_
     assert report["scenario"]["name"].endswith(f"run 3 ({ids[3]})")
     for i in range(len(ids)):
         assert find_run(out, index=i)["id"] == ids[i]
+    # plan.json names the run at each index and hashes the list; each run's inputs are in its record, not again there
+    plan = json.loads((out / "plan.json").read_text())
+    assert plan["run_ids"] == ids and "runs" not in plan
+    assert plan["runs_sha256"] == hashlib.sha256("\n".join(ids).encode()).hexdigest()
     # Digits after --run are the start of an id, whether or not they could also be an index: a number that
     # starts no id is refused with the flag that takes an index (before, "--run 4" meant index 4 unless some id
     # happened to start with "4").

@@ -2,7 +2,7 @@
 
 ::
 
-    DIR/plan.json                 the campaign and every run's inputs: id, index, axis values, seed, artifact, scenario
+    DIR/plan.json                 the campaign, its runs' ids in plan order and their sha256
     DIR/artifacts/<sha256>.json DIR/fmus/<sha256>.fmu        what travelled to the workers
     DIR/blocks/<address>.parquet  one block of runs (a Dask task's), one row per run (:data:`SCHEMA`)
     DIR/campaign.json campaign.csv summary.txt *.png        the merged report (see report.py)
@@ -172,7 +172,6 @@ class Store:
     def __init__(self, out: str | Path, *, campaign: str = "") -> None:
         self.out = prepare_output_dir(out)
         self.blocks = self.out / "blocks"
-        self.blocks.mkdir(exist_ok=True)
         self.campaign = campaign
         self._index: dict[str, tuple[str, str]] | None = None  # run id -> (status, block file name)
 
@@ -220,6 +219,7 @@ class Store:
         error's)."""
         table = pq.read_table(pa.BufferReader(data), columns=["id", "status", "record"])
         ids, statuses = table.column("id").to_pylist(), table.column("status").to_pylist()
+        self.blocks.mkdir(exist_ok=True)
         atomic_write_bytes(self.blocks / f"{block_address(ids)}.parquet", data)
         self._note(ids, statuses, f"{block_address(ids)}.parquet")
         records = table.column("record").to_pylist()
