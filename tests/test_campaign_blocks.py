@@ -444,3 +444,21 @@ def test_resuming_into_a_folder_with_foreign_blocks_is_refused_in_one_line(tmp_p
         pq.write_table(table.replace_schema_metadata({k.encode(): v.encode() for k, v in meta.items()}), block)
     campaign = _small_campaign_file(tmp_path, "mine")
     assert_refused(["campaign", "run", campaign, "--out", out, "--workers", "1"], phrase, out)
+
+
+@pytest.mark.parametrize(
+    "plan, phrase",
+    [
+        ({"campaign": {"name": "mine"}, "run_ids": ["abc123"]}, "run abc123 has no record yet"),
+        ({"campaign": {"name": "mine"}, "runs": [{"id": "abc123"}]}, "is not a campaign plan this gainlink can read"),
+    ],
+)
+def test_show_refuses_a_run_without_a_record_and_a_plan_of_an_earlier_layout_in_one_line(tmp_path, plan, phrase):
+    import json
+
+    from support.cli import assert_refused
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "plan.json").write_text(json.dumps(plan))
+    assert_refused(["campaign", "show", out, "--run", "abc", "--report", tmp_path / "r"], phrase, out, tmp_path)
