@@ -85,7 +85,8 @@ def as_campaign(campaign: Campaign | str | Path | Mapping) -> Campaign:
 def plan_doc(plan: CampaignPlan) -> dict:
     """``plan.json``: the campaign, its runs' ids in plan order (an index's run) and their sha256. A run's inputs are
     in its record in the store (``inputs``), which is what ``campaign show`` replays: not every run's scenario
-    again here (at 100,000 runs that file was 150 MB, written through json's Python encoder)."""
+    again here (814 bytes a run of the shipped pendulum campaign: 81 MB at 100,000 runs, written through json's Python
+    encoder)."""
     c = plan.campaign
     ids = [r.id for r in plan.runs]
     return {
