@@ -130,7 +130,7 @@ def run(
         LocalCluster process workers (default: one per CPU).
     progress : callable, optional
         ``progress(done, total, run)`` after each run is stored; ``run`` is its ``id``, ``status`` (``done`` or
-        ``error``) and an error's ``reason`` (the full record: :meth:`.store.Store.record`).
+        ``error``) and an error's ``reason`` (the full record: ``Store(out).record(id)``).
     batch : int, optional
         Runs per Dask task (default: :func:`batch_sizes`; results are still stored, retried and reported
         per run).
