@@ -406,7 +406,7 @@ def block_campaign(client, data: dict, out: Path) -> dict:
         res = timed_campaign(data, client, out)
     finally:
         stop()
-    files = sum(1 for _ in (out / "runs").iterdir()) if (out / "runs").is_dir() else 0
+    files = sum(1 for _ in (out / "blocks").iterdir()) if (out / "blocks").is_dir() else 0
     return res | {
         "steps_per_run": steps,
         "runs_own_cpu_per_run_step_us": round(1e3 * res["runs_own_cpu_per_run_ms"] / steps, 3),

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import hashlib
 import json
 import os
 import shlex
@@ -29,6 +30,7 @@ from gainlink.fileio import read_toml
 from gainlink.hil.campaign import CampaignError, parse_campaign, run
 from gainlink.hil.campaign.criteria import growth
 from gainlink.hil.campaign.plan import draw_values, plan_campaign
+from gainlink.hil.campaign.store import Store
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.hil.plants import toml_write
@@ -471,8 +473,9 @@ def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pen
     doc = json.loads((out / "campaign.json").read_text())
     assert doc["counts"]["runs"] == 6 and doc["counts"]["pass"] == result.passed
     a = load(pend)
+    store = Store(out)
     for row in doc["runs"]:
-        rec = json.loads((out / "runs" / f"{row['id']}.json").read_text())
+        rec = store.record(row["id"])
         sc = dict(rec["inputs"]["scenario"], artifact=str(pend), transport={})
         direct = run_scenario(dataclasses.replace(parse_scenario(sc), seed=row["seed"]), artifact=a)
         assert _control(rec) == {k: direct.metrics.get(k) for k in CONTROL_KEYS}
@@ -480,7 +483,7 @@ def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pen
         assert rec["worker"]["pid"] != os.getpid()  # it ran in a worker process
         assert 0 < rec["worker"]["cpu_s"] <= rec["worker"]["stop"] - rec["worker"]["start"] + 0.01
         # 3 s at 100 Hz: 300 samples, all stored (float32), readable by numpy alone
-        stored = np.load(out / "runs" / f"{row['id']}.npy")
+        stored = store.trace(row["id"])
         for k in ("t", "y", "u", "r"):
             assert np.array_equal(stored[k], getattr(direct.trace, k).astype(np.float32)), k
     # The bigger initial offset takes longer to settle: the verdicts follow the metrics, per criterion.
@@ -510,7 +513,7 @@ def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
     res = run_cli("campaign", "show", out, "--run", row["id"][:8], "--report", tmp_path / "r", "--no-plots")
     assert res.code == 0, res.err
     report = json.loads((tmp_path / "r" / "report.json").read_text())
-    rec = json.loads((out / "runs" / f"{row['id']}.json").read_text())
+    rec = Store(out).record(row["id"])
     assert {k: report.get(k) for k in CONTROL_KEYS} == _control(rec)
     assert report["scenario"]["seed"] == row["seed"]
     assert_refused(("campaign", "show", out, "--run", "zzzz"), "no run id matching 'zzzz'", out, tmp_path)
@@ -544,6 +547,10 @@ def test_show_takes_a_run_by_index_or_by_id_never_guessing_which(local_run, tmp_
     assert report["scenario"]["name"].endswith(f"run 3 ({ids[3]})")
     for i in range(len(ids)):
         assert find_run(out, index=i)["id"] == ids[i]
+    # plan.json names the run at each index and hashes the list; each run's inputs are in its record, not again there
+    plan = json.loads((out / "plan.json").read_text())
+    assert plan["run_ids"] == ids and "runs" not in plan
+    assert plan["runs_sha256"] == hashlib.sha256("\n".join(ids).encode()).hexdigest()
     # Digits after --run are the start of an id, whether or not they could also be an index: a number that
     # starts no id is refused with the flag that takes an index (before, "--run 4" meant index 4 unless some id
     # happened to start with "4").
@@ -593,30 +600,90 @@ def test_a_long_run_is_stored_as_evenly_spaced_true_samples_with_both_ends():
     assert got["r"].shape == (MAX_TRACE_POINTS, 0)
 
 
-def test_a_folder_from_before_the_npy_traces_keeps_its_traces_and_a_foreign_worker_answer_is_named(tmp_path):
+def test_a_block_file_holds_each_runs_record_and_traces_and_a_foreign_worker_answer_is_named(tmp_path):
     from gainlink.errors import GainlinkError
-    from gainlink.hil.campaign.store import Store
-    from gainlink.hil.campaign.worker import unpack_results
+    from gainlink.hil.campaign.runner import _block_bytes
+    from gainlink.hil.campaign.store import block_address, encode_block, encode_trace
 
-    store = Store(tmp_path)
     rng = np.random.default_rng(3)
-    old = {
+    trace = {
         "t": np.arange(5, dtype=np.float32),
         "y": rng.random((5, 2), dtype=np.float32),
         "u": rng.random((5, 1), dtype=np.float32),
-        "r": np.zeros((5, 1), np.float32),
+        "r": np.zeros((5, 0), np.float32),
     }
-    np.savez_compressed(store.runs / "oldrun.npz", **old)  # what earlier versions wrote per run
-    got = store.trace("oldrun")
-    assert got.keys() == old.keys() and all(np.array_equal(got[k], old[k]) for k in old)
-    assert store.trace("never") is None
-    with pytest.raises(
-        GainlinkError, match=r"a worker returned list, not a batch of records: .*another gainlink version"
-    ):
-        unpack_results([{"status": "done"}])
+    done = {"status": "done", "metrics": {"iae": 0.25}, "trace": encode_trace(**trace)}
+    error = {"status": "error", "reason": "a reason"}
+    store = Store(tmp_path, campaign="c")
+    stored = store.put_block(encode_block(["run-a", "run-b"], [done, error], campaign="c"))
+    assert stored == [{"id": "run-a", "status": "done", "reason": None}, {"id": "run-b", "status": "error",
+                                                                          "reason": "a reason"}]  # fmt: skip
+    path = tmp_path / "blocks" / f"{block_address(['run-a', 'run-b'])}.parquet"
+    assert [p.name for p in tmp_path.joinpath("blocks").iterdir()] == [path.name]  # no temporary file left
+    assert oct(path.stat().st_mode & 0o777) == "0o644"
+    fresh = Store(tmp_path)  # read back from the file alone
+    got = fresh.trace("run-a")
+    assert got.keys() == trace.keys() and all(np.array_equal(got[k], trace[k]) for k in trace)
+    assert got["r"].shape == (5, 0) and fresh.trace("run-b") is None and fresh.trace("never") is None
+    assert fresh.record("run-a") == {"status": "done", "metrics": {"iae": 0.25}, "id": "run-a"}
+    assert fresh.finished("run-a") and fresh.has("run-b") and not fresh.finished("run-b")
+    # the error run again, now with a result, in a block of its own: the result counts, the error is not read
+    fresh.put_block(encode_block(["run-b"], [done], campaign="c"))
+    assert Store(tmp_path).finished("run-b") and dict(Store(tmp_path).records())["run-b"]["status"] == "done"
+    with pytest.raises(GainlinkError, match=r"a worker returned list, not a block of records: .*another gainlink"):
+        _block_bytes([{"status": "done"}])
+
+
+def test_the_envelopes_read_block_by_block_are_numpys_percentiles_within_half_a_bin(tmp_path):
+    """300 runs in three block files (NaN and an infinite sample among them, 20 runs of another length left out):
+    each percentile of every output and command at each sample, and the failed runs' median, against
+    ``np.nanpercentile`` of all the runs stacked, within the half bin the function states."""
+    from gainlink.hil.campaign.report import PERCENTILES, envelope_bands
+    from gainlink.hil.campaign.store import encode_block, encode_trace
+
+    rng = np.random.default_rng(11)
+    N, store, status, stacks = 40, Store(tmp_path, campaign="c"), {}, []
+    for b in range(3):
+        ids, records = [], []
+        for k in range(110 if b < 2 else 100):
+            run_id, n = f"run-{b}-{k}", N if k < 100 else N + 5  # 20 runs of another length
+            y = rng.normal(np.sin(np.arange(n) * 0.1)[:, None] * (1 + b), 0.3, (n, 2)).astype(np.float32)
+            u = rng.standard_cauchy((n, 1)).astype(np.float32)  # heavy tails: wide bins
+            if k == 3:
+                y[5:9, 0] = np.nan
+            if k == 4 and b == 1:
+                u[7, 0] = np.inf
+            ids.append(run_id)
+            ok = k % 7 != 0
+            records.append({"status": "done", "trace": encode_trace(np.arange(n) * 0.1, y, u, np.zeros((n, 0)))})
+            status[run_id] = "pass" if ok else "fail"
+            if n == N:
+                stacks.append((ok, np.concatenate([y, u], axis=1).astype(float)))
+        store.put_block(encode_block(ids, records, campaign="c"))
+    status["never-stored"] = "pass"
+    bands = envelope_bands(Store(tmp_path), status, bins=256)
+    every = np.stack([s for _, s in stacks])
+    failed = np.stack([s for ok, s in stacks if not ok])
+    assert bands["runs"] == 300 and bands["failed"] == len(failed) and (bands["outputs"], bands["inputs"]) == (2, 1)
+    assert np.array_equal(bands["t"], (np.arange(N) * 0.1).astype(np.float32).astype(float))
+    finite = np.where(np.isfinite(every), every, np.nan)
+    half = (np.nanmax(finite, axis=0) - np.nanmin(finite, axis=0)) / 256 / 2
+    np.testing.assert_array_equal(bands["half_bin"], half)
+    for i, q in enumerate(PERCENTILES):
+        want = np.nanpercentile(every, q, axis=0)
+        assert np.all(np.abs(bands["percentiles"][i] - want) <= half * (1 + 1e-9)), q
+    assert np.all(np.abs(bands["failed_median"] - np.nanmedian(failed, axis=0)) <= half * (1 + 1e-9))
+    assert envelope_bands(Store(tmp_path), {"never-stored": "pass"}) is None
 
 
 # --- a campaign killed halfway resumes ---------------------------------------------------------------
+
+
+def _stored(out: Path) -> dict[str, int]:
+    """The runs with a record in the campaign folder ``out``: run id -> when its block file was written (ns)."""
+    if not (out / "blocks").is_dir():
+        return {}
+    return {i: (out / "blocks" / name).stat().st_mtime_ns for i, (_, name) in Store(out).index().items()}
 
 
 @pytest.mark.slow
@@ -646,12 +713,12 @@ def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster
     )
     try:
         deadline = time.monotonic() + 240
-        while len(list((out / "runs").glob("*.json"))) < 3 and time.monotonic() < deadline and proc.poll() is None:
+        while len(_stored(out)) < 3 and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.05)
         os.killpg(proc.pid, signal.SIGKILL)  # the client, its LocalCluster scheduler and worker processes
     finally:
         proc.wait(timeout=30)
-    before = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
+    before = _stored(out)
     assert 3 <= len(before) < 8, "the campaign was not caught halfway"
     assert not list(out.glob("campaign.json"))
     # Resumed on the scheduler + workers of this module (no second LocalCluster to start): results are the
@@ -659,7 +726,7 @@ def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster
     res = run_cli("campaign", "run", path, "--out", out, "--scheduler", dask_cluster, "--no-progress", "--no-plots")
     assert res.code == 0, res.err
     assert f"resumed: {len(before)} runs had results, {8 - len(before)} ran now" in res.out
-    after = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
+    after = _stored(out)
     assert len(after) == 8 and all(after[k] == v for k, v in before.items())
     assert json.loads((out / "campaign.json").read_text())["counts"]["runs"] == 8
 
@@ -684,9 +751,9 @@ def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_comman
     )
     try:
         deadline = time.monotonic() + 240
-        while len(list((out / "runs").glob("*.json"))) < 2 and time.monotonic() < deadline and proc.poll() is None:
+        while len(_stored(out)) < 2 and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.02)
-        seen = sorted(p.stat().st_mtime for p in (out / "runs").glob("*.json"))
+        seen = sorted(_stored(out).values())
         interrupted = time.time()
         os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the client and the LocalCluster's processes
         _, err = proc.communicate(timeout=120)
@@ -698,8 +765,8 @@ def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_comman
         with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=30)
-    before = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
-    stored = sorted(p.stat().st_mtime - interrupted for p in (out / "runs").glob("*.json"))
+    before = _stored(out)
+    stored = sorted(v / 1e9 - interrupted for v in before.values())
     assert 2 <= len(before) < 8, f"not caught mid-run: runs stored at {stored} s of the interrupt (saw {len(seen)})"
     assert proc.returncode == 130
     assert err.splitlines() == [
@@ -710,7 +777,7 @@ def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_comman
     res = run_cli(*shlex.split(err.split("resume with: ", 1)[1])[1:])
     assert res.code == 0, res.err
     assert f"resumed: {len(before)} runs had results, {8 - len(before)} ran now" in res.out
-    after = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
+    after = _stored(out)
     assert len(after) == 8 and all(after[k] == v for k, v in before.items())
     assert json.loads((out / "campaign.json").read_text())["counts"]["runs"] == 8
 
@@ -937,12 +1004,8 @@ def test_a_hil_fault_matrix_runs_in_parallel_on_separate_buses(pend, dask_cluste
         data, out=tmp_path / "out", scheduler=dask_cluster, plots=False
     )  # its two workers, before any is killed
     assert result.total == 4 and result.errors == 0
-    recs = {
-        (r["values"]["drop"], r["values"]["encoding"]): json.loads(
-            (tmp_path / "out" / "runs" / f"{r['id']}.json").read_text()
-        )
-        for r in result.rows
-    }
+    store = Store(tmp_path / "out")
+    recs = {(r["values"]["drop"], r["values"]["encoding"]): store.record(r["id"]) for r in result.rows}
     for enc in ("float32", "int16"):
         clean, dropped = recs[(0.0, enc)], recs[(0.1, enc)]
         assert clean["link"]["encoding"] == enc and dropped["link"]["encoding"] == enc
@@ -1043,7 +1106,7 @@ def test_runs_that_errored_fail_the_campaign_and_only_they_run_again_on_resume(p
     rows = json.loads((out / "campaign.json").read_text())["runs"]
     assert [r["status"] == "error" for r in rows] == [False, False, True, True]
     assert rows[2]["reasons"] == [f"BuggyPendulum: broken while {broken} exists"]
-    kept = {r["id"]: (out / "runs" / f"{r['id']}.json").stat().st_mtime_ns for r in rows[:2]}
+    kept = {r["id"]: _stored(out)[r["id"]] for r in rows[:2]}
     broken.unlink()  # the cause fixed: the same command
     second = run_cli(*argv)
     assert second.code == 0, second.err
@@ -1051,7 +1114,7 @@ def test_runs_that_errored_fail_the_campaign_and_only_they_run_again_on_resume(p
     doc = json.loads((out / "campaign.json").read_text())
     assert doc["counts"]["runs"] == 4 and doc["counts"].get("error", 0) == 0
     assert all(r["status"] in ("pass", "fail") for r in doc["runs"])
-    assert {i: (out / "runs" / f"{i}.json").stat().st_mtime_ns for i in kept} == kept  # not run again
+    assert {i: _stored(out)[i] for i in kept} == kept  # not run again
     third = run_cli(*argv)
     assert third.code == 0 and "resumed: 4 runs had results, 0 ran now" in third.out
 
@@ -1078,7 +1141,7 @@ def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, da
     # The other two ran alone after the split and equal the same runs of the built-in plant called directly.
     a = load(pend)
     for i in (0, 1):
-        rec = json.loads((tmp_path / "out" / "runs" / f"{rows[i]['id']}.json").read_text())
+        rec = Store(tmp_path / "out").record(rows[i]["id"])
         assert rec["status"] == "done"
         sc = dict(rec["inputs"]["scenario"], artifact=str(pend), transport={})
         sc["plant"] = {k: v for k, v in sc["plant"].items() if k not in ("class", "bug")} | {"kind": "cart_pendulum"}

@@ -408,3 +408,57 @@ def test_each_instance_of_a_block_runs_its_own_gain_set():
             assert np.array_equal(rec["u"][i], want.u.astype(np.float32))
         differ += len(set(rec["u"][:, 0].tolist())) == 3
     assert differ >= 45  # the three sets answer differently
+
+
+@pytest.mark.parametrize(
+    "meta, phrase",
+    [
+        ({"gainlink.campaign": "other", "gainlink.version": "0.1.0"}, "holds campaign 'other', not 'mine'"),
+        ({"gainlink.campaign": "mine", "gainlink.version": "9.9"}, "was written by gainlink 9.9"),
+        (None, "holds per-run results (runs/) of an earlier gainlink"),
+        ("not parquet", "is not a block file this gainlink can read"),
+    ],
+)
+def test_resuming_into_a_folder_with_foreign_blocks_is_refused_in_one_line(tmp_path, meta, phrase):
+    """The folder's plan is this campaign's, but one of its block files (or its layout) is not: refused before
+    anything is written."""
+    import json
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from gainlink.hil.campaign.store import encode_block
+    from gainlink.version import __version__
+    from support.cli import assert_refused
+
+    out = tmp_path / "out"
+    (out / "blocks").mkdir(parents=True)
+    (out / "plan.json").write_text(json.dumps({"campaign": {"name": "mine", "gainlink": __version__}, "runs": []}))
+    block = out / "blocks" / "0123456789abcdef01234567.parquet"
+    if meta is None:
+        (out / "runs").mkdir()
+    elif isinstance(meta, str):
+        block.write_text(meta)
+    else:
+        data = encode_block(["x"], [{"status": "error", "reason": "r"}], campaign="mine")
+        table = pq.read_table(pa.BufferReader(data))
+        pq.write_table(table.replace_schema_metadata({k.encode(): v.encode() for k, v in meta.items()}), block)
+    campaign = _small_campaign_file(tmp_path, "mine")
+    assert_refused(["campaign", "run", campaign, "--out", out, "--workers", "1"], phrase, out)
+
+
+@pytest.mark.parametrize(
+    "plan, phrase",
+    [
+        ({"campaign": {"name": "mine"}, "run_ids": ["abc123"]}, "run abc123 has no record yet"),
+        ({"campaign": {"name": "mine"}, "runs": [{"id": "abc123"}]}, "is not a campaign plan this gainlink can read"),
+    ],
+)
+def test_show_refuses_a_run_without_a_record_and_a_plan_of_an_earlier_layout_in_one_line(tmp_path, plan, phrase):
+    import json
+
+    from support.cli import assert_refused
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "plan.json").write_text(json.dumps(plan))
+    assert_refused(["campaign", "show", out, "--run", "abc", "--report", tmp_path / "r"], phrase, out, tmp_path)

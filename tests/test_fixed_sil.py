@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 from gainlink.hil.campaign.runner import run as run_campaign
+from gainlink.hil.campaign.store import Store
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.laws.fixed.model import FixedPointLoop
@@ -91,5 +92,7 @@ def test_a_campaign_of_a_q31_artifact_runs_the_integer_law_on_its_workers(pend_q
     result = run_campaign(data, out=out, workers=1, plots=False)
     doc = json.loads((out / "campaign.json").read_text())
     assert doc["counts"]["runs"] == 2 and doc["counts"]["error"] == 0, result
-    for rec in (json.loads(p.read_text()) for p in (out / "runs").glob("*.json")):
+    records = [rec for _, rec in Store(out).records()]
+    assert len(records) == 2
+    for rec in records:
         assert rec["metrics"]["fixed_point"]["bit_exact"] is True and rec["metrics"]["fixed_point"]["law"] == "q31"

@@ -23,6 +23,7 @@ import json
 import numpy as np
 import pytest
 from gainlink.hil.campaign import run
+from gainlink.hil.campaign.store import Store
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.shipping.artifact import from_dict, seal
@@ -88,7 +89,7 @@ def test_a_campaign_over_sigma_rate_and_range_finds_where_stability_stops(spring
     }
     assert all("bounds" in row["failed"] for row in doc["runs"] if row["status"] == "fail")
     for row in doc["runs"]:
-        rec = json.loads((tmp_path / "out" / "runs" / f"{row['id']}.json").read_text())
+        rec = Store(tmp_path / "out").record(row["id"])
         sch = rec["metrics"]["schedule"]
         step = row["values"]["sigma_rate"] * 0.02  # sigma per sample (Ts = 0.02 s): the turn falls between samples
         assert row["values"]["sigma_high"] - step <= sch["sigma_max"] <= row["values"]["sigma_high"]

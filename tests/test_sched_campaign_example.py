@@ -17,6 +17,7 @@ import pytest
 from gainlink.errors import LawError
 from gainlink.fileio import read_toml
 from gainlink.hil.campaign import run
+from gainlink.hil.campaign.store import Store
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.laws import design as design_spec
@@ -67,7 +68,7 @@ def test_the_example_campaign_holds_up_to_the_verdicts_rates_and_fails_above(art
     assert status == {rate_max: "pass", 4.0: "pass", 7.0: "fail"}
     assert _radius(art, rate_max) < 0.2 and _radius(art, 7.0) > 1.2  # the verdict's own measure of the same sweeps
     for row in doc["runs"]:
-        rec = json.loads((tmp_path / "out" / "runs" / f"{row['id']}.json").read_text())
+        rec = Store(tmp_path / "out").record(row["id"])
         sch = rec["metrics"]["schedule"]
         assert sch["rate_max"] is None and sch["max_rate"] == pytest.approx(row["values"]["sigma_rate"], rel=1e-4)
         assert rec["inputs"]["scenario"]["sigma_rate_limit"] is False

@@ -21,6 +21,7 @@ import csv
 import io
 import json
 import math
+import warnings
 from collections import Counter
 from typing import Any
 
@@ -32,6 +33,7 @@ from .criteria import evaluate
 from .plan import CampaignPlan, describe_axes
 
 PERCENTILES = (5, 25, 50, 75, 95)
+ENVELOPE_BINS = 512
 MAX_POINT_LINES = 30
 
 
@@ -69,11 +71,9 @@ def _row(point: Any, record: dict, criteria: Any) -> dict:
 
 def rows_of(plan: CampaignPlan, store: Any) -> list[dict]:
     """One row per planned run, with its verdict under the campaign's criteria."""
-    records: dict[str, dict | None] = {}
-    for p in plan.runs:
-        if p.id not in records:
-            records[p.id] = store.record(p.id) if store.has(p.id) else None
-    return [_row(p, records[p.id], plan.campaign.criteria) for p in plan.runs]
+    planned = {p.id for p in plan.runs}
+    records = {run_id: record for run_id, record in store.records() if run_id in planned}
+    return [_row(p, records.get(p.id), plan.campaign.criteria) for p in plan.runs]
 
 
 def _tracked_iae(row: dict) -> float | None:
@@ -259,41 +259,30 @@ def envelopespng_bytes(plan: CampaignPlan, rows: list[dict], store: Any) -> byte
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    traces = {}
-    for r in rows:
-        if r["status"] in ("pass", "fail") and r["id"] not in traces:
-            tr = store.trace(r["id"])
-            if tr is not None:
-                traces[r["id"]] = (tr, r["status"])
-    lengths = Counter(tr["t"].size for tr, _ in traces.values())
-    size = lengths.most_common(1)[0][0] if lengths else 0
-    keep = [(tr, s) for tr, s in traces.values() if tr["t"].size == size]
-    first = next(iter(keep), (None, None))[0]
-    outs = first["y"].shape[1] if first is not None else 0
-    ins = first["u"].shape[1] if first is not None else 0
+    status = {r["id"]: r["status"] for r in rows if r["status"] in ("pass", "fail")}
+    bands = envelope_bands(store, status)
+    outs, ins = (bands["outputs"], bands["inputs"]) if bands is not None else (0, 0)
     sig = _signals(plan)
     fig, axes = plt.subplots(max(outs + ins, 1), 1, figsize=(9, 2.3 * max(outs + ins, 1)), sharex=True, squeeze=False)
-    if first is None:
+    if bands is None:
         axes[0, 0].text(0.5, 0.5, "no finished run", ha="center", transform=axes[0, 0].transAxes)
         return png_bytes(fig)
-    t = first["t"]
+    t = bands["t"]
     for i in range(outs + ins):
         ax = axes[i, 0]
         key, j = ("y", i) if i < outs else ("u", i - outs)
-        data = np.stack([tr[key][:, j] for tr, _ in keep]).astype(float)
-        pct = np.nanpercentile(data, PERCENTILES, axis=0)
+        pct = bands["percentiles"][:, :, i]
         ax.fill_between(t, pct[0], pct[4], alpha=0.2, color="C0", label="5-95 %")
         ax.fill_between(t, pct[1], pct[3], alpha=0.35, color="C0", label="25-75 %")
         ax.plot(t, pct[2], color="C0", lw=1.2, label="median")
-        failed = [tr[key][:, j] for tr, s in keep if s == "fail"]
-        if failed:
+        if bands["failed"]:
             ax.plot(
                 t,
-                np.nanmedian(np.stack(failed), axis=0),
+                bands["failed_median"][:, i],
                 "--",
                 color="C3",
                 lw=1,
-                label=f"median of {len(failed)} failed",
+                label=f"median of {bands['failed']} failed",
             )
         names = sig["outputs"] if key == "y" else sig["inputs"]
         name = names[j] if j < len(names) else f"{key}{j}"
@@ -302,8 +291,91 @@ def envelopespng_bytes(plan: CampaignPlan, rows: list[dict], store: Any) -> byte
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=7)
     axes[-1, 0].set_xlabel(f"t [{sig.get('units', {}).get('time', 's')}]")
-    fig.suptitle(f"{plan.campaign.name}: outputs and commands over {len(keep)} runs")
+    fig.suptitle(f"{plan.campaign.name}: outputs and commands over {bands['runs']} runs")
     return png_bytes(fig)
+
+
+def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_BINS) -> dict | None:
+    """The percentiles (:data:`PERCENTILES`) of every output and command at each stored sample across the runs
+    ``status`` (id -> ``pass`` or ``fail``) whose traces have the most common shape, and the failed runs' median;
+    ``None`` without a stored trace.
+
+    Streamed: the block files are read one at a time, twice (each sample's smallest and largest finite value, then a
+    histogram of ``bins`` equal bins between them per sample and signal), so the memory is the histograms', not the
+    runs'. A percentile is numpy's linear one (``np.nanpercentile``) with each order statistic taken at the centre of
+    its bin: within half a bin, ``(max - min) / (2 * bins)`` of that sample, of the exact value (below a pixel of the
+    plot). NaN samples are left out as nanpercentile leaves them; an infinite one counts in the end bin on its side.
+
+    Returns ``{"t", "percentiles": (len(PERCENTILES), N, S), "failed_median": (N, S), "runs", "failed", "outputs",
+    "inputs", "half_bin": (N, S)}`` with the S signals the outputs then the commands.
+    """
+    shapes: Counter = Counter()
+    for ids, st in store.trace_stacks(set(status)):
+        shapes[(st["t"].shape[1], st["y"].shape[2], st["u"].shape[2])] += len(ids)
+    if not shapes:
+        return None
+    shape = shapes.most_common(1)[0][0]
+    lo, hi, t = None, None, None
+    for _, _, sig in _signal_stacks(store, status, shape):
+        finite = np.where(np.isfinite(sig), sig, np.nan)
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a sample no run has a finite value at
+            mn, mx = np.nanmin(finite, axis=0), np.nanmax(finite, axis=0)
+        lo = mn if lo is None else np.fmin(lo, mn)
+        hi = mx if hi is None else np.fmax(hi, mx)
+    lo, hi = np.nan_to_num(lo), np.nan_to_num(hi)
+    width = np.where(hi > lo, (hi - lo) / bins, 1.0)
+    counts = np.zeros((2, *lo.shape, bins), np.int64)  # all runs, failed runs
+    runs = failed = 0
+    for ids, times, sig in _signal_stacks(store, status, shape):
+        t = times if t is None else t
+        bad = np.array([status[i] == "fail" for i in ids])
+        runs, failed = runs + len(ids), failed + int(bad.sum())
+        counts[0] += _histogram(sig, lo, width, bins)
+        if bad.any():
+            counts[1] += _histogram(sig[bad], lo, width, bins)
+    pct = np.stack([_percentile(counts[0], q, lo, width) for q in PERCENTILES])
+    return {
+        "t": t,
+        "percentiles": pct,
+        "failed_median": _percentile(counts[1], 50, lo, width),
+        "runs": runs,
+        "failed": failed,
+        "outputs": shape[1],
+        "inputs": shape[2],
+        "half_bin": width / 2,
+    }
+
+
+def _signal_stacks(store: Any, status: dict[str, str], shape: tuple) -> Any:
+    """The runs of ``shape`` (samples, outputs, commands), a block at a time: ``(ids, t (N,), (k, N, S) float64)``."""
+    for ids, st in store.trace_stacks(set(status)):
+        if (st["t"].shape[1], st["y"].shape[2], st["u"].shape[2]) == shape:
+            yield ids, st["t"][0].astype(float), np.concatenate([st["y"], st["u"]], axis=2).astype(float)
+
+
+def _histogram(sig: np.ndarray, lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:
+    """Counts of ``sig`` (k, N, S) in ``bins`` bins from ``lo`` of ``width`` per sample and signal: (N, S, bins)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        b = np.floor((sig - lo) / width)
+    ok = ~np.isnan(b)
+    b = np.clip(np.where(ok, b, 0), 0, bins - 1).astype(np.int64)
+    cell = np.arange(lo.size).reshape(lo.shape) * bins
+    flat = (cell + b)[ok]
+    return np.bincount(flat, minlength=lo.size * bins).reshape(*lo.shape, bins)
+
+
+def _percentile(counts: np.ndarray, q: float, lo: np.ndarray, width: np.ndarray) -> np.ndarray:
+    """numpy's linear percentile ``q`` from histograms ``counts`` (N, S, bins), each order statistic at its bin's
+    centre; NaN where a cell counts nothing."""
+    n = counts.sum(axis=-1)
+    cum = np.cumsum(counts, axis=-1)
+    h = q / 100 * np.maximum(n - 1, 0)
+    below, above = np.floor(h), np.ceil(h)
+    at = [(cum > r[..., None]).argmax(axis=-1) for r in (below, above)]
+    value = [lo + (b + 0.5) * width for b in at]
+    out = value[0] + (h - below) * (value[1] - value[0])
+    return np.where(n > 0, out, np.nan)
 
 
 def _iae_unit(sig: dict) -> str:
@@ -372,6 +444,14 @@ def _criteria_doc(c: Any) -> dict:
     return {k: (dict(v) if isinstance(v, dict) else v) for k, v in c.__dict__.items()}
 
 
+def report_json(doc: dict) -> str:
+    """``campaign.json``: ``doc`` indented, its runs one a line (json's C encoder: with ``indent`` json falls back
+    to its Python encoder, 10x slower, which took most of the report's CPU at 10,000 runs)."""
+    head = json.dumps({k: v for k, v in doc.items() if k != "runs"}, sort_keys=True, indent=1, allow_nan=False)
+    runs = ",\n  ".join(json.dumps(r, sort_keys=True, allow_nan=False) for r in doc["runs"])
+    return head[:-2] + (',\n "runs": [\n  ' + runs + "\n ]\n}\n" if runs else ',\n "runs": []\n}\n')
+
+
 PLOTS = ("envelopes.png", "scatter.png")
 
 
@@ -401,7 +481,7 @@ def merge(plan: CampaignPlan, store: Any, *, plots: bool = True) -> tuple[str, l
     }
     summary = summary_text(plan, rows, points, out=store.out, plots=plots)
     files: dict[str, bytes | str] = {
-        "campaign.json": json.dumps(doc, sort_keys=True, indent=1, allow_nan=False) + "\n",
+        "campaign.json": report_json(doc),
         "campaign.csv": campaign_csv(plan, rows),
         "failures.txt": failures_text(rows),
         "summary.txt": summary,

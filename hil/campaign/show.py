@@ -1,8 +1,9 @@
 """Replay one run of a finished campaign by id and write its full HIL report.
 
-A run is a pure function of (artifact, scenario, seed): ``plan.json`` and the artifacts and FMUs kept
-in the campaign folder hold all three, so the run is executed again here, in this process, and
-reported as ``gainlink hil run`` would (``report.json``, plots, ``summary.txt``).
+A run is a pure function of (artifact, scenario, seed): its record in the campaign folder's store (``inputs``) and
+the artifacts and FMUs kept beside it hold all three (``plan.json`` names the run at each index), so the run is
+executed again here, in this process, and reported as ``gainlink hil run`` would (``report.json``, plots,
+``summary.txt``). A run with no record yet (a campaign interrupted before it) is run by resuming the campaign.
 """
 
 from __future__ import annotations
@@ -30,23 +31,39 @@ def find_run(out: Path, run: str | None = None, *, index: int | None = None) -> 
     if (run is None) == (index is None):
         raise CampaignError("campaign show: give a run id (or its unique start) or an index, not both or neither")
     text = read_user_file(out / "plan.json", what="campaign plan", error=CampaignError)
-    plan = json.loads(text)
-    runs, kind = plan["runs"], plan["campaign"]["kind"]
+    try:
+        ids = json.loads(text)["run_ids"]
+    except (ValueError, KeyError, TypeError):
+        raise CampaignError(f"campaign: {out / 'plan.json'} is not a campaign plan this gainlink can read") from None
     if index is not None:
-        if not 0 <= index < len(runs):
-            raise CampaignError(f"campaign {out} has {len(runs)} runs (index 0 to {len(runs) - 1}), not {index}")
-        return runs[index] | {"kind": kind}
-    hits = {r["id"]: r for r in runs if r["id"].startswith(run)}
+        if not 0 <= index < len(ids):
+            raise CampaignError(f"campaign {out} has {len(ids)} runs (index 0 to {len(ids) - 1}), not {index}")
+        return _stored_run(out, ids[index], index)
+    hits = {i: k for k, i in reversed(list(enumerate(ids))) if i.startswith(run)}  # an id's first index
     if len(hits) != 1:
         hint = "give more of the id"
         if not hits:
             hint = "ids are in campaign.csv"
-            if run.isdigit() and int(run) < len(runs):
+            if run.isdigit() and int(run) < len(ids):
                 hint = f"for the run at index {int(run)}, give --index {int(run)}"
         raise CampaignError(
             f"campaign {out}: {'no run id' if not hits else f'{len(hits)} run ids'} matching {run!r} ({hint})"
         )
-    return next(iter(hits.values())) | {"kind": kind}
+    run_id, at = next(iter(hits.items()))
+    return _stored_run(out, run_id, at)
+
+
+def _stored_run(out: Path, run_id: str, index: int) -> dict:
+    """The inputs of run ``run_id`` (at ``index``) as its record in the store holds them."""
+    try:
+        record = Store(out).record(run_id)
+    except KeyError:
+        raise CampaignError(
+            f"campaign {out}: run {run_id} has no record yet: run the campaign again to run it"
+        ) from None
+    inputs = record["inputs"]
+    never = record.get("reason") if record["status"] == "error" and inputs["artifact_sha256"] is None else None
+    return {"id": run_id, "index": index, **inputs, "error": never}
 
 
 def show_run(

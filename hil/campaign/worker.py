@@ -42,7 +42,7 @@ from gainlink.version import __version__
 from ..loop.scenario import parse_scenario
 from ..paths import cache_dir
 from .criteria import measure
-from .store import encode_trace
+from .store import encode_block, encode_trace, with_inputs
 
 MAX_TRACE_POINTS = 600
 MAX_BUS_SLOTS = 64
@@ -283,6 +283,28 @@ def execute_batch(
     and unpacking it runs no code. An exception other than a :class:`~gainlink.errors.GainlinkError` ends
     the batch (the campaign then runs each of its runs alone, so one bad run costs no other its result).
     """
+    return msgpack.packb(batch_records(kind, artifacts, runs, blobs), use_bin_type=True)
+
+
+def execute_block(
+    kind: str,
+    artifacts: dict[str, bytes],
+    runs: list[tuple[str, dict, int]],
+    blobs: dict | None = None,
+    *,
+    ids: list[str],
+    campaign: str,
+) -> bytes:
+    """A campaign task: the runs of :func:`execute_batch` (run ``ids[i]`` is ``runs[i]``), returned as the block's
+    Parquet file for the campaign folder (:func:`~.store.encode_block`): the client only writes its bytes."""
+    records = [with_inputs(r, run, kind=kind) for r, run in zip(batch_records(kind, artifacts, runs, blobs), runs)]
+    return encode_block(ids, records, campaign=campaign)
+
+
+def batch_records(
+    kind: str, artifacts: dict[str, bytes], runs: list[tuple[str, dict, int]], blobs: dict | None = None
+) -> list[dict]:
+    """The records of :func:`execute_batch`, in order."""
     records: list[dict | None] = [None] * len(runs)
     if kind == "sil":
         for members in _blocks(artifacts, runs, blobs or {}).values():
@@ -290,7 +312,7 @@ def execute_batch(
     for i, (sha, scenario, seed) in enumerate(runs):
         if records[i] is None:
             records[i] = execute(kind, artifacts[sha], scenario, seed, blobs)
-    return msgpack.packb(records, use_bin_type=True)
+    return records  # type: ignore[return-value]
 
 
 def _blocks(artifacts: dict[str, bytes], runs: list, blobs: dict) -> dict[tuple, list]:
