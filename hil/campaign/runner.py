@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -41,13 +41,17 @@ BLOCKS_PER_THREAD = 2
 class CampaignResult:
     """A finished campaign: where its report is, its runs (one row each) and the counts.
 
+    ``rows`` is a read-only sequence of the runs' rows in plan order, read from the report's ``campaign.json``
+    when asked (iterate it to stream them; ``rows[i]`` reads the file up to run ``i``): no campaign, however many
+    runs it has, holds them all in memory. It reads the newest merge of ``out``.
+
     ``reused`` runs had a result before this call (a resumed campaign; an error is not a result, so a run that
     errored is run again); ``executed`` ran now. Both count distinct runs (a run planned twice with the same
     inputs runs once); with the runs whose design failed they make up every distinct run.
     """
 
     out: Path
-    rows: tuple[dict, ...]
+    rows: Sequence[dict]
     passed: int
     failed: int
     errors: int
@@ -208,11 +212,10 @@ def _runs_to_do(unique: dict[str, RunPoint], *, reused: set[str], store: Store, 
 
 def _result(plan: CampaignPlan, store: Store, *, reused: int, executed: int, plots: bool) -> CampaignResult:
     """Merge the stored runs into the campaign report and count them."""
-    summary, rows = merge(plan, store, plots=plots)
-    counts = {s: sum(1 for r in rows if r["status"] == s) for s in ("pass", "fail", "error")}
+    summary, rows, counts = merge(plan, store, plots=plots)
     return CampaignResult(
         out=store.out,
-        rows=tuple(rows),
+        rows=rows,
         passed=counts["pass"],
         failed=counts["fail"],
         errors=counts["error"],
