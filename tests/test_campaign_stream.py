@@ -6,22 +6,26 @@ failure table, the CSV read back with the csv module), and tracemalloc for the m
 
 from __future__ import annotations
 
+import copy
 import csv
+import hashlib
 import json
 import math
 import tracemalloc
 
 import numpy as np
 from gainlink.hil.campaign import parse_campaign
-from gainlink.hil.campaign.plan import CampaignPlan, RunPoint
+from gainlink.hil.campaign.plan import CampaignPlan, RunPoint, plan_campaign
 from gainlink.hil.campaign.report import merge
 from gainlink.hil.campaign.store import Store, encode_block, with_inputs
+from gainlink.shipping.artifact import canonical_json
+from gainlink.version import __version__
 from support.paths import EXAMPLES
 
 GRID = [0.8, 1.0, 1.2]
 
 
-def _campaign(runs: int):
+def _campaign(runs: int, *, apply: str = "scale"):
     return parse_campaign(
         {
             "name": "streamed",
@@ -30,7 +34,7 @@ def _campaign(runs: int):
             "runs": runs,
             "spec": str(EXAMPLES / "pendulum.toml"),
             "scenario": {"duration": 0.5, "plant": {"kind": "cart_pendulum"}},
-            "grid": [{"target": "plant.parameters.m", "values": GRID, "apply": "scale"}],
+            "grid": [{"target": "plant.parameters.m", "values": GRID, "apply": apply}],
             "draw": [{"target": "plant.parameters.M", "distribution": "uniform", "low": 0.7, "high": 1.3}],
             "criteria": {"stable": True, "settled_within": 2.0, "iae_below": 0.9},
         }
@@ -155,3 +159,43 @@ def test_merging_holds_a_few_hundred_bytes_a_run_not_the_rows(tmp_path):
     small, large = _merge_peak(tmp_path, 100), _merge_peak(tmp_path, 1000)
     per_run = (large - small) / (3 * 900)
     assert per_run < 1000, f"{per_run:.0f} bytes a run"
+
+
+def _by_hand(campaign, sha: str, k: int) -> tuple[str, int, dict]:
+    """Run ``k``'s id, seed and values as the plan's docstring defines them: grid point ``k // runs`` and draw
+    ``k % runs``, whose seed and values come from ``default_rng([seed, draw])`` (the seed first)."""
+    g, j = divmod(k, campaign.runs)
+    rng = np.random.default_rng([campaign.seed, j])
+    seed = int(rng.integers(2**31 - 1))
+    M = float(rng.uniform(0.7, 1.3))
+    scenario = copy.deepcopy(campaign.scenario)
+    scenario["plant"].setdefault("parameters", {})
+    scenario["plant"]["parameters"].update({"m": GRID[g], "M": M})
+    body = {"kind": "sil", "artifact": sha, "scenario": scenario, "seed": seed, "gainlink": __version__}
+    rid = hashlib.sha256(canonical_json(body).encode("ascii")).hexdigest()[:20]
+    return rid, seed, {"plant.parameters.m": GRID[g], "plant.parameters.M": M}
+
+
+def test_the_generated_plan_gives_each_run_the_id_seed_and_values_its_definition_gives(tmp_path):
+    campaign = _campaign(100, apply="set")
+    plan = plan_campaign(campaign)
+    (sha,) = plan.artifacts
+    runs = list(plan.runs)
+    assert len(plan.runs) == len(runs) == 300
+    for k, p in enumerate(runs):
+        assert (p.id, p.seed, p.values) == _by_hand(campaign, sha, k)
+        assert (p.index, p.grid_index, p.draw) == (k, k // 100, k % 100)
+    for k in (0, 99, 100, 257, -1):  # read alone, a run is the one the walk gives
+        assert plan.runs[k] == runs[k]
+
+
+def test_a_plan_holds_no_run(tmp_path):
+    """Holding every run (its RunPoint and scenario) costs kilobytes a run; the plan keeps its designs only."""
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        plan = plan_campaign(_campaign(1000, apply="set"))
+        held = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert len(plan.runs) == 3000 and held / 3000 < 200, f"{held / 3000:.0f} bytes a run"
