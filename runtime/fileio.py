@@ -10,7 +10,7 @@ import tempfile
 import tomllib
 from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any, Literal, TypeAlias, overload
+from typing import IO, Any, Literal, TypeAlias, overload
 
 from .errors import GainlinkError
 
@@ -61,22 +61,34 @@ def _default_mode() -> int:
     return 0o666 & ~mask
 
 
+@contextlib.contextmanager
+def atomic_writer(path: StrPath, *, binary: bool = False, mode: int | None = None) -> Iterator[IO[Any]]:
+    """A file to write ``path`` through, as a stream: a temporary file in the same folder, renamed to ``path`` when
+    the block ends without an exception and removed when it raises (``path`` is untouched then).
+
+    Text (UTF-8) unless ``binary``; the permissions a plain ``open()`` would give (``mode`` as in
+    :func:`atomic_write_bytes`), set before a byte is written.
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        os.fchmod(fd, _default_mode() if mode is None else mode)
+        with os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            yield fh
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 def atomic_write_bytes(path: StrPath, data: bytes, *, mode: int | None = None) -> None:
     """Write ``data`` to ``path`` through a temporary file in the same folder and a rename.
 
     The file gets the permissions a plain ``open()`` would give it (readable by others under the usual umask),
     or ``mode`` (e.g. 0o600 for a secret), set before a byte is written.
     """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        os.fchmod(fd, _default_mode() if mode is None else mode)
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_writer(path, binary=True, mode=mode) as fh:
+        fh.write(data)
 
 
 def atomic_write_text(path: StrPath, text: str, *, mode: int | None = None) -> None:

@@ -15,6 +15,7 @@ import hashlib
 import itertools
 import json
 import math
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -52,10 +53,11 @@ class RunPoint:
 
 @dataclass(frozen=True)
 class CampaignPlan:
-    """Every run, the artifacts they use (sha256 -> canonical JSON bytes) and the FMUs (sha256 -> bytes)."""
+    """Every run (a :class:`PlannedRuns` from :func:`plan_campaign`: generated when read), the artifacts they use
+    (sha256 -> canonical JSON bytes) and the FMUs (sha256 -> bytes)."""
 
     campaign: Campaign
-    runs: tuple[RunPoint, ...]
+    runs: Sequence[RunPoint]
     artifacts: dict = field(default_factory=dict)
     blobs: dict = field(default_factory=dict)
 
@@ -190,57 +192,98 @@ def _check_scenario(campaign: Campaign, scenario: dict, where: str) -> Scenario:
     return parsed
 
 
+class PlannedRuns(Sequence):
+    """A campaign's runs in plan order (grid point ``g``, draw ``j`` at index ``g * runs + j``), generated when asked,
+    not held: ``runs[i]`` makes run ``i``, iterating makes them in order (the same ids, seeds and values whichever
+    way). The designs, artifacts and FMUs they use were gathered when the campaign was planned."""
+
+    def __init__(self, campaign: Campaign, planner: _Planner) -> None:
+        self.campaign, self._planner = campaign, planner
+        self._count = len(planner.points) * campaign.runs
+
+    def __len__(self) -> int:
+        return self._count
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, slice):
+            return [self._planner.point(k) for k in range(*i.indices(self._count))]
+        k = i + self._count if i < 0 else i
+        if not 0 <= k < self._count:
+            raise IndexError(i)
+        return self._planner.point(k)
+
+    def __iter__(self) -> Iterator[RunPoint]:
+        for k in range(self._count):
+            yield self._planner.point(k)
+
+
+class _Planner:
+    """Makes run ``k`` of a campaign (:meth:`point`), sharing the designs and FMUs between runs."""
+
+    def __init__(self, campaign: Campaign) -> None:
+        self.campaign = campaign
+        self.artifacts: dict[str, bytes] = {}
+        self.blobs: dict[str, bytes] = {}
+        self.fmu_cache: dict = {}
+        self.designs: dict[str, tuple[bytes, str] | str] = {}  # canonical spec -> (artifact, sha256), or the error
+        path = campaign.artifact_path
+        self.fixed = _with_sha(path.read_bytes()) if path is not None else None
+        # Only spec.* axes change the spec: without one, every run shares the campaign's spec and its one design.
+        self.spec_varies = any(a.design for a in (*campaign.grid, *campaign.draws))
+        self.points = list(itertools.product(*(a.values for a in campaign.grid)))
+
+    def point(self, k: int, *, dry: DryBuild | None = None) -> RunPoint:
+        """Run ``k``; with ``dry``, its scenario parsed and its plant dry-built (:class:`.preflight.DryBuild`)."""
+        c = self.campaign
+        g, j = divmod(k, c.runs)
+        seed, drawn = draw_values(c, j)
+        values = {a.name: v for a, v in zip(c.grid, self.points[g])} | drawn
+        spec = copy.deepcopy(c.spec) if self.spec_varies else c.spec
+        scenario = copy.deepcopy(c.scenario)
+        for axis in (*c.grid, *c.draws):
+            _apply_axis(axis, values[axis.name], spec=spec, scenario=scenario, window=c.fault_window)
+        where = f"run {k} ({', '.join(f'{n}={_short(v)}' for n, v in values.items()) or 'base'})"
+        parsed = _check_scenario(c, scenario, where) if dry is not None else None
+        key = canonical_json(spec) if self.spec_varies else ""
+        got = self.fixed if self.fixed is not None else _artifact(c, spec, key, self.designs, where)
+        sha, error = (got[1], None) if isinstance(got, tuple) else (None, got)
+        if sha is not None:
+            self.artifacts.setdefault(sha, got[0])
+            if dry is not None:
+                dry.check(parsed, scenario, artifact_json=got[0], sha=sha, where=where)
+        _fmu_blob(scenario, c, self.blobs, self.fmu_cache)
+        rid = run_id(kind=c.kind, artifact_sha256=sha, scenario=scenario, seed=seed)
+        return RunPoint(
+            index=k,
+            id=rid,
+            grid_index=g,
+            draw=j,
+            values=values,
+            artifact_sha256=sha,
+            scenario=scenario,
+            seed=seed,
+            error=error,
+        )
+
+
 def plan_campaign(campaign: Campaign) -> CampaignPlan:
-    """Expand ``campaign`` into its runs (designing each grid point's artifact).
+    """Plan ``campaign``: make each run once, to check it and gather the designs and FMUs it uses, keeping none;
+    its runs are returned as a :class:`PlannedRuns` (generated again when read).
 
     A mistake of the campaign file is refused here, before any run (:class:`CampaignError`, one line naming the
     key): a value of another kind than the scenario holds (:func:`.preflight.check_axis_values`), a spec the spec
-    parser refuses at any grid point, a plant that cannot be built for one run of each shape
-    (:class:`.preflight.DryBuild`). A design that fails at a grid point (``DesignError``) is that point's result.
+    parser refuses at any grid point, a scenario the scenario parser refuses at any run, a plant that cannot be built
+    for one run of each shape (:class:`.preflight.DryBuild`). A design that fails at a grid point (``DesignError``)
+    is that point's result.
     """
     check_axis_values(campaign)
     dry = DryBuild(campaign)
-    artifacts: dict[str, bytes] = {}
-    blobs: dict[str, bytes] = {}
-    fmu_cache: dict = {}
-    designs: dict[str, tuple[bytes, str] | str] = {}  # canonical spec -> (artifact, sha256), or the design's error
-    fixed = _with_sha(campaign.artifact_path.read_bytes()) if campaign.artifact_path is not None else None
-    # Only spec.* axes change the spec: without one, every run shares the campaign's spec and its one design.
-    spec_varies = any(a.design for a in (*campaign.grid, *campaign.draws))
-    draws = [draw_values(campaign, j) for j in range(campaign.runs)]
-    runs = []
-    points = list(itertools.product(*(a.values for a in campaign.grid)))
-    for g, point in enumerate(points):
-        for j, (seed, drawn) in enumerate(draws):
-            values = {a.name: v for a, v in zip(campaign.grid, point)} | drawn
-            spec = copy.deepcopy(campaign.spec) if spec_varies else campaign.spec
-            scenario = copy.deepcopy(campaign.scenario)
-            for axis in (*campaign.grid, *campaign.draws):
-                _apply_axis(axis, values[axis.name], spec=spec, scenario=scenario, window=campaign.fault_window)
-            where = f"run {len(runs)} ({', '.join(f'{k}={_short(v)}' for k, v in values.items()) or 'base'})"
-            parsed = _check_scenario(campaign, scenario, where)
-            key = canonical_json(spec) if spec_varies else ""
-            got = fixed if fixed is not None else _artifact(campaign, spec, key, designs, where)
-            sha, error = (got[1], None) if isinstance(got, tuple) else (None, got)
-            if sha is not None:
-                artifacts.setdefault(sha, got[0])
-                dry.check(parsed, scenario, artifact_json=got[0], sha=sha, where=where)
-            _fmu_blob(scenario, campaign, blobs, fmu_cache)
-            rid = run_id(kind=campaign.kind, artifact_sha256=sha, scenario=scenario, seed=seed)
-            runs.append(
-                RunPoint(
-                    index=len(runs),
-                    id=rid,
-                    grid_index=g,
-                    draw=j,
-                    values=values,
-                    artifact_sha256=sha,
-                    scenario=scenario,
-                    seed=seed,
-                    error=error,
-                )
-            )
-    return CampaignPlan(campaign=campaign, runs=tuple(runs), artifacts=artifacts, blobs=blobs)
+    planner = _Planner(campaign)
+    for k in range(len(planner.points) * campaign.runs):  # each made, checked and dropped
+        planner.point(k, dry=dry)
+    return CampaignPlan(
+        campaign=campaign, runs=PlannedRuns(campaign, planner), artifacts=planner.artifacts, blobs=planner.blobs
+    )
 
 
 def _with_sha(art: bytes) -> tuple[bytes, str]:

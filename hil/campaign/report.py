@@ -18,116 +18,39 @@ no run (``gainlink campaign show DIR`` re-merges).
 from __future__ import annotations
 
 import csv
-import io
 import json
 import math
+import shutil
+import tempfile
 import warnings
 from collections import Counter
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
-from gainlink.fileio import publish_files
+from gainlink.fileio import atomic_writer, publish_files
 from gainlink.proof.twin_plot import png_bytes
 
-from .criteria import evaluate
 from .plan import CampaignPlan, describe_axes
+from .rows import ReportRows, Tally, Verdicts
 
 PERCENTILES = (5, 25, 50, 75, 95)
 ENVELOPE_BINS = 512
 MAX_POINT_LINES = 30
-
-
-def _row(point: Any, record: dict, criteria: Any) -> dict:
-    row = {
-        "index": point.index,
-        "id": point.id,
-        "grid_index": point.grid_index,
-        "draw": point.draw,
-        "values": point.values,
-        "seed": point.seed,
-        "artifact_sha256": point.artifact_sha256,
-    }
-    if record is None:
-        return row | {"status": "missing", "failed": ["missing"], "reasons": ["no result"]}
-    if record["status"] == "error":
-        return row | {
-            "status": "error",
-            "failed": ["error"],
-            "reasons": [record["reason"]],
-            "worker": record.get("worker"),
-        }
-    failed = evaluate(criteria, record)
-    return row | {
-        "status": "fail" if failed else "pass",
-        "failed": sorted({k for k, _ in failed}),
-        "reasons": [text for _, text in failed],
-        "complete": record["complete"],
-        "run_reason": record.get("reason"),
-        "metrics": record["metrics"],
-        "measures": record["measures"],
-        "worker": record.get("worker"),
-    }
-
-
-def rows_of(plan: CampaignPlan, store: Any) -> list[dict]:
-    """One row per planned run, with its verdict under the campaign's criteria."""
-    planned = {p.id for p in plan.runs}
-    records = {run_id: record for run_id, record in store.records() if run_id in planned}
-    return [_row(p, records.get(p.id), plan.campaign.criteria) for p in plan.runs]
-
-
-def _tracked_iae(row: dict) -> float | None:
-    tr = row.get("metrics", {}).get("tracked", {})
-    vals = [v.get("iae") for v in tr.values()]
-    return None if not vals or any(v is None for v in vals) else float(sum(vals))
-
-
-def _by_point(plan: CampaignPlan, rows: list[dict]) -> list[dict]:
-    points: dict[int, dict] = {}
-    grid_names = [a.name for a in plan.campaign.grid]
-    for row in rows:
-        p = points.setdefault(
-            row["grid_index"],
-            {
-                "grid_index": row["grid_index"],
-                "values": {k: row["values"][k] for k in grid_names},
-                "runs": 0,
-                "pass": 0,
-                "fail": 0,
-                "error": 0,
-                "iae": [],
-            },
-        )
-        p["runs"] += 1
-        p[row["status"] if row["status"] in ("pass", "fail", "error") else "error"] += 1
-        iae = _tracked_iae(row)
-        if iae is not None:
-            p["iae"].append(iae)
-    out = []
-    for p in points.values():
-        iae = p.pop("iae")
-        p["pass_fraction"] = p["pass"] / p["runs"]
-        p["iae_median"] = float(np.median(iae)) if iae else None
-        p["iae_p95"] = float(np.percentile(iae, 95)) if iae else None
-        out.append(p)
-    return out
+MAX_SCATTER = 20_000
 
 
 def _flat(value: Any) -> str:
     return value if isinstance(value, str) else json.dumps(value)
 
 
-def campaign_csv(plan: CampaignPlan, rows: list[dict]) -> str:
-    """``campaign.csv``: one row per run."""
-    axes = [a.name for a in (*plan.campaign.grid, *plan.campaign.draws)]
-    tracked = sorted({k for r in rows for k in r.get("metrics", {}).get("tracked", {})})
-    outs = sorted({k for r in rows for k in r.get("metrics", {}).get("outputs_final", {})})
-    head = [
+def csv_head(plan: CampaignPlan, tracked: set[str], outs: set[str]) -> list[str]:
+    """``campaign.csv``'s header: the run, its axes, measures and the main metrics of each tracked output."""
+    return [
         "index",
         "id",
         "status",
         "reasons",
-        *axes,
+        *_axes(plan),
         "seed",
         "complete",
         "stable",
@@ -136,57 +59,58 @@ def campaign_csv(plan: CampaignPlan, rows: list[dict]) -> str:
         "twin_command_deviation",
         "model_mismatch",
         "model_iae_ratio",
-        *[f"{t}_{k}" for t in tracked for k in ("iae", "overshoot_pct", "settling_time_s")],
-        *[f"{o}_final" for o in outs],
+        *[f"{t}_{k}" for t in sorted(tracked) for k in ("iae", "overshoot_pct", "settling_time_s")],
+        *[f"{o}_final" for o in sorted(outs)],
         "artifact_sha256",
     ]
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(head)
-    for r in rows:
-        m, q = r.get("metrics", {}), r.get("measures", {})
-        w.writerow(
-            [
-                r["index"],
-                r["id"],
-                r["status"],
-                "; ".join(r["reasons"]),
-                *[_flat(r["values"][a]) for a in axes],
-                r["seed"],
-                r.get("complete", ""),
-                q.get("stable", ""),
-                q.get("longest_saturation_s", ""),
-                _num(q.get("twin_output_deviation")),
-                _num(q.get("twin_command_deviation")),
-                _num(q.get("model_mismatch")),
-                _num(q.get("model_iae_ratio")),
-                *[
-                    _num(m.get("tracked", {}).get(t, {}).get(k))
-                    for t in tracked
-                    for k in ("iae", "overshoot_pct", "settling_time_s")
-                ],
-                *[_num(m.get("outputs_final", {}).get(o)) for o in outs],
-                r["artifact_sha256"] or "",
-            ]
-        )
-    return buf.getvalue()
+
+
+def _axes(plan: CampaignPlan) -> list[str]:
+    return [a.name for a in (*plan.campaign.grid, *plan.campaign.draws)]
+
+
+def csv_row(r: dict, axes: list[str], tracked: list[str], outs: list[str]) -> list:
+    """One run's row of ``campaign.csv`` (``tracked``, ``outs``: sorted, as in :func:`csv_head`)."""
+    m, q = r.get("metrics", {}), r.get("measures", {})
+    return [
+        r["index"],
+        r["id"],
+        r["status"],
+        "; ".join(r["reasons"]),
+        *[_flat(r["values"][a]) for a in axes],
+        r["seed"],
+        r.get("complete", ""),
+        q.get("stable", ""),
+        q.get("longest_saturation_s", ""),
+        _num(q.get("twin_output_deviation")),
+        _num(q.get("twin_command_deviation")),
+        _num(q.get("model_mismatch")),
+        _num(q.get("model_iae_ratio")),
+        *[
+            _num(m.get("tracked", {}).get(t, {}).get(k))
+            for t in tracked
+            for k in ("iae", "overshoot_pct", "settling_time_s")
+        ],
+        *[_num(m.get("outputs_final", {}).get(o)) for o in outs],
+        r["artifact_sha256"] or "",
+    ]
 
 
 def _num(v: Any) -> str:
     return "" if v is None else repr(v)
 
 
-def failures_text(rows: list[dict], *, limit: int = 200) -> str:
-    """The failure table: failed and erroneous runs, worst (largest IAE) first, errors last."""
-    bad = [r for r in rows if r["status"] != "pass"]
-    bad.sort(key=lambda r: (r["status"] != "fail", -(_tracked_iae(r) or math.inf if r["status"] == "fail" else 0)))
+def failures_text(tally: Tally) -> str:
+    """The failure table: failed and erroneous runs, worst (largest IAE) first, errors last (the
+    :data:`~.rows.FAILURES_LIMIT` first)."""
+    bad = tally.failures.items()
     lines = [f"{'index':>6}  {'id':<20}  {'status':<6}  values  ->  reasons"]
-    for r in bad[:limit]:
+    for r in bad:
         vals = ", ".join(f"{k}={_short(v)}" for k, v in r["values"].items())
         lines.append(f"{r['index']:>6}  {r['id']:<20}  {r['status']:<6}  {vals}  ->  {'; '.join(r['reasons'])}")
-    if len(bad) > limit:
-        lines.append(f"... and {len(bad) - limit} more (campaign.csv has them all)")
-    if not bad:
+    if tally.bad > len(bad):
+        lines.append(f"... and {tally.bad - len(bad)} more (campaign.csv has them all)")
+    if not tally.bad:
         lines.append("(no failed run)")
     return "\n".join(lines) + "\n"
 
@@ -198,11 +122,11 @@ def _short(v: Any) -> str:
     return text if len(text) <= 30 else text[:27] + "..."
 
 
-def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, out: Any, plots: bool = True) -> str:
+def summary_text(plan: CampaignPlan, tally: Tally, points: list[dict], *, out: Any, plots: bool = True) -> str:
     """A one-screen summary of the campaign (``plots``: whether the report has its PNGs)."""
     c = plan.campaign
-    counts = Counter(r["status"] for r in rows)
-    n = len(rows)
+    counts = tally.counts
+    n = tally.runs
     lines = [
         f"Campaign {c.name} ({c.kind}): {n} runs, {counts['pass']} passed ({100 * counts['pass'] / max(n, 1):.1f}%), "
         f"{counts['fail']} failed, {counts['error']} errors"
@@ -221,45 +145,37 @@ def summary_text(plan: CampaignPlan, rows: list[dict], points: list[dict], *, ou
             lines.append(f"    {vals}: {p['pass']}/{p['runs']} passed ({100 * p['pass_fraction']:.1f}%){iae}")
         if len(points) > MAX_POINT_LINES:
             lines.append(f"    ... {len(points) - MAX_POINT_LINES} more grid points in campaign.json (points)")
-    failed = Counter(k for r in rows for k in r["failed"])
-    if failed:
-        lines.append("  runs failing each criterion: " + ", ".join(f"{k} {v}" for k, v in failed.most_common()))
-    lines += _model_lines(rows)
-    worst = sorted((r for r in rows if _tracked_iae(r) is not None), key=lambda r: -_tracked_iae(r))[:3]
+    if tally.failed:
+        lines.append("  runs failing each criterion: " + ", ".join(f"{k} {v}" for k, v in tally.failed.most_common()))
+    lines += _model_lines(tally)
+    worst = tally.worst.items()
     if worst:
-        lines.append(
-            "  worst IAE: "
-            + ", ".join(f"run {r['index']} {r['id']} ({_tracked_iae(r):.4g}{unit}, {r['status']})" for r in worst)
-        )
-        lines.append(f"  replay one: gainlink campaign show {out} --run {worst[0]['id']} --report REPORT_DIR")
+        lines.append("  worst IAE: " + ", ".join(f"run {i} {rid} ({iae:.4g}{unit}, {st})" for i, rid, iae, st in worst))
+        lines.append(f"  replay one: gainlink campaign show {out} --run {worst[0][1]} --report REPORT_DIR")
     pngs = " envelopes.png, scatter.png," if plots else ""
     lines.append(f"  report: {out / 'campaign.json'}, campaign.csv,{pngs} failures.txt")
     return "\n".join(lines) + "\n"
 
 
-def _model_lines(rows: list[dict]) -> list[str]:
+def _model_lines(tally: Tally) -> list[str]:
     """The model mismatch over the runs (gainlink.hil.loop.model_twin): largest, and how many runs it flagged."""
-    values = [
-        (r, r["measures"]["model_mismatch"]) for r in rows if r.get("measures", {}).get("model_mismatch") is not None
-    ]
-    if not values:
+    if tally.model is None:
         return []
-    r, worst = max(values, key=lambda rv: rv[1])
-    flagged = sum(1 for r_ in rows if r_.get("measures", {}).get("model_warning"))
+    worst, index, run_id = tally.model
     return [
         f"  model mismatch (plant against the design's model): largest {worst:.3g} of an output's range "
-        f"(run {r['index']} {r['id']}); {flagged} run(s) above the warning threshold"
+        f"(run {index} {run_id}); {tally.flagged} run(s) above the warning threshold"
     ]
 
 
-def envelopespng_bytes(plan: CampaignPlan, rows: list[dict], store: Any) -> bytes:
-    """Percentile envelopes of outputs and commands over time (finished runs of the most common length)."""
+def envelopespng_bytes(plan: CampaignPlan, status: dict[str, str], store: Any) -> bytes:
+    """Percentile envelopes of outputs and commands over time across the runs ``status`` (id -> ``pass`` or
+    ``fail``) of the most common trace length."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    status = {r["id"]: r["status"] for r in rows if r["status"] in ("pass", "fail")}
     bands = envelope_bands(store, status)
     outs, ins = (bands["outputs"], bands["inputs"]) if bands is not None else (0, 0)
     sig = _signals(plan)
@@ -393,41 +309,45 @@ def _signals(plan: CampaignPlan) -> dict:
     return {"outputs": [], "inputs": []}
 
 
-def scatterpng_bytes(plan: CampaignPlan, rows: list[dict]) -> bytes:
+def _scatter_sample(tally: Tally) -> np.ndarray:
+    """The runs the scatter plot draws: all of them up to :data:`MAX_SCATTER`, else that many drawn at random (a
+    fixed seed: the same plot for the same runs); the legend counts every run."""
+    n = len(tally.scatter_iae)
+    if n <= MAX_SCATTER:
+        return np.arange(n)
+    return np.sort(np.random.default_rng(0).choice(n, MAX_SCATTER, replace=False))
+
+
+def scatterpng_bytes(plan: CampaignPlan, tally: Tally) -> bytes:
     """IAE of each run against each numeric axis; failed runs marked."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    axes_ = [
-        a.name
-        for a in (*plan.campaign.draws, *plan.campaign.grid)
-        if all(
-            isinstance(r["values"][a.name], (int, float)) and not isinstance(r["values"][a.name], bool) for r in rows
-        )
-    ]
-    done = [r for r in rows if _tracked_iae(r) is not None]
+    axes_ = [name for name in tally.axes if tally.numeric[name]]
+    iae = np.frombuffer(tally.scatter_iae)
+    fail = np.frombuffer(tally.scatter_fail, np.int8).astype(bool)
+    pick = _scatter_sample(tally)
     n = max(len(axes_), 1)
     cols = min(n, 3)
     fig, grid = plt.subplots(math.ceil(n / cols), cols, figsize=(4.2 * cols, 3.4 * math.ceil(n / cols)), squeeze=False)
     for k, name in enumerate(axes_ or [None]):
         ax = grid[k // cols, k % cols]
-        if name is None or not done:
+        if name is None or not iae.size:
             ax.text(
                 0.5, 0.5, "no numeric axis" if name is None else "no finished run", ha="center", transform=ax.transAxes
             )
             continue
-        for status, style in (
-            ("fail", dict(color="C3", marker="x", s=22, alpha=0.8)),
-            ("pass", dict(color="C0", marker="o", s=12, alpha=0.7)),
+        x = np.frombuffer(tally.scatter[name])
+        for status, mask, style in (
+            ("fail", fail, dict(color="C3", marker="x", s=22, alpha=0.8)),
+            ("pass", ~fail, dict(color="C0", marker="o", s=12, alpha=0.7)),
         ):
-            pts = [(r["values"][name], _tracked_iae(r)) for r in done if r["status"] == status]
-            if pts:
-                x, y = zip(*pts)
-                ax.scatter(x, y, label=f"{status} ({len(pts)})", **style)
-        iae = [_tracked_iae(r) for r in done]
-        if min(iae) > 0 and max(iae) > 20 * min(iae):
+            shown = pick[mask[pick]]
+            if mask.any():
+                ax.scatter(x[shown], iae[shown], label=f"{status} ({int(mask.sum())})", **style)
+        if iae.min() > 0 and iae.max() > 20 * iae.min():
             ax.set_yscale("log")
         ax.set_xlabel(name)
         ax.set_ylabel("IAE (sum over tracked outputs)" + _iae_unit(_signals(plan)))
@@ -435,7 +355,8 @@ def scatterpng_bytes(plan: CampaignPlan, rows: list[dict]) -> bytes:
         ax.legend(fontsize=7)
     for k in range(len(axes_ or [None]), grid.size):
         grid[k // cols, k % cols].axis("off")
-    fig.suptitle(f"{plan.campaign.name}: IAE against the varied parameters (x: failed)")
+    shown = "" if iae.size <= MAX_SCATTER else f", {MAX_SCATTER} of {iae.size} runs drawn at random"
+    fig.suptitle(f"{plan.campaign.name}: IAE against the varied parameters (x: failed{shown})")
     fig.tight_layout()
     return png_bytes(fig)
 
@@ -444,53 +365,79 @@ def _criteria_doc(c: Any) -> dict:
     return {k: (dict(v) if isinstance(v, dict) else v) for k, v in c.__dict__.items()}
 
 
-def report_json(doc: dict) -> str:
-    """``campaign.json``: ``doc`` indented, its runs one a line (json's C encoder: with ``indent`` json falls back
-    to its Python encoder, 10x slower, which took most of the report's CPU at 10,000 runs)."""
-    head = json.dumps({k: v for k, v in doc.items() if k != "runs"}, sort_keys=True, indent=1, allow_nan=False)
-    runs = ",\n  ".join(json.dumps(r, sort_keys=True, allow_nan=False) for r in doc["runs"])
-    return head[:-2] + (',\n "runs": [\n  ' + runs + "\n ]\n}\n" if runs else ',\n "runs": []\n}\n')
+def _campaign_doc(c: Any) -> dict:
+    return {
+        "name": c.name,
+        "kind": c.kind,
+        "seed": c.seed,
+        "runs_per_point": c.runs,
+        "description": c.description,
+        "axes": describe_axes(c),
+        "criteria": _criteria_doc(c.criteria),
+        "spec": str(c.spec_path) if c.spec_path else None,
+        "artifact": str(c.artifact_path) if c.artifact_path else None,
+    }
 
 
 PLOTS = ("envelopes.png", "scatter.png")
 
 
-def merge(plan: CampaignPlan, store: Any, *, plots: bool = True) -> tuple[str, list[dict]]:
-    """Merge the stored runs into the report files; returns the summary text and the rows. Without ``plots``,
-    the PNGs are not drawn (about a second per merge) and those of an earlier merge are removed: a report never
-    shows plots of other runs than its own."""
-    rows = rows_of(plan, store)
-    points = _by_point(plan, rows)
-    c = plan.campaign
-    counts = Counter(r["status"] for r in rows)
-    doc = {
-        "campaign": {
-            "name": c.name,
-            "kind": c.kind,
-            "seed": c.seed,
-            "runs_per_point": c.runs,
-            "description": c.description,
-            "axes": describe_axes(c),
-            "criteria": _criteria_doc(c.criteria),
-            "spec": str(c.spec_path) if c.spec_path else None,
-            "artifact": str(c.artifact_path) if c.artifact_path else None,
-        },
-        "counts": {"runs": len(rows), **{k: counts.get(k, 0) for k in ("pass", "fail", "error", "missing")}},
-        "points": points,
-        "runs": rows,
-    }
-    summary = summary_text(plan, rows, points, out=store.out, plots=plots)
-    files: dict[str, bytes | str] = {
-        "campaign.json": report_json(doc),
-        "campaign.csv": campaign_csv(plan, rows),
-        "failures.txt": failures_text(rows),
-        "summary.txt": summary,
-    }
+def _stream_rows(plan: CampaignPlan, store: Any, csv_out: IO[str], runs_out: IO[str]) -> Tally:
+    """Write every row, in plan order, to ``campaign.csv`` (``csv_out``) and as ``campaign.json``'s run lines
+    (``runs_out``), counting each into the returned :class:`Tally`."""
+    verdicts = Verdicts(store, plan.campaign.criteria)
+    try:
+        tally = Tally(plan)
+        axes, tracked, outs = _axes(plan), sorted(verdicts.tracked), sorted(verdicts.outputs)
+        w = csv.writer(csv_out, lineterminator="\n")
+        w.writerow(csv_head(plan, verdicts.tracked, verdicts.outputs))
+        for row in verdicts.rows(plan.runs):
+            w.writerow(csv_row(row, axes, tracked, outs))
+            runs_out.write(("  " if not tally.runs else ",\n  ") + json.dumps(row, sort_keys=True, allow_nan=False))
+            tally.add(row)
+        return tally
+    finally:
+        verdicts.close()
+
+
+def _write_json(fh: IO[str], doc: dict, runs: IO[str]) -> None:
+    """``campaign.json``: ``doc`` indented, then the run lines of ``runs`` (one a line: json's C encoder; with
+    ``indent`` json falls back to its Python encoder, 10x slower)."""
+    head = json.dumps(doc, sort_keys=True, indent=1, allow_nan=False)
+    runs.seek(0)
+    fh.write(head[:-2] + ',\n "runs": [\n')
+    shutil.copyfileobj(runs, fh)
+    fh.write("\n ]\n}\n" if runs.tell() else " ]\n}\n")
+
+
+def merge(plan: CampaignPlan, store: Any, *, plots: bool = True) -> tuple[str, ReportRows, Counter]:
+    """Merge the stored runs into the report files; returns the summary text, the rows (read from
+    ``campaign.json`` when asked) and the count of runs by status.
+
+    Streamed: the rows are written to ``campaign.csv`` and ``campaign.json`` one at a time (each through a temporary
+    file and a rename), and the summary, failures and plots are drawn from a :class:`~.rows.Tally`. Without
+    ``plots``, the PNGs are not drawn (about a second per merge) and those of an earlier merge are removed: a report
+    never shows plots of other runs than its own."""
+    with (
+        atomic_writer(store.out / "campaign.csv") as csv_out,
+        tempfile.TemporaryFile("w+", encoding="utf-8") as runs,
+    ):
+        tally = _stream_rows(plan, store, csv_out, runs)
+        points = tally.point_list()
+        doc = {
+            "campaign": _campaign_doc(plan.campaign),
+            "counts": {"runs": tally.runs, **{k: tally.counts.get(k, 0) for k in ("pass", "fail", "error", "missing")}},
+            "points": points,
+        }
+        with atomic_writer(store.out / "campaign.json") as fh:
+            _write_json(fh, doc, runs)
+    summary = summary_text(plan, tally, points, out=store.out, plots=plots)
+    files: dict[str, bytes | str] = {"failures.txt": failures_text(tally), "summary.txt": summary}
     if plots:
-        files["envelopes.png"] = envelopespng_bytes(plan, rows, store)
-        files["scatter.png"] = scatterpng_bytes(plan, rows)
+        files["envelopes.png"] = envelopespng_bytes(plan, tally.status, store)
+        files["scatter.png"] = scatterpng_bytes(plan, tally)
     else:
         for name in PLOTS:
             (store.out / name).unlink(missing_ok=True)
     publish_files(store.out, files)
-    return summary, rows
+    return summary, ReportRows(store.out / "campaign.json", tally.runs), tally.counts

@@ -14,8 +14,9 @@ run its result.
 from __future__ import annotations
 
 import hashlib
+import itertools
 import logging
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,11 +36,16 @@ log = logging.getLogger(__name__)
 Progress = Callable[[int, int, dict], None]
 MAX_BLOCK = 500
 BLOCKS_PER_THREAD = 2
+BLOCKS_IN_FLIGHT = 4
 
 
 @dataclass(frozen=True)
 class CampaignResult:
     """A finished campaign: where its report is, its runs (one row each) and the counts.
+
+    ``rows`` is a read-only sequence of the runs' rows in plan order, read from the report's ``campaign.json``
+    when asked (iterate it to stream them; ``rows[i]`` reads the file up to run ``i``): no campaign, however many
+    runs it has, holds them all in memory. It reads the newest merge of ``out``.
 
     ``reused`` runs had a result before this call (a resumed campaign; an error is not a result, so a run that
     errored is run again); ``executed`` ran now. Both count distinct runs (a run planned twice with the same
@@ -47,7 +53,7 @@ class CampaignResult:
     """
 
     out: Path
-    rows: tuple[dict, ...]
+    rows: Sequence[dict]
     passed: int
     failed: int
     errors: int
@@ -167,19 +173,22 @@ def run(
     refuse_foreign(out, doc)  # before anything is written
     store = Store(out, campaign=campaign.name)
     store.prepare(plan, plan_doc=doc)
-    unique = {p.id: p for p in reversed(plan.runs)}  # a run planned twice (same inputs) runs once: its first point
-    reused = {i for i in unique if store.finished(i)}  # before anything is stored, so the count is this call's
-    todo = _runs_to_do(unique, reused=reused, store=store, kind=campaign.kind)
-    total = len(unique)
-    done = total - len(todo)
+    ids, reused, todo = _count_runs(plan, store)
+    total = len(ids)
+    done = total - todo
     if todo:
         try:
             with dask_client(scheduler=scheduler, workers=workers) as client:
-                _submit_and_store(client, plan, todo, store, done=done, total=total, progress=progress, batch=batch)
+                threads = sum(client.nthreads().values())
+                sizes = batch_sizes(campaign.kind, todo, threads, batch=batch)
+                blocks = _blocks(plan, store, sizes)
+                _submit_and_store(
+                    client, plan, blocks, store, done=done, total=total, progress=progress, window=threads
+                )
         except KeyboardInterrupt:  # the block closed the client (and the LocalCluster) on its way out
-            finished = sum(store.finished(i) for i in unique)
+            finished = sum(store.finished(i) for i in ids)
             raise CampaignInterrupted(out=store.out, finished=finished, total=total) from None
-    return _result(plan, store, reused=len(reused), executed=len(todo), plots=plots)
+    return _result(plan, store, reused=reused, executed=todo, plots=plots)
 
 
 def _check_counts(*, batch: int | None, workers: int | None) -> None:
@@ -189,30 +198,56 @@ def _check_counts(*, batch: int | None, workers: int | None) -> None:
             raise CampaignError(f"campaign: {name} must be a whole number >= 1, not {value!r}")
 
 
-def _runs_to_do(unique: dict[str, RunPoint], *, reused: set[str], store: Store, kind: str) -> dict[str, RunPoint]:
-    """The runs to submit, by id in plan order: those without a result, except the ones whose design failed,
-    which are stored as errors here."""
-    todo: dict[str, RunPoint] = {}
-    failed: list[RunPoint] = []
-    for point in sorted(unique.values(), key=lambda p: p.index):
-        if point.id in reused:
+def _count_runs(plan: CampaignPlan, store: Store) -> tuple[set[str], int, int]:
+    """One walk over the generated plan: the distinct run ids (a run planned twice with the same inputs runs once),
+    how many had a result before this call, and how many are to submit (those without a result whose design did not
+    fail)."""
+    ids: set[str] = set()
+    reused = todo = 0
+    for point in plan.runs:
+        if point.id in ids:
             continue
+        ids.add(point.id)
+        if store.finished(point.id):
+            reused += 1
+        elif point.error is None:
+            todo += 1
+    return ids, reused, todo
+
+
+def _blocks(plan: CampaignPlan, store: Store, sizes: list[int]) -> Iterator[list[RunPoint]]:
+    """The runs to submit, in plan order, cut into blocks of ``sizes``: a second walk over the generated plan, each
+    distinct run without a result once (its first point); those whose design failed are stored as errors here, a
+    block at a time, instead of being submitted."""
+    kind, pending, failed, seen = plan.campaign.kind, iter(sizes), [], set()
+    block: list[RunPoint] = []
+    size = next(pending, 0)
+    for point in plan.runs:
+        if point.id in seen or store.finished(point.id):
+            continue
+        seen.add(point.id)
         if point.error is not None:
             failed.append(point)
+            if len(failed) == MAX_BLOCK:
+                store.put(failed, kind=kind, results=[{"status": "error", "reason": p.error} for p in failed])
+                failed = []
             continue
-        todo[point.id] = point
+        block.append(point)
+        if len(block) == size:
+            yield block
+            block, size = [], next(pending, 0)
     if failed:
         store.put(failed, kind=kind, results=[{"status": "error", "reason": p.error} for p in failed])
-    return todo
+    if block:
+        yield block
 
 
 def _result(plan: CampaignPlan, store: Store, *, reused: int, executed: int, plots: bool) -> CampaignResult:
     """Merge the stored runs into the campaign report and count them."""
-    summary, rows = merge(plan, store, plots=plots)
-    counts = {s: sum(1 for r in rows if r["status"] == s) for s in ("pass", "fail", "error")}
+    summary, rows, counts = merge(plan, store, plots=plots)
     return CampaignResult(
         out=store.out,
-        rows=tuple(rows),
+        rows=rows,
         passed=counts["pass"],
         failed=counts["fail"],
         errors=counts["error"],
@@ -288,26 +323,25 @@ class _Submitter:
 def _submit_and_store(
     client: Any,
     plan: CampaignPlan,
-    todo: dict[str, RunPoint],
+    blocks: Iterator[list[RunPoint]],
     store: Store,
     *,
     done: int,
     total: int,
     progress: Progress | None,
-    batch: int | None,
+    window: int,
 ) -> None:
+    """Submit ``blocks`` as they are generated, at most :data:`BLOCKS_IN_FLIGHT` per thread (``window``) at a time
+    (so the client holds those blocks' points, not the plan's), and store each as it completes."""
     from asyncio import CancelledError
 
     from distributed import as_completed
 
     kind = plan.campaign.kind
-    # a block steps the runs of one artifact together: the runs of an artifact are submitted side by side
-    points = sorted(todo.values(), key=lambda p: (p.artifact_sha256 or "", p.index))
     submitter = _Submitter(client, plan)
-    futures, i = {}, 0
-    for size in batch_sizes(kind, len(points), sum(client.nthreads().values()), batch=batch):
-        futures[submitter.submit(points[i : i + size])] = points[i : i + size]
-        i += size
+    futures: dict[Any, list[RunPoint]] = {}
+    for points in itertools.islice(blocks, max(window, 1) * BLOCKS_IN_FLIGHT):
+        futures[submitter.submit(points)] = points
     queue = as_completed(list(futures))
     for fut in queue:
         batch_points = futures.pop(fut)
@@ -325,6 +359,10 @@ def _submit_and_store(
                 continue
             stored = store.put(batch_points, kind=kind, results=[{"status": "error", "reason": reason}])
         fut.release()
+        for points in itertools.islice(blocks, 1):  # the next block takes the finished one's place
+            nxt = submitter.submit(points)
+            futures[nxt] = points
+            queue.add(nxt)
         for point, record in zip(batch_points, stored):
             done += 1
             if record["status"] == "error":

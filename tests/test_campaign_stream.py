@@ -1,0 +1,201 @@
+"""The campaign report streamed from the store: the same report as every row held at once, in bounded memory.
+
+Oracles: the rows of ``campaign.json`` reduced here whole in memory (numpy's exact quantiles, Python's sort for the
+failure table, the CSV read back with the csv module), and tracemalloc for the merge's memory per run.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import hashlib
+import json
+import math
+import tracemalloc
+
+import numpy as np
+from gainlink.hil.campaign import parse_campaign
+from gainlink.hil.campaign.plan import CampaignPlan, RunPoint, plan_campaign
+from gainlink.hil.campaign.report import merge
+from gainlink.hil.campaign.store import Store, encode_block, with_inputs
+from gainlink.shipping.artifact import canonical_json
+from gainlink.version import __version__
+from support.paths import EXAMPLES
+
+GRID = [0.8, 1.0, 1.2]
+
+
+def _campaign(runs: int, *, apply: str = "scale"):
+    return parse_campaign(
+        {
+            "name": "streamed",
+            "kind": "sil",
+            "seed": 3,
+            "runs": runs,
+            "spec": str(EXAMPLES / "pendulum.toml"),
+            "scenario": {"duration": 0.5, "plant": {"kind": "cart_pendulum"}},
+            "grid": [{"target": "plant.parameters.m", "values": GRID, "apply": apply}],
+            "draw": [{"target": "plant.parameters.M", "distribution": "uniform", "low": 0.7, "high": 1.3}],
+            "criteria": {"stable": True, "settled_within": 2.0, "iae_below": 0.9},
+        }
+    )
+
+
+def _record(rng: np.random.Generator, k: int) -> dict:
+    """A finished run's record as a worker stores it (no trace), or an error every 17th run."""
+    if k % 17 == 5:
+        return {"status": "error", "reason": f"boom {k}"}
+    iae = float(rng.lognormal(-0.5, 0.6))
+    settle = None if k % 11 == 0 else float(rng.uniform(0.5, 3.0))
+    return {
+        "status": "done",
+        "complete": True,
+        "reason": None,
+        "metrics": {
+            "tracked": {"r_x": {"iae": iae, "overshoot_pct": float(rng.uniform(0, 30)), "settling_time_s": settle}},
+            "outputs_final": {"x": float(rng.normal()), "theta": float(rng.normal())},
+        },
+        "measures": {
+            "stable": k % 13 != 0,
+            "unstable_reason": "growing" if k % 13 == 0 else None,
+            "longest_saturation_s": 0.0,
+            "output_min": {},
+            "output_max": {},
+            "model_mismatch": float(rng.uniform(0, 0.2)),
+            "model_warning": k % 7 == 0,
+        },
+    }
+
+
+def _stored_campaign(tmp_path, draws: int) -> tuple[CampaignPlan, Store]:
+    """A plan of ``len(GRID) * draws`` runs and a store holding a record of each, in blocks of 64 stored in reverse
+    plan order (so the report cannot rely on the blocks' order)."""
+    campaign = _campaign(draws)
+    rng = np.random.default_rng(1)
+    points = []
+    for g, m in enumerate(GRID):
+        for j in range(draws):
+            k = len(points)
+            seed, M = 1000 + j, float(rng.uniform(0.7, 1.3))
+            points.append(
+                RunPoint(
+                    index=k,
+                    id=f"{k:020x}",
+                    grid_index=g,
+                    draw=j,
+                    values={"plant.parameters.m": m, "plant.parameters.M": M},
+                    artifact_sha256="a" * 64,
+                    scenario={"duration": 0.5, "plant": {"kind": "cart_pendulum", "parameters": {"M": M}}},
+                    seed=seed,
+                )
+            )
+    plan = CampaignPlan(campaign=campaign, runs=tuple(points))
+    store = Store(tmp_path / "c", campaign="streamed")
+    kept = points
+    for start in reversed(range(0, len(kept), 64)):
+        block = kept[start : start + 64]
+        records = [with_inputs(_record(rng, p.index), p, kind="sil") for p in block]
+        store.put_block(encode_block([p.id for p in block], records, campaign="streamed"))
+    return plan, store
+
+
+def _iae(row: dict) -> float | None:
+    tr = row.get("metrics", {}).get("tracked", {})
+    return None if not tr else sum(v["iae"] for v in tr.values())
+
+
+def test_the_streamed_report_is_the_report_of_every_row_at_once(tmp_path):
+    plan, store = _stored_campaign(tmp_path, 100)
+    (store.out / "blocks" / sorted(p.name for p in store.files())[0]).unlink()  # some runs missing
+    store = Store(store.out)  # a fresh index, as `campaign show` reads the folder
+    summary, rows, counts = merge(plan, store, plots=True)
+    doc = json.loads((store.out / "campaign.json").read_text())
+    runs = doc["runs"]
+    assert [r["index"] for r in runs] == list(range(300)) and list(rows) == runs and rows[-1] == runs[-1]
+    assert [r["id"] for r in runs] == [p.id for p in plan.runs]
+    assert {s: counts[s] for s in ("pass", "fail", "error", "missing")} == {
+        s: sum(r["status"] == s for r in runs) for s in ("pass", "fail", "error", "missing")
+    }
+    assert 0 < counts["missing"] < 300 and counts["error"] and counts["fail"] and counts["pass"]
+    for p in doc["points"]:
+        mine = [r for r in runs if r["grid_index"] == p["grid_index"]]
+        iae = [_iae(r) for r in mine if r["status"] in ("pass", "fail")]
+        assert p["runs"] == len(mine) and p["pass"] == sum(r["status"] == "pass" for r in mine)
+        assert p["iae_median"] == float(np.median(iae)) and p["iae_p95"] == float(np.percentile(iae, 95))
+    with (store.out / "campaign.csv").open(newline="") as fh:
+        table = list(csv.DictReader(fh))
+    assert [(int(t["index"]), t["id"], t["status"]) for t in table] == [
+        (r["index"], r["id"], r["status"]) for r in runs
+    ]
+    assert all(
+        float(t["r_x_iae"]) == r["metrics"]["tracked"]["r_x"]["iae"] for t, r in zip(table, runs) if "metrics" in r
+    )
+    bad = [r for r in runs if r["status"] != "pass"]
+    bad.sort(key=lambda r: (r["status"] != "fail", -(_iae(r) or math.inf) if r["status"] == "fail" else 0))
+    lines = (store.out / "failures.txt").read_text().splitlines()
+    assert [ln.split()[1] for ln in lines[1:201]] == [r["id"] for r in bad[:200]]
+    assert lines[-1] == f"... and {len(bad) - 200} more (campaign.csv has them all)"
+    worst = max((r for r in runs if r["status"] in ("pass", "fail")), key=_iae)
+    assert f"worst IAE: run {worst['index']} {worst['id']} " in summary
+    for png in ("envelopes.png", "scatter.png"):
+        assert (store.out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not [p.name for p in store.out.iterdir() if p.name.startswith(".")]  # no temporary file left
+
+
+def _merge_peak(tmp_path, draws: int) -> int:
+    plan, store = _stored_campaign(tmp_path / str(draws), draws)
+    store = Store(store.out)
+    tracemalloc.start()
+    try:
+        merge(plan, store, plots=False)
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_merging_holds_a_few_hundred_bytes_a_run_not_the_rows(tmp_path):
+    """Every row held at once (a dict of its values, metrics and measures) is over 2 kB a run in Python; the
+    streamed merge keeps an offset, a status and a few floats a run (the store's index aside)."""
+    small, large = _merge_peak(tmp_path, 100), _merge_peak(tmp_path, 1000)
+    per_run = (large - small) / (3 * 900)
+    assert per_run < 1000, f"{per_run:.0f} bytes a run"
+
+
+def _by_hand(campaign, sha: str, k: int) -> tuple[str, int, dict]:
+    """Run ``k``'s id, seed and values as the plan's docstring defines them: grid point ``k // runs`` and draw
+    ``k % runs``, whose seed and values come from ``default_rng([seed, draw])`` (the seed first)."""
+    g, j = divmod(k, campaign.runs)
+    rng = np.random.default_rng([campaign.seed, j])
+    seed = int(rng.integers(2**31 - 1))
+    M = float(rng.uniform(0.7, 1.3))
+    scenario = copy.deepcopy(campaign.scenario)
+    scenario["plant"].setdefault("parameters", {})
+    scenario["plant"]["parameters"].update({"m": GRID[g], "M": M})
+    body = {"kind": "sil", "artifact": sha, "scenario": scenario, "seed": seed, "gainlink": __version__}
+    rid = hashlib.sha256(canonical_json(body).encode("ascii")).hexdigest()[:20]
+    return rid, seed, {"plant.parameters.m": GRID[g], "plant.parameters.M": M}
+
+
+def test_the_generated_plan_gives_each_run_the_id_seed_and_values_its_definition_gives(tmp_path):
+    campaign = _campaign(100, apply="set")
+    plan = plan_campaign(campaign)
+    (sha,) = plan.artifacts
+    runs = list(plan.runs)
+    assert len(plan.runs) == len(runs) == 300
+    for k, p in enumerate(runs):
+        assert (p.id, p.seed, p.values) == _by_hand(campaign, sha, k)
+        assert (p.index, p.grid_index, p.draw) == (k, k // 100, k % 100)
+    for k in (0, 99, 100, 257, -1):  # read alone, a run is the one the walk gives
+        assert plan.runs[k] == runs[k]
+
+
+def test_a_plan_holds_no_run(tmp_path):
+    """Holding every run (its RunPoint and scenario) costs kilobytes a run; the plan keeps its designs only."""
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        plan = plan_campaign(_campaign(1000, apply="set"))
+        held = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert len(plan.runs) == 3000 and held / 3000 < 200, f"{held / 3000:.0f} bytes a run"
