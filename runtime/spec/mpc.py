@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import SpecError, did_you_mean
-from .model import MpcBox, MpcSpec, OperatingPoint, PlantModel
+from .model import ImplementationSpec, MpcBox, MpcSpec, OperatingPoint, PlantModel
 from .pairs import integer
 from .values import no_unknown, positive_number
 
@@ -120,3 +120,8 @@ def weights_default(Q: np.ndarray, R: np.ndarray, mpc: MpcSpec) -> tuple[float, 
     rho_state = mpc.rho_state if mpc.rho_state is not None else 1000.0 * rho
     box_weight = mpc.box_weight if mpc.box_weight is not None else 1e4 * float(np.max(np.diag(Q)))
     return rho, rho_state, box_weight
+
+
+def check_implementation(implementation: ImplementationSpec) -> None:
+    """:func:`check_mpc_spec` of a spec's ``[implementation]``."""
+    check_mpc_spec(numeric=implementation.numeric, realization=implementation.realization)

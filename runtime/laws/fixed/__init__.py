@@ -13,6 +13,12 @@
 - the loops: the closed-loop run check (:mod:`.run`), processor in the loop and cost (:mod:`.pil`).
 """
 
+from ...shipping import codegen, codegen_fixed, export_c, params
 from .law import FixedLaw
+
+# the lq/q31 and lq/q15 laws' parts the layers below read (gainlink.registry): their C files and parameter tables
+for _law in codegen_fixed.INTEGER_LAWS:
+    export_c.RENDERINGS.register(_law, (codegen_fixed.render_export, codegen.SOURCE_NAME))
+    params.TABLES.register(_law, codegen_fixed.param_table)
 
 __all__ = ["FixedLaw"]

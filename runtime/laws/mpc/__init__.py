@@ -4,6 +4,21 @@ time. :mod:`.design` (the ``mpc`` block), :mod:`.qp` (the QP solved to optimalit
 :mod:`.arith` (float64 and the C's float32), :mod:`.solver` (the ADMM), :mod:`.step` (one step of the law),
 :mod:`.law` (:class:`MpcLaw`)."""
 
+from ...shipping import artifact, codegen_mpc, export_c, mpc, params, systems
+from ...spec import mpc as spec_mpc
+from ...spec import parse
 from .law import MpcLaw
+
+# the mpc/float32 law's parts the layers below read (gainlink.registry): the artifact's mpc block, its C files and
+# parameter table, the spec's [mpc] table and implementation check; its frozen-point coefficients, plant and operating
+# point are the lq structure's (with no box active its optimum is the lq law of the same weights)
+artifact.BLOCKS.register("mpc", mpc.load_mpc)
+export_c.RENDERINGS.register("mpc/float32", (codegen_mpc.render_mpc, codegen_mpc.SOURCE_NAME))
+params.TABLES.register("mpc/float32", codegen_mpc.param_table)
+systems.COEFFICIENTS.register("mpc", systems.lq_coefficients)
+parse.PLANTS.register("mpc", parse.lq_plants)
+parse.OPERATING.register("mpc", parse.lq_operating)
+parse.CHECKS.register("mpc", spec_mpc.check_implementation)
+parse.BLOCKS.register("mpc", spec_mpc.parse_mpc)
 
 __all__ = ["MpcLaw"]

@@ -12,6 +12,17 @@ that is this family's (docs/design.md, "Adding a law").
   the loop and cost (:mod:`.pil`).
 """
 
+from ...shipping import artifact, codegen_scheduled, export_c, params, scheduled, systems
+from ...spec import parse, schedule
 from .law import ScheduledLaw
+
+# the scheduled/float32 law's parts the layers below read (gainlink.registry): the artifact's schedule block, its C
+# files and parameter table, its frozen-point coefficients, the spec's plants and operating points per point
+artifact.BLOCKS.register("schedule", scheduled.load_schedule)
+export_c.RENDERINGS.register("scheduled/float32", (codegen_scheduled.render_scheduled, codegen_scheduled.SOURCE_NAME))
+params.TABLES.register("scheduled/float32", codegen_scheduled.param_table)
+systems.COEFFICIENTS.register("scheduled", scheduled.frozen_coefficients)
+parse.PLANTS.register("scheduled", schedule.scheduled_plants)
+parse.OPERATING.register("scheduled", schedule.scheduled_operating)
 
 __all__ = ["ScheduledLaw"]
