@@ -84,7 +84,7 @@ SOURCES: dict[str, tuple[str, ...]] = {
     "mpc_cost": (
         *_FIRMWARE_C,
         "runtime/shipping/codegen_mpc.py",
-        "runtime/shipping/mpc.py",
+        "runtime/laws/mpc/block.py",
         "runtime/laws/mpc/design.py",
         "runtime/firmware/cost.py",
         "examples/pendulum_mpc.toml",
@@ -96,7 +96,7 @@ SOURCES: dict[str, tuple[str, ...]] = {
         "hil/loop",
         "hil/plants",
         "runtime/laws/mpc",
-        "runtime/shipping/mpc.py",
+        "runtime/laws/mpc/block.py",
         "runtime/synthesis",
         "firmware/src/gl_mpc.c",
         "examples/pendulum.toml",

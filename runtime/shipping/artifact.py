@@ -23,7 +23,7 @@ from ..registry import LawTable
 from .law_c import ONE_OPERATING_POINT, require_structure, sigma_name
 
 if TYPE_CHECKING:
-    from .mpc import Mpc
+    from ..laws.mpc.block import Mpc
     from .scheduled import Schedule
 
 SCHEMA_VERSION = 1
