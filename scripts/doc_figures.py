@@ -83,7 +83,7 @@ SOURCES: dict[str, tuple[str, ...]] = {
     "mavlink_hil": (*_HOST_LINKS, "bench/mavlink_hil.py"),
     "mpc_cost": (
         *_FIRMWARE_C,
-        "runtime/shipping/codegen_mpc.py",
+        "runtime/laws/mpc/codegen.py",
         "runtime/laws/mpc/block.py",
         "runtime/laws/mpc/design.py",
         "runtime/firmware/cost.py",

@@ -1,7 +1,8 @@
 """C code generation for an MPC artifact: ``gl_gains.h`` (the dimensions, horizon, cap and forms as macros) and
 ``gl_mpc_gains.c`` (the tables as one ``const gl_mpc_set_t gl_mpc_default``, ``firmware/include/gainlink/gl_mpc.h``),
 every float printed round-trip. The firmware builds ``firmware/src/gl_mpc.c`` when ``gl_gains.h`` names the law
-(``GL_LAW_STRUCTURE mpc``); :func:`gainlink.shipping.export_c.render_export` calls :func:`render_mpc`.
+(``GL_LAW_STRUCTURE mpc``); :func:`gainlink.shipping.export_c.render_export` calls :func:`render_mpc` (registered in
+``export_c.RENDERINGS`` by this family), the MAVLink upload :func:`param_table` (``params.TABLES``).
 """
 
 from __future__ import annotations
@@ -10,10 +11,10 @@ import zlib
 
 import numpy as np
 
-from . import codegen
-from .artifact import Artifact
-from .law_c import macros as law_macros
-from .params import HASH_ID, INT32, REAL32, Param, as_int32
+from ...shipping import codegen
+from ...shipping.artifact import Artifact
+from ...shipping.law_c import macros as law_macros
+from ...shipping.params import HASH_ID, INT32, REAL32, Param, as_int32
 
 SOURCE_NAME = "gl_mpc_gains.c"
 FORM_CODES = {"predictor": 0, "current": 1}
