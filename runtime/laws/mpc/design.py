@@ -3,7 +3,7 @@ integrators and their anti-windup), then the ``mpc`` block (:mod:`gainlink.laws.
 DARE solution of the same weights, the penalties by their default rules, the per-stage gains, the boxes.
 
 Refused in one line (exit 2): a terminal cost that is not positive definite (the weights leave a mode unseen), a box
-on an output of a plant with feedthrough, and what :func:`gainlink.spec.mpc.check_mpc_spec` refuses at parse time.
+on an output of a plant with feedthrough, and what :func:`gainlink.laws.mpc.spec.check_mpc_spec` refuses at parse time.
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ import numpy as np
 from ...errors import DesignError
 from ...shipping.artifact import matrix_to_json
 from ...spec import PlantSpec
-from ...spec.mpc import weights_default
 from .block import augmented_model, box_rows, stage_cache
+from .spec import weights_default
 
 
 def _terminal_cost(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, K: np.ndarray) -> np.ndarray:
