@@ -52,7 +52,7 @@ _FIRMWARE_C = (
     "firmware/src",
     "firmware/ports/cortex-m",
     "runtime/shipping/codegen.py",
-    "runtime/shipping/codegen_fixed.py",
+    "runtime/laws/fixed/codegen.py",
     "runtime/shipping/codegen_scheduled.py",
     "runtime/shipping/gains_layout.py",
     "runtime/shipping/export_c.py",

@@ -9,9 +9,10 @@ a C member designator). What the parameters are named and what ``GL_HASH`` cover
 - ``lq/float32``: every number of the C ``gl_gains_t`` that is a parameter (:mod:`.gains_layout`), REAL32;
   ``GL_HASH`` is ``gl_gains_crc32`` (the structure words and every float).
 - ``lq/q31``, ``lq/q15``: the certified integers (INT32, bytewise): each non-zero term's mantissa and left shift,
-  then the operating point, limits, safe command and initial state (:data:`.codegen_fixed.VECTORS`); headers
-  ``GL_FX_SIG`` (the formats' signature) and ``GL_FX_STRUCT`` (:func:`.codegen_fixed.structure_crc`); ``GL_HASH``
-  is the CRC of the gain values as int32 words (:func:`.codegen_fixed.set_crc32`).
+  then the operating point, limits, safe command and initial state (``VECTORS`` of
+  :mod:`gainlink.laws.fixed.codegen`, which builds this table); headers ``GL_FX_SIG`` (the formats' signature) and
+  ``GL_FX_STRUCT`` (its ``structure_crc``); ``GL_HASH`` is the CRC of the gain values as int32 words (its
+  ``set_crc32``).
 - ``scheduled/float32``: every float of the tables, REAL32; ``GL_HASH`` the CRC of their bytes.
 - ``mpc/float32``: the dimensions, horizon, box rows and cap (read-only), then every float of the tables
   (``gl_mpc_tables_t``: the observer-based law's numbers, the prediction model and the per-stage gains, the boxes and

@@ -9,6 +9,9 @@ fractional bits of samples and commands, and the declared ranges as the order ke
 step clips with. The integers are taken as stored, never recomputed (docs/design.md, "Fixed point"); the only
 values formed here are those of the ranges (their quantisation is the model's, ``floor(x 2**f + 1/2)``) and
 the powers of two that turn a command word into a float.
+
+The export asks :func:`render_export` and the MAVLink upload :func:`param_table`, through the tables this family
+registers them in (``gainlink.shipping.export_c.RENDERINGS``, ``gainlink.shipping.params.TABLES``).
 """
 
 from __future__ import annotations
@@ -19,11 +22,11 @@ import zlib
 
 import numpy as np
 
-from ..errors import ArtifactError
-from . import codegen
-from .artifact import Artifact
-from .law_c import require_law
-from .params import HASH_ID, INT32, SIGNATURE_ID, STRUCTURE_ID, Param, as_int32, structure_params
+from ...errors import ArtifactError
+from ...shipping import codegen
+from ...shipping.artifact import Artifact
+from ...shipping.law_c import require_law
+from ...shipping.params import HASH_ID, INT32, SIGNATURE_ID, STRUCTURE_ID, Param, as_int32, structure_params
 
 #: The laws whose export this module renders (the lq structure on integers).
 INTEGER_LAWS = ("lq/q31", "lq/q15")
@@ -311,7 +314,7 @@ def param_table(artifact: Artifact) -> tuple[Param, ...]:
         for i in range(count):
             for block, _ in ROWS[kind]:
                 for j, (c, e) in enumerate(zip(table_[block][i], table_[f"{block}_shift"][i], strict=True)):
-                    if c != 0:  # the order of codegen_fixed.terms: term k
+                    if c != 0:  # the order of terms(): term k
                         gains.append(
                             Param(f"GL_{block}_{i}_{j}", INT32, int(c), f"{block}[{i},{j}]", slot=f"g.coef[{k}]")
                         )
