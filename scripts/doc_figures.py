@@ -53,7 +53,7 @@ _FIRMWARE_C = (
     "firmware/ports/cortex-m",
     "runtime/shipping/codegen.py",
     "runtime/laws/fixed/codegen.py",
-    "runtime/shipping/codegen_scheduled.py",
+    "runtime/laws/scheduled/codegen.py",
     "runtime/shipping/gains_layout.py",
     "runtime/shipping/export_c.py",
     "runtime/shipping/flags.py",

@@ -7,20 +7,22 @@ that is this family's (docs/design.md, "Adding a law").
   :mod:`.sweeps`), the design-time float32 fidelity (:mod:`.fidelity`);
 - the float64 law (:mod:`.reference`), the bit-exact model of its C (:mod:`.model`), its one-step check with a
   float32 bound (:mod:`.onestep`), replay files (:mod:`.replay`);
-- the C through ctypes (:mod:`.native`) and under QEMU (:mod:`.qemu`);
+- its C and MAVLink parameter table (:mod:`.codegen`), the C through ctypes (:mod:`.native`) and under QEMU
+  (:mod:`.qemu`);
 - the loops: the design's own plant model (:mod:`.plant`), the closed-loop run blocks (:mod:`.run`), processor in
   the loop and cost (:mod:`.pil`).
 """
 
-from ...shipping import artifact, codegen_scheduled, export_c, params, scheduled, systems
+from ...shipping import artifact, export_c, params, scheduled, systems
 from ...spec import parse, schedule
+from . import codegen
 from .law import ScheduledLaw
 
 # the scheduled/float32 law's parts the layers below read (gainlink.registry): the artifact's schedule block, its C
 # files and parameter table, its frozen-point coefficients, the spec's plants and operating points per point
 artifact.BLOCKS.register("schedule", scheduled.load_schedule)
-export_c.RENDERINGS.register("scheduled/float32", (codegen_scheduled.render_scheduled, codegen_scheduled.SOURCE_NAME))
-params.TABLES.register("scheduled/float32", codegen_scheduled.param_table)
+export_c.RENDERINGS.register("scheduled/float32", (codegen.render_scheduled, codegen.SOURCE_NAME))
+params.TABLES.register("scheduled/float32", codegen.param_table)
 systems.COEFFICIENTS.register("scheduled", scheduled.frozen_coefficients)
 parse.PLANTS.register("scheduled", schedule.scheduled_plants)
 parse.OPERATING.register("scheduled", schedule.scheduled_operating)

@@ -5,7 +5,8 @@ shape of sigma as macros (``GL_SCHEDULED 1``, ``GL_NPTS``, ``GL_E``, ``GL_SIGMA_
 ``const gl_sched_tables_t gl_sched_default`` (``firmware/include/gainlink/gl_sched.h``), every float printed
 round-trip. The firmware builds the scheduled law (``firmware/src/gl_sched.c``) when ``gl_gains.h`` names it
 (``GL_LAW_STRUCTURE scheduled``); :func:`gainlink.shipping.export_c.render_export` is what ``gainlink export`` and
-the firmware build call.
+the firmware build call; it asks :func:`render_scheduled`, and the MAVLink upload :func:`param_table`, through the
+tables this family registers them in (``export_c.RENDERINGS``, ``params.TABLES``).
 """
 
 from __future__ import annotations
@@ -14,12 +15,12 @@ import zlib
 
 import numpy as np
 
-from . import codegen
-from .artifact import Artifact
-from .law_c import macros as law_macros
-from .law_c import require_law
-from .params import HASH_ID, INT32, REAL32, Param, as_int32
-from .scheduled import COEFFICIENTS
+from ...shipping import codegen
+from ...shipping.artifact import Artifact
+from ...shipping.law_c import macros as law_macros
+from ...shipping.law_c import require_law
+from ...shipping.params import HASH_ID, INT32, REAL32, Param, as_int32
+from ...shipping.scheduled import COEFFICIENTS
 
 SOURCE_NAME = "gl_sched_gains.c"
 FORM_CODES = {"predictor": 0, "current": 1}
