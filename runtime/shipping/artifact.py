@@ -24,7 +24,7 @@ from .law_c import ONE_OPERATING_POINT, require_structure, sigma_name
 
 if TYPE_CHECKING:
     from ..laws.mpc.block import Mpc
-    from .scheduled import Schedule
+    from ..laws.scheduled.block import Schedule
 
 SCHEMA_VERSION = 1
 #: A scheduled artifact (``schedule`` holds the points; docs/design.md, scheduled law).
@@ -93,7 +93,7 @@ class Artifact:
     there, for the record only, ``None`` when not recorded.
 
     A scheduled artifact (schema 2, ``anti_windup == "velocity"``) has its per-point design in ``schedule``
-    (:class:`~gainlink.shipping.scheduled.Schedule`) and no single ``Ad Bd Cd Dd K L M Ki Kaw xh0 z0 u_op y_op``:
+    (:class:`~gainlink.laws.scheduled.block.Schedule`) and no single ``Ad Bd Cd Dd K L M Ki Kaw xh0 z0 u_op y_op``:
     those fields are ``None``, so that nothing runs one point's positional law by mistake (each part of the lq law
     refuses another law's artifact in one line: :func:`gainlink.shipping.law_c.require_structure`).
     """

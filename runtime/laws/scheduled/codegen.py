@@ -20,7 +20,7 @@ from ...shipping.artifact import Artifact
 from ...shipping.law_c import macros as law_macros
 from ...shipping.law_c import require_law
 from ...shipping.params import HASH_ID, INT32, REAL32, Param, as_int32
-from ...shipping.scheduled import COEFFICIENTS
+from .block import COEFFICIENTS
 
 SOURCE_NAME = "gl_sched_gains.c"
 FORM_CODES = {"predictor": 0, "current": 1}

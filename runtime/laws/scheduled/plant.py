@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from ...shipping.scheduled import interval, lerp
+from .block import interval, lerp
 
 
 def operating_states(artifact: Any) -> np.ndarray | None:

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from ...shipping.scheduled import interval, lerp
 from .. import flags
+from .block import interval, lerp
 from .plant import ScheduledModel, operating_states
 
 

@@ -1,5 +1,6 @@
-"""The scheduled part of a schema-2 artifact: the points, sigma's source and shaping, and per point the
-coefficients the velocity-form law runs (docs/design.md, scheduled law).
+"""The scheduled block of a schema-2 artifact (``schedule``, read by the artifact loader through
+``gainlink.shipping.artifact.BLOCKS["schedule"]``, which this family registers): the points, sigma's source and shaping,
+and per point the coefficients the velocity-form law runs (docs/design.md, scheduled law).
 
 Per point ``i`` the design gives the positional law in deviations (predictor or current form, one shape)::
 
@@ -18,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ArtifactError
-from .systems import coefficient_law, law_coefficients
+from ...errors import ArtifactError
+from ...shipping.systems import coefficient_law, law_coefficients
 
 #: The per-point coefficient arrays the C step runs, in its order of operations.
 COEFFICIENTS = ("Kx", "Ky", "Kz", "F", "G", "Ly")
