@@ -6,6 +6,9 @@ the points mean different things is refused here in one line: points not increas
 names or dimensions, a sigma that is neither an output nor a declared external signal, a trim outside the limits,
 ``rate_max <= 0``, ``rate_certified = false`` without a ``rate_max``, a ``certify_budget`` that is not a positive
 number of seconds, a transfer-function plant, matrices in ``[plant]`` besides the points'.
+
+The spec's parser reads them through ``gainlink.spec.parse.PLANTS["scheduled"]`` (:func:`scheduled_plants`) and
+``OPERATING["scheduled"]`` (:func:`scheduled_operating`), which this family registers.
 """
 
 from __future__ import annotations
@@ -14,12 +17,12 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import SpecError
-from .model import ImplementationSpec, LimitsSpec, PlantModel, ScheduleSpec
-from .pairs import integer
-from .plant import parse_plant
-from .tables import parse_operating_point
-from .values import SIGNAL_RE, as_vector, no_unknown, positive_number
+from ...errors import SpecError
+from ...spec.model import ImplementationSpec, LimitsSpec, PlantModel, ScheduleSpec
+from ...spec.pairs import integer
+from ...spec.plant import parse_plant
+from ...spec.tables import parse_operating_point
+from ...spec.values import SIGNAL_RE, as_vector, no_unknown, positive_number
 
 SCHEDULE_KEYS = {"sigma", "external", "points", "rate_max", "rate_certified", "certify_budget", "filter_tau", "plant"}
 # the fit keys: each point's fit to its FMU, written by ``linearize --schedule`` (kept as written, not used)
