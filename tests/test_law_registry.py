@@ -75,3 +75,18 @@ def test_every_pair_registers_its_export_and_parameter_table():
 
     # each law pair (gainlink.laws.pairs: the laws' own declaration) has its C and its MAVLink table below the laws
     assert sorted(export_c.RENDERINGS) == sorted(pairs()) == sorted(params.TABLES)
+
+
+def test_the_bridges_plant_table_names_no_law_kind():
+    """A plant is a plant whatever law runs against it: no kind in the bridge's plant table is named after a law
+    (the words of scripts/count_law_branches.py, the counter of kind-named modules)."""
+    import importlib.util
+
+    import gainlink.hil.plants.config  # noqa: F401 - registers every built-in kind
+    from gainlink.hil.plants.base import PLANTS
+    from support.paths import ROOT
+
+    spec = importlib.util.spec_from_file_location("count_law_branches", ROOT / "scripts" / "count_law_branches.py")
+    counter = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(counter)
+    assert PLANTS.names() and [k for k in PLANTS.names() if counter.named_after_a_kind(f"{k}.py")] == []
