@@ -164,11 +164,12 @@ def lq_operating(parts: LawParts) -> tuple[None, Any]:
     return None, operating_point
 
 
-#: Each structure's plants and operating point(s) (the tables :func:`parse_spec` asks, registered by the law families:
-#: :mod:`gainlink.registry`; :mod:`.pairs` says which structure a spec asks for).
 def _no_check(implementation: ImplementationSpec) -> None:
     return None
 
+
+# The tables parse_spec asks of a law, registered by the law families (gainlink.registry); .pairs says which
+# structure a spec asks for.
 
 #: A structure's plants ``(plant table, schedule table, *, Ts) -> tuple[PlantModel, ...]`` (the lq law's:
 #: :func:`lq_plants`).
