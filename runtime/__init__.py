@@ -87,3 +87,10 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted(set(globals()) | set(__all__))
+
+
+# Every law family registers its parts in the tables of the layers below the laws (gainlink.registry) when
+# gainlink.laws is imported; importing it here fills them before any gainlink module is used, whichever is imported
+# first (``import gainlink.shipping.artifact`` runs this file first). It costs numpy and the artifact's modules, which
+# every command that reads a spec or an artifact loads anyway; SciPy and python-control stay lazy.
+from . import laws as _laws  # noqa: E402, F401

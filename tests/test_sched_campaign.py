@@ -3,7 +3,7 @@ worker).
 
 The plant is the spring of schedule_cases (stiffness scheduled 1 -> 400 on an external sigma; no rate certified
 within the default refinements, so its spec declares a rate uncertified: 0.5/s, the rate the old simulated verdict
-gave) run as ``kind = "scheduled_model"``, whose dynamics follow the external signal; the law is the same design
+gave) run as ``kind = "lpv_model"``, whose dynamics follow the external signal; the law is the same design
 with ``rate_max`` removed, so the signal's own rate is the rate sigma moves at. Oracles: the falsifier's sweeps
 (stable at 0.5/s over every sub-range on its grid) and the direct SIL run of each campaign run.
 
@@ -60,7 +60,7 @@ def _campaign(path, rate_max: float) -> dict:
             "controller": "firmware",  # the scheduled C of the host library, built on the worker
             "twin": False,
             "model_twin": False,
-            "plant": {"kind": "scheduled_model"},
+            "plant": {"kind": "lpv_model"},
             "initial_state": {"x": 0.01},
             "schedule_signal": {"k": sweep},
         },

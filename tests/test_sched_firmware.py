@@ -11,12 +11,12 @@ import tomllib
 import numpy as np
 import pytest
 from gainlink.laws import design as design_spec
+from gainlink.laws.scheduled.codegen import tables
 from gainlink.laws.scheduled.model import ScheduledFloat32Loop
 from gainlink.laws.scheduled.native import NativeScheduledLoop
 from gainlink.laws.scheduled.reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop
 from gainlink.shipping import codegen
 from gainlink.shipping.artifact import from_dict, load
-from gainlink.shipping.codegen_scheduled import tables
 from gainlink.shipping.export_c import render_export
 from gainlink.spec import parse_spec
 from schedule_cases import external_tank, tank_dict

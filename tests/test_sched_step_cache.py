@@ -10,10 +10,10 @@ import ctypes
 
 import numpy as np
 import pytest
+from gainlink.laws.scheduled.codegen import fixed_masks, tables
 from gainlink.laws.scheduled.model import ScheduledFloat32Loop
 from gainlink.laws.scheduled.native import NativeScheduledLoop
 from gainlink.shipping.artifact import from_dict
-from gainlink.shipping.codegen_scheduled import fixed_masks, tables
 from gainlink.shipping.export_c import render_export
 from schedule_cases import external_tank
 from support.designs import designed

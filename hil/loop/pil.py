@@ -114,7 +114,7 @@ class HilPlant(DiscretePlant):
 
 def make_plant(name: str, *, artifact: Artifact, x0: np.ndarray | None = None) -> DiscretePlant:
     """``artifact`` (alias ``linear``): the artifact's discrete model (a scheduled artifact's: its points' models
-    interpolated at a moving sigma, the ``scheduled_model`` plant, ``x0`` absolute); any other name: a
+    interpolated at a moving sigma, the ``lpv_model`` plant, ``x0`` absolute); any other name: a
     ``gainlink.hil`` plant."""
     if name in ("artifact", "linear"):
         name = law_of(artifact).own_plant

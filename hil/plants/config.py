@@ -10,7 +10,7 @@ from typing import Any
 
 from gainlink.errors import PlantError, did_you_mean
 
-from . import fmu_interface, linear, models, python, scheduled_model, tank  # noqa: F401 - each registers its kinds
+from . import fmu_interface, linear, lpv_model, models, python, tank  # noqa: F401 - each registers its kinds
 from .base import PLANTS, Plant
 
 

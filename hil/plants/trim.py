@@ -24,7 +24,7 @@ from gainlink.fileio import atomic_write_text, read_toml
 
 from . import toml_write
 from .linearize import Linearization, fmu_path, linearize
-from .schedule_fit import PointFit, fit_schedule, shared_record
+from .point_fit import PointFit, fit_schedule, shared_record
 
 log = logging.getLogger(__name__)
 
@@ -212,7 +212,7 @@ def _design_sections(template: Mapping | None, trims: list[Trim], outputs: list[
 
 @dataclass(frozen=True)
 class ScheduleWritten:
-    """What ``linearize --schedule`` wrote: the trims and each point's fit (:mod:`.schedule_fit`)."""
+    """What ``linearize --schedule`` wrote: the trims and each point's fit (:mod:`.point_fit`)."""
 
     trims: list[Trim]
     fits: list[PointFit]
@@ -234,7 +234,7 @@ def trim_schedule_to_spec(*, fmu, sigma: str, values: Sequence[float], at: Mappi
                           name: str | None = None, inputs=None, outputs=None, method: str = "auto",
                           template: Path | None = None, interface: str = "auto") -> ScheduleWritten:  # fmt: skip
     """Trim at every value, check that the spec designs' parser takes it, fit each point's model to the FMU
-    (:mod:`.schedule_fit`; a poor fit warns naming the point) and write it atomically."""
+    (:mod:`.point_fit`; a poor fit warns naming the point) and write it atomically."""
     from gainlink.spec import parse_spec
 
     if not Ts > 0:

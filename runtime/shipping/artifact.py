@@ -13,19 +13,28 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import ArtifactError, IntegrityError
 from ..fileio import atomic_write_text, read_user_file
+from ..registry import LawTable
 from .law_c import ONE_OPERATING_POINT, require_structure, sigma_name
-from .mpc import Mpc, load_mpc
-from .scheduled import Schedule, load_schedule
+
+if TYPE_CHECKING:
+    from ..laws.mpc.block import Mpc
+    from ..laws.scheduled.block import Schedule
 
 SCHEMA_VERSION = 1
 #: A scheduled artifact (``schedule`` holds the points; docs/design.md, scheduled law).
 SCHEDULED_SCHEMA_VERSION = 2
+
+#: The reader of each law's own block of the artifact, by the block's key (``schedule``: the scheduled law's points,
+#: ``data, *, n, m, p, q, form -> Schedule``; ``mpc``: the MPC law's horizon, cache and boxes, ``data, *, Ad, ...,
+#: y_op -> Mpc``), registered by the law families (:mod:`gainlink.registry`): the loader reads the shared keys and
+#: hands the block to its law's reader.
+BLOCKS: LawTable[Any] = LawTable("artifact block reader")
 
 
 @lru_cache(maxsize=1)
@@ -84,7 +93,7 @@ class Artifact:
     there, for the record only, ``None`` when not recorded.
 
     A scheduled artifact (schema 2, ``anti_windup == "velocity"``) has its per-point design in ``schedule``
-    (:class:`~gainlink.shipping.scheduled.Schedule`) and no single ``Ad Bd Cd Dd K L M Ki Kaw xh0 z0 u_op y_op``:
+    (:class:`~gainlink.laws.scheduled.block.Schedule`) and no single ``Ad Bd Cd Dd K L M Ki Kaw xh0 z0 u_op y_op``:
     those fields are ``None``, so that nothing runs one point's positional law by mistake (each part of the lq law
     refuses another law's artifact in one line: :func:`gainlink.shipping.law_c.require_structure`).
     """
@@ -286,8 +295,8 @@ def _positional(data: dict) -> Artifact:
     u_op, y_op = _vector(data, "u_op", m, 0.0), _vector(data, "y_op", p, 0.0)
     x_op = _vector(data, "x_op", n) if "x_op" in data else None
     mpc = None
-    if "mpc" in data:  # the MPC law: its block checked against the matrices above (gainlink.shipping.mpc)
-        mpc = load_mpc(data, Ad=Ad, Bd=Bd, Cd=Cd, Dd=Dd, Ci=Ci, Ts=float(data["Ts"]), u_min=u_min, u_max=u_max,
+    if "mpc" in data:  # the MPC law: its block checked against the matrices above by its reader (BLOCKS)
+        mpc = BLOCKS["mpc"](data, Ad=Ad, Bd=Bd, Cd=Cd, Dd=Dd, Ci=Ci, Ts=float(data["Ts"]), u_min=u_min, u_max=u_max,
                        u_op=u_op, x_op=x_op, y_op=y_op)  # fmt: skip
     return Artifact(
         data=data,
@@ -322,11 +331,11 @@ def _positional(data: dict) -> Artifact:
 
 
 def _scheduled(data: dict) -> Artifact:
-    """A schema-2 artifact: shared keys here, the points in :func:`~gainlink.shipping.scheduled.load_schedule`."""
+    """A schema-2 artifact: shared keys here, the points by the ``schedule`` block's reader (:data:`BLOCKS`)."""
     n, m, p, q = (int(data[k]) for k in "nmpq")
     if q != m:
         raise ArtifactError(f"a scheduled artifact needs integral action on every input (q = m), has q={q}, m={m}")
-    sched = load_schedule(data, n=n, m=m, p=p, q=q, form=data["observer_form"])
+    sched = BLOCKS["schedule"](data, n=n, m=m, p=p, q=q, form=data["observer_form"])
     u_min, u_max = _vector(data, "u_min", m), _vector(data, "u_max", m)
     if np.any(u_min > u_max):
         raise ArtifactError("artifact has u_min > u_max for some input")

@@ -147,7 +147,7 @@ def render_header(artifact: Artifact, *, more: str = "") -> str:
 def described(artifact: Artifact, *, more: str = "") -> str:
     """What the compiled lq step depends on besides the law's pair (its compatibility signature's text): the
     dimensions, observer form and anti-windup mode, and ``more`` that the law's own files add (a fixed-point law's
-    formats and term structure: :func:`.codegen_fixed.described`)."""
+    formats and term structure: :func:`gainlink.laws.fixed.codegen.described`)."""
     a = artifact
     text = f"n={a.n};m={a.m};p={a.p};q={a.q};form={a.observer_form};aw={a.anti_windup}"
     return text + (f";{more}" if more else "")
@@ -306,7 +306,7 @@ def render_c(artifact: Artifact, *, more: str = "") -> dict[str, str]:
     -------
     dict of str to str
         ``{"gl_gains.h": ..., "gl_gains_layout.h": ..., "gl_gains.c": ..., "gl_step.h": ...}``; identical for the
-        same artifact. A fixed-point law's export adds its integers (:mod:`.codegen_fixed`,
+        same artifact. A fixed-point law's export adds its integers (:mod:`gainlink.laws.fixed.codegen`,
         :func:`gainlink.shipping.export_c.render_export`).
     """
     require_structure(artifact, "lq", "codegen")

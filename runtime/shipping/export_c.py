@@ -1,8 +1,7 @@
 """The C export of an artifact: every file ``gainlink export`` writes and the firmware is built from.
 
-The law's own files (:data:`RENDERINGS`: :func:`gainlink.shipping.codegen.render_c` for the lq structure, with a
-fixed-point law's integers from :mod:`.codegen_fixed`; :func:`gainlink.shipping.codegen_scheduled.render_scheduled`
-for the scheduled one), and what
+The law's own files (:data:`RENDERINGS`, each family's: :func:`gainlink.shipping.codegen.render_c` for the lq
+structure in float32, the families' own renderings for the others), and what
 ``firmware/include/gainlink/gl_law.h`` and the nodes read for every law: ``gl_flags.h`` (the one flag table,
 :mod:`gainlink.shipping.flags`), ``gl_record_<law>.h`` (the record of each law the export builds,
 :mod:`gainlink.shipping.records`) and ``gl_law_params.h`` (the law's MAVLink parameter table,
@@ -14,26 +13,15 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from . import codegen, codegen_fixed, codegen_mpc, codegen_scheduled, params, records
+from ..registry import LawTable
+from . import codegen, params, records
 from .artifact import Artifact
 from .flags import c_header as flags_header
 from .law_c import buildable, law_name
 
-
-def _lq_integers(artifact: Artifact) -> dict[str, str]:
-    """The lq structure's files, whose signature covers the integers' formats and terms, and the integers."""
-    files = codegen.render_c(artifact, more=codegen_fixed.described(artifact))
-    return files | codegen_fixed.render_fixed(artifact)
-
-
-#: Each law's own files (its C rendering) and the source its headers name: the registry the export asks.
-RENDERINGS: dict[str, tuple[Callable[[Artifact], dict[str, str]], str]] = {
-    "lq/float32": (codegen.render_c, codegen.SOURCE_NAME),
-    "lq/q31": (_lq_integers, codegen.SOURCE_NAME),
-    "lq/q15": (_lq_integers, codegen.SOURCE_NAME),
-    "scheduled/float32": (codegen_scheduled.render_scheduled, codegen_scheduled.SOURCE_NAME),
-    "mpc/float32": (codegen_mpc.render_mpc, codegen_mpc.SOURCE_NAME),
-}
+#: Each law's own files (its C rendering, ``artifact -> {name: text}``) and the source its headers name: the table
+#: the export asks, registered by the law families (:mod:`gainlink.registry`).
+RENDERINGS: LawTable[tuple[Callable[[Artifact], dict[str, str]], str]] = LawTable("C rendering")
 
 
 def render_export(artifact: Artifact) -> dict[str, str]:

@@ -9,9 +9,10 @@ a C member designator). What the parameters are named and what ``GL_HASH`` cover
 - ``lq/float32``: every number of the C ``gl_gains_t`` that is a parameter (:mod:`.gains_layout`), REAL32;
   ``GL_HASH`` is ``gl_gains_crc32`` (the structure words and every float).
 - ``lq/q31``, ``lq/q15``: the certified integers (INT32, bytewise): each non-zero term's mantissa and left shift,
-  then the operating point, limits, safe command and initial state (:data:`.codegen_fixed.VECTORS`); headers
-  ``GL_FX_SIG`` (the formats' signature) and ``GL_FX_STRUCT`` (:func:`.codegen_fixed.structure_crc`); ``GL_HASH``
-  is the CRC of the gain values as int32 words (:func:`.codegen_fixed.set_crc32`).
+  then the operating point, limits, safe command and initial state (``VECTORS`` of
+  :mod:`gainlink.laws.fixed.codegen`, which builds this table); headers ``GL_FX_SIG`` (the formats' signature) and
+  ``GL_FX_STRUCT`` (its ``structure_crc``); ``GL_HASH`` is the CRC of the gain values as int32 words (its
+  ``set_crc32``).
 - ``scheduled/float32``: every float of the tables, REAL32; ``GL_HASH`` the CRC of their bytes.
 - ``mpc/float32``: the dimensions, horizon, box rows and cap (read-only), then every float of the tables
   (``gl_mpc_tables_t``: the observer-based law's numbers, the prediction model and the per-stage gains, the boxes and
@@ -62,16 +63,15 @@ All REAL32 but the header. The HEARTBEAT's ``custom_mode`` of the scheduled app 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from . import codegen_mpc
+from ..registry import LawTable
 from . import gains_layout as layout
 from .artifact import Artifact
 from .codegen import gain_set, shape_of
-from .codegen_fixed import ROWS, VECTORS, set_crc32, structure_crc
-from .codegen_scheduled import tables, tables_crc32
 from .law_c import law_name
 
 #: MAV_PARAM_TYPE of the table's parameters (MAVLink common.xml).
@@ -80,8 +80,6 @@ REAL32 = 9
 HASH_ID = "GL_HASH"
 SIGNATURE_ID = "GL_FX_SIG"
 STRUCTURE_ID = "GL_FX_STRUCT"
-#: The scheduled table's read-only structure parameters.
-SCHEDULED_DIMENSION_IDS = ("GL_DIM_N", "GL_DIM_M", "GL_DIM_P", "GL_DIM_Q", "GL_NPTS", "GL_DIM_E")
 
 
 @dataclass(frozen=True)
@@ -112,7 +110,7 @@ def table(artifact: Artifact) -> tuple[Param, ...]:
     return TABLES[law_name(artifact)](artifact)
 
 
-def _structure(artifact: Artifact) -> list[Param]:
+def structure_params(artifact: Artifact) -> list[Param]:
     """The lq structure's read-only parameters (dimensions, observer form, anti-windup)."""
     header = gain_set(artifact).header
     return [Param(f.param, INT32, int(v), f.name) for f, v in zip(layout.STRUCTURE, header, strict=True)]
@@ -140,110 +138,19 @@ def _block(field: layout.Field, values: np.ndarray, shape: layout.Shape) -> list
     ]
 
 
-def _lq(artifact: Artifact) -> tuple[Param, ...]:
+def lq_table(artifact: Artifact) -> tuple[Param, ...]:
+    """The lq/float32 law's table: the structure, ``GL_HASH`` and every parameter of ``gl_gains_t``."""
     gs, shape = gain_set(artifact), shape_of(artifact)
-    out = _structure(artifact) + [Param(HASH_ID, INT32, as_int32(gs.crc32), "crc32", is_hash=True)]
+    out = structure_params(artifact) + [Param(HASH_ID, INT32, as_int32(gs.crc32), "crc32", is_hash=True)]
     for field in layout.NUMBERS:
         if field.param:
             out += _block(field, np.asarray(gs.fields[field.name]), shape)
     return tuple(out)
 
 
-def _fixed(artifact: Artifact) -> tuple[Param, ...]:
-    fp = artifact.checks["fixed_point"]
-    table_, k = fp["integers"], 0
-    gains: list[Param] = []
-    for kind, count in (("v", artifact.m), ("z", artifact.q), ("x", artifact.n)):
-        for i in range(count):
-            for block, _ in ROWS[kind]:
-                for j, (c, e) in enumerate(zip(table_[block][i], table_[f"{block}_shift"][i], strict=True)):
-                    if c != 0:  # the order of codegen_fixed.terms: term k
-                        gains.append(
-                            Param(f"GL_{block}_{i}_{j}", INT32, int(c), f"{block}[{i},{j}]", slot=f"g.coef[{k}]")
-                        )
-                        gains.append(Param(f"GL_{block}E_{i}_{j}", INT32, int(e), f"{block}_shift[{i},{j}]",
-                                           slot=f"g.shift[{k}]"))  # fmt: skip
-                        k += 1
-    for stem, key in VECTORS:
-        field = key.lower()  # gl_fixed_gains_t's field: uop_v, lo_v, ..., z0
-        gains += [Param(f"GL_{stem}_{i}", INT32, int(v), f"{key}[{i}]", slot=f"g.{field}[{i}]")
-                  for i, v in enumerate(table_[key])]  # fmt: skip
-    header = _structure(artifact) + [
-        Param(SIGNATURE_ID, INT32, as_int32(int(fp["signature"], 16)), "checks.fixed_point.signature"),
-        Param(STRUCTURE_ID, INT32, as_int32(structure_crc(artifact)), "structure"),
-        Param(HASH_ID, INT32, as_int32(set_crc32(artifact)), "crc32", is_hash=True),
-    ]
-    return tuple(header + gains)
-
-
-#: Each field of gl_sched_tables_t: its id stem and whether it holds one block per point.
-_SCHEDULED_STEMS = {
-    "S": ("S", False), "Kx": ("KX", True), "Ky": ("KY", True), "Kz": ("KZ", True), "F": ("F", True),
-    "G": ("G", True), "Ly": ("LY", True), "u_op": ("UOP", True), "u_min": ("UMIN", False),
-    "u_max": ("UMAX", False), "Ci": ("CI", False), "alpha": ("ALPHA", False), "rate_step": ("RATE", False),
-}  # fmt: skip
-
-
-def _scheduled_shapes(a: Artifact) -> dict[str, tuple[int, ...]]:
-    """Each field's shape per point (empty: a scalar; one number: a vector)."""
-    n, m, p, q = a.n, a.m, a.p, a.q
-    mats = {"Kx": (m, n), "Ky": (m, p), "Kz": (m, q), "F": (n, n), "G": (n, m), "Ly": (n, p), "Ci": (q, p)}
-    return {**mats, "S": (a.schedule.points.size,), "u_op": (m,), "u_min": (m,), "u_max": (m,), "alpha": (),
-            "rate_step": ()}  # fmt: skip
-
-
-def _scheduled_names(field: str, point: int | None, shape: tuple[int, ...]) -> list[tuple[str, str]]:
-    """Each element's parameter id and C designator in ``gl_sched_set_t`` (``t.Kx[k][i * n + j]``)."""
-    stem = _SCHEDULED_STEMS[field][0]
-    base, slot = (
-        f"GL_{stem}" + ("" if point is None else f"_{point}"),
-        f"t.{field}" + ("" if point is None else f"[{point}]"),
-    )
-    if not shape:
-        return [(base, slot)]
-    if len(shape) == 1:
-        return [(f"{base}_{i}", f"{slot}[{i}]") for i in range(shape[0])]
-    return [(f"{base}_{i}_{j}", f"{slot}[{i * shape[1] + j}]") for i in range(shape[0]) for j in range(shape[1])]
-
-
-def _scheduled(artifact: Artifact) -> tuple[Param, ...]:
-    a = artifact
-    dims = (a.n, a.m, a.p, a.q, a.schedule.points.size, len(a.schedule.external))
-    out = [Param(k, INT32, int(v), "structure") for k, v in zip(SCHEDULED_DIMENSION_IDS, dims, strict=True)]
-    out.append(Param(HASH_ID, INT32, as_int32(tables_crc32(a)), "CRC-32 of the tables", is_hash=True))
-    shapes = _scheduled_shapes(a)
-    for field, values in tables(a).items():
-        flat = np.asarray(values, dtype=np.float32).reshape(-1)
-        points = range(a.schedule.points.size) if _SCHEDULED_STEMS[field][1] else [None]
-        named = [pair for k in points for pair in _scheduled_names(field, k, shapes[field])]
-        out += [Param(name, REAL32, float(v), field, slot=slot) for (name, slot), v in zip(named, flat, strict=True)]
-    return tuple(out)
-
-
-#: The MPC table's read-only structure parameters.
-MPC_DIMENSION_IDS = ("GL_DIM_N", "GL_DIM_M", "GL_DIM_P", "GL_DIM_Q", "GL_HORIZON", "GL_DIM_NC", "GL_MAXIT")
-
-
-def _mpc(artifact: Artifact) -> tuple[Param, ...]:
-    a, b = artifact, artifact.mpc
-    dims = (a.n, a.m, a.p, a.q, b.horizon, b.nc, b.max_iter)
-    out = [Param(k, INT32, int(v), "structure") for k, v in zip(MPC_DIMENSION_IDS, dims, strict=True)]
-    out.append(Param(HASH_ID, INT32, as_int32(codegen_mpc.tables_crc32(a)), "CRC-32 of the tables", is_hash=True))
-    for field, values in codegen_mpc.tables(a).items():
-        stem = field.upper().replace("_", "")
-        if values.ndim == 0:
-            out.append(Param(f"GL_{stem}", REAL32, float(values), field, slot=f"t.{field}"))
-        elif values.ndim == 1:
-            out += [Param(f"GL_{stem}_{j}", REAL32, float(v), field, slot=f"t.{field}[{j}]")
-                    for j, v in enumerate(values)]  # fmt: skip
-        else:
-            out += [Param(f"GL_{stem}{k}_{j}", REAL32, float(v), field, slot=f"t.{field}[{k}][{j}]")
-                    for k, row in enumerate(values) for j, v in enumerate(row)]  # fmt: skip
-    return tuple(out)
-
-
-#: Each law's table (module docstring): the registry the export and the upload ask.
-TABLES = {"lq/float32": _lq, "lq/q31": _fixed, "lq/q15": _fixed, "scheduled/float32": _scheduled, "mpc/float32": _mpc}
+#: Each law's table (module docstring), ``artifact -> tuple[Param, ...]``: the registry the export and the upload ask,
+#: registered by the law families (:mod:`gainlink.registry`; the lq/float32 table is :func:`lq_table`).
+TABLES: LawTable[Callable[[Artifact], tuple[Param, ...]]] = LawTable("parameter table")
 
 
 def c_header(artifact: Artifact, *, banner: str) -> str:

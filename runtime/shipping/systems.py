@@ -11,12 +11,13 @@ Integrators: ``z+ = z + Ts (dr - Ci dy)`` (anti-windup is inactive without satur
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..registry import LawTable
 from .law_c import law_pair
-from .scheduled import law_coefficients
 
 if TYPE_CHECKING:
     import control
@@ -29,10 +30,30 @@ def controller_matrices(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(A, B, C, D)`` of the unsaturated law from ``[dy; dr]`` to ``du`` on the state ``[xh; z]`` (a scheduled
     artifact: the frozen-point law at ``sigma``, its coefficients interpolated there)."""
-    return _COEFFICIENTS[law_pair(a)[0]](a, sigma)
+    return COEFFICIENTS[law_pair(a)[0]](a, sigma)
 
 
-def _lq_coefficients(a: Artifact, sigma: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def law_coefficients(*, Ad, Bd, Cd, Dd, K, L, M, Ki, Ts: float, form: str) -> dict[str, np.ndarray]:
+    """``F G Ly Kx Ky Kz`` of one point's positional law (predictor: ``F = Ad - L Cd``, ``G = Bd - L Dd``,
+    ``Ly = L``, ``Kx = K``, ``Ky = 0``; current: ``F = Ad (I - M Cd)``, ``G = Bd``, ``Ly = Ad M``, ``Kx = K (I - M
+    Cd)``, ``Ky = K M``; ``Kz = Ts Ki``): what the scheduled law interpolates, and the lq law's frozen form."""
+    n = Ad.shape[0]
+    if form == "current":
+        X = np.eye(n) - M @ Cd
+        out = {"F": Ad @ X, "G": Bd.copy(), "Ly": Ad @ M, "Kx": K @ X, "Ky": K @ M}
+    else:
+        out = {
+            "F": Ad - L @ Cd,
+            "G": Bd - L @ Dd,
+            "Ly": L.copy(),
+            "Kx": K.copy(),
+            "Ky": np.zeros((K.shape[0], Cd.shape[0])),
+        }
+    out["Kz"] = Ts * Ki
+    return out
+
+
+def lq_coefficients(a: Artifact, sigma: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The lq law's: its one positional law's coefficients."""
     c = law_coefficients(
         Ad=a.Ad, Bd=a.Bd, Cd=a.Cd, Dd=a.Dd, K=a.K, L=a.L, M=a.M, Ki=a.Ki, Ts=a.Ts, form=a.observer_form
@@ -40,15 +61,12 @@ def _lq_coefficients(a: Artifact, sigma: float | None) -> tuple[np.ndarray, np.n
     return coefficient_law(c["F"], c["G"], c["Ly"], c["Kx"], c["Ky"], a.Ki, Ci=a.Ci, Ts=a.Ts)
 
 
-def _scheduled_coefficients(a: Artifact, sigma: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The scheduled law's: its points' coefficients interpolated at ``sigma``."""
-    c = a.schedule.coefficients_at(sigma)
-    return coefficient_law(c["F"], c["G"], c["Ly"], c["Kx"], c["Ky"], c["Kz"] / a.Ts, Ci=a.Ci, Ts=a.Ts)
-
-
-#: Each structure's frozen-point coefficients (the registry :func:`controller_matrices` asks).
-#: The MPC law's is its unconstrained one: with no box active its optimum is the lq law of the same weights.
-_COEFFICIENTS = {"lq": _lq_coefficients, "scheduled": _scheduled_coefficients, "mpc": _lq_coefficients}
+#: Each structure's frozen-point coefficients ``(a, sigma) -> (A, B, C, D)`` (the table :func:`controller_matrices`
+#: asks), registered by the law families (:mod:`gainlink.registry`). The MPC law's is :func:`lq_coefficients`: with no
+#: box active its optimum is the lq law of the same weights.
+COEFFICIENTS: LawTable[Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = LawTable(
+    "frozen-point coefficients"
+)
 
 
 def coefficient_law(F, G, Ly, Kx, Ky, Ki, *, Ci, Ts: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -19,12 +20,11 @@ import numpy as np
 
 from ..errors import SpecError, did_you_mean
 from ..fileio import read_toml
+from ..registry import LawTable
 from .model import ImplementationSpec, PlantSpec
-from .mpc import check_mpc_spec, parse_mpc
-from .pairs import integer, structure_of
+from .pairs import structure_of
 from .plant import parse_plant
 from .ranges import check_ranges
-from .schedule import check_schedule_table, parse_schedule, point_plants
 from .tables import (
     CONTROLLER_KEYS,
     IMPLEMENTATION_KEYS,
@@ -77,7 +77,7 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
         raise SpecError(f"discretization must be 'zoh' or 'tustin', not {disc!r}")
     structure = structure_of(data)
     sched = table(data, "schedule", required=False)
-    plants = _PLANTS[structure](table(data, "plant", required=True), sched, Ts=Ts)
+    plants = PLANTS[structure](table(data, "plant", required=True), sched, Ts=Ts)
     plant = plants[0]
     ctl = checked_table(data, "controller", CONTROLLER_KEYS, required=True)
     integral = parse_integral(
@@ -90,10 +90,10 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
     limits = parse_limits(limits_table, plant, q=q, structure=structure)
     controllers = tuple(parse_controller(ctl, p, q=q, Ts=Ts) for p in plants)
     implementation = parse_implementation(checked_table(data, "implementation", IMPLEMENTATION_KEYS, required=False))
-    _CHECKS.get(structure, _no_check)(implementation)
-    parts = _LawParts(data=data, sched=sched, plants=plants, integral=integral, limits=limits,
+    CHECKS.get(structure, _no_check)(implementation)
+    parts = LawParts(data=data, sched=sched, plants=plants, integral=integral, limits=limits,
                       controllers=controllers, implementation=implementation)  # fmt: skip
-    schedule, operating_point = _OPERATING[structure](parts)
+    schedule, operating_point = OPERATING[structure](parts)
     return PlantSpec(
         name=name,
         Ts=Ts,
@@ -111,7 +111,7 @@ def parse_spec(data: dict, *, source: str = "<dict>", source_sha256: str | None 
         linearization=checked_table(data, "linearization", LINEARIZATION_KEYS, required=False),
         schedule=schedule,
         units=parse_units(table(data, "units", required=False), plant),
-        mpc=parse_mpc(
+        mpc=BLOCKS["mpc"](
             table(data, "mpc", required=False), method=str(ctl.get("method", "lqr")), plant=plant, op=operating_point
         ),
     )
@@ -137,20 +137,14 @@ def parse_units(units: dict | None, plant) -> dict[str, str]:
     return dict(sorted(out.items()))
 
 
-def _lq_plants(plant: dict, sched: dict | None, *, Ts: float) -> tuple:
+def lq_plants(plant: dict, sched: dict | None, *, Ts: float) -> tuple:
     """The lq law's plant (a 1-tuple)."""
     return (parse_plant(plant, Ts=Ts),)
 
 
-def _scheduled_plants(plant: dict, sched: dict, *, Ts: float) -> tuple:
-    """The scheduled law's plants, one per point of its ``[schedule]``."""
-    points = check_schedule_table(sched)
-    return point_plants(plant, sched["plant"], points, Ts=Ts)
-
-
 @dataclass(frozen=True)
-class _LawParts:
-    """What the spec's structure-specific step reads (:data:`_OPERATING`)."""
+class LawParts:
+    """What the spec's structure-specific step reads (:data:`OPERATING`)."""
 
     data: dict
     sched: dict | None
@@ -161,7 +155,7 @@ class _LawParts:
     implementation: ImplementationSpec
 
 
-def _lq_operating(parts: _LawParts) -> tuple[None, Any]:
+def lq_operating(parts: LawParts) -> tuple[None, Any]:
     """The lq law's ``[operating_point]``, with the declared ranges checked around it: ``(None, operating point)``."""
     plant, limits, integral = parts.plants[0], parts.limits, parts.integral
     operating_point = parse_operating_point(table(parts.data, "operating_point", required=False), plant, limits)
@@ -170,45 +164,21 @@ def _lq_operating(parts: _LawParts) -> tuple[None, Any]:
     return None, operating_point
 
 
-def _scheduled_operating(parts: _LawParts) -> tuple[Any, Any]:
-    """The scheduled law's ``[schedule]`` (each point its own operating point): ``(schedule, its first point's)``."""
-    q = 0 if parts.integral is None else parts.integral.q
-    _check_schedulable(parts.data, q=q, m=parts.plants[0].m, implementation=parts.implementation)
-    points = check_schedule_table(parts.sched)
-    schedule = parse_schedule(parts.sched, parts.plants, points, limits=parts.limits, controllers=parts.controllers)
-    return schedule, schedule.operating_points[0]
-
-
-#: Each structure's plants and operating point(s) (the registry :func:`parse_spec` asks; :mod:`.pairs` says which
-#: structure a spec asks for).
-def _mpc_check(implementation: ImplementationSpec) -> None:
-    check_mpc_spec(numeric=implementation.numeric, realization=implementation.realization)
-
-
 def _no_check(implementation: ImplementationSpec) -> None:
     return None
 
 
-_PLANTS = {"lq": _lq_plants, "scheduled": _scheduled_plants, "mpc": _lq_plants}
-_OPERATING = {"lq": _lq_operating, "scheduled": _scheduled_operating, "mpc": _lq_operating}
-#: A structure's own check of ``[implementation]`` (the MPC law: float32, as designed).
-_CHECKS = {"mpc": _mpc_check}
+# The tables parse_spec asks of a law, registered by the law families (gainlink.registry); .pairs says which
+# structure a spec asks for.
 
-
-def _check_schedulable(data: dict, *, q: int, m: int, implementation: ImplementationSpec) -> None:
-    """What the velocity form needs of the rest of a scheduled spec (docs/design.md, scheduled law)."""
-    if "operating_point" in data:
-        raise SpecError("with a [schedule], each [[schedule.plant]] gives its own u_op, y_op, x_op: "
-                        "drop [operating_point]")  # fmt: skip
-    if q < m:
-        raise SpecError(f"a [schedule] needs integral action on every input ([integral] on {m} outputs, has {q}): "
-                        "the velocity form integrates its command, and without it the trim drifts")  # fmt: skip
-    realization = implementation.realization
-    if realization != "as_designed":
-        raise SpecError(f"implementation.realization {realization!r} cannot be scheduled: the points' estimates "
-                        "must stay in the same coordinates (use as_designed)")  # fmt: skip
-    if integer(implementation.numeric):
-        raise SpecError(
-            f"implementation.numeric {implementation.numeric!r} cannot be scheduled: a scheduled law is time-varying, "
-            "where the fixed-point certificate (worst-case peak gain) does not apply"
-        )
+#: A structure's plants ``(plant table, schedule table, *, Ts) -> tuple[PlantModel, ...]`` (the lq law's:
+#: :func:`lq_plants`).
+PLANTS: LawTable[Callable[..., tuple]] = LawTable("spec plant reader")
+#: A structure's operating point(s) ``LawParts -> (schedule or None, operating point)`` (the lq law's:
+#: :func:`lq_operating`).
+OPERATING: LawTable[Callable[[LawParts], tuple[Any, Any]]] = LawTable("spec operating-point reader")
+#: A structure's own check of ``[implementation]`` (none: nothing to check).
+CHECKS: LawTable[Callable[[ImplementationSpec], None]] = LawTable("spec implementation check")
+#: The reader of a law's own table of the spec, by its name, ``(table or None, *, method, plant, op) -> block or
+#: None`` (``mpc``: the MPC law's horizon and boxes).
+BLOCKS: LawTable[Callable[..., Any]] = LawTable("spec table reader")

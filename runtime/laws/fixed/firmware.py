@@ -25,8 +25,8 @@ from ...firmware.host import HostLaw
 from ...shipping import flags as status_flags
 from ...shipping import records
 from ...shipping.artifact import Artifact
-from ...shipping.codegen_fixed import INTEGER_LAWS
 from ...shipping.law_c import law_name
+from .codegen import INTEGER_LAWS
 
 FAULT, CLIPPED, OVERFLOW = status_flags.FAULT, status_flags.CLIPPED, status_flags.OVERFLOW
 OVERFLOW_BITS = {"dY": 1, "V": 2, "dU": 4, "Uv-V": 8, "Z": 16, "XH": 32}  # GL_FX_OVF_* of gl_fixed.h

@@ -1,9 +1,9 @@
 """The MPC law's design step: the observer-based pipeline (the LQ gain the MPC reduces to, the observer, the
-integrators and their anti-windup), then the ``mpc`` block (:mod:`gainlink.shipping.mpc`): the terminal cost as the
+integrators and their anti-windup), then the ``mpc`` block (:mod:`gainlink.laws.mpc.block`): the terminal cost as the
 DARE solution of the same weights, the penalties by their default rules, the per-stage gains, the boxes.
 
 Refused in one line (exit 2): a terminal cost that is not positive definite (the weights leave a mode unseen), a box
-on an output of a plant with feedthrough, and what :func:`gainlink.spec.mpc.check_mpc_spec` refuses at parse time.
+on an output of a plant with feedthrough, and what :func:`gainlink.laws.mpc.spec.check_mpc_spec` refuses at parse time.
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ import numpy as np
 
 from ...errors import DesignError
 from ...shipping.artifact import matrix_to_json
-from ...shipping.mpc import augmented_model, box_rows, stage_cache
 from ...spec import PlantSpec
-from ...spec.mpc import weights_default
+from .block import augmented_model, box_rows, stage_cache
+from .spec import weights_default
 
 
 def _terminal_cost(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray, K: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ...errors import GainlinkError
-from ...shipping.mpc import Mpc
+from .block import Mpc
 
 
 @dataclass(frozen=True)

@@ -28,13 +28,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...shipping.mpc import Mpc
 from .arith import Arith
+from .block import Mpc
 
 
 @dataclass
 class Tables:
-    """An :class:`~gainlink.shipping.mpc.Mpc` in one arithmetic's numbers (the C's float32 tables)."""
+    """An :class:`~gainlink.laws.mpc.block.Mpc` in one arithmetic's numbers (the C's float32 tables)."""
 
     A: np.ndarray
     B: np.ndarray

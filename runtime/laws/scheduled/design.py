@@ -12,9 +12,10 @@ import numpy as np
 
 from ...errors import DesignError
 from ...shipping.artifact import SCHEDULED_SCHEMA_VERSION, from_dict, matrix_to_json, seal, vector_to_json
-from ...shipping.scheduled import COEFFICIENTS, filter_alpha, law_coefficients, load_schedule
+from ...shipping.systems import law_coefficients
 from ...spec import PlantSpec
 from ...synthesis.record import provenance
+from .block import COEFFICIENTS, filter_alpha, load_schedule
 from .grid import GridCheck, grid_check
 from .variation import DEFAULT_BUDGET, RateSpec, VariationCheck, crossing_warning, rate_text, variation_check
 

@@ -3,7 +3,7 @@ its own loop around the design model, at each sigma of a sweep.
 
 At each sigma of :func:`sweep` (the points and the middle of each interval between them) the plant is the design
 model frozen there (the points' sampled plants and trims interpolated at sigma,
-:meth:`~gainlink.shipping.scheduled.Schedule.plant_at`), and the two laws are the C's arithmetic
+:meth:`~gainlink.laws.scheduled.block.Schedule.plant_at`), and the two laws are the C's arithmetic
 (:class:`~gainlink.laws.scheduled.model.ScheduledFloat32Loop`, bit for bit the host and Cortex-M builds) and the
 float64 law (:class:`~gainlink.laws.scheduled.reference.ScheduledLoop`). They run the observer-based law's
 scenario (:mod:`gainlink.laws.lq.fidelity`: measurement noise, a reference step sized to half the room to the nearer
@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 
 from ...shipping.artifact import Artifact
-from ...shipping.scheduled import interval
 from ...shipping.systems import controller_matrices
 from ..lq.fidelity import Float32Fidelity, LoopPoint, fidelity_at, noise_sd
+from .block import interval
 from .model import ScheduledFloat32Loop
 from .reference import ScheduledLoop
 

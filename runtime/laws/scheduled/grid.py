@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import DesignError
-from ...shipping.scheduled import Schedule
 from ...synthesis.margins import ChannelMargin, broken_loop_margin
+from .block import Schedule
 from .lpv import frozen_loop
 
 GRID_PER_INTERVAL = 10

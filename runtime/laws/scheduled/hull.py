@@ -99,7 +99,7 @@ class LoopHull:
 
     @classmethod
     def of(cls, s, Ci: np.ndarray) -> LoopHull:
-        """The hull of the schedule ``s`` (a :class:`~gainlink.shipping.scheduled.Schedule`) with ``Ci``."""
+        """The hull of the schedule ``s`` (a :class:`~gainlink.laws.scheduled.block.Schedule`) with ``Ci``."""
         raw = [reduced(loop_polynomial(s, Ci, i), s, Ci) for i in range(len(s.points) - 1)]
         balls = lambda i: reduced(loop_polynomial(s, Ci, i, balls=True), s, Ci)  # noqa: E731
         return cls.of_polynomials(s.points, raw, balls)

@@ -140,7 +140,7 @@ class ScheduledLaw(Law):
         return tuple(artifact.schedule.external)
 
     #: The scenario plant that is this law's own model (``plant = "artifact"`` asks for it).
-    own_plant = "scheduled_model"
+    own_plant = "lpv_model"
 
     # -- the design side ----------------------------------------------------------------------------------------
 

@@ -124,7 +124,7 @@ class _Poly:
 
 def loop_polynomial(s, Ci: np.ndarray, i: int, *, balls: bool = False) -> np.ndarray:
     """Monomial coefficients ``(d + 1, N, N)`` of the velocity loop on interval ``i`` of the schedule ``s`` (a
-    :class:`~gainlink.shipping.scheduled.Schedule`), ``lam = (sigma - points[i]) / (points[i+1] - points[i])``:
+    :class:`~gainlink.laws.scheduled.block.Schedule`), ``lam = (sigma - points[i]) / (points[i+1] - points[i])``:
     formed exactly from the affine coefficients, in float64 or (``balls``) as an object array of flint ``arb``
     enclosing the exact polynomial. Coefficients that are exactly zero at the top are dropped (d <= 3)."""
     conv = to_balls if balls else (lambda a: np.asarray(a, dtype=float))

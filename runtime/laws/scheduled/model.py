@@ -1,7 +1,7 @@
 """The scheduled C loop's float32 arithmetic (``firmware/src/gl_sched.c``), reproduced in numpy bit for bit.
 
 The C runs the law of :mod:`gainlink.laws.scheduled.reference` on the float32 tables of
-:func:`gainlink.shipping.codegen_scheduled.tables` (no derivation on the target: the per-point coefficients are
+:func:`gainlink.laws.scheduled.codegen.tables` (no derivation on the target: the per-point coefficients are
 the artifact's, rounded once). Each operation here is the C's, in the C's order (``gl_sched.h`` states it):
 float32 ``+ - /`` correctly rounded (numpy float32 scalars), every multiply-add one correctly rounded ``fmaf``
 (:func:`gainlink.laws.lq.model.fma32_exact`), each interpolated coefficient ``fmaf(lam, X[i+1] - X[i], X[i])``
@@ -17,8 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from ...shipping.artifact import Artifact
-from ...shipping.codegen_scheduled import tables
 from ..lq.model import fma32_exact
+from .codegen import tables
 from .reference import (
     SIGMA_CLIPPED,
     SIGMA_HELD,

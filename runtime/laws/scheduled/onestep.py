@@ -39,7 +39,7 @@ import numpy as np
 from ...errors import DataError
 from ...proof.onestep import OneStepCheck, StepMismatch
 from ...shipping.artifact import Artifact
-from ...shipping.scheduled import interval
+from .block import interval
 from .reference import SIGMA_CLIPPED, SIGMA_HELD, SIGMA_RATE, ScheduledLoop, ScheduledState
 
 EPS = 2.0**-24

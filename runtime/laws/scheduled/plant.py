@@ -7,8 +7,8 @@ coordinates::
     x+ = x_op + Ad (x - x_op) + Bd (u - u_op)          y = y_op + Cd (x - x_op) + Dd (u - u_op)
 
 The model twin of a scheduled run closes the float64 law around this model, which follows the sigma the twin's own
-law uses (:meth:`ScheduledModel.follow`); the scenario plant ``kind = "scheduled_model"``
-(:mod:`gainlink.hil.plants.scheduled_model`) is the same model following an external scheduling signal or its own
+law uses (:meth:`ScheduledModel.follow`); the scenario plant ``kind = "lpv_model"``
+(:mod:`gainlink.hil.plants.lpv_model`) is the same model following an external scheduling signal or its own
 scheduled output. ``x_op`` comes from the points (the spec's operating points); when no point has a trim at all,
 the model is about the origin.
 """
@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from ...shipping.scheduled import interval, lerp
+from .block import interval, lerp
 
 
 def operating_states(artifact: Any) -> np.ndarray | None:

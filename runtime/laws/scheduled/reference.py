@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...shipping.artifact import Artifact
-from ...shipping.scheduled import interval, lerp
+from .block import interval, lerp
 
 SIGMA_HELD, SIGMA_CLIPPED, SIGMA_RATE = 1, 2, 4  # the sigma flags of a step (bits)
 

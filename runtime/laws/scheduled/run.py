@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from ...shipping.scheduled import interval, lerp
 from .. import flags
+from .block import interval, lerp
 from .plant import ScheduledModel, operating_states
 
 
@@ -116,7 +116,7 @@ def _rate(sch: Mapping[str, Any]) -> str:
 def simulate(law: Any, artifact: Any, *, steps: int, x0: Any, reference: Any, noise_std: float, seed: int,
              signals: Any) -> Any:  # fmt: skip
     """The float64 scheduled law around the points' model (:class:`ScheduledModel`), which follows its own scheduled
-    output or the external signals (as the scenario plant ``scheduled_model``): started at ``x_op`` at the start
+    output or the external signals (as the scenario plant ``lpv_model``): started at ``x_op`` at the start
     sigma (the first point, or the first external signal) plus ``x0``; the reference holds the trim there unless
     given; the signals constant ((e,)) or per step ((steps, e))."""
     from ...errors import ArtifactError, DataError

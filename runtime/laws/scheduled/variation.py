@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import DesignError, VerificationError
-from ...shipping.scheduled import Schedule
+from .block import Schedule
 from .certify import (
     MAX_PIECES,
     REFINEMENTS,

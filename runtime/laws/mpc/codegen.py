@@ -1,7 +1,8 @@
 """C code generation for an MPC artifact: ``gl_gains.h`` (the dimensions, horizon, cap and forms as macros) and
 ``gl_mpc_gains.c`` (the tables as one ``const gl_mpc_set_t gl_mpc_default``, ``firmware/include/gainlink/gl_mpc.h``),
 every float printed round-trip. The firmware builds ``firmware/src/gl_mpc.c`` when ``gl_gains.h`` names the law
-(``GL_LAW_STRUCTURE mpc``); :func:`gainlink.shipping.export_c.render_export` calls :func:`render_mpc`.
+(``GL_LAW_STRUCTURE mpc``); :func:`gainlink.shipping.export_c.render_export` calls :func:`render_mpc` (registered in
+``export_c.RENDERINGS`` by this family), the MAVLink upload :func:`param_table` (``params.TABLES``).
 """
 
 from __future__ import annotations
@@ -10,9 +11,10 @@ import zlib
 
 import numpy as np
 
-from . import codegen
-from .artifact import Artifact
-from .law_c import macros as law_macros
+from ...shipping import codegen
+from ...shipping.artifact import Artifact
+from ...shipping.law_c import macros as law_macros
+from ...shipping.params import HASH_ID, INT32, REAL32, Param, as_int32
 
 SOURCE_NAME = "gl_mpc_gains.c"
 FORM_CODES = {"predictor": 0, "current": 1}
@@ -113,3 +115,27 @@ def render_source(artifact: Artifact) -> str:
 def render_mpc(artifact: Artifact) -> dict[str, str]:
     """The export of an MPC artifact: ``{"gl_gains.h": ..., "gl_mpc_gains.c": ...}``; same artifact, same bytes."""
     return {codegen.HEADER_NAME: render_header(artifact), SOURCE_NAME: render_source(artifact)}
+
+
+#: The MPC table's read-only structure parameters.
+MPC_DIMENSION_IDS = ("GL_DIM_N", "GL_DIM_M", "GL_DIM_P", "GL_DIM_Q", "GL_HORIZON", "GL_DIM_NC", "GL_MAXIT")
+
+
+def param_table(artifact: Artifact) -> tuple[Param, ...]:
+    """The MPC law's MAVLink parameter table (:mod:`gainlink.shipping.params`): the structure, ``GL_HASH``, then
+    every float of the tables, REAL32."""
+    a, b = artifact, artifact.mpc
+    dims = (a.n, a.m, a.p, a.q, b.horizon, b.nc, b.max_iter)
+    out = [Param(k, INT32, int(v), "structure") for k, v in zip(MPC_DIMENSION_IDS, dims, strict=True)]
+    out.append(Param(HASH_ID, INT32, as_int32(tables_crc32(a)), "CRC-32 of the tables", is_hash=True))
+    for field, values in tables(a).items():
+        stem = field.upper().replace("_", "")
+        if values.ndim == 0:
+            out.append(Param(f"GL_{stem}", REAL32, float(values), field, slot=f"t.{field}"))
+        elif values.ndim == 1:
+            out += [Param(f"GL_{stem}_{j}", REAL32, float(v), field, slot=f"t.{field}[{j}]")
+                    for j, v in enumerate(values)]  # fmt: skip
+        else:
+            out += [Param(f"GL_{stem}{k}_{j}", REAL32, float(v), field, slot=f"t.{field}[{k}][{j}]")
+                    for k, row in enumerate(values) for j, v in enumerate(row)]  # fmt: skip
+    return tuple(out)

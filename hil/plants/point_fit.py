@@ -6,6 +6,9 @@ The scheduled spec holds what is shared in its ``[linearization]`` table (FMU, h
 interface and why) and each point's fit next to that point's plant, in its ``[[schedule.plant]]`` entry, under
 the same keys the single-point record uses (:data:`POINT_KEYS`). A poor fit at a point warns in one line naming
 the point.
+
+It checks a plant (the FMU against its linearisations at several trim points), not a law: whatever law is later
+designed on the points, so it is named for the points it fits.
 """
 
 from __future__ import annotations

@@ -1,7 +1,10 @@
-"""The design's own model of a scheduled artifact (:class:`gainlink.laws.scheduled.plant.ScheduledModel`: the
-points' sampled plants and trims interpolated at a moving sigma) as the scenario plant ``kind = "scheduled_model"``:
-a plant whose dynamics follow an external scheduling signal (the run hands it the signals each step through
-:meth:`ScheduledModelPlant.schedule`) or its own scheduled output. It advances by the artifact's ``Ts`` only.
+"""A linear parameter-varying plant, ``kind = "lpv_model"``: the sampled plants and trims of an artifact's points
+interpolated at a moving sigma (:class:`gainlink.laws.scheduled.plant.ScheduledModel`), whose dynamics follow an
+external scheduling signal (the run hands it the signals each step through :meth:`LpvModelPlant.schedule`) or its
+own output. It advances by the artifact's ``Ts`` only.
+
+It is a plant, stepped by the loop as every other kind, so it is named for what it is (an LPV model), not after the
+law whose artifact holds its points; the points come from a scheduled artifact, the only one that has them.
 """
 
 from __future__ import annotations
@@ -17,17 +20,20 @@ from gainlink.shipping.law_c import sigma_name
 from .base import PLANTS, Plant
 
 
-class ScheduledModelPlant(Plant):
+class LpvModelPlant(Plant):
     """:class:`ScheduledModel` as a scenario plant; sigma from :meth:`schedule` (external) or its own output."""
 
     def __init__(self, artifact: Any) -> None:
         if artifact is None or sigma_name(artifact) is None:
-            raise PlantError("plant scheduled_model: the scenario's artifact must be scheduled (schema 2)")
+            raise PlantError(
+                "plant lpv_model: the scenario's artifact has no points to interpolate (a scheduled "
+                "artifact, schema 2, has)"
+            )
         X_op = operating_states(artifact)
         if X_op is None:
-            raise PlantError("plant scheduled_model: the schedule's points give no x_op")
+            raise PlantError("plant lpv_model: the schedule's points give no x_op")
         self.a, self.X_op = artifact, X_op
-        self.name = f"{artifact.name} scheduled model"
+        self.name = f"{artifact.name} LPV model"
         sig = artifact.signals
         self.state_names, self.input_names, self.output_names = (
             tuple(sig["states"]), tuple(sig["inputs"]), tuple(sig["outputs"]))  # fmt: skip
@@ -80,9 +86,9 @@ class ScheduledModelPlant(Plant):
         self.model.x, self.model.sigma, self.model.u_prev = x.copy(), sigma, u_prev
 
 
-@PLANTS.register("scheduled_model")
+@PLANTS.register("lpv_model")
 def _factory(config: Mapping[str, Any], *, artifact: Any = None, **_context: Any) -> Plant:
     unknown = sorted(set(config) - {"kind"})
     if unknown:
-        raise PlantError(f"plant scheduled_model: unknown key(s) {', '.join(unknown)} (it takes only kind)")
-    return ScheduledModelPlant(artifact)
+        raise PlantError(f"plant lpv_model: unknown key(s) {', '.join(unknown)} (it takes only kind)")
+    return LpvModelPlant(artifact)

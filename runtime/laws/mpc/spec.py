@@ -14,6 +14,9 @@ table::
 
 A name that is both a state and an output (the pendulum's ``x``) boxes the state. Not with a ``[schedule]``, a
 fixed-point ``numeric`` or another realisation than ``as_designed`` (the boxes are in the design's coordinates).
+
+The spec's parser reads the table through ``gainlink.spec.parse.BLOCKS["mpc"]`` (:func:`parse_mpc`) and checks
+``[implementation]`` through ``parse.CHECKS["mpc"]`` (:func:`check_implementation`), both registered by this family.
 """
 
 from __future__ import annotations
@@ -23,10 +26,10 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import SpecError, did_you_mean
-from .model import MpcBox, MpcSpec, OperatingPoint, PlantModel
-from .pairs import integer
-from .values import no_unknown, positive_number
+from ...errors import SpecError, did_you_mean
+from ...spec.model import ImplementationSpec, MpcBox, MpcSpec, OperatingPoint, PlantModel
+from ...spec.pairs import integer
+from ...spec.values import no_unknown, positive_number
 
 MPC_KEYS = {"horizon", "max_iter", "rho", "rho_state", "tol", "boxes", "box_weight"}
 #: Largest horizon and cap a spec may ask for (the C's workspace is static: a typo of 2000 would not fit anywhere).
@@ -120,3 +123,8 @@ def weights_default(Q: np.ndarray, R: np.ndarray, mpc: MpcSpec) -> tuple[float, 
     rho_state = mpc.rho_state if mpc.rho_state is not None else 1000.0 * rho
     box_weight = mpc.box_weight if mpc.box_weight is not None else 1e4 * float(np.max(np.diag(Q)))
     return rho, rho_state, box_weight
+
+
+def check_implementation(implementation: ImplementationSpec) -> None:
+    """:func:`check_mpc_spec` of a spec's ``[implementation]``."""
+    check_mpc_spec(numeric=implementation.numeric, realization=implementation.realization)

@@ -9,6 +9,9 @@ fractional bits of samples and commands, and the declared ranges as the order ke
 step clips with. The integers are taken as stored, never recomputed (docs/design.md, "Fixed point"); the only
 values formed here are those of the ranges (their quantisation is the model's, ``floor(x 2**f + 1/2)``) and
 the powers of two that turn a command word into a float.
+
+The export asks :func:`render_export` and the MAVLink upload :func:`param_table`, through the tables this family
+registers them in (``gainlink.shipping.export_c.RENDERINGS``, ``gainlink.shipping.params.TABLES``).
 """
 
 from __future__ import annotations
@@ -19,9 +22,11 @@ import zlib
 
 import numpy as np
 
-from ..errors import ArtifactError
-from .artifact import Artifact
-from .law_c import require_law
+from ...errors import ArtifactError
+from ...shipping import codegen
+from ...shipping.artifact import Artifact
+from ...shipping.law_c import require_law
+from ...shipping.params import HASH_ID, INT32, SIGNATURE_ID, STRUCTURE_ID, Param, as_int32, structure_params
 
 #: The laws whose export this module renders (the lq structure on integers).
 INTEGER_LAWS = ("lq/q31", "lq/q15")
@@ -291,3 +296,38 @@ def render_fixed(artifact: Artifact) -> dict[str, str]:
         SOURCE_NAME: render_source(artifact),
         STEP_NAME: render_step(artifact),
     }
+
+
+def render_export(artifact: Artifact) -> dict[str, str]:
+    """The fixed-point law's own files of the export: the lq structure's, whose signature covers the integers'
+    formats and terms (:func:`described`), and the integers (:func:`render_fixed`)."""
+    return codegen.render_c(artifact, more=described(artifact)) | render_fixed(artifact)
+
+
+def param_table(artifact: Artifact) -> tuple[Param, ...]:
+    """The fixed-point law's MAVLink parameter table (:mod:`gainlink.shipping.params`): the structure, the formats' and
+    the terms' signatures, ``GL_HASH``, then each term's mantissa and shift and the vectors, INT32."""
+    fp = artifact.checks["fixed_point"]
+    table_, k = fp["integers"], 0
+    gains: list[Param] = []
+    for kind, count in (("v", artifact.m), ("z", artifact.q), ("x", artifact.n)):
+        for i in range(count):
+            for block, _ in ROWS[kind]:
+                for j, (c, e) in enumerate(zip(table_[block][i], table_[f"{block}_shift"][i], strict=True)):
+                    if c != 0:  # the order of terms(): term k
+                        gains.append(
+                            Param(f"GL_{block}_{i}_{j}", INT32, int(c), f"{block}[{i},{j}]", slot=f"g.coef[{k}]")
+                        )
+                        gains.append(Param(f"GL_{block}E_{i}_{j}", INT32, int(e), f"{block}_shift[{i},{j}]",
+                                           slot=f"g.shift[{k}]"))  # fmt: skip
+                        k += 1
+    for stem, key in VECTORS:
+        field = key.lower()  # gl_fixed_gains_t's field: uop_v, lo_v, ..., z0
+        gains += [Param(f"GL_{stem}_{i}", INT32, int(v), f"{key}[{i}]", slot=f"g.{field}[{i}]")
+                  for i, v in enumerate(table_[key])]  # fmt: skip
+    header = structure_params(artifact) + [
+        Param(SIGNATURE_ID, INT32, as_int32(int(fp["signature"], 16)), "checks.fixed_point.signature"),
+        Param(STRUCTURE_ID, INT32, as_int32(structure_crc(artifact)), "structure"),
+        Param(HASH_ID, INT32, as_int32(set_crc32(artifact)), "crc32", is_hash=True),
+    ]
+    return tuple(header + gains)

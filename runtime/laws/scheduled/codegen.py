@@ -5,7 +5,8 @@ shape of sigma as macros (``GL_SCHEDULED 1``, ``GL_NPTS``, ``GL_E``, ``GL_SIGMA_
 ``const gl_sched_tables_t gl_sched_default`` (``firmware/include/gainlink/gl_sched.h``), every float printed
 round-trip. The firmware builds the scheduled law (``firmware/src/gl_sched.c``) when ``gl_gains.h`` names it
 (``GL_LAW_STRUCTURE scheduled``); :func:`gainlink.shipping.export_c.render_export` is what ``gainlink export`` and
-the firmware build call.
+the firmware build call; it asks :func:`render_scheduled`, and the MAVLink upload :func:`param_table`, through the
+tables this family registers them in (``export_c.RENDERINGS``, ``params.TABLES``).
 """
 
 from __future__ import annotations
@@ -14,11 +15,12 @@ import zlib
 
 import numpy as np
 
-from . import codegen
-from .artifact import Artifact
-from .law_c import macros as law_macros
-from .law_c import require_law
-from .scheduled import COEFFICIENTS
+from ...shipping import codegen
+from ...shipping.artifact import Artifact
+from ...shipping.law_c import macros as law_macros
+from ...shipping.law_c import require_law
+from ...shipping.params import HASH_ID, INT32, REAL32, Param, as_int32
+from .block import COEFFICIENTS
 
 SOURCE_NAME = "gl_sched_gains.c"
 FORM_CODES = {"predictor": 0, "current": 1}
@@ -140,3 +142,52 @@ def render_scheduled(artifact: Artifact) -> dict[str, str]:
     bytes."""
     require_law(artifact, ("scheduled/float32",), "the scheduled tables")
     return {codegen.HEADER_NAME: render_header(artifact), SOURCE_NAME: render_source(artifact)}
+
+
+#: The scheduled table's read-only structure parameters.
+SCHEDULED_DIMENSION_IDS = ("GL_DIM_N", "GL_DIM_M", "GL_DIM_P", "GL_DIM_Q", "GL_NPTS", "GL_DIM_E")
+
+#: Each field of gl_sched_tables_t: its id stem and whether it holds one block per point.
+_SCHEDULED_STEMS = {
+    "S": ("S", False), "Kx": ("KX", True), "Ky": ("KY", True), "Kz": ("KZ", True), "F": ("F", True),
+    "G": ("G", True), "Ly": ("LY", True), "u_op": ("UOP", True), "u_min": ("UMIN", False),
+    "u_max": ("UMAX", False), "Ci": ("CI", False), "alpha": ("ALPHA", False), "rate_step": ("RATE", False),
+}  # fmt: skip
+
+
+def _scheduled_shapes(a: Artifact) -> dict[str, tuple[int, ...]]:
+    """Each field's shape per point (empty: a scalar; one number: a vector)."""
+    n, m, p, q = a.n, a.m, a.p, a.q
+    mats = {"Kx": (m, n), "Ky": (m, p), "Kz": (m, q), "F": (n, n), "G": (n, m), "Ly": (n, p), "Ci": (q, p)}
+    return {**mats, "S": (a.schedule.points.size,), "u_op": (m,), "u_min": (m,), "u_max": (m,), "alpha": (),
+            "rate_step": ()}  # fmt: skip
+
+
+def _scheduled_names(field: str, point: int | None, shape: tuple[int, ...]) -> list[tuple[str, str]]:
+    """Each element's parameter id and C designator in ``gl_sched_set_t`` (``t.Kx[k][i * n + j]``)."""
+    stem = _SCHEDULED_STEMS[field][0]
+    base, slot = (
+        f"GL_{stem}" + ("" if point is None else f"_{point}"),
+        f"t.{field}" + ("" if point is None else f"[{point}]"),
+    )
+    if not shape:
+        return [(base, slot)]
+    if len(shape) == 1:
+        return [(f"{base}_{i}", f"{slot}[{i}]") for i in range(shape[0])]
+    return [(f"{base}_{i}_{j}", f"{slot}[{i * shape[1] + j}]") for i in range(shape[0]) for j in range(shape[1])]
+
+
+def param_table(artifact: Artifact) -> tuple[Param, ...]:
+    """The scheduled law's MAVLink parameter table (:mod:`gainlink.shipping.params`): the structure, ``GL_HASH``,
+    then every float of the tables, REAL32."""
+    a = artifact
+    dims = (a.n, a.m, a.p, a.q, a.schedule.points.size, len(a.schedule.external))
+    out = [Param(k, INT32, int(v), "structure") for k, v in zip(SCHEDULED_DIMENSION_IDS, dims, strict=True)]
+    out.append(Param(HASH_ID, INT32, as_int32(tables_crc32(a)), "CRC-32 of the tables", is_hash=True))
+    shapes = _scheduled_shapes(a)
+    for field, values in tables(a).items():
+        flat = np.asarray(values, dtype=np.float32).reshape(-1)
+        points = range(a.schedule.points.size) if _SCHEDULED_STEMS[field][1] else [None]
+        named = [pair for k in points for pair in _scheduled_names(field, k, shapes[field])]
+        out += [Param(name, REAL32, float(v), field, slot=slot) for (name, slot), v in zip(named, flat, strict=True)]
+    return tuple(out)

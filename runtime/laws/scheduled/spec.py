@@ -6,17 +6,23 @@ the points mean different things is refused here in one line: points not increas
 names or dimensions, a sigma that is neither an output nor a declared external signal, a trim outside the limits,
 ``rate_max <= 0``, ``rate_certified = false`` without a ``rate_max``, a ``certify_budget`` that is not a positive
 number of seconds, a transfer-function plant, matrices in ``[plant]`` besides the points'.
+
+The spec's parser reads them through ``gainlink.spec.parse.PLANTS["scheduled"]`` (:func:`scheduled_plants`) and
+``OPERATING["scheduled"]`` (:func:`scheduled_operating`), which this family registers.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-from ..errors import SpecError
-from .model import LimitsSpec, PlantModel, ScheduleSpec
-from .plant import parse_plant
-from .tables import parse_operating_point
-from .values import SIGNAL_RE, as_vector, no_unknown, positive_number
+from ...errors import SpecError
+from ...spec.model import ImplementationSpec, LimitsSpec, PlantModel, ScheduleSpec
+from ...spec.pairs import integer
+from ...spec.plant import parse_plant
+from ...spec.tables import parse_operating_point
+from ...spec.values import SIGNAL_RE, as_vector, no_unknown, positive_number
 
 SCHEDULE_KEYS = {"sigma", "external", "points", "rate_max", "rate_certified", "certify_budget", "filter_tau", "plant"}
 # the fit keys: each point's fit to its FMU, written by ``linearize --schedule`` (kept as written, not used)
@@ -139,3 +145,37 @@ def parse_schedule(
         rate_certified=certified,
         certify_budget=budget,
     )
+
+
+def scheduled_plants(plant: dict, sched: dict, *, Ts: float) -> tuple:
+    """The scheduled law's plants, one per point of its ``[schedule]``."""
+    points = check_schedule_table(sched)
+    return point_plants(plant, sched["plant"], points, Ts=Ts)
+
+
+def scheduled_operating(parts: Any) -> tuple[Any, Any]:
+    """The scheduled law's ``[schedule]`` (each point its own operating point): ``(schedule, its first point's)``."""
+    q = 0 if parts.integral is None else parts.integral.q
+    _check_schedulable(parts.data, q=q, m=parts.plants[0].m, implementation=parts.implementation)
+    points = check_schedule_table(parts.sched)
+    schedule = parse_schedule(parts.sched, parts.plants, points, limits=parts.limits, controllers=parts.controllers)
+    return schedule, schedule.operating_points[0]
+
+
+def _check_schedulable(data: dict, *, q: int, m: int, implementation: ImplementationSpec) -> None:
+    """What the velocity form needs of the rest of a scheduled spec (docs/design.md, scheduled law)."""
+    if "operating_point" in data:
+        raise SpecError("with a [schedule], each [[schedule.plant]] gives its own u_op, y_op, x_op: "
+                        "drop [operating_point]")  # fmt: skip
+    if q < m:
+        raise SpecError(f"a [schedule] needs integral action on every input ([integral] on {m} outputs, has {q}): "
+                        "the velocity form integrates its command, and without it the trim drifts")  # fmt: skip
+    realization = implementation.realization
+    if realization != "as_designed":
+        raise SpecError(f"implementation.realization {realization!r} cannot be scheduled: the points' estimates "
+                        "must stay in the same coordinates (use as_designed)")  # fmt: skip
+    if integer(implementation.numeric):
+        raise SpecError(
+            f"implementation.numeric {implementation.numeric!r} cannot be scheduled: a scheduled law is time-varying, "
+            "where the fixed-point certificate (worst-case peak gain) does not apply"
+        )

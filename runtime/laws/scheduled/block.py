@@ -1,5 +1,6 @@
-"""The scheduled part of a schema-2 artifact: the points, sigma's source and shaping, and per point the
-coefficients the velocity-form law runs (docs/design.md, scheduled law).
+"""The scheduled block of a schema-2 artifact (``schedule``, read by the artifact loader through
+``gainlink.shipping.artifact.BLOCKS["schedule"]``, which this family registers): the points, sigma's source and shaping,
+and per point the coefficients the velocity-form law runs (docs/design.md, scheduled law).
 
 Per point ``i`` the design gives the positional law in deviations (predictor or current form, one shape)::
 
@@ -18,30 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ArtifactError
+from ...errors import ArtifactError
+from ...shipping.systems import coefficient_law, law_coefficients
 
 #: The per-point coefficient arrays the C step runs, in its order of operations.
 COEFFICIENTS = ("Kx", "Ky", "Kz", "F", "G", "Ly")
 #: Per-point design matrices kept for the record (and the frozen-point checks).
 DESIGN_MATRICES = ("Ad", "Bd", "Cd", "Dd", "K", "L", "Ki")
-
-
-def law_coefficients(*, Ad, Bd, Cd, Dd, K, L, M, Ki, Ts: float, form: str) -> dict[str, np.ndarray]:
-    """``F G Ly Kx Ky Kz`` of one point's positional law (module docstring)."""
-    n = Ad.shape[0]
-    if form == "current":
-        X = np.eye(n) - M @ Cd
-        out = {"F": Ad @ X, "G": Bd.copy(), "Ly": Ad @ M, "Kx": K @ X, "Ky": K @ M}
-    else:
-        out = {
-            "F": Ad - L @ Cd,
-            "G": Bd - L @ Dd,
-            "Ly": L.copy(),
-            "Kx": K.copy(),
-            "Ky": np.zeros((K.shape[0], Cd.shape[0])),
-        }
-    out["Kz"] = Ts * Ki
-    return out
 
 
 def interval(points: np.ndarray, sigma: float) -> tuple[int, float]:
@@ -171,3 +155,10 @@ def _check_coefficients(stacked: dict, entries: list, *, Ts: float, form: str) -
             got = stacked[k][i]
             if np.linalg.norm(got - w) > 1e-9 * max(1.0, float(np.linalg.norm(w))):
                 raise ArtifactError(f"schedule.point[{i}].{k} is not the coefficient its design matrices give")
+
+
+def frozen_coefficients(a, sigma: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The scheduled law's frozen-point ``(A, B, C, D)`` (:func:`gainlink.shipping.systems.controller_matrices`): its
+    points' coefficients interpolated at ``sigma``."""
+    c = a.schedule.coefficients_at(sigma)
+    return coefficient_law(c["F"], c["G"], c["Ly"], c["Kx"], c["Ky"], c["Kz"] / a.Ts, Ci=a.Ci, Ts=a.Ts)

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ArtifactError
+from ...errors import ArtifactError
 
 #: A box bound without its side (JSON has no infinity).
 _BIG = math.inf
