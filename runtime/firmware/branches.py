@@ -134,12 +134,13 @@ def _base(mnemonic: str) -> str:
     return mnemonic.split(".")[0]
 
 
-def _cond_branch(mn: str) -> bool:
+def is_conditional_branch(mn: str) -> bool:
     b = _base(mn)
     return b in ("cbz", "cbnz") or (len(b) == 3 and b[0] == "b" and b[1:] in _CONDS)
 
 
-def _target(insn: Insn) -> tuple[int, str] | None:
+def branch_target(insn: Insn) -> tuple[int, str] | None:
+    """Where a direct branch or call goes: (address, symbol), or None (through a register)."""
     ops = insn.operands.split(",")[-1].strip()
     m = _TARGET.match(ops)
     return (int(m.group(1), 16), m.group(2)) if m else None
@@ -175,7 +176,7 @@ class _Flow:
             f"{name} {i.text}"
             for i in self.insns
             if _base(i.mnemonic) in ("tbb", "tbh")
-            or (_base(i.mnemonic) in ("bx", "blx") and _target(i) is None and "lr" not in i.operands)
+            or (_base(i.mnemonic) in ("bx", "blx") and branch_target(i) is None and "lr" not in i.operands)
             or (_base(i.mnemonic).startswith("mov") and _regs(i.operands)[:1] == ["pc"])
         )
 
@@ -193,14 +194,14 @@ class _Flow:
         b = _base(insn.mnemonic)
         if _is_return(insn) and insn.address not in self.predicated:
             return []
-        tgt = _target(insn)
+        tgt = branch_target(insn)
         if b == "b" and insn.address not in self.predicated:
             if tgt and tgt[0] in self.index:
                 return [self.index[tgt[0]]]
             if tgt:
                 self.calls[insn.address] = tgt[1]  # a tail call
             return []
-        if _cond_branch(insn.mnemonic) and tgt and tgt[0] in self.index:
+        if is_conditional_branch(insn.mnemonic) and tgt and tgt[0] in self.index:
             return [*nxt, self.index[tgt[0]]]
         return nxt
 
@@ -230,11 +231,11 @@ class _Flow:
         if b in _COMPARES:
             return regs, frozenset().union(*(regs.get(r, frozenset()) for r in rs)) | extra
         if b == "b" and not pred:
-            tgt = _target(insn)
+            tgt = branch_target(insn)
             if tgt and tgt[0] not in self.index:  # a tail call: the callee gets these arguments
                 self.sites[insn.address] = (tgt[1], {f"r{i}": regs.get(f"r{i}", frozenset()) for i in range(4)})
             return regs, flags
-        if b.startswith(_NO_WRITE) or _cond_branch(b) or b == "bx" or b.startswith("it"):
+        if b.startswith(_NO_WRITE) or is_conditional_branch(b) or b == "bx" or b.startswith("it"):
             return regs, flags
         if b.startswith(("ldr", "ldm", "pop")):
             for r in _load_dests(b, ops, rs):
@@ -243,7 +244,7 @@ class _Flow:
         return _alu(b, rs, regs, flags, extra, pred)
 
     def _call(self, insn: Insn, regs: dict[str, frozenset[str]]) -> State:
-        callee = (_target(insn) or (0, "?"))[1]
+        callee = (branch_target(insn) or (0, "?"))[1]
         self.calls[insn.address] = callee
         self.sites[insn.address] = (callee, {f"r{i}": regs.get(f"r{i}", frozenset()) for i in range(4)})
         ret = frozenset() if callee in COPIES else frozenset({f"ret:{callee}"})
@@ -253,7 +254,7 @@ class _Flow:
 
     def _targets(self) -> set[int]:
         if not hasattr(self, "_target_set"):
-            self._target_set = {t[0] for t in map(_target, self.insns) if t}
+            self._target_set = {t[0] for t in map(branch_target, self.insns) if t}
         return self._target_set
 
     def _refine(self, k: int, succ: int, states: dict[int, State]) -> State | None:
@@ -272,7 +273,7 @@ class _Flow:
             if (
                 insn.address in self._targets()
                 or _base(insn.mnemonic) in ("b", "bl", "blx", "bx")
-                or _cond_branch(insn.mnemonic)
+                or is_conditional_branch(insn.mnemonic)
             ):
                 return None
             j -= 1
@@ -293,19 +294,19 @@ class _Flow:
             k = work.popleft()
             out = self.step(self.insns[k], states[k])
             for s in self.successors(k):
-                edge = self._refine(k, s, states) if _cond_branch(self.insns[k].mnemonic) else None
+                edge = self._refine(k, s, states) if is_conditional_branch(self.insns[k].mnemonic) else None
                 merged = _join(states.get(s), edge or out)
                 if merged != states.get(s):
                     states[s] = merged
                     work.append(s)
         branches = []
         for k, insn in enumerate(self.insns):
-            if k not in states or not _cond_branch(insn.mnemonic):
+            if k not in states or not is_conditional_branch(insn.mnemonic):
                 continue
             regs, flags = states[k]
             b = _base(insn.mnemonic)
             origins = regs.get(_regs(insn.operands)[0], frozenset()) if b in ("cbz", "cbnz") else flags
-            tgt = _target(insn)
+            tgt = branch_target(insn)
             nxt = self.insns[k + 1].address if k + 1 < len(self.insns) else -1
             branches.append(Branch(self.name, insn, origins, tgt[0] if tgt else -1, nxt))
         return branches
@@ -342,7 +343,7 @@ def _sets_flags(insn: Insn, predicated: set[int]) -> bool:
     b = _base(insn.mnemonic)
     if b in _COMPARES or (b == "vmrs" and "APSR" in insn.operands) or b in ("bl", "blx"):
         return True
-    if insn.address in predicated or b.startswith(("v", "it")) or _cond_branch(b):
+    if insn.address in predicated or b.startswith(("v", "it")) or is_conditional_branch(b):
         return False
     return b.endswith("s") and b not in ("mls", "mrs", "cps") and not b.startswith(("ldr", "ldm", "pop", "str", "stm"))
 
@@ -430,13 +431,13 @@ def straight_call(funcs: dict[str, list[Insn]], function: str, address: int, lim
             return None
         insn = insns[k]
         b = _base(insn.mnemonic)
-        tgt = _target(insn)
+        tgt = branch_target(insn)
         if b in ("bl", "blx") or (b == "b" and tgt and not lo <= tgt[0] <= hi):
             return tgt[1] if tgt else None
         if b == "b" and tgt:
             k = addrs.get(tgt[0])
             continue
-        if _cond_branch(b) or _is_return(insn):
+        if is_conditional_branch(b) or _is_return(insn):
             return None
         k += 1
     return None

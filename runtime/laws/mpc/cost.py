@@ -16,10 +16,11 @@ The argument, in two halves:
    its own per test, the same count every time), or runs ``it`` iterations and stops (1 <= it <= cap: the step's
    fixed part F_stop plus ``it`` times one iteration's count I, the same instructions each iteration), or runs the
    cap and does not stop (F_cap + cap I). So every step's count is at most ``max(refuse paths, F_stop + cap I,
-   F_cap + cap I)``. F_stop, F_cap and I are read off a measured run that takes every path kind (steps that stop at
-   two different iteration counts, at least one capped step, a non-finite value in each sample and reference
-   element); the run must fit those formulas exactly (every count of a kind equal), which checks the first half's
-   conclusion on the image.
+   F_cap + cap I)``. I is the three passes' counts (each the same on every call of the run, checked) plus solve's
+   own loop body, counted on the disassembly (:func:`iteration_instructions`); F_stop and F_cap are read off a run
+   that takes every path kind (a step that stops, a capped step, a non-finite value in each sample and reference
+   element), and the run must fit the formulas exactly (every step of a kind gives the same fixed part), which
+   checks the first half's conclusion on the image.
 
 The bound holds for the image measured (its core, its compiler and flags, the tables' dimensions it was built for:
 any numbers in tables of those dimensions, any samples, any warm start), under the premise stated in
@@ -34,8 +35,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ...firmware.branches import Analysis, analyse_text, disassemble, straight_call
-from ...firmware.cost import count_step_instructions
+from ...firmware.branches import (
+    Analysis,
+    analyse_text,
+    branch_target,
+    disassemble,
+    is_conditional_branch,
+    straight_call,
+)
+from ...firmware.cost import count_calls, count_step_instructions
 from ...shipping.artifact import Artifact
 from ..flags import CAPPED
 
@@ -118,32 +126,63 @@ class NotProved(ValueError):
     """The run does not take every path kind, or its counts do not fit the path formulas: no bound."""
 
 
-def step_bound(counts, iterations, capped, refused, cap: int) -> StepBound:
+def step_bound(counts, iterations, capped, refused, cap: int, per_iteration: int) -> StepBound:
     """The bound at the cap from a measured run (module docstring, second half): ``counts`` each step's
-    instructions, ``iterations`` the solver's iterations, ``capped`` and ``refused`` the step's flags."""
+    instructions, ``iterations`` the solver's iterations, ``capped`` and ``refused`` the step's flags,
+    ``per_iteration`` one iteration's instructions (:func:`iteration_instructions`)."""
     c = np.asarray(counts, dtype=np.int64)
     it = np.asarray(iterations, dtype=np.int64)
     cap_ = np.asarray(capped, dtype=bool)
     ref = np.asarray(refused, dtype=bool)
     stop = ~cap_ & ~ref
-    if not ref.any() or not cap_.any() or len(set(it[stop].tolist())) < 2:
+    if not (ref.any() and cap_.any() and stop.any()):
         raise NotProved(
-            "the run must hold a refused step, a capped step and steps that stop at two different iteration counts "
-            f"(refused {int(ref.sum())}, capped {int(cap_.sum())}, stopped at {sorted(set(it[stop].tolist()))})"
+            "the run must hold a refused step, a capped step and a step that stops "
+            f"(refused {int(ref.sum())}, capped {int(cap_.sum())}, stopped {int(stop.sum())})"
         )
-    i0, i1 = np.flatnonzero(stop)[[np.argmin(it[stop]), np.argmax(it[stop])]]
-    per_iter, rem = divmod(int(c[i1] - c[i0]), int(it[i1] - it[i0]))
-    fixed_stop = c[stop] - it[stop] * per_iter
-    fixed_cap = c[cap_] - it[cap_] * per_iter
-    if rem or len(set(fixed_stop.tolist())) != 1 or len(set(fixed_cap.tolist())) != 1 or np.any(it[cap_] != cap):
+    fixed_stop = sorted(set((c[stop] - it[stop] * per_iteration).tolist()))
+    fixed_cap = sorted(set((c[cap_] - it[cap_] * per_iteration).tolist()))
+    if len(fixed_stop) != 1 or len(fixed_cap) != 1 or np.any(it[cap_] != cap):
         raise NotProved(
-            "the counts do not fit fixed part + iterations x one iteration: "
-            f"stop fixed parts {sorted(set(fixed_stop.tolist()))}, capped {sorted(set(fixed_cap.tolist()))}"
+            f"the counts do not fit fixed part + iterations x {per_iteration}: "
+            f"fixed parts of the steps that stop {fixed_stop}, of the capped ones {fixed_cap}"
         )
-    f_stop, f_cap = int(fixed_stop[0]), int(fixed_cap[0])
     refuse_max = int(c[ref].max())
-    bound = max(refuse_max, f_stop + cap * per_iter, f_cap + cap * per_iter)
-    return StepBound(per_iter, f_stop, f_cap, refuse_max, cap, bound, int(c.max()))
+    bound = max(refuse_max, (max(fixed_stop[0], fixed_cap[0]) + cap * per_iteration))
+    return StepBound(per_iteration, fixed_stop[0], fixed_cap[0], refuse_max, cap, bound, int(c.max()))
+
+
+def loop_instructions(funcs: dict, function: str = SOLVE) -> int:
+    """The instructions ``function``'s loop runs of its own each time round (its calls' excluded): from the target of
+    its one backward conditional branch to that branch, which must be straight code on the way round (every other
+    branch in it leaves the loop, forward)."""
+    insns = [i for i in funcs[function] if not i.mnemonic.startswith(".")]
+    back = [
+        (i, t[0]) for i in insns if is_conditional_branch(i.mnemonic) and (t := branch_target(i)) and t[0] <= i.address
+    ]
+    if len(back) != 1:
+        raise NotProved(f"{function} has {len(back)} backward branches: its loop is not one straight body")
+    end, head = back[0][0].address, back[0][1]
+    body = [i for i in insns if head <= i.address <= end]
+    for i in body[:-1]:
+        t = branch_target(i)
+        if i.mnemonic.split(".")[0] == "b" or (
+            is_conditional_branch(i.mnemonic) and (t is None or head <= t[0] <= end)
+        ):
+            raise NotProved(f"{function}'s loop is not straight at {i.text}")
+    return len(body)
+
+
+def iteration_instructions(a: Artifact, elf: Path, *, board: str, Y: np.ndarray, R: np.ndarray) -> int:
+    """One iteration's instructions in ``elf``: ``backward``, ``forward`` and ``slacks`` (each call of each the same
+    count over the replay of ``Y``, ``R``, or :class:`NotProved`) and solve's own loop (:func:`loop_instructions`)."""
+    total = loop_instructions(disassemble(elf))
+    for part in ITERATION:
+        cost = count_calls(elf, a, symbol=part, Y=Y, R=R, board=board)
+        if cost.cheapest != cost.dearest:
+            raise NotProved(f"{part} took {cost.cheapest} to {cost.dearest} instructions a call: not fixed")
+        total += cost.dearest
+    return total
 
 
 def refuse_samples(p: int, q: int, y: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -188,6 +227,6 @@ def measure(a: Artifact, elf: Path, *, board: str, Y: np.ndarray, R: np.ndarray)
     )
 
 
-def bound_of(m: Measured, cap: int) -> StepBound:
+def bound_of(m: Measured, cap: int, per_iteration: int) -> StepBound:
     """:func:`step_bound` of a measured run."""
-    return step_bound(m.counts, m.iterations, m.capped, m.refused, cap)
+    return step_bound(m.counts, m.iterations, m.capped, m.refused, cap, per_iteration)
