@@ -17,25 +17,41 @@ from gainlink.spec import load_spec
 from support.paths import EXAMPLES
 
 BOARD = "mps2-an386"
+#: (design, target, board, the closed loop's legs: steps, offset); the M4F pendulum in make test, the rest in the matrix
+CASES = [
+    ("pendulum_mpc", "cortex-m4", BOARD, [(60, 1.0), (30, -1.5)]),
+    *[
+        pytest.param("pendulum_mpc", t, b, [(60, 1.0), (30, -1.5)], marks=pytest.mark.matrix)
+        for t, b in (("cortex-m7", "mps2-an500"), ("cortex-m33", "mps2-an505"), ("cortex-m55", "mps3-an547"))
+    ],
+    pytest.param("quadrotor_hover_mpc", "cortex-m4", BOARD, [(40, 0.5), (20, -0.75)], marks=pytest.mark.matrix),
+]
+
+
+def artifact(name: str):
+    logging.disable(logging.WARNING)
+    try:
+        return from_dict(design(load_spec(EXAMPLES / f"{name}.toml")).artifact)
+    finally:
+        logging.disable(logging.NOTSET)
 
 
 @pytest.fixture(scope="module")
 def pendulum():
-    logging.disable(logging.WARNING)
-    a = from_dict(design(load_spec(EXAMPLES / "pendulum_mpc.toml")).artifact)
-    yield a, replay_image(a, target="cortex-m4", board=BOARD)
-    logging.disable(logging.NOTSET)
+    a = artifact("pendulum_mpc")
+    return a, replay_image(a, target="cortex-m4", board=BOARD)
 
 
 def closed_loop(a, legs: list[tuple[int, float]]) -> tuple[np.ndarray, np.ndarray]:
-    """The host C (the image bit for bit) around the design's sampled plant; each leg puts the cart ``start`` m off
-    and runs ``steps`` (the law keeps its state across legs: its warm start is then far off)."""
+    """The host C (the image bit for bit) around the design's sampled plant; each leg puts the plant ``offset`` off
+    (the pendulum's cart; the quadrotor's x, y and z) and runs ``steps`` (the law keeps its state across legs: its
+    warm start is then far off)."""
     law = law_of(a)
     plant, c, r = law.plant(a), law.native(a), law.r_op(a)
     Y = []
-    for steps, start in legs:
+    for steps, offset in legs:
         x0 = np.zeros(a.n)
-        x0[0] = start
+        x0[: 3 if a.n == 12 else 1] = offset
         plant.reset(x0)
         for _ in range(steps):
             Y.append(plant.outputs())
@@ -56,25 +72,32 @@ def test_only_the_non_finite_tests_and_the_stopping_test_depend_on_the_numbers(p
     assert len(arg.stop_tests) == 1 and arg.refuse_tests
 
 
-def test_the_bound_at_the_cap_covers_every_step_and_no_input_breaks_it(pendulum):
-    """A closed loop from 1 m (capped steps, then steps that stop at 1..9 iterations, both boxes and the inside hit)
-    plus a NaN in each sample and reference element fits fixed part + iterations x one iteration exactly; the bound
-    it gives is at least every count of a second run of extreme, alternating and random samples and references
-    (every stage's box active, warm starts far off)."""
-    a, elf = pendulum
+@pytest.mark.parametrize("name,target,board,legs", CASES)
+def test_the_bound_at_the_cap_covers_every_step_and_no_input_breaks_it(name, target, board, legs):
+    """A closed loop from 1 m and then -1.5 m (capped steps, steps that stop early, both boxes and the inside hit) plus
+    a NaN in each sample and reference element fits fixed part + iterations x one iteration exactly, with one
+    iteration the three passes' counts (the same on every call) plus solve's loop body; the bound it gives is at least
+    every count of a second run of extreme, alternating and random samples and references (every stage's box active,
+    warm starts far off). The branch argument holds on the image."""
+    a = artifact(name)
+    elf = replay_image(a, target=target, board=board)
+    assert branch_argument(elf).holds
     cap = a.mpc.max_iter
-    Y, R = closed_loop(a, [(60, 1.0), (30, -1.5)])
+    Y, R = closed_loop(a, legs)
     Yn, Rn = refuse_samples(a.p, a.q, Y[-1], R[-1])
     Y, R = np.vstack([Y, Yn]), np.vstack([R, Rn])
-    m = measure(a, elf, board=BOARD, Y=Y, R=R)
-    per_iteration = iteration_instructions(a, elf, board=BOARD, Y=Y, R=R)  # NotProved if a pass's count varies
+    m = measure(a, elf, board=board, Y=Y, R=R)
+    per_iteration = iteration_instructions(a, elf, board=board, Y=Y, R=R)  # NotProved if a pass's count varies
     bound = bound_of(m, cap, per_iteration)  # NotProved unless every count fits its path's formula
     assert m.capped.any() and m.refused.sum() == a.p + a.q
-    assert len(set(m.iterations[~m.capped & ~m.refused].tolist())) >= 3
-    assert bound.measured_max <= bound.bound <= 50_000, "the issue's M4F target"
-    zu = m.state[:, a.n + a.q : a.n + a.q + a.mpc.horizon * a.m]  # every stage's input slack
-    lo, hi = np.float32(a.mpc.lo_u[0]), np.float32(a.mpc.hi_u[0])
-    assert (zu == lo).any() and (zu == hi).any() and ((zu > lo) & (zu < hi)).any(), "below, above and inside"
+    assert bound.measured_max <= bound.bound
+    if target == "cortex-m4":
+        assert bound.bound <= {"pendulum_mpc": 50_000, "quadrotor_hover_mpc": 168_000}[name], "the issue's targets"
+    if name == "pendulum_mpc":  # it stops at several counts: each fits the same fixed part (a check of I)
+        assert len(set(m.iterations[~m.capped & ~m.refused].tolist())) >= 3
+        zu = m.state[:, a.n + a.q : a.n + a.q + a.mpc.horizon * a.m]  # every stage's input slack
+        lo, hi = np.float32(a.mpc.lo_u[0]), np.float32(a.mpc.hi_u[0])
+        assert (zu == lo).any() and (zu == hi).any() and ((zu > lo) & (zu < hi)).any(), "below, above and inside"
 
     rng = np.random.default_rng(32)
     big = np.array([1e3, -1e3, 1e6, -1e6, 30.0, -30.0, 1e-30])
@@ -84,9 +107,18 @@ def test_the_bound_at_the_cap_covers_every_step_and_no_input_breaks_it(pendulum)
         rng.uniform(-50, 50, size=(20, a.p)),
     ])  # fmt: skip
     Ra = np.vstack([np.zeros((20, a.q)), rng.choice(big, size=(20, a.q)), rng.uniform(-50, 50, size=(20, a.q))])
-    worst = measure(a, elf, board=BOARD, Y=Ya, R=Ra)
+    worst = measure(a, elf, board=board, Y=Ya, R=Ra)
     assert worst.capped.any()
     assert worst.counts.max() <= bound.bound, (int(worst.counts.max()), bound)
+
+
+def test_the_soft_float_cores_are_not_proved():
+    """On the M0 the multiply-adds and float compares are calls whose paths depend on their operands: the argument
+    names them and does not hold (bench/mpc_cost.py labels the M0's figure measured, not proved)."""
+    a = artifact("pendulum_mpc")
+    arg = branch_argument(replay_image(a, target="cortex-m0", board="microbit"))
+    assert not arg.holds
+    assert any("soft-float" in v and "gl_fmaf" in v for v in arg.violations), arg.violations
 
 
 def test_the_analysis_tells_the_numbers_branches_from_the_paths_fixed_ones():
