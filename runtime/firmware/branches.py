@@ -230,9 +230,10 @@ class _Flow:
             return regs, flags
         if b in _COMPARES:
             return regs, frozenset().union(*(regs.get(r, frozenset()) for r in rs)) | extra
-        if b == "b" and not pred:
+        if b == "b" or is_conditional_branch(b):
             tgt = branch_target(insn)
-            if tgt and tgt[0] not in self.index:  # a tail call: the callee gets these arguments
+            if tgt and tgt[0] not in self.index:  # a tail call (conditional or not): the callee gets these arguments
+                self.calls[insn.address] = tgt[1]
                 self.sites[insn.address] = (tgt[1], {f"r{i}": regs.get(f"r{i}", frozenset()) for i in range(4)})
             return regs, flags
         if b.startswith(_NO_WRITE) or is_conditional_branch(b) or b == "bx" or b.startswith("it"):
