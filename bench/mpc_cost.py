@@ -8,15 +8,23 @@ reference, the quadrotor 0.5 m off in x, y and z), replayed through each image (
 so every core sees the same trajectory and runs the same iterations).
 
 What is counted (gainlink.firmware.cost's plugin, exact and deterministic): every call of ``gl_mpc_step`` (the
-law's step, callees included: on the M0 the correctly rounded ``gl_fmaf`` of every multiply-add) and of the three
-parts of an iteration, ``backward``, ``forward`` and ``slacks`` (functions of their own, ``noinline``). The cost of an
-iteration is the sum of the three parts' dearest calls; the bound of a step is its fixed part (the step's instructions
-outside the iterations, the dearest over the run: the step's total minus its iterations at their dearest cost is a
-lower estimate, so the fixed part is taken as the dearest step minus the cap's iterations at their cheapest, an
-upper estimate on this run) plus the cap times the iteration's cost. On an FPU core the passes have no data-dependent
-branch but the slack step's clamps, so their counts vary by a few instructions; on the M0 ``gl_fmaf``'s paths depend on
-the operands. Measured on this run, not proved for every input: the report says so. Instructions are not cycles (a
-``vfma.f32`` takes 3 cycles on the M4F; flash wait states add more): times are not given here.
+law's step, callees included: on the M0 the correctly rounded ``gl_fmaf`` of every multiply-add), each call's count
+apart, and of the three parts of an iteration, ``backward``, ``forward`` and ``slacks`` (functions of their own,
+``noinline``).
+
+The bound at the cap (gainlink.laws.mpc.cost) is **proved** on the hard-float cores (M4F, M7, M33, M55) for the image
+measured (that core, the compiler and flags printed, the tables' dimensions: any numbers in them, any samples, any
+warm start): the disassembly of that image shows that the law's numbers decide only the non-finite tests and the
+solver's stopping test (``branch_argument``: every other conditional branch of the step and its callees is fixed),
+so a step's count is a refuse path's, or F_stop + it x I, or F_cap + cap x I, with I the three passes' counts (each
+the same on every call, checked) plus solve's own loop body (counted on the disassembly); the run (a closed loop from
+1 m, then -1.5 m, then a NaN in each sample and reference element) must fit those formulas exactly, and gives F_stop,
+F_cap and the bound. Then a second run tries to break it (extreme, alternating and random samples and references)
+and its worst count is printed beside. On the M0 (soft float: ``gl_fmaf``'s and the compare routines' paths depend
+on their operands) the bound is the fixed part plus the cap times the dearest iteration measured on this run, not
+proved.
+Instructions are not cycles (a ``vfma.f32`` takes 3 cycles on the M4F; flash wait states add more): times are not
+given here.
 
 Targets (issue 32, M4F, worst case): pendulum <= 50,000 instructions per step; quadrotor <= 168,000, and the law's
 state, workspace and both gain banks <= 16 KiB of RAM (``law_ram_with_both_banks_bytes``: the image's
@@ -42,49 +50,109 @@ from gainlink.firmware.targets import resolve_cortex_m
 from gainlink.laws import design as design_spec
 from gainlink.laws import law_of
 from gainlink.laws.flags import CAPPED
+from gainlink.laws.mpc.cost import NotProved, bound_of, branch_argument, iteration_instructions, refuse_samples
+from gainlink.laws.mpc.cost import measure as measure_steps
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import load_spec
 
 ROOT = Path(__file__).resolve().parents[1]
-TARGETS = ("cortex-m0", "cortex-m4", "cortex-m7")
-STEPS = {"cortex-m0": 3, "cortex-m4": 60, "cortex-m7": 60}  # the M0 runs ~4M instructions a step through gl_fmaf
+TARGETS = ("cortex-m0", "cortex-m4", "cortex-m7", "cortex-m33", "cortex-m55")
+LEGS = ((60, 1.0), (30, -1.5))  # closed-loop legs: steps, the start's offset (the law keeps its state across legs)
+M0_STEPS = 3  # the M0 runs ~4M instructions a step through gl_fmaf: measured only
 PASSES = ("backward", "forward", "slacks")
 TARGET_INSTRUCTIONS = {"pendulum_mpc": 50_000, "quadrotor_hover_mpc": 168_000}
 RAM_TARGET = {"quadrotor_hover_mpc": 16 * 1024}
 
 
-def closed_loop_samples(a, steps: int) -> tuple[np.ndarray, np.ndarray]:
-    """The host C around the design's sampled plant from a start that saturates the inputs: samples and refs."""
+def closed_loop_samples(a, legs=LEGS) -> tuple[np.ndarray, np.ndarray]:
+    """The host C around the design's sampled plant, one leg per (steps, offset) from a start that saturates the
+    inputs (quadrotor: x, y and z off by half the offset; pendulum: the cart), the law's state kept across legs."""
     law = law_of(a)
-    plant = law.plant(a)
-    x0 = np.zeros(a.n)
-    x0[: 3 if a.n == 12 else 1] = 0.5 if a.n == 12 else 1.0  # quadrotor: x, y, z; pendulum: the cart
-    plant.reset(x0)
-    c = law.native(a)
-    Y, R = np.zeros((steps, a.p)), np.tile(law.r_op(a), (steps, 1))
-    for k in range(steps):
-        Y[k] = plant.outputs()
-        plant.advance(c.step(Y[k], R[k], np.zeros(0)).u)
+    plant, c = law.plant(a), law.native(a)
+    Y = []
+    for steps, off in legs:
+        x0 = np.zeros(a.n)
+        x0[: 3 if a.n == 12 else 1] = off / 2 if a.n == 12 else off
+        plant.reset(x0)
+        for _ in range(steps):
+            Y.append(plant.outputs())
+            plant.advance(c.step(Y[-1], law.r_op(a), np.zeros(0)).u)
+    return np.array(Y), np.tile(law.r_op(a), (len(Y), 1))
+
+
+def adversarial_samples(a, steps: int = 60, seed: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """Samples and references chosen to break the bound: alternating far off (the warm start on the wrong side, every
+    stage's box active), random extremes (NaN-free, 1e-30 to 1e6 of either sign), random within +-50."""
+    rng = np.random.default_rng(seed)
+    big = np.array([1e3, -1e3, 1e6, -1e6, 30.0, -30.0, 1e-30])
+    third = steps // 3
+    Y = np.vstack([np.outer(np.tile([1.0, -1.0], third // 2), np.full(a.p, 1e3)),
+                   rng.choice(big, size=(third, a.p)), rng.uniform(-50, 50, size=(third, a.p))])  # fmt: skip
+    R = np.vstack([np.tile(law_of(a).r_op(a), (third, 1)), rng.choice(big, size=(third, a.q)),
+                   rng.uniform(-50, 50, size=(third, a.q))])  # fmt: skip
     return Y, R
 
 
+def compile_flags(elf: Path) -> str:
+    """The flags the law's C was compiled with for ``elf`` (its CMake build's ninja file)."""
+    text = (elf.parent / "build.ninja").read_text()
+    at = text.index("gl_mpc.c.obj:")
+    line = next(ln for ln in text[at:].splitlines() if ln.strip().startswith("FLAGS ="))
+    return line.split("=", 1)[1].strip()
+
+
+def proved_bound(a, elf: Path, board: str) -> dict:
+    """The bound at the cap proved for ``elf`` (module docstring), or why not; the attempt to break it."""
+    arg = branch_argument(elf)
+    out = {"argument": arg.summary(), "compile_flags": compile_flags(elf)}
+    if not arg.holds:
+        return {**out, "proved": False}
+    Y, R = closed_loop_samples(a)
+    Yn, Rn = refuse_samples(a.p, a.q, Y[-1], R[-1])
+    Y, R = np.vstack([Y, Yn]), np.vstack([R, Rn])
+    run = measure_steps(a, elf, board=board, Y=Y, R=R)
+    try:
+        bound = bound_of(run, a.mpc.max_iter, iteration_instructions(a, elf, board=board, Y=Y, R=R))
+    except NotProved as exc:
+        return {**out, "proved": False, "why": str(exc)}
+    Ya, Ra = adversarial_samples(a)
+    worst = measure_steps(a, elf, board=board, Y=Ya, R=Ra)
+    return {**out, "proved": True, **bound.summary(), "run_steps": len(run.counts),
+            "adversarial_steps": len(worst.counts), "adversarial_capped": int(worst.capped.sum()),
+            "adversarial_worst": int(worst.counts.max()),
+            "adversarial_within_bound": bool(worst.counts.max() <= bound.bound)}  # fmt: skip
+
+
 def measure(a, target: str) -> dict:
-    """Counts and sizes of ``a``'s replay image on ``target`` (module docstring)."""
+    """Counts, sizes and the bound of ``a``'s replay image on ``target`` (module docstring)."""
     platform = resolve_cortex_m(target, None)
     board = platform.board.name
     try:
         elf = replay_image(a, target=platform.target.name, board=board)
     except ToolchainError as exc:  # the micro:bit's 16 KiB of RAM: the quadrotor's replay image does not fit
         return {"target": target, "board": board, "built": False, "why": str(exc)[-160:]}
-    Y, R = closed_loop_samples(a, STEPS[target])
+    Y, R = closed_loop_samples(a)
+    if target == "cortex-m0":
+        Y, R = Y[:M0_STEPS], R[:M0_STEPS]
     host = law_of(a).replay(a, "native", Y, R)  # the image's run bit for bit (tests/test_mpc.py)
     iters = host.iterations
     step = count_step_instructions(elf, a, Y=Y, R=R, board=board)
     parts = {p: count_calls(elf, a, symbol=p, Y=Y, R=R, board=board) for p in PASSES}
     per_iter_worst = sum(parts[p].dearest for p in PASSES)
     per_iter_cheap = sum(parts[p].cheapest for p in PASSES)
-    fixed = step.dearest - int(iters.max()) * per_iter_cheap
     cap = a.mpc.max_iter
+    proof = proved_bound(a, elf, board)
+    if proof["proved"]:
+        bound = proof["bound"]
+        scope = (f"proved for every input on this image ({target}, {proof['compile_flags']}; horizon "
+                 f"{a.mpc.horizon}, {a.mpc.nx} states, {a.m} inputs, {a.mpc.nc} box rows, cap {cap}): the numbers "
+                 "decide only the non-finite tests and the stopping test (the disassembly), and the run fits fixed "
+                 "part + iterations x one iteration exactly; premise: a word an integer register loads and only moves, "
+                 "offsets and compares is an address")  # fmt: skip
+    else:
+        bound = step.dearest - int(iters.max()) * per_iter_cheap + cap * per_iter_worst
+        scope = ("measured on this run (fixed part and passes at their dearest), not proved: "
+                 + "; ".join(proof["argument"]["violations"][:2]))  # fmt: skip
     size = size_report(elf, board=board)
     syms = symbol_sizes(elf, ("gl_mpc_default", "gl_mpc_step", "law"))
     tables = syms.get("gl_mpc_default", {}).get("size", 0)
@@ -101,8 +169,11 @@ def measure(a, target: str) -> dict:
         "instructions_per_step_cheapest": step.cheapest,
         "instructions_per_iteration_worst": per_iter_worst,
         "instructions_per_iteration_parts_worst": {p: parts[p].dearest for p in PASSES},
-        "bound_per_step_at_cap": fixed + cap * per_iter_worst,
-        "bound_scope": "measured on this run (fixed part and passes at their dearest), not proved for any input",
+        "instructions_per_iteration_parts_constant": all(parts[p].dearest == parts[p].cheapest for p in PASSES),
+        "bound_per_step_at_cap": bound,
+        "bound_proved": proof["proved"],
+        "bound_scope": scope,
+        "proof": proof,
         "step_code_bytes": syms.get("gl_mpc_step", {}).get("size", 0),
         "tables_bytes": tables,
         "law_state_and_workspace_bytes": state,
@@ -123,7 +194,7 @@ def lq_baseline(name: str, a) -> dict:
     data["controller"]["method"] = "lqr"
     data.pop("mpc")
     lq = from_dict(design_spec(parse_spec(data)).artifact)
-    Y, R = closed_loop_samples(a, STEPS["cortex-m4"])
+    Y, R = closed_loop_samples(a)
     elf = replay_image(lq, target="cortex-m4", board="mps2-an386")
     step = count_step_instructions(elf, lq, Y=Y, R=R, board="mps2-an386")
     return {"law": "lq/float32 (method = lqr, the same weights)", "instructions_per_step_mean": round(step.per_step, 1),

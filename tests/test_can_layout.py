@@ -47,11 +47,44 @@ def test_dbc_round_trips_through_cantools_and_matches_the_fast_codec(pend, fd):
             msg = db.get_message_by_frame_id(frame.arbitration_id)
             assert msg.is_fd == fd and msg.length == len(frame.data)
             decoded = msg.decode(bytes(frame.data))
-            assert decoded["seq"] == seq and decoded["status"] == 0 and decoded["sat"] == 0
+            assert (
+                decoded["seq"] == seq and decoded["status"] == 0 and decoded["sat"] == 0 and decoded["status_hi"] == 0
+            )
             for name in spec.signals:
                 assert decoded[name] == pytest.approx(float(values[name]), rel=0, abs=0)
-            want = {"seq": seq, "status": 0, "sat": 0, **{n: float(values[n]) for n in spec.signals}}
+            want = {"seq": seq, "status": 0, "sat": 0, "status_hi": 0, **{n: float(values[n]) for n in spec.signals}}
             assert msg.encode(want) == bytes(frame.data)
+
+
+@pytest.mark.parametrize("fd", [False, True])
+def test_a_command_frame_carries_every_flag_bit_as_the_dbc_says(fd):
+    """Wire format 3: a command's flags 0-7 in ``status``, 8-11 in ``status_hi`` (an MPC's CAPPED, 0x100, is its bit
+    0), the frame's saturation bits in ``sat``; cantools reading the generated DBC and the link's codec agree on every
+    combination, and the MPC's DBC names CAPPED in ``status_hi``'s value table."""
+    from gainlink.hil.links.can import Assembler, FrameCodec
+    from gainlink.laws import design
+    from gainlink.shipping.artifact import from_dict
+    from gainlink.spec import load_spec
+    from support.paths import EXAMPLES
+
+    art = from_dict(design(load_spec(EXAMPLES / "quadrotor_hover_mpc.toml")).artifact)
+    layout = layout_for(art, fd=fd, base_id=0x200)
+    db = cantools.database.load_string(layout.dbc(), database_format="dbc")
+    assert all(len(spec.signals) <= 4 for spec in layout.command), "a frame carries at most 4 values"
+    hi = db.get_message_by_name(layout.command[0].name).get_signal_by_name("status_hi")
+    assert {int(k): str(v) for k, v in hi.choices.items()} == {1: "CAPPED"}
+    codec = FrameCodec(layout.command, fd=fd)
+    u = np.array([0.5, -1.0, 2.0, 3.5], dtype=np.float32)
+    for status in (0x000, 0x001, 0x080, 0x100, 0x181, 0xFFF):
+        for sat in (np.zeros(4, bool), np.array([True, False, True, True])):
+            frames = codec.encode(seq=7, values=u, status=status, sat=sat)
+            rx = Assembler(codec)
+            got = [rx.feed(f) for f in frames][-1]
+            assert got is not None and got[2] == status and np.array_equal(got[3], sat)
+            for frame, spec in zip(frames, layout.command):
+                d = db.get_message_by_frame_id(frame.arbitration_id).decode(bytes(frame.data), decode_choices=False)
+                assert d["status"] | d["status_hi"] << 8 == status
+                assert d["sat"] == sum(int(sat[spec.first + i]) << i for i in range(len(spec.signals)))
 
 
 def test_dbc_command_writes_a_file(pend, tmp_path):

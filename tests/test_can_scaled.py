@@ -63,7 +63,7 @@ def test_int16_dbc_describes_the_scaled_signals_and_matches_the_fast_codec(pend,
         assert (sig.length, sig.is_signed, sig.is_float, sig.byte_order) == (16, True, False, "little_endian")
         assert (sig.scale, sig.offset, sig.minimum, sig.maximum) == ((b - a) / SPAN, (b + a) / 2, a, b)
         assert sig.choices[INT16_NAN] == "not_a_number"
-    u_sig = db.get_message_by_frame_id(layout.command[0].arbitration_id).signals[3]
+    u_sig = db.get_message_by_frame_id(layout.command[0].arbitration_id).signals[4]
     assert (u_sig.minimum, u_sig.maximum) == (float(art.u_min[0]), float(art.u_max[0]))  # inputs: artifact limits
 
     rng = np.random.default_rng(3)
@@ -74,7 +74,7 @@ def test_int16_dbc_describes_the_scaled_signals_and_matches_the_fast_codec(pend,
         for frame, spec in zip(frames, layout.measurement):
             msg = db.get_message_by_frame_id(frame.arbitration_id)
             assert msg.is_fd == fd and msg.length == len(frame.data)
-            want = {"seq": i, "status": 0, "sat": 0, **{n: float(values[n]) for n in spec.signals}}
+            want = {"seq": i, "status": 0, "sat": 0, "status_hi": 0, **{n: float(values[n]) for n in spec.signals}}
             assert msg.encode(want) == bytes(frame.data)  # cantools rounds like the codec (half to even)
             decoded = msg.decode(bytes(frame.data))
             for n, f in zip(spec.signals, spec.factors):
@@ -88,7 +88,9 @@ def test_int16_dbc_describes_the_scaled_signals_and_matches_the_fast_codec(pend,
     f_u = layout.command[0].factors[0]
     for i, u in enumerate(rng.uniform(art.u_min, art.u_max, size=(20, art.m))):
         (frame,) = cmd.encode(seq=i, values=u, sat=np.array([i % 2 == 0]))
-        assert msg.encode({"seq": i, "status": 0, "sat": int(i % 2 == 0), "u_F": float(u[0])}) == bytes(frame.data)
+        assert msg.encode({"seq": i, "status": 0, "sat": int(i % 2 == 0), "status_hi": 0, "u_F": float(u[0])}) == bytes(
+            frame.data
+        )
         seq, got, status, sat = rx.feed(frame)
         assert seq == i and status == 0 and sat[0] == (i % 2 == 0) and abs(got[0] - u[0]) <= f_u / 2 * (1 + 1e-9)
 
@@ -171,7 +173,9 @@ def test_cli_dbc_and_hil_run_with_int16(tmp_path, pend, cart_fmu):
     res = run_cli("hil", "dbc", pend, "--can", json.dumps(cfg), "--out", out)
     assert res.code == 0, res.err
     db = cantools.database.load_file(out)
-    assert {s.length for m in db.messages for s in m.signals if s.name not in ("seq", "status", "sat")} == {16}
+    assert {
+        s.length for m in db.messages for s in m.signals if s.name not in ("seq", "status", "sat", "status_hi")
+    } == {16}
     assert db.get_message_by_name("Measurement0").get_signal_by_name("y_theta").maximum == PENDULUM_RANGES["theta"][1]
     bad = json.dumps({**cfg, "ranges": {"x": [-5, 5]}})
     assert_refused(("hil", "dbc", pend, "--can", bad), "needs a range for theta, r_x", tmp_path)

@@ -234,6 +234,29 @@ def test_a_sil_run_reports_the_solvers_iterations_as_the_c_ran_them():
     assert "stopped at the cap" in "\n".join(law_of(a).report_lines(res.metrics))
 
 
+def test_over_classic_can_the_answers_say_capped_and_the_report_reads_it_from_the_wire():
+    """HIL over classic CAN (8-byte frames, udp_multicast) to the firmware's host CAN node on the MPC law, from 1 m off:
+    the commands carry CAPPED (wire format 3: byte 3's high nibble), the trace records it from the frames, and the
+    report's count read from the wire is the host C's on the same samples, step by step."""
+    from gainlink.hil import run as hil_run
+    from support.hil import udp_transport
+
+    a = artifact(horizon=5, box=2.5)
+    steps = 30
+    scenario = {"name": "mpc_can", "artifact": "unused.json", "duration": steps * a.Ts, "controller": "firmware",
+                "plant": {"kind": "linear"}, "initial_state": {"x": 1.0}, "transport": udp_transport(fd=False),
+                "twin": False, "model_twin": False}  # fmt: skip
+    res = hil_run(scenario, artifact=a)
+    assert res.complete and res.trace.got.all() and res.info["transport"]["kind"] == "can"
+    tr, block = res.trace, res.metrics["mpc"]
+    c = law_of(a).replay(a, "native", tr.y.astype(np.float32), tr.r.astype(np.float32))
+    wire = tr.flags & law_flags.CAPPED
+    assert np.array_equal(wire, c.flags & law_flags.CAPPED) and np.count_nonzero(wire) > 0
+    assert block["capped_steps_read"] == block["capped_steps"] == np.count_nonzero(wire)
+    assert block["capped_read_is_the_models"]
+    assert "said CAPPED on the link, as the model's" in "\n".join(law_of(a).report_lines(res.metrics))
+
+
 def test_the_mpc_campaign_and_its_lqi_counterpart_draw_the_same_plants_and_an_mpc_run_reports_its_solver():
     """examples/campaigns/pendulum_mpc_mass_uncertainty.toml against the LQI law of pendulum.toml (bench/mpc_pays.py
     pairs them on the draw): the same seed draws the same plant parameters for both laws, each campaign designs its

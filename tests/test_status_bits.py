@@ -2,8 +2,9 @@
 udp_multicast), the host MAVLink app (gainlink_mavlink over UDP) and the Cortex-M image's slcan and MAVLink nodes on
 its UART in QEMU, each running each law that has bits: the float32 law (fault), the fixed-point law (fault, a sample
 clipped to its range, and, with integers edited so that V leaves 32 bits, the second-line saturation) and the
-scheduled law (fault, sigma held, clipped and rate-limited); over MAVLink also the watchdog (the CAN node steps
-only on a sample: it has none).
+scheduled law (fault, sigma held, clipped and rate-limited) and the MPC law (fault, and its solver stopped at the
+cap: bit 8, which CAN carries in byte 3's high nibble since wire format 3); over MAVLink also the watchdog (the CAN
+node steps only on a sample: it has none).
 
 Samples chosen so that each bit must be set (a NaN, a sample and a reference beyond their declared ranges, an
 external sigma that is not finite, beyond the envelope and jumping faster than its rate limit, big errors for the
@@ -16,12 +17,16 @@ from __future__ import annotations
 import copy
 
 import pytest
+from gainlink.laws import design
 from gainlink.shipping.artifact import Artifact, from_dict, load, seal
+from gainlink.spec import load_spec
 from schedule_cases import external_tank
 from support.designs import designed
 from support.fixed import example
 from support.mavlink import start_firmware
+from support.paths import EXAMPLES
 from support.status import (
+    CAPPED,
     CLIPPED,
     FAULT,
     OVERFLOW,
@@ -66,12 +71,23 @@ TANK = [
     (0.3, 3.0, 0.6),
 ]
 
+#: The MPC pendulum (examples/pendulum_mpc.toml: y = x, theta; r = r_x; +-20 N): from its start the first step stops
+#: at once, then 1 m off the cap stops the solver (CAPPED, 0x100: the status word's bit 8, on CAN byte 3's high
+#: nibble), a NaN is refused.
+MPC = [
+    ((1.0, 0.0), 0.0, ()),
+    ((1.0, 0.0), 0.0, ()),  # capped
+    ((NAN, 0.0), 0.0, ()),  # refused: fault, the safe command
+    ((0.9, 0.05), 0.0, ()),  # capped
+]
+
 #: Law -> (the samples, the status bits they must show on every link).
 LAWS = {
     "float32": (PENDULUM, FAULT),
     "q31": (PENDULUM, FAULT | CLIPPED),
     "q31_overflow": (PENDULUM, FAULT | CLIPPED | OVERFLOW),
     "scheduled": (TANK, FAULT | sum(SIGMA_BITS.values())),
+    "mpc": (MPC, FAULT | CAPPED),
 }
 
 
@@ -92,6 +108,7 @@ def laws(pend) -> dict[str, Artifact]:
         "q31": q31,
         "q31_overflow": _overflowing(q31),
         "scheduled": from_dict(designed(external_tank(form="current", rate_max=4.0, filter_tau=0.1))),
+        "mpc": from_dict(design(load_spec(EXAMPLES / "pendulum_mpc.toml")).artifact),
     }
 
 
@@ -129,7 +146,8 @@ def test_the_host_mavlink_app_sends_each_bit_its_law_sets(laws, law):
 
 
 #: The boards the other UART tests build each law's image for (tests/test_target_uart*.py, test_sched_target_uart.py).
-BOARDS = {"float32": "mps2-an386", "q31": "mps2-an385", "q31_overflow": "mps2-an385", "scheduled": "mps2-an386"}
+BOARDS = {"float32": "mps2-an386", "q31": "mps2-an385", "q31_overflow": "mps2-an385", "scheduled": "mps2-an386",
+          "mpc": "mps2-an386"}  # fmt: skip
 
 
 @pytest.mark.parametrize("protocol", ["slcan", "mavlink"])

@@ -32,6 +32,17 @@ static int all_finite(const float *x, uint32_t count)
     return 1;
 }
 
+/** v clamped to [lo, hi] (lo <= hi, as gl_mpc_check requires), as two selects that the hard-float cores compile to a
+ * compare and a predicated move (an IT block or vsel): no branch, so the instructions an iteration executes do not
+ * depend on which side of its box each element falls (docs/design.md, "MPC": the cost bound; the disassembly check
+ * in gainlink.firmware.branches fails if a compiler turns a select into a branch). Equal to
+ * v < lo ? lo : (v > hi ? hi : v) for every v, NaN included. */
+static inline float clamp(float v, float lo, float hi)
+{
+    const float a = v < lo ? lo : v;
+    return a > hi ? hi : a;
+}
+
 gl_mpc_status_t gl_mpc_check(const gl_mpc_tables_t *t)
 {
     if (t == NULL) {
@@ -76,8 +87,7 @@ void gl_mpc_safe(const gl_mpc_t *loop, float *u)
 {
     const gl_mpc_tables_t *t = loop->t;
     for (uint32_t i = 0; i < GL_M; ++i) {
-        const float v = t->u_op[i];
-        u[i] = v < t->u_min[i] ? t->u_min[i] : (v > t->u_max[i] ? t->u_max[i] : v);
+        u[i] = clamp(t->u_op[i], t->u_min[i], t->u_max[i]);
     }
 }
 
@@ -268,7 +278,7 @@ static GL_PASS int slacks(gl_mpc_t *loop)
         for (uint32_t i = 0; i < GL_M; ++i) {
             const float u = loop->u[k][i];
             const float v = u + loop->yu[k][i];
-            const float z = v < t->lo_u[i] ? t->lo_u[i] : (v > t->hi_u[i] ? t->hi_u[i] : v);
+            const float z = clamp(v, t->lo_u[i], t->hi_u[i]);
             const float e = u - z;
             const float dual = t->rho * fabsf(z - loop->zu[k][i]);
             loop->yu[k][i] = loop->yu[k][i] + e;
@@ -280,12 +290,9 @@ static GL_PASS int slacks(gl_mpc_t *loop)
         for (uint32_t r = 0; r < GL_NC; ++r) {
             const float c = loop->c[k][r];
             const float v = c + loop->yx[k][r];
-            float z = v;
-            if (v > t->hi_x[r]) {
-                z = GL_FMA(-t->kappa, v - t->hi_x[r], v);
-            } else if (v < t->lo_x[r]) {
-                z = GL_FMA(-t->kappa, v - t->lo_x[r], v);
-            }
+            /* kappa of the way back to the box, as one chain whatever the side: inside, v - v = +0 and the
+             * multiply-add returns v exactly (the model's three cases, bit for bit) */
+            const float z = GL_FMA(-t->kappa, v - clamp(v, t->lo_x[r], t->hi_x[r]), v);
             const float e = c - z;
             const float dual = t->rho_x * fabsf(z - loop->zx[k][r]);
             loop->yx[k][r] = loop->yx[k][r] + e;
@@ -297,8 +304,10 @@ static GL_PASS int slacks(gl_mpc_t *loop)
     return done;
 }
 
-/** ADMM from the warm start: iterations until the stopping test holds or the cap. */
-static void solve(gl_mpc_t *loop, const float *x0)
+/** ADMM from the warm start: iterations until the stopping test holds or the cap. A function of its own, so its
+ * iteration counter is not a register the step shares with its other tests (the disassembly check, bench/mpc_cost.py,
+ * finds the stopping test as the one branch here that the numbers decide). */
+static GL_PASS void solve(gl_mpc_t *loop, const float *x0)
 {
     int done = 0;
     uint32_t it = 0u;
@@ -336,15 +345,19 @@ static void integrate(gl_mpc_t *loop, const float *ys, const float *rs, const fl
     memcpy(e, rs, sizeof e);
     chain(e, t->Ci, ys, GL_Q, GL_P, -1.0f);
 #if GL_ANTI_WINDUP == GL_MPC_AW_CLAMP
+    uint32_t hold = 0u; /* any input clamped: the integrators hold (a select, not a return: the cost bound) */
     for (uint32_t i = 0; i < GL_M; ++i) {
-        if (u[i] != v[i]) {
-            return;
-        }
+        hold |= (uint32_t)(u[i] != v[i]);
     }
-#endif
+    for (uint32_t j = 0; j < GL_Q; ++j) {
+        const float zn = GL_FMA(t->Ts, e[j], loop->z[j]);
+        loop->z[j] = hold ? loop->z[j] : zn;
+    }
+#else
     for (uint32_t j = 0; j < GL_Q; ++j) {
         loop->z[j] = GL_FMA(t->Ts, e[j], loop->z[j]);
     }
+#endif
 #if GL_ANTI_WINDUP == GL_MPC_AW_BACKCALC
     float w[GL_M];
     for (uint32_t i = 0; i < GL_M; ++i) {
@@ -412,11 +425,11 @@ static uint32_t command(const gl_mpc_t *loop, float *us, float *v)
     uint32_t sat = 0u;
     for (uint32_t i = 0; i < GL_M; ++i) {
         v[i] = t->u_op[i] + loop->u[0][i];
-        const float ui = v[i] < t->u_min[i] ? t->u_min[i] : (v[i] > t->u_max[i] ? t->u_max[i] : v[i]);
+        const float ui = clamp(v[i], t->u_min[i], t->u_max[i]);
         const float z0 = loop->zu[0][i];
-        if (ui != v[i] || z0 == t->lo_u[i] || z0 == t->hi_u[i]) {
-            sat |= 1u << i;
-        }
+        /* | rather than ||: no branch (the cost bound) */
+        const uint32_t on = (uint32_t)(ui != v[i]) | (uint32_t)(z0 == t->lo_u[i]) | (uint32_t)(z0 == t->hi_u[i]);
+        sat |= on << i;
         us[i] = ui;
     }
     return sat;

@@ -13,7 +13,8 @@
  * counted apart, so a report can show how much of the cost is the callees'. Interrupt handlers that ran
  * during a call would be counted too: the image masks interrupts around the calls it measures.
  * At exit `insns=N calls=M own=K min=A max=B` (N summed over the M calls, A and B the cheapest and the
- * dearest call) is written to `out=PATH`. Counting is exact and deterministic.
+ * dearest call) is written to `out=PATH`; with `each=PATH`, every call's count is written there as it closes, one
+ * a line in call order (what a bound per path is checked against). Counting is exact and deterministic.
  * Build: cc -shared -fPIC -O2 -o libgl_insn_count.so gl_insn_count.c
  */
 #include <inttypes.h>
@@ -72,6 +73,7 @@ static uint64_t call_start; /* `executed` when the open call began */
 static int in_call;
 static uint64_t insn_count, call_count, min_call = UINT64_MAX, max_call;
 static char out_path[1024];
+static FILE *each_file; /* every call's count, one a line (each=PATH), or NULL */
 
 static void on_entry(unsigned int vcpu, void *userdata)
 {
@@ -94,6 +96,9 @@ static void on_return(unsigned int vcpu, void *userdata)
     call_count++;
     min_call = cost < min_call ? cost : min_call;
     max_call = cost > max_call ? cost : max_call;
+    if (each_file != NULL) {
+        fprintf(each_file, "%" PRIu64 "\n", cost);
+    }
 }
 
 static int is_return_addr(uint64_t pc)
@@ -133,6 +138,10 @@ static void on_plugin_exit(qemu_plugin_id_t id, void *userdata)
 {
     (void)id;
     (void)userdata;
+    if (each_file != NULL) {
+        fclose(each_file);
+        each_file = NULL;
+    }
     FILE *f = fopen(out_path, "w");
     if (f != NULL) {
         fprintf(f, "insns=%" PRIu64 " calls=%" PRIu64 " own=%" PRIu64 " min=%" PRIu64 " max=%" PRIu64 "\n",
@@ -156,6 +165,12 @@ int qemu_plugin_install(qemu_plugin_id_t id, const qemu_info_t *info, int argc, 
             have_entry = true;
         } else if (strncmp(a, "ret=", 4) == 0 && n_returns < MAX_RETURNS) {
             return_addrs[n_returns++] = strtoull(a + 4, NULL, 0);
+        } else if (strncmp(a, "each=", 5) == 0) {
+            each_file = fopen(a + 5, "w");
+            if (each_file == NULL) {
+                fprintf(stderr, "gl_insn_count: cannot write %s\n", a + 5);
+                return -1;
+            }
         } else if (strncmp(a, "out=", 4) == 0) {
             snprintf(out_path, sizeof out_path, "%s", a + 4);
             have_out = true;

@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 from gainlink.errors import TransportError
 from gainlink.fileio import parse_toml
-from gainlink.shipping.can_layout import CanLayout, FrameSpec, dequantise, layout_for, quantise
+from gainlink.laws.flags import CAN_STATUS_HI_SHIFT
+from gainlink.shipping.can_layout import FD_MAX_VALUES, CanLayout, FrameSpec, dequantise, layout_for, quantise
 
 from .base import TRANSPORTS, Command, Transport
 
@@ -251,7 +252,8 @@ class FrameCodec:
                 for i in range(k):
                     if sat[s.first + i]:
                         bits |= 1 << i
-            data = self.structs[s.arbitration_id].pack(seq, status, bits, *vals[s.first : s.first + k])
+            byte3 = bits | ((status >> 8) & 0x0F) << CAN_STATUS_HI_SHIFT  # wire format 3: status_hi | sat
+            data = self.structs[s.arbitration_id].pack(seq, status & 0xFF, byte3, *vals[s.first : s.first + k])
             frames.append(
                 self._Message(
                     arbitration_id=s.arbitration_id, is_extended_id=False, data=data, is_fd=self.fd, check=False
@@ -265,7 +267,9 @@ class FrameCodec:
         if len(data) < st.size:
             log.debug("short frame id %#x (%d bytes)", arbitration_id, len(data))
             return None
-        seq, status, bits, *vals = st.unpack_from(data)
+        seq, status, byte3, *vals = st.unpack_from(data)
+        status |= (byte3 >> CAN_STATUS_HI_SHIFT) << 8  # wire format 3: the flags' bits 8-11 in the high nibble
+        bits = byte3 & ((1 << CAN_STATUS_HI_SHIFT) - 1)
         if self.int16:
             factors, offsets = self._scale[arbitration_id]
             return seq, status, bits, dequantise(np.array(vals), factors, offsets)
@@ -280,7 +284,7 @@ class Assembler:
         self.partial: dict[int, list] = {}
         self.single = len(codec.specs) == 1
         k = codec.size
-        self._bits = [np.array([(b >> i) & 1 for i in range(k)], dtype=bool) for b in range(1 << min(k, 8))]
+        self._bits = [np.array([(b >> i) & 1 for i in range(k)], dtype=bool) for b in range(1 << min(k, FD_MAX_VALUES))]
 
     def feed(self, msg: Any) -> tuple[int, np.ndarray, int, np.ndarray] | None:
         spec = self.codec.by_id.get(msg.arbitration_id)

@@ -74,6 +74,7 @@ class StepCost:
     own: int = 0
     cheapest: int = 0
     dearest: int = 0
+    each: tuple[int, ...] = ()  # every call's count in call order, when asked for (count_calls(each=True))
 
     @property
     def per_step(self) -> float:
@@ -104,12 +105,13 @@ def count_step_instructions(
     S: np.ndarray | None = None,
     board: str = DEFAULT_BOARD,
     law: str | None = None,
+    each: bool = False,
 ) -> StepCost:
     """Replay ``Y``, ``R`` (and a scheduled law's external signals ``S``) through ``elf`` on ``board`` in QEMU,
     counting every call of the law's step function (``law``: the law the image runs when it is not the artifact's
-    own, a ``GL_LAW`` baseline)."""
+    own, a ``GL_LAW`` baseline; ``each``: every step's count too)."""
     symbol = step_symbol(artifact, law=law)
-    return count_calls(elf, artifact, symbol=symbol, Y=Y, R=R, S=S, board=board, law=law)
+    return count_calls(elf, artifact, symbol=symbol, Y=Y, R=R, S=S, board=board, law=law, each=each)
 
 
 def count_calls(
@@ -122,19 +124,23 @@ def count_calls(
     S: np.ndarray | None = None,
     board: str = DEFAULT_BOARD,
     law: str | None = None,
+    each: bool = False,
 ) -> StepCost:
     """Replay ``Y``, ``R``, ``S`` through ``elf`` on ``board``, counting every direct call of the function ``symbol``
-    (e.g. ``gl_fmaf`` on a soft-float core) from its entry to its return, callees included."""
+    (e.g. ``gl_fmaf`` on a soft-float core) from its entry to its return, callees included (``each``: every call's
+    count too, in :attr:`StepCost.each`)."""
     with tempfile.TemporaryDirectory(prefix="gainlink-cost-") as tmp:
         result = Path(tmp) / "count.txt"
-        plugin = counter_plugin(elf, symbol=symbol, out=result)
+        per_call = Path(tmp) / "each.txt" if each else None
+        plugin = counter_plugin(elf, symbol=symbol, out=result, each=per_call)
         fwqemu.replay(elf, artifact, board=board, Y=Y, R=R, S=S, plugin=plugin, law=law)
-        return read_count(result)
+        return read_count(result, each=per_call)
 
 
-def counter_plugin(elf: Path, *, symbol: str, out: Path) -> list[str]:
+def counter_plugin(elf: Path, *, symbol: str, out: Path, each: Path | None = None) -> list[str]:
     """The QEMU arguments that count every direct call of ``symbol`` in ``elf`` from its entry to its return, callees
-    included (the plugin, built and cached), the totals written to ``out`` when QEMU exits (:func:`read_count`)."""
+    included (the plugin, built and cached), the totals written to ``out`` when QEMU exits (:func:`read_count`), and
+    every call's count to ``each`` when given."""
     sym = symbol_sizes(elf, (symbol,)).get(symbol)
     if sym is None:
         raise FirmwareError(f"{elf} has no {symbol} symbol")
@@ -144,11 +150,14 @@ def counter_plugin(elf: Path, *, symbol: str, out: Path) -> list[str]:
     lo, hi = sym["address"], sym["address"] + sym["size"]
     spec = [f"{build_plugin()}", f"lo={lo:#x}", f"hi={hi:#x}", f"entry={lo:#x}", f"out={out}"]
     spec += [f"ret={r:#x}" for r in returns]
+    if each is not None:
+        spec.append(f"each={each}")
     return ["-plugin", ",".join(spec)]
 
 
-def read_count(out: Path) -> StepCost:
-    """The counts the plugin wrote to ``out`` (:func:`counter_plugin`) when QEMU exited."""
+def read_count(out: Path, each: Path | None = None) -> StepCost:
+    """The counts the plugin wrote to ``out`` (and every call's to ``each``, :func:`counter_plugin`) when QEMU
+    exited."""
     try:
         text = out.read_text()
     except OSError:
@@ -160,6 +169,7 @@ def read_count(out: Path) -> StepCost:
         own=fields["own"],
         cheapest=fields["min"],
         dearest=fields["max"],
+        each=tuple(int(v) for v in each.read_text().split()) if each is not None else (),
     )
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from ..shipping.flags import (
     BITS,
+    CAN_STATUS_HI_SHIFT,
     CAN_STATUS_MASK,
     CAPPED,
     CLIPPED,
@@ -27,6 +28,7 @@ from ..shipping.flags import (
 
 __all__ = [
     "BITS",
+    "CAN_STATUS_HI_SHIFT",
     "CAN_STATUS_MASK",
     "CAPPED",
     "CLIPPED",

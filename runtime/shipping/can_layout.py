@@ -1,20 +1,22 @@
 """The CAN message layout of one artifact, as a DBC (cantools) and as a fast struct codec.
 
-Every frame starts with a 4-byte header: ``seq`` (uint16, little-endian sample counter), ``status``
-(uint8: in commands the step's status flags, the one table of :mod:`gainlink.shipping.flags`, which the DBC carries as
-the signal's value table; 0 in measurements) and ``sat`` (uint8, bit i set when the i-th value of this command frame
-was clamped). Values follow, little-endian, in one of two encodings:
+Every frame starts with a 4-byte header (wire format 3): ``seq`` (uint16, little-endian sample counter), ``status``
+(uint8: in commands bits 0-7 of the step's status flags, the one table of :mod:`gainlink.shipping.flags`, which the DBC
+carries as the signal's value table; 0 in measurements), then one byte whose low nibble is ``sat`` (bit i set when the
+i-th value of this command frame was clamped) and whose high nibble is ``status_hi`` (the flags' bits 8-11: an MPC's
+CAPPED, 0x100, is its bit 0). Every flag fits in classic CAN's 8 bytes this way; the price is at most 4 values a
+frame (the nibble's bits), on CAN FD too. Values follow, little-endian, in one of two encodings:
 
 ``float32`` (default)
-    IEEE float32, 1 per classic CAN frame (8 bytes), up to 8 per CAN FD frame.
+    IEEE float32, 1 per classic CAN frame (8 bytes), up to 4 per CAN FD frame.
 ``int16``
     Scaled integers as on a vehicle bus: ``physical = raw * factor + offset`` with, for a value whose
     range is ``[minimum, maximum]``, ``factor = (maximum - minimum) / 65534`` and ``offset = (maximum +
     minimum) / 2``, so raw -32767 .. 32767 spans exactly the range. Encoding rounds half to even
     (``rint``), in float64, on both sides; values beyond the range saturate to its ends (raw +-32767);
     raw -32768 is reserved for a non-finite value (NaN, +-inf) and decodes to NaN, so a non-finite
-    sample still reaches the controller's fault path. 2 values per classic frame, up to 8 per FD frame
-    (the ``sat`` byte has 8 bits).
+    sample still reaches the controller's fault path. 2 values per classic frame, up to 4 per FD frame
+    (the ``sat`` nibble has 4 bits).
 
 FD frame lengths are rounded up to a valid FD length. Command frames (controller -> plant, ``u``) use
 ids ``base_id + j``; measurement frames (plant -> controller, ``y`` then ``r``, then a scheduled artifact's
@@ -36,7 +38,7 @@ from typing import Any
 import numpy as np
 from gainlink.errors import TransportError
 
-from .flags import FLAGS, Flag
+from .flags import CAN_STATUS_HI_SHIFT, FLAGS, Flag
 from .law_c import externals, law_name
 
 HEADER_BYTES = 4
@@ -44,7 +46,7 @@ COMMAND_OFFSET = 0x00
 MEASUREMENT_OFFSET = 0x10
 MAX_COMMAND_FRAMES = MEASUREMENT_OFFSET - COMMAND_OFFSET  # ids base+0x00 .. base+0x0f
 MAX_MEASUREMENT_FRAMES = 0x20  # ids base+0x10 .. base+0x2f (the firmware tracks them in a 32-bit mask)
-FD_MAX_VALUES = 8
+FD_MAX_VALUES = 4  # the sat nibble's bits (wire format 3: the byte's high nibble is status_hi)
 FD_LENGTHS = (8, 12, 16, 20, 24, 32, 48, 64)
 ENCODINGS = ("float32", "int16")
 #: Which flags of the one table (:data:`gainlink.shipping.flags.FLAGS`, its ``set_by``) each structure's CAN node can
@@ -249,13 +251,19 @@ def _message(spec: FrameSpec, *, sender: str, receiver: str, fd: bool, status_fl
 
 
 def _header_signals(rx: list[str], *, status_flags: tuple[Flag, ...] = ()) -> list:
-    """The header every frame starts with: ``seq``, ``status`` (its value table: the flags the law can set, each one
-    bit of the one flag table), ``sat``."""
+    """The header every frame starts with: ``seq``, ``status`` (its value table: the flags of bits 0-7 the law can
+    set, each one bit of the one flag table), ``sat`` (the low nibble) and ``status_hi`` (bits 8-11, the high nibble;
+    its value table: those flags the law can set)."""
     from cantools.database import Signal
     from cantools.database.conversion import BaseConversion
 
-    choices = {f.bit: f.name for f in status_flags}
-    meaning = "; ".join(f"bit{f.bit.bit_length() - 1} {f.name}: {f.meaning}" for f in status_flags)
+    low = [f for f in status_flags if f.bit < 0x100]
+    high = [f for f in status_flags if f.bit >= 0x100]
+    choices = {f.bit: f.name for f in low}
+    choices_hi = {f.bit >> 8: f.name for f in high}
+    meaning = "; ".join(f"bit{f.bit.bit_length() - 1} {f.name}: {f.meaning}" for f in low)
+    meaning_hi = "; ".join(f"bit{f.bit.bit_length() - 9} (flag bit {f.bit.bit_length() - 1}) {f.name}: {f.meaning}"
+                           for f in high) or "none this law sets"  # fmt: skip
 
     return [
         Signal(
@@ -280,11 +288,21 @@ def _header_signals(rx: list[str], *, status_flags: tuple[Flag, ...] = ()) -> li
         Signal(
             "sat",
             start=24,
-            length=8,
+            length=CAN_STATUS_HI_SHIFT,
             byte_order="little_endian",
             is_signed=False,
             receivers=rx,
             comment="bit i: i-th value of this frame saturated",
+        ),
+        Signal(
+            "status_hi",
+            start=24 + CAN_STATUS_HI_SHIFT,
+            length=8 - CAN_STATUS_HI_SHIFT,
+            byte_order="little_endian",
+            is_signed=False,
+            conversion=BaseConversion.factory(scale=1, offset=0, choices=choices_hi or None, is_float=False),
+            receivers=rx,
+            comment=f"status flags' bits 8-11 (commands; 0 in samples, gainlink.shipping.flags): {meaning_hi}",
         ),
     ]
 
@@ -456,7 +474,7 @@ def layout_for(
     artifact : gainlink.shipping.artifact.Artifact
         The gain artifact.
     fd : bool
-        CAN FD (up to 8 values per frame) instead of classic CAN (1 float32 or 2 int16 values per frame).
+        CAN FD (up to 4 values per frame) instead of classic CAN (1 float32 or 2 int16 values per frame).
     base_id : int
         First 11-bit identifier; the layout uses ``base_id .. base_id + 0x2f``.
     encoding : {"float32", "int16"}

@@ -48,16 +48,19 @@ RESET = BITS["RESET"]
 CAPPED = BITS["CAPPED"]
 
 #: MAVLink keeps bits 0-15 of ``HIL_ACTUATOR_CONTROLS.flags`` (bit 0 is its LOCKSTEP flag): gainlink's flags sit at
-#: bits 16-31 (the table's bits 0-15: CAPPED, 0x100, at bit 24), the saturation mask at bits 32-47. The CAN command
-#: frames' status byte carries the table's bits 0-7 only: an MPC node's CAPPED is not on CAN.
+#: bits 16-31 (the table's bits 0-15: CAPPED, 0x100, at bit 24), the saturation mask at bits 32-47.
 MAVLINK_FLAGS_SHIFT = 16
 MAVLINK_SAT_SHIFT = 32
-#: The table's bits a CAN command frame's status byte carries (the run's report counts an MPC's capped steps from
-#: its model on the samples the node received).
-CAN_STATUS_MASK = 0xFF
+#: The table's bits a CAN command frame carries (wire format 3): bits 0-7 in its ``status`` byte, bits 8-11 in the
+#: high nibble of its ``sat`` byte (``status_hi``; the low nibble is the frame's saturation bits, at most 4 values a
+#: frame). Every flag of the table fits: CAPPED (0x100) is on CAN.
+CAN_STATUS_MASK = 0xFFF
+#: Where the table's bits 8-11 sit in a CAN frame's ``sat`` byte (its high nibble).
+CAN_STATUS_HI_SHIFT = 4
 
 #: The version of the sample/command wire format (ready lines say ``wire=N``; a peer of another version is refused).
-WIRE_VERSION = 2
+#: 3: the CAN frames' ``sat`` byte carries the status bits 8-11 in its high nibble, and a frame at most 4 values.
+WIRE_VERSION = 3
 
 
 def names(flags: int) -> list[str]:
@@ -80,6 +83,8 @@ def c_header() -> str:
         "",
         f"#define GL_FLAGS_MAVLINK_SHIFT {MAVLINK_FLAGS_SHIFT} /**< gainlink's flags in HIL_ACTUATOR_CONTROLS.flags */",
         f"#define GL_SAT_MAVLINK_SHIFT {MAVLINK_SAT_SHIFT} /**< the saturation mask in HIL_ACTUATOR_CONTROLS.flags */",
+        f"#define GL_CAN_STATUS_MASK 0x{CAN_STATUS_MASK:03x}u /**< the table's bits a CAN command frame carries */",
+        f"#define GL_CAN_STATUS_HI_SHIFT {CAN_STATUS_HI_SHIFT} /**< bits 8-11 in the CAN sat byte's high nibble */",
         f"#define GL_WIRE_VERSION {WIRE_VERSION} /**< the sample/command wire format (ready lines: wire=N) */",
         f'#define GL_WIRE_VERSION_TEXT "{WIRE_VERSION}" /**< the same as text */',
         "",

@@ -28,8 +28,10 @@ from .hil import udp_transport
 #: command frames' status byte (the DBC's ``status``: bit0 fault, bit1 watchdog, bit2 a sample clipped, bit3 the
 #: second-line saturation, then sigma held 0x10, clipped 0x20, rate-limited 0x40, reset 0x80).
 FAULT, WATCHDOG, CLIPPED, OVERFLOW, RESET = 0x01, 0x02, 0x04, 0x08, 0x80
+#: The MPC's cap stopped its solver (docs/design.md: bit 8; on CAN the high nibble of byte 3, wire format 3).
+CAPPED = 0x100
 SIGMA_BITS = {SIGMA_HELD: 0x10, SIGMA_CLIPPED: 0x20, SIGMA_RATE: 0x40}  # the scheduled model's flag -> the link's bit
-#: Where MAVLink carries them (docs/design.md, "Links"; wire format 2): HIL_ACTUATOR_CONTROLS.flags bits 0-15 are
+#: Where MAVLink carries them (docs/design.md, "Links"; wire format 3): HIL_ACTUATOR_CONTROLS.flags bits 0-15 are
 #: MAVLink's own (bit 0 its LOCKSTEP flag) and stay clear, the status byte sits at bits 16-31, the saturation mask
 #: (bit k: input k) at bits 32-47.
 MAVLINK_STATUS_AT, MAVLINK_SAT_AT, MAVLINK_OWN = 16, 32, 0xFFFF
@@ -120,8 +122,33 @@ class ScheduledOracle:
         self.loop.reset()
 
 
+class MpcOracle:
+    """The MPC law's float32 model (gainlink.laws.mpc.step, the C bit for bit): fault, the cap, saturation."""
+
+    def __init__(self, a: Artifact) -> None:
+        from gainlink.laws.mpc.arith import Float32
+        from gainlink.laws.mpc.step import MpcLoop
+
+        self.a, self.loop = a, MpcLoop(a, Float32())
+
+    def sample(self, y, r, s) -> Expected:
+        st = self.loop.step(y, r)
+        status = FAULT if st.fault else (0 if st.converged else CAPPED)
+        saturated = np.array([(st.sat >> j) & 1 for j in range(self.a.m)], dtype=bool)
+        return Expected(np.float32(st.u), saturated, status)
+
+    def safe(self) -> np.ndarray:
+        """u_op clamped into the limits."""
+        return np.float32(self.loop.law.safe)
+
+    def reset(self) -> None:
+        self.loop.reset()
+
+
 def oracle(a: Artifact):
     """The model of the law ``a`` runs."""
+    if a.mpc is not None:
+        return MpcOracle(a)
     if a.schedule is not None:
         return ScheduledOracle(a)
     if a.checks.get("fixed_point") is not None:

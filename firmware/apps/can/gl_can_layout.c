@@ -75,7 +75,7 @@ static uint8_t frame_length(const gl_can_layout_t *layout, uint32_t values)
 }
 
 uint32_t gl_can_layout_encode(const gl_can_layout_t *layout, uint32_t id, uint32_t index, uint16_t seq,
-                              uint8_t status, uint32_t sat, const float *values, const gl_can_scale_t *scales,
+                              uint16_t status, uint32_t sat, const float *values, const gl_can_scale_t *scales,
                               uint32_t count, gl_can_frame_t *frame)
 {
     uint32_t k = chunk(layout, index, count);
@@ -87,8 +87,8 @@ uint32_t gl_can_layout_encode(const gl_can_layout_t *layout, uint32_t id, uint32
     frame->len = frame_length(layout, k);
     frame->data[0] = (uint8_t)(seq & 0xFFu);
     frame->data[1] = (uint8_t)(seq >> 8);
-    frame->data[2] = status;
-    frame->data[3] = (uint8_t)((sat >> first) & ((1u << k) - 1u));
+    frame->data[2] = (uint8_t)(status & 0xFFu);
+    frame->data[3] = (uint8_t)(((sat >> first) & ((1u << k) - 1u)) | (((status >> 8) & 0x0Fu) << GL_CAN_SAT_BITS));
     for (uint32_t i = 0; i < k; ++i) {
         uint8_t *p = &frame->data[GL_CAN_HEADER + layout->value_bytes * i];
         if (layout->encoding == GL_CAN_INT16) {

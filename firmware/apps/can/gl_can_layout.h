@@ -2,12 +2,13 @@
  * @file gl_can_layout.h
  * @brief The CAN layout of the artifact's samples and commands (the rule of gainlink.hil.links.can_layout).
  *
- * Every frame: bytes 0-1 `seq` (uint16 LE), byte 2 `status` (a command's: the step's GL_FLAG_* of gl_flags.h, the
- * one flag table; the DBC's value table of `status` is the same table), byte 3 `sat` (bit i: i-th value of this
- * frame saturated), then the values, little-endian, in one of two encodings:
- * - GL_CAN_FLOAT32: IEEE float32, 1 per classic frame (8 bytes), up to 8 per FD frame;
+ * Every frame (wire format 3): bytes 0-1 `seq` (uint16 LE), byte 2 `status` (a command's: bits 0-7 of the step's
+ * GL_FLAG_* of gl_flags.h, the one flag table; the DBC's value table of `status` is the same table), byte 3: its low
+ * nibble `sat` (bit i: i-th value of this frame saturated), its high nibble `status_hi` (the flags' bits 8-11:
+ * CAPPED), then the values, little-endian, in one of two encodings:
+ * - GL_CAN_FLOAT32: IEEE float32, 1 per classic frame (8 bytes), up to 4 per FD frame;
  * - GL_CAN_INT16: scaled integers, `physical = raw * factor + offset` with a factor and offset per value
- *   (gl_can_scale_t, from the DBC), 2 per classic frame, up to 8 per FD frame. Encoding computes
+ *   (gl_can_scale_t, from the DBC), 2 per classic frame, up to 4 per FD frame. Encoding computes
  *   `rint((value - offset) / factor)` in double (round half to even, as Python's numpy.rint and cantools),
  *   saturates to +-32767 and sends a non-finite value as -32768, which decodes to NaN.
  *
@@ -22,7 +23,8 @@
 #include "gl_can_link.h"
 
 #define GL_CAN_HEADER 4u                /**< Header bytes. */
-#define GL_CAN_FD_VALUES 8u             /**< Values per FD frame (the `sat` byte has 8 bits). */
+#define GL_CAN_SAT_BITS 4u              /**< The `sat` nibble's bits; byte 3's high nibble is `status_hi`. */
+#define GL_CAN_FD_VALUES GL_CAN_SAT_BITS /**< Values per FD frame (one `sat` bit each). */
 #define GL_CAN_CMD_OFFSET 0x00u         /**< Command ids: base + this + frame index. */
 #define GL_CAN_MEAS_OFFSET 0x10u        /**< Measurement ids: base + this + frame index. */
 #define GL_CAN_INT16_MAX 32767          /**< Largest raw int16 value (-GL_CAN_INT16_MAX is the smallest). */
@@ -89,7 +91,7 @@ float gl_can_dequantise(int16_t raw, const gl_can_scale_t *scale);
  * @param[in]  id      Arbitration id of the frame.
  * @param[in]  index   Frame index.
  * @param[in]  seq     Sequence number.
- * @param[in]  status  Status byte.
+ * @param[in]  status  Status flags: bits 0-7 go to byte 2, bits 8-11 to byte 3's high nibble.
  * @param[in]  sat     Saturation mask of the whole vector (bit k: value k).
  * @param[in]  values  The vector.
  * @param[in]  scales  Per value factor and offset (GL_CAN_INT16; ignored, may be NULL, for GL_CAN_FLOAT32).
@@ -98,7 +100,7 @@ float gl_can_dequantise(int16_t raw, const gl_can_scale_t *scale);
  * @return Number of values of this frame that were beyond their range and saturated (0 with float32).
  */
 uint32_t gl_can_layout_encode(const gl_can_layout_t *layout, uint32_t id, uint32_t index, uint16_t seq,
-                              uint8_t status, uint32_t sat, const float *values, const gl_can_scale_t *scales,
+                              uint16_t status, uint32_t sat, const float *values, const gl_can_scale_t *scales,
                               uint32_t count, gl_can_frame_t *frame);
 
 /**

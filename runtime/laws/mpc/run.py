@@ -37,7 +37,9 @@ def iterations(artifact: Any, trace: Any, *, ran: str | None) -> dict:
     """The ``mpc`` block of a run's report: the solver's iterations per solved step (mean, worst), the steps the
     cap stopped (``capped_steps``: the projected first move was applied) and the cap, counted by the law that ran on
     the samples it received, in turn: the host C's records (bit for bit the float32 model of every build of the C,
-    tests/test_mpc.py; one C call for the run), or the float64 algorithm for a reference run."""
+    tests/test_mpc.py; one C call for the run), or the float64 algorithm for a reference run; and the answers'
+    CAPPED bits as they arrived (``capped_steps_read``; every link carries them) against that count's, step by step
+    (``capped_read_is_the_models``)."""
     from ...firmware.host import HostLaw
     from .controllers import trace_of_records
 
@@ -50,10 +52,20 @@ def iterations(artifact: Any, trace: Any, *, ran: str | None) -> dict:
         run = trace_of_records(HostLaw(a).run(Y.astype(np.float32), R.astype(np.float32)))
     solved = run.iterations[~run.fault]
     by = "the float64 algorithm" if ran is None else "the host C's records, on the samples the controller received"
-    return {"mpc": {"horizon": int(a.mpc.horizon), "cap": int(a.mpc.max_iter), "solved_steps": int(solved.size),
-                    "iterations_mean": float(solved.mean()) if solved.size else None,
-                    "iterations_max": int(solved.max()) if solved.size else None,
-                    "capped_steps": int(np.count_nonzero(run.flags & flags.CAPPED)), "counted_by": by}}  # fmt: skip
+    block = {"horizon": int(a.mpc.horizon), "cap": int(a.mpc.max_iter), "solved_steps": int(solved.size),
+             "iterations_mean": float(solved.mean()) if solved.size else None,
+             "iterations_max": int(solved.max()) if solved.size else None,
+             "capped_steps": int(np.count_nonzero(run.flags & flags.CAPPED)), "counted_by": by}  # fmt: skip
+    return {"mpc": block | _capped_on_the_wire(trace, run.flags)}
+
+
+def _capped_on_the_wire(trace: Any, model_flags: np.ndarray) -> dict:
+    """The capped steps the commands that arrived said they were (the CAPPED bit every link carries: wire format
+    3), and whether each answered step's bit is the model's on the same sample."""
+    got = np.asarray(trace.got, dtype=bool)
+    wire = np.asarray(trace.flags)[got] & flags.CAPPED
+    return {"capped_steps_read": int(np.count_nonzero(wire)),
+            "capped_read_is_the_models": bool(np.array_equal(wire, model_flags[got] & flags.CAPPED))}  # fmt: skip
 
 
 def summary_lines(metrics: Mapping[str, Any]) -> list[str]:
@@ -61,9 +73,13 @@ def summary_lines(metrics: Mapping[str, Any]) -> list[str]:
     b = metrics.get("mpc")
     if not b or not b["solved_steps"]:
         return []
-    return [f"  MPC horizon {b['horizon']}: {b['iterations_mean']:.1f} iterations per step on average, "
-            f"{b['iterations_max']} at worst (cap {b['cap']}); {b['capped_steps']} of {b['solved_steps']} steps "
-            "stopped at the cap (the projected first move applied)"]  # fmt: skip
+    lines = [f"  MPC horizon {b['horizon']}: {b['iterations_mean']:.1f} iterations per step on average, "
+             f"{b['iterations_max']} at worst (cap {b['cap']}); {b['capped_steps']} of {b['solved_steps']} steps "
+             "stopped at the cap (the projected first move applied)"]  # fmt: skip
+    if "capped_read_is_the_models" in b:
+        agree = "as the model's" if b["capped_read_is_the_models"] else "DIFFERENT from the model's, step by step"
+        lines.append(f"  {b['capped_steps_read']} answers said CAPPED on the link, {agree}")
+    return lines
 
 
 @dataclass(frozen=True)
