@@ -30,7 +30,7 @@ import numpy as np
 from gainlink.fileio import atomic_writer, publish_files
 from gainlink.proof.twin_plot import png_bytes
 
-from .plan import CampaignPlan, describe_axes
+from .plan import CampaignPlan, describe_axes, run_heads
 from .rows import ReportRows, Tally, Verdicts
 
 PERCENTILES = (5, 25, 50, 75, 95)
@@ -391,7 +391,7 @@ def _stream_rows(plan: CampaignPlan, store: Any, csv_out: IO[str], runs_out: IO[
         axes, tracked, outs = _axes(plan), sorted(verdicts.tracked), sorted(verdicts.outputs)
         w = csv.writer(csv_out, lineterminator="\n")
         w.writerow(csv_head(plan, verdicts.tracked, verdicts.outputs))
-        for row in verdicts.rows(plan.runs):
+        for row in verdicts.rows(run_heads(plan)):
             w.writerow(csv_row(row, axes, tracked, outs))
             runs_out.write(("  " if not tally.runs else ",\n  ") + json.dumps(row, sort_keys=True, allow_nan=False))
             tally.add(row)

@@ -26,6 +26,7 @@ import fcntl
 import json
 import logging
 import os
+import pickle
 import socket
 import time
 from collections.abc import Iterator
@@ -299,6 +300,16 @@ def execute_block(
     Parquet file for the campaign folder (:func:`~.store.encode_block`): the client only writes its bytes."""
     records = [with_inputs(r, run, kind=kind) for r, run in zip(batch_records(kind, artifacts, runs, blobs), runs)]
     return encode_block(ids, records, campaign=campaign)
+
+
+def execute_packed(
+    kind: str, artifacts: dict[str, bytes], packed: bytes, blobs: dict | None = None, *, campaign: str
+) -> bytes:
+    """:func:`execute_block` as the campaign submits it: ``packed`` is ``pickle.dumps((ids, runs))``. One bytes
+    argument is what Dask's graph code walks past: a list of runs' scenarios as an argument is walked element by
+    element on the client for dependencies (measured: 11,000 calls a block of 500 pendulum runs)."""
+    ids, runs = pickle.loads(packed)
+    return execute_block(kind, artifacts, runs, blobs, ids=ids, campaign=campaign)
 
 
 def batch_records(
