@@ -107,3 +107,41 @@ def test_a_reports_heads_name_each_run_as_the_run_made_alone(given, tmp_path):
         )
     assert [i.decode() for i in plan.runs.ids] == [p.id for p in plan.runs]
     assert not plan.runs.failed.any()
+
+
+def _fmu_run(cart_fmu, pend, m: float):
+    """A 1 s SIL run of the pendulum law on the cart-pendulum FMU (Co-Simulation), pole mass ``m``, with its twin."""
+    from gainlink.hil.loop.bridge import run_scenario
+
+    data = {
+        "artifact": str(pend),
+        "transport": {},
+        "duration": 1.0,
+        "seed": 3,
+        "initial_state": {"theta": 0.1},
+        "noise": {"theta": 1e-4},
+        "plant": {"kind": "fmu", "path": str(cart_fmu), "interface": "cs", "parameters": {"m": m}},
+    }
+    return run_scenario(parse_scenario(data))
+
+
+def test_an_fmu_instance_serves_a_workers_next_runs_as_a_fresh_one_would(cart_fmu, pend):
+    """Inside reused_instances (as a campaign's worker runs), a run after another run of the FMU with other
+    parameters gives the trace of the same run on fresh instances, bit for bit; over 6 runs the process holds the
+    same instance (one a plant the run opens), one unzipped copy: instances are counted, not timed."""
+    from gainlink.hil.plants import fmu
+
+    fresh = _fmu_run(cart_fmu, pend, 0.12)
+    assert not fmu.idle_instances()  # outside: each plant freed at its run's end
+    with fmu.reused_instances():
+        _fmu_run(cart_fmu, pend, 0.08)
+        (kept,) = fmu.idle_instances().values()
+        again = _fmu_run(cart_fmu, pend, 0.12)
+        for _ in range(4):
+            _fmu_run(cart_fmu, pend, 0.1)
+            (now,) = fmu.idle_instances().values()
+            assert sorted(map(id, now)) == sorted(map(id, kept))
+    assert len(kept) == 1 and kept[0]._unzip is not None
+    for name in ("t", "y", "u", "r"):
+        assert np.array_equal(getattr(again.trace, name), getattr(fresh.trace, name)), name
+    assert again.metrics["twin"] == fresh.metrics["twin"]

@@ -42,6 +42,7 @@ from gainlink.version import __version__
 
 from ..loop.scenario import parse_scenario
 from ..paths import cache_dir
+from ..plants.fmu import reused_instances
 from .criteria import measure
 from .store import encode_block, encode_trace, with_inputs
 
@@ -231,7 +232,8 @@ def execute(kind: str, artifact_json: bytes, scenario: dict, seed: int, blobs: d
     try:
         artifact, path = artifact_from_bytes(artifact_json)
         sc = _scenario(scenario, artifact_path=path, seed=seed, blobs=blobs or {}, kind=kind)
-        result = run_point(kind, artifact, sc)
+        with reused_instances():  # an FMU plant's instance serves this worker's next run of the FMU
+            result = run_point(kind, artifact, sc)
     except GainlinkError as exc:
         return {"status": "error", "reason": str(exc), "worker": _stopped(where, cpu0)}
     return _record(result, artifact) | {"worker": _stopped(where, cpu0)}
