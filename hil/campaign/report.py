@@ -40,6 +40,8 @@ MAX_SCATTER = 20_000
 
 
 def _flat(value: Any) -> str:
+    if type(value) is float and math.isfinite(value):  # json's text of a finite float, without its encoder's call
+        return repr(value)
     return value if isinstance(value, str) else json.dumps(value)
 
 
@@ -225,9 +227,7 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
     Returns ``{"t", "percentiles": (len(PERCENTILES), N, S), "failed_median": (N, S), "runs", "failed", "outputs",
     "inputs", "half_bin": (N, S)}`` with the S signals the outputs then the commands.
     """
-    shapes: Counter = Counter()
-    for ids, st in store.trace_stacks(set(status)):
-        shapes[(st["t"].shape[1], st["y"].shape[2], st["u"].shape[2])] += len(ids)
+    shapes = Counter(store.trace_shapes(set(status)))
     if not shapes:
         return None
     shape = shapes.most_common(1)[0][0]

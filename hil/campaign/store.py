@@ -265,6 +265,20 @@ class Store:
                     if trace is not None:
                         yield run_id, trace
 
+    def trace_shapes(self, ids: set[str]) -> dict[tuple[int, int, int], int]:
+        """How many of the runs ``ids`` that have a result have stored traces of each shape (samples, outputs,
+        commands), from the ``t`` column's lengths and the widths: no output or command trace is read."""
+        index, shapes = self.index(), {}
+        for path in self.files():
+            table = pq.read_table(path, columns=["id", "t", "y_width", "u_width"])
+            names = table.column("id").to_pylist()
+            lengths = pc.list_value_length(table.column("t")).to_pylist()
+            widths = zip(table.column("y_width").to_pylist(), table.column("u_width").to_pylist())
+            for run_id, n, (p, m) in zip(names, lengths, widths):
+                if n is not None and run_id in ids and index[run_id] == ("done", path.name):
+                    shapes[(n, p, m)] = shapes.get((n, p, m), 0) + 1
+        return shapes
+
     def trace_stacks(self, ids: set[str]) -> Iterator[tuple[list[str], dict[str, np.ndarray]]]:
         """The stored traces of the runs ``ids`` that have a result, one block file at a time, stacked: for each
         block, the runs of one trace length ``N`` as ``(ids, {"t": (k, N), "y": (k, N, p), "u": ..., "r": ...})``."""
