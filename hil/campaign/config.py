@@ -48,6 +48,7 @@ anywhere are refused with one line naming them.
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 from collections.abc import Mapping
@@ -97,14 +98,15 @@ _PATH = re.compile(rf"^{_SEGMENT}(?:\.{_SEGMENT})*$")
 _STEP = re.compile(r'([A-Za-z_][A-Za-z0-9_]*|"[^"]+")((?:\[\d+\])*)(?:\.|$)')
 
 
-def path_steps(path: str) -> list[str | int]:
+@functools.cache  # a campaign sets the same few paths in every run
+def path_steps(path: str) -> tuple[str | int, ...]:
     """The keys and indices of a checked path: ``plant.parameters."spring.c"`` -> plant, parameters, spring.c;
     ``spec.controller.Q_diag[2]`` -> spec, controller, Q_diag, 2 (a quoted key may hold dots and brackets)."""
     out: list[str | int] = []
     for m in _STEP.finditer(path):
         out.append(m.group(1).strip('"'))
         out += [int(i) for i in re.findall(r"\[(\d+)\]", m.group(2))]
-    return out
+    return tuple(out)
 
 
 class CampaignError(ScenarioError):

@@ -6,6 +6,17 @@ random numbers), and raising ``runs`` keeps the earlier draws. A grid point whos
 designs its own artifact (designs are shared between points with the same spec). The run id is the
 sha256 of what the run is a function of — kind, artifact sha256, scenario (FMUs by their sha256), seed
 and gainlink's version — so a result file names exactly one run and a resumed campaign finds it.
+
+Planning draws every draw once into arrays (:func:`draw_table`: a seed and a value per axis, 8 bytes each), designs
+once per grid point (per run only when a draw axis changes the spec) and keeps each run's id (20 bytes) and whether
+its design failed (1 byte); a run's scenario is made again when it is read. Not every run's scenario goes through
+the scenario parser: each grid point's runs at the draws that hold the smallest and the largest value of each numeric
+draw axis, and the first draw of each combination of choice values (:meth:`_Planner.checked`). A drawn number reaches
+its path unchanged, scaled or shifted (a monotone map), and the scenario parser's checks of one number are ranges
+(finite, positive, ``>= 0``, within ``[0, 1]``): a value between two accepted ones is accepted, so a draw that can be
+refused anywhere is refused at an extreme, in one line, before anything runs. A check that ties two drawn numbers
+together (one must stay below another) is not covered by the extremes: such a run is refused on its worker and
+recorded as that run's error, costing no other run its result.
 """
 
 from __future__ import annotations
@@ -15,7 +26,8 @@ import hashlib
 import itertools
 import json
 import math
-from collections.abc import Iterator, Sequence
+import pickle
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -103,6 +115,12 @@ def set_path(tree: dict, path: str, value: Any, *, apply: str = "set", where: st
 
 def sample(axis: Axis, rng: np.random.Generator) -> Any:
     """One value of a draw axis (scipy.stats for the truncated normal and the log-uniform)."""
+    drawn = _sample_number(axis, rng)
+    return axis.params["values"][drawn] if axis.distribution == "choice" else drawn
+
+
+def _sample_number(axis: Axis, rng: np.random.Generator) -> Any:
+    """:func:`sample`'s number: the value, or for a choice axis the index of the value (the same draw)."""
     p = axis.params
     dist = axis.distribution
     if dist == "normal":
@@ -110,7 +128,7 @@ def sample(axis: Axis, rng: np.random.Generator) -> Any:
     if dist == "uniform":
         return float(rng.uniform(p["low"], p["high"]))
     if dist == "choice":
-        return p["values"][int(rng.integers(len(p["values"])))]
+        return int(rng.integers(len(p["values"])))
     from scipy import stats
 
     if dist == "loguniform":
@@ -126,9 +144,31 @@ def draw_values(campaign: Campaign, j: int) -> tuple[int, dict]:
     return seed, {a.name: sample(a, rng) for a in campaign.draws}
 
 
-def _apply_axis(axis: Axis, value: Any, *, spec: dict | None, scenario: dict, window: tuple[float, float]) -> None:
+def draw_table(campaign: Campaign) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Every draw's run seed and axis numbers, as :func:`draw_values` gives them: ``seeds`` (runs,) int64 and, by
+    axis name, (runs,) float64 values (a choice axis: int64 indices into its values). Made once per plan: a draw is
+    the same at every grid point."""
+    seeds = np.empty(campaign.runs, np.int64)
+    cols = {a.name: np.empty(campaign.runs, np.int64 if a.distribution == "choice" else np.float64)
+            for a in campaign.draws}  # fmt: skip
+    for j in range(campaign.runs):
+        rng = np.random.default_rng([campaign.seed, j])
+        seeds[j] = rng.integers(2**31 - 1)
+        for a in campaign.draws:
+            cols[a.name][j] = _sample_number(a, rng)
+    return seeds, cols
+
+
+def _apply_axis(
+    axis: Axis, value: Any, *, spec: dict | None, scenario: dict | None, window: tuple[float, float]
+) -> None:
+    """Set ``value`` at the axis's targets: those in the spec when ``spec`` is given, the others when ``scenario``
+    is."""
     where = f"axis {axis.name}"
     for target in axis.targets:
+        if (spec if target.startswith("spec.") else scenario) is None:
+            continue
+        value = value if isinstance(value, (int, float, str)) else copy.deepcopy(value)
         if target == "faults.drop":
             if value > 0:
                 scenario.setdefault("faults", []).append(
@@ -140,9 +180,9 @@ def _apply_axis(axis: Axis, value: Any, *, spec: dict | None, scenario: dict, wi
                     {"kind": "delay", "start": window[0], "stop": window[1], "delay_steps": int(value)}
                 )
         elif target.startswith("spec."):
-            set_path(spec, target[len("spec.") :], copy.deepcopy(value), apply=axis.apply, where=where)
+            set_path(spec, target[len("spec.") :], value, apply=axis.apply, where=where)
         else:
-            set_path(scenario, target, copy.deepcopy(value), apply=axis.apply, where=where)
+            set_path(scenario, target, value, apply=axis.apply, where=where)
 
 
 def run_id(*, kind: str, artifact_sha256: str | None, scenario: dict, seed: int) -> str:
@@ -195,7 +235,8 @@ def _check_scenario(campaign: Campaign, scenario: dict, where: str) -> Scenario:
 class PlannedRuns(Sequence):
     """A campaign's runs in plan order (grid point ``g``, draw ``j`` at index ``g * runs + j``), generated when asked,
     not held: ``runs[i]`` makes run ``i``, iterating makes them in order (the same ids, seeds and values whichever
-    way). The designs, artifacts and FMUs they use were gathered when the campaign was planned."""
+    way). The designs, artifacts and FMUs they use were gathered when the campaign was planned, with each run's id
+    (:attr:`ids`) and whether its design failed (:attr:`failed`)."""
 
     def __init__(self, campaign: Campaign, planner: _Planner) -> None:
         self.campaign, self._planner = campaign, planner
@@ -216,6 +257,59 @@ class PlannedRuns(Sequence):
         for k in range(self._count):
             yield self._planner.point(k)
 
+    @property
+    def ids(self) -> np.ndarray:
+        """Every run's id in plan order, as ASCII bytes (``(len,)``, ``S20``)."""
+        return self._planner.ids
+
+    @property
+    def failed(self) -> np.ndarray:
+        """Every run's flag, in plan order: its grid point's design failed (it is recorded, never submitted)."""
+        return self._planner.failed
+
+    def heads(self) -> Iterator[RunHead]:
+        """The runs in plan order, what a report row names of each (:class:`RunHead`), without making a scenario."""
+        planner = self._planner
+        for k in range(self._count):
+            if planner.spec_per_run:
+                p = planner.point(k)
+                yield RunHead(p.index, p.id, p.grid_index, p.draw, p.values, p.artifact_sha256, p.seed)
+                continue
+            g, j = divmod(k, self.campaign.runs)
+            got = planner.fixed if planner.fixed is not None else planner.by_point[g]
+            sha = got[1] if isinstance(got, tuple) else None
+            seed = int(planner.seeds[j])
+            yield RunHead(k, planner.ids[k].decode("ascii"), g, j, planner.values(g, j), sha, seed)
+
+
+@dataclass(frozen=True)
+class RunHead:
+    """What a report row names of a run (a :class:`RunPoint` without its scenario)."""
+
+    index: int
+    id: str
+    grid_index: int
+    draw: int
+    values: dict
+    artifact_sha256: str | None
+    seed: int
+
+
+def run_heads(plan: CampaignPlan) -> Iterable[RunHead | RunPoint]:
+    """The runs of ``plan`` in plan order as their report rows name them: a generated plan's without making any
+    scenario (:meth:`PlannedRuns.heads`), a plan of points the points themselves."""
+    return plan.runs.heads() if isinstance(plan.runs, PlannedRuns) else plan.runs
+
+
+class _Where:
+    """A run's name in a refusal (``run 12 (M_factor=1.1, ...)``), made only when a refusal prints it."""
+
+    def __init__(self, k: int, values: dict) -> None:
+        self.k, self.values = k, values
+
+    def __str__(self) -> str:
+        return f"run {self.k} ({', '.join(f'{n}={_short(v)}' for n, v in self.values.items()) or 'base'})"
+
 
 class _Planner:
     """Makes run ``k`` of a campaign (:meth:`point`), sharing the designs and FMUs between runs."""
@@ -228,30 +322,46 @@ class _Planner:
         self.designs: dict[str, tuple[bytes, str] | str] = {}  # canonical spec -> (artifact, sha256), or the error
         path = campaign.artifact_path
         self.fixed = _with_sha(path.read_bytes()) if path is not None else None
-        # Only spec.* axes change the spec: without one, every run shares the campaign's spec and its one design.
+        # Only spec.* axes change the spec: without one, every run shares the campaign's spec and its one design;
+        # without a spec.* draw axis, each grid point's runs share theirs.
         self.spec_varies = any(a.design for a in (*campaign.grid, *campaign.draws))
+        self.spec_per_run = any(a.design for a in campaign.draws)
         self.points = list(itertools.product(*(a.values for a in campaign.grid)))
+        self.by_point: dict[int, tuple[bytes, str] | str] = {}  # grid point -> its design (no spec.* draw axis)
+        self.seeds, self.drawn = draw_table(campaign)
+        # A run's scenario and spec are the base's loaded again (a deep copy, 10x cheaper than copy.deepcopy).
+        self._scenario, self._spec = pickle.dumps(campaign.scenario), pickle.dumps(campaign.spec)
+        size = len(self.points) * campaign.runs
+        self.ids, self.failed = np.zeros(size, "S20"), np.zeros(size, bool)
+
+    def values(self, g: int, j: int) -> dict:
+        """The axis values of grid point ``g``, draw ``j``."""
+        c = self.campaign
+        out = {a.name: v for a, v in zip(c.grid, self.points[g])}
+        for a in c.draws:
+            x = self.drawn[a.name][j]
+            out[a.name] = a.params["values"][int(x)] if a.distribution == "choice" else float(x)
+        return out
 
     def point(self, k: int, *, dry: DryBuild | None = None) -> RunPoint:
         """Run ``k``; with ``dry``, its scenario parsed and its plant dry-built (:class:`.preflight.DryBuild`)."""
         c = self.campaign
         g, j = divmod(k, c.runs)
-        seed, drawn = draw_values(c, j)
-        values = {a.name: v for a, v in zip(c.grid, self.points[g])} | drawn
-        spec = copy.deepcopy(c.spec) if self.spec_varies else c.spec
-        scenario = copy.deepcopy(c.scenario)
+        values = self.values(g, j)
+        where = _Where(k, values)
+        scenario = pickle.loads(self._scenario)
+        spec = pickle.loads(self._spec) if self.spec_per_run else None
         for axis in (*c.grid, *c.draws):
             _apply_axis(axis, values[axis.name], spec=spec, scenario=scenario, window=c.fault_window)
-        where = f"run {k} ({', '.join(f'{n}={_short(v)}' for n, v in values.items()) or 'base'})"
-        parsed = _check_scenario(c, scenario, where) if dry is not None else None
-        key = canonical_json(spec) if self.spec_varies else ""
-        got = self.fixed if self.fixed is not None else _artifact(c, spec, key, self.designs, where)
+        parsed = _check_scenario(c, scenario, str(where)) if dry is not None else None
+        got = self._design(g, values, spec, where)
         sha, error = (got[1], None) if isinstance(got, tuple) else (None, got)
         if sha is not None:
             self.artifacts.setdefault(sha, got[0])
             if dry is not None:
-                dry.check(parsed, scenario, artifact_json=got[0], sha=sha, where=where)
+                dry.check(parsed, scenario, artifact_json=got[0], sha=sha, where=str(where))
         _fmu_blob(scenario, c, self.blobs, self.fmu_cache)
+        seed = int(self.seeds[j])
         rid = run_id(kind=c.kind, artifact_sha256=sha, scenario=scenario, seed=seed)
         return RunPoint(
             index=k,
@@ -265,22 +375,61 @@ class _Planner:
             error=error,
         )
 
+    def _design(self, g: int, values: dict, spec: dict | None, where: _Where) -> tuple[bytes, str] | str:
+        """The run's artifact and its sha256 (or its design's error): the campaign's, its grid point's (designed with
+        the grid values), or with a spec.* draw axis its own (``spec``, every axis applied)."""
+        c = self.campaign
+        if self.fixed is not None:
+            return self.fixed
+        if spec is None:
+            if g not in self.by_point:
+                spec = pickle.loads(self._spec)
+                for axis in c.grid:
+                    _apply_axis(axis, values[axis.name], spec=spec, scenario=None, window=c.fault_window)
+                key = canonical_json(spec) if self.spec_varies else ""
+                self.by_point[g] = _artifact(c, spec, key, self.designs, str(where))
+            return self.by_point[g]
+        return _artifact(c, spec, canonical_json(spec), self.designs, str(where))
+
+    def checked(self) -> list[int]:
+        """The runs whose scenarios planning parses (see the module docstring): at each grid point, draw 0, the draws
+        holding each numeric draw axis's smallest and largest value, and the first draw of each combination of
+        choice values."""
+        c = self.campaign
+        draws = {0}
+        numeric = [self.drawn[a.name] for a in c.draws if a.distribution != "choice"]
+        for col in numeric:
+            draws.update((int(np.argmin(col)), int(np.argmax(col))))
+        choices = [self.drawn[a.name] for a in c.draws if a.distribution == "choice"]
+        if choices:
+            _, first = np.unique(np.stack(choices, axis=1), axis=0, return_index=True)
+            draws.update(int(j) for j in first)
+        return [g * c.runs + j for g in range(len(self.points)) for j in sorted(draws)]
+
+    def index(self) -> None:
+        """Make every run once: its id and whether its design failed."""
+        for k in range(len(self.ids)):
+            point = self.point(k)
+            self.ids[k] = point.id.encode("ascii")
+            self.failed[k] = point.error is not None
+
 
 def plan_campaign(campaign: Campaign) -> CampaignPlan:
-    """Plan ``campaign``: make each run once, to check it and gather the designs and FMUs it uses, keeping none;
-    its runs are returned as a :class:`PlannedRuns` (generated again when read).
+    """Plan ``campaign``: check it, design each grid point, and make each run once for its id, keeping none; its
+    runs are returned as a :class:`PlannedRuns` (generated again when read).
 
     A mistake of the campaign file is refused here, before any run (:class:`CampaignError`, one line naming the
     key): a value of another kind than the scenario holds (:func:`.preflight.check_axis_values`), a spec the spec
-    parser refuses at any grid point, a scenario the scenario parser refuses at any run, a plant that cannot be built
-    for one run of each shape (:class:`.preflight.DryBuild`). A design that fails at a grid point (``DesignError``)
-    is that point's result.
+    parser refuses at any grid point, a scenario the scenario parser refuses at any run's draw (checked at the
+    extremes of each drawn number, see the module docstring), a plant that cannot be built for one run of each shape
+    (:class:`.preflight.DryBuild`). A design that fails at a grid point (``DesignError``) is that point's result.
     """
     check_axis_values(campaign)
     dry = DryBuild(campaign)
     planner = _Planner(campaign)
-    for k in range(len(planner.points) * campaign.runs):  # each made, checked and dropped
+    for k in planner.checked():  # each made, checked and dropped
         planner.point(k, dry=dry)
+    planner.index()
     return CampaignPlan(
         campaign=campaign, runs=PlannedRuns(campaign, planner), artifacts=planner.artifacts, blobs=planner.blobs
     )

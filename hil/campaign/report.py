@@ -30,7 +30,7 @@ import numpy as np
 from gainlink.fileio import atomic_writer, publish_files
 from gainlink.proof.twin_plot import png_bytes
 
-from .plan import CampaignPlan, describe_axes
+from .plan import CampaignPlan, describe_axes, run_heads
 from .rows import ReportRows, Tally, Verdicts
 
 PERCENTILES = (5, 25, 50, 75, 95)
@@ -40,6 +40,8 @@ MAX_SCATTER = 20_000
 
 
 def _flat(value: Any) -> str:
+    if type(value) is float and math.isfinite(value):  # json's text of a finite float, without its encoder's call
+        return repr(value)
     return value if isinstance(value, str) else json.dumps(value)
 
 
@@ -225,9 +227,7 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
     Returns ``{"t", "percentiles": (len(PERCENTILES), N, S), "failed_median": (N, S), "runs", "failed", "outputs",
     "inputs", "half_bin": (N, S)}`` with the S signals the outputs then the commands.
     """
-    shapes: Counter = Counter()
-    for ids, st in store.trace_stacks(set(status)):
-        shapes[(st["t"].shape[1], st["y"].shape[2], st["u"].shape[2])] += len(ids)
+    shapes = Counter(store.trace_shapes(set(status)))
     if not shapes:
         return None
     shape = shapes.most_common(1)[0][0]
@@ -391,7 +391,7 @@ def _stream_rows(plan: CampaignPlan, store: Any, csv_out: IO[str], runs_out: IO[
         axes, tracked, outs = _axes(plan), sorted(verdicts.tracked), sorted(verdicts.outputs)
         w = csv.writer(csv_out, lineterminator="\n")
         w.writerow(csv_head(plan, verdicts.tracked, verdicts.outputs))
-        for row in verdicts.rows(plan.runs):
+        for row in verdicts.rows(run_heads(plan)):
             w.writerow(csv_row(row, axes, tracked, outs))
             runs_out.write(("  " if not tally.runs else ",\n  ") + json.dumps(row, sort_keys=True, allow_nan=False))
             tally.add(row)

@@ -1,7 +1,8 @@
 """Run a campaign: plan it, submit the runs without a result to Dask, store each as it completes, merge.
 
 FMUs go to the cluster once each (as tasks returning them, keyed by sha256); a task is
-``execute_block(kind, artifacts, runs, fmus, ids=..., campaign=...)``: a list of runs with the artifacts they use,
+``execute_block(kind, artifacts, runs, fmus, ids=..., campaign=...)`` (submitted as :func:`.worker.execute_packed`, the
+ids and runs pickled into one argument): a list of runs with the artifacts they use,
 inline (SIL: a block of up to :data:`MAX_BLOCK` runs of one artifact stepped together on the worker,
 :func:`batch_sizes`; HIL: one run, keyed by its run id). A task returns its block as one Parquet file made on the
 worker; results come back through ``as_completed`` and each block is written as it completes (the client writes
@@ -16,11 +17,13 @@ from __future__ import annotations
 import hashlib
 import itertools
 import logging
+import pickle
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from gainlink.errors import GainlinkError
 from gainlink.version import __version__
 
@@ -29,7 +32,7 @@ from .config import Campaign, CampaignError, load_campaign, parse_campaign
 from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign
 from .report import merge
 from .store import Store, refuse_foreign
-from .worker import execute_block
+from .worker import execute_packed
 
 log = logging.getLogger(__name__)
 
@@ -94,7 +97,7 @@ def plan_doc(plan: CampaignPlan) -> dict:
     again here (814 bytes a run of the shipped pendulum campaign: 81 MB at 100,000 runs, written through json's Python
     encoder)."""
     c = plan.campaign
-    ids = [r.id for r in plan.runs]
+    ids = [i.decode("ascii") for i in plan.runs.ids]
     return {
         "campaign": {
             "name": c.name,
@@ -173,21 +176,22 @@ def run(
     refuse_foreign(out, doc)  # before anything is written
     store = Store(out, campaign=campaign.name)
     store.prepare(plan, plan_doc=doc)
-    ids, reused, todo = _count_runs(plan, store)
-    total = len(ids)
+    distinct, finished = _distinct_runs(plan, store)
+    total, reused = int(distinct.sum()), int((distinct & finished).sum())
+    todo = int((distinct & ~finished & ~plan.runs.failed).sum())
     done = total - todo
     if todo:
         try:
             with dask_client(scheduler=scheduler, workers=workers) as client:
                 threads = sum(client.nthreads().values())
                 sizes = batch_sizes(campaign.kind, todo, threads, batch=batch)
-                blocks = _blocks(plan, store, sizes)
+                blocks = _blocks(plan, store, sizes, distinct & ~finished)
                 _submit_and_store(
                     client, plan, blocks, store, done=done, total=total, progress=progress, window=threads
                 )
         except KeyboardInterrupt:  # the block closed the client (and the LocalCluster) on its way out
-            finished = sum(store.finished(i) for i in ids)
-            raise CampaignInterrupted(out=store.out, finished=finished, total=total) from None
+            stored = int((distinct & store.finished_mask(plan.runs.ids)).sum())
+            raise CampaignInterrupted(out=store.out, finished=stored, total=total) from None
     return _result(plan, store, reused=reused, executed=todo, plots=plots)
 
 
@@ -198,34 +202,24 @@ def _check_counts(*, batch: int | None, workers: int | None) -> None:
             raise CampaignError(f"campaign: {name} must be a whole number >= 1, not {value!r}")
 
 
-def _count_runs(plan: CampaignPlan, store: Store) -> tuple[set[str], int, int]:
-    """One walk over the generated plan: the distinct run ids (a run planned twice with the same inputs runs once),
-    how many had a result before this call, and how many are to submit (those without a result whose design did not
-    fail)."""
-    ids: set[str] = set()
-    reused = todo = 0
-    for point in plan.runs:
-        if point.id in ids:
-            continue
-        ids.add(point.id)
-        if store.finished(point.id):
-            reused += 1
-        elif point.error is None:
-            todo += 1
-    return ids, reused, todo
+def _distinct_runs(plan: CampaignPlan, store: Store) -> tuple[np.ndarray, np.ndarray]:
+    """By run, in plan order: whether it is the first of its id (a run planned twice with the same inputs runs once)
+    and whether the store holds its result; from the plan's ids, without making a run."""
+    ids = plan.runs.ids
+    distinct = np.zeros(len(ids), bool)
+    distinct[np.unique(ids, return_index=True)[1]] = True
+    return distinct, store.finished_mask(ids)
 
 
-def _blocks(plan: CampaignPlan, store: Store, sizes: list[int]) -> Iterator[list[RunPoint]]:
-    """The runs to submit, in plan order, cut into blocks of ``sizes``: a second walk over the generated plan, each
-    distinct run without a result once (its first point); those whose design failed are stored as errors here, a
-    block at a time, instead of being submitted."""
-    kind, pending, failed, seen = plan.campaign.kind, iter(sizes), [], set()
+def _blocks(plan: CampaignPlan, store: Store, sizes: list[int], pending: np.ndarray) -> Iterator[list[RunPoint]]:
+    """The runs to submit (``pending``: a distinct run without a result), in plan order, cut into blocks of
+    ``sizes`` and made as they are cut; those whose design failed are stored as errors here, a block at a time,
+    instead of being submitted."""
+    kind, cuts, failed = plan.campaign.kind, iter(sizes), []
     block: list[RunPoint] = []
-    size = next(pending, 0)
-    for point in plan.runs:
-        if point.id in seen or store.finished(point.id):
-            continue
-        seen.add(point.id)
+    size = next(cuts, 0)
+    for k in np.flatnonzero(pending):
+        point = plan.runs[int(k)]
         if point.error is not None:
             failed.append(point)
             if len(failed) == MAX_BLOCK:
@@ -235,7 +229,7 @@ def _blocks(plan: CampaignPlan, store: Store, sizes: list[int]) -> Iterator[list
         block.append(point)
         if len(block) == size:
             yield block
-            block, size = [], next(pending, 0)
+            block, size = [], next(cuts, 0)
     if failed:
         store.put(failed, kind=kind, results=[{"status": "error", "reason": p.error} for p in failed])
     if block:
@@ -306,13 +300,13 @@ class _Submitter:
         paths = " ".join(str(p.scenario.get("plant", {}).get("path", "")) for p in points)
         needed = {s: f for s, f in self.blobs.items() if s in paths}
         key = f"gainlink-run-{points[0].id}" if len(points) == 1 else f"gainlink-batch-{points[0].id}-{len(points)}"
+        runs = [(p.artifact_sha256, p.scenario, p.seed) for p in points]
         return self.client.submit(
-            execute_block,
+            execute_packed,
             self.kind,
             {s: self.plan.artifacts[s] for s in shas},
-            [(p.artifact_sha256, p.scenario, p.seed) for p in points],
+            pickle.dumps(([p.id for p in points], runs), protocol=pickle.HIGHEST_PROTOCOL),
             needed,
-            ids=[p.id for p in points],
             campaign=self.plan.campaign.name,
             key=key,
             retries=1,

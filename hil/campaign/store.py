@@ -202,9 +202,10 @@ class Store:
 
     def _note(self, ids: list[str], statuses: list[str], name: str) -> None:
         index = self.index() if self._index is None else self._index
+        entries = {status: (status, name) for status in set(statuses)}  # one tuple a status and block, not a run
         for run_id, status in zip(ids, statuses):
             if index.get(run_id, ("error",))[0] == "error":
-                index[run_id] = (status, name)
+                index[run_id] = entries[status]
 
     def has(self, run_id: str) -> bool:
         """True when run ``run_id`` has a record (a result or an error)."""
@@ -214,16 +215,28 @@ class Store:
         """True when run ``run_id`` has a result: a record that is not an error (errors are run again)."""
         return self.index().get(run_id, ("error",))[0] != "error"
 
+    def finished_mask(self, ids: np.ndarray) -> np.ndarray:
+        """:meth:`finished` of each of ``ids`` (ASCII bytes, as :attr:`.plan.PlannedRuns.ids`), as a bool array."""
+        done = [i.encode("ascii") for i, (status, _) in self.index().items() if status != "error"]
+        if not done:
+            return np.zeros(len(ids), bool)
+        return np.isin(ids, np.array(done, dtype=ids.dtype))
+
     def put_block(self, data: bytes) -> list[dict]:
         """Store a block file made by :func:`encode_block`; returns each run's ``id``, ``status`` and ``reason`` (an
         error's)."""
-        table = pq.read_table(pa.BufferReader(data), columns=["id", "status", "record"])
+        table = pq.read_table(pa.BufferReader(data), columns=["id", "status"])
         ids, statuses = table.column("id").to_pylist(), table.column("status").to_pylist()
+        name = f"{block_address(ids)}.parquet"
         self.blocks.mkdir(exist_ok=True)
-        atomic_write_bytes(self.blocks / f"{block_address(ids)}.parquet", data)
-        self._note(ids, statuses, f"{block_address(ids)}.parquet")
-        records = table.column("record").to_pylist()
-        reasons = [json.loads(r).get("reason") if s == "error" else None for r, s in zip(records, statuses)]
+        atomic_write_bytes(self.blocks / name, data)
+        self._note(ids, statuses, name)
+        reasons: list[str | None] = [None] * len(ids)
+        errors = [i for i, status in enumerate(statuses) if status == "error"]
+        if errors:  # only errors' records are decoded here: a result's is the report's to read
+            records = pq.read_table(pa.BufferReader(data), columns=["record"]).column("record")
+            for i in errors:
+                reasons[i] = json.loads(records[i].as_py()).get("reason")
         return [{"id": i, "status": s, "reason": r} for i, s, r in zip(ids, statuses, reasons)]
 
     def put(self, points: list[RunPoint], *, kind: str, results: list[dict]) -> list[dict]:
@@ -251,6 +264,20 @@ class Store:
                     trace = _trace_of(table, row)
                     if trace is not None:
                         yield run_id, trace
+
+    def trace_shapes(self, ids: set[str]) -> dict[tuple[int, int, int], int]:
+        """How many of the runs ``ids`` that have a result have stored traces of each shape (samples, outputs,
+        commands), from the ``t`` column's lengths and the widths: no output or command trace is read."""
+        index, shapes = self.index(), {}
+        for path in self.files():
+            table = pq.read_table(path, columns=["id", "t", "y_width", "u_width"])
+            names = table.column("id").to_pylist()
+            lengths = pc.list_value_length(table.column("t")).to_pylist()
+            widths = zip(table.column("y_width").to_pylist(), table.column("u_width").to_pylist())
+            for run_id, n, (p, m) in zip(names, lengths, widths):
+                if n is not None and run_id in ids and index[run_id] == ("done", path.name):
+                    shapes[(n, p, m)] = shapes.get((n, p, m), 0) + 1
+        return shapes
 
     def trace_stacks(self, ids: set[str]) -> Iterator[tuple[list[str], dict[str, np.ndarray]]]:
         """The stored traces of the runs ``ids`` that have a result, one block file at a time, stacked: for each

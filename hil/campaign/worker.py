@@ -26,6 +26,7 @@ import fcntl
 import json
 import logging
 import os
+import pickle
 import socket
 import time
 from collections.abc import Iterator
@@ -41,6 +42,7 @@ from gainlink.version import __version__
 
 from ..loop.scenario import parse_scenario
 from ..paths import cache_dir
+from ..plants.fmu import reused_instances
 from .criteria import measure
 from .store import encode_block, encode_trace, with_inputs
 
@@ -230,7 +232,8 @@ def execute(kind: str, artifact_json: bytes, scenario: dict, seed: int, blobs: d
     try:
         artifact, path = artifact_from_bytes(artifact_json)
         sc = _scenario(scenario, artifact_path=path, seed=seed, blobs=blobs or {}, kind=kind)
-        result = run_point(kind, artifact, sc)
+        with reused_instances():  # an FMU plant's instance serves this worker's next run of the FMU
+            result = run_point(kind, artifact, sc)
     except GainlinkError as exc:
         return {"status": "error", "reason": str(exc), "worker": _stopped(where, cpu0)}
     return _record(result, artifact) | {"worker": _stopped(where, cpu0)}
@@ -299,6 +302,16 @@ def execute_block(
     Parquet file for the campaign folder (:func:`~.store.encode_block`): the client only writes its bytes."""
     records = [with_inputs(r, run, kind=kind) for r, run in zip(batch_records(kind, artifacts, runs, blobs), runs)]
     return encode_block(ids, records, campaign=campaign)
+
+
+def execute_packed(
+    kind: str, artifacts: dict[str, bytes], packed: bytes, blobs: dict | None = None, *, campaign: str
+) -> bytes:
+    """:func:`execute_block` as the campaign submits it: ``packed`` is ``pickle.dumps((ids, runs))``. One bytes
+    argument is what Dask's graph code walks past: a list of runs' scenarios as an argument is walked element by
+    element on the client for dependencies (measured: 11,000 calls a block of 500 pendulum runs)."""
+    ids, runs = pickle.loads(packed)
+    return execute_block(kind, artifacts, runs, blobs, ids=ids, campaign=campaign)
 
 
 def batch_records(

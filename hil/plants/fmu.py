@@ -6,13 +6,24 @@ Per step the bridge calls the raw ``fmi2SetReal`` / ``fmi2DoStep`` / ``fmi2GetRe
 (FIELD-NOTES: ~2.5 us per step instead of ~4.8 us through the list wrappers). Snapshots use
 ``fmi2GetFMUstate`` / ``fmi3GetFMUState`` when the FMU can. An FMI 2.0 FMU's log goes to
 :mod:`logging`, and a failed call's :class:`PlantError` carries the FMU's last logged message.
+
+Inside :func:`reused_instances` (a campaign's worker runs its runs there), a closed plant keeps its FMPy instance
+(the unzipped binary, the loaded library, the instantiated FMU) for the next plant of the same FMU file and variables
+opened in this process (:meth:`FmuPlant.open`), which sets its parameters and resets it (``fmi2Reset`` /
+``fmi3Reset``, then the experiment set up again, as every run's start does): FMPy unzips an FMU per instance and
+instances leak memory (fmpy issues), so a campaign opens one instance per (FMU, worker) and use at a time, not one per
+run. A plant whose FMU call failed is freed, never reused.
 """
 
 from __future__ import annotations
 
+import atexit
+import contextlib
+import contextvars
+import json
 import logging
 import shutil
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +34,38 @@ from .base import Plant
 from .fmi import fmi2_callbacks, forget_log, map_variables, open_binary, read_description, set_values
 
 log = logging.getLogger(__name__)
+
+_REUSE: contextvars.ContextVar[bool] = contextvars.ContextVar("gainlink_fmu_reuse", default=False)
+_IDLE: dict[str, list[FmuPlant]] = {}  # closed plants kept for reuse, by FMU file and variables
+
+
+@contextlib.contextmanager
+def reused_instances() -> Iterator[None]:
+    """Within: a closed :class:`FmuPlant` is kept for the next :meth:`FmuPlant.open` of the same FMU and variables
+    in this process (see the module docstring); the kept instances outlive the block (freed at exit)."""
+    token = _REUSE.set(True)
+    try:
+        yield
+    finally:
+        _REUSE.reset(token)
+
+
+def idle_instances() -> dict[str, list[FmuPlant]]:
+    """The plants kept for reuse in this process, by FMU file and variables."""
+    return {k: list(v) for k, v in _IDLE.items()}
+
+
+@atexit.register
+def _free_idle() -> None:
+    for plants in _IDLE.values():
+        for plant in plants:
+            plant._free()
+    _IDLE.clear()
+
+
+def _reuse_key(path: Path, inputs: Any, outputs: Any, states: Any) -> str:
+    stat = Path(path).stat()
+    return json.dumps([str(Path(path).resolve()), stat.st_size, stat.st_mtime_ns, inputs, outputs, states], default=str)
 
 
 class FmuPlant(Plant):
@@ -99,7 +142,35 @@ class FmuPlant(Plant):
         self._in_np = np.frombuffer(self._val_in, dtype=np.float64)
         self._n_in, self._n_out = len(in_names), len(out_names)
         self.time = 0.0
+        self._reuse_key: str | None = None
+        self._broken = False
         self.reset(initial={})
+
+    @classmethod
+    def open(
+        cls,
+        *,
+        path: Path,
+        inputs: Any = None,
+        outputs: Any = None,
+        parameters: Mapping[str, float] | None = None,
+        states: Any = None,
+    ) -> FmuPlant:
+        """A plant of the FMU at ``path``: inside :func:`reused_instances` an idle one of the same FMU and variables,
+        given ``parameters`` and reset, when one was closed; else a new one (the constructor's arguments)."""
+        if not _REUSE.get():
+            return cls(path=path, inputs=inputs, outputs=outputs, parameters=parameters, states=states)
+        key = _reuse_key(path, inputs, outputs, states)
+        idle = _IDLE.get(key)
+        if idle:
+            plant = idle.pop()
+            mapping = map_variables(plant.md, inputs=inputs, outputs=outputs, states=states, parameters=parameters)
+            plant.parameters = mapping.parameters
+            plant.reset(initial={})
+        else:
+            plant = cls(path=path, inputs=inputs, outputs=outputs, parameters=parameters, states=states)
+        plant._reuse_key = key
+        return plant
 
     def _cleanup_unzip(self) -> None:
         if self._own_unzip and self._unzip:
@@ -116,6 +187,7 @@ class FmuPlant(Plant):
         try:
             return fn(*args, **kwargs)
         except Exception as exc:
+            self._broken = True
             raise PlantError(f"FMU {self.md.modelName}: {what} failed ({self._reason(exc)})") from None
 
     def reset(self, *, initial: Mapping[str, float]) -> None:
@@ -172,6 +244,7 @@ class FmuPlant(Plant):
                 fmu.fmi2DoStep(fmu.component, self.time, dt, 1)
                 fmu.fmi2GetReal(fmu.component, self._vr_out, self._n_out, self._val_out)
         except Exception as exc:
+            self._broken = True
             raise PlantError(
                 f"FMU {self.md.modelName}: step at t={self.time:.6g} failed ({self._reason(exc)})"
             ) from None
@@ -194,6 +267,16 @@ class FmuPlant(Plant):
         self._out_np[:] = out
 
     def close(self) -> None:
+        """Free the FMU; inside :func:`reused_instances`, keep it for the next :meth:`open` of the same FMU instead
+        (unless a call of it failed)."""
+        key = getattr(self, "_reuse_key", None)
+        if key is not None and _REUSE.get() and not self._broken and self.fmu is not None:
+            if self not in _IDLE.setdefault(key, []):
+                _IDLE[key].append(self)
+            return
+        self._free()
+
+    def _free(self) -> None:
         fmu = getattr(self, "fmu", None)
         if fmu is not None:
             try:

@@ -127,7 +127,7 @@ def _fmu_factory(
     if choice.interface == "me":
         plant = FmuModelExchangePlant(**args, states=cfg.get("states"), **solver)
     else:
-        plant = FmuPlant(**args, states=cfg.get("states"))
+        plant = FmuPlant.open(**args, states=cfg.get("states"))
     plant.interface_reason, plant.interface_check = choice.reason, choice.check
     return plant
 

@@ -1,0 +1,147 @@
+"""The campaign client's share of a campaign: planning checks the extremes of the draws instead of parsing every
+run's scenario, and a report names each run without making its scenario again.
+
+Oracles: each draw made by hand from its definition (``default_rng([seed, draw])``, the run seed first, as the plan's
+docstring says), the scenario parser on the run made alone, and the runs the generated plan makes one at a time.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from gainlink.hil.campaign import CampaignError, parse_campaign
+from gainlink.hil.campaign import plan as plan_module
+from gainlink.hil.campaign.plan import plan_campaign
+from gainlink.hil.loop.scenario import parse_scenario
+from support.paths import EXAMPLES
+
+RUNS = 400
+
+
+def _campaign(draws: list[dict], *, runs: int = RUNS, seed: int = 5) -> dict:
+    return {
+        "name": "client",
+        "kind": "sil",
+        "seed": seed,
+        "runs": runs,
+        "spec": str(EXAMPLES / "pendulum.toml"),
+        "scenario": {"duration": 0.5, "noise": {"theta": 1e-3}, "plant": {"kind": "cart_pendulum"}},
+        "grid": [{"target": "spec.limits.anti_windup", "values": ["clamp", "backcalc"]}],
+        "draw": draws,
+        "criteria": {"stable": True},
+    }
+
+
+UNIFORM_M = {"target": "plant.parameters.M", "distribution": "uniform", "low": 0.7, "high": 1.3}
+CHOICE_X = {"target": "initial_state.x", "distribution": "choice", "values": [0.0, 0.5, 1.0]}
+
+
+def _noise_draws(seed: int, runs: int, mean: float, std: float) -> np.ndarray:
+    """Draw ``j``'s noise value by hand: the run seed first, then the axes in order (M, then noise)."""
+    out = []
+    for j in range(runs):
+        rng = np.random.default_rng([seed, j])
+        rng.integers(2**31 - 1)
+        rng.uniform(0.7, 1.3)
+        out.append(rng.normal(mean, std))
+    return np.array(out)
+
+
+def test_planning_parses_each_grid_points_extreme_draws_not_every_run(monkeypatch):
+    """800 runs (2 grid points x 400 draws of a uniform and a choice axis): the parser sees, per grid point, draw 0,
+    the smallest and the largest M and the first draw of each choice value (at most 6), not 400."""
+    parsed = []
+
+    def counting(data, **kw):
+        parsed.append(data["plant"].get("parameters", {}).get("M"))
+        return parse_scenario(data, **kw)
+
+    monkeypatch.setattr(plan_module, "parse_scenario", counting)
+    plan = plan_campaign(parse_campaign(_campaign([UNIFORM_M, CHOICE_X])))
+    assert len(plan.runs) == 2 * RUNS
+    assert 2 * 3 <= len(parsed) <= 2 * 6, len(parsed)
+    drawn = [p.values["plant.parameters.M"] for p in plan.runs[:RUNS]]
+    assert min(drawn) in parsed and max(drawn) in parsed  # the extremes of the axis are among those parsed
+
+
+def test_a_draw_refused_at_a_single_run_is_refused_before_anything_runs_naming_that_run():
+    """Noise drawn around 0.008 with std 0.003: of 400 draws exactly one is negative (found by hand from the draws'
+    definition); planning refuses it in one line naming that run and its value, as the parser refuses it alone."""
+    seed, mean, std = 1, 0.008, 0.003
+    noise = _noise_draws(seed, RUNS, mean, std)
+    (bad,) = np.flatnonzero(noise < 0).tolist()  # the seed is chosen so that one draw of 400 is refused
+    draws = [UNIFORM_M, {"target": "noise.theta", "distribution": "normal", "mean": mean, "std": std}]
+    with pytest.raises(CampaignError) as err:
+        plan_campaign(parse_campaign(_campaign(draws, seed=seed)))
+    text = str(err.value)
+    assert text.startswith(f"campaign: run {bad} (") and "\n" not in text, text
+    assert f"noise.theta={noise[bad]:.4g}" in text and text.endswith("scenario: noise.theta must be >= 0.0"), text
+    ok = _campaign([UNIFORM_M, {"target": "noise.theta", "distribution": "normal", "mean": mean, "std": std}], runs=bad)
+    assert len(plan_campaign(parse_campaign(ok)).runs) == 2 * bad  # the draws before it are all accepted
+
+
+@pytest.mark.parametrize("given", ["spec", "artifact"])
+def test_a_reports_heads_name_each_run_as_the_run_made_alone(given, tmp_path):
+    """What a report row names of each run (index, id, grid point, draw, values, seed, artifact), read from the plan
+    without making any scenario, is what making the run gives: of a campaign designed per grid point, and of one
+    given its artifact."""
+    data = _campaign([UNIFORM_M, CHOICE_X], runs=50)
+    if given == "artifact":
+        designed = plan_campaign(parse_campaign(data))
+        path = tmp_path / "gains.json"
+        path.write_bytes(designed.artifacts[designed.runs[0].artifact_sha256])
+        data.pop("spec")
+        data.update(artifact=str(path), grid=[{"target": "initial_state.theta", "values": [0.0, 0.05]}])
+    plan = plan_campaign(parse_campaign(data))
+    heads = list(plan.runs.heads())
+    assert len(heads) == len(plan.runs) == 100
+    for head, point in zip(heads, plan.runs):
+        assert (head.index, head.id, head.grid_index, head.draw, head.values, head.seed, head.artifact_sha256) == (
+            point.index,
+            point.id,
+            point.grid_index,
+            point.draw,
+            point.values,
+            point.seed,
+            point.artifact_sha256,
+        )
+    assert [i.decode() for i in plan.runs.ids] == [p.id for p in plan.runs]
+    assert not plan.runs.failed.any()
+
+
+def _fmu_run(cart_fmu, pend, m: float):
+    """A 1 s SIL run of the pendulum law on the cart-pendulum FMU (Co-Simulation), pole mass ``m``, with its twin."""
+    from gainlink.hil.loop.bridge import run_scenario
+
+    data = {
+        "artifact": str(pend),
+        "transport": {},
+        "duration": 1.0,
+        "seed": 3,
+        "initial_state": {"theta": 0.1},
+        "noise": {"theta": 1e-4},
+        "plant": {"kind": "fmu", "path": str(cart_fmu), "interface": "cs", "parameters": {"m": m}},
+    }
+    return run_scenario(parse_scenario(data))
+
+
+def test_an_fmu_instance_serves_a_workers_next_runs_as_a_fresh_one_would(cart_fmu, pend):
+    """Inside reused_instances (as a campaign's worker runs), a run after another run of the FMU with other
+    parameters gives the trace of the same run on fresh instances, bit for bit; over 6 runs the process holds the
+    same instance (one a plant the run opens), one unzipped copy: instances are counted, not timed."""
+    from gainlink.hil.plants import fmu
+
+    fresh = _fmu_run(cart_fmu, pend, 0.12)
+    assert not fmu.idle_instances()  # outside: each plant freed at its run's end
+    with fmu.reused_instances():
+        _fmu_run(cart_fmu, pend, 0.08)
+        (kept,) = fmu.idle_instances().values()
+        again = _fmu_run(cart_fmu, pend, 0.12)
+        for _ in range(4):
+            _fmu_run(cart_fmu, pend, 0.1)
+            (now,) = fmu.idle_instances().values()
+            assert sorted(map(id, now)) == sorted(map(id, kept))
+    assert len(kept) == 1 and kept[0]._unzip is not None
+    for name in ("t", "y", "u", "r"):
+        assert np.array_equal(getattr(again.trace, name), getattr(fresh.trace, name)), name
+    assert again.metrics["twin"] == fresh.metrics["twin"]
