@@ -66,8 +66,8 @@ class _Steps:
 
     Y: np.ndarray
     U: np.ndarray
-    sat: np.ndarray
-    flags: np.ndarray
+    sat: np.ndarray | None  # None for the twin's (its trace has none)
+    flags: np.ndarray | None
     sigma: np.ndarray
     X: np.ndarray | None  # the plants' states (the run's, when its twin is on)
     L: np.ndarray | None  # the laws' states (the twin's)
@@ -87,7 +87,8 @@ def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts:
     """Step ``controller`` (a block law) around ``batch`` for ``steps`` samples of each run's plan; a run whose
     plant fails stops there (its row steps on, unrecorded). ``always_disturbed``: the command plus the plan's
     disturbance goes to the plant even when it is zero (as the twin does; the run adds it only when the plan has
-    one).
+    one). ``plant_state``: the plants' states recorded; ``law_state``: the laws' (the twin's lockstep: its commands'
+    saturation and flags are not recorded, its trace has none).
 
     A step is array operations over the block and one call of the law: the samples, references and noise of every
     step are stacked before the first (each run's noise drawn by its own plan, as alone), what a step gives is
@@ -110,8 +111,10 @@ def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts:
         t0 = time.perf_counter_ns()
         st = controller.step(Y[k], R[k], S[k])
         lat[k], tick[k] = time.perf_counter_ns() - t0, t0 - t_start
-        U[k], sat[k], flags[k], sigma[k] = st.u, st.sat, st.flags, st.sigma
-        if law_state:
+        U[k], sigma[k] = st.u, st.sigma
+        if not law_state:
+            sat[k], flags[k] = st.sat, st.flags
+        else:
             if L is None:
                 L = np.empty((steps, B, controller.states().shape[1]))
             L[k] = controller.states()
@@ -127,6 +130,8 @@ def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts:
     def runs_first(a: np.ndarray | None) -> np.ndarray | None:
         return None if a is None else np.ascontiguousarray(a[:taken].swapaxes(0, 1))
 
+    if law_state:
+        sat = flags = None
     return _Steps(Y=runs_first(Y), U=runs_first(U), sat=runs_first(sat), flags=runs_first(flags),
                   sigma=runs_first(sigma), X=runs_first(X), L=runs_first(L), steps=done, failed_at=failed_at,
                   tick=tick, lat=lat)  # fmt: skip
