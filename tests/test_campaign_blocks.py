@@ -500,3 +500,19 @@ def test_show_refuses_a_run_without_a_record_and_a_plan_of_an_earlier_layout_in_
     out.mkdir()
     (out / "plan.json").write_text(json.dumps(plan))
     assert_refused(["campaign", "show", out, "--run", "abc", "--report", tmp_path / "r"], phrase, out, tmp_path)
+
+
+@pytest.mark.parametrize("steps, taken", [(150, 150), (150, 129), (64, 64), (10, 3), (0, 0)])
+def test_a_blocks_record_is_each_runs_rows_in_step_order(steps, taken):
+    """Rows written a step at a time (moved run-major a chunk at a time) read back as each run's own rows, up to the
+    step the block stopped at, whatever the chunk boundaries."""
+    from gainlink.hil.loop.block import _RunMajor
+
+    rng = np.random.default_rng(9)
+    rows = rng.normal(size=(steps, 7, 3))
+    record = _RunMajor(steps, 7, (3,))
+    for k in range(taken):
+        record.at(k)[:] = rows[k]
+    got = record.taken(taken)
+    assert np.array_equal(got, rows[:taken].swapaxes(0, 1))
+    assert all(got[i].flags.c_contiguous for i in range(7))
