@@ -171,7 +171,7 @@ def run_block(scenarios: list[Scenario], *, artifact: Artifact, library: Path | 
     try:
         if not (batchable(plants) or linear_batchable(plants)):
             return None
-        runs = [prepare_run(sc, law=law, artifact=a, plant=pl, source="(given as an object)")
+        runs = [prepare_run(sc, law=law, artifact=a, plant=pl, source="(given as an object)", record=False)
                 for sc, pl in zip(scenarios, plants)]  # fmt: skip
         if len({r.plan.N for r in runs}) != 1:
             return None
@@ -201,8 +201,10 @@ def _results(runs: list[Run], rec: _Steps, twins: list, *, describe: dict, ran: 
     and the timing of the block's calls (per number of steps taken: a run whose plant failed has fewer)."""
     artifact_info = describe_artifact(runs[0].law, runs[0].a, "(given as an object)")
     timed: dict[int, dict] = {}
-    shared = {"GOT": np.ones(rec.lat.size, dtype=bool), "LAT": rec.lat, "TICK": rec.tick, "SENT": rec.tick,
-              "BACK": rec.tick + rec.lat}  # fmt: skip
+    N, states = rec.lat.size, len(runs[0].plant.state_names)
+    shared = {"GOT": np.ones(N, dtype=bool), "LAT": rec.lat, "TICK": rec.tick, "SENT": rec.tick,
+              "BACK": rec.tick + rec.lat, "DUE": np.full(N, np.nan), "NAN": np.zeros(N, dtype=bool),
+              "X": np.full((N, states), np.nan)}  # fmt: skip
     results = []
     for i, run in enumerate(runs):
         steps = int(rec.steps[i])
@@ -217,8 +219,9 @@ def _results(runs: list[Run], rec: _Steps, twins: list, *, describe: dict, ran: 
 
 
 def _record(run: Run, rec: _Steps, i: int, *, shared: dict, describe: dict, ran: str | None) -> None:
-    """Point run ``i``'s recorder at its rows of the block's record (views, not copies: its trace reads the steps it
-    took, as its own loop would have recorded them) and at what the runs share; ``endpoint`` None: no link."""
+    """Point run ``i``'s recorder (made without arrays) at its rows of the block's record (views, not copies: its
+    trace reads the steps it took, as its own loop would have recorded them) and at what the runs share (the plant's
+    states NaN without a twin, as a run alone records them); ``endpoint`` None: no link."""
     r = run.rec
     r.Y, r.U, r.SATBITS, r.FLAGS, r.SIGMA = rec.Y[i], rec.U[i], rec.sat[i], rec.flags[i], rec.sigma[i]
     for name, values in shared.items():

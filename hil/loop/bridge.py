@@ -151,23 +151,25 @@ def _check(scenario: Scenario) -> None:
         raise ScenarioError(f'scenario {scenario.name}: a nan fault needs encoding = "float32" (not "{encoding}")')
 
 
-def prepare_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant, source: str) -> Run:
+def prepare_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant, source: str, record: bool = True) -> Run:
     """A run of ``scenario`` ready to step: ``plant`` reset to its initial state, the plan made (before anything is
-    built or started) and where the model twin starts (a campaign block prepares each of its runs so)."""
+    built or started) and where the model twin starts (a campaign block prepares each of its runs so, ``record``
+    False: its recorder's arrays are the block's)."""
     plant.reset(initial=scenario.initial_state)
     plan = plan_run(scenario, law=law, artifact=artifact, plant=plant)
     start = twin_start(plant, sigma=plan.sigma0) if scenario.model_twin else TwinStart({}, False, plan.sigma0)
-    return Run(scenario, law=law, artifact=artifact, plant=plant, plan=plan, source=source, start=start)
+    return Run(scenario, law=law, artifact=artifact, plant=plant, plan=plan, source=source, start=start,
+               record=record)  # fmt: skip
 
 
 class Run:
     """One run being made: the loop and its endpoint, then the result."""
 
     def __init__(self, scenario: Scenario, *, law, artifact: Artifact, plant: Plant, plan: Plan, source: str,
-                 start: TwinStart) -> None:  # fmt: skip
+                 start: TwinStart, record: bool = True) -> None:  # fmt: skip
         self.scenario, self.law, self.a, self.plant, self.plan = scenario, law, artifact, plant, plan
         self.source, self.start = source, start
-        self.rec = Recorder(plan, artifact=artifact, plant=plant)
+        self.rec = Recorder(plan, artifact=artifact, plant=plant, allocate=record)
         self.injector = FaultInjector(scenario.faults, Ts=artifact.Ts, seed=scenario.seed)
         self.safe = law.safe_command(artifact)
         self.extra: dict[str, Any] = {}  # metrics the endpoint adds (the peer's exit, CPU placement, ...)
