@@ -27,6 +27,8 @@ from ..plants.linear import LinearBatch, linear_batchable
 from ..plants.models import OdeBatch, batchable, non_finite
 from .bridge import Run, RunResult, build_plant, in_process, prepare_run
 from .closed_loop import Outcome
+from .metrics import timing
+from .plan import describe_artifact
 from .scenario import Scenario
 from .twins import with_model_twin
 
@@ -60,12 +62,12 @@ def batch_of(plants: list) -> OdeBatch | LinearBatch | None:
 
 @dataclass
 class _Steps:
-    """What a block's lockstep recorded, row k = step k, column i = run i."""
+    """What a block's lockstep recorded: row i = run i, then step k (a run's rows are contiguous, a view)."""
 
     Y: np.ndarray
     U: np.ndarray
-    sat: np.ndarray
-    flags: np.ndarray
+    sat: np.ndarray | None  # None for the twin's (its trace has none)
+    flags: np.ndarray | None
     sigma: np.ndarray
     X: np.ndarray | None  # the plants' states (the run's, when its twin is on)
     L: np.ndarray | None  # the laws' states (the twin's)
@@ -80,44 +82,82 @@ def _stack(runs: list[Run], name: str) -> np.ndarray:
     return np.stack([getattr(r.plan, name) for r in runs], axis=1)
 
 
+CHUNK = 64  # steps a record gathers before they move run-major (1,000 runs of a 4-wide state: 2 MB, in cache)
+
+
+class _RunMajor:
+    """One quantity of every run at every step, written a step at a time as (step, run) rows, moved run-major
+    (``out[i]``: run i's rows, contiguous) every :data:`CHUNK` steps while those rows are in cache: one transpose of
+    the whole record at the end cost twice as much."""
+
+    def __init__(self, steps: int, runs: int, width: tuple = (), dtype: type = float) -> None:
+        self.rows = np.empty((min(CHUNK, steps), runs, *width), dtype)
+        self.out = np.empty((runs, steps, *width), dtype)
+        self.k0 = 0
+
+    def at(self, k: int) -> np.ndarray:
+        """The row of step ``k`` to write (called for each step in turn)."""
+        if k - self.k0 == len(self.rows):
+            self._move(k)
+        return self.rows[k - self.k0]
+
+    def _move(self, end: int) -> None:
+        self.out[:, self.k0 : end] = self.rows[: end - self.k0].swapaxes(0, 1)
+        self.k0 = end
+
+    def taken(self, steps: int) -> np.ndarray:
+        """Every run's first ``steps`` rows (run, step, ...), once the last is written."""
+        self._move(steps)
+        return self.out[:, :steps]
+
+
 def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts: float, steps: int,
               always_disturbed: bool, plant_state: bool, law_state: bool) -> _Steps:  # fmt: skip
     """Step ``controller`` (a block law) around ``batch`` for ``steps`` samples of each run's plan; a run whose
     plant fails stops there (its row steps on, unrecorded). ``always_disturbed``: the command plus the plan's
     disturbance goes to the plant even when it is zero (as the twin does; the run adds it only when the plan has
-    one)."""
+    one). ``plant_state``: the plants' states recorded; ``law_state``: the laws' (the twin's lockstep: its commands'
+    saturation and flags are not recorded, its trace has none).
+
+    A step is array operations over the block and one call of the law: the samples, references and noise of every
+    step are stacked before the first (each run's noise drawn by its own plan, as alone) and what a step gives is
+    written into the rows of :class:`_RunMajor` records."""
     B, noise, R, S, D = len(runs), _stack(runs, "noise"), _stack(runs, "R"), _stack(runs, "S"), _stack(runs, "D")
     disturbed = np.array([always_disturbed or bool(r.plan.D.any()) for r in runs])[:, None]
-    m, p = D.shape[2], noise.shape[2]
-    out = _Steps(Y=np.zeros((steps, B, p)), U=np.zeros((steps, B, m)), sat=np.zeros((steps, B), np.int64),
-                 flags=np.zeros((steps, B), np.int64), sigma=np.full((steps, B), np.nan),
-                 X=np.zeros((steps, *batch.X.shape)) if plant_state else None, L=None,
-                 steps=np.full(B, steps), failed_at=np.full(B, -1), tick=np.zeros(steps),
-                 lat=np.zeros(steps))  # fmt: skip
+    Y, U = _RunMajor(steps, B, (noise.shape[2],)), _RunMajor(steps, B, (D.shape[2],))
+    sigma = _RunMajor(steps, B)
+    sat, flags = (None, None) if law_state else (_RunMajor(steps, B, (), np.int64), _RunMajor(steps, B, (), np.int64))
+    X = _RunMajor(steps, B, batch.X.shape[1:]) if plant_state else None
+    L = _RunMajor(steps, B, controller.states().shape[1:]) if law_state else None
+    done, failed_at, tick, lat = np.full(B, steps), np.full(B, -1), np.zeros(steps), np.zeros(steps)
     alive = np.ones(B, dtype=bool)
     t_start = time.perf_counter_ns()
     for k in range(steps):
-        Y = batch.outputs() + noise[k]
-        out.Y[k] = Y
-        if out.X is not None:
-            out.X[k] = batch.X
+        y = np.add(batch.outputs(), noise[k], out=Y.at(k))
+        if X is not None:
+            X.at(k)[:] = batch.X
         t0 = time.perf_counter_ns()
-        st = controller.step(Y, R[k], S[k])
-        out.lat[k], out.tick[k] = time.perf_counter_ns() - t0, t0 - t_start
-        out.U[k], out.sat[k], out.flags[k], out.sigma[k] = st.u, st.sat, st.flags, st.sigma
-        if law_state:
-            L = controller.states()
-            if out.L is None:
-                out.L = np.zeros((steps, *L.shape))
-            out.L[k] = L
+        st = controller.step(y, R[k], S[k])
+        lat[k], tick[k] = time.perf_counter_ns() - t0, t0 - t_start
+        U.at(k)[:], sigma.at(k)[:] = st.u, st.sigma
+        if sat is not None and flags is not None:
+            sat.at(k)[:], flags.at(k)[:] = st.sat, st.flags
+        if L is not None:
+            L.at(k)[:] = controller.states()
         failed = batch.advance(np.where(disturbed, st.u + D[k], st.u), dt=Ts) & alive
         if failed.any():
-            out.steps[failed], out.failed_at[failed] = k + 1, k
+            done[failed], failed_at[failed] = k + 1, k
             alive &= ~failed
             if not alive.any():
-                out.steps = np.minimum(out.steps, k + 1)
+                done = np.minimum(done, k + 1)
                 break
-    return out
+    taken = int(done.max()) if B else 0  # rows past every run's end were never written
+
+    def out(record: _RunMajor | None) -> np.ndarray | None:
+        return None if record is None else record.taken(taken)
+
+    return _Steps(Y=out(Y), U=out(U), sat=out(sat), flags=out(flags), sigma=out(sigma), X=out(X), L=out(L),
+                  steps=done, failed_at=failed_at, tick=tick, lat=lat)  # fmt: skip
 
 
 def run_block(scenarios: list[Scenario], *, artifact: Artifact, library: Path | None = None) -> list[RunResult] | None:
@@ -131,7 +171,7 @@ def run_block(scenarios: list[Scenario], *, artifact: Artifact, library: Path | 
     try:
         if not (batchable(plants) or linear_batchable(plants)):
             return None
-        runs = [prepare_run(sc, law=law, artifact=a, plant=pl, source="(given as an object)")
+        runs = [prepare_run(sc, law=law, artifact=a, plant=pl, source="(given as an object)", record=False)
                 for sc, pl in zip(scenarios, plants)]  # fmt: skip
         if len({r.plan.N for r in runs}) != 1:
             return None
@@ -150,26 +190,44 @@ def run_block(scenarios: list[Scenario], *, artifact: Artifact, library: Path | 
     t0 = time.perf_counter()
     twins = _twins(runs, law=law, artifact=a, steps=rec.steps)
     twins_s = (time.perf_counter() - t0) / len(runs)
+    return _results(runs, rec, twins, describe=dict(controller.describe) | {"block": len(runs)},
+                    ran=law.label if firmware else None, wall_s=wall / len(runs), twins_s=twins_s,
+                    failure=non_finite(batch.name))  # fmt: skip
+
+
+def _results(runs: list[Run], rec: _Steps, twins: list, *, describe: dict, ran: str | None, wall_s: float,
+             twins_s: float, failure: str) -> list[RunResult]:  # fmt: skip
+    """Each run's result from the block's record. What the runs share is computed once: the artifact's description
+    and the timing of the block's calls (per number of steps taken: a run whose plant failed has fewer)."""
+    artifact_info = describe_artifact(runs[0].law, runs[0].a, "(given as an object)")
+    timed: dict[int, dict] = {}
+    N, states = rec.lat.size, len(runs[0].plant.state_names)
+    shared = {"GOT": np.ones(N, dtype=bool), "LAT": rec.lat, "TICK": rec.tick, "SENT": rec.tick,
+              "BACK": rec.tick + rec.lat, "DUE": np.full(N, np.nan), "NAN": np.zeros(N, dtype=bool),
+              "X": np.full((N, states), np.nan)}  # fmt: skip
     results = []
     for i, run in enumerate(runs):
-        _record(
-            run, rec, i, describe=dict(controller.describe) | {"block": len(runs)}, ran=law.label if firmware else None
-        )
-        reason = None if rec.failed_at[i] < 0 else f"plant failed at step {rec.failed_at[i]}: {non_finite(batch.name)}"
-        outcome = Outcome(steps=int(rec.steps[i]), reason=reason, wall_s=wall / len(runs), overruns=0)
-        results.append(run.result(outcome, twins=twins[i], twins_s=twins_s))
+        steps = int(rec.steps[i])
+        if steps not in timed:
+            timed[steps] = timing(rec.lat[:steps], rec.tick[:steps], np.full(steps, np.nan), mode="sil")
+        _record(run, rec, i, shared=shared, describe=describe, ran=ran)
+        reason = None if rec.failed_at[i] < 0 else f"plant failed at step {rec.failed_at[i]}: {failure}"
+        outcome = Outcome(steps=steps, reason=reason, wall_s=wall_s, overruns=0)
+        results.append(run.result(outcome, twins=twins[i], twins_s=twins_s, timed=timed[steps],
+                                  artifact_info=artifact_info))  # fmt: skip
     return results
 
 
-def _record(run: Run, rec: _Steps, i: int, *, describe: dict, ran: str | None) -> None:
-    """Fill run ``i``'s recorder from the block's columns, as its own loop would have (``endpoint`` None: no link)."""
-    r, steps = run.rec, int(rec.steps[i])
-    r.Y[:steps], r.U[:steps], r.SATBITS[:steps] = rec.Y[:steps, i], rec.U[:steps, i], rec.sat[:steps, i]
-    r.FLAGS[:steps], r.SIGMA[:steps], r.GOT[:steps] = rec.flags[:steps, i], rec.sigma[:steps, i], True
-    r.LAT[:steps], r.TICK[:steps] = rec.lat[:steps], rec.tick[:steps]
-    r.SENT[:steps], r.BACK[:steps] = rec.tick[:steps], rec.tick[:steps] + rec.lat[:steps]
+def _record(run: Run, rec: _Steps, i: int, *, shared: dict, describe: dict, ran: str | None) -> None:
+    """Point run ``i``'s recorder (made without arrays) at its rows of the block's record (views, not copies: its
+    trace reads the steps it took, as its own loop would have recorded them) and at what the runs share (the plant's
+    states NaN without a twin, as a run alone records them); ``endpoint`` None: no link."""
+    r = run.rec
+    r.Y, r.U, r.SATBITS, r.FLAGS, r.SIGMA = rec.Y[i], rec.U[i], rec.sat[i], rec.flags[i], rec.sigma[i]
+    for name, values in shared.items():
+        setattr(r, name, values)
     if rec.X is not None and run.scenario.twin:
-        r.X[:steps] = rec.X[:steps, i]
+        r.X = rec.X[i]
     run.endpoint, run.ran = None, ran
     run.info = {"transport": dict(SIL), "controller": describe}
 
@@ -210,8 +268,6 @@ def _twin_traces(want: list[int], tw: _Steps, *, steps: np.ndarray, name: str) -
         if 0 <= tw.failed_at[j] < n:
             failed[i] = non_finite(name)
             continue
-        state = tw.L[:n, j] if (tw.L is not None and n) else np.zeros((0, 0))
-        traces[i] = TwinTrace(
-            y=tw.Y[:n, j].copy(), u=tw.U[:n, j].copy(), state=state.copy(), sigma=tw.sigma[:n, j].copy()
-        )
+        state = tw.L[j, :n] if (tw.L is not None and n) else np.zeros((0, 0))
+        traces[i] = TwinTrace(y=tw.Y[j, :n], u=tw.U[j, :n], state=state, sigma=tw.sigma[j, :n])
     return traces, failed

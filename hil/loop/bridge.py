@@ -151,23 +151,25 @@ def _check(scenario: Scenario) -> None:
         raise ScenarioError(f'scenario {scenario.name}: a nan fault needs encoding = "float32" (not "{encoding}")')
 
 
-def prepare_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant, source: str) -> Run:
+def prepare_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant, source: str, record: bool = True) -> Run:
     """A run of ``scenario`` ready to step: ``plant`` reset to its initial state, the plan made (before anything is
-    built or started) and where the model twin starts (a campaign block prepares each of its runs so)."""
+    built or started) and where the model twin starts (a campaign block prepares each of its runs so, ``record``
+    False: its recorder's arrays are the block's)."""
     plant.reset(initial=scenario.initial_state)
     plan = plan_run(scenario, law=law, artifact=artifact, plant=plant)
     start = twin_start(plant, sigma=plan.sigma0) if scenario.model_twin else TwinStart({}, False, plan.sigma0)
-    return Run(scenario, law=law, artifact=artifact, plant=plant, plan=plan, source=source, start=start)
+    return Run(scenario, law=law, artifact=artifact, plant=plant, plan=plan, source=source, start=start,
+               record=record)  # fmt: skip
 
 
 class Run:
     """One run being made: the loop and its endpoint, then the result."""
 
     def __init__(self, scenario: Scenario, *, law, artifact: Artifact, plant: Plant, plan: Plan, source: str,
-                 start: TwinStart) -> None:  # fmt: skip
+                 start: TwinStart, record: bool = True) -> None:  # fmt: skip
         self.scenario, self.law, self.a, self.plant, self.plan = scenario, law, artifact, plant, plan
         self.source, self.start = source, start
-        self.rec = Recorder(plan, artifact=artifact, plant=plant)
+        self.rec = Recorder(plan, artifact=artifact, plant=plant, allocate=record)
         self.injector = FaultInjector(scenario.faults, Ts=artifact.Ts, seed=scenario.seed)
         self.safe = law.safe_command(artifact)
         self.extra: dict[str, Any] = {}  # metrics the endpoint adds (the peer's exit, CPU placement, ...)
@@ -220,15 +222,19 @@ class Run:
         self.ran = None if sc.controller == "reference" else _law_named(peer.ready_line)
         return outcome
 
-    def result(self, outcome: Outcome, *, twins, twins_s: float) -> RunResult:
-        """Metrics, trace and what ran, for the steps taken."""
+    def result(
+        self, outcome: Outcome, *, twins, twins_s: float, timed: dict | None = None, artifact_info: dict | None = None
+    ) -> RunResult:
+        """Metrics, trace and what ran, for the steps taken. A campaign block gives what its runs share, computed
+        once: ``timed`` (:func:`~.metrics.timing` of this run's steps) and ``artifact_info``
+        (:func:`~.plan.describe_artifact`)."""
         sc, a, law, steps = self.scenario, self.a, self.law, outcome.steps
         trace = self.rec.trace(steps, law=law, artifact=a, twins=twins)
         link = isinstance(self.endpoint, OverLink)
         mode = sc.mode if link else "sil"
         late = self.endpoint.late if link else 0
         metrics = compute_metrics(trace, artifact=a, mode=mode, late=late, period_s=self.plan.period_s,
-                                  model_start=twins.model_note)  # fmt: skip
+                                  model_start=twins.model_note, timed=timed)  # fmt: skip
         faults = dict(self.injector.counts) if link else {k: v for k, v in self.injector.counts.items() if k == "nan"}
         metrics.update({"complete": outcome.reason is None, "steps_planned": self.plan.N, "wall_s": outcome.wall_s,
                         "steps_per_s": steps / outcome.wall_s if outcome.wall_s > 0 else None, "sched_fifo": False,
@@ -248,8 +254,9 @@ class Run:
                 metrics["uart"] = link_capacity(self.rec.SENT[:steps], self.rec.BACK[:steps],
                                                 answered_in_time=trace.got)  # fmt: skip
         metrics.update(law.run_report(a, trace, ran=self.ran, design_model=is_design_model(sc)))
-        info = {"artifact": describe_artifact(law, a, self.source), "plant": describe_plant(self.plant),
-                **self.info}  # fmt: skip
+        if artifact_info is None:
+            artifact_info = describe_artifact(law, a, self.source)
+        info = {"artifact": artifact_info, "plant": describe_plant(self.plant), **self.info}
         return RunResult(scenario=sc, metrics=metrics, trace=trace, complete=outcome.reason is None,
                          reason=outcome.reason, info=info, artifact=a)  # fmt: skip
 

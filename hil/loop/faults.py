@@ -33,12 +33,20 @@ class FaultInjector:
         self.faults = [f for f in faults if f.kind not in PROCESS_FAULTS + SAMPLE_FAULTS]
         self.sample_faults = [f for f in faults if f.kind in SAMPLE_FAULTS]
         self.Ts = Ts
-        # A stream of its own (not the noise's): adding a fault leaves the run's noise unchanged.
-        self.rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0xFA17])
+        self.seed = int(seed)
+        self._rng: np.random.Generator | None = None
         self.held: list[tuple[int, int, Any]] = []  # (release at sample, sample, unit)
         self.counts = {"drop": 0, "delay": 0, "duplicate": 0, "reorder": 0}
         if self.sample_faults:  # only then: a report without them reads as before
             self.counts["nan"] = 0
+
+    @property
+    def rng(self) -> np.random.Generator:
+        """The stream of the faults' draws: its own (not the noise's), so adding a fault leaves the run's noise
+        unchanged; seeded on first use (seeding costs more than a campaign run's step, and most runs draw none)."""
+        if self._rng is None:
+            self._rng = np.random.default_rng([self.seed & 0xFFFFFFFF, 0xFA17])
+        return self._rng
 
     def _hits(self, f: Fault, k: int) -> bool:
         """Whether fault ``f`` hits sample ``k``: in its window, on its ``every``-th sample, with its probability."""

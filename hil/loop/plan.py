@@ -88,9 +88,11 @@ def plan_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant) -> Pl
 class Recorder:
     """The per-step arrays of a run, filled as it goes; :meth:`trace` cuts them to the steps taken."""
 
-    def __init__(self, plan: Plan, *, artifact: Artifact, plant: Plant) -> None:
+    def __init__(self, plan: Plan, *, artifact: Artifact, plant: Plant, allocate: bool = True) -> None:
         N, a = plan.N, artifact
         self.plan = plan
+        if not allocate:  # a campaign block's run: its arrays are views of the block's record, set by the block
+            return
         self.Y = np.zeros((N, a.p))
         self.U = np.zeros((N, a.m))
         self.SATBITS = np.zeros(N, dtype=np.int64)  # bit j: input j saturated

@@ -37,13 +37,19 @@ def rk4(
     """
     n = max(1, math.ceil(dt / h - 1e-9))
     hh = dt / n
+    half, sixth = 0.5 * hh, hh / 6.0
+    T, acc = np.empty_like(X), np.empty_like(X)  # the stage's state and the weighted sum: this kernel's own buffers
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        for _ in range(n):
+        for _ in range(n):  # X + (hh / 6) (k1 + 2 k2 + 2 k3 + k4), each product and sum in that order, in place
             k1 = rates(X, U, P)
-            k2 = rates(X + 0.5 * hh * k1, U, P)
-            k3 = rates(X + 0.5 * hh * k2, U, P)
-            k4 = rates(X + hh * k3, U, P)
-            X = X + (hh / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            k2 = rates(np.add(X, np.multiply(k1, half, out=T), out=T), U, P)
+            np.multiply(k2, 2.0, out=acc)
+            np.add(k1, acc, out=acc)
+            k3 = rates(np.add(X, np.multiply(k2, half, out=T), out=T), U, P)
+            k4 = rates(np.add(X, np.multiply(k3, hh, out=T), out=T), U, P)
+            acc += np.multiply(k3, 2.0, out=T)
+            acc += k4
+            X = X + np.multiply(acc, sixth, out=acc)
     return X
 
 
@@ -78,7 +84,7 @@ class OdePlant(Plant):
                 )
             params[key] = float(value)
         self.params = params
-        self._P = {k: np.array([v]) for k, v in params.items()}  # the kernel's parameter columns, a batch of one
+        self._P = columns(type(self), {k: np.array([v]) for k, v in params.items()})  # the kernel's, a batch of one
         self._in_idx = select(self.all_inputs, inputs, what="inputs", plant=self.name)
         self._out_idx = select(
             self.state_names, outputs if outputs is not None else self.default_outputs, what="outputs", plant=self.name
@@ -94,8 +100,15 @@ class OdePlant(Plant):
     default_outputs: tuple[str, ...] = ()
 
     def rates(self, X: np.ndarray, U: np.ndarray, P: Mapping[str, np.ndarray]) -> np.ndarray:  # pragma: no cover
-        """dx/dt of each row of ``X`` (B, n) under full inputs ``U`` (B, inputs) and parameter columns ``P``."""
+        """dx/dt of each row of ``X`` (B, n) under full inputs ``U`` (B, inputs) and parameter columns ``P`` (with
+        the :meth:`derived` ones), as a new array (:func:`rk4` reuses the ``X`` it passes)."""
         raise NotImplementedError
+
+    @staticmethod
+    def derived(P: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Columns :meth:`rates` uses computed once from the parameter columns ``P`` instead of at every call (a
+        product ``m * l * w`` evaluates ``m * l`` first, so taking it from a column changes no bit); none here."""
+        return {}
 
     def derivatives(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """dx/dt at one state ``x`` and full input vector ``u`` (the kernel with a batch of one)."""
@@ -137,6 +150,11 @@ class OdePlant(Plant):
         self.x = np.array(snapshot, dtype=float)
 
 
+def columns(cls: type, P: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The parameter columns ``P`` of plants of ``cls`` with its :meth:`OdePlant.derived` ones."""
+    return P | cls.derived(P)
+
+
 def non_finite(name: str) -> str:
     """Why a plant's run ends when its state overflows (alone, or its row in a block)."""
     return f"plant {name}: state became non-finite"
@@ -154,8 +172,8 @@ class OdeBatch:
     def __init__(self, plants: list[OdePlant]) -> None:
         first = plants[0]
         self.kernel, self.name, self.h = first, first.name, first.h
-        self.X = np.stack([p.x for p in plants])
-        self.P = {k: np.array([p.params[k] for p in plants]) for k in first.params}
+        self.X = np.asfortranarray(np.stack([p.x for p in plants]))  # each state a contiguous column
+        self.P = columns(type(first), {k: np.array([p.params[k] for p in plants]) for k in first.params})
         self._in_idx, self._out_idx = first._in_idx, first._out_idx
         self._U = np.zeros((len(plants), len(first.all_inputs)))
 
@@ -206,18 +224,23 @@ class CartPendulum(OdePlant):
     default_outputs = ("x", "theta")
     defaults: ClassVar[Mapping[str, float]] = {"M": 1.0, "m": 0.1, "l": 0.5, "g": 9.81}
 
+    @staticmethod
+    def derived(P: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return {"ml": P["m"] * P["l"], "mg": P["m"] * P["g"], "Mmg": (P["M"] + P["m"]) * P["g"]}
+
     def rates(self, X: np.ndarray, U: np.ndarray, P: Mapping[str, np.ndarray]) -> np.ndarray:
-        M, m, l, g = P["M"], P["m"], P["l"], P["g"]
+        # Each product and sum in the order of the docstring's equations. Plain expressions, not in-place ones:
+        # numpy's in-place operators cost twice a new array at a batch of one (a run alone) and gain ~4 % at 1,000.
         th, w = X[:, 2], X[:, 3]
         s, c = np.sin(th), np.cos(th)
-        D = M + m * s * s
-        f = U[:, 0] + m * l * w * w * s
+        D = P["M"] + P["m"] * s * s
+        f = U[:, 0] + P["ml"] * w * w * s
         out = np.empty_like(X)  # columns assigned: np.stack costs 3x this at a batch of one
         out[:, 0], out[:, 1], out[:, 2], out[:, 3] = (
             X[:, 1],
-            (f - m * g * s * c) / D,
+            (f - P["mg"] * s * c) / D,
             w,
-            ((M + m) * g * s - c * f) / (l * D),
+            (P["Mmg"] * s - c * f) / (P["l"] * D),
         )
         return out
 

@@ -159,6 +159,8 @@ class HostLawBlock:
         self._block = ctypes.CDLL(str(self.library)).gl_host_law_step_block  # long: releases the GIL
         self._block.argtypes = [_VP, ctypes.c_uint32, _VP, _VP]
         self._out = np.zeros(self.count, dtype=self.dtype)
+        self._samples = records.samples(artifact, np.zeros((self.count, artifact.p)))  # TAG_STEP rows, refilled
+        self._widths = records.dims(artifact)[2:]  # p, q, e
         self._staged: dict[int, Any] = {}
 
     def address(self, i: int) -> int:
@@ -177,6 +179,10 @@ class HostLawBlock:
     def step(self, Y: np.ndarray, R: np.ndarray | None = None, S: np.ndarray | None = None) -> np.ndarray:
         """One sample per instance (row i of ``Y`` (count, p), ``R``, ``S`` to instance i): their records (a view
         overwritten by the next call)."""
-        samples = records.samples(self.artifact, Y, R, S)
+        samples = self._samples  # filled in place as records.samples fills a new one (float32, missing ones zero)
+        with np.errstate(over="ignore"):  # beyond float32 is inf, as on the wire: the law's fault path answers it
+            for name, values, width in zip("yrs", (Y, R, S), self._widths):
+                if width:
+                    samples[name][:, :width] = 0.0 if values is None else np.reshape(values, (self.count, width))
         self._block(self._laws.ctypes.data, self.count, samples.ctypes.data, self._out.ctypes.data)
         return self._out
