@@ -37,7 +37,7 @@ from .worker import execute_packed
 log = logging.getLogger(__name__)
 
 Progress = Callable[[int, int, dict], None]
-MAX_BLOCK = 500
+MAX_BLOCK = 1000
 BLOCKS_PER_THREAD = 2
 BLOCKS_IN_FLIGHT = 4
 
