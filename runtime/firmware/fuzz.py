@@ -125,7 +125,7 @@ def _can_frames(artifact: Artifact) -> list[tuple[bool, str, int, bytes]]:
                 if seq == 65535:
                     values[0] = np.nan  # the fault path: a NaN sample (raw -32768 in int16)
                 for index, spec in enumerate(layout.measurement):
-                    signals = {"seq": seq, "status": 0, "sat": 0}
+                    signals = {"seq": seq, "status": 0, "sat": 0, "status_hi": 0}
                     for i, name in enumerate(spec.signals):
                         v = float(values[spec.first + i])
                         # the DBC's int16 signals name raw -32768 "not_a_number"; float32 carries NaN itself
