@@ -8,8 +8,10 @@ import logging
 
 import numpy as np
 import pytest
-from gainlink.firmware.branches import analyse_text, parse
+from gainlink.firmware.branches import analyse_text, disassemble, parse
 from gainlink.firmware.build import replay_image
+from gainlink.firmware.cost import count_calls
+from gainlink.firmware.paths import Bounds, Unbounded
 from gainlink.laws import design, law_of
 from gainlink.laws.mpc.cost import bound_of, branch_argument, iteration_instructions, measure, refuse_samples
 from gainlink.shipping.artifact import from_dict
@@ -112,13 +114,55 @@ def test_the_bound_at_the_cap_covers_every_step_and_no_input_breaks_it(name, tar
     assert worst.counts.max() <= bound.bound, (int(worst.counts.max()), bound)
 
 
-def test_the_soft_float_cores_are_not_proved():
-    """On the M0 the multiply-adds and float compares are calls whose paths depend on their operands: the argument
-    names them and does not hold (bench/mpc_cost.py labels the M0's figure measured, not proved)."""
+def test_the_soft_float_cores_are_not_proved_but_each_float_routine_has_a_bounded_path():
+    """On the M0 the multiply-adds and float compares are calls whose paths depend on their operands: the branch
+    argument names them and does not hold (bench/mpc_cost.py labels the M0's step figure measured, not proved). Each of
+    those routines (gl_fmaf, libgcc's add, subtract, multiply and compares, and what they call) has a loop-free graph,
+    so its dearest call is bounded (gainlink.firmware.paths); QEMU's count of every call over two steps (one 1 m off,
+    one -1000 off: special operands, cancellations, boxes active) stays within it. __clzsi2, read by hand: 21
+    instructions with no branch taken, each of its three taken ``bcc`` skips two, so every call counts 15 to 21."""
     a = artifact("pendulum_mpc")
-    arg = branch_argument(replay_image(a, target="cortex-m0", board="microbit"))
+    elf = replay_image(a, target="cortex-m0", board="microbit")
+    arg = branch_argument(elf)
     assert not arg.holds
     assert any("soft-float" in v and "gl_fmaf" in v for v in arg.violations), arg.violations
+    bounds = Bounds(disassemble(elf))
+    routines = {s.split(" calls ")[1] for s in arg.analysis.soft_float}
+    assert {"gl_fmaf", "__aeabi_fadd", "__aeabi_fmul", "__aeabi_fcmplt"} <= routines
+    for name in routines:
+        assert bounds(name) > 0, name  # Unbounded if its graph had a cycle
+    Y = np.array([[1.0] * a.p, [-1e3] * a.p])
+    R = np.tile(law_of(a).r_op(a), (2, 1))
+    step = tuple(arg.analysis.functions)  # the calls the step makes (start-up checks run with interrupts unmasked)
+    for name in (*sorted(routines), "__clzsi2"):
+        cost = count_calls(elf, a, symbol=name, Y=Y, R=R, board="microbit", each=True, callers=step)
+        assert cost.calls > 0 and cost.dearest <= bounds(name), (name, cost.dearest, bounds(name))
+        if name == "__clzsi2":
+            assert bounds(name) == 21 and set(cost.each) <= {15, 17, 19, 21}
+
+
+def test_the_dearest_path_of_hand_written_thumb():
+    """Hand-written Thumb (the oracle is reading it): a diamond whose long side calls a 3-instruction leaf costs
+    1 + 1 + (1 + 3) + 1 = 7 on that side against 4 on the other; a tail call adds the callee; a loop is refused."""
+    leaf = ["200:\t2001      \tmovs\tr0, #1", "202:\t3001      \tadds\tr0, #1", "204:\t4770      \tbx\tlr"]
+    f = [
+        "100:\t2800      \tcmp\tr0, #0",
+        "102:\td002      \tbeq.n\t10a <f+0xa>",
+        "104:\tf000 f87c \tbl\t200 <leaf>",
+        "108:\t4770      \tbx\tlr",
+        "10a:\t2000      \tmovs\tr0, #0",
+        "10c:\t4770      \tbx\tlr",
+    ]
+    g = ["300:\t2000      \tmovs\tr0, #0", "302:\te77d      \tb.n\t200 <leaf>"]
+    loop = ["400:\t3801      \tsubs\tr0, #1", "402:\td1fd      \tbne.n\t400 <loop>", "404:\t4770      \tbx\tlr"]
+    text = "".join(
+        f"{base:08x} <{name}>:\n" + "\n".join(f"     {x}" for x in body) + "\n"
+        for name, base, body in (("f", 0x100, f), ("leaf", 0x200, leaf), ("g", 0x300, g), ("loop", 0x400, loop))
+    )
+    bounds = Bounds(parse(text))
+    assert bounds("leaf") == 3 and bounds("f") == 1 + 1 + (1 + 3) + 1 and bounds("g") == 1 + (1 + 3)
+    with pytest.raises(Unbounded, match="loop"):
+        bounds("loop")
 
 
 def test_the_analysis_tells_the_numbers_branches_from_the_paths_fixed_ones():
