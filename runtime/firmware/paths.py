@@ -27,10 +27,10 @@ class Unbounded(ValueError):
 
 @dataclass(frozen=True)
 class Node:
-    """An instruction of the graph: its own weight (1, plus its callee's bound for a call) and where it goes."""
+    """An instruction of the graph: the function it calls (``bl``, a tail call) if any, and where it goes."""
 
     insn: Insn
-    weight: int
+    callee: str | None
     successors: tuple[int, ...]  # indices in the function's instruction list
 
 
@@ -58,9 +58,10 @@ def _indirect(insn: Insn) -> bool:
 class Bounds:
     """Each function's dearest call in a disassembly (:func:`gainlink.firmware.branches.disassemble`), memoised."""
 
-    def __init__(self, funcs: dict[str, list[Insn]]) -> None:
+    def __init__(self, funcs: dict[str, list[Insn]], given: dict[str, int] | None = None) -> None:
+        """``given``: the cost of a call of these functions, taken as it is (a copy of a fixed length, measured)."""
         self.funcs = funcs
-        self.bound: dict[str, int] = {}
+        self.bound: dict[str, int] = dict(given or {})
         self._open: list[str] = []
 
     def __call__(self, name: str) -> int:
@@ -73,13 +74,17 @@ class Bounds:
             raise Unbounded(f"{name} is called but not in the disassembly")
         self._open.append(name)
         try:
-            self.bound[name] = longest(name, self.graph(name))
+            self.bound[name] = longest(name, self.graph(name), self.weight)
         finally:
             self._open.pop()
         return self.bound[name]
 
+    def weight(self, node: Node) -> int:
+        """What executing ``node`` costs at most: 1, and its callee's bound."""
+        return 1 + (self(node.callee) if node.callee else 0)
+
     def graph(self, name: str) -> list[Node]:
-        """``name``'s instructions as a graph, calls weighed by their callees' bounds."""
+        """``name``'s instructions as a graph."""
         insns = [i for i in self.funcs[name] if not i.mnemonic.startswith(".")]
         index = {i.address: k for k, i in enumerate(insns)}
         return [self._node(name, k, insn, insns, index) for k, insn in enumerate(insns)]
@@ -90,46 +95,58 @@ class Bounds:
         if _indirect(insn):
             raise Unbounded(f"{name}: a jump through a register or a table: {insn.text}")
         if _is_return(insn):
-            return Node(insn, 1, ())
+            return Node(insn, None, ())
         tgt = branch_target(insn)
         if b == "bl":
             if tgt is None:
                 raise Unbounded(f"{name}: a call with no target: {insn.text}")
-            return Node(insn, 1 + self(tgt[1]), nxt)
+            return Node(insn, tgt[1], nxt)
         inside = tgt is not None and tgt[0] in index
         if b == "b":
             if inside:
-                return Node(insn, 1, (index[tgt[0]],))
-            return Node(insn, 1 + self(tgt[1]), ())  # a tail call: the callee returns for us
+                return Node(insn, None, (index[tgt[0]],))
+            return Node(insn, tgt[1], ())  # a tail call: the callee returns for us
         if is_conditional_branch(insn.mnemonic):
             if tgt is None:
                 raise Unbounded(f"{name}: a conditional branch with no target: {insn.text}")
             if inside:
-                return Node(insn, 1, (*nxt, index[tgt[0]]))
+                return Node(insn, None, (*nxt, index[tgt[0]]))
             # a conditional tail call: the weight of its taken side, the longer, bounds both
-            return Node(insn, 1 + self(tgt[1]), nxt)
-        return Node(insn, 1, nxt)
+            return Node(insn, tgt[1], nxt)
+        return Node(insn, None, nxt)
 
 
-def longest(name: str, graph: list[Node]) -> int:
-    """The heaviest path from ``graph``'s entry (its first node) to a node with no successor, or :class:`Unbounded`
-    naming a back edge of a cycle."""
+def longest(name: str, graph: list[Node], weight) -> int:
+    """The heaviest path from ``graph``'s entry (its first node) to a node with no successor (``weight`` of a node:
+    :meth:`Bounds.weight`), or :class:`Unbounded` naming a back edge of a cycle."""
     if not graph:
         raise Unbounded(f"{name} has no instructions")
-    reach = _reachable(graph)
+    reach = reachable(graph, 0)
     for k in reach:
         if not graph[k].successors and not (_is_return(graph[k].insn) or _base(graph[k].insn.mnemonic) == "b"):
             raise Unbounded(f"{name}: falls off its end at {graph[k].insn.text}")
-    order = _topological(name, graph, reach)
+    return heaviest(name, graph, reach, 0, weight)
+
+
+def heaviest(name: str, graph: list[Node], nodes: set[int], start: int, weight, end: int | None = None) -> int:
+    """The heaviest path from ``start`` through ``nodes`` (edges leaving them ignored) to a node with no successor in
+    them, or to ``end`` when given (its successors ignored); :class:`Unbounded` if ``nodes`` hold a cycle."""
+    inside = {k: tuple(s for s in graph[k].successors if s in nodes) if k != end else () for k in nodes}
     best: dict[int, int] = {}
-    for k in reversed(order):  # a node's successors come after it in the order
-        node = graph[k]
-        best[k] = node.weight + max((best[s] for s in node.successors), default=0)
-    return best[0]
+    for k in reversed(_topological(name, graph, inside)):  # a node's successors come after it in the order
+        tails = [best[s] for s in inside[k] if best[s] >= 0]
+        if end is not None and k != end and not tails:
+            best[k] = -1  # ``end`` is not reached from here
+        else:
+            best[k] = weight(graph[k]) + max(tails, default=0)
+    if best[start] < 0:
+        raise Unbounded(f"{name}: no path from {graph[start].insn.text} to {graph[end].insn.text}")
+    return best[start]
 
 
-def _reachable(graph: list[Node]) -> set[int]:
-    seen, todo = {0}, [0]
+def reachable(graph: list[Node], start: int) -> set[int]:
+    """The nodes reached from ``start``."""
+    seen, todo = {start}, [start]
     while todo:
         for s in graph[todo.pop()].successors:
             if s not in seen:
@@ -138,23 +155,38 @@ def _reachable(graph: list[Node]) -> set[int]:
     return seen
 
 
-def _topological(name: str, graph: list[Node], reach: set[int]) -> list[int]:
-    """Kahn's order of the reachable nodes; a node left over is on a cycle."""
-    indegree = dict.fromkeys(reach, 0)
-    for k in reach:
+def reaching(graph: list[Node], end: int, within: set[int]) -> set[int]:
+    """The nodes of ``within`` from which ``end`` is reached inside ``within``."""
+    preds: dict[int, list[int]] = {}
+    for k in within:
         for s in graph[k].successors:
+            preds.setdefault(s, []).append(k)
+    seen, todo = {end}, [end]
+    while todo:
+        for p in preds.get(todo.pop(), []):
+            if p not in seen and p in within:
+                seen.add(p)
+                todo.append(p)
+    return seen
+
+
+def _topological(name: str, graph: list[Node], inside: dict[int, tuple[int, ...]]) -> list[int]:
+    """Kahn's order of ``inside``'s nodes (their successors given); a node left over is on a cycle."""
+    indegree = dict.fromkeys(inside, 0)
+    for succ in inside.values():
+        for s in succ:
             indegree[s] += 1
-    ready = [k for k in reach if indegree[k] == 0]
+    ready = [k for k, d in indegree.items() if d == 0]
     order = []
     while ready:
         k = ready.pop()
         order.append(k)
-        for s in graph[k].successors:
+        for s in inside[k]:
             indegree[s] -= 1
             if indegree[s] == 0:
                 ready.append(s)
-    if len(order) != len(reach):
-        left = sorted(set(reach) - set(order))
-        back = [graph[k].insn.text for k in left if any(s in left for s in graph[k].successors)]
+    if len(order) != len(inside):
+        left = set(inside) - set(order)
+        back = [graph[k].insn.text for k in sorted(left) if any(s in left for s in inside[k])]
         raise Unbounded(f"{name} has a loop (its graph has a cycle through {back[0] if back else '?'})")
     return order
