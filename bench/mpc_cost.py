@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 from gainlink.errors import ToolchainError
-from gainlink.firmware.branches import disassemble
+from gainlink.firmware.branches import SOFT_FLOAT, disassemble
 from gainlink.firmware.build import replay_image
 from gainlink.firmware.cost import count_calls, count_step_instructions
 from gainlink.firmware.paths import Bounds, Unbounded
@@ -159,9 +159,11 @@ def soft_float_routines(a, elf: Path, board: str, Y, R, proof: dict) -> dict:
     loop-free graph's longest path, callees included) beside the dearest call the step made on this run."""
     funcs = disassemble(elf)
     bounds = Bounds(funcs)
-    step = tuple(proof["argument"]["functions"])
+    # the step's own code: the start-up checks call the compares with interrupts unmasked (a handler would be counted)
+    step = tuple(f for f in proof["argument"]["functions"] if not SOFT_FLOAT.match(f) and f != "__clzsi2")
     out = {}
-    called = {v.split(" calls ")[1].split(" ")[0] for v in proof["argument"]["violations"] if " calls " in v}
+    calls = [v.split(" calls ") for v in proof["argument"]["violations"] if " calls " in v]
+    called = {c[1].split(" ")[0] for c in calls if c[0].split(" ")[-1] in step}
     for name in sorted(called):
         try:
             bound: int | str = bounds(name)

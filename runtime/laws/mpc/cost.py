@@ -441,6 +441,8 @@ def soft_step_bound(a: Artifact, elf: Path, *, board: str, Y: np.ndarray, R: np.
     own = m.counts - m.iterations * body
     for p in ITERATION:  # each step's calls of the pass: its iterations' worth, in order
         each = np.asarray(count_calls(elf, a, symbol=p, Y=Y, R=R, board=board, each=True).each, dtype=np.int64)
+        if len(each) != int(m.iterations.sum()):
+            raise NotProved(f"{p} was called {len(each)} times in {int(m.iterations.sum())} iterations")
         own -= np.add.reduceat(each, np.r_[0, np.cumsum(m.iterations)[:-1]])
     detours = _root_detours(funcs, analysis)
     here = {i.address for i in funcs[ROOT]}
