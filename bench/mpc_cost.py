@@ -21,8 +21,12 @@ the same on every call, checked) plus solve's own loop body (counted on the disa
 1 m, then -1.5 m, then a NaN in each sample and reference element) must fit those formulas exactly, and gives F_stop,
 F_cap and the bound. Then a second run tries to break it (extreme, alternating and random samples and references)
 and its worst count is printed beside. On the M0 (soft float: ``gl_fmaf``'s and the compare routines' paths depend
-on their operands) the bound is the fixed part plus the cap times the dearest iteration measured on this run, not
-proved.
+on their operands) the bound is proved another way (``soft_step_bound``): every float routine the step calls is
+loop-free and is charged at its longest path on the disassembly (``soft_float_routines`` prints each bound beside the
+dearest call measured), the compare-decided clamps are detours charged at their longer side, and the counts of the
+first ``M0_STEPS`` closed-loop steps give each pass's and the fixed part's own instructions; a refused step is bounded
+by the heaviest path to ``refuse``. It is loose (each routine at its dearest path), and six adversarial steps are
+measured beside it.
 Instructions are not cycles (a ``vfma.f32`` takes 3 cycles on the M4F; flash wait states add more): times are not
 given here.
 
@@ -43,14 +47,23 @@ from pathlib import Path
 
 import numpy as np
 from gainlink.errors import ToolchainError
+from gainlink.firmware.branches import SOFT_FLOAT, disassemble
 from gainlink.firmware.build import replay_image
 from gainlink.firmware.cost import count_calls, count_step_instructions
+from gainlink.firmware.paths import Bounds, Unbounded
 from gainlink.firmware.size import size_report, symbol_sizes
 from gainlink.firmware.targets import resolve_cortex_m
 from gainlink.laws import design as design_spec
 from gainlink.laws import law_of
 from gainlink.laws.flags import CAPPED
-from gainlink.laws.mpc.cost import NotProved, bound_of, branch_argument, iteration_instructions, refuse_samples
+from gainlink.laws.mpc.cost import (
+    NotProved,
+    bound_of,
+    branch_argument,
+    iteration_instructions,
+    refuse_samples,
+    soft_step_bound,
+)
 from gainlink.laws.mpc.cost import measure as measure_steps
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import load_spec
@@ -101,10 +114,28 @@ def compile_flags(elf: Path) -> str:
     return line.split("=", 1)[1].strip()
 
 
+def soft_proved_bound(a, elf: Path, board: str) -> dict:
+    """The soft-float cores' bound at the cap (gainlink.laws.mpc.cost.soft_step_bound) from the first M0_STEPS steps
+    of the closed loop, or why not; a short run of adversarial steps beside it."""
+    Y, R = closed_loop_samples(a)
+    try:
+        b = soft_step_bound(a, elf, board=board, Y=Y[:M0_STEPS], R=R[:M0_STEPS])
+    except NotProved as exc:
+        return {"proved": False, "why": str(exc)}
+    Ya, Ra = adversarial_samples(a, steps=6)
+    worst = measure_steps(a, elf, board=board, Y=Ya, R=Ra)
+    return {"proved": True, "method": "soft float: each routine at its dearest path", **b.summary(),
+            "bound_over_measured_worst": round(b.bound / b.measured_max, 2), "adversarial_steps": len(worst.counts),
+            "adversarial_capped": int(worst.capped.sum()), "adversarial_worst": int(worst.counts.max()),
+            "adversarial_within_bound": bool(worst.counts.max() <= b.bound)}  # fmt: skip
+
+
 def proved_bound(a, elf: Path, board: str) -> dict:
     """The bound at the cap proved for ``elf`` (module docstring), or why not; the attempt to break it."""
     arg = branch_argument(elf)
     out = {"argument": arg.summary(), "compile_flags": compile_flags(elf)}
+    if not arg.holds and arg.analysis.soft_float:
+        return {**out, **soft_proved_bound(a, elf, board)}
     if not arg.holds:
         return {**out, "proved": False}
     Y, R = closed_loop_samples(a)
@@ -121,6 +152,26 @@ def proved_bound(a, elf: Path, board: str) -> dict:
             "adversarial_steps": len(worst.counts), "adversarial_capped": int(worst.capped.sum()),
             "adversarial_worst": int(worst.counts.max()),
             "adversarial_within_bound": bool(worst.counts.max() <= bound.bound)}  # fmt: skip
+
+
+def soft_float_routines(a, elf: Path, board: str, Y, R, proof: dict) -> dict:
+    """Each soft-float routine the step calls: its dearest call proved on the disassembly (gainlink.firmware.paths: a
+    loop-free graph's longest path, callees included) beside the dearest call the step made on this run."""
+    funcs = disassemble(elf)
+    bounds = Bounds(funcs)
+    # the step's own code: the start-up checks call the compares with interrupts unmasked (a handler would be counted)
+    step = tuple(f for f in proof["argument"]["functions"] if not SOFT_FLOAT.match(f) and f != "__clzsi2")
+    out = {}
+    calls = [v.split(" calls ") for v in proof["argument"]["violations"] if " calls " in v]
+    called = {c[1].split(" ")[0] for c in calls if c[0].split(" ")[-1] in step}
+    for name in sorted(called):
+        try:
+            bound: int | str = bounds(name)
+        except Unbounded as exc:
+            bound = f"unbounded: {exc}"
+        cost = count_calls(elf, a, symbol=name, Y=Y, R=R, board=board, callers=step)
+        out[name] = {"bound_per_call": bound, "measured_worst_per_call": cost.dearest, "calls": cost.calls}
+    return out
 
 
 def measure(a, target: str) -> dict:
@@ -142,7 +193,16 @@ def measure(a, target: str) -> dict:
     per_iter_cheap = sum(parts[p].cheapest for p in PASSES)
     cap = a.mpc.max_iter
     proof = proved_bound(a, elf, board)
-    if proof["proved"]:
+    if proof["proved"] and "method" in proof:
+        bound = proof["bound"]
+        scope = (f"proved for every input on this image ({target}, {proof['compile_flags']}; horizon "
+                 f"{a.mpc.horizon}, {a.mpc.nx} states, {a.m} inputs, {a.mpc.nc} box rows, cap {cap}): every "
+                 "soft-float routine the step calls is loop-free and charged at its longest path, the passes' and the "
+                 "step's compare-decided branches are detours charged at their longer side, a refused step at the "
+                 "heaviest path to refuse; loose (each routine at its dearest path); premises: a word an integer "
+                 "register loads and only moves, offsets and compares is an address, and the step's branches before "
+                 "solve are its non-finite tests")  # fmt: skip
+    elif proof["proved"]:
         bound = proof["bound"]
         scope = (f"proved for every input on this image ({target}, {proof['compile_flags']}; horizon "
                  f"{a.mpc.horizon}, {a.mpc.nx} states, {a.m} inputs, {a.mpc.nc} box rows, cap {cap}): the numbers "
@@ -151,8 +211,10 @@ def measure(a, target: str) -> dict:
                  "offsets and compares is an address")  # fmt: skip
     else:
         bound = step.dearest - int(iters.max()) * per_iter_cheap + cap * per_iter_worst
-        scope = ("measured on this run (fixed part and passes at their dearest), not proved: "
-                 + "; ".join(proof["argument"]["violations"][:2]))  # fmt: skip
+        why = "; ".join(proof["argument"]["violations"][:2]) + (f" ({proof['why']})" if "why" in proof else "")
+        scope = f"measured on this run (fixed part and passes at their dearest), not proved: {why}"
+    if target == "cortex-m0":
+        proof["soft_float_routines"] = soft_float_routines(a, elf, board, Y, R, proof)
     size = size_report(elf, board=board)
     syms = symbol_sizes(elf, ("gl_mpc_default", "gl_mpc_step", "law"))
     tables = syms.get("gl_mpc_default", {}).get("size", 0)

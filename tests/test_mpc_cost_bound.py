@@ -8,10 +8,19 @@ import logging
 
 import numpy as np
 import pytest
-from gainlink.firmware.branches import analyse_text, parse
+from gainlink.firmware.branches import analyse_text, disassemble, parse
 from gainlink.firmware.build import replay_image
+from gainlink.firmware.cost import count_calls
+from gainlink.firmware.paths import Bounds, Unbounded
 from gainlink.laws import design, law_of
-from gainlink.laws.mpc.cost import bound_of, branch_argument, iteration_instructions, measure, refuse_samples
+from gainlink.laws.mpc.cost import (
+    bound_of,
+    branch_argument,
+    iteration_instructions,
+    measure,
+    refuse_samples,
+    soft_step_bound,
+)
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import load_spec
 from support.paths import EXAMPLES
@@ -112,13 +121,86 @@ def test_the_bound_at_the_cap_covers_every_step_and_no_input_breaks_it(name, tar
     assert worst.counts.max() <= bound.bound, (int(worst.counts.max()), bound)
 
 
-def test_the_soft_float_cores_are_not_proved():
-    """On the M0 the multiply-adds and float compares are calls whose paths depend on their operands: the argument
-    names them and does not hold (bench/mpc_cost.py labels the M0's figure measured, not proved)."""
+def test_each_soft_float_routine_has_a_bounded_path():
+    """On the M0 the multiply-adds and float compares are calls whose paths depend on their operands: the hard-float
+    cores' branch argument names them and does not hold there (the M0's bound is argued by soft_step_bound). Each of
+    those routines (gl_fmaf, libgcc's add, subtract, multiply and compares, and what they call) has a loop-free graph,
+    so its dearest call is bounded (gainlink.firmware.paths); QEMU's count of every call the step's own code makes
+    over two steps (one 1 m off, one -1000 off: special operands, cancellations, boxes active) stays within it.
+    __clzsi2, read by hand: 21 instructions with no branch taken, each of its three taken ``bcc`` skips two, so
+    every call counts 15 to 21."""
     a = artifact("pendulum_mpc")
-    arg = branch_argument(replay_image(a, target="cortex-m0", board="microbit"))
+    elf = replay_image(a, target="cortex-m0", board="microbit")
+    arg = branch_argument(elf)
     assert not arg.holds
     assert any("soft-float" in v and "gl_fmaf" in v for v in arg.violations), arg.violations
+    bounds = Bounds(disassemble(elf))
+    routines = {s.split(" calls ")[1] for s in arg.analysis.soft_float}
+    assert {"gl_fmaf", "__aeabi_fadd", "__aeabi_fmul", "__aeabi_fcmplt"} <= routines
+    for name in routines:
+        assert bounds(name) > 0, name  # Unbounded if its graph had a cycle
+    Y = np.array([[1.0] * a.p, [-1e3] * a.p])
+    R = np.tile(law_of(a).r_op(a), (2, 1))
+    # the calls the step's own code makes (the start-up checks call the compares with interrupts unmasked, and a
+    # handler that runs during such a call is counted in it: 43 for a compare bounded by 42, at random)
+    own = ("gl_mpc_step", "solve", "backward", "forward", "slacks", "refuse")
+    direct = sorted({s.split(" calls ")[1] for s in arg.analysis.soft_float if s.split(" calls ")[0] in own})
+    assert {"gl_fmaf", "__aeabi_fadd", "__aeabi_fmul", "__aeabi_fcmplt"} <= set(direct)
+    for name, callers in (*((f, own) for f in direct), ("__clzsi2", ("gl_fmaf",))):
+        cost = count_calls(elf, a, symbol=name, Y=Y, R=R, board="microbit", each=True, callers=callers)
+        assert cost.calls > 0 and cost.dearest <= bounds(name), (name, cost.dearest, bounds(name))
+        if name == "__clzsi2":
+            assert bounds(name) == 21 and set(cost.each) <= {15, 17, 19, 21}
+
+
+def test_the_m0_bound_at_the_cap_covers_every_step_and_no_input_breaks_it():
+    """The M0's bound at the cap (gainlink.laws.mpc.cost.soft_step_bound) from three closed-loop steps from 1 m (one
+    stops early, two reach the cap): one iteration at most solve's loop body plus each pass at its own instructions,
+    its compare-decided detours and each soft-float call at its routine's dearest path; the fixed part likewise; a
+    refused step at most the heaviest path to refuse. No step of a second run (alternating +-1e3, extreme values, all
+    capped or stopping) and no refused step (a NaN or an infinity in each sample and reference element) passes it,
+    and the measured steps are within it. It is loose (each float routine at its dearest path): under 2x the
+    measured worst here."""
+    a = artifact("pendulum_mpc")
+    elf = replay_image(a, target="cortex-m0", board="microbit")
+    Y, R = closed_loop(a, [(3, 1.0)])
+    b = soft_step_bound(a, elf, board="microbit", Y=Y, R=R)
+    assert b.measured_max <= b.bound < 2 * b.measured_max
+    assert b.bound == max(b.refuse, b.fixed + b.cap * b.per_iteration)
+    rng = np.random.default_rng(32)
+    Ya = np.vstack([np.full((1, a.p), 1e3), np.full((1, a.p), -1e3), rng.choice([1e6, -1e6, 1e-30, 30.0], (2, a.p))])
+    Ra = np.vstack([np.zeros((2, a.q)), rng.choice([1e6, -30.0, 1e-30], (2, a.q))])
+    worst = measure(a, elf, board="microbit", Y=Ya, R=Ra)
+    assert worst.capped.any() and worst.counts.max() <= b.bound
+    Yn, Rn = refuse_samples(a.p, a.q, Y[-1], R[-1])
+    Yi, Ri = Yn.copy(), Rn.copy()
+    Yi[np.isnan(Yi)], Ri[np.isnan(Ri)] = np.inf, -np.inf
+    refused = measure(a, elf, board="microbit", Y=np.vstack([Yn, Yi]), R=np.vstack([Rn, Ri]))
+    assert refused.refused.all() and refused.counts.max() <= b.refuse
+
+
+def test_the_dearest_path_of_hand_written_thumb():
+    """Hand-written Thumb (the oracle is reading it): a diamond whose long side calls a 3-instruction leaf costs
+    1 + 1 + (1 + 3) + 1 = 7 on that side against 4 on the other; a tail call adds the callee; a loop is refused."""
+    leaf = ["200:\t2001      \tmovs\tr0, #1", "202:\t3001      \tadds\tr0, #1", "204:\t4770      \tbx\tlr"]
+    f = [
+        "100:\t2800      \tcmp\tr0, #0",
+        "102:\td002      \tbeq.n\t10a <f+0xa>",
+        "104:\tf000 f87c \tbl\t200 <leaf>",
+        "108:\t4770      \tbx\tlr",
+        "10a:\t2000      \tmovs\tr0, #0",
+        "10c:\t4770      \tbx\tlr",
+    ]
+    g = ["300:\t2000      \tmovs\tr0, #0", "302:\te77d      \tb.n\t200 <leaf>"]
+    loop = ["400:\t3801      \tsubs\tr0, #1", "402:\td1fd      \tbne.n\t400 <loop>", "404:\t4770      \tbx\tlr"]
+    text = "".join(
+        f"{base:08x} <{name}>:\n" + "\n".join(f"     {x}" for x in body) + "\n"
+        for name, base, body in (("f", 0x100, f), ("leaf", 0x200, leaf), ("g", 0x300, g), ("loop", 0x400, loop))
+    )
+    bounds = Bounds(parse(text))
+    assert bounds("leaf") == 3 and bounds("f") == 1 + 1 + (1 + 3) + 1 and bounds("g") == 1 + (1 + 3)
+    with pytest.raises(Unbounded, match="loop"):
+        bounds("loop")
 
 
 def test_the_analysis_tells_the_numbers_branches_from_the_paths_fixed_ones():

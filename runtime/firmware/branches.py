@@ -413,7 +413,8 @@ def analyse_text(funcs: dict[str, list[Insn]], root: str) -> Analysis:
             if SOFT_FLOAT.match(callee):
                 result.soft_float.append(f"{name} calls {callee}")
         for callee, args in flows[name].sites.values():
-            if (callee not in funcs or callee in COPIES) and any(_is_data(o) for o in args.values()):
+            used = ("r0", "r1", "r2") if callee in COPIES else tuple(args)  # a copy takes three arguments
+            if (callee not in funcs or callee in COPIES) and any(_is_data(args[r]) for r in used):
                 result.data_calls.append(f"{name} passes data to {callee}, which is not followed")
     result.soft_float = sorted(set(result.soft_float))
     return result

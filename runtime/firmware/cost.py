@@ -29,6 +29,7 @@ from . import qemu as fwqemu
 from .build import DEFAULT_BOARD, cache_root, firmware_dir
 from .size import symbol_sizes, tool
 
+_FUNC = re.compile(r"^[0-9a-f]+ <(\S+)>:$")
 _CALL = re.compile(r"^\s*([0-9a-f]+):\s+(?:[0-9a-f]{4}\s+){2}bl\s+[0-9a-f]+ <(\S+)>$")
 
 
@@ -87,12 +88,18 @@ class StepCost:
         return self.own / self.calls if self.calls else float("nan")
 
 
-def return_addresses(elf: Path, symbol: str) -> list[int]:
-    """Addresses right after every direct call (``bl``) of ``symbol`` in ``elf``: where its calls return."""
+def return_addresses(elf: Path, symbol: str, callers: tuple[str, ...] = ()) -> list[int]:
+    """Addresses right after every direct call (``bl``) of ``symbol`` in ``elf``: where its calls return (only the
+    calls made in the functions ``callers``, when given)."""
     out = subprocess.run(
         [tool("arm-none-eabi-objdump"), "-d", str(elf)], capture_output=True, text=True, check=True
     ).stdout
-    sites = [int(m.group(1), 16) for m in map(_CALL.match, out.splitlines()) if m and m.group(2) == symbol]
+    sites, function = [], ""
+    for line in out.splitlines():
+        if f := _FUNC.match(line):
+            function = f.group(1)
+        elif (m := _CALL.match(line)) and m.group(2) == symbol and (not callers or function in callers):
+            sites.append(int(m.group(1), 16))
     return [site + 4 for site in sites]  # a Thumb-2 bl is 4 bytes
 
 
@@ -125,28 +132,33 @@ def count_calls(
     board: str = DEFAULT_BOARD,
     law: str | None = None,
     each: bool = False,
+    callers: tuple[str, ...] = (),
 ) -> StepCost:
     """Replay ``Y``, ``R``, ``S`` through ``elf`` on ``board``, counting every direct call of the function ``symbol``
     (e.g. ``gl_fmaf`` on a soft-float core) from its entry to its return, callees included (``each``: every call's
-    count too, in :attr:`StepCost.each`)."""
+    count too, in :attr:`StepCost.each`; ``callers``: only the calls made in those functions, e.g. the step's and not
+    the start-up checks', which run with interrupts unmasked)."""
     with tempfile.TemporaryDirectory(prefix="gainlink-cost-") as tmp:
         result = Path(tmp) / "count.txt"
         per_call = Path(tmp) / "each.txt" if each else None
-        plugin = counter_plugin(elf, symbol=symbol, out=result, each=per_call)
+        plugin = counter_plugin(elf, symbol=symbol, out=result, each=per_call, callers=callers)
         fwqemu.replay(elf, artifact, board=board, Y=Y, R=R, S=S, plugin=plugin, law=law)
         return read_count(result, each=per_call)
 
 
-def counter_plugin(elf: Path, *, symbol: str, out: Path, each: Path | None = None) -> list[str]:
+def counter_plugin(
+    elf: Path, *, symbol: str, out: Path, each: Path | None = None, callers: tuple[str, ...] = ()
+) -> list[str]:
     """The QEMU arguments that count every direct call of ``symbol`` in ``elf`` from its entry to its return, callees
     included (the plugin, built and cached), the totals written to ``out`` when QEMU exits (:func:`read_count`), and
-    every call's count to ``each`` when given."""
+    every call's count to ``each`` when given (``callers``: :func:`return_addresses`)."""
     sym = symbol_sizes(elf, (symbol,)).get(symbol)
     if sym is None:
         raise FirmwareError(f"{elf} has no {symbol} symbol")
-    returns = return_addresses(elf, symbol)
+    returns = return_addresses(elf, symbol, callers)
     if not returns:
-        raise FirmwareError(f"{elf} never calls {symbol} directly: no return address to close a count")
+        where = f" from {', '.join(callers)}" if callers else ""
+        raise FirmwareError(f"{elf} never calls {symbol} directly{where}: no return address to close a count")
     lo, hi = sym["address"], sym["address"] + sym["size"]
     spec = [f"{build_plugin()}", f"lo={lo:#x}", f"hi={hi:#x}", f"entry={lo:#x}", f"out={out}"]
     spec += [f"ret={r:#x}" for r in returns]

@@ -11,7 +11,7 @@ The argument, in two halves:
    tests), so it takes the same outcome on every call: the box projections and the command's clamp are selects (an IT
    block: a predicated instruction is counted whether or not its condition holds), not branches. A soft-float call
    (``gl_fmaf``, ``__aeabi_*``: paths that depend on the operands) or a call that passes the law's numbers to code
-   outside the image makes the argument fail: the M0 and M3 are measured, not proved.
+   outside the image makes this argument fail: the M0 and M3 take the soft-float argument below.
 2. **The paths** that leaves (:func:`step_bound`): a step either refuses at one of the non-finite tests (a path of
    its own per test, the same count every time), or runs ``it`` iterations and stops (1 <= it <= cap: the step's
    fixed part F_stop plus ``it`` times one iteration's count I, the same instructions each iteration), or runs the
@@ -21,6 +21,21 @@ The argument, in two halves:
    that takes every path kind (a step that stops, a capped step, a non-finite value in each sample and reference
    element), and the run must fit the formulas exactly (every step of a kind gives the same fixed part), which
    checks the first half's conclusion on the image.
+
+**Soft float** (the M0, the M3: :func:`soft_step_bound`): the multiply-adds and compares are calls of ``gl_fmaf`` and
+libgcc's routines, whose paths depend on their operands, and the box clamps are branches on a compare's result. Each
+routine's graph is loop-free, so its dearest call is its longest path (:mod:`gainlink.firmware.paths`). A pass
+(``backward``, ``forward``, ``slacks``) may have branches the numbers decide only if they are detours: decided by the
+call right before them, two straight sides with no call that meet again (:func:`_detour`). Its path and its sequence
+of calls are then the same on every call, so a measured run splits its count into its own instructions (the least
+measured, plus one detour's difference per execution) and its calls, each charged at its routine's bound
+(:func:`soft_pass`). One iteration: solve's loop body plus the passes' bounds. The fixed part, from steps that do not
+refuse, the same way: ``gl_mpc_step``'s branches before ``solve`` must be its non-finite tests (an unordered or a
+greater-than compare: premise, a finite sample decides them the same way every step, as the C's ``isfinite`` tests
+are), those after it detours. A refused step: the heaviest path of ``gl_mpc_step`` to its call of ``refuse`` and on to
+its return (the tests must be loop-free), ``refuse``'s copy at its measured fixed count. The bound at the cap is
+``max(refuse, fixed + cap x iteration)``; every routine at its dearest path makes it loose (about 1.9x on the M0
+pendulum), but it holds for any operands.
 
 The bound holds for the image measured (its core, its compiler and flags, the tables' dimensions it was built for:
 any numbers in tables of those dimensions, any samples, any warm start), under the premise stated in
@@ -36,6 +51,8 @@ from pathlib import Path
 import numpy as np
 
 from ...firmware.branches import (
+    COPIES,
+    SOFT_FLOAT,
     Analysis,
     analyse_text,
     branch_target,
@@ -44,6 +61,7 @@ from ...firmware.branches import (
     straight_call,
 )
 from ...firmware.cost import count_calls, count_step_instructions
+from ...firmware.paths import Bounds, heaviest, reachable, reaching
 from ...shipping.artifact import Artifact
 from ..flags import CAPPED
 
@@ -230,3 +248,219 @@ def measure(a: Artifact, elf: Path, *, board: str, Y: np.ndarray, R: np.ndarray)
 def bound_of(m: Measured, cap: int, per_iteration: int) -> StepBound:
     """:func:`step_bound` of a measured run."""
     return step_bound(m.counts, m.iterations, m.capped, m.refused, cap, per_iteration)
+
+
+@dataclass(frozen=True)
+class SoftPass:
+    """One pass of an iteration on a soft-float core: its own instructions (the least a call ran, the most its
+    compare-decided skips can add), the soft-float calls it makes per call and each one's proved dearest call."""
+
+    own: int
+    skips: int
+    calls: dict[str, int]
+    routine_bounds: dict[str, int]
+
+    @property
+    def bound(self) -> int:
+        """The most one call of the pass executes, for any operands."""
+        return self.own + self.skips + sum(n * self.routine_bounds[f] for f, n in self.calls.items())
+
+
+def _straight(insns: list, k: int, index: dict, targets: set, limit: int = 8) -> list[int]:
+    """The addresses straight code runs from ``insns[k]`` (following unconditional branches inside the function), up
+    to a call, a conditional branch, a return or ``limit`` instructions."""
+    out = []
+    while k is not None and k < len(insns) and len(out) < limit:
+        i = insns[k]
+        base = i.mnemonic.split(".")[0]
+        out.append(i.address)
+        if base == "b" and (t := branch_target(i)) and t[0] in index:
+            k = index[t[0]]
+        elif base.startswith(("bl", "bx", "pop")) or is_conditional_branch(i.mnemonic) or base == "b":
+            break
+        else:
+            k += 1
+    return out
+
+
+def _detour(funcs: dict, function: str, branch) -> tuple[str, int]:
+    """A branch the law's numbers decide, if it is a detour: decided by what the call right before it returned
+    (straight code back to that ``bl``), its two sides straight code with no call that meet again. Returns (the
+    deciding routine, the most instructions one side runs more than the other); :class:`NotProved` otherwise."""
+    insns = [i for i in funcs[function] if not i.mnemonic.startswith(".")]
+    index = {i.address: k for k, i in enumerate(insns)}
+    targets = {t[0] for t in map(branch_target, insns) if t}
+    k = index[branch.insn.address]
+    j = k - 1
+    while j >= 0 and insns[j].mnemonic.split(".")[0] != "bl":
+        if insns[j].address in targets or is_conditional_branch(insns[j].mnemonic) or insns[j].mnemonic[0] == "b":
+            raise NotProved(f"{function} {branch.insn.text}: not straight after the call that decides it")
+        j -= 1
+    callee = (branch_target(insns[j]) or (0, "?"))[1] if j >= 0 else "?"
+    if branch.origins != frozenset({f"ret:{callee}"}):
+        raise NotProved(f"{function} {branch.insn.text}: decided by {sorted(branch.origins)}, not by {callee}")
+    taken = _straight(insns, index.get(branch.taken), index, targets)
+    fall = _straight(insns, k + 1, index, targets)
+    meet = next((a for a in fall if a in taken), None)
+    if meet is None:
+        raise NotProved(f"{function} {branch.insn.text}: its sides do not meet in straight code")
+    return callee, abs(taken.index(meet) - fall.index(meet))
+
+
+def _only_soft_float_decides(funcs: dict, analysis: Analysis, part: str, handled: frozenset[str] = frozenset()) -> None:
+    """No function ``part`` reaches other than through a soft-float routine has a branch the numbers decide (``part``
+    itself and ``handled`` aside: their branches are argued apart), no jump is indirect and no call passes the numbers
+    outside the image."""
+    if analysis.indirect or analysis.data_calls:
+        raise NotProved(f"{part}: {(analysis.indirect + analysis.data_calls)[0]}")
+    where = {i.address: f for f, insns in funcs.items() for i in insns}
+    reached, todo = {part}, [part]
+    while todo:
+        f = todo.pop()
+        for at, callee in analysis.calls.items():
+            if where.get(at) == f and callee in funcs and callee not in reached and not SOFT_FLOAT.match(callee):
+                reached.add(callee)
+                todo.append(callee)
+    for f in sorted(reached - {part} - handled):
+        if analysis.data_branches(f):
+            raise NotProved(f"{f}, called by {part}, has branches the numbers decide")
+
+
+def soft_pass(a: Artifact, elf: Path, part: str, *, board: str, Y: np.ndarray, R: np.ndarray) -> SoftPass:
+    """The most one call of ``part`` executes on a soft-float core, for any operands (module docstring, "soft float").
+
+    The pass's only branches the numbers decide must be skips (:func:`_skip`), so its path and its sequence of
+    soft-float calls are the same on every call: each routine's calls over the run split into equal consecutive
+    runs, one per call of the pass; what is left of each call's count is the pass's own instructions, which the skips
+    make vary by at most one skipped side per execution (an execution per call of the routine that decides it)."""
+    funcs = disassemble(elf)
+    analysis = analyse_text(funcs, part)
+    bounds = Bounds(funcs)
+    here = {i.address for i in funcs[part]}
+    callees = sorted({f for at, f in analysis.calls.items() if at in here and SOFT_FLOAT.match(f)})
+    total = count_calls(elf, a, symbol=part, Y=Y, R=R, board=board, each=True)
+    own = np.asarray(total.each, dtype=np.int64)
+    calls: dict[str, int] = {}
+    for f in callees:
+        c = count_calls(elf, a, symbol=f, Y=Y, R=R, board=board, each=True, callers=(part,))
+        if c.calls % total.calls:
+            raise NotProved(f"{part} made {c.calls} calls of {f} in {total.calls} calls: not the same each time")
+        calls[f] = c.calls // total.calls
+        own -= np.asarray(c.each, dtype=np.int64).reshape(total.calls, calls[f]).sum(axis=1)
+    _only_soft_float_decides(funcs, analysis, part)
+    skips = 0
+    for b in analysis.data_branches(part):
+        callee, n = _detour(funcs, part, b)
+        skips += n * calls[callee]
+    if int(own.max() - own.min()) > skips:
+        raise NotProved(f"{part}'s own count ranged over {own.min()}..{own.max()}, more than its skips allow")
+    return SoftPass(int(own.min()), skips, calls, {f: bounds(f) for f in callees})
+
+
+def soft_iteration_bound(a: Artifact, elf: Path, *, board: str, Y: np.ndarray, R: np.ndarray) -> int:
+    """The most one iteration executes on a soft-float core, for any operands: solve's own loop body plus each pass's
+    :func:`soft_pass` bound."""
+    funcs = disassemble(elf)
+    return loop_instructions(funcs) + sum(soft_pass(a, elf, p, board=board, Y=Y, R=R).bound for p in ITERATION)
+
+
+def refuse_bound(a: Artifact, elf: Path, *, board: str, y: np.ndarray, r: np.ndarray) -> int:
+    """The most a step that refuses executes on a soft-float core, for any samples: the heaviest path of
+    ``gl_mpc_step``'s graph from its entry to a call of ``refuse`` (through the instructions that reach it: the
+    non-finite tests must be loop-free) and from there to its return, every call at its callee's bound and the copies
+    ``refuse`` makes at their count measured on a refused step (the same every call: a fixed length)."""
+    funcs = disassemble(elf)
+    Yn, Rn = refuse_samples(a.p, a.q, y, r)
+    given = {}
+    for copy in sorted({(branch_target(i) or (0, ""))[1] for i in funcs[REFUSE]} & COPIES):
+        cost = count_calls(elf, a, symbol=copy, Y=Yn, R=Rn, board=board, callers=(REFUSE,))
+        if cost.cheapest != cost.dearest:
+            raise NotProved(f"{REFUSE}'s {copy} took {cost.cheapest} to {cost.dearest} instructions a call")
+        given[copy] = cost.dearest
+    bounds = Bounds(funcs, given)
+    graph = bounds.graph(ROOT)
+    nodes = reachable(graph, 0)
+    worst = 0
+    for c in (k for k in nodes if graph[k].callee == REFUSE):
+        to = heaviest(ROOT, graph, reaching(graph, c, nodes), 0, bounds.weight, end=c)
+        after = heaviest(ROOT, graph, reachable(graph, c), c, bounds.weight)
+        worst = max(worst, to + after - bounds.weight(graph[c]))
+    if not worst:
+        raise NotProved(f"{ROOT} never calls {REFUSE}")
+    return worst
+
+
+@dataclass(frozen=True)
+class SoftStepBound:
+    """The bound at the cap on a soft-float core: one iteration's bound, the fixed part's, a refused step's."""
+
+    per_iteration: int
+    fixed: int
+    refuse: int
+    cap: int
+    bound: int
+    measured_max: int
+    passes: dict
+
+    def summary(self) -> dict:
+        """JSON-ready."""
+        return dict(self.__dict__)
+
+
+def _root_detours(funcs: dict, analysis: Analysis) -> dict[str, int]:
+    """The most instructions the detours of ``gl_mpc_step`` after its call of ``solve`` add to a step (one side each,
+    per execution: one per call of the routine deciding it); the branches before ``solve`` must be the non-finite
+    tests (decided by an unordered or a greater-than compare, one side reaching ``refuse``)."""
+    at_solve = next(a for a, f in analysis.calls.items() if f == SOLVE and a in {i.address for i in funcs[ROOT]})
+    extra: dict[str, int] = {}
+    for b in analysis.data_branches(ROOT):
+        if b.insn.address < at_solve:
+            if not b.origins <= {"ret:__aeabi_fcmpun", "ret:__aeabi_fcmpgt"}:
+                raise NotProved(f"{ROOT} {b.insn.text}: before {SOLVE}, decided by {sorted(b.origins)}")
+            continue
+        callee, n = _detour(funcs, ROOT, b)
+        extra[callee] = extra.get(callee, 0) + n
+    return extra
+
+
+def soft_step_bound(a: Artifact, elf: Path, *, board: str, Y: np.ndarray, R: np.ndarray) -> SoftStepBound:
+    """The bound at the cap on a soft-float core (module docstring, "soft float") from ``Y``, ``R``: steps that do
+    not refuse, some capped and some stopping early."""
+    funcs = disassemble(elf)
+    analysis = analyse_text(funcs, ROOT)
+    _only_soft_float_decides(funcs, analysis, ROOT, frozenset({SOLVE, REFUSE, *ITERATION}))
+    stops = analysis.data_branches(SOLVE)
+    if len(stops) != 1 or stops[0].origins != STOP:
+        raise NotProved(f"{SOLVE}'s branches the numbers decide are not its one stopping test")
+    m = measure(a, elf, board=board, Y=Y, R=R)
+    if m.refused.any() or not m.capped.any() or m.capped.all():
+        raise NotProved("the run must not refuse, and must hold capped steps and steps that stop early")
+    passes = {p: soft_pass(a, elf, p, board=board, Y=Y, R=R) for p in ITERATION}
+    body = loop_instructions(funcs)
+    per_iteration = body + sum(p.bound for p in passes.values())
+    own = m.counts - m.iterations * body
+    for p in ITERATION:  # each step's calls of the pass: its iterations' worth, in order
+        each = np.asarray(count_calls(elf, a, symbol=p, Y=Y, R=R, board=board, each=True).each, dtype=np.int64)
+        if len(each) != int(m.iterations.sum()):
+            raise NotProved(f"{p} was called {len(each)} times in {int(m.iterations.sum())} iterations")
+        own -= np.add.reduceat(each, np.r_[0, np.cumsum(m.iterations)[:-1]])
+    detours = _root_detours(funcs, analysis)
+    here = {i.address for i in funcs[ROOT]}
+    bounds = Bounds(funcs)
+    calls: dict[str, int] = {}
+    for f in sorted({f for at, f in analysis.calls.items() if at in here and SOFT_FLOAT.match(f)}):
+        c = count_calls(elf, a, symbol=f, Y=Y, R=R, board=board, each=True, callers=(ROOT,))
+        if c.calls % len(Y):
+            raise NotProved(f"{ROOT} made {c.calls} calls of {f} in {len(Y)} steps: not the same each step")
+        calls[f] = c.calls // len(Y)
+        own -= np.asarray(c.each, dtype=np.int64).reshape(len(Y), calls[f]).sum(axis=1)
+    slack = sum(n * calls[f] for f, n in detours.items())
+    for kind in (m.capped, ~m.capped):
+        if int(own[kind].max() - own[kind].min()) > slack:
+            raise NotProved(f"the fixed part ranged over {own[kind].min()}..{own[kind].max()}, more than {slack}")
+    fixed = int(own.max()) + slack + sum(n * bounds(f) for f, n in calls.items())
+    cap = a.mpc.max_iter
+    refuse = refuse_bound(a, elf, board=board, y=Y[-1], r=R[-1])
+    bound = max(refuse, fixed + cap * per_iteration)
+    return SoftStepBound(per_iteration, fixed, refuse, cap, bound, int(m.counts.max()),
+                         {p: v.bound for p, v in passes.items()})  # fmt: skip
