@@ -12,6 +12,7 @@ artifacts of one structure differ in that one translation unit.
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,6 +90,11 @@ def gain_set(artifact: Artifact) -> GainSet:
 def payload_crc32(*, header: tuple[int, ...], fields: dict[str, np.ndarray]) -> int:
     """CRC-32 (zlib) of the little-endian serialisation the C library checksums."""
     return layout.GAINS.crc32(layout.Shape(*header), fields)
+
+
+def float32_tables_crc32(tables: dict[str, np.ndarray]) -> int:
+    """CRC-32 (zlib) of tables as a law's const set holds them: each one's float32 little-endian bytes, in order."""
+    return zlib.crc32(b"".join(np.asarray(v, dtype="<f4").tobytes() for v in tables.values()))
 
 
 def c_float(x: float) -> str:

@@ -7,8 +7,6 @@ every float printed round-trip. The firmware builds ``firmware/src/gl_mpc.c`` wh
 
 from __future__ import annotations
 
-import zlib
-
 import numpy as np
 
 from ...shipping import codegen
@@ -67,7 +65,7 @@ def described(artifact: Artifact) -> str:
 def tables_crc32(artifact: Artifact) -> int:
     """CRC-32 of the tables' bytes as ``gl_mpc_default`` holds them (gl_mpc_tables_crc32(), the MAVLink
     ``GL_HASH``)."""
-    return zlib.crc32(b"".join(np.asarray(v, dtype="<f4").tobytes() for v in tables(artifact).values()))
+    return codegen.float32_tables_crc32(tables(artifact))
 
 
 def render_header(artifact: Artifact) -> str:

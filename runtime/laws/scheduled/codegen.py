@@ -11,8 +11,6 @@ tables this family registers them in (``export_c.RENDERINGS``, ``params.TABLES``
 
 from __future__ import annotations
 
-import zlib
-
 import numpy as np
 
 from ...shipping import codegen
@@ -108,7 +106,7 @@ def described(artifact: Artifact) -> str:
 def tables_crc32(artifact: Artifact) -> int:
     """CRC-32 of the tables' bytes as ``gl_sched_default`` holds them (gl_sched_tables_crc32(), the MAVLink
     ``GL_HASH``)."""
-    return zlib.crc32(b"".join(np.asarray(v, dtype="<f4").tobytes() for v in tables(artifact).values()))
+    return codegen.float32_tables_crc32(tables(artifact))
 
 
 def render_source(artifact: Artifact) -> str:
