@@ -57,12 +57,12 @@ from gainlink.laws import design as design_spec
 from gainlink.laws import law_of
 from gainlink.laws.flags import CAPPED
 from gainlink.laws.mpc.cost import (
+    LEGS,
+    SOFT_STEPS,
     NotProved,
-    bound_of,
     branch_argument,
-    iteration_instructions,
-    refuse_samples,
-    soft_step_bound,
+    closed_loop_samples,
+    prove,
 )
 from gainlink.laws.mpc.cost import measure as measure_steps
 from gainlink.shipping.artifact import from_dict
@@ -70,27 +70,10 @@ from gainlink.spec import load_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = ("cortex-m0", "cortex-m4", "cortex-m7", "cortex-m33", "cortex-m55")
-LEGS = ((60, 1.0), (30, -1.5))  # closed-loop legs: steps, the start's offset (the law keeps its state across legs)
-M0_STEPS = 3  # the M0 runs ~4M instructions a step through gl_fmaf: measured only
+M0_STEPS = SOFT_STEPS  # the M0 runs ~4M instructions a step through gl_fmaf: measured only
 PASSES = ("backward", "forward", "slacks")
 TARGET_INSTRUCTIONS = {"pendulum_mpc": 50_000, "quadrotor_hover_mpc": 168_000}
 RAM_TARGET = {"quadrotor_hover_mpc": 16 * 1024}
-
-
-def closed_loop_samples(a, legs=LEGS) -> tuple[np.ndarray, np.ndarray]:
-    """The host C around the design's sampled plant, one leg per (steps, offset) from a start that saturates the
-    inputs (quadrotor: x, y and z off by half the offset; pendulum: the cart), the law's state kept across legs."""
-    law = law_of(a)
-    plant, c = law.plant(a), law.native(a)
-    Y = []
-    for steps, off in legs:
-        x0 = np.zeros(a.n)
-        x0[: 3 if a.n == 12 else 1] = off / 2 if a.n == 12 else off
-        plant.reset(x0)
-        for _ in range(steps):
-            Y.append(plant.outputs())
-            plant.advance(c.step(Y[-1], law.r_op(a), np.zeros(0)).u)
-    return np.array(Y), np.tile(law.r_op(a), (len(Y), 1))
 
 
 def adversarial_samples(a, steps: int = 60, seed: int = 32) -> tuple[np.ndarray, np.ndarray]:
@@ -114,12 +97,11 @@ def compile_flags(elf: Path) -> str:
     return line.split("=", 1)[1].strip()
 
 
-def soft_proved_bound(a, elf: Path, board: str) -> dict:
-    """The soft-float cores' bound at the cap (gainlink.laws.mpc.cost.soft_step_bound) from the first M0_STEPS steps
-    of the closed loop, or why not; a short run of adversarial steps beside it."""
-    Y, R = closed_loop_samples(a)
+def soft_proved_bound(a, elf: Path, board: str, arg) -> dict:
+    """The soft-float cores' bound at the cap (gainlink.laws.mpc.cost.prove: soft_step_bound on the first M0_STEPS
+    steps of the closed loop), or why not; a short run of adversarial steps beside it."""
     try:
-        b = soft_step_bound(a, elf, board=board, Y=Y[:M0_STEPS], R=R[:M0_STEPS])
+        b = prove(a, elf, board=board, arg=arg)
     except NotProved as exc:
         return {"proved": False, "why": str(exc)}
     Ya, Ra = adversarial_samples(a, steps=6)
@@ -131,24 +113,22 @@ def soft_proved_bound(a, elf: Path, board: str) -> dict:
 
 
 def proved_bound(a, elf: Path, board: str) -> dict:
-    """The bound at the cap proved for ``elf`` (module docstring), or why not; the attempt to break it."""
+    """The bound at the cap proved for ``elf`` (module docstring: gainlink.laws.mpc.cost.prove), or why not; the
+    attempt to break it."""
     arg = branch_argument(elf)
     out = {"argument": arg.summary(), "compile_flags": compile_flags(elf)}
     if not arg.holds and arg.analysis.soft_float:
-        return {**out, **soft_proved_bound(a, elf, board)}
+        return {**out, **soft_proved_bound(a, elf, board, arg)}
     if not arg.holds:
         return {**out, "proved": False}
-    Y, R = closed_loop_samples(a)
-    Yn, Rn = refuse_samples(a.p, a.q, Y[-1], R[-1])
-    Y, R = np.vstack([Y, Yn]), np.vstack([R, Rn])
-    run = measure_steps(a, elf, board=board, Y=Y, R=R)
     try:
-        bound = bound_of(run, a.mpc.max_iter, iteration_instructions(a, elf, board=board, Y=Y, R=R))
+        bound = prove(a, elf, board=board, arg=arg)
     except NotProved as exc:
         return {**out, "proved": False, "why": str(exc)}
+    run_steps = sum(steps for steps, _ in LEGS) + a.p + a.q
     Ya, Ra = adversarial_samples(a)
     worst = measure_steps(a, elf, board=board, Y=Ya, R=Ra)
-    return {**out, "proved": True, **bound.summary(), "run_steps": len(run.counts),
+    return {**out, "proved": True, **bound.summary(), "run_steps": run_steps,
             "adversarial_steps": len(worst.counts), "adversarial_capped": int(worst.capped.sum()),
             "adversarial_worst": int(worst.counts.max()),
             "adversarial_within_bound": bool(worst.counts.max() <= bound.bound)}  # fmt: skip

@@ -325,10 +325,15 @@ def test_pil_counts_the_mpc_steps_instructions_within_the_cost_benchmarks_bound_
     """`pil run` on the M4F counts ``gl_mpc_step`` (callees included) on examples/pendulum_mpc.toml from 1 m off, where
     the cap stops the solver: its worst step is within bench/mpc_cost.py's bound at the cap (the fixed part plus the
     cap times the dearest iteration, recorded in bench/results/mpc_cost.json from replayed samples) and the issue's
-    target of 50,000, and its capped steps cost more than a step that stops early."""
+    target of 50,000, and its capped steps cost more than a step that stops early. The run's own bound (the law's, on
+    the image PIL ran) is proved, covers the run's worst, is fixed + cap x per iteration as the summary prints it, and
+    is the bench's recorded bound for the M4F image."""
     import json
+    import re
+    import tomllib
 
     from gainlink.hil.loop.pil import make_plant, run_pil
+    from gainlink.hil.loop.pil_report import instruction_lines
     from gainlink.laws import design
     from gainlink.spec import load_spec
     from support.paths import ROOT
@@ -342,3 +347,14 @@ def test_pil_counts_the_mpc_steps_instructions_within_the_cost_benchmarks_bound_
     block, mpc = res.summary()["instructions_per_step"], res.summary()["mpc"]
     assert block["symbol"] == "gl_mpc_step" and block["calls"] == 30 and mpc["capped_steps"] > 0
     assert block["fewest"] < block["mean"] <= block["worst"] <= m4["bound_per_step_at_cap"] <= 50_000
+    # the law's own bound on this image (Law.cost_bound), printed beside the counts and written in pil.json: at least
+    # the run's worst, fixed + cap x per iteration as printed, and the bench's bound for the same image measured apart
+    bound = block["bound"]
+    assert bound["proved"] and bound["core"] == "cortex-m4" and block["worst"] <= bound["per_step"]
+    (line,) = [ln for ln in instruction_lines(block) if "bound at the cap" in ln]
+    got = re.search(r"proved on cortex-m4: (\d+) instructions per step = fixed (\d+) \+ cap (\d+) x (\d+) per", line)
+    per_step, fixed, cap, per_iteration = map(int, got.groups())
+    assert cap == tomllib.loads((EXAMPLES / "pendulum_mpc.toml").read_text())["mpc"]["max_iter"]
+    assert per_step == fixed + cap * per_iteration == bound["per_step"]
+    assert (per_step, per_iteration) == (m4["bound_per_step_at_cap"], m4["proof"]["per_iteration"])
+    assert "instructions, not cycles" in instruction_lines(block)[0]

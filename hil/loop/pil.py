@@ -150,6 +150,7 @@ class PilResult:
     signals: np.ndarray | None = None  # (N, e) the external scheduling signals
     cost: StepCost | None = None  # the instructions of the law's step in this run (QEMU's counter)
     cost_symbol: str = ""  # the step function the count covers
+    cost_bound: dict | None = None  # the law's bound on that count for this image (Law.cost_bound), if it states one
 
     def summary(self) -> dict:
         """Counts, timing, the comparison with the twin and the law's checks, JSON-ready."""
@@ -165,6 +166,8 @@ class PilResult:
         }
         if self.cost is not None:
             out["instructions_per_step"] = instructions_block(self.cost, symbol=self.cost_symbol)
+            if self.cost_bound is not None:
+                out["instructions_per_step"]["bound"] = self.cost_bound
         if self.comparison is not None:
             out["twin"] = self.comparison.to_dict()
         for name, block in self.checks.items():
@@ -309,11 +312,12 @@ def run_pil(
         outcome = loop.run(None)
         _await_exit(proc, deadline_s=deadline_s)
         cost = read_count(count)
+    bound = law.cost_bound(a, stream.elf, target=platform.target.name, board=platform.board.name)
     tw = None if twin is None else _twin_after(a, law, twin, plan, steps)  # off the per-sample path
     mt, note = (None, "off") if start is None else model_twin_after(law, a, start=start, plan=plan, steps=steps)
     return _result(a, law, rec, endpoint, plan=plan, wall_s=outcome.wall_s, twins=(tw, mt, note),
                    design_model=isinstance(plant, ArtifactPlant), check_plant=check_plant,
-                   final_state=sampled.state(), cost=(cost, stream.symbol))  # fmt: skip
+                   final_state=sampled.state(), cost=(cost, stream.symbol, bound))  # fmt: skip
 
 
 class _Sampled:
@@ -378,7 +382,7 @@ def _twin_after(a: Artifact, law, plant: DiscretePlant, plan: Plan, steps: int) 
 def _result(a: Artifact, law, rec: Recorder, endpoint, *, plan: Plan, wall_s: float, twins: tuple,
             design_model: bool, check_plant, final_state: np.ndarray, cost: tuple) -> PilResult:  # fmt: skip
     """The PIL result from the run's record, its twins, the law's checks of the image's records and the count of its
-    step's instructions (``cost``: the count and the symbol it covers)."""
+    step's instructions (``cost``: the count, the symbol it covers and the law's bound on it)."""
     twin_trace, model, note = twins
     steps = plan.N
     trace = rec.trace(steps, law=law, artifact=a, twins=Twins(twin_trace, model, note, {}))
@@ -409,6 +413,7 @@ def _result(a: Artifact, law, rec: Recorder, endpoint, *, plan: Plan, wall_s: fl
         signals=plan.S,
         cost=cost[0],
         cost_symbol=cost[1],
+        cost_bound=cost[2],
     )
 
 

@@ -41,11 +41,29 @@ def pil_summary_text(summary: dict, *, artifact: Any, out_dir: Path | None = Non
 
 
 def instruction_lines(block: dict | None) -> list[str]:
-    """The summary's line on the instructions of the law's step in the run (``pil.json``'s
-    ``instructions_per_step``)."""
+    """The summary's lines on the instructions of the law's step in the run (``pil.json``'s
+    ``instructions_per_step``) and the law's bound on them."""
     if not block:
         return []
     return [
         f"  instructions per step in {block['symbol']} (callees included, counted by QEMU): mean {block['mean']:g}, "
         f"worst {block['worst']} over {block['calls']} steps; instructions, not cycles"
+    ] + bound_lines(block.get("bound"))
+
+
+def bound_lines(bound: dict | None) -> list[str]:
+    """The summary's line on the law's bound on those instructions (``instructions_per_step.bound``), if it states
+    one."""
+    if not bound:
+        return []
+    if not bound["proved"]:
+        return [f"  bound at the cap: none ({bound['covers']})"]
+    b = bound
+    at_cap = f"fixed {b['fixed']} + cap {b['cap']} x {b['per_iteration']} per iteration"
+    how = f"= {at_cap} (a refused step {b['refused_step']})"
+    if b["per_step"] != b["fixed"] + b["cap"] * b["per_iteration"]:
+        how = f"= a refused step's, dearer than {at_cap}"
+    return [
+        f"  bound at the cap, proved on {b['core']}: {b['per_step']} instructions per step {how}; "
+        f"covers {b['covers']}; premises: {'; '.join(b['premises'])}"
     ]

@@ -115,3 +115,9 @@ class LoopHooks:
         (``gainlink.firmware.cost.StepCost``: mean, cheapest, dearest)."""
         self.refuse("cost")
         raise LawError(f"cost is not available for the {self.label} law")
+
+    def cost_bound(self, artifact: Any, elf: Any, *, target: str, board: str) -> dict | None:
+        """The proved bound on the instructions of the law's step in the image ``elf`` (``target`` on ``board``), as
+        ``pil.json``'s ``instructions_per_step.bound``: per iteration and per step at the cap, whether it is proved,
+        what it covers and its premises; None for a law that states none."""
+        return None

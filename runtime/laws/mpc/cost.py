@@ -464,3 +464,80 @@ def soft_step_bound(a: Artifact, elf: Path, *, board: str, Y: np.ndarray, R: np.
     bound = max(refuse, fixed + cap * per_iteration)
     return SoftStepBound(per_iteration, fixed, refuse, cap, bound, int(m.counts.max()),
                          {p: v.bound for p, v in passes.items()})  # fmt: skip
+
+
+# -- the bound of an image, as the cost benchmark and `pil run` report it ------------------------------------------
+
+LEGS = ((60, 1.0), (30, -1.5))  # closed-loop legs: steps, the start's offset (the law keeps its state across legs)
+SOFT_STEPS = 3  # a soft-float core runs ~4M instructions a step through gl_fmaf: its bound is taken on a short run
+PREMISE = "a word an integer register loads and only moves, offsets and compares is an address"
+SOFT_PREMISE = "the step's branches before solve are its non-finite tests"
+
+
+def closed_loop_samples(a: Artifact, legs=LEGS) -> tuple[np.ndarray, np.ndarray]:
+    """The host C around the design's sampled plant, one leg per (steps, offset) from a start that saturates the
+    inputs (quadrotor: x, y and z off by half the offset; pendulum: the cart), the law's state kept across legs."""
+    from .. import law_of
+
+    law = law_of(a)
+    plant, c = law.plant(a), law.native(a)
+    Y = []
+    for steps, off in legs:
+        x0 = np.zeros(a.n)
+        x0[: 3 if a.n == 12 else 1] = off / 2 if a.n == 12 else off
+        plant.reset(x0)
+        for _ in range(steps):
+            Y.append(plant.outputs())
+            plant.advance(c.step(Y[-1], law.r_op(a), np.zeros(0)).u)
+    return np.array(Y), np.tile(law.r_op(a), (len(Y), 1))
+
+
+def prove(a: Artifact, elf: Path, *, board: str, arg: BranchArgument | None = None) -> StepBound | SoftStepBound:
+    """The bound at the cap of ``elf`` (``arg``: its :func:`branch_argument`, computed if not given): on a hard-float
+    core from the closed loop of :data:`LEGS` and a NaN in each sample and reference element (:func:`bound_of`), on a
+    soft-float one from the loop's first :data:`SOFT_STEPS` steps (:func:`soft_step_bound`); :class:`NotProved`
+    saying why otherwise."""
+    arg = branch_argument(elf) if arg is None else arg
+    Y, R = closed_loop_samples(a)
+    if not arg.holds and arg.analysis.soft_float:
+        return soft_step_bound(a, elf, board=board, Y=Y[:SOFT_STEPS], R=R[:SOFT_STEPS])
+    if not arg.holds:
+        raise NotProved("; ".join(arg.violations[:2]))
+    Yn, Rn = refuse_samples(a.p, a.q, Y[-1], R[-1])
+    Y, R = np.vstack([Y, Yn]), np.vstack([R, Rn])
+    run = measure(a, elf, board=board, Y=Y, R=R)
+    return bound_of(run, a.mpc.max_iter, iteration_instructions(a, elf, board=board, Y=Y, R=R))
+
+
+def bound_block(a: Artifact, elf: Path, *, board: str, core: str) -> dict:
+    """``pil.json``'s ``instructions_per_step.bound`` for the image ``elf`` on ``core``: the bound per iteration and
+    per step at the cap (``per_step = fixed + cap x per_iteration``, or a refused step's when that is dearer), whether
+    it is proved and what it covers; ``proved`` false, no figure and why when the argument fails (the M3: measured,
+    not proved)."""
+    try:
+        b = prove(a, elf, board=board)
+    except NotProved as exc:
+        return {"proved": False, "core": core, "covers": f"measured, not proved on {core}: {exc}"}
+    soft = isinstance(b, SoftStepBound)
+    fixed = b.fixed if soft else max(b.fixed_stop, b.fixed_cap)
+    refuse = b.refuse if soft else b.refuse_max
+    how = ("soft float: every float routine the step calls charged at its longest path, the compare-decided branches "
+           "at their longer side; loose" if soft else
+           "the law's numbers decide only the non-finite tests and the stopping test (the disassembly), and a run "
+           "fits fixed part + iterations x one iteration exactly")  # fmt: skip
+    premises = [PREMISE, SOFT_PREMISE] if soft else [PREMISE]
+    return {
+        "proved": True,
+        "core": core,
+        "per_iteration": int(b.per_iteration),
+        "fixed": int(fixed),
+        "cap": int(b.cap),
+        "refused_step": int(refuse),
+        "per_step": int(b.bound),
+        "covers": (
+            f"every input (samples, references, warm start, numbers in tables of horizon {a.mpc.horizon}, "
+            f"{a.mpc.nx} states, {a.m} inputs, {a.mpc.nc} box rows) on this image: {core}, its compiler "
+            f"and flags; {how}"
+        ),
+        "premises": premises,
+    }

@@ -164,6 +164,12 @@ class MpcLaw(Law):
 
         return cost(artifact, target=target, board=board, Y=Y, R=R, S=S)
 
+    def cost_bound(self, artifact: Any, elf: Any, *, target: str, board: str) -> dict | None:
+        """The step's bound at the cap on ``elf`` (:func:`.cost.bound_block`: proved per core, or why not)."""
+        from .cost import bound_block
+
+        return bound_block(artifact, Path(elf), board=board, core=target)
+
     # -- what the commands print --------------------------------------------------------------------------------
 
     def design_lines(self, result: DesignResult, path: Path) -> list[str]:
