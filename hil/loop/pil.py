@@ -302,22 +302,42 @@ def run_pil(
     plan = _plan(a, law, sampled, steps=steps, reference=reference, S=S)
     start = _twin_start(plant, sigma=plan.sigma0) if model_twin else None
     rec = Recorder(plan, artifact=a, plant=sampled)
-    with _qemu_fifos(stream.elf, board=platform.board.name, steps=steps, symbol=stream.symbol) as qemu:
-        proc, fin, fout, count = qemu
-        _open_stream(proc, fin, fout, stream, steps=steps, watchdog_periods=watchdog_periods, deadline_s=deadline_s)
-        endpoint = OverFifos(stream, link=(proc, fin, fout), recorder=rec, deadline_s=deadline_s, steps=steps,
-                             safe_command=law.safe_command(a), read=_read_exact)  # fmt: skip
-        loop = ClosedLoop(plan=plan, plant=sampled, endpoint=endpoint, injector=FaultInjector((), Ts=a.Ts), Ts=a.Ts,
-                          record_state=True)  # fmt: skip
-        outcome = loop.run(None)
-        _await_exit(proc, deadline_s=deadline_s)
-        cost = read_count(count)
+    endpoint, outcome, cost = _closed_loop_in_qemu(a, law, stream, board=platform.board.name, plan=plan, plant=sampled,
+                                                   recorder=rec, steps=steps, watchdog_periods=watchdog_periods,
+                                                   deadline_s=deadline_s)  # fmt: skip
     bound = law.cost_bound(a, stream.elf, target=platform.target.name, board=platform.board.name)
     tw = None if twin is None else _twin_after(a, law, twin, plan, steps)  # off the per-sample path
     mt, note = (None, "off") if start is None else model_twin_after(law, a, start=start, plan=plan, steps=steps)
     return _result(a, law, rec, endpoint, plan=plan, wall_s=outcome.wall_s, twins=(tw, mt, note),
                    design_model=isinstance(plant, ArtifactPlant), check_plant=check_plant,
                    final_state=sampled.state(), cost=(cost, stream.symbol, bound))  # fmt: skip
+
+
+def _closed_loop_in_qemu(
+    a: Artifact,
+    law: Any,
+    stream: Any,
+    *,
+    board: str,
+    plan: Any,
+    plant: _Sampled,
+    recorder: Recorder,
+    steps: int,
+    watchdog_periods: int,
+    deadline_s: float,
+) -> tuple:
+    """The run itself: the image in QEMU over its FIFOs, the one closed loop around it, the step's instruction
+    count read when the image has exited: ``(endpoint, outcome, count)``."""
+    with _qemu_fifos(stream.elf, board=board, steps=steps, symbol=stream.symbol) as qemu:
+        proc, fin, fout, count = qemu
+        _open_stream(proc, fin, fout, stream, steps=steps, watchdog_periods=watchdog_periods, deadline_s=deadline_s)
+        endpoint = OverFifos(stream, link=(proc, fin, fout), recorder=recorder, deadline_s=deadline_s, steps=steps,
+                             safe_command=law.safe_command(a), read=_read_exact)  # fmt: skip
+        loop = ClosedLoop(plan=plan, plant=plant, endpoint=endpoint, injector=FaultInjector((), Ts=a.Ts), Ts=a.Ts,
+                          record_state=True)  # fmt: skip
+        outcome = loop.run(None)
+        _await_exit(proc, deadline_s=deadline_s)
+        return endpoint, outcome, read_count(count)
 
 
 class _Sampled:
