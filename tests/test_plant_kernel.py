@@ -47,7 +47,8 @@ def test_the_compiled_kernel_steps_as_the_numpy_kernel_it_replaced(cls, start, c
 
 def test_a_plant_alone_fails_at_the_sample_its_row_fails_and_keeps_its_state():
     """The kernel's failure is the numpy path's: a plant alone raises at the sample whose state is not finite and
-    keeps its last finite state; the same command in a block fails that row alone."""
+    keeps its last finite state; the same command in a block fails that row alone, and the rows beside it (in the
+    same group of SIMD lanes) step as they step alone."""
     alone = Tank(step=0.01)
     alone.reset(initial={"h": 0.5})
     alone.advance(u=np.array([0.2]), dt=0.1)
@@ -62,6 +63,11 @@ def test_a_plant_alone_fails_at_the_sample_its_row_fails_and_keeps_its_state():
     assert batch.advance(np.array([[0.2], [0.2], [0.2]]), dt=0.1).tolist() == [False, False, False]
     assert batch.advance(np.array([[0.2], [np.nan], [0.2]]), dt=0.1).tolist() == [False, True, False]
     assert np.array_equal(batch.X[1], before) and np.isfinite(batch.X).all()
+    other = Tank(step=0.01)
+    other.reset(initial={"h": 0.5})
+    for _ in range(2):
+        other.advance(u=np.array([0.2]), dt=0.1)
+    assert np.array_equal(batch.X[0], other.state()) and np.array_equal(batch.X[2], other.state())
 
 
 def test_the_kernel_is_built_once_into_the_cache_and_a_compiler_failure_is_one_line(tmp_path, monkeypatch):

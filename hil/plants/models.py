@@ -150,7 +150,7 @@ class OdePlant(Plant):
     def advance(self, *, u: np.ndarray, dt: float) -> None:
         one = self._one = self._one or OdeBatch([self])
         one.X[0] = self.x
-        if one.advance(np.reshape(u, (1, -1)), dt=dt)[0]:
+        if one.advance(np.asarray(u)[None], dt=dt)[0]:
             raise PlantError(non_finite(self.name))
         self.x = one.X[0].copy()
 
@@ -188,6 +188,9 @@ class OdeBatch:
         X = np.stack([p.x for p in plants])
         self.P = columns(type(first), {k: np.array([p.params[k] for p in plants]) for k in first.params})
         self._in_idx, self._out_idx = first._in_idx, first._out_idx
+        lo = self._in_idx[0] if self._in_idx else 0  # inputs selected in order: a slice, cheaper than a list
+        in_order = list(self._in_idx) == list(range(lo, lo + len(self._in_idx)))
+        self._in_cols = slice(lo, lo + len(self._in_idx)) if in_order else self._in_idx
         native = vars(type(first)).get("native")
         self._rows = None if native is None else Rows(first.name, X, np.column_stack([self.P[k] for k in native]),
                                                       inputs=len(first.all_inputs))  # fmt: skip
@@ -201,7 +204,7 @@ class OdeBatch:
     def advance(self, U: np.ndarray, *, dt: float) -> np.ndarray:
         """Hold each row's command ``U`` (B, inputs selected) for ``dt``; returns the rows that failed now."""
         full = self._U
-        full[:, self._in_idx] = U  # the inputs not selected stay zero
+        full[:, self._in_cols] = U  # the inputs not selected stay zero
         if self._rows is not None:
             self._rows.advance(*substeps(dt, self.h))
             return self._rows.failed.copy()
