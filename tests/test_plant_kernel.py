@@ -70,9 +70,18 @@ def test_a_plant_alone_fails_at_the_sample_its_row_fails_and_keeps_its_state():
     assert np.array_equal(batch.X[0], other.state()) and np.array_equal(batch.X[2], other.state())
 
 
-def test_the_kernel_is_built_once_into_the_cache_and_a_compiler_failure_is_one_line(tmp_path, monkeypatch):
-    cache = tmp_path / "cache"
-    monkeypatch.setattr(kernel, "cache_root", lambda: cache)
+@pytest.fixture
+def own_cache(tmp_path, monkeypatch):
+    """The kernel's build cache in ``tmp_path / "cache"``, the process's lookups of the library forgotten before and
+    after."""
+    monkeypatch.setattr(kernel, "cache_root", lambda: tmp_path / "cache")
+    kernel._library.cache_clear()
+    yield tmp_path / "cache"
+    kernel._library.cache_clear()
+
+
+def test_the_kernel_is_built_once_into_the_cache_and_a_compiler_failure_is_one_line(own_cache, tmp_path, monkeypatch):
+    cache = own_cache
     broken = tmp_path / "cc"
     broken.write_text("#!/bin/sh\necho 'ode.c:1:1: error: no such compiler today' >&2\nexit 1\n")
     broken.chmod(0o755)
@@ -84,12 +93,13 @@ def test_the_kernel_is_built_once_into_the_cache_and_a_compiler_failure_is_one_l
     monkeypatch.delenv("CC")
     lib = kernel.library()
     assert lib.parent.parent == cache and lib.is_file()
-    assert kernel.library() == lib  # found, not built again
+    built = lib.stat().st_mtime_ns
+    kernel._library.cache_clear()  # as another process finds it
+    assert kernel.library() == lib and lib.stat().st_mtime_ns == built  # found, not built again
     assert sorted(p.name for p in lib.parent.iterdir()) == [".lock", lib.name]
 
 
-def test_a_missing_compiler_stops_a_run_in_one_line(example_artifacts, tmp_path, monkeypatch):
-    monkeypatch.setattr(kernel, "cache_root", lambda: tmp_path / "cache")
+def test_a_missing_compiler_stops_a_run_in_one_line(example_artifacts, own_cache, tmp_path, monkeypatch):
     monkeypatch.setenv("CC", "gainlink-no-such-cc")
     scenario = write_scenario(tmp_path / "s.toml", {
         "artifact": str(example_artifacts["pendulum"]), "duration": 0.1, "controller": "reference",
@@ -98,4 +108,4 @@ def test_a_missing_compiler_stops_a_run_in_one_line(example_artifacts, tmp_path,
     res = run_cli("hil", "run", scenario, "--report", tmp_path / "report", "--no-progress")
     assert res.code == 2
     assert res.err.count("\n") == 1 and "C compiler gainlink-no-such-cc not found" in res.err
-    assert not (tmp_path / "report").exists() and not (tmp_path / "cache").exists()
+    assert not (tmp_path / "report").exists() and not own_cache.exists()

@@ -31,9 +31,8 @@ FLAGS = ("-std=c11", "-O2", "-ffp-contract=off", "-fPIC", "-shared")
 LIBRARY = "libgainlink_plants.so"
 
 
-def compiler() -> str:
-    """The host C compiler (``$CC``, else ``cc``), as a path."""
-    name = os.environ.get("CC", "cc")
+def compiler(name: str) -> str:
+    """The host C compiler ``name`` (``$CC``, else ``cc``), as a path."""
     path = shutil.which(name)
     if path is None:
         raise ToolchainError(f"C compiler {name} not found: the built-in plants' RK4 is compiled on first use "
@@ -42,8 +41,14 @@ def compiler() -> str:
 
 
 def library() -> Path:
-    """The kernel's shared library, built (once per source, flags and compiler) into the build cache."""
-    cc = compiler()
+    """The kernel's shared library, built (once per source, flags and compiler) into the build cache; looked up once
+    per process and compiler name (a lookup reads and hashes the source, finds the compiler and the cache: ~0.5 ms)."""
+    return _library(os.environ.get("CC", "cc"))
+
+
+@functools.cache
+def _library(cc_name: str) -> Path:
+    cc = compiler(cc_name)
     st = os.stat(cc)
     key_text = "|".join([hashlib.sha256(SOURCE.read_bytes()).hexdigest(), *FLAGS, cc, str(st.st_size),
                          str(st.st_mtime_ns)])  # fmt: skip
