@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 
 import numpy as np
 import pytest
@@ -79,11 +80,11 @@ def _pendulum(x, F, M, m, l, g):
 
 def _rk4_by_hand(x: list, F: float, P: dict, *, dt: float, h: float) -> list:
     """CartPendulum's docstring equations and classical RK4 in Python floats, every product and sum in the order
-    written (sin and cos from numpy, whose libm the kernel calls)."""
+    written (sin and cos from math: libm's, which the compiled kernel calls)."""
     M, m, l, g = P["M"], P["m"], P["l"], P["g"]
 
     def f(x):
-        s, c, w = float(np.sin(x[2])), float(np.cos(x[2])), x[3]
+        s, c, w = math.sin(x[2]), math.cos(x[2]), x[3]
         D = M + m * s * s
         return [x[1], (F + m * l * w * w * s - m * g * s * c) / D, w,
                 ((M + m) * g * s - c * (F + m * l * w * w * s)) / (l * D)]  # fmt: skip

@@ -15,8 +15,15 @@ from gainlink.errors import PlantError, did_you_mean
 
 from ..registry import take_keys
 from .base import PLANTS, Plant, select
+from .kernel import Rows
 
 _COMMON_KEYS = {"kind", "inputs", "outputs", "parameters", "step"}
+
+
+def substeps(dt: float, h: float) -> tuple[int, float]:
+    """The RK4 sub-steps of a sample ``dt``: how many (none longer than ``h``) and their length."""
+    n = max(1, math.ceil(dt / h - 1e-9))
+    return n, dt / n
 
 
 def rk4(
@@ -31,12 +38,13 @@ def rk4(
     """Advance a batch of states ``X`` (B, n) under held full inputs ``U`` (B, inputs) by ``dt`` with fixed-step RK4
     (sub-steps no longer than ``h``); ``P`` holds each parameter as a (B,) column.
 
-    The one kernel of a continuous built-in plant: a run alone steps it with a batch of one, a campaign block with
-    its runs stacked. Every operation is elementwise in the batch (no product sums across it), so a run's row is
-    the same bit for bit at any batch size. A row that overflows comes out non-finite (the caller refuses it).
+    The numpy kernel of a continuous plant (a user's :class:`OdePlant`, and the readable definition the compiled
+    kernel of the built-in models follows operation for operation: :mod:`.kernel`): a run alone steps it with a
+    batch of one, a campaign block with its runs stacked. Every operation is elementwise in the batch (no product
+    sums across it), so a run's row is the same bit for bit at any batch size. A row that overflows comes out
+    non-finite (the caller refuses it).
     """
-    n = max(1, math.ceil(dt / h - 1e-9))
-    hh = dt / n
+    n, hh = substeps(dt, h)
     half, sixth = 0.5 * hh, hh / 6.0
     T, acc = np.empty_like(X), np.empty_like(X)  # the stage's state and the weighted sum: this kernel's own buffers
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
@@ -57,8 +65,8 @@ class OdePlant(Plant):
     """A continuous plant ``dx/dt = f(x, u)`` whose outputs are a selection of its states.
 
     Subclasses set ``name``, ``all_inputs``, ``state_names``, ``defaults`` (parameters) and implement :meth:`rates`
-    over a batch axis (the kernel of :func:`rk4`, shared by a run alone and a campaign block:
-    :class:`OdeBatch`); :meth:`clamp` is applied to the state after each sample.
+    over a batch axis (the kernel of :func:`rk4`); :meth:`clamp` is applied to the state after each sample. A run
+    alone steps as a batch of one (:class:`OdeBatch`), so it steps as its row in a campaign block does.
     """
 
     all_inputs: tuple[str, ...]
@@ -67,6 +75,11 @@ class OdePlant(Plant):
     #: block steps only :meth:`rates` and :meth:`clamp` (a subclass that overrides ``advance`` or ``outputs`` runs
     #: alone unless it declares itself vectorised again).
     vectorised: ClassVar[bool] = False
+    #: The built-in models' compiled RK4 (``native/ode.c``, function ``gl_ode_<name>``): the parameter columns it
+    #: takes, in its order (the parameters, then the :meth:`derived` ones); None: :func:`rk4` over :meth:`rates`.
+    #: Declared in the class's own body, as ``vectorised``: a subclass that changes :meth:`rates` or :meth:`clamp`
+    #: steps through numpy unless it declares a kernel of its own.
+    native: ClassVar[tuple[str, ...] | None] = None
 
     def __init__(
         self,
@@ -94,8 +107,8 @@ class OdePlant(Plant):
         if not step > 0:
             raise PlantError(f"plant {self.name}: step must be positive")
         self.h = float(step)
-        self._U = np.zeros((1, len(self.all_inputs)))
         self.x = np.zeros(len(self.state_names))
+        self._one: OdeBatch | None = None  # the batch of one this plant steps as, made at its first advance
 
     default_outputs: tuple[str, ...] = ()
 
@@ -135,13 +148,11 @@ class OdePlant(Plant):
         return self.x.copy()
 
     def advance(self, *, u: np.ndarray, dt: float) -> None:
-        full = self._U
-        full[:] = 0.0
-        full[0, self._in_idx] = u
-        X = self.clamp(rk4(self.rates, self.x[None, :], full, self._P, dt=dt, h=self.h))
-        if not np.all(np.isfinite(X)):
+        one = self._one = self._one or OdeBatch([self])
+        one.X[0] = self.x
+        if one.advance(np.asarray(u)[None], dt=dt)[0]:
             raise PlantError(non_finite(self.name))
-        self.x = X[0]
+        self.x = one.X[0].copy()
 
     def save_state(self) -> Any:
         return self.x.copy()
@@ -161,9 +172,11 @@ def non_finite(name: str) -> str:
 
 
 class OdeBatch:
-    """Plants of one kind stepped together (a campaign block): their states stacked (B, n), their parameters as
-    columns, the same :func:`rk4` kernel a plant alone steps. ``plants`` are reset already; they must share the
-    class, the selected inputs and outputs and the sub-step (:func:`batchable` says whether they do).
+    """Plants of one kind stepped together: their states stacked (B, n), their parameters as columns. A campaign
+    block steps its runs' plants so, a plant alone steps as a batch of one: the same kernel either way, the
+    compiled RK4 of a built-in model (:mod:`.kernel`, its rows advanced in place) or :func:`rk4` over the class's
+    :meth:`~OdePlant.rates`. ``plants`` are reset already; they must share the class, the selected inputs and
+    outputs and the sub-step (:func:`batchable` says whether they do).
 
     A row whose state becomes non-finite is *failed*: it keeps its last finite state and :meth:`advance` reports
     it, as the plant alone raises (the run ends there).
@@ -172,10 +185,17 @@ class OdeBatch:
     def __init__(self, plants: list[OdePlant]) -> None:
         first = plants[0]
         self.kernel, self.name, self.h = first, first.name, first.h
-        self.X = np.asfortranarray(np.stack([p.x for p in plants]))  # each state a contiguous column
+        X = np.stack([p.x for p in plants])
         self.P = columns(type(first), {k: np.array([p.params[k] for p in plants]) for k in first.params})
         self._in_idx, self._out_idx = first._in_idx, first._out_idx
-        self._U = np.zeros((len(plants), len(first.all_inputs)))
+        lo = self._in_idx[0] if self._in_idx else 0  # inputs selected in order: a slice, cheaper than a list
+        in_order = list(self._in_idx) == list(range(lo, lo + len(self._in_idx)))
+        self._in_cols = slice(lo, lo + len(self._in_idx)) if in_order else self._in_idx
+        native = vars(type(first)).get("native")
+        self._rows = None if native is None else Rows(first.name, X, np.column_stack([self.P[k] for k in native]),
+                                                      inputs=len(first.all_inputs))  # fmt: skip
+        self.X = np.asfortranarray(X) if self._rows is None else self._rows.X  # numpy: each state a contiguous column
+        self._U = np.zeros((len(plants), len(first.all_inputs))) if self._rows is None else self._rows.U
 
     def outputs(self) -> np.ndarray:
         """Every row's outputs (B, p)."""
@@ -184,8 +204,10 @@ class OdeBatch:
     def advance(self, U: np.ndarray, *, dt: float) -> np.ndarray:
         """Hold each row's command ``U`` (B, inputs selected) for ``dt``; returns the rows that failed now."""
         full = self._U
-        full[:] = 0.0
-        full[:, self._in_idx] = U
+        full[:, self._in_cols] = U  # the inputs not selected stay zero
+        if self._rows is not None:
+            self._rows.advance(*substeps(dt, self.h))
+            return self._rows.failed.copy()
         X = self.kernel.clamp(rk4(self.kernel.rates, self.X, full, self.P, dt=dt, h=self.h))
         failed = ~np.isfinite(X).all(axis=1)
         if failed.any():
@@ -219,6 +241,7 @@ class CartPendulum(OdePlant):
 
     name = "cart_pendulum"
     vectorised = True
+    native = ("M", "m", "l", "g", "ml", "mg", "Mmg")
     all_inputs = ("F",)
     state_names = ("x", "x_dot", "theta", "theta_dot")
     default_outputs = ("x", "theta")
@@ -257,6 +280,7 @@ class QuadrotorLateral(OdePlant):
 
     name = "quadrotor_lateral"
     vectorised = True
+    native = ("g", "Ixx", "mass", "c_d")
     all_inputs = ("tau",)
     state_names = ("phi", "p", "v", "y")
     default_outputs = ("phi", "y")

@@ -26,6 +26,7 @@ class Tank(OdePlant):
 
     name = "tank"
     vectorised = True
+    native = ("c", "tau_p", "area", "flare")
     all_inputs = ("u",)
     state_names = ("q", "h")
     default_outputs = ("h",)

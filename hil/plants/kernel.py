@@ -1,0 +1,112 @@
+"""The built-in plants' compiled RK4 (``native/ode.c``): built on first use with the host C compiler, loaded with
+ctypes.
+
+The library is built into the firmware build cache (:func:`gainlink.firmware.build.cache_root`, beside the host law
+libraries), in a folder named by a hash of the source, the flags and the compiler (its path, size and time), under
+that folder's file lock: concurrent first uses (pytest-xdist or Dask workers) build it once, the others find it done.
+The library is written under a temporary name and renamed into place, so no reader ever sees half of one and a
+failed build leaves nothing behind.
+
+Flags keep IEEE semantics (``-O2 -ffp-contract=off``, no ``-ffast-math``): the C rounds every operation as numpy
+does, and a row's bits do not depend on the batch size (``native/ode.c`` says how).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import hashlib
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+from gainlink.errors import ToolchainError
+from gainlink.fileio import exclusive_lock
+from gainlink.firmware.build import cache_root
+
+SOURCE = Path(__file__).resolve().parent / "native" / "ode.c"
+FLAGS = ("-std=c11", "-O2", "-ffp-contract=off", "-fPIC", "-shared")
+LIBRARY = "libgainlink_plants.so"
+
+
+def compiler(name: str) -> str:
+    """The host C compiler ``name`` (``$CC``, else ``cc``), as a path."""
+    path = shutil.which(name)
+    if path is None:
+        raise ToolchainError(f"C compiler {name} not found: the built-in plants' RK4 is compiled on first use "
+                             "(make setup installs gcc; set CC to another)")  # fmt: skip
+    return path
+
+
+def library() -> Path:
+    """The kernel's shared library, built (once per source, flags and compiler) into the build cache; looked up once
+    per process and compiler name (a lookup reads and hashes the source, finds the compiler and the cache: ~0.5 ms)."""
+    return _library(os.environ.get("CC", "cc"))
+
+
+@functools.cache
+def _library(cc_name: str) -> Path:
+    cc = compiler(cc_name)
+    st = os.stat(cc)
+    key_text = "|".join([hashlib.sha256(SOURCE.read_bytes()).hexdigest(), *FLAGS, cc, str(st.st_size),
+                         str(st.st_mtime_ns)])  # fmt: skip
+    folder = cache_root() / f"plants-host-{hashlib.sha256(key_text.encode()).hexdigest()[:16]}"
+    lib = folder / LIBRARY
+    if lib.is_file():
+        return lib
+    with exclusive_lock(folder / ".lock"):
+        if not lib.is_file():
+            _compile(cc, lib)
+    return lib
+
+
+def _compile(cc: str, lib: Path) -> None:
+    """Compile :data:`SOURCE` into ``lib`` (through a temporary name in its folder, removed when the build fails)."""
+    staging = lib.with_name(f"{lib.name}.{os.getpid()}.tmp")
+    cmd = [cc, *FLAGS, "-o", str(staging), str(SOURCE), "-lm"]
+    try:
+        proc = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True)
+        if proc.returncode != 0:
+            lines = (proc.stdout + proc.stderr).strip().splitlines()
+            first = next((ln for ln in lines if "error" in ln.lower()), lines[-1] if lines else "")
+            raise ToolchainError(f"compiling the plants' RK4 ({SOURCE.name}) with {cc} failed "
+                                 f"(exit {proc.returncode}): {first.strip()[:300]}")  # fmt: skip
+        os.replace(staging, lib)
+    finally:
+        staging.unlink(missing_ok=True)
+
+
+@functools.cache
+def _loaded(path: Path) -> ctypes.PyDLL:
+    # PyDLL: the call keeps the GIL (a batch of one takes a microsecond; gainlink.engines.native says why that matters
+    # in a Dask worker)
+    return ctypes.PyDLL(str(path))
+
+
+def step_function(model: str) -> ctypes._CFuncPtr:
+    """``gl_ode_<model>(rows, substeps, hh, X, U, P, failed) -> failed rows`` of the kernel (``native/ode.c``)."""
+    fn = getattr(_loaded(library()), f"gl_ode_{model}")
+    fn.argtypes = [ctypes.c_int64, ctypes.c_int64, ctypes.c_double] + [ctypes.c_void_p] * 4
+    fn.restype = ctypes.c_int64
+    return fn
+
+
+class Rows:
+    """Rows of one built-in model stepped by the kernel: states ``X`` (B, n), full inputs ``U`` (B, inputs) and
+    parameters ``P`` (B, k), each contiguous float64 held here, their addresses taken once (no conversion or
+    allocation per step). ``X`` is advanced in place; a failed row keeps its state."""
+
+    def __init__(self, model: str, X: np.ndarray, P: np.ndarray, inputs: int) -> None:
+        self.X = np.ascontiguousarray(X, dtype=np.float64)
+        self.P = np.ascontiguousarray(P, dtype=np.float64)
+        self.U = np.zeros((len(self.X), inputs))
+        self.failed = np.zeros(len(self.X), dtype=np.bool_)
+        self._fn = step_function(model)
+        self._args = [ctypes.c_void_p(a.ctypes.data) for a in (self.X, self.U, self.P, self.failed)]
+
+    def advance(self, substeps: int, hh: float) -> int:
+        """``substeps`` RK4 steps of ``hh`` under the inputs in :attr:`U`; the number of rows that failed (marked in
+        :attr:`failed`)."""
+        return int(self._fn(len(self.X), substeps, hh, *self._args))

@@ -1,0 +1,111 @@
+"""The built-in plants' compiled RK4 (hil/plants/native/ode.c) against the numpy kernel it replaced.
+
+Oracle: :func:`gainlink.hil.plants.models.rk4` over each model's numpy ``rates`` (the readable definition), which
+the C follows operation for operation; test_campaign_blocks.py holds the scalar Python RK4 (math.sin: libm) and the
+batch-of-one against block checks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from gainlink.errors import PlantError, ToolchainError
+from gainlink.hil.plants import kernel
+from gainlink.hil.plants.models import CartPendulum, OdeBatch, QuadrotorLateral, columns, rk4
+from gainlink.hil.plants.tank import Tank
+from support.cli import run_cli
+from support.hil import udp_transport, write_scenario
+
+CASES = [
+    (CartPendulum, {"x": (0.0, 1.0), "x_dot": (0.0, 1.0), "theta": (0.0, 0.8), "theta_dot": (0.0, 2.0)}, 8.0),
+    (QuadrotorLateral, {"phi": (0.0, 0.3), "p": (0.0, 1.0), "v": (0.0, 1.0), "y": (0.0, 1.0)}, 0.02),
+    (Tank, {"q": (0.3, 0.2), "h": (0.4, 0.3)}, 0.4),  # levels below zero: the clamp and the orifice's max(h, 0)
+]
+
+
+@pytest.mark.parametrize("cls, start, command", CASES)
+def test_the_compiled_kernel_steps_as_the_numpy_kernel_it_replaced(cls, start, command):
+    """300 rows of random parameters, states and commands, 30 samples of 3 sub-steps: every figure as numpy's RK4
+    over the model's ``rates`` gives. Tolerance 1e-12 relative: both evaluate each product and sum in the same
+    order, so only a numpy whose sin, cos, tan or sqrt is not libm's (a SIMD build) could differ, by an ulp or so
+    per call; on this project's machines the two agree bit for bit."""
+    rng = np.random.default_rng(3)
+    plants = [cls(parameters={k: v * rng.uniform(0.7, 1.3) for k, v in cls.defaults.items()}, step=0.004)
+              for _ in range(300)]  # fmt: skip
+    for p in plants:
+        p.reset(initial={k: float(rng.normal(m, s)) for k, (m, s) in start.items()})
+    batch = OdeBatch(plants)
+    X = np.stack([p.state() for p in plants])
+    P = columns(cls, {k: np.array([p.params[k] for p in plants]) for k in cls.defaults})
+    model = plants[0]
+    for _ in range(30):
+        U = command * rng.standard_normal((len(plants), 1))
+        assert not batch.advance(U, dt=0.01).any()
+        X = model.clamp(rk4(model.rates, X, U, P, dt=0.01, h=0.004))
+        np.testing.assert_allclose(batch.X, X, rtol=1e-12, atol=1e-15)
+
+
+def test_a_plant_alone_fails_at_the_sample_its_row_fails_and_keeps_its_state():
+    """The kernel's failure is the numpy path's: a plant alone raises at the sample whose state is not finite and
+    keeps its last finite state; the same command in a block fails that row alone, and the rows beside it (in the
+    same group of SIMD lanes) step as they step alone."""
+    alone = Tank(step=0.01)
+    alone.reset(initial={"h": 0.5})
+    alone.advance(u=np.array([0.2]), dt=0.1)
+    before = alone.state()
+    with pytest.raises(PlantError, match="plant tank: state became non-finite"):
+        alone.advance(u=np.array([np.inf]), dt=0.1)
+    assert np.array_equal(alone.state(), before)
+    plants = [Tank(step=0.01) for _ in range(3)]
+    for p in plants:
+        p.reset(initial={"h": 0.5})
+    batch = OdeBatch(plants)
+    assert batch.advance(np.array([[0.2], [0.2], [0.2]]), dt=0.1).tolist() == [False, False, False]
+    assert batch.advance(np.array([[0.2], [np.nan], [0.2]]), dt=0.1).tolist() == [False, True, False]
+    assert np.array_equal(batch.X[1], before) and np.isfinite(batch.X).all()
+    other = Tank(step=0.01)
+    other.reset(initial={"h": 0.5})
+    for _ in range(2):
+        other.advance(u=np.array([0.2]), dt=0.1)
+    assert np.array_equal(batch.X[0], other.state()) and np.array_equal(batch.X[2], other.state())
+
+
+@pytest.fixture
+def own_cache(tmp_path, monkeypatch):
+    """The kernel's build cache in ``tmp_path / "cache"``, the process's lookups of the library forgotten before and
+    after."""
+    monkeypatch.setattr(kernel, "cache_root", lambda: tmp_path / "cache")
+    kernel._library.cache_clear()
+    yield tmp_path / "cache"
+    kernel._library.cache_clear()
+
+
+def test_the_kernel_is_built_once_into_the_cache_and_a_compiler_failure_is_one_line(own_cache, tmp_path, monkeypatch):
+    cache = own_cache
+    broken = tmp_path / "cc"
+    broken.write_text("#!/bin/sh\necho 'ode.c:1:1: error: no such compiler today' >&2\nexit 1\n")
+    broken.chmod(0o755)
+    monkeypatch.setenv("CC", str(broken))
+    with pytest.raises(ToolchainError) as err:
+        kernel.library()
+    assert "no such compiler today" in str(err.value) and "\n" not in str(err.value)
+    assert [p.name for p in cache.rglob("*") if p.is_file()] == [".lock"]  # no library, no temporary file
+    monkeypatch.delenv("CC")
+    lib = kernel.library()
+    assert lib.parent.parent == cache and lib.is_file()
+    built = lib.stat().st_mtime_ns
+    kernel._library.cache_clear()  # as another process finds it
+    assert kernel.library() == lib and lib.stat().st_mtime_ns == built  # found, not built again
+    assert sorted(p.name for p in lib.parent.iterdir()) == [".lock", lib.name]
+
+
+def test_a_missing_compiler_stops_a_run_in_one_line(example_artifacts, own_cache, tmp_path, monkeypatch):
+    monkeypatch.setenv("CC", "gainlink-no-such-cc")
+    scenario = write_scenario(tmp_path / "s.toml", {
+        "artifact": str(example_artifacts["pendulum"]), "duration": 0.1, "controller": "reference",
+        "transport": udp_transport(), "plant": {"kind": "cart_pendulum", "outputs": ["x", "theta"]},
+    })  # fmt: skip
+    res = run_cli("hil", "run", scenario, "--report", tmp_path / "report", "--no-progress")
+    assert res.code == 2
+    assert res.err.count("\n") == 1 and "C compiler gainlink-no-such-cc not found" in res.err
+    assert not (tmp_path / "report").exists() and not own_cache.exists()
