@@ -9,7 +9,7 @@ measurements both are 0. Classic CAN and CAN FD differ only in the header:
 classic (8-byte frames), 4 bytes
     bytes 0-1 ``seq`` (uint16 LE, the sample counter), byte 2 ``status`` (the flags' bits 0-7), byte 3: its low
     nibble ``sat``, its high nibble ``status_hi`` (the flags' bits 8-11: an MPC's CAPPED, 0x100, is its bit 0). Every
-    flag fits beside one float32 value; a frame carries at most 4 values (the nibble's bits).
+    flag fits beside one float32 value (the nibble would allow 4 values; the 4 bytes left hold 1 float32 or 2 int16).
 CAN FD (up to 64 bytes), 8 bytes
     bytes 0-1 ``seq``, byte 2 ``status`` (bits 0-7), byte 3 ``status_hi`` (the flags' bits 8-15: bytes 2-3 are
     the flags as one uint16 LE), bytes 4-7 ``sat`` (uint32 LE). A frame carries up to 14 float32 values (8 + 56 =
