@@ -80,8 +80,9 @@ static uint32_t low_bits(uint32_t bits)
 /** The header's fields as one word, written little-endian (gainlink.shipping.flags.CanHeader.pack). */
 static void put_header(const gl_can_layout_t *layout, uint8_t *data, uint16_t seq, uint16_t status, uint32_t sat)
 {
+    const uint32_t hi = ((uint32_t)status >> 8) & low_bits(layout->status_hi_bits);
     const uint64_t word = (uint64_t)seq | ((uint64_t)(status & 0xFFu) << 16) |
-                          ((uint64_t)((uint32_t)status >> 8 & low_bits(layout->status_hi_bits)) << layout->status_hi_start) |
+                          ((uint64_t)hi << layout->status_hi_start) |
                           ((uint64_t)(sat & low_bits(layout->sat_bits)) << layout->sat_start);
     for (uint32_t b = 0; b < layout->header; ++b) {
         data[b] = (uint8_t)(word >> (8u * b));
