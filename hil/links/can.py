@@ -246,7 +246,9 @@ class FrameCodec:
             vals = self.quantise(np.asarray(values, dtype=float)).tolist()
         else:  # Python floats (a float32 field packs them as the C reads them)
             vals = values.tolist() if isinstance(values, np.ndarray) else [float(v) for v in values]
-        pack = self.header.pack
+        # wire format 4: the header as one integer (gainlink.shipping.flags.CanHeader), each frame's saturation bits
+        # (fewer than the header's sat_bits: a frame has one per value) added to what every frame of the step shares
+        head, sat_at = self.header.pack(seq, status, 0), self.header.sat_start
         for s in self.specs:
             k = len(s.signals)
             bits = 0
@@ -254,8 +256,7 @@ class FrameCodec:
                 for i in range(k):
                     if sat[s.first + i]:
                         bits |= 1 << i
-            head = pack(seq, status, bits)  # wire format 4: the header's fields (gainlink.shipping.flags.CanHeader)
-            data = self.structs[s.arbitration_id].pack(head, *vals[s.first : s.first + k])
+            data = self.structs[s.arbitration_id].pack(head | bits << sat_at, *vals[s.first : s.first + k])
             frames.append(
                 self._Message(
                     arbitration_id=s.arbitration_id, is_extended_id=False, data=data, is_fd=self.fd, check=False
