@@ -330,3 +330,38 @@ def test_udp_multicast_without_a_route_says_how_to_add_one(pend):
         timeout=60,
     )
     assert routed.stdout.strip() == "sent", routed.stdout + routed.stderr
+
+
+@pytest.mark.parametrize("encoding", ["float32", "int16"])
+def test_the_firmware_node_answers_a_wide_sample_sent_in_fd_frames(encoding):
+    """The host CAN node (gainlink_can, a real process on udp_multicast) of the 16-output design assembles each
+    sample from its FD frames (float32: 2 frames of 14 and 3 values; int16: 1 of 17) and answers it with the law's
+    command: the float64 reference law on what the node decoded (float32 on the wire; int16 quantised), within float32
+    rounding (and half an int16 step of the command), the saturation bits equal."""
+    from gainlink.hil.links.can_firmware import firmware_can_executable
+
+    art = _wide_artifact()
+    names = [*art.signals["outputs"], *art.signals["references"]]
+    ranges = {n: [-5.0, 5.0] for n in names}
+    transport = CanTransport({**udp_transport(fd=True), "encoding": encoding, "ranges": ranges}, artifact=art)
+    assert transport.describe()["frames_per_sample"] == {"float32": 2, "int16": 1}[encoding]
+    peer = ControllerProcess([str(firmware_can_executable(art)), *transport.controller_argv()])
+    half_step_u = 0.0 if encoding == "float32" else transport.layout.command[0].factors[0] / 2
+    transport.open()
+    try:
+        peer.start()
+        peer.check_artifact(art.sha256)
+        rng = np.random.default_rng(3)
+        Y = rng.normal(scale=0.05, size=(60, art.p))
+        R = rng.normal(scale=0.5, size=(60, art.q))
+        Y[20:23] *= 40.0  # far off: the torque saturates for a few steps
+        cmds = _exchange(art, transport, [(k, Y[k], R[k]) for k in range(60)])
+        assert all(c is not None for c in cmds)
+        seen = [transport.received_sample(y=Y[k], r=R[k]) for k in range(60)]
+        ref = ReferenceLoop(art).run(np.array([s[0] for s in seen]), np.array([s[1] for s in seen]))
+        scale = float(np.abs(ref.u).max())
+        np.testing.assert_allclose(np.array([c.u for c in cmds]), ref.u, rtol=0, atol=1e-4 * scale + half_step_u)
+        assert np.array_equal(np.array([c.saturated for c in cmds]), ref.saturated) and ref.saturated.any()
+    finally:
+        peer.close()
+        transport.close()
