@@ -85,7 +85,7 @@ def test_q31_hil_report_states_the_law_and_its_deviation_beside_the_certified_bo
 
 def test_a_float32_artifact_names_its_law_and_gets_no_fixed_point_block(pend, can_firmware, cart_fmu):
     res = hil_run(pendulum_scenario(gains=pend, fmu=cart_fmu, transport=udp_transport(fd=True), duration=0.3))
-    assert res.complete and "law=float32 wire=3" in res.info["controller"]["ready"]
+    assert res.complete and "law=float32 wire=4" in res.info["controller"]["ready"]
     assert "fixed_point" not in res.metrics
 
 

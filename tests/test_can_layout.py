@@ -10,6 +10,7 @@ The int16 encoding's own tests are in test_can_scaled.py.
 from __future__ import annotations
 
 import math
+import struct
 
 import cantools
 import numpy as np
@@ -56,35 +57,140 @@ def test_dbc_round_trips_through_cantools_and_matches_the_fast_codec(pend, fd):
             assert msg.encode(want) == bytes(frame.data)
 
 
+#: Wire format 4 as docs/design.md writes it (written out here, never read from gainlink.shipping.flags): per header
+#: ``(bytes, status bits carried, saturation bits a frame)``. Classic: byte 2 the flags' bits 0-7, byte 3's low nibble
+#: the frame's saturation bits and its high nibble the flags' bits 8-11. CAN FD: bytes 2-3 the flags (uint16 LE),
+#: bytes 4-7 the saturation bits (uint32 LE).
+HEADERS = {False: (4, 0x0FFF, 4), True: (8, 0xFFFF, 32)}
+
+
+def _documented_header(fd: bool, seq: int, status: int, sat: int) -> bytes:
+    """A header's bytes at the positions docs/design.md gives them (status bits beyond the header dropped)."""
+    _, carried, _ = HEADERS[fd]
+    status &= carried
+    if fd:
+        return struct.pack("<HHI", seq, status, sat)
+    return struct.pack("<HBB", seq, status & 0xFF, sat | (status >> 8) << 4)
+
+
+def _wide_artifact():
+    """A real design with a wide sample: the quadrotor's lateral channel seen by four redundant sensors per state
+    (16 outputs) with integral action on one of them (1 reference): 17 values a sample, 1 input."""
+    import tomllib
+
+    from gainlink.shipping.artifact import from_dict
+    from support.designs import designed
+    from support.paths import EXAMPLES
+
+    spec = tomllib.loads((EXAMPLES / "quadrotor_lateral.toml").read_text())
+    states = spec["plant"]["states"]
+    spec["plant"]["outputs"] = [f"{s}_{k}" for k in "abcd" for s in states]
+    spec["plant"]["C"] = [[1.0 if j == i % 4 else 0.0 for j in range(4)] for i in range(16)]
+    spec["integral"]["outputs"] = ["y_a"]
+    spec["observer"]["V_diag"] = spec["observer"]["V_diag"][:1] * 16
+    for k in ("y_min", "y_max", "r_min", "r_max"):
+        del spec["limits"][k]
+    spec["units"] = {}
+    return from_dict(designed(spec))
+
+
+@pytest.mark.parametrize("encoding", ["float32", "int16"])
+def test_a_wide_sample_takes_two_fd_frames_and_cantools_decodes_every_one(encoding):
+    """Wire format 4: an FD frame's 8-byte header leaves 56 bytes for 14 float32 (or 28 int16) values, so the
+    17 values of a 16-output sample take 2 FD frames (float32: 64 and 20 bytes) or 1 (int16: 42 bytes, sent as 48),
+    where format 3's 4 values a frame took 5; classic frames are as before (1 float32 or 2 int16 values each).
+    cantools decodes every frame of the layout's DBC to the values the link's codec sent."""
+    from gainlink.shipping.can_layout import FD_LENGTHS
+
+    art = _wide_artifact()
+    k, width = art.p + art.q, {"float32": 4, "int16": 2}[encoding]
+    assert (art.p, art.q, k) == (16, 1, 17)
+    names = [*art.signals["outputs"], *art.signals["references"]]
+    ranges = {n: [-5.0, 5.0] for n in names} if encoding == "int16" else None
+    fd = CanTransport({"interface": "virtual", "fd": True, "encoding": encoding, "ranges": ranges}, artifact=art)
+    classic = CanTransport({"interface": "virtual", "encoding": encoding, "ranges": ranges}, artifact=art)
+    per_fd = (64 - 8) // width
+    chunks = [min(per_fd, k - i) for i in range(0, k, per_fd)]
+    assert len(fd.layout.measurement) == math.ceil(k / per_fd) == {"float32": 2, "int16": 1}[encoding]
+    lengths = [min(n for n in FD_LENGTHS if n >= 8 + width * c) for c in chunks]
+    assert [s.length for s in fd.layout.measurement] == lengths
+    assert len(classic.layout.measurement) == math.ceil(k / (4 // width))
+    db = cantools.database.load_string(fd.layout.dbc(), database_format="dbc")
+    rng = np.random.default_rng(5)
+    for seq in range(20):
+        v = rng.uniform(-4.0, 4.0, k)
+        frames = fd.encode_sample(seq=seq, y=v[: art.p], r=v[art.p :])
+        assert len(frames) == len(chunks) and all(f.is_fd for f in frames)
+        sent = v.astype(np.float32) if encoding == "float32" else np.round(v / (10.0 / 65534)) * (10.0 / 65534)
+        for frame, spec in zip(frames, fd.layout.measurement):
+            assert bytes(frame.data[:8]) == _documented_header(True, seq, 0, 0)
+            msg = db.get_message_by_frame_id(frame.arbitration_id)
+            assert msg.is_fd and msg.length == len(frame.data)
+            d = msg.decode(bytes(frame.data), decode_choices=False)
+            assert (d["seq"], d["status"], d["status_hi"], d["sat"]) == (seq, 0, 0, 0)
+            got = np.array([d[n] for n in spec.signals])
+            want = sent[spec.first : spec.first + len(spec.signals)]
+            np.testing.assert_allclose(got, want, rtol=0, atol=0 if encoding == "float32" else 1e-12)
+
+
+def _patterns(n: int, rng) -> list[int]:
+    """Saturation masks of an ``n``-value vector: none, each bit alone, all, and a few at random."""
+    return [0, (1 << n) - 1, *(1 << i for i in range(n)), *(int(x) for x in rng.integers(0, 1 << n, 6))]
+
+
 @pytest.mark.parametrize("fd", [False, True])
-def test_a_command_frame_carries_every_flag_bit_as_the_dbc_says(fd):
-    """Wire format 3: a command's flags 0-7 in ``status``, 8-11 in ``status_hi`` (an MPC's CAPPED, 0x100, is its bit
-    0), the frame's saturation bits in ``sat``; cantools reading the generated DBC and the link's codec agree on every
-    combination, and the MPC's DBC names CAPPED in ``status_hi``'s value table."""
+def test_every_flag_and_saturation_bit_round_trips_through_c_python_and_cantools(pend, fd):
+    """Every status bit (each alone, CAPPED with others, all 16) times every saturation bit of a 17-value vector
+    (each alone, none, all, random masks): the link's Python codec, the host CAN node's C codec (gl_can_layout.c
+    through ctypes) and cantools reading the generated DBC make and read the same frames, whose headers are the bytes
+    docs/design.md gives (classic: the flags' bits 12-15 do not travel). The MPC's DBC names CAPPED in
+    ``status_hi``'s value table."""
+    import ctypes
+
     from gainlink.hil.links.can import Assembler, FrameCodec
     from gainlink.laws import design
     from gainlink.shipping.artifact import from_dict
     from gainlink.spec import load_spec
+    from support.can_codec import c_codec
     from support.paths import EXAMPLES
 
-    art = from_dict(design(load_spec(EXAMPLES / "quadrotor_hover_mpc.toml")).artifact)
-    layout = layout_for(art, fd=fd, base_id=0x200)
-    db = cantools.database.load_string(layout.dbc(), database_format="dbc")
-    assert all(len(spec.signals) <= 4 for spec in layout.command), "a frame carries at most 4 values"
-    hi = db.get_message_by_name(layout.command[0].name).get_signal_by_name("status_hi")
+    mpc = from_dict(design(load_spec(EXAMPLES / "quadrotor_hover_mpc.toml")).artifact)
+    hi = cantools.database.load_string(layout_for(mpc, fd=fd).dbc(), database_format="dbc")
+    hi = hi.get_message_by_name("Command0").get_signal_by_name("status_hi")
     assert {int(k): str(v) for k, v in hi.choices.items()} == {1: "CAPPED"}
-    codec = FrameCodec(layout.command, fd=fd)
-    u = np.array([0.5, -1.0, 2.0, 3.5], dtype=np.float32)
-    for status in (0x000, 0x001, 0x080, 0x100, 0x181, 0xFFF):
-        for sat in (np.zeros(4, bool), np.array([True, False, True, True])):
-            frames = codec.encode(seq=7, values=u, status=status, sat=sat)
-            rx = Assembler(codec)
-            got = [rx.feed(f) for f in frames][-1]
-            assert got is not None and got[2] == status and np.array_equal(got[3], sat)
-            for frame, spec in zip(frames, layout.command):
-                d = db.get_message_by_frame_id(frame.arbitration_id).decode(bytes(frame.data), decode_choices=False)
-                assert d["status"] | d["status_hi"] << 8 == status
-                assert d["sat"] == sum(int(sat[spec.first + i]) << i for i in range(len(spec.signals)))
+
+    layout = layout_for(_wide_artifact(), fd=fd, base_id=0x200)
+    specs, (size, carried, sat_bits) = layout.measurement, HEADERS[fd]
+    db = cantools.database.load_string(layout.dbc(), database_format="dbc")
+    codec, rx = FrameCodec(specs, fd=fd), Assembler(FrameCodec(specs, fd=fd))
+    lib, _Scale, Layout, Frame = c_codec(load(pend))
+    c_layout = Layout()
+    lib.gl_can_layout_init(ctypes.byref(c_layout), 0x200, int(fd), 0)
+    assert c_layout.per_frame == layout.per_frame == min(sat_bits, ((64 if fd else 8) - size) // 4)
+    rng = np.random.default_rng(2)
+    values = rng.normal(size=codec.size).astype(np.float32)
+    c_values = (ctypes.c_float * codec.size)(*values)
+    statuses = [0, *(1 << b for b in range(16)), 0x100 | 0x81, 0x0FFF, 0xFFFF]
+    for seq, (status, sat) in enumerate((st, m) for st in statuses for m in _patterns(codec.size, rng)):
+        mask = np.array([(sat >> i) & 1 for i in range(codec.size)], dtype=bool)
+        frames = codec.encode(seq=seq, values=values, status=status, sat=mask)
+        got = [rx.feed(f) for f in frames][-1]
+        assert got is not None and got[2] == status & carried and np.array_equal(got[3], mask)
+        for j, (frame, spec) in enumerate(zip(frames, specs)):
+            n = len(spec.signals)
+            bits = (sat >> spec.first) & ((1 << n) - 1)
+            data = bytes(frame.data)
+            assert data[:size] == _documented_header(fd, seq, status, bits), (status, sat, j)
+            d = db.get_message_by_frame_id(frame.arbitration_id).decode(data, decode_choices=False)
+            assert (d["seq"], d["status"] | d["status_hi"] << 8, d["sat"]) == (seq, status & carried, bits)
+            c_frame = Frame()
+            lib.gl_can_layout_encode(ctypes.byref(c_layout), frame.arbitration_id, j, seq, status, sat, c_values,
+                                     None, codec.size, ctypes.byref(c_frame))  # fmt: skip
+            assert bytes(c_frame.data[: c_frame.len]) == data, (status, sat, j)
+            c_seq, c_status, c_sat = ctypes.c_uint16(), ctypes.c_uint16(), ctypes.c_uint32()
+            lib.gl_can_layout_header(ctypes.byref(c_layout), ctypes.byref(c_frame), ctypes.byref(c_seq),
+                                     ctypes.byref(c_status), ctypes.byref(c_sat))  # fmt: skip
+            assert (c_seq.value, c_status.value, c_sat.value) == (seq, status & carried, bits)
 
 
 def test_dbc_command_writes_a_file(pend, tmp_path):
@@ -224,3 +330,38 @@ def test_udp_multicast_without_a_route_says_how_to_add_one(pend):
         timeout=60,
     )
     assert routed.stdout.strip() == "sent", routed.stdout + routed.stderr
+
+
+@pytest.mark.parametrize("encoding", ["float32", "int16"])
+def test_the_firmware_node_answers_a_wide_sample_sent_in_fd_frames(encoding):
+    """The host CAN node (gainlink_can, a real process on udp_multicast) of the 16-output design assembles each
+    sample from its FD frames (float32: 2 frames of 14 and 3 values; int16: 1 of 17) and answers it with the law's
+    command: the float64 reference law on what the node decoded (float32 on the wire; int16 quantised), within float32
+    rounding (and half an int16 step of the command), the saturation bits equal."""
+    from gainlink.hil.links.can_firmware import firmware_can_executable
+
+    art = _wide_artifact()
+    names = [*art.signals["outputs"], *art.signals["references"]]
+    ranges = {n: [-5.0, 5.0] for n in names}
+    transport = CanTransport({**udp_transport(fd=True), "encoding": encoding, "ranges": ranges}, artifact=art)
+    assert transport.describe()["frames_per_sample"] == {"float32": 2, "int16": 1}[encoding]
+    peer = ControllerProcess([str(firmware_can_executable(art)), *transport.controller_argv()])
+    half_step_u = 0.0 if encoding == "float32" else transport.layout.command[0].factors[0] / 2
+    transport.open()
+    try:
+        peer.start()
+        peer.check_artifact(art.sha256)
+        rng = np.random.default_rng(3)
+        Y = rng.normal(scale=0.05, size=(60, art.p))
+        R = rng.normal(scale=0.5, size=(60, art.q))
+        Y[20:23] *= 40.0  # far off: the torque saturates for a few steps
+        cmds = _exchange(art, transport, [(k, Y[k], R[k]) for k in range(60)])
+        assert all(c is not None for c in cmds)
+        seen = [transport.received_sample(y=Y[k], r=R[k]) for k in range(60)]
+        ref = ReferenceLoop(art).run(np.array([s[0] for s in seen]), np.array([s[1] for s in seen]))
+        scale = float(np.abs(ref.u).max())
+        np.testing.assert_allclose(np.array([c.u for c in cmds]), ref.u, rtol=0, atol=1e-4 * scale + half_step_u)
+        assert np.array_equal(np.array([c.saturated for c in cmds]), ref.saturated) and ref.saturated.any()
+    finally:
+        peer.close()
+        transport.close()

@@ -13,18 +13,17 @@ import json
 import logging
 import math
 import struct
-from pathlib import Path
 
 import cantools
 import numpy as np
 import pytest
 from gainlink.errors import TransportError
-from gainlink.firmware.build import host_app
 from gainlink.hil.links.can import Assembler, CanTransport, FrameCodec, firmware_can_argv
 from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import parse_scenario
 from gainlink.shipping.artifact import load
 from gainlink.shipping.can_layout import FD_LENGTHS, INT16_MAX, INT16_NAN, dequantise, quantise
+from support.can_codec import c_codec
 from support.cli import assert_refused, run_cli
 from support.hil import PENDULUM_RANGES, pendulum_scenario, udp_transport, write_scenario
 
@@ -50,8 +49,8 @@ def test_int16_dbc_describes_the_scaled_signals_and_matches_the_fast_codec(pend,
     layout = transport.layout
     names, lo, hi = _value_ranges(art, PENDULUM_RANGES)
     k = len(names)
-    if fd:  # one frame: 4 header bytes + 2 per value, rounded up to a CAN FD length
-        assert [s.length for s in layout.measurement] == [min(n for n in FD_LENGTHS if n >= 4 + 2 * k)]
+    if fd:  # one frame: 8 header bytes (wire format 4's FD header) + 2 per value, rounded up to a CAN FD length
+        assert [s.length for s in layout.measurement] == [min(n for n in FD_LENGTHS if n >= 8 + 2 * k)]
     else:  # classic: two int16 values per 8-byte frame
         assert len(layout.measurement) == math.ceil(k / 2) and all(s.length == 8 for s in layout.measurement)
     db = cantools.database.load_string(layout.dbc(), database_format="dbc")
@@ -101,7 +100,7 @@ def test_int16_non_finite_values_travel_as_the_reserved_raw_value(pend):
     (spec,) = transport.layout.measurement
     db = cantools.database.load_string(transport.layout.dbc(), database_format="dbc")
     (frame,) = transport.encode_sample(seq=5, y=np.array([math.nan, math.inf]), r=np.array([-math.inf]))
-    raw = spec.struct.unpack_from(frame.data)[3:]
+    raw = struct.unpack_from("<3h", frame.data, 8)  # after the FD header's 8 bytes
     assert raw == (INT16_NAN,) * 3 and transport.tx.clipped == 0
     decoded = db.decode_message(frame.arbitration_id, bytes(frame.data))  # any CAN tool names the reserved value
     assert [str(decoded[n]) for n in spec.signals] == ["not_a_number"] * 3
@@ -194,65 +193,8 @@ def test_cli_dbc_and_hil_run_with_int16(tmp_path, pend, cart_fmu):
     assert art.signals["outputs"] == ["x", "theta"]  # the names used above
 
 
-def _c_codec(pend: Path):
-    """The firmware's gl_can_layout.c, built by the firmware's CMake as a shared library (the host apps' tree's
-    target gainlink_can_layout), through ctypes."""
-
-    class Scale(ctypes.Structure):
-        _fields_ = [("factor", ctypes.c_double), ("offset", ctypes.c_double)]
-
-    class Layout(ctypes.Structure):
-        _fields_ = [
-            ("base_id", ctypes.c_uint32),
-            ("fd", ctypes.c_int),
-            ("encoding", ctypes.c_int),
-            ("per_frame", ctypes.c_uint32),
-            ("value_bytes", ctypes.c_uint32),
-        ]
-
-    class Frame(ctypes.Structure):
-        _fields_ = [
-            ("id", ctypes.c_uint32),
-            ("len", ctypes.c_uint8),
-            ("fd", ctypes.c_uint8),
-            ("data", ctypes.c_uint8 * 64),
-        ]
-
-    so = host_app(load(pend), target="gainlink_can_layout", relpath="apps/can/libgainlink_can_layout.so")
-    lib = ctypes.CDLL(str(so))
-    lib.gl_can_quantise.restype = ctypes.c_int16
-    lib.gl_can_quantise.argtypes = [ctypes.c_float, ctypes.POINTER(Scale), ctypes.POINTER(ctypes.c_int)]
-    lib.gl_can_dequantise.restype = ctypes.c_float
-    lib.gl_can_dequantise.argtypes = [ctypes.c_int16, ctypes.POINTER(Scale)]
-    lib.gl_can_layout_init.argtypes = [ctypes.POINTER(Layout), ctypes.c_uint32, ctypes.c_int, ctypes.c_int]
-    lib.gl_can_layout_encode.restype = ctypes.c_uint32
-    lib.gl_can_layout_encode.argtypes = [
-        ctypes.POINTER(Layout),
-        ctypes.c_uint32,
-        ctypes.c_uint32,
-        ctypes.c_uint16,
-        ctypes.c_uint8,
-        ctypes.c_uint32,
-        ctypes.POINTER(ctypes.c_float),
-        ctypes.POINTER(Scale),
-        ctypes.c_uint32,
-        ctypes.POINTER(Frame),
-    ]
-    lib.gl_can_layout_decode.restype = ctypes.c_int
-    lib.gl_can_layout_decode.argtypes = [
-        ctypes.POINTER(Layout),
-        ctypes.c_uint32,
-        ctypes.POINTER(Frame),
-        ctypes.POINTER(ctypes.c_uint16),
-        ctypes.POINTER(ctypes.c_float),
-        ctypes.POINTER(Scale),
-        ctypes.c_uint32,
-    ]
-    return lib, Scale, Layout, Frame
-
-
 def test_c_codec_quantises_like_python_bit_for_bit(pend):
-    lib, Scale, Layout, Frame = _c_codec(pend)
+    lib, Scale, Layout, Frame = c_codec(load(pend))
     rng = np.random.default_rng(11)
     # (min, max): the pendulum's ranges, an asymmetric one, and one with factor 0.5 where k/2 + 1/4 are exact ties.
     for lo, hi in [(-1.0, 1.0), (-5.0, 5.0), (-0.3, 1.7), (-SPAN / 4, SPAN / 4)]:

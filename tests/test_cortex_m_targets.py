@@ -118,7 +118,7 @@ def test_uart_banner_and_one_step_on_every_board(pendulum, board):
         res = fwqemu.run_image(elf, board=board, cwd=Path(tmp), timeout_s=10)
     assert res.returncode == 0, res.meaning
     lines = res.uart.splitlines()
-    assert lines[0] == f"gainlink {a.name} {board} sha256:{a.sha256} law=float32 variant=unrolled wire=3"
+    assert lines[0] == f"gainlink {a.name} {board} sha256:{a.sha256} law=float32 variant=unrolled wire=4"
     host = NativeLoop(a).step(np.full(a.p, 0.5), np.zeros(a.q))
     bits = " ".join(f"u=0x{int(v):08X}" for v in host.u.view(np.uint32))
     assert lines[1] == f"step 0x{host.status & 0xFFFFFFFF:08X} {bits}"

@@ -101,7 +101,7 @@ def test_firmware_run_without_input_is_the_integer_loop_on_stdin(saved):
     numeric = a.checks["fixed_point"]["numeric"]
     assert (
         out[0]
-        == f"gainlink-loop {a.name} sha256:{a.sha256} {a.n} {a.m} {a.p} {a.q} law={numeric} variant=unrolled wire=3"
+        == f"gainlink-loop {a.name} sha256:{a.sha256} {a.n} {a.m} {a.p} {a.q} law={numeric} variant=unrolled wire=4"
     )
     # each step: status flags sat u (m floats), then the words U V (m), XH (n), Z (q), clip, overflow
     steps = [line.split()[1:] for line in out[1:]]

@@ -56,3 +56,32 @@ def test_msgpack_container_bombs_are_refused_without_allocating(harnesses, tmp_p
             [str(exes["can_udp"]), "-rss_limit_mb=256", str(path)], capture_output=True, text=True, timeout=60
         )
         assert proc.returncode == 0, proc.stderr[-400:]
+
+
+def test_can_layout_seeds_cover_every_field_of_both_headers(pend, tmp_path):
+    """The CAN layout harness's corpus has frames of both headers of wire format 4 (docs/design.md) with every field
+    set: classic (4 bytes: byte 2 the flags' bits 0-7, byte 3 the saturation nibble and the flags' bits 8-11) and CAN
+    FD (8 bytes: bytes 2-3 the flags, bytes 4-7 the saturation bits), each with CAPPED (0x100) and every value's
+    saturation bit, both encodings. A seed is ``[config (bit 0 int16, bit 1 FD), length - 1, frame index] + payload``
+    (fuzz_can_layout.c)."""
+    import struct
+
+    a = artifact_mod.load(pend)
+    k = a.p + a.q  # 3 values: one FD frame; classic frames of 1 float32 or 2 int16 values
+    n = fuzz.write_seeds("can_layout", a, tmp_path / "seeds")
+    seeds = [(tmp_path / "seeds" / f"seed-{i:03d}").read_bytes() for i in range(n)]
+    covered = set()
+    for seed in seeds:
+        config, count, index, data = seed[0], seed[1] + 1, seed[2], seed[3:]
+        assert count == k
+        fd, int16 = bool(config & 2), bool(config & 1)
+        if fd:
+            _, status, sat = struct.unpack_from("<HHI", data)
+            values = k
+        else:
+            _, status, byte3 = struct.unpack_from("<HBB", data)
+            status, sat = status | (byte3 >> 4) << 8, byte3 & 0x0F
+            values = min(2 if int16 else 1, k - index * (2 if int16 else 1))
+        if status & 0x100 and sat == (1 << values) - 1:
+            covered.add((fd, int16))
+    assert covered == {(fd, int16) for fd in (False, True) for int16 in (False, True)}

@@ -180,12 +180,12 @@ def test_reference_controller_node_matches_the_firmware(pend, can_firmware, cart
     np.testing.assert_allclose(fw.trace.u, py.trace.u, rtol=0, atol=1e-3)
 
 
-@pytest.mark.parametrize("wire", ["", " wire=1", " wire=2", " wire=4"])
+@pytest.mark.parametrize("wire", ["", " wire=1", " wire=2", " wire=3", " wire=5"])
 def test_a_controller_of_another_wire_format_is_refused_in_one_line(pend, wire):
-    """A node whose ready line names another sample/command wire format than 3 (2: before CAPPED rode on CAN), or
-    none (a firmware from before MAVLink's own flag bits were left to MAVLink), is refused before the first sample,
-    in one line, and stopped: its status bits would be read at other places. The peer is a real process printing
-    that node's ready line."""
+    """A node whose ready line names another sample/command wire format than 4 (3: an FD frame's header was the
+    classic one, 4 values a frame; 2: before CAPPED rode on CAN), or none (a firmware from before MAVLink's own flag
+    bits were left to MAVLink), is refused before the first sample, in one line naming both formats, and stopped: its
+    status bits would be read at other places. The peer is a real process printing that node's ready line."""
     from gainlink.errors import FirmwareError
     from gainlink.hil.loop.controller import ControllerProcess
 
@@ -197,7 +197,8 @@ def test_a_controller_of_another_wire_format_is_refused_in_one_line(pend, wire):
         with pytest.raises(FirmwareError) as err:
             peer.check_artifact(a.sha256)
         msg = str(err.value)
-        assert "\n" not in msg and "this gainlink wire format 3" in msg and "rebuild its firmware" in msg, msg
+        assert "\n" not in msg and "this gainlink wire format 4" in msg and "rebuild its firmware" in msg, msg
+        assert (f"speaks wire format {wire.split('=')[1]}," if wire else "from before it was versioned") in msg, msg
         assert peer.proc.poll() is not None, "the refused node is stopped"
     finally:
         peer.stop()

@@ -156,7 +156,9 @@ def assert_law_ran(a, res, *, order: list[int] | None = None, like: str = "model
     want = [first[k] for k in got]
     u = np.array([s.u for s in want], dtype=np.float32).reshape(got.size, a.m)
     np.testing.assert_array_equal(tr.u[got].astype(np.float32).view(np.uint32), u.view(np.uint32))
-    carried = flags.CAN_STATUS_MASK if res.info["transport"]["kind"] == "can" else ~0  # CAN: bits 0-11, CAPPED too
+    transport = res.info["transport"]
+    # CAN: the bits its header carries (classic 0-11, FD 0-15: CAPPED either way)
+    carried = flags.can_header(transport["fd"]).status_mask if transport["kind"] == "can" else ~0
     np.testing.assert_array_equal(tr.flags[got], [s.flags & carried for s in want])
     np.testing.assert_array_equal(tr.sat[got], [s.saturated for s in want])
     np.testing.assert_array_equal(tr.sigma[got], [s.sigma for s in want])

@@ -236,7 +236,7 @@ def test_firmware_run_mavlink_command_persists_beside_the_artifact(mavlink_exe, 
         try:
             banner = proc.stdout.readline()
             assert banner.startswith("gainlink-mavlink pendulum sha256:"), banner + proc.stderr.read()
-            assert banner.rstrip().endswith(f" gains={which} crc32={runs.crc32} format=float32 law=float32 wire=3"), (
+            assert banner.rstrip().endswith(f" gains={which} crc32={runs.crc32} format=float32 law=float32 wire=4"), (
                 banner
             )
             if round_ == 0:

@@ -234,17 +234,19 @@ def test_a_sil_run_reports_the_solvers_iterations_as_the_c_ran_them():
     assert "stopped at the cap" in "\n".join(law_of(a).report_lines(res.metrics))
 
 
-def test_over_classic_can_the_answers_say_capped_and_the_report_reads_it_from_the_wire():
-    """HIL over classic CAN (8-byte frames, udp_multicast) to the firmware's host CAN node on the MPC law, from 1 m off:
-    the commands carry CAPPED (wire format 3: byte 3's high nibble), the trace records it from the frames, and the
-    report's count read from the wire is the host C's on the same samples, step by step."""
+@pytest.mark.parametrize("fd", [False, True])
+def test_over_can_the_answers_say_capped_and_the_report_reads_it_from_the_wire(fd):
+    """HIL over classic CAN (8-byte frames) and CAN FD (udp_multicast) to the firmware's host CAN node on the MPC law,
+    from 1 m off: the commands carry CAPPED (wire format 4: classic, byte 3's high nibble; FD, byte 3, the flags'
+    bits 8-15), the trace records it from the frames, and the report's count read from the wire is the host C's on
+    the same samples, step by step."""
     from gainlink.hil import run as hil_run
     from support.hil import udp_transport
 
     a = artifact(horizon=5, box=2.5)
     steps = 30
     scenario = {"name": "mpc_can", "artifact": "unused.json", "duration": steps * a.Ts, "controller": "firmware",
-                "plant": {"kind": "linear"}, "initial_state": {"x": 1.0}, "transport": udp_transport(fd=False),
+                "plant": {"kind": "linear"}, "initial_state": {"x": 1.0}, "transport": udp_transport(fd=fd),
                 "twin": False, "model_twin": False}  # fmt: skip
     res = hil_run(scenario, artifact=a)
     assert res.complete and res.trace.got.all() and res.info["transport"]["kind"] == "can"

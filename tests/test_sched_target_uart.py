@@ -97,7 +97,7 @@ def test_the_images_slcan_node_runs_the_scheduled_law_bit_for_bit(level):
     image = hil_run(_sweep(path, slcan, controller="qemu"))
     ready = image.info["controller"]["ready"]
     assert ready.startswith(f"gainlink tank_scheduled {BOARD} sha256:{a.sha256} law=scheduled-float32 variant=unrolled")
-    assert ready.endswith("ready slcan encoding=float32 law=scheduled-float32 wire=3")
+    assert ready.endswith("ready slcan encoding=float32 law=scheduled-float32 wire=4")
     _assert_model(a, image)
     assert image.trace.sigma.min() < 0.05 and image.trace.sigma.max() > 0.8  # across the middle point
     host = hil_run(_sweep(path, udp_transport(fd=False), controller="firmware"))
@@ -222,7 +222,7 @@ def test_a_retuned_schedule_uploaded_to_the_images_mavlink_node_commits_runs_bit
     assert _expected(new) != _expected(old)
     flash = tmp_path / "flash"
     with _mav_image(old, flash) as image:
-        want = f"crc32={table_hash(old) & 0xFFFFFFFF} signing=off law=scheduled-float32 wire=3"
+        want = f"crc32={table_hash(old) & 0xFFFFFFFF} signing=off law=scheduled-float32 wire=4"
         assert image.ready_line.endswith(want), image.ready_line
         assert _table(image.url) == _expected(old)
         with monkeypatch.context() as m:  # a commit the image refuses: every staged value is undone, none kept

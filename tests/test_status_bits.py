@@ -3,8 +3,9 @@ udp_multicast), the host MAVLink app (gainlink_mavlink over UDP) and the Cortex-
 its UART in QEMU, each running each law that has bits: the float32 law (fault), the fixed-point law (fault, a sample
 clipped to its range, and, with integers edited so that V leaves 32 bits, the second-line saturation) and the
 scheduled law (fault, sigma held, clipped and rate-limited) and the MPC law (fault, and its solver stopped at the
-cap: bit 8, which CAN carries in byte 3's high nibble since wire format 3); over MAVLink also the watchdog (the CAN
-node steps only on a sample: it has none).
+cap: bit 8, which CAN carries in byte 3: its high nibble in a classic frame, the flags' bits 8-15 in an FD frame, wire
+format 4); the host CAN node on classic frames and on CAN FD ones; over MAVLink also the watchdog (the CAN node steps
+only on a sample: it has none).
 
 Samples chosen so that each bit must be set (a NaN, a sample and a reference beyond their declared ranges, an
 external sigma that is not finite, beyond the envelope and jumping faster than its rate limit, big errors for the
@@ -72,8 +73,8 @@ TANK = [
 ]
 
 #: The MPC pendulum (examples/pendulum_mpc.toml: y = x, theta; r = r_x; +-20 N): from its start the first step stops
-#: at once, then 1 m off the cap stops the solver (CAPPED, 0x100: the status word's bit 8, on CAN byte 3's high
-#: nibble), a NaN is refused.
+#: at once, then 1 m off the cap stops the solver (CAPPED, 0x100: the status word's bit 8, on CAN in byte 3), a NaN is
+#: refused.
 MPC = [
     ((1.0, 0.0), 0.0, ()),
     ((1.0, 0.0), 0.0, ()),  # capped
@@ -118,12 +119,14 @@ def _check(a: Artifact, law: str, transport, *, mavlink: bool) -> None:
     assert seen == bits | (WATCHDOG if mavlink else 0), f"{law}: the link showed {seen:#04x}"
 
 
+@pytest.mark.parametrize("fd", [False, True], ids=["classic", "fd"])
 @pytest.mark.parametrize("law", list(LAWS))
-def test_the_host_can_node_sends_each_bit_its_law_sets(laws, law):
+def test_the_host_can_node_sends_each_bit_its_law_sets(laws, law, fd):
+    """Classic frames and CAN FD frames (wire format 4: their headers differ), the same bits."""
     from gainlink.hil.links.can_firmware import firmware_can_executable
 
     a = laws[law]
-    with can_node(a, firmware_can_executable(a)) as transport:
+    with can_node(a, firmware_can_executable(a), fd=fd) as transport:
         _check(a, law, transport, mavlink=False)
 
 

@@ -2,11 +2,13 @@
  * @file fuzz_can_layout.c
  * @brief libFuzzer harness: the CAN layout decoder (gl_can_layout_decode), float32 and int16, classic and FD.
  *
- * Input: byte 0 selects the layout (bit 0 int16, bit 1 FD), byte 1 the vector length (1..16) and byte 2 the
+ * Input: byte 0 selects the layout (bit 0 int16, bit 1 FD), byte 1 the vector length (1..32) and byte 2 the
  * frame index; the rest is the frame payload (up to 64 bytes). Oracles besides ASan/UBSan: a frame is refused
  * exactly when it is shorter than its values need; decoding writes only this frame's slice of the vector; and
- * encoding the decoded values again reproduces the payload's value bytes bit for bit (float32: the same bits,
- * NaN payloads included; int16: the same raw values, with the scales of a DBC range of +-5).
+ * encoding the decoded values with the header's status and saturation bits (gl_can_layout_header) again reproduces
+ * the header bit for bit (wire format 4: every header bit is a field; only the saturation bits of values beyond the
+ * frame's are dropped) and the payload's value bytes (float32: the same bits, NaN payloads included; int16: the same
+ * raw values, with the scales of a DBC range of +-5).
  */
 #include <math.h>
 #include <stdint.h>
@@ -15,7 +17,7 @@
 
 #include "gl_can_layout.h"
 
-#define MAX_VALUES 16u
+#define MAX_VALUES 32u /* three FD frames of float32 values, two of int16 */
 
 static const float sentinel = 12345.678f;
 
@@ -48,7 +50,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     uint16_t seq = 0;
     const uint32_t first = index * layout.per_frame;
     const uint32_t k = count - first < layout.per_frame ? count - first : layout.per_frame;
-    const int too_short = frame.len < GL_CAN_HEADER + layout.value_bytes * k;
+    const int too_short = frame.len < layout.header + layout.value_bytes * k;
     const int rc = gl_can_layout_decode(&layout, index, &frame, &seq, values, scales, count);
     if ((rc != 0) != too_short) {
         abort();
@@ -62,10 +64,24 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (rc != 0) {
         return 0;
     }
+    uint16_t hseq = 0, status = 0;
+    uint32_t sat = 0;
+    if (gl_can_layout_header(&layout, &frame, &hseq, &status, &sat) != 0 || hseq != seq) {
+        abort();
+    }
     gl_can_frame_t again;
-    (void)gl_can_layout_encode(&layout, frame.id, index, seq, frame.data[2], 0u, values, scales, count, &again);
-    if (again.data[0] != frame.data[0] || again.data[1] != frame.data[1] ||
-        memcmp(&again.data[GL_CAN_HEADER], &frame.data[GL_CAN_HEADER], layout.value_bytes * k) != 0) {
+    const uint32_t kept = sat & (k >= 32u ? 0xFFFFFFFFu : (1u << k) - 1u); /* the frame's values' bits */
+    (void)gl_can_layout_encode(&layout, frame.id, index, seq, status, kept << first, values, scales, count, &again);
+    uint16_t wseq = 0, wstatus = 0;
+    uint32_t wsat = 0;
+    (void)gl_can_layout_header(&layout, &again, &wseq, &wstatus, &wsat);
+    if (wseq != seq || wstatus != status || wsat != kept) {
+        abort(); /* the header's fields do not survive a round trip */
+    }
+    if (kept == sat && memcmp(again.data, frame.data, layout.header) != 0) {
+        abort(); /* every header bit is a field: the same fields make the same bytes */
+    }
+    if (memcmp(&again.data[layout.header], &frame.data[layout.header], layout.value_bytes * k) != 0) {
         abort();
     }
     return 0;

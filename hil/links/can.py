@@ -31,8 +31,8 @@ from typing import Any
 import numpy as np
 from gainlink.errors import TransportError
 from gainlink.fileio import parse_toml
-from gainlink.laws.flags import CAN_STATUS_HI_SHIFT
-from gainlink.shipping.can_layout import FD_MAX_VALUES, CanLayout, FrameSpec, dequantise, layout_for, quantise
+from gainlink.laws.flags import can_header
+from gainlink.shipping.can_layout import CanLayout, FrameSpec, dequantise, layout_for, quantise
 
 from .base import TRANSPORTS, Command, Transport
 
@@ -208,6 +208,7 @@ class FrameCodec:
 
         self._Message = can.Message
         self.fd = fd
+        self.header = can_header(fd)
         self.specs = tuple(specs)
         self.by_id = {s.arbitration_id: s for s in specs}
         self.structs = {s.arbitration_id: s.struct for s in specs}
@@ -245,6 +246,9 @@ class FrameCodec:
             vals = self.quantise(np.asarray(values, dtype=float)).tolist()
         else:  # Python floats (a float32 field packs them as the C reads them)
             vals = values.tolist() if isinstance(values, np.ndarray) else [float(v) for v in values]
+        # wire format 4: the header as one integer (gainlink.shipping.flags.CanHeader), each frame's saturation bits
+        # (fewer than the header's sat_bits: a frame has one per value) added to what every frame of the step shares
+        head, sat_at = self.header.pack(seq, status, 0), self.header.sat_start
         for s in self.specs:
             k = len(s.signals)
             bits = 0
@@ -252,8 +256,7 @@ class FrameCodec:
                 for i in range(k):
                     if sat[s.first + i]:
                         bits |= 1 << i
-            byte3 = bits | ((status >> 8) & 0x0F) << CAN_STATUS_HI_SHIFT  # wire format 3: status_hi | sat
-            data = self.structs[s.arbitration_id].pack(seq, status & 0xFF, byte3, *vals[s.first : s.first + k])
+            data = self.structs[s.arbitration_id].pack(head | bits << sat_at, *vals[s.first : s.first + k])
             frames.append(
                 self._Message(
                     arbitration_id=s.arbitration_id, is_extended_id=False, data=data, is_fd=self.fd, check=False
@@ -267,9 +270,8 @@ class FrameCodec:
         if len(data) < st.size:
             log.debug("short frame id %#x (%d bytes)", arbitration_id, len(data))
             return None
-        seq, status, byte3, *vals = st.unpack_from(data)
-        status |= (byte3 >> CAN_STATUS_HI_SHIFT) << 8  # wire format 3: the flags' bits 8-11 in the high nibble
-        bits = byte3 & ((1 << CAN_STATUS_HI_SHIFT) - 1)
+        head, *vals = st.unpack_from(data)
+        seq, status, bits = self.header.unpack(head)
         if self.int16:
             factors, offsets = self._scale[arbitration_id]
             return seq, status, bits, dequantise(np.array(vals), factors, offsets)
@@ -283,8 +285,18 @@ class Assembler:
         self.codec = codec
         self.partial: dict[int, list] = {}
         self.single = len(codec.specs) == 1
-        k = codec.size
-        self._bits = [np.array([(b >> i) & 1 for i in range(k)], dtype=bool) for b in range(1 << min(k, FD_MAX_VALUES))]
+        self._shifts = np.arange(codec.size)
+        self._sat_seen: dict[int, np.ndarray] = {}  # a frame's saturation bits as a mask, for the first patterns
+
+    def _sat_mask(self, bits: int) -> np.ndarray:
+        """The saturation bits of a whole vector as booleans (looked up: a run sees few patterns; at most 256 kept,
+        so that hostile traffic cannot grow the table)."""
+        mask = self._sat_seen.get(bits)
+        if mask is None:
+            mask = (bits >> self._shifts) & 1 == 1
+            if len(self._sat_seen) < 256:
+                self._sat_seen[bits] = mask
+        return mask.copy()
 
     def feed(self, msg: Any) -> tuple[int, np.ndarray, int, np.ndarray] | None:
         spec = self.codec.by_id.get(msg.arbitration_id)
@@ -295,7 +307,7 @@ class Assembler:
             return None
         seq, status, bits, vals = got
         if self.single:  # one frame carries the whole vector (CAN FD, or a single value)
-            return seq, vals, status, self._bits[bits].copy()
+            return seq, vals, status, self._sat_mask(bits)
         rec = self.partial.get(seq)
         if rec is None:
             if len(self.partial) > 32:

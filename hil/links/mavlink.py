@@ -6,7 +6,7 @@ Controller → plant: ``HIL_ACTUATOR_CONTROLS`` with the same ``time_usec`` (loc
 names its sample), ``controls[0..m-1] = u`` and ``flags``: bits 0-15 are MAVLink's own (bit 0 its LOCKSTEP flag;
 gainlink sets none of them), bits 16-31 the step's status flags (the one table, :mod:`gainlink.laws.flags`: the
 same bits as the CAN status byte; RESET on the answer to a reset), bits 32-47 the saturation mask (bit 32+k: input k
-clamped). That is wire format 3 (``wire=3`` on the node's ready line, AUTOPILOT_VERSION's
+clamped). That is wire format 4 (``wire=4`` on the node's ready line, AUTOPILOT_VERSION's
 ``middleware_sw_version``); a scheduled law's sample carries its external scheduling signals after ``r``.
 
 Scenario table::

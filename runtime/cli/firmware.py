@@ -377,7 +377,7 @@ certifies).
 
 Without --input the loop reads stdin and answers each line with one line on stdout, flushed at once::
 
-  (first)       gainlink-loop NAME sha256:HEX n m p q law=LAW variant=VARIANT wire=3
+  (first)       gainlink-loop NAME sha256:HEX n m p q law=LAW variant=VARIANT wire=4
   y0.. r0.. [s0..]  the samples, the references (and a scheduled law's external signals; numbers separated by
                 spaces, tabs or commas; nan, inf allowed) -> step and the step's record: the law's fields in
                 order (status, flags, saturation, commands, a fixed-point law's words, the state), integers in

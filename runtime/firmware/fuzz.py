@@ -32,6 +32,9 @@ HARNESSES = ("can_udp", "can_layout", "gains_stage", "mavlink_node") + (
 """Harness names; the executable of ``NAME`` is ``fuzz/fuzz_NAME`` in the fuzz build (``slcan`` where the firmware
 has the slcan adapter)."""
 
+CAN_LAYOUT_VALUES = 32
+"""The longest vector the CAN layout harness decodes (fuzz_can_layout.c's MAX_VALUES)."""
+
 MAX_LEN = 4096
 """Largest input libFuzzer generates (the largest seed, a whole gain set, is a few hundred bytes)."""
 
@@ -109,23 +112,30 @@ def build_harnesses(artifact: Artifact) -> dict[str, Path]:
 
 
 def _can_frames(artifact: Artifact) -> list[tuple[bool, str, int, bytes]]:
-    """(fd, encoding, index, payload) of measurement frames as the bridge sends them, both encodings."""
+    """(fd, encoding, index, payload) of measurement frames as the bridge sends them, both encodings, classic and
+    FD; one sample more has every header field set (every flag of the table, every value's saturation bit), so the
+    corpus covers each header's fields (wire format 4: the FD header's 16 status and 32 saturation bits)."""
     from gainlink.shipping.can_layout import layout_for
+    from gainlink.shipping.flags import FLAGS
 
     rng = np.random.default_rng(7)
     names = [*artifact.signals["outputs"], *artifact.signals["references"]]
     ranges = {name: [-5.0, 5.0] for name in names}
+    every_flag = sum(f.bit for f in FLAGS)
     out = []
     for fd in (False, True):
         for encoding in ("float32", "int16"):
             layout = layout_for(artifact, fd=fd, encoding=encoding, ranges=ranges)
             db = layout.database()
-            for seq in (0, 1, 65535):
+            for seq in (0, 1, 2, 65535):
                 values = rng.uniform(-4.0, 4.0, artifact.p + artifact.q)
                 if seq == 65535:
                     values[0] = np.nan  # the fault path: a NaN sample (raw -32768 in int16)
                 for index, spec in enumerate(layout.measurement):
-                    signals = {"seq": seq, "status": 0, "sat": 0, "status_hi": 0}
+                    flags = every_flag if seq == 2 else 0
+                    sat = (1 << len(spec.signals)) - 1 if seq == 2 else 0
+                    hi = (flags >> 8) & ((1 << spec.header.status_hi_bits) - 1)
+                    signals = {"seq": seq, "status": flags & 0xFF, "sat": sat, "status_hi": hi}
                     for i, name in enumerate(spec.signals):
                         v = float(values[spec.first + i])
                         # the DBC's int16 signals name raw -32768 "not_a_number"; float32 carries NaN itself
@@ -153,7 +163,7 @@ def _seeds_can_layout(artifact: Artifact) -> list[bytes]:
     seeds = []
     for fd, enc, index, data in _can_frames(artifact):
         config = (1 if enc == "int16" else 0) | (2 if fd else 0)
-        seeds.append(bytes([config, (count - 1) % 16, index]) + data)
+        seeds.append(bytes([config, (count - 1) % CAN_LAYOUT_VALUES, index]) + data)
     return seeds
 
 

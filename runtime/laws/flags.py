@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from ..shipping.flags import (
     BITS,
-    CAN_STATUS_HI_SHIFT,
-    CAN_STATUS_MASK,
+    CAN_CLASSIC,
+    CAN_FD,
     CAPPED,
     CLIPPED,
     FAULT,
@@ -21,15 +21,17 @@ from ..shipping.flags import (
     SIGMA_RATE,
     WATCHDOG,
     WIRE_VERSION,
+    CanHeader,
     Flag,
     c_header,
+    can_header,
     names,
 )
 
 __all__ = [
     "BITS",
-    "CAN_STATUS_HI_SHIFT",
-    "CAN_STATUS_MASK",
+    "CAN_CLASSIC",
+    "CAN_FD",
     "CAPPED",
     "CLIPPED",
     "FAULT",
@@ -43,7 +45,9 @@ __all__ = [
     "SIGMA_RATE",
     "WATCHDOG",
     "WIRE_VERSION",
+    "CanHeader",
     "Flag",
     "c_header",
+    "can_header",
     "names",
 ]

@@ -1,27 +1,38 @@
 """The CAN message layout of one artifact, as a DBC (cantools) and as a fast struct codec.
 
-Every frame starts with a 4-byte header (wire format 3): ``seq`` (uint16, little-endian sample counter), ``status``
-(uint8: in commands bits 0-7 of the step's status flags, the one table of :mod:`gainlink.shipping.flags`, which the DBC
-carries as the signal's value table; 0 in measurements), then one byte whose low nibble is ``sat`` (bit i set when the
-i-th value of this command frame was clamped) and whose high nibble is ``status_hi`` (the flags' bits 8-11: an MPC's
-CAPPED, 0x100, is its bit 0). Every flag fits in classic CAN's 8 bytes this way; the price is at most 4 values a
-frame (the nibble's bits), on CAN FD too. Values follow, little-endian, in one of two encodings:
+Every frame starts with a header (wire format 4; :class:`gainlink.shipping.flags.CanHeader` holds its fields, from
+which the C, the Python codec and the DBC are made), then its values. In commands the header carries the step's
+status flags (the one table of :mod:`gainlink.shipping.flags`, which the DBC carries as the value tables of
+``status`` and ``status_hi``) and ``sat`` (bit i set when the i-th value of this command frame was clamped); in
+measurements both are 0. Classic CAN and CAN FD differ only in the header:
+
+classic (8-byte frames), 4 bytes
+    bytes 0-1 ``seq`` (uint16 LE, the sample counter), byte 2 ``status`` (the flags' bits 0-7), byte 3: its low
+    nibble ``sat``, its high nibble ``status_hi`` (the flags' bits 8-11: an MPC's CAPPED, 0x100, is its bit 0). Every
+    flag fits beside one float32 value (the nibble would allow 4 values; the 4 bytes left hold 1 float32 or 2 int16).
+CAN FD (up to 64 bytes), 8 bytes
+    bytes 0-1 ``seq``, byte 2 ``status`` (bits 0-7), byte 3 ``status_hi`` (the flags' bits 8-15: bytes 2-3 are
+    the flags as one uint16 LE), bytes 4-7 ``sat`` (uint32 LE). A frame carries up to 14 float32 values (8 + 56 =
+    64 bytes) or 28 int16 values.
+
+Values follow the header, little-endian, in one of two encodings:
 
 ``float32`` (default)
-    IEEE float32, 1 per classic CAN frame (8 bytes), up to 4 per CAN FD frame.
+    IEEE float32, 1 per classic CAN frame (8 bytes), up to 14 per CAN FD frame.
 ``int16``
     Scaled integers as on a vehicle bus: ``physical = raw * factor + offset`` with, for a value whose
     range is ``[minimum, maximum]``, ``factor = (maximum - minimum) / 65534`` and ``offset = (maximum +
     minimum) / 2``, so raw -32767 .. 32767 spans exactly the range. Encoding rounds half to even
     (``rint``), in float64, on both sides; values beyond the range saturate to its ends (raw +-32767);
     raw -32768 is reserved for a non-finite value (NaN, +-inf) and decodes to NaN, so a non-finite
-    sample still reaches the controller's fault path. 2 values per classic frame, up to 4 per FD frame
-    (the ``sat`` nibble has 4 bits).
+    sample still reaches the controller's fault path. 2 values per classic frame, up to 28 per FD frame.
 
-FD frame lengths are rounded up to a valid FD length. Command frames (controller -> plant, ``u``) use
-ids ``base_id + j``; measurement frames (plant -> controller, ``y`` then ``r``, then a scheduled artifact's
-external scheduling signals ``s_NAME``) use ids ``base_id + 0x10 + i``, so commands win arbitration. The firmware's
-CAN app implements exactly this rule (its int16 factor/offset come from
+Format 3 had the classic header on CAN FD too, so at most 4 values an FD frame: a 16-output sample took 5 FD frames
+where format 4 takes 2 (float32) or 1 (int16). FD frame lengths are rounded up to a valid FD length. Command frames
+(controller -> plant, ``u``) use ids ``base_id + j``; measurement frames (plant -> controller, ``y`` then ``r``,
+then a scheduled artifact's external scheduling signals ``s_NAME``) use ids ``base_id + 0x10 + i``, so commands win
+arbitration. The firmware's CAN app implements exactly this rule (its header fields come from ``gl_flags.h``,
+generated from the same :class:`~gainlink.shipping.flags.CanHeader`; its int16 factor/offset from
 :func:`gainlink.hil.links.can.firmware_can_argv`, i.e. from the same :class:`FrameSpec` data that builds the DBC);
 :meth:`CanLayout.dbc` documents it for any CAN tool.
 """
@@ -38,15 +49,13 @@ from typing import Any
 import numpy as np
 from gainlink.errors import TransportError
 
-from .flags import CAN_STATUS_HI_SHIFT, FLAGS, Flag
+from .flags import CAN_CLASSIC, CAN_FD, FLAGS, CanHeader, Flag, can_header
 from .law_c import externals, law_name
 
-HEADER_BYTES = 4
 COMMAND_OFFSET = 0x00
 MEASUREMENT_OFFSET = 0x10
 MAX_COMMAND_FRAMES = MEASUREMENT_OFFSET - COMMAND_OFFSET  # ids base+0x00 .. base+0x0f
 MAX_MEASUREMENT_FRAMES = 0x20  # ids base+0x10 .. base+0x2f (the firmware tracks them in a 32-bit mask)
-FD_MAX_VALUES = 4  # the sat nibble's bits (wire format 3: the byte's high nibble is status_hi)
 FD_LENGTHS = (8, 12, 16, 20, 24, 32, 48, 64)
 ENCODINGS = ("float32", "int16")
 #: Which flags of the one table (:data:`gainlink.shipping.flags.FLAGS`, its ``set_by``) each structure's CAN node can
@@ -59,7 +68,11 @@ _SET_BY = {
     "mpc/float32": ("every law", "mpc"),
 }
 VALUE_BYTES = {"float32": 4, "int16": 2}
-CLASSIC_VALUES = {"float32": 1, "int16": 2}
+#: Values per frame by encoding (wire format 4: the header's ``sat`` bits and the frame's room).
+CLASSIC_VALUES = {enc: CAN_CLASSIC.values(n) for enc, n in VALUE_BYTES.items()}
+FD_VALUES = {enc: CAN_FD.values(n) for enc, n in VALUE_BYTES.items()}
+#: The struct code of a header read as one little-endian integer, by its size.
+_HEADER_CODES = {4: "I", 8: "Q"}
 INT16_MAX = 32767  #: largest raw value; -INT16_MAX is the smallest
 INT16_NAN = -32768  #: reserved raw value: the value was not finite
 INT16_SPAN = 2 * INT16_MAX  #: raw steps across a range
@@ -141,6 +154,8 @@ class FrameSpec:
         How the values are carried.
     scales : tuple of SignalScale
         With ``int16``: the range of each value (same order as ``signals``); empty with ``float32``.
+    header : CanHeader
+        Its header (classic or CAN FD).
     """
 
     name: str
@@ -150,6 +165,7 @@ class FrameSpec:
     length: int
     encoding: str = "float32"
     scales: tuple[SignalScale, ...] = ()
+    header: CanHeader = CAN_CLASSIC
 
     @property
     def value_bytes(self) -> int:
@@ -158,11 +174,12 @@ class FrameSpec:
 
     @property
     def struct(self) -> struct.Struct:
-        """The little-endian struct of header + values (float32 ``f`` or raw int16 ``h``), padded to ``length``."""
+        """The little-endian struct of the header (one integer: :meth:`CanHeader.pack`) and the values (float32 ``f``
+        or raw int16 ``h``), padded to ``length``."""
         k = len(self.signals)
-        pad = self.length - HEADER_BYTES - self.value_bytes * k
+        pad = self.length - self.header.size - self.value_bytes * k
         code = "f" if self.encoding == "float32" else "h"
-        return struct.Struct(f"<HBB{k}{code}{pad}x")
+        return struct.Struct(f"<{_HEADER_CODES[self.header.size]}{k}{code}{pad}x")
 
     @property
     def factors(self) -> tuple[float, ...]:
@@ -243,17 +260,18 @@ def _message(spec: FrameSpec, *, sender: str, receiver: str, fd: bool, status_fl
         frame_id=spec.arbitration_id,
         name=spec.name,
         length=spec.length,
-        signals=_header_signals([receiver], status_flags=status_flags) + _value_signals(spec, [receiver]),
+        signals=_header_signals([receiver], header=spec.header, status_flags=status_flags)
+        + _value_signals(spec, [receiver]),
         senders=[sender],
         is_fd=fd,
         comment=f"sent by the {sender}",
     )
 
 
-def _header_signals(rx: list[str], *, status_flags: tuple[Flag, ...] = ()) -> list:
-    """The header every frame starts with: ``seq``, ``status`` (its value table: the flags of bits 0-7 the law can
-    set, each one bit of the one flag table), ``sat`` (the low nibble) and ``status_hi`` (bits 8-11, the high nibble;
-    its value table: those flags the law can set)."""
+def _header_signals(rx: list[str], *, header: CanHeader, status_flags: tuple[Flag, ...] = ()) -> list:
+    """The header every frame starts with, where ``header`` puts its fields: ``seq``, ``status`` (the flags' bits 0-7;
+    its value table: those the law can set, each one bit of the one flag table), ``sat`` (the frame's saturation
+    bits) and ``status_hi`` (the flags' bits 8 and up; its value table: those the law can set)."""
     from cantools.database import Signal
     from cantools.database.conversion import BaseConversion
 
@@ -264,64 +282,49 @@ def _header_signals(rx: list[str], *, status_flags: tuple[Flag, ...] = ()) -> li
     meaning = "; ".join(f"bit{f.bit.bit_length() - 1} {f.name}: {f.meaning}" for f in low)
     meaning_hi = "; ".join(f"bit{f.bit.bit_length() - 9} (flag bit {f.bit.bit_length() - 1}) {f.name}: {f.meaning}"
                            for f in high) or "none this law sets"  # fmt: skip
+    last_hi = 7 + header.status_hi_bits
+
+    def field(name: str, start: int, length: int, comment: str, choices: dict | None = None) -> Any:
+        conversion = BaseConversion.factory(scale=1, offset=0, choices=choices or None, is_float=False)
+        return Signal(name, start=start, length=length, byte_order="little_endian", is_signed=False,
+                      conversion=conversion, receivers=rx, comment=comment)  # fmt: skip
 
     return [
-        Signal(
-            "seq",
-            start=0,
-            length=16,
-            byte_order="little_endian",
-            is_signed=False,
-            receivers=rx,
-            comment="sample counter (wraps at 65536)",
-        ),
-        Signal(
+        field("seq", 0, 16, "sample counter (wraps at 65536)"),
+        field(
             "status",
-            start=16,
-            length=8,
-            byte_order="little_endian",
-            is_signed=False,
-            conversion=BaseConversion.factory(scale=1, offset=0, choices=choices or None, is_float=False),
-            receivers=rx,
-            comment=f"status flags of the step (commands; 0 in samples, gainlink.shipping.flags): {meaning}",
+            16,
+            8,
+            f"status flags of the step (commands; 0 in samples, gainlink.shipping.flags): {meaning}",
+            choices,
         ),
-        Signal(
-            "sat",
-            start=24,
-            length=CAN_STATUS_HI_SHIFT,
-            byte_order="little_endian",
-            is_signed=False,
-            receivers=rx,
-            comment="bit i: i-th value of this frame saturated",
-        ),
-        Signal(
+        field("sat", header.sat_start, header.sat_bits, "bit i: i-th value of this frame saturated"),
+        field(
             "status_hi",
-            start=24 + CAN_STATUS_HI_SHIFT,
-            length=8 - CAN_STATUS_HI_SHIFT,
-            byte_order="little_endian",
-            is_signed=False,
-            conversion=BaseConversion.factory(scale=1, offset=0, choices=choices_hi or None, is_float=False),
-            receivers=rx,
-            comment=f"status flags' bits 8-11 (commands; 0 in samples, gainlink.shipping.flags): {meaning_hi}",
+            header.status_hi_start,
+            header.status_hi_bits,
+            f"status flags' bits 8-{last_hi} (commands; 0 in samples, gainlink.shipping.flags): {meaning_hi}",
+            choices_hi,
         ),
     ]
 
 
 def _value_signals(spec: FrameSpec, rx: list[str]) -> list:
     """The values a frame carries after its header, in its encoding."""
+    at = 8 * spec.header.size
     if spec.encoding == "float32":
-        return [_float32_signal(name, i, rx) for i, name in enumerate(spec.signals)]
-    return [_int16_signal(name, i, spec.scales[i], rx) for i, name in enumerate(spec.signals)]
+        return [_float32_signal(name, at + 32 * i, rx) for i, name in enumerate(spec.signals)]
+    return [_int16_signal(name, at + 16 * i, spec.scales[i], rx) for i, name in enumerate(spec.signals)]
 
 
-def _float32_signal(name: str, i: int, rx: list[str]) -> Any:
-    """The ``i``-th value of a frame as an IEEE float32."""
+def _float32_signal(name: str, start: int, rx: list[str]) -> Any:
+    """A value of a frame, at bit ``start``, as an IEEE float32."""
     from cantools.database import Signal
     from cantools.database.conversion import BaseConversion
 
     return Signal(
         name,
-        start=32 + 32 * i,
+        start=start,
         length=32,
         byte_order="little_endian",
         is_signed=True,
@@ -330,14 +333,14 @@ def _float32_signal(name: str, i: int, rx: list[str]) -> Any:
     )
 
 
-def _int16_signal(name: str, i: int, sc: SignalScale, rx: list[str]) -> Any:
-    """The ``i``-th value of a frame as a scaled int16 over the range ``sc`` (raw -32768: not a number)."""
+def _int16_signal(name: str, start: int, sc: SignalScale, rx: list[str]) -> Any:
+    """A value of a frame, at bit ``start``, as a scaled int16 over the range ``sc`` (raw -32768: not a number)."""
     from cantools.database import Signal
     from cantools.database.conversion import BaseConversion
 
     return Signal(
         name,
-        start=32 + 16 * i,
+        start=start,
         length=16,
         byte_order="little_endian",
         is_signed=True,
@@ -380,9 +383,10 @@ def _frames(
 ) -> tuple[FrameSpec, ...]:
     specs = []
     width = VALUE_BYTES[encoding]
+    header = can_header(fd)
     for j, first in enumerate(range(0, len(names), per_frame)):
         chunk = tuple(names[first : first + per_frame])
-        need = HEADER_BYTES + width * len(chunk)
+        need = header.size + width * len(chunk)
         length = next(n for n in FD_LENGTHS if n >= need) if fd else 8
         specs.append(
             FrameSpec(
@@ -393,6 +397,7 @@ def _frames(
                 length=length,
                 encoding=encoding,
                 scales=tuple(scales[first : first + per_frame]) if scales is not None else (),
+                header=header,
             )
         )
     if len(specs) > max_frames:
@@ -474,7 +479,8 @@ def layout_for(
     artifact : gainlink.shipping.artifact.Artifact
         The gain artifact.
     fd : bool
-        CAN FD (up to 4 values per frame) instead of classic CAN (1 float32 or 2 int16 values per frame).
+        CAN FD (up to 14 float32 or 28 int16 values per frame) instead of classic CAN (1 float32 or 2 int16 values per
+        frame).
     base_id : int
         First 11-bit identifier; the layout uses ``base_id .. base_id + 0x2f``.
     encoding : {"float32", "int16"}
@@ -492,7 +498,7 @@ def layout_for(
     """
     ranges = _checked_options(base_id=base_id, encoding=encoding, ranges=ranges)
     sig = artifact.signals
-    per_frame = FD_MAX_VALUES if fd else CLASSIC_VALUES[encoding]
+    per_frame = (FD_VALUES if fd else CLASSIC_VALUES)[encoding]
     ys, rs, us = _dbc_names(artifact)
     external, ss = _external_signals(artifact)
     groups = [

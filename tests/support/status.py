@@ -28,10 +28,11 @@ from .hil import udp_transport
 #: command frames' status byte (the DBC's ``status``: bit0 fault, bit1 watchdog, bit2 a sample clipped, bit3 the
 #: second-line saturation, then sigma held 0x10, clipped 0x20, rate-limited 0x40, reset 0x80).
 FAULT, WATCHDOG, CLIPPED, OVERFLOW, RESET = 0x01, 0x02, 0x04, 0x08, 0x80
-#: The MPC's cap stopped its solver (docs/design.md: bit 8; on CAN the high nibble of byte 3, wire format 3).
+#: The MPC's cap stopped its solver (docs/design.md: bit 8; on CAN byte 3: its high nibble in a classic frame, the
+#: flags' bits 8-15 in an FD frame, wire format 4).
 CAPPED = 0x100
 SIGMA_BITS = {SIGMA_HELD: 0x10, SIGMA_CLIPPED: 0x20, SIGMA_RATE: 0x40}  # the scheduled model's flag -> the link's bit
-#: Where MAVLink carries them (docs/design.md, "Links"; wire format 3): HIL_ACTUATOR_CONTROLS.flags bits 0-15 are
+#: Where MAVLink carries them (docs/design.md, "Links"; wire format 4): HIL_ACTUATOR_CONTROLS.flags bits 0-15 are
 #: MAVLink's own (bit 0 its LOCKSTEP flag) and stay clear, the status byte sits at bits 16-31, the saturation mask
 #: (bit k: input k) at bits 32-47.
 MAVLINK_STATUS_AT, MAVLINK_SAT_AT, MAVLINK_OWN = 16, 32, 0xFFFF
@@ -235,13 +236,13 @@ def _watchdog(a: Artifact, transport, model, seq: int, *, last: np.ndarray, agai
 
 
 @contextmanager
-def can_node(a: Artifact, executable) -> Iterator[Any]:
+def can_node(a: Artifact, executable, *, fd: bool = False) -> Iterator[Any]:
     """The host CAN node (gainlink_can) of ``a`` on a python-can udp_multicast bus of the test's own (classic
-    frames, float32 values); yields the open transport."""
+    frames, or CAN FD ones with ``fd``; float32 values); yields the open transport."""
     from gainlink.hil.links.can import CanTransport
     from gainlink.hil.loop.controller import ControllerProcess
 
-    transport = CanTransport(udp_transport(fd=False), artifact=a)
+    transport = CanTransport(udp_transport(fd=fd), artifact=a)
     peer = ControllerProcess([str(executable), *transport.controller_argv()])
     with ExitStack() as stack:
         transport.open()

@@ -13,13 +13,24 @@
 
 static const uint8_t fd_lengths[] = {8, 12, 16, 20, 24, 32, 48, 64};
 
+_Static_assert(GL_CAN_CLASSIC_HEADER <= 8u && GL_CAN_FD_HEADER <= 8u, "a header is one 64-bit word");
+_Static_assert(GL_CAN_FD_MAX_FRAME <= GL_CAN_MAX_DATA, "an FD frame fits gl_can_frame_t");
+
 void gl_can_layout_init(gl_can_layout_t *layout, uint32_t base_id, int fd, gl_can_encoding_t encoding)
 {
     layout->base_id = base_id;
     layout->fd = fd ? 1 : 0;
     layout->encoding = encoding == GL_CAN_INT16 ? GL_CAN_INT16 : GL_CAN_FLOAT32;
     layout->value_bytes = layout->encoding == GL_CAN_INT16 ? 2u : 4u;
-    layout->per_frame = fd ? GL_CAN_FD_VALUES : (8u - GL_CAN_HEADER) / layout->value_bytes;
+    layout->header = fd ? GL_CAN_FD_HEADER : GL_CAN_CLASSIC_HEADER;
+    layout->status_hi_start = fd ? GL_CAN_FD_STATUS_HI_START : GL_CAN_CLASSIC_STATUS_HI_START;
+    layout->status_hi_bits = fd ? GL_CAN_FD_STATUS_HI_BITS : GL_CAN_CLASSIC_STATUS_HI_BITS;
+    layout->sat_start = fd ? GL_CAN_FD_SAT_START : GL_CAN_CLASSIC_SAT_START;
+    layout->sat_bits = fd ? GL_CAN_FD_SAT_BITS : GL_CAN_CLASSIC_SAT_BITS;
+    layout->max_frame = fd ? GL_CAN_FD_MAX_FRAME : GL_CAN_CLASSIC_MAX_FRAME;
+    /* one `sat` bit per value, within the largest frame (gainlink.shipping.flags.CanHeader.values) */
+    const uint32_t room = (layout->max_frame - layout->header) / layout->value_bytes;
+    layout->per_frame = room < layout->sat_bits ? room : layout->sat_bits;
 }
 
 uint32_t gl_can_layout_frames(const gl_can_layout_t *layout, uint32_t count)
@@ -60,9 +71,48 @@ static uint32_t chunk(const gl_can_layout_t *layout, uint32_t index, uint32_t co
     return left < layout->per_frame ? left : layout->per_frame;
 }
 
+/** The `bits` low bits set (bits <= 32). */
+static uint32_t low_bits(uint32_t bits)
+{
+    return bits >= 32u ? 0xFFFFFFFFu : (1u << bits) - 1u;
+}
+
+/** The header's fields as one word, written little-endian (gainlink.shipping.flags.CanHeader.pack). */
+static void put_header(const gl_can_layout_t *layout, uint8_t *data, uint16_t seq, uint16_t status, uint32_t sat)
+{
+    const uint32_t hi = ((uint32_t)status >> 8) & low_bits(layout->status_hi_bits);
+    const uint64_t word = (uint64_t)seq | ((uint64_t)(status & 0xFFu) << 16) |
+                          ((uint64_t)hi << layout->status_hi_start) |
+                          ((uint64_t)(sat & low_bits(layout->sat_bits)) << layout->sat_start);
+    for (uint32_t b = 0; b < layout->header; ++b) {
+        data[b] = (uint8_t)(word >> (8u * b));
+    }
+}
+
+int gl_can_layout_header(const gl_can_layout_t *layout, const gl_can_frame_t *frame, uint16_t *seq, uint16_t *status,
+                         uint32_t *sat)
+{
+    if (frame->len < layout->header) {
+        return -1;
+    }
+    uint64_t word = 0;
+    for (uint32_t b = 0; b < layout->header; ++b) {
+        word |= (uint64_t)frame->data[b] << (8u * b);
+    }
+    *seq = (uint16_t)(word & 0xFFFFu);
+    if (status != NULL) {
+        const uint32_t hi = (uint32_t)(word >> layout->status_hi_start) & low_bits(layout->status_hi_bits);
+        *status = (uint16_t)(((word >> 16) & 0xFFu) | (hi << 8));
+    }
+    if (sat != NULL) {
+        *sat = (uint32_t)(word >> layout->sat_start) & low_bits(layout->sat_bits);
+    }
+    return 0;
+}
+
 static uint8_t frame_length(const gl_can_layout_t *layout, uint32_t values)
 {
-    uint32_t need = GL_CAN_HEADER + layout->value_bytes * values;
+    uint32_t need = layout->header + layout->value_bytes * values;
     if (!layout->fd) {
         return 8u;
     }
@@ -85,12 +135,11 @@ uint32_t gl_can_layout_encode(const gl_can_layout_t *layout, uint32_t id, uint32
     frame->id = id;
     frame->fd = (uint8_t)layout->fd;
     frame->len = frame_length(layout, k);
-    frame->data[0] = (uint8_t)(seq & 0xFFu);
-    frame->data[1] = (uint8_t)(seq >> 8);
-    frame->data[2] = (uint8_t)(status & 0xFFu);
-    frame->data[3] = (uint8_t)(((sat >> first) & ((1u << k) - 1u)) | (((status >> 8) & 0x0Fu) << GL_CAN_SAT_BITS));
+    /* this frame's values' saturation bits (a vector's mask has 32: none beyond) */
+    const uint32_t frame_sat = first < 32u ? (sat >> first) & low_bits(k) : 0u;
+    put_header(layout, frame->data, seq, status, frame_sat);
     for (uint32_t i = 0; i < k; ++i) {
-        uint8_t *p = &frame->data[GL_CAN_HEADER + layout->value_bytes * i];
+        uint8_t *p = &frame->data[layout->header + layout->value_bytes * i];
         if (layout->encoding == GL_CAN_INT16) {
             int c = 0;
             uint16_t bits = (uint16_t)gl_can_quantise(values[first + i], &scales[first + i], &c);
@@ -114,12 +163,12 @@ int gl_can_layout_decode(const gl_can_layout_t *layout, uint32_t index, const gl
 {
     uint32_t k = chunk(layout, index, count);
     uint32_t first = index * layout->per_frame;
-    if (frame->len < GL_CAN_HEADER + layout->value_bytes * k) {
+    if (frame->len < layout->header + layout->value_bytes * k) {
         return -1;
     }
-    *seq = (uint16_t)(frame->data[0] | ((uint16_t)frame->data[1] << 8));
+    (void)gl_can_layout_header(layout, frame, seq, NULL, NULL);
     for (uint32_t i = 0; i < k; ++i) {
-        const uint8_t *p = &frame->data[GL_CAN_HEADER + layout->value_bytes * i];
+        const uint8_t *p = &frame->data[layout->header + layout->value_bytes * i];
         if (layout->encoding == GL_CAN_INT16) {
             uint16_t bits = (uint16_t)(p[0] | ((uint16_t)p[1] << 8));
             int16_t raw;

@@ -6,8 +6,6 @@
 
 #include <string.h>
 
-_Static_assert(GL_CAN_STATUS_HI_SHIFT == GL_CAN_SAT_BITS, "gl_flags.h and gl_can_layout.h disagree on byte 3");
-
 static void inc(uint32_t *counter, uint32_t by)
 {
     *counter = (*counter > UINT32_MAX - by) ? UINT32_MAX : *counter + by;
@@ -44,8 +42,8 @@ static void answer(gl_can_node_t *node, uint16_t seq)
     const float *s = GL_LAW_E > 0 ? &node->sample[GL_P + GL_Q] : NULL;
     gl_law_out_t out;
     (void)gl_law_step(&node->loop, node->sample, r, s, &out);
-    /* the flags' bits 0-11: byte 2 and byte 3's high nibble (wire format 3, gl_can_layout.h) */
-    const uint16_t status = (uint16_t)(out.flags & GL_CAN_STATUS_MASK);
+    /* the flags' bits 0-15: the header carries those it has room for (wire format 4, gl_can_layout.h) */
+    const uint16_t status = (uint16_t)(out.flags & 0xFFFFu);
     uint32_t cmd_base = node->cfg.base_id + GL_CAN_CMD_OFFSET;
     for (uint32_t j = 0; j < node->cmd_frames; ++j) {
         gl_can_frame_t frame;

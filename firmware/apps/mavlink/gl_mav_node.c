@@ -349,7 +349,7 @@ static void reset_law(gl_mav_node_t *node, gl_law_out_t *out)
     (void)gl_law_reset(&node->law, out);
 }
 
-/** The HIL_ACTUATOR_CONTROLS flags of an answer (wire format 3): MAVLink's own bits 0-15 left alone (bit 0 is its
+/** The HIL_ACTUATOR_CONTROLS flags of an answer (wire format 4, as in 3): MAVLink's own bits 0-15 left alone (bit 0 is its
  *  LOCKSTEP flag), the law's status flags (the one table, gl_flags.h) at bits 16-31, the saturation mask at 32-47. */
 static uint64_t hil_flags(const gl_law_out_t *out)
 {

@@ -13,7 +13,7 @@
  *   capabilities MAVLINK2 | PARAM_ENCODE_BYTEWISE, flight_custom_version = first 8 hex digits of the
  *   artifact's sha256, middleware_custom_version = "gainlink" (how an uploader tells a gainlink node, whose uid
  *   it may read as a gain set, from other autopilots, whose uid is a hardware id) and middleware_sw_version = the
- *   sample/command wire format (GL_WIRE_VERSION: 2), uid = CRC-32 of the committed gain set.
+ *   sample/command wire format (GL_WIRE_VERSION: 4), uid = CRC-32 of the committed gain set.
  * - SYS_STATUS on MAV_CMD_REQUEST_MESSAGE(1): the link's error counters (see gl_mav_node_stats_t).
  * - The parameter protocol over the gain set (naming in gl_mav_params.h): PARAM_REQUEST_LIST (streamed as
  *   the transport has room), PARAM_REQUEST_READ by id or index (PARAM_ERROR when unknown), PARAM_SET

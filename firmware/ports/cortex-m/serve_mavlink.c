@@ -5,7 +5,7 @@
  *        scheduled law's external sigma travels after the references in the HIL sample). Its ready line names the
  *        set in force: ` format=float32|q31|q15|scheduled-float32`, ` gains=persisted` (the one its flash held) or
  *        ` gains=artifact` (the compiled one; option `gains=artifact` starts on it whatever the flash holds) and its
- *        ` crc32=`, then ` signing=on|off`, the law and the wire format (` law=q31 wire=3`).
+ *        ` crc32=`, then ` signing=on|off`, the law and the wire format (` law=q31 wire=4`).
  *
  * A serial link has one peer, so every answer goes to the UART whatever its destination. The node's
  * events are not printed (the UART carries MAVLink); SYS_STATUS reports the counters. The UART is a

@@ -3,7 +3,7 @@
  * @brief The CAN node (apps/can/gl_can_node.h) behind an slcan adapter (apps/can/gl_slcan.h) on the
  *        console UART: `can.Bus(interface="slcan", channel="socket://HOST:PORT")` exchanges the same DBC
  *        frames with it as with the host CAN app (classic frames: slcan has no CAN FD). It runs the build's law
- *        (gl_law.h), which its ready line names with the wire format (`law=q31 wire=3`; a scheduled law's external
+ *        (gl_law.h), which its ready line names with the wire format (`law=q31 wire=4`; a scheduled law's external
  *        sigma travels after the references).
  */
 #include <math.h>
