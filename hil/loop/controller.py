@@ -117,7 +117,7 @@ class ControllerProcess:
 
     def check_artifact(self, sha256: str) -> None:
         """Fail unless the ready line names the artifact ``sha256`` (a firmware built for other gains), speaks this
-        gainlink's wire format (``wire=3``) and, for a MAVLink node, says that it runs that artifact's set
+        gainlink's wire format (``wire=4``) and, for a MAVLink node, says that it runs that artifact's set
         (``gains=artifact``, not a persisted one)."""
         from gainlink.firmware.uart import refuse_other_wire, refuse_persisted
 
