@@ -2,7 +2,8 @@
 # Installs everything gainlink needs on a fresh Debian machine: the apt packages that are missing
 # (ARM toolchain, QEMU for Cortex-M PIL and for the vcan VM, busybox for its initramfs, rt-tests'
 # cyclictest for the real-time benchmark's machine floor, clang for the libFuzzer harnesses, Ninja and ccache
-# for quicker firmware builds) and a virtualenv in .venv with the project installed in editable mode with its test and docs extras.
+# for quicker firmware builds, SLEEF's libsleef-dev for the built-in plants' sin and cos) and a virtualenv in
+# .venv with the project installed in editable mode with its test and docs extras.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -10,7 +11,7 @@ APT_PACKAGES=(
   build-essential cmake
   gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi
   qemu-system-arm qemu-system-x86 busybox-static cpio
-  libmsgpack-dev rt-tests clang ninja-build ccache
+  libmsgpack-dev rt-tests clang ninja-build ccache libsleef-dev
 )
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do

@@ -7,8 +7,11 @@ that folder's file lock: concurrent first uses (pytest-xdist or Dask workers) bu
 The library is written under a temporary name and renamed into place, so no reader ever sees half of one and a
 failed build leaves nothing behind.
 
-Flags keep IEEE semantics (``-O2 -ffp-contract=off``, no ``-ffast-math``): the C rounds every operation as numpy
-does, and a row's bits do not depend on the batch size (``native/ode.c`` says how).
+Flags keep IEEE semantics (``-O2 -ffp-contract=off``, no ``-ffast-math``): the C rounds every product and sum as
+numpy does, and a row's bits do not depend on the batch size (``native/ode.c`` says how). sin and cos are SLEEF's
+deterministic ``Sleef_cinz_sincosd*_u10`` (Debian's ``libsleef-dev``, linked ``-lsleef``), through the widest vector
+extension this machine has (:func:`vector_flags`: AVX-512F, else AVX, else the compiler's default), which is part of
+the library's key. A missing SLEEF is one ``ToolchainError`` line naming the package.
 """
 
 from __future__ import annotations
@@ -29,6 +32,9 @@ from gainlink.firmware.build import cache_root
 SOURCE = Path(__file__).resolve().parent / "native" / "ode.c"
 FLAGS = ("-std=c11", "-O2", "-ffp-contract=off", "-fPIC", "-shared")
 LIBRARY = "libgainlink_plants.so"
+SLEEF_PACKAGE = "libsleef-dev"
+_MISSING_SLEEF = (f"SLEEF not found: the built-in plants' RK4 takes sin and cos from SLEEF's deterministic functions "
+                  f"(install the Debian package {SLEEF_PACKAGE}; make setup does)")  # fmt: skip
 
 
 def compiler(name: str) -> str:
@@ -46,11 +52,24 @@ def library() -> Path:
     return _library(os.environ.get("CC", "cc"))
 
 
+def vector_flags(cpuinfo: Path = Path("/proc/cpuinfo")) -> tuple[str, ...]:
+    """The compiler flag naming the widest x86 vector extension of this machine that SLEEF's deterministic sincos
+    has (``-mavx512f``, ``-mavx``; none elsewhere: SSE2 on x86-64, SLEEF's scalar build on other machines). The
+    library is built on the machine that runs it; every choice gives the same bits (``native/ode.c``)."""
+    try:
+        text = cpuinfo.read_text()
+    except OSError:
+        return ()
+    flags = next((line.split(":", 1)[1].split() for line in text.splitlines() if line.startswith("flags")), [])
+    return ("-mavx512f",) if "avx512f" in flags else ("-mavx",) if "avx" in flags else ()
+
+
 @functools.cache
 def _library(cc_name: str) -> Path:
     cc = compiler(cc_name)
     st = os.stat(cc)
-    key_text = "|".join([hashlib.sha256(SOURCE.read_bytes()).hexdigest(), *FLAGS, cc, str(st.st_size),
+    flags = (*FLAGS, *vector_flags())
+    key_text = "|".join([hashlib.sha256(SOURCE.read_bytes()).hexdigest(), *flags, cc, str(st.st_size),
                          str(st.st_mtime_ns)])  # fmt: skip
     folder = cache_root() / f"plants-host-{hashlib.sha256(key_text.encode()).hexdigest()[:16]}"
     lib = folder / LIBRARY
@@ -58,18 +77,21 @@ def _library(cc_name: str) -> Path:
         return lib
     with exclusive_lock(folder / ".lock"):
         if not lib.is_file():
-            _compile(cc, lib)
+            _compile(cc, flags, lib)
     return lib
 
 
-def _compile(cc: str, lib: Path) -> None:
+def _compile(cc: str, flags: tuple[str, ...], lib: Path) -> None:
     """Compile :data:`SOURCE` into ``lib`` (through a temporary name in its folder, removed when the build fails)."""
     staging = lib.with_name(f"{lib.name}.{os.getpid()}.tmp")
-    cmd = [cc, *FLAGS, "-o", str(staging), str(SOURCE), "-lm"]
+    cmd = [cc, *flags, "-o", str(staging), str(SOURCE), "-lsleef", "-lm"]
     try:
         proc = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True)
         if proc.returncode != 0:
-            lines = (proc.stdout + proc.stderr).strip().splitlines()
+            output = proc.stdout + proc.stderr
+            if "sleef.h" in output or "-lsleef" in output:
+                raise ToolchainError(_MISSING_SLEEF)
+            lines = output.strip().splitlines()
             first = next((ln for ln in lines if "error" in ln.lower()), lines[-1] if lines else "")
             raise ToolchainError(f"compiling the plants' RK4 ({SOURCE.name}) with {cc} failed "
                                  f"(exit {proc.returncode}): {first.strip()[:300]}")  # fmt: skip
@@ -82,7 +104,12 @@ def _compile(cc: str, lib: Path) -> None:
 def _loaded(path: Path) -> ctypes.PyDLL:
     # PyDLL: the call keeps the GIL (a batch of one takes a microsecond; gainlink.engines.native says why that matters
     # in a Dask worker)
-    return ctypes.PyDLL(str(path))
+    try:
+        return ctypes.PyDLL(str(path))
+    except OSError as exc:
+        if "sleef" in str(exc):  # built here, the shared SLEEF removed since
+            raise ToolchainError(_MISSING_SLEEF) from None
+        raise
 
 
 def step_function(model: str) -> ctypes._CFuncPtr:

@@ -39,10 +39,10 @@ def rk4(
     (sub-steps no longer than ``h``); ``P`` holds each parameter as a (B,) column.
 
     The numpy kernel of a continuous plant (a user's :class:`OdePlant`, and the readable definition the compiled
-    kernel of the built-in models follows operation for operation: :mod:`.kernel`): a run alone steps it with a
-    batch of one, a campaign block with its runs stacked. Every operation is elementwise in the batch (no product
-    sums across it), so a run's row is the same bit for bit at any batch size. A row that overflows comes out
-    non-finite (the caller refuses it).
+    kernel of the built-in models follows operation for operation, but for sin and cos, SLEEF's there, within an ulp
+    of numpy's: :mod:`.kernel`): a run alone steps it with a batch of one, a campaign block with its runs stacked.
+    Every operation is elementwise in the batch (no product sums across it), so a run's row is the same bit for bit
+    at any batch size. A row that overflows comes out non-finite (the caller refuses it).
     """
     n, hh = substeps(dt, h)
     half, sixth = 0.5 * hh, hh / 6.0

@@ -8,17 +8,25 @@
  * clamped. A row whose result is not finite is left as it was and failed[r] set to 1 (0 otherwise); the return is
  * the number of such rows.
  *
- * Bit for bit what the numpy kernel (models.rk4) computes: each product and sum of a row in the same order, no
- * fused multiply-add (built with -ffp-contract=off, without -ffast-math), sin, cos, tan and sqrt from libm called
- * per row (no vectorised math library: its SIMD body would round other bits than its scalar tail).
+ * Each product and sum of a row is taken in the numpy kernel's (models.rk4) order, with no fused multiply-add (built
+ * with -ffp-contract=off, without -ffast-math). sin and cos come from SLEEF's deterministic family (Sleef_cinz_*,
+ * 1-ulp "u10" variants: no FMA inside, the same bits in every vector extension and in SLEEF's scalar purec build),
+ * one call per vector of lanes, so within 1 ulp a call of numpy's and libm's, not bit for bit; tan and sqrt are
+ * libm's, per row (sqrt is exactly rounded; tan is scalar per lane, independent of the other lanes).
  *
  * Rows go through in groups of LANES (a partial last group, a batch of one, fills its other lanes with copies of its
- * last row and writes them nowhere): the arithmetic of a group runs in SIMD lanes and its libm calls are
- * independent of each other, where one row at a time waits on each stage's chain. Every operation is elementwise
- * and IEEE-rounded the same in any lane, so a row's bits do not depend on the batch size or its place in a group.
+ * last row and writes them nowhere): the arithmetic of a group runs in SIMD lanes and its sin/cos is one SLEEF call
+ * per vector (the widest cinz extension the compiler is told the build machine has: AVX-512F, else AVX, else SSE2,
+ * else the scalar purec per lane; kernel.py picks it). Every operation is elementwise and rounds the same in any
+ * lane, and a cinz lane's result depends on its argument alone, so a row's bits do not depend on the batch size or
+ * its place in a group.
  */
 #include <math.h>
 #include <stdint.h>
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
+#endif
+#include <sleef.h>
 
 #define LANES 8
 #define MAX_STATES 8
@@ -84,14 +92,34 @@ static inline __attribute__((always_inline)) int64_t rk4_rows(rates_fn f, clamp_
     return count;
 }
 
+/* sin and cos of the LANES values in x, through SLEEF's deterministic 1-ulp sincos. */
+static inline void sincos_lanes(const double *x, double *s, double *c) {
+#if defined(__AVX512F__)
+    Sleef___m512d_2 r = Sleef_cinz_sincosd8_u10avx512fnofma(_mm512_loadu_pd(x));
+    _mm512_storeu_pd(s, r.x), _mm512_storeu_pd(c, r.y);
+#elif defined(__AVX__)
+    for (int j = 0; j < LANES; j += 4) {
+        Sleef___m256d_2 r = Sleef_cinz_sincosd4_u10avx(_mm256_loadu_pd(x + j));
+        _mm256_storeu_pd(s + j, r.x), _mm256_storeu_pd(c + j, r.y);
+    }
+#elif defined(__SSE2__)
+    for (int j = 0; j < LANES; j += 2) {
+        Sleef___m128d_2 r = Sleef_cinz_sincosd2_u10sse2(_mm_loadu_pd(x + j));
+        _mm_storeu_pd(s + j, r.x), _mm_storeu_pd(c + j, r.y);
+    }
+#else
+    for (int j = 0; j < LANES; j++) {
+        Sleef_double_2 r = Sleef_cinz_sincosd1_u10purec(x[j]);
+        s[j] = r.x, c[j] = r.y;
+    }
+#endif
+}
+
 /* CartPendulum. x = (x, x_dot, theta, theta_dot), u = (F), p = (M, m, l, g, ml, mg, Mmg). */
 static inline void cart_pendulum(const lanes_t *x, const lanes_t *u, const lanes_t *p, lanes_t *dx, int g) {
+    (void)g; /* the lanes past g hold copies of the last row: stepped alike, written nowhere */
     lanes_t s, c;
-    for (int j = 0; j < g; j++) {
-        s[j] = sin(x[2][j]);
-        c[j] = cos(x[2][j]);
-    }
-    for (int j = g; j < LANES; j++) s[j] = s[g - 1], c[j] = c[g - 1];
+    sincos_lanes(x[2], s, c);
     for (int j = 0; j < LANES; j++) {
         const double M = p[0][j], m = p[1][j], l = p[2][j], ml = p[4][j], mg = p[5][j], Mmg = p[6][j];
         const double w = x[3][j], D = M + m * s[j] * s[j], f = u[0][j] + ml * w * w * s[j];
