@@ -393,8 +393,8 @@ def test_a_run_whose_plant_blows_up_ends_in_a_block_as_it_ends_alone():
 
 
 def test_a_bad_run_in_a_block_costs_no_other_its_result(caplog):
-    """One run of a task names a parameter its plant does not have: the block fails, each run runs alone, the bad
-    one records its one-line error and the others the records they get alone."""
+    """One run of a task names a parameter its plant does not have: it is left out of its block and runs alone,
+    recording its one-line error; the others still step as a block, with the records they get alone."""
     from gainlink.fileio import read_toml
     from gainlink.hil.campaign import parse_campaign, worker
     from gainlink.hil.campaign.plan import plan_campaign
@@ -413,7 +413,9 @@ def test_a_bad_run_in_a_block_costs_no_other_its_result(caplog):
     with caplog.at_level(logging.INFO, logger="gainlink.hil.campaign.worker"):
         records = worker.unpack_results(worker.execute_batch("sil", plan.artifacts, runs))
     assert [r["status"] for r in records] == ["done", "error", "done"]
-    assert ["block of 3 runs failed" in r.getMessage() for r in caplog.records] == [True]
+    assert [r["worker"].get("block") for r in records] == [2, None, 2]
+    assert ["run 1 of this task runs alone: its plant could not be built" in r.getMessage()
+            for r in caplog.records] == [True]  # fmt: skip
     assert "no parameter 'mass'" in records[1]["reason"] and "\n" not in records[1]["reason"]
     for i in (0, 2):
         want = worker.execute("sil", plan.artifacts[runs[i][0]], runs[i][1], runs[i][2])
@@ -516,3 +518,51 @@ def test_a_blocks_record_is_each_runs_rows_in_step_order(steps, taken):
     got = record.taken(taken)
     assert np.array_equal(got, rows[:taken].swapaxes(0, 1))
     assert all(got[i].flags.c_contiguous for i in range(7))
+
+
+def test_a_blocks_runs_are_parsed_and_planned_once_as_each_alone():
+    """A task's runs of one mode differ only in their draws and seeds: ``_blocks`` parses the first and gives the
+    others its scenario with their own numbers, each equal to its own full parse (the oracle: ``parse_scenario`` of
+    its table); ``prepare_block`` plans the first and gives the others its plan with their own noise, each equal to
+    its own ``plan_run``. A run whose table differs elsewhere (another noise level) is parsed and planned alone."""
+    from gainlink.fileio import read_toml
+    from gainlink.hil.campaign import parse_campaign, worker
+    from gainlink.hil.campaign.plan import plan_campaign
+    from gainlink.hil.loop.block import prepare_block
+    from gainlink.hil.loop.bridge import build_plant
+    from gainlink.hil.loop.plan import plan_run
+    from gainlink.laws import law_of
+    from support.paths import EXAMPLES
+
+    path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
+    data, _ = read_toml(path, what="campaign", error=ValueError)
+    data |= {"runs": 5, "spec": str((path.parent / data["spec"]).resolve())}
+    data["grid"][0]["values"] = ["clamp"]
+    data["scenario"]["duration"] = 0.5
+    plan = plan_campaign(parse_campaign(data))
+    runs = [(p.artifact_sha256, dict(p.scenario), p.seed) for p in plan.runs]
+    runs[3][1]["noise"] = {"x": 0.002, "theta": 0.0005}
+    (members,) = worker._blocks(plan.artifacts, runs, {}).values()
+    assert [i for i, _, _ in members] == [0, 1, 2, 3, 4]
+    for (_, art, got), (_, scenario, seed) in zip(members, runs):
+        want = worker._scenario(scenario, artifact_path=_artifact_file(art), seed=seed, blobs={}, kind="sil")
+        assert got == want
+    assert len({sc.plant["parameters"]["M"] for _, _, sc in members}) == 5
+    art, scs = members[0][1], [sc for _, _, sc in members]
+    law = law_of(art)
+    runs_ = prepare_block(scs, law=law, artifact=art, plants=[build_plant(sc, artifact=art) for sc in scs])
+    for sc, run in zip(scs, runs_):
+        plant = build_plant(sc, artifact=art)
+        plant.reset(initial=sc.initial_state)
+        want = plan_run(sc, law=law, artifact=art, plant=plant)
+        for name in ("t", "R", "noise", "D", "S"):
+            assert np.array_equal(getattr(run.plan, name), getattr(want, name)), name
+        assert (run.plan.N, run.plan.period_s) == (want.N, want.period_s)
+    assert runs_[1].plan.R is runs_[0].plan.R and runs_[3].plan.R is not runs_[0].plan.R
+    assert not np.array_equal(runs_[1].plan.noise, runs_[2].plan.noise)
+
+
+def _artifact_file(artifact):
+    from gainlink.hil.campaign import worker
+
+    return worker._ARTIFACTS[artifact.sha256][1]

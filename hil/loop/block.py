@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from gainlink.errors import GainlinkError
 from gainlink.laws import law_of
 from gainlink.shipping.artifact import Artifact
 
@@ -28,11 +29,12 @@ from ..plants.models import OdeBatch, batchable, non_finite
 from .bridge import Run, RunResult, build_plant, in_process, prepare_run
 from .closed_loop import Outcome
 from .metrics import timing
-from .plan import describe_artifact
+from .plan import describe_artifact, plans_alike
 from .scenario import Scenario
 from .twins import with_model_twin
 
 SIL = {"kind": "sil (in-process, no link)"}  # the run's transport block, as a run alone reports it
+SOURCE = "(given as an object)"  # where the artifact came from, as a run alone given the object reports it
 
 
 def refusal(scenario: Scenario) -> str | None:
@@ -78,8 +80,22 @@ class _Steps:
 
 
 def _stack(runs: list[Run], name: str) -> np.ndarray:
-    """The plans' ``name`` (N, width) of each run, stacked (N, B, width)."""
+    """The plans' ``name`` (N, width) of each run, stacked (N, B, width): a read-only view of one array when the
+    runs share it (:func:`~.plan.plan_like`)."""
+    first = getattr(runs[0].plan, name)
+    if all(getattr(r.plan, name) is first for r in runs):
+        return np.broadcast_to(first[:, None, :], (first.shape[0], len(runs), first.shape[1]))
     return np.stack([getattr(r.plan, name) for r in runs], axis=1)
+
+
+def _disturbed(runs: list[Run], always: bool) -> np.ndarray:
+    """Per run (B, 1): whether its command goes to the plant with its plan's disturbance added (``always``, or the
+    plan has one; asked once per array: a block's runs share one)."""
+    answers: dict[int, bool] = {}
+    for r in runs:
+        if id(r.plan.D) not in answers:
+            answers[id(r.plan.D)] = always or bool(r.plan.D.any())
+    return np.array([answers[id(r.plan.D)] for r in runs])[:, None]
 
 
 CHUNK = 64  # steps a record gathers before they move run-major (1,000 runs of a 4-wide state: 2 MB, in cache)
@@ -123,7 +139,7 @@ def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts:
     step are stacked before the first (each run's noise drawn by its own plan, as alone) and what a step gives is
     written into the rows of :class:`_RunMajor` records."""
     B, noise, R, S, D = len(runs), _stack(runs, "noise"), _stack(runs, "R"), _stack(runs, "S"), _stack(runs, "D")
-    disturbed = np.array([always_disturbed or bool(r.plan.D.any()) for r in runs])[:, None]
+    disturbed = _disturbed(runs, always_disturbed)
     Y, U = _RunMajor(steps, B, (noise.shape[2],)), _RunMajor(steps, B, (D.shape[2],))
     sigma = _RunMajor(steps, B)
     sat, flags = (None, None) if law_state else (_RunMajor(steps, B, (), np.int64), _RunMajor(steps, B, (), np.int64))
@@ -160,46 +176,81 @@ def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts:
                   steps=done, failed_at=failed_at, tick=tick, lat=lat)  # fmt: skip
 
 
-def run_block(scenarios: list[Scenario], *, artifact: Artifact, library: Path | None = None) -> list[RunResult] | None:
+def run_block(
+    scenarios: list[Scenario], *, artifact: Artifact, library: Path | None = None
+) -> list[RunResult | None] | None:
     """Run ``scenarios`` (SIL runs of ``artifact`` that :func:`refusal` accepts, the same duration and controller)
     as one block; None when their plants cannot step as one batch (the caller runs them alone).
 
-    Returns each run's :class:`~.bridge.RunResult`, in order, as :func:`~.bridge.run_scenario` returns it.
+    Returns each run's :class:`~.bridge.RunResult`, in order, as :func:`~.bridge.run_scenario` returns it; None in
+    the place of a run whose plant cannot be built (its drawn numbers are wrong: the caller runs it alone, and it
+    records its own error).
     """
     a, law, Ts = artifact, law_of(artifact), artifact.Ts
-    plants = [build_plant(sc, artifact=a) for sc in scenarios]
+    plants = _plants(scenarios, artifact=a)
+    kept = [i for i, pl in enumerate(plants) if pl is not None]
     try:
-        if not (batchable(plants) or linear_batchable(plants)):
+        live = [plants[i] for i in kept]
+        if not live or not (batchable(live) or linear_batchable(live)):
             return None
-        runs = [prepare_run(sc, law=law, artifact=a, plant=pl, source="(given as an object)", record=False)
-                for sc, pl in zip(scenarios, plants)]  # fmt: skip
-        if len({r.plan.N for r in runs}) != 1:
-            return None
-        batch = batch_of(plants)
+        runs = prepare_block([scenarios[i] for i in kept], law=law, artifact=a, plants=live)
+        batch = batch_of(live)
         firmware = scenarios[0].controller == "firmware"
-        block = len(runs)
-        controller = law.native_block(a, block, library=library) if firmware else law.reference_block(a, block)
+        controller = law.native_block(a, len(runs), library=library) if firmware else law.reference_block(a, len(runs))
         t0 = time.perf_counter()
         rec = _lockstep(runs, batch, controller, Ts=Ts, steps=runs[0].plan.N,
-                        always_disturbed=False, plant_state=any(sc.twin for sc in scenarios),
+                        always_disturbed=False, plant_state=any(r.scenario.twin for r in runs),
                         law_state=False)  # fmt: skip
         wall = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        twins = _twins(runs, law=law, artifact=a, steps=rec.steps)
+        twins_s = (time.perf_counter() - t0) / len(runs)
     finally:
         for pl in plants:
-            pl.close()
-    t0 = time.perf_counter()
-    twins = _twins(runs, law=law, artifact=a, steps=rec.steps)
-    twins_s = (time.perf_counter() - t0) / len(runs)
-    return _results(runs, rec, twins, describe=dict(controller.describe) | {"block": len(runs)},
-                    ran=law.label if firmware else None, wall_s=wall / len(runs), twins_s=twins_s,
-                    failure=non_finite(batch.name))  # fmt: skip
+            if pl is not None:
+                pl.close()
+    results = _results(runs, rec, twins, describe=dict(controller.describe) | {"block": len(runs)},
+                       ran=law.label if firmware else None, wall_s=wall / len(runs), twins_s=twins_s,
+                       failure=non_finite(batch.name))  # fmt: skip
+    out: list[RunResult | None] = [None] * len(scenarios)
+    for i, result in zip(kept, results):
+        out[i] = result
+    return out
+
+
+def _plants(scenarios: list[Scenario], *, artifact: Artifact) -> list:
+    """Each run's plant, or None for a run whose plant cannot be built (a drawn number its plant refuses)."""
+    plants = []
+    for sc in scenarios:
+        try:
+            plants.append(build_plant(sc, artifact=artifact))
+        except GainlinkError:
+            plants.append(None)
+    return plants
+
+
+def prepare_block(scenarios: list[Scenario], *, law, artifact: Artifact, plants: list) -> list[Run]:
+    """Each run prepared as :func:`~.bridge.prepare_run` prepares it alone (its recorder made without arrays: they
+    are the block's), planned once for the block: a run planned as the first but for its seed (its scenario differs
+    only in its seed and its plant's drawn numbers, the same signals) takes the first's plan with its own noise
+    (:func:`~.plan.plan_like`)."""
+    first = prepare_run(scenarios[0], law=law, artifact=artifact, plant=plants[0], source=SOURCE, record=False)
+    runs, p0 = [first], plants[0]
+    for sc, pl in zip(scenarios[1:], plants[1:]):
+        alike = plans_alike(sc, first.scenario) and (pl.input_names, pl.output_names) == (
+            p0.input_names,
+            p0.output_names,
+        )
+        runs.append(prepare_run(sc, law=law, artifact=artifact, plant=pl, source=SOURCE, record=False,
+                                like=first.plan if alike else None))  # fmt: skip
+    return runs
 
 
 def _results(runs: list[Run], rec: _Steps, twins: list, *, describe: dict, ran: str | None, wall_s: float,
              twins_s: float, failure: str) -> list[RunResult]:  # fmt: skip
     """Each run's result from the block's record. What the runs share is computed once: the artifact's description
     and the timing of the block's calls (per number of steps taken: a run whose plant failed has fewer)."""
-    artifact_info = describe_artifact(runs[0].law, runs[0].a, "(given as an object)")
+    artifact_info = describe_artifact(runs[0].law, runs[0].a, SOURCE)
     timed: dict[int, dict] = {}
     N, states = rec.lat.size, len(runs[0].plant.state_names)
     shared = {"GOT": np.ones(N, dtype=bool), "LAT": rec.lat, "TICK": rec.tick, "SENT": rec.tick,
@@ -234,24 +285,20 @@ def _record(run: Run, rec: _Steps, i: int, *, shared: dict, describe: dict, ran:
 
 def _twins(runs: list[Run], *, law, artifact: Artifact, steps: np.ndarray) -> list:
     """Each run's twins: the closed-loop twins of the runs that ask for one stepped as a block (the float64
-    reference of each around a second block of plants), the model twin by the function a run alone uses."""
+    reference of each around a second batch of the runs' plants, reset), the model twin by the function a run alone
+    uses."""
     want = [i for i, r in enumerate(runs) if r.scenario.twin]
     traces: dict[int, object] = {}
     failed: dict[int, str] = {}
     if want:
         sub = [runs[i] for i in want]
-        plants = [build_plant(r.scenario, artifact=artifact) for r in sub]
-        try:
-            for r, pl in zip(sub, plants):
-                pl.reset(initial=r.scenario.initial_state)
-            batch = batch_of(plants)
-            longest = int(max(steps[want]))
-            tw = _lockstep(sub, batch, law.reference_block(artifact, len(sub)), Ts=artifact.Ts,
-                           steps=longest, always_disturbed=True, plant_state=False,
-                           law_state=True)  # fmt: skip
-        finally:
-            for pl in plants:
-                pl.close()
+        for r in sub:  # the run's own plant, reset again: its batch stepped copies of its state, not the plant
+            r.plant.reset(initial=r.scenario.initial_state)
+        batch = batch_of([r.plant for r in sub])
+        longest = int(max(steps[want]))
+        tw = _lockstep(sub, batch, law.reference_block(artifact, len(sub)), Ts=artifact.Ts,
+                       steps=longest, always_disturbed=True, plant_state=False,
+                       law_state=True)  # fmt: skip
         traces, failed = _twin_traces(want, tw, steps=steps, name=batch.name)
     return [with_model_twin(law, artifact, scenario=r.scenario, plan=r.plan, start=r.start, steps=int(steps[i]),
                             twin=traces.get(i), twin_failed=failed.get(i))

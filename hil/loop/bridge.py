@@ -44,7 +44,7 @@ from .controller import ControllerProcess, controller_argv, qemu_peer
 from .endpoints import InProcess, OverLink, refuse_link_faults
 from .faults import FaultInjector
 from .metrics import RunTrace, compute_metrics, link_capacity
-from .plan import Plan, Recorder, describe_artifact, describe_plant, plan_run
+from .plan import Plan, Recorder, describe_artifact, describe_plant, plan_like, plan_run
 from .scenario import Scenario
 from .scenario_plant import build_plant
 from .scheduler import Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
@@ -151,12 +151,17 @@ def _check(scenario: Scenario) -> None:
         raise ScenarioError(f'scenario {scenario.name}: a nan fault needs encoding = "float32" (not "{encoding}")')
 
 
-def prepare_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant, source: str, record: bool = True) -> Run:
+def prepare_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant, source: str, record: bool = True,
+                like: Plan | None = None) -> Run:  # fmt: skip
     """A run of ``scenario`` ready to step: ``plant`` reset to its initial state, the plan made (before anything is
     built or started) and where the model twin starts (a campaign block prepares each of its runs so, ``record``
-    False: its recorder's arrays are the block's)."""
+    False: its recorder's arrays are the block's; ``like``: the plan of a run that differs from this one only in its
+    seed and its plant's drawn numbers, :func:`~.plan.plan_like`)."""
     plant.reset(initial=scenario.initial_state)
-    plan = plan_run(scenario, law=law, artifact=artifact, plant=plant)
+    if like is not None:
+        plan = plan_like(like, scenario, law=law, artifact=artifact, plant=plant)
+    else:
+        plan = plan_run(scenario, law=law, artifact=artifact, plant=plant)
     start = twin_start(plant, sigma=plan.sigma0) if scenario.model_twin else TwinStart({}, False, plan.sigma0)
     return Run(scenario, law=law, artifact=artifact, plant=plant, plan=plan, source=source, start=start,
                record=record)  # fmt: skip
