@@ -566,3 +566,70 @@ def _artifact_file(artifact):
     from gainlink.hil.campaign import worker
 
     return worker._ARTIFACTS[artifact.sha256][1]
+
+
+def _traces(a, rng: np.random.Generator, lengths: list[int]) -> list:
+    """Runs of ``a`` with the cases a block's metrics must get right: references that step at different samples
+    (and never), an error of zero at the start (regulation), saturation, refused steps, NaN samples, runs with and
+    without a twin (one with non-finite integrators), runs of other lengths (0, 1, 2 steps)."""
+    from gainlink.hil.loop.metrics import RunTrace
+
+    traces = []
+    for i, n in enumerate(lengths):
+        t = np.arange(n) * a.Ts
+        y = rng.normal(0.0, 0.3, (n, a.p)) + np.linspace(1.0, 0.0, n)[:, None] * rng.uniform(-2, 2, a.p)
+        r = np.zeros((n, a.q))
+        if a.q and i % 3:
+            r[rng.integers(0, max(n, 1)) :] = rng.normal(0.0, 1.0, a.q)  # one step, somewhere
+        if a.q and i % 5 == 0 and n:
+            y[:] = r @ a.Ci + 0.0  # nothing to track: regulation with zero error
+        if i % 7 == 3 and n:
+            y[rng.integers(0, n), 0] = np.nan
+        u = rng.normal(0.0, 1.0, (n, a.m))
+        sat = rng.random((n, a.m)) < 0.2
+        twin = i % 4 != 1
+        twin_z = rng.normal(0.0, 0.5, (n, a.q)) if twin else np.full((n, a.q), np.nan)
+        if i % 11 == 2 and n:
+            twin_z[0, :] = np.inf
+        traces.append(RunTrace(
+            t=t, y=y, r=r, s=np.zeros((n, 0)), u=u, sat=sat, got=rng.random(n) < 0.95,
+            latency_ns=np.full(n, 1e3), tick_ns=t * 1e9, deadline_ns=np.full(n, np.nan), x=np.full((n, 2), np.nan),
+            flags=np.where(rng.random(n) < 0.1, 1, 0), sigma=np.full(n, np.nan), nan_sent=np.zeros(n, dtype=bool),
+            twin_y=y + rng.normal(0.0, 1e-3, y.shape) if twin else np.full(y.shape, np.nan),
+            twin_u=u + rng.normal(0.0, 1e-3, u.shape) if twin else np.full(u.shape, np.nan),
+            twin_z=twin_z,
+        ))  # fmt: skip
+    return traces
+
+
+@pytest.mark.parametrize("design", ["pendulum", "regulator", "two_references"])
+def test_a_blocks_metrics_as_columns_are_each_runs_own_compute_metrics(design):
+    """block_metrics over 60 runs of mixed lengths and cases equals compute_metrics of each run (the per-run
+    function, the oracle), every figure exactly: no figure needed a tolerance."""
+    from gainlink.hil.loop.block_metrics import block_metrics
+    from gainlink.hil.loop.metrics import compute_metrics
+    from support.fixed import example, random_design
+
+    if design == "pendulum":
+        a = example("pendulum", "float32")
+    elif design == "regulator":
+        a = random_design(4, "float32", n=3, m=2, p=2, q=0)
+    else:
+        a = random_design(5, "float32", n=4, m=2, p=3, q=2)
+    rng = np.random.default_rng(21)
+    lengths = [50] * 40 + [37] * 15 + [0, 1, 1, 2, 2]
+    traces = _traces(a, rng, lengths)
+    timed = [{"latency_us": {"p50": 1.0}, "period_jitter_us": {"p50": None}}] * len(traces)
+    got = block_metrics(traces, artifact=a, mode="sil", late=0, period_s=[a.Ts] * len(traces),
+                        model_start=[""] * len(traces), timed=timed)  # fmt: skip
+    seen = set()
+    for tr, g, tm in zip(traces, got, timed):
+        want = compute_metrics(tr, artifact=a, mode="sil", late=0, period_s=a.Ts, timed=tm)
+        assert g == want
+        assert list(g) == list(want)  # the same order of keys
+        for v in want["tracked"].values():
+            seen |= {("overshoot", v["overshoot_pct"] is None), ("settled", v["settling_time_s"] is not None)}
+        seen |= {("twin", "twin" in want), ("integrator", "peak_integrator" in want)}
+    assert {("twin", True), ("twin", False), ("settled", True), ("overshoot", False)} <= seen
+    if a.q:
+        assert {("overshoot", True), ("settled", False), ("integrator", True)} <= seen

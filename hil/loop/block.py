@@ -26,6 +26,7 @@ from gainlink.shipping.artifact import Artifact
 
 from ..plants.linear import LinearBatch, linear_batchable
 from ..plants.models import OdeBatch, batchable, non_finite
+from .block_metrics import block_metrics
 from .bridge import Run, RunResult, build_plant, in_process, prepare_run
 from .closed_loop import Outcome
 from .metrics import timing
@@ -249,23 +250,30 @@ def prepare_block(scenarios: list[Scenario], *, law, artifact: Artifact, plants:
 def _results(runs: list[Run], rec: _Steps, twins: list, *, describe: dict, ran: str | None, wall_s: float,
              twins_s: float, failure: str) -> list[RunResult]:  # fmt: skip
     """Each run's result from the block's record. What the runs share is computed once: the artifact's description
-    and the timing of the block's calls (per number of steps taken: a run whose plant failed has fewer)."""
+    and the timing of the block's calls (per number of steps taken: a run whose plant failed has fewer); the
+    metrics as columns over the block's traces (:func:`~.block_metrics.block_metrics`)."""
     artifact_info = describe_artifact(runs[0].law, runs[0].a, SOURCE)
     timed: dict[int, dict] = {}
     N, states = rec.lat.size, len(runs[0].plant.state_names)
     shared = {"GOT": np.ones(N, dtype=bool), "LAT": rec.lat, "TICK": rec.tick, "SENT": rec.tick,
               "BACK": rec.tick + rec.lat, "DUE": np.full(N, np.nan), "NAN": np.zeros(N, dtype=bool),
               "X": np.full((N, states), np.nan)}  # fmt: skip
-    results = []
+    traces = []
     for i, run in enumerate(runs):
         steps = int(rec.steps[i])
         if steps not in timed:
             timed[steps] = timing(rec.lat[:steps], rec.tick[:steps], np.full(steps, np.nan), mode="sil")
         _record(run, rec, i, shared=shared, describe=describe, ran=ran)
+        traces.append(run.trace(steps, twins=twins[i]))
+    metrics = block_metrics(traces, artifact=runs[0].a, mode="sil", late=0,
+                            period_s=[r.plan.period_s for r in runs], model_start=[t.model_note for t in twins],
+                            timed=[timed[int(n)] for n in rec.steps])  # fmt: skip
+    results = []
+    for i, run in enumerate(runs):
         reason = None if rec.failed_at[i] < 0 else f"plant failed at step {rec.failed_at[i]}: {failure}"
-        outcome = Outcome(steps=steps, reason=reason, wall_s=wall_s, overruns=0)
-        results.append(run.result(outcome, twins=twins[i], twins_s=twins_s, timed=timed[steps],
-                                  artifact_info=artifact_info))  # fmt: skip
+        outcome = Outcome(steps=int(rec.steps[i]), reason=reason, wall_s=wall_s, overruns=0)
+        results.append(run.result(outcome, twins=twins[i], twins_s=twins_s, artifact_info=artifact_info,
+                                  trace=traces[i], metrics=metrics[i]))  # fmt: skip
     return results
 
 

@@ -227,19 +227,26 @@ class Run:
         self.ran = None if sc.controller == "reference" else _law_named(peer.ready_line)
         return outcome
 
-    def result(
-        self, outcome: Outcome, *, twins, twins_s: float, timed: dict | None = None, artifact_info: dict | None = None
-    ) -> RunResult:
-        """Metrics, trace and what ran, for the steps taken. A campaign block gives what its runs share, computed
-        once: ``timed`` (:func:`~.metrics.timing` of this run's steps) and ``artifact_info``
-        (:func:`~.plan.describe_artifact`)."""
+    def trace(self, steps: int, *, twins) -> RunTrace:
+        """The run's trace up to ``steps``, with its twins."""
+        return self.rec.trace(steps, law=self.law, artifact=self.a, twins=twins)
+
+    def result(self, outcome: Outcome, *, twins, twins_s: float, timed: dict | None = None,
+               artifact_info: dict | None = None, trace: RunTrace | None = None,
+               metrics: dict | None = None) -> RunResult:  # fmt: skip
+        """Metrics, trace and what ran, for the steps taken. A campaign block gives what it computed for its runs
+        together: ``timed`` (:func:`~.metrics.timing` of this run's steps), ``artifact_info``
+        (:func:`~.plan.describe_artifact`), the run's ``trace`` (:meth:`trace`) and its ``metrics``
+        (:func:`~.block_metrics.block_metrics`: :func:`~.metrics.compute_metrics`' figures, a new dict)."""
         sc, a, law, steps = self.scenario, self.a, self.law, outcome.steps
-        trace = self.rec.trace(steps, law=law, artifact=a, twins=twins)
+        if trace is None:
+            trace = self.trace(steps, twins=twins)
         link = isinstance(self.endpoint, OverLink)
         mode = sc.mode if link else "sil"
         late = self.endpoint.late if link else 0
-        metrics = compute_metrics(trace, artifact=a, mode=mode, late=late, period_s=self.plan.period_s,
-                                  model_start=twins.model_note, timed=timed)  # fmt: skip
+        if metrics is None:
+            metrics = compute_metrics(trace, artifact=a, mode=mode, late=late, period_s=self.plan.period_s,
+                                      model_start=twins.model_note, timed=timed)  # fmt: skip
         faults = dict(self.injector.counts) if link else {k: v for k, v in self.injector.counts.items() if k == "nan"}
         metrics.update({"complete": outcome.reason is None, "steps_planned": self.plan.N, "wall_s": outcome.wall_s,
                         "steps_per_s": steps / outcome.wall_s if outcome.wall_s > 0 else None, "sched_fifo": False,
