@@ -504,15 +504,17 @@ def test_show_refuses_a_run_without_a_record_and_a_plan_of_an_earlier_layout_in_
     assert_refused(["campaign", "show", out, "--run", "abc", "--report", tmp_path / "r"], phrase, out, tmp_path)
 
 
+@pytest.mark.parametrize("width, dtype", [((3,), float), ((), np.int64), ((2, 2), float)])
 @pytest.mark.parametrize("steps, taken", [(150, 150), (150, 129), (64, 64), (10, 3), (0, 0)])
-def test_a_blocks_record_is_each_runs_rows_in_step_order(steps, taken):
-    """Rows written a step at a time (moved run-major a chunk at a time) read back as each run's own rows, up to the
-    step the block stopped at, whatever the chunk boundaries."""
+def test_a_blocks_record_is_each_runs_rows_in_step_order(steps, taken, width, dtype):
+    """Rows written a step at a time (moved run-major a chunk at a time, each record as one item of its bytes) read
+    back as each run's own rows, up to the step the block stopped at, whatever the chunk boundaries and the
+    record's shape."""
     from gainlink.hil.loop.block import _RunMajor
 
     rng = np.random.default_rng(9)
-    rows = rng.normal(size=(steps, 7, 3))
-    record = _RunMajor(steps, 7, (3,))
+    rows = (rng.normal(size=(steps, 7, *width)) * 1e6).astype(dtype)
+    record = _RunMajor(steps, 7, width, dtype)
     for k in range(taken):
         record.at(k)[:] = rows[k]
     got = record.taken(taken)
