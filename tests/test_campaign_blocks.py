@@ -635,3 +635,36 @@ def test_a_blocks_metrics_as_columns_are_each_runs_own_compute_metrics(design):
     assert {("twin", True), ("twin", False), ("settled", True), ("overshoot", False)} <= seen
     if a.q:
         assert {("overshoot", True), ("settled", False), ("integrator", True)} <= seen
+
+
+def test_a_scheduled_laws_block_records_each_runs_sigma_as_alone():
+    """The scheduled tank (sigma: its measured level) in a block of four runs of other orifice coefficients and
+    seeds, the host C and the float64 law: each run's trace (its sigma included, recorded because this law has one)
+    equals the run's own, bit for bit."""
+    import copy
+
+    from gainlink.hil.campaign.worker import _library
+    from gainlink.hil.loop.block import run_block
+    from gainlink.hil.loop.bridge import run_scenario
+    from gainlink.hil.loop.scenario import parse_scenario
+    from gainlink.shipping.artifact import from_dict
+    from schedule_cases import tank_dict, tank_hil_scenario
+    from support.designs import designed
+
+    art = from_dict(designed(tank_dict()))
+    base = tank_hil_scenario("unused.json", name="tank", transport={}, duration=0.5, noise={"h": 1e-3})
+    library = _library(art)
+    for controller in ("firmware", "reference"):
+        scs = []
+        for i, c in enumerate((0.4, 0.36, 0.44, 0.41)):
+            data = copy.deepcopy(base) | {"seed": 10 + i, "controller": controller}
+            data["plant"]["parameters"] = {"c": c}
+            scs.append(parse_scenario(data))
+        block = run_block(scs, artifact=art, library=library)
+        assert block is not None and all(r is not None for r in block)
+        for sc, got in zip(scs, block):
+            want = run_scenario(sc, artifact=art, library=library)
+            assert np.isfinite(want.trace.sigma).all()
+            for name in TRACE_FIELDS:
+                assert np.array_equal(getattr(got.trace, name), getattr(want.trace, name), equal_nan=True), name
+            assert {k: got.metrics.get(k) for k in CONTROL_KEYS} == {k: want.metrics.get(k) for k in CONTROL_KEYS}

@@ -35,6 +35,7 @@ from .scenario import Scenario
 from .twins import with_model_twin
 
 SIL = {"kind": "sil (in-process, no link)"}  # the run's transport block, as a run alone reports it
+SHARED = ("GOT", "LAT", "TICK", "SENT", "BACK", "DUE", "NAN", "X")  # a run's record arrays its block's runs share
 SOURCE = "(given as an object)"  # where the artifact came from, as a run alone given the object reports it
 
 
@@ -71,7 +72,7 @@ class _Steps:
     U: np.ndarray
     sat: np.ndarray | None  # None for the twin's (its trace has none)
     flags: np.ndarray | None
-    sigma: np.ndarray
+    sigma: np.ndarray | None  # None: the law has no sigma (every run's is NaN)
     X: np.ndarray | None  # the plants' states (the run's, when its twin is on)
     L: np.ndarray | None  # the laws' states (the twin's)
     steps: np.ndarray  # per run: steps taken (a plant that fails ends its run after that step)
@@ -153,7 +154,7 @@ def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts:
     B, noise, R, S, D = len(runs), _stack(runs, "noise"), _stack(runs, "R"), _stack(runs, "S"), _stack(runs, "D")
     disturbed = _disturbed(runs, always_disturbed)
     Y, U = _RunMajor(steps, B, (noise.shape[2],)), _RunMajor(steps, B, (D.shape[2],))
-    sigma = _RunMajor(steps, B)
+    sigma: _RunMajor | None = None  # made at the first step when the law has a sigma
     sat, flags = (None, None) if law_state else (_RunMajor(steps, B, (), np.int64), _RunMajor(steps, B, (), np.int64))
     X = _RunMajor(steps, B, batch.X.shape[1:]) if plant_state else None
     L = _RunMajor(steps, B, controller.states().shape[1:]) if law_state else None
@@ -167,7 +168,11 @@ def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts:
         t0 = time.perf_counter_ns()
         st = controller.step(y, R[k], S[k])
         lat[k], tick[k] = time.perf_counter_ns() - t0, t0 - t_start
-        U.at(k)[:], sigma.at(k)[:] = st.u, st.sigma
+        U.at(k)[:] = st.u
+        if st.sigma is not None:
+            if sigma is None:
+                sigma = _RunMajor(steps, B)
+            sigma.at(k)[:] = st.sigma
         if sat is not None and flags is not None:
             sat.at(k)[:], flags.at(k)[:] = st.sat, st.flags
         if L is not None:
@@ -268,7 +273,7 @@ def _results(runs: list[Run], rec: _Steps, twins: list, *, describe: dict, ran: 
     N, states = rec.lat.size, len(runs[0].plant.state_names)
     shared = {"GOT": np.ones(N, dtype=bool), "LAT": rec.lat, "TICK": rec.tick, "SENT": rec.tick,
               "BACK": rec.tick + rec.lat, "DUE": np.full(N, np.nan), "NAN": np.zeros(N, dtype=bool),
-              "X": np.full((N, states), np.nan)}  # fmt: skip
+              "X": np.full((N, states), np.nan), "NAN_SIGMA": np.full(N, np.nan)}  # fmt: skip
     traces = []
     for i, run in enumerate(runs):
         steps = int(rec.steps[i])
@@ -293,9 +298,10 @@ def _record(run: Run, rec: _Steps, i: int, *, shared: dict, describe: dict, ran:
     trace reads the steps it took, as its own loop would have recorded them) and at what the runs share (the plant's
     states NaN without a twin, as a run alone records them); ``endpoint`` None: no link."""
     r = run.rec
-    r.Y, r.U, r.SATBITS, r.FLAGS, r.SIGMA = rec.Y[i], rec.U[i], rec.sat[i], rec.flags[i], rec.sigma[i]
-    for name, values in shared.items():
-        setattr(r, name, values)
+    r.Y, r.U, r.SATBITS, r.FLAGS = rec.Y[i], rec.U[i], rec.sat[i], rec.flags[i]
+    r.SIGMA = shared["NAN_SIGMA"] if rec.sigma is None else rec.sigma[i]
+    for name in SHARED:
+        setattr(r, name, shared[name])
     if rec.X is not None and run.scenario.twin:
         r.X = rec.X[i]
     run.endpoint, run.ran = None, ran
@@ -335,5 +341,6 @@ def _twin_traces(want: list[int], tw: _Steps, *, steps: np.ndarray, name: str) -
             failed[i] = non_finite(name)
             continue
         state = tw.L[j, :n] if (tw.L is not None and n) else np.zeros((0, 0))
-        traces[i] = TwinTrace(y=tw.Y[j, :n], u=tw.U[j, :n], state=state, sigma=tw.sigma[j, :n])
+        sigma = np.full(n, np.nan) if tw.sigma is None else tw.sigma[j, :n]
+        traces[i] = TwinTrace(y=tw.Y[j, :n], u=tw.U[j, :n], state=state, sigma=sigma)
     return traces, failed

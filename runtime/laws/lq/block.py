@@ -43,7 +43,7 @@ class ReferenceBlock:
         weights = (1 << np.arange(bits.shape[0], dtype=np.int64))[:, None]
         sat_mask = np.where(ok, (bits.astype(np.int64) * weights).sum(axis=0), 0)
         flags = np.where(ok, 0, status_flags.FAULT).astype(np.int64)
-        return BlockStep(u=U, flags=flags, sat=sat_mask, sigma=np.full(Y.shape[0], np.nan))
+        return BlockStep(u=U, flags=flags, sat=sat_mask, sigma=None)  # not scheduled
 
     def states(self) -> np.ndarray:
         """Each run's ``[xh, z]`` (the reference's ``state()``), as rows."""
