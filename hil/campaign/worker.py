@@ -277,9 +277,10 @@ def execute_batch(
 
     SIL runs of one artifact, controller and length step together as a block (:func:`gainlink.hil.loop.block.run_block`:
     each run's record is the one it gets alone); a run that cannot (a link, faults, a plant that is not vectorised)
-    runs alone, and the block says why once (a log line on the worker, ``worker.block`` in its records). A block
-    that fails with a :class:`~gainlink.errors.GainlinkError` is run again one run at a time, so one bad run costs no
-    other its result.
+    runs alone, and the block says why once (a log line on the worker, ``worker.block`` in its records). A run whose
+    plant cannot be built (a drawn number it refuses) is left out of its block and runs alone, recording its error; a
+    block that fails otherwise with a :class:`~gainlink.errors.GainlinkError` is run again one run at a time, so one
+    bad run costs no other its result.
 
     One bytes object is what Dask moves back: a list of records (nested dicts) is sized and serialised by
     Dask element by element, which cost 3x the worker's CPU per task and 1.6x the client's (measured with
