@@ -668,3 +668,23 @@ def test_a_scheduled_laws_block_records_each_runs_sigma_as_alone():
             for name in TRACE_FIELDS:
                 assert np.array_equal(getattr(got.trace, name), getattr(want.trace, name), equal_nan=True), name
             assert {k: got.metrics.get(k) for k in CONTROL_KEYS} == {k: want.metrics.get(k) for k in CONTROL_KEYS}
+
+
+def test_a_block_whose_runs_differ_in_disturbances_gives_each_what_it_gets_alone():
+    """One run of three pushes the cart (a 3 N input disturbance for 0.2 s), the others do not: that run is planned
+    alone and its command goes to its plant with the push, the others' without, each trace as alone bit for bit."""
+    from gainlink.hil.campaign.worker import _library
+    from gainlink.hil.loop.block import run_block
+    from gainlink.hil.loop.bridge import run_scenario
+    from gainlink.hil.loop.scenario import Disturbance
+
+    art, scenarios = _pendulum_campaign_points(draws=3, duration=0.5)[0]
+    scs = list(scenarios)
+    scs[1] = dataclasses.replace(scs[1], disturbances=(Disturbance(input="F", start=0.1, stop=0.3, value=3.0),))
+    library = _library(art)
+    block = run_block(scs, artifact=art, library=library)
+    alone = [run_scenario(sc, artifact=art, library=library) for sc in scs]
+    for got, want in zip(block, alone):
+        for name in TRACE_FIELDS:
+            assert np.array_equal(getattr(got.trace, name), getattr(want.trace, name), equal_nan=True), name
+        assert {k: got.metrics.get(k) for k in CONTROL_KEYS} == {k: want.metrics.get(k) for k in CONTROL_KEYS}

@@ -90,14 +90,25 @@ def _stack(runs: list[Run], name: str) -> np.ndarray:
     return np.stack([getattr(r.plan, name) for r in runs], axis=1)
 
 
-def _disturbed(runs: list[Run], always: bool) -> np.ndarray:
+def _disturbed(runs: list[Run], always: bool) -> np.ndarray | bool:
     """Per run (B, 1): whether its command goes to the plant with its plan's disturbance added (``always``, or the
-    plan has one; asked once per array: a block's runs share one)."""
+    plan has one; asked once per array: a block's runs share one); True or False when it is the same for every run."""
     answers: dict[int, bool] = {}
     for r in runs:
         if id(r.plan.D) not in answers:
             answers[id(r.plan.D)] = always or bool(r.plan.D.any())
+    if len(set(answers.values())) == 1:
+        return next(iter(answers.values()))
     return np.array([answers[id(r.plan.D)] for r in runs])[:, None]
+
+
+def _command(u: np.ndarray, d: np.ndarray, disturbed: np.ndarray | bool) -> np.ndarray:
+    """What the plants are given: each run's command, plus its disturbance where ``disturbed`` (:func:`_disturbed`)."""
+    if disturbed is True:
+        return u + d
+    if disturbed is False:
+        return u
+    return np.where(disturbed, u + d, u)
 
 
 CHUNK = 64  # steps a record gathers before they move run-major (1,000 runs of a 4-wide state: 2 MB, in cache)
@@ -177,7 +188,7 @@ def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts:
             sat.at(k)[:], flags.at(k)[:] = st.sat, st.flags
         if L is not None:
             L.at(k)[:] = controller.states()
-        failed = batch.advance(np.where(disturbed, st.u + D[k], st.u), dt=Ts) & alive
+        failed = batch.advance(_command(st.u, D[k], disturbed), dt=Ts) & alive
         if failed.any():
             done[failed], failed_at[failed] = k + 1, k
             alive &= ~failed
