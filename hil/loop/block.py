@@ -5,12 +5,14 @@ answers the whole block in one call (:meth:`gainlink.laws.Law.native_block`: one
 :meth:`gainlink.laws.Law.reference_block`: the float64 law, as columns for the lq law) and the plants advance together
 (:class:`~..plants.models.OdeBatch`, the RK4 kernel a plant alone steps with a batch of one;
 :class:`~..plants.linear.LinearBatch`, each run's own matrices). The closed-loop twin is stepped the same way afterwards
-(the float64 reference of each run around a second block of plants). Each run is prepared (plan, noise, references) and
-reported (metrics, the law's report) by the very functions a run alone uses (:mod:`.bridge`), so a run's trace and
-verdict are the same bit for bit whichever path ran it (timing columns aside: a block times its calls, not a run).
+(the float64 reference of each run around a second batch of the runs' plants). Each run is prepared (plan, noise,
+references) and reported (the law's report) by the functions a run alone uses (:mod:`.bridge`), what the runs share
+planned once (:func:`prepare_block`: the first run's plan, each run's own noise) and their metrics computed as columns
+(:func:`~.block_metrics.block_metrics`, each run's what :func:`~.metrics.compute_metrics` gives it), so a run's trace
+and verdict are the same bit for bit whichever path ran it (timing columns aside: a block times its calls, not a run).
 
 What cannot step so (:func:`refusal`: a link, faults, a plant that is not vectorised, a plant that follows external
-signals) is left to the caller, which runs it alone.
+signals) is left to the caller, which runs it alone; so is a run whose plant cannot be built (:func:`run_block`).
 """
 
 from __future__ import annotations
