@@ -96,12 +96,17 @@ def _group(traces: list[RunTrace], *, artifact: Any) -> dict:
     else:
         tracked_y = [Y[:, :, i] for i in range(a.p)]
         refs = [np.broadcast_to(a.y_op[i], Y.shape[:2]) for i in range(a.p)]
-    cols["tracked"] = [_tracking(t, yj, rj) for yj, rj in zip(tracked_y, refs)]
+    cols["tracked"] = [_lists(_tracking(t, yj, rj)) for yj, rj in zip(tracked_y, refs)]
     twin = np.array([tr.has_twin for tr in traces])
     cols["has_twin"] = twin
     if twin.any():
-        cols["twin"] = _twin_columns(traces, Y=Y, U=U, tracked_y=tracked_y, refs=refs, t=t, artifact=a)
-    return cols
+        cols["twin"] = _lists(_twin_columns(traces, Y=Y, U=U, tracked_y=tracked_y, refs=refs, t=t, artifact=a))
+    return _lists(cols)
+
+
+def _lists(cols: dict) -> dict:
+    """``cols`` with each array a list of Python numbers (or of rows): one conversion per column, not one per run."""
+    return {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in cols.items()}
 
 
 def _twin_columns(traces: list[RunTrace], *, Y, U, tracked_y, refs, t, artifact: Any) -> dict:
@@ -118,8 +123,8 @@ def _twin_columns(traces: list[RunTrace], *, Y, U, tracked_y, refs, t, artifact:
         "du": _steps("max", np.abs(U - TU), initial=0.0),
         "dy": _steps("max", np.abs(Y - TY), initial=0.0),
         "excursion": _steps("max", TY) - _steps("min", TY),
-        "iae_real": [np.sum(np.abs(r - y), axis=1) * dt for y, r in zip(tracked_y, refs)],
-        "iae_twin": [np.sum(np.abs(r - y), axis=1) * dt for y, r in zip(twin_tracked, refs)],
+        "iae_real": [(np.sum(np.abs(r - y), axis=1) * dt).tolist() for y, r in zip(tracked_y, refs)],
+        "iae_twin": [(np.sum(np.abs(r - y), axis=1) * dt).tolist() for y, r in zip(twin_tracked, refs)],
         "z_finite": np.isfinite(TZ).all(axis=(1, 2)),
     }
     if a.q:
@@ -167,9 +172,9 @@ def _fin(x: Any) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def _named(names: list[str], values: np.ndarray) -> dict:
+def _named(names: list[str], values: list) -> dict:
     """``{name: value}`` of one run's row, non-finite values None."""
-    return {name: _fin(v) for name, v in zip(names, values.tolist())}
+    return {name: _fin(v) for name, v in zip(names, values)}
 
 
 def _metrics_of(j: int, cols: dict, trace: RunTrace, *, artifact: Any, late: int, period_s: float,
@@ -188,7 +193,7 @@ def _metrics_of(j: int, cols: dict, trace: RunTrace, *, artifact: Any, late: int
         "period_s": _fin(period_s),
         "saturation_fraction": _named(sig["inputs"], cols["sat_frac"][j]),
         "saturated_steps": int(cols["saturated_steps"][j]),
-        "saturated_steps_per_input": dict(zip(sig["inputs"], cols["sat_per_input"][j].tolist())),
+        "saturated_steps_per_input": dict(zip(sig["inputs"], cols["sat_per_input"][j])),
         "outputs_final": _named(sig["outputs"], cols["y_final"][j]),
         "inputs_peak_abs": _named(sig["inputs"], cols["u_peak"][j]),
         "outputs_peak_abs": _named(sig["outputs"], cols["y_peak"][j]),
@@ -221,9 +226,9 @@ def _twin_of(j: int, tw: dict, *, steps: int, artifact: Any) -> dict:
     out: dict[str, Any] = {}
     if a.q and tw["z_finite"][j]:
         out["peak_integrator"] = _named(sig["references"], tw["z_peak"][j])
-        out["peak_integral_command"] = _named(sig["inputs"], tw["integral_cmd"][j])
+        out["peak_integral_command"] = _named(sig["inputs"], tw["integral_cmd"][j].tolist())
     span = (a.u_max - a.u_min).tolist()
-    du, dy, excursion = tw["du"][j].tolist(), tw["dy"][j].tolist(), tw["excursion"][j].tolist()
+    du, dy, excursion = tw["du"][j], tw["dy"][j], tw["excursion"][j]
     du_rel = [d / s if s > 0 else None for d, s in zip(du, span)]
     dy_rel = [d / e if e > 0 else None for d, e in zip(dy, excursion)]
     iae = {}
