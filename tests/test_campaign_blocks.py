@@ -396,8 +396,8 @@ def test_a_run_whose_plant_blows_up_ends_in_a_block_as_it_ends_alone():
 
 
 def test_a_bad_run_in_a_block_costs_no_other_its_result(caplog):
-    """One run of a task names a parameter its plant does not have: the block fails, each run runs alone, the bad
-    one records its one-line error and the others the records they get alone."""
+    """One run of a task names a parameter its plant does not have: it is left out of its block and runs alone,
+    recording its one-line error; the others still step as a block, with the records they get alone."""
     from gainlink.fileio import read_toml
     from gainlink.hil.campaign import parse_campaign, worker
     from gainlink.hil.campaign.plan import plan_campaign
@@ -416,7 +416,9 @@ def test_a_bad_run_in_a_block_costs_no_other_its_result(caplog):
     with caplog.at_level(logging.INFO, logger="gainlink.hil.campaign.worker"):
         records = worker.unpack_results(worker.execute_batch("sil", plan.artifacts, runs))
     assert [r["status"] for r in records] == ["done", "error", "done"]
-    assert ["block of 3 runs failed" in r.getMessage() for r in caplog.records] == [True]
+    assert [r["worker"].get("block") for r in records] == [2, None, 2]
+    assert ["run 1 of this task runs alone: its plant could not be built" in r.getMessage()
+            for r in caplog.records] == [True]  # fmt: skip
     assert "no parameter 'mass'" in records[1]["reason"] and "\n" not in records[1]["reason"]
     for i in (0, 2):
         want = worker.execute("sil", plan.artifacts[runs[i][0]], runs[i][1], runs[i][2])
@@ -505,17 +507,187 @@ def test_show_refuses_a_run_without_a_record_and_a_plan_of_an_earlier_layout_in_
     assert_refused(["campaign", "show", out, "--run", "abc", "--report", tmp_path / "r"], phrase, out, tmp_path)
 
 
+@pytest.mark.parametrize("width, dtype", [((3,), float), ((), np.int64), ((2, 2), float)])
 @pytest.mark.parametrize("steps, taken", [(150, 150), (150, 129), (64, 64), (10, 3), (0, 0)])
-def test_a_blocks_record_is_each_runs_rows_in_step_order(steps, taken):
-    """Rows written a step at a time (moved run-major a chunk at a time) read back as each run's own rows, up to the
-    step the block stopped at, whatever the chunk boundaries."""
+def test_a_blocks_record_is_each_runs_rows_in_step_order(steps, taken, width, dtype):
+    """Rows written a step at a time (moved run-major a chunk at a time, each record as one item of its bytes) read
+    back as each run's own rows, up to the step the block stopped at, whatever the chunk boundaries and the
+    record's shape."""
     from gainlink.hil.loop.block import _RunMajor
 
     rng = np.random.default_rng(9)
-    rows = rng.normal(size=(steps, 7, 3))
-    record = _RunMajor(steps, 7, (3,))
+    rows = (rng.normal(size=(steps, 7, *width)) * 1e6).astype(dtype)
+    record = _RunMajor(steps, 7, width, dtype)
     for k in range(taken):
         record.at(k)[:] = rows[k]
     got = record.taken(taken)
     assert np.array_equal(got, rows[:taken].swapaxes(0, 1))
     assert all(got[i].flags.c_contiguous for i in range(7))
+
+
+def test_a_blocks_runs_are_parsed_and_planned_once_as_each_alone():
+    """A task's runs of one mode differ only in their draws and seeds: ``_blocks`` parses the first and gives the
+    others its scenario with their own numbers, each equal to its own full parse (the oracle: ``parse_scenario`` of
+    its table); ``prepare_block`` plans the first and gives the others its plan with their own noise, each equal to
+    its own ``plan_run``. A run whose table differs elsewhere (another noise level) is parsed and planned alone."""
+    from gainlink.fileio import read_toml
+    from gainlink.hil.campaign import parse_campaign, worker
+    from gainlink.hil.campaign.plan import plan_campaign
+    from gainlink.hil.loop.block import prepare_block
+    from gainlink.hil.loop.bridge import build_plant
+    from gainlink.hil.loop.plan import plan_run
+    from gainlink.laws import law_of
+    from support.paths import EXAMPLES
+
+    path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
+    data, _ = read_toml(path, what="campaign", error=ValueError)
+    data |= {"runs": 5, "spec": str((path.parent / data["spec"]).resolve())}
+    data["grid"][0]["values"] = ["clamp"]
+    data["scenario"]["duration"] = 0.5
+    plan = plan_campaign(parse_campaign(data))
+    runs = [(p.artifact_sha256, dict(p.scenario), p.seed) for p in plan.runs]
+    runs[3][1]["noise"] = {"x": 0.002, "theta": 0.0005}
+    (members,) = worker._blocks(plan.artifacts, runs, {}).values()
+    assert [i for i, _, _ in members] == [0, 1, 2, 3, 4]
+    for (_, art, got), (_, scenario, seed) in zip(members, runs):
+        want = worker._scenario(scenario, artifact_path=_artifact_file(art), seed=seed, blobs={}, kind="sil")
+        assert got == want
+    assert len({sc.plant["parameters"]["M"] for _, _, sc in members}) == 5
+    art, scs = members[0][1], [sc for _, _, sc in members]
+    law = law_of(art)
+    runs_ = prepare_block(scs, law=law, artifact=art, plants=[build_plant(sc, artifact=art) for sc in scs])
+    for sc, run in zip(scs, runs_):
+        plant = build_plant(sc, artifact=art)
+        plant.reset(initial=sc.initial_state)
+        want = plan_run(sc, law=law, artifact=art, plant=plant)
+        for name in ("t", "R", "noise", "D", "S"):
+            assert np.array_equal(getattr(run.plan, name), getattr(want, name)), name
+        assert (run.plan.N, run.plan.period_s) == (want.N, want.period_s)
+    assert runs_[1].plan.R is runs_[0].plan.R and runs_[3].plan.R is not runs_[0].plan.R
+    assert not np.array_equal(runs_[1].plan.noise, runs_[2].plan.noise)
+
+
+def _artifact_file(artifact):
+    from gainlink.hil.campaign import worker
+
+    return worker._ARTIFACTS[artifact.sha256][1]
+
+
+def _traces(a, rng: np.random.Generator, lengths: list[int]) -> list:
+    """Runs of ``a`` with the cases a block's metrics must get right: references that step at different samples
+    (and never), an error of zero at the start (regulation), saturation, refused steps, NaN samples, runs with and
+    without a twin (one with non-finite integrators), runs of other lengths (0, 1, 2 steps)."""
+    from gainlink.hil.loop.metrics import RunTrace
+
+    traces = []
+    for i, n in enumerate(lengths):
+        t = np.arange(n) * a.Ts
+        y = rng.normal(0.0, 0.3, (n, a.p)) + np.linspace(1.0, 0.0, n)[:, None] * rng.uniform(-2, 2, a.p)
+        r = np.zeros((n, a.q))
+        if a.q and i % 3:
+            r[rng.integers(0, max(n, 1)) :] = rng.normal(0.0, 1.0, a.q)  # one step, somewhere
+        if a.q and i % 5 == 0 and n:
+            y[:] = r @ a.Ci + 0.0  # nothing to track: regulation with zero error
+        if i % 7 == 3 and n:
+            y[rng.integers(0, n), 0] = np.nan
+        u = rng.normal(0.0, 1.0, (n, a.m))
+        sat = rng.random((n, a.m)) < 0.2
+        twin = i % 4 != 1
+        twin_z = rng.normal(0.0, 0.5, (n, a.q)) if twin else np.full((n, a.q), np.nan)
+        if i % 11 == 2 and n:
+            twin_z[0, :] = np.inf
+        traces.append(RunTrace(
+            t=t, y=y, r=r, s=np.zeros((n, 0)), u=u, sat=sat, got=rng.random(n) < 0.95,
+            latency_ns=np.full(n, 1e3), tick_ns=t * 1e9, deadline_ns=np.full(n, np.nan), x=np.full((n, 2), np.nan),
+            flags=np.where(rng.random(n) < 0.1, 1, 0), sigma=np.full(n, np.nan), nan_sent=np.zeros(n, dtype=bool),
+            twin_y=y + rng.normal(0.0, 1e-3, y.shape) if twin else np.full(y.shape, np.nan),
+            twin_u=u + rng.normal(0.0, 1e-3, u.shape) if twin else np.full(u.shape, np.nan),
+            twin_z=twin_z,
+        ))  # fmt: skip
+    return traces
+
+
+@pytest.mark.parametrize("design", ["pendulum", "regulator", "two_references"])
+def test_a_blocks_metrics_as_columns_are_each_runs_own_compute_metrics(design):
+    """block_metrics over 60 runs of mixed lengths and cases equals compute_metrics of each run (the per-run
+    function, the oracle), every figure exactly: no figure needed a tolerance."""
+    from gainlink.hil.loop.block_metrics import block_metrics
+    from gainlink.hil.loop.metrics import compute_metrics
+    from support.fixed import example, random_design
+
+    if design == "pendulum":
+        a = example("pendulum", "float32")
+    elif design == "regulator":
+        a = random_design(4, "float32", n=3, m=2, p=2, q=0)
+    else:
+        a = random_design(5, "float32", n=4, m=2, p=3, q=2)
+    rng = np.random.default_rng(21)
+    lengths = [50] * 40 + [37] * 15 + [0, 1, 1, 2, 2]
+    traces = _traces(a, rng, lengths)
+    timed = [{"latency_us": {"p50": 1.0}, "period_jitter_us": {"p50": None}}] * len(traces)
+    got = block_metrics(traces, artifact=a, mode="sil", late=0, period_s=[a.Ts] * len(traces),
+                        model_start=[""] * len(traces), timed=timed)  # fmt: skip
+    seen = set()
+    for tr, g, tm in zip(traces, got, timed):
+        want = compute_metrics(tr, artifact=a, mode="sil", late=0, period_s=a.Ts, timed=tm)
+        assert g == want
+        assert list(g) == list(want)  # the same order of keys
+        for v in want["tracked"].values():
+            seen |= {("overshoot", v["overshoot_pct"] is None), ("settled", v["settling_time_s"] is not None)}
+        seen |= {("twin", "twin" in want), ("integrator", "peak_integrator" in want)}
+    assert {("twin", True), ("twin", False), ("settled", True), ("overshoot", False)} <= seen
+    if a.q:
+        assert {("overshoot", True), ("settled", False), ("integrator", True)} <= seen
+
+
+def test_a_scheduled_laws_block_records_each_runs_sigma_as_alone():
+    """The scheduled tank (sigma: its measured level) in a block of four runs of other orifice coefficients and
+    seeds, the host C and the float64 law: each run's trace (its sigma included, recorded because this law has one)
+    equals the run's own, bit for bit."""
+    import copy
+
+    from gainlink.hil.campaign.worker import _library
+    from gainlink.hil.loop.block import run_block
+    from gainlink.hil.loop.bridge import run_scenario
+    from gainlink.hil.loop.scenario import parse_scenario
+    from gainlink.shipping.artifact import from_dict
+    from schedule_cases import tank_dict, tank_hil_scenario
+    from support.designs import designed
+
+    art = from_dict(designed(tank_dict()))
+    base = tank_hil_scenario("unused.json", name="tank", transport={}, duration=0.5, noise={"h": 1e-3})
+    library = _library(art)
+    for controller in ("firmware", "reference"):
+        scs = []
+        for i, c in enumerate((0.4, 0.36, 0.44, 0.41)):
+            data = copy.deepcopy(base) | {"seed": 10 + i, "controller": controller}
+            data["plant"]["parameters"] = {"c": c}
+            scs.append(parse_scenario(data))
+        block = run_block(scs, artifact=art, library=library)
+        assert block is not None and all(r is not None for r in block)
+        for sc, got in zip(scs, block):
+            want = run_scenario(sc, artifact=art, library=library)
+            assert np.isfinite(want.trace.sigma).all()
+            for name in TRACE_FIELDS:
+                assert np.array_equal(getattr(got.trace, name), getattr(want.trace, name), equal_nan=True), name
+            assert {k: got.metrics.get(k) for k in CONTROL_KEYS} == {k: want.metrics.get(k) for k in CONTROL_KEYS}
+
+
+def test_a_block_whose_runs_differ_in_disturbances_gives_each_what_it_gets_alone():
+    """One run of three pushes the cart (a 3 N input disturbance for 0.2 s), the others do not: that run is planned
+    alone and its command goes to its plant with the push, the others' without, each trace as alone bit for bit."""
+    from gainlink.hil.campaign.worker import _library
+    from gainlink.hil.loop.block import run_block
+    from gainlink.hil.loop.bridge import run_scenario
+    from gainlink.hil.loop.scenario import Disturbance
+
+    art, scenarios = _pendulum_campaign_points(draws=3, duration=0.5)[0]
+    scs = list(scenarios)
+    scs[1] = dataclasses.replace(scs[1], disturbances=(Disturbance(input="F", start=0.1, stop=0.3, value=3.0),))
+    library = _library(art)
+    block = run_block(scs, artifact=art, library=library)
+    alone = [run_scenario(sc, artifact=art, library=library) for sc in scs]
+    for got, want in zip(block, alone):
+        for name in TRACE_FIELDS:
+            assert np.array_equal(getattr(got.trace, name), getattr(want.trace, name), equal_nan=True), name
+        assert {k: got.metrics.get(k) for k in CONTROL_KEYS} == {k: want.metrics.get(k) for k in CONTROL_KEYS}

@@ -21,6 +21,7 @@ error. Anything else propagates, so Dask retries the run (on another worker when
 from __future__ import annotations
 
 import contextlib
+import copy
 import dataclasses
 import fcntl
 import json
@@ -40,7 +41,7 @@ from gainlink.fileio import atomic_write_bytes
 from gainlink.shipping.artifact import Artifact, from_dict
 from gainlink.version import __version__
 
-from ..loop.scenario import parse_scenario
+from ..loop.scenario import DRAWN, parse_scenario
 from ..paths import cache_dir
 from ..plants.fmu import reused_instances
 from .criteria import measure
@@ -276,9 +277,10 @@ def execute_batch(
 
     SIL runs of one artifact, controller and length step together as a block (:func:`gainlink.hil.loop.block.run_block`:
     each run's record is the one it gets alone); a run that cannot (a link, faults, a plant that is not vectorised)
-    runs alone, and the block says why once (a log line on the worker, ``worker.block`` in its records). A block
-    that fails with a :class:`~gainlink.errors.GainlinkError` is run again one run at a time, so one bad run costs no
-    other its result.
+    runs alone, and the block says why once (a log line on the worker, ``worker.block`` in its records). A run whose
+    plant cannot be built (a drawn number it refuses) is left out of its block and runs alone, recording its error; a
+    block that fails otherwise with a :class:`~gainlink.errors.GainlinkError` is run again one run at a time, so one
+    bad run costs no other its result.
 
     One bytes object is what Dask moves back: a list of records (nested dicts) is sized and serialised by
     Dask element by element, which cost 3x the worker's CPU per task and 1.6x the client's (measured with
@@ -331,31 +333,56 @@ def batch_records(
 def _blocks(artifacts: dict[str, bytes], runs: list, blobs: dict) -> dict[tuple, list]:
     """The SIL runs that can step together, by (artifact, controller, steps, the plant but its drawn numbers):
     ``(index, artifact, scenario)``; a run whose inputs are wrong is left out (it runs alone and records its
-    error)."""
+    error). A run whose table differs from the last one parsed of its artifact only in its seed and its plant's
+    drawn numbers (:data:`DRAWN`) is that scenario with its own (:func:`_drawn_like`): parsed once per block,
+    not once per run."""
     from ..loop.block import refusal
 
     groups: dict[tuple, list] = {}
+    parsed: dict[str, tuple] = {}  # per artifact: (artifact, its file, the last table parsed, its scenario, key)
     for i, (sha, scenario, seed) in enumerate(runs):
-        try:
-            artifact, path = artifact_from_bytes(artifacts[sha])
-            sc = _scenario(scenario, artifact_path=path, seed=seed, blobs=blobs, kind="sil")
-        except GainlinkError:
-            continue
-        why = refusal(sc)
-        if why is not None:
-            log.info("campaign run %d of this task runs alone: %s", i, why)
-            continue
-        shape = json.dumps({k: v for k, v in sc.plant.items() if k not in _DRAWN}, sort_keys=True, default=str)
-        groups.setdefault((sha, sc.controller, round(sc.duration / artifact.Ts), shape), []).append((i, artifact, sc))
+        last = parsed.get(sha)
+        sc = _drawn_like(last[2], last[3], scenario, seed) if last is not None else None
+        if sc is None:
+            try:
+                artifact, path = last[:2] if last is not None else artifact_from_bytes(artifacts[sha])
+                sc = _scenario(scenario, artifact_path=path, seed=seed, blobs=blobs, kind="sil")
+            except GainlinkError:
+                continue
+            why = refusal(sc)
+            if why is not None:
+                log.info("campaign run %d of this task runs alone: %s", i, why)
+                continue
+            shape = json.dumps({k: v for k, v in sc.plant.items() if k not in DRAWN}, sort_keys=True, default=str)
+            key = (sha, sc.controller, round(sc.duration / artifact.Ts), shape)
+            last = parsed[sha] = (artifact, path, scenario, sc, key)
+        groups.setdefault(last[4], []).append((i, last[0], sc))
     return groups
 
 
-_DRAWN = ("parameters", "perturb", "scale")  # what a run's plant may differ in from its block's others
+def _drawn_like(table: dict, parsed: Any, scenario: dict, seed: int) -> Any:
+    """``scenario`` (a run's table) parsed, when it is ``table`` (parsed as ``parsed``, a SIL run a block takes)
+    but for its seed and its plant's drawn numbers: ``parsed`` with those; None when it differs in anything else
+    (it is parsed on its own)."""
+    plant, base = scenario.get("plant"), table.get("plant")
+    if scenario.keys() != table.keys() or not isinstance(plant, dict) or plant.keys() != base.keys():
+        return None
+    if any(scenario[k] != table[k] for k in scenario if k not in ("plant", "seed")):
+        return None
+    if any(plant[k] != base[k] for k in plant if k not in DRAWN):
+        return None
+    drawn = {k: plant[k] for k in DRAWN if k in plant}
+    if not all(isinstance(t, dict) and all(type(v) in (int, float) for v in t.values()) for t in drawn.values()):
+        return None  # only tables of numbers are copied as _scenario's JSON copy makes them
+    like = copy.copy(parsed)  # dataclasses.replace re-runs the 28 fields' __init__: 30-70 us a run here
+    like.__dict__.update(seed=int(seed), plant=parsed.plant | {k: dict(t) for k, t in drawn.items()})
+    return like
 
 
 def _run_block(members: list, records: list, runs: list, blobs: dict) -> None:
     """Step ``members`` as one block and fill their ``records``; left empty (each runs alone) when their plants
-    cannot step as one batch or the block fails with a GainlinkError (said once, in the log)."""
+    cannot step as one batch or the block fails with a GainlinkError (said once, in the log). A run whose plant
+    cannot be built (a drawn number it refuses) is left out of the block and runs alone: it records its error."""
     from ..loop.block import run_block
 
     where = {"host": socket.gethostname(), "pid": os.getpid(), "start": time.time()}
@@ -369,10 +396,14 @@ def _run_block(members: list, records: list, runs: list, blobs: dict) -> None:
     if results is None:
         log.info("a campaign block of %d runs steps one by one: its plants are not one vectorised kind", len(members))
         return
+    stepped = sum(result is not None for result in results)
     share = _stopped(where, cpu0)
-    share["cpu_s"] /= len(members)
+    share["cpu_s"] /= max(stepped, 1)
     for (i, _, _), result in zip(members, results):
-        records[i] = _record(result, artifact) | {"worker": share | {"block": len(members)}}
+        if result is None:
+            log.info("campaign run %d of this task runs alone: its plant could not be built in its block", i)
+            continue
+        records[i] = _record(result, artifact) | {"worker": share | {"block": stepped}}
 
 
 def unpack_results(data: bytes) -> list[dict]:

@@ -44,7 +44,7 @@ from .controller import ControllerProcess, controller_argv, qemu_peer
 from .endpoints import InProcess, OverLink, refuse_link_faults
 from .faults import FaultInjector
 from .metrics import RunTrace, compute_metrics, link_capacity
-from .plan import Plan, Recorder, describe_artifact, describe_plant, plan_run
+from .plan import Plan, Recorder, describe_artifact, describe_plant, plan_like, plan_run
 from .scenario import Scenario
 from .scenario_plant import build_plant
 from .scheduler import Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
@@ -151,12 +151,17 @@ def _check(scenario: Scenario) -> None:
         raise ScenarioError(f'scenario {scenario.name}: a nan fault needs encoding = "float32" (not "{encoding}")')
 
 
-def prepare_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant, source: str, record: bool = True) -> Run:
+def prepare_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant, source: str, record: bool = True,
+                like: Plan | None = None) -> Run:  # fmt: skip
     """A run of ``scenario`` ready to step: ``plant`` reset to its initial state, the plan made (before anything is
     built or started) and where the model twin starts (a campaign block prepares each of its runs so, ``record``
-    False: its recorder's arrays are the block's)."""
+    False: its recorder's arrays are the block's; ``like``: the plan of a run that differs from this one only in its
+    seed and its plant's drawn numbers, :func:`~.plan.plan_like`)."""
     plant.reset(initial=scenario.initial_state)
-    plan = plan_run(scenario, law=law, artifact=artifact, plant=plant)
+    if like is not None:
+        plan = plan_like(like, scenario, law=law, artifact=artifact, plant=plant)
+    else:
+        plan = plan_run(scenario, law=law, artifact=artifact, plant=plant)
     start = twin_start(plant, sigma=plan.sigma0) if scenario.model_twin else TwinStart({}, False, plan.sigma0)
     return Run(scenario, law=law, artifact=artifact, plant=plant, plan=plan, source=source, start=start,
                record=record)  # fmt: skip
@@ -222,19 +227,26 @@ class Run:
         self.ran = None if sc.controller == "reference" else _law_named(peer.ready_line)
         return outcome
 
-    def result(
-        self, outcome: Outcome, *, twins, twins_s: float, timed: dict | None = None, artifact_info: dict | None = None
-    ) -> RunResult:
-        """Metrics, trace and what ran, for the steps taken. A campaign block gives what its runs share, computed
-        once: ``timed`` (:func:`~.metrics.timing` of this run's steps) and ``artifact_info``
-        (:func:`~.plan.describe_artifact`)."""
+    def trace(self, steps: int, *, twins) -> RunTrace:
+        """The run's trace up to ``steps``, with its twins."""
+        return self.rec.trace(steps, law=self.law, artifact=self.a, twins=twins)
+
+    def result(self, outcome: Outcome, *, twins, twins_s: float, timed: dict | None = None,
+               artifact_info: dict | None = None, trace: RunTrace | None = None,
+               metrics: dict | None = None) -> RunResult:  # fmt: skip
+        """Metrics, trace and what ran, for the steps taken. A campaign block gives what it computed for its runs
+        together: ``timed`` (:func:`~.metrics.timing` of this run's steps), ``artifact_info``
+        (:func:`~.plan.describe_artifact`), the run's ``trace`` (:meth:`trace`) and its ``metrics``
+        (:func:`~.block_metrics.block_metrics`: :func:`~.metrics.compute_metrics`' figures, a new dict)."""
         sc, a, law, steps = self.scenario, self.a, self.law, outcome.steps
-        trace = self.rec.trace(steps, law=law, artifact=a, twins=twins)
+        if trace is None:
+            trace = self.trace(steps, twins=twins)
         link = isinstance(self.endpoint, OverLink)
         mode = sc.mode if link else "sil"
         late = self.endpoint.late if link else 0
-        metrics = compute_metrics(trace, artifact=a, mode=mode, late=late, period_s=self.plan.period_s,
-                                  model_start=twins.model_note, timed=timed)  # fmt: skip
+        if metrics is None:
+            metrics = compute_metrics(trace, artifact=a, mode=mode, late=late, period_s=self.plan.period_s,
+                                      model_start=twins.model_note, timed=timed)  # fmt: skip
         faults = dict(self.injector.counts) if link else {k: v for k, v in self.injector.counts.items() if k == "nan"}
         metrics.update({"complete": outcome.reason is None, "steps_planned": self.plan.N, "wall_s": outcome.wall_s,
                         "steps_per_s": steps / outcome.wall_s if outcome.wall_s > 0 else None, "sched_fifo": False,

@@ -5,6 +5,7 @@ endpoint (:mod:`.closed_loop`).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,9 +73,7 @@ def plan_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant) -> Pl
     for j, name in enumerate(a.signals["references"]):
         if name in scenario.reference:
             R[:, j] = profile_values(scenario.reference[name], t, base=float(r_op[j]))
-    rng = np.random.default_rng(scenario.seed)
-    noise_sd = np.array([scenario.noise.get(name, 0.0) for name in plant.output_names])
-    noise = rng.standard_normal((N, a.p)) * noise_sd if noise_sd.any() else np.zeros((N, a.p))
+    noise = _noise(scenario, plant=plant, N=N, p=a.p)
     D = np.zeros((N, a.m))
     for d in scenario.disturbances:
         D[(t >= d.start) & (t < d.stop), plant.input_names.index(d.input)] += d.value
@@ -83,6 +82,39 @@ def plan_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant) -> Pl
     period = scenario.period if (realtime and scenario.period) else Ts
     return Plan(N=N, t=t, R=R, noise=noise, D=D, S=S, sigma0=sigma0, silent_at=silent_at, crash_at=crash_at,
                 period_s=period, realtime=realtime)  # fmt: skip
+
+
+def _noise(scenario: Scenario, *, plant: Plant, N: int, p: int) -> np.ndarray:
+    """The run's measurement noise per step (N, p), drawn from its own seed."""
+    noise_sd = np.array([scenario.noise.get(name, 0.0) for name in plant.output_names])
+    if not noise_sd.any():
+        return np.zeros((N, p))
+    return np.random.default_rng(scenario.seed).standard_normal((N, p)) * noise_sd
+
+
+PLANNED = ("duration", "mode", "period", "reference", "schedule_signal", "noise", "disturbances", "faults")
+"""The scenario's fields :func:`plan_run` reads besides its seed (and the plant's start)."""
+
+
+def plans_alike(scenario: Scenario, other: Scenario) -> bool:
+    """Whether :func:`plan_run` plans ``scenario`` as ``other`` but for its seed (:func:`plan_like`)."""
+    return all(getattr(scenario, name) == getattr(other, name) for name in PLANNED)
+
+
+def plan_like(plan: Plan, scenario: Scenario, *, law, artifact: Artifact, plant: Plant) -> Plan:
+    """The plan of ``scenario`` for ``plant`` just reset, when ``plan`` is that of a run whose scenario differs from
+    it only in its seed and its plant's drawn numbers (a campaign block's runs): ``plan`` with the run's own noise,
+    its references, disturbances, signals and times shared (the same arrays, made read-only), what
+    :func:`plan_run` gives it bit for bit. :func:`plan_run` itself when the run starts elsewhere (another sigma)
+    or its plant follows the external signals."""
+    if not plan.N or getattr(plant, "schedule", None) is not None:
+        return plan_run(scenario, law=law, artifact=artifact, plant=plant)
+    sigma0 = law.sigma_of(artifact, plant.outputs(), plan.S[0])
+    if np.float64(sigma0).tobytes() != np.float64(plan.sigma0).tobytes():
+        return plan_run(scenario, law=law, artifact=artifact, plant=plant)
+    for shared in (plan.t, plan.R, plan.D, plan.S):
+        shared.flags.writeable = False
+    return dataclasses.replace(plan, noise=_noise(scenario, plant=plant, N=plan.N, p=artifact.p))
 
 
 class Recorder:

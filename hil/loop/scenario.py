@@ -173,6 +173,9 @@ class Disturbance:
     value: float
 
 
+DRAWN = ("parameters", "perturb", "scale")  # the plant table's entries a campaign's runs of one block may differ in
+
+
 @dataclass(frozen=True)
 class Scenario:
     """A parsed, checked scenario (see the module docstring for the file format)."""

@@ -25,12 +25,13 @@ from . import flags as status_flags
 @dataclass(frozen=True)
 class BlockStep:
     """One step of a block: row i is instance i's :class:`~gainlink.laws.base.Step` (``u`` (B, m) float64 holding
-    the C's float32, ``flags`` and ``sat`` (B,), ``sigma`` (B,): NaN for a law without one)."""
+    the C's float32, ``flags`` and ``sat`` (B,), ``sigma`` (B,); ``sigma`` None for a law without one: every
+    instance's is NaN, and a block records none)."""
 
     u: np.ndarray
     flags: np.ndarray
     sat: np.ndarray
-    sigma: np.ndarray
+    sigma: np.ndarray | None
 
 
 class NativeBlock:
@@ -50,7 +51,7 @@ class NativeBlock:
         rec = self.host.step(Y, R if R.shape[1] else None, S if S.shape[1] else None)
         bits = rec["flags"].astype(np.int64)
         sat = np.where(bits & status_flags.FAULT, 0, rec["sat"]).astype(np.int64)  # a faulted step clamps nothing
-        sigma = rec["sigma"].astype(float) if self._sigma else np.full(rec.size, np.nan)
+        sigma = rec["sigma"].astype(float) if self._sigma else None
         return BlockStep(u=rec["u"].astype(float), flags=bits, sat=sat, sigma=sigma)
 
 
