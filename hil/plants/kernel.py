@@ -27,7 +27,6 @@ from pathlib import Path
 import numpy as np
 from gainlink.errors import ToolchainError
 from gainlink.fileio import exclusive_lock
-from gainlink.firmware.build import cache_root
 
 SOURCE = Path(__file__).resolve().parent / "native" / "ode.c"
 FLAGS = ("-std=c11", "-O2", "-ffp-contract=off", "-fPIC", "-shared")
@@ -62,6 +61,14 @@ def vector_flags(cpuinfo: Path = Path("/proc/cpuinfo")) -> tuple[str, ...]:
         return ()
     flags = next((line.split(":", 1)[1].split() for line in text.splitlines() if line.startswith("flags")), [])
     return ("-mavx512f",) if "avx512f" in flags else ("-mavx",) if "avx" in flags else ()
+
+
+def cache_root() -> Path:
+    """The firmware build cache (:func:`gainlink.firmware.build.cache_root`), imported when a library is wanted: a run
+    without a built-in model never loads the build code."""
+    from gainlink.firmware.build import cache_root as root
+
+    return root()
 
 
 @functools.cache
