@@ -24,14 +24,15 @@ import shutil
 import tempfile
 import warnings
 from collections import Counter
+from collections.abc import Mapping
 from typing import IO, Any
 
 import numpy as np
 from gainlink.fileio import atomic_writer, publish_files
 from gainlink.proof.twin_plot import png_bytes
 
-from .plan import CampaignPlan, describe_axes, run_heads
-from .rows import ReportRows, Tally, Verdicts
+from .plan import CampaignPlan, PlannedRuns, describe_axes, run_heads
+from .rows import STATUSES, ReportRows, RunStatus, Tally, Verdicts, point_row
 
 PERCENTILES = (5, 25, 50, 75, 95)
 ENVELOPE_BINS = 512
@@ -71,41 +72,10 @@ def _axes(plan: CampaignPlan) -> list[str]:
     return [a.name for a in (*plan.campaign.grid, *plan.campaign.draws)]
 
 
-def csv_row(r: dict, axes: list[str], tracked: list[str], outs: list[str]) -> list:
-    """One run's row of ``campaign.csv`` (``tracked``, ``outs``: sorted, as in :func:`csv_head`)."""
-    m, q = r.get("metrics", {}), r.get("measures", {})
-    return [
-        r["index"],
-        r["id"],
-        r["status"],
-        "; ".join(r["reasons"]),
-        *[_flat(r["values"][a]) for a in axes],
-        r["seed"],
-        r.get("complete", ""),
-        q.get("stable", ""),
-        q.get("longest_saturation_s", ""),
-        _num(q.get("twin_output_deviation")),
-        _num(q.get("twin_command_deviation")),
-        _num(q.get("model_mismatch")),
-        _num(q.get("model_iae_ratio")),
-        *[
-            _num(m.get("tracked", {}).get(t, {}).get(k))
-            for t in tracked
-            for k in ("iae", "overshoot_pct", "settling_time_s")
-        ],
-        *[_num(m.get("outputs_final", {}).get(o)) for o in outs],
-        r["artifact_sha256"] or "",
-    ]
-
-
-def _num(v: Any) -> str:
-    return "" if v is None else repr(v)
-
-
 def failures_text(tally: Tally) -> str:
     """The failure table: failed and erroneous runs, worst (largest IAE) first, errors last (the
     :data:`~.rows.FAILURES_LIMIT` first)."""
-    bad = tally.failures.items()
+    bad = tally.failure_rows()
     lines = [f"{'index':>6}  {'id':<20}  {'status':<6}  values  ->  reasons"]
     for r in bad:
         vals = ", ".join(f"{k}={_short(v)}" for k, v in r["values"].items())
@@ -150,7 +120,7 @@ def summary_text(plan: CampaignPlan, tally: Tally, points: list[dict], *, out: A
     if tally.failed:
         lines.append("  runs failing each criterion: " + ", ".join(f"{k} {v}" for k, v in tally.failed.most_common()))
     lines += _model_lines(tally)
-    worst = tally.worst.items()
+    worst = tally.worst_runs
     if worst:
         lines.append("  worst IAE: " + ", ".join(f"run {i} {rid} ({iae:.4g}{unit}, {st})" for i, rid, iae, st in worst))
         lines.append(f"  replay one: gainlink campaign show {out} --run {worst[0][1]} --report REPORT_DIR")
@@ -227,12 +197,13 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
     Returns ``{"t", "percentiles": (len(PERCENTILES), N, S), "failed_median": (N, S), "runs", "failed", "outputs",
     "inputs", "half_bin": (N, S)}`` with the S signals the outputs then the commands.
     """
-    shapes = Counter(store.trace_shapes(set(status)))
+    ids, failing = _status_ids(status)
+    shapes = Counter(store.trace_shapes(ids))
     if not shapes:
         return None
     shape = shapes.most_common(1)[0][0]
     lo, hi, t = None, None, None
-    for _, _, sig in _signal_stacks(store, status, shape):
+    for _, _, sig in _signal_stacks(store, ids, shape):
         finite = np.where(np.isfinite(sig), sig, np.nan)
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # a sample no run has a finite value at
@@ -243,10 +214,10 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
     width = np.where(hi > lo, (hi - lo) / bins, 1.0)
     counts = np.zeros((2, *lo.shape, bins), np.int64)  # all runs, failed runs
     runs = failed = 0
-    for ids, times, sig in _signal_stacks(store, status, shape):
+    for names, times, sig in _signal_stacks(store, ids, shape):
         t = times if t is None else t
-        bad = np.array([status[i] == "fail" for i in ids])
-        runs, failed = runs + len(ids), failed + int(bad.sum())
+        bad = np.isin(names, failing)
+        runs, failed = runs + len(names), failed + int(bad.sum())
         counts[0] += _histogram(sig, lo, width, bins)
         if bad.any():
             counts[1] += _histogram(sig[bad], lo, width, bins)
@@ -263,11 +234,19 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
     }
 
 
-def _signal_stacks(store: Any, status: dict[str, str], shape: tuple) -> Any:
+def _status_ids(status: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray]:
+    """The runs of ``status`` (id -> ``pass`` or ``fail``) and the failed ones, as ASCII bytes arrays."""
+    if isinstance(status, RunStatus):
+        return status.ids, status.ids[status.failed]
+    ids = np.array([i.encode("ascii", "replace") for i in status], dtype="S")
+    return ids, ids[np.array([v == "fail" for v in status.values()], bool)]
+
+
+def _signal_stacks(store: Any, ids: np.ndarray, shape: tuple) -> Any:
     """The runs of ``shape`` (samples, outputs, commands), a block at a time: ``(ids, t (N,), (k, N, S) float64)``."""
-    for ids, st in store.trace_stacks(set(status)):
+    for names, st in store.trace_stacks(ids):
         if (st["t"].shape[1], st["y"].shape[2], st["u"].shape[2]) == shape:
-            yield ids, st["t"][0].astype(float), np.concatenate([st["y"], st["u"]], axis=2).astype(float)
+            yield names, st["t"][0].astype(float), np.concatenate([st["y"], st["u"]], axis=2).astype(float)
 
 
 def _histogram(sig: np.ndarray, lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:
@@ -384,20 +363,37 @@ PLOTS = ("envelopes.png", "scatter.png")
 
 def _stream_rows(plan: CampaignPlan, store: Any, csv_out: IO[str], runs_out: IO[str]) -> Tally:
     """Write every row, in plan order, to ``campaign.csv`` (``csv_out``) and as ``campaign.json``'s run lines
-    (``runs_out``), counting each into the returned :class:`Tally`."""
-    verdicts = Verdicts(store, plan.campaign.criteria)
+    (``runs_out``), counting each into the returned :class:`Tally`: each row from its head (the plan's) and its
+    verdict's spilled text and cells (:class:`~.rows.Verdicts`), nothing decoded again."""
+    ids = plan_ids(plan)
+    verdicts = Verdicts(store, plan.campaign.criteria, ids)
     try:
-        tally = Tally(plan)
+        tally = Tally(plan, verdicts)
         axes, tracked, outs = _axes(plan), sorted(verdicts.tracked), sorted(verdicts.outputs)
         w = csv.writer(csv_out, lineterminator="\n")
         w.writerow(csv_head(plan, verdicts.tracked, verdicts.outputs))
-        for row in verdicts.rows(run_heads(plan)):
-            w.writerow(csv_row(row, axes, tracked, outs))
-            runs_out.write(("  " if not tally.runs else ",\n  ") + json.dumps(row, sort_keys=True, allow_nan=False))
-            tally.add(row)
+        for k, (head, u) in enumerate(zip(run_heads(plan), verdicts.slot.tolist())):
+            body, cells = verdicts.text(u)
+            cells = verdicts.cells(u, cells, tracked, outs)
+            status = STATUSES[verdicts.code[u]]
+            values = [_flat(head.values[a]) for a in axes]
+            w.writerow(
+                [head.index, head.id, status, cells[0], *values, head.seed, *cells[1:], head.artifact_sha256 or ""]
+            )
+            text = json.dumps(point_row(head), sort_keys=True, allow_nan=False)
+            runs_out.write(("  " if not k else ",\n  ") + text[:-1] + ", " + body[1:])
+            tally.add(head, u)
+        tally.finish(ids)
         return tally
     finally:
         verdicts.close()
+
+
+def plan_ids(plan: CampaignPlan) -> np.ndarray:
+    """The plan's run ids in plan order, ASCII bytes."""
+    if isinstance(plan.runs, PlannedRuns):
+        return plan.runs.ids
+    return np.array([p.id.encode("ascii") for p in plan.runs], dtype="S")
 
 
 def _write_json(fh: IO[str], doc: dict, runs: IO[str]) -> None:
