@@ -459,6 +459,7 @@ def test_each_instance_of_a_block_runs_its_own_gain_set():
     [
         ({"gainlink.campaign": "other", "gainlink.version": "0.1.0"}, "holds campaign 'other', not 'mine'"),
         ({"gainlink.campaign": "mine", "gainlink.version": "9.9"}, "was written by gainlink 9.9"),
+        ({"gainlink.campaign": "mine", "gainlink.version": "0.1.0"}, "is a block file of an earlier layout"),
         (None, "holds per-run results (runs/) of an earlier gainlink"),
         ("not parquet", "is not a block file this gainlink can read"),
     ],

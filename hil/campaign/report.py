@@ -188,11 +188,13 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
     ``status`` (id -> ``pass`` or ``fail``) whose traces have the most common shape, and the failed runs' median;
     ``None`` without a stored trace.
 
-    Streamed: the block files are read one at a time, twice (each sample's smallest and largest finite value, then a
-    histogram of ``bins`` equal bins between them per sample and signal), so the memory is the histograms', not the
-    runs'. A percentile is numpy's linear one (``np.nanpercentile``) with each order statistic taken at the centre of
-    its bin: within half a bin, ``(max - min) / (2 * bins)`` of that sample, of the exact value (below a pixel of the
-    plot). NaN samples are left out as nanpercentile leaves them; an infinite one counts in the end bin on its side.
+    Streamed: the block files are read once, one at a time (each sample's smallest and largest finite value, the
+    stack spilled as float32 to an anonymous temporary file in the campaign folder), then the spill is read back a
+    block at a time into a histogram of ``bins`` equal bins between them per sample and signal, so the memory is the
+    histograms', not the runs'. A percentile is numpy's linear one (``np.nanpercentile``) with each order statistic
+    taken at the centre of its bin: within half a bin, ``(max - min) / (2 * bins)`` of that sample, of the exact value
+    (below a pixel of the plot). NaN samples are left out as nanpercentile leaves them; an infinite one counts in the
+    end bin on its side.
 
     Returns ``{"t", "percentiles": (len(PERCENTILES), N, S), "failed_median": (N, S), "runs", "failed", "outputs",
     "inputs", "half_bin": (N, S)}`` with the S signals the outputs then the commands.
@@ -202,36 +204,42 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
     if not shapes:
         return None
     shape = shapes.most_common(1)[0][0]
-    lo, hi, t = None, None, None
-    for _, _, sig in _signal_stacks(store, ids, shape):
-        finite = np.where(np.isfinite(sig), sig, np.nan)
-        with np.errstate(invalid="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # a sample no run has a finite value at
-            mn, mx = np.nanmin(finite, axis=0), np.nanmax(finite, axis=0)
-        lo = mn if lo is None else np.fmin(lo, mn)
-        hi = mx if hi is None else np.fmax(hi, mx)
-    lo, hi = np.nan_to_num(lo), np.nan_to_num(hi)
-    width = np.where(hi > lo, (hi - lo) / bins, 1.0)
-    counts = np.zeros((2, *lo.shape, bins), np.int64)  # all runs, failed runs
-    runs = failed = 0
-    for names, times, sig in _signal_stacks(store, ids, shape):
-        t = times if t is None else t
-        bad = np.isin(names, failing)
-        runs, failed = runs + len(names), failed + int(bad.sum())
-        counts[0] += _histogram(sig, lo, width, bins)
-        if bad.any():
-            counts[1] += _histogram(sig[bad], lo, width, bins)
+    lo, hi, t, chunks = None, None, None, []
+    with tempfile.TemporaryFile(dir=store.out) as spill:  # the stacks read once, kept as float32 for the 2nd pass
+        for names, times, sig in _signal_stacks(store, ids, shape):
+            t = times if t is None else t
+            lo, hi = _extremes(sig, lo, hi)
+            sig.tofile(spill)
+            chunks.append(np.isin(names, failing))
+        lo, hi = np.nan_to_num(lo.astype(float)), np.nan_to_num(hi.astype(float))
+        width = np.where(hi > lo, (hi - lo) / bins, 1.0)
+        counts = np.zeros((2, *lo.shape, bins), np.int64)  # all runs, failed runs
+        spill.seek(0)
+        for bad in chunks:
+            sig = np.fromfile(spill, np.float32, bad.size * lo.size).reshape(bad.size, *lo.shape).astype(float)
+            counts[0] += _histogram(sig, lo, width, bins)
+            if bad.any():
+                counts[1] += _histogram(sig[bad], lo, width, bins)
     pct = np.stack([_percentile(counts[0], q, lo, width) for q in PERCENTILES])
     return {
         "t": t,
         "percentiles": pct,
         "failed_median": _percentile(counts[1], 50, lo, width),
-        "runs": runs,
-        "failed": failed,
+        "runs": sum(b.size for b in chunks),
+        "failed": int(sum(b.sum() for b in chunks)),
         "outputs": shape[1],
         "inputs": shape[2],
         "half_bin": width / 2,
     }
+
+
+def _extremes(sig: np.ndarray, lo: np.ndarray | None, hi: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Each sample's smallest and largest finite value so far, with the runs ``sig`` (k, N, S)."""
+    finite = np.where(np.isfinite(sig), sig, np.nan)
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a sample no run has a finite value at
+        mn, mx = np.nanmin(finite, axis=0), np.nanmax(finite, axis=0)
+    return (mn, mx) if lo is None else (np.fmin(lo, mn), np.fmax(hi, mx))
 
 
 def _status_ids(status: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray]:
@@ -243,21 +251,24 @@ def _status_ids(status: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _signal_stacks(store: Any, ids: np.ndarray, shape: tuple) -> Any:
-    """The runs of ``shape`` (samples, outputs, commands), a block at a time: ``(ids, t (N,), (k, N, S) float64)``."""
-    for names, st in store.trace_stacks(ids):
+    """The runs of ``shape`` (samples, outputs, commands), a block at a time: ``(ids, t (N,), (k, N, S) float32)``."""
+    for names, st in store.trace_stacks(ids, fields=("t", "y", "u")):
         if (st["t"].shape[1], st["y"].shape[2], st["u"].shape[2]) == shape:
-            yield names, st["t"][0].astype(float), np.concatenate([st["y"], st["u"]], axis=2).astype(float)
+            yield names, st["t"][0].astype(float), np.concatenate([st["y"], st["u"]], axis=2)
 
 
 def _histogram(sig: np.ndarray, lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:
     """Counts of ``sig`` (k, N, S) in ``bins`` bins from ``lo`` of ``width`` per sample and signal: (N, S, bins)."""
     with np.errstate(invalid="ignore", over="ignore"):
-        b = np.floor((sig - lo) / width)
-    ok = ~np.isnan(b)
-    b = np.clip(np.where(ok, b, 0), 0, bins - 1).astype(np.int64)
-    cell = np.arange(lo.size).reshape(lo.shape) * bins
-    flat = (cell + b)[ok]
-    return np.bincount(flat, minlength=lo.size * bins).reshape(*lo.shape, bins)
+        b = np.subtract(sig, lo)  # in place from here: the stack is the largest array of the report
+        b /= width
+        np.floor(b, out=b)
+    nan = np.isnan(b)
+    b[nan] = 0
+    np.clip(b, 0, bins - 1, out=b)
+    flat = b.astype(np.int64)
+    flat += np.arange(lo.size).reshape(lo.shape) * bins
+    return np.bincount(flat[~nan] if nan.any() else flat.ravel(), minlength=lo.size * bins).reshape(*lo.shape, bins)
 
 
 def _percentile(counts: np.ndarray, q: float, lo: np.ndarray, width: np.ndarray) -> np.ndarray:
@@ -320,12 +331,12 @@ def scatterpng_bytes(plan: CampaignPlan, tally: Tally) -> bytes:
             continue
         x = np.frombuffer(tally.scatter[name])
         for status, mask, style in (
-            ("fail", fail, dict(color="C3", marker="x", s=22, alpha=0.8)),
-            ("pass", ~fail, dict(color="C0", marker="o", s=12, alpha=0.7)),
+            ("fail", fail, dict(color="C3", marker="x", markersize=4.7, alpha=0.8)),
+            ("pass", ~fail, dict(color="C0", marker="o", markersize=3.5, markeredgewidth=0, alpha=0.7)),
         ):
             shown = pick[mask[pick]]
-            if mask.any():
-                ax.scatter(x[shown], iae[shown], label=f"{status} ({int(mask.sum())})", **style)
+            if mask.any():  # markers of one line, not a scatter collection: a third of the drawing's time
+                ax.plot(x[shown], iae[shown], linestyle="none", label=f"{status} ({int(mask.sum())})", **style)
         if iae.min() > 0 and iae.max() > 20 * iae.min():
             ax.set_yscale("log")
         ax.set_xlabel(name)
@@ -336,8 +347,15 @@ def scatterpng_bytes(plan: CampaignPlan, tally: Tally) -> bytes:
         grid[k // cols, k % cols].axis("off")
     shown = "" if iae.size <= MAX_SCATTER else f", {MAX_SCATTER} of {iae.size} runs drawn at random"
     fig.suptitle(f"{plan.campaign.name}: IAE against the varied parameters (x: failed{shown})")
-    fig.tight_layout()
+    _margins(fig)
     return png_bytes(fig)
+
+
+def _margins(fig: Any) -> None:
+    """Fixed margins in inches for the tick labels, axis labels and title: ``tight_layout`` measured every tick
+    label's box, 40 % of the scatter plot's time for no visible gain."""
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=0.8 / w, right=1 - 0.2 / w, bottom=0.55 / h, top=1 - 0.5 / h, wspace=0.35, hspace=0.45)
 
 
 def _criteria_doc(c: Any) -> dict:

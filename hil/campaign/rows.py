@@ -1,7 +1,8 @@
 """A campaign's rows (one per planned run, with its verdict), streamed from the store in plan order, and the tally
 the report is drawn from, kept in numpy arrays indexed by the plan.
 
-Each block file is read once: each kept record is decoded once (:func:`verdict`), its verdict's JSON text and its
+Each block file is read once: each kept run's stored row (metrics, measures, worker: not its inputs) is decoded once
+and judged (:func:`verdict_head`), its verdict's JSON text (the head's and the stored row's text joined) and its
 ``campaign.csv`` cells go, as one line, to an anonymous temporary file, and its numbers (status, IAE, model mismatch,
 failed criteria) to arrays indexed by the plan's distinct runs. The planned runs are then walked in plan order: each
 row's JSON is its head's (the plan's) and its verdict's texts joined, its CSV row its head's cells and its stored
@@ -32,22 +33,18 @@ PASS, FAIL, ERROR, MISSING = range(4)
 SEP = "\x00"  # between a spilled line's fields (JSON and CSV cells hold no NUL: json escapes it, reasons are text)
 
 
-def verdict(record: dict, criteria: Any) -> dict:
-    """The part of a run's row its stored ``record`` gives: status (``pass``, ``fail``, ``error``), the criteria it
-    failed, the reasons, metrics and measures."""
-    if record["status"] == "error":
-        return {"status": "error", "failed": ["error"], "reasons": [record["reason"]], "worker": record.get("worker")}
-    failed = evaluate(criteria, record)
-    return {
-        "status": "fail" if failed else "pass",
-        "failed": sorted({k for k, _ in failed}),
-        "reasons": [text for _, text in failed],
-        "complete": record["complete"],
-        "run_reason": record.get("reason"),
-        "metrics": record["metrics"],
-        "measures": record["measures"],
-        "worker": record.get("worker"),
-    }
+def verdict_head(status: str, row: dict, reason: str | None, criteria: Any) -> dict:
+    """What a run's row says beyond its stored ``row`` (:data:`~.store.ROW_KEYS` and ``run_reason``: complete,
+    metrics, measures, worker, the run's own reason): its status (``pass``, ``fail``, ``error``), the criteria it
+    failed and the reasons; and ``None`` for any of ``complete``, ``run_reason``, ``worker`` the row lacks."""
+    if status == "error":
+        return {"status": "error", "failed": ["error"], "reasons": [reason]} | (
+            {} if "worker" in row else {"worker": None}
+        )
+    failed = evaluate(criteria, row)
+    missing = {k: None for k in ("complete", "run_reason", "worker") if k not in row}
+    return {"status": "fail" if failed else "pass", "failed": sorted({k for k, _ in failed}),
+            "reasons": [text for _, text in failed]} | missing  # fmt: skip
 
 
 def point_row(point: Any) -> dict:
@@ -122,14 +119,20 @@ class Verdicts:
         self.shapes: list[tuple[tuple[str, ...], tuple[str, ...]]] = []
         self.tracked: set[str] = set()
         self.outputs: set[str] = set()
-        for run_ids, texts in store.record_texts():
+        for run_ids, statuses, rows, reasons in store.report_parts():
             k = np.minimum(np.searchsorted(self.uids, run_ids), max(n - 1, 0))
-            planned = (self.uids[k] == run_ids) if n else np.zeros(len(run_ids), bool)
-            for u, text in zip(k[planned].tolist(), (t for t, p in zip(texts, planned) if p)):
-                self._add(u, verdict(json.loads(text), criteria))
+            planned = (self.uids[k] == run_ids).tolist() if n else [False] * len(run_ids)
+            for i, u in enumerate(k.tolist()):
+                if planned[i]:
+                    self._add(u, statuses[i], rows[i], reasons[i], criteria)
 
-    def _add(self, u: int, v: dict) -> None:
-        """Spill run ``u``'s verdict ``v`` and note its numbers."""
+    def _add(self, u: int, status: str, row_text: str, reason: str | None, criteria: Any) -> None:
+        """Spill run ``u``'s verdict (from its status, its stored row's JSON text and an error's reason) and note its
+        numbers. The verdict's text is its head's and the stored row's joined: the row is decoded, not encoded
+        again."""
+        row = json.loads(row_text)
+        head = verdict_head(status, row, reason, criteria)
+        v = head | row
         cells, tracked, outs = csv_cells(v)
         shape = (tracked, outs)
         if shape not in self.shapes:
@@ -137,7 +140,9 @@ class Verdicts:
             self.tracked.update(tracked)
             self.outputs.update(outs)
         self.shape[u] = self.shapes.index(shape)
-        data = SEP.join([json.dumps(v, sort_keys=True, allow_nan=False), *cells]).encode("utf-8")
+        text = json.dumps(head, sort_keys=True, allow_nan=False)
+        body = text if row_text == "{}" else text[:-1] + ", " + row_text[1:]
+        data = SEP.join([body, *cells]).encode("utf-8")
         self.at[u], self.size[u] = self.file.tell(), len(data)
         self.file.write(data)
         self.code[u] = STATUSES.index(v["status"])

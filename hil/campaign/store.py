@@ -9,11 +9,16 @@
 
 A block file's name is its content address (:func:`block_address`: the sha256 of its runs' ids, each itself the hash
 of the run's inputs and gainlink's version), so the same runs always land in the same file. A row holds the run's id,
-its status (``done`` or ``error``), its record as compact JSON (inputs, reasons, metrics, measures, link, worker) and
-its traces downsampled to at most ``worker.MAX_TRACE_POINTS`` evenly spaced true samples (first and last kept; float32
+its status (``done`` or ``error``), its record as two compact JSON texts (``record``: inputs, link, an error's
+reason; ``row``: :data:`ROW_KEYS` and a result's own reason, what the report decodes) and its traces downsampled to at
+most ``worker.MAX_TRACE_POINTS`` evenly spaced true samples (first and last kept; float32
 ``t``, and ``y``, ``u``, ``r`` flattened row by row with their widths); the full trace of a run is not stored, it is
-replayed (``gainlink campaign show DIR --run ID``). The file's schema metadata names the gainlink version and the
-campaign that wrote it: a folder holding another's blocks is refused in one line on resume (:func:`refuse_foreign`).
+replayed (``gainlink campaign show DIR --run ID``). The file's schema metadata names the gainlink version, the
+campaign that wrote it and the file's layout (:data:`LAYOUT`): a folder holding another's blocks, or blocks of an
+earlier layout, is refused in one line on resume (:func:`refuse_foreign`).
+
+A worker that sees the campaign folder writes its block file there itself (:func:`write_block`); the client notes it
+(:meth:`Store.took_block`) without reading it.
 
 A file is written to a temporary name and renamed (mode 0644 under the usual umask), so a run counts as done exactly
 when a block file holds it; a campaign killed at any point resumes by running the runs no block holds, and those whose
@@ -48,12 +53,15 @@ SCHEMA = pa.schema(
         ("id", pa.string()),
         ("status", pa.string()),
         ("record", pa.string()),
+        ("row", pa.string()),
         ("t", pa.list_(pa.float32())),
         *((k, pa.list_(pa.float32())) for k in WIDE),
         *((f"{k}_width", pa.int32()) for k in WIDE),
     ]
 )
-META_VERSION, META_CAMPAIGN = b"gainlink.version", b"gainlink.campaign"
+META_VERSION, META_CAMPAIGN, META_LAYOUT = b"gainlink.version", b"gainlink.campaign", b"gainlink.block_layout"
+LAYOUT = "2"  # 2: the record split into ``record`` (inputs, link, status, an error's reason) and ``row``
+ROW_KEYS = ("complete", "measures", "metrics", "worker")  # what a report row takes from a record, as it is
 
 
 def encode_trace(t: np.ndarray, y: np.ndarray, u: np.ndarray, r: np.ndarray) -> dict[str, np.ndarray]:
@@ -88,23 +96,40 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes
     :func:`encode_trace` arrays under ``trace``). Made on the worker, which writes it into the campaign folder when it
     can see the folder (:func:`write_block`), else returns it for the client to write."""
     traces = [record.get("trace") for record in records]
+    parts = [_split(run_id, record) for run_id, record in zip(ids, records)]
     cols: dict[str, Any] = {
         "id": pa.array(ids, pa.string()),
         "status": pa.array([record["status"] for record in records], pa.string()),
-        "record": pa.array(
-            [_compact_json({k: v for k, v in r.items() if k != "trace"} | {"id": i}) for i, r in zip(ids, records)],
-            pa.string(),
-        ),
+        "record": pa.array([_compact_json(rest) for rest, _ in parts], pa.string()),
+        "row": pa.array([_compact_json(row) for _, row in parts], pa.string()),
     }
     cols["t"] = _lists([None if tr is None else tr["t"] for tr in traces])
     for k in WIDE:
         cols[k] = _lists([None if tr is None else tr[k].reshape(-1) for tr in traces])
         cols[f"{k}_width"] = pa.array([None if tr is None else tr[k].shape[1] for tr in traces], pa.int32())
-    meta = {META_VERSION: __version__.encode(), META_CAMPAIGN: campaign.encode("utf-8")}
+    meta = {META_VERSION: __version__.encode(), META_CAMPAIGN: campaign.encode("utf-8"), META_LAYOUT: LAYOUT.encode()}
     table = pa.Table.from_arrays([cols[f.name] for f in SCHEMA], schema=SCHEMA.with_metadata(meta))
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink, compression="zstd")
     return sink.getvalue().to_pybytes()
+
+
+def _split(run_id: str, record: dict) -> tuple[dict, dict]:
+    """A record (without its trace) as its ``record`` column's part (id, inputs, link, status, an error's reason)
+    and its ``row`` column's (:data:`ROW_KEYS`; a result's ``reason`` as ``run_reason``): the report decodes the row
+    only."""
+    rest = {k: v for k, v in record.items() if k != "trace"} | {"id": run_id}
+    row = {k: rest.pop(k) for k in ROW_KEYS if k in rest}
+    if record["status"] != "error" and "reason" in rest:
+        row["run_reason"] = rest.pop("reason")
+    return rest, row
+
+
+def _joined(rest: dict, row: dict) -> dict:
+    """The record :func:`_split` split."""
+    if "run_reason" in row:
+        row = {k: v for k, v in row.items() if k != "run_reason"} | {"reason": row["run_reason"]}
+    return rest | row
 
 
 def _lists(rows: list[np.ndarray | None]) -> pa.ListArray:
@@ -203,8 +228,13 @@ def refuse_foreign(out: str | Path, plan_doc: dict) -> None:
             raise CampaignError(
                 f"campaign: {block} is not a block file this gainlink can read; give another --out"
             ) from None
-        got = {k: v.decode("utf-8") for k, v in meta.items() if k in (META_VERSION, META_CAMPAIGN)}
+        got = {k: v.decode("utf-8") for k, v in meta.items() if k in (META_VERSION, META_CAMPAIGN, META_LAYOUT)}
         _refuse(block, got.get(META_CAMPAIGN, "?"), got.get(META_VERSION), plan_doc["campaign"]["name"])
+        if got.get(META_LAYOUT) != LAYOUT:
+            raise CampaignError(
+                f"campaign: {block} is a block file of an earlier layout (before {LAYOUT}) than this gainlink's: "
+                "its runs would not be reused; give another --out"
+            )
 
 
 def _refuse(where: Path, name: str, version: str | None, new: str) -> None:
@@ -362,21 +392,31 @@ class Store:
         records = [with_inputs(r, p, kind=kind) for p, r in zip(points, results)]
         return self.put_block(encode_block([p.id for p in points], records, campaign=self.campaign))
 
-    def record_texts(self) -> Iterator[tuple[np.ndarray, list[str]]]:
-        """Every stored run's record as its JSON text, one block file at a time: ``(ids (ASCII bytes), texts)`` of the
-        rows the index keeps (a run stored twice: one record)."""
+    def report_parts(self) -> Iterator[tuple[np.ndarray, list[str], list[str], list[str | None]]]:
+        """What the report reads of every stored run, one block file at a time: ``(ids (ASCII bytes), statuses, rows
+        (the ``row`` column's JSON text), the errors' reasons (``None`` for a result))`` of the rows the index keeps
+        (a run stored twice: one record); only the errors' ``record`` text is decoded."""
         for path in self.files():
-            table = pq.read_table(path, columns=["id", "record"])
+            table = pq.read_table(path, columns=["id", "status", "row"])
             names = _ids(table.column("id"))
-            kept = self._kept(path, names)
-            texts = table.column("record").filter(pa.array(kept)).to_pylist()
-            yield names[kept], texts
+            kept = pa.array(self._kept(path, names))
+            statuses = table.column("status").filter(kept).to_pylist()
+            rows = table.column("row").filter(kept).to_pylist()
+            reasons: list[str | None] = [None] * len(rows)
+            if "error" in statuses:
+                records = pq.read_table(path, columns=["record"]).column("record").filter(kept)
+                for i in (i for i, status in enumerate(statuses) if status == "error"):
+                    reasons[i] = json.loads(records[i].as_py()).get("reason")
+            yield names[kept.to_numpy(zero_copy_only=False)], statuses, rows, reasons
 
     def records(self) -> Iterator[tuple[str, dict]]:
         """Every stored run's record, one block file at a time (a run stored twice: the record the index keeps)."""
-        for names, texts in self.record_texts():
-            for run_id, text in zip(names.tolist(), texts):
-                yield run_id.decode("ascii"), json.loads(text)
+        for path in self.files():
+            table = pq.read_table(path, columns=["id", "record", "row"])
+            names = _ids(table.column("id"))
+            for i in np.flatnonzero(self._kept(path, names)).tolist():
+                rest, row = (json.loads(table.column(k)[i].as_py()) for k in ("record", "row"))
+                yield names[i].decode("ascii"), _joined(rest, row)
 
     def traces(self, ids: Iterable[str]) -> Iterator[tuple[str, dict[str, np.ndarray]]]:
         """The stored traces of the runs ``ids`` that have a result, one block file at a time."""
@@ -402,28 +442,30 @@ class Store:
             shapes.update(zip(lengths[rows].tolist(), p[rows].tolist(), m[rows].tolist()))
         return dict(shapes)
 
-    def trace_stacks(self, ids: Iterable[str] | np.ndarray) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray]]]:
+    def trace_stacks(
+        self, ids: Iterable[str] | np.ndarray, *, fields: tuple[str, ...] = TRACE_FIELDS
+    ) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray]]]:
         """The stored traces of the runs ``ids`` that have a result, one block file at a time, stacked: for each
         block, the runs of one trace shape as ``(ids (ASCII bytes), {"t": (k, N), "y": (k, N, p), "u": ..., "r":
-        ...})``."""
-        wanted = _wanted(ids)
+        ...})``; only ``fields`` (and ``t``) are read."""
+        wanted, wide = _wanted(ids), [k for k in WIDE if k in fields]
         for path in self.files():
-            table = pq.read_table(path, columns=["id", "t", *WIDE, *(f"{k}_width" for k in WIDE)])
+            table = pq.read_table(path, columns=["id", "t", *wide, *(f"{k}_width" for k in WIDE)])
             names = _ids(table.column("id"))
             rows = self._kept(path, names, results=True) & np.isin(names, wanted) & table.column("t").is_valid()
             if not rows.any():
                 continue
-            part = table.filter(pa.array(rows))
+            part = table if rows.all() else table.filter(pa.array(rows))
             lengths = pc.list_value_length(part.column("t")).to_numpy(zero_copy_only=False)
             widths = np.stack([part.column(f"{k}_width").to_numpy(zero_copy_only=False) for k in WIDE], axis=1)
             shape_of = np.column_stack([lengths, widths])
             for shape in np.unique(shape_of, axis=0):
                 pick = np.flatnonzero((shape_of == shape).all(axis=1))
-                one = part.take(pa.array(pick))
-                n = int(shape[0])
+                one = part if pick.size == part.num_rows else part.take(pa.array(pick))
+                n, size = int(shape[0]), dict(zip(WIDE, shape[1:].tolist()))
                 stack = {"t": _flat(one.column("t")).reshape(len(pick), n)}
-                for k, width in zip(WIDE, shape[1:].tolist()):
-                    stack[k] = _flat(one.column(k)).reshape(len(pick), n, width)
+                for k in wide:
+                    stack[k] = _flat(one.column(k)).reshape(len(pick), n, size[k])
                 yield names[rows][pick], stack
 
     def _row(self, run_id: str, columns: list[str]) -> tuple[pa.Table, int] | None:
@@ -435,10 +477,11 @@ class Store:
 
     def record(self, run_id: str) -> dict:
         """The stored record of a run (KeyError when it has none)."""
-        got = self._row(run_id, ["record"])
+        got = self._row(run_id, ["record", "row"])
         if got is None:
             raise KeyError(run_id)
-        return json.loads(got[0].column("record")[got[1]].as_py())
+        table, i = got
+        return _joined(json.loads(table.column("record")[i].as_py()), json.loads(table.column("row")[i].as_py()))
 
     def trace(self, run_id: str) -> dict[str, np.ndarray] | None:
         """The stored downsampled traces of a run, if any."""
