@@ -38,6 +38,7 @@ PERCENTILES = (5, 25, 50, 75, 95)
 ENVELOPE_BINS = 512
 MAX_POINT_LINES = 30
 MAX_SCATTER = 20_000
+HISTOGRAM_RUNS = 128  # runs histogrammed at a time: its float64 and index temporaries ~16 MB, not a block's ~100
 
 
 def _flat(value: Any) -> str:
@@ -215,7 +216,7 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
         width = np.where(hi > lo, (hi - lo) / bins, 1.0)
         counts = np.zeros((2, *lo.shape, bins), np.int64)  # all runs, failed runs
         spill.seek(0)
-        for bad in chunks:
+        for bad in (b[i : i + HISTOGRAM_RUNS] for b in chunks for i in range(0, b.size, HISTOGRAM_RUNS)):
             sig = np.fromfile(spill, np.float32, bad.size * lo.size).reshape(bad.size, *lo.shape).astype(float)
             counts[0] += _histogram(sig, lo, width, bins)
             if bad.any():

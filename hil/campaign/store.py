@@ -166,6 +166,13 @@ def write_block(folder: str, key: tuple[int, int], ids: list[str], data: bytes, 
     return {"block": name, "runs": len(ids), "errors": errors}
 
 
+def _read(path: Path, columns: list[str]) -> pa.Table:
+    """``columns`` of block file ``path``, after handing back to the system what Arrow's pool kept of the blocks read
+    before (mimalloc keeps freed pages: +30 MB of the client's resident memory over 10,000 runs' records)."""
+    pa.default_memory_pool().release_unused()
+    return pq.read_table(path, columns=columns)
+
+
 def _ids(column: pa.ChunkedArray) -> np.ndarray:
     """A block's ``id`` column as ASCII bytes (numpy ``S``), as the plan's ids are."""
     return np.array(column.to_pylist(), dtype="S")
@@ -286,7 +293,7 @@ class Store:
             return
         self._loaded = True
         for path in self.files():
-            table = pq.read_table(path, columns=["id", "status"])
+            table = _read(path, columns=["id", "status"])
             self._note(_ids(table.column("id")), _done(table.column("status")), path.name)
 
     def _note(self, ids: np.ndarray, done: np.ndarray, name: str) -> None:
@@ -397,14 +404,14 @@ class Store:
         (the ``row`` column's JSON text), the errors' reasons (``None`` for a result))`` of the rows the index keeps
         (a run stored twice: one record); only the errors' ``record`` text is decoded."""
         for path in self.files():
-            table = pq.read_table(path, columns=["id", "status", "row"])
+            table = _read(path, columns=["id", "status", "row"])
             names = _ids(table.column("id"))
             kept = pa.array(self._kept(path, names))
             statuses = table.column("status").filter(kept).to_pylist()
             rows = table.column("row").filter(kept).to_pylist()
             reasons: list[str | None] = [None] * len(rows)
             if "error" in statuses:
-                records = pq.read_table(path, columns=["record"]).column("record").filter(kept)
+                records = _read(path, columns=["record"]).column("record").filter(kept)
                 for i in (i for i, status in enumerate(statuses) if status == "error"):
                     reasons[i] = json.loads(records[i].as_py()).get("reason")
             yield names[kept.to_numpy(zero_copy_only=False)], statuses, rows, reasons
@@ -412,7 +419,7 @@ class Store:
     def records(self) -> Iterator[tuple[str, dict]]:
         """Every stored run's record, one block file at a time (a run stored twice: the record the index keeps)."""
         for path in self.files():
-            table = pq.read_table(path, columns=["id", "record", "row"])
+            table = _read(path, columns=["id", "record", "row"])
             names = _ids(table.column("id"))
             for i in np.flatnonzero(self._kept(path, names)).tolist():
                 rest, row = (json.loads(table.column(k)[i].as_py()) for k in ("record", "row"))
@@ -422,7 +429,7 @@ class Store:
         """The stored traces of the runs ``ids`` that have a result, one block file at a time."""
         wanted = _wanted(ids)
         for path in self.files():
-            table = pq.read_table(path, columns=["id", "t", *WIDE, *(f"{k}_width" for k in WIDE)])
+            table = _read(path, columns=["id", "t", *WIDE, *(f"{k}_width" for k in WIDE)])
             names = _ids(table.column("id"))
             for row in np.flatnonzero(self._kept(path, names, results=True) & np.isin(names, wanted)).tolist():
                 trace = _trace_of(table, row)
@@ -434,7 +441,7 @@ class Store:
         commands), from the ``t`` column's lengths and the widths: no output or command trace is read."""
         wanted, shapes = _wanted(ids), Counter()
         for path in self.files():
-            table = pq.read_table(path, columns=["id", "t", "y_width", "u_width"])
+            table = _read(path, columns=["id", "t", "y_width", "u_width"])
             names = _ids(table.column("id"))
             rows = self._kept(path, names, results=True) & np.isin(names, wanted) & table.column("t").is_valid()
             lengths = pc.list_value_length(table.column("t")).to_numpy(zero_copy_only=False)
@@ -450,7 +457,7 @@ class Store:
         ...})``; only ``fields`` (and ``t``) are read."""
         wanted, wide = _wanted(ids), [k for k in WIDE if k in fields]
         for path in self.files():
-            table = pq.read_table(path, columns=["id", "t", *wide, *(f"{k}_width" for k in WIDE)])
+            table = _read(path, columns=["id", "t", *wide, *(f"{k}_width" for k in WIDE)])
             names = _ids(table.column("id"))
             rows = self._kept(path, names, results=True) & np.isin(names, wanted) & table.column("t").is_valid()
             if not rows.any():
