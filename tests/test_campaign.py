@@ -571,7 +571,6 @@ def test_show_takes_a_run_by_index_or_by_id_never_guessing_which(local_run, tmp_
 
 
 def test_a_long_run_is_stored_as_evenly_spaced_true_samples_with_both_ends():
-    from gainlink.hil.campaign.store import decode_trace
     from gainlink.hil.campaign.worker import MAX_TRACE_POINTS, downsampled_trace
     from gainlink.hil.loop.metrics import RunTrace
 
@@ -590,7 +589,7 @@ def test_a_long_run_is_stored_as_evenly_spaced_true_samples_with_both_ends():
             + ("twin_y", "twin_u", "twin_z")
         },
     )
-    got = decode_trace(downsampled_trace(trace))
+    got = downsampled_trace(trace)
     assert got["t"].size == MAX_TRACE_POINTS and got["t"][0] == 0.0 and got["t"][-1] == np.float32(t[-1])
     k = np.rint(got["t"].astype(float) / 0.01).astype(int)  # which samples they are, from their own times
     assert np.all(np.diff(k) >= N // MAX_TRACE_POINTS) and np.all(np.diff(k) <= N // MAX_TRACE_POINTS + 1)

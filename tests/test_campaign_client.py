@@ -145,3 +145,85 @@ def test_an_fmu_instance_serves_a_workers_next_runs_as_a_fresh_one_would(cart_fm
     for name in ("t", "y", "u", "r"):
         assert np.array_equal(getattr(again.trace, name), getattr(fresh.trace, name)), name
     assert again.metrics["twin"] == fresh.metrics["twin"]
+
+
+def _pendulum_task(runs: int) -> tuple:
+    """The plan of ``runs`` draws of the shipped pendulum campaign (no anti-windup, 0.5 s) and its runs as a task
+    carries them, run 1 naming a plant parameter the pendulum does not have (its record: an error)."""
+    from gainlink.fileio import read_toml
+
+    path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
+    data, _ = read_toml(path, what="campaign", error=ValueError)
+    data |= {"runs": runs, "spec": str((path.parent / data["spec"]).resolve())}
+    data["grid"][0]["values"] = ["none"]
+    data["scenario"]["duration"] = 0.5
+    plan = plan_campaign(parse_campaign(data))
+    points = list(plan.runs)
+    runs_ = [(p.artifact_sha256, dict(p.scenario), p.seed) for p in points]
+    runs_[1][1]["plant"] = dict(runs_[1][1]["plant"], parameters={"mass": 2.0})
+    return plan, points, runs_
+
+
+def _stored(store) -> dict:
+    """A folder's records (but what depends on the clock: the worker's pid and times, the loop's timing metrics),
+    traces and whether each is a result, by run id."""
+    from gainlink.hil.campaign.store import Store
+
+    fresh = Store(store.out)  # read back from the files alone, as a resumed campaign reads them
+    out = {}
+    for i, rec in fresh.records():
+        kept = {k: v for k, v in rec.items() if k not in ("worker", "metrics")}
+        kept["metrics"] = (
+            {k: rec["metrics"].get(k) for k in ("tracked", "outputs_final", "twin")} if "metrics" in rec else None
+        )
+        out[i] = (kept, fresh.trace(i), fresh.finished(i))
+    return out
+
+
+def test_a_worker_that_sees_the_campaign_folder_writes_its_block_and_one_that_does_not_returns_its_bytes(tmp_path):
+    """A task of 4 pendulum runs (one an error) as the campaign submits it: a worker that sees the client's blocks
+    folder (its device and inode) writes the block file there itself, 0644, no temporary file left, and answers a
+    few numbers; a worker whose folder at the same path is another one (made again: another inode, as on another
+    machine) writes nothing and returns the file's bytes, which the client writes. Both folders then hold the same
+    records and traces, and the error's reason reaches the client either way."""
+    import os
+    import pickle
+
+    from gainlink.hil.campaign.runner import _store_answer, plan_doc
+    from gainlink.hil.campaign.store import Store, block_address, folder_key
+    from gainlink.hil.campaign.worker import execute_packed
+
+    plan, points, runs = _pendulum_task(4)
+    ids = [p.id for p in points]
+    packed = pickle.dumps((ids, runs))
+    answers, stores = {}, {}
+    for side in ("sees", "elsewhere"):
+        store = Store(tmp_path / side, campaign=plan.campaign.name)
+        store.prepare(plan, plan_doc=plan_doc(plan))
+        key = folder_key(store.blocks)
+        if side == "elsewhere":  # the path names another folder now
+            os.rename(store.blocks, tmp_path / side / "blocks-client")
+            store.blocks.mkdir()
+        answers[side] = execute_packed(
+            "sil", plan.artifacts, packed, {}, campaign=plan.campaign.name, folder=(str(store.blocks), key)
+        )
+        stores[side] = store
+    name = f"{block_address(ids)}.parquet"
+    assert answers["sees"]["block"] == name and answers["sees"]["runs"] == 4
+    assert [i for i, _ in answers["sees"]["errors"]] == [1]
+    written = stores["sees"].blocks / name
+    assert [p.name for p in stores["sees"].blocks.iterdir()] == [name]  # no temporary file left
+    assert oct(written.stat().st_mode & 0o777) == "0o644"
+    assert isinstance(answers["elsewhere"], bytes) and not list(stores["elsewhere"].blocks.iterdir())
+    told = {side: _store_answer(stores[side], answers[side], points) for side in answers}
+    assert told["sees"] == told["elsewhere"]
+    assert [r["status"] for r in told["sees"]] == ["done", "error", "done", "done"]
+    assert "mass" in told["sees"][1]["reason"] and "\n" not in told["sees"][1]["reason"]
+    assert stores["sees"].finished(ids[0]) and not stores["sees"].finished(ids[1]) and stores["sees"].has(ids[1])
+    got, want = _stored(stores["sees"]), _stored(stores["elsewhere"])
+    assert got.keys() == want.keys() == set(ids)
+    for i in ids:
+        assert got[i][0] == want[i][0] and got[i][2] == want[i][2]
+        assert (got[i][1] is None) == (want[i][1] is None) == (i == ids[1])
+        if got[i][1] is not None:
+            assert all(np.array_equal(got[i][1][k], want[i][1][k]) for k in "tyur")

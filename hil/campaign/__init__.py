@@ -2,7 +2,7 @@
 
 ``gl.campaign.run("campaign.toml", out="DIR")`` (``gainlink campaign run``) plans the runs
 (:mod:`.config`, :mod:`.plan`), runs those without a result on a Dask LocalCluster or any scheduler
-(:mod:`.cluster`, :mod:`.runner`; a task is :func:`.worker.execute_batch`: a HIL run, or a block of SIL runs
+(:mod:`.cluster`, :mod:`.runner`; a task is :func:`.worker.execute_block`: a HIL run, or a block of SIL runs
 stepped together, :mod:`gainlink.hil.loop.block`, each run's record the one :func:`.worker.execute` gives it
 alone), stores each run by its content address (:mod:`.store`) and merges the report
 (:mod:`.report`): pass/fail per run (:mod:`.criteria`), percentile envelopes, scatter plots, a failure table.

@@ -1,15 +1,17 @@
 """Run a campaign: plan it, submit the runs without a result to Dask, store each as it completes, merge.
 
 FMUs go to the cluster once each (as tasks returning them, keyed by sha256); a task is
-``execute_block(kind, artifacts, runs, fmus, ids=..., campaign=...)`` (submitted as :func:`.worker.execute_packed`, the
-ids and runs pickled into one argument): a list of runs with the artifacts they use,
+``execute_block(kind, artifacts, runs, fmus, ids=..., campaign=..., folder=...)`` (submitted as
+:func:`.worker.execute_packed`, the ids and runs pickled into one argument): a list of runs with the artifacts they use,
 inline (SIL: a block of up to :data:`MAX_BLOCK` runs of one artifact stepped together on the worker,
-:func:`batch_sizes`; HIL: one run, keyed by its run id). A task returns its block as one Parquet file made on the
-worker; results come back through ``as_completed`` and each block is written as it completes (the client writes
-bytes, it decodes no trace), so whatever finished before an interruption is kept. A task that raised is retried once
-by Dask (``retries=1``); a batch still failing, or whose workers died under it (``KilledWorker``), is submitted again
-one run per task, and a single run that fails so is recorded as an error with the reason: one bad run costs no other
-run its result.
+:func:`batch_sizes`; HIL: one run, keyed by its run id). A task makes its block's Parquet file on the worker and
+writes it into the campaign folder itself when it sees the folder (a LocalCluster; the folder's device and inode
+tell, not the hostname), returning only the file's name and the errors' reasons; a worker on another machine returns
+the file's bytes for the client to write. Results come back through ``as_completed`` and each block is noted as it
+completes (the client decodes no trace), so whatever finished before an interruption is kept. A task that raised
+is retried once by Dask (``retries=1``); a batch still failing, or whose workers died under it (``KilledWorker``), is
+submitted again one run per task, and a single run that fails so is recorded as an error with the reason: one bad
+run costs no other run its result.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from .cluster import check_main_guard, dask_client
 from .config import Campaign, CampaignError, load_campaign, parse_campaign
 from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign
 from .report import merge
-from .store import Store, refuse_foreign
+from .store import Store, folder_key, refuse_foreign
 from .worker import execute_packed
 
 log = logging.getLogger(__name__)
@@ -190,7 +192,8 @@ def run(
                     client, plan, blocks, store, done=done, total=total, progress=progress, window=threads
                 )
         except KeyboardInterrupt:  # the block closed the client (and the LocalCluster) on its way out
-            stored = int((distinct & store.finished_mask(plan.runs.ids)).sum())
+            # read again from the folder: workers write their blocks themselves, some the client had not yet heard of
+            stored = int((distinct & Store(store.out).finished_mask(plan.runs.ids)).sum())
             raise CampaignInterrupted(out=store.out, finished=stored, total=total) from None
     return _result(plan, store, reused=reused, executed=todo, plots=plots)
 
@@ -273,6 +276,14 @@ def batch_sizes(kind: str, runs: int, threads: int, *, batch: int | None = None)
     return [runs // count + (1 if i < runs % count else 0) for i in range(count)]
 
 
+def _store_answer(store: Store, data: Any, points: list[RunPoint]) -> list[dict]:
+    """Store a task's answer for ``points``: the block file a worker wrote (a few numbers), or its bytes; a worker
+    that answered something else is named."""
+    if isinstance(data, dict) and "block" in data:
+        return store.took_block(data, [p.id for p in points])
+    return store.put_block(_block_bytes(data))
+
+
 def _block_bytes(data: Any) -> bytes:
     """A task's answer: the bytes of a block file; a worker that answered something else is named."""
     if not isinstance(data, bytes):
@@ -286,8 +297,10 @@ def _block_bytes(data: Any) -> bytes:
 class _Submitter:
     """Submits batches of runs to Dask; a batch that failed is submitted again one run per task."""
 
-    def __init__(self, client: Any, plan: CampaignPlan) -> None:
+    def __init__(self, client: Any, plan: CampaignPlan, store: Store) -> None:
         self.client, self.plan, self.kind = client, plan, plan.campaign.kind
+        # where a worker that sees the campaign folder writes its block file itself (folder_key: not the hostname)
+        self.folder = (str(store.blocks.resolve()), folder_key(store.blocks))
         # FMU archives go to the cluster once each, as tasks returning them (not scattered data): a task's result
         # lost with its worker is computed again from the graph, scattered data would be gone for good. Artifacts
         # (a few kB) travel inside each task: a task with no dependency goes to whichever worker is free, instead
@@ -308,6 +321,7 @@ class _Submitter:
             pickle.dumps(([p.id for p in points], runs), protocol=pickle.HIGHEST_PROTOCOL),
             needed,
             campaign=self.plan.campaign.name,
+            folder=self.folder,
             key=key,
             retries=1,
             pure=False,
@@ -332,7 +346,7 @@ def _submit_and_store(
     from distributed import as_completed
 
     kind = plan.campaign.kind
-    submitter = _Submitter(client, plan)
+    submitter = _Submitter(client, plan, store)
     futures: dict[Any, list[RunPoint]] = {}
     for points in itertools.islice(blocks, max(window, 1) * BLOCKS_IN_FLIGHT):
         futures[submitter.submit(points)] = points
@@ -340,7 +354,7 @@ def _submit_and_store(
     for fut in queue:
         batch_points = futures.pop(fut)
         try:
-            stored = store.put_block(_block_bytes(fut.result()))
+            stored = _store_answer(store, fut.result(), batch_points)
         except (Exception, CancelledError) as exc:  # retried once already; KilledWorker: its workers died
             fut.release()
             reason = f"{type(exc).__name__}: {exc}"

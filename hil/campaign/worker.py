@@ -1,6 +1,6 @@
 """What runs on a Dask worker: one campaign run as a pure function of (artifact bytes, scenario, seed).
 
-:func:`execute` is one run; a Dask task is :func:`execute_batch`, a list of runs: a HIL run alone, SIL runs in blocks
+:func:`execute` is one run; a Dask task is :func:`execute_block`, a list of runs: a HIL run alone, SIL runs in blocks
 stepped together (:mod:`gainlink.hil.loop.block`: a task per run cost more than the run's tenth in Dask's bookkeeping,
 and a run stepped alone costs numpy's per-call price at every step). Its inputs travel as bytes (the artifact's
 canonical JSON, FMU archives by sha256); the worker writes each once into a host-local cache named by sha256, builds the
@@ -34,18 +34,16 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import msgpack
 import numpy as np
 from gainlink.errors import GainlinkError, TransportError
 from gainlink.fileio import atomic_write_bytes
 from gainlink.shipping.artifact import Artifact, from_dict
-from gainlink.version import __version__
 
 from ..loop.scenario import DRAWN, parse_scenario
 from ..paths import cache_dir
 from ..plants.fmu import reused_instances
 from .criteria import measure
-from .store import encode_block, encode_trace, with_inputs
+from .store import encode_block, encode_trace, with_inputs, write_block
 
 MAX_TRACE_POINTS = 600
 MAX_BUS_SLOTS = 64
@@ -186,9 +184,9 @@ def _scenario(scenario: dict, *, artifact_path: Path, seed: int, blobs: dict, ki
     return parse_scenario(data)
 
 
-def downsampled_trace(trace: Any) -> bytes:
+def downsampled_trace(trace: Any) -> dict[str, np.ndarray]:
     """The run's t, y, u, r at no more than :data:`MAX_TRACE_POINTS` evenly spaced samples (first and last
-    kept), encoded for the campaign folder (:func:`~.store.encode_trace`)."""
+    kept), as the block file stores them (:func:`~.store.encode_trace`: float32 arrays)."""
     N = trace.t.size
     idx = np.unique(np.linspace(0, N - 1, min(N, MAX_TRACE_POINTS)).round().astype(int)) if N else np.zeros(0, int)
     return encode_trace(trace.t[idx], trace.y[idx], trace.u[idx], trace.r[idx])
@@ -214,7 +212,8 @@ def run_point(kind: str, artifact: Artifact, scenario: Any) -> Any:
 
 
 def execute(kind: str, artifact_json: bytes, scenario: dict, seed: int, blobs: dict | None = None) -> dict:
-    """One campaign run: a JSON-able record plus its downsampled traces (``trace``: ``.npy`` bytes).
+    """One campaign run: a JSON-able record plus its downsampled traces (``trace``: :func:`~.store.encode_trace`'s
+    arrays).
 
     Parameters
     ----------
@@ -259,11 +258,54 @@ def _stopped(where: dict, cpu0: float) -> dict:
     return where | {"stop": time.time(), "cpu_s": time.thread_time() - cpu0}
 
 
-def execute_batch(
+def execute_block(
+    kind: str,
+    artifacts: dict[str, bytes],
+    runs: list[tuple[str, dict, int]],
+    blobs: dict | None = None,
+    *,
+    ids: list[str],
+    campaign: str,
+    folder: tuple[str, tuple[int, int]] | None = None,
+) -> bytes | dict:
+    """A campaign task: the runs of :func:`batch_records` (run ``ids[i]`` is ``runs[i]``) as the block's Parquet
+    file for the campaign folder (:func:`~.store.encode_block`).
+
+    ``folder``: the campaign's ``blocks`` folder and its :func:`~.store.folder_key` as the client saw them. When this
+    worker sees that folder (a LocalCluster, a shared file system), it writes the file there itself and returns a few
+    numbers (:func:`~.store.write_block`: the file's name, the runs, the errors' reasons); else it returns the file's
+    bytes and the client writes them.
+    """
+    records = [with_inputs(r, run, kind=kind) for r, run in zip(batch_records(kind, artifacts, runs, blobs), runs)]
+    data = encode_block(ids, records, campaign=campaign)
+    if folder is not None:
+        errors = [[i, r.get("reason")] for i, r in enumerate(records) if r["status"] == "error"]
+        answer = write_block(folder[0], folder[1], ids, data, errors)
+        if answer is not None:
+            return answer
+    return data
+
+
+def execute_packed(
+    kind: str,
+    artifacts: dict[str, bytes],
+    packed: bytes,
+    blobs: dict | None = None,
+    *,
+    campaign: str,
+    folder: tuple[str, tuple[int, int]] | None = None,
+) -> bytes | dict:
+    """:func:`execute_block` as the campaign submits it: ``packed`` is ``pickle.dumps((ids, runs))``. One bytes
+    argument is what Dask's graph code walks past: a list of runs' scenarios as an argument is walked element by
+    element on the client for dependencies (measured: 11,000 calls a block of 500 pendulum runs)."""
+    ids, runs = pickle.loads(packed)
+    return execute_block(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder)
+
+
+def batch_records(
     kind: str, artifacts: dict[str, bytes], runs: list[tuple[str, dict, int]], blobs: dict | None = None
-) -> bytes:
-    """A task's campaign runs (one Dask task): their records, in order, as one msgpack document (read back with
-    :func:`unpack_results`).
+) -> list[dict]:
+    """A task's campaign runs, their records in order.
 
     Parameters
     ----------
@@ -280,46 +322,9 @@ def execute_batch(
     runs alone, and the block says why once (a log line on the worker, ``worker.block`` in its records). A run whose
     plant cannot be built (a drawn number it refuses) is left out of its block and runs alone, recording its error; a
     block that fails otherwise with a :class:`~gainlink.errors.GainlinkError` is run again one run at a time, so one
-    bad run costs no other its result.
-
-    One bytes object is what Dask moves back: a list of records (nested dicts) is sized and serialised by
-    Dask element by element, which cost 3x the worker's CPU per task and 1.6x the client's (measured with
-    16 pendulum records a task: 9.3 and 7.3 ms against 3.1 and 4.6). msgpack, not pickle: a result is data
-    and unpacking it runs no code. An exception other than a :class:`~gainlink.errors.GainlinkError` ends
-    the batch (the campaign then runs each of its runs alone, so one bad run costs no other its result).
+    bad run costs no other its result. An exception other than a :class:`~gainlink.errors.GainlinkError` ends the task
+    (the campaign then runs each of its runs alone, so one bad run costs no other its result).
     """
-    return msgpack.packb(batch_records(kind, artifacts, runs, blobs), use_bin_type=True)
-
-
-def execute_block(
-    kind: str,
-    artifacts: dict[str, bytes],
-    runs: list[tuple[str, dict, int]],
-    blobs: dict | None = None,
-    *,
-    ids: list[str],
-    campaign: str,
-) -> bytes:
-    """A campaign task: the runs of :func:`execute_batch` (run ``ids[i]`` is ``runs[i]``), returned as the block's
-    Parquet file for the campaign folder (:func:`~.store.encode_block`): the client only writes its bytes."""
-    records = [with_inputs(r, run, kind=kind) for r, run in zip(batch_records(kind, artifacts, runs, blobs), runs)]
-    return encode_block(ids, records, campaign=campaign)
-
-
-def execute_packed(
-    kind: str, artifacts: dict[str, bytes], packed: bytes, blobs: dict | None = None, *, campaign: str
-) -> bytes:
-    """:func:`execute_block` as the campaign submits it: ``packed`` is ``pickle.dumps((ids, runs))``. One bytes
-    argument is what Dask's graph code walks past: a list of runs' scenarios as an argument is walked element by
-    element on the client for dependencies (measured: 11,000 calls a block of 500 pendulum runs)."""
-    ids, runs = pickle.loads(packed)
-    return execute_block(kind, artifacts, runs, blobs, ids=ids, campaign=campaign)
-
-
-def batch_records(
-    kind: str, artifacts: dict[str, bytes], runs: list[tuple[str, dict, int]], blobs: dict | None = None
-) -> list[dict]:
-    """The records of :func:`execute_batch`, in order."""
     records: list[dict | None] = [None] * len(runs)
     if kind == "sil":
         for members in _blocks(artifacts, runs, blobs or {}).values():
@@ -404,13 +409,3 @@ def _run_block(members: list, records: list, runs: list, blobs: dict) -> None:
             log.info("campaign run %d of this task runs alone: its plant could not be built in its block", i)
             continue
         records[i] = _record(result, artifact) | {"worker": share | {"block": stepped}}
-
-
-def unpack_results(data: bytes) -> list[dict]:
-    """The records of an :func:`execute_batch` result; a worker that answered something else is named."""
-    if not isinstance(data, bytes):
-        raise GainlinkError(
-            f"a worker returned {type(data).__name__}, not a batch of records: is it running "
-            f"another gainlink version than this client ({__version__})?"
-        )
-    return msgpack.unpackb(data, raw=False, strict_map_key=False)
