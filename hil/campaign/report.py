@@ -189,9 +189,9 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
     ``status`` (id -> ``pass`` or ``fail``) whose traces have the most common shape, and the failed runs' median;
     ``None`` without a stored trace.
 
-    Streamed: the block files are read once, one at a time (each sample's smallest and largest finite value, the
-    stack spilled as float32 to an anonymous temporary file in the campaign folder), then the spill is read back a
-    block at a time into a histogram of ``bins`` equal bins between them per sample and signal, so the memory is the
+    Streamed: the block files are read once, one at a time (each trace shape's runs: each sample's smallest and largest
+    finite value, the stack spilled as float32 to an anonymous temporary file in the campaign folder; the shapes are
+    counted in the same pass), then the most common shape's spill is read back a block at a time into a histogram of ``bins`` equal bins between them per sample and signal, so the memory is the
     histograms', not the runs'. A percentile is numpy's linear one (``np.nanpercentile``) with each order statistic
     taken at the centre of its bin: within half a bin, ``(max - min) / (2 * bins)`` of that sample, of the exact value
     (below a pixel of the plot). NaN samples are left out as nanpercentile leaves them; an infinite one counts in the
@@ -201,37 +201,61 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
     "inputs", "half_bin": (N, S)}`` with the S signals the outputs then the commands.
     """
     ids, failing = _status_ids(status)
-    shapes = Counter(store.trace_shapes(ids))
-    if not shapes:
-        return None
-    shape = shapes.most_common(1)[0][0]
-    lo, hi, t, chunks = None, None, None, []
     with tempfile.TemporaryFile(dir=store.out) as spill:  # the stacks read once, kept as float32 for the 2nd pass
-        for names, times, sig in _signal_stacks(store, ids, shape):
-            t = times if t is None else t
-            lo, hi = _extremes(sig, lo, hi)
-            sig.tofile(spill)
-            chunks.append(np.isin(names, failing))
-        lo, hi = np.nan_to_num(lo.astype(float)), np.nan_to_num(hi.astype(float))
+        seen = _spill_stacks(store, ids, failing, spill)
+        if not seen:
+            return None
+        shape = max(seen, key=lambda k: seen[k].runs)  # the most common shape; ties: the first met
+        one = seen[shape]
+        lo, hi = np.nan_to_num(one.lo.astype(float)), np.nan_to_num(one.hi.astype(float))
         width = np.where(hi > lo, (hi - lo) / bins, 1.0)
         counts = np.zeros((2, *lo.shape, bins), np.int64)  # all runs, failed runs
-        spill.seek(0)
-        for bad in (b[i : i + HISTOGRAM_RUNS] for b in chunks for i in range(0, b.size, HISTOGRAM_RUNS)):
-            sig = np.fromfile(spill, np.float32, bad.size * lo.size).reshape(bad.size, *lo.shape).astype(float)
-            counts[0] += _histogram(sig, lo, width, bins)
-            if bad.any():
-                counts[1] += _histogram(sig[bad], lo, width, bins)
+        for at, bad in one.chunks:
+            spill.seek(at)
+            for i in range(0, bad.size, HISTOGRAM_RUNS):
+                part = bad[i : i + HISTOGRAM_RUNS]
+                sig = np.fromfile(spill, np.float32, part.size * lo.size).reshape(part.size, *lo.shape).astype(float)
+                counts[0] += _histogram(sig, lo, width, bins)
+                if part.any():
+                    counts[1] += _histogram(sig[part], lo, width, bins)
     pct = np.stack([_percentile(counts[0], q, lo, width) for q in PERCENTILES])
     return {
-        "t": t,
+        "t": one.t,
         "percentiles": pct,
         "failed_median": _percentile(counts[1], 50, lo, width),
-        "runs": sum(b.size for b in chunks),
-        "failed": int(sum(b.sum() for b in chunks)),
+        "runs": one.runs,
+        "failed": int(sum(b.sum() for _, b in one.chunks)),
         "outputs": shape[1],
         "inputs": shape[2],
         "half_bin": width / 2,
     }
+
+
+class _Spilled:
+    """The runs of one trace shape spilled: their times, each sample's extremes, and each block's place in the spill
+    file with which of its runs failed."""
+
+    def __init__(self, t: np.ndarray) -> None:
+        self.t, self.lo, self.hi, self.runs = t, None, None, 0
+        self.chunks: list[tuple[int, np.ndarray]] = []
+
+
+def _spill_stacks(store: Any, ids: np.ndarray, failing: np.ndarray, spill: IO[bytes]) -> dict[tuple, _Spilled]:
+    """Read every block's traces of the runs ``ids`` once, spill them to ``spill`` as float32 and note, per trace
+    shape (samples, outputs, commands), what :func:`envelope_bands` needs: one pass, no separate read of the shapes."""
+    seen: dict[tuple, _Spilled] = {}
+    at = 0
+    for names, st in store.trace_stacks(ids, fields=("t", "y", "u")):
+        shape = (st["t"].shape[1], st["y"].shape[2], st["u"].shape[2])
+        one = seen.setdefault(shape, _Spilled(st["t"][0].astype(float)))
+        sig = np.concatenate([st["y"], st["u"]], axis=2)
+        one.lo, one.hi = _extremes(sig, one.lo, one.hi)
+        one.chunks.append((at, np.isin(names, failing)))
+        one.runs += len(names)
+        sig.tofile(spill)
+        at += sig.nbytes
+    spill.flush()
+    return seen
 
 
 def _extremes(sig: np.ndarray, lo: np.ndarray | None, hi: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -249,13 +273,6 @@ def _status_ids(status: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray]:
         return status.ids, status.ids[status.failed]
     ids = np.array([i.encode("ascii", "replace") for i in status], dtype="S")
     return ids, ids[np.array([v == "fail" for v in status.values()], bool)]
-
-
-def _signal_stacks(store: Any, ids: np.ndarray, shape: tuple) -> Any:
-    """The runs of ``shape`` (samples, outputs, commands), a block at a time: ``(ids, t (N,), (k, N, S) float32)``."""
-    for names, st in store.trace_stacks(ids, fields=("t", "y", "u")):
-        if (st["t"].shape[1], st["y"].shape[2], st["u"].shape[2]) == shape:
-            yield names, st["t"][0].astype(float), np.concatenate([st["y"], st["u"]], axis=2)
 
 
 def _histogram(sig: np.ndarray, lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:
