@@ -191,11 +191,11 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
 
     Streamed: the block files are read once, one at a time (each trace shape's runs: each sample's smallest and largest
     finite value, the stack spilled as float32 to an anonymous temporary file in the campaign folder; the shapes are
-    counted in the same pass), then the most common shape's spill is read back a block at a time into a histogram of ``bins`` equal bins between them per sample and signal, so the memory is the
-    histograms', not the runs'. A percentile is numpy's linear one (``np.nanpercentile``) with each order statistic
-    taken at the centre of its bin: within half a bin, ``(max - min) / (2 * bins)`` of that sample, of the exact value
-    (below a pixel of the plot). NaN samples are left out as nanpercentile leaves them; an infinite one counts in the
-    end bin on its side.
+    counted in the same pass), then the most common shape's spill is read back a block at a time into a histogram of
+    ``bins`` equal bins between them per sample and signal, so the memory is the histograms', not the runs'. A
+    percentile is numpy's linear one (``np.nanpercentile``) with each order statistic taken at the centre of its bin:
+    within half a bin, ``(max - min) / (2 * bins)`` of that sample, of the exact value (below a pixel of the plot). NaN
+    samples are left out as nanpercentile leaves them; an infinite one counts in the end bin on its side.
 
     Returns ``{"t", "percentiles": (len(PERCENTILES), N, S), "failed_median": (N, S), "runs", "failed", "outputs",
     "inputs", "half_bin": (N, S)}`` with the S signals the outputs then the commands.
@@ -214,7 +214,7 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
             spill.seek(at)
             for i in range(0, bad.size, HISTOGRAM_RUNS):
                 part = bad[i : i + HISTOGRAM_RUNS]
-                sig = np.fromfile(spill, np.float32, part.size * lo.size).reshape(part.size, *lo.shape).astype(float)
+                sig = np.fromfile(spill, np.float32, part.size * lo.size).reshape(part.size, *lo.shape)
                 counts[0] += _histogram(sig, lo, width, bins)
                 if part.any():
                     counts[1] += _histogram(sig[part], lo, width, bins)
@@ -278,7 +278,7 @@ def _status_ids(status: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray]:
 def _histogram(sig: np.ndarray, lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:
     """Counts of ``sig`` (k, N, S) in ``bins`` bins from ``lo`` of ``width`` per sample and signal: (N, S, bins)."""
     with np.errstate(invalid="ignore", over="ignore"):
-        b = np.subtract(sig, lo)  # in place from here: the stack is the largest array of the report
+        b = np.subtract(sig, lo)  # float64 (lo's): a float32 stack is widened here, no copy before; in place from here
         b /= width
         np.floor(b, out=b)
     nan = np.isnan(b)
