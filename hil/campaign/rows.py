@@ -62,13 +62,14 @@ def point_row(point: Any) -> dict:
 
 MISSING_VERDICT = {"status": "missing", "failed": ["missing"], "reasons": ["no result"]}
 METRIC_CELLS = ("iae", "overshoot_pct", "settling_time_s")
-
-
-def _cell(v: Any) -> str:
-    """A CSV cell as ``csv.writer`` writes the value (floats by repr, None empty)."""
-    if v is None:
-        return ""
-    return repr(v) if isinstance(v, float) else str(v)
+MEASURE_CELLS = (
+    "stable",
+    "longest_saturation_s",
+    "twin_output_deviation",
+    "twin_command_deviation",
+    "model_mismatch",
+    "model_iae_ratio",
+)
 
 
 def csv_cells(v: dict) -> tuple[list[str], tuple[str, ...], tuple[str, ...]]:
@@ -76,16 +77,14 @@ def csv_cells(v: dict) -> tuple[list[str], tuple[str, ...], tuple[str, ...]]:
     metrics and each output's final value in the run's own sorted order (returned with those names)."""
     m, q = v.get("metrics", {}), v.get("measures", {})
     tracked, outs = tuple(sorted(m.get("tracked", {}))), tuple(sorted(m.get("outputs_final", {})))
-    cells = [
-        "; ".join(v["reasons"]),
-        _cell(v.get("complete")),
-        _cell(q.get("stable")),
-        _cell(q.get("longest_saturation_s")),
-        *(_cell(q.get(k)) for k in ("twin_output_deviation", "twin_command_deviation", "model_mismatch")),
-        _cell(q.get("model_iae_ratio")),
-        *(_cell(m["tracked"][t].get(k)) for t in tracked for k in METRIC_CELLS),
-        *(_cell(m["outputs_final"][o]) for o in outs),
+    values = [
+        v.get("complete"),
+        *(q.get(k) for k in MEASURE_CELLS),
+        *(m["tracked"][t].get(k) for t in tracked for k in METRIC_CELLS),
+        *(m["outputs_final"][o] for o in outs),
     ]
+    cells = ["; ".join(v["reasons"])]  # then each as csv.writer writes it (floats by repr, None empty), inline
+    cells += [repr(x) if isinstance(x, float) else "" if x is None else str(x) for x in values]
     return cells, tracked, outs
 
 
@@ -119,6 +118,7 @@ class Verdicts:
         self.shapes: list[tuple[tuple[str, ...], tuple[str, ...]]] = []
         self.tracked: set[str] = set()
         self.outputs: set[str] = set()
+        self._heads: dict[tuple, str] = {}
         for run_ids, statuses, rows, reasons in store.report_parts():
             k = np.minimum(np.searchsorted(self.uids, run_ids), max(n - 1, 0))
             planned = (self.uids[k] == run_ids).tolist() if n else [False] * len(run_ids)
@@ -140,7 +140,7 @@ class Verdicts:
             self.tracked.update(tracked)
             self.outputs.update(outs)
         self.shape[u] = self.shapes.index(shape)
-        text = json.dumps(head, sort_keys=True, allow_nan=False)
+        text = self._head_text(head)
         body = text if row_text == "{}" else text[:-1] + ", " + row_text[1:]
         data = SEP.join([body, *cells]).encode("utf-8")
         self.at[u], self.size[u] = self.file.tell(), len(data)
@@ -156,6 +156,15 @@ class Verdicts:
             if name not in self.criteria:
                 self.criteria.append(name)
             self.failed[u] |= 1 << self.criteria.index(name)
+
+    def _head_text(self, head: dict) -> str:
+        """``head`` as JSON text; a head without a reason (a passed run's, the same for most runs) encoded once."""
+        if head["reasons"] or head["failed"]:
+            return json.dumps(head, sort_keys=True, allow_nan=False)
+        key = tuple((k, v) for k, v in head.items() if k not in ("failed", "reasons"))  # its status and Nones
+        if key not in self._heads:
+            self._heads[key] = json.dumps(head, sort_keys=True, allow_nan=False)
+        return self._heads[key]
 
     def text(self, u: int) -> tuple[str, list[str]]:
         """Run ``u``'s verdict as JSON text and its CSV cells (:data:`MISSING_VERDICT` without a record)."""
