@@ -32,7 +32,7 @@ from gainlink.fileio import atomic_writer, publish_files
 from gainlink.proof.twin_plot import png_bytes
 
 from .plan import CampaignPlan, PlannedRuns, describe_axes, run_heads
-from .rows import STATUSES, ReportRows, RunStatus, Tally, Verdicts, point_row
+from .rows import MEASURE_CELLS, METRIC_CELLS, STATUSES, ReportRows, RunStatus, Tally, Verdicts, point_row
 
 PERCENTILES = (5, 25, 50, 75, 95)
 ENVELOPE_BINS = 512
@@ -57,13 +57,8 @@ def csv_head(plan: CampaignPlan, tracked: set[str], outs: set[str]) -> list[str]
         *_axes(plan),
         "seed",
         "complete",
-        "stable",
-        "longest_saturation_s",
-        "twin_output_deviation",
-        "twin_command_deviation",
-        "model_mismatch",
-        "model_iae_ratio",
-        *[f"{t}_{k}" for t in sorted(tracked) for k in ("iae", "overshoot_pct", "settling_time_s")],
+        *MEASURE_CELLS,
+        *[f"{t}_{k}" for t in sorted(tracked) for k in METRIC_CELLS],
         *[f"{o}_final" for o in sorted(outs)],
         "artifact_sha256",
     ]
