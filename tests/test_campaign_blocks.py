@@ -270,18 +270,9 @@ def test_a_task_steps_what_it_can_in_a_block_and_the_rest_alone_with_the_same_re
     own), one with a nan fault and two on a user's pendulum that overrides ``advance`` without declaring itself
     vectorised (those three run alone); every record equals the run's own ``execute`` (control metrics, measures,
     traces), and each fallback is said once."""
-    from gainlink.fileio import read_toml
-    from gainlink.hil.campaign import parse_campaign, worker
-    from gainlink.hil.campaign.plan import plan_campaign
-    from support.paths import EXAMPLES
+    from gainlink.hil.campaign import worker
 
-    path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
-    data, _ = read_toml(path, what="campaign", error=ValueError)
-    data |= {"runs": 9, "spec": str((path.parent / data["spec"]).resolve())}
-    data["grid"][0]["values"] = ["clamp"]
-    data["scenario"]["duration"] = 1.0
-    plan = plan_campaign(parse_campaign(data))
-    runs = [(p.artifact_sha256, dict(p.scenario), p.seed) for p in plan.runs]
+    plan, runs = _clamp_campaign(runs=9, duration=1.0)
     runs[4][1]["faults"] = [{"kind": "nan", "start": 0.2, "stop": 0.3}]
     for i in (5, 6):
         runs[i][1]["plant"] = {"kind": "linear"}
@@ -537,22 +528,13 @@ def test_a_blocks_runs_are_parsed_and_planned_once_as_each_alone():
     others its scenario with their own numbers, each equal to its own full parse (the oracle: ``parse_scenario`` of
     its table); ``prepare_block`` plans the first and gives the others its plan with their own noise, each equal to
     its own ``plan_run``. A run whose table differs elsewhere (another noise level) is parsed and planned alone."""
-    from gainlink.fileio import read_toml
-    from gainlink.hil.campaign import parse_campaign, worker
-    from gainlink.hil.campaign.plan import plan_campaign
+    from gainlink.hil.campaign import worker
     from gainlink.hil.loop.block import prepare_block
     from gainlink.hil.loop.bridge import build_plant
     from gainlink.hil.loop.plan import plan_run
     from gainlink.laws import law_of
-    from support.paths import EXAMPLES
 
-    path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
-    data, _ = read_toml(path, what="campaign", error=ValueError)
-    data |= {"runs": 5, "spec": str((path.parent / data["spec"]).resolve())}
-    data["grid"][0]["values"] = ["clamp"]
-    data["scenario"]["duration"] = 0.5
-    plan = plan_campaign(parse_campaign(data))
-    runs = [(p.artifact_sha256, dict(p.scenario), p.seed) for p in plan.runs]
+    plan, runs = _clamp_campaign(runs=5, duration=0.5)
     runs[3][1]["noise"] = {"x": 0.002, "theta": 0.0005}
     (members,) = worker._blocks(plan.artifacts, runs, {}).values()
     assert [i for i, _, _ in members] == [0, 1, 2, 3, 4]
@@ -698,3 +680,20 @@ def test_a_block_whose_runs_differ_in_disturbances_gives_each_what_it_gets_alone
         for name in TRACE_FIELDS:
             assert np.array_equal(getattr(got.trace, name), getattr(want.trace, name), equal_nan=True), name
         assert {k: got.metrics.get(k) for k in CONTROL_KEYS} == {k: want.metrics.get(k) for k in CONTROL_KEYS}
+
+
+def _clamp_campaign(*, runs: int, duration: float):
+    """The shipped pendulum campaign's clamp mode, ``runs`` draws of ``duration`` seconds: its plan and the runs as a
+    task gets them (artifact sha256, scenario, seed)."""
+    from gainlink.fileio import read_toml
+    from gainlink.hil.campaign import parse_campaign
+    from gainlink.hil.campaign.plan import plan_campaign
+    from support.paths import EXAMPLES
+
+    path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
+    data, _ = read_toml(path, what="campaign", error=ValueError)
+    data |= {"runs": runs, "spec": str((path.parent / data["spec"]).resolve())}
+    data["grid"][0]["values"] = ["clamp"]
+    data["scenario"]["duration"] = duration
+    plan = plan_campaign(parse_campaign(data))
+    return plan, [(p.artifact_sha256, dict(p.scenario), p.seed) for p in plan.runs]
