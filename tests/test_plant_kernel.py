@@ -14,7 +14,7 @@ from gainlink.errors import PlantError, ToolchainError
 from gainlink.hil.plants import kernel
 from gainlink.hil.plants.models import CartPendulum, OdeBatch, QuadrotorLateral, columns, rk4
 from gainlink.hil.plants.tank import Tank
-from support.cli import run_cli
+from support.cli import assert_refused
 from support.hil import udp_transport, write_scenario
 
 CASES = [
@@ -157,7 +157,5 @@ def test_a_missing_compiler_stops_a_run_in_one_line(example_artifacts, own_cache
         "artifact": str(example_artifacts["pendulum"]), "duration": 0.1, "controller": "reference",
         "transport": udp_transport(), "plant": {"kind": "cart_pendulum", "outputs": ["x", "theta"]},
     })  # fmt: skip
-    res = run_cli("hil", "run", scenario, "--report", tmp_path / "report", "--no-progress")
-    assert res.code == 2
-    assert res.err.count("\n") == 1 and "C compiler gainlink-no-such-cc not found" in res.err
-    assert not (tmp_path / "report").exists() and not own_cache.exists()
+    argv = ["hil", "run", scenario, "--report", tmp_path / "report", "--no-progress"]
+    assert_refused(argv, "C compiler gainlink-no-such-cc not found", tmp_path)  # own_cache is under it
