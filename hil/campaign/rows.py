@@ -133,7 +133,7 @@ class Verdicts:
         iae = _tracked_iae(part)
         model = np.array(part.measures["model_mismatch"], dtype=float)  # None: NaN
         warning = np.array([x is True for x in part.measures["model_warning"]], bool)
-        chunks, at = [], self.file.tell()
+        at = self.file.tell()
         for i in rows.tolist():
             u, head = int(slots[i]), self._head(part, i, failed[i])
             text = self._head_text(head)
@@ -142,7 +142,7 @@ class Verdicts:
             names = part.shapes[part.shape[i]]
             data = SEP.join([body, "; ".join(head["reasons"]), *cells(i, names)]).encode("utf-8")
             self.at[u], self.size[u] = at, len(data)
-            chunks.append(data)
+            self.file.write(data)
             at += len(data)
             self.shape[u] = shape[i]
             self.code[u] = STATUSES.index(head["status"])
@@ -151,7 +151,6 @@ class Verdicts:
                 if name not in self.criteria:
                     self.criteria.append(name)
                 self.failed[u] |= 1 << self.criteria.index(name)
-        self.file.write(b"".join(chunks))
 
     def _shapes(self, part: Any, rows: np.ndarray) -> np.ndarray:
         """Each run's (tracked outputs, outputs) as a number into :attr:`shapes`, the planned ``rows``' named in the
