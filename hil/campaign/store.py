@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -505,19 +504,6 @@ class Store:
                 trace = _trace_of(table, row)
                 if trace is not None:
                     yield names[row].decode("ascii"), trace
-
-    def trace_shapes(self, ids: Iterable[str] | np.ndarray) -> dict[tuple[int, int, int], int]:
-        """How many of the runs ``ids`` that have a result have stored traces of each shape (samples, outputs,
-        commands), from the ``t`` column's lengths and the widths: no output or command trace is read."""
-        wanted, shapes = _wanted(ids), Counter()
-        for path in self.files():
-            table = _read(path, columns=["id", "t", "y_width", "u_width"])
-            names = _ids(table.column("id"))
-            rows = self._kept(path, names, results=True) & np.isin(names, wanted) & table.column("t").is_valid()
-            lengths = pc.list_value_length(table.column("t")).to_numpy(zero_copy_only=False)
-            p, m = (table.column(k).to_numpy(zero_copy_only=False) for k in ("y_width", "u_width"))
-            shapes.update(zip(lengths[rows].tolist(), p[rows].tolist(), m[rows].tolist()))
-        return dict(shapes)
 
     def trace_stacks(
         self, ids: Iterable[str] | np.ndarray, *, fields: tuple[str, ...] = TRACE_FIELDS
