@@ -22,6 +22,7 @@ farthest from 1; ``model_warning``), from :mod:`gainlink.hil.loop.model_twin`.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -150,3 +151,75 @@ def evaluate(criteria: Criteria, record: dict) -> list[tuple[str, str]]:
                 )
             )
     return failed
+
+
+@dataclass(frozen=True)
+class RunColumns:
+    """What :func:`evaluate` reads of many finished runs, one entry a run: a number is NaN where the run's record holds
+    ``None`` or lacks it (a stored number is never NaN: a measure or metric that is not finite is stored ``None``).
+
+    ``tracked`` maps each tracked output some run has to its :data:`~.rows.METRIC_CELLS` arrays and ``present``
+    (whether the run has that output: it is judged on the outputs it has)."""
+
+    stable: np.ndarray  # bool: True where the record says so
+    unstable_reason: list  # str or None
+    longest_saturation_s: np.ndarray
+    twin_output_deviation: np.ndarray
+    output_min: dict[str, np.ndarray]
+    output_max: dict[str, np.ndarray]
+    tracked: dict[str, dict[str, np.ndarray]]
+
+
+def evaluate_columns(criteria: Criteria, runs: RunColumns) -> list[list[tuple[str, str]]]:
+    """:func:`evaluate` of every run of ``runs`` at once: the same criteria in the same order with the same phrases,
+    each criterion a comparison over the columns and a phrase made for the runs that fail it only."""
+    failed: list[list[tuple[str, str]]] = [[] for _ in range(len(runs.stable))]
+
+    def note(name: str, mask: np.ndarray, phrase: Any) -> None:
+        for i in np.flatnonzero(mask).tolist():
+            failed[i].append((name, phrase(i)))
+
+    if criteria.stable:
+        note("stable", ~runs.stable, lambda i: f"unstable: {runs.unstable_reason[i]}")
+    for name, (lo, hi) in criteria.bounds.items():
+        _bounds(name, lo, hi, runs, note)
+    for name in sorted(runs.tracked):
+        _tracked(criteria, name, runs.tracked[name], note)
+    if criteria.saturated_at_most is not None:
+        sat, most = runs.longest_saturation_s, criteria.saturated_at_most
+        note("saturated_at_most", sat > most, lambda i: f"saturated {sat[i]:.3g} s > {most:g} s")
+    if criteria.twin_deviation_below is not None:
+        dev, below = runs.twin_output_deviation, criteria.twin_deviation_below
+        note("twin_deviation_below", np.isnan(dev) | (dev >= below), lambda i: (
+            f"twin deviation {'None' if np.isnan(dev[i]) else f'{dev[i]:.3g}'} >= {below:g}"
+        ))  # fmt: skip
+    return failed
+
+
+def _bounds(name: str, lo: float, hi: float, runs: RunColumns, note: Any) -> None:
+    """The bounds criterion on output ``name`` of :func:`evaluate_columns`."""
+    nan = np.full(len(runs.stable), np.nan)
+    low, high = runs.output_min.get(name, nan), runs.output_max.get(name, nan)
+    lost = np.isnan(low) | np.isnan(high)
+    note("bounds", lost | (low < lo) | (high > hi), lambda i: (
+        f"{name} not finite" if lost[i] else f"{name} left [{lo:g}, {hi:g}] (min {low[i]:.3g}, max {high[i]:.3g})"
+    ))  # fmt: skip
+
+
+def _tracked(criteria: Criteria, name: str, tr: dict[str, np.ndarray], note: Any) -> None:
+    """The criteria on tracked output ``name`` (``tr``: its columns) of :func:`evaluate_columns`, in its order."""
+    present = tr["present"]
+    if criteria.settled_within is not None:
+        ts, within = tr["settling_time_s"], criteria.settled_within
+        note("settled_within", present & (np.isnan(ts) | (ts > within)), lambda i: (
+            f"{name} " + ("never settled" if np.isnan(ts[i]) else f"settled in {ts[i]:.3g} s") + f" > {within:g} s"
+        ))  # fmt: skip
+    if criteria.overshoot_below is not None:
+        over, below = tr["overshoot_pct"], criteria.overshoot_below
+        note("overshoot_below", present & (np.nan_to_num(over, nan=0.0) >= below),
+             lambda i: f"{name} overshoot {over[i]:.3g}% >= {below:g}%")  # fmt: skip
+    if criteria.iae_below is not None:
+        iae, below = tr["iae"], criteria.iae_below
+        note("iae_below", present & (np.isnan(iae) | (iae >= below)), lambda i: (
+            f"{name} IAE {'None' if np.isnan(iae[i]) else f'{iae[i]:.3g}'} >= {below:g}"
+        ))  # fmt: skip

@@ -22,7 +22,6 @@ import json
 import math
 import shutil
 import tempfile
-import warnings
 from collections import Counter
 from collections.abc import Mapping
 from typing import IO, Any
@@ -204,15 +203,17 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
         one = seen[shape]
         lo, hi = np.nan_to_num(one.lo.astype(float)), np.nan_to_num(one.hi.astype(float))
         width = np.where(hi > lo, (hi - lo) / bins, 1.0)
-        counts = np.zeros((2, *lo.shape, bins), np.int64)  # all runs, failed runs
+        counts = np.zeros((2, lo.size * bins), np.int64)  # all runs, failed runs
         for at, bad in one.chunks:
             spill.seek(at)
             for i in range(0, bad.size, HISTOGRAM_RUNS):
                 part = bad[i : i + HISTOGRAM_RUNS]
                 sig = np.fromfile(spill, np.float32, part.size * lo.size).reshape(part.size, *lo.shape)
-                counts[0] += _histogram(sig, lo, width, bins)
-                if part.any():
-                    counts[1] += _histogram(sig[part], lo, width, bins)
+                where = _bin_numbers(sig, lo, width, bins)
+                counts[0] += _counts(where, lo.size * bins)
+                if part.any():  # the failed runs' bins are theirs of all runs: counted, not made again
+                    counts[1] += _counts(where[part], lo.size * bins)
+    counts = counts.reshape(2, *lo.shape, bins)
     pct = np.stack([_percentile(counts[0], q, lo, width) for q in PERCENTILES])
     return {
         "t": one.t,
@@ -254,11 +255,10 @@ def _spill_stacks(store: Any, ids: np.ndarray, failing: np.ndarray, spill: IO[by
 
 
 def _extremes(sig: np.ndarray, lo: np.ndarray | None, hi: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """Each sample's smallest and largest finite value so far, with the runs ``sig`` (k, N, S)."""
-    finite = np.where(np.isfinite(sig), sig, np.nan)
-    with np.errstate(invalid="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # a sample no run has a finite value at
-        mn, mx = np.nanmin(finite, axis=0), np.nanmax(finite, axis=0)
+    """Each sample's smallest and largest finite value so far, with the runs ``sig`` (k, N, S) (NaN where none is)."""
+    if np.isinf(sig).any():  # rare: the infinities left out as NaN, which fmin and fmax pass over
+        sig = np.where(np.isinf(sig), np.nan, sig)
+    mn, mx = np.fmin.reduce(sig, axis=0), np.fmax.reduce(sig, axis=0)
     return (mn, mx) if lo is None else (np.fmin(lo, mn), np.fmax(hi, mx))
 
 
@@ -270,8 +270,9 @@ def _status_ids(status: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray]:
     return ids, ids[np.array([v == "fail" for v in status.values()], bool)]
 
 
-def _histogram(sig: np.ndarray, lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:
-    """Counts of ``sig`` (k, N, S) in ``bins`` bins from ``lo`` of ``width`` per sample and signal: (N, S, bins)."""
+def _bin_numbers(sig: np.ndarray, lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:
+    """The bin of each value of ``sig`` (k, N, S) among ``bins`` bins from ``lo`` of ``width`` per sample and
+    signal, numbered across the (N, S) cells (cell * bins + bin); a NaN's is ``N * S * bins``, past every cell's."""
     with np.errstate(invalid="ignore", over="ignore"):
         b = np.subtract(sig, lo)  # float64 (lo's): a float32 stack is widened here, no copy before; in place from here
         b /= width
@@ -281,7 +282,13 @@ def _histogram(sig: np.ndarray, lo: np.ndarray, width: np.ndarray, bins: int) ->
     np.clip(b, 0, bins - 1, out=b)
     flat = b.astype(np.int64)
     flat += np.arange(lo.size).reshape(lo.shape) * bins
-    return np.bincount(flat[~nan] if nan.any() else flat.ravel(), minlength=lo.size * bins).reshape(*lo.shape, bins)
+    flat[nan] = lo.size * bins
+    return flat
+
+
+def _counts(where: np.ndarray, cells: int) -> np.ndarray:
+    """How many of the bin numbers ``where`` (:func:`_bin_numbers`) fall in each of ``cells`` bins, NaN's left out."""
+    return np.bincount(where.ravel(), minlength=cells + 1)[:cells]
 
 
 def _percentile(counts: np.ndarray, q: float, lo: np.ndarray, width: np.ndarray) -> np.ndarray:

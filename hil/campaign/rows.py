@@ -1,14 +1,14 @@
 """A campaign's rows (one per planned run, with its verdict), streamed from the store in plan order, and the tally
 the report is drawn from, kept in numpy arrays indexed by the plan.
 
-Each block file is read once: each kept run's stored row (metrics, measures, worker: not its inputs) is decoded once
-and judged (:func:`verdict_head`), its verdict's JSON text (the head's and the stored row's text joined) and its
-``campaign.csv`` cells go, as one line, to an anonymous temporary file, and its numbers (status, IAE, model mismatch,
-failed criteria) to arrays indexed by the plan's distinct runs. The planned runs are then walked in plan order: each
+Each block file is read once, as columns (:meth:`.store.Store.report_parts`): its runs are judged at once
+(:func:`.criteria.evaluate_columns` over the typed columns; no run's JSON is decoded), and each kept run's verdict's
+JSON text (its head's and the stored row's text joined) and its ``campaign.csv`` cells (the columns' values as
+text) go, as one line, to an anonymous temporary file, and its numbers (status, IAE, model mismatch, failed
+criteria) to arrays indexed by the plan's distinct runs. The planned runs are then walked in plan order: each
 row's JSON is its head's (the plan's) and its verdict's texts joined, its CSV row its head's cells and its stored
 cells, with nothing decoded again but the reasons of failed runs. Nothing holds every row: the client keeps an offset
-and a few numbers a run (:class:`Tally`: each run's status, IAE and scatter coordinates, 8 bytes each).
-"""
+and a few numbers a run (:class:`Tally`: each run's status, IAE and scatter coordinates, 8 bytes each)."""
 
 from __future__ import annotations
 
@@ -24,27 +24,13 @@ from typing import IO, Any
 
 import numpy as np
 
-from .criteria import evaluate
+from .criteria import evaluate_columns
 
 FAILURES_LIMIT = 200
 WORST = 3
 STATUSES = ("pass", "fail", "error", "missing")  # a run's status code is its place here
 PASS, FAIL, ERROR, MISSING = range(4)
 SEP = "\x00"  # between a spilled line's fields (JSON and CSV cells hold no NUL: json escapes it, reasons are text)
-
-
-def verdict_head(status: str, row: dict, reason: str | None, criteria: Any) -> dict:
-    """What a run's row says beyond its stored ``row`` (:data:`~.store.ROW_KEYS` and ``run_reason``: complete,
-    metrics, measures, worker, the run's own reason): its status (``pass``, ``fail``, ``error``), the criteria it
-    failed and the reasons; and ``None`` for any of ``complete``, ``run_reason``, ``worker`` the row lacks."""
-    if status == "error":
-        return {"status": "error", "failed": ["error"], "reasons": [reason]} | (
-            {} if "worker" in row else {"worker": None}
-        )
-    failed = evaluate(criteria, row)
-    missing = {k: None for k in ("complete", "run_reason", "worker") if k not in row}
-    return {"status": "fail" if failed else "pass", "failed": sorted({k for k, _ in failed}),
-            "reasons": [text for _, text in failed]} | missing  # fmt: skip
 
 
 def point_row(point: Any) -> dict:
@@ -72,30 +58,41 @@ MEASURE_CELLS = (
 )
 
 
-def csv_cells(v: dict) -> tuple[list[str], tuple[str, ...], tuple[str, ...]]:
-    """A verdict's ``campaign.csv`` cells after the axes and seed: the reasons and measures, then each tracked output's
-    metrics and each output's final value in the run's own sorted order (returned with those names)."""
-    m, q = v.get("metrics", {}), v.get("measures", {})
-    tracked, outs = tuple(sorted(m.get("tracked", {}))), tuple(sorted(m.get("outputs_final", {})))
-    values = [
-        v.get("complete"),
-        *(q.get(k) for k in MEASURE_CELLS),
-        *(m["tracked"][t].get(k) for t in tracked for k in METRIC_CELLS),
-        *(m["outputs_final"][o] for o in outs),
-    ]
-    cells = ["; ".join(v["reasons"])]  # then each as csv.writer writes it (floats by repr, None empty), inline
-    cells += [repr(x) if isinstance(x, float) else "" if x is None else str(x) for x in values]
-    return cells, tracked, outs
-
-
 FIXED_CELLS = 8
+ROW_BITS = {"complete": 1, "run_reason": 2, "worker": 4}  # :data:`.store.ROW_BITS`' bits of the keys a head names
 
 
-def tracked_iae(row: dict) -> float | None:
-    """The run's IAE summed over its tracked outputs (``None`` without one, or when one has none)."""
-    tr = row.get("metrics", {}).get("tracked", {})
-    vals = [v.get("iae") for v in tr.values()]
-    return None if not vals or any(v is None for v in vals) else float(sum(vals))
+def _texts(values: list) -> list[str]:
+    """Values as ``csv.writer`` writes them: floats by ``repr``, ``None`` empty, others by ``str``."""
+    return [repr(x) if type(x) is float else "" if x is None else str(x) for x in values]
+
+
+def _part_cells(part: Any) -> Any:
+    """The ``campaign.csv`` cells of ``part``'s runs after the reasons, as a function of a run and its (tracked
+    outputs, outputs): ``complete`` and the measures, then each tracked output's metrics and each output's final
+    value in the run's own sorted order; each column made text once."""
+    fixed = list(zip(_texts(part.complete), *(_texts(part.measures[k]) for k in MEASURE_CELLS)))
+    tracked = {t: [_texts(cols[k]) for k in METRIC_CELLS] for t, cols in part.tracked.items()}
+    final = {o: _texts(v) for o, v in part.outputs_final.items()}
+
+    def cells(i: int, names: tuple[tuple[str, ...], tuple[str, ...]]) -> list[str]:
+        return [*fixed[i], *(col[i] for t in names[0] for col in tracked[t]), *(final[o][i] for o in names[1])]
+
+    return cells
+
+
+def _tracked_iae(part: Any) -> np.ndarray:
+    """Each run's IAE summed over its tracked outputs in their sorted order (as ``sum`` of the row's values); NaN
+    without one, or when one has none."""
+    total = np.full(len(part.rows), np.nan)
+    for s, (tracked, _) in enumerate(part.shapes):
+        mine = part.shape == s
+        if tracked and mine.any():
+            acc = np.zeros(int(mine.sum()))
+            for t in tracked:
+                acc = acc + part.judged.tracked[t]["iae"][mine]
+            total[mine] = acc
+    return total
 
 
 class Verdicts:
@@ -119,43 +116,68 @@ class Verdicts:
         self.tracked: set[str] = set()
         self.outputs: set[str] = set()
         self._heads: dict[tuple, str] = {}
-        for run_ids, statuses, rows, reasons in store.report_parts():
-            k = np.minimum(np.searchsorted(self.uids, run_ids), max(n - 1, 0))
-            planned = (self.uids[k] == run_ids).tolist() if n else [False] * len(run_ids)
-            for i, u in enumerate(k.tolist()):
-                if planned[i]:
-                    self._add(u, statuses[i], rows[i], reasons[i], criteria)
+        for part in store.report_parts():
+            k = np.minimum(np.searchsorted(self.uids, part.ids), max(n - 1, 0))
+            planned = self.uids[k] == part.ids if n else np.zeros(len(part.ids), bool)
+            if planned.any():
+                self._add_part(part, k, planned, criteria)
 
-    def _add(self, u: int, status: str, row_text: str, reason: str | None, criteria: Any) -> None:
-        """Spill run ``u``'s verdict (from its status, its stored row's JSON text and an error's reason) and note its
-        numbers. The verdict's text is its head's and the stored row's joined: the row is decoded, not encoded
-        again."""
-        row = json.loads(row_text)
-        head = verdict_head(status, row, reason, criteria)
-        v = head | row
-        cells, tracked, outs = csv_cells(v)
-        shape = (tracked, outs)
-        if shape not in self.shapes:
-            self.shapes.append(shape)
-            self.tracked.update(tracked)
-            self.outputs.update(outs)
-        self.shape[u] = self.shapes.index(shape)
-        text = self._head_text(head)
-        body = text if row_text == "{}" else text[:-1] + ", " + row_text[1:]
-        data = SEP.join([body, *cells]).encode("utf-8")
-        self.at[u], self.size[u] = self.file.tell(), len(data)
-        self.file.write(data)
-        self.code[u] = STATUSES.index(v["status"])
-        iae = tracked_iae(v)
-        self.iae[u] = math.nan if iae is None else iae
-        q = v.get("measures", {})
-        if q.get("model_mismatch") is not None:
-            self.model[u] = q["model_mismatch"]
-        self.warning[u] = bool(q.get("model_warning"))
-        for name in v["failed"]:
-            if name not in self.criteria:
-                self.criteria.append(name)
-            self.failed[u] |= 1 << self.criteria.index(name)
+    def _add_part(self, part: Any, slots: np.ndarray, planned: np.ndarray, criteria: Any) -> None:
+        """Judge the runs of ``part`` (a :class:`~.store.ReportPart`) at once and spill those ``planned`` (run
+        ``slots[i]`` of the plan's distinct runs): each verdict's text is its head's and the stored row's text
+        joined (the row is not decoded), its CSV cells the typed columns' values as text."""
+        failed = evaluate_columns(criteria, part.judged)
+        rows = np.flatnonzero(planned)
+        shape = self._shapes(part, rows)
+        cells = _part_cells(part)
+        iae = _tracked_iae(part)
+        model = np.array(part.measures["model_mismatch"], dtype=float)  # None: NaN
+        warning = np.array([x is True for x in part.measures["model_warning"]], bool)
+        at = self.file.tell()
+        for i in rows.tolist():
+            u, head = int(slots[i]), self._head(part, i, failed[i])
+            text = self._head_text(head)
+            row_text = part.rows[i]
+            body = text if row_text == "{}" else text[:-1] + ", " + row_text[1:]
+            names = part.shapes[part.shape[i]]
+            data = SEP.join([body, "; ".join(head["reasons"]), *cells(i, names)]).encode("utf-8")
+            self.at[u], self.size[u] = at, len(data)
+            self.file.write(data)
+            at += len(data)
+            self.shape[u] = shape[i]
+            self.code[u] = STATUSES.index(head["status"])
+            self.iae[u], self.model[u], self.warning[u] = iae[i], model[i], warning[i]
+            for name in head["failed"]:
+                if name not in self.criteria:
+                    self.criteria.append(name)
+                self.failed[u] |= 1 << self.criteria.index(name)
+
+    def _shapes(self, part: Any, rows: np.ndarray) -> np.ndarray:
+        """Each run's (tracked outputs, outputs) as a number into :attr:`shapes`, the planned ``rows``' named in the
+        CSV's columns."""
+        numbers = np.zeros(len(part.shapes), np.int16)
+        for s in np.unique(part.shape[rows]).tolist():
+            names = part.shapes[s]
+            if names not in self.shapes:
+                self.shapes.append(names)
+                self.tracked.update(names[0])
+                self.outputs.update(names[1])
+            numbers[s] = self.shapes.index(names)
+        return numbers[part.shape]
+
+    @staticmethod
+    def _head(part: Any, i: int, failed: list[tuple[str, str]]) -> dict:
+        """What run ``i``'s row says beyond its stored ``row``: its status (``pass``, ``fail``, ``error``), the
+        criteria it failed and the reasons; and ``None`` for any of ``complete``, ``run_reason``, ``worker`` the row
+        lacks (an error's: ``worker``)."""
+        keys = int(part.keys[i])
+        if part.error[i]:
+            return {"status": "error", "failed": ["error"], "reasons": [part.reasons[i]]} | (
+                {} if keys & ROW_BITS["worker"] else {"worker": None}
+            )
+        missing = {k: None for k, bit in ROW_BITS.items() if not keys & bit}
+        return {"status": "fail" if failed else "pass", "failed": sorted({k for k, _ in failed}),
+                "reasons": [text for _, text in failed]} | missing  # fmt: skip
 
     def _head_text(self, head: dict) -> str:
         """``head`` as JSON text; a head without a reason (a passed run's, the same for most runs) encoded once."""

@@ -4,14 +4,16 @@
 
     DIR/plan.json                 the campaign, its runs' ids in plan order and their sha256
     DIR/artifacts/<sha256>.json DIR/fmus/<sha256>.fmu        what travelled to the workers
-    DIR/blocks/<address>.parquet  one block of runs (a Dask task's), one row per run (:data:`SCHEMA`)
+    DIR/blocks/<address>.parquet  one block of runs (a Dask task's), one row per run (:data:`SCHEMA`,
+                                  then :func:`row_columns`)
     DIR/campaign.json campaign.csv summary.txt *.png        the merged report (see report.py)
 
 A block file's name is its content address (:func:`block_address`: the sha256 of its runs' ids, each itself the hash
 of the run's inputs and gainlink's version), so the same runs always land in the same file. A row holds the run's id,
 its status (``done`` or ``error``), its record as two compact JSON texts (``record``: inputs, link, an error's
-reason; ``row``: :data:`ROW_KEYS` and a result's own reason, what the report decodes) and its traces downsampled to at
-most ``worker.MAX_TRACE_POINTS`` evenly spaced true samples (first and last kept; float32
+reason; ``row``: :data:`ROW_KEYS` and a result's own reason, which ``campaign.json`` gives as it is), the numbers its
+verdict and ``campaign.csv`` read as typed columns (:func:`row_columns`: the report decodes no JSON of a result) and
+its traces downsampled to at most ``worker.MAX_TRACE_POINTS`` evenly spaced true samples (first and last kept; float32
 ``t``, and ``y``, ``u``, ``r`` flattened row by row with their widths); the full trace of a run is not stored, it is
 replayed (``gainlink campaign show DIR --run ID``). The file's schema metadata names the gainlink version, the
 campaign that wrote it and the file's layout (:data:`LAYOUT`): a folder holding another's blocks, or blocks of an
@@ -30,8 +32,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections import Counter
 from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +46,9 @@ from gainlink.fileio import atomic_write_bytes, atomic_write_text, prepare_outpu
 from gainlink.version import __version__
 
 from .config import CampaignError
+from .criteria import RunColumns
 from .plan import CampaignPlan, RunPoint
+from .rows import MEASURE_CELLS, METRIC_CELLS
 
 TRACE_FIELDS = ("t", "y", "u", "r")
 WIDE = ("y", "u", "r")
@@ -60,8 +64,24 @@ SCHEMA = pa.schema(
     ]
 )
 META_VERSION, META_CAMPAIGN, META_LAYOUT = b"gainlink.version", b"gainlink.campaign", b"gainlink.block_layout"
-LAYOUT = "2"  # 2: the record split into ``record`` (inputs, link, status, an error's reason) and ``row``
+LAYOUT = "3"  # 2: the record split into ``record`` and ``row``; 3: the row's verdict inputs as typed columns too
 ROW_KEYS = ("complete", "measures", "metrics", "worker")  # what a report row takes from a record, as it is
+ROW_BITS = ("complete", "run_reason", "worker", "measures", "metrics")  # bit k of ``row_keys``: the row has ROW_BITS[k]
+MEASURES = pa.struct(
+    [
+        ("stable", pa.bool_()),
+        ("unstable_reason", pa.string()),
+        *((k, pa.float64()) for k in MEASURE_CELLS if k != "stable"),
+        ("model_warning", pa.bool_()),
+    ]
+)
+TRACKED = pa.struct([(k, pa.float64()) for k in METRIC_CELLS])
+WORKER = pa.struct(
+    [("host", pa.string()), ("pid", pa.int64()), ("start", pa.float64()), ("stop", pa.float64()),
+     ("cpu_s", pa.float64()), ("block", pa.int64())]
+)  # fmt: skip
+NAMED = {"output_min": pa.float64(), "output_max": pa.float64(), "tracked": TRACKED, "outputs_final": pa.float64()}
+ROW_COLUMNS = ("row_keys", "names", "complete", "run_reason", "measures", "worker", *NAMED)
 
 
 def encode_trace(t: np.ndarray, y: np.ndarray, u: np.ndarray, r: np.ndarray) -> dict[str, np.ndarray]:
@@ -103,12 +123,15 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes
         "record": pa.array([_compact_json(rest) for rest, _ in parts], pa.string()),
         "row": pa.array([_compact_json(row) for _, row in parts], pa.string()),
     }
+    typed = row_columns([row for _, row in parts])
     cols["t"] = _lists([None if tr is None else tr["t"] for tr in traces])
     for k in WIDE:
         cols[k] = _lists([None if tr is None else tr[k].reshape(-1) for tr in traces])
         cols[f"{k}_width"] = pa.array([None if tr is None else tr[k].shape[1] for tr in traces], pa.int32())
+    fixed = pa.Table.from_arrays([cols[f.name] for f in SCHEMA], schema=SCHEMA)
+    table = pa.table(fixed.columns + list(typed.values()), names=fixed.column_names + list(typed))
     meta = {META_VERSION: __version__.encode(), META_CAMPAIGN: campaign.encode("utf-8"), META_LAYOUT: LAYOUT.encode()}
-    table = pa.Table.from_arrays([cols[f.name] for f in SCHEMA], schema=SCHEMA.with_metadata(meta))
+    table = table.replace_schema_metadata(meta)
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink, compression="zstd")
     return sink.getvalue().to_pybytes()
@@ -116,13 +139,56 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes
 
 def _split(run_id: str, record: dict) -> tuple[dict, dict]:
     """A record (without its trace) as its ``record`` column's part (id, inputs, link, status, an error's reason)
-    and its ``row`` column's (:data:`ROW_KEYS`; a result's ``reason`` as ``run_reason``): the report decodes the row
-    only."""
+    and its ``row`` column's (:data:`ROW_KEYS`; a result's ``reason`` as ``run_reason``): the report reads the row's
+    text and its typed columns (:func:`row_columns`), not the record."""
     rest = {k: v for k, v in record.items() if k != "trace"} | {"id": run_id}
     row = {k: rest.pop(k) for k in ROW_KEYS if k in rest}
     if record["status"] != "error" and "reason" in rest:
         row["run_reason"] = rest.pop("reason")
     return rest, row
+
+
+def row_columns(rows: list[dict]) -> dict[str, pa.Array]:
+    """What the verdicts and ``campaign.csv`` read of the rows ``rows`` (each a :func:`_split` ``row``), as typed
+    columns beside its JSON text (which ``campaign.json`` and :meth:`Store.record` give as it is):
+
+    - ``row_keys`` (uint8): bit k set when the row has :data:`ROW_BITS` [k] (a key holding ``None`` is not a key
+      missing: the verdict's JSON says ``null`` for a missing one);
+    - ``names`` (dictionary of strings): the run's tracked outputs and outputs (``metrics.tracked``,
+      ``metrics.outputs_final``), sorted, as the JSON ``[[tracked...], [outputs...]]``: its CSV columns;
+    - ``complete`` (bool), ``run_reason`` (string), ``measures`` (:data:`MEASURES`: the measures the criteria and
+      the CSV read), ``worker`` (:data:`WORKER`); null where the row holds ``None`` or lacks it;
+    - :data:`NAMED`: ``output_min``, ``output_max`` (the measures'), ``tracked`` and ``outputs_final`` (the
+      metrics'), each a struct with a field per name some row of the block has (a tracked output a row lacks: a
+      null struct), left out when no row has one (Parquet has no struct without fields).
+    """
+    bits = np.zeros(len(rows), np.uint8)
+    for k, key in enumerate(ROW_BITS):
+        bits |= np.array([key in row for row in rows], np.uint8) << k
+    metrics = [row.get("metrics") or {} for row in rows]
+    measures = [row.get("measures") for row in rows]
+    cols: dict[str, pa.Array] = {"row_keys": pa.array(bits, pa.uint8()), "names": _names(metrics)}
+    cols["complete"] = pa.array([row.get("complete") for row in rows], pa.bool_())
+    cols["run_reason"] = pa.array([row.get("run_reason") for row in rows], pa.string())
+    cols["measures"] = pa.array(measures, MEASURES)
+    cols["worker"] = pa.array([row.get("worker") for row in rows], WORKER)
+    for key, kind in NAMED.items():
+        held = [(m or {}).get(key) for m in (measures if key.startswith("output_m") else metrics)]
+        names = sorted(set().union(*(d for d in held if d)))
+        if names:
+            cols[key] = pa.array(held, pa.struct([(n, kind) for n in names]))
+    return cols
+
+
+def _names(metrics: list[dict]) -> pa.DictionaryArray:
+    """Each run's ``[[tracked...], [outputs...]]`` (sorted), dictionary-encoded: a block's runs share one or two."""
+    texts: dict[tuple, int] = {}
+    codes = []
+    for m in metrics:
+        key = (tuple(sorted(m.get("tracked", ()))), tuple(sorted(m.get("outputs_final", ()))))
+        codes.append(texts.setdefault(key, len(texts)))
+    words = [_compact_json([list(t), list(o)]) for t, o in texts]
+    return pa.DictionaryArray.from_arrays(pa.array(codes, pa.int32()), pa.array(words, pa.string()))
 
 
 def _joined(rest: dict, row: dict) -> dict:
@@ -399,22 +465,25 @@ class Store:
         records = [with_inputs(r, p, kind=kind) for p, r in zip(points, results)]
         return self.put_block(encode_block([p.id for p in points], records, campaign=self.campaign))
 
-    def report_parts(self) -> Iterator[tuple[np.ndarray, list[str], list[str], list[str | None]]]:
-        """What the report reads of every stored run, one block file at a time: ``(ids (ASCII bytes), statuses, rows
-        (the ``row`` column's JSON text), the errors' reasons (``None`` for a result))`` of the rows the index keeps
-        (a run stored twice: one record); only the errors' ``record`` text is decoded."""
+    def report_parts(self) -> Iterator[ReportPart]:
+        """What the report reads of every stored run, one block file at a time (:class:`ReportPart`), of the rows the
+        index keeps (a run stored twice: one record); only the errors' ``record`` text is decoded."""
         for path in self.files():
-            table = _read(path, columns=["id", "status", "row"])
+            present = set(pq.read_schema(path).names)
+            table = _read(path, columns=["id", "status", "row", *(k for k in ROW_COLUMNS if k in present)])
             names = _ids(table.column("id"))
-            kept = pa.array(self._kept(path, names))
-            statuses = table.column("status").filter(kept).to_pylist()
-            rows = table.column("row").filter(kept).to_pylist()
-            reasons: list[str | None] = [None] * len(rows)
-            if "error" in statuses:
-                records = _read(path, columns=["record"]).column("record").filter(kept)
-                for i in (i for i, status in enumerate(statuses) if status == "error"):
+            kept = self._kept(path, names)
+            if not kept.any():
+                continue
+            if not kept.all():
+                table = table.filter(pa.array(kept))
+            error = np.asarray(pc.equal(table.column("status"), "error").to_numpy(zero_copy_only=False), bool)
+            reasons: list[str | None] = [None] * table.num_rows
+            if error.any():
+                records = _read(path, columns=["record"]).column("record").filter(pa.array(kept))
+                for i in np.flatnonzero(error).tolist():
                     reasons[i] = json.loads(records[i].as_py()).get("reason")
-            yield names[kept.to_numpy(zero_copy_only=False)], statuses, rows, reasons
+            yield _report_part(names[kept], error, reasons, table)
 
     def records(self) -> Iterator[tuple[str, dict]]:
         """Every stored run's record, one block file at a time (a run stored twice: the record the index keeps)."""
@@ -435,19 +504,6 @@ class Store:
                 trace = _trace_of(table, row)
                 if trace is not None:
                     yield names[row].decode("ascii"), trace
-
-    def trace_shapes(self, ids: Iterable[str] | np.ndarray) -> dict[tuple[int, int, int], int]:
-        """How many of the runs ``ids`` that have a result have stored traces of each shape (samples, outputs,
-        commands), from the ``t`` column's lengths and the widths: no output or command trace is read."""
-        wanted, shapes = _wanted(ids), Counter()
-        for path in self.files():
-            table = _read(path, columns=["id", "t", "y_width", "u_width"])
-            names = _ids(table.column("id"))
-            rows = self._kept(path, names, results=True) & np.isin(names, wanted) & table.column("t").is_valid()
-            lengths = pc.list_value_length(table.column("t")).to_numpy(zero_copy_only=False)
-            p, m = (table.column(k).to_numpy(zero_copy_only=False) for k in ("y_width", "u_width"))
-            shapes.update(zip(lengths[rows].tolist(), p[rows].tolist(), m[rows].tolist()))
-        return dict(shapes)
 
     def trace_stacks(
         self, ids: Iterable[str] | np.ndarray, *, fields: tuple[str, ...] = TRACE_FIELDS
@@ -503,6 +559,71 @@ class Store:
         """Every FMU that travelled with the campaign."""
         folder = self.out / "fmus"
         return {p.stem: p.read_bytes() for p in folder.glob("*.fmu")} if folder.is_dir() else {}
+
+
+@dataclass(frozen=True)
+class ReportPart:
+    """What the report reads of some stored runs (a block file's), one entry a run: from the typed columns of
+    :func:`row_columns`, as numpy arrays (numbers; NaN where null) and lists of Python values (what
+    ``campaign.csv`` writes as text)."""
+
+    ids: np.ndarray  # ASCII bytes
+    error: np.ndarray  # bool: the run's record is an error
+    rows: list[str]  # the ``row`` column's JSON text
+    reasons: list[str | None]  # an error's reason
+    keys: np.ndarray  # ``row_keys``: which of ROW_BITS each row has
+    shapes: list[tuple[tuple[str, ...], tuple[str, ...]]]  # the distinct (tracked outputs, outputs) of the runs
+    shape: np.ndarray  # each run's, into ``shapes``
+    complete: list  # bool or None
+    measures: dict[str, list]  # each MEASURES field's values
+    tracked: dict[str, dict[str, list]]  # per tracked output, each METRIC_CELLS value
+    outputs_final: dict[str, list]
+    judged: RunColumns  # what the criteria read (:func:`.criteria.evaluate_columns`)
+
+
+def _report_part(ids: np.ndarray, error: np.ndarray, reasons: list, table: pa.Table) -> ReportPart:
+    """A block's kept rows (``table``) as a :class:`ReportPart`."""
+    names = table.column("names").combine_chunks()
+    shapes = [tuple(tuple(x) for x in json.loads(w)) for w in names.dictionary.to_pylist()]
+    measures = _fields(table.column("measures"))
+    named = {key: _fields(table.column(key)) if key in table.column_names else {} for key in NAMED}
+    tracked = {name: _fields(col) for name, col in named["tracked"].items()}
+    present = {name: np.asarray(col.is_valid().to_numpy(zero_copy_only=False), bool)
+               for name, col in named["tracked"].items()}  # fmt: skip
+    judged = RunColumns(
+        stable=np.array([x is True for x in measures["stable"].to_pylist()], bool),
+        unstable_reason=measures["unstable_reason"].to_pylist(),
+        longest_saturation_s=_numbers(measures["longest_saturation_s"]),
+        twin_output_deviation=_numbers(measures["twin_output_deviation"]),
+        output_min={k: _numbers(v) for k, v in named["output_min"].items()},
+        output_max={k: _numbers(v) for k, v in named["output_max"].items()},
+        tracked={k: {m: _numbers(v) for m, v in cols.items()} | {"present": present[k]} for k, cols in tracked.items()},
+    )
+    return ReportPart(
+        ids=ids,
+        error=error,
+        rows=table.column("row").to_pylist(),
+        reasons=reasons,
+        keys=table.column("row_keys").to_numpy(),
+        shapes=shapes,
+        shape=names.indices.to_numpy(zero_copy_only=False),
+        complete=table.column("complete").to_pylist(),
+        measures={k: v.to_pylist() for k, v in measures.items()},
+        tracked={k: {m: v.to_pylist() for m, v in cols.items()} for k, cols in tracked.items()},
+        outputs_final={k: v.to_pylist() for k, v in named["outputs_final"].items()},
+        judged=judged,
+    )
+
+
+def _fields(column: pa.ChunkedArray | pa.Array) -> dict[str, pa.Array]:
+    """A struct column's fields by name, null where the struct is (``StructArray.flatten``)."""
+    col = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
+    return {f.name: arr for f, arr in zip(col.type, col.flatten())}
+
+
+def _numbers(arr: pa.Array) -> np.ndarray:
+    """A float64 column as numpy, NaN where null."""
+    return np.asarray(arr.to_numpy(zero_copy_only=False), np.float64)
 
 
 def with_inputs(record: dict, point: RunPoint | tuple, *, kind: str) -> dict:

@@ -1,0 +1,201 @@
+"""A block file's verdict inputs as typed columns, and the verdicts and CSV cells made from them at once.
+
+Oracles: the per-row :func:`gainlink.hil.campaign.criteria.evaluate` on each run's stored JSON row (decoded with the
+json module), the CSV cells as ``csv.writer`` writes each decoded value (floats by ``repr``, ``None`` empty), and the
+records handed to the store.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+from collections import Counter
+
+import numpy as np
+import pytest
+from gainlink.hil.campaign import parse_campaign
+from gainlink.hil.campaign.config import Criteria
+from gainlink.hil.campaign.criteria import evaluate, evaluate_columns
+from gainlink.hil.campaign.plan import CampaignPlan, RunPoint
+from gainlink.hil.campaign.report import merge
+from gainlink.hil.campaign.rows import MEASURE_CELLS, METRIC_CELLS
+from gainlink.hil.campaign.store import Store, encode_block, with_inputs
+from support.paths import EXAMPLES
+
+CRITERIA = Criteria(
+    stable=True,
+    bounds={"theta": (-0.7, 0.7), "x": (-2.0, 2.0)},
+    settled_within=2.0,
+    overshoot_below=20.0,
+    saturated_at_most=0.5,
+    iae_below=0.9,
+    twin_deviation_below=0.01,
+)
+
+
+def _maybe(rng: np.random.Generator, value: float, p: float = 0.02) -> float | None:
+    return None if rng.random() < p else value
+
+
+def _record(rng: np.random.Generator, k: int) -> dict:
+    """A run's record of every kind a store holds: errors (with and without a worker), incomplete and unstable
+    runs, measures and metrics that are ``None`` (not finite), a tracked output or an output a run lacks, a run
+    without a twin, and plain passes."""
+    if k % 23 == 7:
+        return {"status": "error", "reason": f"boom {k}"} | ({"worker": {"host": "h", "pid": k}} if k % 2 else {})
+    complete = k % 19 != 3
+    tracked = {
+        name: {"iae": _maybe(rng, float(rng.lognormal(-1.5, 0.5))),
+               "overshoot_pct": _maybe(rng, float(rng.uniform(0, 22)), 0.2),
+               "settling_time_s": _maybe(rng, float(rng.uniform(0.5, 2.2))), "start_s": 0.0}
+        for name in (("r_x", "r_theta") if k % 5 else ("r_x",)) if not (k % 31 == 4)
+    }  # fmt: skip
+    outs = ("theta", "x") if k % 29 != 6 else ("x",)
+    measures = {
+        "stable": complete and k % 13 != 0,
+        "unstable_reason": None if complete and k % 13 else ("run stopped" if not complete else "grows"),
+        "longest_saturation_s": float(rng.choice([0.0, 0.0, 0.0, 0.3, 0.7])),
+        "output_min": {o: _maybe(rng, float(rng.uniform(-0.75, 0.0))) for o in outs},
+        "output_max": {o: _maybe(rng, float(rng.uniform(0.0, 0.75))) for o in outs},
+        "model_mismatch": _maybe(rng, float(rng.uniform(0, 0.2)), 0.3),
+        "model_warning": bool(k % 7 == 0),
+        "growth_ratio": {"r_x": 0.5},
+    }
+    if k % 17:
+        measures |= {"twin_output_deviation": _maybe(rng, float(rng.uniform(0, 0.011))),
+                     "twin_command_deviation": float(rng.uniform(0, 0.02)), "model_iae_ratio": 1.25}  # fmt: skip
+    metrics = {"tracked": tracked, "outputs_final": {o: _maybe(rng, float(rng.normal())) for o in outs}, "steps": 10}
+    worker = {"host": "vm", "pid": 40 + k, "start": 1.5, "stop": 2.25, "cpu_s": 0.125} | ({"block": 9} if k % 3 else {})
+    return {"status": "done", "complete": complete, "reason": None if complete else "run stopped",
+            "metrics": metrics, "measures": measures, "worker": worker}  # fmt: skip
+
+
+def _stored(tmp_path, runs: int = 300) -> tuple[CampaignPlan, Store, dict[str, dict]]:
+    campaign = parse_campaign(
+        {"name": "columns", "kind": "sil", "seed": 3, "runs": runs, "spec": str(EXAMPLES / "pendulum.toml"),
+         "scenario": {"duration": 0.5, "plant": {"kind": "cart_pendulum"}},
+         "draw": [{"target": "plant.parameters.M", "distribution": "uniform", "low": 0.7, "high": 1.3}]}
+    )  # fmt: skip
+    rng = np.random.default_rng(5)
+    points, records = [], {}
+    for k in range(runs):
+        point = RunPoint(index=k, id=f"{k:020x}", grid_index=0, draw=k, values={"plant.parameters.M": float(k)},
+                         artifact_sha256="a" * 64, scenario={}, seed=k)  # fmt: skip
+        points.append(point)
+        records[points[-1].id] = with_inputs(_record(rng, k), points[-1], kind="sil")
+    store = Store(tmp_path / "c", campaign="columns")
+    for start in range(0, runs, 64):
+        block = points[start : start + 64]
+        store.put_block(encode_block([p.id for p in block], [records[p.id] for p in block], campaign="columns"))
+    plan = CampaignPlan(campaign=dataclasses.replace(campaign, criteria=CRITERIA), runs=tuple(points))
+    return plan, Store(store.out), records
+
+
+def test_the_verdicts_over_columns_are_each_rows_own_evaluate(tmp_path):
+    _, store, records = _stored(tmp_path)
+    judged = 0
+    for part in store.report_parts():
+        got = evaluate_columns(CRITERIA, part.judged)
+        for i, run_id in enumerate(part.ids.tolist()):
+            row = json.loads(part.rows[i])
+            if records[run_id.decode()]["status"] == "error":
+                assert part.error[i]
+                continue
+            assert got[i] == evaluate(CRITERIA, row), run_id
+            judged += 1
+    assert judged > 250
+    kinds = [name for rec in records.values() if rec["status"] == "done" for name, _ in evaluate(CRITERIA, rec)]
+    assert {"stable", "bounds", "settled_within", "overshoot_below", "iae_below", "saturated_at_most",
+            "twin_deviation_below"} <= set(kinds)  # fmt: skip
+
+
+def _cells(row: dict, reasons: list[str]) -> list[str]:
+    """The CSV cells after the axes and seed, from the decoded row (the run's own tracked outputs and outputs)."""
+    m, q = row.get("metrics", {}), row.get("measures", {})
+    values = [row.get("complete"), *(q.get(k) for k in MEASURE_CELLS)]
+    values += [m["tracked"][t].get(k) for t in sorted(m.get("tracked", {})) for k in METRIC_CELLS]
+    values += [m["outputs_final"][o] for o in sorted(m.get("outputs_final", {}))]
+    return ["; ".join(reasons), *(repr(x) if isinstance(x, float) else "" if x is None else str(x) for x in values)]
+
+
+def test_the_report_rows_and_csv_cells_from_columns_are_each_rows_own(tmp_path):
+    plan, store, records = _stored(tmp_path)
+    merge(plan, store, plots=False)
+    runs = json.loads((store.out / "campaign.json").read_text())["runs"]
+    with (store.out / "campaign.csv").open(newline="") as fh:
+        head, *table = list(csv.reader(fh))
+    at = head.index("complete")
+    for run, cells in zip(runs, table, strict=True):
+        record = json.loads(json.dumps(records[run["id"]], sort_keys=True))  # as stored: the keys sorted
+        record.pop("inputs")
+        if record["status"] == "error":
+            expected = {"status": "error", "failed": ["error"], "reasons": [record.pop("reason")]}
+            expected |= {} if "worker" in record else {"worker": None}
+        else:
+            failed = evaluate(CRITERIA, record)
+            expected = {"status": "fail" if failed else "pass", "failed": sorted({k for k, _ in failed}),
+                        "reasons": [t for _, t in failed], "run_reason": record.pop("reason")}  # fmt: skip
+        expected |= {k: v for k, v in record.items() if k != "status"}
+        assert {k: v for k, v in run.items() if k in expected} == expected and run["status"] == cells[2]
+        own = _cells(record, expected["reasons"])
+        columns = dict(zip(head, cells))
+        assert [columns["reasons"], *cells[at : at + 1 + len(MEASURE_CELLS)]] == own[: 2 + len(MEASURE_CELLS)]
+        tail = [columns[f"{t}_{k}"] for t in sorted(record.get("metrics", {}).get("tracked", {})) for k in METRIC_CELLS]
+        tail += [columns[f"{o}_final"] for o in sorted(record.get("metrics", {}).get("outputs_final", {}))]
+        assert tail == own[2 + len(MEASURE_CELLS) :]
+    assert min(Counter(r["status"] for r in runs).values()) > 10
+
+
+def test_a_blocks_typed_columns_hold_its_rows_numbers_and_the_record_is_the_one_stored(tmp_path):
+    _, store, records = _stored(tmp_path, runs=64)
+    for run_id, record in records.items():
+        assert store.record(run_id) == record | {"id": run_id}
+    assert dict(store.records()) == {k: r | {"id": k} for k, r in records.items()}
+    (path,) = store.files()
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(path)
+    for i, run_id in enumerate(table.column("id").to_pylist()):
+        rec = records[run_id]
+        done = rec["status"] == "done"
+        measures = table.column("measures")[i].as_py()
+        assert measures == (
+            {k: rec["measures"].get(k) for k in ("stable", "unstable_reason", *MEASURE_CELLS[1:], "model_warning")}
+            if done
+            else None
+        )
+        tracked = table.column("tracked")[i].as_py()
+        mine = rec.get("metrics", {}).get("tracked", {})
+        assert {k: v for k, v in (tracked or {}).items() if v is not None} == {
+            t: {k: v[k] for k in METRIC_CELLS} for t, v in mine.items()
+        }
+        assert table.column("worker")[i].as_py() == (
+            None
+            if "worker" not in rec
+            else {k: rec["worker"].get(k) for k in ("host", "pid", "start", "stop", "cpu_s", "block")}
+        )
+        assert table.column("complete")[i].as_py() == rec.get("complete")
+        assert table.column("run_reason")[i].as_py() == (rec.get("reason") if done else None)
+        names = json.loads(table.column("names")[i].as_py())
+        assert names == [sorted(mine), sorted(rec.get("metrics", {}).get("outputs_final", {}))]
+
+
+@pytest.mark.parametrize("layout", ["2", None])
+def test_a_block_of_an_earlier_layout_is_refused_on_resume_in_one_line(tmp_path, layout):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from gainlink.hil.campaign.config import CampaignError
+    from gainlink.hil.campaign.store import refuse_foreign
+    from gainlink.version import __version__
+
+    out = tmp_path / "out"
+    (out / "blocks").mkdir(parents=True)
+    (out / "plan.json").write_text(json.dumps({"campaign": {"name": "mine", "gainlink": __version__}, "runs": []}))
+    table = pq.read_table(pa.BufferReader(encode_block(["x"], [{"status": "error", "reason": "r"}], campaign="mine")))
+    meta = {b"gainlink.campaign": b"mine", b"gainlink.version": __version__.encode()}
+    meta |= {} if layout is None else {b"gainlink.block_layout": layout.encode()}
+    pq.write_table(table.replace_schema_metadata(meta), out / "blocks" / "0123456789abcdef01234567.parquet")
+    with pytest.raises(CampaignError, match=r"is a block file of an earlier layout \(before 3\)") as err:
+        refuse_foreign(out, {"campaign": {"name": "mine"}})
+    assert "\n" not in str(err.value)
