@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import ctypes
 import dataclasses
 import fcntl
 import json
@@ -29,6 +30,7 @@ import logging
 import os
 import pickle
 import socket
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -58,6 +60,8 @@ _ARTIFACTS: dict[str, tuple[Artifact, Path]] = {}
 _LIBRARIES: dict[str, Path] = {}
 _EXECUTABLES: dict[tuple[str, str], Path] = {}
 _FMUS: dict[str, Path] = {}
+# glibc's: hands the free pages of the heap back to the system (None on other C libraries)
+_MALLOC_TRIM = getattr(ctypes.CDLL(None), "malloc_trim", None) if sys.platform.startswith("linux") else None
 
 
 def _local(sub: str) -> Path:
@@ -276,6 +280,16 @@ def execute_block(
     numbers (:func:`~.store.write_block`: the file's name, the runs, the errors' reasons); else it returns the file's
     bytes and the client writes them.
     """
+    try:
+        return _block_answer(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder)
+    finally:  # the block's arrays and records are freed by now
+        hand_back_memory()
+
+
+def _block_answer(
+    kind: str, artifacts: dict, runs: list, blobs: dict | None, *, ids: list[str], campaign: str, folder: Any
+) -> bytes | dict:
+    """:func:`execute_block`'s answer: its block file written into ``folder`` (a few numbers) or its bytes."""
     records = [with_inputs(r, run, kind=kind) for r, run in zip(batch_records(kind, artifacts, runs, blobs), runs)]
     data = encode_block(ids, records, campaign=campaign)
     if folder is not None:
@@ -284,6 +298,22 @@ def execute_block(
         if answer is not None:
             return answer
     return data
+
+
+def hand_back_memory() -> None:
+    """Give the system back the memory a finished task's arrays left free in this process's allocators.
+
+    A block's arrays and its Parquet file are freed when the task ends, but the allocators keep the pages for later:
+    Arrow's pool (mimalloc) those of the file, glibc's heap those of the arrays. Nothing leaks (a worker's memory
+    stays below what its largest block needed), but without this a worker that once ran a large block holds that
+    block's peak for the rest of its life (measured: a 200-run block of 4 s pendulum runs left 68 MB held, 49 of them
+    in Arrow's pool). ``MALLOC_ARENA_MAX`` would not help: a worker's tasks run on one thread, in one arena.
+    """
+    import pyarrow as pa
+
+    pa.default_memory_pool().release_unused()
+    if _MALLOC_TRIM is not None:
+        _MALLOC_TRIM(0)
 
 
 def execute_packed(
