@@ -54,3 +54,32 @@ def test_a_worker_hands_back_what_a_large_block_freed():
     small, _, large, after = json.loads(proc.stdout.splitlines()[-1])
     assert large - small < 15.0, (small, large)
     assert after - small < 15.0, (small, after)
+
+
+def test_a_workers_caches_keep_the_artifacts_it_used_last_not_every_one(pend):
+    """A campaign that draws the design itself has an artifact per run. Over WORKER_CACHE + 6 runs of distinct
+    artifacts the worker keeps WORKER_CACHE of them parsed (the last used, counted as live Artifact objects), not one
+    per run; a run of a kept artifact finds it without parsing it again, and one dropped is parsed again and runs."""
+    import gc
+
+    from gainlink.hil.campaign import worker
+    from gainlink.shipping.artifact import Artifact, canonical_json, seal
+
+    base = json.loads(pend.read_text())
+    docs = [canonical_json(seal(base | {"name": f"pendulum_{k}"})).encode() for k in range(worker.WORKER_CACHE + 6)]
+    shas = [json.loads(doc)["sha256"] for doc in docs]
+    assert len(set(shas)) == len(docs)
+    scenario = {"duration": 0.05, "controller": "reference",
+                "plant": {"kind": "cart_pendulum", "outputs": ["x", "theta"], "step": 0.005}}  # fmt: skip
+
+    def alive() -> set[str]:
+        gc.collect()
+        return {o.sha256 for o in gc.get_objects() if isinstance(o, Artifact) and o.sha256 in shas}
+
+    for doc in docs:
+        assert worker.execute("sil", doc, scenario, 1)["status"] == "done"
+    assert alive() == set(shas[-worker.WORKER_CACHE :])
+    kept = worker.artifact_from_bytes(docs[-1])[0]
+    assert worker.artifact_from_bytes(docs[-1])[0] is kept  # a hit: the same object, not parsed again
+    assert worker.execute("sil", docs[0], scenario, 1)["status"] == "done"  # dropped: parsed again
+    assert shas[0] in alive() and shas[-worker.WORKER_CACHE] not in alive()

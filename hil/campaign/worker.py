@@ -32,7 +32,7 @@ import pickle
 import socket
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +56,12 @@ CAN_ID_STRIDE = 0x40
 
 log = logging.getLogger(__name__)
 
+#: Entries each of the worker's caches keeps (artifacts, their libraries and executables, FMU files), the least
+#: recently used dropped past it: a campaign's tasks use a few (one per grid point of its design: the shipped ones 2
+#: or 3), but a campaign that draws the design itself (a ``spec.*`` draw axis) has an artifact per run, and a worker
+#: lives through many campaigns. A parsed artifact holds ~20 kB (measured: 40 artifacts, 0.8 MB); a miss costs a parse
+#: and a look-up in the firmware build cache, not a build.
+WORKER_CACHE = 64
 _ARTIFACTS: dict[str, tuple[Artifact, Path]] = {}
 _LIBRARIES: dict[str, Path] = {}
 _EXECUTABLES: dict[tuple[str, str], Path] = {}
@@ -74,49 +80,60 @@ def _write_once(path: Path, data: bytes) -> Path:
     return path
 
 
+def _kept(cache: dict, key: Any, make: Callable[[], Any]) -> Any:
+    """``cache[key]``, made by ``make()`` when missing; past :data:`WORKER_CACHE` entries the least recently used is
+    dropped (a dict keeps its insertion order: a hit moves its entry last)."""
+    if key in cache:
+        cache[key] = value = cache.pop(key)
+        return value
+    value = cache[key] = make()
+    while len(cache) > WORKER_CACHE:
+        del cache[next(iter(cache))]
+    return value
+
+
 def artifact_from_bytes(data: bytes) -> tuple[Artifact, Path]:
-    """The artifact of canonical JSON bytes (validated once per process) and its host-local file."""
+    """The artifact of canonical JSON bytes (validated once while the worker keeps it) and its host-local file."""
     doc = json.loads(data)
     sha = doc.get("sha256", "") if isinstance(doc, dict) else ""
-    if sha not in _ARTIFACTS:
-        art = from_dict(doc)
-        _ARTIFACTS[art.sha256] = (art, _write_once(_local("artifacts") / f"{art.sha256}.json", data))
-        sha = art.sha256
-    return _ARTIFACTS[sha]
+    if sha in _ARTIFACTS:
+        return _kept(_ARTIFACTS, sha, lambda: None)
+    art = from_dict(doc)
+    return _kept(_ARTIFACTS, art.sha256, lambda: (art, _write_once(_local("artifacts") / f"{art.sha256}.json", data)))
 
 
 def _fmu_path(ref: str, blobs: dict[str, bytes]) -> Path:
     sha = ref.removeprefix("sha256:")
-    if sha not in _FMUS:
-        if sha not in blobs:
-            raise GainlinkError(f"campaign run names FMU {sha[:12]}... but it did not travel with the run")
-        _FMUS[sha] = _write_once(_local("fmus") / f"{sha}.fmu", blobs[sha])
-    return _FMUS[sha]
+    if sha not in _FMUS and sha not in blobs:
+        raise GainlinkError(f"campaign run names FMU {sha[:12]}... but it did not travel with the run")
+    return _kept(_FMUS, sha, lambda: _write_once(_local("fmus") / f"{sha}.fmu", blobs[sha]))
 
 
 def _library(artifact: Artifact) -> Path:
-    """The host library the law's SIL runs step (``Law.native``: built and cached by sha256 on first use), kept for
-    the worker's life so the next run of the artifact pays nothing for it."""
-    if artifact.sha256 not in _LIBRARIES:
+    """The host library the law's SIL runs step (``Law.native``: built and cached by sha256 on first use), kept while
+    the worker uses the artifact so the next run of it pays nothing for it."""
+
+    def find() -> Path:
         from gainlink.laws import law_of
 
-        _LIBRARIES[artifact.sha256] = Path(law_of(artifact).native(artifact).describe["library"])
-    return _LIBRARIES[artifact.sha256]
+        return Path(law_of(artifact).native(artifact).describe["library"])
+
+    return _kept(_LIBRARIES, artifact.sha256, find)
 
 
 def _executable(artifact: Artifact, transport: dict) -> Path:
     kind = transport.get("kind", "can")
-    key = (artifact.sha256, kind)
-    if key not in _EXECUTABLES:
+
+    def build() -> Path:
         if kind == "mavlink":
             from gainlink.firmware.mavlink_app import mavlink_executable
 
-            _EXECUTABLES[key] = mavlink_executable(artifact)
-        else:
-            from ..links.can_firmware import firmware_can_executable
+            return mavlink_executable(artifact)
+        from ..links.can_firmware import firmware_can_executable
 
-            _EXECUTABLES[key] = firmware_can_executable(artifact)
-    return _EXECUTABLES[key]
+        return firmware_can_executable(artifact)
+
+    return _kept(_EXECUTABLES, (artifact.sha256, kind), build)
 
 
 @contextlib.contextmanager
