@@ -5,8 +5,9 @@ stepped together (:mod:`gainlink.hil.loop.block`: a task per run cost more than 
 and a run stepped alone costs numpy's per-call price at every step). Its inputs travel as bytes (the artifact's
 canonical JSON, FMU archives by sha256); the worker writes each once into a host-local cache named by sha256, builds the
 firmware once per artifact (the firmware build cache is keyed by the artifact's sha256 and serialised by a file lock
-between the processes of a host) and remembers the result for the rest of its life, so the second run of an artifact
-pays nothing for it.
+between the processes of a host) and remembers the result (of the :data:`WORKER_CACHE` artifacts it used last), so the
+second run of an artifact pays nothing for it. At a task's end it hands back to the system what the task's arrays left
+free in its allocators (:func:`hand_back_memory`), so a worker's memory does not keep its largest block's peak.
 
 A HIL run takes a *bus slot* first: a file lock no other process on the host holds. The slot gives the
 run its own udp_multicast group and port (or its own CAN id base on a shared SocketCAN bus, or its own
