@@ -741,7 +741,8 @@ def test_a_blocks_measures_and_downsampled_traces_as_columns_are_each_runs_own(d
         assert g == want
         assert list(g) == list(want)
         seen |= {("stable", want["stable"]), ("grows", "grows" in str(want["unstable_reason"])),
-                 ("saturated", want["longest_saturation_s"] > 0), ("none_min", None in want["output_min"].values())}  # fmt: skip
+                 ("saturated", want["longest_saturation_s"] > 0),
+                 ("none_min", None in want["output_min"].values())}  # fmt: skip
     assert seen >= {("stable", True), ("stable", False), ("grows", True), ("saturated", True), ("none_min", True)}
     stepped = [tr for tr in traces if tr.t.size]  # a run of no steps has no trace to store
     for tr, d in zip(stepped, downsampled_traces(stepped)):
@@ -752,3 +753,60 @@ def test_a_blocks_measures_and_downsampled_traces_as_columns_are_each_runs_own(d
             want = getattr(tr, k)[idx].astype(np.float32)
             assert d[k].dtype == np.float32 and d[k].flags.c_contiguous
             assert np.array_equal(d[k], want if width is None else want.reshape(idx.size, width), equal_nan=True)
+
+
+def _pendulum_form(form: str, anti_windup: str):
+    """The shipped pendulum design (examples/pendulum.toml, the campaign's spec) with observer ``form`` and
+    ``anti_windup`` mode."""
+    import copy
+
+    from gainlink.fileio import read_toml
+    from gainlink.shipping.artifact import from_dict
+    from support.designs import designed
+    from support.paths import EXAMPLES
+
+    data, _ = read_toml(EXAMPLES / "pendulum.toml", what="spec", error=ValueError)
+    data = copy.deepcopy(data)
+    data["observer"]["form"], data["limits"]["anti_windup"] = form, anti_windup
+    return from_dict(designed(data))
+
+
+@pytest.mark.parametrize("form", ["predictor", "current"])
+def test_the_compiled_float64_law_is_each_runs_own_python_reference_bit_for_bit(form):
+    """The twin's law in one C call per step (law.reference_block) against each instance's own Python reference
+    (law.reference: the per-run twin's law) and the Python columns (ReferenceBlock): the shipped pendulum design
+    in each anti-windup mode, 41 instances (not a multiple of any vector width) through saturation, refused (NaN)
+    samples, a reference shared by every run (a row stride of 0) and references of their own; every command, flag,
+    saturation mask and state equal, bit for bit."""
+    from gainlink.laws import law_of
+    from gainlink.laws.lq.block import ReferenceBlock
+    from gainlink.laws.lq.native_block import NativeReferenceBlock
+
+    seen = set()
+    for mode in ("none", "clamp", "backcalc"):
+        a = _pendulum_form(form, mode)
+        law, count = law_of(a), 41
+        block, columns = law.reference_block(a, count), ReferenceBlock(a, count)
+        assert isinstance(block, NativeReferenceBlock)
+        alone = [law.reference(a) for _ in range(count)]
+        rng = np.random.default_rng(7)
+        scale = rng.uniform(0.2, 30.0, count)  # the larger ones saturate
+        for k in range(80):
+            Y = rng.normal(0.0, 0.05, (count, a.p)) * scale[:, None]
+            if k % 2:
+                R = np.broadcast_to(rng.normal(0.0, 1.0, (1, a.q)), (count, a.q))  # shared: stride 0
+            else:
+                R = rng.normal(0.0, 1.0, (count, a.q))
+            if k in (17, 50):
+                Y[3, 0], Y[40, 1] = np.nan, np.inf
+            got, ref = block.step(Y, R, np.zeros((count, 0))), columns.step(Y, R, np.zeros((count, 0)))
+            states = block.states()
+            assert np.array_equal(got.u, ref.u) and np.array_equal(got.sat, ref.sat)
+            assert np.array_equal(got.flags, ref.flags) and np.array_equal(states, columns.states())
+            for i, c in enumerate(alone):
+                want = c.step(Y[i], R[i], np.zeros(0))
+                assert np.array_equal(got.u[i], want.u), (mode, k, i)
+                assert (got.flags[i], got.sat[i]) == (want.flags, want.sat), (mode, k, i)
+                assert np.array_equal(states[i], c.state()), (mode, k, i)
+                seen |= {(mode, "sat", bool(want.sat)), (mode, "fault", bool(want.flags))}
+    assert {(m, w, b) for m in ("none", "clamp", "backcalc") for w in ("sat", "fault") for b in (True, False)} <= seen
