@@ -697,3 +697,116 @@ def _clamp_campaign(*, runs: int, duration: float):
     data["scenario"]["duration"] = duration
     plan = plan_campaign(parse_campaign(data))
     return plan, [(p.artifact_sha256, dict(p.scenario), p.seed) for p in plan.runs]
+
+
+@pytest.mark.parametrize("design", ["pendulum", "regulator", "two_references"])
+def test_a_blocks_measures_and_downsampled_traces_as_columns_are_each_runs_own(design):
+    """measure_block over 300 runs (mixed lengths: 0 to 1,300 steps; NaN samples, growing and decaying errors,
+    saturation, runs that did not complete, with and without twins) equals measure of each run (the per-run
+    function, the oracle), every figure exactly; downsampled_traces gives each run its samples at the evenly
+    spaced indices (first and last kept, at most 600) as float32."""
+    from types import SimpleNamespace
+
+    from gainlink.hil.campaign.criteria import measure, measure_block
+    from gainlink.hil.campaign.worker import MAX_TRACE_POINTS, downsampled_traces
+    from gainlink.hil.loop.metrics import compute_metrics
+    from support.fixed import example, random_design
+
+    if design == "pendulum":
+        a = example("pendulum", "float32")
+    elif design == "regulator":
+        a = random_design(4, "float32", n=3, m=2, p=2, q=0)
+    else:
+        a = random_design(5, "float32", n=4, m=2, p=3, q=2)
+    rng = np.random.default_rng(33)
+    lengths = [60] * 240 + [1300] * 40 + [0, 0, 1, 5, 7, 8, 9, 37, 37] + [2] * 11
+    traces = _traces(a, rng, lengths)
+    results = []
+    for i, tr in enumerate(traces):
+        if i % 6 == 4:  # an error that grows in the last quarter (unstable), or a run all NaN in one output
+            tr.y[:] *= np.linspace(0.1, 3.0, tr.t.size)[:, None] ** 4
+        if i % 53 == 5:
+            tr.y[:, -1] = np.nan
+        metrics = compute_metrics(tr, artifact=a, mode="sil", late=0, period_s=a.Ts, timed=None)
+        if i % 3 == 0:
+            metrics["model_twin"] = {"worst": 0.1 * i, "iae": {"e": {"ratio": 1.0 + i}, "f": {"ratio": None}},
+                                     "warning": i % 2 == 0}  # fmt: skip
+        complete = i % 13 != 6
+        reason = None if complete or i % 2 else f"plant failed at step {i}"
+        results.append(SimpleNamespace(trace=tr, complete=complete, reason=reason, metrics=metrics))
+    got = measure_block(results, a)
+    seen = set()
+    for result, g in zip(results, got):
+        want = measure(result, a)
+        assert g == want
+        assert list(g) == list(want)
+        seen |= {("stable", want["stable"]), ("grows", "grows" in str(want["unstable_reason"])),
+                 ("saturated", want["longest_saturation_s"] > 0),
+                 ("none_min", None in want["output_min"].values())}  # fmt: skip
+    assert seen >= {("stable", True), ("stable", False), ("grows", True), ("saturated", True), ("none_min", True)}
+    stepped = [tr for tr in traces if tr.t.size]  # a run of no steps has no trace to store
+    for tr, d in zip(stepped, downsampled_traces(stepped)):
+        n = tr.t.size
+        idx = np.unique(np.round(np.linspace(0, n - 1, min(n, MAX_TRACE_POINTS))).astype(int))
+        assert idx.size <= MAX_TRACE_POINTS and (idx[0], idx[-1]) == (0, n - 1)
+        for k, width in (("t", None), ("y", a.p), ("u", a.m), ("r", a.q)):
+            want = getattr(tr, k)[idx].astype(np.float32)
+            assert d[k].dtype == np.float32 and d[k].flags.c_contiguous
+            assert np.array_equal(d[k], want if width is None else want.reshape(idx.size, width), equal_nan=True)
+
+
+def _pendulum_form(form: str, anti_windup: str):
+    """The shipped pendulum design (examples/pendulum.toml, the campaign's spec) with observer ``form`` and
+    ``anti_windup`` mode."""
+    import copy
+
+    from gainlink.fileio import read_toml
+    from gainlink.shipping.artifact import from_dict
+    from support.designs import designed
+    from support.paths import EXAMPLES
+
+    data, _ = read_toml(EXAMPLES / "pendulum.toml", what="spec", error=ValueError)
+    data = copy.deepcopy(data)
+    data["observer"]["form"], data["limits"]["anti_windup"] = form, anti_windup
+    return from_dict(designed(data))
+
+
+@pytest.mark.parametrize("form", ["predictor", "current"])
+def test_the_compiled_float64_law_is_each_runs_own_python_reference_bit_for_bit(form):
+    """The twin's law in one C call per step (law.reference_block) against each instance's own Python reference
+    (law.reference: the per-run twin's law) and the Python columns (ReferenceBlock): the shipped pendulum design
+    in each anti-windup mode, 41 instances (not a multiple of any vector width) through saturation, refused (NaN)
+    samples, a reference shared by every run (a row stride of 0) and references of their own; every command, flag,
+    saturation mask and state equal, bit for bit."""
+    from gainlink.laws import law_of
+    from gainlink.laws.lq.block import ReferenceBlock
+    from gainlink.laws.lq.native_block import NativeReferenceBlock
+
+    seen = set()
+    for mode in ("none", "clamp", "backcalc"):
+        a = _pendulum_form(form, mode)
+        law, count = law_of(a), 41
+        block, columns = law.reference_block(a, count), ReferenceBlock(a, count)
+        assert isinstance(block, NativeReferenceBlock)
+        alone = [law.reference(a) for _ in range(count)]
+        rng = np.random.default_rng(7)
+        scale = rng.uniform(0.2, 30.0, count)  # the larger ones saturate
+        for k in range(80):
+            Y = rng.normal(0.0, 0.05, (count, a.p)) * scale[:, None]
+            if k % 2:
+                R = np.broadcast_to(rng.normal(0.0, 1.0, (1, a.q)), (count, a.q))  # shared: stride 0
+            else:
+                R = rng.normal(0.0, 1.0, (count, a.q))
+            if k in (17, 50):
+                Y[3, 0], Y[40, 1] = np.nan, np.inf
+            got, ref = block.step(Y, R, np.zeros((count, 0))), columns.step(Y, R, np.zeros((count, 0)))
+            states = block.states()
+            assert np.array_equal(got.u, ref.u) and np.array_equal(got.sat, ref.sat)
+            assert np.array_equal(got.flags, ref.flags) and np.array_equal(states, columns.states())
+            for i, c in enumerate(alone):
+                want = c.step(Y[i], R[i], np.zeros(0))
+                assert np.array_equal(got.u[i], want.u), (mode, k, i)
+                assert (got.flags[i], got.sat[i]) == (want.flags, want.sat), (mode, k, i)
+                assert np.array_equal(states[i], c.state()), (mode, k, i)
+                seen |= {(mode, "sat", bool(want.sat)), (mode, "fault", bool(want.flags))}
+    assert {(m, w, b) for m in ("none", "clamp", "backcalc") for w in ("sat", "fault") for b in (True, False)} <= seen

@@ -45,7 +45,7 @@ from gainlink.shipping.artifact import Artifact, from_dict
 from ..loop.scenario import DRAWN, parse_scenario
 from ..paths import cache_dir
 from ..plants.fmu import reused_instances
-from .criteria import measure
+from .criteria import measure, measure_block
 from .store import encode_block, encode_trace, with_inputs, write_block
 
 MAX_TRACE_POINTS = 600
@@ -209,9 +209,24 @@ def _scenario(scenario: dict, *, artifact_path: Path, seed: int, blobs: dict, ki
 def downsampled_trace(trace: Any) -> dict[str, np.ndarray]:
     """The run's t, y, u, r at no more than :data:`MAX_TRACE_POINTS` evenly spaced samples (first and last
     kept), as the block file stores them (:func:`~.store.encode_trace`: float32 arrays)."""
-    N = trace.t.size
-    idx = np.unique(np.linspace(0, N - 1, min(N, MAX_TRACE_POINTS)).round().astype(int)) if N else np.zeros(0, int)
-    return encode_trace(trace.t[idx], trace.y[idx], trace.u[idx], trace.r[idx])
+    return downsampled_traces([trace])[0]
+
+
+def downsampled_traces(traces: list) -> list[dict[str, np.ndarray]]:
+    """:func:`downsampled_trace` of each of ``traces``, taken for the runs of one length at once: one gather and one
+    float32 conversion of their ``(runs, steps, width)`` arrays, each run's arrays a contiguous row of them."""
+    from ..loop.block_metrics import stacked
+
+    out: list[dict | None] = [None] * len(traces)
+    lengths: dict[int, list[int]] = {}
+    for i, tr in enumerate(traces):
+        lengths.setdefault(int(tr.t.size), []).append(i)
+    for N, members in lengths.items():
+        idx = np.unique(np.linspace(0, N - 1, min(N, MAX_TRACE_POINTS)).round().astype(int)) if N else np.zeros(0, int)
+        cols = {k: stacked([getattr(traces[i], k) for i in members])[:, idx].astype(np.float32) for k in "tyur"}
+        for j, i in enumerate(members):
+            out[i] = encode_trace(*(cols[k][j] for k in "tyur"))  # rows already float32 and contiguous: no copy
+    return out  # type: ignore[return-value]
 
 
 def run_point(kind: str, artifact: Artifact, scenario: Any) -> Any:
@@ -261,16 +276,18 @@ def execute(kind: str, artifact_json: bytes, scenario: dict, seed: int, blobs: d
     return _record(result, artifact) | {"worker": _stopped(where, cpu0)}
 
 
-def _record(result: Any, artifact: Artifact) -> dict:
-    """A finished run's record (without ``worker``): status, metrics, measures, link, downsampled traces."""
+def _record(result: Any, artifact: Artifact, *, measures: dict | None = None, trace: dict | None = None) -> dict:
+    """A finished run's record (without ``worker``): status, metrics, measures, link, downsampled traces
+    (``measures``, ``trace``: a block's, taken for its runs together by :func:`~.criteria.measure_block` and
+    :func:`downsampled_traces`; by default the run's own)."""
     return {
         "status": "done",
         "complete": result.complete,
         "reason": result.reason,
         "metrics": result.metrics,
-        "measures": measure(result, artifact),
+        "measures": measure(result, artifact) if measures is None else measures,
         "link": result.info["transport"],
-        "trace": downsampled_trace(result.trace),
+        "trace": downsampled_trace(result.trace) if trace is None else trace,
     }
 
 
@@ -449,11 +466,14 @@ def _run_block(members: list, records: list, runs: list, blobs: dict) -> None:
     if results is None:
         log.info("a campaign block of %d runs steps one by one: its plants are not one vectorised kind", len(members))
         return
-    stepped = sum(result is not None for result in results)
-    share = _stopped(where, cpu0)
-    share["cpu_s"] /= max(stepped, 1)
+    done = [(i, result) for (i, _, _), result in zip(members, results) if result is not None]
     for (i, _, _), result in zip(members, results):
         if result is None:
             log.info("campaign run %d of this task runs alone: its plant could not be built in its block", i)
-            continue
-        records[i] = _record(result, artifact) | {"worker": share | {"block": stepped}}
+    measures = measure_block([result for _, result in done], artifact)
+    traces = downsampled_traces([result.trace for _, result in done])
+    share = _stopped(where, cpu0)
+    share["cpu_s"] /= max(len(done), 1)
+    for (i, result), measured, trace in zip(done, measures, traces):
+        worker = share | {"block": len(done)}
+        records[i] = _record(result, artifact, measures=measured, trace=trace) | {"worker": worker}

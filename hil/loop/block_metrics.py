@@ -49,7 +49,7 @@ def block_metrics(traces: list[RunTrace], *, artifact: Any, mode: str, late: int
     return out  # type: ignore[return-value]
 
 
-def _stacked(arrays: list[np.ndarray]) -> np.ndarray:
+def stacked(arrays: list[np.ndarray]) -> np.ndarray:
     """The runs' arrays of one shape as one (runs, ...) array: a read-only view when they lie equally spaced in one
     array (a block's record, a plan's shared references), else a copy."""
     first = arrays[0]
@@ -75,20 +75,20 @@ def _steps(reduce: str, A: np.ndarray, **kw) -> np.ndarray:
 def _group(traces: list[RunTrace], *, artifact: Any) -> dict:
     """The columns of runs of one length ``n`` > 0: each figure of :func:`~.metrics.compute_metrics` per run."""
     a = artifact
-    Y, U = _stacked([tr.y for tr in traces]), _stacked([tr.u for tr in traces])
+    Y, U = stacked([tr.y for tr in traces]), stacked([tr.u for tr in traces])
     sat = np.stack([tr.sat for tr in traces])
     cols: dict[str, Any] = {
-        "lost": np.count_nonzero(~_stacked([tr.got for tr in traces]), axis=1),
+        "lost": np.count_nonzero(~stacked([tr.got for tr in traces]), axis=1),
         "sat_frac": sat.mean(axis=1),
         "saturated_steps": np.count_nonzero(sat.any(axis=2), axis=1),
         "sat_per_input": sat.sum(axis=1),
         "y_final": Y[:, -1],
         "u_peak": _steps("max", np.abs(U)),
         "y_peak": _steps("max", np.abs(Y)),
-        "refused": np.count_nonzero(_stacked([tr.flags for tr in traces]) & flags.FAULT, axis=1),
+        "refused": np.count_nonzero(stacked([tr.flags for tr in traces]) & flags.FAULT, axis=1),
     }
     t = traces[0].t
-    R = _stacked([tr.r for tr in traces])
+    R = stacked([tr.r for tr in traces])
     # the tracked outputs, run by run (the product a run alone takes); a regulator's: its outputs about y_op
     if a.q:
         tracked_y = [np.stack([tr.y @ a.Ci[j] for tr in traces]) for j in range(a.q)]
@@ -113,7 +113,7 @@ def _twin_columns(traces: list[RunTrace], *, Y, U, tracked_y, refs, t, artifact:
     """:func:`gainlink.proof.twin.twin_comparison`'s figures and the twin's integrators' peaks, per run (the rows
     of runs without a twin are computed and never read)."""
     a = artifact
-    TY, TU, TZ = (_stacked([getattr(tr, name) for tr in traces]) for name in ("twin_y", "twin_u", "twin_z"))
+    TY, TU, TZ = (stacked([getattr(tr, name) for tr in traces]) for name in ("twin_y", "twin_u", "twin_z"))
     dt = float(t[1] - t[0]) if t.size > 1 else 0.0
     if a.q:
         twin_tracked = [np.stack([tr.twin_y @ a.Ci[j] for tr in traces]) for j in range(a.q)]

@@ -98,8 +98,9 @@ class LqLaw(Law):
 
     def reference_block(self, artifact: Any, count: int) -> Any:
         from .block import ReferenceBlock
+        from .native_block import NativeReferenceBlock, covers
 
-        return ReferenceBlock(artifact, count)
+        return NativeReferenceBlock(artifact, count) if covers(artifact) else ReferenceBlock(artifact, count)
 
     def safe_command(self, artifact: Any) -> np.ndarray:
         return np.minimum(np.maximum(artifact.u_op, artifact.u_min), artifact.u_max)
