@@ -241,3 +241,127 @@ def test_the_analysis_tells_the_numbers_branches_from_the_paths_fixed_ones():
     assert not by[0x126].data, "r7 is 0 on the fall-through of bhi, whatever the compare said"
     assert by[0x132].data and "bits" in by[0x132].origins
     assert not by[0x13A].data, "an address loaded and stepped to an end"
+
+
+def _function(name: str, base: int, lines: list[str]) -> str:
+    """objdump -d text of a hand-written function: ``lines`` are "mnemonic<TAB>operands", two bytes apart."""
+    body = "\n".join(f"     {base + 2 * k:x}:\tbf00      \t{line}" for k, line in enumerate(lines))
+    return f"{base:08x} <{name}>:\n{body}\n"
+
+
+def _branches(lines: list[str]) -> dict[int, object]:
+    """The conditional branches of ``f`` (at 0x100, calling ``g`` at 0x200), by the index of their line."""
+    text = _function("f", 0x100, lines) + _function("g", 0x200, ["bx\tlr"])
+    a = analyse_text(parse(text), "f")
+    return {(b.insn.address - 0x100) // 2: b for b in a.branches}
+
+
+def test_a_counter_spilled_to_the_stack_and_reloaded_is_fixed():
+    """Hand-written Thumb-2 (the oracle is reading it): a 0/1 toggle kept in [sp, #4] across a call (which clobbers
+    r0-r3) and reloaded, flipped with an eor, stored back, tested: it starts at the immediate 0 and only ever
+    holds what the code put there, so the loop's branch is fixed. Without stack-slot tracking the reload is a
+    loaded word and the eor made it a float's bits (the M3's backward pass was refused on this)."""
+    by = _branches([
+        "push\t{r4, lr}",
+        "sub\tsp, #8",
+        "movs\tr3, #0",
+        "str\tr3, [sp, #4]",
+        "bl\t200 <g>",
+        "ldr\tr3, [sp, #4]",
+        "eor.w\tr3, r3, #1",
+        "str\tr3, [sp, #4]",
+        "cmp\tr3, #0",
+        "bne.n\t108 <f+0x8>",
+        "add\tsp, #8",
+        "pop\t{r4, pc}",
+    ])  # fmt: skip
+    assert not by[9].data, by[9].origins
+
+
+def test_a_counter_spilled_through_a_frame_pointer_is_fixed():
+    """The same toggle kept through a frame pointer (r7 = sp after the push and the sub) at [r7, #4]: fixed. The
+    frame pointer's offset follows ``add r7, sp, #0``; the slot is the same one [sp, #4] names."""
+    by = _branches([
+        "push\t{r7, lr}",
+        "sub\tsp, #8",
+        "add\tr7, sp, #0",
+        "movs\tr3, #0",
+        "str\tr3, [r7, #4]",
+        "bl\t200 <g>",
+        "ldr\tr3, [sp, #4]",
+        "eor.w\tr3, r3, #1",
+        "str\tr3, [r7, #4]",
+        "cmp\tr3, #0",
+        "bne.n\t10a <f+0xa>",
+        "add\tsp, #8",
+        "pop\t{r7, pc}",
+    ])  # fmt: skip
+    assert not by[10].data, by[10].origins
+
+
+def test_a_float_word_spilled_to_the_stack_is_data_when_reloaded():
+    """A soft-float result (what g returned in r0) spilled to [sp, #4] across a second call and reloaded into r3,
+    then tested against 0: the test is decided by g's result, data. Without stack-slot tracking the reload was a
+    loaded word and the test was called fixed."""
+    by = _branches([
+        "push\t{r4, lr}",
+        "sub\tsp, #8",
+        "bl\t200 <g>",
+        "str\tr0, [sp, #4]",
+        "bl\t200 <g>",
+        "ldr\tr3, [sp, #4]",
+        "cmp\tr3, #0",
+        "beq.n\t114 <f+0x14>",
+        "movs\tr0, #1",
+        "nop",
+        "add\tsp, #8",
+        "pop\t{r4, pc}",
+    ])  # fmt: skip
+    assert by[7].data and "ret:g" in by[7].origins
+
+
+def test_a_slot_the_analysis_cannot_pin_is_data():
+    """The slot [sp, #4] holds the immediate 0, then is overwritten through a pointer to it (``add r2, sp, #4``) with
+    g's result: the reload is g's result, data. Its address passed to a call (g may write it), or sp moved by a
+    register (no slot is pinned any more): the reload is unknown, data. Without stack-slot tracking each reload was
+    a loaded word, fixed."""
+    through_pointer = _branches([
+        "push\t{r4, lr}",
+        "sub\tsp, #8",
+        "movs\tr3, #0",
+        "str\tr3, [sp, #4]",
+        "bl\t200 <g>",
+        "add\tr2, sp, #4",
+        "str\tr0, [r2, #0]",
+        "ldr\tr3, [sp, #4]",
+        "cmp\tr3, #0",
+        "bne.n\t108 <f+0x8>",
+        "add\tsp, #8",
+        "pop\t{r4, pc}",
+    ])  # fmt: skip
+    assert through_pointer[9].data and "ret:g" in through_pointer[9].origins
+    escaped = _branches([
+        "push\t{r4, lr}",
+        "sub\tsp, #8",
+        "movs\tr3, #0",
+        "str\tr3, [sp, #4]",
+        "add\tr0, sp, #4",
+        "bl\t200 <g>",
+        "ldr\tr3, [sp, #4]",
+        "cmp\tr3, #0",
+        "bne.n\t108 <f+0x8>",
+        "add\tsp, #8",
+        "pop\t{r4, pc}",
+    ])  # fmt: skip
+    assert escaped[8].data, escaped[8].origins
+    moved = _branches([
+        "push\t{r4, lr}",
+        "movs\tr3, #0",
+        "str\tr3, [sp, #4]",
+        "mov\tsp, r1",
+        "ldr\tr3, [sp, #4]",
+        "cmp\tr3, #0",
+        "bne.n\t108 <f+0x8>",
+        "pop\t{r4, pc}",
+    ])  # fmt: skip
+    assert moved[6].data, moved[6].origins
