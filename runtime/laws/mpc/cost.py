@@ -591,6 +591,14 @@ def prove(a: Artifact, elf: Path, *, board: str, arg: BranchArgument | None = No
     return bound_of(run, a.mpc.max_iter, iteration_instructions(a, elf, board=board, Y=Y, R=R))
 
 
+def premises(elf: Path, *, soft: bool) -> list[str]:
+    """The premises a bound of ``elf`` rests on, to be printed with it (``soft``: proved by :func:`soft_step_bound`)."""
+    out = [PREMISE, FRAME_PREMISE, SOFT_PREMISE] if soft else [PREMISE, FRAME_PREMISE]
+    if soft and normalisation_loops(disassemble(elf)):
+        out.append(LOOP_PREMISE)
+    return out
+
+
 def bound_block(a: Artifact, elf: Path, *, board: str, core: str) -> dict:
     """``pil.json``'s ``instructions_per_step.bound`` for the image ``elf`` on ``core``: the bound per iteration and
     per step at the cap (``per_step = fixed + cap x per_iteration``, or a refused step's when that is dearer), whether
@@ -607,9 +615,6 @@ def bound_block(a: Artifact, elf: Path, *, board: str, core: str) -> dict:
            "at their longer side; loose" if soft else
            "the law's numbers decide only the non-finite tests and the stopping test (the disassembly), and a run "
            "fits fixed part + iterations x one iteration exactly")  # fmt: skip
-    premises = [PREMISE, FRAME_PREMISE, SOFT_PREMISE] if soft else [PREMISE, FRAME_PREMISE]
-    if soft and normalisation_loops(disassemble(elf)):
-        premises.append(LOOP_PREMISE)
     return {
         "proved": True,
         "core": core,
@@ -623,5 +628,5 @@ def bound_block(a: Artifact, elf: Path, *, board: str, core: str) -> dict:
             f"{a.mpc.nx} states, {a.m} inputs, {a.mpc.nc} box rows) on this image: {core}, its compiler "
             f"and flags; {how}"
         ),
-        "premises": premises,
+        "premises": premises(elf, soft=soft),
     }
