@@ -196,7 +196,7 @@ def measure(a, target: str) -> dict:
         bound = step.dearest - int(iters.max()) * per_iter_cheap + cap * per_iter_worst
         why = "; ".join(proof["argument"]["violations"][:2]) + (f" ({proof['why']})" if "why" in proof else "")
         scope = f"measured on this run (fixed part and passes at their dearest), not proved: {why}"
-    if target in SOFT_CORES:
+    if target in SOFT_CORES and proof["proved"]:  # the routines' bounds the proof charged, beside their dearest calls
         proof["soft_float_routines"] = soft_float_routines(a, elf, board, Y, R, proof)
     size = size_report(elf, board=board)
     syms = symbol_sizes(elf, ("gl_mpc_default", "gl_mpc_step", "law"))
