@@ -1,5 +1,5 @@
 """Cost of one step of the MPC law (issue 32, "Cost is a certificate"): instructions per step in QEMU on the
-Cortex-M0, M4F and M7, per iteration and per step at the cap, flash and RAM.
+Cortex-M0, M3, M4F, M7, M33 and M55, per iteration and per step at the cap, flash and RAM.
 
 Designs: ``examples/pendulum_mpc.toml`` (5 states with the integrator, 1 input, horizon 20, cap 10) and
 ``examples/quadrotor_hover_mpc.toml`` (12 states, 4 inputs, horizon 10, cap 10). Samples: the host C closing the loop
@@ -20,13 +20,16 @@ so a step's count is a refuse path's, or F_stop + it x I, or F_cap + cap x I, wi
 the same on every call, checked) plus solve's own loop body (counted on the disassembly); the run (a closed loop from
 1 m, then -1.5 m, then a NaN in each sample and reference element) must fit those formulas exactly, and gives F_stop,
 F_cap and the bound. Then a second run tries to break it (extreme, alternating and random samples and references)
-and its worst count is printed beside. On the M0 (soft float: ``gl_fmaf``'s and the compare routines' paths depend
-on their operands) the bound is proved another way (``soft_step_bound``): every float routine the step calls is
-loop-free and is charged at its longest path on the disassembly (``soft_float_routines`` prints each bound beside the
-dearest call measured), the compare-decided clamps are detours charged at their longer side, and the counts of the
-first ``M0_STEPS`` closed-loop steps give each pass's and the fixed part's own instructions; a refused step is bounded
-by the heaviest path to ``refuse``. It is loose (each routine at its dearest path), and six adversarial steps are
-measured beside it.
+and its worst count is printed beside. On the M0 and the M3 (soft float: ``gl_fmaf``'s and the compare routines'
+paths depend on their operands) the bound is proved another way (``soft_step_bound``): every float routine the step
+calls is charged at its longest path on the disassembly, loop-free but for libgcc's normalisation of a subnormal
+operand in the M3's ``__aeabi_fmul`` (at most 22 times back: a premise printed with the bound;
+``soft_float_routines`` prints each bound beside the dearest call measured), the compare-decided clamps are detours
+charged at their longest path, and the counts of the first ``SOFT_STEPS`` closed-loop steps give each pass's and the
+fixed part's own instructions; a refused step is bounded by the heaviest path to ``refuse``. It is loose (each routine
+at its dearest path), and six adversarial steps are measured beside it. The quadrotor's M3 image is not proved (its
+non-finite tests are a loop on the way to ``refuse``): its figure is then measured, and says so; the micro:bit's 16 KiB
+of RAM does not hold the quadrotor's M0 image.
 Instructions are not cycles (a ``vfma.f32`` takes 3 cycles on the M4F; flash wait states add more): times are not
 given here.
 
@@ -50,7 +53,7 @@ from gainlink.errors import ToolchainError
 from gainlink.firmware.branches import SOFT_FLOAT, disassemble
 from gainlink.firmware.build import replay_image
 from gainlink.firmware.cost import count_calls, count_step_instructions
-from gainlink.firmware.paths import Bounds, Unbounded
+from gainlink.firmware.paths import Unbounded
 from gainlink.firmware.size import size_report, symbol_sizes
 from gainlink.firmware.targets import resolve_cortex_m
 from gainlink.laws import design as design_spec
@@ -62,15 +65,17 @@ from gainlink.laws.mpc.cost import (
     NotProved,
     branch_argument,
     closed_loop_samples,
+    premises,
     prove,
+    routine_bounds,
 )
 from gainlink.laws.mpc.cost import measure as measure_steps
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import load_spec
 
 ROOT = Path(__file__).resolve().parents[1]
-TARGETS = ("cortex-m0", "cortex-m4", "cortex-m7", "cortex-m33", "cortex-m55")
-M0_STEPS = SOFT_STEPS  # the M0 runs ~4M instructions a step through gl_fmaf: measured only
+TARGETS = ("cortex-m0", "cortex-m3", "cortex-m4", "cortex-m7", "cortex-m33", "cortex-m55")
+SOFT_CORES = ("cortex-m0", "cortex-m3")  # ~1.4-3M instructions a step through gl_fmaf: the first SOFT_STEPS only
 PASSES = ("backward", "forward", "slacks")
 TARGET_INSTRUCTIONS = {"pendulum_mpc": 50_000, "quadrotor_hover_mpc": 168_000}
 RAM_TARGET = {"quadrotor_hover_mpc": 16 * 1024}
@@ -98,7 +103,7 @@ def compile_flags(elf: Path) -> str:
 
 
 def soft_proved_bound(a, elf: Path, board: str, arg) -> dict:
-    """The soft-float cores' bound at the cap (gainlink.laws.mpc.cost.prove: soft_step_bound on the first M0_STEPS
+    """The soft-float cores' bound at the cap (gainlink.laws.mpc.cost.prove: soft_step_bound on the first SOFT_STEPS
     steps of the closed loop), or why not; a short run of adversarial steps beside it."""
     try:
         b = prove(a, elf, board=board, arg=arg)
@@ -118,7 +123,7 @@ def proved_bound(a, elf: Path, board: str) -> dict:
     arg = branch_argument(elf)
     out = {"argument": arg.summary(), "compile_flags": compile_flags(elf)}
     if not arg.holds and arg.analysis.soft_float:
-        return {**out, **soft_proved_bound(a, elf, board, arg)}
+        return {**out, **soft_proved_bound(a, elf, board, arg), "premises": premises(elf, soft=True)}
     if not arg.holds:
         return {**out, "proved": False}
     try:
@@ -128,7 +133,7 @@ def proved_bound(a, elf: Path, board: str) -> dict:
     run_steps = sum(steps for steps, _ in LEGS) + a.p + a.q
     Ya, Ra = adversarial_samples(a)
     worst = measure_steps(a, elf, board=board, Y=Ya, R=Ra)
-    return {**out, "proved": True, **bound.summary(), "run_steps": run_steps,
+    return {**out, "proved": True, **bound.summary(), "premises": premises(elf, soft=False), "run_steps": run_steps,
             "adversarial_steps": len(worst.counts), "adversarial_capped": int(worst.capped.sum()),
             "adversarial_worst": int(worst.counts.max()),
             "adversarial_within_bound": bool(worst.counts.max() <= bound.bound)}  # fmt: skip
@@ -138,7 +143,7 @@ def soft_float_routines(a, elf: Path, board: str, Y, R, proof: dict) -> dict:
     """Each soft-float routine the step calls: its dearest call proved on the disassembly (gainlink.firmware.paths: a
     loop-free graph's longest path, callees included) beside the dearest call the step made on this run."""
     funcs = disassemble(elf)
-    bounds = Bounds(funcs)
+    bounds = routine_bounds(funcs)
     # the step's own code: the start-up checks call the compares with interrupts unmasked (a handler would be counted)
     step = tuple(f for f in proof["argument"]["functions"] if not SOFT_FLOAT.match(f) and f != "__clzsi2")
     out = {}
@@ -163,8 +168,8 @@ def measure(a, target: str) -> dict:
     except ToolchainError as exc:  # the micro:bit's 16 KiB of RAM: the quadrotor's replay image does not fit
         return {"target": target, "board": board, "built": False, "why": str(exc)[-160:]}
     Y, R = closed_loop_samples(a)
-    if target == "cortex-m0":
-        Y, R = Y[:M0_STEPS], R[:M0_STEPS]
+    if target in SOFT_CORES:
+        Y, R = Y[:SOFT_STEPS], R[:SOFT_STEPS]
     host = law_of(a).replay(a, "native", Y, R)  # the image's run bit for bit (tests/test_mpc.py)
     iters = host.iterations
     step = count_step_instructions(elf, a, Y=Y, R=R, board=board)
@@ -179,21 +184,19 @@ def measure(a, target: str) -> dict:
                  f"{a.mpc.horizon}, {a.mpc.nx} states, {a.m} inputs, {a.mpc.nc} box rows, cap {cap}): every "
                  "soft-float routine the step calls is loop-free and charged at its longest path, the passes' and the "
                  "step's compare-decided branches are detours charged at their longer side, a refused step at the "
-                 "heaviest path to refuse; loose (each routine at its dearest path); premises: a word an integer "
-                 "register loads and only moves, offsets and compares is an address, and the step's branches before "
-                 "solve are its non-finite tests")  # fmt: skip
+                 "heaviest path to refuse; loose (each routine at its dearest path); premises: "
+                 + "; ".join(proof["premises"]))  # fmt: skip
     elif proof["proved"]:
         bound = proof["bound"]
         scope = (f"proved for every input on this image ({target}, {proof['compile_flags']}; horizon "
                  f"{a.mpc.horizon}, {a.mpc.nx} states, {a.m} inputs, {a.mpc.nc} box rows, cap {cap}): the numbers "
                  "decide only the non-finite tests and the stopping test (the disassembly), and the run fits fixed "
-                 "part + iterations x one iteration exactly; premise: a word an integer register loads and only moves, "
-                 "offsets and compares is an address")  # fmt: skip
+                 "part + iterations x one iteration exactly; premises: " + "; ".join(proof["premises"]))  # fmt: skip
     else:
         bound = step.dearest - int(iters.max()) * per_iter_cheap + cap * per_iter_worst
         why = "; ".join(proof["argument"]["violations"][:2]) + (f" ({proof['why']})" if "why" in proof else "")
         scope = f"measured on this run (fixed part and passes at their dearest), not proved: {why}"
-    if target == "cortex-m0":
+    if target in SOFT_CORES and proof["proved"]:  # the routines' bounds the proof charged, beside their dearest calls
         proof["soft_float_routines"] = soft_float_routines(a, elf, board, Y, R, proof)
     size = size_report(elf, board=board)
     syms = symbol_sizes(elf, ("gl_mpc_default", "gl_mpc_step", "law"))

@@ -658,9 +658,9 @@ def bound_words(proved: bool, proof: dict) -> str:
 
 
 def mpc_cost_block() -> str:
-    """The MPC law's step on the M0, M4F, M7, M33 and M55 (bench/mpc_cost.py): instructions per step, mean and worst,
-    per iteration, the bound at the cap (proved or measured, and what it covers), the attempt to break it, sizes;
-    against the issue's targets and the LQ law of the same weights."""
+    """The MPC law's step on the M0, M3, M4F, M7, M33 and M55 (bench/mpc_cost.py): instructions per step, mean and
+    worst, per iteration, the bound at the cap (proved or measured, and what it covers), the attempt to break it,
+    sizes; against the issue's targets and the LQ law of the same weights."""
     doc = result("mpc_cost")
     if doc is None:
         return missing("MPC step cost", "scripts/bench.sh mpc_cost")
@@ -711,13 +711,17 @@ def mpc_cost_block() -> str:
         "tables of these dimensions) on the image measured: that core, the compiler flags the bench prints, the "
         "design's horizon, states, inputs and box rows. It rests on the disassembly of that image (the law's numbers "
         "decide only the non-finite tests and the solver's stopping test; the box projections are IT-block selects) "
-        "and on a run that fits fixed part + iterations x one iteration exactly; premise: a word an integer register "
-        "loads and only moves, offsets and compares is an address. On the M0 (soft float: the paths of `gl_fmaf` and "
-        "the float compare routines depend on their operands) the bound is proved another way: every float routine "
-        "the step calls is loop-free and is charged at its longest path on the disassembly, the compare-decided "
-        "clamps are detours charged at their longer side, and a refused step is bounded by the heaviest path to "
-        "`refuse`; a further premise there is that the step's branches before `solve` are its non-finite tests. It "
-        "is loose, because every routine is charged at its dearest path."
+        "and on a run that fits fixed part + iterations x one iteration exactly; premises: a word an integer register "
+        "loads and only moves, offsets and compares is an address, and an index added to a stack frame's address is "
+        "not negative (the analysis tracks the stack slots a function spills to and reloads from). On the M0 and the "
+        "M3 (soft float: the paths of `gl_fmaf` and the float routines depend on their operands) the bound is proved "
+        "another way: every float routine the step calls is charged at its longest path on the disassembly, "
+        "loop-free but for libgcc's normalisation of a subnormal operand in the M3's `__aeabi_fmul` (premise: at "
+        "most 22 times back, its mantissa nonzero), the compare-decided clamps are detours charged at their longest "
+        "path, and a refused step is bounded by the heaviest path to `refuse`; a further premise there is that the "
+        "step's branches before `solve` are its non-finite tests. It is loose, because every routine is charged at "
+        "its dearest path. The quadrotor's M3 bound is measured, not proved: its non-finite tests are a loop on the "
+        "way to `refuse`, which the refused step's path search does not bound."
     )
     return (
         table(head, rows)

@@ -14,11 +14,20 @@ from gainlink.firmware.cost import count_calls
 from gainlink.firmware.paths import Bounds, Unbounded
 from gainlink.laws import design, law_of
 from gainlink.laws.mpc.cost import (
+    FRAME_PREMISE,
+    LOOP_PREMISE,
+    PREMISE,
+    SOFT_PREMISE,
+    NotProved,
+    bound_block,
     bound_of,
     branch_argument,
+    detour,
     iteration_instructions,
     measure,
+    normalisation_loops,
     refuse_samples,
+    routine_bounds,
     soft_step_bound,
 )
 from gainlink.shipping.artifact import from_dict
@@ -179,6 +188,38 @@ def test_the_m0_bound_at_the_cap_covers_every_step_and_no_input_breaks_it():
     assert refused.refused.all() and refused.counts.max() <= b.refuse
 
 
+@pytest.mark.matrix
+def test_the_m3_bound_at_the_cap_is_proved_and_no_input_breaks_it():
+    """The M3's bound at the cap through prove(), as `pil run` and the bench report it (bound_block): proved, its
+    premises printed (the frame's, and libgcc's normalisation loops bounded: the M3's __aeabi_fmul has two), the
+    figure max(refused step, fixed + cap x one iteration). No step of a second run through QEMU's M3 (alternating
+    +-1e3, random extremes with float32 subnormals 1e-40 that take fmul's normalisation loops, random within +-50)
+    and no refused step (a NaN or an infinity in each sample and reference element) passes it. In the matrix: ~80 s
+    for the pendulum, as the M0's (which stays in make test). The quadrotor's M3 image is not proved (its non-finite
+    tests are a loop on the way to refuse: the refused step's heaviest path is not bounded)."""
+    a = artifact("pendulum_mpc")
+    elf = replay_image(a, target="cortex-m3", board="mps2-an385")
+    block = bound_block(a, elf, board="mps2-an385", core="cortex-m3")
+    assert block["proved"], block["covers"]
+    assert {PREMISE, FRAME_PREMISE, SOFT_PREMISE, LOOP_PREMISE} <= set(block["premises"])
+    assert len(normalisation_loops(disassemble(elf))) == 2
+    bound = block["per_step"]
+    assert bound == max(block["refused_step"], block["fixed"] + block["cap"] * block["per_iteration"])
+    rng = np.random.default_rng(32)
+    extremes = [1e6, -1e6, 1e-30, 1e-40, -1e-40, 30.0]
+    Ya = np.vstack([np.full((1, a.p), 1e3), np.full((1, a.p), -1e3), rng.choice(extremes, (2, a.p)),
+                    rng.uniform(-50, 50, (1, a.p))])  # fmt: skip
+    Ra = np.vstack([np.zeros((2, a.q)), rng.choice(extremes, (2, a.q)), rng.uniform(-50, 50, (1, a.q))])
+    worst = measure(a, elf, board="mps2-an385", Y=Ya, R=Ra)
+    assert worst.capped.any() and worst.counts.max() <= bound, (int(worst.counts.max()), block)
+    Y, R = closed_loop(a, [(1, 1.0)])
+    Yn, Rn = refuse_samples(a.p, a.q, Y[-1], R[-1])
+    Yi, Ri = Yn.copy(), Rn.copy()
+    Yi[np.isnan(Yi)], Ri[np.isnan(Ri)] = np.inf, -np.inf
+    refused = measure(a, elf, board="mps2-an385", Y=np.vstack([Yn, Yi]), R=np.vstack([Rn, Ri]))
+    assert refused.refused.all() and refused.counts.max() <= block["refused_step"]
+
+
 def test_the_dearest_path_of_hand_written_thumb():
     """Hand-written Thumb (the oracle is reading it): a diamond whose long side calls a 3-instruction leaf costs
     1 + 1 + (1 + 3) + 1 = 7 on that side against 4 on the other; a tail call adds the callee; a loop is refused."""
@@ -201,6 +242,81 @@ def test_the_dearest_path_of_hand_written_thumb():
     assert bounds("leaf") == 3 and bounds("f") == 1 + 1 + (1 + 3) + 1 and bounds("g") == 1 + (1 + 3)
     with pytest.raises(Unbounded, match="loop"):
         bounds("loop")
+
+
+def test_the_dearest_path_through_an_alias_a_fall_through_and_a_bounded_loop():
+    """Hand-written Thumb-2 in the shapes of the M3's libgcc (the oracle is reading it): a call of a symbol objdump
+    does not label (``__aeabi_fadd`` is ``__addsf3``'s address) costs the function at that address; a routine whose
+    last instruction runs on into the next one (``__aeabi_fsub``'s ``eor`` into ``__addsf3``) costs 1 + that one; an
+    ``ldr.w pc, [sp], #8`` is a return; libgcc's normalisation loop (``ittt eq; lsleq; tsteq #0x800000; subeq;
+    beq``) is recognised and goes back at most 22 times: 1 + 5 + 22 x 5 + 1 = 117, and a loop shifting by two is
+    not recognised (Unbounded)."""
+    add = ["600:\t1840      \tadds\tr0, r0, r1", "602:\t4770      \tbx\tlr"]
+    sub = ["5fc:\tf081 4100 \teor.w\tr1, r1, #2147483648"]
+    cmp = ["700:\tf84d ed08 \tstr.w\tlr, [sp, #-8]!", "704:\tf7ff ff7c \tbl\t600 <__aeabi_fadd>",
+           "708:\tf85d fb08 \tldr.w\tpc, [sp], #8"]  # fmt: skip
+    norm = [
+        "800:\tf092 0f00 \tteq\tr2, #0",
+        "804:\tbf02      \tittt\teq",
+        "806:\t0040      \tlsleq\tr0, r0, #1",
+        "808:\tf410 0f00 \ttsteq.w\tr0, #8388608\t@ 0x800000",
+        "80c:\t3a01      \tsubeq\tr2, #1",
+        "80e:\td0f9      \tbeq.n\t804 <__aeabi_fmul+0x4>",
+        "810:\t4770      \tbx\tlr",
+    ]
+    text = "".join(
+        f"{base:08x} <{name}>:\n" + "\n".join(f"     {x}" for x in body) + "\n"
+        for name, base, body in (("__aeabi_fsub", 0x5FC, sub), ("__addsf3", 0x600, add), ("__aeabi_fcmpeq", 0x700, cmp),
+                                 ("__aeabi_fmul", 0x800, norm))
+    )  # fmt: skip
+    funcs = parse(text)
+    bounds = routine_bounds(funcs)
+    assert bounds("__addsf3") == 2 and bounds("__aeabi_fadd") == 2
+    assert bounds("__aeabi_fsub") == 1 + 2
+    assert bounds("__aeabi_fcmpeq") == 1 + (1 + 2) + 1
+    assert normalisation_loops(funcs) == {("__aeabi_fmul", 0x80E): 22}
+    assert bounds("__aeabi_fmul") == 1 + 5 + 22 * 5 + 1
+    twice = parse(text.replace("lsleq\tr0, r0, #1", "lsleq\tr0, r0, #2"))
+    assert normalisation_loops(twice) == {}
+    with pytest.raises(Unbounded, match="loop"):
+        routine_bounds(twice)("__aeabi_fmul")
+
+
+def test_a_clamp_with_two_compares_is_a_detour():
+    """Hand-written Thumb-2 in the shape of the M3 step's command clamp (the oracle is reading it): compare, then on
+    either side a second compare and maybe a move, all four paths meeting at the ``nop`` with two calls of the compare
+    each: paths of 5, 7 (0x112's side, falling through then taken), 7 and 10 own instructions, so one execution runs
+    at most 5 more than another. A side that calls once more than the other is not a detour."""
+    clamp = [
+        "bl\t200 <__aeabi_fcmplt>",  # 100
+        "cmp\tr0, #0",
+        "beq.n\t118 <f+0x18>",  # 104
+        "mov\tr0, r4",
+        "ldr\tr1, [sp, #0]",
+        "bl\t200 <__aeabi_fcmplt>",  # 10a
+        "cmp\tr0, #0",
+        "bne.n\t114 <f+0x14>",  # 10e
+        "nop",  # 110: the meet
+        "bx\tlr",
+        "str\tr4, [sp, #0]",  # 114
+        "b.n\t110 <f+0x10>",
+        "ldr\tr3, [sp, #4]",  # 118
+        "mov\tr0, r4",
+        "str\tr3, [sp, #0]",
+        "ldr\tr1, [sp, #0]",
+        "bl\t200 <__aeabi_fcmplt>",  # 120
+        "cmp\tr0, #0",
+        "beq.n\t110 <f+0x10>",  # 126
+        "b.n\t114 <f+0x14>",
+    ]
+    text = _function("f", 0x100, clamp) + _function("__aeabi_fcmplt", 0x200, ["bx\tlr"])
+    funcs = parse(text)
+    first = next(b for b in analyse_text(funcs, "f").branches if b.insn.address == 0x104)
+    assert detour(funcs, "f", first) == ("__aeabi_fcmplt", 10 - 5)
+    funcs = parse(text.replace("ldr\tr3, [sp, #4]", "bl\t200 <__aeabi_fcmplt>"))
+    first = next(b for b in analyse_text(funcs, "f").branches if b.insn.address == 0x104)
+    with pytest.raises(NotProved, match="different calls"):
+        detour(funcs, "f", first)
 
 
 def test_the_analysis_tells_the_numbers_branches_from_the_paths_fixed_ones():
@@ -241,3 +357,127 @@ def test_the_analysis_tells_the_numbers_branches_from_the_paths_fixed_ones():
     assert not by[0x126].data, "r7 is 0 on the fall-through of bhi, whatever the compare said"
     assert by[0x132].data and "bits" in by[0x132].origins
     assert not by[0x13A].data, "an address loaded and stepped to an end"
+
+
+def _function(name: str, base: int, lines: list[str]) -> str:
+    """objdump -d text of a hand-written function: ``lines`` are "mnemonic<TAB>operands", two bytes apart."""
+    body = "\n".join(f"     {base + 2 * k:x}:\tbf00      \t{line}" for k, line in enumerate(lines))
+    return f"{base:08x} <{name}>:\n{body}\n"
+
+
+def _branches(lines: list[str]) -> dict[int, object]:
+    """The conditional branches of ``f`` (at 0x100, calling ``g`` at 0x200), by the index of their line."""
+    text = _function("f", 0x100, lines) + _function("g", 0x200, ["bx\tlr"])
+    a = analyse_text(parse(text), "f")
+    return {(b.insn.address - 0x100) // 2: b for b in a.branches}
+
+
+def test_a_counter_spilled_to_the_stack_and_reloaded_is_fixed():
+    """Hand-written Thumb-2 (the oracle is reading it): a 0/1 toggle kept in [sp, #4] across a call (which clobbers
+    r0-r3) and reloaded, flipped with an eor, stored back, tested: it starts at the immediate 0 and only ever
+    holds what the code put there, so the loop's branch is fixed. Without stack-slot tracking the reload is a
+    loaded word and the eor made it a float's bits (the M3's backward pass was refused on this)."""
+    by = _branches([
+        "push\t{r4, lr}",
+        "sub\tsp, #8",
+        "movs\tr3, #0",
+        "str\tr3, [sp, #4]",
+        "bl\t200 <g>",
+        "ldr\tr3, [sp, #4]",
+        "eor.w\tr3, r3, #1",
+        "str\tr3, [sp, #4]",
+        "cmp\tr3, #0",
+        "bne.n\t108 <f+0x8>",
+        "add\tsp, #8",
+        "pop\t{r4, pc}",
+    ])  # fmt: skip
+    assert not by[9].data, by[9].origins
+
+
+def test_a_counter_spilled_through_a_frame_pointer_is_fixed():
+    """The same toggle kept through a frame pointer (r7 = sp after the push and the sub) at [r7, #4]: fixed. The
+    frame pointer's offset follows ``add r7, sp, #0``; the slot is the same one [sp, #4] names."""
+    by = _branches([
+        "push\t{r7, lr}",
+        "sub\tsp, #8",
+        "add\tr7, sp, #0",
+        "movs\tr3, #0",
+        "str\tr3, [r7, #4]",
+        "bl\t200 <g>",
+        "ldr\tr3, [sp, #4]",
+        "eor.w\tr3, r3, #1",
+        "str\tr3, [r7, #4]",
+        "cmp\tr3, #0",
+        "bne.n\t10a <f+0xa>",
+        "add\tsp, #8",
+        "pop\t{r7, pc}",
+    ])  # fmt: skip
+    assert not by[10].data, by[10].origins
+
+
+def test_a_float_word_spilled_to_the_stack_is_data_when_reloaded():
+    """A soft-float result (what g returned in r0) spilled to [sp, #4] across a second call and reloaded into r3,
+    then tested against 0: the test is decided by g's result, data. Without stack-slot tracking the reload was a
+    loaded word and the test was called fixed."""
+    by = _branches([
+        "push\t{r4, lr}",
+        "sub\tsp, #8",
+        "bl\t200 <g>",
+        "str\tr0, [sp, #4]",
+        "bl\t200 <g>",
+        "ldr\tr3, [sp, #4]",
+        "cmp\tr3, #0",
+        "beq.n\t114 <f+0x14>",
+        "movs\tr0, #1",
+        "nop",
+        "add\tsp, #8",
+        "pop\t{r4, pc}",
+    ])  # fmt: skip
+    assert by[7].data and "ret:g" in by[7].origins
+
+
+def test_a_slot_the_analysis_cannot_pin_is_data():
+    """The slot [sp, #4] holds the immediate 0, then is overwritten through a pointer to it (``add r2, sp, #4``) with
+    g's result: the reload is g's result, data. Its address passed to a call (g may write it), or sp moved by a
+    register (no slot is pinned any more): the reload is unknown, data. Without stack-slot tracking each reload was
+    a loaded word, fixed."""
+    through_pointer = _branches([
+        "push\t{r4, lr}",
+        "sub\tsp, #8",
+        "movs\tr3, #0",
+        "str\tr3, [sp, #4]",
+        "bl\t200 <g>",
+        "add\tr2, sp, #4",
+        "str\tr0, [r2, #0]",
+        "ldr\tr3, [sp, #4]",
+        "cmp\tr3, #0",
+        "bne.n\t108 <f+0x8>",
+        "add\tsp, #8",
+        "pop\t{r4, pc}",
+    ])  # fmt: skip
+    assert through_pointer[9].data and "ret:g" in through_pointer[9].origins
+    escaped = _branches([
+        "push\t{r4, lr}",
+        "sub\tsp, #8",
+        "movs\tr3, #0",
+        "str\tr3, [sp, #4]",
+        "add\tr0, sp, #4",
+        "bl\t200 <g>",
+        "ldr\tr3, [sp, #4]",
+        "cmp\tr3, #0",
+        "bne.n\t108 <f+0x8>",
+        "add\tsp, #8",
+        "pop\t{r4, pc}",
+    ])  # fmt: skip
+    assert escaped[8].data, escaped[8].origins
+    moved = _branches([
+        "push\t{r4, lr}",
+        "movs\tr3, #0",
+        "str\tr3, [sp, #4]",
+        "mov\tsp, r1",
+        "ldr\tr3, [sp, #4]",
+        "cmp\tr3, #0",
+        "bne.n\t108 <f+0x8>",
+        "pop\t{r4, pc}",
+    ])  # fmt: skip
+    assert moved[6].data, moved[6].origins

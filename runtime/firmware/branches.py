@@ -16,7 +16,22 @@ bhi``: r7 is 0 on the fall-through). Origins of data:
   (``vmov rN, sM``);
 - ``bits``: a word loaded from memory that then went through a bit or multiply operation (how integer code would test
   a float's bits);
-- ``ret:<f>``: what ``f`` returned.
+- ``ret:<f>``: what ``f`` returned;
+- ``slot``: a word reloaded from the function's own frame where no slot is pinned (unknown).
+
+**The frame** (stack-slot tracking): the state also holds sp's offset from its value at the function's entry (it
+follows ``push``, ``pop``, ``stmdb sp!``, ``ldmia sp!``, ``vpush``, ``vpop``, ``sub sp`` and ``add sp`` by
+immediates) and the origins of each word stored in a slot it pins: a store to ``[sp, #imm]``, or through a register
+holding the entry sp + K exactly (a frame pointer: ``add r7, sp, #0``), carries the stored register's origins to the
+slot, and a reload carries them back (a loop counter spilled across a call stays fixed; a float word spilled and
+reloaded is data). A register made from a frame address carries it as a marker, stripped from a branch's origins and
+from a call's arguments (a frame address is an address). What cannot be pinned is unknown, and a reload of it is
+``slot`` (data): a slot not stored on every path to the reload, every slot once sp is moved by a register or differs
+between two paths, a slot a store through a pointer formed from the frame may reach (its origins are joined into
+each such slot), and every slot at or above a frame address passed to a call or stored outside a pinned slot (from
+then on every call and every store through any pointer may write them). The words above the entry sp (the caller's
+stack arguments) are loaded words, as any other. Premise: a pointer formed by adding an index to sp + K reaches sp +
+K and above (the access's own negative offset aside): an index into a local array is not negative.
 
 The premise, stated wherever the result is printed: on the hard-float cores the law's numbers live in the FPU's
 registers, and a word an integer register loads is an address or a copy unless a bit or multiply operation works on
@@ -159,7 +174,12 @@ def _is_return(insn: Insn) -> bool:
     return b == "ldr" and _regs(insn.operands)[:1] == ["pc"]
 
 
-State = tuple[dict[str, frozenset[str]], frozenset[str]]  # register origins, flag origins
+Regs = dict[str, frozenset[str]]
+#: The frame: sp's offset from its value at the function's entry (None: changed by a register, or different on two
+#: paths), the origins of the words stored in the stack slots the analysis pins (keyed by their offset from the entry
+#: sp; a slot absent is unknown), and the lowest offset a frame address was passed or stored at (None: none escaped).
+Frame = tuple[int | None, dict[int, frozenset[str]], int | None]
+State = tuple[Regs, frozenset[str], Frame]  # register origins, flag origins, the frame
 
 
 class _Flow:
@@ -206,18 +226,30 @@ class _Flow:
         return nxt
 
     def step(self, insn: Insn, state: State, known: str | None = None) -> State:
-        """What ``insn`` does to the origins of the registers and the flags (``known``: the condition the flags are
-        known to satisfy on this path, which decides a predicated instruction of that condition or its opposite)."""
-        regs, flags = dict(state[0]), state[1]
-        b, ops = _base(insn.mnemonic), insn.operands
-        pred = insn.address in self.predicated
-        if pred and b[-2:] in _CONDS and not b.startswith("it"):
+        """What ``insn`` does to the origins of the registers, the flags and the frame's slots (``known``: the
+        condition the flags are known to satisfy on this path, which decides a predicated instruction of that
+        condition or its opposite)."""
+        regs, flags, frame = state
+        b = _base(insn.mnemonic)
+        pred = insn.address in self.predicated and b[-2:] in _CONDS and not b.startswith("it")
+        if pred:
             cond = _NORM.get(b[-2:], b[-2:])
             b = b[:-2]
             if known is not None and cond == known:
                 pred = False  # it runs, decided by the branch the path took
             elif known is not None and cond == _OPPOSITE[known]:
-                return regs, flags  # it does not run
+                return state  # it does not run
+        before = {**regs, "sp": _sp_origin(frame)}
+        after, flags = self._registers(insn, b, before, flags, pred)
+        after, frame = _frame_effect(insn, b, before, after, frame, pred)
+        after.pop("sp", None)
+        return after, flags, frame
+
+    def _registers(self, insn: Insn, b: str, regs: dict[str, frozenset[str]], flags: frozenset[str],
+                   pred: bool) -> tuple[dict[str, frozenset[str]], frozenset[str]]:  # fmt: skip
+        """The registers' and the flags' origins after ``insn`` (mnemonic ``b`` without its condition; ``pred``:
+        whether its condition may not hold), a load's destination a loaded word (:data:`MEM`)."""
+        regs, ops = dict(regs), insn.operands
         rs = _regs(ops)
         extra = flags if pred else frozenset()  # a predicated write: its condition decides it
         if b == "vmrs":
@@ -234,7 +266,7 @@ class _Flow:
             tgt = branch_target(insn)
             if tgt and tgt[0] not in self.index:  # a tail call (conditional or not): the callee gets these arguments
                 self.calls[insn.address] = tgt[1]
-                self.sites[insn.address] = (tgt[1], {f"r{i}": regs.get(f"r{i}", frozenset()) for i in range(4)})
+                self.sites[insn.address] = (tgt[1], _arguments(regs))
             return regs, flags
         if b.startswith(_NO_WRITE) or is_conditional_branch(b) or b == "bx" or b.startswith("it"):
             return regs, flags
@@ -244,10 +276,10 @@ class _Flow:
             return regs, flags
         return _alu(b, rs, regs, flags, extra, pred)
 
-    def _call(self, insn: Insn, regs: dict[str, frozenset[str]]) -> State:
+    def _call(self, insn: Insn, regs: Regs) -> tuple[Regs, frozenset[str]]:
         callee = (branch_target(insn) or (0, "?"))[1]
         self.calls[insn.address] = callee
-        self.sites[insn.address] = (callee, {f"r{i}": regs.get(f"r{i}", frozenset()) for i in range(4)})
+        self.sites[insn.address] = (callee, _arguments(regs))
         ret = frozenset() if callee in COPIES else frozenset({f"ret:{callee}"})
         for r in ("r0", "r1", "r2", "r3", "r12", "lr"):
             regs[r] = ret
@@ -289,7 +321,7 @@ class _Flow:
         """The fixed point from the entry state; every conditional branch with the origins that decide it."""
         if not self.insns:
             return []
-        states: dict[int, State] = {0: (entry, frozenset())}
+        states: dict[int, State] = {0: (entry, frozenset(), (0, {}, None))}
         work = deque([0])
         while work:
             k = work.popleft()
@@ -304,9 +336,10 @@ class _Flow:
         for k, insn in enumerate(self.insns):
             if k not in states or not is_conditional_branch(insn.mnemonic):
                 continue
-            regs, flags = states[k]
+            regs, flags, _ = states[k]
             b = _base(insn.mnemonic)
             origins = regs.get(_regs(insn.operands)[0], frozenset()) if b in ("cbz", "cbnz") else flags
+            origins = _plain(origins)  # a frame address is an address
             tgt = branch_target(insn)
             nxt = self.insns[k + 1].address if k + 1 < len(self.insns) else -1
             branches.append(Branch(self.name, insn, origins, tgt[0] if tgt else -1, nxt))
@@ -316,8 +349,203 @@ class _Flow:
 MEM = "mem"  # a loaded word: an address or a copy, not data (module docstring)
 
 
+SLOT = "slot"  # a word reloaded from the frame where the analysis pins no slot: unknown, so data
+#: The origin a frame address carries: ``frame=K`` the entry sp + K exactly, ``frame>=K`` a pointer formed from it by
+#: adding (it reaches sp + K and above: premise), ``frame>=*`` anywhere in the frame. Stripped from a branch's origins
+#: and a call's arguments: a frame address is an address.
+_AT, _FROM, _ANYWHERE = "frame=", "frame>=", "frame>=*"
+_STORES = ("str", "stm", "push", "vst", "vpush", "stc")  # stc, ldc: how objdump shows MVE's vstrw, vldrw
+_LOADS = ("ldr", "ldm", "pop", "vldr", "vldm", "vpop", "ldc")
+_MEMORY = re.compile(r"\[(\w+)(?:,\s*#(-?\d+))?(?:,\s*(\w+)[^\]]*)?\](!)?(?:,\s*#(-?\d+))?")
+
+
 def _is_data(origins: frozenset[str]) -> bool:
-    return bool(origins - {MEM})
+    return bool(_plain(origins) - {MEM})
+
+
+def _plain(origins: frozenset[str]) -> frozenset[str]:
+    """``origins`` without the frame-address markers."""
+    return frozenset(o for o in origins if not o.startswith("frame"))
+
+
+def _arguments(regs: Regs) -> Regs:
+    """The origins of r0..r3 a call passes (a frame address is an address to the callee)."""
+    return {f"r{i}": _plain(regs.get(f"r{i}", frozenset())) for i in range(4)}
+
+
+def _sp_origin(frame: Frame) -> frozenset[str]:
+    return frozenset({f"{_AT}{frame[0]}" if frame[0] is not None else _ANYWHERE})
+
+
+def _exact(origins: frozenset[str]) -> int | None:
+    """The frame offset a register holds exactly (one ``frame=K`` marker and no other frame marker), or None."""
+    marks = [o for o in origins if o.startswith("frame")]
+    return int(marks[0][len(_AT) :]) if len(marks) == 1 and marks[0].startswith(_AT) else None
+
+
+def _lowest(origins: frozenset[str]) -> float | None:
+    """The lowest frame offset a register's frame markers let it reach (None: it holds no frame address)."""
+    floors = [
+        -float("inf") if o == _ANYWHERE else int(o[len(_AT) :] if o.startswith(_AT) else o[len(_FROM) :])
+        for o in origins
+        if o.startswith("frame")
+    ]
+    return min(floors, default=None)
+
+
+def _words(b: str, ops: str) -> list[str]:
+    """The registers a list store or load moves, one a word in address order (a ``d`` register two words, marked
+    ``float``; a range ``s16-s31`` expanded)."""
+    if "{" not in ops:
+        return []
+    out: list[str] = []
+    for part in ops[ops.index("{") + 1 : ops.index("}")].split(","):
+        part = part.strip()
+        m = re.fullmatch(r"([sd])(\d+)(?:-[sd](\d+))?", part)
+        if m:
+            n = int(m.group(3) or m.group(2)) - int(m.group(2)) + 1
+            out += ["float"] * (n * (2 if m.group(1) == "d" else 1))
+        else:
+            out.append(_ALIAS.get(part, part))
+    return out
+
+
+def _frame_effect(insn: Insn, b: str, before: Regs, after: Regs, frame: Frame, pred: bool) -> tuple[Regs, Frame]:
+    """What ``insn`` does to the frame (stack-slot tracking): a store to a pinned slot (``[sp, #imm]``, or through
+    any register holding sp + K exactly, a frame pointer) carries the stored register's origins to the slot, a load
+    from it back; sp's offset from the entry follows ``push``, ``pop``, ``sub sp`` and ``add sp``. A store through a
+    pointer formed from the frame joins its origins into every pinned slot it may reach, a call or a store of a frame
+    address anywhere but a pinned slot lets the frame escape (then every call and every store through any pointer may
+    write it); what the analysis cannot pin falls back to unknown (:data:`SLOT`, data)."""
+    depth, slots, esc = frame[0], dict(frame[1]), frame[2]
+    ops = insn.operands
+    after = dict(after)
+    if b in ("bl", "blx"):
+        marks = [_lowest(before.get(f"r{i}", frozenset())) for i in range(4)]
+        marks += [_lowest(o) for o in slots.values()]
+        esc = _min(esc, *marks)
+        return after, (depth, _forget(slots, esc), esc)
+    if b.startswith(_STORES) or b.startswith(_LOADS):
+        return _memory_access(insn, b, before, after, (depth, slots, esc), pred)
+    rs = _regs(ops)
+    if not rs or b in ("b", "bx") or is_conditional_branch(b) or b.startswith(("v", "it", *_COMPARES, *_NO_WRITE)):
+        return after, (depth, slots, esc)
+    dest = rs[0]
+    after[dest] = _pointer_arithmetic(b, ops, rs, before, after.get(dest, frozenset()))
+    if dest == "sp":
+        depth = _exact(after[dest]) if not pred else None
+    return after, (depth, slots, esc)
+
+
+def _memory_access(insn: Insn, b: str, before: Regs, after: Regs, frame: Frame, pred: bool) -> tuple[Regs, Frame]:
+    """A store's or a load's effect on the frame, and a load's destinations' origins from it
+    (:func:`_frame_effect`)."""
+    access = _access(b, insn.operands)
+    if access is None:  # a form not read here (a register list through a register index...): the frame is unknown
+        return after, (frame[0], {}, frame[2]) if b.startswith(_STORES) else frame
+    base, offset, words, wb = access
+    depth, slots, esc = frame[0], dict(frame[1]), frame[2]
+    origins = before.get(base, frozenset())
+    k, low = _exact(origins), _lowest(origins)
+    at = k + offset if k is not None and offset is not None else None
+    reach = None if low is None else low + min(0, offset or 0)  # a register index: not negative (premise)
+    store = b.startswith(_STORES)
+    values = [frozenset({"float"}) if w == "float" else before.get(w, frozenset()) for w in words]
+    sub_word = b[3:4] in ("b", "h") or b[3:5] in ("sb", "sh")
+    for i, (w, v) in enumerate(zip(words, values)):
+        if at is not None:
+            slot = (at + 4 * i) // 4 * 4
+            if store and not pred and not sub_word and (at + 4 * i) % 4 == 0:
+                slots[slot] = v
+            elif store:
+                if slot in slots:
+                    slots[slot] |= v
+            elif w not in ("float", "pc"):
+                got = slots.get(slot, frozenset({MEM if slot >= 0 else SLOT}))
+                after[w] = got | (after.get(w, frozenset()) if pred else frozenset())
+        elif store:
+            floor = reach if reach is not None else esc
+            if floor is not None:
+                slots = {o: (x | v if o >= floor else x) for o, x in slots.items()}
+        elif reach is not None and w not in ("float", "pc"):
+            after[w] = frozenset({SLOT}) | (after.get(w, frozenset()) if pred else frozenset())
+    if store and at is None:
+        esc = _min(esc, *(_lowest(v) for v in values))
+    if wb is not None and low is not None:
+        moved = frozenset({f"{_AT}{k + wb}"}) if k is not None else origins if wb >= 0 else frozenset({_ANYWHERE})
+        after[base] = _plain(after.get(base, frozenset())) | moved
+        if base == "sp":
+            depth = _exact(after[base]) if not pred else None
+    return after, (depth, slots, esc)
+
+
+def _access(b: str, ops: str) -> tuple[str, int | None, list[str], int | None] | None:
+    """A store's or a load's base register, the offset of its first word from it (None: a register index), the
+    registers of its words in address order (``float`` for a float register's) and the base's writeback (None: none);
+    None for a form not read here."""
+    if b.startswith(("push", "pop", "vpush", "vpop", "stm", "ldm", "vstm", "vldm")):
+        words = _words(b, ops) if b.startswith("v") or "{" not in ops else _regs(ops[ops.index("{") :])
+        implied = b.startswith(("push", "pop", "vpush", "vpop"))
+        head = ops[: ops.index("{")] if "{" in ops else ""
+        base = "sp" if implied else (_regs(head) or [""])[0]
+        if not base:
+            return None
+        down = b.startswith(("push", "vpush")) or "db" in b
+        n = 4 * len(words)
+        wb = (-n if down else n) if implied or "!" in head else None
+        return base, (-n if down else 0), words, wb
+    m = _MEMORY.search(ops)
+    if not m:
+        return None
+    base = _ALIAS.get(m.group(1), m.group(1))
+    head = ops[: m.start()]
+    if b.startswith(("stc", "ldc")):  # a vector register's words: how many is not read here
+        return base, None, ["float"], int(m.group(5) or m.group(2) or 0) if m.group(5) or m.group(4) else None
+    if b.startswith("v"):
+        words = ["float"] * (2 if re.search(r"\bd\d+", head) else 1)
+    else:
+        words = _regs(head)[1:2] if b.startswith("strex") else _regs(head)[: 2 if b.startswith(("strd", "ldrd")) else 1]
+    offset = None if m.group(3) else int(m.group(2) or 0)
+    if m.group(5) is not None:  # post-indexed: the access at the base, then the base moves
+        return base, 0, words, int(m.group(5))
+    return base, offset, words, (offset if m.group(4) else None)
+
+
+def _min(*values: float | None) -> int | None:
+    found = [v for v in values if v is not None]
+    if not found:
+        return None
+    low = min(found)
+    return -(2**31) if low == -float("inf") else int(low)
+
+
+def _forget(slots: dict[int, frozenset[str]], esc: int | None) -> dict[int, frozenset[str]]:
+    """The pinned slots an escaped frame address cannot reach (those below it)."""
+    return slots if esc is None else {o: v for o, v in slots.items() if o < esc}
+
+
+def _pointer_arithmetic(b: str, ops: str, rs: list[str], before: Regs, written: frozenset[str]) -> frozenset[str]:
+    """The frame markers of an integer operation's result: sp + K plus or minus an immediate, or a copy, is exact;
+    a frame address plus a register reaches its K and above (premise: an index added to a frame address is not
+    negative); anything else made from one may point anywhere in the frame."""
+    srcs = rs[1:]
+    if (len(rs) == 1 and not b.startswith("mov")) or b.startswith(("movt", "bfi", "bfc")):
+        srcs = rs  # as _alu reads them
+    plain = _plain(written)
+    marked = [r for r in srcs if _lowest(before.get(r, frozenset())) is not None]
+    if not marked:
+        return plain
+    imm = re.search(r"#(-?\d+)\s*$", ops)
+    if len(srcs) == 1 and b.startswith("mov") and not imm:  # a copy: the same frame address (or addresses)
+        return plain | {o for o in before.get(srcs[0], frozenset()) if o.startswith("frame")}
+    if len(srcs) == 1 and (k := _exact(before.get(srcs[0], frozenset()))) is not None:
+        if imm and b.startswith(("add", "sub")) and not b.startswith(("adc", "sbc")):
+            sign = -1 if b.startswith("sub") else 1
+            return plain | {f"{_AT}{k + sign * int(imm.group(1))}"}
+    if b.startswith("add") and not b.startswith("adc"):
+        low = min(_lowest(before[r]) for r in marked)  # type: ignore[type-var]
+        return plain | {_ANYWHERE if low == -float("inf") else f"{_FROM}{int(low)}"}
+    return plain | {_ANYWHERE}
 
 
 def _alu(b: str, rs: list[str], regs: dict[str, frozenset[str]], flags: frozenset[str], extra: frozenset[str],
@@ -375,7 +603,14 @@ def _join_regs(a: dict[str, frozenset[str]], b: dict[str, frozenset[str]]) -> di
 
 
 def _join(a: State | None, b: State) -> State:
-    return b if a is None else (_join_regs(a[0], b[0]), a[1] | b[1])
+    return b if a is None else (_join_regs(a[0], b[0]), a[1] | b[1], _join_frames(a[2], b[2]))
+
+
+def _join_frames(a: Frame, b: Frame) -> Frame:
+    """Two paths' frames met: a slot pinned on one only is unknown, sp's offset unknown unless the same."""
+    slots = {o: a[1][o] | b[1][o] for o in a[1].keys() & b[1].keys()}
+    esc = min((e for e in (a[2], b[2]) if e is not None), default=None)
+    return (a[0] if a[0] == b[0] else None), slots, esc
 
 
 def analyse(elf: Path, root: str) -> Analysis:

@@ -32,6 +32,7 @@ class Node:
     insn: Insn
     callee: str | None
     successors: tuple[int, ...]  # indices in the function's instruction list
+    extra: int = 0  # a bounded loop's back edge: the instructions its body runs again, at most
 
 
 def _base(mnemonic: str) -> str:
@@ -41,6 +42,8 @@ def _base(mnemonic: str) -> str:
 def _is_return(insn: Insn) -> bool:
     b, ops = _base(insn.mnemonic), insn.operands
     if b == "bx" and ops.strip() == "lr":
+        return True
+    if b == "ldr" and ops.startswith("pc, [sp]"):  # ldr.w pc, [sp], #8: the saved lr popped into pc
         return True
     if b in ("pop", "ldmia", "ldm") and "{" in ops:
         return "pc" in ops[ops.index("{") :]
@@ -58,16 +61,30 @@ def _indirect(insn: Insn) -> bool:
 class Bounds:
     """Each function's dearest call in a disassembly (:func:`gainlink.firmware.branches.disassemble`), memoised."""
 
-    def __init__(self, funcs: dict[str, list[Insn]], given: dict[str, int] | None = None) -> None:
-        """``given``: the cost of a call of these functions, taken as it is (a copy of a fixed length, measured)."""
+    def __init__(self, funcs: dict[str, list[Insn]], given: dict[str, int] | None = None,
+                 loops: dict[tuple[str, int], int] | None = None) -> None:  # fmt: skip
+        """``given``: the cost of a call of these functions, taken as it is (a copy of a fixed length, measured);
+        ``loops``: (function, address of a loop's backward conditional branch) -> the most times it is taken (argued
+        by the caller): the loop's body, straight code from the branch's target to the branch, is then counted that
+        many times more, and the back edge leaves the graph."""
         self.funcs = funcs
         self.bound: dict[str, int] = dict(given or {})
+        self.loops = dict(loops or {})
         self._open: list[str] = []
+        self._alias: dict[str, str] = {}
+        # a symbol objdump does not label (an alias: __aeabi_fadd is __addsf3) by its address, and where each starts
+        self._starts = sorted((i[0].address, f) for f, i in funcs.items() if i and not i[0].mnemonic.startswith("."))
+        self._at = dict(self._starts)
+        for t in (branch_target(i) for insns in funcs.values() for i in insns):
+            if t and t[1] not in funcs and t[0] in self._at:
+                self._alias[t[1]] = self._at[t[0]]
 
     def __call__(self, name: str) -> int:
         """The most instructions a call of ``name`` executes, callees included (:class:`Unbounded` if none)."""
         if name in self.bound:
             return self.bound[name]
+        if name not in self.funcs and name in self._alias:
+            return self(self._alias[name])
         if name in self._open:
             raise Unbounded(f"recursion: {' -> '.join([*self._open, name])}")
         if name not in self.funcs:
@@ -80,8 +97,15 @@ class Bounds:
         return self.bound[name]
 
     def weight(self, node: Node) -> int:
-        """What executing ``node`` costs at most: 1, and its callee's bound."""
-        return 1 + (self(node.callee) if node.callee else 0)
+        """What executing ``node`` costs at most: 1, its callee's bound, a bounded loop's body again."""
+        return 1 + (self(node.callee) if node.callee else 0) + node.extra
+
+    def _callee(self, target: tuple[int, str]) -> str:
+        return target[1] if target[1] in self.funcs else self._alias.get(target[1], target[1])
+
+    def _next_function(self, address: int) -> str | None:
+        """The function that starts next after ``address`` (where code that falls off its function's end goes)."""
+        return next((f for a, f in self._starts if a > address), None)
 
     def graph(self, name: str) -> list[Node]:
         """``name``'s instructions as a graph."""
@@ -100,20 +124,39 @@ class Bounds:
         if b == "bl":
             if tgt is None:
                 raise Unbounded(f"{name}: a call with no target: {insn.text}")
-            return Node(insn, tgt[1], nxt)
+            return Node(insn, self._callee(tgt), nxt)
         inside = tgt is not None and tgt[0] in index
         if b == "b":
             if inside:
                 return Node(insn, None, (index[tgt[0]],))
-            return Node(insn, tgt[1], ())  # a tail call: the callee returns for us
+            return Node(insn, self._callee(tgt) if tgt else None, ())  # a tail call: the callee returns for us
         if is_conditional_branch(insn.mnemonic):
             if tgt is None:
                 raise Unbounded(f"{name}: a conditional branch with no target: {insn.text}")
+            if (name, insn.address) in self.loops and inside:
+                return Node(insn, None, nxt, self._body(name, insns, index[tgt[0]], k) * self.loops[name, insn.address])
             if inside:
                 return Node(insn, None, (*nxt, index[tgt[0]]))
             # a conditional tail call: the weight of its taken side, the longer, bounds both
-            return Node(insn, tgt[1], nxt)
+            return Node(insn, self._callee(tgt), nxt)
+        if not nxt:  # the last instruction and no return: it runs on into the next function (a tail call)
+            return Node(insn, self._next_function(insn.address), ())
         return Node(insn, None, nxt)
+
+    def _body(self, name: str, insns: list[Insn], head: int, end: int) -> int:
+        """The instructions of a bounded loop's body, ``insns[head..end]``: straight code (no branch, call or return
+        in it; nothing else in the function jumps into it but to its head), or :class:`Unbounded`."""
+        if head > end:
+            raise Unbounded(f"{name}: {insns[end].text} is not a backward branch")
+        body = {i.address for i in insns[head + 1 : end + 1]}
+        for k, i in enumerate(insns):
+            b, tgt = _base(i.mnemonic), branch_target(i)
+            in_body = head <= k < end
+            if in_body and (b in ("b", "bl", "blx", "bx") or is_conditional_branch(i.mnemonic) or _is_return(i)):
+                raise Unbounded(f"{name}: the loop ending at {insns[end].text} is not straight at {i.text}")
+            if tgt is not None and tgt[0] in body:
+                raise Unbounded(f"{name}: {i.text} jumps into the loop ending at {insns[end].text}")
+        return end - head + 1
 
 
 def longest(name: str, graph: list[Node], weight) -> int:
@@ -123,7 +166,12 @@ def longest(name: str, graph: list[Node], weight) -> int:
         raise Unbounded(f"{name} has no instructions")
     reach = reachable(graph, 0)
     for k in reach:
-        if not graph[k].successors and not (_is_return(graph[k].insn) or _base(graph[k].insn.mnemonic) == "b"):
+        node = graph[k]
+        if (
+            not node.successors
+            and node.callee is None
+            and not (_is_return(node.insn) or _base(node.insn.mnemonic) == "b")
+        ):
             raise Unbounded(f"{name}: falls off its end at {graph[k].insn.text}")
     return heaviest(name, graph, reach, 0, weight)
 

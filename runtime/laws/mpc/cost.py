@@ -24,10 +24,13 @@ The argument, in two halves:
 
 **Soft float** (the M0, the M3: :func:`soft_step_bound`): the multiply-adds and compares are calls of ``gl_fmaf`` and
 libgcc's routines, whose paths depend on their operands, and the box clamps are branches on a compare's result. Each
-routine's graph is loop-free, so its dearest call is its longest path (:mod:`gainlink.firmware.paths`). A pass
-(``backward``, ``forward``, ``slacks``) may have branches the numbers decide only if they are detours: decided by the
-call right before them, two straight sides with no call that meet again (:func:`_detour`). Its path and its sequence
-of calls are then the same on every call, so a measured run splits its count into its own instructions (the least
+routine's graph is loop-free but for libgcc's normalisation of a subnormal operand in the M3's ``__aeabi_fmul``
+(:func:`normalisation_loops`: at most 22 times back, premise :data:`LOOP_PREMISE`), so its dearest call is its
+longest path, those loops at their most (:mod:`gainlink.firmware.paths`). A pass (``backward``, ``forward``,
+``slacks``) may have branches the numbers decide only if they are detours: decided by the call right before them,
+every path from their two sides meeting again within a few instructions, loop-free, each making the same soft-float
+calls (a clamp: a compare, and a move or a second compare; :func:`detour`). Its path and its calls are then the same
+on every call, so a measured run splits its count into its own instructions (the least
 measured, plus one detour's difference per execution) and its calls, each charged at its routine's bound
 (:func:`soft_pass`). One iteration: solve's loop body plus the passes' bounds. The fixed part, from steps that do not
 refuse, the same way: ``gl_mpc_step``'s branches before ``solve`` must be its non-finite tests (an unordered or a
@@ -35,16 +38,18 @@ greater-than compare: premise, a finite sample decides them the same way every s
 are), those after it detours. A refused step: the heaviest path of ``gl_mpc_step`` to its call of ``refuse`` and on to
 its return (the tests must be loop-free), ``refuse``'s copy at its measured fixed count. The bound at the cap is
 ``max(refuse, fixed + cap x iteration)``; every routine at its dearest path makes it loose (about 1.9x on the M0
-pendulum), but it holds for any operands.
+pendulum, 3.9x on the M3, whose ``__aeabi_fmul`` is charged with both operands subnormal), but it holds for any
+operands.
 
 The bound holds for the image measured (its core, its compiler and flags, the tables' dimensions it was built for:
-any numbers in tables of those dimensions, any samples, any warm start), under the premise stated in
+any numbers in tables of those dimensions, any samples, any warm start), under the premises stated in
 :mod:`gainlink.firmware.branches` (an integer word loaded from memory and only moved, offset and compared is an
-address).
+address; an index added to a frame address is not negative: :data:`PREMISE`, :data:`FRAME_PREMISE`).
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -61,7 +66,7 @@ from ...firmware.branches import (
     straight_call,
 )
 from ...firmware.cost import count_calls, count_step_instructions
-from ...firmware.paths import Bounds, heaviest, reachable, reaching
+from ...firmware.paths import Bounds, Unbounded, heaviest, reachable, reaching
 from ...shipping.artifact import Artifact
 from ..flags import CAPPED
 
@@ -266,27 +271,79 @@ class SoftPass:
         return self.own + self.skips + sum(n * self.routine_bounds[f] for f, n in self.calls.items())
 
 
-def _straight(insns: list, k: int, index: dict, targets: set, limit: int = 8) -> list[int]:
-    """The addresses straight code runs from ``insns[k]`` (following unconditional branches inside the function), up
-    to a call, a conditional branch, a return or ``limit`` instructions."""
-    out = []
-    while k is not None and k < len(insns) and len(out) < limit:
-        i = insns[k]
-        base = i.mnemonic.split(".")[0]
-        out.append(i.address)
-        if base == "b" and (t := branch_target(i)) and t[0] in index:
-            k = index[t[0]]
-        elif base.startswith(("bl", "bx", "pop")) or is_conditional_branch(i.mnemonic) or base == "b":
-            break
-        else:
-            k += 1
+#: libgcc's normalisation of a subnormal operand on the M3 (ieee754-sf.S, ``__aeabi_fmul``): shift the word left by
+#: one until its bit 23 is set, counting the exponent down: ``ittt eq; lsleq rX, rX, #1; tsteq rX, #0x800000;
+#: subeq rY, #1; beq`` back to the ``ittt``.
+NORMALISE = (r"itt+", r"lsl(?:eq)?", r"tst(?:eq)?", r"sub(?:eq)?", r"beq")
+#: How many times its ``beq`` goes back, at most: the operand's mantissa is nonzero (zero operands leave before it: the
+#: libgcc source, premise) and below 2**23, its top bit at 0..22 after the first shift has pushed the sign out, so
+#: bit 23 is set after at most 23 shifts, the last of which falls through.
+NORMALISE_TRIPS = 22
+LOOP_PREMISE = (
+    "libgcc's normalisation loop of a subnormal operand (shift left by one until bit 23 is set) goes back at most "
+    f"{NORMALISE_TRIPS} times: its mantissa is nonzero (zero operands leave before it)"
+)
+
+
+def normalisation_loops(funcs: dict) -> dict[tuple[str, int], int]:
+    """Every loop of the soft-float routines that is libgcc's normalisation of a subnormal operand
+    (:data:`NORMALISE`: the shift by one and the test of bit 23 on the same register), keyed as
+    :class:`~gainlink.firmware.paths.Bounds` takes them, each bounded by :data:`NORMALISE_TRIPS`."""
+    out = {}
+    for name, insns in funcs.items():
+        if not SOFT_FLOAT.match(name):
+            continue
+        code = [i for i in insns if not i.mnemonic.startswith(".")]
+        for k in range(len(NORMALISE) - 1, len(code)):
+            body = code[k - len(NORMALISE) + 1 : k + 1]
+            if not all(re.fullmatch(p, i.mnemonic.split(".")[0]) for p, i in zip(NORMALISE, body)):
+                continue
+            shift, test = body[1].operands.replace(" ", "").split(","), body[2].operands.replace(" ", "").split(",")
+            target = branch_target(body[-1])
+            if (target and target[0] == body[0].address and shift[0] == shift[1] == test[0] and shift[2] == "#1"
+                    and test[1] == "#8388608"):  # fmt: skip
+                out[name, body[-1].address] = NORMALISE_TRIPS
     return out
 
 
-def _detour(funcs: dict, function: str, branch) -> tuple[str, int]:
+def routine_bounds(funcs: dict, given: dict[str, int] | None = None) -> Bounds:
+    """The dearest call of each routine of ``funcs`` (:class:`~gainlink.firmware.paths.Bounds`), libgcc's
+    normalisation loops bounded (:func:`normalisation_loops`)."""
+    return Bounds(funcs, given, normalisation_loops(funcs))
+
+
+def _paths(insns: list, k: int | None, index: dict, limit: int = 24) -> list[tuple[list[int], list[str]]]:
+    """Every path from ``insns[k]`` inside the function (both sides of each conditional branch, unconditional branches
+    followed), each up to ``limit`` instructions, a return or a tail call: its addresses and the functions it calls."""
+    out: list[tuple[list[int], list[str]]] = []
+    todo: list[tuple[int | None, list[int], list[str]]] = [(k, [], [])]
+    while todo:
+        k, addrs, calls = todo.pop()
+        while k is not None and k < len(insns) and len(addrs) < limit:
+            i = insns[k]
+            base, target = i.mnemonic.split(".")[0], branch_target(i)
+            addrs = [*addrs, i.address]
+            if base == "bl":
+                calls = [*calls, target[1] if target else "?"]
+            elif base == "b" or is_conditional_branch(i.mnemonic):
+                inside = index.get(target[0]) if target else None
+                if base == "b":
+                    k = inside  # a tail call (None) ends the path
+                    continue
+                todo.append((inside, addrs, calls))  # the taken side (None: it leaves the function)
+            elif base == "bx" or i.operands.startswith("pc") or ("{" in i.operands and "pc" in i.operands):
+                break  # a return (bx lr, pop {..., pc}, ldr pc, [sp], #8)
+            k += 1
+        out.append((addrs, calls))
+    return out
+
+
+def detour(funcs: dict, function: str, branch) -> tuple[str, int]:
     """A branch the law's numbers decide, if it is a detour: decided by what the call right before it returned
-    (straight code back to that ``bl``), its two sides straight code with no call that meet again. Returns (the
-    deciding routine, the most instructions one side runs more than the other); :class:`NotProved` otherwise."""
+    (straight code back to that ``bl``), and every path from its two sides (through the branches after it, both
+    sides of each) meets again within a few instructions, loop-free, each making the same soft-float calls (a clamp
+    is one: compare, and maybe move or compare again). Returns (the deciding routine, the most instructions one path
+    runs more than another, calls aside); :class:`NotProved` otherwise."""
     insns = [i for i in funcs[function] if not i.mnemonic.startswith(".")]
     index = {i.address: k for k, i in enumerate(insns)}
     targets = {t[0] for t in map(branch_target, insns) if t}
@@ -299,31 +356,51 @@ def _detour(funcs: dict, function: str, branch) -> tuple[str, int]:
     callee = (branch_target(insns[j]) or (0, "?"))[1] if j >= 0 else "?"
     if branch.origins != frozenset({f"ret:{callee}"}):
         raise NotProved(f"{function} {branch.insn.text}: decided by {sorted(branch.origins)}, not by {callee}")
-    taken = _straight(insns, index.get(branch.taken), index, targets)
-    fall = _straight(insns, k + 1, index, targets)
-    meet = next((a for a in fall if a in taken), None)
+    paths = _paths(insns, index.get(branch.taken), index) + _paths(insns, k + 1, index)
+    meet = next((a for a in paths[0][0] if all(a in p for p, _ in paths)), None)
     if meet is None:
-        raise NotProved(f"{function} {branch.insn.text}: its sides do not meet in straight code")
-    return callee, abs(taken.index(meet) - fall.index(meet))
+        raise NotProved(f"{function} {branch.insn.text}: its sides do not meet")
+    cut = [(p[: p.index(meet)], c[: sum(1 for a in p[: p.index(meet)] if _is_call(insns[index[a]]))]) for p, c in paths]
+    if any(len(set(p)) != len(p) for p, _ in cut):
+        raise NotProved(f"{function} {branch.insn.text}: a loop before its sides meet")
+    if len({tuple(sorted(c)) for _, c in cut}) != 1 or not all(SOFT_FLOAT.match(f) for _, c in cut for f in c):
+        raise NotProved(f"{function} {branch.insn.text}: its sides make different calls before they meet")
+    lengths = [len(p) for p, _ in cut]
+    return callee, max(lengths) - min(lengths)
 
 
-def _only_soft_float_decides(funcs: dict, analysis: Analysis, part: str, handled: frozenset[str] = frozenset()) -> None:
-    """No function ``part`` reaches other than through a soft-float routine has a branch the numbers decide (``part``
-    itself and ``handled`` aside: their branches are argued apart), no jump is indirect and no call passes the numbers
-    outside the image."""
-    if analysis.indirect or analysis.data_calls:
-        raise NotProved(f"{part}: {(analysis.indirect + analysis.data_calls)[0]}")
+def _is_call(insn) -> bool:
+    return insn.mnemonic.split(".")[0] == "bl"
+
+
+def _reached(funcs: dict, analysis: Analysis, part: str, stop: frozenset[str] = frozenset()) -> set[str]:
+    """The functions ``part`` calls in the image, and those they call, but for the soft-float routines and ``stop``
+    (not entered), ``part`` included."""
     where = {i.address: f for f, insns in funcs.items() for i in insns}
     reached, todo = {part}, [part]
     while todo:
         f = todo.pop()
         for at, callee in analysis.calls.items():
-            if where.get(at) == f and callee in funcs and callee not in reached and not SOFT_FLOAT.match(callee):
+            if (where.get(at) == f and callee in funcs and callee not in reached | stop
+                    and not SOFT_FLOAT.match(callee)):  # fmt: skip
                 reached.add(callee)
                 todo.append(callee)
+    return reached
+
+
+def _only_soft_float_decides(
+    funcs: dict, analysis: Analysis, part: str, handled: frozenset[str] = frozenset()
+) -> set[str]:
+    """No function ``part`` reaches other than through a soft-float routine has a branch the numbers decide (``part``
+    itself and ``handled`` aside: their branches are argued apart), no jump is indirect and no call passes the numbers
+    outside the image. Returns those functions, ``part`` included."""
+    if analysis.indirect or analysis.data_calls:
+        raise NotProved(f"{part}: {(analysis.indirect + analysis.data_calls)[0]}")
+    reached = _reached(funcs, analysis, part)
     for f in sorted(reached - {part} - handled):
         if analysis.data_branches(f):
             raise NotProved(f"{f}, called by {part}, has branches the numbers decide")
+    return reached
 
 
 def soft_pass(a: Artifact, elf: Path, part: str, *, board: str, Y: np.ndarray, R: np.ndarray) -> SoftPass:
@@ -335,22 +412,22 @@ def soft_pass(a: Artifact, elf: Path, part: str, *, board: str, Y: np.ndarray, R
     make vary by at most one skipped side per execution (an execution per call of the routine that decides it)."""
     funcs = disassemble(elf)
     analysis = analyse_text(funcs, part)
-    bounds = Bounds(funcs)
-    here = {i.address for i in funcs[part]}
+    bounds = routine_bounds(funcs)
+    reached = _only_soft_float_decides(funcs, analysis, part)  # part and the helpers it calls (backward_stage)
+    here = {i.address for f in reached for i in funcs[f]}
     callees = sorted({f for at, f in analysis.calls.items() if at in here and SOFT_FLOAT.match(f)})
     total = count_calls(elf, a, symbol=part, Y=Y, R=R, board=board, each=True)
     own = np.asarray(total.each, dtype=np.int64)
     calls: dict[str, int] = {}
     for f in callees:
-        c = count_calls(elf, a, symbol=f, Y=Y, R=R, board=board, each=True, callers=(part,))
+        c = count_calls(elf, a, symbol=f, Y=Y, R=R, board=board, each=True, callers=tuple(sorted(reached)))
         if c.calls % total.calls:
             raise NotProved(f"{part} made {c.calls} calls of {f} in {total.calls} calls: not the same each time")
         calls[f] = c.calls // total.calls
         own -= np.asarray(c.each, dtype=np.int64).reshape(total.calls, calls[f]).sum(axis=1)
-    _only_soft_float_decides(funcs, analysis, part)
     skips = 0
     for b in analysis.data_branches(part):
-        callee, n = _detour(funcs, part, b)
+        callee, n = detour(funcs, part, b)
         skips += n * calls[callee]
     if int(own.max() - own.min()) > skips:
         raise NotProved(f"{part}'s own count ranged over {own.min()}..{own.max()}, more than its skips allow")
@@ -377,7 +454,7 @@ def refuse_bound(a: Artifact, elf: Path, *, board: str, y: np.ndarray, r: np.nda
         if cost.cheapest != cost.dearest:
             raise NotProved(f"{REFUSE}'s {copy} took {cost.cheapest} to {cost.dearest} instructions a call")
         given[copy] = cost.dearest
-    bounds = Bounds(funcs, given)
+    bounds = routine_bounds(funcs, given)
     graph = bounds.graph(ROOT)
     nodes = reachable(graph, 0)
     worst = 0
@@ -418,7 +495,7 @@ def _root_detours(funcs: dict, analysis: Analysis) -> dict[str, int]:
             if not b.origins <= {"ret:__aeabi_fcmpun", "ret:__aeabi_fcmpgt"}:
                 raise NotProved(f"{ROOT} {b.insn.text}: before {SOLVE}, decided by {sorted(b.origins)}")
             continue
-        callee, n = _detour(funcs, ROOT, b)
+        callee, n = detour(funcs, ROOT, b)
         extra[callee] = extra.get(callee, 0) + n
     return extra
 
@@ -445,11 +522,12 @@ def soft_step_bound(a: Artifact, elf: Path, *, board: str, Y: np.ndarray, R: np.
             raise NotProved(f"{p} was called {len(each)} times in {int(m.iterations.sum())} iterations")
         own -= np.add.reduceat(each, np.r_[0, np.cumsum(m.iterations)[:-1]])
     detours = _root_detours(funcs, analysis)
-    here = {i.address for i in funcs[ROOT]}
-    bounds = Bounds(funcs)
+    own_code = _reached(funcs, analysis, ROOT, frozenset({SOLVE, REFUSE, *ITERATION}))  # the step and its helpers
+    here = {i.address for f in own_code for i in funcs[f]}
+    bounds = routine_bounds(funcs)
     calls: dict[str, int] = {}
     for f in sorted({f for at, f in analysis.calls.items() if at in here and SOFT_FLOAT.match(f)}):
-        c = count_calls(elf, a, symbol=f, Y=Y, R=R, board=board, each=True, callers=(ROOT,))
+        c = count_calls(elf, a, symbol=f, Y=Y, R=R, board=board, each=True, callers=tuple(sorted(own_code)))
         if c.calls % len(Y):
             raise NotProved(f"{ROOT} made {c.calls} calls of {f} in {len(Y)} steps: not the same each step")
         calls[f] = c.calls // len(Y)
@@ -471,6 +549,7 @@ def soft_step_bound(a: Artifact, elf: Path, *, board: str, Y: np.ndarray, R: np.
 LEGS = ((60, 1.0), (30, -1.5))  # closed-loop legs: steps, the start's offset (the law keeps its state across legs)
 SOFT_STEPS = 3  # a soft-float core runs ~4M instructions a step through gl_fmaf: its bound is taken on a short run
 PREMISE = "a word an integer register loads and only moves, offsets and compares is an address"
+FRAME_PREMISE = "an index added to a stack frame's address is not negative (a local array is not indexed below it)"
 SOFT_PREMISE = "the step's branches before solve are its non-finite tests"
 
 
@@ -500,7 +579,10 @@ def prove(a: Artifact, elf: Path, *, board: str, arg: BranchArgument | None = No
     arg = branch_argument(elf) if arg is None else arg
     Y, R = closed_loop_samples(a)
     if not arg.holds and arg.analysis.soft_float:
-        return soft_step_bound(a, elf, board=board, Y=Y[:SOFT_STEPS], R=R[:SOFT_STEPS])
+        try:
+            return soft_step_bound(a, elf, board=board, Y=Y[:SOFT_STEPS], R=R[:SOFT_STEPS])
+        except Unbounded as exc:  # a routine's dearest path is not bounded: no bound
+            raise NotProved(str(exc)) from exc
     if not arg.holds:
         raise NotProved("; ".join(arg.violations[:2]))
     Yn, Rn = refuse_samples(a.p, a.q, Y[-1], R[-1])
@@ -509,10 +591,18 @@ def prove(a: Artifact, elf: Path, *, board: str, arg: BranchArgument | None = No
     return bound_of(run, a.mpc.max_iter, iteration_instructions(a, elf, board=board, Y=Y, R=R))
 
 
+def premises(elf: Path, *, soft: bool) -> list[str]:
+    """The premises a bound of ``elf`` rests on, to be printed with it (``soft``: proved by :func:`soft_step_bound`)."""
+    out = [PREMISE, FRAME_PREMISE, SOFT_PREMISE] if soft else [PREMISE, FRAME_PREMISE]
+    if soft and normalisation_loops(disassemble(elf)):
+        out.append(LOOP_PREMISE)
+    return out
+
+
 def bound_block(a: Artifact, elf: Path, *, board: str, core: str) -> dict:
     """``pil.json``'s ``instructions_per_step.bound`` for the image ``elf`` on ``core``: the bound per iteration and
     per step at the cap (``per_step = fixed + cap x per_iteration``, or a refused step's when that is dearer), whether
-    it is proved and what it covers; ``proved`` false, no figure and why when the argument fails (the M3: measured,
+    it is proved and what it covers; ``proved`` false, no figure and why when the argument fails (then measured,
     not proved)."""
     try:
         b = prove(a, elf, board=board)
@@ -525,7 +615,6 @@ def bound_block(a: Artifact, elf: Path, *, board: str, core: str) -> dict:
            "at their longer side; loose" if soft else
            "the law's numbers decide only the non-finite tests and the stopping test (the disassembly), and a run "
            "fits fixed part + iterations x one iteration exactly")  # fmt: skip
-    premises = [PREMISE, SOFT_PREMISE] if soft else [PREMISE]
     return {
         "proved": True,
         "core": core,
@@ -539,5 +628,5 @@ def bound_block(a: Artifact, elf: Path, *, board: str, core: str) -> dict:
             f"{a.mpc.nx} states, {a.m} inputs, {a.mpc.nc} box rows) on this image: {core}, its compiler "
             f"and flags; {how}"
         ),
-        "premises": premises,
+        "premises": premises(elf, soft=soft),
     }
