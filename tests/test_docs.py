@@ -182,8 +182,18 @@ def run_page(page: Path, folder: Path, tiers: tuple[str, ...]) -> None:
             output = _run(b, folder, str(b.mark)) if b.mark in tiers else None
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("page", _ids("test"), ids=lambda p: str(p.relative_to(ROOT)))
+#: CPU seconds each page's make-test blocks took (one process, GAINLINK_TEST_CPU, warm caches): the order they start in
+PAGE_CPU = {"README.md": 28, "docs/guide/firmware.md": 28, "docs/guide/fixed_point.md": 16, "docs/guide/hil.md": 15,
+            "docs/guide/python.md": 14, "docs/guide/specs.md": 8, "docs/guide/scheduled.md": 7,
+            "docs/guide/campaigns.md": 5, "docs/guide/mpc.md": 4, "docs/guide/troubleshooting.md": 1}  # fmt: skip
+
+
+def _page_params(tier: str) -> list:
+    return [pytest.param(page, marks=pytest.mark.slow(cpu=PAGE_CPU.get(str(page.relative_to(ROOT)), 0)))
+            for page in _ids(tier)]  # fmt: skip
+
+
+@pytest.mark.parametrize("page", _page_params("test"), ids=lambda p: str(p.relative_to(ROOT)))
 def test_the_blocks_of_a_page_run_as_written(page, tmp_path):
     run_page(page, tmp_path, ("test",))
 
