@@ -204,7 +204,7 @@ def test_the_long_blocks_of_a_page_run_as_written(page, tmp_path):
     run_page(page, tmp_path, ("test", "matrix"))
 
 
-@pytest.mark.slow
+@pytest.mark.slow(cpu=13)
 def test_the_site_builds_offline_with_warnings_as_errors(tmp_path):
     """``make docs``'s build (Sphinx, -W), in a network namespace without network where one can be made: nothing
     is fetched. Its pages include the architecture page, the API reference of every name of gl.__all__ and the
@@ -225,7 +225,7 @@ def test_the_site_builds_offline_with_warnings_as_errors(tmp_path):
     assert (html / "design.html").is_file() and (html / "guide" / "troubleshooting.html").is_file()
 
 
-@pytest.mark.slow
+@pytest.mark.slow(cpu=34)  # the pendulum's images on every core built, in a fresh checkout (10 with them cached)
 def test_the_figures_are_what_the_results_and_the_builds_say_now():
     """scripts/doc_figures.py --check: every figures block says what bench/results/ and the cached builds of the
     pendulum's images say now, including which recorded figures are older than the code they describe."""
