@@ -28,12 +28,18 @@ from support.paths import EXAMPLE_NAMES, EXAMPLES
 from support.shared import once_per_run, register_run
 
 
+def _run_order(item: pytest.Item) -> tuple[bool, float]:
+    slow = item.get_closest_marker("slow")
+    return slow is None, -float(slow.kwargs.get("cpu", 0.0)) if slow else 0.0
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """The tests marked ``slow`` (builds, VMs, long closed loops) run first, the rest keep their order: with
-    `make test`'s scheduling (``--dist loadgroup --no-loadscope-reorder``: tests a few at a time in this order,
-    those of one ``xdist_group`` together) the long ones spread over the workers from the start instead of
-    ending the run on one of them."""
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+    """The tests marked ``slow`` (builds, VMs, long closed loops) run first, the dearest first (``slow(cpu=N)``:
+    the CPU seconds the test, or the group or fixture it starts, was measured to take), the rest keep their order:
+    with `make test`'s scheduling (``--dist loadgroup --no-loadscope-reorder``: tests a few at a time in this
+    order, those of one ``xdist_group`` together, where its first test falls) the long ones spread over the
+    workers from the start instead of ending the run on one of them."""
+    items.sort(key=_run_order)
 
 
 def _cpu_seconds() -> float:

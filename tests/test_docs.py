@@ -182,8 +182,18 @@ def run_page(page: Path, folder: Path, tiers: tuple[str, ...]) -> None:
             output = _run(b, folder, str(b.mark)) if b.mark in tiers else None
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("page", _ids("test"), ids=lambda p: str(p.relative_to(ROOT)))
+#: CPU seconds each page's make-test blocks took (one process, GAINLINK_TEST_CPU, warm caches): the order they start in
+PAGE_CPU = {"README.md": 28, "docs/guide/firmware.md": 28, "docs/guide/fixed_point.md": 16, "docs/guide/hil.md": 15,
+            "docs/guide/python.md": 14, "docs/guide/specs.md": 8, "docs/guide/scheduled.md": 7,
+            "docs/guide/campaigns.md": 5, "docs/guide/mpc.md": 4, "docs/guide/troubleshooting.md": 1}  # fmt: skip
+
+
+def _page_params(tier: str) -> list:
+    return [pytest.param(page, marks=pytest.mark.slow(cpu=PAGE_CPU.get(str(page.relative_to(ROOT)), 0)))
+            for page in _ids(tier)]  # fmt: skip
+
+
+@pytest.mark.parametrize("page", _page_params("test"), ids=lambda p: str(p.relative_to(ROOT)))
 def test_the_blocks_of_a_page_run_as_written(page, tmp_path):
     run_page(page, tmp_path, ("test",))
 
@@ -194,7 +204,7 @@ def test_the_long_blocks_of_a_page_run_as_written(page, tmp_path):
     run_page(page, tmp_path, ("test", "matrix"))
 
 
-@pytest.mark.slow
+@pytest.mark.slow(cpu=13)
 def test_the_site_builds_offline_with_warnings_as_errors(tmp_path):
     """``make docs``'s build (Sphinx, -W), in a network namespace without network where one can be made: nothing
     is fetched. Its pages include the architecture page, the API reference of every name of gl.__all__ and the
@@ -215,7 +225,7 @@ def test_the_site_builds_offline_with_warnings_as_errors(tmp_path):
     assert (html / "design.html").is_file() and (html / "guide" / "troubleshooting.html").is_file()
 
 
-@pytest.mark.slow
+@pytest.mark.slow(cpu=34)  # the pendulum's images on every core built, in a fresh checkout (10 with them cached)
 def test_the_figures_are_what_the_results_and_the_builds_say_now():
     """scripts/doc_figures.py --check: every figures block says what bench/results/ and the cached builds of the
     pendulum's images say now, including which recorded figures are older than the code they describe."""

@@ -35,7 +35,12 @@ from support.mpc import mpc_pendulum
 from support.net import tcp_port, udp_port
 from support.status import FAULT
 
-pytestmark = [pytest.mark.usefixtures("quiet_design_warnings"), pytest.mark.xdist_group("test_law_cells")]
+# one worker runs the module (39 CPU-s): started first
+pytestmark = [
+    pytest.mark.usefixtures("quiet_design_warnings"),
+    pytest.mark.xdist_group("test_law_cells"),
+    pytest.mark.slow(cpu=39),
+]
 
 PAIRS = tuple(pairs())
 

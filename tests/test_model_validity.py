@@ -35,7 +35,8 @@ from support.hil import udp_transport
 from support.thirdparty import TEMPLATE, gemseo_fmu
 
 # One worker runs this module (make test: --dist loadgroup): the mass-damper FMU and its design, made once.
-pytestmark = pytest.mark.xdist_group("test_model_validity")
+# one worker runs the module (34 CPU-s, its HIL runs among them): started first
+pytestmark = [pytest.mark.xdist_group("test_model_validity"), pytest.mark.slow(cpu=34)]
 
 TS = 1e-3
 C_SPRING, D_DAMP, MASS = 1.0e4, 10.0, 1.0
@@ -236,7 +237,6 @@ def _scenario(gains: Path, fmu: Path, *, interface: str | None = None, **extra) 
     }
 
 
-@pytest.mark.slow
 def test_done_when_the_default_path_tracks_in_hil_and_agrees_with_its_model(designed, mass_damper, tmp_path):
     sc = _scenario(
         designed,
@@ -292,7 +292,6 @@ def test_the_model_twin_is_the_designed_closed_loop(designed, mass_damper):
     np.testing.assert_allclose(tr.model_y[:, 0], art.y_op[0] + resp.outputs[0], atol=1e-9)
 
 
-@pytest.mark.slow
 def test_campaign_runs_record_the_mismatch(designed, mass_damper, tmp_path):
     from gainlink.hil.campaign import run
 

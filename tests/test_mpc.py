@@ -192,6 +192,7 @@ def test_an_mpc_law_with_a_schedule_is_refused_in_one_line():
         law_for_spec(parse_spec(data))
 
 
+@pytest.mark.slow(cpu=5)
 @pytest.mark.parametrize("target,steps", [("cortex-m4", 40), ("cortex-m0", 4)])
 def test_pil_closes_the_loop_on_the_image_and_its_records_are_the_float32_model_step_by_step(target, steps):
     """PIL on the M4F and a very short run on the M0 (~3M instructions a step through gl_fmaf): the image's records
@@ -323,6 +324,7 @@ def test_an_image_whose_mpc_workspace_does_not_fit_the_boards_ram_is_refused_wit
         replay_image(a, target="cortex-m0", board="microbit")
 
 
+@pytest.mark.slow(cpu=6)
 def test_pil_counts_the_mpc_steps_instructions_within_the_cost_benchmarks_bound_at_the_cap():
     """`pil run` on the M4F counts ``gl_mpc_step`` (callees included) on examples/pendulum_mpc.toml from 1 m off, where
     the cap stops the solver: its worst step is within bench/mpc_cost.py's bound at the cap (the fixed part plus the

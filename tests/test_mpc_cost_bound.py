@@ -130,6 +130,7 @@ def test_the_bound_at_the_cap_covers_every_step_and_no_input_breaks_it(name, tar
     assert worst.counts.max() <= bound.bound, (int(worst.counts.max()), bound)
 
 
+@pytest.mark.slow(cpu=4)
 def test_each_soft_float_routine_has_a_bounded_path():
     """On the M0 the multiply-adds and float compares are calls whose paths depend on their operands: the hard-float
     cores' branch argument names them and does not hold there (the M0's bound is argued by soft_step_bound). Each of
@@ -162,6 +163,7 @@ def test_each_soft_float_routine_has_a_bounded_path():
             assert bounds(name) == 21 and set(cost.each) <= {15, 17, 19, 21}
 
 
+@pytest.mark.slow(cpu=7)
 def test_the_m0_bound_at_the_cap_covers_every_step_and_no_input_breaks_it():
     """The M0's bound at the cap (gainlink.laws.mpc.cost.soft_step_bound) from three closed-loop steps from 1 m (one
     stops early, two reach the cap): one iteration at most solve's loop body plus each pass at its own instructions,

@@ -49,6 +49,7 @@ def _sched_cost_tank():
     return from_dict(design_spec(parse_spec(bench.tank_spec())).artifact)
 
 
+@pytest.mark.slow(cpu=5)
 @pytest.mark.parametrize(
     ("family", "symbol"),
     [("lq/float32", "gl_loop_step"), ("lq/q31", "gl_fixed_step"), ("scheduled/float32", "gl_sched_step")],

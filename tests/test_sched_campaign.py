@@ -72,6 +72,7 @@ def _campaign(path, rate_max: float) -> dict:
     }
 
 
+@pytest.mark.slow(cpu=8)
 def test_a_campaign_over_sigma_rate_and_range_finds_where_stability_stops(spring_free, tmp_path):
     path, rate_max = spring_free
     result = run(_campaign(path, rate_max), out=tmp_path / "out", workers=1, plots=False)

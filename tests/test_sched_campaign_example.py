@@ -28,7 +28,8 @@ from support.paths import EXAMPLES
 from support.shared import once_per_run
 
 CAMPAIGN = EXAMPLES / "campaigns" / "tank_sigma_rate.toml"
-pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
+# one worker designs examples/tank_showcase_load.toml for this module and test_schedule_rate_proof's showcase test
+pytestmark = [pytest.mark.usefixtures("quiet_design_warnings"), pytest.mark.xdist_group("tank_showcase_load")]
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +50,7 @@ def _radius(art, rate: float) -> float:
     return monodromy_radius(loops_at(art.schedule, art.Ci), np.concatenate([up, up[::-1][1:], [0.04]]))
 
 
-@pytest.mark.slow
+@pytest.mark.slow(cpu=31)  # the design (25 CPU-s) and 3 runs
 def test_the_example_campaign_holds_up_to_the_verdicts_rates_and_fails_above(artifact, tmp_path):
     art = load(artifact)
     v = art.checks["schedule"]["variation"]

@@ -23,7 +23,8 @@ from schedule_cases import external_tank, tank_dict
 from support.cli import assert_refused, run_cli
 from support.designs import designed
 
-pytestmark = pytest.mark.xdist_group("test_sched_onestep")
+# one worker runs the module (23 CPU-s): started first
+pytestmark = [pytest.mark.xdist_group("test_sched_onestep"), pytest.mark.slow(cpu=23)]
 
 CASES = {
     "level": lambda: tank_dict(),

@@ -26,7 +26,8 @@ from support.cli import assert_refused, run_cli
 from support.designs import designed
 from support.status import SIGMA_BITS, scheduled_status
 
-pytestmark = pytest.mark.xdist_group("test_sched_pil")  # one worker: the images are built once
+# one worker: the images are built once (the module 15 CPU-s): started first
+pytestmark = [pytest.mark.xdist_group("test_sched_pil"), pytest.mark.slow(cpu=15)]
 
 STEPS = 400
 

@@ -26,7 +26,13 @@ from support.cli import assert_refused
 from support.hil import udp_transport
 from support.shared import once_per_run
 
-pytestmark = [pytest.mark.slow, pytest.mark.usefixtures("quiet_design_warnings")]
+# one worker runs the showcase (38 CPU-s: two designs, six HIL runs, the plots) for its tests: on three at once, two
+# would wait for the first
+pytestmark = [
+    pytest.mark.slow(cpu=38),
+    pytest.mark.xdist_group("test_sched_showcase"),
+    pytest.mark.usefixtures("quiet_design_warnings"),
+]
 
 
 @pytest.fixture(scope="module")

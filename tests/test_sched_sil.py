@@ -25,7 +25,12 @@ from support.designs import designed
 from support.hil import udp_transport, write_scenario
 
 # One worker runs this module (make test: --dist loadgroup): the tank designs, made once.
-pytestmark = [pytest.mark.usefixtures("quiet_design_warnings"), pytest.mark.xdist_group("test_sched_sil")]
+# one worker runs the module (17 CPU-s): started first
+pytestmark = [
+    pytest.mark.usefixtures("quiet_design_warnings"),
+    pytest.mark.xdist_group("test_sched_sil"),
+    pytest.mark.slow(cpu=17),
+]
 C_ORIFICE = 0.4  # the tank's orifice coefficient: equilibrium q = u = c sqrt(h)
 
 

@@ -41,7 +41,12 @@ from support.mavlink import read_params
 from support.net import tcp_port, udp_port
 from support.status import scheduled_status
 
-pytestmark = [pytest.mark.usefixtures("quiet_design_warnings"), pytest.mark.xdist_group("test_sched_target_uart")]
+# one worker runs the module (24 CPU-s: the images built, QEMU): started first
+pytestmark = [
+    pytest.mark.usefixtures("quiet_design_warnings"),
+    pytest.mark.xdist_group("test_sched_target_uart"),
+    pytest.mark.slow(cpu=24),
+]
 
 BOARD = "mps2-an386"
 

@@ -215,6 +215,7 @@ def test_api_replay_and_controller_at_sigma(external):
         assert np.allclose(got, np.sort_complex(np.linalg.eigvals(hand)), atol=1e-10)
 
 
+@pytest.mark.slow(cpu=5)
 def test_gl_design_with_a_schedule_of_statespaces():
     """gl.design(sys, schedule={..., "plant": [StateSpace, ...]}) designs the same artifact as the spec dict."""
     data = external_tank()

@@ -16,7 +16,8 @@ from schedule_cases import external_tank
 from support.designs import designed
 
 # One worker runs this module (make test: --dist loadgroup): the scheduled designs, made once.
-pytestmark = pytest.mark.xdist_group("test_schedule_law")
+# one worker runs the module (8 CPU-s: the per-point oracles designed once per form): started first
+pytestmark = [pytest.mark.xdist_group("test_schedule_law"), pytest.mark.slow(cpu=8)]
 
 
 @pytest.fixture(scope="module", params=["predictor", "current"])

@@ -28,6 +28,9 @@ from support.sched_paths import LoopModel, adversarial, hold_ramp_hold
 from support.shared import once_per_run
 
 pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
+# The spring 1 -> 65 designed with its certificate (16 CPU-s), by one worker for its three tests: on three at once,
+# two would wait for the first
+ON_SPRING65 = pytest.mark.xdist_group("spring65")
 
 
 def _spring65() -> dict:
@@ -58,6 +61,8 @@ def _reduced_matrix(model: LoopModel, sigma: float, Ci: np.ndarray) -> np.ndarra
     return A[:r] @ E
 
 
+@pytest.mark.slow(cpu=16)
+@ON_SPRING65
 def test_the_spring_ships_a_certified_rate_that_no_path_within_it_breaks(spring65):
     """rate_max is certified, below the spec's 10/s (said in a warning's words in the record), and the oracle's
     worst hold/jump/ramp path at that rate decays; the recorded P(sigma) makes x' P x decrease at 300 random pairs
@@ -85,6 +90,8 @@ def test_the_spring_ships_a_certified_rate_that_no_path_within_it_breaks(spring6
         assert np.linalg.eigvalsh(P_at(s) - A.T @ P_at(s2) @ A)[0] > 0
 
 
+@pytest.mark.slow(cpu=16)
+@ON_SPRING65
 def test_the_old_verdict_is_broken_and_the_falsifier_finds_a_growing_path(spring65):
     """The old verdict (rate_max null, "confirmed by simulation"): jumping between the ends with dwells of 18 and
     16 samples grows 1.0068 per step (the oracle). The falsifier now reports a growing path above the certified
@@ -102,6 +109,8 @@ def test_the_old_verdict_is_broken_and_the_falsifier_finds_a_growing_path(spring
     assert at["rate"] == art.schedule.rate_max and at["growth_per_step"] < 1.0
 
 
+@pytest.mark.slow(cpu=16)
+@ON_SPRING65
 def test_the_reference_law_with_its_rate_limit_holds_under_jumping_sigma(spring65):
     """The float64 law itself, sigma jumping 0 <-> 1 with dwells of 18 and 16 samples (the path that grows
     unlimited): its rate limit flags the jumps and the plant, interpolated at the sigma the law uses, decays from
@@ -130,6 +139,8 @@ def showcase(tmp_path_factory):
                         lambda: design_spec(load_spec(EXAMPLES / "tank_showcase_load.toml")).artifact)  # fmt: skip
 
 
+@pytest.mark.slow(cpu=31)  # with the example campaign of test_sched_campaign_example, which reads the same design
+@pytest.mark.xdist_group("tank_showcase_load")
 def test_the_showcase_ships_certified(showcase):
     """The showcase's rate_max is certified (2.78/s measured; the old one, 2.8/s, was simulated) and the oracle's
     worst path at it decays."""
@@ -157,6 +168,7 @@ def test_no_certified_rate_is_refused_in_one_line_naming_where(tmp_path):
     assert "k in [" in res.err and "rate_certified = false" in res.err
 
 
+@pytest.mark.slow(cpu=7)
 def test_a_declared_uncertified_rate_ships_and_says_so_wherever_it_appears(tmp_path):
     """rate_max 0.5 with rate_certified = false: the artifact, the design's (JSON and lines) and analyze's output,
     the warnings, the exported header and a run's report all say "not certified"; nothing claims a proof of the

@@ -62,18 +62,30 @@ def multirotor():
     return path, start
 
 
-def test_schedule_on_a_parameter_trims_hover_throttle(multirotor, tmp_path):
+@pytest.fixture(scope="module")
+def hover(multirotor, tmp_path_factory):
+    """The multirotor scheduled on its mass (0.8, 1.0, 1.5, the altitude held at 2 m) with TEMPLATE by
+    `linearize --json`, and that spec designed: (spec path, printed JSON, linearize's stderr, design's result).
+    One linearization and one design (with its certificate) for the tests that read them, on one worker."""
+    path, _ = multirotor
+    folder = tmp_path_factory.mktemp("hover")
+    spec = folder / "spec.toml"
+    js, err = _schedule_json(path, spec)
+    return spec, js, err, run_cli("design", spec, "--out", folder / "design")
+
+
+ON_HOVER = pytest.mark.xdist_group("test_schedule_trim_hover")
+
+
+@pytest.mark.slow(cpu=10)
+@ON_HOVER
+def test_schedule_on_a_parameter_trims_hover_throttle(multirotor, hover):
     """Scheduled on the mass (a parameter: sigma is external) with the altitude held: at each mass the throttle
     is sqrt(m g / k_T) and B = [0, 2 k_T u / m] (the model's own hand-derived hover, from its parameters), and
     the spec designs a schema-2 artifact."""
-    path, p = multirotor
-    tmpl = tmp_path / "tmpl.toml"
-    tmpl.write_text(TEMPLATE)
-    spec = tmp_path / "spec.toml"
+    _, p = multirotor
+    spec, _, _, design = hover
     masses = [0.8, 1.0, 1.5]
-    res = run_cli("linearize", path, "--schedule", "mass=" + ",".join(map(str, masses)), "--at", "z=2",
-                  "--template", tmpl, "--out", spec)  # fmt: skip
-    assert res.code == 0, res.err
     data, _ = read_toml(spec, what="spec", error=ValueError)
     sched = data["schedule"]
     assert sched["sigma"] == "mass" and sched["external"] == ["mass"] and sched["points"] == masses
@@ -82,11 +94,11 @@ def test_schedule_on_a_parameter_trims_hover_throttle(multirotor, tmp_path):
         assert pt["u_op"][0] == pytest.approx(u, rel=1e-9)
         assert pt["x_op"] == pytest.approx([2.0, 0.0], abs=1e-9) and pt["y_op"] == pytest.approx([2.0])
         assert np.allclose(pt["B"], [[0.0], [2 * p["k_T"] * u / m]], rtol=1e-6)
-    out = tmp_path / "design"
-    assert run_cli("design", spec, "--out", out).code == 0
-    assert '"schema_version": 2' in (out / "gains.json").read_text()
+    assert design.code == 0, design.err
+    assert '"schema_version": 2' in (spec.parent / "design" / "gains.json").read_text()
 
 
+@pytest.mark.slow(cpu=5)
 def test_the_default_spec_of_a_slow_loop_designs_its_certificate_proved_in_float64(multirotor, tmp_path):
     """The spec `linearize --schedule` writes without a template (the multirotor on its mass) needs a Lyapunov
     matrix with a condition number near 1e7: Clarabel stopped short of its tolerances (InsufficientProgress) and the
@@ -167,12 +179,11 @@ def _schedule_json(path, out, *extra):
     return json.loads(res.out), res.err
 
 
-def test_each_point_records_its_fit_and_it_is_good(multirotor, tmp_path):
+@ON_HOVER
+def test_each_point_records_its_fit_and_it_is_good(hover):
     """Each point's model fits the FMU (small steps from its trim through the interface runs use): NRMSE and final
     error far below 5 %, recorded next to the point's plant in the spec and per point in --json, no warning."""
-    path, _ = multirotor
-    spec = tmp_path / "spec.toml"
-    js, err = _schedule_json(path, spec)
+    spec, js, err, design = hover
     assert "poorly" not in err
     data, _ = read_toml(spec, what="spec", error=ValueError)
     assert data["linearization"]["interface"] == js["linearization"]["interface"] and "fit" not in data["linearization"]
@@ -181,7 +192,7 @@ def test_each_point_records_its_fit_and_it_is_good(multirotor, tmp_path):
         assert point["fit"] == pt["fit"] and point["fit_steps"] == pt["fit_steps"] > 0
         assert pt["fit"]["z"]["nrmse"] < 1e-3 and pt["fit"]["z"]["final_error"] < 1e-3, pt["fit"]
         assert pt["fit_amplitude"]["throttle"] > 0 and "fit_warning" not in pt
-    assert run_cli("design", spec, "--out", tmp_path / "design").code == 0  # the record does not stop a design
+    assert design.code == 0, design.err  # the record does not stop a design
 
 
 def test_a_poor_fit_at_a_point_warns_naming_the_point(multirotor, monkeypatch, caplog, tmp_path):

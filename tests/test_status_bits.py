@@ -43,7 +43,7 @@ from support.status import (
 pytestmark = [
     pytest.mark.usefixtures("quiet_design_warnings"),
     pytest.mark.xdist_group("test_status_bits"),
-    pytest.mark.slow,  # builds: started first (tests/conftest.py)
+    pytest.mark.slow(cpu=50),  # builds and runs on one worker, 50 CPU-s: started first (tests/conftest.py)
 ]
 
 NAN = float("nan")

@@ -20,7 +20,7 @@ from gainlink.hil.loop.bridge import run_scenario
 from gainlink.hil.loop.scenario import load_scenario
 from support.hil import pendulum_scenario, udp_transport, write_scenario
 
-pytestmark = pytest.mark.slow
+pytestmark = pytest.mark.slow(cpu=58)  # the VM's boot and its Python under TCG
 
 
 @pytest.mark.skipif(shutil.which("qemu-system-x86_64") is None, reason="qemu-system-x86 is installed by make setup")
