@@ -1149,6 +1149,45 @@ def test_a_batch_with_a_run_that_raises_is_split_so_only_that_run_fails(pend, da
     assert result.errors == 2 and result.total == 4
 
 
+def _held_in_flight(pend, scheduler: str, folder: Path, batch: int) -> int:
+    """The client's Python memory (tracemalloc) over its memory before a campaign of 10 blocks of ``batch`` runs,
+    when the first block is stored: 8 blocks in flight (4 per worker thread of ``scheduler``)."""
+    import gc
+    import tracemalloc
+
+    data = small_campaign(pend, runs=10 * batch, grid=[], draw=small_campaign(pend)["draw"][:1])
+    data["scenario"]["duration"] = 0.5
+    held: list[int] = []
+    gc.collect()
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+
+        def progress(done: int, total: int, record: dict) -> None:
+            if done == batch:  # the first block stored, the next 7 and the one taking its place in flight
+                gc.collect()  # what only a collection would free is not held
+                held.append(tracemalloc.get_traced_memory()[0] - before)
+
+        result = run(data, out=folder, scheduler=scheduler, batch=batch, plots=False, progress=progress)
+    finally:
+        tracemalloc.stop()
+    assert result.executed == 10 * batch and len(held) == 1
+    return held[0]
+
+
+@ON_THE_CLUSTERS
+def test_the_client_holds_a_few_bytes_a_run_in_flight_not_the_runs(pend, dask_cluster, tmp_path):
+    """8 blocks in flight, of 5 runs and of 30: the client's Python memory while they run (tracemalloc; the scheduler
+    and workers are processes of their own) grows by a few hundred bytes a run in flight (its plan index, its id in
+    the plan and the store's index, and the pickled runs Dask's client keeps of a task), not by the runs themselves
+    (a run's scenario, values and id as Python objects: 2.6 kB a run in flight when the client held them). Dask's
+    state per task and what the first campaign imports are the same in both and cancel."""
+    _held_in_flight(pend, dask_cluster, tmp_path / "warm", 1)  # imports, connections
+    small, large = (_held_in_flight(pend, dask_cluster, tmp_path / str(b), b) for b in (5, 30))
+    per_run = (large - small) / (8 * 25)
+    assert per_run < 1000, f"{per_run:.0f} bytes a run in flight"
+
+
 def _worker_view() -> tuple[int, bool]:
     return os.getppid(), "gainlink.hil.campaign.worker" in sys.modules
 
