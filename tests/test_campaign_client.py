@@ -215,7 +215,7 @@ def test_a_worker_that_sees_the_campaign_folder_writes_its_block_and_one_that_do
     assert [p.name for p in stores["sees"].blocks.iterdir()] == [name]  # no temporary file left
     assert oct(written.stat().st_mode & 0o777) == "0o644"
     assert isinstance(answers["elsewhere"], bytes) and not list(stores["elsewhere"].blocks.iterdir())
-    told = {side: _store_answer(stores[side], answers[side], points) for side in answers}
+    told = {side: _store_answer(stores[side], answers[side], ids) for side in answers}
     assert told["sees"] == told["elsewhere"]
     assert [r["status"] for r in told["sees"]] == ["done", "error", "done", "done"]
     assert "mass" in told["sees"][1]["reason"] and "\n" not in told["sees"][1]["reason"]

@@ -29,6 +29,12 @@ from gainlink.errors import GainlinkError
 log = logging.getLogger(__name__)
 
 ALLOWED_FAILURES = 1
+# Dask keeps the last ``low-level-log-length`` messages of each of its batched streams (each under 1 MB: a block's
+# task with its pickled runs, ~300 kB for 1,000 runs of the shipped pendulum campaign) and as many transitions and
+# events, for its developers' debugging; by default 1,000: the client grew by ~0.6 kB a run up to 1,000 blocks (the
+# client's stream to the scheduler, and the LocalCluster's scheduler's to its workers, in this process). A few kept.
+RECENT_MESSAGES = 16
+CLIENT_CONFIG = {"distributed.admin.low-level-log-length": RECENT_MESSAGES}
 # The LocalCluster's own settings. Dask's defaults sample every worker's stack 100 times a second (for a
 # dashboard this cluster does not start) and wake every scheduler, worker and nanny 50 times a second to
 # time its event loop: measured here, 16 % of a CPU beside a busy single worker; with these, 3 %.
@@ -41,6 +47,7 @@ LOCAL_CONFIG = {
     "distributed.admin.tick.interval": "1s",
     "distributed.admin.system-monitor.interval": "2s",
     "distributed.worker.memory.monitor-interval": "1s",
+    **CLIENT_CONFIG,
 }
 
 # Without a dashboard the scheduler still serves its HTTP routes (health, metrics), by default on port 8787, and warns
@@ -183,7 +190,8 @@ def dask_client(
 
     if scheduler is not None:
         try:
-            client = Client(scheduler, timeout=timeout)
+            with dask.config.set(CLIENT_CONFIG):  # read when the client's stream to the scheduler is made
+                client = Client(scheduler, timeout=timeout)
         except (OSError, TimeoutError) as exc:
             raise ClusterError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
         with contextlib.closing(client):
@@ -207,7 +215,7 @@ def dask_client(
         )
     interrupted = False
     try:
-        with contextlib.closing(Client(cluster)) as client:
+        with dask.config.set(CLIENT_CONFIG), contextlib.closing(Client(cluster)) as client:
             held.release()  # a Ctrl-C while the cluster started: now, with the cluster in hand
             yield client
     except KeyboardInterrupt:

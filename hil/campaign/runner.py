@@ -174,10 +174,7 @@ def run(
     _check_counts(batch=batch, workers=workers)  # before anything is planned or written
     campaign = as_campaign(campaign)
     plan = plan_campaign(campaign)
-    doc = plan_doc(plan)
-    refuse_foreign(out, doc)  # before anything is written
-    store = Store(out, campaign=campaign.name)
-    store.prepare(plan, plan_doc=doc)
+    store = _prepared_store(plan, out)
     distinct, finished = _distinct_runs(plan, store)
     total, reused = int(distinct.sum()), int((distinct & finished).sum())
     todo = int((distinct & ~finished & ~plan.runs.failed).sum())
@@ -198,6 +195,16 @@ def run(
     return _result(plan, store, reused=reused, executed=todo, plots=plots)
 
 
+def _prepared_store(plan: CampaignPlan, out: str | Path) -> Store:
+    """The campaign folder ``out`` with its inputs written (refused in one line, before anything is written, when it
+    holds another campaign's). ``plan.json``'s document (a string a run) is not kept while the campaign runs."""
+    doc = plan_doc(plan)
+    refuse_foreign(out, doc)
+    store = Store(out, campaign=plan.campaign.name)
+    store.prepare(plan, plan_doc=doc)
+    return store
+
+
 def _check_counts(*, batch: int | None, workers: int | None) -> None:
     """``batch`` and ``workers`` are whole numbers >= 1 when given."""
     for name, value in (("batch", batch), ("workers", workers)):
@@ -214,29 +221,21 @@ def _distinct_runs(plan: CampaignPlan, store: Store) -> tuple[np.ndarray, np.nda
     return distinct, store.finished_mask(ids)
 
 
-def _blocks(plan: CampaignPlan, store: Store, sizes: list[int], pending: np.ndarray) -> Iterator[list[RunPoint]]:
+def _blocks(plan: CampaignPlan, store: Store, sizes: list[int], pending: np.ndarray) -> Iterator[np.ndarray]:
     """The runs to submit (``pending``: a distinct run without a result), in plan order, cut into blocks of
-    ``sizes`` and made as they are cut; those whose design failed are stored as errors here, a block at a time,
-    instead of being submitted."""
-    kind, cuts, failed = plan.campaign.kind, iter(sizes), []
-    block: list[RunPoint] = []
-    size = next(cuts, 0)
-    for k in np.flatnonzero(pending):
-        point = plan.runs[int(k)]
-        if point.error is not None:
-            failed.append(point)
-            if len(failed) == MAX_BLOCK:
-                store.put(failed, kind=kind, results=[{"status": "error", "reason": p.error} for p in failed])
-                failed = []
-            continue
-        block.append(point)
-        if len(block) == size:
-            yield block
-            block, size = [], next(cuts, 0)
-    if failed:
-        store.put(failed, kind=kind, results=[{"status": "error", "reason": p.error} for p in failed])
-    if block:
-        yield block
+    ``sizes``: each block the plan indices of its runs (int64), not its runs, which are made when it is submitted
+    (:class:`_Submitter`) and not held while it runs. Those whose design failed are stored as errors here, a block
+    at a time, instead of being submitted."""
+    failed = np.flatnonzero(pending & plan.runs.failed)
+    for start in range(0, len(failed), MAX_BLOCK):
+        points = [plan.runs[int(k)] for k in failed[start : start + MAX_BLOCK]]
+        store.put(points, kind=plan.campaign.kind, results=[{"status": "error", "reason": p.error} for p in points])
+    todo = np.flatnonzero(pending & ~plan.runs.failed)
+    for start, size in zip(itertools.accumulate(sizes, initial=0), sizes):
+        if start < len(todo):
+            yield todo[start : start + size]
+    if sum(sizes) < len(todo):  # sizes cover ``todo`` (batch_sizes); a remainder is one more block
+        yield todo[sum(sizes) :]
 
 
 def _result(plan: CampaignPlan, store: Store, *, reused: int, executed: int, plots: bool) -> CampaignResult:
@@ -276,11 +275,11 @@ def batch_sizes(kind: str, runs: int, threads: int, *, batch: int | None = None)
     return [runs // count + (1 if i < runs % count else 0) for i in range(count)]
 
 
-def _store_answer(store: Store, data: Any, points: list[RunPoint]) -> list[dict]:
-    """Store a task's answer for ``points``: the block file a worker wrote (a few numbers), or its bytes; a worker
+def _store_answer(store: Store, data: Any, ids: list[str]) -> list[dict]:
+    """Store a task's answer for runs ``ids``: the block file a worker wrote (a few numbers), or its bytes; a worker
     that answered something else is named."""
     if isinstance(data, dict) and "block" in data:
-        return store.took_block(data, [p.id for p in points])
+        return store.took_block(data, ids)
     return store.put_block(_block_bytes(data))
 
 
@@ -295,7 +294,8 @@ def _block_bytes(data: Any) -> bytes:
 
 
 class _Submitter:
-    """Submits batches of runs to Dask; a batch that failed is submitted again one run per task."""
+    """Submits blocks of runs to Dask, each given by its plan indices; a block that failed is submitted again one run
+    per task."""
 
     def __init__(self, client: Any, plan: CampaignPlan, store: Store) -> None:
         self.client, self.plan, self.kind = client, plan, plan.campaign.kind
@@ -307,8 +307,18 @@ class _Submitter:
         # of queueing on the worker that happens to hold the artifact.
         self.blobs = {sha: client.submit(_data, data, key=f"gainlink-fmu-{sha}") for sha, data in plan.blobs.items()}
 
-    def submit(self, points: list[RunPoint]) -> Any:
-        """One task running ``points`` in order (retried once by Dask when it raises)."""
+    def ids(self, block: np.ndarray) -> list[str]:
+        """The run ids of the plan indices ``block``."""
+        return [i.decode("ascii") for i in self.plan.runs.ids[block].tolist()]
+
+    def points(self, block: np.ndarray) -> list[RunPoint]:
+        """The runs of the plan indices ``block``, made again (a few kB each: made when needed, never held)."""
+        return [self.plan.runs[k] for k in block.tolist()]
+
+    def submit(self, block: np.ndarray) -> Any:
+        """One task running the runs of plan indices ``block`` in order (retried once by Dask when it raises). The
+        runs are made here and dropped once pickled into the task."""
+        points = self.points(block)
         shas = {p.artifact_sha256 for p in points}
         paths = " ".join(str(p.scenario.get("plant", {}).get("path", "")) for p in points)
         needed = {s: f for s, f in self.blobs.items() if s in paths}
@@ -331,7 +341,7 @@ class _Submitter:
 def _submit_and_store(
     client: Any,
     plan: CampaignPlan,
-    blocks: Iterator[list[RunPoint]],
+    blocks: Iterator[np.ndarray],
     store: Store,
     *,
     done: int,
@@ -339,41 +349,42 @@ def _submit_and_store(
     progress: Progress | None,
     window: int,
 ) -> None:
-    """Submit ``blocks`` as they are generated, at most :data:`BLOCKS_IN_FLIGHT` per thread (``window``) at a time
-    (so the client holds those blocks' points, not the plan's), and store each as it completes."""
+    """Submit ``blocks`` (plan indices) as they are generated, at most :data:`BLOCKS_IN_FLIGHT` per thread
+    (``window``) at a time, and store each as it completes. The client holds each block in flight as its plan indices
+    (8 bytes a run), not its runs: a run is made to be pickled into its task, and again only if its task failed."""
     from asyncio import CancelledError
 
     from distributed import as_completed
 
     kind = plan.campaign.kind
     submitter = _Submitter(client, plan, store)
-    futures: dict[Any, list[RunPoint]] = {}
-    for points in itertools.islice(blocks, max(window, 1) * BLOCKS_IN_FLIGHT):
-        futures[submitter.submit(points)] = points
+    futures: dict[Any, np.ndarray] = {}
+    for block in itertools.islice(blocks, max(window, 1) * BLOCKS_IN_FLIGHT):
+        futures[submitter.submit(block)] = block
     queue = as_completed(list(futures))
     for fut in queue:
-        batch_points = futures.pop(fut)
+        block = futures.pop(fut)
         try:
-            stored = _store_answer(store, fut.result(), batch_points)
+            stored = _store_answer(store, fut.result(), submitter.ids(block))
         except (Exception, CancelledError) as exc:  # retried once already; KilledWorker: its workers died
             fut.release()
             reason = f"{type(exc).__name__}: {exc}"
-            if len(batch_points) > 1:  # each run alone: only the run at fault fails
-                log.info("a batch of %d runs failed (%s); running each alone", len(batch_points), reason)
-                for point in batch_points:
-                    single = submitter.submit([point])
-                    futures[single] = [point]
+            if len(block) > 1:  # each run alone: only the run at fault fails
+                log.info("a batch of %d runs failed (%s); running each alone", len(block), reason)
+                for i in range(len(block)):
+                    single = submitter.submit(block[i : i + 1])
+                    futures[single] = block[i : i + 1]
                     queue.add(single)
                 continue
-            stored = store.put(batch_points, kind=kind, results=[{"status": "error", "reason": reason}])
+            stored = store.put(submitter.points(block), kind=kind, results=[{"status": "error", "reason": reason}])
         fut.release()
-        for points in itertools.islice(blocks, 1):  # the next block takes the finished one's place
-            nxt = submitter.submit(points)
-            futures[nxt] = points
-            queue.add(nxt)
-        for point, record in zip(batch_points, stored):
+        for nxt in itertools.islice(blocks, 1):  # the next block takes the finished one's place
+            queued = submitter.submit(nxt)
+            futures[queued] = nxt
+            queue.add(queued)
+        for k, record in zip(block.tolist(), stored):
             done += 1
             if record["status"] == "error":
-                log.warning("run %s (%d) failed: %s", point.id, point.index, record["reason"])
+                log.warning("run %s (%d) failed: %s", record["id"], k, record["reason"])
             if progress is not None:
                 progress(done, total, record)
