@@ -633,12 +633,18 @@ def test_a_block_file_holds_each_runs_record_and_traces_and_a_foreign_worker_ans
         _block_bytes([{"status": "done"}])
 
 
-def test_the_envelopes_read_block_by_block_are_numpys_percentiles_within_half_a_bin(tmp_path):
+@pytest.mark.parametrize("batch", [None, 32])
+def test_the_envelopes_read_block_by_block_are_numpys_percentiles_within_half_a_bin(tmp_path, monkeypatch, batch):
     """300 runs in three block files (NaN and an infinite sample among them, 20 runs of another length left out):
     each percentile of every output and command at each sample, and the failed runs' median, against
-    ``np.nanpercentile`` of all the runs stacked, within the half bin the function states."""
+    ``np.nanpercentile`` of all the runs stacked, within the half bin the function states; each block read whole,
+    and 32 runs at a time (batches that split a block's runs of one length)."""
+    from gainlink.hil.campaign import store as store_module
     from gainlink.hil.campaign.report import PERCENTILES, envelope_bands
     from gainlink.hil.campaign.store import encode_block, encode_trace
+
+    if batch is not None:
+        monkeypatch.setattr(store_module, "TRACE_BATCH", batch)
 
     rng = np.random.default_rng(11)
     N, store, status, stacks = 40, Store(tmp_path, campaign="c"), {}, []

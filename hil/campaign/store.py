@@ -111,6 +111,11 @@ def block_address(run_ids: Iterable[str]) -> str:
     return hashlib.sha256(body.encode("ascii")).hexdigest()[:24]
 
 
+#: Runs read at a time for the envelopes (:meth:`Store.trace_stacks`): a whole 1,000-run block's traces decoded at
+#: once, with the copies made of them, took the client's peak resident memory 77 MB over its start for 10,000 runs;
+#: 128 at a time, 45 MB, for the same CPU.
+TRACE_BATCH = 128
+
 #: The block file's columns whose values repeat from run to run (dictionary-encoded in the Parquet file).
 REPEATED = ["status", "names", "run_reason"]
 
@@ -514,28 +519,36 @@ class Store:
     def trace_stacks(
         self, ids: Iterable[str] | np.ndarray, *, fields: tuple[str, ...] = TRACE_FIELDS
     ) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray]]]:
-        """The stored traces of the runs ``ids`` that have a result, one block file at a time, stacked: for each
-        block, the runs of one trace shape as ``(ids (ASCII bytes), {"t": (k, N), "y": (k, N, p), "u": ..., "r":
-        ...})``; only ``fields`` (and ``t``) are read."""
+        """The stored traces of the runs ``ids`` that have a result, a block file at a time and within it
+        :data:`TRACE_BATCH` runs at a time, stacked: for each batch, the runs of one trace shape as ``(ids (ASCII
+        bytes), {"t": (k, N), "y": (k, N, p), "u": ..., "r": ...})``; only ``fields`` (and ``t``) are read."""
         wanted, wide = _wanted(ids), [k for k in WIDE if k in fields]
+        columns = ["id", "t", *wide, *(f"{k}_width" for k in WIDE)]
         for path in self.files():
-            table = _read(path, columns=["id", "t", *wide, *(f"{k}_width" for k in WIDE)])
-            names = _ids(table.column("id"))
-            rows = self._kept(path, names, results=True) & np.isin(names, wanted) & table.column("t").is_valid()
-            if not rows.any():
-                continue
-            part = table if rows.all() else table.filter(pa.array(rows))
-            lengths = pc.list_value_length(part.column("t")).to_numpy(zero_copy_only=False)
-            widths = np.stack([part.column(f"{k}_width").to_numpy(zero_copy_only=False) for k in WIDE], axis=1)
-            shape_of = np.column_stack([lengths, widths])
-            for shape in np.unique(shape_of, axis=0):
-                pick = np.flatnonzero((shape_of == shape).all(axis=1))
-                one = part if pick.size == part.num_rows else part.take(pa.array(pick))
-                n, size = int(shape[0]), dict(zip(WIDE, shape[1:].tolist()))
-                stack = {"t": _flat(one.column("t")).reshape(len(pick), n)}
-                for k in wide:
-                    stack[k] = _flat(one.column(k)).reshape(len(pick), n, size[k])
-                yield names[rows][pick], stack
+            pa.default_memory_pool().release_unused()  # as _read: what the blocks before left in Arrow's pool
+            for batch in pq.ParquetFile(path, pre_buffer=False).iter_batches(TRACE_BATCH, columns=columns):
+                yield from self._stacks(path, pa.Table.from_batches([batch]), wanted, wide)
+
+    def _stacks(
+        self, path: Path, table: pa.Table, wanted: np.ndarray, wide: list[str]
+    ) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray]]]:
+        """:meth:`trace_stacks`' stacks of the runs of ``table`` (a part of block file ``path``)."""
+        names = _ids(table.column("id"))
+        rows = self._kept(path, names, results=True) & np.isin(names, wanted) & table.column("t").is_valid()
+        if not rows.any():
+            return
+        part = table if rows.all() else table.filter(pa.array(rows))
+        lengths = pc.list_value_length(part.column("t")).to_numpy(zero_copy_only=False)
+        widths = np.stack([part.column(f"{k}_width").to_numpy(zero_copy_only=False) for k in WIDE], axis=1)
+        shape_of = np.column_stack([lengths, widths])
+        for shape in np.unique(shape_of, axis=0):
+            pick = np.flatnonzero((shape_of == shape).all(axis=1))
+            one = part if pick.size == part.num_rows else part.take(pa.array(pick))
+            n, size = int(shape[0]), dict(zip(WIDE, shape[1:].tolist()))
+            stack = {"t": _flat(one.column("t")).reshape(len(pick), n)}
+            for k in wide:
+                stack[k] = _flat(one.column(k)).reshape(len(pick), n, size[k])
+            yield names[rows][pick], stack
 
     def _row(self, run_id: str, columns: list[str]) -> tuple[pa.Table, int] | None:
         hit = self._find(run_id)
