@@ -32,6 +32,7 @@ from gainlink.proof.twin_plot import png_bytes
 
 from .plan import CampaignPlan, PlannedRuns, describe_axes, run_heads
 from .rows import MEASURE_CELLS, METRIC_CELLS, STATUSES, ReportRows, RunStatus, Tally, Verdicts, point_row
+from .store import members
 
 PERCENTILES = (5, 25, 50, 75, 95)
 ENVELOPE_BINS = 512
@@ -196,7 +197,7 @@ def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_B
     """
     ids, failing = _status_ids(status)
     with tempfile.TemporaryFile(dir=store.out) as spill:  # the stacks read once, kept as float32 for the 2nd pass
-        seen = _spill_stacks(store, ids, failing, spill)
+        seen = _spill_stacks(store, ids, np.unique(failing), spill)
         if not seen:
             return None
         shape = max(seen, key=lambda k: seen[k].runs)  # the most common shape; ties: the first met
@@ -237,8 +238,9 @@ class _Spilled:
 
 
 def _spill_stacks(store: Any, ids: np.ndarray, failing: np.ndarray, spill: IO[bytes]) -> dict[tuple, _Spilled]:
-    """Read every block's traces of the runs ``ids`` once, spill them to ``spill`` as float32 and note, per trace
-    shape (samples, outputs, commands), what :func:`envelope_bands` needs: one pass, no separate read of the shapes."""
+    """Read every block's traces of the runs ``ids`` once (``failing``: the failed ones, sorted and distinct), spill
+    them to ``spill`` as float32 and note, per trace shape (samples, outputs, commands), what :func:`envelope_bands`
+    needs: one pass, no separate read of the shapes."""
     seen: dict[tuple, _Spilled] = {}
     at = 0
     for names, st in store.trace_stacks(ids, fields=("t", "y", "u")):
@@ -246,7 +248,7 @@ def _spill_stacks(store: Any, ids: np.ndarray, failing: np.ndarray, spill: IO[by
         one = seen.setdefault(shape, _Spilled(st["t"][0].astype(float)))
         sig = np.concatenate([st["y"], st["u"]], axis=2)
         one.lo, one.hi = _extremes(sig, one.lo, one.hi)
-        one.chunks.append((at, np.isin(names, failing)))
+        one.chunks.append((at, members(names, failing)))
         one.runs += len(names)
         sig.tofile(spill)
         at += sig.nbytes
