@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from gainlink.errors import PlantError, ToolchainError
+from gainlink.firmware import build, c_kernel
 from gainlink.hil.plants import kernel
 from gainlink.hil.plants.models import CartPendulum, OdeBatch, QuadrotorLateral, columns, rk4
 from gainlink.hil.plants.tank import Tank
@@ -102,10 +103,10 @@ def test_a_row_steps_to_the_same_bits_in_a_batch_of_any_size():
 def own_cache(tmp_path, monkeypatch):
     """The kernel's build cache in ``tmp_path / "cache"``, the process's lookups of the library forgotten before and
     after."""
-    monkeypatch.setattr(kernel, "cache_root", lambda: tmp_path / "cache")
-    kernel._library.cache_clear()
+    monkeypatch.setattr(build, "cache_root", lambda: tmp_path / "cache")
+    c_kernel._library.cache_clear()
     yield tmp_path / "cache"
-    kernel._library.cache_clear()
+    c_kernel._library.cache_clear()
 
 
 def test_the_kernel_is_built_once_into_the_cache_and_a_compiler_failure_is_one_line(own_cache, tmp_path, monkeypatch):
@@ -122,7 +123,7 @@ def test_the_kernel_is_built_once_into_the_cache_and_a_compiler_failure_is_one_l
     lib = kernel.library()
     assert lib.parent.parent == cache and lib.is_file()
     built = lib.stat().st_mtime_ns
-    kernel._library.cache_clear()  # as another process finds it
+    c_kernel._library.cache_clear()  # as another process finds it
     assert kernel.library() == lib and lib.stat().st_mtime_ns == built  # found, not built again
     assert sorted(p.name for p in lib.parent.iterdir()) == [".lock", lib.name]
 

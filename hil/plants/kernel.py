@@ -1,11 +1,9 @@
 """The built-in plants' compiled RK4 (``native/ode.c``): built on first use with the host C compiler, loaded with
 ctypes.
 
-The library is built into the firmware build cache (:func:`gainlink.firmware.build.cache_root`, beside the host law
-libraries), in a folder named by a hash of the source, the flags and the compiler (its path, size and time), under
-that folder's file lock: concurrent first uses (pytest-xdist or Dask workers) build it once, the others find it done.
-The library is written under a temporary name and renamed into place, so no reader ever sees half of one and a
-failed build leaves nothing behind.
+The library is built as every kernel of gainlink's own is (:mod:`gainlink.firmware.c_kernel`): into the firmware
+build cache, in a folder named by a hash of the source, the flags and the compiler, under that folder's file lock,
+through a temporary name renamed into place.
 
 Flags keep IEEE semantics (``-O2 -ffp-contract=off``, no ``-ffast-math``): the C rounds every product and sum as
 numpy does, and a row's bits do not depend on the batch size (``native/ode.c`` says how). sin and cos are SLEEF's
@@ -18,37 +16,31 @@ from __future__ import annotations
 
 import ctypes
 import functools
-import hashlib
-import os
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
 from gainlink.errors import ToolchainError
-from gainlink.fileio import exclusive_lock
+from gainlink.firmware.c_kernel import kernel_library
 
 SOURCE = Path(__file__).resolve().parent / "native" / "ode.c"
-FLAGS = ("-std=c11", "-O2", "-ffp-contract=off", "-fPIC", "-shared")
 LIBRARY = "libgainlink_plants.so"
 SLEEF_PACKAGE = "libsleef-dev"
 _MISSING_SLEEF = (f"SLEEF not found: the built-in plants' RK4 takes sin and cos from SLEEF's deterministic functions "
                   f"(install the Debian package {SLEEF_PACKAGE}; make setup does)")  # fmt: skip
 
 
-def compiler(name: str) -> str:
-    """The host C compiler ``name`` (``$CC``, else ``cc``), as a path."""
-    path = shutil.which(name)
-    if path is None:
-        raise ToolchainError(f"C compiler {name} not found: the built-in plants' RK4 is compiled on first use "
-                             "(make setup installs gcc; set CC to another)")  # fmt: skip
-    return path
-
-
 def library() -> Path:
-    """The kernel's shared library, built (once per source, flags and compiler) into the build cache; looked up once
-    per process and compiler name (a lookup reads and hashes the source, finds the compiler and the cache: ~0.5 ms)."""
-    return _library(os.environ.get("CC", "cc"))
+    """The kernel's shared library, built (once per source, flags and compiler) into the build cache
+    (:func:`gainlink.firmware.c_kernel.kernel_library`, with this machine's :func:`vector_flags` and SLEEF); looked up
+    once per process and compiler name (a lookup reads and hashes the source, finds the compiler and the cache: ~0.5
+    ms)."""
+    return kernel_library(SOURCE, name=LIBRARY, what="the built-in plants' RK4", flags=_vector_flags(),
+                          libs=("-lsleef", "-lm"), explain=_missing_sleef)  # fmt: skip
+
+
+def _missing_sleef(output: str) -> str | None:
+    """The line naming SLEEF's package when the compiler's ``output`` says its header or library is missing."""
+    return _MISSING_SLEEF if "sleef.h" in output or "-lsleef" in output else None
 
 
 def vector_flags(cpuinfo: Path = Path("/proc/cpuinfo")) -> tuple[str, ...]:
@@ -63,48 +55,9 @@ def vector_flags(cpuinfo: Path = Path("/proc/cpuinfo")) -> tuple[str, ...]:
     return ("-mavx512f",) if "avx512f" in flags else ("-mavx",) if "avx" in flags else ()
 
 
-def cache_root() -> Path:
-    """The firmware build cache (:func:`gainlink.firmware.build.cache_root`), imported when a library is wanted: a run
-    without a built-in model never loads the build code."""
-    from gainlink.firmware.build import cache_root as root
-
-    return root()
-
-
 @functools.cache
-def _library(cc_name: str) -> Path:
-    cc = compiler(cc_name)
-    st = os.stat(cc)
-    flags = (*FLAGS, *vector_flags())
-    key_text = "|".join([hashlib.sha256(SOURCE.read_bytes()).hexdigest(), *flags, cc, str(st.st_size),
-                         str(st.st_mtime_ns)])  # fmt: skip
-    folder = cache_root() / f"plants-host-{hashlib.sha256(key_text.encode()).hexdigest()[:16]}"
-    lib = folder / LIBRARY
-    if lib.is_file():
-        return lib
-    with exclusive_lock(folder / ".lock"):
-        if not lib.is_file():
-            _compile(cc, flags, lib)
-    return lib
-
-
-def _compile(cc: str, flags: tuple[str, ...], lib: Path) -> None:
-    """Compile :data:`SOURCE` into ``lib`` (through a temporary name in its folder, removed when the build fails)."""
-    staging = lib.with_name(f"{lib.name}.{os.getpid()}.tmp")
-    cmd = [cc, *flags, "-o", str(staging), str(SOURCE), "-lsleef", "-lm"]
-    try:
-        proc = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True)
-        if proc.returncode != 0:
-            output = proc.stdout + proc.stderr
-            if "sleef.h" in output or "-lsleef" in output:
-                raise ToolchainError(_MISSING_SLEEF)
-            lines = output.strip().splitlines()
-            first = next((ln for ln in lines if "error" in ln.lower()), lines[-1] if lines else "")
-            raise ToolchainError(f"compiling the plants' RK4 ({SOURCE.name}) with {cc} failed "
-                                 f"(exit {proc.returncode}): {first.strip()[:300]}")  # fmt: skip
-        os.replace(staging, lib)
-    finally:
-        staging.unlink(missing_ok=True)
+def _vector_flags() -> tuple[str, ...]:
+    return vector_flags()
 
 
 @functools.cache

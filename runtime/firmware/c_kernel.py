@@ -1,5 +1,6 @@
 """A C file of gainlink's own compiled on first use with the host C compiler into the build cache, loaded with ctypes
-(a campaign block's kernels: :mod:`gainlink.laws.lq.native_block`).
+(a campaign block's kernels: :mod:`gainlink.laws.lq.native_block`, and the built-in plants' RK4,
+``gainlink.hil.plants.kernel``).
 
 The library goes into :func:`~.build.cache_root`, in a folder named by a hash of the source, the flags and the
 compiler (its path, size and time), under that folder's file lock: concurrent first uses (pytest-xdist or Dask
@@ -16,6 +17,7 @@ import hashlib
 import os
 import shutil
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 
 from ..errors import ToolchainError
@@ -34,40 +36,65 @@ def compiler(name: str, *, what: str) -> str:
     return path
 
 
-def kernel_library(source: Path, *, name: str, what: str, libs: tuple[str, ...] = ()) -> Path:
+def kernel_library(
+    source: Path,
+    *,
+    name: str,
+    what: str,
+    flags: tuple[str, ...] = (),
+    libs: tuple[str, ...] = (),
+    explain: Callable[[str], str | None] | None = None,
+) -> Path:
     """``source`` built (once per source, flags and compiler: ``$CC``, else ``cc``) into the build cache as the
-    shared library ``name``; ``what`` names the kernel in an error. Looked up once per process."""
-    return _library(source, name, what, libs, os.environ.get("CC", "cc"))
+    shared library ``name``, with the compiler ``flags`` beside :data:`IEEE_FLAGS` and the libraries ``libs``;
+    ``what`` names the kernel in an error, and ``explain`` (given the compiler's whole output) may say the cause in
+    its own words (a missing library's package). Looked up once per process."""
+    return _library(source, name, what, flags, libs, explain, os.environ.get("CC", "cc"))
 
 
 @functools.cache
-def _library(source: Path, name: str, what: str, libs: tuple[str, ...], cc_name: str) -> Path:
+def _library(
+    source: Path,
+    name: str,
+    what: str,
+    flags: tuple[str, ...],
+    libs: tuple[str, ...],
+    explain: Callable[[str], str | None] | None,
+    cc_name: str,
+) -> Path:
     from .build import cache_root  # the build code loaded when a kernel is wanted, not at import
 
     cc = compiler(cc_name, what=what)
     st = os.stat(cc)
-    key_text = "|".join([hashlib.sha256(source.read_bytes()).hexdigest(), *IEEE_FLAGS, *libs, cc, str(st.st_size),
-                         str(st.st_mtime_ns)])  # fmt: skip
+    key_text = "|".join([hashlib.sha256(source.read_bytes()).hexdigest(), *IEEE_FLAGS, *flags, *libs, cc,
+                         str(st.st_size), str(st.st_mtime_ns)])  # fmt: skip
     folder = cache_root() / f"{Path(name).stem}-{hashlib.sha256(key_text.encode()).hexdigest()[:16]}"
     lib = folder / name
     if lib.is_file():
         return lib
     with exclusive_lock(folder / ".lock"):
         if not lib.is_file():
-            _compile(cc, source, lib, libs=libs, what=what)
+            _compile([cc, *IEEE_FLAGS, *flags], source, lib, libs=libs, what=what, explain=explain)
     return lib
 
 
-def _compile(cc: str, source: Path, lib: Path, *, libs: tuple[str, ...], what: str) -> None:
-    """Compile ``source`` into ``lib`` (through a temporary name in its folder, removed when the build fails)."""
+def _compile(
+    cmd: list[str], source: Path, lib: Path, *, libs: tuple[str, ...], what: str, explain: Callable | None
+) -> None:
+    """Compile ``source`` into ``lib`` with the compiler and flags ``cmd`` (through a temporary name in its folder,
+    removed when the build fails)."""
     staging = lib.with_name(f"{lib.name}.{os.getpid()}.tmp")
-    cmd = [cc, *IEEE_FLAGS, "-o", str(staging), str(source), *libs]
     try:
-        proc = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True)
+        proc = subprocess.run([*cmd, "-o", str(staging), str(source), *libs], stdin=subprocess.DEVNULL,
+                              capture_output=True, text=True)  # fmt: skip
         if proc.returncode != 0:
-            lines = (proc.stdout + proc.stderr).strip().splitlines()
+            output = proc.stdout + proc.stderr
+            said = explain(output) if explain is not None else None
+            if said is not None:
+                raise ToolchainError(said)
+            lines = output.strip().splitlines()
             first = next((ln for ln in lines if "error" in ln.lower()), lines[-1] if lines else "")
-            raise ToolchainError(f"compiling {what} ({source.name}) with {cc} failed "
+            raise ToolchainError(f"compiling {what} ({source.name}) with {cmd[0]} failed "
                                  f"(exit {proc.returncode}): {first.strip()[:300]}")  # fmt: skip
         os.replace(staging, lib)
     finally:
