@@ -407,8 +407,10 @@ def _block_lines(blocks: dict | None) -> list[str]:
     large = blocks.get("hundred_thousand")
     if large:
         lines.append(
-            f"- blocks at {large['runs']} runs: {large['wall_s']:.0f} s wall, client peak RSS "
-            f"+{large['client_peak_rss_growth_mb']:.0f} MB, {large['result_files']} result files"
+            f"- blocks at {large['runs']} runs: {large['wall_s']:.0f} s wall ({large['runs_wall_s']:.0f} s until the "
+            f"last run is stored, the report {large['report_cpu_s']:.0f} s of CPU), client peak RSS "
+            f"+{large['client_peak_rss_growth_mb']:.0f} MB over its {large['client_rss_start_mb']:.0f} MB at the start "
+            f"(the bench's client, grown by the campaigns before), {large['result_files']} result files"
         )
     return lines
 
