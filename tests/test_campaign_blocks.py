@@ -562,6 +562,18 @@ def _artifact_file(artifact):
     return worker._ARTIFACTS[artifact.sha256][1]
 
 
+def _design(name: str):
+    """The artifact of the block column tests' ``design``: the shipped pendulum, a regulator (no tracked output) or a
+    random design tracking two references."""
+    from support.fixed import example, random_design
+
+    if name == "pendulum":
+        return example("pendulum", "float32")
+    if name == "regulator":
+        return random_design(4, "float32", n=3, m=2, p=2, q=0)
+    return random_design(5, "float32", n=4, m=2, p=3, q=2)
+
+
 def _traces(a, rng: np.random.Generator, lengths: list[int]) -> list:
     """Runs of ``a`` with the cases a block's metrics must get right: references that step at different samples
     (and never), an error of zero at the start (regulation), saturation, refused steps, NaN samples, runs with and
@@ -602,14 +614,8 @@ def test_a_blocks_metrics_as_columns_are_each_runs_own_compute_metrics(design):
     function, the oracle), every figure exactly: no figure needed a tolerance."""
     from gainlink.hil.loop.block_metrics import block_metrics
     from gainlink.hil.loop.metrics import compute_metrics
-    from support.fixed import example, random_design
 
-    if design == "pendulum":
-        a = example("pendulum", "float32")
-    elif design == "regulator":
-        a = random_design(4, "float32", n=3, m=2, p=2, q=0)
-    else:
-        a = random_design(5, "float32", n=4, m=2, p=3, q=2)
+    a = _design(design)
     rng = np.random.default_rng(21)
     lengths = [50] * 40 + [37] * 15 + [0, 1, 1, 2, 2]
     traces = _traces(a, rng, lengths)
@@ -710,14 +716,8 @@ def test_a_blocks_measures_and_downsampled_traces_as_columns_are_each_runs_own(d
     from gainlink.hil.campaign.criteria import measure, measure_block
     from gainlink.hil.campaign.worker import MAX_TRACE_POINTS, downsampled_traces
     from gainlink.hil.loop.metrics import compute_metrics
-    from support.fixed import example, random_design
 
-    if design == "pendulum":
-        a = example("pendulum", "float32")
-    elif design == "regulator":
-        a = random_design(4, "float32", n=3, m=2, p=2, q=0)
-    else:
-        a = random_design(5, "float32", n=4, m=2, p=3, q=2)
+    a = _design(design)
     rng = np.random.default_rng(33)
     lengths = [60] * 240 + [1300] * 40 + [0, 0, 1, 5, 7, 8, 9, 37, 37] + [2] * 11
     traces = _traces(a, rng, lengths)
