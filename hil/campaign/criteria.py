@@ -64,7 +64,7 @@ def measure(result: Any, artifact: Any) -> dict:
     """What the criteria read from a run (JSON-able; NaN and infinity become ``None``)."""
     tr = result.trace
     finite = bool(np.all(np.isfinite(tr.y)))
-    grew = [growth(e) for e in _errors(tr, artifact).values()] if (result.complete and finite) else []
+    grew = {k: growth(e) for k, e in _errors(tr, artifact).items()} if (result.complete and finite) else {}
     sat = tr.sat.any(axis=1) if tr.sat.size else np.zeros(0, bool)
     low = [float(np.nanmin(tr.y[:, i])) for i in range(tr.y.shape[1])] if tr.y.size else []
     high = [float(np.nanmax(tr.y[:, i])) for i in range(tr.y.shape[1])] if tr.y.size else []
@@ -91,7 +91,7 @@ def measure_block(results: list, artifact: Any) -> list[dict]:
         traces = [results[i].trace for i in idx]
         Y = stacked([tr.y for tr in traces])
         finite = np.isfinite(Y).all(axis=(1, 2)).tolist()
-        grew = _growth_columns(_error_columns(traces, Y, artifact), n)
+        grew = _growth_columns(_error_columns(traces, artifact), n)
         sat = np.stack([tr.sat for tr in traces])
         longest = _longest_columns(sat.any(axis=2) if sat.shape[2] else np.zeros(sat.shape[:2], bool))
         with warnings.catch_warnings():  # a column all NaN: nanmin's NaN (None), as a run alone gets it
@@ -100,36 +100,32 @@ def measure_block(results: list, artifact: Any) -> list[dict]:
             high = np.stack([np.nanmax(Y[:, :, i], axis=1) for i in range(Y.shape[2])], axis=1).tolist()
         for j, i in enumerate(idx):
             result = results[i]
-            mine = [g[j] for g in grew] if (result.complete and finite[j]) else []
+            mine = {k: g[j] for k, g in grew.items()} if (result.complete and finite[j]) else {}
             out[i] = _measured(result, artifact, finite=finite[j], grew=mine, low=low[j], high=high[j],
                                longest=longest[j])  # fmt: skip
     return out  # type: ignore[return-value]
 
 
-def _error_columns(traces: list, Y: np.ndarray, artifact: Any) -> list[np.ndarray]:
-    """:func:`_errors` of each run as (runs, steps) columns, one per tracked signal (``y @ Ci[j]`` run by run)."""
-    a = artifact
-    if a.q:
-        from ..loop.block_metrics import stacked
-
-        R = stacked([tr.r for tr in traces])
-        return [R[:, :, j] - np.stack([tr.y @ a.Ci[j] for tr in traces]) for j in range(a.q)]
-    return [-Y[:, :, i] for i in range(Y.shape[2])]
+def _error_columns(traces: list, artifact: Any) -> dict[str, np.ndarray]:
+    """:func:`_errors` of each of ``traces`` (runs of one length) as (runs, steps) columns, one per tracked signal:
+    each run's made as it is alone, then stacked."""
+    each = [_errors(tr, artifact) for tr in traces]
+    return {name: np.stack([e[name] for e in each]) for name in each[0]}
 
 
-def _growth_columns(errors: list[np.ndarray], n: int) -> list[list[tuple[bool, float | None]]]:
+def _growth_columns(errors: dict[str, np.ndarray], n: int) -> dict[str, list[tuple[bool, float | None]]]:
     """:func:`growth` of each row of each (runs, ``n``) error column: per signal, per run, ``(ok, ratio)``."""
-    out = []
-    for E in errors:
+    out = {}
+    for name, E in errors.items():
         if n < 8:
-            out.append([(True, None)] * E.shape[0])
+            out[name] = [(True, None)] * E.shape[0]
             continue
         A = np.abs(E)
         last, third, peak = A[:, 3 * n // 4 :].max(axis=1), A[:, n // 2 : 3 * n // 4].max(axis=1), A.max(axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(third > 0, last / third, np.where(last == 0, 0.0, np.inf))
         ok = (last <= GROWTH * third) | (last <= FLOOR * peak)
-        out.append(list(zip(ok.tolist(), ratio.tolist())))
+        out[name] = list(zip(ok.tolist(), ratio.tolist()))
     return out
 
 
@@ -141,13 +137,13 @@ def _longest_columns(mask: np.ndarray) -> list[int]:
     return (steps - last_false).max(axis=1).tolist() if mask.shape[1] else [0] * mask.shape[0]
 
 
-def _measured(result: Any, artifact: Any, *, finite: bool, grew: list, low: list, high: list, longest: int) -> dict:
+def _measured(result: Any, artifact: Any, *, finite: bool, grew: dict, low: list, high: list, longest: int) -> dict:
     """:func:`measure`'s dict from a run's figures: ``grew`` its tracked errors' :func:`growth` (empty unless it
     completed with finite outputs), ``low``/``high`` its outputs' NaN-ignoring extrema, ``longest`` its longest
     stretch of saturated steps."""
     stable, why, ratios = bool(result.complete and finite), result.reason, {}
     if stable:
-        for name, (ok, ratio) in zip(_tracked_names(artifact), grew):
+        for name, (ok, ratio) in grew.items():
             ratios[name] = ratio
             if not ok:
                 stable, why = False, f"{name} error grows at the end (last/third quarter peak {ratio:.3g})"
@@ -173,11 +169,6 @@ def _measured(result: Any, artifact: Any, *, finite: bool, grew: list, low: list
         out["model_iae_ratio"] = max(ratios, key=lambda x: abs(np.log(x)) if x > 0 else np.inf, default=None)
         out["model_warning"] = bool(model.get("warning"))
     return _clean(out)
-
-
-def _tracked_names(artifact: Any) -> list[str]:
-    """The names of :func:`_errors`' signals: the references, or the outputs without integral action."""
-    return list(artifact.signals["references"] if artifact.q else artifact.signals["outputs"])
 
 
 def _clean(obj: Any) -> Any:
