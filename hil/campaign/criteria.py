@@ -66,8 +66,10 @@ def measure(result: Any, artifact: Any) -> dict:
     finite = bool(np.all(np.isfinite(tr.y)))
     grew = {k: growth(e) for k, e in _errors(tr, artifact).items()} if (result.complete and finite) else {}
     sat = tr.sat.any(axis=1) if tr.sat.size else np.zeros(0, bool)
-    low = [float(np.nanmin(tr.y[:, i])) for i in range(tr.y.shape[1])] if tr.y.size else []
-    high = [float(np.nanmax(tr.y[:, i])) for i in range(tr.y.shape[1])] if tr.y.size else []
+    with warnings.catch_warnings():  # an output all NaN: nanmin's NaN (None in the row), not a warning a run
+        warnings.simplefilter("ignore", RuntimeWarning)
+        low = [float(np.nanmin(tr.y[:, i])) for i in range(tr.y.shape[1])] if tr.y.size else []
+        high = [float(np.nanmax(tr.y[:, i])) for i in range(tr.y.shape[1])] if tr.y.size else []
     return _measured(result, artifact, finite=finite, grew=grew, low=low, high=high, longest=_longest_true(sat))
 
 
