@@ -810,3 +810,146 @@ def test_the_compiled_float64_law_is_each_runs_own_python_reference_bit_for_bit(
                 assert np.array_equal(states[i], c.state()), (mode, k, i)
                 seen |= {(mode, "sat", bool(want.sat)), (mode, "fault", bool(want.flags))}
     assert {(m, w, b) for m in ("none", "clamp", "backcalc") for w in ("sat", "fault") for b in (True, False)} <= seen
+
+
+STEPS_FIELDS = ("Y", "U", "sat", "flags", "sigma", "X", "L", "steps", "failed_at")
+
+
+def _block_inputs(art, scenarios: list, *, twin: bool, library=None, blows: int | None = 8):
+    """A block's runs prepared as ``run_block`` prepares them (fresh plants and laws) with what a campaign rarely
+    gives but a block must step alike: NaN and +-inf noise samples (run 2), references of its own (run 4, the others
+    sharing one array), a disturbance that blows its plant up mid-run (run 6) and a plant that blows up in its
+    first sample (run ``blows``, when the block has one); the controller the run (or its twin) steps with."""
+    import dataclasses as dc
+
+    from gainlink.hil.loop.block import batch_of, prepare_block
+    from gainlink.hil.loop.bridge import build_plant
+    from gainlink.laws import law_of
+
+    law = law_of(art)
+    scenarios = [dc.replace(sc, initial_state={"theta_dot": 1e200}) if i == blows else sc
+                 for i, sc in enumerate(scenarios)]  # fmt: skip
+    plants = [build_plant(sc, artifact=art) for sc in scenarios]
+    runs = prepare_block(scenarios, law=law, artifact=art, plants=plants)
+    for i, run in enumerate(runs):
+        plan = run.plan
+        if i == 2:
+            noise = plan.noise.copy()
+            noise[5, 0], noise[30, 1], noise[31, 0] = np.nan, np.inf, -np.inf
+            plan = dc.replace(plan, noise=noise)
+        if i == 4:
+            R = plan.R.copy()
+            R[40:] += 0.2
+            plan = dc.replace(plan, R=R)
+        if i == 6:
+            D = plan.D.copy()
+            D[60:, 0] = 1e300
+            plan = dc.replace(plan, D=D)
+        run.plan = plan
+    if twin:
+        for r in runs:  # as _twins does: the run's plant reset again
+            r.plant.reset(initial=r.scenario.initial_state)
+    batch = batch_of(plants)
+    controller = law.reference_block(art, len(runs)) if twin else law.native_block(art, len(runs), library=library)
+    return runs, batch, controller
+
+
+def _both_loops(art, scenarios: list, *, twin: bool, library=None, blows: int | None = 8) -> tuple:
+    """The C loop's and the numpy loop's records of the same block (each on its own fresh plants and laws), and
+    each one's plants' and laws' states after it."""
+    from gainlink.hil.loop import block as blk
+    from gainlink.hil.loop import lockstep
+
+    got = []
+    for c in (True, False):
+        runs, batch, controller = _block_inputs(art, scenarios, twin=twin, library=library, blows=blows)
+        kw = dict(Ts=art.Ts, steps=runs[0].plan.N, disturbed=blk._disturbed(runs, twin), plant_state=not twin,
+                  law_state=twin)  # fmt: skip
+        assert lockstep.why_not(batch, controller) is None
+        if c:
+            rec = lockstep.run(runs, batch, controller, **kw)
+        else:
+            rec = blk._python_lockstep(runs, batch, controller, loop="numpy", **kw)
+        laws = controller.states() if twin else _rebased(controller.host.c_block()["laws"])
+        got.append((rec, batch.X.copy(), np.array(laws, copy=True)))
+    return got[0], got[1]
+
+
+def _rebased(words: np.ndarray) -> np.ndarray:
+    """The host laws' buffer (uint64 words) with each address into itself (an instance's pointer to its own gain
+    set) made an offset from its start: two buffers of the same states compare equal."""
+    base, end = words.ctypes.data, words.ctypes.data + words.nbytes
+    inside = (words >= base) & (words < end)
+    return np.where(inside, words - np.uint64(base), words)
+
+
+def _bit_for_bit(a, b) -> bool:
+    """Two arrays (or two Nones) of one dtype and shape with the same bytes (NaN payloads and -0.0 included)."""
+    if a is None or b is None:
+        return a is None and b is None
+    return (
+        a.dtype == b.dtype
+        and a.shape == b.shape
+        and np.ascontiguousarray(a).tobytes() == np.ascontiguousarray(b).tobytes()
+    )
+
+
+@pytest.mark.parametrize("form", ["predictor", "current"])
+def test_the_c_loop_records_what_the_numpy_loop_records_bit_for_bit(form):
+    """The block's loop in one C call against the numpy loop (the oracle), on the shipped pendulum design in each
+    anti-windup mode and observer form, the host C law and the twin's float64 law: 11 runs (a group of 8 lanes and
+    3) with NaN/inf noise samples, a run of its own references, a plant blowing up mid-run and one in its first
+    sample; then blocks of one run (one that runs through, one that fails at once: the loop stops). Every record
+    (Y, U, sat, flags, sigma, X, L, steps, failed_at) and the plants' and laws' states after: the same bytes."""
+    from gainlink.hil.campaign.worker import _library
+
+    (_, scenarios), *_ = _pendulum_campaign_points(draws=11, duration=1.5)
+    seen = set()
+    for mode in ("none", "clamp", "backcalc"):
+        art = _pendulum_form(form, mode)
+        library = _library(art)
+        for twin in (False, True):
+            for block, blows in ((scenarios, 8), (scenarios[:1], None), (scenarios[:1], 0)):
+                (c, c_x, c_law), (py, py_x, py_law) = _both_loops(art, block, twin=twin, library=library, blows=blows)
+                for name in STEPS_FIELDS:
+                    assert _bit_for_bit(getattr(c, name), getattr(py, name)), (mode, twin, len(block), name)
+                assert _bit_for_bit(c_x, py_x) and _bit_for_bit(c_law, py_law), (mode, twin, len(block))
+                assert c.lat.shape == py.lat.shape and (c.lat[: int(c.steps.max())] > 0).all()
+                seen.add((twin, len(block), tuple(int(s) for s in py.steps)))
+                if len(block) == 11:
+                    assert py.failed_at[8] == 0 and py.failed_at[6] >= 60 and (py.failed_at[[0, 1, 2, 4]] == -1).all()
+                    if not twin:
+                        assert (py.flags[2, [5, 30, 31]] != 0).all() and (py.sat != 0).any()
+    assert (False, 1, (1,)) in seen and (True, 1, (1,)) in seen  # the one-run block that fails stops at once
+    assert (False, 1, (150,)) in seen
+
+
+def test_the_block_says_where_its_loop_ran(tmp_path, monkeypatch):
+    """The run's controller description names the loop: the C for the pendulum's host law and twin, numpy (and
+    why) for linear plants, and numpy with the compiler's one line when the loop's C does not compile (a source
+    with an error in it: what a broken compiler or header gives); the records the same whichever ran."""
+    from gainlink.hil.campaign.worker import _library
+    from gainlink.hil.loop import lockstep
+    from gainlink.hil.loop.block import run_block
+
+    art, scenarios = _pendulum_campaign_points(draws=2, duration=0.2)[0]
+    library = _library(art)
+    in_c = run_block(scenarios, artifact=art, library=library)
+    assert [r.info["controller"]["loop"] for r in in_c] == [lockstep.IN_C] * 2
+    linear = [dataclasses.replace(sc, plant={"kind": "linear"}) for sc in scenarios]
+    block = run_block(linear, artifact=art, library=library)
+    assert block[0].info["controller"]["loop"].startswith("numpy: the LinearBatch")
+    broken = tmp_path / "lockstep.c"
+    broken.write_text("#error this compiler cannot build the loop\n")
+    monkeypatch.setattr(lockstep, "SOURCE", broken)
+    lockstep._kernel.cache_clear()
+    try:
+        block = run_block(scenarios, artifact=art, library=library)
+    finally:
+        monkeypatch.undo()
+        lockstep._kernel.cache_clear()
+    said = block[0].info["controller"]["loop"]
+    assert said.startswith("numpy: compiling the campaign block's loop (lockstep.c)") and "\n" not in said
+    for got, want in zip(block, in_c):
+        for name in TRACE_FIELDS:
+            assert np.array_equal(getattr(got.trace, name), getattr(want.trace, name), equal_nan=True), name

@@ -1,5 +1,8 @@
 """A campaign block: SIL runs of one artifact stepped together, in lockstep, each answering what it answers alone.
 
+The block's loop over all its steps is one C call where the C covers its plants and law (:mod:`.lockstep`: the
+built-in models' compiled RK4, a law's host library or the lq law's compiled float64 reference), the numpy loop
+below (:func:`_python_lockstep`, its oracle, bit for bit) elsewhere; the run's controller description says which ran.
 Per step ``k`` every run of the block is sampled (its plant's outputs plus its own noise, one stacked array), the law
 answers the whole block in one call (:meth:`gainlink.laws.Law.native_block`: one C call for the host C;
 :meth:`gainlink.laws.Law.reference_block`: the float64 law, as columns for the lq law) and the plants advance together
@@ -18,7 +21,6 @@ signals) is left to the caller, which runs it alone; so is a run whose plant can
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -28,9 +30,11 @@ from gainlink.shipping.artifact import Artifact
 
 from ..plants.linear import LinearBatch, linear_batchable
 from ..plants.models import OdeBatch, batchable, non_finite
+from . import lockstep
 from .block_metrics import block_metrics
 from .bridge import Run, RunResult, build_plant, in_process, prepare_run
 from .closed_loop import Outcome
+from .lockstep import Steps
 from .metrics import timing
 from .plan import describe_artifact, plans_alike
 from .scenario import Scenario
@@ -64,23 +68,6 @@ def batch_of(plants: list) -> OdeBatch | LinearBatch | None:
     if linear_batchable(plants):
         return LinearBatch(plants)
     return None
-
-
-@dataclass
-class _Steps:
-    """What a block's lockstep recorded: row i = run i, then step k (a run's rows are contiguous, a view)."""
-
-    Y: np.ndarray
-    U: np.ndarray
-    sat: np.ndarray | None  # None for the twin's (its trace has none)
-    flags: np.ndarray | None
-    sigma: np.ndarray | None  # None: the law has no sigma (every run's is NaN)
-    X: np.ndarray | None  # the plants' states (the run's, when its twin is on)
-    L: np.ndarray | None  # the laws' states (the twin's)
-    steps: np.ndarray  # per run: steps taken (a plant that fails ends its run after that step)
-    failed_at: np.ndarray  # per run: the step whose advance failed (-1: none)
-    tick: np.ndarray  # (N,): when step k started, ns from the block's start
-    lat: np.ndarray  # (N,): the law's call for the block, ns, shared by its runs
 
 
 def _stack(runs: list[Run], name: str) -> np.ndarray:
@@ -154,18 +141,33 @@ def _items(a: np.ndarray) -> np.ndarray:
 
 
 def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts: float, steps: int,
-              always_disturbed: bool, plant_state: bool, law_state: bool) -> _Steps:  # fmt: skip
+              always_disturbed: bool, plant_state: bool, law_state: bool) -> Steps:  # fmt: skip
     """Step ``controller`` (a block law) around ``batch`` for ``steps`` samples of each run's plan; a run whose
     plant fails stops there (its row steps on, unrecorded). ``always_disturbed``: the command plus the plan's
     disturbance goes to the plant even when it is zero (as the twin does; the run adds it only when the plan has
     one). ``plant_state``: the plants' states recorded; ``law_state``: the laws' (the twin's lockstep: its commands'
     saturation and flags are not recorded, its trace has none).
 
-    A step is array operations over the block and one call of the law: the samples, references and noise of every
+    In one C call for all the steps where the C covers the plants and the law (:mod:`.lockstep`: the built-in
+    models' compiled RK4 with a law's host library or the lq law's compiled float64 reference); elsewhere (linear
+    plants, a user's vectorised model, a law's float64 reference without a C step, no C compiler) the numpy loop
+    (:func:`_python_lockstep`), whose records the C's equal bit for bit. :attr:`Steps.loop` says which ran."""
+    disturbed = _disturbed(runs, always_disturbed)
+    why = lockstep.why_not(batch, controller)
+    if why is None:
+        return lockstep.run(runs, batch, controller, Ts=Ts, steps=steps, disturbed=disturbed,
+                            plant_state=plant_state, law_state=law_state)  # fmt: skip
+    return _python_lockstep(runs, batch, controller, Ts=Ts, steps=steps, disturbed=disturbed,
+                            plant_state=plant_state, law_state=law_state, loop=why)  # fmt: skip
+
+
+def _python_lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts: float, steps: int,
+                     disturbed: np.ndarray | bool, plant_state: bool, law_state: bool, loop: str) -> Steps:  # fmt: skip
+    """:func:`_lockstep` in numpy (``disturbed``: :func:`_disturbed`; ``loop``: why it runs here, recorded). A
+    step is array operations over the block and one call of the law: the samples, references and noise of every
     step are stacked before the first (each run's noise drawn by its own plan, as alone) and what a step gives is
     written into the rows of :class:`_RunMajor` records."""
     B, noise, R, S, D = len(runs), _stack(runs, "noise"), _stack(runs, "R"), _stack(runs, "S"), _stack(runs, "D")
-    disturbed = _disturbed(runs, always_disturbed)
     Y, U = _RunMajor(steps, B, (noise.shape[2],)), _RunMajor(steps, B, (D.shape[2],))
     sigma: _RunMajor | None = None  # made at the first step when the law has a sigma
     sat, flags = (None, None) if law_state else (_RunMajor(steps, B, (), np.int64), _RunMajor(steps, B, (), np.int64))
@@ -202,8 +204,8 @@ def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts:
     def out(record: _RunMajor | None) -> np.ndarray | None:
         return None if record is None else record.taken(taken)
 
-    return _Steps(Y=out(Y), U=out(U), sat=out(sat), flags=out(flags), sigma=out(sigma), X=out(X), L=out(L),
-                  steps=done, failed_at=failed_at, tick=tick, lat=lat)  # fmt: skip
+    return Steps(Y=out(Y), U=out(U), sat=out(sat), flags=out(flags), sigma=out(sigma), X=out(X), L=out(L),
+                  steps=done, failed_at=failed_at, tick=tick, lat=lat, loop=loop)  # fmt: skip
 
 
 def run_block(
@@ -239,7 +241,7 @@ def run_block(
         for pl in plants:
             if pl is not None:
                 pl.close()
-    results = _results(runs, rec, twins, describe=dict(controller.describe) | {"block": len(runs)},
+    results = _results(runs, rec, twins, describe=dict(controller.describe) | {"block": len(runs), "loop": rec.loop},
                        ran=law.label if firmware else None, wall_s=wall / len(runs), twins_s=twins_s,
                        failure=non_finite(batch.name))  # fmt: skip
     out: list[RunResult | None] = [None] * len(scenarios)
@@ -276,7 +278,7 @@ def prepare_block(scenarios: list[Scenario], *, law, artifact: Artifact, plants:
     return runs
 
 
-def _results(runs: list[Run], rec: _Steps, twins: list, *, describe: dict, ran: str | None, wall_s: float,
+def _results(runs: list[Run], rec: Steps, twins: list, *, describe: dict, ran: str | None, wall_s: float,
              twins_s: float, failure: str) -> list[RunResult]:  # fmt: skip
     """Each run's result from the block's record. What the runs share is computed once: the artifact's description
     and the timing of the block's calls (per number of steps taken: a run whose plant failed has fewer); the
@@ -306,7 +308,7 @@ def _results(runs: list[Run], rec: _Steps, twins: list, *, describe: dict, ran: 
     return results
 
 
-def _record(run: Run, rec: _Steps, i: int, *, shared: dict, describe: dict, ran: str | None) -> None:
+def _record(run: Run, rec: Steps, i: int, *, shared: dict, describe: dict, ran: str | None) -> None:
     """Point run ``i``'s recorder (made without arrays) at its rows of the block's record (views, not copies: its
     trace reads the steps it took, as its own loop would have recorded them) and at what the runs share (the plant's
     states NaN without a twin, as a run alone records them); ``endpoint`` None: no link."""
@@ -343,7 +345,7 @@ def _twins(runs: list[Run], *, law, artifact: Artifact, steps: np.ndarray) -> li
             for i, r in enumerate(runs)]  # fmt: skip
 
 
-def _twin_traces(want: list[int], tw: _Steps, *, steps: np.ndarray, name: str) -> tuple[dict, dict]:
+def _twin_traces(want: list[int], tw: Steps, *, steps: np.ndarray, name: str) -> tuple[dict, dict]:
     """Run i's :class:`~gainlink.proof.twin.TwinTrace` over its own steps, or why its twin's plant failed in them."""
     from gainlink.proof.twin import TwinTrace
 

@@ -93,6 +93,11 @@ class Rows:
         self._fn = step_function(model)
         self._args = [ctypes.c_void_p(a.ctypes.data) for a in (self.X, self.U, self.P, self.failed)]
 
+    @property
+    def address(self) -> int:
+        """The address of the model's ``gl_ode_<model>`` (a loop written in C calls it as :meth:`advance` does)."""
+        return int(ctypes.cast(self._fn, ctypes.c_void_p).value or 0)
+
     def advance(self, substeps: int, hh: float) -> int:
         """``substeps`` RK4 steps of ``hh`` under the inputs in :attr:`U`; the number of rows that failed (marked in
         :attr:`failed`)."""

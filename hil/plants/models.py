@@ -201,6 +201,19 @@ class OdeBatch:
         """Every row's outputs (B, p)."""
         return self.X[:, self._out_idx]
 
+    def c_plant(self, *, dt: float) -> dict | None:
+        """How a loop written in C steps this batch as :meth:`advance` does for ``dt`` (``gainlink.hil.loop
+        .lockstep``): the compiled RK4's function and rows (advanced in place), the sub-steps, the outputs' and the
+        selected inputs' columns; None when the batch steps through numpy (:func:`rk4`)."""
+        if self._rows is None:
+            return None
+        n, hh = substeps(dt, self.h)
+        rows = self._rows
+        return {"fn": rows.address, "X": rows.X, "U": rows.U, "P": rows.P, "failed": rows.failed,
+                "nx": rows.X.shape[1], "nu": rows.U.shape[1], "substeps": n, "hh": hh,
+                "out_idx": np.array(self._out_idx, dtype=np.int64),
+                "in_idx": np.array(self._in_idx, dtype=np.int64)}  # fmt: skip
+
     def advance(self, U: np.ndarray, *, dt: float) -> np.ndarray:
         """Hold each row's command ``U`` (B, inputs selected) for ``dt``; returns the rows that failed now."""
         full = self._U

@@ -176,6 +176,14 @@ class HostLawBlock:
         self._staged[i] = gains
         return int(lib.gl_host_law_stage(self.address(i), ctypes.addressof(gains)))
 
+    def c_block(self) -> dict[str, Any]:
+        """What a loop written in C needs to step the block as :meth:`step` does: ``fn`` the address of
+        ``gl_host_law_step_block``, ``laws`` the instances, ``samples`` the sample records it fills (float32, a step
+        each) and ``records`` the records the call answers (arrays held here, their addresses valid as long as this
+        block lives), ``widths`` the law's (p, q, e)."""
+        return {"fn": ctypes.cast(self._block, _VP).value, "laws": self._laws, "samples": self._samples,
+                "records": self._out, "widths": self._widths}  # fmt: skip
+
     def step(self, Y: np.ndarray, R: np.ndarray | None = None, S: np.ndarray | None = None) -> np.ndarray:
         """One sample per instance (row i of ``Y`` (count, p), ``R``, ``S`` to instance i): their records (a view
         overwritten by the next call)."""

@@ -46,6 +46,19 @@ class NativeBlock:
         self.describe = {"kind": "firmware (host C, a block of instances, ctypes)", "library": str(self.host.library)}
         self._sigma = "sigma" in self.host.dtype.names
 
+    def c_law(self) -> dict[str, Any]:
+        """How a loop written in C steps this block as :meth:`step` does (``gainlink.hil.loop.lockstep``: kind 0,
+        ``gl_host_law_step_block`` of the host library, the byte offsets of the sample's and the record's fields;
+        ``sigma_off`` -1 for a law without sigma; ``fault`` the flag that zeroes the saturation mask)."""
+        c = self.host.c_block()
+        ins, outs = c["samples"].dtype.fields, c["records"].dtype.fields
+        _, q, e = c["widths"]
+        return {"kind": 0, "fn": c["fn"], "laws": c["laws"], "samples": c["samples"], "records": c["records"],
+                "sample_bytes": c["samples"].dtype.itemsize, "y_off": ins["y"][1], "r_off": ins["r"][1] if q else 0,
+                "s_off": ins["s"][1] if e else 0, "law_q": q, "law_e": e, "record_bytes": c["records"].dtype.itemsize,
+                "flags_off": outs["flags"][1], "sat_off": outs["sat"][1], "u_off": outs["u"][1],
+                "sigma_off": outs["sigma"][1] if self._sigma else -1, "fault": status_flags.FAULT}  # fmt: skip
+
     def step(self, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> BlockStep:
         """Row i of ``Y``, ``R``, ``S`` to instance i."""
         rec = self.host.step(Y, R if R.shape[1] else None, S if S.shape[1] else None)
