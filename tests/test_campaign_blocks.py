@@ -815,11 +815,12 @@ def test_the_compiled_float64_law_is_each_runs_own_python_reference_bit_for_bit(
 STEPS_FIELDS = ("Y", "U", "sat", "flags", "sigma", "X", "L", "steps", "failed_at")
 
 
-def _block_inputs(art, scenarios: list, *, twin: bool, library=None, blows: int | None = 8):
+def _block_inputs(art, scenarios: list, *, twin: bool, library=None, blows=(8,), mid: int = 6):
     """A block's runs prepared as ``run_block`` prepares them (fresh plants and laws) with what a campaign rarely
     gives but a block must step alike: NaN and +-inf noise samples (run 2), references of its own (run 4, the others
-    sharing one array), a disturbance that blows its plant up mid-run (run 6) and a plant that blows up in its
-    first sample (run ``blows``, when the block has one); the controller the run (or its twin) steps with."""
+    sharing one array), a disturbance that blows its plant up mid-run (run ``mid``) and plants that blow up in their
+    first sample (the runs ``blows``), each when the block has that run; the controller the run (or its twin) steps
+    with."""
     import dataclasses as dc
 
     from gainlink.hil.loop.block import batch_of, prepare_block
@@ -827,7 +828,7 @@ def _block_inputs(art, scenarios: list, *, twin: bool, library=None, blows: int 
     from gainlink.laws import law_of
 
     law = law_of(art)
-    scenarios = [dc.replace(sc, initial_state={"theta_dot": 1e200}) if i == blows else sc
+    scenarios = [dc.replace(sc, initial_state={"theta_dot": 1e200}) if i in blows else sc
                  for i, sc in enumerate(scenarios)]  # fmt: skip
     plants = [build_plant(sc, artifact=art) for sc in scenarios]
     runs = prepare_block(scenarios, law=law, artifact=art, plants=plants)
@@ -841,7 +842,7 @@ def _block_inputs(art, scenarios: list, *, twin: bool, library=None, blows: int 
             R = plan.R.copy()
             R[40:] += 0.2
             plan = dc.replace(plan, R=R)
-        if i == 6:
+        if i == mid:
             D = plan.D.copy()
             D[60:, 0] = 1e300
             plan = dc.replace(plan, D=D)
@@ -854,7 +855,7 @@ def _block_inputs(art, scenarios: list, *, twin: bool, library=None, blows: int 
     return runs, batch, controller
 
 
-def _both_loops(art, scenarios: list, *, twin: bool, library=None, blows: int | None = 8) -> tuple:
+def _both_loops(art, scenarios: list, *, twin: bool, library=None, **vary) -> tuple:
     """The C loop's and the numpy loop's records of the same block (each on its own fresh plants and laws), and
     each one's plants' and laws' states after it."""
     from gainlink.hil.loop import block as blk
@@ -862,7 +863,7 @@ def _both_loops(art, scenarios: list, *, twin: bool, library=None, blows: int | 
 
     got = []
     for c in (True, False):
-        runs, batch, controller = _block_inputs(art, scenarios, twin=twin, library=library, blows=blows)
+        runs, batch, controller = _block_inputs(art, scenarios, twin=twin, library=library, **vary)
         kw = dict(Ts=art.Ts, steps=runs[0].plan.N, disturbed=blk._disturbed(runs, twin), plant_state=not twin,
                   law_state=twin)  # fmt: skip
         assert lockstep.why_not(batch, controller) is None
@@ -899,29 +900,36 @@ def test_the_c_loop_records_what_the_numpy_loop_records_bit_for_bit(form):
     """The block's loop in one C call against the numpy loop (the oracle), on the shipped pendulum design in each
     anti-windup mode and observer form, the host C law and the twin's float64 law: 11 runs (a group of 8 lanes and
     3) with NaN/inf noise samples, a run of its own references, a plant blowing up mid-run and one in its first
-    sample; then blocks of one run (one that runs through, one that fails at once: the loop stops). Every record
-    (Y, U, sat, flags, sigma, X, L, steps, failed_at) and the plants' and laws' states after: the same bytes."""
+    sample; 70 runs (the C's spans of 32, 32 and 6) whose last span all fails at once while the others run on, and
+    whose every run fails, the last in the middle span mid-run (spans that stopped step on to the block's end); blocks
+    of one run (one that runs through, one that fails at once: the loop stops). Every record (Y, U, sat, flags,
+    sigma, X, L, steps, failed_at) and the plants' and laws' states after: the same bytes."""
     from gainlink.hil.campaign.worker import _library
 
-    (_, scenarios), *_ = _pendulum_campaign_points(draws=11, duration=1.5)
+    (_, scenarios), *_ = _pendulum_campaign_points(draws=70, duration=1.5)
+    blocks = [(scenarios[:11], {}), (scenarios, {"blows": range(64, 70)}),
+              (scenarios, {"blows": set(range(70)) - {40}, "mid": 40}),
+              (scenarios[:1], {"blows": ()}), (scenarios[:1], {"blows": (0,)})]  # fmt: skip
     seen = set()
     for mode in ("none", "clamp", "backcalc"):
         art = _pendulum_form(form, mode)
         library = _library(art)
         for twin in (False, True):
-            for block, blows in ((scenarios, 8), (scenarios[:1], None), (scenarios[:1], 0)):
-                (c, c_x, c_law), (py, py_x, py_law) = _both_loops(art, block, twin=twin, library=library, blows=blows)
+            for block, vary in blocks:
+                (c, c_x, c_law), (py, py_x, py_law) = _both_loops(art, block, twin=twin, library=library, **vary)
                 for name in STEPS_FIELDS:
-                    assert _bit_for_bit(getattr(c, name), getattr(py, name)), (mode, twin, len(block), name)
-                assert _bit_for_bit(c_x, py_x) and _bit_for_bit(c_law, py_law), (mode, twin, len(block))
-                assert c.lat.shape == py.lat.shape and (c.lat[: int(c.steps.max())] > 0).all()
-                seen.add((twin, len(block), tuple(int(s) for s in py.steps)))
+                    assert _bit_for_bit(getattr(c, name), getattr(py, name)), (mode, twin, len(block), vary, name)
+                assert _bit_for_bit(c_x, py_x) and _bit_for_bit(c_law, py_law), (mode, twin, len(block), vary)
+                taken = int(py.steps.max())
+                assert (c.lat[:taken] > 0).all() and (c.lat[taken:] == 0).all() and (np.diff(c.tick[:taken]) > 0).all()
+                seen.add((twin, len(block), taken, int(py.steps.min())))
                 if len(block) == 11:
                     assert py.failed_at[8] == 0 and py.failed_at[6] >= 60 and (py.failed_at[[0, 1, 2, 4]] == -1).all()
                     if not twin:
                         assert (py.flags[2, [5, 30, 31]] != 0).all() and (py.sat != 0).any()
-    assert (False, 1, (1,)) in seen and (True, 1, (1,)) in seen  # the one-run block that fails stops at once
-    assert (False, 1, (150,)) in seen
+    assert {(t, 1, 1, 1) for t in (False, True)} <= seen  # the one-run block that fails stops at once
+    assert {(t, 70, 150, 1) for t in (False, True)} <= seen  # a span failed at once, the others ran on
+    assert any(n == 70 and 60 < taken < 150 for _, n, taken, _ in seen)  # every run failed, the last mid-run
 
 
 def test_the_block_says_where_its_loop_ran(tmp_path, monkeypatch):

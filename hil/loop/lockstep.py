@@ -36,12 +36,14 @@ class _Plan(ctypes.Structure):
 
 
 class _Plant(ctypes.Structure):
-    _fields_ = (_fields(_P, "fn", "X", "U", "P", "failed") + _fields(_I, "nx", "nu", "substeps") + _fields(_D, "hh")
+    _fields_ = (_fields(_P, "fn", "X", "U", "P", "failed") + _fields(_I, "nx", "nu", "npar", "substeps")
+                + _fields(_D, "hh")
                 + _fields(_P, "out_idx", "in_idx"))  # fmt: skip
 
 
 class _Law(ctypes.Structure):
-    _fields_ = (_fields(_I, "kind") + _fields(_P, "fn", "laws", "samples", "records")
+    _fields_ = (_fields(_I, "kind") + _fields(_P, "fn", "laws") + _fields(_I, "law_bytes")
+                + _fields(_P, "samples", "records")
                 + _fields(_I, "sample_bytes", "y_off", "r_off", "s_off", "law_q", "law_e", "record_bytes", "flags_off",
                           "sat_off", "u_off", "sigma_off", "fault")
                 + _fields(_P, "dims", "mats", "state") + _fields(_I, "state_width")
@@ -65,7 +67,7 @@ class Steps:
     L: np.ndarray | None  # the laws' states (the twin's)
     steps: np.ndarray  # per run: steps taken (a plant that fails ends its run after that step)
     failed_at: np.ndarray  # per run: the step whose advance failed (-1: none)
-    tick: np.ndarray  # (N,): when step k's law call started, ns from the loop's start
+    tick: np.ndarray  # (N,): when step k started, ns from the loop's start (the C: on the block's own clock)
     lat: np.ndarray  # (N,): the law's call for the block, ns, shared by its runs
     loop: str  # where the loop ran: IN_C, or why it ran in numpy
 

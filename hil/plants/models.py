@@ -210,7 +210,7 @@ class OdeBatch:
         n, hh = substeps(dt, self.h)
         rows = self._rows
         return {"fn": rows.address, "X": rows.X, "U": rows.U, "P": rows.P, "failed": rows.failed,
-                "nx": rows.X.shape[1], "nu": rows.U.shape[1], "substeps": n, "hh": hh,
+                "nx": rows.X.shape[1], "nu": rows.U.shape[1], "npar": rows.P.shape[1], "substeps": n, "hh": hh,
                 "out_idx": np.array(self._out_idx, dtype=np.int64),
                 "in_idx": np.array(self._in_idx, dtype=np.int64)}  # fmt: skip
 

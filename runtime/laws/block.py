@@ -53,7 +53,8 @@ class NativeBlock:
         c = self.host.c_block()
         ins, outs = c["samples"].dtype.fields, c["records"].dtype.fields
         _, q, e = c["widths"]
-        return {"kind": 0, "fn": c["fn"], "laws": c["laws"], "samples": c["samples"], "records": c["records"],
+        return {"kind": 0, "fn": c["fn"], "laws": c["laws"], "law_bytes": c["laws"].strides[0],
+                "samples": c["samples"], "records": c["records"],
                 "sample_bytes": c["samples"].dtype.itemsize, "y_off": ins["y"][1], "r_off": ins["r"][1] if q else 0,
                 "s_off": ins["s"][1] if e else 0, "law_q": q, "law_e": e, "record_bytes": c["records"].dtype.itemsize,
                 "flags_off": outs["flags"][1], "sat_off": outs["sat"][1], "u_off": outs["u"][1],
