@@ -7,6 +7,7 @@ scipy's ``solve_ivp`` (a tight adaptive integrator) for the kernel's accuracy.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 
@@ -895,6 +896,13 @@ def _bit_for_bit(a, b) -> bool:
     )
 
 
+@functools.cache
+def _seventy_draws() -> list:
+    """70 draws of the shipped campaign's first mode, 1.5 s each (planned once for both observer forms)."""
+    (_, scenarios), *_ = _pendulum_campaign_points(draws=70, duration=1.5)
+    return scenarios
+
+
 @pytest.mark.parametrize("form", ["predictor", "current"])
 def test_the_c_loop_records_what_the_numpy_loop_records_bit_for_bit(form):
     """The block's loop in one C call against the numpy loop (the oracle), on the shipped pendulum design in each
@@ -906,7 +914,7 @@ def test_the_c_loop_records_what_the_numpy_loop_records_bit_for_bit(form):
     sigma, X, L, steps, failed_at) and the plants' and laws' states after: the same bytes."""
     from gainlink.hil.campaign.worker import _library
 
-    (_, scenarios), *_ = _pendulum_campaign_points(draws=70, duration=1.5)
+    scenarios = _seventy_draws()
     blocks = [(scenarios[:11], {}), (scenarios, {"blows": range(64, 70)}),
               (scenarios, {"blows": set(range(70)) - {40}, "mid": 40}),
               (scenarios[:1], {"blows": ()}), (scenarios[:1], {"blows": (0,)})]  # fmt: skip
