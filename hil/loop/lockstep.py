@@ -111,49 +111,60 @@ def run(runs: list, batch: Any, controller: Any, *, Ts: float, steps: int, distu
         kept.append(a)
         return a.ctypes.data
 
-    def per_run(name: str) -> tuple[int, int]:
-        """The address of each run's plan array ``name`` (asked once per array: a block's runs share their
-        references and disturbances; an address costs ~8 us), and its width."""
+    plan = _plan(runs, steps=steps, disturbed=disturbed, at=at)
+    plant = _struct(_Plant, batch.c_plant(dt=Ts), at)
+    law_args = dict(controller.c_law())
+    law_args |= {"sat": np.zeros(B, np.int64), "flags": np.zeros(B, np.int64),
+                 "r": np.zeros((B, max(int(law_args["law_q"]), 1)))}  # fmt: skip
+    law = _struct(_Law, law_args, at)
+    rec = _records(B, steps, widths=(plan.p, plan.m, plant.nx), law=law_args, plant_state=plant_state,
+                   law_state=law_state)  # fmt: skip
+    record = _struct(_Record, rec, at)
+    taken = _kernel()(ctypes.byref(plan), ctypes.byref(plant), ctypes.byref(law), ctypes.byref(record),
+                      at(np.empty((B, plan.m))))  # fmt: skip
+    if taken < 0:
+        raise ValueError(f"{SOURCE.name} refused the law's kind {law_args['kind']}")
+    cut = {k: (v[:, :taken] if k in _RECORDS else v) for k, v in rec.items()}
+    return Steps(Y=cut["Y"], U=cut["U"], sat=cut.get("sat"), flags=cut.get("flags"), sigma=cut.get("sigma"),
+                 X=cut.get("X"), L=cut.get("L"), steps=rec["done"], failed_at=rec["failed_at"], tick=rec["tick"],
+                 lat=rec["lat"], loop=IN_C)  # fmt: skip
+
+
+def _plan(runs: list, *, steps: int, disturbed: np.ndarray | bool, at: Any) -> _Plan:
+    """What the runs are fed: the address of each run's plan arrays (asked once per array: a block's runs share
+    their references, disturbances and signals, and an address costs ~8 us here), their widths, and whether each
+    run's command goes to its plant with its disturbance."""
+    args: dict[str, Any] = {"runs": len(runs), "steps": steps}
+    for name, field, width in (("noise", "noise", "p"), ("R", "r", "q"), ("S", "s", "e"), ("D", "d", "m")):
         address: dict[int, int] = {}
         for r in runs:
             given = getattr(r.plan, name)
             if id(given) not in address:
-                kept.append(given)  # the id stays this array's while it is kept
+                at(given)  # kept: the id stays this array's
                 address[id(given)] = at(np.ascontiguousarray(given, dtype=np.float64))
-        first = getattr(runs[0].plan, name)
-        return at(np.array([address[id(getattr(r.plan, name))] for r in runs], dtype=np.uintp)), first.shape[1]
+        args[field] = at(np.array([address[id(getattr(r.plan, name))] for r in runs], dtype=np.uintp))
+        args[width] = getattr(runs[0].plan, name).shape[1]
+    flags = np.broadcast_to(np.asarray(disturbed, dtype=np.uint8).reshape(-1), (len(runs),))
+    return _Plan(**args, disturbed=at(np.ascontiguousarray(flags)))
 
-    plan_args: dict[str, Any] = {"runs": B, "steps": steps}
-    for name, field, width in (("noise", "noise", "p"), ("R", "r", "q"), ("S", "s", "e"), ("D", "d", "m")):
-        plan_args[field], plan_args[width] = per_run(name)
-    flags = np.broadcast_to(np.asarray(disturbed, dtype=np.uint8).reshape(-1), (B,))
-    plan = _Plan(**plan_args, disturbed=at(np.ascontiguousarray(flags)))
-    plant = _struct(_Plant, batch.c_plant(dt=Ts), at)
-    p, m = plan.p, plan.m
-    law_args = dict(controller.c_law())
-    u, r = np.empty((B, m)), np.zeros((B, max(int(law_args["law_q"]), 1)))
-    law_args |= {"sat": np.zeros(B, np.int64), "flags": np.zeros(B, np.int64), "r": r}
-    law = _struct(_Law, law_args, at)
-    width = plant.nx
+
+def _records(B: int, steps: int, *, widths: tuple, law: dict, plant_state: bool, law_state: bool) -> dict:
+    """The arrays the C writes (run-major records of the numpy loop's dtypes; the per-run and per-step figures):
+    saturation and flags but for the twin's loop (``law_state``: the laws' states instead), sigma when the law has
+    one, the plants' states when asked."""
+    p, m, nx = widths
     rec = {"Y": np.empty((B, steps, p)), "U": np.empty((B, steps, m)), "done": np.empty(B, np.int64),
            "failed_at": np.empty(B, np.int64), "tick": np.zeros(steps), "lat": np.zeros(steps),
            "alive": np.empty(B, np.uint8)}  # fmt: skip
     if not law_state:
         rec |= {"sat": np.empty((B, steps), np.int64), "flags": np.empty((B, steps), np.int64)}
-    if law_args["kind"] == 0 and law_args["sigma_off"] >= 0:
+    if law["kind"] == 0 and law["sigma_off"] >= 0:
         rec["sigma"] = np.empty((B, steps))
     if plant_state:
-        rec["X"] = np.empty((B, steps, width))
+        rec["X"] = np.empty((B, steps, nx))
     if law_state:
-        rec["L"] = np.empty((B, steps, int(law_args["state_width"])))
-    record = _struct(_Record, rec, at)
-    taken = _kernel()(ctypes.byref(plan), ctypes.byref(plant), ctypes.byref(law), ctypes.byref(record), at(u))
-    if taken < 0:
-        raise ValueError(f"{SOURCE.name} refused the law's kind {law_args['kind']}")
-    cut = {k: (v[:, :taken] if k in _RECORDS and v is not None else v) for k, v in rec.items()}
-    return Steps(Y=cut["Y"], U=cut["U"], sat=cut.get("sat"), flags=cut.get("flags"), sigma=cut.get("sigma"),
-                 X=cut.get("X"), L=cut.get("L"), steps=rec["done"], failed_at=rec["failed_at"], tick=rec["tick"],
-                 lat=rec["lat"], loop=IN_C)  # fmt: skip
+        rec["L"] = np.empty((B, steps, int(law["state_width"])))
+    return rec
 
 
 #: the run-major records (B, steps, ...), cut to the steps taken
