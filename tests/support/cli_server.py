@@ -5,9 +5,10 @@ A page of the docs runs up to a dozen ``gainlink`` commands as its reader types 
 python-control (2.6 CPU-s: SciPy's signal module parses its docstrings on import) before a few milliseconds of
 design. ``tests/test_docs.py`` puts a ``gainlink`` of its own first on the blocks' PATH: a small client that hands
 its command line, folder, environment, standard streams and network namespace to the server and exits with the
-command's status. The command runs as the console script runs it (:func:`gainlink.cli.main` without arguments:
-the process is the command) in a fork of the server: the same code on the same arguments, files and streams,
-without the imports.
+command's status; the signals it receives (SIGINT, SIGTERM, SIGHUP) are passed on to the command, and the command
+is killed if the client is. The command runs as the console script runs it (:func:`gainlink.cli.main` without
+arguments: the process is the command) in a fork of the server: the same code on the same arguments, files and
+streams, without the imports.
 
 Run as a script: ``python cli_server.py SOCKET`` serves until SIGTERM (it prints ``ready`` once it listens), then
 waits for the commands it started, so that their CPU time is counted as its children's.
@@ -16,10 +17,12 @@ waits for the commands it started, so that their CPU time is counted as its chil
 from __future__ import annotations
 
 import array
+import contextlib
 import ctypes
 import io
 import json
 import os
+import select
 import signal
 import socket
 import sys
@@ -31,13 +34,15 @@ FDS = 4  # the client's stdin, stdout, stderr and network namespace
 
 #: The client: the interpreter's quickest start (-IS: isolated, no site packages), the standard library only.
 CLIENT = """\
-import array, json, os, socket, sys
+import array, json, os, signal, socket, sys
 request = json.dumps({"argv": sys.argv[1:], "cwd": os.getcwd(), "env": dict(os.environ)}).encode()
 fds = array.array("i", [0, 1, 2, os.open("/proc/self/ns/net", os.O_RDONLY)])
 with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as conn:
     conn.connect(%(socket)r)
     conn.sendmsg([len(request).to_bytes(4, "big")], [(socket.SOL_SOCKET, socket.SCM_RIGHTS, fds)])
     conn.sendall(request)
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # passed on to the command
+        signal.signal(signum, lambda signum, _: conn.send(bytes([signum])))
     reply = b""
     while chunk := conn.recv(16):
         reply += chunk
@@ -135,8 +140,9 @@ def _command(request: dict, fds: list[int]) -> int:
 
 
 def _serve_one(conn: socket.socket) -> None:
-    """In a child of the server: fork the command, wait for it, send its exit status (a shell's 128 + N when a
-    signal N ended it)."""
+    """In a child of the server: fork the command, pass on the signals the client receives (Ctrl-C, a timeout's
+    SIGTERM) and kill it if the client is gone, wait for it, send its exit status (a shell's 128 + N when a signal N
+    ended it)."""
     request, fds = _receive(conn)
     pid = os.fork()
     if pid == 0:
@@ -144,8 +150,18 @@ def _serve_one(conn: socket.socket) -> None:
         os._exit(_command(request, fds))
     for fd in fds:
         os.close(fd)
+    done = os.pidfd_open(pid)
+    while done not in select.select([conn, done], [], [])[0]:
+        sent = conn.recv(16)
+        if not sent:  # the client is gone (killed): so is its command
+            os.kill(pid, signal.SIGKILL)
+            break
+        for signum in sent:
+            os.kill(pid, signum)
+    os.close(done)
     code = os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
-    conn.sendall(str(code if code >= 0 else 128 - code).encode())
+    with contextlib.suppress(OSError):  # a client that is gone
+        conn.sendall(str(code if code >= 0 else 128 - code).encode())
 
 
 def _stop(_signum: int, _frame: object) -> None:
