@@ -17,12 +17,16 @@ import functools
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from support import cli_server
+from support.cli_server import write_client
 from support.paths import ROOT
 
 DOCS = ROOT / "docs"
@@ -134,8 +138,10 @@ def private_network() -> tuple[str, ...]:
     return ()
 
 
-def _run(block: Block, folder: Path, tier: str) -> str:
-    path = f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}"
+def _run(block: Block, folder: Path, tier: str, cli: Path | None = None) -> str:
+    """Run one block in ``folder`` (its ``gainlink`` commands through the server of ``cli``, a folder holding the
+    client, when given); what it printed."""
+    path = os.pathsep.join([*([str(cli)] if cli else []), str(VENV_BIN), os.environ.get("PATH", "")])
     env = {**os.environ, "PATH": path, "OPENBLAS_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
     if block.lang == "python":
         script = folder / f"block_{block.line}.py"
@@ -167,9 +173,10 @@ def _check_excerpt(block: Block, output: str) -> None:
         at = hit + 1
 
 
-def run_page(page: Path, folder: Path, tiers: tuple[str, ...]) -> None:
+def run_page(page: Path, folder: Path, tiers: tuple[str, ...], cli: Path | None = None) -> None:
     """Run the blocks of ``page`` marked with one of ``tiers`` in order in ``folder``; write its files; check its
-    excerpts against the block before each."""
+    excerpts against the block before each. ``cli``: a folder whose ``gainlink`` runs each command in a server
+    (:func:`gainlink_server`)."""
     (folder / "examples").symlink_to(ROOT / "examples")
     output: str | None = None
     for b in ALL[page]:
@@ -179,13 +186,14 @@ def run_page(page: Path, folder: Path, tiers: tuple[str, ...]) -> None:
             if output is not None:  # None: the block before runs in another tier
                 _check_excerpt(b, output)
         else:
-            output = _run(b, folder, str(b.mark)) if b.mark in tiers else None
+            output = _run(b, folder, str(b.mark), cli) if b.mark in tiers else None
 
 
-#: CPU seconds each page's make-test blocks took (one process, GAINLINK_TEST_CPU, warm caches): the order they start in
-PAGE_CPU = {"README.md": 28, "docs/guide/firmware.md": 28, "docs/guide/fixed_point.md": 16, "docs/guide/hil.md": 15,
-            "docs/guide/python.md": 14, "docs/guide/specs.md": 8, "docs/guide/scheduled.md": 7,
-            "docs/guide/campaigns.md": 5, "docs/guide/mpc.md": 4, "docs/guide/troubleshooting.md": 1}  # fmt: skip
+#: CPU seconds each page's make-test blocks took (one process, warm caches, their ``gainlink`` commands through the
+#: CLI server: measured by the server with wait4; its start, 3.3 CPU-s once per worker, aside): the order they start in
+PAGE_CPU = {"docs/guide/python.md": 9, "README.md": 6, "docs/guide/firmware.md": 5, "docs/guide/fixed_point.md": 4,
+            "docs/guide/hil.md": 3, "docs/guide/scheduled.md": 3, "docs/guide/campaigns.md": 2,
+            "docs/guide/specs.md": 1, "docs/guide/troubleshooting.md": 1}  # fmt: skip
 
 
 def _page_params(tier: str) -> list:
@@ -193,15 +201,60 @@ def _page_params(tier: str) -> list:
             for page in _ids(tier)]  # fmt: skip
 
 
+@pytest.fixture(scope="session")
+def gainlink_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """A folder whose ``gainlink`` runs each command as the console script would, in a fork of one process that
+    imported the command line and its libraries once (``support/cli_server.py``: python-control's import alone is
+    2.6 CPU-s a command). One per worker (session: a module's fixtures are made again each time a worker comes back
+    to the module); stopped at the worker's end, having waited for every command it ran, so that their CPU is the
+    suite's (GAINLINK_TEST_CPU counts it in the worker's last test)."""
+    folder = tmp_path_factory.mktemp("gainlink_cli")
+    sock = folder / "cli.sock"
+    write_client(folder / "gainlink", sock)
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    server = subprocess.Popen([sys.executable, cli_server.__file__, str(sock)], stdin=subprocess.DEVNULL,
+                              stdout=subprocess.PIPE, text=True, env=env, start_new_session=True)  # fmt: skip
+    try:
+        assert server.stdout is not None and server.stdout.readline().strip() == "ready", "the CLI server did not start"
+        yield folder
+    finally:
+        server.terminate()
+        try:
+            server.wait(timeout=120)
+        except subprocess.TimeoutExpired:
+            os.killpg(server.pid, signal.SIGKILL)
+            server.wait()
+
+
 @pytest.mark.parametrize("page", _page_params("test"), ids=lambda p: str(p.relative_to(ROOT)))
-def test_the_blocks_of_a_page_run_as_written(page, tmp_path):
-    run_page(page, tmp_path, ("test",))
+def test_the_blocks_of_a_page_run_as_written(page, tmp_path, gainlink_server):
+    run_page(page, tmp_path, ("test",), gainlink_server)
+
+
+def test_a_command_through_the_server_is_the_console_scripts(gainlink_server, pend, tmp_path):
+    """The pages' ``gainlink`` (a fork of the CLI server) against the installed console script, the reader's: the
+    same exit status, stdout, stderr and files for a command that writes in the caller's folder, a refusal (exit 2,
+    one line, nothing written), a usage error and a help text."""
+    simulate = ("simulate", pend, "--steps", "20", "--x0", "0", "0", "0.1", "0", "--out", "s.csv")
+    cases = {("--version",): 0, simulate: 0, ("design", "missing.toml", "--out", "o"): 2, ("design", "--bogus"): 2,
+             ("export", "--help"): 0}  # fmt: skip
+    for argv, status in cases.items():
+        outs = []
+        for exe in (VENV_BIN / "gainlink", gainlink_server / "gainlink"):
+            r = subprocess.run([str(exe), *map(str, argv)], cwd=tmp_path, capture_output=True, text=True,
+                               timeout=120, stdin=subprocess.DEVNULL)  # fmt: skip
+            written = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+            for p in tmp_path.iterdir():
+                p.unlink()
+            outs.append((r.returncode, r.stdout, r.stderr, written))
+        assert outs[1] == outs[0], argv
+        assert outs[0][0] == status and bool(outs[0][3]) == (argv[0] == "simulate"), outs[0]
 
 
 @pytest.mark.matrix
 @pytest.mark.parametrize("page", _ids("matrix"), ids=lambda p: str(p.relative_to(ROOT)))
-def test_the_long_blocks_of_a_page_run_as_written(page, tmp_path):
-    run_page(page, tmp_path, ("test", "matrix"))
+def test_the_long_blocks_of_a_page_run_as_written(page, tmp_path, gainlink_server):
+    run_page(page, tmp_path, ("test", "matrix"), gainlink_server)
 
 
 @pytest.mark.slow(cpu=13)
@@ -225,20 +278,13 @@ def test_the_site_builds_offline_with_warnings_as_errors(tmp_path):
     assert (html / "design.html").is_file() and (html / "guide" / "troubleshooting.html").is_file()
 
 
-@pytest.mark.slow(cpu=34)  # the pendulum's images on every core built, in a fresh checkout (10 with them cached)
-def test_the_figures_are_what_the_results_and_the_builds_say_now():
+@pytest.mark.slow(cpu=31)  # the pendulum's images on every core built, in a fresh checkout (6 with them cached)
+def test_the_figures_are_what_the_results_and_the_builds_say_now(capsys):
     """scripts/doc_figures.py --check: every figures block says what bench/results/ and the cached builds of the
-    pendulum's images say now, including which recorded figures are older than the code they describe."""
-    proc = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "doc_figures.py"), "--check"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        stdin=subprocess.DEVNULL,
-        env={**os.environ, "OPENBLAS_NUM_THREADS": "1"},
-        timeout=1200,
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
+    pendulum's images say now, including which recorded figures are older than the code they describe (run here, in
+    the worker that has imported python-control already: as its own process, that import was half its 6.5 CPU-s)."""
+    status = _doc_figures().main(["--check"])
+    assert status == 0, capsys.readouterr().err
 
 
 def _doc_figures():

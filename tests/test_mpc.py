@@ -192,12 +192,14 @@ def test_an_mpc_law_with_a_schedule_is_refused_in_one_line():
         law_for_spec(parse_spec(data))
 
 
+# The M0's run is the matrix's: its image is the host C bit for bit, whole state included, in make test
+# (test_the_cortex_m_image_is_the_host_c_bit_for_bit[cortex-m0-3]), and PIL's loop is the M4F's run's
 @pytest.mark.slow(cpu=5)
-@pytest.mark.parametrize("target,steps", [("cortex-m4", 40), ("cortex-m0", 4)])
+@pytest.mark.parametrize("target,steps", [("cortex-m4", 40), pytest.param("cortex-m0", 4, marks=pytest.mark.matrix)])
 def test_pil_closes_the_loop_on_the_image_and_its_records_are_the_float32_model_step_by_step(target, steps):
-    """PIL on the M4F and a very short run on the M0 (~3M instructions a step through gl_fmaf): the image's records
-    (command, flags, iterations, its whole state) are checked from its own state against the float32 model, and its
-    commands are the model's fed the float32 samples the plant gave, in turn."""
+    """PIL on the M4F and (``-m matrix``) a very short run on the M0 (~3M instructions a step through gl_fmaf): the
+    image's records (command, flags, iterations, its whole state) are checked from its own state against the float32
+    model, and its commands are the model's fed the float32 samples the plant gave, in turn."""
     from gainlink.hil.loop.pil import make_plant, run_pil
 
     a = artifact(horizon=5, box=2.5)
