@@ -25,18 +25,23 @@ from gainlink.laws import law_of
 from gainlink.shipping.artifact import from_dict, load
 from gainlink.spec import load_spec
 from support.paths import EXAMPLES
-from support.shared import once_per_run
+from support.shared import once_per_run, shared_lmi_solves
 
 CAMPAIGN = EXAMPLES / "campaigns" / "tank_sigma_rate.toml"
 # one worker designs examples/tank_showcase_load.toml for this module and test_schedule_rate_proof's showcase test
 pytestmark = [pytest.mark.usefixtures("quiet_design_warnings"), pytest.mark.xdist_group("tank_showcase_load")]
 
 
+def _designed(factory):
+    """examples/tank_showcase_load.toml designed, its certificate's LMI solves shared with the showcase's tank."""
+    with shared_lmi_solves(factory):
+        return design_spec(load_spec(EXAMPLES / "tank_showcase_load.toml")).artifact
+
+
 @pytest.fixture(scope="module")
 def artifact(tmp_path_factory):
     """examples/tank_showcase_load.toml designed once per test run, saved."""
-    made = once_per_run(tmp_path_factory, "tank_showcase_load",
-                        lambda: design_spec(load_spec(EXAMPLES / "tank_showcase_load.toml")).artifact)  # fmt: skip
+    made = once_per_run(tmp_path_factory, "tank_showcase_load", lambda: _designed(tmp_path_factory))
     path = tmp_path_factory.mktemp("tank_load") / "gains.json"
     from_dict(made).save(path)
     return path

@@ -24,7 +24,7 @@ import pytest
 from gainlink.hil.loop.showcase import default_showcase, run_showcase
 from support.cli import assert_refused
 from support.hil import udp_transport
-from support.shared import once_per_run
+from support.shared import once_per_run, shared_lmi_solves
 
 # one worker runs the showcase (38 CPU-s: two designs, six HIL runs, the plots) for its tests: on three at once, two
 # would wait for the first
@@ -44,7 +44,8 @@ def showcase(tmp_path_factory):
 
     def make():
         desc = default_showcase() | {"transport": udp_transport(fd=True)}  # the built-in, on a bus of this run's
-        result = run_showcase(report_dir=report, showcase=desc)
+        with shared_lmi_solves(tmp_path_factory):  # the tank's certificate search is tank_showcase_load's
+            result = run_showcase(report_dir=report, showcase=desc)
         return SimpleNamespace(table=result.table, summary=result.summary)
 
     return once_per_run(tmp_path_factory, "sched_showcase", make), report

@@ -25,7 +25,7 @@ from support.cli import assert_refused, run_cli
 from support.designs import designed
 from support.paths import EXAMPLES
 from support.sched_paths import LoopModel, adversarial, hold_ramp_hold
-from support.shared import once_per_run
+from support.shared import once_per_run, shared_lmi_solves
 
 pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 # The spring 1 -> 65 designed with its certificate (16 CPU-s), by one worker for its three tests: on three at once,
@@ -132,11 +132,16 @@ def test_the_reference_law_with_its_rate_limit_holds_under_jumping_sigma(spring6
     assert flags & SIGMA_RATE and max(norms[-340:]) < 1e-9
 
 
+def _designed(factory):
+    """examples/tank_showcase_load.toml designed, its certificate's LMI solves shared with the showcase's tank."""
+    with shared_lmi_solves(factory):
+        return design_spec(load_spec(EXAMPLES / "tank_showcase_load.toml")).artifact
+
+
 @pytest.fixture(scope="module")
 def showcase(tmp_path_factory):
     """examples/tank_showcase_load.toml (the showcase's law, sigma external) designed once per test run."""
-    return once_per_run(tmp_path_factory, "tank_showcase_load",
-                        lambda: design_spec(load_spec(EXAMPLES / "tank_showcase_load.toml")).artifact)  # fmt: skip
+    return once_per_run(tmp_path_factory, "tank_showcase_load", lambda: _designed(tmp_path_factory))
 
 
 @pytest.mark.slow(cpu=31)  # with the example campaign of test_sched_campaign_example, which reads the same design
