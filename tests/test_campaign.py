@@ -337,6 +337,22 @@ def test_draws_are_reproducible_shared_by_grid_points_and_kept_when_runs_grow(pe
     assert not {r.id for r in other.runs} & {r.id for r in p3.runs}
 
 
+def test_a_tasks_inputs_are_its_runs_and_hash_to_the_planned_ids(pend):
+    # What the client pickles into a task (made without the runs' ids, which the plan holds): each run's own inputs,
+    # made in any order; the oracle is the run made whole (plan.runs[k]) and the content address of its inputs.
+    from gainlink.hil.campaign.plan import run_id
+
+    plan = plan_campaign(parse_campaign(small_campaign(pend, runs=4)))
+    order = np.array([5, 0, 7, 2, 2, 1])
+    for k, (sha, scenario, seed) in zip(order.tolist(), plan.runs.inputs(order)):
+        point = plan.runs[k]
+        assert (sha, scenario, seed) == (point.artifact_sha256, point.scenario, point.seed)
+        assert run_id(kind="sil", artifact_sha256=sha, scenario=scenario, seed=seed) == plan.runs.ids[k].decode()
+    first, again = plan.runs.inputs(order[:1])[0], plan.runs.inputs(order[:1])[0]
+    first[1]["duration"] = -1.0  # each call makes its scenario anew: a task's copy is its own
+    assert again[1]["duration"] != -1.0
+
+
 @pytest.mark.parametrize(
     "draw, dist",
     [
@@ -1202,9 +1218,9 @@ def test_the_client_keeps_nothing_of_a_stored_block_but_its_ids(pend, dask_clust
     """From the 8th block stored to the 78th of 80 (blocks of 20 runs), the client's Python memory grows by the
     stored runs' place in the store's index (25 bytes a run) and Dask's bounded logs, not by each block's task: Dask
     kept the last 1,000 messages of the client's stream to the scheduler (a block's task with its pickled runs), for
-    its developers' debugging (0.66 kB a run with it, here). A reading varies by some 60 kB from one instant to the next (Dask's
-    comms and buffers), so the figure is the slope fitted through 15 readings over 70 blocks (~±500 bytes a block,
-    ~±25 a run); two readings 30 blocks apart of 5 runs varied by ±2 kB a block."""
+    its developers' debugging (0.66 kB a run with it, here). A reading varies by some 60 kB from one instant to the
+    next (Dask's comms and buffers), so the figure is the slope fitted through 15 readings over 70 blocks (~±500 bytes
+    a block, ~±25 a run); two readings 30 blocks apart of 5 runs varied by ±2 kB a block."""
     _held(pend, dask_cluster, tmp_path / "warm", 1, 2, (1,))  # imports, connections
     at = tuple(range(8, 79, 5))
     held = _held(pend, dask_cluster, tmp_path / "c", 20, 80, at)

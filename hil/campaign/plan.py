@@ -267,6 +267,11 @@ class PlannedRuns(Sequence):
         """Every run's flag, in plan order: its grid point's design failed (it is recorded, never submitted)."""
         return self._planner.failed
 
+    def inputs(self, indices: np.ndarray) -> list[tuple[str | None, dict, int]]:
+        """The runs at plan indices ``indices`` as their tasks carry them: ``(artifact sha256, scenario, seed)``, each
+        what ``runs[k]`` holds, made without the id (:attr:`ids` holds it)."""
+        return [self._planner.inputs(k) for k in np.asarray(indices).tolist()]
+
     def heads(self) -> Iterator[RunHead]:
         """The runs in plan order, what a report row names of each (:class:`RunHead`), without making a scenario."""
         planner = self._planner
@@ -345,6 +350,29 @@ class _Planner:
 
     def point(self, k: int, *, dry: DryBuild | None = None) -> RunPoint:
         """Run ``k``; with ``dry``, its scenario parsed and its plant dry-built (:class:`.preflight.DryBuild`)."""
+        values, scenario, sha, error, seed = self._made(k, dry=dry)
+        g, j = divmod(k, self.campaign.runs)
+        rid = run_id(kind=self.campaign.kind, artifact_sha256=sha, scenario=scenario, seed=seed)
+        return RunPoint(
+            index=k,
+            id=rid,
+            grid_index=g,
+            draw=j,
+            values=values,
+            artifact_sha256=sha,
+            scenario=scenario,
+            seed=seed,
+            error=error,
+        )
+
+    def inputs(self, k: int) -> tuple[str | None, dict, int]:
+        """Run ``k``'s inputs as its task carries them (artifact sha256, scenario, seed): :meth:`point` without the
+        run's id, whose canonical JSON and hash are two thirds of making a run (the plan holds the ids)."""
+        _, scenario, sha, _, seed = self._made(k)
+        return sha, scenario, seed
+
+    def _made(self, k: int, *, dry: DryBuild | None = None) -> tuple[dict, dict, str | None, str | None, int]:
+        """Run ``k``'s axis values, scenario, artifact sha256, its design's error and its seed."""
         c = self.campaign
         g, j = divmod(k, c.runs)
         values = self.values(g, j)
@@ -361,19 +389,7 @@ class _Planner:
             if dry is not None:
                 dry.check(parsed, scenario, artifact_json=got[0], sha=sha, where=str(where))
         _fmu_blob(scenario, c, self.blobs, self.fmu_cache)
-        seed = int(self.seeds[j])
-        rid = run_id(kind=c.kind, artifact_sha256=sha, scenario=scenario, seed=seed)
-        return RunPoint(
-            index=k,
-            id=rid,
-            grid_index=g,
-            draw=j,
-            values=values,
-            artifact_sha256=sha,
-            scenario=scenario,
-            seed=seed,
-            error=error,
-        )
+        return values, scenario, sha, error, int(self.seeds[j])
 
     def _design(self, g: int, values: dict, spec: dict | None, where: _Where) -> tuple[bytes, str] | str:
         """The run's artifact and its sha256 (or its design's error): the campaign's, its grid point's (designed with
