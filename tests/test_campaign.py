@@ -649,6 +649,41 @@ def test_a_block_file_holds_each_runs_record_and_traces_and_a_foreign_worker_ans
         _block_bytes([{"status": "done"}])
 
 
+@pytest.mark.parametrize("batch", [3, 128])
+def test_stacked_traces_are_the_runs_own_with_errors_and_other_lengths_between_them(tmp_path, monkeypatch, batch):
+    """A block's runs read as stacks (the envelopes' read: one array over each batch's column buffer) are each run's
+    own traces as handed in, whatever lies between them in the file (errors without a trace, runs of another length,
+    runs not asked for) and however the batches cut the block; a run read alone (``Store.trace``) is a copy of its
+    own."""
+    from gainlink.hil.campaign import store as store_module
+    from gainlink.hil.campaign.store import encode_block, encode_trace
+
+    monkeypatch.setattr(store_module, "TRACE_BATCH", batch)
+    rng = np.random.default_rng(5)
+    ids, records, given = [], [], {}
+    for k in range(23):
+        ids.append(f"run-{k}")
+        if k % 5 == 2:
+            records.append({"status": "error", "reason": "r"})
+            continue
+        n = 7 if k % 3 else 4
+        tr = {"t": np.arange(n) * 0.5, "y": rng.normal(size=(n, 2)), "u": rng.normal(size=(n, 1)),
+              "r": rng.normal(size=(n, 1))}  # fmt: skip
+        records.append({"status": "done", "trace": encode_trace(**tr)})
+        given[ids[-1]] = {key: v.astype(np.float32) for key, v in tr.items()}
+    store = Store(tmp_path, campaign="c")
+    store.put_block(encode_block(ids, records, campaign="c"))
+    asked = [i for i in ids if i != "run-4"]
+    seen = set()
+    for names, stack in Store(tmp_path).trace_stacks(asked, fields=("t", "y", "u", "r")):
+        for j, name in enumerate(names.tolist()):
+            seen.add(name.decode())
+            assert all(np.array_equal(stack[key][j], given[name.decode()][key]) for key in "tyur")
+    assert seen == {i for i in given if i != "run-4"}
+    alone = Store(tmp_path).trace("run-6")
+    assert all(np.array_equal(alone[key], given["run-6"][key]) for key in "tyur") and alone["y"].flags.writeable
+
+
 @pytest.mark.parametrize("batch", [None, 32])
 def test_the_envelopes_read_block_by_block_are_numpys_percentiles_within_half_a_bin(tmp_path, monkeypatch, batch):
     """300 runs in three block files (NaN and an infinite sample among them, 20 runs of another length left out):
