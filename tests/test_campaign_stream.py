@@ -200,3 +200,28 @@ def test_a_plan_holds_no_run(tmp_path):
     finally:
         tracemalloc.stop()
     assert len(plan.runs) == 3000 and held / 3000 < 200, f"{held / 3000:.0f} bytes a run"
+
+
+def test_the_plans_columns_are_each_runs_head_values(tmp_path):
+    """The report's per-run arrays from the plan (grid point, each axis's value as a number and whether it is one)
+    against each run's head, made one at a time; a choice axis of an int and a float, and values that are not numbers
+    (a bool, a string, a table) as the scatter plot leaves them out."""
+    from gainlink.hil.campaign.plan import _numbers, plan_columns
+
+    data = {
+        "name": "columns", "kind": "sil", "seed": 3, "runs": 40, "spec": str(EXAMPLES / "pendulum.toml"),
+        "scenario": {"duration": 0.5, "plant": {"kind": "cart_pendulum"}},
+        "grid": [{"target": "plant.parameters.m", "values": GRID}],
+        "draw": [{"target": "plant.parameters.M", "distribution": "uniform", "low": 0.7, "high": 1.3},
+                 {"target": "noise.x", "distribution": "choice", "values": [1, 0.002]}],
+    }  # fmt: skip
+    plan = plan_campaign(parse_campaign(data))
+    cols = plan_columns(plan)
+    heads = list(plan.runs.heads())
+    assert cols.grid.tolist() == [h.grid_index for h in heads]
+    assert cols.grid_values == {g: {"plant.parameters.m": m} for g, m in enumerate(GRID)}
+    for name in ("plant.parameters.m", "plant.parameters.M", "noise.x"):
+        assert cols.numbers[name].tolist() == [float(h.values[name]) for h in heads] and cols.numeric[name].all()
+    assert {type(h.values["noise.x"]) for h in heads} == {int, float}
+    x, ok = _numbers([True, "clamp", {"a": 1}, 2, 0.5])
+    assert ok.tolist() == [False, False, False, True, True] and np.array_equal(x, [np.nan] * 3 + [2.0, 0.5], True)

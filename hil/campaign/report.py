@@ -338,8 +338,7 @@ def scatterpng_bytes(plan: CampaignPlan, tally: Tally) -> bytes:
     import matplotlib.pyplot as plt
 
     axes_ = [name for name in tally.axes if tally.numeric[name]]
-    iae = np.frombuffer(tally.scatter_iae)
-    fail = np.frombuffer(tally.scatter_fail, np.int8).astype(bool)
+    iae, fail = tally.scatter_iae, tally.scatter_fail
     pick = _scatter_sample(tally)
     n = max(len(axes_), 1)
     cols = min(n, 3)
@@ -351,7 +350,7 @@ def scatterpng_bytes(plan: CampaignPlan, tally: Tally) -> bytes:
                 0.5, 0.5, "no numeric axis" if name is None else "no finished run", ha="center", transform=ax.transAxes
             )
             continue
-        x = np.frombuffer(tally.scatter[name])
+        x = tally.scatter[name]
         for status, mask, style in (
             ("fail", fail, dict(color="C3", marker="x", markersize=4.7, alpha=0.8)),
             ("pass", ~fail, dict(color="C0", marker="o", markersize=3.5, markeredgewidth=0, alpha=0.7)),
@@ -437,7 +436,6 @@ def _stream_rows(plan: CampaignPlan, store: Any, csv_out: IO[str], runs_out: IO[
             )
             text = json.dumps(point_row(head), sort_keys=True, allow_nan=False)
             runs_out.write(("  " if not k else ",\n  ") + text[:-1] + ", " + body[1:])
-            tally.add(head, u)
         tally.finish(ids)
         return tally
     finally:
