@@ -225,3 +225,25 @@ def test_the_plans_columns_are_each_runs_head_values(tmp_path):
     assert {type(h.values["noise.x"]) for h in heads} == {int, float}
     x, ok = _numbers([True, "clamp", {"a": 1}, 2, 0.5])
     assert ok.tolist() == [False, False, False, True, True] and np.array_equal(x, [np.nan] * 3 + [2.0, 0.5], True)
+
+
+def test_a_rows_head_text_is_what_json_writes_of_its_head():
+    """The head of each run's line in campaign.json, made from its parts, against json.dumps of the head's dict (the
+    oracle: json's own encoder) for values of every kind an axis gives (floats of every exponent, -0.0, ints, bools,
+    strings with quotes and non-ASCII letters, tables, numpy floats) and a run without an artifact; a value json
+    refuses (NaN) is refused the same way."""
+    import pytest
+    from gainlink.hil.campaign.rows import point_row, point_row_text
+
+    values = [1e-05, 1e16, 1.5e300, 5e-324, -0.0, 0.1, 3, -7, True, None, 'say "hi"', "Ω-axis", [1, 2.5],
+              {"b": 1, "a": [0.5]}, np.float64(0.3), 2**70]  # fmt: skip
+    for k, v in enumerate(values):
+        head = RunPoint(index=k, id=f"{k:020x}", grid_index=k // 3, draw=k % 3, seed=10**9 + k,
+                        artifact_sha256=None if k % 4 == 0 else "f" * 64, scenario={},
+                        values={"z.last": v, "a.first": values[-1 - k], "Ω": k / 7, 'q"uote': v})  # fmt: skip
+        assert point_row_text(head) == json.dumps(point_row(head), sort_keys=True, allow_nan=False), v
+    bad = RunPoint(index=0, id="x", grid_index=0, draw=0, seed=0, artifact_sha256=None, scenario={},
+                   values={"m": float("nan")})  # fmt: skip
+    for make in (point_row_text, lambda p: json.dumps(point_row(p), sort_keys=True, allow_nan=False)):
+        with pytest.raises(ValueError):
+            make(bad)

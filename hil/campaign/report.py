@@ -31,7 +31,7 @@ from gainlink.fileio import atomic_writer, publish_files
 from gainlink.proof.twin_plot import png_bytes
 
 from .plan import CampaignPlan, PlannedRuns, describe_axes, run_heads
-from .rows import MEASURE_CELLS, METRIC_CELLS, STATUSES, ReportRows, RunStatus, Tally, Verdicts, point_row
+from .rows import MEASURE_CELLS, METRIC_CELLS, STATUSES, ReportRows, RunStatus, Tally, Verdicts, point_row_text
 from .store import members
 
 PERCENTILES = (5, 25, 50, 75, 95)
@@ -434,7 +434,7 @@ def _stream_rows(plan: CampaignPlan, store: Any, csv_out: IO[str], runs_out: IO[
             w.writerow(
                 [head.index, head.id, status, cells[0], *values, head.seed, *cells[1:], head.artifact_sha256 or ""]
             )
-            text = json.dumps(point_row(head), sort_keys=True, allow_nan=False)
+            text = point_row_text(head)
             runs_out.write(("  " if not k else ",\n  ") + text[:-1] + ", " + body[1:])
         tally.finish(ids)
         return tally
