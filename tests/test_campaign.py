@@ -649,6 +649,28 @@ def test_a_block_file_holds_each_runs_record_and_traces_and_a_foreign_worker_ans
         _block_bytes([{"status": "done"}])
 
 
+def test_every_column_of_a_block_file_is_compressed_the_traces_with_lz4():
+    """Each leaf column of a block file (a struct's fields too: a codec given by column name left them uncompressed)
+    is zstd, but the traces, LZ4; read from the file's Parquet metadata."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from gainlink.hil.campaign.store import encode_block, encode_trace
+
+    n = 6
+    trace = encode_trace(np.arange(n) * 0.1, np.ones((n, 2)), np.ones((n, 1)), np.zeros((n, 1)))
+    done = {"status": "done", "complete": True, "reason": None, "trace": trace,
+            "measures": {"stable": True, "unstable_reason": None, "longest_saturation_s": 0.0,
+                         "output_min": {"x": -1.0}, "output_max": {"x": 1.0}},
+            "metrics": {"tracked": {"r_x": {"iae": 0.5}}, "outputs_final": {"x": 0.0}},
+            "worker": {"host": "h", "pid": 1, "start": 0.0, "stop": 1.0, "cpu_s": 0.5, "block": 2}}  # fmt: skip
+    data = encode_block(["a", "b"], [done, {"status": "error", "reason": "r"}], campaign="c")
+    meta = pq.ParquetFile(pa.BufferReader(data)).metadata
+    codecs = {meta.row_group(0).column(i).path_in_schema: meta.row_group(0).column(i).compression
+              for i in range(meta.num_columns)}  # fmt: skip
+    assert {p for p in codecs if "." in p} >= {"measures.stable", "worker.host", "tracked.r_x.iae", "output_min.x"}
+    assert {p: c for p, c in codecs.items() if c != ("LZ4" if p in "tyur" else "ZSTD")} == {}
+
+
 @pytest.mark.parametrize("batch", [3, 128])
 def test_stacked_traces_are_the_runs_own_with_errors_and_other_lengths_between_them(tmp_path, monkeypatch, batch):
     """A block's runs read as stacks (the envelopes' read: one array over each batch's column buffer) are each run's

@@ -150,11 +150,24 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes
     # LZ4: zstd gained 5 % of the file on float bytes for 3.5x the write and 3x the read (910 runs: 48 -> 14 and
     # 25 -> 8 us a run). A row group a TRACE_BATCH of runs: the envelopes' batched read of a block's traces held its
     # whole row group's (the read's peak on the 10,002-run store +56 MB with a row group a block, +35 so).
-    codecs = {name: "lz4" if name in TRACE_FIELDS else "zstd" for name in table.column_names}
+    codecs = {path: "lz4" if path in TRACE_FIELDS else "zstd" for path in _leaf_paths(table.schema)}
     pq.write_table(
         table, sink, compression=codecs, use_dictionary=REPEATED, write_statistics=False, row_group_size=TRACE_BATCH
     )
     return sink.getvalue().to_pybytes()
+
+
+def _leaf_paths(schema: pa.Schema) -> list[str]:
+    """The Parquet column paths of ``schema``'s leaves (a struct's fields as ``name.field``): a codec given by column
+    must name each leaf, or the leaf is written uncompressed."""
+    paths, todo = [], [(f.name, f.type) for f in schema]
+    while todo:
+        path, kind = todo.pop()
+        if pa.types.is_struct(kind):
+            todo += [(f"{path}.{f.name}", f.type) for f in kind]
+        else:
+            paths.append(path)
+    return paths
 
 
 def _split(run_id: str, record: dict) -> tuple[dict, dict]:
