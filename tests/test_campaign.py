@@ -337,6 +337,22 @@ def test_draws_are_reproducible_shared_by_grid_points_and_kept_when_runs_grow(pe
     assert not {r.id for r in other.runs} & {r.id for r in p3.runs}
 
 
+def test_a_tasks_inputs_are_its_runs_and_hash_to_the_planned_ids(pend):
+    # What the client pickles into a task (made without the runs' ids, which the plan holds): each run's own inputs,
+    # made in any order; the oracle is the run made whole (plan.runs[k]) and the content address of its inputs.
+    from gainlink.hil.campaign.plan import run_id
+
+    plan = plan_campaign(parse_campaign(small_campaign(pend, runs=4)))
+    order = np.array([5, 0, 7, 2, 2, 1])
+    for k, (sha, scenario, seed) in zip(order.tolist(), plan.runs.inputs(order)):
+        point = plan.runs[k]
+        assert (sha, scenario, seed) == (point.artifact_sha256, point.scenario, point.seed)
+        assert run_id(kind="sil", artifact_sha256=sha, scenario=scenario, seed=seed) == plan.runs.ids[k].decode()
+    first, again = plan.runs.inputs(order[:1])[0], plan.runs.inputs(order[:1])[0]
+    first[1]["duration"] = -1.0  # each call makes its scenario anew: a task's copy is its own
+    assert again[1]["duration"] != -1.0
+
+
 @pytest.mark.parametrize(
     "draw, dist",
     [
@@ -631,6 +647,63 @@ def test_a_block_file_holds_each_runs_record_and_traces_and_a_foreign_worker_ans
     assert Store(tmp_path).finished("run-b") and dict(Store(tmp_path).records())["run-b"]["status"] == "done"
     with pytest.raises(GainlinkError, match=r"a worker returned list, not a block of records: .*another gainlink"):
         _block_bytes([{"status": "done"}])
+
+
+def test_every_column_of_a_block_file_is_compressed_the_traces_with_lz4():
+    """Each leaf column of a block file (a struct's fields too: a codec given by column name left them uncompressed)
+    is zstd, but the traces, LZ4; read from the file's Parquet metadata."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from gainlink.hil.campaign.store import encode_block, encode_trace
+
+    n = 6
+    trace = encode_trace(np.arange(n) * 0.1, np.ones((n, 2)), np.ones((n, 1)), np.zeros((n, 1)))
+    done = {"status": "done", "complete": True, "reason": None, "trace": trace,
+            "measures": {"stable": True, "unstable_reason": None, "longest_saturation_s": 0.0,
+                         "output_min": {"x": -1.0}, "output_max": {"x": 1.0}},
+            "metrics": {"tracked": {"r_x": {"iae": 0.5}}, "outputs_final": {"x": 0.0}},
+            "worker": {"host": "h", "pid": 1, "start": 0.0, "stop": 1.0, "cpu_s": 0.5, "block": 2}}  # fmt: skip
+    data = encode_block(["a", "b"], [done, {"status": "error", "reason": "r"}], campaign="c")
+    meta = pq.ParquetFile(pa.BufferReader(data)).metadata
+    codecs = {meta.row_group(0).column(i).path_in_schema: meta.row_group(0).column(i).compression
+              for i in range(meta.num_columns)}  # fmt: skip
+    assert {p for p in codecs if "." in p} >= {"measures.stable", "worker.host", "tracked.r_x.iae", "output_min.x"}
+    assert {p: c for p, c in codecs.items() if c != ("LZ4" if p in "tyur" else "ZSTD")} == {}
+
+
+@pytest.mark.parametrize("batch", [3, 128])
+def test_stacked_traces_are_the_runs_own_with_errors_and_other_lengths_between_them(tmp_path, monkeypatch, batch):
+    """A block's runs read as stacks (the envelopes' read: one array over each batch's column buffer) are each run's
+    own traces as handed in, whatever lies between them in the file (errors without a trace, runs of another length,
+    runs not asked for) and however the batches cut the block; a run read alone (``Store.trace``) is a copy of its
+    own."""
+    from gainlink.hil.campaign import store as store_module
+    from gainlink.hil.campaign.store import encode_block, encode_trace
+
+    monkeypatch.setattr(store_module, "TRACE_BATCH", batch)
+    rng = np.random.default_rng(5)
+    ids, records, given = [], [], {}
+    for k in range(23):
+        ids.append(f"run-{k}")
+        if k % 5 == 2:
+            records.append({"status": "error", "reason": "r"})
+            continue
+        n = 7 if k % 3 else 4
+        tr = {"t": np.arange(n) * 0.5, "y": rng.normal(size=(n, 2)), "u": rng.normal(size=(n, 1)),
+              "r": rng.normal(size=(n, 1))}  # fmt: skip
+        records.append({"status": "done", "trace": encode_trace(**tr)})
+        given[ids[-1]] = {key: v.astype(np.float32) for key, v in tr.items()}
+    store = Store(tmp_path, campaign="c")
+    store.put_block(encode_block(ids, records, campaign="c"))
+    asked = [i for i in ids if i != "run-4"]
+    seen = set()
+    for names, stack in Store(tmp_path).trace_stacks(asked, fields=("t", "y", "u", "r")):
+        for j, name in enumerate(names.tolist()):
+            seen.add(name.decode())
+            assert all(np.array_equal(stack[key][j], given[name.decode()][key]) for key in "tyur")
+    assert seen == {i for i in given if i != "run-4"}
+    alone = Store(tmp_path).trace("run-6")
+    assert all(np.array_equal(alone[key], given["run-6"][key]) for key in "tyur") and alone["y"].flags.writeable
 
 
 @pytest.mark.parametrize("batch", [None, 32])
@@ -1202,9 +1275,9 @@ def test_the_client_keeps_nothing_of_a_stored_block_but_its_ids(pend, dask_clust
     """From the 8th block stored to the 78th of 80 (blocks of 20 runs), the client's Python memory grows by the
     stored runs' place in the store's index (25 bytes a run) and Dask's bounded logs, not by each block's task: Dask
     kept the last 1,000 messages of the client's stream to the scheduler (a block's task with its pickled runs), for
-    its developers' debugging (0.66 kB a run with it, here). A reading varies by some 60 kB from one instant to the next (Dask's
-    comms and buffers), so the figure is the slope fitted through 15 readings over 70 blocks (~±500 bytes a block,
-    ~±25 a run); two readings 30 blocks apart of 5 runs varied by ±2 kB a block."""
+    its developers' debugging (0.66 kB a run with it, here). A reading varies by some 60 kB from one instant to the
+    next (Dask's comms and buffers), so the figure is the slope fitted through 15 readings over 70 blocks (~±500 bytes
+    a block, ~±25 a run); two readings 30 blocks apart of 5 runs varied by ±2 kB a block."""
     _held(pend, dask_cluster, tmp_path / "warm", 1, 2, (1,))  # imports, connections
     at = tuple(range(8, 79, 5))
     held = _held(pend, dask_cluster, tmp_path / "c", 20, 80, at)

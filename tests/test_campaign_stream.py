@@ -200,3 +200,50 @@ def test_a_plan_holds_no_run(tmp_path):
     finally:
         tracemalloc.stop()
     assert len(plan.runs) == 3000 and held / 3000 < 200, f"{held / 3000:.0f} bytes a run"
+
+
+def test_the_plans_columns_are_each_runs_head_values(tmp_path):
+    """The report's per-run arrays from the plan (grid point, each axis's value as a number and whether it is one)
+    against each run's head, made one at a time; a choice axis of an int and a float, and values that are not numbers
+    (a bool, a string, a table) as the scatter plot leaves them out."""
+    from gainlink.hil.campaign.plan import _numbers, plan_columns
+
+    data = {
+        "name": "columns", "kind": "sil", "seed": 3, "runs": 40, "spec": str(EXAMPLES / "pendulum.toml"),
+        "scenario": {"duration": 0.5, "plant": {"kind": "cart_pendulum"}},
+        "grid": [{"target": "plant.parameters.m", "values": GRID}],
+        "draw": [{"target": "plant.parameters.M", "distribution": "uniform", "low": 0.7, "high": 1.3},
+                 {"target": "noise.x", "distribution": "choice", "values": [1, 0.002]}],
+    }  # fmt: skip
+    plan = plan_campaign(parse_campaign(data))
+    cols = plan_columns(plan)
+    heads = list(plan.runs.heads())
+    assert cols.grid.tolist() == [h.grid_index for h in heads]
+    assert cols.grid_values == {g: {"plant.parameters.m": m} for g, m in enumerate(GRID)}
+    for name in ("plant.parameters.m", "plant.parameters.M", "noise.x"):
+        assert cols.numbers[name].tolist() == [float(h.values[name]) for h in heads] and cols.numeric[name].all()
+    assert {type(h.values["noise.x"]) for h in heads} == {int, float}
+    x, ok = _numbers([True, "clamp", {"a": 1}, 2, 0.5])
+    assert ok.tolist() == [False, False, False, True, True] and np.array_equal(x, [np.nan] * 3 + [2.0, 0.5], True)
+
+
+def test_a_rows_head_text_is_what_json_writes_of_its_head():
+    """The head of each run's line in campaign.json, made from its parts, against json.dumps of the head's dict (the
+    oracle: json's own encoder) for values of every kind an axis gives (floats of every exponent, -0.0, ints, bools,
+    strings with quotes and non-ASCII letters, tables, numpy floats) and a run without an artifact; a value json
+    refuses (NaN) is refused the same way."""
+    import pytest
+    from gainlink.hil.campaign.rows import point_row, point_row_text
+
+    values = [1e-05, 1e16, 1.5e300, 5e-324, -0.0, 0.1, 3, -7, True, None, 'say "hi"', "Ω-axis", [1, 2.5],
+              {"b": 1, "a": [0.5]}, np.float64(0.3), 2**70]  # fmt: skip
+    for k, v in enumerate(values):
+        head = RunPoint(index=k, id=f"{k:020x}", grid_index=k // 3, draw=k % 3, seed=10**9 + k,
+                        artifact_sha256=None if k % 4 == 0 else "f" * 64, scenario={},
+                        values={"z.last": v, "a.first": values[-1 - k], "Ω": k / 7, 'q"uote': v})  # fmt: skip
+        assert point_row_text(head) == json.dumps(point_row(head), sort_keys=True, allow_nan=False), v
+    bad = RunPoint(index=0, id="x", grid_index=0, draw=0, seed=0, artifact_sha256=None, scenario={},
+                   values={"m": float("nan")})  # fmt: skip
+    for make in (point_row_text, lambda p: json.dumps(point_row(p), sort_keys=True, allow_nan=False)):
+        with pytest.raises(ValueError):
+            make(bad)

@@ -267,19 +267,80 @@ class PlannedRuns(Sequence):
         """Every run's flag, in plan order: its grid point's design failed (it is recorded, never submitted)."""
         return self._planner.failed
 
+    def inputs(self, indices: np.ndarray) -> list[tuple[str | None, dict, int]]:
+        """The runs at plan indices ``indices`` as their tasks carry them: ``(artifact sha256, scenario, seed)``, each
+        what ``runs[k]`` holds, made without the id (:attr:`ids` holds it)."""
+        return [self._planner.inputs(k) for k in np.asarray(indices).tolist()]
+
     def heads(self) -> Iterator[RunHead]:
         """The runs in plan order, what a report row names of each (:class:`RunHead`), without making a scenario."""
-        planner = self._planner
         for k in range(self._count):
-            if planner.spec_per_run:
-                p = planner.point(k)
-                yield RunHead(p.index, p.id, p.grid_index, p.draw, p.values, p.artifact_sha256, p.seed)
-                continue
-            g, j = divmod(k, self.campaign.runs)
-            got = planner.fixed if planner.fixed is not None else planner.by_point[g]
-            sha = got[1] if isinstance(got, tuple) else None
-            seed = int(planner.seeds[j])
-            yield RunHead(k, planner.ids[k].decode("ascii"), g, j, planner.values(g, j), sha, seed)
+            yield self.head(k)
+
+    def head(self, k: int) -> RunHead:
+        """What a report row names of run ``k`` (:class:`RunHead`), without making its scenario (but with a
+        ``spec.*`` draw axis, whose design is the run's own)."""
+        planner = self._planner
+        if planner.spec_per_run:
+            p = planner.point(k)
+            return RunHead(p.index, p.id, p.grid_index, p.draw, p.values, p.artifact_sha256, p.seed)
+        g, j = divmod(k, self.campaign.runs)
+        got = planner.fixed if planner.fixed is not None else planner.by_point[g]
+        sha = got[1] if isinstance(got, tuple) else None
+        return RunHead(k, planner.ids[k].decode("ascii"), g, j, planner.values(g, j), sha, int(planner.seeds[j]))
+
+    def columns(self) -> PlanColumns:
+        """Every run's grid point and axis values in plan order as arrays (:class:`PlanColumns`), from the grid and
+        the draw table, without making a run."""
+        planner, c = self._planner, self.campaign
+        points, runs = planner.points, c.runs
+        numbers, numeric = {}, {}
+        for i, a in enumerate(c.grid):
+            x, ok = _numbers([p[i] for p in points])
+            numbers[a.name], numeric[a.name] = np.repeat(x, runs), np.repeat(ok, runs)
+        for a in c.draws:
+            drawn = planner.drawn[a.name]
+            if a.distribution == "choice":
+                x, ok = _numbers(a.params["values"])
+                pick = np.asarray(drawn, int)
+                x, ok = x[pick], ok[pick]
+            else:
+                x, ok = np.asarray(drawn, float), np.ones(len(drawn), bool)
+            numbers[a.name], numeric[a.name] = np.tile(x, len(points)), np.tile(ok, len(points))
+        grid_values = {g: {a.name: v for a, v in zip(c.grid, p)} for g, p in enumerate(points)}
+        return PlanColumns(np.repeat(np.arange(len(points)), runs), numbers, numeric, grid_values)
+
+
+@dataclass(frozen=True)
+class PlanColumns:
+    """A plan's runs in plan order as arrays: each run's grid point (``grid``), each axis's value as a float
+    (``numbers``, NaN where it is not a number) and whether it is one (``numeric``: an int or a float, not a bool),
+    and each grid point's values (``grid_values``, in the order first met)."""
+
+    grid: np.ndarray
+    numbers: dict[str, np.ndarray]
+    numeric: dict[str, np.ndarray]
+    grid_values: dict[int, dict]
+
+
+def _numbers(values: Sequence) -> tuple[np.ndarray, np.ndarray]:
+    """``values`` as floats (NaN where one is not a number: a string, a bool, a table) and whether each is one."""
+    ok = np.array([isinstance(v, (int, float)) and not isinstance(v, bool) for v in values], bool)
+    return np.array([float(v) if k else math.nan for v, k in zip(values, ok)], float), ok
+
+
+def plan_columns(plan: CampaignPlan) -> PlanColumns:
+    """:meth:`PlannedRuns.columns` of ``plan``; of a plan of points, gathered from the points."""
+    if isinstance(plan.runs, PlannedRuns):
+        return plan.runs.columns()
+    names = [a.name for a in (*plan.campaign.grid, *plan.campaign.draws)]
+    numbers, numeric = {}, {}
+    for name in names:
+        numbers[name], numeric[name] = _numbers([p.values[name] for p in plan.runs])
+    grid_values: dict[int, dict] = {}
+    for p in plan.runs:
+        grid_values.setdefault(p.grid_index, {a.name: p.values[a.name] for a in plan.campaign.grid})
+    return PlanColumns(np.array([p.grid_index for p in plan.runs], int), numbers, numeric, grid_values)
 
 
 @dataclass(frozen=True)
@@ -345,6 +406,29 @@ class _Planner:
 
     def point(self, k: int, *, dry: DryBuild | None = None) -> RunPoint:
         """Run ``k``; with ``dry``, its scenario parsed and its plant dry-built (:class:`.preflight.DryBuild`)."""
+        values, scenario, sha, error, seed = self._made(k, dry=dry)
+        g, j = divmod(k, self.campaign.runs)
+        rid = run_id(kind=self.campaign.kind, artifact_sha256=sha, scenario=scenario, seed=seed)
+        return RunPoint(
+            index=k,
+            id=rid,
+            grid_index=g,
+            draw=j,
+            values=values,
+            artifact_sha256=sha,
+            scenario=scenario,
+            seed=seed,
+            error=error,
+        )
+
+    def inputs(self, k: int) -> tuple[str | None, dict, int]:
+        """Run ``k``'s inputs as its task carries them (artifact sha256, scenario, seed): :meth:`point` without the
+        run's id, whose canonical JSON and hash are two thirds of making a run (the plan holds the ids)."""
+        _, scenario, sha, _, seed = self._made(k)
+        return sha, scenario, seed
+
+    def _made(self, k: int, *, dry: DryBuild | None = None) -> tuple[dict, dict, str | None, str | None, int]:
+        """Run ``k``'s axis values, scenario, artifact sha256, its design's error and its seed."""
         c = self.campaign
         g, j = divmod(k, c.runs)
         values = self.values(g, j)
@@ -361,19 +445,7 @@ class _Planner:
             if dry is not None:
                 dry.check(parsed, scenario, artifact_json=got[0], sha=sha, where=str(where))
         _fmu_blob(scenario, c, self.blobs, self.fmu_cache)
-        seed = int(self.seeds[j])
-        rid = run_id(kind=c.kind, artifact_sha256=sha, scenario=scenario, seed=seed)
-        return RunPoint(
-            index=k,
-            id=rid,
-            grid_index=g,
-            draw=j,
-            values=values,
-            artifact_sha256=sha,
-            scenario=scenario,
-            seed=seed,
-            error=error,
-        )
+        return values, scenario, sha, error, int(self.seeds[j])
 
     def _design(self, g: int, values: dict, spec: dict | None, where: _Where) -> tuple[bytes, str] | str:
         """The run's artifact and its sha256 (or its design's error): the campaign's, its grid point's (designed with

@@ -31,7 +31,7 @@ from gainlink.fileio import atomic_writer, publish_files
 from gainlink.proof.twin_plot import png_bytes
 
 from .plan import CampaignPlan, PlannedRuns, describe_axes, run_heads
-from .rows import MEASURE_CELLS, METRIC_CELLS, STATUSES, ReportRows, RunStatus, Tally, Verdicts, point_row
+from .rows import MEASURE_CELLS, METRIC_CELLS, STATUSES, ReportRows, RunStatus, Tally, Verdicts, point_row_text
 from .store import members
 
 PERCENTILES = (5, 25, 50, 75, 95)
@@ -338,8 +338,7 @@ def scatterpng_bytes(plan: CampaignPlan, tally: Tally) -> bytes:
     import matplotlib.pyplot as plt
 
     axes_ = [name for name in tally.axes if tally.numeric[name]]
-    iae = np.frombuffer(tally.scatter_iae)
-    fail = np.frombuffer(tally.scatter_fail, np.int8).astype(bool)
+    iae, fail = tally.scatter_iae, tally.scatter_fail
     pick = _scatter_sample(tally)
     n = max(len(axes_), 1)
     cols = min(n, 3)
@@ -351,7 +350,7 @@ def scatterpng_bytes(plan: CampaignPlan, tally: Tally) -> bytes:
                 0.5, 0.5, "no numeric axis" if name is None else "no finished run", ha="center", transform=ax.transAxes
             )
             continue
-        x = np.frombuffer(tally.scatter[name])
+        x = tally.scatter[name]
         for status, mask, style in (
             ("fail", fail, dict(color="C3", marker="x", markersize=4.7, alpha=0.8)),
             ("pass", ~fail, dict(color="C0", marker="o", markersize=3.5, markeredgewidth=0, alpha=0.7)),
@@ -435,9 +434,8 @@ def _stream_rows(plan: CampaignPlan, store: Any, csv_out: IO[str], runs_out: IO[
             w.writerow(
                 [head.index, head.id, status, cells[0], *values, head.seed, *cells[1:], head.artifact_sha256 or ""]
             )
-            text = json.dumps(point_row(head), sort_keys=True, allow_nan=False)
+            text = point_row_text(head)
             runs_out.write(("  " if not k else ",\n  ") + text[:-1] + ", " + body[1:])
-            tally.add(head, u)
         tally.finish(ids)
         return tally
     finally:

@@ -317,18 +317,19 @@ class _Submitter:
 
     def submit(self, block: np.ndarray) -> Any:
         """One task running the runs of plan indices ``block`` in order (retried once by Dask when it raises). The
-        runs are made here and dropped once pickled into the task."""
-        points = self.points(block)
-        shas = {p.artifact_sha256 for p in points}
-        paths = " ".join(str(p.scenario.get("plant", {}).get("path", "")) for p in points)
-        needed = {s: f for s, f in self.blobs.items() if s in paths}
-        key = f"gainlink-run-{points[0].id}" if len(points) == 1 else f"gainlink-batch-{points[0].id}-{len(points)}"
-        runs = [(p.artifact_sha256, p.scenario, p.seed) for p in points]
+        runs' inputs are made here (without their ids: the plan holds them) and dropped once pickled into the task."""
+        ids, runs = self.ids(block), self.plan.runs.inputs(block)
+        shas = {sha for sha, _, _ in runs}
+        needed = {}
+        if self.blobs:
+            paths = " ".join(str(scenario.get("plant", {}).get("path", "")) for _, scenario, _ in runs)
+            needed = {s: f for s, f in self.blobs.items() if s in paths}
+        key = f"gainlink-run-{ids[0]}" if len(ids) == 1 else f"gainlink-batch-{ids[0]}-{len(ids)}"
         return self.client.submit(
             execute_packed,
             self.kind,
             {s: self.plan.artifacts[s] for s in shas},
-            pickle.dumps(([p.id for p in points], runs), protocol=pickle.HIGHEST_PROTOCOL),
+            pickle.dumps((ids, runs), protocol=pickle.HIGHEST_PROTOCOL),
             needed,
             campaign=self.plan.campaign.name,
             folder=self.folder,

@@ -13,11 +13,12 @@ of the run's inputs and gainlink's version), so the same runs always land in the
 its status (``done`` or ``error``), its record as two compact JSON texts (``record``: inputs, link, an error's
 reason; ``row``: :data:`ROW_KEYS` and a result's own reason, which ``campaign.json`` gives as it is), the numbers its
 verdict and ``campaign.csv`` read as typed columns (:func:`row_columns`: the report decodes no JSON of a result) and
-its traces downsampled to at most ``worker.MAX_TRACE_POINTS`` evenly spaced true samples (first and last kept; float32
-``t``, and ``y``, ``u``, ``r`` flattened row by row with their widths); the full trace of a run is not stored, it is
-replayed (``gainlink campaign show DIR --run ID``). The file's schema metadata names the gainlink version, the
-campaign that wrote it and the file's layout (:data:`LAYOUT`): a folder holding another's blocks, or blocks of an
-earlier layout, is refused in one line on resume (:func:`refuse_foreign`).
+its traces downsampled to at most ``worker.MAX_TRACE_POINTS`` evenly spaced true samples (first and last kept; each a
+binary value, the run's float32 values in C order: ``t``, and ``y``, ``u``, ``r`` row by row with their widths, so a
+batch of runs is read as one numpy array over the column's buffer, :func:`_flat`); the full trace of a run is not
+stored, it is replayed (``gainlink campaign show DIR --run ID``). The file's schema metadata names the gainlink
+version, the campaign that wrote it and the file's layout (:data:`LAYOUT`): a folder holding another's blocks, or
+blocks of an earlier layout, is refused in one line on resume (:func:`refuse_foreign`).
 
 A worker that sees the campaign folder writes its block file there itself (:func:`write_block`); the client notes it
 (:meth:`Store.took_block`) without reading it.
@@ -58,13 +59,14 @@ SCHEMA = pa.schema(
         ("status", pa.string()),
         ("record", pa.string()),
         ("row", pa.string()),
-        ("t", pa.list_(pa.float32())),
-        *((k, pa.list_(pa.float32())) for k in WIDE),
+        ("t", pa.large_binary()),
+        *((k, pa.large_binary()) for k in WIDE),
         *((f"{k}_width", pa.int32()) for k in WIDE),
     ]
 )
 META_VERSION, META_CAMPAIGN, META_LAYOUT = b"gainlink.version", b"gainlink.campaign", b"gainlink.block_layout"
-LAYOUT = "3"  # 2: the record split into ``record`` and ``row``; 3: the row's verdict inputs as typed columns too
+LAYOUT = "4"  # 2: the record split into ``record`` and ``row``; 3: the row's verdict inputs as typed columns too;
+# 4: each trace a run's float32 bytes (not a list of floats: Parquet's levels per value, and numpy's per run to read)
 ROW_KEYS = ("complete", "measures", "metrics", "worker")  # what a report row takes from a record, as it is
 ROW_BITS = ("complete", "run_reason", "worker", "measures", "metrics")  # bit k of ``row_keys``: the row has ROW_BITS[k]
 MEASURES = pa.struct(
@@ -133,9 +135,9 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes
         "row": pa.array([_compact_json(row) for _, row in parts], pa.string()),
     }
     typed = row_columns([row for _, row in parts])
-    cols["t"] = _lists([None if tr is None else tr["t"] for tr in traces])
+    cols["t"] = _blobs([None if tr is None else tr["t"] for tr in traces])
     for k in WIDE:
-        cols[k] = _lists([None if tr is None else tr[k].reshape(-1) for tr in traces])
+        cols[k] = _blobs([None if tr is None else tr[k] for tr in traces])
         cols[f"{k}_width"] = pa.array([None if tr is None else tr[k].shape[1] for tr in traces], pa.int32())
     fixed = pa.Table.from_arrays([cols[f.name] for f in SCHEMA], schema=SCHEMA)
     table = pa.table(fixed.columns + list(typed.values()), names=fixed.column_names + list(typed))
@@ -143,9 +145,29 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes
     table = table.replace_schema_metadata(meta)
     sink = pa.BufferOutputStream()
     # Dictionaries only for the columns that repeat: tried on every column, Arrow spent 110 of 183 ms (910 runs) on
-    # the traces' and the JSON texts' values, nearly all distinct, and the file came out 19 % larger.
-    pq.write_table(table, sink, compression="zstd", use_dictionary=REPEATED)
+    # the traces' and the JSON texts' values, nearly all distinct, and the file came out 19 % larger. No statistics:
+    # nothing reads them (a trace's min and max bytes, a JSON text's), and they were 10 % of the write. The traces in
+    # LZ4: zstd gained 5 % of the file on float bytes for 3.5x the write and 3x the read (910 runs: 48 -> 14 and
+    # 25 -> 8 us a run). A row group a TRACE_BATCH of runs: the envelopes' batched read of a block's traces held its
+    # whole row group's (the read's peak on the 10,002-run store +56 MB with a row group a block, +35 so).
+    codecs = {path: "lz4" if path in TRACE_FIELDS else "zstd" for path in _leaf_paths(table.schema)}
+    pq.write_table(
+        table, sink, compression=codecs, use_dictionary=REPEATED, write_statistics=False, row_group_size=TRACE_BATCH
+    )
     return sink.getvalue().to_pybytes()
+
+
+def _leaf_paths(schema: pa.Schema) -> list[str]:
+    """The Parquet column paths of ``schema``'s leaves (a struct's fields as ``name.field``): a codec given by column
+    must name each leaf, or the leaf is written uncompressed."""
+    paths, todo = [], [(f.name, f.type) for f in schema]
+    while todo:
+        path, kind = todo.pop()
+        if pa.types.is_struct(kind):
+            todo += [(f"{path}.{f.name}", f.type) for f in kind]
+        else:
+            paths.append(path)
+    return paths
 
 
 def _split(run_id: str, record: dict) -> tuple[dict, dict]:
@@ -209,15 +231,18 @@ def _joined(rest: dict, row: dict) -> dict:
     return rest | row
 
 
-def _lists(rows: list[np.ndarray | None]) -> pa.ListArray:
-    """float32 rows (``None``: no trace) as one Arrow list array: one concatenation and its offsets, not an Arrow
-    array a row."""
-    sizes = np.array([0 if r is None else r.size for r in rows], np.int32)
-    offsets = pa.array(np.concatenate(([0], np.cumsum(sizes, dtype=np.int32))), pa.int32())
-    present = [r for r in rows if r is not None]
-    values = pa.array(np.concatenate(present) if present else np.zeros(0, np.float32), pa.float32())
-    mask = pa.array([r is None for r in rows], pa.bool_())
-    return pa.ListArray.from_arrays(offsets, values, mask=mask)
+def _blobs(rows: list[np.ndarray | None]) -> pa.LargeBinaryArray:
+    """float32 arrays (``None``: no trace) as one Arrow binary array, each row its array's bytes in C order: one
+    concatenation and its offsets, not an Arrow value a row. Parquet writes a binary value as one length and its bytes
+    (a list of floats: a repetition and a definition level per float, 2.3x the CPU of the block file's write)."""
+    valid = np.array([r is not None for r in rows], bool)
+    sizes = np.array([0 if r is None else r.nbytes for r in rows], np.int64)
+    offsets = np.concatenate(([0], np.cumsum(sizes)))
+    present = [np.ascontiguousarray(r, np.float32).reshape(-1) for r in rows if r is not None]
+    data = np.concatenate(present) if present else np.zeros(0, np.float32)
+    bits = pa.py_buffer(np.packbits(valid, bitorder="little"))
+    buffers = [bits, pa.py_buffer(offsets), pa.py_buffer(data)]
+    return pa.Array.from_buffers(pa.large_binary(), len(rows), buffers, null_count=int((~valid).sum()))
 
 
 def folder_key(folder: Path) -> tuple[int, int]:
@@ -277,20 +302,25 @@ def members(names: np.ndarray, pool: np.ndarray) -> np.ndarray:
     return pool[k] == names
 
 
-def _flat(column: pa.ChunkedArray) -> np.ndarray:
-    """A float32 list column's values, in row order."""
-    return pc.list_flatten(column).to_numpy(zero_copy_only=False)
+def _flat(column: pa.ChunkedArray | pa.Array) -> np.ndarray:
+    """A trace column's float32 values, its rows' one after the other: a read-only view of the column's buffer (its
+    rows' bytes are contiguous in a binary array), no copy."""
+    arr = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
+    _, offsets, data = arr.buffers()
+    at = np.frombuffer(offsets, np.int64, len(arr) + 1, offset=8 * arr.offset) if offsets is not None else [0, 0]
+    if data is None or at[-1] == at[0]:
+        return np.zeros(0, np.float32)
+    return np.frombuffer(data, np.float32, int(at[-1] - at[0]) // 4, offset=int(at[0]))
 
 
 def _trace_of(table: pa.Table, row: int) -> dict[str, np.ndarray] | None:
-    t = table.column("t")[row].values
+    t = table.column("t")[row].as_py()
     if t is None:
         return None
-    out = {"t": t.to_numpy(zero_copy_only=False)}
+    out = {"t": np.frombuffer(t, np.float32).copy()}
     for k in WIDE:
         width = table.column(f"{k}_width")[row].as_py()
-        flat = table.column(k)[row].values.to_numpy(zero_copy_only=False)
-        out[k] = flat.reshape(out["t"].size, width)
+        out[k] = np.frombuffer(table.column(k)[row].as_py(), np.float32).reshape(out["t"].size, width).copy()
     return out
 
 
@@ -548,7 +578,7 @@ class Store:
         if not rows.any():
             return
         part = table if rows.all() else table.filter(pa.array(rows))
-        lengths = pc.list_value_length(part.column("t")).to_numpy(zero_copy_only=False)
+        lengths = pc.binary_length(part.column("t")).to_numpy(zero_copy_only=False) // 4
         widths = np.stack([part.column(f"{k}_width").to_numpy(zero_copy_only=False) for k in WIDE], axis=1)
         shape_of = np.column_stack([lengths, widths])
         for shape in np.unique(shape_of, axis=0):
