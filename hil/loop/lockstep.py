@@ -158,7 +158,7 @@ def _records(B: int, steps: int, *, widths: tuple, law: dict, plant_state: bool,
            "alive": np.empty(B, np.uint8)}  # fmt: skip
     if not law_state:
         rec |= {"sat": np.empty((B, steps), np.int64), "flags": np.empty((B, steps), np.int64)}
-    if law["kind"] == 0 and law["sigma_off"] >= 0:
+    if law["records_sigma"]:
         rec["sigma"] = np.empty((B, steps))
     if plant_state:
         rec["X"] = np.empty((B, steps, nx))

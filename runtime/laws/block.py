@@ -49,7 +49,8 @@ class NativeBlock:
     def c_law(self) -> dict[str, Any]:
         """How a loop written in C steps this block as :meth:`step` does (``gainlink.hil.loop.lockstep``: kind 0,
         ``gl_host_law_step_block`` of the host library, the byte offsets of the sample's and the record's fields;
-        ``sigma_off`` -1 for a law without sigma; ``fault`` the flag that zeroes the saturation mask)."""
+        ``sigma_off`` -1 for a law without sigma, ``records_sigma`` whether the loop records it; ``fault`` the flag
+        that zeroes the saturation mask)."""
         c = self.host.c_block()
         ins, outs = c["samples"].dtype.fields, c["records"].dtype.fields
         _, q, e = c["widths"]
@@ -58,7 +59,8 @@ class NativeBlock:
                 "sample_bytes": c["samples"].dtype.itemsize, "y_off": ins["y"][1], "r_off": ins["r"][1] if q else 0,
                 "s_off": ins["s"][1] if e else 0, "law_q": q, "law_e": e, "record_bytes": c["records"].dtype.itemsize,
                 "flags_off": outs["flags"][1], "sat_off": outs["sat"][1], "u_off": outs["u"][1],
-                "sigma_off": outs["sigma"][1] if self._sigma else -1, "fault": status_flags.FAULT}  # fmt: skip
+                "sigma_off": outs["sigma"][1] if self._sigma else -1, "records_sigma": self._sigma,
+                "fault": status_flags.FAULT}  # fmt: skip
 
     def step(self, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> BlockStep:
         """Row i of ``Y``, ``R``, ``S`` to instance i."""

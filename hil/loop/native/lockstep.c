@@ -64,8 +64,11 @@ typedef struct {
     const int64_t *in_idx;  /* m: the inputs commanded */
 } gl_ls_plant_t;
 
-/* The law: kind 0, a host law library's block (byte offsets into its sample and record layouts); kind 1, the
- * float64 reference's block (its scratch buffers). */
+/* How a block law is called (the law's c_law() says which; not which law it is: every law a host library builds
+ * comes as HOST_RECORDS): kind 0, a host law library's block step on float32 sample and record layouts (byte
+ * offsets into them); kind 1, a float64 block step on columns (its scratch buffers). */
+enum { HOST_RECORDS = 0, FLOAT64_COLUMNS = 1 };
+
 typedef struct {
     int64_t kind;
     void *fn;
@@ -243,7 +246,9 @@ static int64_t run_span(const gl_ls_plan_t *pl, gl_ls_plant_t *pt, const gl_ls_l
     int64_t t0 = now_ns();
     for (int64_t k = from; k < to; k++) {
         sample(pl, pt, rec, sp, k);
-        rec->lat[k] += (double)(lw->kind == 0 ? host_law(pl, lw, rec, sp, k, u) : reference_law(pl, lw, rec, sp, k, u));
+        const int64_t took = lw->kind == HOST_RECORDS ? host_law(pl, lw, rec, sp, k, u)
+                                                      : reference_law(pl, lw, rec, sp, k, u);
+        rec->lat[k] += (double)took;
         const int ended = command(pl, pt, rec, sp, k, u) && end_failed(pt, rec, sp, k);
         const int64_t t1 = now_ns();
         rec->tick[k] += (double)(t1 - t0);
@@ -279,7 +284,7 @@ static int64_t span_end(const gl_ls_plan_t *pl, const gl_ls_record_t *rec, span_
 int64_t gl_lockstep(const gl_ls_plan_t *pl, gl_ls_plant_t *pt, const gl_ls_law_t *lw, const gl_ls_record_t *rec,
                     double *u)
 {
-    if (lw->kind != 0 && lw->kind != 1) return -1;
+    if (lw->kind != HOST_RECORDS && lw->kind != FLOAT64_COLUMNS) return -1;
     for (int64_t i = 0; i < pl->runs; i++) rec->done[i] = pl->steps, rec->failed_at[i] = -1, rec->alive[i] = 1;
     for (int64_t k = 0; k < pl->steps; k++) rec->tick[k] = 0.0, rec->lat[k] = 0.0;
     int64_t taken = 0;

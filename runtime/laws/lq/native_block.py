@@ -65,10 +65,10 @@ class NativeReferenceBlock:
 
     def c_law(self) -> dict[str, Any]:
         """How a loop written in C steps this block as :meth:`step` does (``gainlink.hil.loop.lockstep``: kind 1,
-        ``gl_ref_block`` on this block's dims, matrices and states)."""
+        ``gl_ref_block`` on this block's dims, matrices and states; the float64 law records no sigma)."""
         return {"kind": 1, "fn": ctypes.cast(self._fn, ctypes.c_void_p).value, "dims": self._dims,
                 "mats": self._table, "state": self.state, "state_width": self.state.shape[1], "law_q": self.q,
-                "fault": status_flags.FAULT}  # fmt: skip
+                "records_sigma": False, "fault": status_flags.FAULT}  # fmt: skip
 
     def step(self, Y: np.ndarray, R: np.ndarray, S: np.ndarray) -> BlockStep:
         """Row i of ``Y`` (B, p), ``R`` (B, q) to instance i (``S`` unused: this law is not scheduled)."""
