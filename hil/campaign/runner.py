@@ -263,15 +263,18 @@ def batch_sizes(kind: str, runs: int, threads: int, *, batch: int | None = None)
 
     HIL: 1 (a run lasts seconds). SIL: blocks stepped together on the worker (:mod:`gainlink.hil.loop.block`), as
     few as keep every thread busy (:data:`BLOCKS_PER_THREAD` each) and no larger than :data:`MAX_BLOCK` runs (a
-    block's records live in the worker's memory until it ends), the runs shared evenly. ``batch`` fixes the size
-    instead.
+    block's records live in the worker's memory until it ends), the runs shared evenly, and as many blocks as a
+    whole number of rounds of the threads: 5 blocks on 2 threads would leave one thread running the fifth alone
+    while the other waits (a sixth of the campaign's runs time lost), 6 do not. ``batch`` fixes the size instead.
     """
     if batch is not None or kind == "hil":
         size = batch or 1
         return [size] * (runs // size) + ([runs % size] if runs % size else [])
     if not runs:
         return []
-    count = min(runs, max(-(-runs // MAX_BLOCK), max(threads, 1) * BLOCKS_PER_THREAD))
+    threads = max(threads, 1)
+    rounds = -(-max(-(-runs // MAX_BLOCK), threads * BLOCKS_PER_THREAD) // threads)
+    count = min(runs, rounds * threads)
     return [runs // count + (1 if i < runs % count else 0) for i in range(count)]
 
 
