@@ -9,7 +9,10 @@ and gainlink's version — so a result file names exactly one run and a resumed 
 
 Planning draws every draw once into arrays (:func:`draw_table`: a seed and a value per axis, 8 bytes each), designs
 once per grid point (per run only when a draw axis changes the spec) and keeps each run's id (20 bytes) and whether
-its design failed (1 byte); a run's scenario is made again when it is read. Not every run's scenario goes through
+its design failed (1 byte); a run's scenario is made again when it is read. The ids come without making the runs where
+the draw axes set, scale or shift scenario values: each grid point's id body is written once as canonical JSON with a
+slot for each drawn value and the seed, and a run's id hashes that text with its values' JSON in the slots
+(:class:`_IdTemplate`; making the run is its oracle and its fallback). Not every run's scenario goes through
 the scenario parser: each grid point's runs at the draws that hold the smallest and the largest value of each numeric
 draw axis, and the first draw of each combination of choice values (:meth:`_Planner.checked`). A drawn number reaches
 its path unchanged, scaled or shifted (a monotone map), and the scenario parser's checks of one number are ranges
@@ -27,6 +30,7 @@ import itertools
 import json
 import math
 import pickle
+import re
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -479,16 +483,154 @@ class _Planner:
         return [g * c.runs + j for g in range(len(self.points)) for j in sorted(draws)]
 
     def index(self) -> None:
-        """Make every run once: its id and whether its design failed."""
-        for k in range(len(self.ids)):
-            point = self.point(k)
-            self.ids[k] = point.id.encode("ascii")
-            self.failed[k] = point.error is not None
+        """Every run's id and whether its design failed: by its grid point's :class:`_IdTemplate` where the axes allow
+        one (:func:`_templated`), else by making the run (:meth:`point`, also the template's fallback for a run whose
+        value it cannot write)."""
+        c = self.campaign
+        drawn = [self._drawn_values(a) for a in c.draws]
+        seeds = self.seeds.tolist()
+        for g in range(len(self.points)):
+            template = self._id_template(g) if _templated(c) else None
+            for j in range(c.runs):
+                k = g * c.runs + j
+                rid = None if template is None else template.run_id([col[j] for col in drawn], seeds[j])
+                if rid is None:
+                    point = self.point(k)
+                    rid, failed = point.id, point.error is not None
+                else:
+                    failed = template.failed
+                self.ids[k], self.failed[k] = rid.encode("ascii"), failed
+
+    def _drawn_values(self, axis: Axis) -> list:
+        """Every draw's value of draw axis ``axis`` as :meth:`values` gives it (a float, or a choice's value)."""
+        col = self.drawn[axis.name].tolist()
+        if axis.distribution == "choice":
+            return [axis.params["values"][int(x)] for x in col]
+        return [float(x) for x in col]
+
+    def _id_template(self, g: int) -> _IdTemplate | None:
+        """Grid point ``g``'s :class:`_IdTemplate`, ``None`` when only making each run can say (a target that is not
+        a number to scale or shift, an FMU plant, a path the base refuses: the run made says why)."""
+        c = self.campaign
+        values = self.values(g, 0)
+        scenario = pickle.loads(self._scenario)
+        leaves = []
+        try:
+            for axis in c.grid:
+                _apply_axis(axis, values[axis.name], spec=None, scenario=scenario, window=c.fault_window)
+            for i, axis in enumerate(c.draws):
+                for target in axis.targets:
+                    base = _leaf(scenario, target)
+                    if axis.apply != "set" and not _is_number(base):
+                        return None
+                    set_path(scenario, target, _SLOT.format(len(leaves)))
+                    leaves.append((i, axis.apply, base))
+        except CampaignError:
+            return None
+        plant = scenario.get("plant")
+        if isinstance(plant, dict) and plant.get("kind") == "fmu":
+            return None
+        got = self._design(g, values, None, _Where(g * c.runs, values))
+        sha = None
+        if isinstance(got, tuple):
+            sha = got[1]
+            self.artifacts.setdefault(sha, got[0])
+        body = {"kind": c.kind, "artifact": sha, "scenario": scenario, "seed": _SLOT.format("seed"),
+                "gainlink": __version__}  # fmt: skip
+        return _IdTemplate.of(canonical_json(body), leaves, failed=not isinstance(got, tuple))
+
+
+#: A drawn value's (or the seed's) place in a grid point's :class:`_IdTemplate`: a string no scenario holds.
+_SLOT = "gainlink-plan-slot-{}-7c1e"
+_PLANT_FILE = ("plant.kind", "plant.fmu", "plant.path")  # what makes a plant an FMU, read by _fmu_blob
+_SLOTS = re.compile('"' + _SLOT.format("(seed|[0-9]+)") + '"')
+
+
+class _IdTemplate:
+    """The run ids of one grid point's runs without making their scenarios: the canonical JSON of an id's body
+    (:func:`run_id`) made once with a slot where each drawn value lands and where the seed goes; a run's id is the
+    sha256 of that text with its own values' JSON in the slots (what :func:`set_path` leaves there: the value, or the
+    base's number scaled or shifted by it, by Python's own float arithmetic). Making each run (:meth:`_Planner.point`)
+    is its oracle, and its fallback for a value it cannot write."""
+
+    def __init__(self, parts: list[str], slots: list[int | None], leaves: list[tuple[int, str, Any]], failed: bool):
+        self.parts, self.slots, self.leaves, self.failed = parts, slots, leaves, failed
+
+    @classmethod
+    def of(cls, text: str, leaves: list[tuple[int, str, Any]], *, failed: bool) -> _IdTemplate | None:
+        """The template of canonical JSON ``text`` holding each slot once (``leaves``: each drawn slot's draw axis,
+        ``apply`` and base value), ``None`` if it does not."""
+        found = _SLOTS.split(text)
+        parts, names = found[::2], found[1::2]
+        slots = [None if n == "seed" else int(n) for n in names]
+        if sorted(slots, key=lambda x: -1 if x is None else x) != [None, *range(len(leaves))]:
+            return None
+        return cls(parts, slots, leaves, failed)
+
+    def run_id(self, values: list, seed: int) -> str | None:
+        """The id of the run with draw-axis values ``values`` (in the campaign's order) and ``seed``; ``None`` when a
+        value is not one the template writes (a non-finite number, a scale or shift by a non-number)."""
+        texts = []
+        for slot in self.slots:
+            if slot is None:
+                texts.append(str(seed))
+                continue
+            axis, apply, base = self.leaves[slot]
+            text = _leaf_json(values[axis], apply, base)
+            if text is None:
+                return None
+            texts.append(text)
+        body = "".join(itertools.chain.from_iterable(zip(self.parts, [*texts, ""])))
+        return hashlib.sha256(body.encode("ascii")).hexdigest()[:20]
+
+
+def _templated(campaign: Campaign) -> bool:
+    """Whether a campaign's run ids can come from :class:`_IdTemplate`: each draw axis sets, scales or shifts scenario
+    values (not the spec, not a fault or the transport), and no target lies inside another's (or is another's)."""
+    if any(a.design or a.apply not in ("set", "scale", "add") for a in campaign.draws):
+        return False
+    if any(t.startswith(("faults.", "transport.")) or t in _PLANT_FILE for a in campaign.draws for t in a.targets):
+        return False
+    paths = [path_steps(t) for a in (*campaign.grid, *campaign.draws) for t in a.targets if not t.startswith("spec.")]
+    return not any(i != j and q[: len(p)] == p for i, p in enumerate(paths) for j, q in enumerate(paths))
+
+
+def _leaf(tree: dict, path: str) -> Any:
+    """The value at ``path`` in ``tree``, ``None`` where there is none."""
+    node: Any = tree
+    for step in path_steps(path):
+        if isinstance(step, int):
+            if not isinstance(node, list) or step >= len(node):
+                return None
+        elif not isinstance(node, dict) or step not in node:
+            return None
+        node = node[step]
+    return node
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _leaf_json(value: Any, apply: str, base: Any) -> str | None:
+    """The canonical JSON of what :func:`set_path` leaves at a target given ``value`` (``apply``: set, scale or add to
+    ``base``); ``None`` for a value only the run made can say (a non-finite number, a non-number to scale or add)."""
+    if apply != "set":
+        if not _is_number(value):
+            return None
+        value = base * value if apply == "scale" else base + value
+    if isinstance(value, float):
+        return repr(value) if math.isfinite(value) else None
+    try:
+        return canonical_json(value)
+    except (GainlinkError, TypeError, ValueError):
+        return None
 
 
 def plan_campaign(campaign: Campaign) -> CampaignPlan:
-    """Plan ``campaign``: check it, design each grid point, and make each run once for its id, keeping none; its
-    runs are returned as a :class:`PlannedRuns` (generated again when read).
+    """Plan ``campaign``: check it, design each grid point, and give each run its id (from its grid point's
+    :class:`_IdTemplate` where the axes allow, else by making the run), keeping no run; its runs are returned as a
+    :class:`PlannedRuns` (generated again when read).
 
     A mistake of the campaign file is refused here, before any run (:class:`CampaignError`, one line naming the
     key): a value of another kind than the scenario holds (:func:`.preflight.check_axis_values`), a spec the spec

@@ -5,7 +5,8 @@
   and measures;
 - ``campaign.csv``: one row per run (axis values, status, reasons, the main metrics);
 - ``envelopes.png``: percentiles (5-95, 25-75, median) of every output and command over time across
-  the finished runs, with the failed runs' median dashed;
+  the finished runs (at most :data:`ENVELOPE_RUNS` of them, every k-th in plan order, as its title says), with
+  the failed runs' median dashed;
 - ``scatter.png``: for each drawn (or numeric grid) axis, each tracked output's IAE against it, failed
   runs marked;
 - ``failures.txt``: the failure table (run, axis values, reasons), worst first;
@@ -36,6 +37,9 @@ from .store import members
 
 PERCENTILES = (5, 25, 50, 75, 95)
 ENVELOPE_BINS = 512
+#: The most runs whose traces the envelopes read (:func:`envelope_runs`): 512 bins a sample show no more than a few
+#: thousand runs' percentiles, and each run read costs the report ~0.1 ms of CPU.
+ENVELOPE_RUNS = 2000
 MAX_POINT_LINES = 30
 MAX_SCATTER = 20_000
 HISTOGRAM_RUNS = 128  # runs histogrammed at a time: its float64 and index temporaries ~16 MB, not a block's ~100
@@ -138,7 +142,9 @@ def _model_lines(tally: Tally) -> list[str]:
 
 def envelopespng_bytes(plan: CampaignPlan, status: dict[str, str], store: Any) -> bytes:
     """Percentile envelopes of outputs and commands over time across the runs ``status`` (id -> ``pass`` or
-    ``fail``) of the most common trace length."""
+    ``fail``, in plan order) of the most common trace length: at most :data:`ENVELOPE_RUNS` of them, every k-th
+    in plan order (:func:`envelope_runs`), and the failed runs' median by the same rule over the failed runs; the
+    title and the legend say which runs when not all are drawn."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -160,14 +166,7 @@ def envelopespng_bytes(plan: CampaignPlan, status: dict[str, str], store: Any) -
         ax.fill_between(t, pct[1], pct[3], alpha=0.35, color="C0", label="25-75 %")
         ax.plot(t, pct[2], color="C0", lw=1.2, label="median")
         if bands["failed"]:
-            ax.plot(
-                t,
-                bands["failed_median"][:, i],
-                "--",
-                color="C3",
-                lw=1,
-                label=f"median of {bands['failed']} failed",
-            )
+            ax.plot(t, bands["failed_median"][:, i], "--", color="C3", lw=1, label=_failed_label(bands))
         names = sig["outputs"] if key == "y" else sig["inputs"]
         name = names[j] if j < len(names) else f"{key}{j}"
         unit = sig.get("units", {}).get(name)
@@ -175,85 +174,158 @@ def envelopespng_bytes(plan: CampaignPlan, status: dict[str, str], store: Any) -
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=7)
     axes[-1, 0].set_xlabel(f"t [{sig.get('units', {}).get('time', 's')}]")
-    fig.suptitle(f"{plan.campaign.name}: outputs and commands over {bands['runs']} runs")
+    fig.suptitle(f"{plan.campaign.name}: {_envelope_scope(bands)}")
     return png_bytes(fig)
 
 
-def envelope_bands(store: Any, status: dict[str, str], *, bins: int = ENVELOPE_BINS) -> dict | None:
+def _envelope_scope(bands: dict) -> str:
+    """What the envelopes cover, for the title: every run, or which of the finished runs."""
+    if bands["every"] == 1:
+        return f"outputs and commands over {bands['runs']} runs"
+    return (
+        f"percentiles over {bands['runs']} of {bands['finished']} finished runs, "
+        f"every {_ordinal(bands['every'])} in plan order"
+    )
+
+
+def _failed_label(bands: dict) -> str:
+    """The failed runs' median's legend: how many, and which when not all are drawn."""
+    if bands["failed_every"] == 1:
+        return f"median of {bands['failed']} failed"
+    return f"median of {bands['failed']} of {bands['failed_of']} failed, every {_ordinal(bands['failed_every'])}"
+
+
+def _ordinal(n: int) -> str:
+    """``2nd``, ``5th``, ``11th``, ``21st``."""
+    last = "th" if n % 100 in (11, 12, 13) else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{last}"
+
+
+def envelope_runs(ids: np.ndarray, cap: int = ENVELOPE_RUNS) -> tuple[np.ndarray, int]:
+    """The runs the envelopes read of ``ids`` (distinct, in plan order): every k-th from the first, k the smallest
+    step that keeps them at most ``cap`` (all of them when they are that few); returns them and k. A rule of the plan
+    order alone, so the same runs give the same picture however they were stored."""
+    every = max(1, -(-len(ids) // cap))
+    return ids[::every], every
+
+
+def envelope_bands(
+    store: Any, status: dict[str, str], *, bins: int = ENVELOPE_BINS, cap: int | None = None
+) -> dict | None:
     """The percentiles (:data:`PERCENTILES`) of every output and command at each stored sample across the runs
-    ``status`` (id -> ``pass`` or ``fail``) whose traces have the most common shape, and the failed runs' median;
-    ``None`` without a stored trace.
+    ``status`` (id -> ``pass`` or ``fail``, in plan order) whose traces have the most common shape, and the failed
+    runs' median; ``None`` without a stored trace.
+
+    Bounded: of more than ``cap`` (default :data:`ENVELOPE_RUNS`) finished runs only every k-th in plan order is
+    read (:func:`envelope_runs`), and the failed runs' median is over every failed run when they are at most ``cap``,
+    else over every k'-th of them by the same rule; ``runs`` and ``failed`` count the runs of the most common shape so
+    read, ``finished`` and ``failed_of`` all the distinct finished and failed runs, ``every`` and ``failed_every`` the
+    steps (1: every run). The other runs' traces are still decoded (a block file's row group holds 128 runs: while
+    the step is below 128, every row group holds a chosen run), but not stacked, spilled or histogrammed.
 
     Streamed: the block files are read once, one at a time (each trace shape's runs: each sample's smallest and largest
     finite value, the stack spilled as float32 to an anonymous temporary file in the campaign folder; the shapes are
     counted in the same pass), then the most common shape's spill is read back a block at a time into a histogram of
     ``bins`` equal bins between them per sample and signal, so the memory is the histograms', not the runs'. A
-    percentile is numpy's linear one (``np.nanpercentile``) with each order statistic taken at the centre of its bin:
-    within half a bin, ``(max - min) / (2 * bins)`` of that sample, of the exact value (below a pixel of the plot). NaN
-    samples are left out as nanpercentile leaves them; an infinite one counts in the end bin on its side.
+    percentile is numpy's linear one (``np.nanpercentile``) over the runs read with each order statistic taken at the
+    centre of its bin: within half a bin, ``(max - min) / (2 * bins)`` of that sample (the extremes over every run
+    read), of the exact value (below a pixel of the plot). NaN samples are left out as nanpercentile leaves them; an
+    infinite one counts in the end bin on its side.
 
-    Returns ``{"t", "percentiles": (len(PERCENTILES), N, S), "failed_median": (N, S), "runs", "failed", "outputs",
-    "inputs", "half_bin": (N, S)}`` with the S signals the outputs then the commands.
+    Returns ``{"t", "percentiles": (len(PERCENTILES), N, S), "failed_median": (N, S), "runs", "failed", "finished",
+    "failed_of", "every", "failed_every", "outputs", "inputs", "half_bin": (N, S)}`` with the S signals the outputs
+    then the commands.
     """
+    cap = ENVELOPE_RUNS if cap is None else cap
     ids, failing = _status_ids(status)
+    chosen, every = envelope_runs(ids, cap)
+    failed, failed_every = envelope_runs(failing, cap)
     with tempfile.TemporaryFile(dir=store.out) as spill:  # the stacks read once, kept as float32 for the 2nd pass
-        seen = _spill_stacks(store, ids, np.unique(failing), spill)
+        seen = _spill_stacks(store, np.unique(chosen), np.unique(failed), spill)
         if not seen:
             return None
         shape = max(seen, key=lambda k: seen[k].runs)  # the most common shape; ties: the first met
         one = seen[shape]
         lo, hi = np.nan_to_num(one.lo.astype(float)), np.nan_to_num(one.hi.astype(float))
         width = np.where(hi > lo, (hi - lo) / bins, 1.0)
-        counts = np.zeros((2, lo.size * bins), np.int64)  # all runs, failed runs
-        for at, bad in one.chunks:
-            spill.seek(at)
-            for i in range(0, bad.size, HISTOGRAM_RUNS):
-                part = bad[i : i + HISTOGRAM_RUNS]
-                sig = np.fromfile(spill, np.float32, part.size * lo.size).reshape(part.size, *lo.shape)
-                where = _bin_numbers(sig, lo, width, bins)
-                counts[0] += _counts(where, lo.size * bins)
-                if part.any():  # the failed runs' bins are theirs of all runs: counted, not made again
-                    counts[1] += _counts(where[part], lo.size * bins)
-    counts = counts.reshape(2, *lo.shape, bins)
+        counts = _histograms(one, spill, lo, width, bins)
     pct = np.stack([_percentile(counts[0], q, lo, width) for q in PERCENTILES])
     return {
         "t": one.t,
         "percentiles": pct,
         "failed_median": _percentile(counts[1], 50, lo, width),
         "runs": one.runs,
-        "failed": int(sum(b.sum() for _, b in one.chunks)),
+        "failed": int(sum(b.sum() for _, _, b in one.chunks)),
+        "finished": len(ids),
+        "failed_of": len(failing),
+        "every": every,
+        "failed_every": failed_every,
         "outputs": shape[1],
         "inputs": shape[2],
         "half_bin": width / 2,
     }
 
 
+def _histograms(one: _Spilled, spill: IO[bytes], lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:
+    """The histograms (2, N, S, ``bins``) of the runs of ``one`` read back from ``spill``: of the runs chosen for the
+    percentiles, and of the failed runs chosen for their median. Each run is binned once; the bin numbers are counted
+    :data:`HISTOGRAM_RUNS` runs at a time across the blocks' chunks (a count is a pass over every bin: the few runs a
+    chunk holds once only every k-th is read are gathered first)."""
+    cells = lo.size * bins
+    counts = np.zeros((2, cells), np.int64)
+    held: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])
+    for at, chosen, bad in one.chunks:
+        spill.seek(at)
+        for i in range(0, bad.size, HISTOGRAM_RUNS):
+            rows = (chosen[i : i + HISTOGRAM_RUNS], bad[i : i + HISTOGRAM_RUNS])
+            sig = np.fromfile(spill, np.float32, rows[0].size * lo.size).reshape(rows[0].size, *lo.shape)
+            where = _bin_numbers(sig, lo, width, bins)
+            for k, pick in enumerate(rows):
+                if pick.any():  # the failed runs' bins are theirs of all runs: counted, not made again
+                    held[k].append(where if pick.all() else where[pick])
+                if sum(map(len, held[k])) >= HISTOGRAM_RUNS:
+                    counts[k] += _counts(np.concatenate(held[k]), cells)
+                    held[k].clear()
+    for k in (0, 1):
+        if held[k]:
+            counts[k] += _counts(np.concatenate(held[k]), cells)
+    return counts.reshape(2, *lo.shape, bins)
+
+
 class _Spilled:
-    """The runs of one trace shape spilled: their times, each sample's extremes, and each block's place in the spill
-    file with which of its runs failed."""
+    """The runs of one trace shape spilled: their times, each sample's extremes, how many of them the percentiles
+    count, and each block's place in the spill file with which of its runs the percentiles count and which failed
+    runs the failed median does."""
 
     def __init__(self, t: np.ndarray) -> None:
         self.t, self.lo, self.hi, self.runs = t, None, None, 0
-        self.chunks: list[tuple[int, np.ndarray]] = []
+        self.chunks: list[tuple[int, np.ndarray, np.ndarray]] = []
 
 
-def _spill_stacks(store: Any, ids: np.ndarray, failing: np.ndarray, spill: IO[bytes]) -> dict[tuple, _Spilled]:
-    """Read every block's traces of the runs ``ids`` once (``failing``: the failed ones, sorted and distinct), spill
-    them to ``spill`` as float32 and note, per trace shape (samples, outputs, commands), what :func:`envelope_bands`
-    needs: one pass, no separate read of the shapes."""
+def _spill_stacks(store: Any, chosen: np.ndarray, failing: np.ndarray, spill: IO[bytes]) -> dict[tuple, _Spilled]:
+    """Read every block's traces of the runs ``chosen`` and ``failing`` (the percentiles' and the failed median's,
+    each sorted and distinct) once, spill them to ``spill`` as float32 and note, per trace shape (samples, outputs,
+    commands), what :func:`envelope_bands` needs: one pass, no separate read of the shapes."""
     seen: dict[tuple, _Spilled] = {}
     at = 0
-    for names, st in store.trace_stacks(ids, fields=("t", "y", "u")):
+    wanted = np.union1d(chosen, failing) if len(failing) and not _covers(chosen, failing) else chosen
+    for names, st in store.trace_stacks(wanted, fields=("t", "y", "u")):
         shape = (st["t"].shape[1], st["y"].shape[2], st["u"].shape[2])
         one = seen.setdefault(shape, _Spilled(st["t"][0].astype(float)))
         sig = np.concatenate([st["y"], st["u"]], axis=2)
         one.lo, one.hi = _extremes(sig, one.lo, one.hi)
-        one.chunks.append((at, members(names, failing)))
-        one.runs += len(names)
+        mine = members(names, chosen)
+        one.chunks.append((at, mine, members(names, failing)))
+        one.runs += int(mine.sum())
         sig.tofile(spill)
         at += sig.nbytes
     spill.flush()
     return seen
+
+
+def _covers(pool: np.ndarray, ids: np.ndarray) -> bool:
+    """Whether every one of ``ids`` is in ``pool`` (both sorted and distinct)."""
+    return len(ids) <= len(pool) and bool(members(ids, pool).all())
 
 
 def _extremes(sig: np.ndarray, lo: np.ndarray | None, hi: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -265,11 +337,17 @@ def _extremes(sig: np.ndarray, lo: np.ndarray | None, hi: np.ndarray | None) -> 
 
 
 def _status_ids(status: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray]:
-    """The runs of ``status`` (id -> ``pass`` or ``fail``) and the failed ones, as ASCII bytes arrays."""
+    """The distinct runs of ``status`` (id -> ``pass`` or ``fail``) and the failed ones, as ASCII bytes arrays in
+    ``status``' order (a run planned twice: where it is first)."""
     if isinstance(status, RunStatus):
-        return status.ids, status.ids[status.failed]
-    ids = np.array([i.encode("ascii", "replace") for i in status], dtype="S")
-    return ids, ids[np.array([v == "fail" for v in status.values()], bool)]
+        ids, failed = status.ids, status.failed
+    else:
+        ids = np.array([i.encode("ascii", "replace") for i in status], dtype="S")
+        failed = np.array([v == "fail" for v in status.values()], bool)
+    first = np.sort(np.unique(ids, return_index=True)[1])
+    if len(first) < len(ids):
+        ids, failed = ids[first], failed[first]
+    return ids, ids[failed]
 
 
 def _bin_numbers(sig: np.ndarray, lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:

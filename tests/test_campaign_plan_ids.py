@@ -1,0 +1,83 @@
+"""The plan's run ids made from each grid point's id template (one canonical JSON text with a slot per drawn value)
+are the ids of the runs made whole.
+
+Oracles: the run made whole (``_Planner.point``: its scenario built and its body through ``json.dumps``), and for
+one campaign the id worked out by hand from the run's definition (the base scenario with the values set, scaled,
+shifted).
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+
+import numpy as np
+import pytest
+from gainlink.hil.campaign import parse_campaign
+from gainlink.hil.campaign import plan as plan_module
+from gainlink.hil.campaign.plan import draw_values, plan_campaign
+from gainlink.version import __version__
+from support.paths import EXAMPLES
+
+RUNS = 40
+BASE = {
+    "duration": 0.5,
+    "plant": {"kind": "cart_pendulum", "outputs": ["x", "theta"], "parameters": {"M": 1.0, "m": 0.1, "l": 0.5}},
+}
+SCALE_M = {"target": "plant.parameters.M", "distribution": "uniform", "low": 0.7, "high": 1.3, "apply": "scale"}
+ADD_M = {"target": "plant.parameters.m", "distribution": "normal", "mean": 0.0, "std": 0.005, "apply": "add"}
+SET_L = {"target": "plant.parameters.l", "distribution": "truncnormal", "mean": 0.5, "std": 0.02, "low": 0.45,
+         "high": 0.55}  # fmt: skip
+NEW_PATH = {"target": "noise.x", "distribution": "choice", "values": [1, 0.002, 0]}  # an int, a float; a new table
+GRID_X = {"target": "initial_state.x", "values": [0.2, 1.0]}
+
+
+def _campaign(spec: str, grid: list, draws: list) -> dict:
+    return {"name": "ids", "kind": "sil", "seed": 5, "runs": RUNS, "spec": spec, "scenario": copy.deepcopy(BASE),
+            "grid": grid, "draw": draws, "criteria": {"stable": True}}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("grid", "draws", "templated"),
+    [
+        ([GRID_X], [SCALE_M, ADD_M, SET_L, NEW_PATH], True),
+        ([{"target": "spec.limits.anti_windup", "values": ["clamp", "none"]}], [SCALE_M, NEW_PATH], True),
+        ([{"name": "M", "target": "plant.parameters.M", "values": [0.9, 1.1]}], [SCALE_M], False),  # one path, 2 axes
+    ],
+)
+def test_the_planned_ids_are_the_ids_of_the_runs_made_whole(grid, draws, templated):
+    """Every run's planned id and design flag against the run made whole (its scenario built, its body through
+    json's encoder), for draws that scale, shift and set values and make a new table, a grid over the spec, and a
+    campaign whose two axes touch one path (each run made: the template is not used there)."""
+    campaign = parse_campaign(_campaign(str(EXAMPLES / "pendulum.toml"), grid, draws))
+    plan = plan_campaign(campaign)
+    assert plan_module._templated(campaign) is templated
+    planner = plan.runs._planner
+    made = [planner.point(k) for k in range(len(plan.runs))]
+    assert plan.runs.ids.tolist() == [p.id.encode("ascii") for p in made]
+    assert plan.runs.failed.tolist() == [p.error is not None for p in made]
+    assert len(set(plan.runs.ids.tolist())) == len(plan.runs)
+
+
+def test_a_planned_id_is_the_hash_of_the_runs_definition_worked_by_hand():
+    """Run k's id from its definition: draw j's values from ``default_rng([seed, j])``, the base with M scaled, m
+    shifted, l set and noise.x a new table, initial_state.x the grid's; the body's canonical JSON and sha256."""
+    campaign = parse_campaign(_campaign(str(EXAMPLES / "pendulum.toml"), [GRID_X], [SCALE_M, ADD_M, SET_L, NEW_PATH]))
+    plan = plan_campaign(campaign)
+    (sha,) = plan.artifacts
+    for k in (0, 1, RUNS - 1, RUNS, 2 * RUNS - 1):
+        g, j = divmod(k, RUNS)
+        seed, v = draw_values(campaign, j)
+        scenario = copy.deepcopy(BASE)
+        p = scenario["plant"]["parameters"]
+        p["M"] *= v["plant.parameters.M"]
+        p["m"] += v["plant.parameters.m"]
+        p["l"] = v["plant.parameters.l"]
+        scenario["noise"] = {"x": v["noise.x"]}
+        scenario["initial_state"] = {"x": GRID_X["values"][g]}
+        body = {"kind": "sil", "artifact": sha, "scenario": scenario, "seed": seed, "gainlink": __version__}
+        text = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+        assert plan.runs.ids[k] == hashlib.sha256(text.encode("ascii")).hexdigest()[:20].encode("ascii"), k
+    assert {type(v) for v in (draw_values(campaign, j)[1]["noise.x"] for j in range(RUNS))} == {int, float}
+    assert np.unique(plan.runs.ids).size == len(plan.runs)
