@@ -22,6 +22,7 @@ farthest from 1; ``model_warning``), from :mod:`gainlink.hil.loop.model_twin`.
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -174,9 +175,11 @@ def _measured(result: Any, artifact: Any, *, finite: bool, grew: dict, low: list
 
 
 def _clean(obj: Any) -> Any:
+    """``obj`` with every non-finite float (at any depth of its dicts) None (``math.isfinite``: a Python float's
+    test without numpy's per-call cost)."""
     if isinstance(obj, dict):
         return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, float) and not np.isfinite(obj):
+    if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj
 
