@@ -95,7 +95,7 @@ def measure_block(results: list, artifact: Any) -> list[dict]:
         Y = stacked([tr.y for tr in traces])
         finite = np.isfinite(Y).all(axis=(1, 2)).tolist()
         grew = _growth_columns(_error_columns(traces, artifact), n)
-        sat = np.stack([tr.sat for tr in traces])
+        sat = stacked([tr.sat for tr in traces])
         longest = _longest_columns(sat.any(axis=2) if sat.shape[2] else np.zeros(sat.shape[:2], bool))
         with warnings.catch_warnings():  # a column all NaN: nanmin's NaN (None), as a run alone gets it
             warnings.simplefilter("ignore", RuntimeWarning)

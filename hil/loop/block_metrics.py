@@ -86,7 +86,7 @@ def _group(traces: list[RunTrace], *, artifact: Any) -> dict:
     """The columns of runs of one length ``n`` > 0: each figure of :func:`~.metrics.compute_metrics` per run."""
     a = artifact
     Y, U = stacked([tr.y for tr in traces]), stacked([tr.u for tr in traces])
-    sat = np.stack([tr.sat for tr in traces])
+    sat = stacked([tr.sat for tr in traces])
     cols: dict[str, Any] = {
         "lost": np.count_nonzero(~stacked([tr.got for tr in traces]), axis=1),
         "sat_frac": sat.mean(axis=1),

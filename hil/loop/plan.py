@@ -130,12 +130,18 @@ def plan_like(plan: Plan, scenario: Scenario, *, law, artifact: Artifact, plant:
     return dataclasses.replace(plan, noise=_noise(scenario, plant=plant, N=plan.N, p=artifact.p))
 
 
+def saturated(bits: np.ndarray, m: int) -> np.ndarray:
+    """The saturation flags of ``bits`` (..., bit j: input j saturated) as bools (..., m)."""
+    return ((bits[..., None] >> np.arange(m)) & 1).astype(bool)
+
+
 class Recorder:
     """The per-step arrays of a run, filled as it goes; :meth:`trace` cuts them to the steps taken."""
 
     def __init__(self, plan: Plan, *, artifact: Artifact, plant: Plant, allocate: bool = True) -> None:
         N, a = plan.N, artifact
         self.plan = plan
+        self.SAT: np.ndarray | None = None  # the saturation flags as bools (N, m), when a campaign block made them
         if not allocate:  # a campaign block's run: its arrays are views of the block's record, set by the block
             return
         self.Y = np.zeros((N, a.p))
@@ -168,7 +174,7 @@ class Recorder:
             r=p.R[:steps],
             s=p.S[:steps],
             u=self.U[:steps],
-            sat=((self.SATBITS[:steps, None] >> np.arange(self.U.shape[1])) & 1).astype(bool),
+            sat=saturated(self.SATBITS[:steps], self.U.shape[1]) if self.SAT is None else self.SAT[:steps],
             got=self.GOT[:steps],
             latency_ns=self.LAT[:steps],
             tick_ns=self.TICK[:steps],
