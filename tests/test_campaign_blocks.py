@@ -638,14 +638,16 @@ def test_a_blocks_metrics_as_columns_are_each_runs_own_compute_metrics(design):
 
 def _as_block(traces: list, step_at: int | None, rng: np.random.Generator) -> list:
     """``traces`` (runs of one length) laid out as a block's: each run's arrays rows of one run-major record, every
-    run reading one shared reference array (a plan's: a step at ``step_at``, or constant)."""
+    run reading one shared reference array (a plan's: a step at ``step_at``, or constant) and one array of the steps
+    answered in time."""
     n, q = traces[0].t.size, traces[0].r.shape[1]
     shared = np.zeros((n, q)) + rng.normal(0.0, 0.5, q)
     if step_at is not None:
         shared[step_at:] += rng.normal(0.0, 1.0, q)
     shared.flags.writeable = False
+    got = rng.random(n) < 0.9  # one array every run reads, as a block's runs share theirs
     record = {name: np.stack([getattr(tr, name) for tr in traces]) for name in ("y", "u", "twin_y", "twin_u", "twin_z")}
-    return [dataclasses.replace(tr, r=shared, t=traces[0].t, **{k: v[i] for k, v in record.items()})
+    return [dataclasses.replace(tr, r=shared, t=traces[0].t, got=got[:], **{k: v[i] for k, v in record.items()})
             for i, tr in enumerate(traces)]  # fmt: skip
 
 
