@@ -636,6 +636,22 @@ def test_a_blocks_metrics_as_columns_are_each_runs_own_compute_metrics(design):
         assert {("overshoot", True), ("settled", False), ("integrator", True)} <= seen
 
 
+def test_an_arrays_address_is_numpys_own_whatever_its_layout():
+    """lockstep.address (what the C is handed and what block_metrics.stacked compares) equals numpy's own
+    ``__array_interface__`` address for the arrays a block hands over: contiguous rows, strided and reversed views,
+    a law state's column, read-only plan arrays, empty and 0-d arrays."""
+    from gainlink.hil.loop.lockstep import address
+
+    A, L = np.zeros((4, 5, 6)), np.zeros((3, 7, 5))
+    frozen = A.copy()
+    frozen.flags.writeable = False
+    cases = [A[1], A[1, 2:], A[:, 1], A[1][::-1], A[1][:, ::-1], A[..., 2], L[1, :, 4:5], L[2, :, 1:3], frozen[2],
+             frozen[:, 3], np.zeros(0), np.zeros((3, 0)), np.zeros(()),
+             np.broadcast_to(A[0], (3, 5, 6))[2]]  # fmt: skip
+    for a in cases:
+        assert address(a) == a.__array_interface__["data"][0], (a.shape, a.strides)
+
+
 def _as_block(traces: list, step_at: int | None, rng: np.random.Generator) -> list:
     """``traces`` (runs of one length) laid out as a block's: each run's arrays rows of one run-major record, every
     run reading one shared reference array (a plan's: a step at ``step_at``, or constant) and one array of the steps

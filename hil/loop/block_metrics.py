@@ -12,13 +12,13 @@ shape differently. What a block rarely has is left to the per-run functions: a r
 
 from __future__ import annotations
 
-import ctypes
 import math
 from typing import Any
 
 import numpy as np
 from gainlink.laws import flags
 
+from .lockstep import address
 from .metrics import RunTrace, _clean, compute_metrics
 from .model_twin import model_mismatch
 
@@ -58,22 +58,12 @@ def stacked(arrays: list[np.ndarray]) -> np.ndarray:
         a.base is first.base and a.shape == first.shape and a.strides == first.strides for a in arrays
     )
     if alike and len(arrays) > 1:
-        gaps = np.diff([_address(a) for a in arrays])
+        gaps = np.diff([address(a) for a in arrays])
         if (gaps == gaps[0]).all():
             view = np.lib.stride_tricks.as_strided(first, (len(arrays), *first.shape), (int(gaps[0]), *first.strides))
             view.flags.writeable = False
             return view
     return np.stack(arrays)
-
-
-def _address(a: np.ndarray) -> int:
-    """Where ``a``'s first element lies: through ctypes for a writable array (~1 us: the buffer of its first element,
-    a view contiguous whatever ``a``'s strides; a block's record rows), else its ``__array_interface__`` (~3.4 us:
-    the dict it builds; a plan's read-only arrays, an empty one)."""
-    try:
-        return ctypes.addressof(ctypes.c_char.from_buffer(a if a.flags.c_contiguous else a[(slice(0, 1),) * a.ndim]))
-    except (TypeError, ValueError, BufferError):
-        return a.__array_interface__["data"][0]
 
 
 def _steps(reduce: str, A: np.ndarray, **kw) -> np.ndarray:
