@@ -51,9 +51,12 @@ def block_metrics(traces: list[RunTrace], *, artifact: Any, mode: str, late: int
 
 
 def stacked(arrays: list[np.ndarray]) -> np.ndarray:
-    """The runs' arrays of one shape as one (runs, ...) array: a read-only view when they lie equally spaced in one
-    array (a block's record, a plan's shared references), else a copy."""
+    """The runs' arrays of one shape as one (runs, ...) array: a read-only view when they are one array (a plan's
+    times or references every run of a block reads: stride 0) or lie equally spaced in one (a block's record), else
+    a copy."""
     first = arrays[0]
+    if all(a is first for a in arrays):
+        return np.broadcast_to(first, (len(arrays), *first.shape))
     alike = first.base is not None and all(
         a.base is first.base and a.shape == first.shape and a.strides == first.strides for a in arrays
     )

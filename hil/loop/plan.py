@@ -167,22 +167,25 @@ class Recorder:
         def nan(width: int) -> np.ndarray:
             return np.full((steps, width), np.nan)
 
+        def cut(a: np.ndarray) -> np.ndarray:  # the array itself when it holds just the steps: the runs of a block
+            return a if len(a) == steps else a[:steps]  # that share one (a plan's times) give that one object
+
         z = None if tw is None else law.integrators(artifact, tw.state)
         return RunTrace(
-            t=p.t[:steps],
-            y=self.Y[:steps],
-            r=p.R[:steps],
-            s=p.S[:steps],
-            u=self.U[:steps],
-            sat=saturated(self.SATBITS[:steps], self.U.shape[1]) if self.SAT is None else self.SAT[:steps],
-            got=self.GOT[:steps],
-            latency_ns=self.LAT[:steps],
-            tick_ns=self.TICK[:steps],
-            deadline_ns=self.DUE[:steps],
-            x=self.X[:steps],
-            flags=self.FLAGS[:steps],
-            sigma=self.SIGMA[:steps],
-            nan_sent=self.NAN[:steps],
+            t=cut(p.t),
+            y=cut(self.Y),
+            r=cut(p.R),
+            s=cut(p.S),
+            u=cut(self.U),
+            sat=saturated(self.SATBITS[:steps], self.U.shape[1]) if self.SAT is None else cut(self.SAT),
+            got=cut(self.GOT),
+            latency_ns=cut(self.LAT),
+            tick_ns=cut(self.TICK),
+            deadline_ns=cut(self.DUE),
+            x=cut(self.X),
+            flags=cut(self.FLAGS),
+            sigma=cut(self.SIGMA),
+            nan_sent=cut(self.NAN),
             twin_y=tw.y if tw else nan(self.Y.shape[1]),
             twin_u=tw.u if tw else nan(self.U.shape[1]),
             twin_z=z if z is not None else nan(p.R.shape[1]),
