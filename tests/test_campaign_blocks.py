@@ -636,6 +636,75 @@ def test_a_blocks_metrics_as_columns_are_each_runs_own_compute_metrics(design):
         assert {("overshoot", True), ("settled", False), ("integrator", True)} <= seen
 
 
+def test_an_arrays_address_is_numpys_own_whatever_its_layout():
+    """lockstep.address (what the C is handed and what block_metrics.stacked compares) equals numpy's own
+    ``__array_interface__`` address for the arrays a block hands over: contiguous rows, strided and reversed views,
+    a law state's column, read-only plan arrays, empty and 0-d arrays."""
+    from gainlink.hil.loop.lockstep import address
+
+    A, L = np.zeros((4, 5, 6)), np.zeros((3, 7, 5))
+    frozen = A.copy()
+    frozen.flags.writeable = False
+    cases = [A[1], A[1, 2:], A[:, 1], A[1][::-1], A[1][:, ::-1], A[..., 2], L[1, :, 4:5], L[2, :, 1:3], frozen[2],
+             frozen[:, 3], np.zeros(0), np.zeros((3, 0)), np.zeros(()),
+             np.broadcast_to(A[0], (3, 5, 6))[2]]  # fmt: skip
+    for a in cases:
+        assert address(a) == a.__array_interface__["data"][0], (a.shape, a.strides)
+
+
+def _as_block(traces: list, step_at: int | None, rng: np.random.Generator) -> list:
+    """``traces`` (runs of one length) laid out as a block's: each run's arrays rows of one run-major record, every
+    run reading one shared reference array (a plan's: a step at ``step_at``, or constant) and one array of the steps
+    answered in time."""
+    n, q = traces[0].t.size, traces[0].r.shape[1]
+    shared = np.zeros((n, q)) + rng.normal(0.0, 0.5, q)
+    if step_at is not None:
+        shared[step_at:] += rng.normal(0.0, 1.0, q)
+    shared.flags.writeable = False
+    got = rng.random(n) < 0.9  # one array every run reads, as a block's runs share theirs
+    record = {name: np.stack([getattr(tr, name) for tr in traces]) for name in ("y", "u", "twin_y", "twin_u", "twin_z")}
+    return [dataclasses.replace(tr, r=shared, t=traces[0].t, got=got[:], **{k: v[i] for k, v in record.items()})
+            for i, tr in enumerate(traces)]  # fmt: skip
+
+
+@pytest.mark.parametrize("design", ["pendulum", "regulator", "two_references"])
+@pytest.mark.parametrize("step_at", [None, 0, 1, 23, 49])
+def test_a_blocks_columns_over_its_record_and_a_shared_reference_are_each_runs_own(design, step_at):
+    """The block's own layout (each run's rows views of one record, one reference array all its runs share: the
+    columns' shared-start path, the traces' one gather) in blocks of 1 and 30 runs: block_metrics, measure_block and
+    downsampled_traces equal compute_metrics, measure and each run's own samples (the per-run functions, the
+    oracles), every figure exactly; NaN samples, non-finite integrators, runs without a twin and a regulation that
+    starts at its set point included (_traces)."""
+    from types import SimpleNamespace
+
+    from gainlink.hil.campaign.criteria import measure, measure_block
+    from gainlink.hil.campaign.worker import downsampled_trace, downsampled_traces
+    from gainlink.hil.loop.block_metrics import block_metrics
+    from gainlink.hil.loop.metrics import compute_metrics
+
+    a = _design(design)
+    rng = np.random.default_rng(57 + (step_at or 0))
+    for runs in (1, 30):
+        traces = _as_block(_traces(a, rng, [50] * runs), step_at, rng)
+        if a.q:  # the first run at its set point from its start: nothing to track
+            traces[0].y[:] = traces[0].r @ a.Ci + 0.0
+        timed = [{"latency_us": {"p50": 1.0}, "period_jitter_us": {"p50": None}}] * runs
+        got = block_metrics(traces, artifact=a, mode="sil", late=0, period_s=[a.Ts] * runs,
+                            model_start=[""] * runs, timed=timed)  # fmt: skip
+        results = [SimpleNamespace(trace=tr, complete=i % 7 != 3, reason=None, metrics=m)
+                   for i, (tr, m) in enumerate(zip(traces, got))]  # fmt: skip
+        measured = measure_block(results, a)
+        stored = downsampled_traces(traces)
+        for tr, g, result, mg, d in zip(traces, got, results, measured, stored):
+            want = compute_metrics(tr, artifact=a, mode="sil", late=0, period_s=a.Ts, timed=timed[0])
+            assert g == want and list(g) == list(want)
+            assert mg == measure(result, a)
+            alone = downsampled_trace(dataclasses.replace(tr, **{k: getattr(tr, k).copy() for k in "tyur"}))
+            for k in "tyur":
+                assert d[k].dtype == np.float32 and d[k].flags.c_contiguous
+                assert d[k].shape == alone[k].shape and np.array_equal(d[k], alone[k], equal_nan=True), k
+
+
 def test_a_scheduled_laws_block_records_each_runs_sigma_as_alone():
     """The scheduled tank (sigma: its measured level) in a block of four runs of other orifice coefficients and
     seeds, the host C and the float64 law: each run's trace (its sigma included, recorded because this law has one)

@@ -22,6 +22,7 @@ farthest from 1; ``model_warning``), from :mod:`gainlink.hil.loop.model_twin`.
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -94,7 +95,7 @@ def measure_block(results: list, artifact: Any) -> list[dict]:
         Y = stacked([tr.y for tr in traces])
         finite = np.isfinite(Y).all(axis=(1, 2)).tolist()
         grew = _growth_columns(_error_columns(traces, artifact), n)
-        sat = np.stack([tr.sat for tr in traces])
+        sat = stacked([tr.sat for tr in traces])
         longest = _longest_columns(sat.any(axis=2) if sat.shape[2] else np.zeros(sat.shape[:2], bool))
         with warnings.catch_warnings():  # a column all NaN: nanmin's NaN (None), as a run alone gets it
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -174,9 +175,11 @@ def _measured(result: Any, artifact: Any, *, finite: bool, grew: dict, low: list
 
 
 def _clean(obj: Any) -> Any:
+    """``obj`` with every non-finite float (at any depth of its dicts) None (``math.isfinite``: a Python float's
+    test without numpy's per-call cost)."""
     if isinstance(obj, dict):
         return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, float) and not np.isfinite(obj):
+    if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj
 

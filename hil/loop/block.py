@@ -36,7 +36,7 @@ from .bridge import Run, RunResult, build_plant, in_process, prepare_run
 from .closed_loop import Outcome
 from .lockstep import Steps
 from .metrics import timing
-from .plan import describe_artifact, plans_alike
+from .plan import describe_artifact, plans_alike, saturated
 from .scenario import Scenario
 from .twins import with_model_twin
 
@@ -288,7 +288,8 @@ def _results(runs: list[Run], rec: Steps, twins: list, *, describe: dict, ran: s
     N, states = rec.lat.size, len(runs[0].plant.state_names)
     shared = {"GOT": np.ones(N, dtype=bool), "LAT": rec.lat, "TICK": rec.tick, "SENT": rec.tick,
               "BACK": rec.tick + rec.lat, "DUE": np.full(N, np.nan), "NAN": np.zeros(N, dtype=bool),
-              "X": np.full((N, states), np.nan), "NAN_SIGMA": np.full(N, np.nan)}  # fmt: skip
+              "X": np.full((N, states), np.nan), "NAN_SIGMA": np.full(N, np.nan),
+              "SAT": saturated(rec.sat, rec.U.shape[2])}  # fmt: skip
     traces = []
     for i, run in enumerate(runs):
         steps = int(rec.steps[i])
@@ -313,7 +314,7 @@ def _record(run: Run, rec: Steps, i: int, *, shared: dict, describe: dict, ran: 
     trace reads the steps it took, as its own loop would have recorded them) and at what the runs share (the plant's
     states NaN without a twin, as a run alone records them); ``endpoint`` None: no link."""
     r = run.rec
-    r.Y, r.U, r.SATBITS, r.FLAGS = rec.Y[i], rec.U[i], rec.sat[i], rec.flags[i]
+    r.Y, r.U, r.SATBITS, r.FLAGS, r.SAT = rec.Y[i], rec.U[i], rec.sat[i], rec.flags[i], shared["SAT"][i]
     r.SIGMA = shared["NAN_SIGMA"] if rec.sigma is None else rec.sigma[i]
     for name in SHARED:
         setattr(r, name, shared[name])

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from gainlink.laws import flags
 
+from .lockstep import address
 from .metrics import RunTrace, _clean, compute_metrics
 from .model_twin import model_mismatch
 
@@ -50,14 +51,17 @@ def block_metrics(traces: list[RunTrace], *, artifact: Any, mode: str, late: int
 
 
 def stacked(arrays: list[np.ndarray]) -> np.ndarray:
-    """The runs' arrays of one shape as one (runs, ...) array: a read-only view when they lie equally spaced in one
-    array (a block's record, a plan's shared references), else a copy."""
+    """The runs' arrays of one shape as one (runs, ...) array: a read-only view when they are one array (a plan's
+    times or references every run of a block reads: stride 0) or lie equally spaced in one (a block's record), else
+    a copy."""
     first = arrays[0]
+    if all(a is first for a in arrays):
+        return np.broadcast_to(first, (len(arrays), *first.shape))
     alike = first.base is not None and all(
         a.base is first.base and a.shape == first.shape and a.strides == first.strides for a in arrays
     )
     if alike and len(arrays) > 1:
-        gaps = np.diff([a.__array_interface__["data"][0] for a in arrays])
+        gaps = np.diff([address(a) for a in arrays])
         if (gaps == gaps[0]).all():
             view = np.lib.stride_tricks.as_strided(first, (len(arrays), *first.shape), (int(gaps[0]), *first.strides))
             view.flags.writeable = False
@@ -72,13 +76,28 @@ def _steps(reduce: str, A: np.ndarray, **kw) -> np.ndarray:
     return np.stack(columns, axis=-1) if columns else np.zeros((A.shape[0], 0))
 
 
+def _count_false(A: np.ndarray) -> np.ndarray:
+    """The False steps of each row of ``A`` (runs, n), counted once when the runs share one array (stride 0: a
+    block's runs all answered in time)."""
+    if A.strides[0] == 0:
+        return np.broadcast_to(np.count_nonzero(~A[0]), A.shape[:1])
+    return np.count_nonzero(~A, axis=1)
+
+
+def _largest_difference(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Each run's largest ``|A - B|`` over its steps per column (runs, width), 0 when it has none: a column at a
+    time (the differences of the whole (runs, n, width) arrays and their middle axis's maxima cost ~1.8x as much)."""
+    columns = [np.abs(A[:, :, k] - B[:, :, k]).max(axis=1, initial=0.0) for k in range(A.shape[2])]
+    return np.stack(columns, axis=-1) if columns else np.zeros((A.shape[0], 0))
+
+
 def _group(traces: list[RunTrace], *, artifact: Any) -> dict:
     """The columns of runs of one length ``n`` > 0: each figure of :func:`~.metrics.compute_metrics` per run."""
     a = artifact
     Y, U = stacked([tr.y for tr in traces]), stacked([tr.u for tr in traces])
-    sat = np.stack([tr.sat for tr in traces])
+    sat = stacked([tr.sat for tr in traces])
     cols: dict[str, Any] = {
-        "lost": np.count_nonzero(~stacked([tr.got for tr in traces]), axis=1),
+        "lost": _count_false(stacked([tr.got for tr in traces])),
         "sat_frac": sat.mean(axis=1),
         "saturated_steps": np.count_nonzero(sat.any(axis=2), axis=1),
         "sat_per_input": sat.sum(axis=1),
@@ -97,10 +116,12 @@ def _group(traces: list[RunTrace], *, artifact: Any) -> dict:
         tracked_y = [Y[:, :, i] for i in range(a.p)]
         refs = [np.broadcast_to(a.y_op[i], Y.shape[:2]) for i in range(a.p)]
     cols["tracked"] = [_lists(_tracking(t, yj, rj)) for yj, rj in zip(tracked_y, refs)]
-    twin = np.array([tr.has_twin for tr in traces])
+    TU = stacked([tr.twin_u for tr in traces])
+    twin = np.isfinite(TU).all(axis=(1, 2))  # RunTrace.has_twin of each (n > 0 here)
     cols["has_twin"] = twin
     if twin.any():
-        cols["twin"] = _lists(_twin_columns(traces, Y=Y, U=U, tracked_y=tracked_y, refs=refs, t=t, artifact=a))
+        cols["twin"] = _lists(_twin_columns(traces, Y=Y, U=U, TU=TU, tracked_y=tracked_y, refs=refs, t=t,
+                                            artifact=a))  # fmt: skip
     return _lists(cols)
 
 
@@ -109,19 +130,19 @@ def _lists(cols: dict) -> dict:
     return {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in cols.items()}
 
 
-def _twin_columns(traces: list[RunTrace], *, Y, U, tracked_y, refs, t, artifact: Any) -> dict:
+def _twin_columns(traces: list[RunTrace], *, Y, U, TU, tracked_y, refs, t, artifact: Any) -> dict:
     """:func:`gainlink.proof.twin.twin_comparison`'s figures and the twin's integrators' peaks, per run (the rows
     of runs without a twin are computed and never read)."""
     a = artifact
-    TY, TU, TZ = (stacked([getattr(tr, name) for tr in traces]) for name in ("twin_y", "twin_u", "twin_z"))
+    TY, TZ = stacked([tr.twin_y for tr in traces]), stacked([tr.twin_z for tr in traces])
     dt = float(t[1] - t[0]) if t.size > 1 else 0.0
     if a.q:
         twin_tracked = [np.stack([tr.twin_y @ a.Ci[j] for tr in traces]) for j in range(a.q)]
     else:
         twin_tracked = [TY[:, :, i] for i in range(a.p)]
     cols = {
-        "du": _steps("max", np.abs(U - TU), initial=0.0),
-        "dy": _steps("max", np.abs(Y - TY), initial=0.0),
+        "du": _largest_difference(U, TU),
+        "dy": _largest_difference(Y, TY),
         "excursion": _steps("max", TY) - _steps("min", TY),
         "iae_real": [(np.sum(np.abs(r - y), axis=1) * dt).tolist() for y, r in zip(tracked_y, refs)],
         "iae_twin": [(np.sum(np.abs(r - y), axis=1) * dt).tolist() for y, r in zip(twin_tracked, refs)],
@@ -129,9 +150,22 @@ def _twin_columns(traces: list[RunTrace], *, Y, U, tracked_y, refs, t, artifact:
     }
     if a.q:
         cols["z_peak"] = _steps("max", np.abs(TZ))
-        cols["integral_cmd"] = [np.abs(tr.twin_z @ a.Ki.T).max(axis=0) if ok else None
-                                for tr, ok in zip(traces, cols["z_finite"])]  # fmt: skip
+        cols["integral_cmd"] = _integral_command(traces, TZ, finite=cols["z_finite"], Ki=a.Ki)
     return cols
+
+
+def _integral_command(traces: list[RunTrace], TZ: np.ndarray, *, finite: np.ndarray, Ki: Any) -> list:
+    """Each run's ``|z Ki^T|`` peak per input (None where its integrators are not finite): with one integrator the
+    product's every number is one multiplication (``z Ki[j]``, whatever kernel a run alone's product reaches; the
+    absolute value drops the sign a BLAS kernel's zero start gives a zero), so it is taken over the block at once;
+    with more, run by run (a BLAS kernel's sum order is its own). ``Ki`` is not read when no run's are finite (a
+    scheduled law's twin records none)."""
+    if not finite.any():
+        return [None] * len(traces)
+    if Ki.shape[1] == 1:
+        peaks = _steps("max", np.abs(TZ[:, :, :1] * Ki[:, 0]))
+        return [row if ok else None for row, ok in zip(peaks, finite)]
+    return [np.abs(tr.twin_z @ Ki.T).max(axis=0) if ok else None for tr, ok in zip(traces, finite)]
 
 
 def _tracking(t: np.ndarray, y: np.ndarray, r: np.ndarray) -> dict:
@@ -141,29 +175,45 @@ def _tracking(t: np.ndarray, y: np.ndarray, r: np.ndarray) -> dict:
     G, n = y.shape
     dt = float(t[1] - t[0]) if n > 1 else 0.0
     e = r - y
-    change = np.abs(np.diff(r, axis=1)) > 0
-    k0 = np.zeros(G, dtype=np.intp)
-    if n > 1:  # the last change + 1
-        k0 = np.where(change.any(axis=1), n - 1 - np.argmax(change[:, ::-1], axis=1), 0)
-    rows = np.arange(G)
-    e0 = e[rows, k0]
+    k0 = _starts(r)
+    e0 = e[np.arange(G), k0]
     iae = np.sum(np.abs(e), axis=1) * dt
-    seg = e * np.where(e0 != 0, np.sign(e0), 1.0)[:, None]
-    after = np.arange(n)[None, :] >= k0[:, None]
+    sign = np.where(e0 != 0, np.sign(e0), 1.0)[:, None]
     scale = np.abs(e0)
     regulation = scale < 1e-12  # no initial error: measured against the largest excursion instead
-    largest = np.where(after, np.abs(seg), -np.inf).max(axis=1)
-    scale = np.where(regulation, largest, scale)
-    lowest = -np.where(after, seg, np.inf).min(axis=1)
+    if (k0 == k0[0]).all():  # one start for every run (a shared reference): the steps from it, no masks
+        seg = e[:, k0[0] :] * sign
+        size = np.abs(seg)
+        largest, lowest = size.max(axis=1), -seg.min(axis=1)
+        scale = np.where(regulation, largest, scale)
+        outside = size > (BAND * scale)[:, None]
+    else:
+        seg = e * sign
+        size = np.abs(seg)
+        after = np.arange(n)[None, :] >= k0[:, None]
+        largest, lowest = np.where(after, size, -np.inf).max(axis=1), -np.where(after, seg, np.inf).min(axis=1)
+        scale = np.where(regulation, largest, scale)
+        outside = (size > (BAND * scale)[:, None]) & after
     with np.errstate(divide="ignore", invalid="ignore"):
         overshoot = np.where(lowest > 0.0, lowest, 0.0) / scale * 100.0  # Python's max(0.0, x): 0.0 unless x > 0
-    outside = (np.abs(seg) > (BAND * scale)[:, None]) & after
-    last = n - 1 - np.argmax(outside[:, ::-1], axis=1)
+    last = n - 1 - np.argmax(outside[:, ::-1], axis=1)  # the row's last step outside (its slice ends at n - 1 too)
     settle = t[np.minimum(last + 1, n - 1)] - t[k0]
     settle = np.where(last == n - 1, np.nan, settle)
     settle = np.where(outside.any(axis=1), settle, 0.0)
     return {"overshoot": np.where(regulation, np.nan, overshoot), "settle": settle, "iae": iae, "start": t[k0],
             "at_once": regulation & (scale < 1e-12), "regulation": regulation}  # fmt: skip
+
+
+def _starts(r: np.ndarray) -> np.ndarray:
+    """Each row's start (runs,): the step after its reference's last change, 0 when it never changes; found once
+    when the rows are one array every run shares (a view whose runs' stride is 0: the plan's references)."""
+    G, n = r.shape
+    rows = r[:1] if r.strides[0] == 0 else r
+    k0 = np.zeros(rows.shape[0], dtype=np.intp)
+    if n > 1:
+        change = np.abs(np.diff(rows, axis=1)) > 0
+        k0 = np.where(change.any(axis=1), n - 1 - np.argmax(change[:, ::-1], axis=1), 0)
+    return np.broadcast_to(k0, (G,)) if rows is not r else k0
 
 
 def _fin(x: Any) -> float | None:

@@ -3,6 +3,7 @@ integrator, overshoot, settling time, IAE)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -230,6 +231,6 @@ def link_capacity(sent_ns: np.ndarray, back_ns: np.ndarray, *, answered_in_time:
 def _clean(obj: Any) -> Any:
     if isinstance(obj, dict):
         return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, float) and not np.isfinite(obj):
+    if isinstance(obj, float) and not math.isfinite(obj):  # numpy's isfinite costs ~1 us a call on a float
         return None
     return obj

@@ -6,6 +6,7 @@ endpoint (:mod:`.closed_loop`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -85,11 +86,23 @@ def plan_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant) -> Pl
 
 
 def _noise(scenario: Scenario, *, plant: Plant, N: int, p: int) -> np.ndarray:
-    """The run's measurement noise per step (N, p), drawn from its own seed."""
-    noise_sd = np.array([scenario.noise.get(name, 0.0) for name in plant.output_names])
-    if not noise_sd.any():
+    """The run's measurement noise per step (N, p), drawn from its own seed: each draw times its output's standard
+    deviation, multiplied in place over the flat draws (numpy broadcasting a (N, 2) array by a (2,) row loops over
+    pairs, ~5x slower; the same products)."""
+    noise_sd = tuple(float(scenario.noise.get(name, 0.0)) for name in plant.output_names)
+    if not any(noise_sd):
         return np.zeros((N, p))
-    return np.random.default_rng(scenario.seed).standard_normal((N, p)) * noise_sd
+    draws = np.random.default_rng(scenario.seed).standard_normal(N * p)  # the (N, p) draws in their order
+    draws *= _tiled(noise_sd, N)
+    return draws.reshape(N, p)
+
+
+@functools.lru_cache(maxsize=4)
+def _tiled(row: tuple[float, ...], N: int) -> np.ndarray:
+    """``row`` repeated ``N`` times, flat and read-only (a campaign block's runs share one)."""
+    out = np.tile(np.array(row), N)
+    out.flags.writeable = False
+    return out
 
 
 PLANNED = ("duration", "mode", "period", "reference", "schedule_signal", "noise", "disturbances", "faults")
@@ -117,12 +130,18 @@ def plan_like(plan: Plan, scenario: Scenario, *, law, artifact: Artifact, plant:
     return dataclasses.replace(plan, noise=_noise(scenario, plant=plant, N=plan.N, p=artifact.p))
 
 
+def saturated(bits: np.ndarray, m: int) -> np.ndarray:
+    """The saturation flags of ``bits`` (..., bit j: input j saturated) as bools (..., m)."""
+    return ((bits[..., None] >> np.arange(m)) & 1).astype(bool)
+
+
 class Recorder:
     """The per-step arrays of a run, filled as it goes; :meth:`trace` cuts them to the steps taken."""
 
     def __init__(self, plan: Plan, *, artifact: Artifact, plant: Plant, allocate: bool = True) -> None:
         N, a = plan.N, artifact
         self.plan = plan
+        self.SAT: np.ndarray | None = None  # the saturation flags as bools (N, m), when a campaign block made them
         if not allocate:  # a campaign block's run: its arrays are views of the block's record, set by the block
             return
         self.Y = np.zeros((N, a.p))
@@ -148,22 +167,25 @@ class Recorder:
         def nan(width: int) -> np.ndarray:
             return np.full((steps, width), np.nan)
 
+        def cut(a: np.ndarray) -> np.ndarray:  # the array itself when it holds just the steps: the runs of a block
+            return a if len(a) == steps else a[:steps]  # that share one (a plan's times) give that one object
+
         z = None if tw is None else law.integrators(artifact, tw.state)
         return RunTrace(
-            t=p.t[:steps],
-            y=self.Y[:steps],
-            r=p.R[:steps],
-            s=p.S[:steps],
-            u=self.U[:steps],
-            sat=((self.SATBITS[:steps, None] >> np.arange(self.U.shape[1])) & 1).astype(bool),
-            got=self.GOT[:steps],
-            latency_ns=self.LAT[:steps],
-            tick_ns=self.TICK[:steps],
-            deadline_ns=self.DUE[:steps],
-            x=self.X[:steps],
-            flags=self.FLAGS[:steps],
-            sigma=self.SIGMA[:steps],
-            nan_sent=self.NAN[:steps],
+            t=cut(p.t),
+            y=cut(self.Y),
+            r=cut(p.R),
+            s=cut(p.S),
+            u=cut(self.U),
+            sat=saturated(self.SATBITS[:steps], self.U.shape[1]) if self.SAT is None else cut(self.SAT),
+            got=cut(self.GOT),
+            latency_ns=cut(self.LAT),
+            tick_ns=cut(self.TICK),
+            deadline_ns=cut(self.DUE),
+            x=cut(self.X),
+            flags=cut(self.FLAGS),
+            sigma=cut(self.SIGMA),
+            nan_sent=cut(self.NAN),
             twin_y=tw.y if tw else nan(self.Y.shape[1]),
             twin_u=tw.u if tw else nan(self.U.shape[1]),
             twin_z=z if z is not None else nan(p.R.shape[1]),

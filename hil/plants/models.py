@@ -6,6 +6,7 @@ Continuous models integrate with fixed-step RK4 (sub-steps no longer than ``step
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
@@ -97,7 +98,6 @@ class OdePlant(Plant):
                 )
             params[key] = float(value)
         self.params = params
-        self._P = columns(type(self), {k: np.array([v]) for k, v in params.items()})  # the kernel's, a batch of one
         self._in_idx = select(self.all_inputs, inputs, what="inputs", plant=self.name)
         self._out_idx = select(
             self.state_names, outputs if outputs is not None else self.default_outputs, what="outputs", plant=self.name
@@ -122,6 +122,12 @@ class OdePlant(Plant):
         """Columns :meth:`rates` uses computed once from the parameter columns ``P`` instead of at every call (a
         product ``m * l * w`` evaluates ``m * l`` first, so taking it from a column changes no bit); none here."""
         return {}
+
+    @functools.cached_property
+    def _P(self) -> dict[str, np.ndarray]:
+        """The kernel's parameter columns of this plant alone (a batch of one), made when first asked: a campaign
+        block builds a plant per run and never asks (its batch gathers the runs' ``params``)."""
+        return columns(type(self), {k: np.array([v]) for k, v in self.params.items()})
 
     def derivatives(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """dx/dt at one state ``x`` and full input vector ``u`` (the kernel with a batch of one)."""
