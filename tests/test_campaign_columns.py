@@ -60,8 +60,10 @@ def _record(rng: np.random.Generator, k: int) -> dict:
         "output_max": {o: _maybe(rng, float(rng.uniform(0.0, 0.75))) for o in outs},
         "model_mismatch": _maybe(rng, float(rng.uniform(0, 0.2)), 0.3),
         "model_warning": bool(k % 7 == 0),
-        "growth_ratio": {"r_x": 0.5},
+        "growth_ratio": {} if not complete or k % 13 == 0 else {"r_x": _maybe(rng, 0.5, 0.2)},
     }
+    if k % 41 == 5 and measures["growth_ratio"]:  # an int where the measures' floats are: JSON's "1", not "1.0"
+        measures["growth_ratio"] = {"r_x": 1}
     if k % 17:
         measures |= {"twin_output_deviation": _maybe(rng, float(rng.uniform(0, 0.011))),
                      "twin_command_deviation": float(rng.uniform(0, 0.02)), "model_iae_ratio": 1.25}  # fmt: skip
@@ -181,7 +183,7 @@ def test_a_blocks_typed_columns_hold_its_rows_numbers_and_the_record_is_the_one_
         assert names == [sorted(mine), sorted(rec.get("metrics", {}).get("outputs_final", {}))]
 
 
-@pytest.mark.parametrize("layout", ["2", "3", None])
+@pytest.mark.parametrize("layout", ["2", "3", "4", None])
 def test_a_block_of_an_earlier_layout_is_refused_on_resume_in_one_line(tmp_path, layout):
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -196,6 +198,72 @@ def test_a_block_of_an_earlier_layout_is_refused_on_resume_in_one_line(tmp_path,
     meta = {b"gainlink.campaign": b"mine", b"gainlink.version": __version__.encode()}
     meta |= {} if layout is None else {b"gainlink.block_layout": layout.encode()}
     pq.write_table(table.replace_schema_metadata(meta), out / "blocks" / "0123456789abcdef01234567.parquet")
-    with pytest.raises(CampaignError, match=r"is a block file of an earlier layout \(before 4\)") as err:
+    with pytest.raises(CampaignError, match=r"is a block file of an earlier layout \(before 5\)") as err:
         refuse_foreign(out, {"campaign": {"name": "mine"}})
     assert "\n" not in str(err.value)
+
+
+def _row_text(record: dict) -> str:
+    """A stored record's report row as text, as json writes it (keys sorted, compact): what the block stored as JSON
+    before layout 5 and ``campaign.json`` gives as it is."""
+    row = {k: record[k] for k in ("complete", "measures", "metrics", "worker") if k in record}
+    if record["status"] != "error" and "reason" in record:
+        row["run_reason"] = record["reason"]
+    return json.dumps(row, sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def test_a_rows_text_made_from_the_typed_columns_is_the_json_of_its_row(tmp_path):
+    """Every kind of record (errors with and without a worker, runs without a twin, an output or a growth ratio,
+    None measures, an int among the floats) gives its row's text exactly; a row whose typed columns give it keeps no
+    JSON of it but its metrics', the others keep the whole row."""
+    import pyarrow.parquet as pq
+    from gainlink.hil.campaign.store import row_texts
+
+    _, store, records = _stored(tmp_path)
+    checked, given = 0, 0
+    for part in store.report_parts():
+        for i, run_id in enumerate(part.ids.tolist()):
+            assert part.rows[i] == _row_text(records[run_id.decode()]), run_id
+            checked += 1
+    for path in store.files():
+        table = pq.read_table(path)
+        assert row_texts(table) == [_row_text(records[i]) for i in table.column("id").to_pylist()]
+        whole = table.column("row").is_null().to_pylist()
+        given += sum(whole)
+        for i, run_id in enumerate(table.column("id").to_pylist()):
+            metrics = records[run_id].get("metrics")
+            stored = table.column("metrics")[i].as_py()
+            assert stored is None if not whole[i] or metrics is None else json.loads(stored) == metrics
+    assert checked == len(records) and 200 < given < checked  # most rows from their columns, the odd ones whole
+
+
+def test_a_shipped_runs_row_is_made_from_its_columns(tmp_path):
+    """The records a worker makes of the shipped pendulum's runs: no row stored as JSON, only its metrics; the text
+    made from the columns is json's of the record's row, and the record read back is the one made."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from gainlink.fileio import read_toml
+    from gainlink.hil.campaign.plan import plan_campaign
+    from gainlink.hil.campaign.store import encode_block, row_texts
+    from gainlink.hil.campaign.worker import batch_records
+
+    path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
+    data, _ = read_toml(path, what="campaign", error=ValueError)
+    data.update(runs=8, seed=2026, spec=str((path.parent / data["spec"]).resolve()))
+    campaign = parse_campaign(data)
+    plan = plan_campaign(campaign)
+    runs = [(p.artifact_sha256, p.scenario, p.seed) for p in plan.runs]
+    records = batch_records("sil", dict(plan.artifacts), runs)
+    records = [with_inputs(r, run, kind="sil") for r, run in zip(records, runs)]
+    ids = [p.id for p in plan.runs]
+    table = pq.read_table(pa.BufferReader(encode_block(ids, records, campaign=campaign.name)))
+    assert table.column("row").null_count == len(ids)
+    expected = [_row_text(r) for r in records]
+    assert row_texts(table) == expected
+    assert {json.loads(t)["measures"]["stable"] for t in expected} == {True, False}  # a failed run among them
+    store = Store(tmp_path / "s", campaign=campaign.name)
+    store.put_block(encode_block(ids, records, campaign=campaign.name))
+    for run_id, record in zip(ids, records):
+        assert store.record(run_id) == json.loads(json.dumps({k: v for k, v in record.items() if k != "trace"})) | {
+            "id": run_id
+        }
