@@ -27,7 +27,7 @@ import itertools
 import json
 import math
 import pickle
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -289,6 +289,20 @@ class PlannedRuns(Sequence):
         sha = got[1] if isinstance(got, tuple) else None
         return RunHead(k, planner.ids[k].decode("ascii"), g, j, planner.values(g, j), sha, int(planner.seeds[j]))
 
+    def head_parts(self) -> HeadParts | None:
+        """What every run's head (:meth:`head`) is made of: each grid point's values and artifact sha256, each draw's
+        values and seed (run ``k`` is grid point ``k // runs``, draw ``k % runs``), for rows made many at a time;
+        ``None`` under a ``spec.*`` draw axis (each run's design, and so its sha256, is its own)."""
+        planner, c = self._planner, self.campaign
+        if planner.spec_per_run:
+            return None
+        shas = []
+        for g in range(len(planner.points)):
+            got = planner.fixed if planner.fixed is not None else planner.by_point[g]
+            shas.append(got[1] if isinstance(got, tuple) else None)
+        grid = [{a.name: v for a, v in zip(c.grid, p)} for p in planner.points]
+        return HeadParts(grid=grid, shas=shas, draw=planner.draw_values, seeds=planner.seeds, runs=c.runs)
+
     def columns(self) -> PlanColumns:
         """Every run's grid point and axis values in plan order as arrays (:class:`PlanColumns`), from the grid and
         the draw table, without making a run."""
@@ -309,6 +323,18 @@ class PlannedRuns(Sequence):
             numbers[a.name], numeric[a.name] = np.tile(x, len(points)), np.tile(ok, len(points))
         grid_values = {g: {a.name: v for a, v in zip(c.grid, p)} for g, p in enumerate(points)}
         return PlanColumns(np.repeat(np.arange(len(points)), runs), numbers, numeric, grid_values)
+
+
+@dataclass(frozen=True)
+class HeadParts:
+    """A generated plan's runs' heads by part (:meth:`PlannedRuns.head_parts`): run ``k`` is grid point
+    ``g, j = divmod(k, runs)``, its values ``grid[g] | draw(j)``, its artifact ``shas[g]``, its seed ``seeds[j]``."""
+
+    grid: list[dict]
+    shas: list[str | None]
+    draw: Callable[[int], dict]  # draw ``j``'s values (the draw axes')
+    seeds: np.ndarray
+    runs: int
 
 
 @dataclass(frozen=True)
@@ -397,9 +423,12 @@ class _Planner:
 
     def values(self, g: int, j: int) -> dict:
         """The axis values of grid point ``g``, draw ``j``."""
-        c = self.campaign
-        out = {a.name: v for a, v in zip(c.grid, self.points[g])}
-        for a in c.draws:
+        return {a.name: v for a, v in zip(self.campaign.grid, self.points[g])} | self.draw_values(j)
+
+    def draw_values(self, j: int) -> dict:
+        """The draw axes' values of draw ``j``."""
+        out = {}
+        for a in self.campaign.draws:
             x = self.drawn[a.name][j]
             out[a.name] = a.params["values"][int(x)] if a.distribution == "choice" else float(x)
         return out

@@ -3,16 +3,20 @@ the report is drawn from, kept in numpy arrays indexed by the plan.
 
 Each block file is read once, as columns (:meth:`.store.Store.report_parts`): its runs are judged at once
 (:func:`.criteria.evaluate_columns` over the typed columns; no run's JSON is decoded), and each kept run's verdict's
-JSON text (its head's and the stored row's text joined) and its ``campaign.csv`` cells (the columns' values as
-text) go, as one line, to an anonymous temporary file, and its numbers (status, IAE, model mismatch, failed
-criteria) to arrays indexed by the plan's distinct runs. The planned runs are then walked in plan order: each
-row's JSON is its head's (the plan's) and its verdict's texts joined, its CSV row its head's cells and its stored
-cells, with nothing decoded again but the reasons of failed runs. Nothing holds every row: the client keeps an offset
+JSON text (its head's and the row's text joined, :func:`.store.row_texts`), its ``campaign.csv`` status and reasons
+and its cells (the columns' values as text, made once a column) go, as one line, to an anonymous temporary file, and
+its numbers (status, IAE, model mismatch, failed criteria) to arrays indexed by the plan's distinct runs. The planned
+runs are then walked in plan order, :data:`HEAD_CHUNK` at a time: each row's JSON is its head's text
+(:func:`head_texts`: a generated plan's made from each grid point's template and each draw's values' texts) and its
+verdict's joined, its CSV row its head's texts and its spilled ones joined, with nothing decoded again but the
+reasons of failed runs. Nothing holds every row: the client keeps an offset
 and a few numbers a run, and :class:`Tally` counts from them and the plan's arrays (:func:`.plan.plan_columns`: each
 run's grid point and axis values, 9 bytes an axis), not run by run."""
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import math
 import os
@@ -76,6 +80,107 @@ def point_row_text(point: Any) -> str:
         f'"grid_index": {_json_value(point.grid_index)}, "id": {_json_value(point.id)}, '
         f'"index": {_json_value(point.index)}, "seed": {_json_value(point.seed)}, "values": {{{", ".join(pairs)}}}}}'
     )
+
+
+def csv_field(text: str) -> str:
+    """``text`` as one field of ``csv.writer``'s row (its default dialect): as it is, or quoted by the writer itself
+    when it holds a character the writer quotes (of this Python: a comma, a quote, a line end; ``\\r`` checked too)."""
+    if "," not in text and '"' not in text and "\n" not in text and "\r" not in text:
+        return text
+    out = io.StringIO()
+    csv.writer(out, lineterminator="\n").writerow([text, ""])
+    return out.getvalue()[:-2]
+
+
+def _csv_value(value: Any) -> str:
+    """An axis value as ``campaign.csv`` writes it: a string as it is, a finite float by ``repr``, else JSON."""
+    if type(value) is float and math.isfinite(value):
+        return float.__repr__(value)
+    return csv_field(value if isinstance(value, str) else json.dumps(value))
+
+
+HEAD_CHUNK = 256  # runs whose rows are made at once: their texts held together, a few kB a run
+
+
+def head_texts(plan: Any, axes: list[str]) -> Iterator[tuple[list[str], list[str], list[str], list[str]]]:
+    """The parts of each planned run's rows its head gives, in plan order, :data:`HEAD_CHUNK` runs at a time: its
+    ``campaign.json`` row's start (:func:`point_row_text` without its closing brace, and ``", "``) and the three parts
+    of its ``campaign.csv`` row around the verdict's (``index,id,``; ``,`` the ``axes`` values and the seed ``,``;
+    ``,`` the artifact's sha256 and the line end). A generated plan's from its parts (:meth:`.plan.PlannedRuns.
+    head_parts`): each grid point's and each draw's values made text once, a run's texts a template filled."""
+    parts = plan.runs.head_parts() if isinstance(plan.runs, PlannedRuns) else None
+    if parts is None:
+        heads = iter(plan.runs.heads() if isinstance(plan.runs, PlannedRuns) else plan.runs)
+        while chunk := [h for _, h in zip(range(HEAD_CHUNK), heads)]:
+            yield _point_texts(chunk, axes)
+        return
+    ids = plan.runs.ids
+    plain = bool(np.char.isalnum(ids).all()) if len(ids) else True
+    texts = _HeadTemplates(parts, axes)
+    for start in range(0, len(ids), HEAD_CHUNK):
+        yield texts.chunk(start, ids[start : start + HEAD_CHUNK].tolist(), plain)
+
+
+def _point_texts(heads: list, axes: list[str]) -> tuple[list[str], list[str], list[str], list[str]]:
+    """:func:`head_texts` of the heads ``heads``, each from its own values."""
+    json_ = [point_row_text(h)[:-1] + ", " for h in heads]
+    pre = [f"{h.index},{csv_field(h.id)}," for h in heads]
+    mid = ["," + ",".join([*(_csv_value(h.values[a]) for a in axes), str(h.seed)]) + "," for h in heads]
+    post = ["," + csv_field(h.artifact_sha256 or "") + "\n" for h in heads]
+    return json_, pre, mid, post
+
+
+class _HeadTemplates:
+    """A generated plan's head texts by part: per grid point a template of its values (the draws' left as ``%s``)
+    and its CSV values, made once; a draw's values' texts made once per chunk of runs (not held for every draw)."""
+
+    def __init__(self, parts: Any, axes: list[str]) -> None:
+        self.parts, self.axes = parts, axes
+        self.drawn = drawn = sorted(parts.draw(0)) if parts.runs else []
+        self.values, self.csv_mid = [], []
+        for g, grid in enumerate(parts.grid):
+            pairs = [_key(name) + ("%s" if name in drawn else _json_value(grid[name]).replace("%", "%%"))
+                     for name in sorted({*grid, *drawn})]  # fmt: skip
+            sha = _json_value(parts.shas[g]).replace("%", "%%")
+            self.values.append(f'"artifact_sha256": {sha}, "draw": %s, "grid_index": {g}, "id": "%s", "index": %s, '
+                               f'"seed": %s, "values": {{{", ".join(pairs)}}}, ')  # fmt: skip
+            self.csv_mid.append("," + "".join(_csv_value(grid[a]) + "," for a in axes if a in grid))
+        self.shas = ["," + csv_field(sha or "") + "\n" for sha in parts.shas]
+
+    def _draw(self, j: int) -> tuple[tuple[str, ...], str]:
+        """Draw ``j``'s values as JSON texts (sorted by name) and its CSV cells with the seed (and a comma after)."""
+        values = self.parts.draw(j)
+        cells = [_csv_value(values[a]) for a in self.axes if a in values]
+        return tuple(_json_value(values[name]) for name in self.drawn), ",".join(
+            [*cells, str(self.parts.seeds[j])]
+        ) + ","
+
+    def chunk(self, start: int, ids: list[bytes], plain: bool) -> tuple[list[str], list[str], list[str], list[str]]:
+        """The texts of the runs from plan index ``start`` (``ids``; ``plain``: every id alphanumeric)."""
+        runs, seeds = self.parts.runs, self.parts.seeds
+        draws: dict[int, tuple[tuple[str, ...], str]] = {}
+        json_, pre, mid, post = [], [], [], []
+        for k, rid in enumerate(ids, start):
+            g, j = divmod(k, runs)
+            texts = draws.get(j) or draws.setdefault(j, self._draw(j))
+            text = rid.decode("ascii")
+            template = self.values[g]
+            if not plain:  # an id json escapes: its own text
+                template = template.replace('"id": "%s"', '"id": ' + _json_value(text).replace("%", "%%"))
+            args = (j, text, k, int(seeds[j])) if plain else (j, k, int(seeds[j]))
+            json_.append("{" + template % (*args, *texts[0]))
+            pre.append(f"{k},{text if plain else csv_field(text)},")
+            mid.append(self.csv_mid[g] + texts[1])
+            post.append(self.shas[g])
+        return json_, pre, mid, post
+
+
+def _key(name: str) -> str:
+    """An axis name as a JSON object key with its colon, escaped for a ``%`` template."""
+    key = _KEYS.get(name)
+    if key is None:
+        key = _KEYS[name] = json.dumps(name) + ": "
+    return key.replace("%", "%%")
 
 
 MISSING_VERDICT = {"status": "missing", "failed": ["missing"], "reasons": ["no result"]}
@@ -173,7 +278,8 @@ class Verdicts:
             row_text = part.rows[i]
             body = text if row_text == "{}" else text[:-1] + ", " + row_text[1:]
             names = part.shapes[part.shape[i]]
-            lines.append(SEP.join([body, "; ".join(head["reasons"]), *cells(i, names)]).encode("utf-8"))
+            verdict = head["status"] + "," + csv_field("; ".join(head["reasons"]))
+            lines.append(SEP.join([body, verdict, ",".join(cells(i, names))]).encode("utf-8"))
             code[n] = STATUSES.index(head["status"])
             for name in head["failed"]:
                 if name not in self.criteria:
@@ -223,28 +329,48 @@ class Verdicts:
             self._heads[key] = json.dumps(head, sort_keys=True, allow_nan=False)
         return self._heads[key]
 
-    def text(self, u: int) -> tuple[str, list[str]]:
-        """Run ``u``'s verdict as JSON text and its CSV cells (:data:`MISSING_VERDICT` without a record)."""
+    def text(self, u: int) -> tuple[str, str, str]:
+        """Run ``u``'s verdict as JSON text, its CSV status and reasons, and its CSV cells after them in its own
+        tracked outputs and outputs (:data:`MISSING_VERDICT` without a record)."""
         at = int(self.at[u])
         if at < 0:
-            return json.dumps(MISSING_VERDICT, sort_keys=True), ["no result"] + [""] * (FIXED_CELLS - 1)
+            return self._missing
         if not self._flushed:  # the spill is written whole before the first read
             self.file.flush()
             self._flushed = True
         # one pread a run, not a seek and a buffered read; not a memory map either: its pages read would count in
         # the client's resident memory (the spill of 100,000 runs is ~220 MB)
-        body, *cells = os.pread(self.file.fileno(), int(self.size[u]), at).decode("utf-8").split(SEP)
-        return body, cells
+        body, verdict, cells = os.pread(self.file.fileno(), int(self.size[u]), at).decode("utf-8").split(SEP)
+        return body, verdict, cells
 
-    def cells(self, u: int, cells: list[str], tracked: list[str], outs: list[str]) -> list[str]:
-        """Run ``u``'s CSV cells in the columns ``tracked`` and ``outs`` (sorted) of every run."""
+    _missing = (json.dumps(MISSING_VERDICT, sort_keys=True), "missing,no result", "," * (FIXED_CELLS - 2))
+
+    def rows(self, slots: list[int], tracked: list[str], outs: list[str]) -> tuple[list[str], list[str], list[str]]:
+        """:meth:`text` of each of runs ``slots``, the cells in the columns ``tracked`` and ``outs`` (sorted) of every
+        run."""
+        bodies, verdicts, cells = [], [], []
+        every = (tuple(tracked), tuple(outs))
+        plain = [names == every for names in self.shapes]
+        for u in slots:
+            body, verdict, own = self.text(u)
+            if self.at[u] < 0 or not plain[self.shape[u]]:
+                own = self.cells(u, own, tracked, outs)
+            bodies.append(body)
+            verdicts.append(verdict)
+            cells.append(own)
+        return bodies, verdicts, cells
+
+    def cells(self, u: int, cells: str, tracked: list[str], outs: list[str]) -> str:
+        """Run ``u``'s CSV cells (``cells``: after its reasons, in its own tracked outputs and outputs) in the columns
+        ``tracked`` and ``outs`` (sorted) of every run (the cells are numbers: no comma)."""
         own_tracked, own_outs = self.shapes[self.shape[u]] if self.at[u] >= 0 else ((), ())
-        if list(own_tracked) == tracked and list(own_outs) == outs:
-            return cells
-        fixed, rest = cells[:FIXED_CELLS], cells[FIXED_CELLS:]
+        split = cells.split(",")
+        fixed, rest = split[: FIXED_CELLS - 1], split[FIXED_CELLS - 1 :]
         by_t = {t: rest[3 * i : 3 * i + 3] for i, t in enumerate(own_tracked)}
         by_o = {o: rest[3 * len(own_tracked) + i] for i, o in enumerate(own_outs)}
-        return [*fixed, *(c for t in tracked for c in by_t.get(t, ["", "", ""])), *(by_o.get(o, "") for o in outs)]
+        return ",".join(
+            [*fixed, *(c for t in tracked for c in by_t.get(t, ["", "", ""])), *(by_o.get(o, "") for o in outs)]
+        )
 
     def close(self) -> None:
         self.file.close()
