@@ -27,7 +27,7 @@ import itertools
 import json
 import math
 import pickle
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -301,7 +301,9 @@ class PlannedRuns(Sequence):
             got = planner.fixed if planner.fixed is not None else planner.by_point[g]
             shas.append(got[1] if isinstance(got, tuple) else None)
         grid = [{a.name: v for a, v in zip(c.grid, p)} for p in planner.points]
-        return HeadParts(grid=grid, shas=shas, draw=planner.draw_values, seeds=planner.seeds, runs=c.runs)
+        choices = {a.name: list(a.params["values"]) for a in c.draws if a.distribution == "choice"}
+        drawn = {a.name: planner.drawn[a.name] for a in c.draws}
+        return HeadParts(grid=grid, shas=shas, drawn=drawn, choices=choices, seeds=planner.seeds, runs=c.runs)
 
     def columns(self) -> PlanColumns:
         """Every run's grid point and axis values in plan order as arrays (:class:`PlanColumns`), from the grid and
@@ -328,11 +330,13 @@ class PlannedRuns(Sequence):
 @dataclass(frozen=True)
 class HeadParts:
     """A generated plan's runs' heads by part (:meth:`PlannedRuns.head_parts`): run ``k`` is grid point
-    ``g, j = divmod(k, runs)``, its values ``grid[g] | draw(j)``, its artifact ``shas[g]``, its seed ``seeds[j]``."""
+    ``g, j = divmod(k, runs)``, its values ``grid[g]`` and draw ``j``'s of ``drawn`` (a choice axis's
+    ``choices[name][drawn[name][j]]``, another's the float), its artifact ``shas[g]``, its seed ``seeds[j]``."""
 
     grid: list[dict]
     shas: list[str | None]
-    draw: Callable[[int], dict]  # draw ``j``'s values (the draw axes')
+    drawn: dict[str, np.ndarray]  # per draw axis (in the campaign's order), each draw's number (a choice's: its index)
+    choices: dict[str, list]  # a choice axis's values
     seeds: np.ndarray
     runs: int
 
@@ -423,12 +427,9 @@ class _Planner:
 
     def values(self, g: int, j: int) -> dict:
         """The axis values of grid point ``g``, draw ``j``."""
-        return {a.name: v for a, v in zip(self.campaign.grid, self.points[g])} | self.draw_values(j)
-
-    def draw_values(self, j: int) -> dict:
-        """The draw axes' values of draw ``j``."""
-        out = {}
-        for a in self.campaign.draws:
+        c = self.campaign
+        out = {a.name: v for a, v in zip(c.grid, self.points[g])}
+        for a in c.draws:
             x = self.drawn[a.name][j]
             out[a.name] = a.params["values"][int(x)] if a.distribution == "choice" else float(x)
         return out

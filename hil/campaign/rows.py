@@ -132,11 +132,13 @@ def _point_texts(heads: list, axes: list[str]) -> tuple[list[str], list[str], li
 
 class _HeadTemplates:
     """A generated plan's head texts by part: per grid point a template of its values (the draws' left as ``%s``)
-    and its CSV values, made once; a draw's values' texts made once per chunk of runs (not held for every draw)."""
+    and its CSV values, made once; the draws' values made text a chunk of runs at a time, an axis at a time (a
+    choice's values once each), not held for every draw."""
 
     def __init__(self, parts: Any, axes: list[str]) -> None:
-        self.parts, self.axes = parts, axes
-        self.drawn = drawn = sorted(parts.draw(0)) if parts.runs else []
+        self.parts = parts
+        self.drawn = drawn = sorted(parts.drawn)
+        self.csv_drawn = [a for a in axes if a in parts.drawn]  # the CSV's order
         self.values, self.csv_mid = [], []
         for g, grid in enumerate(parts.grid):
             pairs = [_key(name) + ("%s" if name in drawn else _json_value(grid[name]).replace("%", "%%"))
@@ -146,31 +148,46 @@ class _HeadTemplates:
                                f'"seed": %s, "values": {{{", ".join(pairs)}}}, ')  # fmt: skip
             self.csv_mid.append("," + "".join(_csv_value(grid[a]) + "," for a in axes if a in grid))
         self.shas = ["," + csv_field(sha or "") + "\n" for sha in parts.shas]
+        self.choices = {
+            name: [(_json_value(v), _csv_value(v)) for v in values] for name, values in parts.choices.items()
+        }
 
-    def _draw(self, j: int) -> tuple[tuple[str, ...], str]:
-        """Draw ``j``'s values as JSON texts (sorted by name) and its CSV cells with the seed (and a comma after)."""
-        values = self.parts.draw(j)
-        cells = [_csv_value(values[a]) for a in self.axes if a in values]
-        return tuple(_json_value(values[name]) for name in self.drawn), ",".join(
-            [*cells, str(self.parts.seeds[j])]
-        ) + ","
+    def _draws(self, js: np.ndarray) -> tuple[list[tuple[str, ...]], list[str]]:
+        """Draws ``js``' values as JSON texts (by name) and their CSV cells with the seed (a comma after), an axis at
+        a time: a number's text is its ``repr`` in both (a value that is not finite: json's refusal, as a head's)."""
+        texts: dict[str, tuple[list[str], list[str]]] = {}
+        for name, column in self.parts.drawn.items():
+            if name in self.choices:
+                words = self.choices[name]
+                both = [words[c] for c in column[js].astype(int).tolist()]
+                texts[name] = ([w for w, _ in both], [c for _, c in both])
+                continue
+            numbers = [float(x) for x in column[js].tolist()]
+            made = (
+                list(map(float.__repr__, numbers)) if np.isfinite(column[js]).all() else list(map(_json_value, numbers))
+            )
+            texts[name] = (made, made)
+        seeds = list(map(str, self.parts.seeds[js].tolist()))
+        json_ = list(zip(*(texts[name][0] for name in self.drawn))) if self.drawn else [()] * len(js)
+        cells = [",".join(row) + "," for row in zip(*(texts[name][1] for name in self.csv_drawn), seeds)]
+        return json_, cells
 
     def chunk(self, start: int, ids: list[bytes], plain: bool) -> tuple[list[str], list[str], list[str], list[str]]:
         """The texts of the runs from plan index ``start`` (``ids``; ``plain``: every id alphanumeric)."""
         runs, seeds = self.parts.runs, self.parts.seeds
-        draws: dict[int, tuple[tuple[str, ...], str]] = {}
+        ks = np.arange(start, start + len(ids))
+        draw_json, draw_csv = self._draws(ks % runs)
         json_, pre, mid, post = [], [], [], []
-        for k, rid in enumerate(ids, start):
+        for n, (k, rid) in enumerate(zip(ks.tolist(), ids)):
             g, j = divmod(k, runs)
-            texts = draws.get(j) or draws.setdefault(j, self._draw(j))
             text = rid.decode("ascii")
             template = self.values[g]
             if not plain:  # an id json escapes: its own text
                 template = template.replace('"id": "%s"', '"id": ' + _json_value(text).replace("%", "%%"))
             args = (j, text, k, int(seeds[j])) if plain else (j, k, int(seeds[j]))
-            json_.append("{" + template % (*args, *texts[0]))
+            json_.append("{" + template % (*args, *draw_json[n]))
             pre.append(f"{k},{text if plain else csv_field(text)},")
-            mid.append(self.csv_mid[g] + texts[1])
+            mid.append(self.csv_mid[g] + draw_csv[n])
             post.append(self.shas[g])
         return json_, pre, mid, post
 
@@ -204,18 +221,22 @@ def _texts(values: list) -> list[str]:
     return [repr(x) if type(x) is float else "" if x is None else str(x) for x in values]
 
 
-def _part_cells(part: Any) -> Any:
-    """The ``campaign.csv`` cells of ``part``'s runs after the reasons, as a function of a run and its (tracked
-    outputs, outputs): ``complete`` and the measures, then each tracked output's metrics and each output's final
-    value in the run's own sorted order; each column made text once."""
-    fixed = list(zip(_texts(part.complete), *(_texts(part.measures[k]) for k in MEASURE_CELLS)))
+def _part_cells(part: Any) -> list[str]:
+    """The ``campaign.csv`` cells of ``part``'s runs after the reasons, as CSV text (numbers and booleans: no field
+    quoted): ``complete`` and the measures, then each tracked output's metrics and each output's final value in the
+    run's own sorted order; each column made text once, the runs of one (tracked outputs, outputs) joined at once."""
+    fixed = [_texts(part.complete), *(_texts(part.measures[k]) for k in MEASURE_CELLS)]
     tracked = {t: [_texts(cols[k]) for k in METRIC_CELLS] for t, cols in part.tracked.items()}
     final = {o: _texts(v) for o, v in part.outputs_final.items()}
-
-    def cells(i: int, names: tuple[tuple[str, ...], tuple[str, ...]]) -> list[str]:
-        return [*fixed[i], *(col[i] for t in names[0] for col in tracked[t]), *(final[o][i] for o in names[1])]
-
-    return cells
+    out = [""] * len(part.rows)
+    for s, (names, outs) in enumerate(part.shapes):
+        rows = np.flatnonzero(part.shape == s).tolist()
+        columns = [*fixed, *(col for t in names for col in tracked[t]), *(final[o] for o in outs)]
+        if len(rows) < len(out):
+            columns = [[col[i] for i in rows] for col in columns]
+        for i, text in zip(rows, map(",".join, zip(*columns))):
+            out[i] = text
+    return out
 
 
 def _tracked_iae(part: Any) -> np.ndarray:
@@ -273,18 +294,20 @@ class Verdicts:
         warning = np.array([x is True for x in part.measures["model_warning"]], bool)
         lines, code, masks = [], np.zeros(len(rows), np.int8), np.zeros(len(rows), np.int64)
         for n, i in enumerate(rows.tolist()):
-            head = self._head(part, i, failed[i])
-            text = self._head_text(head)
+            if failed[i] or part.error[i]:
+                head = self._head(part, i, failed[i])
+                text = self._head_text(head)
+                verdict = head["status"] + "," + csv_field("; ".join(head["reasons"]))
+                code[n] = STATUSES.index(head["status"])
+                for name in head["failed"]:
+                    if name not in self.criteria:
+                        self.criteria.append(name)
+                    masks[n] |= 1 << self.criteria.index(name)
+            else:  # a passed run's head: the same text for every run of the same keys
+                text, verdict, code[n] = self._passed(part, i), "pass,", PASS
             row_text = part.rows[i]
             body = text if row_text == "{}" else text[:-1] + ", " + row_text[1:]
-            names = part.shapes[part.shape[i]]
-            verdict = head["status"] + "," + csv_field("; ".join(head["reasons"]))
-            lines.append(SEP.join([body, verdict, ",".join(cells(i, names))]).encode("utf-8"))
-            code[n] = STATUSES.index(head["status"])
-            for name in head["failed"]:
-                if name not in self.criteria:
-                    self.criteria.append(name)
-                masks[n] |= 1 << self.criteria.index(name)
+            lines.append(SEP.join([body, verdict, cells[i]]).encode("utf-8"))
         # the part's numbers set at once and its lines written in one call (a write a run: 18 us of each, profiled)
         u, sizes = slots[rows], np.array([len(x) for x in lines], np.int64)
         self.at[u] = self.file.tell() + np.cumsum(sizes) - sizes
@@ -319,6 +342,13 @@ class Verdicts:
         missing = {k: None for k, bit in ROW_BITS.items() if not keys & bit}
         return {"status": "fail" if failed else "pass", "failed": sorted({k for k, _ in failed}),
                 "reasons": [text for _, text in failed]} | missing  # fmt: skip
+
+    def _passed(self, part: Any, i: int) -> str:
+        """The head text of run ``i`` of ``part``, a passed run (:meth:`_head`'s, as :meth:`_head_text` writes it)."""
+        key = ("pass", int(part.keys[i]) & 7)
+        if key not in self._heads:
+            self._heads[key] = self._head_text(self._head(part, i, []))
+        return self._heads[key]
 
     def _head_text(self, head: dict) -> str:
         """``head`` as JSON text; a head without a reason (a passed run's, the same for most runs) encoded once."""
