@@ -369,3 +369,20 @@ def test_the_rows_made_a_chunk_at_a_time_are_the_rows_made_one_by_one(tmp_path, 
     assert (store.out / "campaign.csv").read_text() == csv_text
     assert _runs_text(store.out / "campaign.json") == runs_text
     assert {"missing", "error", "fail", "pass"} <= {json.loads(line)["status"] for line in runs_text.split(",\n  ")}
+
+
+@pytest.mark.parametrize("where", ["twin_output_deviation", "output_min", "worker"])
+def test_a_row_with_a_value_json_refuses_is_refused_as_json_refuses_it(where):
+    """A NaN or an infinity among the values a row's text would be made from: the block is refused as json refuses
+    the row (ValueError), not written with a text json would never write."""
+    record = _record(np.random.default_rng(0), 1)
+    if where == "worker":
+        record["worker"]["start"] = float("nan")
+    elif where == "output_min":
+        record["measures"]["output_min"]["x"] = float("-inf")
+    else:
+        record["measures"][where] = float("nan")
+    with pytest.raises(ValueError):
+        json.dumps(record, allow_nan=False)
+    with pytest.raises(ValueError):
+        encode_block(["x"], [record], campaign="c")

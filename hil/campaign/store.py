@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import operator
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -143,8 +142,8 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes
     parts = [_split(run_id, record) for run_id, record in zip(ids, records)]
     rows = [row for _, row in parts]
     typed = row_columns(rows)
-    names = {key: typed[key].type if key in typed else () for key in OF_MEASURES}
-    given = [_given(row, names) for row in rows]
+    names = {key: [f.name for f in typed[key].type] if key in typed else [] for key in OF_MEASURES}
+    given = (_finite(typed, len(rows)) & np.array([_given(row, names) for row in rows], bool)).tolist()
     cols: dict[str, Any] = {
         "id": pa.array(ids, pa.string()),
         "status": pa.array([record["status"] for record in records], pa.string()),
@@ -245,17 +244,15 @@ _MEASURE_SETS = {
 }  # the key sets a run's measures have (:func:`.criteria.measure`): with or without each twin's
 
 
-def _number(v: Any) -> bool:
-    """Whether ``v`` is what a float64 column gives back as JSON writes it: ``None`` or a finite float (not an int,
-    not numpy's)."""
-    return v is None or (type(v) is float and math.isfinite(v))
+_NUMBERS = frozenset({float, type(None)})  # what a float64 column gives back as JSON wrote it (not an int, not numpy's)
 
 
-def _given(row: dict, names: dict[str, Any]) -> bool:
+def _given(row: dict, names: dict[str, list[str]]) -> bool:
     """Whether the typed columns give row ``row`` (a :func:`_split` ``row``) exactly, so that :func:`row_texts` makes
     its JSON text from them and its metrics' text: each value of the types its column holds, its measures one of the
     key sets :func:`.criteria.measure` makes, with the block's names (``names``: the :data:`OF_MEASURES` structs'
-    fields) in ``output_min`` and ``output_max`` and in ``growth_ratio`` or none."""
+    fields) in ``output_min`` and ``output_max`` and in ``growth_ratio`` or none. (Its floats' finiteness is checked
+    over the columns, :func:`_finite`.)"""
     complete, reason, worker = row.get("complete"), row.get("run_reason"), row.get("worker")
     if not (complete is None or type(complete) is bool) or not (reason is None or type(reason) is str):
         return False
@@ -270,13 +267,13 @@ def _given(row: dict, names: dict[str, Any]) -> bool:
         return False
     if not (m["unstable_reason"] is None or type(m["unstable_reason"]) is str):
         return False
-    if not all(_number(m[k]) for k in _FLOAT_MEASURES if k in m):
+    if not {type(m[k]) for k in _FLOAT_MEASURES if k in m} <= _NUMBERS:
         return False
     for key in OF_MEASURES:
-        held, want = m[key], [f.name for f in names[key]]
-        if type(held) is not dict or not all(_number(v) for v in held.values()):
+        held = m[key]
+        if type(held) is not dict or not set(map(type, held.values())) <= _NUMBERS:
             return False
-        if sorted(held) != want and (held or key != "growth_ratio"):  # growth ratios: every name's or none
+        if sorted(held) != names[key] and (held or key != "growth_ratio"):  # growth ratios: every name's or none
             return False
     return True
 
@@ -290,7 +287,19 @@ def _given_worker(worker: Any) -> bool:
     host, pid = worker.get("host"), worker.get("pid")
     if type(host) is not str or type(pid) is not int:
         return False
-    return all(type(worker.get(k)) is float and math.isfinite(worker[k]) for k in ("start", "stop", "cpu_s"))
+    return all(type(worker.get(k)) is float for k in ("start", "stop", "cpu_s"))
+
+
+def _finite(typed: dict[str, pa.Array], rows: int) -> np.ndarray:
+    """Which rows have no infinite or NaN value in the floats of the typed columns a row's text is made from (JSON
+    refuses them: such a row is kept whole, and its JSON raises as it did)."""
+    ok = np.ones(rows, bool)
+    todo = [typed[k] for k in ("measures", "worker", *OF_MEASURES) if k in typed]
+    for col in todo:
+        for field, arr in zip(col.type, col.flatten()):
+            if pa.types.is_floating(field.type) and arr.null_count < len(arr):
+                ok &= np.asarray(pc.fill_null(pc.is_finite(arr), True).to_numpy(zero_copy_only=False), bool)
+    return ok
 
 
 def _names(metrics: list[dict]) -> pa.DictionaryArray:
