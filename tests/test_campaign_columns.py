@@ -13,6 +13,7 @@ import json
 from collections import Counter
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 from gainlink.hil.campaign import parse_campaign
 from gainlink.hil.campaign.config import Criteria
@@ -60,8 +61,10 @@ def _record(rng: np.random.Generator, k: int) -> dict:
         "output_max": {o: _maybe(rng, float(rng.uniform(0.0, 0.75))) for o in outs},
         "model_mismatch": _maybe(rng, float(rng.uniform(0, 0.2)), 0.3),
         "model_warning": bool(k % 7 == 0),
-        "growth_ratio": {"r_x": 0.5},
+        "growth_ratio": {} if not complete or k % 13 == 0 else {"r_x": _maybe(rng, 0.5, 0.2)},
     }
+    if k % 41 == 5 and measures["growth_ratio"]:  # an int where the measures' floats are: JSON's "1", not "1.0"
+        measures["growth_ratio"] = {"r_x": 1}
     if k % 17:
         measures |= {"twin_output_deviation": _maybe(rng, float(rng.uniform(0, 0.011))),
                      "twin_command_deviation": float(rng.uniform(0, 0.02)), "model_iae_ratio": 1.25}  # fmt: skip
@@ -181,7 +184,7 @@ def test_a_blocks_typed_columns_hold_its_rows_numbers_and_the_record_is_the_one_
         assert names == [sorted(mine), sorted(rec.get("metrics", {}).get("outputs_final", {}))]
 
 
-@pytest.mark.parametrize("layout", ["2", "3", None])
+@pytest.mark.parametrize("layout", ["2", "3", "4", None])
 def test_a_block_of_an_earlier_layout_is_refused_on_resume_in_one_line(tmp_path, layout):
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -196,6 +199,190 @@ def test_a_block_of_an_earlier_layout_is_refused_on_resume_in_one_line(tmp_path,
     meta = {b"gainlink.campaign": b"mine", b"gainlink.version": __version__.encode()}
     meta |= {} if layout is None else {b"gainlink.block_layout": layout.encode()}
     pq.write_table(table.replace_schema_metadata(meta), out / "blocks" / "0123456789abcdef01234567.parquet")
-    with pytest.raises(CampaignError, match=r"is a block file of an earlier layout \(before 4\)") as err:
+    with pytest.raises(CampaignError, match=r"is a block file of an earlier layout \(before 5\)") as err:
         refuse_foreign(out, {"campaign": {"name": "mine"}})
     assert "\n" not in str(err.value)
+
+
+def _row_text(record: dict) -> str:
+    """A stored record's report row as text, as json writes it (keys sorted, compact): what the block stored as JSON
+    before layout 5 and ``campaign.json`` gives as it is."""
+    row = {k: record[k] for k in ("complete", "measures", "metrics", "worker") if k in record}
+    if record["status"] != "error" and "reason" in record:
+        row["run_reason"] = record["reason"]
+    return json.dumps(row, sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def test_a_rows_text_made_from_the_typed_columns_is_the_json_of_its_row(tmp_path):
+    """Every kind of record (errors with and without a worker, runs without a twin, an output or a growth ratio,
+    None measures, an int among the floats) gives its row's text exactly; a row whose typed columns give it keeps no
+    JSON of it but its metrics', the others keep the whole row."""
+    import pyarrow.parquet as pq
+    from gainlink.hil.campaign.store import row_texts
+
+    _, store, records = _stored(tmp_path)
+    checked, given = 0, 0
+    for part in store.report_parts():
+        for i, run_id in enumerate(part.ids.tolist()):
+            assert part.rows[i] == _row_text(records[run_id.decode()]), run_id
+            checked += 1
+    for path in store.files():
+        table = pq.read_table(path)
+        assert row_texts(table) == [_row_text(records[i]) for i in table.column("id").to_pylist()]
+        whole = table.column("row").is_null().to_pylist()
+        given += sum(whole)
+        for i, run_id in enumerate(table.column("id").to_pylist()):
+            metrics = records[run_id].get("metrics")
+            stored = table.column("metrics")[i].as_py()
+            assert stored is None if not whole[i] or metrics is None else json.loads(stored) == metrics
+    assert checked == len(records) and 200 < given < checked  # most rows from their columns, the odd ones whole
+
+
+def test_a_shipped_runs_row_is_made_from_its_columns(tmp_path):
+    """The records a worker makes of the shipped pendulum's runs: no row stored as JSON, only its metrics; the text
+    made from the columns is json's of the record's row, and the record read back is the one made."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from gainlink.fileio import read_toml
+    from gainlink.hil.campaign.plan import plan_campaign
+    from gainlink.hil.campaign.store import encode_block, row_texts
+    from gainlink.hil.campaign.worker import batch_records
+
+    path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
+    data, _ = read_toml(path, what="campaign", error=ValueError)
+    data.update(runs=8, seed=2026, spec=str((path.parent / data["spec"]).resolve()))
+    campaign = parse_campaign(data)
+    plan = plan_campaign(campaign)
+    runs = [(p.artifact_sha256, p.scenario, p.seed) for p in plan.runs]
+    records = batch_records("sil", dict(plan.artifacts), runs)
+    records = [with_inputs(r, run, kind="sil") for r, run in zip(records, runs)]
+    ids = [p.id for p in plan.runs]
+    table = pq.read_table(pa.BufferReader(encode_block(ids, records, campaign=campaign.name)))
+    assert table.column("row").null_count == len(ids)
+    expected = [_row_text(r) for r in records]
+    assert row_texts(table) == expected
+    assert {json.loads(t)["measures"]["stable"] for t in expected} == {True, False}  # a failed run among them
+    store = Store(tmp_path / "s", campaign=campaign.name)
+    store.put_block(encode_block(ids, records, campaign=campaign.name))
+    for run_id, record in zip(ids, records):
+        assert store.record(run_id) == json.loads(json.dumps({k: v for k, v in record.items() if k != "trace"})) | {
+            "id": run_id
+        }
+
+
+def _verdict(record: dict | None) -> dict:
+    """A run's verdict head as the report defines it, from its record (``None``: no record)."""
+    if record is None:
+        return {"status": "missing", "failed": ["missing"], "reasons": ["no result"]}
+    if record["status"] == "error":
+        return {"status": "error", "failed": ["error"], "reasons": [record["reason"]]} | (
+            {} if "worker" in record else {"worker": None}
+        )
+    failed = evaluate(CRITERIA, json.loads(json.dumps(record, sort_keys=True)))  # as stored: the keys sorted
+    head = {"status": "fail" if failed else "pass", "failed": sorted({k for k, _ in failed}),
+            "reasons": [t for _, t in failed]}  # fmt: skip
+    return head | {k: None for k, r in (("complete", "complete"), ("run_reason", "reason"), ("worker", "worker"))
+                   if r not in record}  # fmt: skip
+
+
+def _axis_cell(value) -> str:
+    return repr(value) if type(value) is float else value if isinstance(value, str) else json.dumps(value)
+
+
+def _report_by_rows(plan, records: dict[str, dict], stored: set[str]) -> tuple[str, str]:
+    """``campaign.csv`` and ``campaign.json``'s run lines as the report wrote them a row at a time before its rows
+    were made a chunk at a time: each head by ``point_row_text``, each verdict and row by json, each CSV row by
+    ``csv.writer``, from the records themselves (runs not ``stored``: missing)."""
+    import io
+
+    from gainlink.hil.campaign.plan import run_heads
+    from gainlink.hil.campaign.report import csv_head
+    from gainlink.hil.campaign.rows import point_row_text
+
+    mine = [records[i] for i in stored if records[i]["status"] != "error"]
+    tracked = {t for r in mine for t in r["metrics"]["tracked"]}
+    outs = {o for r in mine for o in r["metrics"]["outputs_final"]}
+    axes = [a.name for a in (*plan.campaign.grid, *plan.campaign.draws)]
+    out, lines = io.StringIO(), []
+    w = csv.writer(out, lineterminator="\n")
+    w.writerow(csv_head(plan, tracked, outs))
+    for head in run_heads(plan):
+        record = records[head.id] if head.id in stored else None
+        verdict = _verdict(record)
+        verdict_text = json.dumps(verdict, sort_keys=True)
+        row = _row_text(record) if record is not None else "{}"
+        body = verdict_text if row == "{}" else verdict_text[:-1] + ", " + row[1:]
+        lines.append(point_row_text(head)[:-1] + ", " + body[1:])
+        rec = record if record is not None and record["status"] != "error" else {}
+        m, q = rec.get("metrics", {}), rec.get("measures", {})
+        cells = [rec.get("complete"), *(q.get(k) for k in MEASURE_CELLS)]
+        cells += [m.get("tracked", {}).get(t, {}).get(k) for t in sorted(tracked) for k in METRIC_CELLS]
+        cells += [m.get("outputs_final", {}).get(o) for o in sorted(outs)]
+        values = [_axis_cell(head.values[a]) for a in axes]
+        w.writerow([head.index, head.id, verdict["status"], "; ".join(verdict["reasons"]), *values, head.seed, *cells,
+                    head.artifact_sha256 or ""])  # fmt: skip
+    return out.getvalue(), "  " + ",\n  ".join(lines)
+
+
+def _runs_text(path) -> str:
+    text = path.read_text()
+    return text[text.index(' "runs": [\n') + len(' "runs": [\n') : text.rindex("\n ]\n}")]
+
+
+@pytest.mark.parametrize("generated", [True, False])
+def test_the_rows_made_a_chunk_at_a_time_are_the_rows_made_one_by_one(tmp_path, generated):
+    """campaign.csv and campaign.json's runs, byte for byte, against the same rows made one at a time by the
+    per-row functions (a generated plan of a grid and two drawn axes, an int and a float among a choice's values,
+    more runs than a chunk; and a plan of points), on a store with errors, None measures and metrics, failed runs,
+    runs of other tracked outputs and outputs than the others, and runs with no record."""
+    from gainlink.hil.campaign.plan import plan_campaign
+    from gainlink.hil.campaign.rows import HEAD_CHUNK
+
+    if generated:
+        campaign = parse_campaign(
+            {"name": "columns", "kind": "sil", "seed": 3, "runs": 130, "spec": str(EXAMPLES / "pendulum.toml"),
+             "scenario": {"duration": 0.5, "plant": {"kind": "cart_pendulum"}},
+             "grid": [{"target": "plant.parameters.m", "values": [0.1, 0.2, 0.3]}],
+             "draw": [{"target": "plant.parameters.M", "distribution": "uniform", "low": 0.7, "high": 1.3},
+                      {"target": "noise.x", "distribution": "choice", "values": [1, 0.002]}],
+             "criteria": dataclasses.asdict(CRITERIA) | {"bounds": {k: list(v) for k, v in CRITERIA.bounds.items()}}}
+        )  # fmt: skip
+        plan = plan_campaign(campaign)
+        assert len(plan.runs) > HEAD_CHUNK
+        rng = np.random.default_rng(8)
+        records = {h.id: with_inputs(_record(rng, h.index), (h.artifact_sha256, {}, h.seed), kind="sil")
+                   for h in plan.runs.heads()}  # fmt: skip
+        store = Store(tmp_path / "g", campaign="columns")
+        ids = list(records)
+        for start in range(0, len(ids), 50):
+            store.put_block(encode_block(ids[start : start + 50], [records[i] for i in ids[start : start + 50]],
+                                         campaign="columns"))  # fmt: skip
+    else:
+        plan, store, records = _stored(tmp_path)
+    stored = {i.decode() for i in store._table()[0].tolist()}
+    dropped = sorted(store.files())[1]
+    stored -= set(pq.read_table(dropped, columns=["id"]).column("id").to_pylist())
+    dropped.unlink()
+    store = Store(store.out)
+    merge(plan, store, plots=False)
+    csv_text, runs_text = _report_by_rows(plan, records, stored)
+    assert (store.out / "campaign.csv").read_text() == csv_text
+    assert _runs_text(store.out / "campaign.json") == runs_text
+    assert {"missing", "error", "fail", "pass"} <= {json.loads(line)["status"] for line in runs_text.split(",\n  ")}
+
+
+@pytest.mark.parametrize("where", ["twin_output_deviation", "output_min", "worker"])
+def test_a_row_with_a_value_json_refuses_is_refused_as_json_refuses_it(where):
+    """A NaN or an infinity among the values a row's text would be made from: the block is refused as json refuses
+    the row (ValueError), not written with a text json would never write."""
+    record = _record(np.random.default_rng(0), 1)
+    if where == "worker":
+        record["worker"]["start"] = float("nan")
+    elif where == "output_min":
+        record["measures"]["output_min"]["x"] = float("-inf")
+    else:
+        record["measures"][where] = float("nan")
+    with pytest.raises(ValueError):
+        json.dumps(record, allow_nan=False)
+    with pytest.raises(ValueError):
+        encode_block(["x"], [record], campaign="c")

@@ -247,3 +247,17 @@ def test_a_rows_head_text_is_what_json_writes_of_its_head():
     for make in (point_row_text, lambda p: json.dumps(point_row(p), sort_keys=True, allow_nan=False)):
         with pytest.raises(ValueError):
             make(bad)
+
+
+def test_a_csv_field_is_what_csv_writer_writes_of_it():
+    """A reason or axis value as one field of campaign.csv, against csv.writer's own row (the oracle) for text that
+    needs no quotes and text with commas, quotes, line ends, a carriage return, spaces and non-ASCII letters."""
+    import io
+
+    from gainlink.hil.campaign.rows import csv_field
+
+    texts = ["", "plain", "a, b", 'say "hi"', "two\nlines", "cr\rhere", " lead", "Ω-axis; θ left [-0.7, 0.7]", '"', ","]
+    for text in texts:
+        out = io.StringIO()
+        csv.writer(out, lineterminator="\n").writerow(["x", text, "y"])
+        assert "x," + csv_field(text) + ",y\n" == out.getvalue(), text

@@ -293,6 +293,22 @@ class PlannedRuns(Sequence):
         sha = got[1] if isinstance(got, tuple) else None
         return RunHead(k, planner.ids[k].decode("ascii"), g, j, planner.values(g, j), sha, int(planner.seeds[j]))
 
+    def head_parts(self) -> HeadParts | None:
+        """What every run's head (:meth:`head`) is made of: each grid point's values and artifact sha256, each draw's
+        values and seed (run ``k`` is grid point ``k // runs``, draw ``k % runs``), for rows made many at a time;
+        ``None`` under a ``spec.*`` draw axis (each run's design, and so its sha256, is its own)."""
+        planner, c = self._planner, self.campaign
+        if planner.spec_per_run:
+            return None
+        shas = []
+        for g in range(len(planner.points)):
+            got = planner.fixed if planner.fixed is not None else planner.by_point[g]
+            shas.append(got[1] if isinstance(got, tuple) else None)
+        grid = [{a.name: v for a, v in zip(c.grid, p)} for p in planner.points]
+        choices = {a.name: list(a.params["values"]) for a in c.draws if a.distribution == "choice"}
+        drawn = {a.name: planner.drawn[a.name] for a in c.draws}
+        return HeadParts(grid=grid, shas=shas, drawn=drawn, choices=choices, seeds=planner.seeds, runs=c.runs)
+
     def columns(self) -> PlanColumns:
         """Every run's grid point and axis values in plan order as arrays (:class:`PlanColumns`), from the grid and
         the draw table, without making a run."""
@@ -313,6 +329,20 @@ class PlannedRuns(Sequence):
             numbers[a.name], numeric[a.name] = np.tile(x, len(points)), np.tile(ok, len(points))
         grid_values = {g: {a.name: v for a, v in zip(c.grid, p)} for g, p in enumerate(points)}
         return PlanColumns(np.repeat(np.arange(len(points)), runs), numbers, numeric, grid_values)
+
+
+@dataclass(frozen=True)
+class HeadParts:
+    """A generated plan's runs' heads by part (:meth:`PlannedRuns.head_parts`): run ``k`` is grid point
+    ``g, j = divmod(k, runs)``, its values ``grid[g]`` and draw ``j``'s of ``drawn`` (a choice axis's
+    ``choices[name][drawn[name][j]]``, another's the float), its artifact ``shas[g]``, its seed ``seeds[j]``."""
+
+    grid: list[dict]
+    shas: list[str | None]
+    drawn: dict[str, np.ndarray]  # per draw axis (in the campaign's order), each draw's number (a choice's: its index)
+    choices: dict[str, list]  # a choice axis's values
+    seeds: np.ndarray
+    runs: int
 
 
 @dataclass(frozen=True)

@@ -31,8 +31,8 @@ import numpy as np
 from gainlink.fileio import atomic_writer, publish_files
 from gainlink.proof.twin_plot import png_bytes
 
-from .plan import CampaignPlan, PlannedRuns, describe_axes, run_heads
-from .rows import MEASURE_CELLS, METRIC_CELLS, STATUSES, ReportRows, RunStatus, Tally, Verdicts, point_row_text
+from .plan import CampaignPlan, PlannedRuns, describe_axes
+from .rows import MEASURE_CELLS, METRIC_CELLS, ReportRows, RunStatus, Tally, Verdicts, head_texts
 from .store import members
 
 PERCENTILES = (5, 25, 50, 75, 95)
@@ -43,12 +43,6 @@ ENVELOPE_RUNS = 2000
 MAX_POINT_LINES = 30
 MAX_SCATTER = 20_000
 HISTOGRAM_RUNS = 128  # runs histogrammed at a time: its float64 and index temporaries ~16 MB, not a block's ~100
-
-
-def _flat(value: Any) -> str:
-    if type(value) is float and math.isfinite(value):  # json's text of a finite float, without its encoder's call
-        return repr(value)
-    return value if isinstance(value, str) else json.dumps(value)
 
 
 def csv_head(plan: CampaignPlan, tracked: set[str], outs: set[str]) -> list[str]:
@@ -495,25 +489,23 @@ PLOTS = ("envelopes.png", "scatter.png")
 
 def _stream_rows(plan: CampaignPlan, store: Any, csv_out: IO[str], runs_out: IO[str]) -> Tally:
     """Write every row, in plan order, to ``campaign.csv`` (``csv_out``) and as ``campaign.json``'s run lines
-    (``runs_out``), counting each into the returned :class:`Tally`: each row from its head (the plan's) and its
-    verdict's spilled text and cells (:class:`~.rows.Verdicts`), nothing decoded again."""
+    (``runs_out``), counting each into the returned :class:`Tally`: a chunk of runs at a time, each row's text joined
+    from its head's (:func:`~.rows.head_texts`: the plan's, made a chunk at a time) and its verdict's spilled texts
+    (:class:`~.rows.Verdicts`), nothing decoded again and no row built value by value."""
     ids = plan_ids(plan)
     verdicts = Verdicts(store, plan.campaign.criteria, ids)
     try:
         tally = Tally(plan, verdicts)
-        axes, tracked, outs = _axes(plan), sorted(verdicts.tracked), sorted(verdicts.outputs)
-        w = csv.writer(csv_out, lineterminator="\n")
-        w.writerow(csv_head(plan, verdicts.tracked, verdicts.outputs))
-        for k, (head, u) in enumerate(zip(run_heads(plan), verdicts.slot.tolist())):
-            body, cells = verdicts.text(u)
-            cells = verdicts.cells(u, cells, tracked, outs)
-            status = STATUSES[verdicts.code[u]]
-            values = [_flat(head.values[a]) for a in axes]
-            w.writerow(
-                [head.index, head.id, status, cells[0], *values, head.seed, *cells[1:], head.artifact_sha256 or ""]
-            )
-            text = point_row_text(head)
-            runs_out.write(("  " if not k else ",\n  ") + text[:-1] + ", " + body[1:])
+        tracked, outs = sorted(verdicts.tracked), sorted(verdicts.outputs)
+        csv.writer(csv_out, lineterminator="\n").writerow(csv_head(plan, verdicts.tracked, verdicts.outputs))
+        start = 0
+        for heads, pre, mid, post in head_texts(plan, _axes(plan)):
+            slots = verdicts.slot[start : start + len(heads)].tolist()
+            bodies, status, cells = verdicts.rows(slots, tracked, outs)
+            csv_out.write("".join([a + b + c + d + e for a, b, c, d, e in zip(pre, status, mid, cells, post)]))
+            lead = "  " if not start else ",\n  "
+            runs_out.write(lead + ",\n  ".join([h + body[1:] for h, body in zip(heads, bodies)]))
+            start += len(heads)
         tally.finish(ids)
         return tally
     finally:

@@ -3,16 +3,20 @@ the report is drawn from, kept in numpy arrays indexed by the plan.
 
 Each block file is read once, as columns (:meth:`.store.Store.report_parts`): its runs are judged at once
 (:func:`.criteria.evaluate_columns` over the typed columns; no run's JSON is decoded), and each kept run's verdict's
-JSON text (its head's and the stored row's text joined) and its ``campaign.csv`` cells (the columns' values as
-text) go, as one line, to an anonymous temporary file, and its numbers (status, IAE, model mismatch, failed
-criteria) to arrays indexed by the plan's distinct runs. The planned runs are then walked in plan order: each
-row's JSON is its head's (the plan's) and its verdict's texts joined, its CSV row its head's cells and its stored
-cells, with nothing decoded again but the reasons of failed runs. Nothing holds every row: the client keeps an offset
+JSON text (its head's and the row's text joined, :func:`.store.row_texts`), its ``campaign.csv`` status and reasons
+and its cells (the columns' values as text, made once a column) go, as one line, to an anonymous temporary file, and
+its numbers (status, IAE, model mismatch, failed criteria) to arrays indexed by the plan's distinct runs. The planned
+runs are then walked in plan order, :data:`HEAD_CHUNK` at a time: each row's JSON is its head's text
+(:func:`head_texts`: a generated plan's made from each grid point's template and each draw's values' texts) and its
+verdict's joined, its CSV row its head's texts and its spilled ones joined, with nothing decoded again but the
+reasons of failed runs. Nothing holds every row: the client keeps an offset
 and a few numbers a run, and :class:`Tally` counts from them and the plan's arrays (:func:`.plan.plan_columns`: each
 run's grid point and axis values, 9 bytes an axis), not run by run."""
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import math
 import os
@@ -78,6 +82,124 @@ def point_row_text(point: Any) -> str:
     )
 
 
+def csv_field(text: str) -> str:
+    """``text`` as one field of ``csv.writer``'s row (its default dialect): as it is, or quoted by the writer itself
+    when it holds a character the writer quotes (of this Python: a comma, a quote, a line end; ``\\r`` checked too)."""
+    if "," not in text and '"' not in text and "\n" not in text and "\r" not in text:
+        return text
+    out = io.StringIO()
+    csv.writer(out, lineterminator="\n").writerow([text, ""])
+    return out.getvalue()[:-2]
+
+
+def _csv_value(value: Any) -> str:
+    """An axis value as ``campaign.csv`` writes it: a string as it is, a finite float by ``repr``, else JSON."""
+    if type(value) is float and math.isfinite(value):
+        return float.__repr__(value)
+    return csv_field(value if isinstance(value, str) else json.dumps(value))
+
+
+HEAD_CHUNK = 256  # runs whose rows are made at once: their texts held together, a few kB a run
+
+
+def head_texts(plan: Any, axes: list[str]) -> Iterator[tuple[list[str], list[str], list[str], list[str]]]:
+    """The parts of each planned run's rows its head gives, in plan order, :data:`HEAD_CHUNK` runs at a time: its
+    ``campaign.json`` row's start (:func:`point_row_text` without its closing brace, and ``", "``) and the three parts
+    of its ``campaign.csv`` row around the verdict's (``index,id,``; ``,`` the ``axes`` values and the seed ``,``;
+    ``,`` the artifact's sha256 and the line end). A generated plan's from its parts (:meth:`.plan.PlannedRuns.
+    head_parts`): each grid point's and each draw's values made text once, a run's texts a template filled."""
+    parts = plan.runs.head_parts() if isinstance(plan.runs, PlannedRuns) else None
+    if parts is None:
+        heads = iter(plan.runs.heads() if isinstance(plan.runs, PlannedRuns) else plan.runs)
+        while chunk := [h for _, h in zip(range(HEAD_CHUNK), heads)]:
+            yield _point_texts(chunk, axes)
+        return
+    ids = plan.runs.ids
+    plain = bool(np.char.isalnum(ids).all()) if len(ids) else True
+    texts = _HeadTemplates(parts, axes)
+    for start in range(0, len(ids), HEAD_CHUNK):
+        yield texts.chunk(start, ids[start : start + HEAD_CHUNK].tolist(), plain)
+
+
+def _point_texts(heads: list, axes: list[str]) -> tuple[list[str], list[str], list[str], list[str]]:
+    """:func:`head_texts` of the heads ``heads``, each from its own values."""
+    json_ = [point_row_text(h)[:-1] + ", " for h in heads]
+    pre = [f"{h.index},{csv_field(h.id)}," for h in heads]
+    mid = ["," + ",".join([*(_csv_value(h.values[a]) for a in axes), str(h.seed)]) + "," for h in heads]
+    post = ["," + csv_field(h.artifact_sha256 or "") + "\n" for h in heads]
+    return json_, pre, mid, post
+
+
+class _HeadTemplates:
+    """A generated plan's head texts by part: per grid point a template of its values (the draws' left as ``%s``)
+    and its CSV values, made once; the draws' values made text a chunk of runs at a time, an axis at a time (a
+    choice's values once each), not held for every draw."""
+
+    def __init__(self, parts: Any, axes: list[str]) -> None:
+        self.parts = parts
+        self.drawn = drawn = sorted(parts.drawn)
+        self.csv_drawn = [a for a in axes if a in parts.drawn]  # the CSV's order
+        self.values, self.csv_mid = [], []
+        for g, grid in enumerate(parts.grid):
+            pairs = [_key(name) + ("%s" if name in drawn else _json_value(grid[name]).replace("%", "%%"))
+                     for name in sorted({*grid, *drawn})]  # fmt: skip
+            sha = _json_value(parts.shas[g]).replace("%", "%%")
+            self.values.append(f'"artifact_sha256": {sha}, "draw": %s, "grid_index": {g}, "id": "%s", "index": %s, '
+                               f'"seed": %s, "values": {{{", ".join(pairs)}}}, ')  # fmt: skip
+            self.csv_mid.append("," + "".join(_csv_value(grid[a]) + "," for a in axes if a in grid))
+        self.shas = ["," + csv_field(sha or "") + "\n" for sha in parts.shas]
+        self.choices = {
+            name: [(_json_value(v), _csv_value(v)) for v in values] for name, values in parts.choices.items()
+        }
+
+    def _draws(self, js: np.ndarray) -> tuple[list[tuple[str, ...]], list[str]]:
+        """Draws ``js``' values as JSON texts (by name) and their CSV cells with the seed (a comma after), an axis at
+        a time: a number's text is its ``repr`` in both (a value that is not finite: json's refusal, as a head's)."""
+        texts: dict[str, tuple[list[str], list[str]]] = {}
+        for name, column in self.parts.drawn.items():
+            if name in self.choices:
+                words = self.choices[name]
+                both = [words[c] for c in column[js].astype(int).tolist()]
+                texts[name] = ([w for w, _ in both], [c for _, c in both])
+                continue
+            numbers = [float(x) for x in column[js].tolist()]
+            made = (
+                list(map(float.__repr__, numbers)) if np.isfinite(column[js]).all() else list(map(_json_value, numbers))
+            )
+            texts[name] = (made, made)
+        seeds = list(map(str, self.parts.seeds[js].tolist()))
+        json_ = list(zip(*(texts[name][0] for name in self.drawn))) if self.drawn else [()] * len(js)
+        cells = [",".join(row) + "," for row in zip(*(texts[name][1] for name in self.csv_drawn), seeds)]
+        return json_, cells
+
+    def chunk(self, start: int, ids: list[bytes], plain: bool) -> tuple[list[str], list[str], list[str], list[str]]:
+        """The texts of the runs from plan index ``start`` (``ids``; ``plain``: every id alphanumeric)."""
+        runs, seeds = self.parts.runs, self.parts.seeds
+        ks = np.arange(start, start + len(ids))
+        draw_json, draw_csv = self._draws(ks % runs)
+        json_, pre, mid, post = [], [], [], []
+        for n, (k, rid) in enumerate(zip(ks.tolist(), ids)):
+            g, j = divmod(k, runs)
+            text = rid.decode("ascii")
+            template = self.values[g]
+            if not plain:  # an id json escapes: its own text
+                template = template.replace('"id": "%s"', '"id": ' + _json_value(text).replace("%", "%%"))
+            args = (j, text, k, int(seeds[j])) if plain else (j, k, int(seeds[j]))
+            json_.append("{" + template % (*args, *draw_json[n]))
+            pre.append(f"{k},{text if plain else csv_field(text)},")
+            mid.append(self.csv_mid[g] + draw_csv[n])
+            post.append(self.shas[g])
+        return json_, pre, mid, post
+
+
+def _key(name: str) -> str:
+    """An axis name as a JSON object key with its colon, escaped for a ``%`` template."""
+    key = _KEYS.get(name)
+    if key is None:
+        key = _KEYS[name] = json.dumps(name) + ": "
+    return key.replace("%", "%%")
+
+
 MISSING_VERDICT = {"status": "missing", "failed": ["missing"], "reasons": ["no result"]}
 METRIC_CELLS = ("iae", "overshoot_pct", "settling_time_s")
 MEASURE_CELLS = (
@@ -99,18 +221,22 @@ def _texts(values: list) -> list[str]:
     return [repr(x) if type(x) is float else "" if x is None else str(x) for x in values]
 
 
-def _part_cells(part: Any) -> Any:
-    """The ``campaign.csv`` cells of ``part``'s runs after the reasons, as a function of a run and its (tracked
-    outputs, outputs): ``complete`` and the measures, then each tracked output's metrics and each output's final
-    value in the run's own sorted order; each column made text once."""
-    fixed = list(zip(_texts(part.complete), *(_texts(part.measures[k]) for k in MEASURE_CELLS)))
+def _part_cells(part: Any) -> list[str]:
+    """The ``campaign.csv`` cells of ``part``'s runs after the reasons, as CSV text (numbers and booleans: no field
+    quoted): ``complete`` and the measures, then each tracked output's metrics and each output's final value in the
+    run's own sorted order; each column made text once, the runs of one (tracked outputs, outputs) joined at once."""
+    fixed = [_texts(part.complete), *(_texts(part.measures[k]) for k in MEASURE_CELLS)]
     tracked = {t: [_texts(cols[k]) for k in METRIC_CELLS] for t, cols in part.tracked.items()}
     final = {o: _texts(v) for o, v in part.outputs_final.items()}
-
-    def cells(i: int, names: tuple[tuple[str, ...], tuple[str, ...]]) -> list[str]:
-        return [*fixed[i], *(col[i] for t in names[0] for col in tracked[t]), *(final[o][i] for o in names[1])]
-
-    return cells
+    out = [""] * len(part.rows)
+    for s, (names, outs) in enumerate(part.shapes):
+        rows = np.flatnonzero(part.shape == s).tolist()
+        columns = [*fixed, *(col for t in names for col in tracked[t]), *(final[o] for o in outs)]
+        if len(rows) < len(out):
+            columns = [[col[i] for i in rows] for col in columns]
+        for i, text in zip(rows, map(",".join, zip(*columns))):
+            out[i] = text
+    return out
 
 
 def _tracked_iae(part: Any) -> np.ndarray:
@@ -168,17 +294,20 @@ class Verdicts:
         warning = np.array([x is True for x in part.measures["model_warning"]], bool)
         lines, code, masks = [], np.zeros(len(rows), np.int8), np.zeros(len(rows), np.int64)
         for n, i in enumerate(rows.tolist()):
-            head = self._head(part, i, failed[i])
-            text = self._head_text(head)
+            if failed[i] or part.error[i]:
+                head = self._head(part, i, failed[i])
+                text = self._head_text(head)
+                verdict = head["status"] + "," + csv_field("; ".join(head["reasons"]))
+                code[n] = STATUSES.index(head["status"])
+                for name in head["failed"]:
+                    if name not in self.criteria:
+                        self.criteria.append(name)
+                    masks[n] |= 1 << self.criteria.index(name)
+            else:  # a passed run's head: the same text for every run of the same keys
+                text, verdict, code[n] = self._passed(part, i), "pass,", PASS
             row_text = part.rows[i]
             body = text if row_text == "{}" else text[:-1] + ", " + row_text[1:]
-            names = part.shapes[part.shape[i]]
-            lines.append(SEP.join([body, "; ".join(head["reasons"]), *cells(i, names)]).encode("utf-8"))
-            code[n] = STATUSES.index(head["status"])
-            for name in head["failed"]:
-                if name not in self.criteria:
-                    self.criteria.append(name)
-                masks[n] |= 1 << self.criteria.index(name)
+            lines.append(SEP.join([body, verdict, cells[i]]).encode("utf-8"))
         # the part's numbers set at once and its lines written in one call (a write a run: 18 us of each, profiled)
         u, sizes = slots[rows], np.array([len(x) for x in lines], np.int64)
         self.at[u] = self.file.tell() + np.cumsum(sizes) - sizes
@@ -214,6 +343,13 @@ class Verdicts:
         return {"status": "fail" if failed else "pass", "failed": sorted({k for k, _ in failed}),
                 "reasons": [text for _, text in failed]} | missing  # fmt: skip
 
+    def _passed(self, part: Any, i: int) -> str:
+        """The head text of run ``i`` of ``part``, a passed run (:meth:`_head`'s, as :meth:`_head_text` writes it)."""
+        key = ("pass", int(part.keys[i]) & 7)
+        if key not in self._heads:
+            self._heads[key] = self._head_text(self._head(part, i, []))
+        return self._heads[key]
+
     def _head_text(self, head: dict) -> str:
         """``head`` as JSON text; a head without a reason (a passed run's, the same for most runs) encoded once."""
         if head["reasons"] or head["failed"]:
@@ -223,28 +359,48 @@ class Verdicts:
             self._heads[key] = json.dumps(head, sort_keys=True, allow_nan=False)
         return self._heads[key]
 
-    def text(self, u: int) -> tuple[str, list[str]]:
-        """Run ``u``'s verdict as JSON text and its CSV cells (:data:`MISSING_VERDICT` without a record)."""
+    def text(self, u: int) -> tuple[str, str, str]:
+        """Run ``u``'s verdict as JSON text, its CSV status and reasons, and its CSV cells after them in its own
+        tracked outputs and outputs (:data:`MISSING_VERDICT` without a record)."""
         at = int(self.at[u])
         if at < 0:
-            return json.dumps(MISSING_VERDICT, sort_keys=True), ["no result"] + [""] * (FIXED_CELLS - 1)
+            return self._missing
         if not self._flushed:  # the spill is written whole before the first read
             self.file.flush()
             self._flushed = True
         # one pread a run, not a seek and a buffered read; not a memory map either: its pages read would count in
         # the client's resident memory (the spill of 100,000 runs is ~220 MB)
-        body, *cells = os.pread(self.file.fileno(), int(self.size[u]), at).decode("utf-8").split(SEP)
-        return body, cells
+        body, verdict, cells = os.pread(self.file.fileno(), int(self.size[u]), at).decode("utf-8").split(SEP)
+        return body, verdict, cells
 
-    def cells(self, u: int, cells: list[str], tracked: list[str], outs: list[str]) -> list[str]:
-        """Run ``u``'s CSV cells in the columns ``tracked`` and ``outs`` (sorted) of every run."""
+    _missing = (json.dumps(MISSING_VERDICT, sort_keys=True), "missing,no result", "," * (FIXED_CELLS - 2))
+
+    def rows(self, slots: list[int], tracked: list[str], outs: list[str]) -> tuple[list[str], list[str], list[str]]:
+        """:meth:`text` of each of runs ``slots``, the cells in the columns ``tracked`` and ``outs`` (sorted) of every
+        run."""
+        bodies, verdicts, cells = [], [], []
+        every = (tuple(tracked), tuple(outs))
+        plain = [names == every for names in self.shapes]
+        for u in slots:
+            body, verdict, own = self.text(u)
+            if self.at[u] < 0 or not plain[self.shape[u]]:
+                own = self.cells(u, own, tracked, outs)
+            bodies.append(body)
+            verdicts.append(verdict)
+            cells.append(own)
+        return bodies, verdicts, cells
+
+    def cells(self, u: int, cells: str, tracked: list[str], outs: list[str]) -> str:
+        """Run ``u``'s CSV cells (``cells``: after its reasons, in its own tracked outputs and outputs) in the columns
+        ``tracked`` and ``outs`` (sorted) of every run (the cells are numbers: no comma)."""
         own_tracked, own_outs = self.shapes[self.shape[u]] if self.at[u] >= 0 else ((), ())
-        if list(own_tracked) == tracked and list(own_outs) == outs:
-            return cells
-        fixed, rest = cells[:FIXED_CELLS], cells[FIXED_CELLS:]
+        split = cells.split(",")
+        fixed, rest = split[: FIXED_CELLS - 1], split[FIXED_CELLS - 1 :]
         by_t = {t: rest[3 * i : 3 * i + 3] for i, t in enumerate(own_tracked)}
         by_o = {o: rest[3 * len(own_tracked) + i] for i, o in enumerate(own_outs)}
-        return [*fixed, *(c for t in tracked for c in by_t.get(t, ["", "", ""])), *(by_o.get(o, "") for o in outs)]
+        return ",".join(
+            [*fixed, *(c for t in tracked for c in by_t.get(t, ["", "", ""])), *(by_o.get(o, "") for o in outs)]
+        )
 
     def close(self) -> None:
         self.file.close()

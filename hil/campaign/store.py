@@ -10,9 +10,11 @@
 
 A block file's name is its content address (:func:`block_address`: the sha256 of its runs' ids, each itself the hash
 of the run's inputs and gainlink's version), so the same runs always land in the same file. A row holds the run's id,
-its status (``done`` or ``error``), its record as two compact JSON texts (``record``: inputs, link, an error's
-reason; ``row``: :data:`ROW_KEYS` and a result's own reason, which ``campaign.json`` gives as it is), the numbers its
-verdict and ``campaign.csv`` read as typed columns (:func:`row_columns`: the report decodes no JSON of a result) and
+its status (``done`` or ``error``), its record's free-form parts as compact JSON texts (``record``: inputs, link, an
+error's reason; ``metrics``: the run's metrics), its report row's typed values as typed columns (:func:`row_columns`:
+``complete``, the run's own reason, the measures, the worker; what the verdict and ``campaign.csv`` read: the report
+decodes no JSON of a result), not again as JSON: the row's text, which ``campaign.json`` gives, is made from them
+(:func:`row_texts`; ``row`` holds it whole only for a row they cannot give exactly, :func:`_given`), and
 its traces downsampled to at most ``worker.MAX_TRACE_POINTS`` evenly spaced true samples (first and last kept; each a
 binary value, the run's float32 values in C order: ``t``, and ``y``, ``u``, ``r`` row by row with their widths, so a
 batch of runs is read as one numpy array over the column's buffer, :func:`_flat`); the full trace of a run is not
@@ -33,6 +35,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import operator
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,16 +62,23 @@ SCHEMA = pa.schema(
         ("status", pa.string()),
         ("record", pa.string()),
         ("row", pa.string()),
+        ("metrics", pa.string()),
         ("t", pa.large_binary()),
         *((k, pa.large_binary()) for k in WIDE),
         *((f"{k}_width", pa.int32()) for k in WIDE),
     ]
 )
 META_VERSION, META_CAMPAIGN, META_LAYOUT = b"gainlink.version", b"gainlink.campaign", b"gainlink.block_layout"
-LAYOUT = "4"  # 2: the record split into ``record`` and ``row``; 3: the row's verdict inputs as typed columns too;
-# 4: each trace a run's float32 bytes (not a list of floats: Parquet's levels per value, and numpy's per run to read)
+LAYOUT = "5"  # 2: the record split into ``record`` and ``row``; 3: the row's verdict inputs as typed columns too;
+# 4: each trace a run's float32 bytes (not a list of floats: Parquet's levels per value, and numpy's per run to read);
+# 5: a row's typed values (complete, run_reason, measures, worker) not again in JSON: its text made from the columns
 ROW_KEYS = ("complete", "measures", "metrics", "worker")  # what a report row takes from a record, as it is
-ROW_BITS = ("complete", "run_reason", "worker", "measures", "metrics")  # bit k of ``row_keys``: the row has ROW_BITS[k]
+# bit k of ``row_keys``: the row has ROW_BITS[k]; its measures have the twin's, the model twin's, growth ratios
+ROW_BITS = ("complete", "run_reason", "worker", "measures", "metrics", "twin", "model", "growth")
+TWIN_KEYS = ("twin_command_deviation", "twin_output_deviation")
+MODEL_KEYS = ("model_iae_ratio", "model_mismatch", "model_warning")
+MEASURE_KEYS = ("growth_ratio", "longest_saturation_s", "output_max", "output_min", "stable", "unstable_reason")
+WORKER_KEYS = ("cpu_s", "host", "pid", "start", "stop")  # and ``block`` in a block's runs
 MEASURES = pa.struct(
     [
         ("stable", pa.bool_()),
@@ -82,8 +92,10 @@ WORKER = pa.struct(
     [("host", pa.string()), ("pid", pa.int64()), ("start", pa.float64()), ("stop", pa.float64()),
      ("cpu_s", pa.float64()), ("block", pa.int64())]
 )  # fmt: skip
-NAMED = {"output_min": pa.float64(), "output_max": pa.float64(), "tracked": TRACKED, "outputs_final": pa.float64()}
+NAMED = {"output_min": pa.float64(), "output_max": pa.float64(), "tracked": TRACKED, "outputs_final": pa.float64(),
+         "growth_ratio": pa.float64()}  # fmt: skip
 ROW_COLUMNS = ("row_keys", "names", "complete", "run_reason", "measures", "worker", *NAMED)
+OF_MEASURES = ("output_min", "output_max", "growth_ratio")  # the NAMED structs a row's measures hold, the rest metrics'
 
 
 def encode_trace(t: np.ndarray, y: np.ndarray, u: np.ndarray, r: np.ndarray) -> dict[str, np.ndarray]:
@@ -128,13 +140,21 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes
     can see the folder (:func:`write_block`), else returns it for the client to write."""
     traces = [record.get("trace") for record in records]
     parts = [_split(run_id, record) for run_id, record in zip(ids, records)]
+    rows = [row for _, row in parts]
+    typed = row_columns(rows)
+    names = {key: [f.name for f in typed[key].type] if key in typed else [] for key in OF_MEASURES}
+    given = (_finite(typed, len(rows)) & np.array([_given(row, names) for row in rows], bool)).tolist()
     cols: dict[str, Any] = {
         "id": pa.array(ids, pa.string()),
         "status": pa.array([record["status"] for record in records], pa.string()),
         "record": pa.array([_compact_json(rest) for rest, _ in parts], pa.string()),
-        "row": pa.array([_compact_json(row) for _, row in parts], pa.string()),
+        # JSON only for what the typed columns do not hold: a row's metrics, or a whole row they cannot give exactly
+        "row": pa.array([None if ok else _compact_json(row) for row, ok in zip(rows, given)], pa.string()),
+        "metrics": pa.array(
+            [_compact_json(row["metrics"]) if ok and "metrics" in row else None for row, ok in zip(rows, given)],
+            pa.string(),
+        ),
     }
-    typed = row_columns([row for _, row in parts])
     cols["t"] = _blobs([None if tr is None else tr["t"] for tr in traces])
     for k in WIDE:
         cols[k] = _blobs([None if tr is None else tr[k] for tr in traces])
@@ -196,21 +216,90 @@ def row_columns(rows: list[dict]) -> dict[str, pa.Array]:
       null struct), left out when no row has one (Parquet has no struct without fields).
     """
     bits = np.zeros(len(rows), np.uint8)
-    for k, key in enumerate(ROW_BITS):
-        bits |= np.array([key in row for row in rows], np.uint8) << k
-    metrics = [row.get("metrics") or {} for row in rows]
     measures = [row.get("measures") for row in rows]
+    for k, key in enumerate(ROW_BITS[:5]):
+        bits |= np.array([key in row for row in rows], np.uint8) << k
+    held = [m if type(m) is dict else {} for m in measures]
+    bits |= np.array([TWIN_KEYS[0] in m for m in held], np.uint8) << 5
+    bits |= np.array([MODEL_KEYS[0] in m for m in held], np.uint8) << 6
+    bits |= np.array([bool(m.get("growth_ratio")) for m in held], np.uint8) << 7
+    metrics = [row.get("metrics") or {} for row in rows]
     cols: dict[str, pa.Array] = {"row_keys": pa.array(bits, pa.uint8()), "names": _names(metrics)}
     cols["complete"] = pa.array([row.get("complete") for row in rows], pa.bool_())
     cols["run_reason"] = pa.array([row.get("run_reason") for row in rows], pa.string())
     cols["measures"] = pa.array(measures, MEASURES)
     cols["worker"] = pa.array([row.get("worker") for row in rows], WORKER)
     for key, kind in NAMED.items():
-        held = [(m or {}).get(key) for m in (measures if key.startswith("output_m") else metrics)]
+        held = [(m or {}).get(key) for m in (measures if key in OF_MEASURES else metrics)]
         names = sorted(set().union(*(d for d in held if d)))
         if names:
             cols[key] = pa.array(held, pa.struct([(n, kind) for n in names]))
     return cols
+
+
+_FLOAT_MEASURES = ("longest_saturation_s", "twin_command_deviation", "twin_output_deviation", "model_iae_ratio",
+                   "model_mismatch")  # fmt: skip
+_MEASURE_SETS = {
+    frozenset(MEASURE_KEYS + twin + model) for twin in ((), TWIN_KEYS) for model in ((), MODEL_KEYS)
+}  # the key sets a run's measures have (:func:`.criteria.measure`): with or without each twin's
+
+
+_NUMBERS = frozenset({float, type(None)})  # what a float64 column gives back as JSON wrote it (not an int, not numpy's)
+
+
+def _given(row: dict, names: dict[str, list[str]]) -> bool:
+    """Whether the typed columns give row ``row`` (a :func:`_split` ``row``) exactly, so that :func:`row_texts` makes
+    its JSON text from them and its metrics' text: each value of the types its column holds, its measures one of the
+    key sets :func:`.criteria.measure` makes, with the block's names (``names``: the :data:`OF_MEASURES` structs'
+    fields) in ``output_min`` and ``output_max`` and in ``growth_ratio`` or none. (Its floats' finiteness is checked
+    over the columns, :func:`_finite`.)"""
+    complete, reason, worker = row.get("complete"), row.get("run_reason"), row.get("worker")
+    if not (complete is None or type(complete) is bool) or not (reason is None or type(reason) is str):
+        return False
+    if worker is not None and not _given_worker(worker):
+        return False
+    m = row.get("measures")
+    if m is None:
+        return True
+    if type(m) is not dict or frozenset(m) not in _MEASURE_SETS:
+        return False
+    if not all(m.get(k) is None or type(m[k]) is bool for k in ("stable", "model_warning")):
+        return False
+    if not (m["unstable_reason"] is None or type(m["unstable_reason"]) is str):
+        return False
+    if not {type(m[k]) for k in _FLOAT_MEASURES if k in m} <= _NUMBERS:
+        return False
+    for key in OF_MEASURES:
+        held = m[key]
+        if type(held) is not dict or not set(map(type, held.values())) <= _NUMBERS:
+            return False
+        if sorted(held) != names[key] and (held or key != "growth_ratio"):  # growth ratios: every name's or none
+            return False
+    return True
+
+
+def _given_worker(worker: Any) -> bool:
+    """Whether a row's ``worker`` is the dict a worker records (:data:`WORKER_KEYS`, and ``block`` in a block)."""
+    if type(worker) is not dict or len(worker) != (5 if "block" not in worker else 6):
+        return False
+    if "block" in worker and type(worker["block"]) is not int:
+        return False
+    host, pid = worker.get("host"), worker.get("pid")
+    if type(host) is not str or type(pid) is not int:
+        return False
+    return all(type(worker.get(k)) is float for k in ("start", "stop", "cpu_s"))
+
+
+def _finite(typed: dict[str, pa.Array], rows: int) -> np.ndarray:
+    """Which rows have no infinite or NaN value in the floats of the typed columns a row's text is made from (JSON
+    refuses them: such a row is kept whole, and its JSON raises as it did)."""
+    ok = np.ones(rows, bool)
+    todo = [typed[k] for k in ("measures", "worker", *OF_MEASURES) if k in typed]
+    for col in todo:
+        for field, arr in zip(col.type, col.flatten()):
+            if pa.types.is_floating(field.type) and arr.null_count < len(arr):
+                ok &= np.asarray(pc.fill_null(pc.is_finite(arr), True).to_numpy(zero_copy_only=False), bool)
+    return ok
 
 
 def _names(metrics: list[dict]) -> pa.DictionaryArray:
@@ -222,6 +311,136 @@ def _names(metrics: list[dict]) -> pa.DictionaryArray:
         codes.append(texts.setdefault(key, len(texts)))
     words = [_compact_json([list(t), list(o)]) for t, o in texts]
     return pa.DictionaryArray.from_arrays(pa.array(codes, pa.int32()), pa.array(words, pa.string()))
+
+
+_TRUTH = {True: "true", False: "false", None: "null"}
+
+
+def _numbers_text(arr: pa.Array, *, repeated: bool = False) -> list[str]:
+    """A float64 or int64 column's values as JSON writes each (``null`` where null; a float by its ``repr``, as
+    json's encoder). ``repeated``: a column of a few distinct values (a block's worker, its runs' sample times), each
+    made text once."""
+    if repeated:
+        codes = pc.dictionary_encode(arr)
+        words = _numbers_text(codes.dictionary) + ["null"]
+        return [words[k] for k in codes.indices.fill_null(len(words) - 1).to_numpy(zero_copy_only=False).tolist()]
+    values = arr.to_pylist()
+    return list(map(repr, values)) if not arr.null_count else ["null" if v is None else repr(v) for v in values]
+
+
+def _strings_text(arr: pa.Array) -> list[str]:
+    """A string column's values as JSON writes each, each distinct one encoded once."""
+    done: dict[Any, str] = {None: "null"}
+    return [done[v] if v in done else done.setdefault(v, json.dumps(v)) for v in arr.to_pylist()]
+
+
+def _filled(template: str, columns: list[list[str]], rows: list[int] | None = None) -> list[str]:
+    """``template`` (``%s`` a value) filled with each run's texts of ``columns`` (only runs ``rows``, when given)."""
+    if rows is not None and rows != list(range(len(columns[0]) if columns else 0)):
+        pick = operator.itemgetter(*rows) if len(rows) > 1 else lambda col: (col[rows[0]],)
+        columns = [pick(col) for col in columns]
+    if not columns:
+        return [template] * (len(rows) if rows is not None else 0)
+    return [template % values for values in zip(*columns)]
+
+
+def _object_texts(column: pa.Array | None, rows: int) -> list[str]:
+    """A struct column of float64 fields (a field per name) as each run's JSON object of them, keys sorted (``{}``
+    without the column)."""
+    if column is None:
+        return ["{}"] * rows
+    fields = sorted(zip(column.type, _fields(column).values()), key=lambda f: f[0].name)
+    template = "{" + ",".join(_key(f.name) + "%s" for f, _ in fields) + "}"
+    return _filled(template, [_numbers_text(arr) for _, arr in fields])
+
+
+def _key(name: str) -> str:
+    """An object key as compact JSON writes it, with its colon, escaped for a ``%`` template."""
+    return (json.dumps(name) + ":").replace("%", "%%")
+
+
+def row_texts(table: pa.Table) -> list[str]:
+    """Each row's JSON text, as ``json.dumps(row, sort_keys=True, separators=(",", ":"))`` writes the :func:`_split`
+    ``row`` the block was made from: the ``row`` column's where the typed columns could not give it exactly
+    (:func:`_given`), else made from the typed columns and the ``metrics`` column's text: each value made text once,
+    a column at a time, and the runs of one form (which keys the row and its measures have, which are null) filled
+    into one template."""
+    out = table.column("row").to_pylist()
+    typed = np.flatnonzero(table.column("row").is_null().to_numpy(zero_copy_only=False))
+    if not typed.size:
+        return out
+    texts = _value_texts(table)
+    form = table.column("row_keys").to_numpy(zero_copy_only=False).astype(np.int64)
+    for k, col in enumerate(("measures", "worker")):
+        form |= np.asarray(table.column(col).is_valid().to_numpy(zero_copy_only=False), np.int64) << (8 + k)
+    block = table.column("worker").combine_chunks().field("block").is_valid().to_numpy(zero_copy_only=False)
+    form |= np.asarray(block, np.int64) << 10
+    forms = form[typed]
+    for f in np.unique(forms).tolist():
+        rows = typed[forms == f].tolist()
+        template, names = _row_template(f)
+        for i, text in zip(rows, _filled(template, [texts[name] for name in names], rows)):
+            out[i] = text
+    return out
+
+
+def _row_template(form: int) -> tuple[str, list[str]]:
+    """The JSON text of the rows of one ``form`` (bits: :data:`ROW_BITS`, then whether ``measures``, ``worker`` and
+    ``worker.block`` are not null) as a ``%`` template and the names of the texts (:func:`_value_texts`) it takes."""
+    has = {name: bool(form >> k & 1) for k, name in enumerate((*ROW_BITS, "measures?", "worker?", "block?"))}
+    parts: list[tuple[str, str | None]] = []  # (literal text, the value after it)
+    if has["complete"]:
+        parts.append(('"complete":', "complete"))
+    if has["measures"] and not has["measures?"]:
+        parts.append(('"measures":null', None))
+    elif has["measures"]:
+        names = ["growth_ratio" if has["growth"] else None, "longest_saturation_s"]
+        names += list(MODEL_KEYS) if has["model"] else []
+        names += ["output_max", "output_min", "stable"] + (list(TWIN_KEYS) if has["twin"] else []) + ["unstable_reason"]
+        for k, name in enumerate(names):
+            head = ('"measures":{' if k == 0 else ",") + _key(name or "growth_ratio")
+            parts.append((head + ("{}" if name is None else ""), name))
+        parts.append(("}", None))
+    if has["metrics"]:
+        parts.append(('"metrics":', "metrics"))
+    if has["run_reason"]:
+        parts.append(('"run_reason":', "run_reason"))
+    if has["worker"] and not has["worker?"]:
+        parts.append(('"worker":null', None))
+    elif has["worker"]:
+        names = (["block"] if has["block?"] else []) + list(WORKER_KEYS)
+        for k, name in enumerate(names):
+            parts.append((('"worker":{' if k == 0 else ",") + _key(name), "worker." + name))
+        parts.append(("}", None))
+    template, names, first = "{", [], True
+    for text, name in parts:
+        lead = "," if not first and text[0] == '"' else ""
+        first = False
+        template += lead + text + ("" if name is None else "%s")
+        if name is not None:
+            names.append(name)
+    return template + "}", names
+
+
+def _value_texts(table: pa.Table) -> dict[str, list[str]]:
+    """Each typed value a row's text holds, as JSON text, by name (``worker.pid``; a measure by its own name), one
+    list a column over the block's runs."""
+    n = table.num_rows
+    measures = _fields(table.column("measures"))
+    worker = _fields(table.column("worker"))
+    texts = {k: _numbers_text(measures[k], repeated=k == "longest_saturation_s") for k in _FLOAT_MEASURES}
+    texts |= {k: [_TRUTH[v] for v in measures[k].to_pylist()] for k in ("stable", "model_warning")}
+    texts["unstable_reason"] = _strings_text(measures["unstable_reason"])
+    texts |= {key: _object_texts(table.column(key).combine_chunks() if key in table.column_names else None, n)
+              for key in OF_MEASURES}  # fmt: skip
+    texts |= {
+        f"worker.{k}": _numbers_text(worker[k], repeated=True) for k in ("block", "cpu_s", "pid", "start", "stop")
+    }
+    texts["worker.host"] = _strings_text(worker["host"])
+    texts["complete"] = [_TRUTH[v] for v in table.column("complete").to_pylist()]
+    texts["run_reason"] = _strings_text(table.column("run_reason").combine_chunks())
+    texts["metrics"] = table.column("metrics").to_pylist()
+    return texts
 
 
 def _joined(rest: dict, row: dict) -> dict:
@@ -273,6 +492,15 @@ def _read(path: Path, columns: list[str]) -> pa.Table:
     before (mimalloc keeps freed pages: +30 MB of the client's resident memory over 10,000 runs' records)."""
     pa.default_memory_pool().release_unused()
     return pq.read_table(path, columns=columns)
+
+
+TEXT_COLUMNS = ("row", "metrics")  # a row's JSON texts (:func:`row_texts`)
+
+
+def _row_columns(path: Path) -> list[str]:
+    """The columns of block file ``path`` :func:`row_texts` reads."""
+    present = set(pq.read_schema(path).names)
+    return [*TEXT_COLUMNS, *(k for k in ROW_COLUMNS if k in present)]
 
 
 def _ids(column: pa.ChunkedArray) -> np.ndarray:
@@ -521,7 +749,7 @@ class Store:
         index keeps (a run stored twice: one record); only the errors' ``record`` text is decoded."""
         for path in self.files():
             present = set(pq.read_schema(path).names)
-            table = _read(path, columns=["id", "status", "row", *(k for k in ROW_COLUMNS if k in present)])
+            table = _read(path, columns=["id", "status", *TEXT_COLUMNS, *(k for k in ROW_COLUMNS if k in present)])
             names = _ids(table.column("id"))
             kept = self._kept(path, names)
             if not kept.any():
@@ -539,11 +767,12 @@ class Store:
     def records(self) -> Iterator[tuple[str, dict]]:
         """Every stored run's record, one block file at a time (a run stored twice: the record the index keeps)."""
         for path in self.files():
-            table = _read(path, columns=["id", "record", "row"])
+            table = _read(path, columns=["id", "record", *_row_columns(path)])
             names = _ids(table.column("id"))
-            for i in np.flatnonzero(self._kept(path, names)).tolist():
-                rest, row = (json.loads(table.column(k)[i].as_py()) for k in ("record", "row"))
-                yield names[i].decode("ascii"), _joined(rest, row)
+            kept = np.flatnonzero(self._kept(path, names)).tolist()
+            rows = row_texts(table.take(pa.array(kept, pa.int64()))) if kept else []
+            for i, row in zip(kept, rows):
+                yield names[i].decode("ascii"), _joined(json.loads(table.column("record")[i].as_py()), json.loads(row))
 
     def traces(self, ids: Iterable[str]) -> Iterator[tuple[str, dict[str, np.ndarray]]]:
         """The stored traces of the runs ``ids`` that have a result, one block file at a time."""
@@ -601,11 +830,14 @@ class Store:
 
     def record(self, run_id: str) -> dict:
         """The stored record of a run (KeyError when it has none)."""
-        got = self._row(run_id, ["record", "row"])
-        if got is None:
+        hit = self._find(run_id)
+        if hit is None:
             raise KeyError(run_id)
+        got = self._row(run_id, ["record", *_row_columns(self.blocks / hit[1])])
+        assert got is not None
         table, i = got
-        return _joined(json.loads(table.column("record")[i].as_py()), json.loads(table.column("row")[i].as_py()))
+        row = row_texts(table.slice(i, 1))[0]
+        return _joined(json.loads(table.column("record")[i].as_py()), json.loads(row))
 
     def trace(self, run_id: str) -> dict[str, np.ndarray] | None:
         """The stored downsampled traces of a run, if any."""
@@ -663,7 +895,7 @@ def _report_part(ids: np.ndarray, error: np.ndarray, reasons: list, table: pa.Ta
     return ReportPart(
         ids=ids,
         error=error,
-        rows=table.column("row").to_pylist(),
+        rows=row_texts(table),
         reasons=reasons,
         keys=table.column("row_keys").to_numpy(),
         shapes=shapes,
