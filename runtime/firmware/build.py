@@ -11,6 +11,7 @@ key (pytest-xdist workers, Dask workers) build it once and the others then find 
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import logging
 import os
@@ -167,7 +168,7 @@ def build(
         build (the compiler's last lines are in the message).
     """
     platform = _targets.resolve(target, board, default_target=_targets.HOST)
-    options = dict(sorted((options or {}).items()))
+    options = dict(sorted((host_options(platform) | (options or {})).items()))
     cmake = _which("cmake", "install cmake (make setup)")
     if platform.board is not None:
         _which("arm-none-eabi-gcc", "install gcc-arm-none-eabi and libnewlib-arm-none-eabi (make setup)")
@@ -199,6 +200,33 @@ def build(
         gains_dir=gen,
         files=_outputs(cm, platform),
     )
+
+
+def host_options(platform: _targets.Platform) -> dict[str, str]:
+    """The CMake options a host build takes from the machine it runs on: ``GL_HOST_FMA=ON`` on an x86-64 CPU with
+    FMA (:func:`host_has_fma`), so the law's fused multiply-adds are instructions, not libm calls (the same bits);
+    none for a Cortex-M image or elsewhere. Part of the build's key, as every option."""
+    if platform.board is None and host_has_fma():
+        return {"GL_HOST_FMA": "ON"}
+    return {}
+
+
+@functools.lru_cache(maxsize=1)
+def host_has_fma() -> bool:
+    """Whether this is Linux on an x86-64 CPU with the FMA instructions (``fma`` among ``/proc/cpuinfo``'s flags).
+    An aarch64 compiler inlines ``fmaf`` without a flag; elsewhere the host keeps libm's call."""
+    import platform as _platform
+
+    if sys.platform != "linux" or _platform.machine() != "x86_64":
+        return False
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("flags"):
+                    return "fma" in line.split(":", 1)[1].split()
+    except OSError:
+        return False
+    return False
 
 
 def _build_command(cmake: str, cm: Path, only: str | None) -> list[str]:
