@@ -109,6 +109,19 @@ def path_steps(path: str) -> tuple[str | int, ...]:
     return tuple(out)
 
 
+def value_at(tree: Any, path: str, missing: Any = None) -> Any:
+    """The value at ``path`` (:func:`path_steps`) in ``tree``; ``missing`` where there is none."""
+    node = tree
+    for step in path_steps(path):
+        if isinstance(step, int):
+            if not isinstance(node, list) or step >= len(node):
+                return missing
+        elif not isinstance(node, dict) or step not in node:
+            return missing
+        node = node[step]
+    return node
+
+
 class CampaignError(ScenarioError):
     """A campaign file is malformed or asks for something a run cannot do."""
 

@@ -43,7 +43,7 @@ from gainlink.version import __version__
 
 from ..loop.endpoints import refuse_link_faults
 from ..loop.scenario import Scenario, parse_scenario
-from .config import Axis, Campaign, CampaignError, path_steps
+from .config import Axis, Campaign, CampaignError, path_steps, value_at
 from .preflight import DryBuild, check_axis_values
 
 
@@ -550,7 +550,7 @@ class _Planner:
                 _apply_axis(axis, values[axis.name], spec=None, scenario=scenario, window=c.fault_window)
             for i, axis in enumerate(c.draws):
                 for target in axis.targets:
-                    base = _leaf(scenario, target)
+                    base = value_at(scenario, target)
                     if axis.apply != "set" and not _is_number(base):
                         return None
                     set_path(scenario, target, _SLOT.format(len(leaves)))
@@ -623,19 +623,6 @@ def _templated(campaign: Campaign) -> bool:
         return False
     paths = [path_steps(t) for a in (*campaign.grid, *campaign.draws) for t in a.targets if not t.startswith("spec.")]
     return not any(i != j and q[: len(p)] == p for i, p in enumerate(paths) for j, q in enumerate(paths))
-
-
-def _leaf(tree: dict, path: str) -> Any:
-    """The value at ``path`` in ``tree``, ``None`` where there is none."""
-    node: Any = tree
-    for step in path_steps(path):
-        if isinstance(step, int):
-            if not isinstance(node, list) or step >= len(node):
-                return None
-        elif not isinstance(node, dict) or step not in node:
-            return None
-        node = node[step]
-    return node
 
 
 def _is_number(value: Any) -> bool:

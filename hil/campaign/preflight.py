@@ -29,7 +29,7 @@ from ..loop.plan import plan_run
 from ..loop.scenario import Scenario
 from ..loop.scenario_plant import build_plant
 from ..plants.base import PLANTS
-from .config import Axis, Campaign, CampaignError, path_steps
+from .config import Axis, Campaign, CampaignError, value_at
 
 FAULT_TARGETS = ("faults.drop", "faults.delay_steps", "transport.encoding")
 _MISSING = object()
@@ -45,19 +45,6 @@ def _kind(value: Any) -> str:
     if isinstance(value, list):
         return "a list"
     return "a table" if isinstance(value, dict) else type(value).__name__
-
-
-def _lookup(tree: Any, path: str) -> Any:
-    """The value at ``path`` in ``tree``, or ``_MISSING``."""
-    node = tree
-    for step in path_steps(path):
-        if isinstance(step, int):
-            if not isinstance(node, list) or step >= len(node):
-                return _MISSING
-        elif not isinstance(node, dict) or step not in node:
-            return _MISSING
-        node = node[step]
-    return node
 
 
 def _candidates(axis: Axis) -> list:
@@ -80,7 +67,7 @@ def check_axis_values(campaign: Campaign) -> None:
         for target in axis.targets:
             if target in FAULT_TARGETS or target.startswith("spec."):
                 continue
-            base = _lookup(campaign.scenario, target)
+            base = value_at(campaign.scenario, target, _MISSING)
             if base is _MISSING:
                 continue
             for value in _candidates(axis):
