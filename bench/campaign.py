@@ -34,7 +34,9 @@ Prints JSON. Everything is measured in the same run, against a baseline of the s
   cold builds of the three laws timed apart, ``cluster_start_s`` and ``builds_and_first_runs_s``) the same
   :data:`BLOCK_SPEEDUP_DRAWS` draws (seeds 1 and 2 on each side): ``speedup_2_vs_1`` (target >= 1.8), and
   ``speedup_2_vs_1_runs`` the same until the last run is stored (the report, merged by the client alone after it,
-  apart: the serial part that bounds the first); on the first
+  apart: the serial part that bounds the first), and ``plain_processes`` the machine's ceiling for it: the same
+  block work in 1 and in 2 plain processes, no Dask, client or report (:func:`plain_block_processes_speedup`,
+  ``speedup_of_plain_processes`` the campaign's share of it); on the first
   2-worker cluster :data:`BLOCK_DRAWS` draws (target <= 20 s wall, report included), with the runs' own CPU per
   run-step (target <= 1 us), the machinery's share of the whole campaign, and ``machinery``: its part that grows
   with the runs (``per_run_ratio``, target <= 0.10) and its fixed part (``fixed_s``), from the line through the
@@ -277,6 +279,67 @@ def plain_processes_speedup() -> dict:
     }
 
 
+BLOCK_PLAIN_RUNS = 1_000  # runs of one build a block of the plain-process ceiling steps
+
+
+def _block_work(draws: int) -> tuple[dict, list]:
+    """The shipped pendulum campaign's first ``draws`` runs of its first build, as a worker's task gets them."""
+    from gainlink.hil.campaign import parse_campaign
+    from gainlink.hil.campaign.plan import plan_campaign
+
+    plan = plan_campaign(parse_campaign(shipped_pendulum(3 * draws)))
+    runs = [(p.artifact_sha256, p.scenario, p.seed) for p in plan.runs]
+    return dict(plan.artifacts), [r for r in runs if r[0] == runs[0][0]][:draws]
+
+
+def _plain_block_process(blocks: int, barrier, done) -> None:
+    """In a process of its own: ``blocks`` blocks of :data:`BLOCK_PLAIN_RUNS` runs stepped as a worker steps them
+    (``batch_records``: the runs and their records; no Dask, no file, no client), started when every process is warm."""
+    from gainlink.hil.campaign.worker import batch_records
+
+    artifacts, runs = _block_work(BLOCK_PLAIN_RUNS)
+    batch_records("sil", artifacts, runs[:3])  # the law's host library built and loaded
+    barrier.wait()
+    for _ in range(blocks):
+        batch_records("sil", artifacts, runs)
+    done.put(blocks)
+
+
+def _plain_block_wall(processes: int) -> float:
+    """Wall time of 2 blocks stepped by ``processes`` plain processes started together (2 in one, or 1 in each)."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")
+    barrier, done = ctx.Barrier(processes + 1), ctx.Queue()
+    procs = [ctx.Process(target=_plain_block_process, args=(2 // processes, barrier, done)) for _ in range(processes)]
+    for proc in procs:
+        proc.start()
+    barrier.wait()
+    t0 = time.perf_counter()
+    stepped = sum(done.get() for _ in procs)
+    wall = time.perf_counter() - t0
+    for proc in procs:
+        proc.join()
+    assert stepped == 2
+    return wall
+
+
+def plain_block_processes_speedup() -> dict:
+    """The ceiling of the block benchmark's 2-workers-over-1 on this machine: the same block work (2 blocks of
+    :data:`BLOCK_PLAIN_RUNS` runs) in 1 plain process, then 1 block in each of 2 started together, order 1, 2, 2, 1;
+    what the CPUs give block work with no scheduler, client or report at all (two cores that share caches and memory
+    bandwidth give less than 2)."""
+    walls: dict[int, float] = {1: 0.0, 2: 0.0}
+    for processes in (1, 2, 2, 1):
+        walls[processes] += _plain_block_wall(processes)
+    return {
+        "runs_per_block": BLOCK_PLAIN_RUNS,
+        "one_process_s": round(walls[1], 3),
+        "two_processes_s": round(walls[2], 3),
+        "speedup_2_vs_1": round(walls[1] / walls[2], 3),
+    }
+
+
 def worker_rss_mb(client) -> float:
     import psutil
 
@@ -490,6 +553,7 @@ def measure_blocks(tmp: Path) -> dict:
                 if os.environ.get("BENCH_LARGE") == "1":
                     out["hundred_thousand"] = block_campaign(client, shipped_pendulum(LARGE_DRAWS), tmp / "blocks_100k")
     speed = sum(walls[1]) / sum(walls[2])
+    out["plain_processes"] = ceiling = plain_block_processes_speedup()
     ten = out["ten_thousand"]
     two = [r for r in out["speedup_runs"] if r["workers"] == 2]
     out["machinery"] = split = machinery_split(two, ten)
@@ -501,6 +565,7 @@ def measure_blocks(tmp: Path) -> dict:
             "speedup_2_vs_1_runs": round(sum(runs_walls[1]) / sum(runs_walls[2]), 3),
             "target_speedup": 1.8,
             "meets_speedup": speed >= 1.8,
+            "speedup_of_plain_processes": round(speed / ceiling["speedup_2_vs_1"], 3),
             "block_vs_per_run_path": round(out["per_run_path"]["cpu_per_run_step_us"] / block_us, 1),
             "target_block_vs_per_run_path": 50,
             "target_cpu_per_run_step_us": 1.0,
