@@ -274,7 +274,7 @@ def prepare_block(scenarios: list[Scenario], *, law, artifact: Artifact, plants:
             p0.output_names,
         )
         runs.append(prepare_run(sc, law=law, artifact=artifact, plant=pl, source=SOURCE, record=False,
-                                like=first.plan if alike else None))  # fmt: skip
+                                like=first if alike else None))  # fmt: skip
     return runs
 
 
