@@ -163,7 +163,12 @@ def prepare_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant, so
         plan = plan_like(like.plan, scenario, law=law, artifact=artifact, plant=plant)
     else:
         plan = plan_run(scenario, law=law, artifact=artifact, plant=plant)
-    start = twin_start(plant, sigma=plan.sigma0) if scenario.model_twin else TwinStart({}, False, plan.sigma0)
+    if scenario.model_twin:
+        start = twin_start(plant, sigma=plan.sigma0)
+    elif like is not None and not like.scenario.model_twin and plan.t is like.plan.t:  # its plan: the same sigma
+        start = like.start
+    else:
+        start = TwinStart({}, False, plan.sigma0)
     return Run(scenario, law=law, artifact=artifact, plant=plant, plan=plan, source=source, start=start,
                record=record, like=like)  # fmt: skip
 
@@ -239,12 +244,13 @@ class Run:
         return self.rec.trace(steps, law=self.law, artifact=self.a, twins=twins)
 
     def result(self, outcome: Outcome, *, twins, twins_s: float, timed: dict | None = None,
-               artifact_info: dict | None = None, trace: RunTrace | None = None,
+               artifact_info: dict | None = None, plant_info: dict | None = None, trace: RunTrace | None = None,
                metrics: dict | None = None) -> RunResult:  # fmt: skip
         """Metrics, trace and what ran, for the steps taken. A campaign block gives what it computed for its runs
         together: ``timed`` (:func:`~.metrics.timing` of this run's steps), ``artifact_info``
-        (:func:`~.plan.describe_artifact`), the run's ``trace`` (:meth:`trace`) and its ``metrics``
-        (:func:`~.block_metrics.block_metrics`: :func:`~.metrics.compute_metrics`' figures, a new dict)."""
+        (:func:`~.plan.describe_artifact`), ``plant_info`` (:func:`~.plan.describe_plant` of a plant like this
+        run's), the run's ``trace`` (:meth:`trace`) and its ``metrics`` (:func:`~.block_metrics.block_metrics`:
+        :func:`~.metrics.compute_metrics`' figures, a new dict)."""
         sc, a, law, steps = self.scenario, self.a, self.law, outcome.steps
         if trace is None:
             trace = self.trace(steps, twins=twins)
@@ -275,7 +281,9 @@ class Run:
         metrics.update(law.run_report(a, trace, ran=self.ran, design_model=is_design_model(sc)))
         if artifact_info is None:
             artifact_info = describe_artifact(law, a, self.source)
-        info = {"artifact": artifact_info, "plant": describe_plant(self.plant), **self.info}
+        if plant_info is None:
+            plant_info = describe_plant(self.plant)
+        info = {"artifact": artifact_info, "plant": plant_info, **self.info}
         return RunResult(scenario=sc, metrics=metrics, trace=trace, complete=outcome.reason is None,
                          reason=outcome.reason, info=info, artifact=a)  # fmt: skip
 
