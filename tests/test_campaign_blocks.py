@@ -259,6 +259,37 @@ def test_the_pendulum_campaign_through_blocks_run_for_run_at_full_length():
     assert _same_runs(draws=100, duration=10.0) == 3 * 2 * 100
 
 
+TIMING_KEYS = {"latency_us", "loop_cpu_s", "period_jitter_us", "steps_per_s", "twins_wall_s", "wall_s"}
+
+
+def test_a_blocks_runs_with_and_without_a_model_twin_report_all_a_run_alone_reports():
+    """A block of the campaign's draws, every other one with the model twin (the runs prepared like the block's
+    first share what does not differ between them): each run's every metric but the timing (the model twin's
+    figures and notes included), its artifact, plant and transport blocks and its model twin's trace equal what
+    the run gives alone (run_scenario)."""
+    from gainlink.hil.campaign.worker import _library
+    from gainlink.hil.loop.block import run_block
+    from gainlink.hil.loop.bridge import run_scenario
+
+    art, scenarios = _pendulum_campaign_points(draws=6, duration=0.5)[0]
+    scs = [dataclasses.replace(sc, model_twin=i % 2 == 1) for i, sc in enumerate(scenarios)]
+    library = _library(art)
+    block = run_block(scs, artifact=art, library=library)
+    assert block is not None
+    for sc, got in zip(scs, block):
+        want = run_scenario(sc, artifact=art, library=library)
+        assert got.metrics.keys() == want.metrics.keys()
+        assert {k: v for k, v in got.metrics.items() if k not in TIMING_KEYS} == {
+            k: v for k, v in want.metrics.items() if k not in TIMING_KEYS
+        }
+        assert ("model_twin" in got.metrics) == sc.model_twin
+        for part in ("artifact", "plant", "transport"):
+            assert got.info[part] == want.info[part], part
+        for name in TRACE_FIELDS + ("model_y", "model_u"):
+            a, b = getattr(got.trace, name), getattr(want.trace, name)
+            assert (a is None and b is None) or np.array_equal(a, b, equal_nan=True), name
+
+
 def _same_trace(got: dict, want: dict) -> bool:
     """Two records' stored traces (float32 arrays by name) are the same, bit for bit (NaN as NaN)."""
     return got["trace"].keys() == want["trace"].keys() and all(

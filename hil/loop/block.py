@@ -36,7 +36,7 @@ from .bridge import Run, RunResult, build_plant, in_process, prepare_run
 from .closed_loop import Outcome
 from .lockstep import Steps
 from .metrics import timing
-from .plan import describe_artifact, plans_alike, saturated
+from .plan import describe_artifact, describe_plant, plans_alike, saturated
 from .scenario import Scenario
 from .twins import with_model_twin
 
@@ -274,7 +274,7 @@ def prepare_block(scenarios: list[Scenario], *, law, artifact: Artifact, plants:
             p0.output_names,
         )
         runs.append(prepare_run(sc, law=law, artifact=artifact, plant=pl, source=SOURCE, record=False,
-                                like=first.plan if alike else None))  # fmt: skip
+                                like=first if alike else None))  # fmt: skip
     return runs
 
 
@@ -300,13 +300,27 @@ def _results(runs: list[Run], rec: Steps, twins: list, *, describe: dict, ran: s
     metrics = block_metrics(traces, artifact=runs[0].a, mode="sil", late=0,
                             period_s=[r.plan.period_s for r in runs], model_start=[t.model_note for t in twins],
                             timed=[timed[int(n)] for n in rec.steps])  # fmt: skip
-    results = []
+    results, plant_info = [], _plant_infos()
     for i, run in enumerate(runs):
         reason = None if rec.failed_at[i] < 0 else f"plant failed at step {rec.failed_at[i]}: {failure}"
         outcome = Outcome(steps=int(rec.steps[i]), reason=reason, wall_s=wall_s, overruns=0)
         results.append(run.result(outcome, twins=twins[i], twins_s=twins_s, artifact_info=artifact_info,
-                                  trace=traces[i], metrics=metrics[i]))  # fmt: skip
+                                  plant_info=plant_info(run.plant), trace=traces[i], metrics=metrics[i]))  # fmt: skip
     return results
+
+
+def _plant_infos():
+    """:func:`~.plan.describe_plant` of a block's plants, made once per kind and signals (the runs of one kind
+    share it: the block's plants are built-in models or linear plants, without an FMU's interface)."""
+    made: dict[tuple, dict] = {}
+
+    def info(plant) -> dict:
+        key = (type(plant), plant.name, *map(tuple, (plant.input_names, plant.output_names, plant.state_names)))
+        if key not in made:
+            made[key] = describe_plant(plant)
+        return made[key]
+
+    return info
 
 
 def _record(run: Run, rec: Steps, i: int, *, shared: dict, describe: dict, ran: str | None) -> None:
@@ -350,13 +364,16 @@ def _twin_traces(want: list[int], tw: Steps, *, steps: np.ndarray, name: str) ->
     """Run i's :class:`~gainlink.proof.twin.TwinTrace` over its own steps, or why its twin's plant failed in them."""
     from gainlink.proof.twin import TwinTrace
 
-    traces, failed = {}, {}
+    traces, failed, nan = {}, {}, {}  # nan: the sigma of the twins of n steps of a law without one, shared
     for j, i in enumerate(want):
         n = int(steps[i])
         if 0 <= tw.failed_at[j] < n:
             failed[i] = non_finite(name)
             continue
         state = tw.L[j, :n] if (tw.L is not None and n) else np.zeros((0, 0))
-        sigma = np.full(n, np.nan) if tw.sigma is None else tw.sigma[j, :n]
+        if tw.sigma is None:
+            sigma = nan[n] if n in nan else nan.setdefault(n, np.full(n, np.nan))
+        else:
+            sigma = tw.sigma[j, :n]
         traces[i] = TwinTrace(y=tw.Y[j, :n], u=tw.U[j, :n], state=state, sigma=sigma)
     return traces, failed

@@ -152,31 +152,43 @@ def _check(scenario: Scenario) -> None:
 
 
 def prepare_run(scenario: Scenario, *, law, artifact: Artifact, plant: Plant, source: str, record: bool = True,
-                like: Plan | None = None) -> Run:  # fmt: skip
+                like: Run | None = None) -> Run:  # fmt: skip
     """A run of ``scenario`` ready to step: ``plant`` reset to its initial state, the plan made (before anything is
     built or started) and where the model twin starts (a campaign block prepares each of its runs so, ``record``
-    False: its recorder's arrays are the block's; ``like``: the plan of a run that differs from this one only in its
-    seed and its plant's drawn numbers, :func:`~.plan.plan_like`)."""
+    False: its recorder's arrays are the block's; ``like``: a run of the same law and artifact that differs from this
+    one only in its seed and its plant's drawn numbers: its plan taken with this run's noise,
+    :func:`~.plan.plan_like`, and what :class:`Run` shares with it)."""
     plant.reset(initial=scenario.initial_state)
     if like is not None:
-        plan = plan_like(like, scenario, law=law, artifact=artifact, plant=plant)
+        plan = plan_like(like.plan, scenario, law=law, artifact=artifact, plant=plant)
     else:
         plan = plan_run(scenario, law=law, artifact=artifact, plant=plant)
-    start = twin_start(plant, sigma=plan.sigma0) if scenario.model_twin else TwinStart({}, False, plan.sigma0)
+    if scenario.model_twin:
+        start = twin_start(plant, sigma=plan.sigma0)
+    elif like is not None and not like.scenario.model_twin and plan.t is like.plan.t:  # its plan: the same sigma
+        start = like.start
+    else:
+        start = TwinStart({}, False, plan.sigma0)
     return Run(scenario, law=law, artifact=artifact, plant=plant, plan=plan, source=source, start=start,
-               record=record)  # fmt: skip
+               record=record, like=like)  # fmt: skip
 
 
 class Run:
-    """One run being made: the loop and its endpoint, then the result."""
+    """One run being made: the loop and its endpoint, then the result.
+
+    ``like``: a run of the same law and artifact (a campaign block's first) whose safe command this run takes, and
+    its fault injector too when neither injects a fault (an injector without faults is never changed)."""
 
     def __init__(self, scenario: Scenario, *, law, artifact: Artifact, plant: Plant, plan: Plan, source: str,
-                 start: TwinStart, record: bool = True) -> None:  # fmt: skip
+                 start: TwinStart, record: bool = True, like: Run | None = None) -> None:  # fmt: skip
         self.scenario, self.law, self.a, self.plant, self.plan = scenario, law, artifact, plant, plan
         self.source, self.start = source, start
         self.rec = Recorder(plan, artifact=artifact, plant=plant, allocate=record)
-        self.injector = FaultInjector(scenario.faults, Ts=artifact.Ts, seed=scenario.seed)
-        self.safe = law.safe_command(artifact)
+        if like is not None and not scenario.faults and not like.scenario.faults:
+            self.injector = like.injector
+        else:
+            self.injector = FaultInjector(scenario.faults, Ts=artifact.Ts, seed=scenario.seed)
+        self.safe = law.safe_command(artifact) if like is None else like.safe
         self.extra: dict[str, Any] = {}  # metrics the endpoint adds (the peer's exit, CPU placement, ...)
         self.info: dict[str, Any] = {}
 
@@ -232,12 +244,13 @@ class Run:
         return self.rec.trace(steps, law=self.law, artifact=self.a, twins=twins)
 
     def result(self, outcome: Outcome, *, twins, twins_s: float, timed: dict | None = None,
-               artifact_info: dict | None = None, trace: RunTrace | None = None,
+               artifact_info: dict | None = None, plant_info: dict | None = None, trace: RunTrace | None = None,
                metrics: dict | None = None) -> RunResult:  # fmt: skip
         """Metrics, trace and what ran, for the steps taken. A campaign block gives what it computed for its runs
         together: ``timed`` (:func:`~.metrics.timing` of this run's steps), ``artifact_info``
-        (:func:`~.plan.describe_artifact`), the run's ``trace`` (:meth:`trace`) and its ``metrics``
-        (:func:`~.block_metrics.block_metrics`: :func:`~.metrics.compute_metrics`' figures, a new dict)."""
+        (:func:`~.plan.describe_artifact`), ``plant_info`` (:func:`~.plan.describe_plant` of a plant like this
+        run's), the run's ``trace`` (:meth:`trace`) and its ``metrics`` (:func:`~.block_metrics.block_metrics`:
+        :func:`~.metrics.compute_metrics`' figures, a new dict)."""
         sc, a, law, steps = self.scenario, self.a, self.law, outcome.steps
         if trace is None:
             trace = self.trace(steps, twins=twins)
@@ -268,7 +281,9 @@ class Run:
         metrics.update(law.run_report(a, trace, ran=self.ran, design_model=is_design_model(sc)))
         if artifact_info is None:
             artifact_info = describe_artifact(law, a, self.source)
-        info = {"artifact": artifact_info, "plant": describe_plant(self.plant), **self.info}
+        if plant_info is None:
+            plant_info = describe_plant(self.plant)
+        info = {"artifact": artifact_info, "plant": plant_info, **self.info}
         return RunResult(scenario=sc, metrics=metrics, trace=trace, complete=outcome.reason is None,
                          reason=outcome.reason, info=info, artifact=a)  # fmt: skip
 
