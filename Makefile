@@ -24,7 +24,7 @@ demo: setup
 # The suite in parallel (pytest-xdist; tests are isolated by port, multicast group and folder, caches are filled
 # under file locks), the tests marked slow first (tests/conftest.py), handed out a few at a time except those
 # marked xdist_group (tests sharing an expensive module fixture: one worker makes it once), then pytest's ten
-# slowest. TEST_WORKERS=0 runs it in one process.
+# slowest. TEST_WORKERS=0 runs it in one process; PYTEST_ARGS replaces --durations=10 (e.g. PYTEST_ARGS=--durations=40).
 # Bytecode is written (PYC_ENV): without it every process the suite starts (the xdist workers, Dask workers, the
 # CLI run as a subprocess) compiles the package again. The test modules' rewritten asserts are written first, once
 # (scripts/warm_test_asserts.py, 2 s): otherwise each of the workers, started together, rewrites all ~80 modules to
@@ -32,10 +32,14 @@ demo: setup
 # One BLAS thread per process (OPENBLAS_NUM_THREADS=1, as Dask sets for its workers): the suite's processes
 # already fill the cores, and idle OpenBLAS threads spin; with them the design-heavy modules took twice the CPU.
 TEST_ENV := $(PYC_ENV) OPENBLAS_NUM_THREADS=1
-TEST_WORKERS ?= 4
+# Three workers on two cores: with four, the warm suite took 754 CPU-s and 7 min 02 s, with three 676 CPU-s and
+# 6 min 33 s (one run each, quiet machine): the fourth's collection (~11 CPU-s) and four processes' contention for
+# two cores cost more than its overlap of the tests that wait (QEMU's UART, the sleeping campaign plants) saved.
+TEST_WORKERS ?= 3
+PYTEST_ARGS ?= --durations=10
 test: setup
 	$(TEST_ENV) $(PY) scripts/warm_test_asserts.py
-	$(TEST_ENV) $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder --durations=10
+	$(TEST_ENV) $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder $(PYTEST_ARGS)
 
 test-matrix: setup
 	$(TEST_ENV) $(PY) -m pytest -q -m matrix

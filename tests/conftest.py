@@ -13,6 +13,7 @@ import os
 import resource
 import shutil
 import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -52,14 +53,17 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
     """With ``GAINLINK_TEST_CPU=FILE``, append each test's CPU seconds (the worker's and its reaped child
     processes': builds, QEMU, firmware, Dask workers) to FILE as a JSON line: on a 2-core machine the suite's
     time is its CPU over two, so this, not ``--durations``' wall time under contention, says what to make
-    cheaper (``scripts/test_cpu.py FILE`` sums it per test module)."""
+    cheaper (``scripts/test_cpu.py FILE`` sums it per test module). Each line also has the xdist worker, the
+    test's start (epoch seconds) and its wall time: which worker ran what when (``--timeline``)."""
     path = os.environ.get("GAINLINK_TEST_CPU")
-    start = _cpu_seconds()
+    start, began = _cpu_seconds(), time.time()
     try:
         return (yield)
     finally:
         if path:
-            record = {"test": item.nodeid, "cpu": round(_cpu_seconds() - start, 3)}
+            record = {"test": item.nodeid, "cpu": round(_cpu_seconds() - start, 3),
+                      "worker": os.environ.get("PYTEST_XDIST_WORKER", "main"),
+                      "start": round(began, 3), "wall": round(time.time() - began, 3)}  # fmt: skip
             with open(path, "a") as fh:
                 fh.write(json.dumps(record) + "\n")
 
