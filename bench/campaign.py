@@ -248,22 +248,28 @@ def _plain_process(data: dict, part: slice, barrier, done) -> None:
 def plain_processes_wall(data: dict, processes: int) -> float:
     """Wall time of the campaign's runs split over ``processes`` plain processes started together (no Dask,
     no files): what this machine's CPUs give for these runs with no scheduler at all."""
+    n = data["runs"]
+    parts = [slice(k * n // processes, (k + 1) * n // processes) for k in range(processes)]
+    return _processes_wall(_plain_process, [(data, part) for part in parts], expected=n)
+
+
+def _processes_wall(target: Callable, args: list[tuple], *, expected: int) -> float:
+    """Wall time of one spawned process per ``args`` running ``target(*a, barrier, done)``, from the moment all are
+    warm (each waits at ``barrier``) until each has put its count on ``done`` (``expected`` in all)."""
     import multiprocessing
 
     ctx = multiprocessing.get_context("spawn")
-    barrier, done = ctx.Barrier(processes + 1), ctx.Queue()
-    n = data["runs"]
-    parts = [slice(k * n // processes, (k + 1) * n // processes) for k in range(processes)]
-    procs = [ctx.Process(target=_plain_process, args=(data, part, barrier, done)) for part in parts]
+    barrier, done = ctx.Barrier(len(args) + 1), ctx.Queue()
+    procs = [ctx.Process(target=target, args=(*a, barrier, done)) for a in args]
     for proc in procs:
         proc.start()
     barrier.wait()
     t0 = time.perf_counter()
-    ran = sum(done.get() for _ in procs)
+    counted = sum(done.get() for _ in procs)
     wall = time.perf_counter() - t0
     for proc in procs:
         proc.join()
-    assert ran == n
+    assert counted == expected
     return wall
 
 
@@ -307,21 +313,7 @@ def _plain_block_process(blocks: int, barrier, done) -> None:
 
 def _plain_block_wall(processes: int) -> float:
     """Wall time of 2 blocks stepped by ``processes`` plain processes started together (2 in one, or 1 in each)."""
-    import multiprocessing
-
-    ctx = multiprocessing.get_context("spawn")
-    barrier, done = ctx.Barrier(processes + 1), ctx.Queue()
-    procs = [ctx.Process(target=_plain_block_process, args=(2 // processes, barrier, done)) for _ in range(processes)]
-    for proc in procs:
-        proc.start()
-    barrier.wait()
-    t0 = time.perf_counter()
-    stepped = sum(done.get() for _ in procs)
-    wall = time.perf_counter() - t0
-    for proc in procs:
-        proc.join()
-    assert stepped == 2
-    return wall
+    return _processes_wall(_plain_block_process, [(2 // processes,)] * processes, expected=2)
 
 
 def plain_block_processes_speedup() -> dict:
