@@ -39,7 +39,8 @@ Prints JSON. Everything is measured in the same run, against a baseline of the s
   ``speedup_of_plain_processes`` the campaign's share of it); on the first
   2-worker cluster :data:`BLOCK_DRAWS` draws (target <= 20 s wall, report included), with the runs' own CPU per
   run-step (target <= 1 us), the machinery's share of the whole campaign, and ``machinery``: its part that grows
-  with the runs (``per_run_ratio``, target <= 0.10) and its fixed part (``fixed_s``), from the line through the
+  with the runs (``per_run_ratio``, target <= 0.10; ``per_run_ms_by_part``: workers, client, report) and its fixed
+  part (``fixed_s``), from the line through the
   2-worker campaigns of both sizes (:func:`machinery_split`), the client's peak resident memory over its
   start (sampled every 50 ms), the worker's, and the number of result files; ``per_run_path`` is a sample of the
   same runs each through the per-run path (``execute``) in this process, measured in the same run, and
@@ -188,6 +189,13 @@ def timed_campaign(data: dict, client, out: Path) -> dict:
         "client_process_cpu_per_run_ms": round(1e3 * (c1 - c0) / n, 2),
         "runs_own_cpu_per_run_ms": round(1e3 * runs_cpu / n, 2),
         "machinery_cpu_s": round(cpu - runs_cpu, 3),
+        # the machinery by where it runs: the worker processes outside the runs, this process until the last run
+        # was stored (client, scheduler, nannies, result files), the report after it
+        "machinery_parts_cpu_s": {
+            "workers_outside_runs": round(w1 - w0 - runs_cpu, 3),
+            "client_until_stored": round(last["cpu"] - c0, 3),
+            "report": round(report_cpu, 3),
+        },
         "runs_own_cpu_s": round(runs_cpu, 3),
         "machinery_cpu_per_run_ms": round(1e3 * (cpu - runs_cpu) / n, 2),
         "machinery_ratio": round((cpu - runs_cpu) / runs_cpu, 4),
@@ -503,16 +511,23 @@ def machinery_split(small: list[dict], large: dict) -> dict:
     on the same cluster size: the line through (runs, machinery CPU) of the smaller campaigns' mean and the larger
     one. ``per_run_ratio`` is its slope over the larger campaign's runs' own CPU per run (the target's figure: the
     machinery a run adds); ``fixed_s`` what the line gives at zero runs (cluster bookkeeping, the report's figures
-    and files, the plan): a cost per campaign, whatever its size."""
+    and files, the plan): a cost per campaign, whatever its size. ``per_run_ms_by_part``: the same slope for each
+    place the machinery runs (the workers outside the runs, the client until the last run is stored, the report
+    after it): they sum to ``per_run_ms``."""
     n0, m0 = _mean(small, "runs"), _mean(small, "machinery_cpu_s")
     n1, m1 = large["runs"], large["machinery_cpu_s"]
     slope = (m1 - m0) / (n1 - n0)
     own = large["runs_own_cpu_s"] / n1
+    parts = {}
+    for part, m1_part in large["machinery_parts_cpu_s"].items():
+        m0_part = sum(r["machinery_parts_cpu_s"][part] for r in small) / len(small)
+        parts[part] = round(1e3 * (m1_part - m0_part) / (n1 - n0), 3)
     return {
         "from_runs": [round(n0), n1],
         "per_run_ms": round(1e3 * slope, 3),
         "per_run_ratio": round(slope / own, 4),
         "fixed_s": round(m1 - slope * n1, 2),
+        "per_run_ms_by_part": parts,  # where the machinery a run adds runs (the three sum to per_run_ms)
     }
 
 

@@ -432,9 +432,17 @@ def _machinery(blocks: dict, ten: dict) -> str:
     split = blocks.get("machinery")
     if not split:
         return f"**{whole}** (target {blocks['target_machinery_ratio']:.0%})"
+    parts = split.get("per_run_ms_by_part")
+    where = (
+        ""
+        if not parts
+        else f": {parts['workers_outside_runs']:.2f} ms in the workers outside the runs, "
+        f"{parts['client_until_stored']:.2f} in the client until the last run is stored, {parts['report']:.2f} in the "
+        "report"
+    )
     return (
         f"a run adds **{split['per_run_ratio']:+.0%}** of its own CPU (target {blocks['target_machinery_ratio']:.0%}; "
-        f"the slope over {split['from_runs'][0]} and {split['from_runs'][1]} runs) and a campaign "
+        f"the slope over {split['from_runs'][0]} and {split['from_runs'][1]} runs{where}) and a campaign "
         f"{split['fixed_s']:.1f} s whatever its size ({whole})"
     )
 
