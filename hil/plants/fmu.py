@@ -8,8 +8,9 @@ Per step the bridge calls the raw ``fmi2SetReal`` / ``fmi2DoStep`` / ``fmi2GetRe
 :mod:`logging`, and a failed call's :class:`PlantError` carries the FMU's last logged message.
 
 Inside :func:`reused_instances` (a campaign's worker runs its runs there), a closed plant keeps its FMPy instance
-(the unzipped binary, the loaded library, the instantiated FMU) for the next plant of the same FMU file and variables
-opened in this process (:meth:`FmuPlant.open`), which sets its parameters and resets it (``fmi2Reset`` /
+(the unzipped binary, the loaded library, the instantiated FMU) for the next plant of the same interface, FMU file and
+variables opened in this process (:meth:`FmuPlant.open`, :meth:`.fmu_me.FmuModelExchangePlant.open` through
+:func:`taken_idle` and :func:`kept_idle`), which sets its parameters and resets it (``fmi2Reset`` /
 ``fmi3Reset``, then the experiment set up again, as every run's start does): FMPy unzips an FMU per instance and
 instances leak memory (fmpy issues), so a campaign opens one instance per (FMU, worker) and use at a time, not one per
 run. A plant whose FMU call failed is freed, never reused.
@@ -36,7 +37,7 @@ from .fmi import fmi2_callbacks, forget_log, map_variables, open_binary, read_de
 log = logging.getLogger(__name__)
 
 _REUSE: contextvars.ContextVar[bool] = contextvars.ContextVar("gainlink_fmu_reuse", default=False)
-_IDLE: dict[str, list[FmuPlant]] = {}  # closed plants kept for reuse, by FMU file and variables
+_IDLE: dict[str, list[Any]] = {}  # closed plants kept for reuse, by interface, FMU file and variables
 
 
 @contextlib.contextmanager
@@ -50,9 +51,27 @@ def reused_instances() -> Iterator[None]:
         _REUSE.reset(token)
 
 
-def idle_instances() -> dict[str, list[FmuPlant]]:
-    """The plants kept for reuse in this process, by FMU file and variables."""
+def idle_instances() -> dict[str, list[Any]]:
+    """The plants kept for reuse in this process (Co-Simulation and Model Exchange), by FMU file and variables."""
     return {k: list(v) for k, v in _IDLE.items()}
+
+
+def taken_idle(key: str | None) -> Any:
+    """An idle plant kept under ``key`` (:func:`reuse_key`), taken out of the pool; None when there is none or
+    when not inside :func:`reused_instances` (``key`` None)."""
+    idle = _IDLE.get(key) if key is not None else None
+    return idle.pop() if idle else None
+
+
+def kept_idle(plant: Any, *, broken: bool) -> bool:
+    """Keep ``plant`` (closed by its run) for the next :func:`taken_idle` of its key, inside
+    :func:`reused_instances` and unless a call of it failed (``broken``); False when it is to be freed."""
+    key = getattr(plant, "_reuse_key", None)
+    if key is None or not _REUSE.get() or broken:
+        return False
+    if plant not in _IDLE.setdefault(key, []):
+        _IDLE[key].append(plant)
+    return True
 
 
 @atexit.register
@@ -63,9 +82,14 @@ def _free_idle() -> None:
     _IDLE.clear()
 
 
-def _reuse_key(path: Path, inputs: Any, outputs: Any, states: Any) -> str:
+def reuse_key(interface: str, path: Path, inputs: Any, outputs: Any, states: Any) -> str | None:
+    """What a kept plant must share with the next one to serve it (its interface, FMU file and variables); None
+    outside :func:`reused_instances` (nothing is kept)."""
+    if not _REUSE.get():
+        return None
     stat = Path(path).stat()
-    return json.dumps([str(Path(path).resolve()), stat.st_size, stat.st_mtime_ns, inputs, outputs, states], default=str)
+    where = [interface, str(Path(path).resolve()), stat.st_size, stat.st_mtime_ns, inputs, outputs, states]
+    return json.dumps(where, default=str)
 
 
 class FmuPlant(Plant):
@@ -158,12 +182,9 @@ class FmuPlant(Plant):
     ) -> FmuPlant:
         """A plant of the FMU at ``path``: inside :func:`reused_instances` an idle one of the same FMU and variables,
         given ``parameters`` and reset, when one was closed; else a new one (the constructor's arguments)."""
-        if not _REUSE.get():
-            return cls(path=path, inputs=inputs, outputs=outputs, parameters=parameters, states=states)
-        key = _reuse_key(path, inputs, outputs, states)
-        idle = _IDLE.get(key)
-        if idle:
-            plant = idle.pop()
+        key = reuse_key(cls.interface, path, inputs, outputs, states)
+        plant = taken_idle(key)
+        if plant is not None:
             mapping = map_variables(plant.md, inputs=inputs, outputs=outputs, states=states, parameters=parameters)
             plant.parameters = mapping.parameters
             plant.reset(initial={})
@@ -269,12 +290,8 @@ class FmuPlant(Plant):
     def close(self) -> None:
         """Free the FMU; inside :func:`reused_instances`, keep it for the next :meth:`open` of the same FMU instead
         (unless a call of it failed)."""
-        key = getattr(self, "_reuse_key", None)
-        if key is not None and _REUSE.get() and not self._broken and self.fmu is not None:
-            if self not in _IDLE.setdefault(key, []):
-                _IDLE[key].append(self)
-            return
-        self._free()
+        if not kept_idle(self, broken=self._broken or self.fmu is None):
+            self._free()
 
     def _free(self) -> None:
         fmu = getattr(self, "fmu", None)

@@ -125,7 +125,7 @@ def _fmu_factory(
     choice = choose_interface(md, requested=requested, step=None if artifact is None else artifact.Ts, setup=setup)
     plant: Any
     if choice.interface == "me":
-        plant = FmuModelExchangePlant(**args, states=cfg.get("states"), **solver)
+        plant = FmuModelExchangePlant.open(**args, states=cfg.get("states"), **solver)
     else:
         plant = FmuPlant.open(**args, states=cfg.get("states"))
     plant.interface_reason, plant.interface_check = choice.reason, choice.check

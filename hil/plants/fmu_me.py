@@ -21,6 +21,7 @@ from gainlink.errors import PlantError
 from .base import Plant
 from .fmi import map_variables, read_description
 from .fmi_me import ModelExchange, check_model_exchange
+from .fmu import kept_idle, reuse_key, taken_idle
 
 
 class _HeldInput:
@@ -62,16 +63,12 @@ class FmuModelExchangePlant(Plant):
         md = read_description(self.path)
         self.md = md
         check_model_exchange(self.path, md)
-        if not (rtol > 0 and math.isfinite(rtol)):
-            raise PlantError("plant fmu: rtol must be a positive number")
-        if max_step is not None and not max_step > 0:
-            raise PlantError("plant fmu: max_step must be positive")
+        self.rtol, self.max_step = _solver_settings(rtol, max_step)
         self.name = f"fmu:{md.modelName}"
         mapping = map_variables(md, inputs=inputs, outputs=outputs, states=states, parameters=parameters)
         self.vars, self.real_type = mapping.vars, mapping.real_type
         self.input_names, self.output_names, self.state_names = mapping.inputs, mapping.outputs, mapping.states
         self.parameters = mapping.parameters
-        self.rtol, self.max_step = float(rtol), max_step
         self.can_snapshot = bool(md.modelExchange.canGetAndSetFMUstate)
         self._vr_in = [self.vars[n].valueReference for n in self.input_names]
         self._vr_out = [self.vars[n].valueReference for n in self.output_names]
@@ -81,14 +78,46 @@ class FmuModelExchangePlant(Plant):
         self.solver: Any = None
         self.time = 0.0
         self._out = np.zeros(len(self._vr_out))
+        self._reuse_key: str | None = None
+        self._broken = False
         self.reset(initial={})
+
+    @classmethod
+    def open(
+        cls,
+        *,
+        path: Path,
+        inputs: Any = None,
+        outputs: Any = None,
+        parameters: Mapping[str, Any] | None = None,
+        states: Any = None,
+        rtol: float = 1e-8,
+        max_step: float | None = None,
+    ) -> FmuModelExchangePlant:
+        """A plant of the FMU at ``path``: inside :func:`~.fmu.reused_instances` an idle one of the same FMU and
+        variables (its instance reset, ``fmi2Reset``/``fmi3Reset``, and a new CVode solver with ``rtol`` and
+        ``max_step``), given ``parameters``, when one was closed; else a new one (the constructor's arguments)."""
+        key = reuse_key(cls.interface, path, inputs, outputs, states)
+        plant = taken_idle(key)
+        if plant is None:
+            plant = cls(path=path, inputs=inputs, outputs=outputs, parameters=parameters, states=states, rtol=rtol,
+                        max_step=max_step)  # fmt: skip
+        else:
+            plant.rtol, plant.max_step = _solver_settings(rtol, max_step)
+            mapping = map_variables(plant.md, inputs=inputs, outputs=outputs, states=states, parameters=parameters)
+            plant.parameters = mapping.parameters
+            plant.reset(initial={})
+        plant._reuse_key = key
+        return plant
 
     def _call(self, what: str, fn: Any, *args: Any, **kwargs: Any) -> Any:
         try:
             return fn(*args, **kwargs)
         except PlantError:
+            self._broken = True
             raise
         except Exception as exc:
+            self._broken = True
             raise PlantError(f"FMU {self.md.modelName}: {what} failed ({self._reason(exc)})") from None
 
     def _reason(self, exc: Exception) -> str:
@@ -147,8 +176,10 @@ class FmuModelExchangePlant(Plant):
         try:
             self._integrate(np.asarray(u, float), dt)
         except PlantError:
+            self._broken = True
             raise
         except Exception as exc:  # CVode's RuntimeError, fmpy's FMICallException
+            self._broken = True
             raise PlantError(
                 f"FMU {self.md.modelName}: step at t={self.time:.6g} failed ({self._reason(exc)})"
             ) from None
@@ -195,7 +226,23 @@ class FmuModelExchangePlant(Plant):
         self.solver.reset(t)
 
     def close(self) -> None:
+        """Free the FMU; inside :func:`~.fmu.reused_instances`, keep its instance for the next :meth:`open` of the
+        same FMU instead (unless a call of it failed). Its CVode solver is freed either way."""
+        self.solver = None  # CVode's memory is freed before the FMU that its callbacks reach
+        if not kept_idle(self, broken=self._broken or getattr(self, "me", None) is None):
+            self._free()
+
+    def _free(self) -> None:
+        self.solver = None
         if getattr(self, "me", None) is not None:
-            self.solver = None  # CVode's memory is freed before the FMU that its callbacks reach
             self.me.close()
             self.me = None
+
+
+def _solver_settings(rtol: float, max_step: float | None) -> tuple[float, float | None]:
+    """CVode's relative tolerance and largest step, checked: one :class:`PlantError` line for a bad one."""
+    if not (rtol > 0 and math.isfinite(rtol)):
+        raise PlantError("plant fmu: rtol must be a positive number")
+    if max_step is not None and not max_step > 0:
+        raise PlantError("plant fmu: max_step must be positive")
+    return float(rtol), max_step
