@@ -164,10 +164,8 @@ class _HeadTemplates:
                 both = [words[c] for c in column[js].astype(int).tolist()]
                 texts[name] = ([w for w, _ in both], [c for _, c in both])
                 continue
-            numbers = [float(x) for x in column[js].tolist()]
-            made = (
-                list(map(float.__repr__, numbers)) if np.isfinite(column[js]).all() else list(map(_json_value, numbers))
-            )
+            numbers = column[js].astype(float).tolist()
+            made = list(map(float.__repr__ if np.isfinite(numbers).all() else _json_value, numbers))
             texts[name] = (made, made)
         seeds = list(map(str, self.parts.seeds[js].tolist()))
         json_ = list(zip(*(texts[name][0] for name in self.drawn))) if self.drawn else [()] * len(js)
@@ -175,23 +173,49 @@ class _HeadTemplates:
         return json_, cells
 
     def chunk(self, start: int, ids: list[bytes], plain: bool) -> tuple[list[str], list[str], list[str], list[str]]:
-        """The texts of the runs from plan index ``start`` (``ids``; ``plain``: every id alphanumeric)."""
-        runs, seeds = self.parts.runs, self.parts.seeds
+        """The texts of the runs from plan index ``start`` (``ids``; ``plain``: every id alphanumeric), the runs of
+        one grid point (a chunk holds one or two) filled into its template together."""
+        runs = self.parts.runs
         ks = np.arange(start, start + len(ids))
-        draw_json, draw_csv = self._draws(ks % runs)
+        js = ks % runs
+        draw_json, draw_csv = self._draws(js)
+        if not plain:
+            return self._each(ks, ids, draw_json, draw_csv)
+        texts = [rid.decode("ascii") for rid in ids]
+        json_, pre, mid, post = [], [], [], []
+        gs = ks // runs
+        for a, b in _spans(gs):
+            g, k_, j_ = int(gs[a]), ks[a:b].tolist(), js[a:b].tolist()
+            template, seeds = "{" + self.values[g], self.parts.seeds[js[a:b]].tolist()
+            json_ += [template % (j, t, k, seed, *d)
+                      for j, t, k, seed, d in zip(j_, texts[a:b], k_, seeds, draw_json[a:b])]  # fmt: skip
+            pre += [f"{k},{t}," for k, t in zip(k_, texts[a:b])]
+            mid += [self.csv_mid[g] + d for d in draw_csv[a:b]]
+            post += [self.shas[g]] * (b - a)
+        return json_, pre, mid, post
+
+    def _each(
+        self, ks: np.ndarray, ids: list[bytes], draw_json: list[tuple[str, ...]], draw_csv: list[str]
+    ) -> tuple[list[str], list[str], list[str], list[str]]:
+        """:meth:`chunk`'s texts run by run, of runs ``ks`` of which some id is not alphanumeric (json may escape
+        it: its own text)."""
+        runs, seeds = self.parts.runs, self.parts.seeds
         json_, pre, mid, post = [], [], [], []
         for n, (k, rid) in enumerate(zip(ks.tolist(), ids)):
             g, j = divmod(k, runs)
             text = rid.decode("ascii")
-            template = self.values[g]
-            if not plain:  # an id json escapes: its own text
-                template = template.replace('"id": "%s"', '"id": ' + _json_value(text).replace("%", "%%"))
-            args = (j, text, k, int(seeds[j])) if plain else (j, k, int(seeds[j]))
-            json_.append("{" + template % (*args, *draw_json[n]))
-            pre.append(f"{k},{text if plain else csv_field(text)},")
+            template = self.values[g].replace('"id": "%s"', '"id": ' + _json_value(text).replace("%", "%%"))
+            json_.append("{" + template % (j, k, int(seeds[j]), *draw_json[n]))
+            pre.append(f"{k},{csv_field(text)},")
             mid.append(self.csv_mid[g] + draw_csv[n])
             post.append(self.shas[g])
         return json_, pre, mid, post
+
+
+def _spans(values: np.ndarray) -> list[tuple[int, int]]:
+    """The spans ``[a, b)`` of equal neighbours in ``values``."""
+    cut = (np.flatnonzero(values[1:] != values[:-1]) + 1).tolist()
+    return list(zip([0, *cut], [*cut, len(values)]))
 
 
 def _key(name: str) -> str:
