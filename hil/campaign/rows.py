@@ -436,6 +436,8 @@ class Verdicts:
         """:meth:`text` of each of runs ``slots``, the cells in the columns ``tracked`` and ``outs`` (sorted) of every
         run. The runs whose lines follow each other in the spill (a block's, in plan order: most of a chunk) are read
         by one ``pread`` and split at once."""
+        if not slots:
+            return [], [], []
         at, size = self.at[slots], self.size[slots]
         fields: list[str] = []
         # a span of lines: where the next run's line starts where this one's ends (a missing run is a span alone)
