@@ -35,9 +35,8 @@ FAILURES_LIMIT = 200
 WORST = 3
 STATUSES = ("pass", "fail", "error", "missing")  # a run's status code is its place here
 PASS, FAIL, ERROR, MISSING = range(4)
-SEP = (
-    "\x00"  # after each of a spilled line's fields (JSON and CSV cells hold no NUL: json escapes it, reasons are text)
-)
+# after each field of a spilled line (JSON and CSV cells hold no NUL: json escapes it, reasons are text)
+SEP = "\x00"
 
 
 def point_row(point: Any) -> dict:
