@@ -68,6 +68,8 @@ def _record(rng: np.random.Generator, k: int) -> dict:
     if k % 17:
         measures |= {"twin_output_deviation": _maybe(rng, float(rng.uniform(0, 0.011))),
                      "twin_command_deviation": float(rng.uniform(0, 0.02)), "model_iae_ratio": 1.25}  # fmt: skip
+    if k % 11 == 2:  # a run without a model twin: none of its keys
+        measures = {key: v for key, v in measures.items() if not key.startswith("model_")}
     metrics = {"tracked": tracked, "outputs_final": {o: _maybe(rng, float(rng.normal())) for o in outs}, "steps": 10}
     worker = {"host": "vm", "pid": 40 + k, "start": 1.5, "stop": 2.25, "cpu_s": 0.125} | ({"block": 9} if k % 3 else {})
     return {"status": "done", "complete": complete, "reason": None if complete else "run stopped",
@@ -333,8 +335,9 @@ def _runs_text(path) -> str:
 def test_the_rows_made_a_chunk_at_a_time_are_the_rows_made_one_by_one(tmp_path, generated):
     """campaign.csv and campaign.json's runs, byte for byte, against the same rows made one at a time by the
     per-row functions (a generated plan of a grid and two drawn axes, an int and a float among a choice's values,
-    more runs than a chunk; and a plan of points), on a store with errors, None measures and metrics, failed runs,
-    runs of other tracked outputs and outputs than the others, and runs with no record."""
+    more runs than a chunk; and a plan of points, one of them planned twice), on a store with errors, None measures
+    and metrics, failed runs, runs of other tracked outputs and outputs than the others, runs with and without a model
+    twin, and runs with no record."""
     from gainlink.hil.campaign.plan import plan_campaign
     from gainlink.hil.campaign.rows import HEAD_CHUNK
 
@@ -362,6 +365,11 @@ def test_the_rows_made_a_chunk_at_a_time_are_the_rows_made_one_by_one(tmp_path, 
     stored = {i.decode() for i in store._table()[0].tolist()}
     dropped = sorted(store.files())[1]
     stored -= set(pq.read_table(dropped, columns=["id"]).column("id").to_pylist())
+    if not generated:  # a stored run planned twice, in the middle of the plan: its row each time
+        twice = next(p for p in plan.runs if p.id in stored and records[p.id]["status"] == "done" and p.index > 100)
+        runs = list(plan.runs)
+        runs.insert(150, twice)
+        plan = dataclasses.replace(plan, runs=tuple(dataclasses.replace(p, index=k) for k, p in enumerate(runs)))
     dropped.unlink()
     store = Store(store.out)
     merge(plan, store, plots=False)

@@ -8,7 +8,8 @@
   the finished runs (at most :data:`ENVELOPE_RUNS` of them, every k-th in plan order, as its title says), with
   the failed runs' median dashed;
 - ``scatter.png``: for each drawn (or numeric grid) axis, each tracked output's IAE against it, failed
-  runs marked;
+  runs marked (at most :data:`SCATTER_RUNS` of each status, every k-th in plan order, as its title says; the legend
+  counts every run);
 - ``failures.txt``: the failure table (run, axis values, reasons), worst first;
 - ``summary.txt``: counts, pass fraction per grid point, the worst runs and how to replay one.
 
@@ -41,7 +42,9 @@ ENVELOPE_BINS = 512
 #: thousand runs' percentiles, and each run read costs the report ~0.1 ms of CPU.
 ENVELOPE_RUNS = 2000
 MAX_POINT_LINES = 30
-MAX_SCATTER = 20_000
+#: The most runs of each status (passed, failed) the scatter plot draws (:func:`scatter_runs`): a run drawn costs the
+#: figure ~10 µs of CPU in the shipped pendulum's three panels, and a few thousand show the cloud as all of them do.
+SCATTER_RUNS = 2000
 HISTOGRAM_RUNS = 128  # runs histogrammed at a time: its float64 and index temporaries ~16 MB, not a block's ~100
 
 
@@ -393,13 +396,24 @@ def _signals(plan: CampaignPlan) -> dict:
     return {"outputs": [], "inputs": []}
 
 
-def _scatter_sample(tally: Tally) -> np.ndarray:
-    """The runs the scatter plot draws: all of them up to :data:`MAX_SCATTER`, else that many drawn at random (a
-    fixed seed: the same plot for the same runs); the legend counts every run."""
-    n = len(tally.scatter_iae)
-    if n <= MAX_SCATTER:
-        return np.arange(n)
-    return np.sort(np.random.default_rng(0).choice(n, MAX_SCATTER, replace=False))
+def scatter_runs(fail: np.ndarray, cap: int | None = None) -> dict[str, tuple[np.ndarray, int]]:
+    """The runs the scatter plot draws of its runs (``fail``: whether each failed, in plan order), by status
+    (``"fail"``, ``"pass"``): each status's runs every k-th in plan order, k the smallest step that keeps them at most
+    ``cap`` (default :data:`SCATTER_RUNS`; all of them when they are that few), as the envelopes choose theirs
+    (:func:`envelope_runs`); each status's indices into the runs and its k."""
+    cap = SCATTER_RUNS if cap is None else cap
+    return {status: envelope_runs(np.flatnonzero(fail == (status == "fail")), cap) for status in ("fail", "pass")}
+
+
+def _scatter_scope(fail: np.ndarray, drawn: dict[str, tuple[np.ndarray, int]]) -> str:
+    """What the scatter plot leaves out, for its title: nothing when it draws every run."""
+    parts = []
+    for status, word in (("pass", "passed"), ("fail", "failed")):
+        runs, every = drawn[status]
+        if every > 1:
+            of = int((fail == (status == "fail")).sum())
+            parts.append(f"{len(runs)} of {of} {word}, every {_ordinal(every)} in plan order")
+    return "" if not parts else "\ndrawn: " + "; ".join(parts)
 
 
 def scatterpng_bytes(plan: CampaignPlan, tally: Tally) -> bytes:
@@ -411,7 +425,7 @@ def scatterpng_bytes(plan: CampaignPlan, tally: Tally) -> bytes:
 
     axes_ = [name for name in tally.axes if tally.numeric[name]]
     iae, fail = tally.scatter_iae, tally.scatter_fail
-    pick = _scatter_sample(tally)
+    drawn = scatter_runs(fail)
     n = max(len(axes_), 1)
     cols = min(n, 3)
     fig, grid = plt.subplots(math.ceil(n / cols), cols, figsize=(4.2 * cols, 3.4 * math.ceil(n / cols)), squeeze=False)
@@ -427,7 +441,7 @@ def scatterpng_bytes(plan: CampaignPlan, tally: Tally) -> bytes:
             ("fail", fail, dict(color="C3", marker="x", markersize=4.7, alpha=0.8)),
             ("pass", ~fail, dict(color="C0", marker="o", markersize=3.5, markeredgewidth=0, alpha=0.7)),
         ):
-            shown = pick[mask[pick]]
+            shown = drawn[status][0]
             if mask.any():  # markers of one line, not a scatter collection: a third of the drawing's time
                 ax.plot(x[shown], iae[shown], linestyle="none", label=f"{status} ({int(mask.sum())})", **style)
         if iae.min() > 0 and iae.max() > 20 * iae.min():
@@ -439,9 +453,9 @@ def scatterpng_bytes(plan: CampaignPlan, tally: Tally) -> bytes:
         ax.legend(fontsize=7)
     for k in range(len(axes_ or [None]), grid.size):
         grid[k // cols, k % cols].axis("off")
-    shown = "" if iae.size <= MAX_SCATTER else f", {MAX_SCATTER} of {iae.size} runs drawn at random"
-    fig.suptitle(f"{plan.campaign.name}: IAE against the varied parameters (x: failed{shown})")
-    _margins(fig)
+    scope = _scatter_scope(fail, drawn)
+    fig.suptitle(f"{plan.campaign.name}: IAE against the varied parameters (x: failed){scope}")
+    _margins(fig, title_lines=1 + scope.count("\n"))
     return png_bytes(fig)
 
 
@@ -459,11 +473,12 @@ def _power_of_ten(value: float, _pos: Any = None) -> str:
     return "10" + str(round(exponent)).translate(_SUPERSCRIPT)
 
 
-def _margins(fig: Any) -> None:
-    """Fixed margins in inches for the tick labels, axis labels and title: ``tight_layout`` measured every tick
-    label's box, 40 % of the scatter plot's time for no visible gain."""
+def _margins(fig: Any, *, title_lines: int = 1) -> None:
+    """Fixed margins in inches for the tick labels, axis labels and title (of ``title_lines`` lines): ``tight_layout``
+    measured every tick label's box, 40 % of the scatter plot's time for no visible gain."""
     w, h = fig.get_size_inches()
-    fig.subplots_adjust(left=0.8 / w, right=1 - 0.2 / w, bottom=0.55 / h, top=1 - 0.5 / h, wspace=0.35, hspace=0.45)
+    top = 1 - (0.5 + 0.22 * (title_lines - 1)) / h
+    fig.subplots_adjust(left=0.8 / w, right=1 - 0.2 / w, bottom=0.55 / h, top=top, wspace=0.35, hspace=0.45)
 
 
 def _criteria_doc(c: Any) -> dict:

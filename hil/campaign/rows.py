@@ -35,7 +35,8 @@ FAILURES_LIMIT = 200
 WORST = 3
 STATUSES = ("pass", "fail", "error", "missing")  # a run's status code is its place here
 PASS, FAIL, ERROR, MISSING = range(4)
-SEP = "\x00"  # between a spilled line's fields (JSON and CSV cells hold no NUL: json escapes it, reasons are text)
+# after each field of a spilled line (JSON and CSV cells hold no NUL: json escapes it, reasons are text)
+SEP = "\x00"
 
 
 def point_row(point: Any) -> dict:
@@ -162,10 +163,8 @@ class _HeadTemplates:
                 both = [words[c] for c in column[js].astype(int).tolist()]
                 texts[name] = ([w for w, _ in both], [c for _, c in both])
                 continue
-            numbers = [float(x) for x in column[js].tolist()]
-            made = (
-                list(map(float.__repr__, numbers)) if np.isfinite(column[js]).all() else list(map(_json_value, numbers))
-            )
+            numbers = column[js].astype(float).tolist()
+            made = list(map(float.__repr__ if np.isfinite(numbers).all() else _json_value, numbers))
             texts[name] = (made, made)
         seeds = list(map(str, self.parts.seeds[js].tolist()))
         json_ = list(zip(*(texts[name][0] for name in self.drawn))) if self.drawn else [()] * len(js)
@@ -173,23 +172,49 @@ class _HeadTemplates:
         return json_, cells
 
     def chunk(self, start: int, ids: list[bytes], plain: bool) -> tuple[list[str], list[str], list[str], list[str]]:
-        """The texts of the runs from plan index ``start`` (``ids``; ``plain``: every id alphanumeric)."""
-        runs, seeds = self.parts.runs, self.parts.seeds
+        """The texts of the runs from plan index ``start`` (``ids``; ``plain``: every id alphanumeric), the runs of
+        one grid point (a chunk holds one or two) filled into its template together."""
+        runs = self.parts.runs
         ks = np.arange(start, start + len(ids))
-        draw_json, draw_csv = self._draws(ks % runs)
+        js = ks % runs
+        draw_json, draw_csv = self._draws(js)
+        if not plain:
+            return self._each(ks, ids, draw_json, draw_csv)
+        texts = [rid.decode("ascii") for rid in ids]
+        json_, pre, mid, post = [], [], [], []
+        gs = ks // runs
+        for a, b in _spans(gs):
+            g, k_, j_ = int(gs[a]), ks[a:b].tolist(), js[a:b].tolist()
+            template, seeds = "{" + self.values[g], self.parts.seeds[js[a:b]].tolist()
+            json_ += [template % (j, t, k, seed, *d)
+                      for j, t, k, seed, d in zip(j_, texts[a:b], k_, seeds, draw_json[a:b])]  # fmt: skip
+            pre += [f"{k},{t}," for k, t in zip(k_, texts[a:b])]
+            mid += [self.csv_mid[g] + d for d in draw_csv[a:b]]
+            post += [self.shas[g]] * (b - a)
+        return json_, pre, mid, post
+
+    def _each(
+        self, ks: np.ndarray, ids: list[bytes], draw_json: list[tuple[str, ...]], draw_csv: list[str]
+    ) -> tuple[list[str], list[str], list[str], list[str]]:
+        """:meth:`chunk`'s texts run by run, of runs ``ks`` of which some id is not alphanumeric (json may escape
+        it: its own text)."""
+        runs, seeds = self.parts.runs, self.parts.seeds
         json_, pre, mid, post = [], [], [], []
         for n, (k, rid) in enumerate(zip(ks.tolist(), ids)):
             g, j = divmod(k, runs)
             text = rid.decode("ascii")
-            template = self.values[g]
-            if not plain:  # an id json escapes: its own text
-                template = template.replace('"id": "%s"', '"id": ' + _json_value(text).replace("%", "%%"))
-            args = (j, text, k, int(seeds[j])) if plain else (j, k, int(seeds[j]))
-            json_.append("{" + template % (*args, *draw_json[n]))
-            pre.append(f"{k},{text if plain else csv_field(text)},")
+            template = self.values[g].replace('"id": "%s"', '"id": ' + _json_value(text).replace("%", "%%"))
+            json_.append("{" + template % (j, k, int(seeds[j]), *draw_json[n]))
+            pre.append(f"{k},{csv_field(text)},")
             mid.append(self.csv_mid[g] + draw_csv[n])
             post.append(self.shas[g])
         return json_, pre, mid, post
+
+
+def _spans(values: np.ndarray) -> list[tuple[int, int]]:
+    """The spans ``[a, b)`` of equal neighbours in ``values``."""
+    cut = (np.flatnonzero(values[1:] != values[:-1]) + 1).tolist()
+    return list(zip([0, *cut], [*cut, len(values)]))
 
 
 def _key(name: str) -> str:
@@ -216,18 +241,24 @@ FIXED_CELLS = 8
 ROW_BITS = {"complete": 1, "run_reason": 2, "worker": 4}  # :data:`.store.ROW_BITS`' bits of the keys a head names
 
 
-def _texts(values: list) -> list[str]:
-    """Values as ``csv.writer`` writes them: floats by ``repr``, ``None`` empty, others by ``str``."""
-    return [repr(x) if type(x) is float else "" if x is None else str(x) for x in values]
+_CELL = {"null": "", "true": "True", "false": "False"}  # a value's JSON text -> its cell, where they differ
+
+
+def _cells(texts: list[str]) -> list[str]:
+    """Values' JSON texts as ``csv.writer`` writes the values: ``null`` empty, booleans by ``str``, numbers as they
+    are (a float's JSON text is its ``repr``)."""
+    cell = _CELL.get
+    return [cell(t, t) for t in texts]
 
 
 def _part_cells(part: Any) -> list[str]:
     """The ``campaign.csv`` cells of ``part``'s runs after the reasons, as CSV text (numbers and booleans: no field
     quoted): ``complete`` and the measures, then each tracked output's metrics and each output's final value in the
-    run's own sorted order; each column made text once, the runs of one (tracked outputs, outputs) joined at once."""
-    fixed = [_texts(part.complete), *(_texts(part.measures[k]) for k in MEASURE_CELLS)]
-    tracked = {t: [_texts(cols[k]) for k in METRIC_CELLS] for t, cols in part.tracked.items()}
-    final = {o: _texts(v) for o, v in part.outputs_final.items()}
+    run's own sorted order; each column's texts made once (the measures' shared with the row's JSON text), the runs
+    of one (tracked outputs, outputs) joined at once."""
+    fixed = [_cells(part.texts["complete"]), *(_cells(part.texts[k]) for k in MEASURE_CELLS)]
+    tracked = {t: [_cells(cols[k]) for k in METRIC_CELLS] for t, cols in part.tracked.items()}
+    final = {o: _cells(v) for o, v in part.outputs_final.items()}
     out = [""] * len(part.rows)
     for s, (names, outs) in enumerate(part.shapes):
         rows = np.flatnonzero(part.shape == s).tolist()
@@ -284,35 +315,56 @@ class Verdicts:
     def _add_part(self, part: Any, slots: np.ndarray, planned: np.ndarray, criteria: Any) -> None:
         """Judge the runs of ``part`` (a :class:`~.store.ReportPart`) at once and spill those ``planned`` (run
         ``slots[i]`` of the plan's distinct runs): each verdict's text is its head's and the stored row's text
-        joined (the row is not decoded), its CSV cells the typed columns' values as text."""
+        joined (the row is not decoded), its CSV cells the typed columns' values as text. A passed run's head (most
+        runs') is one text per set of keys, its line joined with the others in bulk; a failed run's or an error's
+        made from its own reasons."""
         failed = evaluate_columns(criteria, part.judged)
         rows = np.flatnonzero(planned)
         shape = self._shapes(part, rows)
         cells = _part_cells(part)
         iae = _tracked_iae(part)
-        model = np.array(part.measures["model_mismatch"], dtype=float)  # None: NaN
-        warning = np.array([x is True for x in part.measures["model_warning"]], bool)
-        lines, code, masks = [], np.zeros(len(rows), np.int8), np.zeros(len(rows), np.int64)
-        for n, i in enumerate(rows.tolist()):
-            if failed[i] or part.error[i]:
-                head = self._head(part, i, failed[i])
-                text = self._head_text(head)
-                verdict = head["status"] + "," + csv_field("; ".join(head["reasons"]))
-                code[n] = STATUSES.index(head["status"])
-                for name in head["failed"]:
-                    if name not in self.criteria:
-                        self.criteria.append(name)
-                    masks[n] |= 1 << self.criteria.index(name)
-            else:  # a passed run's head: the same text for every run of the same keys
-                text, verdict, code[n] = self._passed(part, i), "pass,", PASS
-            row_text = part.rows[i]
-            body = text if row_text == "{}" else text[:-1] + ", " + row_text[1:]
-            lines.append(SEP.join([body, verdict, cells[i]]).encode("utf-8"))
+        model, warning = part.model_mismatch, part.model_warning
+        bad = np.fromiter(map(bool, failed), bool, len(failed)) | part.error
+        code, masks = np.full(len(rows), PASS, np.int8), np.zeros(len(rows), np.int64)
+        good = rows[~bad[rows]]
+        keys = part.keys & 7
+        passed = {
+            key: self._passed(part, int(good[np.argmax(keys[good] == key)])) for key in np.unique(keys[good]).tolist()
+        }
+        texts = [passed.get(key, "") for key in keys[rows].tolist()]
+        verdicts = ["pass,"] * len(rows)
+        for n in np.flatnonzero(bad[rows]).tolist():
+            i = int(rows[n])
+            head = self._head(part, i, failed[i])
+            texts[n] = self._head_text(head)
+            verdicts[n] = head["status"] + "," + csv_field("; ".join(head["reasons"]))
+            code[n] = STATUSES.index(head["status"])
+            for name in head["failed"]:
+                if name not in self.criteria:
+                    self.criteria.append(name)
+                masks[n] |= 1 << self.criteria.index(name)
+        pick = rows.tolist()
+        whole = len(pick) == len(part.rows)
+        row_texts, cell_texts = (
+            (part.rows, cells) if whole else ([part.rows[i] for i in pick], [cells[i] for i in pick])
+        )
+        lines = [
+            (text if row == "{}" else text[:-1] + ", " + row[1:]) + SEP + verdict + SEP + cell + SEP
+            for text, row, verdict, cell in zip(texts, row_texts, verdicts, cell_texts)
+        ]
+        spill = "".join(lines)
+        # ASCII (the usual): a line's bytes are its characters, the part encoded once (a line at a time otherwise)
+        encoded = spill.encode("utf-8") if spill.isascii() else None
+        if encoded is None:
+            pieces = [x.encode("utf-8") for x in lines]
+            encoded, sizes = b"".join(pieces), np.array([len(x) for x in pieces], np.int64)
+        else:
+            sizes = np.array([len(x) for x in lines], np.int64)
         # the part's numbers set at once and its lines written in one call (a write a run: 18 us of each, profiled)
-        u, sizes = slots[rows], np.array([len(x) for x in lines], np.int64)
+        u = slots[rows]
         self.at[u] = self.file.tell() + np.cumsum(sizes) - sizes
         self.size[u] = sizes
-        self.file.write(b"".join(lines))
+        self.file.write(encoded)
         self.shape[u], self.code[u], self.failed[u] = shape[rows], code, masks
         self.iae[u], self.model[u], self.warning[u] = iae[rows], model[rows], warning[rows]
 
@@ -365,29 +417,40 @@ class Verdicts:
         at = int(self.at[u])
         if at < 0:
             return self._missing
+        body, verdict, cells, _ = self._read(at, int(self.size[u])).split(SEP)
+        return body, verdict, cells
+
+    def _read(self, at: int, size: int) -> str:
+        """``size`` bytes of the spill from ``at``, as text: by ``os.pread``, not a seek and a buffered read; not a
+        memory map either, whose pages read would count in the client's resident memory (the spill of 100,000 runs
+        is ~220 MB)."""
         if not self._flushed:  # the spill is written whole before the first read
             self.file.flush()
             self._flushed = True
-        # one pread a run, not a seek and a buffered read; not a memory map either: its pages read would count in
-        # the client's resident memory (the spill of 100,000 runs is ~220 MB)
-        body, verdict, cells = os.pread(self.file.fileno(), int(self.size[u]), at).decode("utf-8").split(SEP)
-        return body, verdict, cells
+        return os.pread(self.file.fileno(), size, at).decode("utf-8")
 
     _missing = (json.dumps(MISSING_VERDICT, sort_keys=True), "missing,no result", "," * (FIXED_CELLS - 2))
 
     def rows(self, slots: list[int], tracked: list[str], outs: list[str]) -> tuple[list[str], list[str], list[str]]:
         """:meth:`text` of each of runs ``slots``, the cells in the columns ``tracked`` and ``outs`` (sorted) of every
-        run."""
-        bodies, verdicts, cells = [], [], []
+        run. The runs whose lines follow each other in the spill (a block's, in plan order: most of a chunk) are read
+        by one ``pread`` and split at once."""
+        if not slots:
+            return [], [], []
+        at, size = self.at[slots], self.size[slots]
+        fields: list[str] = []
+        # a span of lines: where the next run's line starts where this one's ends (a missing run is a span alone)
+        cut = np.flatnonzero((at[1:] != at[:-1] + size[:-1]) | (at[1:] < 0) | (at[:-1] < 0)) + 1
+        for a, b in zip([0, *cut.tolist()], [*cut.tolist(), len(slots)]):
+            if at[a] < 0:
+                fields.extend(self._missing)
+            else:
+                fields.extend(self._read(int(at[a]), int(size[a:b].sum())).split(SEP)[:-1])
+        bodies, verdicts, cells = fields[0::3], fields[1::3], fields[2::3]
         every = (tuple(tracked), tuple(outs))
-        plain = [names == every for names in self.shapes]
-        for u in slots:
-            body, verdict, own = self.text(u)
-            if self.at[u] < 0 or not plain[self.shape[u]]:
-                own = self.cells(u, own, tracked, outs)
-            bodies.append(body)
-            verdicts.append(verdict)
-            cells.append(own)
+        plain = np.array([names == every for names in self.shapes] or [True], bool)[self.shape[slots]] & (at >= 0)
+        for n in np.flatnonzero(~plain).tolist():
+            cells[n] = self.cells(slots[n], cells[n], tracked, outs)
         return bodies, verdicts, cells
 
     def cells(self, u: int, cells: str, tracked: list[str], outs: list[str]) -> str:

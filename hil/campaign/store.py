@@ -359,17 +359,17 @@ def _key(name: str) -> str:
     return (json.dumps(name) + ":").replace("%", "%%")
 
 
-def row_texts(table: pa.Table) -> list[str]:
+def row_texts(table: pa.Table, texts: dict[str, list[str]] | None = None) -> list[str]:
     """Each row's JSON text, as ``json.dumps(row, sort_keys=True, separators=(",", ":"))`` writes the :func:`_split`
     ``row`` the block was made from: the ``row`` column's where the typed columns could not give it exactly
     (:func:`_given`), else made from the typed columns and the ``metrics`` column's text: each value made text once,
-    a column at a time, and the runs of one form (which keys the row and its measures have, which are null) filled
-    into one template."""
+    a column at a time (``texts``: :func:`_value_texts` of ``table``, when made already), and the runs of one form
+    (which keys the row and its measures have, which are null) filled into one template."""
     out = table.column("row").to_pylist()
     typed = np.flatnonzero(table.column("row").is_null().to_numpy(zero_copy_only=False))
     if not typed.size:
         return out
-    texts = _value_texts(table)
+    texts = _value_texts(table) if texts is None else texts
     form = table.column("row_keys").to_numpy(zero_copy_only=False).astype(np.int64)
     for k, col in enumerate(("measures", "worker")):
         form |= np.asarray(table.column(col).is_valid().to_numpy(zero_copy_only=False), np.int64) << (8 + k)
@@ -487,11 +487,17 @@ def write_block(folder: str, key: tuple[int, int], ids: list[str], data: bytes, 
     return {"block": name, "runs": len(ids), "errors": errors}
 
 
-def _read(path: Path, columns: list[str]) -> pa.Table:
-    """``columns`` of block file ``path``, after handing back to the system what Arrow's pool kept of the blocks read
-    before (mimalloc keeps freed pages: +30 MB of the client's resident memory over 10,000 runs' records)."""
+def _read(path: Path | pq.ParquetFile, columns: list[str]) -> pa.Table:
+    """``columns`` of block file ``path`` (or of the file already open), after handing back to the system what
+    Arrow's pool kept of the blocks read before (mimalloc keeps freed pages: +30 MB of the client's resident memory
+    over 10,000 runs' records). Read by :class:`pyarrow.parquet.ParquetFile` in this thread: ``pq.read_table``'s
+    dataset machinery and its thread pool cost ~10 ms of CPU a block file of the report's columns (of 834 runs),
+    this ~4.5."""
     pa.default_memory_pool().release_unused()
-    return pq.read_table(path, columns=columns)
+    if isinstance(path, pq.ParquetFile):
+        return path.read(columns=columns, use_threads=False)
+    with pq.ParquetFile(path) as block:
+        return block.read(columns=columns, use_threads=False)
 
 
 TEXT_COLUMNS = ("row", "metrics")  # a row's JSON texts (:func:`row_texts`)
@@ -748,20 +754,21 @@ class Store:
         """What the report reads of every stored run, one block file at a time (:class:`ReportPart`), of the rows the
         index keeps (a run stored twice: one record); only the errors' ``record`` text is decoded."""
         for path in self.files():
-            present = set(pq.read_schema(path).names)
-            table = _read(path, columns=["id", "status", *TEXT_COLUMNS, *(k for k in ROW_COLUMNS if k in present)])
-            names = _ids(table.column("id"))
-            kept = self._kept(path, names)
-            if not kept.any():
-                continue
-            if not kept.all():
-                table = table.filter(pa.array(kept))
-            error = np.asarray(pc.equal(table.column("status"), "error").to_numpy(zero_copy_only=False), bool)
-            reasons: list[str | None] = [None] * table.num_rows
-            if error.any():
-                records = _read(path, columns=["record"]).column("record").filter(pa.array(kept))
-                for i in np.flatnonzero(error).tolist():
-                    reasons[i] = json.loads(records[i].as_py()).get("reason")
+            with pq.ParquetFile(path) as block:  # its footer parsed once: the schema and the columns read from it
+                present = set(block.schema_arrow.names)
+                table = _read(block, ["id", "status", *TEXT_COLUMNS, *(k for k in ROW_COLUMNS if k in present)])
+                names = _ids(table.column("id"))
+                kept = self._kept(path, names)
+                if not kept.any():
+                    continue
+                if not kept.all():
+                    table = table.filter(pa.array(kept))
+                error = np.asarray(pc.equal(table.column("status"), "error").to_numpy(zero_copy_only=False), bool)
+                reasons: list[str | None] = [None] * table.num_rows
+                if error.any():
+                    records = _read(block, ["record"]).column("record").filter(pa.array(kept))
+                    for i in np.flatnonzero(error).tolist():
+                        reasons[i] = json.loads(records[i].as_py()).get("reason")
             yield _report_part(names[kept], error, reasons, table)
 
     def records(self) -> Iterator[tuple[str, dict]]:
@@ -857,8 +864,8 @@ class Store:
 @dataclass(frozen=True)
 class ReportPart:
     """What the report reads of some stored runs (a block file's), one entry a run: from the typed columns of
-    :func:`row_columns`, as numpy arrays (numbers; NaN where null) and lists of Python values (what
-    ``campaign.csv`` writes as text)."""
+    :func:`row_columns`, as numpy arrays (numbers; NaN where null) and, for ``campaign.csv``'s cells, each column's
+    values as JSON writes them (``null`` where null), made once for the row's text and the cells."""
 
     ids: np.ndarray  # ASCII bytes
     error: np.ndarray  # bool: the run's record is an error
@@ -867,10 +874,11 @@ class ReportPart:
     keys: np.ndarray  # ``row_keys``: which of ROW_BITS each row has
     shapes: list[tuple[tuple[str, ...], tuple[str, ...]]]  # the distinct (tracked outputs, outputs) of the runs
     shape: np.ndarray  # each run's, into ``shapes``
-    complete: list  # bool or None
-    measures: dict[str, list]  # each MEASURES field's values
-    tracked: dict[str, dict[str, list]]  # per tracked output, each METRIC_CELLS value
-    outputs_final: dict[str, list]
+    texts: dict[str, list[str]]  # ``complete`` and each MEASURE_CELLS measure, as JSON text
+    tracked: dict[str, dict[str, list[str]]]  # per tracked output, each METRIC_CELLS value as JSON text
+    outputs_final: dict[str, list[str]]  # per output, as JSON text
+    model_mismatch: np.ndarray  # NaN where null
+    model_warning: np.ndarray  # bool (null: False)
     judged: RunColumns  # what the criteria read (:func:`.criteria.evaluate_columns`)
 
 
@@ -892,20 +900,28 @@ def _report_part(ids: np.ndarray, error: np.ndarray, reasons: list, table: pa.Ta
         output_max={k: _numbers(v) for k, v in named["output_max"].items()},
         tracked={k: {m: _numbers(v) for m, v in cols.items()} | {"present": present[k]} for k, cols in tracked.items()},
     )
+    texts = _value_texts(table)  # the row's and the cells' texts of the measures, made once for both
     return ReportPart(
         ids=ids,
         error=error,
-        rows=row_texts(table),
+        rows=row_texts(table, texts),
         reasons=reasons,
         keys=table.column("row_keys").to_numpy(),
         shapes=shapes,
         shape=names.indices.to_numpy(zero_copy_only=False),
-        complete=table.column("complete").to_pylist(),
-        measures={k: v.to_pylist() for k, v in measures.items()},
-        tracked={k: {m: v.to_pylist() for m, v in cols.items()} for k, cols in tracked.items()},
-        outputs_final={k: v.to_pylist() for k, v in named["outputs_final"].items()},
+        texts={k: texts[k] for k in ("complete", "stable", *_FLOAT_MEASURES)},
+        tracked={k: _metric_texts(cols) for k, cols in tracked.items()},
+        outputs_final={k: _numbers_text(v) for k, v in named["outputs_final"].items()},
+        model_mismatch=_numbers(measures["model_mismatch"]),
+        model_warning=np.asarray(pc.fill_null(measures["model_warning"], False).to_numpy(zero_copy_only=False), bool),
         judged=judged,
     )
+
+
+def _metric_texts(fields: dict[str, pa.Array]) -> dict[str, list[str]]:
+    """A tracked output's metrics as JSON text, each value made text once (a settling time, a whole number of samples,
+    repeats: its distinct values once each)."""
+    return {m: _numbers_text(v, repeated=m == "settling_time_s") for m, v in fields.items()}
 
 
 def _fields(column: pa.ChunkedArray | pa.Array) -> dict[str, pa.Array]:
