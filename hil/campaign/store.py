@@ -51,6 +51,7 @@ from gainlink.version import __version__
 
 from .config import CampaignError
 from .criteria import RunColumns
+from .jsontext import compact_json, json_texts
 from .plan import CampaignPlan, RunPoint
 from .rows import MEASURE_CELLS, METRIC_CELLS
 
@@ -111,10 +112,6 @@ def encode_trace(t: np.ndarray, y: np.ndarray, u: np.ndarray, r: np.ndarray) -> 
     return out
 
 
-def _compact_json(obj: Any) -> str:
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
-
-
 def _json(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, indent=1, allow_nan=False) + "\n"
 
@@ -147,12 +144,11 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes
     cols: dict[str, Any] = {
         "id": pa.array(ids, pa.string()),
         "status": pa.array([record["status"] for record in records], pa.string()),
-        "record": pa.array([_compact_json(rest) for rest, _ in parts], pa.string()),
+        "record": pa.array(json_texts([rest for rest, _ in parts]), pa.string()),
         # JSON only for what the typed columns do not hold: a row's metrics, or a whole row they cannot give exactly
-        "row": pa.array([None if ok else _compact_json(row) for row, ok in zip(rows, given)], pa.string()),
-        "metrics": pa.array(
-            [_compact_json(row["metrics"]) if ok and "metrics" in row else None for row, ok in zip(rows, given)],
-            pa.string(),
+        "row": pa.array([None if ok else compact_json(row) for row, ok in zip(rows, given)], pa.string()),
+        "metrics": _metrics_texts(
+            [row.get("metrics") if ok and "metrics" in row else _NONE for row, ok in zip(rows, given)]
         ),
     }
     cols["t"] = _blobs([None if tr is None else tr["t"] for tr in traces])
@@ -175,6 +171,19 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes
         table, sink, compression=codecs, use_dictionary=REPEATED, write_statistics=False, row_group_size=TRACE_BATCH
     )
     return sink.getvalue().to_pybytes()
+
+
+_NONE = object()  # a row whose metrics the ``metrics`` column does not hold
+
+
+def _metrics_texts(metrics: list) -> pa.Array:
+    """The ``metrics`` column: each run's metrics as compact JSON (:func:`.jsontext.json_texts`, the block's runs at
+    once), null where ``metrics[i]`` is :data:`_NONE`."""
+    held = [k for k, m in enumerate(metrics) if m is not _NONE]
+    texts: list[str | None] = [None] * len(metrics)
+    for k, text in zip(held, json_texts([metrics[k] for k in held])):
+        texts[k] = text
+    return pa.array(texts, pa.string())
 
 
 def _leaf_paths(schema: pa.Schema) -> list[str]:
@@ -309,7 +318,7 @@ def _names(metrics: list[dict]) -> pa.DictionaryArray:
     for m in metrics:
         key = (tuple(sorted(m.get("tracked", ()))), tuple(sorted(m.get("outputs_final", ()))))
         codes.append(texts.setdefault(key, len(texts)))
-    words = [_compact_json([list(t), list(o)]) for t, o in texts]
+    words = [compact_json([list(t), list(o)]) for t, o in texts]
     return pa.DictionaryArray.from_arrays(pa.array(codes, pa.int32()), pa.array(words, pa.string()))
 
 

@@ -334,8 +334,11 @@ def _block_answer(
     kind: str, artifacts: dict, runs: list, blobs: dict | None, *, ids: list[str], campaign: str, folder: Any
 ) -> bytes | dict:
     """:func:`execute_block`'s answer: its block file written into ``folder`` (a few numbers) or its bytes."""
+    from ..loop.scheduler import gc_paused
+
     records = [with_inputs(r, run, kind=kind) for r, run in zip(batch_records(kind, artifacts, runs, blobs), runs)]
-    data = encode_block(ids, records, campaign=campaign)
+    with gc_paused():
+        data = encode_block(ids, records, campaign=campaign)
     if folder is not None:
         errors = [[i, r.get("reason")] for i, r in enumerate(records) if r["status"] == "error"]
         answer = write_block(folder[0], folder[1], ids, data, errors)
