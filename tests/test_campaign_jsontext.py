@@ -50,6 +50,7 @@ SPECIAL = [
     ("keys that need escapes", lambda k, m: m | {'a"b\\c%s%%é\n': {"\u2603": k, "%d": "é%s\x00"}}),
     ("a run missing a key", lambda k, m: {key: v for key, v in m.items() if k % 3 or key != "twin"}),
     ("a run with an extra key", lambda k, m: m | ({"extra": {"deep": [k]}} if k % 4 == 1 else {})),
+    ("one key, not the same", lambda k, m: m | {"one": {"a" if k % 2 else "b": k}}),
     ("a nested key missing", lambda k, m: m | {"tracked": {"r_x": {"iae": 1.5}} if k == 2 else m["tracked"]}),
     ("a bool where another run has a number", lambda k, m: m | {"saturated_steps": k % 2 == 0 if k % 3 else k}),
     ("None where another has a dict", lambda k, m: m | {"twin": None if k % 2 else m["twin"]}),

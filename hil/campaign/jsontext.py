@@ -116,14 +116,14 @@ def _flat(node: dict | list, parts: list[str], columns: list[list[str]]) -> None
         keys = sorted(node[0]) if all(type(k) is str for k in node[0]) else None
         if keys is None or set(map(len, node)) != {len(keys)}:
             raise _Split(_shapes(node))
+        if not keys:
+            parts.append("{}")
+            return
         try:
-            rows = list(map(itemgetter(*keys), node)) if len(keys) > 1 else None
+            rows = list(map(itemgetter(*keys), node))  # a key another run lacks: KeyError
         except KeyError:
             raise _Split(_shapes(node)) from None
-        if rows is None:
-            _object(keys, [[d[k] for d in node] for k in keys], parts, columns)
-        else:
-            _object(keys, [list(col) for col in zip(*rows)], parts, columns)
+        _object(keys, [list(col) for col in zip(*rows)] if len(keys) > 1 else [rows], parts, columns)
     elif kinds == {list}:
         sizes = set(map(len, node))
         if len(sizes) > 1:
