@@ -189,7 +189,9 @@ def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> bytes:
         "row": pa.array(
             [None if ok else compact_json(_row_of(runs, i)) for i, ok in enumerate(given.tolist())], pa.string()
         ),
-        "metrics": _metrics_texts([m if ok else _NONE for m, ok in zip(runs.metrics, given.tolist())]),
+        "metrics": _metrics_texts(
+            runs.metrics if given.all() else [m if ok else _NONE for m, ok in zip(runs.metrics, given.tolist())]
+        ),
     }
     return _block_file(texts, runs.traces, typed, campaign=campaign)
 
@@ -231,6 +233,8 @@ _NONE = object()  # a row whose metrics the ``metrics`` column does not hold
 def _metrics_texts(metrics: list) -> pa.Array:
     """The ``metrics`` column: each run's metrics as compact JSON (:func:`.jsontext.json_texts`, the block's runs at
     once), null where ``metrics[i]`` is :data:`_NONE`."""
+    if _NONE not in metrics:  # (a block's usual: every run's held)
+        return pa.array(json_texts(metrics), pa.string())
     held = [k for k, m in enumerate(metrics) if m is not _NONE]
     texts: list[str | None] = [None] * len(metrics)
     for k, text in zip(held, json_texts([metrics[k] for k in held])):
