@@ -338,7 +338,7 @@ def _block_answer(
 
     task = _task_records(kind, artifacts, runs, blobs)
     with gc_paused():  # the lists of texts and values make no cycles
-        if all(type(r) is _Block for r in task):  # only blocks' runs: a column at a time, no record dict a run
+        if task and all(type(r) is _Block for r in task):  # only blocks' runs: a column at a time, no record dict a run
             data = encode_runs(ids, _block_runs(kind, runs, task), campaign=campaign)
             errors: list = []
         else:
