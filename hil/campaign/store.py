@@ -23,7 +23,9 @@ version, the campaign that wrote it and the file's layout (:data:`LAYOUT`): a fo
 blocks of an earlier layout, is refused in one line on resume (:func:`refuse_foreign`).
 
 A worker that sees the campaign folder writes its block file there itself (:func:`write_block`); the client notes it
-(:meth:`Store.took_block`) without reading it.
+(:meth:`Store.took_block`) without reading it. A task whose runs all stepped in blocks is stored from the blocks' lists
+(:class:`BlockRuns`, :func:`encode_runs`: no record dict a run), the same table :func:`encode_block` makes of the runs'
+records; the JSON texts of a block's runs are made a structure at a time (:mod:`.jsontext`).
 
 A file is written to a temporary name and renamed (mode 0644 under the usual umask), so a run counts as done exactly
 when a block file holds it; a campaign killed at any point resumes by running the runs no block holds, and those whose
