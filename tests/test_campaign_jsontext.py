@@ -128,13 +128,15 @@ def test_any_numbers_in_one_key_give_each_ones_json(numbers):
 
 def test_a_long_column_of_floats_of_every_size_is_each_ones_repr():
     """A column long enough for Arrow's texts (``jsontext._float_texts``): floats of every exponent (random bits),
-    around the thresholds where Python's ``repr`` switches to an exponent, integers and halves as floats."""
+    around the thresholds where Python's ``repr`` switches to an exponent and where Arrow's does (1e-6), integers and
+    halves as floats."""
     rng = np.random.default_rng(7)
     bits = np.frombuffer(rng.integers(0, 2**63, 4000, dtype=np.uint64).tobytes(), np.float64)
     edges = np.array([1e-4, 1e-5, 1e15, 1e16, 2.0**52, 2.0**53, 0.1, 0.5])
     near = np.concatenate([np.nextafter(edges, 0.0), np.nextafter(edges, np.inf), edges, -edges])
     floats = np.concatenate([bits, near, rng.lognormal(0, 8, 4000), rng.integers(-(10**6), 10**6, 500) / 2.0,
-                             10.0 ** rng.uniform(-30, 30, 4000), -rng.random(4000)])  # fmt: skip
+                             10.0 ** rng.uniform(-30, 30, 4000), -rng.random(4000),
+                             10.0 ** rng.uniform(-6.5, -3.5, 3000) * rng.choice([-1, 1], 3000)])  # fmt: skip
     values = [float(v) for v in floats if np.isfinite(v)]
     rng.shuffle(values)
     rows = [{"x": v} for v in values]
