@@ -394,3 +394,76 @@ def test_a_row_with_a_value_json_refuses_is_refused_as_json_refuses_it(where):
         json.dumps(record, allow_nan=False)
     with pytest.raises(ValueError):
         encode_block(["x"], [record], campaign="c")
+
+
+def _table(data: bytes):
+    import pyarrow as pa
+
+    return pq.read_table(pa.BufferReader(data))
+
+
+def test_a_blocks_runs_as_lists_make_the_file_their_records_make():
+    """A block's finished runs given as lists (``store.encode_runs``, no record dict a run) make the table their
+    records make through ``encode_block`` (its oracle), column by column, schema and metadata: runs of every form a
+    record takes (measures None, without the twins' keys, an int among the floats, a worker without ``block``, NaN
+    where JSON says null), so the typed columns' checks fall back run by run."""
+    from gainlink.hil.campaign.store import BlockRuns, encode_runs
+
+    rng = np.random.default_rng(11)
+    records = [r for k in range(120) if (r := _record(rng, k))["status"] == "done"]
+    links = [{"kind": "sil (in-process, no link)"} if k % 5 else {"kind": "x", "n": k} for k in range(len(records))]
+    inputs = [("a" * 64, {"plant": {"M": 1.0 + k / 7}, "duration": 1.0}, k) for k in range(len(records))]
+    ids = [f"{k:020x}" for k in range(len(records))]
+    runs = BlockRuns(
+        kind="sil",
+        inputs=inputs,
+        complete=[r["complete"] for r in records],
+        reason=[r["reason"] for r in records],
+        metrics=[r["metrics"] for r in records],
+        measures=[r["measures"] for r in records],
+        link=links,
+        traces=[None] * len(records),
+        worker=[r["worker"] for r in records],
+    )
+    made = _table(encode_runs(ids, runs, campaign="c"))
+    full = [with_inputs(r | {"link": link}, point, kind="sil") for r, link, point in zip(records, links, inputs)]
+    oracle = _table(encode_block(ids, full, campaign="c"))
+    assert made.schema.equals(oracle.schema, check_metadata=True)
+    for name in oracle.column_names:
+        assert made.column(name).equals(oracle.column(name)), name
+    assert 0 < made.column("row").null_count < len(ids)  # some rows from their columns, the odd ones whole
+
+
+def test_a_workers_block_file_is_the_one_its_records_make(tmp_path):
+    """The shipped pendulum's runs in a worker's task, two grid points' blocks interleaved: the block file made from
+    the blocks' lists (``worker._block_runs``, ``store.encode_runs``: the worker's path) is the table the same runs'
+    records make through ``encode_block`` (the per-run path's), column by column; ``campaign show``'s record of each
+    run is its record."""
+    from gainlink.fileio import read_toml
+    from gainlink.hil.campaign import worker
+    from gainlink.hil.campaign.plan import plan_campaign
+    from gainlink.hil.campaign.store import encode_runs
+
+    path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
+    data, _ = read_toml(path, what="campaign", error=ValueError)
+    data.update(runs=4, seed=2026, spec=str((path.parent / data["spec"]).resolve()))
+    campaign = parse_campaign(data)
+    plan = plan_campaign(campaign)
+    points = sorted(plan.runs, key=lambda p: (p.draw, p.grid_index))  # grid points' runs interleaved in the task
+    runs = [(p.artifact_sha256, p.scenario, p.seed) for p in points]
+    ids = [p.id for p in points]
+    task = worker._task_records("sil", dict(plan.artifacts), runs, None)
+    assert all(type(r) is worker._Block for r in task) and len({id(r) for r in task}) > 1
+    made = encode_runs(ids, worker._block_runs("sil", runs, task), campaign=campaign.name)
+    records = [with_inputs(r, run, kind="sil") for r, run in zip(worker._materialized(task), runs)]
+    oracle = _table(encode_block(ids, records, campaign=campaign.name))
+    table = _table(made)
+    assert table.schema.equals(oracle.schema, check_metadata=True)
+    for name in oracle.column_names:
+        assert table.column(name).equals(oracle.column(name)), name
+    store = Store(tmp_path / "s", campaign=campaign.name)
+    store.put_block(made)
+    for run_id, record in zip(ids, records):
+        assert store.record(run_id) == json.loads(json.dumps({k: v for k, v in record.items() if k != "trace"})) | {
+            "id": run_id
+        }

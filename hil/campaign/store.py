@@ -23,7 +23,9 @@ version, the campaign that wrote it and the file's layout (:data:`LAYOUT`): a fo
 blocks of an earlier layout, is refused in one line on resume (:func:`refuse_foreign`).
 
 A worker that sees the campaign folder writes its block file there itself (:func:`write_block`); the client notes it
-(:meth:`Store.took_block`) without reading it.
+(:meth:`Store.took_block`) without reading it. A task whose runs all stepped in blocks is stored from the blocks' lists
+(:class:`BlockRuns`, :func:`encode_runs`: no record dict a run), the same table :func:`encode_block` makes of the runs'
+records; the JSON texts of a block's runs are made a structure at a time (:mod:`.jsontext`).
 
 A file is written to a temporary name and renamed (mode 0644 under the usual umask), so a run counts as done exactly
 when a block file holds it; a campaign killed at any point resumes by running the runs no block holds, and those whose
@@ -38,6 +40,8 @@ import json
 import operator
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from itertools import chain
+from operator import itemgetter
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +55,7 @@ from gainlink.version import __version__
 
 from .config import CampaignError
 from .criteria import RunColumns
+from .jsontext import compact_json, json_texts, object_texts
 from .plan import CampaignPlan, RunPoint
 from .rows import MEASURE_CELLS, METRIC_CELLS
 
@@ -111,10 +116,6 @@ def encode_trace(t: np.ndarray, y: np.ndarray, u: np.ndarray, r: np.ndarray) -> 
     return out
 
 
-def _compact_json(obj: Any) -> str:
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
-
-
 def _json(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, indent=1, allow_nan=False) + "\n"
 
@@ -138,23 +139,74 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes
     """The Parquet file of a block: one row per run (``records[i]`` is run ``ids[i]``'s, its traces as
     :func:`encode_trace` arrays under ``trace``). Made on the worker, which writes it into the campaign folder when it
     can see the folder (:func:`write_block`), else returns it for the client to write."""
-    traces = [record.get("trace") for record in records]
     parts = [_split(run_id, record) for run_id, record in zip(ids, records)]
     rows = [row for _, row in parts]
     typed = row_columns(rows)
     names = {key: [f.name for f in typed[key].type] if key in typed else [] for key in OF_MEASURES}
     given = (_finite(typed, len(rows)) & np.array([_given(row, names) for row in rows], bool)).tolist()
-    cols: dict[str, Any] = {
+    texts = {
         "id": pa.array(ids, pa.string()),
         "status": pa.array([record["status"] for record in records], pa.string()),
-        "record": pa.array([_compact_json(rest) for rest, _ in parts], pa.string()),
+        "record": pa.array(json_texts([rest for rest, _ in parts]), pa.string()),
         # JSON only for what the typed columns do not hold: a row's metrics, or a whole row they cannot give exactly
-        "row": pa.array([None if ok else _compact_json(row) for row, ok in zip(rows, given)], pa.string()),
-        "metrics": pa.array(
-            [_compact_json(row["metrics"]) if ok and "metrics" in row else None for row, ok in zip(rows, given)],
-            pa.string(),
+        "row": pa.array([None if ok else compact_json(row) for row, ok in zip(rows, given)], pa.string()),
+        "metrics": _metrics_texts(
+            [row.get("metrics") if ok and "metrics" in row else _NONE for row, ok in zip(rows, given)]
         ),
     }
+    return _block_file(texts, [record.get("trace") for record in records], typed, campaign=campaign)
+
+
+@dataclass(frozen=True)
+class BlockRuns:
+    """The finished runs of a block as lists, one entry a run, what a block's records would hold (``status`` done, a
+    ``reason`` each, no ``row`` key missing): :func:`encode_runs` stores them as :func:`encode_block` stores their
+    records, without a record dict a run."""
+
+    kind: str
+    inputs: list  # (artifact sha256, scenario, seed) of each run, as :func:`with_inputs` takes them
+    complete: list
+    reason: list
+    metrics: list
+    measures: list
+    link: list
+    traces: list  # encode_trace's arrays
+    worker: list  # each run's: its block's share (host, pid, start, stop, cpu_s, block), one dict a block
+
+
+def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> bytes:
+    """The Parquet file of a block of finished runs given as lists (``runs``; run ``ids[i]`` is entry ``i``): the
+    file :func:`encode_block` makes of the runs' records, made a column at a time."""
+    n = len(ids)
+    typed = _typed_columns([np.ones(n, bool)] * 5, runs.complete, runs.reason, runs.measures, runs.metrics, runs.worker)
+    names = {key: [f.name for f in typed[key].type] if key in typed else [] for key in OF_MEASURES}
+    given = _finite(typed, n) & _given_columns(runs, names)
+    shas, scenarios, seeds = (list(col) for col in zip(*runs.inputs)) if n else ([], [], [])
+    inputs = {"artifact_sha256": shas, "kind": [runs.kind] * n, "scenario": scenarios, "seed": seeds}
+    record = {"id": ids, "inputs": inputs, "link": runs.link, "status": ["done"] * n}
+    texts = {
+        "id": pa.array(ids, pa.string()),
+        "status": pa.array(["done"] * n, pa.string()),
+        "record": pa.array(object_texts(record, n), pa.string()),
+        "row": pa.array(
+            [None if ok else compact_json(_row_of(runs, i)) for i, ok in enumerate(given.tolist())], pa.string()
+        ),
+        "metrics": _metrics_texts(
+            runs.metrics if given.all() else [m if ok else _NONE for m, ok in zip(runs.metrics, given.tolist())]
+        ),
+    }
+    return _block_file(texts, runs.traces, typed, campaign=campaign)
+
+
+def _row_of(runs: BlockRuns, i: int) -> dict:
+    """Run ``i``'s ``row`` (:func:`_split`'s) of ``runs``."""
+    return {"complete": runs.complete[i], "measures": runs.measures[i], "metrics": runs.metrics[i],
+            "worker": runs.worker[i], "run_reason": runs.reason[i]}  # fmt: skip
+
+
+def _block_file(texts: dict[str, pa.Array], traces: list, typed: dict[str, pa.Array], *, campaign: str) -> bytes:
+    """The Parquet bytes of a block: the JSON and text columns ``texts``, the traces, the typed columns."""
+    cols = dict(texts)
     cols["t"] = _blobs([None if tr is None else tr["t"] for tr in traces])
     for k in WIDE:
         cols[k] = _blobs([None if tr is None else tr[k] for tr in traces])
@@ -175,6 +227,21 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes
         table, sink, compression=codecs, use_dictionary=REPEATED, write_statistics=False, row_group_size=TRACE_BATCH
     )
     return sink.getvalue().to_pybytes()
+
+
+_NONE = object()  # a row whose metrics the ``metrics`` column does not hold
+
+
+def _metrics_texts(metrics: list) -> pa.Array:
+    """The ``metrics`` column: each run's metrics as compact JSON (:func:`.jsontext.json_texts`, the block's runs at
+    once), null where ``metrics[i]`` is :data:`_NONE`."""
+    if _NONE not in metrics:  # (a block's usual: every run's held)
+        return pa.array(json_texts(metrics), pa.string())
+    held = [k for k, m in enumerate(metrics) if m is not _NONE]
+    texts: list[str | None] = [None] * len(metrics)
+    for k, text in zip(held, json_texts([metrics[k] for k in held])):
+        texts[k] = text
+    return pa.array(texts, pa.string())
 
 
 def _leaf_paths(schema: pa.Schema) -> list[str]:
@@ -215,20 +282,35 @@ def row_columns(rows: list[dict]) -> dict[str, pa.Array]:
       metrics'), each a struct with a field per name some row of the block has (a tracked output a row lacks: a
       null struct), left out when no row has one (Parquet has no struct without fields).
     """
-    bits = np.zeros(len(rows), np.uint8)
-    measures = [row.get("measures") for row in rows]
-    for k, key in enumerate(ROW_BITS[:5]):
-        bits |= np.array([key in row for row in rows], np.uint8) << k
+    return _typed_columns(
+        [np.array([key in row for row in rows], bool) for key in ROW_BITS[:5]],
+        [row.get("complete") for row in rows],
+        [row.get("run_reason") for row in rows],
+        [row.get("measures") for row in rows],
+        [row.get("metrics") for row in rows],
+        [row.get("worker") for row in rows],
+    )
+
+
+def _typed_columns(
+    has: list[np.ndarray], complete: list, reason: list, measures: list, metrics: list, worker: list | pa.Array
+) -> dict[str, pa.Array]:
+    """:func:`row_columns` of rows given a list a key: ``has[k]``, whether each row has :data:`ROW_BITS` [k] (the
+    first five); a row's ``complete``, ``run_reason``, ``measures``, ``metrics``, ``worker`` (None where it has not;
+    ``worker`` a list of dicts or its column made already)."""
+    bits = np.zeros(len(complete), np.uint8)
+    for k, present in enumerate(has):
+        bits |= present.astype(np.uint8) << k
     held = [m if type(m) is dict else {} for m in measures]
     bits |= np.array([TWIN_KEYS[0] in m for m in held], np.uint8) << 5
     bits |= np.array([MODEL_KEYS[0] in m for m in held], np.uint8) << 6
     bits |= np.array([bool(m.get("growth_ratio")) for m in held], np.uint8) << 7
-    metrics = [row.get("metrics") or {} for row in rows]
+    metrics = [m or {} for m in metrics]
     cols: dict[str, pa.Array] = {"row_keys": pa.array(bits, pa.uint8()), "names": _names(metrics)}
-    cols["complete"] = pa.array([row.get("complete") for row in rows], pa.bool_())
-    cols["run_reason"] = pa.array([row.get("run_reason") for row in rows], pa.string())
+    cols["complete"] = pa.array(complete, pa.bool_())
+    cols["run_reason"] = pa.array(reason, pa.string())
     cols["measures"] = pa.array(measures, MEASURES)
-    cols["worker"] = pa.array([row.get("worker") for row in rows], WORKER)
+    cols["worker"] = worker if isinstance(worker, pa.Array) else pa.array(worker, WORKER)
     for key, kind in NAMED.items():
         held = [(m or {}).get(key) for m in (measures if key in OF_MEASURES else metrics)]
         names = sorted(set().union(*(d for d in held if d)))
@@ -278,6 +360,58 @@ def _given(row: dict, names: dict[str, list[str]]) -> bool:
     return True
 
 
+def _given_columns(runs: BlockRuns, names: dict[str, list[str]]) -> np.ndarray:
+    """:func:`_given` of each run of ``runs``, checked a column at a time when the runs' values are of one form (the
+    usual block: every measures dict of one key set, the block's names in each), else run by run."""
+    n = len(runs.complete)
+    if n and _one_form(runs, names):
+        return np.ones(n, bool)
+    return np.array([_given(_row_of(runs, i), names) for i in range(n)], bool)
+
+
+def _one_form(runs: BlockRuns, names: dict[str, list[str]]) -> bool:
+    """Whether every run of ``runs`` is given (:func:`_given`), by checks over its columns: False may be wrong."""
+    if not set(map(type, runs.complete)) <= {bool, type(None)} or not set(map(type, runs.reason)) <= {str, type(None)}:
+        return False
+    shares = {id(w): w for w in runs.worker}.values()  # a block's runs share one
+    if not all(map(_given_worker, shares)) or set(map(type, runs.measures)) != {dict}:
+        return False
+    keys = sorted(runs.measures[0])
+    if frozenset(keys) not in _MEASURE_SETS or set(map(len, runs.measures)) != {len(keys)}:
+        return False
+    try:
+        columns = dict(zip(keys, zip(*map(itemgetter(*keys), runs.measures))))
+    except KeyError:
+        return False
+    kinds = {key: set(map(type, col)) for key, col in columns.items()}
+    if not all(kinds[k] <= {bool, type(None)} for k in ("stable", "model_warning") if k in kinds):
+        return False
+    if not kinds["unstable_reason"] <= {str, type(None)} or not all(
+        kinds[k] <= _NUMBERS for k in _FLOAT_MEASURES if k in kinds
+    ):
+        return False
+    return all(_named_given(columns[key], names[key], empty=key == "growth_ratio") for key in OF_MEASURES)
+
+
+def _named_given(held: tuple, names: list[str], *, empty: bool) -> bool:
+    """Whether each of ``held`` (a measure's dicts by name) is a dict of floats or None with keys ``names`` (or no
+    key, when ``empty``)."""
+    if set(map(type, held)) != {dict}:
+        return False
+    sizes = set(map(len, held))
+    if sizes != {len(names)} and not (empty and sizes <= {0, len(names)}):
+        return False
+    full = [d for d in held if d] if 0 in sizes else list(held)
+    if not names:
+        return not full
+    try:
+        values = list(map(itemgetter(*names), full))
+    except KeyError:
+        return False
+    values = values if len(names) > 1 else [(v,) for v in values]
+    return set(map(type, chain.from_iterable(values))) <= _NUMBERS
+
+
 def _given_worker(worker: Any) -> bool:
     """Whether a row's ``worker`` is the dict a worker records (:data:`WORKER_KEYS`, and ``block`` in a block)."""
     if type(worker) is not dict or len(worker) != (5 if "block" not in worker else 6):
@@ -309,7 +443,7 @@ def _names(metrics: list[dict]) -> pa.DictionaryArray:
     for m in metrics:
         key = (tuple(sorted(m.get("tracked", ()))), tuple(sorted(m.get("outputs_final", ()))))
         codes.append(texts.setdefault(key, len(texts)))
-    words = [_compact_json([list(t), list(o)]) for t, o in texts]
+    words = [compact_json([list(t), list(o)]) for t, o in texts]
     return pa.DictionaryArray.from_arrays(pa.array(codes, pa.int32()), pa.array(words, pa.string()))
 
 

@@ -46,7 +46,7 @@ from ..loop.scenario import DRAWN, parse_scenario
 from ..paths import cache_dir
 from ..plants.fmu import reused_instances
 from .criteria import measure, measure_block
-from .store import encode_block, with_inputs, write_block
+from .store import BlockRuns, encode_block, encode_runs, with_inputs, write_block
 
 MAX_TRACE_POINTS = 600
 MAX_BUS_SLOTS = 64
@@ -334,10 +334,18 @@ def _block_answer(
     kind: str, artifacts: dict, runs: list, blobs: dict | None, *, ids: list[str], campaign: str, folder: Any
 ) -> bytes | dict:
     """:func:`execute_block`'s answer: its block file written into ``folder`` (a few numbers) or its bytes."""
-    records = [with_inputs(r, run, kind=kind) for r, run in zip(batch_records(kind, artifacts, runs, blobs), runs)]
-    data = encode_block(ids, records, campaign=campaign)
+    from ..loop.scheduler import gc_paused
+
+    task = _task_records(kind, artifacts, runs, blobs)
+    with gc_paused():  # the lists of texts and values make no cycles
+        if task and all(type(r) is _Block for r in task):  # only blocks' runs: a column at a time, no record dict a run
+            data = encode_runs(ids, _block_runs(kind, runs, task), campaign=campaign)
+            errors: list = []
+        else:
+            records = [with_inputs(r, run, kind=kind) for r, run in zip(_materialized(task), runs)]
+            data = encode_block(ids, records, campaign=campaign)
+            errors = [[i, r.get("reason")] for i, r in enumerate(records) if r["status"] == "error"]
     if folder is not None:
-        errors = [[i, r.get("reason")] for i, r in enumerate(records) if r["status"] == "error"]
         answer = write_block(folder[0], folder[1], ids, data, errors)
         if answer is not None:
             return answer
@@ -399,14 +407,70 @@ def batch_records(
     bad run costs no other its result. An exception other than a :class:`~gainlink.errors.GainlinkError` ends the task
     (the campaign then runs each of its runs alone, so one bad run costs no other its result).
     """
-    records: list[dict | None] = [None] * len(runs)
+    return _materialized(_task_records(kind, artifacts, runs, blobs))
+
+
+def _task_records(kind: str, artifacts: dict[str, bytes], runs: list, blobs: dict | None) -> list:
+    """:func:`batch_records`' records, a run of a block given by its :class:`_Block` (its lists, not a dict)."""
+    records: list[dict | _Block | None] = [None] * len(runs)
     if kind == "sil":
         for members in _blocks(artifacts, runs, blobs or {}).values():
             _run_block(members, records, runs, blobs or {})
     for i, (sha, scenario, seed) in enumerate(runs):
         if records[i] is None:
             records[i] = execute(kind, artifacts[sha], scenario, seed, blobs)
-    return records  # type: ignore[return-value]
+    return records
+
+
+@dataclasses.dataclass(frozen=True)
+class _Block:
+    """The finished runs of a block, as lists: their positions in the task, results, measures (a run's dict, by
+    :func:`~.criteria.measure_block`), stored traces, and the block's share of the worker's time (``worker``)."""
+
+    artifact: Artifact
+    positions: list[int]
+    results: list
+    measures: list
+    traces: list
+    worker: dict
+
+    def record(self, j: int) -> dict:
+        """The record of the block's ``j``-th run, as :func:`execute` gives a run's."""
+        record = _record(self.results[j], self.artifact, measures=self.measures[j], trace=self.traces[j])
+        return record | {"worker": dict(self.worker)}
+
+
+def _materialized(task: list) -> list[dict]:
+    """A task's records (:func:`_task_records`), each block's run as its record dict."""
+    index: dict[tuple[int, int], int] = {}  # (block, position in the task): the run's index in its block
+    for block in {id(r): r for r in task if type(r) is _Block}.values():
+        index.update(((id(block), i), j) for j, i in enumerate(block.positions))
+    return [r.record(index[id(r), i]) if type(r) is _Block else r for i, r in enumerate(task)]
+
+
+def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
+    """The task's runs, every one a block's (``task``: :func:`_task_records`), as the lists of
+    :func:`~.store.encode_runs`, in task order."""
+    blocks = list({id(b): b for b in task}.values())
+    order = np.argsort(np.concatenate([b.positions for b in blocks]), kind="stable").tolist()
+    ordered = order == list(range(len(order)))
+
+    def column(of: Callable[[_Block], list]) -> list:
+        values = [v for b in blocks for v in of(b)]
+        return values if ordered else [values[k] for k in order]
+
+    results = column(lambda b: b.results)
+    return BlockRuns(
+        kind=kind,
+        inputs=runs,
+        complete=[r.complete for r in results],
+        reason=[r.reason for r in results],
+        metrics=[r.metrics for r in results],
+        measures=column(lambda b: b.measures),
+        link=[r.info["transport"] for r in results],
+        traces=column(lambda b: b.traces),
+        worker=column(lambda b: [b.worker] * len(b.positions)),
+    )
 
 
 def _blocks(artifacts: dict[str, bytes], runs: list, blobs: dict) -> dict[tuple, list]:
@@ -459,7 +523,8 @@ def _drawn_like(table: dict, parsed: Any, scenario: dict, seed: int) -> Any:
 
 
 def _run_block(members: list, records: list, runs: list, blobs: dict) -> None:
-    """Step ``members`` as one block and fill their ``records``; left empty (each runs alone) when their plants
+    """Step ``members`` as one block and fill their ``records`` with it (a :class:`_Block`: the block's lists, not a
+    dict a run); left empty (each runs alone) when their plants
     cannot step as one batch or the block fails with a GainlinkError (said once, in the log). A run whose plant
     cannot be built (a drawn number it refuses) is left out of the block and runs alone: it records its error.
 
@@ -490,6 +555,8 @@ def _run_block(members: list, records: list, runs: list, blobs: dict) -> None:
         traces = downsampled_traces([result.trace for _, result in done])
         share = _stopped(where, cpu0)
         share["cpu_s"] /= max(len(done), 1)
-        for (i, result), measured, trace in zip(done, measures, traces):
-            worker = share | {"block": len(done)}
-            records[i] = _record(result, artifact, measures=measured, trace=trace) | {"worker": worker}
+        block = _Block(
+            artifact, [i for i, _ in done], [r for _, r in done], measures, traces, share | {"block": len(done)}
+        )
+        for i in block.positions:
+            records[i] = block
