@@ -32,6 +32,8 @@ CHOOSE_L = {"name": "l", "target": "plant.parameters.l", "distribution": "choice
 INITIAL = {"name": "th0", "target": "initial_state.theta", "distribution": "uniform", "low": -0.05, "high": 0.05}
 NOISE = {"name": "nz", "target": "noise.theta", "distribution": "loguniform", "low": 1e-4, "high": 1e-3}
 FAULT = {"name": "fault", "target": "faults[0].start", "distribution": "uniform", "low": 0.1, "high": 0.3}
+NOISES = {"name": "nzs", "target": "noise", "distribution": "choice",
+          "values": [{"x": 5e-4, "theta": 5e-4}, {"x": 1e-3}]}  # fmt: skip
 GRID = [{"name": "aw", "target": "spec.limits.anti_windup", "values": ["clamp", "backcalc"]},
         {"name": "x0", "target": "initial_state.x", "values": [0.2, 0.6]}]  # fmt: skip
 
@@ -111,7 +113,7 @@ GRID_M = [{"name": "M0", "target": "plant.parameters.M", "values": [0.9, 1.1]}] 
     [
         ([SCALE_M, ADD_M, CHOOSE_L], False, GRID, True),  # the plant's drawn tables: set, scaled, shifted, chosen
         ([SCALE_M, INITIAL, NOISE], False, GRID, True),  # an initial state and a noise level drawn (a new table key)
-        ([CHOOSE_L, FAULT], True, GRID, True),  # a fault's start drawn
+        ([CHOOSE_L, FAULT, NOISES], True, GRID, True),  # a fault's start drawn, a table chosen
         ([SCALE_M, NOISE], False, GRID_M, False),  # a grid axis and a draw axis on one path: each run made whole
     ],
 )
