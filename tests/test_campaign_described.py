@@ -124,6 +124,7 @@ def test_a_campaigns_tasks_over_grid_axes_and_draws_describe_the_plans_own_runs(
     scenarios and a few bytes a run (1,000 runs: under 48 bytes a run, the seed and the numbers 8 bytes each)."""
     plan = plan_campaign(_campaign(draws, faults=faults, grid=grid))
     assert plan.runs.task(np.arange(2)).leaves is leaves
+    assert list(plan.runs.task(np.arange(0))) == []
     _check_same_runs(plan, described=True)
     big = plan_campaign(_campaign(draws, faults=faults, runs=1000, grid=grid[:1]))
     task = big.runs.task(np.arange(1000))

@@ -633,7 +633,7 @@ class _Planner:
         g, j = np.divmod(indices, c.runs)
         cuts = (np.flatnonzero(np.diff(g)) + 1).tolist()
         parts = []
-        for start, stop in zip([0, *cuts], [*cuts, len(indices)]):
+        for start, stop in zip([0, *cuts], [*cuts, len(indices)]) if len(indices) else ():
             point = int(g[start])
             values = self.values(point, 0)
             scenario = pickle.loads(self._scenario)
