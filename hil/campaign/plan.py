@@ -113,8 +113,16 @@ def set_path(tree: dict, path: str, value: Any, *, apply: str = "set", where: st
             raise CampaignError(
                 f'campaign: {where}: apply = "{apply}" needs a number at {path} in the base (found {base!r})'
             )
-        value = base * value if apply == "scale" else base + value
+        value = _leaf_value(value, apply, base)
     node[last] = value
+
+
+def _leaf_value(value: Any, apply: str, base: Any) -> Any:
+    """What :func:`set_path` leaves at a target given ``value``: the value, or ``base`` scaled or shifted by it
+    (Python's own arithmetic)."""
+    if apply == "set":
+        return value
+    return base * value if apply == "scale" else base + value
 
 
 def sample(axis: Axis, rng: np.random.Generator) -> Any:
@@ -205,9 +213,16 @@ def _design(spec: dict, *, source: str) -> bytes:
 
 def _fmu_blob(scenario: dict, campaign: Campaign, blobs: dict, cache: dict) -> None:
     """An FMU plant travels as bytes: read it here, name it by sha256 (``path = "sha256:<hex>"``)."""
+    sha = _fmu_sha(scenario, campaign, blobs, cache)
+    if sha is not None:
+        _name_fmu(scenario, sha)
+
+
+def _fmu_sha(scenario: dict, campaign: Campaign, blobs: dict, cache: dict) -> str | None:
+    """The sha256 of the scenario's FMU plant (its bytes read once into ``blobs``), None for another plant."""
     plant = scenario.get("plant")
     if not isinstance(plant, dict) or plant.get("kind") != "fmu":
-        return
+        return None
     from ..plants.fmi import resolve_fmu
 
     key = (plant.get("fmu"), plant.get("path"))
@@ -217,8 +232,14 @@ def _fmu_blob(scenario: dict, campaign: Campaign, blobs: dict, cache: dict) -> N
         sha = hashlib.sha256(data).hexdigest()
         blobs[sha] = data
         cache[key] = sha
+    return cache[key]
+
+
+def _name_fmu(scenario: dict, sha: str) -> None:
+    """The scenario's FMU plant named by its sha256 (what travels), in place of its file."""
+    plant = scenario["plant"]
     plant.pop("fmu", None)
-    plant["path"] = f"sha256:{cache[key]}"
+    plant["path"] = f"sha256:{sha}"
 
 
 def _check_scenario(campaign: Campaign, scenario: dict, where: str) -> Scenario:
@@ -272,9 +293,25 @@ class PlannedRuns(Sequence):
         return self._planner.failed
 
     def inputs(self, indices: np.ndarray) -> list[tuple[str | None, dict, int]]:
-        """The runs at plan indices ``indices`` as their tasks carry them: ``(artifact sha256, scenario, seed)``, each
-        what ``runs[k]`` holds, made without the id (:attr:`ids` holds it)."""
+        """The runs at plan indices ``indices`` enumerated: ``(artifact sha256, scenario, seed)``, each what ``runs[k]``
+        holds, made without the id (:attr:`ids` holds it)."""
         return [self._planner.inputs(k) for k in np.asarray(indices).tolist()]
+
+    def task(self, indices: np.ndarray) -> DescribedRuns | list[tuple[str | None, dict, int]]:
+        """The runs at plan indices ``indices`` (in plan order) as their task carries them: described
+        (:class:`DescribedRuns`: each grid point's scenario once, each run's draw-table row and seed) when the plan can
+        describe its runs so (:attr:`describable`), else enumerated (:meth:`inputs`). Either gives, run for run, the
+        ``(artifact sha256, scenario, seed)`` that ``runs[k]`` holds."""
+        if self.describable:
+            return self._planner.described(np.asarray(indices, np.int64))
+        return self.inputs(indices)
+
+    @property
+    def describable(self) -> bool:
+        """Whether a task carries these runs described (:meth:`task`): each grid point's runs share one artifact and
+        one FMU, so a run is its grid point's scenario with its draws. Not with a ``spec.*`` draw axis (each run its
+        own design) or a draw axis that sets the plant table or its FMU (each run its own FMU)."""
+        return self._planner.describable
 
     def heads(self) -> Iterator[RunHead]:
         """The runs in plan order, what a report row names of each (:class:`RunHead`), without making a scenario."""
@@ -396,6 +433,149 @@ def run_heads(plan: CampaignPlan) -> Iterable[RunHead | RunPoint]:
     return plan.runs.heads() if isinstance(plan.runs, PlannedRuns) else plan.runs
 
 
+@dataclass(frozen=True)
+class GridPart:
+    """Runs ``start:stop`` of a :class:`DescribedRuns`, all of one grid point: its scenario (the campaign's with the
+    grid axes applied, pickled), its artifact's sha256 and its FMU's (None when its plant is not an FMU)."""
+
+    start: int
+    stop: int
+    sha: str | None
+    scenario: bytes
+    fmu: str | None
+
+
+@dataclass(frozen=True, eq=False)
+class DescribedRuns(Sequence):
+    """A task's runs described, not enumerated (:meth:`PlannedRuns.task`): each grid point's scenario once
+    (:class:`GridPart`) and, per run, its draw's row of the draw table (``drawn``: each draw axis's number, a choice
+    axis's index) and its seed, a few bytes a run. ``runs[i]`` makes run ``i`` as the plan's ``runs[k]`` holds it,
+    ``(artifact sha256, scenario, seed)``: its grid point's scenario with its draws applied (:meth:`apply_draws`, the
+    plan's own :func:`_apply_axis` in the campaign's order, after the grid axes as :meth:`_Planner._made` applies
+    them) and an FMU named by its sha256 after them, as :func:`_fmu_blob` names it."""
+
+    axes: tuple[Axis, ...]  # the campaign's draw axes
+    window: tuple[float, float]  # the campaign's fault window (a faults.* axis's)
+    parts: tuple[GridPart, ...]
+    seeds: np.ndarray
+    drawn: tuple[np.ndarray, ...]  # per draw axis, each run's number
+    leaves: bool = False  # each draw axis sets, scales or shifts a scenario value no other axis's target holds
+
+    def __len__(self) -> int:
+        return len(self.seeds)
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, slice):
+            return [self[k] for k in range(*i.indices(len(self)))]
+        k = i + len(self) if i < 0 else i
+        part = next((p for p in self.parts if p.start <= k < p.stop), None)
+        if part is None:
+            raise IndexError(i)
+        return self.made(part, k)
+
+    def __iter__(self) -> Iterator[tuple[str | None, dict, int]]:
+        for part in self.parts:
+            yield from self.part_runs(part)
+
+    def part_runs(self, part: GridPart) -> Iterator[tuple[str | None, dict, int]]:
+        """The runs of ``part`` in order, as :meth:`made` makes them: where each draw axis sets, scales or shifts a
+        scenario value no other axis's target holds (:attr:`leaves`, the id template's condition), its scenario with
+        the targets in place (:meth:`_slots`) and each run's values put there, what :meth:`made` leaves there; the
+        tables and lists on the targets' paths are each run's own, the rest of the scenario is shared by the part's
+        runs (read, never changed: a run's table is parsed from a JSON copy and stored as JSON); else each run made."""
+        slots = self._slots(part) if self.leaves else None
+        if slots is None:
+            for i in range(part.start, part.stop):
+                yield self.made(part, i)
+            return
+        base, paths, leaves = slots
+        if part.fmu is not None:  # named after the draws in the run's own plant table
+            paths = sorted(dict.fromkeys([("plant",), *paths]), key=len)
+        copies = [(path, path[:-1], path[-1]) for path in paths]
+        puts = [(steps[:-1], steps[-1], column) for steps, column in leaves]
+        for i, seed in enumerate(self.seeds[part.start : part.stop].tolist()):
+            own = {(): dict(base)}
+            for path, up, key in copies:  # each container on a target's path copied once, its parent's before it
+                node = own[up][key]
+                own[path] = own[up][key] = list(node) if isinstance(node, list) else dict(node)
+            for up, key, column in puts:
+                value = column[i]
+                own[up][key] = value if isinstance(value, (int, float, str)) else copy.deepcopy(value)
+            scenario = own[()]
+            if part.fmu is not None:
+                _name_fmu(scenario, part.fmu)
+            yield part.sha, scenario, seed
+
+    def _slots(self, part: GridPart) -> tuple[dict, list[tuple], list[tuple[tuple, list]]] | None:
+        """``part``'s scenario with every draw target in place (its tables made and its key set, in the order
+        :meth:`apply_draws` makes them), the paths of the containers on the targets' paths (each after its parent's)
+        and, per target, its path and each run's value there (:func:`_leaf_value`: the drawn value, or the scenario's
+        number scaled or shifted by it); None where a value is not one to put so (a scale or shift of a non-number, a
+        path the scenario refuses: :meth:`made` says why)."""
+        scenario, leaves = pickle.loads(part.scenario), []
+        try:
+            for axis, col in zip(self.axes, self.drawn):
+                values = [_drawn_value(axis, x) for x in col[part.start : part.stop].tolist()]
+                for target in axis.targets:
+                    base = value_at(scenario, target)
+                    if axis.apply != "set" and not (_is_number(base) and all(_is_number(v) for v in values)):
+                        return None
+                    set_path(scenario, target, None)
+                    leaves.append((path_steps(target), [_leaf_value(v, axis.apply, base) for v in values]))
+        except CampaignError:
+            return None
+        paths = list(dict.fromkeys(steps[:k] for steps, _ in leaves for k in range(1, len(steps))))
+        return scenario, sorted(paths, key=len), leaves
+
+    def made(self, part: GridPart, i: int) -> tuple[str | None, dict, int]:
+        """Run ``i`` (of ``part``): its artifact sha256, its scenario and its seed."""
+        scenario = pickle.loads(part.scenario)
+        self.apply_draws(i, scenario)
+        if part.fmu is not None:
+            _name_fmu(scenario, part.fmu)
+        return part.sha, scenario, int(self.seeds[i])
+
+    def made_runs(self) -> MadeRuns:
+        """Every run made (:meth:`part_runs`), once, with this description (what a worker steps and records)."""
+        return MadeRuns(itertools.chain.from_iterable(map(self.part_runs, self.parts)), self)
+
+    def apply_draws(self, i: int, tree: dict) -> None:
+        """Run ``i``'s drawn values set, scaled or shifted at their targets in ``tree`` (its grid point's scenario, or
+        the part of it the targets lie in), in place."""
+        for axis, col in zip(self.axes, self.drawn):
+            _apply_axis(axis, _drawn_value(axis, col[i]), spec=None, scenario=tree, window=self.window)
+
+    def uses(self) -> tuple[set[str], set[str]]:
+        """The artifacts and the FMUs (each by sha256) the runs use."""
+        return {p.sha for p in self.parts if p.sha}, {p.fmu for p in self.parts if p.fmu}
+
+
+class MadeRuns(list):
+    """A described task's runs made, each ``(artifact sha256, scenario, seed)`` (:meth:`DescribedRuns.made_runs`),
+    with the description they were made from (``described``: their grid points and draw axes)."""
+
+    def __init__(self, runs: Iterable, described: DescribedRuns) -> None:
+        super().__init__(runs)
+        self.described = described
+
+
+def task_uses(runs: DescribedRuns | Sequence[tuple[str | None, dict, int]]) -> tuple[set[str], set[str]]:
+    """The artifacts and the FMUs (each by sha256) a task's runs (:meth:`PlannedRuns.task`) use."""
+    if isinstance(runs, DescribedRuns):
+        return runs.uses()
+    fmus = set()
+    for _, scenario, _ in runs:
+        path = str((scenario.get("plant") or {}).get("path", ""))
+        if path.startswith("sha256:"):
+            fmus.add(path.removeprefix("sha256:"))
+    return {sha for sha, _, _ in runs if sha}, fmus
+
+
+def _drawn_value(axis: Axis, x: Any) -> Any:
+    """A draw axis's value from its number in the draw table (a float, or a choice's value at the index)."""
+    return axis.params["values"][int(x)] if axis.distribution == "choice" else float(x)
+
+
 class _Where:
     """A run's name in a refusal (``run 12 (M_factor=1.1, ...)``), made only when a refusal prints it."""
 
@@ -434,9 +614,37 @@ class _Planner:
         c = self.campaign
         out = {a.name: v for a, v in zip(c.grid, self.points[g])}
         for a in c.draws:
-            x = self.drawn[a.name][j]
-            out[a.name] = a.params["values"][int(x)] if a.distribution == "choice" else float(x)
+            out[a.name] = _drawn_value(a, self.drawn[a.name][j])
         return out
+
+    @property
+    def describable(self) -> bool:
+        """See :attr:`PlannedRuns.describable`."""
+        files = [path_steps(f) for f in _PLANT_FILE]
+        targets = [path_steps(t) for a in self.campaign.draws for t in a.targets]
+        return not self.spec_per_run and not any(f[: len(t)] == t for t in targets for f in files)
+
+    def described(self, indices: np.ndarray) -> DescribedRuns:
+        """The runs at plan indices ``indices`` (in plan order, none whose design failed) as a
+        :class:`DescribedRuns`: a :class:`GridPart` for each stretch of one grid point's runs (its scenario with the
+        grid axes applied, as :meth:`_made` applies them first, its artifact and its FMU), the draw table's rows and
+        seeds of the runs' draws."""
+        c = self.campaign
+        g, j = np.divmod(indices, c.runs)
+        cuts = (np.flatnonzero(np.diff(g)) + 1).tolist()
+        parts = []
+        for start, stop in zip([0, *cuts], [*cuts, len(indices)]) if len(indices) else ():
+            point = int(g[start])
+            values = self.values(point, 0)
+            scenario = pickle.loads(self._scenario)
+            for axis in c.grid:
+                _apply_axis(axis, values[axis.name], spec=None, scenario=scenario, window=c.fault_window)
+            got = self._design(point, values, None, _Where(point * c.runs, values))
+            fmu = _fmu_sha(scenario, c, self.blobs, self.fmu_cache)
+            scenario_bytes = pickle.dumps(scenario, protocol=pickle.HIGHEST_PROTOCOL)
+            parts.append(GridPart(start, stop, got[1] if isinstance(got, tuple) else None, scenario_bytes, fmu))
+        drawn = tuple(self.drawn[a.name][j] for a in c.draws)
+        return DescribedRuns(tuple(c.draws), c.fault_window, tuple(parts), self.seeds[j], drawn, leaves=_templated(c))
 
     def point(self, k: int, *, dry: DryBuild | None = None) -> RunPoint:
         """Run ``k``; with ``dry``, its scenario parsed and its plant dry-built (:class:`.preflight.DryBuild`)."""
@@ -635,7 +843,7 @@ def _leaf_json(value: Any, apply: str, base: Any) -> str | None:
     if apply != "set":
         if not _is_number(value):
             return None
-        value = base * value if apply == "scale" else base + value
+        value = _leaf_value(value, apply, base)
     if isinstance(value, float):
         return repr(value) if math.isfinite(value) else None
     try:

@@ -2,9 +2,10 @@
 
 FMUs go to the cluster once each (as tasks returning them, keyed by sha256); a task is
 ``execute_block(kind, artifacts, runs, fmus, ids=..., campaign=..., folder=...)`` (submitted as
-:func:`.worker.execute_packed`, the ids and runs pickled into one argument): a list of runs with the artifacts they use,
-inline (SIL: a block of up to :data:`MAX_BLOCK` runs of one artifact stepped together on the worker,
-:func:`batch_sizes`; HIL: one run, keyed by its run id). A task makes its block's Parquet file on the worker and
+:func:`.worker.execute_packed`, the ids and runs pickled into one argument): its runs (described by their grid points'
+scenarios and their draws where the plan can, :meth:`.plan.PlannedRuns.task`) with the artifacts they use, inline
+(SIL: a block of up to :data:`MAX_BLOCK` runs of one artifact stepped together on the worker, :func:`batch_sizes`;
+HIL: one run, keyed by its run id). A task makes its block's Parquet file on the worker and
 writes it into the campaign folder itself when it sees the folder (a LocalCluster; the folder's device and inode
 tell, not the hostname), returning only the file's name and the errors' reasons; a worker on another machine returns
 the file's bytes for the client to write. Results come back through ``as_completed`` and each block is noted as it
@@ -31,7 +32,7 @@ from gainlink.version import __version__
 
 from .cluster import check_main_guard, dask_client
 from .config import Campaign, CampaignError, load_campaign, parse_campaign
-from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign
+from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign, task_uses
 from .report import merge
 from .store import Store, folder_key, refuse_foreign
 from .worker import execute_packed
@@ -320,13 +321,12 @@ class _Submitter:
 
     def submit(self, block: np.ndarray) -> Any:
         """One task running the runs of plan indices ``block`` in order (retried once by Dask when it raises). The
-        runs' inputs are made here (without their ids: the plan holds them) and dropped once pickled into the task."""
-        ids, runs = self.ids(block), self.plan.runs.inputs(block)
-        shas = {sha for sha, _, _ in runs}
-        needed = {}
-        if self.blobs:
-            paths = " ".join(str(scenario.get("plant", {}).get("path", "")) for _, scenario, _ in runs)
-            needed = {s: f for s, f in self.blobs.items() if s in paths}
+        runs travel as the plan's task gives them (:meth:`.plan.PlannedRuns.task`: described, each grid point's
+        scenario once and each run's draws and seed as numbers, or else each run's inputs made here), without their
+        ids' making (the plan holds them), and are dropped once pickled into the task."""
+        ids, runs = self.ids(block), self.plan.runs.task(block)
+        shas, fmus = task_uses(runs)
+        needed = {s: f for s, f in self.blobs.items() if s in fmus}
         key = f"gainlink-run-{ids[0]}" if len(ids) == 1 else f"gainlink-batch-{ids[0]}-{len(ids)}"
         return self.client.submit(
             execute_packed,

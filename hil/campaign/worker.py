@@ -22,7 +22,6 @@ error. Anything else propagates, so Dask retries the run (on another worker when
 from __future__ import annotations
 
 import contextlib
-import copy
 import ctypes
 import dataclasses
 import fcntl
@@ -33,7 +32,7 @@ import pickle
 import socket
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +44,9 @@ from gainlink.shipping.artifact import Artifact, from_dict
 from ..loop.scenario import DRAWN, parse_scenario
 from ..paths import cache_dir
 from ..plants.fmu import reused_instances
+from .config import path_steps
 from .criteria import measure, measure_block
+from .plan import DescribedRuns, MadeRuns
 from .store import BlockRuns, encode_block, encode_runs, with_inputs, write_block
 
 MAX_TRACE_POINTS = 600
@@ -309,7 +310,7 @@ def _stopped(where: dict, cpu0: float) -> dict:
 def execute_block(
     kind: str,
     artifacts: dict[str, bytes],
-    runs: list[tuple[str, dict, int]],
+    runs: Sequence,
     blobs: dict | None = None,
     *,
     ids: list[str],
@@ -377,16 +378,17 @@ def execute_packed(
     campaign: str,
     folder: tuple[str, tuple[int, int]] | None = None,
 ) -> bytes | dict:
-    """:func:`execute_block` as the campaign submits it: ``packed`` is ``pickle.dumps((ids, runs))``. One bytes
+    """:func:`execute_block` as the campaign submits it: ``packed`` is ``pickle.dumps((ids, runs))``, ``runs`` as
+    :meth:`.plan.PlannedRuns.task` gives them (described, or a list of each run's inputs). One bytes
     argument is what Dask's graph code walks past: a list of runs' scenarios as an argument is walked element by
     element on the client for dependencies (measured: 11,000 calls a block of 500 pendulum runs)."""
     ids, runs = pickle.loads(packed)
+    if isinstance(runs, DescribedRuns):  # made once: grouped, run and recorded from the same runs
+        runs = runs.made_runs()
     return execute_block(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder)
 
 
-def batch_records(
-    kind: str, artifacts: dict[str, bytes], runs: list[tuple[str, dict, int]], blobs: dict | None = None
-) -> list[dict]:
+def batch_records(kind: str, artifacts: dict[str, bytes], runs: Sequence, blobs: dict | None = None) -> list[dict]:
     """A task's campaign runs, their records in order.
 
     Parameters
@@ -394,8 +396,9 @@ def batch_records(
     kind : {"sil", "hil"}
     artifacts : dict
         The artifacts' canonical JSON by sha256 (each once, however many runs use it).
-    runs : list of (artifact sha256, scenario, seed)
-        As in :func:`execute`.
+    runs : sequence of (artifact sha256, scenario, seed)
+        As in :func:`execute`: a list, or a :class:`~.plan.DescribedRuns` (a task's runs described by their grid
+        points and draws; ``runs[i]`` makes run ``i``'s).
     blobs : dict, optional
         FMU archives by sha256.
 
@@ -407,17 +410,20 @@ def batch_records(
     bad run costs no other its result. An exception other than a :class:`~gainlink.errors.GainlinkError` ends the task
     (the campaign then runs each of its runs alone, so one bad run costs no other its result).
     """
+    if isinstance(runs, DescribedRuns):
+        runs = runs.made_runs()
     return _materialized(_task_records(kind, artifacts, runs, blobs))
 
 
-def _task_records(kind: str, artifacts: dict[str, bytes], runs: list, blobs: dict | None) -> list:
+def _task_records(kind: str, artifacts: dict[str, bytes], runs: Sequence, blobs: dict | None) -> list:
     """:func:`batch_records`' records, a run of a block given by its :class:`_Block` (its lists, not a dict)."""
     records: list[dict | _Block | None] = [None] * len(runs)
     if kind == "sil":
         for members in _blocks(artifacts, runs, blobs or {}).values():
             _run_block(members, records, runs, blobs or {})
-    for i, (sha, scenario, seed) in enumerate(runs):
-        if records[i] is None:
+    for i, record in enumerate(records):
+        if record is None:
+            sha, scenario, seed = runs[i]
             records[i] = execute(kind, artifacts[sha], scenario, seed, blobs)
     return records
 
@@ -473,34 +479,84 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
     )
 
 
-def _blocks(artifacts: dict[str, bytes], runs: list, blobs: dict) -> dict[tuple, list]:
+def _blocks(artifacts: dict[str, bytes], runs: Sequence, blobs: dict) -> dict[tuple, list]:
     """The SIL runs that can step together, by (artifact, controller, steps, the plant but its drawn numbers):
-    ``(index, artifact, scenario)``; a run whose inputs are wrong is left out (it runs alone and records its
-    error). A run whose table differs from the last one parsed of its artifact only in its seed and its plant's
-    drawn numbers (:data:`DRAWN`) is that scenario with its own (:func:`_drawn_like`): parsed once per block,
-    not once per run."""
-    from ..loop.block import refusal
-
+    ``(index, artifact, scenario)``; a run whose inputs are wrong is left out (it runs alone and records its error).
+    Runs made from their description (:class:`~.plan.MadeRuns`) go by their grid points (:func:`_described_blocks`);
+    runs enumerated are each compared with the last one parsed of its artifact: one that differs from it only in its
+    seed and its plant's drawn numbers (:data:`DRAWN`) is that scenario with its own (:func:`_drawn_like`), parsed
+    once per block, not once per run."""
+    if isinstance(runs, MadeRuns):
+        return _described_blocks(artifacts, runs, blobs)
     groups: dict[tuple, list] = {}
-    parsed: dict[str, tuple] = {}  # per artifact: (artifact, its file, the last table parsed, its scenario, key)
+    parsed: dict[str, tuple] = {}  # per artifact: (the last table parsed, its parse: artifact, scenario, key)
+    files: dict[str, tuple] = {}
     for i, (sha, scenario, seed) in enumerate(runs):
         last = parsed.get(sha)
-        sc = _drawn_like(last[2], last[3], scenario, seed) if last is not None else None
+        sc = _drawn_like(last[0], last[1][1], scenario, seed) if last is not None else None
         if sc is None:
-            try:
-                artifact, path = last[:2] if last is not None else artifact_from_bytes(artifacts[sha])
-                sc = _scenario(scenario, artifact_path=path, seed=seed, blobs=blobs, kind="sil")
-            except GainlinkError:
+            made = _parsed(artifacts, files, sha, scenario, seed, blobs, i)
+            if made is None:
                 continue
-            why = refusal(sc)
-            if why is not None:
-                log.info("campaign run %d of this task runs alone: %s", i, why)
-                continue
-            shape = json.dumps({k: v for k, v in sc.plant.items() if k not in DRAWN}, sort_keys=True, default=str)
-            key = (sha, sc.controller, round(sc.duration / artifact.Ts), shape)
-            last = parsed[sha] = (artifact, path, scenario, sc, key)
-        groups.setdefault(last[4], []).append((i, last[0], sc))
+            last = parsed[sha] = (scenario, made)
+            sc = made[1]
+        groups.setdefault(last[1][2], []).append((i, last[1][0], sc))
     return groups
+
+
+def _described_blocks(artifacts: dict[str, bytes], runs: MadeRuns, blobs: dict) -> dict[tuple, list]:
+    """:func:`_blocks` of runs made from their description: by grid point, the first run that steps in a block parsed
+    and, when every draw axis sets a number of the plant's drawn tables (:func:`_drawn_only`), each other run that
+    scenario with its own seed and drawn tables (:func:`_with_drawn`), compared with nothing; else each run parsed."""
+    groups: dict[tuple, list] = {}
+    files: dict[str, tuple] = {}
+    drawn_only = _drawn_only(runs.described.axes)
+    for part in runs.described.parts:
+        first = None
+        for i in range(part.start, part.stop):
+            sha, scenario, seed = runs[i]
+            plant = scenario.get("plant")
+            drawn = {k: plant[k] for k in DRAWN if k in plant} if isinstance(plant, dict) else None
+            sc = _with_drawn(first[1], seed, drawn) if first is not None and drawn is not None else None
+            if sc is not None:
+                artifact, key = first[0], first[2]
+            else:
+                made = _parsed(artifacts, files, sha, scenario, seed, blobs, i)
+                if made is None:
+                    continue
+                artifact, sc, key = made
+                first = made if drawn_only else None
+            groups.setdefault(key, []).append((i, artifact, sc))
+    return groups
+
+
+def _parsed(
+    artifacts: dict[str, bytes], files: dict, sha: str, scenario: dict, seed: int, blobs: dict, i: int
+) -> tuple | None:
+    """Run ``i`` parsed for a block: its artifact, its scenario and its block's key; None when its inputs are wrong
+    or it cannot step in a block (it runs alone, said in the log). ``files`` keeps each artifact parsed once."""
+    from ..loop.block import refusal
+
+    try:
+        if sha not in files:
+            files[sha] = artifact_from_bytes(artifacts[sha])
+        artifact, path = files[sha]
+        sc = _scenario(scenario, artifact_path=path, seed=seed, blobs=blobs, kind="sil")
+    except GainlinkError:
+        return None
+    why = refusal(sc)
+    if why is not None:
+        log.info("campaign run %d of this task runs alone: %s", i, why)
+        return None
+    shape = json.dumps({k: v for k, v in sc.plant.items() if k not in DRAWN}, sort_keys=True, default=str)
+    return artifact, sc, (sha, sc.controller, round(sc.duration / artifact.Ts), shape)
+
+
+def _drawn_only(axes: tuple) -> bool:
+    """Whether every draw axis sets, scales or shifts a value of the plant's drawn tables (:data:`DRAWN`:
+    ``plant.parameters.M``), so that runs of one grid point differ only there and in their seeds."""
+    steps = [path_steps(t) for a in axes for t in a.targets]
+    return all(len(s) == 3 and s[0] == "plant" and s[1] in DRAWN and isinstance(s[2], str) for s in steps)
 
 
 def _drawn_like(table: dict, parsed: Any, scenario: dict, seed: int) -> Any:
@@ -514,12 +570,22 @@ def _drawn_like(table: dict, parsed: Any, scenario: dict, seed: int) -> Any:
         return None
     if any(plant[k] != base[k] for k in plant if k not in DRAWN):
         return None
-    drawn = {k: plant[k] for k in DRAWN if k in plant}
-    if not all(isinstance(t, dict) and all(type(v) in (int, float) for v in t.values()) for t in drawn.values()):
-        return None  # only tables of numbers are copied as _scenario's JSON copy makes them
-    like = copy.copy(parsed)  # dataclasses.replace re-runs the 28 fields' __init__: 30-70 us a run here
-    like.__dict__.update(seed=int(seed), plant=parsed.plant | {k: dict(t) for k, t in drawn.items()})
+    return _with_drawn(parsed, seed, {k: plant[k] for k in DRAWN if k in plant})
+
+
+def _with_drawn(parsed: Any, seed: int, drawn: dict) -> Any:
+    """``parsed`` (a scenario) with ``seed`` and the plant's drawn tables ``drawn`` (:data:`DRAWN`); None when a
+    table is not one of numbers (only those are copied as :func:`_scenario`'s JSON copy makes them)."""
+    if not all(isinstance(t, dict) and _NUMBERS.issuperset(map(type, t.values())) for t in drawn.values()):
+        return None
+    # copy.copy's own steps (a new instance, the fields' dict copied) without its __reduce_ex__ round (~3 us a run);
+    # dataclasses.replace re-runs the 28 fields' __init__: 30-70 us a run here
+    like = object.__new__(type(parsed))
+    like.__dict__.update(parsed.__dict__, seed=int(seed), plant=parsed.plant | {k: dict(t) for k, t in drawn.items()})
     return like
+
+
+_NUMBERS = frozenset((int, float))  # the types of a drawn table's values (not bool, not numpy's)
 
 
 def _run_block(members: list, records: list, runs: list, blobs: dict) -> None:
