@@ -629,13 +629,16 @@ def _traces(a, rng: np.random.Generator, lengths: list[int]) -> list:
         twin_z = rng.normal(0.0, 0.5, (n, a.q)) if twin else np.full((n, a.q), np.nan)
         if i % 11 == 2 and n:
             twin_z[0, :] = np.inf
+        twin_y = y + rng.normal(0.0, 1e-3, y.shape) if twin else np.full(y.shape, np.nan)
+        twin_u = u + rng.normal(0.0, 1e-3, u.shape) if twin else np.full(u.shape, np.nan)
+        if i % 9 in (4, 6) and n:  # a NaN command or sample its finite twin does not share: a NaN relative figure,
+            hit = u if i % 9 == 4 else y  # first or later in its row
+            hit[rng.integers(0, n), (i // 9) % hit.shape[1]] = np.nan
         traces.append(RunTrace(
             t=t, y=y, r=r, s=np.zeros((n, 0)), u=u, sat=sat, got=rng.random(n) < 0.95,
             latency_ns=np.full(n, 1e3), tick_ns=t * 1e9, deadline_ns=np.full(n, np.nan), x=np.full((n, 2), np.nan),
             flags=np.where(rng.random(n) < 0.1, 1, 0), sigma=np.full(n, np.nan), nan_sent=np.zeros(n, dtype=bool),
-            twin_y=y + rng.normal(0.0, 1e-3, y.shape) if twin else np.full(y.shape, np.nan),
-            twin_u=u + rng.normal(0.0, 1e-3, u.shape) if twin else np.full(u.shape, np.nan),
-            twin_z=twin_z,
+            twin_y=twin_y, twin_u=twin_u, twin_z=twin_z,
         ))  # fmt: skip
     return traces
 
