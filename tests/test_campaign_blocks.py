@@ -1073,3 +1073,18 @@ def test_the_block_says_where_its_loop_ran(tmp_path, monkeypatch):
     for got, want in zip(block, in_c):
         for name in TRACE_FIELDS:
             assert np.array_equal(getattr(got.trace, name), getattr(want.trace, name), equal_nan=True), name
+
+
+@pytest.mark.parametrize("m", [1, 2, 3])
+def test_the_saturation_bits_unpack_to_each_inputs_flag(m):
+    """plan.saturated (a block's bits unpacked once, a run alone's per trace) against each bit read by hand, for a
+    block's (runs, steps) bits, a run's (steps,) and no steps."""
+    from gainlink.hil.loop.plan import saturated
+
+    rng = np.random.default_rng(m)
+    bits = rng.integers(0, 1 << m, (7, 40)).astype(np.int64)
+    for b in (bits, bits[3], bits[:, :0]):
+        want = np.array([[(int(x) >> j) & 1 == 1 for j in range(m)] for x in b.reshape(-1)], dtype=bool)
+        got = saturated(b, m)
+        assert got.dtype == bool and got.shape == (*b.shape, m)
+        assert np.array_equal(got.reshape(-1, m), want.reshape(-1, m))
