@@ -1088,3 +1088,49 @@ def test_the_saturation_bits_unpack_to_each_inputs_flag(m):
         got = saturated(b, m)
         assert got.dtype == bool and got.shape == (*b.shape, m)
         assert np.array_equal(got.reshape(-1, m), want.reshape(-1, m))
+
+
+def test_a_block_of_more_runs_than_are_reduced_at_once_gives_each_what_it_gets_alone(monkeypatch):
+    """A block of 41 of the campaign's draws, its metrics and measures reduced 16 runs at a time (RUNS_AT_ONCE made
+    small: three parts), with runs without a twin, one with the model twin, one whose noise is all NaN and two whose
+    plants blow up mid-run (a shorter length, in other parts): each run's trace, every metric but the timing, its
+    measures and its stored trace equal what it gives alone (run_scenario, measure, downsampled_trace: the per-run
+    path)."""
+    from gainlink.hil.campaign.criteria import measure, measure_block
+    from gainlink.hil.campaign.worker import _library, downsampled_trace, downsampled_traces
+    from gainlink.hil.loop import block_metrics
+    from gainlink.hil.loop.block import run_block
+    from gainlink.hil.loop.bridge import run_scenario
+    from gainlink.hil.loop.scenario import Disturbance
+
+    monkeypatch.setattr(block_metrics, "RUNS_AT_ONCE", 16)
+    count = 41
+    art, scenarios = _pendulum_campaign_points(draws=count, duration=0.2)[0]
+    push = (Disturbance(input="F", start=0.1, stop=0.2, value=1e300),)
+    scs = []
+    for i, sc in enumerate(scenarios):
+        change: dict = {"twin": i % 5 != 2, "model_twin": i == 9}
+        if i == 3:
+            change["noise"] = dict(sc.noise) | {name: float("nan") for name in sc.noise}
+        if i in (7, count - 3):
+            change["disturbances"] = push
+        scs.append(dataclasses.replace(sc, **change))
+    library = _library(art)
+    block = run_block(scs, artifact=art, library=library)
+    assert block is not None and len(block) == count
+    alone = [run_scenario(sc, artifact=art, library=library) for sc in scs]
+    assert [i for i, r in enumerate(alone) if not r.complete] == [7, count - 3]
+    assert not np.isfinite(alone[3].trace.y).all() and alone[3].trace.y.shape == alone[0].trace.y.shape
+    for got, want, got_m in zip(block, alone, measure_block(block, art)):
+        for name in TRACE_FIELDS + ("model_y", "model_u"):
+            a, b = getattr(got.trace, name), getattr(want.trace, name)
+            assert (a is None and b is None) or np.array_equal(a, b, equal_nan=True), name
+        assert {k: v for k, v in got.metrics.items() if k not in TIMING_KEYS} == {
+            k: v for k, v in want.metrics.items() if k not in TIMING_KEYS
+        }
+        assert (got.complete, got.reason) == (want.complete, want.reason)
+        assert got_m == measure(want, art)
+    stepped = [i for i, r in enumerate(block) if r.trace.t.size]
+    for i, stored in zip(stepped, downsampled_traces([block[i].trace for i in stepped])):
+        want = downsampled_trace(alone[i].trace)
+        assert all(np.array_equal(stored[k], want[k], equal_nan=True) for k in "tyur")
