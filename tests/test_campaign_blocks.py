@@ -629,27 +629,31 @@ def _traces(a, rng: np.random.Generator, lengths: list[int]) -> list:
         twin_z = rng.normal(0.0, 0.5, (n, a.q)) if twin else np.full((n, a.q), np.nan)
         if i % 11 == 2 and n:
             twin_z[0, :] = np.inf
+        twin_y = y + rng.normal(0.0, 1e-3, y.shape) if twin else np.full(y.shape, np.nan)
+        twin_u = u + rng.normal(0.0, 1e-3, u.shape) if twin else np.full(u.shape, np.nan)
+        if i % 9 in (4, 6) and n:  # a NaN command or sample its finite twin does not share: a NaN relative figure,
+            hit = u if i % 9 == 4 else y  # first or later in its row
+            hit[rng.integers(0, n), (i // 9) % hit.shape[1]] = np.nan
         traces.append(RunTrace(
             t=t, y=y, r=r, s=np.zeros((n, 0)), u=u, sat=sat, got=rng.random(n) < 0.95,
             latency_ns=np.full(n, 1e3), tick_ns=t * 1e9, deadline_ns=np.full(n, np.nan), x=np.full((n, 2), np.nan),
             flags=np.where(rng.random(n) < 0.1, 1, 0), sigma=np.full(n, np.nan), nan_sent=np.zeros(n, dtype=bool),
-            twin_y=y + rng.normal(0.0, 1e-3, y.shape) if twin else np.full(y.shape, np.nan),
-            twin_u=u + rng.normal(0.0, 1e-3, u.shape) if twin else np.full(u.shape, np.nan),
-            twin_z=twin_z,
+            twin_y=twin_y, twin_u=twin_u, twin_z=twin_z,
         ))  # fmt: skip
     return traces
 
 
 @pytest.mark.parametrize("design", ["pendulum", "regulator", "two_references"])
 def test_a_blocks_metrics_as_columns_are_each_runs_own_compute_metrics(design):
-    """block_metrics over 60 runs of mixed lengths and cases equals compute_metrics of each run (the per-run
-    function, the oracle), every figure exactly: no figure needed a tolerance."""
-    from gainlink.hil.loop.block_metrics import block_metrics
+    """block_metrics over 197 runs of mixed lengths and cases (137 of one length: reduced in two parts) equals
+    compute_metrics of each run (the per-run function, the oracle), every figure exactly: no figure needed a
+    tolerance."""
+    from gainlink.hil.loop.block_metrics import RUNS_AT_ONCE, block_metrics
     from gainlink.hil.loop.metrics import compute_metrics
 
     a = _design(design)
     rng = np.random.default_rng(21)
-    lengths = [50] * 40 + [37] * 15 + [0, 1, 1, 2, 2]
+    lengths = [50] * 40 + [37] * 15 + [0, 1, 1, 2, 2] + [20] * (RUNS_AT_ONCE + 9)  # the last: more than one part
     traces = _traces(a, rng, lengths)
     timed = [{"latency_us": {"p50": 1.0}, "period_jitter_us": {"p50": None}}] * len(traces)
     got = block_metrics(traces, artifact=a, mode="sil", late=0, period_s=[a.Ts] * len(traces),
@@ -1069,3 +1073,64 @@ def test_the_block_says_where_its_loop_ran(tmp_path, monkeypatch):
     for got, want in zip(block, in_c):
         for name in TRACE_FIELDS:
             assert np.array_equal(getattr(got.trace, name), getattr(want.trace, name), equal_nan=True), name
+
+
+@pytest.mark.parametrize("m", [1, 2, 3])
+def test_the_saturation_bits_unpack_to_each_inputs_flag(m):
+    """plan.saturated (a block's bits unpacked once, a run alone's per trace) against each bit read by hand, for a
+    block's (runs, steps) bits, a run's (steps,) and no steps."""
+    from gainlink.hil.loop.plan import saturated
+
+    rng = np.random.default_rng(m)
+    bits = rng.integers(0, 1 << m, (7, 40)).astype(np.int64)
+    for b in (bits, bits[3], bits[:, :0]):
+        want = np.array([[(int(x) >> j) & 1 == 1 for j in range(m)] for x in b.reshape(-1)], dtype=bool)
+        got = saturated(b, m)
+        assert got.dtype == bool and got.shape == (*b.shape, m)
+        assert np.array_equal(got.reshape(-1, m), want.reshape(-1, m))
+
+
+def test_a_block_of_more_runs_than_are_reduced_at_once_gives_each_what_it_gets_alone(monkeypatch):
+    """A block of 41 of the campaign's draws, its metrics and measures reduced 16 runs at a time (RUNS_AT_ONCE made
+    small: three parts), with runs without a twin, one with the model twin, one whose noise is all NaN and two whose
+    plants blow up mid-run (a shorter length, in other parts): each run's trace, every metric but the timing, its
+    measures and its stored trace equal what it gives alone (run_scenario, measure, downsampled_trace: the per-run
+    path)."""
+    from gainlink.hil.campaign.criteria import measure, measure_block
+    from gainlink.hil.campaign.worker import _library, downsampled_trace, downsampled_traces
+    from gainlink.hil.loop import block_metrics
+    from gainlink.hil.loop.block import run_block
+    from gainlink.hil.loop.bridge import run_scenario
+    from gainlink.hil.loop.scenario import Disturbance
+
+    monkeypatch.setattr(block_metrics, "RUNS_AT_ONCE", 16)
+    count = 41
+    art, scenarios = _pendulum_campaign_points(draws=count, duration=0.2)[0]
+    push = (Disturbance(input="F", start=0.1, stop=0.2, value=1e300),)
+    scs = []
+    for i, sc in enumerate(scenarios):
+        change: dict = {"twin": i % 5 != 2, "model_twin": i == 9}
+        if i == 3:
+            change["noise"] = dict(sc.noise) | {name: float("nan") for name in sc.noise}
+        if i in (7, count - 3):
+            change["disturbances"] = push
+        scs.append(dataclasses.replace(sc, **change))
+    library = _library(art)
+    block = run_block(scs, artifact=art, library=library)
+    assert block is not None and len(block) == count
+    alone = [run_scenario(sc, artifact=art, library=library) for sc in scs]
+    assert [i for i, r in enumerate(alone) if not r.complete] == [7, count - 3]
+    assert not np.isfinite(alone[3].trace.y).all() and alone[3].trace.y.shape == alone[0].trace.y.shape
+    for got, want, got_m in zip(block, alone, measure_block(block, art)):
+        for name in TRACE_FIELDS + ("model_y", "model_u"):
+            a, b = getattr(got.trace, name), getattr(want.trace, name)
+            assert (a is None and b is None) or np.array_equal(a, b, equal_nan=True), name
+        assert {k: v for k, v in got.metrics.items() if k not in TIMING_KEYS} == {
+            k: v for k, v in want.metrics.items() if k not in TIMING_KEYS
+        }
+        assert (got.complete, got.reason) == (want.complete, want.reason)
+        assert got_m == measure(want, art)
+    stepped = [i for i, r in enumerate(block) if r.trace.t.size]
+    for i, stored in zip(stepped, downsampled_traces([block[i].trace for i in stepped])):
+        want = downsampled_trace(alone[i].trace)
+        assert all(np.array_equal(stored[k], want[k], equal_nan=True) for k in "tyur")

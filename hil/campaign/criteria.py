@@ -69,18 +69,19 @@ def measure(result: Any, artifact: Any) -> dict:
     sat = tr.sat.any(axis=1) if tr.sat.size else np.zeros(0, bool)
     with warnings.catch_warnings():  # an output all NaN: nanmin's NaN (None in the row), not a warning a run
         warnings.simplefilter("ignore", RuntimeWarning)
-        low = [float(np.nanmin(tr.y[:, i])) for i in range(tr.y.shape[1])] if tr.y.size else []
-        high = [float(np.nanmax(tr.y[:, i])) for i in range(tr.y.shape[1])] if tr.y.size else []
+        low = [_num(float(np.nanmin(tr.y[:, i]))) for i in range(tr.y.shape[1])] if tr.y.size else []
+        high = [_num(float(np.nanmax(tr.y[:, i]))) for i in range(tr.y.shape[1])] if tr.y.size else []
     return _measured(result, artifact, finite=finite, grew=grew, low=low, high=high, longest=_longest_true(sat))
 
 
 def measure_block(results: list, artifact: Any) -> list[dict]:
     """:func:`measure` of each of ``results`` (a campaign block's runs), each figure taken as a column over the
-    block's runs of one length (their ``(runs, steps, ...)`` arrays): the same dicts, every number bit for bit
-    (extrema and counts have no order, the growth ratios are the same IEEE operations on them; the tracked errors'
-    products ``y @ Ci[j]`` are taken run by run, the call a run alone makes). A run of no steps takes
-    :func:`measure` itself."""
-    from ..loop.block_metrics import stacked
+    block's runs of one length (their ``(runs, steps, ...)`` arrays, :data:`~..loop.block_metrics.RUNS_AT_ONCE` runs
+    at a time): the same dicts, every number bit for bit (extrema and counts have no order, and ``np.nanmin`` of an
+    array is ``np.fmin.reduce`` of it; the growth ratios are the same IEEE operations on them; the tracked errors'
+    products ``y @ Ci[j]`` are taken run by run, the call a run alone makes, their differences from the references
+    over the block). A run of no steps takes :func:`measure` itself."""
+    from ..loop.block_metrics import runs_at_once
 
     out: list[dict | None] = [None] * len(results)
     lengths: dict[int, list[int]] = {}
@@ -91,29 +92,44 @@ def measure_block(results: list, artifact: Any) -> list[dict]:
             for i in idx:
                 out[i] = measure(results[i], artifact)
             continue
-        traces = [results[i].trace for i in idx]
-        Y = stacked([tr.y for tr in traces])
-        finite = np.isfinite(Y).all(axis=(1, 2)).tolist()
-        grew = _growth_columns(_error_columns(traces, artifact), n)
-        sat = stacked([tr.sat for tr in traces])
-        longest = _longest_columns(sat.any(axis=2) if sat.shape[2] else np.zeros(sat.shape[:2], bool))
-        with warnings.catch_warnings():  # a column all NaN: nanmin's NaN (None), as a run alone gets it
-            warnings.simplefilter("ignore", RuntimeWarning)
-            low = np.stack([np.nanmin(Y[:, :, i], axis=1) for i in range(Y.shape[2])], axis=1).tolist()
-            high = np.stack([np.nanmax(Y[:, :, i], axis=1) for i in range(Y.shape[2])], axis=1).tolist()
-        for j, i in enumerate(idx):
-            result = results[i]
-            mine = {k: g[j] for k, g in grew.items()} if (result.complete and finite[j]) else {}
-            out[i] = _measured(result, artifact, finite=finite[j], grew=mine, low=low[j], high=high[j],
-                               longest=longest[j])  # fmt: skip
+        for part in runs_at_once(idx):
+            group = [results[i] for i in part]
+            for i, measured in zip(part, _measured_group(group, artifact, n=n)):
+                out[i] = measured
     return out  # type: ignore[return-value]
 
 
-def _error_columns(traces: list, artifact: Any) -> dict[str, np.ndarray]:
-    """:func:`_errors` of each of ``traces`` (runs of one length) as (runs, steps) columns, one per tracked signal:
-    each run's made as it is alone, then stacked."""
-    each = [_errors(tr, artifact) for tr in traces]
-    return {name: np.stack([e[name] for e in each]) for name in each[0]}
+def _measured_group(results: list, artifact: Any, *, n: int) -> list[dict]:
+    """:func:`measure` of runs of one length ``n`` > 0, from their columns."""
+    from ..loop.block_metrics import finite_lists, stacked
+
+    traces = [r.trace for r in results]
+    Y = stacked([tr.y for tr in traces])
+    finite = np.isfinite(Y).all(axis=(1, 2)).tolist()
+    grew = _growth_columns(_error_columns(traces, artifact, Y=Y), n)
+    sat = stacked([tr.sat for tr in traces])
+    longest = _longest_columns(sat.any(axis=2) if sat.shape[2] else np.zeros(sat.shape[:2], bool))
+    low = finite_lists(np.stack([np.fmin.reduce(Y[:, :, i], axis=1) for i in range(Y.shape[2])], axis=1))
+    high = finite_lists(np.stack([np.fmax.reduce(Y[:, :, i], axis=1) for i in range(Y.shape[2])], axis=1))
+    out = []
+    for j, result in enumerate(results):
+        mine = {k: g[j] for k, g in grew.items()} if (result.complete and finite[j]) else {}
+        out.append(_measured(result, artifact, finite=finite[j], grew=mine, low=low[j], high=high[j],
+                             longest=longest[j]))  # fmt: skip
+    return out
+
+
+def _error_columns(traces: list, artifact: Any, *, Y: np.ndarray) -> dict[str, np.ndarray]:
+    """:func:`_errors` of each of ``traces`` (runs of one length, their outputs ``Y`` stacked) as (runs, steps)
+    columns, one per tracked signal: each run's product ``y @ Ci[j]`` made as it is alone, the differences from the
+    references taken over the runs (the same subtraction)."""
+    from ..loop.block_metrics import stacked
+
+    if not artifact.q:
+        return {name: -Y[:, :, i] for i, name in enumerate(artifact.signals["outputs"])}
+    R = stacked([tr.r for tr in traces])
+    return {name: R[:, :, j] - np.stack([tr.y @ artifact.Ci[j] for tr in traces])
+            for j, name in enumerate(artifact.signals["references"])}  # fmt: skip
 
 
 def _growth_columns(errors: dict[str, np.ndarray], n: int) -> dict[str, list[tuple[bool, float | None]]]:
@@ -142,12 +158,12 @@ def _longest_columns(mask: np.ndarray) -> list[int]:
 
 def _measured(result: Any, artifact: Any, *, finite: bool, grew: dict, low: list, high: list, longest: int) -> dict:
     """:func:`measure`'s dict from a run's figures: ``grew`` its tracked errors' :func:`growth` (empty unless it
-    completed with finite outputs), ``low``/``high`` its outputs' NaN-ignoring extrema, ``longest`` its longest
-    stretch of saturated steps."""
+    completed with finite outputs), ``low``/``high`` its outputs' NaN-ignoring extrema (non-finite ones None),
+    ``longest`` its longest stretch of saturated steps; every number made JSON-able as it is put in (:func:`_num`)."""
     stable, why, ratios = bool(result.complete and finite), result.reason, {}
     if stable:
         for name, (ok, ratio) in grew.items():
-            ratios[name] = ratio
+            ratios[name] = _num(ratio)
             if not ok:
                 stable, why = False, f"{name} error grows at the end (last/third quarter peak {ratio:.3g})"
     elif why is None:
@@ -159,29 +175,32 @@ def _measured(result: Any, artifact: Any, *, finite: bool, grew: dict, low: list
         "growth_ratio": ratios,
         "output_min": dict(zip(outs, low)),
         "output_max": dict(zip(outs, high)),
-        "longest_saturation_s": longest * artifact.Ts,
+        "longest_saturation_s": _num(longest * artifact.Ts),
     }
     twin = result.metrics.get("twin")  # gainlink.proof.twin.twin_comparison of the run and its float64 twin
     if isinstance(twin, dict):
-        out["twin_output_deviation"] = twin.get("worst_dy_rel")
-        out["twin_command_deviation"] = twin.get("worst_du_rel")
+        out["twin_output_deviation"] = _clean(twin.get("worst_dy_rel"))
+        out["twin_command_deviation"] = _clean(twin.get("worst_du_rel"))
     model = result.metrics.get("model_twin")  # gainlink.hil.loop.model_twin: the plant against the design's model
     if isinstance(model, dict):
-        out["model_mismatch"] = model.get("worst")
+        out["model_mismatch"] = _clean(model.get("worst"))
         ratios = [v.get("ratio") for v in model.get("iae", {}).values() if v.get("ratio") is not None]
-        out["model_iae_ratio"] = max(ratios, key=lambda x: abs(np.log(x)) if x > 0 else np.inf, default=None)
+        out["model_iae_ratio"] = _clean(max(ratios, key=lambda x: abs(np.log(x)) if x > 0 else np.inf, default=None))
         out["model_warning"] = bool(model.get("warning"))
-    return _clean(out)
+    return out
+
+
+def _num(x: Any) -> Any:
+    """``x``, None when it is a float that is not finite (``math.isfinite``: a Python float's test without numpy's
+    per-call cost)."""
+    return None if isinstance(x, float) and not math.isfinite(x) else x
 
 
 def _clean(obj: Any) -> Any:
-    """``obj`` with every non-finite float (at any depth of its dicts) None (``math.isfinite``: a Python float's
-    test without numpy's per-call cost)."""
+    """``obj`` with every non-finite float (at any depth of its dicts) None."""
     if isinstance(obj, dict):
         return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
+    return _num(obj)
 
 
 def evaluate(criteria: Criteria, record: dict) -> list[tuple[str, str]]:

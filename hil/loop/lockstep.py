@@ -146,11 +146,10 @@ def _plan(runs: list, *, steps: int, disturbed: np.ndarray | bool, at: Any) -> _
     run's command goes to its plant with its disturbance."""
     args: dict[str, Any] = {"runs": len(runs), "steps": steps}
     for name, field, width in (("noise", "noise", "p"), ("R", "r", "q"), ("S", "s", "e"), ("D", "d", "m")):
-        where: dict[int, int] = {}
+        where: dict[int, int] = {}  # by id: each run's plan holds its array until the call returns
         for r in runs:
             given = getattr(r.plan, name)
             if id(given) not in where:
-                at(given)  # kept: the id stays this array's
                 where[id(given)] = at(np.ascontiguousarray(given, dtype=np.float64))
         args[field] = at(np.array([where[id(getattr(r.plan, name))] for r in runs], dtype=np.uintp))
         args[width] = getattr(runs[0].plan, name).shape[1]

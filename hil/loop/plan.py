@@ -140,8 +140,13 @@ def plan_like(plan: Plan, scenario: Scenario, *, law, artifact: Artifact, plant:
 
 
 def saturated(bits: np.ndarray, m: int) -> np.ndarray:
-    """The saturation flags of ``bits`` (..., bit j: input j saturated) as bools (..., m)."""
-    return ((bits[..., None] >> np.arange(m)) & 1).astype(bool)
+    """The saturation flags of ``bits`` (..., bit j: input j saturated) as bools (..., m), one input at a time: numpy
+    broadcasting ``bits[..., None]`` against the m bits loops over a last axis of m (1 for the pendulum) at every
+    record, 2-4x slower over a block's (1000, 1000) bits."""
+    out = np.empty((*bits.shape, m), dtype=bool)
+    for j in range(m):
+        np.not_equal(bits & (1 << j), 0, out=out[..., j])
+    return out
 
 
 class Recorder:
