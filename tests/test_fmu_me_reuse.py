@@ -19,6 +19,9 @@ def no_kept_instances():
     fmu._free_idle()
 
 
+ARGS = {"inputs": None, "outputs": None, "states": None, "parameters": {"m": 0.1}}
+
+
 def _me_run(cart_fmu, pend, m: float, *, rtol: float = 1e-8):
     """A 0.5 s SIL run of the pendulum law on the cart-pendulum FMU through Model Exchange (fmpy's CVode), pole mass
     ``m``."""
@@ -66,12 +69,12 @@ def test_a_model_exchange_plant_whose_call_failed_is_freed_not_kept(cart_fmu):
     from gainlink.hil.plants.fmu_me import FmuModelExchangePlant
 
     with fmu.reused_instances():
-        plant = FmuModelExchangePlant.open(path=cart_fmu, parameters={"m": 0.1})
+        plant = fmu.opened(FmuModelExchangePlant, ARGS | {"path": cart_fmu}, {})
         with pytest.raises(PlantError):
             plant.advance(u=np.array([np.inf]), dt=0.01)
         plant.close()
         assert not any(fmu.idle_instances().values()) and plant.me is None
-        good = FmuModelExchangePlant.open(path=cart_fmu, parameters={"m": 0.1})
+        good = fmu.opened(FmuModelExchangePlant, ARGS | {"path": cart_fmu}, {})
         good.close()
         (kept,) = fmu.idle_instances().values()
         assert kept == [good] and good.me is not None

@@ -9,8 +9,8 @@ Per step the bridge calls the raw ``fmi2SetReal`` / ``fmi2DoStep`` / ``fmi2GetRe
 
 Inside :func:`reused_instances` (a campaign's worker runs its runs there), a closed plant keeps its FMPy instance
 (the unzipped binary, the loaded library, the instantiated FMU) for the next plant of the same interface, FMU file and
-variables opened in this process (:meth:`FmuPlant.open`, :meth:`.fmu_me.FmuModelExchangePlant.open` through
-:func:`taken_idle` and :func:`kept_idle`), which sets its parameters and resets it (``fmi2Reset`` /
+variables opened in this process (:func:`opened`, for :class:`FmuPlant` and
+:class:`.fmu_me.FmuModelExchangePlant` alike), which sets its parameters and resets it (``fmi2Reset`` /
 ``fmi3Reset``, then the experiment set up again, as every run's start does): FMPy unzips an FMU per instance and
 instances leak memory (fmpy issues), so a campaign opens one instance per (FMU, worker) and use at a time, not one per
 run. A plant whose FMU call failed is freed, never reused.
@@ -42,7 +42,7 @@ _IDLE: dict[str, list[Any]] = {}  # closed plants kept for reuse, by interface, 
 
 @contextlib.contextmanager
 def reused_instances() -> Iterator[None]:
-    """Within: a closed :class:`FmuPlant` is kept for the next :meth:`FmuPlant.open` of the same FMU and variables
+    """Within: a closed FMU plant is kept for the next :func:`opened` of the same interface, FMU and variables
     in this process (see the module docstring); the kept instances outlive the block (freed at exit)."""
     token = _REUSE.set(True)
     try:
@@ -80,6 +80,22 @@ def _free_idle() -> None:
         for plant in plants:
             plant._free()
     _IDLE.clear()
+
+
+def opened(cls: Any, args: dict, settings: dict) -> Any:
+    """A plant of ``cls`` (an FMU plant class) for ``args`` (its ``path``, ``inputs``, ``outputs``, ``parameters``,
+    ``states``) and ``settings`` (its other constructor arguments): inside :func:`reused_instances` an idle one of the
+    same interface, FMU file and variables, given its parameters and renewed (``renew(settings)``: reset), when one
+    was closed; else a new one."""
+    key = reuse_key(cls.interface, args["path"], args["inputs"], args["outputs"], args["states"])
+    plant = taken_idle(key)
+    if plant is None:
+        plant = cls(**args, **settings)
+    else:
+        plant.parameters = map_variables(plant.md, **{k: v for k, v in args.items() if k != "path"}).parameters
+        plant.renew(settings)
+    plant._reuse_key = key
+    return plant
 
 
 def reuse_key(interface: str, path: Path, inputs: Any, outputs: Any, states: Any) -> str | None:
@@ -170,28 +186,9 @@ class FmuPlant(Plant):
         self._broken = False
         self.reset(initial={})
 
-    @classmethod
-    def open(
-        cls,
-        *,
-        path: Path,
-        inputs: Any = None,
-        outputs: Any = None,
-        parameters: Mapping[str, float] | None = None,
-        states: Any = None,
-    ) -> FmuPlant:
-        """A plant of the FMU at ``path``: inside :func:`reused_instances` an idle one of the same FMU and variables,
-        given ``parameters`` and reset, when one was closed; else a new one (the constructor's arguments)."""
-        key = reuse_key(cls.interface, path, inputs, outputs, states)
-        plant = taken_idle(key)
-        if plant is not None:
-            mapping = map_variables(plant.md, inputs=inputs, outputs=outputs, states=states, parameters=parameters)
-            plant.parameters = mapping.parameters
-            plant.reset(initial={})
-        else:
-            plant = cls(path=path, inputs=inputs, outputs=outputs, parameters=parameters, states=states)
-        plant._reuse_key = key
-        return plant
+    def renew(self, settings: dict) -> None:
+        """Serve a new run (:func:`opened`, which set its parameters): the instance reset."""
+        self.reset(initial={})
 
     def _cleanup_unzip(self) -> None:
         if self._own_unzip and self._unzip:

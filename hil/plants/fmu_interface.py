@@ -24,7 +24,7 @@ from gainlink.errors import PlantError
 from ..registry import take_keys
 from .base import PLANTS, Plant
 from .fmi import map_variables, read_description, resolve_fmu, settable_at_start, signal_name
-from .fmu import FmuPlant
+from .fmu import FmuPlant, opened
 from .fmu_check import TOLERANCE, CheckSetup, InterfaceCheck, check_cosimulation
 from .fmu_me import FmuModelExchangePlant
 
@@ -125,9 +125,9 @@ def _fmu_factory(
     choice = choose_interface(md, requested=requested, step=None if artifact is None else artifact.Ts, setup=setup)
     plant: Any
     if choice.interface == "me":
-        plant = FmuModelExchangePlant.open(**args, states=cfg.get("states"), **solver)
+        plant = opened(FmuModelExchangePlant, args | {"states": cfg.get("states")}, solver)
     else:
-        plant = FmuPlant.open(**args, states=cfg.get("states"))
+        plant = opened(FmuPlant, args | {"states": cfg.get("states")}, {})
     plant.interface_reason, plant.interface_check = choice.reason, choice.check
     return plant
 

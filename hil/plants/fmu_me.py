@@ -21,7 +21,7 @@ from gainlink.errors import PlantError
 from .base import Plant
 from .fmi import map_variables, read_description
 from .fmi_me import ModelExchange, check_model_exchange
-from .fmu import kept_idle, reuse_key, taken_idle
+from .fmu import kept_idle
 
 
 class _HeldInput:
@@ -29,6 +29,10 @@ class _HeldInput:
 
     def apply(self, time: float, continuous: bool = True, discrete: bool = True, after_event: bool = False) -> None:
         return None
+
+
+#: CVode's relative tolerance unless the plant table sets ``rtol``
+RTOL = 1e-8
 
 
 class FmuModelExchangePlant(Plant):
@@ -56,7 +60,7 @@ class FmuModelExchangePlant(Plant):
         outputs: Any = None,
         parameters: Mapping[str, Any] | None = None,
         states: Any = None,
-        rtol: float = 1e-8,
+        rtol: float = RTOL,
         max_step: float | None = None,
     ) -> None:
         self.path = Path(path)
@@ -82,33 +86,11 @@ class FmuModelExchangePlant(Plant):
         self._broken = False
         self.reset(initial={})
 
-    @classmethod
-    def open(
-        cls,
-        *,
-        path: Path,
-        inputs: Any = None,
-        outputs: Any = None,
-        parameters: Mapping[str, Any] | None = None,
-        states: Any = None,
-        rtol: float = 1e-8,
-        max_step: float | None = None,
-    ) -> FmuModelExchangePlant:
-        """A plant of the FMU at ``path``: inside :func:`~.fmu.reused_instances` an idle one of the same FMU and
-        variables (its instance reset, ``fmi2Reset``/``fmi3Reset``, and a new CVode solver with ``rtol`` and
-        ``max_step``), given ``parameters``, when one was closed; else a new one (the constructor's arguments)."""
-        key = reuse_key(cls.interface, path, inputs, outputs, states)
-        plant = taken_idle(key)
-        if plant is None:
-            plant = cls(path=path, inputs=inputs, outputs=outputs, parameters=parameters, states=states, rtol=rtol,
-                        max_step=max_step)  # fmt: skip
-        else:
-            plant.rtol, plant.max_step = _solver_settings(rtol, max_step)
-            mapping = map_variables(plant.md, inputs=inputs, outputs=outputs, states=states, parameters=parameters)
-            plant.parameters = mapping.parameters
-            plant.reset(initial={})
-        plant._reuse_key = key
-        return plant
+    def renew(self, settings: dict) -> None:
+        """Serve a new run (:func:`~.fmu.opened`, which set its parameters): its solver ``settings``, the instance
+        reset and a new CVode solver made."""
+        self.rtol, self.max_step = _solver_settings(settings.get("rtol", RTOL), settings.get("max_step"))
+        self.reset(initial={})
 
     def _call(self, what: str, fn: Any, *args: Any, **kwargs: Any) -> Any:
         try:
