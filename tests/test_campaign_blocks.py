@@ -965,12 +965,13 @@ def _both_loops(art, scenarios: list, *, twin: bool, library=None, **vary) -> tu
     each one's plants' and laws' states after it."""
     from gainlink.hil.loop import block as blk
     from gainlink.hil.loop import lockstep
+    from gainlink.laws import law_of
 
     got = []
     for c in (True, False):
         runs, batch, controller = _block_inputs(art, scenarios, twin=twin, library=library, **vary)
         kw = dict(Ts=art.Ts, steps=runs[0].plan.N, disturbed=blk._disturbed(runs, twin), plant_state=not twin,
-                  law_state=twin)  # fmt: skip
+                  law_state=law_of(art).integrator_columns(art) if twin else None)  # fmt: skip
         assert lockstep.why_not(batch, controller) is None
         if c:
             rec = lockstep.run(runs, batch, controller, **kw)
@@ -1042,6 +1043,30 @@ def test_the_c_loop_records_what_the_numpy_loop_records_bit_for_bit(form):
     assert {(t, 1, 1, 1) for t in (False, True)} <= seen  # the one-run block that fails stops at once
     assert {(t, 70, 150, 1) for t in (False, True)} <= seen  # a span failed at once, the others ran on
     assert any(n == 70 and 60 < taken < 150 for _, n, taken, _ in seen)  # every run failed, the last mid-run
+
+
+@pytest.mark.parametrize("mode", ["none", "backcalc"])
+def test_the_twins_loop_records_the_integrators_alone_as_the_whole_states_columns(mode):
+    """The twin's loop in C records of the laws' states only the integrators (all a run's trace reads of them):
+    (runs, steps, q), each the integrator column of the whole state [xh, z] the numpy loop records when asked for
+    every column (the shipped pendulum design, 11 runs with NaN/inf noise and plants that blow up)."""
+    from gainlink.hil.loop import block as blk
+    from gainlink.hil.loop import lockstep
+    from gainlink.laws import law_of
+
+    art = _pendulum_form("predictor", mode)
+    columns = law_of(art).integrator_columns(art)
+    assert (columns.start, columns.stop) == (art.n, art.n + art.q) and art.q == 1
+    got = {}
+    for c, kept in ((True, columns), (False, slice(None))):
+        runs, batch, controller = _block_inputs(art, _seventy_draws()[:11], twin=True)
+        kw = dict(Ts=art.Ts, steps=runs[0].plan.N, disturbed=True, plant_state=False, law_state=kept)
+        run = lockstep.run if c else functools.partial(blk._python_lockstep, loop="numpy")
+        got[c] = run(runs, batch, controller, **kw)
+    whole = got[False].L
+    assert whole.shape[2] == art.n + art.q and got[True].L.shape == (*whole.shape[:2], art.q)
+    assert _bit_for_bit(got[True].L, np.ascontiguousarray(whole[:, :, art.n :]))
+    assert np.isfinite(whole[0, :, art.n]).all() and np.ptp(whole[0, :, art.n]) > 0  # an integrator that moves
 
 
 def test_the_block_says_where_its_loop_ran(tmp_path, monkeypatch):

@@ -184,7 +184,7 @@ class Recorder:
         def cut(a: np.ndarray) -> np.ndarray:  # the array itself when it holds just the steps: the runs of a block
             return a if len(a) == steps else a[:steps]  # that share one (a plan's times) give that one object
 
-        z = None if tw is None else law.integrators(artifact, tw.state)
+        z = None if tw is None else tw.integrators(law, artifact)
         return RunTrace(
             t=cut(p.t),
             y=cut(self.Y),
