@@ -10,6 +10,7 @@ import dataclasses
 import functools
 import logging
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -1159,3 +1160,37 @@ def test_a_block_of_more_runs_than_are_reduced_at_once_gives_each_what_it_gets_a
     for i, stored in zip(stepped, downsampled_traces([block[i].trace for i in stepped])):
         want = downsampled_trace(alone[i].trace)
         assert all(np.array_equal(stored[k], want[k], equal_nan=True) for k in "tyur")
+
+
+def test_a_plant_named_relative_to_the_working_directory_is_read_from_the_current_one(
+    example_artifacts, tmp_path, monkeypatch
+):
+    """A scenario without a file names its plant's files relative to the working directory: the one current when
+    each plant is built (the block's plants ask for it once per folder, never a stale one): the pendulum's spec read
+    in one folder steps as the spec's own linear model, and in a folder without it the build refuses in one line
+    naming that folder."""
+    import shutil
+
+    from gainlink.errors import PlantError
+    from gainlink.hil.loop.scenario import parse_scenario
+    from gainlink.hil.loop.scenario_plant import build_plant
+    from gainlink.hil.plants.config import plant_from_config
+    from gainlink.shipping.artifact import load
+
+    art = load(example_artifacts["pendulum"])
+    spec = Path(__file__).resolve().parents[1] / "examples" / "pendulum.toml"
+    here, there = tmp_path / "here", tmp_path / "there"
+    here.mkdir(), there.mkdir()
+    shutil.copy(spec, here / "m.toml")
+    table = {"artifact": str(example_artifacts["pendulum"]), "duration": 0.1,
+             "plant": {"kind": "linear", "spec": "m.toml"}, "transport": {"kind": "sil"}}  # fmt: skip
+    scenario = parse_scenario(table)
+    monkeypatch.chdir(here)
+    plant = build_plant(scenario, artifact=art)
+    direct = plant_from_config({"kind": "linear", "spec": str(spec)}, artifact=art)
+    plant.advance(u=np.ones(art.m), dt=art.Ts), direct.advance(u=np.ones(art.m), dt=art.Ts)
+    assert np.array_equal(plant.outputs(), direct.outputs()) and np.any(plant.outputs() != 0)
+    monkeypatch.chdir(there)
+    with pytest.raises(PlantError) as err:
+        build_plant(scenario, artifact=art)
+    assert str(there / "m.toml") in str(err.value) and "\n" not in str(err.value)
