@@ -10,6 +10,7 @@ import dataclasses
 import functools
 import logging
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -965,12 +966,13 @@ def _both_loops(art, scenarios: list, *, twin: bool, library=None, **vary) -> tu
     each one's plants' and laws' states after it."""
     from gainlink.hil.loop import block as blk
     from gainlink.hil.loop import lockstep
+    from gainlink.laws import law_of
 
     got = []
     for c in (True, False):
         runs, batch, controller = _block_inputs(art, scenarios, twin=twin, library=library, **vary)
         kw = dict(Ts=art.Ts, steps=runs[0].plan.N, disturbed=blk._disturbed(runs, twin), plant_state=not twin,
-                  law_state=twin)  # fmt: skip
+                  law_state=law_of(art).integrator_columns(art) if twin else None)  # fmt: skip
         assert lockstep.why_not(batch, controller) is None
         if c:
             rec = lockstep.run(runs, batch, controller, **kw)
@@ -1042,6 +1044,30 @@ def test_the_c_loop_records_what_the_numpy_loop_records_bit_for_bit(form):
     assert {(t, 1, 1, 1) for t in (False, True)} <= seen  # the one-run block that fails stops at once
     assert {(t, 70, 150, 1) for t in (False, True)} <= seen  # a span failed at once, the others ran on
     assert any(n == 70 and 60 < taken < 150 for _, n, taken, _ in seen)  # every run failed, the last mid-run
+
+
+@pytest.mark.parametrize("mode", ["none", "backcalc"])
+def test_the_twins_loop_records_the_integrators_alone_as_the_whole_states_columns(mode):
+    """The twin's loop in C records of the laws' states only the integrators (all a run's trace reads of them):
+    (runs, steps, q), each the integrator column of the whole state [xh, z] the numpy loop records when asked for
+    every column (the shipped pendulum design, 11 runs with NaN/inf noise and plants that blow up)."""
+    from gainlink.hil.loop import block as blk
+    from gainlink.hil.loop import lockstep
+    from gainlink.laws import law_of
+
+    art = _pendulum_form("predictor", mode)
+    columns = law_of(art).integrator_columns(art)
+    assert (columns.start, columns.stop) == (art.n, art.n + art.q) and art.q == 1
+    got = {}
+    for c, kept in ((True, columns), (False, slice(None))):
+        runs, batch, controller = _block_inputs(art, _seventy_draws()[:11], twin=True)
+        kw = dict(Ts=art.Ts, steps=runs[0].plan.N, disturbed=True, plant_state=False, law_state=kept)
+        run = lockstep.run if c else functools.partial(blk._python_lockstep, loop="numpy")
+        got[c] = run(runs, batch, controller, **kw)
+    whole = got[False].L
+    assert whole.shape[2] == art.n + art.q and got[True].L.shape == (*whole.shape[:2], art.q)
+    assert _bit_for_bit(got[True].L, np.ascontiguousarray(whole[:, :, art.n :]))
+    assert np.isfinite(whole[0, :, art.n]).all() and np.ptp(whole[0, :, art.n]) > 0  # an integrator that moves
 
 
 def test_the_block_says_where_its_loop_ran(tmp_path, monkeypatch):
@@ -1134,3 +1160,37 @@ def test_a_block_of_more_runs_than_are_reduced_at_once_gives_each_what_it_gets_a
     for i, stored in zip(stepped, downsampled_traces([block[i].trace for i in stepped])):
         want = downsampled_trace(alone[i].trace)
         assert all(np.array_equal(stored[k], want[k], equal_nan=True) for k in "tyur")
+
+
+def test_a_plant_named_relative_to_the_working_directory_is_read_from_the_current_one(
+    example_artifacts, tmp_path, monkeypatch
+):
+    """A scenario without a file names its plant's files relative to the working directory: the one current when
+    each plant is built (the block's plants ask for it once per folder, never a stale one): the pendulum's spec read
+    in one folder steps as the spec's own linear model, and in a folder without it the build refuses in one line
+    naming that folder."""
+    import shutil
+
+    from gainlink.errors import PlantError
+    from gainlink.hil.loop.scenario import parse_scenario
+    from gainlink.hil.loop.scenario_plant import build_plant
+    from gainlink.hil.plants.config import plant_from_config
+    from gainlink.shipping.artifact import load
+
+    art = load(example_artifacts["pendulum"])
+    spec = Path(__file__).resolve().parents[1] / "examples" / "pendulum.toml"
+    here, there = tmp_path / "here", tmp_path / "there"
+    here.mkdir(), there.mkdir()
+    shutil.copy(spec, here / "m.toml")
+    table = {"artifact": str(example_artifacts["pendulum"]), "duration": 0.1,
+             "plant": {"kind": "linear", "spec": "m.toml"}, "transport": {"kind": "sil"}}  # fmt: skip
+    scenario = parse_scenario(table)
+    monkeypatch.chdir(here)
+    plant = build_plant(scenario, artifact=art)
+    direct = plant_from_config({"kind": "linear", "spec": str(spec)}, artifact=art)
+    plant.advance(u=np.ones(art.m), dt=art.Ts), direct.advance(u=np.ones(art.m), dt=art.Ts)
+    assert np.array_equal(plant.outputs(), direct.outputs()) and np.any(plant.outputs() != 0)
+    monkeypatch.chdir(there)
+    with pytest.raises(PlantError) as err:
+        build_plant(scenario, artifact=art)
+    assert str(there / "m.toml") in str(err.value) and "\n" not in str(err.value)

@@ -141,12 +141,13 @@ def _items(a: np.ndarray) -> np.ndarray:
 
 
 def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts: float, steps: int,
-              always_disturbed: bool, plant_state: bool, law_state: bool) -> Steps:  # fmt: skip
+              always_disturbed: bool, plant_state: bool, law_state: slice | None) -> Steps:  # fmt: skip
     """Step ``controller`` (a block law) around ``batch`` for ``steps`` samples of each run's plan; a run whose
     plant fails stops there (its row steps on, unrecorded). ``always_disturbed``: the command plus the plan's
     disturbance goes to the plant even when it is zero (as the twin does; the run adds it only when the plan has
-    one). ``plant_state``: the plants' states recorded; ``law_state``: the laws' (the twin's lockstep: its commands'
-    saturation and flags are not recorded, its trace has none).
+    one). ``plant_state``: the plants' states recorded; ``law_state``: these columns of the laws' states recorded
+    (the twin's lockstep, its integrators: its commands' saturation and flags are not recorded, its trace has
+    none); None: no law state.
 
     In one C call for all the steps where the C covers the plants and the law (:mod:`.lockstep`: the built-in
     models' compiled RK4 with a law's host library or the lq law's compiled float64 reference); elsewhere (linear
@@ -162,7 +163,8 @@ def _lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts:
 
 
 def _python_lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller, *, Ts: float, steps: int,
-                     disturbed: np.ndarray | bool, plant_state: bool, law_state: bool, loop: str) -> Steps:  # fmt: skip
+                     disturbed: np.ndarray | bool, plant_state: bool, law_state: slice | None,
+                     loop: str) -> Steps:  # fmt: skip
     """:func:`_lockstep` in numpy (``disturbed``: :func:`_disturbed`; ``loop``: why it runs here, recorded). A
     step is array operations over the block and one call of the law: the samples, references and noise of every
     step are stacked before the first (each run's noise drawn by its own plan, as alone) and what a step gives is
@@ -170,9 +172,10 @@ def _python_lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller,
     B, noise, R, S, D = len(runs), _stack(runs, "noise"), _stack(runs, "R"), _stack(runs, "S"), _stack(runs, "D")
     Y, U = _RunMajor(steps, B, (noise.shape[2],)), _RunMajor(steps, B, (D.shape[2],))
     sigma: _RunMajor | None = None  # made at the first step when the law has a sigma
-    sat, flags = (None, None) if law_state else (_RunMajor(steps, B, (), np.int64), _RunMajor(steps, B, (), np.int64))
+    twin = law_state is not None
+    sat, flags = (None, None) if twin else (_RunMajor(steps, B, (), np.int64), _RunMajor(steps, B, (), np.int64))
     X = _RunMajor(steps, B, batch.X.shape[1:]) if plant_state else None
-    L = _RunMajor(steps, B, controller.states().shape[1:]) if law_state else None
+    L = _RunMajor(steps, B, controller.states()[:, law_state].shape[1:]) if law_state is not None else None
     done, failed_at, tick, lat = np.full(B, steps), np.full(B, -1), np.zeros(steps), np.zeros(steps)
     alive = np.ones(B, dtype=bool)
     t_start = time.perf_counter_ns()
@@ -191,7 +194,7 @@ def _python_lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller,
         if sat is not None and flags is not None:
             sat.at(k)[:], flags.at(k)[:] = st.sat, st.flags
         if L is not None:
-            L.at(k)[:] = controller.states()
+            L.at(k)[:] = controller.states()[:, law_state]
         failed = batch.advance(_command(st.u, D[k], disturbed), dt=Ts) & alive
         if failed.any():
             done[failed], failed_at[failed] = k + 1, k
@@ -232,7 +235,7 @@ def run_block(
         t0 = time.perf_counter()
         rec = _lockstep(runs, batch, controller, Ts=Ts, steps=runs[0].plan.N,
                         always_disturbed=False, plant_state=any(r.scenario.twin for r in runs),
-                        law_state=False)  # fmt: skip
+                        law_state=None)  # fmt: skip
         wall = time.perf_counter() - t0
         t0 = time.perf_counter()
         twins = _twins(runs, law=law, artifact=a, steps=rec.steps)
@@ -340,8 +343,8 @@ def _record(run: Run, rec: Steps, i: int, *, shared: dict, describe: dict, ran: 
 
 def _twins(runs: list[Run], *, law, artifact: Artifact, steps: np.ndarray) -> list:
     """Each run's twins: the closed-loop twins of the runs that ask for one stepped as a block (the float64
-    reference of each around a second batch of the runs' plants, reset), the model twin by the function a run alone
-    uses."""
+    reference of each around a second batch of the runs' plants, reset; of the laws' states only the integrators
+    recorded, all a run's trace reads of them), the model twin by the function a run alone uses."""
     want = [i for i, r in enumerate(runs) if r.scenario.twin]
     traces: dict[int, object] = {}
     failed: dict[int, str] = {}
@@ -350,18 +353,21 @@ def _twins(runs: list[Run], *, law, artifact: Artifact, steps: np.ndarray) -> li
         for r in sub:  # the run's own plant, reset again: its batch stepped copies of its state, not the plant
             r.plant.reset(initial=r.scenario.initial_state)
         batch = batch_of([r.plant for r in sub])
-        longest = int(max(steps[want]))
+        longest, columns = int(max(steps[want])), law.integrator_columns(artifact)
         tw = _lockstep(sub, batch, law.reference_block(artifact, len(sub)), Ts=artifact.Ts,
                        steps=longest, always_disturbed=True, plant_state=False,
-                       law_state=True)  # fmt: skip
-        traces, failed = _twin_traces(want, tw, steps=steps, name=batch.name)
+                       law_state=slice(0, 0) if columns is None else columns)  # fmt: skip
+        traces, failed = _twin_traces(want, tw, steps=steps, name=batch.name, integrators=columns is not None)
     return [with_model_twin(law, artifact, scenario=r.scenario, plan=r.plan, start=r.start, steps=int(steps[i]),
                             twin=traces.get(i), twin_failed=failed.get(i))
             for i, r in enumerate(runs)]  # fmt: skip
 
 
-def _twin_traces(want: list[int], tw: Steps, *, steps: np.ndarray, name: str) -> tuple[dict, dict]:
-    """Run i's :class:`~gainlink.proof.twin.TwinTrace` over its own steps, or why its twin's plant failed in them."""
+def _twin_traces(want: list[int], tw: Steps, *, steps: np.ndarray, name: str,
+                 integrators: bool) -> tuple[dict, dict]:  # fmt: skip
+    """Run i's :class:`~gainlink.proof.twin.TwinTrace` over its own steps, or why its twin's plant failed in them
+    (``integrators``: the law keeps some, ``tw.L`` holds them; a run of no steps keeps the empty state a run alone
+    records)."""
     from gainlink.proof.twin import TwinTrace
 
     traces, failed, nan = {}, {}, {}  # nan: the sigma of the twins of n steps of a law without one, shared
@@ -370,10 +376,13 @@ def _twin_traces(want: list[int], tw: Steps, *, steps: np.ndarray, name: str) ->
         if 0 <= tw.failed_at[j] < n:
             failed[i] = non_finite(name)
             continue
-        state = tw.L[j, :n] if (tw.L is not None and n) else np.zeros((0, 0))
         if tw.sigma is None:
             sigma = nan[n] if n in nan else nan.setdefault(n, np.full(n, np.nan))
         else:
             sigma = tw.sigma[j, :n]
-        traces[i] = TwinTrace(y=tw.Y[j, :n], u=tw.U[j, :n], state=state, sigma=sigma)
+        if not n:
+            traces[i] = TwinTrace(y=tw.Y[j, :n], u=tw.U[j, :n], state=np.zeros((0, 0)), sigma=sigma)
+            continue
+        z = tw.L[j, :n] if (integrators and tw.L is not None) else None
+        traces[i] = TwinTrace(y=tw.Y[j, :n], u=tw.U[j, :n], state=None, sigma=sigma, z=z)
     return traces, failed

@@ -46,7 +46,7 @@ class _Law(ctypes.Structure):
                 + _fields(_P, "samples", "records")
                 + _fields(_I, "sample_bytes", "y_off", "r_off", "s_off", "law_q", "law_e", "record_bytes", "flags_off",
                           "sat_off", "u_off", "sigma_off", "fault")
-                + _fields(_P, "dims", "mats", "state") + _fields(_I, "state_width")
+                + _fields(_P, "dims", "mats", "state") + _fields(_I, "state_width", "kept_from", "kept")
                 + _fields(_P, "sat", "flags", "r"))  # fmt: skip
 
 
@@ -64,7 +64,7 @@ class Steps:
     flags: np.ndarray | None
     sigma: np.ndarray | None  # None: the law has no sigma (every run's is NaN)
     X: np.ndarray | None  # the plants' states (the run's, when its twin is on)
-    L: np.ndarray | None  # the laws' states (the twin's)
+    L: np.ndarray | None  # the columns kept of the laws' states (the twin's integrators)
     steps: np.ndarray  # per run: steps taken (a plant that fails ends its run after that step)
     failed_at: np.ndarray  # per run: the step whose advance failed (-1: none)
     tick: np.ndarray  # (N,): when step k started, ns from the loop's start (the C: on the block's own clock)
@@ -112,9 +112,10 @@ def address(a: np.ndarray) -> int:
 
 
 def run(runs: list, batch: Any, controller: Any, *, Ts: float, steps: int, disturbed: np.ndarray | bool,
-        plant_state: bool, law_state: bool) -> Steps:  # fmt: skip
+        plant_state: bool, law_state: slice | None) -> Steps:  # fmt: skip
     """The block's loop in C (:func:`why_not` None), with the arguments of :func:`.block._python_lockstep`
-    (``disturbed``: per run (B, 1), or one answer for all) and the same record."""
+    (``disturbed``: per run (B, 1), or one answer for all; ``law_state``: the columns of the laws' states kept) and
+    the same record."""
     B, kept = len(runs), []  # kept: every array whose address the C holds, alive until it returns
 
     def at(a: np.ndarray) -> int:
@@ -126,6 +127,9 @@ def run(runs: list, batch: Any, controller: Any, *, Ts: float, steps: int, distu
     law_args = dict(controller.c_law())
     law_args |= {"sat": np.zeros(B, np.int64), "flags": np.zeros(B, np.int64),
                  "r": np.zeros((B, max(int(law_args["law_q"]), 1)))}  # fmt: skip
+    if law_state is not None:
+        first, stop, _ = law_state.indices(int(law_args["state_width"]))
+        law_args |= {"kept_from": first, "kept": max(stop - first, 0)}
     law = _struct(_Law, law_args, at)
     rec = _records(B, steps, widths=(plan.p, plan.m, plant.nx), law=law_args, plant_state=plant_state,
                    law_state=law_state)  # fmt: skip
@@ -157,22 +161,22 @@ def _plan(runs: list, *, steps: int, disturbed: np.ndarray | bool, at: Any) -> _
     return _Plan(**args, disturbed=at(np.ascontiguousarray(flags)))
 
 
-def _records(B: int, steps: int, *, widths: tuple, law: dict, plant_state: bool, law_state: bool) -> dict:
+def _records(B: int, steps: int, *, widths: tuple, law: dict, plant_state: bool, law_state: slice | None) -> dict:
     """The arrays the C writes (run-major records of the numpy loop's dtypes; the per-run and per-step figures):
-    saturation and flags but for the twin's loop (``law_state``: the laws' states instead), sigma when the law has
-    one, the plants' states when asked."""
+    saturation and flags but for the twin's loop (``law_state``: the columns kept of the laws' states instead),
+    sigma when the law has one, the plants' states when asked."""
     p, m, nx = widths
     rec = {"Y": np.empty((B, steps, p)), "U": np.empty((B, steps, m)), "done": np.empty(B, np.int64),
            "failed_at": np.empty(B, np.int64), "tick": np.zeros(steps), "lat": np.zeros(steps),
            "alive": np.empty(B, np.uint8)}  # fmt: skip
-    if not law_state:
+    if law_state is None:
         rec |= {"sat": np.empty((B, steps), np.int64), "flags": np.empty((B, steps), np.int64)}
     if law["records_sigma"]:
         rec["sigma"] = np.empty((B, steps))
     if plant_state:
         rec["X"] = np.empty((B, steps, nx))
-    if law_state:
-        rec["L"] = np.empty((B, steps, int(law["state_width"])))
+    if law_state is not None:
+        rec["L"] = np.empty((B, steps, int(law["kept"])))
     return rec
 
 

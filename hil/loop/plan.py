@@ -5,7 +5,6 @@ endpoint (:mod:`.closed_loop`).
 
 from __future__ import annotations
 
-import copy
 import functools
 import struct
 from dataclasses import dataclass
@@ -134,8 +133,10 @@ def plan_like(plan: Plan, scenario: Scenario, *, law, artifact: Artifact, plant:
     for shared in (plan.t, plan.R, plan.D, plan.S):
         if shared.flags.writeable:  # made read-only by the first run that shares it
             shared.flags.writeable = False
-    out = copy.copy(plan)  # dataclasses.replace re-runs the fields' __init__: ~18 us a run here
-    object.__setattr__(out, "noise", _noise(scenario, plant=plant, N=plan.N, p=artifact.p))
+    # a shallow copy through the instance's dict: dataclasses.replace re-runs the fields' __init__ (~18 us a run),
+    # copy.copy goes through __reduce_ex__ (~5.5 us); this ~1.4 us, the same fields (a frozen dataclass, no slots)
+    out = object.__new__(Plan)
+    out.__dict__.update(plan.__dict__, noise=_noise(scenario, plant=plant, N=plan.N, p=artifact.p))
     return out
 
 
@@ -184,7 +185,7 @@ class Recorder:
         def cut(a: np.ndarray) -> np.ndarray:  # the array itself when it holds just the steps: the runs of a block
             return a if len(a) == steps else a[:steps]  # that share one (a plan's times) give that one object
 
-        z = None if tw is None else law.integrators(artifact, tw.state)
+        z = None if tw is None else tw.integrators(law, artifact)
         return RunTrace(
             t=cut(p.t),
             y=cut(self.Y),

@@ -32,10 +32,17 @@ class LoopHooks:
         starts); NaN for a law without one."""
         return math.nan
 
+    def integrator_columns(self, artifact: Any) -> slice | None:
+        """Where the integrators lie in a row of ``Controller.state()`` of this law's float64 reference (the
+        columns :meth:`integrators` reads; a campaign block's twin records only these); None for a law that keeps
+        none."""
+        return None
+
     def integrators(self, artifact: Any, states: np.ndarray) -> np.ndarray | None:
         """The integrators (N, q) in rows of ``Controller.state()`` of this law's float64 reference (N, ...); None
-        for a law that keeps none."""
-        return None
+        for a law that keeps none (:meth:`integrator_columns`)."""
+        columns = self.integrator_columns(artifact)
+        return None if columns is None else np.asarray(states)[:, columns]
 
     def design_model(self, artifact: Any, *, state: Mapping[str, float] | None, deviation: bool,
                      sigma: float) -> tuple[Any, str]:  # fmt: skip

@@ -26,12 +26,22 @@ from ..shipping.artifact import Artifact
 @dataclass(frozen=True)
 class TwinTrace:
     """A twin's run, row k = sample k: sampled outputs (with the run's noise), commands, the law's state after each
-    step (rows of the controller's ``state()``) and the sigma each step used (NaN for a law without one)."""
+    step (rows of the controller's ``state()``) and the sigma each step used (NaN for a law without one).
+
+    A campaign block's twin records only what is read of the law's state, its integrators (``z``, the columns
+    ``law.integrator_columns`` names; ``state`` None); :meth:`integrators` reads them from either."""
 
     y: np.ndarray  # (N, p)
     u: np.ndarray  # (N, m)
-    state: np.ndarray  # (N, state size)
+    state: np.ndarray | None  # (N, state size); None where only the integrators were recorded
     sigma: np.ndarray  # (N,)
+    z: np.ndarray | None = None  # (N, q): the integrators alone, where the loop recorded only them
+
+    def integrators(self, law: Any, artifact: Artifact) -> np.ndarray | None:
+        """The twin's integrators (N, q), None for a law that keeps none (``law.integrators`` of its state)."""
+        if self.state is None:
+            return self.z
+        return law.integrators(artifact, self.state)
 
 
 def run_twin(

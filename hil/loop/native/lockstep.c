@@ -83,6 +83,7 @@ typedef struct {
     const void *mats;
     double *state; /* runs x state_width */
     int64_t state_width;
+    int64_t kept_from, kept; /* the columns [kept_from, kept_from + kept) of a state recorded (rec->L) */
     int64_t *sat;    /* runs */
     int64_t *flags;  /* runs: 1 refused */
     double *r;       /* runs x q, the step's references gathered */
@@ -185,12 +186,12 @@ static int64_t host_law(const gl_ls_plan_t *pl, const gl_ls_law_t *lw, const gl_
     return took;
 }
 
-/* 2, kind 1: the float64 reference's block step over the span (its states recorded when asked). Returns the call's
- * time, ns. */
+/* 2, kind 1: the float64 reference's block step over the span (the columns of its states kept, when asked: the
+ * integrators, all of them that is read). Returns the call's time, ns. */
 static int64_t reference_law(const gl_ls_plan_t *pl, const gl_ls_law_t *lw, const gl_ls_record_t *rec, span_t sp,
                              int64_t k, double *u)
 {
-    const int64_t N = pl->steps, p = pl->p, m = pl->m, q = lw->law_q, w = lw->state_width;
+    const int64_t N = pl->steps, p = pl->p, m = pl->m, q = lw->law_q, w = lw->state_width, kw = lw->kept;
     for (int64_t i = sp.i0; i < sp.i0 + sp.n; i++)
         for (int64_t j = 0; j < q; j++) lw->r[i * q + j] = j < pl->q ? pl->r[i][k * pl->q + j] : 0.0;
     const int64_t t0 = now_ns();
@@ -201,7 +202,7 @@ static int64_t reference_law(const gl_ls_plan_t *pl, const gl_ls_law_t *lw, cons
         if (rec->flags) rec->flags[i * N + k] = lw->flags[i] * lw->fault;
         if (rec->sat) rec->sat[i * N + k] = lw->sat[i];
         if (rec->L)
-            for (int64_t j = 0; j < w; j++) rec->L[(i * N + k) * w + j] = lw->state[i * w + j];
+            for (int64_t j = 0; j < kw; j++) rec->L[(i * N + k) * kw + j] = lw->state[i * w + lw->kept_from + j];
     }
     return took;
 }

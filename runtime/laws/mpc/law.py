@@ -110,8 +110,8 @@ class MpcLaw(Law):
 
     # -- the closed loop (gainlink.laws.hooks.LoopHooks) ------------------------------------------------------
 
-    def integrators(self, artifact: Any, states: np.ndarray) -> np.ndarray | None:
-        return np.asarray(states)[:, artifact.n : artifact.n + artifact.q]
+    def integrator_columns(self, artifact: Any) -> slice | None:
+        return slice(artifact.n, artifact.n + artifact.q)
 
     def design_model(self, artifact: Any, *, state: Mapping[str, float] | None, deviation: bool,
                      sigma: float) -> tuple[Any, str]:  # fmt: skip
