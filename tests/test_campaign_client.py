@@ -13,6 +13,7 @@ from gainlink.hil.campaign import CampaignError, parse_campaign
 from gainlink.hil.campaign import plan as plan_module
 from gainlink.hil.campaign.plan import plan_campaign
 from gainlink.hil.loop.scenario import parse_scenario
+from support.campaign_plants import fmu_run
 from support.paths import EXAMPLES
 
 RUNS = 400
@@ -111,18 +112,7 @@ def test_a_reports_heads_name_each_run_as_the_run_made_alone(given, tmp_path):
 
 def _fmu_run(cart_fmu, pend, m: float):
     """A 1 s SIL run of the pendulum law on the cart-pendulum FMU (Co-Simulation), pole mass ``m``, with its twin."""
-    from gainlink.hil.loop.bridge import run_scenario
-
-    data = {
-        "artifact": str(pend),
-        "transport": {},
-        "duration": 1.0,
-        "seed": 3,
-        "initial_state": {"theta": 0.1},
-        "noise": {"theta": 1e-4},
-        "plant": {"kind": "fmu", "path": str(cart_fmu), "interface": "cs", "parameters": {"m": m}},
-    }
-    return run_scenario(parse_scenario(data))
+    return fmu_run(cart_fmu, pend, m, interface="cs", duration=1.0)
 
 
 def test_an_fmu_instance_serves_a_workers_next_runs_as_a_fresh_one_would(cart_fmu, pend):

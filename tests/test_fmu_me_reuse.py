@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from gainlink.hil.loop.scenario import parse_scenario
+from support.campaign_plants import fmu_run
 
 
 @pytest.fixture(autouse=True)
@@ -25,18 +25,7 @@ ARGS = {"inputs": None, "outputs": None, "states": None, "parameters": {"m": 0.1
 def _me_run(cart_fmu, pend, m: float, *, rtol: float = 1e-8):
     """A 0.5 s SIL run of the pendulum law on the cart-pendulum FMU through Model Exchange (fmpy's CVode), pole mass
     ``m``."""
-    from gainlink.hil.loop.bridge import run_scenario
-
-    data = {
-        "artifact": str(pend),
-        "transport": {},
-        "duration": 0.5,
-        "seed": 3,
-        "initial_state": {"theta": 0.1},
-        "noise": {"theta": 1e-4},
-        "plant": {"kind": "fmu", "path": str(cart_fmu), "interface": "me", "parameters": {"m": m}, "rtol": rtol},
-    }
-    return run_scenario(parse_scenario(data))
+    return fmu_run(cart_fmu, pend, m, interface="me", duration=0.5, rtol=rtol)
 
 
 def test_a_model_exchange_instance_serves_the_next_runs_as_a_fresh_one_would(cart_fmu, pend):

@@ -1,5 +1,5 @@
 """Plants for the campaign tests: one that fails as a bug in a user's plant does (with an exception of its own),
-one that takes its time.
+one that takes its time; and a SIL run of the pendulum law on the project's cart-pendulum FMU (:func:`fmu_run`).
 
 Imported by name (``kind = "python", class = "support.campaign_plants:BuggyPendulum"``) in the Dask worker
 processes of the tests, which have this folder on their ``PYTHONPATH``.
@@ -39,3 +39,21 @@ class SlowPendulum(CartPendulum):
     def advance(self, *, u, dt: float) -> None:
         time.sleep(self.pause)
         super().advance(u=u, dt=dt)
+
+
+def fmu_run(cart_fmu: Path, pend: Path, m: float, *, interface: str, duration: float, **plant):
+    """A SIL run of the pendulum law (``pend``, its gains.json) on the cart-pendulum FMU through ``interface``
+    (``cs`` or ``me``), pole mass ``m`` and the plant table's other keys ``plant``, with its twin."""
+    from gainlink.hil.loop.bridge import run_scenario
+    from gainlink.hil.loop.scenario import parse_scenario
+
+    data = {
+        "artifact": str(pend),
+        "transport": {},
+        "duration": duration,
+        "seed": 3,
+        "initial_state": {"theta": 0.1},
+        "noise": {"theta": 1e-4},
+        "plant": {"kind": "fmu", "path": str(cart_fmu), "interface": interface, "parameters": {"m": m}, **plant},
+    }
+    return run_scenario(parse_scenario(data))
