@@ -69,3 +69,22 @@ def test_a_model_exchange_plant_whose_call_failed_is_freed_not_kept(cart_fmu):
         assert kept == [good] and good.me is not None
     fmu._free_idle()  # as at exit
     assert good.me is None
+
+
+def test_a_kept_instance_that_cannot_serve_the_next_run_is_freed_with_one_line(cart_fmu):
+    """The next run's refused setting (a negative rtol) or parameter (a name the FMU has not), met when a kept instance
+    is taken for it: one PlantError line naming it, and the instance freed, neither kept nor left loaded."""
+    from gainlink.errors import PlantError
+    from gainlink.hil.plants import fmu
+    from gainlink.hil.plants.fmu_me import FmuModelExchangePlant
+
+    args = ARGS | {"path": cart_fmu}
+    refusals = ((args, {"rtol": -1.0}, "rtol"), (args | {"parameters": {"nope": 1.0}}, {}, "nope"))
+    for bad_args, settings, says in refusals:
+        with fmu.reused_instances():
+            fmu.opened(FmuModelExchangePlant, args, {}).close()
+            (kept,) = fmu.idle_instances().values()
+            with pytest.raises(PlantError, match=says) as refused:
+                fmu.opened(FmuModelExchangePlant, bad_args, settings)
+            assert "\n" not in str(refused.value)
+            assert not any(fmu.idle_instances().values()) and kept[0].me is None

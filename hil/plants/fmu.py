@@ -92,8 +92,12 @@ def opened(cls: Any, args: dict, settings: dict) -> Any:
     if plant is None:
         plant = cls(**args, **settings)
     else:
-        plant.parameters = map_variables(plant.md, **{k: v for k, v in args.items() if k != "path"}).parameters
-        plant.renew(settings)
+        try:
+            plant.parameters = map_variables(plant.md, **{k: v for k, v in args.items() if k != "path"}).parameters
+            plant.renew(settings)
+        except BaseException:  # a refused parameter or setting, a failed reset: the instance is freed, not lost
+            plant._free()
+            raise
     plant._reuse_key = key
     return plant
 
