@@ -30,6 +30,8 @@ ADD_M = {"target": "plant.parameters.m", "distribution": "normal", "mean": 0.0, 
 SET_L = {"target": "plant.parameters.l", "distribution": "truncnormal", "mean": 0.5, "std": 0.02, "low": 0.45,
          "high": 0.55}  # fmt: skip
 NEW_PATH = {"target": "noise.x", "distribution": "choice", "values": [1, 0.002, 0]}  # an int, a float; a new table
+SIGNED_ZEROS = {"target": "noise.x", "distribution": "choice", "values": [0, -0.0, 0.0, 0.002]}  # equal, 3 texts
+LOG_M = {"target": "plant.parameters.M", "distribution": "loguniform", "low": 0.8, "high": 1.25, "apply": "scale"}
 GRID_X = {"target": "initial_state.x", "values": [0.2, 1.0]}
 
 
@@ -42,6 +44,7 @@ def _campaign(spec: str, grid: list, draws: list) -> dict:
     ("grid", "draws", "templated"),
     [
         ([GRID_X], [SCALE_M, ADD_M, SET_L, NEW_PATH], True),
+        ([GRID_X], [LOG_M, SIGNED_ZEROS], True),
         ([{"target": "spec.limits.anti_windup", "values": ["clamp", "none"]}], [SCALE_M, NEW_PATH], True),
         ([{"name": "M", "target": "plant.parameters.M", "values": [0.9, 1.1]}], [SCALE_M], False),  # one path, 2 axes
     ],
@@ -81,3 +84,22 @@ def test_a_planned_id_is_the_hash_of_the_runs_definition_worked_by_hand():
         assert plan.runs.ids[k] == hashlib.sha256(text.encode("ascii")).hexdigest()[:20].encode("ascii"), k
     assert {type(v) for v in (draw_values(campaign, j)[1]["noise.x"] for j in range(RUNS))} == {int, float}
     assert np.unique(plan.runs.ids).size == len(plan.runs)
+
+
+def test_the_draw_table_holds_each_draws_values_drawn_from_its_own_generator():
+    """Draw j's seed and values, worked from the definition with scipy's distributions made anew for each draw (the
+    table makes each axis's once): ``default_rng([seed, j])``, its first integer the run's seed, then each axis in
+    order from the same generator."""
+    from scipy import stats
+
+    scale_m = SCALE_M | {"target": "plant.parameters.m"}
+    campaign = parse_campaign(_campaign(str(EXAMPLES / "pendulum.toml"), [], [SET_L, LOG_M, scale_m, NEW_PATH]))
+    seeds, cols = plan_module.draw_table(campaign)
+    for j in range(RUNS):
+        rng = np.random.default_rng([5, j])
+        assert seeds[j] == rng.integers(2**31 - 1)
+        lo, hi = (0.45 - 0.5) / 0.02, (0.55 - 0.5) / 0.02
+        assert cols["plant.parameters.l"][j] == stats.truncnorm(lo, hi, loc=0.5, scale=0.02).rvs(random_state=rng)
+        assert cols["plant.parameters.M"][j] == stats.loguniform(0.8, 1.25).rvs(random_state=rng)
+        assert cols["plant.parameters.m"][j] == rng.uniform(0.7, 1.3)
+        assert cols["noise.x"][j] == rng.integers(3)

@@ -31,7 +31,7 @@ import json
 import math
 import pickle
 import re
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -127,26 +127,29 @@ def _leaf_value(value: Any, apply: str, base: Any) -> Any:
 
 def sample(axis: Axis, rng: np.random.Generator) -> Any:
     """One value of a draw axis (scipy.stats for the truncated normal and the log-uniform)."""
-    drawn = _sample_number(axis, rng)
+    drawn = _sampler(axis)(rng)
     return axis.params["values"][drawn] if axis.distribution == "choice" else drawn
 
 
-def _sample_number(axis: Axis, rng: np.random.Generator) -> Any:
-    """:func:`sample`'s number: the value, or for a choice axis the index of the value (the same draw)."""
+def _sampler(axis: Axis) -> Callable[[np.random.Generator], Any]:
+    """:func:`sample`'s number from a generator: the value, or for a choice axis the index of the value (the same
+    draw). Made once per axis: scipy's frozen distribution draws from the generator it is given, made once or anew."""
     p = axis.params
     dist = axis.distribution
     if dist == "normal":
-        return float(rng.normal(p["mean"], p["std"]))
+        return lambda rng: float(rng.normal(p["mean"], p["std"]))
     if dist == "uniform":
-        return float(rng.uniform(p["low"], p["high"]))
+        return lambda rng: float(rng.uniform(p["low"], p["high"]))
     if dist == "choice":
-        return int(rng.integers(len(p["values"])))
+        return lambda rng: int(rng.integers(len(p["values"])))
     from scipy import stats
 
     if dist == "loguniform":
-        return float(stats.loguniform(p["low"], p["high"]).rvs(random_state=rng))
-    a, b = (p["low"] - p["mean"]) / p["std"], (p["high"] - p["mean"]) / p["std"]
-    return float(stats.truncnorm(a, b, loc=p["mean"], scale=p["std"]).rvs(random_state=rng))
+        frozen = stats.loguniform(p["low"], p["high"])
+    else:
+        a, b = (p["low"] - p["mean"]) / p["std"], (p["high"] - p["mean"]) / p["std"]
+        frozen = stats.truncnorm(a, b, loc=p["mean"], scale=p["std"])
+    return lambda rng: float(frozen.rvs(random_state=rng))
 
 
 def draw_values(campaign: Campaign, j: int) -> tuple[int, dict]:
@@ -160,15 +163,16 @@ def draw_table(campaign: Campaign) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Every draw's run seed and axis numbers, as :func:`draw_values` gives them: ``seeds`` (runs,) int64 and, by
     axis name, (runs,) float64 values (a choice axis: int64 indices into its values). Made once per plan: a draw is
     the same at every grid point."""
-    seeds = np.empty(campaign.runs, np.int64)
-    cols = {a.name: np.empty(campaign.runs, np.int64 if a.distribution == "choice" else np.float64)
-            for a in campaign.draws}  # fmt: skip
+    samplers = [_sampler(a) for a in campaign.draws]
+    seeds, rows = [], []
     for j in range(campaign.runs):
         rng = np.random.default_rng([campaign.seed, j])
-        seeds[j] = rng.integers(2**31 - 1)
-        for a in campaign.draws:
-            cols[a.name][j] = _sample_number(a, rng)
-    return seeds, cols
+        seeds.append(int(rng.integers(2**31 - 1)))
+        rows.append([draw(rng) for draw in samplers])
+    columns = list(zip(*rows)) if rows else [()] * len(samplers)
+    cols = {a.name: np.array(col, np.int64 if a.distribution == "choice" else np.float64).reshape(-1)
+            for a, col in zip(campaign.draws, columns)}  # fmt: skip
+    return np.array(seeds, np.int64).reshape(-1), cols
 
 
 def _apply_axis(
@@ -729,14 +733,14 @@ class _Planner:
         seeds = self.seeds.tolist()
         for g in range(len(self.points)):
             template = self._id_template(g) if _templated(c) else None
-            for j in range(c.runs):
+            ids = [None] * c.runs if template is None else template.run_ids(drawn, seeds)
+            for j, rid in enumerate(ids):
                 k = g * c.runs + j
-                rid = None if template is None else template.run_id([col[j] for col in drawn], seeds[j])
                 if rid is None:
                     point = self.point(k)
                     rid, failed = point.id, point.error is not None
                 else:
-                    failed = template.failed
+                    failed = template.failed  # type: ignore[union-attr]
                 self.ids[k], self.failed[k] = rid.encode("ascii"), failed
 
     def _drawn_values(self, axis: Axis) -> list:
@@ -805,21 +809,21 @@ class _IdTemplate:
             return None
         return cls(parts, slots, leaves, failed)
 
-    def run_id(self, values: list, seed: int) -> str | None:
-        """The id of the run with draw-axis values ``values`` (in the campaign's order) and ``seed``; ``None`` when a
-        value is not one the template writes (a non-finite number, a scale or shift by a non-number)."""
-        texts = []
-        for slot in self.slots:
-            if slot is None:
-                texts.append(str(seed))
-                continue
-            axis, apply, base = self.leaves[slot]
-            text = _leaf_json(values[axis], apply, base)
-            if text is None:
-                return None
-            texts.append(text)
-        body = "".join(itertools.chain.from_iterable(zip(self.parts, [*texts, ""])))
-        return hashlib.sha256(body.encode("ascii")).hexdigest()[:20]
+    def run_ids(self, drawn: list[list], seeds: list[int]) -> list[str | None]:
+        """The id of each draw ``j``'s run: draw-axis values ``drawn[i][j]`` (axis ``i`` in the campaign's order) and
+        seed ``seeds[j]``; ``None`` where a value is not one the template writes (a non-finite number, a scale or
+        shift by a non-number). Each slot's texts are made a column at a time (:func:`_leaf_texts`), then each run's
+        body once through the template."""
+        columns = [
+            list(map(str, seeds)) if slot is None else _leaf_texts(drawn[self.leaves[slot][0]], *self.leaves[slot][1:])
+            for slot in self.slots
+        ]
+        template = "%s".join(part.replace("%", "%%") for part in self.parts)
+        sha256 = hashlib.sha256
+        return [
+            None if None in texts else sha256((template % texts).encode("ascii")).hexdigest()[:20]
+            for texts in zip(*columns)
+        ]
 
 
 def _templated(campaign: Campaign) -> bool:
@@ -835,6 +839,24 @@ def _templated(campaign: Campaign) -> bool:
 
 def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _leaf_texts(values: list, apply: str, base: Any) -> list[str | None]:
+    """:func:`_leaf_json` of each of ``values`` (one draw axis's, every draw): a column of floats set, scaled or
+    shifted by a number at once (Python's own arithmetic and ``float.__repr__``, as the run made whole writes them),
+    else each value's text made once per object (a choice axis repeats a few; by identity: ``-0.0 == 0.0``)."""
+    if apply != "set" and not _is_number(base):
+        return [None] * len(values)
+    if all(type(v) is float for v in values) and (apply == "set" or type(base) in (int, float)):
+        left = (
+            values if apply == "set" else [base * v for v in values] if apply == "scale" else [base + v for v in values]
+        )
+        return [repr(v) if math.isfinite(v) else None for v in left]
+    texts: dict[int, str | None] = {}
+    for v in values:
+        if id(v) not in texts:
+            texts[id(v)] = _leaf_json(v, apply, base)
+    return [texts[id(v)] for v in values]
 
 
 def _leaf_json(value: Any, apply: str, base: Any) -> str | None:
