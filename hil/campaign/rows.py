@@ -498,7 +498,7 @@ class Tally:
         self.model = None if k < 0 else (float(model[k]), k, ids[k].decode("ascii"))
         self.flagged = int(v.warning[slot].sum())
         finished = code <= FAIL
-        self.status = RunStatus(ids[finished], code[finished] == FAIL)
+        self.status = RunStatus(ids[finished], code[finished] == FAIL, plan_draws(self.plan)[finished])
         columns = plan_columns(self.plan)
         self._points(columns, code, iae)
         self._scatter(columns, code, iae)
@@ -565,11 +565,19 @@ class Tally:
         return out
 
 
-class RunStatus(Mapping):
-    """Run id -> ``pass`` or ``fail``, held as two arrays: the ids (ASCII bytes) and whether each failed."""
+def plan_draws(plan: Any) -> np.ndarray:
+    """Each planned run's draw, its place among its grid point's runs (a generated plan's run ``k``: ``k % runs``)."""
+    if isinstance(plan.runs, PlannedRuns):
+        return np.arange(len(plan.runs)) % max(plan.campaign.runs, 1)
+    return np.array([p.draw for p in plan.runs], np.int64)
 
-    def __init__(self, ids: np.ndarray, failed: np.ndarray) -> None:
-        self.ids, self.failed = ids, failed
+
+class RunStatus(Mapping):
+    """Run id -> ``pass`` or ``fail``, held as arrays: the ids (ASCII bytes), whether each failed and each one's draw
+    (:func:`plan_draws`)."""
+
+    def __init__(self, ids: np.ndarray, failed: np.ndarray, draws: np.ndarray) -> None:
+        self.ids, self.failed, self.draws = ids, failed, draws
 
     def __len__(self) -> int:
         return len(self.ids)

@@ -621,6 +621,14 @@ def write_block(folder: str, key: tuple[int, int], ids: list[str], data: bytes, 
     return {"block": name, "runs": len(ids), "errors": errors}
 
 
+def _row_groups(block: pq.ParquetFile, wanted: np.ndarray) -> list[int]:
+    """The row groups of the open block file ``block`` that hold one of the runs ``wanted`` (sorted, distinct), from
+    its ``id`` column (a few bytes a run) and its row groups' sizes."""
+    rows = np.flatnonzero(members(_ids(block.read(columns=["id"], use_threads=False).column("id")), wanted))
+    ends = np.cumsum([block.metadata.row_group(g).num_rows for g in range(block.num_row_groups)])
+    return np.unique(np.searchsorted(ends, rows, side="right")).tolist()
+
+
 def _read(path: Path | pq.ParquetFile, columns: list[str]) -> pa.Table:
     """``columns`` of block file ``path`` (or of the file already open), after handing back to the system what
     Arrow's pool kept of the blocks read before (mimalloc keeps freed pages: +30 MB of the client's resident memory
@@ -931,13 +939,25 @@ class Store:
     ) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray]]]:
         """The stored traces of the runs ``ids`` that have a result, a block file at a time and within it
         :data:`TRACE_BATCH` runs at a time, stacked: for each batch, the runs of one trace shape as ``(ids (ASCII
-        bytes), {"t": (k, N), "y": (k, N, p), "u": ..., "r": ...})``; only ``fields`` (and ``t``) are read."""
+        bytes), {"t": (k, N), "y": (k, N, p), "u": ..., "r": ...})``; only ``fields`` (and ``t``) are read, of the
+        block files that hold one of the runs only the row groups that do (:meth:`_row_groups`)."""
         wanted, wide = np.unique(_wanted(ids)), [k for k in WIDE if k in fields]
         columns = ["id", "t", *wide, *(f"{k}_width" for k in WIDE)]
-        for path in self.files():
+        for path in self._holding(wanted):
             pa.default_memory_pool().release_unused()  # as _read: what the blocks before left in Arrow's pool
-            for batch in pq.ParquetFile(path, pre_buffer=False).iter_batches(TRACE_BATCH, columns=columns):
-                yield from self._stacks(path, pa.Table.from_batches([batch]), wanted, wide)
+            with pq.ParquetFile(path, pre_buffer=False) as block:
+                groups = _row_groups(block, wanted)
+                for batch in block.iter_batches(TRACE_BATCH, row_groups=groups, columns=columns) if groups else ():
+                    yield from self._stacks(path, pa.Table.from_batches([batch]), wanted, wide)
+
+    def _holding(self, wanted: np.ndarray) -> list[Path]:
+        """The block files, by name, whose kept results include one of the runs ``wanted`` (sorted, distinct)."""
+        table_ids, done, block = self._table()
+        if not len(table_ids) or not len(wanted):
+            return []
+        k = np.minimum(np.searchsorted(table_ids, wanted), len(table_ids) - 1)
+        numbers = np.unique(block[k[(table_ids[k] == wanted) & done[k]]])
+        return sorted(self.blocks / self._names[n] for n in numbers.tolist())
 
     def _stacks(
         self, path: Path, table: pa.Table, wanted: np.ndarray, wide: list[str]
