@@ -55,7 +55,7 @@ from gainlink.version import __version__
 
 from .config import CampaignError
 from .criteria import RunColumns
-from .jsontext import compact_json, json_texts, object_texts
+from .jsontext import ARROW_FLOATS, compact_json, float_texts, json_texts, object_texts
 from .plan import CampaignPlan, RunPoint
 from .rows import MEASURE_CELLS, METRIC_CELLS
 
@@ -452,13 +452,18 @@ _TRUTH = {True: "true", False: "false", None: "null"}
 
 def _numbers_text(arr: pa.Array, *, repeated: bool = False) -> list[str]:
     """A float64 or int64 column's values as JSON writes each (``null`` where null; a float by its ``repr``, as
-    json's encoder). ``repeated``: a column of a few distinct values (a block's worker, its runs' sample times), each
-    made text once."""
+    json's encoder: of a long float column, through :func:`.jsontext.float_texts`). ``repeated``: a column of a few
+    distinct values (a block's worker, its runs' sample times), each made text once."""
     if repeated:
         codes = pc.dictionary_encode(arr)
         words = _numbers_text(codes.dictionary) + ["null"]
         return [words[k] for k in codes.indices.fill_null(len(words) - 1).to_numpy(zero_copy_only=False).tolist()]
     values = arr.to_pylist()
+    if pa.types.is_float64(arr.type) and len(arr) - arr.null_count >= ARROW_FLOATS:
+        if not arr.null_count:
+            return float_texts(values, arr)
+        made = iter(float_texts([v for v in values if v is not None], arr.drop_null()))
+        return ["null" if v is None else next(made) for v in values]
     return list(map(repr, values)) if not arr.null_count else ["null" if v is None else repr(v) for v in values]
 
 
