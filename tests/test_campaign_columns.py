@@ -186,7 +186,7 @@ def test_a_blocks_typed_columns_hold_its_rows_numbers_and_the_record_is_the_one_
         assert names == [sorted(mine), sorted(rec.get("metrics", {}).get("outputs_final", {}))]
 
 
-@pytest.mark.parametrize("layout", ["2", "3", "4", None])
+@pytest.mark.parametrize("layout", ["2", "3", "4", "5", None])
 def test_a_block_of_an_earlier_layout_is_refused_on_resume_in_one_line(tmp_path, layout):
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -201,7 +201,7 @@ def test_a_block_of_an_earlier_layout_is_refused_on_resume_in_one_line(tmp_path,
     meta = {b"gainlink.campaign": b"mine", b"gainlink.version": __version__.encode()}
     meta |= {} if layout is None else {b"gainlink.block_layout": layout.encode()}
     pq.write_table(table.replace_schema_metadata(meta), out / "blocks" / "0123456789abcdef01234567.parquet")
-    with pytest.raises(CampaignError, match=r"is a block file of an earlier layout \(before 5\)") as err:
+    with pytest.raises(CampaignError, match=r"is a block file of an earlier layout \(before 6\)") as err:
         refuse_foreign(out, {"campaign": {"name": "mine"}})
     assert "\n" not in str(err.value)
 

@@ -11,8 +11,6 @@ is asked for them, against those that hold a chosen run, from where the blocks w
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
@@ -134,13 +132,13 @@ def test_past_the_cap_of_grid_points_every_kth_run_of_the_first_draw(tmp_path):
 
 
 def test_the_read_touches_only_the_row_groups_of_the_runs_drawn(tmp_path, monkeypatch):
-    """Blocks of 110, 110 and 80 runs in row groups of 10 (30 in all): at a cap of 20 (each grid point's first 6
-    draws; of the failed, their first 47) Parquet is asked only for the row groups holding one of them, worked out from
-    the cuts (each named here by its first run, read back from the file); under the cap, for every row group."""
-    monkeypatch.setattr(store_module, "TRACE_BATCH", 10)  # the row groups' size as the blocks are written
+    """300 runs in blocks of 10 (a row group each): at a cap of 20 (each grid point's first 6 draws; of the failed,
+    their first 47) Parquet is asked only for the row groups holding one of them, worked out from the cuts (each named
+    here by its first run, read back from the file); under the cap, for every one. A block file is one row group."""
     ids, status, sig = _runs()
-    cuts = [0, 110, 220, 300]
+    cuts = list(range(0, 301, 10))
     store = _store(tmp_path, ids, sig, cuts[1:-1])
+    assert {pq.ParquetFile(path).num_row_groups for path in store.files()} == {1}
     asked: list[str] = []
     iter_batches = pq.ParquetFile.iter_batches
 
@@ -153,12 +151,27 @@ def test_the_read_touches_only_the_row_groups_of_the_runs_drawn(tmp_path, monkey
     draws_of = [k % DRAWS for k in range(300)]
     envelope_bands(store, _status(status, draws_of), bins=256, cap=20)
     wanted = [k for k in range(300) if k % DRAWS < 6 or (k % 7 == 0 and k % DRAWS < 47)]
-    starts = {a + (k - a) // 10 * 10 for k in wanted for a, c in itertools.pairwise(cuts) if a <= k < c}
-    assert sorted(asked) == [ids[k] for k in sorted(starts)] and len(starts) == 15
+    assert sorted(asked) == [ids[k] for k in sorted({k // 10 * 10 for k in wanted})] and len(asked) == 15
     asked.clear()
     envelope_bands(store, _status(status, draws_of), bins=256, cap=300)
-    assert sorted(asked) == sorted({ids[a + g] for a, c in itertools.pairwise(cuts) for g in range(0, c - a, 10)})
-    assert len(asked) == 30
+    assert sorted(asked) == ids[::10]
+
+
+def test_a_block_file_of_many_runs_is_one_row_group(tmp_path):
+    """A block of 300 runs (past store.TRACE_BATCH, the row group's size before layout 6) is one row group of 300
+    rows, read from the file's Parquet metadata; its traces read back in batches are each run's own."""
+    ids, _, sig = _runs()
+    store = _store(tmp_path, ids, sig, [])
+    (path,) = store.files()
+    meta = pq.ParquetFile(path).metadata
+    assert (meta.num_row_groups, meta.row_group(0).num_rows) == (1, 300) and store_module.TRACE_BATCH < 300
+    seen = 0
+    for names, stack in store.trace_stacks(ids[::-1], fields=("t", "y", "u")):
+        for j, name in enumerate(names.tolist()):
+            got = np.concatenate([stack["y"][j], stack["u"][j]], axis=1)
+            np.testing.assert_array_equal(got, sig[name.decode()])
+            seen += 1
+    assert seen == 300
 
 
 def test_the_same_runs_give_the_same_bands_however_they_are_stored(tmp_path):

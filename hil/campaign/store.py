@@ -74,9 +74,10 @@ SCHEMA = pa.schema(
     ]
 )
 META_VERSION, META_CAMPAIGN, META_LAYOUT = b"gainlink.version", b"gainlink.campaign", b"gainlink.block_layout"
-LAYOUT = "5"  # 2: the record split into ``record`` and ``row``; 3: the row's verdict inputs as typed columns too;
+LAYOUT = "6"  # 2: the record split into ``record`` and ``row``; 3: the row's verdict inputs as typed columns too;
 # 4: each trace a run's float32 bytes (not a list of floats: Parquet's levels per value, and numpy's per run to read);
-# 5: a row's typed values (complete, run_reason, measures, worker) not again in JSON: its text made from the columns
+# 5: a row's typed values (complete, run_reason, measures, worker) not again in JSON: its text made from the columns;
+# 6: one row group a block (5: a row group a TRACE_BATCH of runs)
 ROW_KEYS = ("complete", "measures", "metrics", "worker")  # what a report row takes from a record, as it is
 # bit k of ``row_keys``: the row has ROW_BITS[k]; its measures have the twin's, the model twin's, growth ratios
 ROW_BITS = ("complete", "run_reason", "worker", "measures", "metrics", "twin", "model", "growth")
@@ -130,6 +131,10 @@ def block_address(run_ids: Iterable[str]) -> str:
 #: once, with the copies made of them, took the client's peak resident memory 77 MB over its start for 10,000 runs;
 #: 128 at a time, 45 MB, for the same CPU.
 TRACE_BATCH = 128
+
+#: Bytes of a block file's column read at a time for the envelopes (:meth:`Store.trace_stacks`): its pages decoded as
+#: the batches need them, not its whole column chunk (a block's: one row group) read at once.
+TRACE_BUFFER = 1 << 20
 
 #: The block file's columns whose values repeat from run to run (dictionary-encoded in the Parquet file).
 REPEATED = ["status", "names", "run_reason"]
@@ -220,11 +225,17 @@ def _block_file(texts: dict[str, pa.Array], traces: list, typed: dict[str, pa.Ar
     # the traces' and the JSON texts' values, nearly all distinct, and the file came out 19 % larger. No statistics:
     # nothing reads them (a trace's min and max bytes, a JSON text's), and they were 10 % of the write. The traces in
     # LZ4: zstd gained 5 % of the file on float bytes for 3.5x the write and 3x the read (910 runs: 48 -> 14 and
-    # 25 -> 8 us a run). A row group a TRACE_BATCH of runs: the envelopes' batched read of a block's traces held its
-    # whole row group's (the read's peak on the 10,002-run store +56 MB with a row group a block, +35 so).
+    # 25 -> 8 us a run). One row group a block: a row group a TRACE_BATCH of runs cost the write ~40 % more and the
+    # report's read of its columns ~75 % more (each column chunk's pages and metadata per group); the envelopes read
+    # a block's traces through a buffered stream (TRACE_BUFFER), its pages as the batches need them.
     codecs = {path: "lz4" if path in TRACE_FIELDS else "zstd" for path in _leaf_paths(table.schema)}
     pq.write_table(
-        table, sink, compression=codecs, use_dictionary=REPEATED, write_statistics=False, row_group_size=TRACE_BATCH
+        table,
+        sink,
+        compression=codecs,
+        use_dictionary=REPEATED,
+        write_statistics=False,
+        row_group_size=max(table.num_rows, 1),
     )
     return sink.getvalue().to_pybytes()
 
@@ -950,7 +961,7 @@ class Store:
         columns = ["id", "t", *wide, *(f"{k}_width" for k in WIDE)]
         for path in self._holding(wanted):
             pa.default_memory_pool().release_unused()  # as _read: what the blocks before left in Arrow's pool
-            with pq.ParquetFile(path, pre_buffer=False) as block:
+            with pq.ParquetFile(path, pre_buffer=False, buffer_size=TRACE_BUFFER) as block:
                 groups = _row_groups(block, wanted)
                 for batch in block.iter_batches(TRACE_BATCH, row_groups=groups, columns=columns) if groups else ():
                     yield from self._stacks(path, pa.Table.from_batches([batch]), wanted, wide)
