@@ -379,6 +379,28 @@ def test_the_rows_made_a_chunk_at_a_time_are_the_rows_made_one_by_one(tmp_path, 
     assert {"missing", "error", "fail", "pass"} <= {json.loads(line)["status"] for line in runs_text.split(",\n  ")}
 
 
+def test_a_run_planned_twice_is_one_of_the_envelopes_runs(tmp_path):
+    """A stored run planned twice (a plan of points): the runs the envelopes choose from (the tally's status) are the
+    finished runs once each, in plan order where each is first, each with its own draw (the points', by hand)."""
+    import tempfile
+
+    from gainlink.hil.campaign.report import _stream_rows
+
+    plan, store, records = _stored(tmp_path)
+    runs = list(plan.runs)
+    runs.insert(150, runs[120])
+    plan = dataclasses.replace(plan, runs=tuple(dataclasses.replace(p, index=k) for k, p in enumerate(runs)))
+    with tempfile.TemporaryFile("w+") as csv_out, tempfile.TemporaryFile("w+") as runs_out:
+        status = _stream_rows(plan, store, csv_out, runs_out).status
+    first: dict[str, RunPoint] = {}
+    for p in runs:
+        first.setdefault(p.id, p)
+    finished = [p for p in first.values() if records[p.id]["status"] == "done"]
+    assert len(finished) < len(runs) - 1 and records[runs[120].id]["status"] == "done"
+    assert list(status) == [p.id for p in finished]
+    assert status.draws.tolist() == [p.draw for p in finished]
+
+
 @pytest.mark.parametrize("where", ["twin_output_deviation", "output_min", "worker"])
 def test_a_row_with_a_value_json_refuses_is_refused_as_json_refuses_it(where):
     """A NaN or an infinity among the values a row's text would be made from: the block is refused as json refuses

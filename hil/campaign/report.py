@@ -370,15 +370,15 @@ def _extremes(sig: np.ndarray, lo: np.ndarray | None, hi: np.ndarray | None) -> 
 
 
 def _status_runs(status: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The distinct runs of ``status`` (id -> ``pass`` or ``fail``) as ASCII bytes in ``status``' order (a run planned
-    twice: where it is first), each one's draw (a plain mapping's: its place, the runs one grid point's draws) and
-    whether each failed."""
+    """The distinct runs of ``status`` (id -> ``pass`` or ``fail``) as ASCII bytes in ``status``' order, each one's
+    draw (a plain mapping's: its place, the runs one grid point's draws) and whether each failed. A
+    :class:`~.rows.RunStatus` holds distinct runs already; a plain mapping's ids, made ASCII, are made distinct here
+    (where each is first)."""
     if isinstance(status, RunStatus):
-        ids, failed, draws = status.ids, status.failed, status.draws
-    else:
-        ids = np.array([i.encode("ascii", "replace") for i in status], dtype="S")
-        failed = np.array([v == "fail" for v in status.values()], bool)
-        draws = np.arange(len(ids))
+        return status.ids, status.draws, status.failed
+    ids = np.array([i.encode("ascii", "replace") for i in status], dtype="S")
+    failed = np.array([v == "fail" for v in status.values()], bool)
+    draws = np.arange(len(ids))
     first = np.sort(np.unique(ids, return_index=True)[1])
     if len(first) < len(ids):
         ids, failed, draws = ids[first], failed[first], draws[first]

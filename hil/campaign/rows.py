@@ -502,7 +502,10 @@ class Tally:
         self.model = None if k < 0 else (float(model[k]), k, ids[k].decode("ascii"))
         self.flagged = int(v.warning[slot].sum())
         finished = code <= FAIL
-        self.status = RunStatus(ids[finished], code[finished] == FAIL, plan_draws(self.plan)[finished])
+        distinct = np.zeros(len(slot), bool)  # a run planned twice: where it is first (its slot's first place)
+        distinct[np.unique(slot, return_index=True)[1]] = True
+        seen = finished & distinct
+        self.status = RunStatus(ids[seen], code[seen] == FAIL, plan_draws(self.plan)[seen])
         columns = plan_columns(self.plan)
         self._points(columns, code, iae)
         self._scatter(columns, code, iae)
@@ -577,8 +580,8 @@ def plan_draws(plan: Any) -> np.ndarray:
 
 
 class RunStatus(Mapping):
-    """Run id -> ``pass`` or ``fail``, held as arrays: the ids (ASCII bytes), whether each failed and each one's draw
-    (:func:`plan_draws`)."""
+    """Run id -> ``pass`` or ``fail``, held as arrays: the ids (ASCII bytes, distinct), whether each failed and each
+    one's draw (:func:`plan_draws`)."""
 
     def __init__(self, ids: np.ndarray, failed: np.ndarray, draws: np.ndarray) -> None:
         self.ids, self.failed, self.draws = ids, failed, draws
