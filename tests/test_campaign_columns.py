@@ -186,7 +186,7 @@ def test_a_blocks_typed_columns_hold_its_rows_numbers_and_the_record_is_the_one_
         assert names == [sorted(mine), sorted(rec.get("metrics", {}).get("outputs_final", {}))]
 
 
-@pytest.mark.parametrize("layout", ["2", "3", "4", None])
+@pytest.mark.parametrize("layout", ["2", "3", "4", "5", None])
 def test_a_block_of_an_earlier_layout_is_refused_on_resume_in_one_line(tmp_path, layout):
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -201,7 +201,7 @@ def test_a_block_of_an_earlier_layout_is_refused_on_resume_in_one_line(tmp_path,
     meta = {b"gainlink.campaign": b"mine", b"gainlink.version": __version__.encode()}
     meta |= {} if layout is None else {b"gainlink.block_layout": layout.encode()}
     pq.write_table(table.replace_schema_metadata(meta), out / "blocks" / "0123456789abcdef01234567.parquet")
-    with pytest.raises(CampaignError, match=r"is a block file of an earlier layout \(before 5\)") as err:
+    with pytest.raises(CampaignError, match=r"is a block file of an earlier layout \(before 6\)") as err:
         refuse_foreign(out, {"campaign": {"name": "mine"}})
     assert "\n" not in str(err.value)
 
@@ -377,6 +377,28 @@ def test_the_rows_made_a_chunk_at_a_time_are_the_rows_made_one_by_one(tmp_path, 
     assert (store.out / "campaign.csv").read_text() == csv_text
     assert _runs_text(store.out / "campaign.json") == runs_text
     assert {"missing", "error", "fail", "pass"} <= {json.loads(line)["status"] for line in runs_text.split(",\n  ")}
+
+
+def test_a_run_planned_twice_is_one_of_the_envelopes_runs(tmp_path):
+    """A stored run planned twice (a plan of points): the runs the envelopes choose from (the tally's status) are the
+    finished runs once each, in plan order where each is first, each with its own draw (the points', by hand)."""
+    import tempfile
+
+    from gainlink.hil.campaign.report import _stream_rows
+
+    plan, store, records = _stored(tmp_path)
+    runs = list(plan.runs)
+    runs.insert(150, runs[120])
+    plan = dataclasses.replace(plan, runs=tuple(dataclasses.replace(p, index=k) for k, p in enumerate(runs)))
+    with tempfile.TemporaryFile("w+") as csv_out, tempfile.TemporaryFile("w+") as runs_out:
+        status = _stream_rows(plan, store, csv_out, runs_out).status
+    first: dict[str, RunPoint] = {}
+    for p in runs:
+        first.setdefault(p.id, p)
+    finished = [p for p in first.values() if records[p.id]["status"] == "done"]
+    assert len(finished) < len(runs) - 1 and records[runs[120].id]["status"] == "done"
+    assert list(status) == [p.id for p in finished]
+    assert status.draws.tolist() == [p.draw for p in finished]
 
 
 @pytest.mark.parametrize("where", ["twin_output_deviation", "output_min", "worker"])

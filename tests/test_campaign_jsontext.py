@@ -127,7 +127,7 @@ def test_any_numbers_in_one_key_give_each_ones_json(numbers):
 
 
 def test_a_long_column_of_floats_of_every_size_is_each_ones_repr():
-    """A column long enough for Arrow's texts (``jsontext._float_texts``): floats of every exponent (random bits),
+    """A column long enough for Arrow's texts (``jsontext.float_texts``): floats of every exponent (random bits),
     around the thresholds where Python's ``repr`` switches to an exponent and where Arrow's does (1e-6), integers and
     halves as floats."""
     rng = np.random.default_rng(7)

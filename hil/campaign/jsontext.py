@@ -171,18 +171,19 @@ def _leaf_texts(values: list, kinds: set) -> list[str]:
     (kind,) = kinds
     if kind is type(None):
         return ["null"] * len(values)
-    if kind is float and len(values) >= _ARROW_FLOATS:
-        return _float_texts(values)
+    if kind is float and len(values) >= ARROW_FLOATS:
+        return float_texts(values)
     return list(map(_LEAF_TEXT[kind], values))
 
 
-#: Floats in a column from which their texts are Arrow's (:func:`_float_texts`): below, ``float.__repr__`` each.
-_ARROW_FLOATS = 64
+#: Floats in a column from which their texts are Arrow's (:func:`float_texts`): below, ``float.__repr__`` each.
+ARROW_FLOATS = 64
 
 
-def _float_texts(values: list[float]) -> list[str]:
-    """``float.__repr__`` of each of ``values`` (finite floats), those of a column mostly of numbers with a fraction of
-    magnitude in [1e-4, 1e16) made by Arrow's cast to text.
+def float_texts(values: list[float], arr: pa.Array | None = None) -> list[str]:
+    """``float.__repr__`` of each of ``values`` (floats; ``arr``: the same as an Arrow float64 array without a null,
+    when made already), those of a column mostly of numbers with a fraction of magnitude in [1e-4, 1e16) made by
+    Arrow's cast to text (a value that is not finite is never one of them).
 
     Both write a float's shortest digits that read back as it (the closest such, ties to even: David Gay's dtoa in
     Python, double-conversion in Arrow) and write such a number positionally, Arrow at ~0.6 us a value against ~1.2
@@ -190,7 +191,7 @@ def _float_texts(values: list[float]) -> list[str]:
     ``0.00001`` for ``1e-05``, ``1.5e-7`` for ``1.5e-07``), and putting Arrow's text in Python's form a value at a time
     cost more than ``repr`` (1.1-1.4 against 0.9 us a value of ~1e-6), so every other value is ``float.__repr__``'s,
     and so is Arrow's text that has an exponent or does not read back as the value."""
-    arr = pa.array(values, pa.float64())
+    arr = pa.array(values, pa.float64()) if arr is None else arr
     x = arr.to_numpy(zero_copy_only=True)
     size = np.abs(x)
     ok = (size >= 1e-4) & (size < 1e16) & (np.trunc(x) != x)

@@ -5,8 +5,8 @@
   and measures;
 - ``campaign.csv``: one row per run (axis values, status, reasons, the main metrics);
 - ``envelopes.png``: percentiles (5-95, 25-75, median) of every output and command over time across
-  the finished runs (at most :data:`ENVELOPE_RUNS` of them, every k-th in plan order, as its title says), with
-  the failed runs' median dashed;
+  the finished runs (at most :data:`ENVELOPE_RUNS` of them, each grid point's first draws, as its title says),
+  with the failed runs' median dashed;
 - ``scatter.png``: for each drawn (or numeric grid) axis, each tracked output's IAE against it, failed
   runs marked (at most :data:`SCATTER_RUNS` of each status, every k-th in plan order, as its title says; the legend
   counts every run);
@@ -26,7 +26,7 @@ import shutil
 import tempfile
 from collections import Counter
 from collections.abc import Mapping
-from typing import IO, Any
+from typing import IO, Any, NamedTuple
 
 import numpy as np
 from gainlink.fileio import atomic_writer, publish_files
@@ -139,8 +139,8 @@ def _model_lines(tally: Tally) -> list[str]:
 
 def envelopespng_bytes(plan: CampaignPlan, status: dict[str, str], store: Any) -> bytes:
     """Percentile envelopes of outputs and commands over time across the runs ``status`` (id -> ``pass`` or
-    ``fail``, in plan order) of the most common trace length: at most :data:`ENVELOPE_RUNS` of them, every k-th
-    in plan order (:func:`envelope_runs`), and the failed runs' median by the same rule over the failed runs; the
+    ``fail``, in plan order) of the most common trace length: at most :data:`ENVELOPE_RUNS` of them, each grid
+    point's first draws (:func:`envelope_runs`), and the failed runs' median by the same rule over the failed runs; the
     title and the legend say which runs when not all are drawn."""
     import matplotlib
 
@@ -176,20 +176,25 @@ def envelopespng_bytes(plan: CampaignPlan, status: dict[str, str], store: Any) -
 
 
 def _envelope_scope(bands: dict) -> str:
-    """What the envelopes cover, for the title: every run, or which of the finished runs."""
-    if bands["every"] == 1:
+    """What the envelopes cover, for the title: every run, or which of the finished runs (on a second line)."""
+    if bands["drawn"].draws is None:
         return f"outputs and commands over {bands['runs']} runs"
-    return (
-        f"percentiles over {bands['runs']} of {bands['finished']} finished runs, "
-        f"every {_ordinal(bands['every'])} in plan order"
+    drawn = bands["drawn"]
+    which = (
+        f"each grid point's first {drawn.draws} draws"
+        if drawn.every == 1
+        else f"every {_ordinal(drawn.every)} run of the first draw in plan order"
     )
+    return f"percentiles over {bands['runs']} of {bands['finished']} finished runs\n{which}"
 
 
 def _failed_label(bands: dict) -> str:
     """The failed runs' median's legend: how many, and which when not all are drawn."""
-    if bands["failed_every"] == 1:
+    drawn = bands["failed_drawn"]
+    if drawn.draws is None:
         return f"median of {bands['failed']} failed"
-    return f"median of {bands['failed']} of {bands['failed_of']} failed, every {_ordinal(bands['failed_every'])}"
+    which = f"first {drawn.draws} draws" if drawn.every == 1 else f"first draw, every {_ordinal(drawn.every)}"
+    return f"median of {bands['failed']} of {bands['failed_of']} failed, {which}"
 
 
 def _ordinal(n: int) -> str:
@@ -198,27 +203,57 @@ def _ordinal(n: int) -> str:
     return f"{n}{last}"
 
 
-def envelope_runs(ids: np.ndarray, cap: int = ENVELOPE_RUNS) -> tuple[np.ndarray, int]:
-    """The runs the envelopes read of ``ids`` (distinct, in plan order): every k-th from the first, k the smallest
-    step that keeps them at most ``cap`` (all of them when they are that few); returns them and k. A rule of the plan
-    order alone, so the same runs give the same picture however they were stored."""
+def every_kth(ids: np.ndarray, cap: int) -> tuple[np.ndarray, int]:
+    """Every k-th of ``ids`` from the first, k the smallest step that keeps them at most ``cap`` (all of them when they
+    are that few); returns them and k."""
     every = max(1, -(-len(ids) // cap))
     return ids[::every], every
 
 
+class Drawn(NamedTuple):
+    """The runs :func:`envelope_runs` chose: their indices into the runs given, how many first draws of each grid
+    point they are (``None``: every run) and the step taken through the first draw's runs (1 but when they alone are
+    more than the cap)."""
+
+    runs: np.ndarray
+    draws: int | None
+    every: int
+
+
+def envelope_runs(draws: np.ndarray, cap: int = ENVELOPE_RUNS) -> Drawn:
+    """The runs the envelopes read of runs whose draws are ``draws`` (each one's place among its grid point's runs,
+    the runs in plan order): every run when they are at most ``cap``; else those of each grid point's first D draws,
+    D the most that keeps them at most ``cap``; and when the first draw's runs alone are more (a grid of more than
+    ``cap`` points), every k-th of them in plan order (:func:`every_kth`).
+
+    A Monte-Carlo campaign's draws are independent and alike, so its first D draws are as fair a sample as any D of
+    them, and each grid point's first D draws are neighbours in plan order: the runs chosen lie in a few row groups
+    of the block files (:meth:`~.store.Store.trace_stacks` reads only those). A rule of the plan alone, so the same
+    runs give the same picture however they were stored."""
+    if len(draws) <= cap:
+        return Drawn(np.arange(len(draws)), None, 1)
+    within = np.cumsum(np.bincount(draws))
+    first = int(np.searchsorted(within, cap, side="right"))
+    if first:
+        return Drawn(np.flatnonzero(draws < first), first, 1)
+    picked, every = every_kth(np.flatnonzero(draws == 0), cap)
+    return Drawn(picked, 1, every)
+
+
 def envelope_bands(
-    store: Any, status: dict[str, str], *, bins: int = ENVELOPE_BINS, cap: int | None = None
+    store: Any, status: Mapping[str, str], *, bins: int = ENVELOPE_BINS, cap: int | None = None
 ) -> dict | None:
     """The percentiles (:data:`PERCENTILES`) of every output and command at each stored sample across the runs
-    ``status`` (id -> ``pass`` or ``fail``, in plan order) whose traces have the most common shape, and the failed
-    runs' median; ``None`` without a stored trace.
+    ``status`` (id -> ``pass`` or ``fail``, in plan order; a :class:`~.rows.RunStatus` with each run's draw, a plain
+    mapping's runs each a draw of one grid point) whose traces have the most common shape, and the failed runs'
+    median; ``None`` without a stored trace.
 
-    Bounded: of more than ``cap`` (default :data:`ENVELOPE_RUNS`) finished runs only every k-th in plan order is
-    read (:func:`envelope_runs`), and the failed runs' median is over every failed run when they are at most ``cap``,
-    else over every k'-th of them by the same rule; ``runs`` and ``failed`` count the runs of the most common shape so
-    read, ``finished`` and ``failed_of`` all the distinct finished and failed runs, ``every`` and ``failed_every`` the
-    steps (1: every run). The other runs' traces are still decoded (a block file's row group holds 128 runs: while
-    the step is below 128, every row group holds a chosen run), but not stacked, spilled or histogrammed.
+    Bounded: of more than ``cap`` (default :data:`ENVELOPE_RUNS`) finished runs only those of each grid point's
+    first draws are read (:func:`envelope_runs`), and the failed runs' median is over every failed run when they are
+    at most ``cap``, else over the failed runs of their first draws by the same rule; ``runs`` and ``failed`` count the
+    runs of the most common shape so read, ``finished`` and ``failed_of`` all the distinct finished and failed runs,
+    ``drawn`` and ``failed_drawn`` the rule's choices (:class:`Drawn`). Only the row groups of the block files that
+    hold a chosen run are read.
 
     Streamed: the block files are read once, one at a time (each trace shape's runs: each sample's smallest and largest
     finite value, the stack spilled as float32 to an anonymous temporary file in the campaign folder; the shapes are
@@ -230,13 +265,14 @@ def envelope_bands(
     infinite one counts in the end bin on its side.
 
     Returns ``{"t", "percentiles": (len(PERCENTILES), N, S), "failed_median": (N, S), "runs", "failed", "finished",
-    "failed_of", "every", "failed_every", "outputs", "inputs", "half_bin": (N, S)}`` with the S signals the outputs
+    "failed_of", "drawn", "failed_drawn", "outputs", "inputs", "half_bin": (N, S)}`` with the S signals the outputs
     then the commands.
     """
     cap = ENVELOPE_RUNS if cap is None else cap
-    ids, failing = _status_ids(status)
-    chosen, every = envelope_runs(ids, cap)
-    failed, failed_every = envelope_runs(failing, cap)
+    ids, draws, failing = _status_runs(status)
+    drawn = envelope_runs(draws, cap)
+    failed_drawn = envelope_runs(draws[failing], cap)
+    chosen, failed = ids[drawn.runs], ids[failing][failed_drawn.runs]
     with tempfile.TemporaryFile(dir=store.out) as spill:  # the stacks read once, kept as float32 for the 2nd pass
         seen = _spill_stacks(store, np.unique(chosen), np.unique(failed), spill)
         if not seen:
@@ -254,9 +290,9 @@ def envelope_bands(
         "runs": one.runs,
         "failed": int(sum(b.sum() for _, _, b in one.chunks)),
         "finished": len(ids),
-        "failed_of": len(failing),
-        "every": every,
-        "failed_every": failed_every,
+        "failed_of": int(failing.sum()),
+        "drawn": drawn,
+        "failed_drawn": failed_drawn,
         "outputs": shape[1],
         "inputs": shape[2],
         "half_bin": width / 2,
@@ -333,18 +369,20 @@ def _extremes(sig: np.ndarray, lo: np.ndarray | None, hi: np.ndarray | None) -> 
     return (mn, mx) if lo is None else (np.fmin(lo, mn), np.fmax(hi, mx))
 
 
-def _status_ids(status: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray]:
-    """The distinct runs of ``status`` (id -> ``pass`` or ``fail``) and the failed ones, as ASCII bytes arrays in
-    ``status``' order (a run planned twice: where it is first)."""
+def _status_runs(status: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The distinct runs of ``status`` (id -> ``pass`` or ``fail``) as ASCII bytes in ``status``' order, each one's
+    draw (a plain mapping's: its place, the runs one grid point's draws) and whether each failed. A
+    :class:`~.rows.RunStatus` holds distinct runs already; a plain mapping's ids, made ASCII, are made distinct here
+    (where each is first)."""
     if isinstance(status, RunStatus):
-        ids, failed = status.ids, status.failed
-    else:
-        ids = np.array([i.encode("ascii", "replace") for i in status], dtype="S")
-        failed = np.array([v == "fail" for v in status.values()], bool)
+        return status.ids, status.draws, status.failed
+    ids = np.array([i.encode("ascii", "replace") for i in status], dtype="S")
+    failed = np.array([v == "fail" for v in status.values()], bool)
+    draws = np.arange(len(ids))
     first = np.sort(np.unique(ids, return_index=True)[1])
     if len(first) < len(ids):
-        ids, failed = ids[first], failed[first]
-    return ids, ids[failed]
+        ids, failed, draws = ids[first], failed[first], draws[first]
+    return ids, draws, failed
 
 
 def _bin_numbers(sig: np.ndarray, lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:
@@ -399,10 +437,11 @@ def _signals(plan: CampaignPlan) -> dict:
 def scatter_runs(fail: np.ndarray, cap: int | None = None) -> dict[str, tuple[np.ndarray, int]]:
     """The runs the scatter plot draws of its runs (``fail``: whether each failed, in plan order), by status
     (``"fail"``, ``"pass"``): each status's runs every k-th in plan order, k the smallest step that keeps them at most
-    ``cap`` (default :data:`SCATTER_RUNS`; all of them when they are that few), as the envelopes choose theirs
-    (:func:`envelope_runs`); each status's indices into the runs and its k."""
+    ``cap`` (default :data:`SCATTER_RUNS`; all of them when they are that few: :func:`every_kth`); each status's
+    indices into the runs and its k. (The scatter reads no trace: no row group to spare, as the envelopes'
+    :func:`envelope_runs` spares them.)"""
     cap = SCATTER_RUNS if cap is None else cap
-    return {status: envelope_runs(np.flatnonzero(fail == (status == "fail")), cap) for status in ("fail", "pass")}
+    return {status: every_kth(np.flatnonzero(fail == (status == "fail")), cap) for status in ("fail", "pass")}
 
 
 def _scatter_scope(fail: np.ndarray, drawn: dict[str, tuple[np.ndarray, int]]) -> str:

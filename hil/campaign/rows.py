@@ -27,8 +27,10 @@ from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
+import pyarrow as pa
 
 from .criteria import evaluate_columns
+from .jsontext import float_texts
 from .plan import PlanColumns, PlannedRuns, plan_columns
 
 FAILURES_LIMIT = 200
@@ -155,7 +157,8 @@ class _HeadTemplates:
 
     def _draws(self, js: np.ndarray) -> tuple[list[tuple[str, ...]], list[str]]:
         """Draws ``js``' values as JSON texts (by name) and their CSV cells with the seed (a comma after), an axis at
-        a time: a number's text is its ``repr`` in both (a value that is not finite: json's refusal, as a head's)."""
+        a time: a number's text is its ``repr`` in both (:func:`.jsontext.float_texts`; a value that is not finite:
+        json's refusal, as a head's)."""
         texts: dict[str, tuple[list[str], list[str]]] = {}
         for name, column in self.parts.drawn.items():
             if name in self.choices:
@@ -163,8 +166,9 @@ class _HeadTemplates:
                 both = [words[c] for c in column[js].astype(int).tolist()]
                 texts[name] = ([w for w, _ in both], [c for _, c in both])
                 continue
-            numbers = column[js].astype(float).tolist()
-            made = list(map(float.__repr__ if np.isfinite(numbers).all() else _json_value, numbers))
+            x = column[js].astype(float)
+            numbers = x.tolist()
+            made = float_texts(numbers, pa.array(x)) if np.isfinite(x).all() else list(map(_json_value, numbers))
             texts[name] = (made, made)
         seeds = list(map(str, self.parts.seeds[js].tolist()))
         json_ = list(zip(*(texts[name][0] for name in self.drawn))) if self.drawn else [()] * len(js)
@@ -498,7 +502,10 @@ class Tally:
         self.model = None if k < 0 else (float(model[k]), k, ids[k].decode("ascii"))
         self.flagged = int(v.warning[slot].sum())
         finished = code <= FAIL
-        self.status = RunStatus(ids[finished], code[finished] == FAIL)
+        distinct = np.zeros(len(slot), bool)  # a run planned twice: where it is first (its slot's first place)
+        distinct[np.unique(slot, return_index=True)[1]] = True
+        seen = finished & distinct
+        self.status = RunStatus(ids[seen], code[seen] == FAIL, plan_draws(self.plan)[seen])
         columns = plan_columns(self.plan)
         self._points(columns, code, iae)
         self._scatter(columns, code, iae)
@@ -565,11 +572,19 @@ class Tally:
         return out
 
 
-class RunStatus(Mapping):
-    """Run id -> ``pass`` or ``fail``, held as two arrays: the ids (ASCII bytes) and whether each failed."""
+def plan_draws(plan: Any) -> np.ndarray:
+    """Each planned run's draw, its place among its grid point's runs (a generated plan's run ``k``: ``k % runs``)."""
+    if isinstance(plan.runs, PlannedRuns):
+        return np.arange(len(plan.runs)) % max(plan.campaign.runs, 1)
+    return np.array([p.draw for p in plan.runs], np.int64)
 
-    def __init__(self, ids: np.ndarray, failed: np.ndarray) -> None:
-        self.ids, self.failed = ids, failed
+
+class RunStatus(Mapping):
+    """Run id -> ``pass`` or ``fail``, held as arrays: the ids (ASCII bytes, distinct), whether each failed and each
+    one's draw (:func:`plan_draws`)."""
+
+    def __init__(self, ids: np.ndarray, failed: np.ndarray, draws: np.ndarray) -> None:
+        self.ids, self.failed, self.draws = ids, failed, draws
 
     def __len__(self) -> int:
         return len(self.ids)

@@ -55,7 +55,7 @@ from gainlink.version import __version__
 
 from .config import CampaignError
 from .criteria import RunColumns
-from .jsontext import compact_json, json_texts, object_texts
+from .jsontext import ARROW_FLOATS, compact_json, float_texts, json_texts, object_texts
 from .plan import CampaignPlan, RunPoint
 from .rows import MEASURE_CELLS, METRIC_CELLS
 
@@ -74,9 +74,10 @@ SCHEMA = pa.schema(
     ]
 )
 META_VERSION, META_CAMPAIGN, META_LAYOUT = b"gainlink.version", b"gainlink.campaign", b"gainlink.block_layout"
-LAYOUT = "5"  # 2: the record split into ``record`` and ``row``; 3: the row's verdict inputs as typed columns too;
+LAYOUT = "6"  # 2: the record split into ``record`` and ``row``; 3: the row's verdict inputs as typed columns too;
 # 4: each trace a run's float32 bytes (not a list of floats: Parquet's levels per value, and numpy's per run to read);
-# 5: a row's typed values (complete, run_reason, measures, worker) not again in JSON: its text made from the columns
+# 5: a row's typed values (complete, run_reason, measures, worker) not again in JSON: its text made from the columns;
+# 6: one row group a block (5: a row group a TRACE_BATCH of runs)
 ROW_KEYS = ("complete", "measures", "metrics", "worker")  # what a report row takes from a record, as it is
 # bit k of ``row_keys``: the row has ROW_BITS[k]; its measures have the twin's, the model twin's, growth ratios
 ROW_BITS = ("complete", "run_reason", "worker", "measures", "metrics", "twin", "model", "growth")
@@ -130,6 +131,10 @@ def block_address(run_ids: Iterable[str]) -> str:
 #: once, with the copies made of them, took the client's peak resident memory 77 MB over its start for 10,000 runs;
 #: 128 at a time, 45 MB, for the same CPU.
 TRACE_BATCH = 128
+
+#: Bytes of a block file's column read at a time for the envelopes (:meth:`Store.trace_stacks`): its pages decoded as
+#: the batches need them, not its whole column chunk (a block's: one row group) read at once.
+TRACE_BUFFER = 1 << 20
 
 #: The block file's columns whose values repeat from run to run (dictionary-encoded in the Parquet file).
 REPEATED = ["status", "names", "run_reason"]
@@ -220,11 +225,17 @@ def _block_file(texts: dict[str, pa.Array], traces: list, typed: dict[str, pa.Ar
     # the traces' and the JSON texts' values, nearly all distinct, and the file came out 19 % larger. No statistics:
     # nothing reads them (a trace's min and max bytes, a JSON text's), and they were 10 % of the write. The traces in
     # LZ4: zstd gained 5 % of the file on float bytes for 3.5x the write and 3x the read (910 runs: 48 -> 14 and
-    # 25 -> 8 us a run). A row group a TRACE_BATCH of runs: the envelopes' batched read of a block's traces held its
-    # whole row group's (the read's peak on the 10,002-run store +56 MB with a row group a block, +35 so).
+    # 25 -> 8 us a run). One row group a block: a row group a TRACE_BATCH of runs cost the write ~40 % more and the
+    # report's read of its columns ~75 % more (each column chunk's pages and metadata per group); the envelopes read
+    # a block's traces through a buffered stream (TRACE_BUFFER), its pages as the batches need them.
     codecs = {path: "lz4" if path in TRACE_FIELDS else "zstd" for path in _leaf_paths(table.schema)}
     pq.write_table(
-        table, sink, compression=codecs, use_dictionary=REPEATED, write_statistics=False, row_group_size=TRACE_BATCH
+        table,
+        sink,
+        compression=codecs,
+        use_dictionary=REPEATED,
+        write_statistics=False,
+        row_group_size=max(table.num_rows, 1),
     )
     return sink.getvalue().to_pybytes()
 
@@ -452,13 +463,18 @@ _TRUTH = {True: "true", False: "false", None: "null"}
 
 def _numbers_text(arr: pa.Array, *, repeated: bool = False) -> list[str]:
     """A float64 or int64 column's values as JSON writes each (``null`` where null; a float by its ``repr``, as
-    json's encoder). ``repeated``: a column of a few distinct values (a block's worker, its runs' sample times), each
-    made text once."""
+    json's encoder: of a long float column, through :func:`.jsontext.float_texts`). ``repeated``: a column of a few
+    distinct values (a block's worker, its runs' sample times), each made text once."""
     if repeated:
         codes = pc.dictionary_encode(arr)
         words = _numbers_text(codes.dictionary) + ["null"]
         return [words[k] for k in codes.indices.fill_null(len(words) - 1).to_numpy(zero_copy_only=False).tolist()]
     values = arr.to_pylist()
+    if pa.types.is_float64(arr.type) and len(arr) - arr.null_count >= ARROW_FLOATS:
+        if not arr.null_count:
+            return float_texts(values, arr)
+        made = iter(float_texts([v for v in values if v is not None], arr.drop_null()))
+        return ["null" if v is None else next(made) for v in values]
     return list(map(repr, values)) if not arr.null_count else ["null" if v is None else repr(v) for v in values]
 
 
@@ -619,6 +635,14 @@ def write_block(folder: str, key: tuple[int, int], ids: list[str], data: bytes, 
     name = f"{block_address(ids)}.parquet"
     atomic_write_bytes(path / name, data)
     return {"block": name, "runs": len(ids), "errors": errors}
+
+
+def _row_groups(block: pq.ParquetFile, wanted: np.ndarray) -> list[int]:
+    """The row groups of the open block file ``block`` that hold one of the runs ``wanted`` (sorted, distinct), from
+    its ``id`` column (a few bytes a run) and its row groups' sizes."""
+    rows = np.flatnonzero(members(_ids(block.read(columns=["id"], use_threads=False).column("id")), wanted))
+    ends = np.cumsum([block.metadata.row_group(g).num_rows for g in range(block.num_row_groups)])
+    return np.unique(np.searchsorted(ends, rows, side="right")).tolist()
 
 
 def _read(path: Path | pq.ParquetFile, columns: list[str]) -> pa.Table:
@@ -931,13 +955,25 @@ class Store:
     ) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray]]]:
         """The stored traces of the runs ``ids`` that have a result, a block file at a time and within it
         :data:`TRACE_BATCH` runs at a time, stacked: for each batch, the runs of one trace shape as ``(ids (ASCII
-        bytes), {"t": (k, N), "y": (k, N, p), "u": ..., "r": ...})``; only ``fields`` (and ``t``) are read."""
+        bytes), {"t": (k, N), "y": (k, N, p), "u": ..., "r": ...})``; only ``fields`` (and ``t``) are read, of the
+        block files that hold one of the runs only the row groups that do (:meth:`_row_groups`)."""
         wanted, wide = np.unique(_wanted(ids)), [k for k in WIDE if k in fields]
         columns = ["id", "t", *wide, *(f"{k}_width" for k in WIDE)]
-        for path in self.files():
+        for path in self._holding(wanted):
             pa.default_memory_pool().release_unused()  # as _read: what the blocks before left in Arrow's pool
-            for batch in pq.ParquetFile(path, pre_buffer=False).iter_batches(TRACE_BATCH, columns=columns):
-                yield from self._stacks(path, pa.Table.from_batches([batch]), wanted, wide)
+            with pq.ParquetFile(path, pre_buffer=False, buffer_size=TRACE_BUFFER) as block:
+                groups = _row_groups(block, wanted)
+                for batch in block.iter_batches(TRACE_BATCH, row_groups=groups, columns=columns) if groups else ():
+                    yield from self._stacks(path, pa.Table.from_batches([batch]), wanted, wide)
+
+    def _holding(self, wanted: np.ndarray) -> list[Path]:
+        """The block files, by name, whose kept results include one of the runs ``wanted`` (sorted, distinct)."""
+        table_ids, done, block = self._table()
+        if not len(table_ids) or not len(wanted):
+            return []
+        k = np.minimum(np.searchsorted(table_ids, wanted), len(table_ids) - 1)
+        numbers = np.unique(block[k[(table_ids[k] == wanted) & done[k]]])
+        return sorted(self.blocks / self._names[n] for n in numbers.tolist())
 
     def _stacks(
         self, path: Path, table: pa.Table, wanted: np.ndarray, wide: list[str]
