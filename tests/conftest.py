@@ -25,22 +25,19 @@ from gainlink.shipping import artifact as artifact_mod
 from gainlink.shipping.artifact import load
 from gainlink.spec import load_spec
 from support.mavlink import retuned_pendulum
+from support.order import slow_first
 from support.paths import EXAMPLE_NAMES, EXAMPLES
 from support.shared import once_per_run, register_run
 
 
-def _run_order(item: pytest.Item) -> tuple[bool, float]:
-    slow = item.get_closest_marker("slow")
-    return slow is None, -float(slow.kwargs.get("cpu", 0.0)) if slow else 0.0
-
-
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """The tests marked ``slow`` (builds, VMs, long closed loops) run first, the dearest first (``slow(cpu=N)``:
-    the CPU seconds the test, or the group or fixture it starts, was measured to take), the rest keep their order:
-    with `make test`'s scheduling (``--dist loadgroup --no-loadscope-reorder``: tests a few at a time in this
-    order, those of one ``xdist_group`` together, where its first test falls) the long ones spread over the
-    workers from the start instead of ending the run on one of them."""
-    items.sort(key=_run_order)
+    the CPU seconds the test, or the group or fixture it starts, was measured to take), the rest keep their order,
+    and the tests of one ``xdist_group`` stay together where their dearest one falls (support.order): with `make
+    test`'s scheduling (``--dist loadgroup --no-loadscope-reorder``: tests a few at a time in this order, those of one
+    ``xdist_group`` together on one worker) the long ones spread over the workers from the start instead of ending
+    the run on one of them, and in one process a group's module fixtures are made once."""
+    slow_first(items)
 
 
 def _cpu_seconds() -> float:

@@ -26,9 +26,9 @@ from gainlink.firmware.build import firmware_dir, replay_image
 from gainlink.firmware.cost import count_step_instructions
 from gainlink.firmware.targets import BOARDS, CORTEX_M_TARGETS, TARGETS
 from gainlink.hil.loop.pil import make_plant, run_pil
-from gainlink.laws.lq.golden import example_cases
 from gainlink.shipping.artifact import load
 from support.cli import assert_refused, run_cli
+from support.designs import golden_examples
 
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = ("u", "sat", "xh", "z", "fault")
@@ -43,7 +43,7 @@ def _quiet_design_warnings():
 
 @pytest.fixture(scope="module")
 def pendulum():
-    return example_cases(ROOT / "examples")[0]
+    return golden_examples()[0]
 
 
 def assert_bit_identical(a: dict, b: dict, label: str) -> None:

@@ -196,9 +196,17 @@ PAGE_CPU = {"docs/guide/python.md": 9, "README.md": 6, "docs/guide/firmware.md":
             "docs/guide/specs.md": 1, "docs/guide/troubleshooting.md": 1}  # fmt: skip
 
 
+#: The pages' tests and the server's own: one worker runs them, so one CLI server serves them all (on every worker
+#: that came to a page, each server's start cost its 3.3 CPU-s)
+ON_THE_SERVER = pytest.mark.xdist_group("docs-cli-server")
+
+
 def _page_params(tier: str) -> list:
-    return [pytest.param(page, marks=pytest.mark.slow(cpu=PAGE_CPU.get(str(page.relative_to(ROOT)), 0)))
-            for page in _ids(tier)]  # fmt: skip
+    return [pytest.param(page, marks=[pytest.mark.slow(cpu=_page_cpu(page)), ON_THE_SERVER]) for page in _ids(tier)]
+
+
+def _page_cpu(page: Path) -> float:
+    return PAGE_CPU.get(str(page.relative_to(ROOT)), 0)
 
 
 @pytest.fixture(scope="session")
@@ -206,8 +214,9 @@ def gainlink_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     """A folder whose ``gainlink`` runs each command as the console script would, in a fork of one process that
     imported the command line and its libraries once (``support/cli_server.py``: python-control's import alone is
     2.6 CPU-s a command). One per worker (session: a module's fixtures are made again each time a worker comes back
-    to the module); stopped at the worker's end, having waited for every command it ran, so that their CPU is the
-    suite's (GAINLINK_TEST_CPU counts it in the worker's last test)."""
+    to the module), and the tests that use it are one xdist group (ON_THE_SERVER), so one worker starts one; stopped
+    at the worker's end, having waited for every command it ran, so that their CPU is the suite's (GAINLINK_TEST_CPU
+    counts it in the worker's last test)."""
     folder = tmp_path_factory.mktemp("gainlink_cli")
     sock = folder / "cli.sock"
     write_client(folder / "gainlink", sock)
@@ -231,6 +240,7 @@ def test_the_blocks_of_a_page_run_as_written(page, tmp_path, gainlink_server):
     run_page(page, tmp_path, ("test",), gainlink_server)
 
 
+@ON_THE_SERVER
 def test_a_command_through_the_server_is_the_console_scripts(gainlink_server, pend, tmp_path):
     """The pages' ``gainlink`` (a fork of the CLI server) against the installed console script, the reader's: the
     same exit status, stdout, stderr and files for a command that writes in the caller's folder, a refusal (exit 2,
@@ -252,6 +262,7 @@ def test_a_command_through_the_server_is_the_console_scripts(gainlink_server, pe
 
 
 @pytest.mark.matrix
+@ON_THE_SERVER
 @pytest.mark.parametrize("page", _ids("matrix"), ids=lambda p: str(p.relative_to(ROOT)))
 def test_the_long_blocks_of_a_page_run_as_written(page, tmp_path, gainlink_server):
     run_page(page, tmp_path, ("test", "matrix"), gainlink_server)

@@ -7,14 +7,13 @@ import logging
 import pytest
 from gainlink.firmware.build import replay_image
 from gainlink.firmware.cost import count_step_instructions, law_macs
-from gainlink.laws.lq.golden import example_cases
-from support.paths import EXAMPLES
+from support.designs import golden_examples
 
 
 @pytest.fixture(scope="module")
 def pendulum():
     logging.disable(logging.WARNING)
-    yield example_cases(EXAMPLES)[0]
+    yield golden_examples()[0]
     logging.disable(logging.NOTSET)
 
 

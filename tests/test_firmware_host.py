@@ -17,13 +17,13 @@ import numpy as np
 import pytest
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware.build import build
-from gainlink.laws.lq.golden import example_cases, random_cases
+from gainlink.laws.lq.golden import random_cases
 from gainlink.proof.reference import ReferenceLoop
 from gainlink.shipping.artifact import from_dict, seal
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
-from support.paths import EXAMPLES
+from support.designs import golden_examples
 
 RTOL = 1e-4
 FORMS, MODES = ("predictor", "current"), ("none", "clamp", "backcalc")
@@ -60,7 +60,7 @@ def assert_matches_reference(trace, expected, artifact, label):
 
 
 def test_examples_match_reference():
-    for case in example_cases(EXAMPLES):
+    for case in golden_examples():
         trace = NativeLoop(case.artifact).run(case.Y, case.R)
         assert case.expected.saturated.any(), f"{case.label}: golden samples should saturate"
         assert_matches_reference(trace, case.expected, case.artifact, case.label)
@@ -112,7 +112,7 @@ def test_generated_unrolled_step_is_bit_identical_to_generic_loops(random_design
 
 @pytest.fixture(scope="module")
 def pendulum():
-    return example_cases(EXAMPLES)[0]
+    return golden_examples()[0]
 
 
 def test_nan_sample_leaves_state_untouched_and_returns_safe_command(pendulum):

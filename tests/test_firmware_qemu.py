@@ -20,10 +20,10 @@ from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware import qemu as fwqemu
 from gainlink.firmware.build import build, replay_image
-from gainlink.laws.lq.golden import example_cases, random_cases
+from gainlink.laws.lq.golden import random_cases
 from gainlink.shipping.artifact import render
 from support.cli import assert_refused
-from support.paths import EXAMPLES
+from support.designs import golden_examples
 
 KEYS = ("u", "sat", "xh", "z", "fault")
 GAINLINK = str(Path(sys.executable).with_name("gainlink"))  # the console script, run as a real process
@@ -40,7 +40,7 @@ def assert_bit_identical(a: dict, b: dict, label: str) -> None:
 
 @pytest.mark.parametrize("board", ["mps2-an386", "netduinoplus2"])
 def test_examples_bit_identical_to_host_on_both_boards(board):
-    for case in example_cases(EXAMPLES):
+    for case in golden_examples():
         Y = case.Y.copy()
         Y[17, 0] = np.nan  # a refused sample travels through both
         host = NativeLoop(case.artifact).run_raw(Y, case.R)
@@ -76,7 +76,7 @@ def test_more_random_designs_bit_identical_to_host(index):
 
 @pytest.fixture(scope="module")
 def pendulum():
-    return example_cases(EXAMPLES)[0]
+    return golden_examples()[0]
 
 
 def test_watchdog_in_the_image(pendulum):

@@ -5,6 +5,7 @@ stable and unstable compensators, q31 and q15)."""
 
 from __future__ import annotations
 
+import hashlib
 import math
 from fractions import Fraction
 
@@ -20,6 +21,7 @@ from gainlink.proof.sampled_plant import SampledPlant
 from gainlink.shipping.artifact import from_dict
 from gainlink.spec import parse_spec
 from gainlink.synthesis.random_plants import random_spec
+from support.shared import once
 
 # (seed, random_spec options, numeric): chosen to cover stable plants (4, 7, 10) and unstable ones (0, 2, 9), both
 # forms, clamp, back-calculation and no integrator, and unstable compensators (2: |z| = 1.14; 4 current: 1.11)
@@ -56,12 +58,18 @@ def _no_float32(spec: dict) -> dict:
 
 
 def _design(case):
+    """The case's artifact and certificate, made once per test run (support.shared.once: the cases' tests are
+    spread over the workers, and each worker designed and certified every case again, 5 CPU-s for the eight)."""
     key = repr(case)
     if key not in _CACHE:
-        seed, kw, numeric = case
-        a = from_dict(design_spec(parse_spec(_no_float32(random_spec(seed, **kw)))).artifact)
-        _CACHE[key] = (a, certify(a, _ranges(a), numeric=numeric, max_error=1.0))
+        _CACHE[key] = once(f"fixed-law-{hashlib.sha256(key.encode()).hexdigest()[:16]}", lambda: _certified(case))
     return _CACHE[key]
+
+
+def _certified(case):
+    seed, kw, numeric = case
+    a = from_dict(design_spec(parse_spec(_no_float32(random_spec(seed, **kw)))).artifact)
+    return a, certify(a, _ranges(a), numeric=numeric, max_error=1.0)
 
 
 def _in_range(rng, a, steps: int, corners: bool) -> tuple[np.ndarray, np.ndarray]:

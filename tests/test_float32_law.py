@@ -11,9 +11,8 @@ import ctypes.util
 import numpy as np
 import pytest
 from gainlink.engines.native import NativeLoop
-from gainlink.laws.lq.golden import example_cases
 from gainlink.laws.lq.model import Float32Loop, fma32_exact
-from support.paths import EXAMPLES
+from support.designs import golden_examples
 
 pytestmark = pytest.mark.usefixtures("quiet_design_warnings")
 
@@ -97,7 +96,7 @@ def test_the_compared_cases_cover_every_structure(random_designs, closed_loop_de
 def test_float32_loop_equals_the_host_build_bit_for_bit(source, request):
     """The numpy float32 model equals the host build bit for bit (a refused sample included), on the examples
     and on one random design per compiled structure."""
-    cases = example_cases(EXAMPLES) if source == "examples" else _structures(request.getfixturevalue(source))
+    cases = golden_examples() if source == "examples" else _structures(request.getfixturevalue(source))
     for case in cases:
         Y = case.Y.copy()
         Y[11, 0] = np.nan  # a refused sample: the safe command, state kept

@@ -24,6 +24,7 @@ from gainlink.spec import parse_spec
 from gainlink.synthesis.compensator import compensator_stability
 from gainlink.synthesis.random_plants import random_spec
 from support.cli import assert_refused, run_cli
+from support.designs import golden_examples
 from support.oracles import jacobian_poles
 
 CLOSED_LOOP_DESIGNS = 12  # conftest's closed_loop_designs
@@ -209,10 +210,7 @@ def test_what_the_one_step_check_catches_is_what_its_docstring_says(closed_loop_
     every gain matrix is caught on the pendulum and quadrotor_lateral records, of Ad and Cd on every record
     (the examples' golden records and twelve random closed-loop ones). It used to say any gain bent by 1e-4
     is caught: measured over 8 matrices x 15 records, 9 of 96 such bends pass (K on loop110, Kaw of Wood-Berry)."""
-    from gainlink.laws.lq.golden import example_cases
-    from support.paths import EXAMPLES
-
-    examples = list(example_cases(EXAMPLES))
+    examples = list(golden_examples())
     assert [c.label for c in examples] == ["pendulum", "quadrotor_lateral", "wood_berry"]
     case = (examples + list(closed_loop_designs))[index]
     a = case.artifact

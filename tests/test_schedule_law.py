@@ -22,9 +22,10 @@ pytestmark = [pytest.mark.xdist_group("test_schedule_law"), pytest.mark.slow(cpu
 
 @pytest.fixture(scope="module", params=["predictor", "current"])
 def scheduled(request):
-    """(spec, artifact) of the external-sigma tank in each observer form."""
-    spec = parse_spec(external_tank(form=request.param))
-    return spec, from_dict(design_spec(spec).artifact)
+    """(spec, artifact) of the external-sigma tank in each observer form (designed once per run: the predictor form is
+    the tank six other modules use)."""
+    data = external_tank(form=request.param)
+    return parse_spec(data), from_dict(designed(data))
 
 
 def _hand_coefficients(art_i, Ts: float) -> dict:

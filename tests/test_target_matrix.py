@@ -18,7 +18,8 @@ from gainlink.engines import qemu as qemu_engine
 from gainlink.engines.native import NativeLoop
 from gainlink.firmware.targets import BOARDS, CORTEX_M_TARGETS
 from gainlink.hil.loop.pil import make_plant, run_pil
-from gainlink.laws.lq.golden import EXAMPLES, example_cases, random_cases
+from gainlink.laws.lq.golden import EXAMPLES, random_cases
+from support.designs import golden_examples
 
 pytestmark = pytest.mark.matrix
 
@@ -36,7 +37,7 @@ def _quiet_design_warnings():
 
 
 def _case(name: str):
-    return next(c for c in example_cases(ROOT / "examples") if c.label == name)
+    return next(c for c in golden_examples() if c.label == name)
 
 
 def assert_bit_identical(a: dict, b: dict, label: str) -> None:

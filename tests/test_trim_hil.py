@@ -70,6 +70,10 @@ def fmu_parameters(fmu: Path) -> dict:
     return {v.name: float(v.start) for v in md.modelVariables if v.causality == "parameter"}
 
 
+# the five tests read one linearization and design (3 CPU-s): one worker makes it for them, not each that meets one
+pytestmark = pytest.mark.xdist_group("test_trim_hil")
+
+
 @pytest.fixture(scope="module")
 def hover(tmp_path_factory) -> dict:
     """FMU -> ``gainlink linearize --at`` -> spec -> ``gainlink design`` -> artifact; and the same artifact

@@ -14,11 +14,14 @@ import json
 from typing import Any
 
 from gainlink.laws import design as design_spec
+from gainlink.laws.lq.golden import GoldenCase, example_cases
 from gainlink.spec import parse_spec
 
+from .paths import EXAMPLES
 from .shared import once
 
 _LOCAL: dict[str, dict] = {}  # this process's copies
+_GOLDEN: list[tuple[GoldenCase, ...]] = []
 
 
 def designed(spec: dict) -> dict[str, Any]:
@@ -29,3 +32,12 @@ def designed(spec: dict) -> dict[str, Any]:
     if key not in _LOCAL:
         _LOCAL[key] = once(key, lambda: design_spec(parse_spec(data)).artifact)
     return copy.deepcopy(_LOCAL[key])
+
+
+def golden_examples() -> tuple[GoldenCase, ...]:
+    """:func:`gainlink.laws.lq.golden.example_cases` of the shipped examples (their designs and golden records, 2.2
+    CPU-s), made once per test run: eight modules use them, spread over every worker. One copy per process, as the
+    function's own cache gives."""
+    if not _GOLDEN:
+        _GOLDEN.append(once("golden-example-cases", lambda: example_cases(EXAMPLES)))
+    return _GOLDEN[0]

@@ -24,10 +24,11 @@ _RUN: list[pytest.TempPathFactory] = []  # the run's factory, registered by conf
 
 
 def once_per_run(factory: pytest.TempPathFactory, name: str, make: Callable[[], T]) -> T:
-    """``make()``, computed by one process of this run (directly when the run is not distributed)."""
-    if "PYTEST_XDIST_WORKER" not in os.environ:
-        return make()
-    root = factory.getbasetemp().parent  # the run's folder, above every worker's own
+    """``make()``, computed by one process of this run; every call gets its own copy (unpickled), in one process as
+    under pytest-xdist (`make test TEST_WORKERS=0`, ``-n 0``: the slow-first order sets a module fixture up again
+    after its module's slow tests, and the modules sharing a value each asked for it)."""
+    base = factory.getbasetemp()
+    root = base.parent if "PYTEST_XDIST_WORKER" in os.environ else base  # the run's folder, above every worker's own
     path = root / f"{name}.pickle"
     with exclusive_lock(root / f"{name}.lock"):
         if path.is_file():
