@@ -19,6 +19,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import warnings
@@ -799,6 +800,10 @@ def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster
     before = _stored(out)
     assert 3 <= len(before) < 8, "the campaign was not caught halfway"
     assert not list(out.glob("campaign.json"))
+    # what a worker killed while it wrote a block file leaves: the file's temporary name (fileio.atomic_writer's)
+    fd, unfinished = tempfile.mkstemp(prefix=".0a1b2c.parquet.", suffix=".tmp", dir=out / "blocks")
+    os.write(fd, b"PAR1 half a block")
+    os.close(fd)
     # Resumed on the scheduler + workers of this module (no second LocalCluster to start): results are the
     # folder's, whichever cluster made them.
     res = run_cli("campaign", "run", path, "--out", out, "--scheduler", dask_cluster, "--no-progress", "--no-plots")
@@ -807,6 +812,7 @@ def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster
     after = _stored(out)
     assert len(after) == 8 and all(after[k] == v for k, v in before.items())
     assert json.loads((out / "campaign.json").read_text())["counts"]["runs"] == 8
+    assert not Path(unfinished).exists() and not list((out / "blocks").glob(".*"))
 
 
 @pytest.mark.slow
@@ -919,7 +925,7 @@ def test_ctrl_c_while_the_cluster_starts_exits_130_with_one_line_and_leaves_no_p
 
 
 # A run stuck in C code that holds the GIL (here a libc sleep of 8 s) when Ctrl-C comes: its worker cannot stop, and
-# the nanny kills it after 4 s, with a warning of Dask's that the stop the user asked for is not worth.
+# is killed (cluster._end_workers; a nanny's own stop warned after 4 s that it killed it: Dask's news, not the user's).
 _STUCK_RUN_INTERRUPTED = """
 import ctypes, logging, time
 from gainlink.hil.campaign.cluster import dask_client, quiet_dask_logs
@@ -950,6 +956,48 @@ def test_ctrl_c_during_a_run_stuck_in_c_code_stops_the_cluster_without_dask_s_wa
     script.write_text(_STUCK_RUN_INTERRUPTED)
     res = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert (res.returncode, res.stdout, res.stderr) == (0, "stopped\n", "")
+
+
+# A run in progress when Ctrl-C comes: 3 s of work left. Its result is not wanted (the campaign keeps what was stored
+# and resumes the rest), so its worker is ended at once; a nanny's own stop asks the worker to close and waits 4 s for
+# it, and the run finished first (a Ctrl-C took ~5 s to return while a block ran).
+_RUN_INTERRUPTED = """
+import logging, sys, time
+from pathlib import Path
+from gainlink.hil.campaign.cluster import dask_client, quiet_dask_logs
+
+def run_on(marker, started, seconds):
+    Path(started).write_text("started")
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        time.sleep(0.05)
+    Path(marker).write_text("finished")
+
+if __name__ == "__main__":
+    logging.basicConfig(format="gainlink: %(levelname)s: %(message)s")
+    quiet_dask_logs(logging.WARNING)  # as gainlink campaign run does
+    marker, started, seconds = Path("finished.txt").resolve(), Path("started.txt").resolve(), 3.0
+    try:
+        with dask_client(workers=1) as client:
+            client.wait_for_workers(1, timeout=60)
+            future = client.submit(run_on, str(marker), str(started), seconds, pure=False)
+            deadline = time.monotonic() + 60
+            while not started.exists() and time.monotonic() < deadline:
+                time.sleep(0.02)
+            raise KeyboardInterrupt
+    except KeyboardInterrupt:
+        time.sleep(seconds + 1.0)  # past the end the run would have had
+        print("finished" if marker.exists() else "stopped")
+"""
+
+
+@pytest.mark.slow
+def test_ctrl_c_ends_the_run_in_progress_instead_of_waiting_for_it(tmp_path):
+    script = tmp_path / "run_on.py"
+    script.write_text(_RUN_INTERRUPTED)
+    res = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert (res.returncode, res.stdout, res.stderr) == (0, "stopped\n", ""), res.stderr
+    assert (tmp_path / "started.txt").is_file()
 
 
 # --- a real scheduler and two workers ---------------------------------------------------------------

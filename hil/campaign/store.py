@@ -781,7 +781,9 @@ class Store:
         self._loaded = False
 
     def prepare(self, plan: CampaignPlan, *, plan_doc: dict) -> None:
-        """Write the inputs: artifacts, FMUs and ``plan.json``; make the ``blocks`` folder."""
+        """Write the inputs: artifacts, FMUs and ``plan.json``; make the ``blocks`` folder, and remove from it the
+        temporary files of block files an earlier run of the folder did not finish writing (a worker ended by a
+        Ctrl-C, or killed, while it wrote one: those runs are run again)."""
         for folder, items, ext in (("artifacts", plan.artifacts, "json"), ("fmus", plan.blobs, "fmu")):
             if items:
                 (self.out / folder).mkdir(exist_ok=True)
@@ -791,6 +793,8 @@ class Store:
                     atomic_write_bytes(path, data)
         atomic_write_text(self.out / "plan.json", _json(plan_doc))
         self.blocks.mkdir(exist_ok=True)
+        for unfinished in self.blocks.glob(".*.parquet.*.tmp"):  # fileio.atomic_writer's temporary names
+            unfinished.unlink(missing_ok=True)
 
     def files(self) -> list[Path]:
         """The block files, by name."""
