@@ -226,6 +226,7 @@ def dask_client(
         quiet_dask_logs(_dask_log_level())
         with contextlib.suppress(Exception):  # the interrupt is the news, not what stopping in its middle raised
             _end_workers(cluster)
+        with contextlib.suppress(Exception):  # (closed whether or not the workers could be ended first)
             cluster.close()
         raise
     finally:
