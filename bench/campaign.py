@@ -159,6 +159,7 @@ def timed_campaign(data: dict, client, out: Path) -> dict:
     """Wall time, and CPU time of the workers and nannies plus this process (client and the LocalCluster's
     scheduler); the CPU of this process after the last run was stored is the report's."""
     from gainlink.hil.campaign import run
+    from gainlink.hil.campaign.store import Store
 
     last = {}
 
@@ -175,7 +176,7 @@ def timed_campaign(data: dict, client, out: Path) -> dict:
     n = result.total
     report_cpu = c1 - last["cpu"]
     # The runs' own CPU, measured on the worker around the run function: the rest is the machinery's.
-    runs_cpu = sum(r["worker"]["cpu_s"] for r in result.rows if r.get("worker"))
+    runs_cpu = Store(out).runs_cpu_s()
     return {
         "runs": n,
         "wall_s": round(wall, 3),

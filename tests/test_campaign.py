@@ -488,10 +488,13 @@ def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pen
     result, out, _ = local_run
     assert result.total == 6 and result.executed == 6 and result.reused == 0 and result.errors == 0
     doc = json.loads((out / "campaign.json").read_text())
-    assert doc["counts"]["runs"] == 6 and doc["counts"]["pass"] == result.passed
+    assert doc["counts"]["runs"] == 6 and doc["counts"]["pass"] == result.passed and "runs" not in doc
+    assert sorted(f["id"] for f in doc["failures"]) == sorted(r["id"] for r in _csv_rows(out) if r["status"] != "pass")
     a = load(pend)
     store = Store(out)
-    for row in doc["runs"]:
+    rows = list(result.rows)
+    assert [r["id"] for r in rows] == [r["id"] for r in _csv_rows(out)] and len(rows) == 6
+    for row in rows:
         rec = store.record(row["id"])
         sc = dict(rec["inputs"]["scenario"], artifact=str(pend), transport={})
         direct = run_scenario(dataclasses.replace(parse_scenario(sc), seed=row["seed"]), artifact=a)
@@ -504,7 +507,7 @@ def test_local_cluster_runs_equal_direct_sil_runs_and_the_report_is_complete(pen
         for k in ("t", "y", "u", "r"):
             assert np.array_equal(stored[k], getattr(direct.trace, k).astype(np.float32)), k
     # The bigger initial offset takes longer to settle: the verdicts follow the metrics, per criterion.
-    for row in doc["runs"]:
+    for row in rows:
         ts = row["metrics"]["tracked"]["r_x"]["settling_time_s"]
         assert ("settled_within" in row["failed"]) == (ts is None or ts > 2.5)
     lines = (out / "campaign.csv").read_text().splitlines()
@@ -548,8 +551,8 @@ def test_no_plots_merges_the_report_without_pngs_and_removes_those_of_an_earlier
     assert "resumed: 6 runs had results, 0 ran now" in res.out  # every run kept: no cluster, only the merge
     assert not (folder / "envelopes.png").exists() and not (folder / "scatter.png").exists()
     assert ".png" not in (folder / "summary.txt").read_text() and ".png" in (out / "summary.txt").read_text()
-    rows = json.loads((folder / "campaign.json").read_text())["runs"]
-    assert rows == json.loads((out / "campaign.json").read_text())["runs"]
+    assert (folder / "campaign.csv").read_bytes() == (out / "campaign.csv").read_bytes()
+    assert json.loads((folder / "campaign.json").read_text()) == json.loads((out / "campaign.json").read_text())
 
 
 @ON_THE_CLUSTERS
@@ -756,6 +759,18 @@ def test_the_envelopes_read_block_by_block_are_numpys_percentiles_within_half_a_
 
 
 # --- a campaign killed halfway resumes ---------------------------------------------------------------
+
+
+def _csv_rows(out: Path) -> list[dict]:
+    """The runs of the campaign folder ``out`` as a user of the CLI reads them: each ``campaign.csv`` row (index, id,
+    status, reasons) and the run's record in the store (``None`` without one)."""
+    import csv
+
+    store = Store(out)
+    with (out / "campaign.csv").open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    return [{"index": int(r["index"]), "id": r["id"], "status": r["status"], "reasons": r["reasons"],
+             "record": store.record(r["id"]) if store.has(r["id"]) else None} for r in rows]  # fmt: skip
 
 
 def _stored(out: Path) -> dict[str, int]:
@@ -1090,13 +1105,12 @@ def test_scheduler_and_two_worker_processes_give_the_local_cluster_results(pend,
         "--no-plots",
     )
     assert res.code == 0, res.err
-    local = json.loads((local_out / "campaign.json").read_text())["runs"]
-    dist = json.loads((tmp_path / "dist" / "campaign.json").read_text())["runs"]
+    local, dist = _csv_rows(local_out), _csv_rows(tmp_path / "dist")
     assert [r["id"] for r in dist] == [r["id"] for r in local]
     for a, b in zip(local, dist):
         assert (a["status"], a["reasons"]) == (b["status"], b["reasons"])
-        assert {k: a["metrics"].get(k) for k in CONTROL_KEYS} == {k: b["metrics"].get(k) for k in CONTROL_KEYS}
-    assert {r["worker"]["pid"] for r in dist} <= _worker_pids(dask_cluster)
+        assert _control(a["record"]) == _control(b["record"])
+    assert {r["record"]["worker"]["pid"] for r in dist} <= _worker_pids(dask_cluster)
 
 
 @ON_THE_CLUSTERS
@@ -1229,9 +1243,9 @@ def test_runs_that_errored_fail_the_campaign_and_only_they_run_again_on_resume(p
         "again, and only them, once the cause is fixed"
     )
     assert "4 runs, " in first.out and ", 2 errors" in first.out and "resumed" not in first.out
-    rows = json.loads((out / "campaign.json").read_text())["runs"]
+    rows = _csv_rows(out)
     assert [r["status"] == "error" for r in rows] == [False, False, True, True]
-    assert rows[2]["reasons"] == [f"BuggyPendulum: broken while {broken} exists"]
+    assert rows[2]["reasons"] == f"BuggyPendulum: broken while {broken} exists"
     kept = {r["id"]: _stored(out)[r["id"]] for r in rows[:2]}
     broken.unlink()  # the cause fixed: the same command
     second = run_cli(*argv)
@@ -1239,7 +1253,7 @@ def test_runs_that_errored_fail_the_campaign_and_only_they_run_again_on_resume(p
     assert "resumed: 2 runs had results, 2 ran now" in second.out
     doc = json.loads((out / "campaign.json").read_text())
     assert doc["counts"]["runs"] == 4 and doc["counts"].get("error", 0) == 0
-    assert all(r["status"] in ("pass", "fail") for r in doc["runs"])
+    assert all(r["status"] in ("pass", "fail") for r in _csv_rows(out))
     assert {i: _stored(out)[i] for i in kept} == kept  # not run again
     third = run_cli(*argv)
     assert third.code == 0 and "resumed: 4 runs had results, 0 ran now" in third.out

@@ -100,7 +100,7 @@ def _stored(tmp_path, runs: int = 300) -> tuple[CampaignPlan, Store, dict[str, d
 def test_the_verdicts_over_columns_are_each_rows_own_evaluate(tmp_path):
     _, store, records = _stored(tmp_path)
     judged = 0
-    for part in store.report_parts():
+    for part in store.report_parts(rows=True):
         got = evaluate_columns(CRITERIA, part.judged)
         for i, run_id in enumerate(part.ids.tolist()):
             row = json.loads(part.rows[i])
@@ -126,8 +126,8 @@ def _cells(row: dict, reasons: list[str]) -> list[str]:
 
 def test_the_report_rows_and_csv_cells_from_columns_are_each_rows_own(tmp_path):
     plan, store, records = _stored(tmp_path)
-    merge(plan, store, plots=False)
-    runs = json.loads((store.out / "campaign.json").read_text())["runs"]
+    _, rows, _ = merge(plan, store, plots=False)
+    runs = list(rows)
     with (store.out / "campaign.csv").open(newline="") as fh:
         head, *table = list(csv.reader(fh))
     at = head.index("complete")
@@ -157,6 +157,8 @@ def test_a_blocks_typed_columns_hold_its_rows_numbers_and_the_record_is_the_one_
     for run_id, record in records.items():
         assert store.record(run_id) == record | {"id": run_id}
     assert dict(store.records()) == {k: r | {"id": k} for k, r in records.items()}
+    cpu = [r["worker"].get("cpu_s", 0.0) for r in records.values() if r.get("worker")]
+    assert len(cpu) > 10 and store.runs_cpu_s() == pytest.approx(sum(cpu), rel=1e-12)  # what the bench counts
     (path,) = store.files()
     import pyarrow.parquet as pq
 
@@ -224,7 +226,7 @@ def test_a_rows_text_made_from_the_typed_columns_is_the_json_of_its_row(tmp_path
 
     _, store, records = _stored(tmp_path)
     checked, given = 0, 0
-    for part in store.report_parts():
+    for part in store.report_parts(rows=True):
         for i, run_id in enumerate(part.ids.tolist()):
             assert part.rows[i] == _row_text(records[run_id.decode()]), run_id
             checked += 1
@@ -291,15 +293,14 @@ def _axis_cell(value) -> str:
     return repr(value) if type(value) is float else value if isinstance(value, str) else json.dumps(value)
 
 
-def _report_by_rows(plan, records: dict[str, dict], stored: set[str]) -> tuple[str, str]:
-    """``campaign.csv`` and ``campaign.json``'s run lines as the report wrote them a row at a time before its rows
-    were made a chunk at a time: each head by ``point_row_text``, each verdict and row by json, each CSV row by
-    ``csv.writer``, from the records themselves (runs not ``stored``: missing)."""
+def _report_by_rows(plan, records: dict[str, dict], stored: set[str]) -> tuple[str, list[dict]]:
+    """``campaign.csv`` and the runs' rows as the report made them a row at a time before its rows were made a chunk
+    at a time: each head a dict of the run's point, each verdict and row by json, each CSV row by ``csv.writer``, from
+    the records themselves (runs not ``stored``: missing)."""
     import io
 
     from gainlink.hil.campaign.plan import run_heads
     from gainlink.hil.campaign.report import csv_head
-    from gainlink.hil.campaign.rows import point_row_text
 
     mine = [records[i] for i in stored if records[i]["status"] != "error"]
     tracked = {t for r in mine for t in r["metrics"]["tracked"]}
@@ -314,7 +315,9 @@ def _report_by_rows(plan, records: dict[str, dict], stored: set[str]) -> tuple[s
         verdict_text = json.dumps(verdict, sort_keys=True)
         row = _row_text(record) if record is not None else "{}"
         body = verdict_text if row == "{}" else verdict_text[:-1] + ", " + row[1:]
-        lines.append(point_row_text(head)[:-1] + ", " + body[1:])
+        point = {"index": head.index, "id": head.id, "grid_index": head.grid_index, "draw": head.draw,
+                 "values": head.values, "seed": head.seed, "artifact_sha256": head.artifact_sha256}  # fmt: skip
+        lines.append(point | json.loads(body))
         rec = record if record is not None and record["status"] != "error" else {}
         m, q = rec.get("metrics", {}), rec.get("measures", {})
         cells = [rec.get("complete"), *(q.get(k) for k in MEASURE_CELLS)]
@@ -323,17 +326,12 @@ def _report_by_rows(plan, records: dict[str, dict], stored: set[str]) -> tuple[s
         values = [_axis_cell(head.values[a]) for a in axes]
         w.writerow([head.index, head.id, verdict["status"], "; ".join(verdict["reasons"]), *values, head.seed, *cells,
                     head.artifact_sha256 or ""])  # fmt: skip
-    return out.getvalue(), "  " + ",\n  ".join(lines)
-
-
-def _runs_text(path) -> str:
-    text = path.read_text()
-    return text[text.index(' "runs": [\n') + len(' "runs": [\n') : text.rindex("\n ]\n}")]
+    return out.getvalue(), lines
 
 
 @pytest.mark.parametrize("generated", [True, False])
 def test_the_rows_made_a_chunk_at_a_time_are_the_rows_made_one_by_one(tmp_path, generated):
-    """campaign.csv and campaign.json's runs, byte for byte, against the same rows made one at a time by the
+    """campaign.csv byte for byte and the rows (``CampaignResult.rows``) against the same rows made one at a time by the
     per-row functions (a generated plan of a grid and two drawn axes, an int and a float among a choice's values,
     more runs than a chunk; and a plan of points, one of them planned twice), on a store with errors, None measures
     and metrics, failed runs, runs of other tracked outputs and outputs than the others, runs with and without a model
@@ -372,11 +370,11 @@ def test_the_rows_made_a_chunk_at_a_time_are_the_rows_made_one_by_one(tmp_path, 
         plan = dataclasses.replace(plan, runs=tuple(dataclasses.replace(p, index=k) for k, p in enumerate(runs)))
     dropped.unlink()
     store = Store(store.out)
-    merge(plan, store, plots=False)
-    csv_text, runs_text = _report_by_rows(plan, records, stored)
+    _, rows, _ = merge(plan, store, plots=False)
+    csv_text, by_rows = _report_by_rows(plan, records, stored)
     assert (store.out / "campaign.csv").read_text() == csv_text
-    assert _runs_text(store.out / "campaign.json") == runs_text
-    assert {"missing", "error", "fail", "pass"} <= {json.loads(line)["status"] for line in runs_text.split(",\n  ")}
+    assert list(rows) == by_rows
+    assert {"missing", "error", "fail", "pass"} <= {row["status"] for row in by_rows}
 
 
 def test_a_run_planned_twice_is_one_of_the_envelopes_runs(tmp_path):
@@ -390,8 +388,8 @@ def test_a_run_planned_twice_is_one_of_the_envelopes_runs(tmp_path):
     runs = list(plan.runs)
     runs.insert(150, runs[120])
     plan = dataclasses.replace(plan, runs=tuple(dataclasses.replace(p, index=k) for k, p in enumerate(runs)))
-    with tempfile.TemporaryFile("w+") as csv_out, tempfile.TemporaryFile("w+") as runs_out:
-        status = _stream_rows(plan, store, csv_out, runs_out).status
+    with tempfile.TemporaryFile("w+") as csv_out:
+        status = _stream_rows(plan, store, csv_out).status
     first: dict[str, RunPoint] = {}
     for p in runs:
         first.setdefault(p.id, p)

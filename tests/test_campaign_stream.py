@@ -1,7 +1,8 @@
 """The campaign report streamed from the store: the same report as every row held at once, in bounded memory.
 
-Oracles: the rows of ``campaign.json`` reduced here whole in memory (numpy's exact quantiles, Python's sort for the
-failure table, the CSV read back with the csv module), and tracemalloc for the merge's memory per run.
+Oracles: the records the test stored, judged one at a time by :func:`.criteria.evaluate` (the per-record verdict) and
+reduced here whole in memory (numpy's exact quantiles, Python's sort for the failure table, the CSV read back with the
+csv module), and tracemalloc for the merge's memory per run.
 """
 
 from __future__ import annotations
@@ -67,9 +68,10 @@ def _record(rng: np.random.Generator, k: int) -> dict:
     }
 
 
-def _stored_campaign(tmp_path, draws: int) -> tuple[CampaignPlan, Store]:
+def _stored_campaign(tmp_path, draws: int, records: dict | None = None) -> tuple[CampaignPlan, Store]:
     """A plan of ``len(GRID) * draws`` runs and a store holding a record of each, in blocks of 64 stored in reverse
-    plan order (so the report cannot rely on the blocks' order)."""
+    plan order (so the report cannot rely on the blocks' order); ``records``: filled with each block file's records
+    by run id."""
     campaign = _campaign(draws)
     rng = np.random.default_rng(1)
     points = []
@@ -94,8 +96,10 @@ def _stored_campaign(tmp_path, draws: int) -> tuple[CampaignPlan, Store]:
     kept = points
     for start in reversed(range(0, len(kept), 64)):
         block = kept[start : start + 64]
-        records = [with_inputs(_record(rng, p.index), p, kind="sil") for p in block]
-        store.put_block(encode_block([p.id for p in block], records, campaign="streamed"))
+        made = [with_inputs(_record(rng, p.index), p, kind="sil") for p in block]
+        store.put_block(encode_block([p.id for p in block], made, campaign="streamed"))
+        if records is not None:
+            records[store.where(block[0].id).name] = {p.id: r for p, r in zip(block, made)}
     return plan, store
 
 
@@ -104,18 +108,39 @@ def _iae(row: dict) -> float | None:
     return None if not tr else sum(v["iae"] for v in tr.values())
 
 
+def _row_by_hand(point: RunPoint, record: dict | None, criteria) -> dict:
+    """Run ``point``'s row from the record the test stored (``None``: none), its verdict by :func:`evaluate`."""
+    from gainlink.hil.campaign.criteria import evaluate
+
+    head = {"index": point.index, "id": point.id, "grid_index": point.grid_index, "draw": point.draw,
+            "values": point.values, "seed": point.seed, "artifact_sha256": point.artifact_sha256}  # fmt: skip
+    if record is None:
+        return head | {"status": "missing", "failed": ["missing"], "reasons": ["no result"]}
+    if record["status"] == "error":
+        return head | {"status": "error", "failed": ["error"], "reasons": [record["reason"]], "worker": None}
+    failed = evaluate(criteria, record)
+    row = {k: record[k] for k in ("complete", "metrics", "measures")} | {"run_reason": record["reason"]}
+    verdict = {"status": "fail" if failed else "pass", "failed": sorted({k for k, _ in failed}),
+               "reasons": [text for _, text in failed], "worker": None}  # fmt: skip
+    return head | verdict | row
+
+
 def test_the_streamed_report_is_the_report_of_every_row_at_once(tmp_path):
-    plan, store = _stored_campaign(tmp_path, 100)
-    (store.out / "blocks" / sorted(p.name for p in store.files())[0]).unlink()  # some runs missing
+    stored: dict[str, dict] = {}
+    plan, store = _stored_campaign(tmp_path, 100, stored)
+    gone = sorted(p.name for p in store.files())[0]
+    (store.out / "blocks" / gone).unlink()  # some runs missing
+    held = {run_id: r for name, records in stored.items() if name != gone for run_id, r in records.items()}
     store = Store(store.out)  # a fresh index, as `campaign show` reads the folder
     summary, rows, counts = merge(plan, store, plots=True)
     doc = json.loads((store.out / "campaign.json").read_text())
-    runs = doc["runs"]
-    assert [r["index"] for r in runs] == list(range(300)) and list(rows) == runs and rows[-1] == runs[-1]
-    assert [r["id"] for r in runs] == [p.id for p in plan.runs]
+    runs = [_row_by_hand(p, held.get(p.id), plan.campaign.criteria) for p in plan.runs]
+    assert "runs" not in doc and len(rows) == 300  # campaign.json: counts, points, failures; a run's row: the store's
+    assert list(rows) == runs and rows[-1] == runs[-1] and rows[5] == runs[5] and rows[-3:] == runs[-3:]
     assert {s: counts[s] for s in ("pass", "fail", "error", "missing")} == {
         s: sum(r["status"] == s for r in runs) for s in ("pass", "fail", "error", "missing")
     }
+    assert doc["counts"] == {"runs": 300, **{s: counts[s] for s in ("pass", "fail", "error", "missing")}}
     assert 0 < counts["missing"] < 300 and counts["error"] and counts["fail"] and counts["pass"]
     for p in doc["points"]:
         mine = [r for r in runs if r["grid_index"] == p["grid_index"]]
@@ -134,6 +159,7 @@ def test_the_streamed_report_is_the_report_of_every_row_at_once(tmp_path):
     bad.sort(key=lambda r: (r["status"] != "fail", -(_iae(r) or math.inf) if r["status"] == "fail" else 0))
     lines = (store.out / "failures.txt").read_text().splitlines()
     assert [ln.split()[1] for ln in lines[1:201]] == [r["id"] for r in bad[:200]]
+    assert doc["failures"] == [{k: r[k] for k in ("index", "id", "status", "values", "reasons")} for r in bad[:200]]
     assert lines[-1] == f"... and {len(bad) - 200} more (campaign.csv has them all)"
     worst = max((r for r in runs if r["status"] in ("pass", "fail")), key=_iae)
     assert f"worst IAE: run {worst['index']} {worst['id']} " in summary
@@ -225,28 +251,6 @@ def test_the_plans_columns_are_each_runs_head_values(tmp_path):
     assert {type(h.values["noise.x"]) for h in heads} == {int, float}
     x, ok = _numbers([True, "clamp", {"a": 1}, 2, 0.5])
     assert ok.tolist() == [False, False, False, True, True] and np.array_equal(x, [np.nan] * 3 + [2.0, 0.5], True)
-
-
-def test_a_rows_head_text_is_what_json_writes_of_its_head():
-    """The head of each run's line in campaign.json, made from its parts, against json.dumps of the head's dict (the
-    oracle: json's own encoder) for values of every kind an axis gives (floats of every exponent, -0.0, ints, bools,
-    strings with quotes and non-ASCII letters, tables, numpy floats) and a run without an artifact; a value json
-    refuses (NaN) is refused the same way."""
-    import pytest
-    from gainlink.hil.campaign.rows import point_row, point_row_text
-
-    values = [1e-05, 1e16, 1.5e300, 5e-324, -0.0, 0.1, 3, -7, True, None, 'say "hi"', "Ω-axis", [1, 2.5],
-              {"b": 1, "a": [0.5]}, np.float64(0.3), 2**70]  # fmt: skip
-    for k, v in enumerate(values):
-        head = RunPoint(index=k, id=f"{k:020x}", grid_index=k // 3, draw=k % 3, seed=10**9 + k,
-                        artifact_sha256=None if k % 4 == 0 else "f" * 64, scenario={},
-                        values={"z.last": v, "a.first": values[-1 - k], "Ω": k / 7, 'q"uote': v})  # fmt: skip
-        assert point_row_text(head) == json.dumps(point_row(head), sort_keys=True, allow_nan=False), v
-    bad = RunPoint(index=0, id="x", grid_index=0, draw=0, seed=0, artifact_sha256=None, scenario={},
-                   values={"m": float("nan")})  # fmt: skip
-    for make in (point_row_text, lambda p: json.dumps(point_row(p), sort_keys=True, allow_nan=False)):
-        with pytest.raises(ValueError):
-            make(bad)
 
 
 def test_a_csv_field_is_what_csv_writer_writes_of_it():

@@ -307,10 +307,8 @@ def test_campaign_runs_record_the_mismatch(designed, mass_damper, tmp_path):
         },
         "grid": [{"target": "plant.interface", "values": ["auto", "cs"]}],
     }
-    run(data, out=tmp_path / "out", workers=1, plots=False)
-    rows = {
-        r["values"]["plant.interface"]: r for r in json.loads((tmp_path / "out" / "campaign.json").read_text())["runs"]
-    }
+    result = run(data, out=tmp_path / "out", workers=1, plots=False)
+    rows = {r["values"]["plant.interface"]: r for r in result.rows}
     assert rows["auto"]["measures"]["model_mismatch"] < 1e-3 and not rows["auto"]["measures"]["model_warning"]
     assert rows["cs"]["measures"]["model_mismatch"] > MISMATCH_WARN and rows["cs"]["measures"]["model_warning"]
     head = (tmp_path / "out" / "campaign.csv").read_text().splitlines()[0].split(",")

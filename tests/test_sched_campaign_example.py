@@ -10,8 +10,6 @@ the others decay.
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 from gainlink.errors import LawError
@@ -69,11 +67,11 @@ def test_the_example_campaign_holds_up_to_the_verdicts_rates_and_fails_above(art
     data["grid"][0]["values"] = [rate_max, 4.0, 7.0]
     result = run(data, out=tmp_path / "out", workers=1, plots=False)
     assert result.total == 3 and result.errors == 0
-    doc = json.loads((tmp_path / "out" / "campaign.json").read_text())
-    status = {row["values"]["sigma_rate"]: row["status"] for row in doc["runs"]}
+    rows = list(result.rows)
+    status = {row["values"]["sigma_rate"]: row["status"] for row in rows}
     assert status == {rate_max: "pass", 4.0: "pass", 7.0: "fail"}
     assert _radius(art, rate_max) < 0.2 and _radius(art, 7.0) > 1.2  # the verdict's own measure of the same sweeps
-    for row in doc["runs"]:
+    for row in rows:
         rec = Store(tmp_path / "out").record(row["id"])
         sch = rec["metrics"]["schedule"]
         assert sch["rate_max"] is None and sch["max_rate"] == pytest.approx(row["values"]["sigma_rate"], rel=1e-4)

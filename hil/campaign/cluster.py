@@ -194,7 +194,7 @@ def dask_client(
                 client = Client(scheduler, timeout=timeout)
         except (OSError, TimeoutError) as exc:
             raise ClusterError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
-        with contextlib.closing(client):
+        with contextlib.closing(client), _quiet_on_interrupt():
             yield client
         return
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
@@ -215,7 +215,7 @@ def dask_client(
         )
     interrupted = False
     try:
-        with dask.config.set(CLIENT_CONFIG), contextlib.closing(Client(cluster)) as client:
+        with dask.config.set(CLIENT_CONFIG), contextlib.closing(Client(cluster)) as client, _quiet_on_interrupt():
             held.release()  # a Ctrl-C while the cluster started: now, with the cluster in hand
             yield client
     except KeyboardInterrupt:
@@ -223,7 +223,6 @@ def dask_client(
         # 4 s, and the closing comms may log errors: the stop the user asked for, not news (the campaign says
         # what it kept); shown with -v
         interrupted = True
-        quiet_dask_logs(_dask_log_level())
         with contextlib.suppress(Exception):  # the interrupt is the news, not what stopping in its middle raised
             _end_workers(cluster)
         with contextlib.suppress(Exception):  # (closed whether or not the workers could be ended first)
@@ -232,6 +231,18 @@ def dask_client(
     finally:
         if not interrupted:
             cluster.close()
+
+
+@contextlib.contextmanager
+def _quiet_on_interrupt() -> Iterator[None]:
+    """On a Ctrl-C in the block, quiet Dask's logs (:func:`quiet_dask_logs`) before the client closes: a result it
+    was fetching when interrupted ends with its key forgotten, which the client logged as an error ("Couldn't gather
+    keys") above the line saying what the campaign kept. The interrupt is the news; shown with -v."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        quiet_dask_logs(_dask_log_level())
+        raise
 
 
 def _end_workers(cluster: Any) -> None:

@@ -1,8 +1,9 @@
 """The merged campaign report: ``campaign.json``, ``campaign.csv``, plots and a one-screen summary.
 
-- ``campaign.json``: the campaign (axes, criteria), counts, the pass fraction per grid point, and every
-  run — index, id, axis values, seed, status (``pass``, ``fail``, ``error``), the reasons, its metrics
-  and measures;
+- ``campaign.json``: the campaign (axes, criteria), counts, the pass fraction and IAE quantiles per grid point,
+  and the failures (the :data:`~.rows.FAILURES_LIMIT` worst runs that did not pass: index, id, status, axis values,
+  reasons); not every run: a run's whole row (its verdict, metrics and measures) is the store's, made when asked
+  (``CampaignResult.rows``, :class:`~.stored_rows.StoredRows`; ``gainlink campaign show DIR --run ID``);
 - ``campaign.csv``: one row per run (axis values, status, reasons, the main metrics);
 - ``envelopes.png``: percentiles (5-95, 25-75, median) of every output and command over time across
   the finished runs (at most :data:`ENVELOPE_RUNS` of them, each grid point's first draws, as its title says),
@@ -22,7 +23,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import shutil
 import tempfile
 from collections import Counter
 from collections.abc import Mapping
@@ -33,8 +33,9 @@ from gainlink.fileio import atomic_writer, publish_files
 from gainlink.proof.twin_plot import png_bytes
 
 from .plan import CampaignPlan, PlannedRuns, describe_axes
-from .rows import MEASURE_CELLS, METRIC_CELLS, ReportRows, RunStatus, Tally, Verdicts, head_texts
+from .rows import FAILURES_LIMIT, MEASURE_CELLS, METRIC_CELLS, RunStatus, Tally, Verdicts, head_texts
 from .store import members
+from .stored_rows import StoredRows
 
 PERCENTILES = (5, 25, 50, 75, 95)
 ENVELOPE_BINS = 512
@@ -541,11 +542,11 @@ def _campaign_doc(c: Any) -> dict:
 PLOTS = ("envelopes.png", "scatter.png")
 
 
-def _stream_rows(plan: CampaignPlan, store: Any, csv_out: IO[str], runs_out: IO[str]) -> Tally:
-    """Write every row, in plan order, to ``campaign.csv`` (``csv_out``) and as ``campaign.json``'s run lines
-    (``runs_out``), counting each into the returned :class:`Tally`: a chunk of runs at a time, each row's text joined
-    from its head's (:func:`~.rows.head_texts`: the plan's, made a chunk at a time) and its verdict's spilled texts
-    (:class:`~.rows.Verdicts`), nothing decoded again and no row built value by value."""
+def _stream_rows(plan: CampaignPlan, store: Any, csv_out: IO[str]) -> Tally:
+    """Write every row, in plan order, to ``campaign.csv`` (``csv_out``), counting each into the returned
+    :class:`Tally`: a chunk of runs at a time, each row's text joined from its head's (:func:`~.rows.head_texts`: the
+    plan's, made a chunk at a time) and its verdict's spilled texts (:class:`~.rows.Verdicts`), nothing decoded again
+    and no row built value by value."""
     ids = plan_ids(plan)
     verdicts = Verdicts(store, plan.campaign.criteria, ids)
     try:
@@ -553,13 +554,11 @@ def _stream_rows(plan: CampaignPlan, store: Any, csv_out: IO[str], runs_out: IO[
         tracked, outs = sorted(verdicts.tracked), sorted(verdicts.outputs)
         csv.writer(csv_out, lineterminator="\n").writerow(csv_head(plan, verdicts.tracked, verdicts.outputs))
         start = 0
-        for heads, pre, mid, post in head_texts(plan, _axes(plan)):
-            slots = verdicts.slot[start : start + len(heads)].tolist()
-            bodies, status, cells = verdicts.rows(slots, tracked, outs)
+        for pre, mid, post in head_texts(plan, _axes(plan)):
+            slots = verdicts.slot[start : start + len(pre)].tolist()
+            status, cells = verdicts.rows(slots, tracked, outs)
             csv_out.write("".join([a + b + c + d + e for a, b, c, d, e in zip(pre, status, mid, cells, post)]))
-            lead = "  " if not start else ",\n  "
-            runs_out.write(lead + ",\n  ".join([h + body[1:] for h, body in zip(heads, bodies)]))
-            start += len(heads)
+            start += len(pre)
         tally.finish(ids)
         return tally
     finally:
@@ -573,39 +572,31 @@ def plan_ids(plan: CampaignPlan) -> np.ndarray:
     return np.array([p.id.encode("ascii") for p in plan.runs], dtype="S")
 
 
-def _write_json(fh: IO[str], doc: dict, runs: IO[str]) -> None:
-    """``campaign.json``: ``doc`` indented, then the run lines of ``runs`` (one a line: json's C encoder; with
-    ``indent`` json falls back to its Python encoder, 10x slower)."""
-    head = json.dumps(doc, sort_keys=True, indent=1, allow_nan=False)
-    runs.seek(0)
-    fh.write(head[:-2] + ',\n "runs": [\n')
-    shutil.copyfileobj(runs, fh)
-    fh.write("\n ]\n}\n" if runs.tell() else " ]\n}\n")
+def merge(plan: CampaignPlan, store: Any, *, plots: bool = True) -> tuple[str, StoredRows, Counter]:
+    """Merge the stored runs into the report files; returns the summary text, the rows (made from the store when
+    asked, :class:`~.stored_rows.StoredRows`) and the count of runs by status.
 
-
-def merge(plan: CampaignPlan, store: Any, *, plots: bool = True) -> tuple[str, ReportRows, Counter]:
-    """Merge the stored runs into the report files; returns the summary text, the rows (read from
-    ``campaign.json`` when asked) and the count of runs by status.
-
-    Streamed: the rows are written to ``campaign.csv`` and ``campaign.json`` one at a time (each through a temporary
-    file and a rename), and the summary, failures and plots are drawn from a :class:`~.rows.Tally`. Without
-    ``plots``, the PNGs are not drawn (about a second per merge) and those of an earlier merge are removed: a report
-    never shows plots of other runs than its own."""
-    with (
-        atomic_writer(store.out / "campaign.csv") as csv_out,
-        tempfile.TemporaryFile("w+", encoding="utf-8") as runs,
-    ):
-        tally = _stream_rows(plan, store, csv_out, runs)
-        points = tally.point_list()
-        doc = {
-            "campaign": _campaign_doc(plan.campaign),
-            "counts": {"runs": tally.runs, **{k: tally.counts.get(k, 0) for k in ("pass", "fail", "error", "missing")}},
-            "points": points,
-        }
-        with atomic_writer(store.out / "campaign.json") as fh:
-            _write_json(fh, doc, runs)
+    Streamed: the rows are written to ``campaign.csv`` a chunk at a time (through a temporary file and a rename),
+    ``campaign.json`` holds the campaign, the counts, the grid points and the failures (not every run: its whole row
+    is the store's, :class:`~.stored_rows.StoredRows`, ``gainlink campaign show --run``), and the summary, failures
+    and plots are drawn from a :class:`~.rows.Tally`. Without ``plots``, the PNGs are not drawn (about a second per
+    merge) and those of an earlier merge are removed: a report never shows plots of other runs than its own."""
+    with atomic_writer(store.out / "campaign.csv") as csv_out:
+        tally = _stream_rows(plan, store, csv_out)
+    points = tally.point_list()
+    doc = {
+        "campaign": _campaign_doc(plan.campaign),
+        "counts": {"runs": tally.runs, **{k: tally.counts.get(k, 0) for k in ("pass", "fail", "error", "missing")}},
+        "points": points,
+        "failures": tally.failure_rows(),
+        "failures_limit": FAILURES_LIMIT,
+    }
     summary = summary_text(plan, tally, points, out=store.out, plots=plots)
-    files: dict[str, bytes | str] = {"failures.txt": failures_text(tally), "summary.txt": summary}
+    files: dict[str, bytes | str] = {
+        "campaign.json": json.dumps(doc, sort_keys=True, indent=1, allow_nan=False) + "\n",
+        "failures.txt": failures_text(tally),
+        "summary.txt": summary,
+    }
     if plots:
         files["envelopes.png"] = envelopespng_bytes(plan, tally.status, store)
         files["scatter.png"] = scatterpng_bytes(plan, tally)
@@ -613,4 +604,4 @@ def merge(plan: CampaignPlan, store: Any, *, plots: bool = True) -> tuple[str, R
         for name in PLOTS:
             (store.out / name).unlink(missing_ok=True)
     publish_files(store.out, files)
-    return summary, ReportRows(store.out / "campaign.json", tally.runs), tally.counts
+    return summary, StoredRows(plan, store), tally.counts

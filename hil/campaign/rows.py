@@ -1,17 +1,17 @@
-"""A campaign's rows (one per planned run, with its verdict), streamed from the store in plan order, and the tally
-the report is drawn from, kept in numpy arrays indexed by the plan.
+"""A campaign's verdicts (one per planned run), judged from the store in plan order, and the tally the report is
+drawn from, kept in numpy arrays indexed by the plan.
 
 Each block file is read once, as columns (:meth:`.store.Store.report_parts`): its runs are judged at once
-(:func:`.criteria.evaluate_columns` over the typed columns; no run's JSON is decoded), and each kept run's verdict's
-JSON text (its head's and the row's text joined, :func:`.store.row_texts`), its ``campaign.csv`` status and reasons
-and its cells (the columns' values as text, made once a column) go, as one line, to an anonymous temporary file, and
-its numbers (status, IAE, model mismatch, failed criteria) to arrays indexed by the plan's distinct runs. The planned
-runs are then walked in plan order, :data:`HEAD_CHUNK` at a time: each row's JSON is its head's text
-(:func:`head_texts`: a generated plan's made from each grid point's template and each draw's values' texts) and its
-verdict's joined, its CSV row its head's texts and its spilled ones joined, with nothing decoded again but the
-reasons of failed runs. Nothing holds every row: the client keeps an offset
+(:func:`.criteria.evaluate_columns` over the typed columns; no run's JSON is decoded), and each kept run's
+``campaign.csv`` status and reasons and its cells (the columns' values as text, made once a column), with the verdict's
+JSON text of a run that did not pass, go, as one line, to an anonymous temporary file, and its numbers (status, IAE,
+model mismatch, failed criteria) to arrays indexed by the plan's distinct runs. The planned runs are then walked in
+plan order, :data:`HEAD_CHUNK` at a time: each CSV row is its head's texts (:func:`head_texts`: a generated plan's
+made from each grid point's template and each draw's values' texts) and its spilled ones joined, with nothing decoded
+again but the reasons of the failed runs ``failures.txt`` lists. Nothing holds every row: the client keeps an offset
 and a few numbers a run, and :class:`Tally` counts from them and the plan's arrays (:func:`.plan.plan_columns`: each
-run's grid point and axis values, 9 bytes an axis), not run by run."""
+run's grid point and axis values, 9 bytes an axis), not run by run. A run's whole row (its head, verdict and stored
+record) is made when asked, from the store (:class:`.stored_rows.StoredRows`)."""
 
 from __future__ import annotations
 
@@ -22,8 +22,7 @@ import math
 import os
 import tempfile
 from collections import Counter
-from collections.abc import Iterator, Mapping, Sequence
-from pathlib import Path
+from collections.abc import Iterator, Mapping
 from typing import IO, Any
 
 import numpy as np
@@ -54,37 +53,6 @@ def point_row(point: Any) -> dict:
     }
 
 
-_KEYS: dict[str, str] = {}  # an axis name as a JSON object key, with its colon
-
-
-def _json_value(value: Any) -> str:
-    """``value`` as ``json.dumps(value, sort_keys=True, allow_nan=False)`` writes it; a finite float (by its own
-    ``float.__repr__``, as json's encoder) or an int without the encoder's call."""
-    kind = type(value)
-    if kind is float and math.isfinite(value):
-        return float.__repr__(value)
-    if kind is int:
-        return int.__repr__(value)
-    return json.dumps(value, sort_keys=True, allow_nan=False)
-
-
-def point_row_text(point: Any) -> str:
-    """``json.dumps(point_row(point), sort_keys=True, allow_nan=False)``, made from its parts: the report writes one a
-    run, and json's encoder was a fifth of the walk's CPU."""
-    values = point.values
-    pairs = []
-    for name in sorted(values):
-        key = _KEYS.get(name)
-        if key is None:
-            key = _KEYS[name] = json.dumps(name) + ": "
-        pairs.append(key + _json_value(values[name]))
-    return (
-        f'{{"artifact_sha256": {_json_value(point.artifact_sha256)}, "draw": {_json_value(point.draw)}, '
-        f'"grid_index": {_json_value(point.grid_index)}, "id": {_json_value(point.id)}, '
-        f'"index": {_json_value(point.index)}, "seed": {_json_value(point.seed)}, "values": {{{", ".join(pairs)}}}}}'
-    )
-
-
 def csv_field(text: str) -> str:
     """``text`` as one field of ``csv.writer``'s row (its default dialect): as it is, or quoted by the writer itself
     when it holds a character the writer quotes (of this Python: a comma, a quote, a line end; ``\\r`` checked too)."""
@@ -102,15 +70,14 @@ def _csv_value(value: Any) -> str:
     return csv_field(value if isinstance(value, str) else json.dumps(value))
 
 
-HEAD_CHUNK = 256  # runs whose rows are made at once: their texts held together, a few kB a run
+HEAD_CHUNK = 256  # runs whose CSV rows are made at once: their texts held together, a few hundred bytes a run
 
 
-def head_texts(plan: Any, axes: list[str]) -> Iterator[tuple[list[str], list[str], list[str], list[str]]]:
-    """The parts of each planned run's rows its head gives, in plan order, :data:`HEAD_CHUNK` runs at a time: its
-    ``campaign.json`` row's start (:func:`point_row_text` without its closing brace, and ``", "``) and the three parts
-    of its ``campaign.csv`` row around the verdict's (``index,id,``; ``,`` the ``axes`` values and the seed ``,``;
-    ``,`` the artifact's sha256 and the line end). A generated plan's from its parts (:meth:`.plan.PlannedRuns.
-    head_parts`): each grid point's and each draw's values made text once, a run's texts a template filled."""
+def head_texts(plan: Any, axes: list[str]) -> Iterator[tuple[list[str], list[str], list[str]]]:
+    """The parts of each planned run's ``campaign.csv`` row its head gives, in plan order, :data:`HEAD_CHUNK` runs at
+    a time: the three parts around the verdict's (``index,id,``; ``,`` the ``axes`` values and the seed ``,``; ``,``
+    the artifact's sha256 and the line end). A generated plan's from its parts (:meth:`.plan.PlannedRuns.head_parts`):
+    each grid point's and each draw's values made text once, a run's texts joined a chunk at a time."""
     parts = plan.runs.head_parts() if isinstance(plan.runs, PlannedRuns) else None
     if parts is None:
         heads = iter(plan.runs.heads() if isinstance(plan.runs, PlannedRuns) else plan.runs)
@@ -118,115 +85,66 @@ def head_texts(plan: Any, axes: list[str]) -> Iterator[tuple[list[str], list[str
             yield _point_texts(chunk, axes)
         return
     ids = plan.runs.ids
-    plain = bool(np.char.isalnum(ids).all()) if len(ids) else True
     texts = _HeadTemplates(parts, axes)
     for start in range(0, len(ids), HEAD_CHUNK):
-        yield texts.chunk(start, ids[start : start + HEAD_CHUNK].tolist(), plain)
+        yield texts.chunk(start, ids[start : start + HEAD_CHUNK].tolist())
 
 
-def _point_texts(heads: list, axes: list[str]) -> tuple[list[str], list[str], list[str], list[str]]:
+def _point_texts(heads: list, axes: list[str]) -> tuple[list[str], list[str], list[str]]:
     """:func:`head_texts` of the heads ``heads``, each from its own values."""
-    json_ = [point_row_text(h)[:-1] + ", " for h in heads]
     pre = [f"{h.index},{csv_field(h.id)}," for h in heads]
     mid = ["," + ",".join([*(_csv_value(h.values[a]) for a in axes), str(h.seed)]) + "," for h in heads]
     post = ["," + csv_field(h.artifact_sha256 or "") + "\n" for h in heads]
-    return json_, pre, mid, post
+    return pre, mid, post
 
 
 class _HeadTemplates:
-    """A generated plan's head texts by part: per grid point a template of its values (the draws' left as ``%s``)
-    and its CSV values, made once; the draws' values made text a chunk of runs at a time, an axis at a time (a
-    choice's values once each), not held for every draw."""
+    """A generated plan's CSV head texts by part: per grid point its values' cells, made once; the draws' values made
+    text a chunk of runs at a time, an axis at a time (a choice's values once each), not held for every draw."""
 
     def __init__(self, parts: Any, axes: list[str]) -> None:
         self.parts = parts
-        self.drawn = drawn = sorted(parts.drawn)
         self.csv_drawn = [a for a in axes if a in parts.drawn]  # the CSV's order
-        self.values, self.csv_mid = [], []
-        for g, grid in enumerate(parts.grid):
-            pairs = [_key(name) + ("%s" if name in drawn else _json_value(grid[name]).replace("%", "%%"))
-                     for name in sorted({*grid, *drawn})]  # fmt: skip
-            sha = _json_value(parts.shas[g]).replace("%", "%%")
-            self.values.append(f'"artifact_sha256": {sha}, "draw": %s, "grid_index": {g}, "id": "%s", "index": %s, '
-                               f'"seed": %s, "values": {{{", ".join(pairs)}}}, ')  # fmt: skip
-            self.csv_mid.append("," + "".join(_csv_value(grid[a]) + "," for a in axes if a in grid))
+        self.csv_mid = ["," + "".join(_csv_value(grid[a]) + "," for a in axes if a in grid) for grid in parts.grid]
         self.shas = ["," + csv_field(sha or "") + "\n" for sha in parts.shas]
-        self.choices = {
-            name: [(_json_value(v), _csv_value(v)) for v in values] for name, values in parts.choices.items()
-        }
+        self.choices = {name: [_csv_value(v) for v in values] for name, values in parts.choices.items()}
 
-    def _draws(self, js: np.ndarray) -> tuple[list[tuple[str, ...]], list[str]]:
-        """Draws ``js``' values as JSON texts (by name) and their CSV cells with the seed (a comma after), an axis at
-        a time: a number's text is its ``repr`` in both (:func:`.jsontext.float_texts`; a value that is not finite:
-        json's refusal, as a head's)."""
-        texts: dict[str, tuple[list[str], list[str]]] = {}
-        for name, column in self.parts.drawn.items():
+    def _draws(self, js: np.ndarray) -> list[str]:
+        """Draws ``js``' values as their CSV cells with the seed (a comma after), an axis at a time: a number's text is
+        its ``repr`` (:func:`.jsontext.float_texts`; a value that is not finite: JSON's text, as a head's)."""
+        texts: dict[str, list[str]] = {}
+        for name in self.csv_drawn:
+            column = self.parts.drawn[name]
             if name in self.choices:
                 words = self.choices[name]
-                both = [words[c] for c in column[js].astype(int).tolist()]
-                texts[name] = ([w for w, _ in both], [c for _, c in both])
+                texts[name] = [words[c] for c in column[js].astype(int).tolist()]
                 continue
             x = column[js].astype(float)
             numbers = x.tolist()
-            made = float_texts(numbers, pa.array(x)) if np.isfinite(x).all() else list(map(_json_value, numbers))
-            texts[name] = (made, made)
+            texts[name] = float_texts(numbers, pa.array(x)) if np.isfinite(x).all() else list(map(_csv_value, numbers))
         seeds = list(map(str, self.parts.seeds[js].tolist()))
-        json_ = list(zip(*(texts[name][0] for name in self.drawn))) if self.drawn else [()] * len(js)
-        cells = [",".join(row) + "," for row in zip(*(texts[name][1] for name in self.csv_drawn), seeds)]
-        return json_, cells
+        return [",".join(row) + "," for row in zip(*(texts[name] for name in self.csv_drawn), seeds)]
 
-    def chunk(self, start: int, ids: list[bytes], plain: bool) -> tuple[list[str], list[str], list[str], list[str]]:
-        """The texts of the runs from plan index ``start`` (``ids``; ``plain``: every id alphanumeric), the runs of
-        one grid point (a chunk holds one or two) filled into its template together."""
+    def chunk(self, start: int, ids: list[bytes]) -> tuple[list[str], list[str], list[str]]:
+        """The texts of the runs from plan index ``start`` (``ids``), the runs of one grid point (a chunk holds one or
+        two) joined together."""
         runs = self.parts.runs
         ks = np.arange(start, start + len(ids))
-        js = ks % runs
-        draw_json, draw_csv = self._draws(js)
-        if not plain:
-            return self._each(ks, ids, draw_json, draw_csv)
-        texts = [rid.decode("ascii") for rid in ids]
-        json_, pre, mid, post = [], [], [], []
+        draw_csv = self._draws(ks % runs)
+        pre = [f"{k},{csv_field(rid.decode('ascii'))}," for k, rid in zip(ks.tolist(), ids)]
+        mid, post = [], []
         gs = ks // runs
         for a, b in _spans(gs):
-            g, k_, j_ = int(gs[a]), ks[a:b].tolist(), js[a:b].tolist()
-            template, seeds = "{" + self.values[g], self.parts.seeds[js[a:b]].tolist()
-            json_ += [template % (j, t, k, seed, *d)
-                      for j, t, k, seed, d in zip(j_, texts[a:b], k_, seeds, draw_json[a:b])]  # fmt: skip
-            pre += [f"{k},{t}," for k, t in zip(k_, texts[a:b])]
+            g = int(gs[a])
             mid += [self.csv_mid[g] + d for d in draw_csv[a:b]]
             post += [self.shas[g]] * (b - a)
-        return json_, pre, mid, post
-
-    def _each(
-        self, ks: np.ndarray, ids: list[bytes], draw_json: list[tuple[str, ...]], draw_csv: list[str]
-    ) -> tuple[list[str], list[str], list[str], list[str]]:
-        """:meth:`chunk`'s texts run by run, of runs ``ks`` of which some id is not alphanumeric (json may escape
-        it: its own text)."""
-        runs, seeds = self.parts.runs, self.parts.seeds
-        json_, pre, mid, post = [], [], [], []
-        for n, (k, rid) in enumerate(zip(ks.tolist(), ids)):
-            g, j = divmod(k, runs)
-            text = rid.decode("ascii")
-            template = self.values[g].replace('"id": "%s"', '"id": ' + _json_value(text).replace("%", "%%"))
-            json_.append("{" + template % (j, k, int(seeds[j]), *draw_json[n]))
-            pre.append(f"{k},{csv_field(text)},")
-            mid.append(self.csv_mid[g] + draw_csv[n])
-            post.append(self.shas[g])
-        return json_, pre, mid, post
+        return pre, mid, post
 
 
 def _spans(values: np.ndarray) -> list[tuple[int, int]]:
     """The spans ``[a, b)`` of equal neighbours in ``values``."""
     cut = (np.flatnonzero(values[1:] != values[:-1]) + 1).tolist()
     return list(zip([0, *cut], [*cut, len(values)]))
-
-
-def _key(name: str) -> str:
-    """An axis name as a JSON object key with its colon, escaped for a ``%`` template."""
-    key = _KEYS.get(name)
-    if key is None:
-        key = _KEYS[name] = json.dumps(name) + ": "
-    return key.replace("%", "%%")
 
 
 MISSING_VERDICT = {"status": "missing", "failed": ["missing"], "reasons": ["no result"]}
@@ -263,7 +181,7 @@ def _part_cells(part: Any) -> list[str]:
     fixed = [_cells(part.texts["complete"]), *(_cells(part.texts[k]) for k in MEASURE_CELLS)]
     tracked = {t: [_cells(cols[k]) for k in METRIC_CELLS] for t, cols in part.tracked.items()}
     final = {o: _cells(v) for o, v in part.outputs_final.items()}
-    out = [""] * len(part.rows)
+    out = [""] * len(part.ids)
     for s, (names, outs) in enumerate(part.shapes):
         rows = np.flatnonzero(part.shape == s).tolist()
         columns = [*fixed, *(col for t in names for col in tracked[t]), *(final[o] for o in outs)]
@@ -277,7 +195,7 @@ def _part_cells(part: Any) -> list[str]:
 def _tracked_iae(part: Any) -> np.ndarray:
     """Each run's IAE summed over its tracked outputs in their sorted order (as ``sum`` of the row's values); NaN
     without one, or when one has none."""
-    total = np.full(len(part.rows), np.nan)
+    total = np.full(len(part.ids), np.nan)
     for s, (tracked, _) in enumerate(part.shapes):
         mine = part.shape == s
         if tracked and mine.any():
@@ -286,6 +204,20 @@ def _tracked_iae(part: Any) -> np.ndarray:
                 acc = acc + part.judged.tracked[t]["iae"][mine]
             total[mine] = acc
     return total
+
+
+def verdict_head(part: Any, i: int, failed: list[tuple[str, str]]) -> dict:
+    """What run ``i`` of ``part`` (a :class:`~.store.ReportPart`) says beyond its stored ``row``, given the criteria it
+    ``failed`` (name, reason): its status (``pass``, ``fail``, ``error``), the criteria it failed and the reasons;
+    and ``None`` for any of ``complete``, ``run_reason``, ``worker`` the row lacks (an error's: ``worker``)."""
+    keys = int(part.keys[i])
+    if part.error[i]:
+        return {"status": "error", "failed": ["error"], "reasons": [part.reasons[i]]} | (
+            {} if keys & ROW_BITS["worker"] else {"worker": None}
+        )
+    missing = {k: None for k, bit in ROW_BITS.items() if not keys & bit}
+    return {"status": "fail" if failed else "pass", "failed": sorted({k for k, _ in failed}),
+            "reasons": [text for _, text in failed]} | missing  # fmt: skip
 
 
 class Verdicts:
@@ -308,7 +240,6 @@ class Verdicts:
         self.shapes: list[tuple[tuple[str, ...], tuple[str, ...]]] = []
         self.tracked: set[str] = set()
         self.outputs: set[str] = set()
-        self._heads: dict[tuple, str] = {}
         self._flushed = False
         for part in store.report_parts():
             k = np.minimum(np.searchsorted(self.uids, part.ids), max(n - 1, 0))
@@ -318,10 +249,9 @@ class Verdicts:
 
     def _add_part(self, part: Any, slots: np.ndarray, planned: np.ndarray, criteria: Any) -> None:
         """Judge the runs of ``part`` (a :class:`~.store.ReportPart`) at once and spill those ``planned`` (run
-        ``slots[i]`` of the plan's distinct runs): each verdict's text is its head's and the stored row's text
-        joined (the row is not decoded), its CSV cells the typed columns' values as text. A passed run's head (most
-        runs') is one text per set of keys, its line joined with the others in bulk; a failed run's or an error's
-        made from its own reasons."""
+        ``slots[i]`` of the plan's distinct runs): a run that did not pass its verdict's JSON text (its status, the
+        criteria it failed, the reasons: what ``failures.txt`` and ``campaign.json``'s failures read again), every
+        run its ``campaign.csv`` status and reasons and its cells (the typed columns' values as text)."""
         failed = evaluate_columns(criteria, part.judged)
         rows = np.flatnonzero(planned)
         shape = self._shapes(part, rows)
@@ -330,17 +260,12 @@ class Verdicts:
         model, warning = part.model_mismatch, part.model_warning
         bad = np.fromiter(map(bool, failed), bool, len(failed)) | part.error
         code, masks = np.full(len(rows), PASS, np.int8), np.zeros(len(rows), np.int64)
-        good = rows[~bad[rows]]
-        keys = part.keys & 7
-        passed = {
-            key: self._passed(part, int(good[np.argmax(keys[good] == key)])) for key in np.unique(keys[good]).tolist()
-        }
-        texts = [passed.get(key, "") for key in keys[rows].tolist()]
+        texts = [""] * len(rows)
         verdicts = ["pass,"] * len(rows)
         for n in np.flatnonzero(bad[rows]).tolist():
             i = int(rows[n])
-            head = self._head(part, i, failed[i])
-            texts[n] = self._head_text(head)
+            head = verdict_head(part, i, failed[i])
+            texts[n] = json.dumps(head, sort_keys=True, allow_nan=False)
             verdicts[n] = head["status"] + "," + csv_field("; ".join(head["reasons"]))
             code[n] = STATUSES.index(head["status"])
             for name in head["failed"]:
@@ -348,14 +273,8 @@ class Verdicts:
                     self.criteria.append(name)
                 masks[n] |= 1 << self.criteria.index(name)
         pick = rows.tolist()
-        whole = len(pick) == len(part.rows)
-        row_texts, cell_texts = (
-            (part.rows, cells) if whole else ([part.rows[i] for i in pick], [cells[i] for i in pick])
-        )
-        lines = [
-            (text if row == "{}" else text[:-1] + ", " + row[1:]) + SEP + verdict + SEP + cell + SEP
-            for text, row, verdict, cell in zip(texts, row_texts, verdicts, cell_texts)
-        ]
+        cell_texts = cells if len(pick) == len(part.ids) else [cells[i] for i in pick]
+        lines = [text + SEP + verdict + SEP + cell + SEP for text, verdict, cell in zip(texts, verdicts, cell_texts)]
         spill = "".join(lines)
         # ASCII (the usual): a line's bytes are its characters, the part encoded once (a line at a time otherwise)
         encoded = spill.encode("utf-8") if spill.isascii() else None
@@ -385,39 +304,9 @@ class Verdicts:
             numbers[s] = self.shapes.index(names)
         return numbers[part.shape]
 
-    @staticmethod
-    def _head(part: Any, i: int, failed: list[tuple[str, str]]) -> dict:
-        """What run ``i``'s row says beyond its stored ``row``: its status (``pass``, ``fail``, ``error``), the
-        criteria it failed and the reasons; and ``None`` for any of ``complete``, ``run_reason``, ``worker`` the row
-        lacks (an error's: ``worker``)."""
-        keys = int(part.keys[i])
-        if part.error[i]:
-            return {"status": "error", "failed": ["error"], "reasons": [part.reasons[i]]} | (
-                {} if keys & ROW_BITS["worker"] else {"worker": None}
-            )
-        missing = {k: None for k, bit in ROW_BITS.items() if not keys & bit}
-        return {"status": "fail" if failed else "pass", "failed": sorted({k for k, _ in failed}),
-                "reasons": [text for _, text in failed]} | missing  # fmt: skip
-
-    def _passed(self, part: Any, i: int) -> str:
-        """The head text of run ``i`` of ``part``, a passed run (:meth:`_head`'s, as :meth:`_head_text` writes it)."""
-        key = ("pass", int(part.keys[i]) & 7)
-        if key not in self._heads:
-            self._heads[key] = self._head_text(self._head(part, i, []))
-        return self._heads[key]
-
-    def _head_text(self, head: dict) -> str:
-        """``head`` as JSON text; a head without a reason (a passed run's, the same for most runs) encoded once."""
-        if head["reasons"] or head["failed"]:
-            return json.dumps(head, sort_keys=True, allow_nan=False)
-        key = tuple((k, v) for k, v in head.items() if k not in ("failed", "reasons"))  # its status and Nones
-        if key not in self._heads:
-            self._heads[key] = json.dumps(head, sort_keys=True, allow_nan=False)
-        return self._heads[key]
-
     def text(self, u: int) -> tuple[str, str, str]:
-        """Run ``u``'s verdict as JSON text, its CSV status and reasons, and its CSV cells after them in its own
-        tracked outputs and outputs (:data:`MISSING_VERDICT` without a record)."""
+        """Run ``u``'s verdict as JSON text (empty for a run that passed), its CSV status and reasons, and its CSV
+        cells after them in its own tracked outputs and outputs (:data:`MISSING_VERDICT` without a record)."""
         at = int(self.at[u])
         if at < 0:
             return self._missing
@@ -435,12 +324,12 @@ class Verdicts:
 
     _missing = (json.dumps(MISSING_VERDICT, sort_keys=True), "missing,no result", "," * (FIXED_CELLS - 2))
 
-    def rows(self, slots: list[int], tracked: list[str], outs: list[str]) -> tuple[list[str], list[str], list[str]]:
-        """:meth:`text` of each of runs ``slots``, the cells in the columns ``tracked`` and ``outs`` (sorted) of every
-        run. The runs whose lines follow each other in the spill (a block's, in plan order: most of a chunk) are read
-        by one ``pread`` and split at once."""
+    def rows(self, slots: list[int], tracked: list[str], outs: list[str]) -> tuple[list[str], list[str]]:
+        """The CSV status and reasons and the cells of each of runs ``slots`` (:meth:`text`'s), the cells in the
+        columns ``tracked`` and ``outs`` (sorted) of every run. The runs whose lines follow each other in the spill (a
+        block's, in plan order: most of a chunk) are read by one ``pread`` and split at once."""
         if not slots:
-            return [], [], []
+            return [], []
         at, size = self.at[slots], self.size[slots]
         fields: list[str] = []
         # a span of lines: where the next run's line starts where this one's ends (a missing run is a span alone)
@@ -450,12 +339,12 @@ class Verdicts:
                 fields.extend(self._missing)
             else:
                 fields.extend(self._read(int(at[a]), int(size[a:b].sum())).split(SEP)[:-1])
-        bodies, verdicts, cells = fields[0::3], fields[1::3], fields[2::3]
+        verdicts, cells = fields[1::3], fields[2::3]
         every = (tuple(tracked), tuple(outs))
         plain = np.array([names == every for names in self.shapes] or [True], bool)[self.shape[slots]] & (at >= 0)
         for n in np.flatnonzero(~plain).tolist():
             cells[n] = self.cells(slots[n], cells[n], tracked, outs)
-        return bodies, verdicts, cells
+        return verdicts, cells
 
     def cells(self, u: int, cells: str, tracked: list[str], outs: list[str]) -> str:
         """Run ``u``'s CSV cells (``cells``: after its reasons, in its own tracked outputs and outputs) in the columns
@@ -597,35 +486,3 @@ class RunStatus(Mapping):
         if not hit.size:
             raise KeyError(run_id)
         return "fail" if self.failed[hit[0]] else "pass"
-
-
-class ReportRows(Sequence):
-    """The runs of a merged report (``campaign.json``'s ``runs``), read from the file when asked, one line each:
-    iterating streams them, ``rows[i]`` reads up to the ``i``-th. The file is the newest merge's."""
-
-    def __init__(self, path: Path, count: int) -> None:
-        self.path, self.count = Path(path), count
-
-    def __len__(self) -> int:
-        return self.count
-
-    def __iter__(self) -> Iterator[dict]:
-        with self.path.open("r", encoding="utf-8") as fh:
-            for line in fh:
-                if line == ' "runs": [\n':
-                    break
-            for line in fh:
-                if not line.startswith("  {"):
-                    return
-                yield json.loads(line.strip().rstrip(","))
-
-    def __getitem__(self, i: Any) -> Any:
-        if isinstance(i, slice):
-            return list(self)[i]
-        k = i + self.count if i < 0 else i
-        if not 0 <= k < self.count:
-            raise IndexError(i)
-        for j, row in enumerate(self):
-            if j == k:
-                return row
-        raise IndexError(i)

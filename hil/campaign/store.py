@@ -572,14 +572,24 @@ def _row_template(form: int) -> tuple[str, list[str]]:
     return template + "}", names
 
 
-def _value_texts(table: pa.Table) -> dict[str, list[str]]:
+def _cell_texts(table: pa.Table) -> dict[str, list[str]]:
+    """The typed values a row's ``campaign.csv`` cells and its text share (``complete``, ``stable`` and the float
+    measures), as JSON text, by name, one list a column over the block's runs."""
+    measures = _fields(table.column("measures"))
+    texts = {k: _numbers_text(measures[k], repeated=k == "longest_saturation_s") for k in _FLOAT_MEASURES}
+    texts["stable"] = [_TRUTH[v] for v in measures["stable"].to_pylist()]
+    texts["complete"] = [_TRUTH[v] for v in table.column("complete").to_pylist()]
+    return texts
+
+
+def _value_texts(table: pa.Table, cells: dict[str, list[str]] | None = None) -> dict[str, list[str]]:
     """Each typed value a row's text holds, as JSON text, by name (``worker.pid``; a measure by its own name), one
-    list a column over the block's runs."""
+    list a column over the block's runs (``cells``: :func:`_cell_texts` of ``table``, when made already)."""
     n = table.num_rows
     measures = _fields(table.column("measures"))
     worker = _fields(table.column("worker"))
-    texts = {k: _numbers_text(measures[k], repeated=k == "longest_saturation_s") for k in _FLOAT_MEASURES}
-    texts |= {k: [_TRUTH[v] for v in measures[k].to_pylist()] for k in ("stable", "model_warning")}
+    texts = dict(_cell_texts(table) if cells is None else cells)
+    texts["model_warning"] = [_TRUTH[v] for v in measures["model_warning"].to_pylist()]
     texts["unstable_reason"] = _strings_text(measures["unstable_reason"])
     texts |= {key: _object_texts(table.column(key).combine_chunks() if key in table.column_names else None, n)
               for key in OF_MEASURES}  # fmt: skip
@@ -587,7 +597,6 @@ def _value_texts(table: pa.Table) -> dict[str, list[str]]:
         f"worker.{k}": _numbers_text(worker[k], repeated=True) for k in ("block", "cpu_s", "pid", "start", "stop")
     }
     texts["worker.host"] = _strings_text(worker["host"])
-    texts["complete"] = [_TRUTH[v] for v in table.column("complete").to_pylist()]
     texts["run_reason"] = _strings_text(table.column("run_reason").combine_chunks())
     texts["metrics"] = table.column("metrics").to_pylist()
     return texts
@@ -843,6 +852,11 @@ class Store:
             return None
         return bool(done[k]), self._names[block[k]]
 
+    def where(self, run_id: str) -> Path | None:
+        """The block file holding the record of run ``run_id`` the index keeps, ``None`` without a record."""
+        hit = self._find(run_id)
+        return None if hit is None else self.blocks / hit[1]
+
     def _kept(self, path: Path, ids: np.ndarray, *, results: bool = False) -> np.ndarray:
         """Which rows of block file ``path`` (run ``ids``) hold the record the index keeps (``results``: and it is a
         result)."""
@@ -912,26 +926,35 @@ class Store:
         records = [with_inputs(r, p, kind=kind) for p, r in zip(points, results)]
         return self.put_block(encode_block([p.id for p in points], records, campaign=self.campaign))
 
-    def report_parts(self) -> Iterator[ReportPart]:
-        """What the report reads of every stored run, one block file at a time (:class:`ReportPart`), of the rows the
-        index keeps (a run stored twice: one record); only the errors' ``record`` text is decoded."""
+    def report_parts(self, *, rows: bool = False) -> Iterator[ReportPart]:
+        """What the report reads of every stored run, one block file at a time (:meth:`report_part`)."""
         for path in self.files():
-            with pq.ParquetFile(path) as block:  # its footer parsed once: the schema and the columns read from it
-                present = set(block.schema_arrow.names)
-                table = _read(block, ["id", "status", *TEXT_COLUMNS, *(k for k in ROW_COLUMNS if k in present)])
-                names = _ids(table.column("id"))
-                kept = self._kept(path, names)
-                if not kept.any():
-                    continue
-                if not kept.all():
-                    table = table.filter(pa.array(kept))
-                error = np.asarray(pc.equal(table.column("status"), "error").to_numpy(zero_copy_only=False), bool)
-                reasons: list[str | None] = [None] * table.num_rows
-                if error.any():
-                    records = _read(block, ["record"]).column("record").filter(pa.array(kept))
-                    for i in np.flatnonzero(error).tolist():
-                        reasons[i] = json.loads(records[i].as_py()).get("reason")
-            yield _report_part(names[kept], error, reasons, table)
+            part = self.report_part(path, rows=rows)
+            if part is not None:
+                yield part
+
+    def report_part(self, path: Path, *, rows: bool = False) -> ReportPart | None:
+        """What the report reads of the runs of block file ``path`` whose records the index keeps (a run stored twice:
+        one record), ``None`` when it keeps none; only the errors' ``record`` text is decoded. ``rows``: with each
+        run's ``row`` text (:func:`row_texts`: what :class:`~.stored_rows.StoredRows` gives; the report does not make
+        them)."""
+        with pq.ParquetFile(path) as block:  # its footer parsed once: the schema and the columns read from it
+            present = set(block.schema_arrow.names)
+            texts = TEXT_COLUMNS if rows else ()
+            table = _read(block, ["id", "status", *texts, *(k for k in ROW_COLUMNS if k in present)])
+            names = _ids(table.column("id"))
+            kept = self._kept(path, names)
+            if not kept.any():
+                return None
+            if not kept.all():
+                table = table.filter(pa.array(kept))
+            error = np.asarray(pc.equal(table.column("status"), "error").to_numpy(zero_copy_only=False), bool)
+            reasons: list[str | None] = [None] * table.num_rows
+            if error.any():
+                records = _read(block, ["record"]).column("record").filter(pa.array(kept))
+                for i in np.flatnonzero(error).tolist():
+                    reasons[i] = json.loads(records[i].as_py()).get("reason")
+        return _report_part(names[kept], error, reasons, table, rows=rows)
 
     def records(self) -> Iterator[tuple[str, dict]]:
         """Every stored run's record, one block file at a time (a run stored twice: the record the index keeps)."""
@@ -942,6 +965,16 @@ class Store:
             rows = row_texts(table.take(pa.array(kept, pa.int64()))) if kept else []
             for i, row in zip(kept, rows):
                 yield names[i].decode("ascii"), _joined(json.loads(table.column("record")[i].as_py()), json.loads(row))
+
+    def runs_cpu_s(self) -> float:
+        """The CPU seconds of the stored runs as their workers measured each around the run (``worker.cpu_s``: a
+        block's runs each their share of the block's), summed over the records the index keeps."""
+        total = 0.0
+        for path in self.files():
+            table = _read(path, ["id", "worker"])
+            kept = self._kept(path, _ids(table.column("id")))
+            total += float(np.nansum(_numbers(_fields(table.column("worker"))["cpu_s"])[kept]))
+        return total
 
     def traces(self, ids: Iterable[str]) -> Iterator[tuple[str, dict[str, np.ndarray]]]:
         """The stored traces of the runs ``ids`` that have a result, one block file at a time."""
@@ -1043,7 +1076,7 @@ class ReportPart:
 
     ids: np.ndarray  # ASCII bytes
     error: np.ndarray  # bool: the run's record is an error
-    rows: list[str]  # the ``row`` column's JSON text
+    rows: list[str] | None  # each run's row as JSON text (:func:`row_texts`), when asked
     reasons: list[str | None]  # an error's reason
     keys: np.ndarray  # ``row_keys``: which of ROW_BITS each row has
     shapes: list[tuple[tuple[str, ...], tuple[str, ...]]]  # the distinct (tracked outputs, outputs) of the runs
@@ -1056,8 +1089,11 @@ class ReportPart:
     judged: RunColumns  # what the criteria read (:func:`.criteria.evaluate_columns`)
 
 
-def _report_part(ids: np.ndarray, error: np.ndarray, reasons: list, table: pa.Table) -> ReportPart:
-    """A block's kept rows (``table``) as a :class:`ReportPart`."""
+def _report_part(
+    ids: np.ndarray, error: np.ndarray, reasons: list, table: pa.Table, *, rows: bool = False
+) -> ReportPart:
+    """A block's kept rows (``table``) as a :class:`ReportPart`; ``rows``: with their texts (``table`` holds
+    :data:`TEXT_COLUMNS`)."""
     names = table.column("names").combine_chunks()
     shapes = [tuple(tuple(x) for x in json.loads(w)) for w in names.dictionary.to_pylist()]
     measures = _fields(table.column("measures"))
@@ -1074,11 +1110,11 @@ def _report_part(ids: np.ndarray, error: np.ndarray, reasons: list, table: pa.Ta
         output_max={k: _numbers(v) for k, v in named["output_max"].items()},
         tracked={k: {m: _numbers(v) for m, v in cols.items()} | {"present": present[k]} for k, cols in tracked.items()},
     )
-    texts = _value_texts(table)  # the row's and the cells' texts of the measures, made once for both
+    texts = _cell_texts(table)  # the cells' texts of the measures, made once for the cells and a row's text
     return ReportPart(
         ids=ids,
         error=error,
-        rows=row_texts(table, texts),
+        rows=row_texts(table, _value_texts(table, texts)) if rows else None,
         reasons=reasons,
         keys=table.column("row_keys").to_numpy(),
         shapes=shapes,
