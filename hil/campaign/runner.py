@@ -49,9 +49,10 @@ BLOCKS_IN_FLIGHT = 4
 class CampaignResult:
     """A finished campaign: where its report is, its runs (one row each) and the counts.
 
-    ``rows`` is a read-only sequence of the runs' rows in plan order, read from the report's ``campaign.json``
-    when asked (iterate it to stream them; ``rows[i]`` reads the file up to run ``i``): no campaign, however many
-    runs it has, holds them all in memory. It reads the newest merge of ``out``.
+    ``rows`` is a read-only sequence of the runs' rows in plan order (each its point, its verdict and its stored
+    record's row), made from the campaign folder's store when asked, a block file at a time
+    (:class:`~.stored_rows.StoredRows`: iterate it to walk them; ``rows[i]`` reads run ``i``'s block file): no
+    campaign, however many runs it has, holds them all in memory.
 
     ``reused`` runs had a result before this call (a resumed campaign; an error is not a result, so a run that
     errored is run again); ``executed`` ran now. Both count distinct runs (a run planned twice with the same

@@ -13,7 +13,7 @@ of the run's inputs and gainlink's version), so the same runs always land in the
 its status (``done`` or ``error``), its record's free-form parts as compact JSON texts (``record``: inputs, link, an
 error's reason; ``metrics``: the run's metrics), its report row's typed values as typed columns (:func:`row_columns`:
 ``complete``, the run's own reason, the measures, the worker; what the verdict and ``campaign.csv`` read: the report
-decodes no JSON of a result), not again as JSON: the row's text, which ``campaign.json`` gives, is made from them
+decodes no JSON of a result), not again as JSON: the row's text, which a run's row gives, is made from them
 (:func:`row_texts`; ``row`` holds it whole only for a row they cannot give exactly, :func:`_given`), and
 its traces downsampled to at most ``worker.MAX_TRACE_POINTS`` evenly spaced true samples (first and last kept; each a
 binary value, the run's float32 values in C order: ``t``, and ``y``, ``u``, ``r`` row by row with their widths, so a
@@ -281,7 +281,7 @@ def _split(run_id: str, record: dict) -> tuple[dict, dict]:
 
 def row_columns(rows: list[dict]) -> dict[str, pa.Array]:
     """What the verdicts and ``campaign.csv`` read of the rows ``rows`` (each a :func:`_split` ``row``), as typed
-    columns beside its JSON text (which ``campaign.json`` and :meth:`Store.record` give as it is):
+    columns beside its JSON text (which a run's row and :meth:`Store.record` give as it is):
 
     - ``row_keys`` (uint8): bit k set when the row has :data:`ROW_BITS` [k] (a key holding ``None`` is not a key
       missing: the verdict's JSON says ``null`` for a missing one);
