@@ -540,6 +540,26 @@ def test_show_replays_a_run_with_its_full_report(local_run, tmp_path):
 
 
 @ON_THE_CLUSTERS
+def test_show_record_prints_a_runs_stored_record_and_its_verdict_without_running_it(local_run, tmp_path):
+    """campaign.json lists no run: a run's whole record and verdict from the command line, against the store's record
+    and the row ``CampaignResult.rows`` gives (judged again from the store); nothing replayed or written."""
+    result, out, _ = local_run
+    rows = list(result.rows)
+    k = next((i for i, r in enumerate(rows) if r["status"] == "fail"), 2)
+    before = sorted(p.relative_to(out) for p in out.rglob("*"))
+    res = run_cli("campaign", "show", out, "--index", str(k), "--record")
+    assert res.code == 0, res.err
+    doc = json.loads(res.out)
+    assert (doc["index"], doc["id"]) == (k, rows[k]["id"])
+    assert doc["record"] == json.loads(json.dumps(Store(out).record(rows[k]["id"])))
+    assert doc["verdict"] == {"status": rows[k]["status"], "reasons": rows[k]["reasons"]}
+    assert doc["record"]["metrics"] == json.loads(json.dumps(rows[k]["metrics"]))
+    assert sorted(p.relative_to(out) for p in out.rglob("*")) == before  # no replay folder
+    assert_refused(("campaign", "show", out, "--record"), "--record prints one run: give --run ID or --index N", out)
+    assert_refused(("campaign", "show", out, "--index", "1", "--record", "--no-plots"), "are a replay's", out)
+
+
+@ON_THE_CLUSTERS
 def test_no_plots_merges_the_report_without_pngs_and_removes_those_of_an_earlier_merge(pend, local_run, tmp_path):
     _, out, _ = local_run
     folder = tmp_path / "copy"

@@ -6,7 +6,7 @@
 stepped together, :mod:`gainlink.hil.loop.block`, each run's record the one :func:`.worker.execute` gives it
 alone), stores each run by its content address (:mod:`.store`) and merges the report
 (:mod:`.report`): pass/fail per run (:mod:`.criteria`), percentile envelopes, scatter plots, a failure table.
-:func:`show_run` replays one run with its full HIL report.
+:func:`show_run` replays one run with its full HIL report; :func:`stored_run` gives its stored record and verdict.
 
 From a script, call :func:`run` under ``if __name__ == "__main__":``: the LocalCluster's worker processes import
 the script again, and :func:`run` refuses an unguarded call (:class:`UnguardedMainError`) before any starts.
@@ -15,7 +15,7 @@ the script again, and :func:`run` refuses an unguarded call (:class:`UnguardedMa
 from .cluster import UnguardedMainError
 from .config import Campaign, CampaignError, Criteria, load_campaign, parse_campaign
 from .runner import CampaignInterrupted, CampaignResult, run
-from .show import show_run
+from .show import show_run, stored_run
 
 __all__ = [
     "Campaign",
@@ -28,4 +28,5 @@ __all__ = [
     "parse_campaign",
     "run",
     "show_run",
+    "stored_run",
 ]

@@ -4,10 +4,12 @@ A run is a pure function of (artifact, scenario, seed): its record in the campai
 the artifacts and FMUs kept beside it hold all three (``plan.json`` names the run at each index), so the run is
 executed again here, in this process, and reported as ``gainlink hil run`` would (``report.json``, plots,
 ``summary.txt``). A run with no record yet (a campaign interrupted before it) is run by resuming the campaign.
+:func:`stored_run` gives a run's stored record with its verdict as the last merge judged it, without running it.
 """
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import json
 from pathlib import Path
@@ -64,6 +66,29 @@ def _stored_run(out: Path, run_id: str, index: int) -> dict:
     inputs = record["inputs"]
     never = record.get("reason") if record["status"] == "error" and inputs["artifact_sha256"] is None else None
     return {"id": run_id, "index": index, **inputs, "error": never}
+
+
+def stored_run(out: str | Path, run: str | None = None, *, index: int | None = None) -> dict:
+    """A run of the campaign in ``out`` as its folder holds it, by id (or a start of it no other id shares) or by
+    index, without running it: ``index``, ``id``, its ``verdict`` as the last merge wrote it in ``campaign.csv``
+    (``status`` and ``reasons``; ``None`` before a merge) and its whole ``record`` (inputs, metrics, measures,
+    worker; an error's reason)."""
+    out = Path(out)
+    point = find_run(out, run, index=index)
+    return {"index": point["index"], "id": point["id"], "verdict": _verdict(out, point["index"], point["id"]),
+            "record": Store(out).record(point["id"])}  # fmt: skip
+
+
+def _verdict(out: Path, index: int, run_id: str) -> dict | None:
+    """Run ``run_id``'s (at ``index``) status and reasons in the folder's ``campaign.csv``, None without one."""
+    path = out / "campaign.csv"
+    if not path.is_file():
+        return None
+    with path.open(newline="", encoding="utf-8") as fh:
+        for row in csv.DictReader(fh):
+            if row.get("index") == str(index) and row.get("id") == run_id:
+                return {"status": row["status"], "reasons": row["reasons"].split("; ") if row["reasons"] else []}
+    return None
 
 
 def show_run(

@@ -9,6 +9,7 @@ gives the command that resumes).
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import shlex
 import sys
@@ -98,15 +99,22 @@ def _run_campaign(args: argparse.Namespace) -> int:
 
 def _show(args: argparse.Namespace) -> int:
     from gainlink.errors import GainlinkError
-    from gainlink.hil.campaign import show_run
+    from gainlink.hil.campaign import show_run, stored_run
     from gainlink.hil.loop.report import summary_text
 
     out = Path(args.dir)
+    if args.record and args.run is None and args.index is None:
+        raise GainlinkError("campaign show: --record prints one run: give --run ID or --index N")
     if args.run is None and args.index is None:
         path = out / "summary.txt"
         if not path.is_file():
             raise GainlinkError(f"{out} holds no campaign report (no summary.txt)")
         sys.stdout.write(path.read_text("utf-8"))
+        return 0
+    if args.record:
+        if args.report is not None or args.no_plots:
+            raise GainlinkError("campaign show: --record prints the stored run; --report and --no-plots are a replay's")
+        sys.stdout.write(json.dumps(stored_run(out, args.run, index=args.index), indent=1, sort_keys=True) + "\n")
         return 0
     result, folder = show_run(out, args.run, index=args.index, report=args.report, plots=not args.no_plots)
     sys.stdout.write(summary_text(result, report_dir=folder))
@@ -136,11 +144,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     r.set_defaults(func=_run)
 
-    s = sub.add_parser("show", help="print a campaign's summary, or replay one run with its full HIL report")
+    s = sub.add_parser(
+        "show", help="print a campaign's summary, or replay one run with its full HIL report (or print its record)"
+    )
     s.add_argument("dir", help="campaign folder")
     which = s.add_mutually_exclusive_group()
     which.add_argument("--run", metavar="ID", help="replay the run with this id (or a start of it no other id shares)")
     which.add_argument("--index", type=int, metavar="N", help="replay the run at this index (its row in campaign.csv)")
     s.add_argument("--report", help="report folder of the replayed run (default DIR/replay/ID)")
     s.add_argument("--no-plots", action="store_true", help="report.json and summary.txt only")
+    s.add_argument(
+        "--record",
+        action="store_true",
+        help="print the run's stored record (inputs, metrics, measures) and its verdict as JSON, without a replay",
+    )
     s.set_defaults(func=_show)
