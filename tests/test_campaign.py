@@ -552,7 +552,7 @@ def test_show_record_prints_a_runs_stored_record_and_its_verdict_without_running
     doc = json.loads(res.out)
     assert (doc["index"], doc["id"]) == (k, rows[k]["id"])
     assert doc["record"] == json.loads(json.dumps(Store(out).record(rows[k]["id"])))
-    assert doc["verdict"] == {"status": rows[k]["status"], "reasons": rows[k]["reasons"]}
+    assert doc["verdict"] == {"status": rows[k]["status"], "reasons": "; ".join(rows[k]["reasons"])}
     assert doc["record"]["metrics"] == json.loads(json.dumps(rows[k]["metrics"]))
     assert sorted(p.relative_to(out) for p in out.rglob("*")) == before  # no replay folder
     assert_refused(("campaign", "show", out, "--record"), "--record prints one run: give --run ID or --index N", out)

@@ -85,9 +85,10 @@ def head_texts(plan: Any, axes: list[str]) -> Iterator[tuple[list[str], list[str
             yield _point_texts(chunk, axes)
         return
     ids = plan.runs.ids
+    plain = bool(np.char.isalnum(ids).all()) if len(ids) else True
     texts = _HeadTemplates(parts, axes)
     for start in range(0, len(ids), HEAD_CHUNK):
-        yield texts.chunk(start, ids[start : start + HEAD_CHUNK].tolist())
+        yield texts.chunk(start, ids[start : start + HEAD_CHUNK].tolist(), plain)
 
 
 def _point_texts(heads: list, axes: list[str]) -> tuple[list[str], list[str], list[str]]:
@@ -125,13 +126,14 @@ class _HeadTemplates:
         seeds = list(map(str, self.parts.seeds[js].tolist()))
         return [",".join(row) + "," for row in zip(*(texts[name] for name in self.csv_drawn), seeds)]
 
-    def chunk(self, start: int, ids: list[bytes]) -> tuple[list[str], list[str], list[str]]:
-        """The texts of the runs from plan index ``start`` (``ids``), the runs of one grid point (a chunk holds one or
-        two) joined together."""
+    def chunk(self, start: int, ids: list[bytes], plain: bool) -> tuple[list[str], list[str], list[str]]:
+        """The texts of the runs from plan index ``start`` (``ids``; ``plain``: every id alphanumeric, a CSV field as
+        it is), the runs of one grid point (a chunk holds one or two) joined together."""
         runs = self.parts.runs
         ks = np.arange(start, start + len(ids))
         draw_csv = self._draws(ks % runs)
-        pre = [f"{k},{csv_field(rid.decode('ascii'))}," for k, rid in zip(ks.tolist(), ids)]
+        texts = [rid.decode("ascii") for rid in ids]
+        pre = [f"{k},{t}," if plain else f"{k},{csv_field(t)}," for k, t in zip(ks.tolist(), texts)]
         mid, post = [], []
         gs = ks // runs
         for a, b in _spans(gs):

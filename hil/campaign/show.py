@@ -71,8 +71,8 @@ def _stored_run(out: Path, run_id: str, index: int) -> dict:
 def stored_run(out: str | Path, run: str | None = None, *, index: int | None = None) -> dict:
     """A run of the campaign in ``out`` as its folder holds it, by id (or a start of it no other id shares) or by
     index, without running it: ``index``, ``id``, its ``verdict`` as the last merge wrote it in ``campaign.csv``
-    (``status`` and ``reasons``; ``None`` before a merge) and its whole ``record`` (inputs, metrics, measures,
-    worker; an error's reason)."""
+    (``status``, and ``reasons`` as the CSV's one text, joined by ``"; "``; ``None`` before a merge) and its whole
+    ``record`` (inputs, metrics, measures, worker; an error's reason)."""
     out = Path(out)
     point = find_run(out, run, index=index)
     return {"index": point["index"], "id": point["id"], "verdict": _verdict(out, point["index"], point["id"]),
@@ -87,7 +87,7 @@ def _verdict(out: Path, index: int, run_id: str) -> dict | None:
     with path.open(newline="", encoding="utf-8") as fh:
         for row in csv.DictReader(fh):
             if row.get("index") == str(index) and row.get("id") == run_id:
-                return {"status": row["status"], "reasons": row["reasons"].split("; ") if row["reasons"] else []}
+                return {"status": row["status"], "reasons": row["reasons"]}  # one text: a reason may hold "; "
     return None
 
 
