@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 import pytest
-from gainlink.hil.campaign.jsontext import json_texts, object_texts
+from gainlink.hil.campaign.jsontext import form_texts, json_forms, json_texts, object_texts
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -35,6 +35,22 @@ def _metrics(k: int, x: float) -> dict:
         "twin": {"iae": {"r_x": {"difference": x * 1e-9, "real": x}}, "steps": 1000},
         "names": ["x", "theta"],
     }
+
+
+def _through_forms(values: list) -> list[str]:
+    """Each value's text as a block file gives it back: its form's template filled with its slots, the floats
+    through float64 numbers (:func:`json_forms`, then :func:`form_texts` as ``store.metric_texts`` reads them)."""
+    forms, whole = json_forms(values)
+    out: list = [None] * len(values)
+    for form in forms:
+        texts = [col for kind, col in zip(form.kinds, form.columns) if kind == "t"]
+        floats = [col for kind, col in zip(form.kinds, form.columns) if kind == "f"]
+        numbers = np.array(floats, np.float64).T.reshape(len(form.rows), -1)
+        for i, text in zip(form.rows, form_texts(form.template, form.kinds, texts, numbers)):
+            out[i] = text
+    for i, text in whole.items():
+        out[i] = text
+    return out
 
 
 class _Level(enum.IntEnum):
@@ -69,6 +85,7 @@ def test_a_blocks_json_texts_are_each_runs_json(name, change):
     rng = np.random.default_rng(3)
     values = [change(k, _metrics(k, float(rng.lognormal()))) for k in range(12)]
     assert json_texts(values) == [_oracle(v) for v in values]
+    assert _through_forms(values) == [_oracle(v) for v in values]
 
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
@@ -117,6 +134,7 @@ def test_any_mix_of_json_values_gives_each_ones_json(base, others, picks):
     pool = [base, *others]
     values = [pool[k % len(pool)] for k in picks]
     assert json_texts(values) == [_oracle(v) for v in values]
+    assert _through_forms(values) == [_oracle(v) for v in values]
 
 
 @settings(max_examples=100, deadline=None)
@@ -124,6 +142,7 @@ def test_any_mix_of_json_values_gives_each_ones_json(base, others, picks):
 def test_any_numbers_in_one_key_give_each_ones_json(numbers):
     values = [{"v": {"x": v, "y": [v, -v]}} for v in numbers]
     assert json_texts(values) == [_oracle(v) for v in values]
+    assert _through_forms(values) == [_oracle(v) for v in values]
 
 
 def test_a_long_column_of_floats_of_every_size_is_each_ones_repr():
@@ -141,3 +160,4 @@ def test_a_long_column_of_floats_of_every_size_is_each_ones_repr():
     rng.shuffle(values)
     rows = [{"x": v} for v in values]
     assert json_texts(rows) == [_oracle(r) for r in rows]
+    assert _through_forms(rows) == [_oracle(r) for r in rows]

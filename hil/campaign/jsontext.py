@@ -10,12 +10,17 @@ whose texts are all the same written into the template) and fills the template o
 structures (a key missing, another type) are split into groups of one structure each; a value the template cannot
 give exactly (a NaN or an infinity, which json refuses; a key that is not a string; a type other than dict, list,
 str, int, float, bool and None, subclasses included) is given to ``json.dumps`` itself, which raises as it would.
+
+:func:`json_forms` stops short of the texts: each structure's template, which values of its runs are floats and the
+runs' values, floats as numbers (a block file stores them so, :mod:`.store`), which :func:`form_texts` makes the same
+texts of when they are read.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from json.encoder import encode_basestring_ascii  # the encoder json.dumps uses for a string (ensure_ascii)
 from operator import itemgetter
 from typing import Any
@@ -55,31 +60,81 @@ def object_texts(columns: dict[str, Any], runs: int) -> list[str]:
     return _texts(columns, runs)
 
 
+@dataclass(frozen=True)
+class Form:
+    """Runs of one structure (:func:`json_forms`): their positions, the ``%`` template of their JSON text (a ``%s``
+    a slot), each slot's kind (``kinds``: ``t`` a text, ``f`` a float) and the slots' columns in order, a text column a
+    list of JSON texts, a float column a list of finite floats (their texts made by :meth:`texts`)."""
+
+    rows: list[int]
+    template: str
+    kinds: str
+    columns: list[list]
+
+    def texts(self) -> list[str]:
+        """Each run's JSON text."""
+        if not self.columns:
+            return [self.template % ()] * len(self.rows)
+        cols = [_float_column_texts(col) if kind == "f" else col for kind, col in zip(self.kinds, self.columns)]
+        return list(map(self.template.__mod__, zip(*cols)))
+
+
+def json_forms(values: list) -> tuple[list[Form], dict[int, str]]:
+    """The values of :func:`json_texts` as the forms of their structures (:class:`Form`), and the texts of those
+    json writes itself (by position: a value the template cannot give exactly; a NaN raises as json raises)."""
+    return _forms(values, len(values))
+
+
+def form_texts(template: str, kinds: str, texts: list[list[str]], floats: np.ndarray) -> list[str]:
+    """The JSON texts of runs of one :class:`Form` given by its slots as stored: ``texts`` each text slot's column,
+    ``floats`` (runs, float slots) their numbers."""
+    columns, text, number = [], iter(texts), iter(floats.T.tolist())
+    for kind in kinds:
+        columns.append(next(number) if kind == "f" else next(text))
+    return Form(list(range(floats.shape[0])), template, kinds, columns).texts()
+
+
+def _float_column_texts(values: list[float]) -> list[str]:
+    """``float.__repr__`` of each of a column's floats (finite), through Arrow for a long column."""
+    return float_texts(values) if len(values) >= ARROW_FLOATS else list(map(float.__repr__, values))
+
+
 def _texts(node: dict | list, runs: int) -> list[str]:
     """The texts of ``runs`` runs of ``node`` (a column of values, or a dict of such nodes), a structure at a time."""
     out: list[str] = [""] * runs
+    forms, whole = _forms(node, runs)
+    for form in forms:
+        for i, text in zip(form.rows, form.texts()):
+            out[i] = text
+    for i, text in whole.items():
+        out[i] = text
+    return out
+
+
+def _forms(node: dict | list, runs: int) -> tuple[list[Form], dict[int, str]]:
+    """:func:`json_forms` of ``runs`` runs of ``node`` (a column of values, or a dict of such nodes)."""
+    forms: list[Form] = []
+    whole: dict[int, str] = {}
     todo = [list(range(runs))] if runs else []
     while todo:
         rows = todo.pop()
         part = node if len(rows) == runs else _picked(node, rows)
         parts: list[str] = []
-        columns: list[list[str]] = []
+        columns: list[list] = []
+        kinds: list[str] = []
         try:
-            _flat(part, parts, columns)
+            _flat(part, parts, columns, kinds)
         except _Split as split:
             for positions, direct in split.groups:
                 members = [rows[j] for j in positions]
                 if direct or len(members) == len(rows):  # (no structure to split by: json writes them)
                     for i in members:
-                        out[i] = compact_json(_value(node, i))
+                        whole[i] = compact_json(_value(node, i))
                 elif members:
                     todo.append(members)
             continue
-        template = "".join(parts)
-        texts = list(map(template.__mod__, zip(*columns))) if columns else [template % ()] * len(rows)
-        for i, text in zip(rows, texts):
-            out[i] = text
-    return out
+        forms.append(Form(rows, "".join(parts), "".join(kinds), columns))
+    return forms, whole
 
 
 def _picked(node: dict | list, rows: list[int]) -> dict | list:
@@ -95,24 +150,32 @@ def _value(node: dict | list, i: int) -> Any:
     return {key: _value(sub, i) for key, sub in node.items()} if isinstance(node, dict) else node[i]
 
 
-def _flat(node: dict | list, parts: list[str], columns: list[list[str]]) -> None:
-    """Append ``node``'s template text to ``parts`` (``%s`` where a value's text goes) and its varying texts to
-    ``columns``; raise :class:`_Split` where its runs differ in structure."""
+def _flat(node: dict | list, parts: list[str], columns: list[list], kinds: list[str]) -> None:
+    """Append ``node``'s template text to ``parts`` (``%s`` where a value goes), its varying values to ``columns``
+    (a column of finite floats as they are, another as texts) and their kinds (``f``, ``t``) to ``kinds``; raise
+    :class:`_Split` where its runs differ in structure."""
     if isinstance(node, dict):
-        _object(sorted(node), [node[key] for key in sorted(node)], parts, columns)
+        _object(sorted(node), [node[key] for key in sorted(node)], parts, columns, kinds)
         return
-    kinds = set(map(type, node))
-    if kinds <= _LEAVES:
-        if len(kinds) == 1 and _same(node):  # a value the runs share (the block's own): its text once
+    types = set(map(type, node))
+    if types <= _LEAVES:
+        if len(types) == 1 and _same(node):  # a value the runs share (the block's own): its text once
             parts.append(_LEAF_TEXT[type(node[0])](node[0]).replace("%", "%%"))
             return
-        texts = _leaf_texts(node, kinds)
+        if types == {float}:
+            _finite(node, node)
+            parts.append("%s")
+            columns.append(node)
+            kinds.append("f")
+            return
+        texts = _leaf_texts(node, types)
         if texts.count(texts[0]) == len(texts):
             parts.append(texts[0].replace("%", "%%"))
         else:
             parts.append("%s")
             columns.append(texts)
-    elif kinds == {dict}:
+            kinds.append("t")
+    elif types == {dict}:
         keys = sorted(node[0]) if all(type(k) is str for k in node[0]) else None
         if keys is None or set(map(len, node)) != {len(keys)}:
             raise _Split(_shapes(node))
@@ -123,8 +186,8 @@ def _flat(node: dict | list, parts: list[str], columns: list[list[str]]) -> None
             rows = list(map(itemgetter(*keys), node))  # a key another run lacks: KeyError
         except KeyError:
             raise _Split(_shapes(node)) from None
-        _object(keys, [list(col) for col in zip(*rows)] if len(keys) > 1 else [rows], parts, columns)
-    elif kinds == {list}:
+        _object(keys, [list(col) for col in zip(*rows)] if len(keys) > 1 else [rows], parts, columns, kinds)
+    elif types == {list}:
         sizes = set(map(len, node))
         if len(sizes) > 1:
             raise _Split(_shapes(node))
@@ -133,46 +196,52 @@ def _flat(node: dict | list, parts: list[str], columns: list[list[str]]) -> None
             return
         for k, col in enumerate(zip(*node)):
             parts.append("[" if k == 0 else ",")
-            _flat(list(col), parts, columns)
+            _flat(list(col), parts, columns, kinds)
         parts.append("]")
     else:
         raise _Split(_shapes(node))
 
 
-def _object(keys: list[str], nodes: list, parts: list[str], columns: list[list[str]]) -> None:
+def _object(keys: list[str], nodes: list, parts: list[str], columns: list[list], kinds: list[str]) -> None:
     """An object of ``keys`` (sorted) and their nodes."""
     if not keys:
         parts.append("{}")
         return
     for k, (key, sub) in enumerate(zip(keys, nodes)):
         parts.append(("{" if k == 0 else ",") + encode_basestring_ascii(key).replace("%", "%%") + ":")
-        _flat(sub, parts, columns)
+        _flat(sub, parts, columns, kinds)
     parts.append("}")
 
 
 def _same(values: list) -> bool:
-    """Whether ``values`` (of one leaf type) are all one value of one text: equal, and not a float zero (``-0.0``
-    equals ``0.0``) or a NaN or an infinity (json refuses them: :func:`_leaf_texts` finds them)."""
+    """Whether ``values`` (of one leaf type) are all one value of one text: equal, and of one sign when a float zero
+    (``-0.0`` equals ``0.0``), not a NaN or an infinity (json refuses them: :func:`_finite` finds them)."""
     first = values[0]
-    if type(first) is float and (first == 0.0 or not math.isfinite(first)):
+    if type(first) is float and not math.isfinite(first):
         return False
-    return values.count(first) == len(values)
+    if values.count(first) != len(values):
+        return False
+    return type(first) is not float or first != 0.0 or len({math.copysign(1.0, v) for v in values}) == 1
 
 
-def _leaf_texts(values: list, kinds: set) -> list[str]:
-    """Each of ``values`` (of the leaf types ``kinds``) as json writes it; a NaN or an infinity raises :class:`_Split`
-    (json itself writes those runs: it refuses them)."""
-    floats = values if kinds == {float} else [v for v in values if type(v) is float] if float in kinds else ()
+def _finite(values: list, floats: list) -> None:
+    """Raise :class:`_Split` when one of ``floats`` (the floats of ``values``) is a NaN or an infinity (json itself
+    writes those runs: it refuses them)."""
     if not all(map(math.isfinite, floats)):
         bad = [type(v) is float and not math.isfinite(v) for v in values]
         raise _Split([([j for j, b in enumerate(bad) if not b], False), ([j for j, b in enumerate(bad) if b], True)])
+
+
+def _leaf_texts(values: list, kinds: set) -> list[str]:
+    """Each of ``values`` (of the leaf types ``kinds``, not floats alone: :func:`_flat` keeps those as numbers) as
+    json writes it; a NaN or an infinity raises :class:`_Split`."""
+    if float in kinds:
+        _finite(values, [v for v in values if type(v) is float])
     if len(kinds) > 1:
         return [_LEAF_TEXT[type(v)](v) for v in values]
     (kind,) = kinds
     if kind is type(None):
         return ["null"] * len(values)
-    if kind is float and len(values) >= ARROW_FLOATS:
-        return float_texts(values)
     return list(map(_LEAF_TEXT[kind], values))
 
 

@@ -55,7 +55,7 @@ from gainlink.version import __version__
 
 from .config import CampaignError
 from .criteria import RunColumns
-from .jsontext import ARROW_FLOATS, compact_json, float_texts, json_texts, object_texts
+from .jsontext import ARROW_FLOATS, compact_json, float_texts, form_texts, json_forms, json_texts, object_texts
 from .plan import CampaignPlan, RunPoint
 from .rows import MEASURE_CELLS, METRIC_CELLS
 
@@ -68,16 +68,20 @@ SCHEMA = pa.schema(
         ("record", pa.string()),
         ("row", pa.string()),
         ("metrics", pa.string()),
+        ("metrics_form", pa.dictionary(pa.int32(), pa.string())),
+        ("metrics_slots", pa.string()),
+        ("metrics_numbers", pa.large_binary()),
         ("t", pa.large_binary()),
         *((k, pa.large_binary()) for k in WIDE),
         *((f"{k}_width", pa.int32()) for k in WIDE),
     ]
 )
 META_VERSION, META_CAMPAIGN, META_LAYOUT = b"gainlink.version", b"gainlink.campaign", b"gainlink.block_layout"
-LAYOUT = "6"  # 2: the record split into ``record`` and ``row``; 3: the row's verdict inputs as typed columns too;
+LAYOUT = "7"  # 2: the record split into ``record`` and ``row``; 3: the row's verdict inputs as typed columns too;
 # 4: each trace a run's float32 bytes (not a list of floats: Parquet's levels per value, and numpy's per run to read);
 # 5: a row's typed values (complete, run_reason, measures, worker) not again in JSON: its text made from the columns;
-# 6: one row group a block (5: a row group a TRACE_BATCH of runs)
+# 6: one row group a block (5: a row group a TRACE_BATCH of runs); 7: a run's metrics as its form's template and its
+# values (``metrics_form``, ``metrics_slots``, ``metrics_numbers``), their text made when read (:func:`metric_texts`)
 ROW_KEYS = ("complete", "measures", "metrics", "worker")  # what a report row takes from a record, as it is
 # bit k of ``row_keys``: the row has ROW_BITS[k]; its measures have the twin's, the model twin's, growth ratios
 ROW_BITS = ("complete", "run_reason", "worker", "measures", "metrics", "twin", "model", "growth")
@@ -137,7 +141,12 @@ TRACE_BATCH = 128
 TRACE_BUFFER = 1 << 20
 
 #: The block file's columns whose values repeat from run to run (dictionary-encoded in the Parquet file).
-REPEATED = ["status", "names", "run_reason"]
+REPEATED = ["status", "names", "run_reason", "metrics_form"]
+#: The block file's columns of JSON texts, compressed with zstd (every other leaf with LZ4: :func:`_block_file`).
+TEXTS = ("id", "record", "row", "metrics", "metrics_slots")
+#: The columns that hold a run's metrics (:func:`metric_columns`, :func:`metric_texts`).
+METRIC_COLUMNS = ("metrics", "metrics_form", "metrics_slots", "metrics_numbers")
+SLOT = "\x00"  # between a run's text slots: a JSON text holds no NUL (json writes it \u0000)
 
 
 def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes:
@@ -155,9 +164,7 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> bytes
         "record": pa.array(json_texts([rest for rest, _ in parts]), pa.string()),
         # JSON only for what the typed columns do not hold: a row's metrics, or a whole row they cannot give exactly
         "row": pa.array([None if ok else compact_json(row) for row, ok in zip(rows, given)], pa.string()),
-        "metrics": _metrics_texts(
-            [row.get("metrics") if ok and "metrics" in row else _NONE for row, ok in zip(rows, given)]
-        ),
+        **metric_columns([row.get("metrics") if ok and "metrics" in row else _NONE for row, ok in zip(rows, given)]),
     }
     return _block_file(texts, [record.get("trace") for record in records], typed, campaign=campaign)
 
@@ -196,7 +203,7 @@ def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> bytes:
         "row": pa.array(
             [None if ok else compact_json(_row_of(runs, i)) for i, ok in enumerate(given.tolist())], pa.string()
         ),
-        "metrics": _metrics_texts(
+        **metric_columns(
             runs.metrics if given.all() else [m if ok else _NONE for m, ok in zip(runs.metrics, given.tolist())]
         ),
     }
@@ -227,8 +234,10 @@ def _block_file(texts: dict[str, pa.Array], traces: list, typed: dict[str, pa.Ar
     # LZ4: zstd gained 5 % of the file on float bytes for 3.5x the write and 3x the read (910 runs: 48 -> 14 and
     # 25 -> 8 us a run). One row group a block: a row group a TRACE_BATCH of runs cost the write ~40 % more and the
     # report's read of its columns ~75 % more (each column chunk's pages and metadata per group); the envelopes read
-    # a block's traces through a buffered stream (TRACE_BUFFER), its pages as the batches need them.
-    codecs = {path: "lz4" if path in TRACE_FIELDS else "zstd" for path in _leaf_paths(table.schema)}
+    # a block's traces through a buffered stream (TRACE_BUFFER), its pages as the batches need them. zstd for the
+    # JSON texts only: on the typed columns' ~35 leaves its fixed cost a leaf (~30 us) was 0.9 ms of a 1,000-run
+    # block's 6.5 for a file no smaller.
+    codecs = {path: "zstd" if path in TEXTS else "lz4" for path in _leaf_paths(table.schema)}
     pq.write_table(
         table,
         sink,
@@ -243,16 +252,64 @@ def _block_file(texts: dict[str, pa.Array], traces: list, typed: dict[str, pa.Ar
 _NONE = object()  # a row whose metrics the ``metrics`` column does not hold
 
 
-def _metrics_texts(metrics: list) -> pa.Array:
-    """The ``metrics`` column: each run's metrics as compact JSON (:func:`.jsontext.json_texts`, the block's runs at
-    once), null where ``metrics[i]`` is :data:`_NONE`."""
-    if _NONE not in metrics:  # (a block's usual: every run's held)
-        return pa.array(json_texts(metrics), pa.string())
+def metric_columns(metrics: list) -> dict[str, pa.Array]:
+    """The columns of the runs' metrics (:data:`METRIC_COLUMNS`; ``metrics[i]`` :data:`_NONE`: null in each), made
+    for the block's runs at once (:func:`.jsontext.json_forms`): a run of a structure the block's runs share holds its
+    form (``metrics_form``: the structure's kinds of slots, a newline, its ``%`` template; a block's runs share one or
+    two), its text slots joined by :data:`SLOT` (``metrics_slots``) and its float slots as float64 bytes
+    (``metrics_numbers``), no text made of a float; a run json writes alone holds its text (``metrics``)."""
+    n = len(metrics)
     held = [k for k, m in enumerate(metrics) if m is not _NONE]
-    texts: list[str | None] = [None] * len(metrics)
-    for k, text in zip(held, json_texts([metrics[k] for k in held])):
-        texts[k] = text
-    return pa.array(texts, pa.string())
+    forms, whole = json_forms([metrics[k] for k in held] if len(held) < n else metrics)
+    texts: list[str | None] = [None] * n
+    codes = np.full(n, -1, np.int32)
+    slots: list[str | None] = [None] * n
+    numbers: list[np.ndarray | None] = [None] * n
+    for code, form in enumerate(forms):
+        rows = [held[j] for j in form.rows]
+        codes[rows] = code
+        text = [col for kind, col in zip(form.kinds, form.columns) if kind == "t"]
+        for i, joined in zip(rows, map(SLOT.join, zip(*text)) if text else [""] * len(rows)):
+            slots[i] = joined
+        floats = [col for kind, col in zip(form.kinds, form.columns) if kind == "f"]
+        values = np.array(floats, np.float64).T.copy() if floats else np.zeros((len(rows), 0))
+        for i, row in zip(rows, values):
+            numbers[i] = row
+    for j, text in whole.items():
+        texts[held[j]] = text
+    words = [form.kinds + "\n" + form.template for form in forms]
+    return {
+        "metrics": pa.array(texts, pa.string()),
+        "metrics_form": pa.DictionaryArray.from_arrays(
+            pa.array(codes, pa.int32(), mask=codes < 0), pa.array(words, pa.string())
+        ),
+        "metrics_slots": pa.array(slots, pa.string()),
+        "metrics_numbers": _blobs(numbers, np.float64),
+    }
+
+
+def metric_texts(table: pa.Table) -> list[str | None]:
+    """Each row's metrics as compact JSON (:func:`.jsontext.compact_json` of the run's metrics; None where the file
+    holds none), from the columns :func:`metric_columns` made (a file of layout 6 or before: its ``metrics`` texts)."""
+    out = table.column("metrics").to_pylist()
+    if "metrics_form" not in table.column_names:
+        return out
+    form = table.column("metrics_form").combine_chunks()
+    if form.null_count == len(form):
+        return out
+    codes = np.asarray(pc.fill_null(form.indices, -1).to_numpy(zero_copy_only=False))
+    slots, numbers = table.column("metrics_slots"), table.column("metrics_numbers")
+    for code, word in enumerate(form.dictionary.to_pylist()):
+        rows = np.flatnonzero(codes == code).tolist()
+        if not rows:
+            continue
+        kinds, template = word.split("\n", 1)
+        texts = kinds.count("t")
+        split = [slots[i].as_py().split(SLOT) for i in rows] if texts else []
+        floats = np.frombuffer(b"".join(numbers[i].as_py() for i in rows), np.float64).reshape(len(rows), -1)
+        for i, text in zip(rows, form_texts(template, kinds, [list(c) for c in zip(*split)], floats)):
+            out[i] = text
+    return out
 
 
 def _leaf_paths(schema: pa.Schema) -> list[str]:
@@ -598,7 +655,7 @@ def _value_texts(table: pa.Table, cells: dict[str, list[str]] | None = None) -> 
     }
     texts["worker.host"] = _strings_text(worker["host"])
     texts["run_reason"] = _strings_text(table.column("run_reason").combine_chunks())
-    texts["metrics"] = table.column("metrics").to_pylist()
+    texts["metrics"] = metric_texts(table)
     return texts
 
 
@@ -609,15 +666,16 @@ def _joined(rest: dict, row: dict) -> dict:
     return rest | row
 
 
-def _blobs(rows: list[np.ndarray | None]) -> pa.LargeBinaryArray:
-    """float32 arrays (``None``: no trace) as one Arrow binary array, each row its array's bytes in C order: one
+def _blobs(rows: list[np.ndarray | None], dtype: type = np.float32) -> pa.LargeBinaryArray:
+    """Arrays of ``dtype`` (``None``: no value) as one Arrow binary array, each row its array's bytes in C order: one
     concatenation and its offsets, not an Arrow value a row. Parquet writes a binary value as one length and its bytes
     (a list of floats: a repetition and a definition level per float, 2.3x the CPU of the block file's write)."""
     valid = np.array([r is not None for r in rows], bool)
-    sizes = np.array([0 if r is None else r.nbytes for r in rows], np.int64)
+    present = [np.ascontiguousarray(r, dtype).reshape(-1) for r in rows if r is not None]
+    sizes = np.zeros(len(rows), np.int64)
+    sizes[valid] = [r.nbytes for r in present]
     offsets = np.concatenate(([0], np.cumsum(sizes)))
-    present = [np.ascontiguousarray(r, np.float32).reshape(-1) for r in rows if r is not None]
-    data = np.concatenate(present) if present else np.zeros(0, np.float32)
+    data = np.concatenate(present) if present else np.zeros(0, dtype)
     bits = pa.py_buffer(np.packbits(valid, bitorder="little"))
     buffers = [bits, pa.py_buffer(offsets), pa.py_buffer(data)]
     return pa.Array.from_buffers(pa.large_binary(), len(rows), buffers, null_count=int((~valid).sum()))
@@ -667,13 +725,17 @@ def _read(path: Path | pq.ParquetFile, columns: list[str]) -> pa.Table:
         return block.read(columns=columns, use_threads=False)
 
 
-TEXT_COLUMNS = ("row", "metrics")  # a row's JSON texts (:func:`row_texts`)
+TEXT_COLUMNS = ("row", *METRIC_COLUMNS)  # a row's JSON texts and its metrics' (:func:`row_texts`)
 
 
 def _row_columns(path: Path) -> list[str]:
     """The columns of block file ``path`` :func:`row_texts` reads."""
-    present = set(pq.read_schema(path).names)
-    return [*TEXT_COLUMNS, *(k for k in ROW_COLUMNS if k in present)]
+    return _text_columns(set(pq.read_schema(path).names), ROW_COLUMNS)
+
+
+def _text_columns(present: set[str], more: Iterable[str] = ()) -> list[str]:
+    """:data:`TEXT_COLUMNS` and ``more`` of a block file whose columns are ``present`` (an earlier layout's: fewer)."""
+    return [k for k in (*TEXT_COLUMNS, *more) if k in present]
 
 
 def _ids(column: pa.ChunkedArray) -> np.ndarray:
@@ -940,7 +1002,7 @@ class Store:
         them)."""
         with pq.ParquetFile(path) as block:  # its footer parsed once: the schema and the columns read from it
             present = set(block.schema_arrow.names)
-            texts = TEXT_COLUMNS if rows else ()
+            texts = _text_columns(present) if rows else []
             table = _read(block, ["id", "status", *texts, *(k for k in ROW_COLUMNS if k in present)])
             names = _ids(table.column("id"))
             kept = self._kept(path, names)
