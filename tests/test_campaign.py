@@ -673,9 +673,10 @@ def test_a_block_file_holds_each_runs_record_and_traces_and_a_foreign_worker_ans
         _block_bytes([{"status": "done"}])
 
 
-def test_every_column_of_a_block_file_is_compressed_the_traces_with_lz4():
+def test_every_column_of_a_block_file_is_compressed_the_json_texts_with_zstd():
     """Each leaf column of a block file (a struct's fields too: a codec given by column name left them uncompressed)
-    is zstd, but the traces, LZ4; read from the file's Parquet metadata."""
+    is LZ4, but the JSON texts (the id, the record, a whole row, the metrics' texts and text slots), zstd; read from
+    the file's Parquet metadata."""
     import pyarrow as pa
     import pyarrow.parquet as pq
     from gainlink.hil.campaign.store import encode_block, encode_trace
@@ -692,7 +693,9 @@ def test_every_column_of_a_block_file_is_compressed_the_traces_with_lz4():
     codecs = {meta.row_group(0).column(i).path_in_schema: meta.row_group(0).column(i).compression
               for i in range(meta.num_columns)}  # fmt: skip
     assert {p for p in codecs if "." in p} >= {"measures.stable", "worker.host", "tracked.r_x.iae", "output_min.x"}
-    assert {p: c for p, c in codecs.items() if c != ("LZ4" if p in "tyur" else "ZSTD")} == {}
+    texts = {"id", "record", "row", "metrics", "metrics_slots"}
+    assert {"t", "y", "metrics_numbers", "metrics_form"} <= set(codecs)
+    assert {p: c for p, c in codecs.items() if c != ("ZSTD" if p in texts else "LZ4")} == {}
 
 
 @pytest.mark.parametrize("batch", [3, 128])
