@@ -410,7 +410,7 @@ def _block_lines(blocks: dict | None) -> list[str]:
             f"- blocks at {large['runs']} runs: {large['wall_s']:.0f} s wall ({large['runs_wall_s']:.0f} s until the "
             f"last run is stored, the report {large['report_cpu_s']:.0f} s of CPU), client peak RSS "
             f"+{large['client_peak_rss_growth_mb']:.0f} MB over its {large['client_rss_start_mb']:.0f} MB at the start "
-            f"(the bench's client, grown by the campaigns before), {large['result_files']} result files"
+            f"(the bench's client, grown by the campaigns before), {large['result_files']} result files{_large(blocks)}"
         )
     return lines
 
@@ -438,6 +438,16 @@ def _small(blocks: dict) -> str:
     )
 
 
+def _large(blocks: dict) -> str:
+    """The 2-workers-over-1 at the larger campaign (1-2-2-1 at 100,000 draws), when recorded."""
+    if "speedup_2_vs_1_large" not in blocks:
+        return ""
+    return (
+        f"; 2 workers over 1 at this size (1-2-2-1): **{blocks['speedup_2_vs_1_large']:.2f}x** (target "
+        f"{blocks['target_speedup']}; {blocks['speedup_2_vs_1_large_runs']:.2f}x until the last run is stored)"
+    )
+
+
 def _mean_of(rows: list[dict], key: str) -> float:
     return sum(r[key] for r in rows) / len(rows)
 
@@ -459,8 +469,16 @@ def _machinery(blocks: dict, ten: dict) -> str:
     return (
         f"a run adds **{split['per_run_ratio']:+.0%}** of its own CPU (target {blocks['target_machinery_ratio']:.0%}; "
         f"the slope over {split['from_runs'][0]} and {split['from_runs'][1]} runs{where}) and a campaign "
-        f"{split['fixed_s']:.1f} s whatever its size ({whole})"
+        f"{split['fixed_s']:.1f} s whatever its size ({whole}){_slope_large(blocks)}"
     )
+
+
+def _slope_large(blocks: dict) -> str:
+    """The machinery a run adds from the 10,000- to the 100,000-run campaigns, when recorded."""
+    large = blocks.get("machinery_large")
+    if not large:
+        return ""
+    return f"; over {large['from_runs'][0]} and {large['from_runs'][1]} runs a run adds {large['per_run_ratio']:+.0%}"
 
 
 def loop_rates_block() -> str:
