@@ -1,12 +1,13 @@
 """The report's envelopes at a bounded cost: past ``cap`` finished runs only those of each grid point's first draws
-are read, and of the block files only the row groups that hold them; the failed runs' median by the same rule over
-the failed runs, and the figure says so.
+are read, and of the block files only the row groups that hold them; the failed runs' median over the failed runs among
+them, and the figure says so.
 
 Oracles: ``np.nanpercentile`` / ``np.nanmedian`` over the runs the rule names, picked here by a loop over the number of
-first draws (the most whose runs stay within the cap; worked out by hand too: 300 runs of 3 grid points of 100 draws
-at a cap of 100: 33 draws, 99 runs; of 20: 6 draws; the 43 failed at a cap of 20: 47 draws, 20 runs), within the half
-bin the function states, recomputed here from the extremes of the runs read; the row groups read, recorded as Parquet
-is asked for them, against those that hold a chosen run, from where the blocks were cut and the row group's size.
+first draws (the most whose runs stay within the cap; worked out by hand too: 300 runs of 3 grid points of 100 draws,
+every 7th failed, at a cap of 100: 33 draws, 99 runs, of them 5 + 4 + 5 = 14 failed (runs 0-28, 105-126 and 203-231 by
+7); at a cap of 20: 6 draws, 18 runs, 3 failed (runs 0, 105 and 203)), within the half bin the function states,
+recomputed here from the extremes of the runs read; the row groups read, recorded as Parquet is asked for them, against
+those that hold a chosen run, from where the blocks were cut and the row group's size.
 """
 
 from __future__ import annotations
@@ -91,50 +92,43 @@ def _check_bands(bands: dict, sig: dict, chosen: list[str], failed: list[str]) -
 
 
 @pytest.mark.parametrize(
-    ("cap", "draws", "runs", "failed_draws", "failed"),
-    [(100, 33, 99, None, 43), (20, 6, 18, 47, 20), (300, None, 300, None, 43)],
+    ("cap", "draws", "runs", "failed"),
+    [(100, 33, 99, 14), (20, 6, 18, 3), (300, None, 300, 43)],
 )
-def test_the_bands_are_numpys_percentiles_over_each_grid_points_first_draws(
-    tmp_path, cap, draws, runs, failed_draws, failed
-):
+def test_the_bands_are_numpys_percentiles_over_each_grid_points_first_draws(tmp_path, cap, draws, runs, failed):
     """300 finished runs of 3 grid points (43 failed) in three blocks: the percentiles are numpy's over each grid
     point's first D draws, D the most that keeps them within the cap, and the failed median numpy's over the failed
-    runs of their first D' draws by the same rule, each within half a bin; the counts and the draws name them."""
+    runs among them, each within half a bin; the counts and the draws name them."""
     ids, status, sig = _runs()
     store = _store(tmp_path, ids, sig, [110, 220])
     draws_of = [k % DRAWS for k in range(300)]
     bands = envelope_bands(store, _status(status, draws_of), bins=256, cap=cap)
     chosen = [i for i, ok in zip(ids, _first_draws(draws_of, cap)) if ok]
-    bad = [(i, d) for i, d in zip(ids, draws_of) if status[i] == "fail"]
-    failed_ids = [i for (i, _), ok in zip(bad, _first_draws([d for _, d in bad], cap)) if ok]
+    failed_ids = [i for i in chosen if status[i] == "fail"]
     assert (len(chosen), len(failed_ids)) == (runs, failed)  # the rule's runs, counted by hand
-    assert (bands["drawn"].draws, bands["failed_drawn"].draws, bands["finished"], bands["failed_of"]) == (
-        draws,
-        failed_draws,
-        300,
-        43,
-    )
+    assert (bands["drawn"].draws, bands["finished"], bands["failed_of"]) == (draws, 300, 43)
     _check_bands(bands, sig, chosen, failed_ids)
 
 
 def test_past_the_cap_of_grid_points_every_kth_run_of_the_first_draw(tmp_path):
     """300 grid points of one draw each at a cap of 100: the first draw alone is over the cap, so every 3rd run in
-    plan order (and every 3rd of the 43 failed at a cap of 20, the failed runs' 1st, 4th, ...)."""
+    plan order, the failed median over the failed among them (every 21st run: 15); at a cap of 20 every 15th (the
+    failed among them every 105th: 3)."""
     ids, status, sig = _runs()
     store = _store(tmp_path, ids, sig, [150])
     bands = envelope_bands(store, _status(status, [0] * 300), bins=256, cap=100)
     assert (bands["drawn"].draws, bands["drawn"].every) == (1, 3)
-    failed = [i for i in ids if status[i] == "fail"]
-    _check_bands(bands, sig, ids[::3], failed)
+    _check_bands(bands, sig, ids[::3], ids[::21])
     few = envelope_bands(store, _status(status, [0] * 300), bins=256, cap=20)
-    assert (few["failed_drawn"].draws, few["failed_drawn"].every) == (1, 3)
-    _check_bands(few, sig, ids[::15], failed[::3])
+    assert (few["drawn"].draws, few["drawn"].every, few["failed"]) == (1, 15, 3)
+    _check_bands(few, sig, ids[::15], ids[::105])
 
 
 def test_the_read_touches_only_the_row_groups_of_the_runs_drawn(tmp_path, monkeypatch):
-    """300 runs in blocks of 10 (a row group each): at a cap of 20 (each grid point's first 6 draws; of the failed,
-    their first 47) Parquet is asked only for the row groups holding one of them, worked out from the cuts (each named
-    here by its first run, read back from the file); under the cap, for every one. A block file is one row group."""
+    """300 runs in blocks of 10 (a row group each): at a cap of 20 (each grid point's first 6 draws, the failed median
+    over the failed among them) Parquet is asked only for the row groups holding one of them, worked out from the cuts
+    (each named here by its first run, read back from the file); under the cap, for every one. A block file is one row
+    group."""
     ids, status, sig = _runs()
     cuts = list(range(0, 301, 10))
     store = _store(tmp_path, ids, sig, cuts[1:-1])
@@ -150,8 +144,8 @@ def test_the_read_touches_only_the_row_groups_of_the_runs_drawn(tmp_path, monkey
     monkeypatch.setattr(pq.ParquetFile, "iter_batches", spied)
     draws_of = [k % DRAWS for k in range(300)]
     envelope_bands(store, _status(status, draws_of), bins=256, cap=20)
-    wanted = [k for k in range(300) if k % DRAWS < 6 or (k % 7 == 0 and k % DRAWS < 47)]
-    assert sorted(asked) == [ids[k] for k in sorted({k // 10 * 10 for k in wanted})] and len(asked) == 15
+    wanted = [k for k in range(300) if k % DRAWS < 6]
+    assert sorted(asked) == [ids[k] for k in sorted({k // 10 * 10 for k in wanted})] and len(asked) == 3
     asked.clear()
     envelope_bands(store, _status(status, draws_of), bins=256, cap=300)
     assert sorted(asked) == ids[::10]
@@ -207,7 +201,7 @@ def test_the_figure_names_the_runs_it_covers(tmp_path, monkeypatch):
     past, under = drawn
     assert past._suptitle.get_text() == ("c: percentiles over 18 of 300 finished runs\neach grid point's first 6 draws")
     legend = [t.get_text() for t in past.axes[0].get_legend().get_texts()]
-    assert "median of 20 of 43 failed, first 47 draws" in legend
+    assert "median of 3 of 43 failed (those drawn)" in legend
     assert under._suptitle.get_text() == "c: outputs and commands over 300 runs"
     assert "median of 43 failed" in [t.get_text() for t in under.axes[0].get_legend().get_texts()]
 

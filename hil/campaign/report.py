@@ -7,7 +7,7 @@
 - ``campaign.csv``: one row per run (axis values, status, reasons, the main metrics);
 - ``envelopes.png``: percentiles (5-95, 25-75, median) of every output and command over time across
   the finished runs (at most :data:`ENVELOPE_RUNS` of them, each grid point's first draws, as its title says),
-  with the failed runs' median dashed;
+  with the median of the failed runs among them dashed;
 - ``scatter.png``: for each drawn (or numeric grid) axis, each tracked output's IAE against it, failed
   runs marked (at most :data:`SCATTER_RUNS` of each status, every k-th in plan order, as its title says; the legend
   counts every run);
@@ -141,8 +141,8 @@ def _model_lines(tally: Tally) -> list[str]:
 def envelopespng_bytes(plan: CampaignPlan, status: dict[str, str], store: Any) -> bytes:
     """Percentile envelopes of outputs and commands over time across the runs ``status`` (id -> ``pass`` or
     ``fail``, in plan order) of the most common trace length: at most :data:`ENVELOPE_RUNS` of them, each grid
-    point's first draws (:func:`envelope_runs`), and the failed runs' median by the same rule over the failed runs; the
-    title and the legend say which runs when not all are drawn."""
+    point's first draws (:func:`envelope_runs`), and the median of the failed runs among them; the title and the
+    legend say which runs when not all are drawn."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -190,12 +190,10 @@ def _envelope_scope(bands: dict) -> str:
 
 
 def _failed_label(bands: dict) -> str:
-    """The failed runs' median's legend: how many, and which when not all are drawn."""
-    drawn = bands["failed_drawn"]
-    if drawn.draws is None:
+    """The failed runs' median's legend: how many, and of how many failed runs when not all are drawn."""
+    if bands["drawn"].draws is None:
         return f"median of {bands['failed']} failed"
-    which = f"first {drawn.draws} draws" if drawn.every == 1 else f"first draw, every {_ordinal(drawn.every)}"
-    return f"median of {bands['failed']} of {bands['failed_of']} failed, {which}"
+    return f"median of {bands['failed']} of {bands['failed_of']} failed (those drawn)"
 
 
 def _ordinal(n: int) -> str:
@@ -246,15 +244,15 @@ def envelope_bands(
 ) -> dict | None:
     """The percentiles (:data:`PERCENTILES`) of every output and command at each stored sample across the runs
     ``status`` (id -> ``pass`` or ``fail``, in plan order; a :class:`~.rows.RunStatus` with each run's draw, a plain
-    mapping's runs each a draw of one grid point) whose traces have the most common shape, and the failed runs'
-    median; ``None`` without a stored trace.
+    mapping's runs each a draw of one grid point) whose traces have the most common shape, and the median of the
+    failed ones among them; ``None`` without a stored trace.
 
     Bounded: of more than ``cap`` (default :data:`ENVELOPE_RUNS`) finished runs only those of each grid point's
-    first draws are read (:func:`envelope_runs`), and the failed runs' median is over every failed run when they are
-    at most ``cap``, else over the failed runs of their first draws by the same rule; ``runs`` and ``failed`` count the
-    runs of the most common shape so read, ``finished`` and ``failed_of`` all the distinct finished and failed runs,
-    ``drawn`` and ``failed_drawn`` the rule's choices (:class:`Drawn`). Only the row groups of the block files that
-    hold a chosen run are read.
+    first draws are read (:func:`envelope_runs`), and the failed runs' median is over the failed runs among them (the
+    same sample of the campaign: the failed runs elsewhere would put a run of every block file in the read); ``runs``
+    and ``failed`` count the runs of the most common shape so read, ``finished`` and ``failed_of`` all the distinct
+    finished and failed runs, ``drawn`` the rule's choice (:class:`Drawn`). Only the row groups of the block files
+    that hold a chosen run are read.
 
     Streamed: the block files are read once, one at a time (each trace shape's runs: each sample's smallest and largest
     finite value, the stack spilled as float32 to an anonymous temporary file in the campaign folder; the shapes are
@@ -266,14 +264,13 @@ def envelope_bands(
     infinite one counts in the end bin on its side.
 
     Returns ``{"t", "percentiles": (len(PERCENTILES), N, S), "failed_median": (N, S), "runs", "failed", "finished",
-    "failed_of", "drawn", "failed_drawn", "outputs", "inputs", "half_bin": (N, S)}`` with the S signals the outputs
-    then the commands.
+    "failed_of", "drawn", "outputs", "inputs", "half_bin": (N, S)}`` with the S signals the outputs then the
+    commands.
     """
     cap = ENVELOPE_RUNS if cap is None else cap
     ids, draws, failing = _status_runs(status)
     drawn = envelope_runs(draws, cap)
-    failed_drawn = envelope_runs(draws[failing], cap)
-    chosen, failed = ids[drawn.runs], ids[failing][failed_drawn.runs]
+    chosen, failed = ids[drawn.runs], ids[drawn.runs[failing[drawn.runs]]]
     with tempfile.TemporaryFile(dir=store.out) as spill:  # the stacks read once, kept as float32 for the 2nd pass
         seen = _spill_stacks(store, np.unique(chosen), np.unique(failed), spill)
         if not seen:
@@ -293,7 +290,6 @@ def envelope_bands(
         "finished": len(ids),
         "failed_of": int(failing.sum()),
         "drawn": drawn,
-        "failed_drawn": failed_drawn,
         "outputs": shape[1],
         "inputs": shape[2],
         "half_bin": width / 2,
@@ -337,13 +333,12 @@ class _Spilled:
 
 
 def _spill_stacks(store: Any, chosen: np.ndarray, failing: np.ndarray, spill: IO[bytes]) -> dict[tuple, _Spilled]:
-    """Read every block's traces of the runs ``chosen`` and ``failing`` (the percentiles' and the failed median's,
-    each sorted and distinct) once, spill them to ``spill`` as float32 and note, per trace shape (samples, outputs,
+    """Read every block's traces of the runs ``chosen`` (the percentiles', sorted and distinct; ``failing`` the failed
+    median's among them) once, spill them to ``spill`` as float32 and note, per trace shape (samples, outputs,
     commands), what :func:`envelope_bands` needs: one pass, no separate read of the shapes."""
     seen: dict[tuple, _Spilled] = {}
     at = 0
-    wanted = np.union1d(chosen, failing) if len(failing) and not _covers(chosen, failing) else chosen
-    for names, st in store.trace_stacks(wanted, fields=("t", "y", "u")):
+    for names, st in store.trace_stacks(chosen, fields=("t", "y", "u")):
         shape = (st["t"].shape[1], st["y"].shape[2], st["u"].shape[2])
         one = seen.setdefault(shape, _Spilled(st["t"][0].astype(float)))
         sig = np.concatenate([st["y"], st["u"]], axis=2)
@@ -355,11 +350,6 @@ def _spill_stacks(store: Any, chosen: np.ndarray, failing: np.ndarray, spill: IO
         at += sig.nbytes
     spill.flush()
     return seen
-
-
-def _covers(pool: np.ndarray, ids: np.ndarray) -> bool:
-    """Whether every one of ``ids`` is in ``pool`` (both sorted and distinct)."""
-    return len(ids) <= len(pool) and bool(members(ids, pool).all())
 
 
 def _extremes(sig: np.ndarray, lo: np.ndarray | None, hi: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
