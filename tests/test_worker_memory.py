@@ -56,6 +56,32 @@ def test_a_worker_hands_back_what_a_large_block_freed():
     assert after - small < 15.0, (small, after)
 
 
+def _waiting_after(pause: float) -> bool:
+    """:func:`~gainlink.hil.campaign.worker.next_task_waiting` in a task, after ``pause`` s: time for the scheduler to
+    have handed this worker the task that follows, when there is one."""
+    import time
+
+    from gainlink.hil.campaign.worker import next_task_waiting
+
+    time.sleep(pause)
+    return next_task_waiting()
+
+
+def test_a_worker_keeps_its_pages_for_its_next_block_and_hands_them_back_after_its_last():
+    """A block's task hands its freed memory back only when no other task is ready on its worker: three tasks on a
+    1-worker cluster (Dask gives a worker of one thread its next task while one runs) see a task waiting, a task
+    waiting, then none (the last hands back). Outside a Dask worker (a test, the per-run path) a block always hands
+    its memory back, as the test above measures."""
+    from gainlink.hil.campaign.cluster import dask_client
+    from gainlink.hil.campaign.worker import next_task_waiting
+
+    assert next_task_waiting() is False
+    with dask_client(workers=1) as client:
+        client.wait_for_workers(1, timeout=60)
+        futures = [client.submit(_waiting_after, 0.5, pure=False) for _ in range(3)]
+        assert [f.result(timeout=60) for f in futures] == [True, True, False]
+
+
 def test_a_workers_caches_keep_the_artifacts_it_used_last_not_every_one(pend):
     """A campaign that draws the design itself has an artifact per run. Over WORKER_CACHE + 6 runs of distinct
     artifacts the worker keeps WORKER_CACHE of them parsed (the last used, counted as live Artifact objects), not one

@@ -6,8 +6,9 @@ and a run stepped alone costs numpy's per-call price at every step). Its inputs 
 canonical JSON, FMU archives by sha256); the worker writes each once into a host-local cache named by sha256, builds the
 firmware once per artifact (the firmware build cache is keyed by the artifact's sha256 and serialised by a file lock
 between the processes of a host) and remembers the result (of the :data:`WORKER_CACHE` artifacts it used last), so the
-second run of an artifact pays nothing for it. At a task's end it hands back to the system what the task's arrays left
-free in its allocators (:func:`hand_back_memory`), so a worker's memory does not keep its largest block's peak.
+second run of an artifact pays nothing for it. At a task's end with no other task ready to run (the last block of a
+campaign, :func:`next_task_waiting`) it hands back to the system what the task's arrays left free in its allocators
+(:func:`hand_back_memory`), so a worker's memory does not keep its largest block's peak.
 
 A HIL run takes a *bus slot* first: a file lock no other process on the host holds. The slot gives the
 run its own udp_multicast group and port (or its own CAN id base on a shared SocketCAN bus, or its own
@@ -328,7 +329,23 @@ def execute_block(
     try:
         return _block_answer(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder)
     finally:  # the block's arrays and records are freed by now
-        hand_back_memory()
+        if not next_task_waiting():
+            hand_back_memory()
+
+
+def next_task_waiting() -> bool:
+    """Whether this process is a Dask worker with another task ready to run, which will reuse the pages the task
+    ending leaves free: a worker of a campaign under way hands its memory back after its last block, not after each.
+    Handed back after each block, the next one took every page again from the system (measured: 6,000-7,000 page
+    faults and 35-70 µs of kernel CPU a run of a 834-run block, against 0-1,400 and 0-15 kept). A task ready when a
+    block ended that Dask then gives another worker leaves this one holding a block's pages until its next block ends.
+    ``False`` outside a Dask worker's task (its memory handed back after each block, as before)."""
+    try:
+        from distributed import get_worker
+
+        return len(get_worker().state.ready) > 0
+    except (ImportError, ValueError, AttributeError):  # ValueError: not in a worker's task
+        return False
 
 
 def _block_answer(
