@@ -367,7 +367,7 @@ def _block_answer(
         answer = write_block(folder[0], folder[1], ids, data, errors)
         if answer is not None:
             return answer
-    return data
+    return data.to_pybytes()  # to the client, which writes it
 
 
 def hand_back_memory() -> None:
