@@ -138,20 +138,20 @@ def hil_campaign(runs: int, seed: int) -> dict:
     return c
 
 
-def _pid_cpu_s() -> tuple[int, float]:
+def _pid_cpu_s() -> tuple[int, tuple[float, float]]:
     import psutil
 
     t = psutil.Process().cpu_times()
-    return os.getpid(), t.user + t.system
+    return os.getpid(), (t.user + t.system, t.system)
 
 
-def _cluster_cpu_s(client) -> float:
+def _cluster_cpu_s(client) -> tuple[float, float]:
     """CPU seconds so far of the cluster's processes other than this one: the workers, and the nannies where
     they have a process of their own (a LocalCluster's nannies live in this process, whose CPU is counted
-    by the caller: each process is counted once)."""
+    by the caller: each process is counted once); and the part of it the kernel spent for them (system time)."""
     cpu = dict(client.run(_pid_cpu_s).values()) | dict(client.run(_pid_cpu_s, nanny=True).values())
     cpu.pop(os.getpid(), None)
-    return sum(cpu.values())
+    return sum(total for total, _ in cpu.values()), sum(system for _, system in cpu.values())
 
 
 def _steal_s() -> float:
@@ -173,9 +173,9 @@ def timed_campaign(data: dict, client, out: Path) -> dict:
         if done == total:
             last["cpu"], last["wall"] = time.process_time(), time.perf_counter()
 
-    s0, w0, c0, t0 = _steal_s(), _cluster_cpu_s(client), time.process_time(), time.perf_counter()
+    s0, (w0, k0), c0, t0 = _steal_s(), _cluster_cpu_s(client), time.process_time(), time.perf_counter()
     result = run(data, out=out, scheduler=client.scheduler.address, progress=progress)
-    wall, c1, w1 = time.perf_counter() - t0, time.process_time(), _cluster_cpu_s(client)
+    wall, c1, (w1, k1) = time.perf_counter() - t0, time.process_time(), _cluster_cpu_s(client)
     steal = _steal_s() - s0
     cpu = c1 - c0 + w1 - w0
     assert result.executed == result.total, "a bench campaign must start from an empty folder"
@@ -204,6 +204,8 @@ def timed_campaign(data: dict, client, out: Path) -> dict:
             "report": round(report_cpu, 3),
         },
         "runs_own_cpu_s": round(runs_cpu, 3),
+        # of the workers' CPU, the kernel's (system time: page faults, the block files' writes), runs' and outside
+        "workers_kernel_cpu_s": round(k1 - k0, 3),
         "machinery_cpu_per_run_ms": round(1e3 * (cpu - runs_cpu) / n, 2),
         "machinery_ratio": round((cpu - runs_cpu) / runs_cpu, 4),
         "machinery_ratio_without_report": round((cpu - report_cpu - runs_cpu) / runs_cpu, 4),
@@ -345,6 +347,51 @@ def plain_block_processes_speedup() -> dict:
         "two_processes_s": round(walls[2], 3),
         "speedup_2_vs_1": round(walls[1] / walls[2], 3),
     }
+
+
+PROBE_FILE_MB = 6  # a block file of the shipped campaign (834 runs of 1,000 steps: ~6 MB)
+PROBE_FILES = 24  # 144 MB: more than the few tens of MB of free pages a virtual machine here keeps warm
+
+
+def page_costs(folder: Path) -> dict:
+    """What this machine's kernel costs for memory not used before, measured now, in CPU ms a MB (the median over
+    :data:`PROBE_FILES` pieces of :data:`PROBE_FILE_MB`): writing new files the size of a block file into ``folder``,
+    kept until the last is written as a campaign's block files are (new pages of the page cache), against writing the
+    same bytes over them again (their pages in the cache already), and touching new anonymous memory (a process's new
+    pages). On a virtual machine that hands the memory its guest frees back to its host (virtio-balloon's free page
+    reporting), a new page includes the host faulting it in again: the block files and a worker's memory pay it."""
+    import mmap
+
+    import numpy as np
+
+    data, size = os.urandom(PROBE_FILE_MB << 20), PROBE_FILE_MB << 20
+    paths = [folder / f"page_probe_{i}" for i in range(PROBE_FILES)]
+    new, again, touched = [], [], []
+    try:
+        for path in paths:
+            t0 = time.process_time()
+            path.write_bytes(data)
+            new.append(time.process_time() - t0)
+        for path in paths:
+            t0 = time.process_time()
+            with open(path, "r+b") as fh:
+                fh.write(data)
+            again.append(time.process_time() - t0)
+    finally:
+        for path in paths:
+            path.unlink(missing_ok=True)
+    with mmap.mmap(-1, size * PROBE_FILES) as fresh:
+        pages = np.frombuffer(fresh, np.uint8)
+        for k in range(PROBE_FILES):
+            t0 = time.process_time()
+            pages[k * size : (k + 1) * size : mmap.PAGESIZE] = 1  # one byte a page: each page faulted in once
+            touched.append(time.process_time() - t0)
+        del pages
+    return {
+        key: round(1e3 * statistics.median(times) / PROBE_FILE_MB, 3)
+        for key, times in (("new_file_write_ms_per_mb", new), ("file_rewrite_ms_per_mb", again),
+                           ("new_memory_ms_per_mb", touched))
+    }  # fmt: skip
 
 
 def worker_rss_mb(client) -> float:
@@ -530,12 +577,15 @@ def machinery_split(small: list[dict], large: list[dict]) -> dict:
         m0_part = sum(r["machinery_parts_cpu_s"][part] for r in small) / len(small)
         m1_part = sum(r["machinery_parts_cpu_s"][part] for r in large) / len(large)
         parts[part] = round(1e3 * (m1_part - m0_part) / (n1 - n0), 3)
+    kernel = (_mean(large, "workers_kernel_cpu_s") - _mean(small, "workers_kernel_cpu_s")) / (n1 - n0)
     return {
         "from_runs": [round(n0), round(n1)],
         "per_run_ms": round(1e3 * slope, 3),
         "per_run_ratio": round(slope / own, 4),
         "fixed_s": round(m1 - slope * n1, 2),
         "per_run_ms_by_part": parts,  # where the machinery a run adds runs (the three sum to per_run_ms)
+        # the same slope of the workers' kernel CPU (the runs' and the rest's: not a part of per_run_ms alone)
+        "workers_kernel_per_run_ms": round(1e3 * kernel, 3),
     }
 
 
@@ -546,7 +596,7 @@ def measure_blocks(tmp: Path) -> dict:
     2-worker cluster the per-run path on a sample; with BENCH_LARGE=1, :data:`LARGE_DRAWS` draws on each cluster."""
     from gainlink.hil.campaign.cluster import dask_client
 
-    out: dict = {"speedup_runs": [], "small_campaigns": []}
+    out: dict = {"speedup_runs": [], "small_campaigns": [], "page_costs_before": page_costs(tmp)}
     for k, n in enumerate((1, 2, 2, 1)):
         t0 = time.perf_counter()
         with dask_client(workers=n) as client:
@@ -568,6 +618,7 @@ def measure_blocks(tmp: Path) -> dict:
                     out["hundred_thousand"] = out["large_campaigns"][-1]
                 shutil.rmtree(tmp / f"blocks_100k_{k}")  # ~0.7 GB a campaign: not four held at once
     out["plain_processes"] = ceiling = plain_block_processes_speedup()
+    out["page_costs_after"] = page_costs(tmp)
     ten = out["ten_thousand"]
     two = {key: [r for r in out[key] if r["workers"] == 2] for key in ("small_campaigns", "speedup_runs")}
     out["machinery"] = split = machinery_split(two["small_campaigns"], two["speedup_runs"])

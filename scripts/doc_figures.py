@@ -469,7 +469,21 @@ def _machinery(blocks: dict, ten: dict) -> str:
     return (
         f"a run adds **{split['per_run_ratio']:+.0%}** of its own CPU (target {blocks['target_machinery_ratio']:.0%}; "
         f"the slope over {split['from_runs'][0]} and {split['from_runs'][1]} runs{where}) and a campaign "
-        f"{split['fixed_s']:.1f} s whatever its size ({whole}){_slope_large(blocks)}"
+        f"{split['fixed_s']:.1f} s whatever its size ({whole}){_slope_large(blocks)}{_kernel(blocks)}"
+    )
+
+
+def _kernel(blocks: dict) -> str:
+    """The workers' kernel CPU a run adds and this machine's cost of new pages, when recorded."""
+    split, pages = blocks.get("machinery_large") or blocks.get("machinery"), blocks.get("page_costs_before")
+    if not pages or "workers_kernel_per_run_ms" not in split:
+        return ""
+    return (
+        f"; the workers' kernel CPU a run adds (system time, the runs' and the rest's) "
+        f"{split['workers_kernel_per_run_ms']:.3f} ms; a new page-cache page costs this machine "
+        f"{pages['new_file_write_ms_per_mb']:.2f} ms a MB written (the same bytes written over them again "
+        f"{pages['file_rewrite_ms_per_mb']:.2f}; new memory {pages['new_memory_ms_per_mb']:.2f}), measured before the "
+        "benchmark"
     )
 
 
