@@ -476,7 +476,7 @@ def _machinery(blocks: dict, ten: dict) -> str:
 def _kernel(blocks: dict) -> str:
     """The workers' kernel CPU a run adds and this machine's cost of new pages, when recorded."""
     split, pages = blocks.get("machinery_large") or blocks.get("machinery"), blocks.get("page_costs_before")
-    if not pages or "workers_kernel_per_run_ms" not in split:
+    if not pages or not split or "workers_kernel_per_run_ms" not in split:
         return ""
     return (
         f"; the workers' kernel CPU a run adds (system time, the runs' and the rest's) "
