@@ -217,3 +217,45 @@ def test_a_worker_that_sees_the_campaign_folder_writes_its_block_and_one_that_do
         assert (got[i][1] is None) == (want[i][1] is None) == (i == ids[1])
         if got[i][1] is not None:
             assert all(np.array_equal(got[i][1][k], want[i][1][k]) for k in "tyur")
+
+
+def test_a_task_runs_its_steps_outside_the_runs_without_cyclic_collection_and_leaves_the_collector_on(
+    tmp_path, monkeypatch
+):
+    """A block's task (4 pendulum runs, one an error) groups its runs, stores them and writes its file with the cyclic
+    garbage collector paused (each such collection walked the block's ~10^5 objects), and leaves the collector on
+    after it, also when the task fails (bytes that are not a task)."""
+    import gc
+    import pickle
+
+    import gainlink.hil.campaign.worker as worker
+    from gainlink.hil.campaign.runner import plan_doc
+    from gainlink.hil.campaign.store import Store, folder_key
+
+    plan, points, runs = _pendulum_task(4)
+    store = Store(tmp_path, campaign=plan.campaign.name)
+    store.prepare(plan, plan_doc=plan_doc(plan))
+    packed = pickle.dumps(([p.id for p in points], runs))
+    collecting: dict[str, bool] = {}
+
+    def spied(name: str):
+        real = getattr(worker, name)
+
+        def step(*args, **kwargs):
+            collecting[name] = gc.isenabled()
+            return real(*args, **kwargs)
+
+        monkeypatch.setattr(worker, name, step)
+
+    for name in ("_blocks", "encode_block", "write_block"):  # a task with an error: its records, not lists
+        spied(name)
+    assert gc.isenabled()
+    answer = worker.execute_packed(
+        "sil", plan.artifacts, packed, {}, campaign=plan.campaign.name,
+        folder=(str(store.blocks), folder_key(store.blocks)),
+    )  # fmt: skip
+    assert answer["runs"] == 4 and collecting == {"_blocks": False, "encode_block": False, "write_block": False}
+    assert gc.isenabled()
+    with pytest.raises(pickle.UnpicklingError):
+        worker.execute_packed("sil", plan.artifacts, b"not a task", {}, campaign=plan.campaign.name)
+    assert gc.isenabled()

@@ -326,11 +326,14 @@ def execute_block(
     numbers (:func:`~.store.write_block`: the file's name, the runs, the errors' reasons); else it returns the file's
     bytes and the client writes them.
     """
-    try:
-        return _block_answer(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder)
-    finally:  # the block's arrays and records are freed by now
-        if not next_task_waiting():
-            hand_back_memory()
+    from ..loop.scheduler import gc_paused
+
+    with gc_paused():  # see execute_packed
+        try:
+            return _block_answer(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder)
+        finally:  # the block's arrays and records are freed by now
+            if not next_task_waiting():
+                hand_back_memory()
 
 
 def next_task_waiting() -> bool:
@@ -352,17 +355,14 @@ def _block_answer(
     kind: str, artifacts: dict, runs: list, blobs: dict | None, *, ids: list[str], campaign: str, folder: Any
 ) -> bytes | dict:
     """:func:`execute_block`'s answer: its block file written into ``folder`` (a few numbers) or its bytes."""
-    from ..loop.scheduler import gc_paused
-
     task = _task_records(kind, artifacts, runs, blobs)
-    with gc_paused():  # the lists of texts and values make no cycles
-        if task and all(type(r) is _Block for r in task):  # only blocks' runs: a column at a time, no record dict a run
-            data = encode_runs(ids, _block_runs(kind, runs, task), campaign=campaign)
-            errors: list = []
-        else:
-            records = [with_inputs(r, run, kind=kind) for r, run in zip(_materialized(task), runs)]
-            data = encode_block(ids, records, campaign=campaign)
-            errors = [[i, r.get("reason")] for i, r in enumerate(records) if r["status"] == "error"]
+    if task and all(type(r) is _Block for r in task):  # only blocks' runs: a column at a time, no record dict a run
+        data = encode_runs(ids, _block_runs(kind, runs, task), campaign=campaign)
+        errors: list = []
+    else:
+        records = [with_inputs(r, run, kind=kind) for r, run in zip(_materialized(task), runs)]
+        data = encode_block(ids, records, campaign=campaign)
+        errors = [[i, r.get("reason")] for i, r in enumerate(records) if r["status"] == "error"]
     if folder is not None:
         answer = write_block(folder[0], folder[1], ids, data, errors)
         if answer is not None:
@@ -399,10 +399,17 @@ def execute_packed(
     :meth:`.plan.PlannedRuns.task` gives them (described, or a list of each run's inputs). One bytes
     argument is what Dask's graph code walks past: a list of runs' scenarios as an argument is walked element by
     element on the client for dependencies (measured: 11,000 calls a block of 500 pendulum runs)."""
-    ids, runs = pickle.loads(packed)
-    if isinstance(runs, DescribedRuns):  # made once: grouped, run and recorded from the same runs
-        runs = runs.made_runs()
-    return execute_block(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder)
+    from ..loop.scheduler import gc_paused
+
+    # Without cyclic garbage collection for the whole task: a block's runs, texts and columns are ~10^5 objects in
+    # acyclic lists and dicts, and collections in its steps outside the runs (grouping, storing) cost ~50 a worker's
+    # 10,002-run campaign (0.3 ms each, a full one 30-60 ms). Paused, the task's garbage is found by the first
+    # collection after it (a traceback's cycles, say).
+    with gc_paused():
+        ids, runs = pickle.loads(packed)
+        if isinstance(runs, DescribedRuns):  # made once: grouped, run and recorded from the same runs
+            runs = runs.made_runs()
+        return execute_block(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder)
 
 
 def batch_records(kind: str, artifacts: dict[str, bytes], runs: Sequence, blobs: dict | None = None) -> list[dict]:
