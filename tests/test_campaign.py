@@ -1414,3 +1414,32 @@ def test_the_pendulum_example_passes_the_plants_that_stay_up_under_back_calculat
         assert evaluate(plan.campaign.criteria, record) == [], point.values
         settle = record["metrics"]["tracked"]["r_x"]["settling_time_s"]
         assert settle is None or settle > 8.0  # what settled_within = 8 failed (None: not within the 10 s run)
+
+
+@ON_THE_CLUSTERS
+def test_a_campaign_leaves_the_objects_before_it_out_of_collections_and_gives_them_back_after(pend, dask_cluster,
+                                                                                              tmp_path):  # fmt: skip
+    """While a campaign runs, the objects the process held before it are frozen (left out of the cyclic garbage
+    collections: they outlive it); after it, whether it ended or failed, they are given back, and a caller's own
+    frozen objects stay frozen."""
+    import gc
+
+    seen: list[int] = []
+    data = small_campaign(pend, runs=2, grid=[])
+    data["scenario"]["duration"] = 0.5
+    assert gc.get_freeze_count() == 0
+    run(data, out=tmp_path / "a", scheduler=dask_cluster, plots=False,
+        progress=lambda *args: seen.append(gc.get_freeze_count()))  # fmt: skip
+    assert len(seen) == 2 and min(seen) > 0
+    assert gc.get_freeze_count() == 0
+    with pytest.raises(CampaignError):
+        run(dict(data, runs=-1), out=tmp_path / "b", scheduler=dask_cluster)
+    assert gc.get_freeze_count() == 0
+    gc.freeze()
+    try:
+        mine = gc.get_freeze_count()
+        with pytest.raises(CampaignError):
+            run(dict(data, runs=-1), out=tmp_path / "c", scheduler=dask_cluster)
+        assert gc.get_freeze_count() == mine
+    finally:
+        gc.unfreeze()

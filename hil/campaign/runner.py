@@ -17,6 +17,8 @@ run costs no other run its result.
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import hashlib
 import itertools
 import logging
@@ -174,7 +176,39 @@ def run(
     if scheduler is None:  # a LocalCluster's workers import the calling script again
         check_main_guard()
     _check_counts(batch=batch, workers=workers)  # before anything is planned or written
-    campaign = as_campaign(campaign)
+    with _gc_frozen():
+        return _run(as_campaign(campaign), out=out, scheduler=scheduler, workers=workers, progress=progress,
+                    batch=batch, plots=plots)  # fmt: skip
+
+
+@contextlib.contextmanager
+def _gc_frozen() -> Iterator[None]:
+    """The objects this process holds when a campaign starts (its modules', ~200,000 here) left out of the cyclic
+    garbage collections while it runs: they outlive it, and each full collection walked them all again (measured in
+    the client of a 10,002-run campaign: one full collection, ~0.1 s of its 1.2 CPU-s; at 100,002 runs two, 0.2 s).
+    Given back to the collector when the campaign ends, however it ends. A caller that froze objects itself keeps
+    them frozen, and the campaign's objects are then collected as usual (an unfreeze would undo the caller's)."""
+    if gc.get_freeze_count():
+        yield
+        return
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
+
+
+def _run(
+    campaign: Campaign,
+    *,
+    out: str | Path,
+    scheduler: str | None,
+    workers: int | None,
+    progress: Progress | None,
+    batch: int | None,
+    plots: bool,
+) -> CampaignResult:
+    """:func:`run` of a campaign read and options checked."""
     plan = plan_campaign(campaign)
     store = _prepared_store(plan, out)
     distinct, finished = _distinct_runs(plan, store)
