@@ -460,11 +460,13 @@ def test_a_blocks_runs_as_lists_make_the_file_their_records_make():
     assert 0 < made.column("row").null_count < len(ids)  # some rows from their columns, the odd ones whole
 
 
-def test_a_workers_block_file_is_the_one_its_records_make(tmp_path):
-    """The shipped pendulum's runs in a worker's task, two grid points' blocks interleaved: the block file made from
-    the blocks' lists (``worker._block_runs``, ``store.encode_runs``: the worker's path) is the table the same runs'
-    records make through ``encode_block`` (the per-run path's), column by column; ``campaign show``'s record of each
-    run is its record."""
+@pytest.mark.parametrize("interleaved", [True, False])
+def test_a_workers_block_file_is_the_one_its_records_make(tmp_path, interleaved):
+    """The shipped pendulum's runs in a worker's task, two grid points' blocks interleaved (or one grid point's block,
+    whose traces go to the file as the block's arrays, not a run's at a time): the block file made from the blocks'
+    lists (``worker._block_runs``, ``store.encode_runs``: the worker's path) is the table the same runs' records make
+    through ``encode_block`` (the per-run path's), column by column; ``campaign show``'s record of each run is its
+    record."""
     from gainlink.fileio import read_toml
     from gainlink.hil.campaign import worker
     from gainlink.hil.campaign.plan import plan_campaign
@@ -476,11 +478,15 @@ def test_a_workers_block_file_is_the_one_its_records_make(tmp_path):
     campaign = parse_campaign(data)
     plan = plan_campaign(campaign)
     points = sorted(plan.runs, key=lambda p: (p.draw, p.grid_index))  # grid points' runs interleaved in the task
+    if not interleaved:
+        points = [p for p in points if p.grid_index == 0]
     runs = [(p.artifact_sha256, p.scenario, p.seed) for p in points]
     ids = [p.id for p in points]
     task = worker._task_records("sil", dict(plan.artifacts), runs, None)
-    assert all(type(r) is worker._Block for r in task) and len({id(r) for r in task}) > 1
-    made = encode_runs(ids, worker._block_runs("sil", runs, task), campaign=campaign.name)
+    assert all(type(r) is worker._Block for r in task) and (len({id(r) for r in task}) > 1) == interleaved
+    lists = worker._block_runs("sil", runs, task)
+    assert isinstance(lists.traces, dict) != interleaved
+    made = encode_runs(ids, lists, campaign=campaign.name)
     records = [with_inputs(r, run, kind="sil") for r, run in zip(worker._materialized(task), runs)]
     oracle = _table(encode_block(ids, records, campaign=campaign.name))
     table = _table(made)

@@ -182,7 +182,7 @@ class BlockRuns:
     metrics: list
     measures: list
     link: list
-    traces: list  # encode_trace's arrays
+    traces: list | dict  # encode_trace's arrays, or all runs' at once (:func:`_block_file`)
     worker: list  # each run's: its block's share (host, pid, start, stop, cpu_s, block), one dict a block
 
 
@@ -216,15 +216,25 @@ def _row_of(runs: BlockRuns, i: int) -> dict:
             "worker": runs.worker[i], "run_reason": runs.reason[i]}  # fmt: skip
 
 
-def _block_file(texts: dict[str, pa.Array], traces: list, typed: dict[str, pa.Array], *, campaign: str) -> pa.Buffer:
-    """The Parquet file of a block, as Arrow's buffer: the JSON and text columns ``texts``, the traces, the typed
-    columns. Not copied into a ``bytes`` (the worker that writes it into the folder itself writes the buffer: a copy
-    of ~6 MB a block, and its pages faulted in, saved)."""
+def _block_file(
+    texts: dict[str, pa.Array], traces: list | dict, typed: dict[str, pa.Array], *, campaign: str
+) -> pa.Buffer:
+    """The Parquet file of a block, as Arrow's buffer: the JSON and text columns ``texts``, the traces (each run's
+    :func:`encode_trace` arrays, None for none; or every run's at once, a dict of ``t`` (runs, N) and ``y``, ``u``,
+    ``r`` (runs, N, width) float32 arrays, each run's rows its own), the typed columns. Not copied into a ``bytes``
+    (the worker that writes it into the folder itself writes the buffer: a copy of ~6 MB a block, and its pages
+    faulted in, saved)."""
     cols = dict(texts)
-    cols["t"] = _blobs([None if tr is None else tr["t"] for tr in traces])
-    for k in WIDE:
-        cols[k] = _blobs([None if tr is None else tr[k] for tr in traces])
-        cols[f"{k}_width"] = pa.array([None if tr is None else tr[k].shape[1] for tr in traces], pa.int32())
+    if isinstance(traces, dict):
+        for k in ("t", *WIDE):
+            cols[k] = _stacked_blobs(traces[k])
+        for k in WIDE:
+            cols[f"{k}_width"] = pa.array(np.full(traces[k].shape[0], traces[k].shape[2], np.int32))
+    else:
+        cols["t"] = _blobs([None if tr is None else tr["t"] for tr in traces])
+        for k in WIDE:
+            cols[k] = _blobs([None if tr is None else tr[k] for tr in traces])
+            cols[f"{k}_width"] = pa.array([None if tr is None else tr[k].shape[1] for tr in traces], pa.int32())
     fixed = pa.Table.from_arrays([cols[f.name] for f in SCHEMA], schema=SCHEMA)
     table = pa.table(fixed.columns + list(typed.values()), names=fixed.column_names + list(typed))
     meta = {META_VERSION: __version__.encode(), META_CAMPAIGN: campaign.encode("utf-8"), META_LAYOUT: LAYOUT.encode()}
@@ -683,6 +693,15 @@ def _blobs(rows: list[np.ndarray | None], dtype: type = np.float32) -> pa.LargeB
     bits = pa.py_buffer(np.packbits(valid, bitorder="little"))
     buffers = [bits, pa.py_buffer(offsets), pa.py_buffer(data)]
     return pa.Array.from_buffers(pa.large_binary(), len(rows), buffers, null_count=int((~valid).sum()))
+
+
+def _stacked_blobs(A: np.ndarray) -> pa.LargeBinaryArray:
+    """:func:`_blobs` of the rows of float32 ``A`` (runs, ...), none missing: its bytes as they lie when C-ordered
+    (not copied: a block's outputs and commands, ~6 MB a 1,000-run block), each row one value."""
+    data = np.ascontiguousarray(A, np.float32).reshape(-1)
+    size = data.size // max(A.shape[0], 1) * data.itemsize
+    offsets = np.arange(A.shape[0] + 1, dtype=np.int64) * size
+    return pa.Array.from_buffers(pa.large_binary(), A.shape[0], [None, pa.py_buffer(offsets), pa.py_buffer(data)])
 
 
 def folder_key(folder: Path) -> tuple[int, int]:

@@ -217,18 +217,25 @@ def downsampled_trace(trace: Any) -> dict[str, np.ndarray]:
 def downsampled_traces(traces: list) -> list[dict[str, np.ndarray]]:
     """:func:`downsampled_trace` of each of ``traces``, taken for the runs of one length at once: one gather and one
     float32 conversion of their ``(runs, steps, width)`` arrays, each run's arrays a contiguous row of them."""
+    return _downsampled(traces)[0]
+
+
+def _downsampled(traces: list) -> tuple[list[dict[str, np.ndarray]], dict[str, np.ndarray] | None]:
+    """:func:`downsampled_traces`, and when the runs are of one length their arrays as the gather made them (the
+    rows the runs' arrays are: ``t`` (runs, N), ``y``, ``u``, ``r`` (runs, N, width)), else None."""
     from ..loop.block_metrics import stacked
 
     out: list[dict | None] = [None] * len(traces)
     lengths: dict[int, list[int]] = {}
     for i, tr in enumerate(traces):
         lengths.setdefault(int(tr.t.size), []).append(i)
+    cols: dict[str, np.ndarray] = {}
     for N, members in lengths.items():
         idx = np.unique(np.linspace(0, N - 1, min(N, MAX_TRACE_POINTS)).round().astype(int)) if N else np.zeros(0, int)
         cols = {k: _gathered(stacked([getattr(traces[i], k) for i in members]), idx) for k in "tyur"}
         for j, i in enumerate(members):  # each row float32, contiguous and shaped as encode_trace makes it
             out[i] = {"t": cols["t"][j], "y": cols["y"][j], "u": cols["u"][j], "r": cols["r"][j]}
-    return out  # type: ignore[return-value]
+    return out, cols if len(lengths) == 1 else None  # type: ignore[return-value]
 
 
 def _gathered(A: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -463,6 +470,7 @@ class _Block:
     measures: list
     traces: list
     worker: dict
+    stack: dict[str, np.ndarray] | None = None  # the traces as the block's arrays (runs of one length), else None
 
     def record(self, j: int) -> dict:
         """The record of the block's ``j``-th run, as :func:`execute` gives a run's."""
@@ -490,6 +498,7 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
         return values if ordered else [values[k] for k in order]
 
     results = column(lambda b: b.results)
+    whole = len(blocks) == 1 and ordered and blocks[0].stack is not None  # its arrays are the task's, run for run
     return BlockRuns(
         kind=kind,
         inputs=runs,
@@ -498,7 +507,7 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
         metrics=[r.metrics for r in results],
         measures=column(lambda b: b.measures),
         link=[r.info["transport"] for r in results],
-        traces=column(lambda b: b.traces),
+        traces=blocks[0].stack if whole else column(lambda b: b.traces),  # type: ignore[arg-type]
         worker=column(lambda b: [b.worker] * len(b.positions)),
     )
 
@@ -642,11 +651,11 @@ def _run_block(members: list, records: list, runs: list, blobs: dict) -> None:
             if result is None:
                 log.info("campaign run %d of this task runs alone: its plant could not be built in its block", i)
         measures = measure_block([result for _, result in done], artifact)
-        traces = downsampled_traces([result.trace for _, result in done])
+        traces, stack = _downsampled([result.trace for _, result in done])
         share = _stopped(where, cpu0)
         share["cpu_s"] /= max(len(done), 1)
         block = _Block(
-            artifact, [i for i, _ in done], [r for _, r in done], measures, traces, share | {"block": len(done)}
+            artifact, [i for i, _ in done], [r for _, r in done], measures, traces, share | {"block": len(done)}, stack
         )
         for i in block.positions:
             records[i] = block
