@@ -672,6 +672,33 @@ def test_a_blocks_metrics_as_columns_are_each_runs_own_compute_metrics(design):
         assert {("overshoot", True), ("settled", False), ("integrator", True)} <= seen
 
 
+@pytest.mark.parametrize("design", ["pendulum", "regulator", "two_references"])
+def test_a_blocks_metrics_columns_from_its_column_trees_are_those_of_its_runs_dicts(design):
+    """The block file's metrics columns made from the block's column trees (one tree a structure of the runs' dicts:
+    with a twin or not, integrator peaks or not; runs of several lengths and groups joined) are those the runs' dicts
+    make (store.metric_columns, itself checked against json's text), every column equal; runs of no steps leave
+    the trees unusable for that (their dicts held whole) and the worker then takes the dicts."""
+    from gainlink.hil.campaign.store import metric_columns, tree_metric_columns
+    from gainlink.hil.loop.block_metrics import RUNS_AT_ONCE, metric_trees
+
+    a = _design(design)
+    rng = np.random.default_rng(33)
+    for lengths, columnar in (([50] * 40 + [37] * 15 + [20] * (RUNS_AT_ONCE + 9), True), ([50] * 9 + [0, 2], False)):
+        traces = _traces(a, rng, lengths)
+        timed = [{"latency_us": {"p50": 1.0}, "period_jitter_us": {"p50": None}}] * len(traces)
+        trees = metric_trees(traces, artifact=a, mode="sil", late=0, period_s=[a.Ts] * len(traces),
+                             model_start=[""] * len(traces), timed=timed)  # fmt: skip
+        rows = trees.rows()
+        assert trees.columnar == columnar
+        assert sorted(i for positions, _ in trees.trees for i in positions) == list(range(len(traces)))
+        if columnar:
+            assert len(trees.trees) > 1  # runs of more than one structure
+            made, oracle = tree_metric_columns(trees.trees, len(rows)), metric_columns(rows)
+            assert list(made) == list(oracle)
+            for name in oracle:
+                assert made[name].equals(oracle[name]), name
+
+
 def test_an_arrays_address_is_numpys_own_whatever_its_layout():
     """lockstep.address (what the C is handed and what block_metrics.stacked compares) equals numpy's own
     ``__array_interface__`` address for the arrays a block hands over: contiguous rows, strided and reversed views,
@@ -1194,3 +1221,23 @@ def test_a_plant_named_relative_to_the_working_directory_is_read_from_the_curren
     with pytest.raises(PlantError) as err:
         build_plant(scenario, artifact=art)
     assert str(there / "m.toml") in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_blocks_column_trees_take_what_each_runs_result_adds_or_hold_the_dicts_whole():
+    """BlockMetrics.completed: the keys a run's result adds to its figures (completion, times, a plant's failure)
+    become columns of the tree of runs that all have them, in each run's values; a tree whose runs differ in them
+    holds its runs' dicts whole (not columnar), so the block file is made from the dicts; the rows are the dicts."""
+    from gainlink.hil.loop.block_metrics import BlockMetrics
+
+    tree = {"steps": [3, 3, 3], "twin": {"iae": [0.5, None, 1.5]}}
+    trees = BlockMetrics([([0, 2, 4], tree), ([1, 3], {"steps": [0, 0]})], 5)
+    finals = trees.rows()
+    for i, row in enumerate(finals):
+        row.update({"complete": i != 3, "wall_s": 0.25 * i})
+    finals[3]["reason"] = "plant failed at step 0"  # one run of the second tree only
+    done = trees.completed(finals)
+    assert [positions for positions, _ in done.trees] == [[0, 2, 4], [1, 3]]
+    first, second = done.trees[0][1], done.trees[1][1]
+    assert first == tree | {"complete": [True, True, True], "wall_s": [0.0, 0.5, 1.0]}
+    assert second == [finals[1], finals[3]] and not done.columnar
+    assert done.rows() == finals

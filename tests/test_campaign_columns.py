@@ -486,6 +486,7 @@ def test_a_workers_block_file_is_the_one_its_records_make(tmp_path, interleaved)
     assert all(type(r) is worker._Block for r in task) and (len({id(r) for r in task}) > 1) == interleaved
     lists = worker._block_runs("sil", runs, task)
     assert isinstance(lists.traces, dict) != interleaved
+    assert (lists.metric_trees is not None) != interleaved  # one block: its metrics from its column trees
     made = encode_runs(ids, lists, campaign=campaign.name)
     records = [with_inputs(r, run, kind="sil") for r, run in zip(worker._materialized(task), runs)]
     oracle = _table(encode_block(ids, records, campaign=campaign.name))

@@ -85,6 +85,12 @@ def json_forms(values: list) -> tuple[list[Form], dict[int, str]]:
     return _forms(values, len(values))
 
 
+def tree_forms(node: dict, runs: int) -> tuple[list[Form], dict[int, str]]:
+    """:func:`json_forms` of ``runs`` values given as a column tree (a dict of trees, or a column of values: what
+    :func:`object_texts` takes), without the values made: the same forms as of the values."""
+    return _forms(node, runs)
+
+
 def form_texts(template: str, kinds: str, texts: list[list[str]], floats: np.ndarray) -> list[str]:
     """The JSON texts of runs of one :class:`Form` given by its slots as stored: ``texts`` each text slot's column,
     ``floats`` (runs, float slots) their numbers."""

@@ -39,7 +39,7 @@ import hashlib
 import json
 import operator
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import chain
 from operator import itemgetter
 from pathlib import Path
@@ -55,7 +55,17 @@ from gainlink.version import __version__
 
 from .config import CampaignError
 from .criteria import RunColumns
-from .jsontext import ARROW_FLOATS, compact_json, float_texts, form_texts, json_forms, json_texts, object_texts
+from .jsontext import (
+    ARROW_FLOATS,
+    Form,
+    compact_json,
+    float_texts,
+    form_texts,
+    json_forms,
+    json_texts,
+    object_texts,
+    tree_forms,
+)
 from .plan import CampaignPlan, RunPoint
 from .rows import MEASURE_CELLS, METRIC_CELLS
 
@@ -184,6 +194,7 @@ class BlockRuns:
     link: list
     traces: list | dict  # encode_trace's arrays, or all runs' at once (:func:`_block_file`)
     worker: list  # each run's: its block's share (host, pid, start, stop, cpu_s, block), one dict a block
+    metric_trees: list | None = None  # the metrics as column trees (:func:`tree_metric_columns`), when made so
 
 
 def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
@@ -203,11 +214,17 @@ def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
         "row": pa.array(
             [None if ok else compact_json(_row_of(runs, i)) for i, ok in enumerate(given.tolist())], pa.string()
         ),
-        **metric_columns(
-            runs.metrics if given.all() else [m if ok else _NONE for m, ok in zip(runs.metrics, given.tolist())]
-        ),
+        **_run_metric_columns(runs, given),
     }
     return _block_file(texts, runs.traces, typed, campaign=campaign)
+
+
+def _run_metric_columns(runs: BlockRuns, given: np.ndarray) -> dict[str, pa.Array]:
+    """The metrics columns of ``runs`` (those not ``given`` null: their row's text holds them), from the block's
+    column trees when it has them and every run is given."""
+    if runs.metric_trees is not None and given.all():
+        return tree_metric_columns(runs.metric_trees, len(given))
+    return metric_columns(runs.metrics if given.all() else [m if ok else _NONE for m, ok in zip(runs.metrics, given)])
 
 
 def _row_of(runs: BlockRuns, i: int) -> dict:
@@ -270,15 +287,36 @@ def metric_columns(metrics: list) -> dict[str, pa.Array]:
     form (``metrics_form``: the structure's kinds of slots, a newline, its ``%`` template; a block's runs share one or
     two), its text slots joined by :data:`SLOT` (``metrics_slots``) and its float slots as float64 bytes
     (``metrics_numbers``), no text made of a float; a run json writes alone holds its text (``metrics``)."""
-    n = len(metrics)
     held = [k for k, m in enumerate(metrics) if m is not _NONE]
-    forms, whole = json_forms([metrics[k] for k in held] if len(held) < n else metrics)
+    if len(held) == len(metrics):
+        return _form_columns(*json_forms(metrics), len(metrics))
+    forms, whole = json_forms([metrics[k] for k in held])
+    forms = [replace(form, rows=[held[j] for j in form.rows]) for form in forms]
+    return _form_columns(forms, {held[j]: text for j, text in whole.items()}, len(metrics))
+
+
+def tree_metric_columns(trees: list[tuple[list[int], Any]], runs: int) -> dict[str, pa.Array]:
+    """:func:`metric_columns` of ``runs`` runs whose metrics are given as column trees (``(positions, tree)``, each
+    run in one: :class:`~..loop.block_metrics.BlockMetrics`), made from the trees' columns, not a dict a run."""
+    forms: list[Form] = []
+    whole: dict[int, str] = {}
+    for positions, tree in trees:
+        made, texts = tree_forms(tree, len(positions))
+        forms += [replace(form, rows=[positions[j] for j in form.rows]) for form in made]
+        whole |= {positions[j]: text for j, text in texts.items()}
+    return _form_columns(forms, whole, runs)
+
+
+def _form_columns(forms: list[Form], whole: dict[int, str], n: int) -> dict[str, pa.Array]:
+    """The metrics columns of ``n`` runs from their forms (:class:`.jsontext.Form`, rows the runs') and the texts of
+    the runs json writes alone; the forms in the order of their first run (whichever way they were found)."""
+    forms = sorted(forms, key=lambda form: min(form.rows))
     texts: list[str | None] = [None] * n
     codes = np.full(n, -1, np.int32)
     slots: list[str | None] = [None] * n
     numbers: list[np.ndarray | None] = [None] * n
     for code, form in enumerate(forms):
-        rows = [held[j] for j in form.rows]
+        rows = form.rows
         codes[rows] = code
         text = [col for kind, col in zip(form.kinds, form.columns) if kind == "t"]
         for i, joined in zip(rows, map(SLOT.join, zip(*text)) if text else [""] * len(rows)):
@@ -287,8 +325,8 @@ def metric_columns(metrics: list) -> dict[str, pa.Array]:
         values = np.array(floats, np.float64).T.copy() if floats else np.zeros((len(rows), 0))
         for i, row in zip(rows, values):
             numbers[i] = row
-    for j, text in whole.items():
-        texts[held[j]] = text
+    for i, text in whole.items():
+        texts[i] = text
     words = [form.kinds + "\n" + form.template for form in forms]
     return {
         "metrics": pa.array(texts, pa.string()),

@@ -471,6 +471,7 @@ class _Block:
     traces: list
     worker: dict
     stack: dict[str, np.ndarray] | None = None  # the traces as the block's arrays (runs of one length), else None
+    metric_trees: list | None = None  # the metrics as column trees by position in the block, when every run is one's
 
     def record(self, j: int) -> dict:
         """The record of the block's ``j``-th run, as :func:`execute` gives a run's."""
@@ -509,6 +510,7 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
         link=[r.info["transport"] for r in results],
         traces=blocks[0].stack if whole else column(lambda b: b.traces),  # type: ignore[arg-type]
         worker=column(lambda b: [b.worker] * len(b.positions)),
+        metric_trees=blocks[0].metric_trees if whole else None,
     )
 
 
@@ -654,8 +656,8 @@ def _run_block(members: list, records: list, runs: list, blobs: dict) -> None:
         traces, stack = _downsampled([result.trace for _, result in done])
         share = _stopped(where, cpu0)
         share["cpu_s"] /= max(len(done), 1)
-        block = _Block(
-            artifact, [i for i, _ in done], [r for _, r in done], measures, traces, share | {"block": len(done)}, stack
-        )
+        trees = results.metrics.trees if len(done) == len(members) and results.metrics.columnar else None
+        block = _Block(artifact, [i for i, _ in done], [r for _, r in done], measures, traces,
+                       share | {"block": len(done)}, stack, trees)  # fmt: skip
         for i in block.positions:
             records[i] = block

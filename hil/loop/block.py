@@ -20,7 +20,9 @@ signals) is left to the caller, which runs it alone; so is a run whose plant can
 
 from __future__ import annotations
 
+import dataclasses
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +33,7 @@ from gainlink.shipping.artifact import Artifact
 from ..plants.linear import LinearBatch, linear_batchable
 from ..plants.models import OdeBatch, batchable, non_finite
 from . import lockstep
-from .block_metrics import block_metrics
+from .block_metrics import BlockMetrics, metric_trees
 from .bridge import Run, RunResult, build_plant, in_process, prepare_run
 from .closed_loop import Outcome
 from .lockstep import Steps
@@ -211,15 +213,13 @@ def _python_lockstep(runs: list[Run], batch: OdeBatch | LinearBatch, controller,
                   steps=done, failed_at=failed_at, tick=tick, lat=lat, loop=loop)  # fmt: skip
 
 
-def run_block(
-    scenarios: list[Scenario], *, artifact: Artifact, library: Path | None = None
-) -> list[RunResult | None] | None:
+def run_block(scenarios: list[Scenario], *, artifact: Artifact, library: Path | None = None) -> BlockResults | None:
     """Run ``scenarios`` (SIL runs of ``artifact`` that :func:`refusal` accepts, the same duration and controller)
     as one block; None when their plants cannot step as one batch (the caller runs them alone).
 
     Returns each run's :class:`~.bridge.RunResult`, in order, as :func:`~.bridge.run_scenario` returns it; None in
     the place of a run whose plant cannot be built (its drawn numbers are wrong: the caller runs it alone, and it
-    records its own error).
+    records its own error): a :class:`BlockResults`, which also holds the runs' metrics as columns.
     """
     a, law, Ts = artifact, law_of(artifact), artifact.Ts
     plants = _plants(scenarios, artifact=a)
@@ -244,13 +244,37 @@ def run_block(
         for pl in plants:
             if pl is not None:
                 pl.close()
-    results = _results(runs, rec, twins, describe=dict(controller.describe) | {"block": len(runs), "loop": rec.loop},
-                       ran=law.label if firmware else None, wall_s=wall / len(runs), twins_s=twins_s,
-                       failure=non_finite(batch.name))  # fmt: skip
+    described = dict(controller.describe) | {"block": len(runs), "loop": rec.loop}
+    results, trees = _results(
+        runs,
+        rec,
+        twins,
+        describe=described,
+        ran=law.label if firmware else None,
+        wall_s=wall / len(runs),
+        twins_s=twins_s,
+        failure=non_finite(batch.name),
+    )
     out: list[RunResult | None] = [None] * len(scenarios)
     for i, result in zip(kept, results):
         out[i] = result
-    return out
+    return BlockResults(out, trees.at(kept, len(scenarios)))
+
+
+@dataclasses.dataclass(frozen=True)
+class BlockResults(Sequence):
+    """:func:`run_block`'s answer: each scenario's :class:`~.bridge.RunResult` in order (None for a run whose plant
+    could not be built), and the block's metrics as column trees (:class:`~.block_metrics.BlockMetrics`, by the
+    scenarios' positions), which a campaign's block file is made from without a run's dict."""
+
+    results: list
+    metrics: BlockMetrics
+
+    def __getitem__(self, i):  # type: ignore[override]
+        return self.results[i]
+
+    def __len__(self) -> int:
+        return len(self.results)
 
 
 def _plants(scenarios: list[Scenario], *, artifact: Artifact) -> list:
@@ -282,10 +306,11 @@ def prepare_block(scenarios: list[Scenario], *, law, artifact: Artifact, plants:
 
 
 def _results(runs: list[Run], rec: Steps, twins: list, *, describe: dict, ran: str | None, wall_s: float,
-             twins_s: float, failure: str) -> list[RunResult]:  # fmt: skip
-    """Each run's result from the block's record. What the runs share is computed once: the artifact's description
-    and the timing of the block's calls (per number of steps taken: a run whose plant failed has fewer); the
-    metrics as columns over the block's traces (:func:`~.block_metrics.block_metrics`)."""
+             twins_s: float, failure: str) -> tuple[list[RunResult], BlockMetrics]:  # fmt: skip
+    """Each run's result from the block's record, and the runs' metrics as column trees (completed with what each
+    result adds). What the runs share is computed once: the artifact's description and the timing of the block's
+    calls (per number of steps taken: a run whose plant failed has fewer); the metrics as columns over the block's
+    traces (:func:`~.block_metrics.metric_trees`)."""
     artifact_info = describe_artifact(runs[0].law, runs[0].a, SOURCE)
     timed: dict[int, dict] = {}
     N, states = rec.lat.size, len(runs[0].plant.state_names)
@@ -300,16 +325,17 @@ def _results(runs: list[Run], rec: Steps, twins: list, *, describe: dict, ran: s
             timed[steps] = timing(rec.lat[:steps], rec.tick[:steps], np.full(steps, np.nan), mode="sil")
         _record(run, rec, i, shared=shared, describe=describe, ran=ran)
         traces.append(run.trace(steps, twins=twins[i]))
-    metrics = block_metrics(traces, artifact=runs[0].a, mode="sil", late=0,
-                            period_s=[r.plan.period_s for r in runs], model_start=[t.model_note for t in twins],
-                            timed=[timed[int(n)] for n in rec.steps])  # fmt: skip
+    trees = metric_trees(traces, artifact=runs[0].a, mode="sil", late=0,
+                         period_s=[r.plan.period_s for r in runs], model_start=[t.model_note for t in twins],
+                         timed=[timed[int(n)] for n in rec.steps])  # fmt: skip
+    metrics = trees.rows()
     results, plant_info = [], _plant_infos()
     for i, run in enumerate(runs):
         reason = None if rec.failed_at[i] < 0 else f"plant failed at step {rec.failed_at[i]}: {failure}"
         outcome = Outcome(steps=int(rec.steps[i]), reason=reason, wall_s=wall_s, overruns=0)
         results.append(run.result(outcome, twins=twins[i], twins_s=twins_s, artifact_info=artifact_info,
                                   plant_info=plant_info(run.plant), trace=traces[i], metrics=metrics[i]))  # fmt: skip
-    return results
+    return results, trees.completed([r.metrics for r in results])
 
 
 def _plant_infos():

@@ -13,6 +13,7 @@ shape differently. What a block rarely has is left to the per-run functions: a r
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -29,7 +30,57 @@ def block_metrics(traces: list[RunTrace], *, artifact: Any, mode: str, late: int
                   model_start: list[str], timed: list[dict]) -> list[dict]:  # fmt: skip
     """:func:`~.metrics.compute_metrics` of each of ``traces`` (with its ``period_s``, ``model_start`` and ``timed``),
     computed as columns over the traces of each length (module docstring)."""
-    out: list[dict | None] = [None] * len(traces)
+    return metric_trees(traces, artifact=artifact, mode=mode, late=late, period_s=period_s, model_start=model_start,
+                        timed=timed).rows()  # fmt: skip
+
+
+@dataclass(frozen=True)
+class BlockMetrics:
+    """The metrics of a block's runs as column trees (a dict of trees, or a column: one value a run, as
+    :func:`~gainlink.hil.campaign.jsontext.object_texts` takes them): ``trees`` lists (the runs' positions, their
+    tree), each run in one; the runs of a dict tree share their metrics' structure (their dicts' keys), and a column
+    tree holds each run's dict (a run of no steps: :func:`~.metrics.compute_metrics` itself)."""
+
+    trees: list[tuple[list[int], Any]]
+    runs: int
+
+    @property
+    def columnar(self) -> bool:
+        """Whether every tree is a dict of columns (no run's dict held whole)."""
+        return all(isinstance(tree, dict) for _, tree in self.trees)
+
+    def rows(self) -> list[dict]:
+        """Each run's dict, as :func:`~.metrics.compute_metrics` makes it (its keys in that order)."""
+        out: list[dict | None] = [None] * self.runs
+        for positions, tree in self.trees:
+            for i, row in zip(positions, tree_rows(tree, len(positions))):
+                out[i] = row
+        return out  # type: ignore[return-value]
+
+    def completed(self, metrics: list[dict]) -> BlockMetrics:
+        """These trees with what each run's final dict (``metrics[i]``: what its result adds to its figures, its
+        completion, times, the law's report) holds beyond them as columns; a tree whose runs' dicts differ in those
+        keys becomes a column of the dicts. (A result adds keys :func:`~.metrics.compute_metrics` never makes.)"""
+        out: list[tuple[list[int], Any]] = []
+        for positions, tree in self.trees:
+            first = metrics[positions[0]].keys()
+            if not isinstance(tree, dict) or not all(metrics[i].keys() == first for i in positions):
+                out.append((positions, [metrics[i] for i in positions]))
+                continue
+            added = [k for k in first if k not in tree]
+            out.append((positions, tree | {k: [metrics[i][k] for i in positions] for k in added}))
+        return BlockMetrics(out, self.runs)
+
+    def at(self, positions: list[int], runs: int) -> BlockMetrics:
+        """The trees of ``runs`` runs of which run ``i`` of these is run ``positions[i]``."""
+        return BlockMetrics([([positions[i] for i in rows], tree) for rows, tree in self.trees], runs)
+
+
+def metric_trees(traces: list[RunTrace], *, artifact: Any, mode: str, late: int, period_s: list[float],
+                 model_start: list[str], timed: list[dict]) -> BlockMetrics:  # fmt: skip
+    """:func:`block_metrics` as column trees, one per structure of the runs' dicts (their groups of
+    :data:`RUNS_AT_ONCE` runs joined)."""
+    trees: list[tuple[list[int], Any]] = []
     cleaned: dict[int, dict] = {}
     for t in timed:  # once per dict: the runs of one length share theirs
         if id(t) not in cleaned:
@@ -37,20 +88,23 @@ def block_metrics(traces: list[RunTrace], *, artifact: Any, mode: str, late: int
     lengths: dict[int, list[int]] = {}
     for i, tr in enumerate(traces):
         lengths.setdefault(int(tr.t.size), []).append(i)
+    kinds: dict[tuple, list[tuple[list[int], dict]]] = {}
     for n, idx in lengths.items():
         if n == 0:  # nothing to reduce: the run's own function
-            for i in idx:
-                out[i] = compute_metrics(traces[i], artifact=artifact, mode=mode, late=late, period_s=period_s[i],
-                                         model_start=model_start[i], timed=timed[i])  # fmt: skip
+            trees.append((idx, [compute_metrics(traces[i], artifact=artifact, mode=mode, late=late,
+                                                period_s=period_s[i], model_start=model_start[i], timed=timed[i])
+                                for i in idx]))  # fmt: skip
             continue
         for part in runs_at_once(idx):
             group = [traces[i] for i in part]
-            made = _group_metrics(_group(group, artifact=artifact), group, artifact=artifact, late=late,
-                                  period_s=[period_s[i] for i in part], model_start=[model_start[i] for i in part],
-                                  timed=[cleaned[id(timed[i])] for i in part])  # fmt: skip
-            for i, metrics in zip(part, made):
-                out[i] = metrics
-    return out  # type: ignore[return-value]
+            made = _group_trees(_group(group, artifact=artifact), group, artifact=artifact, late=late,
+                                period_s=[period_s[i] for i in part], model_start=[model_start[i] for i in part],
+                                timed=[cleaned[id(timed[i])] for i in part])  # fmt: skip
+            for kind, rows, tree in made:
+                kinds.setdefault(kind, []).append(([part[r] for r in rows], tree))
+    for parts in kinds.values():
+        trees.append(([i for rows, _ in parts for i in rows], joined([(tree, len(rows)) for rows, tree in parts])))
+    return BlockMetrics(trees, len(traces))
 
 
 #: Runs whose columns are reduced together: a figure's (runs, steps) arrays of runs of 1,000 steps ~1 MB, in cache
@@ -244,104 +298,158 @@ def finite_lists(A: Any) -> list:
     return out
 
 
-def _named_rows(names: list[str], A: Any) -> list[dict]:
-    """Each run's ``{name: value}`` of its row of ``A`` (runs, len(names)), non-finite values None."""
-    return [dict(zip(names, row)) for row in finite_lists(A)]
+def _named(names: list[str], A: Any) -> dict[str, list]:
+    """``{name: column}`` of ``A`` (runs, len(names)): each name's values, one a run, non-finite ones None."""
+    return dict(zip(names, zip_lists(finite_lists(A), len(names))))
 
 
-def _group_metrics(cols: dict, traces: list[RunTrace], *, artifact: Any, late: int, period_s: list,
-                   model_start: list, timed: list) -> list[dict]:  # fmt: skip
-    """Each run's dict of its group's columns, as :func:`~.metrics.compute_metrics` makes it (a new dict per run,
-    its keys in that order, its numbers made JSON-able as they are put in): each figure converted for the group at
-    once (:func:`finite_lists`), then each run's dict put together from the lists."""
+def zip_lists(rows: list[list], width: int) -> list[list]:
+    """The columns of ``rows`` (runs, ``width``) as lists."""
+    return [list(col) for col in zip(*rows)] if rows else [[] for _ in range(width)]
+
+
+def _group_trees(cols: dict, traces: list[RunTrace], *, artifact: Any, late: int, period_s: list,
+                 model_start: list, timed: list) -> list[tuple[tuple, list[int], dict]]:  # fmt: skip
+    """The group's metrics as column trees, one per structure its runs' dicts have (with a twin or not, the twin's
+    integrator peaks or not, a model twin or not: ``(that key, the runs' positions in the group, the tree)``), each
+    tree's keys in :func:`~.metrics.compute_metrics`' order, its numbers made JSON-able (:func:`finite_lists`)."""
     a, sig = artifact, artifact.signals
-    n = int(traces[0].t.size)
-    lost, refused = cols["lost"].tolist(), cols["refused"].tolist()
-    sat_frac, final = _named_rows(sig["inputs"], cols["sat_frac"]), _named_rows(sig["outputs"], cols["y_final"])
-    u_peak, y_peak = _named_rows(sig["inputs"], cols["u_peak"]), _named_rows(sig["outputs"], cols["y_peak"])
-    sat_steps, per_input = cols["saturated_steps"].tolist(), cols["sat_per_input"].tolist()
-    has_twin = cols["has_twin"].tolist()
-    twins = _twin_dicts(cols["twin"], steps=n, artifact=a) if "twin" in cols else None
+    G, n = len(traces), int(traces[0].t.size)
+    lost = cols["lost"].tolist()
+    tree: dict[str, Any] = {
+        "steps": [n] * G,
+        "lost": lost,
+        "late": [int(late)] * G,
+        "deadline_misses": lost,
+        "latency_us": _shared(timed, "latency_us"),
+        "period_jitter_us": _shared(timed, "period_jitter_us"),
+        "period_s": [_fin(p) for p in period_s],
+        "saturation_fraction": _named(sig["inputs"], cols["sat_frac"]),
+        "saturated_steps": cols["saturated_steps"].tolist(),
+        "saturated_steps_per_input": dict(
+            zip(sig["inputs"], zip_lists(cols["sat_per_input"].tolist(), len(sig["inputs"])))
+        ),
+        "outputs_final": _named(sig["outputs"], cols["y_final"]),
+        "inputs_peak_abs": _named(sig["inputs"], cols["u_peak"]),
+        "outputs_peak_abs": _named(sig["outputs"], cols["y_peak"]),
+        "refused_steps": cols["refused"].tolist(),
+    }
+    twin, peak = cols["has_twin"].tolist(), [False] * G
+    if "twin" in cols:
+        tree |= _twin_tree(cols["twin"], steps=n, artifact=a)
+        if "peak_integrator" in tree:  # a run's peaks when it has a twin and its integrators are finite
+            peak = (cols["twin"]["z_finite"] & cols["has_twin"]).tolist()
+    model = [tr.has_model_twin for tr in traces]
+    if any(model):
+        tree["model_twin"] = [_model_twin(tr, a, start) if m else None
+                              for tr, m, start in zip(traces, model, model_start)]  # fmt: skip
     names = sig["references"] if a.q else sig["outputs"]
-    tracked = [_tracked_dicts(tr) for tr in cols["tracked"]]
-    out = []
-    for j, (trace, tm) in enumerate(zip(traces, timed)):
-        run = {
-            "steps": n,
-            "lost": lost[j],
-            "late": int(late),
-            "deadline_misses": lost[j],
-            "latency_us": dict(tm["latency_us"]),  # cleaned once for the runs that share it
-            "period_jitter_us": dict(tm["period_jitter_us"]),
-            "period_s": _fin(period_s[j]),
-            "saturation_fraction": sat_frac[j],
-            "saturated_steps": sat_steps[j],
-            "saturated_steps_per_input": dict(zip(sig["inputs"], per_input[j])),
-            "outputs_final": final[j],
-            "inputs_peak_abs": u_peak[j],
-            "outputs_peak_abs": y_peak[j],
-            "refused_steps": refused[j],
-        }
-        if has_twin[j]:
-            run.update(twins[j])  # type: ignore[index]
-        if trace.has_model_twin:
-            mismatch = model_mismatch(t=trace.t, y=trace.y, r=trace.r, model_y=trace.model_y, artifact=a,
-                                      start=model_start[j])  # fmt: skip
-            run["model_twin"] = _clean(mismatch.to_dict())
-        run["tracked"] = {name: tr[j] for name, tr in zip(names, tracked)}
-        out.append(run)
-    return out
+    tree["tracked"] = dict(zip(names, map(_tracked_tree, cols["tracked"])))
+    kinds: dict[tuple, list[int]] = {}
+    for j, kind in enumerate(zip(twin, peak, model)):
+        kinds.setdefault(kind, []).append(j)
+    return [(kind, rows, _kept_keys(tree, kind, rows, G)) for kind, rows in kinds.items()]
 
 
-def _tracked_dicts(tr: dict) -> list[dict]:
-    """Each run's :func:`~.metrics.tracking` dict from the columns of :func:`_tracking`."""
-    iae, start, settle, overshoot = (
-        finite_lists(tr["iae"]),
-        finite_lists(tr["start"]),
-        finite_lists(tr["settle"]),
-        finite_lists(tr["overshoot"]),
-    )
+_OF_TWIN = ("peak_integrator", "peak_integral_command", "twin")
+
+
+def _kept_keys(tree: dict, kind: tuple, rows: list[int], runs: int) -> dict:
+    """``tree`` for the runs ``rows`` of one structure ``kind`` (twin, integrator peaks, model twin): the keys they
+    lack dropped, their values only (the whole tree when they are all its runs)."""
+    twin, peak, model = kind
+    lacks = {k for k, has in zip(_OF_TWIN, (peak, peak, twin)) if not has} | (set() if model else {"model_twin"})
+    kept = {k: v for k, v in tree.items() if k not in lacks}
+    return kept if len(rows) == runs else picked(kept, rows)
+
+
+def picked(node: Any, rows: list[int]) -> Any:
+    """A column tree (a dict of trees, or a column: one value a run) at runs ``rows`` only."""
+    if isinstance(node, dict):
+        return {key: picked(sub, rows) for key, sub in node.items()}
+    return [node[j] for j in rows]
+
+
+def tree_rows(node: Any, runs: int) -> list:
+    """Each run's value of a column tree of ``runs`` runs (a dict of trees: a new dict a run, its keys in the tree's
+    order; a column: its values)."""
+    if not isinstance(node, dict):
+        return node
+    if not node:
+        return [{} for _ in range(runs)]
+    keys = list(node)
+    return [dict(zip(keys, values)) for values in zip(*(tree_rows(sub, runs) for sub in node.values()))]
+
+
+def joined(parts: list[tuple[Any, int]]) -> Any:
+    """Column trees of runs of one structure (``(tree, its runs)`` each) as one: each column the runs' of each tree in
+    turn; a level where the trees differ (a dict's keys, a column against a dict) a column of the runs' values."""
+    first = parts[0][0]
+    if len(parts) == 1:
+        return first
+    if isinstance(first, dict) and all(isinstance(t, dict) and list(t) == list(first) for t, _ in parts):
+        return {key: joined([(t[key], runs) for t, runs in parts]) for key in first}
+    return [v for t, runs in parts for v in tree_rows(t, runs)]
+
+
+def _shared(timed: list[dict], key: str) -> Any:
+    """The column tree of the runs' ``timed[j][key]`` dicts (cleaned once for the runs that share one): a column of
+    each run's copy when they differ."""
+    first = timed[0][key]
+    if all(t is timed[0] for t in timed):
+        return {k: [v] * len(timed) for k, v in first.items()}
+    return [dict(t[key]) for t in timed]
+
+
+def _model_twin(trace: RunTrace, artifact: Any, start: str) -> dict:
+    """The run's model twin's figures (:func:`~.model_twin.model_mismatch`), JSON-able."""
+    mismatch = model_mismatch(t=trace.t, y=trace.y, r=trace.r, model_y=trace.model_y, artifact=artifact, start=start)
+    return _clean(mismatch.to_dict())
+
+
+def _tracked_tree(tr: dict) -> dict:
+    """A tracked signal's :func:`~.metrics.tracking` figures as columns, from those of :func:`_tracking` (a run that
+    settled at once: no overshoot and a settling time of 0)."""
     at_once, regulation = tr["at_once"].tolist(), tr["regulation"].tolist()
-    return [{"overshoot_pct": None, "settling_time_s": 0.0, "iae": iae[j], "start_s": start[j]} if at_once[j] else
-            {"overshoot_pct": None if regulation[j] else overshoot[j], "settling_time_s": settle[j], "iae": iae[j],
-             "start_s": start[j]}
-            for j in range(len(iae))]  # fmt: skip
+    overshoot, settle = finite_lists(tr["overshoot"]), finite_lists(tr["settle"])
+    return {
+        "overshoot_pct": [None if at_once[j] or regulation[j] else v for j, v in enumerate(overshoot)],
+        "settling_time_s": [0.0 if at_once[j] else v for j, v in enumerate(settle)],
+        "iae": finite_lists(tr["iae"]),
+        "start_s": finite_lists(tr["start"]),
+    }
 
 
-def _twin_dicts(tw: dict, *, steps: int, artifact: Any) -> list[dict]:
-    """Each run's twin figures (``peak_integrator``, ``peak_integral_command``, ``twin``) from the columns of
+def _twin_tree(tw: dict, *, steps: int, artifact: Any) -> dict:
+    """The twin's figures (``peak_integrator``, ``peak_integral_command``, ``twin``) as columns, from those of
     :func:`_twin_columns`, as :func:`~.metrics.compute_metrics` and ``TwinComparison.to_dict`` make them: the
-    relative figures the same IEEE operations, taken over the group (a run's are read only when it has a twin)."""
+    relative figures the same IEEE operations, taken over the group (a run's are read only when it has a twin; the
+    peaks only when its integrators are finite)."""
     a, sig = artifact, artifact.signals
+    runs = tw["du"].shape[0]
     span = a.u_max - a.u_min
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # NaN where a run alone has None
         du_rel = np.where(span > 0, tw["du"] / span, np.nan)
         dy_rel = np.where(tw["excursion"] > 0, tw["dy"] / tw["excursion"], np.nan)
-    inputs = _differences(sig["inputs"], tw["du"], du_rel, "max_du")
-    outputs = _differences(sig["outputs"], tw["dy"], dy_rel, "max_dy")
-    worst_du = _worst(np.where(span > 0, du_rel, 0.0))
-    worst_dy = _worst(np.where(tw["excursion"] > 0, dy_rel, 0.0))
-    iae: list[dict] = [{} for _ in range(tw["du"].shape[0])]
+    iae = {}
     for k, name in enumerate(sig["references"] if a.q else sig["outputs"]):
         real, ideal = tw["iae_real"][k], tw["iae_twin"][k]
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             rel = np.where(ideal > 0, (real - ideal) / ideal, np.nan)
-        for row, values in zip(
-            iae, zip(finite_lists(real), finite_lists(ideal), finite_lists(real - ideal), finite_lists(rel))
-        ):
-            row[name] = dict(zip(("real", "twin", "difference", "difference_rel"), values))
-    peaks = bool(a.q) and bool(tw["z_finite"].any())
-    z_peak = _named_rows(sig["references"], tw["z_peak"]) if peaks else []
-    command = _named_rows(sig["inputs"], tw["integral_cmd"]) if peaks else []
-    finite = tw["z_finite"].tolist()
-    out = []
-    for j in range(len(iae)):
-        run: dict[str, Any] = {}
-        if peaks and finite[j]:
-            run["peak_integrator"], run["peak_integral_command"] = z_peak[j], command[j]
-        run["twin"] = {"steps": steps, "inputs": inputs[j], "outputs": outputs[j], "iae": iae[j],
-                       "worst_du_rel": worst_du[j], "worst_dy_rel": worst_dy[j]}  # fmt: skip
-        out.append(run)
+        iae[name] = dict(zip(("real", "twin", "difference", "difference_rel"),
+                             map(finite_lists, (real, ideal, real - ideal, rel))))  # fmt: skip
+    out: dict[str, Any] = {}
+    if a.q and tw["z_finite"].any():
+        out["peak_integrator"] = _named(sig["references"], tw["z_peak"])
+        out["peak_integral_command"] = _named(sig["inputs"], tw["integral_cmd"])
+    out["twin"] = {
+        "steps": [steps] * runs,
+        "inputs": _differences(sig["inputs"], tw["du"], du_rel, "max_du"),
+        "outputs": _differences(sig["outputs"], tw["dy"], dy_rel, "max_dy"),
+        "iae": iae,
+        "worst_du_rel": _worst(np.where(span > 0, du_rel, 0.0)),
+        "worst_dy_rel": _worst(np.where(tw["excursion"] > 0, dy_rel, 0.0)),
+    }
     return out
 
 
@@ -358,8 +466,8 @@ def _worst(values: np.ndarray) -> list:
     return worst
 
 
-def _differences(names: list[str], largest: np.ndarray, relative: np.ndarray, key: str) -> list[dict]:
-    """Each run's ``{name: {key: largest, key_rel: relative}}`` (non-finite: None)."""
-    rel_key = f"{key}_rel"
-    return [{name: {key: d, rel_key: r} for name, d, r in zip(names, big, rel)}
-            for big, rel in zip(finite_lists(largest), finite_lists(relative))]  # fmt: skip
+def _differences(names: list[str], largest: np.ndarray, relative: np.ndarray, key: str) -> dict:
+    """``{name: {key: column, key_rel: column}}`` of each run's largest and relative differences (non-finite: None)."""
+    width = len(names)
+    big, rel = zip_lists(finite_lists(largest), width), zip_lists(finite_lists(relative), width)
+    return {name: {key: b, f"{key}_rel": r} for name, b, r in zip(names, big, rel)}
