@@ -300,12 +300,7 @@ def finite_lists(A: Any) -> list:
 
 def _named(names: list[str], A: Any) -> dict[str, list]:
     """``{name: column}`` of ``A`` (runs, len(names)): each name's values, one a run, non-finite ones None."""
-    return dict(zip(names, zip_lists(finite_lists(A), len(names))))
-
-
-def zip_lists(rows: list[list], width: int) -> list[list]:
-    """The columns of ``rows`` (runs, ``width``) as lists."""
-    return [list(col) for col in zip(*rows)] if rows else [[] for _ in range(width)]
+    return dict(zip(names, finite_lists(np.asarray(A).T)))
 
 
 def _group_trees(cols: dict, traces: list[RunTrace], *, artifact: Any, late: int, period_s: list,
@@ -326,9 +321,7 @@ def _group_trees(cols: dict, traces: list[RunTrace], *, artifact: Any, late: int
         "period_s": [_fin(p) for p in period_s],
         "saturation_fraction": _named(sig["inputs"], cols["sat_frac"]),
         "saturated_steps": cols["saturated_steps"].tolist(),
-        "saturated_steps_per_input": dict(
-            zip(sig["inputs"], zip_lists(cols["sat_per_input"].tolist(), len(sig["inputs"])))
-        ),
+        "saturated_steps_per_input": dict(zip(sig["inputs"], cols["sat_per_input"].T.tolist())),
         "outputs_final": _named(sig["outputs"], cols["y_final"]),
         "inputs_peak_abs": _named(sig["inputs"], cols["u_peak"]),
         "outputs_peak_abs": _named(sig["outputs"], cols["y_peak"]),
@@ -468,6 +461,5 @@ def _worst(values: np.ndarray) -> list:
 
 def _differences(names: list[str], largest: np.ndarray, relative: np.ndarray, key: str) -> dict:
     """``{name: {key: column, key_rel: column}}`` of each run's largest and relative differences (non-finite: None)."""
-    width = len(names)
-    big, rel = zip_lists(finite_lists(largest), width), zip_lists(finite_lists(relative), width)
+    big, rel = finite_lists(largest.T), finite_lists(relative.T)
     return {name: {key: b, f"{key}_rel": r} for name, b, r in zip(names, big, rel)}
