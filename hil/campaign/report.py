@@ -286,7 +286,7 @@ def envelope_bands(
         "percentiles": pct,
         "failed_median": _percentile(counts[1], 50, lo, width),
         "runs": one.runs,
-        "failed": int(sum(b.sum() for _, _, b in one.chunks)),
+        "failed": int(sum(b.sum() for _, b in one.chunks)),
         "finished": len(ids),
         "failed_of": int(failing.sum()),
         "drawn": drawn,
@@ -304,15 +304,16 @@ def _histograms(one: _Spilled, spill: IO[bytes], lo: np.ndarray, width: np.ndarr
     cells = lo.size * bins
     counts = np.zeros((2, cells), np.int64)
     held: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])
-    for at, chosen, bad in one.chunks:
+    for at, bad in one.chunks:
         spill.seek(at)
         for i in range(0, bad.size, HISTOGRAM_RUNS):
-            rows = (chosen[i : i + HISTOGRAM_RUNS], bad[i : i + HISTOGRAM_RUNS])
-            sig = np.fromfile(spill, np.float32, rows[0].size * lo.size).reshape(rows[0].size, *lo.shape)
+            failed = bad[i : i + HISTOGRAM_RUNS]
+            sig = np.fromfile(spill, np.float32, failed.size * lo.size).reshape(failed.size, *lo.shape)
             where = _bin_numbers(sig, lo, width, bins)
-            for k, pick in enumerate(rows):
-                if pick.any():  # the failed runs' bins are theirs of all runs: counted, not made again
-                    held[k].append(where if pick.all() else where[pick])
+            held[0].append(where)
+            if failed.any():  # the failed runs' bins are theirs of all runs: counted, not made again
+                held[1].append(where if failed.all() else where[failed])
+            for k in (0, 1):
                 if sum(map(len, held[k])) >= HISTOGRAM_RUNS:
                     counts[k] += _counts(np.concatenate(held[k]), cells)
                     held[k].clear()
@@ -323,13 +324,12 @@ def _histograms(one: _Spilled, spill: IO[bytes], lo: np.ndarray, width: np.ndarr
 
 
 class _Spilled:
-    """The runs of one trace shape spilled: their times, each sample's extremes, how many of them the percentiles
-    count, and each block's place in the spill file with which of its runs the percentiles count and which failed
-    runs the failed median does."""
+    """The runs of one trace shape spilled (every one counts in the percentiles): their times, each sample's extremes,
+    how many they are, and each block's place in the spill file with which of its runs the failed median counts."""
 
     def __init__(self, t: np.ndarray) -> None:
         self.t, self.lo, self.hi, self.runs = t, None, None, 0
-        self.chunks: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self.chunks: list[tuple[int, np.ndarray]] = []
 
 
 def _spill_stacks(store: Any, chosen: np.ndarray, failing: np.ndarray, spill: IO[bytes]) -> dict[tuple, _Spilled]:
@@ -343,9 +343,8 @@ def _spill_stacks(store: Any, chosen: np.ndarray, failing: np.ndarray, spill: IO
         one = seen.setdefault(shape, _Spilled(st["t"][0].astype(float)))
         sig = np.concatenate([st["y"], st["u"]], axis=2)
         one.lo, one.hi = _extremes(sig, one.lo, one.hi)
-        mine = members(names, chosen)
-        one.chunks.append((at, mine, members(names, failing)))
-        one.runs += int(mine.sum())
+        one.chunks.append((at, members(names, failing)))  # the stacks hold the runs ``chosen`` only
+        one.runs += len(names)
         sig.tofile(spill)
         at += sig.nbytes
     spill.flush()
