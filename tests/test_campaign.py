@@ -150,6 +150,7 @@ def local_run(pend, tmp_path_factory):
         ({"kind": "pil"}, "kind must be sil or hil"),
         ({"spec": "x.toml"}, "exactly one of spec"),
         ({"runs": 0}, "runs must be a whole number >= 1"),
+        ({"traces": "failed"}, "traces must be drawn or all, not 'failed'"),
         ({"draw": [{"target": "plant.parameters.M", "distribution": "gamma"}]}, "distribution must be one of"),
         ({"draw": [{"target": "plant.parameters.M", "distribution": "uniform", "low": 1.0}]}, "(missing high)"),
         (
@@ -851,6 +852,49 @@ def test_a_killed_campaign_resumes_with_only_the_missing_runs(pend, dask_cluster
     assert len(after) == 8 and all(after[k] == v for k, v in before.items())
     assert json.loads((out / "campaign.json").read_text())["counts"]["runs"] == 8
     assert not Path(unfinished).exists() and not list((out / "blocks").glob(".*"))
+
+
+@ON_THE_CLUSTERS
+def test_past_the_envelopes_cap_only_the_runs_they_draw_keep_their_traces_and_the_report_is_the_same(
+    pend, dask_cluster, tmp_path, monkeypatch
+):
+    """30 runs (3 grid points x 10 draws) with the envelopes' cap at 12: each grid point's first 4 draws (4 x 3 = 12,
+    5 x 3 = 15 > 12) keep their traces and no other run does, each the trace the same campaign stores when it keeps
+    every run's (``traces = "all"``); the verdicts and the envelopes' bands are those of that campaign; resuming the
+    folder asking for every trace is refused in one line, nothing written."""
+    from gainlink.hil.campaign import report
+
+    monkeypatch.setattr(report, "ENVELOPE_RUNS", 12)
+    grid = [{"target": "initial_state.x", "values": [0.2, 0.6, 1.0]}]
+    runs = {}
+    for traces in ("drawn", "all"):
+        runs[traces] = run(small_campaign(pend, runs=10, grid=grid, traces=traces), out=tmp_path / traces,
+                           scheduler=dask_cluster)  # fmt: skip
+    rows = {traces: _csv_rows(tmp_path / traces) for traces in runs}
+    ids = [r["id"] for r in rows["all"]]
+    assert [r["id"] for r in rows["drawn"]] == ids and len(set(ids)) == 30
+    for a, b in zip(rows["drawn"], rows["all"]):
+        assert (a["status"], a["reasons"], _control(a["record"])) == (b["status"], b["reasons"], _control(b["record"]))
+    drawn = [i for i in ids if ids.index(i) % 10 < 4]
+    kept = dict(Store(tmp_path / "drawn").traces(ids))
+    every = dict(Store(tmp_path / "all").traces(ids))
+    assert sorted(kept) == sorted(drawn) and sorted(every) == sorted(ids)
+    for i in drawn:
+        assert all(np.array_equal(kept[i][k], every[i][k]) for k in "tyur")
+    statuses = {r["id"]: r["status"] for r in rows["all"] if r["status"] in ("pass", "fail")}  # in plan order
+    assert len(statuses) == 30
+    traced = report.traced_runs(plan_campaign(parse_campaign(small_campaign(pend, runs=10, grid=grid))))
+    bands = {t: report.envelope_bands(Store(tmp_path / t), statuses, bins=64, traced=traced) for t in runs}
+    assert bands["drawn"]["runs"] == bands["all"]["runs"] == 12
+    for key in ("t", "percentiles", "failed_median", "half_bin"):
+        assert np.array_equal(bands["drawn"][key], bands["all"][key], equal_nan=True)
+    assert "traces stored: the 12 runs the envelopes draw" in runs["drawn"].summary
+    assert "traces stored" not in runs["all"].summary
+    before = sorted(p.name for p in (tmp_path / "drawn").rglob("*"))
+    with pytest.raises(CampaignError) as refused:
+        run(small_campaign(pend, runs=10, grid=grid, traces="all"), out=tmp_path / "drawn", scheduler=dask_cluster)
+    assert "stores traces = 'drawn', this campaign 'all': give another --out" in str(refused.value)
+    assert "\n" not in str(refused.value) and sorted(p.name for p in (tmp_path / "drawn").rglob("*")) == before
 
 
 @pytest.mark.slow

@@ -185,7 +185,7 @@ def test_a_worker_that_sees_the_campaign_folder_writes_its_block_and_one_that_do
 
     plan, points, runs = _pendulum_task(4)
     ids = [p.id for p in points]
-    packed = pickle.dumps((ids, runs))
+    packed = pickle.dumps((ids, runs, None))
     answers, stores = {}, {}
     for side in ("sees", "elsewhere"):
         store = Store(tmp_path / side, campaign=plan.campaign.name)
@@ -235,7 +235,7 @@ def test_a_task_runs_its_steps_outside_the_runs_without_cyclic_collection_and_le
     plan, points, runs = _pendulum_task(4)
     store = Store(tmp_path, campaign=plan.campaign.name)
     store.prepare(plan, plan_doc=plan_doc(plan))
-    packed = pickle.dumps(([p.id for p in points], runs))
+    packed = pickle.dumps(([p.id for p in points], runs, None))
     collecting: dict[str, bool] = {}
 
     def spied(name: str):

@@ -7,6 +7,7 @@ Example (``examples/campaigns/`` has complete ones)::
     seed = 2026                       # the campaign's draws and every run's noise follow from it
     runs = 500                        # Monte-Carlo draws per grid point (default 1)
     spec = "../pendulum.toml"         # designed once per grid point ... or: artifact = "gains.json"
+    traces = "drawn"                  # drawn (default): store the traces of the runs the envelopes draw | all
 
     [scenario]                        # the base run: a HIL scenario's keys except artifact (SIL: no transport)
     duration = 8.0
@@ -73,7 +74,11 @@ TOP_KEYS = {
     "draw",
     "fault_matrix",
     "criteria",
+    "traces",
 }
+#: Whose downsampled traces a campaign stores: ``drawn``, the runs its envelopes draw (every run of a campaign of at
+#: most ``report.ENVELOPE_RUNS``; any other run's trace is ``campaign show --run``'s replay), or ``all``.
+TRACES = ("drawn", "all")
 DISTRIBUTIONS = {
     "normal": {"mean", "std"},
     "uniform": {"low", "high"},
@@ -179,6 +184,7 @@ class Campaign:
     fault_window: tuple[float, float] = (0.0, 1e300)
     path: Path | None = None
     description: str = ""
+    traces: str = "drawn"
 
     @property
     def base_dir(self) -> Path:
@@ -394,6 +400,9 @@ def parse_campaign(data: Mapping[str, Any], *, path: Path | None = None) -> Camp
     seed = data.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise _fail(f"seed must be a whole number >= 0, not {seed!r}")
+    traces = data.get("traces", "drawn")
+    if traces not in TRACES:
+        raise _fail(f"traces must be drawn or all, not {traces!r}")
     return Campaign(
         name=str(data.get("name", path.stem if path is not None else "campaign")),
         kind=kind,
@@ -409,6 +418,7 @@ def parse_campaign(data: Mapping[str, Any], *, path: Path | None = None) -> Camp
         fault_window=window,
         path=path,
         description=str(data.get("description", "")),
+        traces=traces,
     )
 
 

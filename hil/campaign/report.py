@@ -33,7 +33,7 @@ from gainlink.fileio import atomic_writer, publish_files
 from gainlink.proof.twin_plot import png_bytes
 
 from .plan import CampaignPlan, PlannedRuns, describe_axes
-from .rows import FAILURES_LIMIT, MEASURE_CELLS, METRIC_CELLS, RunStatus, Tally, Verdicts, head_texts
+from .rows import FAILURES_LIMIT, MEASURE_CELLS, METRIC_CELLS, RunStatus, Tally, Verdicts, head_texts, plan_draws
 from .store import members
 from .stored_rows import StoredRows
 
@@ -92,8 +92,11 @@ def _short(v: Any) -> str:
     return text if len(text) <= 30 else text[:27] + "..."
 
 
-def summary_text(plan: CampaignPlan, tally: Tally, points: list[dict], *, out: Any, plots: bool = True) -> str:
-    """A one-screen summary of the campaign (``plots``: whether the report has its PNGs)."""
+def summary_text(
+    plan: CampaignPlan, tally: Tally, points: list[dict], *, out: Any, plots: bool = True, traced: Traced | None = None
+) -> str:
+    """A one-screen summary of the campaign (``plots``: whether the report has its PNGs; ``traced``: the runs whose
+    traces it stores, when not every run's)."""
     c = plan.campaign
     counts = tally.counts
     n = tally.runs
@@ -122,6 +125,11 @@ def summary_text(plan: CampaignPlan, tally: Tally, points: list[dict], *, out: A
     if worst:
         lines.append("  worst IAE: " + ", ".join(f"run {i} {rid} ({iae:.4g}{unit}, {st})" for i, rid, iae, st in worst))
         lines.append(f"  replay one: gainlink campaign show {out} --run {worst[0][1]} --report REPORT_DIR")
+    if traced is not None and traced.drawn.draws is not None:
+        lines.append(
+            f'  traces stored: the {int(traced.mask.sum())} runs the envelopes draw (traces = "all" stores every '
+            "run's; campaign show --run replays any run)"
+        )
     pngs = " envelopes.png, scatter.png," if plots else ""
     lines.append(f"  report: {out / 'campaign.json'}, campaign.csv,{pngs} failures.txt")
     return "\n".join(lines) + "\n"
@@ -138,17 +146,17 @@ def _model_lines(tally: Tally) -> list[str]:
     ]
 
 
-def envelopespng_bytes(plan: CampaignPlan, status: dict[str, str], store: Any) -> bytes:
+def envelopespng_bytes(plan: CampaignPlan, status: dict[str, str], store: Any, traced: Traced | None = None) -> bytes:
     """Percentile envelopes of outputs and commands over time across the runs ``status`` (id -> ``pass`` or
     ``fail``, in plan order) of the most common trace length: at most :data:`ENVELOPE_RUNS` of them, each grid
-    point's first draws (:func:`envelope_runs`), and the median of the failed runs among them; the title and the
-    legend say which runs when not all are drawn."""
+    point's first draws (:func:`envelope_runs`; those of the plan's ``traced`` runs when given), and the median of the
+    failed runs among them; the title and the legend say which runs when not all are drawn."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    bands = envelope_bands(store, status)
+    bands = envelope_bands(store, status, traced=traced)
     outs, ins = (bands["outputs"], bands["inputs"]) if bands is not None else (0, 0)
     sig = _signals(plan)
     fig, axes = plt.subplots(max(outs + ins, 1), 1, figsize=(9, 2.3 * max(outs + ins, 1)), sharex=True, squeeze=False)
@@ -239,8 +247,40 @@ def envelope_runs(draws: np.ndarray, cap: int = ENVELOPE_RUNS) -> Drawn:
     return Drawn(picked, 1, every)
 
 
+class Traced(NamedTuple):
+    """The runs of a plan whose traces its campaign stores and its envelopes draw (:func:`traced_runs`): a mask over
+    the plan's runs, their ids (ASCII bytes, sorted) and the rule's choice among the runs that can finish."""
+
+    mask: np.ndarray
+    ids: np.ndarray
+    drawn: Drawn
+
+
+def traced_runs(plan: CampaignPlan) -> Traced:
+    """:func:`envelope_runs` of the plan's runs that can finish (each id where it is first planned, its grid point's
+    design not failed), in plan order: a rule of the plan alone, so the client tells each block's worker which of its
+    runs' traces to store before any has run, and the envelopes draw those of them that finish."""
+    ids = plan_ids(plan)
+    runnable = np.zeros(len(ids), bool)
+    runnable[np.unique(ids, return_index=True)[1]] = True
+    if isinstance(plan.runs, PlannedRuns):
+        runnable &= ~plan.runs.failed
+    else:
+        runnable &= np.array([p.error is None for p in plan.runs], bool)
+    at = np.flatnonzero(runnable)
+    drawn = envelope_runs(plan_draws(plan)[at], ENVELOPE_RUNS)
+    mask = np.zeros(len(ids), bool)
+    mask[at[drawn.runs]] = True
+    return Traced(mask, np.unique(ids[mask]), drawn)
+
+
 def envelope_bands(
-    store: Any, status: Mapping[str, str], *, bins: int = ENVELOPE_BINS, cap: int | None = None
+    store: Any,
+    status: Mapping[str, str],
+    *,
+    bins: int = ENVELOPE_BINS,
+    cap: int | None = None,
+    traced: Traced | None = None,
 ) -> dict | None:
     """The percentiles (:data:`PERCENTILES`) of every output and command at each stored sample across the runs
     ``status`` (id -> ``pass`` or ``fail``, in plan order; a :class:`~.rows.RunStatus` with each run's draw, a plain
@@ -248,11 +288,12 @@ def envelope_bands(
     failed ones among them; ``None`` without a stored trace.
 
     Bounded: of more than ``cap`` (default :data:`ENVELOPE_RUNS`) finished runs only those of each grid point's
-    first draws are read (:func:`envelope_runs`), and the failed runs' median is over the failed runs among them (the
-    same sample of the campaign: the failed runs elsewhere would put a run of every block file in the read); ``runs``
-    and ``failed`` count the runs of the most common shape so read, ``finished`` and ``failed_of`` all the distinct
-    finished and failed runs, ``drawn`` the rule's choice (:class:`Drawn`). Only the row groups of the block files
-    that hold a chosen run are read.
+    first draws are read (:func:`envelope_runs`; given the plan's ``traced`` runs, the finished among them, ``cap``
+    unused: the runs whose traces the campaign stored), and the failed runs' median is over the failed runs among them
+    (the same sample of the campaign: the failed runs elsewhere would put a run of every block file in the read);
+    ``runs`` and ``failed`` count the runs of the most common shape so read, ``finished`` and ``failed_of`` all the
+    distinct finished and failed runs, ``drawn`` the rule's choice (:class:`Drawn`). Only the row groups of the block
+    files that hold a chosen run are read.
 
     Streamed: the block files are read once, one at a time (each trace shape's runs: each sample's smallest and largest
     finite value, the stack spilled as float32 to an anonymous temporary file in the campaign folder; the shapes are
@@ -269,8 +310,12 @@ def envelope_bands(
     """
     cap = ENVELOPE_RUNS if cap is None else cap
     ids, draws, failing = _status_runs(status)
-    drawn = envelope_runs(draws, cap)
-    chosen, failed = ids[drawn.runs], ids[drawn.runs[failing[drawn.runs]]]
+    if traced is None:
+        drawn = envelope_runs(draws, cap)
+        picked = drawn.runs
+    else:
+        drawn, picked = traced.drawn, np.flatnonzero(members(ids, traced.ids))
+    chosen, failed = ids[picked], ids[picked[failing[picked]]]
     with tempfile.TemporaryFile(dir=store.out) as spill:  # the stacks read once, kept as float32 for the 2nd pass
         seen = _spill_stacks(store, np.unique(chosen), np.unique(failed), spill)
         if not seen:
@@ -525,6 +570,7 @@ def _campaign_doc(c: Any) -> dict:
         "criteria": _criteria_doc(c.criteria),
         "spec": str(c.spec_path) if c.spec_path else None,
         "artifact": str(c.artifact_path) if c.artifact_path else None,
+        "traces": c.traces,
     }
 
 
@@ -580,14 +626,16 @@ def merge(plan: CampaignPlan, store: Any, *, plots: bool = True) -> tuple[str, S
         "failures": tally.failure_rows(),
         "failures_limit": FAILURES_LIMIT,
     }
-    summary = summary_text(plan, tally, points, out=store.out, plots=plots)
+    traced = traced_runs(plan)
+    stored = traced if plan.campaign.traces == "drawn" else None
+    summary = summary_text(plan, tally, points, out=store.out, plots=plots, traced=stored)
     files: dict[str, bytes | str] = {
         "campaign.json": json.dumps(doc, sort_keys=True, indent=1, allow_nan=False) + "\n",
         "failures.txt": failures_text(tally),
         "summary.txt": summary,
     }
     if plots:
-        files["envelopes.png"] = envelopespng_bytes(plan, tally.status, store)
+        files["envelopes.png"] = envelopespng_bytes(plan, tally.status, store, traced)
         files["scatter.png"] = scatterpng_bytes(plan, tally)
     else:
         for name in PLOTS:

@@ -35,7 +35,7 @@ from gainlink.version import __version__
 from .cluster import check_main_guard, dask_client
 from .config import Campaign, CampaignError, load_campaign, parse_campaign
 from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign, task_uses
-from .report import merge
+from .report import merge, traced_runs
 from .store import Store, folder_key, refuse_foreign
 from .worker import execute_packed
 
@@ -114,6 +114,7 @@ def plan_doc(plan: CampaignPlan) -> dict:
             "artifact": str(c.artifact_path) if c.artifact_path else None,
             "axes": describe_axes(c),
             "description": c.description,
+            "traces": c.traces,
             "gainlink": __version__,
         },
         "run_ids": ids,
@@ -345,6 +346,8 @@ class _Submitter:
         # (a few kB) travel inside each task: a task with no dependency goes to whichever worker is free, instead
         # of queueing on the worker that happens to hold the artifact.
         self.blobs = {sha: client.submit(_data, data, key=f"gainlink-fmu-{sha}") for sha, data in plan.blobs.items()}
+        # whose traces the workers store (report.traced_runs), None for every run's
+        self.traced = None if plan.campaign.traces == "all" else traced_runs(plan).mask
 
     def ids(self, block: np.ndarray) -> list[str]:
         """The run ids of the plan indices ``block``."""
@@ -360,6 +363,7 @@ class _Submitter:
         scenario once and each run's draws and seed as numbers, or else each run's inputs made here), without their
         ids' making (the plan holds them), and are dropped once pickled into the task."""
         ids, runs = self.ids(block), self.plan.runs.task(block)
+        kept = None if self.traced is None or self.traced[block].all() else self.traced[block]
         shas, fmus = task_uses(runs)
         needed = {s: f for s, f in self.blobs.items() if s in fmus}
         key = f"gainlink-run-{ids[0]}" if len(ids) == 1 else f"gainlink-batch-{ids[0]}-{len(ids)}"
@@ -367,7 +371,7 @@ class _Submitter:
             execute_packed,
             self.kind,
             {s: self.plan.artifacts[s] for s in shas},
-            pickle.dumps((ids, runs), protocol=pickle.HIGHEST_PROTOCOL),
+            pickle.dumps((ids, runs, kept), protocol=pickle.HIGHEST_PROTOCOL),
             needed,
             campaign=self.plan.campaign.name,
             folder=self.folder,

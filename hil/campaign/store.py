@@ -853,7 +853,8 @@ def _trace_of(table: pa.Table, row: int) -> dict[str, np.ndarray] | None:
 def refuse_foreign(out: str | Path, plan_doc: dict) -> None:
     """Refuse, in one line and before anything is written, to resume into ``out`` when its ``plan.json`` or one of
     its block files is another campaign's (another name) or another gainlink version's (its runs would be ignored,
-    not resumed), or when it holds the per-run result files of an earlier gainlink (``runs/``)."""
+    not resumed), when it stored other runs' traces (``traces``), or when it holds the per-run result files of an
+    earlier gainlink (``runs/``)."""
     out = Path(out)
     path = out / "plan.json"
     if (out / "runs").is_dir():
@@ -871,6 +872,9 @@ def refuse_foreign(out: str | Path, plan_doc: dict) -> None:
             f"campaign: {path} is not a campaign plan this gainlink can read; give another --out"
         ) from None
     _refuse(out, name, version, plan_doc["campaign"]["name"])
+    kept, wanted = old.get("traces"), plan_doc["campaign"].get("traces")
+    if kept is not None and kept != wanted:  # the runs reused would not hold the traces this campaign stores
+        raise CampaignError(f"campaign: {out} stores traces = {kept!r}, this campaign {wanted!r}: give another --out")
     for block in sorted((out / "blocks").glob("*.parquet")) if (out / "blocks").is_dir() else ():
         try:
             meta = pq.read_schema(block).metadata or {}

@@ -217,25 +217,30 @@ def downsampled_trace(trace: Any) -> dict[str, np.ndarray]:
 def downsampled_traces(traces: list) -> list[dict[str, np.ndarray]]:
     """:func:`downsampled_trace` of each of ``traces``, taken for the runs of one length at once: one gather and one
     float32 conversion of their ``(runs, steps, width)`` arrays, each run's arrays a contiguous row of them."""
-    return _downsampled(traces)[0]
+    return _downsampled(traces)[0]  # type: ignore[return-value]  (every run kept: no None)
 
 
-def _downsampled(traces: list) -> tuple[list[dict[str, np.ndarray]], dict[str, np.ndarray] | None]:
-    """:func:`downsampled_traces`, and when the runs are of one length their arrays as the gather made them (the
-    rows the runs' arrays are: ``t`` (runs, N), ``y``, ``u``, ``r`` (runs, N, width)), else None."""
+def _downsampled(
+    traces: list, kept: Sequence[bool] | None = None
+) -> tuple[list[dict[str, np.ndarray] | None], dict[str, np.ndarray] | None]:
+    """:func:`downsampled_traces` of the runs ``kept`` says (None: every run; the others' None, not gathered), and
+    when every run is kept and of one length their arrays as the gather made them (the rows the runs' arrays are:
+    ``t`` (runs, N), ``y``, ``u``, ``r`` (runs, N, width)), else None."""
     from ..loop.block_metrics import stacked
 
     out: list[dict | None] = [None] * len(traces)
     lengths: dict[int, list[int]] = {}
     for i, tr in enumerate(traces):
-        lengths.setdefault(int(tr.t.size), []).append(i)
+        if kept is None or kept[i]:
+            lengths.setdefault(int(tr.t.size), []).append(i)
     cols: dict[str, np.ndarray] = {}
     for N, members in lengths.items():
         idx = np.unique(np.linspace(0, N - 1, min(N, MAX_TRACE_POINTS)).round().astype(int)) if N else np.zeros(0, int)
         cols = {k: _gathered(stacked([getattr(traces[i], k) for i in members]), idx) for k in "tyur"}
         for j, i in enumerate(members):  # each row float32, contiguous and shaped as encode_trace makes it
             out[i] = {"t": cols["t"][j], "y": cols["y"][j], "u": cols["u"][j], "r": cols["r"][j]}
-    return out, cols if len(lengths) == 1 else None  # type: ignore[return-value]
+    whole = len(lengths) == 1 and (kept is None or all(kept))
+    return out, cols if whole else None  # type: ignore[return-value]
 
 
 def _gathered(A: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -324,9 +329,11 @@ def execute_block(
     ids: list[str],
     campaign: str,
     folder: tuple[str, tuple[int, int]] | None = None,
+    kept: Sequence[bool] | None = None,
 ) -> bytes | dict:
     """A campaign task: the runs of :func:`batch_records` (run ``ids[i]`` is ``runs[i]``) as the block's Parquet
-    file for the campaign folder (:func:`~.store.encode_block`).
+    file for the campaign folder (:func:`~.store.encode_block`), the traces of the runs ``kept`` says (every run's
+    when None; the others' null).
 
     ``folder``: the campaign's ``blocks`` folder and its :func:`~.store.folder_key` as the client saw them. When this
     worker sees that folder (a LocalCluster, a shared file system), it writes the file there itself and returns a few
@@ -337,7 +344,7 @@ def execute_block(
 
     with gc_paused():  # see execute_packed
         try:
-            return _block_answer(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder)
+            return _block_answer(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder, kept=kept)
         finally:  # the block's arrays and records are freed by now
             if not next_task_waiting():
                 hand_back_memory()
@@ -359,10 +366,18 @@ def next_task_waiting() -> bool:
 
 
 def _block_answer(
-    kind: str, artifacts: dict, runs: list, blobs: dict | None, *, ids: list[str], campaign: str, folder: Any
+    kind: str,
+    artifacts: dict,
+    runs: list,
+    blobs: dict | None,
+    *,
+    ids: list[str],
+    campaign: str,
+    folder: Any,
+    kept: Sequence[bool] | None,
 ) -> bytes | dict:
     """:func:`execute_block`'s answer: its block file written into ``folder`` (a few numbers) or its bytes."""
-    task = _task_records(kind, artifacts, runs, blobs)
+    task = _task_records(kind, artifacts, runs, blobs, kept)
     if task and all(type(r) is _Block for r in task):  # only blocks' runs: a column at a time, no record dict a run
         data = encode_runs(ids, _block_runs(kind, runs, task), campaign=campaign)
         errors: list = []
@@ -402,8 +417,9 @@ def execute_packed(
     campaign: str,
     folder: tuple[str, tuple[int, int]] | None = None,
 ) -> bytes | dict:
-    """:func:`execute_block` as the campaign submits it: ``packed`` is ``pickle.dumps((ids, runs))``, ``runs`` as
-    :meth:`.plan.PlannedRuns.task` gives them (described, or a list of each run's inputs). One bytes
+    """:func:`execute_block` as the campaign submits it: ``packed`` is ``pickle.dumps((ids, runs, kept))``, ``runs`` as
+    :meth:`.plan.PlannedRuns.task` gives them (described, or a list of each run's inputs), ``kept`` whose traces to
+    store (None: every run's). One bytes
     argument is what Dask's graph code walks past: a list of runs' scenarios as an argument is walked element by
     element on the client for dependencies (measured: 11,000 calls a block of 500 pendulum runs)."""
     from ..loop.scheduler import gc_paused
@@ -413,10 +429,10 @@ def execute_packed(
     # 10,002-run campaign (0.3 ms each, a full one 30-60 ms). Paused, the task's garbage is found by the first
     # collection after it (a traceback's cycles, say).
     with gc_paused():
-        ids, runs = pickle.loads(packed)
+        ids, runs, kept = pickle.loads(packed)
         if isinstance(runs, DescribedRuns):  # made once: grouped, run and recorded from the same runs
             runs = runs.made_runs()
-        return execute_block(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder)
+        return execute_block(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder, kept=kept)
 
 
 def batch_records(kind: str, artifacts: dict[str, bytes], runs: Sequence, blobs: dict | None = None) -> list[dict]:
@@ -446,16 +462,21 @@ def batch_records(kind: str, artifacts: dict[str, bytes], runs: Sequence, blobs:
     return _materialized(_task_records(kind, artifacts, runs, blobs))
 
 
-def _task_records(kind: str, artifacts: dict[str, bytes], runs: Sequence, blobs: dict | None) -> list:
-    """:func:`batch_records`' records, a run of a block given by its :class:`_Block` (its lists, not a dict)."""
+def _task_records(
+    kind: str, artifacts: dict[str, bytes], runs: Sequence, blobs: dict | None, kept: Sequence[bool] | None = None
+) -> list:
+    """:func:`batch_records`' records, a run of a block given by its :class:`_Block` (its lists, not a dict); a run
+    not ``kept`` (None: every run is) without its trace."""
     records: list[dict | _Block | None] = [None] * len(runs)
     if kind == "sil":
         for members in _blocks(artifacts, runs, blobs or {}).values():
-            _run_block(members, records, runs, blobs or {})
+            _run_block(members, records, runs, blobs or {}, kept)
     for i, record in enumerate(records):
         if record is None:
             sha, scenario, seed = runs[i]
             records[i] = execute(kind, artifacts[sha], scenario, seed, blobs)
+            if kept is not None and not kept[i]:
+                records[i]["trace"] = None  # type: ignore[index]
     return records
 
 
@@ -623,7 +644,7 @@ def _with_drawn(parsed: Any, seed: int, drawn: dict) -> Any:
 _NUMBERS = frozenset((int, float))  # the types of a drawn table's values (not bool, not numpy's)
 
 
-def _run_block(members: list, records: list, runs: list, blobs: dict) -> None:
+def _run_block(members: list, records: list, runs: list, blobs: dict, kept: Sequence[bool] | None = None) -> None:
     """Step ``members`` as one block and fill their ``records`` with it (a :class:`_Block`: the block's lists, not a
     dict a run); left empty (each runs alone) when their plants
     cannot step as one batch or the block fails with a GainlinkError (said once, in the log). A run whose plant
@@ -653,7 +674,8 @@ def _run_block(members: list, records: list, runs: list, blobs: dict) -> None:
             if result is None:
                 log.info("campaign run %d of this task runs alone: its plant could not be built in its block", i)
         measures = measure_block([result for _, result in done], artifact)
-        traces, stack = _downsampled([result.trace for _, result in done])
+        keep = None if kept is None else [kept[i] for i, _ in done]
+        traces, stack = _downsampled([result.trace for _, result in done], keep)
         share = _stopped(where, cpu0)
         share["cpu_s"] /= max(len(done), 1)
         trees = results.metrics.trees if len(done) == len(members) and results.metrics.columnar else None
