@@ -219,6 +219,44 @@ def test_a_worker_that_sees_the_campaign_folder_writes_its_block_and_one_that_do
             assert all(np.array_equal(got[i][1][k], want[i][1][k]) for k in "tyur")
 
 
+def test_a_block_keeping_some_traces_stores_only_theirs_and_its_metrics_from_the_column_trees(tmp_path, monkeypatch):
+    """A task of one block (4 pendulum runs) told to keep runs 0 and 2's traces: the file holds theirs, each the trace
+    the same task stores keeping every run's, and null for runs 1 and 3, the records otherwise the same; the metrics'
+    columns come from the block's column trees either way (not the runs' dicts walked again)."""
+    import pickle
+
+    import gainlink.hil.campaign.store as store_module
+    from gainlink.hil.campaign.runner import _store_answer, plan_doc
+    from gainlink.hil.campaign.store import Store, folder_key
+    from gainlink.hil.campaign.worker import execute_packed
+
+    plan, points, runs = _pendulum_task(4)
+    runs[1] = (points[1].artifact_sha256, dict(points[1].scenario), points[1].seed)  # no error: one block of 4
+    ids = [p.id for p in points]
+    paths: list[str] = []
+    for name in ("tree_metric_columns", "metric_columns"):
+        real = getattr(store_module, name)
+        monkeypatch.setattr(store_module, name, lambda *a, _real=real, _name=name: paths.append(_name) or _real(*a))
+    stored = {}
+    for kept in (None, [True, False, True, False]):
+        store = Store(tmp_path / str(kept is None), campaign=plan.campaign.name)
+        store.prepare(plan, plan_doc=plan_doc(plan))
+        answer = execute_packed(
+            "sil", plan.artifacts, pickle.dumps((ids, runs, kept)), {}, campaign=plan.campaign.name,
+            folder=(str(store.blocks), folder_key(store.blocks)),
+        )  # fmt: skip
+        _store_answer(store, answer, ids)
+        stored[kept is None] = _stored(store)
+    assert paths == ["tree_metric_columns", "tree_metric_columns"]
+    every, some = stored[True], stored[False]
+    assert every.keys() == some.keys() == set(ids)
+    for k, i in enumerate(ids):
+        assert every[i][0] == some[i][0] and every[i][2] and some[i][2]
+        assert every[i][1] is not None and (some[i][1] is None) == (k in (1, 3))
+        if k in (0, 2):
+            assert all(np.array_equal(every[i][1][f], some[i][1][f]) for f in "tyur")
+
+
 def test_a_task_runs_its_steps_outside_the_runs_without_cyclic_collection_and_leaves_the_collector_on(
     tmp_path, monkeypatch
 ):

@@ -520,7 +520,8 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
         return values if ordered else [values[k] for k in order]
 
     results = column(lambda b: b.results)
-    whole = len(blocks) == 1 and ordered and blocks[0].stack is not None  # its arrays are the task's, run for run
+    one = len(blocks) == 1 and ordered  # the block's runs are the task's, run for run
+    whole = one and blocks[0].stack is not None  # and so are its traces' arrays (every trace kept, of one length)
     return BlockRuns(
         kind=kind,
         inputs=runs,
@@ -531,7 +532,7 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
         link=[r.info["transport"] for r in results],
         traces=blocks[0].stack if whole else column(lambda b: b.traces),  # type: ignore[arg-type]
         worker=column(lambda b: [b.worker] * len(b.positions)),
-        metric_trees=blocks[0].metric_trees if whole else None,
+        metric_trees=blocks[0].metric_trees if one else None,
     )
 
 
