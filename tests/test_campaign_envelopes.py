@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from gainlink.hil.campaign import report
+from gainlink.hil.campaign import figures, report
 from gainlink.hil.campaign import store as store_module
 from gainlink.hil.campaign.report import PERCENTILES, envelope_bands
 from gainlink.hil.campaign.rows import RunStatus
@@ -193,11 +193,11 @@ def test_the_figure_names_the_runs_it_covers(tmp_path, monkeypatch):
     ids, status, sig = _runs()
     store = _store(tmp_path, ids, sig, [150])
     drawn = []
-    monkeypatch.setattr(report, "png_bytes", lambda fig: drawn.append(fig) or b"")
+    monkeypatch.setattr(figures, "png_bytes", lambda fig: drawn.append(fig) or b"")
     plan = SimpleNamespace(campaign=SimpleNamespace(name="c"), artifacts={})
     for cap in (20, 2000):
         monkeypatch.setattr(report, "ENVELOPE_RUNS", cap)
-        report.envelopespng_bytes(plan, _status(status, [k % DRAWS for k in range(300)]), store)
+        report.envelope_figure(plan, _status(status, [k % DRAWS for k in range(300)]), store).png()
     past, under = drawn
     assert past._suptitle.get_text() == ("c: percentiles over 18 of 300 finished runs\neach grid point's first 6 draws")
     legend = [t.get_text() for t in past.axes[0].get_legend().get_texts()]

@@ -12,6 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from gainlink.hil.campaign import figures as figures_module
 from gainlink.hil.campaign import report
 
 RUNS = 300
@@ -32,10 +33,10 @@ def _tally() -> SimpleNamespace:
 
 def _drawn(monkeypatch, cap: int) -> object:
     figures = []
-    monkeypatch.setattr(report, "png_bytes", lambda fig: figures.append(fig) or b"")
+    monkeypatch.setattr(figures_module, "png_bytes", lambda fig: figures.append(fig) or b"")
     monkeypatch.setattr(report, "SCATTER_RUNS", cap)
     plan = SimpleNamespace(campaign=SimpleNamespace(name="c"), artifacts={})
-    report.scatterpng_bytes(plan, _tally())
+    report.scatter_figure(plan, _tally()).png()
     (fig,) = figures
     return fig
 

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import tempfile
 from collections import Counter
 from collections.abc import Mapping
@@ -30,8 +29,8 @@ from typing import IO, Any, NamedTuple
 
 import numpy as np
 from gainlink.fileio import atomic_writer, publish_files
-from gainlink.proof.twin_plot import png_bytes
 
+from .figures import EnvelopeFigure, ScatterFigure, ScatterPanel, ordinal
 from .plan import CampaignPlan, PlannedRuns, describe_axes
 from .rows import FAILURES_LIMIT, MEASURE_CELLS, METRIC_CELLS, RunStatus, Tally, Verdicts, head_texts, plan_draws
 from .store import members
@@ -146,68 +145,17 @@ def _model_lines(tally: Tally) -> list[str]:
     ]
 
 
-def envelopespng_bytes(plan: CampaignPlan, status: dict[str, str], store: Any, traced: Traced | None = None) -> bytes:
-    """Percentile envelopes of outputs and commands over time across the runs ``status`` (id -> ``pass`` or
-    ``fail``, in plan order) of the most common trace length: at most :data:`ENVELOPE_RUNS` of them, each grid
-    point's first draws (:func:`envelope_runs`; those of the plan's ``traced`` runs when given), and the median of the
-    failed runs among them; the title and the legend say which runs when not all are drawn."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    bands = envelope_bands(store, status, traced=traced)
-    outs, ins = (bands["outputs"], bands["inputs"]) if bands is not None else (0, 0)
+def envelope_figure(
+    plan: CampaignPlan, status: dict[str, str], store: Any, traced: Traced | None = None
+) -> EnvelopeFigure:
+    """``envelopes.png``'s data: percentile envelopes of outputs and commands over time across the runs ``status``
+    (id -> ``pass`` or ``fail``, in plan order) of the most common trace length: at most :data:`ENVELOPE_RUNS` of
+    them, each grid point's first draws (:func:`envelope_runs`; those of the plan's ``traced`` runs when given), and
+    the median of the failed runs among them (:func:`envelope_bands`)."""
     sig = _signals(plan)
-    fig, axes = plt.subplots(max(outs + ins, 1), 1, figsize=(9, 2.3 * max(outs + ins, 1)), sharex=True, squeeze=False)
-    if bands is None:
-        axes[0, 0].text(0.5, 0.5, "no finished run", ha="center", transform=axes[0, 0].transAxes)
-        return png_bytes(fig)
-    t = bands["t"]
-    for i in range(outs + ins):
-        ax = axes[i, 0]
-        key, j = ("y", i) if i < outs else ("u", i - outs)
-        pct = bands["percentiles"][:, :, i]
-        ax.fill_between(t, pct[0], pct[4], alpha=0.2, color="C0", label="5-95 %")
-        ax.fill_between(t, pct[1], pct[3], alpha=0.35, color="C0", label="25-75 %")
-        ax.plot(t, pct[2], color="C0", lw=1.2, label="median")
-        if bands["failed"]:
-            ax.plot(t, bands["failed_median"][:, i], "--", color="C3", lw=1, label=_failed_label(bands))
-        names = sig["outputs"] if key == "y" else sig["inputs"]
-        name = names[j] if j < len(names) else f"{key}{j}"
-        unit = sig.get("units", {}).get(name)
-        ax.set_ylabel(f"{name} [{unit}]" if unit else name)
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="best", fontsize=7)
-    axes[-1, 0].set_xlabel(f"t [{sig.get('units', {}).get('time', 's')}]")
-    fig.suptitle(f"{plan.campaign.name}: {_envelope_scope(bands)}")
-    return png_bytes(fig)
-
-
-def _envelope_scope(bands: dict) -> str:
-    """What the envelopes cover, for the title: every run, or which of the finished runs (on a second line)."""
-    if bands["drawn"].draws is None:
-        return f"outputs and commands over {bands['runs']} runs"
-    drawn = bands["drawn"]
-    which = (
-        f"each grid point's first {drawn.draws} draws"
-        if drawn.every == 1
-        else f"every {_ordinal(drawn.every)} run of the first draw in plan order"
-    )
-    return f"percentiles over {bands['runs']} of {bands['finished']} finished runs\n{which}"
-
-
-def _failed_label(bands: dict) -> str:
-    """The failed runs' median's legend: how many, and of how many failed runs when not all are drawn."""
-    if bands["drawn"].draws is None:
-        return f"median of {bands['failed']} failed"
-    return f"median of {bands['failed']} of {bands['failed_of']} failed (those drawn)"
-
-
-def _ordinal(n: int) -> str:
-    """``2nd``, ``5th``, ``11th``, ``21st``."""
-    last = "th" if n % 100 in (11, 12, 13) else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
-    return f"{n}{last}"
+    bands = envelope_bands(store, status, traced=traced)
+    units = dict(sig.get("units", {}))
+    return EnvelopeFigure(plan.campaign.name, bands, tuple(sig["outputs"]), tuple(sig["inputs"]), units)
 
 
 def every_kth(ids: np.ndarray, cap: int) -> tuple[np.ndarray, int]:
@@ -486,73 +434,31 @@ def _scatter_scope(fail: np.ndarray, drawn: dict[str, tuple[np.ndarray, int]]) -
         runs, every = drawn[status]
         if every > 1:
             of = int((fail == (status == "fail")).sum())
-            parts.append(f"{len(runs)} of {of} {word}, every {_ordinal(every)} in plan order")
+            parts.append(f"{len(runs)} of {of} {word}, every {ordinal(every)} in plan order")
     return "" if not parts else "\ndrawn: " + "; ".join(parts)
 
 
-def scatterpng_bytes(plan: CampaignPlan, tally: Tally) -> bytes:
-    """IAE of each run against each numeric axis; failed runs marked."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    axes_ = [name for name in tally.axes if tally.numeric[name]]
+def scatter_figure(plan: CampaignPlan, tally: Tally) -> ScatterFigure:
+    """``scatter.png``'s data: the IAE of each run against each numeric axis, failed runs marked (at most
+    :data:`SCATTER_RUNS` of each status drawn: :func:`scatter_runs`)."""
+    names = [name for name in tally.axes if tally.numeric[name]]
     iae, fail = tally.scatter_iae, tally.scatter_fail
     drawn = scatter_runs(fail)
-    n = max(len(axes_), 1)
-    cols = min(n, 3)
-    fig, grid = plt.subplots(math.ceil(n / cols), cols, figsize=(4.2 * cols, 3.4 * math.ceil(n / cols)), squeeze=False)
-    for k, name in enumerate(axes_ or [None]):
-        ax = grid[k // cols, k % cols]
+    log = bool(iae.size and iae.min() > 0 and iae.max() > 20 * iae.min())
+    count = {"fail": int(fail.sum()), "pass": int((~fail).sum())}
+    panels = []
+    for name in names or [None]:
         if name is None or not iae.size:
-            ax.text(
-                0.5, 0.5, "no numeric axis" if name is None else "no finished run", ha="center", transform=ax.transAxes
-            )
+            empty = "no numeric axis" if name is None else "no finished run"
+            panels.append(ScatterPanel(name, {}, {}, count, empty=empty))
             continue
         x = tally.scatter[name]
-        for status, mask, style in (
-            ("fail", fail, dict(color="C3", marker="x", markersize=4.7, alpha=0.8)),
-            ("pass", ~fail, dict(color="C0", marker="o", markersize=3.5, markeredgewidth=0, alpha=0.7)),
-        ):
-            shown = drawn[status][0]
-            if mask.any():  # markers of one line, not a scatter collection: a third of the drawing's time
-                ax.plot(x[shown], iae[shown], linestyle="none", label=f"{status} ({int(mask.sum())})", **style)
-        if iae.min() > 0 and iae.max() > 20 * iae.min():
-            ax.set_yscale("log")
-            ax.yaxis.set_major_formatter(_power_of_ten)
-        ax.set_xlabel(name)
-        ax.set_ylabel("IAE (sum over tracked outputs)" + _iae_unit(_signals(plan)))
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7)
-    for k in range(len(axes_ or [None]), grid.size):
-        grid[k // cols, k % cols].axis("off")
-    scope = _scatter_scope(fail, drawn)
-    fig.suptitle(f"{plan.campaign.name}: IAE against the varied parameters (x: failed){scope}")
-    _margins(fig, title_lines=1 + scope.count("\n"))
-    return png_bytes(fig)
-
-
-_SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079")
-
-
-def _power_of_ten(value: float, _pos: Any = None) -> str:
-    """A log axis' tick label as plain text, ``10`` and a superscript exponent (the decades only, as matplotlib's
-    own labels over more than a decade): its mathtext labels cost 0.3 s of parsing and layout per merge."""
-    if not value > 0:
-        return ""
-    exponent = math.log10(value)
-    if abs(exponent - round(exponent)) > 1e-9:
-        return ""
-    return "10" + str(round(exponent)).translate(_SUPERSCRIPT)
-
-
-def _margins(fig: Any, *, title_lines: int = 1) -> None:
-    """Fixed margins in inches for the tick labels, axis labels and title (of ``title_lines`` lines): ``tight_layout``
-    measured every tick label's box, 40 % of the scatter plot's time for no visible gain."""
-    w, h = fig.get_size_inches()
-    top = 1 - (0.5 + 0.22 * (title_lines - 1)) / h
-    fig.subplots_adjust(left=0.8 / w, right=1 - 0.2 / w, bottom=0.55 / h, top=top, wspace=0.35, hspace=0.45)
+        shown = {status: runs for status, (runs, _) in drawn.items()}
+        panels.append(
+            ScatterPanel(name, {s: x[k] for s, k in shown.items()}, {s: iae[k] for s, k in shown.items()}, count, log)
+        )
+    ylabel = "IAE (sum over tracked outputs)" + _iae_unit(_signals(plan))
+    return ScatterFigure(plan.campaign.name, tuple(panels), ylabel, _scatter_scope(fail, drawn))
 
 
 def _criteria_doc(c: Any) -> dict:
@@ -635,8 +541,8 @@ def merge(plan: CampaignPlan, store: Any, *, plots: bool = True) -> tuple[str, S
         "summary.txt": summary,
     }
     if plots:
-        files["envelopes.png"] = envelopespng_bytes(plan, tally.status, store, traced)
-        files["scatter.png"] = scatterpng_bytes(plan, tally)
+        files["envelopes.png"] = envelope_figure(plan, tally.status, store, traced).png()
+        files["scatter.png"] = scatter_figure(plan, tally).png()
     else:
         for name in PLOTS:
             (store.out / name).unlink(missing_ok=True)
