@@ -897,6 +897,43 @@ def test_past_the_envelopes_cap_only_the_runs_they_draw_keep_their_traces_and_th
     assert "\n" not in str(refused.value) and sorted(p.name for p in (tmp_path / "drawn").rglob("*")) == before
 
 
+@ON_THE_CLUSTERS
+def test_the_report_figures_are_drawn_on_the_cluster_and_one_it_fails_to_draw_is_drawn_here(
+    pend, dask_cluster, tmp_path, monkeypatch, caplog
+):
+    """A campaign on a cluster has its two figures drawn there: with this process's drawing broken, the run still
+    writes them, byte for byte the PNGs a merge draws here. A drawing whose task fails (a real task raising on a
+    worker) is drawn here, said once in the log, the same bytes."""
+    import logging
+    import operator
+
+    from distributed import Client
+    from gainlink.hil.campaign import figures, report
+
+    data = small_campaign(pend)
+    png = {cls: cls.png for cls in (figures.EnvelopeFigure, figures.ScatterFigure)}
+
+    def broken(self):
+        raise AssertionError("drawn in the client")
+
+    for cls in png:
+        monkeypatch.setattr(cls, "png", broken)
+    run(data, out=tmp_path / "c", scheduler=dask_cluster)
+    on_cluster = {name: (tmp_path / "c" / name).read_bytes() for name in report.PLOTS}
+    for cls, method in png.items():
+        monkeypatch.setattr(cls, "png", method)
+    plan, store = plan_campaign(parse_campaign(data)), Store(tmp_path / "c")
+    report.merge(plan, store)
+    here = {name: (tmp_path / "c" / name).read_bytes() for name in report.PLOTS}
+    assert on_cluster == here and all(v.startswith(b"\x89PNG") for v in here.values())
+    with Client(dask_cluster) as client, caplog.at_level(logging.WARNING, "gainlink.hil.campaign.report"):
+        report.merge(plan, store, draw=lambda figure: client.submit(operator.truediv, 1, 0, pure=False))
+    failed = [r.getMessage() for r in caplog.records if "could not be drawn on the cluster" in r.getMessage()]
+    assert sorted(m.split()[0] for m in failed) == ["envelopes.png", "scatter.png"]
+    assert all("ZeroDivisionError" in m and m.endswith("drawn here") for m in failed)
+    assert {name: (tmp_path / "c" / name).read_bytes() for name in report.PLOTS} == here
+
+
 @pytest.mark.slow
 def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_command_that_resumes(pend, tmp_path):
     data = slow_campaign(pend)

@@ -133,6 +133,14 @@ class ScatterFigure:
         return png_bytes(fig)
 
 
+Figure = EnvelopeFigure | ScatterFigure  # a report figure, drawn by its ``png()``
+
+
+def png_of(figure: Figure) -> bytes:
+    """``figure.png()``: what a cluster's task calls (the figure travels as data, the drawing is the worker's code)."""
+    return figure.png()
+
+
 _STYLES = {
     "fail": dict(color="C3", marker="x", markersize=4.7, alpha=0.8),
     "pass": dict(color="C0", marker="o", markersize=3.5, markeredgewidth=0, alpha=0.7),

@@ -22,19 +22,23 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import tempfile
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from functools import partial
 from typing import IO, Any, NamedTuple
 
 import numpy as np
 from gainlink.fileio import atomic_writer, publish_files
 
-from .figures import EnvelopeFigure, ScatterFigure, ScatterPanel, ordinal
+from .figures import EnvelopeFigure, Figure, ScatterFigure, ScatterPanel, ordinal
 from .plan import CampaignPlan, PlannedRuns, describe_axes
 from .rows import FAILURES_LIMIT, MEASURE_CELLS, METRIC_CELLS, RunStatus, Tally, Verdicts, head_texts, plan_draws
 from .store import members
 from .stored_rows import StoredRows
+
+log = logging.getLogger(__name__)
 
 PERCENTILES = (5, 25, 50, 75, 95)
 ENVELOPE_BINS = 512
@@ -513,7 +517,9 @@ def plan_ids(plan: CampaignPlan) -> np.ndarray:
     return np.array([p.id.encode("ascii") for p in plan.runs], dtype="S")
 
 
-def merge(plan: CampaignPlan, store: Any, *, plots: bool = True) -> tuple[str, StoredRows, Counter]:
+def merge(
+    plan: CampaignPlan, store: Any, *, plots: bool = True, draw: Callable[[Figure], Any] | None = None
+) -> tuple[str, StoredRows, Counter]:
     """Merge the stored runs into the report files; returns the summary text, the rows (made from the store when
     asked, :class:`~.stored_rows.StoredRows`) and the count of runs by status.
 
@@ -521,9 +527,13 @@ def merge(plan: CampaignPlan, store: Any, *, plots: bool = True) -> tuple[str, S
     ``campaign.json`` holds the campaign, the counts, the grid points and the failures (not every run: its whole row
     is the store's, :class:`~.stored_rows.StoredRows`, ``gainlink campaign show --run``), and the summary, failures
     and plots are drawn from a :class:`~.rows.Tally`. Without ``plots``, the PNGs are not drawn (about a second per
-    merge) and those of an earlier merge are removed: a report never shows plots of other runs than its own."""
+    merge) and those of an earlier merge are removed: a report never shows plots of other runs than its own.
+
+    ``draw``: where the figures are drawn (:func:`drawn_figures`), here when None."""
     with atomic_writer(store.out / "campaign.csv") as csv_out:
         tally = _stream_rows(plan, store, csv_out)
+    traced = traced_runs(plan)
+    pngs = drawn_figures(plan, tally, store, traced, draw) if plots else {}
     points = tally.point_list()
     doc = {
         "campaign": _campaign_doc(plan.campaign),
@@ -532,7 +542,6 @@ def merge(plan: CampaignPlan, store: Any, *, plots: bool = True) -> tuple[str, S
         "failures": tally.failure_rows(),
         "failures_limit": FAILURES_LIMIT,
     }
-    traced = traced_runs(plan)
     stored = traced if plan.campaign.traces == "drawn" else None
     summary = summary_text(plan, tally, points, out=store.out, plots=plots, traced=stored)
     files: dict[str, bytes | str] = {
@@ -540,11 +549,45 @@ def merge(plan: CampaignPlan, store: Any, *, plots: bool = True) -> tuple[str, S
         "failures.txt": failures_text(tally),
         "summary.txt": summary,
     }
-    if plots:
-        files["envelopes.png"] = envelope_figure(plan, tally.status, store, traced).png()
-        files["scatter.png"] = scatter_figure(plan, tally).png()
-    else:
+    if not plots:
         for name in PLOTS:
             (store.out / name).unlink(missing_ok=True)
+    files.update((name, png()) for name, png in pngs.items())
     publish_files(store.out, files)
     return summary, StoredRows(plan, store), tally.counts
+
+
+def drawn_figures(
+    plan: CampaignPlan, tally: Tally, store: Any, traced: Traced, draw: Callable[[Figure], Any] | None
+) -> dict[str, Callable[[], bytes]]:
+    """The report's PNGs by name, each as the call that gives its bytes. Each figure's data is gathered here, the
+    scatter's first; ``draw`` (a cluster's ``submit`` of :meth:`~.figures.ScatterFigure.png`, say: any call returning
+    something whose ``result()`` is the PNG) draws each elsewhere meanwhile, so the scatter is drawn while the
+    envelopes' bands are read here and both figures are drawn at once on two workers. A figure ``draw`` fails to give
+    is drawn here, said in the log; without ``draw`` each is drawn here."""
+    figures: dict[str, Figure] = {}
+    pending: dict[str, Any] = {}
+    for name, gather in (
+        ("scatter.png", lambda: scatter_figure(plan, tally)),
+        ("envelopes.png", lambda: envelope_figure(plan, tally.status, store, traced)),
+    ):
+        figures[name] = gather()
+        if draw is not None:
+            pending[name] = draw(figures[name])
+    return {name: partial(_png, name, figures[name], pending.get(name)) for name in PLOTS}
+
+
+def _png(name: str, figure: Figure, drawing: Any | None) -> bytes:
+    """``figure``'s PNG: ``drawing``'s result when it gives one, else drawn here (a failed drawing said in the log)."""
+    if drawing is None:
+        return figure.png()
+    try:
+        png = drawing.result()
+    except Exception as exc:  # a dead worker, a cluster gone: the figure is still the report's
+        why = f"{type(exc).__name__}: {exc}"
+    else:
+        if isinstance(png, bytes):
+            return png
+        why = f"it gave {type(png).__name__}, not the PNG's bytes"
+    log.warning("%s could not be drawn on the cluster (%s); drawn here", name, why)
+    return figure.png()

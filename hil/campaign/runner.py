@@ -23,6 +23,7 @@ import hashlib
 import itertools
 import logging
 import pickle
+import uuid
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +35,7 @@ from gainlink.version import __version__
 
 from .cluster import check_main_guard, dask_client
 from .config import Campaign, CampaignError, load_campaign, parse_campaign
+from .figures import Figure, png_of
 from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign, task_uses
 from .report import merge, traced_runs
 from .store import Store, folder_key, refuse_foreign
@@ -225,6 +227,7 @@ def _run(
                 _submit_and_store(
                     client, plan, blocks, store, done=done, total=total, progress=progress, window=threads
                 )
+                return _result(plan, store, reused=reused, executed=todo, plots=plots, draw=_drawing(client))
         except KeyboardInterrupt:  # the block closed the client (and the LocalCluster) on its way out
             # read again from the folder: workers write their blocks themselves, some the client had not yet heard of
             stored = int((distinct & Store(store.out).finished_mask(plan.runs.ids)).sum())
@@ -275,9 +278,12 @@ def _blocks(plan: CampaignPlan, store: Store, sizes: list[int], pending: np.ndar
         yield todo[sum(sizes) :]
 
 
-def _result(plan: CampaignPlan, store: Store, *, reused: int, executed: int, plots: bool) -> CampaignResult:
-    """Merge the stored runs into the campaign report and count them."""
-    summary, rows, counts = merge(plan, store, plots=plots)
+def _result(
+    plan: CampaignPlan, store: Store, *, reused: int, executed: int, plots: bool, draw: Callable | None = None
+) -> CampaignResult:
+    """Merge the stored runs into the campaign report and count them (``draw``: where its figures are drawn,
+    :func:`~.report.drawn_figures`)."""
+    summary, rows, counts = merge(plan, store, plots=plots, draw=draw)
     return CampaignResult(
         out=store.out,
         rows=rows,
@@ -288,6 +294,13 @@ def _result(plan: CampaignPlan, store: Store, *, reused: int, executed: int, plo
         executed=executed,
         summary=summary,
     )
+
+
+def _drawing(client: Any) -> Callable[[Figure], Any]:
+    """A report figure drawn as a task on the cluster, whose workers are idle once the runs are stored: the scatter
+    and the envelopes drawn at once on two workers, and each while the client goes on with the report (see
+    :func:`~.report.drawn_figures`)."""
+    return lambda figure: client.submit(png_of, figure, key=f"gainlink-figure-{uuid.uuid4().hex}", retries=1)
 
 
 def _data(value: bytes) -> bytes:
