@@ -196,8 +196,9 @@ def timed_campaign(data: dict, client, out: Path) -> dict:
         "client_process_cpu_per_run_ms": round(1e3 * (c1 - c0) / n, 2),
         "runs_own_cpu_per_run_ms": round(1e3 * runs_cpu / n, 2),
         "machinery_cpu_s": round(cpu - runs_cpu, 3),
-        # the machinery by where it runs: the worker processes outside the runs, this process until the last run
-        # was stored (client, scheduler, nannies, result files), the report after it
+        # the machinery by where it runs: the worker processes outside the runs (the report's two figures
+        # included: drawn on the workers), this process until the last run was stored (client, scheduler, nannies,
+        # result files), the report after it (its rows, bands and files)
         "machinery_parts_cpu_s": {
             "workers_outside_runs": round(w1 - w0 - runs_cpu, 3),
             "client_until_stored": round(last["cpu"] - c0, 3),
