@@ -448,7 +448,8 @@ def scatter_figure(plan: CampaignPlan, tally: Tally) -> ScatterFigure:
     names = [name for name in tally.axes if tally.numeric[name]]
     iae, fail = tally.scatter_iae, tally.scatter_fail
     drawn = scatter_runs(fail)
-    log = bool(iae.size and iae.min() > 0 and iae.max() > 20 * iae.min())
+    shown = {status: runs for status, (runs, _) in drawn.items()}
+    log_scale = bool(iae.size and iae.min() > 0 and iae.max() > 20 * iae.min())
     count = {"fail": int(fail.sum()), "pass": int((~fail).sum())}
     panels = []
     for name in names or [None]:
@@ -457,10 +458,8 @@ def scatter_figure(plan: CampaignPlan, tally: Tally) -> ScatterFigure:
             panels.append(ScatterPanel(name, {}, {}, count, empty=empty))
             continue
         x = tally.scatter[name]
-        shown = {status: runs for status, (runs, _) in drawn.items()}
-        panels.append(
-            ScatterPanel(name, {s: x[k] for s, k in shown.items()}, {s: iae[k] for s, k in shown.items()}, count, log)
-        )
+        xs, ys = {s: x[k] for s, k in shown.items()}, {s: iae[k] for s, k in shown.items()}
+        panels.append(ScatterPanel(name, xs, ys, count, log_scale))
     ylabel = "IAE (sum over tracked outputs)" + _iae_unit(_signals(plan))
     return ScatterFigure(plan.campaign.name, tuple(panels), ylabel, _scatter_scope(fail, drawn))
 
@@ -561,8 +560,8 @@ def drawn_figures(
     plan: CampaignPlan, tally: Tally, store: Any, traced: Traced, draw: Callable[[Figure], Any] | None
 ) -> dict[str, Callable[[], bytes]]:
     """The report's PNGs by name, each as the call that gives its bytes. Each figure's data is gathered here, the
-    scatter's first; ``draw`` (a cluster's ``submit`` of :meth:`~.figures.ScatterFigure.png`, say: any call returning
-    something whose ``result()`` is the PNG) draws each elsewhere meanwhile, so the scatter is drawn while the
+    scatter's first; ``draw`` (a cluster's ``submit`` of :func:`~.figures.png_of`, say: any call returning something
+    whose ``result()`` is the PNG) draws each elsewhere meanwhile, so the scatter is drawn while the
     envelopes' bands are read here and both figures are drawn at once on two workers. A figure ``draw`` fails to give
     is drawn here, said in the log; without ``draw`` each is drawn here."""
     figures: dict[str, Figure] = {}
