@@ -35,8 +35,8 @@ LOG_M = {"target": "plant.parameters.M", "distribution": "loguniform", "low": 0.
 GRID_X = {"target": "initial_state.x", "values": [0.2, 1.0]}
 
 
-def _campaign(spec: str, grid: list, draws: list) -> dict:
-    return {"name": "ids", "kind": "sil", "seed": 5, "runs": RUNS, "spec": spec, "scenario": copy.deepcopy(BASE),
+def _campaign(spec: str, grid: list, draws: list, runs: int = RUNS) -> dict:
+    return {"name": "ids", "kind": "sil", "seed": 5, "runs": runs, "spec": spec, "scenario": copy.deepcopy(BASE),
             "grid": grid, "draw": draws, "criteria": {"stable": True}}  # fmt: skip
 
 
@@ -64,7 +64,7 @@ def test_the_planned_ids_are_the_ids_of_the_runs_made_whole(grid, draws, templat
 
 
 def test_a_planned_id_is_the_hash_of_the_runs_definition_worked_by_hand():
-    """Run k's id from its definition: draw j's values from ``default_rng([seed, j])``, the base with M scaled, m
+    """Run k's id from its definition: draw j's values (:func:`draw_values`, its chunk's), the base with M scaled, m
     shifted, l set and noise.x a new table, initial_state.x the grid's; the body's canonical JSON and sha256."""
     campaign = parse_campaign(_campaign(str(EXAMPLES / "pendulum.toml"), [GRID_X], [SCALE_M, ADD_M, SET_L, NEW_PATH]))
     plan = plan_campaign(campaign)
@@ -86,20 +86,31 @@ def test_a_planned_id_is_the_hash_of_the_runs_definition_worked_by_hand():
     assert np.unique(plan.runs.ids).size == len(plan.runs)
 
 
-def test_the_draw_table_holds_each_draws_values_drawn_from_its_own_generator():
-    """Draw j's seed and values, worked from the definition with scipy's distributions made anew for each draw (the
-    table makes each axis's once): ``default_rng([seed, j])``, its first integer the run's seed, then each axis in
-    order from the same generator."""
+def test_the_draw_table_holds_each_draws_values_drawn_from_its_chunks_generator():
+    """Draw j's seed and values, worked from the definition with scipy's distributions made anew for each chunk:
+    draws come in chunks of 1,024, chunk c from ``default_rng([seed, c])``: its 1,024 run seeds first, then each
+    axis's 1,024 values in order from the same generator; a campaign of 1,500 runs spans two chunks, and its first
+    400 draws are those of a campaign of 400 (raising ``runs`` keeps the earlier draws)."""
     from scipy import stats
 
     scale_m = SCALE_M | {"target": "plant.parameters.m"}
-    campaign = parse_campaign(_campaign(str(EXAMPLES / "pendulum.toml"), [], [SET_L, LOG_M, scale_m, NEW_PATH]))
+    axes = [SET_L, LOG_M, scale_m, NEW_PATH]
+    campaign = parse_campaign(_campaign(str(EXAMPLES / "pendulum.toml"), [], axes, runs=1500))
     seeds, cols = plan_module.draw_table(campaign)
-    for j in range(RUNS):
-        rng = np.random.default_rng([5, j])
-        assert seeds[j] == rng.integers(2**31 - 1)
-        lo, hi = (0.45 - 0.5) / 0.02, (0.55 - 0.5) / 0.02
-        assert cols["plant.parameters.l"][j] == stats.truncnorm(lo, hi, loc=0.5, scale=0.02).rvs(random_state=rng)
-        assert cols["plant.parameters.M"][j] == stats.loguniform(0.8, 1.25).rvs(random_state=rng)
-        assert cols["plant.parameters.m"][j] == rng.uniform(0.7, 1.3)
-        assert cols["noise.x"][j] == rng.integers(3)
+    assert seeds.shape == (1500,) and all(col.shape == (1500,) for col in cols.values())
+    lo, hi = (0.45 - 0.5) / 0.02, (0.55 - 0.5) / 0.02
+    for c in (0, 1):
+        rng = np.random.default_rng([5, c])
+        chunk = slice(1024 * c, min(1024 * (c + 1), 1500))
+        n = chunk.stop - chunk.start
+        assert seeds[chunk].tolist() == rng.integers(2**31 - 1, size=1024)[:n].tolist()
+        l_ = stats.truncnorm(lo, hi, loc=0.5, scale=0.02).rvs(size=1024, random_state=rng)
+        assert cols["plant.parameters.l"][chunk].tolist() == l_[:n].tolist()
+        M = stats.loguniform(0.8, 1.25).rvs(size=1024, random_state=rng)
+        assert cols["plant.parameters.M"][chunk].tolist() == M[:n].tolist()
+        assert cols["plant.parameters.m"][chunk].tolist() == rng.uniform(0.7, 1.3, size=1024)[:n].tolist()
+        assert cols["noise.x"][chunk].tolist() == rng.integers(3, size=1024)[:n].tolist()
+    fewer = parse_campaign(_campaign(str(EXAMPLES / "pendulum.toml"), [], axes))
+    few_seeds, few_cols = plan_module.draw_table(fewer)
+    assert few_seeds.tolist() == seeds[:RUNS].tolist()
+    assert all(few_cols[name].tolist() == col[:RUNS].tolist() for name, col in cols.items())

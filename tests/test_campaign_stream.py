@@ -189,11 +189,12 @@ def test_merging_holds_a_few_hundred_bytes_a_run_not_the_rows(tmp_path):
 
 def _by_hand(campaign, sha: str, k: int) -> tuple[str, int, dict]:
     """Run ``k``'s id, seed and values as the plan's docstring defines them: grid point ``k // runs`` and draw
-    ``k % runs``, whose seed and values come from ``default_rng([seed, draw])`` (the seed first)."""
+    ``k % runs``, whose seed and values come from its chunk of 1,024 draws: ``default_rng([seed, draw // 1024])``,
+    the chunk's seeds first, then its values of M."""
     g, j = divmod(k, campaign.runs)
-    rng = np.random.default_rng([campaign.seed, j])
-    seed = int(rng.integers(2**31 - 1))
-    M = float(rng.uniform(0.7, 1.3))
+    rng = np.random.default_rng([campaign.seed, j // 1024])
+    seed = int(rng.integers(2**31 - 1, size=1024)[j % 1024])
+    M = float(rng.uniform(0.7, 1.3, size=1024)[j % 1024])
     scenario = copy.deepcopy(campaign.scenario)
     scenario["plant"].setdefault("parameters", {})
     scenario["plant"]["parameters"].update({"m": GRID[g], "M": M})
