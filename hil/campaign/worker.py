@@ -532,8 +532,16 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
         link=[r.info["transport"] for r in results],
         traces=blocks[0].stack if whole else column(lambda b: b.traces),  # type: ignore[arg-type]
         worker=column(lambda b: [b.worker] * len(b.positions)),
-        metric_trees=blocks[0].metric_trees if one else None,
+        metric_trees=_task_trees(blocks),
     )
+
+
+def _task_trees(blocks: list[_Block]) -> list | None:
+    """The blocks' metrics column trees with each run's position in the task (a block's trees hold its runs by their
+    position in the block), or None when a block has none."""
+    if any(b.metric_trees is None for b in blocks):
+        return None
+    return [([b.positions[j] for j in positions], tree) for b in blocks for positions, tree in b.metric_trees]
 
 
 def _blocks(artifacts: dict[str, bytes], runs: Sequence, blobs: dict) -> dict[tuple, list]:
