@@ -1459,19 +1459,37 @@ def _worker_view() -> tuple[int, bool]:
     return os.getppid(), "gainlink.hil.campaign.worker" in sys.modules
 
 
-def test_local_cluster_workers_are_forked_from_a_server_that_imported_the_runner():
+def _periods_ms(dask_worker=None, dask_scheduler=None) -> dict[str, float]:
+    server = dask_worker if dask_worker is not None else dask_scheduler
+    return {name: pc.callback_time for name, pc in server.periodic_callbacks.items()}
+
+
+def test_local_cluster_workers_are_forked_from_a_server_that_imported_the_runner_and_wake_seldom():
     """Each LocalCluster worker started afresh imported Dask, numpy and gainlink's runner again (2-3 CPU-s each):
     they are forked from one server process that imported them once. A spawned worker is a child of this process
-    and has not imported the runner before its first run."""
+    and has not imported the runner before its first run.
+
+    An event loop's wake-up costs ~2 ms of CPU on these machines: no periodic task of the cluster's scheduler,
+    nannies or workers runs more than once a second (Dask's workers beat every 0.5 s, its scheduler checks unset
+    timeouts every 0.25 s), and the heartbeats are Dask's own again once the cluster is closed."""
+    import distributed.scheduler
     from gainlink.hil.campaign.cluster import dask_client
 
     with dask_client(workers=2) as client:
         client.wait_for_workers(2, timeout=60)
         views = list(client.run(_worker_view).values())
+        deadline = time.monotonic() + 10  # a worker takes its heartbeat's period from the scheduler's first answer
+        while min(p["heartbeat"] for p in client.run(_periods_ms).values()) < 1000 and time.monotonic() < deadline:
+            time.sleep(0.2)
+        periods = [*client.run(_periods_ms).values(), *client.run(_periods_ms, nanny=True).values()]
+        periods.append(client.run_on_scheduler(_periods_ms))
     assert len(views) == 2
     parents = {ppid for ppid, _ in views}
     assert len(parents) == 1 and os.getpid() not in parents, views
     assert all(imported for _, imported in views), views
+    assert len(periods) == 5 and all("heartbeat" in p for p in periods[:2]) and "idle-timeout" in periods[4]
+    assert all(ms >= 1000 for p in periods for ms in p.values()), periods
+    assert distributed.scheduler.heartbeat_interval(2) == 0.5
 
 
 def test_the_pendulum_example_passes_the_plants_that_stay_up_under_back_calculation(tmp_path):

@@ -6,8 +6,9 @@ or ``dask scheduler`` by hand (``--scheduler tcp://HOST:8786``). On the LocalClu
 dies is rescheduled once (``distributed.scheduler.allowed-failures = 1``); a second death of a worker
 under it makes it fail with ``KilledWorker``, which the campaign records. A remote scheduler applies
 its own setting (Dask's default: 3). The LocalCluster also turns off Dask's background work that only
-a dashboard would show (:data:`LOCAL_CONFIG`), and its worker processes ignore a Ctrl-C, which the client
-alone handles (:mod:`.local_worker`); a cluster of yours keeps its own configuration.
+a dashboard would show and wakes its processes' event loops seldom (:data:`LOCAL_CONFIG`, :data:`HEARTBEAT_S`),
+and its worker processes ignore a Ctrl-C, which the client alone handles (:mod:`.local_worker`); a cluster of
+yours keeps its own configuration.
 """
 
 from __future__ import annotations
@@ -34,21 +35,39 @@ ALLOWED_FAILURES = 1
 # events, for its developers' debugging; by default 1,000: the client grew by ~0.6 kB a run up to 1,000 blocks (the
 # client's stream to the scheduler, and the LocalCluster's scheduler's to its workers, in this process). A few kept.
 RECENT_MESSAGES = 16
-CLIENT_CONFIG = {"distributed.admin.low-level-log-length": RECENT_MESSAGES}
+CLIENT_CONFIG = {
+    "distributed.admin.low-level-log-length": RECENT_MESSAGES,
+    # the client's copy of the scheduler's view of the cluster (for its repr and dashboards), by default every 2 s
+    "distributed.client.scheduler-info-interval": "10s",
+}
 # The LocalCluster's own settings. Dask's defaults sample every worker's stack 100 times a second (for a
 # dashboard this cluster does not start) and wake every scheduler, worker and nanny 50 times a second to
 # time its event loop: measured here, 16 % of a CPU beside a busy single worker; with these, 3 %.
+# Each wake-up of an event loop costs on these virtual machines: ~2 ms of CPU with both CPUs busy (a loop that
+# does nothing, woken 10 times a second beside two busy processes, took 1.8 % of a CPU, and they lost about that),
+# more when a CPU was idle. So what only a dashboard shows is sampled every 10 s, and memory is checked every 5 s
+# (a campaign's worker holds ~150 MB of a limit of its share of the machine's memory; the nanny still ends one past
+# 95 % of it): with these and the wake-ups below (:func:`_fewer_wakeups`), each worker's event loop took 7-9 us of
+# CPU a run of a 20,000-run campaign on 2 workers against 7-15 before, the client's 14-15 against 15-27.
 LOCAL_CONFIG = {
     "distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
     # worker processes forked from one server that imported what a run needs (:func:`_preload_worker_modules`),
     # instead of each started afresh and importing it again (2-3 CPU-s per worker)
     "distributed.worker.multiprocessing-method": "forkserver",
     "distributed.worker.profile.enabled": False,
-    "distributed.admin.tick.interval": "1s",
-    "distributed.admin.system-monitor.interval": "2s",
-    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.admin.tick.interval": "10s",
+    "distributed.admin.tick.cycle": "10s",
+    "distributed.admin.system-monitor.interval": "10s",
+    "distributed.worker.memory.monitor-interval": "5s",
+    "distributed.scheduler.active-memory-manager.interval": "10s",
     **CLIENT_CONFIG,
 }
+#: How often a LocalCluster's worker tells its scheduler it lives (and so looks for missing inputs: Dask ties the
+#: two), and the scheduler's checks for timeouts this cluster does not set (idle, no workers) run, in seconds; Dask:
+#: every 0.5 s and 0.25 s, not configurable (dask/distributed#3877, #5000). A worker process that dies is seen by its
+#: nanny at once, without a heartbeat.
+HEARTBEAT_S = 2.0
+UNSET_TIMEOUT_CHECKS_S = 5.0
 
 # Without a dashboard the scheduler still serves its HTTP routes (health, metrics), by default on port 8787, and warns
 # "Port 8787 is already in use" when another cluster on the host has it: a port of the system's choosing instead,
@@ -186,7 +205,7 @@ def dask_client(
         Seconds to wait for the scheduler.
     """
     import dask
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     if scheduler is not None:
         try:
@@ -201,36 +220,74 @@ def dask_client(
     n = cpus if workers is None else workers
     if n < 1:
         raise ClusterError(f"--workers must be at least 1, not {n}")
-    held = _HeldInterrupt()
-    with dask.config.set(LOCAL_CONFIG), held:
-        _start_fork_server()
-        cluster = LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=_dask_log_level(),
-            scheduler_kwargs={"dashboard_address": SCHEDULER_HTTP},
-            preload=[WORKER_SETUP],  # each worker process ignores SIGINT: the client stops them
-        )
-    interrupted = False
+    with _local_client(n) as client:
+        yield client
+
+
+@contextlib.contextmanager
+def _local_client(n: int) -> Iterator[distributed.Client]:  # noqa: F821
+    """:func:`dask_client`'s LocalCluster of ``n`` process workers (:data:`LOCAL_CONFIG`), and its client."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    with _slower_heartbeats():
+        held = _HeldInterrupt()
+        with dask.config.set(LOCAL_CONFIG), held:
+            _start_fork_server()
+            cluster = LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=_dask_log_level(),
+                scheduler_kwargs={"dashboard_address": SCHEDULER_HTTP},
+                preload=[WORKER_SETUP],  # each worker process ignores SIGINT: the client stops them
+                scheduler_sync_interval=10,  # the cluster object's copy of the scheduler's identity (Dask: each 1 s)
+            )
+        _fewer_wakeups(cluster.scheduler)
+        interrupted = False
+        try:
+            with dask.config.set(CLIENT_CONFIG), contextlib.closing(Client(cluster)) as client, _quiet_on_interrupt():
+                held.release()  # a Ctrl-C while the cluster started: now, with the cluster in hand
+                yield client
+        except KeyboardInterrupt:
+            # the nannies then stop workers in the middle of a run, warn that they kill the ones still busy after
+            # 4 s, and the closing comms may log errors: the stop the user asked for, not news (the campaign says
+            # what it kept); shown with -v
+            interrupted = True
+            with contextlib.suppress(Exception):  # the interrupt is the news, not what stopping in its middle raised
+                _end_workers(cluster)
+            with contextlib.suppress(Exception):  # (closed whether or not the workers could be ended first)
+                cluster.close()
+            raise
+        finally:
+            if not interrupted:
+                cluster.close()
+
+
+@contextlib.contextmanager
+def _slower_heartbeats() -> Iterator[None]:
+    """While the block runs, the schedulers of this process ask their workers for a heartbeat every
+    :data:`HEARTBEAT_S` at least (Dask's ``heartbeat_interval``, a module function its scheduler calls at each
+    heartbeat: no setting changes it)."""
+    import distributed.scheduler as scheduler
+
+    original = scheduler.heartbeat_interval
+    scheduler.heartbeat_interval = lambda workers: max(original(workers), HEARTBEAT_S)
     try:
-        with dask.config.set(CLIENT_CONFIG), contextlib.closing(Client(cluster)) as client, _quiet_on_interrupt():
-            held.release()  # a Ctrl-C while the cluster started: now, with the cluster in hand
-            yield client
-    except KeyboardInterrupt:
-        # the nannies then stop workers in the middle of a run, warn that they kill the ones still busy after
-        # 4 s, and the closing comms may log errors: the stop the user asked for, not news (the campaign says
-        # what it kept); shown with -v
-        interrupted = True
-        with contextlib.suppress(Exception):  # the interrupt is the news, not what stopping in its middle raised
-            _end_workers(cluster)
-        with contextlib.suppress(Exception):  # (closed whether or not the workers could be ended first)
-            cluster.close()
-        raise
+        yield
     finally:
-        if not interrupted:
-            cluster.close()
+        scheduler.heartbeat_interval = original
+
+
+def _fewer_wakeups(scheduler: Any) -> None:
+    """The LocalCluster's scheduler checks the idle and no-worker timeouts every :data:`UNSET_TIMEOUT_CHECKS_S`
+    when they are not set (the checks then find nothing to do), not 4 times a second each."""
+    timeouts = {"idle-timeout": scheduler.idle_timeout, "no-workers-timeout": scheduler.no_workers_timeout}
+    for name, timeout in timeouts.items():
+        check = scheduler.periodic_callbacks.get(name)
+        if check is not None and timeout is None:
+            check.callback_time = 1000 * UNSET_TIMEOUT_CHECKS_S
 
 
 @contextlib.contextmanager
