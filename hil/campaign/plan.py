@@ -158,8 +158,8 @@ def draw_chunk(campaign: Campaign, c: int) -> tuple[np.ndarray, dict[str, np.nda
     (a choice axis: int64 indices into its values)."""
     rng = np.random.default_rng([campaign.seed, c])
     seeds = rng.integers(2**31 - 1, size=DRAW_CHUNK).astype(np.int64)
-    cols = {a.name: _sampler(a)(rng, DRAW_CHUNK) for a in campaign.draws}
-    return seeds, {a.name: cols[a.name].astype(np.int64 if a.distribution == "choice" else np.float64)
+    # one axis after the other from the one generator: the order of this comprehension is the draws' definition
+    return seeds, {a.name: _sampler(a)(rng, DRAW_CHUNK).astype(np.int64 if a.distribution == "choice" else np.float64)
                    for a in campaign.draws}  # fmt: skip
 
 
@@ -815,18 +815,17 @@ class _IdTemplate:
             return None
         return cls(parts, slots, leaves, failed)
 
-    def run_ids(self, drawn: list[list], seeds: list[int], texts: dict | None = None) -> list[str | None]:
+    def run_ids(self, drawn: list[list], seeds: list[int], made: dict | None = None) -> list[str | None]:
         """The id of each draw ``j``'s run: draw-axis values ``drawn[i][j]`` (axis ``i`` in the campaign's order) and
         seed ``seeds[j]``; ``None`` where a value is not one the template writes (a non-finite number, a scale or
-        shift by a non-number). Each slot's texts are made a column at a time (:meth:`texts`, kept in ``texts`` for
+        shift by a non-number). Each slot's texts are made a column at a time (:meth:`texts`, kept in ``made`` for
         the next grid point), then each run's body once through the template."""
-        texts = {} if texts is None else texts
-        columns = [self.texts(slot, drawn, seeds, texts) for slot in self.slots]
+        made = {} if made is None else made
+        columns = [self.texts(slot, drawn, seeds, made) for slot in self.slots]
         template = "%s".join(part.replace("%", "%%") for part in self.parts)
         sha256 = hashlib.sha256
         return [
-            None if None in texts else sha256((template % texts).encode("ascii")).hexdigest()[:20]
-            for texts in zip(*columns)
+            None if None in row else sha256((template % row).encode("ascii")).hexdigest()[:20] for row in zip(*columns)
         ]
 
     def texts(self, slot: int | None, drawn: list[list], seeds: list[int], made: dict) -> list[str | None]:
