@@ -1492,6 +1492,22 @@ def test_local_cluster_workers_are_forked_from_a_server_that_imported_the_runner
     assert distributed.scheduler.heartbeat_interval(2) == 0.5
 
 
+def test_two_local_clusters_closing_out_of_order_give_dask_its_heartbeat_back_after_the_last():
+    """The slower heartbeats replace a Dask function for as long as any LocalCluster of this process runs: two whose
+    lives overlap, the first closed first (two threads), keep it until the second closes, then Dask's is back."""
+    import distributed.scheduler
+    from gainlink.hil.campaign.cluster import HEARTBEAT_S, _slower_heartbeats
+
+    dask_own = distributed.scheduler.heartbeat_interval
+    first, second = _slower_heartbeats(), _slower_heartbeats()
+    first.__enter__()
+    second.__enter__()
+    first.__exit__(None, None, None)
+    assert distributed.scheduler.heartbeat_interval(2) == HEARTBEAT_S
+    second.__exit__(None, None, None)
+    assert distributed.scheduler.heartbeat_interval is dask_own and dask_own(2) == 0.5
+
+
 def test_the_pendulum_example_passes_the_plants_that_stay_up_under_back_calculation(tmp_path):
     """examples/campaigns/pendulum_mass_uncertainty.toml judges what its text asks, whether the pendulum stays up
     (stable, within 40 degrees, the cart on its track), not how fast the cart comes back: its back-calculation

@@ -46,7 +46,7 @@ CLIENT_CONFIG = {
 # Each wake-up of an event loop costs on these virtual machines: ~2 ms of CPU with both CPUs busy (a loop that
 # does nothing, woken 10 times a second beside two busy processes, took 1.8 % of a CPU, and they lost about that),
 # more when a CPU was idle. So what only a dashboard shows is sampled every 10 s, and memory is checked every 5 s
-# (a campaign's worker holds ~150 MB of a limit of its share of the machine's memory; the nanny still ends one past
+# (a campaign's worker holds ~150-180 MB of a limit of its share of the machine's memory; the nanny still ends one past
 # 95 % of it): with these and the wake-ups below (:func:`_fewer_wakeups`), each worker's event loop took 7-9 us of
 # CPU a run of a 20,000-run campaign on 2 workers against 7-15 before, the client's 14-15 against 15-27.
 LOCAL_CONFIG = {
@@ -269,15 +269,25 @@ def _local_client(n: int) -> Iterator[distributed.Client]:  # noqa: F821
 def _slower_heartbeats() -> Iterator[None]:
     """While the block runs, the schedulers of this process ask their workers for a heartbeat every
     :data:`HEARTBEAT_S` at least (Dask's ``heartbeat_interval``, a module function its scheduler calls at each
-    heartbeat: no setting changes it)."""
+    heartbeat: no setting changes it). Dask's function is back once the last of this process's LocalClusters (in
+    whatever order they close, from whichever thread) has closed."""
     import distributed.scheduler as scheduler
 
-    original = scheduler.heartbeat_interval
-    scheduler.heartbeat_interval = lambda workers: max(original(workers), HEARTBEAT_S)
+    with _HEARTBEATS["lock"]:
+        if _HEARTBEATS["clusters"] == 0:
+            original = _HEARTBEATS["dask"] = scheduler.heartbeat_interval
+            scheduler.heartbeat_interval = lambda workers: max(original(workers), HEARTBEAT_S)
+        _HEARTBEATS["clusters"] += 1
     try:
         yield
     finally:
-        scheduler.heartbeat_interval = original
+        with _HEARTBEATS["lock"]:
+            _HEARTBEATS["clusters"] -= 1
+            if _HEARTBEATS["clusters"] == 0:
+                scheduler.heartbeat_interval = _HEARTBEATS["dask"]
+
+
+_HEARTBEATS: dict[str, Any] = {"lock": threading.Lock(), "clusters": 0, "dask": None}
 
 
 def _fewer_wakeups(scheduler: Any) -> None:
