@@ -75,6 +75,7 @@ SOURCES: dict[str, tuple[str, ...]] = {
         "firmware/ports/host/gl_host.c",
         "bench/campaign.py",
     ),
+    "cold_pages": ("hil/campaign", "hil/loop/block.py", "bench/campaign.py", "bench/cold_pages.py"),
     "firmware_cost": (*_FIRMWARE_C, "runtime/firmware/cost.py", "bench/firmware_cost.py"),
     "fixed_point_cost": (*_FIRMWARE_C, "runtime/laws/fixed/certificate.py", "bench/fixed_point_cost.py"),
     "fuzz": ("firmware/fuzz", "firmware/apps", "firmware/src", "bench/fuzz.py"),
