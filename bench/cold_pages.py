@@ -136,7 +136,6 @@ def block() -> dict:
 
 
 def main() -> None:
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     print(json.dumps({"probe": probe(), "block": block(), "load_average": round(os.getloadavg()[0], 2)}, indent=2))
 
 
