@@ -37,7 +37,7 @@ from campaign import BLOCK_DRAWS, shipped_pendulum  # bench/campaign.py: a scrip
 REPEATS = 5
 PAUSES_S = (0.05, 0.2, 0.5)
 BLOCKS = 8
-BLOCK_COUNT = 12  # the 10,000-run benchmark's blocks on 2 workers (runner.batch_sizes)
+WORKERS = 2  # the 10,000-run benchmark's cluster, whose block size the runner chooses (runner.batch_sizes)
 
 
 def _spin(seconds: float) -> None:
@@ -83,10 +83,11 @@ def block() -> dict:
     from gainlink.hil.campaign import parse_campaign
     from gainlink.hil.campaign import worker as wk
     from gainlink.hil.campaign.plan import plan_campaign
+    from gainlink.hil.campaign.runner import batch_sizes
     from gainlink.hil.campaign.store import folder_key
 
     plan = plan_campaign(parse_campaign(shipped_pendulum(BLOCK_DRAWS)))
-    size = -(-len(plan.runs.ids) // BLOCK_COUNT)
+    size = batch_sizes("sil", len(plan.runs.ids), WORKERS)[0]
     artifacts = dict(plan.artifacts)
     cold: list[float] = []
     warm: list[float] = []
