@@ -325,6 +325,34 @@ def test_a_task_steps_what_it_can_in_a_block_and_the_rest_alone_with_the_same_re
     assert sum("injects faults" in line for line in lines) == 1
 
 
+def test_a_task_of_more_runs_than_step_in_lockstep_steps_them_in_parts_with_the_same_records(monkeypatch):
+    """A task of 8 pendulum runs with at most 3 stepped in lockstep: parts of 2, 3 and 3 runs, in order (each run's
+    ``worker.block`` its part's size), every run's record (metrics but the timing, measures, link, stored trace) the
+    one it gets when the 8 step as one block; and the task's lists for its block file hold the parts' runs in task
+    order, as their records do."""
+    from gainlink.hil.campaign import worker
+
+    plan, runs = _clamp_campaign(runs=8, duration=1.0)
+    whole = worker.batch_records("sil", plan.artifacts, runs)
+    monkeypatch.setattr(worker, "LOCKSTEP_RUNS", 3)
+    assert [len(p) for p in worker.lockstep_parts(list(range(8)))] == [2, 3, 3]
+    task = worker._task_records("sil", plan.artifacts, runs, None)
+    parts = worker._materialized(task)
+    assert [r["worker"]["block"] for r in whole] == [8] * 8
+    assert [r["worker"]["block"] for r in parts] == [2, 2, 3, 3, 3, 3, 3, 3]
+    assert len({id(b) for b in task}) == 3
+    for got, want in zip(parts, whole):
+        assert {k: v for k, v in got["metrics"].items() if k not in TIMING_KEYS} == {
+            k: v for k, v in want["metrics"].items() if k not in TIMING_KEYS
+        }
+        keys = ("complete", "reason", "measures", "link")
+        assert [got[k] for k in keys] == [want[k] for k in keys]
+        assert _same_trace(got, want)
+    lists = worker._block_runs("sil", runs, task)
+    assert lists.measures == [r["measures"] for r in parts] and lists.metrics == [r["metrics"] for r in parts]
+    assert lists.worker == [r["worker"] for r in parts]
+
+
 @pytest.mark.parametrize("Ts", [None, 0.02])
 def test_linear_plants_step_in_a_block_as_alone_and_as_the_exact_discretisation(Ts):
     """Perturbed linear plants (continuous: sampled by the matrix exponential; discrete) in a block of 200 against

@@ -26,6 +26,7 @@ import contextlib
 import ctypes
 import dataclasses
 import fcntl
+import itertools
 import json
 import logging
 import os
@@ -65,6 +66,9 @@ log = logging.getLogger(__name__)
 #: lives through many campaigns. A parsed artifact holds ~20 kB (measured: 40 artifacts, 0.8 MB); a miss costs a parse
 #: and a look-up in the firmware build cache, not a build.
 WORKER_CACHE = 64
+#: Runs stepped in lockstep at most (a task of more steps them in parts, :func:`lockstep_parts`): a block's state of
+#: ~1,000 pendulum runs fits the core's cache; past it the runs' own CPU a run-step grows (~15 % at 2,500).
+LOCKSTEP_RUNS = 1000
 _ARTIFACTS: dict[str, tuple[Artifact, Path]] = {}
 _LIBRARIES: dict[str, Path] = {}
 _EXECUTABLES: dict[tuple[str, str], Path] = {}
@@ -303,15 +307,20 @@ def _record(result: Any, artifact: Artifact, *, measures: dict | None = None, tr
     """A finished run's record (without ``worker``): status, metrics, measures, link, downsampled traces
     (``measures``, ``trace``: a block's, taken for its runs together by :func:`~.criteria.measure_block` and
     :func:`downsampled_traces`; by default the run's own)."""
-    return {
-        "status": "done",
-        "complete": result.complete,
-        "reason": result.reason,
-        "metrics": result.metrics,
-        "measures": measure(result, artifact) if measures is None else measures,
-        "link": result.info["transport"],
-        "trace": downsampled_trace(result.trace) if trace is None else trace,
-    }
+    return _done(
+        result.complete,
+        result.reason,
+        result.metrics,
+        measure(result, artifact) if measures is None else measures,
+        result.info["transport"],
+        downsampled_trace(result.trace) if trace is None else trace,
+    )
+
+
+def _done(complete: bool, reason: str | None, metrics: dict, measures: dict, link: dict, trace: dict | None) -> dict:
+    """A finished run's record (without ``worker``) from its parts."""
+    return {"status": "done", "complete": complete, "reason": reason, "metrics": metrics, "measures": measures,
+            "link": link, "trace": trace}  # fmt: skip
 
 
 def _stopped(where: dict, cpu0: float) -> dict:
@@ -470,7 +479,8 @@ def _task_records(
     records: list[dict | _Block | None] = [None] * len(runs)
     if kind == "sil":
         for members in _blocks(artifacts, runs, blobs or {}).values():
-            _run_block(members, records, runs, blobs or {}, kept)
+            for part in lockstep_parts(members):
+                _run_block(part, records, runs, blobs or {}, kept)
     for i, record in enumerate(records):
         if record is None:
             sha, scenario, seed = runs[i]
@@ -480,23 +490,43 @@ def _task_records(
     return records
 
 
+def lockstep_parts(members: list) -> list[list]:
+    """``members`` (the runs of one block key) in as few consecutive parts of at most :data:`LOCKSTEP_RUNS` as hold
+    them, of sizes differing by one at most: each part steps in lockstep, and the task's runs make one file."""
+    count = -(-len(members) // LOCKSTEP_RUNS)
+    bounds = [len(members) * k // count for k in range(count + 1)]
+    return [members[a:b] for a, b in itertools.pairwise(bounds)]
+
+
 @dataclasses.dataclass(frozen=True)
 class _Block:
-    """The finished runs of a block, as lists: their positions in the task, results, measures (a run's dict, by
-    :func:`~.criteria.measure_block`), stored traces, and the block's share of the worker's time (``worker``)."""
+    """The finished runs of a block, as lists: their positions in the task, what their results say (``complete``,
+    ``reason``, ``metrics``, ``link``), measures (a run's dict, by :func:`~.criteria.measure_block`), stored traces,
+    and the block's share of the worker's time (``worker``). Not the results themselves: their traces hold the
+    block's arrays, which the task's next lockstep part (:func:`lockstep_parts`) then steps in again."""
 
-    artifact: Artifact
     positions: list[int]
-    results: list
+    complete: list
+    reason: list
+    metrics: list
+    link: list
     measures: list
     traces: list
     worker: dict
     stack: dict[str, np.ndarray] | None = None  # the traces as the block's arrays (runs of one length), else None
     metric_trees: list | None = None  # the metrics as column trees by position in the block, when every run is one's
 
+    @classmethod
+    def of(cls, positions: list[int], results: list, measures: list, traces: list, worker: dict, **more) -> _Block:
+        """The block of ``results`` (in the task at ``positions``)."""
+        return cls(positions, [r.complete for r in results], [r.reason for r in results],
+                   [r.metrics for r in results], [r.info["transport"] for r in results],
+                   measures, traces, worker, **more)  # fmt: skip
+
     def record(self, j: int) -> dict:
         """The record of the block's ``j``-th run, as :func:`execute` gives a run's."""
-        record = _record(self.results[j], self.artifact, measures=self.measures[j], trace=self.traces[j])
+        record = _done(self.complete[j], self.reason[j], self.metrics[j], self.measures[j], self.link[j],
+                       self.traces[j])  # fmt: skip
         return record | {"worker": dict(self.worker)}
 
 
@@ -519,17 +549,16 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
         values = [v for b in blocks for v in of(b)]
         return values if ordered else [values[k] for k in order]
 
-    results = column(lambda b: b.results)
     one = len(blocks) == 1 and ordered  # the block's runs are the task's, run for run
     whole = one and blocks[0].stack is not None  # and so are its traces' arrays (every trace kept, of one length)
     return BlockRuns(
         kind=kind,
         inputs=runs,
-        complete=[r.complete for r in results],
-        reason=[r.reason for r in results],
-        metrics=[r.metrics for r in results],
+        complete=column(lambda b: b.complete),
+        reason=column(lambda b: b.reason),
+        metrics=column(lambda b: b.metrics),
         measures=column(lambda b: b.measures),
-        link=[r.info["transport"] for r in results],
+        link=column(lambda b: b.link),
         traces=blocks[0].stack if whole else column(lambda b: b.traces),  # type: ignore[arg-type]
         worker=column(lambda b: [b.worker] * len(b.positions)),
         metric_trees=_task_trees(blocks),
@@ -688,7 +717,7 @@ def _run_block(members: list, records: list, runs: list, blobs: dict, kept: Sequ
         share = _stopped(where, cpu0)
         share["cpu_s"] /= max(len(done), 1)
         trees = results.metrics.trees if len(done) == len(members) and results.metrics.columnar else None
-        block = _Block(artifact, [i for i, _ in done], [r for _, r in done], measures, traces,
-                       share | {"block": len(done)}, stack, trees)  # fmt: skip
+        block = _Block.of([i for i, _ in done], [r for _, r in done], measures, traces, share | {"block": len(done)},
+                          stack=stack, metric_trees=trees)  # fmt: skip
         for i in block.positions:
             records[i] = block
