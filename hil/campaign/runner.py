@@ -4,7 +4,8 @@ FMUs go to the cluster once each (as tasks returning them, keyed by sha256); a t
 ``execute_block(kind, artifacts, runs, fmus, ids=..., campaign=..., folder=...)`` (submitted as
 :func:`.worker.execute_packed`, the ids and runs pickled into one argument): its runs (described by their grid points'
 scenarios and their draws where the plan can, :meth:`.plan.PlannedRuns.task`) with the artifacts they use, inline
-(SIL: a block of up to :data:`MAX_BLOCK` runs of one artifact stepped together on the worker, :func:`batch_sizes`;
+(SIL: a block of up to :data:`MAX_BLOCK` runs stepped together on the worker, in lockstep parts of at most
+:data:`.worker.LOCKSTEP_RUNS`, :func:`batch_sizes`;
 HIL: one run, keyed by its run id). A task makes its block's Parquet file on the worker and
 writes it into the campaign folder itself when it sees the folder (a LocalCluster; the folder's device and inode
 tell, not the hostname), returning only the file's name and the errors' reasons; a worker on another machine returns
@@ -44,7 +45,10 @@ from .worker import execute_packed
 log = logging.getLogger(__name__)
 
 Progress = Callable[[int, int, dict], None]
-MAX_BLOCK = 1000
+#: Runs a SIL task holds at most (one block file): its costs a task (Dask's, the file's, the client's and the
+#: report's, ~10 ms) spread over more runs than one lockstep part (:data:`.worker.LOCKSTEP_RUNS`) holds. Its runs'
+#: results live in the worker's memory until it ends; the parts' arrays do not (:class:`.worker._Block`).
+MAX_BLOCK = 2500
 BLOCKS_PER_THREAD = 2
 BLOCKS_IN_FLIGHT = 4
 
@@ -311,11 +315,12 @@ def _data(value: bytes) -> bytes:
 def batch_sizes(kind: str, runs: int, threads: int, *, batch: int | None = None) -> list[int]:
     """Runs per Dask task, in the order of submission.
 
-    HIL: 1 (a run lasts seconds). SIL: blocks stepped together on the worker (:mod:`gainlink.hil.loop.block`), as
-    few as keep every thread busy (:data:`BLOCKS_PER_THREAD` each) and no larger than :data:`MAX_BLOCK` runs (a
-    block's records live in the worker's memory until it ends), the runs shared evenly, and as many blocks as a
-    whole number of rounds of the threads: 5 blocks on 2 threads would leave one thread running the fifth alone
-    while the other waits (a sixth of the campaign's runs time lost), 6 do not. ``batch`` fixes the size instead.
+    HIL: 1 (a run lasts seconds). SIL: blocks stepped together on the worker (:mod:`gainlink.hil.loop.block`, in
+    lockstep parts of at most :data:`.worker.LOCKSTEP_RUNS`), as few as keep every thread busy
+    (:data:`BLOCKS_PER_THREAD` each) and no larger than :data:`MAX_BLOCK` runs, the runs shared evenly, and as many
+    blocks as a whole number of rounds of the threads: 5 blocks on 2 threads would leave one thread running the
+    fifth alone while the other waits (a sixth of the campaign's runs time lost), 6 do not. ``batch`` fixes the
+    size instead.
     """
     if batch is not None or kind == "hil":
         size = batch or 1
