@@ -10,13 +10,13 @@ a block, after ~0.5 s of the runs, so they always run in that state.
 - ``probe``: a fixed piece of work (50 numpy sums over a 1.6 MB array, then ``json.dumps`` of 20,000 small dicts)
   timed at once after itself (``baseline``, in the same run) and after the thread spun on the clock for 0.05, 0.2 and
   0.5 s (busy, touching almost nothing): thread CPU, medians of :data:`REPEATS`, and the ratio to the baseline.
-- ``block``: the shipped pendulum campaign's runs in blocks of the 10,000-run benchmark's size (10,002 runs in 12
-  blocks of 834) run in this process as a worker runs them (``execute_packed``), the block's file made
-  (``encode_runs``) right after its runs (``encode_cold``: what a worker does) and at once again from the same runs
-  (``encode_warm``); thread CPU a run, medians over :data:`BLOCKS` blocks after a first one; ``penalty_ms_a_block``
-  their difference; ``outside_runs_us_a_run`` the task's CPU outside the runs (the runs' own as the campaign measures
-  it, around the runs; the second encode not counted; its memory kept between blocks, as a worker with blocks queued
-  keeps it) and ``penalty_share_of_outside`` the penalty's part of it.
+- ``block``: the shipped pendulum campaign's runs in blocks of the 10,000-run benchmark's size (10,002 runs in 6
+  blocks of 1,667, each stepped in two lockstep parts) run in this process as a worker runs them (``execute_packed``),
+  the block's file made (``encode_runs``) right after its runs (``encode_cold``: what a worker does) and at once again
+  from the same runs (``encode_warm``); thread CPU a run, medians over :data:`BLOCKS` blocks after a first one;
+  ``penalty_ms_a_block`` their difference; ``outside_runs_us_a_run`` the task's CPU outside the runs (the runs' own as
+  the campaign measures it, around the runs; the second encode not counted; its memory kept between blocks, as a
+  worker with blocks queued keeps it) and ``penalty_share_of_outside`` the penalty's part of it.
 """
 
 from __future__ import annotations
@@ -87,7 +87,10 @@ def block() -> dict:
     from gainlink.hil.campaign.store import folder_key
 
     plan = plan_campaign(parse_campaign(shipped_pendulum(BLOCK_DRAWS)))
-    size = batch_sizes("sil", len(plan.runs.ids), WORKERS)[0]
+    runs = len(plan.runs.ids)
+    size = batch_sizes("sil", runs, WORKERS)[0]
+    if (1 + BLOCKS) * size > runs:  # the blocks' runs from more draws of the same campaign
+        plan = plan_campaign(parse_campaign(shipped_pendulum(BLOCK_DRAWS * -(-(1 + BLOCKS) * size // runs))))
     artifacts = dict(plan.artifacts)
     cold: list[float] = []
     warm: list[float] = []
