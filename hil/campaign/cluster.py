@@ -207,6 +207,8 @@ def dask_client(
     import dask
     from distributed import Client
 
+    # logged by the client's event loop, in its thread, whenever it runs: in place before the first blocking call
+    add_filter_once(logging.getLogger("tornado.application"), DaskSyncCancelRace())
     if scheduler is not None:
         try:
             with dask.config.set(CLIENT_CONFIG):  # read when the client's stream to the scheduler is made
@@ -310,6 +312,32 @@ def _quiet_on_interrupt() -> Iterator[None]:
     except KeyboardInterrupt:
         quiet_dask_logs(_dask_log_level())
         raise
+
+
+class DaskSyncCancelRace(logging.Filter):
+    """Drops the traceback Dask's event loop logs when a Ctrl-C comes before a blocking call's coroutine started.
+
+    ``distributed.utils.sync`` (2026.8) schedules a ``cancel`` of the call's future on the interrupt; the future is
+    made only once the loop thread has run the call, so a ``cancel`` that runs first fails with a ``NameError``
+    (``cannot access free variable 'future'``), which tornado logs as "Exception in callback" with its traceback,
+    above the line saying what the campaign kept. Nothing was left running (there was no future to cancel). Only that
+    record is dropped: a ``NameError`` raised in that function of that module."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        error = record.exc_info[1] if record.exc_info else None
+        if not isinstance(error, NameError) or error.__traceback__ is None:
+            return True
+        last = error.__traceback__
+        while last.tb_next is not None:
+            last = last.tb_next
+        code = last.tb_frame.f_code
+        return not (code.co_name == "cancel" and Path(code.co_filename).parts[-2:] == ("distributed", "utils.py"))
+
+
+def add_filter_once(logger: logging.Logger, new: logging.Filter) -> None:
+    """Add ``new`` to ``logger`` unless a filter of its class is there already."""
+    if not any(type(present) is type(new) for present in logger.filters):
+        logger.addFilter(new)
 
 
 def _end_workers(cluster: Any) -> None:
