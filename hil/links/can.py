@@ -369,23 +369,36 @@ class CanTransport(Transport):
             self.bus, self._tx = open_link_buses(self.config)
 
     def close(self) -> None:
+        """Shut the link's buses down. A Ctrl-C that lands in the middle (at the start of python-can's ``shutdown``,
+        before it marks the bus shut) is raised once the buses still held are shut: dropped half-shut, a bus's
+        finaliser logged "was not properly shut down" above the interrupted command's one line."""
+        try:
+            self._shut_buses()
+        except KeyboardInterrupt:
+            self._shut_buses()  # python-can's shutdown may be called again: a bus already shut returns at once
+            raise
+
+    def _shut_buses(self) -> None:
+        """Shut the send bus, then the receive bus, each let go once its ``shutdown`` has returned or raised an
+        error (not an interrupt)."""
         if self._tx is not None and self._tx is not self.bus:
             self._tx.shutdown()
         self._tx = None
-        if self.bus is not None:
-            try:
-                self.bus.shutdown()
-            except Exception as exc:
-                if not self.slcan:
-                    raise
-                # slcan's shutdown writes "C" to the adapter first; when the adapter (the image in QEMU) is
-                # already gone that write fails and python-can leaves the port open: close it here
-                log.debug("slcan: closing a link whose other end is gone: %s", exc)
-                port = getattr(self.bus, "serialPortOrig", None)
-                if port is not None:
-                    port.close()
-            finally:
+        if self.bus is None:
+            return
+        try:
+            self.bus.shutdown()
+        except Exception as exc:
+            if not self.slcan:
                 self.bus = None
+                raise
+            # slcan's shutdown writes "C" to the adapter first; when the adapter (the image in QEMU) is
+            # already gone that write fails and python-can leaves the port open: close it here
+            log.debug("slcan: closing a link whose other end is gone: %s", exc)
+            port = getattr(self.bus, "serialPortOrig", None)
+            if port is not None:
+                port.close()
+        self.bus = None
 
     def encode_sample(self, *, seq: int, y: np.ndarray, r: np.ndarray) -> list[Any]:
         return self.tx.encode(seq=seq, values=[*np.asarray(y).tolist(), *np.asarray(r).tolist()])
