@@ -469,6 +469,7 @@ def test_a_workers_block_file_is_the_one_its_records_make(tmp_path, interleaved)
     trees, in a form a block where the records' dicts make one for the task: the same texts read back); ``campaign
     show``'s record of each run is its record."""
     from gainlink.fileio import read_toml
+    from gainlink.hil.campaign import store as store_module
     from gainlink.hil.campaign import worker
     from gainlink.hil.campaign.plan import plan_campaign
     from gainlink.hil.campaign.store import encode_runs
@@ -487,7 +488,9 @@ def test_a_workers_block_file_is_the_one_its_records_make(tmp_path, interleaved)
     assert all(type(r) is worker._Block for r in task) and (len({id(r) for r in task}) > 1) == interleaved
     lists = worker._block_runs("sil", runs, task)
     assert isinstance(lists.traces, dict) != interleaved
-    assert lists.metric_trees is not None  # each block's metrics from its column trees
+    assert lists.metric_trees is not None and lists.metrics is None  # each block's metrics in its column trees
+    # one block's: its metrics' typed columns straight from its trees; two blocks': from the runs' dicts made of them
+    assert (store_module._tree_named(lists.metric_trees, len(ids)) is None) == interleaved
     made = encode_runs(ids, lists, campaign=campaign.name)
     records = [with_inputs(r, run, kind="sil") for r, run in zip(worker._materialized(task), runs)]
     oracle = _table(encode_block(ids, records, campaign=campaign.name))

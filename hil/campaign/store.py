@@ -189,7 +189,7 @@ class BlockRuns:
     inputs: list  # (artifact sha256, scenario, seed) of each run, as :func:`with_inputs` takes them
     complete: list
     reason: list
-    metrics: list
+    metrics: list | None  # each run's dict; None when its metric_trees hold them (made from those when needed)
     measures: list
     link: list
     traces: list | dict  # encode_trace's arrays, or all runs' at once (:func:`_block_file`)
@@ -201,9 +201,15 @@ def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
     """The Parquet file of a block of finished runs given as lists (``runs``; run ``ids[i]`` is entry ``i``): the
     file :func:`encode_block` makes of the runs' records, made a column at a time."""
     n = len(ids)
-    typed = _typed_columns([np.ones(n, bool)] * 5, runs.complete, runs.reason, runs.measures, runs.metrics, runs.worker)
+    of_metrics = _tree_named(runs.metric_trees, n) if runs.metrics is None else None
+    if of_metrics is None:
+        runs = replace(runs, metrics=_metrics_of(runs))
+        of_metrics = _metric_named(runs.metrics)
+    typed = _typed_columns([np.ones(n, bool)] * 5, runs.complete, runs.reason, runs.measures, of_metrics, runs.worker)
     names = {key: [f.name for f in typed[key].type] if key in typed else [] for key in OF_MEASURES}
     given = _finite(typed, n) & _given_columns(runs, names)
+    if runs.metrics is None and not given.all():  # a row the typed columns cannot give is stored whole
+        runs = replace(runs, metrics=_metrics_of(runs))
     shas, scenarios, seeds = (list(col) for col in zip(*runs.inputs)) if n else ([], [], [])
     inputs = {"artifact_sha256": shas, "kind": [runs.kind] * n, "scenario": scenarios, "seed": seeds}
     record = {"id": ids, "inputs": inputs, "link": runs.link, "status": ["done"] * n}
@@ -225,6 +231,15 @@ def _run_metric_columns(runs: BlockRuns, given: np.ndarray) -> dict[str, pa.Arra
     if runs.metric_trees is not None and given.all():
         return tree_metric_columns(runs.metric_trees, len(given))
     return metric_columns(runs.metrics if given.all() else [m if ok else _NONE for m, ok in zip(runs.metrics, given)])
+
+
+def _metrics_of(runs: BlockRuns) -> list[dict]:
+    """Each run's metrics dict: those ``runs`` holds, or made from its column trees."""
+    from ..loop.block_metrics import BlockMetrics
+
+    if runs.metrics is not None:
+        return runs.metrics
+    return BlockMetrics(runs.metric_trees, len(runs.complete)).rows()  # type: ignore[arg-type]
 
 
 def _row_of(runs: BlockRuns, i: int) -> dict:
@@ -405,17 +420,17 @@ def row_columns(rows: list[dict]) -> dict[str, pa.Array]:
         [row.get("complete") for row in rows],
         [row.get("run_reason") for row in rows],
         [row.get("measures") for row in rows],
-        [row.get("metrics") for row in rows],
+        _metric_named([row.get("metrics") for row in rows]),
         [row.get("worker") for row in rows],
     )
 
 
 def _typed_columns(
-    has: list[np.ndarray], complete: list, reason: list, measures: list, metrics: list, worker: list | pa.Array
+    has: list[np.ndarray], complete: list, reason: list, measures: list, of_metrics: dict, worker: list | pa.Array
 ) -> dict[str, pa.Array]:
     """:func:`row_columns` of rows given a list a key: ``has[k]``, whether each row has :data:`ROW_BITS` [k] (the
-    first five); a row's ``complete``, ``run_reason``, ``measures``, ``metrics``, ``worker`` (None where it has not;
-    ``worker`` a list of dicts or its column made already)."""
+    first five); a row's ``complete``, ``run_reason``, ``measures``, ``worker`` (None where it has not; ``worker`` a
+    list of dicts or its column made already); the columns of their metrics (``of_metrics``: :func:`_metric_named`)."""
     bits = np.zeros(len(complete), np.uint8)
     for k, present in enumerate(has):
         bits |= present.astype(np.uint8) << k
@@ -423,18 +438,68 @@ def _typed_columns(
     bits |= np.array([TWIN_KEYS[0] in m for m in held], np.uint8) << 5
     bits |= np.array([MODEL_KEYS[0] in m for m in held], np.uint8) << 6
     bits |= np.array([bool(m.get("growth_ratio")) for m in held], np.uint8) << 7
-    metrics = [m or {} for m in metrics]
-    cols: dict[str, pa.Array] = {"row_keys": pa.array(bits, pa.uint8()), "names": _names(metrics)}
+    cols: dict[str, pa.Array] = {"row_keys": pa.array(bits, pa.uint8()), "names": of_metrics["names"]}
     cols["complete"] = pa.array(complete, pa.bool_())
     cols["run_reason"] = pa.array(reason, pa.string())
     cols["measures"] = pa.array(measures, MEASURES)
     cols["worker"] = worker if isinstance(worker, pa.Array) else pa.array(worker, WORKER)
     for key, kind in NAMED.items():
-        held = [(m or {}).get(key) for m in (measures if key in OF_MEASURES else metrics)]
+        if key not in OF_MEASURES:
+            if key in of_metrics:
+                cols[key] = of_metrics[key]
+            continue
+        held = [(m or {}).get(key) for m in measures]
         names = sorted(set().union(*(d for d in held if d)))
         if names:
             cols[key] = pa.array(held, pa.struct([(n, kind) for n in names]))
     return cols
+
+
+def _metric_named(metrics: list) -> dict[str, pa.Array]:
+    """The typed columns of the runs' metrics (each a dict, or None): ``names`` (:func:`_names`) and the
+    :data:`NAMED` structs the metrics hold (``tracked``, ``outputs_final``), each left out when no run has a name."""
+    metrics = [m or {} for m in metrics]
+    cols = {"names": _names(metrics)}
+    for key in _OF_METRICS:
+        held = [m.get(key) for m in metrics]
+        names = sorted(set().union(*(d for d in held if d)))
+        if names:
+            cols[key] = pa.array(held, pa.struct([(n, NAMED[key]) for n in names]))
+    return cols
+
+
+_OF_METRICS = tuple(key for key in NAMED if key not in OF_MEASURES)  # the NAMED structs a run's metrics hold
+
+
+def _tree_named(trees: list | None, n: int) -> dict[str, pa.Array] | None:
+    """:func:`_metric_named` of ``n`` runs from their metrics' column trees (:class:`~..loop.block_metrics.
+    BlockMetrics`' ``trees``) when one tree of dicts holds them all in order, each name's figures a column (the
+    usual block); else None (the runs' dicts are made)."""
+    if not trees or len(trees) != 1 or trees[0][0] != list(range(n)) or not isinstance(trees[0][1], dict):
+        return None
+    tree = trees[0][1]
+    tracked, final = tree.get("tracked", {}), tree.get("outputs_final", {})
+    if not isinstance(tracked, dict) or not isinstance(final, dict):
+        return None
+    cells = [t.get(c) if isinstance(t, dict) else None for t in tracked.values() for c in TRACKED.names]
+    if not all(isinstance(col, list) for col in [*cells, *final.values()]):
+        return None
+    words = [compact_json([sorted(tracked), sorted(final)])]
+    cols = {"names": pa.DictionaryArray.from_arrays(pa.array(np.zeros(n, np.int32)), pa.array(words, pa.string()))}
+    if tracked:
+        cols["tracked"] = pa.StructArray.from_arrays(
+            [_struct_of({c: tracked[name][c] for c in TRACKED.names}, TRACKED) for name in sorted(tracked)],
+            fields=[pa.field(name, TRACKED) for name in sorted(tracked)],
+        )
+    if final:
+        kind = NAMED["outputs_final"]
+        cols["outputs_final"] = _struct_of(final, pa.struct([(name, kind) for name in sorted(final)]))
+    return cols
+
+
+def _struct_of(columns: dict[str, list], kind: pa.StructType) -> pa.StructArray:
+    """The struct array of type ``kind`` whose field ``f`` holds ``columns[f]`` (each field a column of its type)."""
+    return pa.StructArray.from_arrays([pa.array(columns[f.name], f.type) for f in kind], fields=list(kind))
 
 
 _FLOAT_MEASURES = ("longest_saturation_s", "twin_command_deviation", "twin_output_deviation", "model_iae_ratio",
@@ -484,6 +549,7 @@ def _given_columns(runs: BlockRuns, names: dict[str, list[str]]) -> np.ndarray:
     n = len(runs.complete)
     if n and _one_form(runs, names):
         return np.ones(n, bool)
+    runs = replace(runs, metrics=_metrics_of(runs))
     return np.array([_given(_row_of(runs, i), names) for i in range(n)], bool)
 
 

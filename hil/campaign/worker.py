@@ -300,7 +300,9 @@ def execute(kind: str, artifact_json: bytes, scenario: dict, seed: int, blobs: d
             result = run_point(kind, artifact, sc)
     except GainlinkError as exc:
         return {"status": "error", "reason": str(exc), "worker": _stopped(where, cpu0)}
-    return _record(result, artifact) | {"worker": _stopped(where, cpu0)}
+    record = _record(result, artifact)
+    del result  # let go inside the run's time, as a block's runs are (:func:`_run_block`)
+    return record | {"worker": _stopped(where, cpu0)}
 
 
 def _record(result: Any, artifact: Artifact, *, measures: dict | None = None, trace: dict | None = None) -> dict:
@@ -516,26 +518,35 @@ class _Block:
     stack: dict[str, np.ndarray] | None = None  # the traces as the block's arrays (runs of one length), else None
     metric_trees: list | None = None  # the metrics as column trees by position in the block, when every run is one's
 
-    @classmethod
-    def of(cls, positions: list[int], results: list, measures: list, traces: list, worker: dict, **more) -> _Block:
-        """The block of ``results`` (in the task at ``positions``)."""
-        return cls(positions, [r.complete for r in results], [r.reason for r in results],
-                   [r.metrics for r in results], [r.info["transport"] for r in results],
-                   measures, traces, worker, **more)  # fmt: skip
+    @staticmethod
+    def parts(results: list, *, metrics: bool) -> tuple[list, list, list | None, list]:
+        """What a block keeps of its ``results``: ``complete``, ``reason``, ``metrics`` (their dicts, or None when
+        ``metrics`` is false: the block's column trees hold them) and ``link``."""
+        return ([r.complete for r in results], [r.reason for r in results],
+                [r.metrics for r in results] if metrics else None, [r.info["transport"] for r in results])  # fmt: skip
 
-    def record(self, j: int) -> dict:
-        """The record of the block's ``j``-th run, as :func:`execute` gives a run's."""
-        record = _done(self.complete[j], self.reason[j], self.metrics[j], self.measures[j], self.link[j],
-                       self.traces[j])  # fmt: skip
+    def metric_rows(self) -> list[dict]:
+        """Each run's metrics dict, in the block's order: those it holds, or made from its column trees."""
+        if self.metrics is not None:
+            return self.metrics
+        from ..loop.block_metrics import BlockMetrics
+
+        return BlockMetrics(self.metric_trees, len(self.positions)).rows()  # type: ignore[arg-type]
+
+    def record(self, j: int, metrics: dict) -> dict:
+        """The record of the block's ``j``-th run (its metrics ``metrics``), as :func:`execute` gives a run's."""
+        record = _done(self.complete[j], self.reason[j], metrics, self.measures[j], self.link[j], self.traces[j])
         return record | {"worker": dict(self.worker)}
 
 
 def _materialized(task: list) -> list[dict]:
     """A task's records (:func:`_task_records`), each block's run as its record dict."""
     index: dict[tuple[int, int], int] = {}  # (block, position in the task): the run's index in its block
+    rows: dict[int, list[dict]] = {}  # each block's runs' metrics dicts
     for block in {id(r): r for r in task if type(r) is _Block}.values():
         index.update(((id(block), i), j) for j, i in enumerate(block.positions))
-    return [r.record(index[id(r), i]) if type(r) is _Block else r for i, r in enumerate(task)]
+        rows[id(block)] = block.metric_rows()
+    return [r.record(j := index[id(r), i], rows[id(r)][j]) if type(r) is _Block else r for i, r in enumerate(task)]
 
 
 def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
@@ -549,6 +560,7 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
         values = [v for b in blocks for v in of(b)]
         return values if ordered else [values[k] for k in order]
 
+    trees = _task_trees(blocks)
     one = len(blocks) == 1 and ordered  # the block's runs are the task's, run for run
     whole = one and blocks[0].stack is not None  # and so are its traces' arrays (every trace kept, of one length)
     return BlockRuns(
@@ -556,12 +568,12 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
         inputs=runs,
         complete=column(lambda b: b.complete),
         reason=column(lambda b: b.reason),
-        metrics=column(lambda b: b.metrics),
+        metrics=None if trees is not None else column(_Block.metric_rows),
         measures=column(lambda b: b.measures),
         link=column(lambda b: b.link),
         traces=blocks[0].stack if whole else column(lambda b: b.traces),  # type: ignore[arg-type]
         worker=column(lambda b: [b.worker] * len(b.positions)),
-        metric_trees=_task_trees(blocks),
+        metric_trees=trees,
     )
 
 
@@ -711,13 +723,19 @@ def _run_block(members: list, records: list, runs: list, blobs: dict, kept: Sequ
         for (i, _, _), result in zip(members, results):
             if result is None:
                 log.info("campaign run %d of this task runs alone: its plant could not be built in its block", i)
+        del result
         measures = measure_block([result for _, result in done], artifact)
         keep = None if kept is None else [kept[i] for i, _ in done]
         traces, stack = _downsampled([result.trace for _, result in done], keep)
-        share = _stopped(where, cpu0)
-        share["cpu_s"] /= max(len(done), 1)
         trees = results.metrics.trees if len(done) == len(members) and results.metrics.columnar else None
-        block = _Block.of([i for i, _ in done], [r for _, r in done], measures, traces, share | {"block": len(done)},
-                          stack=stack, metric_trees=trees)  # fmt: skip
-        for i in block.positions:
-            records[i] = block
+        kept_parts = _Block.parts([r for _, r in done], metrics=trees is None)
+        positions = [i for i, _ in done]
+        # The runs' objects (results, traces' views, metrics dicts) are let go before the clock stops: releasing them
+        # is the runs' own work, as it is in a run alone; the block keeps only what its file is made from.
+        del results, done
+        share = _stopped(where, cpu0)
+    share["cpu_s"] /= max(len(positions), 1)
+    block = _Block(positions, *kept_parts, measures, traces, share | {"block": len(positions)}, stack=stack,
+                   metric_trees=trees)  # fmt: skip
+    for i in block.positions:
+        records[i] = block
