@@ -1509,9 +1509,24 @@ def test_two_local_clusters_closing_out_of_order_give_dask_its_heartbeat_back_af
 
 
 DASK_CANCEL_RACE = """
-import asyncio, logging, signal, sys, threading
+import asyncio, logging, signal, sys, threading, time
 from distributed.utils import LoopRunner, sync
 from gainlink.hil.campaign.cluster import DaskSyncCancelRace, add_filter_once
+
+
+def waiting_in_sync(ident):
+    frame, calls = sys._current_frames().get(ident), set()
+    while frame is not None:
+        calls.add((frame.f_code.co_name, frame.f_code.co_filename.endswith("distributed/utils.py")))
+        frame = frame.f_back
+    return ("sync", True) in calls and ("wait", True) in calls
+
+
+def ctrl_c_once_waiting(ident):  # not on a timer: on a loaded machine it fired before the main thread was in sync
+    while not waiting_in_sync(ident):
+        time.sleep(0.01)
+    signal.pthread_kill(ident, signal.SIGINT)
+
 
 if sys.argv[1] == "filtered":
     add_filter_once(logging.getLogger("tornado.application"), DaskSyncCancelRace())
@@ -1519,12 +1534,14 @@ runner = LoopRunner(asynchronous=False)
 runner.start()
 gate = threading.Event()
 runner.loop.add_callback(gate.wait)  # the loop thread busy: a blocking call's coroutine has not started
-threading.Timer(0.3, signal.pthread_kill, (threading.main_thread().ident, signal.SIGINT)).start()  # a Ctrl-C
 try:
-    sync(runner.loop, asyncio.sleep, 0)
-except KeyboardInterrupt:
-    pass
-gate.set()
+    threading.Thread(target=ctrl_c_once_waiting, args=(threading.main_thread().ident,), daemon=True).start()
+    try:
+        sync(runner.loop, asyncio.sleep, 0)  # a Ctrl-C while it waits
+    except KeyboardInterrupt:
+        pass
+finally:
+    gate.set()  # never left held: the loop thread would keep the process from exiting
 sync(runner.loop, asyncio.sleep, 0)  # the loop has run Dask's cancel
 logging.getLogger("tornado.application").error("another error", exc_info=NameError("ours"))
 runner.stop()
