@@ -460,6 +460,38 @@ def test_a_blocks_runs_as_lists_make_the_file_their_records_make():
     assert 0 < made.column("row").null_count < len(ids)  # some rows from their columns, the odd ones whole
 
 
+def test_a_blocks_run_its_typed_columns_cannot_give_is_stored_whole_with_its_metrics_from_the_trees():
+    """One block's runs, their metrics only as its column trees (no dict a run), one run's measures of a form the
+    typed columns cannot give (an int among the floats): the file is the one the records make through
+    ``encode_block`` column by column, that run's row stored whole with the metrics its record holds."""
+    from dataclasses import replace
+
+    from gainlink.fileio import read_toml
+    from gainlink.hil.campaign import worker
+    from gainlink.hil.campaign.plan import plan_campaign
+    from gainlink.hil.campaign.store import encode_runs
+
+    path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
+    data, _ = read_toml(path, what="campaign", error=ValueError)
+    data.update(runs=3, seed=7, spec=str((path.parent / data["spec"]).resolve()))
+    plan = plan_campaign(parse_campaign(data))
+    points = [p for p in plan.runs if p.grid_index == 0]
+    runs, ids = [(p.artifact_sha256, p.scenario, p.seed) for p in points], [p.id for p in points]
+    task = worker._task_records("sil", dict(plan.artifacts), runs, None)
+    lists = worker._block_runs("sil", runs, task)
+    assert lists.metrics is None and lists.metric_trees is not None
+    records = [with_inputs(r, run, kind="sil") for r, run in zip(worker._materialized(task), runs)]
+    odd = dict(lists.measures[1], longest_saturation_s=1)
+    lists = replace(lists, measures=[m if k != 1 else odd for k, m in enumerate(lists.measures)])
+    records[1] = records[1] | {"measures": odd}
+    table, oracle = _table(encode_runs(ids, lists, campaign="c")), _table(encode_block(ids, records, campaign="c"))
+    assert table.schema.equals(oracle.schema, check_metadata=True)
+    for name in oracle.column_names:
+        assert table.column(name).equals(oracle.column(name)), name
+    rows = table.column("row").to_pylist()
+    assert rows[0] is None and rows[2] is None and json.loads(rows[1])["metrics"] == records[1]["metrics"]
+
+
 @pytest.mark.parametrize("interleaved", [True, False])
 def test_a_workers_block_file_is_the_one_its_records_make(tmp_path, interleaved):
     """The shipped pendulum's runs in a worker's task, two grid points' blocks interleaved (or one grid point's block,

@@ -242,10 +242,12 @@ def _metrics_of(runs: BlockRuns) -> list[dict]:
     return BlockMetrics(runs.metric_trees, len(runs.complete)).rows()  # type: ignore[arg-type]
 
 
-def _row_of(runs: BlockRuns, i: int) -> dict:
-    """Run ``i``'s ``row`` (:func:`_split`'s) of ``runs``."""
-    return {"complete": runs.complete[i], "measures": runs.measures[i], "metrics": runs.metrics[i],
-            "worker": runs.worker[i], "run_reason": runs.reason[i]}  # fmt: skip
+def _row_of(runs: BlockRuns, i: int, *, metrics: bool = True) -> dict:
+    """Run ``i``'s ``row`` (:func:`_split`'s) of ``runs``; without its metrics when ``metrics`` is false (what
+    :func:`_given` checks holds none: a block's dicts are made from its trees only for a row stored whole)."""
+    row = {"complete": runs.complete[i], "measures": runs.measures[i], "worker": runs.worker[i],
+           "run_reason": runs.reason[i]}  # fmt: skip
+    return row | {"metrics": runs.metrics[i]} if metrics else row  # type: ignore[index]
 
 
 def _block_file(
@@ -549,8 +551,7 @@ def _given_columns(runs: BlockRuns, names: dict[str, list[str]]) -> np.ndarray:
     n = len(runs.complete)
     if n and _one_form(runs, names):
         return np.ones(n, bool)
-    runs = replace(runs, metrics=_metrics_of(runs))
-    return np.array([_given(_row_of(runs, i), names) for i in range(n)], bool)
+    return np.array([_given(_row_of(runs, i, metrics=False), names) for i in range(n)], bool)
 
 
 def _one_form(runs: BlockRuns, names: dict[str, list[str]]) -> bool:
