@@ -329,7 +329,10 @@ def test_a_task_of_more_runs_than_step_in_lockstep_steps_them_in_parts_with_the_
     """A task of 8 pendulum runs with at most 3 stepped in lockstep: parts of 2, 3 and 3 runs, in order (each run's
     ``worker.block`` its part's size), every run's record (metrics but the timing, measures, link, stored trace) the
     one it gets when the 8 step as one block; and the task's lists for its block file hold the parts' runs in task
-    order, as their records do (the metrics as the parts' column trees, no dict a run)."""
+    order, as their records do (the metrics as one column tree the parts' join, no dict a run), and the block file
+    made from those lists is the one the records make (``encode_block``, the per-run path's), column by column."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
     from gainlink.hil.campaign import store, worker
 
     plan, runs = _clamp_campaign(runs=8, duration=1.0)
@@ -352,6 +355,15 @@ def test_a_task_of_more_runs_than_step_in_lockstep_steps_them_in_parts_with_the_
     assert lists.measures == [r["measures"] for r in parts] and lists.metrics is None
     assert store._metrics_of(lists) == [r["metrics"] for r in parts]
     assert lists.worker == [r["worker"] for r in parts]
+    assert [positions for positions, _ in lists.metric_trees] == [list(range(8))]  # the parts' trees joined
+    assert store._tree_named(lists.metric_trees, 8) is not None  # the typed columns straight from the tree
+    ids = [f"run{i}" for i in range(8)]
+    made = pq.read_table(pa.BufferReader(store.encode_runs(ids, lists, campaign="c")))
+    records = [store.with_inputs(r, run, kind="sil") for r, run in zip(parts, runs)]
+    oracle = pq.read_table(pa.BufferReader(store.encode_block(ids, records, campaign="c")))
+    assert made.schema.equals(oracle.schema, check_metadata=True)
+    for name in oracle.column_names:
+        assert made.column(name).equals(oracle.column(name)), name
 
 
 @pytest.mark.parametrize("Ts", [None, 0.02])

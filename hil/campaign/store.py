@@ -328,6 +328,8 @@ def _form_columns(forms: list[Form], whole: dict[int, str], n: int) -> dict[str,
     """The metrics columns of ``n`` runs from their forms (:class:`.jsontext.Form`, rows the runs') and the texts of
     the runs json writes alone; the forms in the order of their first run (whichever way they were found)."""
     forms = sorted(forms, key=lambda form: min(form.rows))
+    if not whole and len(forms) == 1 and forms[0].rows == list(range(n)):
+        return _one_form_columns(forms[0], n)
     texts: list[str | None] = [None] * n
     codes = np.full(n, -1, np.int32)
     slots: list[str | None] = [None] * n
@@ -352,6 +354,22 @@ def _form_columns(forms: list[Form], whole: dict[int, str], n: int) -> dict[str,
         ),
         "metrics_slots": pa.array(slots, pa.string()),
         "metrics_numbers": _blobs(numbers, np.float64),
+    }
+
+
+def _one_form_columns(form: Form, n: int) -> dict[str, pa.Array]:
+    """:func:`_form_columns` of ``n`` runs of one form, run ``i`` its ``i``-th (the usual block): its slots joined a
+    column at a time and its numbers one (runs, float slots) array, not a row at a time."""
+    text = [col for kind, col in zip(form.kinds, form.columns) if kind == "t"]
+    floats = [col for kind, col in zip(form.kinds, form.columns) if kind == "f"]
+    numbers = np.array(floats, np.float64).T if floats else np.zeros((n, 0))
+    return {
+        "metrics": pa.nulls(n, pa.string()),
+        "metrics_form": pa.DictionaryArray.from_arrays(
+            pa.array(np.zeros(n, np.int32)), pa.array([form.kinds + "\n" + form.template], pa.string())
+        ),
+        "metrics_slots": pa.array(list(map(SLOT.join, zip(*text))) if text else [""] * n, pa.string()),
+        "metrics_numbers": _stacked_blobs(numbers, np.float64),
     }
 
 
@@ -800,10 +818,10 @@ def _blobs(rows: list[np.ndarray | None], dtype: type = np.float32) -> pa.LargeB
     return pa.Array.from_buffers(pa.large_binary(), len(rows), buffers, null_count=int((~valid).sum()))
 
 
-def _stacked_blobs(A: np.ndarray) -> pa.LargeBinaryArray:
-    """:func:`_blobs` of the rows of float32 ``A`` (runs, ...), none missing: its bytes as they lie when C-ordered
-    (not copied: a block's outputs and commands, ~6 MB a 1,000-run block), each row one value."""
-    data = np.ascontiguousarray(A, np.float32).reshape(-1)
+def _stacked_blobs(A: np.ndarray, dtype: type = np.float32) -> pa.LargeBinaryArray:
+    """:func:`_blobs` of the rows of ``A`` (runs, ...) as ``dtype``, none missing: its bytes as they lie when C-ordered
+    (not copied when so already: a block's outputs and commands, ~6 MB a 1,000-run block), each row one value."""
+    data = np.ascontiguousarray(A, dtype).reshape(-1)
     size = data.size // max(A.shape[0], 1) * data.itemsize
     offsets = np.arange(A.shape[0] + 1, dtype=np.int64) * size
     return pa.Array.from_buffers(pa.large_binary(), A.shape[0], [None, pa.py_buffer(offsets), pa.py_buffer(data)])

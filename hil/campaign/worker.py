@@ -579,10 +579,16 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
 
 def _task_trees(blocks: list[_Block]) -> list | None:
     """The blocks' metrics column trees with each run's position in the task (a block's trees hold its runs by their
-    position in the block), or None when a block has none."""
+    position in the block), joined into one (:func:`~..loop.block_metrics.joined`: the task's lockstep parts share a
+    structure, and its file's columns are then made from one tree, not a dict a run), or None when a block has none."""
+    from ..loop.block_metrics import joined
+
     if any(b.metric_trees is None for b in blocks):
         return None
-    return [([b.positions[j] for j in positions], tree) for b in blocks for positions, tree in b.metric_trees]
+    trees = [([b.positions[j] for j in positions], tree) for b in blocks for positions, tree in b.metric_trees]
+    if len(trees) == 1:
+        return trees
+    return [([i for positions, _ in trees for i in positions], joined([(tree, len(pos)) for pos, tree in trees]))]
 
 
 def _blocks(artifacts: dict[str, bytes], runs: Sequence, blobs: dict) -> dict[tuple, list]:
