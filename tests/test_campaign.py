@@ -1529,7 +1529,9 @@ def ctrl_c_once_waiting(ident):  # not on a timer: on a loaded machine it fired 
 
 
 # a Ctrl-C raises here whatever this process inherits: in a fresh clone's suite the test hung, its SIGINT never
-# handled (a process started with SIGINT blocked or ignored keeps it so)
+# handled (a process started with SIGINT blocked or ignored keeps it so). The suite had been started in the
+# background by a shell (`make test &`): POSIX shells start such a command with SIGINT ignored, and every process
+# under it inherits that; no test changes it (checked after each test of a whole suite)
 signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 signal.signal(signal.SIGINT, signal.default_int_handler)
 if sys.argv[1] == "filtered":
