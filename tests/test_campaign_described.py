@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from gainlink.fileio import read_toml
 from gainlink.hil.campaign import parse_campaign, worker
+from gainlink.hil.campaign.jsontext import object_texts
 from gainlink.hil.campaign.plan import DescribedRuns, plan_campaign, task_uses
 from support.paths import EXAMPLES
 
@@ -70,7 +71,8 @@ def _as_text(run) -> str:
 
 def _check_same_runs(plan, described: bool) -> None:
     """Each block's task gives, run for run, the plan's own run (``plan.runs[k]``), as text, by iteration and by
-    index, and again after the pickle round trip the task travels in."""
+    index, and again after the pickle round trip the task travels in; and where it gives its scenarios as column
+    trees (what a block file's records are written from), their JSON texts are the plan's runs' scenarios'."""
     for block in _blocks_of(len(plan.runs)):
         task = plan.runs.task(block)
         assert isinstance(task, DescribedRuns) is described
@@ -78,6 +80,13 @@ def _check_same_runs(plan, described: bool) -> None:
         travelled = pickle.loads(pickle.dumps(task, protocol=pickle.HIGHEST_PROTOCOL))
         assert [_as_text(r) for r in task] == want
         assert [_as_text(travelled[i]) for i in range(len(block))] == want
+        scenarios = [json.dumps({"s": plan.runs[k].scenario}, sort_keys=True, separators=(",", ":"))
+                     for k in block.tolist()]  # fmt: skip
+        for made in (task, travelled) if described else ():  # task: its parts' slots made by iterating it
+            trees = made.scenario_trees()
+            if trees is not None:
+                assert [(a, b) for a, b, _ in trees] == [(p.start, p.stop) for p in made.parts]
+                assert [t for a, b, tree in trees for t in object_texts({"s": tree}, b - a)] == scenarios
         shas, fmus = task_uses(travelled)
         assert shas == {plan.runs[k].artifact_sha256 for k in block.tolist()}
         assert fmus == {
@@ -102,6 +111,8 @@ def test_a_shipped_campaigns_tasks_describe_the_plans_own_runs(name):
     runs = 9 if name.startswith("pendulum") else None
     plan = plan_campaign(_shipped(name, runs))
     assert plan.runs.describable
+    # the pendulums' scenarios as column trees (an FMU's is named after its draws: each run made)
+    assert (plan.runs.task(np.arange(len(plan.runs))).scenario_trees() is not None) is name.startswith("pendulum")
     _check_same_runs(plan, described=True)
 
 
@@ -124,6 +135,8 @@ def test_a_campaigns_tasks_over_grid_axes_and_draws_describe_the_plans_own_runs(
     scenarios and a few bytes a run (1,000 runs: under 48 bytes a run, the seed and the numbers 8 bytes each)."""
     plan = plan_campaign(_campaign(draws, faults=faults, grid=grid))
     assert plan.runs.task(np.arange(2)).leaves is leaves
+    # as column trees but where a draw's path runs through a list (the faults) or its runs are each made whole
+    assert (plan.runs.task(np.arange(len(plan.runs))).scenario_trees() is not None) is (leaves and not faults)
     assert list(plan.runs.task(np.arange(0))) == []
     _check_same_runs(plan, described=True)
     big = plan_campaign(_campaign(draws, faults=faults, runs=1000, grid=grid[:1]))

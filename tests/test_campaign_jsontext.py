@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 import pytest
-from gainlink.hil.campaign.jsontext import form_texts, json_forms, json_texts, object_texts
+from gainlink.hil.campaign.jsontext import Shared, form_texts, json_forms, json_texts, object_texts
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -111,6 +111,24 @@ def test_an_object_of_columns_is_each_runs_object():
     ]
     assert object_texts(columns, 3) == [_oracle(w) for w in want]
     assert object_texts({}, 2) == ["{}", "{}"] and json_texts([]) == [] and object_texts(columns | {"id": []}, 0) == []
+
+
+def test_a_value_every_run_shares_is_written_once_as_json_writes_it_in_each_run():
+    """A column tree with :class:`Shared` values (a scenario's tables its runs share): each run's object as json writes
+    it whole, keys sorted across shared and own values at every level; a shared value json refuses (a NaN, keys it
+    cannot sort) refused for every run as json refuses it."""
+    plant = {"kind": "cart_pendulum", "outputs": ["x", "theta"], "parameters": None, "step": 0.005, "%": -0.0}
+    tree = {"plant": {k: Shared(v) for k, v in plant.items() if k != "parameters"}, "duration": Shared(10.0)}
+    tree["plant"]["parameters"] = {"M": [1.0, 1.2500000000000002, 0.75], "g": Shared(9.81), "l": Shared(1)}
+    tree["noise"] = Shared({"x": 5e-4, "theta": 0.0})
+    want = [{"plant": plant | {"parameters": {"M": M, "g": 9.81, "l": 1}}, "duration": 10.0,
+             "noise": {"x": 5e-4, "theta": 0.0}} for M in (1.0, 1.2500000000000002, 0.75)]  # fmt: skip
+    assert object_texts(tree, 3) == [_oracle(w) for w in want]
+    for bad, error in ((math.nan, ValueError), ({1: 2, "a": 3}, TypeError)):
+        with pytest.raises(error):
+            _oracle(want[0] | {"z": bad})
+        with pytest.raises(error):
+            object_texts(tree | {"z": Shared(bad)}, 3)
 
 
 _LEAF = st.one_of(

@@ -44,9 +44,9 @@ class _Split(Exception):
     """Raised where the values of a level differ in structure: ``groups`` lists (positions, whether json itself must
     write them)."""
 
-    def __init__(self, groups: list[tuple[list[int], bool]]):
+    def __init__(self, groups: list[tuple[list[int], bool]] | None):
         super().__init__()
-        self.groups = groups
+        self.groups = groups  # None: every run, each written by json (a Shared value it refuses)
 
 
 def json_texts(values: list) -> list[str]:
@@ -56,8 +56,19 @@ def json_texts(values: list) -> list[str]:
 
 def object_texts(columns: dict[str, Any], runs: int) -> list[str]:
     """:func:`compact_json` of the object each run ``i`` of ``runs`` would be, ``{key: columns[key][i]}`` (a value of
-    ``columns`` itself a dict: an object of such columns, nested), without making the objects."""
+    ``columns`` itself a dict: an object of such columns, nested; or a :class:`Shared` value, every run's), without
+    making the objects."""
     return _texts(columns, runs)
+
+
+class Shared:
+    """A node of a column tree (:func:`object_texts`) that every run holds, one value: its text made once, not a
+    column of runs walked for it (a scenario's tables that a grid point's runs share)."""
+
+    __slots__ = ("value",)
+
+    def __init__(self, value: Any) -> None:
+        self.value = value
 
 
 @dataclass(frozen=True)
@@ -131,7 +142,7 @@ def _forms(node: dict | list, runs: int) -> tuple[list[Form], dict[int, str]]:
         try:
             _flat(part, parts, columns, kinds)
         except _Split as split:
-            for positions, direct in split.groups:
+            for positions, direct in split.groups or [(list(range(len(rows))), True)]:
                 members = [rows[j] for j in positions]
                 if direct or len(members) == len(rows):  # (no structure to split by: json writes them)
                     for i in members:
@@ -145,6 +156,8 @@ def _forms(node: dict | list, runs: int) -> tuple[list[Form], dict[int, str]]:
 
 def _picked(node: dict | list, rows: list[int]) -> dict | list:
     """``node`` (a column, or a dict of nodes) at runs ``rows`` only."""
+    if isinstance(node, Shared):
+        return node
     if isinstance(node, dict):
         return {key: _picked(sub, rows) for key, sub in node.items()}
     pick = itemgetter(*rows)
@@ -153,6 +166,8 @@ def _picked(node: dict | list, rows: list[int]) -> dict | list:
 
 def _value(node: dict | list, i: int) -> Any:
     """Run ``i``'s value of ``node``."""
+    if isinstance(node, Shared):
+        return node.value
     return {key: _value(sub, i) for key, sub in node.items()} if isinstance(node, dict) else node[i]
 
 
@@ -160,6 +175,12 @@ def _flat(node: dict | list, parts: list[str], columns: list[list], kinds: list[
     """Append ``node``'s template text to ``parts`` (``%s`` where a value goes), its varying values to ``columns``
     (a column of finite floats as they are, another as texts) and their kinds (``f``, ``t``) to ``kinds``; raise
     :class:`_Split` where its runs differ in structure."""
+    if isinstance(node, Shared):
+        try:
+            parts.append(compact_json(node.value).replace("%", "%%"))
+        except (TypeError, ValueError):  # json refuses it (a NaN, a key it cannot sort): it raises for every run
+            raise _Split(None) from None
+        return
     if isinstance(node, dict):
         _object(sorted(node), [node[key] for key in sorted(node)], parts, columns, kinds)
         return

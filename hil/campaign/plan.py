@@ -45,6 +45,7 @@ from gainlink.version import __version__
 from ..loop.endpoints import refuse_link_faults
 from ..loop.scenario import Scenario, parse_scenario
 from .config import Axis, Campaign, CampaignError, path_steps, value_at
+from .jsontext import Shared
 from .preflight import DryBuild, check_axis_values
 
 
@@ -469,6 +470,8 @@ class DescribedRuns(Sequence):
     seeds: np.ndarray
     drawn: tuple[np.ndarray, ...]  # per draw axis, each run's number
     leaves: bool = False  # each draw axis sets, scales or shifts a scenario value no other axis's target holds
+    # each part's _slots once made (by part_runs, then scenario_trees): filled where the runs are made, on the worker
+    made_slots: dict = field(default_factory=dict, init=False, compare=False, repr=False)
 
     def __len__(self) -> int:
         return len(self.seeds)
@@ -515,12 +518,35 @@ class DescribedRuns(Sequence):
                 _name_fmu(scenario, part.fmu)
             yield part.sha, scenario, seed
 
+    def scenario_trees(self) -> list[tuple[int, int, dict]] | None:
+        """The runs' scenarios as column trees (:func:`.jsontext.object_texts`: their JSON texts made without walking
+        each run's tables), a grid part at a time, ``(start, stop, tree)``: the part's scenario with every value its
+        runs share a :class:`~.jsontext.Shared` and each draw target's value the column of what :meth:`part_runs`
+        puts there; None where :meth:`part_runs` makes each run (not :attr:`leaves`, a value it cannot put), names an
+        FMU after its draws, or a target's path runs through a list."""
+        if not self.leaves:
+            return None
+        trees = []
+        for part in self.parts:
+            slots = self._slots(part) if part.fmu is None else None
+            tree = None if slots is None else _column_tree(slots[0], dict(slots[2]), set(slots[1]), ())
+            if tree is None:
+                return None
+            trees.append((part.start, part.stop, tree))
+        return trees
+
     def _slots(self, part: GridPart) -> tuple[dict, list[tuple], list[tuple[tuple, list]]] | None:
         """``part``'s scenario with every draw target in place (its tables made and its key set, in the order
         :meth:`apply_draws` makes them), the paths of the containers on the targets' paths (each after its parent's)
         and, per target, its path and each run's value there (:func:`_leaf_value`: the drawn value, or the scenario's
         number scaled or shifted by it); None where a value is not one to put so (a scale or shift of a non-number, a
         path the scenario refuses: :meth:`made` says why)."""
+        if part.start not in self.made_slots:
+            self.made_slots[part.start] = self._made_slots(part)
+        return self.made_slots[part.start]
+
+    def _made_slots(self, part: GridPart) -> tuple[dict, list[tuple], list[tuple[tuple, list]]] | None:
+        """:meth:`_slots` made."""
         scenario, leaves = pickle.loads(part.scenario), []
         try:
             for axis, col in zip(self.axes, self.drawn):
@@ -557,6 +583,24 @@ class DescribedRuns(Sequence):
     def uses(self) -> tuple[set[str], set[str]]:
         """The artifacts and the FMUs (each by sha256) the runs use."""
         return {p.sha for p in self.parts if p.sha}, {p.fmu for p in self.parts if p.fmu}
+
+
+def _column_tree(node: dict, columns: dict[tuple, list], paths: set[tuple], at: tuple) -> dict | None:
+    """The column tree of table ``node`` (at steps ``at``): a target's value its column (``columns`` by path), a table
+    on a target's path (``paths``) its own tree, anything else :class:`~.jsontext.Shared`; None for a list on a
+    target's path."""
+    tree: dict = {}
+    for key, value in node.items():
+        steps = (*at, key)
+        if steps in columns:
+            tree[key] = columns[steps]
+        elif steps not in paths:
+            tree[key] = Shared(value)
+        elif isinstance(value, dict) and (sub := _column_tree(value, columns, paths, steps)) is not None:
+            tree[key] = sub
+        else:
+            return None
+    return tree
 
 
 class MadeRuns(list):

@@ -195,6 +195,8 @@ class BlockRuns:
     traces: list | dict  # encode_trace's arrays, or all runs' at once (:func:`_block_file`)
     worker: list  # each run's: its block's share (host, pid, start, stop, cpu_s, block), one dict a block
     metric_trees: list | None = None  # the metrics as column trees (:func:`tree_metric_columns`), when made so
+    # the scenarios of ``inputs`` as column trees, (start, stop, tree) in order (DescribedRuns.scenario_trees)
+    scenario_trees: list | None = None
 
 
 def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
@@ -210,19 +212,29 @@ def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
     given = _finite(typed, n) & _given_columns(runs, names)
     if runs.metrics is None and not given.all():  # a row the typed columns cannot give is stored whole
         runs = replace(runs, metrics=_metrics_of(runs))
-    shas, scenarios, seeds = (list(col) for col in zip(*runs.inputs)) if n else ([], [], [])
-    inputs = {"artifact_sha256": shas, "kind": [runs.kind] * n, "scenario": scenarios, "seed": seeds}
-    record = {"id": ids, "inputs": inputs, "link": runs.link, "status": ["done"] * n}
     texts = {
         "id": pa.array(ids, pa.string()),
         "status": pa.array(["done"] * n, pa.string()),
-        "record": pa.array(object_texts(record, n), pa.string()),
+        "record": pa.array(_record_texts(ids, runs), pa.string()),
         "row": pa.array(
             [None if ok else compact_json(_row_of(runs, i)) for i, ok in enumerate(given.tolist())], pa.string()
         ),
         **_run_metric_columns(runs, given),
     }
     return _block_file(texts, runs.traces, typed, campaign=campaign)
+
+
+def _record_texts(ids: list[str], runs: BlockRuns) -> list[str]:
+    """Each run's record text (its id, inputs, link and status, as :func:`encode_block` writes the record's rest):
+    its scenario from :attr:`BlockRuns.scenario_trees` when the runs have them, a grid part at a time, else from
+    each run's table."""
+    shas, scenarios, seeds = (list(col) for col in zip(*runs.inputs)) if ids else ([], [], [])
+    texts: list[str] = []
+    for a, b, scenario in runs.scenario_trees or [(0, len(ids), scenarios)]:
+        inputs = {"artifact_sha256": shas[a:b], "kind": [runs.kind] * (b - a), "scenario": scenario, "seed": seeds[a:b]}
+        record = {"id": ids[a:b], "inputs": inputs, "link": runs.link[a:b], "status": ["done"] * (b - a)}
+        texts += object_texts(record, b - a)
+    return texts
 
 
 def _run_metric_columns(runs: BlockRuns, given: np.ndarray) -> dict[str, pa.Array]:

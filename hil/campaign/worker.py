@@ -574,6 +574,7 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
         traces=blocks[0].stack if whole else column(lambda b: b.traces),  # type: ignore[arg-type]
         worker=column(lambda b: [b.worker] * len(b.positions)),
         metric_trees=trees,
+        scenario_trees=runs.described.scenario_trees() if isinstance(runs, MadeRuns) else None,
     )
 
 
