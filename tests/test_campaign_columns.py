@@ -336,15 +336,16 @@ def _report_by_rows(plan, records: dict[str, dict], stored: set[str]) -> tuple[s
 
 
 @pytest.mark.parametrize("generated", [True, False])
-def test_the_rows_made_a_chunk_at_a_time_are_the_rows_made_one_by_one(tmp_path, generated):
+def test_the_rows_made_a_chunk_at_a_time_are_the_rows_made_one_by_one(tmp_path, generated, monkeypatch):
     """campaign.csv byte for byte and the rows (``CampaignResult.rows``) against the same rows made one at a time by the
     per-row functions (a generated plan of a grid and two drawn axes, an int and a float among a choice's values,
     more runs than a chunk; and a plan of points, one of them planned twice), on a store with errors, None measures
     and metrics, failed runs, runs of other tracked outputs and outputs than the others, runs with and without a model
     twin, and runs with no record."""
+    import gainlink.hil.campaign.rows as csv_rows
     from gainlink.hil.campaign.plan import plan_campaign
-    from gainlink.hil.campaign.rows import HEAD_CHUNK
 
+    monkeypatch.setattr(csv_rows, "HEAD_CHUNK", 128)  # chunks of fewer runs than the plan's, one of them part-filled
     if generated:
         campaign = parse_campaign(
             {"name": "columns", "kind": "sil", "seed": 3, "runs": 130, "spec": str(EXAMPLES / "pendulum.toml"),
@@ -355,7 +356,7 @@ def test_the_rows_made_a_chunk_at_a_time_are_the_rows_made_one_by_one(tmp_path, 
              "criteria": dataclasses.asdict(CRITERIA) | {"bounds": {k: list(v) for k, v in CRITERIA.bounds.items()}}}
         )  # fmt: skip
         plan = plan_campaign(campaign)
-        assert len(plan.runs) > HEAD_CHUNK
+        assert len(plan.runs) > csv_rows.HEAD_CHUNK and len(plan.runs) % csv_rows.HEAD_CHUNK
         rng = np.random.default_rng(8)
         records = {h.id: with_inputs(_record(rng, h.index), (h.artifact_sha256, {}, h.seed), kind="sil")
                    for h in plan.runs.heads()}  # fmt: skip

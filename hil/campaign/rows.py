@@ -70,7 +70,7 @@ def _csv_value(value: Any) -> str:
     return csv_field(value if isinstance(value, str) else json.dumps(value))
 
 
-HEAD_CHUNK = 256  # runs whose CSV rows are made at once: their texts held together, a few hundred bytes a run
+HEAD_CHUNK = 2048  # runs whose CSV rows are made at once: their texts held together, a few hundred bytes a run
 
 
 def head_texts(plan: Any, axes: list[str]) -> Iterator[tuple[list[str], list[str], list[str]]]:
