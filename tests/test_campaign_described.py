@@ -141,7 +141,10 @@ def test_a_campaigns_tasks_over_grid_axes_and_draws_describe_the_plans_own_runs(
     _check_same_runs(plan, described=True)
     big = plan_campaign(_campaign(draws, faults=faults, runs=1000, grid=grid[:1]))
     task = big.runs.task(np.arange(1000))
-    assert len(pickle.dumps(task, protocol=pickle.HIGHEST_PROTOCOL)) / 1000 < 48
+    size = len(pickle.dumps(task, protocol=pickle.HIGHEST_PROTOCOL))
+    assert size / 1000 < 48
+    list(task), task.scenario_trees()  # the slots made from it (kept for its trees) do not travel with it
+    assert len(pickle.dumps(task, protocol=pickle.HIGHEST_PROTOCOL)) == size
 
 
 @pytest.mark.parametrize("drawn", ["parameter", "initial state"])

@@ -476,6 +476,13 @@ class DescribedRuns(Sequence):
     def __len__(self) -> int:
         return len(self.seeds)
 
+    def __getstate__(self) -> dict:
+        # the task travels without the slots made from it (each run's value a target): the worker makes its own
+        return {k: v for k, v in self.__dict__.items() if k != "made_slots"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state, made_slots={})
+
     def __getitem__(self, i: Any) -> Any:
         if isinstance(i, slice):
             return [self[k] for k in range(*i.indices(len(self)))]
