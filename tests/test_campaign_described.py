@@ -82,6 +82,12 @@ def _check_same_runs(plan, described: bool) -> None:
         assert [_as_text(travelled[i]) for i in range(len(block))] == want
         scenarios = [json.dumps({"s": plan.runs[k].scenario}, sort_keys=True, separators=(",", ":"))
                      for k in block.tolist()]  # fmt: skip
+        if described:  # the runs a worker makes: by index (a part at a time), alone, and their artifacts and seeds
+            assert [_as_text(r) for r in travelled.made_runs()] == want
+            alone = travelled.made_runs()
+            assert [_as_text(alone.one(i)) for i in reversed(range(len(block)))] == want[::-1]
+            assert alone.columns() == ([p.artifact_sha256 for p in (plan.runs[k] for k in block.tolist())],
+                                       [plan.runs[k].seed for k in block.tolist()])  # fmt: skip
         for made in (task, travelled) if described else ():  # task: its parts' slots made by iterating it
             trees = made.scenario_trees()
             if trees is not None:
@@ -218,3 +224,36 @@ def test_a_described_tasks_records_are_the_enumerated_tasks_run_for_run():
         p = plan.runs[int(block[i])]
         inputs = with_inputs(a, described[i], kind="sil")["inputs"]
         assert json.dumps(inputs["scenario"]) == json.dumps(p.scenario) and inputs["seed"] == p.seed
+
+
+def test_a_described_tasks_block_file_holds_the_enumerated_tasks_records_without_making_each_runs_scenario(
+    monkeypatch,
+):
+    """The block file a worker makes of a described task whose draws all set the plant's drawn numbers: its records
+    (each run's id, inputs, link, status) are the same runs enumerated's, text for text, and so are its metrics' forms
+    and text slots;
+    the worker made no run's scenario but each grid point's first (``part_runs`` refused: the drawn tables come from
+    the task's columns, the record texts from its column trees and its artifacts and seeds)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    plan = plan_campaign(_campaign([SCALE_M, ADD_M, CHOOSE_L], runs=5))
+    block = np.arange(len(plan.runs))[1::2]
+    ids = [plan.runs[k].id for k in block.tolist()]
+
+    def stored(runs) -> pa.Table:
+        packed = pickle.dumps((ids, runs, None))
+        return pq.read_table(pa.BufferReader(worker.execute_packed("sil", plan.artifacts, packed, campaign="c")))
+
+    want = stored(plan.runs.inputs(block))
+
+    def refused(self, part):
+        raise AssertionError("a run's scenario made")
+
+    monkeypatch.setattr(DescribedRuns, "part_runs", refused)
+    got = stored(plan.runs.task(block))
+    for column in ("id", "status", "record", "metrics_form", "metrics_slots"):  # numbers: timings too
+        assert got.column(column).to_pylist() == want.column(column).to_pylist(), column
+    assert [json.loads(r)["inputs"]["seed"] for r in got.column("record").to_pylist()] == [
+        plan.runs[k].seed for k in block.tolist()
+    ]

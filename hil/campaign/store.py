@@ -195,8 +195,10 @@ class BlockRuns:
     traces: list | dict  # encode_trace's arrays, or all runs' at once (:func:`_block_file`)
     worker: list  # each run's: its block's share (host, pid, start, stop, cpu_s, block), one dict a block
     metric_trees: list | None = None  # the metrics as column trees (:func:`tree_metric_columns`), when made so
-    # the scenarios of ``inputs`` as column trees, (start, stop, tree) in order (DescribedRuns.scenario_trees)
+    # the scenarios of ``inputs`` as column trees, (start, stop, tree) in order (DescribedRuns.scenario_trees), and
+    # with them each run's artifact sha256 and seed (MadeRuns.columns): the record texts made without a run's inputs
     scenario_trees: list | None = None
+    input_columns: tuple[list, list] | None = None
 
 
 def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
@@ -226,11 +228,15 @@ def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
 
 def _record_texts(ids: list[str], runs: BlockRuns) -> list[str]:
     """Each run's record text (its id, inputs, link and status, as :func:`encode_block` writes the record's rest):
-    its scenario from :attr:`BlockRuns.scenario_trees` when the runs have them, a grid part at a time, else from
-    each run's table."""
-    shas, scenarios, seeds = (list(col) for col in zip(*runs.inputs)) if ids else ([], [], [])
+    its scenario from :attr:`BlockRuns.scenario_trees` and its artifact and seed from :attr:`BlockRuns.input_columns`
+    when the runs have them, a grid part at a time, else from each run's inputs."""
+    if runs.scenario_trees is not None and runs.input_columns is not None:
+        (shas, seeds), parts = runs.input_columns, runs.scenario_trees
+    else:
+        shas, scenarios, seeds = (list(col) for col in zip(*runs.inputs)) if ids else ([], [], [])
+        parts = [(0, len(ids), scenarios)]
     texts: list[str] = []
-    for a, b, scenario in runs.scenario_trees or [(0, len(ids), scenarios)]:
+    for a, b, scenario in parts:
         inputs = {"artifact_sha256": shas[a:b], "kind": [runs.kind] * (b - a), "scenario": scenario, "seed": seeds[a:b]}
         record = {"id": ids[a:b], "inputs": inputs, "link": runs.link[a:b], "status": ["done"] * (b - a)}
         texts += object_texts(record, b - a)

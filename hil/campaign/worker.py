@@ -34,7 +34,7 @@ import pickle
 import socket
 import sys
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -561,6 +561,7 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
         return values if ordered else [values[k] for k in order]
 
     trees = _task_trees(blocks)
+    trees_of_runs = runs.described.scenario_trees() if isinstance(runs, MadeRuns) else None
     one = len(blocks) == 1 and ordered  # the block's runs are the task's, run for run
     whole = one and blocks[0].stack is not None  # and so are its traces' arrays (every trace kept, of one length)
     return BlockRuns(
@@ -574,7 +575,8 @@ def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
         traces=blocks[0].stack if whole else column(lambda b: b.traces),  # type: ignore[arg-type]
         worker=column(lambda b: [b.worker] * len(b.positions)),
         metric_trees=trees,
-        scenario_trees=runs.described.scenario_trees() if isinstance(runs, MadeRuns) else None,
+        scenario_trees=trees_of_runs,
+        input_columns=runs.columns() if trees_of_runs is not None else None,
     )
 
 
@@ -620,20 +622,27 @@ def _blocks(artifacts: dict[str, bytes], runs: Sequence, blobs: dict) -> dict[tu
 def _described_blocks(artifacts: dict[str, bytes], runs: MadeRuns, blobs: dict) -> dict[tuple, list]:
     """:func:`_blocks` of runs made from their description: by grid point, the first run that steps in a block parsed
     and, when every draw axis sets a number of the plant's drawn tables (:func:`_drawn_only`), each other run that
-    scenario with its own seed and drawn tables (:func:`_with_drawn`), compared with nothing; else each run parsed."""
+    scenario with its own seed and drawn tables (:func:`_with_drawn`; the tables from the part's columns,
+    :func:`_part_tables`, its runs' scenarios not made), compared with nothing; else each run parsed."""
     groups: dict[tuple, list] = {}
     files: dict[str, tuple] = {}
     drawn_only = _drawn_only(runs.described.axes)
+    seeds = runs.described.seeds
     for part in runs.described.parts:
+        tables = _part_tables(runs.described, part) if drawn_only else None
         first = None
         for i in range(part.start, part.stop):
-            sha, scenario, seed = runs[i]
-            plant = scenario.get("plant")
-            drawn = {k: plant[k] for k in DRAWN if k in plant} if isinstance(plant, dict) else None
-            sc = _with_drawn(first[1], seed, drawn) if first is not None and drawn is not None else None
+            if first is None:
+                sc = None
+            elif tables is not None:  # a part's tables: numbers, each run's own
+                sc = _like(first[1], seeds[i], tables[i - part.start])
+            else:
+                drawn = _run_tables(runs[i][1])
+                sc = None if drawn is None else _with_drawn(first[1], seeds[i], drawn)
             if sc is not None:
                 artifact, key = first[0], first[2]
             else:
+                sha, scenario, seed = runs.one(i)
                 made = _parsed(artifacts, files, sha, scenario, seed, blobs, i)
                 if made is None:
                     continue
@@ -641,6 +650,38 @@ def _described_blocks(artifacts: dict[str, bytes], runs: MadeRuns, blobs: dict) 
                 first = made if drawn_only else None
             groups.setdefault(key, []).append((i, artifact, sc))
     return groups
+
+
+def _run_tables(scenario: dict) -> dict | None:
+    """A run's plant's drawn tables (:data:`DRAWN`), from its scenario; None when its plant is not a table."""
+    plant = scenario.get("plant")
+    return {k: plant[k] for k in DRAWN if k in plant} if isinstance(plant, dict) else None
+
+
+def _part_tables(described: DescribedRuns, part: Any) -> list[dict] | None:
+    """Each run of grid part ``part``'s plant drawn tables (:data:`DRAWN`), each run's own, made from the part's
+    target columns (:meth:`~.plan.DescribedRuns.target_columns`) as :func:`_run_tables` finds them in its scenario;
+    None when the part's runs are made one by one, name an FMU after their draws, a target is not a key of a drawn
+    table, or a value there is not a number (:func:`_with_drawn` takes each run's own then, or parses it)."""
+    columns = described.target_columns(part) if part.fmu is None else None
+    plant = columns[0].get("plant") if columns is not None else None
+    if not isinstance(plant, dict):
+        return None
+    base = {k: plant[k] for k in DRAWN if k in plant}
+    puts = [(steps[1], steps[2], values) for steps, values in columns[1]]  # type: ignore[index]
+    if not all(isinstance(t, dict) for t in base.values()) or any(k not in base for k, _, _ in puts):
+        return None
+    targets = {(k, key) for k, key, _ in puts}
+    rest = [v for k, t in base.items() for key, v in t.items() if (k, key) not in targets]
+    if not (_numbers(rest) and all(_numbers(values) for _, _, values in puts)):
+        return None
+    tables = []
+    for j in range(part.stop - part.start):
+        own = {k: dict(t) for k, t in base.items()}
+        for k, key, values in puts:
+            own[k][key] = values[j]
+        tables.append(own)
+    return tables
 
 
 def _parsed(
@@ -689,13 +730,23 @@ def _drawn_like(table: dict, parsed: Any, scenario: dict, seed: int) -> Any:
 def _with_drawn(parsed: Any, seed: int, drawn: dict) -> Any:
     """``parsed`` (a scenario) with ``seed`` and the plant's drawn tables ``drawn`` (:data:`DRAWN`); None when a
     table is not one of numbers (only those are copied as :func:`_scenario`'s JSON copy makes them)."""
-    if not all(isinstance(t, dict) and _NUMBERS.issuperset(map(type, t.values())) for t in drawn.values()):
+    if not all(isinstance(t, dict) and _numbers(t.values()) for t in drawn.values()):
         return None
+    return _like(parsed, seed, {k: dict(t) for k, t in drawn.items()})
+
+
+def _like(parsed: Any, seed: int, tables: dict) -> Any:
+    """``parsed`` (a scenario) with ``seed`` and the plant's drawn tables ``tables`` (tables of numbers, its own)."""
     # copy.copy's own steps (a new instance, the fields' dict copied) without its __reduce_ex__ round (~3 us a run);
     # dataclasses.replace re-runs the 28 fields' __init__: 30-70 us a run here
     like = object.__new__(type(parsed))
-    like.__dict__.update(parsed.__dict__, seed=int(seed), plant=parsed.plant | {k: dict(t) for k, t in drawn.items()})
+    like.__dict__.update(parsed.__dict__, seed=int(seed), plant=parsed.plant | tables)
     return like
+
+
+def _numbers(values: Iterable) -> bool:
+    """Whether every one of ``values`` is an int or a float (not a bool, not numpy's)."""
+    return _NUMBERS.issuperset(map(type, values))
 
 
 _NUMBERS = frozenset((int, float))  # the types of a drawn table's values (not bool, not numpy's)
