@@ -230,8 +230,7 @@ def test_a_described_tasks_block_file_holds_the_enumerated_tasks_records_without
     monkeypatch,
 ):
     """The block file a worker makes of a described task whose draws all set the plant's drawn numbers: its records
-    (each run's id, inputs, link, status) are the same runs enumerated's, text for text, and so are its metrics' forms
-    and text slots;
+    (each run's id, inputs, link, status) are the same runs enumerated's, text for text;
     the worker made no run's scenario but each grid point's first (``part_runs`` refused: the drawn tables come from
     the task's columns, the record texts from its column trees and its artifacts and seeds)."""
     import pyarrow as pa
@@ -252,7 +251,7 @@ def test_a_described_tasks_block_file_holds_the_enumerated_tasks_records_without
 
     monkeypatch.setattr(DescribedRuns, "part_runs", refused)
     got = stored(plan.runs.task(block))
-    for column in ("id", "status", "record", "metrics_form", "metrics_slots"):  # numbers: timings too
+    for column in ("id", "status", "record"):  # the metrics hold timings (latency, steps a second): run's own
         assert got.column(column).to_pylist() == want.column(column).to_pylist(), column
     assert [json.loads(r)["inputs"]["seed"] for r in got.column("record").to_pylist()] == [
         plan.runs[k].seed for k in block.tolist()
