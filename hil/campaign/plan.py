@@ -631,7 +631,6 @@ class MadeRuns(Sequence):
         self.described = described
         self._starts = [part.start for part in described.parts]
         self._parts: dict[int, list] = {}  # a part's runs, by its start, once one of them was asked for
-        self._one: dict[int, tuple] = {}  # runs made alone (:meth:`one`), by index
 
     def __len__(self) -> int:
         return len(self.described)
@@ -648,11 +647,8 @@ class MadeRuns(Sequence):
         """Run ``i`` (not negative) made alone, its part's other runs not made (a run of a part already made: as
         ``runs[i]``)."""
         part = self._part(i)
-        if part.start in self._parts:
-            return self._parts[part.start][i - part.start]
-        if i not in self._one:
-            self._one[i] = self.described.made(part, i)
-        return self._one[i]
+        made = self._parts.get(part.start)
+        return made[i - part.start] if made is not None else self.described.made(part, i)
 
     def columns(self) -> tuple[list, list]:
         """Each run's artifact sha256 and seed, in order, without making a scenario."""

@@ -627,7 +627,7 @@ def _described_blocks(artifacts: dict[str, bytes], runs: MadeRuns, blobs: dict) 
     groups: dict[tuple, list] = {}
     files: dict[str, tuple] = {}
     drawn_only = _drawn_only(runs.described.axes)
-    seeds = runs.described.seeds
+    seeds = runs.described.seeds.tolist()
     for part in runs.described.parts:
         tables = _part_tables(runs.described, part) if drawn_only else None
         first = None
