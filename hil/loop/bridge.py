@@ -48,6 +48,7 @@ from .plan import Plan, Recorder, describe_artifact, describe_plant, plan_like, 
 from .scenario import Scenario
 from .scenario_plant import build_plant
 from .scheduler import Placement, cpu_latency_qos, gc_paused, resolve_affinity, set_fifo, set_other
+from .teardown import ClosingStack
 from .twins import TwinStart, run_twins, twin_start
 
 log = logging.getLogger(__name__)
@@ -111,7 +112,7 @@ def run_scenario(
         a, library = law.without_rate_limit(a), None
     _check(scenario)
     plant = build_plant(scenario, artifact=a)
-    with ExitStack() as stack:
+    with ClosingStack() as stack:
         stack.callback(plant.close)
         run = prepare_run(scenario, law=law, artifact=a, plant=plant, source=source)
         start, plan = run.start, run.plan
@@ -119,6 +120,7 @@ def run_scenario(
             outcome = run.in_process(library=library, progress=progress)
         else:
             outcome = run.over_link(stack, progress=progress)
+        stack.closing()  # the link, the peer and the plant close whole, a Ctrl-C after them
     t0 = time.perf_counter()
     twins = run_twins(law, a, scenario=scenario, plan=plan, start=start, steps=outcome.steps,
                       build=lambda: build_plant(scenario, artifact=a))  # fmt: skip
