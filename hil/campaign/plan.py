@@ -40,12 +40,13 @@ from typing import Any
 
 import numpy as np
 from gainlink.errors import GainlinkError, SpecError, did_you_mean
-from gainlink.shipping.artifact import canonical_json, render
+from gainlink.shipping.artifact import canonical_json
 from gainlink.version import __version__
 
 from ..loop.endpoints import refuse_link_faults
 from ..loop.scenario import Scenario, parse_scenario
 from .config import Axis, Campaign, CampaignError, path_steps, value_at
+from .designs import designed
 from .jsontext import Shared
 from .preflight import DryBuild, check_axis_values
 
@@ -212,14 +213,6 @@ def run_id(*, kind: str, artifact_sha256: str | None, scenario: dict, seed: int)
     """The content address of a run (hex, 20 characters)."""
     body = {"kind": kind, "artifact": artifact_sha256, "scenario": scenario, "seed": seed, "gainlink": __version__}
     return hashlib.sha256(canonical_json(body).encode("ascii")).hexdigest()[:20]
-
-
-def _design(spec: dict, *, source: str) -> bytes:
-    from gainlink.laws import design
-    from gainlink.spec import parse_spec
-
-    sealed = design(parse_spec(spec, source=source)).artifact
-    return render(sealed).encode("utf-8")
 
 
 def _fmu_blob(scenario: dict, campaign: Campaign, blobs: dict, cache: dict) -> None:
@@ -1012,7 +1005,7 @@ def _artifact(campaign: Campaign, spec: dict, key: str, designs: dict, where: st
     """The artifact of ``spec`` (canonical ``key``) and its sha256, designed once per key; or the design's error."""
     if key not in designs:
         try:
-            designs[key] = _with_sha(_design(spec, source=f"{campaign.spec_path} ({where})"))
+            designs[key] = _with_sha(designed(spec, source=f"{campaign.spec_path} ({where})"))
         except SpecError as exc:  # the campaign's spec or its spec.* axes are wrong, at every run alike
             raise CampaignError(f"campaign: {where}: {exc}") from None
         except GainlinkError as exc:
