@@ -31,8 +31,9 @@ Prints JSON. Everything is measured in the same run, against a baseline of the s
 - ``blocks``: the shipped pendulum campaign (examples/campaigns/pendulum_mass_uncertainty.toml: 10 s, 1,000 steps of
   the RK4 pendulum, the host C law, the closed-loop twin, its three anti-windup builds) through campaign blocks
   (:mod:`gainlink.hil.loop.block`). On clusters of 1, 2, 2 and 1 workers (new each time; cluster start and the
-  cold builds of the three laws timed apart, ``cluster_start_s`` and ``builds_and_first_runs_s``) the same
-  :data:`BLOCK_DRAWS` draws (the issue's block benchmark; seeds 1 and 2 on each side, ``speedup_runs``):
+  three laws' designs and cold builds timed apart, ``cluster_start_s`` and ``builds_and_first_runs_s``: the timed
+  campaigns take the designs this process made, :mod:`gainlink.hil.campaign.designs`, as the workers their builds)
+  the same :data:`BLOCK_DRAWS` draws (the issue's block benchmark; seeds 1 and 2 on each side, ``speedup_runs``):
   ``speedup_2_vs_1`` (target >= 1.8), and ``speedup_2_vs_1_runs`` the same until the last run is stored (the report,
   merged by the client alone after it, apart: the serial part that bounds the first); the same for
   :data:`BLOCK_SPEEDUP_DRAWS` draws on the same clusters (``small_campaigns``, ``speedup_2_vs_1_small``: a campaign
@@ -49,8 +50,8 @@ Prints JSON. Everything is measured in the same run, against a baseline of the s
   same runs each through the per-run path (``execute``) in this process, measured in the same run, and
   ``block_vs_per_run_path`` the ratio of CPU per run-step (target >= 50). With ``BENCH_LARGE=1``
   :data:`LARGE_DRAWS` draws on each of the four clusters too (``large_campaigns``, seeds 1 and 2 on each side,
-  ``speedup_2_vs_1_large``: the block benchmark's larger campaign, whose serial parts, the plan's designs and the
-  report, weigh least), the first 2-worker one ``hundred_thousand`` (target: client peak RSS growth <= 100 MB).
+  ``speedup_2_vs_1_large``: the block benchmark's larger campaign, whose serial parts, the plan and the report, weigh
+  least), the first 2-worker one ``hundred_thousand`` (target: client peak RSS growth <= 100 MB).
   ``python bench/campaign.py --blocks`` runs this part alone.
 
 Clusters are started before the timing (and warmed by a few runs that build the firmware), so the
@@ -603,7 +604,7 @@ def measure_blocks(tmp: Path) -> dict:
         with dask_client(workers=n) as client:
             start = time.perf_counter() - t0
             t1 = time.perf_counter()
-            timed_campaign(shipped_pendulum(3, seed=99), client, tmp / f"blocks_warm_{k}")  # builds the 3 laws
+            timed_campaign(shipped_pendulum(3, seed=99), client, tmp / f"blocks_warm_{k}")  # designs, builds the 3 laws
             warm = time.perf_counter() - t1
             head = {"workers": n, "cluster_start_s": round(start, 2), "builds_and_first_runs_s": round(warm, 2)}
             for key, draws in (("small_campaigns", BLOCK_SPEEDUP_DRAWS), ("speedup_runs", BLOCK_DRAWS)):
