@@ -11,6 +11,7 @@ refusal is not kept: a spec that fails is designed (and refused) again.
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 
 from gainlink.shipping.artifact import canonical_json, render
@@ -20,19 +21,23 @@ from gainlink.shipping.artifact import canonical_json, render
 KEPT = 64
 
 _designed: OrderedDict[str, bytes] = OrderedDict()
+_lock = threading.Lock()  # two threads planning at once: neither sees the other's entry half moved or dropped
 
 
 def designed(spec: dict, *, source: str) -> bytes:
     """The artifact (rendered JSON) of the law ``spec`` asks for, designed at its first call in this process."""
     key = canonical_json(spec)
-    art = _designed.get(key)
-    if art is None:
-        art = _design(spec, source=source)
+    with _lock:
+        art = _designed.get(key)
+        if art is not None:
+            _designed.move_to_end(key)
+            return art
+    art = _design(spec, source=source)  # not under the lock: a design takes ~0.1 s, and two alike give the same bytes
+    with _lock:
         _designed[key] = art
-        if len(_designed) > KEPT:
-            _designed.popitem(last=False)
-    else:
         _designed.move_to_end(key)
+        while len(_designed) > KEPT:
+            _designed.popitem(last=False)
     return art
 
 
