@@ -178,8 +178,9 @@ def test_a_worker_that_sees_the_campaign_folder_writes_its_block_and_one_that_do
     import os
     import pickle
 
+    from gainlink.hil.campaign.block_layout import block_address
     from gainlink.hil.campaign.runner import _store_answer, plan_doc
-    from gainlink.hil.campaign.store import Store, block_address, folder_key
+    from gainlink.hil.campaign.store import Store, folder_key
     from gainlink.hil.campaign.worker import execute_packed
 
     plan, points, runs = _pendulum_task(4)

@@ -16,12 +16,13 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from gainlink.hil.campaign import parse_campaign
+from gainlink.hil.campaign.block_layout import METRIC_COLUMNS
 from gainlink.hil.campaign.config import Criteria
 from gainlink.hil.campaign.criteria import evaluate, evaluate_columns
 from gainlink.hil.campaign.plan import CampaignPlan, RunPoint
 from gainlink.hil.campaign.report import merge
 from gainlink.hil.campaign.rows import MEASURE_CELLS, METRIC_CELLS
-from gainlink.hil.campaign.store import METRIC_COLUMNS, Store, encode_block, metric_texts, with_inputs
+from gainlink.hil.campaign.store import Store, encode_block, metric_texts, with_inputs
 from support.paths import EXAMPLES
 
 CRITERIA = Criteria(

@@ -162,7 +162,8 @@ MEASURE_CELLS = (
 
 
 FIXED_CELLS = 8
-ROW_BITS = {"complete": 1, "run_reason": 2, "worker": 4}  # :data:`.store.ROW_BITS`' bits of the keys a head names
+# :data:`.block_layout.ROW_BITS`' bits of the keys a head names
+ROW_BITS = {"complete": 1, "run_reason": 2, "worker": 4}
 
 
 _CELL = {"null": "", "true": "True", "false": "False"}  # a value's JSON text -> its cell, where they differ

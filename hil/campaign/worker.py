@@ -214,7 +214,7 @@ def _scenario(scenario: dict, *, artifact_path: Path, seed: int, blobs: dict, ki
 
 def downsampled_trace(trace: Any) -> dict[str, np.ndarray]:
     """The run's t, y, u, r at no more than :data:`MAX_TRACE_POINTS` evenly spaced samples (first and last
-    kept), as the block file stores them (:func:`~.store.encode_trace`: float32 arrays)."""
+    kept), as the block file stores them (:func:`~.block_layout.encode_trace`: float32 arrays)."""
     return downsampled_traces([trace])[0]
 
 
@@ -276,8 +276,8 @@ def run_point(kind: str, artifact: Artifact, scenario: Any) -> Any:
 
 
 def execute(kind: str, artifact_json: bytes, scenario: dict, seed: int, blobs: dict | None = None) -> dict:
-    """One campaign run: a JSON-able record plus its downsampled traces (``trace``: :func:`~.store.encode_trace`'s
-    arrays).
+    """One campaign run: a JSON-able record plus its downsampled traces (``trace``:
+    :func:`~.block_layout.encode_trace`'s arrays).
 
     Parameters
     ----------
