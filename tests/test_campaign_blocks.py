@@ -719,7 +719,7 @@ def test_a_blocks_metrics_columns_from_its_column_trees_are_those_of_its_runs_di
     with a twin or not, integrator peaks or not; runs of several lengths and groups joined) are those the runs' dicts
     make (store.metric_columns, itself checked against json's text), every column equal; runs of no steps leave
     the trees unusable for that (their dicts held whole) and the worker then takes the dicts."""
-    from gainlink.hil.campaign.store import metric_columns, tree_metric_columns
+    from gainlink.hil.campaign.block_columns import metric_columns, tree_metric_columns
     from gainlink.hil.loop.block_metrics import RUNS_AT_ONCE, metric_trees
 
     a = _design(design)

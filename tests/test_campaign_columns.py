@@ -435,7 +435,8 @@ def test_a_blocks_runs_as_lists_make_the_file_their_records_make():
     records make through ``encode_block`` (its oracle), column by column, schema and metadata: runs of every form a
     record takes (measures None, without the twins' keys, an int among the floats, a worker without ``block``, NaN
     where JSON says null), so the typed columns' checks fall back run by run."""
-    from gainlink.hil.campaign.store import BlockRuns, encode_runs
+    from gainlink.hil.campaign.block_columns import BlockRuns
+    from gainlink.hil.campaign.store import encode_runs
 
     rng = np.random.default_rng(11)
     records = [r for k in range(120) if (r := _record(rng, k))["status"] == "done"]
@@ -503,8 +504,7 @@ def test_a_workers_block_file_is_the_one_its_records_make(tmp_path, interleaved)
     trees, in a form a block where the records' dicts make one for the task: the same texts read back); ``campaign
     show``'s record of each run is its record."""
     from gainlink.fileio import read_toml
-    from gainlink.hil.campaign import store as store_module
-    from gainlink.hil.campaign import worker
+    from gainlink.hil.campaign import block_columns, worker
     from gainlink.hil.campaign.plan import plan_campaign
     from gainlink.hil.campaign.store import encode_runs
 
@@ -524,7 +524,7 @@ def test_a_workers_block_file_is_the_one_its_records_make(tmp_path, interleaved)
     assert isinstance(lists.traces, dict) != interleaved
     assert lists.metric_trees is not None and lists.metrics is None  # each block's metrics in its column trees
     # one block's: its metrics' typed columns straight from its trees; two blocks': from the runs' dicts made of them
-    assert (store_module._tree_named(lists.metric_trees, len(ids)) is None) == interleaved
+    assert (block_columns._tree_named(lists.metric_trees, len(ids)) is None) == interleaved
     made = encode_runs(ids, lists, campaign=campaign.name)
     records = [with_inputs(r, run, kind="sil") for r, run in zip(worker._materialized(task), runs)]
     oracle = _table(encode_block(ids, records, campaign=campaign.name))

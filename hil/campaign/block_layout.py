@@ -36,7 +36,8 @@ LAYOUT = "7"  # 2: the record split into ``record`` and ``row``; 3: the row's ve
 # 4: each trace a run's float32 bytes (not a list of floats: Parquet's levels per value, and numpy's per run to read);
 # 5: a row's typed values (complete, run_reason, measures, worker) not again in JSON: its text made from the columns;
 # 6: one row group a block (5: a row group a TRACE_BATCH of runs); 7: a run's metrics as its form's template and its
-# values (``metrics_form``, ``metrics_slots``, ``metrics_numbers``), their text made when read (:func:`metric_texts`)
+# values (``metrics_form``, ``metrics_slots``, ``metrics_numbers``), their text made when read
+# (:func:`.store.metric_texts`)
 ROW_KEYS = ("complete", "measures", "metrics", "worker")  # what a report row takes from a record, as it is
 # bit k of ``row_keys``: the row has ROW_BITS[k]; its measures have the twin's, the model twin's, growth ratios
 ROW_BITS = ("complete", "run_reason", "worker", "measures", "metrics", "twin", "model", "growth")

@@ -4,28 +4,29 @@
 
     DIR/plan.json                 the campaign, its runs' ids in plan order and their sha256
     DIR/artifacts/<sha256>.json DIR/fmus/<sha256>.fmu        what travelled to the workers
-    DIR/blocks/<address>.parquet  one block of runs (a Dask task's), one row per run (:data:`SCHEMA`,
-                                  then :func:`row_columns`)
+    DIR/blocks/<address>.parquet  one block of runs (a Dask task's), one row per run (:data:`.block_layout.SCHEMA`,
+                                  then :func:`.block_columns.row_columns`)
     DIR/campaign.json campaign.csv summary.txt *.png        the merged report (see report.py)
 
-A block file's name is its content address (:func:`block_address`: the sha256 of its runs' ids, each itself the hash
-of the run's inputs and gainlink's version), so the same runs always land in the same file. A row holds the run's id,
-its status (``done`` or ``error``), its record's free-form parts as compact JSON texts (``record``: inputs, link, an
-error's reason; ``metrics``: the run's metrics), its report row's typed values as typed columns (:func:`row_columns`:
-``complete``, the run's own reason, the measures, the worker; what the verdict and ``campaign.csv`` read: the report
-decodes no JSON of a result), not again as JSON: the row's text, which a run's row gives, is made from them
-(:func:`row_texts`; ``row`` holds it whole only for a row they cannot give exactly, :func:`_given`), and
-its traces downsampled to at most ``worker.MAX_TRACE_POINTS`` evenly spaced true samples (first and last kept; each a
-binary value, the run's float32 values in C order: ``t``, and ``y``, ``u``, ``r`` row by row with their widths, so a
-batch of runs is read as one numpy array over the column's buffer, :func:`_flat`); the full trace of a run is not
-stored, it is replayed (``gainlink campaign show DIR --run ID``). The file's schema metadata names the gainlink
-version, the campaign that wrote it and the file's layout (:data:`LAYOUT`): a folder holding another's blocks, or
-blocks of an earlier layout, is refused in one line on resume (:func:`refuse_foreign`).
+A block file's name is its content address (:func:`.block_layout.block_address`: the sha256 of its runs' ids, each
+itself the hash of the run's inputs and gainlink's version), so the same runs always land in the same file. A row holds
+the run's id, its status (``done`` or ``error``), its record's free-form parts as compact JSON texts (``record``:
+inputs, link, an error's reason; ``metrics``: the run's metrics), its report row's typed values as typed columns
+(:func:`.block_columns.row_columns`: ``complete``, the run's own reason, the measures, the worker; what the verdict and
+``campaign.csv`` read: the report decodes no JSON of a result), not again as JSON: the row's text, which a run's row
+gives, is made from them (:func:`row_texts`; ``row`` holds it whole only for a row they cannot give exactly,
+:func:`.block_columns._given`), and its traces downsampled to at most ``worker.MAX_TRACE_POINTS`` evenly spaced true
+samples (first and last kept; each a binary value, the run's float32 values in C order: ``t``, and ``y``, ``u``, ``r``
+row by row with their widths, so a batch of runs is read as one numpy array over the column's buffer, :func:`_flat`);
+the full trace of a run is not stored, it is replayed (``gainlink campaign show DIR --run ID``). The file's schema
+metadata names the gainlink version, the campaign that wrote it and the file's layout (:data:`.block_layout.LAYOUT`): a
+folder holding another's blocks, or blocks of an earlier layout, is refused in one line on resume
+(:func:`refuse_foreign`).
 
 A worker that sees the campaign folder writes its block file there itself (:func:`write_block`); the client notes it
 (:meth:`Store.took_block`) without reading it. A task whose runs all stepped in blocks is stored from the blocks' lists
-(:class:`BlockRuns`, :func:`encode_runs`: no record dict a run), the same table :func:`encode_block` makes of the runs'
-records; the JSON texts of a block's runs are made a structure at a time (:mod:`.jsontext`).
+(:class:`.block_columns.BlockRuns`, :func:`encode_runs`: no record dict a run), the same table :func:`encode_block`
+makes of the runs' records; the JSON texts of a block's runs are made a structure at a time (:mod:`.jsontext`).
 
 A file is written to a temporary name and renamed (mode 0644 under the usual umask), so a run counts as done exactly
 when a block file holds it; a campaign killed at any point resumes by running the runs no block holds, and those whose
@@ -39,8 +40,6 @@ import json
 import operator
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, replace
-from itertools import chain
-from operator import itemgetter
 from pathlib import Path
 from typing import Any
 
@@ -52,10 +51,25 @@ from gainlink.errors import GainlinkError
 from gainlink.fileio import atomic_write_bytes, atomic_write_text, prepare_output_dir
 from gainlink.version import __version__
 
+from .block_columns import (
+    _FLOAT_MEASURES,
+    _NONE,
+    BlockRuns,
+    _blobs,
+    _finite,
+    _given,
+    _given_columns,
+    _metric_named,
+    _row_of,
+    _stacked_blobs,
+    _tree_named,
+    _typed_columns,
+    metric_columns,
+    row_columns,
+    tree_metric_columns,
+)
 from .block_layout import (
     LAYOUT,
-    MEASURE_KEYS,
-    MEASURES,
     META_CAMPAIGN,
     META_LAYOUT,
     META_VERSION,
@@ -71,10 +85,8 @@ from .block_layout import (
     SLOT,
     TEXTS,
     TRACE_FIELDS,
-    TRACKED,
     TWIN_KEYS,
     WIDE,
-    WORKER,
     WORKER_KEYS,
     block_address,
 )
@@ -82,14 +94,11 @@ from .config import CampaignError
 from .criteria import RunColumns
 from .jsontext import (
     ARROW_FLOATS,
-    Form,
     compact_json,
     float_texts,
     form_texts,
-    json_forms,
     json_texts,
     object_texts,
-    tree_forms,
 )
 from .plan import CampaignPlan, RunPoint
 
@@ -110,8 +119,9 @@ TRACE_BUFFER = 1 << 20
 
 def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> pa.Buffer:
     """The Parquet file of a block (an Arrow buffer, bytes-like): one row per run (``records[i]`` is run ``ids[i]``'s,
-    its traces as :func:`encode_trace` arrays under ``trace``). Made on the worker, which writes it into the campaign
-    folder when it can see the folder (:func:`write_block`), else returns its bytes for the client to write."""
+    its traces as :func:`.block_layout.encode_trace` arrays under ``trace``). Made on the worker, which writes it into
+    the campaign folder when it can see the folder (:func:`write_block`), else returns its bytes for the client to
+    write."""
     parts = [_split(run_id, record) for run_id, record in zip(ids, records)]
     rows = [row for _, row in parts]
     typed = row_columns(rows)
@@ -126,28 +136,6 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> pa.Bu
         **metric_columns([row.get("metrics") if ok and "metrics" in row else _NONE for row, ok in zip(rows, given)]),
     }
     return _block_file(texts, [record.get("trace") for record in records], typed, campaign=campaign)
-
-
-@dataclass(frozen=True)
-class BlockRuns:
-    """The finished runs of a block as lists, one entry a run, what a block's records would hold (``status`` done, a
-    ``reason`` each, no ``row`` key missing): :func:`encode_runs` stores them as :func:`encode_block` stores their
-    records, without a record dict a run."""
-
-    kind: str
-    inputs: list  # (artifact sha256, scenario, seed) of each run, as :func:`with_inputs` takes them
-    complete: list
-    reason: list
-    metrics: list | None  # each run's dict; None when its metric_trees hold them (made from those when needed)
-    measures: list
-    link: list
-    traces: list | dict  # encode_trace's arrays, or all runs' at once (:func:`_block_file`)
-    worker: list  # each run's: its block's share (host, pid, start, stop, cpu_s, block), one dict a block
-    metric_trees: list | None = None  # the metrics as column trees (:func:`tree_metric_columns`), when made so
-    # the scenarios of ``inputs`` as column trees, (start, stop, tree) in order (DescribedRuns.scenario_trees), and
-    # with them each run's artifact sha256 and seed (MadeRuns.columns): the record texts made without a run's inputs
-    scenario_trees: list | None = None
-    input_columns: tuple[list, list] | None = None
 
 
 def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
@@ -177,8 +165,9 @@ def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
 
 def _record_texts(ids: list[str], runs: BlockRuns) -> list[str]:
     """Each run's record text (its id, inputs, link and status, as :func:`encode_block` writes the record's rest):
-    its scenario from :attr:`BlockRuns.scenario_trees` and its artifact and seed from :attr:`BlockRuns.input_columns`
-    when the runs have them, a grid part at a time, else from each run's inputs."""
+    its scenario from :attr:`.block_columns.BlockRuns.scenario_trees` and its artifact and seed from
+    :attr:`.block_columns.BlockRuns.input_columns` when the runs have them, a grid part at a time, else from each run's
+    inputs."""
     if runs.scenario_trees is not None and runs.input_columns is not None:
         (shas, seeds), parts = runs.input_columns, runs.scenario_trees
     else:
@@ -209,22 +198,14 @@ def _metrics_of(runs: BlockRuns) -> list[dict]:
     return BlockMetrics(runs.metric_trees, len(runs.complete)).rows()  # type: ignore[arg-type]
 
 
-def _row_of(runs: BlockRuns, i: int, *, metrics: bool = True) -> dict:
-    """Run ``i``'s ``row`` (:func:`_split`'s) of ``runs``; without its metrics when ``metrics`` is false (what
-    :func:`_given` checks holds none: a block's dicts are made from its trees only for a row stored whole)."""
-    row = {"complete": runs.complete[i], "measures": runs.measures[i], "worker": runs.worker[i],
-           "run_reason": runs.reason[i]}  # fmt: skip
-    return row | {"metrics": runs.metrics[i]} if metrics else row  # type: ignore[index]
-
-
 def _block_file(
     texts: dict[str, pa.Array], traces: list | dict, typed: dict[str, pa.Array], *, campaign: str
 ) -> pa.Buffer:
     """The Parquet file of a block, as Arrow's buffer: the JSON and text columns ``texts``, the traces (each run's
-    :func:`encode_trace` arrays, None for none; or every run's at once, a dict of ``t`` (runs, N) and ``y``, ``u``,
-    ``r`` (runs, N, width) float32 arrays, each run's rows its own), the typed columns. Not copied into a ``bytes``
-    (the worker that writes it into the folder itself writes the buffer: a copy of ~6 MB a block, and its pages
-    faulted in, saved)."""
+    :func:`.block_layout.encode_trace` arrays, None for none; or every run's at once, a dict of ``t`` (runs, N) and
+    ``y``, ``u``, ``r`` (runs, N, width) float32 arrays, each run's rows its own), the typed columns. Not copied into a
+    ``bytes`` (the worker that writes it into the folder itself writes the buffer: a copy of ~6 MB a block, and its
+    pages faulted in, saved)."""
     cols = dict(texts)
     if isinstance(traces, dict):
         for k in ("t", *WIDE):
@@ -262,87 +243,10 @@ def _block_file(
     return sink.getvalue()
 
 
-_NONE = object()  # a row whose metrics the ``metrics`` column does not hold
-
-
-def metric_columns(metrics: list) -> dict[str, pa.Array]:
-    """The columns of the runs' metrics (:data:`METRIC_COLUMNS`; ``metrics[i]`` :data:`_NONE`: null in each), made
-    for the block's runs at once (:func:`.jsontext.json_forms`): a run of a structure the block's runs share holds its
-    form (``metrics_form``: the structure's kinds of slots, a newline, its ``%`` template; a block's runs share one or
-    two), its text slots joined by :data:`SLOT` (``metrics_slots``) and its float slots as float64 bytes
-    (``metrics_numbers``), no text made of a float; a run json writes alone holds its text (``metrics``)."""
-    held = [k for k, m in enumerate(metrics) if m is not _NONE]
-    if len(held) == len(metrics):
-        return _form_columns(*json_forms(metrics), len(metrics))
-    forms, whole = json_forms([metrics[k] for k in held])
-    forms = [replace(form, rows=[held[j] for j in form.rows]) for form in forms]
-    return _form_columns(forms, {held[j]: text for j, text in whole.items()}, len(metrics))
-
-
-def tree_metric_columns(trees: list[tuple[list[int], Any]], runs: int) -> dict[str, pa.Array]:
-    """:func:`metric_columns` of ``runs`` runs whose metrics are given as column trees (``(positions, tree)``, each
-    run in one: :class:`~..loop.block_metrics.BlockMetrics`), made from the trees' columns, not a dict a run."""
-    forms: list[Form] = []
-    whole: dict[int, str] = {}
-    for positions, tree in trees:
-        made, texts = tree_forms(tree, len(positions))
-        forms += [replace(form, rows=[positions[j] for j in form.rows]) for form in made]
-        whole |= {positions[j]: text for j, text in texts.items()}
-    return _form_columns(forms, whole, runs)
-
-
-def _form_columns(forms: list[Form], whole: dict[int, str], n: int) -> dict[str, pa.Array]:
-    """The metrics columns of ``n`` runs from their forms (:class:`.jsontext.Form`, rows the runs') and the texts of
-    the runs json writes alone; the forms in the order of their first run (whichever way they were found)."""
-    forms = sorted(forms, key=lambda form: min(form.rows))
-    if not whole and len(forms) == 1 and forms[0].rows == list(range(n)):
-        return _one_form_columns(forms[0], n)
-    texts: list[str | None] = [None] * n
-    codes = np.full(n, -1, np.int32)
-    slots: list[str | None] = [None] * n
-    numbers: list[np.ndarray | None] = [None] * n
-    for code, form in enumerate(forms):
-        rows = form.rows
-        codes[rows] = code
-        text = [col for kind, col in zip(form.kinds, form.columns) if kind == "t"]
-        for i, joined in zip(rows, map(SLOT.join, zip(*text)) if text else [""] * len(rows)):
-            slots[i] = joined
-        floats = [col for kind, col in zip(form.kinds, form.columns) if kind == "f"]
-        values = np.array(floats, np.float64).T.copy() if floats else np.zeros((len(rows), 0))
-        for i, row in zip(rows, values):
-            numbers[i] = row
-    for i, text in whole.items():
-        texts[i] = text
-    words = [form.kinds + "\n" + form.template for form in forms]
-    return {
-        "metrics": pa.array(texts, pa.string()),
-        "metrics_form": pa.DictionaryArray.from_arrays(
-            pa.array(codes, pa.int32(), mask=codes < 0), pa.array(words, pa.string())
-        ),
-        "metrics_slots": pa.array(slots, pa.string()),
-        "metrics_numbers": _blobs(numbers, np.float64),
-    }
-
-
-def _one_form_columns(form: Form, n: int) -> dict[str, pa.Array]:
-    """:func:`_form_columns` of ``n`` runs of one form, run ``i`` its ``i``-th (the usual block): its slots joined a
-    column at a time and its numbers one (runs, float slots) array, not a row at a time."""
-    text = [col for kind, col in zip(form.kinds, form.columns) if kind == "t"]
-    floats = [col for kind, col in zip(form.kinds, form.columns) if kind == "f"]
-    numbers = np.array(floats, np.float64).T if floats else np.zeros((n, 0))
-    return {
-        "metrics": pa.nulls(n, pa.string()),
-        "metrics_form": pa.DictionaryArray.from_arrays(
-            pa.array(np.zeros(n, np.int32)), pa.array([form.kinds + "\n" + form.template], pa.string())
-        ),
-        "metrics_slots": pa.array(list(map(SLOT.join, zip(*text))) if text else [""] * n, pa.string()),
-        "metrics_numbers": _stacked_blobs(numbers, np.float64),
-    }
-
-
 def metric_texts(table: pa.Table) -> list[str | None]:
     """Each row's metrics as compact JSON (:func:`.jsontext.compact_json` of the run's metrics; None where the file
-    holds none), from the columns :func:`metric_columns` made (a file of layout 6 or before: its ``metrics`` texts)."""
+    holds none), from the columns :func:`.block_columns.metric_columns` made (a file of layout 6 or before: its
+    ``metrics`` texts)."""
     out = table.column("metrics").to_pylist()
     if "metrics_form" not in table.column_names:
         return out
@@ -379,242 +283,13 @@ def _leaf_paths(schema: pa.Schema) -> list[str]:
 
 def _split(run_id: str, record: dict) -> tuple[dict, dict]:
     """A record (without its trace) as its ``record`` column's part (id, inputs, link, status, an error's reason)
-    and its ``row`` column's (:data:`ROW_KEYS`; a result's ``reason`` as ``run_reason``): the report reads the row's
-    text and its typed columns (:func:`row_columns`), not the record."""
+    and its ``row`` column's (:data:`.block_layout.ROW_KEYS`; a result's ``reason`` as ``run_reason``): the report reads
+    the row's text and its typed columns (:func:`.block_columns.row_columns`), not the record."""
     rest = {k: v for k, v in record.items() if k != "trace"} | {"id": run_id}
     row = {k: rest.pop(k) for k in ROW_KEYS if k in rest}
     if record["status"] != "error" and "reason" in rest:
         row["run_reason"] = rest.pop("reason")
     return rest, row
-
-
-def row_columns(rows: list[dict]) -> dict[str, pa.Array]:
-    """What the verdicts and ``campaign.csv`` read of the rows ``rows`` (each a :func:`_split` ``row``), as typed
-    columns beside its JSON text (which a run's row and :meth:`Store.record` give as it is):
-
-    - ``row_keys`` (uint8): bit k set when the row has :data:`ROW_BITS` [k] (a key holding ``None`` is not a key
-      missing: the verdict's JSON says ``null`` for a missing one);
-    - ``names`` (dictionary of strings): the run's tracked outputs and outputs (``metrics.tracked``,
-      ``metrics.outputs_final``), sorted, as the JSON ``[[tracked...], [outputs...]]``: its CSV columns;
-    - ``complete`` (bool), ``run_reason`` (string), ``measures`` (:data:`MEASURES`: the measures the criteria and
-      the CSV read), ``worker`` (:data:`WORKER`); null where the row holds ``None`` or lacks it;
-    - :data:`NAMED`: ``output_min``, ``output_max`` (the measures'), ``tracked`` and ``outputs_final`` (the
-      metrics'), each a struct with a field per name some row of the block has (a tracked output a row lacks: a
-      null struct), left out when no row has one (Parquet has no struct without fields).
-    """
-    return _typed_columns(
-        [np.array([key in row for row in rows], bool) for key in ROW_BITS[:5]],
-        [row.get("complete") for row in rows],
-        [row.get("run_reason") for row in rows],
-        [row.get("measures") for row in rows],
-        _metric_named([row.get("metrics") for row in rows]),
-        [row.get("worker") for row in rows],
-    )
-
-
-def _typed_columns(
-    has: list[np.ndarray], complete: list, reason: list, measures: list, of_metrics: dict, worker: list | pa.Array
-) -> dict[str, pa.Array]:
-    """:func:`row_columns` of rows given a list a key: ``has[k]``, whether each row has :data:`ROW_BITS` [k] (the
-    first five); a row's ``complete``, ``run_reason``, ``measures``, ``worker`` (None where it has not; ``worker`` a
-    list of dicts or its column made already); the columns of their metrics (``of_metrics``: :func:`_metric_named`)."""
-    bits = np.zeros(len(complete), np.uint8)
-    for k, present in enumerate(has):
-        bits |= present.astype(np.uint8) << k
-    held = [m if type(m) is dict else {} for m in measures]
-    bits |= np.array([TWIN_KEYS[0] in m for m in held], np.uint8) << 5
-    bits |= np.array([MODEL_KEYS[0] in m for m in held], np.uint8) << 6
-    bits |= np.array([bool(m.get("growth_ratio")) for m in held], np.uint8) << 7
-    cols: dict[str, pa.Array] = {"row_keys": pa.array(bits, pa.uint8()), "names": of_metrics["names"]}
-    cols["complete"] = pa.array(complete, pa.bool_())
-    cols["run_reason"] = pa.array(reason, pa.string())
-    cols["measures"] = pa.array(measures, MEASURES)
-    cols["worker"] = worker if isinstance(worker, pa.Array) else pa.array(worker, WORKER)
-    for key, kind in NAMED.items():
-        if key not in OF_MEASURES:
-            if key in of_metrics:
-                cols[key] = of_metrics[key]
-            continue
-        held = [(m or {}).get(key) for m in measures]
-        names = sorted(set().union(*(d for d in held if d)))
-        if names:
-            cols[key] = pa.array(held, pa.struct([(n, kind) for n in names]))
-    return cols
-
-
-def _metric_named(metrics: list) -> dict[str, pa.Array]:
-    """The typed columns of the runs' metrics (each a dict, or None): ``names`` (:func:`_names`) and the
-    :data:`NAMED` structs the metrics hold (``tracked``, ``outputs_final``), each left out when no run has a name."""
-    metrics = [m or {} for m in metrics]
-    cols = {"names": _names(metrics)}
-    for key in _OF_METRICS:
-        held = [m.get(key) for m in metrics]
-        names = sorted(set().union(*(d for d in held if d)))
-        if names:
-            cols[key] = pa.array(held, pa.struct([(n, NAMED[key]) for n in names]))
-    return cols
-
-
-_OF_METRICS = tuple(key for key in NAMED if key not in OF_MEASURES)  # the NAMED structs a run's metrics hold
-
-
-def _tree_named(trees: list | None, n: int) -> dict[str, pa.Array] | None:
-    """:func:`_metric_named` of ``n`` runs from their metrics' column trees (:class:`~..loop.block_metrics.
-    BlockMetrics`' ``trees``) when one tree of dicts holds them all in order, each name's figures a column (the
-    usual block); else None (the runs' dicts are made)."""
-    if not trees or len(trees) != 1 or trees[0][0] != list(range(n)) or not isinstance(trees[0][1], dict):
-        return None
-    tree = trees[0][1]
-    tracked, final = tree.get("tracked", {}), tree.get("outputs_final", {})
-    if not isinstance(tracked, dict) or not isinstance(final, dict):
-        return None
-    cells = [t.get(c) if isinstance(t, dict) else None for t in tracked.values() for c in TRACKED.names]
-    if not all(isinstance(col, list) for col in [*cells, *final.values()]):
-        return None
-    words = [compact_json([sorted(tracked), sorted(final)])]
-    cols = {"names": pa.DictionaryArray.from_arrays(pa.array(np.zeros(n, np.int32)), pa.array(words, pa.string()))}
-    if tracked:
-        cols["tracked"] = pa.StructArray.from_arrays(
-            [_struct_of({c: tracked[name][c] for c in TRACKED.names}, TRACKED) for name in sorted(tracked)],
-            fields=[pa.field(name, TRACKED) for name in sorted(tracked)],
-        )
-    if final:
-        kind = NAMED["outputs_final"]
-        cols["outputs_final"] = _struct_of(final, pa.struct([(name, kind) for name in sorted(final)]))
-    return cols
-
-
-def _struct_of(columns: dict[str, list], kind: pa.StructType) -> pa.StructArray:
-    """The struct array of type ``kind`` whose field ``f`` holds ``columns[f]`` (each field a column of its type)."""
-    return pa.StructArray.from_arrays([pa.array(columns[f.name], f.type) for f in kind], fields=list(kind))
-
-
-_FLOAT_MEASURES = ("longest_saturation_s", "twin_command_deviation", "twin_output_deviation", "model_iae_ratio",
-                   "model_mismatch")  # fmt: skip
-_MEASURE_SETS = {
-    frozenset(MEASURE_KEYS + twin + model) for twin in ((), TWIN_KEYS) for model in ((), MODEL_KEYS)
-}  # the key sets a run's measures have (:func:`.criteria.measure`): with or without each twin's
-
-
-_NUMBERS = frozenset({float, type(None)})  # what a float64 column gives back as JSON wrote it (not an int, not numpy's)
-
-
-def _given(row: dict, names: dict[str, list[str]]) -> bool:
-    """Whether the typed columns give row ``row`` (a :func:`_split` ``row``) exactly, so that :func:`row_texts` makes
-    its JSON text from them and its metrics' text: each value of the types its column holds, its measures one of the
-    key sets :func:`.criteria.measure` makes, with the block's names (``names``: the :data:`OF_MEASURES` structs'
-    fields) in ``output_min`` and ``output_max`` and in ``growth_ratio`` or none. (Its floats' finiteness is checked
-    over the columns, :func:`_finite`.)"""
-    complete, reason, worker = row.get("complete"), row.get("run_reason"), row.get("worker")
-    if not (complete is None or type(complete) is bool) or not (reason is None or type(reason) is str):
-        return False
-    if worker is not None and not _given_worker(worker):
-        return False
-    m = row.get("measures")
-    if m is None:
-        return True
-    if type(m) is not dict or frozenset(m) not in _MEASURE_SETS:
-        return False
-    if not all(m.get(k) is None or type(m[k]) is bool for k in ("stable", "model_warning")):
-        return False
-    if not (m["unstable_reason"] is None or type(m["unstable_reason"]) is str):
-        return False
-    if not {type(m[k]) for k in _FLOAT_MEASURES if k in m} <= _NUMBERS:
-        return False
-    for key in OF_MEASURES:
-        held = m[key]
-        if type(held) is not dict or not set(map(type, held.values())) <= _NUMBERS:
-            return False
-        if sorted(held) != names[key] and (held or key != "growth_ratio"):  # growth ratios: every name's or none
-            return False
-    return True
-
-
-def _given_columns(runs: BlockRuns, names: dict[str, list[str]]) -> np.ndarray:
-    """:func:`_given` of each run of ``runs``, checked a column at a time when the runs' values are of one form (the
-    usual block: every measures dict of one key set, the block's names in each), else run by run."""
-    n = len(runs.complete)
-    if n and _one_form(runs, names):
-        return np.ones(n, bool)
-    return np.array([_given(_row_of(runs, i, metrics=False), names) for i in range(n)], bool)
-
-
-def _one_form(runs: BlockRuns, names: dict[str, list[str]]) -> bool:
-    """Whether every run of ``runs`` is given (:func:`_given`), by checks over its columns: False may be wrong."""
-    if not set(map(type, runs.complete)) <= {bool, type(None)} or not set(map(type, runs.reason)) <= {str, type(None)}:
-        return False
-    shares = {id(w): w for w in runs.worker}.values()  # a block's runs share one
-    if not all(map(_given_worker, shares)) or set(map(type, runs.measures)) != {dict}:
-        return False
-    keys = sorted(runs.measures[0])
-    if frozenset(keys) not in _MEASURE_SETS or set(map(len, runs.measures)) != {len(keys)}:
-        return False
-    try:
-        columns = dict(zip(keys, zip(*map(itemgetter(*keys), runs.measures))))
-    except KeyError:
-        return False
-    kinds = {key: set(map(type, col)) for key, col in columns.items()}
-    if not all(kinds[k] <= {bool, type(None)} for k in ("stable", "model_warning") if k in kinds):
-        return False
-    if not kinds["unstable_reason"] <= {str, type(None)} or not all(
-        kinds[k] <= _NUMBERS for k in _FLOAT_MEASURES if k in kinds
-    ):
-        return False
-    return all(_named_given(columns[key], names[key], empty=key == "growth_ratio") for key in OF_MEASURES)
-
-
-def _named_given(held: tuple, names: list[str], *, empty: bool) -> bool:
-    """Whether each of ``held`` (a measure's dicts by name) is a dict of floats or None with keys ``names`` (or no
-    key, when ``empty``)."""
-    if set(map(type, held)) != {dict}:
-        return False
-    sizes = set(map(len, held))
-    if sizes != {len(names)} and not (empty and sizes <= {0, len(names)}):
-        return False
-    full = [d for d in held if d] if 0 in sizes else list(held)
-    if not names:
-        return not full
-    try:
-        values = list(map(itemgetter(*names), full))
-    except KeyError:
-        return False
-    values = values if len(names) > 1 else [(v,) for v in values]
-    return set(map(type, chain.from_iterable(values))) <= _NUMBERS
-
-
-def _given_worker(worker: Any) -> bool:
-    """Whether a row's ``worker`` is the dict a worker records (:data:`WORKER_KEYS`, and ``block`` in a block)."""
-    if type(worker) is not dict or len(worker) != (5 if "block" not in worker else 6):
-        return False
-    if "block" in worker and type(worker["block"]) is not int:
-        return False
-    host, pid = worker.get("host"), worker.get("pid")
-    if type(host) is not str or type(pid) is not int:
-        return False
-    return all(type(worker.get(k)) is float for k in ("start", "stop", "cpu_s"))
-
-
-def _finite(typed: dict[str, pa.Array], rows: int) -> np.ndarray:
-    """Which rows have no infinite or NaN value in the floats of the typed columns a row's text is made from (JSON
-    refuses them: such a row is kept whole, and its JSON raises as it did)."""
-    ok = np.ones(rows, bool)
-    todo = [typed[k] for k in ("measures", "worker", *OF_MEASURES) if k in typed]
-    for col in todo:
-        for field, arr in zip(col.type, col.flatten()):
-            if pa.types.is_floating(field.type) and arr.null_count < len(arr):
-                ok &= np.asarray(pc.fill_null(pc.is_finite(arr), True).to_numpy(zero_copy_only=False), bool)
-    return ok
-
-
-def _names(metrics: list[dict]) -> pa.DictionaryArray:
-    """Each run's ``[[tracked...], [outputs...]]`` (sorted), dictionary-encoded: a block's runs share one or two."""
-    texts: dict[tuple, int] = {}
-    codes = []
-    for m in metrics:
-        key = (tuple(sorted(m.get("tracked", ()))), tuple(sorted(m.get("outputs_final", ()))))
-        codes.append(texts.setdefault(key, len(texts)))
-    words = [compact_json([list(t), list(o)]) for t, o in texts]
-    return pa.DictionaryArray.from_arrays(pa.array(codes, pa.int32()), pa.array(words, pa.string()))
 
 
 _TRUTH = {True: "true", False: "false", None: "null"}
@@ -671,9 +346,9 @@ def _key(name: str) -> str:
 def row_texts(table: pa.Table, texts: dict[str, list[str]] | None = None) -> list[str]:
     """Each row's JSON text, as ``json.dumps(row, sort_keys=True, separators=(",", ":"))`` writes the :func:`_split`
     ``row`` the block was made from: the ``row`` column's where the typed columns could not give it exactly
-    (:func:`_given`), else made from the typed columns and the ``metrics`` column's text: each value made text once,
-    a column at a time (``texts``: :func:`_value_texts` of ``table``, when made already), and the runs of one form
-    (which keys the row and its measures have, which are null) filled into one template."""
+    (:func:`.block_columns._given`), else made from the typed columns and the ``metrics`` column's text: each value made
+    text once, a column at a time (``texts``: :func:`_value_texts` of ``table``, when made already), and the runs of one
+    form (which keys the row and its measures have, which are null) filled into one template."""
     out = table.column("row").to_pylist()
     typed = np.flatnonzero(table.column("row").is_null().to_numpy(zero_copy_only=False))
     if not typed.size:
@@ -694,8 +369,9 @@ def row_texts(table: pa.Table, texts: dict[str, list[str]] | None = None) -> lis
 
 
 def _row_template(form: int) -> tuple[str, list[str]]:
-    """The JSON text of the rows of one ``form`` (bits: :data:`ROW_BITS`, then whether ``measures``, ``worker`` and
-    ``worker.block`` are not null) as a ``%`` template and the names of the texts (:func:`_value_texts`) it takes."""
+    """The JSON text of the rows of one ``form`` (bits: :data:`.block_layout.ROW_BITS`, then whether ``measures``,
+    ``worker`` and ``worker.block`` are not null) as a ``%`` template and the names of the texts (:func:`_value_texts`)
+    it takes."""
     has = {name: bool(form >> k & 1) for k, name in enumerate((*ROW_BITS, "measures?", "worker?", "block?"))}
     parts: list[tuple[str, str | None]] = []  # (literal text, the value after it)
     if has["complete"]:
@@ -766,32 +442,6 @@ def _joined(rest: dict, row: dict) -> dict:
     if "run_reason" in row:
         row = {k: v for k, v in row.items() if k != "run_reason"} | {"reason": row["run_reason"]}
     return rest | row
-
-
-def _blobs(rows: list[np.ndarray | None], dtype: type = np.float32) -> pa.LargeBinaryArray:
-    """Arrays of ``dtype`` (``None``: no value) as one Arrow binary array, each row its array's bytes in C order: one
-    concatenation and its offsets, not an Arrow value a row. Parquet writes a binary value as one length and its bytes
-    (a list of floats: a repetition and a definition level per float, 2.3x the CPU of the block file's write)."""
-    valid = np.array([r is not None for r in rows], bool)
-    present = [r for r in rows if r is not None]
-    sizes = np.zeros(len(rows), np.int64)
-    sizes[valid] = [r.size for r in present]
-    sizes *= np.dtype(dtype).itemsize
-    offsets = np.concatenate(([0], np.cumsum(sizes)))
-    # axis None: each array flattened in C order into the one copy (not a copy and a view a row: ~0.8 us a run)
-    data = np.concatenate(present, axis=None, dtype=dtype, casting="same_kind") if present else np.zeros(0, dtype)
-    bits = pa.py_buffer(np.packbits(valid, bitorder="little"))
-    buffers = [bits, pa.py_buffer(offsets), pa.py_buffer(data)]
-    return pa.Array.from_buffers(pa.large_binary(), len(rows), buffers, null_count=int((~valid).sum()))
-
-
-def _stacked_blobs(A: np.ndarray, dtype: type = np.float32) -> pa.LargeBinaryArray:
-    """:func:`_blobs` of the rows of ``A`` (runs, ...) as ``dtype``, none missing: its bytes as they lie when C-ordered
-    (not copied when so already: a block's outputs and commands, ~6 MB a 1,000-run block), each row one value."""
-    data = np.ascontiguousarray(A, dtype).reshape(-1)
-    size = data.size // max(A.shape[0], 1) * data.itemsize
-    offsets = np.arange(A.shape[0] + 1, dtype=np.int64) * size
-    return pa.Array.from_buffers(pa.large_binary(), A.shape[0], [None, pa.py_buffer(offsets), pa.py_buffer(data)])
 
 
 def folder_key(folder: Path) -> tuple[int, int]:
@@ -1252,8 +902,8 @@ class Store:
 @dataclass(frozen=True)
 class ReportPart:
     """What the report reads of some stored runs (a block file's), one entry a run: from the typed columns of
-    :func:`row_columns`, as numpy arrays (numbers; NaN where null) and, for ``campaign.csv``'s cells, each column's
-    values as JSON writes them (``null`` where null), made once for the row's text and the cells."""
+    :func:`.block_columns.row_columns`, as numpy arrays (numbers; NaN where null) and, for ``campaign.csv``'s cells,
+    each column's values as JSON writes them (``null`` where null), made once for the row's text and the cells."""
 
     ids: np.ndarray  # ASCII bytes
     error: np.ndarray  # bool: the run's record is an error

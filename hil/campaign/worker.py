@@ -46,10 +46,11 @@ from gainlink.shipping.artifact import Artifact, from_dict
 from ..loop.scenario import DRAWN, parse_scenario
 from ..paths import cache_dir
 from ..plants.fmu import reused_instances
+from .block_columns import BlockRuns
 from .config import path_steps
 from .criteria import measure, measure_block
 from .plan import DescribedRuns, MadeRuns
-from .store import BlockRuns, encode_block, encode_runs, with_inputs, write_block
+from .store import encode_block, encode_runs, with_inputs, write_block
 
 MAX_TRACE_POINTS = 600
 MAX_BUS_SLOTS = 64
