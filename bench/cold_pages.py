@@ -82,9 +82,9 @@ def block() -> dict:
     import pyarrow.parquet as pq
     from gainlink.hil.campaign import parse_campaign
     from gainlink.hil.campaign import worker as wk
+    from gainlink.hil.campaign.block_file import folder_key
     from gainlink.hil.campaign.plan import plan_campaign
     from gainlink.hil.campaign.runner import batch_sizes
-    from gainlink.hil.campaign.store import folder_key
 
     plan = plan_campaign(parse_campaign(shipped_pendulum(BLOCK_DRAWS)))
     runs = len(plan.runs.ids)

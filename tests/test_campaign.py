@@ -642,9 +642,9 @@ def test_a_long_run_is_stored_as_evenly_spaced_true_samples_with_both_ends():
 
 def test_a_block_file_holds_each_runs_record_and_traces_and_a_foreign_worker_answer_is_named(tmp_path):
     from gainlink.errors import GainlinkError
+    from gainlink.hil.campaign.block_file import encode_block
     from gainlink.hil.campaign.block_layout import block_address, encode_trace
     from gainlink.hil.campaign.runner import _block_bytes
-    from gainlink.hil.campaign.store import encode_block
 
     rng = np.random.default_rng(3)
     trace = {
@@ -681,8 +681,8 @@ def test_every_column_of_a_block_file_is_compressed_the_json_texts_with_zstd():
     the file's Parquet metadata."""
     import pyarrow as pa
     import pyarrow.parquet as pq
+    from gainlink.hil.campaign.block_file import encode_block
     from gainlink.hil.campaign.block_layout import encode_trace
-    from gainlink.hil.campaign.store import encode_block
 
     n = 6
     trace = encode_trace(np.arange(n) * 0.1, np.ones((n, 2)), np.ones((n, 1)), np.zeros((n, 1)))
@@ -708,8 +708,8 @@ def test_stacked_traces_are_the_runs_own_with_errors_and_other_lengths_between_t
     runs not asked for) and however the batches cut the block; a run read alone (``Store.trace``) is a copy of its
     own."""
     from gainlink.hil.campaign import store as store_module
+    from gainlink.hil.campaign.block_file import encode_block
     from gainlink.hil.campaign.block_layout import encode_trace
-    from gainlink.hil.campaign.store import encode_block
 
     monkeypatch.setattr(store_module, "TRACE_BATCH", batch)
     rng = np.random.default_rng(5)
@@ -744,9 +744,9 @@ def test_the_envelopes_read_block_by_block_are_numpys_percentiles_within_half_a_
     ``np.nanpercentile`` of all the runs stacked, within the half bin the function states; each block read whole,
     and 32 runs at a time (batches that split a block's runs of one length)."""
     from gainlink.hil.campaign import store as store_module
+    from gainlink.hil.campaign.block_file import encode_block
     from gainlink.hil.campaign.block_layout import encode_trace
     from gainlink.hil.campaign.report import PERCENTILES, envelope_bands
-    from gainlink.hil.campaign.store import encode_block
 
     if batch is not None:
         monkeypatch.setattr(store_module, "TRACE_BATCH", batch)

@@ -333,7 +333,7 @@ def test_a_task_of_more_runs_than_step_in_lockstep_steps_them_in_parts_with_the_
     made from those lists is the one the records make (``encode_block``, the per-run path's), column by column."""
     import pyarrow as pa
     import pyarrow.parquet as pq
-    from gainlink.hil.campaign import store, worker
+    from gainlink.hil.campaign import block_columns, block_file, worker
 
     plan, runs = _clamp_campaign(runs=8, duration=1.0)
     whole = worker.batch_records("sil", plan.artifacts, runs)
@@ -353,14 +353,14 @@ def test_a_task_of_more_runs_than_step_in_lockstep_steps_them_in_parts_with_the_
         assert _same_trace(got, want)
     lists = worker._block_runs("sil", runs, task)
     assert lists.measures == [r["measures"] for r in parts] and lists.metrics is None
-    assert store._metrics_of(lists) == [r["metrics"] for r in parts]
+    assert block_file._metrics_of(lists) == [r["metrics"] for r in parts]
     assert lists.worker == [r["worker"] for r in parts]
     assert [positions for positions, _ in lists.metric_trees] == [list(range(8))]  # the parts' trees joined
-    assert store._tree_named(lists.metric_trees, 8) is not None  # the typed columns straight from the tree
+    assert block_columns._tree_named(lists.metric_trees, 8) is not None  # the typed columns straight from the tree
     ids = [f"run{i}" for i in range(8)]
-    made = pq.read_table(pa.BufferReader(store.encode_runs(ids, lists, campaign="c")))
-    records = [store.with_inputs(r, run, kind="sil") for r, run in zip(parts, runs)]
-    oracle = pq.read_table(pa.BufferReader(store.encode_block(ids, records, campaign="c")))
+    made = pq.read_table(pa.BufferReader(block_file.encode_runs(ids, lists, campaign="c")))
+    records = [block_file.with_inputs(r, run, kind="sil") for r, run in zip(parts, runs)]
+    oracle = pq.read_table(pa.BufferReader(block_file.encode_block(ids, records, campaign="c")))
     assert made.schema.equals(oracle.schema, check_metadata=True)
     for name in oracle.column_names:
         assert made.column(name).equals(oracle.column(name)), name
@@ -541,7 +541,7 @@ def test_resuming_into_a_folder_with_foreign_blocks_is_refused_in_one_line(tmp_p
 
     import pyarrow as pa
     import pyarrow.parquet as pq
-    from gainlink.hil.campaign.store import encode_block
+    from gainlink.hil.campaign.block_file import encode_block
     from gainlink.version import __version__
     from support.cli import assert_refused
 
@@ -717,7 +717,7 @@ def test_a_blocks_metrics_as_columns_are_each_runs_own_compute_metrics(design):
 def test_a_blocks_metrics_columns_from_its_column_trees_are_those_of_its_runs_dicts(design):
     """The block file's metrics columns made from the block's column trees (one tree a structure of the runs' dicts:
     with a twin or not, integrator peaks or not; runs of several lengths and groups joined) are those the runs' dicts
-    make (store.metric_columns, itself checked against json's text), every column equal; runs of no steps leave
+    make (block_columns.metric_columns, itself checked against json's text), every column equal; runs of no steps leave
     the trees unusable for that (their dicts held whole) and the worker then takes the dicts."""
     from gainlink.hil.campaign.block_columns import metric_columns, tree_metric_columns
     from gainlink.hil.loop.block_metrics import RUNS_AT_ONCE, metric_trees

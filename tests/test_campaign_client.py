@@ -178,9 +178,10 @@ def test_a_worker_that_sees_the_campaign_folder_writes_its_block_and_one_that_do
     import os
     import pickle
 
+    from gainlink.hil.campaign.block_file import folder_key
     from gainlink.hil.campaign.block_layout import block_address
     from gainlink.hil.campaign.runner import _store_answer, plan_doc
-    from gainlink.hil.campaign.store import Store, folder_key
+    from gainlink.hil.campaign.store import Store
     from gainlink.hil.campaign.worker import execute_packed
 
     plan, points, runs = _pendulum_task(4)
@@ -225,9 +226,10 @@ def test_a_block_keeping_some_traces_stores_only_theirs_and_its_metrics_from_the
     columns come from the block's column trees either way (not the runs' dicts walked again)."""
     import pickle
 
-    import gainlink.hil.campaign.store as store_module
+    import gainlink.hil.campaign.block_file as block_file
+    from gainlink.hil.campaign.block_file import folder_key
     from gainlink.hil.campaign.runner import _store_answer, plan_doc
-    from gainlink.hil.campaign.store import Store, folder_key
+    from gainlink.hil.campaign.store import Store
     from gainlink.hil.campaign.worker import execute_packed
 
     plan, points, runs = _pendulum_task(4)
@@ -235,8 +237,8 @@ def test_a_block_keeping_some_traces_stores_only_theirs_and_its_metrics_from_the
     ids = [p.id for p in points]
     paths: list[str] = []
     for name in ("tree_metric_columns", "metric_columns"):
-        real = getattr(store_module, name)
-        monkeypatch.setattr(store_module, name, lambda *a, _real=real, _name=name: paths.append(_name) or _real(*a))
+        real = getattr(block_file, name)
+        monkeypatch.setattr(block_file, name, lambda *a, _real=real, _name=name: paths.append(_name) or _real(*a))
     stored = {}
     for kept in (None, [True, False, True, False]):
         store = Store(tmp_path / str(kept is None), campaign=plan.campaign.name)
@@ -267,8 +269,9 @@ def test_a_task_runs_its_steps_outside_the_runs_without_cyclic_collection_and_le
     import pickle
 
     import gainlink.hil.campaign.worker as worker
+    from gainlink.hil.campaign.block_file import folder_key
     from gainlink.hil.campaign.runner import plan_doc
-    from gainlink.hil.campaign.store import Store, folder_key
+    from gainlink.hil.campaign.store import Store
 
     plan, points, runs = _pendulum_task(4)
     store = Store(tmp_path, campaign=plan.campaign.name)

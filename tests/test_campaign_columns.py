@@ -16,13 +16,14 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from gainlink.hil.campaign import parse_campaign
+from gainlink.hil.campaign.block_file import encode_block, with_inputs
 from gainlink.hil.campaign.block_layout import METRIC_COLUMNS
 from gainlink.hil.campaign.config import Criteria
 from gainlink.hil.campaign.criteria import evaluate, evaluate_columns
 from gainlink.hil.campaign.plan import CampaignPlan, RunPoint
 from gainlink.hil.campaign.report import merge
 from gainlink.hil.campaign.rows import MEASURE_CELLS, METRIC_CELLS
-from gainlink.hil.campaign.store import Store, encode_block, metric_texts, with_inputs
+from gainlink.hil.campaign.store import Store, metric_texts
 from support.paths import EXAMPLES
 
 CRITERIA = Criteria(
@@ -255,8 +256,9 @@ def test_a_shipped_runs_row_is_made_from_its_columns(tmp_path):
     import pyarrow as pa
     import pyarrow.parquet as pq
     from gainlink.fileio import read_toml
+    from gainlink.hil.campaign.block_file import encode_block
     from gainlink.hil.campaign.plan import plan_campaign
-    from gainlink.hil.campaign.store import encode_block, row_texts
+    from gainlink.hil.campaign.store import row_texts
     from gainlink.hil.campaign.worker import batch_records
 
     path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
@@ -436,7 +438,7 @@ def test_a_blocks_runs_as_lists_make_the_file_their_records_make():
     record takes (measures None, without the twins' keys, an int among the floats, a worker without ``block``, NaN
     where JSON says null), so the typed columns' checks fall back run by run."""
     from gainlink.hil.campaign.block_columns import BlockRuns
-    from gainlink.hil.campaign.store import encode_runs
+    from gainlink.hil.campaign.block_file import encode_runs
 
     rng = np.random.default_rng(11)
     records = [r for k in range(120) if (r := _record(rng, k))["status"] == "done"]
@@ -471,8 +473,8 @@ def test_a_blocks_run_its_typed_columns_cannot_give_is_stored_whole_with_its_met
 
     from gainlink.fileio import read_toml
     from gainlink.hil.campaign import worker
+    from gainlink.hil.campaign.block_file import encode_runs
     from gainlink.hil.campaign.plan import plan_campaign
-    from gainlink.hil.campaign.store import encode_runs
 
     path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
     data, _ = read_toml(path, what="campaign", error=ValueError)
@@ -505,8 +507,8 @@ def test_a_workers_block_file_is_the_one_its_records_make(tmp_path, interleaved)
     show``'s record of each run is its record."""
     from gainlink.fileio import read_toml
     from gainlink.hil.campaign import block_columns, worker
+    from gainlink.hil.campaign.block_file import encode_runs
     from gainlink.hil.campaign.plan import plan_campaign
-    from gainlink.hil.campaign.store import encode_runs
 
     path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"
     data, _ = read_toml(path, what="campaign", error=ValueError)

@@ -211,7 +211,7 @@ def test_a_described_tasks_records_are_the_enumerated_tasks_run_for_run():
     """``batch_records`` of a described task (blocks across grid points, a run alone with a fault) and of the same runs
     enumerated: the same statuses, measures and downsampled traces bit for bit, and each record's inputs are the
     plan's run."""
-    from gainlink.hil.campaign.store import with_inputs
+    from gainlink.hil.campaign.block_file import with_inputs
 
     plan = plan_campaign(_campaign([SCALE_M, INITIAL], runs=4))
     block = np.arange(len(plan.runs))[::3]

@@ -17,10 +17,11 @@ import pyarrow.parquet as pq
 import pytest
 from gainlink.hil.campaign import figures, report
 from gainlink.hil.campaign import store as store_module
+from gainlink.hil.campaign.block_file import encode_block
 from gainlink.hil.campaign.block_layout import encode_trace
 from gainlink.hil.campaign.report import PERCENTILES, envelope_bands
 from gainlink.hil.campaign.rows import RunStatus
-from gainlink.hil.campaign.store import Store, encode_block
+from gainlink.hil.campaign.store import Store
 
 N = 40  # samples a trace
 DRAWS = 100  # draws a grid point: run k is draw k % 100 of grid point k // 100

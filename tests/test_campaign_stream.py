@@ -16,9 +16,10 @@ import tracemalloc
 
 import numpy as np
 from gainlink.hil.campaign import parse_campaign
+from gainlink.hil.campaign.block_file import encode_block, with_inputs
 from gainlink.hil.campaign.plan import CampaignPlan, RunPoint, plan_campaign
 from gainlink.hil.campaign.report import merge
-from gainlink.hil.campaign.store import Store, encode_block, with_inputs
+from gainlink.hil.campaign.store import Store
 from gainlink.shipping.artifact import canonical_json
 from gainlink.version import __version__
 from support.paths import EXAMPLES

@@ -38,17 +38,17 @@ from .jsontext import (
 @dataclass(frozen=True)
 class BlockRuns:
     """The finished runs of a block as lists, one entry a run, what a block's records would hold (``status`` done, a
-    ``reason`` each, no ``row`` key missing): :func:`.store.encode_runs` stores them as :func:`.store.encode_block`
-    stores their records, without a record dict a run."""
+    ``reason`` each, no ``row`` key missing): :func:`.block_file.encode_runs` stores them as
+    :func:`.block_file.encode_block` stores their records, without a record dict a run."""
 
     kind: str
-    inputs: list  # (artifact sha256, scenario, seed) of each run, as :func:`.store.with_inputs` takes them
+    inputs: list  # (artifact sha256, scenario, seed) of each run, as :func:`.block_file.with_inputs` takes them
     complete: list
     reason: list
     metrics: list | None  # each run's dict; None when its metric_trees hold them (made from those when needed)
     measures: list
     link: list
-    traces: list | dict  # encode_trace's arrays, or all runs' at once (:func:`.store._block_file`)
+    traces: list | dict  # encode_trace's arrays, or all runs' at once (:func:`.block_file._block_file`)
     worker: list  # each run's: its block's share (host, pid, start, stop, cpu_s, block), one dict a block
     metric_trees: list | None = None  # the metrics as column trees (:func:`tree_metric_columns`), when made so
     # the scenarios of ``inputs`` as column trees, (start, stop, tree) in order (DescribedRuns.scenario_trees), and
@@ -58,8 +58,8 @@ class BlockRuns:
 
 
 def _row_of(runs: BlockRuns, i: int, *, metrics: bool = True) -> dict:
-    """Run ``i``'s ``row`` (:func:`.store._split`'s) of ``runs``; without its metrics when ``metrics`` is false (what
-    :func:`_given` checks holds none: a block's dicts are made from its trees only for a row stored whole)."""
+    """Run ``i``'s ``row`` (:func:`.block_file._split`'s) of ``runs``; without its metrics when ``metrics`` is false
+    (what :func:`_given` checks holds none: a block's dicts are made from its trees only for a row stored whole)."""
     row = {"complete": runs.complete[i], "measures": runs.measures[i], "worker": runs.worker[i],
            "run_reason": runs.reason[i]}  # fmt: skip
     return row | {"metrics": runs.metrics[i]} if metrics else row  # type: ignore[index]
@@ -145,8 +145,8 @@ def _one_form_columns(form: Form, n: int) -> dict[str, pa.Array]:
 
 
 def row_columns(rows: list[dict]) -> dict[str, pa.Array]:
-    """What the verdicts and ``campaign.csv`` read of the rows ``rows`` (each a :func:`.store._split` ``row``), as typed
-    columns beside its JSON text (which a run's row and :meth:`.store.Store.record` give as it is):
+    """What the verdicts and ``campaign.csv`` read of the rows ``rows`` (each a :func:`.block_file._split` ``row``), as
+    typed columns beside its JSON text (which a run's row and :meth:`.store.Store.record` give as it is):
 
     - ``row_keys`` (uint8): bit k set when the row has :data:`.block_layout.ROW_BITS` [k] (a key holding ``None`` is not
     a key
@@ -261,7 +261,7 @@ _NUMBERS = frozenset({float, type(None)})  # what a float64 column gives back as
 
 
 def _given(row: dict, names: dict[str, list[str]]) -> bool:
-    """Whether the typed columns give row ``row`` (a :func:`.store._split` ``row``) exactly, so that
+    """Whether the typed columns give row ``row`` (a :func:`.block_file._split` ``row``) exactly, so that
     :func:`.store.row_texts` makes its JSON text from them and its metrics' text: each value of the types its column
     holds, its measures one of the key sets :func:`.criteria.measure` makes, with the block's names (``names``: the
     :data:`.block_layout.OF_MEASURES` structs' fields) in ``output_min`` and ``output_max`` and in ``growth_ratio`` or

@@ -68,8 +68,8 @@ def encode_trace(t: np.ndarray, y: np.ndarray, u: np.ndarray, r: np.ndarray) -> 
     """A run's traces as a block file stores them: float32 ``t`` (N,) and ``y`` (N x p outputs), ``u`` (N x m
     commands), ``r`` (N x q references), each contiguous.
 
-    How a worker's record carries its traces to the block's table (:func:`.store.encode_block`): as arrays, not bytes to
-    decode again.
+    How a worker's record carries its traces to the block's table (:func:`.block_file.encode_block`): as arrays, not
+    bytes to decode again.
     """
     out = {"t": np.ascontiguousarray(t, np.float32).reshape(-1)}
     for k, v in (("y", y), ("u", u), ("r", r)):
@@ -85,8 +85,9 @@ def block_address(run_ids: Iterable[str]) -> str:
 
 #: The block file's columns whose values repeat from run to run (dictionary-encoded in the Parquet file).
 REPEATED = ["status", "names", "run_reason", "metrics_form"]
-#: The block file's columns of JSON texts, compressed with zstd (every other leaf with LZ4: :func:`.store._block_file`).
+#: The block file's columns of JSON texts, compressed with zstd (every other leaf with LZ4:
+#: :func:`.block_file._block_file`).
 TEXTS = ("id", "record", "row", "metrics", "metrics_slots")
-#: The columns that hold a run's metrics (:func:`.store.metric_columns`, :func:`.store.metric_texts`).
+#: The columns that hold a run's metrics (:func:`.block_columns.metric_columns`, :func:`.store.metric_texts`).
 METRIC_COLUMNS = ("metrics", "metrics_form", "metrics_slots", "metrics_numbers")
 SLOT = "\x00"  # between a run's text slots: a JSON text holds no NUL (json writes it \u0000)

@@ -34,12 +34,13 @@ import numpy as np
 from gainlink.errors import GainlinkError
 from gainlink.version import __version__
 
+from .block_file import folder_key
 from .cluster import check_main_guard, dask_client
 from .config import Campaign, CampaignError, load_campaign, parse_campaign
 from .figures import Figure, png_of
 from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign, task_uses
 from .report import merge, traced_runs
-from .store import Store, folder_key, refuse_foreign
+from .store import Store, refuse_foreign
 from .worker import execute_packed
 
 log = logging.getLogger(__name__)

@@ -23,10 +23,11 @@ metadata names the gainlink version, the campaign that wrote it and the file's l
 folder holding another's blocks, or blocks of an earlier layout, is refused in one line on resume
 (:func:`refuse_foreign`).
 
-A worker that sees the campaign folder writes its block file there itself (:func:`write_block`); the client notes it
-(:meth:`Store.took_block`) without reading it. A task whose runs all stepped in blocks is stored from the blocks' lists
-(:class:`.block_columns.BlockRuns`, :func:`encode_runs`: no record dict a run), the same table :func:`encode_block`
-makes of the runs' records; the JSON texts of a block's runs are made a structure at a time (:mod:`.jsontext`).
+A worker that sees the campaign folder writes its block file there itself (:func:`.block_file.write_block`); the client
+notes it (:meth:`Store.took_block`) without reading it. A task whose runs all stepped in blocks is stored from the
+blocks' lists (:class:`.block_columns.BlockRuns`, :func:`.block_file.encode_runs`: no record dict a run), the same table
+:func:`.block_file.encode_block` makes of the runs' records; the JSON texts of a block's runs are made a structure at a
+time (:mod:`.jsontext`).
 
 A file is written to a temporary name and renamed (mode 0644 under the usual umask), so a run counts as done exactly
 when a block file holds it; a campaign killed at any point resumes by running the runs no block holds, and those whose
@@ -39,7 +40,7 @@ from __future__ import annotations
 import json
 import operator
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -53,21 +54,8 @@ from gainlink.version import __version__
 
 from .block_columns import (
     _FLOAT_MEASURES,
-    _NONE,
-    BlockRuns,
-    _blobs,
-    _finite,
-    _given,
-    _given_columns,
-    _metric_named,
-    _row_of,
-    _stacked_blobs,
-    _tree_named,
-    _typed_columns,
-    metric_columns,
-    row_columns,
-    tree_metric_columns,
 )
+from .block_file import encode_block, with_inputs
 from .block_layout import (
     LAYOUT,
     META_CAMPAIGN,
@@ -77,13 +65,9 @@ from .block_layout import (
     MODEL_KEYS,
     NAMED,
     OF_MEASURES,
-    REPEATED,
     ROW_BITS,
     ROW_COLUMNS,
-    ROW_KEYS,
-    SCHEMA,
     SLOT,
-    TEXTS,
     TRACE_FIELDS,
     TWIN_KEYS,
     WIDE,
@@ -94,11 +78,8 @@ from .config import CampaignError
 from .criteria import RunColumns
 from .jsontext import (
     ARROW_FLOATS,
-    compact_json,
     float_texts,
     form_texts,
-    json_texts,
-    object_texts,
 )
 from .plan import CampaignPlan, RunPoint
 
@@ -115,132 +96,6 @@ TRACE_BATCH = 128
 #: Bytes of a block file's column read at a time for the envelopes (:meth:`Store.trace_stacks`): its pages decoded as
 #: the batches need them, not its whole column chunk (a block's: one row group) read at once.
 TRACE_BUFFER = 1 << 20
-
-
-def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> pa.Buffer:
-    """The Parquet file of a block (an Arrow buffer, bytes-like): one row per run (``records[i]`` is run ``ids[i]``'s,
-    its traces as :func:`.block_layout.encode_trace` arrays under ``trace``). Made on the worker, which writes it into
-    the campaign folder when it can see the folder (:func:`write_block`), else returns its bytes for the client to
-    write."""
-    parts = [_split(run_id, record) for run_id, record in zip(ids, records)]
-    rows = [row for _, row in parts]
-    typed = row_columns(rows)
-    names = {key: [f.name for f in typed[key].type] if key in typed else [] for key in OF_MEASURES}
-    given = (_finite(typed, len(rows)) & np.array([_given(row, names) for row in rows], bool)).tolist()
-    texts = {
-        "id": pa.array(ids, pa.string()),
-        "status": pa.array([record["status"] for record in records], pa.string()),
-        "record": pa.array(json_texts([rest for rest, _ in parts]), pa.string()),
-        # JSON only for what the typed columns do not hold: a row's metrics, or a whole row they cannot give exactly
-        "row": pa.array([None if ok else compact_json(row) for row, ok in zip(rows, given)], pa.string()),
-        **metric_columns([row.get("metrics") if ok and "metrics" in row else _NONE for row, ok in zip(rows, given)]),
-    }
-    return _block_file(texts, [record.get("trace") for record in records], typed, campaign=campaign)
-
-
-def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
-    """The Parquet file of a block of finished runs given as lists (``runs``; run ``ids[i]`` is entry ``i``): the
-    file :func:`encode_block` makes of the runs' records, made a column at a time."""
-    n = len(ids)
-    of_metrics = _tree_named(runs.metric_trees, n) if runs.metrics is None else None
-    if of_metrics is None:
-        runs = replace(runs, metrics=_metrics_of(runs))
-        of_metrics = _metric_named(runs.metrics)
-    typed = _typed_columns([np.ones(n, bool)] * 5, runs.complete, runs.reason, runs.measures, of_metrics, runs.worker)
-    names = {key: [f.name for f in typed[key].type] if key in typed else [] for key in OF_MEASURES}
-    given = _finite(typed, n) & _given_columns(runs, names)
-    if runs.metrics is None and not given.all():  # a row the typed columns cannot give is stored whole
-        runs = replace(runs, metrics=_metrics_of(runs))
-    texts = {
-        "id": pa.array(ids, pa.string()),
-        "status": pa.array(["done"] * n, pa.string()),
-        "record": pa.array(_record_texts(ids, runs), pa.string()),
-        "row": pa.array(
-            [None if ok else compact_json(_row_of(runs, i)) for i, ok in enumerate(given.tolist())], pa.string()
-        ),
-        **_run_metric_columns(runs, given),
-    }
-    return _block_file(texts, runs.traces, typed, campaign=campaign)
-
-
-def _record_texts(ids: list[str], runs: BlockRuns) -> list[str]:
-    """Each run's record text (its id, inputs, link and status, as :func:`encode_block` writes the record's rest):
-    its scenario from :attr:`.block_columns.BlockRuns.scenario_trees` and its artifact and seed from
-    :attr:`.block_columns.BlockRuns.input_columns` when the runs have them, a grid part at a time, else from each run's
-    inputs."""
-    if runs.scenario_trees is not None and runs.input_columns is not None:
-        (shas, seeds), parts = runs.input_columns, runs.scenario_trees
-    else:
-        shas, scenarios, seeds = (list(col) for col in zip(*runs.inputs)) if ids else ([], [], [])
-        parts = [(0, len(ids), scenarios)]
-    texts: list[str] = []
-    for a, b, scenario in parts:
-        inputs = {"artifact_sha256": shas[a:b], "kind": [runs.kind] * (b - a), "scenario": scenario, "seed": seeds[a:b]}
-        record = {"id": ids[a:b], "inputs": inputs, "link": runs.link[a:b], "status": ["done"] * (b - a)}
-        texts += object_texts(record, b - a)
-    return texts
-
-
-def _run_metric_columns(runs: BlockRuns, given: np.ndarray) -> dict[str, pa.Array]:
-    """The metrics columns of ``runs`` (those not ``given`` null: their row's text holds them), from the block's
-    column trees when it has them and every run is given."""
-    if runs.metric_trees is not None and given.all():
-        return tree_metric_columns(runs.metric_trees, len(given))
-    return metric_columns(runs.metrics if given.all() else [m if ok else _NONE for m, ok in zip(runs.metrics, given)])
-
-
-def _metrics_of(runs: BlockRuns) -> list[dict]:
-    """Each run's metrics dict: those ``runs`` holds, or made from its column trees."""
-    from ..loop.block_metrics import BlockMetrics
-
-    if runs.metrics is not None:
-        return runs.metrics
-    return BlockMetrics(runs.metric_trees, len(runs.complete)).rows()  # type: ignore[arg-type]
-
-
-def _block_file(
-    texts: dict[str, pa.Array], traces: list | dict, typed: dict[str, pa.Array], *, campaign: str
-) -> pa.Buffer:
-    """The Parquet file of a block, as Arrow's buffer: the JSON and text columns ``texts``, the traces (each run's
-    :func:`.block_layout.encode_trace` arrays, None for none; or every run's at once, a dict of ``t`` (runs, N) and
-    ``y``, ``u``, ``r`` (runs, N, width) float32 arrays, each run's rows its own), the typed columns. Not copied into a
-    ``bytes`` (the worker that writes it into the folder itself writes the buffer: a copy of ~6 MB a block, and its
-    pages faulted in, saved)."""
-    cols = dict(texts)
-    if isinstance(traces, dict):
-        for k in ("t", *WIDE):
-            cols[k] = _stacked_blobs(traces[k])
-        for k in WIDE:
-            cols[f"{k}_width"] = pa.array(np.full(traces[k].shape[0], traces[k].shape[2], np.int32))
-    else:
-        cols["t"] = _blobs([None if tr is None else tr["t"] for tr in traces])
-        for k in WIDE:
-            cols[k] = _blobs([None if tr is None else tr[k] for tr in traces])
-            cols[f"{k}_width"] = pa.array([None if tr is None else tr[k].shape[1] for tr in traces], pa.int32())
-    fixed = pa.Table.from_arrays([cols[f.name] for f in SCHEMA], schema=SCHEMA)
-    table = pa.table(fixed.columns + list(typed.values()), names=fixed.column_names + list(typed))
-    meta = {META_VERSION: __version__.encode(), META_CAMPAIGN: campaign.encode("utf-8"), META_LAYOUT: LAYOUT.encode()}
-    table = table.replace_schema_metadata(meta)
-    sink = pa.BufferOutputStream()
-    # Dictionaries only for the columns that repeat: tried on every column, Arrow spent 110 of 183 ms (910 runs) on
-    # the traces' and the JSON texts' values, nearly all distinct, and the file came out 19 % larger. No statistics:
-    # nothing reads them (a trace's min and max bytes, a JSON text's), and they were 10 % of the write. The traces in
-    # LZ4: zstd gained 5 % of the file on float bytes for 3.5x the write and 3x the read (910 runs: 48 -> 14 and
-    # 25 -> 8 us a run). One row group a block: a row group a TRACE_BATCH of runs cost the write ~40 % more and the
-    # report's read of its columns ~75 % more (each column chunk's pages and metadata per group); the envelopes read
-    # a block's traces through a buffered stream (TRACE_BUFFER), its pages as the batches need them. zstd for the
-    # JSON texts only: on the typed columns' ~35 leaves its fixed cost a leaf (~30 us) was 0.9 ms of a 1,000-run
-    # block's 6.5 for a file no smaller.
-    codecs = {path: "zstd" if path in TEXTS else "lz4" for path in _leaf_paths(table.schema)}
-    pq.write_table(
-        table,
-        sink,
-        compression=codecs,
-        use_dictionary=REPEATED,
-        write_statistics=False,
-        row_group_size=max(table.num_rows, 1),
-    )
-    return sink.getvalue()
 
 
 def metric_texts(table: pa.Table) -> list[str | None]:
@@ -266,30 +121,6 @@ def metric_texts(table: pa.Table) -> list[str | None]:
         for i, text in zip(rows, form_texts(template, kinds, [list(c) for c in zip(*split)], floats)):
             out[i] = text
     return out
-
-
-def _leaf_paths(schema: pa.Schema) -> list[str]:
-    """The Parquet column paths of ``schema``'s leaves (a struct's fields as ``name.field``): a codec given by column
-    must name each leaf, or the leaf is written uncompressed."""
-    paths, todo = [], [(f.name, f.type) for f in schema]
-    while todo:
-        path, kind = todo.pop()
-        if pa.types.is_struct(kind):
-            todo += [(f"{path}.{f.name}", f.type) for f in kind]
-        else:
-            paths.append(path)
-    return paths
-
-
-def _split(run_id: str, record: dict) -> tuple[dict, dict]:
-    """A record (without its trace) as its ``record`` column's part (id, inputs, link, status, an error's reason)
-    and its ``row`` column's (:data:`.block_layout.ROW_KEYS`; a result's ``reason`` as ``run_reason``): the report reads
-    the row's text and its typed columns (:func:`.block_columns.row_columns`), not the record."""
-    rest = {k: v for k, v in record.items() if k != "trace"} | {"id": run_id}
-    row = {k: rest.pop(k) for k in ROW_KEYS if k in rest}
-    if record["status"] != "error" and "reason" in rest:
-        row["run_reason"] = rest.pop("reason")
-    return rest, row
 
 
 _TRUTH = {True: "true", False: "false", None: "null"}
@@ -344,11 +175,11 @@ def _key(name: str) -> str:
 
 
 def row_texts(table: pa.Table, texts: dict[str, list[str]] | None = None) -> list[str]:
-    """Each row's JSON text, as ``json.dumps(row, sort_keys=True, separators=(",", ":"))`` writes the :func:`_split`
-    ``row`` the block was made from: the ``row`` column's where the typed columns could not give it exactly
-    (:func:`.block_columns._given`), else made from the typed columns and the ``metrics`` column's text: each value made
-    text once, a column at a time (``texts``: :func:`_value_texts` of ``table``, when made already), and the runs of one
-    form (which keys the row and its measures have, which are null) filled into one template."""
+    """Each row's JSON text, as ``json.dumps(row, sort_keys=True, separators=(",", ":"))`` writes the
+    :func:`.block_file._split` ``row`` the block was made from: the ``row`` column's where the typed columns could not
+    give it exactly (:func:`.block_columns._given`), else made from the typed columns and the ``metrics`` column's text:
+    each value made text once, a column at a time (``texts``: :func:`_value_texts` of ``table``, when made already), and
+    the runs of one form (which keys the row and its measures have, which are null) filled into one template."""
     out = table.column("row").to_pylist()
     typed = np.flatnonzero(table.column("row").is_null().to_numpy(zero_copy_only=False))
     if not typed.size:
@@ -438,35 +269,10 @@ def _value_texts(table: pa.Table, cells: dict[str, list[str]] | None = None) -> 
 
 
 def _joined(rest: dict, row: dict) -> dict:
-    """The record :func:`_split` split."""
+    """The record :func:`.block_file._split` split."""
     if "run_reason" in row:
         row = {k: v for k, v in row.items() if k != "run_reason"} | {"reason": row["run_reason"]}
     return rest | row
-
-
-def folder_key(folder: Path) -> tuple[int, int]:
-    """What a worker compares to tell that the folder it sees at a path is the client's: its device and inode."""
-    st = folder.stat()
-    return st.st_dev, st.st_ino
-
-
-def write_block(
-    folder: str, key: tuple[int, int], ids: list[str], data: bytes | pa.Buffer, errors: list
-) -> dict | None:
-    """Write block file ``data`` (runs ``ids``; ``errors``: ``[row, reason]`` of its errors) into the campaign's
-    ``blocks`` folder when the folder at ``folder`` is the client's (``key``: :func:`folder_key` as the client saw
-    it), through a temporary name and a rename as the store writes one; ``None`` when this process cannot see it
-    (another machine: the client writes it). Returns what the client keeps of the block (:meth:`Store.took_block`):
-    its file's name, its number of runs and ``errors``."""
-    path = Path(folder)
-    try:
-        if folder_key(path) != tuple(key):
-            return None
-    except OSError:
-        return None
-    name = f"{block_address(ids)}.parquet"
-    atomic_write_bytes(path / name, data)
-    return {"block": name, "runs": len(ids), "errors": errors}
 
 
 def _row_groups(block: pq.ParquetFile, wanted: np.ndarray) -> list[int]:
@@ -722,8 +528,8 @@ class Store:
         return np.isin(ids, table_ids[done])
 
     def put_block(self, data: bytes | pa.Buffer) -> list[dict]:
-        """Store a block file made by :func:`encode_block`; returns each run's ``id``, ``status`` and ``reason`` (an
-        error's)."""
+        """Store a block file made by :func:`.block_file.encode_block`; returns each run's ``id``, ``status`` and
+        ``reason`` (an error's)."""
         table = pq.read_table(pa.BufferReader(data), columns=["id", "status"])
         ids, statuses = table.column("id").to_pylist(), table.column("status").to_pylist()
         name = f"{block_address(ids)}.parquet"
@@ -739,8 +545,8 @@ class Store:
         return [{"id": i, "status": s, "reason": r} for i, s, r in zip(ids, statuses, reasons)]
 
     def took_block(self, answer: dict, ids: list[str]) -> list[dict]:
-        """Note a block file a worker wrote itself (``answer``: :func:`write_block`'s, for runs ``ids``); returns each
-        run's ``id``, ``status`` and ``reason`` as :meth:`put_block` does, without reading the file."""
+        """Note a block file a worker wrote itself (``answer``: :func:`.block_file.write_block`'s, for runs ``ids``);
+        returns each run's ``id``, ``status`` and ``reason`` as :meth:`put_block` does, without reading the file."""
         if answer.get("runs") != len(ids) or answer.get("block") != f"{block_address(ids)}.parquet":
             raise GainlinkError(f"a worker wrote block {answer.get('block')!r}, not the one of these {len(ids)} runs")
         reasons: list[str | None] = [None] * len(ids)
@@ -974,9 +780,3 @@ def _fields(column: pa.ChunkedArray | pa.Array) -> dict[str, pa.Array]:
 def _numbers(arr: pa.Array) -> np.ndarray:
     """A float64 column as numpy, NaN where null."""
     return np.asarray(arr.to_numpy(zero_copy_only=False), np.float64)
-
-
-def with_inputs(record: dict, point: RunPoint | tuple, *, kind: str) -> dict:
-    """``record`` with the run's ``inputs`` (kind, artifact sha256, scenario, seed), as stored."""
-    sha, scenario, seed = (point.artifact_sha256, point.scenario, point.seed) if isinstance(point, RunPoint) else point
-    return record | {"inputs": {"kind": kind, "artifact_sha256": sha, "scenario": scenario, "seed": seed}}

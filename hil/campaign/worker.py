@@ -47,10 +47,10 @@ from ..loop.scenario import DRAWN, parse_scenario
 from ..paths import cache_dir
 from ..plants.fmu import reused_instances
 from .block_columns import BlockRuns
+from .block_file import encode_block, encode_runs, with_inputs, write_block
 from .config import path_steps
 from .criteria import measure, measure_block
 from .plan import DescribedRuns, MadeRuns
-from .store import encode_block, encode_runs, with_inputs, write_block
 
 MAX_TRACE_POINTS = 600
 MAX_BUS_SLOTS = 64
@@ -344,13 +344,13 @@ def execute_block(
     kept: Sequence[bool] | None = None,
 ) -> bytes | dict:
     """A campaign task: the runs of :func:`batch_records` (run ``ids[i]`` is ``runs[i]``) as the block's Parquet
-    file for the campaign folder (:func:`~.store.encode_block`), the traces of the runs ``kept`` says (every run's
+    file for the campaign folder (:func:`~.block_file.encode_block`), the traces of the runs ``kept`` says (every run's
     when None; the others' null).
 
-    ``folder``: the campaign's ``blocks`` folder and its :func:`~.store.folder_key` as the client saw them. When this
-    worker sees that folder (a LocalCluster, a shared file system), it writes the file there itself and returns a few
-    numbers (:func:`~.store.write_block`: the file's name, the runs, the errors' reasons); else it returns the file's
-    bytes and the client writes them.
+    ``folder``: the campaign's ``blocks`` folder and its :func:`~.block_file.folder_key` as the client saw them. When
+    this worker sees that folder (a LocalCluster, a shared file system), it writes the file there itself and returns a
+    few numbers (:func:`~.block_file.write_block`: the file's name, the runs, the errors' reasons); else it returns the
+    file's bytes and the client writes them.
     """
     from ..loop.scheduler import gc_paused
 
@@ -552,7 +552,7 @@ def _materialized(task: list) -> list[dict]:
 
 def _block_runs(kind: str, runs: list, task: list) -> BlockRuns:
     """The task's runs, every one a block's (``task``: :func:`_task_records`), as the lists of
-    :func:`~.store.encode_runs`, in task order."""
+    :func:`~.block_file.encode_runs`, in task order."""
     blocks = list({id(b): b for b in task}.values())
     order = np.argsort(np.concatenate([b.positions for b in blocks]), kind="stable").tolist()
     ordered = order == list(range(len(order)))
