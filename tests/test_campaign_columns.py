@@ -18,12 +18,13 @@ import pytest
 from gainlink.hil.campaign import parse_campaign
 from gainlink.hil.campaign.block_file import encode_block, with_inputs
 from gainlink.hil.campaign.block_layout import METRIC_COLUMNS
+from gainlink.hil.campaign.block_texts import metric_texts
 from gainlink.hil.campaign.config import Criteria
 from gainlink.hil.campaign.criteria import evaluate, evaluate_columns
 from gainlink.hil.campaign.plan import CampaignPlan, RunPoint
 from gainlink.hil.campaign.report import merge
 from gainlink.hil.campaign.rows import MEASURE_CELLS, METRIC_CELLS
-from gainlink.hil.campaign.store import Store, metric_texts
+from gainlink.hil.campaign.store import Store
 from support.paths import EXAMPLES
 
 CRITERIA = Criteria(
@@ -225,7 +226,7 @@ def test_a_rows_text_made_from_the_typed_columns_is_the_json_of_its_row(tmp_path
     JSON of it but its metrics', the others keep the whole row."""
     import pyarrow as pa
     import pyarrow.parquet as pq
-    from gainlink.hil.campaign.store import metric_texts, row_texts
+    from gainlink.hil.campaign.block_texts import metric_texts, row_texts
 
     _, store, records = _stored(tmp_path)
     checked, given = 0, 0
@@ -257,8 +258,8 @@ def test_a_shipped_runs_row_is_made_from_its_columns(tmp_path):
     import pyarrow.parquet as pq
     from gainlink.fileio import read_toml
     from gainlink.hil.campaign.block_file import encode_block
+    from gainlink.hil.campaign.block_texts import row_texts
     from gainlink.hil.campaign.plan import plan_campaign
-    from gainlink.hil.campaign.store import row_texts
     from gainlink.hil.campaign.worker import batch_records
 
     path = EXAMPLES / "campaigns" / "pendulum_mass_uncertainty.toml"

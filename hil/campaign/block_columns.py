@@ -262,10 +262,10 @@ _NUMBERS = frozenset({float, type(None)})  # what a float64 column gives back as
 
 def _given(row: dict, names: dict[str, list[str]]) -> bool:
     """Whether the typed columns give row ``row`` (a :func:`.block_file._split` ``row``) exactly, so that
-    :func:`.store.row_texts` makes its JSON text from them and its metrics' text: each value of the types its column
-    holds, its measures one of the key sets :func:`.criteria.measure` makes, with the block's names (``names``: the
-    :data:`.block_layout.OF_MEASURES` structs' fields) in ``output_min`` and ``output_max`` and in ``growth_ratio`` or
-    none. (Its floats' finiteness is checked over the columns, :func:`_finite`.)"""
+    :func:`.block_texts.row_texts` makes its JSON text from them and its metrics' text: each value of the types its
+    column holds, its measures one of the key sets :func:`.criteria.measure` makes, with the block's names (``names``:
+    the :data:`.block_layout.OF_MEASURES` structs' fields) in ``output_min`` and ``output_max`` and in ``growth_ratio``
+    or none. (Its floats' finiteness is checked over the columns, :func:`_finite`.)"""
     complete, reason, worker = row.get("complete"), row.get("run_reason"), row.get("worker")
     if not (complete is None or type(complete) is bool) or not (reason is None or type(reason) is str):
         return False

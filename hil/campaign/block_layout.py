@@ -37,7 +37,7 @@ LAYOUT = "7"  # 2: the record split into ``record`` and ``row``; 3: the row's ve
 # 5: a row's typed values (complete, run_reason, measures, worker) not again in JSON: its text made from the columns;
 # 6: one row group a block (5: a row group a TRACE_BATCH of runs); 7: a run's metrics as its form's template and its
 # values (``metrics_form``, ``metrics_slots``, ``metrics_numbers``), their text made when read
-# (:func:`.store.metric_texts`)
+# (:func:`.block_texts.metric_texts`)
 ROW_KEYS = ("complete", "measures", "metrics", "worker")  # what a report row takes from a record, as it is
 # bit k of ``row_keys``: the row has ROW_BITS[k]; its measures have the twin's, the model twin's, growth ratios
 ROW_BITS = ("complete", "run_reason", "worker", "measures", "metrics", "twin", "model", "growth")
@@ -88,6 +88,6 @@ REPEATED = ["status", "names", "run_reason", "metrics_form"]
 #: The block file's columns of JSON texts, compressed with zstd (every other leaf with LZ4:
 #: :func:`.block_file._block_file`).
 TEXTS = ("id", "record", "row", "metrics", "metrics_slots")
-#: The columns that hold a run's metrics (:func:`.block_columns.metric_columns`, :func:`.store.metric_texts`).
+#: The columns that hold a run's metrics (:func:`.block_columns.metric_columns`, :func:`.block_texts.metric_texts`).
 METRIC_COLUMNS = ("metrics", "metrics_form", "metrics_slots", "metrics_numbers")
 SLOT = "\x00"  # between a run's text slots: a JSON text holds no NUL (json writes it \u0000)

@@ -3,7 +3,7 @@
 A row is what its planned point gives (:func:`.rows.point_row`: index, id, grid point, draw, axis values, seed,
 artifact sha256), its verdict (:func:`.rows.verdict_head`: status, failed criteria, reasons; judged here by the
 campaign's criteria over the block's typed columns, as the report judges them) and its stored record's row (complete,
-measures, metrics, worker, the run's own reason: :func:`.store.row_texts`). A run without a record is
+measures, metrics, worker, the run's own reason: :func:`.block_texts.row_texts`). A run without a record is
 :data:`.rows.MISSING_VERDICT`. Nothing holds every row: the rows are made a block file at a time as the walk in plan
 order meets its runs, the last few files' rows kept (a block holds runs that follow each other in plan order but for
 the grid points of another firmware build); ``rows[i]`` reads the one block file of run ``i``.
