@@ -33,6 +33,11 @@ A file is written to a temporary name and renamed (mode 0644 under the usual uma
 when a block file holds it; a campaign killed at any point resumes by running the runs no block holds, and those whose
 only record is an error (an error is not a result: run the campaign again once its cause is fixed). A run recorded
 twice (an error, then a result on resume) counts by its result.
+
+This module holds the folder: its inputs, its index of which block holds which run, and what is read from it (records,
+traces, the report's parts). A block file itself is made and read back by the modules below it:
+:mod:`.block_layout` (its columns, layout version and name), :mod:`.block_columns` (a block's runs as typed columns),
+:mod:`.block_file` (the file made on the worker) and :mod:`.block_texts` (its runs made text again when read).
 """
 
 from __future__ import annotations
