@@ -16,6 +16,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from .block_layout import (
+    FLOAT_MEASURES,
     MEASURE_KEYS,
     MEASURES,
     MODEL_KEYS,
@@ -250,8 +251,6 @@ def _struct_of(columns: dict[str, list], kind: pa.StructType) -> pa.StructArray:
     return pa.StructArray.from_arrays([pa.array(columns[f.name], f.type) for f in kind], fields=list(kind))
 
 
-_FLOAT_MEASURES = ("longest_saturation_s", "twin_command_deviation", "twin_output_deviation", "model_iae_ratio",
-                   "model_mismatch")  # fmt: skip
 _MEASURE_SETS = {
     frozenset(MEASURE_KEYS + twin + model) for twin in ((), TWIN_KEYS) for model in ((), MODEL_KEYS)
 }  # the key sets a run's measures have (:func:`.criteria.measure`): with or without each twin's
@@ -280,7 +279,7 @@ def _given(row: dict, names: dict[str, list[str]]) -> bool:
         return False
     if not (m["unstable_reason"] is None or type(m["unstable_reason"]) is str):
         return False
-    if not {type(m[k]) for k in _FLOAT_MEASURES if k in m} <= _NUMBERS:
+    if not {type(m[k]) for k in FLOAT_MEASURES if k in m} <= _NUMBERS:
         return False
     for key in OF_MEASURES:
         held = m[key]
@@ -318,7 +317,7 @@ def _one_form(runs: BlockRuns, names: dict[str, list[str]]) -> bool:
     if not all(kinds[k] <= {bool, type(None)} for k in ("stable", "model_warning") if k in kinds):
         return False
     if not kinds["unstable_reason"] <= {str, type(None)} or not all(
-        kinds[k] <= _NUMBERS for k in _FLOAT_MEASURES if k in kinds
+        kinds[k] <= _NUMBERS for k in FLOAT_MEASURES if k in kinds
     ):
         return False
     return all(_named_given(columns[key], names[key], empty=key == "growth_ratio") for key in OF_MEASURES)

@@ -63,6 +63,10 @@ NAMED = {"output_min": pa.float64(), "output_max": pa.float64(), "tracked": TRAC
 ROW_COLUMNS = ("row_keys", "names", "complete", "run_reason", "measures", "worker", *NAMED)
 OF_MEASURES = ("output_min", "output_max", "growth_ratio")  # the NAMED structs a row's measures hold, the rest metrics'
 
+#: The measures a run's row holds as floats (the rest: ``stable``, ``unstable_reason``, ``model_warning``, the named).
+FLOAT_MEASURES = ("longest_saturation_s", "twin_command_deviation", "twin_output_deviation", "model_iae_ratio",
+                   "model_mismatch")  # fmt: skip
+
 
 def encode_trace(t: np.ndarray, y: np.ndarray, u: np.ndarray, r: np.ndarray) -> dict[str, np.ndarray]:
     """A run's traces as a block file stores them: float32 ``t`` (N,) and ``y`` (N x p outputs), ``u`` (N x m

@@ -1,7 +1,7 @@
 """A block file's runs as text again, made from its columns when read: each run's row as compact JSON
 (:func:`row_texts`, the typed columns filled into one template a form of row), its metrics' JSON (:func:`metric_texts`,
 their form's template filled with their values) and the columns' values as JSON and CSV cells write them
-(:func:`_value_texts`, :func:`_cell_texts`): each value made text once, a column at a time."""
+(:func:`value_texts`, :func:`cell_texts`): each value made text once, a column at a time."""
 
 from __future__ import annotations
 
@@ -13,10 +13,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from .block_columns import (
-    _FLOAT_MEASURES,
-)
 from .block_layout import (
+    FLOAT_MEASURES,
     MODEL_KEYS,
     OF_MEASURES,
     ROW_BITS,
@@ -59,13 +57,13 @@ def metric_texts(table: pa.Table) -> list[str | None]:
 _TRUTH = {True: "true", False: "false", None: "null"}
 
 
-def _numbers_text(arr: pa.Array, *, repeated: bool = False) -> list[str]:
+def numbers_text(arr: pa.Array, *, repeated: bool = False) -> list[str]:
     """A float64 or int64 column's values as JSON writes each (``null`` where null; a float by its ``repr``, as
     json's encoder: of a long float column, through :func:`.jsontext.float_texts`). ``repeated``: a column of a few
     distinct values (a block's worker, its runs' sample times), each made text once."""
     if repeated:
         codes = pc.dictionary_encode(arr)
-        words = _numbers_text(codes.dictionary) + ["null"]
+        words = numbers_text(codes.dictionary) + ["null"]
         return [words[k] for k in codes.indices.fill_null(len(words) - 1).to_numpy(zero_copy_only=False).tolist()]
     values = arr.to_pylist()
     if pa.types.is_float64(arr.type) and len(arr) - arr.null_count >= ARROW_FLOATS:
@@ -97,9 +95,9 @@ def _object_texts(column: pa.Array | None, rows: int) -> list[str]:
     without the column)."""
     if column is None:
         return ["{}"] * rows
-    fields = sorted(zip(column.type, _fields(column).values()), key=lambda f: f[0].name)
+    fields = sorted(zip(column.type, struct_fields(column).values()), key=lambda f: f[0].name)
     template = "{" + ",".join(_key(f.name) + "%s" for f, _ in fields) + "}"
-    return _filled(template, [_numbers_text(arr) for _, arr in fields])
+    return _filled(template, [numbers_text(arr) for _, arr in fields])
 
 
 def _key(name: str) -> str:
@@ -111,13 +109,13 @@ def row_texts(table: pa.Table, texts: dict[str, list[str]] | None = None) -> lis
     """Each row's JSON text, as ``json.dumps(row, sort_keys=True, separators=(",", ":"))`` writes the
     :func:`.block_file._split` ``row`` the block was made from: the ``row`` column's where the typed columns could not
     give it exactly (:func:`.block_columns._given`), else made from the typed columns and the ``metrics`` column's text:
-    each value made text once, a column at a time (``texts``: :func:`_value_texts` of ``table``, when made already), and
+    each value made text once, a column at a time (``texts``: :func:`value_texts` of ``table``, when made already), and
     the runs of one form (which keys the row and its measures have, which are null) filled into one template."""
     out = table.column("row").to_pylist()
     typed = np.flatnonzero(table.column("row").is_null().to_numpy(zero_copy_only=False))
     if not typed.size:
         return out
-    texts = _value_texts(table) if texts is None else texts
+    texts = value_texts(table) if texts is None else texts
     form = table.column("row_keys").to_numpy(zero_copy_only=False).astype(np.int64)
     for k, col in enumerate(("measures", "worker")):
         form |= np.asarray(table.column(col).is_valid().to_numpy(zero_copy_only=False), np.int64) << (8 + k)
@@ -134,7 +132,7 @@ def row_texts(table: pa.Table, texts: dict[str, list[str]] | None = None) -> lis
 
 def _row_template(form: int) -> tuple[str, list[str]]:
     """The JSON text of the rows of one ``form`` (bits: :data:`.block_layout.ROW_BITS`, then whether ``measures``,
-    ``worker`` and ``worker.block`` are not null) as a ``%`` template and the names of the texts (:func:`_value_texts`)
+    ``worker`` and ``worker.block`` are not null) as a ``%`` template and the names of the texts (:func:`value_texts`)
     it takes."""
     has = {name: bool(form >> k & 1) for k, name in enumerate((*ROW_BITS, "measures?", "worker?", "block?"))}
     parts: list[tuple[str, str | None]] = []  # (literal text, the value after it)
@@ -171,44 +169,42 @@ def _row_template(form: int) -> tuple[str, list[str]]:
     return template + "}", names
 
 
-def _cell_texts(table: pa.Table) -> dict[str, list[str]]:
+def cell_texts(table: pa.Table) -> dict[str, list[str]]:
     """The typed values a row's ``campaign.csv`` cells and its text share (``complete``, ``stable`` and the float
     measures), as JSON text, by name, one list a column over the block's runs."""
-    measures = _fields(table.column("measures"))
-    texts = {k: _numbers_text(measures[k], repeated=k == "longest_saturation_s") for k in _FLOAT_MEASURES}
+    measures = struct_fields(table.column("measures"))
+    texts = {k: numbers_text(measures[k], repeated=k == "longest_saturation_s") for k in FLOAT_MEASURES}
     texts["stable"] = [_TRUTH[v] for v in measures["stable"].to_pylist()]
     texts["complete"] = [_TRUTH[v] for v in table.column("complete").to_pylist()]
     return texts
 
 
-def _value_texts(table: pa.Table, cells: dict[str, list[str]] | None = None) -> dict[str, list[str]]:
+def value_texts(table: pa.Table, cells: dict[str, list[str]] | None = None) -> dict[str, list[str]]:
     """Each typed value a row's text holds, as JSON text, by name (``worker.pid``; a measure by its own name), one
-    list a column over the block's runs (``cells``: :func:`_cell_texts` of ``table``, when made already)."""
+    list a column over the block's runs (``cells``: :func:`cell_texts` of ``table``, when made already)."""
     n = table.num_rows
-    measures = _fields(table.column("measures"))
-    worker = _fields(table.column("worker"))
-    texts = dict(_cell_texts(table) if cells is None else cells)
+    measures = struct_fields(table.column("measures"))
+    worker = struct_fields(table.column("worker"))
+    texts = dict(cell_texts(table) if cells is None else cells)
     texts["model_warning"] = [_TRUTH[v] for v in measures["model_warning"].to_pylist()]
     texts["unstable_reason"] = _strings_text(measures["unstable_reason"])
     texts |= {key: _object_texts(table.column(key).combine_chunks() if key in table.column_names else None, n)
               for key in OF_MEASURES}  # fmt: skip
-    texts |= {
-        f"worker.{k}": _numbers_text(worker[k], repeated=True) for k in ("block", "cpu_s", "pid", "start", "stop")
-    }
+    texts |= {f"worker.{k}": numbers_text(worker[k], repeated=True) for k in ("block", "cpu_s", "pid", "start", "stop")}
     texts["worker.host"] = _strings_text(worker["host"])
     texts["run_reason"] = _strings_text(table.column("run_reason").combine_chunks())
     texts["metrics"] = metric_texts(table)
     return texts
 
 
-def _joined(rest: dict, row: dict) -> dict:
+def joined(rest: dict, row: dict) -> dict:
     """The record :func:`.block_file._split` split."""
     if "run_reason" in row:
         row = {k: v for k, v in row.items() if k != "run_reason"} | {"reason": row["run_reason"]}
     return rest | row
 
 
-def _fields(column: pa.ChunkedArray | pa.Array) -> dict[str, pa.Array]:
+def struct_fields(column: pa.ChunkedArray | pa.Array) -> dict[str, pa.Array]:
     """A struct column's fields by name, null where the struct is (``StructArray.flatten``)."""
     col = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
     return {f.name: arr for f, arr in zip(col.type, col.flatten())}

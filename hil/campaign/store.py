@@ -56,11 +56,9 @@ from gainlink.errors import GainlinkError
 from gainlink.fileio import atomic_write_bytes, atomic_write_text, prepare_output_dir
 from gainlink.version import __version__
 
-from .block_columns import (
-    _FLOAT_MEASURES,
-)
 from .block_file import encode_block, with_inputs
 from .block_layout import (
+    FLOAT_MEASURES,
     LAYOUT,
     META_CAMPAIGN,
     META_LAYOUT,
@@ -72,7 +70,7 @@ from .block_layout import (
     WIDE,
     block_address,
 )
-from .block_texts import _cell_texts, _fields, _joined, _numbers_text, _value_texts, row_texts
+from .block_texts import cell_texts, joined, numbers_text, row_texts, struct_fields, value_texts
 from .config import CampaignError
 from .criteria import RunColumns
 from .plan import CampaignPlan, RunPoint
@@ -418,7 +416,7 @@ class Store:
             kept = np.flatnonzero(self._kept(path, names)).tolist()
             rows = row_texts(table.take(pa.array(kept, pa.int64()))) if kept else []
             for i, row in zip(kept, rows):
-                yield names[i].decode("ascii"), _joined(json.loads(table.column("record")[i].as_py()), json.loads(row))
+                yield names[i].decode("ascii"), joined(json.loads(table.column("record")[i].as_py()), json.loads(row))
 
     def runs_cpu_s(self) -> float:
         """The CPU seconds of the stored runs as their workers measured each around the run (``worker.cpu_s``: a
@@ -427,7 +425,7 @@ class Store:
         for path in self.files():
             table = _read(path, ["id", "worker"])
             kept = self._kept(path, _ids(table.column("id")))
-            total += float(np.nansum(_numbers(_fields(table.column("worker"))["cpu_s"])[kept]))
+            total += float(np.nansum(_numbers(struct_fields(table.column("worker"))["cpu_s"])[kept]))
         return total
 
     def traces(self, ids: Iterable[str]) -> Iterator[tuple[str, dict[str, np.ndarray]]]:
@@ -505,7 +503,7 @@ class Store:
         assert got is not None
         table, i = got
         row = row_texts(table.slice(i, 1))[0]
-        return _joined(json.loads(table.column("record")[i].as_py()), json.loads(row))
+        return joined(json.loads(table.column("record")[i].as_py()), json.loads(row))
 
     def trace(self, run_id: str) -> dict[str, np.ndarray] | None:
         """The stored downsampled traces of a run, if any."""
@@ -550,9 +548,9 @@ def _report_part(
     :data:`TEXT_COLUMNS`)."""
     names = table.column("names").combine_chunks()
     shapes = [tuple(tuple(x) for x in json.loads(w)) for w in names.dictionary.to_pylist()]
-    measures = _fields(table.column("measures"))
-    named = {key: _fields(table.column(key)) if key in table.column_names else {} for key in NAMED}
-    tracked = {name: _fields(col) for name, col in named["tracked"].items()}
+    measures = struct_fields(table.column("measures"))
+    named = {key: struct_fields(table.column(key)) if key in table.column_names else {} for key in NAMED}
+    tracked = {name: struct_fields(col) for name, col in named["tracked"].items()}
     present = {name: np.asarray(col.is_valid().to_numpy(zero_copy_only=False), bool)
                for name, col in named["tracked"].items()}  # fmt: skip
     judged = RunColumns(
@@ -564,18 +562,18 @@ def _report_part(
         output_max={k: _numbers(v) for k, v in named["output_max"].items()},
         tracked={k: {m: _numbers(v) for m, v in cols.items()} | {"present": present[k]} for k, cols in tracked.items()},
     )
-    texts = _cell_texts(table)  # the cells' texts of the measures, made once for the cells and a row's text
+    texts = cell_texts(table)  # the cells' texts of the measures, made once for the cells and a row's text
     return ReportPart(
         ids=ids,
         error=error,
-        rows=row_texts(table, _value_texts(table, texts)) if rows else None,
+        rows=row_texts(table, value_texts(table, texts)) if rows else None,
         reasons=reasons,
         keys=table.column("row_keys").to_numpy(),
         shapes=shapes,
         shape=names.indices.to_numpy(zero_copy_only=False),
-        texts={k: texts[k] for k in ("complete", "stable", *_FLOAT_MEASURES)},
+        texts={k: texts[k] for k in ("complete", "stable", *FLOAT_MEASURES)},
         tracked={k: _metric_texts(cols) for k, cols in tracked.items()},
-        outputs_final={k: _numbers_text(v) for k, v in named["outputs_final"].items()},
+        outputs_final={k: numbers_text(v) for k, v in named["outputs_final"].items()},
         model_mismatch=_numbers(measures["model_mismatch"]),
         model_warning=np.asarray(pc.fill_null(measures["model_warning"], False).to_numpy(zero_copy_only=False), bool),
         judged=judged,
@@ -585,7 +583,7 @@ def _report_part(
 def _metric_texts(fields: dict[str, pa.Array]) -> dict[str, list[str]]:
     """A tracked output's metrics as JSON text, each value made text once (a settling time, a whole number of samples,
     repeats: its distinct values once each)."""
-    return {m: _numbers_text(v, repeated=m == "settling_time_s") for m, v in fields.items()}
+    return {m: numbers_text(v, repeated=m == "settling_time_s") for m, v in fields.items()}
 
 
 def _numbers(arr: pa.Array) -> np.ndarray:
