@@ -356,7 +356,7 @@ def test_a_task_of_more_runs_than_step_in_lockstep_steps_them_in_parts_with_the_
     assert block_file._metrics_of(lists) == [r["metrics"] for r in parts]
     assert lists.worker == [r["worker"] for r in parts]
     assert [positions for positions, _ in lists.metric_trees] == [list(range(8))]  # the parts' trees joined
-    assert block_columns._tree_named(lists.metric_trees, 8) is not None  # the typed columns straight from the tree
+    assert block_columns.tree_named(lists.metric_trees, 8) is not None  # the typed columns straight from the tree
     ids = [f"run{i}" for i in range(8)]
     made = pq.read_table(pa.BufferReader(block_file.encode_runs(ids, lists, campaign="c")))
     records = [block_file.with_inputs(r, run, kind="sil") for r, run in zip(parts, runs)]

@@ -527,7 +527,7 @@ def test_a_workers_block_file_is_the_one_its_records_make(tmp_path, interleaved)
     assert isinstance(lists.traces, dict) != interleaved
     assert lists.metric_trees is not None and lists.metrics is None  # each block's metrics in its column trees
     # one block's: its metrics' typed columns straight from its trees; two blocks': from the runs' dicts made of them
-    assert (block_columns._tree_named(lists.metric_trees, len(ids)) is None) == interleaved
+    assert (block_columns.tree_named(lists.metric_trees, len(ids)) is None) == interleaved
     made = encode_runs(ids, lists, campaign=campaign.name)
     records = [with_inputs(r, run, kind="sil") for r, run in zip(worker._materialized(task), runs)]
     oracle = _table(encode_block(ids, records, campaign=campaign.name))

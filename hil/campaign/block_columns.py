@@ -1,8 +1,9 @@
 """A block's runs as the typed columns of its file (:data:`.block_layout.SCHEMA` holds the rest): a run's row
 (:func:`row_columns`: what the verdicts and ``campaign.csv`` read), its metrics (:func:`metric_columns`,
-:func:`tree_metric_columns`: each form's template and its values) and arrays as binary values (:func:`_blobs`), made
+:func:`tree_metric_columns`: each form's template and its values) and arrays as binary values (:func:`blobs`), made
 from the runs' records or from a block's lists (:class:`BlockRuns`); with the checks that the columns give a run's row
-exactly (:func:`_given`, :func:`_given_columns`, :func:`_finite`): a row they cannot give is stored whole as JSON."""
+exactly (:func:`given_row`, :func:`given_columns`, :func:`finite_rows`): a row they cannot give is stored whole as
+JSON."""
 
 from __future__ import annotations
 
@@ -58,25 +59,25 @@ class BlockRuns:
     input_columns: tuple[list, list] | None = None
 
 
-def _row_of(runs: BlockRuns, i: int, *, metrics: bool = True) -> dict:
+def row_of(runs: BlockRuns, i: int, *, metrics: bool = True) -> dict:
     """Run ``i``'s ``row`` (:func:`.block_file._split`'s) of ``runs``; without its metrics when ``metrics`` is false
-    (what :func:`_given` checks holds none: a block's dicts are made from its trees only for a row stored whole)."""
+    (what :func:`given_row` checks holds none: a block's dicts are made from its trees only for a row stored whole)."""
     row = {"complete": runs.complete[i], "measures": runs.measures[i], "worker": runs.worker[i],
            "run_reason": runs.reason[i]}  # fmt: skip
     return row | {"metrics": runs.metrics[i]} if metrics else row  # type: ignore[index]
 
 
-_NONE = object()  # a row whose metrics the ``metrics`` column does not hold
+NONE = object()  # a row whose metrics the ``metrics`` column does not hold
 
 
 def metric_columns(metrics: list) -> dict[str, pa.Array]:
-    """The columns of the runs' metrics (:data:`.block_layout.METRIC_COLUMNS`; ``metrics[i]`` :data:`_NONE`: null in
+    """The columns of the runs' metrics (:data:`.block_layout.METRIC_COLUMNS`; ``metrics[i]`` :data:`NONE`: null in
     each), made for the block's runs at once (:func:`.jsontext.json_forms`): a run of a structure the block's runs share
     holds its form (``metrics_form``: the structure's kinds of slots, a newline, its ``%`` template; a block's runs
     share one or two), its text slots joined by :data:`.block_layout.SLOT` (``metrics_slots``) and its float slots as
     float64 bytes (``metrics_numbers``), no text made of a float; a run json writes alone holds its text
     (``metrics``)."""
-    held = [k for k, m in enumerate(metrics) if m is not _NONE]
+    held = [k for k, m in enumerate(metrics) if m is not NONE]
     if len(held) == len(metrics):
         return _form_columns(*json_forms(metrics), len(metrics))
     forms, whole = json_forms([metrics[k] for k in held])
@@ -125,7 +126,7 @@ def _form_columns(forms: list[Form], whole: dict[int, str], n: int) -> dict[str,
             pa.array(codes, pa.int32(), mask=codes < 0), pa.array(words, pa.string())
         ),
         "metrics_slots": pa.array(slots, pa.string()),
-        "metrics_numbers": _blobs(numbers, np.float64),
+        "metrics_numbers": blobs(numbers, np.float64),
     }
 
 
@@ -141,7 +142,7 @@ def _one_form_columns(form: Form, n: int) -> dict[str, pa.Array]:
             pa.array(np.zeros(n, np.int32)), pa.array([form.kinds + "\n" + form.template], pa.string())
         ),
         "metrics_slots": pa.array(list(map(SLOT.join, zip(*text))) if text else [""] * n, pa.string()),
-        "metrics_numbers": _stacked_blobs(numbers, np.float64),
+        "metrics_numbers": stacked_blobs(numbers, np.float64),
     }
 
 
@@ -162,23 +163,23 @@ def row_columns(rows: list[dict]) -> dict[str, pa.Array]:
       metrics'), each a struct with a field per name some row of the block has (a tracked output a row lacks: a
       null struct), left out when no row has one (Parquet has no struct without fields).
     """
-    return _typed_columns(
+    return typed_columns(
         [np.array([key in row for row in rows], bool) for key in ROW_BITS[:5]],
         [row.get("complete") for row in rows],
         [row.get("run_reason") for row in rows],
         [row.get("measures") for row in rows],
-        _metric_named([row.get("metrics") for row in rows]),
+        metric_named([row.get("metrics") for row in rows]),
         [row.get("worker") for row in rows],
     )
 
 
-def _typed_columns(
+def typed_columns(
     has: list[np.ndarray], complete: list, reason: list, measures: list, of_metrics: dict, worker: list | pa.Array
 ) -> dict[str, pa.Array]:
     """:func:`row_columns` of rows given a list a key: ``has[k]``, whether each row has :data:`.block_layout.ROW_BITS`
     [k] (the first five); a row's ``complete``, ``run_reason``, ``measures``, ``worker`` (None where it has not;
     ``worker`` a list of dicts or its column made already); the columns of their metrics (``of_metrics``:
-    :func:`_metric_named`)."""
+    :func:`metric_named`)."""
     bits = np.zeros(len(complete), np.uint8)
     for k, present in enumerate(has):
         bits |= present.astype(np.uint8) << k
@@ -203,7 +204,7 @@ def _typed_columns(
     return cols
 
 
-def _metric_named(metrics: list) -> dict[str, pa.Array]:
+def metric_named(metrics: list) -> dict[str, pa.Array]:
     """The typed columns of the runs' metrics (each a dict, or None): ``names`` (:func:`_names`) and the
     :data:`.block_layout.NAMED` structs the metrics hold (``tracked``, ``outputs_final``), each left out when no run has
     a name."""
@@ -220,8 +221,8 @@ def _metric_named(metrics: list) -> dict[str, pa.Array]:
 _OF_METRICS = tuple(key for key in NAMED if key not in OF_MEASURES)  # the NAMED structs a run's metrics hold
 
 
-def _tree_named(trees: list | None, n: int) -> dict[str, pa.Array] | None:
-    """:func:`_metric_named` of ``n`` runs from their metrics' column trees (:class:`~..loop.block_metrics.
+def tree_named(trees: list | None, n: int) -> dict[str, pa.Array] | None:
+    """:func:`metric_named` of ``n`` runs from their metrics' column trees (:class:`~..loop.block_metrics.
     BlockMetrics`' ``trees``) when one tree of dicts holds them all in order, each name's figures a column (the
     usual block); else None (the runs' dicts are made)."""
     if not trees or len(trees) != 1 or trees[0][0] != list(range(n)) or not isinstance(trees[0][1], dict):
@@ -259,12 +260,12 @@ _MEASURE_SETS = {
 _NUMBERS = frozenset({float, type(None)})  # what a float64 column gives back as JSON wrote it (not an int, not numpy's)
 
 
-def _given(row: dict, names: dict[str, list[str]]) -> bool:
+def given_row(row: dict, names: dict[str, list[str]]) -> bool:
     """Whether the typed columns give row ``row`` (a :func:`.block_file._split` ``row``) exactly, so that
     :func:`.block_texts.row_texts` makes its JSON text from them and its metrics' text: each value of the types its
     column holds, its measures one of the key sets :func:`.criteria.measure` makes, with the block's names (``names``:
     the :data:`.block_layout.OF_MEASURES` structs' fields) in ``output_min`` and ``output_max`` and in ``growth_ratio``
-    or none. (Its floats' finiteness is checked over the columns, :func:`_finite`.)"""
+    or none. (Its floats' finiteness is checked over the columns, :func:`finite_rows`.)"""
     complete, reason, worker = row.get("complete"), row.get("run_reason"), row.get("worker")
     if not (complete is None or type(complete) is bool) or not (reason is None or type(reason) is str):
         return False
@@ -290,17 +291,17 @@ def _given(row: dict, names: dict[str, list[str]]) -> bool:
     return True
 
 
-def _given_columns(runs: BlockRuns, names: dict[str, list[str]]) -> np.ndarray:
-    """:func:`_given` of each run of ``runs``, checked a column at a time when the runs' values are of one form (the
+def given_columns(runs: BlockRuns, names: dict[str, list[str]]) -> np.ndarray:
+    """:func:`given_row` of each run of ``runs``, checked a column at a time when the runs' values are of one form (the
     usual block: every measures dict of one key set, the block's names in each), else run by run."""
     n = len(runs.complete)
     if n and _one_form(runs, names):
         return np.ones(n, bool)
-    return np.array([_given(_row_of(runs, i, metrics=False), names) for i in range(n)], bool)
+    return np.array([given_row(row_of(runs, i, metrics=False), names) for i in range(n)], bool)
 
 
 def _one_form(runs: BlockRuns, names: dict[str, list[str]]) -> bool:
-    """Whether every run of ``runs`` is given (:func:`_given`), by checks over its columns: False may be wrong."""
+    """Whether every run of ``runs`` is given (:func:`given_row`), by checks over its columns: False may be wrong."""
     if not set(map(type, runs.complete)) <= {bool, type(None)} or not set(map(type, runs.reason)) <= {str, type(None)}:
         return False
     shares = {id(w): w for w in runs.worker}.values()  # a block's runs share one
@@ -355,7 +356,7 @@ def _given_worker(worker: Any) -> bool:
     return all(type(worker.get(k)) is float for k in ("start", "stop", "cpu_s"))
 
 
-def _finite(typed: dict[str, pa.Array], rows: int) -> np.ndarray:
+def finite_rows(typed: dict[str, pa.Array], rows: int) -> np.ndarray:
     """Which rows have no infinite or NaN value in the floats of the typed columns a row's text is made from (JSON
     refuses them: such a row is kept whole, and its JSON raises as it did)."""
     ok = np.ones(rows, bool)
@@ -378,7 +379,7 @@ def _names(metrics: list[dict]) -> pa.DictionaryArray:
     return pa.DictionaryArray.from_arrays(pa.array(codes, pa.int32()), pa.array(words, pa.string()))
 
 
-def _blobs(rows: list[np.ndarray | None], dtype: type = np.float32) -> pa.LargeBinaryArray:
+def blobs(rows: list[np.ndarray | None], dtype: type = np.float32) -> pa.LargeBinaryArray:
     """Arrays of ``dtype`` (``None``: no value) as one Arrow binary array, each row its array's bytes in C order: one
     concatenation and its offsets, not an Arrow value a row. Parquet writes a binary value as one length and its bytes
     (a list of floats: a repetition and a definition level per float, 2.3x the CPU of the block file's write)."""
@@ -395,8 +396,8 @@ def _blobs(rows: list[np.ndarray | None], dtype: type = np.float32) -> pa.LargeB
     return pa.Array.from_buffers(pa.large_binary(), len(rows), buffers, null_count=int((~valid).sum()))
 
 
-def _stacked_blobs(A: np.ndarray, dtype: type = np.float32) -> pa.LargeBinaryArray:
-    """:func:`_blobs` of the rows of ``A`` (runs, ...) as ``dtype``, none missing: its bytes as they lie when C-ordered
+def stacked_blobs(A: np.ndarray, dtype: type = np.float32) -> pa.LargeBinaryArray:
+    """:func:`blobs` of the rows of ``A`` (runs, ...) as ``dtype``, none missing: its bytes as they lie when C-ordered
     (not copied when so already: a block's outputs and commands, ~6 MB a 1,000-run block), each row one value."""
     data = np.ascontiguousarray(A, dtype).reshape(-1)
     size = data.size // max(A.shape[0], 1) * data.itemsize

@@ -15,20 +15,20 @@ from gainlink.fileio import atomic_write_bytes
 from gainlink.version import __version__
 
 from .block_columns import (
-    _NONE,
+    NONE,
     BlockRuns,
-    _blobs,
-    _finite,
-    _given,
-    _given_columns,
-    _metric_named,
-    _row_of,
-    _stacked_blobs,
-    _tree_named,
-    _typed_columns,
+    blobs,
+    finite_rows,
+    given_columns,
+    given_row,
     metric_columns,
+    metric_named,
     row_columns,
+    row_of,
+    stacked_blobs,
     tree_metric_columns,
+    tree_named,
+    typed_columns,
 )
 from .block_layout import (
     LAYOUT,
@@ -60,14 +60,14 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> pa.Bu
     rows = [row for _, row in parts]
     typed = row_columns(rows)
     names = {key: [f.name for f in typed[key].type] if key in typed else [] for key in OF_MEASURES}
-    given = (_finite(typed, len(rows)) & np.array([_given(row, names) for row in rows], bool)).tolist()
+    given = (finite_rows(typed, len(rows)) & np.array([given_row(row, names) for row in rows], bool)).tolist()
     texts = {
         "id": pa.array(ids, pa.string()),
         "status": pa.array([record["status"] for record in records], pa.string()),
         "record": pa.array(json_texts([rest for rest, _ in parts]), pa.string()),
         # JSON only for what the typed columns do not hold: a row's metrics, or a whole row they cannot give exactly
         "row": pa.array([None if ok else compact_json(row) for row, ok in zip(rows, given)], pa.string()),
-        **metric_columns([row.get("metrics") if ok and "metrics" in row else _NONE for row, ok in zip(rows, given)]),
+        **metric_columns([row.get("metrics") if ok and "metrics" in row else NONE for row, ok in zip(rows, given)]),
     }
     return _block_file(texts, [record.get("trace") for record in records], typed, campaign=campaign)
 
@@ -76,13 +76,13 @@ def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
     """The Parquet file of a block of finished runs given as lists (``runs``; run ``ids[i]`` is entry ``i``): the
     file :func:`encode_block` makes of the runs' records, made a column at a time."""
     n = len(ids)
-    of_metrics = _tree_named(runs.metric_trees, n) if runs.metrics is None else None
+    of_metrics = tree_named(runs.metric_trees, n) if runs.metrics is None else None
     if of_metrics is None:
         runs = replace(runs, metrics=_metrics_of(runs))
-        of_metrics = _metric_named(runs.metrics)
-    typed = _typed_columns([np.ones(n, bool)] * 5, runs.complete, runs.reason, runs.measures, of_metrics, runs.worker)
+        of_metrics = metric_named(runs.metrics)
+    typed = typed_columns([np.ones(n, bool)] * 5, runs.complete, runs.reason, runs.measures, of_metrics, runs.worker)
     names = {key: [f.name for f in typed[key].type] if key in typed else [] for key in OF_MEASURES}
-    given = _finite(typed, n) & _given_columns(runs, names)
+    given = finite_rows(typed, n) & given_columns(runs, names)
     if runs.metrics is None and not given.all():  # a row the typed columns cannot give is stored whole
         runs = replace(runs, metrics=_metrics_of(runs))
     texts = {
@@ -90,7 +90,7 @@ def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
         "status": pa.array(["done"] * n, pa.string()),
         "record": pa.array(_record_texts(ids, runs), pa.string()),
         "row": pa.array(
-            [None if ok else compact_json(_row_of(runs, i)) for i, ok in enumerate(given.tolist())], pa.string()
+            [None if ok else compact_json(row_of(runs, i)) for i, ok in enumerate(given.tolist())], pa.string()
         ),
         **_run_metric_columns(runs, given),
     }
@@ -120,7 +120,7 @@ def _run_metric_columns(runs: BlockRuns, given: np.ndarray) -> dict[str, pa.Arra
     column trees when it has them and every run is given."""
     if runs.metric_trees is not None and given.all():
         return tree_metric_columns(runs.metric_trees, len(given))
-    return metric_columns(runs.metrics if given.all() else [m if ok else _NONE for m, ok in zip(runs.metrics, given)])
+    return metric_columns(runs.metrics if given.all() else [m if ok else NONE for m, ok in zip(runs.metrics, given)])
 
 
 def _metrics_of(runs: BlockRuns) -> list[dict]:
@@ -143,13 +143,13 @@ def _block_file(
     cols = dict(texts)
     if isinstance(traces, dict):
         for k in ("t", *WIDE):
-            cols[k] = _stacked_blobs(traces[k])
+            cols[k] = stacked_blobs(traces[k])
         for k in WIDE:
             cols[f"{k}_width"] = pa.array(np.full(traces[k].shape[0], traces[k].shape[2], np.int32))
     else:
-        cols["t"] = _blobs([None if tr is None else tr["t"] for tr in traces])
+        cols["t"] = blobs([None if tr is None else tr["t"] for tr in traces])
         for k in WIDE:
-            cols[k] = _blobs([None if tr is None else tr[k] for tr in traces])
+            cols[k] = blobs([None if tr is None else tr[k] for tr in traces])
             cols[f"{k}_width"] = pa.array([None if tr is None else tr[k].shape[1] for tr in traces], pa.int32())
     fixed = pa.Table.from_arrays([cols[f.name] for f in SCHEMA], schema=SCHEMA)
     table = pa.table(fixed.columns + list(typed.values()), names=fixed.column_names + list(typed))

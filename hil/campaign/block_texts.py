@@ -108,9 +108,10 @@ def _key(name: str) -> str:
 def row_texts(table: pa.Table, texts: dict[str, list[str]] | None = None) -> list[str]:
     """Each row's JSON text, as ``json.dumps(row, sort_keys=True, separators=(",", ":"))`` writes the
     :func:`.block_file._split` ``row`` the block was made from: the ``row`` column's where the typed columns could not
-    give it exactly (:func:`.block_columns._given`), else made from the typed columns and the ``metrics`` column's text:
-    each value made text once, a column at a time (``texts``: :func:`value_texts` of ``table``, when made already), and
-    the runs of one form (which keys the row and its measures have, which are null) filled into one template."""
+    give it exactly (:func:`.block_columns.given_row`), else made from the typed columns and the ``metrics`` column's
+    text: each value made text once, a column at a time (``texts``: :func:`value_texts` of ``table``, when made
+    already), and the runs of one form (which keys the row and its measures have, which are null) filled into one
+    template."""
     out = table.column("row").to_pylist()
     typed = np.flatnonzero(table.column("row").is_null().to_numpy(zero_copy_only=False))
     if not typed.size:

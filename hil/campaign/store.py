@@ -15,9 +15,9 @@ inputs, link, an error's reason; ``metrics``: the run's metrics), its report row
 (:func:`.block_columns.row_columns`: ``complete``, the run's own reason, the measures, the worker; what the verdict and
 ``campaign.csv`` read: the report decodes no JSON of a result), not again as JSON: the row's text, which a run's row
 gives, is made from them (:func:`.block_texts.row_texts`; ``row`` holds it whole only for a row they cannot give
-exactly, :func:`.block_columns._given`), and its traces downsampled to at most ``worker.MAX_TRACE_POINTS`` evenly spaced
-true samples (first and last kept; each a binary value, the run's float32 values in C order: ``t``, and ``y``, ``u``,
-``r`` row by row with their widths, so a batch of runs is read as one numpy array over the column's buffer,
+exactly, :func:`.block_columns.given_row`), and its traces downsampled to at most ``worker.MAX_TRACE_POINTS`` evenly
+spaced true samples (first and last kept; each a binary value, the run's float32 values in C order: ``t``, and ``y``,
+``u``, ``r`` row by row with their widths, so a batch of runs is read as one numpy array over the column's buffer,
 :func:`_flat`); the full trace of a run is not stored, it is replayed (``gainlink campaign show DIR --run ID``). The
 file's schema metadata names the gainlink version, the campaign that wrote it and the file's layout
 (:data:`.block_layout.LAYOUT`): a folder holding another's blocks, or blocks of an earlier layout, is refused in one
