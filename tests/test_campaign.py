@@ -696,8 +696,8 @@ def test_every_column_of_a_block_file_is_compressed_the_json_texts_with_zstd():
     codecs = {meta.row_group(0).column(i).path_in_schema: meta.row_group(0).column(i).compression
               for i in range(meta.num_columns)}  # fmt: skip
     assert {p for p in codecs if "." in p} >= {"measures.stable", "worker.host", "tracked.r_x.iae", "output_min.x"}
-    texts = {"id", "record", "row", "metrics", "metrics_slots"}
-    assert {"t", "y", "metrics_numbers", "metrics_form"} <= set(codecs)
+    texts = {"id", "record", "record_slots", "row", "metrics", "metrics_slots"}
+    assert {"t", "y", "metrics_numbers", "metrics_form", "record_numbers", "record_form"} <= set(codecs)
     assert {p: c for p, c in codecs.items() if c != ("ZSTD" if p in texts else "LZ4")} == {}
 
 

@@ -17,8 +17,8 @@ import pyarrow.parquet as pq
 import pytest
 from gainlink.hil.campaign import parse_campaign
 from gainlink.hil.campaign.block_file import encode_block, with_inputs
-from gainlink.hil.campaign.block_layout import METRIC_COLUMNS
-from gainlink.hil.campaign.block_texts import metric_texts
+from gainlink.hil.campaign.block_layout import METRIC_COLUMNS, RECORD_COLUMNS, ROW_KEYS
+from gainlink.hil.campaign.block_texts import metric_texts, record_texts
 from gainlink.hil.campaign.config import Criteria
 from gainlink.hil.campaign.criteria import evaluate, evaluate_columns
 from gainlink.hil.campaign.plan import CampaignPlan, RunPoint
@@ -191,7 +191,7 @@ def test_a_blocks_typed_columns_hold_its_rows_numbers_and_the_record_is_the_one_
         assert names == [sorted(mine), sorted(rec.get("metrics", {}).get("outputs_final", {}))]
 
 
-@pytest.mark.parametrize("layout", ["2", "3", "4", "5", "6", None])
+@pytest.mark.parametrize("layout", ["2", "3", "4", "5", "6", "7", None])
 def test_a_block_of_an_earlier_layout_is_refused_on_resume_in_one_line(tmp_path, layout):
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -206,7 +206,7 @@ def test_a_block_of_an_earlier_layout_is_refused_on_resume_in_one_line(tmp_path,
     meta = {b"gainlink.campaign": b"mine", b"gainlink.version": __version__.encode()}
     meta |= {} if layout is None else {b"gainlink.block_layout": layout.encode()}
     pq.write_table(table.replace_schema_metadata(meta), out / "blocks" / "0123456789abcdef01234567.parquet")
-    with pytest.raises(CampaignError, match=r"is a block file of an earlier layout \(before 7\)") as err:
+    with pytest.raises(CampaignError, match=r"is a block file of an earlier layout \(before 8\)") as err:
         refuse_foreign(out, {"campaign": {"name": "mine"}})
     assert "\n" not in str(err.value)
 
@@ -534,9 +534,12 @@ def test_a_workers_block_file_is_the_one_its_records_make(tmp_path, interleaved)
     table = _table(made)
     assert table.schema.equals(oracle.schema, check_metadata=True)
     for name in oracle.column_names:
-        if name not in METRIC_COLUMNS or not interleaved:
+        if name not in (*METRIC_COLUMNS, *RECORD_COLUMNS) or not interleaved:
             assert table.column(name).equals(oracle.column(name)), name
-    compact = {"sort_keys": True, "separators": (",", ":")}  # json's own text of each run's metrics
+    compact = {"sort_keys": True, "separators": (",", ":")}  # json's own text of each run's metrics and record
+    rest = [{k: v for k, v in r.items() if k not in (*ROW_KEYS, "trace", "reason")} | {"id": i}
+            for i, r in zip(ids, records)]  # fmt: skip
+    assert record_texts(table) == record_texts(oracle) == [json.dumps(r, **compact) for r in rest]
     assert metric_texts(table) == metric_texts(oracle) == [json.dumps(r["metrics"], **compact) for r in records]
     store = Store(tmp_path / "s", campaign=campaign.name)
     store.put_block(made)

@@ -67,42 +67,55 @@ def row_of(runs: BlockRuns, i: int, *, metrics: bool = True) -> dict:
     return row | {"metrics": runs.metrics[i]} if metrics else row  # type: ignore[index]
 
 
-NONE = object()  # a row whose metrics the ``metrics`` column does not hold
+NONE = object()  # a run whose value (a row's metrics) the columns do not hold
 
 
 def metric_columns(metrics: list) -> dict[str, pa.Array]:
     """The columns of the runs' metrics (:data:`.block_layout.METRIC_COLUMNS`; ``metrics[i]`` :data:`NONE`: null in
-    each), made for the block's runs at once (:func:`.jsontext.json_forms`): a run of a structure the block's runs share
-    holds its form (``metrics_form``: the structure's kinds of slots, a newline, its ``%`` template; a block's runs
-    share one or two), its text slots joined by :data:`.block_layout.SLOT` (``metrics_slots``) and its float slots as
-    float64 bytes (``metrics_numbers``), no text made of a float; a run json writes alone holds its text
-    (``metrics``)."""
-    held = [k for k, m in enumerate(metrics) if m is not NONE]
-    if len(held) == len(metrics):
-        return _form_columns(*json_forms(metrics), len(metrics))
-    forms, whole = json_forms([metrics[k] for k in held])
-    forms = [replace(form, rows=[held[j] for j in form.rows]) for form in forms]
-    return _form_columns(forms, {held[j]: text for j, text in whole.items()}, len(metrics))
+    each): :func:`json_columns` named ``metrics``."""
+    return json_columns(metrics, "metrics")
 
 
 def tree_metric_columns(trees: list[tuple[list[int], Any]], runs: int) -> dict[str, pa.Array]:
     """:func:`metric_columns` of ``runs`` runs whose metrics are given as column trees (``(positions, tree)``, each
     run in one: :class:`~..loop.block_metrics.BlockMetrics`), made from the trees' columns, not a dict a run."""
+    return tree_columns(trees, runs, "metrics")
+
+
+def json_columns(values: list, name: str) -> dict[str, pa.Array]:
+    """The four columns ``name`` that hold a JSON value of each run (its metrics, its record:
+    :data:`.block_layout.METRIC_COLUMNS`, :data:`.block_layout.RECORD_COLUMNS`; ``values[i]`` :data:`NONE`: null in
+    each), made for the block's runs at once (:func:`.jsontext.json_forms`): a run of a structure the block's runs
+    share holds its form (``<name>_form``: the structure's kinds of slots, a newline, its ``%`` template; a block's
+    runs share one or a few), its text slots joined by :data:`.block_layout.SLOT` (``<name>_slots``) and its float slots
+    as float64 bytes (``<name>_numbers``), no text made of a float; a run json writes alone holds its text
+    (``<name>``). Read back by :func:`.block_texts.form_texts_of`."""
+    held = [k for k, m in enumerate(values) if m is not NONE]
+    if len(held) == len(values):
+        return _form_columns(*json_forms(values), len(values), name)
+    forms, whole = json_forms([values[k] for k in held])
+    forms = [replace(form, rows=[held[j] for j in form.rows]) for form in forms]
+    return _form_columns(forms, {held[j]: text for j, text in whole.items()}, len(values), name)
+
+
+def tree_columns(trees: list[tuple[list[int], Any]], runs: int, name: str) -> dict[str, pa.Array]:
+    """:func:`json_columns` of ``runs`` runs whose values are given as column trees (``(positions, tree)``, each run
+    in one; a tree as :func:`.jsontext.object_texts` takes it), made from the trees' columns, not a dict a run."""
     forms: list[Form] = []
     whole: dict[int, str] = {}
     for positions, tree in trees:
         made, texts = tree_forms(tree, len(positions))
         forms += [replace(form, rows=[positions[j] for j in form.rows]) for form in made]
         whole |= {positions[j]: text for j, text in texts.items()}
-    return _form_columns(forms, whole, runs)
+    return _form_columns(forms, whole, runs, name)
 
 
-def _form_columns(forms: list[Form], whole: dict[int, str], n: int) -> dict[str, pa.Array]:
-    """The metrics columns of ``n`` runs from their forms (:class:`.jsontext.Form`, rows the runs') and the texts of
+def _form_columns(forms: list[Form], whole: dict[int, str], n: int, name: str) -> dict[str, pa.Array]:
+    """The columns ``name`` of ``n`` runs from their forms (:class:`.jsontext.Form`, rows the runs') and the texts of
     the runs json writes alone; the forms in the order of their first run (whichever way they were found)."""
     forms = sorted(forms, key=lambda form: min(form.rows))
     if not whole and len(forms) == 1 and forms[0].rows == list(range(n)):
-        return _one_form_columns(forms[0], n)
+        return _one_form_columns(forms[0], n, name)
     texts: list[str | None] = [None] * n
     codes = np.full(n, -1, np.int32)
     slots: list[str | None] = [None] * n
@@ -121,28 +134,28 @@ def _form_columns(forms: list[Form], whole: dict[int, str], n: int) -> dict[str,
         texts[i] = text
     words = [form.kinds + "\n" + form.template for form in forms]
     return {
-        "metrics": pa.array(texts, pa.string()),
-        "metrics_form": pa.DictionaryArray.from_arrays(
+        name: pa.array(texts, pa.string()),
+        f"{name}_form": pa.DictionaryArray.from_arrays(
             pa.array(codes, pa.int32(), mask=codes < 0), pa.array(words, pa.string())
         ),
-        "metrics_slots": pa.array(slots, pa.string()),
-        "metrics_numbers": blobs(numbers, np.float64),
+        f"{name}_slots": pa.array(slots, pa.string()),
+        f"{name}_numbers": blobs(numbers, np.float64),
     }
 
 
-def _one_form_columns(form: Form, n: int) -> dict[str, pa.Array]:
+def _one_form_columns(form: Form, n: int, name: str) -> dict[str, pa.Array]:
     """:func:`_form_columns` of ``n`` runs of one form, run ``i`` its ``i``-th (the usual block): its slots joined a
     column at a time and its numbers one (runs, float slots) array, not a row at a time."""
     text = [col for kind, col in zip(form.kinds, form.columns) if kind == "t"]
     floats = [col for kind, col in zip(form.kinds, form.columns) if kind == "f"]
     numbers = np.array(floats, np.float64).T if floats else np.zeros((n, 0))
     return {
-        "metrics": pa.nulls(n, pa.string()),
-        "metrics_form": pa.DictionaryArray.from_arrays(
+        name: pa.nulls(n, pa.string()),
+        f"{name}_form": pa.DictionaryArray.from_arrays(
             pa.array(np.zeros(n, np.int32)), pa.array([form.kinds + "\n" + form.template], pa.string())
         ),
-        "metrics_slots": pa.array(list(map(SLOT.join, zip(*text))) if text else [""] * n, pa.string()),
-        "metrics_numbers": stacked_blobs(numbers, np.float64),
+        f"{name}_slots": pa.array(list(map(SLOT.join, zip(*text))) if text else [""] * n, pa.string()),
+        f"{name}_numbers": stacked_blobs(numbers, np.float64),
     }
 
 

@@ -21,11 +21,13 @@ from .block_columns import (
     finite_rows,
     given_columns,
     given_row,
+    json_columns,
     metric_columns,
     metric_named,
     row_columns,
     row_of,
     stacked_blobs,
+    tree_columns,
     tree_metric_columns,
     tree_named,
     typed_columns,
@@ -45,8 +47,6 @@ from .block_layout import (
 )
 from .jsontext import (
     compact_json,
-    json_texts,
-    object_texts,
 )
 from .plan import RunPoint
 
@@ -64,7 +64,7 @@ def encode_block(ids: list[str], records: list[dict], *, campaign: str) -> pa.Bu
     texts = {
         "id": pa.array(ids, pa.string()),
         "status": pa.array([record["status"] for record in records], pa.string()),
-        "record": pa.array(json_texts([rest for rest, _ in parts]), pa.string()),
+        **json_columns([rest for rest, _ in parts], "record"),
         # JSON only for what the typed columns do not hold: a row's metrics, or a whole row they cannot give exactly
         "row": pa.array([None if ok else compact_json(row) for row, ok in zip(rows, given)], pa.string()),
         **metric_columns([row.get("metrics") if ok and "metrics" in row else NONE for row, ok in zip(rows, given)]),
@@ -88,7 +88,7 @@ def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
     texts = {
         "id": pa.array(ids, pa.string()),
         "status": pa.array(["done"] * n, pa.string()),
-        "record": pa.array(_record_texts(ids, runs), pa.string()),
+        **_record_columns(ids, runs),
         "row": pa.array(
             [None if ok else compact_json(row_of(runs, i)) for i, ok in enumerate(given.tolist())], pa.string()
         ),
@@ -97,22 +97,23 @@ def encode_runs(ids: list[str], runs: BlockRuns, *, campaign: str) -> pa.Buffer:
     return _block_file(texts, runs.traces, typed, campaign=campaign)
 
 
-def _record_texts(ids: list[str], runs: BlockRuns) -> list[str]:
-    """Each run's record text (its id, inputs, link and status, as :func:`encode_block` writes the record's rest):
-    its scenario from :attr:`.block_columns.BlockRuns.scenario_trees` and its artifact and seed from
-    :attr:`.block_columns.BlockRuns.input_columns` when the runs have them, a grid part at a time, else from each run's
-    inputs."""
+def _record_columns(ids: list[str], runs: BlockRuns) -> dict[str, pa.Array]:
+    """The record columns (:data:`.block_layout.RECORD_COLUMNS`) of the runs: each run's id, inputs, link and status,
+    as :func:`encode_block` stores the record's rest; its scenario from
+    :attr:`.block_columns.BlockRuns.scenario_trees` and its artifact and seed from
+    :attr:`.block_columns.BlockRuns.input_columns` when the runs have them, a grid part at a time (a part's shared
+    scenario once in its form's template), else from each run's inputs."""
     if runs.scenario_trees is not None and runs.input_columns is not None:
         (shas, seeds), parts = runs.input_columns, runs.scenario_trees
     else:
         shas, scenarios, seeds = (list(col) for col in zip(*runs.inputs)) if ids else ([], [], [])
         parts = [(0, len(ids), scenarios)]
-    texts: list[str] = []
+    trees = []
     for a, b, scenario in parts:
         inputs = {"artifact_sha256": shas[a:b], "kind": [runs.kind] * (b - a), "scenario": scenario, "seed": seeds[a:b]}
         record = {"id": ids[a:b], "inputs": inputs, "link": runs.link[a:b], "status": ["done"] * (b - a)}
-        texts += object_texts(record, b - a)
-    return texts
+        trees.append((list(range(a, b)), record))
+    return tree_columns(trees, len(ids), "record")
 
 
 def _run_metric_columns(runs: BlockRuns, given: np.ndarray) -> dict[str, pa.Array]:

@@ -21,6 +21,9 @@ SCHEMA = pa.schema(
         ("id", pa.string()),
         ("status", pa.string()),
         ("record", pa.string()),
+        ("record_form", pa.dictionary(pa.int32(), pa.string())),
+        ("record_slots", pa.string()),
+        ("record_numbers", pa.large_binary()),
         ("row", pa.string()),
         ("metrics", pa.string()),
         ("metrics_form", pa.dictionary(pa.int32(), pa.string())),
@@ -32,12 +35,13 @@ SCHEMA = pa.schema(
     ]
 )
 META_VERSION, META_CAMPAIGN, META_LAYOUT = b"gainlink.version", b"gainlink.campaign", b"gainlink.block_layout"
-LAYOUT = "7"  # 2: the record split into ``record`` and ``row``; 3: the row's verdict inputs as typed columns too;
+LAYOUT = "8"  # 2: the record split into ``record`` and ``row``; 3: the row's verdict inputs as typed columns too;
 # 4: each trace a run's float32 bytes (not a list of floats: Parquet's levels per value, and numpy's per run to read);
 # 5: a row's typed values (complete, run_reason, measures, worker) not again in JSON: its text made from the columns;
 # 6: one row group a block (5: a row group a TRACE_BATCH of runs); 7: a run's metrics as its form's template and its
 # values (``metrics_form``, ``metrics_slots``, ``metrics_numbers``), their text made when read
-# (:func:`.block_texts.metric_texts`)
+# (:func:`.block_texts.metric_texts`); 8: a run's record the same way (``record_form``, ``record_slots``,
+# ``record_numbers``; ``record`` only for a record json writes alone: :func:`.block_texts.record_texts`)
 ROW_KEYS = ("complete", "measures", "metrics", "worker")  # what a report row takes from a record, as it is
 # bit k of ``row_keys``: the row has ROW_BITS[k]; its measures have the twin's, the model twin's, growth ratios
 ROW_BITS = ("complete", "run_reason", "worker", "measures", "metrics", "twin", "model", "growth")
@@ -88,10 +92,13 @@ def block_address(run_ids: Iterable[str]) -> str:
 
 
 #: The block file's columns whose values repeat from run to run (dictionary-encoded in the Parquet file).
-REPEATED = ["status", "names", "run_reason", "metrics_form"]
+REPEATED = ["status", "names", "run_reason", "record_form", "metrics_form"]
 #: The block file's columns of JSON texts, compressed with zstd (every other leaf with LZ4:
 #: :func:`.block_file._block_file`).
-TEXTS = ("id", "record", "row", "metrics", "metrics_slots")
+TEXTS = ("id", "record", "record_slots", "row", "metrics", "metrics_slots")
 #: The columns that hold a run's metrics (:func:`.block_columns.metric_columns`, :func:`.block_texts.metric_texts`).
 METRIC_COLUMNS = ("metrics", "metrics_form", "metrics_slots", "metrics_numbers")
+#: The columns that hold a run's record (its id, inputs, link, status, an error's reason: :func:`.block_file._split`;
+#: :func:`.block_columns.json_columns`, :func:`.block_texts.record_texts`).
+RECORD_COLUMNS = ("record", "record_form", "record_slots", "record_numbers")
 SLOT = "\x00"  # between a run's text slots: a JSON text holds no NUL (json writes it \u0000)

@@ -1,7 +1,8 @@
 """A block file's runs as text again, made from its columns when read: each run's row as compact JSON
-(:func:`row_texts`, the typed columns filled into one template a form of row), its metrics' JSON (:func:`metric_texts`,
-their form's template filled with their values) and the columns' values as JSON and CSV cells write them
-(:func:`value_texts`, :func:`cell_texts`): each value made text once, a column at a time."""
+(:func:`row_texts`, the typed columns filled into one template a form of row), its metrics' and its record's JSON
+(:func:`metric_texts`, :func:`record_texts`: their form's template filled with their values) and the columns' values as
+JSON and CSV cells write them (:func:`value_texts`, :func:`cell_texts`): each value made text once, a column at a
+time."""
 
 from __future__ import annotations
 
@@ -33,14 +34,27 @@ def metric_texts(table: pa.Table) -> list[str | None]:
     """Each row's metrics as compact JSON (:func:`.jsontext.compact_json` of the run's metrics; None where the file
     holds none), from the columns :func:`.block_columns.metric_columns` made (a file of layout 6 or before: its
     ``metrics`` texts)."""
-    out = table.column("metrics").to_pylist()
-    if "metrics_form" not in table.column_names:
+    return form_texts_of(table, "metrics")
+
+
+def record_texts(table: pa.Table) -> list[str | None]:
+    """Each row's record as compact JSON (its id, inputs, link, status, an error's reason), from the columns
+    :func:`.block_file.encode_block` and :func:`.block_file.encode_runs` made (:data:`.block_layout.RECORD_COLUMNS`)."""
+    return form_texts_of(table, "record")
+
+
+def form_texts_of(table: pa.Table, name: str) -> list[str | None]:
+    """Each row's JSON text of the value the columns ``name`` hold (:func:`.block_columns.json_columns`: a run of a
+    form, its form's template filled with its slots; a run json wrote alone, its ``name`` text; None where neither);
+    a table without ``<name>_form``: its ``name`` texts."""
+    out = table.column(name).to_pylist()
+    if f"{name}_form" not in table.column_names:
         return out
-    form = table.column("metrics_form").combine_chunks()
+    form = table.column(f"{name}_form").combine_chunks()
     if form.null_count == len(form):
         return out
     codes = np.asarray(pc.fill_null(form.indices, -1).to_numpy(zero_copy_only=False))
-    slots, numbers = table.column("metrics_slots"), table.column("metrics_numbers")
+    slots, numbers = table.column(f"{name}_slots"), table.column(f"{name}_numbers")
     for code, word in enumerate(form.dictionary.to_pylist()):
         rows = np.flatnonzero(codes == code).tolist()
         if not rows:

@@ -65,12 +65,13 @@ from .block_layout import (
     META_VERSION,
     METRIC_COLUMNS,
     NAMED,
+    RECORD_COLUMNS,
     ROW_COLUMNS,
     TRACE_FIELDS,
     WIDE,
     block_address,
 )
-from .block_texts import cell_texts, joined, numbers_text, row_texts, struct_fields, value_texts
+from .block_texts import cell_texts, joined, numbers_text, record_texts, row_texts, struct_fields, value_texts
 from .config import CampaignError
 from .criteria import RunColumns
 from .plan import CampaignPlan, RunPoint
@@ -354,9 +355,9 @@ class Store:
         reasons: list[str | None] = [None] * len(ids)
         errors = [i for i, status in enumerate(statuses) if status == "error"]
         if errors:  # only errors' records are decoded here: a result's is the report's to read
-            records = pq.read_table(pa.BufferReader(data), columns=["record"]).column("record")
-            for i in errors:
-                reasons[i] = json.loads(records[i].as_py()).get("reason")
+            records = pq.read_table(pa.BufferReader(data), columns=list(RECORD_COLUMNS))
+            for i, text in zip(errors, record_texts(records.take(pa.array(errors, pa.int64())))):
+                reasons[i] = json.loads(text).get("reason")
         return [{"id": i, "status": s, "reason": r} for i, s, r in zip(ids, statuses, reasons)]
 
     def took_block(self, answer: dict, ids: list[str]) -> list[dict]:
@@ -403,20 +404,23 @@ class Store:
             error = np.asarray(pc.equal(table.column("status"), "error").to_numpy(zero_copy_only=False), bool)
             reasons: list[str | None] = [None] * table.num_rows
             if error.any():
-                records = _read(block, ["record"]).column("record").filter(pa.array(kept))
-                for i in np.flatnonzero(error).tolist():
-                    reasons[i] = json.loads(records[i].as_py()).get("reason")
+                records = _read(block, list(RECORD_COLUMNS)).filter(pa.array(kept))
+                errors = np.flatnonzero(error).tolist()
+                for i, text in zip(errors, record_texts(records.take(pa.array(errors, pa.int64())))):
+                    reasons[i] = json.loads(text).get("reason")
         return _report_part(names[kept], error, reasons, table, rows=rows)
 
     def records(self) -> Iterator[tuple[str, dict]]:
         """Every stored run's record, one block file at a time (a run stored twice: the record the index keeps)."""
         for path in self.files():
-            table = _read(path, columns=["id", "record", *_row_columns(path)])
+            table = _read(path, columns=["id", *RECORD_COLUMNS, *_row_columns(path)])
             names = _ids(table.column("id"))
             kept = np.flatnonzero(self._kept(path, names)).tolist()
-            rows = row_texts(table.take(pa.array(kept, pa.int64()))) if kept else []
-            for i, row in zip(kept, rows):
-                yield names[i].decode("ascii"), joined(json.loads(table.column("record")[i].as_py()), json.loads(row))
+            taken = table.take(pa.array(kept, pa.int64())) if kept else None
+            rows = row_texts(taken) if taken is not None else []
+            records = record_texts(taken) if taken is not None else []
+            for i, record, row in zip(kept, records, rows):
+                yield names[i].decode("ascii"), joined(json.loads(record), json.loads(row))
 
     def runs_cpu_s(self) -> float:
         """The CPU seconds of the stored runs as their workers measured each around the run (``worker.cpu_s``: a
@@ -499,11 +503,11 @@ class Store:
         hit = self._find(run_id)
         if hit is None:
             raise KeyError(run_id)
-        got = self._row(run_id, ["record", *_row_columns(self.blocks / hit[1])])
+        got = self._row(run_id, [*RECORD_COLUMNS, *_row_columns(self.blocks / hit[1])])
         assert got is not None
         table, i = got
-        row = row_texts(table.slice(i, 1))[0]
-        return joined(json.loads(table.column("record")[i].as_py()), json.loads(row))
+        one = table.slice(i, 1)
+        return joined(json.loads(record_texts(one)[0]), json.loads(row_texts(one)[0]))
 
     def trace(self, run_id: str) -> dict[str, np.ndarray] | None:
         """The stored downsampled traces of a run, if any."""
