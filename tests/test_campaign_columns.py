@@ -17,13 +17,12 @@ import pyarrow.parquet as pq
 import pytest
 from gainlink.hil.campaign import parse_campaign
 from gainlink.hil.campaign.block_file import encode_block, with_inputs
-from gainlink.hil.campaign.block_layout import METRIC_COLUMNS, RECORD_COLUMNS, ROW_KEYS
+from gainlink.hil.campaign.block_layout import MEASURE_CELLS, METRIC_CELLS, METRIC_COLUMNS, RECORD_COLUMNS, ROW_KEYS
 from gainlink.hil.campaign.block_texts import metric_texts, record_texts
 from gainlink.hil.campaign.config import Criteria
 from gainlink.hil.campaign.criteria import evaluate, evaluate_columns
 from gainlink.hil.campaign.plan import CampaignPlan, RunPoint
 from gainlink.hil.campaign.report import merge
-from gainlink.hil.campaign.rows import MEASURE_CELLS, METRIC_CELLS
 from gainlink.hil.campaign.store import Store
 from support.paths import EXAMPLES
 

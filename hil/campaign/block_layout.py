@@ -12,8 +12,16 @@ import numpy as np
 import pyarrow as pa
 from gainlink.version import __version__
 
-from .rows import MEASURE_CELLS, METRIC_CELLS
-
+# the metrics of a tracked output and the measures ``campaign.csv`` has a cell of, in its columns' order
+METRIC_CELLS = ("iae", "overshoot_pct", "settling_time_s")
+MEASURE_CELLS = (
+    "stable",
+    "longest_saturation_s",
+    "twin_output_deviation",
+    "twin_command_deviation",
+    "model_mismatch",
+    "model_iae_ratio",
+)
 TRACE_FIELDS = ("t", "y", "u", "r")
 WIDE = ("y", "u", "r")
 SCHEMA = pa.schema(

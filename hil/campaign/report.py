@@ -32,9 +32,10 @@ from typing import IO, Any, NamedTuple
 import numpy as np
 from gainlink.fileio import atomic_writer, publish_files
 
+from .block_layout import MEASURE_CELLS, METRIC_CELLS
 from .figures import EnvelopeFigure, Figure, ScatterFigure, ScatterPanel, ordinal
 from .plan import CampaignPlan, PlannedRuns, describe_axes
-from .rows import FAILURES_LIMIT, MEASURE_CELLS, METRIC_CELLS, RunStatus, Tally, Verdicts, head_texts, plan_draws
+from .rows import FAILURES_LIMIT, RunStatus, Tally, Verdicts, head_texts, plan_draws
 from .store import members
 from .stored_rows import StoredRows
 

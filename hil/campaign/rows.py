@@ -28,6 +28,7 @@ from typing import IO, Any
 import numpy as np
 import pyarrow as pa
 
+from .block_layout import MEASURE_CELLS, METRIC_CELLS
 from .criteria import evaluate_columns
 from .jsontext import float_texts
 from .plan import PlanColumns, PlannedRuns, plan_columns
@@ -150,15 +151,6 @@ def _spans(values: np.ndarray) -> list[tuple[int, int]]:
 
 
 MISSING_VERDICT = {"status": "missing", "failed": ["missing"], "reasons": ["no result"]}
-METRIC_CELLS = ("iae", "overshoot_pct", "settling_time_s")
-MEASURE_CELLS = (
-    "stable",
-    "longest_saturation_s",
-    "twin_output_deviation",
-    "twin_command_deviation",
-    "model_mismatch",
-    "model_iae_ratio",
-)
 
 
 FIXED_CELLS = 8
