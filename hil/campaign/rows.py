@@ -23,7 +23,8 @@ import os
 import tempfile
 from collections import Counter
 from collections.abc import Iterator, Mapping
-from typing import IO, Any
+from json.encoder import encode_basestring_ascii  # the encoder json.dumps uses for a string (ensure_ascii)
+from typing import IO, Any, NamedTuple
 
 import numpy as np
 import pyarrow as pa
@@ -55,13 +56,16 @@ def point_row(point: Any) -> dict:
 
 
 def csv_field(text: str) -> str:
-    """``text`` as one field of ``csv.writer``'s row (its default dialect): as it is, or quoted by the writer itself
-    when it holds a character the writer quotes (of this Python: a comma, a quote, a line end; ``\\r`` checked too)."""
-    if "," not in text and '"' not in text and "\n" not in text and "\r" not in text:
+    """``text`` as one field of ``csv.writer``'s row (its default dialect: minimal quoting, a quote doubled): as it is,
+    or in quotes when it holds a comma, a quote or a line end; one with a carriage return as the writer itself writes
+    it (whether it quotes one depends on the Python: 3.11's does not)."""
+    if "\r" in text:
+        out = io.StringIO()
+        csv.writer(out, lineterminator="\n").writerow([text, ""])
+        return out.getvalue()[:-2]
+    if "," not in text and '"' not in text and "\n" not in text:
         return text
-    out = io.StringIO()
-    csv.writer(out, lineterminator="\n").writerow([text, ""])
-    return out.getvalue()[:-2]
+    return '"' + text.replace('"', '""') + '"'
 
 
 def _csv_value(value: Any) -> str:
@@ -201,18 +205,34 @@ def _tracked_iae(part: Any) -> np.ndarray:
     return total
 
 
-def verdict_head(part: Any, i: int, failed: list[tuple[str, str]]) -> dict:
+def verdict_form(part: Any, i: int, failed: list[tuple[str, str]]) -> tuple[tuple, list[str]]:
     """What run ``i`` of ``part`` (a :class:`~.store.ReportPart`) says beyond its stored ``row``, given the criteria it
-    ``failed`` (name, reason): its status (``pass``, ``fail``, ``error``), the criteria it failed and the reasons;
-    and ``None`` for any of ``complete``, ``run_reason``, ``worker`` the row lacks (an error's: ``worker``)."""
+    ``failed`` (name, reason): its form (its status, ``pass``, ``fail`` or ``error``; the criteria it failed, sorted;
+    which of ``complete``, ``run_reason``, ``worker`` the row lacks, each ``None`` in the verdict: an error's only
+    ``worker``) and its reasons."""
     keys = int(part.keys[i])
     if part.error[i]:
-        return {"status": "error", "failed": ["error"], "reasons": [part.reasons[i]]} | (
-            {} if keys & ROW_BITS["worker"] else {"worker": None}
-        )
-    missing = {k: None for k, bit in ROW_BITS.items() if not keys & bit}
-    return {"status": "fail" if failed else "pass", "failed": sorted({k for k, _ in failed}),
-            "reasons": [text for _, text in failed]} | missing  # fmt: skip
+        return ("error", ("error",), () if keys & ROW_BITS["worker"] else ("worker",)), [part.reasons[i]]
+    missing = tuple(k for k, bit in ROW_BITS.items() if not keys & bit)
+    return ("fail" if failed else "pass", tuple(sorted({k for k, _ in failed})), missing), [t for _, t in failed]
+
+
+def verdict_head(part: Any, i: int, failed: list[tuple[str, str]]) -> dict:
+    """Run ``i``'s verdict (:func:`verdict_form`) as a dict: its status, the criteria it failed and the reasons, and
+    ``None`` for each key its row lacks."""
+    (status, names, missing), reasons = verdict_form(part, i, failed)
+    return {"status": status, "failed": list(names), "reasons": reasons} | dict.fromkeys(missing)
+
+
+class _Form(NamedTuple):
+    """The verdicts of one form (:func:`verdict_form`): the JSON text around the reasons, the CSV status, the status
+    code and the failed criteria (bits into :attr:`Verdicts.criteria`)."""
+
+    before: str
+    after: str
+    status: str
+    code: int
+    mask: int
 
 
 class Verdicts:
@@ -236,6 +256,7 @@ class Verdicts:
         self.tracked: set[str] = set()
         self.outputs: set[str] = set()
         self._flushed = False
+        self._forms: dict[tuple, _Form] = {}
         for part in store.report_parts():
             k = np.minimum(np.searchsorted(self.uids, part.ids), max(n - 1, 0))
             planned = self.uids[k] == part.ids if n else np.zeros(len(part.ids), bool)
@@ -259,14 +280,11 @@ class Verdicts:
         verdicts = ["pass,"] * len(rows)
         for n in np.flatnonzero(bad[rows]).tolist():
             i = int(rows[n])
-            head = verdict_head(part, i, failed[i])
-            texts[n] = json.dumps(head, sort_keys=True, allow_nan=False)
-            verdicts[n] = head["status"] + "," + csv_field("; ".join(head["reasons"]))
-            code[n] = STATUSES.index(head["status"])
-            for name in head["failed"]:
-                if name not in self.criteria:
-                    self.criteria.append(name)
-                masks[n] |= 1 << self.criteria.index(name)
+            key, reasons = verdict_form(part, i, failed[i])
+            form = self._forms.get(key) or self._form(key)
+            texts[n] = form.before + ", ".join(map(encode_basestring_ascii, reasons)) + form.after
+            verdicts[n] = form.status + csv_field("; ".join(reasons))
+            code[n], masks[n] = form.code, form.mask
         pick = rows.tolist()
         cell_texts = cells if len(pick) == len(part.ids) else [cells[i] for i in pick]
         lines = [text + SEP + verdict + SEP + cell + SEP for text, verdict, cell in zip(texts, verdicts, cell_texts)]
@@ -285,6 +303,23 @@ class Verdicts:
         self.file.write(encoded)
         self.shape[u], self.code[u], self.failed[u] = shape[rows], code, masks
         self.iae[u], self.model[u], self.warning[u] = iae[rows], model[rows], warning[rows]
+
+    def _form(self, key: tuple) -> _Form:
+        """The verdicts of form ``key`` (:func:`verdict_form`), made once: ``json.dumps`` of the verdict with its keys
+        sorted, its reasons left out (each run's written in by json's own string encoder); its failed criteria noted
+        in :attr:`criteria` in the order first met."""
+        status, names, missing = key
+        text = json.dumps({"status": status, "failed": list(names), "reasons": []} | dict.fromkeys(missing),
+                          sort_keys=True)  # fmt: skip
+        before, after = text.split('"reasons": []')
+        mask = 0
+        for name in names:
+            if name not in self.criteria:
+                self.criteria.append(name)
+            mask |= 1 << self.criteria.index(name)
+        form = _Form(before + '"reasons": [', "]" + after, status + ",", STATUSES.index(status), mask)
+        self._forms[key] = form
+        return form
 
     def _shapes(self, part: Any, rows: np.ndarray) -> np.ndarray:
         """Each run's (tracked outputs, outputs) as a number into :attr:`shapes`, the planned ``rows``' named in the
