@@ -24,6 +24,7 @@ import hashlib
 import itertools
 import logging
 import pickle
+import queue
 import uuid
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -400,6 +401,27 @@ class _Submitter:
         )
 
 
+class _Finished:
+    """The futures added, each given back once as it finishes (done, failed or cancelled), until none is left: Dask's
+    callback thread puts a finished future on a queue the caller blocks on. (``distributed.as_completed`` wakes its
+    caller ten times a second to look instead, and a wake-up costs CPU on these virtual machines: the campaign's
+    main thread took 15 ms a second of a run's wall time with it.)"""
+
+    def __init__(self) -> None:
+        self._done: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._pending = 0
+
+    def add(self, future: Any) -> None:
+        self._pending += 1
+        future.add_done_callback(self._done.put)
+
+    def __iter__(self) -> Iterator[Any]:
+        while self._pending:
+            future = self._done.get()
+            self._pending -= 1
+            yield future
+
+
 def _submit_and_store(
     client: Any,
     plan: CampaignPlan,
@@ -416,15 +438,15 @@ def _submit_and_store(
     (8 bytes a run), not its runs: a run is made to be pickled into its task, and again only if its task failed."""
     from asyncio import CancelledError
 
-    from distributed import as_completed
-
     kind = plan.campaign.kind
     submitter = _Submitter(client, plan, store)
     futures: dict[Any, np.ndarray] = {}
+    finished = _Finished()
     for block in itertools.islice(blocks, max(window, 1) * BLOCKS_IN_FLIGHT):
-        futures[submitter.submit(block)] = block
-    queue = as_completed(list(futures))
-    for fut in queue:
+        first = submitter.submit(block)
+        futures[first] = block
+        finished.add(first)
+    for fut in finished:
         block = futures.pop(fut)
         try:
             stored = _store_answer(store, fut.result(), submitter.ids(block))
@@ -436,14 +458,14 @@ def _submit_and_store(
                 for i in range(len(block)):
                     single = submitter.submit(block[i : i + 1])
                     futures[single] = block[i : i + 1]
-                    queue.add(single)
+                    finished.add(single)
                 continue
             stored = store.put(submitter.points(block), kind=kind, results=[{"status": "error", "reason": reason}])
         fut.release()
         for nxt in itertools.islice(blocks, 1):  # the next block takes the finished one's place
             queued = submitter.submit(nxt)
             futures[queued] = nxt
-            queue.add(queued)
+            finished.add(queued)
         for k, record in zip(block.tolist(), stored):
             done += 1
             if record["status"] == "error":
