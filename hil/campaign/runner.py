@@ -9,11 +9,11 @@ scenarios and their draws where the plan can, :meth:`.plan.PlannedRuns.task`) wi
 HIL: one run, keyed by its run id). A task makes its block's Parquet file on the worker and
 writes it into the campaign folder itself when it sees the folder (a LocalCluster; the folder's device and inode
 tell, not the hostname), returning only the file's name and the errors' reasons; a worker on another machine returns
-the file's bytes for the client to write. Results come back through ``as_completed`` and each block is noted as it
-completes (the client decodes no trace), so whatever finished before an interruption is kept. A task that raised
-is retried once by Dask (``retries=1``); a batch still failing, or whose workers died under it (``KilledWorker``), is
-submitted again one run per task, and a single run that fails so is recorded as an error with the reason: one bad
-run costs no other run its result.
+the file's bytes for the client to write. Results come back as their tasks finish (Dask's done-callbacks) and each block
+is noted as it completes (the client decodes no trace), so whatever finished before an interruption is kept. A task that
+raised is retried once by Dask (``retries=1``); a batch still failing, or whose workers died under it
+(``KilledWorker``), is submitted again one run per task, and a single run that fails so is recorded as an error with the
+reason: one bad run costs no other run its result.
 """
 
 from __future__ import annotations
