@@ -355,9 +355,7 @@ class Store:
         reasons: list[str | None] = [None] * len(ids)
         errors = [i for i, status in enumerate(statuses) if status == "error"]
         if errors:  # only errors' records are decoded here: a result's is the report's to read
-            records = pq.read_table(pa.BufferReader(data), columns=list(RECORD_COLUMNS))
-            for i, text in zip(errors, record_texts(records.take(pa.array(errors, pa.int64())))):
-                reasons[i] = json.loads(text).get("reason")
+            reasons = _error_reasons(pq.read_table(pa.BufferReader(data), columns=list(RECORD_COLUMNS)), errors)
         return [{"id": i, "status": s, "reason": r} for i, s, r in zip(ids, statuses, reasons)]
 
     def took_block(self, answer: dict, ids: list[str]) -> list[dict]:
@@ -405,9 +403,7 @@ class Store:
             reasons: list[str | None] = [None] * table.num_rows
             if error.any():
                 records = _read(block, list(RECORD_COLUMNS)).filter(pa.array(kept))
-                errors = np.flatnonzero(error).tolist()
-                for i, text in zip(errors, record_texts(records.take(pa.array(errors, pa.int64())))):
-                    reasons[i] = json.loads(text).get("reason")
+                reasons = _error_reasons(records, np.flatnonzero(error).tolist())
         return _report_part(names[kept], error, reasons, table, rows=rows)
 
     def records(self) -> Iterator[tuple[str, dict]]:
@@ -543,6 +539,15 @@ class ReportPart:
     model_mismatch: np.ndarray  # NaN where null
     model_warning: np.ndarray  # bool (null: False)
     judged: RunColumns  # what the criteria read (:func:`.criteria.evaluate_columns`)
+
+
+def _error_reasons(records: pa.Table, errors: list[int]) -> list[str | None]:
+    """The ``reason`` of each of rows ``errors`` of ``records`` (a block's :data:`.block_layout.RECORD_COLUMNS`), None
+    for its other rows: only the errors' records made text and decoded."""
+    reasons: list[str | None] = [None] * records.num_rows
+    for i, text in zip(errors, record_texts(records.take(pa.array(errors, pa.int64())))):
+        reasons[i] = json.loads(text).get("reason")
+    return reasons
 
 
 def _report_part(
