@@ -404,8 +404,8 @@ class _Submitter:
 class _Finished:
     """The futures added, each given back once as it finishes (done, failed or cancelled), until none is left: Dask's
     callback thread puts a finished future on a queue the caller blocks on. (``distributed.as_completed`` wakes its
-    caller ten times a second to look instead, and a wake-up costs CPU on these virtual machines: the campaign's
-    main thread took 15 ms a second of a run's wall time with it.)"""
+    caller ten times a second to look instead: with it the main thread took 1.8-2.1 us of CPU a run while the runs
+    went, with this 1.5-1.6; 30,002 runs on 2 workers.)"""
 
     def __init__(self) -> None:
         self._done: queue.SimpleQueue[Any] = queue.SimpleQueue()
