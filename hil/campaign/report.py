@@ -25,7 +25,7 @@ import json
 import logging
 import tempfile
 from collections import Counter
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from functools import partial
 from typing import IO, Any, NamedTuple
 
@@ -50,7 +50,7 @@ MAX_POINT_LINES = 30
 #: The most runs of each status (passed, failed) the scatter plot draws (:func:`scatter_runs`): a run drawn costs the
 #: figure ~10 µs of CPU in the shipped pendulum's three panels, and a few thousand show the cloud as all of them do.
 SCATTER_RUNS = 2000
-HISTOGRAM_RUNS = 128  # runs histogrammed at a time: its float64 and index temporaries ~16 MB, not a block's ~100
+HISTOGRAM_VALUES = 1 << 20  # values binned and counted at a time: their float64 and index temporaries ~17 MB
 
 
 def csv_head(plan: CampaignPlan, tracked: set[str], outs: set[str]) -> list[str]:
@@ -278,11 +278,11 @@ def envelope_bands(
         lo, hi = np.nan_to_num(one.lo.astype(float)), np.nan_to_num(one.hi.astype(float))
         width = np.where(hi > lo, (hi - lo) / bins, 1.0)
         counts = _histograms(one, spill, lo, width, bins)
-    pct = np.stack([_percentile(counts[0], q, lo, width) for q in PERCENTILES])
+    pct = _percentiles(counts[0], PERCENTILES, lo, width)
     return {
         "t": one.t,
         "percentiles": pct,
-        "failed_median": _percentile(counts[1], 50, lo, width),
+        "failed_median": _percentiles(counts[1], (50,), lo, width)[0],
         "runs": one.runs,
         "failed": int(sum(b.sum() for _, b in one.chunks)),
         "finished": len(ids),
@@ -296,29 +296,36 @@ def envelope_bands(
 
 def _histograms(one: _Spilled, spill: IO[bytes], lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:
     """The histograms (2, N, S, ``bins``) of the runs of ``one`` read back from ``spill``: of the runs chosen for the
-    percentiles, and of the failed runs chosen for their median. Each run is binned once; the bin numbers are counted
-    :data:`HISTOGRAM_RUNS` runs at a time across the blocks' chunks (a count is a pass over every bin: the few runs a
-    chunk holds once only every k-th is read are gathered first)."""
+    percentiles, and of the failed runs chosen for their median. Each run is binned once, :data:`HISTOGRAM_VALUES`
+    values at a time (:func:`_spilled_runs`; a count is a pass over every bin, so the fewer the better)."""
     cells = lo.size * bins
     counts = np.zeros((2, cells), np.int64)
-    held: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])
-    for at, bad in one.chunks:
-        spill.seek(at)
-        for i in range(0, bad.size, HISTOGRAM_RUNS):
-            failed = bad[i : i + HISTOGRAM_RUNS]
-            sig = np.fromfile(spill, np.float32, failed.size * lo.size).reshape(failed.size, *lo.shape)
-            where = _bin_numbers(sig, lo, width, bins)
-            held[0].append(where)
-            if failed.any():  # the failed runs' bins are theirs of all runs: counted, not made again
-                held[1].append(where if failed.all() else where[failed])
-            for k in (0, 1):
-                if sum(map(len, held[k])) >= HISTOGRAM_RUNS:
-                    counts[k] += _counts(np.concatenate(held[k]), cells)
-                    held[k].clear()
-    for k in (0, 1):
-        if held[k]:
-            counts[k] += _counts(np.concatenate(held[k]), cells)
+    for sig, failed in _spilled_runs(one, spill, lo.shape, max(1, HISTOGRAM_VALUES // lo.size)):
+        where = _bin_numbers(sig, lo, width, bins)
+        counts[0] += _counts(where, cells)
+        if failed.any():  # the failed runs' bins are theirs of all runs: counted, not made again
+            counts[1] += _counts(where if failed.all() else where[failed], cells)
     return counts.reshape(2, *lo.shape, bins)
+
+
+def _spilled_runs(one: _Spilled, spill: IO[bytes], shape: tuple, step: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """The runs of ``one`` read back from ``spill`` (float32, ``shape`` a run), ``step`` runs at a time across its
+    blocks' chunks (the few runs a chunk holds when only every k-th is read gathered with the next chunk's), each with
+    which of them the failed median counts."""
+    held: list[np.ndarray] = []
+    bad: list[np.ndarray] = []
+    for at, failed in one.chunks:
+        spill.seek(at)
+        for i in range(0, failed.size, step):
+            part = failed[i : i + step]
+            held.append(np.fromfile(spill, np.float32, part.size * int(np.prod(shape))).reshape(part.size, *shape))
+            bad.append(part)
+            if sum(map(len, bad)) >= step:
+                yield np.concatenate(held), np.concatenate(bad)
+                held.clear()
+                bad.clear()
+    if bad:
+        yield np.concatenate(held), np.concatenate(bad)
 
 
 class _Spilled:
@@ -376,17 +383,15 @@ def _status_runs(status: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray, np.
 def _bin_numbers(sig: np.ndarray, lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:
     """The bin of each value of ``sig`` (k, N, S) among ``bins`` bins from ``lo`` of ``width`` per sample and
     signal, numbered across the (N, S) cells (cell * bins + bin); a NaN's is ``N * S * bins``, past every cell's."""
+    nan = np.isnan(sig) if np.isnan(sig.min(initial=0.0)) else None  # NaN samples are rare: looked for once
     with np.errstate(invalid="ignore", over="ignore"):
         b = np.subtract(sig, lo)  # float64 (lo's): a float32 stack is widened here, no copy before; in place from here
         b /= width
-        np.floor(b, out=b)
-    nan = np.isnan(b)
-    b[nan] = 0
-    np.clip(b, 0, bins - 1, out=b)
-    flat = b.astype(np.int64)
-    flat += np.arange(lo.size).reshape(lo.shape) * bins
-    flat[nan] = lo.size * bins
-    return flat
+    np.clip(b, 0, bins - 1, out=b)  # clipped first, then truncated: the floor of what is left, none negative
+    b += np.arange(lo.size, dtype=float).reshape(lo.shape) * bins  # whole numbers: exact in a float64
+    if nan is not None:
+        b[nan] = lo.size * bins
+    return b.astype(np.int64)
 
 
 def _counts(where: np.ndarray, cells: int) -> np.ndarray:
@@ -394,17 +399,27 @@ def _counts(where: np.ndarray, cells: int) -> np.ndarray:
     return np.bincount(where.ravel(), minlength=cells + 1)[:cells]
 
 
-def _percentile(counts: np.ndarray, q: float, lo: np.ndarray, width: np.ndarray) -> np.ndarray:
-    """numpy's linear percentile ``q`` from histograms ``counts`` (N, S, bins), each order statistic at its bin's
-    centre; NaN where a cell counts nothing."""
-    n = counts.sum(axis=-1)
-    cum = np.cumsum(counts, axis=-1)
-    h = q / 100 * np.maximum(n - 1, 0)
-    below, above = np.floor(h), np.ceil(h)
-    at = [(cum > r[..., None]).argmax(axis=-1) for r in (below, above)]
-    value = [lo + (b + 0.5) * width for b in at]
-    out = value[0] + (h - below) * (value[1] - value[0])
-    return np.where(n > 0, out, np.nan)
+def _percentiles(counts: np.ndarray, qs: tuple[float, ...], lo: np.ndarray, width: np.ndarray) -> np.ndarray:
+    """numpy's linear percentiles ``qs`` (len(qs), N, S) from histograms ``counts`` (N, S, bins), each order statistic
+    at its bin's centre; NaN where a cell counts nothing. The cumulative counts are summed once for every ``q``, and
+    each order statistic's bin is found by one ``searchsorted`` across the cells (each cell's cumulative counts
+    lifted past the one before's)."""
+    bins = counts.shape[-1]
+    cum = np.cumsum(counts.reshape(-1, bins), axis=-1)
+    n = cum[:, -1]
+    lift = np.arange(len(n), dtype=np.int64) * (int(n.max(initial=0)) + 1)
+    flat = (cum + lift[:, None]).ravel()
+    start = np.arange(len(n), dtype=np.int64) * bins  # each cell's first bin in ``flat``
+    out = []
+    for q in qs:
+        h = q / 100 * np.maximum(n - 1, 0)
+        below, above = np.floor(h), np.ceil(h)
+        # the bin of order statistic r: the first whose cumulative count passes r (the count of those at most r)
+        at = [np.minimum(np.searchsorted(flat, r.astype(np.int64) + lift, side="right") - start, bins - 1)
+              for r in (below, above)]  # fmt: skip
+        value = [lo.ravel() + (b + 0.5) * width.ravel() for b in at]
+        out.append(np.where(n > 0, value[0] + (h - below) * (value[1] - value[0]), np.nan).reshape(lo.shape))
+    return np.stack(out)
 
 
 def _iae_unit(sig: dict) -> str:
