@@ -35,7 +35,7 @@ from gainlink.fileio import atomic_writer, publish_files
 from .block_layout import MEASURE_CELLS, METRIC_CELLS
 from .figures import EnvelopeFigure, Figure, ScatterFigure, ScatterPanel, ordinal
 from .plan import CampaignPlan, PlannedRuns, describe_axes
-from .rows import FAILURES_LIMIT, RunStatus, Tally, Verdicts, head_texts, plan_draws
+from .rows import FAILURES_LIMIT, RunStatus, Tally, Verdicts, head_texts, plan_draws, plan_ids
 from .store import members
 from .stored_rows import StoredRows
 
@@ -523,13 +523,6 @@ def _stream_rows(plan: CampaignPlan, store: Any, csv_out: IO[str]) -> Tally:
         return tally
     finally:
         verdicts.close()
-
-
-def plan_ids(plan: CampaignPlan) -> np.ndarray:
-    """The plan's run ids in plan order, ASCII bytes."""
-    if isinstance(plan.runs, PlannedRuns):
-        return plan.runs.ids
-    return np.array([p.id.encode("ascii") for p in plan.runs], dtype="S")
 
 
 def merge(

@@ -491,6 +491,13 @@ class Tally:
         return out
 
 
+def plan_ids(plan: Any) -> np.ndarray:
+    """The plan's run ids in plan order, ASCII bytes."""
+    if isinstance(plan.runs, PlannedRuns):
+        return plan.runs.ids
+    return np.array([p.id.encode("ascii") for p in plan.runs], dtype="S")
+
+
 def plan_draws(plan: Any) -> np.ndarray:
     """Each planned run's draw, its place among its grid point's runs (a generated plan's run ``k``: ``k % runs``)."""
     if isinstance(plan.runs, PlannedRuns):
