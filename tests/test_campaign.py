@@ -746,7 +746,7 @@ def test_the_envelopes_read_block_by_block_are_numpys_percentiles_within_half_a_
     from gainlink.hil.campaign import store as store_module
     from gainlink.hil.campaign.block_file import encode_block
     from gainlink.hil.campaign.block_layout import encode_trace
-    from gainlink.hil.campaign.report import PERCENTILES, envelope_bands
+    from gainlink.hil.campaign.envelopes import PERCENTILES, envelope_bands
 
     if batch is not None:
         monkeypatch.setattr(store_module, "TRACE_BATCH", batch)
@@ -866,9 +866,9 @@ def test_past_the_envelopes_cap_only_the_runs_they_draw_keep_their_traces_and_th
     5 x 3 = 15 > 12) keep their traces and no other run does, each the trace the same campaign stores when it keeps
     every run's (``traces = "all"``); the verdicts and the envelopes' bands are those of that campaign; resuming the
     folder asking for every trace is refused in one line, nothing written."""
-    from gainlink.hil.campaign import report
+    from gainlink.hil.campaign import envelopes
 
-    monkeypatch.setattr(report, "ENVELOPE_RUNS", 12)
+    monkeypatch.setattr(envelopes, "ENVELOPE_RUNS", 12)
     grid = [{"target": "initial_state.x", "values": [0.2, 0.6, 1.0]}]
     runs = {}
     for traces in ("drawn", "all"):
@@ -887,8 +887,8 @@ def test_past_the_envelopes_cap_only_the_runs_they_draw_keep_their_traces_and_th
         assert all(np.array_equal(kept[i][k], every[i][k]) for k in "tyur")
     statuses = {r["id"]: r["status"] for r in rows["all"] if r["status"] in ("pass", "fail")}  # in plan order
     assert len(statuses) == 30
-    traced = report.traced_runs(plan_campaign(parse_campaign(small_campaign(pend, runs=10, grid=grid))))
-    bands = {t: report.envelope_bands(Store(tmp_path / t), statuses, bins=64, traced=traced) for t in runs}
+    traced = envelopes.traced_runs(plan_campaign(parse_campaign(small_campaign(pend, runs=10, grid=grid))))
+    bands = {t: envelopes.envelope_bands(Store(tmp_path / t), statuses, bins=64, traced=traced) for t in runs}
     assert bands["drawn"]["runs"] == bands["all"]["runs"] == 12
     for key in ("t", "percentiles", "failed_median", "half_bin"):
         assert np.array_equal(bands["drawn"][key], bands["all"][key], equal_nan=True)

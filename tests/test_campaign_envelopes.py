@@ -15,11 +15,11 @@ from __future__ import annotations
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from gainlink.hil.campaign import figures, report
+from gainlink.hil.campaign import envelopes, figures, report
 from gainlink.hil.campaign import store as store_module
 from gainlink.hil.campaign.block_file import encode_block
 from gainlink.hil.campaign.block_layout import encode_trace
-from gainlink.hil.campaign.report import PERCENTILES, envelope_bands
+from gainlink.hil.campaign.envelopes import PERCENTILES, envelope_bands
 from gainlink.hil.campaign.rows import RunStatus
 from gainlink.hil.campaign.store import Store
 
@@ -198,7 +198,7 @@ def test_the_figure_names_the_runs_it_covers(tmp_path, monkeypatch):
     monkeypatch.setattr(figures, "png_bytes", lambda fig: drawn.append(fig) or b"")
     plan = SimpleNamespace(campaign=SimpleNamespace(name="c"), artifacts={})
     for cap in (20, 2000):
-        monkeypatch.setattr(report, "ENVELOPE_RUNS", cap)
+        monkeypatch.setattr(envelopes, "ENVELOPE_RUNS", cap)
         report.envelope_figure(plan, _status(status, [k % DRAWS for k in range(300)]), store).png()
     past, under = drawn
     assert past._suptitle.get_text() == ("c: percentiles over 18 of 300 finished runs\neach grid point's first 6 draws")

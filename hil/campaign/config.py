@@ -77,7 +77,7 @@ TOP_KEYS = {
     "traces",
 }
 #: Whose downsampled traces a campaign stores: ``drawn``, the runs its envelopes draw (every run of a campaign of at
-#: most ``report.ENVELOPE_RUNS``; any other run's trace is ``campaign show --run``'s replay), or ``all``.
+#: most ``envelopes.ENVELOPE_RUNS``; any other run's trace is ``campaign show --run``'s replay), or ``all``.
 TRACES = ("drawn", "all")
 DISTRIBUTIONS = {
     "normal": {"mean", "std"},

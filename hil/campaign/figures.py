@@ -34,7 +34,7 @@ def ordinal(n: int) -> str:
 
 @dataclass(frozen=True)
 class EnvelopeFigure:
-    """``envelopes.png``: the campaign's ``name``, its envelope bands (:func:`.report.envelope_bands`; ``None``
+    """``envelopes.png``: the campaign's ``name``, its envelope bands (:func:`.envelopes.envelope_bands`; ``None``
     without a finished run) and its signals' names and units (``outputs``, ``inputs``, ``units``)."""
 
     name: str

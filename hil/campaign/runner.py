@@ -38,9 +38,10 @@ from gainlink.version import __version__
 from .block_file import folder_key
 from .cluster import check_main_guard, dask_client
 from .config import Campaign, CampaignError, load_campaign, parse_campaign
+from .envelopes import traced_runs
 from .figures import Figure, png_of
 from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign, task_uses
-from .report import merge, traced_runs
+from .report import merge
 from .store import Store, refuse_foreign
 from .worker import execute_packed
 
@@ -368,7 +369,7 @@ class _Submitter:
         # (a few kB) travel inside each task: a task with no dependency goes to whichever worker is free, instead
         # of queueing on the worker that happens to hold the artifact.
         self.blobs = {sha: client.submit(_data, data, key=f"gainlink-fmu-{sha}") for sha, data in plan.blobs.items()}
-        # whose traces the workers store (report.traced_runs), None for every run's
+        # whose traces the workers store (envelopes.traced_runs), None for every run's
         self.traced = None if plan.campaign.traces == "all" else traced_runs(plan).mask
 
     def ids(self, block: np.ndarray) -> list[str]:
