@@ -902,17 +902,36 @@ def test_past_the_envelopes_cap_only_the_runs_they_draw_keep_their_traces_and_th
 
 
 @ON_THE_CLUSTERS
+class _FailingDrawing:
+    """A report drawing whose every task raises on a worker (a real task: ZeroDivisionError)."""
+
+    def __init__(self, client):
+        import operator
+
+        self.fail = lambda *args: client.submit(operator.truediv, 1, 0, pure=False)
+
+    def draw(self, figure):
+        return self.fail()
+
+    def read_stack(self, ids):
+        return self.fail()
+
+    def stack_png(self, stack, request, figure):
+        return self.fail()
+
+
 def test_the_report_figures_are_drawn_on_the_cluster_and_one_it_fails_to_draw_is_drawn_here(
     pend, dask_cluster, tmp_path, monkeypatch, caplog
 ):
-    """A campaign on a cluster has its two figures drawn there: with this process's drawing broken, the run still
-    writes them, byte for byte the PNGs a merge draws here. A drawing whose task fails (a real task raising on a
-    worker) is drawn here, said once in the log, the same bytes."""
+    """A campaign on a cluster has its two figures drawn there (the envelopes' bands too, from traces a worker read
+    while the client judged the runs): with this process's drawing broken, the run still writes them, byte for byte
+    the PNGs a merge draws here. A drawing whose task fails (a real task raising on a worker) is drawn here, said once
+    in the log, the same bytes. Workers that do not see the campaign folder leave the envelopes to this process,
+    quietly: the same bytes."""
     import logging
-    import operator
 
     from distributed import Client
-    from gainlink.hil.campaign import figures, report
+    from gainlink.hil.campaign import figures, report, runner
 
     data = small_campaign(pend)
     png = {cls: cls.png for cls in (figures.EnvelopeFigure, figures.ScatterFigure)}
@@ -931,10 +950,19 @@ def test_the_report_figures_are_drawn_on_the_cluster_and_one_it_fails_to_draw_is
     here = {name: (tmp_path / "c" / name).read_bytes() for name in report.PLOTS}
     assert on_cluster == here and all(v.startswith(b"\x89PNG") for v in here.values())
     with Client(dask_cluster) as client, caplog.at_level(logging.WARNING, "gainlink.hil.campaign.report"):
-        report.merge(plan, store, draw=lambda figure: client.submit(operator.truediv, 1, 0, pure=False))
+        report.merge(plan, store, drawing=_FailingDrawing(client))
     failed = [r.getMessage() for r in caplog.records if "could not be drawn on the cluster" in r.getMessage()]
     assert sorted(m.split()[0] for m in failed) == ["envelopes.png", "scatter.png"]
     assert all("ZeroDivisionError" in m and m.endswith("drawn here") for m in failed)
+    assert {name: (tmp_path / "c" / name).read_bytes() for name in report.PLOTS} == here
+    caplog.clear()
+    for cls in png:  # another machine's workers: the envelopes made here (quietly), the scatter drawn there
+        monkeypatch.setattr(cls, "png", broken if cls is figures.ScatterFigure else png[cls])
+    with Client(dask_cluster) as client, caplog.at_level(logging.WARNING, "gainlink.hil.campaign.report"):
+        elsewhere = runner._ClusterDrawing(client, store)
+        elsewhere.folder = (elsewhere.folder[0], (-1, -1))
+        report.merge(plan, store, drawing=elsewhere)
+    assert not caplog.records
     assert {name: (tmp_path / "c" / name).read_bytes() for name in report.PLOTS} == here
 
 

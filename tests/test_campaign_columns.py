@@ -390,16 +390,18 @@ def test_the_rows_made_a_chunk_at_a_time_are_the_rows_made_one_by_one(tmp_path, 
 def test_a_run_planned_twice_is_one_of_the_envelopes_runs(tmp_path):
     """A stored run planned twice (a plan of points): the runs the envelopes choose from (the tally's status) are the
     finished runs once each, in plan order where each is first, each with its own draw (the points', by hand)."""
-    import tempfile
-
-    from gainlink.hil.campaign.report import _stream_rows
+    from gainlink.hil.campaign.report import tallied
+    from gainlink.hil.campaign.rows import Verdicts, plan_ids
 
     plan, store, records = _stored(tmp_path)
     runs = list(plan.runs)
     runs.insert(150, runs[120])
     plan = dataclasses.replace(plan, runs=tuple(dataclasses.replace(p, index=k) for k, p in enumerate(runs)))
-    with tempfile.TemporaryFile("w+") as csv_out:
-        status = _stream_rows(plan, store, csv_out).status
+    verdicts = Verdicts(store, plan.campaign.criteria, plan_ids(plan))
+    try:
+        status = tallied(plan, verdicts).status
+    finally:
+        verdicts.close()
     first: dict[str, RunPoint] = {}
     for p in runs:
         first.setdefault(p.id, p)

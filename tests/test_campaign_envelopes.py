@@ -17,7 +17,7 @@ import pyarrow.parquet as pq
 import pytest
 from gainlink.hil.campaign import envelopes, figures, report
 from gainlink.hil.campaign import store as store_module
-from gainlink.hil.campaign.block_file import encode_block
+from gainlink.hil.campaign.block_file import encode_block, folder_key
 from gainlink.hil.campaign.block_layout import encode_trace
 from gainlink.hil.campaign.envelopes import PERCENTILES, envelope_bands
 from gainlink.hil.campaign.rows import RunStatus
@@ -77,11 +77,12 @@ def _within_half_bin(got: np.ndarray, want: np.ndarray, half: np.ndarray) -> boo
     return same_nan and bool(np.all(np.abs(np.nan_to_num(got - want)) <= half * (1 + 1e-9)))
 
 
-def _check_bands(bands: dict, sig: dict, chosen: list[str], failed: list[str]) -> None:
-    """The bands are numpy's percentiles over ``chosen`` and numpy's median over ``failed``, within half a bin."""
+def _check_bands(bands: dict, sig: dict, chosen: list[str], failed: list[str], bins: int = 256) -> None:
+    """The bands are numpy's percentiles over ``chosen`` and numpy's median over ``failed``, within half a bin (of
+    ``bins`` a sample)."""
     assert (bands["runs"], bands["failed"]) == (len(chosen), len(failed))
     read = np.stack([sig[i] for i in sorted(set(chosen) | set(failed))]).astype(float)
-    half = (np.nanmax(read, axis=0) - np.nanmin(read, axis=0)) / 256 / 2
+    half = (np.nanmax(read, axis=0) - np.nanmin(read, axis=0)) / bins / 2
     np.testing.assert_array_equal(bands["half_bin"], half)
     over = np.stack([sig[i] for i in chosen]).astype(float)
     for i, q in enumerate(PERCENTILES):
@@ -229,3 +230,27 @@ def test_a_runs_draw_is_its_place_among_its_grid_points_runs():
     assert plan_draws(plan).tolist() == [h.draw for h in heads] == [0, 1, 2, 3, 4] * 3
     points = CampaignPlan(campaign=campaign, runs=tuple(plan.runs)[::-1])
     assert plan_draws(points).tolist() == [4, 3, 2, 1, 0] * 3
+
+
+def test_a_stack_read_before_the_verdicts_gives_their_bands_and_refuses_a_run_they_did_not_choose(tmp_path):
+    """The two steps apart, as a cluster's worker and the client take them: the runs' traces read and binned with no
+    verdict (of a folder the worker sees: none from one it does not), then the verdicts' failed runs counted: numpy's
+    percentiles, to the bit the one call's bands; a stack holding a run the verdicts did not choose (stored, not
+    finished) is refused, not made into bands of other runs."""
+    ids, status, sig = _runs()
+    store = _store(tmp_path, ids, sig, [150])
+    every = np.array([i.encode() for i in ids], dtype="S")
+    verdicts = _status(status, [k % DRAWS for k in range(300)])
+    request = envelopes.envelope_request(verdicts, cap=1000)
+    key = folder_key(store.blocks)
+    assert envelopes.cluster_stack((str(store.out), (key[0], key[1] + 1)), every) is None  # another machine's folder
+    stack = envelopes.cluster_stack((str(tmp_path), key), every)
+    bands = envelopes.stack_bands(stack, request)
+    _check_bands(bands, sig, ids, [i for i in ids if status[i] == "fail"], bins=envelopes.ENVELOPE_BINS)
+    whole = envelope_bands(store, verdicts, cap=1000)
+    assert all(np.array_equal(bands[k], whole[k], equal_nan=True) for k in ("t", "percentiles", "failed_median"))
+    assert (bands["runs"], bands["failed"], bands["finished"], bands["failed_of"]) == (300, 43, 300, 43)
+    unfinished = dict(list(status.items())[1:])  # run 0 stored, its verdict not a finished run's
+    fewer = envelopes.envelope_request(_status(unfinished, [k % DRAWS for k in range(1, 300)]), cap=1000)
+    with pytest.raises(envelopes.StackMismatch):
+        envelopes.stack_bands(stack, fewer)

@@ -6,13 +6,18 @@ from __future__ import annotations
 
 import tempfile
 from collections.abc import Iterator, Mapping
+from dataclasses import replace
+from pathlib import Path
 from typing import IO, Any, NamedTuple
 
 import numpy as np
+from gainlink.errors import GainlinkError
 
+from .block_file import folder_key
+from .figures import EnvelopeFigure
 from .plan import CampaignPlan, PlannedRuns
 from .rows import RunStatus, plan_draws, plan_ids
-from .store import members
+from .store import Store, members
 
 PERCENTILES = (5, 25, 50, 75, 95)
 ENVELOPE_BINS = 512
@@ -107,19 +112,44 @@ def envelope_bands(
     distinct finished and failed runs, ``drawn`` the rule's choice (:class:`Drawn`). Only the row groups of the block
     files that hold a chosen run are read.
 
+    In two steps, the runs read and binned (:func:`read_stack`, which needs no verdict), then their verdicts taken
+    (:func:`stack_bands`): a cluster's worker does the first while the client judges the runs.
+
     Streamed: the block files are read once, one at a time (each trace shape's runs: each sample's smallest and largest
     finite value, the stack spilled as float32 to an anonymous temporary file in the campaign folder; the shapes are
-    counted in the same pass), then the most common shape's spill is read back a block at a time into a histogram of
-    ``bins`` equal bins between them per sample and signal, so the memory is the histograms', not the runs'. A
-    percentile is numpy's linear one (``np.nanpercentile``) over the runs read with each order statistic taken at the
-    centre of its bin: within half a bin, ``(max - min) / (2 * bins)`` of that sample (the extremes over every run
-    read), of the exact value (below a pixel of the plot). NaN samples are left out as nanpercentile leaves them; an
-    infinite one counts in the end bin on its side.
+    counted in the same pass), then the most common shape's spill is read back into each value's bin among ``bins``
+    equal bins between them per sample and signal (2 bytes a value) and a histogram of them, so the memory is the
+    histograms' and the bins', not the runs' float traces. A percentile is numpy's linear one (``np.nanpercentile``)
+    over the runs read with each order statistic taken at the centre of its bin: within half a bin,
+    ``(max - min) / (2 * bins)`` of that sample (the extremes over every run read), of the exact value (below a pixel
+    of the plot). NaN samples are left out as nanpercentile leaves them; an infinite one counts in the end bin on its
+    side.
 
     Returns ``{"t", "percentiles": (len(PERCENTILES), N, S), "failed_median": (N, S), "runs", "failed", "finished",
     "failed_of", "drawn", "outputs", "inputs", "half_bin": (N, S)}`` with the S signals the outputs then the
     commands.
     """
+    request = envelope_request(status, cap=cap, traced=traced)
+    return stack_bands(read_stack(store, request.chosen, bins=bins), request)
+
+
+class EnvelopeRequest(NamedTuple):
+    """What the envelopes take of the runs' verdicts (:func:`envelope_request`): the runs they read (the finished runs
+    the rule chose; ASCII ids, sorted, distinct), the failed among them, how many distinct runs finished and failed in
+    all, and the rule's choice."""
+
+    chosen: np.ndarray
+    failed: np.ndarray
+    finished: int
+    failed_of: int
+    drawn: Drawn
+
+
+def envelope_request(
+    status: Mapping[str, str], *, cap: int | None = None, traced: Traced | None = None
+) -> EnvelopeRequest:
+    """:func:`envelope_bands`' runs of ``status``: its finished runs of each grid point's first draws, at most ``cap``
+    (:func:`envelope_runs`), or the finished among the plan's ``traced`` runs."""
     cap = ENVELOPE_RUNS if cap is None else cap
     ids, draws, failing = _status_runs(status)
     if traced is None:
@@ -127,92 +157,177 @@ def envelope_bands(
         picked = drawn.runs
     else:
         drawn, picked = traced.drawn, np.flatnonzero(members(ids, traced.ids))
-    chosen, failed = ids[picked], ids[picked[failing[picked]]]
+    chosen, failed = np.unique(ids[picked]), np.unique(ids[picked[failing[picked]]])
+    return EnvelopeRequest(chosen, failed, len(ids), int(failing.sum()), drawn)
+
+
+class StackMismatch(GainlinkError):
+    """A stack read before the verdicts holds a run that is not among the runs they chose (a run with a stored trace
+    that did not finish): its bands would not be theirs."""
+
+
+class StackShape(NamedTuple):
+    """Of the runs an :class:`EnvelopeStack` read, those of the most common trace shape: the times ``t``, the bins'
+    ``lo`` and ``width`` per sample and signal (N, S), the runs (``names``, in the order of ``numbers``), each value's
+    bin (``numbers``: (runs, N, S) uint16, the bin count for a NaN), the histogram of them all (``counts``: (N, S,
+    bins)) and the signals' count (``outputs``, ``inputs``)."""
+
+    t: np.ndarray
+    lo: np.ndarray
+    width: np.ndarray
+    names: np.ndarray
+    numbers: np.ndarray
+    counts: np.ndarray
+    outputs: int
+    inputs: int
+
+
+class EnvelopeStack(NamedTuple):
+    """Runs' traces read for the envelopes before their verdicts are known (:func:`read_stack`): every run read
+    (``read``: ASCII ids, sorted), the number of ``bins`` a sample and the most common shape's runs (``shape``; None
+    without a stored trace). Plain arrays: a worker's result, moved to another process if need be."""
+
+    read: np.ndarray
+    bins: int
+    shape: StackShape | None
+
+    def __sizeof__(self) -> int:  # what Dask weighs the result by (a worker's memory, where its bands are made)
+        arrays = (self.read, *(self.shape[:6] if self.shape is not None else ()))
+        return object.__sizeof__(self) + sum(a.nbytes for a in arrays)
+
+
+def read_stack(store: Any, ids: np.ndarray, *, bins: int = ENVELOPE_BINS) -> EnvelopeStack:
+    """The stored traces of the runs ``ids`` (ASCII, sorted, distinct) read and binned for :func:`stack_bands`,
+    which needs no verdict (:class:`EnvelopeStack`): each block file read once, its stacks spilled as float32 to an
+    anonymous temporary file in the campaign folder with each trace shape's extremes, then the most common shape's
+    (ties: the first met) read back into bins and their histogram."""
     with tempfile.TemporaryFile(dir=store.out) as spill:  # the stacks read once, kept as float32 for the 2nd pass
-        seen = _spill_stacks(store, np.unique(chosen), np.unique(failed), spill)
+        seen, read = _spill_stacks(store, ids, spill)
         if not seen:
-            return None
-        shape = max(seen, key=lambda k: seen[k].runs)  # the most common shape; ties: the first met
+            return EnvelopeStack(read, bins, None)
+        shape = max(seen, key=lambda k: seen[k].runs)
         one = seen[shape]
         lo, hi = np.nan_to_num(one.lo.astype(float)), np.nan_to_num(one.hi.astype(float))
         width = np.where(hi > lo, (hi - lo) / bins, 1.0)
-        counts = _histograms(one, spill, lo, width, bins)
-    pct = _percentiles(counts[0], PERCENTILES, lo, width)
+        numbers, counts = _binned(one, spill, lo, width, bins)
+    names = np.concatenate([n for _, n in one.chunks])
+    return EnvelopeStack(read, bins, StackShape(one.t, lo, width, names, numbers, counts, shape[1], shape[2]))
+
+
+def stack_bands(stack: EnvelopeStack, request: EnvelopeRequest) -> dict | None:
+    """:func:`envelope_bands` of a stack read before the verdicts (:func:`read_stack`) and the verdicts' ``request``
+    (:func:`envelope_request`): the failed runs' histogram counted from their bins, nothing read again. Raises
+    :class:`StackMismatch` when the stack holds a run the verdicts did not choose."""
+    if not members(stack.read, request.chosen).all():
+        raise StackMismatch("the envelopes' traces read before the verdicts include a run that did not finish")
+    one = stack.shape
+    if one is None:
+        return None
+    failing = members(one.names, request.failed)
+    lo, width = one.lo, one.width
     return {
         "t": one.t,
-        "percentiles": pct,
-        "failed_median": _percentiles(counts[1], (50,), lo, width)[0],
-        "runs": one.runs,
-        "failed": int(sum(b.sum() for _, b in one.chunks)),
-        "finished": len(ids),
-        "failed_of": int(failing.sum()),
-        "drawn": drawn,
-        "outputs": shape[1],
-        "inputs": shape[2],
+        "percentiles": _percentiles(one.counts, PERCENTILES, lo, width),
+        "failed_median": _percentiles(_histogram(one.numbers[failing], stack.bins), (50,), lo, width)[0],
+        "runs": len(one.names),
+        "failed": int(failing.sum()),
+        "finished": request.finished,
+        "failed_of": request.failed_of,
+        "drawn": request.drawn,
+        "outputs": one.outputs,
+        "inputs": one.inputs,
         "half_bin": width / 2,
     }
 
 
-def _histograms(one: _Spilled, spill: IO[bytes], lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:
-    """The histograms (2, N, S, ``bins``) of the runs of ``one`` read back from ``spill``: of the runs chosen for the
-    percentiles, and of the failed runs chosen for their median. Each run is binned once, :data:`HISTOGRAM_VALUES`
-    values at a time (:func:`_spilled_runs`; a count is a pass over every bin, so the fewer the better)."""
-    cells = lo.size * bins
-    counts = np.zeros((2, cells), np.int64)
-    for sig, failed in _spilled_runs(one, spill, lo.shape, max(1, HISTOGRAM_VALUES // lo.size)):
-        where = _bin_numbers(sig, lo, width, bins)
-        counts[0] += _counts(where, cells)
-        if failed.any():  # the failed runs' bins are theirs of all runs: counted, not made again
-            counts[1] += _counts(where if failed.all() else where[failed], cells)
-    return counts.reshape(2, *lo.shape, bins)
+def cluster_stack(folder: tuple[str, tuple[int, int]], ids: np.ndarray) -> EnvelopeStack | None:
+    """:func:`read_stack` as a cluster's task: of the campaign folder ``folder`` (its path and the
+    :func:`~.block_file.folder_key` of its ``blocks``, the client's), ``None`` from a worker that does not see that
+    folder (another machine's: the client then reads the traces itself)."""
+    out, key = folder
+    if folder_key(Path(out) / "blocks") != key:
+        return None
+    return read_stack(Store(out), ids)
 
 
-def _spilled_runs(one: _Spilled, spill: IO[bytes], shape: tuple, step: int) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+def stack_png(stack: EnvelopeStack | None, request: EnvelopeRequest, figure: EnvelopeFigure) -> bytes | None:
+    """``envelopes.png`` as a cluster's task, where ``stack`` was read (:func:`cluster_stack`): ``figure`` (its
+    bands not yet made) with the bands of the stack and the verdicts' ``request``; ``None`` without a stack."""
+    if stack is None:
+        return None
+    return replace(figure, bands=stack_bands(stack, request)).png()
+
+
+def _binned(one: _Spilled, spill: IO[bytes], lo: np.ndarray, width: np.ndarray, bins: int) -> tuple:
+    """The bins (runs, N, S) of the runs of ``one`` read back from ``spill``, and their histogram (N, S, ``bins``):
+    :data:`HISTOGRAM_VALUES` values at a time (a count is a pass over every bin, so the fewer the better)."""
+    numbers = np.empty((one.runs, *lo.shape), np.uint16)
+    counts = np.zeros(lo.size * (bins + 1), np.int64)
+    at = 0
+    for sig in _spilled_runs(one, spill, lo.shape, max(1, HISTOGRAM_VALUES // lo.size)):
+        part = numbers[at : at + len(sig)]
+        part[...] = _bin_numbers(sig, lo, width, bins)
+        counts += _counts(part, bins)
+        at += len(sig)
+    return numbers, counts.reshape(*lo.shape, bins + 1)[..., :bins]
+
+
+def _histogram(numbers: np.ndarray, bins: int) -> np.ndarray:
+    """The histogram (N, S, ``bins``) of the bins ``numbers`` (runs, N, S), :data:`HISTOGRAM_VALUES` values at a
+    time."""
+    cells = int(np.prod(numbers.shape[1:]))
+    counts = np.zeros(cells * (bins + 1), np.int64)
+    step = max(1, HISTOGRAM_VALUES // max(cells, 1))
+    for i in range(0, len(numbers), step):
+        counts += _counts(numbers[i : i + step], bins)
+    return counts.reshape(*numbers.shape[1:], bins + 1)[..., :bins]
+
+
+def _spilled_runs(one: _Spilled, spill: IO[bytes], shape: tuple, step: int) -> Iterator[np.ndarray]:
     """The runs of ``one`` read back from ``spill`` (float32, ``shape`` a run), ``step`` runs at a time across its
-    blocks' chunks (the few runs a chunk holds when only every k-th is read gathered with the next chunk's), each with
-    which of them the failed median counts."""
+    blocks' chunks (the few runs a chunk holds when only every k-th is read gathered with the next chunk's)."""
     held: list[np.ndarray] = []
-    bad: list[np.ndarray] = []
-    for at, failed in one.chunks:
+    size = int(np.prod(shape))
+    for at, names in one.chunks:
         spill.seek(at)
-        for i in range(0, failed.size, step):
-            part = failed[i : i + step]
-            held.append(np.fromfile(spill, np.float32, part.size * int(np.prod(shape))).reshape(part.size, *shape))
-            bad.append(part)
-            if sum(map(len, bad)) >= step:
-                yield np.concatenate(held), np.concatenate(bad)
+        for i in range(0, len(names), step):
+            k = min(step, len(names) - i)
+            held.append(np.fromfile(spill, np.float32, k * size).reshape(k, *shape))
+            if sum(map(len, held)) >= step:
+                yield np.concatenate(held)
                 held.clear()
-                bad.clear()
-    if bad:
-        yield np.concatenate(held), np.concatenate(bad)
+    if held:
+        yield np.concatenate(held)
 
 
 class _Spilled:
-    """The runs of one trace shape spilled (every one counts in the percentiles): their times, each sample's extremes,
-    how many they are, and each block's place in the spill file with which of its runs the failed median counts."""
+    """The runs of one trace shape spilled: their times, each sample's extremes, how many they are, and each block's
+    place in the spill file with its runs."""
 
     def __init__(self, t: np.ndarray) -> None:
         self.t, self.lo, self.hi, self.runs = t, None, None, 0
         self.chunks: list[tuple[int, np.ndarray]] = []
 
 
-def _spill_stacks(store: Any, chosen: np.ndarray, failing: np.ndarray, spill: IO[bytes]) -> dict[tuple, _Spilled]:
-    """Read every block's traces of the runs ``chosen`` (the percentiles', sorted and distinct; ``failing`` the failed
-    median's among them) once, spill them to ``spill`` as float32 and note, per trace shape (samples, outputs,
-    commands), what :func:`envelope_bands` needs: one pass, no separate read of the shapes."""
+def _spill_stacks(store: Any, ids: np.ndarray, spill: IO[bytes]) -> tuple[dict[tuple, _Spilled], np.ndarray]:
+    """Read every block's traces of the runs ``ids`` (sorted, distinct) once, spill them to ``spill`` as float32 and
+    note, per trace shape (samples, outputs, commands), what :func:`read_stack` needs: one pass, no separate read of
+    the shapes. Returns them and every run read (sorted)."""
     seen: dict[tuple, _Spilled] = {}
+    read: list[np.ndarray] = []
     at = 0
-    for names, st in store.trace_stacks(chosen, fields=("t", "y", "u")):
+    for names, st in store.trace_stacks(ids, fields=("t", "y", "u")):
         shape = (st["t"].shape[1], st["y"].shape[2], st["u"].shape[2])
         one = seen.setdefault(shape, _Spilled(st["t"][0].astype(float)))
         sig = np.concatenate([st["y"], st["u"]], axis=2)
         one.lo, one.hi = _extremes(sig, one.lo, one.hi)
-        one.chunks.append((at, members(names, failing)))  # the stacks hold the runs ``chosen`` only
+        one.chunks.append((at, names))
         one.runs += len(names)
+        read.append(names)
         sig.tofile(spill)
         at += sig.nbytes
     spill.flush()
-    return seen
+    return seen, np.sort(np.concatenate(read)) if read else np.zeros(0, "S1")
 
 
 def _extremes(sig: np.ndarray, lo: np.ndarray | None, hi: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -241,21 +356,24 @@ def _status_runs(status: Mapping[str, str]) -> tuple[np.ndarray, np.ndarray, np.
 
 def _bin_numbers(sig: np.ndarray, lo: np.ndarray, width: np.ndarray, bins: int) -> np.ndarray:
     """The bin of each value of ``sig`` (k, N, S) among ``bins`` bins from ``lo`` of ``width`` per sample and
-    signal, numbered across the (N, S) cells (cell * bins + bin); a NaN's is ``N * S * bins``, past every cell's."""
+    signal (uint16); a NaN's is ``bins``, past every bin."""
     nan = np.isnan(sig) if np.isnan(sig.min(initial=0.0)) else None  # NaN samples are rare: looked for once
     with np.errstate(invalid="ignore", over="ignore"):
         b = np.subtract(sig, lo)  # float64 (lo's): a float32 stack is widened here, no copy before; in place from here
         b /= width
     np.clip(b, 0, bins - 1, out=b)  # clipped first, then truncated: the floor of what is left, none negative
-    b += np.arange(lo.size, dtype=float).reshape(lo.shape) * bins  # whole numbers: exact in a float64
     if nan is not None:
-        b[nan] = lo.size * bins
-    return b.astype(np.int64)
+        b[nan] = bins
+    return b.astype(np.uint16)
 
 
-def _counts(where: np.ndarray, cells: int) -> np.ndarray:
-    """How many of the bin numbers ``where`` (:func:`_bin_numbers`) fall in each of ``cells`` bins, NaN's left out."""
-    return np.bincount(where.ravel(), minlength=cells + 1)[:cells]
+def _counts(numbers: np.ndarray, bins: int) -> np.ndarray:
+    """How many of the bins ``numbers`` (k, N, S; :func:`_bin_numbers`) fall in each bin of each (N, S) cell, as
+    (N * S * (bins + 1)): each cell's last slot its NaNs'."""
+    cells = numbers[0].size if len(numbers) else 0
+    flat = numbers.astype(np.intp)
+    flat += (np.arange(cells, dtype=np.intp) * (bins + 1)).reshape(numbers.shape[1:])
+    return np.bincount(flat.ravel(), minlength=max(cells, 1) * (bins + 1))[: cells * (bins + 1)]
 
 
 def _percentiles(counts: np.ndarray, qs: tuple[float, ...], lo: np.ndarray, width: np.ndarray) -> np.ndarray:

@@ -25,14 +25,15 @@ import json
 import logging
 from collections import Counter
 from collections.abc import Callable
+from dataclasses import replace
 from functools import partial
-from typing import IO, Any
+from typing import IO, Any, Protocol
 
 import numpy as np
 from gainlink.fileio import atomic_writer, publish_files
 
 from .block_layout import MEASURE_CELLS, METRIC_CELLS
-from .envelopes import Traced, envelope_bands, every_kth, traced_runs
+from .envelopes import EnvelopeRequest, Traced, envelope_bands, envelope_request, every_kth, traced_runs
 from .figures import EnvelopeFigure, Figure, ScatterFigure, ScatterPanel, ordinal
 from .plan import CampaignPlan, describe_axes
 from .rows import FAILURES_LIMIT, Tally, Verdicts, head_texts, plan_ids
@@ -146,14 +147,19 @@ def _model_lines(tally: Tally) -> list[str]:
 def envelope_figure(
     plan: CampaignPlan, status: dict[str, str], store: Any, traced: Traced | None = None
 ) -> EnvelopeFigure:
-    """``envelopes.png``'s data: percentile envelopes of outputs and commands over time across the runs ``status``
-    (id -> ``pass`` or ``fail``, in plan order) of the most common trace length: at most :data:`ENVELOPE_RUNS` of
-    them, each grid point's first draws (:func:`envelope_runs`; those of the plan's ``traced`` runs when given), and
-    the median of the failed runs among them (:func:`envelope_bands`)."""
+    """``envelopes.png``'s data: percentiles of outputs and commands over time across the runs ``status``
+    (id -> ``pass`` or ``fail``, in plan order) of the most common trace length: at most
+    :data:`~.envelopes.ENVELOPE_RUNS` of them, each grid point's first draws (:func:`~.envelopes.envelope_runs`; those
+    of the plan's ``traced`` runs when given), and the median of the failed runs among them
+    (:func:`~.envelopes.envelope_bands`)."""
+    return replace(envelope_template(plan), bands=envelope_bands(store, status, traced=traced))
+
+
+def envelope_template(plan: CampaignPlan) -> EnvelopeFigure:
+    """``envelopes.png``'s data but its bands (``None``): the campaign's name, its signals' names and units."""
     sig = _signals(plan)
-    bands = envelope_bands(store, status, traced=traced)
     units = dict(sig.get("units", {}))
-    return EnvelopeFigure(plan.campaign.name, bands, tuple(sig["outputs"]), tuple(sig["inputs"]), units)
+    return EnvelopeFigure(plan.campaign.name, None, tuple(sig["outputs"]), tuple(sig["inputs"]), units)
 
 
 def _iae_unit(sig: dict) -> str:
@@ -236,31 +242,44 @@ def _campaign_doc(c: Any) -> dict:
 PLOTS = ("envelopes.png", "scatter.png")
 
 
-def _stream_rows(plan: CampaignPlan, store: Any, csv_out: IO[str]) -> Tally:
-    """Write every row, in plan order, to ``campaign.csv`` (``csv_out``), counting each into the returned
-    :class:`Tally`: a chunk of runs at a time, each row's text joined from its head's (:func:`~.rows.head_texts`: the
-    plan's, made a chunk at a time) and its verdict's spilled texts (:class:`~.rows.Verdicts`), nothing decoded again
-    and no row built value by value."""
-    ids = plan_ids(plan)
-    verdicts = Verdicts(store, plan.campaign.criteria, ids)
-    try:
-        tally = Tally(plan, verdicts)
-        tracked, outs = sorted(verdicts.tracked), sorted(verdicts.outputs)
-        csv.writer(csv_out, lineterminator="\n").writerow(csv_head(plan, verdicts.tracked, verdicts.outputs))
-        start = 0
-        for pre, mid, post in head_texts(plan, _axes(plan)):
-            slots = verdicts.slot[start : start + len(pre)].tolist()
-            status, cells = verdicts.rows(slots, tracked, outs)
-            csv_out.write("".join([a + b + c + d + e for a, b, c, d, e in zip(pre, status, mid, cells, post)]))
-            start += len(pre)
-        tally.finish(ids)
-        return tally
-    finally:
-        verdicts.close()
+def _write_rows(plan: CampaignPlan, verdicts: Verdicts, csv_out: IO[str]) -> None:
+    """Write every row, in plan order, to ``campaign.csv`` (``csv_out``): a chunk of runs at a time, each row's text
+    joined from its head's (:func:`~.rows.head_texts`: the plan's, made a chunk at a time) and its verdict's spilled
+    texts (:class:`~.rows.Verdicts`), nothing decoded again and no row built value by value."""
+    tracked, outs = sorted(verdicts.tracked), sorted(verdicts.outputs)
+    csv.writer(csv_out, lineterminator="\n").writerow(csv_head(plan, verdicts.tracked, verdicts.outputs))
+    start = 0
+    for pre, mid, post in head_texts(plan, _axes(plan)):
+        slots = verdicts.slot[start : start + len(pre)].tolist()
+        status, cells = verdicts.rows(slots, tracked, outs)
+        csv_out.write("".join([a + b + c + d + e for a, b, c, d, e in zip(pre, status, mid, cells, post)]))
+        start += len(pre)
+
+
+def tallied(plan: CampaignPlan, verdicts: Verdicts) -> Tally:
+    """The :class:`~.rows.Tally` of the plan's runs, judged by ``verdicts`` (made for :func:`~.rows.plan_ids`)."""
+    tally = Tally(plan, verdicts)
+    tally.finish(plan_ids(plan))
+    return tally
+
+
+class Drawing(Protocol):
+    """Where the report's figures are made besides here (a cluster: the runner's), each call giving at once something
+    whose ``result()`` is what was asked (a Dask future, say)."""
+
+    def draw(self, figure: Figure) -> Any:
+        """``figure``'s PNG (:func:`~.figures.png_of`)."""
+
+    def read_stack(self, ids: np.ndarray) -> Any:
+        """The envelopes' stack of the runs ``ids`` (:func:`~.envelopes.cluster_stack`; ``None``: not read there)."""
+
+    def stack_png(self, stack: Any, request: EnvelopeRequest, figure: EnvelopeFigure) -> Any:
+        """``envelopes.png`` of ``stack`` (what :meth:`read_stack` gave) and the verdicts' ``request``
+        (:func:`~.envelopes.stack_png`; ``None``: no stack there)."""
 
 
 def merge(
-    plan: CampaignPlan, store: Any, *, plots: bool = True, draw: Callable[[Figure], Any] | None = None
+    plan: CampaignPlan, store: Any, *, plots: bool = True, drawing: Drawing | None = None
 ) -> tuple[str, StoredRows, Counter]:
     """Merge the stored runs into the report files; returns the summary text, the rows (made from the store when
     asked, :class:`~.stored_rows.StoredRows`) and the count of runs by status.
@@ -271,11 +290,18 @@ def merge(
     and plots are drawn from a :class:`~.rows.Tally`. Without ``plots``, the PNGs are not drawn (about a second per
     merge) and those of an earlier merge are removed: a report never shows plots of other runs than its own.
 
-    ``draw``: where the figures are drawn (:func:`drawn_figures`), here when None."""
-    with atomic_writer(store.out / "campaign.csv") as csv_out:
-        tally = _stream_rows(plan, store, csv_out)
+    ``drawing``: where the figures are made besides here (:func:`drawn_figures`): the envelopes' traces are read there
+    from the start, while the runs are judged here, and the rows are written here while the figures are drawn."""
     traced = traced_runs(plan)
-    pngs = drawn_figures(plan, tally, store, traced, draw) if plots else {}
+    stack = drawing.read_stack(traced.ids) if plots and drawing is not None else None
+    verdicts = Verdicts(store, plan.campaign.criteria, plan_ids(plan))
+    try:
+        tally = tallied(plan, verdicts)
+        pngs = drawn_figures(plan, tally, store, traced, drawing, stack) if plots else {}
+        with atomic_writer(store.out / "campaign.csv") as csv_out:
+            _write_rows(plan, verdicts, csv_out)
+    finally:
+        verdicts.close()
     points = tally.point_list()
     doc = {
         "campaign": _campaign_doc(plan.campaign),
@@ -300,29 +326,31 @@ def merge(
 
 
 def drawn_figures(
-    plan: CampaignPlan, tally: Tally, store: Any, traced: Traced, draw: Callable[[Figure], Any] | None
+    plan: CampaignPlan, tally: Tally, store: Any, traced: Traced, drawing: Drawing | None, stack: Any = None
 ) -> dict[str, Callable[[], bytes]]:
-    """The report's PNGs by name, each as the call that gives its bytes. Each figure's data is gathered here, the
-    scatter's first; ``draw`` (a cluster's ``submit`` of :func:`~.figures.png_of`, say: any call returning something
-    whose ``result()`` is the PNG) draws each elsewhere meanwhile, so the scatter is drawn while the
-    envelopes' bands are read here and both figures are drawn at once on two workers. A figure ``draw`` fails to give
-    is drawn here, said in the log; without ``draw`` each is drawn here."""
-    figures: dict[str, Figure] = {}
-    pending: dict[str, Any] = {}
-    for name, gather in (
-        ("scatter.png", lambda: scatter_figure(plan, tally)),
-        ("envelopes.png", lambda: envelope_figure(plan, tally.status, store, traced)),
-    ):
-        figures[name] = gather()
-        if draw is not None:
-            pending[name] = draw(figures[name])
-    return {name: partial(_png, name, figures[name], pending.get(name)) for name in PLOTS}
-
-
-def _png(name: str, figure: Figure, drawing: Any | None) -> bytes:
-    """``figure``'s PNG: ``drawing``'s result when it gives one, else drawn here (a failed drawing said in the log)."""
+    """The report's PNGs by name, each as the call that gives its bytes. Without ``drawing`` each figure's data is
+    gathered here and drawn here. With it the scatter's data is gathered here and drawn there; the envelopes', given
+    the ``stack`` :meth:`Drawing.read_stack` is reading, are made there from it (:meth:`Drawing.stack_png`: the bands
+    of a cluster's worker that read the traces while the runs were judged here), else gathered here and drawn there.
+    A figure ``drawing`` fails to give is made here, said in the log (a stack not read there, made here quietly)."""
+    scatter = scatter_figure(plan, tally)
+    envelopes = partial(envelope_figure, plan, tally.status, store, traced)
     if drawing is None:
-        return figure.png()
+        return {"envelopes.png": lambda: envelopes().png(), "scatter.png": scatter.png}
+    pending = {"scatter.png": drawing.draw(scatter)}
+    if stack is not None:
+        pending["envelopes.png"] = drawing.stack_png(stack, envelope_request(tally.status, traced=traced),
+                                                     envelope_template(plan))  # fmt: skip
+    else:
+        figure = envelopes()
+        envelopes, pending["envelopes.png"] = (lambda: figure), drawing.draw(figure)
+    gathered = {"envelopes.png": envelopes, "scatter.png": lambda: scatter}
+    return {name: partial(_png, name, gathered[name], pending[name]) for name in PLOTS}
+
+
+def _png(name: str, gather: Callable[[], Figure], drawing: Any) -> bytes:
+    """A figure's PNG: ``drawing``'s result when it gives one, else its data ``gather``-ed and drawn here (a failed
+    drawing said in the log; ``None``, a stack not read there, not)."""
     try:
         png = drawing.result()
     except Exception as exc:  # a dead worker, a cluster gone: the figure is still the report's
@@ -330,6 +358,8 @@ def _png(name: str, figure: Figure, drawing: Any | None) -> bytes:
     else:
         if isinstance(png, bytes):
             return png
+        if png is None:
+            return gather().png()
         why = f"it gave {type(png).__name__}, not the PNG's bytes"
     log.warning("%s could not be drawn on the cluster (%s); drawn here", name, why)
-    return figure.png()
+    return gather().png()

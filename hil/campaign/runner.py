@@ -38,10 +38,10 @@ from gainlink.version import __version__
 from .block_file import folder_key
 from .cluster import check_main_guard, dask_client
 from .config import Campaign, CampaignError, load_campaign, parse_campaign
-from .envelopes import traced_runs
-from .figures import Figure, png_of
+from .envelopes import EnvelopeRequest, cluster_stack, stack_png, traced_runs
+from .figures import EnvelopeFigure, Figure, png_of
 from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign, task_uses
-from .report import merge
+from .report import Drawing, merge
 from .store import Store, refuse_foreign
 from .worker import execute_packed
 
@@ -236,7 +236,8 @@ def _run(
                 _submit_and_store(
                     client, plan, blocks, store, done=done, total=total, progress=progress, window=threads
                 )
-                return _result(plan, store, reused=reused, executed=todo, plots=plots, draw=_drawing(client))
+                drawing = _ClusterDrawing(client, store)
+                return _result(plan, store, reused=reused, executed=todo, plots=plots, drawing=drawing)
         except KeyboardInterrupt:  # the block closed the client (and the LocalCluster) on its way out
             # read again from the folder: workers write their blocks themselves, some the client had not yet heard of
             stored = int((distinct & Store(store.out).finished_mask(plan.runs.ids)).sum())
@@ -288,11 +289,11 @@ def _blocks(plan: CampaignPlan, store: Store, sizes: list[int], pending: np.ndar
 
 
 def _result(
-    plan: CampaignPlan, store: Store, *, reused: int, executed: int, plots: bool, draw: Callable | None = None
+    plan: CampaignPlan, store: Store, *, reused: int, executed: int, plots: bool, drawing: Drawing | None = None
 ) -> CampaignResult:
-    """Merge the stored runs into the campaign report and count them (``draw``: where its figures are drawn,
-    :func:`~.report.drawn_figures`)."""
-    summary, rows, counts = merge(plan, store, plots=plots, draw=draw)
+    """Merge the stored runs into the campaign report and count them (``drawing``: where its figures are made besides
+    here, :func:`~.report.drawn_figures`)."""
+    summary, rows, counts = merge(plan, store, plots=plots, drawing=drawing)
     return CampaignResult(
         out=store.out,
         rows=rows,
@@ -305,11 +306,27 @@ def _result(
     )
 
 
-def _drawing(client: Any) -> Callable[[Figure], Any]:
-    """A report figure drawn as a task on the cluster, whose workers are idle once the runs are stored: the scatter
-    and the envelopes drawn at once on two workers, and each while the client goes on with the report (see
+class _ClusterDrawing:
+    """The report's figures made as tasks on the cluster, whose workers are idle once the runs are stored
+    (:class:`~.report.Drawing`): the envelopes' traces read and binned on a worker that sees the campaign folder while
+    the client judges the runs, their bands and figure made there, the scatter drawn on another meanwhile (see
     :func:`~.report.drawn_figures`)."""
-    return lambda figure: client.submit(png_of, figure, key=f"gainlink-figure-{uuid.uuid4().hex}", retries=1)
+
+    def __init__(self, client: Any, store: Store) -> None:
+        self.client = client
+        self.folder = (str(store.out.resolve()), folder_key(store.blocks))  # as _Submitter's: seen, or not, by each
+
+    def draw(self, figure: Figure) -> Any:
+        return self._submit(png_of, figure)
+
+    def read_stack(self, ids: np.ndarray) -> Any:
+        return self._submit(cluster_stack, self.folder, ids)
+
+    def stack_png(self, stack: Any, request: EnvelopeRequest, figure: EnvelopeFigure) -> Any:
+        return self._submit(stack_png, stack, request, figure)
+
+    def _submit(self, fn: Callable, *args: Any) -> Any:
+        return self.client.submit(fn, *args, key=f"gainlink-report-{uuid.uuid4().hex}", retries=1)
 
 
 def _data(value: bytes) -> bytes:
