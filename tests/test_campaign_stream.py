@@ -260,7 +260,7 @@ def test_a_csv_field_is_what_csv_writer_writes_of_it():
     needs no quotes and text with commas, quotes, line ends, a carriage return, spaces and non-ASCII letters."""
     import io
 
-    from gainlink.hil.campaign.rows import csv_field
+    from gainlink.hil.campaign.judged import csv_field
 
     texts = ["", "plain", "a, b", 'say "hi"', "two\nlines", "cr\rhere", " lead", "Ω-axis; θ left [-0.7, 0.7]", '"', ","]
     for text in texts:

@@ -1,7 +1,7 @@
 """A campaign's rows, one per planned run in plan order, made from the store when asked (``CampaignResult.rows``).
 
 A row is what its planned point gives (:func:`.rows.point_row`: index, id, grid point, draw, axis values, seed,
-artifact sha256), its verdict (:func:`.rows.verdict_head`: status, failed criteria, reasons; judged here by the
+artifact sha256), its verdict (:func:`.judged.verdict_head`: status, failed criteria, reasons; judged here by the
 campaign's criteria over the block's typed columns, as the report judges them) and its stored record's row (complete,
 measures, metrics, worker, the run's own reason: :func:`.block_texts.row_texts`). A run without a record is
 :data:`.rows.MISSING_VERDICT`. Nothing holds every row: the rows are made a block file at a time as the walk in plan
@@ -17,8 +17,9 @@ from collections.abc import Iterator, Sequence
 from typing import Any
 
 from .criteria import evaluate_columns
+from .judged import verdict_head
 from .plan import CampaignPlan, PlannedRuns
-from .rows import MISSING_VERDICT, point_row, verdict_head
+from .rows import MISSING_VERDICT, point_row
 
 BLOCKS_KEPT = 4  # block files whose rows a walk keeps: one block per firmware build the grid interleaves
 

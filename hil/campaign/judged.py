@@ -1,0 +1,92 @@
+"""A block file's runs judged at once, and the texts ``campaign.csv`` and the report hold of each: the pieces the
+client's :class:`.rows.Verdicts` is made of (:class:`~.store.ReportPart` in, each run's verdict, cells and numbers out).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from typing import Any
+
+import numpy as np
+
+from .block_layout import MEASURE_CELLS, METRIC_CELLS
+
+
+def csv_field(text: str) -> str:
+    """``text`` as one field of ``csv.writer``'s row (its default dialect: minimal quoting, a quote doubled): as it is,
+    or in quotes when it holds a comma, a quote or a line end; one with a carriage return as the writer itself writes
+    it (whether it quotes one depends on the Python: 3.11's does not)."""
+    if "\r" in text:
+        out = io.StringIO()
+        csv.writer(out, lineterminator="\n").writerow([text, ""])
+        return out.getvalue()[:-2]
+    if "," not in text and '"' not in text and "\n" not in text:
+        return text
+    return '"' + text.replace('"', '""') + '"'
+
+
+# :data:`.block_layout.ROW_BITS`' bits of the keys a head names
+ROW_BITS = {"complete": 1, "run_reason": 2, "worker": 4}
+
+
+_CELL = {"null": "", "true": "True", "false": "False"}  # a value's JSON text -> its cell, where they differ
+
+
+def _cells(texts: list[str]) -> list[str]:
+    """Values' JSON texts as ``csv.writer`` writes the values: ``null`` empty, booleans by ``str``, numbers as they
+    are (a float's JSON text is its ``repr``)."""
+    cell = _CELL.get
+    return [cell(t, t) for t in texts]
+
+
+def part_cells(part: Any) -> list[str]:
+    """The ``campaign.csv`` cells of ``part``'s runs after the reasons, as CSV text (numbers and booleans: no field
+    quoted): ``complete`` and the measures, then each tracked output's metrics and each output's final value in the
+    run's own sorted order; each column's texts made once (the measures' shared with the row's JSON text), the runs
+    of one (tracked outputs, outputs) joined at once."""
+    fixed = [_cells(part.texts["complete"]), *(_cells(part.texts[k]) for k in MEASURE_CELLS)]
+    tracked = {t: [_cells(cols[k]) for k in METRIC_CELLS] for t, cols in part.tracked.items()}
+    final = {o: _cells(v) for o, v in part.outputs_final.items()}
+    out = [""] * len(part.ids)
+    for s, (names, outs) in enumerate(part.shapes):
+        rows = np.flatnonzero(part.shape == s).tolist()
+        columns = [*fixed, *(col for t in names for col in tracked[t]), *(final[o] for o in outs)]
+        if len(rows) < len(out):
+            columns = [[col[i] for i in rows] for col in columns]
+        for i, text in zip(rows, map(",".join, zip(*columns))):
+            out[i] = text
+    return out
+
+
+def tracked_iae(part: Any) -> np.ndarray:
+    """Each run's IAE summed over its tracked outputs in their sorted order (as ``sum`` of the row's values); NaN
+    without one, or when one has none."""
+    total = np.full(len(part.ids), np.nan)
+    for s, (tracked, _) in enumerate(part.shapes):
+        mine = part.shape == s
+        if tracked and mine.any():
+            acc = np.zeros(int(mine.sum()))
+            for t in tracked:
+                acc = acc + part.judged.tracked[t]["iae"][mine]
+            total[mine] = acc
+    return total
+
+
+def verdict_form(part: Any, i: int, failed: list[tuple[str, str]]) -> tuple[tuple, list[str]]:
+    """What run ``i`` of ``part`` (a :class:`~.store.ReportPart`) says beyond its stored ``row``, given the criteria it
+    ``failed`` (name, reason): its form (its status, ``pass``, ``fail`` or ``error``; the criteria it failed, sorted;
+    which of ``complete``, ``run_reason``, ``worker`` the row lacks, each ``None`` in the verdict: an error's only
+    ``worker``) and its reasons."""
+    keys = int(part.keys[i])
+    if part.error[i]:
+        return ("error", ("error",), () if keys & ROW_BITS["worker"] else ("worker",)), [part.reasons[i]]
+    missing = tuple(k for k, bit in ROW_BITS.items() if not keys & bit)
+    return ("fail" if failed else "pass", tuple(sorted({k for k, _ in failed})), missing), [t for _, t in failed]
+
+
+def verdict_head(part: Any, i: int, failed: list[tuple[str, str]]) -> dict:
+    """Run ``i``'s verdict (:func:`verdict_form`) as a dict: its status, the criteria it failed and the reasons, and
+    ``None`` for each key its row lacks."""
+    (status, names, missing), reasons = verdict_form(part, i, failed)
+    return {"status": status, "failed": list(names), "reasons": reasons} | dict.fromkeys(missing)
