@@ -966,6 +966,28 @@ def test_the_report_figures_are_drawn_on_the_cluster_and_one_it_fails_to_draw_is
     assert {name: (tmp_path / "c" / name).read_bytes() for name in report.PLOTS} == here
 
 
+@pytest.mark.parametrize("sees_folder", [True, False], ids=["worker-writes-block", "client-writes-block"])
+def test_each_block_is_judged_by_the_worker_that_ran_it_and_the_report_is_the_one_judged_here(
+    pend, dask_cluster, tmp_path, monkeypatch, sees_folder
+):
+    """A campaign on a cluster has each block's runs judged by the worker that ran them (the client, whose judging is
+    broken here, judges none), whether the worker writes the block file itself or, not seeing the campaign folder,
+    sends its bytes: the report's files are byte for byte those of a merge that judges every run here."""
+    from gainlink.hil.campaign import report, rows, runner
+
+    data = small_campaign(pend, runs=12, criteria={"stable": True, "bounds": {"theta": [-0.5, 0.5]}})
+    with monkeypatch.context() as patch:
+        patch.setattr(rows, "judge_part", lambda *a: pytest.fail("a block judged in the client"))
+        if not sees_folder:  # as a worker on another machine: the block file's bytes come back with the verdicts
+            patch.setattr(runner, "folder_key", lambda path: (-1, -1))
+        result = run(data, out=tmp_path / "c", scheduler=dask_cluster, plots=False)
+    assert result.executed == 24 and result.passed and result.failed  # verdicts of both kinds
+    names = ("campaign.csv", "campaign.json", "summary.txt", "failures.txt")
+    on_cluster = {name: (tmp_path / "c" / name).read_bytes() for name in names}
+    report.merge(plan_campaign(parse_campaign(data)), Store(tmp_path / "c"), plots=False)
+    assert {name: (tmp_path / "c" / name).read_bytes() for name in names} == on_cluster
+
+
 @pytest.mark.slow
 def test_ctrl_c_stops_the_cluster_keeps_every_finished_run_and_prints_the_command_that_resumes(pend, tmp_path):
     data = slow_campaign(pend)

@@ -397,7 +397,7 @@ def test_a_run_planned_twice_is_one_of_the_envelopes_runs(tmp_path):
     runs = list(plan.runs)
     runs.insert(150, runs[120])
     plan = dataclasses.replace(plan, runs=tuple(dataclasses.replace(p, index=k) for k, p in enumerate(runs)))
-    verdicts = Verdicts(store, plan.campaign.criteria, plan_ids(plan))
+    verdicts = Verdicts(plan.campaign.criteria, plan_ids(plan)).complete(store)
     try:
         status = tallied(plan, verdicts).status
     finally:
@@ -548,3 +548,58 @@ def test_a_workers_block_file_is_the_one_its_records_make(tmp_path, interleaved)
         assert store.record(run_id) == json.loads(json.dumps({k: v for k, v in record.items() if k != "trace"})) | {
             "id": run_id
         }
+
+
+def _verdicts_by_run(verdicts) -> list[tuple]:
+    """Each planned run's verdict as :class:`~gainlink.hil.campaign.rows.Verdicts` holds it: status code, the names
+    of the criteria it failed (its bits decoded), IAE, model mismatch and warning, its outputs' names and its texts."""
+    out = []
+    for u in range(len(verdicts.uids)):
+        failed = sorted(name for bit, name in enumerate(verdicts.criteria) if verdicts.failed[u] >> bit & 1)
+        shape = verdicts.shapes[verdicts.shape[u]] if verdicts.at[u] >= 0 else None
+        numbers = (repr(float(verdicts.iae[u])), repr(float(verdicts.model[u])))  # NaN equal to NaN
+        out.append((int(verdicts.code[u]), failed, numbers, bool(verdicts.warning[u]), shape, verdicts.text(u)))
+    return out
+
+
+def test_blocks_judged_where_they_ran_are_the_verdicts_judged_here_and_a_record_stored_again_judges_anew(
+    tmp_path, monkeypatch
+):
+    """Each block file judged from its bytes (as the worker that made it judges it) and filed in, in another order than
+    the store's: the same verdicts, texts and numbers as the store's files judged here, and nothing read from the store
+    to complete them. A run stored again afterwards (a later error record: the one the store keeps) makes the verdicts
+    judged ahead not the store's, whatever order they were filed in: they are all judged again, the run's the new
+    record's."""
+    from gainlink.hil.campaign.judged import judge_part
+    from gainlink.hil.campaign.rows import Verdicts, plan_ids
+    from gainlink.hil.campaign.store import block_report_part
+
+    plan, store, records = _stored(tmp_path)
+    ids, criteria = plan_ids(plan), plan.campaign.criteria
+    here = Verdicts(criteria, ids).complete(store)
+    expected = _verdicts_by_run(here)
+    here.close()
+    judged = {path.name: judge_part(block_report_part(path.read_bytes()), criteria) for path in store.files()}
+    ahead = Verdicts(criteria, ids)
+    for name in reversed(list(judged)):
+        ahead.add(name, judged[name])
+    with monkeypatch.context() as patch:
+        patch.setattr(Store, "report_part", lambda *a, **k: pytest.fail("a block judged ahead read again"))
+        ahead.complete(store)
+    assert _verdicts_by_run(ahead) == expected
+    assert {"pass", "fail", "error"} <= {("pass", "fail", "error", "missing")[c] for c, *_ in expected}
+    ahead.close()
+
+    again = next(p for p in plan.runs if records[p.id]["status"] == "error")
+    store.put([again], kind="sil", results=[{"status": "error", "reason": "stored again"}])
+    (new,) = set(store.files()) - {store.blocks / name for name in judged}
+    redone = Verdicts(criteria, ids)
+    redone.add(new.name, judge_part(block_report_part(new.read_bytes()), criteria))  # the later file filed in first
+    for name, part in judged.items():
+        redone.add(name, part)
+    fresh = Verdicts(criteria, ids).complete(store)
+    assert _verdicts_by_run(redone.complete(store)) == _verdicts_by_run(fresh) != expected
+    u = int(np.searchsorted(redone.uids, again.id.encode()))
+    assert "stored again" in redone.text(u)[0]
+    redone.close()
+    fresh.close()

@@ -43,7 +43,7 @@ from .block_layout import (
     SCHEMA,
     TEXTS,
     WIDE,
-    block_address,
+    block_file_name,
 )
 from .jsontext import (
     compact_json,
@@ -222,7 +222,7 @@ def write_block(
             return None
     except OSError:
         return None
-    name = f"{block_address(ids)}.parquet"
+    name = block_file_name(ids)
     atomic_write_bytes(path / name, data)
     return {"block": name, "runs": len(ids), "errors": errors}
 

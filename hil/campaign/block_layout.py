@@ -99,6 +99,11 @@ def block_address(run_ids: Iterable[str]) -> str:
     return hashlib.sha256(body.encode("ascii")).hexdigest()[:24]
 
 
+def block_file_name(run_ids: list[str]) -> str:
+    """The name of the block file of runs ``run_ids`` (in its order): its :func:`block_address`."""
+    return f"{block_address(run_ids)}.parquet"
+
+
 #: The block file's columns whose values repeat from run to run (dictionary-encoded in the Parquet file).
 REPEATED = ["status", "names", "run_reason", "record_form", "metrics_form"]
 #: The block file's columns of JSON texts, compressed with zstd (every other leaf with LZ4:

@@ -279,7 +279,12 @@ class Drawing(Protocol):
 
 
 def merge(
-    plan: CampaignPlan, store: Any, *, plots: bool = True, drawing: Drawing | None = None
+    plan: CampaignPlan,
+    store: Any,
+    *,
+    plots: bool = True,
+    drawing: Drawing | None = None,
+    verdicts: Verdicts | None = None,
 ) -> tuple[str, StoredRows, Counter]:
     """Merge the stored runs into the report files; returns the summary text, the rows (made from the store when
     asked, :class:`~.stored_rows.StoredRows`) and the count of runs by status.
@@ -291,11 +296,15 @@ def merge(
     merge) and those of an earlier merge are removed: a report never shows plots of other runs than its own.
 
     ``drawing``: where the figures are made besides here (:func:`drawn_figures`): the envelopes' traces are read there
-    from the start, while the runs are judged here, and the rows are written here while the figures are drawn."""
+    from the start, while the runs are judged here, and the rows are written here while the figures are drawn.
+
+    ``verdicts``: the plan's, holding those of the blocks judged ahead (by the workers that ran them, as the campaign
+    ran: :meth:`~.rows.Verdicts.add`); the other stored runs are judged here. Closed here, as verdicts made here are."""
     traced = traced_runs(plan)
     stack = drawing.read_stack(traced.ids) if plots and drawing is not None else None
-    verdicts = Verdicts(store, plan.campaign.criteria, plan_ids(plan))
+    verdicts = Verdicts(plan.campaign.criteria, plan_ids(plan)) if verdicts is None else verdicts
     try:
+        verdicts.complete(store)
         tally = tallied(plan, verdicts)
         pngs = drawn_figures(plan, tally, store, traced, drawing, stack) if plots else {}
         with atomic_writer(store.out / "campaign.csv") as csv_out:

@@ -1,7 +1,8 @@
 """A campaign's verdicts (one per planned run), judged from the store in plan order, and the tally the report is
 drawn from, kept in numpy arrays indexed by the plan.
 
-Each block file is read once, as columns (:meth:`.store.Store.report_parts`): its runs are judged at once
+Each block file is judged once (:func:`.judged.judge_part`, by the cluster's worker that ran its runs, or here from
+the store's columns, :meth:`.store.Store.report_part`): its runs are judged at once
 (:func:`.criteria.evaluate_columns` over the typed columns; no run's JSON is decoded), and each kept run's
 ``campaign.csv`` status and reasons and its cells (the columns' values as text, made once a column), with the verdict's
 JSON text of a run that did not pass, go, as one line, to an anonymous temporary file, and its numbers (status, IAE,
@@ -16,28 +17,27 @@ record) is made when asked, from the store (:class:`.stored_rows.StoredRows`).""
 from __future__ import annotations
 
 import json
+import logging
 import math
 import os
 import tempfile
 from collections import Counter
 from collections.abc import Iterator, Mapping
-from json.encoder import encode_basestring_ascii  # the encoder json.dumps uses for a string (ensure_ascii)
-from typing import IO, Any, NamedTuple
+from typing import IO, Any
 
 import numpy as np
 import pyarrow as pa
 
-from .criteria import evaluate_columns
 from .jsontext import float_texts
-from .judged import csv_field, part_cells, tracked_iae, verdict_form
+from .judged import SEP, JudgedPart, csv_field, judge_part
 from .plan import PlanColumns, PlannedRuns, plan_columns
+
+log = logging.getLogger(__name__)
 
 FAILURES_LIMIT = 200
 WORST = 3
 STATUSES = ("pass", "fail", "error", "missing")  # a run's status code is its place here
 PASS, FAIL, ERROR, MISSING = range(4)
-# after each field of a spilled line (JSON and CSV cells hold no NUL: json escapes it, reasons are text)
-SEP = "\x00"
 
 
 def point_row(point: Any) -> dict:
@@ -145,27 +145,25 @@ MISSING_VERDICT = {"status": "missing", "failed": ["missing"], "reasons": ["no r
 FIXED_CELLS = 8
 
 
-class _Form(NamedTuple):
-    """The verdicts of one form (:func:`verdict_form`): the JSON text around the reasons, the CSV status, the status
-    code and the failed criteria (bits into :attr:`Verdicts.criteria`)."""
-
-    before: str
-    after: str
-    status: str
-    code: int
-    mask: int
-
-
 class Verdicts:
-    """Every stored run's verdict, made once from its record and spilled to an anonymous temporary file (gone when
-    closed) with its ``campaign.csv`` cells; its numbers in arrays indexed by the plan's distinct runs (``ids``, ASCII
-    bytes in plan order; a run planned twice is one run). The tracked outputs and outputs the runs report are the
-    CSV's columns."""
+    """Every stored run's verdict, its ``campaign.csv`` texts spilled to an anonymous temporary file (gone when
+    closed); its numbers in arrays indexed by the plan's distinct runs (``ids``, ASCII bytes in plan order; a run
+    planned twice is one run). The tracked outputs and outputs the runs report are the CSV's columns.
 
-    def __init__(self, store: Any, criteria: Any, ids: np.ndarray) -> None:
+    Filled a block file at a time: by :meth:`add`, a block a cluster's worker judged as it ran it (while the campaign
+    runs), then by :meth:`complete`, which judges here every other block file of the store."""
+
+    def __init__(self, criteria: Any, ids: np.ndarray) -> None:
+        self.criteria_given = criteria
         self.file: IO[bytes] = tempfile.TemporaryFile()
         self.uids, self.slot = np.unique(ids, return_inverse=True)
+        self._empty()
+
+    def _empty(self) -> None:
+        """No run judged yet: every run missing, the spill empty."""
         n = len(self.uids)
+        self.file.seek(0)
+        self.file.truncate()
         self.at, self.size = np.full(n, -1, np.int64), np.zeros(n, np.int32)
         self.code = np.full(n, MISSING, np.int8)
         self.iae, self.model = np.full(n, np.nan), np.full(n, np.nan)
@@ -176,71 +174,62 @@ class Verdicts:
         self.shapes: list[tuple[tuple[str, ...], tuple[str, ...]]] = []
         self.tracked: set[str] = set()
         self.outputs: set[str] = set()
+        self.ahead: dict[str, np.ndarray] = {}  # the block files :meth:`add` took: their runs' ids
         self._flushed = False
-        self._forms: dict[tuple, _Form] = {}
-        for part in store.report_parts():
-            k = np.minimum(np.searchsorted(self.uids, part.ids), max(n - 1, 0))
-            planned = self.uids[k] == part.ids if n else np.zeros(len(part.ids), bool)
-            if planned.any():
-                self._add_part(part, k, planned, criteria)
+        self._forms: dict[tuple, tuple[int, int]] = {}
 
-    def _add_part(self, part: Any, slots: np.ndarray, planned: np.ndarray, criteria: Any) -> None:
-        """Judge the runs of ``part`` (a :class:`~.store.ReportPart`) at once and spill those ``planned`` (run
-        ``slots[i]`` of the plan's distinct runs): a run that did not pass its verdict's JSON text (its status, the
-        criteria it failed, the reasons: what ``failures.txt`` and ``campaign.json``'s failures read again), every
-        run its ``campaign.csv`` status and reasons and its cells (the typed columns' values as text)."""
-        failed = evaluate_columns(criteria, part.judged)
+    def add(self, name: str, judged: JudgedPart) -> None:
+        """Take the runs of block file ``name`` as judged elsewhere (:func:`~.judged.judge_part`: by the worker that
+        ran them), as the file is stored; :meth:`complete` checks that the store keeps their records there."""
+        self.ahead[name] = judged.ids
+        self._take(judged)
+
+    def complete(self, store: Any) -> Verdicts:
+        """Judge here the runs of every block file of ``store`` :meth:`add` did not take, and return this. When the
+        store does not keep the records of every run of a file taken ahead there (a run stored again since, in
+        another file), every run is judged again from the store: a verdict is the record's the store keeps."""
+        if not all(store.keeps_all(name, ids) for name, ids in self.ahead.items()):
+            log.info("the verdicts judged on the workers are not all of the records stored: judged again here")
+            self._empty()
+        for path in store.files():
+            if path.name not in self.ahead and (part := store.report_part(path)) is not None:
+                self._take(judge_part(part, self.criteria_given))
+        return self
+
+    def _take(self, judged: JudgedPart) -> None:
+        """File the runs of ``judged`` the plan holds in: their numbers set at once and their lines written in one call
+        (a write a run: 18 us of each, profiled)."""
+        n = len(self.uids)
+        slots = np.minimum(np.searchsorted(self.uids, judged.ids), max(n - 1, 0))
+        planned = self.uids[slots] == judged.ids if n else np.zeros(len(judged.ids), bool)
         rows = np.flatnonzero(planned)
-        shape = self._shapes(part, rows)
-        cells = part_cells(part)
-        iae = tracked_iae(part)
-        model, warning = part.model_mismatch, part.model_warning
-        bad = np.fromiter(map(bool, failed), bool, len(failed)) | part.error
-        code, masks = np.full(len(rows), PASS, np.int8), np.zeros(len(rows), np.int64)
-        texts = [""] * len(rows)
-        verdicts = ["pass,"] * len(rows)
-        for n in np.flatnonzero(bad[rows]).tolist():
-            i = int(rows[n])
-            key, reasons = verdict_form(part, i, failed[i])
-            form = self._forms.get(key) or self._form(key)
-            texts[n] = form.before + ", ".join(map(encode_basestring_ascii, reasons)) + form.after
-            verdicts[n] = form.status + csv_field("; ".join(reasons))
-            code[n], masks[n] = form.code, form.mask
-        pick = rows.tolist()
-        cell_texts = cells if len(pick) == len(part.ids) else [cells[i] for i in pick]
-        lines = [text + SEP + verdict + SEP + cell + SEP for text, verdict, cell in zip(texts, verdicts, cell_texts)]
-        spill = "".join(lines)
-        # ASCII (the usual): a line's bytes are its characters, the part encoded once (a line at a time otherwise)
-        encoded = spill.encode("utf-8") if spill.isascii() else None
-        if encoded is None:
-            pieces = [x.encode("utf-8") for x in lines]
-            encoded, sizes = b"".join(pieces), np.array([len(x) for x in pieces], np.int64)
-        else:
-            sizes = np.array([len(x) for x in lines], np.int64)
-        # the part's numbers set at once and its lines written in one call (a write a run: 18 us of each, profiled)
+        if not len(rows):
+            return
+        lines, sizes = (judged.lines, judged.sizes) if len(rows) == len(judged.ids) else _lines_of(judged, rows)
         u = slots[rows]
         self.at[u] = self.file.tell() + np.cumsum(sizes) - sizes
         self.size[u] = sizes
-        self.file.write(encoded)
-        self.shape[u], self.code[u], self.failed[u] = shape[rows], code, masks
-        self.iae[u], self.model[u], self.warning[u] = iae[rows], model[rows], warning[rows]
+        self.file.write(lines)
+        forms = [self._form(key) for key in judged.forms]
+        codes = np.array([*(c for c, _ in forms), PASS], np.int8)  # a run that passed (form -1): the last
+        masks = np.array([*(m for _, m in forms), 0], np.int64)
+        form = judged.form[rows]
+        self.shape[u], self.code[u], self.failed[u] = self._shapes(judged, rows)[rows], codes[form], masks[form]
+        self.iae[u], self.model[u], self.warning[u] = judged.iae[rows], judged.model[rows], judged.warning[rows]
 
-    def _form(self, key: tuple) -> _Form:
-        """The verdicts of form ``key`` (:func:`verdict_form`), made once: ``json.dumps`` of the verdict with its keys
-        sorted, its reasons left out (each run's written in by json's own string encoder); its failed criteria noted
-        in :attr:`criteria` in the order first met."""
-        status, names, missing = key
-        text = json.dumps({"status": status, "failed": list(names), "reasons": []} | dict.fromkeys(missing),
-                          sort_keys=True)  # fmt: skip
-        before, after = text.split('"reasons": []')
+    def _form(self, key: tuple) -> tuple[int, int]:
+        """The status code and the failed criteria's bits (into :attr:`criteria`, noted in the order first met) of the
+        verdicts of form ``key`` (:func:`~.judged.verdict_form`), made once."""
+        if key in self._forms:
+            return self._forms[key]
+        status, names, _ = key
         mask = 0
         for name in names:
             if name not in self.criteria:
                 self.criteria.append(name)
             mask |= 1 << self.criteria.index(name)
-        form = _Form(before + '"reasons": [', "]" + after, status + ",", STATUSES.index(status), mask)
-        self._forms[key] = form
-        return form
+        self._forms[key] = STATUSES.index(status), mask
+        return self._forms[key]
 
     def _shapes(self, part: Any, rows: np.ndarray) -> np.ndarray:
         """Each run's (tracked outputs, outputs) as a number into :attr:`shapes`, the planned ``rows``' named in the
@@ -444,3 +433,10 @@ class RunStatus(Mapping):
         if not hit.size:
             raise KeyError(run_id)
         return "fail" if self.failed[hit[0]] else "pass"
+
+
+def _lines_of(judged: JudgedPart, rows: np.ndarray) -> tuple[bytes, np.ndarray]:
+    """The spilled lines of the runs ``rows`` of ``judged`` and their sizes."""
+    starts = np.cumsum(judged.sizes) - judged.sizes
+    sizes = judged.sizes[rows]
+    return b"".join(judged.lines[a : a + b] for a, b in zip(starts[rows].tolist(), sizes.tolist())), sizes

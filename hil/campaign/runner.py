@@ -36,12 +36,15 @@ from gainlink.errors import GainlinkError
 from gainlink.version import __version__
 
 from .block_file import folder_key
+from .block_layout import block_file_name
 from .cluster import check_main_guard, dask_client
 from .config import Campaign, CampaignError, load_campaign, parse_campaign
 from .envelopes import EnvelopeRequest, cluster_stack, stack_png, traced_runs
 from .figures import EnvelopeFigure, Figure, png_of
+from .judged import JudgedPart
 from .plan import CampaignPlan, RunPoint, describe_axes, plan_campaign, task_uses
 from .report import Drawing, merge
+from .rows import Verdicts, plan_ids
 from .store import Store, refuse_foreign
 from .worker import execute_packed
 
@@ -229,15 +232,25 @@ def _run(
     done = total - todo
     if todo:
         try:
-            with dask_client(scheduler=scheduler, workers=workers) as client:
+            with dask_client(scheduler=scheduler, workers=workers) as client, _verdicts(plan) as verdicts:
                 threads = sum(client.nthreads().values())
                 sizes = batch_sizes(campaign.kind, todo, threads, batch=batch)
                 blocks = _blocks(plan, store, sizes, distinct & ~finished)
                 _submit_and_store(
-                    client, plan, blocks, store, done=done, total=total, progress=progress, window=threads
+                    client,
+                    plan,
+                    blocks,
+                    store,
+                    done=done,
+                    total=total,
+                    progress=progress,
+                    window=threads,
+                    verdicts=verdicts,
                 )
                 drawing = _ClusterDrawing(client, store)
-                return _result(plan, store, reused=reused, executed=todo, plots=plots, drawing=drawing)
+                return _result(
+                    plan, store, reused=reused, executed=todo, plots=plots, drawing=drawing, verdicts=verdicts
+                )
         except KeyboardInterrupt:  # the block closed the client (and the LocalCluster) on its way out
             # read again from the folder: workers write their blocks themselves, some the client had not yet heard of
             stored = int((distinct & Store(store.out).finished_mask(plan.runs.ids)).sum())
@@ -288,12 +301,30 @@ def _blocks(plan: CampaignPlan, store: Store, sizes: list[int], pending: np.ndar
         yield todo[sum(sizes) :]
 
 
+@contextlib.contextmanager
+def _verdicts(plan: CampaignPlan) -> Iterator[Verdicts]:
+    """The campaign's verdicts while it runs, each block's filed in as the block is stored (judged by its worker),
+    closed when the campaign ends (:func:`~.report.merge` completes them)."""
+    verdicts = Verdicts(plan.campaign.criteria, plan_ids(plan))
+    try:
+        yield verdicts
+    finally:
+        verdicts.close()
+
+
 def _result(
-    plan: CampaignPlan, store: Store, *, reused: int, executed: int, plots: bool, drawing: Drawing | None = None
+    plan: CampaignPlan,
+    store: Store,
+    *,
+    reused: int,
+    executed: int,
+    plots: bool,
+    drawing: Drawing | None = None,
+    verdicts: Verdicts | None = None,
 ) -> CampaignResult:
     """Merge the stored runs into the campaign report and count them (``drawing``: where its figures are made besides
-    here, :func:`~.report.drawn_figures`)."""
-    summary, rows, counts = merge(plan, store, plots=plots, drawing=drawing)
+    here, :func:`~.report.drawn_figures`; ``verdicts``: those of the blocks judged ahead, :func:`~.report.merge`)."""
+    summary, rows, counts = merge(plan, store, plots=plots, drawing=drawing, verdicts=verdicts)
     return CampaignResult(
         out=store.out,
         rows=rows,
@@ -355,12 +386,16 @@ def batch_sizes(kind: str, runs: int, threads: int, *, batch: int | None = None)
     return [runs // count + (1 if i < runs % count else 0) for i in range(count)]
 
 
-def _store_answer(store: Store, data: Any, ids: list[str]) -> list[dict]:
-    """Store a task's answer for runs ``ids``: the block file a worker wrote (a few numbers), or its bytes; a worker
-    that answered something else is named."""
+def _store_answer(store: Store, data: Any, ids: list[str], verdicts: Verdicts | None = None) -> list[dict]:
+    """Store a task's answer for runs ``ids``: the block file a worker wrote (a few numbers), or its bytes, with the
+    runs judged by the worker (filed into ``verdicts``) when it did; a worker that answered something else is named."""
     if isinstance(data, dict) and "block" in data:
-        return store.took_block(data, ids)
-    return store.put_block(_block_bytes(data))
+        stored = store.took_block(data, ids)
+    else:
+        stored = store.put_block(_block_bytes(data.get("data") if isinstance(data, dict) else data))
+    if verdicts is not None and isinstance(data, dict) and isinstance(data.get("judged"), JudgedPart):
+        verdicts.add(block_file_name(ids), data["judged"])
+    return stored
 
 
 def _block_bytes(data: Any) -> bytes:
@@ -415,6 +450,7 @@ class _Submitter:
             needed,
             campaign=self.plan.campaign.name,
             folder=self.folder,
+            criteria=self.plan.campaign.criteria,
             key=key,
             retries=1,
             pure=False,
@@ -452,10 +488,12 @@ def _submit_and_store(
     total: int,
     progress: Progress | None,
     window: int,
+    verdicts: Verdicts | None = None,
 ) -> None:
     """Submit ``blocks`` (plan indices) as they are generated, at most :data:`BLOCKS_IN_FLIGHT` per thread
     (``window``) at a time, and store each as it completes. The client holds each block in flight as its plan indices
-    (8 bytes a run), not its runs: a run is made to be pickled into its task, and again only if its task failed."""
+    (8 bytes a run), not its runs: a run is made to be pickled into its task, and again only if its task failed. The
+    runs a worker judged are filed into ``verdicts`` as their block is stored."""
     from asyncio import CancelledError
 
     kind = plan.campaign.kind
@@ -469,7 +507,7 @@ def _submit_and_store(
     for fut in finished:
         block = futures.pop(fut)
         try:
-            stored = _store_answer(store, fut.result(), submitter.ids(block))
+            stored = _store_answer(store, fut.result(), submitter.ids(block), verdicts)
         except (Exception, CancelledError) as exc:  # retried once already; KilledWorker: its workers died
             fut.release()
             reason = f"{type(exc).__name__}: {exc}"

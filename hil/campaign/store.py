@@ -43,7 +43,7 @@ traces, the report's parts). A block file itself is made and read back by the mo
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -69,7 +69,7 @@ from .block_layout import (
     ROW_COLUMNS,
     TRACE_FIELDS,
     WIDE,
-    block_address,
+    block_file_name,
 )
 from .block_texts import cell_texts, joined, numbers_text, record_texts, row_texts, struct_fields, value_texts
 from .config import CampaignError
@@ -348,7 +348,7 @@ class Store:
         ``reason`` (an error's)."""
         table = pq.read_table(pa.BufferReader(data), columns=["id", "status"])
         ids, statuses = table.column("id").to_pylist(), table.column("status").to_pylist()
-        name = f"{block_address(ids)}.parquet"
+        name = block_file_name(ids)
         self.blocks.mkdir(exist_ok=True)
         atomic_write_bytes(self.blocks / name, data)
         self._note(_ids(table.column("id")), _done(table.column("status")), name)
@@ -361,7 +361,7 @@ class Store:
     def took_block(self, answer: dict, ids: list[str]) -> list[dict]:
         """Note a block file a worker wrote itself (``answer``: :func:`.block_file.write_block`'s, for runs ``ids``);
         returns each run's ``id``, ``status`` and ``reason`` as :meth:`put_block` does, without reading the file."""
-        if answer.get("runs") != len(ids) or answer.get("block") != f"{block_address(ids)}.parquet":
+        if answer.get("runs") != len(ids) or answer.get("block") != block_file_name(ids):
             raise GainlinkError(f"a worker wrote block {answer.get('block')!r}, not the one of these {len(ids)} runs")
         reasons: list[str | None] = [None] * len(ids)
         done = np.ones(len(ids), bool)
@@ -390,21 +390,11 @@ class Store:
         run's ``row`` text (:func:`.block_texts.row_texts`: what :class:`~.stored_rows.StoredRows` gives; the report
         does not make them)."""
         with pq.ParquetFile(path) as block:  # its footer parsed once: the schema and the columns read from it
-            present = set(block.schema_arrow.names)
-            texts = _text_columns(present) if rows else []
-            table = _read(block, ["id", "status", *texts, *(k for k in ROW_COLUMNS if k in present)])
-            names = _ids(table.column("id"))
-            kept = self._kept(path, names)
-            if not kept.any():
-                return None
-            if not kept.all():
-                table = table.filter(pa.array(kept))
-            error = np.asarray(pc.equal(table.column("status"), "error").to_numpy(zero_copy_only=False), bool)
-            reasons: list[str | None] = [None] * table.num_rows
-            if error.any():
-                records = _read(block, list(RECORD_COLUMNS)).filter(pa.array(kept))
-                reasons = _error_reasons(records, np.flatnonzero(error).tolist())
-        return _report_part(names[kept], error, reasons, table, rows=rows)
+            return _report_of(block, lambda names: self._kept(path, names), rows=rows)
+
+    def keeps_all(self, name: str, ids: np.ndarray) -> bool:
+        """Whether the index keeps the records of runs ``ids`` (ASCII bytes) in block file ``name``, every one."""
+        return bool(self._kept(self.blocks / name, ids).all())
 
     def records(self) -> Iterator[tuple[str, dict]]:
         """Every stored run's record, one block file at a time (a run stored twice: the record the index keeps)."""
@@ -539,6 +529,37 @@ class ReportPart:
     model_mismatch: np.ndarray  # NaN where null
     model_warning: np.ndarray  # bool (null: False)
     judged: RunColumns  # what the criteria read (:func:`.criteria.evaluate_columns`)
+
+
+def block_report_part(data: bytes | pa.Buffer) -> ReportPart:
+    """What the report reads of every run of a block file's bytes (:func:`.block_file.encode_block`'s), as
+    :meth:`Store.report_part` reads a stored one: for the worker that made it to judge it."""
+    with pq.ParquetFile(pa.BufferReader(data)) as block:
+        part = _report_of(block, None)
+    assert part is not None  # every run of the file: a block holds one at least
+    return part
+
+
+def _report_of(
+    block: pq.ParquetFile, kept_of: Callable[[np.ndarray], np.ndarray] | None, *, rows: bool = False
+) -> ReportPart | None:
+    """:meth:`Store.report_part` of the open block file ``block``, the runs ``kept_of`` their ids says (None: every
+    run); ``None`` when it keeps none."""
+    present = set(block.schema_arrow.names)
+    texts = _text_columns(present) if rows else []
+    table = _read(block, ["id", "status", *texts, *(k for k in ROW_COLUMNS if k in present)])
+    names = _ids(table.column("id"))
+    kept = np.ones(len(names), bool) if kept_of is None else kept_of(names)
+    if not kept.any():
+        return None
+    if not kept.all():
+        table = table.filter(pa.array(kept))
+    error = np.asarray(pc.equal(table.column("status"), "error").to_numpy(zero_copy_only=False), bool)
+    reasons: list[str | None] = [None] * table.num_rows
+    if error.any():
+        records = _read(block, list(RECORD_COLUMNS)).filter(pa.array(kept))
+        reasons = _error_reasons(records, np.flatnonzero(error).tolist())
+    return _report_part(names[kept], error, reasons, table, rows=rows)
 
 
 def _error_reasons(records: pa.Table, errors: list[int]) -> list[str | None]:

@@ -48,9 +48,11 @@ from ..paths import cache_dir
 from ..plants.fmu import reused_instances
 from .block_columns import BlockRuns
 from .block_file import encode_block, encode_runs, with_inputs, write_block
-from .config import path_steps
+from .config import Criteria, path_steps
 from .criteria import measure, measure_block
+from .judged import judge_part
 from .plan import DescribedRuns, MadeRuns
+from .store import block_report_part
 
 MAX_TRACE_POINTS = 600
 MAX_BUS_SLOTS = 64
@@ -342,10 +344,13 @@ def execute_block(
     campaign: str,
     folder: tuple[str, tuple[int, int]] | None = None,
     kept: Sequence[bool] | None = None,
+    criteria: Criteria | None = None,
 ) -> bytes | dict:
     """A campaign task: the runs of :func:`batch_records` (run ``ids[i]`` is ``runs[i]``) as the block's Parquet
     file for the campaign folder (:func:`~.block_file.encode_block`), the traces of the runs ``kept`` says (every run's
-    when None; the others' null).
+    when None; the others' null). Given the campaign's ``criteria``, the block's runs judged too
+    (:func:`~.judged.judge_part`, the answer's ``judged``): the client files their verdicts in as it stores the block,
+    instead of judging them itself after the last run.
 
     ``folder``: the campaign's ``blocks`` folder and its :func:`~.block_file.folder_key` as the client saw them. When
     this worker sees that folder (a LocalCluster, a shared file system), it writes the file there itself and returns a
@@ -356,7 +361,9 @@ def execute_block(
 
     with gc_paused():  # see execute_packed
         try:
-            return _block_answer(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder, kept=kept)
+            return _block_answer(
+                kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder, kept=kept, criteria=criteria
+            )
         finally:  # the block's arrays and records are freed by now
             if not next_task_waiting():
                 hand_back_memory()
@@ -387,8 +394,10 @@ def _block_answer(
     campaign: str,
     folder: Any,
     kept: Sequence[bool] | None,
+    criteria: Criteria | None = None,
 ) -> bytes | dict:
-    """:func:`execute_block`'s answer: its block file written into ``folder`` (a few numbers) or its bytes."""
+    """:func:`execute_block`'s answer: its block file written into ``folder`` (a few numbers) or its bytes, with the
+    runs judged against ``criteria`` when given (a dict then: the bytes its ``data``)."""
     task = _task_records(kind, artifacts, runs, blobs, kept)
     if task and all(type(r) is _Block for r in task):  # only blocks' runs: a column at a time, no record dict a run
         data = encode_runs(ids, _block_runs(kind, runs, task), campaign=campaign)
@@ -397,11 +406,29 @@ def _block_answer(
         records = [with_inputs(r, run, kind=kind) for r, run in zip(_materialized(task), runs)]
         data = encode_block(ids, records, campaign=campaign)
         errors = [[i, r.get("reason")] for i, r in enumerate(records) if r["status"] == "error"]
+    judged = {} if criteria is None else _judged(data, criteria)
     if folder is not None:
         answer = write_block(folder[0], folder[1], ids, data, errors)
         if answer is not None:
-            return answer
+            return answer | judged
+    if judged:
+        return {"data": data.to_pybytes()} | judged
     return data.to_pybytes()  # to the client, which writes it
+
+
+def _judged(data: Any, criteria: Criteria) -> dict:
+    """``{"judged": ...}``: the runs of block file ``data`` judged (:func:`~.judged.judge_part`); empty (the client
+    judges them) when that fails, said in the log."""
+    try:
+        return {"judged": judge_part(block_report_part(data), criteria)}
+    except Exception as exc:  # the runs are stored either way: their verdicts are made on the client instead
+        log.warning(
+            "block of %d bytes not judged on the worker (%s: %s): judged on the client",
+            len(data),
+            type(exc).__name__,
+            exc,
+        )
+        return {}
 
 
 def hand_back_memory() -> None:
@@ -428,6 +455,7 @@ def execute_packed(
     *,
     campaign: str,
     folder: tuple[str, tuple[int, int]] | None = None,
+    criteria: Criteria | None = None,
 ) -> bytes | dict:
     """:func:`execute_block` as the campaign submits it: ``packed`` is ``pickle.dumps((ids, runs, kept))``, ``runs`` as
     :meth:`.plan.PlannedRuns.task` gives them (described, or a list of each run's inputs), ``kept`` whose traces to
@@ -444,7 +472,9 @@ def execute_packed(
         ids, runs, kept = pickle.loads(packed)
         if isinstance(runs, DescribedRuns):  # made once: grouped, run and recorded from the same runs
             runs = runs.made_runs()
-        return execute_block(kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder, kept=kept)
+        return execute_block(
+            kind, artifacts, runs, blobs, ids=ids, campaign=campaign, folder=folder, kept=kept, criteria=criteria
+        )
 
 
 def batch_records(kind: str, artifacts: dict[str, bytes], runs: Sequence, blobs: dict | None = None) -> list[dict]:
