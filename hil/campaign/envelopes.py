@@ -259,17 +259,14 @@ def stack_png(stack: EnvelopeStack | None, request: EnvelopeRequest, figure: Env
 
 
 def _binned(one: _Spilled, spill: IO[bytes], lo: np.ndarray, width: np.ndarray, bins: int) -> tuple:
-    """The bins (runs, N, S) of the runs of ``one`` read back from ``spill``, and their histogram (N, S, ``bins``):
-    :data:`HISTOGRAM_VALUES` values at a time (a count is a pass over every bin, so the fewer the better)."""
+    """The bins (runs, N, S) of the runs of ``one`` read back from ``spill`` (:data:`HISTOGRAM_VALUES` values at a
+    time), and their histogram (N, S, ``bins``: :func:`_histogram`)."""
     numbers = np.empty((one.runs, *lo.shape), np.uint16)
-    counts = np.zeros(lo.size * (bins + 1), np.int64)
     at = 0
     for sig in _spilled_runs(one, spill, lo.shape, max(1, HISTOGRAM_VALUES // lo.size)):
-        part = numbers[at : at + len(sig)]
-        part[...] = _bin_numbers(sig, lo, width, bins)
-        counts += _counts(part, bins)
+        numbers[at : at + len(sig)] = _bin_numbers(sig, lo, width, bins)
         at += len(sig)
-    return numbers, counts.reshape(*lo.shape, bins + 1)[..., :bins]
+    return numbers, _histogram(numbers, bins)
 
 
 def _histogram(numbers: np.ndarray, bins: int) -> np.ndarray:
