@@ -402,7 +402,8 @@ def _block_lines(blocks: dict | None) -> list[str]:
         f"{blocks['target_block_vs_per_run_path']}x); machinery {_machinery(blocks, ten)}; client peak RSS "
         f"+{ten['client_peak_rss_growth_mb']:.0f} MB, "
         f"worker {ten['worker_rss_mb']:.0f} MB, {ten['result_files']} result files",
-        f"- blocks, 2 workers over 1 (1-2-2-1, {blocks['speedup_runs'][0]['runs']} runs each): "
+        f"- blocks, 2 workers over 1 ({'-'.join(map(str, blocks.get('order', (1, 2, 2, 1))))}, "
+        f"{blocks['speedup_runs'][0]['runs']} runs each): "
         f"**{blocks['speedup_2_vs_1']:.2f}x** (target {blocks['target_speedup']}){_ceiling(blocks)}{_small(blocks)}",
     ]
     large = blocks.get("hundred_thousand")
