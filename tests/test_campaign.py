@@ -673,6 +673,9 @@ def test_a_block_file_holds_each_runs_record_and_traces_and_a_foreign_worker_ans
     assert Store(tmp_path).finished("run-b") and dict(Store(tmp_path).records())["run-b"]["status"] == "done"
     with pytest.raises(GainlinkError, match=r"a worker returned list, not a block of records: .*another gainlink"):
         _block_bytes([{"status": "done"}])
+    with pytest.raises(GainlinkError, match=r"a worker returned a dict of \['judged', 'status'\], not a block"):
+        _block_bytes({"status": "done", "judged": None})
+    assert _block_bytes({"data": b"PAR1", "judged": None}) == b"PAR1"
 
 
 def test_every_column_of_a_block_file_is_compressed_the_json_texts_with_zstd():

@@ -154,7 +154,7 @@ class Verdicts:
     runs), then by :meth:`complete`, which judges here every other block file of the store."""
 
     def __init__(self, criteria: Any, ids: np.ndarray) -> None:
-        self.criteria_given = criteria
+        self.against = criteria  # what the runs are judged against (self.criteria: the names of those failed)
         self.file: IO[bytes] = tempfile.TemporaryFile()
         self.uids, self.slot = np.unique(ids, return_inverse=True)
         self._empty()
@@ -193,7 +193,7 @@ class Verdicts:
             self._empty()
         for path in store.files():
             if path.name not in self.ahead and (part := store.report_part(path)) is not None:
-                self._take(judge_part(part, self.criteria_given))
+                self._take(judge_part(part, self.against))
         return self
 
     def _take(self, judged: JudgedPart) -> None:

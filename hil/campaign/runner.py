@@ -392,20 +392,23 @@ def _store_answer(store: Store, data: Any, ids: list[str], verdicts: Verdicts | 
     if isinstance(data, dict) and "block" in data:
         stored = store.took_block(data, ids)
     else:
-        stored = store.put_block(_block_bytes(data.get("data") if isinstance(data, dict) else data))
+        stored = store.put_block(_block_bytes(data))
     if verdicts is not None and isinstance(data, dict) and isinstance(data.get("judged"), JudgedPart):
         verdicts.add(block_file_name(ids), data["judged"])
     return stored
 
 
 def _block_bytes(data: Any) -> bytes:
-    """A task's answer: the bytes of a block file; a worker that answered something else is named."""
-    if not isinstance(data, bytes):
+    """A task's answer: the bytes of a block file, alone or as a dict's ``data``; a worker that answered something
+    else is named (a dict by its keys)."""
+    bytes_ = data.get("data") if isinstance(data, dict) else data
+    if not isinstance(bytes_, bytes):
+        what = f"a dict of {sorted(map(str, data))}" if isinstance(data, dict) else type(data).__name__
         raise GainlinkError(
-            f"a worker returned {type(data).__name__}, not a block of records: is it running "
+            f"a worker returned {what}, not a block of records: is it running "
             f"another gainlink version than this client ({__version__})?"
         )
-    return data
+    return bytes_
 
 
 class _Submitter:
