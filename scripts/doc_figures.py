@@ -425,8 +425,17 @@ def _ceiling(blocks: dict) -> str:
     return (
         f"; {blocks['speedup_2_vs_1_runs']:.2f}x until the last run is stored, {_per_run_cpu(blocks):.2f}x per second "
         f"of the runs' own CPU (the host's slower CPUs on one side taken out); the same block work in 2 plain "
-        f"processes without Dask: {plain['speedup_2_vs_1']:.2f}x, the machine's ceiling"
+        f"processes without Dask: {plain['speedup_2_vs_1']:.2f}x, the machine's ceiling{_by_pair(blocks)}"
     )
+
+
+def _by_pair(blocks: dict) -> str:
+    """The ceiling and the campaigns' 2-over-1 pair of clusters by pair, when the ceiling was measured beside each."""
+    ceilings, speeds = blocks["plain_processes"].get("speedup_2_vs_1_by_pair"), blocks.get("speedup_2_vs_1_by_pair")
+    if not ceilings or not speeds:
+        return ""
+    pairs = ", ".join(f"{c:.2f}x/{p:.2f}x" for c, p in zip(speeds, ceilings))
+    return f" at the same moments (measured before each cluster's campaign; pair by pair, campaign/ceiling: {pairs})"
 
 
 def _per_run_cpu(blocks: dict) -> float:
