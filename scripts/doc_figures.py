@@ -487,10 +487,25 @@ def _machinery(blocks: dict, ten: dict) -> str:
         f"{parts['client_until_stored']:.2f} in the client until the last run is stored, {parts['report']:.2f} in the "
         "report"
     )
+    slope = f"the slope over {split['from_runs'][0]} and {split['from_runs'][1]} runs{where}"
+    if blocks.get("machinery_fit"):
+        head = f"{_fit(blocks)}; between the means of two sizes alone {split['per_run_ratio']:+.0%} ({slope})"
+    else:
+        head = (
+            f"a run adds **{split['per_run_ratio']:+.0%}** of its own CPU (target "
+            f"{blocks['target_machinery_ratio']:.0%}; {slope})"
+        )
+    fixed = f" and a campaign {split['fixed_s']:.1f} s whatever its size ({whole})"
+    return f"{head}{fixed}{_slope_large(blocks)}{_kernel(blocks)}"
+
+
+def _fit(blocks: dict) -> str:
+    """The machinery a run adds by the line through every 2-worker campaign (the target's figure), when recorded."""
+    fit = blocks["machinery_fit"]
     return (
-        f"a run adds **{split['per_run_ratio']:+.0%}** of its own CPU (target {blocks['target_machinery_ratio']:.0%}; "
-        f"the slope over {split['from_runs'][0]} and {split['from_runs'][1]} runs{where}) and a campaign "
-        f"{split['fixed_s']:.1f} s whatever its size ({whole}){_slope_large(blocks)}{_kernel(blocks)}"
+        f"a run adds **{fit['per_run_ratio']:+.1%}** of its own CPU, +/- {fit['per_run_ratio_stderr']:.1%} (target "
+        f"{blocks['target_machinery_ratio']:.0%}; the line through the {fit['campaigns']} campaigns of "
+        f"{', '.join(map(str, fit['from_runs']))} runs on 2 workers)"
     )
 
 
