@@ -769,48 +769,68 @@ def mpc_cost_block() -> str:
     doc = result("mpc_cost")
     if doc is None:
         return missing("MPC step cost", "scripts/bench.sh mpc_cost")
-    rows, notes = [], []
-    for d in doc["designs"]:
-        for r in d["targets"]:
-            core = r["target"].removeprefix("cortex-").upper() + ("F" if r["target"] == "cortex-m4" else "")
-            if not r.get("built", True):
-                rows.append([d["design"], core, "not built: the law's replay image does not fit the board's RAM"]
-                            + ["—"] * 7)  # fmt: skip
-                continue
-            proof = r.get("proof", {})
-            proved = r.get("bound_proved", False)
-            tried = (f"{num(proof['adversarial_worst'])} over {proof['adversarial_steps']} steps"
-                     if proved else "—")  # fmt: skip
-            rows.append([
-                d["design"], core,
-                f"{r['iterations_mean']:g} / {r['iterations_max']} ({r['capped_steps']}/{r['steps']} capped)",
-                f"{num(r['instructions_per_step_mean'])} / {num(r['instructions_per_step_worst'])}",
-                num(proof["per_iteration"]) if proved else num(r["instructions_per_iteration_worst"]),
-                f"{num(r['bound_per_step_at_cap'])} ({bound_words(proved, proof)})",
-                tried,
-                f"{num(r['tables_bytes'])} B",
-                f"{num(r['law_state_and_workspace_bytes'])} B",
-                f"{num(r['law_ram_with_both_banks_bytes'])} B",
-            ])  # fmt: skip
-        m4 = next(r for r in d["targets"] if r["target"] == "cortex-m4")
-        target = d.get("target_m4f_instructions_per_step_worst")
-        words = (f"{d['design']} (N = {d['horizon']}, cap {d['cap']}, {d['macs_per_iteration']:,} multiply-adds per "
-                 f"iteration): M4F worst {num(m4['instructions_per_step_worst'])} instructions per step, proved bound "
-                 f"{num(m4['bound_per_step_at_cap'])}")  # fmt: skip
-        if target:
-            verdict = "within" if d.get("m4f_bound_within_target") else "OVER"
-            words += f", {verdict} the target of {num(target)}"
-        base = d["baseline_m4f"]
-        words += (f"; the LQ law of the same weights takes {num(base['instructions_per_step_worst'])} "
-                  f"({d['ratio_to_baseline_worst']:g}x)")  # fmt: skip
-        if "m4f_law_ram_with_both_banks_within_16KiB" in d:
-            ok = "within" if d["m4f_law_ram_with_both_banks_within_16KiB"] else "OVER"
-            words += f"; state, workspace and both banks {num(m4['law_ram_with_both_banks_bytes'])} B, {ok} 16 KiB"
-        notes.append(words + ".")
+    rows = [_mpc_cost_row(d, r) for d in doc["designs"] for r in d["targets"]]
+    notes = [_mpc_cost_note(d) for d in doc["designs"]]
     head = ["design", "core", "iterations mean / worst", "instructions per step mean / worst", "per iteration"]
     head += ["bound at the cap", "worst found trying to break it", "tables (one bank)", "state + workspace"]
     head += ["both banks + state"]
-    caveat = prose(
+    return (
+        table(head, rows)
+        + "\n"
+        + "\n".join(prose(n) for n in notes)
+        + "\n\n"
+        + _mpc_cost_caveat()
+        + "\n\n"
+        + provenance(doc)
+        + "\n"
+    )
+
+
+def _mpc_cost_row(d: Doc, r: Doc) -> list[str]:
+    """One core's row of a design's MPC step cost: iterations, instructions, the bound and the attempt to break it,
+    the sizes; or why it was not built."""
+    core = r["target"].removeprefix("cortex-").upper() + ("F" if r["target"] == "cortex-m4" else "")
+    if not r.get("built", True):
+        return [d["design"], core, "not built: the law's replay image does not fit the board's RAM"] + ["—"] * 7
+    proof = r.get("proof", {})
+    proved = r.get("bound_proved", False)
+    tried = f"{num(proof['adversarial_worst'])} over {proof['adversarial_steps']} steps" if proved else "—"
+    return [
+        d["design"], core,
+        f"{r['iterations_mean']:g} / {r['iterations_max']} ({r['capped_steps']}/{r['steps']} capped)",
+        f"{num(r['instructions_per_step_mean'])} / {num(r['instructions_per_step_worst'])}",
+        num(proof["per_iteration"]) if proved else num(r["instructions_per_iteration_worst"]),
+        f"{num(r['bound_per_step_at_cap'])} ({bound_words(proved, proof)})",
+        tried,
+        f"{num(r['tables_bytes'])} B",
+        f"{num(r['law_state_and_workspace_bytes'])} B",
+        f"{num(r['law_ram_with_both_banks_bytes'])} B",
+    ]  # fmt: skip
+
+
+def _mpc_cost_note(d: Doc) -> str:
+    """A design's sentence under the table: its M4F worst and proved bound against the target, the LQ law of the
+    same weights, and its RAM against 16 KiB."""
+    m4 = next(r for r in d["targets"] if r["target"] == "cortex-m4")
+    target = d.get("target_m4f_instructions_per_step_worst")
+    words = (f"{d['design']} (N = {d['horizon']}, cap {d['cap']}, {d['macs_per_iteration']:,} multiply-adds per "
+             f"iteration): M4F worst {num(m4['instructions_per_step_worst'])} instructions per step, proved bound "
+             f"{num(m4['bound_per_step_at_cap'])}")  # fmt: skip
+    if target:
+        verdict = "within" if d.get("m4f_bound_within_target") else "OVER"
+        words += f", {verdict} the target of {num(target)}"
+    base = d["baseline_m4f"]
+    words += (f"; the LQ law of the same weights takes {num(base['instructions_per_step_worst'])} "
+              f"({d['ratio_to_baseline_worst']:g}x)")  # fmt: skip
+    if "m4f_law_ram_with_both_banks_within_16KiB" in d:
+        ok = "within" if d["m4f_law_ram_with_both_banks_within_16KiB"] else "OVER"
+        words += f"; state, workspace and both banks {num(m4['law_ram_with_both_banks_bytes'])} B, {ok} 16 KiB"
+    return words + "."
+
+
+def _mpc_cost_caveat() -> str:
+    """What an MPC step's instruction count and its bound cover, and on what premises."""
+    return prose(
         "Instructions, not cycles: a `vfma.f32` takes 3 cycles on the M4F and flash wait states add more, so no time "
         "is given. A bound marked proved holds for every input (any samples, references, warm start and numbers in "
         "tables of these dimensions) on the image measured: that core, the compiler flags the bench prints, the "
@@ -827,16 +847,6 @@ def mpc_cost_block() -> str:
         "step's branches before `solve` are its non-finite tests. It is loose, because every routine is charged at "
         "its dearest path. The quadrotor's M3 bound is measured, not proved: its non-finite tests are a loop on the "
         "way to `refuse`, which the refused step's path search does not bound."
-    )
-    return (
-        table(head, rows)
-        + "\n"
-        + "\n".join(prose(n) for n in notes)
-        + "\n\n"
-        + caveat
-        + "\n\n"
-        + provenance(doc)
-        + "\n"
     )
 
 
