@@ -21,11 +21,21 @@ from ..shipping import artifact as artifact_mod
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the design-side subcommands."""
+    _add_analyze(sub)
+    _add_design(sub)
+    _add_validate(sub)
+    _add_simulate(sub)
+    _add_replay(sub)
+
+
+def _add_analyze(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("analyze", help="structural analysis of a plant spec")
     p.add_argument("spec", help="plant spec (TOML)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=cmd_analyze)
 
+
+def _add_design(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("design", help="design controller + observer and write DIR/gains.json")
     p.add_argument("spec", help="plant spec (TOML)")
     p.add_argument("--out", required=True, help="output directory")
@@ -43,10 +53,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.set_defaults(func=cmd_design)
 
+
+def _add_validate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("validate", help="check a gain artifact against its schema, hash and invariants")
     p.add_argument("artifact", help="gains.json")
     p.set_defaults(func=cmd_validate)
 
+
+def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("simulate", help="closed-loop run on the artifact's discrete plant, written as replay input")
     p.add_argument("artifact", help="gains.json")
     p.add_argument("--steps", type=int, default=500, help="number of samples (default 500)")
@@ -70,6 +84,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="output CSV (t, y0.., r0.., and a scheduled law's s0..)")
     p.set_defaults(func=cmd_simulate)
 
+
+def _add_replay(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("replay", help="run recorded samples through an engine of the control law")
     p.add_argument("artifact", help="gains.json")
     p.add_argument("--input", required=True, help="CSV with y0..y{p-1}, r0..r{q-1} (and optionally t)")
