@@ -28,7 +28,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("mavlink", help="MAVLink parameter upload and listing")
     sub = p.add_subparsers(dest="mavlink_command", metavar="ACTION")
     sub.required = True
+    _add_upload(sub)
+    _add_params(sub)
+    _add_setup_signing(sub)
+    _add_keygen(sub)
 
+
+def _add_upload(sub: argparse._SubParsersAction) -> None:
     up = sub.add_parser("upload", help="upload an artifact's gains (verified, rolled back on failure)")
     up.add_argument("artifact", help="gains.json")
     up.add_argument("--connect", help="pymavlink URL: udpout:HOST:PORT, udpin:HOST:PORT, /dev/ttyACM0")
@@ -60,6 +66,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     up.add_argument("--target-component", type=int, metavar="N", help="and this component id (default: any)")
     up.set_defaults(func=_upload)
 
+
+def _add_params(sub: argparse._SubParsersAction) -> None:
     ls = sub.add_parser(
         "params",
         help="list a vehicle's, an artifact's or a .params file's parameters, or write them as a QGroundControl "
@@ -75,6 +83,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ls.add_argument("--signing-key", metavar="FILE", help=SIGNING_HELP)
     ls.set_defaults(func=_params)
 
+
+def _add_setup_signing(sub: argparse._SubParsersAction) -> None:
     ss = sub.add_parser("setup-signing", help="give a vehicle a signing key (SETUP_SIGNING) and check it signs with it")
     ss.add_argument("key", help="key file to give (from `gainlink mavlink keygen`)")
     ss.add_argument("--connect", required=True, help="pymavlink URL: tcp:HOST:PORT (the image's UART), a serial device")
@@ -87,6 +97,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ss.add_argument("--heartbeat-timeout", type=float, default=5.0, help="seconds to wait for a heartbeat (default 5)")
     ss.set_defaults(func=_setup_signing)
 
+
+def _add_keygen(sub: argparse._SubParsersAction) -> None:
     kg = sub.add_parser("keygen", help="write a new MAVLink 2 signing key file (64 hex digits, mode 0600)")
     kg.add_argument("out", help="key file to create (an existing file is not replaced)")
     kg.set_defaults(func=_keygen)
