@@ -350,9 +350,9 @@ def plain_ceiling(walls: list[dict]) -> dict:
     (:data:`BLOCK_PLAIN_BLOCKS` blocks of :data:`BLOCK_PLAIN_RUNS` runs) in 1 plain process or half in each of 2
     started together (:func:`_plain_block_wall`), one before each cluster's :data:`BLOCK_DRAWS` campaign, in its
     size: what the CPUs gave block work at the moments the campaigns ran, with no scheduler, client or report at all.
-    Measured so since 2026-12-01: a lone process here ran the same work 1.4-2.0x as fast as each of two, minutes
-    apart (a plain Python loop as well: 1.5-2.3x), so a ceiling measured once, at the end, said little of the
-    campaigns' moments."""
+    Measured so since 2026-12-01: here the same work went 1.4-2.0x as fast in two processes as in one, minutes apart,
+    the lone process's time moving while the two's held (a plain Python loop as well: 1.5-2.3x), so a ceiling measured
+    once, at the end, said little of the campaigns' moments."""
     sides = {n: [w["wall_s"] for w in walls if w["processes"] == n] for n in (1, 2)}
     pairs = [walls[k : k + 2] for k in range(0, len(walls) - 1, 2)]
     return {
@@ -624,7 +624,7 @@ def machinery_fit(campaigns: list[dict]) -> dict:
     2-worker ones of every size), with its slope's standard error; ``per_run_ratio`` is the slope over the largest
     campaigns' runs' own CPU per run. The target's figure when the 100,000-run campaigns ran: a two-point slope rests
     on two sizes' means, and between 4,002 and 10,002 runs the few tenths of a second a campaign's fixed costs move
-    with the host moved it by 0.05 of the runs' own CPU from one recording to the next (0.049, then 0.123)."""
+    with the host moved it by 0.07 of the runs' own CPU from one recording to the next (0.049, then 0.123)."""
     import numpy as np
 
     runs = np.array([c["runs"] for c in campaigns], float)
