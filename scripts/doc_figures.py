@@ -434,7 +434,7 @@ def _by_pair(blocks: dict) -> str:
     ceilings, speeds = blocks["plain_processes"].get("speedup_2_vs_1_by_pair"), blocks.get("speedup_2_vs_1_by_pair")
     if not ceilings or not speeds:
         return ""
-    pairs = ", ".join(f"{c:.2f}x/{p:.2f}x" for c, p in zip(speeds, ceilings))
+    pairs = ", ".join(f"{campaign:.2f}x/{ceiling:.2f}x" for campaign, ceiling in zip(speeds, ceilings))
     return f" at the same moments (measured before each cluster's campaign; pair by pair, campaign/ceiling: {pairs})"
 
 
